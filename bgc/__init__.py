@@ -1,0 +1,2 @@
+"""bgc: a compiler for bond-graph models."""
+__version__ = "0.1.0"

@@ -1,0 +1,104 @@
+"""Source spans and model diagnostics: `path:line:col: error: message`, the line, carets."""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+
+@dataclass(frozen=True)
+class Span:
+    """A region of one source file; lines and columns are 1-based, end exclusive."""
+
+    line: int
+    col: int
+    end_line: int
+    end_col: int
+
+    def join(self, other: "Span") -> "Span":
+        start = min((self.line, self.col), (other.line, other.col))
+        end = max((self.end_line, self.end_col), (other.end_line, other.end_col))
+        return Span(start[0], start[1], end[0], end[1])
+
+
+NOWHERE = Span(1, 1, 1, 1)
+
+
+@dataclass(frozen=True)
+class Note:
+    span: Span | None
+    message: str
+
+
+@dataclass(frozen=True)
+class Diagnostic:
+    severity: str  # "error" | "warning"
+    span: Span | None
+    message: str
+    notes: tuple[Note, ...] = ()
+
+
+class ModelError(Exception):
+    """One or more errors in a model (never a bug in bgc)."""
+
+    def __init__(self, diagnostics):
+        self.diagnostics = tuple(diagnostics)
+        super().__init__("; ".join(d.message for d in self.diagnostics))
+
+
+def error(span: Span | None, message: str, *notes: Note) -> Diagnostic:
+    return Diagnostic("error", span, message, tuple(notes))
+
+
+def warning(span: Span | None, message: str, *notes: Note) -> Diagnostic:
+    return Diagnostic("warning", span, message, tuple(notes))
+
+
+def fail(span: Span | None, message: str, *notes: Note):
+    raise ModelError([error(span, message, *notes)])
+
+
+@dataclass
+class Collector:
+    """Semantic stages collect all their diagnostics, then stop (see raise_if_errors)."""
+
+    items: list = field(default_factory=list)
+
+    def error(self, span, message, *notes):
+        self.items.append(error(span, message, *notes))
+
+    def warning(self, span, message, *notes):
+        self.items.append(warning(span, message, *notes))
+
+    @property
+    def errors(self):
+        return [d for d in self.items if d.severity == "error"]
+
+    @property
+    def warnings(self):
+        return tuple(d for d in self.items if d.severity == "warning")
+
+    def raise_if_errors(self):
+        if self.errors:
+            raise ModelError(self.errors)
+
+
+def _excerpt(source_lines, span: Span) -> list[str]:
+    if span is None or not (1 <= span.line <= len(source_lines)):
+        return []
+    text = source_lines[span.line - 1].rstrip("\n").expandtabs(1)
+    gutter = f"{span.line:>4} | "
+    end_col = span.end_col if span.end_line == span.line else len(text) + 1
+    width = max(1, end_col - span.col)
+    caret = " " * (len(gutter) - 2) + "| " + " " * (span.col - 1) + "^" + "~" * (width - 1)
+    return [gutter + text, caret]
+
+
+def format_diagnostic(d: Diagnostic, path: str, source: str | None) -> str:
+    lines = source.splitlines() if source is not None else []
+    where = f"{path}:{d.span.line}:{d.span.col}" if d.span else path
+    out = [f"{where}: {d.severity}: {d.message}"]
+    out += _excerpt(lines, d.span)
+    for n in d.notes:
+        nwhere = f"{path}:{n.span.line}:{n.span.col}" if n.span else path
+        out.append(f"{nwhere}: note: {n.message}")
+        out += _excerpt(lines, n.span)
+    return "\n".join(out)
