@@ -1,0 +1,222 @@
+"""AST of a .bg model: frozen nodes, each with the source span it came from."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from .diagnostics import Span
+
+
+# ---------------------------------------------------------------- expressions
+@dataclass(frozen=True)
+class Num:
+    text: str
+    span: Span
+
+
+@dataclass(frozen=True)
+class Name:
+    name: str
+    span: Span
+
+
+@dataclass(frozen=True)
+class Field:
+    """X.e, X.f, X.p, X.q, X.lambda, X.residual."""
+
+    owner: str
+    field: str
+    span: Span
+
+
+@dataclass(frozen=True)
+class Call:
+    func: str
+    args: tuple
+    span: Span
+
+
+@dataclass(frozen=True)
+class BinOp:
+    op: str  # + - * / ^
+    left: object
+    right: object
+    span: Span
+
+
+@dataclass(frozen=True)
+class Neg:
+    operand: object
+    span: Span
+
+
+@dataclass(frozen=True)
+class Index:
+    base: object
+    index: object
+    span: Span
+
+
+@dataclass(frozen=True)
+class Vector:
+    items: tuple
+    span: Span
+
+
+# ---------------------------------------------------------------- declarations
+@dataclass(frozen=True)
+class Ident:
+    name: str
+    span: Span
+
+
+@dataclass(frozen=True)
+class Dim:
+    n: int
+    m: int | None  # two-ports map n -> m
+    span: Span
+
+
+@dataclass(frozen=True)
+class Arg:
+    law: Ident | None  # `e = EXPR(f)` style law arguments name their left side
+    expr: object
+    span: Span
+
+
+@dataclass(frozen=True)
+class InitClause:
+    var: Ident
+    expr: object
+    span: Span
+
+
+@dataclass(frozen=True)
+class Corrector:
+    kind: str  # pid | pd | none
+    args: tuple
+    span: Span
+
+
+@dataclass(frozen=True)
+class ConstraintSpec:
+    kind: Ident | None  # holonomic | nonholonomic | None (detect)
+    annotation: tuple | None  # ("init" | "phi", expr, span)
+    corrector: Corrector | None
+    span: Span
+
+
+@dataclass(frozen=True)
+class ModelDecl:
+    name: Ident
+    doc: str | None
+    span: Span
+
+
+@dataclass(frozen=True)
+class ParamDecl:
+    name: Ident
+    expr: object
+    doc: str | None
+    span: Span
+
+
+@dataclass(frozen=True)
+class ElementDecl:
+    name: Ident
+    kind: Ident  # Se, I, MTF, ... or "0"/"1" for junctions
+    dim: Dim | None
+    args: tuple[Arg, ...]
+    inits: tuple[InitClause, ...]
+    effects: tuple[Ident, ...]
+    constraint: ConstraintSpec | None
+    doc: str | None
+    span: Span
+
+    @property
+    def is_junction(self) -> bool:
+        return self.kind.name in ("0", "1")
+
+
+@dataclass(frozen=True)
+class SignalDecl:
+    name: Ident
+    dim: Dim | None
+    expr: object
+    span: Span
+
+
+@dataclass(frozen=True)
+class IntegralDecl:
+    name: Ident
+    dim: Dim | None
+    expr: object
+    init: object
+    span: Span
+
+
+@dataclass(frozen=True)
+class BondChain:
+    nodes: tuple[Ident, ...]
+    span: Span
+
+
+# ---------------------------------------------------------------- scenes
+@dataclass(frozen=True)
+class OutRef:
+    owner: str
+    field: str | None
+    index: int | None
+    span: Span
+
+    @property
+    def text(self) -> str:
+        s = self.owner + (f".{self.field}" if self.field else "")
+        return s + (f"[{self.index}]" if self.index is not None else "")
+
+
+@dataclass(frozen=True)
+class SceneEffects:
+    names: tuple[Ident, ...] | None  # None: `effects none`
+    span: Span
+
+
+@dataclass(frozen=True)
+class SceneOutputs:
+    refs: tuple[OutRef, ...]
+    span: Span
+
+
+@dataclass(frozen=True)
+class SceneTime:
+    start: object
+    stop: object
+    every: object | None
+    span: Span
+
+
+@dataclass(frozen=True)
+class SceneSolver:
+    name: Ident
+    options: tuple[tuple[Ident, object], ...]
+    span: Span
+
+
+@dataclass(frozen=True)
+class SceneSet:
+    name: Ident
+    expr: object
+    span: Span
+
+
+@dataclass(frozen=True)
+class SceneDecl:
+    name: Ident
+    doc: str | None
+    stmts: tuple
+    span: Span
+
+
+@dataclass(frozen=True)
+class Model:
+    decls: tuple
+    path: str

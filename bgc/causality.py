@@ -1,0 +1,181 @@
+"""Stage 4, causality: the Sequential Causality Assignment Procedure (SCAP).
+
+For every bond we decide which end sets its effort (the other end sets its flow).  Order:
+sources and constraint junctions (their causality is fixed), storage elements in preferred
+integral causality, resistors, then any bond still free; each choice is propagated through
+junctions and two-ports before the next.  A choice that contradicts an earlier one is a causal
+conflict and names both.  Storage elements left in derivative causality are reported, not refused.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from .diagnostics import Collector, Note
+from .resolve import Bond, Element, Graph
+
+
+@dataclass(frozen=True)
+class Causality:
+    effort_by: tuple[str, ...]  # per bond (graph order): the node that sets the bond's effort
+    derivative: tuple[str, ...]  # storage elements in derivative causality
+    arbitrary: tuple[str, ...]  # resistors / bonds whose causality was chosen freely
+
+    def sets_effort(self, bond_index: int, node: str) -> bool:
+        return self.effort_by[bond_index] == node
+
+
+class _Assigner:
+    def __init__(self, graph: Graph, diags: Collector):
+        self.g = graph
+        self.diags = diags
+        self.by: list[str | None] = [None] * len(graph.bonds)
+        self.origin: list[str | None] = [None] * len(graph.bonds)
+        self.incident = {el.name: [i for i, b in enumerate(graph.bonds) if el.name in (b.src, b.dst)]
+                         for el in graph.elements}
+        self.elements = {el.name: el for el in graph.elements}
+        self.failed = False
+
+    @staticmethod
+    def other(b: Bond, node: str) -> str:
+        return b.dst if b.src == node else b.src
+
+    def assign(self, i: int, setter: str, origin: str, at: str):
+        """Bond i's effort is set by `setter`, because of `origin`; propagate from both ends."""
+        if self.by[i] is not None:
+            if self.by[i] != setter and not self.failed:
+                self._conflict(i, origin, at)
+            return
+        self.by[i] = setter
+        self.origin[i] = origin
+        b = self.g.bonds[i]
+        for node in (b.src, b.dst):
+            self.propagate(node, origin)
+
+    def _conflict(self, i, origin, at):
+        self.failed = True
+        first = self.origin[i]
+        el = self.elements[at]
+        where = f"junction '{at}'" if el.is_junction else f"'{at}'"
+        kind = "effort" if el.kind == "0" else "flow" if el.kind == "1" else "causality"
+        self.diags.error(self.elements[origin].name_span,
+                         f"causal conflict at {where}: '{origin}' and '{first}' both impose the "
+                         f"{kind}" if first != origin else
+                         f"causal conflict at {where}: '{origin}' imposes contradictory causality",
+                         Note(self.elements[first].name_span, f"'{first}' is declared here"),
+                         Note(self.g.bonds[i].span, "on this bond"))
+
+    def propagate(self, node: str, origin: str):
+        el = self.elements[node]
+        bonds = self.incident[node]
+        if el.is_junction:
+            self._junction(el, bonds, origin)
+        elif el.spec.ports == 2:
+            self._two_port(el, bonds, origin)
+
+    def _junction(self, el: Element, bonds, origin):
+        # effort "in" at a 0-junction: set by the other end; at a 1-junction, the one bond whose
+        # effort the junction computes is the odd one out.
+        odd_setter = (lambda i: self.by[i] == self.other(self.g.bonds[i], el.name)) \
+            if el.kind == "0" else (lambda i: self.by[i] == el.name)
+        usual = (lambda i: el.name) if el.kind == "0" else \
+            (lambda i: self.other(self.g.bonds[i], el.name))
+        if el.constraint is not None:
+            return  # all its bonds were fixed when it was seeded
+        odd = [i for i in bonds if self.by[i] is not None and odd_setter(i)]
+        free = [i for i in bonds if self.by[i] is None]
+        if len(odd) > 1 and not self.failed:
+            i, j = odd[0], odd[1]
+            self.failed = True
+            kind = "effort" if el.kind == "0" else "flow"
+            a, b = self.origin[j], self.origin[i]
+            self.diags.error(self.elements[a].name_span,
+                             f"causal conflict at junction '{el.name}': '{a}' and '{b}' both "
+                             f"impose its {kind}",
+                             Note(self.elements[b].name_span, f"'{b}' is declared here"),
+                             Note(el.name_span, f"junction '{el.name}'"))
+            return
+        if len(odd) == 1:
+            for i in free:
+                self.assign(i, usual(i), origin, el.name)
+        elif len(free) == 1 and not odd:
+            i = free[0]
+            setter = self.other(self.g.bonds[i], el.name) if el.kind == "0" else el.name
+            self.assign(i, setter, origin, el.name)
+
+    def _two_port(self, el: Element, bonds, origin):
+        known = [i for i in bonds if self.by[i] is not None]
+        free = [i for i in bonds if self.by[i] is None]
+        if len(known) != 1 or len(free) != 1:
+            return
+        k, f = known[0], free[0]
+        sets_k = self.by[k] == el.name
+        # TF passes causality through (sets exactly one effort); GY sets both efforts or none.
+        sets_f = (not sets_k) if el.spec.role == "transformer" else sets_k
+        self.assign(f, el.name if sets_f else self.other(self.g.bonds[f], el.name), origin,
+                    el.name)
+
+
+def _seed_fixed(a: _Assigner):
+    for el in a.g.elements:
+        if el.constraint is not None:
+            # The multiplier is an unknown effort (0) / flow (1) imposed on every bond.
+            for i in a.incident[el.name]:
+                setter = el.name if el.kind == "0" else a.other(a.g.bonds[i], el.name)
+                a.assign(i, setter, el.name, el.name)
+        elif not el.is_junction and el.spec.role == "source":
+            (i,) = a.incident[el.name]
+            setter = el.name if el.spec.fixed == "effort" else a.other(a.g.bonds[i], el.name)
+            a.assign(i, setter, el.name, el.name)
+
+
+def _preferred_setter(a: _Assigner, el: Element, i: int) -> str:
+    sets_effort = el.spec.preferred == "effort"
+    return el.name if sets_effort else a.other(a.g.bonds[i], el.name)
+
+
+def assign_causality(graph: Graph) -> Causality:
+    diags = Collector()
+    a = _Assigner(graph, diags)
+    _seed_fixed(a)
+    storage = [el for el in graph.elements if not el.is_junction and el.spec.role == "storage"]
+    for el in storage:
+        (i,) = a.incident[el.name]
+        if a.by[i] is None:
+            a.assign(i, _preferred_setter(a, el, i), el.name, el.name)
+    arbitrary = []
+    for el in graph.elements:
+        if not el.is_junction and el.spec.role == "resistor":
+            (i,) = a.incident[el.name]
+            if a.by[i] is None:
+                arbitrary.append(el.name)
+                # resistance form e = r f unless the law is written f = EXPR(e)
+                sets_effort = not (el.law is not None and el.law[0] == "f")
+                a.assign(i, el.name if sets_effort else a.other(graph.bonds[i], el.name),
+                         el.name, el.name)
+    for i, b in enumerate(graph.bonds):
+        if a.by[i] is None:
+            arbitrary.append(b.label)
+            a.assign(i, b.src, b.src, b.src)
+    _check_junctions(a, diags)
+    diags.raise_if_errors()
+    derivative = tuple(el.name for el in storage
+                       if a.by[a.incident[el.name][0]] != _preferred_setter(a, el, a.incident[el.name][0]))
+    return Causality(tuple(a.by), derivative, tuple(arbitrary))
+
+
+def _check_junctions(a: _Assigner, diags: Collector):
+    """Every plain junction must have its common variable set by exactly one bond."""
+    if a.failed:
+        return
+    for el in a.g.elements:
+        if not el.is_junction or el.constraint is not None or not a.incident[el.name]:
+            continue
+        bonds = a.incident[el.name]
+        if el.kind == "0":
+            odd = [i for i in bonds if a.by[i] != el.name]
+        else:
+            odd = [i for i in bonds if a.by[i] == el.name]
+        if len(odd) != 1:
+            what = "effort" if el.kind == "0" else "flow"
+            diags.error(el.name_span, f"junction '{el.name}': its common {what} is set by "
+                                      f"{len(odd)} bonds, it must be set by exactly one")

@@ -1,0 +1,283 @@
+"""Stage 1, parse: source text -> AST (bgc.ast), syntax errors as located diagnostics."""
+from __future__ import annotations
+
+from functools import lru_cache
+
+from lark import Lark, Token, Transformer_NonRecursive, Tree, v_args
+from lark.exceptions import UnexpectedCharacters, UnexpectedEOF, UnexpectedInput, UnexpectedToken
+
+from . import ast
+from .diagnostics import Span, fail
+from .resources import resource_dir
+
+MAX_SOURCE_BYTES = 1 << 20  # 1 MiB: larger input is refused, not attempted
+MAX_NESTING = 100  # levels of nested brackets / operators of different kinds
+
+# Friendly names for terminals in "expected ..." messages.
+_TERMINAL_NAMES = {
+    "NAME": "a name", "NUMBER": "a number", "INT": "an integer", "STRING": "a string",
+    "_NL": "end of line", "SEMICOLON": "';'", "LPAR": "'('", "RPAR": "')'", "LSQB": "'['",
+    "RSQB": "']'", "LBRACE": "'{'", "RBRACE": "'}'", "COMMA": "','", "COLON": "':'",
+    "EQUAL": "'='", "PLUS": "'+'", "MINUS": "'-'", "STAR": "'*'", "SLASH": "'/'", "POW": "'^'",
+    "DOT": "'.'", "AT": "'@'", "$END": "end of file", "CKIND": "'holonomic' or 'nonholonomic'",
+    "ANNOT": "'init' or 'phi'",
+}
+
+
+class _BracketPostLex:
+    """Drop newlines inside ( ) and [ ]: they do not end a statement there."""
+
+    always_accept = ("_NL",)
+
+    def process(self, stream):
+        depth = 0
+        for tok in stream:
+            if tok.type in ("LPAR", "LSQB"):
+                depth += 1
+            elif tok.type in ("RPAR", "RSQB"):
+                depth = max(0, depth - 1)
+            elif tok.type == "_NL" and depth > 0:
+                continue
+            yield tok
+
+
+@lru_cache(maxsize=1)
+def _lark() -> Lark:
+    text = (resource_dir("grammar") / "bg.lark").read_text(encoding="utf-8")
+    return Lark(text, parser="lalr", lexer="contextual", postlex=_BracketPostLex(),
+                propagate_positions=True, maybe_placeholders=True)
+
+
+def _span(meta) -> Span:
+    return Span(meta.line, meta.column, meta.end_line, meta.end_column)
+
+
+def _tspan(tok: Token) -> Span:
+    return Span(tok.line, tok.column, tok.end_line, tok.end_column)
+
+
+def _ident(tok: Token) -> ast.Ident:
+    return ast.Ident(str(tok), _tspan(tok))
+
+
+def _doc(tok) -> str | None:
+    if tok is None:
+        return None
+    return str(tok)[1:-1].replace('\\"', '"').replace("\\\\", "\\")
+
+
+@v_args(meta=True)
+class _ToAst(Transformer_NonRecursive):
+    """Builds typed nodes only; no checking beyond the shape of the syntax."""
+
+    def start(self, meta, children):
+        return tuple(children)
+
+    # declarations
+    def model_decl(self, meta, c):
+        return ast.ModelDecl(_ident(c[0]), _doc(c[1]), _span(meta))
+
+    def param_decl(self, meta, c):
+        return ast.ParamDecl(_ident(c[0]), c[1], _doc(c[2]), _span(meta))
+
+    def element_decl(self, meta, c):
+        name, kind, dim, args, *rest = c
+        inits = tuple(x for x in rest if isinstance(x, ast.InitClause))
+        effects = tuple(x for x in rest if isinstance(x, ast.Ident))
+        return ast.ElementDecl(_ident(name), _ident(kind), dim, tuple(args or ()), inits,
+                               effects, None, _doc(rest[-1]), _span(meta))
+
+    def junction_decl(self, meta, c):
+        name, kind, dim, constraint, *rest = c
+        effects = tuple(x for x in rest if isinstance(x, ast.Ident))
+        return ast.ElementDecl(_ident(name), _ident(kind), dim, (), (), effects, constraint,
+                               _doc(rest[-1]), _span(meta))
+
+    def dim(self, meta, c):
+        return ast.Dim(int(c[0]), int(c[1]) if c[1] is not None else None, _span(meta))
+
+    def args(self, meta, c):
+        return tuple(c)
+
+    def pos_arg(self, meta, c):
+        return ast.Arg(None, c[0], _span(meta))
+
+    def law_arg(self, meta, c):
+        return ast.Arg(_ident(c[0]), c[1], _span(meta))
+
+    def init_clause(self, meta, c):
+        return ast.InitClause(_ident(c[0]), c[1], _span(meta))
+
+    def effect(self, meta, c):
+        return _ident(c[0])
+
+    def constraint(self, meta, c):
+        kind = _ident(c[0]) if c[0] is not None else None
+        return ast.ConstraintSpec(kind, c[1], c[2], _span(meta))
+
+    def annotation(self, meta, c):
+        return (str(c[0]), c[1], _span(meta))
+
+    def corrector(self, meta, c):
+        return c[0]
+
+    def pid(self, meta, c):
+        return ast.Corrector("pid", tuple(c), _span(meta))
+
+    def pd(self, meta, c):
+        return ast.Corrector("pd", tuple(c), _span(meta))
+
+    def nocorr(self, meta, c):
+        return ast.Corrector("none", (), _span(meta))
+
+    def signal_decl(self, meta, c):
+        return ast.SignalDecl(_ident(c[0]), c[1], c[2], _span(meta))
+
+    def integral_decl(self, meta, c):
+        return ast.IntegralDecl(_ident(c[0]), c[1], c[2], c[3], _span(meta))
+
+    def bond_chain(self, meta, c):
+        return ast.BondChain(tuple(_ident(t) for t in c), _span(meta))
+
+    # scenes
+    def scene_decl(self, meta, c):
+        return ast.SceneDecl(_ident(c[0]), _doc(c[1]), tuple(c[2:]), _span(meta))
+
+    def scene_effects(self, meta, c):
+        return ast.SceneEffects(tuple(_ident(t) for t in c), _span(meta))
+
+    def scene_no_effects(self, meta, c):
+        return ast.SceneEffects(None, _span(meta))
+
+    def scene_outputs(self, meta, c):
+        return ast.SceneOutputs(tuple(c), _span(meta))
+
+    def outref(self, meta, c):
+        index = int(c[2]) if c[2] is not None else None
+        return ast.OutRef(str(c[0]), str(c[1]) if c[1] is not None else None, index, _span(meta))
+
+    def scene_time(self, meta, c):
+        return ast.SceneTime(c[0], c[1], c[2], _span(meta))
+
+    def scene_solver(self, meta, c):
+        opts = tuple(x for x in c[1:] if x is not None)
+        return ast.SceneSolver(_ident(c[0]), opts, _span(meta))
+
+    def kwarg(self, meta, c):
+        return (_ident(c[0]), c[1])
+
+    def scene_set(self, meta, c):
+        return ast.SceneSet(_ident(c[0]), c[1], _span(meta))
+
+    # expressions
+    def number(self, meta, c):
+        return ast.Num(str(c[0]), _span(meta))
+
+    def name(self, meta, c):
+        return ast.Name(str(c[0]), _span(meta))
+
+    def field(self, meta, c):
+        return ast.Field(str(c[0]), str(c[1]), _span(meta))
+
+    def call(self, meta, c):
+        return ast.Call(str(c[0]), tuple(x for x in c[1:] if x is not None), _span(meta))
+
+    def vector(self, meta, c):
+        return ast.Vector(tuple(c), _span(meta))
+
+    def index(self, meta, c):
+        return ast.Index(c[0], c[1], _span(meta))
+
+    def neg(self, meta, c):
+        return ast.Neg(c[0], _span(meta))
+
+    def pos(self, meta, c):
+        return c[0]
+
+    def _bin(op):
+        def build(self, meta, c):
+            return ast.BinOp(op, c[0], c[-1], _span(meta))
+        return build
+
+    add, sub, mul, div, pow = _bin("+"), _bin("-"), _bin("*"), _bin("/"), _bin("^")
+
+
+_CHAINS = {"add": "sum", "sub": "sum", "mul": "product", "div": "product"}
+
+
+def _check_nesting(tree: Tree):
+    """Refuse trees nested deeper than MAX_NESTING (chains of + or * count once)."""
+    stack = [(tree, 0, None)]
+    while stack:
+        node, depth, group = stack.pop()
+        if not isinstance(node, Tree):
+            continue
+        g = _CHAINS.get(node.data)
+        d = depth if (g is not None and g == group) else depth + 1
+        if d > MAX_NESTING + 8:  # statement levels above expressions
+            fail(_span(node.meta), f"expression nested too deeply (more than {MAX_NESTING} levels)")
+        stack.extend((ch, d, g) for ch in node.children)
+
+
+def _expected(exc: UnexpectedInput) -> str:
+    names = sorted({_TERMINAL_NAMES.get(t, f"'{t.lower()}'" if t.isupper() and not t.startswith("__")
+                                        else t) for t in (getattr(exc, "expected", None) or ())})
+    names = [n for n in names if not n.startswith("'__") and not n.startswith("__")]
+    if not names:
+        return ""
+    if len(names) > 6:
+        return ""
+    return ", expected " + (names[0] if len(names) == 1 else "one of " + ", ".join(names))
+
+
+def _describe(tok: Token) -> str:
+    if tok.type == "$END":
+        return "end of file"
+    if tok.type == "_NL":
+        return "end of line"
+    return f"'{tok}'"
+
+
+def _syntax_error(exc: UnexpectedInput, source: str):
+    line, col = max(exc.line, 1), max(exc.column, 1)
+    if isinstance(exc, UnexpectedToken):
+        tok = exc.token
+        if tok.type == "$END":
+            lines = source.splitlines() or [""]
+            line, col = len(lines), len(lines[-1]) + 1
+        msg = f"syntax error: unexpected {_describe(tok)}{_expected(exc)}"
+        width = max(1, len(str(tok))) if tok.type not in ("$END", "_NL") else 1
+    elif isinstance(exc, UnexpectedCharacters):
+        ch = source[exc.pos_in_stream] if exc.pos_in_stream < len(source) else "?"
+        msg = f"syntax error: unexpected character {ch!r}"
+        width = 1
+    else:
+        msg = "syntax error: unexpected end of file"
+        width = 1
+    fail(Span(line, col, line, col + width), msg)
+
+
+def decode(data: bytes) -> str:
+    if len(data) > MAX_SOURCE_BYTES:
+        fail(None, f"model file too large ({len(data)} bytes; the limit is {MAX_SOURCE_BYTES})")
+    try:
+        return data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        line = data[: exc.start].count(b"\n") + 1
+        col = exc.start - (data.rfind(b"\n", 0, exc.start) + 1) + 1
+        fail(Span(line, col, line, col + 1), "input is not valid UTF-8")
+
+
+def parse(source: str, path: str = "<model>") -> ast.Model:
+    """Parse `source` into an ast.Model; raises ModelError with a located diagnostic."""
+    if len(source.encode("utf-8")) > MAX_SOURCE_BYTES:
+        fail(None, f"model file too large (the limit is {MAX_SOURCE_BYTES} bytes)")
+    text = source if source.endswith("\n") else source + "\n"
+    try:
+        tree = _lark().parse(text)
+    except (UnexpectedEOF, UnexpectedToken, UnexpectedCharacters) as exc:
+        _syntax_error(exc, source)
+    except UnexpectedInput as exc:  # any other lark input error
+        _syntax_error(exc, source)
+    _check_nesting(tree)
+    return ast.Model(_ToAst().transform(tree), path)

@@ -1,0 +1,525 @@
+"""Stage 2, resolve: AST -> Graph (elements, bonds, signals, scenes) with SymPy expressions.
+
+Expressions are built node by node from the grammar's tree; no string ever becomes an expression.
+Model variables are SymPy symbols named as the modeller writes them (`m`, `x`, `mx.p`, `vx.f`,
+`rod.lambda`); the equations stage defines the element variables in terms of bond variables.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import sympy as sp
+
+from . import ast
+from .diagnostics import Collector, ModelError, Note, Span, fail
+from .kinds import KINDS
+
+TIME = sp.Symbol("t", real=True)
+
+FUNCTIONS = {  # name -> (sympy function, arity)
+    "sin": (sp.sin, 1), "cos": (sp.cos, 1), "tan": (sp.tan, 1), "asin": (sp.asin, 1),
+    "acos": (sp.acos, 1), "atan": (sp.atan, 1), "atan2": (sp.atan2, 2), "sinh": (sp.sinh, 1),
+    "cosh": (sp.cosh, 1), "tanh": (sp.tanh, 1), "exp": (sp.exp, 1), "log": (sp.log, 1),
+    "sqrt": (sp.sqrt, 1), "abs": (sp.Abs, 1), "sign": (sp.sign, 1), "min": (sp.Min, None),
+    "max": (sp.Max, None),
+}
+
+FIELDS_ONE_PORT = ("e", "f")
+
+
+def var(name: str) -> sp.Symbol:
+    """The symbol of a model variable (all model quantities are real)."""
+    return sp.Symbol(name, real=True)
+
+
+@dataclass(frozen=True)
+class Expr:
+    """A resolved expression and the model names it refers to (for later checks)."""
+
+    value: sp.Expr
+    refs: tuple[tuple[str, Span], ...]  # (owner name, span) of every name reference
+    span: Span
+
+
+@dataclass(frozen=True)
+class Parameter:
+    name: str
+    expr: Expr
+    doc: str | None
+    span: Span
+
+
+@dataclass(frozen=True)
+class Constraint:
+    kind: str | None  # "holonomic" | "nonholonomic" | None (detect)
+    annotation: tuple | None  # ("init" | "phi", Expr)
+    corrector: str  # pid | pd | none
+    gains: tuple[Expr, ...]
+    corrector_span: Span | None
+    span: Span
+
+
+@dataclass(frozen=True)
+class Element:
+    name: str
+    kind: str  # Se, MSe, ..., "0", "1"
+    value: Expr | None  # the positional argument
+    law: tuple[str, Expr] | None  # ("f", EXPR(p)) etc.
+    init: tuple[str, Expr] | None
+    effects: tuple[str, ...]
+    constraint: Constraint | None
+    doc: str | None
+    span: Span
+    name_span: Span
+
+    @property
+    def is_junction(self) -> bool:
+        return self.kind in ("0", "1")
+
+    @property
+    def spec(self):
+        return KINDS.get(self.kind)
+
+
+@dataclass(frozen=True)
+class Bond:
+    src: str
+    dst: str
+    label: str  # unique, e.g. "vx->mx"
+    span: Span
+
+
+@dataclass(frozen=True)
+class Signal:
+    name: str
+    expr: Expr
+    init: Expr | None  # integral blocks: the state's initial value
+    span: Span
+
+    @property
+    def is_integral(self) -> bool:
+        return self.init is not None
+
+
+@dataclass(frozen=True)
+class Scene:
+    name: str
+    doc: str | None
+    effects: tuple[str, ...] | None  # None: all effects
+    effects_span: Span | None
+    outputs: tuple[ast.OutRef, ...] | None
+    time: tuple[Expr, Expr, Expr | None] | None
+    solver: tuple[str, tuple[tuple[str, Expr], ...], Span] | None
+    sets: tuple[tuple[str, Expr, Span], ...]
+    span: Span
+
+
+@dataclass(frozen=True)
+class Graph:
+    name: str
+    doc: str | None
+    path: str
+    parameters: tuple[Parameter, ...]
+    elements: tuple[Element, ...]
+    bonds: tuple[Bond, ...]
+    signals: tuple[Signal, ...]
+    scenes: tuple[Scene, ...]
+    warnings: tuple = ()
+
+    def element(self, name: str) -> Element:
+        return next(e for e in self.elements if e.name == name)
+
+    def bonds_of(self, name: str) -> tuple[Bond, ...]:
+        return tuple(b for b in self.bonds if name in (b.src, b.dst))
+
+
+class _Scope:
+    """What a name means: parameter, signal, element, or a law's own variable."""
+
+    def __init__(self, params, signals, elements):
+        self.params = params  # name -> decl (in order)
+        self.signals = signals
+        self.elements = elements
+        self.local: dict[str, sp.Symbol] = {}
+        self.params_only = False
+        self.visible_params: set[str] | None = None
+
+
+class _ExprBuilder:
+    def __init__(self, scope: _Scope, diags: Collector):
+        self.scope = scope
+        self.diags = diags
+        self.refs: list = []
+
+    def build(self, node) -> Expr:
+        self.refs = []
+        value = self._node(node)
+        if value.has(sp.zoo, sp.nan, sp.oo, -sp.oo):
+            fail(node.span, "expression is not finite (division by zero?)")
+        return Expr(value, tuple(self.refs), node.span)
+
+    def _node(self, node):
+        method = getattr(self, "_" + type(node).__name__.lower())
+        return method(node)
+
+    def _num(self, node: ast.Num):
+        text = node.text
+        try:
+            if text.isdigit():
+                if float(int(text)) == math.inf:
+                    raise OverflowError
+                return sp.Integer(int(text))
+            value = float(text)
+        except OverflowError:
+            value = math.inf
+        if not math.isfinite(value):
+            fail(node.span, f"number {text} does not fit a double")
+        if value != 0.0 and abs(value) < 2.2250738585072014e-308:
+            fail(node.span, f"number {text} is too small for a normal double")
+        return sp.Float(value)
+
+    def _name(self, node: ast.Name):
+        s = self.scope
+        if node.name in s.local:
+            return s.local[node.name]
+        if node.name == "t":
+            if s.params_only:
+                fail(node.span, "'t' cannot be used here: only parameters are allowed")
+            return TIME
+        if node.name in s.params:
+            if s.visible_params is not None and node.name not in s.visible_params:
+                fail(node.span, f"parameter '{node.name}' is used before it is defined",
+                     Note(s.params[node.name].span, f"'{node.name}' is defined here"))
+            self.refs.append((node.name, node.span))
+            return var(node.name)
+        if node.name in s.signals:
+            if s.params_only:
+                fail(node.span, f"'{node.name}' is a signal: only parameters are allowed here")
+            self.refs.append((node.name, node.span))
+            return var(node.name)
+        if node.name in s.elements:
+            fail(node.span, f"'{node.name}' is an element; name one of its variables "
+                            f"({node.name}.e, {node.name}.f, ...)")
+        fail(node.span, f"unknown name '{node.name}'")
+
+    def _field(self, node: ast.Field):
+        s = self.scope
+        if s.params_only:
+            fail(node.span, f"'{node.owner}.{node.field}' cannot be used here: only parameters "
+                            "are allowed")
+        decl = s.elements.get(node.owner)
+        if decl is None:
+            what = "a parameter" if node.owner in s.params else (
+                "a signal" if node.owner in s.signals else None)
+            if what:
+                fail(node.span, f"'{node.owner}' is {what} and has no field '{node.field}'")
+            fail(node.span, f"unknown element '{node.owner}'")
+        allowed = _fields_of(decl)
+        if node.field not in allowed:
+            options = ", ".join(f"{node.owner}.{f}" for f in allowed) or "none"
+            fail(node.span, f"'{node.owner}' ({decl.kind.name}) has no variable "
+                            f"'{node.field}' (it has: {options})")
+        if node.field == "residual":
+            fail(node.span, f"'{node.owner}.residual' can only be asked for as an output")
+        self.refs.append((node.owner, node.span))
+        return var(f"{node.owner}.{node.field}")
+
+    def _call(self, node: ast.Call):
+        if node.func == "diag":
+            fail(node.span, "diag(...) is not supported yet: vector bonds come in a later version")
+        if node.func not in FUNCTIONS:
+            fail(node.span, f"unknown function '{node.func}'")
+        func, arity = FUNCTIONS[node.func]
+        if arity is not None and len(node.args) != arity:
+            fail(node.span, f"{node.func}() takes {arity} argument{'s' * (arity > 1)}, "
+                            f"got {len(node.args)}")
+        if arity is None and len(node.args) < 2:
+            fail(node.span, f"{node.func}() takes at least 2 arguments")
+        return func(*[self._node(a) for a in node.args])
+
+    def _binop(self, node: ast.BinOp):
+        a, b = self._node(node.left), self._node(node.right)
+        if node.op == "/" and b == 0:
+            fail(node.right.span, "division by zero")
+        return {"+": lambda: a + b, "-": lambda: a - b, "*": lambda: a * b,
+                "/": lambda: a / b, "^": lambda: a ** b}[node.op]()
+
+    def _neg(self, node: ast.Neg):
+        return -self._node(node.operand)
+
+    def _vector(self, node):
+        fail(node.span, "vector expressions are not supported yet: vector bonds come in a "
+                        "later version")
+
+    _index = _vector
+
+
+def _fields_of(decl: ast.ElementDecl) -> tuple[str, ...]:
+    k = decl.kind.name
+    if k == "0":
+        base = ("e",)
+    elif k == "1":
+        base = ("f",)
+    elif k in KINDS and KINDS[k].ports == 1:
+        base = FIELDS_ONE_PORT + ((KINDS[k].state,) if KINDS[k].state else ())
+    else:
+        base = ()
+    if decl.constraint is not None:
+        base = base + ("lambda", "residual")
+    return base
+
+
+# ---------------------------------------------------------------- declarations
+
+def _collect_names(model: ast.Model, diags: Collector):
+    params, signals, elements, first = {}, {}, {}, {}
+    for d in model.decls:
+        if isinstance(d, (ast.ParamDecl, ast.SignalDecl, ast.IntegralDecl, ast.ElementDecl)):
+            name = d.name.name
+            if name == "t":
+                diags.error(d.name.span, "'t' is time and cannot be declared")
+                continue
+            if name in first:
+                diags.error(d.name.span, f"'{name}' is declared twice",
+                            Note(first[name], f"first declaration of '{name}'"))
+                continue
+            first[name] = d.name.span
+            table = (params if isinstance(d, ast.ParamDecl) else
+                     signals if isinstance(d, (ast.SignalDecl, ast.IntegralDecl)) else elements)
+            table[name] = d
+    return params, signals, elements
+
+
+def _model_decl(model: ast.Model, diags: Collector):
+    decls = [d for d in model.decls if isinstance(d, ast.ModelDecl)]
+    if not model.decls or not isinstance(model.decls[0], ast.ModelDecl):
+        span = model.decls[0].span if model.decls else Span(1, 1, 1, 2)
+        diags.error(span, "a model file must start with 'model NAME'")
+        diags.raise_if_errors()
+    for extra in decls[1:]:
+        diags.error(extra.span, "only one 'model' statement is allowed per file",
+                    Note(decls[0].span, "the model is declared here"))
+    return decls[0]
+
+
+def _guard(diags: Collector, fn, *args):
+    """Run fn; turn its ModelError into collected diagnostics (so one stage reports them all)."""
+    try:
+        return fn(*args)
+    except ModelError as exc:
+        diags.items.extend(exc.diagnostics)
+        return None
+
+
+def _parameters(params, scope: _Scope, diags: Collector):
+    out, seen = [], set()
+    for name, d in params.items():
+        scope.params_only, scope.visible_params = True, seen
+        e = _guard(diags, _ExprBuilder(scope, diags).build, d.expr)
+        seen.add(name)
+        if e is not None:
+            out.append(Parameter(name, e, d.doc, d.span))
+    scope.params_only, scope.visible_params = False, None
+    return out
+
+
+def _element(d: ast.ElementDecl, scope: _Scope, diags: Collector) -> Element | None:
+    kname = d.kind.name
+    if d.dim is not None and (d.dim.n != 1 or (d.dim.m not in (None, 1))):
+        fail(d.dim.span, f"vector bonds ({kname}[{d.dim.n}{'->' + str(d.dim.m) if d.dim.m else ''}]) "
+                         "are not supported yet: this version handles scalar bonds")
+    if d.is_junction:
+        constraint = _constraint(d, scope) if d.constraint is not None else None
+        return Element(d.name.name, kname, None, None, None, tuple(e.name for e in d.effects),
+                       constraint, d.doc, d.span, d.name.span)
+    if kname not in KINDS:
+        if kname.isdigit():
+            fail(d.kind.span, f"unknown junction kind '{kname}': junctions are 0 or 1")
+        fail(d.kind.span, f"unknown kind '{kname}' (known: {', '.join(KINDS)}, 0, 1)")
+    spec = KINDS[kname]
+    if len(d.args) != 1:
+        fail(d.span, f"{kname} takes one argument, got {len(d.args)}")
+    arg = d.args[0]
+    value = law = None
+    if arg.law is None:
+        value = _ExprBuilder(scope, diags).build(arg.expr)
+    else:
+        if arg.law.name not in spec.laws:
+            allowed = " or ".join(f"'{v} = ...'" for v in spec.laws) or "no law form"
+            fail(arg.law.span, f"{kname} law must be written {allowed}")
+        law = (arg.law.name, _with_own_vars(d, scope, diags, arg.expr))
+    init = _init(d, spec, scope, diags)
+    return Element(d.name.name, kname, value, law, init, tuple(e.name for e in d.effects),
+                   None, d.doc, d.span, d.name.span)
+
+
+def _with_own_vars(d, scope, diags, node) -> Expr:
+    own = {v: var(f"{d.name.name}.{v}") for v in ("e", "f")}
+    spec = KINDS[d.kind.name]
+    if spec.state:
+        own[spec.state] = var(f"{d.name.name}.{spec.state}")
+    scope.local = own
+    try:
+        return _ExprBuilder(scope, diags).build(node)
+    finally:
+        scope.local = {}
+
+
+def _init(d, spec, scope, diags):
+    if not d.inits:
+        return None
+    if len(d.inits) > 1:
+        fail(d.inits[1].span, f"'{d.name.name}' has more than one init clause")
+    clause = d.inits[0]
+    allowed = (spec.state, "f" if spec.state == "p" else "e") if spec.state else ()
+    if clause.var.name not in allowed:
+        if not allowed:
+            fail(clause.span, f"{d.kind.name} has no state to initialise")
+        fail(clause.var.span, f"{d.kind.name} is initialised by 'init {allowed[0]} = ...' or "
+                              f"'init {allowed[1]} = ...'")
+    scope.params_only = True
+    try:
+        return (clause.var.name, _ExprBuilder(scope, diags).build(clause.expr))
+    finally:
+        scope.params_only = False
+
+
+def _constraint(d: ast.ElementDecl, scope) -> Constraint:
+    c = d.constraint
+    kind = c.kind.name if c.kind else None
+    annotation = None
+    if c.annotation is not None:
+        which, node, span = c.annotation
+        if kind == "nonholonomic":
+            fail(span, f"'{which} = ...' belongs to holonomic constraints only")
+        if which == "init":
+            scope.params_only = True
+        try:
+            annotation = (which, _ExprBuilder(scope, None).build(node))
+        finally:
+            scope.params_only = False
+    corr = c.corrector
+    name, gains, cspan = "none", (), None
+    if corr is not None:
+        name, cspan = corr.kind, corr.span
+        if name == "pid" and kind == "nonholonomic":
+            fail(corr.span, "a nonholonomic constraint takes a pd(gamma) corrector, not pid")
+        if name == "pd" and kind == "holonomic":
+            fail(corr.span, "a holonomic constraint takes a pid(alpha, beta) corrector, not pd")
+        gains = tuple(_ExprBuilder(scope, None).build(a) for a in corr.args)
+    return Constraint(kind, annotation, name, gains, cspan, c.span)
+
+
+def _signal(d, scope, diags) -> Signal:
+    if d.dim is not None and d.dim.n != 1:
+        fail(d.dim.span, "vector signals are not supported yet: this version handles scalars")
+    expr = _ExprBuilder(scope, diags).build(d.expr)
+    init = None
+    if isinstance(d, ast.IntegralDecl):
+        scope.params_only = True
+        try:
+            init = _ExprBuilder(scope, diags).build(d.init)
+        finally:
+            scope.params_only = False
+    return Signal(d.name.name, expr, init, d.span)
+
+
+def _bonds(model, elements, params, signals, diags: Collector):
+    bonds, seen = [], {}
+    for chain in (d for d in model.decls if isinstance(d, ast.BondChain)):
+        ok = True
+        for node in chain.nodes:
+            if node.name not in elements:
+                what = ("a parameter" if node.name in params else
+                        "a signal" if node.name in signals else None)
+                diags.error(node.span, f"bond to '{node.name}', which is {what}, not an element"
+                            if what else f"bond to undeclared node '{node.name}'")
+                ok = False
+        if not ok:
+            continue
+        for a, b in zip(chain.nodes, chain.nodes[1:]):
+            if a.name == b.name:
+                diags.error(a.span.join(b.span), f"bond from '{a.name}' to itself")
+                continue
+            key = f"{a.name}->{b.name}"
+            seen[key] = seen.get(key, 0) + 1
+            label = key if seen[key] == 1 else f"{key}#{seen[key]}"
+            bonds.append(Bond(a.name, b.name, label, a.span.join(b.span)))
+    return bonds
+
+
+def _check_ports(elements: list[Element], bonds: list[Bond], diags: Collector):
+    for el in elements:
+        ins = [b for b in bonds if b.dst == el.name]
+        outs = [b for b in bonds if b.src == el.name]
+        if el.is_junction:
+            if not ins and not outs:
+                diags.warning(el.name_span, f"junction '{el.name}' has no bonds")
+            continue
+        spec = el.spec
+        if spec.ports == 2 and (len(ins) != 1 or len(outs) != 1):
+            diags.error(el.name_span, f"two-port '{el.name}' ({el.kind}) needs exactly one bond in "
+                                      f"and one bond out; it has {len(ins)} in and {len(outs)} out",
+                        *[Note(b.span, "bond here") for b in ins + outs])
+        elif spec.ports == 1 and len(ins) + len(outs) != 1:
+            diags.error(el.name_span, f"'{el.name}' ({el.kind}) needs exactly one bond; it has "
+                                      f"{len(ins) + len(outs)}",
+                        *[Note(b.span, "bond here") for b in ins + outs])
+        elif spec.ports == 1 and outs and spec.role in ("storage", "resistor"):
+            diags.warning(outs[0].span, f"the bond of '{el.name}' ({el.kind}) points away from "
+                                        "it: power flows out of a passive element")
+
+
+def _scene(d: ast.SceneDecl, scope: _Scope, diags: Collector) -> Scene:
+    effects = effects_span = outputs = time = solver = None
+    sets = []
+    scope.params_only = True
+    try:
+        for s in d.stmts:
+            if isinstance(s, ast.SceneEffects):
+                effects = () if s.names is None else tuple(n.name for n in s.names)
+                effects_span = s.span
+            elif isinstance(s, ast.SceneOutputs):
+                outputs = s.refs
+            elif isinstance(s, ast.SceneTime):
+                b = _ExprBuilder(scope, diags)
+                time = (b.build(s.start), b.build(s.stop),
+                        b.build(s.every) if s.every is not None else None)
+            elif isinstance(s, ast.SceneSolver):
+                opts = tuple((k.name, _ExprBuilder(scope, diags).build(v)) for k, v in s.options)
+                solver = (s.name.name, opts, s.span)
+            elif isinstance(s, ast.SceneSet):
+                if s.name.name not in scope.params:
+                    fail(s.name.span, f"'set' names a parameter; '{s.name.name}' is not one")
+                sets.append((s.name.name, _ExprBuilder(scope, diags).build(s.expr), s.span))
+    finally:
+        scope.params_only = False
+    return Scene(d.name.name, d.doc, effects, effects_span, outputs, time, solver, tuple(sets),
+                 d.span)
+
+
+def resolve(model: ast.Model) -> Graph:
+    """Check names, kinds and bonds; build every expression; collect all errors, then stop."""
+    diags = Collector()
+    mdecl = _model_decl(model, diags)
+    params, signals, elements = _collect_names(model, diags)
+    scope = _Scope(params, signals, elements)
+    parameters = _parameters(params, scope, diags)
+    els = [e for e in (_guard(diags, _element, d, scope, diags) for d in elements.values()) if e]
+    sigs = [s for s in (_guard(diags, _signal, d, scope, diags) for d in signals.values()) if s]
+    bonds = _bonds(model, elements, params, signals, diags)
+    _check_ports(els, bonds, diags)
+    scenes, scene_names = [], {}
+    for d in (d for d in model.decls if isinstance(d, ast.SceneDecl)):
+        if d.name.name in scene_names:
+            diags.error(d.name.span, f"scene '{d.name.name}' is declared twice",
+                        Note(scene_names[d.name.name], "first declaration"))
+            continue
+        scene_names[d.name.name] = d.name.span
+        sc = _guard(diags, _scene, d, scope, diags)
+        if sc:
+            scenes.append(sc)
+    diags.raise_if_errors()
+    return Graph(mdecl.name.name, mdecl.doc, model.path, tuple(parameters), tuple(els),
+                 tuple(bonds), tuple(sigs), tuple(scenes), diags.warnings)
