@@ -1,2 +1,11 @@
-"""bgc: a compiler for bond-graph models."""
+"""bgc: a compiler for bond-graph models.
+
+    import bgc
+    t, Y, names = bgc.simulate("models/pendulum.bg", scene="swing")
+"""
+from .api import (BgcModelError, Compiled, SimulationFailed, build, check, compile, equations,
+                  load, simulate)
+
 __version__ = "0.1.0"
+__all__ = ["BgcModelError", "Compiled", "SimulationFailed", "build", "check", "compile",
+           "equations", "load", "simulate"]

@@ -88,3 +88,94 @@ def make_block(exprs, prefix: str = "w") -> Block:
         return Block((), ())
     temps, reduced = sp.cse(exprs, symbols=sp.numbered_symbols(prefix), order="none")
     return Block(tuple(temps), tuple(reduced))
+
+
+# ---------------------------------------------------------------- lowering (Reduced -> CodeModel)
+
+def _index_map(reduced):
+    from .resolve import TIME, var
+
+    es = reduced.system
+    sub = {TIME: T}
+    for i, st in enumerate(reduced.states):
+        sub[st.symbol] = X[i]
+    for j, prm in enumerate(es.graph.parameters):
+        sub[var(prm.name)] = P[j]
+    return sub
+
+
+def _lowered(expr, sub, what: str):
+    from .diagnostics import fail
+
+    out = expr.xreplace(sub)
+    stray = [s for s in out.free_symbols
+             if isinstance(s, sp.Symbol) and s not in (T, X.label, P.label)]
+    stray += [s for s in out.atoms(sp.Indexed) if s.base not in (X, P)]
+    if stray:  # a state that pruning removed, or an unknown that survived: a bgc bug
+        fail(None, f"internal error: {what} still refers to {sorted(map(str, stray))}")
+    return out
+
+
+def _init_exprs(reduced, sub):
+    from .resolve import TIME
+
+    es = reduced.system
+    t0 = sp.Float(es.settings.t0)
+    out = []
+    for st in reduced.states:
+        e = st.init.xreplace({TIME: t0})
+        out.append(_lowered(e, sub, f"the initial value of {st.name}"))
+    return out
+
+
+def _params(reduced, sub):
+    es = reduced.system
+    sets = dict(es.settings.sets)
+    return tuple(Param(p.name, _lowered(sets.get(p.name, p.expr).value, sub, f"parameter {p.name}"))
+                 for p in es.graph.parameters)
+
+
+def _constraint_rows(reduced, sub):
+    from .reduce import constraint_rows, scale_of
+
+    kept = {st.symbol for st in reduced.states}
+    all_states = {st.symbol for st in reduced.system.states}
+    rows = []
+    for junction, level, expr in constraint_rows(reduced):
+        if (expr.free_symbols & all_states) - kept:
+            continue  # a constraint on states that this scene does not integrate
+        rows.append((ConstraintRow(junction, level), _lowered(expr, sub, f"constraint {junction}"),
+                     _lowered(scale_of(expr), sub, f"constraint {junction}")))
+    return rows
+
+
+def _jacobian(rows, n):
+    return [sp.diff(r, X[i]) for r in rows for i in range(n)]
+
+
+def lower(reduced, name_override: str | None = None) -> CodeModel:
+    """The code model of a reduced system: index maps, CSE'd blocks, constraint rows."""
+    es = reduced.system
+    sub = _index_map(reduced)
+    n = len(reduced.states)
+    rows = _constraint_rows(reduced, sub)
+    pos = [r for c, r, _ in rows if c.level == "position"]
+    vel = [r for c, r, _ in rows if c.level == "velocity"]
+    in_position = set().union(*[r.atoms(sp.Indexed) for r in pos]) if pos else set()
+    s = es.settings
+    return CodeModel(
+        name=name_override or es.graph.name,
+        states=tuple(st.name for st in reduced.states),
+        params=_params(reduced, sub),
+        outputs=tuple(o.name for o in reduced.outputs),
+        init=make_block(_init_exprs(reduced, sub)),
+        rhs=make_block([_lowered(st.rhs, sub, f"d({st.name})/dt") for st in reduced.states]),
+        out=make_block([_lowered(o.expr, sub, f"output {o.name}") for o in reduced.outputs]),
+        constraints=tuple(c for c, _, _ in rows),
+        residual=make_block([r for _, r, _ in rows]),
+        scale=make_block([sc for _, _, sc in rows]),
+        position_jac=make_block(_jacobian(pos, n)),
+        velocity_jac=make_block(_jacobian(vel, n)),
+        velocity_movable=tuple(X[i] not in in_position for i in range(n)),
+        scene=SceneSettings(s.t0, s.t_end, s.dt, s.solver, s.rtol, s.atol, s.step),
+    )
