@@ -54,15 +54,17 @@ class _Assigner:
     def _conflict(self, i, origin, at):
         self.failed = True
         first = self.origin[i]
-        el = self.elements[at]
-        where = f"junction '{at}'" if el.is_junction else f"'{at}'"
-        kind = "effort" if el.kind == "0" else "flow" if el.kind == "1" else "causality"
+        b = self.g.bonds[i]
+        junction = next((n for n in (b.dst, b.src) if self.elements[n].is_junction), at)
+        el = self.elements[junction]
+        where = f"junction '{junction}'" if el.is_junction else f"'{junction}'"
+        what = "its effort" if el.kind == "0" else "its flow" if el.kind == "1" else "causality"
         self.diags.error(self.elements[origin].name_span,
-                         f"causal conflict at {where}: '{origin}' and '{first}' both impose the "
-                         f"{kind}" if first != origin else
+                         f"causal conflict at {where}: '{origin}' and '{first}' both impose {what}"
+                         if first != origin else
                          f"causal conflict at {where}: '{origin}' imposes contradictory causality",
                          Note(self.elements[first].name_span, f"'{first}' is declared here"),
-                         Note(self.g.bonds[i].span, "on this bond"))
+                         Note(b.span, "on this bond"))
 
     def propagate(self, node: str, origin: str):
         el = self.elements[node]

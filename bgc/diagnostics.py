@@ -81,14 +81,25 @@ class Collector:
             raise ModelError(self.errors)
 
 
+EXCERPT_WIDTH = 100  # longer source lines are shown as a window around the column
+
+
 def _excerpt(source_lines, span: Span) -> list[str]:
     if span is None or not (1 <= span.line <= len(source_lines)):
         return []
     text = source_lines[span.line - 1].rstrip("\n").expandtabs(1)
-    gutter = f"{span.line:>4} | "
     end_col = span.end_col if span.end_line == span.line else len(text) + 1
-    width = max(1, end_col - span.col)
-    caret = " " * (len(gutter) - 2) + "| " + " " * (span.col - 1) + "^" + "~" * (width - 1)
+    start, col = 0, span.col
+    if len(text) > EXCERPT_WIDTH:
+        start = max(0, min(span.col - 1 - EXCERPT_WIDTH // 3, len(text) - EXCERPT_WIDTH))
+        shown = text[start:start + EXCERPT_WIDTH]
+        prefix = "..." if start > 0 else ""
+        text = prefix + shown + ("..." if start + EXCERPT_WIDTH < len(text) else "")
+        col = span.col - start + len(prefix)
+        end_col = min(end_col - start + len(prefix), len(prefix) + len(shown) + 1)
+    gutter = f"{span.line:>4} | "
+    width = max(1, end_col - col)
+    caret = " " * (len(gutter) - 2) + "| " + " " * (col - 1) + "^" + "~" * (width - 1)
     return [gutter + text, caret]
 
 

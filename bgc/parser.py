@@ -7,7 +7,7 @@ from lark import Lark, Token, Transformer_NonRecursive, Tree, v_args
 from lark.exceptions import UnexpectedCharacters, UnexpectedEOF, UnexpectedInput, UnexpectedToken
 
 from . import ast
-from .diagnostics import Span, fail
+from .diagnostics import Note, Span, fail
 from .resources import resource_dir
 
 MAX_SOURCE_BYTES = 1 << 20  # 1 MiB: larger input is refused, not attempted
@@ -225,7 +225,7 @@ def _expected(exc: UnexpectedInput) -> str:
     names = [n for n in names if not n.startswith("'__") and not n.startswith("__")]
     if not names:
         return ""
-    if len(names) > 6:
+    if len(names) > 10:
         return ""
     return ", expected " + (names[0] if len(names) == 1 else "one of " + ", ".join(names))
 
@@ -236,6 +236,32 @@ def _describe(tok: Token) -> str:
     if tok.type == "_NL":
         return "end of line"
     return f"'{tok}'"
+
+
+def _unclosed_bracket(source: str, line: int, col: int) -> Span | None:
+    """The innermost ( or [ still open before (line, col), skipping strings and comments."""
+    stack, ln, cl, i = [], 1, 1, 0
+    in_string = in_comment = False
+    while i < len(source) and (ln, cl) < (line, col):
+        ch = source[i]
+        if in_comment:
+            in_comment = ch != "\n"
+        elif in_string:
+            if ch == "\\":
+                i, cl = i + 1, cl + 1
+            elif ch == '"':
+                in_string = False
+        elif ch == "#":
+            in_comment = True
+        elif ch == '"':
+            in_string = True
+        elif ch in "([":
+            stack.append(Span(ln, cl, ln, cl + 1))
+        elif ch in ")]" and stack:
+            stack.pop()
+        ln, cl = (ln + 1, 1) if ch == "\n" else (ln, cl + 1)
+        i += 1
+    return stack[-1] if stack else None
 
 
 def _syntax_error(exc: UnexpectedInput, source: str):
@@ -254,7 +280,10 @@ def _syntax_error(exc: UnexpectedInput, source: str):
     else:
         msg = "syntax error: unexpected end of file"
         width = 1
-    fail(Span(line, col, line, col + width), msg)
+    opened = _unclosed_bracket(source, line, col)
+    notes = [Note(opened, "this bracket is not closed (a newline inside brackets does not end "
+                          "a statement)")] if opened else []
+    fail(Span(line, col, line, col + width), msg, *notes)
 
 
 def decode(data: bytes) -> str:

@@ -255,7 +255,8 @@ def _alias_chain(local, symbols):
 
 
 def _integrable(coeffs, a0) -> bool:
-    comps = [(q, a) for q, a in coeffs.items() if a != 0] + [(TIME, a0)]
+    """Closed 1-form test over (q, t): d a_i / d z_j == d a_j / d z_i for every pair."""
+    comps = list(coeffs.items()) + [(TIME, a0)]
     zs = [q for q, _ in comps]
     for i, (qi, ai) in enumerate(comps):
         for qj, aj in comps[i + 1:]:
@@ -265,7 +266,7 @@ def _integrable(coeffs, a0) -> bool:
 
 
 def _potential(coeffs, a0, span, name):
-    comps = [(q, a) for q, a in coeffs.items() if a != 0] + [(TIME, a0)]
+    comps = list(coeffs.items()) + [(TIME, a0)]
     P = sp.Integer(0)
     for z, a in comps:
         rest = sp.simplify(a - sp.diff(P, z))

@@ -4,8 +4,15 @@ from __future__ import annotations
 import sympy as sp
 
 
+class _Printer(sp.printing.str.StrPrinter):
+    """sstr, with floats as the shortest text that reads back as the same double."""
+
+    def _print_Float(self, expr):
+        return repr(float(expr))
+
+
 def _s(expr) -> str:
-    return sp.sstr(expr, order="lex")
+    return _Printer({"order": "lex"}).doprint(expr)
 
 
 def _header(compiled) -> list[str]:

@@ -121,11 +121,25 @@ def _solver(scene_solver, params) -> tuple:
     return name, values.get("rtol", rtol), values.get("atol", atol), values.get("step")
 
 
+def _check_laws(graph: R.Graph, params: dict):
+    """A storage law singular at the given parameter values (I(0), C(0)) is a model error."""
+    diags = Collector()
+    for el in graph.elements:
+        if el.value is None or el.is_junction or el.spec.role != "storage":
+            continue
+        v = el.value.value.xreplace(params)
+        if v.is_number and float(v) == 0.0:
+            diags.error(el.value.span, f"{el.kind}({el.value.value}) of '{el.name}' is singular: "
+                                       "its value is 0 at the given parameters")
+    diags.raise_if_errors()
+
+
 def apply_scene(graph: R.Graph, name: str | None) -> tuple[R.Graph, Settings]:
     """The graph as scene `name` sees it (None: the default scene, all effects, every state)."""
     if name is None:
         t0, t1, dt = DEFAULT_TIME
         solver, rtol, atol = DEFAULT_SOLVER
+        _check_laws(graph, parameter_values(graph))
         return graph, Settings(None, None, t0, t1, dt, solver, rtol, atol, None, ())
     scene = next((s for s in graph.scenes if s.name == name), None)
     if scene is None:
@@ -133,6 +147,7 @@ def apply_scene(graph: R.Graph, name: str | None) -> tuple[R.Graph, Settings]:
         fail(None, f"no scene named '{name}' in model '{graph.name}' (scenes: {known})")
     g = _apply_effects(graph, scene.effects)
     params = parameter_values(g, tuple((n, e) for n, e, _ in scene.sets))
+    _check_laws(g, params)
     t0, t1, dt = DEFAULT_TIME
     if scene.time is not None:
         t0, t1 = _number(scene.time[0], params), _number(scene.time[1], params)

@@ -1,0 +1,298 @@
+"""SymPy code printers for the generated C and Python: one expression to one line of code.
+
+Both printers accept exactly the expressions the code model allows (see bgc.codemodel) and
+refuse anything else with `UnsupportedExpressionError` before printing a character, so that
+broken code is never emitted.  They share the arithmetic layout (`_ArithmeticPrinting`): terms,
+factors and powers come out in the same order with the same operations in both languages, so
+the C program and the Python module compute bit-identical values wherever they call the same
+libm functions.
+
+Layout decisions (identical in C and Python):
+  - every number prints as a double literal with 17 significant digits ("2.0", "0.33333333333333331");
+  - x**n for a plain variable and 2 <= n <= 4 prints as x*x*...; (expr)**2 as a square helper;
+    x**(1/2) as sqrt(x); x**-n as 1.0/(...); other powers as pow();
+  - a + (-b) prints as a - b, and factors with negative rational exponents go below one "/".
+"""
+from __future__ import annotations
+
+import re
+
+import sympy as sp
+from sympy.printing.c import C99CodePrinter
+from sympy.printing.pycode import PythonCodePrinter
+
+from bgc.codemodel import P, T, X
+
+FUNCTIONS = ("sin", "cos", "tan", "asin", "acos", "atan", "atan2", "sinh", "cosh", "tanh",
+             "exp", "log", "sqrt", "Abs", "sign", "Min", "Max", "Heaviside")
+_CLASSES = tuple(getattr(sp, name) for name in FUNCTIONS if name != "sqrt")  # sqrt is a Pow
+_ARITY = {"atan2": (2, 2), "Min": (2, None), "Max": (2, None), "Heaviside": (1, 2)}
+_TEMP = re.compile(r"w[0-9]+\Z")
+MAX_EXPANDED_POWER = 4  # x**n for 2 <= n <= 4 prints as x*x*...
+
+PREC_ADD, PREC_MUL, PREC_ATOM = 1, 2, 3
+
+
+class UnsupportedExpressionError(ValueError):
+    """An expression outside what the code model allows (a bug in the stage that built it)."""
+
+
+def float_literal(value: float) -> str:
+    """A double literal with 17 significant digits, valid in both C and Python."""
+    value = float(value)
+    if value != value or value in (float("inf"), float("-inf")):
+        raise UnsupportedExpressionError(f"non-finite constant {value!r}")
+    text = "%.17g" % value
+    if not any(c in text for c in ".en"):
+        text += ".0"
+    return text
+
+
+# ---------------------------------------------------------------- validation
+
+
+def check_expression(expr: sp.Basic, n_states: int, n_params: int) -> None:
+    """Raise UnsupportedExpressionError unless `expr` uses only what the code model allows."""
+    if isinstance(expr, sp.Indexed):
+        _check_indexed(expr, n_states, n_params)
+    elif isinstance(expr, sp.Symbol):
+        if expr != T and not _TEMP.match(expr.name):
+            raise UnsupportedExpressionError(f"unexpected symbol {expr.name!r}")
+    elif isinstance(expr, (sp.Integer, sp.Rational, sp.Float)) or expr in (sp.pi, sp.E):
+        if isinstance(expr, sp.Float):
+            float_literal(float(expr))
+    elif isinstance(expr, (sp.Add, sp.Mul, sp.Pow)):
+        for arg in expr.args:
+            check_expression(arg, n_states, n_params)
+    elif type(expr) in _CLASSES:
+        _check_arity(expr)
+        for arg in expr.args:
+            check_expression(arg, n_states, n_params)
+    else:
+        raise UnsupportedExpressionError(f"cannot print {type(expr).__name__}: {expr}")
+
+
+def _check_indexed(expr: sp.Indexed, n_states: int, n_params: int) -> None:
+    sizes = {X: n_states, P: n_params}
+    if expr.base not in sizes or len(expr.indices) != 1:
+        raise UnsupportedExpressionError(f"unexpected indexed variable {expr}")
+    index = expr.indices[0]
+    if not isinstance(index, sp.Integer) or not 0 <= int(index) < sizes[expr.base]:
+        raise UnsupportedExpressionError(f"index out of range: {expr}")
+
+
+def _check_arity(expr: sp.Function) -> None:
+    low, high = _ARITY.get(type(expr).__name__, (1, 1))
+    n = len(expr.args)
+    if n < low or (high is not None and n > high):
+        raise UnsupportedExpressionError(f"wrong number of arguments: {expr}")
+
+
+# ---------------------------------------------------------------- shared layout
+
+
+def _is_simple(expr: sp.Basic) -> bool:
+    return isinstance(expr, (sp.Symbol, sp.Indexed))
+
+
+def _split_coefficient(coeff: sp.Number) -> tuple[list, list]:
+    """A positive coefficient as (numerator, denominator) factors: p/q with q not a power of
+    two divides by q, which is more accurate than multiplying by the rounded 1/q."""
+    if isinstance(coeff, sp.Rational) and coeff.q & (coeff.q - 1):
+        return ([] if coeff.p == 1 else [sp.Integer(coeff.p)]), [sp.Integer(coeff.q)]
+    return ([] if coeff == 1 else [coeff]), []
+
+
+class _ArithmeticPrinting:
+    """The language-independent part; subclasses supply names, indexing, squares and pow."""
+
+    # set by subclasses
+    FUNCTION_NAMES: dict[str, str] = {}
+
+    def __init__(self, n_states: int, n_params: int, settings=None):
+        super().__init__(dict(settings or {}, strict=True))
+        self._n_states = n_states
+        self._n_params = n_params
+
+    def doprint(self, expr, assign_to=None):
+        if assign_to is not None:
+            raise TypeError("assign_to is not supported; the templates write assignments")
+        expr = sp.sympify(expr)
+        check_expression(expr, self._n_states, self._n_params)
+        return self._print(expr)
+
+    def _print(self, expr, **kwargs):
+        if isinstance(expr, sp.Indexed):
+            return self._print_index(expr.base, int(expr.indices[0]))
+        if isinstance(expr, sp.Symbol):
+            return expr.name
+        if isinstance(expr, sp.Add):
+            return self._print_sum(expr)
+        if isinstance(expr, sp.Mul):
+            return self._print_product(expr)
+        if isinstance(expr, sp.Pow):
+            return self._print_power(expr)
+        if type(expr) in _CLASSES:
+            return self._print_call(expr)
+        if isinstance(expr, sp.Rational):
+            return float_literal(int(expr.p) / int(expr.q))
+        if isinstance(expr, sp.Float) or expr in (sp.pi, sp.E):
+            return float_literal(float(expr))
+        raise UnsupportedExpressionError(f"cannot print {type(expr).__name__}: {expr}")
+
+    # -- precedence of what _print produces
+
+    def _precedence(self, expr: sp.Basic) -> int:
+        if isinstance(expr, sp.Add):
+            return PREC_ADD
+        if isinstance(expr, sp.Mul):
+            return PREC_MUL
+        if isinstance(expr, sp.Pow):
+            return self._power_precedence(expr)
+        return PREC_ATOM
+
+    def _power_precedence(self, expr: sp.Pow) -> int:
+        base, exp = expr.base, expr.exp
+        if exp == 1:
+            return self._precedence(base)
+        if exp == sp.S.Half:
+            return PREC_ATOM
+        if exp.is_Rational and exp.is_negative:
+            return PREC_MUL
+        if exp.is_Integer and _is_simple(base) and int(exp) <= MAX_EXPANDED_POWER:
+            return PREC_MUL
+        return PREC_ATOM
+
+    def _operand(self, expr: sp.Basic, level: int) -> str:
+        text = self._print(expr)
+        if self._precedence(expr) < level or text.startswith("-"):
+            return f"({text})"
+        return text
+
+    # -- arithmetic
+
+    def _print_sum(self, expr: sp.Add) -> str:
+        terms = expr.as_ordered_terms()
+        parts = [self._print(terms[0])]
+        for term in terms[1:]:
+            text = self._print(term)
+            parts.append(f" - {text[1:]}" if text.startswith("-") else f" + {text}")
+        return "".join(parts)
+
+    def _print_product(self, expr: sp.Mul) -> str:
+        coeff, rest = expr.as_coeff_Mul()
+        sign = "-" if coeff.is_negative else ""
+        coeff = -coeff if coeff.is_negative else coeff
+        numer, denom = _split_coefficient(coeff)
+        for factor in rest.as_ordered_factors():
+            if factor.is_Pow and factor.exp.is_Rational and factor.exp.is_negative:
+                denom.append(sp.Pow(factor.base, -factor.exp, evaluate=False))
+            else:
+                numer.append(factor)
+        text = "*".join(self._operand(f, PREC_MUL) for f in numer) if numer else "1.0"
+        if len(denom) == 1:
+            text += "/" + self._operand(denom[0], PREC_ATOM)
+        elif denom:
+            text += "/(" + "*".join(self._operand(f, PREC_MUL) for f in denom) + ")"
+        return sign + text
+
+    def _print_power(self, expr: sp.Pow) -> str:
+        base, exp = expr.base, expr.exp
+        if exp == 1:
+            return self._print(base)
+        if exp == sp.S.Half:
+            return f"{self.FUNCTION_NAMES['sqrt']}({self._print(base)})"
+        if exp.is_Rational and exp.is_negative:
+            return "1.0/" + self._operand(sp.Pow(base, -exp, evaluate=False), PREC_ATOM)
+        if exp.is_Integer and _is_simple(base) and int(exp) <= MAX_EXPANDED_POWER:
+            return "*".join([self._print(base)] * int(exp))
+        if exp == 2:
+            return self._print_square(base)
+        return self._print_pow_call(self._print(base), self._print(exp))
+
+    # -- functions
+
+    def _print_call(self, expr: sp.Function) -> str:
+        name = type(expr).__name__
+        args = [self._print(a) for a in expr.args]
+        if name == "Heaviside":
+            half = args[1] if len(args) > 1 else float_literal(0.5)
+            return f"{self.FUNCTION_NAMES[name]}({args[0]}, {half})"
+        if name in ("Min", "Max"):
+            return self._print_extremum(self.FUNCTION_NAMES[name], args)
+        return f"{self.FUNCTION_NAMES[name]}({', '.join(args)})"
+
+    def _print_extremum(self, func: str, args: list[str]) -> str:
+        text = args[0]
+        for arg in args[1:]:
+            text = f"{func}({text}, {arg})"
+        return text
+
+    # -- language hooks
+
+    def _print_index(self, base: sp.IndexedBase, index: int) -> str:
+        raise NotImplementedError
+
+    def _print_square(self, base: sp.Basic) -> str:
+        raise NotImplementedError
+
+    def _print_pow_call(self, base: str, exp: str) -> str:
+        raise NotImplementedError
+
+
+# ---------------------------------------------------------------- C
+
+
+class CPrinter(_ArithmeticPrinting, C99CodePrinter):
+    """C99: x[i], parameters as struct fields p-><field>, helpers bgc_sq/bgc_sign/... ."""
+
+    FUNCTION_NAMES = {**{f: f for f in FUNCTIONS}, "Abs": "fabs", "sign": "bgc_sign",
+                      "Min": "bgc_min", "Max": "bgc_max", "Heaviside": "bgc_heaviside"}
+
+    def __init__(self, n_states: int, param_fields: tuple[str, ...]):
+        super().__init__(n_states, len(param_fields))
+        self._param_fields = tuple(param_fields)
+
+    def _print_index(self, base, index):
+        if base == X:
+            return f"x[{index}]"
+        return f"p->{self._param_fields[index]}"
+
+    def _print_square(self, base):
+        return f"bgc_sq({self._print(base)})"
+
+    def _print_pow_call(self, base, exp):
+        return f"pow({base}, {exp})"
+
+
+# ---------------------------------------------------------------- Python
+
+
+_PY_FAST = {**{f: f"math.{f}" for f in FUNCTIONS}, "Abs": "abs", "sign": "_sign",
+            "Min": "min", "Max": "max", "Heaviside": "_heaviside"}
+_PY_IEEE = {**_PY_FAST, **{f: f"numpy.{f}" for f in ("sin", "cos", "tan", "sinh", "cosh",
+                                                      "tanh", "exp", "log", "sqrt")},
+            "asin": "numpy.arcsin", "acos": "numpy.arccos", "atan": "numpy.arctan",
+            "atan2": "numpy.arctan2"}
+
+
+class PythonPrinter(_ArithmeticPrinting, PythonCodePrinter):
+    """Python: x[i], p[j]; `ieee=False` uses math (fast, raises on domain errors), `ieee=True`
+    numpy on numpy.float64 values (inf/nan like C, for the fallback path)."""
+
+    def __init__(self, n_states: int, n_params: int, ieee: bool = False):
+        super().__init__(n_states, n_params)
+        self._ieee = ieee
+        self.FUNCTION_NAMES = _PY_IEEE if ieee else _PY_FAST
+
+    def _print_index(self, base, index):
+        return f"{base.name}[{index}]"
+
+    def _print_extremum(self, func, args):
+        return f"{func}({', '.join(args)})"  # min(a, b, c) == min(min(a, b), c) exactly
+
+    def _print_square(self, base):
+        return f"({self._print(base)})**2"
+
+    def _print_pow_call(self, base, exp):
+        return f"{'numpy.power' if self._ieee else 'math.pow'}({base}, {exp})"
