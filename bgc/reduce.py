@@ -16,6 +16,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import sympy as sp
+from sympy.solvers.solveset import NonlinearError
 
 from .diagnostics import Collector, ModelError, Note, Span, fail
 from .equations import ConstraintEq, EquationSystem
@@ -38,6 +39,7 @@ class ConstraintResult:
     kind: str  # detected or declared: holonomic | nonholonomic
     detected: bool  # kind found by the integrability test (not declared)
     corrector: str
+    gains: tuple
     multiplier: sp.Expr  # explicit, in states, parameters and t
     balance: sp.Expr  # explicit: dPhi/dt (holonomic) or Phi (nonholonomic)
     phi: sp.Expr | None  # holonomic Phi(q, t)
@@ -119,7 +121,7 @@ def _components(targets, deps):
 def _solve_linear(eqs, unknowns, what: str, span, names):
     try:
         A, b = sp.linear_eq_to_matrix(eqs, unknowns)
-    except sp.solvers.solveset.NonlinearError:
+    except NonlinearError:
         return None
     if len(unknowns) == 1:
         a = sp.cancel(A[0, 0])
@@ -155,23 +157,57 @@ def _ordered(es: EquationSystem):
     return local, order, loops
 
 
+def _tear(comp, assign):
+    """Substitute loop variables into each other until only tear variables remain.
+
+    Returns (tears, equations over the tears, eliminated [(v, expr)] in elimination order)."""
+    defs = {v: assign[v].expr for v in comp}
+    eliminated = []
+    for v in comp:
+        expr = defs[v]
+        if v in expr.free_symbols:
+            continue  # v refers to itself by now: a tear variable
+        del defs[v]
+        for u in defs:
+            if v in defs[u].free_symbols:
+                defs[u] = defs[u].xreplace({v: expr})
+        eliminated = [(w, e.xreplace({v: expr}) if v in e.free_symbols else e)
+                      for w, e in eliminated]
+        eliminated.append((v, expr))
+    tears = [v for v in comp if v in defs]
+    return tears, [v - defs[v] for v in tears], eliminated
+
+
 def _solve_loop(comp, assign, local) -> Loop:
     elements = tuple(dict.fromkeys(assign[v].origin for v in comp))
     names = ", ".join(f"'{e}'" for e in elements)
     span = assign[comp[0]].span
-    eqs = [v - assign[v].expr for v in comp]
-    sol = _solve_linear(eqs, comp, f"the algebraic loop through {names}", span, names)
+    tears, eqs, eliminated = _tear(comp, assign)
+    sol = _solve_linear(eqs, tears, f"the algebraic loop through {names}", span, names)
     linear = sol is not None
     if sol is None:
-        sols = sp.solve(eqs, comp, dict=True)
-        if len(sols) != 1 or any(v not in sols[0] for v in comp):
-            fail(span, f"nonlinear algebraic loop through {names}: SymPy finds "
-                       f"{len(sols)} solutions; break the loop or write the laws the other way",
-                 *[Note(assign[v].span, f"'{v}' is computed here") for v in comp[1:2]])
-        sol = [sols[0][v] for v in comp]
-    for v, s in zip(comp, sol):
-        local[v] = sp.cancel(s) if sp.count_ops(s) < 400 else s
+        sol = _solve_nonlinear(eqs, tears, names, span)
+    solved = {v: (sp.cancel(s) if sp.count_ops(s) < 400 else s) for v, s in zip(tears, sol)}
+    for v, expr in eliminated:
+        solved[v] = expr.xreplace(solved)
+    for v in comp:
+        local[v] = solved[v]
     return Loop(tuple(str(v) for v in comp), elements, linear)
+
+
+def _solve_nonlinear(eqs, tears, names, span):
+    # SymPy is tried on small polynomial systems only; transcendental loops would grind for
+    # minutes to end in no closed form anyway.
+    polynomial = all(e.is_polynomial(*tears) for e in eqs)
+    try:
+        sols = sp.solve(eqs, tears, dict=True) if polynomial and len(tears) <= 3 else []
+    except NotImplementedError:
+        sols = []
+    if len(sols) != 1 or any(v not in sols[0] for v in tears):
+        how = f"{len(sols)} solutions" if len(sols) > 1 else "no closed-form solution"
+        fail(span, f"nonlinear algebraic loop through {names}: SymPy finds {how}; break the "
+                   "loop (e.g. add a small storage element) or write a law the other way round")
+    return [sols[0][v] for v in tears]
 
 
 def _substituted(local, order, frozen=frozenset()):
@@ -402,8 +438,8 @@ def _finish_constraint(c, info, solution):
     kind, detected, balance, phi = info
     lam = solution[c.multiplier]
     residual = phi if kind == "holonomic" else balance
-    return ConstraintResult(c.junction, kind, detected, c.corrector, lam, balance, phi, residual,
-                            c.span)
+    return ConstraintResult(c.junction, kind, detected, c.corrector, c.gains, lam, balance, phi,
+                            residual, c.span)
 
 
 def _outputs(es, full, constraints) -> tuple[Output, ...]:

@@ -45,7 +45,8 @@ def check_report(compiled) -> str:
         lines.append("constraints:")
         for k in r.constraints:
             how = "detected" if k.detected else "declared"
-            lines.append(f"  {k.junction}: {k.kind} ({how}), corrector {k.corrector}")
+            gains = f"({', '.join(_s(g) for g in k.gains)})" if k.gains else ""
+            lines.append(f"  {k.junction}: {k.kind} ({how}), corrector {k.corrector}{gains}")
             if k.phi is not None:
                 lines.append(f"    Phi = {_s(k.phi)}")
             lines.append(f"    {'dPhi/dt' if k.kind == 'holonomic' else 'Phi'} = {_s(k.balance)}")
