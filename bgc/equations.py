@@ -45,6 +45,7 @@ class DerivativeStore:
     state_expr: sp.Expr  # in terms of other variables (its input through the law)
     sign: int
     span: Span
+    given_init: sp.Expr | None = None  # an init clause, which derivative causality overrides
 
 
 @dataclass(frozen=True)
@@ -69,6 +70,7 @@ class EquationSystem:
     states: tuple[State, ...]
     stores: tuple[DerivativeStore, ...]
     constraints: tuple[ConstraintEq, ...]
+    warnings: tuple = ()
 
 
 def bond_effort(label: str) -> sp.Symbol:
@@ -86,6 +88,7 @@ class _Builder:
         self.states: list[State] = []
         self.stores: list[DerivativeStore] = []
         self.constraints: list[ConstraintEq] = []
+        self.warnings: list = []
 
     def emit(self, target, expr, el_or_name, span):
         origin = el_or_name if isinstance(el_or_name, str) else el_or_name.name
@@ -154,7 +157,8 @@ class _Builder:
             output = e if st == "p" else f
             sign = 1 if st == "p" else s
             self.emit(state, dep, el, el.span)
-            self.stores.append(DerivativeStore(el.name, output, state, dep, sign, el.span))
+            given = self._init(el, law, state) if el.init is not None else None
+            self.stores.append(DerivativeStore(el.name, output, state, dep, sign, el.span, given))
 
     def _init(self, el, law, state):
         if el.init is None:
@@ -257,4 +261,4 @@ def build_equations(graph: Graph, causality: Causality, settings: Settings) -> E
         else:
             b.one_port(item)
     return EquationSystem(graph, causality, settings, tuple(b.assignments), tuple(b.states),
-                          tuple(b.stores), tuple(b.constraints))
+                          tuple(b.stores), tuple(b.constraints), tuple(b.warnings))

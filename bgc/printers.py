@@ -56,7 +56,7 @@ def check_expression(expr: sp.Basic, n_states: int, n_params: int) -> None:
     if isinstance(expr, sp.Indexed):
         _check_indexed(expr, n_states, n_params)
     elif isinstance(expr, sp.Symbol):
-        if expr != T and not _TEMP.match(expr.name):
+        if expr.name != T.name and not _TEMP.match(expr.name):
             raise UnsupportedExpressionError(f"unexpected symbol {expr.name!r}")
     elif isinstance(expr, (sp.Integer, sp.Rational, sp.Float)) or expr in (sp.pi, sp.E):
         if isinstance(expr, sp.Float):
@@ -73,11 +73,11 @@ def check_expression(expr: sp.Basic, n_states: int, n_params: int) -> None:
 
 
 def _check_indexed(expr: sp.Indexed, n_states: int, n_params: int) -> None:
-    sizes = {X: n_states, P: n_params}
-    if expr.base not in sizes or len(expr.indices) != 1:
+    sizes = {X.name: n_states, P.name: n_params}  # by name: assumptions do not matter
+    if expr.base.name not in sizes or len(expr.indices) != 1:
         raise UnsupportedExpressionError(f"unexpected indexed variable {expr}")
     index = expr.indices[0]
-    if not isinstance(index, sp.Integer) or not 0 <= int(index) < sizes[expr.base]:
+    if not isinstance(index, sp.Integer) or not 0 <= int(index) < sizes[expr.base.name]:
         raise UnsupportedExpressionError(f"index out of range: {expr}")
 
 
@@ -254,7 +254,7 @@ class CPrinter(_ArithmeticPrinting, C99CodePrinter):
         self._param_fields = tuple(param_fields)
 
     def _print_index(self, base, index):
-        if base == X:
+        if base.name == X.name:
             return f"x[{index}]"
         return f"p->{self._param_fields[index]}"
 
@@ -286,7 +286,7 @@ class PythonPrinter(_ArithmeticPrinting, PythonCodePrinter):
         self.FUNCTION_NAMES = _PY_IEEE if ieee else _PY_FAST
 
     def _print_index(self, base, index):
-        return f"{base.name}[{index}]"
+        return f"{base.name}[{index}]"  # x or p, checked
 
     def _print_extremum(self, func, args):
         return f"{func}({', '.join(args)})"  # min(a, b, c) == min(min(a, b), c) exactly

@@ -13,12 +13,12 @@
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import sympy as sp
 from sympy.solvers.solveset import NonlinearError
 
-from .diagnostics import Collector, ModelError, Note, Span, fail
+from .diagnostics import Collector, ModelError, Note, Span, fail, warning
 from .equations import ConstraintEq, EquationSystem
 from .resolve import TIME, var
 from .scene import parameter_values
@@ -187,7 +187,7 @@ def _solve_loop(comp, assign, local) -> Loop:
     linear = sol is not None
     if sol is None:
         sol = _solve_nonlinear(eqs, tears, names, span)
-    solved = {v: (sp.cancel(s) if sp.count_ops(s) < 400 else s) for v, s in zip(tears, sol)}
+    solved = {v: sp.together(s) for v, s in zip(tears, sol)}
     for v, expr in eliminated:
         solved[v] = expr.xreplace(solved)
     for v in comp:
@@ -368,10 +368,28 @@ def reduce(es: EquationSystem, project_initial: bool = False) -> Reduced:
     kept, pruned = _prune(states, rates, outputs)
     state_eqs = tuple(StateEq(st.symbol, st.name, rates[st.symbol], st.init) for st in kept)
     reduced = Reduced(es, state_eqs, outputs, constraints, eliminated, tuple(loops),
-                      tuple(st.name for st in pruned), tuple(diags.warnings))
+                      tuple(st.name for st in pruned), es.warnings + tuple(diags.warnings))
     if not project_initial:
         check_initial(reduced)
-    return reduced
+    return replace(reduced, warnings=reduced.warnings + _ignored_inits(es, full))
+
+
+def _ignored_inits(es, full) -> tuple:
+    """Warn where an init clause on a derivative-causality element disagrees with the model."""
+    stores = [s for s in es.stores if s.given_init is not None]
+    if not stores:
+        return ()
+    values = _initial_values(es)
+    out = []
+    for s in stores:
+        implied = float(full[s.state_symbol].xreplace(values))
+        given = float(s.given_init.xreplace(values))
+        if abs(implied - given) > RELATIVE_TOLERANCE * max(abs(implied), abs(given), 1e-300):
+            el = es.graph.element(s.element)
+            out.append(warning(el.init[1].span, f"'{s.element}' is in derivative causality: its "
+                                                f"state is {implied:.6g} at the start, not the "
+                                                f"{given:.6g} given here, which is ignored"))
+    return tuple(out)
 
 
 def _store_equation(s, full, rates, unknowns):
@@ -515,13 +533,18 @@ def scale_of(expr):
     return sp.Add(*[sp.Abs(term) for term in sp.Add.make_args(expr)])
 
 
-def check_initial(reduced: Reduced):
-    es = reduced.system
+def _initial_values(es) -> dict:
+    """Numeric parameters, initial states and t0 at the scene's defaults."""
     params = parameter_values(es.graph, es.settings.sets)
     x0 = {st.symbol: st.init.xreplace(params).xreplace({TIME: es.settings.t0})
           for st in es.states}
-    values = {**params, **{k: sp.Float(float(v)) for k, v in x0.items()},
-              TIME: sp.Float(es.settings.t0)}
+    return {**params, **{k: sp.Float(float(v)) for k, v in x0.items()},
+            TIME: sp.Float(es.settings.t0)}
+
+
+def check_initial(reduced: Reduced):
+    es = reduced.system
+    values = _initial_values(es)
     diags = Collector()
     for junction, level, expr in constraint_rows(reduced):
         r = float(expr.xreplace(values))

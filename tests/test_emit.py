@@ -1,0 +1,737 @@
+"""The emitters, solvers and backends, on hand-built code models (no front end involved).
+
+The models have closed forms (oscillator, decay, blow-up, uniform circular motion) so the
+generated C and Python are checked against mathematics, and against each other.
+"""
+from __future__ import annotations
+
+import ast
+import math
+import os
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+import sympy as sp
+
+from bgc import backends
+from bgc.backends import BackendError, compile_c, have_c_compiler, load_python_module, run_c
+from bgc.codemodel import CodeModel, ConstraintRow, P, Param, SceneSettings, T, X, make_block
+from bgc.emit import EmitError, c_param_fields, c_string_literal, emit_c, emit_python
+from bgc.printers import CPrinter, PythonPrinter, UnsupportedExpressionError
+
+STRICT = ("-O2", "-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic")
+HERE = Path(__file__).resolve().parent
+needs_cc = pytest.mark.skipif(not have_c_compiler(), reason="no C compiler")
+EMPTY = make_block([])
+
+
+@pytest.fixture(autouse=True, scope="session")
+def _cache_dir(tmp_path_factory):
+    old = os.environ.get("BGC_CACHE_DIR")
+    os.environ["BGC_CACHE_DIR"] = str(tmp_path_factory.mktemp("bgc-cache"))
+    yield
+    if old is None:
+        del os.environ["BGC_CACHE_DIR"]
+    else:
+        os.environ["BGC_CACHE_DIR"] = old
+
+
+# ---------------------------------------------------------------- models
+
+
+def scene(t_end=10.0, dt=0.1, solver="dopri5", rtol=1e-6, atol=1e-9, step=None, t0=0.0):
+    return SceneSettings(t0, t_end, dt, solver, rtol, atol, step)
+
+
+def model(name, states, params, outputs, init, rhs, out, sc=None, **constraint_parts):
+    parts = dict(constraints=(), residual=EMPTY, scale=EMPTY, position_jac=EMPTY,
+                 velocity_jac=EMPTY, velocity_movable=(True,) * len(states))
+    parts.update(constraint_parts)
+    return CodeModel(name=name, states=tuple(states), params=tuple(params),
+                     outputs=tuple(outputs), init=make_block(init), rhs=make_block(rhs),
+                     out=make_block(out), scene=sc or scene(), **parts)
+
+
+def oscillator(**kw):
+    """m x'' = -k x, x(0) = 1: x = cos(w t), p = m x' = -m w sin(w t), w = sqrt(k/m) (derived)."""
+    k, m, w = P[0], P[1], P[2]
+    params = (Param("k", sp.Integer(4)), Param("m", sp.Integer(1)), Param("w", sp.sqrt(k / m)))
+    return model("osc", ("x", "mx.p"), params, ("x", "v", "xref"), [1, 0],
+                 [X[1] / m, -k * X[0]], [X[0], X[1] / m, sp.cos(w * T)], scene(**kw))
+
+
+def decay(**kw):
+    """x' = -a x, x(0) = x0: x = x0 exp(-a t)."""
+    params = (Param("a", sp.Float(0.7)), Param("x0", sp.Integer(2)))
+    return model("decay", ("x",), params, ("x", "exact"), [P[1]], [-P[0] * X[0]],
+                 [X[0], P[1] * sp.exp(-P[0] * T)], scene(**kw))
+
+
+def blowup(state="x", **kw):
+    """x' = x^2, x(0) = 1: x = 1/(1 - t), infinite at t = 1."""
+    return model("blowup", (state,), (), (state,), [1], [X[0] ** 2], [X[0]], scene(**kw))
+
+
+def sqrt_of_negative(**kw):
+    """x' = sqrt(x - 2) at x = 1: the derivative is not a number at once."""
+    return model("neg", ("x",), (), ("x",), [1], [sp.sqrt(X[0] - 2)], [X[0]], scene(**kw))
+
+
+def damped(**kw):
+    """A forced, damped, nonlinear oscillator that uses many functions."""
+    c, k, f = P[0], P[1], P[2]
+    params = (Param("c", sp.Float(0.3)), Param("k", sp.Integer(2)), Param("F", sp.Rational(1, 3)))
+    rhs = [X[1], -c * X[1] * sp.Abs(X[1]) - k * sp.sin(X[0]) + f * sp.cos(sp.pi * T / 3)
+           + sp.tanh(X[0]) / 10 - X[0] ** 3 / 7]
+    out = [X[0], X[1], sp.atan2(X[1], X[0] + 3), sp.exp(-X[0] ** 2) * sp.log(2 + X[1] ** 2)]
+    return model("damped", ("q", "p"), params, ("q", "p", "angle", "g"), [sp.Rational(1, 2), 0],
+                 rhs, out, scene(**kw))
+
+
+def functions_model():
+    """One constant state; outputs exercise every function the printers know."""
+    a = T / 10 - sp.Rational(1, 2)  # in [-0.5, 0.5] for t in [0, 10]
+    exprs = [sp.sin(a), sp.cos(a), sp.tan(a), sp.asin(a), sp.acos(a), sp.atan(a),
+             sp.atan2(a, 1 + T), sp.sinh(a), sp.cosh(a), sp.tanh(a), sp.exp(a), sp.log(2 + a),
+             sp.sqrt(1 + a), sp.Abs(a), sp.sign(a), sp.Min(a, X[0], T), sp.Max(a, X[0] / 10),
+             sp.Heaviside(a), (1 + a) ** sp.Rational(3, 2), (2 + a) ** -3, 1 / sp.sqrt(2 + a),
+             (a + 1) ** 2, X[0] ** 5, sp.pi * sp.E * a]
+    names = [f"f{i}" for i in range(len(exprs))]
+    return model("funcs", ("x",), (), names, [sp.Rational(1, 4)], [0], exprs,
+                 scene(t_end=10.0, dt=0.25)), exprs
+
+
+def circle(x0=1.0, y0=0.0, vx0=0.0, vy0=1.0, **kw):
+    """Uniform circular motion; constraint 'rod': x^2 + y^2 = 1 and x vx + y vy = 0."""
+    params = tuple(Param(n, sp.Float(v)) for n, v in
+                   (("x0", x0), ("y0", y0), ("vx0", vx0), ("vy0", vy0)))
+    x, y, vx, vy = (X[i] for i in range(4))
+    v2 = vx ** 2 + vy ** 2
+    return model(
+        "circle", ("x", "y", "vx", "vy"), params, ("x", "y", "vx", "vy"),
+        [P[0], P[1], P[2], P[3]], [vx, vy, -x * v2, -y * v2], [x, y, vx, vy], scene(**kw),
+        constraints=(ConstraintRow("rod", "position"), ConstraintRow("rod", "velocity")),
+        residual=make_block([x ** 2 + y ** 2 - 1, x * vx + y * vy]),
+        scale=make_block([1, 1]),
+        position_jac=make_block([2 * x, 2 * y, 0, 0]),
+        velocity_jac=make_block([vx, vy, x, y]),
+        velocity_movable=(False, False, True, True))
+
+
+EVIL = ('a"; system("rm -rf /"); //', "new\nline */ /* \\ ??= ??/ %s%n", "caf\u00e9 \u2603",
+        "tab\t'q'", "q[1]")
+
+
+def evil(**kw):
+    """Names that must never reach code except as escaped literals; keyword-named params."""
+    names = ("int", "double", "a.b", "a_b", "p", "x", "t", "w0", "bgc_sq", "main", EVIL[0],
+             EVIL[1])
+    params = tuple(Param(n, sp.Integer(j + 1)) for j, n in enumerate(names))
+    total = sum(P[j] for j in range(len(names)))
+    return model(EVIL[0], (EVIL[0], EVIL[1]), params, (EVIL[2], EVIL[3], EVIL[4]), [1, 0],
+                 [X[1], -X[0] * P[0] / total], [X[0], X[1], total], scene(**kw))
+
+
+# ---------------------------------------------------------------- helpers
+
+
+def c_program(cm, flags=STRICT):
+    (source,) = emit_c(cm).values()
+    return compile_c(source, flags=flags)
+
+
+def run_python_program(cm, args, tmp_path):
+    (name, source), = emit_python(cm).items()
+    path = tmp_path / name
+    path.write_text(source, encoding="utf-8")
+    env = dict(os.environ, PYTHONIOENCODING="utf-8")
+    done = subprocess.run([sys.executable, str(path), *args], capture_output=True, text=True,
+                          encoding="utf-8", env=env)
+    return done.returncode, done.stdout, done.stderr
+
+
+def python_module(cm):
+    (source,) = emit_python(cm).values()
+    return load_python_module(source)
+
+
+def parse_csv(text):
+    lines = text.splitlines()
+    return lines[0], np.array([[float(v) for v in line.split(",")] for line in lines[1:]])
+
+
+def run_c_csv(cm, *args):
+    code, out, err = run_c(c_program(cm), args)
+    assert code == 0, err
+    return parse_csv(out)
+
+
+# ---------------------------------------------------------------- printers
+
+
+def test_printer_powers_and_numbers():
+    c = CPrinter(2, ("p_k",))
+    py = PythonPrinter(2, 1)
+    assert c.doprint(X[0] ** 2) == "x[0]*x[0]"
+    assert c.doprint(X[0] ** -2) == "1.0/(x[0]*x[0])"
+    assert c.doprint((X[0] + X[1]) ** 2) == "bgc_sq(x[0] + x[1])"
+    assert py.doprint((X[0] + X[1]) ** 2) == "(x[0] + x[1])**2"
+    assert c.doprint(sp.sqrt(X[0])) == "sqrt(x[0])"
+    assert c.doprint(X[0] ** sp.Rational(-1, 2)) == "1.0/sqrt(x[0])"
+    assert c.doprint(X[0] ** 7) == "pow(x[0], 7.0)"
+    assert py.doprint(X[0] ** 7) == "math.pow(x[0], 7.0)"
+    assert c.doprint(X[0] / 3) == "x[0]/3.0"
+    assert c.doprint(P[0] * X[0] / 2) == "0.5*p->p_k*x[0]"
+    assert c.doprint(sp.Float(0.1) * T) == "0.10000000000000001*t"
+    assert c.doprint(sp.Integer(10) ** 30 * T) == "1e+30*t"
+
+
+def test_printer_refuses_unsupported():
+    c = CPrinter(1, ())
+    for bad in (sp.Symbol("y"), sp.Piecewise((1, X[0] > 0), (0, True)), sp.oo * X[0],
+                sp.floor(X[0]), X[1], P[0], sp.IndexedBase("q")[0], sp.I * X[0],
+                sp.Function("f")(X[0]), sp.nan, sp.zoo):
+        with pytest.raises(UnsupportedExpressionError):
+            c.doprint(bad)
+
+
+def test_c_string_literal_escapes():
+    assert c_string_literal('a"b\\c?') == '"a\\"b\\\\c\\?"'
+    assert c_string_literal("x\ny\u00e9") == '"x\\012y\\303\\251"'
+    assert c_string_literal("??=") == '"\\?\\?="'
+
+
+def test_param_fields_are_safe_and_unique():
+    assert c_param_fields(("int", "k")) == ("p_int", "p_k")
+    fields = c_param_fields(("a.b", "a_b", EVIL[0]))
+    assert len(set(fields)) == 3 and all(f.replace("_", "a").isalnum() for f in fields)
+
+
+def test_python_literals_round_trip():
+    (source,) = emit_python(evil()).values()
+    tree = ast.parse(source)
+    values = {node.targets[0].id: ast.literal_eval(node.value) for node in tree.body
+              if isinstance(node, ast.Assign) and isinstance(node.targets[0], ast.Name)
+              and node.targets[0].id in ("STATES", "OUTPUTS", "MODEL")}
+    assert values == {"MODEL": EVIL[0], "STATES": list(EVIL[:2]), "OUTPUTS": list(EVIL[2:])}
+
+
+def test_invalid_code_models_are_refused():
+    cm = oscillator()
+    with pytest.raises(EmitError):
+        emit_c(CodeModel(**{**cm.__dict__, "init": make_block([T])}))
+    with pytest.raises(EmitError):
+        emit_c(CodeModel(**{**cm.__dict__, "params": (Param("k", P[1]), Param("m", P[0]))}))
+    with pytest.raises(EmitError):
+        emit_python(CodeModel(**{**cm.__dict__, "rhs": make_block([X[0]])}))
+
+
+# ---------------------------------------------------------------- determinism
+
+_DIGEST_SCRIPT = """
+import hashlib, test_emit as m
+from bgc.emit import emit_c, emit_python
+h = hashlib.sha256()
+for cm in (m.oscillator(), m.damped(), m.circle(), m.evil(), m.functions_model()[0]):
+    for files in (emit_c(cm), emit_python(cm)):
+        for name, text in sorted(files.items()):
+            h.update(name.encode() + text.encode())
+print(h.hexdigest())
+"""
+
+
+def test_emit_is_byte_identical_under_hash_seeds():
+    digests = set()
+    for seed in ("0", "1", "12345"):
+        env = dict(os.environ, PYTHONHASHSEED=seed,
+                   PYTHONPATH=os.pathsep.join([str(HERE), str(HERE.parent)]))
+        done = subprocess.run([sys.executable, "-c", _DIGEST_SCRIPT], capture_output=True,
+                              text=True, env=env, cwd=HERE)
+        assert done.returncode == 0, done.stderr
+        digests.add(done.stdout.strip())
+    assert len(digests) == 1
+
+
+def test_no_stamps_in_generated_code():
+    for emit in (emit_c, emit_python):
+        (text,) = emit(oscillator()).values()
+        assert emit(oscillator()) == emit(oscillator())
+        assert not re.search(r"\b(19|20)\d\d-\d\d-\d\d|\d\d:\d\d:\d\d|0\.1\.0", text)
+
+
+# ---------------------------------------------------------------- C compiles
+
+
+def empty():
+    return model("empty", (), (), (), [], [], [])
+
+
+@needs_cc
+@pytest.mark.parametrize("make", [oscillator, decay, damped, circle, evil, blowup, empty,
+                                  lambda: functions_model()[0]])
+@pytest.mark.parametrize("level", ["-O1", "-O2", "-O3"])
+def test_c_compiles_with_strict_warnings(make, level):
+    exe = c_program(make(), (level,) + STRICT[1:])
+    assert exe.is_file()
+
+
+@needs_cc
+def test_model_without_states_or_outputs(tmp_path):
+    for code, out, _ in (run_c(c_program(empty()), ["--t-end", "0.2"]),
+                         run_python_program(empty(), ["--t-end", "0.2"], tmp_path)):
+        assert code == 0 and out.splitlines() == ["t", "0", "0.10000000000000001",
+                                                  "0.20000000000000001"]
+
+
+@needs_cc
+def test_c_compiles_as_library():
+    (source,) = emit_c(circle()).values()
+    user = source + """
+#include <assert.h>
+int main(void)
+{
+    bgc_params p;
+    bgc_settings s;
+    bgc_stats st = {0, 0, 0};
+    double x[BGC_NUM_STATES], dx[BGC_NUM_STATES];
+    char msg[256];
+    bgc_params_defaults(&p, NULL);
+    bgc_init(&p, x);
+    bgc_rhs(0.0, x, &p, dx);
+    bgc_settings_default(&s);
+    s.t_end = 1.0;
+    return bgc_simulate(&s, &p, x, NULL, NULL, &st, msg, sizeof msg) != 0 || st.steps == 0;
+}
+"""
+    exe = compile_c(user, flags=STRICT + ("-DBGC_NO_MAIN",))
+    assert run_c(exe)[0] == 0
+
+
+@needs_cc
+def test_compile_cache_hit_does_not_compile(monkeypatch):
+    (source,) = emit_c(decay()).values()
+    first = compile_c(source)
+
+    def no_compiler(*args, **kwargs):
+        raise AssertionError("compiled again")
+
+    monkeypatch.setattr(backends, "_run_compiler", no_compiler)
+    assert compile_c(source) == first
+
+
+@needs_cc
+def test_compiler_failure_is_a_backend_error():
+    with pytest.raises(BackendError, match="bug in bgc"):
+        compile_c("int main(void) { return undefined_thing; }\n")
+
+
+def test_no_eval_or_exec_in_backends():
+    for name in ("printers.py", "emit.py", "backends.py"):
+        text = (HERE.parent / "bgc" / name).read_text()
+        assert "eval(" not in text and "exec(" not in text, name
+
+
+# ---------------------------------------------------------------- accuracy
+
+
+def oscillator_error(t, Y, k=4.0, m=1.0):
+    w = math.sqrt(k / m)
+    return max(np.max(np.abs(Y[:, 0] - np.cos(w * t))),
+               np.max(np.abs(Y[:, 1] + w * np.sin(w * t))))
+
+
+@needs_cc
+def test_c_dopri5_matches_closed_form():
+    header, data = run_c_csv(oscillator(), "--rtol", "1e-10", "--atol", "1e-12")
+    assert header == "t,x,v,xref"
+    assert oscillator_error(data[:, 0], data[:, 1:]) < 1e-8
+    header, data = run_c_csv(decay(), "--rtol", "1e-10", "--atol", "1e-12")
+    assert np.max(np.abs(data[:, 1] - data[:, 2])) < 1e-8
+
+
+def test_python_dopri5_matches_closed_form():
+    mod = python_module(oscillator())
+    t, Y = mod.simulate(rtol=1e-10, atol=1e-12)
+    assert Y.shape == (101, 3)
+    assert oscillator_error(t, Y) < 1e-8
+    t, Y = python_module(decay()).simulate(rtol=1e-10, atol=1e-12)
+    assert np.max(np.abs(Y[:, 0] - Y[:, 1])) < 1e-8
+
+
+def test_dopri5_dense_output_does_not_shorten_steps():
+    mod = python_module(oscillator())
+    steps = {}
+    for dt in (1.0, 0.001):
+        st = {"steps": 0, "rejected": 0, "rhs": 0}
+        s = mod._settings(dt=dt)
+        mod._integrate(s, mod._param_values({}), mod._init(mod._param_values({})),
+                       lambda *a: None, st)
+        steps[dt] = st["steps"]
+    assert abs(steps[1.0] - steps[0.001]) <= 2
+
+
+@pytest.mark.parametrize("solver, order", [("euler", 1), ("rk4", 4)])
+def test_fixed_step_convergence_order(solver, order):
+    mod = python_module(decay())
+    errors = []
+    for h in (0.02, 0.01):
+        t, Y = mod.simulate(t_end=2.0, dt=0.1, solver=solver, step=h)
+        errors.append(np.max(np.abs(Y[:, 0] - Y[:, 1])))
+    assert 0.85 * 2 ** order < errors[0] / errors[1] < 1.15 * 2 ** order
+
+
+@needs_cc
+@pytest.mark.parametrize("solver, order", [("euler", 1), ("rk4", 4)])
+def test_c_fixed_step_convergence_order(solver, order):
+    errors = []
+    for h in ("0.02", "0.01"):
+        _, data = run_c_csv(decay(), "--t-end", "2", "--solver", solver, "--step", h)
+        errors.append(np.max(np.abs(data[:, 1] - data[:, 2])))
+    assert 0.85 * 2 ** order < errors[0] / errors[1] < 1.15 * 2 ** order
+
+
+def test_damped_model_matches_scipy():
+    from scipy.integrate import solve_ivp
+
+    def f(t, y):
+        q, p = y
+        return [p, -0.3 * p * abs(p) - 2 * math.sin(q) + math.cos(math.pi * t / 3) / 3
+                + math.tanh(q) / 10 - q ** 3 / 7]
+
+    t, Y = python_module(damped()).simulate(rtol=1e-11, atol=1e-12)
+    ref = solve_ivp(f, (0, 10), [0.5, 0.0], t_eval=t, rtol=1e-12, atol=1e-13, method="DOP853")
+    assert np.max(np.abs(Y[:, :2] - ref.y.T)) < 1e-8
+    assert np.allclose(Y[:, 2], np.arctan2(Y[:, 1], Y[:, 0] + 3), rtol=1e-14)
+
+
+@needs_cc
+def test_every_function_prints_correctly_in_both_languages():
+    cm, exprs = functions_model()
+    header, data = run_c_csv(cm)
+    t, Y = python_module(cm).simulate()
+    assert np.array_equal(data[:, 0], t)
+    ref = np.array([[float(e.subs({T: tk, X[0]: 0.25}).evalf(30)) for e in exprs] for tk in t])
+    assert np.allclose(data[:, 1:], ref, rtol=1e-14, atol=1e-15)
+    assert np.allclose(Y, ref, rtol=1e-14, atol=1e-15)
+
+
+def test_python_rhs_matches_independent_evaluation():
+    mod = python_module(damped())
+    rng = np.random.default_rng(1)
+    c, k, f = mod.PARAMETERS.values()
+    for _ in range(20):
+        t, (q, p) = rng.uniform(0, 10), rng.normal(size=2)
+        expected = [p, -c * p * abs(p) - k * np.sin(q) + f * np.cos(np.pi * t / 3)
+                    + np.tanh(q) / 10 - q ** 3 / 7]
+        assert np.allclose(mod.rhs(t, [q, p], [c, k, f]), expected, rtol=1e-13, atol=1e-15)
+        assert mod.outputs(t, [q, p], [c, k, f]).shape == (4,)
+
+
+# ---------------------------------------------------------------- C and Python agree
+
+
+@needs_cc
+@pytest.mark.parametrize("args", [(), ("--solver", "rk4"), ("--solver", "euler", "--step", "0.01"),
+                                  ("--t-end", "3.05", "--dt", "0.2", "-p", "k=9")])
+def test_c_and_python_programs_agree(args, tmp_path):
+    cm = damped() if not args else oscillator()
+    code, c_out, c_err = run_c(c_program(cm), args)
+    py_code, py_out, py_err = run_python_program(cm, args, tmp_path)
+    assert (code, py_code) == (0, 0), c_err + py_err
+    c_header, c_data = parse_csv(c_out)
+    py_header, py_data = parse_csv(py_out)
+    assert c_header == py_header and c_data.shape == py_data.shape
+    assert np.array_equal(c_data[:, 0], py_data[:, 0])
+    assert np.allclose(c_data, py_data, rtol=1e-12, atol=1e-14)
+
+
+@needs_cc
+def test_stats_line(tmp_path):
+    code, _, err = run_c(c_program(oscillator()), ["--stats"])
+    py_code, _, py_err = run_python_program(oscillator(), ["--stats"], tmp_path)
+    assert code == py_code == 0
+    for text in (err, py_err):
+        (line,) = [ln for ln in text.splitlines() if ln.startswith("stats:")]
+        steps, rejected, rhs = (int(part.split("=")[1]) for part in line.split()[1:])
+        assert steps > 10 and rhs >= 6 * (steps + rejected)
+
+
+# ---------------------------------------------------------------- CSV and options
+
+
+@needs_cc
+@pytest.mark.parametrize("t_end, dt, times", [
+    ("1", "0.3", [0, 0.3, 0.6, 0.9, 1.0]),
+    ("1", "0.1", [round(0.1 * k, 12) for k in range(11)]),
+    ("0.9999999999", "0.1", [round(0.1 * k, 12) for k in range(10)] + [0.9999999999]),
+    ("0", "0.1", [0.0]),
+])
+def test_output_times(t_end, dt, times, tmp_path):
+    for solver in ("dopri5", "rk4"):
+        args = ("--t-end", t_end, "--dt", dt, "--solver", solver)
+        code, out, _ = run_c(c_program(oscillator()), args)
+        py_code, py_out, _ = run_python_program(oscillator(), args, tmp_path)
+        assert code == py_code == 0
+        for text in (out, py_out):
+            lines = text.splitlines()
+            assert lines[0] == "t,x,v,xref" and len(lines) == len(times) + 1
+            assert [float(ln.split(",")[0]) for ln in lines[1:]] == pytest.approx(times)
+            assert lines[-1].split(",")[0] == "%.17g" % float(t_end)  # exactly t_end
+            assert lines[1].split(",")[1:3] == ["1", "0"]  # t0 row: the initial state
+
+
+@needs_cc
+def test_csv_numbers_are_printf_17g():
+    _, out, _ = run_c(c_program(decay()), ["--t-end", "1"])
+    for line in out.splitlines()[1:]:
+        for field in line.split(","):
+            assert field == "%.17g" % float(field)
+
+
+@needs_cc
+def test_parameter_override_recomputes_derived(tmp_path):
+    header, data = run_c_csv(oscillator(), "-p", "k=9", "--rtol", "1e-10", "--atol", "1e-12")
+    assert np.allclose(data[:, 3], np.cos(3 * data[:, 0]), atol=1e-15)  # w = sqrt(k/m) = 3
+    assert oscillator_error(data[:, 0], data[:, 1:], k=9.0) < 1e-8
+    _, data = run_c_csv(oscillator(), "-p", "k=9", "-p", "w=1")  # given w is not recomputed
+    assert np.allclose(data[:, 3], np.cos(data[:, 0]), atol=1e-15)
+    mod = python_module(oscillator())
+    assert list(mod.PARAMETERS.items()) == [("k", 4.0), ("m", 1.0), ("w", 2.0)]
+    t, Y = mod.simulate(params={"k": 9.0, "m": 1.0})
+    assert np.allclose(Y[:, 2], np.cos(3 * t), atol=1e-15)
+    with pytest.raises(ValueError, match="unknown parameter 'nope'"):
+        mod.simulate(params={"nope": 1})
+
+
+@needs_cc
+@pytest.mark.parametrize("args, message", [
+    (["--bogus"], "error: unknown option '--bogus'"),
+    (["-p", "nope=1"], "error: unknown parameter 'nope'"),
+    (["-p", "k"], "error: -p expects NAME=VALUE, got 'k'"),
+    (["--dt", "abc"], "error: invalid value for --dt: 'abc'"),
+    (["--dt", "0"], "error: --dt must be positive"),
+    (["--dt"], "error: option '--dt' needs a value"),
+    (["--solver", "rk45"], "error: unknown solver 'rk45' (expected euler, rk4 or dopri5)"),
+    (["--t-end", "-1"], "error: --t-end must not be before the start time"),
+    (["-p", "k=nan"], "error: invalid value for k: 'nan'"),
+])
+def test_usage_errors_exit_2(args, message, tmp_path):
+    for code, out, err in (run_c(c_program(oscillator()), args),
+                           run_python_program(oscillator(), args, tmp_path)):
+        assert code == 2 and out == ""
+        assert err.splitlines()[0] == message
+
+
+@needs_cc
+def test_help_lists_parameters(tmp_path):
+    for code, out, _ in (run_c(c_program(oscillator()), ["--help"]),
+                         run_python_program(oscillator(), ["--help"], tmp_path)):
+        assert code == 0 and out.startswith("usage: osc ") and "  w = 2\n" in out
+
+
+# ---------------------------------------------------------------- runtime failures
+
+
+@needs_cc
+def test_non_finite_state_stops_with_partial_rows(tmp_path):
+    args = ["--t-end", "2", "--dt", "0.1", "--solver", "rk4", "--step", "0.01"]
+    for code, out, err in (run_c(c_program(blowup("mx.p")), args),
+                           run_python_program(blowup("mx.p"), args, tmp_path)):
+        assert code == 3
+        assert "error: at t = " in err and "state 'mx.p' is not finite" in err
+        t_fail = float(err.split("at t = ")[1].split(":")[0])
+        assert 1.0 < t_fail < 1.1  # rk4 steps across the pole at t = 1, then overflows
+        _, data = parse_csv(out)
+        assert len(data) == 11 and data[-1, 0] == 1.0 and np.all(np.isfinite(data))
+        assert data[-2, 1] == pytest.approx(10.0, rel=1e-3)  # the rows before are kept
+    mod = python_module(blowup("mx.p"))
+    with pytest.raises(mod.SimulationError, match="state 'mx.p' is not finite") as info:
+        mod.simulate(t_end=2.0, solver="rk4", step=0.01)
+    assert 1.0 < info.value.t < 1.1 and info.value.rows.shape == (11, 1)
+    assert info.value.times[-1] == 1.0
+
+
+@needs_cc
+def test_step_size_too_small_names_time_and_state(tmp_path):
+    args = ["--t-end", "2", "--dt", "0.25", "--rtol", "1e-8", "--atol", "1e-8"]
+    for code, out, err in (run_c(c_program(blowup()), args),
+                           run_python_program(blowup(), args, tmp_path)):
+        assert code == 3
+        assert "step size too small" in err and "state 'x'" in err
+        t_fail = float(err.split("at t = ")[1].split(":")[0])
+        assert abs(t_fail - 1.0) < 1e-6  # the pole of x = 1/(1 - t)
+        assert parse_csv(out)[1][:4, 0].tolist() == [0, 0.25, 0.5, 0.75]
+
+
+@needs_cc
+def test_non_finite_derivative_at_start(tmp_path):
+    for solver in ("dopri5", "euler"):
+        args = ["--solver", solver]
+        for code, out, err in (run_c(c_program(sqrt_of_negative()), args),
+                               run_python_program(sqrt_of_negative(), args, tmp_path)):
+            assert code == 3
+            assert err.strip() == "error: at t = 0: derivative of state 'x' is not finite"
+            assert out.splitlines() == ["t,x", "0,1"]
+
+
+def test_python_ieee_fallback_gives_c_semantics():
+    mod = python_module(sqrt_of_negative())
+    dx = mod.rhs(0.0, [1.0], [])
+    assert math.isnan(dx[0])
+    assert mod.rhs(0.0, [6.0], [])[0] == 2.0
+
+
+# ---------------------------------------------------------------- constraints
+
+
+@needs_cc
+def test_consistent_constraints_run(tmp_path):
+    _, data = run_c_csv(circle(), "--rtol", "1e-10", "--atol", "1e-12")
+    assert np.allclose(data[:, 1], np.cos(data[:, 0]), atol=1e-8)
+    t, Y = python_module(circle()).simulate(rtol=1e-10, atol=1e-12)
+    assert np.allclose(Y[:, 1], np.sin(t), atol=1e-8)
+
+
+@needs_cc
+def test_constraint_violation_exits_1_without_csv(tmp_path):
+    cm = circle(x0=1.1, vx0=0.1)
+    expected = ["error: initial conditions violate constraint 'rod' (position): residual = %.17g"
+                % (1.1 * 1.1 - 1),
+                "error: initial conditions violate constraint 'rod' (velocity): residual = %.17g"
+                % (1.1 * 0.1)]
+    for code, out, err in (run_c(c_program(cm), []), run_python_program(cm, [], tmp_path)):
+        assert code == 1 and out == ""
+        assert err.splitlines() == expected
+    mod = python_module(cm)
+    with pytest.raises(mod.ConstraintError) as info:
+        mod.simulate()
+    assert len(info.value.messages) == 2
+
+
+@needs_cc
+def test_project_initial(tmp_path):
+    cm = circle(x0=1.1, y0=0.2, vx0=0.1, vy0=0.9)
+    for code, out, err in (run_c(c_program(cm), ["--project-initial"]),
+                           run_python_program(cm, ["--project-initial"], tmp_path)):
+        assert code == 0, err
+        x, y, vx, vy = parse_csv(out)[1][0, 1:]
+        assert abs(x * x + y * y - 1) <= 1e-9 and abs(x * vx + y * vy) <= 1e-9
+        assert math.atan2(y, x) == pytest.approx(math.atan2(0.2, 1.1))  # minimum-norm move
+        assert (vx, vy) != (0.1, 0.9)
+    t, Y = python_module(cm).simulate(project_initial=True)
+    assert Y[0, 0] ** 2 + Y[0, 1] ** 2 == pytest.approx(1.0, abs=1e-9)
+
+
+@needs_cc
+def test_project_initial_singular_fails(tmp_path):
+    cm = circle(x0=0.0, y0=0.0)  # J = [0, 0, 0, 0] at the origin
+    for code, out, err in (run_c(c_program(cm), ["--project-initial"]),
+                           run_python_program(cm, ["--project-initial"], tmp_path)):
+        assert code == 1 and out == ""
+        assert "cannot project the initial conditions onto the position constraints" in err
+        assert "singular" in err
+
+
+# ---------------------------------------------------------------- names
+
+
+@needs_cc
+def test_malicious_names_stay_literals(tmp_path):
+    cm = evil()
+    (source,) = emit_c(cm).values()
+    assert 'system("rm' not in source and "\nline" not in source
+    code, out, err = run_c(c_program(cm), ["-p", "int=3", "-p", EVIL[1] + "=2"])
+    assert code == 0, err
+    assert out.startswith("t," + ",".join(EVIL[2:]) + "\n")
+    py_code, py_out, py_err = run_python_program(cm, ["-p", "int=3", "-p", EVIL[1] + "=2"],
+                                                 tmp_path)
+    assert py_code == 0, py_err
+    assert py_out.startswith("t," + ",".join(EVIL[2:]) + "\n")
+    mod = python_module(cm)
+    assert mod.STATES == list(EVIL[:2]) and mod.OUTPUTS == list(EVIL[2:])
+    assert list(mod.PARAMETERS)[-2:] == list(EVIL[:2])
+    code, _, err = run_c(c_program(cm), ["-p", EVIL[0] + "=x"])
+    assert code == 2 and err == "error: invalid value for %s: 'x'\n" % EVIL[0]
+
+
+# ---------------------------------------------------------------- the %.17g formatter
+
+_FORMAT_DRIVER = r"""
+#undef main
+static unsigned long long rng = 88172645463325252ULL;
+static unsigned long long next64(void)
+{
+    rng ^= rng << 13;
+    rng ^= rng >> 7;
+    rng ^= rng << 17;
+    return rng;
+}
+static double unif(void) { return (double)(next64() >> 11) / 9007199254740992.0; }
+static double pick(long i)
+{
+    double v;
+    unsigned long long b;
+    long j;
+    switch (i % 8) {
+    case 0: /* any bit pattern but NaN */
+        do {
+            b = next64();
+            memcpy(&v, &b, sizeof v);
+        } while (v != v);
+        return v;
+    case 1: return ldexp(1.0 + unif(), (int)(next64() % 220) - 70);
+    case 2: return unif() * pow(10.0, (int)(next64() % 60) - 14);
+    case 3: /* powers of ten and their neighbours */
+        v = pow(10.0, (int)(next64() % 60) - 14);
+        for (j = (long)(next64() % 7) - 3; j > 0; j--)
+            v = nextafter(v, HUGE_VAL);
+        for (j = (long)(next64() % 7) - 3; j < 0; j++)
+            v = nextafter(v, 0.0);
+        return v;
+    case 4: return ldexp((double)(next64() % 100000000), -(int)(next64() % 60)); /* ties */
+    case 5: return (double)(long)(next64() % 100000) * 0.01;
+    case 6: return (double)(next64() >> (next64() % 64));
+    default: return -pick(i + 1 + (long)(next64() % 6));
+    }
+}
+int main(int argc, char **argv)
+{
+    long n = atol(argv[1]), i, bad = 0;
+    unsigned long typical_slow;
+    char a[64], b[64];
+    static const double edge[] = { 0.0, -0.0, 1.0, -1.0, 0.1, 1e16, 1e17, 9.9999999999999998e16,
+                                   1e-5, 1e-4, 123456789012345680.0, 5e-324, 2.2250738585072014e-308,
+                                   1.7976931348623157e308, 1e23, 8.5e-12, 9.5e43, 0.5 };
+    for (i = 0; i < n; i++) {
+        double v = i < 18 ? edge[i] : i < 20 ? (i == 18 ? HUGE_VAL : -HUGE_VAL) : pick(i);
+        bgc_fmt17(a, v);
+        snprintf(b, sizeof b, "%.17g", v);
+        if (strcmp(a, b) != 0 && bad++ < 10)
+            printf("mismatch %a: %s %s\n", v, a, b);
+    }
+    bgc_fmt17(a, nan(""));
+    bgc_fmt_slow_count = 0;
+    for (i = 0; i < 100000; i++)
+        bgc_fmt17(b, (unif() - 0.5) * pow(10.0, (int)(i % 12) - 5));
+    typical_slow = bgc_fmt_slow_count;
+    printf("mismatches=%ld nan=%s typical_slow=%lu\n", bad, a, typical_slow);
+    return 0;
+}
+"""
+
+
+@needs_cc
+def test_fast_formatter_equals_snprintf():
+    (source,) = emit_c(oscillator()).values()
+    exe = compile_c(source + _FORMAT_DRIVER, flags=("-O2", "-std=c99", "-Dmain=bgc_main"))
+    code, out, err = run_c(exe, ["1200000"], timeout=120)
+    assert code == 0, err
+    summary = out.splitlines()[-1]
+    fields = dict(item.split("=") for item in summary.split())
+    assert fields["mismatches"] == "0", out
+    assert fields["nan"] == "nan"
+    assert int(fields["typical_slow"]) < 5000  # the fast path decides >= 95% of typical values
