@@ -1,13 +1,15 @@
-"""Locate grammar/ and templates/: beside the package in a source tree, inside it once installed."""
+"""Locate grammar/ and templates/: inside the package once installed (bgc/grammar,
+bgc/templates, see pyproject.toml), beside it in a source tree."""
 from __future__ import annotations
 
-import importlib.resources
 from pathlib import Path
+
+_HERE = Path(__file__).resolve().parent
 
 
 def resource_dir(name: str) -> Path:
-    """The directory `name` ("grammar" or "templates"), source tree first, then the installed copy."""
-    source = Path(__file__).resolve().parent.parent / name
-    if source.is_dir():
-        return source
-    return Path(str(importlib.resources.files(f"bgc.{name}")))
+    """The directory `name` ("grammar" or "templates")."""
+    for candidate in (_HERE / name, _HERE.parent / name):
+        if candidate.is_dir():
+            return candidate
+    raise FileNotFoundError(f"bgc is installed without its {name}/ directory")
