@@ -383,19 +383,13 @@ def assert_columns_match(got: Columns, ref: Columns, t: np.ndarray, what: str,
 
 
 # --------------------------------------------------------------------------- tests
-def _bgc_or_skip():
-    bgc = pytest.importorskip("bgc")
-    if not hasattr(bgc, "simulate"):
-        pytest.skip("bgc.simulate is not available yet")
-    return bgc
-
-
 @pytest.mark.parametrize("backend", ["c", "python"])
 @pytest.mark.parametrize("case", CASES, ids=[c.id for c in CASES])
 def test_model_matches_reference(case: Case, backend: str) -> None:
-    bgc = _bgc_or_skip()
+    import bgc
+    import bgc.backends
+
     if backend == "c":
-        import bgc.backends
         if not bgc.backends.have_c_compiler():
             pytest.skip("no C compiler")
     kwargs = {"scene": case.scene, "backend": backend}
