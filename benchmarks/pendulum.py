@@ -209,8 +209,8 @@ def c_program(name: str, exe: Path, extra: list[str], t_end: float, workdir: Pat
 
 def count_instructions(cmd: list[str]) -> int | None:
     """Instructions executed by `cmd` under valgrind's callgrind: exact, unlike a stopwatch.
-    (Under valgrind long double has 53 bits, so bgc's fast number formatter falls back to
-    snprintf: count only runs that write next to nothing.)"""
+    Counted on runs that write next to nothing, so that the comparison is of the integration,
+    not of two different number formatters."""
     proc = subprocess.run(["valgrind", "--tool=callgrind", "--callgrind-out-file=/dev/null",
                            *cmd], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
     found = re.search(r"Collected : (\d+)", proc.stderr)

@@ -4,6 +4,8 @@ Every expression here is a SymPy expression over exactly these symbols:
   t            Symbol("t")            time
   x[i]         IndexedBase("x")[i]    state i, ordered as `states`
   p[j]         IndexedBase("p")[j]    parameter j, ordered as `params`
+  c[k]         IndexedBase("c")[k]    constant k: result k of the `consts` block, a function of
+                                      the parameters only, computed once whenever they are set
   w0, w1, ...  Symbol("w<k>")         common subexpressions, defined in a Block's `temps`
 and the functions sin cos tan asin acos atan atan2 sinh cosh tanh exp log sqrt Abs sign
 Min Max Heaviside, Pow, Rational, Float, Integer, pi, E.  Model names never occur in
@@ -13,6 +15,7 @@ expressions, so nothing a model author writes can reach generated code except th
 """
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import sympy as sp
@@ -20,6 +23,16 @@ import sympy as sp
 T = sp.Symbol("t")
 X = sp.IndexedBase("x")
 P = sp.IndexedBase("p")
+C = sp.IndexedBase("c")
+
+
+def as_expr(value) -> sp.Basic:
+    """A SymPy object from a SymPy object or a Python number; never parses text."""
+    if isinstance(value, sp.Basic):
+        return value
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise TypeError(f"expected a SymPy expression or a number, got {type(value).__name__}")
+    return sp.Integer(value) if isinstance(value, int) else sp.Float(value)
 
 
 @dataclass(frozen=True)
@@ -71,6 +84,7 @@ class CodeModel:
     velocity_jac: Block  # results: row-major d r[k] / d x[i] for velocity rows
     velocity_movable: tuple[bool, ...]  # per state: may the velocity projection move it?
     scene: SceneSettings
+    consts: Block = Block((), ())  # results: c[k]; uses p only (not t, x or c)
 
     @property
     def position_rows(self) -> tuple[int, ...]:
@@ -83,11 +97,60 @@ class CodeModel:
 
 def make_block(exprs, prefix: str = "w") -> Block:
     """CSE a list of expressions into a Block with deterministic temporaries."""
-    exprs = [sp.Integer(e) if isinstance(e, int) else e for e in exprs]
+    exprs = [as_expr(e) for e in exprs]
     if not exprs:
         return Block((), ())
     temps, reduced = sp.cse(exprs, symbols=sp.numbered_symbols(prefix), order="none")
     return Block(tuple(temps), tuple(reduced))
+
+
+def _parameter_only(expr: sp.Basic) -> bool:
+    """Uses p and numbers only: no t, x or c."""
+    return not (expr.has(T) or expr.has(X) or expr.has(C))
+
+
+def hoist_constants(groups: Sequence[Sequence[sp.Expr]]
+                    ) -> tuple[tuple[sp.Expr, ...], tuple[tuple[sp.Expr, ...], ...]]:
+    """The parameter-only subexpressions of groups (sequences of expressions over t, x, p),
+    replaced by constants c[k]: returns (constant expressions, rewritten groups).
+
+    What becomes a constant: every largest subexpression that uses parameters and no t or
+    x and is more than a single parameter; and within a sum or product that also uses t or
+    x, its parameter-only terms or factors taken together (so that `2*m*g*y` becomes c[k]*y
+    with c[k] = 2*m*g).  A constant that occurs more than once is one c[k]; the constants
+    are numbered in order of first occurrence, walking the groups and the expression trees
+    in their (canonical) argument order, so that no set or hash order reaches the result.
+    Nothing changes but where the arithmetic is done: sums and products may group their
+    terms differently, so values can differ in the last bits."""
+    pool: dict[sp.Expr, sp.Indexed] = {}
+    memo: dict[sp.Expr, sp.Expr] = {}
+
+    def constant(expr):
+        if expr.is_Atom or isinstance(expr, sp.Indexed) or not expr.has(P):
+            return expr  # a number or one parameter: nothing to compute
+        if expr not in pool:
+            pool[expr] = C[len(pool)]
+        return pool[expr]
+
+    def visit(expr):
+        if expr.is_Atom or isinstance(expr, sp.Indexed):
+            return expr
+        if expr not in memo:
+            memo[expr] = rewrite(expr)
+        return memo[expr]
+
+    def rewrite(expr):
+        if _parameter_only(expr):
+            return constant(expr)
+        if isinstance(expr, (sp.Add, sp.Mul)):
+            fixed = [a for a in expr.args if _parameter_only(a)]
+            if len(fixed) > 1:
+                varying = [visit(a) for a in expr.args if not _parameter_only(a)]
+                return expr.func(constant(expr.func(*fixed)), *varying)
+        return expr.func(*[visit(a) for a in expr.args])
+
+    rewritten = tuple(tuple(visit(as_expr(e)) for e in group) for group in groups)
+    return tuple(pool), rewritten
 
 
 # ---------------------------------------------------------------- lowering (Reduced -> CodeModel)
@@ -163,19 +226,27 @@ def lower(reduced, name_override: str | None = None) -> CodeModel:
     vel = [r for c, r, _ in rows if c.level == "velocity"]
     in_position = set().union(*[r.atoms(sp.Indexed) for r in pos]) if pos else set()
     s = es.settings
+    consts, (rhs, out, residual, scale, position_jac, velocity_jac) = hoist_constants((
+        [_lowered(st.rhs, sub, f"d({st.name})/dt") for st in reduced.states],
+        [_lowered(o.expr, sub, f"output {o.name}") for o in reduced.outputs],
+        [r for _, r, _ in rows],
+        [sc for _, _, sc in rows],
+        _jacobian(pos, n),
+        _jacobian(vel, n)))
     return CodeModel(
         name=name_override or es.graph.name,
         states=tuple(st.name for st in reduced.states),
         params=_params(reduced, sub),
         outputs=tuple(o.name for o in reduced.outputs),
         init=make_block(_init_exprs(reduced, sub)),
-        rhs=make_block([_lowered(st.rhs, sub, f"d({st.name})/dt") for st in reduced.states]),
-        out=make_block([_lowered(o.expr, sub, f"output {o.name}") for o in reduced.outputs]),
+        rhs=make_block(rhs),
+        out=make_block(out),
         constraints=tuple(c for c, _, _ in rows),
-        residual=make_block([r for _, r, _ in rows]),
-        scale=make_block([sc for _, _, sc in rows]),
-        position_jac=make_block(_jacobian(pos, n)),
-        velocity_jac=make_block(_jacobian(vel, n)),
+        residual=make_block(residual),
+        scale=make_block(scale),
+        position_jac=make_block(position_jac),
+        velocity_jac=make_block(velocity_jac),
         velocity_movable=tuple(X[i] not in in_position for i in range(n)),
         scene=SceneSettings(s.t0, s.t_end, s.dt, s.solver, s.rtol, s.atol, s.step),
+        consts=make_block(consts),
     )

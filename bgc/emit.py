@@ -13,11 +13,12 @@ import re
 import jinja2
 import sympy as sp
 
-from bgc.codemodel import Block, CodeModel, P, T, X
+from bgc.codemodel import Block, C, CodeModel, P, T, X, as_expr
 from bgc.printers import CPrinter, PythonPrinter, float_literal
 from bgc.resources import resource_dir
 
 SOLVERS = ("euler", "rk4", "dopri5")
+POW10_RANGE = (-24, 56)  # powers of ten for the C number formatter: |v| in about 1e-40..1e40
 
 
 class EmitError(ValueError):
@@ -28,14 +29,14 @@ def emit_c(cm: CodeModel) -> dict[str, str]:
     """The standalone C99 program: {"<name>.c": text}."""
     _validate(cm)
     fields = c_param_fields(tuple(p.name for p in cm.params))
-    printer = CPrinter(len(cm.states), fields)
+    printer = CPrinter(len(cm.states), fields, len(cm.consts.results))
     context = _common_context(cm, c_string_literal)
     context.update(
         param_fields=fields,
         param_defaults=[printer.doprint(p.default) for p in cm.params],
         blocks=_print_blocks(cm, printer),
         scene=_scene_context(cm, c_string_literal, step_none="0.0"),
-        digit_pairs=["".join("%02d" % (10 * row + i) for i in range(10)) for row in range(10)],
+        pow10_table=pow10_table(*POW10_RANGE),
     )
     return {f"{context['ident']}.c": _render("c_program.c.j2", context)}
 
@@ -43,8 +44,8 @@ def emit_c(cm: CodeModel) -> dict[str, str]:
 def emit_python(cm: CodeModel) -> dict[str, str]:
     """The standalone Python module (numpy only): {"<name>.py": text}."""
     _validate(cm)
-    n, m = len(cm.states), len(cm.params)
-    fast, ieee = PythonPrinter(n, m), PythonPrinter(n, m, ieee=True)
+    n, m, k = len(cm.states), len(cm.params), len(cm.consts.results)
+    fast, ieee = PythonPrinter(n, m, n_consts=k), PythonPrinter(n, m, ieee=True, n_consts=k)
     context = _common_context(cm, py_string_literal)
     context.update(
         param_defaults={"fast": [fast.doprint(p.default) for p in cm.params],
@@ -96,6 +97,26 @@ def c_param_fields(names: tuple[str, ...]) -> tuple[str, ...]:
     return tuple(f"p{j}_{b}" for j, b in enumerate(bases))
 
 
+def pow10_table(low: int, high: int) -> list[dict]:
+    """10^m for low <= m <= high as (hi * 2^64 + lo) * 2^e2 rounded down, with
+    2^127 <= hi * 2^64 + lo < 2^128: hi and lo as 16 hex digits (exact integer arithmetic)."""
+    rows = []
+    for m in range(low, high + 1):
+        num, den = (10 ** m, 1) if m >= 0 else (1, 10 ** -m)
+        e2 = num.bit_length() - den.bit_length() - 128
+        while True:
+            mant = (num << -e2) // den if e2 < 0 else num // (den << e2)
+            if mant >> 128:
+                e2 += 1
+            elif not mant >> 127:
+                e2 -= 1
+            else:
+                break
+        rows.append({"m": m, "hi": "%016x" % (mant >> 64), "lo": "%016x" % (mant & (2**64 - 1)),
+                     "e2": e2})
+    return rows
+
+
 # ---------------------------------------------------------------- context
 
 
@@ -110,6 +131,7 @@ def _common_context(cm: CodeModel, literal) -> dict:
                         for c in cm.constraints],
         "n_states": len(cm.states),
         "n_params": len(cm.params),
+        "n_consts": len(cm.consts.results),
         "n_outputs": len(cm.outputs),
         "n_constraints": len(cm.constraints),
         "position_rows": list(cm.position_rows),
@@ -132,7 +154,7 @@ def _scene_context(cm: CodeModel, literal, step_none: str) -> dict:
     }
 
 
-_BLOCKS = ("init", "rhs", "out", "residual", "scale", "position_jac", "velocity_jac")
+_BLOCKS = ("consts", "init", "rhs", "out", "residual", "scale", "position_jac", "velocity_jac")
 
 
 def _print_blocks(cm: CodeModel, printer) -> dict:
@@ -152,9 +174,9 @@ def _renumber_temps(block: Block) -> Block:
     mapping = {sym: sp.Symbol(f"w{k}") for k, (sym, _) in enumerate(block.temps)}
     if all(old == new for old, new in mapping.items()):
         return block
-    return Block(tuple((mapping[sym], sp.sympify(expr).xreplace(mapping))
+    return Block(tuple((mapping[sym], as_expr(expr).xreplace(mapping))
                        for sym, expr in block.temps),
-                 tuple(sp.sympify(expr).xreplace(mapping) for expr in block.results))
+                 tuple(as_expr(expr).xreplace(mapping) for expr in block.results))
 
 
 # ---------------------------------------------------------------- validation
@@ -174,21 +196,22 @@ def _validate(cm: CodeModel) -> None:
         raise EmitError(f"unknown solver {cm.scene.solver!r}")
     if any(c.level not in ("position", "velocity") for c in cm.constraints):
         raise EmitError("constraint levels must be 'position' or 'velocity'")
-    if _uses_time_or_state(cm.init):
-        raise EmitError("the init block may use parameters only")
+    for name in ("init", "consts"):
+        if _uses_more_than_parameters(getattr(cm, name)):
+            raise EmitError(f"the {name} block may use parameters only")
     for j, param in enumerate(cm.params):
         _check_default(j, param.default)
 
 
-def _uses_time_or_state(block: Block) -> bool:
-    exprs = [e for _, e in block.temps] + list(block.results)
-    return any(T in sp.sympify(e).free_symbols or sp.sympify(e).has(X) for e in exprs)
+def _uses_more_than_parameters(block: Block) -> bool:
+    exprs = [as_expr(e) for _, e in block.temps] + [as_expr(e) for e in block.results]
+    return any(T in e.free_symbols or e.has(X) or e.has(C) for e in exprs)
 
 
 def _check_default(j: int, default: sp.Expr) -> None:
-    default = sp.sympify(default)
-    if T in default.free_symbols or default.has(X):
-        raise EmitError(f"the default of parameter {j} uses time or states")
+    default = as_expr(default)
+    if T in default.free_symbols or default.has(X) or default.has(C):
+        raise EmitError(f"the default of parameter {j} uses time, states or constants")
     for ref in default.atoms(sp.Indexed):
         if ref.base == P and not (ref.indices[0].is_Integer and int(ref.indices[0]) < j):
             raise EmitError(f"the default of parameter {j} uses {ref}, not an earlier parameter")

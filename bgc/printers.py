@@ -11,17 +11,23 @@ Layout decisions (identical in C and Python):
   - every number prints as a double literal with 17 significant digits ("2.0", "0.33333333333333331");
   - x**n for a plain variable and 2 <= n <= 4 prints as x*x*...; (expr)**2 as a square helper;
     x**(1/2) as sqrt(x); x**-n as 1.0/(...); other powers as pow();
-  - a + (-b) prints as a - b, and factors with negative rational exponents go below one "/".
+  - a + (-b) prints as a - b, and factors with negative rational exponents go below one "/";
+  - for speed, sums add as a balanced tree: a + b + (c + d), so that n terms wait for
+    log2(n) additions rather than n - 1; and in a product that divides by a variable, the
+    simple factors (numbers, variables) are divided first, in parentheses, so that the
+    division runs while the compound factors (sums, calls) are still being computed:
+    S*(2.0*x[0]/(x[1] + 1.0)) (a division by a number alone stays 3.0*S/7.0).
 """
 from __future__ import annotations
 
 import re
 
 import sympy as sp
+
 from sympy.printing.c import C99CodePrinter
 from sympy.printing.pycode import PythonCodePrinter
 
-from bgc.codemodel import P, T, X
+from bgc.codemodel import C, P, T, X, as_expr
 
 FUNCTIONS = ("sin", "cos", "tan", "asin", "acos", "atan", "atan2", "sinh", "cosh", "tanh",
              "exp", "log", "sqrt", "Abs", "sign", "Min", "Max", "Heaviside")
@@ -51,10 +57,10 @@ def float_literal(value: float) -> str:
 # ---------------------------------------------------------------- validation
 
 
-def check_expression(expr: sp.Basic, n_states: int, n_params: int) -> None:
+def check_expression(expr: sp.Basic, n_states: int, n_params: int, n_consts: int = 0) -> None:
     """Raise UnsupportedExpressionError unless `expr` uses only what the code model allows."""
     if isinstance(expr, sp.Indexed):
-        _check_indexed(expr, n_states, n_params)
+        _check_indexed(expr, n_states, n_params, n_consts)
     elif isinstance(expr, sp.Symbol):
         if expr.name != T.name and not _TEMP.match(expr.name):
             raise UnsupportedExpressionError(f"unexpected symbol {expr.name!r}")
@@ -63,17 +69,17 @@ def check_expression(expr: sp.Basic, n_states: int, n_params: int) -> None:
             float_literal(float(expr))
     elif isinstance(expr, (sp.Add, sp.Mul, sp.Pow)):
         for arg in expr.args:
-            check_expression(arg, n_states, n_params)
+            check_expression(arg, n_states, n_params, n_consts)
     elif type(expr) in _CLASSES:
         _check_arity(expr)
         for arg in expr.args:
-            check_expression(arg, n_states, n_params)
+            check_expression(arg, n_states, n_params, n_consts)
     else:
         raise UnsupportedExpressionError(f"cannot print {type(expr).__name__}: {expr}")
 
 
-def _check_indexed(expr: sp.Indexed, n_states: int, n_params: int) -> None:
-    sizes = {X.name: n_states, P.name: n_params}  # by name: assumptions do not matter
+def _check_indexed(expr: sp.Indexed, n_states: int, n_params: int, n_consts: int) -> None:
+    sizes = {X.name: n_states, P.name: n_params, C.name: n_consts}  # by name, not assumptions
     if expr.base.name not in sizes or len(expr.indices) != 1:
         raise UnsupportedExpressionError(f"unexpected indexed variable {expr}")
     index = expr.indices[0]
@@ -109,16 +115,17 @@ class _ArithmeticPrinting:
     # set by subclasses
     FUNCTION_NAMES: dict[str, str] = {}
 
-    def __init__(self, n_states: int, n_params: int, settings=None):
+    def __init__(self, n_states: int, n_params: int, n_consts: int = 0, settings=None):
         super().__init__(dict(settings or {}, strict=True))
         self._n_states = n_states
         self._n_params = n_params
+        self._n_consts = n_consts
 
     def doprint(self, expr, assign_to=None):
         if assign_to is not None:
             raise TypeError("assign_to is not supported; the templates write assignments")
-        expr = sp.sympify(expr)
-        check_expression(expr, self._n_states, self._n_params)
+        expr = as_expr(expr)
+        check_expression(expr, self._n_states, self._n_params, self._n_consts)
         return self._print(expr)
 
     def _print(self, expr, **kwargs):
@@ -172,12 +179,17 @@ class _ArithmeticPrinting:
     # -- arithmetic
 
     def _print_sum(self, expr: sp.Add) -> str:
-        terms = expr.as_ordered_terms()
-        parts = [self._print(terms[0])]
-        for term in terms[1:]:
-            text = self._print(term)
-            parts.append(f" - {text[1:]}" if text.startswith("-") else f" + {text}")
-        return "".join(parts)
+        return self._balanced_sum([self._print(term) for term in expr.as_ordered_terms()])
+
+    def _balanced_sum(self, texts: list[str]) -> str:
+        """texts added as a balanced tree: the first half (itself balanced) + (the second)."""
+        if len(texts) == 1:
+            return texts[0]
+        half = (len(texts) + 1) // 2
+        left, right = self._balanced_sum(texts[:half]), self._balanced_sum(texts[half:])
+        if len(texts) - half > 1:
+            return f"{left} + ({right})"
+        return f"{left} - {right[1:]}" if right.startswith("-") else f"{left} + {right}"
 
     def _print_product(self, expr: sp.Mul) -> str:
         coeff, rest = expr.as_coeff_Mul()
@@ -189,12 +201,20 @@ class _ArithmeticPrinting:
                 denom.append(sp.Pow(factor.base, -factor.exp, evaluate=False))
             else:
                 numer.append(factor)
+        simple = [f for f in numer if f.is_Number or _is_simple(f)]
+        if simple and len(simple) < len(numer) and not all(f.is_Number for f in denom):
+            compound = [f for f in numer if not (f.is_Number or _is_simple(f))]
+            return sign + "".join(self._operand(f, PREC_MUL) + "*" for f in compound) + \
+                "(" + self._quotient(simple, denom) + ")"  # S*(a/d): d divides while S adds up
+        return sign + self._quotient(numer, denom)
+
+    def _quotient(self, numer: list, denom: list) -> str:
         text = "*".join(self._operand(f, PREC_MUL) for f in numer) if numer else "1.0"
         if len(denom) == 1:
             text += "/" + self._operand(denom[0], PREC_ATOM)
         elif denom:
             text += "/(" + "*".join(self._operand(f, PREC_MUL) for f in denom) + ")"
-        return sign + text
+        return text
 
     def _print_power(self, expr: sp.Pow) -> str:
         base, exp = expr.base, expr.exp
@@ -244,18 +264,21 @@ class _ArithmeticPrinting:
 
 
 class CPrinter(_ArithmeticPrinting, C99CodePrinter):
-    """C99: x[i], parameters as struct fields p-><field>, helpers bgc_sq/bgc_sign/... ."""
+    """C99: x[i], parameters as struct fields p-><field>, constants as p->c[k] (the struct
+    carries them), helpers bgc_sq/bgc_sign/... ."""
 
     FUNCTION_NAMES = {**{f: f for f in FUNCTIONS}, "Abs": "fabs", "sign": "bgc_sign",
                       "Min": "bgc_min", "Max": "bgc_max", "Heaviside": "bgc_heaviside"}
 
-    def __init__(self, n_states: int, param_fields: tuple[str, ...]):
-        super().__init__(n_states, len(param_fields))
+    def __init__(self, n_states: int, param_fields: tuple[str, ...], n_consts: int = 0):
+        super().__init__(n_states, len(param_fields), n_consts)
         self._param_fields = tuple(param_fields)
 
     def _print_index(self, base, index):
         if base.name == X.name:
             return f"x[{index}]"
+        if base.name == C.name:
+            return f"p->c[{index}]"
         return f"p->{self._param_fields[index]}"
 
     def _print_square(self, base):
@@ -277,15 +300,18 @@ _PY_IEEE = {**_PY_FAST, **{f: f"numpy.{f}" for f in ("sin", "cos", "tan", "sinh"
 
 
 class PythonPrinter(_ArithmeticPrinting, PythonCodePrinter):
-    """Python: x[i], p[j]; `ieee=False` uses math (fast, raises on domain errors), `ieee=True`
-    numpy on numpy.float64 values (inf/nan like C, for the fallback path)."""
+    """Python: x[i], p[j], and constant k as p[n_params + k] (the module's functions take the
+    parameters followed by their constants); `ieee=False` uses math (fast, raises on domain
+    errors), `ieee=True` numpy on numpy.float64 values (inf/nan like C, for the fallback)."""
 
-    def __init__(self, n_states: int, n_params: int, ieee: bool = False):
-        super().__init__(n_states, n_params)
+    def __init__(self, n_states: int, n_params: int, ieee: bool = False, n_consts: int = 0):
+        super().__init__(n_states, n_params, n_consts)
         self._ieee = ieee
         self.FUNCTION_NAMES = _PY_IEEE if ieee else _PY_FAST
 
     def _print_index(self, base, index):
+        if base.name == C.name:
+            return f"p[{self._n_params + index}]"
         return f"{base.name}[{index}]"  # x or p, checked
 
     def _print_extremum(self, func, args):

@@ -79,7 +79,9 @@ def _heaviside(a, at_zero):
 
 # ---------------------------------------------------------------- model
 # Each function runs first with math (fast); on a floating-point exception it runs again
-# on numpy.float64 values, which give inf and nan as the C program does.
+# on numpy.float64 values, which give inf and nan as the C program does.  The model
+# functions take p as the parameters followed by the constants computed from them once
+# (_with_constants): constant k is p[9 + k].
 
 
 def _fill_params(p, given):
@@ -131,6 +133,37 @@ def _fill_params_ieee(p, given):
         return [float(v) for v in p]
 
 
+def _constants(p):
+    try:
+        w0 = 1.0/p[2]
+        w1 = 1.0/p[4]
+        return [
+            -w0*p[1],
+            -w1*p[3],
+            -p[6],
+            w0*p[3],
+            -w1*p[5],
+            w1,
+        ]
+    except (ArithmeticError, ValueError):
+        return _constants_ieee(p)
+
+
+def _constants_ieee(p):
+    with numpy.errstate(all="ignore"):
+        p = numpy.asarray(p, dtype=numpy.float64)
+        w0 = 1.0/p[2]
+        w1 = 1.0/p[4]
+        return [float(v) for v in (
+            -w0*p[1],
+            -w1*p[3],
+            -p[6],
+            w0*p[3],
+            -w1*p[5],
+            w1,
+        )]
+
+
 def _init(p):
     try:
         return [
@@ -154,12 +187,10 @@ def _init_ieee(p):
 
 def _rhs(t, x, p):
     try:
-        w0 = 1.0/p[2]
-        w1 = x[1]/p[4]
         return [
-            -w0*p[1]*x[0] - w1*p[3] + p[0],
-            w0*p[3]*x[0] - w1*p[5] - p[6],
-            w1,
+            p[9]*x[0] + p[10]*x[1] + p[0],
+            p[11] + p[12]*x[0] + p[13]*x[1],
+            p[14]*x[1],
         ]
     except (ArithmeticError, ValueError):
         return _rhs_ieee(t, x, p)
@@ -170,12 +201,10 @@ def _rhs_ieee(t, x, p):
         t = numpy.float64(t)
         x = numpy.asarray(x, dtype=numpy.float64)
         p = numpy.asarray(p, dtype=numpy.float64)
-        w0 = 1.0/p[2]
-        w1 = x[1]/p[4]
         return [float(v) for v in (
-            -w0*p[1]*x[0] - w1*p[3] + p[0],
-            w0*p[3]*x[0] - w1*p[5] - p[6],
-            w1,
+            p[9]*x[0] + p[10]*x[1] + p[0],
+            p[11] + p[12]*x[0] + p[13]*x[1],
+            p[14]*x[1],
         )]
 
 
@@ -279,6 +308,12 @@ def _param_values(overrides):
     return _fill_params(p, overrides)
 
 
+def _with_constants(p):
+    """The parameters followed by the constants computed from them, as the model functions
+    take them."""
+    return list(p) + _constants(p)
+
+
 PARAMETERS = dict(zip(_PARAM_NAMES, _param_values({})))
 
 
@@ -291,12 +326,14 @@ def _vector(v, n, what):
 
 def rhs(t, x, p):
     """dx/dt at (t, x) with parameters p (a 1-D array ordered as PARAMETERS)."""
-    return numpy.array(_rhs(float(t), _vector(x, _N, "x"), _vector(p, len(_PARAM_NAMES), "p")))
+    p = _with_constants(_vector(p, len(_PARAM_NAMES), "p"))
+    return numpy.array(_rhs(float(t), _vector(x, _N, "x"), p))
 
 
 def outputs(t, x, p):
     """The outputs at (t, x), ordered as OUTPUTS."""
-    y = _out(float(t), _vector(x, _N, "x"), _vector(p, len(_PARAM_NAMES), "p"))
+    p = _with_constants(_vector(p, len(_PARAM_NAMES), "p"))
+    y = _out(float(t), _vector(x, _N, "x"), p)
     return numpy.array(y, dtype=float)
 
 
@@ -708,8 +745,9 @@ def _overrides(params):
 
 
 def _initial_state(s, p, project_initial):
-    """x0 for the run: initialised, checked finite, projected if asked, constraints checked."""
-    j = _first_nonfinite(p)
+    """x0 for the run: initialised, checked finite, projected if asked, constraints checked.
+    p: the parameters and their constants."""
+    j = _first_nonfinite(p[:len(_PARAM_NAMES)])
     if j >= 0:
         raise SimulationError("parameter '%s' is not finite" % _PARAM_NAMES[j], s.t0,
                               numpy.zeros(0), numpy.zeros((0, len(OUTPUTS))))
@@ -730,7 +768,7 @@ def simulate(t_end=None, dt=None, solver=None, rtol=None, atol=None, params=None
              project_initial=False):
     """Runs the model; returns (t, Y) with Y[k] the outputs at t[k].  None: the scene's value."""
     s = _settings(t_end, dt, solver, rtol, atol, step)
-    p = _param_values(_overrides(params))
+    p = _with_constants(_param_values(_overrides(params)))
     x0 = _initial_state(s, p, project_initial)
     times, rows = [], []
 
@@ -865,7 +903,7 @@ def main(argv=None):
     except ValueError as error:
         sys.stderr.write("error: %s\n" % error)
         return 2
-    p = _param_values(given)
+    p = _with_constants(_param_values(given))
     try:
         x0 = _initial_state(s, p, "--project-initial" in flags)
     except ConstraintError as error:

@@ -79,7 +79,9 @@ def _heaviside(a, at_zero):
 
 # ---------------------------------------------------------------- model
 # Each function runs first with math (fast); on a floating-point exception it runs again
-# on numpy.float64 values, which give inf and nan as the C program does.
+# on numpy.float64 values, which give inf and nan as the C program does.  The model
+# functions take p as the parameters followed by the constants computed from them once
+# (_with_constants): constant k is p[11 + k].
 
 
 def _fill_params(p, given):
@@ -139,6 +141,45 @@ def _fill_params_ieee(p, given):
         return [float(v) for v in p]
 
 
+def _constants(p):
+    try:
+        w0 = 1.0/p[1]
+        w1 = p[0]*p[4]
+        w2 = p[10]*p[1]
+        w3 = 1.0/p[0]
+        return [
+            w0,
+            w1*p[1],
+            w2,
+            -w2,
+            w1,
+            -w0,
+            w3,
+            -w3,
+        ]
+    except (ArithmeticError, ValueError):
+        return _constants_ieee(p)
+
+
+def _constants_ieee(p):
+    with numpy.errstate(all="ignore"):
+        p = numpy.asarray(p, dtype=numpy.float64)
+        w0 = 1.0/p[1]
+        w1 = p[0]*p[4]
+        w2 = p[10]*p[1]
+        w3 = 1.0/p[0]
+        return [float(v) for v in (
+            w0,
+            w1*p[1],
+            w2,
+            -w2,
+            w1,
+            -w0,
+            w3,
+            -w3,
+        )]
+
+
 def _init(p):
     try:
         w0 = p[0]*p[5]
@@ -171,17 +212,15 @@ def _init_ieee(p):
 def _rhs(t, x, p):
     try:
         w0 = math.sin(x[5])
-        w1 = 1.0/p[1]
-        w2 = math.cos(x[5])
-        w3 = w1*(-w0*p[10]*p[1]*x[0] - w0*x[1]*x[2] + w2*p[0]*p[1]*p[4] + w2*p[10]*p[1]*x[1] - w2*x[0]*x[2])/(w0*w0 + w2*w2)
-        w4 = 1.0/p[0]
+        w1 = math.cos(x[5])
+        w2 = (w0*p[14]*x[0] - w0*x[1]*x[2] + w1*p[12] + (w1*p[13]*x[1] - w1*x[0]*x[2]))/(w0*w0 + w1*w1)
         return [
-            w0*w3,
-            -w2*w3 + p[0]*p[4],
+            w0*w2*p[11],
+            w1*w2*p[16] + p[15],
             0.0,
-            w4*x[0],
-            w4*x[1],
-            w1*x[2],
+            p[17]*x[0],
+            p[17]*x[1],
+            p[11]*x[2],
         ]
     except (ArithmeticError, ValueError):
         return _rhs_ieee(t, x, p)
@@ -193,17 +232,15 @@ def _rhs_ieee(t, x, p):
         x = numpy.asarray(x, dtype=numpy.float64)
         p = numpy.asarray(p, dtype=numpy.float64)
         w0 = numpy.sin(x[5])
-        w1 = 1.0/p[1]
-        w2 = numpy.cos(x[5])
-        w3 = w1*(-w0*p[10]*p[1]*x[0] - w0*x[1]*x[2] + w2*p[0]*p[1]*p[4] + w2*p[10]*p[1]*x[1] - w2*x[0]*x[2])/(w0*w0 + w2*w2)
-        w4 = 1.0/p[0]
+        w1 = numpy.cos(x[5])
+        w2 = (w0*p[14]*x[0] - w0*x[1]*x[2] + w1*p[12] + (w1*p[13]*x[1] - w1*x[0]*x[2]))/(w0*w0 + w1*w1)
         return [float(v) for v in (
-            w0*w3,
-            -w2*w3 + p[0]*p[4],
+            w0*w2*p[11],
+            w1*w2*p[16] + p[15],
             0.0,
-            w4*x[0],
-            w4*x[1],
-            w1*x[2],
+            p[17]*x[0],
+            p[17]*x[1],
+            p[11]*x[2],
         )]
 
 
@@ -238,9 +275,8 @@ def _out_ieee(t, x, p):
 
 def _residual(t, x, p):
     try:
-        w0 = 1.0/p[0]
         return [
-            -w0*math.sin(x[5])*x[0] + w0*math.cos(x[5])*x[1],
+            math.sin(x[5])*p[18]*x[0] + math.cos(x[5])*p[17]*x[1],
         ]
     except (ArithmeticError, ValueError):
         return _residual_ieee(t, x, p)
@@ -251,17 +287,15 @@ def _residual_ieee(t, x, p):
         t = numpy.float64(t)
         x = numpy.asarray(x, dtype=numpy.float64)
         p = numpy.asarray(p, dtype=numpy.float64)
-        w0 = 1.0/p[0]
         return [float(v) for v in (
-            -w0*numpy.sin(x[5])*x[0] + w0*numpy.cos(x[5])*x[1],
+            numpy.sin(x[5])*p[18]*x[0] + numpy.cos(x[5])*p[17]*x[1],
         )]
 
 
 def _scale(t, x, p):
     try:
-        w0 = 1.0/p[0]
         return [
-            abs(w0*math.sin(x[5])*x[0]) + abs(w0*math.cos(x[5])*x[1]),
+            abs(math.sin(x[5])*p[17]*x[0]) + abs(math.cos(x[5])*p[17]*x[1]),
         ]
     except (ArithmeticError, ValueError):
         return _scale_ieee(t, x, p)
@@ -272,9 +306,8 @@ def _scale_ieee(t, x, p):
         t = numpy.float64(t)
         x = numpy.asarray(x, dtype=numpy.float64)
         p = numpy.asarray(p, dtype=numpy.float64)
-        w0 = 1.0/p[0]
         return [float(v) for v in (
-            abs(w0*numpy.sin(x[5])*x[0]) + abs(w0*numpy.cos(x[5])*x[1]),
+            abs(numpy.sin(x[5])*p[17]*x[0]) + abs(numpy.cos(x[5])*p[17]*x[1]),
         )]
 
 
@@ -297,16 +330,15 @@ def _position_jac_ieee(t, x, p):
 
 def _velocity_jac(t, x, p):
     try:
-        w0 = 1.0/p[0]
-        w1 = w0*math.sin(x[5])
-        w2 = w0*math.cos(x[5])
+        w0 = math.sin(x[5])*p[18]
+        w1 = math.cos(x[5])
         return [
-            -w1,
-            w2,
+            w0,
+            w1*p[17],
             0.0,
             0.0,
             0.0,
-            -w1*x[1] - w2*x[0],
+            w0*x[1] + w1*p[18]*x[0],
         ]
     except (ArithmeticError, ValueError):
         return _velocity_jac_ieee(t, x, p)
@@ -317,16 +349,15 @@ def _velocity_jac_ieee(t, x, p):
         t = numpy.float64(t)
         x = numpy.asarray(x, dtype=numpy.float64)
         p = numpy.asarray(p, dtype=numpy.float64)
-        w0 = 1.0/p[0]
-        w1 = w0*numpy.sin(x[5])
-        w2 = w0*numpy.cos(x[5])
+        w0 = numpy.sin(x[5])*p[18]
+        w1 = numpy.cos(x[5])
         return [float(v) for v in (
-            -w1,
-            w2,
+            w0,
+            w1*p[17],
             0.0,
             0.0,
             0.0,
-            -w1*x[1] - w2*x[0],
+            w0*x[1] + w1*p[18]*x[0],
         )]
 
 
@@ -337,6 +368,12 @@ def _param_values(overrides):
     for j, value in overrides.items():
         p[j] = float(value)
     return _fill_params(p, overrides)
+
+
+def _with_constants(p):
+    """The parameters followed by the constants computed from them, as the model functions
+    take them."""
+    return list(p) + _constants(p)
 
 
 PARAMETERS = dict(zip(_PARAM_NAMES, _param_values({})))
@@ -351,12 +388,14 @@ def _vector(v, n, what):
 
 def rhs(t, x, p):
     """dx/dt at (t, x) with parameters p (a 1-D array ordered as PARAMETERS)."""
-    return numpy.array(_rhs(float(t), _vector(x, _N, "x"), _vector(p, len(_PARAM_NAMES), "p")))
+    p = _with_constants(_vector(p, len(_PARAM_NAMES), "p"))
+    return numpy.array(_rhs(float(t), _vector(x, _N, "x"), p))
 
 
 def outputs(t, x, p):
     """The outputs at (t, x), ordered as OUTPUTS."""
-    y = _out(float(t), _vector(x, _N, "x"), _vector(p, len(_PARAM_NAMES), "p"))
+    p = _with_constants(_vector(p, len(_PARAM_NAMES), "p"))
+    y = _out(float(t), _vector(x, _N, "x"), p)
     return numpy.array(y, dtype=float)
 
 
@@ -768,8 +807,9 @@ def _overrides(params):
 
 
 def _initial_state(s, p, project_initial):
-    """x0 for the run: initialised, checked finite, projected if asked, constraints checked."""
-    j = _first_nonfinite(p)
+    """x0 for the run: initialised, checked finite, projected if asked, constraints checked.
+    p: the parameters and their constants."""
+    j = _first_nonfinite(p[:len(_PARAM_NAMES)])
     if j >= 0:
         raise SimulationError("parameter '%s' is not finite" % _PARAM_NAMES[j], s.t0,
                               numpy.zeros(0), numpy.zeros((0, len(OUTPUTS))))
@@ -790,7 +830,7 @@ def simulate(t_end=None, dt=None, solver=None, rtol=None, atol=None, params=None
              project_initial=False):
     """Runs the model; returns (t, Y) with Y[k] the outputs at t[k].  None: the scene's value."""
     s = _settings(t_end, dt, solver, rtol, atol, step)
-    p = _param_values(_overrides(params))
+    p = _with_constants(_param_values(_overrides(params)))
     x0 = _initial_state(s, p, project_initial)
     times, rows = [], []
 
@@ -925,7 +965,7 @@ def main(argv=None):
     except ValueError as error:
         sys.stderr.write("error: %s\n" % error)
         return 2
-    p = _param_values(given)
+    p = _with_constants(_param_values(given))
     try:
         x0 = _initial_state(s, p, "--project-initial" in flags)
     except ConstraintError as error:

@@ -18,6 +18,7 @@
 #pragma STDC FP_CONTRACT OFF
 #endif
 #include <float.h>
+#include <limits.h>
 #include <math.h>
 #include <stddef.h>
 #include <stdio.h>
@@ -28,6 +29,7 @@
 
 #define BGC_NUM_STATES 4
 #define BGC_NUM_PARAMS 6
+#define BGC_NUM_CONSTANTS 10
 #define BGC_NUM_OUTPUTS 4
 #define BGC_NUM_CONSTRAINTS 2
 #define BGC_NUM_POSITION_ROWS 1
@@ -45,7 +47,9 @@ extern const char *const bgc_output_names[BGC_DIM(BGC_NUM_OUTPUTS)];
 extern const char *const bgc_constraint_names[BGC_DIM(BGC_NUM_CONSTRAINTS)]; /* junctions */
 extern const char *const bgc_constraint_levels[BGC_DIM(BGC_NUM_CONSTRAINTS)]; /* position|velocity */
 
-/* The parameters, one field per parameter in order (field j is parameter bgc_param_names[j]). */
+/* The parameters, one field per parameter in order (field j is parameter bgc_param_names[j]),
+   and c: constants computed from them once (the subexpressions of the model functions that
+   depend on the parameters only), which the model functions below read. */
 typedef struct bgc_params {
     double p_m;
     double p_l;
@@ -53,11 +57,17 @@ typedef struct bgc_params {
     double p_theta0;
     double p_alpha;
     double p_beta;
+    double c[BGC_DIM(BGC_NUM_CONSTANTS)];
 } bgc_params;
 
 /* Sets every parameter j with !given[j] (all of them if given is NULL) from its default
-   expression, in order, so that a derived parameter follows the parameters it uses. */
+   expression, in order, so that a derived parameter follows the parameters it uses; then
+   updates the constants. */
 void bgc_params_defaults(bgc_params *p, const int *given);
+/* Recomputes the constants p->c from the parameter fields.  Call it after setting a field
+   and before calling a model function (bgc_simulate, bgc_check_constraints and
+   bgc_project_initial update a copy of p themselves). */
+void bgc_params_update(bgc_params *p);
 /* The field of parameter j (NULL if j is out of range); its index by name (-1 if unknown). */
 double *bgc_param_ref(bgc_params *p, int j);
 int bgc_param_index(const char *name);
@@ -148,7 +158,6 @@ static inline double bgc_heaviside(double a, double at_zero)
 
 void bgc_params_defaults(bgc_params *p, const int *given)
 {
-    (void)p;
     (void)given;
     if (!given || !given[0])
         p->p_m = 1.0;
@@ -162,6 +171,25 @@ void bgc_params_defaults(bgc_params *p, const int *given)
         p->p_alpha = 5.0;
     if (!given || !given[5])
         p->p_beta = 5.0;
+    bgc_params_update(p);
+}
+
+void bgc_params_update(bgc_params *p)
+{
+    const double w0 = p->p_m*p->p_m;
+    const double w1 = w0*p->p_beta*p->p_beta;
+    const double w2 = p->p_l*p->p_l;
+    const double w3 = 1.0/p->p_m;
+    p->c[0] = w1;
+    p->c[1] = -w1*w2;
+    p->c[2] = 2.0*w0*p->p_g;
+    p->c[3] = 4.0*p->p_m*p->p_alpha;
+    p->c[4] = -0.5*w3;
+    p->c[5] = p->p_m*p->p_g;
+    p->c[6] = w3;
+    p->c[7] = -w2;
+    p->c[8] = 2.0*w3;
+    p->c[9] = w2;
 }
 
 double *bgc_param_ref(bgc_params *p, int j)
@@ -206,26 +234,24 @@ void bgc_init(const bgc_params *p, double *x0)
     x0[3] = cos(p->p_theta0)*p->p_l;
 }
 
-void bgc_rhs(double t, const double *x, const bgc_params *p, double *dx)
+/* The right-hand side and the outputs are static inline, so that the solvers below can
+   inline them (the compiler decides); bgc_rhs and bgc_outputs call them. */
+static inline void bgc_model_rhs(double t, const double *x, const bgc_params *p, double *dx)
 {
     (void)t;
     (void)x;
     (void)p;
     (void)dx;
-    const double w0 = 1.0/p->p_m;
-    const double w1 = x[2]*x[2];
-    const double w2 = x[3]*x[3];
-    const double w3 = p->p_m*p->p_m;
-    const double w4 = w3*p->p_beta*p->p_beta;
-    const double w5 = 4.0*p->p_m*p->p_alpha;
-    const double w6 = 0.5*w0*(w1*w4 + w2*w4 + 2.0*w3*p->p_g*x[3] - w4*p->p_l*p->p_l + w5*x[0]*x[2] + w5*x[1]*x[3] + 2.0*x[0]*x[0] + 2.0*x[1]*x[1])/(w1 + w2);
-    dx[0] = -w6*x[2];
-    dx[1] = -w6*x[3] + p->p_m*p->p_g;
-    dx[2] = w0*x[0];
-    dx[3] = w0*x[1];
+    const double w0 = x[2]*x[2];
+    const double w1 = x[3]*x[3];
+    const double w2 = (w0*p->c[0] + w1*p->c[0] + (p->c[1] + p->c[2]*x[3]) + (p->c[3]*x[0]*x[2] + p->c[3]*x[1]*x[3] + (2.0*x[0]*x[0] + 2.0*x[1]*x[1])))*(p->c[4]/(w0 + w1));
+    dx[0] = w2*x[2];
+    dx[1] = w2*x[3] + p->c[5];
+    dx[2] = p->c[6]*x[0];
+    dx[3] = p->c[6]*x[1];
 }
 
-void bgc_outputs(double t, const double *x, const bgc_params *p, double *y)
+static inline void bgc_model_outputs(double t, const double *x, const bgc_params *p, double *y)
 {
     (void)t;
     (void)x;
@@ -237,15 +263,24 @@ void bgc_outputs(double t, const double *x, const bgc_params *p, double *y)
     y[3] = x[3];
 }
 
+void bgc_rhs(double t, const double *x, const bgc_params *p, double *dx)
+{
+    bgc_model_rhs(t, x, p, dx);
+}
+
+void bgc_outputs(double t, const double *x, const bgc_params *p, double *y)
+{
+    bgc_model_outputs(t, x, p, y);
+}
+
 void bgc_residual(double t, const double *x, const bgc_params *p, double *r)
 {
     (void)t;
     (void)x;
     (void)p;
     (void)r;
-    const double w0 = 2.0/p->p_m;
-    r[0] = -p->p_l*p->p_l + x[2]*x[2] + x[3]*x[3];
-    r[1] = w0*x[0]*x[2] + w0*x[1]*x[3];
+    r[0] = p->c[7] + x[2]*x[2] + x[3]*x[3];
+    r[1] = p->c[8]*x[0]*x[2] + p->c[8]*x[1]*x[3];
 }
 
 void bgc_scale(double t, const double *x, const bgc_params *p, double *s)
@@ -254,9 +289,8 @@ void bgc_scale(double t, const double *x, const bgc_params *p, double *s)
     (void)x;
     (void)p;
     (void)s;
-    const double w0 = 1.0/p->p_m;
-    s[0] = p->p_l*p->p_l + x[2]*x[2] + x[3]*x[3];
-    s[1] = 2.0*fabs(w0*x[0]*x[2]) + 2.0*fabs(w0*x[1]*x[3]);
+    s[0] = p->c[9] + x[2]*x[2] + x[3]*x[3];
+    s[1] = 2.0*fabs(p->c[6]*x[0]*x[2]) + 2.0*fabs(p->c[6]*x[1]*x[3]);
 }
 
 void bgc_position_jac(double t, const double *x, const bgc_params *p, double *J)
@@ -277,11 +311,10 @@ void bgc_velocity_jac(double t, const double *x, const bgc_params *p, double *J)
     (void)x;
     (void)p;
     (void)J;
-    const double w0 = 2.0/p->p_m;
-    J[0] = w0*x[2];
-    J[1] = w0*x[3];
-    J[2] = w0*x[0];
-    J[3] = w0*x[1];
+    J[0] = p->c[8]*x[2];
+    J[1] = p->c[8]*x[3];
+    J[2] = p->c[8]*x[0];
+    J[3] = p->c[8]*x[1];
 }
 
 /* ========================================================= constraints === */
@@ -293,9 +326,11 @@ static const int bgc_velocity_movable[BGC_DIM(BGC_NUM_STATES)] = { 1, 1, 0, 0 };
 int bgc_check_constraints(double t, const double *x, const bgc_params *p, FILE *err)
 {
     double r[BGC_DIM(BGC_NUM_CONSTRAINTS)] = { 0.0 }, s[BGC_DIM(BGC_NUM_CONSTRAINTS)] = { 0.0 };
+    bgc_params q = *p;
     int k, bad = 0;
-    bgc_residual(t, x, p, r);
-    bgc_scale(t, x, p, s);
+    bgc_params_update(&q);
+    bgc_residual(t, x, &q, r);
+    bgc_scale(t, x, &q, s);
     for (k = 0; k < BGC_NUM_CONSTRAINTS; k++) {
         if (fabs(r[k]) <= 1e-9 * s[k])
             continue;
@@ -397,11 +432,14 @@ int bgc_project_initial(double t, double *x, const bgc_params *p, char *msg, siz
 {
     static const char *const why[] = { "", "the constraint Jacobian is singular",
                                        "no convergence after 50 iterations" };
-    int rc = bgc_project_rows(t, x, p, bgc_position_rows, BGC_NUM_POSITION_ROWS,
-                              bgc_position_jac, NULL);
+    bgc_params q = *p;
     const char *level = "position";
+    int rc;
+    bgc_params_update(&q);
+    rc = bgc_project_rows(t, x, &q, bgc_position_rows, BGC_NUM_POSITION_ROWS, bgc_position_jac,
+                          NULL);
     if (rc == 0) {
-        rc = bgc_project_rows(t, x, p, bgc_velocity_rows, BGC_NUM_VELOCITY_ROWS,
+        rc = bgc_project_rows(t, x, &q, bgc_velocity_rows, BGC_NUM_VELOCITY_ROWS,
                               bgc_velocity_jac, bgc_velocity_movable);
         level = "velocity";
     }
@@ -501,7 +539,7 @@ static int bgc_emit(const bgc_params *p, double t, const double *x, bgc_sink sin
 {
     double y[BGC_DIM(BGC_NUM_OUTPUTS)] = { 0.0 };
     int j;
-    bgc_outputs(t, x, p, y);
+    bgc_model_outputs(t, x, p, y);
     j = bgc_first_nonfinite(y, BGC_NUM_OUTPUTS);
     if (j >= 0)
         return bgc_fail(msg, msg_size, t, "output", bgc_output_names[j]);
@@ -527,7 +565,7 @@ static int bgc_fixed_step(int solver, const bgc_params *p, double t, double h, d
     double *k1 = work, *k2 = work + D, *k3 = work + 2 * D, *k4 = work + 3 * D, *yt = work + 4 * D;
     const double h2 = 0.5 * h, h6 = h / 6.0;
     int i;
-    bgc_rhs(t, y, p, k1);
+    bgc_model_rhs(t, y, p, k1);
     st->rhs++;
     i = bgc_first_nonfinite(k1, N);
     if (i >= 0)
@@ -538,13 +576,13 @@ static int bgc_fixed_step(int solver, const bgc_params *p, double t, double h, d
     } else {
         for (i = 0; i < N; i++)
             yt[i] = y[i] + h2 * k1[i];
-        bgc_rhs(t + h2, yt, p, k2);
+        bgc_model_rhs(t + h2, yt, p, k2);
         for (i = 0; i < N; i++)
             yt[i] = y[i] + h2 * k2[i];
-        bgc_rhs(t + h2, yt, p, k3);
+        bgc_model_rhs(t + h2, yt, p, k3);
         for (i = 0; i < N; i++)
             yt[i] = y[i] + h * k3[i];
-        bgc_rhs(t + h, yt, p, k4);
+        bgc_model_rhs(t + h, yt, p, k4);
         st->rhs += 3;
         for (i = 0; i < N; i++)
             y[i] = y[i] + h6 * (k1[i] + 2.0 * (k2[i] + k3[i]) + k4[i]);
@@ -645,7 +683,7 @@ static double bgc_initial_step(const bgc_settings *s, const bgc_params *p, doubl
     h = bgc_min(h, hmax);
     for (i = 0; i < N; i++)
         y1[i] = y[i] + h * f0[i];
-    bgc_rhs(t + h, y1, p, f1);
+    bgc_model_rhs(t + h, y1, p, f1);
     st->rhs++;
     for (i = 0; i < N; i++) {
         const double q = (f1[i] - f0[i]) / (s->atol + s->rtol * fabs(y[i]));
@@ -701,7 +739,7 @@ static int bgc_run_dopri5(const bgc_settings *s, const bgc_params *p, double *y,
     rc = bgc_emit(p, t, y, sink, ctx, msg, msg_size);
     if (rc || nout == 0)
         return rc;
-    bgc_rhs(t, y, p, k1);
+    bgc_model_rhs(t, y, p, k1);
     st->rhs++;
     i = bgc_first_nonfinite(k1, N);
     if (i >= 0)
@@ -723,24 +761,24 @@ static int bgc_run_dopri5(const bgc_settings *s, const bgc_params *p, double *y,
         tph = last ? s->t_end : t + h;
         for (i = 0; i < N; i++)
             ys[i] = y[i] + h * BGC_A21 * k1[i];
-        bgc_rhs(t + BGC_C2 * h, ys, p, k2);
+        bgc_model_rhs(t + BGC_C2 * h, ys, p, k2);
         for (i = 0; i < N; i++)
             ys[i] = y[i] + h * (BGC_A31 * k1[i] + BGC_A32 * k2[i]);
-        bgc_rhs(t + BGC_C3 * h, ys, p, k3);
+        bgc_model_rhs(t + BGC_C3 * h, ys, p, k3);
         for (i = 0; i < N; i++)
             ys[i] = y[i] + h * (BGC_A41 * k1[i] + BGC_A42 * k2[i] + BGC_A43 * k3[i]);
-        bgc_rhs(t + BGC_C4 * h, ys, p, k4);
+        bgc_model_rhs(t + BGC_C4 * h, ys, p, k4);
         for (i = 0; i < N; i++)
             ys[i] = y[i] + h * (BGC_A51 * k1[i] + BGC_A52 * k2[i] + BGC_A53 * k3[i] + BGC_A54 * k4[i]);
-        bgc_rhs(t + BGC_C5 * h, ys, p, k5);
+        bgc_model_rhs(t + BGC_C5 * h, ys, p, k5);
         for (i = 0; i < N; i++)
             ys[i] = y[i] + h * (BGC_A61 * k1[i] + BGC_A62 * k2[i] + BGC_A63 * k3[i] + BGC_A64 * k4[i]
                                 + BGC_A65 * k5[i]);
-        bgc_rhs(tph, ys, p, k6);
+        bgc_model_rhs(tph, ys, p, k6);
         for (i = 0; i < N; i++)
             y1[i] = y[i] + h * (BGC_A71 * k1[i] + BGC_A73 * k3[i] + BGC_A74 * k4[i] + BGC_A75 * k5[i]
                                 + BGC_A76 * k6[i]);
-        bgc_rhs(tph, y1, p, k7);
+        bgc_model_rhs(tph, y1, p, k7);
         st->rhs += 6;
 
         /* Hairer's error norm: RMS of err_i / (atol + rtol * max(|y_i|, |y1_i|)). */
@@ -823,29 +861,33 @@ int bgc_simulate(const bgc_settings *s, const bgc_params *p, const double *x0, b
                  void *ctx, bgc_stats *stats, char *msg, size_t msg_size)
 {
     double y[BGC_DIM(BGC_NUM_STATES)] = { 0.0 };
+    bgc_params q = *p;
     int i, rc = bgc_check_settings(s, msg, msg_size);
     if (rc)
         return rc;
+    bgc_params_update(&q);
     for (i = 0; i < BGC_NUM_STATES; i++)
         y[i] = x0[i];
     i = bgc_first_nonfinite(y, BGC_NUM_STATES);
     if (i >= 0)
         return bgc_fail(msg, msg_size, s->t0, "state", bgc_state_names[i]);
     if (s->solver == BGC_DOPRI5)
-        return bgc_run_dopri5(s, p, y, sink, ctx, stats, msg, msg_size);
-    return bgc_run_fixed(s, p, y, sink, ctx, stats, msg, msg_size);
+        return bgc_run_dopri5(s, &q, y, sink, ctx, stats, msg, msg_size);
+    return bgc_run_fixed(s, &q, y, sink, ctx, stats, msg, msg_size);
 }
 
 #ifndef BGC_NO_MAIN
 /* ================================================================ CSV === */
 
-/* Numbers are written exactly as printf("%.17g") writes them (NaN as "nan"), by a fast
-   path where long double is x87 extended or IEEE quad: |v| scaled by an exact power of ten
-   to a 17-digit integer with one rounding (error < 2^-8), rounded to nearest, and
-   snprintf whenever the fraction lies within 2^-7 of one half, the power of ten is not
-   exact (decimal exponent outside -11..43), or v is subnormal or not finite.
-   Compile with -DBGC_PLAIN_PRINTF to always use snprintf. */
-#define BGC_FMT_SIZE 32
+/* Numbers are written exactly as printf("%.17g") writes them (NaN as "nan"), in integer
+   arithmetic: |v| = M 2^q (M < 2^53) times 10^m, a 128-bit mantissa from bgc_pow10 rounded
+   down, is one 192-bit product whose integer part is v's 17 significant digits and whose
+   next 64 bits, the fraction, are off by less than 1/8 of their last place.  That decides
+   the rounding to nearest unless the fraction lies within that error of one half (exact
+   ties, about one value in 2^63 otherwise): snprintf writes those, and subnormals,
+   infinities and |v| outside 1e-40..1e40 (the range of the table).  Compile with
+   -DBGC_PLAIN_PRINTF to always use snprintf. */
+#define BGC_FMT_SIZE 32 /* bgc_fmt17 writes at most 26 bytes (it stores whole words) */
 static unsigned long bgc_fmt_slow_count; /* snprintf fallbacks, for tests */
 
 static int bgc_fmt_printf(char *buf, double v)
@@ -858,98 +900,121 @@ static int bgc_fmt_printf(char *buf, double v)
     return snprintf(buf, BGC_FMT_SIZE, "%.17g", v);
 }
 
-#if (LDBL_MANT_DIG == 64 || LDBL_MANT_DIG == 113) && !defined(BGC_PLAIN_PRINTF)
-static const long double bgc_pow10[28] = {
-    1e0L, 1e1L, 1e2L, 1e3L, 1e4L, 1e5L, 1e6L, 1e7L, 1e8L, 1e9L, 1e10L, 1e11L, 1e12L, 1e13L,
-    1e14L, 1e15L, 1e16L, 1e17L, 1e18L, 1e19L, 1e20L, 1e21L, 1e22L, 1e23L, 1e24L, 1e25L,
-    1e26L, 1e27L
+#if !defined(BGC_PLAIN_PRINTF) && FLT_RADIX == 2 && DBL_MANT_DIG == 53 && DBL_MAX_EXP == 1024 \
+    && ULLONG_MAX == 0xffffffffffffffffULL
+typedef unsigned long long bgc_u64;
+
+#if defined(__SIZEOF_INT128__) && !defined(BGC_NO_INT128)
+__extension__ typedef unsigned __int128 bgc_u128;
+/* a * b = (returned) 2^64 + *lo. */
+static inline bgc_u64 bgc_mul64(bgc_u64 a, bgc_u64 b, bgc_u64 *lo)
+{
+    const bgc_u128 prod = (bgc_u128)a * b;
+    *lo = (bgc_u64)prod;
+    return (bgc_u64)(prod >> 64);
+}
+#else
+/* a * b = (returned) 2^64 + *lo, from 32-bit halves (C99 has no 128-bit integer). */
+static inline bgc_u64 bgc_mul64(bgc_u64 a, bgc_u64 b, bgc_u64 *lo)
+{
+    const bgc_u64 mask = 0xffffffffULL, a0 = a & mask, a1 = a >> 32, b0 = b & mask, b1 = b >> 32;
+    const bgc_u64 p00 = a0 * b0, p01 = a0 * b1, p10 = a1 * b0;
+    const bgc_u64 mid = (p00 >> 32) + (p01 & mask) + (p10 & mask);
+    *lo = (mid << 32) | (p00 & mask);
+    return a1 * b1 + (p01 >> 32) + (p10 >> 32) + (mid >> 32);
+}
+#endif
+
+/* 10^m = (hi 2^64 + lo) 2^e2 rounded down, 2^127 <= hi 2^64 + lo < 2^128, for m in
+   BGC_POW10_MIN..BGC_POW10_MAX. */
+#define BGC_POW10_MIN (-24)
+#define BGC_POW10_MAX 56
+static const struct bgc_pow10_entry {
+    bgc_u64 hi, lo;
+    int e2;
+} bgc_pow10[] = {
+    { 0x9abe14cd44753b52ULL, 0xc4926a9672793542ULL, -207 }, /* 1e-24 */
+    { 0xc16d9a0095928a27ULL, 0x75b7053c0f178293ULL, -204 }, /* 1e-23 */
+    { 0xf1c90080baf72cb1ULL, 0x5324c68b12dd6338ULL, -201 }, /* 1e-22 */
+    { 0x971da05074da7beeULL, 0xd3f6fc16ebca5e03ULL, -197 }, /* 1e-21 */
+    { 0xbce5086492111aeaULL, 0x88f4bb1ca6bcf584ULL, -194 }, /* 1e-20 */
+    { 0xec1e4a7db69561a5ULL, 0x2b31e9e3d06c32e5ULL, -191 }, /* 1e-19 */
+    { 0x9392ee8e921d5d07ULL, 0x3aff322e62439fcfULL, -187 }, /* 1e-18 */
+    { 0xb877aa3236a4b449ULL, 0x09befeb9fad487c2ULL, -184 }, /* 1e-17 */
+    { 0xe69594bec44de15bULL, 0x4c2ebe687989a9b3ULL, -181 }, /* 1e-16 */
+    { 0x901d7cf73ab0acd9ULL, 0x0f9d37014bf60a10ULL, -177 }, /* 1e-15 */
+    { 0xb424dc35095cd80fULL, 0x538484c19ef38c94ULL, -174 }, /* 1e-14 */
+    { 0xe12e13424bb40e13ULL, 0x2865a5f206b06fb9ULL, -171 }, /* 1e-13 */
+    { 0x8cbccc096f5088cbULL, 0xf93f87b7442e45d3ULL, -167 }, /* 1e-12 */
+    { 0xafebff0bcb24aafeULL, 0xf78f69a51539d748ULL, -164 }, /* 1e-11 */
+    { 0xdbe6fecebdedd5beULL, 0xb573440e5a884d1bULL, -161 }, /* 1e-10 */
+    { 0x89705f4136b4a597ULL, 0x31680a88f8953030ULL, -157 }, /* 1e-9 */
+    { 0xabcc77118461cefcULL, 0xfdc20d2b36ba7c3dULL, -154 }, /* 1e-8 */
+    { 0xd6bf94d5e57a42bcULL, 0x3d32907604691b4cULL, -151 }, /* 1e-7 */
+    { 0x8637bd05af6c69b5ULL, 0xa63f9a49c2c1b10fULL, -147 }, /* 1e-6 */
+    { 0xa7c5ac471b478423ULL, 0x0fcf80dc33721d53ULL, -144 }, /* 1e-5 */
+    { 0xd1b71758e219652bULL, 0xd3c36113404ea4a8ULL, -141 }, /* 1e-4 */
+    { 0x83126e978d4fdf3bULL, 0x645a1cac083126e9ULL, -137 }, /* 1e-3 */
+    { 0xa3d70a3d70a3d70aULL, 0x3d70a3d70a3d70a3ULL, -134 }, /* 1e-2 */
+    { 0xccccccccccccccccULL, 0xccccccccccccccccULL, -131 }, /* 1e-1 */
+    { 0x8000000000000000ULL, 0x0000000000000000ULL, -127 }, /* 1e0 */
+    { 0xa000000000000000ULL, 0x0000000000000000ULL, -124 }, /* 1e1 */
+    { 0xc800000000000000ULL, 0x0000000000000000ULL, -121 }, /* 1e2 */
+    { 0xfa00000000000000ULL, 0x0000000000000000ULL, -118 }, /* 1e3 */
+    { 0x9c40000000000000ULL, 0x0000000000000000ULL, -114 }, /* 1e4 */
+    { 0xc350000000000000ULL, 0x0000000000000000ULL, -111 }, /* 1e5 */
+    { 0xf424000000000000ULL, 0x0000000000000000ULL, -108 }, /* 1e6 */
+    { 0x9896800000000000ULL, 0x0000000000000000ULL, -104 }, /* 1e7 */
+    { 0xbebc200000000000ULL, 0x0000000000000000ULL, -101 }, /* 1e8 */
+    { 0xee6b280000000000ULL, 0x0000000000000000ULL, -98 }, /* 1e9 */
+    { 0x9502f90000000000ULL, 0x0000000000000000ULL, -94 }, /* 1e10 */
+    { 0xba43b74000000000ULL, 0x0000000000000000ULL, -91 }, /* 1e11 */
+    { 0xe8d4a51000000000ULL, 0x0000000000000000ULL, -88 }, /* 1e12 */
+    { 0x9184e72a00000000ULL, 0x0000000000000000ULL, -84 }, /* 1e13 */
+    { 0xb5e620f480000000ULL, 0x0000000000000000ULL, -81 }, /* 1e14 */
+    { 0xe35fa931a0000000ULL, 0x0000000000000000ULL, -78 }, /* 1e15 */
+    { 0x8e1bc9bf04000000ULL, 0x0000000000000000ULL, -74 }, /* 1e16 */
+    { 0xb1a2bc2ec5000000ULL, 0x0000000000000000ULL, -71 }, /* 1e17 */
+    { 0xde0b6b3a76400000ULL, 0x0000000000000000ULL, -68 }, /* 1e18 */
+    { 0x8ac7230489e80000ULL, 0x0000000000000000ULL, -64 }, /* 1e19 */
+    { 0xad78ebc5ac620000ULL, 0x0000000000000000ULL, -61 }, /* 1e20 */
+    { 0xd8d726b7177a8000ULL, 0x0000000000000000ULL, -58 }, /* 1e21 */
+    { 0x878678326eac9000ULL, 0x0000000000000000ULL, -54 }, /* 1e22 */
+    { 0xa968163f0a57b400ULL, 0x0000000000000000ULL, -51 }, /* 1e23 */
+    { 0xd3c21bcecceda100ULL, 0x0000000000000000ULL, -48 }, /* 1e24 */
+    { 0x84595161401484a0ULL, 0x0000000000000000ULL, -44 }, /* 1e25 */
+    { 0xa56fa5b99019a5c8ULL, 0x0000000000000000ULL, -41 }, /* 1e26 */
+    { 0xcecb8f27f4200f3aULL, 0x0000000000000000ULL, -38 }, /* 1e27 */
+    { 0x813f3978f8940984ULL, 0x4000000000000000ULL, -34 }, /* 1e28 */
+    { 0xa18f07d736b90be5ULL, 0x5000000000000000ULL, -31 }, /* 1e29 */
+    { 0xc9f2c9cd04674edeULL, 0xa400000000000000ULL, -28 }, /* 1e30 */
+    { 0xfc6f7c4045812296ULL, 0x4d00000000000000ULL, -25 }, /* 1e31 */
+    { 0x9dc5ada82b70b59dULL, 0xf020000000000000ULL, -21 }, /* 1e32 */
+    { 0xc5371912364ce305ULL, 0x6c28000000000000ULL, -18 }, /* 1e33 */
+    { 0xf684df56c3e01bc6ULL, 0xc732000000000000ULL, -15 }, /* 1e34 */
+    { 0x9a130b963a6c115cULL, 0x3c7f400000000000ULL, -11 }, /* 1e35 */
+    { 0xc097ce7bc90715b3ULL, 0x4b9f100000000000ULL, -8 }, /* 1e36 */
+    { 0xf0bdc21abb48db20ULL, 0x1e86d40000000000ULL, -5 }, /* 1e37 */
+    { 0x96769950b50d88f4ULL, 0x1314448000000000ULL, -1 }, /* 1e38 */
+    { 0xbc143fa4e250eb31ULL, 0x17d955a000000000ULL, 2 }, /* 1e39 */
+    { 0xeb194f8e1ae525fdULL, 0x5dcfab0800000000ULL, 5 }, /* 1e40 */
+    { 0x92efd1b8d0cf37beULL, 0x5aa1cae500000000ULL, 9 }, /* 1e41 */
+    { 0xb7abc627050305adULL, 0xf14a3d9e40000000ULL, 12 }, /* 1e42 */
+    { 0xe596b7b0c643c719ULL, 0x6d9ccd05d0000000ULL, 15 }, /* 1e43 */
+    { 0x8f7e32ce7bea5c6fULL, 0xe4820023a2000000ULL, 19 }, /* 1e44 */
+    { 0xb35dbf821ae4f38bULL, 0xdda2802c8a800000ULL, 22 }, /* 1e45 */
+    { 0xe0352f62a19e306eULL, 0xd50b2037ad200000ULL, 25 }, /* 1e46 */
+    { 0x8c213d9da502de45ULL, 0x4526f422cc340000ULL, 29 }, /* 1e47 */
+    { 0xaf298d050e4395d6ULL, 0x9670b12b7f410000ULL, 32 }, /* 1e48 */
+    { 0xdaf3f04651d47b4cULL, 0x3c0cdd765f114000ULL, 35 }, /* 1e49 */
+    { 0x88d8762bf324cd0fULL, 0xa5880a69fb6ac800ULL, 39 }, /* 1e50 */
+    { 0xab0e93b6efee0053ULL, 0x8eea0d047a457a00ULL, 42 }, /* 1e51 */
+    { 0xd5d238a4abe98068ULL, 0x72a4904598d6d880ULL, 45 }, /* 1e52 */
+    { 0x85a36366eb71f041ULL, 0x47a6da2b7f864750ULL, 49 }, /* 1e53 */
+    { 0xa70c3c40a64e6c51ULL, 0x999090b65f67d924ULL, 52 }, /* 1e54 */
+    { 0xd0cf4b50cfe20765ULL, 0xfff4b4e3f741cf6dULL, 55 }, /* 1e55 */
+    { 0x82818f1281ed449fULL, 0xbff8f10e7a8921a4ULL, 59 }, /* 1e56 */
 };
-static const char bgc_pairs[] =
-    "00010203040506070809"
-    "10111213141516171819"
-    "20212223242526272829"
-    "30313233343536373839"
-    "40414243444546474849"
-    "50515253545556575859"
-    "60616263646566676869"
-    "70717273747576777879"
-    "80818283848586878889"
-    "90919293949596979899"
-    ;
-static int bgc_ldbl_ok = -1; /* long double arithmetic really has >= 64 bits (x87 precision) */
-static long double bgc_round_magic; /* 2^(LDBL_MANT_DIG - 1): x + it has unit last place 1 */
-
-static int bgc_check_long_double(void)
-{
-    volatile long double one = 1.0L, tiny = 1.0L / 1152921504606846976.0L; /* 2^-60 */
-    bgc_round_magic = ldexpl(1.0L, LDBL_MANT_DIG - 1);
-    return one + tiny != one;
-}
-
-/* |v| * 10^m with one rounding, for -27 <= m <= 27. */
-static long double bgc_scale10(long double a, int m)
-{
-    return m >= 0 ? a * bgc_pow10[m] : a / bgc_pow10[-m];
-}
-
-/* The 4 digits of v < 10000 into o[0..3]. */
-static void bgc_digits4(char *o, unsigned v)
-{
-    memcpy(o, bgc_pairs + 2 * (v / 100U), 2);
-    memcpy(o + 2, bgc_pairs + 2 * (v % 100U), 2);
-}
-
-/* The 17 significant digits of d (10^16 <= d < 10^17) into dg[0..16]. */
-static void bgc_digits17(unsigned long long d, char *dg)
-{
-    const unsigned hi = (unsigned)(d / 100000000ULL), lo = (unsigned)(d % 100000000ULL);
-    dg[0] = (char)('0' + hi / 100000000U);
-    bgc_digits4(dg + 1, hi / 10000U % 10000U);
-    bgc_digits4(dg + 5, hi % 10000U);
-    bgc_digits4(dg + 9, lo / 10000U);
-    bgc_digits4(dg + 13, lo % 10000U);
-}
-
-/* %g layout of 17 digits dg with decimal exponent x: fixed for -4 <= x < 17, else e-style. */
-static char *bgc_layout(char *o, const char *dg, int x)
-{
-    int nd = 17, i;
-    while (nd > 1 && dg[nd - 1] == '0')
-        nd--;
-    if (x < -4 || x >= 17) {
-        int ax = x < 0 ? -x : x;
-        *o++ = dg[0];
-        if (nd > 1) {
-            *o++ = '.';
-            memcpy(o, dg + 1, (size_t)(nd - 1));
-            o += nd - 1;
-        }
-        *o++ = 'e';
-        *o++ = x < 0 ? '-' : '+';
-        if (ax >= 100) {
-            *o++ = (char)('0' + ax / 100);
-            ax %= 100;
-        }
-        *o++ = (char)('0' + ax / 10);
-        *o++ = (char)('0' + ax % 10);
-    } else if (x >= 0) {
-        memcpy(o, dg, (size_t)(x + 1));
-        o += x + 1;
-        if (nd > x + 1) {
-            *o++ = '.';
-            memcpy(o, dg + x + 1, (size_t)(nd - x - 1));
-            o += nd - x - 1;
-        }
-    } else {
-        *o++ = '0';
-        *o++ = '.';
-        for (i = 0; i < -x - 1; i++)
-            *o++ = '0';
-        memcpy(o, dg, (size_t)nd);
-        o += nd;
-    }
-    return o;
-}
 
 /* floor(log10(2^e)) for |e| <= 1650 (the constant is Ryu's). */
 static int bgc_floor_log10_pow2(int e)
@@ -958,52 +1023,143 @@ static int bgc_floor_log10_pow2(int e)
                   : -(int)((((unsigned long)-e * 78913UL) >> 18) + 1);
 }
 
+/* floor(mant 2^q 10^m) and (in *frac) the next 64 bits, for mant < 2^53 and a result in
+   [2^53, 2^60); the fraction is short by less than 1/8 of its last place. */
+static inline bgc_u64 bgc_scaled(bgc_u64 mant, int q, int m, bgc_u64 *frac)
+{
+    const struct bgc_pow10_entry *p = &bgc_pow10[m - BGC_POW10_MIN];
+    bgc_u64 w0, w1, w2, mid_lo;
+    const bgc_u64 mid = bgc_mul64(mant, p->lo, &w0);
+    int shift;
+    w2 = bgc_mul64(mant, p->hi, &mid_lo);
+    w1 = mid + mid_lo;
+    w2 += w1 < mid; /* the product is w2 2^128 + w1 2^64 + w0 */
+    shift = -(q + p->e2) - 64; /* 56..63: the binary point lies that far into w1 */
+    *frac = (w1 << (64 - shift)) | (w0 >> shift);
+    return (w2 << (64 - shift)) | (w1 >> shift);
+}
+
+/* The 8 digits of v < 10^8, all at once, as the word whose byte i (bits 8i..8i+7) is the
+   character of digit i: v splits into two 4-digit lanes, each into two 2-digit lanes, each
+   of those into two digits (the multiply-shifts divide exactly in these ranges). */
+static inline bgc_u64 bgc_digits8(bgc_u64 v)
+{
+    const bgc_u64 high4 = (v * 109951163U) >> 40; /* v / 10000 */
+    const bgc_u64 quads = high4 | (v - 10000U * high4) << 32;
+    const bgc_u64 top2 = ((quads * 10486U) >> 20) & 0x0000007f0000007fULL; /* quads / 100 */
+    const bgc_u64 pairs = (quads - 100U * top2) << 16 | top2;
+    const bgc_u64 top1 = ((pairs * 103U) >> 10) & 0x000f000f000f000fULL; /* pairs / 10 */
+    return ((pairs - 10U * top1) << 8 | top1) | 0x3030303030303030ULL;
+}
+
+/* Byte i of w into o[i], i < 8: one store where the bytes of a word are in that order
+   (the test is a constant that compilers fold). */
+static inline void bgc_store8(char *o, bgc_u64 w)
+{
+    const bgc_u64 one = 1;
+    char first;
+    int i;
+    memcpy(&first, &one, 1);
+    if (first == 1) {
+        memcpy(o, &w, 8);
+        return;
+    }
+    for (i = 0; i < 8; i++)
+        o[i] = (char)(w >> (8 * i));
+}
+
+/* The %g layout of the 17 digits of d (10^16 <= d < 10^17) with decimal exponent x: fixed
+   for -4 <= x < 17, else e-style.  The digits stay in registers (never stored and read
+   back); whole words are stored, so it writes up to o[24]. */
+static inline char *bgc_layout(char *o, bgc_u64 d, int x)
+{
+    const bgc_u64 high9 = d / 100000000U, low8 = d - 100000000U * high9;
+    const bgc_u64 lead = high9 / 100000000U;
+    const bgc_u64 w1 = bgc_digits8(high9 - 100000000U * lead), w2 = bgc_digits8(low8);
+    int nd = 17, ax; /* significant digits without the trailing zeros */
+    if ((w2 >> 56) == '0') /* the last digit */
+        for (d /= 10U, nd--; d % 10U == 0; d /= 10U)
+            nd--;
+    o[0] = (char)('0' + lead);
+    if (x >= 0 && x < 17) { /* digits 0..x, and '.' and digits x+1..nd-1 if nd > x + 1 */
+        bgc_store8(o + 1, w1);
+        bgc_store8(o + 9, w2);
+        if (nd <= x + 1)
+            return o + x + 1;
+        if (x == 0) {
+            bgc_store8(o + 2, w1);
+            bgc_store8(o + 10, w2);
+        } else if (x < 8) { /* digits x+1.. are w1:w2 shifted down by x bytes */
+            bgc_store8(o + x + 2, w1 >> (8 * x) | w2 << (64 - 8 * x));
+            bgc_store8(o + x + 10, w2 >> (8 * x));
+        } else {
+            bgc_store8(o + x + 2, w2 >> (8 * x - 64));
+        }
+        o[x + 1] = '.';
+        return o + nd + 1;
+    }
+    if (x < 0 && x >= -4) { /* "0.", -x - 1 zeros, the digits */
+        const char lead_char = o[0];
+        memcpy(o, "0.000", 5);
+        o += 1 - x;
+        o[0] = lead_char;
+        bgc_store8(o + 1, w1);
+        bgc_store8(o + 9, w2);
+        return o + nd;
+    }
+    o[1] = '.';
+    bgc_store8(o + 2, w1);
+    bgc_store8(o + 10, w2);
+    o += nd > 1 ? nd + 1 : 1;
+    ax = x < 0 ? -x : x;
+    *o++ = 'e';
+    *o++ = x < 0 ? '-' : '+';
+    if (ax >= 100) {
+        *o++ = (char)('0' + ax / 100);
+        ax %= 100;
+    }
+    o[0] = (char)('0' + ax / 10);
+    o[1] = (char)('0' + ax % 10);
+    return o + 2;
+}
+
 /* Writes v into buf (>= BGC_FMT_SIZE bytes) as printf("%.17g", v); returns the length. */
 static int bgc_fmt17(char *buf, double v)
 {
-    const long double margin = 0.0078125L; /* 2^-7 */
-    long double a, s, r, frac;
-    double hi;
-    unsigned long long bits, d;
-    char dg[17], *o = buf;
+    const bgc_u64 half = 1ULL << 63, ten17 = 100000000000000000ULL;
+    bgc_u64 bits, mant, d, frac;
+    char *o = buf;
     int e2, x, m;
-    if (bgc_ldbl_ok < 0)
-        bgc_ldbl_ok = bgc_check_long_double();
     memcpy(&bits, &v, sizeof bits);
     e2 = (int)((bits >> 52) & 0x7ff); /* biased binary exponent */
-    if (e2 == 0 || e2 == 0x7ff || !bgc_ldbl_ok) {
+    if (e2 == 0 || e2 == 0x7ff) {
         if (v != 0.0)
-            return bgc_fmt_printf(buf, v); /* subnormal, inf, nan, or no 64-bit long double */
+            return bgc_fmt_printf(buf, v); /* subnormal, inf or nan */
         if (signbit(v))
             *o++ = '-';
         *o++ = '0';
         *o = '\0';
         return (int)(o - buf);
     }
+    mant = (bits & 0xfffffffffffffULL) | (1ULL << 52);
     x = bgc_floor_log10_pow2(e2 - 1023); /* floor(log10|v|) or one less */
     m = 16 - x;
-    if (m < -26 || m > 27)
+    if (m - 1 < BGC_POW10_MIN || m > BGC_POW10_MAX)
         return bgc_fmt_printf(buf, v);
-    a = fabsl((long double)v);
-    s = bgc_scale10(a, m);
-    if (s >= 1e17L) {
+    d = bgc_scaled(mant, e2 - 1075, m, &frac);
+    if (d >= ten17) {
         x++;
-        s = bgc_scale10(a, --m);
+        d = bgc_scaled(mant, e2 - 1075, --m, &frac);
     }
-    r = (s + bgc_round_magic) - bgc_round_magic; /* s rounded to the nearest integer */
-    frac = s - r;
-    if (frac > 0.5L - margin || frac < margin - 0.5L)
+    if (frac - (half - 1) <= 1)
         return bgc_fmt_printf(buf, v); /* too close to a tie to decide */
-    hi = (double)r; /* r < 2^57 split exactly into two doubles, converted without x87 */
-    d = (unsigned long long)(long long)hi + (unsigned long long)(long long)(double)(r - hi);
-    if (d >= 100000000000000000ULL) {
+    d += frac >> 63; /* rounded to nearest */
+    if (d == ten17) {
         d /= 10;
         x++;
     }
-    bgc_digits17(d, dg);
-    if (v < 0.0)
-        *o++ = '-';
-    o = bgc_layout(o, dg, x);
+    *o = '-';
+    o = bgc_layout(o + (bits >> 63), d, x);
     *o = '\0';
     return (int)(o - buf);
 }

@@ -79,7 +79,9 @@ def _heaviside(a, at_zero):
 
 # ---------------------------------------------------------------- model
 # Each function runs first with math (fast); on a floating-point exception it runs again
-# on numpy.float64 values, which give inf and nan as the C program does.
+# on numpy.float64 values, which give inf and nan as the C program does.  The model
+# functions take p as the parameters followed by the constants computed from them once
+# (_with_constants): constant k is p[6 + k].
 
 
 def _fill_params(p, given):
@@ -119,6 +121,49 @@ def _fill_params_ieee(p, given):
         return [float(v) for v in p]
 
 
+def _constants(p):
+    try:
+        w0 = p[0]*p[0]
+        w1 = w0*p[5]*p[5]
+        w2 = p[1]*p[1]
+        w3 = 1.0/p[0]
+        return [
+            w1,
+            -w1*w2,
+            2.0*w0*p[2],
+            4.0*p[0]*p[4],
+            -0.5*w3,
+            p[0]*p[2],
+            w3,
+            -w2,
+            2.0*w3,
+            w2,
+        ]
+    except (ArithmeticError, ValueError):
+        return _constants_ieee(p)
+
+
+def _constants_ieee(p):
+    with numpy.errstate(all="ignore"):
+        p = numpy.asarray(p, dtype=numpy.float64)
+        w0 = p[0]*p[0]
+        w1 = w0*p[5]*p[5]
+        w2 = p[1]*p[1]
+        w3 = 1.0/p[0]
+        return [float(v) for v in (
+            w1,
+            -w1*w2,
+            2.0*w0*p[2],
+            4.0*p[0]*p[4],
+            -0.5*w3,
+            p[0]*p[2],
+            w3,
+            -w2,
+            2.0*w3,
+            w2,
+        )]
+
+
 def _init(p):
     try:
         return [
@@ -144,18 +189,14 @@ def _init_ieee(p):
 
 def _rhs(t, x, p):
     try:
-        w0 = 1.0/p[0]
-        w1 = x[2]*x[2]
-        w2 = x[3]*x[3]
-        w3 = p[0]*p[0]
-        w4 = w3*p[5]*p[5]
-        w5 = 4.0*p[0]*p[4]
-        w6 = 0.5*w0*(w1*w4 + w2*w4 + 2.0*w3*p[2]*x[3] - w4*p[1]*p[1] + w5*x[0]*x[2] + w5*x[1]*x[3] + 2.0*x[0]*x[0] + 2.0*x[1]*x[1])/(w1 + w2)
+        w0 = x[2]*x[2]
+        w1 = x[3]*x[3]
+        w2 = (w0*p[6] + w1*p[6] + (p[7] + p[8]*x[3]) + (p[9]*x[0]*x[2] + p[9]*x[1]*x[3] + (2.0*x[0]*x[0] + 2.0*x[1]*x[1])))*(p[10]/(w0 + w1))
         return [
-            -w6*x[2],
-            -w6*x[3] + p[0]*p[2],
-            w0*x[0],
-            w0*x[1],
+            w2*x[2],
+            w2*x[3] + p[11],
+            p[12]*x[0],
+            p[12]*x[1],
         ]
     except (ArithmeticError, ValueError):
         return _rhs_ieee(t, x, p)
@@ -166,18 +207,14 @@ def _rhs_ieee(t, x, p):
         t = numpy.float64(t)
         x = numpy.asarray(x, dtype=numpy.float64)
         p = numpy.asarray(p, dtype=numpy.float64)
-        w0 = 1.0/p[0]
-        w1 = x[2]*x[2]
-        w2 = x[3]*x[3]
-        w3 = p[0]*p[0]
-        w4 = w3*p[5]*p[5]
-        w5 = 4.0*p[0]*p[4]
-        w6 = 0.5*w0*(w1*w4 + w2*w4 + 2.0*w3*p[2]*x[3] - w4*p[1]*p[1] + w5*x[0]*x[2] + w5*x[1]*x[3] + 2.0*x[0]*x[0] + 2.0*x[1]*x[1])/(w1 + w2)
+        w0 = x[2]*x[2]
+        w1 = x[3]*x[3]
+        w2 = (w0*p[6] + w1*p[6] + (p[7] + p[8]*x[3]) + (p[9]*x[0]*x[2] + p[9]*x[1]*x[3] + (2.0*x[0]*x[0] + 2.0*x[1]*x[1])))*(p[10]/(w0 + w1))
         return [float(v) for v in (
-            -w6*x[2],
-            -w6*x[3] + p[0]*p[2],
-            w0*x[0],
-            w0*x[1],
+            w2*x[2],
+            w2*x[3] + p[11],
+            p[12]*x[0],
+            p[12]*x[1],
         )]
 
 
@@ -208,10 +245,9 @@ def _out_ieee(t, x, p):
 
 def _residual(t, x, p):
     try:
-        w0 = 2.0/p[0]
         return [
-            -p[1]*p[1] + x[2]*x[2] + x[3]*x[3],
-            w0*x[0]*x[2] + w0*x[1]*x[3],
+            p[13] + x[2]*x[2] + x[3]*x[3],
+            p[14]*x[0]*x[2] + p[14]*x[1]*x[3],
         ]
     except (ArithmeticError, ValueError):
         return _residual_ieee(t, x, p)
@@ -222,19 +258,17 @@ def _residual_ieee(t, x, p):
         t = numpy.float64(t)
         x = numpy.asarray(x, dtype=numpy.float64)
         p = numpy.asarray(p, dtype=numpy.float64)
-        w0 = 2.0/p[0]
         return [float(v) for v in (
-            -p[1]*p[1] + x[2]*x[2] + x[3]*x[3],
-            w0*x[0]*x[2] + w0*x[1]*x[3],
+            p[13] + x[2]*x[2] + x[3]*x[3],
+            p[14]*x[0]*x[2] + p[14]*x[1]*x[3],
         )]
 
 
 def _scale(t, x, p):
     try:
-        w0 = 1.0/p[0]
         return [
-            p[1]*p[1] + x[2]*x[2] + x[3]*x[3],
-            2.0*abs(w0*x[0]*x[2]) + 2.0*abs(w0*x[1]*x[3]),
+            p[15] + x[2]*x[2] + x[3]*x[3],
+            2.0*abs(p[12]*x[0]*x[2]) + 2.0*abs(p[12]*x[1]*x[3]),
         ]
     except (ArithmeticError, ValueError):
         return _scale_ieee(t, x, p)
@@ -245,10 +279,9 @@ def _scale_ieee(t, x, p):
         t = numpy.float64(t)
         x = numpy.asarray(x, dtype=numpy.float64)
         p = numpy.asarray(p, dtype=numpy.float64)
-        w0 = 1.0/p[0]
         return [float(v) for v in (
-            p[1]*p[1] + x[2]*x[2] + x[3]*x[3],
-            2.0*abs(w0*x[0]*x[2]) + 2.0*abs(w0*x[1]*x[3]),
+            p[15] + x[2]*x[2] + x[3]*x[3],
+            2.0*abs(p[12]*x[0]*x[2]) + 2.0*abs(p[12]*x[1]*x[3]),
         )]
 
 
@@ -279,12 +312,11 @@ def _position_jac_ieee(t, x, p):
 
 def _velocity_jac(t, x, p):
     try:
-        w0 = 2.0/p[0]
         return [
-            w0*x[2],
-            w0*x[3],
-            w0*x[0],
-            w0*x[1],
+            p[14]*x[2],
+            p[14]*x[3],
+            p[14]*x[0],
+            p[14]*x[1],
         ]
     except (ArithmeticError, ValueError):
         return _velocity_jac_ieee(t, x, p)
@@ -295,12 +327,11 @@ def _velocity_jac_ieee(t, x, p):
         t = numpy.float64(t)
         x = numpy.asarray(x, dtype=numpy.float64)
         p = numpy.asarray(p, dtype=numpy.float64)
-        w0 = 2.0/p[0]
         return [float(v) for v in (
-            w0*x[2],
-            w0*x[3],
-            w0*x[0],
-            w0*x[1],
+            p[14]*x[2],
+            p[14]*x[3],
+            p[14]*x[0],
+            p[14]*x[1],
         )]
 
 
@@ -311,6 +342,12 @@ def _param_values(overrides):
     for j, value in overrides.items():
         p[j] = float(value)
     return _fill_params(p, overrides)
+
+
+def _with_constants(p):
+    """The parameters followed by the constants computed from them, as the model functions
+    take them."""
+    return list(p) + _constants(p)
 
 
 PARAMETERS = dict(zip(_PARAM_NAMES, _param_values({})))
@@ -325,12 +362,14 @@ def _vector(v, n, what):
 
 def rhs(t, x, p):
     """dx/dt at (t, x) with parameters p (a 1-D array ordered as PARAMETERS)."""
-    return numpy.array(_rhs(float(t), _vector(x, _N, "x"), _vector(p, len(_PARAM_NAMES), "p")))
+    p = _with_constants(_vector(p, len(_PARAM_NAMES), "p"))
+    return numpy.array(_rhs(float(t), _vector(x, _N, "x"), p))
 
 
 def outputs(t, x, p):
     """The outputs at (t, x), ordered as OUTPUTS."""
-    y = _out(float(t), _vector(x, _N, "x"), _vector(p, len(_PARAM_NAMES), "p"))
+    p = _with_constants(_vector(p, len(_PARAM_NAMES), "p"))
+    y = _out(float(t), _vector(x, _N, "x"), p)
     return numpy.array(y, dtype=float)
 
 
@@ -742,8 +781,9 @@ def _overrides(params):
 
 
 def _initial_state(s, p, project_initial):
-    """x0 for the run: initialised, checked finite, projected if asked, constraints checked."""
-    j = _first_nonfinite(p)
+    """x0 for the run: initialised, checked finite, projected if asked, constraints checked.
+    p: the parameters and their constants."""
+    j = _first_nonfinite(p[:len(_PARAM_NAMES)])
     if j >= 0:
         raise SimulationError("parameter '%s' is not finite" % _PARAM_NAMES[j], s.t0,
                               numpy.zeros(0), numpy.zeros((0, len(OUTPUTS))))
@@ -764,7 +804,7 @@ def simulate(t_end=None, dt=None, solver=None, rtol=None, atol=None, params=None
              project_initial=False):
     """Runs the model; returns (t, Y) with Y[k] the outputs at t[k].  None: the scene's value."""
     s = _settings(t_end, dt, solver, rtol, atol, step)
-    p = _param_values(_overrides(params))
+    p = _with_constants(_param_values(_overrides(params)))
     x0 = _initial_state(s, p, project_initial)
     times, rows = [], []
 
@@ -899,7 +939,7 @@ def main(argv=None):
     except ValueError as error:
         sys.stderr.write("error: %s\n" % error)
         return 2
-    p = _param_values(given)
+    p = _with_constants(_param_values(given))
     try:
         x0 = _initial_state(s, p, "--project-initial" in flags)
     except ConstraintError as error:
