@@ -148,19 +148,6 @@ def simulate(model, scene: str | None = None, backend: str = "c", **options):
     return _parse_csv(out)
 
 
-def run_python_program(text: str, args) -> tuple[int, str, str]:
-    """Run a generated Python module as a program (`python model.py ARGS`)."""
-    import subprocess
-    import sys
-    import tempfile
-
-    with tempfile.TemporaryDirectory(prefix="bgc-") as tmp:
-        path = Path(tmp) / "model.py"
-        path.write_text(text, encoding="utf-8")
-        proc = subprocess.run([sys.executable, str(path), *args], capture_output=True, text=True)
-    return proc.returncode, proc.stdout, proc.stderr
-
-
 class SimulationFailed(RuntimeError):
     """The generated program stopped with an error; `partial_csv` holds the rows written."""
 

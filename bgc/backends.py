@@ -100,3 +100,13 @@ def load_python_module(source: str, name: str | None = None) -> ModuleType:
         finally:
             sys.dont_write_bytecode = dont_write
     return module
+
+
+def run_python(source: str, args=(), timeout: float | None = None) -> tuple[int, str, str]:
+    """Run generated Python as a program (`python model.py ARGS`), as run_c runs a C program."""
+    with tempfile.TemporaryDirectory(prefix="bgc-") as tmp:
+        path = Path(tmp) / "model.py"
+        path.write_text(source, encoding="utf-8")
+        proc = subprocess.run([sys.executable, str(path), *map(str, args)], capture_output=True,
+                              text=True, timeout=timeout)
+    return proc.returncode, proc.stdout, proc.stderr

@@ -149,7 +149,7 @@ def simulate(model, scene, backend, solver, rtol, atol, t_end, dt, step, params,
         code, out, err = backends.run_c(backends.compile_c(text), args)
     else:
         (text,) = emit_python(compiled.code).values()
-        code, out, err = api.run_python_program(text, args)
+        code, out, err = backends.run_python(text, args)
     if err:
         click.echo(err, err=True, nl=False)
     if output and (code == 0 or out):
