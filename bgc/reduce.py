@@ -18,7 +18,7 @@ from dataclasses import dataclass, replace
 import sympy as sp
 from sympy.solvers.solveset import NonlinearError
 
-from .diagnostics import Collector, ModelError, Note, Span, fail, warning
+from .diagnostics import Collector, ModelError, Span, fail, warning
 from .equations import ConstraintEq, EquationSystem
 from .resolve import TIME, var
 from .scene import parameter_values
