@@ -1,5 +1,5 @@
 """The pipeline as functions: load -> parse -> resolve -> scene -> causality -> equations ->
-reduce -> code model -> emit.  `bgc.cli` and the tests use exactly these."""
+reduce -> lower -> emit.  `bgc.cli` and the tests use exactly these."""
 from __future__ import annotations
 
 import io
@@ -8,14 +8,18 @@ from pathlib import Path
 
 import numpy as np
 
-from . import ast
-from .causality import Causality, assign_causality
-from .codemodel import CodeModel, lower
+from . import ast, backends
+from .causality import CausalGraph, assign_causality
 from .diagnostics import ModelError, format_diagnostic
-from .equations import build_equations
+from .emit import emit_c, emit_python
+from .equations import EquationSystem, build_equations
+from .graph import Graph
+from .ir import Program
+from .lower import lower
 from .parser import decode, parse
-from .reduce import Reduced, reduce
-from .resolve import Graph, resolve
+from .reduce import ALGEBRA, Reduced, reduce
+from .report import check_report, equations_latex, equations_text
+from .resolve import resolve
 from .scene import Settings, apply_scene
 
 
@@ -27,16 +31,25 @@ class Source:
 
 @dataclass(frozen=True)
 class Compiled:
+    """Every stage's value, for reports and tests (each stage took only the one before)."""
+
     source: Source
-    graph: Graph  # with the scene's effects applied
-    settings: Settings
-    causality: Causality
+    causal: CausalGraph  # the scene's graph, its settings, the causal strokes
+    system: EquationSystem
     reduced: Reduced
-    code: CodeModel
+    program: Program
+
+    @property
+    def graph(self) -> Graph:  # with the scene's effects applied
+        return self.causal.graph
+
+    @property
+    def settings(self) -> Settings:
+        return self.causal.settings
 
     @property
     def warnings(self):
-        return tuple(self.graph.warnings) + tuple(self.reduced.warnings)
+        return tuple(self.reduced.warnings)
 
 
 class BgcModelError(Exception):
@@ -76,41 +89,45 @@ def parse_model(model) -> ast.Model:
         raise BgcModelError(exc, src) from None
 
 
-def build(model, scene: str | None = None, project_initial: bool = False) -> Compiled:
-    """Run the pipeline up to the code model."""
+def build(model, scene: str | None = None, project_initial: bool = False,
+          algebra: str = "auto") -> Compiled:
+    """Run the pipeline up to the program IR."""
+    if algebra not in ALGEBRA:
+        raise ValueError(f"algebra must be one of {', '.join(ALGEBRA)}, not {algebra!r}")
     src = _source(model)
     try:
         graph = resolve(parse(src.text, src.path))
-        graph, settings = apply_scene(graph, scene)
-        causality = assign_causality(graph)
-        system = build_equations(graph, causality, settings)
-        reduced = reduce(system, project_initial=project_initial)
-        code = lower(reduced)
+        causal = assign_causality(apply_scene(graph, scene))
+        system = build_equations(causal)
+        reduced = reduce(system, project_initial=project_initial, algebra=algebra)
+        program = lower(reduced)
     except ModelError as exc:
         raise BgcModelError(exc, src) from None
-    return Compiled(src, graph, settings, causality, reduced, code)
+    return Compiled(src, causal, system, reduced, program)
 
 
-def check(model, scene: str | None = None) -> str:
-    from .report import check_report
-
-    return check_report(build(model, scene))
+def check(model, scene: str | None = None, algebra: str = "auto") -> str:
+    return check_report(build(model, scene, algebra=algebra))
 
 
-def equations(model, scene: str | None = None, format: str = "text") -> str:
-    from .report import equations_latex, equations_text
-
-    compiled = build(model, scene)
+def equations(model, scene: str | None = None, format: str = "text",
+              algebra: str = "auto") -> str:
+    if format not in ("text", "latex"):
+        raise ValueError(f"format must be 'text' or 'latex', not {format!r}")
+    compiled = build(model, scene, algebra=algebra)
     return equations_latex(compiled) if format == "latex" else equations_text(compiled)
 
 
-def compile(model, target: str = "c", scene: str | None = None,
-            project_initial: bool = False) -> dict[str, str]:
-    """Standalone source code: {filename: text}."""
-    from .emit import emit_c, emit_python
+TARGETS = ("c", "python")
 
-    code = build(model, scene, project_initial).code
-    return emit_c(code) if target == "c" else emit_python(code)
+
+def compile(model, target: str = "c", scene: str | None = None,
+            project_initial: bool = False, algebra: str = "auto") -> dict[str, str]:
+    """Standalone source code: {filename: text}."""
+    if target not in TARGETS:
+        raise ValueError(f"target must be one of {', '.join(TARGETS)}, not {target!r}")
+    program = build(model, scene, project_initial, algebra).program
+    return emit_c(program) if target == "c" else emit_python(program)
 
 
 def run_args(t_end=None, dt=None, solver=None, rtol=None, atol=None, step=None, params=None,
@@ -128,19 +145,25 @@ def run_args(t_end=None, dt=None, solver=None, rtol=None, atol=None, step=None, 
     return args
 
 
-def simulate(model, scene: str | None = None, backend: str = "c", **options):
+BACKENDS = ("c", "python")
+SIMULATE_OPTIONS = ("t_end", "dt", "solver", "rtol", "atol", "step", "params", "project_initial")
+
+
+def simulate(model, scene: str | None = None, backend: str = "c", algebra: str = "auto",
+             **options):
     """Simulate; returns (t, Y, names).  options: t_end, dt, solver, rtol, atol, step, params,
     project_initial.  backend "c" falls back to "python" when there is no C compiler."""
-    from . import backends
-
-    compiled = build(model, scene, options.get("project_initial", False))
+    if backend not in BACKENDS:
+        raise ValueError(f"backend must be one of {', '.join(BACKENDS)}, not {backend!r}")
+    unknown = sorted(set(options) - set(SIMULATE_OPTIONS))
+    if unknown:
+        raise TypeError(f"simulate() got unknown options: {', '.join(unknown)}")
+    compiled = build(model, scene, options.get("project_initial", False), algebra)
     if backend == "c" and not backends.have_c_compiler():
         backend = "python"
     if backend == "python":
         return _simulate_python(compiled, options)
-    from .emit import emit_c
-
-    (text,) = emit_c(compiled.code).values()
+    (text,) = emit_c(compiled.program).values()
     exe = backends.compile_c(text)
     code, out, err = backends.run_c(exe, run_args(**options))
     if code != 0:
@@ -157,13 +180,9 @@ class SimulationFailed(RuntimeError):
 
 
 def _simulate_python(compiled, options):
-    from . import backends
-    from .emit import emit_python
-
-    (text,) = emit_python(compiled.code).values()
+    (text,) = emit_python(compiled.program).values()
     module = backends.load_python_module(text)
-    opts = dict(options)
-    t, Y = module.simulate(**opts)
+    t, Y = module.simulate(**options)
     return np.asarray(t), np.asarray(Y), list(module.OUTPUTS)
 
 

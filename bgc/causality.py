@@ -1,21 +1,29 @@
-"""Stage 4, causality: the Sequential Causality Assignment Procedure (SCAP).
+"""Stage 4, causality: Scenario -> CausalGraph, by the Sequential Causality Assignment Procedure.
 
 For every bond we decide which end sets its effort (the other end sets its flow).  Order:
 sources and constraint junctions (their causality is fixed), storage elements in preferred
 integral causality, resistors, then any bond still free; each choice is propagated through
 junctions and two-ports before the next.  A choice that contradicts an earlier one is a causal
 conflict and names both.  Storage elements left in derivative causality are reported, not refused.
+
+Propagation runs on an explicit stack (a chain of junctions as long as the model is does not
+recurse), and every lookup is an index map built once.
 """
 from __future__ import annotations
 
 from dataclasses import dataclass
 
 from .diagnostics import Collector, Note
-from .resolve import Bond, Element, Graph
+from .graph import Element, Graph
+from .scene import Scenario, Settings
 
 
 @dataclass(frozen=True)
-class Causality:
+class CausalGraph:
+    """The scene's graph with a causal stroke on every bond."""
+
+    graph: Graph
+    settings: Settings
     effort_by: tuple[str, ...]  # per bond (graph order): the node that sets the bond's effort
     derivative: tuple[str, ...]  # storage elements in derivative causality
     arbitrary: tuple[str, ...]  # resistors / bonds whose causality was chosen freely
@@ -30,17 +38,14 @@ class _Assigner:
         self.diags = diags
         self.by: list[str | None] = [None] * len(graph.bonds)
         self.origin: list[str | None] = [None] * len(graph.bonds)
-        self.incident = {el.name: [i for i, b in enumerate(graph.bonds) if el.name in (b.src, b.dst)]
-                         for el in graph.elements}
-        self.elements = {el.name: el for el in graph.elements}
+        self.incident = graph.incident
+        self.elements = graph.by_name
         self.failed = False
-
-    @staticmethod
-    def other(b: Bond, node: str) -> str:
-        return b.dst if b.src == node else b.src
+        self._pending: list[tuple[str, str]] = []  # (node, origin) still to propagate from
 
     def assign(self, i: int, setter: str, origin: str, at: str):
-        """Bond i's effort is set by `setter`, because of `origin`; propagate from both ends."""
+        """Bond i's effort is set by `setter`, because of `origin`; propagate from both ends
+        (before the caller's next choice: run() drains the stack)."""
         if self.by[i] is not None:
             if self.by[i] != setter and not self.failed:
                 self._conflict(i, origin, at)
@@ -48,8 +53,15 @@ class _Assigner:
         self.by[i] = setter
         self.origin[i] = origin
         b = self.g.bonds[i]
-        for node in (b.src, b.dst):
-            self.propagate(node, origin)
+        self._pending.append((b.dst, origin))
+        self._pending.append((b.src, origin))
+
+    def choose(self, i: int, setter: str, origin: str):
+        """A free choice (or a fixed one): assign it and propagate all its consequences."""
+        self.assign(i, setter, origin, origin)
+        while self._pending:
+            node, why = self._pending.pop()
+            self.propagate(node, why)
 
     def _conflict(self, i, origin, at):
         self.failed = True
@@ -75,15 +87,15 @@ class _Assigner:
             self._two_port(el, bonds, origin)
 
     def _junction(self, el: Element, bonds, origin):
-        # effort "in" at a 0-junction: set by the other end; at a 1-junction, the one bond whose
-        # effort the junction computes is the odd one out.
-        odd_setter = (lambda i: self.by[i] == self.other(self.g.bonds[i], el.name)) \
-            if el.kind == "0" else (lambda i: self.by[i] == el.name)
-        usual = (lambda i: el.name) if el.kind == "0" else \
-            (lambda i: self.other(self.g.bonds[i], el.name))
         if el.constraint is not None:
             return  # all its bonds were fixed when it was seeded
-        odd = [i for i in bonds if self.by[i] is not None and odd_setter(i)]
+        bond = self.g.bonds
+        # effort "in" at a 0-junction: set by the other end; at a 1-junction, the one bond whose
+        # effort the junction computes is the odd one out.
+        if el.kind == "0":
+            odd = [i for i in bonds if self.by[i] is not None and self.by[i] != el.name]
+        else:
+            odd = [i for i in bonds if self.by[i] == el.name]
         free = [i for i in bonds if self.by[i] is None]
         if len(odd) > 1 and not self.failed:
             i, j = odd[0], odd[1]
@@ -98,10 +110,11 @@ class _Assigner:
             return
         if len(odd) == 1:
             for i in free:
-                self.assign(i, usual(i), origin, el.name)
+                usual = el.name if el.kind == "0" else bond[i].other(el.name)
+                self.assign(i, usual, origin, el.name)
         elif len(free) == 1 and not odd:
             i = free[0]
-            setter = self.other(self.g.bonds[i], el.name) if el.kind == "0" else el.name
+            setter = bond[i].other(el.name) if el.kind == "0" else el.name
             self.assign(i, setter, origin, el.name)
 
     def _two_port(self, el: Element, bonds, origin):
@@ -113,8 +126,7 @@ class _Assigner:
         sets_k = self.by[k] == el.name
         # TF passes causality through (sets exactly one effort); GY sets both efforts or none.
         sets_f = (not sets_k) if el.spec.role == "transformer" else sets_k
-        self.assign(f, el.name if sets_f else self.other(self.g.bonds[f], el.name), origin,
-                    el.name)
+        self.assign(f, el.name if sets_f else self.g.bonds[f].other(el.name), origin, el.name)
 
 
 def _seed_fixed(a: _Assigner):
@@ -122,20 +134,21 @@ def _seed_fixed(a: _Assigner):
         if el.constraint is not None:
             # The multiplier is an unknown effort (0) / flow (1) imposed on every bond.
             for i in a.incident[el.name]:
-                setter = el.name if el.kind == "0" else a.other(a.g.bonds[i], el.name)
-                a.assign(i, setter, el.name, el.name)
+                setter = el.name if el.kind == "0" else a.g.bonds[i].other(el.name)
+                a.choose(i, setter, el.name)
         elif not el.is_junction and el.spec.role == "source":
             (i,) = a.incident[el.name]
-            setter = el.name if el.spec.fixed == "effort" else a.other(a.g.bonds[i], el.name)
-            a.assign(i, setter, el.name, el.name)
+            setter = el.name if el.spec.fixed == "effort" else a.g.bonds[i].other(el.name)
+            a.choose(i, setter, el.name)
 
 
 def _preferred_setter(a: _Assigner, el: Element, i: int) -> str:
     sets_effort = el.spec.preferred == "effort"
-    return el.name if sets_effort else a.other(a.g.bonds[i], el.name)
+    return el.name if sets_effort else a.g.bonds[i].other(el.name)
 
 
-def assign_causality(graph: Graph) -> Causality:
+def assign_causality(scenario: Scenario) -> CausalGraph:
+    graph = scenario.graph
     diags = Collector()
     a = _Assigner(graph, diags)
     _seed_fixed(a)
@@ -143,7 +156,7 @@ def assign_causality(graph: Graph) -> Causality:
     for el in storage:
         (i,) = a.incident[el.name]
         if a.by[i] is None:
-            a.assign(i, _preferred_setter(a, el, i), el.name, el.name)
+            a.choose(i, _preferred_setter(a, el, i), el.name)
     arbitrary = []
     for el in graph.elements:
         if not el.is_junction and el.spec.role == "resistor":
@@ -152,17 +165,17 @@ def assign_causality(graph: Graph) -> Causality:
                 arbitrary.append(el.name)
                 # resistance form e = r f unless the law is written f = EXPR(e)
                 sets_effort = not (el.law is not None and el.law[0] == "f")
-                a.assign(i, el.name if sets_effort else a.other(graph.bonds[i], el.name),
-                         el.name, el.name)
+                a.choose(i, el.name if sets_effort else graph.bonds[i].other(el.name), el.name)
     for i, b in enumerate(graph.bonds):
         if a.by[i] is None:
             arbitrary.append(b.label)
-            a.assign(i, b.src, b.src, b.src)
+            a.choose(i, b.src, b.src)
     _check_junctions(a, diags)
     diags.raise_if_errors()
     derivative = tuple(el.name for el in storage
-                       if a.by[a.incident[el.name][0]] != _preferred_setter(a, el, a.incident[el.name][0]))
-    return Causality(tuple(a.by), derivative, tuple(arbitrary))
+                       if a.by[a.incident[el.name][0]] != _preferred_setter(
+                           a, el, a.incident[el.name][0]))
+    return CausalGraph(graph, scenario.settings, tuple(a.by), derivative, tuple(arbitrary))
 
 
 def _check_junctions(a: _Assigner, diags: Collector):

@@ -9,8 +9,10 @@ from pathlib import Path
 
 import click
 
-from . import api
+from . import api, backends
 from .diagnostics import format_diagnostic
+from .emit import emit_c, emit_python
+from .report import check_report, equations_latex, equations_text
 
 
 def _warn(compiled: api.Compiled):
@@ -18,9 +20,9 @@ def _warn(compiled: api.Compiled):
         click.echo(format_diagnostic(d, compiled.source.path, compiled.source.text), err=True)
 
 
-def _build(model, scene, project_initial=False) -> api.Compiled:
+def _build(model, scene, project_initial=False, algebra="auto") -> api.Compiled:
     try:
-        compiled = api.build(model, scene, project_initial)
+        compiled = api.build(model, scene, project_initial, algebra)
     except api.BgcModelError as exc:
         click.echo(str(exc), err=True)
         sys.exit(1)
@@ -46,7 +48,7 @@ def _write_atomic(path: str, text: str):
 
 
 def _parse_params(values, compiled) -> dict:
-    names = {p.name for p in compiled.code.params}
+    names = {p.name for p in compiled.program.params}
     out = {}
     for item in values:
         name, sep, value = item.partition("=")
@@ -65,6 +67,11 @@ def _parse_params(values, compiled) -> dict:
 MODEL = click.argument("model", type=click.Path(dir_okay=False))
 SCENE = click.option("--scene", "-s", default=None, help="Scene to use (default: all effects, "
                                                          "every state as an output).")
+ALGEBRA = click.option("--algebra", type=click.Choice(list(api.ALGEBRA)), default="auto",
+                       show_default=True,
+                       help="How algebraic blocks are solved: symbolically when linear and "
+                            "small (auto), always symbolically, or always numerically in the "
+                            "generated code.")
 
 
 @click.group(context_settings={"help_option_names": ["-h", "--help"]})
@@ -76,38 +83,35 @@ def main():
 @main.command()
 @MODEL
 @SCENE
-def check(model, scene):
-    """Parse and assign causality; print states, constraints, loops, warnings."""
-    from .report import check_report
-
-    click.echo(check_report(_build(model, scene)), nl=False)
+@ALGEBRA
+def check(model, scene, algebra):
+    """Parse and assign causality; print states, constraints, algebraic blocks, warnings."""
+    click.echo(check_report(_build(model, scene, algebra=algebra)), nl=False)
 
 
 @main.command()
 @MODEL
 @SCENE
+@ALGEBRA
 @click.option("--format", "fmt", type=click.Choice(["text", "latex"]), default="text")
-def equations(model, scene, fmt):
+def equations(model, scene, algebra, fmt):
     """Print the reduced equations, multipliers included."""
-    from .report import equations_latex, equations_text
-
-    compiled = _build(model, scene)
+    compiled = _build(model, scene, algebra=algebra)
     click.echo((equations_latex if fmt == "latex" else equations_text)(compiled), nl=False)
 
 
 @main.command()
 @MODEL
 @SCENE
+@ALGEBRA
 @click.option("--target", type=click.Choice(["c", "python"]), default="c")
 @click.option("-o", "output", default=None, help="Output file (default: stdout).")
 @click.option("--project-initial", is_flag=True, help="Project initial values onto the "
                                                       "constraints instead of refusing them.")
-def compile(model, scene, target, output, project_initial):
+def compile(model, scene, algebra, target, output, project_initial):
     """Emit standalone C or Python source code."""
-    from .emit import emit_c, emit_python
-
-    compiled = _build(model, scene, project_initial)
-    files = (emit_c if target == "c" else emit_python)(compiled.code)
+    compiled = _build(model, scene, project_initial, algebra)
+    files = (emit_c if target == "c" else emit_python)(compiled.program)
     (text,) = files.values()
     if output:
         _write_atomic(output, text)
@@ -118,6 +122,7 @@ def compile(model, scene, target, output, project_initial):
 @main.command()
 @MODEL
 @SCENE
+@ALGEBRA
 @click.option("--backend", type=click.Choice(["c", "python"]), default="c")
 @click.option("--solver", type=click.Choice(["euler", "rk4", "dopri5"]), default=None)
 @click.option("--rtol", type=float, default=None)
@@ -129,13 +134,10 @@ def compile(model, scene, target, output, project_initial):
 @click.option("--project-initial", is_flag=True, help="Project initial values onto the "
                                                       "constraints instead of refusing them.")
 @click.option("-o", "output", default=None, help="CSV file (default: stdout).")
-def simulate(model, scene, backend, solver, rtol, atol, t_end, dt, step, params,
+def simulate(model, scene, algebra, backend, solver, rtol, atol, t_end, dt, step, params,
              project_initial, output):
     """Simulate and write CSV."""
-    from . import backends
-    from .emit import emit_c, emit_python
-
-    compiled = _build(model, scene, project_initial)
+    compiled = _build(model, scene, project_initial, algebra)
     for name, value in (("--rtol", rtol), ("--atol", atol), ("--dt", dt), ("--step", step)):
         if value is not None and not value > 0:
             raise click.UsageError(f"{name} must be positive")
@@ -145,10 +147,10 @@ def simulate(model, scene, backend, solver, rtol, atol, t_end, dt, step, params,
         click.echo("warning: no C compiler found (cc or $CC); using the Python backend", err=True)
         backend = "python"
     if backend == "c":
-        (text,) = emit_c(compiled.code).values()
+        (text,) = emit_c(compiled.program).values()
         code, out, err = backends.run_c(backends.compile_c(text), args)
     else:
-        (text,) = emit_python(compiled.code).values()
+        (text,) = emit_python(compiled.program).values()
         code, out, err = backends.run_python(text, args)
     if err:
         click.echo(err, err=True, nl=False)

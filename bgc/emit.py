@@ -1,58 +1,273 @@
-"""Emitters: a CodeModel to source text, {filename: text}, through the templates in templates/.
+"""Stage 8, emit: Program -> {filename: text}, through the templates in templates/ and the
+runtime files in bgc/runtime/ (inlined verbatim: a generated program stays one file).
 
-Pure functions: the same CodeModel gives the same bytes (no version, date or time stamp, no
+Pure functions: the same Program gives the same bytes (no version, date or time stamp, no
 set or dict-of-symbols order).  Names from the model reach the output only as escaped string
 literals; C identifiers derived from parameter names are sanitised and prefixed.
+
+Each IR function becomes one function of the target language, or several when it is long
+(bgc.ir.layout: chunks of bounded size, so that a C compiler's time grows linearly with the
+model); the values that cross chunks, and those a Newton block reads or sets, live in the
+workspace, the rest are locals.  The workspace's layout is decided here, once per program.
 """
 from __future__ import annotations
 
 import functools
 import json
 import re
+from dataclasses import dataclass
 
 import jinja2
 import sympy as sp
 
-from bgc.codemodel import Block, C, CodeModel, P, T, X, as_expr
+from bgc import ir
+from bgc.ir import Assign, Newton, Program, Resolve, Solve, Store, as_expr
 from bgc.printers import CPrinter, PythonPrinter, float_literal
 from bgc.resources import resource_dir
 
 SOLVERS = ("euler", "rk4", "dopri5")
 POW10_RANGE = (-24, 56)  # powers of ten for the C number formatter: |v| in about 1e-40..1e40
+PLAN_ARRAYS = ("diag", "lptr", "lpos", "lrow", "uptr", "upos", "ucol", "upd", "prow", "pcol")
+MODEL_FUNCTIONS = ("rhs", "outputs", "jvp")  # take the workspace, may solve blocks
+PLAIN_FUNCTIONS = ("residual", "scale", "position_jac", "velocity_jac")
 
 
 class EmitError(ValueError):
-    """A CodeModel the emitters cannot print (a bug in the stage that built it)."""
+    """A Program the emitters cannot print (a bug in the stage that built it)."""
 
 
-def emit_c(cm: CodeModel) -> dict[str, str]:
+# ---------------------------------------------------------------- the workspace
+
+
+@dataclass(frozen=True)
+class _BlockArea:
+    save: int
+    lu: int
+    dense: int
+    b: int
+    scale: int
+    z: int
+    r: int
+    zt: int
+    rt: int
+    piv: int
+    how: int
+
+
+@dataclass(frozen=True)
+class _Workspace:
+    """Offsets of everything in the workspace's double and int arrays."""
+
+    y0: int
+    stages: int
+    y: int
+    jac: int
+    slots: int
+    blocks: tuple[_BlockArea, ...]
+    doubles: int
+    ints: int
+    layouts: dict  # function name -> ir.Layout
+
+
+def _workspace(program: Program, chunk_ops: int) -> _Workspace:
+    n = max(len(program.states), 1)
+    y0, stages = 0, n
+    y = stages + 15 * n
+    jac = y + max(len(program.outputs), 1)
+    slots = jac + 2 * n
+    layouts = {name: ir.layout(program.function(name).body, slots, chunk_ops)
+               for name in MODEL_FUNCTIONS}
+    top = slots + max((len(lay.slot) for lay in layouts.values()), default=0)
+    areas, ints = [], 0
+    for bp in program.blocks:
+        m, nnz = bp.lu.m, bp.lu.nnz
+        save = top
+        lu = save + nnz
+        dense = lu + (0 if bp.lu.dense else nnz)
+        b = dense + m * m
+        areas.append(_BlockArea(save, lu, dense, b, b + m, b + 2 * m, b + 3 * m, b + 4 * m,
+                                b + 5 * m, ints, ints + m))
+        top = b + 6 * m
+        ints += m + 1
+    return _Workspace(y0, stages, y, jac, slots, tuple(areas), top, ints, layouts)
+
+
+# ---------------------------------------------------------------- statements to lines
+
+
+class _Writer:
+    """Lines of one target language for the statements of one function."""
+
+    def __init__(self, program: Program, ws: _Workspace, printer, lang: str):
+        self.program = program
+        self.ws = ws
+        self.printer = printer
+        self.c = lang == "c"
+        self.function = ""  # the IR function being written (names its Newton functions)
+
+    def newton_name(self, block: int) -> str:
+        return (f"bgc_{self.function}_block{block}" if self.c
+                else f"_{self.function}_block{block}")
+
+    def storage(self, layout: ir.Layout):
+        """Where each program variable of a function lives: its slot, its Newton area, or a
+        local of its own name."""
+        names = {w: f"wv[{s}]" for w, s in layout.slot.items()}
+        for chunk in layout.chunks:
+            for s in chunk:
+                if isinstance(s, Newton):
+                    area = self.ws.blocks[s.block]
+                    for k, z in enumerate(s.unknowns):
+                        names[z] = f"wv[{area.z + k}]"
+        return names
+
+    def code(self, e) -> str:
+        return self.printer.doprint(e)
+
+    def assign(self, target: str, value: str, local: bool) -> str:
+        if local:
+            return f"const double {target} = {value};" if self.c else f"{target} = {value}"
+        return f"{target} = {value};" if self.c else f"{target} = {value}"
+
+    def statement(self, s, out_name: str, t_name="t") -> list[str]:
+        names = self.printer.names
+        if isinstance(s, Assign):
+            text = names.get(s.target)
+            return [self.assign(text or s.target.name, self.code(s.expr), text is None)]
+        if isinstance(s, Store):
+            return [self.assign(f"{out_name}[{s.index}]", self.code(s.expr), False)]
+        semi = ";" if self.c else ""
+        if isinstance(s, (Solve, Resolve)):
+            bp = self.program.blocks[s.block]
+            area = self.ws.blocks[s.block]
+            lines = []
+            if isinstance(s, Solve):
+                for pos, e in zip(bp.lu.entries, s.matrix):
+                    lines.append(f"wv[{area.save + pos}] = {self.code(e)}{semi}")
+            for r, e in enumerate(s.rhs):
+                lines.append(f"wv[{area.b + r}] = {self.code(e)}{semi}")
+            call = "bgc_block_solve" if isinstance(s, Solve) else "bgc_block_resolve"
+            if self.c:
+                lines.append(f"if ({call}(w, {s.block}, {t_name}))")
+                lines.append("    return 1;")
+            else:
+                lines.append(f"_{call[4:]}(w, {s.block}, {t_name})")
+            targets = s.unknowns if isinstance(s, Solve) else s.targets
+            for k, z in enumerate(targets):
+                text = names.get(z)
+                lines.append(self.assign(text or z.name, f"wv[{area.b + k}]", text is None))
+            return lines
+        if isinstance(s, Newton):
+            newton_name = self.newton_name(s.block)
+            final = int(s.final_factor) if self.c else bool(s.final_factor)
+            if self.c:
+                return [f"if (bgc_newton(w, {s.block}, {newton_name}, {t_name}, x, p, {final}))",
+                        "    return 1;"]
+            return [f"_newton(w, {s.block}, {newton_name}, {t_name}, x, p, {final})"]
+        raise EmitError(f"unknown statement {s!r}")
+
+    def newton_function(self, s: Newton, layout_names: dict) -> dict:
+        """The lines of a Newton block's residual/Jacobian function (unknowns as z[k])."""
+        bp = self.program.blocks[s.block]
+        names = dict(layout_names)
+        # C passes pointers; Python the workspace list and an offset into it
+        z, r, J = ("z[{}]", "r[{}]", "J[{}]") if self.c else ("z[zo + {}]", "r[ro + {}]",
+                                                              "J[jo + {}]")
+        for k, u in enumerate(s.unknowns):
+            names[u] = z.format(k)
+        self.printer.names = names
+        body = []
+        for a in s.body:
+            body += self.statement(a, "r")
+        residuals = [self.assign(r.format(i), self.code(e), False)
+                     for i, e in enumerate(s.residuals)]
+        tangents = []
+        for a in s.tangents:
+            tangents += self.statement(a, "J")
+        jacobian = [self.assign(J.format(pos), self.code(e), False)
+                    for pos, e in zip(bp.lu.entries, s.jacobian)]
+        return {"name": self.newton_name(s.block), "body": body, "residuals": residuals,
+                "tangents": tangents, "jacobian": jacobian}
+
+
+def _function_context(writer: _Writer, name: str, out_name: str) -> dict:
+    f = writer.program.function(name)
+    writer.function = name
+    layout = writer.ws.layouts[name]
+    names = writer.storage(layout)
+    chunks = []
+    newtons = {}
+    for chunk in layout.chunks:
+        writer.printer.names = names
+        lines = []
+        for s in chunk:
+            lines += writer.statement(s, out_name)
+        chunks.append(lines)
+        for s in chunk:
+            if isinstance(s, Newton) and s.block not in newtons:
+                newtons[s.block] = s
+    evals = [writer.newton_function(s, names) for _, s in sorted(newtons.items())]
+    writer.printer.names = {}
+    return {"name": name, "args": f.args, "chunks": chunks, "evals": evals}
+
+
+def _plain_lines(writer: _Writer, name: str, out_name: str) -> list[str]:
+    writer.printer.names = {}
+    lines = []
+    for s in writer.program.function(name).body:
+        lines += writer.statement(s, out_name)
+    return lines
+
+
+# ---------------------------------------------------------------- C
+
+
+def emit_c(program: Program, chunk_ops: int = ir.CHUNK_OPS) -> dict[str, str]:
     """The standalone C99 program: {"<name>.c": text}."""
-    _validate(cm)
-    fields = c_param_fields(tuple(p.name for p in cm.params))
-    printer = CPrinter(len(cm.states), fields, len(cm.consts.results))
-    context = _common_context(cm, c_string_literal)
+    _validate(program)
+    fields = c_param_fields(tuple(p.name for p in program.params))
+    printer = CPrinter(len(program.states), fields, program.n_consts)
+    ws = _workspace(program, chunk_ops)
+    writer = _Writer(program, ws, printer, "c")
+    context = _common_context(program, ws, c_string_literal)
     context.update(
         param_fields=fields,
-        param_defaults=[printer.doprint(p.default) for p in cm.params],
-        blocks=_print_blocks(cm, printer),
-        scene=_scene_context(cm, c_string_literal, step_none="0.0"),
-        pow10_table=pow10_table(*POW10_RANGE),
+        param_defaults=[printer.doprint(p.default) for p in program.params],
+        model={name: _function_context(writer, name, "out") for name in MODEL_FUNCTIONS},
+        plain={name: _plain_lines(writer, name, "out") for name in PLAIN_FUNCTIONS},
+        consts=_plain_lines(writer, "consts", "p->c"),
+        init=_plain_lines(writer, "init", "x0"),
+        scene=_scene_context(program, c_string_literal, step_none="0.0"),
+        api=_runtime_text("api.h"),
+        runtime=_runtime_text("runtime.c"),
     )
     return {f"{context['ident']}.c": _render("c_program.c.j2", context)}
 
 
-def emit_python(cm: CodeModel) -> dict[str, str]:
+def emit_python(program: Program, chunk_ops: int = ir.CHUNK_OPS) -> dict[str, str]:
     """The standalone Python module (numpy only): {"<name>.py": text}."""
-    _validate(cm)
-    n, m, k = len(cm.states), len(cm.params), len(cm.consts.results)
+    _validate(program)
+    n, m, k = len(program.states), len(program.params), program.n_consts
     fast, ieee = PythonPrinter(n, m, n_consts=k), PythonPrinter(n, m, ieee=True, n_consts=k)
-    context = _common_context(cm, py_string_literal)
+    ws = _workspace(program, chunk_ops)
+    context = _common_context(program, ws, py_string_literal)
+    variants = {}
+    for label, printer in (("fast", fast), ("ieee", ieee)):
+        writer = _Writer(program, ws, printer, "python")
+        variants[label] = {
+            "model": {name: _function_context(writer, name, "out") for name in MODEL_FUNCTIONS},
+            "plain": {name: _plain_lines(writer, name, "out") for name in PLAIN_FUNCTIONS},
+            "consts": _plain_lines(writer, "consts", "out"),
+            "init": _plain_lines(writer, "init", "out"),
+            "param_defaults": [printer.doprint(p.default) for p in program.params],
+        }
     context.update(
-        param_defaults={"fast": [fast.doprint(p.default) for p in cm.params],
-                        "ieee": [ieee.doprint(p.default) for p in cm.params]},
-        blocks={"fast": _print_blocks(cm, fast), "ieee": _print_blocks(cm, ieee)},
-        scene=_scene_context(cm, py_string_literal, step_none="None"),
-        velocity_movable=["True" if v else "False" for v in cm.velocity_movable],
+        fast=variants["fast"], ieee=variants["ieee"],
+        jac_colors=list(program.jacobian.colors), jac_columns=list(program.jacobian.columns),
+        plain_sizes={name: program.function(name).size for name in PLAIN_FUNCTIONS},
+        scene=_scene_context(program, py_string_literal, step_none="None"),
+        velocity_movable=["True" if v else "False" for v in program.velocity_movable],
+        runtime=_runtime_text("runtime.py"),
     )
     return {f"{context['ident']}.py": _render("python_module.py.j2", context)}
 
@@ -99,7 +314,8 @@ def c_param_fields(names: tuple[str, ...]) -> tuple[str, ...]:
 
 def pow10_table(low: int, high: int) -> list[dict]:
     """10^m for low <= m <= high as (hi * 2^64 + lo) * 2^e2 rounded down, with
-    2^127 <= hi * 2^64 + lo < 2^128: hi and lo as 16 hex digits (exact integer arithmetic)."""
+    2^127 <= hi * 2^64 + lo < 2^128: hi and lo as 16 hex digits (exact integer arithmetic).
+    The C runtime carries this table for POW10_RANGE (a test checks that it is this)."""
     rows = []
     for m in range(low, high + 1):
         num, den = (10 ** m, 1) if m >= 0 else (1, 10 ** -m)
@@ -117,31 +333,79 @@ def pow10_table(low: int, high: int) -> list[dict]:
     return rows
 
 
+def _list(values) -> str:
+    return ", ".join(str(v) for v in values) if values else "0"
+
+
+def _block_names(program: Program, limit: int = 6) -> list[str]:
+    out = []
+    for bp in program.blocks:
+        names = list(bp.unknowns[:limit])
+        if len(bp.unknowns) > limit:
+            names.append(f"and {len(bp.unknowns) - limit} more")
+        out.append(", ".join(names))
+    return out
+
+
 # ---------------------------------------------------------------- context
 
 
-def _common_context(cm: CodeModel, literal) -> dict:
+def _common_context(program: Program, ws: _Workspace, literal) -> dict:
+    jac = program.jacobian
+    color_ptr, color_cols, col_ptr, col_rows = [0], [], [0], []
+    for cols in jac.colors:
+        color_cols += cols
+        color_ptr.append(len(color_cols))
+    for rows in jac.columns:
+        col_rows += rows
+        col_ptr.append(len(col_rows))
+    blocks = []
+    for k, (bp, area) in enumerate(zip(program.blocks, ws.blocks)):
+        lu = bp.lu
+        flat, pointers = [], []
+        for key in PLAN_ARRAYS:
+            values = getattr(lu, key)
+            pointers.append(f"bgc_block{k}_plan + {len(flat)}" if values else "NULL")
+            flat += values
+        fields = [str(lu.m), str(int(lu.dense)), str(lu.nnz)] + pointers
+        offsets = [area.save, area.lu, area.dense, area.b, area.scale, area.z, area.r, area.zt,
+                   area.rt, area.piv, area.how]
+        blocks.append({
+            "flat": _list(flat),
+            "init": "{ { " + ", ".join(fields) + " }, " + ", ".join(map(str, offsets)) + " }",
+            "m": lu.m, "dense": lu.dense, "nnz": lu.nnz, "offsets": offsets,
+            "arrays": {key: list(getattr(lu, key)) for key in PLAN_ARRAYS},
+        })
     return {
-        "ident": identifier(cm.name),
-        "model_name": literal(cm.name),
-        "states": [literal(s) for s in cm.states],
-        "params": [literal(p.name) for p in cm.params],
-        "outputs": [literal(o) for o in cm.outputs],
+        "ident": identifier(program.name),
+        "model_name": literal(program.name),
+        "ident_literal": literal(identifier(program.name)),
+        "states": [literal(s) for s in program.states],
+        "params": [literal(p.name) for p in program.params],
+        "outputs": [literal(o) for o in program.outputs],
         "constraints": [{"junction": literal(c.junction), "level": literal(c.level)}
-                        for c in cm.constraints],
-        "n_states": len(cm.states),
-        "n_params": len(cm.params),
-        "n_consts": len(cm.consts.results),
-        "n_outputs": len(cm.outputs),
-        "n_constraints": len(cm.constraints),
-        "position_rows": list(cm.position_rows),
-        "velocity_rows": list(cm.velocity_rows),
-        "velocity_movable": [1 if v else 0 for v in cm.velocity_movable],
+                        for c in program.constraints],
+        "block_names": [literal(b) for b in _block_names(program)],
+        "blocks": blocks,
+        "n_states": len(program.states),
+        "n_params": len(program.params),
+        "n_consts": program.n_consts,
+        "n_outputs": len(program.outputs),
+        "n_constraints": len(program.constraints),
+        "n_blocks": len(program.blocks),
+        "position_rows": list(program.position_rows),
+        "velocity_rows": list(program.velocity_rows),
+        "velocity_movable": [1 if v else 0 for v in program.velocity_movable],
+        "jac": {"colors": len(jac.colors), "color_ptr": _list(color_ptr),
+                "color_cols": _list(color_cols), "col_ptr": _list(col_ptr),
+                "col_rows": _list(col_rows), "nnz": len(col_rows)},
+        "ws": ws,
+        "list": _list,
     }
 
 
-def _scene_context(cm: CodeModel, literal, step_none: str) -> dict:
-    sc = cm.scene
+def _scene_context(program: Program, literal, step_none: str) -> dict:
+    sc = program.scene
     return {
         "t0": float_literal(sc.t0),
         "t_end": float_literal(sc.t_end),
@@ -154,66 +418,51 @@ def _scene_context(cm: CodeModel, literal, step_none: str) -> dict:
     }
 
 
-_BLOCKS = ("consts", "init", "rhs", "out", "residual", "scale", "position_jac", "velocity_jac")
-
-
-def _print_blocks(cm: CodeModel, printer) -> dict:
-    return {name: _print_block(getattr(cm, name), printer) for name in _BLOCKS}
-
-
-def _print_block(block: Block, printer) -> dict:
-    block = _renumber_temps(block)
-    return {
-        "temps": [(sym.name, printer.doprint(expr)) for sym, expr in block.temps],
-        "results": [printer.doprint(expr) for expr in block.results],
-    }
-
-
-def _renumber_temps(block: Block) -> Block:
-    """Temporaries renamed w0, w1, ... in order, whatever prefix the block was made with."""
-    mapping = {sym: sp.Symbol(f"w{k}") for k, (sym, _) in enumerate(block.temps)}
-    if all(old == new for old, new in mapping.items()):
-        return block
-    return Block(tuple((mapping[sym], as_expr(expr).xreplace(mapping))
-                       for sym, expr in block.temps),
-                 tuple(as_expr(expr).xreplace(mapping) for expr in block.results))
-
-
 # ---------------------------------------------------------------- validation
 
 
-def _validate(cm: CodeModel) -> None:
-    n, n_pos, n_vel = len(cm.states), len(cm.position_rows), len(cm.velocity_rows)
-    sizes = {"init": n, "rhs": n, "out": len(cm.outputs), "residual": len(cm.constraints),
-             "scale": len(cm.constraints), "position_jac": n_pos * n, "velocity_jac": n_vel * n}
+def _validate(program: Program) -> None:
+    n = len(program.states)
+    sizes = {"init": n, "rhs": n, "jvp": n, "outputs": len(program.outputs),
+             "residual": len(program.constraints), "scale": len(program.constraints),
+             "position_jac": len(program.position_rows) * n,
+             "velocity_jac": len(program.velocity_rows) * n}
     for name, size in sizes.items():
-        got = len(getattr(cm, name).results)
-        if got != size:
-            raise EmitError(f"block {name} has {got} results, expected {size}")
-    if len(cm.velocity_movable) != n:
-        raise EmitError(f"velocity_movable has {len(cm.velocity_movable)} entries, expected {n}")
-    if cm.scene.solver not in SOLVERS:
-        raise EmitError(f"unknown solver {cm.scene.solver!r}")
-    if any(c.level not in ("position", "velocity") for c in cm.constraints):
+        f = program.function(name)
+        if f.size != size:
+            raise EmitError(f"function {name} has {f.size} results, expected {size}")
+        stores = sorted(s.index for s in f.body if isinstance(s, Store))
+        if stores != list(range(size)):
+            raise EmitError(f"function {name} does not store each of its {size} results once")
+    if len(program.velocity_movable) != n:
+        raise EmitError(f"velocity_movable has {len(program.velocity_movable)} entries, "
+                        f"expected {n}")
+    if program.scene.solver not in SOLVERS:
+        raise EmitError(f"unknown solver {program.scene.solver!r}")
+    if any(c.level not in ("position", "velocity") for c in program.constraints):
         raise EmitError("constraint levels must be 'position' or 'velocity'")
     for name in ("init", "consts"):
-        if _uses_more_than_parameters(getattr(cm, name)):
-            raise EmitError(f"the {name} block may use parameters only")
-    for j, param in enumerate(cm.params):
+        if _uses_more_than_parameters(program.function(name)):
+            raise EmitError(f"the {name} function may use parameters only")
+    for name in PLAIN_FUNCTIONS + ("init", "consts"):
+        if any(not isinstance(s, (Assign, Store)) for s in program.function(name).body):
+            raise EmitError(f"the {name} function cannot solve algebraic blocks")
+    for j, param in enumerate(program.params):
         _check_default(j, param.default)
 
 
-def _uses_more_than_parameters(block: Block) -> bool:
-    exprs = [as_expr(e) for _, e in block.temps] + [as_expr(e) for e in block.results]
-    return any(T in e.free_symbols or e.has(X) or e.has(C) for e in exprs)
+def _uses_more_than_parameters(f: ir.Function) -> bool:
+    exprs = [e for s in f.body for e in ir.expressions(s)]
+    return any(ir.T in e.free_symbols or e.has(ir.X) or e.has(ir.C) or e.has(ir.V)
+               for e in exprs)
 
 
 def _check_default(j: int, default: sp.Expr) -> None:
     default = as_expr(default)
-    if T in default.free_symbols or default.has(X) or default.has(C):
+    if ir.T in default.free_symbols or default.has(ir.X) or default.has(ir.C):
         raise EmitError(f"the default of parameter {j} uses time, states or constants")
     for ref in default.atoms(sp.Indexed):
-        if ref.base == P and not (ref.indices[0].is_Integer and int(ref.indices[0]) < j):
+        if ref.base == ir.P and not (ref.indices[0].is_Integer and int(ref.indices[0]) < j):
             raise EmitError(f"the default of parameter {j} uses {ref}, not an earlier parameter")
 
 
@@ -222,7 +471,7 @@ def _check_default(j: int, default: sp.Expr) -> None:
 
 @functools.lru_cache(maxsize=None)
 def _environment() -> jinja2.Environment:
-    return jinja2.Environment(
+    env = jinja2.Environment(
         loader=jinja2.FileSystemLoader(str(resource_dir("templates"))),
         undefined=jinja2.StrictUndefined,
         keep_trailing_newline=True,
@@ -230,6 +479,13 @@ def _environment() -> jinja2.Environment:
         trim_blocks=True,
         lstrip_blocks=True,
     )
+    env.filters["indent_line"] = lambda line: "    " + line
+    return env
+
+
+@functools.lru_cache(maxsize=None)
+def _runtime_text(name: str) -> str:
+    return (resource_dir("runtime") / name).read_text(encoding="utf-8")
 
 
 def _render(template: str, context: dict) -> str:

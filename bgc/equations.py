@@ -1,9 +1,15 @@
-"""Stage 5, equations: the causal bond graph as assignments `variable = expression`.
+"""Stage 5, equations: CausalGraph -> EquationSystem, the causal bond graph as equations.
 
-Every bond k has symbols e[k] and f[k]; each node contributes an assignment for each variable
-its causality makes it compute.  States (I, C, integral signals) are leaves with a derivative
-expression; storage in derivative causality and constraint multipliers leave unknowns that the
-reduce stage determines.  Each assignment carries the span of the declaration it came from.
+Every bond k has symbols e[k] and f[k]; each node contributes one equation for each variable
+its causality makes it compute.  An equation is *explicit*, `target = expr`, or *implicit*,
+`0 = expr`, which determines its target without giving it (a law that has no clean inverse in
+the causality it is in; the reduce stage adds those of the constraint multipliers).  States
+(I, C, integral signals) are leaves: each has one explicit equation for its derivative
+`der(x)`.  Storage in derivative causality computes its state from its input and its output
+from that state's derivative `der(X.q)`, which the reduce stage derives.
+
+The system carries nothing of the graph: names, spans and the numbers of the run, so that the
+later stages cannot reach back into it.
 """
 from __future__ import annotations
 
@@ -11,66 +17,15 @@ from dataclasses import dataclass
 
 import sympy as sp
 
-from .causality import Causality
-from .diagnostics import Span, fail
-from .resolve import Element, Graph, var
-from .scene import Settings
+from .algebra import solve_for
+from .causality import CausalGraph
+from .diagnostics import Collector, ModelError, Span, fail
+from .graph import TIME, Element, Graph, var
 
 
-@dataclass(frozen=True)
-class Assignment:
-    target: sp.Symbol
-    expr: sp.Expr
-    origin: str  # the element or signal that computes it
-    span: Span
-
-
-@dataclass(frozen=True)
-class State:
-    symbol: sp.Symbol
-    name: str  # as shown to users: "mx.p", "c1.q", "x"
-    derivative: sp.Expr
-    init: sp.Expr  # the state's initial value (parameters and t only)
-    origin: str
-    span: Span
-
-
-@dataclass(frozen=True)
-class DerivativeStore:
-    """A storage element in derivative causality: output = sign * d/dt(state_expr)."""
-
-    element: str
-    output: sp.Symbol  # the bond variable it sets (an unknown for the reduce stage)
-    state_symbol: sp.Symbol  # X.p / X.q, here a dependent quantity
-    state_expr: sp.Expr  # in terms of other variables (its input through the law)
-    sign: int
-    span: Span
-    given_init: sp.Expr | None = None  # an init clause, which derivative causality overrides
-
-
-@dataclass(frozen=True)
-class ConstraintEq:
-    junction: str
-    kind: str | None  # declared kind
-    multiplier: sp.Symbol
-    balance: sp.Expr  # flows in - flows out (0) / efforts in - efforts out (1)
-    corrector: str
-    gains: tuple[sp.Expr, ...]
-    annotation: tuple | None  # ("init" | "phi", sympy expr, span)
-    span: Span
-    element: Element
-
-
-@dataclass(frozen=True)
-class EquationSystem:
-    graph: Graph
-    causality: Causality
-    settings: Settings
-    assignments: tuple[Assignment, ...]
-    states: tuple[State, ...]
-    stores: tuple[DerivativeStore, ...]
-    constraints: tuple[ConstraintEq, ...]
-    warnings: tuple = ()
+def der(symbol: sp.Symbol) -> sp.Symbol:
+    """The symbol of the time derivative of a variable: der(mx.p)."""
+    return var(f"der({symbol.name})")
 
 
 def bond_effort(label: str) -> sp.Symbol:
@@ -81,21 +36,105 @@ def bond_flow(label: str) -> sp.Symbol:
     return var(f"f[{label}]")
 
 
-class _Builder:
-    def __init__(self, graph: Graph, causality: Causality):
-        self.g, self.c = graph, causality
-        self.assignments: list[Assignment] = []
-        self.states: list[State] = []
-        self.stores: list[DerivativeStore] = []
-        self.constraints: list[ConstraintEq] = []
-        self.warnings: list = []
+@dataclass(frozen=True)
+class Equation:
+    target: sp.Symbol
+    expr: sp.Expr
+    explicit: bool  # target = expr; else 0 = expr determines target
+    origin: str  # the element, signal or junction it comes from
+    span: Span
 
-    def emit(self, target, expr, el_or_name, span):
-        origin = el_or_name if isinstance(el_or_name, str) else el_or_name.name
-        self.assignments.append(Assignment(target, expr, origin, span))
+
+@dataclass(frozen=True)
+class StateVar:
+    symbol: sp.Symbol
+    name: str  # as shown to users: "mx.p", "c1.q", "x"
+    init: sp.Expr  # the initial value (parameters only; t is t0)
+    kind: str  # "I", "C" or "integral signal"
+    span: Span
+
+
+@dataclass(frozen=True)
+class ConstraintDef:
+    junction: str
+    kind: str | None  # declared: holonomic | nonholonomic | None (detect)
+    corrector: str  # pid | pd | none
+    gains: tuple[sp.Expr, ...]
+    annotation: tuple | None  # ("init" | "phi", sympy expr, span)
+    multiplier: sp.Symbol  # X.lambda: its equation comes from the reduce stage
+    balance: sp.Symbol  # X.balance = flows in - flows out (efforts, on a 1 junction)
+    residual: sp.Symbol  # X.residual: Phi (holonomic) or the balance (nonholonomic)
+    span: Span
+    name_span: Span
+
+
+@dataclass(frozen=True)
+class Store:
+    """A storage element in derivative causality (its state is a dependent variable)."""
+
+    element: str
+    state: sp.Symbol
+    given_init: sp.Expr | None  # an init clause, which derivative causality overrides
+    init_span: Span | None
+
+
+@dataclass(frozen=True)
+class OutputDef:
+    name: str  # the CSV column
+    expr: sp.Expr  # over model symbols
+    span: Span | None
+
+
+@dataclass(frozen=True)
+class ParameterDef:
+    name: str
+    expr: sp.Expr  # default, the scene's `set` applied; earlier parameters only
+    span: Span
+
+
+@dataclass(frozen=True)
+class Run:
+    """The numbers of the scene's run."""
+
+    scene: str | None
+    t0: float
+    t_end: float
+    dt: float
+    solver: str
+    rtol: float
+    atol: float
+    step: float | None
+
+
+@dataclass(frozen=True)
+class EquationSystem:
+    name: str
+    parameters: tuple[ParameterDef, ...]
+    states: tuple[StateVar, ...]
+    equations: tuple[Equation, ...]
+    constraints: tuple[ConstraintDef, ...]
+    stores: tuple[Store, ...]
+    outputs: tuple[OutputDef, ...]
+    run: Run
+    warnings: tuple = ()
+
+
+class _Builder:
+    def __init__(self, cg: CausalGraph):
+        self.g: Graph = cg.graph
+        self.effort_by = cg.effort_by
+        self.equations: list[Equation] = []
+        self.states: list[StateVar] = []
+        self.stores: list[Store] = []
+        self.constraints: list[ConstraintDef] = []
+
+    def emit(self, target, expr, el: Element | str, span, explicit=True):
+        origin = el if isinstance(el, str) else el.name
+        self.equations.append(Equation(target, expr, explicit, origin, span))
 
     def incident(self, name):
-        return [(i, b) for i, b in enumerate(self.g.bonds) if name in (b.src, b.dst)]
+        bonds = self.g.bonds
+        return [(i, bonds[i]) for i in self.g.incident[name]]
 
     # ------------------------------------------------------------ one-ports
     def one_port(self, el: Element):
@@ -104,7 +143,7 @@ class _Builder:
         s = 1 if b.dst == el.name else -1  # orientation: the element's own flow is s*f
         self.emit(var(f"{el.name}.e"), e, el, el.span)
         self.emit(var(f"{el.name}.f"), f, el, el.span)
-        sets_effort = self.c.effort_by[i] == el.name
+        sets_effort = self.effort_by[i] == el.name
         role = el.spec.role
         if role == "source":
             self.emit(e if el.spec.fixed == "effort" else f, el.value.value, el, el.span)
@@ -112,9 +151,6 @@ class _Builder:
             self.resistor(el, e, f, s, sets_effort)
         else:
             self.storage(el, e, f, s, sets_effort)
-
-    def _own(self, el, e, f, s):
-        return {var(f"{el.name}.e"): e, var(f"{el.name}.f"): s * f}
 
     def resistor(self, el, e, f, s, sets_effort):
         own_e, own_f = sp.Symbol("_E", real=True), sp.Symbol("_F", real=True)
@@ -125,40 +161,50 @@ class _Builder:
             law = expr.value.xreplace({var(f"{el.name}.e"): own_e, var(f"{el.name}.f"): own_f})
             lhs, rhs = (own_e, law) if which == "e" else (own_f, law)
         want = own_e if sets_effort else own_f
-        sol = rhs if lhs == want else _invert(lhs - rhs, want, el)
-        sol = sol.xreplace({own_e: e, own_f: s * f})
-        if sets_effort:
-            self.emit(e, sol, el, el.span)
+        target = e if sets_effort else f
+        bond = {own_e: e, own_f: s * f}
+        if lhs == want and not rhs.has(want):
+            sol = rhs
         else:
-            self.emit(f, s * sol, el, el.span)
+            sol = _invert(lhs - rhs, want, el)
+        if sol is None:  # no clean inverse: the law itself determines the variable
+            self.emit(target, (lhs - rhs).xreplace(bond), el, el.span, explicit=False)
+        elif sets_effort:
+            self.emit(e, sol.xreplace(bond), el, el.span)
+        else:
+            self.emit(f, s * sol.xreplace(bond), el, el.span)
 
     def storage(self, el, e, f, s, sets_effort):
         st = el.spec.state  # "p" (I) or "q" (C)
         state = var(f"{el.name}.{st}")
         partner = sp.Symbol("_V", real=True)  # f for I, e for C
-        if el.law is None:
-            law = state / el.value.value  # f = p/m, e = q/c
-        else:
-            law = el.law[1].value
+        law = state / el.value.value if el.law is None else el.law[1].value  # f = p/m, e = q/c
         integral = sets_effort == (el.spec.preferred == "effort")
-        bond_partner = e if st == "q" else s * f
         if integral:
-            out = law
             if st == "p":
-                self.emit(f, s * out, el, el.span)
-                deriv = e
+                self.emit(f, s * law, el, el.span)
+                rate = e
             else:
-                self.emit(e, out, el, el.span)
-                deriv = s * f
-            self.states.append(State(state, f"{el.name}.{st}", deriv, self._init(el, law, state),
-                                     el.name, el.span))
+                self.emit(e, law, el, el.span)
+                rate = s * f
+            self.states.append(StateVar(state, f"{el.name}.{st}", self._init(el, law, state),
+                                        el.kind, el.span))
+            self.emit(der(state), rate, el, el.span)
+            return
+        bond_partner = e if st == "q" else s * f  # the law's input, from the bond
+        dep = _invert(partner - law, state, el)
+        if dep is None:
+            self.emit(state, (partner - law).xreplace({partner: bond_partner}), el, el.span,
+                      explicit=False)
         else:
-            dep = _invert(partner - law, state, el).xreplace({partner: bond_partner})
-            output = e if st == "p" else f
-            sign = 1 if st == "p" else s
-            self.emit(state, dep, el, el.span)
-            given = self._init(el, law, state) if el.init is not None else None
-            self.stores.append(DerivativeStore(el.name, output, state, dep, sign, el.span, given))
+            self.emit(state, dep.xreplace({partner: bond_partner}), el, el.span)
+        # its output is the state's rate: I sets the effort dp/dt, C the flow dq/dt (own sign)
+        if st == "p":
+            self.emit(e, der(state), el, el.span)
+        else:
+            self.emit(f, s * der(state), el, el.span)
+        given = self._init(el, law, state) if el.init is not None else None
+        self.stores.append(Store(el.name, state, given, el.init[1].span if el.init else None))
 
     def _init(self, el, law, state):
         if el.init is None:
@@ -167,7 +213,12 @@ class _Builder:
         if which == el.spec.state:
             return expr.value
         partner = sp.Symbol("_V", real=True)
-        return _invert(partner - law, state, el).xreplace({partner: expr.value})
+        inverse = _invert(partner - law, state, el)
+        if inverse is None:
+            fail(expr.span, f"the law of '{el.name}' has no closed-form inverse, so its state "
+                            f"cannot be computed from this value: write 'init {el.spec.state} "
+                            "= ...' instead")
+        return inverse.xreplace({partner: expr.value})
 
     # ------------------------------------------------------------ two-ports
     def two_port(self, el: Element):
@@ -177,14 +228,14 @@ class _Builder:
             bond_flow(b.label)
         n = el.value.value
         if el.spec.role == "transformer":
-            if self.c.effort_by[ia] == el.name:  # e_in = n e_out, f_out = n f_in
+            if self.effort_by[ia] == el.name:  # e_in = n e_out, f_out = n f_in
                 self.emit(ea, n * eb, el, el.span)
                 self.emit(fb, n * fa, el, el.span)
             else:
                 self.emit(eb, ea / n, el, el.span)
                 self.emit(fa, fb / n, el, el.span)
         else:
-            if self.c.effort_by[ia] == el.name:  # e_in = r f_out, e_out = r f_in
+            if self.effort_by[ia] == el.name:  # e_in = r f_out, e_out = r f_in
                 self.emit(ea, n * fb, el, el.span)
                 self.emit(eb, n * fa, el, el.span)
             else:
@@ -198,26 +249,16 @@ class _Builder:
         common, through = (bond_effort, bond_flow) if el.kind == "0" else (bond_flow, bond_effort)
         field = "e" if el.kind == "0" else "f"
         if el.constraint is not None:
-            lam = var(f"{el.name}.lambda")
-            for i, b in bonds:
-                self.emit(common(b.label), lam, el, el.span)
-            self.emit(var(f"{el.name}.{field}"), lam, el, el.span)
-            balance = sp.Add(*[sigma[i] * through(b.label) for i, b in bonds])
-            c = el.constraint
-            ann = None
-            if c.annotation is not None:
-                ann = (c.annotation[0], c.annotation[1].value, c.annotation[1].span)
-            self.constraints.append(ConstraintEq(el.name, c.kind, lam, balance, c.corrector,
-                                                 tuple(g.value for g in c.gains), ann, el.span, el))
+            self.constraint(el, bonds, sigma, common, through, field)
             return
         if not bonds:
             return
         # the odd bond: at a 0-junction the one that sets the effort, at a 1-junction the one
         # whose effort the junction computes (equivalently, that sets the common flow).
         if el.kind == "0":
-            (k, kb), = [(i, b) for i, b in bonds if self.c.effort_by[i] != el.name]
+            (k, kb), = [(i, b) for i, b in bonds if self.effort_by[i] != el.name]
         else:
-            (k, kb), = [(i, b) for i, b in bonds if self.c.effort_by[i] == el.name]
+            (k, kb), = [(i, b) for i, b in bonds if self.effort_by[i] == el.name]
         for i, b in bonds:
             if i != k:
                 self.emit(common(b.label), common(kb.label), el, el.span)
@@ -225,40 +266,110 @@ class _Builder:
         self.emit(through(kb.label), -sigma[k] * others, el, el.span)
         self.emit(var(f"{el.name}.{field}"), common(kb.label), el, el.span)
 
+    def constraint(self, el, bonds, sigma, common, through, field):
+        lam = var(f"{el.name}.lambda")
+        for _, b in bonds:
+            self.emit(common(b.label), lam, el, el.span)
+        self.emit(var(f"{el.name}.{field}"), lam, el, el.span)
+        balance = var(f"{el.name}.balance")
+        self.emit(balance, sp.Add(*[sigma[i] * through(b.label) for i, b in bonds]), el,
+                  el.span)
+        c = el.constraint
+        ann = None
+        if c.annotation is not None:
+            ann = (c.annotation[0], c.annotation[1].value, c.annotation[1].span)
+        self.constraints.append(ConstraintDef(
+            el.name, c.kind, c.corrector, tuple(g.value for g in c.gains), ann, lam, balance,
+            var(f"{el.name}.residual"), el.span, el.name_span))
+
     def signal(self, s):
         if s.is_integral:
-            self.states.append(State(var(s.name), s.name, s.expr.value, s.init.value, s.name,
-                                     s.span))
+            sym = var(s.name)
+            self.states.append(StateVar(sym, s.name, s.init.value, "integral signal", s.span))
+            self.emit(der(sym), s.expr.value, s.name, s.span)
         else:
             self.emit(var(s.name), s.expr.value, s.name, s.span)
 
 
 def _invert(equation, unknown, el: Element):
-    """Solve equation == 0 for unknown; the law must have exactly one solution."""
+    """Solve equation == 0 for unknown: a clean closed form, or None (the equation then stays
+    implicit, and is solved numerically unless the reduce stage finds better)."""
     if not equation.has(unknown):
         fail(el.span, f"the law of '{el.name}' does not involve the variable its causality asks for")
-    if sp.degree(equation, unknown) == 1 if equation.is_polynomial(unknown) else False:
-        a = equation.diff(unknown)
-        return sp.cancel(-(equation - a * unknown) / a) if a.free_symbols else \
-            -(equation - a * unknown) / a
-    sols = sp.solve(equation, unknown, dict=True)
-    if len(sols) != 1:
-        fail(el.span, f"the law of '{el.name}' cannot be inverted uniquely for the causality "
-                      f"it is in ({len(sols)} solutions); write it the other way round")
-    return sols[0][unknown]
+    return solve_for(equation, unknown)
 
 
-def build_equations(graph: Graph, causality: Causality, settings: Settings) -> EquationSystem:
-    b = _Builder(graph, causality)
-    for item in sorted(list(graph.elements) + list(graph.signals),
+# ---------------------------------------------------------------- outputs
+
+
+def _outputs(b: _Builder, refs) -> tuple[OutputDef, ...]:
+    states = {st.symbol: st for st in b.states}
+    if refs is None:
+        return tuple(OutputDef(st.name, st.symbol, st.span) for st in b.states)
+    targets = {eq.target for eq in b.equations}
+    constraints = {c.junction: c for c in b.constraints}
+    params = {p.name for p in b.g.parameters}
+    diags = Collector()
+    out = []
+    for ref in refs:
+        try:
+            out.append(OutputDef(ref.text, _output_expr(ref, b.g, states, targets, constraints,
+                                                        params), ref.span))
+        except ModelError as exc:
+            diags.items.extend(exc.diagnostics)
+    diags.raise_if_errors()
+    return tuple(out)
+
+
+def _output_expr(ref, g: Graph, states, targets, constraints, params):
+    if ref.index is not None and ref.index != 0:
+        fail(ref.span, f"'{ref.owner}' is a scalar: index [{ref.index}] is out of range")
+    if ref.field is None:
+        sym = var(ref.owner)
+        if sym in states or sym in targets or ref.owner in params:
+            return sym
+        fail(ref.span, f"unknown output '{ref.owner}'")
+    if ref.owner not in g.by_name:
+        fail(ref.span, f"unknown element '{ref.owner}' in outputs")
+    if ref.field in ("lambda", "residual"):
+        c = constraints.get(ref.owner)
+        if c is None:
+            fail(ref.span, f"'{ref.owner}' is not a constraint junction")
+        return c.multiplier if ref.field == "lambda" else c.residual
+    sym = var(f"{ref.owner}.{ref.field}")
+    if ref.field in ("e", "f", "p", "q") and (sym in states or sym in targets):
+        return sym
+    fail(ref.span, f"'{ref.owner}' has no variable '{ref.field}'")
+
+
+def build_equations(cg: CausalGraph) -> EquationSystem:
+    b = _Builder(cg)
+    g = cg.graph
+    diags = Collector()
+    for item in sorted(list(g.elements) + list(g.signals),
                        key=lambda d: (d.span.line, d.span.col)):
-        if not hasattr(item, "kind"):
-            b.signal(item)
-        elif item.is_junction:
-            b.junction(item)
-        elif item.spec.ports == 2:
-            b.two_port(item)
-        else:
-            b.one_port(item)
-    return EquationSystem(graph, causality, settings, tuple(b.assignments), tuple(b.states),
-                          tuple(b.stores), tuple(b.constraints), tuple(b.warnings))
+        try:
+            if not isinstance(item, Element):
+                b.signal(item)
+            elif item.is_junction:
+                b.junction(item)
+            elif item.spec.ports == 2:
+                b.two_port(item)
+            else:
+                b.one_port(item)
+        except ModelError as exc:
+            diags.items.extend(exc.diagnostics)
+    diags.raise_if_errors()
+    s = cg.settings
+    sets = {name: expr for name, expr in s.sets}
+    params = tuple(ParameterDef(p.name, sets.get(p.name, p.expr).value, p.span)
+                   for p in g.parameters)
+    run = Run(s.scene, s.t0, s.t_end, s.dt, s.solver, s.rtol, s.atol, s.step)
+    return EquationSystem(g.name, params, tuple(b.states), tuple(b.equations),
+                          tuple(b.constraints), tuple(b.stores), _outputs(b, s.outputs), run,
+                          tuple(g.warnings))
+
+
+__all__ = ["TIME", "Equation", "EquationSystem", "StateVar", "ConstraintDef", "Store",
+           "OutputDef", "ParameterDef", "Run", "build_equations", "der", "bond_effort",
+           "bond_flow"]

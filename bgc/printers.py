@@ -1,6 +1,6 @@
 """SymPy code printers for the generated C and Python: one expression to one line of code.
 
-Both printers accept exactly the expressions the code model allows (see bgc.codemodel) and
+Both printers accept exactly the expressions the program IR allows (see bgc.ir) and
 refuse anything else with `UnsupportedExpressionError` before printing a character, so that
 broken code is never emitted.  They share the arithmetic layout (`_ArithmeticPrinting`): terms,
 factors and powers come out in the same order with the same operations in both languages, so
@@ -27,10 +27,7 @@ import sympy as sp
 from sympy.printing.c import C99CodePrinter
 from sympy.printing.pycode import PythonCodePrinter
 
-from bgc.codemodel import C, P, T, X, as_expr
-
-FUNCTIONS = ("sin", "cos", "tan", "asin", "acos", "atan", "atan2", "sinh", "cosh", "tanh",
-             "exp", "log", "sqrt", "Abs", "sign", "Min", "Max", "Heaviside")
+from bgc.ir import C, FUNCTIONS, P, T, V, X, as_expr
 _CLASSES = tuple(getattr(sp, name) for name in FUNCTIONS if name != "sqrt")  # sqrt is a Pow
 _ARITY = {"atan2": (2, 2), "Min": (2, None), "Max": (2, None), "Heaviside": (1, 2)}
 _TEMP = re.compile(r"w[0-9]+\Z")
@@ -58,28 +55,30 @@ def float_literal(value: float) -> str:
 
 
 def check_expression(expr: sp.Basic, n_states: int, n_params: int, n_consts: int = 0) -> None:
-    """Raise UnsupportedExpressionError unless `expr` uses only what the code model allows."""
-    if isinstance(expr, sp.Indexed):
-        _check_indexed(expr, n_states, n_params, n_consts)
-    elif isinstance(expr, sp.Symbol):
-        if expr.name != T.name and not _TEMP.match(expr.name):
-            raise UnsupportedExpressionError(f"unexpected symbol {expr.name!r}")
-    elif isinstance(expr, (sp.Integer, sp.Rational, sp.Float)) or expr in (sp.pi, sp.E):
-        if isinstance(expr, sp.Float):
-            float_literal(float(expr))
-    elif isinstance(expr, (sp.Add, sp.Mul, sp.Pow)):
-        for arg in expr.args:
-            check_expression(arg, n_states, n_params, n_consts)
-    elif type(expr) in _CLASSES:
-        _check_arity(expr)
-        for arg in expr.args:
-            check_expression(arg, n_states, n_params, n_consts)
-    else:
-        raise UnsupportedExpressionError(f"cannot print {type(expr).__name__}: {expr}")
+    """Raise UnsupportedExpressionError unless `expr` uses only what the program IR allows
+    (an explicit stack: no recursion however deep the expression)."""
+    stack = [expr]
+    while stack:
+        e = stack.pop()
+        if isinstance(e, sp.Indexed):
+            _check_indexed(e, n_states, n_params, n_consts)
+        elif isinstance(e, sp.Symbol):
+            if e.name != T.name and not _TEMP.match(e.name):
+                raise UnsupportedExpressionError(f"unexpected symbol {e.name!r}")
+        elif isinstance(e, (sp.Integer, sp.Rational, sp.Float)) or e in (sp.pi, sp.E):
+            if isinstance(e, sp.Float):
+                float_literal(float(e))
+        elif isinstance(e, (sp.Add, sp.Mul, sp.Pow)):
+            stack.extend(e.args)
+        elif type(e) in _CLASSES:
+            _check_arity(e)
+            stack.extend(e.args)
+        else:
+            raise UnsupportedExpressionError(f"cannot print {type(e).__name__}: {e}")
 
 
 def _check_indexed(expr: sp.Indexed, n_states: int, n_params: int, n_consts: int) -> None:
-    sizes = {X.name: n_states, P.name: n_params, C.name: n_consts}  # by name, not assumptions
+    sizes = {X.name: n_states, P.name: n_params, C.name: n_consts, V.name: n_states}
     if expr.base.name not in sizes or len(expr.indices) != 1:
         raise UnsupportedExpressionError(f"unexpected indexed variable {expr}")
     index = expr.indices[0]
@@ -120,6 +119,7 @@ class _ArithmeticPrinting:
         self._n_states = n_states
         self._n_params = n_params
         self._n_consts = n_consts
+        self.names: dict = {}  # program variable -> its storage text (default: its name)
 
     def doprint(self, expr, assign_to=None):
         if assign_to is not None:
@@ -132,7 +132,7 @@ class _ArithmeticPrinting:
         if isinstance(expr, sp.Indexed):
             return self._print_index(expr.base, int(expr.indices[0]))
         if isinstance(expr, sp.Symbol):
-            return expr.name
+            return self.names.get(expr, expr.name)
         if isinstance(expr, sp.Add):
             return self._print_sum(expr)
         if isinstance(expr, sp.Mul):
@@ -275,8 +275,8 @@ class CPrinter(_ArithmeticPrinting, C99CodePrinter):
         self._param_fields = tuple(param_fields)
 
     def _print_index(self, base, index):
-        if base.name == X.name:
-            return f"x[{index}]"
+        if base.name in (X.name, V.name):
+            return f"{base.name}[{index}]"
         if base.name == C.name:
             return f"p->c[{index}]"
         return f"p->{self._param_fields[index]}"
@@ -296,7 +296,7 @@ _PY_FAST = {**{f: f"math.{f}" for f in FUNCTIONS}, "Abs": "abs", "sign": "_sign"
 _PY_IEEE = {**_PY_FAST, **{f: f"numpy.{f}" for f in ("sin", "cos", "tan", "sinh", "cosh",
                                                       "tanh", "exp", "log", "sqrt")},
             "asin": "numpy.arcsin", "acos": "numpy.arccos", "atan": "numpy.arctan",
-            "atan2": "numpy.arctan2"}
+            "atan2": "numpy.arctan2", "asinh": "numpy.arcsinh", "atanh": "numpy.arctanh"}
 
 
 class PythonPrinter(_ArithmeticPrinting, PythonCodePrinter):
@@ -312,7 +312,7 @@ class PythonPrinter(_ArithmeticPrinting, PythonCodePrinter):
     def _print_index(self, base, index):
         if base.name == C.name:
             return f"p[{self._n_params + index}]"
-        return f"{base.name}[{index}]"  # x or p, checked
+        return f"{base.name}[{index}]"  # x, p or v, checked
 
     def _print_extremum(self, func, args):
         return f"{func}({', '.join(args)})"  # min(a, b, c) == min(min(a, b), c) exactly

@@ -1,411 +1,389 @@
-"""Stage 6, reduce: explicit state derivatives, multipliers and outputs in SymPy.
+"""Stage 6, reduce: EquationSystem -> Reduced, a sorted program of assignments and blocks.
 
-1. The assignments are ordered by their dependencies (strongly connected components, in a
-   deterministic order); a component of more than one variable is an algebraic loop, solved
-   symbolically (linear: exactly; nonlinear: SymPy's solve, or a located error).
-2. Storage in derivative causality and constraint multipliers are the remaining unknowns Z: each
-   derivative store gives `output = d/dt(state_expr)`, each constraint its acceleration-level
-   equation with the corrector (eq. 2/3 of the paper).  Both are linear in Z; Z is solved
-   symbolically (the code model could instead carry the linear system for a numeric solve).
-3. A holonomic constraint's Phi comes from the balance written in the integrated coordinates
-   (integrability test, antiderivative, `init`/`phi` annotation).
-4. What the scene's outputs do not need is pruned.
+1. Constraints (the paper's sections 2-4): each constraint junction's balance is written in the
+   coordinates that integral signals integrate; the integrability test decides holonomic or
+   not, and gives Phi (`init`/`phi` annotation).  The multiplier gets its equation, the
+   acceleration-level constraint with the corrector: der(B) + 2 alpha B + beta^2 Phi = 0
+   (pid), der(B) + gamma B = 0 (pd), der(B) = 0 (none).  It is implicit: the multiplier
+   does not occur in it, it acts through the efforts it sets.
+2. Time derivatives der(v) that equations use (constraints, storage in derivative causality)
+   are derived on demand by differentiating v's own equation (forward, symbolically, one
+   equation each: linear in the model's size), the derivative of a state being its rate.
+3. Only what the outputs need is kept: the outputs' dependencies, the states they reach and
+   those states' rates, to a fixed point.
+4. The kept equations are sorted into strongly connected blocks in evaluation order (BLT).  A
+   block of one explicit equation is an assignment; any other block is torn, and its tears
+   z are the unknowns of residual equations r(z) = 0, the rest of the block being explicit
+   given z.  Each block is then solved
+   - symbolically when it is linear and small, or a single equation with a clean inverse;
+   - else numerically in the generated code: A z = b by LU when linear (A and b emitted as
+     expressions, derived forward through the block), Newton's method with the block's
+     symbolic Jacobian when not.
+   `algebra="symbolic"|"numeric"` forces either path.
+5. The initial conditions are checked against the constraints.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field
 
 import sympy as sp
-from sympy.solvers.solveset import NonlinearError
 
-from .diagnostics import Collector, ModelError, Span, fail, warning
-from .equations import ConstraintEq, EquationSystem
-from .resolve import TIME, var
-from .scene import parameter_values
+from . import blt
+from .algebra import is_zero, solve_for
+from .diagnostics import Collector, ModelError, Note, Span, fail, warning
+from .differentiate import directional, partial
+from .equations import (TIME, ConstraintDef, Equation, EquationSystem, OutputDef, ParameterDef,
+                        Run, StateVar, der)
+from .graph import var
 
 RELATIVE_TOLERANCE = 1e-9
+ALGEBRA = ("auto", "symbolic", "numeric")
+SYMBOLIC_MAX_UNKNOWNS = 2  # auto: linear blocks up to this size are solved symbolically ...
+SYMBOLIC_MAX_OPS = 400  # ... when their matrix and right side are no bigger than this
+SUBSTITUTE_MAX_BODY = 40  # a nonlinear block of one unknown: body small enough to substitute
+MAX_DERIVATIVE_ORDER = 3
+
+
+# ---------------------------------------------------------------- the result
 
 
 @dataclass(frozen=True)
-class Loop:
-    variables: tuple[str, ...]
-    elements: tuple[str, ...]
-    linear: bool
-
-
-@dataclass(frozen=True)
-class ConstraintResult:
-    junction: str
-    kind: str  # detected or declared: holonomic | nonholonomic
-    detected: bool  # kind found by the integrability test (not declared)
-    corrector: str
-    gains: tuple
-    multiplier: sp.Expr  # explicit, in states, parameters and t
-    balance: sp.Expr  # explicit: dPhi/dt (holonomic) or Phi (nonholonomic)
-    phi: sp.Expr | None  # holonomic Phi(q, t)
-    residual: sp.Expr  # what NAME.residual reports
-    span: Span
-
-
-@dataclass(frozen=True)
-class StateEq:
-    symbol: sp.Symbol
-    name: str
-    rhs: sp.Expr
-    init: sp.Expr
-
-
-@dataclass(frozen=True)
-class Output:
-    name: str
+class Assign:
+    target: sp.Symbol
     expr: sp.Expr
 
 
 @dataclass(frozen=True)
+class Block:
+    """Unknowns z determined by residuals(z) = 0; body: the block's other variables, explicit
+    given z, in order.  method "lu": A z = b with A = matrix (i, j, expr) and b = rhs, both over
+    variables computed before the block and the `prelude` assignments; "newton": the Jacobian
+    d residuals / d z is `jacobian`, its entries over z, the body and `tangents` (assignments
+    computed after the body at each iterate)."""
+
+    index: int  # 1-based, in evaluation order, as reports name it
+    unknowns: tuple[sp.Symbol, ...]
+    body: tuple[Assign, ...]
+    residuals: tuple[sp.Expr, ...]
+    method: str  # "lu" | "newton"
+    prelude: tuple[Assign, ...] = ()
+    matrix: tuple[tuple[int, int, sp.Expr], ...] = ()
+    rhs: tuple[sp.Expr, ...] = ()
+    tangents: tuple[Assign, ...] = ()
+    jacobian: tuple[tuple[int, int, sp.Expr], ...] = ()
+
+
+@dataclass(frozen=True)
+class BlockInfo:
+    """What `bgc check` says of a block: its unknowns, where it comes from, how it is solved."""
+
+    index: int
+    unknowns: tuple[str, ...]
+    origins: tuple[str, ...]
+    linear: bool
+    method: str  # symbolic | lu | newton
+    span: Span
+
+
+@dataclass(frozen=True)
+class ConstraintInfo:
+    junction: str
+    kind: str  # holonomic | nonholonomic
+    detected: bool  # kind found by the integrability test (not declared)
+    corrector: str
+    gains: tuple
+    phi: sp.Expr | None  # holonomic Phi(q, t)
+    balance: sp.Expr  # the balance in the states: dPhi/dt (holonomic) or Phi (nonholonomic)
+    multiplier: sp.Symbol
+    span: Span
+    name_span: Span
+
+
+@dataclass(frozen=True)
+class ConstraintRow:
+    """One scalar constraint residual in the kept states, checked at the initial time."""
+
+    junction: str
+    level: str  # "position" (holonomic Phi) or "velocity" (dPhi/dt, or nonholonomic Phi)
+    expr: sp.Expr
+    scale: sp.Expr  # the row holds when |expr| <= 1e-9 * scale
+
+
+@dataclass(frozen=True)
 class Reduced:
-    system: EquationSystem
-    states: tuple[StateEq, ...]  # pruned to what the outputs need
-    outputs: tuple[Output, ...]
-    constraints: tuple[ConstraintResult, ...]
-    eliminated: tuple[tuple[str, sp.Expr], ...]  # derivative-causality states, explicit
-    loops: tuple[Loop, ...]
+    name: str
+    parameters: tuple[ParameterDef, ...]
+    states: tuple[StateVar, ...]  # kept: integrated, in the system's order
     pruned: tuple[str, ...]  # states not integrated because no output needs them
-    warnings: tuple
+    steps: tuple[Assign | Block, ...]  # evaluation order
+    rates: tuple[sp.Symbol, ...]  # der(x) of each kept state, computed by the steps
+    outputs: tuple[OutputDef, ...]
+    constraints: tuple[ConstraintInfo, ...]
+    rows: tuple[ConstraintRow, ...]
+    blocks: tuple[BlockInfo, ...]
+    eliminated: tuple[tuple[str, sp.Expr | None], ...]  # derivative causality: state = expr
+    run: Run
+    algebra: str
+    warnings: tuple = ()
 
 
-# ---------------------------------------------------------------- ordering
+# ---------------------------------------------------------------- equations by target
 
-def _components(targets, deps):
-    """Tarjan's SCCs, iterative; dependencies come out before their dependents."""
-    index, low, on_stack, stack, out = {}, {}, set(), [], []
-    counter = 0
-    for root in targets:
-        if root in index:
-            continue
-        work = [(root, iter(deps[root]))]
-        index[root] = low[root] = counter
-        counter += 1
-        stack.append(root)
-        on_stack.add(root)
-        while work:
-            v, it = work[-1]
-            advanced = False
-            for w in it:
-                if w not in index:
-                    index[w] = low[w] = counter
-                    counter += 1
-                    stack.append(w)
-                    on_stack.add(w)
-                    work.append((w, iter(deps[w])))
-                    advanced = True
-                    break
-                if w in on_stack:
-                    low[v] = min(low[v], index[w])
-            if advanced:
+
+class _System:
+    """The equations indexed by target, growing as constraints and derivatives add to them."""
+
+    def __init__(self, es: EquationSystem):
+        self.es = es
+        self.eqs: dict[sp.Symbol, Equation] = {}
+        self.order: dict[sp.Symbol, int] = {}
+        self.states = {st.symbol: st for st in es.states}
+        self.params = {var(p.name) for p in es.parameters}
+        self.by_name: dict[str, sp.Symbol] = {}
+        diags = Collector()
+        for eq in es.equations:
+            if eq.target in self.eqs:
+                first = self.eqs[eq.target]
+                diags.error(eq.span, f"'{eq.target}' is computed twice (by '{first.origin}' and "
+                                     f"'{eq.origin}'): check the causality of the model")
                 continue
-            work.pop()
-            if work:
-                low[work[-1][0]] = min(low[work[-1][0]], low[v])
-            if low[v] == index[v]:
-                comp = []
-                while True:
-                    w = stack.pop()
-                    on_stack.discard(w)
-                    comp.append(w)
-                    if w == v:
-                        break
-                out.append(sorted(comp, key=targets.index))
-    return out
+            self.add(eq)
+        diags.raise_if_errors()
+        for st in es.states:
+            self.by_name[st.symbol.name] = st.symbol
+
+    def add(self, eq: Equation):
+        self.eqs[eq.target] = eq
+        self.order[eq.target] = len(self.order)
+        self.by_name[eq.target.name] = eq.target
+
+    def is_leaf(self, s) -> bool:
+        return s is TIME or s in self.params or s in self.states
+
+    def symbols(self, expr) -> list[sp.Symbol]:
+        """The free symbols of expr in a deterministic order."""
+        return sorted(expr.free_symbols, key=lambda s: s.name)
+
+    # -- time derivatives on demand
+
+    def derivative_of(self, d: sp.Symbol) -> sp.Symbol | None:
+        """v for a symbol named der(v) whose v is known, else None."""
+        name = d.name
+        if not (name.startswith("der(") and name.endswith(")")):
+            return None
+        return self.by_name.get(name[4:-1])
+
+    def differentiate(self, v: sp.Symbol) -> Equation:
+        """The equation of der(v), from v's own equation (which must exist)."""
+        eq = self.eqs[v]
+        if v.name.count("der(") >= MAX_DERIVATIVE_ORDER:
+            fail(eq.span, f"'{eq.origin}' needs a time derivative of order "
+                          f"{MAX_DERIVATIVE_ORDER + 1} ({der(v)}): the model's index is too high")
+        direction = {u: der(u) for u in eq.expr.free_symbols if u not in self.params}
+        direction[TIME] = sp.Integer(1)
+        new = Equation(der(v), directional(eq.expr, direction), eq.explicit, eq.origin, eq.span)
+        self.add(new)
+        return new
 
 
-def _solve_linear(eqs, unknowns, what: str, span, names):
-    try:
-        A, b = sp.linear_eq_to_matrix(eqs, unknowns)
-    except NonlinearError:
-        return None
-    if len(unknowns) == 1:
-        a = sp.cancel(A[0, 0])
-        if a == 0:
-            fail(span, f"{what} is singular: {names} cannot be determined")
-        return [b[0] / a]
-    if sp.simplify(A.det()) == 0:
-        fail(span, f"{what} is singular: {names} cannot be determined")
-    return list(A.LUsolve(b))
+# ---------------------------------------------------------------- leaf forms
 
 
-def _ordered(es: EquationSystem):
-    """Local solutions: each variable in terms of variables outside its own component."""
-    assign = {a.target: a for a in es.assignments}
-    targets = [a.target for a in es.assignments]
-    diags = Collector()
-    seen = {}
-    for a in es.assignments:
-        if a.target in seen:
-            diags.error(a.span, f"'{a.target}' is computed twice (by '{seen[a.target].origin}' and "
-                                f"'{a.origin}'): check the causality of the model")
-        seen[a.target] = a
-    diags.raise_if_errors()
-    deps = {v: sorted((s for s in assign[v].expr.free_symbols if s in assign),
-                      key=targets.index) for v in targets}
-    local, order, loops = {}, [], []
-    for comp in _components(targets, deps):
-        order.extend(comp)
-        if len(comp) == 1 and comp[0] not in deps[comp[0]]:
-            local[comp[0]] = assign[comp[0]].expr
+class _Cycle(Exception):
+    pass
+
+
+def _leaf_forms(targets, defs, expandable, memo):
+    """memo[s] := the expression of s with every expandable symbol replaced by its own
+    definition, recursively (explicit stack).  Raises _Cycle on an algebraic loop."""
+    for root in targets:
+        if root in memo or not expandable(root):
             continue
-        loops.append(_solve_loop(comp, assign, local))
-    return local, order, loops
+        stack = [(root, False)]
+        on_path = set()
+        while stack:
+            s, ready = stack.pop()
+            if s in memo:
+                continue
+            expr = defs[s]
+            inner = [u for u in expr.free_symbols if expandable(u)]
+            if not ready:
+                if s in on_path:
+                    raise _Cycle(s)
+                on_path.add(s)
+                stack.append((s, True))
+                for u in inner:
+                    if u not in memo:
+                        if u in on_path:
+                            raise _Cycle(u)
+                        stack.append((u, False))
+                continue
+            on_path.discard(s)
+            memo[s] = expr.xreplace({u: memo[u] for u in inner}) if inner else expr
 
 
-def _tear(comp, assign):
-    """Substitute loop variables into each other until only tear variables remain.
-
-    Returns (tears, equations over the tears, eliminated [(v, expr)] in elimination order)."""
-    defs = {v: assign[v].expr for v in comp}
-    eliminated = []
-    for v in comp:
-        expr = defs[v]
-        if v in expr.free_symbols:
-            continue  # v refers to itself by now: a tear variable
-        del defs[v]
-        for u in defs:
-            if v in defs[u].free_symbols:
-                defs[u] = defs[u].xreplace({v: expr})
-        eliminated = [(w, e.xreplace({v: expr}) if v in e.free_symbols else e)
-                      for w, e in eliminated]
-        eliminated.append((v, expr))
-    tears = [v for v in comp if v in defs]
-    return tears, [v - defs[v] for v in tears], eliminated
-
-
-def _solve_loop(comp, assign, local) -> Loop:
-    elements = tuple(dict.fromkeys(assign[v].origin for v in comp))
-    names = ", ".join(f"'{e}'" for e in elements)
-    span = assign[comp[0]].span
-    tears, eqs, eliminated = _tear(comp, assign)
-    sol = _solve_linear(eqs, tears, f"the algebraic loop through {names}", span, names)
-    linear = sol is not None
-    if sol is None:
-        sol = _solve_nonlinear(eqs, tears, names, span)
-    solved = {v: sp.together(s) for v, s in zip(tears, sol)}
-    for v, expr in eliminated:
-        solved[v] = expr.xreplace(solved)
-    for v in comp:
-        local[v] = solved[v]
-    return Loop(tuple(str(v) for v in comp), elements, linear)
-
-
-def _solve_nonlinear(eqs, tears, names, span):
-    # SymPy is tried on small polynomial systems only; transcendental loops would grind for
-    # minutes to end in no closed form anyway.
-    polynomial = all(e.is_polynomial(*tears) for e in eqs)
-    try:
-        sols = sp.solve(eqs, tears, dict=True) if polynomial and len(tears) <= 3 else []
-    except NotImplementedError:
-        sols = []
-    if len(sols) != 1 or any(v not in sols[0] for v in tears):
-        how = f"{len(sols)} solutions" if len(sols) > 1 else "no closed-form solution"
-        fail(span, f"nonlinear algebraic loop through {names}: SymPy finds {how}; break the "
-                   "loop (e.g. add a small storage element) or write a law the other way round")
-    return [sols[0][v] for v in tears]
-
-
-def _substituted(local, order, frozen=frozenset()):
-    """Every variable in terms of leaves (states, parameters, t, unknowns, frozen variables)."""
-    full = {}
-    for v in order:
-        if v in frozen:
-            full[v] = v
-            continue
-        e = local[v]
-        sub = {s: full[s] for s in e.free_symbols if s in full}
-        full[v] = e.xreplace(sub) if sub else e
-    return full
-
-
-def _subst(expr, full):
-    sub = {s: full[s] for s in expr.free_symbols if s in full}
-    return expr.xreplace(sub) if sub else expr
-
-
-def _total_derivative(expr, rates: dict):
-    """d/dt of expr(x, t) given dx/dt for each state."""
-    d = sp.diff(expr, TIME)
-    for x, dx in rates.items():
-        if expr.has(x):
-            d += sp.diff(expr, x) * dx
-    return _clean(d)
-
-
-def _clean(expr):
-    """Drop DiracDelta terms that differentiating sign/abs leaves (zero almost everywhere)."""
-    if expr.has(sp.DiracDelta):
-        expr = expr.replace(lambda e: isinstance(e, sp.DiracDelta), lambda e: sp.Integer(0))
-    return expr
+def _leaf(expr, defs, expandable, memo=None):
+    memo = {} if memo is None else memo
+    inner = [u for u in expr.free_symbols if expandable(u)]
+    _leaf_forms(inner, defs, expandable, memo)
+    return expr.xreplace({u: memo[u] for u in inner}) if inner else expr
 
 
 # ---------------------------------------------------------------- constraints
 
-def _coordinates_form(c: ConstraintEq, es, local, order, states):
+
+def _explicit_defs(sys: _System) -> dict:
+    return {s: eq.expr for s, eq in sys.eqs.items() if eq.explicit}
+
+
+def _coordinates_form(c: ConstraintDef, sys: _System, defs):
     """The balance as sum_i a_i(q, t) dq_i/dt + a_0(q, t), or None with a reason."""
-    integrals = [s for s in es.states if s.origin in {g.name for g in es.graph.signals}]
+    integrals = [st for st in sys.es.states if st.kind == "integral signal"]
     if not integrals:
         return None, "no integral signal integrates its flows into coordinates"
-    targets = set(local)
-    frozen = frozenset(_alias_chain(local, st.derivative.free_symbols & targets)
-                       for st in integrals)
-    frozen = frozenset().union(*frozen)
-    ff = _substituted(local, order, frozen)
-    balance = _subst(c.balance, ff)
+    # the flows that the integral signals integrate, at the end of their alias chains
+    integrands = {}
+    for st in integrals:
+        rate = sys.eqs[der(st.symbol)].expr
+        for u in rate.free_symbols:
+            integrands[_alias_end(u, defs)] = True
+    frozen = set(integrands)
+
+    def expandable(s):
+        return s in defs and s not in frozen and not sys.is_leaf(s)
+
+    try:
+        balance = _leaf(defs[c.balance], defs, expandable)
+        rates_of = {st.symbol: _leaf(sys.eqs[der(st.symbol)].expr, defs, expandable)
+                    for st in integrals}
+    except _Cycle:
+        return None, "its flows depend on an algebraic loop"
     coords = [st.symbol for st in integrals]
-    rates = {st.symbol: var(f"d{st.name}/dt") for st in integrals}
-    others = {st.symbol for st in states} - set(coords)
-    unknowns = sorted((s for s in balance.free_symbols if s in frozen or s in others), key=str)
-    if unknowns:
-        eqs = [_subst(st.derivative, ff) - rates[st.symbol] for st in integrals]
-        eqs = [e for e in eqs if e.free_symbols & set(unknowns)]
-        sols = sp.solve(eqs, unknowns, dict=True) if eqs else []
-        if len(sols) != 1 or any(u not in sols[0] for u in unknowns):
-            return None, "its flows are not all integrated into coordinates by integral signals"
-        balance = balance.xreplace(sols[0])
-    leftover = balance.free_symbols & (targets | others)
-    if leftover:
+    rate_sym = {q: var(f"d{q.name}/dt") for q in coords}
+    others = set(sys.states) - set(coords)
+    unknowns = [s for s in balance.free_symbols if s in frozen or s in others]
+    solved = {}
+    progress = True
+    while progress and any(u not in solved for u in unknowns):
+        progress = False
+        for q in coords:
+            expr = rates_of[q].xreplace(solved)
+            open_ = [u for u in expr.free_symbols if (u in frozen or u in others)
+                     and u not in solved]
+            if len(open_) == 1:
+                sol = solve_for(expr - rate_sym[q], open_[0])
+                if sol is not None:
+                    solved[open_[0]] = sol
+                    progress = True
+    if any(u not in solved for u in unknowns):
         return None, "its flows are not all integrated into coordinates by integral signals"
-    coeffs = {q: sp.diff(balance, rates[q]) for q in coords}
-    a0 = sp.expand(balance.xreplace({r: 0 for r in rates.values()}))
-    if any(co.free_symbols & set(rates.values()) for co in coeffs.values()):
+    balance = balance.xreplace(solved)
+    if balance.free_symbols & (set(defs) | others | {m for m in _multipliers(sys)}):
+        return None, "its flows are not all integrated into coordinates by integral signals"
+    coeffs = {q: partial(balance, rate_sym[q]) for q in coords if balance.has(rate_sym[q])}
+    if any(co.free_symbols & set(rate_sym.values()) for co in coeffs.values()):
         return None, "it is not linear in the coordinate rates"
-    return (coeffs, a0), None
+    a0 = sp.expand(balance.xreplace({r: 0 for r in rate_sym.values()}))
+    return (coeffs, a0, coords), None
 
 
-def _alias_chain(local, symbols):
-    """For each symbol, what it is a plain alias of at the end of its chain (vx.f -> f[vx->mx])."""
-    out = set()
-    for s in symbols:
-        seen = {s}
-        while isinstance(local.get(s), sp.Symbol) and local[s] in local and local[s] not in seen:
-            s = local[s]
-            seen.add(s)
-        out.add(s)
-    return frozenset(out)
+def _multipliers(sys):
+    return [c.multiplier for c in sys.es.constraints]
 
 
-def _integrable(coeffs, a0) -> bool:
-    """Closed 1-form test over (q, t): d a_i / d z_j == d a_j / d z_i for every pair."""
-    comps = list(coeffs.items()) + [(TIME, a0)]
-    zs = [q for q, _ in comps]
-    for i, (qi, ai) in enumerate(comps):
-        for qj, aj in comps[i + 1:]:
-            if sp.simplify(sp.diff(ai, qj) - sp.diff(aj, qi)) != 0:
+def _alias_end(s, defs):
+    """What s is a plain alias of at the end of its chain (vx.f -> f[vx->mx])."""
+    seen = {s}
+    while isinstance(defs.get(s), sp.Symbol) and defs[s] in defs and defs[s] not in seen:
+        s = defs[s]
+        seen.add(s)
+    return s
+
+
+def _integrable(coeffs, a0, coords) -> bool:
+    """Closed 1-form test over (q, t): d a_i / d z_j == d a_j / d z_i for every pair of the
+    variables that occur (a coordinate that occurs in no coefficient has a_j = 0)."""
+    occurring = set(coeffs)
+    for a in list(coeffs.values()) + [a0]:
+        occurring |= a.free_symbols & set(coords)
+    zs = [q for q in coords if q in occurring] + [TIME]
+    comp = dict(coeffs)
+    comp[TIME] = a0
+    for i, zi in enumerate(zs):
+        for zj in zs[i + 1:]:
+            d = partial(comp.get(zi, sp.Integer(0)), zj) - partial(comp.get(zj, sp.Integer(0)), zi)
+            if d != 0 and not is_zero(d):
                 return False
-    return bool(zs)
+    return True
 
 
 def _potential(coeffs, a0, span, name):
     comps = list(coeffs.items()) + [(TIME, a0)]
     P = sp.Integer(0)
     for z, a in comps:
-        rest = sp.simplify(a - sp.diff(P, z))
-        if rest == 0:
+        rest = a - partial(P, z)
+        if rest == 0 or is_zero(rest):
             continue
-        term = sp.integrate(rest, z)
+        term = sp.integrate(sp.expand(rest), z)
         if term.has(sp.Integral):
             fail(span, f"cannot integrate the balance of '{name}' symbolically: give "
                        "'phi = ...' on the junction")
         P += term
     zero = {z: 0 for z, _ in comps}
-    return sp.simplify(P - P.xreplace(zero))
+    P = sp.expand(P - P.xreplace(zero))
+    return P
 
 
-def _phi(c: ConstraintEq, form, es, init_values):
-    coeffs, a0 = form
+def _phi(c: ConstraintDef, form, sys: _System):
+    coeffs, a0, coords = form
     if c.annotation is not None and c.annotation[0] == "phi":
         phi, span = c.annotation[1], c.annotation[2]
-        for z, a in list(coeffs.items()) + [(TIME, a0)]:
-            if sp.simplify(sp.diff(phi, z) - a) != 0:
+        zs = list(dict.fromkeys(list(coeffs) + sorted(phi.free_symbols & set(coords),
+                                                      key=lambda s: s.name))) + [TIME]
+        comp = dict(coeffs)
+        comp[TIME] = a0
+        for z in zs:
+            a = comp.get(z, sp.Integer(0))
+            if not is_zero(partial(phi, z) - a):
                 fail(span, f"phi of '{c.junction}' does not match its flow balance: "
-                           f"d(phi)/d{z} = {sp.diff(phi, z)}, the balance has {a}")
+                           f"d(phi)/d{z} = {partial(phi, z)}, the balance has {a}")
         return phi, None
     P = _potential(coeffs, a0, c.span, c.junction)
     if c.annotation is not None:
         return P + c.annotation[1], None
-    t0 = sp.Float(es.settings.t0)
-    const = -P.xreplace(init_values).xreplace({TIME: t0})
+    t0 = sp.Float(sys.es.run.t0)
+    init = {st.symbol: st.init for st in sys.es.states}
+    const = -P.xreplace(init).xreplace({TIME: t0})
     msg = (f"constraint '{c.junction}' has no 'init = ...' or 'phi = ...': the geometric "
            f"constant is taken from the initial state (Phi = {P + const})")
     return P + const, msg
 
 
-# ---------------------------------------------------------------- main
-
-def reduce(es: EquationSystem, project_initial: bool = False) -> Reduced:
-    diags = Collector()
-    local, order, loops = _ordered(es)
-    full = _substituted(local, order)
-    states = list(es.states)
-    rates = {st.symbol: _clean(_subst(st.derivative, full)) for st in states}
-    unknowns = [s.output for s in es.stores] + [c.multiplier for c in es.constraints]
-    eqs = [_store_equation(s, full, rates, unknowns) for s in es.stores]
-    init_values = {st.symbol: st.init for st in states}
-    results = []
-    for c in es.constraints:
+def _constraints(sys: _System, diags: Collector) -> list[ConstraintInfo]:
+    defs = _explicit_defs(sys)
+    multipliers = set(_multipliers(sys))
+    infos = []
+    for c in sys.es.constraints:
         try:
-            eq, info = _constraint_equation(c, es, local, order, full, rates, unknowns,
-                                            init_values, diags)
+            infos.append(_constraint(c, sys, defs, multipliers, diags))
         except ModelError as exc:
             diags.items.extend(exc.diagnostics)
-            continue
-        eqs.append(eq)
-        results.append(info)
-    diags.raise_if_errors()
-    solution = _solve_unknowns(eqs, unknowns, es)
-    rates = {x: _clean(r.xreplace(solution)) for x, r in rates.items()}
-    constraints = tuple(_finish_constraint(c, info, solution) for c, info in zip(es.constraints,
-                                                                                    results))
-    full = {v: e.xreplace(solution) for v, e in full.items()}
-    eliminated = tuple((str(s.state_symbol), full[s.state_symbol]) for s in es.stores)
-    outputs = _outputs(es, full, constraints)
-    kept, pruned = _prune(states, rates, outputs)
-    state_eqs = tuple(StateEq(st.symbol, st.name, rates[st.symbol], st.init) for st in kept)
-    reduced = Reduced(es, state_eqs, outputs, constraints, eliminated, tuple(loops),
-                      tuple(st.name for st in pruned), es.warnings + tuple(diags.warnings))
-    if not project_initial:
-        check_initial(reduced)
-    return replace(reduced, warnings=reduced.warnings + _ignored_inits(es, full))
+    return infos
 
 
-def _ignored_inits(es, full) -> tuple:
-    """Warn where an init clause on a derivative-causality element disagrees with the model."""
-    stores = [s for s in es.stores if s.given_init is not None]
-    if not stores:
-        return ()
-    values = _initial_values(es)
-    out = []
-    for s in stores:
-        implied = float(full[s.state_symbol].xreplace(values))
-        given = float(s.given_init.xreplace(values))
-        if abs(implied - given) > RELATIVE_TOLERANCE * max(abs(implied), abs(given), 1e-300):
-            el = es.graph.element(s.element)
-            out.append(warning(el.init[1].span, f"'{s.element}' is in derivative causality: its "
-                                                f"state is {implied:.6g} at the start, not the "
-                                                f"{given:.6g} given here, which is ignored"))
-    return tuple(out)
+def _constraint(c, sys, defs, multipliers, diags) -> ConstraintInfo:
+    def expandable(s):
+        return s in defs and not sys.is_leaf(s)
 
-
-def _store_equation(s, full, rates, unknowns):
-    dep = _subst(s.state_expr, full)
-    if dep.free_symbols & set(unknowns):
-        fail(s.span, f"'{s.element}' is in derivative causality with an input that depends on "
-                     "a multiplier or another derivative-causality element; not supported")
-    return s.output - s.sign * _total_derivative(dep, rates)
-
-
-def _constraint_equation(c, es, local, order, full, rates, unknowns, init_values, diags):
-    balance = _subst(c.balance, full)
-    if balance.free_symbols & set(unknowns):
+    try:
+        in_states = _leaf(defs[c.balance], defs, expandable)
+    except _Cycle:
+        fail(c.name_span, f"the balance of constraint junction '{c.junction}' depends on an "
+                          "algebraic loop; not supported")
+    if in_states.free_symbols & multipliers:
         fail(c.span, f"the flow balance of constraint junction '{c.junction}' depends on a "
                      "multiplier directly (a resistive path?): declare it as a plain junction")
-    form, reason = _coordinates_form(c, es, local, order, es.states)
+    form, reason = _coordinates_form(c, sys, defs)
     integrable = form is not None and _integrable(*form)
     kind, detected = c.kind, c.kind is None
     if kind is None:
@@ -413,119 +391,352 @@ def _constraint_equation(c, es, local, order, full, rates, unknowns, init_values
     if kind == "holonomic" and not integrable:
         why = reason or "its coefficients have no symmetric Jacobian (not the derivative of a " \
                         "function of the coordinates)"
-        fail(c.element.name_span, f"constraint '{c.junction}' is declared holonomic but is not "
-                                  f"integrable: {why}")
+        fail(c.name_span, f"constraint '{c.junction}' is declared holonomic but is not "
+                          f"integrable: {why}")
     phi = None
     if kind == "holonomic":
-        phi, msg = _phi(c, form, es, init_values)
-        if msg and (c.corrector == "pid" or _residual_asked(es, c.junction)):
-            diags.warning(c.element.name_span, msg)
-    dB = _total_derivative(balance, rates)
-    gains = c.gains
+        phi, msg = _phi(c, form, sys)
+        if msg and (c.corrector == "pid" or _residual_asked(sys.es, c)):
+            diags.warning(c.name_span, msg)
+    residual = phi if kind == "holonomic" else c.balance
+    sys.add(Equation(c.residual, residual, True, c.junction, c.span))
+    B, dB, gains = c.balance, der(c.balance), c.gains
     if c.corrector == "pid":
-        eq = dB + 2 * gains[0] * balance + gains[1] ** 2 * phi
+        law = dB + 2 * gains[0] * B + gains[1] ** 2 * c.residual
     elif c.corrector == "pd":
-        eq = dB + gains[0] * balance
+        law = dB + gains[0] * B
     else:
-        eq = dB
-    return eq, (kind, detected, balance, phi)
+        law = dB
+    sys.add(Equation(c.multiplier, law, False, c.junction, c.span))
+    return ConstraintInfo(c.junction, kind, detected, c.corrector, c.gains, phi, in_states,
+                          c.multiplier, c.span, c.name_span)
 
 
-def _residual_asked(es, name):
-    outs = es.settings.outputs or ()
-    return any(o.owner == name and o.field == "residual" for o in outs)
+def _residual_asked(es, c) -> bool:
+    return any(o.expr == c.residual for o in es.outputs)
 
 
-def _solve_unknowns(eqs, unknowns, es):
-    if not unknowns:
-        return {}
-    names = ", ".join(str(u) for u in unknowns)
-    span = (es.stores[0].span if es.stores else es.constraints[0].span)
-    sol = _solve_linear(eqs, unknowns, "the system for the multipliers and derivative-"
-                        "causality variables", span, names)
-    if sol is None:
-        fail(span, f"the equations for {names} are not linear in them; not supported")
-    return {u: _tidy(s) for u, s in zip(unknowns, sol)}
+# ---------------------------------------------------------------- what the outputs need
+
+
+def _needed(sys: _System) -> tuple[list[sp.Symbol], list[StateVar]]:
+    """The targets the outputs need (deriving der() equations on demand), and the states."""
+    needed: set = set()
+    kept: set = set()
+    todo: list = []
+    for o in sys.es.outputs:
+        todo.extend(reversed(sys.symbols(o.expr)))
+    while todo:
+        s = todo.pop()
+        if s in needed or s is TIME or s in sys.params:
+            continue
+        if s in sys.states:
+            if s not in kept:
+                kept.add(s)
+                todo.append(der(s))
+            continue
+        eq = sys.eqs.get(s)
+        if eq is None:
+            v = sys.derivative_of(s)
+            if v is None or v not in sys.eqs:
+                raise AssertionError(f"bgc bug: '{s}' has no equation")  # pragma: no cover
+            eq = sys.differentiate(v)
+        needed.add(s)
+        todo.extend(reversed(sys.symbols(eq.expr)))
+    targets = sorted(needed, key=lambda s: sys.order[s])
+    states = [st for st in sys.es.states if st.symbol in kept]
+    return targets, states
+
+
+# ---------------------------------------------------------------- blocks
+
+
+class _Blocks:
+    def __init__(self, sys: _System, algebra: str):
+        self.sys = sys
+        self.algebra = algebra
+        self.steps: list = []
+        self.infos: list[BlockInfo] = []
+        self.fresh = 0
+
+    def symbol(self, hint: str) -> sp.Symbol:
+        self.fresh += 1
+        return sp.Symbol(f"{hint}#{self.fresh}", real=True)
+
+    def run(self, targets):
+        index = {s: i for i, s in enumerate(targets)}
+        eqs = [self.sys.eqs[s] for s in targets]
+        succ = [sorted(index[u] for u in eq.expr.free_symbols if u in index) for eq in eqs]
+        for comp in blt.components(len(targets), succ):
+            if len(comp) == 1 and eqs[comp[0]].explicit and comp[0] not in succ[comp[0]]:
+                eq = eqs[comp[0]]
+                self.steps.append(Assign(eq.target, eq.expr))
+            else:
+                self.block([eqs[i] for i in comp], {i: succ[i] for i in comp}, comp)
+
+    # -- one block
+
+    def block(self, eqs, succ, comp):
+        pos = {v: k for k, v in enumerate(comp)}
+        fixed = [v for v in comp if not eqs[pos[v]].explicit]
+        tears, body_order = blt.tear(comp, succ, fixed)
+        tear_eqs = [eqs[pos[v]] for v in tears]
+        z = tuple(eq.target for eq in tear_eqs)
+        body = tuple(Assign(eqs[pos[v]].target, eqs[pos[v]].expr) for v in body_order)
+        residuals = tuple(eq.expr if not eq.explicit else eq.target - eq.expr
+                          for eq in tear_eqs)
+        origins = tuple(dict.fromkeys(eq.origin for eq in eqs))
+        span = tear_eqs[0].span
+        index = len(self.infos) + 1
+        self._check_structure(z, body, residuals, origins, span)
+        partials = _partials(z, body, residuals)
+        linear = partials is not None
+        method = self._choose(z, linear)
+        if linear:
+            prelude, matrix, rhs = self._linear_system(z, body, residuals, partials)
+            if method == "symbolic":
+                method = self._symbolic_linear(z, body, prelude, matrix, rhs, origins, span)
+            if method == "lu":
+                self.steps.append(Block(index, z, body, residuals, "lu", prelude, matrix, rhs))
+        else:
+            if method == "symbolic":
+                method = self._symbolic_nonlinear(z, body, residuals, origins, span)
+            if method == "newton":
+                tangents, jacobian = self._jacobian(z, body, residuals)
+                self.steps.append(Block(index, z, body, residuals, "newton",
+                                        tangents=tangents, jacobian=jacobian))
+        self.infos.append(BlockInfo(index, tuple(s.name for s in z), origins, linear, method,
+                                    span))
+
+    def _choose(self, z, linear) -> str:
+        if self.algebra == "numeric":
+            return "lu" if linear else "newton"
+        if self.algebra == "symbolic":
+            return "symbolic"
+        if linear:
+            return "symbolic" if len(z) <= SYMBOLIC_MAX_UNKNOWNS else "lu"
+        return "symbolic" if len(z) == 1 else "newton"
+
+    def _check_structure(self, z, body, residuals, origins, span):
+        """Each residual must be matchable to its own unknown through the body."""
+        bit = {s: 1 << k for k, s in enumerate(z)}
+        deps = dict(bit)
+        for a in body:
+            m = 0
+            for u in a.expr.free_symbols:
+                m |= deps.get(u, 0)
+            deps[a.target] = m
+        cols = []
+        for r in residuals:
+            m = 0
+            for u in r.free_symbols:
+                m |= deps.get(u, 0)
+            cols.append([k for k in range(len(z)) if m >> k & 1])
+        if blt.perfect_matching(len(z), cols) is None:
+            names = ", ".join(f"'{o}'" for o in origins)
+            fail(span, f"the equations through {names} do not determine "
+                       f"{', '.join(s.name for s in z)} (structurally singular)")
+
+    # -- linear blocks
+
+    def _linear_system(self, z, body, residuals, partials):
+        """A z = b: A by forward differentiation through the body (tangent variables for the
+        intermediate coefficients, so that the work stays linear in the body), b = -r(0)."""
+        prelude: list[Assign] = []
+        tangent: dict = {}  # (symbol, k) -> coefficient d symbol / d z_k
+        for k, s in enumerate(z):
+            tangent[(s, k)] = sp.Integer(1)
+        zdep = {s: [k] for k, s in enumerate(z)}
+        for a, parts in zip(body, partials[0]):
+            ks = sorted({k for u in parts for k in zdep[u]})
+            zdep[a.target] = ks
+            for k in ks:
+                coeff = sp.Add(*[d * tangent[(u, k)] for u, d in parts.items()
+                                 if (u, k) in tangent])
+                tangent[(a.target, k)] = self._named(coeff, prelude, "dz")
+        matrix = []
+        for i, parts in enumerate(partials[1]):
+            ks = sorted({k for u in parts for k in zdep[u]})
+            for k in ks:
+                entry = sp.Add(*[d * tangent[(u, k)] for u, d in parts.items()
+                                 if (u, k) in tangent])
+                if entry != 0:
+                    matrix.append((i, k, entry))
+        at_zero = {s: sp.Integer(0) for s in z}
+        for a in body:
+            value = a.expr.xreplace(at_zero)
+            at_zero[a.target] = self._named(value, prelude, "z0")
+        rhs = tuple(-r.xreplace(at_zero) for r in residuals)
+        return tuple(prelude), tuple(matrix), rhs
+
+    def _named(self, expr, prelude, hint):
+        """expr itself when it is a number or one symbol, else a new symbol assigned to it."""
+        if expr.is_Number or expr.is_Symbol or (expr.is_Mul and len(expr.args) == 2
+                                                and expr.args[0] == -1 and expr.args[1].is_Symbol):
+            return expr
+        s = self.symbol(hint)
+        prelude.append(Assign(s, expr))
+        return s
+
+    def _symbolic_linear(self, z, body, prelude, matrix, rhs, origins, span) -> str:
+        defs = {a.target: a.expr for a in prelude}
+        memo: dict = {}
+
+        def expandable(s):
+            return s in defs
+
+        m = len(z)
+        A = sp.zeros(m, m)
+        for i, k, e in matrix:
+            A[i, k] = _leaf(e, defs, expandable, memo)
+        b = sp.Matrix([_leaf(e, defs, expandable, memo) for e in rhs])
+        if self.algebra == "auto" and sum(sp.count_ops(e) for e in list(A) + list(b)) \
+                > SYMBOLIC_MAX_OPS:
+            return "lu"
+        det = A[0, 0] if m == 1 else A.det(method="berkowitz")
+        if is_zero(det):
+            names = ", ".join(f"'{o}'" for o in origins)
+            fail(span, f"the equations through {names} are singular: "
+                       f"{', '.join(s.name for s in z)} cannot be determined")
+        sol = [b[0] / A[0, 0]] if m == 1 else list(A.LUsolve(b))
+        for s, value in zip(z, sol):
+            self.steps.append(Assign(s, _tidy(value)))
+        self.steps.extend(body)
+        return "symbolic"
+
+    # -- nonlinear blocks
+
+    def _symbolic_nonlinear(self, z, body, residuals, origins, span) -> str:
+        if len(z) == 1 and len(body) <= SUBSTITUTE_MAX_BODY:
+            defs = {a.target: a.expr for a in body}
+            r = _leaf(residuals[0], defs, lambda s: s in defs)
+            sol = solve_for(r, z[0])
+            if sol is not None:
+                self.steps.append(Assign(z[0], sol))
+                self.steps.extend(body)
+                return "symbolic"
+        if self.algebra == "symbolic":
+            names = ", ".join(f"'{o}'" for o in origins)
+            fail(span, f"nonlinear algebraic equations through {names} have no clean "
+                       "closed-form solution; let bgc solve them numerically (--algebra auto "
+                       "or numeric)")
+        return "newton"
+
+    def _jacobian(self, z, body, residuals):
+        """d residuals / d z by forward differentiation through the body: tangent assignments
+        (over z, the body and what precedes the block) and the nonzero entries."""
+        tangents: list[Assign] = []
+        tangent: dict = {(s, k): sp.Integer(1) for k, s in enumerate(z)}
+        zdep = {s: [k] for k, s in enumerate(z)}
+        for a in body:
+            parts = {u: partial(a.expr, u) for u in a.expr.free_symbols if u in zdep}
+            ks = sorted({k for u in parts for k in zdep[u]})
+            zdep[a.target] = ks
+            for k in ks:
+                coeff = sp.Add(*[d * tangent[(u, k)] for u, d in parts.items()
+                                 if (u, k) in tangent])
+                tangent[(a.target, k)] = self._named(coeff, tangents, "dz")
+        jacobian = []
+        for i, r in enumerate(residuals):
+            parts = {u: partial(r, u) for u in r.free_symbols if u in zdep}
+            for k in sorted({k for u in parts for k in zdep[u]}):
+                entry = sp.Add(*[d * tangent[(u, k)] for u, d in parts.items()
+                                 if (u, k) in tangent])
+                if entry != 0:
+                    jacobian.append((i, k, entry))
+        return tuple(tangents), tuple(jacobian)
+
+
+def _partials(z, body, residuals):
+    """For each body assignment and each residual, {u: d expr / d u} over its z-dependent
+    inputs u; None when some partial itself depends on z (the block is nonlinear)."""
+    zdep = set(z)
+    body_parts = []
+    for a in body:
+        parts = _linear_parts(a.expr, zdep)
+        if parts is None:
+            return None
+        body_parts.append(parts)
+        if parts:
+            zdep.add(a.target)
+    res_parts = []
+    for r in residuals:
+        parts = _linear_parts(r, zdep)
+        if parts is None:
+            return None
+        res_parts.append(parts)
+    return body_parts, res_parts
+
+
+def _linear_parts(expr, zdep):
+    parts = {}
+    for u in sorted((u for u in expr.free_symbols if u in zdep), key=lambda s: s.name):
+        d = partial(expr, u)
+        if d.free_symbols & zdep:
+            return None
+        if d != 0:
+            parts[u] = d
+    return parts
 
 
 def _tidy(expr):
     return sp.factor_terms(sp.cancel(expr)) if sp.count_ops(expr) < 300 else expr
 
 
-def _finish_constraint(c, info, solution):
-    kind, detected, balance, phi = info
-    lam = solution[c.multiplier]
-    residual = phi if kind == "holonomic" else balance
-    return ConstraintResult(c.junction, kind, detected, c.corrector, c.gains, lam, balance, phi,
-                            residual, c.span)
+# ---------------------------------------------------------------- main
 
 
-def _outputs(es, full, constraints) -> tuple[Output, ...]:
-    refs = es.settings.outputs
-    if refs is None:
-        return tuple(Output(st.name, st.symbol) for st in es.states)
+def reduce(es: EquationSystem, project_initial: bool = False, algebra: str = "auto") -> Reduced:
+    if algebra not in ALGEBRA:
+        raise ValueError(f"algebra must be one of {', '.join(ALGEBRA)}, not {algebra!r}")
+    sys = _System(es)
     diags = Collector()
-    out = []
-    for ref in refs:
-        try:
-            out.append(Output(ref.text, _output_expr(ref, es, full, constraints)))
-        except ModelError as exc:
-            diags.items.extend(exc.diagnostics)
+    infos = _constraints(sys, diags)
     diags.raise_if_errors()
+    targets, kept = _needed(sys)
+    blocks = _Blocks(sys, algebra)
+    blocks.run(targets)
+    rows = _rows(sys, infos, kept)
+    pruned = tuple(st.name for st in es.states if st not in kept)
+    eliminated = _eliminated(sys)
+    reduced = Reduced(es.name, es.parameters, tuple(kept), pruned, tuple(blocks.steps),
+                      tuple(der(st.symbol) for st in kept), es.outputs, tuple(infos),
+                      tuple(rows), tuple(blocks.infos), eliminated, es.run, algebra,
+                      tuple(es.warnings) + tuple(diags.warnings))
+    if not project_initial:
+        check_initial(reduced)
+    return _with_init_warnings(reduced, sys, eliminated)
+
+
+def _eliminated(sys: _System):
+    defs = _explicit_defs(sys)
+
+    def expandable(s):
+        return s in defs and not sys.is_leaf(s)
+
+    out = []
+    for st in sys.es.stores:
+        try:
+            out.append((st.state.name, _leaf(st.state, defs, expandable)
+                        if st.state in defs else None))
+        except _Cycle:
+            out.append((st.state.name, None))
     return tuple(out)
 
 
-def _output_expr(ref, es, full, constraints):
-    if ref.index is not None and ref.index != 0:
-        fail(ref.span, f"'{ref.owner}' is a scalar: index [{ref.index}] is out of range")
-    states = {st.symbol for st in es.states}
-    g = es.graph
-    if ref.field is None:
-        sym = var(ref.owner)
-        if sym in states:
-            return sym
-        if sym in full:
-            return full[sym]
-        if any(p.name == ref.owner for p in g.parameters):
-            return sym
-        fail(ref.span, f"unknown output '{ref.owner}'")
-    if not any(el.name == ref.owner for el in g.elements):
-        fail(ref.span, f"unknown element '{ref.owner}' in outputs")
-    if ref.field in ("lambda", "residual"):
-        c = next((c for c in constraints if c.junction == ref.owner), None)
-        if c is None:
-            fail(ref.span, f"'{ref.owner}' is not a constraint junction")
-        return c.multiplier if ref.field == "lambda" else c.residual
-    sym = var(f"{ref.owner}.{ref.field}")
-    if sym in states:
-        return sym
-    if sym in full:
-        return full[sym]
-    fail(ref.span, f"'{ref.owner}' has no variable '{ref.field}'")
-
-
-def _prune(states, rates, outputs):
-    by_symbol = {st.symbol: st for st in states}
-    needed, todo = set(), [o.expr for o in outputs]
-    while todo:
-        for s in todo.pop().free_symbols:
-            if s in by_symbol and s not in needed:
-                needed.add(s)
-                todo.append(rates[s])
-    kept = [st for st in states if st.symbol in needed]
-    pruned = [st for st in states if st.symbol not in needed]
-    return kept, pruned
-
-
-# ---------------------------------------------------------------- initial conditions
-
-def constraint_rows(reduced: Reduced):
-    """(junction, level, residual expr) for every scalar constraint row."""
+def _rows(sys, infos, kept) -> list[ConstraintRow]:
+    """The constraint rows in the kept states (constraints on states that this scene does not
+    integrate are left out)."""
+    kept_symbols = {st.symbol for st in kept}
+    all_states = set(sys.states)
     rows = []
-    for c in reduced.constraints:
-        if c.kind == "holonomic":
-            rows.append((c.junction, "position", c.phi))
-        rows.append((c.junction, "velocity", c.balance))
+    for c in infos:
+        levels = ([("position", c.phi)] if c.kind == "holonomic" else []) + \
+            [("velocity", c.balance)]
+        for level, expr in levels:
+            if (expr.free_symbols & all_states) - kept_symbols:
+                continue
+            rows.append(ConstraintRow(c.junction, level, expr, scale_of(expr)))
     return rows
 
 
@@ -533,29 +744,119 @@ def scale_of(expr):
     return sp.Add(*[sp.Abs(term) for term in sp.Add.make_args(expr)])
 
 
-def _initial_values(es) -> dict:
+# ---------------------------------------------------------------- initial conditions
+
+
+def initial_values(reduced: Reduced) -> dict:
     """Numeric parameters, initial states and t0 at the scene's defaults."""
-    params = parameter_values(es.graph, es.settings.sets)
-    x0 = {st.symbol: st.init.xreplace(params).xreplace({TIME: es.settings.t0})
-          for st in es.states}
-    return {**params, **{k: sp.Float(float(v)) for k, v in x0.items()},
-            TIME: sp.Float(es.settings.t0)}
+    params = parameter_values(reduced.parameters)
+    t0 = sp.Float(reduced.run.t0)
+    x0 = {st.symbol: sp.Float(float(st.init.xreplace(params).xreplace({TIME: t0})))
+          for st in reduced.states}
+    return {**params, **x0, TIME: t0}
+
+
+def parameter_values(parameters) -> dict:
+    values = {}
+    for p in parameters:
+        values[var(p.name)] = sp.Float(float(p.expr.xreplace(values)))
+    return values
 
 
 def check_initial(reduced: Reduced):
-    es = reduced.system
-    values = _initial_values(es)
+    values = initial_values(reduced)
     diags = Collector()
-    for junction, level, expr in constraint_rows(reduced):
-        r = float(expr.xreplace(values))
-        s = float(scale_of(expr).xreplace(values))
+    kinds = {c.junction: c for c in reduced.constraints}
+    for row in reduced.rows:
+        r = float(row.expr.xreplace(values))
+        s = float(row.scale.xreplace(values))
         if abs(r) > RELATIVE_TOLERANCE * s:
-            el = es.graph.element(junction)
-            what = "Phi" if level == "position" else "dPhi/dt" if any(
-                c.junction == junction and c.kind == "holonomic" for c in reduced.constraints) \
+            c = kinds[row.junction]
+            what = "Phi" if row.level == "position" else "dPhi/dt" if c.kind == "holonomic" \
                 else "Phi (nonholonomic)"
-            diags.error(el.name_span, f"initial conditions violate constraint '{junction}': "
-                                      f"{what} = {r:.6g} (relative {abs(r) / s if s else r:.3g}, "
-                                      f"tolerance {RELATIVE_TOLERANCE:g}); fix the initial values "
-                                      "or use --project-initial")
+            diags.error(c.name_span, f"initial conditions violate constraint '{row.junction}': "
+                                     f"{what} = {r:.6g} (relative {abs(r) / s if s else r:.3g}, "
+                                     f"tolerance {RELATIVE_TOLERANCE:g}); fix the initial values "
+                                     "or use --project-initial")
     diags.raise_if_errors()
+
+
+def _with_init_warnings(reduced: Reduced, sys: _System, eliminated) -> Reduced:
+    """Warn where an init clause on a derivative-causality element disagrees with the model."""
+    stores = [s for s in sys.es.stores if s.given_init is not None]
+    if not stores:
+        return reduced
+    implied_of = dict(eliminated)
+    params = parameter_values(reduced.parameters)
+    t0 = sp.Float(reduced.run.t0)
+    values = {**params, TIME: t0,
+              **{st.symbol: sp.Float(float(st.init.xreplace(params).xreplace({TIME: t0})))
+                 for st in sys.es.states}}
+    out = []
+    for s in stores:
+        expr = implied_of.get(s.state.name)
+        if expr is None:
+            continue
+        implied = float(expr.xreplace(values))
+        given = float(s.given_init.xreplace(values))
+        if abs(implied - given) > RELATIVE_TOLERANCE * max(abs(implied), abs(given), 1e-300):
+            out.append(warning(s.init_span, f"'{s.element}' is in derivative causality: its "
+                                            f"state is {implied:.6g} at the start, not the "
+                                            f"{given:.6g} given here, which is ignored"))
+    return Reduced(**{**reduced.__dict__, "warnings": reduced.warnings + tuple(out)})
+
+
+# ---------------------------------------------------------------- explicit forms (reports)
+
+
+def explicit_forms(reduced: Reduced, symbols, max_ops: int = 3000) -> dict | None:
+    """Each symbol in the states, parameters and t alone (every assignment substituted), or
+    None when a block is solved numerically on the way or an expression grows beyond max_ops:
+    the equations are then shown as the program that computes them."""
+    defs = {}
+    for step in reduced.steps:
+        if isinstance(step, Block):
+            for s in step.unknowns + tuple(a.target for a in step.body):
+                defs[s] = None
+        else:
+            defs[step.target] = step.expr
+    memo: dict = {}
+    out = {}
+    for s in symbols:
+        try:
+            expr = _explicit(s, defs, memo, max_ops)
+        except _Cycle:
+            return None
+        if expr is None:
+            return None
+        out[s] = expr
+    return out
+
+
+def _explicit(root, defs, memo, max_ops):
+    stack = [(root, False)]
+    while stack:
+        s, ready = stack.pop()
+        if s in memo:
+            continue
+        if s not in defs:
+            memo[s] = s
+            continue
+        expr = defs[s]
+        if expr is None:
+            raise _Cycle(s)  # computed by a numeric block
+        inner = [u for u in expr.free_symbols if u in defs and u not in memo]
+        if not ready and inner:
+            stack.append((s, True))
+            stack.extend((u, False) for u in inner)
+            continue
+        value = expr.xreplace({u: memo[u] for u in expr.free_symbols if u in defs})
+        if sp.count_ops(value) > max_ops:
+            raise _Cycle(s)
+        memo[s] = value
+    return memo[root]
+
+
+__all__ = ["Assign", "Block", "BlockInfo", "ConstraintInfo", "ConstraintRow", "Reduced",
+           "reduce", "check_initial", "explicit_forms", "initial_values", "parameter_values",
+           "scale_of", "ALGEBRA", "Note"]

@@ -3,6 +3,13 @@ from __future__ import annotations
 
 import sympy as sp
 
+from .reduce import Block, explicit_forms
+
+METHODS = {"symbolic": "solved symbolically", "lu": "solved numerically (LU)",
+           "newton": "solved numerically (Newton)"}
+KINDS = {"I": "I, integral causality", "C": "C, integral causality",
+         "integral signal": "integral signal"}
+
 
 class _Printer(sp.printing.str.StrPrinter):
     """sstr, with floats as the shortest text that reads back as the same double."""
@@ -16,31 +23,32 @@ def _s(expr) -> str:
 
 
 def _header(compiled) -> list[str]:
-    g, s = compiled.graph, compiled.settings
-    return [f"model {g.name}" + (f", scene {s.scene}" if s.scene else ", default scene")]
+    s = compiled.settings
+    return [f"model {compiled.graph.name}" + (f", scene {s.scene}" if s.scene
+                                              else ", default scene")]
 
 
 def check_report(compiled) -> str:
-    g, c, r = compiled.graph, compiled.causality, compiled.reduced
-    es = r.system
-    kinds = {st.symbol: _state_kind(es, st) for st in es.states}
+    g, cg, r = compiled.graph, compiled.causal, compiled.reduced
     lines = _header(compiled)
     lines.append(f"states ({len(r.states)}):")
-    lines += [f"  {st.name}  {kinds[st.symbol]}" for st in r.states]
+    lines += [f"  {st.name}  {KINDS[st.kind]}" for st in r.states]
     if r.pruned:
         lines.append("not integrated (no output needs them): " + ", ".join(r.pruned))
     lines.append("causality (bond: effort set by -> flow set by):")
-    for b, by in zip(g.bonds, c.effort_by):
-        other = b.dst if by == b.src else b.src
-        lines.append(f"  {b.label}: {by} -> {other}")
+    for b, by in zip(g.bonds, cg.effort_by):
+        lines.append(f"  {b.label}: {by} -> {b.other(by)}")
     if r.eliminated:
         lines.append("derivative causality (dependent states, eliminated):")
-        lines += [f"  {name} = {_s(e)}" for name, e in r.eliminated]
-    if r.loops:
-        lines.append("algebraic loops:")
-        lines += [f"  through {', '.join(lp.elements)}: "
-                  f"{'linear, solved symbolically' if lp.linear else 'nonlinear, solved symbolically'}"
-                  for lp in r.loops]
+        lines += [f"  {name} = {_s(e) if e is not None else '(solved with its block)'}"
+                  for name, e in r.eliminated]
+    if r.blocks:
+        lines.append("algebraic blocks:")
+        for b in r.blocks:
+            kind = "linear" if b.linear else "nonlinear"
+            lines.append(f"  {b.index}: {', '.join(b.unknowns)} ({len(b.unknowns)} unknown"
+                         f"{'s' * (len(b.unknowns) > 1)}) through {', '.join(b.origins)}: "
+                         f"{kind}, {METHODS[b.method]}")
     if r.constraints:
         lines.append("constraints:")
         for k in r.constraints:
@@ -50,32 +58,42 @@ def check_report(compiled) -> str:
             if k.phi is not None:
                 lines.append(f"    Phi = {_s(k.phi)}")
             lines.append(f"    {'dPhi/dt' if k.kind == 'holonomic' else 'Phi'} = {_s(k.balance)}")
-    warnings = list(g.warnings) + list(r.warnings)
-    lines.append(f"warnings: {len(warnings)}")
+    lines.append(f"warnings: {len(r.warnings)}")
     return "\n".join(lines) + "\n"
-
-
-def _state_kind(es, st) -> str:
-    if st.origin in {s.name for s in es.graph.signals}:
-        return "integral signal"
-    el = es.graph.element(st.origin)
-    return f"{el.kind}, integral causality"
 
 
 def equations_text(compiled) -> str:
     r = compiled.reduced
     lines = _header(compiled)
     lines.append("parameters:")
-    sets = dict(compiled.settings.sets)
-    for p in compiled.graph.parameters:
-        lines.append(f"  {p.name} = {_s(sets.get(p.name, p.expr).value)}")
+    lines += [f"  {p.name} = {_s(p.expr)}" for p in r.parameters]
     lines.append("initial values:")
     lines += [f"  {st.name}(t0) = {_s(st.init)}" for st in r.states]
+    multipliers = [k.multiplier for k in r.constraints]
+    out_syms = [o.expr for o in r.outputs]
+    forms = explicit_forms(r, list(r.rates) + multipliers + out_syms)
+    if forms is not None:
+        lines.append("state equations:")
+        lines += [f"  d({st.name})/dt = {_s(forms[d])}" for st, d in zip(r.states, r.rates)]
+        if multipliers:
+            lines.append("multipliers:")
+            lines += [f"  {k.junction}.lambda = {_s(forms[k.multiplier])}"
+                      for k in r.constraints]
+        lines.append("outputs:")
+        lines += [f"  {o.name} = {_s(forms[o.expr])}" for o in r.outputs]
+        return "\n".join(lines) + "\n"
+    lines.append("program (in evaluation order; blocks solved numerically in the generated code):")
+    for step in r.steps:
+        if isinstance(step, Block):
+            z = ", ".join(u.name for u in step.unknowns)
+            how = "A z = b, LU" if step.method == "lu" else "Newton's method"
+            lines.append(f"  block {step.index} ({how}) for {z}:")
+            lines += [f"    0 = {_s(e)}" for e in step.residuals]
+            lines += [f"    where {a.target} = {_s(a.expr)}" for a in step.body]
+        else:
+            lines.append(f"  {step.target} = {_s(step.expr)}")
     lines.append("state equations:")
-    lines += [f"  d({st.name})/dt = {_s(st.rhs)}" for st in r.states]
-    if r.constraints:
-        lines.append("multipliers:")
-        lines += [f"  {k.junction}.lambda = {_s(k.multiplier)}" for k in r.constraints]
+    lines += [f"  d({st.name})/dt = {d}" for st, d in zip(r.states, r.rates)]
     lines.append("outputs:")
     lines += [f"  {o.name} = {_s(o.expr)}" for o in r.outputs]
     return "\n".join(lines) + "\n"
@@ -83,9 +101,12 @@ def equations_text(compiled) -> str:
 
 def equations_latex(compiled) -> str:
     r = compiled.reduced
-    rows = [rf"\frac{{d}}{{dt}} {_tex_name(st.name)} &= {sp.latex(st.rhs)}" for st in r.states]
-    rows += [rf"\lambda_{{\mathrm{{{k.junction}}}}} &= {sp.latex(k.multiplier)}"
-             for k in r.constraints]
+    multipliers = [k.multiplier for k in r.constraints]
+    forms = explicit_forms(r, list(r.rates) + multipliers) or {}
+    rows = [rf"\frac{{d}}{{dt}} {_tex_name(st.name)} &= {sp.latex(forms.get(d, d))}"
+            for st, d in zip(r.states, r.rates)]
+    rows += [rf"\lambda_{{\mathrm{{{k.junction}}}}} &= "
+             rf"{sp.latex(forms.get(k.multiplier, k.multiplier))}" for k in r.constraints]
     return "\\begin{aligned}\n" + " \\\\\n".join(rows) + "\n\\end{aligned}\n"
 
 

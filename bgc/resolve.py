@@ -3,19 +3,21 @@
 Expressions are built node by node from the grammar's tree; no string ever becomes an expression.
 Model variables are SymPy symbols named as the modeller writes them (`m`, `x`, `mx.p`, `vx.f`,
 `rod.lambda`); the equations stage defines the element variables in terms of bond variables.
+The builder keeps its own stack (an expression may be as long as the model allows, its depth
+is what the parser admits), and builds a chain of `+`/`-` or `*`/`/` as one SymPy sum or
+product, so that a sum of n terms costs n, not n^2.
 """
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 
 import sympy as sp
 
 from . import ast
 from .diagnostics import Collector, ModelError, Note, Span, fail
+from .graph import (TIME, Bond, Constraint, Element, Expr, Graph, Parameter, Scene, Signal,
+                    check_ports, var)
 from .kinds import KINDS
-
-TIME = sp.Symbol("t", real=True)
 
 FUNCTIONS = {  # name -> (sympy function, arity)
     "sin": (sp.sin, 1), "cos": (sp.cos, 1), "tan": (sp.tan, 1), "asin": (sp.asin, 1),
@@ -26,112 +28,9 @@ FUNCTIONS = {  # name -> (sympy function, arity)
 }
 
 FIELDS_ONE_PORT = ("e", "f")
-
-
-def var(name: str) -> sp.Symbol:
-    """The symbol of a model variable (all model quantities are real)."""
-    return sp.Symbol(name, real=True)
-
-
-@dataclass(frozen=True)
-class Expr:
-    """A resolved expression and the model names it refers to (for later checks)."""
-
-    value: sp.Expr
-    refs: tuple[tuple[str, Span], ...]  # (owner name, span) of every name reference
-    span: Span
-
-
-@dataclass(frozen=True)
-class Parameter:
-    name: str
-    expr: Expr
-    doc: str | None
-    span: Span
-
-
-@dataclass(frozen=True)
-class Constraint:
-    kind: str | None  # "holonomic" | "nonholonomic" | None (detect)
-    annotation: tuple | None  # ("init" | "phi", Expr)
-    corrector: str  # pid | pd | none
-    gains: tuple[Expr, ...]
-    corrector_span: Span | None
-    span: Span
-
-
-@dataclass(frozen=True)
-class Element:
-    name: str
-    kind: str  # Se, MSe, ..., "0", "1"
-    value: Expr | None  # the positional argument
-    law: tuple[str, Expr] | None  # ("f", EXPR(p)) etc.
-    init: tuple[str, Expr] | None
-    effects: tuple[str, ...]
-    constraint: Constraint | None
-    doc: str | None
-    span: Span
-    name_span: Span
-
-    @property
-    def is_junction(self) -> bool:
-        return self.kind in ("0", "1")
-
-    @property
-    def spec(self):
-        return KINDS.get(self.kind)
-
-
-@dataclass(frozen=True)
-class Bond:
-    src: str
-    dst: str
-    label: str  # unique, e.g. "vx->mx"
-    span: Span
-
-
-@dataclass(frozen=True)
-class Signal:
-    name: str
-    expr: Expr
-    init: Expr | None  # integral blocks: the state's initial value
-    span: Span
-
-    @property
-    def is_integral(self) -> bool:
-        return self.init is not None
-
-
-@dataclass(frozen=True)
-class Scene:
-    name: str
-    doc: str | None
-    effects: tuple[str, ...] | None  # None: all effects
-    effects_span: Span | None
-    outputs: tuple[ast.OutRef, ...] | None
-    time: tuple[Expr, Expr, Expr | None] | None
-    solver: tuple[str, tuple[tuple[str, Expr], ...], Span] | None
-    sets: tuple[tuple[str, Expr, Span], ...]
-    span: Span
-
-
-@dataclass(frozen=True)
-class Graph:
-    name: str
-    doc: str | None
-    path: str
-    parameters: tuple[Parameter, ...]
-    elements: tuple[Element, ...]
-    bonds: tuple[Bond, ...]
-    signals: tuple[Signal, ...]
-    scenes: tuple[Scene, ...]
-    warnings: tuple = ()
-
-    def element(self, name: str) -> Element:
-        return next(e for e in self.elements if e.name == name)
-
-    def bonds_of(self, name: str) -> tuple[Bond, ...]:
-        return tuple(b for b in self.bonds if name in (b.src, b.dst))
+MAX_EXACT_INTEGER = 2 ** 53  # integral literals up to this are exact SymPy integers
+MAX_EXACT_POWER = 64  # number ** integer with a larger exponent is computed in floating point
+LOG10_MAX_DOUBLE = math.log10(1.7976931348623157e308)
 
 
 class _Scope:
@@ -147,37 +46,97 @@ class _Scope:
 
 
 class _ExprBuilder:
-    def __init__(self, scope: _Scope, diags: Collector):
+    def __init__(self, scope: _Scope, diags: Collector | None):
         self.scope = scope
         self.diags = diags
         self.refs: list = []
 
     def build(self, node) -> Expr:
         self.refs = []
-        value = self._node(node)
+        value = self._evaluate(node)
         if value.has(sp.zoo, sp.nan, sp.oo, -sp.oo):
             fail(node.span, "expression is not finite (division by zero?)")
+        if value.has(sp.I):
+            fail(node.span, "expression is not a real number")
         return Expr(value, tuple(self.refs), node.span)
 
-    def _node(self, node):
-        method = getattr(self, "_" + type(node).__name__.lower())
-        return method(node)
+    def _evaluate(self, root):
+        """Post-order evaluation with an explicit stack; values accumulate on `done`."""
+        done: list = []
+        todo: list = [(None, root)]
+        while todo:
+            action, node = todo.pop()
+            if action is not None:
+                action(node, done)
+                continue
+            if isinstance(node, ast.BinOp) and node.op in "+-*/":
+                operands = _chain(node)
+                todo.append((self._combine, (node.op in "+-", operands)))
+                todo.extend((None, n) for _, n in reversed(operands))
+            elif isinstance(node, ast.BinOp):  # ^
+                todo.append((self._power, node))
+                todo.extend(((None, node.right), (None, node.left)))
+            elif isinstance(node, ast.Neg):
+                todo.append((_negate, node))
+                todo.append((None, node.operand))
+            elif isinstance(node, ast.Call):
+                self._check_call(node)
+                todo.append((self._apply, node))
+                todo.extend((None, a) for a in reversed(node.args))
+            else:
+                done.append(self._leaf(node))
+        (value,) = done
+        return value
 
-    def _num(self, node: ast.Num):
-        text = node.text
-        try:
-            if text.isdigit():
-                if float(int(text)) == math.inf:
-                    raise OverflowError
-                return sp.Integer(int(text))
-            value = float(text)
-        except OverflowError:
-            value = math.inf
-        if not math.isfinite(value):
-            fail(node.span, f"number {text} does not fit a double")
-        if value != 0.0 and abs(value) < 2.2250738585072014e-308:
-            fail(node.span, f"number {text} is too small for a normal double")
-        return sp.Float(value)
+    def _combine(self, item, done):
+        additive, operands = item
+        values = done[len(done) - len(operands):]
+        del done[len(done) - len(operands):]
+        if additive:
+            done.append(sp.Add(*[v if s > 0 else -v for (s, _), v in zip(operands, values)]))
+            return
+        factors = []
+        for (s, n), v in zip(operands, values):
+            if s < 0 and v == 0:
+                fail(n.span, "division by zero")
+            factors.append(v if s > 0 else 1 / v)
+        done.append(sp.Mul(*factors))
+
+    def _power(self, node, done):
+        b = done.pop()
+        a = done.pop()
+        if a.is_Number and b.is_Number:
+            done.append(_number_power(a, b, node.span))
+        else:
+            done.append(a ** b)
+
+    def _apply(self, node, done):
+        func, _ = FUNCTIONS[node.func]
+        args = done[len(done) - len(node.args):]
+        del done[len(done) - len(node.args):]
+        done.append(func(*args))
+
+    def _check_call(self, node: ast.Call):
+        if node.func == "diag":
+            fail(node.span, "diag(...) is not supported yet: vector bonds come in a later version")
+        if node.func not in FUNCTIONS:
+            fail(node.span, f"unknown function '{node.func}'")
+        _, arity = FUNCTIONS[node.func]
+        if arity is not None and len(node.args) != arity:
+            fail(node.span, f"{node.func}() takes {arity} argument{'s' * (arity > 1)}, "
+                            f"got {len(node.args)}")
+        if arity is None and len(node.args) < 2:
+            fail(node.span, f"{node.func}() takes at least 2 arguments")
+
+    def _leaf(self, node):
+        if isinstance(node, ast.Num):
+            return _number(node)
+        if isinstance(node, ast.Name):
+            return self._name(node)
+        if isinstance(node, ast.Field):
+            return self._field(node)
+        fail(node.span, "vector expressions are not supported yet: vector bonds come in a "
+                        "later version")
 
     def _name(self, node: ast.Name):
         s = self.scope
@@ -225,34 +184,61 @@ class _ExprBuilder:
         self.refs.append((node.owner, node.span))
         return var(f"{node.owner}.{node.field}")
 
-    def _call(self, node: ast.Call):
-        if node.func == "diag":
-            fail(node.span, "diag(...) is not supported yet: vector bonds come in a later version")
-        if node.func not in FUNCTIONS:
-            fail(node.span, f"unknown function '{node.func}'")
-        func, arity = FUNCTIONS[node.func]
-        if arity is not None and len(node.args) != arity:
-            fail(node.span, f"{node.func}() takes {arity} argument{'s' * (arity > 1)}, "
-                            f"got {len(node.args)}")
-        if arity is None and len(node.args) < 2:
-            fail(node.span, f"{node.func}() takes at least 2 arguments")
-        return func(*[self._node(a) for a in node.args])
 
-    def _binop(self, node: ast.BinOp):
-        a, b = self._node(node.left), self._node(node.right)
-        if node.op == "/" and b == 0:
-            fail(node.right.span, "division by zero")
-        return {"+": lambda: a + b, "-": lambda: a - b, "*": lambda: a * b,
-                "/": lambda: a / b, "^": lambda: a ** b}[node.op]()
+def _chain(node: ast.BinOp):
+    """The operands of a chain of + and - (or of * and /) as [(sign, node)], left to right:
+    a - (b + c) gives [(+1, a), (-1, b), (-1, c)]; for products the sign says divide."""
+    group = "+-" if node.op in "+-" else "*/"
+    out, stack = [], [(1, node)]
+    while stack:
+        sign, n = stack.pop()
+        if isinstance(n, ast.BinOp) and n.op in group:
+            stack.append((sign if n.op in "+*" else -sign, n.right))
+            stack.append((sign, n.left))
+        else:
+            out.append((sign, n))
+    return out
 
-    def _neg(self, node: ast.Neg):
-        return -self._node(node.operand)
 
-    def _vector(self, node):
-        fail(node.span, "vector expressions are not supported yet: vector bonds come in a "
-                        "later version")
+def _negate(node, done):
+    done.append(-done.pop())
 
-    _index = _vector
+
+def _number(node: ast.Num):
+    text = node.text
+    if text.isdigit():
+        digits = text.lstrip("0")
+        if len(digits) > 309:  # before int(): Python refuses to read more than 4300 digits
+            fail(node.span, f"number {text[:20]}... does not fit a double")
+        value = int(text)
+        if value <= MAX_EXACT_INTEGER:
+            return sp.Integer(value)
+        x = float(value)
+    else:
+        x = float(text)  # the grammar admits decimal numbers only
+    if not math.isfinite(x):
+        fail(node.span, f"number {text} does not fit a double")
+    if x != 0.0 and abs(x) < 2.2250738585072014e-308:
+        fail(node.span, f"number {text} is too small for a normal double")
+    if x.is_integer() and abs(x) <= MAX_EXACT_INTEGER:
+        return sp.Integer(int(x))  # 2.0 is the integer 2: no 1.0*x in the equations
+    return sp.Float(x)
+
+
+def _number_power(a, b, span):
+    """a ** b for numbers, refused when it does not fit a double (before computing it)."""
+    if a.is_negative and not b.is_Integer:
+        fail(span, "expression is not a real number (a negative number to a fractional power)")
+    if a == 0:
+        if b.is_negative:
+            fail(span, "division by zero (0 to a negative power)")
+        return sp.Integer(0) if b != 0 else sp.Integer(1)
+    magnitude = float(b) * math.log10(abs(float(a)))
+    if magnitude > LOG10_MAX_DOUBLE:
+        fail(span, "number does not fit a double")
+    if b.is_Integer and abs(int(b)) <= MAX_EXACT_POWER and (a.is_Rational or abs(magnitude) < 300):
+        return a ** b
+    return sp.Float(math.pow(float(a), float(b)))
 
 
 def _fields_of(decl: ast.ElementDecl) -> tuple[str, ...]:
@@ -449,28 +435,6 @@ def _bonds(model, elements, params, signals, diags: Collector):
     return bonds
 
 
-def _check_ports(elements: list[Element], bonds: list[Bond], diags: Collector):
-    for el in elements:
-        ins = [b for b in bonds if b.dst == el.name]
-        outs = [b for b in bonds if b.src == el.name]
-        if el.is_junction:
-            if not ins and not outs:
-                diags.warning(el.name_span, f"junction '{el.name}' has no bonds")
-            continue
-        spec = el.spec
-        if spec.ports == 2 and (len(ins) != 1 or len(outs) != 1):
-            diags.error(el.name_span, f"two-port '{el.name}' ({el.kind}) needs exactly one bond in "
-                                      f"and one bond out; it has {len(ins)} in and {len(outs)} out",
-                        *[Note(b.span, "bond here") for b in ins + outs])
-        elif spec.ports == 1 and len(ins) + len(outs) != 1:
-            diags.error(el.name_span, f"'{el.name}' ({el.kind}) needs exactly one bond; it has "
-                                      f"{len(ins) + len(outs)}",
-                        *[Note(b.span, "bond here") for b in ins + outs])
-        elif spec.ports == 1 and outs and spec.role in ("storage", "resistor"):
-            diags.warning(outs[0].span, f"the bond of '{el.name}' ({el.kind}) points away from "
-                                        "it: power flows out of a passive element")
-
-
 def _scene(d: ast.SceneDecl, scope: _Scope, diags: Collector) -> Scene:
     effects = effects_span = outputs = time = solver = None
     sets = []
@@ -509,7 +473,7 @@ def resolve(model: ast.Model) -> Graph:
     els = [e for e in (_guard(diags, _element, d, scope, diags) for d in elements.values()) if e]
     sigs = [s for s in (_guard(diags, _signal, d, scope, diags) for d in signals.values()) if s]
     bonds = _bonds(model, elements, params, signals, diags)
-    _check_ports(els, bonds, diags)
+    check_ports(els, bonds, diags)
     scenes, scene_names = [], {}
     for d in (d for d in model.decls if isinstance(d, ast.SceneDecl)):
         if d.name.name in scene_names:

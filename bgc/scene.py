@@ -1,4 +1,5 @@
-"""Stage 3, scene: the graph with one scene's effects applied, and its simulation settings."""
+"""Stage 3, scene: Graph -> Scenario, the graph with one scene's effects applied and the
+scene's simulation settings."""
 from __future__ import annotations
 
 import math
@@ -6,8 +7,8 @@ from dataclasses import dataclass, replace
 
 import sympy as sp
 
-from . import resolve as R
 from .diagnostics import Collector, Note, fail
+from .graph import Expr, Graph, check_ports, var
 
 SOLVERS = ("euler", "rk4", "dopri5")
 SOLVER_OPTIONS = ("rtol", "atol", "step")
@@ -26,14 +27,22 @@ class Settings:
     rtol: float
     atol: float
     step: float | None
-    sets: tuple[tuple[str, R.Expr], ...]  # parameter default overrides
+    sets: tuple[tuple[str, Expr], ...]  # parameter default overrides
+
+
+@dataclass(frozen=True)
+class Scenario:
+    """What the causality stage takes: the graph as the scene sees it, and the settings."""
+
+    graph: Graph
+    settings: Settings
 
 
 def _tagged_out(effects, chosen) -> bool:
     return chosen is not None and any(e not in chosen for e in effects)
 
 
-def _apply_effects(graph: R.Graph, chosen) -> R.Graph:
+def _apply_effects(graph: Graph, chosen) -> Graph:
     keep, dropped = [], {}
     for el in graph.elements:
         if not _tagged_out(el.effects, chosen):
@@ -50,7 +59,7 @@ def _apply_effects(graph: R.Graph, chosen) -> R.Graph:
     return g
 
 
-def _exprs_of(graph: R.Graph):
+def _exprs_of(graph: Graph):
     for el in graph.elements:
         for e in (el.value, el.law and el.law[1]):
             if e is not None:
@@ -63,7 +72,7 @@ def _exprs_of(graph: R.Graph):
         yield s.expr
 
 
-def _check_references(graph: R.Graph, dropped):
+def _check_references(graph: Graph, dropped):
     diags = Collector()
     for expr in _exprs_of(graph):
         for owner, span in expr.refs:
@@ -71,11 +80,11 @@ def _check_references(graph: R.Graph, dropped):
                 diags.error(span, f"'{owner}' is left out by this scene's effects but is used here",
                             Note(dropped[owner].name_span, f"'{owner}' is tagged "
                                  + " ".join("@" + e for e in dropped[owner].effects)))
-    R._check_ports(list(graph.elements), list(graph.bonds), diags)
+    check_ports(graph.elements, graph.bonds, diags)
     diags.raise_if_errors()
 
 
-def _number(expr: R.Expr, params: dict) -> float:
+def _number(expr: Expr, params: dict) -> float:
     value = expr.value.xreplace(params)
     try:
         x = float(value)
@@ -86,7 +95,7 @@ def _number(expr: R.Expr, params: dict) -> float:
     return x
 
 
-def parameter_values(graph: R.Graph, sets=()) -> dict:
+def parameter_values(graph: Graph, sets=()) -> dict:
     """Numeric default value of every parameter (with scene overrides), in order."""
     overrides = dict(sets)
     values = {}
@@ -99,7 +108,7 @@ def parameter_values(graph: R.Graph, sets=()) -> dict:
             fail(expr.span, f"parameter '{p.name}' does not evaluate to a number")
         if not math.isfinite(x):
             fail(expr.span, f"parameter '{p.name}' is not finite ({x})")
-        values[R.var(p.name)] = sp.Float(x)
+        values[var(p.name)] = sp.Float(x)
     return values
 
 
@@ -121,7 +130,7 @@ def _solver(scene_solver, params) -> tuple:
     return name, values.get("rtol", rtol), values.get("atol", atol), values.get("step")
 
 
-def _check_laws(graph: R.Graph, params: dict):
+def _check_laws(graph: Graph, params: dict):
     """A storage law singular at the given parameter values (I(0), C(0)) is a model error."""
     diags = Collector()
     for el in graph.elements:
@@ -134,13 +143,13 @@ def _check_laws(graph: R.Graph, params: dict):
     diags.raise_if_errors()
 
 
-def apply_scene(graph: R.Graph, name: str | None) -> tuple[R.Graph, Settings]:
+def apply_scene(graph: Graph, name: str | None) -> Scenario:
     """The graph as scene `name` sees it (None: the default scene, all effects, every state)."""
     if name is None:
         t0, t1, dt = DEFAULT_TIME
         solver, rtol, atol = DEFAULT_SOLVER
         _check_laws(graph, parameter_values(graph))
-        return graph, Settings(None, None, t0, t1, dt, solver, rtol, atol, None, ())
+        return Scenario(graph, Settings(None, None, t0, t1, dt, solver, rtol, atol, None, ()))
     scene = next((s for s in graph.scenes if s.name == name), None)
     if scene is None:
         known = ", ".join(s.name for s in graph.scenes) or "none"
@@ -161,4 +170,5 @@ def apply_scene(graph: R.Graph, name: str | None) -> tuple[R.Graph, Settings]:
             dt = (t1 - t0) / 1000
     solver, rtol, atol, step = _solver(scene.solver, params)
     sets = tuple((n, e) for n, e, _ in scene.sets)
-    return g, Settings(scene.name, scene.outputs, t0, t1, dt, solver, rtol, atol, step, sets)
+    return Scenario(g, Settings(scene.name, scene.outputs, t0, t1, dt, solver, rtol, atol, step,
+                                sets))

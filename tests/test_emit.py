@@ -1,4 +1,4 @@
-"""The emitters, solvers and backends, on hand-built code models (no front end involved).
+"""The emitters, solvers and backends, on hand-built programs (no front end involved).
 
 The models have closed forms (oscillator, decay, blow-up, uniform circular motion) so the
 generated C and Python are checked against mathematics, and against each other.
@@ -6,6 +6,7 @@ generated C and Python are checked against mathematics, and against each other.
 from __future__ import annotations
 
 import ast
+import dataclasses
 import math
 import os
 import re
@@ -19,15 +20,16 @@ import sympy as sp
 
 from bgc import backends
 from bgc.backends import BackendError, compile_c, have_c_compiler, load_python_module, run_c
-from bgc.codemodel import (C, CodeModel, ConstraintRow, P, Param, SceneSettings, T, X,
-                           hoist_constants, make_block)
-from bgc.emit import EmitError, c_param_fields, c_string_literal, emit_c, emit_python
+from bgc.emit import (POW10_RANGE, EmitError, c_param_fields, c_string_literal, emit_c,
+                      emit_python, pow10_table)
+from bgc.ir import C, ConstraintRow, Function, P, Param, SceneSettings, Store, T, X
+from bgc.ir import expressions as ir_expressions
+from bgc.lower import explicit_program, hoist_constants
 from bgc.printers import CPrinter, PythonPrinter, UnsupportedExpressionError
 
 STRICT = ("-O2", "-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic")
 HERE = Path(__file__).resolve().parent
 needs_cc = pytest.mark.skipif(not have_c_compiler(), reason="no C compiler")
-EMPTY = make_block([])
 
 
 @pytest.fixture(autouse=True, scope="session")
@@ -49,12 +51,8 @@ def scene(t_end=10.0, dt=0.1, solver="dopri5", rtol=1e-6, atol=1e-9, step=None, 
 
 
 def model(name, states, params, outputs, init, rhs, out, sc=None, **constraint_parts):
-    parts = dict(constraints=(), residual=EMPTY, scale=EMPTY, position_jac=EMPTY,
-                 velocity_jac=EMPTY, velocity_movable=(True,) * len(states))
-    parts.update(constraint_parts)
-    return CodeModel(name=name, states=tuple(states), params=tuple(params),
-                     outputs=tuple(outputs), init=make_block(init), rhs=make_block(rhs),
-                     out=make_block(out), scene=sc or scene(), **parts)
+    return explicit_program(name, states, params, outputs, init, rhs, out, sc or scene(),
+                            **constraint_parts)
 
 
 def oscillator(**kw):
@@ -66,14 +64,12 @@ def oscillator(**kw):
 
 
 def hoisted_oscillator(**kw):
-    """The oscillator with its parameter-only subexpressions hoisted into constants (1/m, -k),
-    as lower() does: the constants must follow -p overrides of k and m."""
-    cm = oscillator(**kw)
-    k, m, w = P[0], P[1], P[2]
-    consts, (rhs, out) = hoist_constants(([X[1] / m, -k * X[0]], [X[0], X[1] / m, sp.cos(w * T)]))
-    assert consts == (1 / m, -k)
-    return CodeModel(**{**cm.__dict__, "rhs": make_block(rhs), "out": make_block(out),
-                        "consts": make_block(consts)})
+    """The oscillator, whose parameter-only subexpressions become constants (1/m, -k) as in
+    every program: the constants must follow -p overrides of k and m."""
+    program = oscillator(**kw)
+    k, m = P[0], P[1]
+    assert [st.expr for st in program.function("consts").body] == [1 / m, -k]
+    return program
 
 
 def decay(**kw):
@@ -127,10 +123,10 @@ def circle(x0=1.0, y0=0.0, vx0=0.0, vy0=1.0, **kw):
         "circle", ("x", "y", "vx", "vy"), params, ("x", "y", "vx", "vy"),
         [P[0], P[1], P[2], P[3]], [vx, vy, -x * v2, -y * v2], [x, y, vx, vy], scene(**kw),
         constraints=(ConstraintRow("rod", "position"), ConstraintRow("rod", "velocity")),
-        residual=make_block([x ** 2 + y ** 2 - 1, x * vx + y * vy]),
-        scale=make_block([1, 1]),
-        position_jac=make_block([2 * x, 2 * y, 0, 0]),
-        velocity_jac=make_block([vx, vy, x, y]),
+        residual=[x ** 2 + y ** 2 - 1, x * vx + y * vy],
+        scale=[1, 1],
+        position_jac=[2 * x, 2 * y, 0, 0],
+        velocity_jac=[vx, vy, x, y],
         velocity_movable=(False, False, True, True))
 
 
@@ -254,50 +250,64 @@ def test_python_literals_round_trip():
     assert values == {"MODEL": EVIL[0], "STATES": list(EVIL[:2]), "OUTPUTS": list(EVIL[2:])}
 
 
-def test_invalid_code_models_are_refused():
+def _with_function(program, name, exprs, size=None):
+    f = Function(name, program.function(name).args, len(exprs) if size is None else size,
+                 tuple(Store(k, sp.sympify(e) if not isinstance(e, sp.Basic) else e)
+                       for k, e in enumerate(exprs)))
+    return dataclasses.replace(program, functions={**program.functions, name: f})
+
+
+def test_invalid_programs_are_refused():
     cm = oscillator()
     with pytest.raises(EmitError):
-        emit_c(CodeModel(**{**cm.__dict__, "init": make_block([T])}))
+        emit_c(_with_function(cm, "init", [T, 0]))
     with pytest.raises(EmitError):
-        emit_c(CodeModel(**{**cm.__dict__, "params": (Param("k", P[1]), Param("m", P[0]))}))
+        emit_c(dataclasses.replace(cm, params=(Param("k", P[1]), Param("m", P[0]),
+                                               Param("w", sp.Integer(2)))))
     with pytest.raises(EmitError):
-        emit_python(CodeModel(**{**cm.__dict__, "rhs": make_block([X[0]])}))
+        emit_python(_with_function(cm, "rhs", [X[0]]))
     for consts in ([X[0]], [T * P[0]], [C[0]]):  # constants use parameters only
         with pytest.raises(EmitError):
-            emit_c(CodeModel(**{**cm.__dict__, "consts": make_block(consts)}))
+            emit_c(_with_function(cm, "consts", consts))
     with pytest.raises(EmitError):  # and parameter defaults do not use constants
-        emit_c(CodeModel(**{**hoisted_oscillator().__dict__,
-                            "params": (Param("k", C[0]), Param("m", sp.Integer(1)),
-                                       Param("w", sp.Integer(2)))}))
+        emit_c(dataclasses.replace(cm, params=(Param("k", C[0]), Param("m", sp.Integer(1)),
+                                               Param("w", sp.Integer(2)))))
 
 
 # ---------------------------------------------------------------- hoisted constants
+
+
+def _stores(*exprs):
+    return Function("rhs", ("t", "x", "p"), len(exprs), tuple(Store(k, e)
+                                                             for k, e in enumerate(exprs)))
 
 
 def test_hoist_constants_moves_parameter_only_parts():
     m, g, k = P[0], P[1], P[2]
     groups = ([2 * m * g * X[0] + X[1] / m, sp.sin(k * m * T) + m],
               [X[0] / m + 1, sp.cos(g) + X[0], -k * X[0], m, T * X[0]])
-    consts, rewritten = hoist_constants(groups)
+    consts, rewritten = hoist_constants([_stores(*group) for group in groups])
     assert consts == (1 / m, 2 * m * g, k * m, sp.cos(g), -k)  # in order of first occurrence
-    assert rewritten == ((C[0] * X[1] + C[1] * X[0], sp.sin(C[2] * T) + m),
-                         (C[0] * X[0] + 1, C[3] + X[0], C[4] * X[0], m, T * X[0]))
+    got = [tuple(st.expr for st in f.body) for f in rewritten]
+    assert got == [(C[0] * X[1] + C[1] * X[0], sp.sin(C[2] * T) + m),
+                   (C[0] * X[0] + 1, C[3] + X[0], C[4] * X[0], m, T * X[0])]
     back = {C[j]: c for j, c in enumerate(consts)}
-    for old, new in zip(groups[0] + groups[1], rewritten[0] + rewritten[1]):
+    for old, new in zip(groups[0] + groups[1], got[0] + got[1]):
         assert sp.simplify(new.xreplace(back) - old) == 0
-    assert hoist_constants(([X[0] + 1, 2 * T],)) == ((), ((X[0] + 1, 2 * T),))
+    consts, (f,) = hoist_constants([_stores(X[0] + 1, 2 * T)])
+    assert consts == () and [st.expr for st in f.body] == [X[0] + 1, 2 * T]
 
 
 def test_front_end_hoists_constants():
     import bgc
 
-    code = bgc.build(HERE.parent / "models" / "pendulum.bg", "long").code
-    assert len(code.consts.results) > 0
-    for block in (code.rhs, code.out):
-        exprs = [e for _, e in block.temps] + list(block.results)
+    program = bgc.build(HERE.parent / "models" / "pendulum.bg", "long").program
+    assert program.n_consts > 0
+    for name in ("rhs", "outputs", "jvp"):
+        exprs = [e for s in program.function(name).body for e in ir_expressions(s)]
         assert not any(e.has(P) for e in exprs)  # every parameter use became a constant
         assert any(e.has(C) for e in exprs)
-    assert not any(e.has(C) or e.has(X) for e in code.consts.results)
+    assert not any(st.expr.has(C) or st.expr.has(X) for st in program.function("consts").body)
 
 
 @needs_cc
@@ -338,16 +348,19 @@ int main(void)
     bgc_params p;
     bgc_settings s;
     bgc_stats st = {0, 0, 0};
+    bgc_work *w = bgc_work_new();
     double x[2] = {1.0, 2.0}, dx[2];
     char msg[256];
+    assert(w != NULL);
     bgc_params_defaults(&p, NULL);
-    bgc_rhs(0.0, x, &p, dx);
+    assert(bgc_rhs(0.0, x, &p, w, dx) == 0);
     assert(dx[0] == 2.0 && dx[1] == -4.0);
     p.p_k = 9.0;
     p.p_m = 4.0;
     bgc_params_update(&p);
-    bgc_rhs(0.0, x, &p, dx);
+    assert(bgc_rhs(0.0, x, &p, w, dx) == 0);
     assert(dx[0] == 0.5 && dx[1] == -9.0);
+    bgc_work_free(w);
     p.p_k = 16.0; /* bgc_simulate updates a copy: w = sqrt(16/4) = 2 */
     bgc_settings_default(&s);
     s.t_end = 3.0;
@@ -432,11 +445,17 @@ int main(void)
     bgc_params p;
     bgc_settings s;
     bgc_stats st = {0, 0, 0};
-    double x[BGC_NUM_STATES], dx[BGC_NUM_STATES];
+    bgc_work *w = bgc_work_new();
+    double x[BGC_NUM_STATES], dx[BGC_NUM_STATES], J[BGC_NUM_STATES * BGC_NUM_STATES];
     char msg[256];
     bgc_params_defaults(&p, NULL);
     bgc_init(&p, x);
-    bgc_rhs(0.0, x, &p, dx);
+    if (!w || bgc_rhs(0.0, x, &p, w, dx) || bgc_jacobian(0.0, x, &p, w, J))
+        return 2;
+    /* circle: d(vx)/dt = -x (vx^2 + vy^2): d/dvx = -2 x vx = 0 at (1, 0, 0, 1) */
+    if (J[2 * BGC_NUM_STATES + 2] != 0.0 || J[2 * BGC_NUM_STATES + 0] != -1.0)
+        return 3;
+    bgc_work_free(w);
     bgc_settings_default(&s);
     s.t_end = 1.0;
     return bgc_simulate(&s, &p, x, NULL, NULL, &st, msg, sizeof msg) != 0 || st.steps == 0;
@@ -465,7 +484,7 @@ def test_compiler_failure_is_a_backend_error():
 
 
 def test_no_eval_or_exec_in_backends():
-    for name in ("printers.py", "emit.py", "backends.py"):
+    for name in ("printers.py", "emit.py", "backends.py", "lower.py", "ir.py"):
         text = (HERE.parent / "bgc" / name).read_text()
         assert "eval(" not in text and "exec(" not in text, name
 
@@ -503,8 +522,8 @@ def test_dopri5_dense_output_does_not_shorten_steps():
     for dt in (1.0, 0.001):
         st = {"steps": 0, "rejected": 0, "rhs": 0}
         s = mod._settings(dt=dt)
-        mod._integrate(s, mod._param_values({}), mod._init(mod._param_values({})),
-                       lambda *a: None, st)
+        p = mod._with_constants(mod._param_values({}))
+        mod._integrate(s, p, mod._init(p), lambda *a: None, st)
         steps[dt] = st["steps"]
     assert abs(steps[1.0] - steps[0.001]) <= 2
 

@@ -12,10 +12,13 @@ Importable:
   PARAMETERS              dict name -> default value, in order
   rhs(t, x, p) -> dx      x ordered as STATES, p as PARAMETERS (1-D arrays)
   outputs(t, x, p) -> y   ordered as OUTPUTS
+  jacobian(t, x, p) -> J  d rhs / d x, shape (len(STATES), len(STATES)), derived symbolically
+                          through the algebraic solves; jvp(t, x, p, v) -> J v
   simulate(t_end=None, dt=None, solver=None, rtol=None, atol=None, params=None,
            step=None, project_initial=False) -> (t, Y), Y of shape (len(t), len(OUTPUTS));
            None means the compiled scene's setting; params maps names to overrides.
-  SimulationError (.t, .times, .rows: the rows computed before it), ConstraintError
+  SimulationError (.t, .times, .rows: the rows computed before it), ConstraintError,
+  BlockError (an algebraic block solved numerically failed in rhs/outputs/jacobian)
 """
 import math
 import sys
@@ -37,51 +40,29 @@ SCENE = {
 }
 SOLVERS = ("euler", "rk4", "dopri5")
 
+_IDENT = "knife_edge"
 _PARAM_NAMES = ["m", "Jz", "g", "incline", "g_slope", "v0", "omega0", "th0", "x0", "y0", "gamma"]
 _N = 6
 _POSITION_ROWS = []
 _VELOCITY_ROWS = [0]
 _VELOCITY_MOVABLE = [True, True, True, True, True, True]
 _EPS = sys.float_info.epsilon
-
-
-class SimulationError(RuntimeError):
-    """A non-finite value or a step size too small; .times and .rows hold the rows before it."""
-
-    def __init__(self, message, t, times, rows):
-        super().__init__(message)
-        self.t = t
-        self.times = times
-        self.rows = rows
-
-
-class ConstraintError(RuntimeError):
-    """The initial conditions violate a constraint (or cannot be projected onto them)."""
-
-    def __init__(self, message, messages=()):
-        super().__init__(message)
-        self.messages = list(messages) or [message]
-
-
-class _Failure(Exception):
-    def __init__(self, message, t):
-        super().__init__(message)
-        self.t = t
-
-
-def _sign(a):
-    return 1.0 if a > 0.0 else (-1.0 if a < 0.0 else a)
-
-
-def _heaviside(a, at_zero):
-    return 1.0 if a > 0.0 else (0.0 if a < 0.0 else (at_zero if a == 0.0 else a))
+_WORK_DOUBLES = 115
+_WORK_INTS = 0
+_BLOCK_NAMES = []
+# Per algebraic block: its factorization plan (bgc/sparse.py) and its storage in the workspace.
+_BLOCKS = [
+]
+# The Jacobian's structure: the columns of each colour, the rows of each column.
+_JAC_COLORS = [(0, 3, 4), (1,), (2,), (5,)]
+_JAC_COLUMNS = [(0, 1, 3), (0, 1, 4), (0, 1, 5), (), (), (0, 1)]
 
 
 # ---------------------------------------------------------------- model
-# Each function runs first with math (fast); on a floating-point exception it runs again
-# on numpy.float64 values, which give inf and nan as the C program does.  The model
-# functions take p as the parameters followed by the constants computed from them once
-# (_with_constants): constant k is p[11 + k].
+# Each function runs first with math (fast); on a floating-point exception it runs again on
+# numpy.float64 values, which give inf and nan as the C program does.  The model functions
+# take p as the parameters followed by the constants computed from them once
+# (_with_constants): constant k is p[11 + k].  w is the workspace (_Work).
 
 
 def _fill_params(p, given):
@@ -141,859 +122,326 @@ def _fill_params_ieee(p, given):
         return [float(v) for v in p]
 
 
-def _constants(p):
+def _constants_into(p, out):
     try:
-        w0 = 1.0/p[1]
-        w1 = p[0]*p[4]
-        w2 = 1.0/p[0]
-        return [
-            w0,
-            w1*p[1],
-            w1,
-            -w0,
-            w2,
-            -w2,
-        ]
+        out[0] = 1.0/p[0]
+        out[1] = 1.0/p[1]
+        out[2] = p[0]*p[4]
+        out[3] = -p[0]
+        out[4] = -1.0/p[0]
     except (ArithmeticError, ValueError):
-        return _constants_ieee(p)
+        return _constants_into_ieee(p, out)
 
 
-def _constants_ieee(p):
+def _constants_into_ieee(p, out):
     with numpy.errstate(all="ignore"):
         p = numpy.asarray(p, dtype=numpy.float64)
-        w0 = 1.0/p[1]
-        w1 = p[0]*p[4]
-        w2 = 1.0/p[0]
-        return [float(v) for v in (
-            w0,
-            w1*p[1],
-            w1,
-            -w0,
-            w2,
-            -w2,
-        )]
+        out[0] = 1.0/p[0]
+        out[1] = 1.0/p[1]
+        out[2] = p[0]*p[4]
+        out[3] = -p[0]
+        out[4] = -1.0/p[0]
+
+
+
+def _constants(p):
+    out = [0.0] * 5
+    _constants_into(p, out)
+    return [float(v) for v in out]
+
+
+def _init_into(p, out):
+    try:
+        out[0] = math.cos(p[7])*p[0]*p[5]
+        out[1] = math.sin(p[7])*p[0]*p[5]
+        out[2] = p[1]*p[6]
+        out[3] = p[8]
+        out[4] = p[9]
+        out[5] = p[7]
+    except (ArithmeticError, ValueError):
+        return _init_into_ieee(p, out)
+
+
+def _init_into_ieee(p, out):
+    with numpy.errstate(all="ignore"):
+        p = numpy.asarray(p, dtype=numpy.float64)
+        out[0] = numpy.cos(p[7])*p[0]*p[5]
+        out[1] = numpy.sin(p[7])*p[0]*p[5]
+        out[2] = p[1]*p[6]
+        out[3] = p[8]
+        out[4] = p[9]
+        out[5] = p[7]
+
 
 
 def _init(p):
+    out = [0.0] * _N
+    _init_into(p, out)
+    return [float(v) for v in out]
+
+
+
+def _rhs_0(t, x, p, w, out):
+    wv = w.v
     try:
-        w0 = p[0]*p[5]
-        return [
-            w0*math.cos(p[7]),
-            w0*math.sin(p[7]),
-            p[1]*p[6],
-            p[8],
-            p[9],
-            p[7],
-        ]
+        w0 = p[11]*x[0]
+        w1 = p[12]*x[2]
+        w2 = p[11]*x[1]
+        w17 = math.sin(x[5])
+        w18 = math.cos(x[5])
+        w4 = (w0*w1*w18*p[14] + w1*w17*w2*p[14] + w18*p[13])/(w17*w17 + w18*w18)
+        w5 = -w17*w4
+        w6 = w18*w4
+        w7 = -w6 + p[13]
+        out[0] = -w5
+        out[1] = w7
+        out[2] = 0.0
+        out[3] = w0
+        out[4] = w2
+        out[5] = w1
     except (ArithmeticError, ValueError):
-        return _init_ieee(p)
+        return _rhs_0_ieee(t, x, p, w, out)
 
 
-def _init_ieee(p):
-    with numpy.errstate(all="ignore"):
-        p = numpy.asarray(p, dtype=numpy.float64)
-        w0 = p[0]*p[5]
-        return [float(v) for v in (
-            w0*numpy.cos(p[7]),
-            w0*numpy.sin(p[7]),
-            p[1]*p[6],
-            p[8],
-            p[9],
-            p[7],
-        )]
-
-
-def _rhs(t, x, p):
-    try:
-        w0 = math.sin(x[5])
-        w1 = math.cos(x[5])
-        w2 = (-w0*x[1]*x[2] + w1*p[12] - w1*x[0]*x[2])/(w0*w0 + w1*w1)
-        return [
-            w0*w2*p[11],
-            w1*w2*p[14] + p[13],
-            0.0,
-            p[15]*x[0],
-            p[15]*x[1],
-            p[11]*x[2],
-        ]
-    except (ArithmeticError, ValueError):
-        return _rhs_ieee(t, x, p)
-
-
-def _rhs_ieee(t, x, p):
+def _rhs_0_ieee(t, x, p, w, out):
+    wv = w.v
     with numpy.errstate(all="ignore"):
         t = numpy.float64(t)
         x = numpy.asarray(x, dtype=numpy.float64)
         p = numpy.asarray(p, dtype=numpy.float64)
-        w0 = numpy.sin(x[5])
-        w1 = numpy.cos(x[5])
-        w2 = (-w0*x[1]*x[2] + w1*p[12] - w1*x[0]*x[2])/(w0*w0 + w1*w1)
-        return [float(v) for v in (
-            w0*w2*p[11],
-            w1*w2*p[14] + p[13],
-            0.0,
-            p[15]*x[0],
-            p[15]*x[1],
-            p[11]*x[2],
-        )]
+        w0 = p[11]*x[0]
+        w1 = p[12]*x[2]
+        w2 = p[11]*x[1]
+        w17 = numpy.sin(x[5])
+        w18 = numpy.cos(x[5])
+        w4 = (w0*w1*w18*p[14] + w1*w17*w2*p[14] + w18*p[13])/(w17*w17 + w18*w18)
+        w5 = -w17*w4
+        w6 = w18*w4
+        w7 = -w6 + p[13]
+        out[0] = -w5
+        out[1] = w7
+        out[2] = 0.0
+        out[3] = w0
+        out[4] = w2
+        out[5] = w1
 
 
-def _out(t, x, p):
+
+def _rhs(t, x, p, w, out):
+    _rhs_0(t, x, p, w, out)
+
+
+
+def _outputs_0(t, x, p, w, out):
+    wv = w.v
     try:
-        w0 = p[15]*x[1]
-        w1 = math.cos(x[5])
-        w2 = math.sin(x[5])
-        return [
-            x[3],
-            x[4],
-            x[5],
-            p[15]*x[0],
-            w0,
-            (w1*p[12] - w1*x[0]*x[2] - w2*x[1]*x[2])*(p[11]/(w1*w1 + w2*w2)),
-            w0*w1 + w2*p[16]*x[0],
-        ]
+        w0 = p[11]*x[0]
+        w1 = p[12]*x[2]
+        w2 = p[11]*x[1]
+        w19 = math.sin(x[5])
+        w20 = math.cos(x[5])
+        w4 = (w0*w1*w20*p[14] + w1*w19*w2*p[14] + w20*p[13])/(w19*w19 + w20*w20)
+        w8 = -w0*w19
+        w9 = w2*w20
+        w10 = w8 + w9
+        out[0] = x[3]
+        out[1] = x[4]
+        out[2] = x[5]
+        out[3] = w0
+        out[4] = w2
+        out[5] = w4
+        out[6] = w10
     except (ArithmeticError, ValueError):
-        return _out_ieee(t, x, p)
+        return _outputs_0_ieee(t, x, p, w, out)
 
 
-def _out_ieee(t, x, p):
+def _outputs_0_ieee(t, x, p, w, out):
+    wv = w.v
     with numpy.errstate(all="ignore"):
         t = numpy.float64(t)
         x = numpy.asarray(x, dtype=numpy.float64)
         p = numpy.asarray(p, dtype=numpy.float64)
-        w0 = p[15]*x[1]
-        w1 = numpy.cos(x[5])
-        w2 = numpy.sin(x[5])
-        return [float(v) for v in (
-            x[3],
-            x[4],
-            x[5],
-            p[15]*x[0],
-            w0,
-            (w1*p[12] - w1*x[0]*x[2] - w2*x[1]*x[2])*(p[11]/(w1*w1 + w2*w2)),
-            w0*w1 + w2*p[16]*x[0],
-        )]
+        w0 = p[11]*x[0]
+        w1 = p[12]*x[2]
+        w2 = p[11]*x[1]
+        w19 = numpy.sin(x[5])
+        w20 = numpy.cos(x[5])
+        w4 = (w0*w1*w20*p[14] + w1*w19*w2*p[14] + w20*p[13])/(w19*w19 + w20*w20)
+        w8 = -w0*w19
+        w9 = w2*w20
+        w10 = w8 + w9
+        out[0] = x[3]
+        out[1] = x[4]
+        out[2] = x[5]
+        out[3] = w0
+        out[4] = w2
+        out[5] = w4
+        out[6] = w10
+
+
+
+def _out(t, x, p, w, out):
+    _outputs_0(t, x, p, w, out)
+
+
+
+def _jvp_0(t, x, p, w, v, out):
+    wv = w.v
+    try:
+        w0 = p[11]*x[0]
+        w11 = p[11]*v[0]
+        w1 = p[12]*x[2]
+        w12 = p[12]*v[2]
+        w2 = p[11]*x[1]
+        w13 = p[11]*v[1]
+        w21 = math.sin(x[5])
+        w22 = math.cos(x[5])
+        w4 = (w0*w1*w22*p[14] + w1*w2*w21*p[14] + w22*p[13])/(w21*w21 + w22*w22)
+        w14 = (w0*w1*w21*p[0]*v[5] + w0*w12*w22*p[14] + (w1*w11*w22*p[14] + w1*w13*w21*p[14]) + (w1*w2*w22*p[14]*v[5] + w12*w2*w21*p[14] - w21*p[13]*v[5]))/(w21*w21 + w22*w22)
+        w15 = -w14*w21 - w22*w4*v[5]
+        w16 = w14*w22 - w21*w4*v[5]
+        out[0] = -w15
+        out[1] = -w16
+        out[2] = 0.0
+        out[3] = w11
+        out[4] = w13
+        out[5] = w12
+    except (ArithmeticError, ValueError):
+        return _jvp_0_ieee(t, x, p, w, v, out)
+
+
+def _jvp_0_ieee(t, x, p, w, v, out):
+    wv = w.v
+    with numpy.errstate(all="ignore"):
+        t = numpy.float64(t)
+        x = numpy.asarray(x, dtype=numpy.float64)
+        p = numpy.asarray(p, dtype=numpy.float64)
+        w0 = p[11]*x[0]
+        w11 = p[11]*v[0]
+        w1 = p[12]*x[2]
+        w12 = p[12]*v[2]
+        w2 = p[11]*x[1]
+        w13 = p[11]*v[1]
+        w21 = numpy.sin(x[5])
+        w22 = numpy.cos(x[5])
+        w4 = (w0*w1*w22*p[14] + w1*w2*w21*p[14] + w22*p[13])/(w21*w21 + w22*w22)
+        w14 = (w0*w1*w21*p[0]*v[5] + w0*w12*w22*p[14] + (w1*w11*w22*p[14] + w1*w13*w21*p[14]) + (w1*w2*w22*p[14]*v[5] + w12*w2*w21*p[14] - w21*p[13]*v[5]))/(w21*w21 + w22*w22)
+        w15 = -w14*w21 - w22*w4*v[5]
+        w16 = w14*w22 - w21*w4*v[5]
+        out[0] = -w15
+        out[1] = -w16
+        out[2] = 0.0
+        out[3] = w11
+        out[4] = w13
+        out[5] = w12
+
+
+
+def _jvp(t, x, p, w, v, out):
+    _jvp_0(t, x, p, w, v, out)
+
+
+def _residual_into(t, x, p, out):
+    try:
+        out[0] = math.sin(x[5])*p[15]*x[0] + math.cos(x[5])*p[11]*x[1]
+    except (ArithmeticError, ValueError):
+        return _residual_into_ieee(t, x, p, out)
+
+
+def _residual_into_ieee(t, x, p, out):
+    with numpy.errstate(all="ignore"):
+        t = numpy.float64(t)
+        x = numpy.asarray(x, dtype=numpy.float64)
+        p = numpy.asarray(p, dtype=numpy.float64)
+        out[0] = numpy.sin(x[5])*p[15]*x[0] + numpy.cos(x[5])*p[11]*x[1]
+
 
 
 def _residual(t, x, p):
+    out = [0.0] * 1
+    _residual_into(t, x, p, out)
+    return [float(v) for v in out]
+
+
+def _scale_into(t, x, p, out):
     try:
-        return [
-            math.sin(x[5])*p[16]*x[0] + math.cos(x[5])*p[15]*x[1],
-        ]
+        out[0] = abs(math.sin(x[5])*p[11]*x[0]) + abs(math.cos(x[5])*p[11]*x[1])
     except (ArithmeticError, ValueError):
-        return _residual_ieee(t, x, p)
+        return _scale_into_ieee(t, x, p, out)
 
 
-def _residual_ieee(t, x, p):
+def _scale_into_ieee(t, x, p, out):
     with numpy.errstate(all="ignore"):
         t = numpy.float64(t)
         x = numpy.asarray(x, dtype=numpy.float64)
         p = numpy.asarray(p, dtype=numpy.float64)
-        return [float(v) for v in (
-            numpy.sin(x[5])*p[16]*x[0] + numpy.cos(x[5])*p[15]*x[1],
-        )]
+        out[0] = abs(numpy.sin(x[5])*p[11]*x[0]) + abs(numpy.cos(x[5])*p[11]*x[1])
+
 
 
 def _scale(t, x, p):
+    out = [0.0] * 1
+    _scale_into(t, x, p, out)
+    return [float(v) for v in out]
+
+
+def _position_jac_into(t, x, p, out):
     try:
-        return [
-            abs(math.sin(x[5])*p[15]*x[0]) + abs(math.cos(x[5])*p[15]*x[1]),
-        ]
+        pass
     except (ArithmeticError, ValueError):
-        return _scale_ieee(t, x, p)
+        return _position_jac_into_ieee(t, x, p, out)
 
 
-def _scale_ieee(t, x, p):
+def _position_jac_into_ieee(t, x, p, out):
     with numpy.errstate(all="ignore"):
         t = numpy.float64(t)
         x = numpy.asarray(x, dtype=numpy.float64)
         p = numpy.asarray(p, dtype=numpy.float64)
-        return [float(v) for v in (
-            abs(numpy.sin(x[5])*p[15]*x[0]) + abs(numpy.cos(x[5])*p[15]*x[1]),
-        )]
+        pass
+
 
 
 def _position_jac(t, x, p):
+    out = [0.0] * 0
+    _position_jac_into(t, x, p, out)
+    return [float(v) for v in out]
+
+
+def _velocity_jac_into(t, x, p, out):
     try:
-        return [
-        ]
+        w23 = math.sin(x[5])
+        out[0] = w23*p[15]
+        w24 = math.cos(x[5])
+        out[1] = w24*p[11]
+        out[2] = 0.0
+        out[3] = 0.0
+        out[4] = 0.0
+        out[5] = w23*p[15]*x[1] + w24*p[15]*x[0]
     except (ArithmeticError, ValueError):
-        return _position_jac_ieee(t, x, p)
+        return _velocity_jac_into_ieee(t, x, p, out)
 
 
-def _position_jac_ieee(t, x, p):
+def _velocity_jac_into_ieee(t, x, p, out):
     with numpy.errstate(all="ignore"):
         t = numpy.float64(t)
         x = numpy.asarray(x, dtype=numpy.float64)
         p = numpy.asarray(p, dtype=numpy.float64)
-        return [float(v) for v in (
-        )]
+        w23 = numpy.sin(x[5])
+        out[0] = w23*p[15]
+        w24 = numpy.cos(x[5])
+        out[1] = w24*p[11]
+        out[2] = 0.0
+        out[3] = 0.0
+        out[4] = 0.0
+        out[5] = w23*p[15]*x[1] + w24*p[15]*x[0]
+
 
 
 def _velocity_jac(t, x, p):
-    try:
-        w0 = math.sin(x[5])*p[16]
-        w1 = math.cos(x[5])
-        return [
-            w0,
-            w1*p[15],
-            0.0,
-            0.0,
-            0.0,
-            w0*x[1] + w1*p[16]*x[0],
-        ]
-    except (ArithmeticError, ValueError):
-        return _velocity_jac_ieee(t, x, p)
+    out = [0.0] * 6
+    _velocity_jac_into(t, x, p, out)
+    return [float(v) for v in out]
 
 
-def _velocity_jac_ieee(t, x, p):
-    with numpy.errstate(all="ignore"):
-        t = numpy.float64(t)
-        x = numpy.asarray(x, dtype=numpy.float64)
-        p = numpy.asarray(p, dtype=numpy.float64)
-        w0 = numpy.sin(x[5])*p[16]
-        w1 = numpy.cos(x[5])
-        return [float(v) for v in (
-            w0,
-            w1*p[15],
-            0.0,
-            0.0,
-            0.0,
-            w0*x[1] + w1*p[16]*x[0],
-        )]
+[bgc/runtime/runtime.py]
 
-
-
-def _param_values(overrides):
-    """All parameter values: the overrides {index: value}, the rest from their defaults."""
-    p = [0.0] * len(_PARAM_NAMES)
-    for j, value in overrides.items():
-        p[j] = float(value)
-    return _fill_params(p, overrides)
-
-
-def _with_constants(p):
-    """The parameters followed by the constants computed from them, as the model functions
-    take them."""
-    return list(p) + _constants(p)
-
-
-PARAMETERS = dict(zip(_PARAM_NAMES, _param_values({})))
-
-
-def _vector(v, n, what):
-    values = numpy.asarray(v, dtype=float).reshape(-1).tolist()
-    if len(values) != n:
-        raise ValueError(f"{what} must have {n} elements, not {len(values)}")
-    return values
-
-
-def rhs(t, x, p):
-    """dx/dt at (t, x) with parameters p (a 1-D array ordered as PARAMETERS)."""
-    p = _with_constants(_vector(p, len(_PARAM_NAMES), "p"))
-    return numpy.array(_rhs(float(t), _vector(x, _N, "x"), p))
-
-
-def outputs(t, x, p):
-    """The outputs at (t, x), ordered as OUTPUTS."""
-    p = _with_constants(_vector(p, len(_PARAM_NAMES), "p"))
-    y = _out(float(t), _vector(x, _N, "x"), p)
-    return numpy.array(y, dtype=float)
-
-
-# ---------------------------------------------------------------- constraints
-
-
-def _check_constraints(t, x, p):
-    """Messages for the violated constraint rows at (t, x)."""
-    r, s = _residual(t, x, p), _scale(t, x, p)
-    return [
-        "initial conditions violate constraint '%s' (%s): residual = %.17g"
-        % (CONSTRAINTS[k][0], CONSTRAINTS[k][1], r[k])
-        for k in range(len(CONSTRAINTS))
-        if not abs(r[k]) <= 1e-9 * s[k]
-    ]
-
-
-def _solve(m, A, b):
-    """Gaussian elimination with partial pivoting (A row-major m x m); None if singular."""
-    scale = 0.0
-    for a in A:
-        scale = max(scale, abs(a))
-    for k in range(m):
-        piv = k
-        for i in range(k + 1, m):
-            if abs(A[i * m + k]) > abs(A[piv * m + k]):
-                piv = i
-        if not abs(A[piv * m + k]) > 1e-14 * scale:
-            return None
-        if piv != k:
-            for j in range(m):
-                A[k * m + j], A[piv * m + j] = A[piv * m + j], A[k * m + j]
-            b[k], b[piv] = b[piv], b[k]
-        for i in range(k + 1, m):
-            f = A[i * m + k] / A[k * m + k]
-            for j in range(k, m):
-                A[i * m + j] -= f * A[k * m + j]
-            b[i] -= f * b[k]
-    for i in range(m - 1, -1, -1):
-        total = b[i]
-        for j in range(i + 1, m):
-            total -= A[i * m + j] * b[j]
-        b[i] = total / A[i * m + i]
-    return b
-
-
-def _project_rows(t, x, p, rows, jac, movable):
-    """Gauss-Newton minimum-norm projection onto rows; None or the reason it failed."""
-    m, n = len(rows), _N
-    for it in range(51):
-        r, s = _residual(t, x, p), _scale(t, x, p)
-        z = [r[k] for k in rows]
-        if all(abs(z[i]) <= 1e-9 * s[k] for i, k in enumerate(rows)):
-            return None
-        if it == 50:
-            return "no convergence after 50 iterations"
-        J = jac(t, x, p)
-        if movable is not None:
-            J = [0.0 if not movable[c % n] else v for c, v in enumerate(J)]
-        A = [0.0] * (m * m)
-        for i in range(m):
-            for j in range(m):
-                total = 0.0
-                for k in range(n):
-                    total += J[i * n + k] * J[j * n + k]
-                A[i * m + j] = total
-        if _solve(m, A, z) is None:
-            return "the constraint Jacobian is singular"
-        for k in range(n):
-            dx = 0.0
-            for i in range(m):
-                dx += J[i * n + k] * z[i]
-            x[k] -= dx
-    return None
-
-
-def _project_initial(t, x, p):
-    why = _project_rows(t, x, p, _POSITION_ROWS, _position_jac, None)
-    level = "position"
-    if why is None:
-        why = _project_rows(t, x, p, _VELOCITY_ROWS, _velocity_jac, _VELOCITY_MOVABLE)
-        level = "velocity"
-    if why is not None:
-        raise ConstraintError(
-            "cannot project the initial conditions onto the %s constraints: %s" % (level, why))
-
-
-# ---------------------------------------------------------------- settings
-
-
-class _Settings:
-    __slots__ = ("t0", "t_end", "dt", "solver", "rtol", "atol", "step")
-
-    def __init__(self, **values):
-        for key in self.__slots__:
-            setattr(self, key, values[key])
-
-
-def _settings(t_end=None, dt=None, solver=None, rtol=None, atol=None, step=None):
-    given = {"t_end": t_end, "dt": dt, "solver": solver, "rtol": rtol, "atol": atol, "step": step}
-    values = dict(SCENE, **{k: v for k, v in given.items() if v is not None})
-    for key in ("t0", "t_end", "dt", "rtol", "atol"):
-        values[key] = float(values[key])
-    values["step"] = 0.0 if values["step"] is None else float(values["step"])
-    s = _Settings(**values)
-    message = _check_settings(s)
-    if message:
-        raise ValueError(message)
-    return s
-
-
-def _check_settings(s):
-    if not all(math.isfinite(v) for v in (s.t0, s.t_end, s.dt, s.rtol, s.atol, s.step)):
-        return "settings must be finite numbers"
-    if not s.dt > 0.0:
-        return "--dt must be positive"
-    if s.t_end < s.t0:
-        return "--t-end must not be before the start time"
-    if not (s.rtol > 0.0 and s.atol > 0.0):
-        return "--rtol and --atol must be positive"
-    if s.step < 0.0:
-        return "--step must be positive"
-    if s.solver not in SOLVERS:
-        return "unknown solver"
-    if not (s.t_end - s.t0) / s.dt <= 1e9:
-        return "too many output rows (more than 1e9): increase --dt"
-    return None
-
-
-# ---------------------------------------------------------------- solvers
-
-
-def _output_count(s):
-    n = math.ceil((s.t_end - s.t0) / s.dt - 1e-6)
-    return n if n > 0 else 0
-
-
-def _output_time(s, k, n):
-    return s.t_end if k >= n else s.t0 + k * s.dt
-
-
-def _hmin(t):
-    """Steps below this are too small to resolve at t (16 ulps of t; the least normal at 0)."""
-    return max(16.0 * _EPS * abs(t), sys.float_info.min)
-
-
-def _first_nonfinite(v):
-    for i, a in enumerate(v):
-        if not math.isfinite(a):
-            return i
-    return -1
-
-
-def _fail(t, what, name):
-    return _Failure("at t = %.17g: %s '%s' is not finite" % (t, what, name), t)
-
-
-def _fail_step(t, h, worst):
-    if worst >= 0:
-        message = "at t = %.17g: step size too small (h = %.3g), limited by state '%s'" % (
-            t, h, STATES[worst])
-    else:
-        message = "at t = %.17g: step size too small (h = %.3g)" % (t, h)
-    return _Failure(message, t)
-
-
-def _emit(p, t, x, sink):
-    y = _out(t, x, p)
-    j = _first_nonfinite(y)
-    if j >= 0:
-        raise _fail(t, "output", OUTPUTS[j])
-    sink(t, x, y)
-
-
-def _substeps(span, h):
-    r = span / h
-    if not r < 1e15:
-        return -1
-    m = math.ceil(r - 1e-6)
-    return 1 if m < 1 else m
-
-
-def _fixed_step(solver, p, t, h, y, st):
-    """One Euler or classical Runge-Kutta step from (t, y) to t + h; returns the new y."""
-    k1 = _rhs(t, y, p)
-    st["rhs"] += 1
-    i = _first_nonfinite(k1)
-    if i >= 0:
-        raise _fail(t, "derivative of state", STATES[i])
-    if solver == "euler":
-        y = [a + h * b for a, b in zip(y, k1)]
-    else:
-        h2, h6 = 0.5 * h, h / 6.0
-        k2 = _rhs(t + h2, [a + h2 * b for a, b in zip(y, k1)], p)
-        k3 = _rhs(t + h2, [a + h2 * b for a, b in zip(y, k2)], p)
-        k4 = _rhs(t + h, [a + h * b for a, b in zip(y, k3)], p)
-        st["rhs"] += 3
-        y = [a + h6 * (b1 + 2.0 * (b2 + b3) + b4) for a, b1, b2, b3, b4 in zip(y, k1, k2, k3, k4)]
-    st["steps"] += 1
-    i = _first_nonfinite(y)
-    if i >= 0:
-        raise _fail(t + h, "state", STATES[i])
-    return y
-
-
-def _run_fixed(s, p, y, sink, st):
-    nout = _output_count(s)
-    hstep = s.step if s.step > 0.0 else s.dt
-    ta = s.t0
-    _emit(p, ta, y, sink)
-    for k in range(1, nout + 1):
-        tb = _output_time(s, k, nout)
-        m = _substeps(tb - ta, hstep)
-        if m < 0:
-            raise _fail_step(ta, hstep, -1)
-        for j in range(m):
-            t = ta + j * hstep
-            t1 = tb if j + 1 == m else ta + (j + 1) * hstep
-            if not t1 - t >= _hmin(t):
-                raise _fail_step(t, t1 - t, -1)
-            y = _fixed_step(s.solver, p, t, t1 - t, y, st)
-        _emit(p, tb, y, sink)
-        ta = tb
-
-
-# Dormand-Prince 5(4) coefficients, as in Hairer's DOPRI5.
-C2, C3, C4, C5 = 1.0 / 5.0, 3.0 / 10.0, 4.0 / 5.0, 8.0 / 9.0
-A21 = 1.0 / 5.0
-A31, A32 = 3.0 / 40.0, 9.0 / 40.0
-A41, A42, A43 = 44.0 / 45.0, -56.0 / 15.0, 32.0 / 9.0
-A51, A52, A53, A54 = 19372.0 / 6561.0, -25360.0 / 2187.0, 64448.0 / 6561.0, -212.0 / 729.0
-A61, A62, A63 = 9017.0 / 3168.0, -355.0 / 33.0, 46732.0 / 5247.0
-A64, A65 = 49.0 / 176.0, -5103.0 / 18656.0
-A71, A73, A74 = 35.0 / 384.0, 500.0 / 1113.0, 125.0 / 192.0
-A75, A76 = -2187.0 / 6784.0, 11.0 / 84.0
-E1, E3, E4 = 71.0 / 57600.0, -71.0 / 16695.0, 71.0 / 1920.0
-E5, E6, E7 = -17253.0 / 339200.0, 22.0 / 525.0, -1.0 / 40.0
-D1, D3 = -12715105075.0 / 11282082432.0, 87487479700.0 / 32700410799.0
-D4, D5 = -10690763975.0 / 1880347072.0, 701980252875.0 / 199316789632.0
-D6, D7 = -1453857185.0 / 822651844.0, 69997945.0 / 29380423.0
-SAFE, FACC1, FACC2, BETA = 0.9, 5.0, 0.1, 0.04  # FACC1 = 1/0.2, FACC2 = 1/10
-EXPO1 = 0.2 - BETA * 0.75
-
-
-def _initial_step(s, p, t, y, f0, hmax, st):
-    """Hairer's initial step size guess (HINIT with order 5)."""
-    dnf = dny = der2 = 0.0
-    for a, f in zip(y, f0):
-        sk = s.atol + s.rtol * abs(a)
-        qf, qy = f / sk, a / sk
-        dnf += qf * qf
-        dny += qy * qy
-    h = 1e-6 if (dnf <= 1e-10 or dny <= 1e-10) else math.sqrt(dny / dnf) * 0.01
-    h = min(h, hmax)
-    f1 = _rhs(t + h, [a + h * f for a, f in zip(y, f0)], p)
-    st["rhs"] += 1
-    for a, f, g in zip(y, f0, f1):
-        q = (g - f) / (s.atol + s.rtol * abs(a))
-        der2 += q * q
-    der2 = math.sqrt(der2) / h
-    der12 = max(math.sqrt(dnf), abs(der2))  # a NaN der2 is ignored
-    h1 = max(1e-6, h * 1e-3) if der12 <= 1e-15 else (0.01 / der12) ** 0.2
-    if not h1 > 0.0:
-        h1 = h * 1e-3
-    return min(min(100.0 * h, h1), hmax)
-
-
-def _trial_culprit(y1, stages):
-    i = _first_nonfinite(y1)
-    if i >= 0:
-        return i, "state"
-    for k in stages:
-        i = _first_nonfinite(k)
-        if i >= 0:
-            break
-    return i, "derivative of state"
-
-
-def _run_dopri5(s, p, y, sink, st):
-    nout = _output_count(s)
-    hmax = s.t_end - s.t0
-    t, facold, kout = s.t0, 1e-4, 1
-    reject, last, worst, bad, bad_kind = False, False, -1, -1, ""
-    n = _N
-    _emit(p, t, y, sink)
-    if nout == 0:
-        return
-    k1 = _rhs(t, y, p)
-    st["rhs"] += 1
-    i = _first_nonfinite(k1)
-    if i >= 0:
-        raise _fail(t, "derivative of state", STATES[i])
-    h = _initial_step(s, p, t, y, k1, hmax, st)
-    while True:
-        if not h >= _hmin(t):
-            if bad >= 0:
-                raise _fail(t, bad_kind, STATES[bad])
-            raise _fail_step(t, h, worst)
-        if t + 1.01 * h - s.t_end > 0.0:
-            h = s.t_end - t
-            last = True
-        tph = s.t_end if last else t + h
-        k2 = _rhs(t + C2 * h, [a + h * A21 * b1 for a, b1 in zip(y, k1)], p)
-        k3 = _rhs(t + C3 * h, [a + h * (A31 * b1 + A32 * b2) for a, b1, b2 in zip(y, k1, k2)], p)
-        k4 = _rhs(t + C4 * h, [a + h * (A41 * b1 + A42 * b2 + A43 * b3)
-                               for a, b1, b2, b3 in zip(y, k1, k2, k3)], p)
-        k5 = _rhs(t + C5 * h, [a + h * (A51 * b1 + A52 * b2 + A53 * b3 + A54 * b4)
-                               for a, b1, b2, b3, b4 in zip(y, k1, k2, k3, k4)], p)
-        k6 = _rhs(tph, [a + h * (A61 * b1 + A62 * b2 + A63 * b3 + A64 * b4 + A65 * b5)
-                        for a, b1, b2, b3, b4, b5 in zip(y, k1, k2, k3, k4, k5)], p)
-        y1 = [a + h * (A71 * b1 + A73 * b3 + A74 * b4 + A75 * b5 + A76 * b6)
-              for a, b1, b3, b4, b5, b6 in zip(y, k1, k3, k4, k5, k6)]
-        k7 = _rhs(tph, y1, p)
-        st["rhs"] += 6
-
-        # Hairer's error norm: RMS of err_i / (atol + rtol * max(|y_i|, |y1_i|)).
-        err, worst_q = 0.0, -1.0
-        for i in range(n):
-            sk = s.atol + s.rtol * max(abs(y[i]), abs(y1[i]))
-            q = h * (E1 * k1[i] + E3 * k3[i] + E4 * k4[i] + E5 * k5[i] + E6 * k6[i]
-                     + E7 * k7[i]) / sk
-            err += q * q
-            if q * q > worst_q:
-                worst_q, worst = q * q, i
-        err = math.sqrt(err / n) if n > 0 else 0.0
-        if err != err:  # a non-finite stage: retry with a much smaller step
-            bad, bad_kind = _trial_culprit(y1, (k2, k3, k4, k5, k6, k7))
-            h = h / FACC1
-            reject, last = True, False
-            st["rejected"] += 1
-            continue
-
-        fac11 = err ** EXPO1
-        fac = fac11 / facold ** BETA
-        fac = max(FACC2, min(FACC1, fac / SAFE))
-        hnew = h / fac
-        if err <= 1.0:
-            facold = max(err, 1e-4)
-            st["steps"] += 1
-            i = _first_nonfinite(y1)
-            if i >= 0:
-                raise _fail(tph, "state", STATES[i])
-            rcont = None
-            while kout <= nout:
-                tk = _output_time(s, kout, nout)
-                if tk > tph:
-                    break
-                if tk == tph:
-                    _emit(p, tk, y1, sink)
-                else:
-                    if rcont is None:
-                        rcont = _dense_coefficients(h, y, y1, k1, k3, k4, k5, k6, k7)
-                    _emit(p, tk, _dense(rcont, (tk - t) / h), sink)
-                kout += 1
-            k1, y, t = k7, y1, tph
-            if last:
-                return
-            if abs(hnew) > hmax:
-                hnew = hmax
-            if reject:
-                hnew = min(hnew, h)
-            reject, bad = False, -1
-        else:
-            hnew = h / min(FACC1, fac11 / SAFE)
-            reject, last = True, False
-            st["rejected"] += 1
-        h = hnew
-
-
-def _dense_coefficients(h, y, y1, k1, k3, k4, k5, k6, k7):
-    rcont = []
-    for i in range(len(y)):
-        ydiff = y1[i] - y[i]
-        bspl = h * k1[i] - ydiff
-        rcont.append((y[i], ydiff, bspl, -h * k7[i] + ydiff - bspl,
-                      h * (D1 * k1[i] + D3 * k3[i] + D4 * k4[i] + D5 * k5[i] + D6 * k6[i]
-                           + D7 * k7[i])))
-    return rcont
-
-
-def _dense(rcont, theta):
-    """Hairer's continuous extension of order 4 (CONTD5) at theta in [0, 1]."""
-    theta1 = 1.0 - theta
-    return [r1 + theta * (r2 + theta1 * (r3 + theta * (r4 + theta1 * r5)))
-            for r1, r2, r3, r4, r5 in rcont]
-
-
-def _integrate(s, p, x0, sink, st):
-    y = list(x0)
-    i = _first_nonfinite(y)
-    if i >= 0:
-        raise _fail(s.t0, "state", STATES[i])
-    if s.solver == "dopri5":
-        _run_dopri5(s, p, y, sink, st)
-    else:
-        _run_fixed(s, p, y, sink, st)
-
-
-# ---------------------------------------------------------------- simulate
-
-
-def _overrides(params):
-    given = {}
-    for name, value in (params or {}).items():
-        if name not in _PARAM_NAMES:
-            raise ValueError("unknown parameter '%s'" % name)
-        given[_PARAM_NAMES.index(name)] = float(value)
-    return given
-
-
-def _initial_state(s, p, project_initial):
-    """x0 for the run: initialised, checked finite, projected if asked, constraints checked.
-    p: the parameters and their constants."""
-    j = _first_nonfinite(p[:len(_PARAM_NAMES)])
-    if j >= 0:
-        raise SimulationError("parameter '%s' is not finite" % _PARAM_NAMES[j], s.t0,
-                              numpy.zeros(0), numpy.zeros((0, len(OUTPUTS))))
-    x0 = _init(p)
-    i = _first_nonfinite(x0)
-    if i >= 0:
-        raise SimulationError(str(_fail(s.t0, "state", STATES[i])), s.t0, numpy.zeros(0),
-                              numpy.zeros((0, len(OUTPUTS))))
-    if project_initial:
-        _project_initial(s.t0, x0, p)
-    messages = _check_constraints(s.t0, x0, p)
-    if messages:
-        raise ConstraintError("; ".join(messages), messages)
-    return x0
-
-
-def simulate(t_end=None, dt=None, solver=None, rtol=None, atol=None, params=None, step=None,
-             project_initial=False):
-    """Runs the model; returns (t, Y) with Y[k] the outputs at t[k].  None: the scene's value."""
-    s = _settings(t_end, dt, solver, rtol, atol, step)
-    p = _with_constants(_param_values(_overrides(params)))
-    x0 = _initial_state(s, p, project_initial)
-    times, rows = [], []
-
-    def sink(t, x, y):
-        times.append(t)
-        rows.append(y)
-
-    try:
-        _integrate(s, p, x0, sink, {"steps": 0, "rejected": 0, "rhs": 0})
-    except _Failure as failure:
-        raise SimulationError(str(failure), failure.t, numpy.array(times, dtype=float),
-                              numpy.array(rows, dtype=float).reshape(len(times), len(OUTPUTS)))
-    return (numpy.array(times, dtype=float),
-            numpy.array(rows, dtype=float).reshape(len(times), len(OUTPUTS)))
-
-
-# ---------------------------------------------------------------- command line
-
-USAGE = (
-    "usage: knife_edge [--t-end T] [--dt DT] [--solver euler|rk4|dopri5] [--rtol R] [--atol A]\n"
-    "       [--step H] [-p NAME=VALUE ...] [--project-initial] [--stats]\n"
-)
-_WITH_VALUE = ("--t-end", "--dt", "--solver", "--rtol", "--atol", "--step", "-p")
-_NUMBER_CHARS = frozenset("0123456789+-.eE")
-
-
-class _UsageError(Exception):
-    pass
-
-
-def _help():
-    s = _settings()
-    lines = [
-        USAGE + "Simulates the model and writes CSV (t and the outputs) to stdout.",
-        "  --t-end T          end time (%.17g; the start time is %.17g)" % (s.t_end, s.t0),
-        "  --dt DT            output interval (%.17g)" % s.dt,
-        "  --solver NAME      euler, rk4 or dopri5 (%s)" % s.solver,
-        "  --rtol R           relative tolerance of dopri5 (%.17g)" % s.rtol,
-        "  --atol A           absolute tolerance of dopri5 (%.17g)" % s.atol,
-        "  --step H           fixed step of euler and rk4 (default: dt)",
-        "  -p NAME=VALUE      set a parameter; derived parameters follow",
-        "  --project-initial  project the initial state onto the constraints",
-        "  --stats            print step statistics to stderr",
-    ]
-    if PARAMETERS:
-        lines.append("parameters (NAME = default):")
-    lines += ["  %s = %.17g" % (name, value) for name, value in PARAMETERS.items()]
-    sys.stdout.write("\n".join(lines) + "\n")
-
-
-def _parse_number(option, text):
-    """A decimal number (digits, sign, '.', exponent: no hex, inf or nan), finite."""
-    if text and set(text) <= _NUMBER_CHARS:
-        try:
-            value = float(text)
-        except ValueError:
-            value = math.nan
-        if math.isfinite(value):
-            return value
-    raise _UsageError("error: invalid value for %s: '%s'\n" % (option, text))
-
-
-def _parse_param(text, given):
-    name, eq, value = text.rpartition("=")
-    if not eq or not name:
-        raise _UsageError("error: -p expects NAME=VALUE, got '%s'\n" % text)
-    if name not in _PARAM_NAMES:
-        raise _UsageError("error: unknown parameter '%s'\n" % name)
-    given[_PARAM_NAMES.index(name)] = _parse_number(name, value)
-
-
-def _apply_option(name, value, options, given):
-    if name == "-p":
-        _parse_param(value, given)
-    elif name == "--solver":
-        if value not in SOLVERS:
-            raise _UsageError(
-                "error: unknown solver '%s' (expected euler, rk4 or dopri5)\n" % value)
-        options["solver"] = value
-    elif name == "--step":
-        options["step"] = _parse_number(name, value)
-        if not options["step"] > 0.0:
-            raise _UsageError("error: --step must be positive\n")
-    else:
-        options[name[2:].replace("-", "_")] = _parse_number(name, value)
-
-
-def _parse_args(argv):
-    """(options, given parameters, flags), or None after --help."""
-    options, given, flags = {}, {}, set()
-    i = 0
-    while i < len(argv):
-        arg = argv[i]
-        if arg in ("-h", "--help"):
-            _help()
-            return None
-        if arg in ("--project-initial", "--stats"):
-            flags.add(arg)
-            i += 1
-            continue
-        name, eq, value = arg.partition("=") if arg.startswith("--") else (arg, "", "")
-        if name not in _WITH_VALUE:
-            raise _UsageError("error: unknown option '%s'\n%s" % (arg, USAGE))
-        if not eq:
-            if i + 1 >= len(argv):
-                raise _UsageError("error: option '%s' needs a value\n%s" % (arg, USAGE))
-            i += 1
-            value = argv[i]
-        _apply_option(name, value, options, given)
-        i += 1
-    return options, given, flags
-
-
-def _write_rows(out, times, rows):
-    out.write("".join(
-        ",".join(["%.17g" % t] + ["%.17g" % v for v in y]) + "\n" for t, y in zip(times, rows)))
-
-
-def main(argv=None):
-    """The command line; returns the exit status."""
-    argv = sys.argv[1:] if argv is None else list(argv)
-    try:
-        parsed = _parse_args(argv)
-    except _UsageError as error:
-        sys.stderr.write(str(error))
-        return 2
-    if parsed is None:
-        return 0
-    options, given, flags = parsed
-    try:
-        s = _settings(**options)
-    except ValueError as error:
-        sys.stderr.write("error: %s\n" % error)
-        return 2
-    p = _with_constants(_param_values(given))
-    try:
-        x0 = _initial_state(s, p, "--project-initial" in flags)
-    except ConstraintError as error:
-        sys.stderr.write("".join("error: %s\n" % m for m in error.messages))
-        return 1
-    except SimulationError as error:
-        sys.stderr.write("error: %s\n" % error)
-        return 3
-    times, rows = [], []
-    stats = {"steps": 0, "rejected": 0, "rhs": 0}
-    failure = None
-    try:
-        _integrate(s, p, x0, lambda t, x, y: (times.append(t), rows.append(y)), stats)
-    except _Failure as error:
-        failure = error
-    out = sys.stdout
-    out.write(",".join(["t"] + OUTPUTS) + "\n")
-    _write_rows(out, times, rows)
-    out.flush()
-    if "--stats" in flags:
-        sys.stderr.write("stats: steps=%(steps)d rejected=%(rejected)d rhs=%(rhs)d\n" % stats)
-    if failure is not None:
-        sys.stderr.write("error: %s\n" % failure)
-        return 3
-    return 0
-
-
-if __name__ == "__main__":
-    sys.exit(main())

@@ -1,0 +1,121 @@
+"""Small symbolic helpers that more than one stage uses: inverting a law, testing for zero.
+
+Nothing here calls a general SymPy solver: an equation is inverted only where its inverse is
+clean by construction (degree one in the unknown, or the unknown occurring once under
+functions with a real inverse), so the work is bounded by the size of the expression and can
+never hang.  Everything else is left to a numeric solve in the generated code.
+"""
+from __future__ import annotations
+
+import random
+
+import sympy as sp
+
+# f(u) = w  ->  u = inverse(w), for functions that are bijections of the reals (or of their
+# range onto the reals, where the inverse then gives NaN outside the range, as it should).
+_INVERSES = {
+    sp.exp: sp.log,
+    sp.log: sp.exp,
+    sp.sinh: sp.asinh,
+    sp.tanh: sp.atanh,
+}
+
+
+def linear_solution(equation: sp.Expr, unknown: sp.Symbol) -> sp.Expr | None:
+    """The solution of equation == 0 when it has degree one in unknown with a coefficient
+    free of it: -(equation - a*unknown)/a.  None otherwise."""
+    a = sp.diff(equation, unknown)
+    if a == 0 or a.has(unknown):
+        return None
+    rest = equation - a * unknown
+    if rest.has(unknown):
+        rest = sp.expand(rest)
+        if rest.has(unknown):
+            return None
+    return sp.cancel(-rest / a) if a.free_symbols else -rest / a
+
+
+def peel(equation: sp.Expr, unknown: sp.Symbol) -> sp.Expr | None:
+    """Solve equation == 0 for unknown where the unknown occurs exactly once, under sums,
+    products, odd integer powers and exp/log/sinh/tanh: undo them one by one.  None when
+    that does not apply (then the equation has no clean closed-form inverse)."""
+    if _occurrences(equation, unknown) != 1:
+        return None
+    lhs, rhs = equation, sp.Integer(0)
+    while lhs != unknown:
+        if lhs.is_Add or lhs.is_Mul:
+            inside = [a for a in lhs.args if a.has(unknown)]
+            outside = [a for a in lhs.args if not a.has(unknown)]
+            if lhs.is_Add:
+                rhs = rhs - sp.Add(*outside)
+            else:
+                rhs = rhs / sp.Mul(*outside)
+            (lhs,) = inside
+        elif lhs.is_Pow:
+            base, exp = lhs.args
+            if base.has(unknown) and exp.is_Integer and int(exp) % 2 == 1:
+                n = int(exp)
+                root = sp.sign(rhs) * sp.Abs(rhs) ** sp.Rational(1, abs(n)) if abs(n) != 1 \
+                    else rhs
+                rhs = root if n > 0 else 1 / root
+                lhs = base
+            elif exp.has(unknown) and base.is_Number and base.is_positive and base != 1:
+                rhs = sp.log(rhs) / sp.log(base)
+                lhs = exp
+            else:
+                return None
+        elif type(lhs) in _INVERSES and len(lhs.args) == 1:
+            rhs = _INVERSES[type(lhs)](rhs)
+            (lhs,) = lhs.args
+        else:
+            return None
+    return rhs
+
+
+def _occurrences(expr: sp.Expr, symbol: sp.Symbol) -> int:
+    """How often symbol occurs as a leaf of expr's tree (an explicit stack, no recursion)."""
+    count, stack = 0, [expr]
+    while stack:
+        e = stack.pop()
+        if e == symbol:
+            count += 1
+        elif e.args:
+            stack.extend(a for a in e.args if a.has(symbol))
+    return count
+
+
+def solve_for(equation: sp.Expr, unknown: sp.Symbol) -> sp.Expr | None:
+    """A clean closed form of the unknown from equation == 0, or None (see the module doc)."""
+    return linear_solution(equation, unknown) if _degree_one(equation, unknown) \
+        else peel(equation, unknown)
+
+
+def _degree_one(equation, unknown) -> bool:
+    d = sp.diff(equation, unknown)
+    return d != 0 and not d.has(unknown)
+
+
+def is_zero(expr: sp.Expr, points: int = 3, seed: int = 0) -> bool:
+    """Whether expr is identically zero: structurally after cancellation, or else by its value
+    at random points in 30-digit arithmetic (zero at several random points of an analytic
+    function of real arguments, it is zero: the probability of a false 'zero' is nil).
+    Cheap and bounded, unlike simplify."""
+    expr = sp.expand(expr) if expr.is_Add or expr.is_Mul else expr
+    if expr == 0:
+        return True
+    if not expr.free_symbols:
+        try:
+            return abs(complex(expr.evalf(30))) < 1e-25
+        except (TypeError, ValueError):
+            return False
+    rng = random.Random(seed)
+    symbols = sorted(expr.free_symbols, key=str)
+    for _ in range(points):
+        values = {s: sp.Float(rng.uniform(0.3, 1.7), 30) for s in symbols}
+        try:
+            v = complex(expr.xreplace(values).evalf(30))
+        except (TypeError, ValueError, ZeroDivisionError):
+            return False
+        if not abs(v) < 1e-20:
+            return False
+    return True

@@ -1,0 +1,168 @@
+"""The bond graph as the resolve stage hands it on: elements, bonds, signals, scenes.
+
+Plain frozen values in declaration order, with index maps built once (by name, incident bonds),
+so that every later question about the graph is a dictionary lookup, never a list search.
+The well-formedness checks that more than one stage needs (ports of each element) live here
+as public functions.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import cached_property
+
+import sympy as sp
+
+from .diagnostics import Collector, Note, Span
+from .kinds import KINDS
+
+TIME = sp.Symbol("t", real=True)
+
+
+def var(name: str) -> sp.Symbol:
+    """The symbol of a model variable (all model quantities are real)."""
+    return sp.Symbol(name, real=True)
+
+
+@dataclass(frozen=True)
+class Expr:
+    """A resolved expression and the model names it refers to (for later checks)."""
+
+    value: sp.Expr
+    refs: tuple[tuple[str, Span], ...]  # (owner name, span) of every name reference
+    span: Span
+
+
+@dataclass(frozen=True)
+class Parameter:
+    name: str
+    expr: Expr
+    doc: str | None
+    span: Span
+
+
+@dataclass(frozen=True)
+class Constraint:
+    kind: str | None  # "holonomic" | "nonholonomic" | None (detect)
+    annotation: tuple | None  # ("init" | "phi", Expr)
+    corrector: str  # pid | pd | none
+    gains: tuple[Expr, ...]
+    corrector_span: Span | None
+    span: Span
+
+
+@dataclass(frozen=True)
+class Element:
+    name: str
+    kind: str  # Se, MSe, ..., "0", "1"
+    value: Expr | None  # the positional argument
+    law: tuple[str, Expr] | None  # ("f", EXPR(p)) etc.
+    init: tuple[str, Expr] | None
+    effects: tuple[str, ...]
+    constraint: Constraint | None
+    doc: str | None
+    span: Span
+    name_span: Span
+
+    @property
+    def is_junction(self) -> bool:
+        return self.kind in ("0", "1")
+
+    @property
+    def spec(self):
+        return KINDS.get(self.kind)
+
+
+@dataclass(frozen=True)
+class Bond:
+    src: str
+    dst: str
+    label: str  # unique, e.g. "vx->mx"
+    span: Span
+
+    def other(self, node: str) -> str:
+        return self.dst if self.src == node else self.src
+
+
+@dataclass(frozen=True)
+class Signal:
+    name: str
+    expr: Expr
+    init: Expr | None  # integral blocks: the state's initial value
+    span: Span
+
+    @property
+    def is_integral(self) -> bool:
+        return self.init is not None
+
+
+@dataclass(frozen=True)
+class Scene:
+    name: str
+    doc: str | None
+    effects: tuple[str, ...] | None  # None: all effects
+    effects_span: Span | None
+    outputs: tuple | None  # ast.OutRef
+    time: tuple[Expr, Expr, Expr | None] | None
+    solver: tuple[str, tuple[tuple[str, Expr], ...], Span] | None
+    sets: tuple[tuple[str, Expr, Span], ...]
+    span: Span
+
+
+@dataclass(frozen=True)
+class Graph:
+    name: str
+    doc: str | None
+    path: str
+    parameters: tuple[Parameter, ...]
+    elements: tuple[Element, ...]
+    bonds: tuple[Bond, ...]
+    signals: tuple[Signal, ...]
+    scenes: tuple[Scene, ...]
+    warnings: tuple = ()
+
+    @cached_property
+    def by_name(self) -> dict[str, Element]:
+        return {el.name: el for el in self.elements}
+
+    @cached_property
+    def incident(self) -> dict[str, tuple[int, ...]]:
+        """Element name -> indices of its bonds, in bond order."""
+        out: dict[str, list[int]] = {el.name: [] for el in self.elements}
+        for i, b in enumerate(self.bonds):
+            out[b.src].append(i)
+            if b.dst != b.src:
+                out[b.dst].append(i)
+        return {name: tuple(ix) for name, ix in out.items()}
+
+    def element(self, name: str) -> Element:
+        return self.by_name[name]
+
+
+def check_ports(elements, bonds, diags: Collector) -> None:
+    """Every one-port has one bond, every two-port one bond in and one out; a passive element
+    whose bond points away from it and a junction without bonds are warnings."""
+    ins: dict[str, list[Bond]] = {el.name: [] for el in elements}
+    outs: dict[str, list[Bond]] = {el.name: [] for el in elements}
+    for b in bonds:
+        if b.dst in ins:
+            ins[b.dst].append(b)
+        if b.src in outs:
+            outs[b.src].append(b)
+    for el in elements:
+        i, o = ins[el.name], outs[el.name]
+        if el.is_junction:
+            if not i and not o:
+                diags.warning(el.name_span, f"junction '{el.name}' has no bonds")
+            continue
+        spec = el.spec
+        if spec.ports == 2 and (len(i) != 1 or len(o) != 1):
+            diags.error(el.name_span, f"two-port '{el.name}' ({el.kind}) needs exactly one bond in "
+                                      f"and one bond out; it has {len(i)} in and {len(o)} out",
+                        *[Note(b.span, "bond here") for b in i + o])
+        elif spec.ports == 1 and len(i) + len(o) != 1:
+            diags.error(el.name_span, f"'{el.name}' ({el.kind}) needs exactly one bond; it has "
+                                      f"{len(i) + len(o)}",
+                        *[Note(b.span, "bond here") for b in i + o])
+        elif spec.ports == 1 and o and spec.role in ("storage", "resistor"):
+            diags.warning(o[0].span, f"the bond of '{el.name}' ({el.kind}) points away from "
+                                     "it: power flows out of a passive element")

@@ -1,0 +1,339 @@
+"""The program IR: what the emitters print, nothing they must derive.
+
+A Program is a few functions, each a list of statements over these symbols:
+  t            Symbol("t")            time
+  x[i]         IndexedBase("x")[i]    state i, ordered as `states`
+  p[j]         IndexedBase("p")[j]    parameter j, ordered as `params`
+  c[k]         IndexedBase("c")[k]    constant k: result k of the `consts` function (parameters
+                                      only), computed once whenever they are set
+  v[i]         IndexedBase("v")[i]    component i of the direction of `jvp`
+  w0, w1, ...  Symbol("w<k>")         program variables, each assigned once
+and the functions sin cos tan asin acos atan atan2 sinh cosh tanh asinh atanh exp log sqrt
+Abs sign Min Max Heaviside, Pow, Rational, Float, Integer, pi, E.  Model names never occur in
+expressions, so nothing a model author writes reaches generated code except through the name
+strings (states, outputs, params, block unknowns), which the emitters escape as literals.
+
+Statements (the kinds both emitters render):
+  Assign(w, expr)            w = expr
+  Store(k, expr)             result[k] = expr (a state derivative, an output, x0[k], ...)
+  Solve(block, z, A, b)      A z = b for the unknowns z: A's entries in the order of the
+                             block's plan (bgc.sparse), factored and kept for a Resolve
+  Newton(block, z, ...)      residuals(z) = 0 by Newton's method from z's previous value: body
+                             (assignments given z), residuals, tangents and Jacobian entries
+  Resolve(block, dz, rhs)    J dz = rhs with the factors the block's last solve left (the
+                             tangent of a block in `jvp`)
+"""
+from __future__ import annotations
+
+from collections import Counter
+from dataclasses import dataclass, field
+
+import sympy as sp
+
+from .sparse import LUPlan
+
+T = sp.Symbol("t")
+X = sp.IndexedBase("x")
+P = sp.IndexedBase("p")
+C = sp.IndexedBase("c")
+V = sp.IndexedBase("v")
+FUNCTIONS = ("sin", "cos", "tan", "asin", "acos", "atan", "atan2", "sinh", "cosh", "tanh",
+             "asinh", "atanh", "exp", "log", "sqrt", "Abs", "sign", "Min", "Max", "Heaviside")
+
+
+def W(k: int) -> sp.Symbol:
+    return sp.Symbol(f"w{k}")
+
+
+def as_expr(value) -> sp.Basic:
+    """A SymPy object from a SymPy object or a Python number; never parses text."""
+    if isinstance(value, sp.Basic):
+        return value
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise TypeError(f"expected a SymPy expression or a number, got {type(value).__name__}")
+    return sp.Integer(value) if isinstance(value, int) else sp.Float(value)
+
+
+# ---------------------------------------------------------------- statements
+
+
+@dataclass(frozen=True)
+class Assign:
+    target: sp.Symbol
+    expr: sp.Expr
+
+
+@dataclass(frozen=True)
+class Store:
+    index: int
+    expr: sp.Expr
+
+
+@dataclass(frozen=True)
+class Solve:
+    block: int  # index into Program.blocks
+    unknowns: tuple[sp.Symbol, ...]
+    matrix: tuple[sp.Expr, ...]  # one per entry of the block's plan, in the plan's order
+    rhs: tuple[sp.Expr, ...]  # one per residual row, in the block's row order
+
+
+@dataclass(frozen=True)
+class Newton:
+    block: int
+    unknowns: tuple[sp.Symbol, ...]
+    body: tuple[Assign, ...]
+    residuals: tuple[sp.Expr, ...]
+    tangents: tuple[Assign, ...]
+    jacobian: tuple[sp.Expr, ...]  # one per entry of the block's plan
+    final_factor: bool = False  # factor the Jacobian at the solution (for a Resolve)
+
+
+@dataclass(frozen=True)
+class Resolve:
+    block: int
+    targets: tuple[sp.Symbol, ...]
+    rhs: tuple[sp.Expr, ...]
+
+
+Statement = Assign | Store | Solve | Newton | Resolve
+
+
+def expressions(s) -> list[sp.Expr]:
+    """The expressions a statement reads at its own level (a Newton's inner ones excluded)."""
+    if isinstance(s, (Assign, Store)):
+        return [s.expr]
+    if isinstance(s, Solve):
+        return list(s.matrix) + list(s.rhs)
+    if isinstance(s, Resolve):
+        return list(s.rhs)
+    return []
+
+
+def inner_expressions(s: Newton) -> list[sp.Expr]:
+    return [a.expr for a in s.body] + list(s.residuals) + [a.expr for a in s.tangents] + \
+        list(s.jacobian)
+
+
+def defines(s) -> tuple[sp.Symbol, ...]:
+    """The program variables a statement defines (visible after it)."""
+    if isinstance(s, Assign):
+        return (s.target,)
+    if isinstance(s, Solve):
+        return s.unknowns
+    if isinstance(s, Resolve):
+        return s.targets
+    if isinstance(s, Newton):
+        return s.unknowns + tuple(a.target for a in s.body)
+    return ()
+
+
+def uses(s) -> set:
+    """The symbols a statement reads from before it."""
+    if isinstance(s, Newton):
+        inner = set(s.unknowns) | {a.target for a in s.body} | {a.target for a in s.tangents}
+        out = set()
+        for e in inner_expressions(s):
+            out |= e.free_symbols
+        return out - inner
+    out = set()
+    for e in expressions(s):
+        out |= e.free_symbols
+    return out
+
+
+# ---------------------------------------------------------------- the program
+
+
+@dataclass(frozen=True)
+class Function:
+    name: str  # consts init rhs outputs jvp residual scale position_jac velocity_jac
+    args: tuple[str, ...]  # of t, x, p, v
+    size: int  # of its result array
+    body: tuple
+
+
+@dataclass(frozen=True)
+class Param:
+    name: str
+    default: sp.Expr  # uses only p[k] for k < own index; recomputed when not overridden
+
+
+@dataclass(frozen=True)
+class ConstraintRow:
+    """One scalar constraint residual, checked (and optionally projected) at the initial time."""
+
+    junction: str
+    level: str  # "position" (holonomic Phi) or "velocity" (dPhi/dt, or nonholonomic Phi)
+
+
+@dataclass(frozen=True)
+class SceneSettings:
+    t0: float
+    t_end: float
+    dt: float
+    solver: str  # euler | rk4 | dopri5
+    rtol: float
+    atol: float
+    step: float | None  # fixed step for euler/rk4; None: dt
+
+
+@dataclass(frozen=True)
+class BlockPlan:
+    index: int  # 1-based, as messages and reports name it
+    unknowns: tuple[str, ...]  # display names
+    method: str  # "lu" | "newton"
+    lu: LUPlan
+
+
+@dataclass(frozen=True)
+class JacobianPattern:
+    """Where d rhs / d x may be nonzero, and the columns that one directional derivative can
+    evaluate together (no two share a row): J costs len(colors) calls of jvp."""
+
+    columns: tuple[tuple[int, ...], ...]  # per state j: the rows i with J[i, j] possibly nonzero
+    colors: tuple[tuple[int, ...], ...]
+
+
+FUNCTION_NAMES = ("consts", "init", "rhs", "outputs", "jvp", "residual", "scale",
+                  "position_jac", "velocity_jac")
+
+
+@dataclass(frozen=True)
+class Program:
+    name: str
+    states: tuple[str, ...]
+    params: tuple[Param, ...]
+    outputs: tuple[str, ...]
+    constraints: tuple[ConstraintRow, ...]
+    velocity_movable: tuple[bool, ...]
+    scene: SceneSettings
+    functions: dict  # name -> Function, for every name of FUNCTION_NAMES
+    blocks: tuple[BlockPlan, ...] = ()
+    jacobian: JacobianPattern = JacobianPattern((), ())
+
+    def function(self, name: str) -> Function:
+        return self.functions[name]
+
+    @property
+    def n_consts(self) -> int:
+        return self.functions["consts"].size
+
+    @property
+    def position_rows(self) -> tuple[int, ...]:
+        return tuple(k for k, c in enumerate(self.constraints) if c.level == "position")
+
+    @property
+    def velocity_rows(self) -> tuple[int, ...]:
+        return tuple(k for k, c in enumerate(self.constraints) if c.level == "velocity")
+
+
+# ---------------------------------------------------------------- operation counts
+
+
+def count_ops(program: Program, names=("rhs", "outputs")) -> Counter:
+    """Operations by kind (add, mul, div, call, pow, solve) of the named functions, counted as
+    the printers write them: a - b is one add, x**2 one mul, a/b one div."""
+    total = Counter()
+    for name in names:
+        for s in program.function(name).body:
+            for e in expressions(s):
+                total.update(expression_ops(e))
+            if isinstance(s, Newton):
+                for e in inner_expressions(s):
+                    total.update(expression_ops(e))
+            if isinstance(s, (Solve, Newton, Resolve)):
+                total["solve"] += 1
+                total["solve_flops"] += program.blocks[s.block].lu.flops
+    return total
+
+
+def expression_ops(expr: sp.Expr) -> Counter:
+    ops = Counter()
+    stack = [(expr, False)]
+    while stack:
+        e, in_sum = stack.pop()
+        if e.is_Atom or e.is_Indexed:
+            continue
+        if e.is_Add:
+            ops["add"] += len(e.args) - 1
+            stack.extend((a, True) for a in e.args)
+            continue
+        elif e.is_Mul:
+            coeff, rest = e.as_coeff_Mul()
+            factors = sp.Mul.make_args(rest)
+            inverse = sum(1 for f in factors if f.is_Pow and f.exp.is_Rational and f.exp < 0)
+            direct = len(factors) - inverse + (0 if abs(coeff) == 1 else 1)
+            ops["mul"] += max(direct - 1, 0)
+            ops["div"] += 1 if inverse else 0
+            ops["mul"] += max(inverse - 1, 0)
+            if coeff == -1 and direct <= 1 and not inverse and not in_sum:
+                ops["neg"] += 1  # a negated term of a sum is a subtraction, counted there
+        elif e.is_Pow:
+            if e.exp == sp.S.Half:
+                ops["call"] += 1
+            elif e.exp.is_Integer and 2 <= abs(int(e.exp)) <= 4:
+                ops["mul"] += abs(int(e.exp)) - 1
+                ops["div"] += 1 if e.exp < 0 else 0
+            elif e.exp == -1:
+                ops["div"] += 1
+            else:
+                ops["call"] += 1
+        else:
+            ops["call"] += 1
+        stack.extend((a, False) for a in e.args)
+    return ops
+
+
+# ---------------------------------------------------------------- layout for emitters
+
+
+@dataclass(frozen=True)
+class Layout:
+    """How an emitter lays a function out: chunks of statements (each its own C or Python
+    function, so that long straight-line code stays digestible), and which program variables
+    live in the workspace (read across chunks, or by a Newton block's own function) rather than
+    as locals: slot[w] = index into the workspace's variable area."""
+
+    chunks: tuple[tuple, ...]
+    slot: dict = field(default_factory=dict)
+
+
+CHUNK_OPS = 3000  # operations per chunk (gcc -O2 time grows faster than linearly in this)
+
+
+def layout(body: tuple, base: int = 0, chunk_ops: int = CHUNK_OPS) -> Layout:
+    """Split body into chunks of at most about chunk_ops operations; variables read outside the
+    chunk that defines them, and everything a Newton block reads or defines, get slots from
+    `base` on, in order of definition."""
+    chunks: list[list] = [[]]
+    ops = 0
+    for s in body:
+        cost = sum(sum(expression_ops(e).values()) + 1 for e in expressions(s))
+        if isinstance(s, Newton):
+            cost += sum(sum(expression_ops(e).values()) + 1 for e in inner_expressions(s))
+        if chunks[-1] and ops + cost > chunk_ops:
+            chunks.append([])
+            ops = 0
+        chunks[-1].append(s)
+        ops += cost
+    home = {}
+    for k, chunk in enumerate(chunks):
+        for s in chunk:
+            for w in defines(s):
+                home[w] = k
+    shared = set()
+    for k, chunk in enumerate(chunks):
+        for s in chunk:
+            read = uses(s)
+            if isinstance(s, Newton):
+                shared |= {u for u in read if u in home}
+                shared |= set(defines(s))
+            else:
+                shared |= {u for u in read if u in home and home[u] != k}
+    slot = {}
+    for chunk in chunks:
+        for s in chunk:
+            for w in defines(s):
+                if w in shared and w not in slot:
+                    slot[w] = base + len(slot)
+    return Layout(tuple(tuple(c) for c in chunks), slot)

@@ -1,0 +1,133 @@
+/* ======================================================================= API === */
+/* Everything global is prefixed bgc_/BGC_.  The model part above defines the sizes
+   (BGC_NUM_*) and the parameter struct; the functions below are defined further down. */
+
+#define BGC_DIM(n) ((n) > 0 ? (n) : 1) /* array size for n elements, n may be 0 */
+
+enum { BGC_EULER = 0, BGC_RK4 = 1, BGC_DOPRI5 = 2 };
+enum { BGC_OK = 0, BGC_ERR_CONSTRAINT = 1, BGC_ERR_USAGE = 2, BGC_ERR_RUNTIME = 3 };
+/* How an algebraic block failed (bgc_work.failure). */
+enum { BGC_BLOCK_SINGULAR = 1, BGC_BLOCK_DIVERGED = 2, BGC_BLOCK_NONFINITE = 3 };
+
+/* Display names, ordered as the arrays below use them. */
+extern const char *const bgc_model_name;
+extern const char *const bgc_state_names[BGC_DIM(BGC_NUM_STATES)];
+extern const char *const bgc_param_names[BGC_DIM(BGC_NUM_PARAMS)];
+extern const char *const bgc_output_names[BGC_DIM(BGC_NUM_OUTPUTS)];
+extern const char *const bgc_constraint_names[BGC_DIM(BGC_NUM_CONSTRAINTS)]; /* junctions */
+extern const char *const bgc_constraint_levels[BGC_DIM(BGC_NUM_CONSTRAINTS)]; /* position|velocity */
+
+/* Sets every parameter j with !given[j] (all of them if given is NULL) from its default
+   expression, in order, so that a derived parameter follows the parameters it uses; then
+   updates the constants. */
+void bgc_params_defaults(bgc_params *p, const int *given);
+/* Recomputes the constants p->c from the parameter fields.  Call it after setting a field
+   and before calling a model function (bgc_simulate, bgc_check_constraints and
+   bgc_project_initial update a copy of p themselves). */
+void bgc_params_update(bgc_params *p);
+/* The field of parameter j (NULL if j is out of range); its index by name (-1 if unknown). */
+double *bgc_param_ref(bgc_params *p, int j);
+int bgc_param_index(const char *name);
+
+/* The workspace of the model functions: the values they share between their parts, the
+   storage of the algebraic blocks solved numerically (factors, and each Newton block's last
+   solution, its next starting value), and the tolerance of the Newton iterations.  One per
+   thread; bgc_work_new returns NULL when out of memory. */
+typedef struct bgc_work {
+    double *v;          /* BGC_WORK_DOUBLES values */
+    int *iv;            /* BGC_WORK_INTS values (pivots) */
+    double rtol, atol;  /* Newton: |step| <= 0.01 * (atol + rtol * |z|) ends the iteration */
+    int block;          /* after a failure: the block (1-based, as bgc_block_names) ... */
+    int failure;        /* ... and how: BGC_BLOCK_SINGULAR, _DIVERGED or _NONFINITE */
+    double t;           /* ... and when */
+} bgc_work;
+bgc_work *bgc_work_new(void);
+void bgc_work_free(bgc_work *w);
+/* The unknowns of each algebraic block solved in the generated code (comma-separated). */
+extern const char *const bgc_block_names[BGC_DIM(BGC_NUM_BLOCKS)];
+/* "at t = ...: algebraic block k (...) is singular" after a model function returned nonzero. */
+void bgc_work_message(const bgc_work *w, char *msg, size_t msg_size);
+
+/* The model: x[BGC_NUM_STATES] ordered as bgc_state_names, y as bgc_output_names.  The
+   functions that may solve algebraic blocks return 0, or nonzero when a block failed (see
+   bgc_work_message).  bgc_jvp gives jv = J v for the Jacobian J = d rhs / d x, and
+   bgc_jacobian J itself (row-major, BGC_NUM_STATES squared), both derived symbolically
+   through the algebraic solves.  r and s per constraint row; the constraint Jacobians
+   row-major (rows x BGC_NUM_STATES) for the position rows and for the velocity rows.  Row k
+   holds when |r[k]| <= 1e-9 * s[k]. */
+void bgc_init(const bgc_params *p, double *x0);
+int bgc_rhs(double t, const double *x, const bgc_params *p, bgc_work *w, double *dx);
+int bgc_outputs(double t, const double *x, const bgc_params *p, bgc_work *w, double *y);
+int bgc_jvp(double t, const double *x, const bgc_params *p, bgc_work *w, const double *v,
+            double *jv);
+int bgc_jacobian(double t, const double *x, const bgc_params *p, bgc_work *w, double *J);
+void bgc_residual(double t, const double *x, const bgc_params *p, double *r);
+void bgc_scale(double t, const double *x, const bgc_params *p, double *s);
+void bgc_position_jac(double t, const double *x, const bgc_params *p, double *J);
+void bgc_velocity_jac(double t, const double *x, const bgc_params *p, double *J);
+
+/* Number of violated constraint rows at (t, x); each is reported on err if err != NULL. */
+int bgc_check_constraints(double t, const double *x, const bgc_params *p, FILE *err);
+/* Gauss-Newton minimum-norm projection of x onto the position rows, then onto the velocity
+   rows (moving only velocity-movable states).  0 on success, else BGC_ERR_CONSTRAINT
+   with a message in msg. */
+int bgc_project_initial(double t, double *x, const bgc_params *p, char *msg, size_t msg_size);
+
+typedef struct bgc_settings {
+    double t0, t_end, dt; /* output times t0 + k*dt, and t_end */
+    int solver;           /* BGC_EULER, BGC_RK4 or BGC_DOPRI5 */
+    double rtol, atol;    /* dopri5 error control (and the Newton tolerance) */
+    double step;          /* fixed step of euler/rk4; 0: dt */
+} bgc_settings;
+typedef struct bgc_stats {
+    long steps, rejected, rhs; /* accepted steps, rejected steps, bgc_rhs calls */
+} bgc_stats;
+/* Called at every output time with the state and the outputs; nonzero stops the run. */
+typedef int (*bgc_sink)(void *ctx, double t, const double *x, const double *y);
+
+/* The compiled scene's settings; 0 if s is valid, else BGC_ERR_USAGE and a message. */
+void bgc_settings_default(bgc_settings *s);
+int bgc_check_settings(const bgc_settings *s, char *msg, size_t msg_size);
+/* Integrates from x0 at s->t0 to s->t_end.  Returns 0, BGC_ERR_USAGE (bad settings),
+   BGC_ERR_RUNTIME (non-finite value, step size too small, a failed algebraic block or no
+   memory: message in msg), or the sink's nonzero value.  stats are added to. */
+int bgc_simulate(const bgc_settings *s, const bgc_params *p, const double *x0, bgc_sink sink,
+                 void *ctx, bgc_stats *stats, char *msg, size_t msg_size);
+
+/* -------------------------------------------- between the model part and the runtime --- */
+static inline double bgc_sq(double a) { return a * a; }
+static inline double bgc_min(double a, double b) { return b < a ? b : a; }
+static inline double bgc_max(double a, double b) { return b > a ? b : a; }
+static inline double bgc_sign(double a) { return a > 0.0 ? 1.0 : (a < 0.0 ? -1.0 : a); }
+static inline double bgc_heaviside(double a, double at_zero)
+{
+    return a > 0.0 ? 1.0 : (a < 0.0 ? 0.0 : (a == 0.0 ? at_zero : a));
+}
+
+/* A block's factorization plan (bgc/sparse.py): static order, or dense (partial pivoting). */
+typedef struct bgc_lu_plan {
+    int m, dense, nnz;
+    const int *diag, *lptr, *lpos, *lrow, *uptr, *upos, *ucol, *upd, *prow, *pcol;
+} bgc_lu_plan;
+/* A block and where its values live: offsets into bgc_work.v (the matrix as assembled,
+   its factors, the dense fallback, the right side / solution; for Newton blocks the unknowns,
+   which persist as the next starting value, the residuals, a trial point and its residuals)
+   and into bgc_work.iv (pivots, and which factorization was used). */
+typedef struct bgc_block {
+    bgc_lu_plan lu;
+    int save, lu_off, dense, b, scale, z, r, zt, rt;
+    int piv, how;
+} bgc_block;
+/* A Newton block's residuals r at z (and, if J is not NULL, its Jacobian at the positions of
+   the block's plan); nonzero if a block inside failed. */
+typedef int (*bgc_eval_fn)(double t, const double *x, const bgc_params *p, bgc_work *w,
+                           const double *z, double *r, double *J);
+/* Factor the matrix assembled at .save and solve for the right side at .b, in place. */
+int bgc_block_solve(bgc_work *w, int k, double t);
+/* Solve again for the right side at .b with the factors the last solve (or Newton's final
+   factorization) left. */
+int bgc_block_resolve(bgc_work *w, int k, double t);
+/* Newton's method from the unknowns' last values, damped (Armijo); final_factor: factor the
+   Jacobian at the solution for a later bgc_block_resolve. */
+int bgc_newton(bgc_work *w, int k, bgc_eval_fn f, double t, const double *x,
+               const bgc_params *p, int final_factor);
