@@ -9,7 +9,10 @@ from __future__ import annotations
 
 import random
 
+import mpmath  # SymPy's own dependency: the 30-digit determinant of is_singular
 import sympy as sp
+
+from .differentiate import partial
 
 # f(u) = w  ->  u = inverse(w), for functions that are bijections of the reals (or of their
 # range onto the reals, where the inverse then gives NaN outside the range, as it should).
@@ -24,7 +27,7 @@ _INVERSES = {
 def linear_solution(equation: sp.Expr, unknown: sp.Symbol) -> sp.Expr | None:
     """The solution of equation == 0 when it has degree one in unknown with a coefficient
     free of it: -(equation - a*unknown)/a.  None otherwise."""
-    a = sp.diff(equation, unknown)
+    a = partial(equation, unknown)
     if a == 0 or a.has(unknown):
         return None
     rest = equation - a * unknown
@@ -32,7 +35,9 @@ def linear_solution(equation: sp.Expr, unknown: sp.Symbol) -> sp.Expr | None:
         rest = sp.expand(rest)
         if rest.has(unknown):
             return None
-    return sp.cancel(-rest / a) if a.free_symbols else -rest / a
+    if a.is_Add and a.free_symbols and sp.count_ops(a) + sp.count_ops(rest) < 40:
+        return sp.cancel(-rest / a)  # tidy a compound coefficient; a monomial divides cleanly
+    return -rest / a
 
 
 def peel(equation: sp.Expr, unknown: sp.Symbol) -> sp.Expr | None:
@@ -91,7 +96,7 @@ def solve_for(equation: sp.Expr, unknown: sp.Symbol) -> sp.Expr | None:
 
 
 def _degree_one(equation, unknown) -> bool:
-    d = sp.diff(equation, unknown)
+    d = partial(equation, unknown)
     return d != 0 and not d.has(unknown)
 
 
@@ -118,4 +123,31 @@ def is_zero(expr: sp.Expr, points: int = 3, seed: int = 0) -> bool:
             return False
         if not abs(v) < 1e-20:
             return False
+    return True
+
+
+def is_singular(rows: int, entries, points: int = 3, seed: int = 0) -> bool:
+    """Whether the square matrix with these (row, column, expression) entries is singular
+    whatever the values of its symbols: its determinant, at random points in 30-digit
+    arithmetic, below 1e-20 of Hadamard's bound (the product of the rows' norms).  A
+    determinant that vanishes at several random points vanishes identically."""
+    rng = random.Random(seed)
+    symbols = sorted(set().union(*[e.free_symbols for _, _, e in entries]) if entries else (),
+                     key=str)
+    with mpmath.workdps(30):
+        for _ in range(points):
+            values = {s: sp.Float(rng.uniform(0.3, 1.7), 30) for s in symbols}
+            a = mpmath.zeros(rows, rows)
+            for i, j, e in entries:
+                try:
+                    a[i, j] = mpmath.mpf(sp.Float(e.xreplace(values).evalf(30), 30))
+                except (TypeError, ValueError):
+                    return False  # not a real number there: no conclusion
+            bound = mpmath.mpf(1)
+            for i in range(rows):
+                bound *= mpmath.sqrt(sum(a[i, j] ** 2 for j in range(rows)))
+            if bound == 0:
+                continue
+            if abs(mpmath.det(a)) > mpmath.mpf("1e-20") * bound:
+                return False
     return True

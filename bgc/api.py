@@ -3,6 +3,7 @@ reduce -> lower -> emit.  `bgc.cli` and the tests use exactly these."""
 from __future__ import annotations
 
 import io
+import time
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -37,7 +38,8 @@ class Compiled:
     causal: CausalGraph  # the scene's graph, its settings, the causal strokes
     system: EquationSystem
     reduced: Reduced
-    program: Program
+    program: Program | None  # None when built for a report only
+    timings: tuple[tuple[str, float], ...] = ()  # (stage, seconds), for benchmarks
 
     @property
     def graph(self) -> Graph:  # with the scene's effects applied
@@ -90,31 +92,48 @@ def parse_model(model) -> ast.Model:
 
 
 def build(model, scene: str | None = None, project_initial: bool = False,
-          algebra: str = "auto") -> Compiled:
-    """Run the pipeline up to the program IR."""
+          algebra: str = "auto", program: bool = True) -> Compiled:
+    """Run the pipeline up to the program IR (program=False: up to the reduce stage, all that
+    `check` and `equations` need; Compiled.program is then None)."""
     if algebra not in ALGEBRA:
         raise ValueError(f"algebra must be one of {', '.join(ALGEBRA)}, not {algebra!r}")
     src = _source(model)
+    clock = _Clock()
     try:
-        graph = resolve(parse(src.text, src.path))
-        causal = assign_causality(apply_scene(graph, scene))
-        system = build_equations(causal)
-        reduced = reduce(system, project_initial=project_initial, algebra=algebra)
-        program = lower(reduced)
+        ast_ = clock("parse", parse, src.text, src.path)
+        graph = clock("resolve", resolve, ast_)
+        scenario = clock("scene", apply_scene, graph, scene)
+        causal = clock("causality", assign_causality, scenario)
+        system = clock("equations", build_equations, causal)
+        reduced = clock("reduce", reduce, system, project_initial, algebra)
+        ir_program = clock("lower", lower, reduced) if program else None
     except ModelError as exc:
         raise BgcModelError(exc, src) from None
-    return Compiled(src, causal, system, reduced, program)
+    return Compiled(src, causal, system, reduced, ir_program, tuple(clock.times))
+
+
+class _Clock:
+    """Runs the stages, noting how long each took."""
+
+    def __init__(self):
+        self.times: list[tuple[str, float]] = []
+
+    def __call__(self, name, stage, *args):
+        start = time.perf_counter()
+        value = stage(*args)
+        self.times.append((name, time.perf_counter() - start))
+        return value
 
 
 def check(model, scene: str | None = None, algebra: str = "auto") -> str:
-    return check_report(build(model, scene, algebra=algebra))
+    return check_report(build(model, scene, algebra=algebra, program=False))
 
 
 def equations(model, scene: str | None = None, format: str = "text",
               algebra: str = "auto") -> str:
     if format not in ("text", "latex"):
         raise ValueError(f"format must be 'text' or 'latex', not {format!r}")
-    compiled = build(model, scene, algebra=algebra)
+    compiled = build(model, scene, algebra=algebra, program=False)
     return equations_latex(compiled) if format == "latex" else equations_text(compiled)
 
 

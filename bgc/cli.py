@@ -20,9 +20,9 @@ def _warn(compiled: api.Compiled):
         click.echo(format_diagnostic(d, compiled.source.path, compiled.source.text), err=True)
 
 
-def _build(model, scene, project_initial=False, algebra="auto") -> api.Compiled:
+def _build(model, scene, project_initial=False, algebra="auto", program=True) -> api.Compiled:
     try:
-        compiled = api.build(model, scene, project_initial, algebra)
+        compiled = api.build(model, scene, project_initial, algebra, program)
     except api.BgcModelError as exc:
         click.echo(str(exc), err=True)
         sys.exit(1)
@@ -86,7 +86,7 @@ def main():
 @ALGEBRA
 def check(model, scene, algebra):
     """Parse and assign causality; print states, constraints, algebraic blocks, warnings."""
-    click.echo(check_report(_build(model, scene, algebra=algebra)), nl=False)
+    click.echo(check_report(_build(model, scene, algebra=algebra, program=False)), nl=False)
 
 
 @main.command()
@@ -96,7 +96,7 @@ def check(model, scene, algebra):
 @click.option("--format", "fmt", type=click.Choice(["text", "latex"]), default="text")
 def equations(model, scene, algebra, fmt):
     """Print the reduced equations, multipliers included."""
-    compiled = _build(model, scene, algebra=algebra)
+    compiled = _build(model, scene, algebra=algebra, program=False)
     click.echo((equations_latex if fmt == "latex" else equations_text)(compiled), nl=False)
 
 

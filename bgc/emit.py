@@ -30,6 +30,7 @@ POW10_RANGE = (-24, 56)  # powers of ten for the C number formatter: |v| in abou
 PLAN_ARRAYS = ("diag", "lptr", "lpos", "lrow", "uptr", "upos", "ucol", "upd", "prow", "pcol")
 MODEL_FUNCTIONS = ("rhs", "outputs", "jvp")  # take the workspace, may solve blocks
 PLAIN_FUNCTIONS = ("residual", "scale", "position_jac", "velocity_jac")
+SPARSE_FUNCTIONS = ("position_jac", "velocity_jac")  # store their nonzero entries only
 
 
 class EmitError(ValueError):
@@ -104,6 +105,7 @@ class _Writer:
         self.printer = printer
         self.c = lang == "c"
         self.function = ""  # the IR function being written (names its Newton functions)
+        self.used: set = set()  # the symbols the function reads
 
     def newton_name(self, block: int) -> str:
         return (f"bgc_{self.function}_block{block}" if self.c
@@ -154,6 +156,8 @@ class _Writer:
                 lines.append(f"_{call[4:]}(w, {s.block}, {t_name})")
             targets = s.unknowns if isinstance(s, Solve) else s.targets
             for k, z in enumerate(targets):
+                if z not in self.used:
+                    continue  # an unknown that nothing reads stays in the workspace
                 text = names.get(z)
                 lines.append(self.assign(text or z.name, f"wv[{area.b + k}]", text is None))
             return lines
@@ -193,6 +197,7 @@ class _Writer:
 def _function_context(writer: _Writer, name: str, out_name: str) -> dict:
     f = writer.program.function(name)
     writer.function = name
+    writer.used = set().union(*[ir.uses(s) for s in f.body]) if f.body else set()
     layout = writer.ws.layouts[name]
     names = writer.storage(layout)
     chunks = []
@@ -235,6 +240,8 @@ def emit_c(program: Program, chunk_ops: int = ir.CHUNK_OPS) -> dict[str, str]:
         param_defaults=[printer.doprint(p.default) for p in program.params],
         model={name: _function_context(writer, name, "out") for name in MODEL_FUNCTIONS},
         plain={name: _plain_lines(writer, name, "out") for name in PLAIN_FUNCTIONS},
+        plain_sizes={name: program.function(name).size for name in PLAIN_FUNCTIONS},
+        sparse=SPARSE_FUNCTIONS,
         consts=_plain_lines(writer, "consts", "p->c"),
         init=_plain_lines(writer, "init", "x0"),
         scene=_scene_context(program, c_string_literal, step_none="0.0"),
@@ -432,7 +439,10 @@ def _validate(program: Program) -> None:
         if f.size != size:
             raise EmitError(f"function {name} has {f.size} results, expected {size}")
         stores = sorted(s.index for s in f.body if isinstance(s, Store))
-        if stores != list(range(size)):
+        if name in SPARSE_FUNCTIONS:  # the nonzero entries, each once
+            if len(set(stores)) != len(stores) or any(not 0 <= k < size for k in stores):
+                raise EmitError(f"function {name} stores an entry twice or out of range")
+        elif stores != list(range(size)):
             raise EmitError(f"function {name} does not store each of its {size} results once")
     if len(program.velocity_movable) != n:
         raise EmitError(f"velocity_movable has {len(program.velocity_movable)} entries, "

@@ -54,6 +54,44 @@ def as_expr(value) -> sp.Basic:
     return sp.Integer(value) if isinstance(value, int) else sp.Float(value)
 
 
+# ---------------------------------------------------------------- rebuilding expressions
+
+_UNEVALUATED = (sp.Abs, sp.sign)  # rebuilt as they are: evaluating them queries SymPy's
+#                                   assumptions about every factor, the costliest step here
+
+
+def rebuild(e, args):
+    """e with new arguments (e itself when none changed)."""
+    if all(a is b for a, b in zip(args, e.args)):
+        return e
+    if isinstance(e, _UNEVALUATED):
+        return e.func(*args, evaluate=False)
+    return e.func(*args)
+
+
+def substitute(expr, mapping: dict, memo: dict | None = None):
+    """expr with the symbols (or subexpressions) of mapping replaced, bottom-up with an explicit
+    stack; only changed nodes are rebuilt; memo (shared between calls) remembers results."""
+    memo = {} if memo is None else memo
+    stack = [(expr, False)]
+    while stack:
+        e, ready = stack.pop()
+        if e in memo:
+            continue
+        if e in mapping:
+            memo[e] = mapping[e]
+            continue
+        if e.is_Atom or e.is_Indexed or not e.args:
+            memo[e] = e
+            continue
+        if not ready:
+            stack.append((e, True))
+            stack.extend((a, False) for a in e.args if a not in memo)
+            continue
+        memo[e] = rebuild(e, [memo[a] for a in e.args])
+    return memo[expr]
+
+
 # ---------------------------------------------------------------- statements
 
 
@@ -298,7 +336,7 @@ class Layout:
     slot: dict = field(default_factory=dict)
 
 
-CHUNK_OPS = 3000  # operations per chunk (gcc -O2 time grows faster than linearly in this)
+CHUNK_OPS = 1500  # operations per chunk (gcc -O2 time grows faster than linearly in this)
 
 
 def layout(body: tuple, base: int = 0, chunk_ops: int = CHUNK_OPS) -> Layout:

@@ -191,6 +191,7 @@ class _Mapper:
         self.count = 0
         self.blocks: dict = {}  # reduce Block.index -> position in plans
         self.plans: list[BlockPlan] = []
+        self.mapped: dict = {}  # model expression -> IR expression
 
     def target(self, s):
         """The program variable of s (from now on, s means it)."""
@@ -202,8 +203,12 @@ class _Mapper:
         return w
 
     def expr(self, e):
-        e = e.xreplace(self.sub) if e.free_symbols else e
-        return _integral_floats(e)
+        """e in the IR's symbols.  A model symbol means the same in every function, so an
+        expression that rhs, outputs and jvp share is mapped once."""
+        done = self.mapped.get(e)
+        if done is None:
+            done = self.mapped[e] = _integral_floats(ir.substitute(e, self.sub))
+        return done
 
     def assign(self, a: RAssign, out, propagate=True):
         e = self.expr(a.expr)
@@ -321,39 +326,57 @@ def hoist_constants(functions: list[Function]) -> tuple[tuple[sp.Expr, ...], lis
     than a single parameter; and within a sum or product that also uses those, its
     parameter-only terms or factors taken together (2*m*g*y becomes c[k]*y).  A constant that
     occurs more than once is one c[k]; they are numbered in order of first occurrence (walking
-    the statements and the expression trees in their canonical order), so that no set or hash
-    order reaches the result.  Sums and products may group their terms differently, so values
-    can differ in the last bits."""
+    the statements and the expression trees left to right in their canonical order), so that
+    no set or hash order reaches the result.  Sums and products may group their terms
+    differently, so values can differ in the last bits.  One bottom-up pass per expression."""
     pool: dict = {}
-    memo: dict = {}
+    info: dict = {}  # node -> (rewritten, parameter-only, uses a parameter)
 
-    def parameter_only(e):
-        """Numbers and parameters only (the label symbol p comes with every p[j])."""
-        return all(s == P.label or (s.is_Indexed and s.base == P) for s in e.free_symbols)
-
-    def constant(e):
-        if e.is_Atom or e.is_Indexed or not e.has(P):
+    def constant(e, uses_p):
+        if e.is_Atom or e.is_Indexed or not uses_p:
             return e
         if e not in pool:
             pool[e] = C[len(pool)]
         return pool[e]
 
-    def visit(e):
-        if e.is_Atom or e.is_Indexed:
-            return e
-        if e not in memo:
-            memo[e] = rewrite(e)
-        return memo[e]
+    def analyse(root):
+        stack = [(root, False)]
+        while stack:
+            e, ready = stack.pop()
+            if e in info:
+                continue
+            if e.is_Indexed:
+                info[e] = (e, e.base == P, e.base == P)
+                continue
+            if e.is_Symbol:
+                info[e] = (e, False, False)  # t, a program variable
+                continue
+            if e.is_Atom or not e.args:
+                info[e] = (e, True, False)  # a number
+                continue
+            if not ready:
+                stack.append((e, True))
+                stack.extend((a, False) for a in reversed(e.args) if a not in info)
+                continue
+            kids = [info[a] for a in e.args]
+            uses_p = any(k[2] for k in kids)
+            if all(k[1] for k in kids):
+                info[e] = (e, True, uses_p)
+                continue
+            if (e.is_Add or e.is_Mul) and sum(1 for k in kids if k[1]) > 1:
+                fixed = [a for a, k in zip(e.args, kids) if k[1]]
+                group = e.func(*fixed)
+                varying = [k[0] for k in kids if not k[1]]
+                new = e.func(constant(group, any(k[2] for k in kids if k[1])), *varying)
+            else:
+                new = ir.rebuild(e, [constant(a, k[2]) if k[1] else k[0]
+                                     for a, k in zip(e.args, kids)])
+            info[e] = (new, False, uses_p)
 
-    def rewrite(e):
-        if parameter_only(e):
-            return constant(e)
-        if e.is_Add or e.is_Mul:
-            fixed = [a for a in e.args if parameter_only(a)]
-            if len(fixed) > 1:
-                varying = [visit(a) for a in e.args if not parameter_only(a)]
-                return e.func(constant(e.func(*fixed)), *varying)
-        return e.func(*[visit(a) for a in e.args])
+    def visit(e):
+        analyse(e)
+        new, fixed, uses_p = info[e]
+        return constant(e, uses_p) if fixed else new
 
     out = [Function(f.name, f.args, f.size, tuple(_map_statement(s, visit) for s in f.body))
            for f in functions]
@@ -413,8 +436,7 @@ def common_subexpressions(f: Function, start: int) -> tuple[Function, int]:
                     stack.append((n, True))
                     stack.extend((a, False) for a in n.args)
                     continue
-                args = [done.get(a, names.get(a, a)) for a in n.args]
-                value = n.func(*args) if any(x is not y for x, y in zip(args, n.args)) else n
+                value = ir.rebuild(n, [done.get(a, names.get(a, a)) for a in n.args])
                 if n in repeated:
                     w = ir.W(count)
                     count += 1
@@ -438,7 +460,8 @@ def _propagate_copies(f: Function) -> Function:
     body = []
     for s in f.body:
         if sub:
-            s = _map_statement(s, lambda e: e.xreplace(sub) if e.free_symbols & sub.keys() else e)
+            s = _map_statement(s, lambda e: ir.substitute(e, sub) if e.free_symbols & sub.keys()
+                               else e)
         if isinstance(s, Assign) and _trivial(s.expr):
             sub[s.target] = s.expr
             continue
@@ -557,8 +580,17 @@ def lower(reduced: Reduced) -> Program:
 
 
 def _row_jacobian(rows, states):
-    return [("store", k * len(states) + i, partial(r, s))
-            for k, r in enumerate(rows) for i, s in enumerate(states)]
+    """The nonzero entries of d row / d x, row-major (the caller zeroes the rest): only the
+    states that occur in a row are differentiated, so the work is the rows' size, not
+    rows x states."""
+    index = {s: i for i, s in enumerate(states)}
+    out = []
+    for k, r in enumerate(rows):
+        for s in sorted((s for s in r.free_symbols if s in index), key=index.get):
+            d = partial(r, s)
+            if d != 0:
+                out.append(("store", k * len(states) + index[s], d))
+    return out
 
 
 HOISTED = ("rhs", "outputs", "jvp", "residual", "scale", "position_jac", "velocity_jac")

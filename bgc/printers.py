@@ -108,6 +108,12 @@ def _split_coefficient(coeff: sp.Number) -> tuple[list, list]:
     return ([] if coeff == 1 else [coeff]), []
 
 
+def _terms(expr: sp.Add):
+    """The terms of a sum, numbers last (a - 1.0 rather than -1.0 + a)."""
+    args = expr.args
+    return [a for a in args if not a.is_Number] + [a for a in args if a.is_Number]
+
+
 class _ArithmeticPrinting:
     """The language-independent part; subclasses supply names, indexing, squares and pow."""
 
@@ -179,7 +185,9 @@ class _ArithmeticPrinting:
     # -- arithmetic
 
     def _print_sum(self, expr: sp.Add) -> str:
-        return self._balanced_sum([self._print(term) for term in expr.as_ordered_terms()])
+        # Add's own argument order is canonical (SymPy sorts it structurally, independent of
+        # hashing), and cheap, unlike as_ordered_terms' polynomial ordering
+        return self._balanced_sum([self._print(term) for term in _terms(expr)])
 
     def _balanced_sum(self, texts: list[str]) -> str:
         """texts added as a balanced tree: the first half (itself balanced) + (the second)."""

@@ -29,7 +29,7 @@ from dataclasses import dataclass, field
 import sympy as sp
 
 from . import blt
-from .algebra import is_zero, solve_for
+from .algebra import is_singular, is_zero, solve_for
 from .diagnostics import Collector, ModelError, Note, Span, fail, warning
 from .differentiate import directional, partial
 from .equations import (TIME, ConstraintDef, Equation, EquationSystem, OutputDef, ParameterDef,
@@ -38,9 +38,10 @@ from .graph import var
 
 RELATIVE_TOLERANCE = 1e-9
 ALGEBRA = ("auto", "symbolic", "numeric")
-SYMBOLIC_MAX_UNKNOWNS = 2  # auto: linear blocks up to this size are solved symbolically ...
+SYMBOLIC_MAX_UNKNOWNS = 1  # auto: linear blocks up to this size are solved symbolically ...
 SYMBOLIC_MAX_OPS = 400  # ... when their matrix and right side are no bigger than this
 SUBSTITUTE_MAX_BODY = 40  # a nonlinear block of one unknown: body small enough to substitute
+SINGULAR_CHECK_MAX = 40  # linear blocks up to this size: determinant tested at compile time
 MAX_DERIVATIVE_ORDER = 3
 
 
@@ -236,55 +237,81 @@ def _explicit_defs(sys: _System) -> dict:
     return {s: eq.expr for s, eq in sys.eqs.items() if eq.explicit}
 
 
-def _coordinates_form(c: ConstraintDef, sys: _System, defs):
-    """The balance as sum_i a_i(q, t) dq_i/dt + a_0(q, t), or None with a reason."""
-    integrals = [st for st in sys.es.states if st.kind == "integral signal"]
-    if not integrals:
-        return None, "no integral signal integrates its flows into coordinates"
-    # the flows that the integral signals integrate, at the end of their alias chains
-    integrands = {}
-    for st in integrals:
-        rate = sys.eqs[der(st.symbol)].expr
-        for u in rate.free_symbols:
-            integrands[_alias_end(u, defs)] = True
-    frozen = set(integrands)
+class _Coordinates:
+    """The coordinates that integral signals integrate, and the flows they integrate (at the
+    end of their alias chains), each solved for its coordinate's rate: worked out once for all
+    the constraint junctions of the model."""
 
-    def expandable(s):
-        return s in defs and s not in frozen and not sys.is_leaf(s)
+    def __init__(self, sys: _System, defs: dict):
+        self.sys, self.defs = sys, defs
+        self.integrals = [st for st in sys.es.states if st.kind == "integral signal"]
+        self.coords = [st.symbol for st in self.integrals]
+        self.rate = {q: var(f"d{q.name}/dt") for q in self.coords}
+        self.others = set(sys.states) - set(self.coords)
+        frozen = set()
+        for st in self.integrals:
+            frozen |= {_alias_end(u, defs) for u in sys.eqs[der(st.symbol)].expr.free_symbols}
+        self.frozen = frozen
+        self.memo: dict = {}
+        self.solved: dict = {}
+        self.loop = False
+        try:
+            rates = {q: self.leaf(sys.eqs[der(q)].expr) for q in self.coords}
+        except _Cycle:
+            self.loop = True
+            return
+        pending = list(self.coords)
+        while pending:
+            progress, still = False, []
+            for q in pending:
+                expr = rates[q].xreplace(self.solved) if self.solved else rates[q]
+                open_ = [u for u in expr.free_symbols if self.unknown(u) and u not in self.solved]
+                if len(open_) == 1:
+                    sol = solve_for(expr - self.rate[q], open_[0])
+                    if sol is not None:
+                        self.solved[open_[0]] = sol
+                        progress = True
+                        continue
+                still.append(q)
+            if not progress:
+                break
+            pending = still
 
-    try:
-        balance = _leaf(defs[c.balance], defs, expandable)
-        rates_of = {st.symbol: _leaf(sys.eqs[der(st.symbol)].expr, defs, expandable)
-                    for st in integrals}
-    except _Cycle:
-        return None, "its flows depend on an algebraic loop"
-    coords = [st.symbol for st in integrals]
-    rate_sym = {q: var(f"d{q.name}/dt") for q in coords}
-    others = set(sys.states) - set(coords)
-    unknowns = [s for s in balance.free_symbols if s in frozen or s in others]
-    solved = {}
-    progress = True
-    while progress and any(u not in solved for u in unknowns):
-        progress = False
-        for q in coords:
-            expr = rates_of[q].xreplace(solved)
-            open_ = [u for u in expr.free_symbols if (u in frozen or u in others)
-                     and u not in solved]
-            if len(open_) == 1:
-                sol = solve_for(expr - rate_sym[q], open_[0])
-                if sol is not None:
-                    solved[open_[0]] = sol
-                    progress = True
-    if any(u not in solved for u in unknowns):
-        return None, "its flows are not all integrated into coordinates by integral signals"
-    balance = balance.xreplace(solved)
-    if balance.free_symbols & (set(defs) | others | {m for m in _multipliers(sys)}):
-        return None, "its flows are not all integrated into coordinates by integral signals"
-    coeffs = {q: partial(balance, rate_sym[q]) for q in coords if balance.has(rate_sym[q])}
-    if any(co.free_symbols & set(rate_sym.values()) for co in coeffs.values()):
-        return None, "it is not linear in the coordinate rates"
-    a0 = sp.expand(balance.xreplace({r: 0 for r in rate_sym.values()}))
-    return (coeffs, a0, coords), None
+    def unknown(self, u) -> bool:
+        return u in self.frozen or u in self.others
+
+    def expandable(self, s) -> bool:
+        return s in self.defs and s not in self.frozen and not self.sys.is_leaf(s)
+
+    def leaf(self, expr):
+        return _leaf(expr, self.defs, self.expandable, self.memo)
+
+    def form(self, c: ConstraintDef):
+        """The balance as sum_i a_i(q, t) dq_i/dt + a_0(q, t), or None with a reason."""
+        if not self.integrals:
+            return None, "no integral signal integrates its flows into coordinates"
+        if self.loop:
+            return None, "its flows depend on an algebraic loop"
+        try:
+            balance = self.leaf(self.defs[c.balance])
+        except _Cycle:
+            return None, "its flows depend on an algebraic loop"
+        unknowns = [u for u in balance.free_symbols if self.unknown(u)]
+        if any(u not in self.solved for u in unknowns):
+            return None, "its flows are not all integrated into coordinates by integral signals"
+        balance = balance.xreplace({u: self.solved[u] for u in unknowns})
+        multipliers = set(_multipliers(self.sys))
+        if any(s in self.defs or s in self.others or s in multipliers
+               for s in balance.free_symbols):
+            return None, "its flows are not all integrated into coordinates by integral signals"
+        rates = {r: q for q, r in self.rate.items()}
+        coeffs = {rates[r]: partial(balance, r) for r in
+                  sorted(balance.free_symbols & rates.keys(), key=lambda s: s.name)}
+        coeffs = {q: coeffs[q] for q in self.coords if q in coeffs}
+        if any(co.free_symbols & rates.keys() for co in coeffs.values()):
+            return None, "it is not linear in the coordinate rates"
+        a0 = sp.expand(balance.xreplace({r: 0 for r in rates}))
+        return (coeffs, a0, self.coords), None
 
 
 def _multipliers(sys):
@@ -360,30 +387,34 @@ def _phi(c: ConstraintDef, form, sys: _System):
 
 
 def _constraints(sys: _System, diags: Collector) -> list[ConstraintInfo]:
+    if not sys.es.constraints:
+        return []
     defs = _explicit_defs(sys)
+    coordinates = _Coordinates(sys, defs)
     multipliers = set(_multipliers(sys))
+    memo: dict = {}
     infos = []
     for c in sys.es.constraints:
         try:
-            infos.append(_constraint(c, sys, defs, multipliers, diags))
+            infos.append(_constraint(c, sys, defs, coordinates, multipliers, memo, diags))
         except ModelError as exc:
             diags.items.extend(exc.diagnostics)
     return infos
 
 
-def _constraint(c, sys, defs, multipliers, diags) -> ConstraintInfo:
+def _constraint(c, sys, defs, coordinates, multipliers, memo, diags) -> ConstraintInfo:
     def expandable(s):
         return s in defs and not sys.is_leaf(s)
 
     try:
-        in_states = _leaf(defs[c.balance], defs, expandable)
+        in_states = _leaf(defs[c.balance], defs, expandable, memo)
     except _Cycle:
         fail(c.name_span, f"the balance of constraint junction '{c.junction}' depends on an "
                           "algebraic loop; not supported")
     if in_states.free_symbols & multipliers:
         fail(c.span, f"the flow balance of constraint junction '{c.junction}' depends on a "
                      "multiplier directly (a resistive path?): declare it as a plain junction")
-    form, reason = _coordinates_form(c, sys, defs)
+    form, reason = coordinates.form(c)
     integrable = form is not None and _integrable(*form)
     kind, detected = c.kind, c.kind is None
     if kind is None:
@@ -497,6 +528,8 @@ class _Blocks:
             if method == "symbolic":
                 method = self._symbolic_linear(z, body, prelude, matrix, rhs, origins, span)
             if method == "lu":
+                if len(z) <= SINGULAR_CHECK_MAX:
+                    self._matrix_in_outer(z, prelude, matrix, origins, span)
                 self.steps.append(Block(index, z, body, residuals, "lu", prelude, matrix, rhs))
         else:
             if method == "symbolic":
@@ -578,26 +611,28 @@ class _Blocks:
         prelude.append(Assign(s, expr))
         return s
 
-    def _symbolic_linear(self, z, body, prelude, matrix, rhs, origins, span) -> str:
+    def _matrix_in_outer(self, z, prelude, matrix, origins, span):
+        """A with the prelude substituted (in what precedes the block); a located error when
+        it is singular whatever the state (the block then determines nothing)."""
         defs = {a.target: a.expr for a in prelude}
         memo: dict = {}
-
-        def expandable(s):
-            return s in defs
-
         m = len(z)
         A = sp.zeros(m, m)
         for i, k, e in matrix:
-            A[i, k] = _leaf(e, defs, expandable, memo)
-        b = sp.Matrix([_leaf(e, defs, expandable, memo) for e in rhs])
-        if self.algebra == "auto" and sum(sp.count_ops(e) for e in list(A) + list(b)) \
-                > SYMBOLIC_MAX_OPS:
-            return "lu"
-        det = A[0, 0] if m == 1 else A.det(method="berkowitz")
-        if is_zero(det):
+            A[i, k] = _leaf(e, defs, lambda s: s in defs, memo)
+        if is_singular(m, [(i, k, A[i, k]) for i, k, _ in matrix]):
             names = ", ".join(f"'{o}'" for o in origins)
             fail(span, f"the equations through {names} are singular: "
                        f"{', '.join(s.name for s in z)} cannot be determined")
+        return A, defs, memo
+
+    def _symbolic_linear(self, z, body, prelude, matrix, rhs, origins, span) -> str:
+        A, defs, memo = self._matrix_in_outer(z, prelude, matrix, origins, span)
+        m = len(z)
+        b = sp.Matrix([_leaf(e, defs, lambda s: s in defs, memo) for e in rhs])
+        if self.algebra == "auto" and sum(sp.count_ops(e) for e in list(A) + list(b)) \
+                > SYMBOLIC_MAX_OPS:
+            return "lu"
         sol = [b[0] / A[0, 0]] if m == 1 else list(A.LUsolve(b))
         for s, value in zip(z, sol):
             self.steps.append(Assign(s, _tidy(value)))
@@ -697,7 +732,8 @@ def reduce(es: EquationSystem, project_initial: bool = False, algebra: str = "au
     blocks = _Blocks(sys, algebra)
     blocks.run(targets)
     rows = _rows(sys, infos, kept)
-    pruned = tuple(st.name for st in es.states if st not in kept)
+    kept_symbols = {st.symbol for st in kept}
+    pruned = tuple(st.name for st in es.states if st.symbol not in kept_symbols)
     eliminated = _eliminated(sys)
     reduced = Reduced(es.name, es.parameters, tuple(kept), pruned, tuple(blocks.steps),
                       tuple(der(st.symbol) for st in kept), es.outputs, tuple(infos),
@@ -741,7 +777,9 @@ def _rows(sys, infos, kept) -> list[ConstraintRow]:
 
 
 def scale_of(expr):
-    return sp.Add(*[sp.Abs(term) for term in sp.Add.make_args(expr)])
+    """The sum of the magnitudes of expr's terms (Abs left unevaluated: evaluating it asks
+    SymPy's assumptions about every factor, which costs more than all else here)."""
+    return sp.Add(*[sp.Abs(term, evaluate=False) for term in sp.Add.make_args(expr)])
 
 
 # ---------------------------------------------------------------- initial conditions

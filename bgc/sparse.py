@@ -11,15 +11,15 @@ Because no pivot is chosen at run time, the runtime tests every pivot (threshold
 pivoting: |pivot| >= 0.1 * the largest entry below it in its column, and clearly nonzero
 relative to its row); if one fails, it factors the same matrix again densely with partial
 pivoting, so that the result is always that of a stable elimination.  Blocks whose static
-factorization would fill most of the matrix are planned dense from the start.
+factorization would cost more than a dense one (m^3/3 multiply-adds), or whose update list
+would be too long to carry as data, are planned dense from the start.
 """
 from __future__ import annotations
 
 import heapq
 from dataclasses import dataclass
 
-DENSE_FILL = 0.5  # static plan only while the factors fill at most half of an m x m matrix ...
-DENSE_MIN = 6  # ... for blocks larger than this (smaller ones always get a static plan)
+MAX_UPDATES = 250_000  # a static plan's update list beyond this (in ints) is planned dense
 
 
 @dataclass(frozen=True)
@@ -67,7 +67,7 @@ def plan(m: int, entries: list[tuple[int, int]], matching: list[int]) -> LUPlan:
     for k in range(m):
         rows[k].add(k)
     filled, flops = _symbolic(m, rows)
-    if m > DENSE_MIN and sum(len(r) for r in filled) > DENSE_FILL * m * m:
+    if flops > max(m ** 3 // 3, 1) or flops > MAX_UPDATES:
         return _dense(m, entries)
     positions = {}
     prow, pcol = [], []

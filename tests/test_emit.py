@@ -211,7 +211,7 @@ def test_printer_constants():
 def test_printer_layout_for_latency():
     c = CPrinter(5, ())
     assert c.doprint(X[0] + X[1] + X[2] + X[3]) == "x[0] + x[1] + (x[2] + x[3])"
-    assert c.doprint(X[0] - X[1] - X[2] + X[3] + T) == "t + x[0] - x[1] + (-x[2] + x[3])"
+    assert c.doprint(X[0] - X[1] - X[2] + X[3] + T) == "t - x[1] - x[2] + (x[0] + x[3])"
     assert c.doprint(sum(X[i] for i in range(5)) + T) == "t + x[0] + x[1] + (x[2] + x[3] + x[4])"
     # the simple factors are divided while the sum is being added up
     assert c.doprint(sp.sin(X[0]) * (X[0] + X[1]) * X[2] * X[4] / (X[3] + 1)) == \

@@ -237,7 +237,7 @@ static inline int bgc_model_rhs(double t, const double *x, const bgc_params *p, 
     const double w3 = w2*w21;
     const double w4 = w1 + w3;
     const double w5 = p->c[1]*x[2];
-    const double w7 = (w0*w21*w5*p->c[4] + w2*w20*w5*p->c[4] + (w21*p->c[2] + w4*p->c[3]))/(w20*w20 + w21*w21);
+    const double w7 = (w21*p->c[2] + w4*p->c[3] + (w0*w21*w5*p->c[4] + w2*w20*w5*p->c[4]))/(w20*w20 + w21*w21);
     const double w8 = -w20*w7;
     const double w9 = w21*w7;
     const double w10 = -w9 + p->c[2];
@@ -283,7 +283,7 @@ static inline int bgc_model_jvp(double t, const double *x, const bgc_params *p, 
     const double w22 = sin(x[5]);
     const double w1 = -w0*w22;
     const double w23 = cos(x[5]);
-    const double w12 = -w0*w23*v[5] - w11*w22;
+    const double w12 = -w11*w22 - w0*w23*v[5];
     const double w2 = p->c[0]*x[1];
     const double w13 = p->c[0]*v[1];
     const double w3 = w2*w23;
@@ -292,8 +292,8 @@ static inline int bgc_model_jvp(double t, const double *x, const bgc_params *p, 
     const double w15 = w12 + w14;
     const double w5 = p->c[1]*x[2];
     const double w16 = p->c[1]*v[2];
-    const double w7 = (w0*w23*w5*p->c[4] + w2*w22*w5*p->c[4] + (w23*p->c[2] + w4*p->c[3]))/(w22*w22 + w23*w23);
-    const double w17 = (w0*w16*w23*p->c[4] + w0*w22*w5*p->p_m*v[5] + (w11*w23*w5*p->c[4] + w13*w22*w5*p->c[4]) + (w15*p->c[3] + w16*w2*w22*p->c[4] + (w2*w23*w5*p->c[4]*v[5] - w22*p->c[2]*v[5])))/(w22*w22 + w23*w23);
+    const double w7 = (w23*p->c[2] + w4*p->c[3] + (w0*w23*w5*p->c[4] + w2*w22*w5*p->c[4]))/(w22*w22 + w23*w23);
+    const double w17 = (w15*p->c[3] - w22*p->c[2]*v[5] + (w0*w16*w23*p->c[4] + w11*w23*w5*p->c[4]) + (w13*w22*w5*p->c[4] + w16*w2*w22*p->c[4] + (w0*w22*w5*p->p_m*v[5] + w2*w23*w5*p->c[4]*v[5])))/(w22*w22 + w23*w23);
     const double w18 = -w17*w22 - w23*w7*v[5];
     const double w19 = w17*w23 - w22*w7*v[5];
     out[0] = -w18;
@@ -311,7 +311,7 @@ void bgc_residual(double t, const double *x, const bgc_params *p, double *out)
     (void)x;
     (void)p;
     (void)out;
-    out[0] = sin(x[5])*p->c[5]*x[0] + cos(x[5])*p->c[0]*x[1];
+    out[0] = cos(x[5])*p->c[0]*x[1] + sin(x[5])*p->c[5]*x[0];
 }
 
 void bgc_scale(double t, const double *x, const bgc_params *p, double *out)
@@ -320,7 +320,7 @@ void bgc_scale(double t, const double *x, const bgc_params *p, double *out)
     (void)x;
     (void)p;
     (void)out;
-    out[0] = fabs(sin(x[5])*p->c[0]*x[0]) + fabs(cos(x[5])*p->c[0]*x[1]);
+    out[0] = fabs(cos(x[5])*p->c[0]*x[1]) + fabs(sin(x[5])*p->c[5]*x[0]);
 }
 
 void bgc_position_jac(double t, const double *x, const bgc_params *p, double *out)
@@ -337,13 +337,11 @@ void bgc_velocity_jac(double t, const double *x, const bgc_params *p, double *ou
     (void)x;
     (void)p;
     (void)out;
+    memset(out, 0, 6 * sizeof *out); /* the nonzero entries follow */
     const double w24 = sin(x[5]);
     out[0] = w24*p->c[5];
     const double w25 = cos(x[5]);
     out[1] = w25*p->c[0];
-    out[2] = 0.0;
-    out[3] = 0.0;
-    out[4] = 0.0;
     out[5] = w24*p->c[5]*x[1] + w25*p->c[5]*x[0];
 }
 

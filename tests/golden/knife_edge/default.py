@@ -194,7 +194,7 @@ def _rhs_0(t, x, p, w, out):
         w3 = w2*w21
         w4 = w1 + w3
         w5 = p[12]*x[2]
-        w7 = (w0*w21*w5*p[15] + w2*w20*w5*p[15] + (w21*p[13] + w4*p[14]))/(w20*w20 + w21*w21)
+        w7 = (w21*p[13] + w4*p[14] + (w0*w21*w5*p[15] + w2*w20*w5*p[15]))/(w20*w20 + w21*w21)
         w8 = -w20*w7
         w9 = w21*w7
         w10 = -w9 + p[13]
@@ -222,7 +222,7 @@ def _rhs_0_ieee(t, x, p, w, out):
         w3 = w2*w21
         w4 = w1 + w3
         w5 = p[12]*x[2]
-        w7 = (w0*w21*w5*p[15] + w2*w20*w5*p[15] + (w21*p[13] + w4*p[14]))/(w20*w20 + w21*w21)
+        w7 = (w21*p[13] + w4*p[14] + (w0*w21*w5*p[15] + w2*w20*w5*p[15]))/(w20*w20 + w21*w21)
         w8 = -w20*w7
         w9 = w21*w7
         w10 = -w9 + p[13]
@@ -281,7 +281,7 @@ def _jvp_0(t, x, p, w, v, out):
         w22 = math.sin(x[5])
         w1 = -w0*w22
         w23 = math.cos(x[5])
-        w12 = -w0*w23*v[5] - w11*w22
+        w12 = -w11*w22 - w0*w23*v[5]
         w2 = p[11]*x[1]
         w13 = p[11]*v[1]
         w3 = w2*w23
@@ -290,8 +290,8 @@ def _jvp_0(t, x, p, w, v, out):
         w15 = w12 + w14
         w5 = p[12]*x[2]
         w16 = p[12]*v[2]
-        w7 = (w0*w23*w5*p[15] + w2*w22*w5*p[15] + (w23*p[13] + w4*p[14]))/(w22*w22 + w23*w23)
-        w17 = (w0*w16*w23*p[15] + w0*w22*w5*p[0]*v[5] + (w11*w23*w5*p[15] + w13*w22*w5*p[15]) + (w15*p[14] + w16*w2*w22*p[15] + (w2*w23*w5*p[15]*v[5] - w22*p[13]*v[5])))/(w22*w22 + w23*w23)
+        w7 = (w23*p[13] + w4*p[14] + (w0*w23*w5*p[15] + w2*w22*w5*p[15]))/(w22*w22 + w23*w23)
+        w17 = (w15*p[14] - w22*p[13]*v[5] + (w0*w16*w23*p[15] + w11*w23*w5*p[15]) + (w13*w22*w5*p[15] + w16*w2*w22*p[15] + (w0*w22*w5*p[0]*v[5] + w2*w23*w5*p[15]*v[5])))/(w22*w22 + w23*w23)
         w18 = -w17*w22 - w23*w7*v[5]
         w19 = w17*w23 - w22*w7*v[5]
         out[0] = -w18
@@ -315,7 +315,7 @@ def _jvp_0_ieee(t, x, p, w, v, out):
         w22 = numpy.sin(x[5])
         w1 = -w0*w22
         w23 = numpy.cos(x[5])
-        w12 = -w0*w23*v[5] - w11*w22
+        w12 = -w11*w22 - w0*w23*v[5]
         w2 = p[11]*x[1]
         w13 = p[11]*v[1]
         w3 = w2*w23
@@ -324,8 +324,8 @@ def _jvp_0_ieee(t, x, p, w, v, out):
         w15 = w12 + w14
         w5 = p[12]*x[2]
         w16 = p[12]*v[2]
-        w7 = (w0*w23*w5*p[15] + w2*w22*w5*p[15] + (w23*p[13] + w4*p[14]))/(w22*w22 + w23*w23)
-        w17 = (w0*w16*w23*p[15] + w0*w22*w5*p[0]*v[5] + (w11*w23*w5*p[15] + w13*w22*w5*p[15]) + (w15*p[14] + w16*w2*w22*p[15] + (w2*w23*w5*p[15]*v[5] - w22*p[13]*v[5])))/(w22*w22 + w23*w23)
+        w7 = (w23*p[13] + w4*p[14] + (w0*w23*w5*p[15] + w2*w22*w5*p[15]))/(w22*w22 + w23*w23)
+        w17 = (w15*p[14] - w22*p[13]*v[5] + (w0*w16*w23*p[15] + w11*w23*w5*p[15]) + (w13*w22*w5*p[15] + w16*w2*w22*p[15] + (w0*w22*w5*p[0]*v[5] + w2*w23*w5*p[15]*v[5])))/(w22*w22 + w23*w23)
         w18 = -w17*w22 - w23*w7*v[5]
         w19 = w17*w23 - w22*w7*v[5]
         out[0] = -w18
@@ -343,7 +343,7 @@ def _jvp(t, x, p, w, v, out):
 
 def _residual_into(t, x, p, out):
     try:
-        out[0] = math.sin(x[5])*p[16]*x[0] + math.cos(x[5])*p[11]*x[1]
+        out[0] = math.cos(x[5])*p[11]*x[1] + math.sin(x[5])*p[16]*x[0]
     except (ArithmeticError, ValueError):
         return _residual_into_ieee(t, x, p, out)
 
@@ -353,7 +353,7 @@ def _residual_into_ieee(t, x, p, out):
         t = numpy.float64(t)
         x = numpy.asarray(x, dtype=numpy.float64)
         p = numpy.asarray(p, dtype=numpy.float64)
-        out[0] = numpy.sin(x[5])*p[16]*x[0] + numpy.cos(x[5])*p[11]*x[1]
+        out[0] = numpy.cos(x[5])*p[11]*x[1] + numpy.sin(x[5])*p[16]*x[0]
 
 
 
@@ -365,7 +365,7 @@ def _residual(t, x, p):
 
 def _scale_into(t, x, p, out):
     try:
-        out[0] = abs(math.sin(x[5])*p[11]*x[0]) + abs(math.cos(x[5])*p[11]*x[1])
+        out[0] = abs(math.cos(x[5])*p[11]*x[1]) + abs(math.sin(x[5])*p[16]*x[0])
     except (ArithmeticError, ValueError):
         return _scale_into_ieee(t, x, p, out)
 
@@ -375,7 +375,7 @@ def _scale_into_ieee(t, x, p, out):
         t = numpy.float64(t)
         x = numpy.asarray(x, dtype=numpy.float64)
         p = numpy.asarray(p, dtype=numpy.float64)
-        out[0] = abs(numpy.sin(x[5])*p[11]*x[0]) + abs(numpy.cos(x[5])*p[11]*x[1])
+        out[0] = abs(numpy.cos(x[5])*p[11]*x[1]) + abs(numpy.sin(x[5])*p[16]*x[0])
 
 
 
@@ -413,9 +413,6 @@ def _velocity_jac_into(t, x, p, out):
         out[0] = w24*p[16]
         w25 = math.cos(x[5])
         out[1] = w25*p[11]
-        out[2] = 0.0
-        out[3] = 0.0
-        out[4] = 0.0
         out[5] = w24*p[16]*x[1] + w25*p[16]*x[0]
     except (ArithmeticError, ValueError):
         return _velocity_jac_into_ieee(t, x, p, out)
@@ -430,9 +427,6 @@ def _velocity_jac_into_ieee(t, x, p, out):
         out[0] = w24*p[16]
         w25 = numpy.cos(x[5])
         out[1] = w25*p[11]
-        out[2] = 0.0
-        out[3] = 0.0
-        out[4] = 0.0
         out[5] = w24*p[16]*x[1] + w25*p[16]*x[0]
 
 

@@ -235,7 +235,7 @@ static inline int bgc_model_rhs(double t, const double *x, const bgc_params *p, 
     const double w3 = w19*w2;
     const double w4 = w1 + w3;
     const double w5 = p->c[1]*x[2];
-    const double w6 = (-w0*w19*w5 - w18*w2*w5 + w4*p->p_gamma)*(p->p_m/(w18*w18 + w19*w19));
+    const double w6 = (w4*p->p_gamma - w0*w19*w5 - w18*w2*w5)*(p->p_m/(w18*w18 + w19*w19));
     const double w7 = -w18*w6;
     const double w8 = w19*w6;
     out[0] = -w7;
@@ -264,7 +264,7 @@ static inline int bgc_model_outputs(double t, const double *x, const bgc_params 
     const double w3 = w2*w21;
     const double w4 = w1 + w3;
     const double w5 = p->c[1]*x[2];
-    const double w6 = (-w0*w21*w5 - w2*w20*w5 + w4*p->p_gamma)*(p->p_m/(w20*w20 + w21*w21));
+    const double w6 = (w4*p->p_gamma - w0*w21*w5 - w2*w20*w5)*(p->p_m/(w20*w20 + w21*w21));
     out[0] = x[3];
     out[1] = x[4];
     out[2] = x[5];
@@ -290,7 +290,7 @@ static inline int bgc_model_jvp(double t, const double *x, const bgc_params *p, 
     const double w22 = sin(x[5]);
     const double w1 = -w0*w22;
     const double w23 = cos(x[5]);
-    const double w10 = -w0*w23*v[5] - w22*w9;
+    const double w10 = -w22*w9 - w0*w23*v[5];
     const double w2 = p->c[0]*x[1];
     const double w11 = p->c[0]*v[1];
     const double w3 = w2*w23;
@@ -299,8 +299,8 @@ static inline int bgc_model_jvp(double t, const double *x, const bgc_params *p, 
     const double w13 = w10 + w12;
     const double w5 = p->c[1]*x[2];
     const double w14 = p->c[1]*v[2];
-    const double w6 = (-w0*w23*w5 - w2*w22*w5 + w4*p->p_gamma)*(p->p_m/(w22*w22 + w23*w23));
-    const double w15 = (-w0*w14*w23 + w0*w22*w5*v[5] + (-w11*w22*w5 + w13*p->p_gamma) + (-w14*w2*w22 - w2*w23*w5*v[5] - w23*w5*w9))*(p->p_m/(w22*w22 + w23*w23));
+    const double w6 = (w4*p->p_gamma - w0*w23*w5 - w2*w22*w5)*(p->p_m/(w22*w22 + w23*w23));
+    const double w15 = (w13*p->p_gamma - w0*w14*w23 + (-w11*w22*w5 - w14*w2*w22) + (-w23*w5*w9 + w0*w22*w5*v[5] - w2*w23*w5*v[5]))*(p->p_m/(w22*w22 + w23*w23));
     const double w16 = -w15*w22 - w23*w6*v[5];
     const double w17 = w15*w23 - w22*w6*v[5];
     out[0] = -w16;
@@ -318,7 +318,7 @@ void bgc_residual(double t, const double *x, const bgc_params *p, double *out)
     (void)x;
     (void)p;
     (void)out;
-    out[0] = sin(x[5])*p->c[2]*x[0] + cos(x[5])*p->c[0]*x[1];
+    out[0] = cos(x[5])*p->c[0]*x[1] + sin(x[5])*p->c[2]*x[0];
 }
 
 void bgc_scale(double t, const double *x, const bgc_params *p, double *out)
@@ -327,7 +327,7 @@ void bgc_scale(double t, const double *x, const bgc_params *p, double *out)
     (void)x;
     (void)p;
     (void)out;
-    out[0] = fabs(sin(x[5])*p->c[0]*x[0]) + fabs(cos(x[5])*p->c[0]*x[1]);
+    out[0] = fabs(cos(x[5])*p->c[0]*x[1]) + fabs(sin(x[5])*p->c[2]*x[0]);
 }
 
 void bgc_position_jac(double t, const double *x, const bgc_params *p, double *out)
@@ -344,13 +344,11 @@ void bgc_velocity_jac(double t, const double *x, const bgc_params *p, double *ou
     (void)x;
     (void)p;
     (void)out;
+    memset(out, 0, 6 * sizeof *out); /* the nonzero entries follow */
     const double w24 = sin(x[5]);
     out[0] = w24*p->c[2];
     const double w25 = cos(x[5]);
     out[1] = w25*p->c[0];
-    out[2] = 0.0;
-    out[3] = 0.0;
-    out[4] = 0.0;
     out[5] = w24*p->c[2]*x[1] + w25*p->c[2]*x[0];
 }
 

@@ -188,7 +188,7 @@ def _rhs_0(t, x, p, w, out):
         w3 = w19*w2
         w4 = w1 + w3
         w5 = p[12]*x[2]
-        w6 = (-w0*w19*w5 - w18*w2*w5 + w4*p[10])*(p[0]/(w18*w18 + w19*w19))
+        w6 = (w4*p[10] - w0*w19*w5 - w18*w2*w5)*(p[0]/(w18*w18 + w19*w19))
         w7 = -w18*w6
         w8 = w19*w6
         out[0] = -w7
@@ -215,7 +215,7 @@ def _rhs_0_ieee(t, x, p, w, out):
         w3 = w19*w2
         w4 = w1 + w3
         w5 = p[12]*x[2]
-        w6 = (-w0*w19*w5 - w18*w2*w5 + w4*p[10])*(p[0]/(w18*w18 + w19*w19))
+        w6 = (w4*p[10] - w0*w19*w5 - w18*w2*w5)*(p[0]/(w18*w18 + w19*w19))
         w7 = -w18*w6
         w8 = w19*w6
         out[0] = -w7
@@ -243,7 +243,7 @@ def _outputs_0(t, x, p, w, out):
         w3 = w2*w21
         w4 = w1 + w3
         w5 = p[12]*x[2]
-        w6 = (-w0*w21*w5 - w2*w20*w5 + w4*p[10])*(p[0]/(w20*w20 + w21*w21))
+        w6 = (w4*p[10] - w0*w21*w5 - w2*w20*w5)*(p[0]/(w20*w20 + w21*w21))
         out[0] = x[3]
         out[1] = x[4]
         out[2] = x[5]
@@ -269,7 +269,7 @@ def _outputs_0_ieee(t, x, p, w, out):
         w3 = w2*w21
         w4 = w1 + w3
         w5 = p[12]*x[2]
-        w6 = (-w0*w21*w5 - w2*w20*w5 + w4*p[10])*(p[0]/(w20*w20 + w21*w21))
+        w6 = (w4*p[10] - w0*w21*w5 - w2*w20*w5)*(p[0]/(w20*w20 + w21*w21))
         out[0] = x[3]
         out[1] = x[4]
         out[2] = x[5]
@@ -293,7 +293,7 @@ def _jvp_0(t, x, p, w, v, out):
         w22 = math.sin(x[5])
         w1 = -w0*w22
         w23 = math.cos(x[5])
-        w10 = -w0*w23*v[5] - w22*w9
+        w10 = -w22*w9 - w0*w23*v[5]
         w2 = p[11]*x[1]
         w11 = p[11]*v[1]
         w3 = w2*w23
@@ -302,8 +302,8 @@ def _jvp_0(t, x, p, w, v, out):
         w13 = w10 + w12
         w5 = p[12]*x[2]
         w14 = p[12]*v[2]
-        w6 = (-w0*w23*w5 - w2*w22*w5 + w4*p[10])*(p[0]/(w22*w22 + w23*w23))
-        w15 = (-w0*w14*w23 + w0*w22*w5*v[5] + (-w11*w22*w5 + w13*p[10]) + (-w14*w2*w22 - w2*w23*w5*v[5] - w23*w5*w9))*(p[0]/(w22*w22 + w23*w23))
+        w6 = (w4*p[10] - w0*w23*w5 - w2*w22*w5)*(p[0]/(w22*w22 + w23*w23))
+        w15 = (w13*p[10] - w0*w14*w23 + (-w11*w22*w5 - w14*w2*w22) + (-w23*w5*w9 + w0*w22*w5*v[5] - w2*w23*w5*v[5]))*(p[0]/(w22*w22 + w23*w23))
         w16 = -w15*w22 - w23*w6*v[5]
         w17 = w15*w23 - w22*w6*v[5]
         out[0] = -w16
@@ -327,7 +327,7 @@ def _jvp_0_ieee(t, x, p, w, v, out):
         w22 = numpy.sin(x[5])
         w1 = -w0*w22
         w23 = numpy.cos(x[5])
-        w10 = -w0*w23*v[5] - w22*w9
+        w10 = -w22*w9 - w0*w23*v[5]
         w2 = p[11]*x[1]
         w11 = p[11]*v[1]
         w3 = w2*w23
@@ -336,8 +336,8 @@ def _jvp_0_ieee(t, x, p, w, v, out):
         w13 = w10 + w12
         w5 = p[12]*x[2]
         w14 = p[12]*v[2]
-        w6 = (-w0*w23*w5 - w2*w22*w5 + w4*p[10])*(p[0]/(w22*w22 + w23*w23))
-        w15 = (-w0*w14*w23 + w0*w22*w5*v[5] + (-w11*w22*w5 + w13*p[10]) + (-w14*w2*w22 - w2*w23*w5*v[5] - w23*w5*w9))*(p[0]/(w22*w22 + w23*w23))
+        w6 = (w4*p[10] - w0*w23*w5 - w2*w22*w5)*(p[0]/(w22*w22 + w23*w23))
+        w15 = (w13*p[10] - w0*w14*w23 + (-w11*w22*w5 - w14*w2*w22) + (-w23*w5*w9 + w0*w22*w5*v[5] - w2*w23*w5*v[5]))*(p[0]/(w22*w22 + w23*w23))
         w16 = -w15*w22 - w23*w6*v[5]
         w17 = w15*w23 - w22*w6*v[5]
         out[0] = -w16
@@ -355,7 +355,7 @@ def _jvp(t, x, p, w, v, out):
 
 def _residual_into(t, x, p, out):
     try:
-        out[0] = math.sin(x[5])*p[13]*x[0] + math.cos(x[5])*p[11]*x[1]
+        out[0] = math.cos(x[5])*p[11]*x[1] + math.sin(x[5])*p[13]*x[0]
     except (ArithmeticError, ValueError):
         return _residual_into_ieee(t, x, p, out)
 
@@ -365,7 +365,7 @@ def _residual_into_ieee(t, x, p, out):
         t = numpy.float64(t)
         x = numpy.asarray(x, dtype=numpy.float64)
         p = numpy.asarray(p, dtype=numpy.float64)
-        out[0] = numpy.sin(x[5])*p[13]*x[0] + numpy.cos(x[5])*p[11]*x[1]
+        out[0] = numpy.cos(x[5])*p[11]*x[1] + numpy.sin(x[5])*p[13]*x[0]
 
 
 
@@ -377,7 +377,7 @@ def _residual(t, x, p):
 
 def _scale_into(t, x, p, out):
     try:
-        out[0] = abs(math.sin(x[5])*p[11]*x[0]) + abs(math.cos(x[5])*p[11]*x[1])
+        out[0] = abs(math.cos(x[5])*p[11]*x[1]) + abs(math.sin(x[5])*p[13]*x[0])
     except (ArithmeticError, ValueError):
         return _scale_into_ieee(t, x, p, out)
 
@@ -387,7 +387,7 @@ def _scale_into_ieee(t, x, p, out):
         t = numpy.float64(t)
         x = numpy.asarray(x, dtype=numpy.float64)
         p = numpy.asarray(p, dtype=numpy.float64)
-        out[0] = abs(numpy.sin(x[5])*p[11]*x[0]) + abs(numpy.cos(x[5])*p[11]*x[1])
+        out[0] = abs(numpy.cos(x[5])*p[11]*x[1]) + abs(numpy.sin(x[5])*p[13]*x[0])
 
 
 
@@ -425,9 +425,6 @@ def _velocity_jac_into(t, x, p, out):
         out[0] = w24*p[13]
         w25 = math.cos(x[5])
         out[1] = w25*p[11]
-        out[2] = 0.0
-        out[3] = 0.0
-        out[4] = 0.0
         out[5] = w24*p[13]*x[1] + w25*p[13]*x[0]
     except (ArithmeticError, ValueError):
         return _velocity_jac_into_ieee(t, x, p, out)
@@ -442,9 +439,6 @@ def _velocity_jac_into_ieee(t, x, p, out):
         out[0] = w24*p[13]
         w25 = numpy.cos(x[5])
         out[1] = w25*p[11]
-        out[2] = 0.0
-        out[3] = 0.0
-        out[4] = 0.0
         out[5] = w24*p[13]*x[1] + w25*p[13]*x[0]
 
 

@@ -238,7 +238,7 @@ static inline int bgc_model_rhs(double t, const double *x, const bgc_params *p, 
     const double w3 = w2*w21;
     const double w4 = w1 + w3;
     const double w5 = p->c[1]*x[2];
-    const double w7 = (w0*w21*w5*p->c[4] + w2*w20*w5*p->c[4] + (w21*p->c[2] + w4*p->c[3]))/(w20*w20 + w21*w21);
+    const double w7 = (w21*p->c[2] + w4*p->c[3] + (w0*w21*w5*p->c[4] + w2*w20*w5*p->c[4]))/(w20*w20 + w21*w21);
     const double w8 = -w20*w7;
     const double w9 = w21*w7;
     const double w10 = -w9 + p->c[2];
@@ -268,7 +268,7 @@ static inline int bgc_model_outputs(double t, const double *x, const bgc_params 
     const double w3 = w2*w23;
     const double w4 = w1 + w3;
     const double w5 = p->c[1]*x[2];
-    const double w7 = (w0*w23*w5*p->c[4] + w2*w22*w5*p->c[4] + (w23*p->c[2] + w4*p->c[3]))/(w22*w22 + w23*w23);
+    const double w7 = (w23*p->c[2] + w4*p->c[3] + (w0*w23*w5*p->c[4] + w2*w22*w5*p->c[4]))/(w22*w22 + w23*w23);
     out[0] = x[3];
     out[1] = x[4];
     out[2] = x[5];
@@ -294,7 +294,7 @@ static inline int bgc_model_jvp(double t, const double *x, const bgc_params *p, 
     const double w24 = sin(x[5]);
     const double w1 = -w0*w24;
     const double w25 = cos(x[5]);
-    const double w12 = -w0*w25*v[5] - w11*w24;
+    const double w12 = -w11*w24 - w0*w25*v[5];
     const double w2 = p->c[0]*x[1];
     const double w13 = p->c[0]*v[1];
     const double w3 = w2*w25;
@@ -303,8 +303,8 @@ static inline int bgc_model_jvp(double t, const double *x, const bgc_params *p, 
     const double w15 = w12 + w14;
     const double w5 = p->c[1]*x[2];
     const double w16 = p->c[1]*v[2];
-    const double w7 = (w0*w25*w5*p->c[4] + w2*w24*w5*p->c[4] + (w25*p->c[2] + w4*p->c[3]))/(w24*w24 + w25*w25);
-    const double w17 = (w0*w16*w25*p->c[4] + w0*w24*w5*p->p_m*v[5] + (w11*w25*w5*p->c[4] + w13*w24*w5*p->c[4]) + (w15*p->c[3] + w16*w2*w24*p->c[4] + (w2*w25*w5*p->c[4]*v[5] - w24*p->c[2]*v[5])))/(w24*w24 + w25*w25);
+    const double w7 = (w25*p->c[2] + w4*p->c[3] + (w0*w25*w5*p->c[4] + w2*w24*w5*p->c[4]))/(w24*w24 + w25*w25);
+    const double w17 = (w15*p->c[3] - w24*p->c[2]*v[5] + (w0*w16*w25*p->c[4] + w11*w25*w5*p->c[4]) + (w13*w24*w5*p->c[4] + w16*w2*w24*p->c[4] + (w0*w24*w5*p->p_m*v[5] + w2*w25*w5*p->c[4]*v[5])))/(w24*w24 + w25*w25);
     const double w18 = -w17*w24 - w25*w7*v[5];
     const double w19 = w17*w25 - w24*w7*v[5];
     out[0] = -w18;
@@ -322,7 +322,7 @@ void bgc_residual(double t, const double *x, const bgc_params *p, double *out)
     (void)x;
     (void)p;
     (void)out;
-    out[0] = sin(x[5])*p->c[5]*x[0] + cos(x[5])*p->c[0]*x[1];
+    out[0] = cos(x[5])*p->c[0]*x[1] + sin(x[5])*p->c[5]*x[0];
 }
 
 void bgc_scale(double t, const double *x, const bgc_params *p, double *out)
@@ -331,7 +331,7 @@ void bgc_scale(double t, const double *x, const bgc_params *p, double *out)
     (void)x;
     (void)p;
     (void)out;
-    out[0] = fabs(sin(x[5])*p->c[0]*x[0]) + fabs(cos(x[5])*p->c[0]*x[1]);
+    out[0] = fabs(cos(x[5])*p->c[0]*x[1]) + fabs(sin(x[5])*p->c[5]*x[0]);
 }
 
 void bgc_position_jac(double t, const double *x, const bgc_params *p, double *out)
@@ -348,13 +348,11 @@ void bgc_velocity_jac(double t, const double *x, const bgc_params *p, double *ou
     (void)x;
     (void)p;
     (void)out;
+    memset(out, 0, 6 * sizeof *out); /* the nonzero entries follow */
     const double w26 = sin(x[5]);
     out[0] = w26*p->c[5];
     const double w27 = cos(x[5]);
     out[1] = w27*p->c[0];
-    out[2] = 0.0;
-    out[3] = 0.0;
-    out[4] = 0.0;
     out[5] = w26*p->c[5]*x[1] + w27*p->c[5]*x[0];
 }
 

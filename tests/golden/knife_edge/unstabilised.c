@@ -234,7 +234,7 @@ static inline int bgc_model_rhs(double t, const double *x, const bgc_params *p, 
     const double w2 = p->c[0]*x[1];
     const double w17 = sin(x[5]);
     const double w18 = cos(x[5]);
-    const double w4 = (w0*w1*w18*p->c[3] + w1*w17*w2*p->c[3] + w18*p->c[2])/(w17*w17 + w18*w18);
+    const double w4 = (w18*p->c[2] + w0*w1*w18*p->c[3] + w1*w17*w2*p->c[3])/(w17*w17 + w18*w18);
     const double w5 = -w17*w4;
     const double w6 = w18*w4;
     const double w7 = -w6 + p->c[2];
@@ -261,7 +261,7 @@ static inline int bgc_model_outputs(double t, const double *x, const bgc_params 
     const double w2 = p->c[0]*x[1];
     const double w19 = sin(x[5]);
     const double w20 = cos(x[5]);
-    const double w4 = (w0*w1*w20*p->c[3] + w1*w19*w2*p->c[3] + w20*p->c[2])/(w19*w19 + w20*w20);
+    const double w4 = (w20*p->c[2] + w0*w1*w20*p->c[3] + w1*w19*w2*p->c[3])/(w19*w19 + w20*w20);
     const double w8 = -w0*w19;
     const double w9 = w2*w20;
     const double w10 = w8 + w9;
@@ -293,8 +293,8 @@ static inline int bgc_model_jvp(double t, const double *x, const bgc_params *p, 
     const double w13 = p->c[0]*v[1];
     const double w21 = sin(x[5]);
     const double w22 = cos(x[5]);
-    const double w4 = (w0*w1*w22*p->c[3] + w1*w2*w21*p->c[3] + w22*p->c[2])/(w21*w21 + w22*w22);
-    const double w14 = (w0*w1*w21*p->p_m*v[5] + w0*w12*w22*p->c[3] + (w1*w11*w22*p->c[3] + w1*w13*w21*p->c[3]) + (w1*w2*w22*p->c[3]*v[5] + w12*w2*w21*p->c[3] - w21*p->c[2]*v[5]))/(w21*w21 + w22*w22);
+    const double w4 = (w22*p->c[2] + w0*w1*w22*p->c[3] + w1*w2*w21*p->c[3])/(w21*w21 + w22*w22);
+    const double w14 = (-w21*p->c[2]*v[5] + w0*w12*w22*p->c[3] + (w1*w11*w22*p->c[3] + w1*w13*w21*p->c[3]) + (w12*w2*w21*p->c[3] + w0*w1*w21*p->p_m*v[5] + w1*w2*w22*p->c[3]*v[5]))/(w21*w21 + w22*w22);
     const double w15 = -w14*w21 - w22*w4*v[5];
     const double w16 = w14*w22 - w21*w4*v[5];
     out[0] = -w15;
@@ -312,7 +312,7 @@ void bgc_residual(double t, const double *x, const bgc_params *p, double *out)
     (void)x;
     (void)p;
     (void)out;
-    out[0] = sin(x[5])*p->c[4]*x[0] + cos(x[5])*p->c[0]*x[1];
+    out[0] = cos(x[5])*p->c[0]*x[1] + sin(x[5])*p->c[4]*x[0];
 }
 
 void bgc_scale(double t, const double *x, const bgc_params *p, double *out)
@@ -321,7 +321,7 @@ void bgc_scale(double t, const double *x, const bgc_params *p, double *out)
     (void)x;
     (void)p;
     (void)out;
-    out[0] = fabs(sin(x[5])*p->c[0]*x[0]) + fabs(cos(x[5])*p->c[0]*x[1]);
+    out[0] = fabs(cos(x[5])*p->c[0]*x[1]) + fabs(sin(x[5])*p->c[4]*x[0]);
 }
 
 void bgc_position_jac(double t, const double *x, const bgc_params *p, double *out)
@@ -338,13 +338,11 @@ void bgc_velocity_jac(double t, const double *x, const bgc_params *p, double *ou
     (void)x;
     (void)p;
     (void)out;
+    memset(out, 0, 6 * sizeof *out); /* the nonzero entries follow */
     const double w23 = sin(x[5]);
     out[0] = w23*p->c[4];
     const double w24 = cos(x[5]);
     out[1] = w24*p->c[0];
-    out[2] = 0.0;
-    out[3] = 0.0;
-    out[4] = 0.0;
     out[5] = w23*p->c[4]*x[1] + w24*p->c[4]*x[0];
 }
 

@@ -189,7 +189,7 @@ def _rhs_0(t, x, p, w, out):
         w2 = p[11]*x[1]
         w17 = math.sin(x[5])
         w18 = math.cos(x[5])
-        w4 = (w0*w1*w18*p[14] + w1*w17*w2*p[14] + w18*p[13])/(w17*w17 + w18*w18)
+        w4 = (w18*p[13] + w0*w1*w18*p[14] + w1*w17*w2*p[14])/(w17*w17 + w18*w18)
         w5 = -w17*w4
         w6 = w18*w4
         w7 = -w6 + p[13]
@@ -214,7 +214,7 @@ def _rhs_0_ieee(t, x, p, w, out):
         w2 = p[11]*x[1]
         w17 = numpy.sin(x[5])
         w18 = numpy.cos(x[5])
-        w4 = (w0*w1*w18*p[14] + w1*w17*w2*p[14] + w18*p[13])/(w17*w17 + w18*w18)
+        w4 = (w18*p[13] + w0*w1*w18*p[14] + w1*w17*w2*p[14])/(w17*w17 + w18*w18)
         w5 = -w17*w4
         w6 = w18*w4
         w7 = -w6 + p[13]
@@ -240,7 +240,7 @@ def _outputs_0(t, x, p, w, out):
         w2 = p[11]*x[1]
         w19 = math.sin(x[5])
         w20 = math.cos(x[5])
-        w4 = (w0*w1*w20*p[14] + w1*w19*w2*p[14] + w20*p[13])/(w19*w19 + w20*w20)
+        w4 = (w20*p[13] + w0*w1*w20*p[14] + w1*w19*w2*p[14])/(w19*w19 + w20*w20)
         w8 = -w0*w19
         w9 = w2*w20
         w10 = w8 + w9
@@ -266,7 +266,7 @@ def _outputs_0_ieee(t, x, p, w, out):
         w2 = p[11]*x[1]
         w19 = numpy.sin(x[5])
         w20 = numpy.cos(x[5])
-        w4 = (w0*w1*w20*p[14] + w1*w19*w2*p[14] + w20*p[13])/(w19*w19 + w20*w20)
+        w4 = (w20*p[13] + w0*w1*w20*p[14] + w1*w19*w2*p[14])/(w19*w19 + w20*w20)
         w8 = -w0*w19
         w9 = w2*w20
         w10 = w8 + w9
@@ -296,8 +296,8 @@ def _jvp_0(t, x, p, w, v, out):
         w13 = p[11]*v[1]
         w21 = math.sin(x[5])
         w22 = math.cos(x[5])
-        w4 = (w0*w1*w22*p[14] + w1*w2*w21*p[14] + w22*p[13])/(w21*w21 + w22*w22)
-        w14 = (w0*w1*w21*p[0]*v[5] + w0*w12*w22*p[14] + (w1*w11*w22*p[14] + w1*w13*w21*p[14]) + (w1*w2*w22*p[14]*v[5] + w12*w2*w21*p[14] - w21*p[13]*v[5]))/(w21*w21 + w22*w22)
+        w4 = (w22*p[13] + w0*w1*w22*p[14] + w1*w2*w21*p[14])/(w21*w21 + w22*w22)
+        w14 = (-w21*p[13]*v[5] + w0*w12*w22*p[14] + (w1*w11*w22*p[14] + w1*w13*w21*p[14]) + (w12*w2*w21*p[14] + w0*w1*w21*p[0]*v[5] + w1*w2*w22*p[14]*v[5]))/(w21*w21 + w22*w22)
         w15 = -w14*w21 - w22*w4*v[5]
         w16 = w14*w22 - w21*w4*v[5]
         out[0] = -w15
@@ -324,8 +324,8 @@ def _jvp_0_ieee(t, x, p, w, v, out):
         w13 = p[11]*v[1]
         w21 = numpy.sin(x[5])
         w22 = numpy.cos(x[5])
-        w4 = (w0*w1*w22*p[14] + w1*w2*w21*p[14] + w22*p[13])/(w21*w21 + w22*w22)
-        w14 = (w0*w1*w21*p[0]*v[5] + w0*w12*w22*p[14] + (w1*w11*w22*p[14] + w1*w13*w21*p[14]) + (w1*w2*w22*p[14]*v[5] + w12*w2*w21*p[14] - w21*p[13]*v[5]))/(w21*w21 + w22*w22)
+        w4 = (w22*p[13] + w0*w1*w22*p[14] + w1*w2*w21*p[14])/(w21*w21 + w22*w22)
+        w14 = (-w21*p[13]*v[5] + w0*w12*w22*p[14] + (w1*w11*w22*p[14] + w1*w13*w21*p[14]) + (w12*w2*w21*p[14] + w0*w1*w21*p[0]*v[5] + w1*w2*w22*p[14]*v[5]))/(w21*w21 + w22*w22)
         w15 = -w14*w21 - w22*w4*v[5]
         w16 = w14*w22 - w21*w4*v[5]
         out[0] = -w15
@@ -343,7 +343,7 @@ def _jvp(t, x, p, w, v, out):
 
 def _residual_into(t, x, p, out):
     try:
-        out[0] = math.sin(x[5])*p[15]*x[0] + math.cos(x[5])*p[11]*x[1]
+        out[0] = math.cos(x[5])*p[11]*x[1] + math.sin(x[5])*p[15]*x[0]
     except (ArithmeticError, ValueError):
         return _residual_into_ieee(t, x, p, out)
 
@@ -353,7 +353,7 @@ def _residual_into_ieee(t, x, p, out):
         t = numpy.float64(t)
         x = numpy.asarray(x, dtype=numpy.float64)
         p = numpy.asarray(p, dtype=numpy.float64)
-        out[0] = numpy.sin(x[5])*p[15]*x[0] + numpy.cos(x[5])*p[11]*x[1]
+        out[0] = numpy.cos(x[5])*p[11]*x[1] + numpy.sin(x[5])*p[15]*x[0]
 
 
 
@@ -365,7 +365,7 @@ def _residual(t, x, p):
 
 def _scale_into(t, x, p, out):
     try:
-        out[0] = abs(math.sin(x[5])*p[11]*x[0]) + abs(math.cos(x[5])*p[11]*x[1])
+        out[0] = abs(math.cos(x[5])*p[11]*x[1]) + abs(math.sin(x[5])*p[15]*x[0])
     except (ArithmeticError, ValueError):
         return _scale_into_ieee(t, x, p, out)
 
@@ -375,7 +375,7 @@ def _scale_into_ieee(t, x, p, out):
         t = numpy.float64(t)
         x = numpy.asarray(x, dtype=numpy.float64)
         p = numpy.asarray(p, dtype=numpy.float64)
-        out[0] = abs(numpy.sin(x[5])*p[11]*x[0]) + abs(numpy.cos(x[5])*p[11]*x[1])
+        out[0] = abs(numpy.cos(x[5])*p[11]*x[1]) + abs(numpy.sin(x[5])*p[15]*x[0])
 
 
 
@@ -413,9 +413,6 @@ def _velocity_jac_into(t, x, p, out):
         out[0] = w23*p[15]
         w24 = math.cos(x[5])
         out[1] = w24*p[11]
-        out[2] = 0.0
-        out[3] = 0.0
-        out[4] = 0.0
         out[5] = w23*p[15]*x[1] + w24*p[15]*x[0]
     except (ArithmeticError, ValueError):
         return _velocity_jac_into_ieee(t, x, p, out)
@@ -430,9 +427,6 @@ def _velocity_jac_into_ieee(t, x, p, out):
         out[0] = w23*p[15]
         w24 = numpy.cos(x[5])
         out[1] = w24*p[11]
-        out[2] = 0.0
-        out[3] = 0.0
-        out[4] = 0.0
         out[5] = w23*p[15]*x[1] + w24*p[15]*x[0]
 
 

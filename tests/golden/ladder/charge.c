@@ -30,14 +30,14 @@
 
 #define BGC_NUM_STATES 1
 #define BGC_NUM_PARAMS 8
-#define BGC_NUM_CONSTANTS 12
+#define BGC_NUM_CONSTANTS 5
 #define BGC_NUM_OUTPUTS 6
 #define BGC_NUM_CONSTRAINTS 0
 #define BGC_NUM_POSITION_ROWS 0
 #define BGC_NUM_VELOCITY_ROWS 0
-#define BGC_NUM_BLOCKS 0
-#define BGC_WORK_DOUBLES 24
-#define BGC_WORK_INTS 0
+#define BGC_NUM_BLOCKS 1
+#define BGC_WORK_DOUBLES 48
+#define BGC_WORK_INTS 3
 #define BGC_WORK_Y0 0
 #define BGC_WORK_STAGES 1
 #define BGC_WORK_Y 16
@@ -56,7 +56,7 @@ typedef struct bgc_params {
     double p_R5;
     double p_Cc;
     double p_v0;
-    double c[12];
+    double c[5];
 } bgc_params;
 
 [bgc/runtime/api.h]
@@ -95,7 +95,7 @@ const char *const bgc_constraint_levels[BGC_DIM(BGC_NUM_CONSTRAINTS)] = {
     ""
 };
 const char *const bgc_block_names[BGC_DIM(BGC_NUM_BLOCKS)] = {
-    ""
+    "e[s1->n2], e[s3->n4]",
 };
 
 /* ================================================================= scene === */
@@ -135,17 +135,10 @@ void bgc_params_defaults(bgc_params *p, const int *given)
 void bgc_params_update(bgc_params *p)
 {
     p->c[0] = 1.0/p->p_Cc;
-    p->c[1] = p->p_R1*p->p_R2;
-    p->c[2] = p->p_R1*p->p_R3;
-    p->c[3] = p->p_R2*p->p_R3;
-    p->c[4] = p->p_V0*p->p_R2*p->p_R5;
-    p->c[5] = p->p_R4/(p->p_R1*p->p_R2*p->p_R4 + p->p_R1*p->p_R2*p->p_R5 + (p->p_R1*p->p_R3*p->p_R4 + p->p_R1*p->p_R3*p->p_R5) + (p->p_R1*p->p_R4*p->p_R5 + p->p_R2*p->p_R3*p->p_R4 + (p->p_R2*p->p_R3*p->p_R5 + p->p_R2*p->p_R4*p->p_R5)));
-    p->c[6] = 1.0/p->p_R5;
-    p->c[7] = p->p_R1*p->p_R4;
-    p->c[8] = p->p_V0*p->p_R3*p->p_R4 + p->p_V0*p->p_R3*p->p_R5 + p->p_V0*p->p_R4*p->p_R5;
-    p->c[9] = p->p_R2/(p->p_R1*p->p_R2*p->p_R4 + p->p_R1*p->p_R2*p->p_R5 + (p->p_R1*p->p_R3*p->p_R4 + p->p_R1*p->p_R3*p->p_R5) + (p->p_R1*p->p_R4*p->p_R5 + p->p_R2*p->p_R3*p->p_R4 + (p->p_R2*p->p_R3*p->p_R5 + p->p_R2*p->p_R4*p->p_R5)));
-    p->c[10] = 1.0/p->p_R4;
-    p->c[11] = 1.0/p->p_R2;
+    p->c[1] = 1.0/p->p_R5;
+    p->c[2] = 1.0/p->p_R4;
+    p->c[3] = 1.0/p->p_R2;
+    p->c[4] = -1.0/p->p_R5;
 }
 
 double *bgc_param_ref(bgc_params *p, int j)
@@ -180,8 +173,9 @@ static const int bgc_velocity_rows[BGC_DIM(BGC_NUM_VELOCITY_ROWS)] = { 0 };
 static const int bgc_velocity_movable[BGC_DIM(BGC_NUM_STATES)] = { 1 };
 
 /* The algebraic blocks solved here: factorization plans (bgc/sparse.py) and storage. */
+static const int bgc_block0_plan[] = { 0, 3, 0, 1, 1, 2, 1, 0, 1, 1, 1, 1, 3, 0, 0, 1, 1, 0, 1, 0, 1 };
 static const bgc_block bgc_blocks[BGC_DIM(BGC_NUM_BLOCKS)] = {
-    { { 0, 0, 0, NULL, NULL, NULL, NULL, NULL, NULL, NULL, NULL, NULL, NULL }, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0 }
+    { { 2, 0, 4, bgc_block0_plan + 0, bgc_block0_plan + 2, bgc_block0_plan + 5, bgc_block0_plan + 6, bgc_block0_plan + 7, bgc_block0_plan + 10, bgc_block0_plan + 11, bgc_block0_plan + 12, bgc_block0_plan + 13, bgc_block0_plan + 17 }, 24, 28, 32, 36, 38, 40, 42, 44, 46, 0, 2 },
 };
 
 /* The Jacobian's structure: the columns of each colour (evaluated by one bgc_jvp), and the
@@ -208,10 +202,25 @@ static inline int bgc_model_rhs(double t, const double *x, const bgc_params *p, 
     (void)wv;
     (void)out;
     const double w0 = p->c[0]*x[0];
-    const double w1 = (w0*p->c[1] + w0*p->c[2] + (w0*p->c[3] + p->c[4]))*p->c[5];
-    const double w2 = -w0 + w1;
-    const double w3 = w2*p->c[6];
-    out[0] = w3;
+    const double w3 = p->c[1] + p->c[2];
+    const double w5 = p->c[3]*p->p_R1;
+    const double w6 = w3*p->p_R1;
+    const double w7 = w3*p->p_R3;
+    const double w8 = w0*p->c[4];
+    const double w9 = w8*p->p_R1;
+    const double w10 = w8*p->p_R3;
+    wv[24] = w5 + 1.0;
+    wv[25] = w6;
+    wv[26] = -1.0;
+    wv[27] = w7 + 1.0;
+    wv[36] = -w9 + p->p_V0;
+    wv[37] = -w10;
+    if (bgc_block_solve(w, 0, t))
+        return 1;
+    const double w12 = wv[37];
+    const double w13 = w12 - w0;
+    const double w14 = w13*p->c[1];
+    out[0] = w14;
     return 0;
 }
 
@@ -225,20 +234,35 @@ static inline int bgc_model_outputs(double t, const double *x, const bgc_params 
     (void)wv;
     (void)out;
     const double w0 = p->c[0]*x[0];
-    const double w4 = (w0*p->c[7] + p->c[8])*p->c[9];
-    const double w1 = (w0*p->c[1] + w0*p->c[2] + (w0*p->c[3] + p->c[4]))*p->c[5];
-    const double w2 = -w0 + w1;
-    const double w3 = w2*p->c[6];
-    const double w5 = w1*p->c[10];
-    const double w6 = w3 + w5;
-    const double w7 = w4*p->c[11];
-    const double w8 = w6 + w7;
+    const double w3 = p->c[1] + p->c[2];
+    const double w5 = p->c[3]*p->p_R1;
+    const double w6 = w3*p->p_R1;
+    const double w7 = w3*p->p_R3;
+    const double w8 = w0*p->c[4];
+    const double w9 = w8*p->p_R1;
+    const double w10 = w8*p->p_R3;
+    wv[24] = w5 + 1.0;
+    wv[25] = w6;
+    wv[26] = -1.0;
+    wv[27] = w7 + 1.0;
+    wv[36] = -w9 + p->p_V0;
+    wv[37] = -w10;
+    if (bgc_block_solve(w, 0, t))
+        return 1;
+    const double w11 = wv[36];
+    const double w12 = wv[37];
+    const double w13 = w12 - w0;
+    const double w14 = w13*p->c[1];
+    const double w15 = w12*p->c[2];
+    const double w16 = w14 + w15;
+    const double w17 = w11*p->c[3];
+    const double w18 = w16 + w17;
     out[0] = w0;
     out[1] = x[0];
-    out[2] = w8;
-    out[3] = w4;
-    out[4] = w6;
-    out[5] = w1;
+    out[2] = w18;
+    out[3] = w11;
+    out[4] = w16;
+    out[5] = w12;
     return 0;
 }
 
@@ -252,11 +276,18 @@ static inline int bgc_model_jvp(double t, const double *x, const bgc_params *p, 
     (void)wv;
     (void)v;
     (void)out;
-    const double w9 = p->c[0]*v[0];
-    const double w10 = (w9*p->c[1] + w9*p->c[2] + w9*p->c[3])*p->c[5];
-    const double w11 = w10 - w9;
-    const double w12 = w11*p->c[6];
-    out[0] = w12;
+    const double w19 = p->c[0]*v[0];
+    const double w20 = w19*p->c[4];
+    const double w21 = w20*p->p_R1;
+    const double w22 = w20*p->p_R3;
+    wv[36] = -w21;
+    wv[37] = -w22;
+    if (bgc_block_resolve(w, 0, t))
+        return 1;
+    const double w24 = wv[37];
+    const double w25 = w24 - w19;
+    const double w26 = w25*p->c[1];
+    out[0] = w26;
     return 0;
 }
 

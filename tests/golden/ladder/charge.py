@@ -47,11 +47,23 @@ _POSITION_ROWS = []
 _VELOCITY_ROWS = []
 _VELOCITY_MOVABLE = [True]
 _EPS = sys.float_info.epsilon
-_WORK_DOUBLES = 24
-_WORK_INTS = 0
-_BLOCK_NAMES = []
+_WORK_DOUBLES = 48
+_WORK_INTS = 3
+_BLOCK_NAMES = ["e[s1->n2], e[s3->n4]"]
 # Per algebraic block: its factorization plan (bgc/sparse.py) and its storage in the workspace.
 _BLOCKS = [
+    (2, False, 4,
+     (0, 3),  # diag
+     (0, 1, 1),  # lptr
+     (2,),  # lpos
+     (1,),  # lrow
+     (0, 1, 1),  # uptr
+     (1,),  # upos
+     (1,),  # ucol
+     (3,),  # upd
+     (0, 0, 1, 1),  # prow
+     (0, 1, 0, 1),  # pcol
+     24, 28, 32, 36, 38, 40, 42, 44, 46, 0, 2),
 ]
 # The Jacobian's structure: the columns of each colour, the rows of each column.
 _JAC_COLORS = [(0,)]
@@ -113,17 +125,10 @@ def _fill_params_ieee(p, given):
 def _constants_into(p, out):
     try:
         out[0] = 1.0/p[6]
-        out[1] = p[1]*p[2]
-        out[2] = p[1]*p[3]
-        out[3] = p[2]*p[3]
-        out[4] = p[0]*p[2]*p[5]
-        out[5] = p[4]/(p[1]*p[2]*p[4] + p[1]*p[2]*p[5] + (p[1]*p[3]*p[4] + p[1]*p[3]*p[5]) + (p[1]*p[4]*p[5] + p[2]*p[3]*p[4] + (p[2]*p[3]*p[5] + p[2]*p[4]*p[5])))
-        out[6] = 1.0/p[5]
-        out[7] = p[1]*p[4]
-        out[8] = p[0]*p[3]*p[4] + p[0]*p[3]*p[5] + p[0]*p[4]*p[5]
-        out[9] = p[2]/(p[1]*p[2]*p[4] + p[1]*p[2]*p[5] + (p[1]*p[3]*p[4] + p[1]*p[3]*p[5]) + (p[1]*p[4]*p[5] + p[2]*p[3]*p[4] + (p[2]*p[3]*p[5] + p[2]*p[4]*p[5])))
-        out[10] = 1.0/p[4]
-        out[11] = 1.0/p[2]
+        out[1] = 1.0/p[5]
+        out[2] = 1.0/p[4]
+        out[3] = 1.0/p[2]
+        out[4] = -1.0/p[5]
     except (ArithmeticError, ValueError):
         return _constants_into_ieee(p, out)
 
@@ -132,22 +137,15 @@ def _constants_into_ieee(p, out):
     with numpy.errstate(all="ignore"):
         p = numpy.asarray(p, dtype=numpy.float64)
         out[0] = 1.0/p[6]
-        out[1] = p[1]*p[2]
-        out[2] = p[1]*p[3]
-        out[3] = p[2]*p[3]
-        out[4] = p[0]*p[2]*p[5]
-        out[5] = p[4]/(p[1]*p[2]*p[4] + p[1]*p[2]*p[5] + (p[1]*p[3]*p[4] + p[1]*p[3]*p[5]) + (p[1]*p[4]*p[5] + p[2]*p[3]*p[4] + (p[2]*p[3]*p[5] + p[2]*p[4]*p[5])))
-        out[6] = 1.0/p[5]
-        out[7] = p[1]*p[4]
-        out[8] = p[0]*p[3]*p[4] + p[0]*p[3]*p[5] + p[0]*p[4]*p[5]
-        out[9] = p[2]/(p[1]*p[2]*p[4] + p[1]*p[2]*p[5] + (p[1]*p[3]*p[4] + p[1]*p[3]*p[5]) + (p[1]*p[4]*p[5] + p[2]*p[3]*p[4] + (p[2]*p[3]*p[5] + p[2]*p[4]*p[5])))
-        out[10] = 1.0/p[4]
-        out[11] = 1.0/p[2]
+        out[1] = 1.0/p[5]
+        out[2] = 1.0/p[4]
+        out[3] = 1.0/p[2]
+        out[4] = -1.0/p[5]
 
 
 
 def _constants(p):
-    out = [0.0] * 12
+    out = [0.0] * 5
     _constants_into(p, out)
     return [float(v) for v in out]
 
@@ -177,10 +175,24 @@ def _rhs_0(t, x, p, w, out):
     wv = w.v
     try:
         w0 = p[8]*x[0]
-        w1 = (w0*p[9] + w0*p[10] + (w0*p[11] + p[12]))*p[13]
-        w2 = -w0 + w1
-        w3 = w2*p[14]
-        out[0] = w3
+        w3 = p[9] + p[10]
+        w5 = p[11]*p[1]
+        w6 = w3*p[1]
+        w7 = w3*p[3]
+        w8 = w0*p[12]
+        w9 = w8*p[1]
+        w10 = w8*p[3]
+        wv[24] = w5 + 1.0
+        wv[25] = w6
+        wv[26] = -1.0
+        wv[27] = w7 + 1.0
+        wv[36] = -w9 + p[0]
+        wv[37] = -w10
+        _block_solve(w, 0, t)
+        w12 = wv[37]
+        w13 = w12 - w0
+        w14 = w13*p[9]
+        out[0] = w14
     except (ArithmeticError, ValueError):
         return _rhs_0_ieee(t, x, p, w, out)
 
@@ -192,10 +204,24 @@ def _rhs_0_ieee(t, x, p, w, out):
         x = numpy.asarray(x, dtype=numpy.float64)
         p = numpy.asarray(p, dtype=numpy.float64)
         w0 = p[8]*x[0]
-        w1 = (w0*p[9] + w0*p[10] + (w0*p[11] + p[12]))*p[13]
-        w2 = -w0 + w1
-        w3 = w2*p[14]
-        out[0] = w3
+        w3 = p[9] + p[10]
+        w5 = p[11]*p[1]
+        w6 = w3*p[1]
+        w7 = w3*p[3]
+        w8 = w0*p[12]
+        w9 = w8*p[1]
+        w10 = w8*p[3]
+        wv[24] = w5 + 1.0
+        wv[25] = w6
+        wv[26] = -1.0
+        wv[27] = w7 + 1.0
+        wv[36] = -w9 + p[0]
+        wv[37] = -w10
+        _block_solve(w, 0, t)
+        w12 = wv[37]
+        w13 = w12 - w0
+        w14 = w13*p[9]
+        out[0] = w14
 
 
 
@@ -208,20 +234,34 @@ def _outputs_0(t, x, p, w, out):
     wv = w.v
     try:
         w0 = p[8]*x[0]
-        w4 = (w0*p[15] + p[16])*p[17]
-        w1 = (w0*p[9] + w0*p[10] + (w0*p[11] + p[12]))*p[13]
-        w2 = -w0 + w1
-        w3 = w2*p[14]
-        w5 = w1*p[18]
-        w6 = w3 + w5
-        w7 = w4*p[19]
-        w8 = w6 + w7
+        w3 = p[9] + p[10]
+        w5 = p[11]*p[1]
+        w6 = w3*p[1]
+        w7 = w3*p[3]
+        w8 = w0*p[12]
+        w9 = w8*p[1]
+        w10 = w8*p[3]
+        wv[24] = w5 + 1.0
+        wv[25] = w6
+        wv[26] = -1.0
+        wv[27] = w7 + 1.0
+        wv[36] = -w9 + p[0]
+        wv[37] = -w10
+        _block_solve(w, 0, t)
+        w11 = wv[36]
+        w12 = wv[37]
+        w13 = w12 - w0
+        w14 = w13*p[9]
+        w15 = w12*p[10]
+        w16 = w14 + w15
+        w17 = w11*p[11]
+        w18 = w16 + w17
         out[0] = w0
         out[1] = x[0]
-        out[2] = w8
-        out[3] = w4
-        out[4] = w6
-        out[5] = w1
+        out[2] = w18
+        out[3] = w11
+        out[4] = w16
+        out[5] = w12
     except (ArithmeticError, ValueError):
         return _outputs_0_ieee(t, x, p, w, out)
 
@@ -233,20 +273,34 @@ def _outputs_0_ieee(t, x, p, w, out):
         x = numpy.asarray(x, dtype=numpy.float64)
         p = numpy.asarray(p, dtype=numpy.float64)
         w0 = p[8]*x[0]
-        w4 = (w0*p[15] + p[16])*p[17]
-        w1 = (w0*p[9] + w0*p[10] + (w0*p[11] + p[12]))*p[13]
-        w2 = -w0 + w1
-        w3 = w2*p[14]
-        w5 = w1*p[18]
-        w6 = w3 + w5
-        w7 = w4*p[19]
-        w8 = w6 + w7
+        w3 = p[9] + p[10]
+        w5 = p[11]*p[1]
+        w6 = w3*p[1]
+        w7 = w3*p[3]
+        w8 = w0*p[12]
+        w9 = w8*p[1]
+        w10 = w8*p[3]
+        wv[24] = w5 + 1.0
+        wv[25] = w6
+        wv[26] = -1.0
+        wv[27] = w7 + 1.0
+        wv[36] = -w9 + p[0]
+        wv[37] = -w10
+        _block_solve(w, 0, t)
+        w11 = wv[36]
+        w12 = wv[37]
+        w13 = w12 - w0
+        w14 = w13*p[9]
+        w15 = w12*p[10]
+        w16 = w14 + w15
+        w17 = w11*p[11]
+        w18 = w16 + w17
         out[0] = w0
         out[1] = x[0]
-        out[2] = w8
-        out[3] = w4
-        out[4] = w6
-        out[5] = w1
+        out[2] = w18
+        out[3] = w11
+        out[4] = w16
+        out[5] = w12
 
 
 
@@ -258,11 +312,17 @@ def _out(t, x, p, w, out):
 def _jvp_0(t, x, p, w, v, out):
     wv = w.v
     try:
-        w9 = p[8]*v[0]
-        w10 = (w9*p[9] + w9*p[10] + w9*p[11])*p[13]
-        w11 = w10 - w9
-        w12 = w11*p[14]
-        out[0] = w12
+        w19 = p[8]*v[0]
+        w20 = w19*p[12]
+        w21 = w20*p[1]
+        w22 = w20*p[3]
+        wv[36] = -w21
+        wv[37] = -w22
+        _block_resolve(w, 0, t)
+        w24 = wv[37]
+        w25 = w24 - w19
+        w26 = w25*p[9]
+        out[0] = w26
     except (ArithmeticError, ValueError):
         return _jvp_0_ieee(t, x, p, w, v, out)
 
@@ -273,11 +333,17 @@ def _jvp_0_ieee(t, x, p, w, v, out):
         t = numpy.float64(t)
         x = numpy.asarray(x, dtype=numpy.float64)
         p = numpy.asarray(p, dtype=numpy.float64)
-        w9 = p[8]*v[0]
-        w10 = (w9*p[9] + w9*p[10] + w9*p[11])*p[13]
-        w11 = w10 - w9
-        w12 = w11*p[14]
-        out[0] = w12
+        w19 = p[8]*v[0]
+        w20 = w19*p[12]
+        w21 = w20*p[1]
+        w22 = w20*p[3]
+        wv[36] = -w21
+        wv[37] = -w22
+        _block_resolve(w, 0, t)
+        w24 = wv[37]
+        w25 = w24 - w19
+        w26 = w25*p[9]
+        out[0] = w26
 
 
 

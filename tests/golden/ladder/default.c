@@ -30,14 +30,14 @@
 
 #define BGC_NUM_STATES 1
 #define BGC_NUM_PARAMS 8
-#define BGC_NUM_CONSTANTS 7
+#define BGC_NUM_CONSTANTS 5
 #define BGC_NUM_OUTPUTS 1
 #define BGC_NUM_CONSTRAINTS 0
 #define BGC_NUM_POSITION_ROWS 0
 #define BGC_NUM_VELOCITY_ROWS 0
-#define BGC_NUM_BLOCKS 0
-#define BGC_WORK_DOUBLES 19
-#define BGC_WORK_INTS 0
+#define BGC_NUM_BLOCKS 1
+#define BGC_WORK_DOUBLES 43
+#define BGC_WORK_INTS 3
 #define BGC_WORK_Y0 0
 #define BGC_WORK_STAGES 1
 #define BGC_WORK_Y 16
@@ -56,7 +56,7 @@ typedef struct bgc_params {
     double p_R5;
     double p_Cc;
     double p_v0;
-    double c[7];
+    double c[5];
 } bgc_params;
 
 [bgc/runtime/api.h]
@@ -90,7 +90,7 @@ const char *const bgc_constraint_levels[BGC_DIM(BGC_NUM_CONSTRAINTS)] = {
     ""
 };
 const char *const bgc_block_names[BGC_DIM(BGC_NUM_BLOCKS)] = {
-    ""
+    "e[s1->n2], e[s3->n4]",
 };
 
 /* ================================================================= scene === */
@@ -130,12 +130,10 @@ void bgc_params_defaults(bgc_params *p, const int *given)
 void bgc_params_update(bgc_params *p)
 {
     p->c[0] = 1.0/p->p_Cc;
-    p->c[1] = p->p_R1*p->p_R2;
-    p->c[2] = p->p_R1*p->p_R3;
-    p->c[3] = p->p_R2*p->p_R3;
-    p->c[4] = p->p_V0*p->p_R2*p->p_R5;
-    p->c[5] = p->p_R4/(p->p_R1*p->p_R2*p->p_R4 + p->p_R1*p->p_R2*p->p_R5 + (p->p_R1*p->p_R3*p->p_R4 + p->p_R1*p->p_R3*p->p_R5) + (p->p_R1*p->p_R4*p->p_R5 + p->p_R2*p->p_R3*p->p_R4 + (p->p_R2*p->p_R3*p->p_R5 + p->p_R2*p->p_R4*p->p_R5)));
-    p->c[6] = 1.0/p->p_R5;
+    p->c[1] = 1.0/p->p_R5;
+    p->c[2] = 1.0/p->p_R4;
+    p->c[3] = 1.0/p->p_R2;
+    p->c[4] = -1.0/p->p_R5;
 }
 
 double *bgc_param_ref(bgc_params *p, int j)
@@ -170,8 +168,9 @@ static const int bgc_velocity_rows[BGC_DIM(BGC_NUM_VELOCITY_ROWS)] = { 0 };
 static const int bgc_velocity_movable[BGC_DIM(BGC_NUM_STATES)] = { 1 };
 
 /* The algebraic blocks solved here: factorization plans (bgc/sparse.py) and storage. */
+static const int bgc_block0_plan[] = { 0, 3, 0, 1, 1, 2, 1, 0, 1, 1, 1, 1, 3, 0, 0, 1, 1, 0, 1, 0, 1 };
 static const bgc_block bgc_blocks[BGC_DIM(BGC_NUM_BLOCKS)] = {
-    { { 0, 0, 0, NULL, NULL, NULL, NULL, NULL, NULL, NULL, NULL, NULL, NULL }, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0 }
+    { { 2, 0, 4, bgc_block0_plan + 0, bgc_block0_plan + 2, bgc_block0_plan + 5, bgc_block0_plan + 6, bgc_block0_plan + 7, bgc_block0_plan + 10, bgc_block0_plan + 11, bgc_block0_plan + 12, bgc_block0_plan + 13, bgc_block0_plan + 17 }, 19, 23, 27, 31, 33, 35, 37, 39, 41, 0, 2 },
 };
 
 /* The Jacobian's structure: the columns of each colour (evaluated by one bgc_jvp), and the
@@ -198,10 +197,25 @@ static inline int bgc_model_rhs(double t, const double *x, const bgc_params *p, 
     (void)wv;
     (void)out;
     const double w0 = p->c[0]*x[0];
-    const double w1 = (w0*p->c[1] + w0*p->c[2] + (w0*p->c[3] + p->c[4]))*p->c[5];
-    const double w2 = -w0 + w1;
-    const double w3 = w2*p->c[6];
-    out[0] = w3;
+    const double w3 = p->c[1] + p->c[2];
+    const double w5 = p->c[3]*p->p_R1;
+    const double w6 = w3*p->p_R1;
+    const double w7 = w3*p->p_R3;
+    const double w8 = w0*p->c[4];
+    const double w9 = w8*p->p_R1;
+    const double w10 = w8*p->p_R3;
+    wv[19] = w5 + 1.0;
+    wv[20] = w6;
+    wv[21] = -1.0;
+    wv[22] = w7 + 1.0;
+    wv[31] = -w9 + p->p_V0;
+    wv[32] = -w10;
+    if (bgc_block_solve(w, 0, t))
+        return 1;
+    const double w12 = wv[32];
+    const double w13 = w12 - w0;
+    const double w14 = w13*p->c[1];
+    out[0] = w14;
     return 0;
 }
 
@@ -228,11 +242,18 @@ static inline int bgc_model_jvp(double t, const double *x, const bgc_params *p, 
     (void)wv;
     (void)v;
     (void)out;
-    const double w4 = p->c[0]*v[0];
-    const double w5 = (w4*p->c[1] + w4*p->c[2] + w4*p->c[3])*p->c[5];
-    const double w6 = -w4 + w5;
-    const double w7 = w6*p->c[6];
-    out[0] = w7;
+    const double w15 = p->c[0]*v[0];
+    const double w16 = w15*p->c[4];
+    const double w17 = w16*p->p_R1;
+    const double w18 = w16*p->p_R3;
+    wv[31] = -w17;
+    wv[32] = -w18;
+    if (bgc_block_resolve(w, 0, t))
+        return 1;
+    const double w20 = wv[32];
+    const double w21 = w20 - w15;
+    const double w22 = w21*p->c[1];
+    out[0] = w22;
     return 0;
 }
 

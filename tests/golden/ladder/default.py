@@ -47,11 +47,23 @@ _POSITION_ROWS = []
 _VELOCITY_ROWS = []
 _VELOCITY_MOVABLE = [True]
 _EPS = sys.float_info.epsilon
-_WORK_DOUBLES = 19
-_WORK_INTS = 0
-_BLOCK_NAMES = []
+_WORK_DOUBLES = 43
+_WORK_INTS = 3
+_BLOCK_NAMES = ["e[s1->n2], e[s3->n4]"]
 # Per algebraic block: its factorization plan (bgc/sparse.py) and its storage in the workspace.
 _BLOCKS = [
+    (2, False, 4,
+     (0, 3),  # diag
+     (0, 1, 1),  # lptr
+     (2,),  # lpos
+     (1,),  # lrow
+     (0, 1, 1),  # uptr
+     (1,),  # upos
+     (1,),  # ucol
+     (3,),  # upd
+     (0, 0, 1, 1),  # prow
+     (0, 1, 0, 1),  # pcol
+     19, 23, 27, 31, 33, 35, 37, 39, 41, 0, 2),
 ]
 # The Jacobian's structure: the columns of each colour, the rows of each column.
 _JAC_COLORS = [(0,)]
@@ -113,12 +125,10 @@ def _fill_params_ieee(p, given):
 def _constants_into(p, out):
     try:
         out[0] = 1.0/p[6]
-        out[1] = p[1]*p[2]
-        out[2] = p[1]*p[3]
-        out[3] = p[2]*p[3]
-        out[4] = p[0]*p[2]*p[5]
-        out[5] = p[4]/(p[1]*p[2]*p[4] + p[1]*p[2]*p[5] + (p[1]*p[3]*p[4] + p[1]*p[3]*p[5]) + (p[1]*p[4]*p[5] + p[2]*p[3]*p[4] + (p[2]*p[3]*p[5] + p[2]*p[4]*p[5])))
-        out[6] = 1.0/p[5]
+        out[1] = 1.0/p[5]
+        out[2] = 1.0/p[4]
+        out[3] = 1.0/p[2]
+        out[4] = -1.0/p[5]
     except (ArithmeticError, ValueError):
         return _constants_into_ieee(p, out)
 
@@ -127,17 +137,15 @@ def _constants_into_ieee(p, out):
     with numpy.errstate(all="ignore"):
         p = numpy.asarray(p, dtype=numpy.float64)
         out[0] = 1.0/p[6]
-        out[1] = p[1]*p[2]
-        out[2] = p[1]*p[3]
-        out[3] = p[2]*p[3]
-        out[4] = p[0]*p[2]*p[5]
-        out[5] = p[4]/(p[1]*p[2]*p[4] + p[1]*p[2]*p[5] + (p[1]*p[3]*p[4] + p[1]*p[3]*p[5]) + (p[1]*p[4]*p[5] + p[2]*p[3]*p[4] + (p[2]*p[3]*p[5] + p[2]*p[4]*p[5])))
-        out[6] = 1.0/p[5]
+        out[1] = 1.0/p[5]
+        out[2] = 1.0/p[4]
+        out[3] = 1.0/p[2]
+        out[4] = -1.0/p[5]
 
 
 
 def _constants(p):
-    out = [0.0] * 7
+    out = [0.0] * 5
     _constants_into(p, out)
     return [float(v) for v in out]
 
@@ -167,10 +175,24 @@ def _rhs_0(t, x, p, w, out):
     wv = w.v
     try:
         w0 = p[8]*x[0]
-        w1 = (w0*p[9] + w0*p[10] + (w0*p[11] + p[12]))*p[13]
-        w2 = -w0 + w1
-        w3 = w2*p[14]
-        out[0] = w3
+        w3 = p[9] + p[10]
+        w5 = p[11]*p[1]
+        w6 = w3*p[1]
+        w7 = w3*p[3]
+        w8 = w0*p[12]
+        w9 = w8*p[1]
+        w10 = w8*p[3]
+        wv[19] = w5 + 1.0
+        wv[20] = w6
+        wv[21] = -1.0
+        wv[22] = w7 + 1.0
+        wv[31] = -w9 + p[0]
+        wv[32] = -w10
+        _block_solve(w, 0, t)
+        w12 = wv[32]
+        w13 = w12 - w0
+        w14 = w13*p[9]
+        out[0] = w14
     except (ArithmeticError, ValueError):
         return _rhs_0_ieee(t, x, p, w, out)
 
@@ -182,10 +204,24 @@ def _rhs_0_ieee(t, x, p, w, out):
         x = numpy.asarray(x, dtype=numpy.float64)
         p = numpy.asarray(p, dtype=numpy.float64)
         w0 = p[8]*x[0]
-        w1 = (w0*p[9] + w0*p[10] + (w0*p[11] + p[12]))*p[13]
-        w2 = -w0 + w1
-        w3 = w2*p[14]
-        out[0] = w3
+        w3 = p[9] + p[10]
+        w5 = p[11]*p[1]
+        w6 = w3*p[1]
+        w7 = w3*p[3]
+        w8 = w0*p[12]
+        w9 = w8*p[1]
+        w10 = w8*p[3]
+        wv[19] = w5 + 1.0
+        wv[20] = w6
+        wv[21] = -1.0
+        wv[22] = w7 + 1.0
+        wv[31] = -w9 + p[0]
+        wv[32] = -w10
+        _block_solve(w, 0, t)
+        w12 = wv[32]
+        w13 = w12 - w0
+        w14 = w13*p[9]
+        out[0] = w14
 
 
 
@@ -220,11 +256,17 @@ def _out(t, x, p, w, out):
 def _jvp_0(t, x, p, w, v, out):
     wv = w.v
     try:
-        w4 = p[8]*v[0]
-        w5 = (w4*p[9] + w4*p[10] + w4*p[11])*p[13]
-        w6 = -w4 + w5
-        w7 = w6*p[14]
-        out[0] = w7
+        w15 = p[8]*v[0]
+        w16 = w15*p[12]
+        w17 = w16*p[1]
+        w18 = w16*p[3]
+        wv[31] = -w17
+        wv[32] = -w18
+        _block_resolve(w, 0, t)
+        w20 = wv[32]
+        w21 = w20 - w15
+        w22 = w21*p[9]
+        out[0] = w22
     except (ArithmeticError, ValueError):
         return _jvp_0_ieee(t, x, p, w, v, out)
 
@@ -235,11 +277,17 @@ def _jvp_0_ieee(t, x, p, w, v, out):
         t = numpy.float64(t)
         x = numpy.asarray(x, dtype=numpy.float64)
         p = numpy.asarray(p, dtype=numpy.float64)
-        w4 = p[8]*v[0]
-        w5 = (w4*p[9] + w4*p[10] + w4*p[11])*p[13]
-        w6 = -w4 + w5
-        w7 = w6*p[14]
-        out[0] = w7
+        w15 = p[8]*v[0]
+        w16 = w15*p[12]
+        w17 = w16*p[1]
+        w18 = w16*p[3]
+        wv[31] = -w17
+        wv[32] = -w18
+        _block_resolve(w, 0, t)
+        w20 = wv[32]
+        w21 = w20 - w15
+        w22 = w21*p[9]
+        out[0] = w22
 
 
 

@@ -130,15 +130,15 @@ void bgc_params_defaults(bgc_params *p, const int *given)
 void bgc_params_update(bgc_params *p)
 {
     p->c[0] = 1.0/p->p_m;
-    const double w27 = p->p_l*p->p_l;
-    p->c[1] = -w27;
+    const double w27 = -p->p_l*p->p_l;
+    p->c[1] = w27;
     p->c[2] = p->p_m*p->p_g;
     p->c[3] = 2.0*p->p_m;
     p->c[4] = p->p_m*p->p_beta*p->p_beta;
     p->c[5] = 2.0*p->p_m*p->p_alpha;
     p->c[6] = 4.0*p->p_m;
     p->c[7] = 2.0/p->p_m;
-    p->c[8] = w27;
+    p->c[8] = fabs(w27);
 }
 
 double *bgc_param_ref(bgc_params *p, int j)
@@ -207,7 +207,7 @@ static inline int bgc_model_rhs(double t, const double *x, const bgc_params *p, 
     const double w20 = x[3]*x[3];
     const double w21 = x[2]*x[2];
     const double w5 = w20 + w21 + p->c[1];
-    const double w7 = (w0*w0*p->c[3] + w2*w2*p->c[3] + w4*p->c[5] + (w5*p->c[4] + 2.0*p->c[2]*x[3]))*(0.25/(w20 + w21));
+    const double w7 = (w4*p->c[5] + w5*p->c[4] + w0*w0*p->c[3] + (w2*w2*p->c[3] + 2.0*p->c[2]*x[3]))*(0.25/(w20 + w21));
     const double w8 = 2.0*w7*x[2];
     const double w9 = 2.0*w7*x[3];
     const double w10 = -w9 + p->c[2];
@@ -258,10 +258,10 @@ static inline int bgc_model_jvp(double t, const double *x, const bgc_params *p, 
     const double w23 = x[2]*x[2];
     const double w5 = w22 + w23 + p->c[1];
     const double w24 = 2.0*v[2]*x[2] + 2.0*v[3]*x[3];
-    const double w25 = w0*w0*p->c[3] + w2*w2*p->c[3] + w4*p->c[5] + (w5*p->c[4] + 2.0*p->c[2]*x[3]);
+    const double w25 = w4*p->c[5] + w5*p->c[4] + w0*w0*p->c[3] + (w2*w2*p->c[3] + 2.0*p->c[2]*x[3]);
     const double w26 = w22 + w23;
     const double w7 = 0.25*w25/w26;
-    const double w17 = -0.25*w24*w25/(w26*w26) + (w0*w11*p->c[6] + w13*w2*p->c[6] + w15*p->c[5] + (w24*p->c[4] + 2.0*p->c[2]*v[3]))*(0.25/w26);
+    const double w17 = (w15*p->c[5] + w24*p->c[4] + 2.0*p->c[2]*v[3] + (w0*w11*p->c[6] + w13*w2*p->c[6]))*(0.25/w26) - 0.25*w24*w25/(w26*w26);
     const double w18 = 2.0*w17*x[2] + 2.0*w7*v[2];
     const double w19 = 2.0*w17*x[3] + 2.0*w7*v[3];
     out[0] = -w18;
@@ -277,7 +277,7 @@ void bgc_residual(double t, const double *x, const bgc_params *p, double *out)
     (void)x;
     (void)p;
     (void)out;
-    out[0] = p->c[1] + x[2]*x[2] + x[3]*x[3];
+    out[0] = x[2]*x[2] + x[3]*x[3] + p->c[1];
     out[1] = p->c[7]*x[0]*x[2] + p->c[7]*x[1]*x[3];
 }
 
@@ -287,8 +287,8 @@ void bgc_scale(double t, const double *x, const bgc_params *p, double *out)
     (void)x;
     (void)p;
     (void)out;
-    out[0] = p->c[8] + x[2]*x[2] + x[3]*x[3];
-    out[1] = 2.0*fabs(p->c[0]*x[0]*x[2]) + 2.0*fabs(p->c[0]*x[1]*x[3]);
+    out[0] = fabs(x[2]*x[2]) + fabs(x[3]*x[3]) + p->c[8];
+    out[1] = fabs(p->c[7]*x[0]*x[2]) + fabs(p->c[7]*x[1]*x[3]);
 }
 
 void bgc_position_jac(double t, const double *x, const bgc_params *p, double *out)
@@ -297,8 +297,7 @@ void bgc_position_jac(double t, const double *x, const bgc_params *p, double *ou
     (void)x;
     (void)p;
     (void)out;
-    out[0] = 0.0;
-    out[1] = 0.0;
+    memset(out, 0, 4 * sizeof *out); /* the nonzero entries follow */
     out[2] = 2.0*x[2];
     out[3] = 2.0*x[3];
 }
@@ -309,6 +308,7 @@ void bgc_velocity_jac(double t, const double *x, const bgc_params *p, double *ou
     (void)x;
     (void)p;
     (void)out;
+    memset(out, 0, 4 * sizeof *out); /* the nonzero entries follow */
     out[0] = p->c[7]*x[2];
     out[1] = p->c[7]*x[3];
     out[2] = p->c[7]*x[0];

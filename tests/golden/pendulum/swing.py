@@ -105,15 +105,15 @@ def _fill_params_ieee(p, given):
 def _constants_into(p, out):
     try:
         out[0] = 1.0/p[0]
-        w29 = p[1]*p[1]
-        out[1] = -w29
+        w29 = -p[1]*p[1]
+        out[1] = w29
         out[2] = p[0]*p[2]
         out[3] = 2.0*p[0]
         out[4] = p[0]*p[5]*p[5]
         out[5] = 2.0*p[0]*p[4]
         out[6] = 4.0*p[0]
         out[7] = 2.0/p[0]
-        out[8] = w29
+        out[8] = abs(w29)
     except (ArithmeticError, ValueError):
         return _constants_into_ieee(p, out)
 
@@ -122,15 +122,15 @@ def _constants_into_ieee(p, out):
     with numpy.errstate(all="ignore"):
         p = numpy.asarray(p, dtype=numpy.float64)
         out[0] = 1.0/p[0]
-        w29 = p[1]*p[1]
-        out[1] = -w29
+        w29 = -p[1]*p[1]
+        out[1] = w29
         out[2] = p[0]*p[2]
         out[3] = 2.0*p[0]
         out[4] = p[0]*p[5]*p[5]
         out[5] = 2.0*p[0]*p[4]
         out[6] = 4.0*p[0]
         out[7] = 2.0/p[0]
-        out[8] = w29
+        out[8] = abs(w29)
 
 
 
@@ -178,7 +178,7 @@ def _rhs_0(t, x, p, w, out):
         w20 = x[3]*x[3]
         w21 = x[2]*x[2]
         w5 = w20 + w21 + p[7]
-        w7 = (w0*w0*p[9] + w2*w2*p[9] + w4*p[11] + (w5*p[10] + 2.0*p[8]*x[3]))*(0.25/(w20 + w21))
+        w7 = (w4*p[11] + w5*p[10] + w0*w0*p[9] + (w2*w2*p[9] + 2.0*p[8]*x[3]))*(0.25/(w20 + w21))
         w8 = 2.0*w7*x[2]
         w9 = 2.0*w7*x[3]
         w10 = -w9 + p[8]
@@ -204,7 +204,7 @@ def _rhs_0_ieee(t, x, p, w, out):
         w20 = x[3]*x[3]
         w21 = x[2]*x[2]
         w5 = w20 + w21 + p[7]
-        w7 = (w0*w0*p[9] + w2*w2*p[9] + w4*p[11] + (w5*p[10] + 2.0*p[8]*x[3]))*(0.25/(w20 + w21))
+        w7 = (w4*p[11] + w5*p[10] + w0*w0*p[9] + (w2*w2*p[9] + 2.0*p[8]*x[3]))*(0.25/(w20 + w21))
         w8 = 2.0*w7*x[2]
         w9 = 2.0*w7*x[3]
         w10 = -w9 + p[8]
@@ -231,7 +231,7 @@ def _outputs_0(t, x, p, w, out):
         w22 = x[3]*x[3]
         w23 = x[2]*x[2]
         w5 = w22 + w23 + p[7]
-        w7 = (w0*w0*p[9] + w2*w2*p[9] + w4*p[11] + (w5*p[10] + 2.0*p[8]*x[3]))*(0.25/(w22 + w23))
+        w7 = (w4*p[11] + w5*p[10] + w0*w0*p[9] + (w2*w2*p[9] + 2.0*p[8]*x[3]))*(0.25/(w22 + w23))
         out[0] = x[2]
         out[1] = x[3]
         out[2] = w7
@@ -254,7 +254,7 @@ def _outputs_0_ieee(t, x, p, w, out):
         w22 = x[3]*x[3]
         w23 = x[2]*x[2]
         w5 = w22 + w23 + p[7]
-        w7 = (w0*w0*p[9] + w2*w2*p[9] + w4*p[11] + (w5*p[10] + 2.0*p[8]*x[3]))*(0.25/(w22 + w23))
+        w7 = (w4*p[11] + w5*p[10] + w0*w0*p[9] + (w2*w2*p[9] + 2.0*p[8]*x[3]))*(0.25/(w22 + w23))
         out[0] = x[2]
         out[1] = x[3]
         out[2] = w7
@@ -284,10 +284,10 @@ def _jvp_0(t, x, p, w, v, out):
         w25 = x[2]*x[2]
         w5 = w24 + w25 + p[7]
         w26 = 2.0*v[2]*x[2] + 2.0*v[3]*x[3]
-        w27 = w0*w0*p[9] + w2*w2*p[9] + w4*p[11] + (w5*p[10] + 2.0*p[8]*x[3])
+        w27 = w4*p[11] + w5*p[10] + w0*w0*p[9] + (w2*w2*p[9] + 2.0*p[8]*x[3])
         w28 = w24 + w25
         w7 = 0.25*w27/w28
-        w17 = -0.25*w26*w27/(w28*w28) + (w0*w11*p[12] + w13*w2*p[12] + w15*p[11] + (w26*p[10] + 2.0*p[8]*v[3]))*(0.25/w28)
+        w17 = (w15*p[11] + w26*p[10] + 2.0*p[8]*v[3] + (w0*w11*p[12] + w13*w2*p[12]))*(0.25/w28) - 0.25*w26*w27/(w28*w28)
         w18 = 2.0*w17*x[2] + 2.0*w7*v[2]
         w19 = 2.0*w17*x[3] + 2.0*w7*v[3]
         out[0] = -w18
@@ -318,10 +318,10 @@ def _jvp_0_ieee(t, x, p, w, v, out):
         w25 = x[2]*x[2]
         w5 = w24 + w25 + p[7]
         w26 = 2.0*v[2]*x[2] + 2.0*v[3]*x[3]
-        w27 = w0*w0*p[9] + w2*w2*p[9] + w4*p[11] + (w5*p[10] + 2.0*p[8]*x[3])
+        w27 = w4*p[11] + w5*p[10] + w0*w0*p[9] + (w2*w2*p[9] + 2.0*p[8]*x[3])
         w28 = w24 + w25
         w7 = 0.25*w27/w28
-        w17 = -0.25*w26*w27/(w28*w28) + (w0*w11*p[12] + w13*w2*p[12] + w15*p[11] + (w26*p[10] + 2.0*p[8]*v[3]))*(0.25/w28)
+        w17 = (w15*p[11] + w26*p[10] + 2.0*p[8]*v[3] + (w0*w11*p[12] + w13*w2*p[12]))*(0.25/w28) - 0.25*w26*w27/(w28*w28)
         w18 = 2.0*w17*x[2] + 2.0*w7*v[2]
         w19 = 2.0*w17*x[3] + 2.0*w7*v[3]
         out[0] = -w18
@@ -337,7 +337,7 @@ def _jvp(t, x, p, w, v, out):
 
 def _residual_into(t, x, p, out):
     try:
-        out[0] = p[7] + x[2]*x[2] + x[3]*x[3]
+        out[0] = x[2]*x[2] + x[3]*x[3] + p[7]
         out[1] = p[13]*x[0]*x[2] + p[13]*x[1]*x[3]
     except (ArithmeticError, ValueError):
         return _residual_into_ieee(t, x, p, out)
@@ -348,7 +348,7 @@ def _residual_into_ieee(t, x, p, out):
         t = numpy.float64(t)
         x = numpy.asarray(x, dtype=numpy.float64)
         p = numpy.asarray(p, dtype=numpy.float64)
-        out[0] = p[7] + x[2]*x[2] + x[3]*x[3]
+        out[0] = x[2]*x[2] + x[3]*x[3] + p[7]
         out[1] = p[13]*x[0]*x[2] + p[13]*x[1]*x[3]
 
 
@@ -361,8 +361,8 @@ def _residual(t, x, p):
 
 def _scale_into(t, x, p, out):
     try:
-        out[0] = p[14] + x[2]*x[2] + x[3]*x[3]
-        out[1] = 2.0*abs(p[6]*x[0]*x[2]) + 2.0*abs(p[6]*x[1]*x[3])
+        out[0] = abs(x[2]*x[2]) + abs(x[3]*x[3]) + p[14]
+        out[1] = abs(p[13]*x[0]*x[2]) + abs(p[13]*x[1]*x[3])
     except (ArithmeticError, ValueError):
         return _scale_into_ieee(t, x, p, out)
 
@@ -372,8 +372,8 @@ def _scale_into_ieee(t, x, p, out):
         t = numpy.float64(t)
         x = numpy.asarray(x, dtype=numpy.float64)
         p = numpy.asarray(p, dtype=numpy.float64)
-        out[0] = p[14] + x[2]*x[2] + x[3]*x[3]
-        out[1] = 2.0*abs(p[6]*x[0]*x[2]) + 2.0*abs(p[6]*x[1]*x[3])
+        out[0] = abs(x[2]*x[2]) + abs(x[3]*x[3]) + p[14]
+        out[1] = abs(p[13]*x[0]*x[2]) + abs(p[13]*x[1]*x[3])
 
 
 
@@ -385,8 +385,6 @@ def _scale(t, x, p):
 
 def _position_jac_into(t, x, p, out):
     try:
-        out[0] = 0.0
-        out[1] = 0.0
         out[2] = 2.0*x[2]
         out[3] = 2.0*x[3]
     except (ArithmeticError, ValueError):
@@ -398,8 +396,6 @@ def _position_jac_into_ieee(t, x, p, out):
         t = numpy.float64(t)
         x = numpy.asarray(x, dtype=numpy.float64)
         p = numpy.asarray(p, dtype=numpy.float64)
-        out[0] = 0.0
-        out[1] = 0.0
         out[2] = 2.0*x[2]
         out[3] = 2.0*x[3]
 

@@ -131,11 +131,11 @@ void bgc_params_update(bgc_params *p)
 {
     p->c[0] = 1.0/p->p_m;
     p->c[1] = p->p_m*p->p_g;
-    const double w17 = p->p_l*p->p_l;
-    p->c[2] = -w17;
+    const double w17 = -p->p_l*p->p_l;
+    p->c[2] = w17;
     p->c[3] = 2.0*p->p_m;
     p->c[4] = 2.0/p->p_m;
-    p->c[5] = w17;
+    p->c[5] = fabs(w17);
 }
 
 double *bgc_param_ref(bgc_params *p, int j)
@@ -248,7 +248,7 @@ static inline int bgc_model_jvp(double t, const double *x, const bgc_params *p, 
     const double w15 = w0*w0*p->p_m + w1*w1*p->p_m + p->c[1]*x[3];
     const double w16 = x[2]*x[2] + x[3]*x[3];
     const double w3 = 0.5*w15/w16;
-    const double w10 = -(2.0*v[2]*x[2] + 2.0*v[3]*x[3])*(0.5*w15/(w16*w16)) + (w0*w8*p->c[3] + w1*w9*p->c[3] + p->c[1]*v[3])*(0.5/w16);
+    const double w10 = (p->c[1]*v[3] + w0*w8*p->c[3] + w1*w9*p->c[3])*(0.5/w16) - (2.0*v[2]*x[2] + 2.0*v[3]*x[3])*(0.5*w15/(w16*w16));
     const double w11 = 2.0*w10*x[2] + 2.0*w3*v[2];
     const double w12 = 2.0*w10*x[3] + 2.0*w3*v[3];
     out[0] = -w11;
@@ -264,7 +264,7 @@ void bgc_residual(double t, const double *x, const bgc_params *p, double *out)
     (void)x;
     (void)p;
     (void)out;
-    out[0] = p->c[2] + x[2]*x[2] + x[3]*x[3];
+    out[0] = x[2]*x[2] + x[3]*x[3] + p->c[2];
     out[1] = p->c[4]*x[0]*x[2] + p->c[4]*x[1]*x[3];
 }
 
@@ -274,8 +274,8 @@ void bgc_scale(double t, const double *x, const bgc_params *p, double *out)
     (void)x;
     (void)p;
     (void)out;
-    out[0] = p->c[5] + x[2]*x[2] + x[3]*x[3];
-    out[1] = 2.0*fabs(p->c[0]*x[0]*x[2]) + 2.0*fabs(p->c[0]*x[1]*x[3]);
+    out[0] = fabs(x[2]*x[2]) + fabs(x[3]*x[3]) + p->c[5];
+    out[1] = fabs(p->c[4]*x[0]*x[2]) + fabs(p->c[4]*x[1]*x[3]);
 }
 
 void bgc_position_jac(double t, const double *x, const bgc_params *p, double *out)
@@ -284,8 +284,7 @@ void bgc_position_jac(double t, const double *x, const bgc_params *p, double *ou
     (void)x;
     (void)p;
     (void)out;
-    out[0] = 0.0;
-    out[1] = 0.0;
+    memset(out, 0, 4 * sizeof *out); /* the nonzero entries follow */
     out[2] = 2.0*x[2];
     out[3] = 2.0*x[3];
 }
@@ -296,6 +295,7 @@ void bgc_velocity_jac(double t, const double *x, const bgc_params *p, double *ou
     (void)x;
     (void)p;
     (void)out;
+    memset(out, 0, 4 * sizeof *out); /* the nonzero entries follow */
     out[0] = p->c[4]*x[2];
     out[1] = p->c[4]*x[3];
     out[2] = p->c[4]*x[0];

@@ -106,11 +106,11 @@ def _constants_into(p, out):
     try:
         out[0] = 1.0/p[0]
         out[1] = p[0]*p[2]
-        w17 = p[1]*p[1]
-        out[2] = -w17
+        w17 = -p[1]*p[1]
+        out[2] = w17
         out[3] = 2.0*p[0]
         out[4] = 2.0/p[0]
-        out[5] = w17
+        out[5] = abs(w17)
     except (ArithmeticError, ValueError):
         return _constants_into_ieee(p, out)
 
@@ -120,11 +120,11 @@ def _constants_into_ieee(p, out):
         p = numpy.asarray(p, dtype=numpy.float64)
         out[0] = 1.0/p[0]
         out[1] = p[0]*p[2]
-        w17 = p[1]*p[1]
-        out[2] = -w17
+        w17 = -p[1]*p[1]
+        out[2] = w17
         out[3] = 2.0*p[0]
         out[4] = 2.0/p[0]
-        out[5] = w17
+        out[5] = abs(w17)
 
 
 
@@ -253,7 +253,7 @@ def _jvp_0(t, x, p, w, v, out):
         w15 = w0*w0*p[0] + w1*w1*p[0] + p[7]*x[3]
         w16 = x[2]*x[2] + x[3]*x[3]
         w3 = 0.5*w15/w16
-        w10 = -(2.0*v[2]*x[2] + 2.0*v[3]*x[3])*(0.5*w15/(w16*w16)) + (w0*w8*p[9] + w1*w9*p[9] + p[7]*v[3])*(0.5/w16)
+        w10 = (p[7]*v[3] + w0*w8*p[9] + w1*w9*p[9])*(0.5/w16) - (2.0*v[2]*x[2] + 2.0*v[3]*x[3])*(0.5*w15/(w16*w16))
         w11 = 2.0*w10*x[2] + 2.0*w3*v[2]
         w12 = 2.0*w10*x[3] + 2.0*w3*v[3]
         out[0] = -w11
@@ -277,7 +277,7 @@ def _jvp_0_ieee(t, x, p, w, v, out):
         w15 = w0*w0*p[0] + w1*w1*p[0] + p[7]*x[3]
         w16 = x[2]*x[2] + x[3]*x[3]
         w3 = 0.5*w15/w16
-        w10 = -(2.0*v[2]*x[2] + 2.0*v[3]*x[3])*(0.5*w15/(w16*w16)) + (w0*w8*p[9] + w1*w9*p[9] + p[7]*v[3])*(0.5/w16)
+        w10 = (p[7]*v[3] + w0*w8*p[9] + w1*w9*p[9])*(0.5/w16) - (2.0*v[2]*x[2] + 2.0*v[3]*x[3])*(0.5*w15/(w16*w16))
         w11 = 2.0*w10*x[2] + 2.0*w3*v[2]
         w12 = 2.0*w10*x[3] + 2.0*w3*v[3]
         out[0] = -w11
@@ -293,7 +293,7 @@ def _jvp(t, x, p, w, v, out):
 
 def _residual_into(t, x, p, out):
     try:
-        out[0] = p[8] + x[2]*x[2] + x[3]*x[3]
+        out[0] = x[2]*x[2] + x[3]*x[3] + p[8]
         out[1] = p[10]*x[0]*x[2] + p[10]*x[1]*x[3]
     except (ArithmeticError, ValueError):
         return _residual_into_ieee(t, x, p, out)
@@ -304,7 +304,7 @@ def _residual_into_ieee(t, x, p, out):
         t = numpy.float64(t)
         x = numpy.asarray(x, dtype=numpy.float64)
         p = numpy.asarray(p, dtype=numpy.float64)
-        out[0] = p[8] + x[2]*x[2] + x[3]*x[3]
+        out[0] = x[2]*x[2] + x[3]*x[3] + p[8]
         out[1] = p[10]*x[0]*x[2] + p[10]*x[1]*x[3]
 
 
@@ -317,8 +317,8 @@ def _residual(t, x, p):
 
 def _scale_into(t, x, p, out):
     try:
-        out[0] = p[11] + x[2]*x[2] + x[3]*x[3]
-        out[1] = 2.0*abs(p[6]*x[0]*x[2]) + 2.0*abs(p[6]*x[1]*x[3])
+        out[0] = abs(x[2]*x[2]) + abs(x[3]*x[3]) + p[11]
+        out[1] = abs(p[10]*x[0]*x[2]) + abs(p[10]*x[1]*x[3])
     except (ArithmeticError, ValueError):
         return _scale_into_ieee(t, x, p, out)
 
@@ -328,8 +328,8 @@ def _scale_into_ieee(t, x, p, out):
         t = numpy.float64(t)
         x = numpy.asarray(x, dtype=numpy.float64)
         p = numpy.asarray(p, dtype=numpy.float64)
-        out[0] = p[11] + x[2]*x[2] + x[3]*x[3]
-        out[1] = 2.0*abs(p[6]*x[0]*x[2]) + 2.0*abs(p[6]*x[1]*x[3])
+        out[0] = abs(x[2]*x[2]) + abs(x[3]*x[3]) + p[11]
+        out[1] = abs(p[10]*x[0]*x[2]) + abs(p[10]*x[1]*x[3])
 
 
 
@@ -341,8 +341,6 @@ def _scale(t, x, p):
 
 def _position_jac_into(t, x, p, out):
     try:
-        out[0] = 0.0
-        out[1] = 0.0
         out[2] = 2.0*x[2]
         out[3] = 2.0*x[3]
     except (ArithmeticError, ValueError):
@@ -354,8 +352,6 @@ def _position_jac_into_ieee(t, x, p, out):
         t = numpy.float64(t)
         x = numpy.asarray(x, dtype=numpy.float64)
         p = numpy.asarray(p, dtype=numpy.float64)
-        out[0] = 0.0
-        out[1] = 0.0
         out[2] = 2.0*x[2]
         out[3] = 2.0*x[3]
 

@@ -1,0 +1,128 @@
+"""Families of bond-graph models that grow with one size parameter, as .bg text.
+
+Used by benchmarks/compile_scale.py and by the tests (the 3-link chain against its
+minimal-coordinate reference).  Each generator returns the model's source text; the models
+are written the way a modeller writes them, one element per line.
+
+- pendulum_chain(n): n point masses in a planar chain, absolute (Cartesian) coordinates, one
+  holonomic constraint junction per rod with a Baumgarte pid corrector (the paper's pendulum,
+  n times): 4n states, n multipliers coupled along the chain.
+- mass_chain(n): n masses joined by spring-damper pairs, the first to a wall, a force on
+  the last: 2n states, no algebraic loop.
+- rc_ladder(n): n sections of series resistor and shunt capacitor fed by a voltage source:
+  n states.
+- resistor_ladder(n): n sections of series and shunt resistors, each its own parameter, then
+  a capacitor: one state behind a linear algebraic loop through all 2n resistors.
+"""
+from __future__ import annotations
+
+
+def pendulum_chain(n: int, theta0: float = 0.5, dtheta: float = 0.15) -> str:
+    """Link k (1-based) starts at angle theta0 + (k - 1) * dtheta from the downward vertical,
+    at rest; y points down, gravity along +y."""
+    lines = [
+        f'model chain{n} "{n}-link planar pendulum chain in absolute coordinates, '
+        'Baumgarte-stabilised"',
+        "parameter m = 1.0 \"mass of each point\"",
+        "parameter l = 1.0 \"length of each rod\"",
+        "parameter g = 9.81",
+        "parameter alpha = 5.0 \"Baumgarte damping gain\"",
+        "parameter beta = 5.0 \"Baumgarte stiffness gain\"",
+        f"parameter theta0 = {theta0!r} \"initial angle of the first link\"",
+        f"parameter dtheta = {dtheta!r} \"each further link starts this much further round\"",
+        "",
+    ]
+    for k in range(1, n + 1):
+        th = f"(theta0 + {k - 1}*dtheta)" if k > 1 else "theta0"
+        xprev = f" + x{k - 1}_0" if k > 1 else ""
+        yprev = f" + y{k - 1}_0" if k > 1 else ""
+        lines += [
+            f"parameter x{k}_0 = l*sin({th}){xprev}",
+            f"parameter y{k}_0 = l*cos({th}){yprev}",
+            f"vx{k} : 1",
+            f"vy{k} : 1",
+            f"mx{k} : I(m)",
+            f"my{k} : I(m)",
+            f"w{k} : Se(m*g) @gravity",
+            f"rod{k} : 0 constraint holonomic(init = -l^2) corrector pid(alpha, beta) "
+            "@stabilisation",
+            f"signal x{k} = integral(vx{k}.f, init = x{k}_0)",
+            f"signal y{k} = integral(vy{k}.f, init = y{k}_0)",
+            f"vx{k} -> mx{k}",
+            f"vy{k} -> my{k}",
+            f"w{k} -> vy{k}",
+        ]
+        if k == 1:
+            lines += [f"ax1 : MTF(2*x1)", f"ay1 : MTF(2*y1)"]
+        else:
+            lines += [
+                f"ax{k} : MTF(2*(x{k} - x{k - 1}))",
+                f"ay{k} : MTF(2*(y{k} - y{k - 1}))",
+                f"bx{k} : MTF(-2*(x{k} - x{k - 1}))",
+                f"by{k} : MTF(-2*(y{k} - y{k - 1}))",
+                f"vx{k - 1} -> bx{k} -> rod{k}",
+                f"vy{k - 1} -> by{k} -> rod{k}",
+            ]
+        lines += [f"vx{k} -> ax{k} -> rod{k}", f"vy{k} -> ay{k} -> rod{k}", ""]
+    outputs = ", ".join(f"x{k}, y{k}" for k in range(1, n + 1))
+    lines.append(f"scene swing {{ outputs {outputs}; time 0 .. 5 every 0.01; "
+                 "solver dopri5(rtol = 1e-10, atol = 1e-12) }")
+    return "\n".join(lines) + "\n"
+
+
+def mass_chain(n: int) -> str:
+    lines = [
+        f'model masses{n} "{n} masses joined by springs and dampers, the first to a wall"',
+        "parameter m = 1.0", "parameter k = 100.0", "parameter b = 0.5",
+        "parameter F = 1.0 \"force on the last mass\"",
+        "wall : Sf(0)",
+        "push : Se(F)",
+    ]
+    for i in range(1, n + 1):
+        left = "wall" if i == 1 else f"v{i - 1}"
+        lines += [
+            f"v{i} : 1", f"mass{i} : I(m)", f"v{i} -> mass{i}",
+            f"n{i} : 0", f"d{i} : 1", f"spring{i} : C(1/k)", f"damper{i} : R(b)",
+            f"{left} -> n{i} -> v{i}", f"n{i} -> d{i}", f"d{i} -> spring{i}",
+            f"d{i} -> damper{i}",
+        ]
+    lines.append(f"push -> v{n}")
+    return "\n".join(lines) + "\n"
+
+
+def rc_ladder(n: int) -> str:
+    lines = [
+        f'model rc{n} "{n}-section RC ladder driven by a voltage source"',
+        "parameter V0 = 1.0", "parameter R = 1.0", "parameter Cc = 0.01",
+        "src : Se(V0)",
+    ]
+    for i in range(1, n + 1):
+        left = "src" if i == 1 else f"n{i - 1}"
+        lines += [f"j{i} : 1", f"r{i} : R(R)", f"n{i} : 0", f"c{i} : C(Cc)",
+                  f"{left} -> j{i} -> n{i}", f"j{i} -> r{i}", f"n{i} -> c{i}"]
+    return "\n".join(lines) + "\n"
+
+
+def resistor_ladder(n: int) -> str:
+    lines = [
+        f'model rladder{n} "{n}-section resistor ladder with symbolic resistances charging '
+        'a capacitor"',
+        "parameter V0 = 10.0", "parameter Cc = 0.2",
+    ]
+    for i in range(1, n + 1):
+        lines += [f"parameter Rs{i} = {1.0 + 0.1 * i!r}", f"parameter Rp{i} = {2.0 + 0.05 * i!r}"]
+    lines += ["src : Se(V0)", "cap : C(Cc)"]
+    for i in range(1, n + 1):
+        left = "src" if i == 1 else f"n{i - 1}"
+        lines += [f"s{i} : 1", f"rs{i} : R(Rs{i})", f"n{i} : 0", f"rp{i} : R(Rp{i})",
+                  f"{left} -> s{i} -> n{i}", f"s{i} -> rs{i}", f"n{i} -> rp{i}"]
+    lines += [f"last : 1", f"rl : R(Rs1)", f"n{n} -> last -> cap", "last -> rl"]
+    return "\n".join(lines) + "\n"
+
+
+FAMILIES = {
+    "pendulum_chain": pendulum_chain,
+    "mass_chain": mass_chain,
+    "rc_ladder": rc_ladder,
+    "resistor_ladder": resistor_ladder,
+}
