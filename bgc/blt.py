@@ -62,12 +62,13 @@ def components(n: int, succ: list[list[int]], roots=None) -> list[list[int]]:
     return out
 
 
-def tear(vertices: list[int], succ: dict[int, list[int]], fixed: list[int]) -> tuple[list[int],
-                                                                                   list[int]]:
+def tear(vertices: list[int], succ: dict[int, list[int]], fixed: list[int],
+         preferred: frozenset = frozenset()) -> tuple[list[int], list[int]]:
     """Tears for the subgraph on `vertices` (succ restricted to them): `fixed` are tears
-    already (their edges are cut), more are chosen until no cycle is left, each the vertex
-    of a remaining cycle with the most edges into it from that cycle (ties: the lowest).
-    Returns (tears, the others in evaluation order, dependencies first)."""
+    already (their edges are cut), more are chosen until no cycle is left, each from a
+    remaining cycle: a `preferred` vertex first, then the one with the most edges into it
+    from that cycle, then the lowest.  Returns (tears, the others in evaluation order,
+    dependencies first)."""
     tears = list(fixed)
     cut = set(fixed)
     while True:
@@ -85,7 +86,7 @@ def tear(vertices: list[int], succ: dict[int, list[int]], fixed: list[int]) -> t
                 for w in graph[v]:
                     if w in members:
                         indegree[w] += 1
-            best = max(comp, key=lambda v: (indegree[v], -v))
+            best = max(comp, key=lambda v: (rest[v] in preferred, indegree[v], -v))
             tears.append(rest[best])
             cut.add(rest[best])
 

@@ -294,12 +294,20 @@ def _integral_floats(e):
 
 
 def _dead_code(f: Function) -> Function:
+    """The statements the stores need, backwards; a Resolve needs the factors of its block's
+    solve as well as its own inputs."""
     needed = set()
+    factored = set()  # blocks whose factors a kept Resolve uses
     keep = []
     for s in reversed(f.body):
-        if isinstance(s, Store) or any(d in needed for d in ir.defines(s)):
+        if isinstance(s, Store) or any(d in needed for d in ir.defines(s)) or (
+                isinstance(s, (Solve, Newton)) and s.block in factored):
             keep.append(s)
             needed |= ir.uses(s)
+            if isinstance(s, Resolve):
+                factored.add(s.block)
+            elif isinstance(s, (Solve, Newton)):
+                factored.discard(s.block)
     keep.reverse()
     return Function(f.name, f.args, f.size, tuple(keep))
 

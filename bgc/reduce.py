@@ -510,7 +510,7 @@ class _Blocks:
     def block(self, eqs, succ, comp):
         pos = {v: k for k, v in enumerate(comp)}
         fixed = [v for v in comp if not eqs[pos[v]].explicit]
-        tears, body_order = blt.tear(comp, succ, fixed)
+        tears, body_order = blt.tear(comp, succ, fixed, _inputs_of_nonlinearities(eqs, comp))
         tear_eqs = [eqs[pos[v]] for v in tears]
         z = tuple(eq.target for eq in tear_eqs)
         body = tuple(Assign(eqs[pos[v]].target, eqs[pos[v]].expr) for v in body_order)
@@ -680,6 +680,28 @@ class _Blocks:
                 if entry != 0:
                     jacobian.append((i, k, entry))
         return tuple(tangents), tuple(jacobian)
+
+
+def _inputs_of_nonlinearities(eqs, comp) -> frozenset:
+    """The block's variables that occur inside a function or a non-polynomial power of its
+    equations.  Tearing there evaluates each nonlinearity forward from the unknown, which
+    suits Newton's method (for a diode, its voltage rather than its current: from a poor
+    start the exponential overshoots and the damping pulls back, instead of Newton creeping
+    up its flat side one thermal voltage per step)."""
+    targets = {eq.target: v for eq, v in zip(eqs, comp)}
+    out = set()
+    for eq in eqs:
+        stack = [(eq.expr, False)]
+        while stack:
+            e, inside = stack.pop()
+            if e.is_Symbol:
+                if inside and e in targets:
+                    out.add(targets[e])
+                continue
+            nonlinear = inside or isinstance(e, sp.Function) or (
+                e.is_Pow and not (e.exp.is_Integer and e.exp > 0))
+            stack.extend((a, nonlinear) for a in e.args)
+    return frozenset(out)
 
 
 def _partials(z, body, residuals):

@@ -263,20 +263,21 @@ int bgc_newton(bgc_work *w, int k, bgc_eval_fn f, double t, const double *x,
         for (i = 0; i < m; i++)
             dz[i] = -r[i];
         bgc_block_lsolve(w, b, dz);
+        small = 1; /* a full step this small ends the iteration (quadratic convergence) */
+        for (i = 0; i < m; i++)
+            if (fabs(dz[i]) > 0.01 * (w->atol + w->rtol * fabs(z[i])) &&
+                fabs(dz[i]) > 4.0 * DBL_EPSILON * fabs(z[i]))
+                small = 0;
         for (lambda = 1.0;; lambda *= 0.5) {
             for (i = 0; i < m; i++)
                 zt[i] = z[i] + lambda * dz[i];
             if (f(t, x, p, w, zt, rt, NULL))
                 return 1;
             trial = bgc_norm2(rt, m);
-            if (trial <= (1.0 - 1e-4 * lambda) * norm || lambda < 1e-3)
+            if (small || trial <= (1.0 - 1e-4 * lambda) * norm || lambda < 1e-3)
                 break;
         }
-        small = lambda == 1.0;
         for (i = 0; i < m; i++) {
-            if (fabs(dz[i]) > 0.01 * (w->atol + w->rtol * fabs(zt[i])) &&
-                fabs(dz[i]) > 4.0 * DBL_EPSILON * fabs(zt[i]))
-                small = 0;
             z[i] = zt[i];
             r[i] = rt[i];
         }

@@ -235,21 +235,21 @@ def _newton(w, k, f, t, x, p, final_factor):
         for i in range(m):
             v[b.b + i] = -v[b.r + i]
         _block_lsolve(w, b, b.b)
+        small = True  # a full step this small ends the iteration (quadratic convergence)
+        for i in range(m):
+            dz, z = v[b.b + i], v[b.z + i]
+            if abs(dz) > 0.01 * (w.atol + w.rtol * abs(z)) and abs(dz) > 4.0 * _EPS * abs(z):
+                small = False
         lam = 1.0
         while True:
             for i in range(m):
                 zt[i] = v[b.z + i] + lam * v[b.b + i]
             f(t, x, p, w, zt, 0, rt, 0, None, 0)
             trial = _norm2(rt, 0, m)
-            if trial <= (1.0 - 1e-4 * lam) * norm or lam < 1e-3:
+            if small or trial <= (1.0 - 1e-4 * lam) * norm or lam < 1e-3:
                 break
             lam *= 0.5
-        small = lam == 1.0
         for i in range(m):
-            dz = v[b.b + i]
-            if abs(dz) > 0.01 * (w.atol + w.rtol * abs(zt[i])) and \
-                    abs(dz) > 4.0 * _EPS * abs(zt[i]):
-                small = False
             v[b.z + i] = zt[i]
             v[b.r + i] = rt[i]
         norm = trial

@@ -242,10 +242,26 @@ static inline int bgc_model_jvp(double t, const double *x, const bgc_params *p, 
     (void)wv;
     (void)v;
     (void)out;
+    const double w0 = p->c[0]*x[0];
     const double w15 = p->c[0]*v[0];
+    const double w3 = p->c[1] + p->c[2];
+    const double w5 = p->c[3]*p->p_R1;
+    const double w6 = w3*p->p_R1;
+    const double w7 = w3*p->p_R3;
+    const double w8 = w0*p->c[4];
     const double w16 = w15*p->c[4];
+    const double w9 = w8*p->p_R1;
     const double w17 = w16*p->p_R1;
+    const double w10 = w8*p->p_R3;
     const double w18 = w16*p->p_R3;
+    wv[19] = w5 + 1.0;
+    wv[20] = w6;
+    wv[21] = -1.0;
+    wv[22] = w7 + 1.0;
+    wv[31] = -w9 + p->p_V0;
+    wv[32] = -w10;
+    if (bgc_block_solve(w, 0, t))
+        return 1;
     wv[31] = -w17;
     wv[32] = -w18;
     if (bgc_block_resolve(w, 0, t))

@@ -256,10 +256,25 @@ def _out(t, x, p, w, out):
 def _jvp_0(t, x, p, w, v, out):
     wv = w.v
     try:
+        w0 = p[8]*x[0]
         w15 = p[8]*v[0]
+        w3 = p[9] + p[10]
+        w5 = p[11]*p[1]
+        w6 = w3*p[1]
+        w7 = w3*p[3]
+        w8 = w0*p[12]
         w16 = w15*p[12]
+        w9 = w8*p[1]
         w17 = w16*p[1]
+        w10 = w8*p[3]
         w18 = w16*p[3]
+        wv[19] = w5 + 1.0
+        wv[20] = w6
+        wv[21] = -1.0
+        wv[22] = w7 + 1.0
+        wv[31] = -w9 + p[0]
+        wv[32] = -w10
+        _block_solve(w, 0, t)
         wv[31] = -w17
         wv[32] = -w18
         _block_resolve(w, 0, t)
@@ -277,10 +292,25 @@ def _jvp_0_ieee(t, x, p, w, v, out):
         t = numpy.float64(t)
         x = numpy.asarray(x, dtype=numpy.float64)
         p = numpy.asarray(p, dtype=numpy.float64)
+        w0 = p[8]*x[0]
         w15 = p[8]*v[0]
+        w3 = p[9] + p[10]
+        w5 = p[11]*p[1]
+        w6 = w3*p[1]
+        w7 = w3*p[3]
+        w8 = w0*p[12]
         w16 = w15*p[12]
+        w9 = w8*p[1]
         w17 = w16*p[1]
+        w10 = w8*p[3]
         w18 = w16*p[3]
+        wv[19] = w5 + 1.0
+        wv[20] = w6
+        wv[21] = -1.0
+        wv[22] = w7 + 1.0
+        wv[31] = -w9 + p[0]
+        wv[32] = -w10
+        _block_solve(w, 0, t)
         wv[31] = -w17
         wv[32] = -w18
         _block_resolve(w, 0, t)
