@@ -151,3 +151,28 @@ def is_singular(rows: int, entries, points: int = 3, seed: int = 0) -> bool:
             if abs(mpmath.det(a)) > mpmath.mpf("1e-20") * bound:
                 return False
     return True
+
+
+def is_symmetric(entries, points: int = 2, seed: int = 1) -> bool:
+    """Whether the square matrix with these (row, column, expression) entries is symmetric
+    whatever the values of its symbols: its pattern, and its values at random points to 1e-12
+    relative (two analytic functions equal at random points are equal)."""
+    values = {(i, j): e for i, j, e in entries}
+    if any((j, i) not in values for i, j in values):
+        return False
+    pairs = [(i, j) for i, j in values if i < j]
+    if not pairs:
+        return True
+    rng = random.Random(seed)
+    symbols = sorted(set().union(*[e.free_symbols for e in values.values()]), key=str)
+    for _ in range(points):
+        point = {s: sp.Float(rng.uniform(0.3, 1.7), 20) for s in symbols}
+        for i, j in pairs:
+            try:
+                a = complex(values[(i, j)].xreplace(point).evalf(20))
+                b = complex(values[(j, i)].xreplace(point).evalf(20))
+            except (TypeError, ValueError, ZeroDivisionError):
+                return False
+            if not abs(a - b) <= 1e-12 * (abs(a) + abs(b)):
+                return False
+    return True

@@ -83,14 +83,6 @@ def _source(model) -> Source:
     return model if isinstance(model, Source) else load(model)
 
 
-def parse_model(model) -> ast.Model:
-    src = _source(model)
-    try:
-        return parse(src.text, src.path)
-    except ModelError as exc:
-        raise BgcModelError(exc, src) from None
-
-
 def build(model, scene: str | None = None, project_initial: bool = False,
           algebra: str = "auto", program: bool = True) -> Compiled:
     """Run the pipeline up to the program IR (program=False: up to the reduce stage, all that

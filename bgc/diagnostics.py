@@ -19,8 +19,6 @@ class Span:
         return Span(start[0], start[1], end[0], end[1])
 
 
-NOWHERE = Span(1, 1, 1, 1)
-
 
 @dataclass(frozen=True)
 class Note:

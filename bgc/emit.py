@@ -374,13 +374,14 @@ def _common_context(program: Program, ws: _Workspace, literal) -> dict:
             values = getattr(lu, key)
             pointers.append(f"bgc_block{k}_plan + {len(flat)}" if values else "NULL")
             flat += values
-        fields = [str(lu.m), str(int(lu.dense)), str(lu.nnz)] + pointers
+        fields = [str(lu.m), str(int(lu.dense)), str(int(lu.symmetric)), str(lu.nnz)] + pointers
         offsets = [area.save, area.lu, area.dense, area.b, area.scale, area.z, area.r, area.zt,
                    area.rt, area.piv, area.how]
         blocks.append({
             "flat": _list(flat),
             "init": "{ { " + ", ".join(fields) + " }, " + ", ".join(map(str, offsets)) + " }",
-            "m": lu.m, "dense": lu.dense, "nnz": lu.nnz, "offsets": offsets,
+            "m": lu.m, "dense": lu.dense, "symmetric": lu.symmetric, "nnz": lu.nnz,
+            "offsets": offsets,
             "arrays": {key: list(getattr(lu, key)) for key in PLAN_ARRAYS},
         })
     return {

@@ -223,7 +223,7 @@ class _Builder:
     # ------------------------------------------------------------ two-ports
     def two_port(self, el: Element):
         (ia, a), = [(i, b) for i, b in self.incident(el.name) if b.dst == el.name]
-        (ib, b), = [(i, b) for i, b in self.incident(el.name) if b.src == el.name]
+        (_, b), = [(i, b) for i, b in self.incident(el.name) if b.src == el.name]
         ea, fa, eb, fb = bond_effort(a.label), bond_flow(a.label), bond_effort(b.label), \
             bond_flow(b.label)
         n = el.value.value

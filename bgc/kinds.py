@@ -33,6 +33,3 @@ KINDS = {k.name: k for k in (
     Kind("GY", 2, "gyrator"),
     Kind("MGY", 2, "gyrator", modulated=True),
 )}
-
-# The law variable each storage kind's state is paired with: I: p <-> f, C: q <-> e.
-STATE_PARTNER = {"p": "f", "q": "e"}

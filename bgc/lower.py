@@ -227,7 +227,8 @@ class _Mapper:
                 raise AssertionError("bgc bug: a block without a matching reached lower")
             self.blocks[b.index] = len(self.plans)
             self.plans.append(BlockPlan(b.index, tuple(z.name for z in b.unknowns), b.method,
-                                        lu_plan(len(b.unknowns), pattern, matching)))
+                                        lu_plan(len(b.unknowns), pattern, matching,
+                                                b.symmetric)))
         return self.blocks[b.index]
 
     def function(self, name, args, statements, size) -> Function:

@@ -29,8 +29,8 @@ from dataclasses import dataclass, field
 import sympy as sp
 
 from . import blt
-from .algebra import is_singular, is_zero, solve_for
-from .diagnostics import Collector, ModelError, Note, Span, fail, warning
+from .algebra import is_singular, is_symmetric, is_zero, solve_for
+from .diagnostics import Collector, ModelError, Span, fail, warning
 from .differentiate import directional, partial
 from .equations import (TIME, ConstraintDef, Equation, EquationSystem, OutputDef, ParameterDef,
                         Run, StateVar, der)
@@ -42,6 +42,7 @@ SYMBOLIC_MAX_UNKNOWNS = 1  # auto: linear blocks up to this size are solved symb
 SYMBOLIC_MAX_OPS = 400  # ... when their matrix and right side are no bigger than this
 SUBSTITUTE_MAX_BODY = 40  # a nonlinear block of one unknown: body small enough to substitute
 SINGULAR_CHECK_MAX = 40  # linear blocks up to this size: determinant tested at compile time
+SYMMETRY_CHECK_MAX = 200  # ... and up to this size: symmetry (LDL^T-like elimination) tested
 MAX_DERIVATIVE_ORDER = 3
 
 
@@ -72,6 +73,7 @@ class Block:
     rhs: tuple[sp.Expr, ...] = ()
     tangents: tuple[Assign, ...] = ()
     jacobian: tuple[tuple[int, int, sp.Expr], ...] = ()
+    symmetric: bool = False  # A = A^T whatever the state (with a full diagonal)
 
 
 @dataclass(frozen=True)
@@ -528,9 +530,14 @@ class _Blocks:
             if method == "symbolic":
                 method = self._symbolic_linear(z, body, prelude, matrix, rhs, origins, span)
             if method == "lu":
-                if len(z) <= SINGULAR_CHECK_MAX:
-                    self._matrix_in_outer(z, prelude, matrix, origins, span)
-                self.steps.append(Block(index, z, body, residuals, "lu", prelude, matrix, rhs))
+                symmetric = False
+                if len(z) <= SYMMETRY_CHECK_MAX:
+                    A, _, _ = self._matrix_in_outer(z, prelude, matrix, origins, span)
+                    entries = [(i, k, A[i, k]) for i, k, _ in matrix]
+                    symmetric = all(any(i == k == d for i, k, _ in matrix)
+                                    for d in range(len(z))) and is_symmetric(entries)
+                self.steps.append(Block(index, z, body, residuals, "lu", prelude, matrix, rhs,
+                                        symmetric=symmetric))
         else:
             if method == "symbolic":
                 method = self._symbolic_nonlinear(z, body, residuals, origins, span)
@@ -620,7 +627,7 @@ class _Blocks:
         A = sp.zeros(m, m)
         for i, k, e in matrix:
             A[i, k] = _leaf(e, defs, lambda s: s in defs, memo)
-        if is_singular(m, [(i, k, A[i, k]) for i, k, _ in matrix]):
+        if m <= SINGULAR_CHECK_MAX and is_singular(m, [(i, k, A[i, k]) for i, k, _ in matrix]):
             names = ", ".join(f"'{o}'" for o in origins)
             fail(span, f"the equations through {names} are singular: "
                        f"{', '.join(s.name for s in z)} cannot be determined")
@@ -919,4 +926,4 @@ def _explicit(root, defs, memo, max_ops):
 
 __all__ = ["Assign", "Block", "BlockInfo", "ConstraintInfo", "ConstraintRow", "Reduced",
            "reduce", "check_initial", "explicit_forms", "initial_values", "parameter_values",
-           "scale_of", "ALGEBRA", "Note"]
+           "scale_of", "ALGEBRA"]

@@ -7,12 +7,14 @@ block's matching), a symmetric fill-reducing order (minimum degree, ties by inde
 positions of every entry of L and U with their update lists.  The generated code then factors
 in that order with no search: O(fill) work and memory instead of O(m^3).
 
-Because no pivot is chosen at run time, the runtime tests every pivot (threshold partial
-pivoting: |pivot| >= 0.1 * the largest entry below it in its column, and clearly nonzero
-relative to its row); if one fails, it factors the same matrix again densely with partial
-pivoting, so that the result is always that of a stable elimination.  Blocks whose static
-factorization would cost more than a dense one (m^3/3 multiply-adds), or whose update list
-would be too long to carry as data, are planned dense from the start.
+Because no pivot is chosen at run time, the runtime tests every pivot: for a symmetric matrix,
+that all have one sign (the matrix is then definite, as J M^-1 J^T of a constraint block is,
+and elimination without pivoting is LDL^T, stable); otherwise threshold partial pivoting,
+|pivot| >= 0.1 * the largest entry below it in its column.  Every pivot must also be clearly
+nonzero relative to its row.  If a test fails, the runtime factors the same matrix again
+densely with partial pivoting, so that the result is always that of a stable elimination.  Blocks whose static
+factorization would save less than half of a dense one's m^3/3 multiply-adds, or whose update
+list would be too long to carry as data, are planned dense from the start.
 """
 from __future__ import annotations
 
@@ -26,6 +28,7 @@ MAX_UPDATES = 250_000  # a static plan's update list beyond this (in ints) is pl
 class LUPlan:
     m: int
     dense: bool  # factor densely with partial pivoting (the static lists below are empty)
+    symmetric: bool  # A = A^T: pivots of one sign prove it definite (LDL^T, no threshold)
     row_of: tuple[int, ...]  # factored row k is residual row_of[k]
     col_of: tuple[int, ...]  # factored column k is unknown col_of[k]
     entries: tuple[int, ...]  # storage position of each given entry, in the order given
@@ -47,11 +50,16 @@ class LUPlan:
         return len(self.upd) + len(self.lpos) if not self.dense else self.m ** 3 // 3
 
 
-def plan(m: int, entries: list[tuple[int, int]], matching: list[int]) -> LUPlan:
+def plan(m: int, entries: list[tuple[int, int]], matching: list[int],
+         symmetric: bool = False) -> LUPlan:
     """The plan for an m x m matrix with the given (row, column) entries; matching[r] is a
-    column with entry (r, matching[r]) for each row r, all distinct."""
+    column with entry (r, matching[r]) for each row r, all distinct.  A symmetric matrix
+    (with a full diagonal) keeps its rows: the order is then symmetric, and the elimination
+    that of LDL^T."""
     if m == 0:
-        return LUPlan(0, False, (), (), (), 0)
+        return LUPlan(0, False, False, (), (), (), 0)
+    if symmetric:
+        matching = list(range(m))
     perm_row = {r: matching[r] for r in range(m)}  # B = rows moved so that B[c, c] != 0
     pattern = [set() for _ in range(m)]  # B's rows: column sets
     for r, c in entries:
@@ -67,8 +75,8 @@ def plan(m: int, entries: list[tuple[int, int]], matching: list[int]) -> LUPlan:
     for k in range(m):
         rows[k].add(k)
     filled, flops = _symbolic(m, rows)
-    if flops > max(m ** 3 // 3, 1) or flops > MAX_UPDATES:
-        return _dense(m, entries)
+    if (m > 2 and flops > m ** 3 // 6) or flops > MAX_UPDATES:
+        return _dense(m, entries)  # static order saves less than half of dense LU's work
     positions = {}
     prow, pcol = [], []
     for i in range(m):
@@ -95,14 +103,14 @@ def plan(m: int, entries: list[tuple[int, int]], matching: list[int]) -> LUPlan:
         for i in below:
             upd += [positions[(i, j)] for j in right]
     given = tuple(positions[(rank[perm_row[r]], rank[c])] for r, c in entries)
-    return LUPlan(m, False, row_of, col_of, given, len(prow), tuple(diag), tuple(lptr),
+    return LUPlan(m, False, symmetric, row_of, col_of, given, len(prow), tuple(diag), tuple(lptr),
                   tuple(lpos), tuple(lrow), tuple(uptr), tuple(upos), tuple(ucol), tuple(upd),
                   tuple(prow), tuple(pcol))
 
 
 def _dense(m, entries) -> LUPlan:
     ident = tuple(range(m))
-    return LUPlan(m, True, ident, ident, tuple(r * m + c for r, c in entries), m * m)
+    return LUPlan(m, True, False, ident, ident, tuple(r * m + c for r, c in entries), m * m)
 
 
 def _minimum_degree(m: int, pattern: list[set]) -> list[int]:

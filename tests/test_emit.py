@@ -912,6 +912,17 @@ int main(void)
 """
 
 
+def test_runtime_carries_the_pow10_table():
+    """The formatter's table in bgc/runtime/runtime.c is pow10_table(POW10_RANGE), exactly."""
+    runtime = (HERE.parent / "bgc" / "runtime" / "runtime.c").read_text()
+    rows = re.findall(r"\{ 0x([0-9a-f]{16})ULL, 0x([0-9a-f]{16})ULL, (-?\d+) \}, /\* 1e(-?\d+) \*/",
+                      runtime)
+    expected = [(r["hi"], r["lo"], str(r["e2"]), str(r["m"])) for r in pow10_table(*POW10_RANGE)]
+    assert rows == expected
+    assert f"#define BGC_POW10_MIN ({POW10_RANGE[0]})" in runtime
+    assert f"#define BGC_POW10_MAX {POW10_RANGE[1]}" in runtime
+
+
 @needs_cc
 def test_digit_words_are_exact():
     (source,) = emit_c(oscillator()).values()

@@ -106,7 +106,7 @@ static inline double bgc_heaviside(double a, double at_zero)
 
 /* A block's factorization plan (bgc/sparse.py): static order, or dense (partial pivoting). */
 typedef struct bgc_lu_plan {
-    int m, dense, nnz;
+    int m, dense, symmetric, nnz;
     const int *diag, *lptr, *lpos, *lrow, *uptr, *upos, *ucol, *upd, *prow, *pcol;
 } bgc_lu_plan;
 /* A block and where its values live: offsets into bgc_work.v (the matrix as assembled,

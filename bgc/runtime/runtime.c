@@ -127,18 +127,27 @@ static void bgc_lu_dense_solve(int m, const double *a, const int *piv, double *b
     }
 }
 
-/* LU in the plan's static order, in place.  0, or 1 if a pivot fails the threshold test
-   (|pivot| >= 0.1 * the largest entry below it, and clearly nonzero for its row). */
+/* LU in the plan's static order, in place.  0, or 1 if a pivot fails its test: for a
+   symmetric matrix one sign for all pivots (definite: elimination is LDL^T, stable without
+   pivoting), otherwise |pivot| >= 0.1 * the largest entry below it; and clearly nonzero for
+   its row. */
 static int bgc_lu_static(const bgc_lu_plan *pl, double *lu, const double *scale)
 {
     int k, l, u, q = 0;
+    const double sign = pl->m > 0 && lu[pl->diag[0]] < 0.0 ? -1.0 : 1.0;
     for (k = 0; k < pl->m; k++) {
         const double pivot = lu[pl->diag[k]];
         double largest = fabs(pivot);
-        for (l = pl->lptr[k]; l < pl->lptr[k + 1]; l++)
-            largest = bgc_max(largest, fabs(lu[pl->lpos[l]]));
-        if (!(fabs(pivot) >= 0.1 * largest && fabs(pivot) > 1e-14 * scale[k]) || !isfinite(pivot))
-            return 1;
+        if (pl->symmetric) {
+            if (!(sign * pivot > 1e-14 * scale[k]) || !isfinite(pivot))
+                return 1;
+        } else {
+            for (l = pl->lptr[k]; l < pl->lptr[k + 1]; l++)
+                largest = bgc_max(largest, fabs(lu[pl->lpos[l]]));
+            if (!(fabs(pivot) >= 0.1 * largest && fabs(pivot) > 1e-14 * scale[k]) ||
+                !isfinite(pivot))
+                return 1;
+        }
         for (l = pl->lptr[k]; l < pl->lptr[k + 1]; l++) {
             const double f = lu[pl->lpos[l]] / pivot;
             lu[pl->lpos[l]] = f;

@@ -54,7 +54,7 @@ def _heaviside(a, at_zero):
 
 
 class _Block:
-    __slots__ = ("m", "dense", "nnz", "diag", "lptr", "lpos", "lrow", "uptr", "upos", "ucol",
+    __slots__ = ("m", "dense", "symmetric", "nnz", "diag", "lptr", "lpos", "lrow", "uptr", "upos", "ucol",
                  "upd", "prow", "pcol", "save", "lu", "dense_off", "b", "scale", "z", "r", "zt",
                  "rt", "piv", "how")
 
@@ -131,19 +131,25 @@ def _lu_dense_solve(m, a, base, piv, pbase, x, xbase):
 
 
 def _lu_static(b, a, base, scale):
-    """LU in the plan's static order, in place; False if a pivot fails the threshold test."""
+    """LU in the plan's static order, in place; False if a pivot fails its test (one sign for
+    a symmetric matrix, else the threshold; clearly nonzero for its row)."""
     q = 0
     lptr, lpos, uptr, upos, upd = b.lptr, b.lpos, b.uptr, b.upos, b.upd
+    sign = -1.0 if b.m > 0 and a[base + b.diag[0]] < 0.0 else 1.0
     for k in range(b.m):
         pivot = a[base + b.diag[k]]
-        largest = abs(pivot)
-        for l in range(lptr[k], lptr[k + 1]):
-            v = abs(a[base + lpos[l]])
-            if v > largest:
-                largest = v
-        if not (abs(pivot) >= 0.1 * largest and abs(pivot) > 1e-14 * scale[k]) \
-                or not math.isfinite(pivot):
-            return False
+        if b.symmetric:
+            if not sign * pivot > 1e-14 * scale[k] or not math.isfinite(pivot):
+                return False
+        else:
+            largest = abs(pivot)
+            for l in range(lptr[k], lptr[k + 1]):
+                v = abs(a[base + lpos[l]])
+                if v > largest:
+                    largest = v
+            if not (abs(pivot) >= 0.1 * largest and abs(pivot) > 1e-14 * scale[k]) \
+                    or not math.isfinite(pivot):
+                return False
         for l in range(lptr[k], lptr[k + 1]):
             f = a[base + lpos[l]] / pivot
             a[base + lpos[l]] = f

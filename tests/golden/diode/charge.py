@@ -52,7 +52,7 @@ _WORK_INTS = 2
 _BLOCK_NAMES = ["e[loop->d1]"]
 # Per algebraic block: its factorization plan (bgc/sparse.py) and its storage in the workspace.
 _BLOCKS = [
-    (1, False, 1,
+    (1, False, False, 1,
      (0,),  # diag
      (0, 0),  # lptr
      (),  # lpos

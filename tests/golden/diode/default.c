@@ -151,7 +151,7 @@ static const int bgc_velocity_movable[BGC_DIM(BGC_NUM_STATES)] = { 1 };
 /* The algebraic blocks solved here: factorization plans (bgc/sparse.py) and storage. */
 static const int bgc_block0_plan[] = { 0, 0, 0, 0, 0, 0, 0 };
 static const bgc_block bgc_blocks[BGC_DIM(BGC_NUM_BLOCKS)] = {
-    { { 1, 0, 1, bgc_block0_plan + 0, bgc_block0_plan + 1, NULL, NULL, bgc_block0_plan + 3, NULL, NULL, NULL, bgc_block0_plan + 5, bgc_block0_plan + 6 }, 24, 25, 26, 27, 28, 29, 30, 31, 32, 0, 1 },
+    { { 1, 0, 0, 1, bgc_block0_plan + 0, bgc_block0_plan + 1, NULL, NULL, bgc_block0_plan + 3, NULL, NULL, NULL, bgc_block0_plan + 5, bgc_block0_plan + 6 }, 24, 25, 26, 27, 28, 29, 30, 31, 32, 0, 1 },
 };
 
 /* The Jacobian's structure: the columns of each colour (evaluated by one bgc_jvp), and the

@@ -52,7 +52,7 @@ _WORK_INTS = 3
 _BLOCK_NAMES = ["e[s1->n2], e[s3->n4]"]
 # Per algebraic block: its factorization plan (bgc/sparse.py) and its storage in the workspace.
 _BLOCKS = [
-    (2, False, 4,
+    (2, False, False, 4,
      (0, 3),  # diag
      (0, 1, 1),  # lptr
      (2,),  # lpos

@@ -52,7 +52,7 @@ _WORK_INTS = 9
 _BLOCK_NAMES = ["rod1.lambda, rod2.lambda, rod3.lambda, rod4.lambda, rod5.lambda, rod6.lambda, and 2 more"]
 # Per algebraic block: its factorization plan (bgc/sparse.py) and its storage in the workspace.
 _BLOCKS = [
-    (8, False, 22,
+    (8, False, True, 22,
      (0, 3, 6, 9, 12, 15, 18, 21),  # diag
      (0, 1, 2, 3, 4, 5, 6, 7, 7),  # lptr
      (2, 5, 8, 11, 14, 17, 20),  # lpos

@@ -341,7 +341,7 @@ static const int bgc_velocity_movable[BGC_DIM(BGC_NUM_STATES)] = { 1, 1, 0, 0, 1
 /* The algebraic blocks solved here: factorization plans (bgc/sparse.py) and storage. */
 static const int bgc_block0_plan[] = { 0, 3, 6, 9, 12, 15, 18, 21, 0, 1, 2, 3, 4, 5, 6, 7, 7, 2, 5, 8, 11, 14, 17, 20, 1, 2, 3, 4, 5, 6, 7, 0, 1, 2, 3, 4, 5, 6, 7, 7, 1, 4, 7, 10, 13, 16, 19, 1, 2, 3, 4, 5, 6, 7, 3, 6, 9, 12, 15, 18, 21, 0, 0, 1, 1, 1, 2, 2, 2, 3, 3, 3, 4, 4, 4, 5, 5, 5, 6, 6, 6, 7, 7, 0, 1, 0, 1, 2, 1, 2, 3, 2, 3, 4, 3, 4, 5, 4, 5, 6, 5, 6, 7, 6, 7 };
 static const bgc_block bgc_blocks[BGC_DIM(BGC_NUM_BLOCKS)] = {
-    { { 8, 0, 22, bgc_block0_plan + 0, bgc_block0_plan + 8, bgc_block0_plan + 17, bgc_block0_plan + 24, bgc_block0_plan + 31, bgc_block0_plan + 40, bgc_block0_plan + 47, bgc_block0_plan + 54, bgc_block0_plan + 61, bgc_block0_plan + 83 }, 760, 782, 804, 868, 876, 884, 892, 900, 908, 0, 8 },
+    { { 8, 0, 1, 22, bgc_block0_plan + 0, bgc_block0_plan + 8, bgc_block0_plan + 17, bgc_block0_plan + 24, bgc_block0_plan + 31, bgc_block0_plan + 40, bgc_block0_plan + 47, bgc_block0_plan + 54, bgc_block0_plan + 61, bgc_block0_plan + 83 }, 760, 782, 804, 868, 876, 884, 892, 900, 908, 0, 8 },
 };
 
 /* The Jacobian's structure: the columns of each colour (evaluated by one bgc_jvp), and the
