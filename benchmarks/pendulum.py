@@ -37,6 +37,8 @@ HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
 MODEL = ROOT / "models" / "pendulum.bg"
 HANDWRITTEN = HERE / "handwritten_dopri5.c"
+sys.path.insert(0, str(HERE))  # machine.py, beside this file
+import machine  # noqa: E402
 SCENE = "long"
 DT, RTOL, ATOL = 0.01, 1e-8, 1e-10
 REF_TOL, REF_CHECK_TOL = 1e-13, 1e-12
@@ -304,19 +306,8 @@ def machine_facts() -> list[str]:
     import scipy
     import sympy
 
-    try:
-        cc_line = subprocess.run([*c_compiler(), "--version"], capture_output=True,
-                                 text=True).stdout.splitlines()[0]
-    except (OSError, IndexError):
-        cc_line = f"{' '.join(c_compiler())}: not found"
-    processor = platform.processor() or platform.machine()
-    try:
-        with open("/proc/cpuinfo", encoding="utf-8") as fh:
-            processor = next(line.split(":", 1)[1].strip() for line in fh
-                             if line.startswith("model name"))
-    except (OSError, StopIteration):
-        pass
-    load = " ".join(f"{v:.2f}" for v in os.getloadavg()) if hasattr(os, "getloadavg") else "?"
+    cc_line, processor, load = (machine.cc_version(c_compiler()), machine.processor(),
+                                machine.load_average())
     try:
         from bgc.backends import C_FLAGS as bgc_flags
     except ImportError:

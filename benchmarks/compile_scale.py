@@ -1,0 +1,865 @@
+"""How bgc's compile time grows with the size of a model, beside CasADi (and BondGraphTools).
+
+    python benchmarks/compile_scale.py [--quick] [--families a,b] [--repeats N]
+                                       [--plot FILE.png] [--bondgraphtools PYTHON]
+
+The models are the four families of benchmarks/families.py (pendulum_chain compiled with its
+scene "swing", the others with the default scene), each at a range of sizes.  For every model:
+
+  stages   bgc.build(...).timings (parse, resolve, scene, causality, equations, reduce, lower)
+           and emit_c, timed inside a fresh Python process (this script run with the hidden
+           option --one FAMILY N DIR, which prints JSON): SymPy caches what it has seen, so sizes
+           built in one process would warm each other.  Median over the repeats.
+  command  wall clock of `python -m bgc compile FILE --target c -o OUT` (with `--scene swing`
+           for the chains), what a user waits for, Python's start-up and imports included; for
+           the RC ladder also of `python -m bgc check FILE`.  Median over the repeats.
+  cc       wall clock of `cc -O2 -std=c99 model.c -o model -lm` (the program, runtime
+           included).  Median over the repeats.
+  ops      the right side's arithmetic in the program IR: add + mul + div + call + neg from
+           bgc.ir.count_ops(program, names=("rhs",)); "flops" are those of the LU
+           factorisations and solves it runs (solve_flops), counted apart.
+  rhs/jac  time per call of the generated bgc_rhs and bgc_jacobian: a driver appended to the
+           generated C (built with -DBGC_NO_MAIN) calls them through a function pointer,
+           changing one state slightly between calls so that no call repeats the last; the
+           number of calls is raised until a loop takes --min-time (0.2 s), then the best of
+           three loops is reported.
+  fit      the growth exponent: least squares of log(time) against log(size) over the larger
+           half of a family's sizes (the sizes are printed); the target is <= 1.2 for the
+           in-process total and for the whole command.  Reported, never asserted.
+
+Baselines in the same run, in the same tables:
+
+  CasADi (if importable) builds the right side of the same N-link chain by hand, index-reduced
+  with the same Baumgarte law: q = (x, y), v = p/m, Phi_k = |r_k - r_(k-1)|^2 - l^2 (r_0 = 0),
+  J = jacobian(Phi, q), (J M^-1 J^T) lambda = -(J M^-1 F + d(Jv)/dq v + 2 alpha J v +
+  beta^2 Phi) (d(Jv)/dq v by jtimes), dp/dt = F + J^T lambda, dq/dt = v; two ways: "MX+QR",
+  an MX graph whose solve is casadi.solve(A, b, "qr"), a sparse QR node run by the generated
+  code, and "SX", all scalar (casadi.solve on SX, QR unrolled into the expressions).  And an
+  SX right side of the mass chain.  The parameters are an input vector of the function, as
+  in bgc's code.  Build time (expressions and Function), code generation time
+  (CodeGenerator.add + generate), cc -O2 of the generated file (-c: it has no main), time per
+  call from the same driver, and for SX the operation count: every instruction of the
+  function's algorithm except inputs, outputs, constants, parameters and copies (a square or a
+  doubling counts one, as bgc counts x**2 as one mul).  Each CasADi right side is compared with
+  bgc's generated Python module at random states near the initial one and, from both
+  generated C files, at the initial state: "vs bgc" is the largest relative difference.
+
+  BondGraphTools (--bondgraphtools PYTHON, an interpreter that has it: slow, off by default)
+  builds the 20-mass chain of mass_chain(20) with symbolic parameters and times its
+  constitutive_relations (the reduction) in a subprocess, with a timeout; its equations are
+  checked against bgc's at one state.
+
+Timings are medians of measurements made in this run, printed, never asserted.
+"""
+from __future__ import annotations
+
+import argparse
+import datetime
+import json
+import os
+import platform
+import re
+import shlex
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+HERE = Path(__file__).resolve().parent
+ROOT = HERE.parent
+sys.path.insert(0, str(HERE))  # families.py and machine.py, beside this file
+sys.path.insert(0, str(ROOT))  # bgc, from this checkout
+
+import families  # noqa: E402
+import machine  # noqa: E402
+
+SIZES = {
+    "pendulum_chain": (1, 2, 4, 8, 16, 32, 64),
+    "mass_chain": (10, 30, 100, 300, 1000),
+    "rc_ladder": (10, 30, 100, 300, 600, 1000),
+    "resistor_ladder": (2, 4, 8, 16, 32, 64),
+}
+QUICK_SIZES = {
+    "pendulum_chain": (2, 8, 16),
+    "mass_chain": (10, 100),
+    "rc_ladder": (10, 100),
+    "resistor_ladder": (4, 16),
+}
+SCENES = {"pendulum_chain": "swing"}
+STAGES = ("parse", "resolve", "scene", "causality", "equations", "reduce", "lower", "emit")
+ARITHMETIC = ("add", "mul", "div", "call", "neg")
+CFLAGS = ("-O2", "-std=c99")
+DRIVER_FLAGS = ("-D_POSIX_C_SOURCE=199309L",)
+TARGET_EXPONENT = 1.2
+CHECK_TARGET = ("rc_ladder", 600, 3.0)  # the issue: `bgc check` under 3 s at 600 sections
+BGT_MASSES, BGT_TIMEOUT = 20, 600.0
+BGT_REPORTED = ("BondGraphTools 0.4.6, 20-mass chain: 151 s reported by the issue that asked "
+                "for this benchmark; not measured in this run (use --bondgraphtools "
+                "/work/bgt-venv/bin/python)")
+AGREEMENT = 1e-9  # relative; anything above is flagged in the table
+
+
+@dataclass
+class Row:
+    """One compiled model, bgc's or a baseline's: what was measured (None: not measured)."""
+    family: str
+    size: int
+    tool: str
+    states: int | None = None
+    stages: dict = field(default_factory=dict)  # bgc: stage -> median seconds
+    build: float | None = None    # bgc: parse .. lower; CasADi: expressions + Function
+    codegen: float | None = None  # bgc: emit_c; CasADi: CodeGenerator
+    command: float | None = None  # python -m bgc compile
+    check: float | None = None    # python -m bgc check (RC ladder)
+    cc: float | None = None
+    ops: int | None = None
+    flops: int | None = None
+    rhs_ns: float | None = None
+    jac_ns: float | None = None
+    error: float | None = None    # baselines: largest relative difference from bgc
+    dx0: list | None = None       # the generated C's right side at the initial state
+    note: str = ""
+
+    @property
+    def total(self) -> float | None:
+        if self.build is None or self.codegen is None:
+            return None
+        return self.build + self.codegen
+
+
+# ---------------------------------------------------------------- running things
+
+def model_name(family: str, n: int) -> str:
+    return f"{family}{n}"
+
+
+def c_compiler() -> list[str]:
+    """$CC split like a shell word list, else cc (as bgc does)."""
+    return shlex.split(os.environ.get("CC") or "cc")
+
+
+def python_env() -> dict:
+    """The environment for child Pythons: this checkout's bgc first."""
+    env = dict(os.environ)
+    env["PYTHONPATH"] = os.pathsep.join(p for p in (str(ROOT), env.get("PYTHONPATH")) if p)
+    return env
+
+
+def run(cmd: list[str], timeout: float | None = None, **kwargs) -> tuple[float, str]:
+    """Run a command; (wall seconds, stdout).  A failure raises with its stderr."""
+    start = time.perf_counter()
+    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout, **kwargs)
+    elapsed = time.perf_counter() - start
+    if proc.returncode != 0:
+        raise RuntimeError(f"{' '.join(map(str, cmd))} exited {proc.returncode}:\n"
+                           f"{proc.stderr.strip()[-2000:]}")
+    return elapsed, proc.stdout
+
+
+def compile_c(source: Path, output: Path, *flags: str) -> float:
+    """cc -O2 -std=c99 [flags] source -o output -lm; returns the wall seconds."""
+    link = () if "-c" in flags else ("-lm",)
+    return run([*c_compiler(), *CFLAGS, *flags, str(source), "-o", str(output), *link])[0]
+
+
+def median(values) -> float | None:
+    values = [v for v in values if v is not None]
+    return statistics.median(values) if values else None
+
+
+def progress(message: str) -> None:
+    print(message, file=sys.stderr, flush=True)
+
+
+# ---------------------------------------------------------------- the timing driver (C)
+
+DRIVER_MAIN = r"""
+/* ---- appended by benchmarks/compile_scale.py: time the model functions ---- */
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+
+typedef int (*bench_fn)(const double *x, double *out);
+static volatile double bench_sink;
+
+static double bench_now(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
+}
+
+/* Seconds for `calls` calls of f, x[0] changed slightly before each, so that no call repeats
+   the last and nothing can be hoisted out of the loop; -1 if a call failed. */
+static double bench_loop(bench_fn f, double *x, double *out, long calls)
+{
+    double x0 = x[0], acc = 0.0, start = bench_now(), elapsed;
+    long k;
+    for (k = 0; k < calls; ++k) {
+        x[0] = x0 + 1e-9 * (double)(k & 7);
+        if (f(x, out) != 0)
+            return -1.0;
+        acc += out[0];
+    }
+    elapsed = bench_now() - start;
+    bench_sink = acc;
+    x[0] = x0;
+    return elapsed;
+}
+
+/* Nanoseconds per call: more calls until one loop takes min_time, then the best of repeats. */
+static double bench_per_call(bench_fn f, double *x, double *out, double min_time, int repeats)
+{
+    long calls = 1;
+    double t, best;
+    int r;
+    for (;;) {
+        t = bench_loop(f, x, out, calls);
+        if (t < 0.0)
+            return -1.0;
+        if (t >= min_time)
+            break;
+        calls = t * 100.0 < min_time ? calls * 10 : (long)((double)calls * 1.1 * min_time / t) + 1;
+    }
+    best = t;
+    for (r = 1; r < repeats; ++r) {
+        t = bench_loop(f, x, out, calls);
+        if (t >= 0.0 && t < best)
+            best = t;
+    }
+    return 1e9 * best / (double)calls;
+}
+
+int main(int argc, char **argv)
+{
+    double min_time = argc > 1 ? atof(argv[1]) : 0.2;
+    int repeats = argc > 2 ? atoi(argv[2]) : 3, i;
+    double *x = malloc(BENCH_N * sizeof *x), *dx = malloc(BENCH_N * sizeof *dx);
+    if (!x || !dx || bench_setup(x) != 0 || bench_rhs(x, dx) != 0) {
+        fprintf(stderr, "driver: setup or the first right-side call failed\n");
+        return 1;
+    }
+    printf("dx");
+    for (i = 0; i < BENCH_N; ++i)
+        printf(" %.17g", dx[i]);
+    printf("\nrhs_ns %.6g\n", bench_per_call(bench_rhs, x, dx, min_time, repeats));
+#if BENCH_JAC
+    {
+        double *jac = malloc((size_t)BENCH_N * BENCH_N * sizeof *jac);
+        if (!jac)
+            return 1;
+        printf("jac_ns %.6g\n", bench_per_call(bench_jac, x, jac, min_time, repeats));
+    }
+#endif
+    return 0;
+}
+"""
+
+BGC_ADAPTER = r"""
+/* ---- appended by benchmarks/compile_scale.py: the bgc model behind the driver ---- */
+#if defined(__GNUC__)
+#define BENCH_NOINLINE __attribute__((noinline))
+#else
+#define BENCH_NOINLINE
+#endif
+#define BENCH_N BGC_DIM(BGC_NUM_STATES)
+#define BENCH_JAC 1
+static bgc_params bench_p;
+static bgc_work *bench_w;
+
+static int bench_setup(double *x)
+{
+    bgc_params_defaults(&bench_p, NULL);
+    bench_w = bgc_work_new();
+    if (!bench_w)
+        return 1;
+    bgc_init(&bench_p, x);
+    return 0;
+}
+
+static BENCH_NOINLINE int bench_rhs(const double *x, double *dx)
+{
+    return bgc_rhs(0.0, x, &bench_p, bench_w, dx);
+}
+
+static BENCH_NOINLINE int bench_jac(const double *x, double *J)
+{
+    return bgc_jacobian(0.0, x, &bench_p, bench_w, J);
+}
+"""
+
+CASADI_ADAPTER = r"""
+/* ---- appended by benchmarks/compile_scale.py: the CasADi function behind the driver ---- */
+#include <stdlib.h>
+#include <string.h>
+#define BENCH_N {n}
+#define BENCH_JAC 0
+static const double bench_x0[BENCH_N] = {{{x0}}};
+static const double bench_params[] = {{{params}}};
+static const casadi_real **bench_arg;
+static casadi_real **bench_res, *bench_w;
+static casadi_int *bench_iw;
+static int bench_mem;
+
+static int bench_setup(double *x)
+{{
+    casadi_int n_arg, n_res, n_iw, n_w;
+    if ({name}_work(&n_arg, &n_res, &n_iw, &n_w) != 0)
+        return 1;
+    bench_arg = malloc((size_t)(n_arg + 1) * sizeof *bench_arg);
+    bench_res = malloc((size_t)(n_res + 1) * sizeof *bench_res);
+    bench_iw = malloc((size_t)(n_iw + 1) * sizeof *bench_iw);
+    bench_w = malloc((size_t)(n_w + 1) * sizeof *bench_w);
+    if (!bench_arg || !bench_res || !bench_iw || !bench_w)
+        return 1;
+    {name}_incref();
+    bench_mem = {name}_checkout();
+    memcpy(x, bench_x0, sizeof bench_x0);
+    return 0;
+}}
+
+static int bench_rhs(const double *x, double *dx)
+{{
+    bench_arg[0] = x;
+    bench_arg[1] = bench_params;
+    bench_res[0] = dx;
+    return {name}(bench_arg, bench_res, bench_iw, bench_w, bench_mem);
+}}
+"""
+
+
+def time_calls(c_text: str, adapter: str, stem: Path, args) -> dict:
+    """Build the generated C with the driver appended and run it: {"dx": [...], "rhs_ns": ...,
+    "jac_ns": ...}."""
+    source = stem.with_name(stem.name + "_driver.c")
+    source.write_text(c_text + adapter + DRIVER_MAIN, encoding="utf-8")
+    exe = stem.with_name(stem.name + "_driver")
+    compile_c(source, exe, *DRIVER_FLAGS, "-DBGC_NO_MAIN")
+    out = run([str(exe), repr(args.min_time), "3"])[1]
+    result = {}
+    for line in out.splitlines():
+        key, *values = line.split()
+        numbers = [float(v) for v in values]
+        result[key] = numbers if key == "dx" else numbers[0]
+    return result
+
+
+# ---------------------------------------------------------------- bgc, one model
+
+def one(family: str, n: int, outdir: Path, with_python: bool) -> None:
+    """The --one mode, in a fresh process: build and emit one model, print JSON."""
+    import bgc
+    from bgc import ir
+    from bgc.api import Source
+    from bgc.emit import emit_c, emit_python
+
+    name = model_name(family, n)
+    compiled = bgc.build(Source(f"{name}.bg", families.FAMILIES[family](n)), SCENES.get(family))
+    start = time.perf_counter()
+    (c_text,) = emit_c(compiled.program).values()
+    emit = time.perf_counter() - start
+    ops = ir.count_ops(compiled.program, names=("rhs",))
+    (outdir / f"{name}.c").write_text(c_text, encoding="utf-8")
+    if with_python:  # untimed, for checking the baselines against
+        (py_text,) = emit_python(compiled.program).values()
+        (outdir / f"{name}.py").write_text(py_text, encoding="utf-8")
+    print(json.dumps({"stages": {**dict(compiled.timings), "emit": emit},
+                      "states": len(compiled.program.states),
+                      "ops": sum(ops[k] for k in ARITHMETIC), "flops": ops["solve_flops"]}))
+
+
+def build_in_fresh_process(family: str, n: int, workdir: Path, with_python: bool) -> dict:
+    cmd = [sys.executable, str(Path(__file__).resolve()), "--one", family, str(n),
+           str(workdir)] + (["--with-python"] if with_python else [])
+    return json.loads(run(cmd, env=python_env())[1].strip().splitlines()[-1])
+
+
+def bgc_command(*args: str, workdir: Path) -> float:
+    return run([sys.executable, "-m", "bgc", *args], cwd=workdir, env=python_env())[0]
+
+
+def measure_bgc(family: str, n: int, workdir: Path, args) -> Row:
+    """Every measurement of one bgc model, the repeats interleaved so that a change of load on
+    the machine hits them alike."""
+    name = model_name(family, n)
+    model = workdir / f"{name}.bg"
+    model.write_text(families.FAMILIES[family](n), encoding="utf-8")
+    scene = ["--scene", SCENES[family]] if family in SCENES else []
+    builds, commands, checks, ccs = [], [], [], []
+    for r in range(args.repeats):
+        builds.append(build_in_fresh_process(family, n, workdir, with_python=r == 0))
+        commands.append(bgc_command("compile", model.name, *scene, "--target", "c",
+                                    "-o", f"{name}_cmd.c", workdir=workdir))
+        if family == CHECK_TARGET[0]:
+            checks.append(bgc_command("check", model.name, *scene, workdir=workdir))
+        ccs.append(compile_c(workdir / f"{name}.c", workdir / name))
+    stages = {s: median(b["stages"][s] for b in builds) for s in STAGES}
+    row = Row(family, n, "bgc", states=builds[0]["states"], stages=stages,
+              build=sum(stages[s] for s in STAGES if s != "emit"), codegen=stages["emit"],
+              command=median(commands), check=median(checks), cc=median(ccs),
+              ops=builds[0]["ops"], flops=builds[0]["flops"])
+    calls = time_calls((workdir / f"{name}.c").read_text(encoding="utf-8"), BGC_ADAPTER,
+                       workdir / name, args)
+    row.rhs_ns, row.jac_ns, row.dx0 = calls.get("rhs_ns"), calls.get("jac_ns"), calls.get("dx")
+    return row
+
+
+def bgc_module(family: str, n: int, workdir: Path):
+    """bgc's generated Python module of a model measured before (written by --one)."""
+    from bgc import backends
+
+    return backends.load_python_module(
+        (workdir / f"{model_name(family, n)}.py").read_text(encoding="utf-8"))
+
+
+# ---------------------------------------------------------------- CasADi baselines
+
+def casadi_chain(ca, n: int, scalar: bool, name: str):
+    """The n-link chain's right side as a CasADi Function (x, params) -> dx, x = (px_1..px_n,
+    py_1..py_n, x_1..x_n, y_1..y_n), params = (m, l, g, alpha, beta); y points down."""
+    sym = ca.SX if scalar else ca.MX
+    momenta, positions = sym.sym("p", 2 * n), sym.sym("q", 2 * n)
+    params = sym.sym("params", 5)
+    m, l, g, alpha, beta = ca.vertsplit(params)
+    x, y = positions[:n], positions[n:]
+    if n > 1:
+        x_prev, y_prev = ca.vertcat(sym.zeros(1), x[:n - 1]), ca.vertcat(sym.zeros(1), y[:n - 1])
+    else:  # an empty slice does not concatenate in MX
+        x_prev, y_prev = sym.zeros(1), sym.zeros(1)
+    v = momenta / m
+    force = ca.vertcat(sym.zeros(n), m * g * sym.ones(n))
+    phi = (x - x_prev) ** 2 + (y - y_prev) ** 2 - l ** 2
+    jac = ca.jacobian(phi, positions)
+    jv = ca.mtimes(jac, v)
+    lhs = ca.mtimes(jac, jac.T) / m
+    rhs = -(ca.mtimes(jac, force) / m + ca.jtimes(jv, positions, v) + 2 * alpha * jv
+            + beta ** 2 * phi)
+    lam = ca.solve(lhs, rhs) if scalar else ca.solve(lhs, rhs, "qr")
+    dx = ca.vertcat(force + ca.mtimes(jac.T, lam), v)
+    return ca.Function(name, [ca.vertcat(momenta, positions), params], [ca.densify(dx)])
+
+
+def chain_states(n: int) -> list[str]:
+    """bgc's names of casadi_chain's states, in its order."""
+    return [f"{prefix}{k}{suffix}" for prefix, suffix in (("mx", ".p"), ("my", ".p"),
+                                                           ("x", ""), ("y", ""))
+            for k in range(1, n + 1)]
+
+
+def casadi_masses(ca, n: int, name: str):
+    """The n-mass chain's right side, SX: x = (p_1, q_1, .., p_n, q_n) as bgc orders it
+    (momentum of mass i, compression of spring-damper i), params = (m, k, b, F)."""
+    x, params = ca.SX.sym("x", 2 * n), ca.SX.sym("params", 4)
+    m, k, b, push = ca.vertsplit(params)
+    momenta, springs = x[0::2], x[1::2]
+    v = momenta / m
+    flow = ca.vertcat(0, v[:n - 1]) - v  # into spring-damper i: v_(i-1) - v_i, v_0 = 0
+    effort = k * springs + b * flow
+    dp = effort - ca.vertcat(effort[1:], 0) + ca.vertcat(ca.SX.zeros(n - 1), push)
+    dx = ca.reshape(ca.horzcat(dp, flow).T, 2 * n, 1)  # interleave
+    return ca.Function(name, [x, params], [dx])
+
+
+def mass_states(n: int) -> list[str]:
+    return [f"{kind}{i}.{var}" for i in range(1, n + 1) for kind, var in (("mass", "p"),
+                                                                          ("spring", "q"))]
+
+
+def count_sx_ops(ca, f) -> int:
+    """Instructions of an SX function that compute: all but inputs, outputs, constants,
+    parameters and copies."""
+    skip = {ca.OP_INPUT, ca.OP_OUTPUT, ca.OP_CONST, ca.OP_PARAMETER, ca.OP_ASSIGN}
+    return sum(1 for k in range(f.n_instructions()) if f.instruction_id(k) not in skip)
+
+
+@dataclass(frozen=True)
+class Baseline:
+    """A CasADi right side of a bgc family: how to build it and which bgc parameters and states
+    its inputs are."""
+    family: str
+    tool: str
+    build: object       # (ca, n, name) -> Function
+    states: object      # n -> bgc's state names in the Function's order
+    params: tuple       # bgc's parameter names in the Function's order
+    scalar: bool
+
+
+BASELINES = (
+    Baseline("pendulum_chain", "CasADi MX+QR",
+             lambda ca, n, name: casadi_chain(ca, n, False, name), chain_states,
+             ("m", "l", "g", "alpha", "beta"), False),
+    Baseline("pendulum_chain", "CasADi SX",
+             lambda ca, n, name: casadi_chain(ca, n, True, name), chain_states,
+             ("m", "l", "g", "alpha", "beta"), True),
+    Baseline("mass_chain", "CasADi SX", casadi_masses, mass_states, ("m", "k", "b", "F"), True),
+)
+
+
+def relative_difference(got, ref) -> float:
+    got, ref = np.asarray(got, float), np.asarray(ref, float)
+    return float(np.max(np.abs(got - ref)) / max(np.max(np.abs(ref)), 1e-300))
+
+
+def difference_from_bgc(f, module, names: list[str], params: list[float], rng) -> float:
+    """Largest relative difference of f from bgc's rhs at random states near the initial one."""
+    p = list(module.PARAMETERS.values())
+    perm = [module.STATES.index(s) for s in names]
+    x0 = np.asarray(module._init(module._with_constants(p)), float)
+    worst = 0.0
+    for _ in range(3):
+        x = x0 + 0.05 * rng.standard_normal(x0.size)
+        ref = np.asarray(module.rhs(0.0, x, p), float)[perm]
+        worst = max(worst, relative_difference(np.asarray(f(x[perm], params)).ravel(), ref))
+    return worst
+
+
+def c_array(values) -> str:
+    return ", ".join(repr(float(v)) for v in values)
+
+
+def measure_casadi(ca, base: Baseline, n: int, bgc_row: Row, workdir: Path, args, rng) -> Row:
+    name = f"{base.tool.split()[-1].replace('+', '').lower()}_{model_name(base.family, n)}"
+    builds, codegens, ccs = [], [], []
+    for _ in range(args.repeats):
+        start = time.perf_counter()
+        f = base.build(ca, n, name)
+        builds.append(time.perf_counter() - start)
+        start = time.perf_counter()
+        generator = ca.CodeGenerator(f"{name}.c", {"with_header": False})
+        generator.add(f)
+        source = Path(generator.generate(str(workdir) + os.sep))
+        codegens.append(time.perf_counter() - start)
+        ccs.append(compile_c(source, workdir / f"{name}.o", "-c"))
+    row = Row(base.family, n, base.tool, states=f.size1_in(0), build=median(builds),
+              codegen=median(codegens), cc=median(ccs),
+              ops=count_sx_ops(ca, f) if base.scalar else None)
+    module = bgc_module(base.family, n, workdir)
+    names = base.states(n)
+    perm = [module.STATES.index(s) for s in names]
+    params = [module.PARAMETERS[p] for p in base.params]
+    x0 = np.asarray(module._init(module._with_constants(list(module.PARAMETERS.values()))))
+    adapter = CASADI_ADAPTER.format(n=len(names), x0=c_array(x0[perm]),
+                                    params=c_array(params), name=name)
+    calls = time_calls(source.read_text(encoding="utf-8"), adapter, workdir / name, args)
+    row.rhs_ns = calls.get("rhs_ns")
+    row.error = difference_from_bgc(f, module, names, params, rng)
+    if bgc_row.dx0 is not None and calls.get("dx") is not None:  # the two generated C files
+        row.error = max(row.error, relative_difference(calls["dx"],
+                                                       np.asarray(bgc_row.dx0)[perm]))
+    if row.error > AGREEMENT:
+        row.note = f"DIFFERS FROM bgc by {row.error:.1e} (relative)"
+    return row
+
+
+# ---------------------------------------------------------------- BondGraphTools
+
+BGT_SCRIPT = r"""
+import json, sys, time
+import sympy as sp
+import BondGraphTools as bgt
+from BondGraphTools.version import version
+
+n, state, values = int(sys.argv[1]), json.loads(sys.argv[2]), json.loads(sys.argv[3])
+m, c, b, F = sp.symbols("m c b F")  # c = 1/k: BondGraphTools takes a symbol, not 1/k
+start = time.perf_counter()
+model = bgt.new(name=f"masses{n}")
+wall, push = bgt.new("Sf", value=0, name="wall"), bgt.new("Se", value=F, name="push")
+bgt.add(model, wall, push)
+left = wall
+for i in range(1, n + 1):
+    v, mass = bgt.new("1", name=f"v{i}"), bgt.new("I", value=m, name=f"mass{i}")
+    node, pair = bgt.new("0", name=f"n{i}"), bgt.new("1", name=f"d{i}")
+    spring = bgt.new("C", value=c, name=f"spring{i}")
+    damper = bgt.new("R", value=b, name=f"damper{i}")
+    bgt.add(model, v, mass, node, pair, spring, damper)
+    for tail, head in ((v, mass), (left, node), (node, v), (node, pair), (pair, spring),
+                       (pair, damper)):
+        bgt.connect(tail, head)
+    left = v
+bgt.connect(push, left)
+built = time.perf_counter()
+relations = model.constitutive_relations
+reduced = time.perf_counter()
+names = {x: f"{comp.name}.{var.split('_')[0]}" for x, (comp, var) in model.state_vars.items()}
+numbers = {sp.Symbol(x): state[name] for x, name in names.items()}
+numbers.update({sp.Symbol(k): v for k, v in values.items()})
+dx = [sp.Symbol("d" + x) for x in names]
+solution, = sp.linsolve([r.subs(numbers) for r in relations], dx)
+print(json.dumps({"version": version, "sympy": sp.__version__, "build": built - start,
+                  "reduce": reduced - built, "relations": len(relations),
+                  "dx": {names[str(d)[1:]]: float(v) for d, v in zip(dx, solution)}}))
+"""
+
+
+def measure_bondgraphtools(python: str, workdir: Path, args) -> list[str]:
+    """The 20-mass chain in BondGraphTools (one run, in its own interpreter) and in bgc."""
+    n = BGT_MASSES
+    bgc_row = measure_bgc("mass_chain", n, workdir, args)
+    module = bgc_module("mass_chain", n, workdir)
+    rng = np.random.default_rng(2)
+    x = rng.standard_normal(len(module.STATES))
+    p = list(module.PARAMETERS.values())
+    ref = dict(zip(module.STATES, np.asarray(module.rhs(0.0, x, p), float)))
+    values = dict(module.PARAMETERS)
+    values = {"m": values["m"], "c": 1.0 / values["k"], "b": values["b"], "F": values["F"]}
+    progress(f"[BondGraphTools] {n}-mass chain, timeout {BGT_TIMEOUT:g} s ...")
+    try:
+        out = run([python, "-c", BGT_SCRIPT, str(n), json.dumps(dict(zip(module.STATES, x))),
+                   json.dumps(values)], timeout=BGT_TIMEOUT, cwd=workdir)[1]
+        bgt = json.loads(out.strip().splitlines()[-1])
+    except subprocess.TimeoutExpired:
+        return [f"BondGraphTools, {n}-mass chain: no result within {BGT_TIMEOUT:g} s "
+                "(timed out)"]
+    except (RuntimeError, OSError, ValueError, IndexError) as exc:
+        return [f"BondGraphTools, {n}-mass chain: FAILED: {str(exc).strip()[:300]}"]
+    names = list(bgt["dx"])
+    diff = relative_difference([bgt["dx"][s] for s in names], [ref[s] for s in names])
+    agree = "agree" if diff <= AGREEMENT and len(names) == len(ref) else "DISAGREE"
+    return [f"BondGraphTools {bgt['version']} (sympy {bgt['sympy']}), {n}-mass chain with "
+            f"symbolic m, 1/k, b, F: building {bgt['build']:.3g} s, constitutive_relations "
+            f"(the reduction) {bgt['reduce']:.4g} s, one run; its {bgt['relations']} "
+            f"relations and bgc's right side {agree} at a random state (relative "
+            f"difference {diff:.1e})",
+            f"bgc, the same chain: {bgc_row.total:.3g} s in process (median of "
+            f"{args.repeats}), {bgc_row.command:.3g} s for the whole command; "
+            f"BondGraphTools / bgc in process: {bgt['reduce'] / bgc_row.total:.0f}x"]
+
+
+# ---------------------------------------------------------------- fits and tables
+
+def fitted_sizes(sizes: list[int]) -> list[int]:
+    """The larger half of the sizes (at least two)."""
+    return sizes[max(0, min(len(sizes) // 2, len(sizes) - 2)):]
+
+
+def exponent(points: list[tuple[int, float]]) -> tuple[float | None, list[int]]:
+    """Least-squares slope of log(time) on log(size) over the larger half of the sizes."""
+    points = sorted((n, t) for n, t in points if t)
+    chosen = fitted_sizes([n for n, _ in points])
+    if len(chosen) < 2:
+        return None, chosen
+    times = dict(points)
+    slope = np.polyfit(np.log(chosen), np.log([times[n] for n in chosen]), 1)[0]
+    return float(slope), chosen
+
+
+def fmt(value, spec: str, width: int) -> str:
+    """value formatted by spec, right-aligned in width, always after at least one space."""
+    text = "-" if value is None else format(value, spec)
+    return " " + format(text, f">{width - 1}")
+
+
+def stage_table(rows: list[Row]) -> str:
+    head = f"{'family':<16}{'size':>5}{'states':>7}" + "".join(
+        f"{s[:9]:>10}" for s in STAGES) + f"{'total':>9}"
+    lines = [head, "-" * len(head)]
+    for r in rows:
+        lines.append(f"{r.family:<16}{r.size:>5}{r.states:>7}"
+                     + "".join(fmt(r.stages.get(s), ".3f", 10) for s in STAGES)
+                     + fmt(r.total, ".3f", 9))
+    return "\n".join(lines)
+
+
+def side_by_side_table(rows: list[Row]) -> str:
+    head = (f"{'family':<16}{'size':>5} {'tool':<13}{'states':>7}{'build':>8}{'codegen':>8}"
+            f"{'total':>8}{'command':>8}{'check':>7}{'cc':>7}{'ops':>7}{'flops':>7}"
+            f"{'rhs µs':>10}{'jac µs':>10}{'vs bgc':>8}")
+    lines = [head, "-" * len(head)]
+    for r in rows:
+        lines.append(
+            f"{r.family:<16}{r.size:>5} {r.tool:<13}{fmt(r.states, 'd', 7)}"
+            f"{fmt(r.build, '.3g', 8)}{fmt(r.codegen, '.3g', 8)}{fmt(r.total, '.3g', 8)}"
+            f"{fmt(r.command, '.3g', 8)}{fmt(r.check, '.3g', 7)}{fmt(r.cc, '.3g', 7)}"
+            f"{fmt(r.ops, 'd', 7)}{fmt(r.flops, 'd', 7)}"
+            f"{fmt(None if r.rhs_ns is None else r.rhs_ns / 1e3, '.3g', 10)}"
+            f"{fmt(None if r.jac_ns is None else r.jac_ns / 1e3, '.3g', 10)}"
+            f"{fmt(r.error, '.0e', 8)}" + (f"  {r.note}" if r.note else ""))
+    return "\n".join(lines)
+
+
+def fit_lines(rows: list[Row]) -> list[str]:
+    lines = [f"{'family':<16}{'tool':<13}{'fitted sizes':<22}{'in process':>11}"
+             f"{'command':>9}{'cc':>7}  target <= {TARGET_EXPONENT:g} (bgc: in process, command)"]
+    lines.append("-" * len(lines[0]))
+    keys = dict.fromkeys((r.family, r.tool) for r in rows)
+    for family, tool in keys:
+        mine = [r for r in rows if (r.family, r.tool) == (family, tool)]
+        total, sizes = exponent([(r.size, r.total) for r in mine])
+        command, _ = exponent([(r.size, r.command) for r in mine])
+        cc, _ = exponent([(r.size, r.cc) for r in mine])
+        verdicts = [v for v in (total, command) if v is not None]
+        verdict = ("-" if tool != "bgc" or not verdicts else
+                   "met" if all(v <= TARGET_EXPONENT for v in verdicts) else "NOT MET")
+        lines.append(f"{family:<16}{tool:<13}{', '.join(map(str, sizes)):<22}"
+                     f"{fmt(total, '.2f', 11)}{fmt(command, '.2f', 9)}{fmt(cc, '.2f', 7)}"
+                     f"  {verdict}")
+    return lines
+
+
+def check_line(rows: list[Row]) -> str | None:
+    family, size, limit = CHECK_TARGET
+    row = next((r for r in rows if (r.family, r.size, r.tool) == (family, size, "bgc")), None)
+    if row is None or row.check is None:
+        return None
+    verdict = "met" if row.check < limit else "NOT MET"
+    return (f"`python -m bgc check` on the {size}-section RC ladder: {row.check:.3g} s "
+            f"(target < {limit:g} s: {verdict})")
+
+
+def plot(rows: list[Row], path: str) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, (ax_compile, ax_cc) = plt.subplots(1, 2, figsize=(12, 4.8), sharey=True)
+    colors = dict(zip(SIZES, ("tab:blue", "tab:orange", "tab:green", "tab:red")))
+    for (family, tool) in dict.fromkeys((r.family, r.tool) for r in rows):
+        mine = sorted((r for r in rows if (r.family, r.tool) == (family, tool)),
+                      key=lambda r: r.size)
+        sizes = [r.size for r in mine]
+        color = colors.get(family, "gray")
+        if tool == "bgc":
+            ax_compile.plot(sizes, [r.total for r in mine], "o-", color=color,
+                            label=f"{family}, in process")
+            ax_compile.plot(sizes, [r.command for r in mine], "s:", color=color,
+                            label=f"{family}, whole command")
+            ax_cc.plot(sizes, [r.cc for r in mine], "o-", color=color, label=f"{family}, bgc")
+        else:
+            style = "^--" if "SX" in tool else "v-."
+            ax_compile.plot(sizes, [r.total for r in mine], style, color=color, alpha=0.6,
+                            label=f"{family}, {tool} (build + codegen)")
+            ax_cc.plot(sizes, [r.cc for r in mine], style, color=color, alpha=0.6,
+                       label=f"{family}, {tool} (-c)")
+    ax_compile.set_title("compile time: bgc (model -> C) and CasADi")
+    ax_cc.set_title("cc -O2 of the generated C")
+    for ax in (ax_compile, ax_cc):
+        ax.set_xscale("log")
+        ax.set_yscale("log")
+        ax.set_xlabel("size n (links, masses, sections)")
+        ax.grid(which="both", alpha=0.3)
+        ax.legend(fontsize=6.5)
+    ax_compile.set_ylabel("seconds (median)")
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
+def machine_facts(ca, args) -> list[str]:
+    import scipy
+    import sympy
+
+    cc_line, processor, load = (machine.cc_version(c_compiler()), machine.processor(),
+                                machine.load_average())
+    import bgc
+
+    casadi = ca.__version__ if ca else "not installed"
+    return [f"date:     {datetime.datetime.now().isoformat(timespec='seconds')}",
+            f"cc:       {cc_line}  (flags: {' '.join(CFLAGS)} ... -lm)",
+            f"python:   {sys.version.split()[0]}  bgc {bgc.__version__}  numpy {np.__version__}"
+            f"  scipy {scipy.__version__}  sympy {sympy.__version__}  casadi {casadi}",
+            f"machine:  {processor}, {os.cpu_count()} cores, {platform.system()} "
+            f"{platform.release()}, load average {load}",
+            f"timing:   medians of {args.repeats} (bgc stages: a fresh process each); "
+            f"rhs/jac: best of 3 loops of >= {args.min_time:g} s; times in seconds"]
+
+
+# ---------------------------------------------------------------- main
+
+def parse_args(argv=None):
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--quick", action="store_true",
+                        help="fewer and smaller sizes, one repeat (about a minute)")
+    parser.add_argument("--families", default=",".join(SIZES),
+                        help=f"comma-separated, of {', '.join(SIZES)}")
+    parser.add_argument("--repeats", type=int, help="measurements per number (median); "
+                        "default 3, 1 with --quick")
+    parser.add_argument("--min-time", type=float, default=0.2,
+                        help="seconds of one timing loop of the generated C (default 0.2)")
+    parser.add_argument("--plot", metavar="FILE.png", help="log-log plot of the times")
+    parser.add_argument("--bondgraphtools", metavar="PYTHON",
+                        help="an interpreter with BondGraphTools: time its reduction of the "
+                             f"{BGT_MASSES}-mass chain (slow)")
+    parser.add_argument("--one", nargs=3, metavar=("FAMILY", "N", "DIR"), help=argparse.SUPPRESS)
+    parser.add_argument("--with-python", action="store_true", help=argparse.SUPPRESS)
+    args = parser.parse_args(argv)
+    if args.one:
+        return args
+    args.families = [f.strip() for f in args.families.split(",") if f.strip()]
+    unknown = [f for f in args.families if f not in SIZES]
+    if unknown or not args.families:
+        parser.error(f"unknown families {', '.join(unknown)}; choose from {', '.join(SIZES)}")
+    if args.repeats is None:
+        args.repeats = 1 if args.quick else 3
+    if args.repeats < 1 or not args.min_time > 0:
+        parser.error("--repeats must be >= 1 and --min-time > 0")
+    return args
+
+
+def import_casadi():
+    try:
+        import casadi
+    except ImportError:
+        return None
+    return casadi
+
+
+def run_all(args, ca, workdir: Path) -> list[Row]:
+    sizes = QUICK_SIZES if args.quick else SIZES
+    rows, rng = [], np.random.default_rng(1)
+    for family in args.families:
+        for n in sizes[family]:
+            progress(f"[bgc] {family} {n} ...")
+            bgc_row = measure_bgc(family, n, workdir, args)
+            rows.append(bgc_row)
+            for base in (b for b in BASELINES if ca and b.family == family):
+                progress(f"[{base.tool}] {family} {n} ...")
+                rows.append(measure_casadi(ca, base, n, bgc_row, workdir, args, rng))
+    return rows
+
+
+def main(argv=None) -> int:
+    args = parse_args(argv)
+    if args.one:
+        family, n, outdir = args.one
+        one(family, int(n), Path(outdir), args.with_python)
+        return 0
+    ca = import_casadi()
+    print("\n".join(machine_facts(ca, args)))
+    with tempfile.TemporaryDirectory(prefix="bgc-scale-") as tmp:
+        rows = run_all(args, ca, Path(tmp))
+        bgt_lines = (measure_bondgraphtools(args.bondgraphtools, Path(tmp), args)
+                     if args.bondgraphtools else [BGT_REPORTED])
+    bgc_rows = [r for r in rows if r.tool == "bgc"]
+    print("\nbgc's stages, in process [s]:")
+    print(stage_table(bgc_rows))
+    print("\nbgc and the baselines [s, µs]: build + codegen = total; command = python -m bgc "
+          "compile;\ncheck = python -m bgc check; cc -O2 (CasADi: -c); ops, flops: the right "
+          "side's;\nrhs, jac: per call; vs bgc: relative difference of the right sides")
+    print(side_by_side_table(rows))
+    print("\ngrowth exponents, log(time) on log(size) over the larger half of the sizes:")
+    print("\n".join(fit_lines(rows)))
+    line = check_line(rows)
+    if line:
+        print(f"\n{line}")
+    if not ca:
+        print("\nCasADi: not importable, its baselines were skipped")
+    print()
+    print("\n".join(bgt_lines))
+    if args.plot:
+        try:
+            plot(rows, args.plot)
+            print(f"\nplot written to {args.plot}")
+        except ImportError:
+            print("\n--plot: matplotlib is not installed, no plot")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
