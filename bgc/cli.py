@@ -9,7 +9,7 @@ from pathlib import Path
 
 import click
 
-from . import api, backends
+from . import api, backends, solvers
 from .diagnostics import format_diagnostic
 from .emit import emit_c, emit_python
 from .report import check_report, equations_latex, equations_text
@@ -124,25 +124,31 @@ def compile(model, scene, algebra, target, output, project_initial):
 @SCENE
 @ALGEBRA
 @click.option("--backend", type=click.Choice(["c", "python"]), default="c")
-@click.option("--solver", type=click.Choice(["euler", "rk4", "dopri5"]), default=None)
+@click.option("--solver", type=click.Choice(solvers.NAMES), default=None,
+              help="The solver (default: the scene's); see docs/solvers.md.")
 @click.option("--rtol", type=float, default=None)
 @click.option("--atol", type=float, default=None)
 @click.option("--t-end", type=float, default=None)
 @click.option("--dt", type=float, default=None, help="Output interval.")
-@click.option("--step", type=float, default=None, help="Fixed step for euler/rk4 (default: dt).")
+@click.option("--step", type=float, default=None,
+              help="Step of the fixed-step solvers (default: dt); for an adaptive solver, "
+                   "fixed steps of this size without error control.")
 @click.option("-p", "params", multiple=True, metavar="NAME=VALUE", help="Parameter override.")
 @click.option("--project-initial", is_flag=True, help="Project initial values onto the "
                                                       "constraints instead of refusing them.")
+@click.option("--stats", is_flag=True, help="Print the solver's counters (steps, rejected "
+                                            "steps, right-side calls, Jacobians, "
+                                            "factorisations, solves) to stderr.")
 @click.option("-o", "output", default=None, help="CSV file (default: stdout).")
 def simulate(model, scene, algebra, backend, solver, rtol, atol, t_end, dt, step, params,
-             project_initial, output):
+             project_initial, stats, output):
     """Simulate and write CSV."""
     compiled = _build(model, scene, project_initial, algebra)
     for name, value in (("--rtol", rtol), ("--atol", atol), ("--dt", dt), ("--step", step)):
         if value is not None and not value > 0:
             raise click.UsageError(f"{name} must be positive")
     args = api.run_args(t_end, dt, solver, rtol, atol, step, _parse_params(params, compiled),
-                        project_initial)
+                        project_initial) + (["--stats"] if stats else [])
     if backend == "c" and not backends.have_c_compiler():
         click.echo("warning: no C compiler found (cc or $CC); using the Python backend", err=True)
         backend = "python"

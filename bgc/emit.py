@@ -20,13 +20,14 @@ from dataclasses import dataclass
 import jinja2
 import sympy as sp
 
-from bgc import ir
+from bgc import ir, solvers
 from bgc.ir import Assign, Newton, Program, Resolve, Solve, Store, as_expr
 from bgc.printers import CPrinter, PythonPrinter, float_literal
 from bgc.resources import resource_dir
 
-SOLVERS = ("euler", "rk4", "dopri5")
 POW10_RANGE = (-24, 56)  # powers of ten for the C number formatter: |v| in about 1e-40..1e40
+C_RUNTIME = ("runtime.c", "solve.c", "stiff.c", "main.c")  # bgc/runtime/, in this order
+PYTHON_RUNTIME = ("runtime.py", "solve.py", "stiff.py")
 PLAN_ARRAYS = ("diag", "lptr", "lpos", "lrow", "uptr", "upos", "ucol", "upd", "prow", "pcol")
 MODEL_FUNCTIONS = ("rhs", "outputs", "jvp")  # take the workspace, may solve blocks
 PLAIN_FUNCTIONS = ("residual", "scale", "position_jac", "velocity_jac")
@@ -245,8 +246,7 @@ def emit_c(program: Program, chunk_ops: int = ir.CHUNK_OPS) -> dict[str, str]:
         consts=_plain_lines(writer, "consts", "p->c"),
         init=_plain_lines(writer, "init", "x0"),
         scene=_scene_context(program, c_string_literal, step_none="0.0"),
-        api=_runtime_text("api.h"),
-        runtime=_runtime_text("runtime.c"),
+        **c_runtime_parts(),
     )
     return {f"{context['ident']}.c": _render("c_program.c.j2", context)}
 
@@ -274,7 +274,7 @@ def emit_python(program: Program, chunk_ops: int = ir.CHUNK_OPS) -> dict[str, st
         plain_sizes={name: program.function(name).size for name in PLAIN_FUNCTIONS},
         scene=_scene_context(program, py_string_literal, step_none="None"),
         velocity_movable=["True" if v else "False" for v in program.velocity_movable],
-        runtime=_runtime_text("runtime.py"),
+        runtime=python_runtime(),
     )
     return {f"{context['ident']}.py": _render("python_module.py.j2", context)}
 
@@ -401,6 +401,7 @@ def _common_context(program: Program, ws: _Workspace, literal) -> dict:
         "n_outputs": len(program.outputs),
         "n_constraints": len(program.constraints),
         "n_blocks": len(program.blocks),
+        "autonomous": int(not _reads_time(program.function("rhs"))),
         "position_rows": list(program.position_rows),
         "velocity_rows": list(program.velocity_rows),
         "velocity_movable": [1 if v else 0 for v in program.velocity_movable],
@@ -419,7 +420,7 @@ def _scene_context(program: Program, literal, step_none: str) -> dict:
         "t_end": float_literal(sc.t_end),
         "dt": float_literal(sc.dt),
         "solver": literal(sc.solver),
-        "solver_enum": SOLVERS.index(sc.solver),
+        "solver_enum": solvers.index(sc.solver),
         "rtol": float_literal(sc.rtol),
         "atol": float_literal(sc.atol),
         "step": step_none if sc.step is None else float_literal(sc.step),
@@ -448,7 +449,7 @@ def _validate(program: Program) -> None:
     if len(program.velocity_movable) != n:
         raise EmitError(f"velocity_movable has {len(program.velocity_movable)} entries, "
                         f"expected {n}")
-    if program.scene.solver not in SOLVERS:
+    if program.scene.solver not in solvers.SOLVERS:
         raise EmitError(f"unknown solver {program.scene.solver!r}")
     if any(c.level not in ("position", "velocity") for c in program.constraints):
         raise EmitError("constraint levels must be 'position' or 'velocity'")
@@ -460,6 +461,10 @@ def _validate(program: Program) -> None:
             raise EmitError(f"the {name} function cannot solve algebraic blocks")
     for j, param in enumerate(program.params):
         _check_default(j, param.default)
+
+
+def _reads_time(f: ir.Function) -> bool:
+    return any(ir.T in e.free_symbols for s in f.body for e in ir.expressions(s))
 
 
 def _uses_more_than_parameters(f: ir.Function) -> bool:
@@ -495,9 +500,173 @@ def _environment() -> jinja2.Environment:
 
 
 @functools.lru_cache(maxsize=None)
+def c_runtime_parts() -> dict[str, str]:
+    """The model-independent parts of a generated C program, as the template places them:
+    the solvers' numbers (before the API), the API (bgc/runtime/api.h), and the solver tables
+    followed by the runtime files (after the model part)."""
+    return {"solver_enum": solver_enum_c(), "api": _runtime_text("api.h"),
+            "runtime": "\n".join([solver_tables_c()] + [_runtime_text(f) for f in C_RUNTIME])}
+
+
+def python_runtime() -> str:
+    """The model-independent end of a generated Python module: the solver tables and the
+    runtime files."""
+    return "\n\n".join([solver_tables_python()] + [_runtime_text(f) for f in PYTHON_RUNTIME])
+
+
 def _runtime_text(name: str) -> str:
     return (resource_dir("runtime") / name).read_text(encoding="utf-8")
 
 
 def _render(template: str, context: dict) -> str:
     return _environment().get_template(template).render(**context)
+
+
+# ---------------------------------------------------------------- the solver tables
+
+
+def _number(value) -> str:
+    """A coefficient as the shortest literal that reads back as the same double (C and
+    Python)."""
+    text = repr(float(value))
+    return text if any(c in text for c in ".en") else text + ".0"
+
+
+def _c_array(name: str, values) -> str:
+    values = list(values)
+    if not values:
+        return ""
+    body = ", ".join(_number(v) for v in values)
+    return f"static const double {name}[{len(values)}] = {{ {body} }};\n"
+
+
+def _square(rows, width: int) -> list:
+    """Strictly lower triangular rows as a width x width row-major list."""
+    out = []
+    for row in rows:
+        out += list(row) + [0] * (width - len(row))
+    return out
+
+
+def solver_enum_c() -> str:
+    """The solvers' numbers, before the API section of a generated C program."""
+    lines = ["/* ============================================================ solvers === */",
+             "/* The solvers (bgc/solvers.py); their tables follow the API section. */",
+             f"#define BGC_NUM_SOLVERS {len(solvers.NAMES)}",
+             f"#define BGC_SOLVER_LIST {c_string_literal(solvers.names_text())}",
+             "enum {"]
+    lines += [f"    BGC_SOLVER_{name.upper()} = {k}," for k, name in enumerate(solvers.NAMES)]
+    lines.append("};")
+    return "\n".join(lines) + "\n"
+
+
+def solver_tables_c() -> str:
+    """The solvers' coefficients and descriptions as C data (the same in every program)."""
+    out = ["/* ====================================================== solver tables === */",
+           "/* Printed from bgc/solvers.py. */"]
+    for s in solvers.SOLVER_LIST:
+        tab, ident = s.tableau, f"bgc_{s.name}"
+        if isinstance(tab, solvers.ERKTableau):
+            width = tab.all_stages
+            out.append(_c_array(f"{ident}_c", tab.c + tab.extra_c)
+                       + _c_array(f"{ident}_a", _square(tab.a + tab.extra_a, width))
+                       + _c_array(f"{ident}_b", tab.b) + _c_array(f"{ident}_e", tab.error)
+                       + _c_array(f"{ident}_e2", tab.error2)
+                       + _c_array(f"{ident}_P", [v for row in tab.dense for v in row]))
+            degree = len(tab.dense[0]) if tab.dense else 0
+            ptr = lambda part, present: f"{ident}_{part}" if present else "NULL"  # noqa: E731
+            out.append(f"static const bgc_erk {ident}_erk = {{ {tab.stages}, {width}, "
+                       f"{int(tab.fsal)}, {degree}, {ident}_c, {ident}_a, {ident}_b, "
+                       f"{ptr('e', tab.error)}, {ptr('e2', tab.error2)}, "
+                       f"{ptr('P', tab.dense)} }};")
+        elif isinstance(tab, solvers.RosenbrockTableau):
+            st = tab.stages
+            out.append(_c_array(f"{ident}_c", tab.c) + _c_array(f"{ident}_d", tab.d)
+                       + _c_array(f"{ident}_a", _square(tab.a, st))
+                       + _c_array(f"{ident}_C", _square(tab.C, st))
+                       + _c_array(f"{ident}_m", tab.m) + _c_array(f"{ident}_e", tab.e)
+                       + _c_array(f"{ident}_d2", tab.d2) + _c_array(f"{ident}_d3", tab.d3))
+            out.append(f"static const bgc_rosenbrock {ident}_ros = {{ {st}, "
+                       f"{_number(tab.gamma)}, {ident}_c, {ident}_d, {ident}_a, {ident}_C, "
+                       f"{ident}_m, {ident}_e, {ident}_d2, {ident}_d3 }};")
+        elif isinstance(tab, solvers.RadauTableau):
+            out.append(_c_array(f"{ident}_T", [v for row in tab.T for v in row])
+                       + _c_array(f"{ident}_Ti", [v for row in tab.Ti for v in row])
+                       + _c_array(f"{ident}_e", tab.e))
+            out.append(f"static const bgc_radau {ident}_radau = {{ {_number(tab.c1)}, "
+                       f"{_number(tab.c2)}, {_number(tab.gamma)}, {_number(tab.alpha)}, "
+                       f"{_number(tab.beta)}, {ident}_T, {ident}_Ti, {ident}_e }};")
+    out.append("const char *const bgc_solver_names[BGC_NUM_SOLVERS] = {")
+    out += [f"    {c_string_literal(s.name)}," for s in solvers.SOLVER_LIST]
+    out.append("};")
+    out.append("static const bgc_method bgc_methods[BGC_NUM_SOLVERS] = {")
+    for k, s in enumerate(solvers.SOLVER_LIST):
+        ctl = s.control or solvers.Control(0.9, 0.2, 10.0, 0.0, s.order)
+        stiff = s.stiffness
+        erk = f"&bgc_{s.name}_erk" if isinstance(s.tableau, solvers.ERKTableau) else "NULL"
+        ros = (f"&bgc_{s.name}_ros" if isinstance(s.tableau, solvers.RosenbrockTableau)
+               else "NULL")
+        radau = (f"&bgc_{s.name}_radau" if isinstance(s.tableau, solvers.RadauTableau)
+                 else "NULL")
+        phases = ((solvers.index(s.explicit), solvers.index(s.stiff)) if s.family == "auto"
+                  else (-1, -1))
+        out.append(
+            f"    {{ {c_string_literal(s.name)}, {c_string_literal(s.summary)}, "
+            f"BGC_FAMILY_{s.family.upper()}, {s.order}, {erk}, {ros}, {_number(ctl.safe)}, "
+            f"{_number(ctl.fac_min)}, {_number(ctl.fac_max)}, {_number(ctl.beta)}, {ctl.q}, "
+            f"{_number(ctl.expo_beta)}, "
+            f"{stiff.stage_i if stiff else -1}, {stiff.stage_j if stiff else -1}, "
+            f"{_number(stiff.bound) if stiff else '0.0'}, {phases[0]}, {phases[1]}, {radau} }},")
+    out.append("};")
+    return "\n".join(out) + "\n"
+
+
+def _py_tuple(values) -> str:
+    values = [_number(v) for v in values]
+    return "(" + ", ".join(values) + ("," if len(values) == 1 else "") + ")"
+
+
+def solver_tables_python() -> str:
+    """The solvers' coefficients and descriptions as Python data (the same in every module):
+    _METHODS maps a name to a dict of its family, control and tableau."""
+    lines = ["# ================================================================ solvers ===",
+             "# Printed from bgc/solvers.py.", "_METHODS = {"]
+    for s in solvers.SOLVER_LIST:
+        ctl = s.control or solvers.Control(0.9, 0.2, 10.0, 0.0, s.order)
+        fields = {"family": repr(s.family), "order": str(s.order), "summary": repr(s.summary),
+                  "safe": _number(ctl.safe), "fac_min": _number(ctl.fac_min),
+                  "fac_max": _number(ctl.fac_max), "beta": _number(ctl.beta), "q": str(ctl.q),
+                  "expo_beta": _number(ctl.expo_beta)}
+        tab = s.tableau
+        if isinstance(tab, solvers.ERKTableau):
+            fields.update(
+                stages=str(tab.stages), fsal=str(tab.fsal),
+                c=_py_tuple(tab.c + tab.extra_c),
+                a="(" + ", ".join(_py_tuple(r) for r in tab.a + tab.extra_a) + ",)",
+                b=_py_tuple(tab.b), e=_py_tuple(tab.error), e2=_py_tuple(tab.error2),
+                P="(" + "".join(_py_tuple(r) + ", " for r in tab.dense) + ")")
+        elif isinstance(tab, solvers.RosenbrockTableau):
+            fields.update(
+                stages=str(tab.stages), gamma=_number(tab.gamma), c=_py_tuple(tab.c),
+                d=_py_tuple(tab.d), a="(" + ", ".join(_py_tuple(r) for r in tab.a) + ",)",
+                C="(" + ", ".join(_py_tuple(r) for r in tab.C) + ",)", m=_py_tuple(tab.m),
+                e=_py_tuple(tab.e), d2=_py_tuple(tab.d2), d3=_py_tuple(tab.d3))
+        elif isinstance(tab, solvers.RadauTableau):  # a dict of its own: 'beta' is taken
+            radau = {"c1": _number(tab.c1), "c2": _number(tab.c2), "gamma": _number(tab.gamma),
+                     "alpha": _number(tab.alpha), "beta": _number(tab.beta),
+                     "T": "(" + ", ".join(_py_tuple(r) for r in tab.T) + ",)",
+                     "Ti": "(" + ", ".join(_py_tuple(r) for r in tab.Ti) + ",)",
+                     "e": _py_tuple(tab.e)}
+            fields["radau"] = "{" + ", ".join(f"{k!r}: {v}" for k, v in radau.items()) + "}"
+        if s.stiffness:
+            fields["stiffness"] = (f"({s.stiffness.stage_i}, {s.stiffness.stage_j}, "
+                                   f"{_number(s.stiffness.bound)})")
+        if s.family == "auto":
+            fields.update(explicit=repr(s.explicit), stiff=repr(s.stiff))
+        lines.append(f"    {s.name!r}: {{")
+        lines += [f"        {key!r}: {value}," for key, value in fields.items()]
+        lines.append("    },")
+    lines.append("}")
+    lines.append("SOLVERS = tuple(_METHODS)")
+    lines.append(f"_SOLVER_LIST = {solvers.names_text()!r}")
+    return "\n".join(lines) + "\n"

@@ -7,13 +7,13 @@ from dataclasses import dataclass, replace
 
 import sympy as sp
 
+from . import solvers
 from .diagnostics import Collector, Note, fail
 from .graph import Expr, Graph, check_ports, var
 
-SOLVERS = ("euler", "rk4", "dopri5")
 SOLVER_OPTIONS = ("rtol", "atol", "step")
 DEFAULT_TIME = (0.0, 10.0, 0.01)
-DEFAULT_SOLVER = ("dopri5", 1e-6, 1e-9)
+DEFAULT_SOLVER = (solvers.DEFAULT, 1e-6, 1e-9)
 
 
 @dataclass(frozen=True)
@@ -118,8 +118,8 @@ def _solver(scene_solver, params) -> tuple:
     if scene_solver is None:
         return name, rtol, atol, step
     name, opts, span = scene_solver
-    if name not in SOLVERS:
-        fail(span, f"unknown solver '{name}' (known: {', '.join(SOLVERS)})")
+    if name not in solvers.SOLVERS:
+        fail(span, f"unknown solver '{name}' (known: {', '.join(solvers.NAMES)})")
     values = {}
     for key, expr in opts:
         if key not in SOLVER_OPTIONS:

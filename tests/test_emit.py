@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 import sympy as sp
 
-from bgc import backends
+from bgc import backends, solvers
 from bgc.backends import BackendError, compile_c, have_c_compiler, load_python_module, run_c
 from bgc.emit import (POW10_RANGE, EmitError, c_param_fields, c_string_literal, emit_c,
                       emit_python, pow10_table)
@@ -347,7 +347,7 @@ int main(void)
 {
     bgc_params p;
     bgc_settings s;
-    bgc_stats st = {0, 0, 0};
+    bgc_stats st = {0};
     bgc_work *w = bgc_work_new();
     double x[2] = {1.0, 2.0}, dx[2];
     char msg[256];
@@ -444,7 +444,7 @@ int main(void)
 {
     bgc_params p;
     bgc_settings s;
-    bgc_stats st = {0, 0, 0};
+    bgc_stats st = {0};
     bgc_work *w = bgc_work_new();
     double x[BGC_NUM_STATES], dx[BGC_NUM_STATES], J[BGC_NUM_STATES * BGC_NUM_STATES];
     char msg[256];
@@ -610,8 +610,10 @@ def test_stats_line(tmp_path):
     assert code == py_code == 0
     for text in (err, py_err):
         (line,) = [ln for ln in text.splitlines() if ln.startswith("stats:")]
-        steps, rejected, rhs = (int(part.split("=")[1]) for part in line.split()[1:])
+        counts = dict(part.split("=") for part in line.split()[1:])
+        steps, rejected, rhs = (int(counts[k]) for k in ("steps", "rejected", "rhs"))
         assert steps > 10 and rhs >= 6 * (steps + rejected)
+        assert counts["jac"] == counts["lu"] == counts["solves"] == "0"  # dopri5
 
 
 # ---------------------------------------------------------------- CSV and options
@@ -669,7 +671,8 @@ def test_parameter_override_recomputes_derived(tmp_path):
     (["--dt", "abc"], "error: invalid value for --dt: 'abc'"),
     (["--dt", "0"], "error: --dt must be positive"),
     (["--dt"], "error: option '--dt' needs a value"),
-    (["--solver", "rk45"], "error: unknown solver 'rk45' (expected euler, rk4 or dopri5)"),
+    (["--solver", "rk45"], "error: unknown solver 'rk45' (expected "
+                           f"{solvers.names_text()})"),
     (["--t-end", "-1"], "error: --t-end must not be before the start time"),
     (["-p", "k=nan"], "error: invalid value for k: 'nan'"),
 ])
@@ -913,8 +916,8 @@ int main(void)
 
 
 def test_runtime_carries_the_pow10_table():
-    """The formatter's table in bgc/runtime/runtime.c is pow10_table(POW10_RANGE), exactly."""
-    runtime = (HERE.parent / "bgc" / "runtime" / "runtime.c").read_text()
+    """The formatter's table in bgc/runtime/main.c is pow10_table(POW10_RANGE), exactly."""
+    runtime = (HERE.parent / "bgc" / "runtime" / "main.c").read_text()
     rows = re.findall(r"\{ 0x([0-9a-f]{16})ULL, 0x([0-9a-f]{16})ULL, (-?\d+) \}, /\* 1e(-?\d+) \*/",
                       runtime)
     expected = [(r["hi"], r["lo"], str(r["e2"]), str(r["m"])) for r in pow10_table(*POW10_RANGE)]

@@ -11,7 +11,7 @@ import sympy as sp
 
 import bgc
 from bgc import backends
-from bgc.emit import emit_c, emit_python
+from bgc.emit import c_runtime_parts, emit_c, emit_python, python_runtime
 from bgc.graph import TIME, var
 from bgc.reduce import explicit_forms
 from bgc.report import check_report, equations_text
@@ -31,17 +31,23 @@ def _cases():
 CASES = list(_cases())
 
 
-RUNTIME = ROOT / "bgc" / "runtime"
-
-
 def model_part(text: str) -> str:
-    """The generated file without the runtime inlined verbatim (it is in bgc/runtime/ and the
-    same in every file): the goldens show what depends on the model."""
-    for name in ("api.h", "runtime.c", "runtime.py"):
-        runtime = (RUNTIME / name).read_text(encoding="utf-8")
-        assert text.count(runtime) <= 1
-        text = text.replace(runtime, f"[bgc/runtime/{name}]\n")
+    """The generated file without its model-independent parts (the solver tables and the
+    runtime of bgc/runtime/, the same in every file, in the runtime goldens below): the
+    goldens of the models show what depends on the model."""
+    parts = dict(c_runtime_parts(), python=python_runtime())
+    for name, part in parts.items():
+        assert text.count(part) <= 1
+        text = text.replace(part, f"[runtime: {name}]\n")
     return text
+
+
+def test_runtime_golden(golden):
+    """The runtimes once, as they appear in every generated program."""
+    parts = c_runtime_parts()
+    golden(GOLDEN / "runtime" / "runtime.c",
+           "\n".join((parts["solver_enum"], parts["api"], parts["runtime"])))
+    golden(GOLDEN / "runtime" / "runtime.py", python_runtime())
 
 
 @pytest.mark.parametrize("path, scene", CASES)
@@ -52,8 +58,8 @@ def test_golden(path, scene, golden):
     golden(base.with_suffix(".equations.txt"), equations_text(compiled))
     (c_text,) = emit_c(compiled.program).values()
     (py_text,) = emit_python(compiled.program).values()
-    assert "[bgc/runtime/runtime.c]" in model_part(c_text)
-    assert "[bgc/runtime/runtime.py]" in model_part(py_text)
+    assert "[runtime: runtime]" in model_part(c_text)
+    assert "[runtime: python]" in model_part(py_text)
     golden(base.with_suffix(".c"), model_part(c_text))
     golden(base.with_suffix(".py"), model_part(py_text))
 

@@ -1,2 +1,3 @@
 """bgc's runtimes: the model-independent code of every generated program, as plain source files
-(runtime.c with its declarations api.h, and runtime.py), inlined verbatim by bgc.emit."""
+inlined verbatim by bgc.emit: C (api.h, the declarations; runtime.c, solve.c, stiff.c, main.c)
+and Python (runtime.py, solve.py, stiff.py)."""

@@ -4,7 +4,6 @@
 
 #define BGC_DIM(n) ((n) > 0 ? (n) : 1) /* array size for n elements, n may be 0 */
 
-enum { BGC_EULER = 0, BGC_RK4 = 1, BGC_DOPRI5 = 2 };
 enum { BGC_OK = 0, BGC_ERR_CONSTRAINT = 1, BGC_ERR_USAGE = 2, BGC_ERR_RUNTIME = 3 };
 /* How an algebraic block failed (bgc_work.failure). */
 enum { BGC_BLOCK_SINGULAR = 1, BGC_BLOCK_DIVERGED = 2, BGC_BLOCK_NONFINITE = 3 };
@@ -73,17 +72,29 @@ int bgc_check_constraints(double t, const double *x, const bgc_params *p, FILE *
    with a message in msg. */
 int bgc_project_initial(double t, double *x, const bgc_params *p, char *msg, size_t msg_size);
 
+/* The solvers, numbered BGC_SOLVER_<NAME> as bgc_solver_names lists them (the table comes
+   from bgc/solvers.py; `./model --help` lists them with a line each). */
+extern const char *const bgc_solver_names[BGC_NUM_SOLVERS];
+/* The solver's number by name, -1 if unknown. */
+int bgc_solver_index(const char *name);
+
 typedef struct bgc_settings {
     double t0, t_end, dt; /* output times t0 + k*dt, and t_end */
-    int solver;           /* BGC_EULER, BGC_RK4 or BGC_DOPRI5 */
-    double rtol, atol;    /* dopri5 error control (and the Newton tolerance) */
-    double step;          /* fixed step of euler/rk4; 0: dt */
+    int solver;           /* BGC_SOLVER_<NAME> */
+    double rtol, atol;    /* error control of the adaptive solvers (and the Newton tolerance) */
+    double step;          /* fixed step of the fixed-step solvers; 0: dt */
 } bgc_settings;
 typedef struct bgc_stats {
-    long steps, rejected, rhs; /* accepted steps, rejected steps, bgc_rhs calls */
+    long steps, rejected, rhs; /* accepted steps, rejected steps, right-side calls */
+    long jac, lu, solves;      /* stiff solvers: Jacobians, LU factorisations, linear solves */
+    int switched;              /* auto: 1 once it has switched to its stiff method ... */
+    double t_switch;           /* ... at this time */
 } bgc_stats;
 /* Called at every output time with the state and the outputs; nonzero stops the run. */
 typedef int (*bgc_sink)(void *ctx, double t, const double *x, const double *y);
+
+/* "stats: steps=.. rejected=.. rhs=.. jac=.. lu=.. solves=..[ stiff_from=T]" and a newline. */
+void bgc_print_stats(FILE *f, const bgc_stats *st);
 
 /* The compiled scene's settings; 0 if s is valid, else BGC_ERR_USAGE and a message. */
 void bgc_settings_default(bgc_settings *s);
@@ -103,6 +114,43 @@ static inline double bgc_heaviside(double a, double at_zero)
 {
     return a > 0.0 ? 1.0 : (a < 0.0 ? 0.0 : (a == 0.0 ? at_zero : a));
 }
+
+/* A solver as bgc/solvers.py describes it (the tables are printed below this section).
+   erk: an explicit Runge-Kutta tableau: c[all], a[all x all] (row-major, strictly lower),
+   b and e (NULL: fixed step) and e2 (NULL: one estimate) over the first `stages`; the last of
+   those is f(t + h, y1) if fsal; P[all x degree]: the dense output's polynomials.
+   rosenbrock: Hairer's transformed coefficients (see bgc/solvers.py).
+   radau: Radau IIA of order 5 in RADAU5's transformed form: nodes c1, c2, 1; the eigenvalues
+   gamma and alpha +- i beta of A^-1; T and Ti = T^-1 (3 x 3, row-major) with
+   Ti A^-1 T = [gamma 0 0; 0 alpha -beta; 0 beta alpha]; e: the error estimate's weights. */
+typedef struct bgc_erk {
+    int stages, all, fsal, degree;
+    const double *c, *a, *b, *e, *e2, *P;
+} bgc_erk;
+typedef struct bgc_rosenbrock {
+    int stages;
+    double gamma;
+    const double *c, *d, *a, *C, *m, *e, *d2, *d3; /* a, C: stages x stages, row-major */
+} bgc_rosenbrock;
+typedef struct bgc_radau {
+    double c1, c2, gamma, alpha, beta;
+    const double *T, *Ti, *e;
+} bgc_radau;
+enum { BGC_FAMILY_FIXED, BGC_FAMILY_ERK, BGC_FAMILY_ROSENBROCK, BGC_FAMILY_RADAU5,
+       BGC_FAMILY_AUTO };
+typedef struct bgc_method {
+    const char *name, *summary;
+    int family, order;
+    const bgc_erk *erk;
+    const bgc_rosenbrock *ros;
+    double safe, fac_min, fac_max, beta; /* step-size control: hnew/h in [fac_min, fac_max] */
+    int q;                               /* the error estimate's order + 1 */
+    double expo_beta;                    /* exponent err^(1/q - expo_beta * beta) */
+    int stiff_i, stiff_j;                /* erk: the stiffness test's stages (-1: none) */
+    double stiff_bound;
+    int explicit_solver, stiff_solver;   /* auto: the two phases (-1: not auto) */
+    const bgc_radau *radau;              /* radau5: its constants (NULL: another family) */
+} bgc_method;
 
 /* A block's factorization plan (bgc/sparse.py): static order, or dense (partial pivoting). */
 typedef struct bgc_lu_plan {

@@ -483,316 +483,6 @@ def _check_settings(s):
     return None
 
 
-# ---------------------------------------------------------------- solvers
-
-
-def _output_count(s):
-    n = math.ceil((s.t_end - s.t0) / s.dt - 1e-6)
-    return n if n > 0 else 0
-
-
-def _output_time(s, k, n):
-    return s.t_end if k >= n else s.t0 + k * s.dt
-
-
-def _hmin(t):
-    """Steps below this are too small to resolve at t (16 ulps of t; the least normal at 0)."""
-    return max(16.0 * _EPS * abs(t), sys.float_info.min)
-
-
-def _first_nonfinite(v):
-    for i, a in enumerate(v):
-        if not math.isfinite(a):
-            return i
-    return -1
-
-
-def _fail(t, what, name):
-    return _Failure("at t = %.17g: %s '%s' is not finite" % (t, what, name), t)
-
-
-def _fail_step(t, h, worst):
-    if worst >= 0:
-        message = "at t = %.17g: step size too small (h = %.3g), limited by state '%s'" % (
-            t, h, STATES[worst])
-    else:
-        message = "at t = %.17g: step size too small (h = %.3g)" % (t, h)
-    return _Failure(message, t)
-
-
-def _f(t, y, p, w):
-    """dy/dt; a failed algebraic block raises _BlockFailure."""
-    out = [0.0] * _N
-    _rhs(t, y, p, w, out)
-    return out
-
-
-def _block_failed(failure):
-    return _Failure(str(failure), failure.t)
-
-
-def _emit(p, w, t, x, sink):
-    y = [0.0] * len(OUTPUTS)
-    try:
-        _out(t, x, p, w, y)
-    except _BlockFailure as failure:
-        raise _block_failed(failure) from None
-    j = _first_nonfinite(y)
-    if j >= 0:
-        raise _fail(t, "output", OUTPUTS[j])
-    sink(t, x, y)
-
-
-def _substeps(span, h):
-    r = span / h
-    if not r < 1e15:
-        return -1
-    m = math.ceil(r - 1e-6)
-    return 1 if m < 1 else m
-
-
-def _fixed_step(solver, p, w, t, h, y, st):
-    """One Euler or classical Runge-Kutta step from (t, y) to t + h; returns the new y."""
-    try:
-        k1 = _f(t, y, p, w)
-        st["rhs"] += 1
-        i = _first_nonfinite(k1)
-        if i >= 0:
-            raise _fail(t, "derivative of state", STATES[i])
-        if solver == "euler":
-            y = [a + h * b for a, b in zip(y, k1)]
-        else:
-            h2, h6 = 0.5 * h, h / 6.0
-            k2 = _f(t + h2, [a + h2 * b for a, b in zip(y, k1)], p, w)
-            k3 = _f(t + h2, [a + h2 * b for a, b in zip(y, k2)], p, w)
-            k4 = _f(t + h, [a + h * b for a, b in zip(y, k3)], p, w)
-            st["rhs"] += 3
-            y = [a + h6 * (b1 + 2.0 * (b2 + b3) + b4)
-                 for a, b1, b2, b3, b4 in zip(y, k1, k2, k3, k4)]
-    except _BlockFailure as failure:
-        raise _block_failed(failure) from None
-    st["steps"] += 1
-    i = _first_nonfinite(y)
-    if i >= 0:
-        raise _fail(t + h, "state", STATES[i])
-    return y
-
-
-def _run_fixed(s, p, w, y, sink, st):
-    nout = _output_count(s)
-    hstep = s.step if s.step > 0.0 else s.dt
-    ta = s.t0
-    _emit(p, w, ta, y, sink)
-    for k in range(1, nout + 1):
-        tb = _output_time(s, k, nout)
-        m = _substeps(tb - ta, hstep)
-        if m < 0:
-            raise _fail_step(ta, hstep, -1)
-        for j in range(m):
-            t = ta + j * hstep
-            t1 = tb if j + 1 == m else ta + (j + 1) * hstep
-            if not t1 - t >= _hmin(t):
-                raise _fail_step(t, t1 - t, -1)
-            y = _fixed_step(s.solver, p, w, t, t1 - t, y, st)
-        _emit(p, w, tb, y, sink)
-        ta = tb
-
-
-# Dormand-Prince 5(4) coefficients, as in Hairer's DOPRI5.
-C2, C3, C4, C5 = 1.0 / 5.0, 3.0 / 10.0, 4.0 / 5.0, 8.0 / 9.0
-A21 = 1.0 / 5.0
-A31, A32 = 3.0 / 40.0, 9.0 / 40.0
-A41, A42, A43 = 44.0 / 45.0, -56.0 / 15.0, 32.0 / 9.0
-A51, A52, A53, A54 = 19372.0 / 6561.0, -25360.0 / 2187.0, 64448.0 / 6561.0, -212.0 / 729.0
-A61, A62, A63 = 9017.0 / 3168.0, -355.0 / 33.0, 46732.0 / 5247.0
-A64, A65 = 49.0 / 176.0, -5103.0 / 18656.0
-A71, A73, A74 = 35.0 / 384.0, 500.0 / 1113.0, 125.0 / 192.0
-A75, A76 = -2187.0 / 6784.0, 11.0 / 84.0
-E1, E3, E4 = 71.0 / 57600.0, -71.0 / 16695.0, 71.0 / 1920.0
-E5, E6, E7 = -17253.0 / 339200.0, 22.0 / 525.0, -1.0 / 40.0
-D1, D3 = -12715105075.0 / 11282082432.0, 87487479700.0 / 32700410799.0
-D4, D5 = -10690763975.0 / 1880347072.0, 701980252875.0 / 199316789632.0
-D6, D7 = -1453857185.0 / 822651844.0, 69997945.0 / 29380423.0
-SAFE, FACC1, FACC2, BETA = 0.9, 5.0, 0.1, 0.04  # FACC1 = 1/0.2, FACC2 = 1/10
-EXPO1 = 0.2 - BETA * 0.75
-
-
-def _initial_step(s, p, w, t, y, f0, hmax, st):
-    """Hairer's initial step size guess (HINIT with order 5)."""
-    dnf = dny = der2 = 0.0
-    for a, f in zip(y, f0):
-        sk = s.atol + s.rtol * abs(a)
-        qf, qy = f / sk, a / sk
-        dnf += qf * qf
-        dny += qy * qy
-    h = 1e-6 if (dnf <= 1e-10 or dny <= 1e-10) else math.sqrt(dny / dnf) * 0.01
-    h = min(h, hmax)
-    st["rhs"] += 1
-    try:
-        f1 = _f(t + h, [a + h * f for a, f in zip(y, f0)], p, w)
-    except _BlockFailure:
-        return h  # a block failed there: start small, the step control takes over
-    for a, f, g in zip(y, f0, f1):
-        q = (g - f) / (s.atol + s.rtol * abs(a))
-        der2 += q * q
-    der2 = math.sqrt(der2) / h
-    der12 = max(math.sqrt(dnf), abs(der2))  # a NaN der2 is ignored
-    h1 = max(1e-6, h * 1e-3) if der12 <= 1e-15 else (0.01 / der12) ** 0.2
-    if not h1 > 0.0:
-        h1 = h * 1e-3
-    return min(min(100.0 * h, h1), hmax)
-
-
-def _trial_culprit(y1, stages):
-    i = _first_nonfinite(y1)
-    if i >= 0:
-        return i, "state"
-    for k in stages:
-        i = _first_nonfinite(k)
-        if i >= 0:
-            break
-    return i, "derivative of state"
-
-
-def _stages(s, p, w, t, h, tph, y, k1):
-    k2 = _f(t + C2 * h, [a + h * A21 * b1 for a, b1 in zip(y, k1)], p, w)
-    k3 = _f(t + C3 * h, [a + h * (A31 * b1 + A32 * b2) for a, b1, b2 in zip(y, k1, k2)], p, w)
-    k4 = _f(t + C4 * h, [a + h * (A41 * b1 + A42 * b2 + A43 * b3)
-                         for a, b1, b2, b3 in zip(y, k1, k2, k3)], p, w)
-    k5 = _f(t + C5 * h, [a + h * (A51 * b1 + A52 * b2 + A53 * b3 + A54 * b4)
-                         for a, b1, b2, b3, b4 in zip(y, k1, k2, k3, k4)], p, w)
-    k6 = _f(tph, [a + h * (A61 * b1 + A62 * b2 + A63 * b3 + A64 * b4 + A65 * b5)
-                  for a, b1, b2, b3, b4, b5 in zip(y, k1, k2, k3, k4, k5)], p, w)
-    y1 = [a + h * (A71 * b1 + A73 * b3 + A74 * b4 + A75 * b5 + A76 * b6)
-          for a, b1, b3, b4, b5, b6 in zip(y, k1, k3, k4, k5, k6)]
-    k7 = _f(tph, y1, p, w)
-    return k2, k3, k4, k5, k6, k7, y1
-
-
-def _run_dopri5(s, p, w, y, sink, st):
-    nout = _output_count(s)
-    hmax = s.t_end - s.t0
-    t, facold, kout = s.t0, 1e-4, 1
-    reject, last, worst, bad, bad_kind = False, False, -1, -1, ""
-    block_failure = None
-    n = _N
-    _emit(p, w, t, y, sink)
-    if nout == 0:
-        return
-    st["rhs"] += 1
-    try:
-        k1 = _f(t, y, p, w)
-    except _BlockFailure as failure:
-        raise _block_failed(failure) from None
-    i = _first_nonfinite(k1)
-    if i >= 0:
-        raise _fail(t, "derivative of state", STATES[i])
-    h = _initial_step(s, p, w, t, y, k1, hmax, st)
-    while True:
-        if not h >= _hmin(t):
-            if bad == -2:
-                raise _block_failed(block_failure)
-            if bad >= 0:
-                raise _fail(t, bad_kind, STATES[bad])
-            raise _fail_step(t, h, worst)
-        if t + 1.01 * h - s.t_end > 0.0:
-            h = s.t_end - t
-            last = True
-        tph = s.t_end if last else t + h
-        st["rhs"] += 6
-        try:
-            k2, k3, k4, k5, k6, k7, y1 = _stages(s, p, w, t, h, tph, y, k1)
-        except _BlockFailure as failure:  # retry with a much smaller step
-            bad, block_failure = -2, failure
-            h = h / FACC1
-            reject, last = True, False
-            st["rejected"] += 1
-            continue
-
-        # Hairer's error norm: RMS of err_i / (atol + rtol * max(|y_i|, |y1_i|)).
-        err, worst_q = 0.0, -1.0
-        for i in range(n):
-            sk = s.atol + s.rtol * max(abs(y[i]), abs(y1[i]))
-            q = h * (E1 * k1[i] + E3 * k3[i] + E4 * k4[i] + E5 * k5[i] + E6 * k6[i]
-                     + E7 * k7[i]) / sk
-            err += q * q
-            if q * q > worst_q:
-                worst_q, worst = q * q, i
-        err = math.sqrt(err / n) if n > 0 else 0.0
-        if err != err:  # a non-finite stage: retry with a much smaller step
-            bad, bad_kind = _trial_culprit(y1, (k2, k3, k4, k5, k6, k7))
-            h = h / FACC1
-            reject, last = True, False
-            st["rejected"] += 1
-            continue
-
-        fac11 = err ** EXPO1
-        fac = fac11 / facold ** BETA
-        fac = max(FACC2, min(FACC1, fac / SAFE))
-        hnew = h / fac
-        if err <= 1.0:
-            facold = max(err, 1e-4)
-            st["steps"] += 1
-            i = _first_nonfinite(y1)
-            if i >= 0:
-                raise _fail(tph, "state", STATES[i])
-            rcont = None
-            while kout <= nout:
-                tk = _output_time(s, kout, nout)
-                if tk > tph:
-                    break
-                if tk == tph:
-                    _emit(p, w, tk, y1, sink)
-                else:
-                    if rcont is None:
-                        rcont = _dense_coefficients(h, y, y1, k1, k3, k4, k5, k6, k7)
-                    _emit(p, w, tk, _dense(rcont, (tk - t) / h), sink)
-                kout += 1
-            k1, y, t = k7, y1, tph
-            if last:
-                return
-            if abs(hnew) > hmax:
-                hnew = hmax
-            if reject:
-                hnew = min(hnew, h)
-            reject, bad = False, -1
-        else:
-            hnew = h / min(FACC1, fac11 / SAFE)
-            reject, last = True, False
-            st["rejected"] += 1
-        h = hnew
-
-
-def _dense_coefficients(h, y, y1, k1, k3, k4, k5, k6, k7):
-    rcont = []
-    for i in range(len(y)):
-        ydiff = y1[i] - y[i]
-        bspl = h * k1[i] - ydiff
-        rcont.append((y[i], ydiff, bspl, -h * k7[i] + ydiff - bspl,
-                      h * (D1 * k1[i] + D3 * k3[i] + D4 * k4[i] + D5 * k5[i] + D6 * k6[i]
-                           + D7 * k7[i])))
-    return rcont
-
-
-def _dense(rcont, theta):
-    """Hairer's continuous extension of order 4 (CONTD5) at theta in [0, 1]."""
-    theta1 = 1.0 - theta
-    return [r1 + theta * (r2 + theta1 * (r3 + theta * (r4 + theta1 * r5)))
-            for r1, r2, r3, r4, r5 in rcont]
-
-
-def _integrate(s, p, x0, sink, st):
-    y = list(x0)
-    i = _first_nonfinite(y)
-    if i >= 0:
-        raise _fail(s.t0, "state", STATES[i])
-    w = _Work(s.rtol, s.atol)
-    if s.solver == "dopri5":
-        _run_dopri5(s, p, w, y, sink, st)
-    else:
-        _run_fixed(s, p, w, y, sink, st)
-
-
 # ---------------------------------------------------------------- simulate
 
 
@@ -838,7 +528,7 @@ def simulate(t_end=None, dt=None, solver=None, rtol=None, atol=None, params=None
         rows.append(y)
 
     try:
-        _integrate(s, p, x0, sink, {"steps": 0, "rejected": 0, "rhs": 0})
+        _integrate(s, p, x0, sink, _new_stats())
     except _Failure as failure:
         raise SimulationError(str(failure), failure.t, numpy.array(times, dtype=float),
                               numpy.array(rows, dtype=float).reshape(len(times), len(OUTPUTS)))
@@ -849,7 +539,7 @@ def simulate(t_end=None, dt=None, solver=None, rtol=None, atol=None, params=None
 # ---------------------------------------------------------------- command line
 
 USAGE = (
-    " [--t-end T] [--dt DT] [--solver euler|rk4|dopri5] [--rtol R] [--atol A]\n"
+    " [--t-end T] [--dt DT] [--solver NAME] [--rtol R] [--atol A]\n"
     "       [--step H] [-p NAME=VALUE ...] [--project-initial] [--stats]\n"
 )
 _WITH_VALUE = ("--t-end", "--dt", "--solver", "--rtol", "--atol", "--step", "-p")
@@ -870,14 +560,16 @@ def _help():
         _usage() + "Simulates the model and writes CSV (t and the outputs) to stdout.",
         "  --t-end T          end time (%.17g; the start time is %.17g)" % (s.t_end, s.t0),
         "  --dt DT            output interval (%.17g)" % s.dt,
-        "  --solver NAME      euler, rk4 or dopri5 (%s)" % s.solver,
-        "  --rtol R           relative tolerance of dopri5 (%.17g)" % s.rtol,
-        "  --atol A           absolute tolerance of dopri5 (%.17g)" % s.atol,
-        "  --step H           fixed step of euler and rk4 (default: dt)",
+        "  --solver NAME      the solver (%s), one of those listed below" % s.solver,
+        "  --rtol R           relative tolerance of the adaptive solvers (%.17g)" % s.rtol,
+        "  --atol A           absolute tolerance of the adaptive solvers (%.17g)" % s.atol,
+        "  --step H           step of the fixed-step solvers (default: dt)",
         "  -p NAME=VALUE      set a parameter; derived parameters follow",
         "  --project-initial  project the initial state onto the constraints",
-        "  --stats            print step statistics to stderr",
+        "  --stats            print the solver's counters to stderr",
+        "solvers:",
     ]
+    lines += ["  %-8s %s" % (name, m["summary"]) for name, m in _METHODS.items()]
     if PARAMETERS:
         lines.append("parameters (NAME = default):")
     lines += ["  %s = %.17g" % (name, value) for name, value in PARAMETERS.items()]
@@ -911,7 +603,7 @@ def _apply_option(name, value, options, given):
     elif name == "--solver":
         if value not in SOLVERS:
             raise _UsageError(
-                "error: unknown solver '%s' (expected euler, rk4 or dopri5)\n" % value)
+                "error: unknown solver '%s' (expected %s)\n" % (value, _SOLVER_LIST))
         options["solver"] = value
     elif name == "--step":
         options["step"] = _parse_number(name, value)
@@ -978,7 +670,7 @@ def main(argv=None):
         sys.stderr.write("error: %s\n" % error)
         return 3
     times, rows = [], []
-    stats = {"steps": 0, "rejected": 0, "rhs": 0}
+    stats = _new_stats()
     failure = None
     try:
         _integrate(s, p, x0, lambda t, x, y: (times.append(t), rows.append(y)), stats)
@@ -989,12 +681,9 @@ def main(argv=None):
     _write_rows(out, times, rows)
     out.flush()
     if "--stats" in flags:
-        sys.stderr.write("stats: steps=%(steps)d rejected=%(rejected)d rhs=%(rhs)d\n" % stats)
+        sys.stderr.write(_stats_line(stats) + "\n")
     if failure is not None:
         sys.stderr.write("error: %s\n" % failure)
         return 3
     return 0
 
-
-if __name__ == "__main__":
-    sys.exit(main())

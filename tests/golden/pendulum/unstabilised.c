@@ -3,7 +3,7 @@
  * C99 with libm only:   cc -O2 -std=c99 pendulum.c -o pendulum -lm
  *
  * As a program:
- *   ./pendulum [--t-end T] [--dt DT] [--solver euler|rk4|dopri5] [--rtol R] [--atol A]
+ *   ./pendulum [--t-end T] [--dt DT] [--solver NAME] [--rtol R] [--atol A]
  *        [--step H] [-p NAME=VALUE ...] [--project-initial] [--stats]
  *   writes CSV to stdout: a header "t,<outputs>", then one row per output time
  *   t0 + k*dt (k = 0, 1, ...) below t_end, then a last row at exactly t_end (the grid
@@ -36,6 +36,7 @@
 #define BGC_NUM_POSITION_ROWS 1
 #define BGC_NUM_VELOCITY_ROWS 1
 #define BGC_NUM_BLOCKS 0
+#define BGC_AUTONOMOUS 1 /* 1: the right side does not read t */
 #define BGC_WORK_DOUBLES 76
 #define BGC_WORK_INTS 0
 #define BGC_WORK_Y0 0
@@ -57,7 +58,9 @@ typedef struct bgc_params {
     double c[6];
 } bgc_params;
 
-[bgc/runtime/api.h]
+[runtime: solver_enum]
+
+[runtime: api]
 
 /* ================================================================= names === */
 
@@ -302,5 +305,5 @@ void bgc_velocity_jac(double t, const double *x, const bgc_params *p, double *ou
     out[3] = p->c[4]*x[1];
 }
 
-[bgc/runtime/runtime.c]
+[runtime: runtime]
 

@@ -1,0 +1,598 @@
+# ================================================================== solve ===
+# The solvers' common machinery, the explicit Runge-Kutta family (read from _METHODS, printed
+# from bgc/solvers.py) and _integrate, which picks a family's run function; the stiff
+# families follow (bgc/runtime/stiff.py).  States are numpy vectors; the arithmetic is the C
+# runtime's, in the same order.
+
+
+def _output_count(s):
+    n = math.ceil((s.t_end - s.t0) / s.dt - 1e-6)
+    return n if n > 0 else 0
+
+
+def _output_time(s, k, n):
+    return s.t_end if k >= n else s.t0 + k * s.dt
+
+
+def _hmin(t):
+    """Steps below this are too small to resolve at t (16 ulps of t; the least normal at 0)."""
+    return max(16.0 * _EPS * abs(t), sys.float_info.min)
+
+
+def _first_nonfinite(v):
+    for i, a in enumerate(v):
+        if not math.isfinite(a):
+            return i
+    return -1
+
+
+def _fail(t, what, name):
+    return _Failure("at t = %.17g: %s '%s' is not finite" % (t, what, name), t)
+
+
+def _fail_step(t, h, worst):
+    if worst >= 0:
+        message = "at t = %.17g: step size too small (h = %.3g), limited by state '%s'" % (
+            t, h, STATES[worst])
+    else:
+        message = "at t = %.17g: step size too small (h = %.3g)" % (t, h)
+    return _Failure(message, t)
+
+
+def _block_failed(failure):
+    return _Failure(str(failure), failure.t)
+
+
+def _new_stats():
+    return {"steps": 0, "rejected": 0, "rhs": 0, "jac": 0, "lu": 0, "solves": 0,
+            "switched": False, "t_switch": 0.0}
+
+
+def _stats_line(st):
+    line = ("stats: steps=%(steps)d rejected=%(rejected)d rhs=%(rhs)d jac=%(jac)d lu=%(lu)d "
+            "solves=%(solves)d" % st)
+    if st["switched"]:
+        line += " stiff_from=%.17g" % st["t_switch"]
+    return line
+
+
+class _Stiff(Exception):
+    """An auto run's explicit phase found the problem stiff."""
+
+
+class _Run:
+    """A run in progress (see bgc_run in the C runtime): a run function integrates from
+    (run.t, y) to s.t_end, hands the output times run.kout .. run.nout to the sink as it
+    passes them, keeps run.t and run.y at its last accepted step, and returns; or raises
+    _Failure, _Stiff (run.h: its last step size)."""
+
+    __slots__ = ("s", "p", "w", "sink", "st", "nout", "kout", "t", "h", "y",
+                 "detect_stiffness")
+
+    def __init__(self, s, p, w, sink, st, y):
+        self.s, self.p, self.w, self.sink, self.st = s, p, w, sink, st
+        self.nout, self.kout = _output_count(s), 1
+        self.t, self.h, self.y = s.t0, 0.0, y
+        self.detect_stiffness = False
+
+    def f(self, t, y):
+        """dy/dt as a numpy vector; a failed algebraic block raises _BlockFailure."""
+        out = [0.0] * _N
+        _rhs(t, y.tolist(), self.p, self.w, out)
+        return numpy.array(out, dtype=float)
+
+    def fv(self, t, y):
+        """dy/dt for the explicit solvers, in _V's kind of vector."""
+        if _V is _ArrayVectors:
+            return self.f(t, y)
+        out = [0.0] * _N
+        _rhs(t, y, self.p, self.w, out)
+        return out
+
+    def emit(self, t, x):
+        if isinstance(x, numpy.ndarray):
+            x = x.tolist()
+        y = [0.0] * len(OUTPUTS)
+        try:
+            _out(t, x, self.p, self.w, y)
+        except _BlockFailure as failure:
+            raise _block_failed(failure) from None
+        j = _first_nonfinite(y)
+        if j >= 0:
+            raise _fail(t, "output", OUTPUTS[j])
+        self.sink(t, x, y)
+
+    def emit_step(self, t, h, tph, y1, dense):
+        """The output times in (t, tph] after an accepted step: tph from y1, the others from
+        dense(theta), a function that dense_at() prepares on first use."""
+        at = None
+        while self.kout <= self.nout:
+            tk = _output_time(self.s, self.kout, self.nout)
+            if tk > tph:
+                break
+            if tk == tph:
+                self.emit(tk, y1)
+            else:
+                if at is None:
+                    at = dense()
+                self.emit(tk, at((tk - t) / h))
+            self.kout += 1
+
+
+def _weights(s, y, y1):
+    """Hairer's error-norm weights atol + rtol * max(|y_i|, |y1_i|)."""
+    return s.atol + s.rtol * numpy.maximum(numpy.abs(y), numpy.abs(y1))
+
+
+def _initial_step(run, q, y, f0, hmax):
+    """Hairer's initial step size guess (HINIT) for a method of order q."""
+    s = run.s
+    y, f0 = numpy.asarray(y, dtype=float), numpy.asarray(f0, dtype=float)
+    sk = s.atol + s.rtol * numpy.abs(y)
+    dnf = float(numpy.sum((f0 / sk) ** 2))
+    dny = float(numpy.sum((y / sk) ** 2))
+    h = 1e-6 if (dnf <= 1e-10 or dny <= 1e-10) else math.sqrt(dny / dnf) * 0.01
+    h = min(h, hmax)
+    run.st["rhs"] += 1
+    try:
+        f1 = run.f(run.t + h, y + h * f0)
+    except _BlockFailure:
+        return h  # a block failed there: start small, the step control takes over
+    with numpy.errstate(all="ignore"):
+        der2 = math.sqrt(float(numpy.sum(((f1 - f0) / sk) ** 2))) / h
+    der12 = max(math.sqrt(dnf), abs(der2))  # a NaN der2 is ignored
+    h1 = max(1e-6, h * 1e-3) if der12 <= 1e-15 else (0.01 / der12) ** (1.0 / q)
+    if not h1 > 0.0:
+        h1 = h * 1e-3
+    return min(min(100.0 * h, h1), hmax)
+
+
+# ---------------------------------------------------------------- explicit Runge-Kutta
+# An explicit step's cost beside the model's right side is a few vector operations per
+# stage.  On a handful of states a numpy call costs more than a list comprehension over the
+# whole vector, so the explicit solvers keep their states as lists up to _LIST_STATES states
+# and as numpy vectors above; both kits compute the same values in the same order as the C
+# runtime (bgc_combine: stage by stage, left to right).
+
+_LIST_STATES = 48
+
+
+def _weighted(w, count, stride=None):
+    """The (weight, stage) pairs of w[j] (w[j][stride]) over j < count, zero weights dropped."""
+    pairs = []
+    for j in range(min(count, len(w))):
+        a = w[j] if stride is None else w[j][stride]
+        if a != 0.0:
+            pairs.append((a, j))
+    return tuple(pairs)
+
+
+def _list_terms(acc, pairs, K):
+    """acc + a_0 K_j0 + ... (up to four pairs, left to right; acc None: no acc)."""
+    n = len(pairs)
+    (a, i) = pairs[0]
+    if n == 1:
+        if acc is None:
+            return [a * u for u in K[i]]
+        return [s + a * u for s, u in zip(acc, K[i])]
+    (b, j) = pairs[1]
+    if n == 2:
+        if acc is None:
+            return [a * u + b * v for u, v in zip(K[i], K[j])]
+        return [s + a * u + b * v for s, u, v in zip(acc, K[i], K[j])]
+    (c, k) = pairs[2]
+    if n == 3:
+        if acc is None:
+            return [a * u + b * v + c * w for u, v, w in zip(K[i], K[j], K[k])]
+        return [s + a * u + b * v + c * w for s, u, v, w in zip(acc, K[i], K[j], K[k])]
+    (d, l) = pairs[3]
+    if acc is None:
+        return [a * u + b * v + c * w + d * x for u, v, w, x in zip(K[i], K[j], K[k], K[l])]
+    return [s + a * u + b * v + c * w + d * x
+            for s, u, v, w, x in zip(acc, K[i], K[j], K[k], K[l])]
+
+
+def _list_terms_into(y, h, pairs, K):
+    """y + h * (a_0 K_j0 + ...) for up to four pairs, in one comprehension."""
+    n = len(pairs)
+    (a, i) = pairs[0]
+    if n == 1:
+        return [z + h * (a * u) for z, u in zip(y, K[i])]
+    (b, j) = pairs[1]
+    if n == 2:
+        return [z + h * (a * u + b * v) for z, u, v in zip(y, K[i], K[j])]
+    (c, k) = pairs[2]
+    if n == 3:
+        return [z + h * (a * u + b * v + c * w) for z, u, v, w in zip(y, K[i], K[j], K[k])]
+    (d, l) = pairs[3]
+    return [z + h * (a * u + b * v + c * w + d * x)
+            for z, u, v, w, x in zip(y, K[i], K[j], K[k], K[l])]
+
+
+class _ListVectors:
+    """States as Python lists."""
+
+    @staticmethod
+    def vec(x):
+        return x.tolist() if isinstance(x, numpy.ndarray) else x
+
+    @staticmethod
+    def combine(y, h, pairs, K):
+        """y + h * sum a K_j over the pairs (y None: h * sum), four terms per comprehension."""
+        n = len(pairs)
+        if n == 0:
+            acc = [0.0] * _N
+        elif n <= 4 and y is not None:
+            return _list_terms_into(y, h, pairs, K)
+        else:
+            acc = _list_terms(None, pairs[:4], K)
+            for k in range(4, n, 4):
+                acc = _list_terms(acc, pairs[k:k + 4], K)
+        if y is None:
+            return [h * u for u in acc]
+        return [u + h * v for u, v in zip(y, acc)]
+
+    @staticmethod
+    def horner(y, q, theta):
+        """y + theta (q_0 + theta (q_1 + ...))."""
+        acc = q[-1]
+        for qd in reversed(q[:-1]):
+            acc = [u + theta * v for u, v in zip(qd, acc)]
+        return [u + theta * v for u, v in zip(y, acc)]
+
+    @staticmethod
+    def error_sums(s, y, y1, e1, e2):
+        """sum (e1_i / sk_i)^2, its largest term's index, and sum (e2_i / sk_i)^2 (e2 may be
+        None), sk_i = atol + rtol * max(|y_i|, |y1_i|)."""
+        rtol, atol = s.rtol, s.atol
+        err = err2 = 0.0
+        worst, worst_q = -1, -1.0
+        for i in range(_N):
+            sk = atol + rtol * max(abs(y[i]), abs(y1[i]))
+            qq = e1[i] / sk
+            qq = qq * qq
+            err += qq
+            if qq > worst_q:
+                worst, worst_q = i, qq
+            if e2 is not None:
+                q2 = e2[i] / sk
+                err2 += q2 * q2
+        return err, worst, err2
+
+    @staticmethod
+    def distance2(u, v):
+        return sum([(a - b) * (a - b) for a, b in zip(u, v)])
+
+
+class _ArrayVectors:
+    """States as numpy vectors."""
+
+    @staticmethod
+    def vec(x):
+        return numpy.asarray(x, dtype=float)
+
+    @staticmethod
+    def combine(y, h, pairs, K):
+        if pairs:
+            a, j = pairs[0]
+            acc = a * K[j]
+            for a, j in pairs[1:]:
+                acc = acc + a * K[j]
+        else:
+            acc = numpy.zeros(_N)
+        return h * acc if y is None else y + h * acc
+
+    @staticmethod
+    def horner(y, q, theta):
+        acc = q[-1]
+        for qd in reversed(q[:-1]):
+            acc = qd + theta * acc
+        return y + theta * acc
+
+    @staticmethod
+    def error_sums(s, y, y1, e1, e2):
+        sk = s.atol + s.rtol * numpy.maximum(numpy.abs(y), numpy.abs(y1))
+        with numpy.errstate(all="ignore"):
+            sq = (e1 / sk) ** 2
+            err = float(numpy.sum(sq)) if _N else 0.0
+            worst = int(numpy.argmax(sq)) if _N and err == err else -1
+            err2 = float(numpy.sum((e2 / sk) ** 2)) if e2 is not None else 0.0
+        return err, worst, err2
+
+    @staticmethod
+    def distance2(u, v):
+        return float(numpy.sum((u - v) ** 2))
+
+
+_V = _ListVectors if _N <= _LIST_STATES else _ArrayVectors
+
+
+def _combine(weights, K, count):
+    """sum_j weights[j] K[j] over j < count with a nonzero weight, left to right, for numpy
+    vectors K[j] (the stiff solvers)."""
+    acc = None
+    for j in range(count):
+        a = weights[j]
+        if a != 0.0:
+            acc = a * K[j] if acc is None else acc + a * K[j]
+    return numpy.zeros(_N) if acc is None else acc
+
+
+class _ErkPlan:
+    """A tableau's nonzero weights, ready for _V.combine."""
+
+    def __init__(self, m):
+        stages, c = m["stages"], m["c"]
+        self.a = [_weighted(m["a"][i], i) for i in range(len(c))]
+        self.b = _weighted(m["b"], stages)
+        self.e = _weighted(m["e"], stages) if "e" in m else ()
+        self.e2 = _weighted(m["e2"], stages) if m.get("e2") else None
+        P = m.get("P")
+        self.P = [_weighted(P, len(P), d) for d in range(len(P[0]))] if P else []
+
+
+def _run_fixed(run, m, y):
+    s, V = run.s, _V
+    hstep = s.step if s.step > 0.0 else s.dt
+    ta = run.t
+    stages, c = m["stages"], m["c"]
+    plan = _ErkPlan(m)
+    combine = V.combine
+    y = V.vec(y)
+    K = [None] * stages
+    while run.kout <= run.nout:
+        tb = _output_time(s, run.kout, run.nout)
+        steps = _substeps(tb - ta, hstep)
+        if steps < 0:
+            raise _fail_step(ta, hstep, -1)
+        for j in range(steps):
+            t = ta + j * hstep
+            t1 = tb if j + 1 == steps else ta + (j + 1) * hstep
+            h = t1 - t
+            if not h >= _hmin(t):
+                raise _fail_step(t, h, -1)
+            try:
+                K[0] = run.fv(t, y)
+                i = _first_nonfinite(K[0])
+                if i >= 0:
+                    raise _fail(t, "derivative of state", STATES[i])
+                for i in range(1, stages):
+                    K[i] = run.fv(t + c[i] * h, combine(y, h, plan.a[i], K))
+            except _BlockFailure as failure:
+                raise _block_failed(failure) from None
+            run.st["rhs"] += stages
+            y = combine(y, h, plan.b, K)
+            run.st["steps"] += 1
+            i = _first_nonfinite(y)
+            if i >= 0:
+                raise _fail(t1, "state", STATES[i])
+            run.t, run.y = t1, y
+        run.emit(tb, y)
+        run.kout += 1
+        ta = tb
+
+
+def _substeps(span, h):
+    r = span / h
+    if not r < 1e15:
+        return -1
+    m = math.ceil(r - 1e-6)
+    return 1 if m < 1 else m
+
+
+def _erk_dense(run, m, plan, t, h, y, K):
+    """The dense output of an accepted step: the extra stages, then
+    y(theta) = y + theta (q_0 + theta (q_1 + ...)), q_d = h sum_i P[i][d] K_i."""
+    def prepare():
+        c, combine = m["c"], _V.combine
+        try:
+            for i in range(m["stages"], len(c)):
+                K[i] = run.fv(t + c[i] * h, combine(y, h, plan.a[i], K))
+                run.st["rhs"] += 1
+        except _BlockFailure as failure:
+            raise _block_failed(failure) from None
+        q = [combine(None, h, pairs, K) for pairs in plan.P]
+        horner = _V.horner
+        return lambda theta: horner(y, q, theta)
+    return prepare
+
+
+def _run_erk(run, m, y):
+    """Embedded explicit pairs: adaptive steps (never shortened for output), Hairer's error
+    norm and controller, outputs by the dense output; with s.step > 0, steps of that size
+    without error control.  With run.detect_stiffness, Hairer's stiffness test raises _Stiff
+    once it has fired on 15 accepted steps."""
+    s, st, V = run.s, run.st, _V
+    if run.kout > run.nout:
+        return
+    stages, c, e = m["stages"], m["c"], m["e"]
+    plan = _ErkPlan(m)
+    combine, error_sums, fv = V.combine, V.error_sums, run.fv
+    last_stage = stages - 1
+    fsal = m["fsal"]
+    fsal_first = fsal and e[last_stage] != 0.0
+    safe, fac_min, fac_max, beta = m["safe"], m["fac_min"], m["fac_max"], m["beta"]
+    expo1 = 1.0 / m["q"] - m["expo_beta"] * beta
+    stiff_i, stiff_j, stiff_bound = m.get("stiffness", (-1, -1, 0.0))
+    hmax = s.t_end - s.t0
+    fixed = s.step > 0.0
+    t, facold = run.t, 1e-4
+    reject, last, worst, bad, bad_kind = False, False, -1, -1, ""
+    block_failure = None
+    stiff_count = nonstiff_count = 0
+    n = _N
+    y = V.vec(y)
+    K = [None] * len(c)
+    st["rhs"] += 1
+    try:
+        K[0] = fv(t, y)
+    except _BlockFailure as failure:
+        raise _block_failed(failure) from None
+    i = _first_nonfinite(K[0])
+    if i >= 0:
+        raise _fail(t, "derivative of state", STATES[i])
+    if fixed:
+        h = s.step
+    elif run.h > 0.0:
+        h = min(run.h, hmax)
+    else:
+        h = _initial_step(run, m["q"], y, K[0], hmax)
+    while True:
+        if not h >= _hmin(t):
+            if bad == -2:
+                raise _block_failed(block_failure)
+            if bad >= 0:
+                raise _fail(t, bad_kind, STATES[bad])
+            raise _fail_step(t, h, worst)
+        if t + 1.01 * h - s.t_end > 0.0:
+            h = s.t_end - t
+            last = True
+        tph = s.t_end if last else t + h
+        ystiff = None
+        try:
+            for i in range(1, stages):
+                if fsal and i == last_stage:
+                    break
+                ys = combine(y, h, plan.a[i], K)
+                if i == stiff_i:
+                    ystiff = ys
+                K[i] = fv(tph if c[i] == 1.0 else t + c[i] * h, ys)
+                st["rhs"] += 1
+            y1 = combine(y, h, plan.b, K)
+            if fsal_first:
+                st["rhs"] += 1
+                K[last_stage] = fv(tph, y1)
+        except _BlockFailure as failure:  # retry with a much smaller step
+            if fixed:
+                raise _block_failed(failure) from None
+            bad, block_failure = -2, failure
+            h = h * fac_min
+            reject, last = True, False
+            st["rejected"] += 1
+            continue
+
+        # Hairer's error norm: RMS of err_i / (atol + rtol * max(|y_i|, |y1_i|)); DOP853
+        # combines its two estimates.
+        e2 = plan.e2
+        try:
+            err, worst_now, err2 = error_sums(
+                s, y, y1, combine(None, 1.0 if e2 else h, plan.e, K),
+                combine(None, 1.0, e2, K) if e2 else None)
+        except (OverflowError, ValueError):  # an infinite stage: treated as NaN below
+            err, worst_now, err2 = math.nan, -1, 0.0
+        if err == err:
+            worst = worst_now
+        if n == 0 or (fixed and err == err):
+            err = 0.0  # fixed steps: accepted as they are (a non-finite stage fails below)
+        elif e2:
+            deno = err + 0.01 * err2
+            if not deno > 0.0:
+                deno = 1.0
+            err = abs(h) * err * math.sqrt(1.0 / (n * deno))
+        else:
+            err = math.sqrt(err / n)
+        if err != err and fixed:
+            raise _fail(tph, "state", STATES[max(_first_nonfinite(y1), 0)])
+        if err != err:  # a non-finite stage: retry with a much smaller step
+            bad, bad_kind = _first_nonfinite(y1), "state"
+            for i in range(1, stages):
+                if bad >= 0:
+                    break
+                if K[i] is not None:
+                    bad, bad_kind = _first_nonfinite(K[i]), "derivative of state"
+            h = h * fac_min
+            reject, last = True, False
+            st["rejected"] += 1
+            continue
+
+        fac11 = err ** expo1
+        fac = fac11 / facold ** beta
+        fac = max(1.0 / fac_max, min(1.0 / fac_min, fac / safe))
+        hnew = s.step if fixed else h / fac
+        if err <= 1.0:
+            facold = max(err, 1e-4)
+            st["steps"] += 1
+            i = _first_nonfinite(y1)
+            if i >= 0:
+                raise _fail(tph, "state", STATES[i])
+            try:
+                if fsal and not fsal_first:
+                    st["rhs"] += 1
+                    K[last_stage] = fv(tph, y1)
+            except _BlockFailure as failure:
+                raise _block_failed(failure) from None
+            run.emit_step(t, h, tph, y1, _erk_dense(run, m, plan, t, h, y, list(K)))
+            if run.detect_stiffness and stiff_i >= 0 and ystiff is not None:
+                # h |f(Y_i) - f(Y_j)| / |Y_i - Y_j| for two stages at the same time
+                num = V.distance2(K[stiff_j], K[stiff_i])
+                den = V.distance2(y1 if stiff_j == last_stage else ys, ystiff)
+                if den > 0.0 and h * math.sqrt(num / den) > stiff_bound:
+                    nonstiff_count = 0
+                    stiff_count += 1
+                    if stiff_count == 15:
+                        run.t, run.y, run.h = tph, y1, hnew
+                        raise _Stiff()
+                else:
+                    nonstiff_count += 1
+                    if nonstiff_count == 6:
+                        stiff_count = 0
+            try:
+                if fsal:
+                    K[0] = K[last_stage]
+                elif not last:
+                    st["rhs"] += 1
+                    K[0] = fv(tph, y1)
+            except _BlockFailure as failure:
+                raise _block_failed(failure) from None
+            y, t = y1, tph
+            run.t, run.y = t, y
+            if last:
+                return
+            if abs(hnew) > hmax and not fixed:
+                hnew = hmax
+            if reject:
+                hnew = min(hnew, h)
+            reject, bad = False, -1
+        else:
+            hnew = h / min(1.0 / fac_min, fac11 / safe)
+            reject, last = True, False
+            st["rejected"] += 1
+        h = hnew
+
+
+# ---------------------------------------------------------------- integrate
+
+
+def _run_family(run, name):
+    m = _METHODS[name]
+    family = m["family"]
+    if family == "fixed":
+        _run_fixed(run, m, run.y)
+    elif family == "erk":
+        _run_erk(run, m, run.y)
+    elif family == "rosenbrock":
+        _run_rosenbrock(run, m, numpy.asarray(run.y, dtype=float))
+    elif family == "radau5":
+        _run_radau5(run, m, numpy.asarray(run.y, dtype=float))
+    else:
+        raise ValueError("solver '%s' cannot run by itself" % name)
+
+
+def _integrate(s, p, x0, sink, st):
+    y = numpy.array(x0, dtype=float)
+    i = _first_nonfinite(y)
+    if i >= 0:
+        raise _fail(s.t0, "state", STATES[i])
+    run = _Run(s, p, _Work(s.rtol, s.atol), sink, st, y)
+    run.emit(s.t0, y)
+    m = _METHODS[s.solver]
+    if m["family"] != "auto":
+        _run_family(run, s.solver)
+        return
+    run.detect_stiffness = True
+    try:
+        _run_family(run, m["explicit"])
+    except _Stiff:
+        st["switched"], st["t_switch"] = True, run.t
+        run.detect_stiffness = False
+        _run_family(run, m["stiff"])

@@ -1,0 +1,2879 @@
+/* ============================================================ solvers === */
+/* The solvers (bgc/solvers.py); their tables follow the API section. */
+#define BGC_NUM_SOLVERS 7
+#define BGC_SOLVER_LIST "euler, rk4, dopri5, dop853, rodas4, radau5 or auto"
+enum {
+    BGC_SOLVER_EULER = 0,
+    BGC_SOLVER_RK4 = 1,
+    BGC_SOLVER_DOPRI5 = 2,
+    BGC_SOLVER_DOP853 = 3,
+    BGC_SOLVER_RODAS4 = 4,
+    BGC_SOLVER_RADAU5 = 5,
+    BGC_SOLVER_AUTO = 6,
+};
+
+/* ======================================================================= API === */
+/* Everything global is prefixed bgc_/BGC_.  The model part above defines the sizes
+   (BGC_NUM_*) and the parameter struct; the functions below are defined further down. */
+
+#define BGC_DIM(n) ((n) > 0 ? (n) : 1) /* array size for n elements, n may be 0 */
+
+enum { BGC_OK = 0, BGC_ERR_CONSTRAINT = 1, BGC_ERR_USAGE = 2, BGC_ERR_RUNTIME = 3 };
+/* How an algebraic block failed (bgc_work.failure). */
+enum { BGC_BLOCK_SINGULAR = 1, BGC_BLOCK_DIVERGED = 2, BGC_BLOCK_NONFINITE = 3 };
+
+/* Display names, ordered as the arrays below use them. */
+extern const char *const bgc_model_name;
+extern const char *const bgc_state_names[BGC_DIM(BGC_NUM_STATES)];
+extern const char *const bgc_param_names[BGC_DIM(BGC_NUM_PARAMS)];
+extern const char *const bgc_output_names[BGC_DIM(BGC_NUM_OUTPUTS)];
+extern const char *const bgc_constraint_names[BGC_DIM(BGC_NUM_CONSTRAINTS)]; /* junctions */
+extern const char *const bgc_constraint_levels[BGC_DIM(BGC_NUM_CONSTRAINTS)]; /* position|velocity */
+
+/* Sets every parameter j with !given[j] (all of them if given is NULL) from its default
+   expression, in order, so that a derived parameter follows the parameters it uses; then
+   updates the constants. */
+void bgc_params_defaults(bgc_params *p, const int *given);
+/* Recomputes the constants p->c from the parameter fields.  Call it after setting a field
+   and before calling a model function (bgc_simulate, bgc_check_constraints and
+   bgc_project_initial update a copy of p themselves). */
+void bgc_params_update(bgc_params *p);
+/* The field of parameter j (NULL if j is out of range); its index by name (-1 if unknown). */
+double *bgc_param_ref(bgc_params *p, int j);
+int bgc_param_index(const char *name);
+
+/* The workspace of the model functions: the values they share between their parts, the
+   storage of the algebraic blocks solved numerically (factors, and each Newton block's last
+   solution, its next starting value), and the tolerance of the Newton iterations.  One per
+   thread; bgc_work_new returns NULL when out of memory. */
+typedef struct bgc_work {
+    double *v;          /* BGC_WORK_DOUBLES values */
+    int *iv;            /* BGC_WORK_INTS values (pivots) */
+    double rtol, atol;  /* Newton: |step| <= 0.01 * (atol + rtol * |z|) ends the iteration */
+    int block;          /* after a failure: the block (1-based, as bgc_block_names) ... */
+    int failure;        /* ... and how: BGC_BLOCK_SINGULAR, _DIVERGED or _NONFINITE */
+    double t;           /* ... and when */
+} bgc_work;
+bgc_work *bgc_work_new(void);
+void bgc_work_free(bgc_work *w);
+/* The unknowns of each algebraic block solved in the generated code (comma-separated). */
+extern const char *const bgc_block_names[BGC_DIM(BGC_NUM_BLOCKS)];
+/* "at t = ...: algebraic block k (...) is singular" after a model function returned nonzero. */
+void bgc_work_message(const bgc_work *w, char *msg, size_t msg_size);
+
+/* The model: x[BGC_NUM_STATES] ordered as bgc_state_names, y as bgc_output_names.  The
+   functions that may solve algebraic blocks return 0, or nonzero when a block failed (see
+   bgc_work_message).  bgc_jvp gives jv = J v for the Jacobian J = d rhs / d x, and
+   bgc_jacobian J itself (row-major, BGC_NUM_STATES squared), both derived symbolically
+   through the algebraic solves.  r and s per constraint row; the constraint Jacobians
+   row-major (rows x BGC_NUM_STATES) for the position rows and for the velocity rows.  Row k
+   holds when |r[k]| <= 1e-9 * s[k]. */
+void bgc_init(const bgc_params *p, double *x0);
+int bgc_rhs(double t, const double *x, const bgc_params *p, bgc_work *w, double *dx);
+int bgc_outputs(double t, const double *x, const bgc_params *p, bgc_work *w, double *y);
+int bgc_jvp(double t, const double *x, const bgc_params *p, bgc_work *w, const double *v,
+            double *jv);
+int bgc_jacobian(double t, const double *x, const bgc_params *p, bgc_work *w, double *J);
+void bgc_residual(double t, const double *x, const bgc_params *p, double *r);
+void bgc_scale(double t, const double *x, const bgc_params *p, double *s);
+void bgc_position_jac(double t, const double *x, const bgc_params *p, double *J);
+void bgc_velocity_jac(double t, const double *x, const bgc_params *p, double *J);
+
+/* Number of violated constraint rows at (t, x); each is reported on err if err != NULL. */
+int bgc_check_constraints(double t, const double *x, const bgc_params *p, FILE *err);
+/* Gauss-Newton minimum-norm projection of x onto the position rows, then onto the velocity
+   rows (moving only velocity-movable states).  0 on success, else BGC_ERR_CONSTRAINT
+   with a message in msg. */
+int bgc_project_initial(double t, double *x, const bgc_params *p, char *msg, size_t msg_size);
+
+/* The solvers, numbered BGC_SOLVER_<NAME> as bgc_solver_names lists them (the table comes
+   from bgc/solvers.py; `./model --help` lists them with a line each). */
+extern const char *const bgc_solver_names[BGC_NUM_SOLVERS];
+/* The solver's number by name, -1 if unknown. */
+int bgc_solver_index(const char *name);
+
+typedef struct bgc_settings {
+    double t0, t_end, dt; /* output times t0 + k*dt, and t_end */
+    int solver;           /* BGC_SOLVER_<NAME> */
+    double rtol, atol;    /* error control of the adaptive solvers (and the Newton tolerance) */
+    double step;          /* fixed step of the fixed-step solvers; 0: dt */
+} bgc_settings;
+typedef struct bgc_stats {
+    long steps, rejected, rhs; /* accepted steps, rejected steps, right-side calls */
+    long jac, lu, solves;      /* stiff solvers: Jacobians, LU factorisations, linear solves */
+    int switched;              /* auto: 1 once it has switched to its stiff method ... */
+    double t_switch;           /* ... at this time */
+} bgc_stats;
+/* Called at every output time with the state and the outputs; nonzero stops the run. */
+typedef int (*bgc_sink)(void *ctx, double t, const double *x, const double *y);
+
+/* "stats: steps=.. rejected=.. rhs=.. jac=.. lu=.. solves=..[ stiff_from=T]" and a newline. */
+void bgc_print_stats(FILE *f, const bgc_stats *st);
+
+/* The compiled scene's settings; 0 if s is valid, else BGC_ERR_USAGE and a message. */
+void bgc_settings_default(bgc_settings *s);
+int bgc_check_settings(const bgc_settings *s, char *msg, size_t msg_size);
+/* Integrates from x0 at s->t0 to s->t_end.  Returns 0, BGC_ERR_USAGE (bad settings),
+   BGC_ERR_RUNTIME (non-finite value, step size too small, a failed algebraic block or no
+   memory: message in msg), or the sink's nonzero value.  stats are added to. */
+int bgc_simulate(const bgc_settings *s, const bgc_params *p, const double *x0, bgc_sink sink,
+                 void *ctx, bgc_stats *stats, char *msg, size_t msg_size);
+
+/* -------------------------------------------- between the model part and the runtime --- */
+static inline double bgc_sq(double a) { return a * a; }
+static inline double bgc_min(double a, double b) { return b < a ? b : a; }
+static inline double bgc_max(double a, double b) { return b > a ? b : a; }
+static inline double bgc_sign(double a) { return a > 0.0 ? 1.0 : (a < 0.0 ? -1.0 : a); }
+static inline double bgc_heaviside(double a, double at_zero)
+{
+    return a > 0.0 ? 1.0 : (a < 0.0 ? 0.0 : (a == 0.0 ? at_zero : a));
+}
+
+/* A solver as bgc/solvers.py describes it (the tables are printed below this section).
+   erk: an explicit Runge-Kutta tableau: c[all], a[all x all] (row-major, strictly lower),
+   b and e (NULL: fixed step) and e2 (NULL: one estimate) over the first `stages`; the last of
+   those is f(t + h, y1) if fsal; P[all x degree]: the dense output's polynomials.
+   rosenbrock: Hairer's transformed coefficients (see bgc/solvers.py).
+   radau: Radau IIA of order 5 in RADAU5's transformed form: nodes c1, c2, 1; the eigenvalues
+   gamma and alpha +- i beta of A^-1; T and Ti = T^-1 (3 x 3, row-major) with
+   Ti A^-1 T = [gamma 0 0; 0 alpha -beta; 0 beta alpha]; e: the error estimate's weights. */
+typedef struct bgc_erk {
+    int stages, all, fsal, degree;
+    const double *c, *a, *b, *e, *e2, *P;
+} bgc_erk;
+typedef struct bgc_rosenbrock {
+    int stages;
+    double gamma;
+    const double *c, *d, *a, *C, *m, *e, *d2, *d3; /* a, C: stages x stages, row-major */
+} bgc_rosenbrock;
+typedef struct bgc_radau {
+    double c1, c2, gamma, alpha, beta;
+    const double *T, *Ti, *e;
+} bgc_radau;
+enum { BGC_FAMILY_FIXED, BGC_FAMILY_ERK, BGC_FAMILY_ROSENBROCK, BGC_FAMILY_RADAU5,
+       BGC_FAMILY_AUTO };
+typedef struct bgc_method {
+    const char *name, *summary;
+    int family, order;
+    const bgc_erk *erk;
+    const bgc_rosenbrock *ros;
+    double safe, fac_min, fac_max, beta; /* step-size control: hnew/h in [fac_min, fac_max] */
+    int q;                               /* the error estimate's order + 1 */
+    double expo_beta;                    /* exponent err^(1/q - expo_beta * beta) */
+    int stiff_i, stiff_j;                /* erk: the stiffness test's stages (-1: none) */
+    double stiff_bound;
+    int explicit_solver, stiff_solver;   /* auto: the two phases (-1: not auto) */
+    const bgc_radau *radau;              /* radau5: its constants (NULL: another family) */
+} bgc_method;
+
+/* A block's factorization plan (bgc/sparse.py): static order, or dense (partial pivoting). */
+typedef struct bgc_lu_plan {
+    int m, dense, symmetric, nnz;
+    const int *diag, *lptr, *lpos, *lrow, *uptr, *upos, *ucol, *upd, *prow, *pcol;
+} bgc_lu_plan;
+/* A block and where its values live: offsets into bgc_work.v (the matrix as assembled,
+   its factors, the dense fallback, the right side / solution; for Newton blocks the unknowns,
+   which persist as the next starting value, the residuals, a trial point and its residuals)
+   and into bgc_work.iv (pivots, and which factorization was used). */
+typedef struct bgc_block {
+    bgc_lu_plan lu;
+    int save, lu_off, dense, b, scale, z, r, zt, rt;
+    int piv, how;
+} bgc_block;
+/* A Newton block's residuals r at z (and, if J is not NULL, its Jacobian at the positions of
+   the block's plan); nonzero if a block inside failed. */
+typedef int (*bgc_eval_fn)(double t, const double *x, const bgc_params *p, bgc_work *w,
+                           const double *z, double *r, double *J);
+/* Factor the matrix assembled at .save and solve for the right side at .b, in place. */
+int bgc_block_solve(bgc_work *w, int k, double t);
+/* Solve again for the right side at .b with the factors the last solve (or Newton's final
+   factorization) left. */
+int bgc_block_resolve(bgc_work *w, int k, double t);
+/* Newton's method from the unknowns' last values, damped (Armijo); final_factor: factor the
+   Jacobian at the solution for a later bgc_block_resolve. */
+int bgc_newton(bgc_work *w, int k, bgc_eval_fn f, double t, const double *x,
+               const bgc_params *p, int final_factor);
+
+/* ====================================================== solver tables === */
+/* Printed from bgc/solvers.py. */
+static const double bgc_euler_c[1] = { 0.0 };
+static const double bgc_euler_a[1] = { 0.0 };
+static const double bgc_euler_b[1] = { 1.0 };
+
+static const bgc_erk bgc_euler_erk = { 1, 1, 0, 0, bgc_euler_c, bgc_euler_a, bgc_euler_b, NULL, NULL, NULL };
+static const double bgc_rk4_c[4] = { 0.0, 0.5, 0.5, 1.0 };
+static const double bgc_rk4_a[16] = { 0.0, 0.0, 0.0, 0.0, 0.5, 0.0, 0.0, 0.0, 0.0, 0.5, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0 };
+static const double bgc_rk4_b[4] = { 0.16666666666666666, 0.3333333333333333, 0.3333333333333333, 0.16666666666666666 };
+
+static const bgc_erk bgc_rk4_erk = { 4, 4, 0, 0, bgc_rk4_c, bgc_rk4_a, bgc_rk4_b, NULL, NULL, NULL };
+static const double bgc_dopri5_c[7] = { 0.0, 0.2, 0.3, 0.8, 0.8888888888888888, 1.0, 1.0 };
+static const double bgc_dopri5_a[49] = { 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.2, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.075, 0.225, 0.0, 0.0, 0.0, 0.0, 0.0, 0.9777777777777777, -3.7333333333333334, 3.5555555555555554, 0.0, 0.0, 0.0, 0.0, 2.9525986892242035, -11.595793324188385, 9.822892851699436, -0.2908093278463649, 0.0, 0.0, 0.0, 2.8462752525252526, -10.757575757575758, 8.906422717743473, 0.2784090909090909, -0.2735313036020583, 0.0, 0.0, 0.09114583333333333, 0.0, 0.44923629829290207, 0.6510416666666666, -0.322376179245283, 0.13095238095238096, 0.0 };
+static const double bgc_dopri5_b[7] = { 0.09114583333333333, 0.0, 0.44923629829290207, 0.6510416666666666, -0.322376179245283, 0.13095238095238096, 0.0 };
+static const double bgc_dopri5_e[7] = { 0.0012326388888888888, 0.0, -0.0042527702905061394, 0.03697916666666667, -0.05086379716981132, 0.0419047619047619, -0.025 };
+static const double bgc_dopri5_P[28] = { 1.0, -2.8535800653862835, 3.0717434641059005, -1.1270175653862835, 0.0, 0.0, 0.0, 0.0, 0.0, 4.023133379230305, -6.249321565289, 2.675424484351598, 0.0, -3.7324019615885042, 10.068970589843675, -5.685526961588504, 0.0, 2.5548038301849423, -6.399112377351017, 3.5219323679207912, 0.0, -1.3744241142186024, 3.272657752246729, -1.7672812570757455, 0.0, 1.3824689317781436, -3.764937863556287, 2.382468931778144 };
+
+static const bgc_erk bgc_dopri5_erk = { 7, 7, 1, 4, bgc_dopri5_c, bgc_dopri5_a, bgc_dopri5_b, bgc_dopri5_e, NULL, bgc_dopri5_P };
+static const double bgc_dop853_c[16] = { 0.0, 0.05260015195876773, 0.0789002279381516, 0.1183503419072274, 0.2816496580927726, 0.3333333333333333, 0.25, 0.3076923076923077, 0.6512820512820513, 0.6, 0.8571428571428571, 1.0, 1.0, 0.1, 0.2, 0.7777777777777778 };
+static const double bgc_dop853_a[256] = { 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.05260015195876773, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0197250569845379, 0.0591751709536137, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.02958758547680685, 0.0, 0.08876275643042054, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.2413651341592667, 0.0, -0.8845494793282861, 0.924834003261792, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.037037037037037035, 0.0, 0.0, 0.17082860872947386, 0.12546768756682242, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.037109375, 0.0, 0.0, 0.17025221101954405, 0.06021653898045596, -0.017578125, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.03709200011850479, 0.0, 0.0, 0.17038392571223998, 0.10726203044637328, -0.015319437748624402, 0.008273789163814023, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.6241109587160757, 0.0, 0.0, -3.3608926294469414, -0.868219346841726, 27.59209969944671, 20.154067550477894, -43.48988418106996, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.47766253643826434, 0.0, 0.0, -2.4881146199716677, -0.590290826836843, 21.230051448181193, 15.279233632882423, -33.28821096898486, -0.020331201708508627, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, -0.9371424300859873, 0.0, 0.0, 5.186372428844064, 1.0914373489967295, -8.149787010746927, -18.52006565999696, 22.739487099350505, 2.4936055526796523, -3.0467644718982196, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 2.273310147516538, 0.0, 0.0, -10.53449546673725, -2.0008720582248625, -17.9589318631188, 27.94888452941996, -2.8589982771350235, -8.87285693353063, 12.360567175794303, 0.6433927460157636, 0.0, 0.0, 0.0, 0.0, 0.0, 0.054293734116568765, 0.0, 0.0, 0.0, 0.0, 4.450312892752409, 1.8915178993145003, -5.801203960010585, 0.3111643669578199, -0.1521609496625161, 0.20136540080403034, 0.04471061572777259, 0.0, 0.0, 0.0, 0.0, 0.056167502283047954, 0.0, 0.0, 0.0, 0.0, 0.0, 0.25350021021662483, -0.2462390374708025, -0.12419142326381637, 0.15329179827876568, 0.00820105229563469, 0.007567897660545699, -0.008298, 0.0, 0.0, 0.0, 0.03183464816350214, 0.0, 0.0, 0.0, 0.0, 0.028300909672366776, 0.053541988307438566, -0.05492374857139099, 0.0, 0.0, -0.00010834732869724932, 0.0003825710908356584, -0.00034046500868740456, 0.1413124436746325, 0.0, 0.0, -0.42889630158379194, 0.0, 0.0, 0.0, 0.0, -4.697621415361164, 7.683421196062599, 4.06898981839711, 0.3567271874552811, 0.0, 0.0, 0.0, -0.0013990241651590145, 2.9475147891527724, -9.15095847217987, 0.0 };
+static const double bgc_dop853_b[13] = { 0.054293734116568765, 0.0, 0.0, 0.0, 0.0, 4.450312892752409, 1.8915178993145003, -5.801203960010585, 0.3111643669578199, -0.1521609496625161, 0.20136540080403034, 0.04471061572777259, 0.0 };
+static const double bgc_dop853_e[13] = { 0.01312004499419488, 0.0, 0.0, 0.0, 0.0, -1.2251564463762044, -0.4957589496572502, 1.6643771824549864, -0.35032884874997366, 0.3341791187130175, 0.08192320648511571, -0.022355307863886294, 0.0 };
+static const double bgc_dop853_e2[13] = { -0.18980075407240762, 0.0, 0.0, 0.0, 0.0, 4.450312892752409, 1.8915178993145003, -5.801203960010585, -0.42268232132379197, -0.1521609496625161, 0.20136540080403034, 0.022651792198360825, 0.0 };
+static const double bgc_dop853_P[112] = { 1.0, -10.266057073759306, 48.161850968566455, -114.93304874997833, 147.46446875669767, -97.06685363011368, 25.69393346270375, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 13.917653631776604, -154.78787266663716, 522.9219089608218, -456.25918840208783, -75.53193732135753, 154.18974869023643, 0.0, 2.6056037519936095, -21.622822384626506, 2.535182028966755, 292.25417465990404, -505.40999933296894, 231.5293791760455, 0.0, -15.018944223519684, 160.09447708973047, -474.3071826037644, 135.96036916173838, 545.1091945264187, -357.6391179106141, 0.0, 3.050527683318488, -38.54396729189063, 174.47140009219885, -337.0513470238771, 291.78987509083254, -93.40532418362432, 0.0, -1.3278744327655212, 16.661770430049543, -74.44027814126304, 140.75210016191608, -119.2562021040512, 37.45832313645163, 0.0, 2.844533632672879, -36.55829548991012, 170.69007169147514, -345.9748485480496, 313.299553623578, -104.0996495089623, 0.0, 0.7657106259527866, -9.906995535619366, 46.8029919188744, -96.5198694669957, 88.74316650017616, -29.8402934266605, 0.0, -1.0889903364513334, 14.097013042320002, -66.68230591294363, 137.96299063474376, -127.82216401767992, 43.53345659001114, 0.0, 18.148505520854727, -127.63310949253875, 357.3419516129657, -500.7031507909224, 349.17035710882897, -96.32455395918828, 0.0, -9.194632392478356, 93.3567459327894, -282.6272618704363, 361.14007718803333, -201.85219053352347, 39.17726167561544, 0.0, -4.436036387594894, 56.68120539776666, -261.77342902691703, 520.9742236688993, -461.17279991013964, 149.72683625798564 };
+
+static const bgc_erk bgc_dop853_erk = { 13, 16, 1, 7, bgc_dop853_c, bgc_dop853_a, bgc_dop853_b, bgc_dop853_e, bgc_dop853_e2, bgc_dop853_P };
+static const double bgc_rodas4_c[6] = { 0.0, 0.386, 0.21, 0.63, 1.0, 1.0 };
+static const double bgc_rodas4_d[6] = { 0.25, -0.1043, 0.1035, -0.03620000000000023, 0.0, 0.0 };
+static const double bgc_rodas4_a[36] = { 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.544, 0.0, 0.0, 0.0, 0.0, 0.0, 0.9466785280815826, 0.2557011698983284, 0.0, 0.0, 0.0, 0.0, 3.314825187068521, 2.896124015972201, 0.9986419139977817, 0.0, 0.0, 0.0, 1.221224509226641, 6.019134481288629, 12.53708332932087, -0.687886036105895, 0.0, 0.0, 1.221224509226641, 6.019134481288629, 12.53708332932087, -0.687886036105895, 1.0, 0.0 };
+static const double bgc_rodas4_C[36] = { 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, -5.6688, 0.0, 0.0, 0.0, 0.0, 0.0, -2.430093356833875, -0.2063599157091915, 0.0, 0.0, 0.0, 0.0, -0.1073529058151375, -9.594562251023355, -20.47028614809616, 0.0, 0.0, 0.0, 7.496443313967647, -10.24680431464352, -33.99990352819905, 11.7089089320616, 0.0, 0.0, 8.083246795921522, -7.981132988064893, -31.52159432874371, 16.31930543123136, -6.058818238834054, 0.0 };
+static const double bgc_rodas4_m[6] = { 1.221224509226641, 6.019134481288629, 12.53708332932087, -0.687886036105895, 1.0, 1.0 };
+static const double bgc_rodas4_e[6] = { 0.0, 0.0, 0.0, 0.0, 0.0, 1.0 };
+static const double bgc_rodas4_d2[6] = { 10.12623508344586, -7.487995877610167, -34.80091861555747, -7.992771707568823, 1.025137723295662, 0.0 };
+static const double bgc_rodas4_d3[6] = { -0.6762803392801253, 6.087714651680015, 16.43084320892478, 24.76722511418386, -6.594389125716872, 0.0 };
+
+static const bgc_rosenbrock bgc_rodas4_ros = { 6, 0.25, bgc_rodas4_c, bgc_rodas4_d, bgc_rodas4_a, bgc_rodas4_C, bgc_rodas4_m, bgc_rodas4_e, bgc_rodas4_d2, bgc_rodas4_d3 };
+static const double bgc_radau5_T[9] = { 0.09123239487089295, -0.1412552950209542, -0.030029194105147424, 0.241717932707107, 0.20412935229379994, 0.3829421127572619, 0.966048182615093, 1.0, 0.0 };
+static const double bgc_radau5_Ti[9] = { 4.325579890063155, 0.33919925181580984, 0.5417705399358749, -4.178718591551905, -0.32768282076106237, 0.47662355450055044, -0.5028726349457868, 2.571926949855605, -0.5960392048282249 };
+static const double bgc_radau5_e[3] = { -10.048809399827416, 1.382142733160749, -0.3333333333333333 };
+
+static const bgc_radau bgc_radau5_radau = { 0.1550510257216822, 0.6449489742783178, 3.637834252744496, 2.6810828736277523, 3.0504301992474105, bgc_radau5_T, bgc_radau5_Ti, bgc_radau5_e };
+const char *const bgc_solver_names[BGC_NUM_SOLVERS] = {
+    "euler",
+    "rk4",
+    "dopri5",
+    "dop853",
+    "rodas4",
+    "radau5",
+    "auto",
+};
+static const bgc_method bgc_methods[BGC_NUM_SOLVERS] = {
+    { "euler", "explicit Euler, fixed step", BGC_FAMILY_FIXED, 1, &bgc_euler_erk, NULL, 0.9, 0.2, 10.0, 0.0, 1, 0.75, -1, -1, 0.0, -1, -1, NULL },
+    { "rk4", "classical Runge-Kutta, fixed step", BGC_FAMILY_FIXED, 4, &bgc_rk4_erk, NULL, 0.9, 0.2, 10.0, 0.0, 4, 0.75, -1, -1, 0.0, -1, -1, NULL },
+    { "dopri5", "Dormand-Prince 5(4), adaptive, dense output of order 4", BGC_FAMILY_ERK, 5, &bgc_dopri5_erk, NULL, 0.9, 0.2, 10.0, 0.04, 5, 0.75, 5, 6, 3.25, -1, -1, NULL },
+    { "dop853", "Dormand-Prince 8(5,3), adaptive, dense output of order 7: tight tolerances", BGC_FAMILY_ERK, 8, &bgc_dop853_erk, NULL, 0.9, 0.333, 6.0, 0.04, 8, 0.2, -1, -1, 0.0, -1, -1, NULL },
+    { "rodas4", "Rosenbrock 4(3), L-stable, stiff; the Jacobian every step", BGC_FAMILY_ROSENBROCK, 4, NULL, &bgc_rodas4_ros, 0.9, 0.2, 6.0, 0.0, 4, 0.75, -1, -1, 0.0, -1, -1, NULL },
+    { "radau5", "Radau IIA of order 5, implicit, L-stable, stiff; Jacobian and factorisations reused", BGC_FAMILY_RADAU5, 5, NULL, NULL, 0.9, 0.2, 8.0, 0.0, 4, 0.75, -1, -1, 0.0, -1, -1, &bgc_radau5_radau },
+    { "auto", "dopri5 until its stiffness test fires, then rodas4 for the rest of the run", BGC_FAMILY_AUTO, 5, NULL, NULL, 0.9, 0.2, 10.0, 0.0, 5, 0.75, -1, -1, 0.0, 2, 4, NULL },
+};
+
+/* ====================================================================== runtime === */
+/* bgc's runtime: model-independent, the same in every generated program (bgc/runtime/runtime.c,
+   inlined verbatim).  It uses the model part above: the sizes, bgc_model_rhs, _outputs and
+   _jvp, the blocks' plans and the Jacobian's colouring. */
+
+/* ========================================================== parameters === */
+
+int bgc_param_index(const char *name)
+{
+    int j;
+    for (j = 0; j < BGC_NUM_PARAMS; j++)
+        if (strcmp(name, bgc_param_names[j]) == 0)
+            return j;
+    return -1;
+}
+
+/* ========================================================== workspace === */
+
+bgc_work *bgc_work_new(void)
+{
+    bgc_work *w = (bgc_work *)calloc(1, sizeof *w);
+    if (!w)
+        return NULL;
+    w->v = (double *)calloc(BGC_DIM(BGC_WORK_DOUBLES), sizeof *w->v);
+    w->iv = (int *)calloc(BGC_DIM(BGC_WORK_INTS), sizeof *w->iv);
+    if (!w->v || !w->iv) {
+        bgc_work_free(w);
+        return NULL;
+    }
+    w->rtol = BGC_SCENE_RTOL;
+    w->atol = BGC_SCENE_ATOL;
+    return w;
+}
+
+void bgc_work_free(bgc_work *w)
+{
+    if (!w)
+        return;
+    free(w->v);
+    free(w->iv);
+    free(w);
+}
+
+void bgc_work_message(const bgc_work *w, char *msg, size_t msg_size)
+{
+    static const char *const how[] = { "failed", "is singular", "did not converge",
+                                       "has a non-finite residual" };
+    const int k = w->block - 1;
+    snprintf(msg, msg_size, "at t = %.17g: algebraic block %d (%s) %s", w->t, w->block,
+             k >= 0 && k < BGC_NUM_BLOCKS ? bgc_block_names[k] : "?",
+             how[w->failure >= 1 && w->failure <= 3 ? w->failure : 0]);
+}
+
+static int bgc_block_fail(bgc_work *w, int k, int failure, double t)
+{
+    w->block = k + 1;
+    w->failure = failure;
+    w->t = t;
+    return 1;
+}
+
+/* ======================================================= linear solves === */
+
+/* Row scales of the assembled matrix: the largest magnitude in each row (of the plan's
+   positions); a pivot below 1e-14 of its row's scale counts as zero. */
+static void bgc_row_scales(const bgc_lu_plan *pl, const double *a, double *scale)
+{
+    int i, q;
+    for (i = 0; i < pl->m; i++)
+        scale[i] = 0.0;
+    for (q = 0; q < pl->nnz; q++) {
+        const int i2 = pl->dense ? q / pl->m : pl->prow[q];
+        scale[i2] = bgc_max(scale[i2], fabs(a[q]));
+    }
+}
+
+/* LU of the dense m x m matrix a (row-major) with partial pivoting, in place; scale: the
+   rows' scales, permuted along.  0, or -1 if singular. */
+static int bgc_lu_dense(int m, double *a, int *piv, double *scale)
+{
+    int i, j, k;
+    for (k = 0; k < m; k++) {
+        int r = k;
+        for (i = k + 1; i < m; i++)
+            if (fabs(a[i * m + k]) > fabs(a[r * m + k]))
+                r = i;
+        piv[k] = r;
+        if (!(fabs(a[r * m + k]) > 1e-14 * scale[r]) || !isfinite(a[r * m + k]))
+            return -1;
+        if (r != k) {
+            double tmp = scale[k];
+            scale[k] = scale[r];
+            scale[r] = tmp;
+            for (j = 0; j < m; j++) {
+                tmp = a[k * m + j];
+                a[k * m + j] = a[r * m + j];
+                a[r * m + j] = tmp;
+            }
+        }
+        for (i = k + 1; i < m; i++) {
+            const double f = a[i * m + k] / a[k * m + k];
+            a[i * m + k] = f;
+            for (j = k + 1; j < m; j++)
+                a[i * m + j] -= f * a[k * m + j];
+        }
+    }
+    return 0;
+}
+
+static void bgc_lu_dense_solve(int m, const double *a, const int *piv, double *b)
+{
+    int i, j, k;
+    for (k = 0; k < m; k++) {
+        if (piv[k] != k) {
+            const double tmp = b[k];
+            b[k] = b[piv[k]];
+            b[piv[k]] = tmp;
+        }
+        for (i = k + 1; i < m; i++)
+            b[i] -= a[i * m + k] * b[k];
+    }
+    for (i = m - 1; i >= 0; i--) {
+        double sum = b[i];
+        for (j = i + 1; j < m; j++)
+            sum -= a[i * m + j] * b[j];
+        b[i] = sum / a[i * m + i];
+    }
+}
+
+/* LU in the plan's static order, in place.  0, or 1 if a pivot fails its test: for a
+   symmetric matrix one sign for all pivots (definite: elimination is LDL^T, stable without
+   pivoting), otherwise |pivot| >= 0.1 * the largest entry below it; and clearly nonzero for
+   its row. */
+static int bgc_lu_static(const bgc_lu_plan *pl, double *lu, const double *scale)
+{
+    int k, l, u, q = 0;
+    const double sign = pl->m > 0 && lu[pl->diag[0]] < 0.0 ? -1.0 : 1.0;
+    for (k = 0; k < pl->m; k++) {
+        const double pivot = lu[pl->diag[k]];
+        double largest = fabs(pivot);
+        if (pl->symmetric) {
+            if (!(sign * pivot > 1e-14 * scale[k]) || !isfinite(pivot))
+                return 1;
+        } else {
+            for (l = pl->lptr[k]; l < pl->lptr[k + 1]; l++)
+                largest = bgc_max(largest, fabs(lu[pl->lpos[l]]));
+            if (!(fabs(pivot) >= 0.1 * largest && fabs(pivot) > 1e-14 * scale[k]) ||
+                !isfinite(pivot))
+                return 1;
+        }
+        for (l = pl->lptr[k]; l < pl->lptr[k + 1]; l++) {
+            const double f = lu[pl->lpos[l]] / pivot;
+            lu[pl->lpos[l]] = f;
+            for (u = pl->uptr[k]; u < pl->uptr[k + 1]; u++)
+                lu[pl->upd[q++]] -= f * lu[pl->upos[u]];
+        }
+    }
+    return 0;
+}
+
+static void bgc_lu_static_solve(const bgc_lu_plan *pl, const double *lu, double *b)
+{
+    int k, l, u;
+    for (k = 0; k < pl->m; k++)
+        for (l = pl->lptr[k]; l < pl->lptr[k + 1]; l++)
+            b[pl->lrow[l]] -= lu[pl->lpos[l]] * b[k];
+    for (k = pl->m - 1; k >= 0; k--) {
+        double sum = b[k];
+        for (u = pl->uptr[k]; u < pl->uptr[k + 1]; u++)
+            sum -= lu[pl->upos[u]] * b[pl->ucol[u]];
+        b[k] = sum / lu[pl->diag[k]];
+    }
+}
+
+/* Factors block k's matrix (assembled at .save): the static order, else densely with
+   partial pivoting.  Records which in .how; -1 if the matrix is singular. */
+static int bgc_block_factor(bgc_work *w, const bgc_block *b)
+{
+    const bgc_lu_plan *pl = &b->lu;
+    double *save = w->v + b->save, *lu = w->v + b->lu_off, *dense = w->v + b->dense;
+    double *scale = w->v + b->scale;
+    int *piv = w->iv + b->piv, q, how = 0;
+    bgc_row_scales(pl, save, scale);
+    if (!pl->dense) {
+        memcpy(lu, save, (size_t)pl->nnz * sizeof *lu);
+        if (bgc_lu_static(pl, lu, scale) == 0) {
+            w->iv[b->how] = 0;
+            return 0;
+        }
+        for (q = 0; q < pl->m * pl->m; q++)
+            dense[q] = 0.0;
+        for (q = 0; q < pl->nnz; q++)
+            dense[pl->prow[q] * pl->m + pl->pcol[q]] = save[q];
+        how = 1;
+    } else {
+        memcpy(dense, save, (size_t)pl->nnz * sizeof *dense);
+        how = 1;
+    }
+    w->iv[b->how] = how;
+    return bgc_lu_dense(pl->m, dense, piv, scale);
+}
+
+static void bgc_block_lsolve(bgc_work *w, const bgc_block *b, double *rhs)
+{
+    if (w->iv[b->how] == 0)
+        bgc_lu_static_solve(&b->lu, w->v + b->lu_off, rhs);
+    else
+        bgc_lu_dense_solve(b->lu.m, w->v + b->dense, w->iv + b->piv, rhs);
+}
+
+static int bgc_first_nonfinite(const double *v, int n)
+{
+    int i;
+    for (i = 0; i < n; i++)
+        if (!isfinite(v[i]))
+            return i;
+    return -1;
+}
+
+int bgc_block_solve(bgc_work *w, int k, double t)
+{
+    const bgc_block *b = &bgc_blocks[k];
+    if (bgc_block_factor(w, b))
+        return bgc_block_fail(w, k, BGC_BLOCK_SINGULAR, t);
+    bgc_block_lsolve(w, b, w->v + b->b);
+    return 0;
+}
+
+int bgc_block_resolve(bgc_work *w, int k, double t)
+{
+    (void)t;
+    bgc_block_lsolve(w, &bgc_blocks[k], w->v + bgc_blocks[k].b);
+    return 0;
+}
+
+static double bgc_norm2(const double *r, int m)
+{
+    double s = 0.0;
+    int i;
+    for (i = 0; i < m; i++)
+        s += r[i] * r[i];
+    return sqrt(s);
+}
+
+#define BGC_NEWTON_MAXIT 50
+
+int bgc_newton(bgc_work *w, int k, bgc_eval_fn f, double t, const double *x,
+               const bgc_params *p, int final_factor)
+{
+    const bgc_block *b = &bgc_blocks[k];
+    const int m = b->lu.m;
+    double *z = w->v + b->z, *r = w->v + b->r, *dz = w->v + b->b, *zt = w->v + b->zt;
+    double *rt = w->v + b->rt, *J = w->v + b->save, norm, trial, lambda;
+    int it, i, small;
+    if (f(t, x, p, w, z, r, J))
+        return 1;
+    norm = bgc_norm2(r, m);
+    if (!isfinite(norm) || bgc_first_nonfinite(z, m) >= 0) {
+        for (i = 0; i < m; i++) /* from a stale or bad start: try again from zero */
+            z[i] = 0.0;
+        if (f(t, x, p, w, z, r, J))
+            return 1;
+        norm = bgc_norm2(r, m);
+        if (!isfinite(norm))
+            return bgc_block_fail(w, k, BGC_BLOCK_NONFINITE, t);
+    }
+    for (it = 0; norm > 0.0; it++) {
+        if (it == BGC_NEWTON_MAXIT)
+            return bgc_block_fail(w, k, BGC_BLOCK_DIVERGED, t);
+        if (bgc_block_factor(w, b))
+            return bgc_block_fail(w, k, BGC_BLOCK_SINGULAR, t);
+        for (i = 0; i < m; i++)
+            dz[i] = -r[i];
+        bgc_block_lsolve(w, b, dz);
+        small = 1; /* a full step this small ends the iteration (quadratic convergence) */
+        for (i = 0; i < m; i++)
+            if (fabs(dz[i]) > 0.01 * (w->atol + w->rtol * fabs(z[i])) &&
+                fabs(dz[i]) > 4.0 * DBL_EPSILON * fabs(z[i]))
+                small = 0;
+        for (lambda = 1.0;; lambda *= 0.5) {
+            for (i = 0; i < m; i++)
+                zt[i] = z[i] + lambda * dz[i];
+            if (f(t, x, p, w, zt, rt, NULL))
+                return 1;
+            trial = bgc_norm2(rt, m);
+            if (small || trial <= (1.0 - 1e-4 * lambda) * norm || lambda < 1e-3)
+                break;
+        }
+        for (i = 0; i < m; i++) {
+            z[i] = zt[i];
+            r[i] = rt[i];
+        }
+        norm = trial;
+        if (!isfinite(norm))
+            return bgc_block_fail(w, k, BGC_BLOCK_NONFINITE, t);
+        if (small)
+            break;
+        if (f(t, x, p, w, z, r, J))
+            return 1;
+    }
+    /* the last evaluation was at z: the block's other variables hold their values there */
+    if (final_factor) {
+        if (f(t, x, p, w, z, r, J))
+            return 1;
+        if (bgc_block_factor(w, b))
+            return bgc_block_fail(w, k, BGC_BLOCK_SINGULAR, t);
+    }
+    return 0;
+}
+
+/* ============================================================ Jacobian === */
+
+int bgc_jacobian(double t, const double *x, const bgc_params *p, bgc_work *w, double *J)
+{
+    enum { N = BGC_NUM_STATES };
+    double *v = w->v + BGC_WORK_JAC, *jv = w->v + BGC_WORK_JAC + BGC_DIM(N);
+    int c, k, i, q;
+    for (q = 0; q < N * N; q++)
+        J[q] = 0.0;
+    for (i = 0; i < N; i++)
+        v[i] = 0.0;
+    for (c = 0; c < BGC_JAC_COLORS; c++) {
+        for (k = bgc_jac_color_ptr[c]; k < bgc_jac_color_ptr[c + 1]; k++)
+            v[bgc_jac_color_cols[k]] = 1.0;
+        if (bgc_model_jvp(t, x, p, w, v, jv))
+            return 1;
+        for (k = bgc_jac_color_ptr[c]; k < bgc_jac_color_ptr[c + 1]; k++) {
+            const int j = bgc_jac_color_cols[k];
+            v[j] = 0.0;
+            for (q = bgc_jac_col_ptr[j]; q < bgc_jac_col_ptr[j + 1]; q++)
+                J[bgc_jac_col_rows[q] * N + j] = jv[bgc_jac_col_rows[q]];
+        }
+    }
+    return 0;
+}
+
+int bgc_rhs(double t, const double *x, const bgc_params *p, bgc_work *w, double *dx)
+{
+    return bgc_model_rhs(t, x, p, w, dx);
+}
+
+int bgc_outputs(double t, const double *x, const bgc_params *p, bgc_work *w, double *y)
+{
+    return bgc_model_outputs(t, x, p, w, y);
+}
+
+int bgc_jvp(double t, const double *x, const bgc_params *p, bgc_work *w, const double *v,
+            double *jv)
+{
+    return bgc_model_jvp(t, x, p, w, v, jv);
+}
+
+/* ========================================================= constraints === */
+
+int bgc_check_constraints(double t, const double *x, const bgc_params *p, FILE *err)
+{
+    double r[BGC_DIM(BGC_NUM_CONSTRAINTS)] = { 0.0 }, s[BGC_DIM(BGC_NUM_CONSTRAINTS)] = { 0.0 };
+    bgc_params q = *p;
+    int k, bad = 0;
+    bgc_params_update(&q);
+    bgc_residual(t, x, &q, r);
+    bgc_scale(t, x, &q, s);
+    for (k = 0; k < BGC_NUM_CONSTRAINTS; k++) {
+        if (fabs(r[k]) <= 1e-9 * s[k])
+            continue;
+        bad++;
+        if (err)
+            fprintf(err, "error: initial conditions violate constraint '%s' (%s): residual = %.17g\n",
+                    bgc_constraint_names[k], bgc_constraint_levels[k], r[k]);
+    }
+    return bad;
+}
+
+/* Solves A z = b (A m x m row-major, both overwritten, z in b) by Gaussian elimination with
+   partial pivoting.  -1 if A is singular to working precision. */
+static int bgc_solve(int m, double *A, double *b)
+{
+    double scale = 0.0;
+    int i, j, k;
+    for (i = 0; i < m * m; i++)
+        scale = bgc_max(scale, fabs(A[i]));
+    for (k = 0; k < m; k++) {
+        int piv = k;
+        for (i = k + 1; i < m; i++)
+            if (fabs(A[i * m + k]) > fabs(A[piv * m + k]))
+                piv = i;
+        if (!(fabs(A[piv * m + k]) > 1e-14 * scale))
+            return -1;
+        for (j = 0; j < m && piv != k; j++) {
+            double tmp = A[k * m + j];
+            A[k * m + j] = A[piv * m + j];
+            A[piv * m + j] = tmp;
+        }
+        if (piv != k) {
+            double tmp = b[k];
+            b[k] = b[piv];
+            b[piv] = tmp;
+        }
+        for (i = k + 1; i < m; i++) {
+            double f = A[i * m + k] / A[k * m + k];
+            for (j = k; j < m; j++)
+                A[i * m + j] -= f * A[k * m + j];
+            b[i] -= f * b[k];
+        }
+    }
+    for (i = m - 1; i >= 0; i--) {
+        double sum = b[i];
+        for (j = i + 1; j < m; j++)
+            sum -= A[i * m + j] * b[j];
+        b[i] = sum / A[i * m + i];
+    }
+    return 0;
+}
+
+/* Projects x onto the m rows (indices rows[]) whose Jacobian jac() gives; only the states
+   with movable[i] (all if movable is NULL) change.  0, or -1 singular, -2 no convergence. */
+static int bgc_project_rows(double t, double *x, const bgc_params *p, const int *rows, int m,
+                            void (*jac)(double, const double *, const bgc_params *, double *),
+                            const int *movable)
+{
+    enum { N = BGC_NUM_STATES, M = BGC_DIM(BGC_NUM_CONSTRAINTS) };
+    double r[M] = { 0.0 }, s[M] = { 0.0 }, z[M] = { 0.0 }, A[M * M] = { 0.0 }, J[M * BGC_DIM(N)] = { 0.0 };
+    int it, i, j, k;
+    for (it = 0;; it++) {
+        int holds = 1;
+        bgc_residual(t, x, p, r);
+        bgc_scale(t, x, p, s);
+        for (i = 0; i < m; i++) {
+            z[i] = r[rows[i]];
+            if (!(fabs(z[i]) <= 1e-9 * s[rows[i]]))
+                holds = 0;
+        }
+        if (holds)
+            return 0;
+        if (it == 50)
+            return -2;
+        jac(t, x, p, J);
+        for (i = 0; i < m; i++)
+            for (k = 0; k < N; k++)
+                if (movable && !movable[k])
+                    J[i * N + k] = 0.0;
+        for (i = 0; i < m; i++)
+            for (j = 0; j < m; j++) {
+                double sum = 0.0;
+                for (k = 0; k < N; k++)
+                    sum += J[i * N + k] * J[j * N + k];
+                A[i * m + j] = sum;
+            }
+        if (bgc_solve(m, A, z))
+            return -1;
+        for (k = 0; k < N; k++) {
+            double dx = 0.0;
+            for (i = 0; i < m; i++)
+                dx += J[i * N + k] * z[i];
+            x[k] -= dx;
+        }
+    }
+}
+
+int bgc_project_initial(double t, double *x, const bgc_params *p, char *msg, size_t msg_size)
+{
+    static const char *const why[] = { "", "the constraint Jacobian is singular",
+                                       "no convergence after 50 iterations" };
+    bgc_params q = *p;
+    const char *level = "position";
+    int rc;
+    bgc_params_update(&q);
+    rc = bgc_project_rows(t, x, &q, bgc_position_rows, BGC_NUM_POSITION_ROWS, bgc_position_jac,
+                          NULL);
+    if (rc == 0) {
+        rc = bgc_project_rows(t, x, &q, bgc_velocity_rows, BGC_NUM_VELOCITY_ROWS,
+                              bgc_velocity_jac, bgc_velocity_movable);
+        level = "velocity";
+    }
+    if (rc == 0)
+        return 0;
+    snprintf(msg, msg_size, "cannot project the initial conditions onto the %s constraints: %s",
+             level, why[-rc]);
+    return BGC_ERR_CONSTRAINT;
+}
+
+/* ============================================================ settings === */
+
+void bgc_settings_default(bgc_settings *s)
+{
+    s->t0 = BGC_SCENE_T0;
+    s->t_end = BGC_SCENE_T_END;
+    s->dt = BGC_SCENE_DT;
+    s->solver = BGC_SCENE_SOLVER;
+    s->rtol = BGC_SCENE_RTOL;
+    s->atol = BGC_SCENE_ATOL;
+    s->step = BGC_SCENE_STEP;
+}
+
+int bgc_check_settings(const bgc_settings *s, char *msg, size_t msg_size)
+{
+    const char *bad = NULL;
+    if (!(isfinite(s->t0) && isfinite(s->t_end) && isfinite(s->dt) && isfinite(s->rtol)
+          && isfinite(s->atol) && isfinite(s->step)))
+        bad = "settings must be finite numbers";
+    else if (!(s->dt > 0.0))
+        bad = "--dt must be positive";
+    else if (s->t_end < s->t0)
+        bad = "--t-end must not be before the start time";
+    else if (!(s->rtol > 0.0 && s->atol > 0.0))
+        bad = "--rtol and --atol must be positive";
+    else if (s->step < 0.0)
+        bad = "--step must be positive";
+    else if (s->solver < 0 || s->solver >= BGC_NUM_SOLVERS)
+        bad = "unknown solver";
+    else if (!((s->t_end - s->t0) / s->dt <= 1e9))
+        bad = "too many output rows (more than 1e9): increase --dt";
+    if (!bad)
+        return 0;
+    snprintf(msg, msg_size, "%s", bad);
+    return BGC_ERR_USAGE;
+}
+
+
+/* ============================================================== solve === */
+/* The solvers' common machinery (output times, failures, the run state, the first step
+   size), the explicit Runge-Kutta family (fixed-step and embedded pairs, read from the
+   tables of bgc/solvers.py above) and bgc_simulate, which picks a family's run function.
+   The stiff families follow in bgc/runtime/stiff.c. */
+
+/* Output times: t0 + k*dt for k < n, and t_end for k = n (see the top of the file). */
+static long bgc_output_count(const bgc_settings *s)
+{
+    double n = ceil((s->t_end - s->t0) / s->dt - 1e-6);
+    return n > 0.0 ? (long)n : 0;
+}
+
+static double bgc_output_time(const bgc_settings *s, long k, long n)
+{
+    return k >= n ? s->t_end : s->t0 + (double)k * s->dt;
+}
+
+/* Steps below this are too small for floating point to resolve at t (16 units in the last
+   place of t; DBL_MIN at t = 0). */
+static double bgc_hmin(double t)
+{
+    return bgc_max(16.0 * DBL_EPSILON * fabs(t), DBL_MIN);
+}
+
+static int bgc_fail(char *msg, size_t msg_size, double t, const char *what, const char *name)
+{
+    snprintf(msg, msg_size, "at t = %.17g: %s '%s' is not finite", t, what, name);
+    return BGC_ERR_RUNTIME;
+}
+
+static int bgc_fail_step(char *msg, size_t msg_size, double t, double h, int worst)
+{
+    if (worst >= 0)
+        snprintf(msg, msg_size, "at t = %.17g: step size too small (h = %.3g), limited by state '%s'",
+                 t, h, bgc_state_names[worst]);
+    else
+        snprintf(msg, msg_size, "at t = %.17g: step size too small (h = %.3g)", t, h);
+    return BGC_ERR_RUNTIME;
+}
+
+static int bgc_fail_block(char *msg, size_t msg_size, const bgc_work *w)
+{
+    bgc_work_message(w, msg, msg_size);
+    return BGC_ERR_RUNTIME;
+}
+
+static int bgc_fail_memory(char *msg, size_t msg_size)
+{
+    snprintf(msg, msg_size, "out of memory");
+    return BGC_ERR_RUNTIME;
+}
+
+/* A run in progress: what every family's run function shares.  A run function integrates
+   from (r->t, y) to s->t_end, hands the output times k = r->kout .. r->nout to the sink as it
+   passes them (k = 0, the start, has been handed over before), keeps r->t and y at its last
+   accepted step, and returns 0, an error (message in r->msg), the sink's nonzero value, or
+   BGC_STIFF (an auto run's explicit phase found the problem stiff; r->h is its last step). */
+typedef struct bgc_run {
+    const bgc_settings *s;
+    const bgc_params *p;
+    bgc_work *w;
+    bgc_sink sink;
+    void *ctx;
+    bgc_stats *st;
+    char *msg;
+    size_t msg_size;
+    long nout, kout;
+    double t, h;
+    int detect_stiffness;
+} bgc_run;
+#define BGC_STIFF (-1)
+
+/* Evaluates the outputs at (t, x), checks them and hands them to the sink. */
+static int bgc_emit(bgc_run *r, double t, const double *x)
+{
+    double *y = r->w->v + BGC_WORK_Y;
+    int j;
+    if (bgc_model_outputs(t, x, r->p, r->w, y))
+        return bgc_fail_block(r->msg, r->msg_size, r->w);
+    j = bgc_first_nonfinite(y, BGC_NUM_OUTPUTS);
+    if (j >= 0)
+        return bgc_fail(r->msg, r->msg_size, t, "output", bgc_output_names[j]);
+    return r->sink ? r->sink(r->ctx, t, x, y) : 0;
+}
+
+/* A method's continuous extension: the state at t + theta h of the step just accepted. */
+typedef void (*bgc_dense_fn)(const void *dctx, double theta, double *yout);
+
+/* After an accepted step from t to tph = t + h (exactly t_end on the last step): hands over
+   the output times in (t, tph], tph itself from y1 and the others through dense (prepare, if
+   not NULL, is called once before the first of them).  yout: N doubles of scratch. */
+static int bgc_emit_step(bgc_run *r, double t, double h, double tph, const double *y1,
+                         int (*prepare)(void *dctx), bgc_dense_fn dense, void *dctx,
+                         double *yout)
+{
+    int rc, prepared = prepare == NULL;
+    for (; r->kout <= r->nout; r->kout++) {
+        const double tk = bgc_output_time(r->s, r->kout, r->nout);
+        if (tk > tph)
+            break;
+        if (tk == tph) {
+            rc = bgc_emit(r, tk, y1);
+        } else {
+            if (!prepared) {
+                rc = prepare(dctx);
+                if (rc)
+                    return rc;
+                prepared = 1;
+            }
+            dense(dctx, (tk - t) / h, yout);
+            rc = bgc_emit(r, tk, yout);
+        }
+        if (rc)
+            return rc;
+    }
+    return 0;
+}
+
+/* The error-norm weight of component i (Hairer's): atol + rtol * max(|y_i|, |y1_i|). */
+static inline double bgc_weight(const bgc_settings *s, double y, double y1)
+{
+    return s->atol + s->rtol * bgc_max(fabs(y), fabs(y1));
+}
+
+/* Hairer's initial step size guess (HINIT) for a method of order q; f1, y1: scratch. */
+static double bgc_initial_step(bgc_run *r, int q, const double *y, const double *f0,
+                               double hmax, double *y1, double *f1)
+{
+    enum { N = BGC_NUM_STATES };
+    const bgc_settings *s = r->s;
+    double dnf = 0.0, dny = 0.0, der2 = 0.0, der12, h, h1;
+    int i;
+    for (i = 0; i < N; i++) {
+        const double sk = s->atol + s->rtol * fabs(y[i]);
+        const double qf = f0[i] / sk, qy = y[i] / sk;
+        dnf += qf * qf;
+        dny += qy * qy;
+    }
+    h = (dnf <= 1e-10 || dny <= 1e-10) ? 1e-6 : sqrt(dny / dnf) * 0.01;
+    h = bgc_min(h, hmax);
+    for (i = 0; i < N; i++)
+        y1[i] = y[i] + h * f0[i];
+    r->st->rhs++;
+    if (bgc_model_rhs(r->t + h, y1, r->p, r->w, f1))
+        return h; /* a block failed there: start small, the step control takes over */
+    for (i = 0; i < N; i++) {
+        const double d = (f1[i] - f0[i]) / (s->atol + s->rtol * fabs(y[i]));
+        der2 += d * d;
+    }
+    der2 = sqrt(der2) / h;
+    der12 = bgc_max(sqrt(dnf), fabs(der2)); /* a NaN der2 is ignored */
+    h1 = der12 <= 1e-15 ? bgc_max(1e-6, h * 1e-3) : pow(0.01 / der12, 1.0 / (double)q);
+    if (!(h1 > 0.0))
+        h1 = h * 1e-3;
+    return bgc_min(bgc_min(100.0 * h, h1), hmax);
+}
+
+/* ------------------------------------------------ explicit Runge-Kutta methods --- */
+
+/* out = y + h * sum_j w[j * stride] k_j over the stages j < count with a nonzero weight
+   (y NULL: out = h * sum); summed stage by stage, left to right, as the Python runtime does.
+   out must not overlap y or k. */
+static void bgc_combine(double *out, const double *y, double h, const double *w, int stride,
+                        int count, const double *k)
+{
+    enum { N = BGC_NUM_STATES, D = BGC_DIM(BGC_NUM_STATES) };
+    int j, l, first = 1;
+    for (j = 0; j < count; j++) {
+        const double a = w[(size_t)j * stride];
+        const double *kj = k + (size_t)j * D;
+        if (a == 0.0)
+            continue;
+        if (first)
+            for (l = 0; l < N; l++)
+                out[l] = a * kj[l];
+        else
+            for (l = 0; l < N; l++)
+                out[l] += a * kj[l];
+        first = 0;
+    }
+    if (first)
+        for (l = 0; l < N; l++)
+            out[l] = 0.0;
+    if (y)
+        for (l = 0; l < N; l++)
+            out[l] = y[l] + h * out[l];
+    else
+        for (l = 0; l < N; l++)
+            out[l] = h * out[l];
+}
+
+/* ys = y + h * sum_j a[j] k_j over the stages j < i. */
+static void bgc_erk_argument(const bgc_erk *m, int i, double h, const double *y,
+                             const double *k, double *ys)
+{
+    bgc_combine(ys, y, h, m->a + (size_t)i * m->all, 1, i, k);
+}
+
+/* One fixed step from (t, y) to t + h, in place; k: the stages, ys: scratch. */
+static int bgc_fixed_step(bgc_run *r, const bgc_erk *m, double t, double h, double *y,
+                          double *k, double *ys)
+{
+    enum { N = BGC_NUM_STATES, D = BGC_DIM(BGC_NUM_STATES) };
+    int i, l;
+    for (i = 0; i < m->stages; i++) {
+        double *ki = k + (size_t)i * D;
+        if (i == 0) {
+            if (bgc_model_rhs(t, y, r->p, r->w, ki))
+                return bgc_fail_block(r->msg, r->msg_size, r->w);
+            l = bgc_first_nonfinite(ki, N);
+            if (l >= 0)
+                return bgc_fail(r->msg, r->msg_size, t, "derivative of state", bgc_state_names[l]);
+        } else {
+            bgc_erk_argument(m, i, h, y, k, ys);
+            if (bgc_model_rhs(t + m->c[i] * h, ys, r->p, r->w, ki))
+                return bgc_fail_block(r->msg, r->msg_size, r->w);
+        }
+    }
+    r->st->rhs += m->stages;
+    bgc_combine(ys, y, h, m->b, 1, m->stages, k);
+    memcpy(y, ys, sizeof(double) * N);
+    r->st->steps++;
+    l = bgc_first_nonfinite(y, N);
+    if (l >= 0)
+        return bgc_fail(r->msg, r->msg_size, t + h, "state", bgc_state_names[l]);
+    return 0;
+}
+
+/* Number of fixed steps of size about h in span: steps of h, the last one shorter. */
+static long bgc_substeps(double span, double h)
+{
+    double q = span / h, m;
+    if (!(q < 1e15))
+        return -1;
+    m = ceil(q - 1e-6);
+    return m < 1.0 ? 1 : (long)m;
+}
+
+/* Fixed-step methods: steps of s->step (or dt) that land exactly on every output time. */
+static int bgc_run_fixed(bgc_run *r, const bgc_method *method, double *y)
+{
+    enum { D = BGC_DIM(BGC_NUM_STATES) };
+    const bgc_erk *m = method->erk;
+    const double hstep = r->s->step > 0.0 ? r->s->step : r->s->dt;
+    double *mem = malloc((size_t)(m->stages + 1) * D * sizeof *mem);
+    double ta = r->t;
+    long j;
+    int rc = mem ? 0 : bgc_fail_memory(r->msg, r->msg_size);
+    for (; r->kout <= r->nout && rc == 0; r->kout++) {
+        const double tb = bgc_output_time(r->s, r->kout, r->nout);
+        const long steps = bgc_substeps(tb - ta, hstep);
+        if (steps < 0) {
+            rc = bgc_fail_step(r->msg, r->msg_size, ta, hstep, -1);
+            break;
+        }
+        for (j = 0; j < steps && rc == 0; j++) {
+            const double t = ta + (double)j * hstep;
+            const double t1 = j + 1 == steps ? tb : ta + (double)(j + 1) * hstep;
+            if (!(t1 - t >= bgc_hmin(t)))
+                rc = bgc_fail_step(r->msg, r->msg_size, t, t1 - t, -1);
+            else
+                rc = bgc_fixed_step(r, m, t, t1 - t, y, mem + D, mem);
+            if (rc == 0)
+                r->t = t1;
+        }
+        if (rc == 0)
+            rc = bgc_emit(r, tb, y);
+        ta = tb;
+    }
+    free(mem);
+    return rc;
+}
+
+/* The dense output of an embedded pair: the extra stages, then q_d = h sum_i P[i][d] k_i,
+   y(theta) = y + theta (q_0 + theta (q_1 + ...)). */
+typedef struct bgc_erk_dense {
+    bgc_run *r;
+    const bgc_erk *m;
+    double t, h;
+    const double *y;
+    double *k, *ys, *q;
+    int failed;
+} bgc_erk_dense;
+
+static int bgc_erk_prepare(void *dctx)
+{
+    enum { N = BGC_NUM_STATES, D = BGC_DIM(BGC_NUM_STATES) };
+    bgc_erk_dense *d = dctx;
+    const bgc_erk *m = d->m;
+    int i, j;
+    for (i = m->stages; i < m->all; i++) {
+        bgc_erk_argument(m, i, d->h, d->y, d->k, d->ys);
+        if (bgc_model_rhs(d->t + m->c[i] * d->h, d->ys, d->r->p, d->r->w, d->k + (size_t)i * D))
+            return bgc_fail_block(d->r->msg, d->r->msg_size, d->r->w);
+        d->r->st->rhs++;
+    }
+    for (j = 0; j < m->degree; j++)
+        bgc_combine(d->q + (size_t)j * D, NULL, d->h, m->P + j, m->degree, m->all, d->k);
+    return 0;
+}
+
+static void bgc_erk_dense_at(const void *dctx, double theta, double *yout)
+{
+    enum { N = BGC_NUM_STATES, D = BGC_DIM(BGC_NUM_STATES) };
+    const bgc_erk_dense *d = dctx;
+    const int deg = d->m->degree;
+    int j, l;
+    for (l = 0; l < N; l++) {
+        double acc = d->q[(size_t)(deg - 1) * D + l];
+        for (j = deg - 2; j >= 0; j--)
+            acc = d->q[(size_t)j * D + l] + theta * acc;
+        yout[l] = d->y[l] + theta * acc;
+    }
+}
+
+/* Embedded explicit pairs: adaptive steps (never shortened for output), Hairer's error norm
+   and step-size controller, outputs by the dense output; with s->step > 0, steps of that size
+   without error control (to measure a method's order, or its stability at a given step).
+   With r->detect_stiffness, Hairer's stiffness test ends the run with BGC_STIFF once it has
+   fired on 15 accepted steps. */
+static int bgc_run_erk(bgc_run *r, const bgc_method *method, double *y)
+{
+    enum { N = BGC_NUM_STATES, D = BGC_DIM(BGC_NUM_STATES) };
+    const bgc_erk *m = method->erk;
+    const bgc_settings *s = r->s;
+    const int last_stage = m->stages - 1;
+    const int fsal_first = m->fsal && m->e[last_stage] != 0.0; /* evaluate f(y1) before the estimate */
+    const double expo1 = 1.0 / (double)method->q - method->expo_beta * method->beta;
+    const double hmax = s->t_end - s->t0;
+    const int fixed = s->step > 0.0;
+    double *mem = malloc((size_t)(m->all + 5 + m->degree) * D * sizeof *mem);
+    double *k, *ys, *y1, *yout, *ystiff, *e2v, *q;
+    double t = r->t, h, hnew, facold = 1e-4;
+    int i, l, rc, reject = 0, last = 0, worst = -1, bad = -1, bad_kind = 0, failed;
+    int stiff_count = 0, nonstiff_count = 0;
+    bgc_erk_dense dense;
+
+    if (!mem)
+        return bgc_fail_memory(r->msg, r->msg_size);
+    k = mem;
+    ys = k + (size_t)m->all * D;
+    y1 = ys + D;
+    yout = y1 + D;
+    ystiff = yout + D;
+    e2v = ystiff + D;
+    q = e2v + D;
+    dense.r = r;
+    dense.m = m;
+    dense.k = k;
+    dense.ys = ys;
+    dense.q = q;
+    rc = 0;
+    if (r->kout > r->nout)
+        goto done;
+    r->st->rhs++;
+    if (bgc_model_rhs(t, y, r->p, r->w, k)) {
+        rc = bgc_fail_block(r->msg, r->msg_size, r->w);
+        goto done;
+    }
+    i = bgc_first_nonfinite(k, N);
+    if (i >= 0) {
+        rc = bgc_fail(r->msg, r->msg_size, t, "derivative of state", bgc_state_names[i]);
+        goto done;
+    }
+    if (fixed)
+        h = s->step;
+    else if (r->h > 0.0)
+        h = bgc_min(r->h, hmax);
+    else
+        h = bgc_initial_step(r, method->q, y, k, hmax, ys, k + D);
+
+    for (;;) {
+        double tph, err = 0.0, err2 = 0.0, worst_q = -1.0, fac11, fac;
+        if (!(h >= bgc_hmin(t))) {
+            if (bad == -2)
+                rc = bgc_fail_block(r->msg, r->msg_size, r->w);
+            else if (bad >= 0)
+                rc = bgc_fail(r->msg, r->msg_size, t,
+                              bad_kind == 1 ? "state" : "derivative of state", bgc_state_names[bad]);
+            else
+                rc = bgc_fail_step(r->msg, r->msg_size, t, h, worst);
+            goto done;
+        }
+        if (t + 1.01 * h - s->t_end > 0.0) {
+            h = s->t_end - t;
+            last = 1;
+        }
+        tph = last ? s->t_end : t + h;
+        failed = 0;
+        for (i = 1; i < m->stages && !failed; i++) {
+            if (m->fsal && i == last_stage)
+                break; /* f(y1), below */
+            bgc_erk_argument(m, i, h, y, k, ys);
+            if (i == method->stiff_i)
+                memcpy(ystiff, ys, sizeof(double) * N);
+            failed = bgc_model_rhs(m->c[i] == 1.0 ? tph : t + m->c[i] * h, ys, r->p, r->w,
+                                   k + (size_t)i * D);
+            r->st->rhs++;
+        }
+        if (!failed) {
+            bgc_combine(y1, y, h, m->b, 1, m->stages, k);
+            if (fsal_first) {
+                failed = bgc_model_rhs(tph, y1, r->p, r->w, k + (size_t)last_stage * D);
+                r->st->rhs++;
+            }
+        }
+        if (failed && fixed) {
+            rc = bgc_fail_block(r->msg, r->msg_size, r->w);
+            goto done;
+        }
+        if (failed) { /* an algebraic block failed in a stage: retry with a much smaller step */
+            bad = -2;
+            h = h * method->fac_min;
+            reject = 1;
+            last = 0;
+            r->st->rejected++;
+            continue;
+        }
+
+        /* Hairer's error norm: RMS of err_i / (atol + rtol * max(|y_i|, |y1_i|)); DOP853
+           combines its two estimates. */
+        bgc_combine(yout, NULL, m->e2 ? 1.0 : h, m->e, 1, m->stages, k);
+        if (m->e2)
+            bgc_combine(e2v, NULL, 1.0, m->e2, 1, m->stages, k);
+        for (l = 0; l < N; l++) {
+            const double sk = bgc_weight(s, y[l], y1[l]);
+            const double qq = yout[l] / sk;
+            err += qq * qq;
+            if (qq * qq > worst_q) {
+                worst_q = qq * qq;
+                worst = l;
+            }
+            if (m->e2)
+                err2 += (e2v[l] / sk) * (e2v[l] / sk);
+        }
+        if (N == 0 || (fixed && err == err)) {
+            err = 0.0; /* fixed steps: accepted as they are (a non-finite stage fails below) */
+        } else if (m->e2) {
+            double deno = err + 0.01 * err2;
+            if (!(deno > 0.0))
+                deno = 1.0;
+            err = fabs(h) * err * sqrt(1.0 / ((double)N * deno));
+        } else {
+            err = sqrt(err / (double)N);
+        }
+        if (err != err && fixed) {
+            i = bgc_first_nonfinite(y1, N);
+            rc = bgc_fail(r->msg, r->msg_size, tph, "state", bgc_state_names[i >= 0 ? i : 0]);
+            goto done;
+        }
+        if (err != err) { /* a non-finite stage: retry with a much smaller step */
+            bad = bgc_first_nonfinite(y1, N);
+            bad_kind = 1;
+            for (i = 1; i < m->stages && bad < 0; i++) {
+                bad = bgc_first_nonfinite(k + (size_t)i * D, N);
+                bad_kind = 2;
+            }
+            h = h * method->fac_min;
+            reject = 1;
+            last = 0;
+            r->st->rejected++;
+            continue;
+        }
+
+        fac11 = pow(err, expo1);
+        fac = fac11 / pow(facold, method->beta);
+        fac = bgc_max(1.0 / method->fac_max, bgc_min(1.0 / method->fac_min, fac / method->safe));
+        hnew = fixed ? s->step : h / fac;
+        if (err <= 1.0) {
+            facold = bgc_max(err, 1e-4);
+            r->st->steps++;
+            i = bgc_first_nonfinite(y1, N);
+            if (i >= 0) {
+                rc = bgc_fail(r->msg, r->msg_size, tph, "state", bgc_state_names[i]);
+                goto done;
+            }
+            if (m->fsal && !fsal_first) {
+                r->st->rhs++;
+                if (bgc_model_rhs(tph, y1, r->p, r->w, k + (size_t)last_stage * D)) {
+                    rc = bgc_fail_block(r->msg, r->msg_size, r->w);
+                    goto done;
+                }
+            }
+            dense.t = t;
+            dense.h = h;
+            dense.y = y;
+            rc = bgc_emit_step(r, t, h, tph, y1, bgc_erk_prepare, bgc_erk_dense_at, &dense, yout);
+            if (rc)
+                goto done;
+            if (r->detect_stiffness && method->stiff_i >= 0) {
+                /* h |f(Y_i) - f(Y_j)| / |Y_i - Y_j| for two stages at the same time */
+                const double *ki = k + (size_t)method->stiff_i * D;
+                const double *kj = k + (size_t)method->stiff_j * D;
+                const double *yj = method->stiff_j == last_stage ? y1 : ys;
+                double num = 0.0, den = 0.0;
+                for (l = 0; l < N; l++) {
+                    num += (kj[l] - ki[l]) * (kj[l] - ki[l]);
+                    den += (yj[l] - ystiff[l]) * (yj[l] - ystiff[l]);
+                }
+                if (den > 0.0 && h * sqrt(num / den) > method->stiff_bound) {
+                    nonstiff_count = 0;
+                    if (++stiff_count == 15) {
+                        memcpy(y, y1, sizeof(double) * N);
+                        r->t = tph;
+                        r->h = hnew;
+                        rc = BGC_STIFF;
+                        goto done;
+                    }
+                } else if (++nonstiff_count == 6) {
+                    stiff_count = 0;
+                }
+            }
+            if (m->fsal)
+                memcpy(k, k + (size_t)last_stage * D, sizeof(double) * N);
+            else if (!last) {
+                r->st->rhs++;
+                if (bgc_model_rhs(tph, y1, r->p, r->w, k)) {
+                    rc = bgc_fail_block(r->msg, r->msg_size, r->w);
+                    goto done;
+                }
+            }
+            memcpy(y, y1, sizeof(double) * N);
+            t = tph;
+            r->t = t;
+            if (last)
+                goto done;
+            if (fabs(hnew) > hmax && !fixed)
+                hnew = hmax;
+            if (reject)
+                hnew = bgc_min(hnew, h);
+            reject = 0;
+            bad = -1;
+        } else {
+            hnew = h / bgc_min(1.0 / method->fac_min, fac11 / method->safe);
+            reject = 1;
+            last = 0;
+            r->st->rejected++;
+        }
+        h = hnew;
+    }
+done:
+    free(mem);
+    return rc;
+}
+
+/* ------------------------------------------------------------ bgc_simulate --- */
+
+int bgc_solver_index(const char *name)
+{
+    int k;
+    for (k = 0; k < BGC_NUM_SOLVERS; k++)
+        if (strcmp(name, bgc_solver_names[k]) == 0)
+            return k;
+    return -1;
+}
+
+void bgc_print_stats(FILE *f, const bgc_stats *st)
+{
+    fprintf(f, "stats: steps=%ld rejected=%ld rhs=%ld jac=%ld lu=%ld solves=%ld", st->steps,
+            st->rejected, st->rhs, st->jac, st->lu, st->solves);
+    if (st->switched)
+        fprintf(f, " stiff_from=%.17g", st->t_switch);
+    fprintf(f, "\n");
+}
+
+static int bgc_run_rosenbrock(bgc_run *r, const bgc_method *method, double *y);
+static int bgc_run_radau5(bgc_run *r, const bgc_method *method, double *y);
+
+static int bgc_run_family(bgc_run *r, int solver, double *y)
+{
+    const bgc_method *m = &bgc_methods[solver];
+    switch (m->family) {
+    case BGC_FAMILY_FIXED:
+        return bgc_run_fixed(r, m, y);
+    case BGC_FAMILY_ERK:
+        return bgc_run_erk(r, m, y);
+    case BGC_FAMILY_ROSENBROCK:
+        return bgc_run_rosenbrock(r, m, y);
+    case BGC_FAMILY_RADAU5:
+        return bgc_run_radau5(r, m, y);
+    default:
+        snprintf(r->msg, r->msg_size, "solver '%s' cannot run by itself", m->name);
+        return BGC_ERR_USAGE;
+    }
+}
+
+int bgc_simulate(const bgc_settings *s, const bgc_params *p, const double *x0, bgc_sink sink,
+                 void *ctx, bgc_stats *stats, char *msg, size_t msg_size)
+{
+    bgc_params q = *p;
+    bgc_run r;
+    double *y;
+    int i, rc = bgc_check_settings(s, msg, msg_size);
+    if (rc)
+        return rc;
+    r.w = bgc_work_new();
+    if (!r.w)
+        return bgc_fail_memory(msg, msg_size);
+    r.w->rtol = s->rtol;
+    r.w->atol = s->atol;
+    r.s = s;
+    r.p = &q;
+    r.sink = sink;
+    r.ctx = ctx;
+    r.st = stats;
+    r.msg = msg;
+    r.msg_size = msg_size;
+    r.nout = bgc_output_count(s);
+    r.kout = 1;
+    r.t = s->t0;
+    r.h = 0.0;
+    r.detect_stiffness = 0;
+    y = r.w->v + BGC_WORK_Y0;
+    bgc_params_update(&q);
+    for (i = 0; i < BGC_NUM_STATES; i++)
+        y[i] = x0[i];
+    i = bgc_first_nonfinite(y, BGC_NUM_STATES);
+    if (i >= 0) {
+        rc = bgc_fail(msg, msg_size, s->t0, "state", bgc_state_names[i]);
+    } else {
+        rc = bgc_emit(&r, s->t0, y);
+        if (rc == 0 && bgc_methods[s->solver].family == BGC_FAMILY_AUTO) {
+            const bgc_method *m = &bgc_methods[s->solver];
+            r.detect_stiffness = 1;
+            rc = bgc_run_family(&r, m->explicit_solver, y);
+            if (rc == BGC_STIFF) {
+                stats->switched = 1;
+                stats->t_switch = r.t;
+                r.detect_stiffness = 0;
+                rc = bgc_run_family(&r, m->stiff_solver, y);
+            }
+        } else if (rc == 0) {
+            rc = bgc_run_family(&r, s->solver, y);
+        }
+    }
+    bgc_work_free(r.w);
+    return rc;
+}
+
+/* ============================================================== stiff === */
+/* The stiff families: Rosenbrock methods in Hairer's transformed form (RODAS's design, any
+   tableau of the family) and Radau IIA of order 5 (RADAU5's design), both with the Jacobian
+   that bgc_jacobian derives symbolically and dense LU factorisations of their own (below). */
+#include <complex.h>
+#undef I /* C99 7.3.1: the program may undefine it; _Complex_I is used below */
+#undef complex
+
+typedef double _Complex bgc_cplx;
+
+/* ------------------------------------------------------ dense linear algebra --- */
+
+/* LU factorisation with partial pivoting of the n x n row-major matrix a, in place (L below
+   the diagonal with a unit diagonal, U on and above it); piv[k]: the row swapped with row k.
+   Returns 0, or k + 1 when column k has no nonzero pivot (a singular matrix; NaNs go through,
+   as in LAPACK, and show as non-finite stages). */
+static int bgc_stiff_lu(int n, double *a, int *piv)
+{
+    int i, j, k;
+    for (k = 0; k < n; k++) {
+        double *ak = a + (size_t)k * n, big = fabs(ak[k]);
+        int p = k;
+        for (i = k + 1; i < n; i++)
+            if (fabs(a[(size_t)i * n + k]) > big) {
+                big = fabs(a[(size_t)i * n + k]);
+                p = i;
+            }
+        piv[k] = p;
+        if (big == 0.0)
+            return k + 1;
+        if (p != k) {
+            double *ap = a + (size_t)p * n;
+            for (j = 0; j < n; j++) {
+                const double tmp = ak[j];
+                ak[j] = ap[j];
+                ap[j] = tmp;
+            }
+        }
+        for (i = k + 1; i < n; i++) {
+            double *ai = a + (size_t)i * n;
+            const double l = ai[k] / ak[k];
+            ai[k] = l;
+            if (l != 0.0)
+                for (j = k + 1; j < n; j++)
+                    ai[j] -= l * ak[j];
+        }
+    }
+    return 0;
+}
+
+/* Solves with the factors of bgc_stiff_lu: b is overwritten by the solution. */
+static void bgc_stiff_lu_solve(int n, const double *lu, const int *piv, double *b)
+{
+    int i, k;
+    for (k = 0; k < n; k++) {
+        const double bk = b[piv[k]];
+        b[piv[k]] = b[k];
+        b[k] = bk;
+        if (bk != 0.0)
+            for (i = k + 1; i < n; i++)
+                b[i] -= lu[(size_t)i * n + k] * bk;
+    }
+    for (k = n - 1; k >= 0; k--) {
+        const double *row = lu + (size_t)k * n;
+        double acc = b[k];
+        for (i = k + 1; i < n; i++)
+            acc -= row[i] * b[i];
+        b[k] = acc / row[k];
+    }
+}
+
+/* The same for a complex matrix (pivots by |re| + |im|). */
+static double bgc_cabs1(bgc_cplx z)
+{
+    return fabs(creal(z)) + fabs(cimag(z));
+}
+
+static int bgc_stiff_zlu(int n, bgc_cplx *a, int *piv)
+{
+    int i, j, k;
+    for (k = 0; k < n; k++) {
+        bgc_cplx *ak = a + (size_t)k * n;
+        double big = bgc_cabs1(ak[k]);
+        int p = k;
+        for (i = k + 1; i < n; i++)
+            if (bgc_cabs1(a[(size_t)i * n + k]) > big) {
+                big = bgc_cabs1(a[(size_t)i * n + k]);
+                p = i;
+            }
+        piv[k] = p;
+        if (big == 0.0)
+            return k + 1;
+        if (p != k) {
+            bgc_cplx *ap = a + (size_t)p * n;
+            for (j = 0; j < n; j++) {
+                const bgc_cplx tmp = ak[j];
+                ak[j] = ap[j];
+                ap[j] = tmp;
+            }
+        }
+        for (i = k + 1; i < n; i++) {
+            bgc_cplx *ai = a + (size_t)i * n;
+            const bgc_cplx l = ai[k] / ak[k];
+            ai[k] = l;
+            if (l != 0.0)
+                for (j = k + 1; j < n; j++)
+                    ai[j] -= l * ak[j];
+        }
+    }
+    return 0;
+}
+
+static void bgc_stiff_zlu_solve(int n, const bgc_cplx *lu, const int *piv, bgc_cplx *b)
+{
+    int i, k;
+    for (k = 0; k < n; k++) {
+        const bgc_cplx bk = b[piv[k]];
+        b[piv[k]] = b[k];
+        b[k] = bk;
+        if (bk != 0.0)
+            for (i = k + 1; i < n; i++)
+                b[i] -= lu[(size_t)i * n + k] * bk;
+    }
+    for (k = n - 1; k >= 0; k--) {
+        const bgc_cplx *row = lu + (size_t)k * n;
+        bgc_cplx acc = b[k];
+        for (i = k + 1; i < n; i++)
+            acc -= row[i] * b[i];
+        b[k] = acc / row[k];
+    }
+}
+
+/* The error norm of the stiff families: sqrt(mean((v_i / w_i)^2)), 0 without states; *worst:
+   the component with the largest share. */
+static double bgc_stiff_norm(const double *v, const double *w, int *worst)
+{
+    enum { N = BGC_NUM_STATES };
+    double sum = 0.0, big = -1.0;
+    int l;
+    for (l = 0; l < N; l++) {
+        const double q = (v[l] / w[l]) * (v[l] / w[l]);
+        sum += q;
+        if (q > big) {
+            big = q;
+            *worst = l;
+        }
+    }
+    return N > 0 ? sqrt(sum / (double)N) : 0.0;
+}
+
+/* A step size below bgc_hmin: the message names what made the steps shrink. bad: -2 an
+   algebraic block failed, -3 the iteration matrix was singular, -4 Newton did not converge,
+   >= 0 a non-finite component (kind 1 a state, else a derivative), else the error test. */
+static int bgc_stiff_fail_step(bgc_run *r, const char *name, double t, double h, int bad,
+                               int bad_kind, int worst)
+{
+    if (bad == -2)
+        return bgc_fail_block(r->msg, r->msg_size, r->w);
+    if (bad == -3) {
+        snprintf(r->msg, r->msg_size,
+                 "at t = %.17g: %s: the iteration matrix is singular (step size down to h = %.3g)",
+                 t, name, h);
+        return BGC_ERR_RUNTIME;
+    }
+    if (bad == -4) {
+        snprintf(r->msg, r->msg_size,
+                 "at t = %.17g: %s: the Newton iteration does not converge (step size down to "
+                 "h = %.3g)", t, name, h);
+        return BGC_ERR_RUNTIME;
+    }
+    if (bad >= 0)
+        return bgc_fail(r->msg, r->msg_size, t, bad_kind == 1 ? "state" : "derivative of state",
+                        bgc_state_names[bad]);
+    return bgc_fail_step(r->msg, r->msg_size, t, h, worst);
+}
+
+static int bgc_stiff_fail_singular(bgc_run *r, const char *name, double t, double h)
+{
+    snprintf(r->msg, r->msg_size, "at t = %.17g: %s: the iteration matrix is singular (h = %.3g)",
+             t, name, h);
+    return BGC_ERR_RUNTIME;
+}
+
+/* Fixed steps (s->step > 0): the grid t_start + k * step, the last step ending on t_end. */
+static double bgc_stiff_grid(const bgc_settings *s, double t_start, long k, long n)
+{
+    return k >= n ? s->t_end : t_start + (double)k * s->step;
+}
+
+/* ------------------------------------------------------- Rosenbrock methods --- */
+
+/* The dense output of a Rosenbrock step: y(theta) = (1 - theta) y0 + theta (y1 + (1 - theta)
+   (q2 + theta q3)), q2 = sum_j d2_j k_j, q3 = sum_j d3_j k_j (formed when first needed). */
+typedef struct bgc_ros_dense {
+    const bgc_rosenbrock *m;
+    const double *y, *y1, *k;
+    double *q2, *q3;
+} bgc_ros_dense;
+
+static int bgc_ros_prepare(void *dctx)
+{
+    enum { N = BGC_NUM_STATES, D = BGC_DIM(BGC_NUM_STATES) };
+    bgc_ros_dense *d = dctx;
+    int j, l;
+    for (l = 0; l < N; l++) {
+        double a2 = 0.0, a3 = 0.0;
+        for (j = 0; j < d->m->stages; j++) {
+            const double kj = d->k[(size_t)j * D + l];
+            a2 += d->m->d2[j] * kj;
+            a3 += d->m->d3[j] * kj;
+        }
+        d->q2[l] = a2;
+        d->q3[l] = a3;
+    }
+    return 0;
+}
+
+static void bgc_ros_dense_at(const void *dctx, double theta, double *yout)
+{
+    enum { N = BGC_NUM_STATES };
+    const bgc_ros_dense *d = dctx;
+    const double s1 = 1.0 - theta;
+    int l;
+    for (l = 0; l < N; l++)
+        yout[l] = s1 * d->y[l] + theta * (d->y1[l] + s1 * (d->q2[l] + theta * d->q3[l]));
+}
+
+/* Rosenbrock methods as Hairer's RODAS: at every new point f(t, y), df/dt (a forward
+   difference, unless the model is autonomous) and the Jacobian J; per step attempt one
+   factorisation of E = I/(gamma h) - J and one solve per stage,
+   E k_i = f(t + c_i h, y + sum_j a_ij k_j) + sum_j C_ij k_j / h + h d_i df/dt;
+   y1 = y + sum m_j k_j, the error sum e_j k_j in Hairer's norm, Gustafsson's predictive step
+   control, outputs by the dense output.  A singular E, a failed block or a non-finite stage
+   halve the step.  With s->step > 0: steps of that size, accepted without error control. */
+static int bgc_run_rosenbrock(bgc_run *r, const bgc_method *method, double *y)
+{
+    enum { N = BGC_NUM_STATES, D = BGC_DIM(BGC_NUM_STATES) };
+    const bgc_rosenbrock *m = method->ros;
+    const bgc_settings *s = r->s;
+    const int S = m->stages, fixed = s->step > 0.0;
+    const double hmax = s->t_end - s->t0, expo = 1.0 / (double)method->q;
+    const double t_start = r->t;
+    double *mem = malloc(((size_t)2 * D * D + (size_t)(S + 7) * D) * sizeof *mem);
+    int *piv = malloc((size_t)D * sizeof *piv);
+    double *J, *E, *k, *f0, *ft, *ys, *y1, *yout, *q2, *q3;
+    double t = r->t, h = 0.0, hnew, hacc = 0.0, erracc = 1.0;
+    long n_fixed = 0, k_fixed = 0;
+    int i, j, l, rc = 0, reject = 0, last = 0, fresh = 1, accepted = 0, nsing = 0;
+    int worst = -1, bad = -1, bad_kind = 0;
+    bgc_ros_dense dense;
+
+    if (!mem || !piv) {
+        rc = bgc_fail_memory(r->msg, r->msg_size);
+        goto done;
+    }
+    J = mem;
+    E = J + (size_t)D * D;
+    k = E + (size_t)D * D;
+    f0 = k + (size_t)S * D;
+    ft = f0 + D;
+    ys = ft + D;
+    y1 = ys + D;
+    yout = y1 + D;
+    q2 = yout + D;
+    q3 = q2 + D;
+    for (l = 0; l < N; l++)
+        ft[l] = 0.0;
+    dense.m = m;
+    dense.y = y;
+    dense.y1 = y1;
+    dense.k = k;
+    dense.q2 = q2;
+    dense.q3 = q3;
+    if (r->kout > r->nout)
+        goto done;
+    if (fixed) {
+        n_fixed = bgc_substeps(s->t_end - t_start, s->step);
+        if (n_fixed < 0) {
+            rc = bgc_fail_step(r->msg, r->msg_size, t, s->step, -1);
+            goto done;
+        }
+    }
+
+    for (;;) {
+        double tph, err, fac;
+        int failed = 0;
+        if (fresh) { /* a new point: f, df/dt, J */
+            r->st->rhs++;
+            if (bgc_model_rhs(t, y, r->p, r->w, f0)) {
+                rc = bgc_fail_block(r->msg, r->msg_size, r->w);
+                goto done;
+            }
+            i = bgc_first_nonfinite(f0, N);
+            if (i >= 0) {
+                rc = bgc_fail(r->msg, r->msg_size, t, "derivative of state", bgc_state_names[i]);
+                goto done;
+            }
+            if (!BGC_AUTONOMOUS) {
+                const double delta = sqrt(DBL_EPSILON * bgc_max(1e-5, fabs(t)));
+                r->st->rhs++;
+                if (bgc_model_rhs(t + delta, y, r->p, r->w, ft)) {
+                    rc = bgc_fail_block(r->msg, r->msg_size, r->w);
+                    goto done;
+                }
+                for (l = 0; l < N; l++)
+                    ft[l] = (ft[l] - f0[l]) / delta;
+            }
+            r->st->jac++;
+            if (bgc_jacobian(t, y, r->p, r->w, J)) {
+                rc = bgc_fail_block(r->msg, r->msg_size, r->w);
+                goto done;
+            }
+            if (h == 0.0 && !fixed)
+                h = r->h > 0.0 ? bgc_min(r->h, hmax)
+                               : bgc_initial_step(r, method->q, y, f0, hmax, ys, y1);
+            fresh = 0;
+        }
+        if (fixed) {
+            last = k_fixed + 1 >= n_fixed;
+            tph = bgc_stiff_grid(s, t_start, k_fixed + 1, n_fixed);
+            h = tph - t;
+            if (!(h >= bgc_hmin(t))) {
+                rc = bgc_fail_step(r->msg, r->msg_size, t, h, -1);
+                goto done;
+            }
+        } else {
+            if (!(h >= bgc_hmin(t))) {
+                rc = bgc_stiff_fail_step(r, method->name, t, h, bad, bad_kind, worst);
+                goto done;
+            }
+            if (t + 1.01 * h - s->t_end > 0.0) {
+                h = s->t_end - t;
+                last = 1;
+            }
+            tph = last ? s->t_end : t + h;
+        }
+
+        /* E = I/(gamma h) - J, factored */
+        for (l = 0; l < N * N; l++)
+            E[l] = -J[l];
+        for (l = 0; l < N; l++)
+            E[(size_t)l * N + l] += 1.0 / (m->gamma * h);
+        r->st->lu++;
+        if (bgc_stiff_lu(N, E, piv)) {
+            if (fixed || ++nsing == 5) {
+                rc = bgc_stiff_fail_singular(r, method->name, t, h);
+                goto done;
+            }
+            bad = -3;
+            h *= 0.5;
+            reject = 1;
+            last = 0;
+            r->st->rejected++;
+            continue;
+        }
+
+        /* the stages */
+        for (i = 0; i < S; i++) {
+            const double *a = m->a + (size_t)i * S, *C = m->C + (size_t)i * S;
+            double *ki = k + (size_t)i * D;
+            if (i == 0) {
+                for (l = 0; l < N; l++)
+                    ki[l] = f0[l];
+            } else {
+                for (l = 0; l < N; l++) {
+                    double acc = 0.0;
+                    for (j = 0; j < i; j++)
+                        if (a[j] != 0.0)
+                            acc += a[j] * k[(size_t)j * D + l];
+                    ys[l] = y[l] + acc;
+                }
+                r->st->rhs++;
+                failed = bgc_model_rhs(m->c[i] == 1.0 ? tph : t + m->c[i] * h, ys, r->p, r->w, ki);
+                if (failed)
+                    break;
+            }
+            for (l = 0; l < N; l++) {
+                double acc = 0.0;
+                for (j = 0; j < i; j++)
+                    if (C[j] != 0.0)
+                        acc += C[j] * k[(size_t)j * D + l];
+                ki[l] += acc / h;
+                if (!BGC_AUTONOMOUS && m->d[i] != 0.0)
+                    ki[l] += h * m->d[i] * ft[l];
+            }
+            bgc_stiff_lu_solve(N, E, piv, ki);
+            r->st->solves++;
+        }
+        if (failed && fixed) {
+            rc = bgc_fail_block(r->msg, r->msg_size, r->w);
+            goto done;
+        }
+        if (failed) { /* an algebraic block failed in a stage */
+            bad = -2;
+            h *= 0.5;
+            reject = 1;
+            last = 0;
+            r->st->rejected++;
+            continue;
+        }
+
+        /* the solution, the error estimate (in q2) and Hairer's norm (weights in q3) */
+        for (l = 0; l < N; l++) {
+            double acc = 0.0, e = 0.0;
+            for (j = 0; j < S; j++) {
+                const double kj = k[(size_t)j * D + l];
+                if (m->m[j] != 0.0)
+                    acc += m->m[j] * kj;
+                if (m->e[j] != 0.0)
+                    e += m->e[j] * kj;
+            }
+            y1[l] = y[l] + acc;
+            q2[l] = e;
+            q3[l] = bgc_weight(s, y[l], y1[l]);
+        }
+        err = bgc_stiff_norm(q2, q3, &worst);
+        i = bgc_first_nonfinite(y1, N);
+        if (err != err || err > DBL_MAX || i >= 0) {
+            if (fixed) {
+                rc = bgc_fail(r->msg, r->msg_size, tph, "state", bgc_state_names[i >= 0 ? i : 0]);
+                goto done;
+            }
+            bad = i;
+            bad_kind = 1;
+            for (j = 1; j < S && bad < 0; j++) {
+                bad = bgc_first_nonfinite(k + (size_t)j * D, N);
+                bad_kind = 2;
+            }
+            h *= 0.5;
+            reject = 1;
+            last = 0;
+            r->st->rejected++;
+            continue;
+        }
+        if (fixed)
+            err = 0.0;
+
+        /* Gustafsson's predictive controller (rodas.f) */
+        fac = bgc_max(1.0 / method->fac_max,
+                      bgc_min(1.0 / method->fac_min, pow(err, expo) / method->safe));
+        hnew = h / fac;
+        if (err <= 1.0) {
+            if (accepted > 0) {
+                double facgus = (hacc / h) * pow(err * err / erracc, expo) / method->safe;
+                facgus = bgc_max(1.0 / method->fac_max, bgc_min(1.0 / method->fac_min, facgus));
+                fac = bgc_max(fac, facgus);
+                hnew = h / fac;
+            }
+            hacc = h;
+            erracc = bgc_max(1e-2, err);
+            accepted++;
+            r->st->steps++;
+            rc = bgc_emit_step(r, t, h, tph, y1, bgc_ros_prepare, bgc_ros_dense_at, &dense, yout);
+            if (rc)
+                goto done;
+            memcpy(y, y1, sizeof(double) * N);
+            t = tph;
+            r->t = t;
+            fresh = 1;
+            nsing = 0;
+            bad = -1;
+            if (last)
+                goto done;
+            k_fixed++;
+            hnew = bgc_min(hnew, hmax);
+            if (reject)
+                hnew = bgc_min(hnew, h);
+            reject = 0;
+        } else {
+            reject = 1;
+            last = 0;
+            r->st->rejected++;
+        }
+        h = hnew;
+    }
+done:
+    free(piv);
+    free(mem);
+    return rc;
+}
+
+/* ------------------------------------------------------- Radau IIA (RADAU5) --- */
+
+/* The collocation polynomial of an accepted step through (0, 0), (c1, Z1), (c2, Z2), (1, Z3)
+   in Newton's form: u(theta) = theta (b1 + (theta - c1) (b2 + (theta - c2) b3)); the state
+   is y0 + u(theta).  b: 3 x D. */
+static void bgc_radau_poly(const bgc_radau *m, const double *z1, const double *z2,
+                           const double *z3, double *b)
+{
+    enum { N = BGC_NUM_STATES, D = BGC_DIM(BGC_NUM_STATES) };
+    int l;
+    for (l = 0; l < N; l++) {
+        const double d01 = z1[l] / m->c1, d12 = (z2[l] - z1[l]) / (m->c2 - m->c1);
+        const double d23 = (z3[l] - z2[l]) / (1.0 - m->c2);
+        const double d012 = (d12 - d01) / m->c2, d123 = (d23 - d12) / (1.0 - m->c1);
+        b[l] = d01;
+        b[D + l] = d012;
+        b[2 * D + l] = d123 - d012;
+    }
+}
+
+static double bgc_radau_u(const bgc_radau *m, const double *b, int l, double theta)
+{
+    enum { D = BGC_DIM(BGC_NUM_STATES) };
+    return theta * (b[l] + (theta - m->c1) * (b[D + l] + (theta - m->c2) * b[2 * D + l]));
+}
+
+typedef struct bgc_radau_dense {
+    const bgc_radau *m;
+    const double *y, *b;
+} bgc_radau_dense;
+
+static void bgc_radau_dense_at(const void *dctx, double theta, double *yout)
+{
+    enum { N = BGC_NUM_STATES };
+    const bgc_radau_dense *d = dctx;
+    int l;
+    for (l = 0; l < N; l++)
+        yout[l] = d->y[l] + bgc_radau_u(d->m, d->b, l, theta);
+}
+
+/* Radau IIA of order 5 after Hairer's RADAU5.  The stage increments Z_i = Y_i - y solve
+   Z = h (A x I) F(Z); with W = (T^-1 x I) Z the simplified Newton iteration decouples into
+   (gamma/h I - J) dW1 = (T^-1 F)_1 - gamma/h W1 and, for dW2 + i dW3, the complex system
+   ((alpha + i beta)/h I - J) with the right side (T^-1 F)_2 + i (T^-1 F)_3
+   - (alpha + i beta)/h (W2 + i W3): one real and one complex factorisation per h and J.
+   Tolerances as RADAU5 transforms them: rtol' = 0.1 rtol^(2/3), atol' = rtol' atol / rtol,
+   weights atol' + rtol' |y| at the step's start.  Newton: at most 7 iterations from the
+   previous step's collocation polynomial (zero on the first step), convergence rate theta,
+   stop when theta/(1 - theta) |dW| <= fnewt = max(10 eps/rtol', min(0.03, rtol'^(1/2)));
+   theta >= 0.99 or no convergence: h / 2; a predicted miss of fnewt within 7 iterations: h
+   shrunk accordingly.  Error estimate: (gamma/h I - J) err = f(t, y) + sum_j e_j Z_j / h,
+   refined once with f(t, y + err) on the first step and after a rejection.  Step control:
+   Gustafsson's with safety min(safe, safe (1 + 2 * 7) / (newton + 2 * 7)), hnew/h in
+   [fac_min, fac_max].  J is recomputed when the contraction was poorer than 0.001, the
+   matrices are refactored unless hnew/h stays in [1, 1.2] (h is then kept).  Outputs by the
+   collocation polynomial.  Counts: each real or complex factorisation and each real or
+   complex solve.  With s->step > 0: steps of that size, no error estimate, and Newton's
+   failure (after a fresh Jacobian) ends the run. */
+static int bgc_run_radau5(bgc_run *r, const bgc_method *method, double *y)
+{
+    enum { N = BGC_NUM_STATES, D = BGC_DIM(BGC_NUM_STATES), NIT = 7 };
+    const bgc_radau *m = method->radau;
+    const bgc_settings *s = r->s;
+    const int fixed = s->step > 0.0;
+    const double hmax = s->t_end - s->t0, expo = 1.0 / (double)method->q, thet = 0.001;
+    const double rtol = 0.1 * pow(s->rtol, 2.0 / 3.0), atol = rtol * (s->atol / s->rtol);
+    const double fnewt = bgc_max(10.0 * DBL_EPSILON / rtol, bgc_min(0.03, sqrt(rtol)));
+    const double cfac = method->safe * (double)(1 + 2 * NIT);
+    const double *T = m->T, *Ti = m->Ti;
+    const double t_start = r->t;
+    double *mem = malloc(((size_t)2 * D * D + (size_t)17 * D) * sizeof *mem);
+    bgc_cplx *cmem = malloc(((size_t)D * D + (size_t)D) * sizeof *cmem);
+    int *piv = malloc((size_t)2 * D * sizeof *piv);
+    double *J, *E1, *z1, *z2, *z3, *w1, *w2, *w3, *f0, *scal, *ys, *y1, *yout, *b, *zlast;
+    double *cont, *f2;
+    bgc_cplx *E2, *zc;
+    double t = r->t, h = 0.0, hnew, hfact = 0.0, hold = 0.0, hacc = 0.0, erracc = 1.0;
+    double faccon = 1.0, theta = thet, thqold = 1.0, dynold = 1.0, hhfac = 0.5;
+    long n_fixed = 0, k_fixed = 0;
+    int i, l, rc = 0, reject = 0, last = 0, first = 1, needjac = 1, caljac = 0;
+    int accepted = 0, nsing = 0, worst = -1, bad = -1, bad_kind = 0, newt = 0;
+    bgc_radau_dense dense;
+
+    if (!mem || !cmem || !piv) {
+        rc = bgc_fail_memory(r->msg, r->msg_size);
+        goto done;
+    }
+    J = mem;
+    E1 = J + (size_t)D * D;
+    z1 = E1 + (size_t)D * D;
+    z2 = z1 + D;
+    z3 = z2 + D;
+    w1 = z3 + D;
+    w2 = w1 + D;
+    w3 = w2 + D;
+    f0 = w3 + D;
+    scal = f0 + D;
+    ys = scal + D;
+    y1 = ys + D;
+    yout = y1 + D;
+    b = yout + D; /* 3 D */
+    zlast = b + 3 * (size_t)D;
+    cont = zlast + D;
+    f2 = cont + D;
+    E2 = cmem;
+    zc = E2 + (size_t)D * D;
+    for (l = 0; l < 3 * D; l++)
+        b[l] = 0.0;
+    for (l = 0; l < D; l++)
+        zlast[l] = 0.0;
+    dense.m = m;
+    dense.y = y;
+    dense.b = b;
+    if (r->kout > r->nout)
+        goto done;
+    if (fixed) {
+        n_fixed = bgc_substeps(s->t_end - t_start, s->step);
+        if (n_fixed < 0) {
+            rc = bgc_fail_step(r->msg, r->msg_size, t, s->step, -1);
+            goto done;
+        }
+    }
+    r->st->rhs++;
+    if (bgc_model_rhs(t, y, r->p, r->w, f0)) {
+        rc = bgc_fail_block(r->msg, r->msg_size, r->w);
+        goto done;
+    }
+    i = bgc_first_nonfinite(f0, N);
+    if (i >= 0) {
+        rc = bgc_fail(r->msg, r->msg_size, t, "derivative of state", bgc_state_names[i]);
+        goto done;
+    }
+    for (l = 0; l < N; l++)
+        scal[l] = atol + rtol * fabs(y[l]);
+    if (!fixed)
+        h = r->h > 0.0 ? bgc_min(r->h, hmax) : bgc_initial_step(r, method->q, y, f0, hmax, ys, y1);
+
+    for (;;) {
+        double tph, err = 0.0, fac1, alphn, betan, dyno = 0.0, quot, fac;
+        int failed = 0;
+        if (needjac) {
+            r->st->jac++;
+            if (bgc_jacobian(t, y, r->p, r->w, J)) {
+                rc = bgc_fail_block(r->msg, r->msg_size, r->w);
+                goto done;
+            }
+            needjac = 0;
+            caljac = 1;
+            hfact = 0.0;
+        }
+        if (fixed) {
+            last = k_fixed + 1 >= n_fixed;
+            tph = bgc_stiff_grid(s, t_start, k_fixed + 1, n_fixed);
+            h = tph - t;
+            if (!(h >= bgc_hmin(t))) {
+                rc = bgc_fail_step(r->msg, r->msg_size, t, h, -1);
+                goto done;
+            }
+        } else {
+            if (!(h >= bgc_hmin(t))) {
+                rc = bgc_stiff_fail_step(r, method->name, t, h, bad, bad_kind, worst);
+                goto done;
+            }
+            if (t + 1.01 * h - s->t_end > 0.0) {
+                h = s->t_end - t;
+                last = 1;
+            }
+            tph = last ? s->t_end : t + h;
+        }
+        fac1 = m->gamma / h;
+        alphn = m->alpha / h;
+        betan = m->beta / h;
+
+        /* gamma/h I - J and (alpha + i beta)/h I - J, factored (unless they are h's already) */
+        if (h != hfact) {
+            int singular;
+            for (l = 0; l < N * N; l++) {
+                E1[l] = -J[l];
+                E2[l] = -J[l];
+            }
+            for (l = 0; l < N; l++) {
+                E1[(size_t)l * N + l] += fac1;
+                E2[(size_t)l * N + l] += alphn + betan * _Complex_I;
+            }
+            r->st->lu++;
+            singular = bgc_stiff_lu(N, E1, piv);
+            if (!singular) {
+                r->st->lu++;
+                singular = bgc_stiff_zlu(N, E2, piv + D);
+            }
+            if (singular) {
+                hfact = 0.0;
+                if (fixed || ++nsing == 5) {
+                    rc = bgc_stiff_fail_singular(r, method->name, t, h);
+                    goto done;
+                }
+                bad = -3;
+                h *= 0.5;
+                reject = 1;
+                last = 0;
+                r->st->rejected++;
+                needjac = !caljac;
+                continue;
+            }
+            hfact = h;
+        }
+
+        /* starting values: the last step's collocation polynomial, extrapolated */
+        if (first) {
+            for (l = 0; l < N; l++)
+                z1[l] = z2[l] = z3[l] = w1[l] = w2[l] = w3[l] = 0.0;
+        } else {
+            const double q = h / hold;
+            for (l = 0; l < N; l++) {
+                const double a1 = bgc_radau_u(m, b, l, 1.0 + m->c1 * q) - zlast[l];
+                const double a2 = bgc_radau_u(m, b, l, 1.0 + m->c2 * q) - zlast[l];
+                const double a3 = bgc_radau_u(m, b, l, 1.0 + q) - zlast[l];
+                z1[l] = a1;
+                z2[l] = a2;
+                z3[l] = a3;
+                w1[l] = Ti[0] * a1 + Ti[1] * a2 + Ti[2] * a3;
+                w2[l] = Ti[3] * a1 + Ti[4] * a2 + Ti[5] * a3;
+                w3[l] = Ti[6] * a1 + Ti[7] * a2 + Ti[8] * a3;
+            }
+        }
+
+        /* the simplified Newton iteration */
+        newt = 0;
+        faccon = pow(bgc_max(faccon, DBL_EPSILON), 0.8);
+        theta = thet;
+        for (;;) {
+            double sum = 0.0;
+            if (newt >= NIT) {
+                failed = 2;
+                break;
+            }
+            /* z_i <- f(t + c_i h, y + z_i) */
+            for (i = 0; i < 3 && !failed; i++) {
+                double *zi = i == 0 ? z1 : (i == 1 ? z2 : z3);
+                const double ti = i == 0 ? t + m->c1 * h : (i == 1 ? t + m->c2 * h : tph);
+                for (l = 0; l < N; l++)
+                    ys[l] = y[l] + zi[l];
+                r->st->rhs++;
+                if (bgc_model_rhs(ti, ys, r->p, r->w, zi)) {
+                    failed = 1;
+                    bad = -2;
+                } else if ((l = bgc_first_nonfinite(zi, N)) >= 0) {
+                    failed = 1;
+                    bad = l;
+                    bad_kind = 2;
+                }
+            }
+            if (failed)
+                break;
+            for (l = 0; l < N; l++) {
+                const double a1 = z1[l], a2 = z2[l], a3 = z3[l];
+                z1[l] = Ti[0] * a1 + Ti[1] * a2 + Ti[2] * a3 - fac1 * w1[l];
+                zc[l] = (Ti[3] * a1 + Ti[4] * a2 + Ti[5] * a3 - (alphn * w2[l] - betan * w3[l]))
+                        + (Ti[6] * a1 + Ti[7] * a2 + Ti[8] * a3 - (betan * w2[l] + alphn * w3[l]))
+                              * _Complex_I;
+            }
+            bgc_stiff_lu_solve(N, E1, piv, z1);
+            bgc_stiff_zlu_solve(N, E2, piv + D, zc);
+            r->st->solves += 2;
+            newt++;
+            for (l = 0; l < N; l++) {
+                const double q1 = z1[l] / scal[l], q2 = creal(zc[l]) / scal[l];
+                const double q3 = cimag(zc[l]) / scal[l];
+                sum += q1 * q1 + q2 * q2 + q3 * q3;
+            }
+            dyno = N > 0 ? sqrt(sum / (double)(3 * N)) : 0.0;
+            if (dyno != dyno || dyno > DBL_MAX) {
+                failed = 2;
+                break;
+            }
+            if (newt > 1 && newt < NIT) {
+                const double thq = dyno / dynold;
+                theta = newt == 2 ? thq : sqrt(thq * thqold);
+                thqold = thq;
+                if (theta < 0.99) {
+                    const double dyth = theta / (1.0 - theta) * dyno
+                                        * pow(theta, (double)(NIT - 1 - newt)) / fnewt;
+                    faccon = theta / (1.0 - theta);
+                    if (dyth >= 1.0 && !fixed) { /* too slow: a smaller step converges sooner */
+                        const double qnewt = bgc_max(1e-4, bgc_min(20.0, dyth));
+                        hhfac = 0.8 * pow(qnewt, -1.0 / (4.0 + (double)(NIT - 1 - newt)));
+                        failed = 3;
+                        break;
+                    }
+                } else {
+                    failed = 2;
+                    break;
+                }
+            }
+            dynold = bgc_max(dyno, DBL_EPSILON);
+            for (l = 0; l < N; l++) {
+                const double a1 = w1[l] + z1[l], a2 = w2[l] + creal(zc[l]);
+                const double a3 = w3[l] + cimag(zc[l]);
+                w1[l] = a1;
+                w2[l] = a2;
+                w3[l] = a3;
+                z1[l] = T[0] * a1 + T[1] * a2 + T[2] * a3;
+                z2[l] = T[3] * a1 + T[4] * a2 + T[5] * a3;
+                z3[l] = T[6] * a1 + T[7] * a2 + T[8] * a3;
+            }
+            if (faccon * dyno <= fnewt)
+                break;
+        }
+        if (failed) {
+            if (fixed) {
+                if (failed == 1) {
+                    rc = bad == -2 ? bgc_fail_block(r->msg, r->msg_size, r->w)
+                                   : bgc_fail(r->msg, r->msg_size, t, "derivative of state",
+                                              bgc_state_names[bad]);
+                    goto done;
+                }
+                if (!caljac) { /* once more with a fresh Jacobian */
+                    needjac = 1;
+                    continue;
+                }
+                snprintf(r->msg, r->msg_size,
+                         "at t = %.17g: %s: the Newton iteration does not converge with the "
+                         "fixed step h = %.3g", t, method->name, h);
+                rc = BGC_ERR_RUNTIME;
+                goto done;
+            }
+            if (failed != 1)
+                bad = -4;
+            h *= failed == 3 ? hhfac : 0.5;
+            reject = 1;
+            last = 0;
+            r->st->rejected++;
+            needjac = !caljac;
+            continue;
+        }
+
+        /* the error estimate */
+        if (!fixed) {
+            for (l = 0; l < N; l++) {
+                f2[l] = (m->e[0] * z1[l] + m->e[1] * z2[l] + m->e[2] * z3[l]) / h;
+                cont[l] = f2[l] + f0[l];
+            }
+            bgc_stiff_lu_solve(N, E1, piv, cont);
+            r->st->solves++;
+            err = bgc_max(bgc_stiff_norm(cont, scal, &worst), 1e-10);
+            if (err >= 1.0 && (first || reject)) { /* refined: f at y + err */
+                for (l = 0; l < N; l++)
+                    ys[l] = y[l] + cont[l];
+                r->st->rhs++;
+                if (bgc_model_rhs(t, ys, r->p, r->w, yout) == 0) {
+                    for (l = 0; l < N; l++)
+                        cont[l] = yout[l] + f2[l];
+                    bgc_stiff_lu_solve(N, E1, piv, cont);
+                    r->st->solves++;
+                    err = bgc_max(bgc_stiff_norm(cont, scal, &worst), 1e-10);
+                }
+            }
+            if (err != err || err > DBL_MAX) {
+                bad = -1;
+                h *= 0.5;
+                reject = 1;
+                last = 0;
+                r->st->rejected++;
+                needjac = !caljac;
+                continue;
+            }
+        }
+
+        /* step control: Gustafsson's, the safety factor scaled by the Newton iterations */
+        fac = bgc_min(method->safe, cfac / (double)(newt + 2 * NIT));
+        quot = bgc_max(1.0 / method->fac_max,
+                       bgc_min(1.0 / method->fac_min, pow(err, expo) / fac));
+        hnew = h / quot;
+        if (err < 1.0) {
+            first = 0;
+            accepted++;
+            if (accepted > 1) {
+                double facgus = (hacc / h) * pow(err * err / erracc, expo) / method->safe;
+                facgus = bgc_max(1.0 / method->fac_max, bgc_min(1.0 / method->fac_min, facgus));
+                quot = bgc_max(quot, facgus);
+                hnew = h / quot;
+            }
+            hacc = h;
+            erracc = bgc_max(1e-2, err);
+            for (l = 0; l < N; l++)
+                y1[l] = y[l] + z3[l];
+            i = bgc_first_nonfinite(y1, N);
+            if (i >= 0) {
+                rc = bgc_fail(r->msg, r->msg_size, tph, "state", bgc_state_names[i]);
+                goto done;
+            }
+            bgc_radau_poly(m, z1, z2, z3, b);
+            memcpy(zlast, z3, sizeof(double) * N);
+            hold = h;
+            r->st->steps++;
+            rc = bgc_emit_step(r, t, h, tph, y1, NULL, bgc_radau_dense_at, &dense, yout);
+            if (rc)
+                goto done;
+            memcpy(y, y1, sizeof(double) * N);
+            t = tph;
+            r->t = t;
+            nsing = 0;
+            bad = -1;
+            caljac = 0;
+            if (last)
+                goto done;
+            for (l = 0; l < N; l++)
+                scal[l] = atol + rtol * fabs(y[l]);
+            r->st->rhs++;
+            if (bgc_model_rhs(t, y, r->p, r->w, f0)) {
+                rc = bgc_fail_block(r->msg, r->msg_size, r->w);
+                goto done;
+            }
+            k_fixed++;
+            hnew = bgc_min(hnew, hmax);
+            if (reject)
+                hnew = bgc_min(hnew, h);
+            reject = 0;
+            if (theta <= thet && hnew / h >= 1.0 && hnew / h <= 1.2)
+                hnew = h; /* keep h and the factorisations */
+            needjac = theta > thet;
+            h = hnew;
+        } else {
+            reject = 1;
+            last = 0;
+            r->st->rejected++;
+            h = first ? 0.1 * h : hnew;
+            needjac = !caljac;
+        }
+    }
+done:
+    free(piv);
+    free(cmem);
+    free(mem);
+    return rc;
+}
+
+#ifndef BGC_NO_MAIN
+/* ================================================================ CSV === */
+
+/* Numbers are written exactly as printf("%.17g") writes them (NaN as "nan"), in integer
+   arithmetic: |v| = M 2^q (M < 2^53) times 10^m, a 128-bit mantissa from bgc_pow10 rounded
+   down, is one 192-bit product whose integer part is v's 17 significant digits and whose
+   next 64 bits, the fraction, are off by less than 1/8 of their last place.  That decides
+   the rounding to nearest unless the fraction lies within that error of one half (exact
+   ties, about one value in 2^63 otherwise): snprintf writes those, and subnormals,
+   infinities and |v| outside 1e-40..1e40 (the range of the table).  Compile with
+   -DBGC_PLAIN_PRINTF to always use snprintf. */
+#define BGC_FMT_SIZE 32 /* bgc_fmt17 writes at most 26 bytes (it stores whole words) */
+static unsigned long bgc_fmt_slow_count; /* snprintf fallbacks, for tests */
+
+static int bgc_fmt_printf(char *buf, double v)
+{
+    bgc_fmt_slow_count++;
+    if (v != v) {
+        memcpy(buf, "nan", 4);
+        return 3;
+    }
+    return snprintf(buf, BGC_FMT_SIZE, "%.17g", v);
+}
+
+#if !defined(BGC_PLAIN_PRINTF) && FLT_RADIX == 2 && DBL_MANT_DIG == 53 && DBL_MAX_EXP == 1024 \
+    && ULLONG_MAX == 0xffffffffffffffffULL
+typedef unsigned long long bgc_u64;
+
+#if defined(__SIZEOF_INT128__) && !defined(BGC_NO_INT128)
+__extension__ typedef unsigned __int128 bgc_u128;
+/* a * b = (returned) 2^64 + *lo. */
+static inline bgc_u64 bgc_mul64(bgc_u64 a, bgc_u64 b, bgc_u64 *lo)
+{
+    const bgc_u128 prod = (bgc_u128)a * b;
+    *lo = (bgc_u64)prod;
+    return (bgc_u64)(prod >> 64);
+}
+#else
+/* a * b = (returned) 2^64 + *lo, from 32-bit halves (C99 has no 128-bit integer). */
+static inline bgc_u64 bgc_mul64(bgc_u64 a, bgc_u64 b, bgc_u64 *lo)
+{
+    const bgc_u64 mask = 0xffffffffULL, a0 = a & mask, a1 = a >> 32, b0 = b & mask, b1 = b >> 32;
+    const bgc_u64 p00 = a0 * b0, p01 = a0 * b1, p10 = a1 * b0;
+    const bgc_u64 mid = (p00 >> 32) + (p01 & mask) + (p10 & mask);
+    *lo = (mid << 32) | (p00 & mask);
+    return a1 * b1 + (p01 >> 32) + (p10 >> 32) + (mid >> 32);
+}
+#endif
+
+/* 10^m = (hi 2^64 + lo) 2^e2 rounded down, 2^127 <= hi 2^64 + lo < 2^128, for m in
+   BGC_POW10_MIN..BGC_POW10_MAX. */
+#define BGC_POW10_MIN (-24)
+#define BGC_POW10_MAX 56
+static const struct bgc_pow10_entry {
+    bgc_u64 hi, lo;
+    int e2;
+} bgc_pow10[] = {
+    { 0x9abe14cd44753b52ULL, 0xc4926a9672793542ULL, -207 }, /* 1e-24 */
+    { 0xc16d9a0095928a27ULL, 0x75b7053c0f178293ULL, -204 }, /* 1e-23 */
+    { 0xf1c90080baf72cb1ULL, 0x5324c68b12dd6338ULL, -201 }, /* 1e-22 */
+    { 0x971da05074da7beeULL, 0xd3f6fc16ebca5e03ULL, -197 }, /* 1e-21 */
+    { 0xbce5086492111aeaULL, 0x88f4bb1ca6bcf584ULL, -194 }, /* 1e-20 */
+    { 0xec1e4a7db69561a5ULL, 0x2b31e9e3d06c32e5ULL, -191 }, /* 1e-19 */
+    { 0x9392ee8e921d5d07ULL, 0x3aff322e62439fcfULL, -187 }, /* 1e-18 */
+    { 0xb877aa3236a4b449ULL, 0x09befeb9fad487c2ULL, -184 }, /* 1e-17 */
+    { 0xe69594bec44de15bULL, 0x4c2ebe687989a9b3ULL, -181 }, /* 1e-16 */
+    { 0x901d7cf73ab0acd9ULL, 0x0f9d37014bf60a10ULL, -177 }, /* 1e-15 */
+    { 0xb424dc35095cd80fULL, 0x538484c19ef38c94ULL, -174 }, /* 1e-14 */
+    { 0xe12e13424bb40e13ULL, 0x2865a5f206b06fb9ULL, -171 }, /* 1e-13 */
+    { 0x8cbccc096f5088cbULL, 0xf93f87b7442e45d3ULL, -167 }, /* 1e-12 */
+    { 0xafebff0bcb24aafeULL, 0xf78f69a51539d748ULL, -164 }, /* 1e-11 */
+    { 0xdbe6fecebdedd5beULL, 0xb573440e5a884d1bULL, -161 }, /* 1e-10 */
+    { 0x89705f4136b4a597ULL, 0x31680a88f8953030ULL, -157 }, /* 1e-9 */
+    { 0xabcc77118461cefcULL, 0xfdc20d2b36ba7c3dULL, -154 }, /* 1e-8 */
+    { 0xd6bf94d5e57a42bcULL, 0x3d32907604691b4cULL, -151 }, /* 1e-7 */
+    { 0x8637bd05af6c69b5ULL, 0xa63f9a49c2c1b10fULL, -147 }, /* 1e-6 */
+    { 0xa7c5ac471b478423ULL, 0x0fcf80dc33721d53ULL, -144 }, /* 1e-5 */
+    { 0xd1b71758e219652bULL, 0xd3c36113404ea4a8ULL, -141 }, /* 1e-4 */
+    { 0x83126e978d4fdf3bULL, 0x645a1cac083126e9ULL, -137 }, /* 1e-3 */
+    { 0xa3d70a3d70a3d70aULL, 0x3d70a3d70a3d70a3ULL, -134 }, /* 1e-2 */
+    { 0xccccccccccccccccULL, 0xccccccccccccccccULL, -131 }, /* 1e-1 */
+    { 0x8000000000000000ULL, 0x0000000000000000ULL, -127 }, /* 1e0 */
+    { 0xa000000000000000ULL, 0x0000000000000000ULL, -124 }, /* 1e1 */
+    { 0xc800000000000000ULL, 0x0000000000000000ULL, -121 }, /* 1e2 */
+    { 0xfa00000000000000ULL, 0x0000000000000000ULL, -118 }, /* 1e3 */
+    { 0x9c40000000000000ULL, 0x0000000000000000ULL, -114 }, /* 1e4 */
+    { 0xc350000000000000ULL, 0x0000000000000000ULL, -111 }, /* 1e5 */
+    { 0xf424000000000000ULL, 0x0000000000000000ULL, -108 }, /* 1e6 */
+    { 0x9896800000000000ULL, 0x0000000000000000ULL, -104 }, /* 1e7 */
+    { 0xbebc200000000000ULL, 0x0000000000000000ULL, -101 }, /* 1e8 */
+    { 0xee6b280000000000ULL, 0x0000000000000000ULL, -98 }, /* 1e9 */
+    { 0x9502f90000000000ULL, 0x0000000000000000ULL, -94 }, /* 1e10 */
+    { 0xba43b74000000000ULL, 0x0000000000000000ULL, -91 }, /* 1e11 */
+    { 0xe8d4a51000000000ULL, 0x0000000000000000ULL, -88 }, /* 1e12 */
+    { 0x9184e72a00000000ULL, 0x0000000000000000ULL, -84 }, /* 1e13 */
+    { 0xb5e620f480000000ULL, 0x0000000000000000ULL, -81 }, /* 1e14 */
+    { 0xe35fa931a0000000ULL, 0x0000000000000000ULL, -78 }, /* 1e15 */
+    { 0x8e1bc9bf04000000ULL, 0x0000000000000000ULL, -74 }, /* 1e16 */
+    { 0xb1a2bc2ec5000000ULL, 0x0000000000000000ULL, -71 }, /* 1e17 */
+    { 0xde0b6b3a76400000ULL, 0x0000000000000000ULL, -68 }, /* 1e18 */
+    { 0x8ac7230489e80000ULL, 0x0000000000000000ULL, -64 }, /* 1e19 */
+    { 0xad78ebc5ac620000ULL, 0x0000000000000000ULL, -61 }, /* 1e20 */
+    { 0xd8d726b7177a8000ULL, 0x0000000000000000ULL, -58 }, /* 1e21 */
+    { 0x878678326eac9000ULL, 0x0000000000000000ULL, -54 }, /* 1e22 */
+    { 0xa968163f0a57b400ULL, 0x0000000000000000ULL, -51 }, /* 1e23 */
+    { 0xd3c21bcecceda100ULL, 0x0000000000000000ULL, -48 }, /* 1e24 */
+    { 0x84595161401484a0ULL, 0x0000000000000000ULL, -44 }, /* 1e25 */
+    { 0xa56fa5b99019a5c8ULL, 0x0000000000000000ULL, -41 }, /* 1e26 */
+    { 0xcecb8f27f4200f3aULL, 0x0000000000000000ULL, -38 }, /* 1e27 */
+    { 0x813f3978f8940984ULL, 0x4000000000000000ULL, -34 }, /* 1e28 */
+    { 0xa18f07d736b90be5ULL, 0x5000000000000000ULL, -31 }, /* 1e29 */
+    { 0xc9f2c9cd04674edeULL, 0xa400000000000000ULL, -28 }, /* 1e30 */
+    { 0xfc6f7c4045812296ULL, 0x4d00000000000000ULL, -25 }, /* 1e31 */
+    { 0x9dc5ada82b70b59dULL, 0xf020000000000000ULL, -21 }, /* 1e32 */
+    { 0xc5371912364ce305ULL, 0x6c28000000000000ULL, -18 }, /* 1e33 */
+    { 0xf684df56c3e01bc6ULL, 0xc732000000000000ULL, -15 }, /* 1e34 */
+    { 0x9a130b963a6c115cULL, 0x3c7f400000000000ULL, -11 }, /* 1e35 */
+    { 0xc097ce7bc90715b3ULL, 0x4b9f100000000000ULL, -8 }, /* 1e36 */
+    { 0xf0bdc21abb48db20ULL, 0x1e86d40000000000ULL, -5 }, /* 1e37 */
+    { 0x96769950b50d88f4ULL, 0x1314448000000000ULL, -1 }, /* 1e38 */
+    { 0xbc143fa4e250eb31ULL, 0x17d955a000000000ULL, 2 }, /* 1e39 */
+    { 0xeb194f8e1ae525fdULL, 0x5dcfab0800000000ULL, 5 }, /* 1e40 */
+    { 0x92efd1b8d0cf37beULL, 0x5aa1cae500000000ULL, 9 }, /* 1e41 */
+    { 0xb7abc627050305adULL, 0xf14a3d9e40000000ULL, 12 }, /* 1e42 */
+    { 0xe596b7b0c643c719ULL, 0x6d9ccd05d0000000ULL, 15 }, /* 1e43 */
+    { 0x8f7e32ce7bea5c6fULL, 0xe4820023a2000000ULL, 19 }, /* 1e44 */
+    { 0xb35dbf821ae4f38bULL, 0xdda2802c8a800000ULL, 22 }, /* 1e45 */
+    { 0xe0352f62a19e306eULL, 0xd50b2037ad200000ULL, 25 }, /* 1e46 */
+    { 0x8c213d9da502de45ULL, 0x4526f422cc340000ULL, 29 }, /* 1e47 */
+    { 0xaf298d050e4395d6ULL, 0x9670b12b7f410000ULL, 32 }, /* 1e48 */
+    { 0xdaf3f04651d47b4cULL, 0x3c0cdd765f114000ULL, 35 }, /* 1e49 */
+    { 0x88d8762bf324cd0fULL, 0xa5880a69fb6ac800ULL, 39 }, /* 1e50 */
+    { 0xab0e93b6efee0053ULL, 0x8eea0d047a457a00ULL, 42 }, /* 1e51 */
+    { 0xd5d238a4abe98068ULL, 0x72a4904598d6d880ULL, 45 }, /* 1e52 */
+    { 0x85a36366eb71f041ULL, 0x47a6da2b7f864750ULL, 49 }, /* 1e53 */
+    { 0xa70c3c40a64e6c51ULL, 0x999090b65f67d924ULL, 52 }, /* 1e54 */
+    { 0xd0cf4b50cfe20765ULL, 0xfff4b4e3f741cf6dULL, 55 }, /* 1e55 */
+    { 0x82818f1281ed449fULL, 0xbff8f10e7a8921a4ULL, 59 }, /* 1e56 */
+};
+
+/* floor(log10(2^e)) for |e| <= 1650 (the constant is Ryu's). */
+static int bgc_floor_log10_pow2(int e)
+{
+    return e >= 0 ? (int)(((unsigned long)e * 78913UL) >> 18)
+                  : -(int)((((unsigned long)-e * 78913UL) >> 18) + 1);
+}
+
+/* floor(mant 2^q 10^m) and (in *frac) the next 64 bits, for mant < 2^53 and a result in
+   [2^53, 2^60); the fraction is short by less than 1/8 of its last place. */
+static inline bgc_u64 bgc_scaled(bgc_u64 mant, int q, int m, bgc_u64 *frac)
+{
+    const struct bgc_pow10_entry *p = &bgc_pow10[m - BGC_POW10_MIN];
+    bgc_u64 w0, w1, w2, mid_lo;
+    const bgc_u64 mid = bgc_mul64(mant, p->lo, &w0);
+    int shift;
+    w2 = bgc_mul64(mant, p->hi, &mid_lo);
+    w1 = mid + mid_lo;
+    w2 += w1 < mid; /* the product is w2 2^128 + w1 2^64 + w0 */
+    shift = -(q + p->e2) - 64; /* 56..63: the binary point lies that far into w1 */
+    *frac = (w1 << (64 - shift)) | (w0 >> shift);
+    return (w2 << (64 - shift)) | (w1 >> shift);
+}
+
+/* The 8 digits of v < 10^8, all at once, as the word whose byte i (bits 8i..8i+7) is the
+   character of digit i: v splits into two 4-digit lanes, each into two 2-digit lanes, each
+   of those into two digits (the multiply-shifts divide exactly in these ranges). */
+static inline bgc_u64 bgc_digits8(bgc_u64 v)
+{
+    const bgc_u64 high4 = (v * 109951163U) >> 40; /* v / 10000 */
+    const bgc_u64 quads = high4 | (v - 10000U * high4) << 32;
+    const bgc_u64 top2 = ((quads * 10486U) >> 20) & 0x0000007f0000007fULL; /* quads / 100 */
+    const bgc_u64 pairs = (quads - 100U * top2) << 16 | top2;
+    const bgc_u64 top1 = ((pairs * 103U) >> 10) & 0x000f000f000f000fULL; /* pairs / 10 */
+    return ((pairs - 10U * top1) << 8 | top1) | 0x3030303030303030ULL;
+}
+
+/* Byte i of w into o[i], i < 8: one store where the bytes of a word are in that order
+   (the test is a constant that compilers fold). */
+static inline void bgc_store8(char *o, bgc_u64 w)
+{
+    const bgc_u64 one = 1;
+    char first;
+    int i;
+    memcpy(&first, &one, 1);
+    if (first == 1) {
+        memcpy(o, &w, 8);
+        return;
+    }
+    for (i = 0; i < 8; i++)
+        o[i] = (char)(w >> (8 * i));
+}
+
+/* The %g layout of the 17 digits of d (10^16 <= d < 10^17) with decimal exponent x: fixed
+   for -4 <= x < 17, else e-style.  The digits stay in registers (never stored and read
+   back); whole words are stored, so it writes up to o[24]. */
+static inline char *bgc_layout(char *o, bgc_u64 d, int x)
+{
+    const bgc_u64 high9 = d / 100000000U, low8 = d - 100000000U * high9;
+    const bgc_u64 lead = high9 / 100000000U;
+    const bgc_u64 w1 = bgc_digits8(high9 - 100000000U * lead), w2 = bgc_digits8(low8);
+    int nd = 17, ax; /* significant digits without the trailing zeros */
+    if ((w2 >> 56) == '0') /* the last digit */
+        for (d /= 10U, nd--; d % 10U == 0; d /= 10U)
+            nd--;
+    o[0] = (char)('0' + lead);
+    if (x >= 0 && x < 17) { /* digits 0..x, and '.' and digits x+1..nd-1 if nd > x + 1 */
+        bgc_store8(o + 1, w1);
+        bgc_store8(o + 9, w2);
+        if (nd <= x + 1)
+            return o + x + 1;
+        if (x == 0) {
+            bgc_store8(o + 2, w1);
+            bgc_store8(o + 10, w2);
+        } else if (x < 8) { /* digits x+1.. are w1:w2 shifted down by x bytes */
+            bgc_store8(o + x + 2, w1 >> (8 * x) | w2 << (64 - 8 * x));
+            bgc_store8(o + x + 10, w2 >> (8 * x));
+        } else {
+            bgc_store8(o + x + 2, w2 >> (8 * x - 64));
+        }
+        o[x + 1] = '.';
+        return o + nd + 1;
+    }
+    if (x < 0 && x >= -4) { /* "0.", -x - 1 zeros, the digits */
+        const char lead_char = o[0];
+        memcpy(o, "0.000", 5);
+        o += 1 - x;
+        o[0] = lead_char;
+        bgc_store8(o + 1, w1);
+        bgc_store8(o + 9, w2);
+        return o + nd;
+    }
+    o[1] = '.';
+    bgc_store8(o + 2, w1);
+    bgc_store8(o + 10, w2);
+    o += nd > 1 ? nd + 1 : 1;
+    ax = x < 0 ? -x : x;
+    *o++ = 'e';
+    *o++ = x < 0 ? '-' : '+';
+    if (ax >= 100) {
+        *o++ = (char)('0' + ax / 100);
+        ax %= 100;
+    }
+    o[0] = (char)('0' + ax / 10);
+    o[1] = (char)('0' + ax % 10);
+    return o + 2;
+}
+
+/* Writes v into buf (>= BGC_FMT_SIZE bytes) as printf("%.17g", v); returns the length. */
+static int bgc_fmt17(char *buf, double v)
+{
+    const bgc_u64 half = 1ULL << 63, ten17 = 100000000000000000ULL;
+    bgc_u64 bits, mant, d, frac;
+    char *o = buf;
+    int e2, x, m;
+    memcpy(&bits, &v, sizeof bits);
+    e2 = (int)((bits >> 52) & 0x7ff); /* biased binary exponent */
+    if (e2 == 0 || e2 == 0x7ff) {
+        if (v != 0.0)
+            return bgc_fmt_printf(buf, v); /* subnormal, inf or nan */
+        if (signbit(v))
+            *o++ = '-';
+        *o++ = '0';
+        *o = '\0';
+        return (int)(o - buf);
+    }
+    mant = (bits & 0xfffffffffffffULL) | (1ULL << 52);
+    x = bgc_floor_log10_pow2(e2 - 1023); /* floor(log10|v|) or one less */
+    m = 16 - x;
+    if (m - 1 < BGC_POW10_MIN || m > BGC_POW10_MAX)
+        return bgc_fmt_printf(buf, v);
+    d = bgc_scaled(mant, e2 - 1075, m, &frac);
+    if (d >= ten17) {
+        x++;
+        d = bgc_scaled(mant, e2 - 1075, --m, &frac);
+    }
+    if (frac - (half - 1) <= 1)
+        return bgc_fmt_printf(buf, v); /* too close to a tie to decide */
+    d += frac >> 63; /* rounded to nearest */
+    if (d == ten17) {
+        d /= 10;
+        x++;
+    }
+    *o = '-';
+    o = bgc_layout(o + (bits >> 63), d, x);
+    *o = '\0';
+    return (int)(o - buf);
+}
+#else
+static int bgc_fmt17(char *buf, double v)
+{
+    return bgc_fmt_printf(buf, v);
+}
+#endif
+
+typedef struct bgc_writer {
+    FILE *file;
+    size_t len;
+    int failed;
+    char buf[1 << 16];
+} bgc_writer;
+
+static bgc_writer bgc_out;
+
+static void bgc_flush(bgc_writer *w)
+{
+    if (w->len && fwrite(w->buf, 1, w->len, w->file) != w->len)
+        w->failed = 1;
+    w->len = 0;
+}
+
+static void bgc_put_number(bgc_writer *w, double v)
+{
+    if (sizeof w->buf - w->len < BGC_FMT_SIZE + 2)
+        bgc_flush(w);
+    w->len += (size_t)bgc_fmt17(w->buf + w->len, v);
+}
+
+static int bgc_csv_row(void *ctx, double t, const double *x, const double *y)
+{
+    bgc_writer *w = (bgc_writer *)ctx;
+    int j;
+    (void)x;
+    bgc_put_number(w, t);
+    for (j = 0; j < BGC_NUM_OUTPUTS; j++) {
+        w->buf[w->len++] = ',';
+        bgc_put_number(w, y[j]);
+    }
+    w->buf[w->len++] = '\n';
+    return w->failed ? BGC_ERR_RUNTIME : 0;
+}
+
+static void bgc_csv_header(FILE *f)
+{
+    int j;
+    fputs("t", f);
+    for (j = 0; j < BGC_NUM_OUTPUTS; j++) {
+        fputc(',', f);
+        fputs(bgc_output_names[j], f);
+    }
+    fputc('\n', f);
+}
+
+/* ======================================================== command line === */
+
+static const char bgc_usage[] =
+    " [--t-end T] [--dt DT] [--solver NAME] [--rtol R] [--atol A]\n"
+    "       [--step H] [-p NAME=VALUE ...] [--project-initial] [--stats]\n";
+
+static void bgc_print_usage(FILE *f)
+{
+    fprintf(f, "usage: %s%s", bgc_ident, bgc_usage);
+}
+
+static void bgc_help(void)
+{
+    bgc_settings s;
+    bgc_params p;
+    int j;
+    bgc_settings_default(&s);
+    bgc_params_defaults(&p, NULL);
+    bgc_print_usage(stdout);
+    printf("Simulates the model and writes CSV (t and the outputs) to stdout.\n"
+           "  --t-end T          end time (%.17g; the start time is %.17g)\n"
+           "  --dt DT            output interval (%.17g)\n"
+           "  --solver NAME      the solver (%s), one of those listed below\n"
+           "  --rtol R           relative tolerance of the adaptive solvers (%.17g)\n"
+           "  --atol A           absolute tolerance of the adaptive solvers (%.17g)\n"
+           "  --step H           step of the fixed-step solvers (default: dt)\n"
+           "  -p NAME=VALUE      set a parameter; derived parameters follow\n"
+           "  --project-initial  project the initial state onto the constraints\n"
+           "  --stats            print the solver's counters to stderr\n",
+           s.t_end, s.t0, s.dt, bgc_solver_names[s.solver], s.rtol, s.atol);
+    printf("solvers:\n");
+    for (j = 0; j < BGC_NUM_SOLVERS; j++)
+        printf("  %-8s %s\n", bgc_methods[j].name, bgc_methods[j].summary);
+    if (BGC_NUM_PARAMS > 0)
+        printf("parameters (NAME = default):\n");
+    for (j = 0; j < BGC_NUM_PARAMS; j++)
+        printf("  %s = %.17g\n", bgc_param_names[j], *bgc_param_ref(&p, j));
+}
+
+/* A decimal number (digits, sign, '.', exponent: no hex, inf or nan), finite. */
+static int bgc_parse_number(const char *option, const char *text, double *out)
+{
+    char *end;
+    if (*text != '\0' && strspn(text, "0123456789+-.eE") == strlen(text)) {
+        *out = strtod(text, &end);
+        if (*end == '\0' && isfinite(*out))
+            return 0;
+    }
+    fprintf(stderr, "error: invalid value for %s: '%s'\n", option, text);
+    return -1;
+}
+
+static int bgc_parse_param(const char *text, bgc_params *p, int *given)
+{
+    const char *eq = strrchr(text, '=');
+    char name[256];
+    size_t len = eq ? (size_t)(eq - text) : 0;
+    int j;
+    double v;
+    if (!eq || len == 0 || len >= sizeof name) {
+        fprintf(stderr, "error: -p expects NAME=VALUE, got '%s'\n", text);
+        return -1;
+    }
+    memcpy(name, text, len);
+    name[len] = '\0';
+    j = bgc_param_index(name);
+    if (j < 0) {
+        fprintf(stderr, "error: unknown parameter '%s'\n", name);
+        return -1;
+    }
+    if (bgc_parse_number(name, eq + 1, &v))
+        return -1;
+    *bgc_param_ref(p, j) = v;
+    given[j] = 1;
+    return 0;
+}
+
+static int bgc_parse_solver(const char *text, int *solver)
+{
+    int k = bgc_solver_index(text);
+    if (k >= 0) {
+        *solver = k;
+        return 0;
+    }
+    fprintf(stderr, "error: unknown solver '%s' (expected %s)\n", text, BGC_SOLVER_LIST);
+    return -1;
+}
+
+/* Applies option `name` (one that takes a value) to the run. */
+static int bgc_apply_option(const char *name, const char *value, bgc_settings *s, bgc_params *p,
+                            int *given)
+{
+    if (strcmp(name, "-p") == 0)
+        return bgc_parse_param(value, p, given);
+    if (strcmp(name, "--solver") == 0)
+        return bgc_parse_solver(value, &s->solver);
+    if (strcmp(name, "--step") == 0) {
+        if (bgc_parse_number(name, value, &s->step))
+            return -1;
+        if (s->step > 0.0)
+            return 0;
+        fprintf(stderr, "error: --step must be positive\n");
+        return -1;
+    }
+    return bgc_parse_number(name, value, strcmp(name, "--t-end") == 0 ? &s->t_end
+                                         : strcmp(name, "--dt") == 0  ? &s->dt
+                                         : strcmp(name, "--rtol") == 0 ? &s->rtol
+                                                                      : &s->atol);
+}
+
+/* -1 to run, else the exit status: 0 after --help, 2 after a usage error. */
+static int bgc_parse_args(int argc, char **argv, bgc_settings *s, bgc_params *p, int *given,
+                          int *project, int *stats)
+{
+    static const char *const with_value[] = { "--t-end", "--dt", "--solver", "--rtol",
+                                              "--atol", "--step", "-p" };
+    int i, k;
+    for (i = 1; i < argc; i++) {
+        const char *arg = argv[i], *eq = strncmp(arg, "--", 2) == 0 ? strchr(arg, '=') : NULL;
+        const size_t len = eq ? (size_t)(eq - arg) : strlen(arg);
+        const char *value;
+        if (strcmp(arg, "-h") == 0 || strcmp(arg, "--help") == 0) {
+            bgc_help();
+            return 0;
+        }
+        if (strcmp(arg, "--project-initial") == 0 || strcmp(arg, "--stats") == 0) {
+            *(arg[2] == 'p' ? project : stats) = 1;
+            continue;
+        }
+        for (k = 0; k < 7; k++)
+            if (strlen(with_value[k]) == len && strncmp(arg, with_value[k], len) == 0)
+                break;
+        if (k == 7) {
+            fprintf(stderr, "error: unknown option '%s'\n", arg);
+            bgc_print_usage(stderr);
+            return BGC_ERR_USAGE;
+        }
+        value = eq ? eq + 1 : (i + 1 < argc ? argv[++i] : NULL);
+        if (!value) {
+            fprintf(stderr, "error: option '%s' needs a value\n", arg);
+            bgc_print_usage(stderr);
+            return BGC_ERR_USAGE;
+        }
+        if (bgc_apply_option(with_value[k], value, s, p, given))
+            return BGC_ERR_USAGE;
+    }
+    return -1;
+}
+
+int main(int argc, char **argv)
+{
+    bgc_settings s;
+    bgc_params p;
+    bgc_stats st = { 0, 0, 0, 0, 0, 0, 0, 0.0 };
+    int given[BGC_DIM(BGC_NUM_PARAMS)] = { 0 };
+    double x0[BGC_DIM(BGC_NUM_STATES)] = { 0.0 };
+    char msg[1024];
+    int project = 0, stats = 0, rc, i;
+
+    bgc_settings_default(&s);
+    rc = bgc_parse_args(argc, argv, &s, &p, given, &project, &stats);
+    if (rc >= 0)
+        return rc;
+    if (bgc_check_settings(&s, msg, sizeof msg)) {
+        fprintf(stderr, "error: %s\n", msg);
+        return BGC_ERR_USAGE;
+    }
+    bgc_params_defaults(&p, given);
+    for (i = 0; i < BGC_NUM_PARAMS; i++)
+        if (!isfinite(*bgc_param_ref(&p, i))) {
+            fprintf(stderr, "error: parameter '%s' is not finite\n", bgc_param_names[i]);
+            return BGC_ERR_RUNTIME;
+        }
+    bgc_init(&p, x0);
+    i = bgc_first_nonfinite(x0, BGC_NUM_STATES);
+    if (i >= 0) {
+        fprintf(stderr, "error: at t = %.17g: state '%s' is not finite\n", s.t0, bgc_state_names[i]);
+        return BGC_ERR_RUNTIME;
+    }
+    if (project && bgc_project_initial(s.t0, x0, &p, msg, sizeof msg)) {
+        fprintf(stderr, "error: %s\n", msg);
+        return BGC_ERR_CONSTRAINT;
+    }
+    if (bgc_check_constraints(s.t0, x0, &p, stderr))
+        return BGC_ERR_CONSTRAINT;
+
+    bgc_out.file = stdout;
+    bgc_csv_header(stdout);
+    rc = bgc_simulate(&s, &p, x0, bgc_csv_row, &bgc_out, &st, msg, sizeof msg);
+    bgc_flush(&bgc_out);
+    if (fflush(stdout) != 0 || bgc_out.failed) {
+        fprintf(stderr, "error: cannot write the output\n");
+        return BGC_ERR_RUNTIME;
+    }
+    if (stats)
+        bgc_print_stats(stderr, &st);
+    if (rc) {
+        fprintf(stderr, "error: %s\n", msg);
+        return BGC_ERR_RUNTIME;
+    }
+    return 0;
+}
+#endif /* BGC_NO_MAIN */

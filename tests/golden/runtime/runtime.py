@@ -1,0 +1,1914 @@
+# ================================================================ solvers ===
+# Printed from bgc/solvers.py.
+_METHODS = {
+    'euler': {
+        'family': 'fixed',
+        'order': 1,
+        'summary': 'explicit Euler, fixed step',
+        'safe': 0.9,
+        'fac_min': 0.2,
+        'fac_max': 10.0,
+        'beta': 0.0,
+        'q': 1,
+        'expo_beta': 0.75,
+        'stages': 1,
+        'fsal': False,
+        'c': (0.0,),
+        'a': ((),),
+        'b': (1.0,),
+        'e': (),
+        'e2': (),
+        'P': (),
+    },
+    'rk4': {
+        'family': 'fixed',
+        'order': 4,
+        'summary': 'classical Runge-Kutta, fixed step',
+        'safe': 0.9,
+        'fac_min': 0.2,
+        'fac_max': 10.0,
+        'beta': 0.0,
+        'q': 4,
+        'expo_beta': 0.75,
+        'stages': 4,
+        'fsal': False,
+        'c': (0.0, 0.5, 0.5, 1.0),
+        'a': ((), (0.5,), (0.0, 0.5), (0.0, 0.0, 1.0),),
+        'b': (0.16666666666666666, 0.3333333333333333, 0.3333333333333333, 0.16666666666666666),
+        'e': (),
+        'e2': (),
+        'P': (),
+    },
+    'dopri5': {
+        'family': 'erk',
+        'order': 5,
+        'summary': 'Dormand-Prince 5(4), adaptive, dense output of order 4',
+        'safe': 0.9,
+        'fac_min': 0.2,
+        'fac_max': 10.0,
+        'beta': 0.04,
+        'q': 5,
+        'expo_beta': 0.75,
+        'stages': 7,
+        'fsal': True,
+        'c': (0.0, 0.2, 0.3, 0.8, 0.8888888888888888, 1.0, 1.0),
+        'a': ((), (0.2,), (0.075, 0.225), (0.9777777777777777, -3.7333333333333334, 3.5555555555555554), (2.9525986892242035, -11.595793324188385, 9.822892851699436, -0.2908093278463649), (2.8462752525252526, -10.757575757575758, 8.906422717743473, 0.2784090909090909, -0.2735313036020583), (0.09114583333333333, 0.0, 0.44923629829290207, 0.6510416666666666, -0.322376179245283, 0.13095238095238096),),
+        'b': (0.09114583333333333, 0.0, 0.44923629829290207, 0.6510416666666666, -0.322376179245283, 0.13095238095238096, 0.0),
+        'e': (0.0012326388888888888, 0.0, -0.0042527702905061394, 0.03697916666666667, -0.05086379716981132, 0.0419047619047619, -0.025),
+        'e2': (),
+        'P': ((1.0, -2.8535800653862835, 3.0717434641059005, -1.1270175653862835), (0.0, 0.0, 0.0, 0.0), (0.0, 4.023133379230305, -6.249321565289, 2.675424484351598), (0.0, -3.7324019615885042, 10.068970589843675, -5.685526961588504), (0.0, 2.5548038301849423, -6.399112377351017, 3.5219323679207912), (0.0, -1.3744241142186024, 3.272657752246729, -1.7672812570757455), (0.0, 1.3824689317781436, -3.764937863556287, 2.382468931778144), ),
+        'stiffness': (5, 6, 3.25),
+    },
+    'dop853': {
+        'family': 'erk',
+        'order': 8,
+        'summary': 'Dormand-Prince 8(5,3), adaptive, dense output of order 7: tight tolerances',
+        'safe': 0.9,
+        'fac_min': 0.333,
+        'fac_max': 6.0,
+        'beta': 0.04,
+        'q': 8,
+        'expo_beta': 0.2,
+        'stages': 13,
+        'fsal': True,
+        'c': (0.0, 0.05260015195876773, 0.0789002279381516, 0.1183503419072274, 0.2816496580927726, 0.3333333333333333, 0.25, 0.3076923076923077, 0.6512820512820513, 0.6, 0.8571428571428571, 1.0, 1.0, 0.1, 0.2, 0.7777777777777778),
+        'a': ((), (0.05260015195876773,), (0.0197250569845379, 0.0591751709536137), (0.02958758547680685, 0.0, 0.08876275643042054), (0.2413651341592667, 0.0, -0.8845494793282861, 0.924834003261792), (0.037037037037037035, 0.0, 0.0, 0.17082860872947386, 0.12546768756682242), (0.037109375, 0.0, 0.0, 0.17025221101954405, 0.06021653898045596, -0.017578125), (0.03709200011850479, 0.0, 0.0, 0.17038392571223998, 0.10726203044637328, -0.015319437748624402, 0.008273789163814023), (0.6241109587160757, 0.0, 0.0, -3.3608926294469414, -0.868219346841726, 27.59209969944671, 20.154067550477894, -43.48988418106996), (0.47766253643826434, 0.0, 0.0, -2.4881146199716677, -0.590290826836843, 21.230051448181193, 15.279233632882423, -33.28821096898486, -0.020331201708508627), (-0.9371424300859873, 0.0, 0.0, 5.186372428844064, 1.0914373489967295, -8.149787010746927, -18.52006565999696, 22.739487099350505, 2.4936055526796523, -3.0467644718982196), (2.273310147516538, 0.0, 0.0, -10.53449546673725, -2.0008720582248625, -17.9589318631188, 27.94888452941996, -2.8589982771350235, -8.87285693353063, 12.360567175794303, 0.6433927460157636), (0.054293734116568765, 0.0, 0.0, 0.0, 0.0, 4.450312892752409, 1.8915178993145003, -5.801203960010585, 0.3111643669578199, -0.1521609496625161, 0.20136540080403034, 0.04471061572777259), (0.056167502283047954, 0.0, 0.0, 0.0, 0.0, 0.0, 0.25350021021662483, -0.2462390374708025, -0.12419142326381637, 0.15329179827876568, 0.00820105229563469, 0.007567897660545699, -0.008298), (0.03183464816350214, 0.0, 0.0, 0.0, 0.0, 0.028300909672366776, 0.053541988307438566, -0.05492374857139099, 0.0, 0.0, -0.00010834732869724932, 0.0003825710908356584, -0.00034046500868740456, 0.1413124436746325), (-0.42889630158379194, 0.0, 0.0, 0.0, 0.0, -4.697621415361164, 7.683421196062599, 4.06898981839711, 0.3567271874552811, 0.0, 0.0, 0.0, -0.0013990241651590145, 2.9475147891527724, -9.15095847217987),),
+        'b': (0.054293734116568765, 0.0, 0.0, 0.0, 0.0, 4.450312892752409, 1.8915178993145003, -5.801203960010585, 0.3111643669578199, -0.1521609496625161, 0.20136540080403034, 0.04471061572777259, 0.0),
+        'e': (0.01312004499419488, 0.0, 0.0, 0.0, 0.0, -1.2251564463762044, -0.4957589496572502, 1.6643771824549864, -0.35032884874997366, 0.3341791187130175, 0.08192320648511571, -0.022355307863886294, 0.0),
+        'e2': (-0.18980075407240762, 0.0, 0.0, 0.0, 0.0, 4.450312892752409, 1.8915178993145003, -5.801203960010585, -0.42268232132379197, -0.1521609496625161, 0.20136540080403034, 0.022651792198360825, 0.0),
+        'P': ((1.0, -10.266057073759306, 48.161850968566455, -114.93304874997833, 147.46446875669767, -97.06685363011368, 25.69393346270375), (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0), (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0), (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0), (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0), (0.0, 13.917653631776604, -154.78787266663716, 522.9219089608218, -456.25918840208783, -75.53193732135753, 154.18974869023643), (0.0, 2.6056037519936095, -21.622822384626506, 2.535182028966755, 292.25417465990404, -505.40999933296894, 231.5293791760455), (0.0, -15.018944223519684, 160.09447708973047, -474.3071826037644, 135.96036916173838, 545.1091945264187, -357.6391179106141), (0.0, 3.050527683318488, -38.54396729189063, 174.47140009219885, -337.0513470238771, 291.78987509083254, -93.40532418362432), (0.0, -1.3278744327655212, 16.661770430049543, -74.44027814126304, 140.75210016191608, -119.2562021040512, 37.45832313645163), (0.0, 2.844533632672879, -36.55829548991012, 170.69007169147514, -345.9748485480496, 313.299553623578, -104.0996495089623), (0.0, 0.7657106259527866, -9.906995535619366, 46.8029919188744, -96.5198694669957, 88.74316650017616, -29.8402934266605), (0.0, -1.0889903364513334, 14.097013042320002, -66.68230591294363, 137.96299063474376, -127.82216401767992, 43.53345659001114), (0.0, 18.148505520854727, -127.63310949253875, 357.3419516129657, -500.7031507909224, 349.17035710882897, -96.32455395918828), (0.0, -9.194632392478356, 93.3567459327894, -282.6272618704363, 361.14007718803333, -201.85219053352347, 39.17726167561544), (0.0, -4.436036387594894, 56.68120539776666, -261.77342902691703, 520.9742236688993, -461.17279991013964, 149.72683625798564), ),
+    },
+    'rodas4': {
+        'family': 'rosenbrock',
+        'order': 4,
+        'summary': 'Rosenbrock 4(3), L-stable, stiff; the Jacobian every step',
+        'safe': 0.9,
+        'fac_min': 0.2,
+        'fac_max': 6.0,
+        'beta': 0.0,
+        'q': 4,
+        'expo_beta': 0.75,
+        'stages': 6,
+        'gamma': 0.25,
+        'c': (0.0, 0.386, 0.21, 0.63, 1.0, 1.0),
+        'd': (0.25, -0.1043, 0.1035, -0.03620000000000023, 0.0, 0.0),
+        'a': ((), (1.544,), (0.9466785280815826, 0.2557011698983284), (3.314825187068521, 2.896124015972201, 0.9986419139977817), (1.221224509226641, 6.019134481288629, 12.53708332932087, -0.687886036105895), (1.221224509226641, 6.019134481288629, 12.53708332932087, -0.687886036105895, 1.0),),
+        'C': ((), (-5.6688,), (-2.430093356833875, -0.2063599157091915), (-0.1073529058151375, -9.594562251023355, -20.47028614809616), (7.496443313967647, -10.24680431464352, -33.99990352819905, 11.7089089320616), (8.083246795921522, -7.981132988064893, -31.52159432874371, 16.31930543123136, -6.058818238834054),),
+        'm': (1.221224509226641, 6.019134481288629, 12.53708332932087, -0.687886036105895, 1.0, 1.0),
+        'e': (0.0, 0.0, 0.0, 0.0, 0.0, 1.0),
+        'd2': (10.12623508344586, -7.487995877610167, -34.80091861555747, -7.992771707568823, 1.025137723295662, 0.0),
+        'd3': (-0.6762803392801253, 6.087714651680015, 16.43084320892478, 24.76722511418386, -6.594389125716872, 0.0),
+    },
+    'radau5': {
+        'family': 'radau5',
+        'order': 5,
+        'summary': 'Radau IIA of order 5, implicit, L-stable, stiff; Jacobian and factorisations reused',
+        'safe': 0.9,
+        'fac_min': 0.2,
+        'fac_max': 8.0,
+        'beta': 0.0,
+        'q': 4,
+        'expo_beta': 0.75,
+        'radau': {'c1': 0.1550510257216822, 'c2': 0.6449489742783178, 'gamma': 3.637834252744496, 'alpha': 2.6810828736277523, 'beta': 3.0504301992474105, 'T': ((0.09123239487089295, -0.1412552950209542, -0.030029194105147424), (0.241717932707107, 0.20412935229379994, 0.3829421127572619), (0.966048182615093, 1.0, 0.0),), 'Ti': ((4.325579890063155, 0.33919925181580984, 0.5417705399358749), (-4.178718591551905, -0.32768282076106237, 0.47662355450055044), (-0.5028726349457868, 2.571926949855605, -0.5960392048282249),), 'e': (-10.048809399827416, 1.382142733160749, -0.3333333333333333)},
+    },
+    'auto': {
+        'family': 'auto',
+        'order': 5,
+        'summary': 'dopri5 until its stiffness test fires, then rodas4 for the rest of the run',
+        'safe': 0.9,
+        'fac_min': 0.2,
+        'fac_max': 10.0,
+        'beta': 0.0,
+        'q': 5,
+        'expo_beta': 0.75,
+        'explicit': 'dopri5',
+        'stiff': 'rodas4',
+    },
+}
+SOLVERS = tuple(_METHODS)
+_SOLVER_LIST = 'euler, rk4, dopri5, dop853, rodas4, radau5 or auto'
+
+
+# ====================================================================== runtime ===
+# bgc's runtime: model-independent, the same in every generated module (bgc/runtime/runtime.py,
+# inlined verbatim).  It uses the model part above: the sizes, _rhs, _out and _jvp, the blocks'
+# plans and the Jacobian's colouring; it does the same arithmetic as the C runtime.
+
+
+class SimulationError(RuntimeError):
+    """A non-finite value, a step size too small or an algebraic block that failed; .times and
+    .rows hold the rows computed before it."""
+
+    def __init__(self, message, t, times, rows):
+        super().__init__(message)
+        self.t = t
+        self.times = times
+        self.rows = rows
+
+
+class ConstraintError(RuntimeError):
+    """The initial conditions violate a constraint (or cannot be projected onto them)."""
+
+    def __init__(self, message, messages=()):
+        super().__init__(message)
+        self.messages = list(messages) or [message]
+
+
+class BlockError(RuntimeError):
+    """An algebraic block solved in the model functions was singular or did not converge."""
+
+
+class _Failure(Exception):
+    def __init__(self, message, t):
+        super().__init__(message)
+        self.t = t
+
+
+class _BlockFailure(Exception):
+    _HOW = {1: "is singular", 2: "did not converge", 3: "has a non-finite residual"}
+
+    def __init__(self, block, failure, t):
+        super().__init__("at t = %.17g: algebraic block %d (%s) %s" % (
+            t, block + 1, _BLOCK_NAMES[block], self._HOW[failure]))
+        self.t = t
+
+
+def _sign(a):
+    return 1.0 if a > 0.0 else (-1.0 if a < 0.0 else a)
+
+
+def _heaviside(a, at_zero):
+    return 1.0 if a > 0.0 else (0.0 if a < 0.0 else (at_zero if a == 0.0 else a))
+
+
+# ---------------------------------------------------------------- workspace
+
+
+class _Block:
+    __slots__ = ("m", "dense", "symmetric", "nnz", "diag", "lptr", "lpos", "lrow", "uptr", "upos", "ucol",
+                 "upd", "prow", "pcol", "save", "lu", "dense_off", "b", "scale", "z", "r", "zt",
+                 "rt", "piv", "how")
+
+    def __init__(self, values):
+        for key, value in zip(self.__slots__, values):
+            setattr(self, key, value)
+
+
+_BLOCK_TABLE = [_Block(row) for row in _BLOCKS]
+
+
+class _Work:
+    """The model functions' workspace: values shared between their parts, the blocks' storage
+    (each Newton block's last solution is its next starting value), the Newton tolerance."""
+
+    __slots__ = ("v", "iv", "rtol", "atol")
+
+    def __init__(self, rtol=None, atol=None):
+        self.v = [0.0] * max(_WORK_DOUBLES, 1)
+        self.iv = [0] * max(_WORK_INTS, 1)
+        self.rtol = SCENE["rtol"] if rtol is None else rtol
+        self.atol = SCENE["atol"] if atol is None else atol
+
+
+# ---------------------------------------------------------------- linear solves
+
+
+def _row_scales(b, a, base):
+    m = b.m
+    scale = [0.0] * m
+    for q in range(b.nnz):
+        i = q // m if b.dense else b.prow[q]
+        v = abs(a[base + q])
+        if v > scale[i]:
+            scale[i] = v
+    return scale
+
+
+def _lu_dense(m, a, base, piv, pbase, scale):
+    """LU with partial pivoting of the m x m matrix at a[base:], in place; False if singular."""
+    for k in range(m):
+        r = k
+        for i in range(k + 1, m):
+            if abs(a[base + i * m + k]) > abs(a[base + r * m + k]):
+                r = i
+        piv[pbase + k] = r
+        pivot = a[base + r * m + k]
+        if not (abs(pivot) > 1e-14 * scale[r]) or not math.isfinite(pivot):
+            return False
+        if r != k:
+            scale[k], scale[r] = scale[r], scale[k]
+            for j in range(m):
+                a[base + k * m + j], a[base + r * m + j] = a[base + r * m + j], a[base + k * m + j]
+        for i in range(k + 1, m):
+            f = a[base + i * m + k] / a[base + k * m + k]
+            a[base + i * m + k] = f
+            for j in range(k + 1, m):
+                a[base + i * m + j] -= f * a[base + k * m + j]
+    return True
+
+
+def _lu_dense_solve(m, a, base, piv, pbase, x, xbase):
+    for k in range(m):
+        r = piv[pbase + k]
+        if r != k:
+            x[xbase + k], x[xbase + r] = x[xbase + r], x[xbase + k]
+        for i in range(k + 1, m):
+            x[xbase + i] -= a[base + i * m + k] * x[xbase + k]
+    for i in range(m - 1, -1, -1):
+        total = x[xbase + i]
+        for j in range(i + 1, m):
+            total -= a[base + i * m + j] * x[xbase + j]
+        x[xbase + i] = total / a[base + i * m + i]
+
+
+def _lu_static(b, a, base, scale):
+    """LU in the plan's static order, in place; False if a pivot fails its test (one sign for
+    a symmetric matrix, else the threshold; clearly nonzero for its row)."""
+    q = 0
+    lptr, lpos, uptr, upos, upd = b.lptr, b.lpos, b.uptr, b.upos, b.upd
+    sign = -1.0 if b.m > 0 and a[base + b.diag[0]] < 0.0 else 1.0
+    for k in range(b.m):
+        pivot = a[base + b.diag[k]]
+        if b.symmetric:
+            if not sign * pivot > 1e-14 * scale[k] or not math.isfinite(pivot):
+                return False
+        else:
+            largest = abs(pivot)
+            for l in range(lptr[k], lptr[k + 1]):
+                v = abs(a[base + lpos[l]])
+                if v > largest:
+                    largest = v
+            if not (abs(pivot) >= 0.1 * largest and abs(pivot) > 1e-14 * scale[k]) \
+                    or not math.isfinite(pivot):
+                return False
+        for l in range(lptr[k], lptr[k + 1]):
+            f = a[base + lpos[l]] / pivot
+            a[base + lpos[l]] = f
+            for u in range(uptr[k], uptr[k + 1]):
+                a[base + upd[q]] -= f * a[base + upos[u]]
+                q += 1
+    return True
+
+
+def _lu_static_solve(b, a, base, x, xbase):
+    for k in range(b.m):
+        for l in range(b.lptr[k], b.lptr[k + 1]):
+            x[xbase + b.lrow[l]] -= a[base + b.lpos[l]] * x[xbase + k]
+    for k in range(b.m - 1, -1, -1):
+        total = x[xbase + k]
+        for u in range(b.uptr[k], b.uptr[k + 1]):
+            total -= a[base + b.upos[u]] * x[xbase + b.ucol[u]]
+        x[xbase + k] = total / a[base + b.diag[k]]
+
+
+def _block_factor(w, b):
+    """Factor the matrix assembled at b.save: the static order, else densely; False if
+    singular.  Records which in w.iv[b.how]."""
+    v = w.v
+    scale = _row_scales(b, v, b.save)
+    if not b.dense:
+        v[b.lu:b.lu + b.nnz] = v[b.save:b.save + b.nnz]
+        if _lu_static(b, v, b.lu, scale):
+            w.iv[b.how] = 0
+            return True
+        m = b.m
+        v[b.dense_off:b.dense_off + m * m] = [0.0] * (m * m)
+        for q in range(b.nnz):
+            v[b.dense_off + b.prow[q] * m + b.pcol[q]] = v[b.save + q]
+    else:
+        v[b.dense_off:b.dense_off + b.nnz] = v[b.save:b.save + b.nnz]
+    w.iv[b.how] = 1
+    return _lu_dense(b.m, v, b.dense_off, w.iv, b.piv, scale)
+
+
+def _block_lsolve(w, b, xbase):
+    if w.iv[b.how] == 0:
+        _lu_static_solve(b, w.v, b.lu, w.v, xbase)
+    else:
+        _lu_dense_solve(b.m, w.v, b.dense_off, w.iv, b.piv, w.v, xbase)
+
+
+def _block_solve(w, k, t):
+    b = _BLOCK_TABLE[k]
+    if not _block_factor(w, b):
+        raise _BlockFailure(k, 1, t)
+    _block_lsolve(w, b, b.b)
+
+
+def _block_resolve(w, k, t):
+    b = _BLOCK_TABLE[k]
+    _block_lsolve(w, b, b.b)
+
+
+def _norm2(v, base, m):
+    return math.sqrt(sum(v[base + i] * v[base + i] for i in range(m)))
+
+
+_NEWTON_MAXIT = 50
+
+
+def _newton(w, k, f, t, x, p, final_factor):
+    """Newton's method from the unknowns' last values, damped (Armijo), as the C runtime."""
+    b = _BLOCK_TABLE[k]
+    m, v = b.m, w.v
+    zt = [0.0] * m
+    rt = [0.0] * m
+    f(t, x, p, w, v, b.z, v, b.r, v, b.save)
+    norm = _norm2(v, b.r, m)
+    if not math.isfinite(norm) or not all(math.isfinite(v[b.z + i]) for i in range(m)):
+        for i in range(m):
+            v[b.z + i] = 0.0
+        f(t, x, p, w, v, b.z, v, b.r, v, b.save)
+        norm = _norm2(v, b.r, m)
+        if not math.isfinite(norm):
+            raise _BlockFailure(k, 3, t)
+    it = 0
+    while norm > 0.0:
+        if it == _NEWTON_MAXIT:
+            raise _BlockFailure(k, 2, t)
+        it += 1
+        if not _block_factor(w, b):
+            raise _BlockFailure(k, 1, t)
+        for i in range(m):
+            v[b.b + i] = -v[b.r + i]
+        _block_lsolve(w, b, b.b)
+        small = True  # a full step this small ends the iteration (quadratic convergence)
+        for i in range(m):
+            dz, z = v[b.b + i], v[b.z + i]
+            if abs(dz) > 0.01 * (w.atol + w.rtol * abs(z)) and abs(dz) > 4.0 * _EPS * abs(z):
+                small = False
+        lam = 1.0
+        while True:
+            for i in range(m):
+                zt[i] = v[b.z + i] + lam * v[b.b + i]
+            f(t, x, p, w, zt, 0, rt, 0, None, 0)
+            trial = _norm2(rt, 0, m)
+            if small or trial <= (1.0 - 1e-4 * lam) * norm or lam < 1e-3:
+                break
+            lam *= 0.5
+        for i in range(m):
+            v[b.z + i] = zt[i]
+            v[b.r + i] = rt[i]
+        norm = trial
+        if not math.isfinite(norm):
+            raise _BlockFailure(k, 3, t)
+        if small:
+            break
+        f(t, x, p, w, v, b.z, v, b.r, v, b.save)
+    if final_factor:
+        f(t, x, p, w, v, b.z, v, b.r, v, b.save)
+        if not _block_factor(w, b):
+            raise _BlockFailure(k, 1, t)
+
+
+# ---------------------------------------------------------------- public functions
+
+
+_WORK = []
+
+
+def _work():
+    if not _WORK:
+        _WORK.append(_Work())
+    return _WORK[0]
+
+
+def _vector(v, n, what):
+    values = numpy.asarray(v, dtype=float).reshape(-1).tolist()
+    if len(values) != n:
+        raise ValueError(f"{what} must have {n} elements, not {len(values)}")
+    return values
+
+
+def _public(function, t, x, p, size, *extra):
+    p = _with_constants(_vector(p, len(_PARAM_NAMES), "p"))
+    out = [0.0] * size
+    try:
+        function(float(t), _vector(x, _N, "x"), p, _work(), *extra, out)
+    except _BlockFailure as failure:
+        raise BlockError(str(failure)) from None
+    return numpy.array(out, dtype=float)
+
+
+def rhs(t, x, p):
+    """dx/dt at (t, x) with parameters p (a 1-D array ordered as PARAMETERS)."""
+    return _public(_rhs, t, x, p, _N)
+
+
+def outputs(t, x, p):
+    """The outputs at (t, x), ordered as OUTPUTS."""
+    return _public(_out, t, x, p, len(OUTPUTS))
+
+
+def jvp(t, x, p, v):
+    """J v, the derivative of rhs with respect to x along v (derived symbolically)."""
+    return _public(_jvp, t, x, p, _N, _vector(v, _N, "v"))
+
+
+def jacobian(t, x, p):
+    """J = d rhs / d x at (t, x), shape (len(STATES), len(STATES)): one jvp per colour of
+    the Jacobian's columns (columns of a colour share no row)."""
+    p = _with_constants(_vector(p, len(_PARAM_NAMES), "p"))
+    x = _vector(x, _N, "x")
+    J = numpy.zeros((_N, _N))
+    try:
+        _jacobian_into(float(t), x, p, _work(), J)
+    except _BlockFailure as failure:
+        raise BlockError(str(failure)) from None
+    return J
+
+
+def _jacobian_into(t, x, p, w, J):
+    v = [0.0] * _N
+    jv = [0.0] * _N
+    for cols in _JAC_COLORS:
+        for j in cols:
+            v[j] = 1.0
+        _jvp(t, x, p, w, v, jv)
+        for j in cols:
+            v[j] = 0.0
+            for i in _JAC_COLUMNS[j]:
+                J[i, j] = jv[i]
+
+
+def _param_values(overrides):
+    """All parameter values: the overrides {index: value}, the rest from their defaults."""
+    p = [0.0] * len(_PARAM_NAMES)
+    for j, value in overrides.items():
+        p[j] = float(value)
+    return _fill_params(p, overrides)
+
+
+def _with_constants(p):
+    """The parameters followed by the constants computed from them, as the model functions
+    take them."""
+    return list(p) + _constants(p)
+
+
+PARAMETERS = dict(zip(_PARAM_NAMES, _param_values({})))
+
+
+# ---------------------------------------------------------------- constraints
+
+
+def _check_constraints(t, x, p):
+    """Messages for the violated constraint rows at (t, x)."""
+    r, s = _residual(t, x, p), _scale(t, x, p)
+    return [
+        "initial conditions violate constraint '%s' (%s): residual = %.17g"
+        % (CONSTRAINTS[k][0], CONSTRAINTS[k][1], r[k])
+        for k in range(len(CONSTRAINTS))
+        if not abs(r[k]) <= 1e-9 * s[k]
+    ]
+
+
+def _solve(m, A, b):
+    """Gaussian elimination with partial pivoting (A row-major m x m); None if singular."""
+    scale = 0.0
+    for a in A:
+        scale = max(scale, abs(a))
+    for k in range(m):
+        piv = k
+        for i in range(k + 1, m):
+            if abs(A[i * m + k]) > abs(A[piv * m + k]):
+                piv = i
+        if not abs(A[piv * m + k]) > 1e-14 * scale:
+            return None
+        if piv != k:
+            for j in range(m):
+                A[k * m + j], A[piv * m + j] = A[piv * m + j], A[k * m + j]
+            b[k], b[piv] = b[piv], b[k]
+        for i in range(k + 1, m):
+            f = A[i * m + k] / A[k * m + k]
+            for j in range(k, m):
+                A[i * m + j] -= f * A[k * m + j]
+            b[i] -= f * b[k]
+    for i in range(m - 1, -1, -1):
+        total = b[i]
+        for j in range(i + 1, m):
+            total -= A[i * m + j] * b[j]
+        b[i] = total / A[i * m + i]
+    return b
+
+
+def _project_rows(t, x, p, rows, jac, movable):
+    """Gauss-Newton minimum-norm projection onto rows; None or the reason it failed."""
+    m, n = len(rows), _N
+    for it in range(51):
+        r, s = _residual(t, x, p), _scale(t, x, p)
+        z = [r[k] for k in rows]
+        if all(abs(z[i]) <= 1e-9 * s[k] for i, k in enumerate(rows)):
+            return None
+        if it == 50:
+            return "no convergence after 50 iterations"
+        J = jac(t, x, p)
+        if movable is not None:
+            J = [0.0 if not movable[c % n] else v for c, v in enumerate(J)]
+        A = [0.0] * (m * m)
+        for i in range(m):
+            for j in range(m):
+                total = 0.0
+                for k in range(n):
+                    total += J[i * n + k] * J[j * n + k]
+                A[i * m + j] = total
+        if _solve(m, A, z) is None:
+            return "the constraint Jacobian is singular"
+        for k in range(n):
+            dx = 0.0
+            for i in range(m):
+                dx += J[i * n + k] * z[i]
+            x[k] -= dx
+    return None
+
+
+def _project_initial(t, x, p):
+    why = _project_rows(t, x, p, _POSITION_ROWS, _position_jac, None)
+    level = "position"
+    if why is None:
+        why = _project_rows(t, x, p, _VELOCITY_ROWS, _velocity_jac, _VELOCITY_MOVABLE)
+        level = "velocity"
+    if why is not None:
+        raise ConstraintError(
+            "cannot project the initial conditions onto the %s constraints: %s" % (level, why))
+
+
+# ---------------------------------------------------------------- settings
+
+
+class _Settings:
+    __slots__ = ("t0", "t_end", "dt", "solver", "rtol", "atol", "step")
+
+    def __init__(self, **values):
+        for key in self.__slots__:
+            setattr(self, key, values[key])
+
+
+def _settings(t_end=None, dt=None, solver=None, rtol=None, atol=None, step=None):
+    given = {"t_end": t_end, "dt": dt, "solver": solver, "rtol": rtol, "atol": atol, "step": step}
+    values = dict(SCENE, **{k: v for k, v in given.items() if v is not None})
+    for key in ("t0", "t_end", "dt", "rtol", "atol"):
+        values[key] = float(values[key])
+    values["step"] = 0.0 if values["step"] is None else float(values["step"])
+    s = _Settings(**values)
+    message = _check_settings(s)
+    if message:
+        raise ValueError(message)
+    return s
+
+
+def _check_settings(s):
+    if not all(math.isfinite(v) for v in (s.t0, s.t_end, s.dt, s.rtol, s.atol, s.step)):
+        return "settings must be finite numbers"
+    if not s.dt > 0.0:
+        return "--dt must be positive"
+    if s.t_end < s.t0:
+        return "--t-end must not be before the start time"
+    if not (s.rtol > 0.0 and s.atol > 0.0):
+        return "--rtol and --atol must be positive"
+    if s.step < 0.0:
+        return "--step must be positive"
+    if s.solver not in SOLVERS:
+        return "unknown solver"
+    if not (s.t_end - s.t0) / s.dt <= 1e9:
+        return "too many output rows (more than 1e9): increase --dt"
+    return None
+
+
+# ---------------------------------------------------------------- simulate
+
+
+def _overrides(params):
+    given = {}
+    for name, value in (params or {}).items():
+        if name not in _PARAM_NAMES:
+            raise ValueError("unknown parameter '%s'" % name)
+        given[_PARAM_NAMES.index(name)] = float(value)
+    return given
+
+
+def _initial_state(s, p, project_initial):
+    """x0 for the run: initialised, checked finite, projected if asked, constraints checked.
+    p: the parameters and their constants."""
+    j = _first_nonfinite(p[:len(_PARAM_NAMES)])
+    if j >= 0:
+        raise SimulationError("parameter '%s' is not finite" % _PARAM_NAMES[j], s.t0,
+                              numpy.zeros(0), numpy.zeros((0, len(OUTPUTS))))
+    x0 = _init(p)
+    i = _first_nonfinite(x0)
+    if i >= 0:
+        raise SimulationError(str(_fail(s.t0, "state", STATES[i])), s.t0, numpy.zeros(0),
+                              numpy.zeros((0, len(OUTPUTS))))
+    if project_initial:
+        _project_initial(s.t0, x0, p)
+    messages = _check_constraints(s.t0, x0, p)
+    if messages:
+        raise ConstraintError("; ".join(messages), messages)
+    return x0
+
+
+def simulate(t_end=None, dt=None, solver=None, rtol=None, atol=None, params=None, step=None,
+             project_initial=False):
+    """Runs the model; returns (t, Y) with Y[k] the outputs at t[k].  None: the scene's value."""
+    s = _settings(t_end, dt, solver, rtol, atol, step)
+    p = _with_constants(_param_values(_overrides(params)))
+    x0 = _initial_state(s, p, project_initial)
+    times, rows = [], []
+
+    def sink(t, x, y):
+        times.append(t)
+        rows.append(y)
+
+    try:
+        _integrate(s, p, x0, sink, _new_stats())
+    except _Failure as failure:
+        raise SimulationError(str(failure), failure.t, numpy.array(times, dtype=float),
+                              numpy.array(rows, dtype=float).reshape(len(times), len(OUTPUTS)))
+    return (numpy.array(times, dtype=float),
+            numpy.array(rows, dtype=float).reshape(len(times), len(OUTPUTS)))
+
+
+# ---------------------------------------------------------------- command line
+
+USAGE = (
+    " [--t-end T] [--dt DT] [--solver NAME] [--rtol R] [--atol A]\n"
+    "       [--step H] [-p NAME=VALUE ...] [--project-initial] [--stats]\n"
+)
+_WITH_VALUE = ("--t-end", "--dt", "--solver", "--rtol", "--atol", "--step", "-p")
+_NUMBER_CHARS = frozenset("0123456789+-.eE")
+
+
+class _UsageError(Exception):
+    pass
+
+
+def _usage():
+    return "usage: " + _IDENT + USAGE
+
+
+def _help():
+    s = _settings()
+    lines = [
+        _usage() + "Simulates the model and writes CSV (t and the outputs) to stdout.",
+        "  --t-end T          end time (%.17g; the start time is %.17g)" % (s.t_end, s.t0),
+        "  --dt DT            output interval (%.17g)" % s.dt,
+        "  --solver NAME      the solver (%s), one of those listed below" % s.solver,
+        "  --rtol R           relative tolerance of the adaptive solvers (%.17g)" % s.rtol,
+        "  --atol A           absolute tolerance of the adaptive solvers (%.17g)" % s.atol,
+        "  --step H           step of the fixed-step solvers (default: dt)",
+        "  -p NAME=VALUE      set a parameter; derived parameters follow",
+        "  --project-initial  project the initial state onto the constraints",
+        "  --stats            print the solver's counters to stderr",
+        "solvers:",
+    ]
+    lines += ["  %-8s %s" % (name, m["summary"]) for name, m in _METHODS.items()]
+    if PARAMETERS:
+        lines.append("parameters (NAME = default):")
+    lines += ["  %s = %.17g" % (name, value) for name, value in PARAMETERS.items()]
+    sys.stdout.write("\n".join(lines) + "\n")
+
+
+def _parse_number(option, text):
+    """A decimal number (digits, sign, '.', exponent: no hex, inf or nan), finite."""
+    if text and set(text) <= _NUMBER_CHARS:
+        try:
+            value = float(text)
+        except ValueError:
+            value = math.nan
+        if math.isfinite(value):
+            return value
+    raise _UsageError("error: invalid value for %s: '%s'\n" % (option, text))
+
+
+def _parse_param(text, given):
+    name, eq, value = text.rpartition("=")
+    if not eq or not name:
+        raise _UsageError("error: -p expects NAME=VALUE, got '%s'\n" % text)
+    if name not in _PARAM_NAMES:
+        raise _UsageError("error: unknown parameter '%s'\n" % name)
+    given[_PARAM_NAMES.index(name)] = _parse_number(name, value)
+
+
+def _apply_option(name, value, options, given):
+    if name == "-p":
+        _parse_param(value, given)
+    elif name == "--solver":
+        if value not in SOLVERS:
+            raise _UsageError(
+                "error: unknown solver '%s' (expected %s)\n" % (value, _SOLVER_LIST))
+        options["solver"] = value
+    elif name == "--step":
+        options["step"] = _parse_number(name, value)
+        if not options["step"] > 0.0:
+            raise _UsageError("error: --step must be positive\n")
+    else:
+        options[name[2:].replace("-", "_")] = _parse_number(name, value)
+
+
+def _parse_args(argv):
+    """(options, given parameters, flags), or None after --help."""
+    options, given, flags = {}, {}, set()
+    i = 0
+    while i < len(argv):
+        arg = argv[i]
+        if arg in ("-h", "--help"):
+            _help()
+            return None
+        if arg in ("--project-initial", "--stats"):
+            flags.add(arg)
+            i += 1
+            continue
+        name, eq, value = arg.partition("=") if arg.startswith("--") else (arg, "", "")
+        if name not in _WITH_VALUE:
+            raise _UsageError("error: unknown option '%s'\n%s" % (arg, _usage()))
+        if not eq:
+            if i + 1 >= len(argv):
+                raise _UsageError("error: option '%s' needs a value\n%s" % (arg, _usage()))
+            i += 1
+            value = argv[i]
+        _apply_option(name, value, options, given)
+        i += 1
+    return options, given, flags
+
+
+def _write_rows(out, times, rows):
+    out.write("".join(
+        ",".join(["%.17g" % t] + ["%.17g" % v for v in y]) + "\n" for t, y in zip(times, rows)))
+
+
+def main(argv=None):
+    """The command line; returns the exit status."""
+    argv = sys.argv[1:] if argv is None else list(argv)
+    try:
+        parsed = _parse_args(argv)
+    except _UsageError as error:
+        sys.stderr.write(str(error))
+        return 2
+    if parsed is None:
+        return 0
+    options, given, flags = parsed
+    try:
+        s = _settings(**options)
+    except ValueError as error:
+        sys.stderr.write("error: %s\n" % error)
+        return 2
+    p = _with_constants(_param_values(given))
+    try:
+        x0 = _initial_state(s, p, "--project-initial" in flags)
+    except ConstraintError as error:
+        sys.stderr.write("".join("error: %s\n" % m for m in error.messages))
+        return 1
+    except SimulationError as error:
+        sys.stderr.write("error: %s\n" % error)
+        return 3
+    times, rows = [], []
+    stats = _new_stats()
+    failure = None
+    try:
+        _integrate(s, p, x0, lambda t, x, y: (times.append(t), rows.append(y)), stats)
+    except _Failure as error:
+        failure = error
+    out = sys.stdout
+    out.write(",".join(["t"] + OUTPUTS) + "\n")
+    _write_rows(out, times, rows)
+    out.flush()
+    if "--stats" in flags:
+        sys.stderr.write(_stats_line(stats) + "\n")
+    if failure is not None:
+        sys.stderr.write("error: %s\n" % failure)
+        return 3
+    return 0
+
+
+
+# ================================================================== solve ===
+# The solvers' common machinery, the explicit Runge-Kutta family (read from _METHODS, printed
+# from bgc/solvers.py) and _integrate, which picks a family's run function; the stiff
+# families follow (bgc/runtime/stiff.py).  States are numpy vectors; the arithmetic is the C
+# runtime's, in the same order.
+
+
+def _output_count(s):
+    n = math.ceil((s.t_end - s.t0) / s.dt - 1e-6)
+    return n if n > 0 else 0
+
+
+def _output_time(s, k, n):
+    return s.t_end if k >= n else s.t0 + k * s.dt
+
+
+def _hmin(t):
+    """Steps below this are too small to resolve at t (16 ulps of t; the least normal at 0)."""
+    return max(16.0 * _EPS * abs(t), sys.float_info.min)
+
+
+def _first_nonfinite(v):
+    for i, a in enumerate(v):
+        if not math.isfinite(a):
+            return i
+    return -1
+
+
+def _fail(t, what, name):
+    return _Failure("at t = %.17g: %s '%s' is not finite" % (t, what, name), t)
+
+
+def _fail_step(t, h, worst):
+    if worst >= 0:
+        message = "at t = %.17g: step size too small (h = %.3g), limited by state '%s'" % (
+            t, h, STATES[worst])
+    else:
+        message = "at t = %.17g: step size too small (h = %.3g)" % (t, h)
+    return _Failure(message, t)
+
+
+def _block_failed(failure):
+    return _Failure(str(failure), failure.t)
+
+
+def _new_stats():
+    return {"steps": 0, "rejected": 0, "rhs": 0, "jac": 0, "lu": 0, "solves": 0,
+            "switched": False, "t_switch": 0.0}
+
+
+def _stats_line(st):
+    line = ("stats: steps=%(steps)d rejected=%(rejected)d rhs=%(rhs)d jac=%(jac)d lu=%(lu)d "
+            "solves=%(solves)d" % st)
+    if st["switched"]:
+        line += " stiff_from=%.17g" % st["t_switch"]
+    return line
+
+
+class _Stiff(Exception):
+    """An auto run's explicit phase found the problem stiff."""
+
+
+class _Run:
+    """A run in progress (see bgc_run in the C runtime): a run function integrates from
+    (run.t, y) to s.t_end, hands the output times run.kout .. run.nout to the sink as it
+    passes them, keeps run.t and run.y at its last accepted step, and returns; or raises
+    _Failure, _Stiff (run.h: its last step size)."""
+
+    __slots__ = ("s", "p", "w", "sink", "st", "nout", "kout", "t", "h", "y",
+                 "detect_stiffness")
+
+    def __init__(self, s, p, w, sink, st, y):
+        self.s, self.p, self.w, self.sink, self.st = s, p, w, sink, st
+        self.nout, self.kout = _output_count(s), 1
+        self.t, self.h, self.y = s.t0, 0.0, y
+        self.detect_stiffness = False
+
+    def f(self, t, y):
+        """dy/dt as a numpy vector; a failed algebraic block raises _BlockFailure."""
+        out = [0.0] * _N
+        _rhs(t, y.tolist(), self.p, self.w, out)
+        return numpy.array(out, dtype=float)
+
+    def fv(self, t, y):
+        """dy/dt for the explicit solvers, in _V's kind of vector."""
+        if _V is _ArrayVectors:
+            return self.f(t, y)
+        out = [0.0] * _N
+        _rhs(t, y, self.p, self.w, out)
+        return out
+
+    def emit(self, t, x):
+        if isinstance(x, numpy.ndarray):
+            x = x.tolist()
+        y = [0.0] * len(OUTPUTS)
+        try:
+            _out(t, x, self.p, self.w, y)
+        except _BlockFailure as failure:
+            raise _block_failed(failure) from None
+        j = _first_nonfinite(y)
+        if j >= 0:
+            raise _fail(t, "output", OUTPUTS[j])
+        self.sink(t, x, y)
+
+    def emit_step(self, t, h, tph, y1, dense):
+        """The output times in (t, tph] after an accepted step: tph from y1, the others from
+        dense(theta), a function that dense_at() prepares on first use."""
+        at = None
+        while self.kout <= self.nout:
+            tk = _output_time(self.s, self.kout, self.nout)
+            if tk > tph:
+                break
+            if tk == tph:
+                self.emit(tk, y1)
+            else:
+                if at is None:
+                    at = dense()
+                self.emit(tk, at((tk - t) / h))
+            self.kout += 1
+
+
+def _weights(s, y, y1):
+    """Hairer's error-norm weights atol + rtol * max(|y_i|, |y1_i|)."""
+    return s.atol + s.rtol * numpy.maximum(numpy.abs(y), numpy.abs(y1))
+
+
+def _initial_step(run, q, y, f0, hmax):
+    """Hairer's initial step size guess (HINIT) for a method of order q."""
+    s = run.s
+    y, f0 = numpy.asarray(y, dtype=float), numpy.asarray(f0, dtype=float)
+    sk = s.atol + s.rtol * numpy.abs(y)
+    dnf = float(numpy.sum((f0 / sk) ** 2))
+    dny = float(numpy.sum((y / sk) ** 2))
+    h = 1e-6 if (dnf <= 1e-10 or dny <= 1e-10) else math.sqrt(dny / dnf) * 0.01
+    h = min(h, hmax)
+    run.st["rhs"] += 1
+    try:
+        f1 = run.f(run.t + h, y + h * f0)
+    except _BlockFailure:
+        return h  # a block failed there: start small, the step control takes over
+    with numpy.errstate(all="ignore"):
+        der2 = math.sqrt(float(numpy.sum(((f1 - f0) / sk) ** 2))) / h
+    der12 = max(math.sqrt(dnf), abs(der2))  # a NaN der2 is ignored
+    h1 = max(1e-6, h * 1e-3) if der12 <= 1e-15 else (0.01 / der12) ** (1.0 / q)
+    if not h1 > 0.0:
+        h1 = h * 1e-3
+    return min(min(100.0 * h, h1), hmax)
+
+
+# ---------------------------------------------------------------- explicit Runge-Kutta
+# An explicit step's cost beside the model's right side is a few vector operations per
+# stage.  On a handful of states a numpy call costs more than a list comprehension over the
+# whole vector, so the explicit solvers keep their states as lists up to _LIST_STATES states
+# and as numpy vectors above; both kits compute the same values in the same order as the C
+# runtime (bgc_combine: stage by stage, left to right).
+
+_LIST_STATES = 48
+
+
+def _weighted(w, count, stride=None):
+    """The (weight, stage) pairs of w[j] (w[j][stride]) over j < count, zero weights dropped."""
+    pairs = []
+    for j in range(min(count, len(w))):
+        a = w[j] if stride is None else w[j][stride]
+        if a != 0.0:
+            pairs.append((a, j))
+    return tuple(pairs)
+
+
+def _list_terms(acc, pairs, K):
+    """acc + a_0 K_j0 + ... (up to four pairs, left to right; acc None: no acc)."""
+    n = len(pairs)
+    (a, i) = pairs[0]
+    if n == 1:
+        if acc is None:
+            return [a * u for u in K[i]]
+        return [s + a * u for s, u in zip(acc, K[i])]
+    (b, j) = pairs[1]
+    if n == 2:
+        if acc is None:
+            return [a * u + b * v for u, v in zip(K[i], K[j])]
+        return [s + a * u + b * v for s, u, v in zip(acc, K[i], K[j])]
+    (c, k) = pairs[2]
+    if n == 3:
+        if acc is None:
+            return [a * u + b * v + c * w for u, v, w in zip(K[i], K[j], K[k])]
+        return [s + a * u + b * v + c * w for s, u, v, w in zip(acc, K[i], K[j], K[k])]
+    (d, l) = pairs[3]
+    if acc is None:
+        return [a * u + b * v + c * w + d * x for u, v, w, x in zip(K[i], K[j], K[k], K[l])]
+    return [s + a * u + b * v + c * w + d * x
+            for s, u, v, w, x in zip(acc, K[i], K[j], K[k], K[l])]
+
+
+def _list_terms_into(y, h, pairs, K):
+    """y + h * (a_0 K_j0 + ...) for up to four pairs, in one comprehension."""
+    n = len(pairs)
+    (a, i) = pairs[0]
+    if n == 1:
+        return [z + h * (a * u) for z, u in zip(y, K[i])]
+    (b, j) = pairs[1]
+    if n == 2:
+        return [z + h * (a * u + b * v) for z, u, v in zip(y, K[i], K[j])]
+    (c, k) = pairs[2]
+    if n == 3:
+        return [z + h * (a * u + b * v + c * w) for z, u, v, w in zip(y, K[i], K[j], K[k])]
+    (d, l) = pairs[3]
+    return [z + h * (a * u + b * v + c * w + d * x)
+            for z, u, v, w, x in zip(y, K[i], K[j], K[k], K[l])]
+
+
+class _ListVectors:
+    """States as Python lists."""
+
+    @staticmethod
+    def vec(x):
+        return x.tolist() if isinstance(x, numpy.ndarray) else x
+
+    @staticmethod
+    def combine(y, h, pairs, K):
+        """y + h * sum a K_j over the pairs (y None: h * sum), four terms per comprehension."""
+        n = len(pairs)
+        if n == 0:
+            acc = [0.0] * _N
+        elif n <= 4 and y is not None:
+            return _list_terms_into(y, h, pairs, K)
+        else:
+            acc = _list_terms(None, pairs[:4], K)
+            for k in range(4, n, 4):
+                acc = _list_terms(acc, pairs[k:k + 4], K)
+        if y is None:
+            return [h * u for u in acc]
+        return [u + h * v for u, v in zip(y, acc)]
+
+    @staticmethod
+    def horner(y, q, theta):
+        """y + theta (q_0 + theta (q_1 + ...))."""
+        acc = q[-1]
+        for qd in reversed(q[:-1]):
+            acc = [u + theta * v for u, v in zip(qd, acc)]
+        return [u + theta * v for u, v in zip(y, acc)]
+
+    @staticmethod
+    def error_sums(s, y, y1, e1, e2):
+        """sum (e1_i / sk_i)^2, its largest term's index, and sum (e2_i / sk_i)^2 (e2 may be
+        None), sk_i = atol + rtol * max(|y_i|, |y1_i|)."""
+        rtol, atol = s.rtol, s.atol
+        err = err2 = 0.0
+        worst, worst_q = -1, -1.0
+        for i in range(_N):
+            sk = atol + rtol * max(abs(y[i]), abs(y1[i]))
+            qq = e1[i] / sk
+            qq = qq * qq
+            err += qq
+            if qq > worst_q:
+                worst, worst_q = i, qq
+            if e2 is not None:
+                q2 = e2[i] / sk
+                err2 += q2 * q2
+        return err, worst, err2
+
+    @staticmethod
+    def distance2(u, v):
+        return sum([(a - b) * (a - b) for a, b in zip(u, v)])
+
+
+class _ArrayVectors:
+    """States as numpy vectors."""
+
+    @staticmethod
+    def vec(x):
+        return numpy.asarray(x, dtype=float)
+
+    @staticmethod
+    def combine(y, h, pairs, K):
+        if pairs:
+            a, j = pairs[0]
+            acc = a * K[j]
+            for a, j in pairs[1:]:
+                acc = acc + a * K[j]
+        else:
+            acc = numpy.zeros(_N)
+        return h * acc if y is None else y + h * acc
+
+    @staticmethod
+    def horner(y, q, theta):
+        acc = q[-1]
+        for qd in reversed(q[:-1]):
+            acc = qd + theta * acc
+        return y + theta * acc
+
+    @staticmethod
+    def error_sums(s, y, y1, e1, e2):
+        sk = s.atol + s.rtol * numpy.maximum(numpy.abs(y), numpy.abs(y1))
+        with numpy.errstate(all="ignore"):
+            sq = (e1 / sk) ** 2
+            err = float(numpy.sum(sq)) if _N else 0.0
+            worst = int(numpy.argmax(sq)) if _N and err == err else -1
+            err2 = float(numpy.sum((e2 / sk) ** 2)) if e2 is not None else 0.0
+        return err, worst, err2
+
+    @staticmethod
+    def distance2(u, v):
+        return float(numpy.sum((u - v) ** 2))
+
+
+_V = _ListVectors if _N <= _LIST_STATES else _ArrayVectors
+
+
+def _combine(weights, K, count):
+    """sum_j weights[j] K[j] over j < count with a nonzero weight, left to right, for numpy
+    vectors K[j] (the stiff solvers)."""
+    acc = None
+    for j in range(count):
+        a = weights[j]
+        if a != 0.0:
+            acc = a * K[j] if acc is None else acc + a * K[j]
+    return numpy.zeros(_N) if acc is None else acc
+
+
+class _ErkPlan:
+    """A tableau's nonzero weights, ready for _V.combine."""
+
+    def __init__(self, m):
+        stages, c = m["stages"], m["c"]
+        self.a = [_weighted(m["a"][i], i) for i in range(len(c))]
+        self.b = _weighted(m["b"], stages)
+        self.e = _weighted(m["e"], stages) if "e" in m else ()
+        self.e2 = _weighted(m["e2"], stages) if m.get("e2") else None
+        P = m.get("P")
+        self.P = [_weighted(P, len(P), d) for d in range(len(P[0]))] if P else []
+
+
+def _run_fixed(run, m, y):
+    s, V = run.s, _V
+    hstep = s.step if s.step > 0.0 else s.dt
+    ta = run.t
+    stages, c = m["stages"], m["c"]
+    plan = _ErkPlan(m)
+    combine = V.combine
+    y = V.vec(y)
+    K = [None] * stages
+    while run.kout <= run.nout:
+        tb = _output_time(s, run.kout, run.nout)
+        steps = _substeps(tb - ta, hstep)
+        if steps < 0:
+            raise _fail_step(ta, hstep, -1)
+        for j in range(steps):
+            t = ta + j * hstep
+            t1 = tb if j + 1 == steps else ta + (j + 1) * hstep
+            h = t1 - t
+            if not h >= _hmin(t):
+                raise _fail_step(t, h, -1)
+            try:
+                K[0] = run.fv(t, y)
+                i = _first_nonfinite(K[0])
+                if i >= 0:
+                    raise _fail(t, "derivative of state", STATES[i])
+                for i in range(1, stages):
+                    K[i] = run.fv(t + c[i] * h, combine(y, h, plan.a[i], K))
+            except _BlockFailure as failure:
+                raise _block_failed(failure) from None
+            run.st["rhs"] += stages
+            y = combine(y, h, plan.b, K)
+            run.st["steps"] += 1
+            i = _first_nonfinite(y)
+            if i >= 0:
+                raise _fail(t1, "state", STATES[i])
+            run.t, run.y = t1, y
+        run.emit(tb, y)
+        run.kout += 1
+        ta = tb
+
+
+def _substeps(span, h):
+    r = span / h
+    if not r < 1e15:
+        return -1
+    m = math.ceil(r - 1e-6)
+    return 1 if m < 1 else m
+
+
+def _erk_dense(run, m, plan, t, h, y, K):
+    """The dense output of an accepted step: the extra stages, then
+    y(theta) = y + theta (q_0 + theta (q_1 + ...)), q_d = h sum_i P[i][d] K_i."""
+    def prepare():
+        c, combine = m["c"], _V.combine
+        try:
+            for i in range(m["stages"], len(c)):
+                K[i] = run.fv(t + c[i] * h, combine(y, h, plan.a[i], K))
+                run.st["rhs"] += 1
+        except _BlockFailure as failure:
+            raise _block_failed(failure) from None
+        q = [combine(None, h, pairs, K) for pairs in plan.P]
+        horner = _V.horner
+        return lambda theta: horner(y, q, theta)
+    return prepare
+
+
+def _run_erk(run, m, y):
+    """Embedded explicit pairs: adaptive steps (never shortened for output), Hairer's error
+    norm and controller, outputs by the dense output; with s.step > 0, steps of that size
+    without error control.  With run.detect_stiffness, Hairer's stiffness test raises _Stiff
+    once it has fired on 15 accepted steps."""
+    s, st, V = run.s, run.st, _V
+    if run.kout > run.nout:
+        return
+    stages, c, e = m["stages"], m["c"], m["e"]
+    plan = _ErkPlan(m)
+    combine, error_sums, fv = V.combine, V.error_sums, run.fv
+    last_stage = stages - 1
+    fsal = m["fsal"]
+    fsal_first = fsal and e[last_stage] != 0.0
+    safe, fac_min, fac_max, beta = m["safe"], m["fac_min"], m["fac_max"], m["beta"]
+    expo1 = 1.0 / m["q"] - m["expo_beta"] * beta
+    stiff_i, stiff_j, stiff_bound = m.get("stiffness", (-1, -1, 0.0))
+    hmax = s.t_end - s.t0
+    fixed = s.step > 0.0
+    t, facold = run.t, 1e-4
+    reject, last, worst, bad, bad_kind = False, False, -1, -1, ""
+    block_failure = None
+    stiff_count = nonstiff_count = 0
+    n = _N
+    y = V.vec(y)
+    K = [None] * len(c)
+    st["rhs"] += 1
+    try:
+        K[0] = fv(t, y)
+    except _BlockFailure as failure:
+        raise _block_failed(failure) from None
+    i = _first_nonfinite(K[0])
+    if i >= 0:
+        raise _fail(t, "derivative of state", STATES[i])
+    if fixed:
+        h = s.step
+    elif run.h > 0.0:
+        h = min(run.h, hmax)
+    else:
+        h = _initial_step(run, m["q"], y, K[0], hmax)
+    while True:
+        if not h >= _hmin(t):
+            if bad == -2:
+                raise _block_failed(block_failure)
+            if bad >= 0:
+                raise _fail(t, bad_kind, STATES[bad])
+            raise _fail_step(t, h, worst)
+        if t + 1.01 * h - s.t_end > 0.0:
+            h = s.t_end - t
+            last = True
+        tph = s.t_end if last else t + h
+        ystiff = None
+        try:
+            for i in range(1, stages):
+                if fsal and i == last_stage:
+                    break
+                ys = combine(y, h, plan.a[i], K)
+                if i == stiff_i:
+                    ystiff = ys
+                K[i] = fv(tph if c[i] == 1.0 else t + c[i] * h, ys)
+                st["rhs"] += 1
+            y1 = combine(y, h, plan.b, K)
+            if fsal_first:
+                st["rhs"] += 1
+                K[last_stage] = fv(tph, y1)
+        except _BlockFailure as failure:  # retry with a much smaller step
+            if fixed:
+                raise _block_failed(failure) from None
+            bad, block_failure = -2, failure
+            h = h * fac_min
+            reject, last = True, False
+            st["rejected"] += 1
+            continue
+
+        # Hairer's error norm: RMS of err_i / (atol + rtol * max(|y_i|, |y1_i|)); DOP853
+        # combines its two estimates.
+        e2 = plan.e2
+        try:
+            err, worst_now, err2 = error_sums(
+                s, y, y1, combine(None, 1.0 if e2 else h, plan.e, K),
+                combine(None, 1.0, e2, K) if e2 else None)
+        except (OverflowError, ValueError):  # an infinite stage: treated as NaN below
+            err, worst_now, err2 = math.nan, -1, 0.0
+        if err == err:
+            worst = worst_now
+        if n == 0 or (fixed and err == err):
+            err = 0.0  # fixed steps: accepted as they are (a non-finite stage fails below)
+        elif e2:
+            deno = err + 0.01 * err2
+            if not deno > 0.0:
+                deno = 1.0
+            err = abs(h) * err * math.sqrt(1.0 / (n * deno))
+        else:
+            err = math.sqrt(err / n)
+        if err != err and fixed:
+            raise _fail(tph, "state", STATES[max(_first_nonfinite(y1), 0)])
+        if err != err:  # a non-finite stage: retry with a much smaller step
+            bad, bad_kind = _first_nonfinite(y1), "state"
+            for i in range(1, stages):
+                if bad >= 0:
+                    break
+                if K[i] is not None:
+                    bad, bad_kind = _first_nonfinite(K[i]), "derivative of state"
+            h = h * fac_min
+            reject, last = True, False
+            st["rejected"] += 1
+            continue
+
+        fac11 = err ** expo1
+        fac = fac11 / facold ** beta
+        fac = max(1.0 / fac_max, min(1.0 / fac_min, fac / safe))
+        hnew = s.step if fixed else h / fac
+        if err <= 1.0:
+            facold = max(err, 1e-4)
+            st["steps"] += 1
+            i = _first_nonfinite(y1)
+            if i >= 0:
+                raise _fail(tph, "state", STATES[i])
+            try:
+                if fsal and not fsal_first:
+                    st["rhs"] += 1
+                    K[last_stage] = fv(tph, y1)
+            except _BlockFailure as failure:
+                raise _block_failed(failure) from None
+            run.emit_step(t, h, tph, y1, _erk_dense(run, m, plan, t, h, y, list(K)))
+            if run.detect_stiffness and stiff_i >= 0 and ystiff is not None:
+                # h |f(Y_i) - f(Y_j)| / |Y_i - Y_j| for two stages at the same time
+                num = V.distance2(K[stiff_j], K[stiff_i])
+                den = V.distance2(y1 if stiff_j == last_stage else ys, ystiff)
+                if den > 0.0 and h * math.sqrt(num / den) > stiff_bound:
+                    nonstiff_count = 0
+                    stiff_count += 1
+                    if stiff_count == 15:
+                        run.t, run.y, run.h = tph, y1, hnew
+                        raise _Stiff()
+                else:
+                    nonstiff_count += 1
+                    if nonstiff_count == 6:
+                        stiff_count = 0
+            try:
+                if fsal:
+                    K[0] = K[last_stage]
+                elif not last:
+                    st["rhs"] += 1
+                    K[0] = fv(tph, y1)
+            except _BlockFailure as failure:
+                raise _block_failed(failure) from None
+            y, t = y1, tph
+            run.t, run.y = t, y
+            if last:
+                return
+            if abs(hnew) > hmax and not fixed:
+                hnew = hmax
+            if reject:
+                hnew = min(hnew, h)
+            reject, bad = False, -1
+        else:
+            hnew = h / min(1.0 / fac_min, fac11 / safe)
+            reject, last = True, False
+            st["rejected"] += 1
+        h = hnew
+
+
+# ---------------------------------------------------------------- integrate
+
+
+def _run_family(run, name):
+    m = _METHODS[name]
+    family = m["family"]
+    if family == "fixed":
+        _run_fixed(run, m, run.y)
+    elif family == "erk":
+        _run_erk(run, m, run.y)
+    elif family == "rosenbrock":
+        _run_rosenbrock(run, m, numpy.asarray(run.y, dtype=float))
+    elif family == "radau5":
+        _run_radau5(run, m, numpy.asarray(run.y, dtype=float))
+    else:
+        raise ValueError("solver '%s' cannot run by itself" % name)
+
+
+def _integrate(s, p, x0, sink, st):
+    y = numpy.array(x0, dtype=float)
+    i = _first_nonfinite(y)
+    if i >= 0:
+        raise _fail(s.t0, "state", STATES[i])
+    run = _Run(s, p, _Work(s.rtol, s.atol), sink, st, y)
+    run.emit(s.t0, y)
+    m = _METHODS[s.solver]
+    if m["family"] != "auto":
+        _run_family(run, s.solver)
+        return
+    run.detect_stiffness = True
+    try:
+        _run_family(run, m["explicit"])
+    except _Stiff:
+        st["switched"], st["t_switch"] = True, run.t
+        run.detect_stiffness = False
+        _run_family(run, m["stiff"])
+
+
+# ================================================================== stiff ===
+# The stiff families: Rosenbrock methods in Hairer's transformed form (RODAS's design, any
+# tableau of the family) and Radau IIA of order 5 (RADAU5's design), as bgc_run_rosenbrock and
+# bgc_run_radau5 in the C runtime (see there).  Linear algebra: each iteration matrix is
+# inverted once per factorisation with numpy.linalg.inv (LAPACK's LU with partial pivoting;
+# an exactly zero pivot raises LinAlgError, the C runtime's singular matrix) and every solve is
+# a matrix-vector product with the inverse.  The results agree with C's within rounding, not
+# bit for bit.
+
+
+def _stiff_norm(v, w):
+    """sqrt(mean((v_i / w_i)^2)) (0 without states) and the component with the largest share."""
+    if _N == 0:
+        return 0.0, -1
+    with numpy.errstate(all="ignore"):
+        q = (v / w) ** 2
+        total = float(numpy.sum(q))
+    worst = int(numpy.argmax(q)) if total == total else -1
+    return math.sqrt(total / _N), worst
+
+
+def _stiff_fail_step(name, t, h, bad, bad_kind, worst, block_failure):
+    """A step size below _hmin: the message names what made the steps shrink (bad: -2 a failed
+    block, -3 a singular matrix, -4 Newton, >= 0 a non-finite component, else the error)."""
+    if bad == -2:
+        return _block_failed(block_failure)
+    if bad == -3:
+        return _Failure("at t = %.17g: %s: the iteration matrix is singular (step size down to "
+                        "h = %.3g)" % (t, name, h), t)
+    if bad == -4:
+        return _Failure("at t = %.17g: %s: the Newton iteration does not converge (step size "
+                        "down to h = %.3g)" % (t, name, h), t)
+    if bad >= 0:
+        return _fail(t, bad_kind, STATES[bad])
+    return _fail_step(t, h, worst)
+
+
+def _stiff_fail_singular(name, t, h):
+    return _Failure("at t = %.17g: %s: the iteration matrix is singular (h = %.3g)"
+                    % (t, name, h), t)
+
+
+def _stiff_inverse(E):
+    """E^-1, or None if E is singular (an exactly zero pivot)."""
+    try:
+        with numpy.errstate(all="ignore"):
+            return numpy.linalg.inv(E)
+    except numpy.linalg.LinAlgError:
+        return None
+
+
+def _method_name(m):
+    """The solver's name for messages (m is one of _METHODS' entries)."""
+    return next(name for name, entry in _METHODS.items() if entry is m)
+
+
+def _stiff_grid(s, t_start, k, n):
+    """Fixed steps: the grid t_start + k * step, the last step ending on t_end."""
+    return s.t_end if k >= n else t_start + k * s.step
+
+
+def _stiff_jacobian(run, t, y):
+    J = numpy.zeros((_N, _N))
+    run.st["jac"] += 1
+    try:
+        _jacobian_into(t, y.tolist(), run.p, run.w, J)
+    except _BlockFailure as failure:
+        raise _block_failed(failure) from None
+    return J
+
+
+def _stiff_start(run, t, y):
+    """f(t, y) at the start of a run or after an accepted step: a failure ends the run."""
+    run.st["rhs"] += 1
+    try:
+        f0 = run.f(t, y)
+    except _BlockFailure as failure:
+        raise _block_failed(failure) from None
+    i = _first_nonfinite(f0)
+    if i >= 0:
+        raise _fail(t, "derivative of state", STATES[i])
+    return f0
+
+
+# ---------------------------------------------------------------- Rosenbrock methods
+
+
+def _run_rosenbrock(run, m, y):
+    """Rosenbrock methods as Hairer's RODAS (see bgc_run_rosenbrock in the C runtime)."""
+    s, st = run.s, run.st
+    if run.kout > run.nout:
+        return
+    name = _method_name(m)
+    stages, gamma = m["stages"], m["gamma"]
+    c, d, a, C = m["c"], m["d"], m["a"], m["C"]
+    mw, ew, d2, d3 = m["m"], m["e"], m["d2"], m["d3"]
+    safe, fac_min, fac_max = m["safe"], m["fac_min"], m["fac_max"]
+    expo = 1.0 / m["q"]
+    fixed = s.step > 0.0
+    hmax = s.t_end - s.t0
+    t_start = t = run.t
+    h, hacc, erracc = 0.0, 0.0, 1.0
+    reject = last = False
+    fresh, accepted, nsing, k_fixed, n_fixed = True, 0, 0, 0, 0
+    worst, bad, bad_kind, block_failure = -1, -1, "", None
+    identity = numpy.eye(_N)
+    ft = numpy.zeros(_N)
+    f0 = J = None
+    if fixed:
+        n_fixed = _substeps(s.t_end - t_start, s.step)
+        if n_fixed < 0:
+            raise _fail_step(t, s.step, -1)
+    while True:
+        if fresh:  # a new point: f, df/dt, J
+            f0 = _stiff_start(run, t, y)
+            if not _AUTONOMOUS:
+                delta = math.sqrt(_EPS * max(1e-5, abs(t)))
+                st["rhs"] += 1
+                try:
+                    ft = (run.f(t + delta, y) - f0) / delta
+                except _BlockFailure as failure:
+                    raise _block_failed(failure) from None
+            J = _stiff_jacobian(run, t, y)
+            if h == 0.0 and not fixed:
+                h = min(run.h, hmax) if run.h > 0.0 else _initial_step(run, m["q"], y, f0, hmax)
+            fresh = False
+        if fixed:
+            last = k_fixed + 1 >= n_fixed
+            tph = _stiff_grid(s, t_start, k_fixed + 1, n_fixed)
+            h = tph - t
+            if not h >= _hmin(t):
+                raise _fail_step(t, h, -1)
+        else:
+            if not h >= _hmin(t):
+                raise _stiff_fail_step(name, t, h, bad, bad_kind, worst, block_failure)
+            if t + 1.01 * h - s.t_end > 0.0:
+                h = s.t_end - t
+                last = True
+            tph = s.t_end if last else t + h
+
+        # E = I/(gamma h) - J, inverted
+        st["lu"] += 1
+        Einv = _stiff_inverse(identity * (1.0 / (gamma * h)) - J)
+        if Einv is None:
+            nsing += 1
+            if fixed or nsing == 5:
+                raise _stiff_fail_singular(name, t, h)
+            bad, h, reject, last = -3, h * 0.5, True, False
+            st["rejected"] += 1
+            continue
+
+        K = [None] * stages
+        try:
+            with numpy.errstate(all="ignore"):
+                for i in range(stages):
+                    if i == 0:
+                        rhs = f0.copy()
+                    else:
+                        st["rhs"] += 1
+                        rhs = run.f(tph if c[i] == 1.0 else t + c[i] * h, y + _combine(a[i], K, i))
+                    rhs = rhs + _combine(C[i], K, i) / h
+                    if not _AUTONOMOUS and d[i] != 0.0:
+                        rhs = rhs + h * d[i] * ft
+                    K[i] = Einv @ rhs
+                    st["solves"] += 1
+        except _BlockFailure as failure:  # an algebraic block failed in a stage
+            if fixed:
+                raise _block_failed(failure) from None
+            bad, block_failure = -2, failure
+            h, reject, last = h * 0.5, True, False
+            st["rejected"] += 1
+            continue
+
+        with numpy.errstate(all="ignore"):
+            y1 = y + _combine(mw, K, stages)
+            err, worst_now = _stiff_norm(_combine(ew, K, stages), _weights(s, y, y1))
+        worst = worst_now if worst_now >= 0 else worst
+        i = _first_nonfinite(y1)
+        if err != err or err == math.inf or i >= 0:
+            if fixed:
+                raise _fail(tph, "state", STATES[max(i, 0)])
+            bad, bad_kind = i, "state"
+            for j in range(1, stages):
+                if bad >= 0:
+                    break
+                bad, bad_kind = _first_nonfinite(K[j]), "derivative of state"
+            h, reject, last = h * 0.5, True, False
+            st["rejected"] += 1
+            continue
+        if fixed:
+            err = 0.0
+
+        # Gustafsson's predictive controller (rodas.f)
+        fac = max(1.0 / fac_max, min(1.0 / fac_min, err ** expo / safe))
+        hnew = h / fac
+        if err <= 1.0:
+            if accepted > 0:
+                facgus = (hacc / h) * (err * err / erracc) ** expo / safe
+                facgus = max(1.0 / fac_max, min(1.0 / fac_min, facgus))
+                fac = max(fac, facgus)
+                hnew = h / fac
+            hacc, erracc = h, max(1e-2, err)
+            accepted += 1
+            st["steps"] += 1
+            run.emit_step(t, h, tph, y1, _rosenbrock_dense(y, y1, K, d2, d3))
+            y, t = y1, tph
+            run.t, run.y = t, y
+            fresh, nsing, bad = True, 0, -1
+            if last:
+                return
+            k_fixed += 1
+            hnew = min(hnew, hmax)
+            if reject:
+                hnew = min(hnew, h)
+            reject = False
+        else:
+            reject, last = True, False
+            st["rejected"] += 1
+        h = hnew
+
+
+def _rosenbrock_dense(y, y1, K, d2, d3):
+    """y(theta) = (1 - theta) y0 + theta (y1 + (1 - theta) (q2 + theta q3))."""
+    def prepare():
+        q2 = _combine(d2, K, len(K))
+        q3 = _combine(d3, K, len(K))
+
+        def at(theta):
+            s1 = 1.0 - theta
+            return s1 * y + theta * (y1 + s1 * (q2 + theta * q3))
+        return at
+    return prepare
+
+
+# ---------------------------------------------------------------- Radau IIA (RADAU5)
+
+
+def _radau_poly(c1, c2, z1, z2, z3):
+    """The collocation polynomial through (0, 0), (c1, Z1), (c2, Z2), (1, Z3) in Newton's form:
+    u(theta) = theta (b1 + (theta - c1) (b2 + (theta - c2) b3))."""
+    d01 = z1 / c1
+    d12 = (z2 - z1) / (c2 - c1)
+    d23 = (z3 - z2) / (1.0 - c2)
+    d012 = (d12 - d01) / c2
+    d123 = (d23 - d12) / (1.0 - c1)
+    return d01, d012, d123 - d012
+
+
+def _radau_u(c1, c2, b, theta):
+    return theta * (b[0] + (theta - c1) * (b[1] + (theta - c2) * b[2]))
+
+
+def _run_radau5(run, m, y):
+    """Radau IIA of order 5 after Hairer's RADAU5 (see bgc_run_radau5 in the C runtime)."""
+    s, st = run.s, run.st
+    if run.kout > run.nout:
+        return
+    name = _method_name(m)
+    rd = m["radau"]
+    c1, c2, gamma, alpha, beta = rd["c1"], rd["c2"], rd["gamma"], rd["alpha"], rd["beta"]
+    T, Ti, ew = numpy.array(rd["T"]), numpy.array(rd["Ti"]), rd["e"]
+    safe, fac_min, fac_max = m["safe"], m["fac_min"], m["fac_max"]
+    expo = 1.0 / m["q"]
+    nit, thet = 7, 0.001
+    fixed = s.step > 0.0
+    hmax = s.t_end - s.t0
+    # Hairer's tolerances for RADAU5 and its Newton tolerance
+    rtol = 0.1 * s.rtol ** (2.0 / 3.0)
+    atol = rtol * (s.atol / s.rtol)
+    fnewt = max(10.0 * _EPS / rtol, min(0.03, math.sqrt(rtol)))
+    cfac = safe * (1 + 2 * nit)
+    t_start = t = run.t
+    h, hfact, hold, hacc, erracc = 0.0, 0.0, 0.0, 0.0, 1.0
+    faccon, theta, thqold, dynold, hhfac = 1.0, thet, 1.0, 1.0, 0.5
+    reject = last = caljac = False
+    first = needjac = True
+    accepted, nsing, k_fixed, n_fixed, newt = 0, 0, 0, 0, 0
+    worst, bad, bad_kind, block_failure = -1, -1, "", None
+    identity = numpy.eye(_N)
+    J = E1inv = E2inv = None
+    b = (numpy.zeros(_N),) * 3
+    zlast = numpy.zeros(_N)
+    if fixed:
+        n_fixed = _substeps(s.t_end - t_start, s.step)
+        if n_fixed < 0:
+            raise _fail_step(t, s.step, -1)
+    f0 = _stiff_start(run, t, y)
+    scal = atol + rtol * numpy.abs(y)
+    if not fixed:
+        h = min(run.h, hmax) if run.h > 0.0 else _initial_step(run, m["q"], y, f0, hmax)
+    while True:
+        if needjac:
+            J = _stiff_jacobian(run, t, y)
+            needjac, caljac, hfact = False, True, 0.0
+        if fixed:
+            last = k_fixed + 1 >= n_fixed
+            tph = _stiff_grid(s, t_start, k_fixed + 1, n_fixed)
+            h = tph - t
+            if not h >= _hmin(t):
+                raise _fail_step(t, h, -1)
+        else:
+            if not h >= _hmin(t):
+                raise _stiff_fail_step(name, t, h, bad, bad_kind, worst, block_failure)
+            if t + 1.01 * h - s.t_end > 0.0:
+                h = s.t_end - t
+                last = True
+            tph = s.t_end if last else t + h
+        fac1, alphn, betan = gamma / h, alpha / h, beta / h
+
+        # gamma/h I - J and (alpha + i beta)/h I - J, inverted (unless they are h's already)
+        if h != hfact:
+            st["lu"] += 1
+            E1inv = _stiff_inverse(identity * fac1 - J)
+            E2inv = None
+            if E1inv is not None:
+                st["lu"] += 1
+                E2inv = _stiff_inverse(identity * complex(alphn, betan) - J)
+            if E2inv is None:
+                hfact = 0.0
+                nsing += 1
+                if fixed or nsing == 5:
+                    raise _stiff_fail_singular(name, t, h)
+                bad, h, reject, last = -3, h * 0.5, True, False
+                st["rejected"] += 1
+                needjac = not caljac
+                continue
+            hfact = h
+
+        # starting values: the last step's collocation polynomial, extrapolated
+        if first:
+            Z = numpy.zeros((3, _N))
+        else:
+            q = h / hold
+            Z = numpy.array([_radau_u(c1, c2, b, 1.0 + c1 * q) - zlast,
+                             _radau_u(c1, c2, b, 1.0 + c2 * q) - zlast,
+                             _radau_u(c1, c2, b, 1.0 + q) - zlast])
+        W = Ti @ Z
+
+        # the simplified Newton iteration
+        newt, failed = 0, 0
+        faccon = max(faccon, _EPS) ** 0.8
+        theta = thet
+        while True:
+            if newt >= nit:
+                failed = 2
+                break
+            F = numpy.empty((3, _N))
+            try:
+                for i, ti in enumerate((t + c1 * h, t + c2 * h, tph)):
+                    st["rhs"] += 1
+                    F[i] = run.f(ti, y + Z[i])
+                    j = _first_nonfinite(F[i])
+                    if j >= 0:
+                        failed, bad, bad_kind = 1, j, "derivative of state"
+                        break
+            except _BlockFailure as failure:
+                failed, bad, block_failure = 1, -2, failure
+            if failed:
+                break
+            with numpy.errstate(all="ignore"):
+                G = Ti @ F
+                g1 = G[0] - fac1 * W[0]
+                g2 = G[1] - (alphn * W[1] - betan * W[2])
+                g3 = G[2] - (betan * W[1] + alphn * W[2])
+                dw1 = E1inv @ g1
+                dwc = E2inv @ (g2 + 1j * g3)
+                dW = numpy.array([dw1, dwc.real, dwc.imag])
+                st["solves"] += 2
+                newt += 1
+                dyno = math.sqrt(float(numpy.sum((dW / scal) ** 2)) / (3 * _N)) if _N else 0.0
+            if dyno != dyno or dyno == math.inf:
+                failed = 2
+                break
+            if 1 < newt < nit:
+                thq = dyno / dynold
+                theta = thq if newt == 2 else math.sqrt(thq * thqold)
+                thqold = thq
+                if theta < 0.99:
+                    faccon = theta / (1.0 - theta)
+                    dyth = faccon * dyno * theta ** (nit - 1 - newt) / fnewt
+                    if dyth >= 1.0 and not fixed:  # too slow: a smaller step converges sooner
+                        qnewt = max(1e-4, min(20.0, dyth))
+                        hhfac = 0.8 * qnewt ** (-1.0 / (4.0 + nit - 1 - newt))
+                        failed = 3
+                        break
+                else:
+                    failed = 2
+                    break
+            dynold = max(dyno, _EPS)
+            W = W + dW
+            Z = T @ W
+            if faccon * dyno <= fnewt:
+                break
+        if failed:
+            if fixed:
+                if failed == 1:
+                    if bad == -2:
+                        raise _block_failed(block_failure)
+                    raise _fail(t, bad_kind, STATES[bad])
+                if not caljac:  # once more with a fresh Jacobian
+                    needjac = True
+                    continue
+                raise _Failure("at t = %.17g: %s: the Newton iteration does not converge with "
+                               "the fixed step h = %.3g" % (t, name, h), t)
+            if failed != 1:
+                bad = -4
+            h *= hhfac if failed == 3 else 0.5
+            reject, last = True, False
+            st["rejected"] += 1
+            needjac = not caljac
+            continue
+
+        # the error estimate
+        err = 0.0
+        if not fixed:
+            with numpy.errstate(all="ignore"):
+                f2 = (ew[0] * Z[0] + ew[1] * Z[1] + ew[2] * Z[2]) / h
+                cont = E1inv @ (f2 + f0)
+                st["solves"] += 1
+                err, worst_now = _stiff_norm(cont, scal)
+                err = max(err, 1e-10)
+                if err >= 1.0 and (first or reject):  # refined: f at y + err
+                    st["rhs"] += 1
+                    try:
+                        f1 = run.f(t, y + cont)
+                    except _BlockFailure:
+                        f1 = None
+                    if f1 is not None:
+                        cont = E1inv @ (f1 + f2)
+                        st["solves"] += 1
+                        err, worst_now = _stiff_norm(cont, scal)
+                        err = max(err, 1e-10)
+            worst = worst_now if worst_now >= 0 else worst
+            if err != err or err == math.inf:
+                bad = -1
+                h, reject, last = h * 0.5, True, False
+                st["rejected"] += 1
+                needjac = not caljac
+                continue
+
+        # step control: Gustafsson's, the safety factor scaled by the Newton iterations
+        fac = min(safe, cfac / (newt + 2 * nit))
+        quot = max(1.0 / fac_max, min(1.0 / fac_min, err ** expo / fac))
+        hnew = h / quot
+        if err < 1.0:
+            first = False
+            accepted += 1
+            if accepted > 1:
+                facgus = (hacc / h) * (err * err / erracc) ** expo / safe
+                facgus = max(1.0 / fac_max, min(1.0 / fac_min, facgus))
+                quot = max(quot, facgus)
+                hnew = h / quot
+            hacc, erracc = h, max(1e-2, err)
+            y1 = y + Z[2]
+            i = _first_nonfinite(y1)
+            if i >= 0:
+                raise _fail(tph, "state", STATES[i])
+            b = _radau_poly(c1, c2, Z[0], Z[1], Z[2])
+            zlast, hold = Z[2], h
+            st["steps"] += 1
+            run.emit_step(t, h, tph, y1, _radau_dense(y, c1, c2, b))
+            y, t = y1, tph
+            run.t, run.y = t, y
+            nsing, bad, caljac = 0, -1, False
+            if last:
+                return
+            scal = atol + rtol * numpy.abs(y)
+            st["rhs"] += 1
+            try:
+                f0 = run.f(t, y)
+            except _BlockFailure as failure:
+                raise _block_failed(failure) from None
+            k_fixed += 1
+            hnew = min(hnew, hmax)
+            if reject:
+                hnew = min(hnew, h)
+            reject = False
+            if theta <= thet and 1.0 <= hnew / h <= 1.2:
+                hnew = h  # keep h and the factorisations
+            needjac = theta > thet
+            h = hnew
+        else:
+            reject, last = True, False
+            st["rejected"] += 1
+            h = 0.1 * h if first else hnew
+            needjac = not caljac
+
+
+def _radau_dense(y, c1, c2, b):
+    def prepare():
+        return lambda theta: y + _radau_u(c1, c2, b, theta)
+    return prepare

@@ -1,0 +1,257 @@
+"""The solver registry (bgc/solvers.py) against the order conditions of its methods, and the
+explicit family in both runtimes: orders by step halving against closed forms, dense output,
+and the work a high-order pair saves on the paper's pendulum (counted, not timed)."""
+from fractions import Fraction
+from pathlib import Path
+
+import numpy as np
+import pytest
+import sympy as sp
+
+import bgc
+from bgc import solvers
+from bgc.backends import compile_c, have_c_compiler, load_python_module, run_c
+from bgc.emit import emit_c, emit_python
+from bgc.ir import P, Param, SceneSettings, T, X
+from bgc.lower import explicit_program
+
+ROOT = Path(__file__).resolve().parent.parent
+BACKENDS = ["python"] + (["c"] if have_c_compiler() else [])
+ERK = [s for s in solvers.SOLVER_LIST if isinstance(s.tableau, solvers.ERKTableau)]
+
+
+# ---------------------------------------------------------------- the registry
+
+
+def test_names_are_unique_and_families_known():
+    assert len(set(solvers.NAMES)) == len(solvers.NAMES)
+    assert all(s.family in solvers.FAMILIES for s in solvers.SOLVER_LIST)
+    assert solvers.DEFAULT in solvers.SOLVERS
+    for s in solvers.SOLVER_LIST:
+        if s.family == "auto":
+            assert solvers.get(s.explicit).stiffness is not None
+            assert solvers.get(s.stiff).uses_jacobian
+
+
+def _rooted_tree_conditions(tab, order):
+    """The order conditions of an explicit RK method up to order 5 (Butcher's trees), exact:
+    (weights, value) pairs whose residual must vanish for b."""
+    s = tab.stages
+    A = [[Fraction(0)] * s for _ in range(s)]
+    for i, row in enumerate(tab.a):
+        for j, v in enumerate(row):
+            A[i][j] = v
+    c = list(tab.c[:s])
+    b = list(tab.b)
+
+    def Av(v):
+        return [sum(A[i][j] * v[j] for j in range(s)) for i in range(s)]
+
+    def dot(u, v):
+        return sum(x * y for x, y in zip(u, v))
+
+    def pw(v, k):
+        return [x ** k for x in v]
+
+    def mul(u, v):
+        return [x * y for x, y in zip(u, v)]
+
+    conds = [(dot(b, [1] * s), Fraction(1))]
+    if order >= 2:
+        conds.append((dot(b, c), Fraction(1, 2)))
+    if order >= 3:
+        conds += [(dot(b, pw(c, 2)), Fraction(1, 3)), (dot(b, Av(c)), Fraction(1, 6))]
+    if order >= 4:
+        conds += [(dot(b, pw(c, 3)), Fraction(1, 4)), (dot(b, mul(c, Av(c))), Fraction(1, 8)),
+                  (dot(b, Av(pw(c, 2))), Fraction(1, 12)), (dot(b, Av(Av(c))), Fraction(1, 24))]
+    if order >= 5:
+        conds += [(dot(b, pw(c, 4)), Fraction(1, 5)),
+                  (dot(b, mul(pw(c, 2), Av(c))), Fraction(1, 10)),
+                  (dot(b, mul(c, Av(pw(c, 2)))), Fraction(1, 15)),
+                  (dot(b, mul(c, Av(Av(c)))), Fraction(1, 30)),
+                  (dot(b, mul(Av(c), Av(c))), Fraction(1, 20)),
+                  (dot(b, Av(pw(c, 3))), Fraction(1, 20)),
+                  (dot(b, Av(mul(c, Av(c)))), Fraction(1, 40)),
+                  (dot(b, Av(Av(pw(c, 2)))), Fraction(1, 60)),
+                  (dot(b, Av(Av(Av(c)))), Fraction(1, 120))]
+    return conds
+
+
+@pytest.mark.parametrize("solver", ERK, ids=lambda s: s.name)
+def test_explicit_tableaus_satisfy_their_conditions(solver):
+    tab = solver.tableau
+    # the nodes are the row sums (stages and the dense output's extra stages)
+    for ci, row in zip(tab.c + tab.extra_c, tab.a + tab.extra_a):
+        assert abs(float(ci - sum(row))) < 1e-14
+    # order conditions up to min(order, 5), exactly for rational tableaus
+    for got, want in _rooted_tree_conditions(tab, min(solver.order, 5)):
+        assert abs(float(got - want)) < 1e-14
+    if tab.error:  # an embedded estimate compares two solutions: its weights sum to zero
+        assert abs(float(sum(tab.error))) < 1e-14
+    if tab.fsal:  # the last stage is f(t + h, y1)
+        assert tab.c[-1] == 1 and tuple(tab.a[-1]) == tuple(tab.b[:-1])
+    if tab.dense:  # y(t + h) from the dense output is y1: sum_j P[i][j] = b_i
+        for i, row in enumerate(tab.dense):
+            bi = tab.b[i] if i < len(tab.b) else 0
+            assert abs(float(sum(row) - bi)) < 1e-14
+
+
+def _rosenbrock_stability(tab, z):
+    """R(z) of a Rosenbrock method in Hairer's transformed form on y' = lambda y (exact
+    Jacobian), z = h lambda: (1/gamma - z) k_i = z (1 + sum_j a_ij k_j) + sum_j C_ij k_j."""
+    g = float(tab.gamma)
+    k = []
+    for i in range(tab.stages):
+        arg = 1 + sum(float(a) * kj for a, kj in zip(tab.a[i], k))
+        k.append((z * arg + sum(float(c) * kj for c, kj in zip(tab.C[i], k))) / (1 / g - z))
+    return 1 + sum(float(m) * kj for m, kj in zip(tab.m, k)), sum(float(e) * kj
+                                                                   for e, kj in zip(tab.e, k))
+
+
+def test_rodas4_is_of_order_4_and_l_stable():
+    tab = solvers.get("rodas4").tableau
+    assert tab.m == tab.a[-1] + (Fraction(1),)  # stiffly accurate: y1 = Y_6 + k_6
+    # R(z) - e^z = O(z^5): the defect falls by 2^5 when z halves
+    d = [abs(_rosenbrock_stability(tab, z)[0] - np.exp(z)) for z in (0.1, 0.05)]
+    assert 2 ** 4.7 < d[0] / d[1] < 2 ** 5.3, d
+    # L-stable: R(z) -> 0 as z -> -inf; A-stable along the imaginary axis
+    assert abs(_rosenbrock_stability(tab, -1e10)[0]) < 1e-8
+    assert all(abs(_rosenbrock_stability(tab, 1j * w)[0]) <= 1 + 1e-12
+               for w in (0.1, 1.0, 10.0, 1e3, 1e6))
+
+
+# ---------------------------------------------------------------- models with closed forms
+
+
+def _program(name, states, params, outputs, init, rhs, out, **scene):
+    settings = dict(t0=0.0, t_end=2.0, dt=0.1, solver="dopri5", rtol=1e-6, atol=1e-9, step=None)
+    settings.update(scene)
+    return explicit_program(name, states, params, outputs, init, rhs, out,
+                            SceneSettings(**settings))
+
+
+def forced_decay():
+    """x' = -a x + sin(w t), x(0) = x0 (non-autonomous): the closed form as an output."""
+    a, w, x0 = P[0], P[1], P[2]
+    params = (Param("a", sp.Float(0.7)), Param("w", sp.Integer(3)), Param("x0", sp.Integer(2)))
+    exact = ((x0 + w / (a ** 2 + w ** 2)) * sp.exp(-a * T)
+             + (a * sp.sin(w * T) - w * sp.cos(w * T)) / (a ** 2 + w ** 2))
+    return _program("forced", ("x",), params, ("x", "exact"), [x0], [-a * X[0] + sp.sin(w * T)],
+                    [X[0], exact])
+
+
+def oscillator():
+    """x'' = -4 x, x(0) = 1: x = cos 2t, v = -2 sin 2t."""
+    return _program("osc", ("x", "v"), (Param("k", sp.Integer(4)),), ("x", "v", "xe", "ve"),
+                    [1, 0], [X[1], -P[0] * X[0]], [X[0], X[1], sp.cos(2 * T), -2 * sp.sin(2 * T)])
+
+
+_CACHE = {}
+
+
+def run(program, backend, **options):
+    """(t, Y) of the program at these settings, in one backend."""
+    key = (id(program), backend)
+    if backend == "python":
+        if key not in _CACHE:
+            _CACHE[key] = (program, load_python_module(next(iter(emit_python(program).values()))))
+        return _CACHE[key][1].simulate(**options)
+    if key not in _CACHE:
+        _CACHE[key] = (program, compile_c(next(iter(emit_c(program).values()))))
+    args = []
+    for name, value in options.items():
+        args += ["--" + name.replace("_", "-"), repr(value) if isinstance(value, float) else value]
+    code, out, err = run_c(_CACHE[key][1], [str(a) for a in args])
+    assert code == 0, err
+    data = np.loadtxt(out.splitlines()[1:], delimiter=",", ndmin=2)
+    return data[:, 0], data[:, 1:]
+
+
+FORCED, OSC = forced_decay(), oscillator()
+
+
+def _error(program, backend, **options):
+    _, Y = run(program, backend, **options)
+    half = Y.shape[1] // 2
+    return np.max(np.abs(Y[:, :half] - Y[:, half:]))
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+@pytest.mark.parametrize("name, steps", [("euler", (0.02, 0.01)), ("rk4", (0.1, 0.05)),
+                                         ("dopri5", (0.2, 0.1)), ("dop853", (0.4, 0.2))])
+def test_order_by_step_halving(backend, name, steps):
+    """Fixed steps (--step; for the adaptive pairs without error control): the error at the
+    output times shrinks by 2^order when the step halves.  Outputs at the step ends only
+    (dt a multiple of the step), so the dense output does not enter."""
+    order = solvers.get(name).order
+    errors = [_error(FORCED, backend, t_end=2.0, dt=0.4, solver=name, step=h) for h in steps]
+    ratio = errors[0] / errors[1]
+    assert 2 ** (order - 0.3) < ratio < 2 ** (order + 0.5), (errors, np.log2(ratio))
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+@pytest.mark.parametrize("name, degree", [("dopri5", 4), ("dop853", 7)])
+def test_dense_output_order(backend, name, degree):
+    """Outputs between the steps come from the continuous extension: with fixed steps and
+    outputs inside them, the error shrinks at least as 2^(degree) on halving (the local error
+    of the extension is O(h^(degree+1)))."""
+    errors = [_error(OSC, backend, t_end=2.0, dt=0.1, solver=name, step=h)
+              for h in (0.4 / 3, 0.2 / 3)]
+    assert errors[0] / errors[1] > 2 ** (degree - 0.5), errors
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+@pytest.mark.parametrize("name", ["dopri5", "dop853"])
+def test_error_follows_the_tolerance(backend, name):
+    """Adaptive runs: the error over the output grid falls as the tolerance tightens and
+    stays within a small multiple of it."""
+    errors = [_error(FORCED, backend, t_end=5.0, dt=0.05, solver=name, rtol=tol, atol=tol)
+              for tol in (1e-5, 1e-7, 1e-9, 1e-11)]
+    assert all(a > b for a, b in zip(errors, errors[1:])), errors
+    assert errors[-1] < 1e-9
+
+
+def test_backends_take_the_same_steps():
+    if "c" not in BACKENDS:
+        pytest.skip("no C compiler")
+    for name in ("dopri5", "dop853"):
+        options = dict(t_end=5.0, dt=0.05, solver=name, rtol=1e-8, atol=1e-10)
+        (tc, yc), (tp, yp) = run(FORCED, "c", **options), run(FORCED, "python", **options)
+        assert np.array_equal(tc, tp)
+        assert np.allclose(yc, yp, rtol=1e-13, atol=1e-15)
+
+
+def test_dop853_halves_the_work_on_the_pendulum():
+    """The issue's bar: on the paper's pendulum (scene swing: 0..10 s every 0.01 s) dopri5 at
+    rtol 1e-10 reaches some error; the high-order pair reaches that error with at most half
+    of its right-side calls, read off its work-precision line (log calls on log error, least
+    squares over tolerances in quarter decades).  The error at the final time (a step end) is
+    the bar; over the whole output grid the pair's order-7 interpolant costs it a little more
+    (0.51x measured when this was written): held to 0.55x.  Errors against eq. (12)
+    integrated by SciPy's DOP853 at rtol 1e-13."""
+    from test_simulate import pendulum_reference
+
+    compiled = bgc.build(ROOT / "models" / "pendulum.bg", "swing")
+    module = load_python_module(next(iter(emit_python(compiled.program).values())))
+    p = module._with_constants(module._param_values({}))
+    x0 = module._init(p)
+    reference = {}
+
+    def work(solver, tol):
+        st, rows = module._new_stats(), []
+        s = module._settings(solver=solver, rtol=tol, atol=tol)
+        module._integrate(s, p, x0, lambda t, x, y: rows.append((t, y[0], y[1])), st)
+        rows = np.array(rows)
+        if "xy" not in reference:
+            reference["xy"] = np.array(pendulum_reference(rows[:, 0])[:2]).T
+        err = np.max(np.abs(rows[:, 1:] - reference["xy"]), axis=1)
+        return err[-1], err.max(), st["rhs"]
+
+    final, grid, calls = work("dopri5", 1e-10)
+    runs = np.array([work("dop853", 10 ** (-k / 4)) for k in range(34, 44)])
+    for column, target, bound in ((0, final, 0.5), (1, grid, 0.55)):
+        errors = runs[:, column]
+        assert errors.min() < target < errors.max()  # interpolated, not extrapolated
+        slope, intercept = np.polyfit(np.log(errors), np.log(runs[:, 2]), 1)
+        needed = np.exp(intercept + slope * np.log(target))
+        assert needed <= bound * calls, (column, target, calls, needed, runs)
