@@ -13,7 +13,7 @@ from . import ast, backends
 from .causality import CausalGraph, assign_causality
 from .diagnostics import ModelError, format_diagnostic
 from .emit import emit_c, emit_python
-from .equations import EquationSystem, build_equations
+from .equations import EquationSystem, build_equations, with_residual_outputs
 from .graph import Graph
 from .ir import Program
 from .lower import lower
@@ -84,9 +84,12 @@ def _source(model) -> Source:
 
 
 def build(model, scene: str | None = None, project_initial: bool = False,
-          algebra: str = "auto", program: bool = True) -> Compiled:
+          algebra: str = "auto", program: bool = True,
+          residual_outputs: bool = False) -> Compiled:
     """Run the pipeline up to the program IR (program=False: up to the reduce stage, all that
-    `check` and `equations` need; Compiled.program is then None)."""
+    `check` and `equations` need; Compiled.program is then None).  residual_outputs: every
+    constraint's residual `J.residual` is an output too (after the scene's), for reports on
+    the drift."""
     if algebra not in ALGEBRA:
         raise ValueError(f"algebra must be one of {', '.join(ALGEBRA)}, not {algebra!r}")
     src = _source(model)
@@ -97,6 +100,8 @@ def build(model, scene: str | None = None, project_initial: bool = False,
         scenario = clock("scene", apply_scene, graph, scene)
         causal = clock("causality", assign_causality, scenario)
         system = clock("equations", build_equations, causal)
+        if residual_outputs:
+            system = with_residual_outputs(system)
         reduced = clock("reduce", reduce, system, project_initial, algebra)
         ir_program = clock("lower", lower, reduced) if program else None
     except ModelError as exc:

@@ -1,7 +1,8 @@
-"""The command line: `bgc check|equations|compile|simulate`.  The only module that uses click
+"""The command line: `bgc check|equations|compile|simulate|accuracy`.  The only module that uses click
 and the only one that writes files.  Model errors exit 1 with a located report, usage errors 2."""
 from __future__ import annotations
 
+import math
 import os
 import sys
 import tempfile
@@ -9,7 +10,8 @@ from pathlib import Path
 
 import click
 
-from . import api, backends, solvers
+from . import accuracy as acc
+from . import api, backends, solvers, stability
 from .diagnostics import format_diagnostic
 from .emit import emit_c, emit_python
 from .report import check_report, equations_latex, equations_text
@@ -20,9 +22,10 @@ def _warn(compiled: api.Compiled):
         click.echo(format_diagnostic(d, compiled.source.path, compiled.source.text), err=True)
 
 
-def _build(model, scene, project_initial=False, algebra="auto", program=True) -> api.Compiled:
+def _build(model, scene, project_initial=False, algebra="auto", program=True,
+           residual_outputs=False) -> api.Compiled:
     try:
-        compiled = api.build(model, scene, project_initial, algebra, program)
+        compiled = api.build(model, scene, project_initial, algebra, program, residual_outputs)
     except api.BgcModelError as exc:
         click.echo(str(exc), err=True)
         sys.exit(1)
@@ -33,6 +36,13 @@ def _build(model, scene, project_initial=False, algebra="auto", program=True) ->
     return compiled
 
 
+def _file_mode() -> int:
+    """The mode a new file gets from open() under the current umask (mkstemp's is 0600)."""
+    umask = os.umask(0)
+    os.umask(umask)
+    return 0o666 & ~umask
+
+
 def _write_atomic(path: str, text: str):
     """Write all of `text` or nothing: a temp file beside `path`, then rename."""
     target = Path(path)
@@ -40,6 +50,7 @@ def _write_atomic(path: str, text: str):
     try:
         with os.fdopen(fd, "w", encoding="utf-8", newline="") as fh:
             fh.write(text)
+        os.chmod(tmp, _file_mode())
         os.replace(tmp, target)
     except BaseException:
         if os.path.exists(tmp):
@@ -147,8 +158,13 @@ def simulate(model, scene, algebra, backend, solver, rtol, atol, t_end, dt, step
     for name, value in (("--rtol", rtol), ("--atol", atol), ("--dt", dt), ("--step", step)):
         if value is not None and not value > 0:
             raise click.UsageError(f"{name} must be positive")
-    args = api.run_args(t_end, dt, solver, rtol, atol, step, _parse_params(params, compiled),
+    overrides = _parse_params(params, compiled)
+    args = api.run_args(t_end, dt, solver, rtol, atol, step, overrides,
                         project_initial) + (["--stats"] if stats else [])
+    s = compiled.settings
+    for message in stability.warnings_for_run(compiled, solver or s.solver, step or s.step,
+                                              dt or s.dt, overrides):
+        click.echo(message, err=True)
     if backend == "c" and not backends.have_c_compiler():
         click.echo("warning: no C compiler found (cc or $CC); using the Python backend", err=True)
         backend = "python"
@@ -165,6 +181,145 @@ def simulate(model, scene, algebra, backend, solver, rtol, atol, t_end, dt, step
     elif not output:
         click.echo(out, nl=False)
     sys.exit(0 if code == 0 else 1)
+
+
+def _numbers(text: str | None, option: str) -> list[float] | None:
+    if text is None:
+        return None
+    try:
+        values = [float(v) for v in text.split(",") if v.strip()]
+    except ValueError:
+        raise click.UsageError(f"{option} expects comma-separated numbers, got '{text}'") \
+            from None
+    if not values or not all(math.isfinite(v) and v >= 0 for v in values):
+        raise click.UsageError(f"{option} expects non-negative numbers, got '{text}'")
+    return values
+
+
+class _Progress:
+    """A one-line progress bar on stderr when it is a terminal; silent otherwise."""
+
+    def __init__(self):
+        self.live = sys.stderr.isatty()
+
+    def __call__(self, text, done=None, total=None):
+        if not self.live:
+            return
+        if text is None:
+            sys.stderr.write("\r\033[K")
+        else:
+            bar = ""
+            if total:
+                filled = int(30 * done / total)
+                bar = f"[{'#' * filled}{'.' * (30 - filled)}] {done}/{total} "
+            sys.stderr.write(f"\r\033[K{bar}{text}")
+        sys.stderr.flush()
+
+
+@main.command()
+@MODEL
+@SCENE
+@ALGEBRA
+@click.option("--backend", type=click.Choice(["c", "python"]), default="c")
+@click.option("--solvers", "solver_list", default=None, metavar="A,B,...",
+              help="Solvers to sweep (default: all; with --gains: the scene's and rk4).")
+@click.option("--rtols", default=None, metavar="R1,R2,...",
+              help="Tolerances of the adaptive solvers (default 1e-3 .. 1e-10); atol follows "
+                   "in the scene's atol/rtol ratio.")
+@click.option("--steps", default=None, metavar="H1,H2,...",
+              help="Steps of the fixed-step solvers (default: dt, dt/2, .. dt/32).")
+@click.option("--reference", default=None, type=click.Path(dir_okay=False),
+              help="CSV to measure the errors against (t and the scene's outputs on its grid); "
+                   "default: bgc at a far tighter tolerance with another method.")
+@click.option("--gains", default=None, metavar="G1,G2,...",
+              help="Sweep the corrector gains instead: every gain parameter set to each value.")
+@click.option("--repeats", type=click.IntRange(1, 100), default=3, show_default=True,
+              help="Timing runs per point (the best is kept).")
+@click.option("--timeout", type=float, default=60.0, show_default=True,
+              help="Seconds a run may take; a solver that exceeds it skips its harder points.")
+@click.option("--t-end", type=float, default=None)
+@click.option("--dt", type=float, default=None, help="Output interval.")
+@click.option("-p", "params", multiple=True, metavar="NAME=VALUE", help="Parameter override.")
+@click.option("--no-plot", is_flag=True, help="Do not write the PNG.")
+@click.option("-o", "output", default=None, metavar="DIR",
+              help="Directory for accuracy.csv and accuracy.png (gains.csv, gains.png with "
+                   "--gains); default: accuracy-MODEL[-SCENE].")
+def accuracy(model, scene, algebra, backend, solver_list, rtols, steps, reference, gains,
+             repeats, timeout, t_end, dt, params, no_plot, output):
+    """Measure each solver's error and cost on the model: table, CSV and work-precision plot."""
+    compiled = _build(model, scene, algebra=algebra, program=True, residual_outputs=True)
+    overrides = _parse_params(params, compiled)
+    names = [n.strip() for n in solver_list.split(",")] if solver_list else None
+    for n in names or []:
+        if n not in solvers.SOLVERS:
+            raise click.UsageError(f"unknown solver '{n}' (solvers: {', '.join(solvers.NAMES)})")
+    rtol_values = _numbers(rtols, "--rtols")
+    step_values = _numbers(steps, "--steps")
+    gain_values = _numbers(gains, "--gains")
+    for option, vals in (("--rtols", rtol_values), ("--steps", step_values)):
+        if vals and not all(v > 0 for v in vals):
+            raise click.UsageError(f"{option} must be positive")
+    if backend == "c" and not backends.have_c_compiler():
+        click.echo("warning: no C compiler found (cc or $CC); using the Python backend", err=True)
+        backend = "python"
+    s = compiled.settings
+    out_dt = dt or s.dt
+    stem = Path(model).stem + (f"-{scene}" if scene else "")
+    directory = Path(output or f"accuracy-{stem}")
+    progress = _Progress()
+    try:
+        if gain_values is not None:
+            chosen = names or [s.solver] + (["rk4"] if s.solver != "rk4" else [])
+            settings = []
+            for n in chosen:
+                if solvers.get(n).family == "fixed":
+                    settings += [(n, "step", h) for h in (step_values or [s.step or out_dt])]
+                else:
+                    settings += [(n, "rtol", r) for r in (rtol_values or [s.rtol])]
+            result = acc.run_gains(compiled, gain_values, settings, backend, repeats, t_end, dt,
+                                   overrides, timeout, progress)
+            base = "gains"
+        else:
+            chosen = names or list(solvers.NAMES)
+            divisions = acc.DEFAULT_STEP_DIVISIONS
+            points = []
+            for n in chosen:
+                if solvers.get(n).family == "fixed":
+                    hs = step_values or [out_dt / k for k in divisions]
+                    points += [acc.Point(n, "step", h) for h in hs]
+                else:
+                    points += [acc.Point(n, "rtol", r) for r in (rtol_values or acc.DEFAULT_RTOLS)]
+            result = acc.run_sweep(compiled, points, backend, repeats, reference, overrides,
+                                   t_end, dt, timeout, progress)
+            base = "accuracy"
+    except acc.AccuracyError as exc:
+        progress(None)
+        click.echo(f"error: {exc}", err=True)
+        sys.exit(1)
+    text = acc.table(result, gains=gain_values is not None)
+    click.echo(text, nl=False)
+    directory.mkdir(parents=True, exist_ok=True)
+    _write_atomic(str(directory / f"{base}.csv"), acc.csv_text(result))
+    written = [str(directory / f"{base}.csv")]
+    if not no_plot:
+        try:
+            import matplotlib  # noqa: F401
+        except ImportError:
+            click.echo("warning: matplotlib is not installed (pip install 'bgc[plot]'): no plot "
+                       "written", err=True)
+        else:
+            png = directory / f"{base}.png"
+            fd, tmp = tempfile.mkstemp(prefix=f".{png.name}.", suffix=".png", dir=directory)
+            os.close(fd)
+            try:
+                acc.plot(result, tmp, gains=gain_values is not None)
+                os.chmod(tmp, _file_mode())
+                os.replace(tmp, png)
+            finally:
+                if os.path.exists(tmp):
+                    os.unlink(tmp)
+            written.append(str(png))
+    click.echo(f"wrote {', '.join(written)}", err=True)
 
 
 if __name__ == "__main__":  # pragma: no cover

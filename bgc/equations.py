@@ -13,7 +13,7 @@ later stages cannot reach back into it.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import sympy as sp
 
@@ -370,6 +370,14 @@ def build_equations(cg: CausalGraph) -> EquationSystem:
                           tuple(g.warnings))
 
 
+def with_residual_outputs(es: EquationSystem) -> EquationSystem:
+    """The system with each constraint's residual appended to the outputs (unless there)."""
+    have = {o.expr for o in es.outputs}
+    extra = tuple(OutputDef(f"{c.junction}.residual", c.residual, c.span)
+                  for c in es.constraints if c.residual not in have)
+    return replace(es, outputs=es.outputs + extra) if extra else es
+
+
 __all__ = ["TIME", "Equation", "EquationSystem", "StateVar", "ConstraintDef", "Store",
-           "OutputDef", "ParameterDef", "Run", "build_equations", "der", "bond_effort",
+           "OutputDef", "ParameterDef", "Run", "build_equations", "with_residual_outputs", "der", "bond_effort",
            "bond_flow"]

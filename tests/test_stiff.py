@@ -150,7 +150,7 @@ def _built(make, backend):
 
 def _parse_stats(line):
     counts = dict(part.split("=") for part in line.split()[1:])
-    return {k: (float(v) if k == "stiff_from" else int(v)) for k, v in counts.items()}
+    return {k: (float(v) if k in ("stiff_from", "cpu") else int(v)) for k, v in counts.items()}
 
 
 @functools.lru_cache(maxsize=None)

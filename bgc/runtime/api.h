@@ -89,11 +89,13 @@ typedef struct bgc_stats {
     long jac, lu, solves;      /* stiff solvers: Jacobians, LU factorisations, linear solves */
     int switched;              /* auto: 1 once it has switched to its stiff method ... */
     double t_switch;           /* ... at this time */
+    double cpu;                /* processor seconds bgc_simulate took (clock()) */
 } bgc_stats;
 /* Called at every output time with the state and the outputs; nonzero stops the run. */
 typedef int (*bgc_sink)(void *ctx, double t, const double *x, const double *y);
 
-/* "stats: steps=.. rejected=.. rhs=.. jac=.. lu=.. solves=..[ stiff_from=T]" and a newline. */
+/* "stats: steps=.. rejected=.. rhs=.. jac=.. lu=.. solves=..[ stiff_from=T] cpu=S" and a
+   newline. */
 void bgc_print_stats(FILE *f, const bgc_stats *st);
 
 /* The compiled scene's settings; 0 if s is valid, else BGC_ERR_USAGE and a message. */

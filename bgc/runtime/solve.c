@@ -4,6 +4,8 @@
    tables of bgc/solvers.py above) and bgc_simulate, which picks a family's run function.
    The stiff families follow in bgc/runtime/stiff.c. */
 
+#include <time.h> /* clock(): the processor time bgc_simulate reports in its stats */
+
 /* Output times: t0 + k*dt for k < n, and t_end for k = n (see the top of the file). */
 static long bgc_output_count(const bgc_settings *s)
 {
@@ -561,7 +563,7 @@ void bgc_print_stats(FILE *f, const bgc_stats *st)
             st->rejected, st->rhs, st->jac, st->lu, st->solves);
     if (st->switched)
         fprintf(f, " stiff_from=%.17g", st->t_switch);
-    fprintf(f, "\n");
+    fprintf(f, " cpu=%.6e\n", st->cpu);
 }
 
 static int bgc_run_rosenbrock(bgc_run *r, const bgc_method *method, double *y);
@@ -588,6 +590,7 @@ static int bgc_run_family(bgc_run *r, int solver, double *y)
 int bgc_simulate(const bgc_settings *s, const bgc_params *p, const double *x0, bgc_sink sink,
                  void *ctx, bgc_stats *stats, char *msg, size_t msg_size)
 {
+    const clock_t start = clock();
     bgc_params q = *p;
     bgc_run r;
     double *y;
@@ -635,5 +638,6 @@ int bgc_simulate(const bgc_settings *s, const bgc_params *p, const double *x0, b
         }
     }
     bgc_work_free(r.w);
+    stats->cpu = (double)(clock() - start) / CLOCKS_PER_SEC;
     return rc;
 }

@@ -1,8 +1,11 @@
 # ================================================================== solve ===
 # The solvers' common machinery, the explicit Runge-Kutta family (read from _METHODS, printed
 # from bgc/solvers.py) and _integrate, which picks a family's run function; the stiff
-# families follow (bgc/runtime/stiff.py).  States are numpy vectors; the arithmetic is the C
-# runtime's, in the same order.
+# families follow (bgc/runtime/stiff.py).  The explicit solvers keep small states as lists
+# and large ones as numpy vectors (see _LIST_STATES); the arithmetic is the C runtime's, in
+# the same order.
+
+import time  # process_time(): the processor time a run reports in its stats
 
 
 def _output_count(s):
@@ -45,7 +48,7 @@ def _block_failed(failure):
 
 def _new_stats():
     return {"steps": 0, "rejected": 0, "rhs": 0, "jac": 0, "lu": 0, "solves": 0,
-            "switched": False, "t_switch": 0.0}
+            "switched": False, "t_switch": 0.0, "cpu": 0.0}
 
 
 def _stats_line(st):
@@ -53,7 +56,7 @@ def _stats_line(st):
             "solves=%(solves)d" % st)
     if st["switched"]:
         line += " stiff_from=%.17g" % st["t_switch"]
-    return line
+    return line + " cpu=%.6e" % st["cpu"]
 
 
 class _Stiff(Exception):
@@ -579,6 +582,15 @@ def _run_family(run, name):
 
 
 def _integrate(s, p, x0, sink, st):
+    """Runs the solver; st["cpu"]: the processor seconds it took."""
+    start = time.process_time()
+    try:
+        _integrate_from(s, p, x0, sink, st)
+    finally:
+        st["cpu"] = time.process_time() - start
+
+
+def _integrate_from(s, p, x0, sink, st):
     y = numpy.array(x0, dtype=float)
     i = _first_nonfinite(y)
     if i >= 0:

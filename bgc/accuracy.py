@@ -1,0 +1,485 @@
+"""`bgc accuracy`: what each solver's accuracy costs in time, measured on the user's own model.
+
+For every solver and every tolerance of a sweep (every step size, for the fixed-step solvers)
+the compiled program runs twice over: once on the scene's output grid, whose CSV gives the
+error and whose `--stats` line the counters, and `repeats` times with two output rows, whose
+best processor time (measured inside the program, around the integration) is the cost.  The
+program is compiled once and reused for every run.
+
+Errors are measured against a reference: by default bgc itself at a far tighter tolerance with
+another method (DOP853 at rtol 1e-13, or Radau IIA at 1e-12 when `auto`'s stiffness test
+fires on the model; that method's own rows are measured against a second reference, Dopri5 at
+1e-13 or Rodas4 at 1e-11, and the two references' disagreement is reported as the floor below
+which errors mean nothing), or a
+CSV given by the user on the same output grid.  Each output column's error is taken relative
+to the column's scale (its largest magnitude in the reference); a row's error is the largest
+over the columns, at the final time and over the whole grid.  Constraint residuals are not
+compared with the reference: their largest magnitude is the row's drift.
+
+Nothing here is timed by a test; tests check the ordering of errors, not the times.
+"""
+from __future__ import annotations
+
+import io
+import math
+import os
+import subprocess
+import sys
+import tempfile
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from . import backends, solvers
+from .api import Compiled, run_args
+from .emit import emit_c, emit_python
+from .stability import fixed_step_checks, fixed_step_of
+
+DEFAULT_RTOLS = tuple(10.0 ** -k for k in range(3, 11))
+DEFAULT_STEP_DIVISIONS = tuple(2 ** k for k in range(6))  # step = dt / k
+REFERENCES = {False: (("dop853", 1e-13), ("dopri5", 1e-13)),
+              True: (("radau5", 1e-12), ("rodas4", 1e-11))}
+
+
+class AccuracyError(RuntimeError):
+    """A sweep that cannot be run as asked (a bad reference, no outputs to compare)."""
+
+
+@dataclass
+class Point:
+    """One run of the sweep."""
+
+    solver: str
+    setting: str  # "rtol" or "step"
+    value: float
+    gain: float | None = None
+    steps: int | None = None
+    rejected: int | None = None
+    rhs: int | None = None
+    jac: int | None = None
+    lu: int | None = None
+    error_final: float | None = None
+    error_max: float | None = None
+    residual: float | None = None
+    cpu: float | None = None
+    amplification: float | None = None  # fixed steps: the corrector's worst |R(h lambda)|
+    status: str = "ok"
+
+
+@dataclass
+class Result:
+    model: str
+    scene: str | None
+    backend: str
+    reference: str  # how the reference was made
+    floor: float | None  # the references' disagreement (None: a given CSV)
+    points: list[Point] = field(default_factory=list)
+
+
+# ---------------------------------------------------------------- running the program
+
+
+class Program:
+    """The compiled scene as a runnable program, built once."""
+
+    def __init__(self, compiled: Compiled, backend: str, timeout: float):
+        self.timeout = timeout
+        self.backend = backend
+        self._tmp = None
+        if backend == "c":
+            (text,) = emit_c(compiled.program).values()
+            self.argv = [str(backends.compile_c(text))]
+        else:
+            (text,) = emit_python(compiled.program).values()
+            self._tmp = tempfile.TemporaryDirectory(prefix="bgc-accuracy-")
+            path = Path(self._tmp.name) / "model.py"
+            path.write_text(text, encoding="utf-8")
+            self.argv = [sys.executable, str(path)]
+
+    def close(self):
+        if self._tmp is not None:
+            self._tmp.cleanup()
+
+    def run(self, args: list[str]) -> tuple[int, str, str]:
+        """(status, stdout, stderr); a run over the time budget is status -1."""
+        try:
+            done = subprocess.run(self.argv + [*args, "--stats"], capture_output=True,
+                                  text=True, timeout=self.timeout)
+        except subprocess.TimeoutExpired:
+            return -1, "", f"stopped after {self.timeout:g} s (the time budget per run)"
+        return done.returncode, done.stdout, done.stderr
+
+
+def _stats(stderr: str) -> dict:
+    for line in stderr.splitlines():
+        if line.startswith("stats:"):
+            return {k: v for k, _, v in (part.partition("=") for part in line.split()[1:])}
+    return {}
+
+
+def _error_line(stderr: str) -> str:
+    lines = stderr.strip().splitlines()
+    errors = [ln for ln in lines if ln.startswith("error:")]
+    if errors:
+        return errors[-1][len("error:"):].strip()
+    return lines[-1] if lines else "failed"
+
+
+def parse_csv(text: str) -> tuple[list[str], np.ndarray]:
+    lines = text.splitlines()
+    if not lines:
+        return [], np.zeros((0, 0))
+    names = lines[0].split(",")
+    if len(lines) == 1:
+        return names, np.zeros((0, len(names)))
+    return names, np.loadtxt(io.StringIO("\n".join(lines[1:])), delimiter=",", ndmin=2)
+
+
+@dataclass
+class Trajectory:
+    names: list[str]
+    data: np.ndarray  # t in column 0
+    stats: dict
+    status: int
+    message: str
+
+
+def run_once(program: Program, settings: dict) -> Trajectory:
+    code, out, err = program.run(run_args(**settings))
+    names, data = parse_csv(out)
+    return Trajectory(names, data, _stats(err), code, "" if code == 0 else _error_line(err))
+
+
+# ---------------------------------------------------------------- errors
+
+
+def compare(traj: Trajectory, ref: Trajectory) -> tuple[float, float, float | None]:
+    """(error at the final time, max over the grid, largest |residual|) of a full run."""
+    names = traj.names[1:]
+    residual_cols = [j for j, n in enumerate(names) if n.endswith(".residual")]
+    compared = [j for j in range(len(names)) if j not in residual_cols]
+    Y, R = traj.data[:, 1:], ref.data[:, 1:]
+    if Y.shape != R.shape or not np.allclose(traj.data[:, 0], ref.data[:, 0], rtol=1e-12,
+                                             atol=1e-12):
+        raise AccuracyError("the run and the reference are not on the same output grid")
+    residual = float(np.max(np.abs(Y[:, residual_cols]))) if residual_cols else None
+    if not compared:
+        raise AccuracyError("no outputs to compare (the scene outputs residuals only)")
+    scale = np.max(np.abs(R[:, compared]), axis=0)
+    scale[scale == 0.0] = 1.0
+    diff = np.abs(Y[:, compared] - R[:, compared]) / scale
+    return float(np.max(diff[-1])), float(np.max(diff)), residual
+
+
+def load_reference(path: str, names: list[str], times: np.ndarray) -> Trajectory:
+    """A user's CSV (t and the outputs, by name) on the scene's output grid."""
+    try:
+        text = Path(path).read_text(encoding="utf-8")
+    except OSError as exc:
+        raise AccuracyError(f"{path}: cannot read: {exc.strerror}") from None
+    ref_names, data = parse_csv(text)
+    if not ref_names or ref_names[0] != "t":
+        raise AccuracyError(f"{path}: the first column must be 't'")
+    cols = [0]
+    for n in names[1:]:
+        if n.endswith(".residual"):
+            cols.append(None)
+        elif n in ref_names:
+            cols.append(ref_names.index(n))
+        else:
+            raise AccuracyError(f"{path}: no column '{n}' (it has {', '.join(ref_names)})")
+    if data.shape[0] != len(times) or not np.allclose(data[:, 0], times, rtol=1e-9,
+                                                      atol=1e-12):
+        raise AccuracyError(f"{path}: its times are not the scene's output grid "
+                            f"({len(times)} rows from {times[0]:g} to {times[-1]:g})")
+    out = np.column_stack([data[:, c] if c is not None else np.zeros(len(times))
+                           for c in cols])
+    return Trajectory(names, out, {}, 0, "")
+
+
+# ---------------------------------------------------------------- the sweep
+
+
+def _is_stiff(program: Program, base: dict) -> bool:
+    """Whether `auto` switches to its stiff method at rtol 1e-6 (Hairer's stiffness test)."""
+    t = run_once(program, _settings(base, solver="auto", rtol=1e-6, atol=1e-6 * base["_ratio"]))
+    return "stiff_from" in t.stats
+
+
+def _settings(base: dict, **kw) -> dict:
+    s = {k: v for k, v in base.items() if not k.startswith("_")}
+    s.update(kw)
+    return s
+
+
+def make_references(program: Program, base: dict, progress) -> tuple[dict, str, float]:
+    """{method: Trajectory} for the two reference methods, a description, and their
+    disagreement (the error floor)."""
+    stiff = _is_stiff(program, base)
+    refs, parts = {}, []
+    for name, rtol in REFERENCES[stiff]:
+        progress(f"reference {name} rtol={rtol:g}")
+        t = run_once(program, _settings(base, solver=name, rtol=rtol, atol=rtol * base["_ratio"]))
+        if t.status != 0:
+            raise AccuracyError(f"the reference run ({name}, rtol {rtol:g}) failed: {t.message}")
+        refs[name] = t
+        parts.append(f"{name} rtol={rtol:g}")
+    (a, ta), (b, tb) = refs.items()
+    _, floor, _ = compare(ta, tb)
+    what = (f"{parts[0]} ({parts[1]} for the {a} rows){'; the model is stiff' if stiff else ''}")
+    return refs, what, floor
+
+
+def measure(program: Program, settings: dict, point: Point, ref: Trajectory, repeats: int,
+            span: float) -> Trajectory:
+    """Fill `point` from one full run and `repeats` timing runs."""
+    traj = run_once(program, settings)
+    st = traj.stats
+    for key in ("steps", "rejected", "rhs", "jac", "lu"):
+        if key in st:
+            setattr(point, key, int(st[key]))
+    if traj.status != 0:
+        point.status = traj.message
+        return traj
+    point.error_final, point.error_max, point.residual = compare(traj, ref)
+    best = math.inf
+    for _ in range(repeats):
+        t = run_once(program, dict(settings, dt=span))
+        if t.status == 0 and "cpu" in t.stats:
+            best = min(best, float(t.stats["cpu"]))
+    point.cpu = best if best < math.inf else None
+    return traj
+
+
+def sweep_points(solver_names, rtols, step_divisions, dt) -> list[Point]:
+    pts = []
+    for name in solver_names:
+        if solvers.get(name).family == "fixed":
+            pts += [Point(name, "step", dt / k) for k in step_divisions]
+        else:
+            pts += [Point(name, "rtol", r) for r in rtols]
+    return pts
+
+
+def run_sweep(compiled: Compiled, points: list[Point], backend: str = "c", repeats: int = 3,
+              reference_csv: str | None = None, params: dict | None = None,
+              t_end: float | None = None, dt: float | None = None, timeout: float = 60.0,
+              progress=None) -> Result:
+    """Run every point (in order; a solver's failure skips its later, harder points)."""
+    progress = progress or (lambda text, done=None, total=None: None)
+    s = compiled.settings
+    base = {"t_end": t_end if t_end is not None else s.t_end, "dt": dt if dt is not None else s.dt,
+            "params": params or {}, "_ratio": s.atol / s.rtol}
+    span = base["t_end"] - s.t0
+    program = Program(compiled, backend, timeout)
+    try:
+        if reference_csv:
+            probe = run_once(program, _settings(base, solver="dop853", rtol=1e-3,
+                                                atol=1e-3 * base["_ratio"], t_end=base["t_end"]))
+            refs = {None: load_reference(reference_csv, probe.names, probe.data[:, 0])}
+            what, floor = f"{reference_csv} (given)", None
+        else:
+            refs, what, floor = make_references(program, base, progress)
+        result = Result(compiled.source.path, s.scene, backend, what, floor)
+        failed: set = set()
+        for k, pt in enumerate(points):
+            progress(f"{pt.solver} {pt.setting}={pt.value:.3g}", k, len(points))
+            key = (pt.solver, pt.gain)
+            if key in failed:
+                pt.status = "skipped (an easier setting failed)"
+                result.points.append(pt)
+                continue
+            run = _settings(base, solver=pt.solver, params=dict(base["params"]))
+            if pt.setting == "rtol":
+                run.update(rtol=pt.value, atol=pt.value * base["_ratio"])
+            else:
+                run.update(step=pt.value)
+            ref = _reference_for(refs, pt.solver)
+            measure(program, run, pt, ref, repeats, span)
+            if pt.status != "ok":
+                failed.add(key)
+            result.points.append(pt)
+        progress(None)
+        return result
+    finally:
+        program.close()
+
+
+def _reference_for(refs: dict, solver: str) -> Trajectory:
+    if None in refs:
+        return refs[None]
+    names = list(refs)
+    return refs[names[1]] if solver == names[0] else refs[names[0]]
+
+
+# ---------------------------------------------------------------- gains
+
+
+def gain_parameters(compiled: Compiled) -> list[str]:
+    """The parameters that are a corrector's gains (each gain must be a bare parameter)."""
+    names: list[str] = []
+    params = {p.name for p in compiled.graph.parameters}
+    for c in compiled.reduced.constraints:
+        if c.corrector not in ("pid", "pd"):
+            continue
+        for g in c.gains:
+            text = str(g)
+            if text not in params:
+                raise AccuracyError(
+                    f"the corrector of '{c.junction}' has the gain '{text}', not a parameter: "
+                    "--gains sets gain parameters (sweep an expression's parameters with bgc "
+                    "sweep or -p)")
+            if text not in names:
+                names.append(text)
+    if not names:
+        raise AccuracyError("--gains needs a constraint with a pid or pd corrector")
+    return names
+
+
+def run_gains(compiled: Compiled, gains: list[float], solver_settings: list[tuple[str, str, float]],
+              backend: str = "c", repeats: int = 3, t_end: float | None = None,
+              dt: float | None = None, params: dict | None = None, timeout: float = 60.0,
+              progress=None) -> Result:
+    """For each gain value (every gain parameter set to it) and each (solver, setting, value):
+    drift, error against a reference at that gain, cost; fixed steps also |R(h lambda)|."""
+    progress = progress or (lambda text, done=None, total=None: None)
+    names = gain_parameters(compiled)
+    s = compiled.settings
+    base = {"t_end": t_end if t_end is not None else s.t_end, "dt": dt if dt is not None else s.dt,
+            "params": dict(params or {}), "_ratio": s.atol / s.rtol}
+    span = base["t_end"] - s.t0
+    program = Program(compiled, backend, timeout)
+    result = None
+    try:
+        total = len(gains) * len(solver_settings)
+        k = 0
+        for g in gains:
+            over = dict(base["params"], **{n: g for n in names})
+            gbase = dict(base, params=over)
+            refs, what, floor = make_references(program, gbase, progress)
+            if result is None:
+                result = Result(compiled.source.path, s.scene, backend, what, floor)
+            else:
+                result.floor = max(result.floor or 0.0, floor)
+            for name, setting, value in solver_settings:
+                progress(f"gain {g:g}: {name} {setting}={value:.3g}", k, total)
+                k += 1
+                pt = Point(name, setting, value, gain=g)
+                run = _settings(gbase, solver=name)
+                if setting == "rtol":
+                    run.update(rtol=value, atol=value * base["_ratio"])
+                else:
+                    run.update(step=value)
+                h = fixed_step_of(name, run.get("step"), base["dt"])
+                if h is not None:
+                    checks = fixed_step_checks(compiled, name, h, over)
+                    if checks:
+                        pt.amplification = max(c.amplification for c in checks)
+                measure(program, run, pt, _reference_for(refs, name), repeats, span)
+                result.points.append(pt)
+        progress(None)
+        return result
+    finally:
+        program.close()
+
+
+# ---------------------------------------------------------------- reports
+
+
+def _fmt(v, spec=".3g"):
+    return "-" if v is None else format(v, spec)
+
+
+def table(result: Result, gains: bool = False) -> str:
+    head = ["solver", "setting"] + (["gain", "|R(hλ)|"] if gains else []) + \
+        ["steps", "rejected", "rhs", "jac", "lu", "err final", "err max", "residual",
+         "cpu [s]", "status"]
+    rows = []
+    for p in result.points:
+        row = [p.solver, f"{p.setting}={p.value:.3g}"]
+        if gains:
+            row += [_fmt(p.gain), _fmt(p.amplification)]
+        row += [_fmt(p.steps, "d"), _fmt(p.rejected, "d"), _fmt(p.rhs, "d"), _fmt(p.jac, "d"),
+                _fmt(p.lu, "d"), _fmt(p.error_final, ".2e"), _fmt(p.error_max, ".2e"),
+                _fmt(p.residual, ".2e"), _fmt(p.cpu, ".3e"), p.status]
+        rows.append(row)
+    widths = [max(len(str(r[j])) for r in rows + [head]) for j in range(len(head))]
+    lines = [f"model: {result.model}, scene {result.scene or '(default)'}, backend {result.backend}",
+             f"reference: {result.reference}"]
+    if result.floor is not None:
+        lines.append(f"reference floor: the two references differ by {result.floor:.2e} "
+                     "(errors near it are the references', not the solver's)")
+    lines.append("errors: max |y - y_ref| / max |y_ref| over the outputs (residuals apart), at "
+                 "t_end and over the grid; residual: max |constraint residual|; cpu: best "
+                 "processor time of the integration alone")
+    lines.append("  ".join(h.ljust(w) for h, w in zip(head, widths)).rstrip())
+    lines.append("  ".join("-" * w for w in widths))
+    lines += ["  ".join(str(c).ljust(w) for c, w in zip(r, widths)).rstrip() for r in rows]
+    return "\n".join(lines) + "\n"
+
+
+CSV_FIELDS = ("solver", "setting", "value", "gain", "steps", "rejected", "rhs", "jac", "lu",
+              "error_final", "error_max", "residual", "cpu_s", "amplification", "status")
+
+
+def csv_text(result: Result) -> str:
+    out = [",".join(CSV_FIELDS)]
+    for p in result.points:
+        vals = [p.solver, p.setting, repr(p.value), p.gain, p.steps, p.rejected, p.rhs, p.jac,
+                p.lu, p.error_final, p.error_max, p.residual, p.cpu, p.amplification,
+                '"' + p.status.replace('"', "'") + '"']
+        out.append(",".join("" if v is None else (f"{v:.17g}" if isinstance(v, float) else str(v))
+                            for v in vals))
+    return "\n".join(out) + "\n"
+
+
+def plot(result: Result, path: str, gains: bool = False) -> None:
+    """Work-precision (error against time, log-log, one line per solver) and error against
+    right-side calls; with gains, drift and error against the gain."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.ticker import NullFormatter
+
+    fig, axes = plt.subplots(1, 3 if gains else 2, figsize=(15 if gains else 11, 4.5))
+    groups: dict = {}
+    for p in result.points:
+        if p.status == "ok" and p.error_max is not None:
+            key = (p.solver, p.setting, p.value) if gains else p.solver
+            groups.setdefault(key, []).append(p)
+    for key, pts in groups.items():
+        label = f"{key[0]} {key[1]}={key[2]:.3g}" if gains else key
+        if gains:
+            xs = [p.gain for p in pts]
+            axes[0].loglog(xs, [max(p.residual or 0.0, 1e-300) for p in pts], "o-", label=label)
+            axes[1].loglog(xs, [max(p.error_max, 1e-300) for p in pts], "o-", label=label)
+            axes[2].loglog(xs, [p.rhs for p in pts], "o-", label=label)
+        else:
+            pts = [p for p in pts if p.cpu]
+            axes[0].loglog([p.cpu for p in pts], [p.error_max for p in pts], "o-", label=label)
+            axes[1].loglog([p.rhs for p in pts], [p.error_max for p in pts], "o-", label=label)
+    if gains:
+        axes[0].set(xlabel="corrector gain", ylabel="max |constraint residual|",
+                    title="drift against gain")
+        axes[1].set(xlabel="corrector gain", ylabel="max relative error",
+                    title="error against gain")
+        axes[2].set(xlabel="corrector gain", ylabel="right-side calls",
+                    title="cost against gain (failed runs left out)")
+    else:
+        axes[0].set(xlabel="processor time of the integration [s]",
+                    ylabel="max relative error over the grid", title="work-precision")
+        axes[1].set(xlabel="right-side calls", ylabel="max relative error over the grid",
+                    title="error against right-side calls")
+    if result.floor:  # on the relative-error axes
+        for ax in ([axes[1]] if gains else axes):
+            ax.axhline(result.floor, color="0.6", ls=":", lw=1)
+    for ax in axes:
+        ax.grid(True, which="both", alpha=0.3)
+        ax.xaxis.set_minor_formatter(NullFormatter())
+    axes[0].legend(fontsize=8)
+    fig.suptitle(f"{os.path.basename(result.model)}, scene {result.scene or '(default)'}, "
+                 f"{result.backend} backend")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
