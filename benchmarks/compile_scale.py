@@ -6,7 +6,7 @@
 The models are the four families of benchmarks/families.py (pendulum_chain compiled with its
 scene "swing", the others with the default scene), each at a range of sizes.  For every model:
 
-  stages   bgc.build(...).timings (parse, resolve, scene, causality, equations, reduce, lower)
+  stages   bgc.build(...).timings (parse, resolve, flatten, scene, causality, equations, reduce, lower)
            and emit_c, timed inside a fresh Python process (this script run with the hidden
            option --one FAMILY N DIR, which prints JSON): SymPy caches what it has seen, so sizes
            built in one process would warm each other.  Median over the repeats.
@@ -80,18 +80,21 @@ import machine  # noqa: E402
 
 SIZES = {
     "pendulum_chain": (1, 2, 4, 8, 16, 32, 64),
+    "pendulum_chain_vector": (1, 2, 4, 8, 16, 32, 64),
     "mass_chain": (10, 30, 100, 300, 1000),
     "rc_ladder": (10, 30, 100, 300, 600, 1000),
     "resistor_ladder": (2, 4, 8, 16, 32, 64),
 }
 QUICK_SIZES = {
     "pendulum_chain": (2, 8, 16),
+    "pendulum_chain_vector": (2, 8, 16),
     "mass_chain": (10, 100),
     "rc_ladder": (10, 100),
     "resistor_ladder": (4, 16),
 }
-SCENES = {"pendulum_chain": "swing"}
-STAGES = ("parse", "resolve", "scene", "causality", "equations", "reduce", "lower", "emit")
+SCENES = {"pendulum_chain": "swing", "pendulum_chain_vector": "swing"}
+STAGES = ("parse", "resolve", "flatten", "scene", "causality", "equations", "reduce", "lower",
+          "emit")
 ARITHMETIC = ("add", "mul", "div", "call", "neg")
 CFLAGS = ("-O2", "-std=c99")
 DRIVER_FLAGS = ("-D_POSIX_C_SOURCE=199309L",)
@@ -656,24 +659,24 @@ def fmt(value, spec: str, width: int) -> str:
 
 
 def stage_table(rows: list[Row]) -> str:
-    head = f"{'family':<16}{'size':>5}{'states':>7}" + "".join(
+    head = f"{'family':<22}{'size':>5}{'states':>7}" + "".join(
         f"{s[:9]:>10}" for s in STAGES) + f"{'total':>9}"
     lines = [head, "-" * len(head)]
     for r in rows:
-        lines.append(f"{r.family:<16}{r.size:>5}{r.states:>7}"
+        lines.append(f"{r.family:<22}{r.size:>5}{r.states:>7}"
                      + "".join(fmt(r.stages.get(s), ".3f", 10) for s in STAGES)
                      + fmt(r.total, ".3f", 9))
     return "\n".join(lines)
 
 
 def side_by_side_table(rows: list[Row]) -> str:
-    head = (f"{'family':<16}{'size':>5} {'tool':<13}{'states':>7}{'build':>8}{'codegen':>8}"
+    head = (f"{'family':<22}{'size':>5} {'tool':<13}{'states':>7}{'build':>8}{'codegen':>8}"
             f"{'total':>8}{'command':>8}{'check':>7}{'cc':>7}{'ops':>7}{'flops':>7}"
             f"{'rhs µs':>10}{'jac µs':>10}{'vs bgc':>8}")
     lines = [head, "-" * len(head)]
     for r in rows:
         lines.append(
-            f"{r.family:<16}{r.size:>5} {r.tool:<13}{fmt(r.states, 'd', 7)}"
+            f"{r.family:<22}{r.size:>5} {r.tool:<13}{fmt(r.states, 'd', 7)}"
             f"{fmt(r.build, '.3g', 8)}{fmt(r.codegen, '.3g', 8)}{fmt(r.total, '.3g', 8)}"
             f"{fmt(r.command, '.3g', 8)}{fmt(r.check, '.3g', 7)}{fmt(r.cc, '.3g', 7)}"
             f"{fmt(r.ops, 'd', 7)}{fmt(r.flops, 'd', 7)}"
@@ -684,7 +687,7 @@ def side_by_side_table(rows: list[Row]) -> str:
 
 
 def fit_lines(rows: list[Row]) -> list[str]:
-    lines = [f"{'family':<16}{'tool':<13}{'fitted sizes':<22}{'in process':>11}"
+    lines = [f"{'family':<22}{'tool':<13}{'fitted sizes':<22}{'in process':>11}"
              f"{'command':>9}{'cc':>7}  target <= {TARGET_EXPONENT:g} (bgc: in process, command)"]
     lines.append("-" * len(lines[0]))
     keys = dict.fromkeys((r.family, r.tool) for r in rows)
@@ -696,7 +699,7 @@ def fit_lines(rows: list[Row]) -> list[str]:
         verdicts = [v for v in (total, command) if v is not None]
         verdict = ("-" if tool != "bgc" or not verdicts else
                    "met" if all(v <= TARGET_EXPONENT for v in verdicts) else "NOT MET")
-        lines.append(f"{family:<16}{tool:<13}{', '.join(map(str, sizes)):<22}"
+        lines.append(f"{family:<22}{tool:<13}{', '.join(map(str, sizes)):<22}"
                      f"{fmt(total, '.2f', 11)}{fmt(command, '.2f', 9)}{fmt(cc, '.2f', 7)}"
                      f"  {verdict}")
     return lines
@@ -719,7 +722,7 @@ def plot(rows: list[Row], path: str) -> None:
     import matplotlib.pyplot as plt
 
     fig, (ax_compile, ax_cc) = plt.subplots(1, 2, figsize=(12, 4.8), sharey=True)
-    colors = dict(zip(SIZES, ("tab:blue", "tab:orange", "tab:green", "tab:red")))
+    colors = dict(zip(SIZES, ("tab:blue", "tab:purple", "tab:orange", "tab:green", "tab:red")))
     for (family, tool) in dict.fromkeys((r.family, r.tool) for r in rows):
         mine = sorted((r for r in rows if (r.family, r.tool) == (family, tool)),
                       key=lambda r: r.size)

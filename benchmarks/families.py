@@ -7,6 +7,8 @@ are written the way a modeller writes them, one element per line.
 - pendulum_chain(n): n point masses in a planar chain, absolute (Cartesian) coordinates, one
   holonomic constraint junction per rod with a Baumgarte pid corrector (the paper's pendulum,
   n times): 4n states, n multipliers coupled along the chain.
+- pendulum_chain_vector(n): the same chain written with vector bonds (a junction array, a
+  mass field, one n x 2n matrix transformer, a constraint array).
 - mass_chain(n): n masses joined by spring-damper pairs, the first to a wall, a force on
   the last: 2n states, no algebraic loop.
 - rc_ladder(n): n sections of series resistor and shunt capacitor fed by a voltage source:
@@ -120,8 +122,53 @@ def resistor_ladder(n: int) -> str:
     return "\n".join(lines) + "\n"
 
 
+def pendulum_chain_vector(n: int, theta0: float = 0.5, dtheta: float = 0.15) -> str:
+    """pendulum_chain(n) in multibond form: one velocity junction array of 2n, one mass field,
+    one weight vector, the n rods a constraint junction array reached through one n x 2n matrix
+    transformer (the constraints' Jacobian), the coordinates one vector signal.  Same
+    equations, same states in the same order."""
+    def q(k, axis):  # the coordinate of point k (1-based), axis 0: x, 1: y
+        return f"q[{2 * (k - 1) + axis}]"
+
+    rows, inits = [], []
+    for k in range(1, n + 1):
+        row = ["0"] * (2 * n)
+        for axis in (0, 1):
+            d = f"{q(k, axis)} - {q(k - 1, axis)}" if k > 1 else q(k, axis)
+            row[2 * (k - 1) + axis] = f"2*({d})"
+            if k > 1:
+                row[2 * (k - 2) + axis] = f"-2*({d})"
+        rows.append("[" + ", ".join(row) + "]")
+        th = f"(theta0 + {k - 1}*dtheta)" if k > 1 else "theta0"
+        inits.append(f"x{k}_0")
+        inits.append(f"y{k}_0")
+    lines = pendulum_chain(n, theta0, dtheta).splitlines()[:9]
+    lines[0] = lines[0].replace(f"model chain{n} ", f"model chain{n}v ")
+    for k in range(1, n + 1):
+        th = f"(theta0 + {k - 1}*dtheta)" if k > 1 else "theta0"
+        lines += [f"parameter x{k}_0 = l*sin({th})" + (f" + x{k - 1}_0" if k > 1 else ""),
+                  f"parameter y{k}_0 = l*cos({th})" + (f" + y{k - 1}_0" if k > 1 else "")]
+    lines += [
+        f"v : 1[{2 * n}]",
+        f"mass : I[{2 * n}](m)",
+        f"weight : Se[{2 * n}]([" + ", ".join(["0", "m*g"] * n) + "]) @gravity",
+        f"J : MTF[{2 * n}->{n}]([" + ",\n    ".join(rows) + "])",
+        f"rods : 0[{n}] constraint holonomic(init = -l^2) corrector pid(alpha, beta) "
+        "@stabilisation",
+        f"signal q[{2 * n}] = integral(v.f, init = [" + ", ".join(inits) + "])",
+        "v -> mass",
+        "weight -> v",
+        "v -> J -> rods",
+        "",
+        "scene swing { outputs q; time 0 .. 5 every 0.01; "
+        "solver dopri5(rtol = 1e-10, atol = 1e-12) }",
+    ]
+    return "\n".join(lines) + "\n"
+
+
 FAMILIES = {
     "pendulum_chain": pendulum_chain,
+    "pendulum_chain_vector": pendulum_chain_vector,
     "mass_chain": mass_chain,
     "rc_ladder": rc_ladder,
     "resistor_ladder": resistor_ladder,

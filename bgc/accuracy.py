@@ -23,6 +23,7 @@ from __future__ import annotations
 import io
 import math
 import os
+import re
 import subprocess
 import sys
 import tempfile
@@ -126,6 +127,11 @@ def _error_line(stderr: str) -> str:
     return lines[-1] if lines else "failed"
 
 
+def _is_residual(name: str) -> bool:
+    """A constraint residual's column: `rod.residual`, or `rod.residual[i]` of an array."""
+    return re.fullmatch(r".*\.residual(\[[0-9]+\])?", name) is not None
+
+
 def parse_csv(text: str) -> tuple[list[str], np.ndarray]:
     lines = text.splitlines()
     if not lines:
@@ -157,7 +163,7 @@ def run_once(program: Program, settings: dict) -> Trajectory:
 def compare(traj: Trajectory, ref: Trajectory) -> tuple[float, float, float | None]:
     """(error at the final time, max over the grid, largest |residual|) of a full run."""
     names = traj.names[1:]
-    residual_cols = [j for j, n in enumerate(names) if n.endswith(".residual")]
+    residual_cols = [j for j, n in enumerate(names) if _is_residual(n)]
     compared = [j for j in range(len(names)) if j not in residual_cols]
     Y, R = traj.data[:, 1:], ref.data[:, 1:]
     if Y.shape != R.shape or not np.allclose(traj.data[:, 0], ref.data[:, 0], rtol=1e-12,
@@ -183,7 +189,7 @@ def load_reference(path: str, names: list[str], times: np.ndarray) -> Trajectory
         raise AccuracyError(f"{path}: the first column must be 't'")
     cols = [0]
     for n in names[1:]:
-        if n.endswith(".residual"):
+        if _is_residual(n):
             cols.append(None)
         elif n in ref_names:
             cols.append(ref_names.index(n))

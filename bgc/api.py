@@ -1,5 +1,5 @@
-"""The pipeline as functions: load -> parse -> resolve -> scene -> causality -> equations ->
-reduce -> lower -> emit.  `bgc.cli` and the tests use exactly these."""
+"""The pipeline as functions: load -> parse -> resolve -> flatten -> scene -> causality ->
+equations -> reduce -> lower -> emit.  `bgc.cli` and the tests use exactly these."""
 from __future__ import annotations
 
 import io
@@ -13,6 +13,7 @@ from . import ast, backends
 from .causality import CausalGraph, assign_causality
 from .diagnostics import ModelError, format_diagnostic
 from .emit import emit_c, emit_python
+from .flatten import flatten
 from .equations import EquationSystem, build_equations, with_residual_outputs
 from .graph import Graph
 from .ir import Program
@@ -97,6 +98,7 @@ def build(model, scene: str | None = None, project_initial: bool = False,
     try:
         ast_ = clock("parse", parse, src.text, src.path)
         graph = clock("resolve", resolve, ast_)
+        graph = clock("flatten", flatten, graph)
         scenario = clock("scene", apply_scene, graph, scene)
         causal = clock("causality", assign_causality, scenario)
         system = clock("equations", build_equations, causal)

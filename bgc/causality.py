@@ -171,11 +171,45 @@ def assign_causality(scenario: Scenario) -> CausalGraph:
             arbitrary.append(b.label)
             a.choose(i, b.src, b.src)
     _check_junctions(a, diags)
+    _check_multibonds(a, diags)
     diags.raise_if_errors()
     derivative = tuple(el.name for el in storage
                        if a.by[a.incident[el.name][0]] != _preferred_setter(
                            a, el, a.incident[el.name][0]))
     return CausalGraph(graph, scenario.settings, tuple(a.by), derivative, tuple(arbitrary))
+
+
+def _check_multibonds(a: _Assigner, diags: Collector):
+    """A vector bond has one causal stroke: its components must agree on which end sets the
+    effort (a multiport transformer then passes flow from its input side, f_out = T f_in, or
+    from its output side when T is square: never part one way and part the other)."""
+    if a.failed or not a.g.multibonds:
+        return
+    index = {b.label: i for i, b in enumerate(a.g.bonds)}
+
+    def base(name):
+        return a.elements[name].origin or name
+
+    for mb in a.g.multibonds:
+        heads = [base(a.by[index[p]]) for p in mb.parts]
+        if len(set(heads)) == 1:
+            continue
+        comps = ", ".join(f"[{k}] by '{h}'" for k, h in enumerate(heads))
+        why = ""
+        for end in (mb.src, mb.dst):
+            v = a.g.vector_by_name.get(end)
+            el = a.g.by_name.get(f"{end}.in[0]")
+            if v is not None and el is not None and el.origin == end:
+                n = sum(1 for p in a.g.elements if p.origin == end and ".in[" in p.name)
+                why = (f"; '{end}' ({v.kind}[{n}->{v.dim}]) passes flow from its input side "
+                       f"(f_out = T f_in), or from its output side only as a whole and only when "
+                       f"T is square")
+                if n != v.dim:
+                    why += f" (this one is {v.dim}x{n})"
+        diags.error(mb.span, f"the vector bond '{mb.src} -> {mb.dst}' gets a different causal "
+                             f"stroke in its components (the effort set {comps}): a multibond "
+                             f"has one causal stroke{why}. Write the components as scalar bonds "
+                             "if they are meant to differ")
 
 
 def _check_junctions(a: _Assigner, diags: Collector):

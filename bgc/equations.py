@@ -20,7 +20,7 @@ import sympy as sp
 from .algebra import solve_for
 from .causality import CausalGraph
 from .diagnostics import Collector, ModelError, Span, fail
-from .graph import TIME, Element, Graph, var
+from .graph import TIME, Element, Graph, part_name, var, variable_name
 
 
 def der(symbol: sp.Symbol) -> sp.Symbol:
@@ -141,8 +141,8 @@ class _Builder:
         ((i, b),) = self.incident(el.name)
         e, f = bond_effort(b.label), bond_flow(b.label)
         s = 1 if b.dst == el.name else -1  # orientation: the element's own flow is s*f
-        self.emit(var(f"{el.name}.e"), e, el, el.span)
-        self.emit(var(f"{el.name}.f"), f, el, el.span)
+        self.emit(var(variable_name(el.name, "e")), e, el, el.span)
+        self.emit(var(variable_name(el.name, "f")), f, el, el.span)
         sets_effort = self.effort_by[i] == el.name
         role = el.spec.role
         if role == "source":
@@ -158,7 +158,8 @@ class _Builder:
             lhs, rhs = own_e, el.value.value * own_f
         else:
             which, expr = el.law
-            law = expr.value.xreplace({var(f"{el.name}.e"): own_e, var(f"{el.name}.f"): own_f})
+            law = expr.value.xreplace({var(variable_name(el.name, "e")): own_e,
+                                       var(variable_name(el.name, "f")): own_f})
             lhs, rhs = (own_e, law) if which == "e" else (own_f, law)
         want = own_e if sets_effort else own_f
         target = e if sets_effort else f
@@ -176,7 +177,7 @@ class _Builder:
 
     def storage(self, el, e, f, s, sets_effort):
         st = el.spec.state  # "p" (I) or "q" (C)
-        state = var(f"{el.name}.{st}")
+        state = var(variable_name(el.name, st))
         partner = sp.Symbol("_V", real=True)  # f for I, e for C
         law = state / el.value.value if el.law is None else el.law[1].value  # f = p/m, e = q/c
         integral = sets_effort == (el.spec.preferred == "effort")
@@ -187,8 +188,8 @@ class _Builder:
             else:
                 self.emit(e, law, el, el.span)
                 rate = s * f
-            self.states.append(StateVar(state, f"{el.name}.{st}", self._init(el, law, state),
-                                        el.kind, el.span))
+            self.states.append(StateVar(state, variable_name(el.name, st),
+                                        self._init(el, law, state), el.kind, el.span))
             self.emit(der(state), rate, el, el.span)
             return
         bond_partner = e if st == "q" else s * f  # the law's input, from the bond
@@ -264,14 +265,14 @@ class _Builder:
                 self.emit(common(b.label), common(kb.label), el, el.span)
         others = sp.Add(*[sigma[i] * through(b.label) for i, b in bonds if i != k])
         self.emit(through(kb.label), -sigma[k] * others, el, el.span)
-        self.emit(var(f"{el.name}.{field}"), common(kb.label), el, el.span)
+        self.emit(var(variable_name(el.name, field)), common(kb.label), el, el.span)
 
     def constraint(self, el, bonds, sigma, common, through, field):
-        lam = var(f"{el.name}.lambda")
+        lam = var(variable_name(el.name, "lambda"))
         for _, b in bonds:
             self.emit(common(b.label), lam, el, el.span)
-        self.emit(var(f"{el.name}.{field}"), lam, el, el.span)
-        balance = var(f"{el.name}.balance")
+        self.emit(var(variable_name(el.name, field)), lam, el, el.span)
+        balance = var(variable_name(el.name, "balance"))
         self.emit(balance, sp.Add(*[sigma[i] * through(b.label) for i, b in bonds]), el,
                   el.span)
         c = el.constraint
@@ -280,7 +281,7 @@ class _Builder:
             ann = (c.annotation[0], c.annotation[1].value, c.annotation[1].span)
         self.constraints.append(ConstraintDef(
             el.name, c.kind, c.corrector, tuple(g.value for g in c.gains), ann, lam, balance,
-            var(f"{el.name}.residual"), el.span, el.name_span))
+            var(variable_name(el.name, "residual")), el.span, el.name_span))
 
     def signal(self, s):
         if s.is_integral:
@@ -313,12 +314,30 @@ def _outputs(b: _Builder, refs) -> tuple[OutputDef, ...]:
     out = []
     for ref in refs:
         try:
-            out.append(OutputDef(ref.text, _output_expr(ref, b.g, states, targets, constraints,
+            for name, part in _expand(ref, b.g):
+                out.append(OutputDef(name, _output_expr(part, b.g, states, targets, constraints,
                                                         params), ref.span))
         except ModelError as exc:
             diags.items.extend(exc.diagnostics)
     diags.raise_if_errors()
     return tuple(out)
+
+
+def _expand(ref, g: Graph) -> list:
+    """(column name, scalar reference) of an output: a multiport's or vector signal's variable
+    is a column per component (`q[0]`, `rod.lambda[1]`), or the one its index names."""
+    v = g.vector_by_name.get(ref.owner)
+    if v is None:
+        return [(ref.text, ref)]
+    if ref.index is not None and not 0 <= ref.index < v.dim:
+        fail(ref.span, f"'{ref.owner}' has {v.dim} components: index [{ref.index}] is out of "
+                       f"range (0 .. {v.dim - 1})")
+    indices = range(v.dim) if ref.index is None else (ref.index,)
+    out = []
+    for i in indices:
+        name = f"{ref.owner}.{ref.field}[{i}]" if ref.field else f"{ref.owner}[{i}]"
+        out.append((name, replace(ref, owner=part_name(ref.owner, i), index=None)))
+    return out
 
 
 def _output_expr(ref, g: Graph, states, targets, constraints, params):
@@ -336,7 +355,7 @@ def _output_expr(ref, g: Graph, states, targets, constraints, params):
         if c is None:
             fail(ref.span, f"'{ref.owner}' is not a constraint junction")
         return c.multiplier if ref.field == "lambda" else c.residual
-    sym = var(f"{ref.owner}.{ref.field}")
+    sym = var(variable_name(ref.owner, ref.field))
     if ref.field in ("e", "f", "p", "q") and (sym in states or sym in targets):
         return sym
     fail(ref.span, f"'{ref.owner}' has no variable '{ref.field}'")
@@ -373,7 +392,7 @@ def build_equations(cg: CausalGraph) -> EquationSystem:
 def with_residual_outputs(es: EquationSystem) -> EquationSystem:
     """The system with each constraint's residual appended to the outputs (unless there)."""
     have = {o.expr for o in es.outputs}
-    extra = tuple(OutputDef(f"{c.junction}.residual", c.residual, c.span)
+    extra = tuple(OutputDef(variable_name(c.junction, "residual"), c.residual, c.span)
                   for c in es.constraints if c.residual not in have)
     return replace(es, outputs=es.outputs + extra) if extra else es
 

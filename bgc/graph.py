@@ -7,6 +7,7 @@ as public functions.
 """
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass
 from functools import cached_property
 
@@ -62,6 +63,8 @@ class Element:
     doc: str | None
     span: Span
     name_span: Span
+    dim: tuple[int, int] | None = None  # multiport (n in, m out; n == m but for MTF/MGY)
+    origin: str | None = None  # after flatten: the multiport this scalar part comes from
 
     @property
     def is_junction(self) -> bool:
@@ -89,10 +92,51 @@ class Signal:
     expr: Expr
     init: Expr | None  # integral blocks: the state's initial value
     span: Span
+    dim: int | None = None  # a vector signal (before flatten)
 
     @property
     def is_integral(self) -> bool:
         return self.init is not None
+
+
+@dataclass(frozen=True)
+class Vector:
+    """A multiport element or a vector signal, flattened into scalar parts named NAME[i]."""
+
+    name: str
+    what: str  # "element" | "signal"
+    dim: int  # its components (a multiport's one-port side, or its output side)
+    kind: str  # the element's kind, "signal" for signals
+    constraint: bool = False
+
+
+@dataclass(frozen=True)
+class Multibond:
+    """A vector bond as written, and the scalar bonds flatten made of it."""
+
+    label: str
+    src: str
+    dst: str
+    dim: int
+    parts: tuple[str, ...]  # the scalar bonds' labels
+    span: Span
+
+
+def part_name(name: str, i: int) -> str:
+    """The scalar part i of a multiport or vector signal."""
+    return f"{name}[{i}]"
+
+
+_PART = re.compile(r"([A-Za-z_][A-Za-z0-9_]*)\[([0-9]+)\]")
+
+
+def variable_name(element: str, field: str) -> str:
+    """The name of an element's variable: `mx.p`, and for part i of a multiport `mass.p[i]`
+    (as the modeller indexes it), not `mass[i].p`."""
+    m = _PART.fullmatch(element)
+    if m:
+        return f"{m.group(1)}.{field}[{m.group(2)}]"
+    return f"{element}.{field}"
 
 
 @dataclass(frozen=True)
@@ -119,6 +163,12 @@ class Graph:
     signals: tuple[Signal, ...]
     scenes: tuple[Scene, ...]
     warnings: tuple = ()
+    vectors: tuple = ()  # after flatten: Vector, one per multiport element or vector signal
+    multibonds: tuple = ()  # after flatten: Multibond, one per vector bond
+
+    @cached_property
+    def vector_by_name(self) -> dict:
+        return {v.name: v for v in self.vectors}
 
     @cached_property
     def by_name(self) -> dict[str, Element]:

@@ -5,6 +5,8 @@ import sympy as sp
 
 from .reduce import Block, explicit_forms
 
+TWO_PORTS = ("TF", "MTF", "GY", "MGY")
+
 METHODS = {"symbolic": "solved symbolically", "lu": "solved numerically (LU)",
            "newton": "solved numerically (Newton)"}
 KINDS = {"I": "I, integral causality", "C": "C, integral causality",
@@ -36,8 +38,7 @@ def check_report(compiled) -> str:
     if r.pruned:
         lines.append("not integrated (no output needs them): " + ", ".join(r.pruned))
     lines.append("causality (bond: effort set by -> flow set by):")
-    for b, by in zip(g.bonds, cg.effort_by):
-        lines.append(f"  {b.label}: {by} -> {b.other(by)}")
+    lines += _causality_lines(g, cg)
     if r.eliminated:
         lines.append("derivative causality (dependent states, eliminated):")
         lines += [f"  {name} = {_s(e) if e is not None else '(solved with its block)'}"
@@ -46,8 +47,10 @@ def check_report(compiled) -> str:
         lines.append("algebraic blocks:")
         for b in r.blocks:
             kind = "linear" if b.linear else "nonlinear"
+            origins = list(dict.fromkeys(
+                (g.by_name[o].origin or o) if o in g.by_name else o for o in b.origins))
             lines.append(f"  {b.index}: {', '.join(b.unknowns)} ({len(b.unknowns)} unknown"
-                         f"{'s' * (len(b.unknowns) > 1)}) through {', '.join(b.origins)}: "
+                         f"{'s' * (len(b.unknowns) > 1)}) through {', '.join(origins)}: "
                          f"{kind}, {METHODS[b.method]}")
     if r.constraints:
         lines.append("constraints:")
@@ -60,6 +63,41 @@ def check_report(compiled) -> str:
             lines.append(f"    {'dPhi/dt' if k.kind == 'holonomic' else 'Phi'} = {_s(k.balance)}")
     lines.append(f"warnings: {len(r.warnings)}")
     return "\n".join(lines) + "\n"
+
+
+def _causality_lines(g, cg) -> list[str]:
+    """One line per bond as written: a vector bond `v->mass [2]` has one causal stroke (its
+    parts', when they agree); the scalar network inside a multiport transformer is not shown."""
+    part_of = {label: mb for mb in g.multibonds for label in mb.parts}
+    index = {b.label: i for i, b in enumerate(g.bonds)}
+
+    def base(name):
+        return g.by_name[name].origin or name
+
+    def inner(name):
+        origin = g.by_name[name].origin
+        return origin is not None and g.vector_by_name[origin].kind in TWO_PORTS
+
+    lines, shown = [], set()
+    for b, by in zip(g.bonds, cg.effort_by):
+        mb = part_of.get(b.label)
+        if mb is None:
+            if not (inner(b.src) and inner(b.dst)):
+                lines.append(f"  {b.label}: {base(by)} -> {base(b.other(by))}")
+            continue
+        if mb.label in shown:
+            continue
+        shown.add(mb.label)
+        setters = [cg.effort_by[index[p]] for p in mb.parts]
+        heads = {base(s) for s in setters}
+        if len(heads) == 1:
+            (head,) = heads
+            tail = mb.dst if head == mb.src else mb.src
+            lines.append(f"  {mb.label} [{mb.dim}]: {head} -> {tail}")
+        else:
+            mixed = ", ".join(f"{p}: {s}" for p, s in zip(mb.parts, setters))
+            lines.append(f"  {mb.label} [{mb.dim}]: mixed ({mixed})")
+    return lines
 
 
 def equations_text(compiled) -> str:

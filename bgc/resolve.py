@@ -16,7 +16,7 @@ import sympy as sp
 from . import ast
 from .diagnostics import Collector, ModelError, Note, Span, fail
 from .graph import (TIME, Bond, Constraint, Element, Expr, Graph, Parameter, Scene, Signal,
-                    check_ports, var)
+                    check_ports, part_name, var, variable_name)
 from .kinds import KINDS
 
 FUNCTIONS = {  # name -> (sympy function, arity)
@@ -83,6 +83,12 @@ class _ExprBuilder:
                 self._check_call(node)
                 todo.append((self._apply, node))
                 todo.extend((None, a) for a in reversed(node.args))
+            elif isinstance(node, ast.Vector):
+                todo.append((self._vector, node))
+                todo.extend((None, a) for a in reversed(node.items))
+            elif isinstance(node, ast.Index):
+                todo.append((self._index, node))
+                todo.extend(((None, node.index), (None, node.base)))
             else:
                 done.append(self._leaf(node))
         (value,) = done
@@ -92,6 +98,9 @@ class _ExprBuilder:
         additive, operands = item
         values = done[len(done) - len(operands):]
         del done[len(done) - len(operands):]
+        if any(_is_matrix(v) for v in values):
+            done.append(_matrix_chain(additive, operands, values))
+            return
         if additive:
             done.append(sp.Add(*[v if s > 0 else -v for (s, _), v in zip(operands, values)]))
             return
@@ -105,20 +114,63 @@ class _ExprBuilder:
     def _power(self, node, done):
         b = done.pop()
         a = done.pop()
+        if _is_matrix(a) or _is_matrix(b):
+            fail(node.span, "'^' takes scalars, not vectors or matrices")
         if a.is_Number and b.is_Number:
             done.append(_number_power(a, b, node.span))
         else:
             done.append(a ** b)
 
     def _apply(self, node, done):
-        func, _ = FUNCTIONS[node.func]
         args = done[len(done) - len(node.args):]
         del done[len(done) - len(node.args):]
+        if node.func == "diag":
+            if len(args) == 1 and _is_matrix(args[0]) and args[0].cols == 1:
+                args = list(args[0])
+            if any(_is_matrix(a) for a in args):
+                fail(node.span, "diag() takes scalars, or one vector")
+            done.append(sp.ImmutableMatrix(sp.diag(*args)))
+            return
+        if any(_is_matrix(a) for a in args):
+            fail(node.span, f"{node.func}() takes scalars, not vectors or matrices")
+        func, _ = FUNCTIONS[node.func]
         done.append(func(*args))
+
+    def _vector(self, node: ast.Vector, done):
+        """[a, b, ...]: a column vector of scalars, or a matrix whose rows are [..] vectors."""
+        items = done[len(done) - len(node.items):]
+        del done[len(done) - len(node.items):]
+        if not any(_is_matrix(v) for v in items):
+            done.append(sp.ImmutableMatrix(len(items), 1, list(items)))
+            return
+        if not all(_is_matrix(v) and v.cols == 1 for v in items):
+            fail(node.span, "a matrix is written [[a, b], [c, d]]: every row a vector")
+        width = items[0].rows
+        for item, sub in zip(items, node.items):
+            if item.rows != width:
+                fail(sub.span, f"this row has {item.rows} entries, the first one {width}")
+        done.append(sp.ImmutableMatrix([list(v) for v in items]))
+
+    def _index(self, node: ast.Index, done):
+        i = done.pop()
+        base = done.pop()
+        if not _is_matrix(base):
+            fail(node.span, "only a vector or a matrix can be indexed")
+        if _is_matrix(i) or not i.is_Integer:
+            fail(node.index.span, "an index is a whole number (0-based)")
+        rows = base.rows
+        if not 0 <= int(i) < rows:
+            fail(node.index.span, f"index {int(i)} is out of range (0 .. {rows - 1})")
+        if base.cols == 1:
+            done.append(base[int(i), 0])
+        else:
+            done.append(sp.ImmutableMatrix(base.row(int(i)).T))
 
     def _check_call(self, node: ast.Call):
         if node.func == "diag":
-            fail(node.span, "diag(...) is not supported yet: vector bonds come in a later version")
+            if not node.args:
+                fail(node.span, "diag() takes at least one argument")
+            return
         if node.func not in FUNCTIONS:
             fail(node.span, f"unknown function '{node.func}'")
         _, arity = FUNCTIONS[node.func]
@@ -135,8 +187,7 @@ class _ExprBuilder:
             return self._name(node)
         if isinstance(node, ast.Field):
             return self._field(node)
-        fail(node.span, "vector expressions are not supported yet: vector bonds come in a "
-                        "later version")
+        fail(node.span, "unexpected expression")
 
     def _name(self, node: ast.Name):
         s = self.scope
@@ -156,6 +207,9 @@ class _ExprBuilder:
             if s.params_only:
                 fail(node.span, f"'{node.name}' is a signal: only parameters are allowed here")
             self.refs.append((node.name, node.span))
+            n = _dim_of(s.signals[node.name])
+            if n is not None:
+                return sp.ImmutableMatrix([var(part_name(node.name, i)) for i in range(n)])
             return var(node.name)
         if node.name in s.elements:
             fail(node.span, f"'{node.name}' is an element; name one of its variables "
@@ -182,7 +236,58 @@ class _ExprBuilder:
         if node.field == "residual":
             fail(node.span, f"'{node.owner}.residual' can only be asked for as an output")
         self.refs.append((node.owner, node.span))
+        n = _dim_of(decl)
+        if n is not None:
+            return sp.ImmutableMatrix([var(variable_name(part_name(node.owner, i), node.field))
+                                       for i in range(n)])
         return var(f"{node.owner}.{node.field}")
+
+
+def _is_matrix(v) -> bool:
+    return isinstance(v, sp.MatrixBase)
+
+
+def _dim_of(decl) -> int | None:
+    """The components of a vector signal or multiport (its output side), None for scalars."""
+    d = getattr(decl, "dim", None)
+    if d is None:
+        return None
+    n = d.m if d.m is not None else d.n
+    return None if n == 1 and d.n == 1 else n
+
+
+def _matrix_chain(additive, operands, values):
+    """A chain of + and - (or * and /) with vectors or matrices among its operands."""
+    (_, first), acc = operands[0], values[0]
+    if additive:
+        acc = acc if operands[0][0] > 0 else -acc
+        for (sign, n), v in zip(operands[1:], values[1:]):
+            if _is_matrix(acc) != _is_matrix(v) or (_is_matrix(v) and acc.shape != v.shape):
+                fail(n.span, f"cannot add {_shape(v)} to {_shape(acc)}")
+            acc = acc + v if sign > 0 else acc - v
+        return acc
+    for (sign, n), v in zip(operands[1:], values[1:]):
+        if sign < 0:
+            if _is_matrix(v):
+                fail(n.span, "division by a vector or a matrix")
+            if v == 0:
+                fail(n.span, "division by zero")
+            acc = acc / v
+        elif _is_matrix(acc) and _is_matrix(v):
+            if acc.cols != v.rows:
+                fail(n.span, f"cannot multiply {_shape(acc)} by {_shape(v)}")
+            acc = acc * v
+        else:
+            acc = acc * v
+    return sp.ImmutableMatrix(acc) if _is_matrix(acc) else acc
+
+
+def _shape(v) -> str:
+    if not _is_matrix(v):
+        return "a scalar"
+    if v.cols == 1:
+        return f"a vector of {v.rows}"
+    return f"a {v.rows}x{v.cols} matrix"
 
 
 def _chain(node: ast.BinOp):
@@ -303,6 +408,10 @@ def _parameters(params, scope: _Scope, diags: Collector):
     for name, d in params.items():
         scope.params_only, scope.visible_params = True, seen
         e = _guard(diags, _ExprBuilder(scope, diags).build, d.expr)
+        if e is not None and _is_matrix(e.value):
+            diags.error(d.expr.span, f"parameter '{name}' is {_shape(e.value)}: parameters are "
+                                     "scalars (write vectors where they are used)")
+            e = None
         seen.add(name)
         if e is not None:
             out.append(Parameter(name, e, d.doc, d.span))
@@ -312,13 +421,11 @@ def _parameters(params, scope: _Scope, diags: Collector):
 
 def _element(d: ast.ElementDecl, scope: _Scope, diags: Collector) -> Element | None:
     kname = d.kind.name
-    if d.dim is not None and (d.dim.n != 1 or (d.dim.m not in (None, 1))):
-        fail(d.dim.span, f"vector bonds ({kname}[{d.dim.n}{'->' + str(d.dim.m) if d.dim.m else ''}]) "
-                         "are not supported yet: this version handles scalar bonds")
+    dim = _element_dim(d)
     if d.is_junction:
         constraint = _constraint(d, scope) if d.constraint is not None else None
         return Element(d.name.name, kname, None, None, None, tuple(e.name for e in d.effects),
-                       constraint, d.doc, d.span, d.name.span)
+                       constraint, d.doc, d.span, d.name.span, dim)
     if kname not in KINDS:
         if kname.isdigit():
             fail(d.kind.span, f"unknown junction kind '{kname}': junctions are 0 or 1")
@@ -337,7 +444,22 @@ def _element(d: ast.ElementDecl, scope: _Scope, diags: Collector) -> Element | N
         law = (arg.law.name, _with_own_vars(d, scope, diags, arg.expr))
     init = _init(d, spec, scope, diags)
     return Element(d.name.name, kname, value, law, init, tuple(e.name for e in d.effects),
-                   None, d.doc, d.span, d.name.span)
+                   None, d.doc, d.span, d.name.span, dim)
+
+
+def _element_dim(d: ast.ElementDecl) -> tuple[int, int] | None:
+    """(n, m) of a multiport, None for a scalar element; KIND[n->m] for two-ports only."""
+    if d.dim is None:
+        return None
+    n, m = d.dim.n, d.dim.m
+    if n < 1 or (m is not None and m < 1):
+        fail(d.dim.span, "a dimension is at least 1")
+    if m is not None and (d.is_junction or d.kind.name not in KINDS
+                          or KINDS[d.kind.name].ports != 2):
+        fail(d.dim.span, f"'[{n}->{m}]' belongs to two-ports (TF, MTF, GY, MGY); "
+                         f"write '{d.kind.name}[{n}]'")
+    m = n if m is None else m
+    return None if n == m == 1 else (n, m)
 
 
 def _with_own_vars(d, scope, diags, node) -> Expr:
@@ -398,9 +520,11 @@ def _constraint(d: ast.ElementDecl, scope) -> Constraint:
 
 
 def _signal(d, scope, diags) -> Signal:
-    if d.dim is not None and d.dim.n != 1:
-        fail(d.dim.span, "vector signals are not supported yet: this version handles scalars")
+    if d.dim is not None and d.dim.m is not None:
+        fail(d.dim.span, f"a signal has one dimension: write '{d.name.name}[{d.dim.n}]'")
+    n = _dim_of(d)
     expr = _ExprBuilder(scope, diags).build(d.expr)
+    _check_size(expr, n, f"signal '{d.name.name}'")
     init = None
     if isinstance(d, ast.IntegralDecl):
         scope.params_only = True
@@ -408,7 +532,19 @@ def _signal(d, scope, diags) -> Signal:
             init = _ExprBuilder(scope, diags).build(d.init)
         finally:
             scope.params_only = False
-    return Signal(d.name.name, expr, init, d.span)
+        _check_size(init, n, f"the initial value of '{d.name.name}'", broadcast=True)
+    return Signal(d.name.name, expr, init, d.span, n)
+
+
+def _check_size(e: Expr, n: int | None, what: str, broadcast: bool = False) -> None:
+    """e is a scalar when n is None, else a vector of n (or, with broadcast, a scalar)."""
+    v = e.value
+    if n is None and _is_matrix(v):
+        fail(e.span, f"{what} is a scalar, but this is {_shape(v)}")
+    if n is not None and _is_matrix(v) and v.shape != (n, 1):
+        fail(e.span, f"{what} is a vector of {n}, but this is {_shape(v)}")
+    if n is not None and not _is_matrix(v) and not broadcast:
+        fail(e.span, f"{what} is a vector of {n}, but this is a scalar")
 
 
 def _bonds(model, elements, params, signals, diags: Collector):
