@@ -117,6 +117,7 @@ class EquationSystem:
     outputs: tuple[OutputDef, ...]
     run: Run
     warnings: tuple = ()
+    fields: tuple = ()  # (field, coordinates of the Hamiltonian correction) of coupled I fields
 
 
 class _Builder:
@@ -127,6 +128,9 @@ class _Builder:
         self.states: list[StateVar] = []
         self.stores: list[Store] = []
         self.constraints: list[ConstraintDef] = []
+        self.fields: dict[str, None] = {}  # coupled I fields, in order
+        self.hamiltonian: dict[str, list[str]] = {}  # ... whose M depends on own coordinates
+        self._integrals = None
 
     def emit(self, target, expr, el: Element | str, span, explicit=True):
         origin = el if isinstance(el, str) else el.name
@@ -176,6 +180,9 @@ class _Builder:
             self.emit(f, s * sol.xreplace(bond), el, el.span)
 
     def storage(self, el, e, f, s, sets_effort):
+        if el.value is not None and isinstance(el.value.value, sp.MatrixBase):
+            self.coupled_field(el, e, sets_effort)
+            return
         st = el.spec.state  # "p" (I) or "q" (C)
         state = var(variable_name(el.name, st))
         partner = sp.Symbol("_V", real=True)  # f for I, e for C
@@ -206,6 +213,53 @@ class _Builder:
             self.emit(f, s * der(state), el, el.span)
         given = self._init(el, law, state) if el.init is not None else None
         self.stores.append(Store(el.name, state, given, el.init[1].span if el.init else None))
+
+    def coupled_field(self, el, e, sets_effort):
+        """Part i of an I field with a full mass matrix M(q): the momentum p_i is a state, the
+        flows solve M f = p together (an implicit equation per part: a linear block, solved in
+        the generated code), and dp_i/dt = e_i + 1/2 f^T (dM/dq_i) f when M depends on the
+        coordinate q_i that integrates the field's own flow f_i (Lagrange's equations: the
+        energy 1/2 p^T M^-1 p is then conserved)."""
+        M, origin = el.value.value, el.origin
+        n = M.rows
+        i = int(el.name[len(origin) + 1:-1])
+        if sets_effort != (el.spec.preferred == "effort"):  # derivative causality
+            fail(el.span, f"'{origin}' is a coupled I field (a non-diagonal mass matrix) and its "
+                          f"component {i} gets derivative causality (its flow is imposed): not "
+                          "supported; impose the flow on a scalar element instead")
+        flows, own = [], None
+        for j in range(n):
+            part = part_name(origin, j)
+            ((_, b),) = self.incident(part)
+            flows.append((1 if b.dst == part else -1) * bond_flow(b.label))
+            own = bond_flow(b.label) if j == i else own
+        state = var(variable_name(el.name, "p"))
+        self.emit(own, sp.Add(*[M[i, j] * flows[j] for j in range(n)]) - state, el, el.span,
+                  explicit=False)
+        rate = e
+        coordinate = self._coordinate_of(part_name(origin, i))
+        if coordinate is not None and M.has(coordinate):
+            dM = M.diff(coordinate)
+            rate = e + sp.Rational(1, 2) * sp.Add(*[flows[j] * dM[j, k] * flows[k]
+                                                     for j in range(n) for k in range(n)])
+            self.hamiltonian.setdefault(origin, []).append(str(coordinate))
+        self.fields.setdefault(origin, None)
+        init = el.init[1].value if el.init is not None else sp.Integer(0)
+        self.states.append(StateVar(state, variable_name(el.name, "p"), init, el.kind, el.span))
+        self.emit(der(state), rate, el, el.span)
+
+    def _coordinate_of(self, part):
+        """The integral signal that integrates this one-port's own flow (or its 1-junction's
+        common flow), as a symbol; None if there is none."""
+        if self._integrals is None:
+            self._integrals = {s.expr.value: var(s.name) for s in self.g.signals
+                               if s.is_integral and isinstance(s.expr.value, sp.Symbol)}
+        ((_, b),) = self.incident(part)
+        other = self.g.by_name[b.other(part)]
+        candidates = [var(variable_name(part, "f"))]
+        if other.kind == "1":
+            candidates.append(var(variable_name(other.name, "f")))
+        return next((self._integrals[c] for c in candidates if c in self._integrals), None)
 
     def _init(self, el, law, state):
         if el.init is None:
@@ -386,7 +440,8 @@ def build_equations(cg: CausalGraph) -> EquationSystem:
     run = Run(s.scene, s.t0, s.t_end, s.dt, s.solver, s.rtol, s.atol, s.step)
     return EquationSystem(g.name, params, tuple(b.states), tuple(b.equations),
                           tuple(b.constraints), tuple(b.stores), _outputs(b, s.outputs), run,
-                          tuple(g.warnings))
+                          tuple(g.warnings),
+                          tuple((name, tuple(b.hamiltonian.get(name, ()))) for name in b.fields))
 
 
 def with_residual_outputs(es: EquationSystem) -> EquationSystem:

@@ -77,6 +77,10 @@ def _one_port(el: Element, n: int) -> list[Element]:
         fail(el.span, f"'{el.name}': a multiport {el.kind} takes a value, not a law (a law "
                       "per component: declare scalar elements)")
     storage_like = spec.role in ("storage", "resistor")
+    v = el.value.value
+    if el.kind == "I" and _is_matrix(v) and v.shape == (n, n) and any(
+            v[i, j] != 0 for i in range(n) for j in range(n) if i != j):
+        return _coupled_field(el, n)
     values = _rows(el.value, n, f"'{el.name}' ({el.kind}[{n}])", storage_like)
     inits = None
     if el.init is not None:
@@ -84,6 +88,26 @@ def _one_port(el: Element, n: int) -> list[Element]:
     return [replace(el, name=part_name(el.name, i), value=_part(el.value, values[i]),
                     init=None if inits is None else (el.init[0], _part(el.init[1], inits[i])),
                     dim=None, origin=el.name)
+            for i in range(n)]
+
+
+def _coupled_field(el: Element, n: int) -> list[Element]:
+    """An I field with a full mass matrix M: n parts that each keep all of M (the equations
+    stage couples them: M f = p, solved in the generated code)."""
+    v = el.value.value
+    for i in range(n):
+        for j in range(i):
+            if sp.expand(v[i, j] - v[j, i]) != 0:
+                fail(el.value.span, f"the mass matrix of '{el.name}' is not symmetric: entries "
+                                    f"[{i}][{j}] and [{j}][{i}] differ")
+    inits = None
+    if el.init is not None:
+        if el.init[0] != "p":
+            fail(el.init[1].span, f"'{el.name}' is a coupled field: give its momenta "
+                                  "('init p = [...]'), not its flows")
+        inits = _rows(el.init[1], n, f"the initial value of '{el.name}'", False)
+    return [replace(el, name=part_name(el.name, i), dim=None, origin=el.name,
+                    init=None if inits is None else ("p", _part(el.init[1], inits[i])))
             for i in range(n)]
 
 

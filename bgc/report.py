@@ -39,6 +39,13 @@ def check_report(compiled) -> str:
         lines.append("not integrated (no output needs them): " + ", ".join(r.pruned))
     lines.append("causality (bond: effort set by -> flow set by):")
     lines += _causality_lines(g, cg)
+    fields = getattr(compiled.system, "fields", ())
+    if fields:
+        lines.append("coupled I fields (M f = p solved in the generated code):")
+        for name, coords in fields:
+            how = (f"Hamiltonian form, dp/dt = e - dT/dq with T = p^T M^-1 p / 2, in "
+                   f"{', '.join(coords)}") if coords else "M does not depend on its own coordinates"
+            lines.append(f"  {name}: {how}")
     if r.eliminated:
         lines.append("derivative causality (dependent states, eliminated):")
         lines += [f"  {name} = {_s(e) if e is not None else '(solved with its block)'}"

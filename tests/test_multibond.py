@@ -166,3 +166,32 @@ def test_four_bar_keeps_its_loop_closed(backend):
     assert np.abs(energy - energy[0]).max() < 1e-7 * np.abs(energy).max()
     crank = np.degrees(np.arctan2(q[:, 1], q[:, 0]))
     assert crank.max() - crank.min() > 90  # it moves through a large part of its range
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_two_link_arm_in_joint_coordinates_is_the_double_pendulum(backend):
+    """The arm's mass matrix M(th) depends on the angles its own flows integrate: with the
+    Hamiltonian correction its motion is the double pendulum's (Lagrange's equations in the
+    angles, solved by SciPy here) and its energy p^T M^-1 p / 2 + V is conserved."""
+    t, Y, names = api.simulate(MODELS / "two_link_arm.bg", "swing", backend=backend)
+    assert names == ["th[0]", "th[1]", "arm.p[0]", "arm.p[1]"]
+    a, b = Y[:, 0], Y[:, 1]
+    x1, y1 = L1 * np.sin(a), L1 * np.cos(a)
+    got = np.column_stack([x1, y1, x1 + L2 * np.sin(b), y1 + L2 * np.cos(b)])
+    ref = double_pendulum_angles(t)
+    assert (np.abs(got - ref).max(axis=0) / np.abs(ref).max(axis=0)).max() < 1e-6
+    c = np.cos(a - b)
+    det = (M1 + M2) * L1**2 * M2 * L2**2 - (M2 * L1 * L2 * c) ** 2
+    p1, p2 = Y[:, 2], Y[:, 3]
+    kinetic = (M2 * L2**2 * p1**2 - 2 * M2 * L1 * L2 * c * p1 * p2
+               + (M1 + M2) * L1**2 * p2**2) / (2 * det)
+    energy = kinetic - (M1 + M2) * G * L1 * np.cos(a) - M2 * G * L2 * np.cos(b)
+    assert np.abs(energy - energy[0]).max() < 1e-8 * np.abs(energy).max()
+
+
+def test_check_says_when_a_field_is_hamiltonian():
+    report = api.check(MODELS / "two_link_arm.bg", "swing")
+    assert "arm: Hamiltonian form, dp/dt = e - dT/dq" in report and "in th[0], th[1]" in report
+    const = _check(HEAD + "v : 1[2]\nm : I[2]([[2, 1], [1, 2]])\nw : Se[2]([0, 1])\n"
+                   "w -> v -> m\n")
+    assert "m: M does not depend on its own coordinates" in const
