@@ -3,6 +3,7 @@ signals, flattened into scalar bonds.  The double pendulum in vector form agains
 system in scalar bonds and against the equations of motion in its two angles (Lagrange's
 equations typed here, solved by SciPy at tight tolerance); the paper's pendulum in vector form
 against its scalar form; and the errors of misused multiports."""
+import json
 from pathlib import Path
 
 import numpy as np
@@ -195,3 +196,15 @@ def test_check_says_when_a_field_is_hamiltonian():
     const = _check(HEAD + "v : 1[2]\nm : I[2]([[2, 1], [1, 2]])\nw : Se[2]([0, 1])\n"
                    "w -> v -> m\n")
     assert "m: M does not depend on its own coordinates" in const
+
+
+@pytest.mark.parametrize("matrix, n, m", [("[[1, 2], [3, 4]]", 2, 2), ("[[1, 2]]", 2, 1)])
+def test_gyrator_matrix(matrix, n, m):
+    """Sf[n](F) into MGY[n->m](G) into unit masses: e_out = G f_in, so p(t) = G F t."""
+    text = (f"model gy\nsrc : Sf[{n}]([1, 1])\nv : 1[{n}]\nG : MGY[{n}->{m}]({matrix})\n"
+            f"mass : I[{m}](1)\nsrc -> v -> G -> mass\n" if m > 1 else
+            f"model gy\nsrc : Sf[{n}]([1, 1])\nv : 1[{n}]\nG : MGY[{n}->{m}]({matrix})\n"
+            "mass : I(1)\nsrc -> v -> G -> mass\n")
+    t, Y, names = api.simulate(Source("gy.bg", text), backend="python", t_end=1.0, dt=1.0)
+    G = np.array(json.loads(matrix), dtype=float)
+    assert np.allclose(Y[-1], G @ np.ones(n), rtol=1e-12)
