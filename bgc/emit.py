@@ -585,10 +585,10 @@ def solver_tables_c() -> str:
                        + _c_array(f"{ident}_a", _square(tab.a, st))
                        + _c_array(f"{ident}_C", _square(tab.C, st))
                        + _c_array(f"{ident}_m", tab.m) + _c_array(f"{ident}_e", tab.e)
-                       + _c_array(f"{ident}_d2", tab.d2) + _c_array(f"{ident}_d3", tab.d3))
-            out.append(f"static const bgc_rosenbrock {ident}_ros = {{ {st}, "
+                       + _c_array(f"{ident}_H", [v for row in tab.dense for v in row]))
+            out.append(f"static const bgc_rosenbrock {ident}_ros = {{ {st}, {len(tab.dense)}, "
                        f"{_number(tab.gamma)}, {ident}_c, {ident}_d, {ident}_a, {ident}_C, "
-                       f"{ident}_m, {ident}_e, {ident}_d2, {ident}_d3 }};")
+                       f"{ident}_m, {ident}_e, {ident}_H }};")
         elif isinstance(tab, solvers.RadauTableau):
             out.append(_c_array(f"{ident}_T", [v for row in tab.T for v in row])
                        + _c_array(f"{ident}_Ti", [v for row in tab.Ti for v in row])
@@ -650,7 +650,7 @@ def solver_tables_python() -> str:
                 stages=str(tab.stages), gamma=_number(tab.gamma), c=_py_tuple(tab.c),
                 d=_py_tuple(tab.d), a="(" + ", ".join(_py_tuple(r) for r in tab.a) + ",)",
                 C="(" + ", ".join(_py_tuple(r) for r in tab.C) + ",)", m=_py_tuple(tab.m),
-                e=_py_tuple(tab.e), d2=_py_tuple(tab.d2), d3=_py_tuple(tab.d3))
+                e=_py_tuple(tab.e), H="(" + ", ".join(_py_tuple(r) for r in tab.dense) + ",)")
         elif isinstance(tab, solvers.RadauTableau):  # a dict of its own: 'beta' is taken
             radau = {"c1": _number(tab.c1), "c2": _number(tab.c2), "gamma": _number(tab.gamma),
                      "alpha": _number(tab.alpha), "beta": _number(tab.beta),

@@ -74,8 +74,9 @@ class ERKTableau:
 class RosenbrockTableau:
     """Hairer's transformed coefficients: Y_i = y + sum_j a[i][j] k_j at t + c_i h;
     (I/(gamma h) - J) k_i = f(t + c_i h, Y_i) + sum_j C[i][j] k_j / h + h d_i f_t;
-    y1 = y + sum_j m_j k_j, err = sum_j e_j k_j; dense output
-    y(theta) = (1 - theta) y0 + theta (y1 + (1 - theta) (sum_j d2_j k_j + theta sum_j d3_j k_j))."""
+    y1 = y + sum_j m_j k_j, err = sum_j e_j k_j; dense output, from R >= 2 rows H_r of
+    `dense`: y(theta) = (1 - theta) y0 + theta (y1 + (1 - theta) (q_1 + theta (q_2 + ...
+    + theta q_R))), q_r = sum_j H_rj k_j (RODAS's d2, d3: R = 2, degree 3)."""
 
     gamma: Fraction
     c: tuple
@@ -84,8 +85,7 @@ class RosenbrockTableau:
     C: tuple  # C[i] has i entries
     m: tuple
     e: tuple
-    d2: tuple
-    d3: tuple
+    dense: tuple  # the rows H_r, each over the stages
 
     @property
     def stages(self) -> int:
@@ -538,12 +538,52 @@ _RODAS4 = RosenbrockTableau(
             "0.1631930543123136e2", "-0.6058818238834054e1")),
     m=_RODAS4_A5 + _row("1", "1"),
     e=_row("0", "0", "0", "0", "0", "1"),
-    d2=_row("0.1012623508344586e2", "-0.7487995877610167e1", "-0.3480091861555747e2",
-            "-0.7992771707568823e1", "0.1025137723295662e1", "0"),
-    d3=_row("-0.6762803392801253", "0.6087714651680015e1", "0.1643084320892478e2",
-            "0.2476722511418386e2", "-0.6594389125716872e1", "0"),
+    dense=(_row("0.1012623508344586e2", "-0.7487995877610167e1", "-0.3480091861555747e2",
+                "-0.7992771707568823e1", "0.1025137723295662e1", "0"),
+           _row("-0.6762803392801253", "0.6087714651680015e1", "0.1643084320892478e2",
+                "0.2476722511418386e2", "-0.6594389125716872e1", "0")),
 )
 
+
+# Steinebach's Rodas5P (order 5(4), eight stages, stiffly accurate, L-stable; its stability
+# function matches exp to order 6), in the transformed form, at the published 17 digits;
+# dense output of order 4 (three rows).
+_RODAS5P_A6 = _row("-7.502846399306121", "2.561846144803919", "-11.627539656261098",
+                   "-0.18268767659942256", "0.030198172008377946")
+_RODAS5P = RosenbrockTableau(
+    gamma=_q("0.21193756319429014"),
+    c=_row("0", "0.6358126895828704", "0.4095798393397535", "0.9769306725060716",
+           "0.4288403609558664", "1", "1", "1"),
+    d=_row("0.21193756319429014", "-0.42387512638858027", "-0.3384627126235924",
+           "1.8046452872882734", "2.325825639765069", "0", "0", "0"),
+    a=((), _row("3"), _row("2.849394379747939", "0.45842242204463923"),
+       _row("-6.954028509809101", "2.489845061869568", "-10.358996098473584"),
+       _row("2.8029986275628964", "0.5072464736228206", "-0.3988312541770524",
+            "-0.04721187230404641"),
+       _RODAS5P_A6, _RODAS5P_A6 + _row("1"), _RODAS5P_A6 + _row("1", "1")),
+    C=((), _row("-14.155112264123755"), _row("-17.97296035885952", "-2.859693295451294"),
+       _row("147.12150275711716", "-1.41221402718213", "71.68940251302358"),
+       _row("165.43517024871676", "-0.4592823456491126", "42.90938336958603",
+            "-5.961986721573306"),
+       _row("24.854864614690072", "-3.0009227002832186", "47.4931110020768",
+            "5.5814197821558125", "-0.6610691825249471"),
+       _row("30.91273214028599", "-3.1208243349937974", "77.79954646070892",
+            "34.28646028294783", "-19.097331116725623", "-28.087943162872662"),
+       _row("37.80277123390563", "-3.2571969029072276", "112.26918849496327",
+            "66.9347231244047", "-40.06618937091002", "-54.66780262877968",
+            "-9.48861652309627")),
+    m=_RODAS5P_A6 + _row("1", "1", "1"),
+    e=_row("0", "0", "0", "0", "0", "0", "0", "1"),
+    dense=(_row("25.948786856663858", "-2.5579724845846235", "10.433815404888879",
+                "-2.3679251022685204", "0.524948541321073", "1.1241088310450404",
+                "0.4272876194431874", "-0.17202221070155493"),
+           _row("-9.91568850695171", "-0.9689944594115154", "3.0438037242978453",
+                "-24.495224566215796", "20.176138334709044", "15.98066361424651",
+                "-6.789040303419874", "-6.710236069923372"),
+           _row("11.419903575922262", "2.8879645146136994", "72.92137995996029",
+                "80.12511834622643", "-52.072871366152654", "-59.78993625266729",
+                "-0.15582684282751913", "4.883087185713722")),
+)
 
 # Radau IIA of order 5 as in Hairer & Wanner's RADAU5: nodes (4 -+ sqrt 6)/10 and 1, the
 # eigenvalues of A^-1 (gamma real, alpha +- i beta), the transformation T (see RadauTableau),
@@ -575,6 +615,9 @@ _RADAU5 = RadauTableau(
 
 _HAIRER_I = "Hairer, Norsett & Wanner, Solving Ordinary Differential Equations I (1993)"
 _HAIRER_II = "Hairer & Wanner, Solving Ordinary Differential Equations II (1996)"
+_STEINEBACH = ("Steinebach, Construction of Rosenbrock-Wanner method Rodas5P and numerical "
+               "benchmarks within the Julia Differential Equations package, BIT Numerical "
+               "Mathematics 63 (2023)")
 _VERNER = ("Verner, Numerically optimal Runge-Kutta pairs with interpolants, Numerical "
            "Algorithms 53 (2010)")
 
@@ -597,6 +640,9 @@ SOLVER_LIST = (
            "Radau IIA of order 5, implicit, L-stable, stiff; Jacobian and factorisations "
            "reused", _RADAU5, Control(0.9, 0.2, 8.0, 0.0, 4), uses_jacobian=True,
            references=(_HAIRER_II,)),
+    Solver("rodas5p", "rosenbrock", 5,
+           "Rosenbrock 5(4), L-stable, stiff; the Jacobian every step", _RODAS5P,
+           Control(0.9, 0.2, 6.0, 0.0, 5), uses_jacobian=True, references=(_STEINEBACH,)),
     Solver("auto", "auto", 5,
            "dopri5 until its stiffness test fires, then rodas4 for the rest of the run",
            None, explicit="dopri5", stiff="rodas4", uses_jacobian=True),

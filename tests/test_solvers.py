@@ -4,6 +4,7 @@ and the work a high-order pair saves on the paper's pendulum (counted, not timed
 from fractions import Fraction
 from pathlib import Path
 
+import mpmath
 import numpy as np
 import pytest
 import sympy as sp
@@ -195,6 +196,104 @@ def test_rodas4_is_of_order_4_and_l_stable():
     assert abs(_rosenbrock_stability(tab, -1e10)[0]) < 1e-8
     assert all(abs(_rosenbrock_stability(tab, 1j * w)[0]) <= 1 + 1e-12
                for w in (0.1, 1.0, 10.0, 1e3, 1e6))
+
+
+
+ROSENBROCK = [s for s in solvers.SOLVER_LIST if isinstance(s.tableau, solvers.RosenbrockTableau)]
+# The order of each Rosenbrock method's embedded estimate and of its dense output.
+ROS_EMBEDDED = {"rodas4": 3, "rodas5p": 4}
+ROS_DENSE = {"rodas4": 3, "rodas5p": 4}
+
+
+def _classical(tab):
+    """The transformed tableau back in the classical form, in 40-digit arithmetic: Gamma =
+    (diag(1/gamma) - C)^-1, alpha = a Gamma, b = m Gamma, b_hat = (m - e) Gamma; the dense
+    output's weights on the stages, b(theta) = w(theta) Gamma, w(theta) = theta m + sum_r
+    (theta^r - theta^(r+1)) H_r, as coefficients of theta, theta^2, ..."""
+    s, mpf = tab.stages, lambda q: mpmath.mpf(q.numerator) / q.denominator
+    Gi, am = mpmath.zeros(s, s), mpmath.zeros(s, s)
+    for i in range(s):
+        Gi[i, i] = 1 / mpf(tab.gamma)
+        for j in range(i):
+            Gi[i, j], am[i, j] = -mpf(tab.C[i][j]), mpf(tab.a[i][j])
+    G = Gi ** -1
+    row = lambda w: list(mpmath.matrix([list(w)]) * G)  # noqa: E731
+    m = [mpf(q) for q in tab.m]
+    P = [[mpmath.mpf(0)] * s for _ in range(len(tab.dense) + 1)]
+    P[0] = list(m)
+    for r, H in enumerate(tab.dense):
+        for j, h in enumerate(H):
+            P[r][j] += mpf(h)
+            P[r + 1][j] -= mpf(h)
+    return (am * G, G, row(m), row(u - mpf(e) for u, e in zip(m, tab.e)),
+            [row(w) for w in P])
+
+
+def _ros_defects(alpha, G, weights, order):
+    """Rosenbrock order conditions (exact Jacobian): sum_i w_i Phi_i(t) = 1/gamma(t), Phi as
+    for Runge-Kutta with alpha, except that a node with exactly one son uses alpha + Gamma;
+    the defects of the trees of exactly `order` nodes."""
+    s, B, memo = len(weights), alpha + G, {}
+
+    def phi(t):
+        if t not in memo:
+            v = [mpmath.mpf(1)] * s
+            for sub in t:
+                M, u = B if len(t) == 1 else alpha, phi(sub)
+                v = [v[i] * mpmath.fsum(M[i, j] * u[j] for j in range(s)) for i in range(s)]
+            memo[t] = v
+        return memo[t]
+    return [mpmath.fsum(w * p for w, p in zip(weights, phi(t))) - mpmath.mpf(1) / _density(t)
+            for t in _trees(order)[order - 1]]
+
+
+@pytest.mark.parametrize("solver", ROSENBROCK, ids=lambda s: s.name)
+def test_rosenbrock_tableaus_satisfy_their_conditions(solver):
+    """Back in the classical form, in 40 digits: c_i = sum_j alpha_ij and d_i = sum_j gamma_ij;
+    the solution's conditions through the method's order, the embedded estimate's through its
+    order, the dense output's through its order (each power of theta), with defects below
+    1e-12 (the coefficients have 16 or 17 digits), and the first order beyond clearly
+    violated."""
+    tab, name = solver.tableau, solver.name
+    with mpmath.workdps(40):
+        alpha, G, b, b_hat, P = _classical(tab)
+        s = tab.stages
+        for i in range(s):
+            assert abs(mpmath.fsum(alpha[i, j] for j in range(s)) - mpmath.mpf(float(tab.c[i]))) < 1e-14
+            assert abs(mpmath.fsum(G[i, j] for j in range(s)) - mpmath.mpf(float(tab.d[i]))) < 1e-14
+        for weights, order in ((b, solver.order), (b_hat, ROS_EMBEDDED[name])):
+            assert max(abs(d) for n in range(1, order + 1)
+                       for d in _ros_defects(alpha, G, weights, n)) < 1e-12
+            assert max(abs(d) for d in _ros_defects(alpha, G, weights, order + 1)) > 1e-4
+        order = ROS_DENSE[name]
+        for n in range(1, order + 2):
+            defects = []
+            for k, w in enumerate(P):  # the coefficient of theta^(k+1)
+                ds = _ros_defects(alpha, G, w, n)
+                defects += [d + (mpmath.mpf(1) / _density(t) if k + 1 != n else 0)
+                            for d, t in zip(ds, _trees(n)[n - 1])]
+            big = max(abs(d) for d in defects)
+            assert (big < 1e-12) if n <= order else (big > 1e-4), (n, big)
+
+
+@pytest.mark.parametrize("solver", ROSENBROCK, ids=lambda s: s.name)
+def test_rosenbrock_stability(solver):
+    """R(z) = 1 + z b^T (I - z (alpha + Gamma))^-1 1 = 1 + sum_k z^(k+1) b^T B^k 1 matches e^z
+    through z^p (rodas4: p = 4; rodas5p: p = 6, one more than its order), in 40 digits; L-stable:
+    stiffly accurate, so R(z) -> 0 as z -> -inf, and |R(iy)| <= 1 on the imaginary axis."""
+    tab = solver.tableau
+    p = {"rodas4": 4, "rodas5p": 6}[solver.name]
+    with mpmath.workdps(40):
+        alpha, G, b, _, _ = _classical(tab)
+        v, B = mpmath.matrix([1] * tab.stages), alpha + G
+        for k in range(p + 1):
+            defect = mpmath.fsum(u * w for u, w in zip(b, v)) - 1 / mpmath.factorial(k + 1)
+            assert (abs(defect) < 1e-13) if k < p else (abs(defect) > 1e-6), (k, defect)
+            v = B * v
+    assert tab.m == tab.a[-1] + (Fraction(1),)  # stiffly accurate: y1 = Y_s + k_s
+    assert abs(_rosenbrock_stability(tab, -1e10)[0]) < 1e-8
+    assert all(abs(_rosenbrock_stability(tab, 1j * w)[0]) <= 1 + 1e-12
+               for w in np.logspace(-3, 8, 89))
 
 
 # ---------------------------------------------------------------- models with closed forms

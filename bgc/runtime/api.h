@@ -130,9 +130,9 @@ typedef struct bgc_erk {
     const double *c, *a, *b, *e, *e2, *P;
 } bgc_erk;
 typedef struct bgc_rosenbrock {
-    int stages;
+    int stages, dense_rows;
     double gamma;
-    const double *c, *d, *a, *C, *m, *e, *d2, *d3; /* a, C: stages x stages, row-major */
+    const double *c, *d, *a, *C, *m, *e, *H; /* a, C: stages x stages, H: dense_rows x stages */
 } bgc_rosenbrock;
 typedef struct bgc_radau {
     double c1, c2, gamma, alpha, beta;

@@ -190,39 +190,45 @@ static double bgc_stiff_grid(const bgc_settings *s, double t_start, long k, long
 /* ------------------------------------------------------- Rosenbrock methods --- */
 
 /* The dense output of a Rosenbrock step: y(theta) = (1 - theta) y0 + theta (y1 + (1 - theta)
-   (q2 + theta q3)), q2 = sum_j d2_j k_j, q3 = sum_j d3_j k_j (formed when first needed). */
+   (q_1 + theta (q_2 + ... + theta q_R))), q_r = sum_j H_rj k_j (formed when first needed). */
 typedef struct bgc_ros_dense {
     const bgc_rosenbrock *m;
     const double *y, *y1, *k;
-    double *q2, *q3;
+    double *q; /* R rows of D */
 } bgc_ros_dense;
 
 static int bgc_ros_prepare(void *dctx)
 {
     enum { N = BGC_NUM_STATES, D = BGC_DIM(BGC_NUM_STATES) };
     bgc_ros_dense *d = dctx;
-    int j, l;
-    for (l = 0; l < N; l++) {
-        double a2 = 0.0, a3 = 0.0;
-        for (j = 0; j < d->m->stages; j++) {
-            const double kj = d->k[(size_t)j * D + l];
-            a2 += d->m->d2[j] * kj;
-            a3 += d->m->d3[j] * kj;
+    const int S = d->m->stages, R = d->m->dense_rows;
+    int j, l, r;
+    for (r = 0; r < R; r++) {
+        const double *H = d->m->H + (size_t)r * S;
+        double *q = d->q + (size_t)r * D;
+        for (l = 0; l < N; l++) {
+            double acc = 0.0;
+            for (j = 0; j < S; j++)
+                acc += H[j] * d->k[(size_t)j * D + l];
+            q[l] = acc;
         }
-        d->q2[l] = a2;
-        d->q3[l] = a3;
     }
     return 0;
 }
 
 static void bgc_ros_dense_at(const void *dctx, double theta, double *yout)
 {
-    enum { N = BGC_NUM_STATES };
+    enum { N = BGC_NUM_STATES, D = BGC_DIM(BGC_NUM_STATES) };
     const bgc_ros_dense *d = dctx;
+    const int R = d->m->dense_rows;
     const double s1 = 1.0 - theta;
-    int l;
-    for (l = 0; l < N; l++)
-        yout[l] = s1 * d->y[l] + theta * (d->y1[l] + s1 * (d->q2[l] + theta * d->q3[l]));
+    int l, r;
+    for (l = 0; l < N; l++) {
+        double acc = d->q[(size_t)(R - 1) * D + l];
+        for (r = R - 2; r >= 0; r--)
+            acc = d->q[(size_t)r * D + l] + theta * acc;
+        yout[l] = s1 * d->y[l] + theta * (d->y1[l] + s1 * acc);
+    }
 }
 
 /* Rosenbrock methods as Hairer's RODAS: at every new point f(t, y), df/dt (a forward
@@ -238,11 +244,12 @@ static int bgc_run_rosenbrock(bgc_run *r, const bgc_method *method, double *y)
     const bgc_rosenbrock *m = method->ros;
     const bgc_settings *s = r->s;
     const int S = m->stages, fixed = s->step > 0.0;
+    const int R = m->dense_rows > 2 ? m->dense_rows : 2; /* q2, q3 also hold the error */
     const double hmax = s->t_end - s->t0, expo = 1.0 / (double)method->q;
     const double t_start = r->t;
-    double *mem = malloc(((size_t)2 * D * D + (size_t)(S + 7) * D) * sizeof *mem);
+    double *mem = malloc(((size_t)2 * D * D + (size_t)(S + 5 + R) * D) * sizeof *mem);
     int *piv = malloc((size_t)D * sizeof *piv);
-    double *J, *E, *k, *f0, *ft, *ys, *y1, *yout, *q2, *q3;
+    double *J, *E, *k, *f0, *ft, *ys, *y1, *yout, *q2, *q3; /* q2: dense.q, R rows */
     double t = r->t, h = 0.0, hnew, hacc = 0.0, erracc = 1.0;
     long n_fixed = 0, k_fixed = 0;
     int i, j, l, rc = 0, reject = 0, last = 0, fresh = 1, accepted = 0, nsing = 0;
@@ -269,8 +276,7 @@ static int bgc_run_rosenbrock(bgc_run *r, const bgc_method *method, double *y)
     dense.y = y;
     dense.y1 = y1;
     dense.k = k;
-    dense.q2 = q2;
-    dense.q3 = q3;
+    dense.q = q2;
     if (r->kout > r->nout)
         goto done;
     if (fixed) {

@@ -93,7 +93,7 @@ def _run_rosenbrock(run, m, y):
     name = _method_name(m)
     stages, gamma = m["stages"], m["gamma"]
     c, d, a, C = m["c"], m["d"], m["a"], m["C"]
-    mw, ew, d2, d3 = m["m"], m["e"], m["d2"], m["d3"]
+    mw, ew, H = m["m"], m["e"], m["H"]
     safe, fac_min, fac_max = m["safe"], m["fac_min"], m["fac_max"]
     expo = 1.0 / m["q"]
     fixed = s.step > 0.0
@@ -202,7 +202,7 @@ def _run_rosenbrock(run, m, y):
             hacc, erracc = h, max(1e-2, err)
             accepted += 1
             st["steps"] += 1
-            run.emit_step(t, h, tph, y1, _rosenbrock_dense(y, y1, K, d2, d3))
+            run.emit_step(t, h, tph, y1, _rosenbrock_dense(y, y1, K, H))
             y, t = y1, tph
             run.t, run.y = t, y
             fresh, nsing, bad = True, 0, -1
@@ -219,15 +219,17 @@ def _run_rosenbrock(run, m, y):
         h = hnew
 
 
-def _rosenbrock_dense(y, y1, K, d2, d3):
-    """y(theta) = (1 - theta) y0 + theta (y1 + (1 - theta) (q2 + theta q3))."""
+def _rosenbrock_dense(y, y1, K, H):
+    """y(theta) = (1 - theta) y0 + theta (y1 + (1 - theta) (q_1 + theta (q_2 + ... theta q_R)))."""
     def prepare():
-        q2 = _combine(d2, K, len(K))
-        q3 = _combine(d3, K, len(K))
+        q = [_combine(row, K, len(K)) for row in H]
 
         def at(theta):
             s1 = 1.0 - theta
-            return s1 * y + theta * (y1 + s1 * (q2 + theta * q3))
+            acc = q[-1]
+            for qr in q[-2::-1]:
+                acc = qr + theta * acc
+            return s1 * y + theta * (y1 + s1 * acc)
         return at
     return prepare
 

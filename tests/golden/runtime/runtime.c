@@ -1,7 +1,7 @@
 /* ============================================================ solvers === */
 /* The solvers (bgc/solvers.py); their tables follow the API section. */
-#define BGC_NUM_SOLVERS 8
-#define BGC_SOLVER_LIST "euler, rk4, dopri5, vern7, dop853, rodas4, radau5 or auto"
+#define BGC_NUM_SOLVERS 9
+#define BGC_SOLVER_LIST "euler, rk4, dopri5, vern7, dop853, rodas4, radau5, rodas5p or auto"
 enum {
     BGC_SOLVER_EULER = 0,
     BGC_SOLVER_RK4 = 1,
@@ -10,7 +10,8 @@ enum {
     BGC_SOLVER_DOP853 = 4,
     BGC_SOLVER_RODAS4 = 5,
     BGC_SOLVER_RADAU5 = 6,
-    BGC_SOLVER_AUTO = 7,
+    BGC_SOLVER_RODAS5P = 7,
+    BGC_SOLVER_AUTO = 8,
 };
 
 /* ======================================================================= API === */
@@ -145,9 +146,9 @@ typedef struct bgc_erk {
     const double *c, *a, *b, *e, *e2, *P;
 } bgc_erk;
 typedef struct bgc_rosenbrock {
-    int stages;
+    int stages, dense_rows;
     double gamma;
-    const double *c, *d, *a, *C, *m, *e, *d2, *d3; /* a, C: stages x stages, row-major */
+    const double *c, *d, *a, *C, *m, *e, *H; /* a, C: stages x stages, H: dense_rows x stages */
 } bgc_rosenbrock;
 typedef struct bgc_radau {
     double c1, c2, gamma, alpha, beta;
@@ -237,15 +238,23 @@ static const double bgc_rodas4_a[36] = { 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.544, 0.
 static const double bgc_rodas4_C[36] = { 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, -5.6688, 0.0, 0.0, 0.0, 0.0, 0.0, -2.430093356833875, -0.2063599157091915, 0.0, 0.0, 0.0, 0.0, -0.1073529058151375, -9.594562251023355, -20.47028614809616, 0.0, 0.0, 0.0, 7.496443313967647, -10.24680431464352, -33.99990352819905, 11.7089089320616, 0.0, 0.0, 8.083246795921522, -7.981132988064893, -31.52159432874371, 16.31930543123136, -6.058818238834054, 0.0 };
 static const double bgc_rodas4_m[6] = { 1.221224509226641, 6.019134481288629, 12.53708332932087, -0.687886036105895, 1.0, 1.0 };
 static const double bgc_rodas4_e[6] = { 0.0, 0.0, 0.0, 0.0, 0.0, 1.0 };
-static const double bgc_rodas4_d2[6] = { 10.12623508344586, -7.487995877610167, -34.80091861555747, -7.992771707568823, 1.025137723295662, 0.0 };
-static const double bgc_rodas4_d3[6] = { -0.6762803392801253, 6.087714651680015, 16.43084320892478, 24.76722511418386, -6.594389125716872, 0.0 };
+static const double bgc_rodas4_H[12] = { 10.12623508344586, -7.487995877610167, -34.80091861555747, -7.992771707568823, 1.025137723295662, 0.0, -0.6762803392801253, 6.087714651680015, 16.43084320892478, 24.76722511418386, -6.594389125716872, 0.0 };
 
-static const bgc_rosenbrock bgc_rodas4_ros = { 6, 0.25, bgc_rodas4_c, bgc_rodas4_d, bgc_rodas4_a, bgc_rodas4_C, bgc_rodas4_m, bgc_rodas4_e, bgc_rodas4_d2, bgc_rodas4_d3 };
+static const bgc_rosenbrock bgc_rodas4_ros = { 6, 2, 0.25, bgc_rodas4_c, bgc_rodas4_d, bgc_rodas4_a, bgc_rodas4_C, bgc_rodas4_m, bgc_rodas4_e, bgc_rodas4_H };
 static const double bgc_radau5_T[9] = { 0.09123239487089295, -0.1412552950209542, -0.030029194105147424, 0.241717932707107, 0.20412935229379994, 0.3829421127572619, 0.966048182615093, 1.0, 0.0 };
 static const double bgc_radau5_Ti[9] = { 4.325579890063155, 0.33919925181580984, 0.5417705399358749, -4.178718591551905, -0.32768282076106237, 0.47662355450055044, -0.5028726349457868, 2.571926949855605, -0.5960392048282249 };
 static const double bgc_radau5_e[3] = { -10.048809399827416, 1.382142733160749, -0.3333333333333333 };
 
 static const bgc_radau bgc_radau5_radau = { 0.1550510257216822, 0.6449489742783178, 3.637834252744496, 2.6810828736277523, 3.0504301992474105, bgc_radau5_T, bgc_radau5_Ti, bgc_radau5_e };
+static const double bgc_rodas5p_c[8] = { 0.0, 0.6358126895828704, 0.4095798393397535, 0.9769306725060716, 0.4288403609558664, 1.0, 1.0, 1.0 };
+static const double bgc_rodas5p_d[8] = { 0.21193756319429014, -0.42387512638858027, -0.3384627126235924, 1.8046452872882734, 2.325825639765069, 0.0, 0.0, 0.0 };
+static const double bgc_rodas5p_a[64] = { 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 3.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 2.849394379747939, 0.45842242204463923, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, -6.954028509809101, 2.489845061869568, -10.358996098473584, 0.0, 0.0, 0.0, 0.0, 0.0, 2.8029986275628964, 0.5072464736228206, -0.3988312541770524, -0.04721187230404641, 0.0, 0.0, 0.0, 0.0, -7.502846399306121, 2.561846144803919, -11.627539656261098, -0.18268767659942256, 0.030198172008377946, 0.0, 0.0, 0.0, -7.502846399306121, 2.561846144803919, -11.627539656261098, -0.18268767659942256, 0.030198172008377946, 1.0, 0.0, 0.0, -7.502846399306121, 2.561846144803919, -11.627539656261098, -0.18268767659942256, 0.030198172008377946, 1.0, 1.0, 0.0 };
+static const double bgc_rodas5p_C[64] = { 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, -14.155112264123755, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, -17.97296035885952, -2.859693295451294, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 147.12150275711716, -1.41221402718213, 71.68940251302358, 0.0, 0.0, 0.0, 0.0, 0.0, 165.43517024871676, -0.4592823456491126, 42.90938336958603, -5.961986721573306, 0.0, 0.0, 0.0, 0.0, 24.854864614690072, -3.0009227002832186, 47.4931110020768, 5.5814197821558125, -0.6610691825249471, 0.0, 0.0, 0.0, 30.91273214028599, -3.1208243349937974, 77.79954646070892, 34.28646028294783, -19.097331116725623, -28.087943162872662, 0.0, 0.0, 37.80277123390563, -3.2571969029072276, 112.26918849496327, 66.9347231244047, -40.06618937091002, -54.66780262877968, -9.48861652309627, 0.0 };
+static const double bgc_rodas5p_m[8] = { -7.502846399306121, 2.561846144803919, -11.627539656261098, -0.18268767659942256, 0.030198172008377946, 1.0, 1.0, 1.0 };
+static const double bgc_rodas5p_e[8] = { 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0 };
+static const double bgc_rodas5p_H[24] = { 25.948786856663858, -2.5579724845846235, 10.433815404888879, -2.3679251022685204, 0.524948541321073, 1.1241088310450404, 0.4272876194431874, -0.17202221070155493, -9.91568850695171, -0.9689944594115154, 3.0438037242978453, -24.495224566215796, 20.176138334709044, 15.98066361424651, -6.789040303419874, -6.710236069923372, 11.419903575922262, 2.8879645146136994, 72.92137995996029, 80.12511834622643, -52.072871366152654, -59.78993625266729, -0.15582684282751913, 4.883087185713722 };
+
+static const bgc_rosenbrock bgc_rodas5p_ros = { 8, 3, 0.21193756319429014, bgc_rodas5p_c, bgc_rodas5p_d, bgc_rodas5p_a, bgc_rodas5p_C, bgc_rodas5p_m, bgc_rodas5p_e, bgc_rodas5p_H };
 const char *const bgc_solver_names[BGC_NUM_SOLVERS] = {
     "euler",
     "rk4",
@@ -254,6 +263,7 @@ const char *const bgc_solver_names[BGC_NUM_SOLVERS] = {
     "dop853",
     "rodas4",
     "radau5",
+    "rodas5p",
     "auto",
 };
 static const bgc_method bgc_methods[BGC_NUM_SOLVERS] = {
@@ -264,6 +274,7 @@ static const bgc_method bgc_methods[BGC_NUM_SOLVERS] = {
     { "dop853", "Dormand-Prince 8(5,3), adaptive, dense output of order 7: tight tolerances", BGC_FAMILY_ERK, 8, &bgc_dop853_erk, NULL, 0.9, 0.333, 6.0, 0.04, 8, 0.2, -1, -1, 0.0, -1, -1, NULL },
     { "rodas4", "Rosenbrock 4(3), L-stable, stiff; the Jacobian every step", BGC_FAMILY_ROSENBROCK, 4, NULL, &bgc_rodas4_ros, 0.9, 0.2, 6.0, 0.0, 4, 0.75, -1, -1, 0.0, -1, -1, NULL },
     { "radau5", "Radau IIA of order 5, implicit, L-stable, stiff; Jacobian and factorisations reused", BGC_FAMILY_RADAU5, 5, NULL, NULL, 0.9, 0.2, 8.0, 0.0, 4, 0.75, -1, -1, 0.0, -1, -1, &bgc_radau5_radau },
+    { "rodas5p", "Rosenbrock 5(4), L-stable, stiff; the Jacobian every step", BGC_FAMILY_ROSENBROCK, 5, NULL, &bgc_rodas5p_ros, 0.9, 0.2, 6.0, 0.0, 5, 0.75, -1, -1, 0.0, -1, -1, NULL },
     { "auto", "dopri5 until its stiffness test fires, then rodas4 for the rest of the run", BGC_FAMILY_AUTO, 5, NULL, NULL, 0.9, 0.2, 10.0, 0.0, 5, 0.75, -1, -1, 0.0, 2, 5, NULL },
 };
 
@@ -1622,39 +1633,45 @@ static double bgc_stiff_grid(const bgc_settings *s, double t_start, long k, long
 /* ------------------------------------------------------- Rosenbrock methods --- */
 
 /* The dense output of a Rosenbrock step: y(theta) = (1 - theta) y0 + theta (y1 + (1 - theta)
-   (q2 + theta q3)), q2 = sum_j d2_j k_j, q3 = sum_j d3_j k_j (formed when first needed). */
+   (q_1 + theta (q_2 + ... + theta q_R))), q_r = sum_j H_rj k_j (formed when first needed). */
 typedef struct bgc_ros_dense {
     const bgc_rosenbrock *m;
     const double *y, *y1, *k;
-    double *q2, *q3;
+    double *q; /* R rows of D */
 } bgc_ros_dense;
 
 static int bgc_ros_prepare(void *dctx)
 {
     enum { N = BGC_NUM_STATES, D = BGC_DIM(BGC_NUM_STATES) };
     bgc_ros_dense *d = dctx;
-    int j, l;
-    for (l = 0; l < N; l++) {
-        double a2 = 0.0, a3 = 0.0;
-        for (j = 0; j < d->m->stages; j++) {
-            const double kj = d->k[(size_t)j * D + l];
-            a2 += d->m->d2[j] * kj;
-            a3 += d->m->d3[j] * kj;
+    const int S = d->m->stages, R = d->m->dense_rows;
+    int j, l, r;
+    for (r = 0; r < R; r++) {
+        const double *H = d->m->H + (size_t)r * S;
+        double *q = d->q + (size_t)r * D;
+        for (l = 0; l < N; l++) {
+            double acc = 0.0;
+            for (j = 0; j < S; j++)
+                acc += H[j] * d->k[(size_t)j * D + l];
+            q[l] = acc;
         }
-        d->q2[l] = a2;
-        d->q3[l] = a3;
     }
     return 0;
 }
 
 static void bgc_ros_dense_at(const void *dctx, double theta, double *yout)
 {
-    enum { N = BGC_NUM_STATES };
+    enum { N = BGC_NUM_STATES, D = BGC_DIM(BGC_NUM_STATES) };
     const bgc_ros_dense *d = dctx;
+    const int R = d->m->dense_rows;
     const double s1 = 1.0 - theta;
-    int l;
-    for (l = 0; l < N; l++)
-        yout[l] = s1 * d->y[l] + theta * (d->y1[l] + s1 * (d->q2[l] + theta * d->q3[l]));
+    int l, r;
+    for (l = 0; l < N; l++) {
+        double acc = d->q[(size_t)(R - 1) * D + l];
+        for (r = R - 2; r >= 0; r--)
+            acc = d->q[(size_t)r * D + l] + theta * acc;
+        yout[l] = s1 * d->y[l] + theta * (d->y1[l] + s1 * acc);
+    }
 }
 
 /* Rosenbrock methods as Hairer's RODAS: at every new point f(t, y), df/dt (a forward
@@ -1670,11 +1687,12 @@ static int bgc_run_rosenbrock(bgc_run *r, const bgc_method *method, double *y)
     const bgc_rosenbrock *m = method->ros;
     const bgc_settings *s = r->s;
     const int S = m->stages, fixed = s->step > 0.0;
+    const int R = m->dense_rows > 2 ? m->dense_rows : 2; /* q2, q3 also hold the error */
     const double hmax = s->t_end - s->t0, expo = 1.0 / (double)method->q;
     const double t_start = r->t;
-    double *mem = malloc(((size_t)2 * D * D + (size_t)(S + 7) * D) * sizeof *mem);
+    double *mem = malloc(((size_t)2 * D * D + (size_t)(S + 5 + R) * D) * sizeof *mem);
     int *piv = malloc((size_t)D * sizeof *piv);
-    double *J, *E, *k, *f0, *ft, *ys, *y1, *yout, *q2, *q3;
+    double *J, *E, *k, *f0, *ft, *ys, *y1, *yout, *q2, *q3; /* q2: dense.q, R rows */
     double t = r->t, h = 0.0, hnew, hacc = 0.0, erracc = 1.0;
     long n_fixed = 0, k_fixed = 0;
     int i, j, l, rc = 0, reject = 0, last = 0, fresh = 1, accepted = 0, nsing = 0;
@@ -1701,8 +1719,7 @@ static int bgc_run_rosenbrock(bgc_run *r, const bgc_method *method, double *y)
     dense.y = y;
     dense.y1 = y1;
     dense.k = k;
-    dense.q2 = q2;
-    dense.q3 = q3;
+    dense.q = q2;
     if (r->kout > r->nout)
         goto done;
     if (fixed) {
