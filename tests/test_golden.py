@@ -98,7 +98,7 @@ def test_python_rhs_matches_sympy_at_random_points(path):
     (text,) = emit_python(compiled.program).values()
     module = backends.load_python_module(text)
     r = bgc.build(path, None, algebra="symbolic").reduced
-    forms = explicit_forms(r, r.rates)
+    forms = explicit_forms(r, r.rates, max_ops=20000)
     rng = np.random.default_rng(1)
     params = np.array(list(module.PARAMETERS.values()), dtype=float)
     psyms = [var(p.name) for p in compiled.graph.parameters]

@@ -110,15 +110,16 @@ static int bgc_lu_dense(int m, double *a, int *piv, double *scale)
 static void bgc_lu_dense_solve(int m, const double *a, const int *piv, double *b)
 {
     int i, j, k;
-    for (k = 0; k < m; k++) {
+    /* bgc_lu_dense swapped whole rows (multipliers included): all the swaps first */
+    for (k = 0; k < m; k++)
         if (piv[k] != k) {
             const double tmp = b[k];
             b[k] = b[piv[k]];
             b[piv[k]] = tmp;
         }
+    for (k = 0; k < m; k++)
         for (i = k + 1; i < m; i++)
             b[i] -= a[i * m + k] * b[k];
-    }
     for (i = m - 1; i >= 0; i--) {
         double sum = b[i];
         for (j = i + 1; j < m; j++)

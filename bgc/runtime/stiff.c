@@ -52,10 +52,15 @@ static int bgc_stiff_lu(int n, double *a, int *piv)
 static void bgc_stiff_lu_solve(int n, const double *lu, const int *piv, double *b)
 {
     int i, k;
+    /* the factorisation swapped whole rows (multipliers included): all the swaps first,
+       then L y = P b */
     for (k = 0; k < n; k++) {
         const double bk = b[piv[k]];
         b[piv[k]] = b[k];
         b[k] = bk;
+    }
+    for (k = 0; k < n; k++) {
+        const double bk = b[k];
         if (bk != 0.0)
             for (i = k + 1; i < n; i++)
                 b[i] -= lu[(size_t)i * n + k] * bk;
@@ -113,10 +118,15 @@ static int bgc_stiff_zlu(int n, bgc_cplx *a, int *piv)
 static void bgc_stiff_zlu_solve(int n, const bgc_cplx *lu, const int *piv, bgc_cplx *b)
 {
     int i, k;
+    /* the factorisation swapped whole rows (multipliers included): all the swaps first,
+       then L y = P b */
     for (k = 0; k < n; k++) {
         const bgc_cplx bk = b[piv[k]];
         b[piv[k]] = b[k];
         b[k] = bk;
+    }
+    for (k = 0; k < n; k++) {
+        const bgc_cplx bk = b[k];
         if (bk != 0.0)
             for (i = k + 1; i < n; i++)
                 b[i] -= lu[(size_t)i * n + k] * bk;

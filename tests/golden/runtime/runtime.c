@@ -390,15 +390,16 @@ static int bgc_lu_dense(int m, double *a, int *piv, double *scale)
 static void bgc_lu_dense_solve(int m, const double *a, const int *piv, double *b)
 {
     int i, j, k;
-    for (k = 0; k < m; k++) {
+    /* bgc_lu_dense swapped whole rows (multipliers included): all the swaps first */
+    for (k = 0; k < m; k++)
         if (piv[k] != k) {
             const double tmp = b[k];
             b[k] = b[piv[k]];
             b[piv[k]] = tmp;
         }
+    for (k = 0; k < m; k++)
         for (i = k + 1; i < m; i++)
             b[i] -= a[i * m + k] * b[k];
-    }
     for (i = m - 1; i >= 0; i--) {
         double sum = b[i];
         for (j = i + 1; j < m; j++)
@@ -1495,10 +1496,15 @@ static int bgc_stiff_lu(int n, double *a, int *piv)
 static void bgc_stiff_lu_solve(int n, const double *lu, const int *piv, double *b)
 {
     int i, k;
+    /* the factorisation swapped whole rows (multipliers included): all the swaps first,
+       then L y = P b */
     for (k = 0; k < n; k++) {
         const double bk = b[piv[k]];
         b[piv[k]] = b[k];
         b[k] = bk;
+    }
+    for (k = 0; k < n; k++) {
+        const double bk = b[k];
         if (bk != 0.0)
             for (i = k + 1; i < n; i++)
                 b[i] -= lu[(size_t)i * n + k] * bk;
@@ -1556,10 +1562,15 @@ static int bgc_stiff_zlu(int n, bgc_cplx *a, int *piv)
 static void bgc_stiff_zlu_solve(int n, const bgc_cplx *lu, const int *piv, bgc_cplx *b)
 {
     int i, k;
+    /* the factorisation swapped whole rows (multipliers included): all the swaps first,
+       then L y = P b */
     for (k = 0; k < n; k++) {
         const bgc_cplx bk = b[piv[k]];
         b[piv[k]] = b[k];
         b[k] = bk;
+    }
+    for (k = 0; k < n; k++) {
+        const bgc_cplx bk = b[k];
         if (bk != 0.0)
             for (i = k + 1; i < n; i++)
                 b[i] -= lu[(size_t)i * n + k] * bk;

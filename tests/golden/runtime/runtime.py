@@ -286,10 +286,12 @@ def _lu_dense(m, a, base, piv, pbase, scale):
 
 
 def _lu_dense_solve(m, a, base, piv, pbase, x, xbase):
+    # _lu_dense swapped whole rows (multipliers included): all the swaps first
     for k in range(m):
         r = piv[pbase + k]
         if r != k:
             x[xbase + k], x[xbase + r] = x[xbase + r], x[xbase + k]
+    for k in range(m):
         for i in range(k + 1, m):
             x[xbase + i] -= a[base + i * m + k] * x[xbase + k]
     for i in range(m - 1, -1, -1):
