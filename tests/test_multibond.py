@@ -208,3 +208,35 @@ def test_gyrator_matrix(matrix, n, m):
     t, Y, names = api.simulate(Source("gy.bg", text), backend="python", t_end=1.0, dt=1.0)
     G = np.array(json.loads(matrix), dtype=float)
     assert np.allclose(Y[-1], G @ np.ones(n), rtol=1e-12)
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_dual_form_parallel_capacitors(backend):
+    """The tie 1-junction keeps both charges as states; the circuit is one RC with C = C1 + C2:
+    v = V0 + (v0 - V0) exp(-t / (Rs C)), and the tie's multiplier is c2's current C2 v'."""
+    V0, Rs, C1, C2, v0 = 5.0, 2.0, 0.5, 1.5, 1.0
+    t, Y, names = api.simulate(MODELS / "parallel_caps_dual.bg", "charge", backend=backend)
+    assert names == ["c1.q", "c2.q", "c1.e", "c2.e", "tie.lambda", "tie.residual"]
+    tau = Rs * (C1 + C2)
+    v = V0 + (v0 - V0) * np.exp(-t / tau)
+    assert np.allclose(Y[:, 2], v, rtol=1e-9) and np.allclose(Y[:, 3], v, rtol=1e-9)
+    assert np.allclose(Y[:, 4], C2 * (V0 - v0) / tau * np.exp(-t / tau), rtol=1e-8, atol=1e-12)
+    assert np.abs(Y[:, 5]).max() < 1e-10
+    _, Z, _ = api.simulate(MODELS / "parallel_caps.bg", "charge", backend=backend)
+    assert np.abs(Y[:, :4] - Z[:, :4]).max() < 1e-9  # the derivative-causality form
+
+
+def test_dual_form_on_a_junction_array():
+    """Two independent pairs of capacitors, each pair tied by one row of a 1[2] constraint
+    array and charged by its own current source: q_a = i C1/(C1 + C2) t, q_b = i C2/(..) t."""
+    text = ("model pairs\nsrc : Sf[2]([1, 2])\nn : 0[2]\na : C[2]([1, 3])\n"
+            "b : C[2]([2, 1])\nties : 1[2] constraint nonholonomic corrector pd(10)\n"
+            "src -> n -> a\nn -> ties -> b\nscene s { outputs a.q, b.q, ties.lambda }\n")
+    assert "n->ties [2]: n -> ties" in api.check(Source("pairs.bg", text), "s")
+    t, Y, names = api.simulate(Source("pairs.bg", text), "s", backend="python", t_end=1.0,
+                               dt=0.5)
+    i, c1, c2 = np.array([1.0, 2.0]), np.array([1.0, 3.0]), np.array([2.0, 1.0])
+    assert names == ["a.q[0]", "a.q[1]", "b.q[0]", "b.q[1]", "ties.lambda[0]",
+                     "ties.lambda[1]"]
+    assert np.allclose(Y[-1], [*(i * c1 / (c1 + c2)), *(i * c2 / (c1 + c2)),
+                               *(i * c2 / (c1 + c2))], rtol=1e-9)
