@@ -240,3 +240,27 @@ def test_dual_form_on_a_junction_array():
                      "ties.lambda[1]"]
     assert np.allclose(Y[-1], [*(i * c1 / (c1 + c2)), *(i * c2 / (c1 + c2)),
                                *(i * c2 / (c1 + c2))], rtol=1e-9)
+
+
+ROWS = HEAD + """v : 1[2]
+m : I[2](1)
+w : Se[2]([0, 9.81])
+J : MTF[2->2]([[2*q[0], 2*q[1]], [JROW]])
+rows : 0[2] constraint holonomic(init = [-1, INIT]) corrector pid([k, 2*k], [3, 4])
+signal q[2] = integral(v.f, init = [0.6, 0.8])
+w -> v -> m
+v -> J -> rows
+"""
+
+
+def test_constraint_array_rows_take_their_gains_and_are_tested_row_by_row():
+    # row 1: d/dt (q0 - q1) = v0 - v1, holonomic; its init makes Phi(q0) = 0
+    good = ROWS.replace("JROW", "1, -1").replace("INIT", "0.2")
+    report = _check(good)
+    assert "rows[0]: holonomic (declared), corrector pid(k, 3)" in report
+    assert "rows[1]: holonomic (declared), corrector pid(2*k, 4)" in report
+    # row 1: q1 v0 is not the derivative of a function of q: the error names the row
+    bad = ROWS.replace("JROW", "q[1], 0").replace("INIT", "0")
+    message = _error(bad)
+    assert "constraint 'rows[1]' is declared holonomic but is not integrable" in message
+    assert "rows[0]" not in message
