@@ -264,3 +264,19 @@ def test_constraint_array_rows_take_their_gains_and_are_tested_row_by_row():
     message = _error(bad)
     assert "constraint 'rows[1]' is declared holonomic but is not integrable" in message
     assert "rows[0]" not in message
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_twin_motors_are_two_dc_motors(backend):
+    """Component i of the multibond drive is models/dc_motor.bg with motor i's data (that model
+    is checked against its own reference in test_models.py)."""
+    t, Y, names = api.simulate(MODELS / "twin_motors.bg", "run", backend=backend)
+    assert names == ["ind.f[0]", "ind.f[1]", "rotor.f[0]", "rotor.f[1]", "angle[0]",
+                     "angle[1]"]
+    data = [dict(V=12.0, Ra=2.0, La=0.5, kt=0.8, Jr=0.05, br=0.1, tau_load=0.5),
+            dict(V=24.0, Ra=1.0, La=0.2, kt=0.5, Jr=0.02, br=0.05, tau_load=0.2)]
+    for i, params in enumerate(data):
+        _, Z, cols = api.simulate(MODELS / "dc_motor.bg", "run", backend=backend, params=params)
+        assert cols[:2] == ["ind.f", "rotor.f"] and cols[4] == "angle"
+        mine = Y[:, [i, 2 + i, 4 + i]]
+        assert np.abs(mine - Z[:, [0, 1, 4]]).max() < 1e-9 * np.abs(Z).max()
