@@ -156,7 +156,27 @@ class _Builder:
         else:
             self.storage(el, e, f, s, sets_effort)
 
+    def _parts(self, el):
+        """(index of el, [(sign, bond) of every part]) of a part of a coupled field."""
+        n, origin = el.value.value.rows, el.origin
+        out = []
+        for j in range(n):
+            part = part_name(origin, j)
+            ((_, b),) = self.incident(part)
+            out.append((1 if b.dst == part else -1, b))
+        return int(el.name[len(origin) + 1:-1]), out
+
     def resistor(self, el, e, f, s, sets_effort):
+        if el.value is not None and isinstance(el.value.value, sp.MatrixBase):
+            # a resistance matrix: e_i = sum_j R_ij f_j over the parts' own flows
+            R = el.value.value
+            i, parts = self._parts(el)
+            law = sp.Add(*[R[i, j] * sj * bond_flow(b.label) for j, (sj, b) in enumerate(parts)])
+            if sets_effort:
+                self.emit(e, law, el, el.span)
+            else:
+                self.emit(f, law - e, el, el.span, explicit=False)
+            return
         own_e, own_f = sp.Symbol("_E", real=True), sp.Symbol("_F", real=True)
         if el.law is None:
             lhs, rhs = own_e, el.value.value * own_f
@@ -181,7 +201,10 @@ class _Builder:
 
     def storage(self, el, e, f, s, sets_effort):
         if el.value is not None and isinstance(el.value.value, sp.MatrixBase):
-            self.coupled_field(el, e, sets_effort)
+            if el.kind == "I":
+                self.coupled_field(el, e, sets_effort)
+            else:
+                self.coupled_capacitor(el, f, s, sets_effort)
             return
         st = el.spec.state  # "p" (I) or "q" (C)
         state = var(variable_name(el.name, st))
@@ -247,6 +270,24 @@ class _Builder:
         init = el.init[1].value if el.init is not None else sp.Integer(0)
         self.states.append(StateVar(state, variable_name(el.name, "p"), init, el.kind, el.span))
         self.emit(der(state), rate, el, el.span)
+
+    def coupled_capacitor(self, el, f, s, sets_effort):
+        """Part i of a C field with a full matrix K: the charge q_i is a state and the efforts
+        solve K e = q together (a linear block in the generated code); dq_i/dt = own flow."""
+        K = el.value.value
+        i, parts = self._parts(el)
+        if sets_effort != (el.spec.preferred == "effort"):
+            fail(el.span, f"'{el.origin}' is a coupled C field (a non-diagonal matrix) and its "
+                          f"component {i} gets derivative causality (its effort is imposed): "
+                          "not supported")
+        state = var(variable_name(el.name, "q"))
+        efforts = [bond_effort(b.label) for _, b in parts]
+        self.emit(efforts[i], sp.Add(*[K[i, j] * efforts[j] for j in range(K.rows)]) - state,
+                  el, el.span, explicit=False)
+        self.fields.setdefault(el.origin, None)
+        init = el.init[1].value if el.init is not None else sp.Integer(0)
+        self.states.append(StateVar(state, variable_name(el.name, "q"), init, el.kind, el.span))
+        self.emit(der(state), s * f, el, el.span)
 
     def _coordinate_of(self, part):
         """The integral signal that integrates this one-port's own flow (or its 1-junction's

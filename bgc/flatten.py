@@ -78,7 +78,7 @@ def _one_port(el: Element, n: int) -> list[Element]:
                       "per component: declare scalar elements)")
     storage_like = spec.role in ("storage", "resistor")
     v = el.value.value
-    if el.kind == "I" and _is_matrix(v) and v.shape == (n, n) and any(
+    if el.kind in ("I", "C", "R") and _is_matrix(v) and v.shape == (n, n) and any(
             v[i, j] != 0 for i in range(n) for j in range(n) if i != j):
         return _coupled_field(el, n)
     values = _rows(el.value, n, f"'{el.name}' ({el.kind}[{n}])", storage_like)
@@ -92,22 +92,25 @@ def _one_port(el: Element, n: int) -> list[Element]:
 
 
 def _coupled_field(el: Element, n: int) -> list[Element]:
-    """An I field with a full mass matrix M: n parts that each keep all of M (the equations
-    stage couples them: M f = p, solved in the generated code)."""
+    """A field with a full matrix (I: M f = p, C: K e = q, R: e = R f): n parts that each keep
+    all of it (the equations stage couples them; the storage fields' solves are made in the
+    generated code)."""
     v = el.value.value
+    what = {"I": "mass matrix", "C": "capacitance matrix", "R": "resistance matrix"}[el.kind]
     for i in range(n):
         for j in range(i):
-            if sp.expand(v[i, j] - v[j, i]) != 0:
-                fail(el.value.span, f"the mass matrix of '{el.name}' is not symmetric: entries "
+            if el.kind != "R" and sp.expand(v[i, j] - v[j, i]) != 0:
+                fail(el.value.span, f"the {what} of '{el.name}' is not symmetric: entries "
                                     f"[{i}][{j}] and [{j}][{i}] differ")
     inits = None
     if el.init is not None:
-        if el.init[0] != "p":
-            fail(el.init[1].span, f"'{el.name}' is a coupled field: give its momenta "
-                                  "('init p = [...]'), not its flows")
+        state = el.spec.state
+        if el.init[0] != state:
+            fail(el.init[1].span, f"'{el.name}' is a coupled field: give its states "
+                                  f"('init {state} = [...]')")
         inits = _rows(el.init[1], n, f"the initial value of '{el.name}'", False)
     return [replace(el, name=part_name(el.name, i), dim=None, origin=el.name,
-                    init=None if inits is None else ("p", _part(el.init[1], inits[i])))
+                    init=None if inits is None else (el.init[0], _part(el.init[1], inits[i])))
             for i in range(n)]
 
 

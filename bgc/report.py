@@ -41,10 +41,11 @@ def check_report(compiled) -> str:
     lines += _causality_lines(g, cg)
     fields = getattr(compiled.system, "fields", ())
     if fields:
-        lines.append("coupled I fields (M f = p solved in the generated code):")
+        lines.append("coupled fields (I: M f = p, C: K e = q, solved in the generated code):")
         for name, coords in fields:
             how = (f"Hamiltonian form, dp/dt = e - dT/dq with T = p^T M^-1 p / 2, in "
-                   f"{', '.join(coords)}") if coords else "M does not depend on its own coordinates"
+                   f"{', '.join(coords)}") if coords else \
+                "its matrix does not depend on its own coordinates"
             lines.append(f"  {name}: {how}")
     if r.eliminated:
         lines.append("derivative causality (dependent states, eliminated):")
