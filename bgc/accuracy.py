@@ -31,6 +31,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+import sympy as sp
 
 from . import backends, solvers
 from .api import Compiled, run_args
@@ -330,8 +331,8 @@ def gain_parameters(compiled: Compiled) -> list[str]:
         if c.corrector not in ("pid", "pd"):
             continue
         for g in c.gains:
-            text = str(g)
-            if text not in params:
+            text = g.name if isinstance(g, sp.Symbol) else str(g)
+            if not isinstance(g, sp.Symbol) or text not in params:
                 raise AccuracyError(
                     f"the corrector of '{c.junction}' has the gain '{text}', not a parameter: "
                     "--gains sets gain parameters (sweep an expression's parameters with bgc "

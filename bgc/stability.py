@@ -57,7 +57,7 @@ def corrector_modes(compiled, overrides: dict | None = None) -> list[CorrectorMo
     for c in compiled.reduced.constraints:
         if c.corrector not in ("pid", "pd"):
             continue
-        gains = tuple(float(sp.sympify(g).xreplace(values)) for g in c.gains)
+        gains = tuple(float(g.xreplace(values)) for g in c.gains)  # SymPy values, built by resolve
         if c.corrector == "pid":
             alpha, beta = gains
             root = cmath.sqrt(alpha * alpha - beta * beta)
