@@ -18,11 +18,11 @@ from .equations import EquationSystem, build_equations, with_residual_outputs
 from .graph import Graph
 from .ir import Program
 from .lower import lower
-from .parser import decode, parse
+from .parser import decode, parse, parse_option
 from .reduce import ALGEBRA, Reduced, reduce
-from .report import check_report, equations_latex, equations_text
+from .report import SceneSummary, check_report, scenes_report, equations_latex, equations_text, scene_summary
 from .resolve import resolve
-from .scene import Settings, apply_scene
+from .scene import Override, Settings, apply_scene
 
 
 @dataclass(frozen=True)
@@ -84,22 +84,50 @@ def _source(model) -> Source:
     return model if isinstance(model, Source) else load(model)
 
 
+def _option_text(value, what: str) -> str:
+    if isinstance(value, str):
+        return value
+    try:
+        items = list(value)
+    except TypeError:
+        raise TypeError(f"{what} must be a string or a list of strings") from None
+    if not all(isinstance(v, str) for v in items):
+        raise TypeError(f"{what} must be a string or a list of strings")
+    return ", ".join(items) if items else ("none" if what == "effects" else "")
+
+
+def scene_override(outputs=None, effects=None, names=("outputs=", "effects=")) -> Override | None:
+    """An ad-hoc scene: outputs ("x, rod.lambda" or ["x", "rod.lambda"]) and effects ("gravity",
+    ["gravity"], "none" or []), parsed by the model grammar; names: how errors call them."""
+    if outputs is None and effects is None:
+        return None
+    outs = effs = None
+    if outputs is not None:
+        outs = parse_option("outputs", _option_text(outputs, "outputs"), names[0])
+    if effects is not None:
+        effs = parse_option("effects", _option_text(effects, "effects"), names[1])
+    return Override(outs, effs)
+
+
 def build(model, scene: str | None = None, project_initial: bool = False,
           algebra: str = "auto", program: bool = True,
-          residual_outputs: bool = False) -> Compiled:
+          residual_outputs: bool = False, outputs=None, effects=None,
+          option_names=("outputs=", "effects=")) -> Compiled:
     """Run the pipeline up to the program IR (program=False: up to the reduce stage, all that
     `check` and `equations` need; Compiled.program is then None).  residual_outputs: every
     constraint's residual `J.residual` is an output too (after the scene's), for reports on
-    the drift."""
+    the drift.  outputs, effects: an ad-hoc scene, replacing the scene's (see
+    scene_override); option_names: how errors name them (the CLI's `--outputs`)."""
     if algebra not in ALGEBRA:
         raise ValueError(f"algebra must be one of {', '.join(ALGEBRA)}, not {algebra!r}")
     src = _source(model)
     clock = _Clock()
     try:
+        override = scene_override(outputs, effects, option_names)
         ast_ = clock("parse", parse, src.text, src.path)
         graph = clock("resolve", resolve, ast_)
         graph = clock("flatten", flatten, graph)
-        scenario = clock("scene", apply_scene, graph, scene)
+        scenario = clock("scene", apply_scene, graph, scene, override)
         causal = clock("causality", assign_causality, scenario)
         system = clock("equations", build_equations, causal)
         if residual_outputs:
@@ -124,15 +152,44 @@ class _Clock:
         return value
 
 
-def check(model, scene: str | None = None, algebra: str = "auto") -> str:
-    return check_report(build(model, scene, algebra=algebra, program=False))
+def summary(compiled: Compiled) -> SceneSummary | None:
+    """What compiled's scene saves against the full model (its default scene, built with the
+    same algebra), or None when the full model does not compile (effects that exclude each
+    other, say)."""
+    if compiled.program is None:
+        raise ValueError("summary() needs a build with its program (program=True)")
+    try:
+        full = build(compiled.source, None, algebra=compiled.reduced.algebra)
+    except BgcModelError:
+        return None
+    return scene_summary(compiled, full)
+
+
+def check(model, scene: str | None = None, algebra: str = "auto", outputs=None,
+          effects=None) -> str:
+    """`bgc check`: with a scene (or outputs, effects) it also compares with the full model."""
+    compiled = build(model, scene, algebra=algebra, program=scene is not None
+                     or outputs is not None or effects is not None, outputs=outputs,
+                     effects=effects)
+    return check_report(compiled, summary(compiled) if compiled.program is not None else None)
+
+
+def scenes(model) -> str:
+    """`bgc scenes`: the model's scenes with their docs, effects, outputs and settings."""
+    src = _source(model)
+    try:
+        graph = resolve(parse(src.text, src.path))
+    except ModelError as exc:
+        raise BgcModelError(exc, src) from None
+    return scenes_report(graph, src.text)
 
 
 def equations(model, scene: str | None = None, format: str = "text",
-              algebra: str = "auto") -> str:
+              algebra: str = "auto", outputs=None, effects=None) -> str:
     if format not in ("text", "latex"):
         raise ValueError(f"format must be 'text' or 'latex', not {format!r}")
-    compiled = build(model, scene, algebra=algebra, program=False)
+    compiled = build(model, scene, algebra=algebra, program=False, outputs=outputs,
+                     effects=effects)
     return equations_latex(compiled) if format == "latex" else equations_text(compiled)
 
 
@@ -140,11 +197,13 @@ TARGETS = ("c", "python")
 
 
 def compile(model, target: str = "c", scene: str | None = None,
-            project_initial: bool = False, algebra: str = "auto") -> dict[str, str]:
+            project_initial: bool = False, algebra: str = "auto", outputs=None,
+            effects=None) -> dict[str, str]:
     """Standalone source code: {filename: text}."""
     if target not in TARGETS:
         raise ValueError(f"target must be one of {', '.join(TARGETS)}, not {target!r}")
-    program = build(model, scene, project_initial, algebra).program
+    program = build(model, scene, project_initial, algebra, outputs=outputs,
+                    effects=effects).program
     return emit_c(program) if target == "c" else emit_python(program)
 
 
@@ -168,15 +227,17 @@ SIMULATE_OPTIONS = ("t_end", "dt", "solver", "rtol", "atol", "step", "params", "
 
 
 def simulate(model, scene: str | None = None, backend: str = "c", algebra: str = "auto",
-             **options):
-    """Simulate; returns (t, Y, names).  options: t_end, dt, solver, rtol, atol, step, params,
-    project_initial.  backend "c" falls back to "python" when there is no C compiler."""
+             outputs=None, effects=None, **options):
+    """Simulate; returns (t, Y, names).  outputs, effects: an ad-hoc scene (see build).
+    options: t_end, dt, solver, rtol, atol, step, params, project_initial.  backend "c" falls
+    back to "python" when there is no C compiler."""
     if backend not in BACKENDS:
         raise ValueError(f"backend must be one of {', '.join(BACKENDS)}, not {backend!r}")
     unknown = sorted(set(options) - set(SIMULATE_OPTIONS))
     if unknown:
         raise TypeError(f"simulate() got unknown options: {', '.join(unknown)}")
-    compiled = build(model, scene, options.get("project_initial", False), algebra)
+    compiled = build(model, scene, options.get("project_initial", False), algebra,
+                     outputs=outputs, effects=effects)
     if backend == "c" and not backends.have_c_compiler():
         backend = "python"
     if backend == "python":

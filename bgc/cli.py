@@ -22,16 +22,22 @@ def _warn(compiled: api.Compiled):
         click.echo(format_diagnostic(d, compiled.source.path, compiled.source.text), err=True)
 
 
-def _build(model, scene, project_initial=False, algebra="auto", program=True,
-           residual_outputs=False) -> api.Compiled:
+def _or_exit(call, *args):
+    """call(*args), or the model's located errors (or an unreadable file) on stderr, exit 1."""
     try:
-        compiled = api.build(model, scene, project_initial, algebra, program, residual_outputs)
+        return call(*args)
     except api.BgcModelError as exc:
         click.echo(str(exc), err=True)
         sys.exit(1)
     except FileNotFoundError as exc:
         click.echo(f"error: {exc}", err=True)
         sys.exit(1)
+
+
+def _build(model, scene, project_initial=False, algebra="auto", program=True,
+           residual_outputs=False, outputs=None, effects=None) -> api.Compiled:
+    compiled = _or_exit(api.build, model, scene, project_initial, algebra, program,
+                        residual_outputs, outputs, effects, ("--outputs", "--effects"))
     _warn(compiled)
     return compiled
 
@@ -78,6 +84,18 @@ def _parse_params(values, compiled) -> dict:
 MODEL = click.argument("model", type=click.Path(dir_okay=False))
 SCENE = click.option("--scene", "-s", default=None, help="Scene to use (default: all effects, "
                                                          "every state as an output).")
+
+
+def ADHOC(f):
+    """--outputs and --effects: a scene made on the command line."""
+    f = click.option("--effects", default=None, metavar="E1,E2,..|none",
+                     help="The effects in (replacing the scene's): tagged items of the others "
+                          "are left out.")(f)
+    return click.option("--outputs", default=None, metavar="X,Y,..",
+                        help="The outputs, in order (replacing the scene's): only what they "
+                             "need is computed.")(f)
+
+
 ALGEBRA = click.option("--algebra", type=click.Choice(list(api.ALGEBRA)), default="auto",
                        show_default=True,
                        help="How algebraic blocks are solved: symbolically when linear and "
@@ -94,34 +112,54 @@ def main():
 @main.command()
 @MODEL
 @SCENE
+@ADHOC
 @ALGEBRA
-def check(model, scene, algebra):
-    """Parse and assign causality; print states, constraints, algebraic blocks, warnings."""
-    click.echo(check_report(_build(model, scene, algebra=algebra, program=False)), nl=False)
+def check(model, scene, outputs, effects, algebra):
+    """Parse and assign causality; print states, constraints, algebraic blocks, warnings.
+    With a scene (or --outputs, --effects): what it leaves out and prunes, and the operations
+    of the generated code against the full model."""
+    adhoc = scene is not None or outputs is not None or effects is not None
+    compiled = _build(model, scene, algebra=algebra, program=adhoc, outputs=outputs,
+                      effects=effects)
+    summary = api.summary(compiled) if adhoc else None
+    if adhoc and summary is None:
+        click.echo("note: the full model (all effects) does not compile, so this scene is not "
+                   "compared with it", err=True)
+    click.echo(check_report(compiled, summary), nl=False)
+
+
+@main.command()
+@MODEL
+def scenes(model):
+    """List the scenes: their docs, effects, outputs, time spans, solvers and settings."""
+    click.echo(_or_exit(api.scenes, model), nl=False)
 
 
 @main.command()
 @MODEL
 @SCENE
+@ADHOC
 @ALGEBRA
 @click.option("--format", "fmt", type=click.Choice(["text", "latex"]), default="text")
-def equations(model, scene, algebra, fmt):
+def equations(model, scene, outputs, effects, algebra, fmt):
     """Print the reduced equations, multipliers included."""
-    compiled = _build(model, scene, algebra=algebra, program=False)
+    compiled = _build(model, scene, algebra=algebra, program=False, outputs=outputs,
+                      effects=effects)
     click.echo((equations_latex if fmt == "latex" else equations_text)(compiled), nl=False)
 
 
 @main.command()
 @MODEL
 @SCENE
+@ADHOC
 @ALGEBRA
 @click.option("--target", type=click.Choice(["c", "python"]), default="c")
 @click.option("-o", "output", default=None, help="Output file (default: stdout).")
 @click.option("--project-initial", is_flag=True, help="Project initial values onto the "
                                                       "constraints instead of refusing them.")
-def compile(model, scene, algebra, target, output, project_initial):
+def compile(model, scene, outputs, effects, algebra, target, output, project_initial):
     """Emit standalone C or Python source code."""
-    compiled = _build(model, scene, project_initial, algebra)
+    compiled = _build(model, scene, project_initial, algebra, outputs=outputs, effects=effects)
     files = (emit_c if target == "c" else emit_python)(compiled.program)
     (text,) = files.values()
     if output:
@@ -133,6 +171,7 @@ def compile(model, scene, algebra, target, output, project_initial):
 @main.command()
 @MODEL
 @SCENE
+@ADHOC
 @ALGEBRA
 @click.option("--backend", type=click.Choice(["c", "python"]), default="c")
 @click.option("--solver", type=click.Choice(solvers.NAMES), default=None,
@@ -151,10 +190,10 @@ def compile(model, scene, algebra, target, output, project_initial):
                                             "steps, right-side calls, Jacobians, "
                                             "factorisations, solves) to stderr.")
 @click.option("-o", "output", default=None, help="CSV file (default: stdout).")
-def simulate(model, scene, algebra, backend, solver, rtol, atol, t_end, dt, step, params,
-             project_initial, stats, output):
+def simulate(model, scene, outputs, effects, algebra, backend, solver, rtol, atol, t_end, dt,
+             step, params, project_initial, stats, output):
     """Simulate and write CSV."""
-    compiled = _build(model, scene, project_initial, algebra)
+    compiled = _build(model, scene, project_initial, algebra, outputs=outputs, effects=effects)
     for name, value in (("--rtol", rtol), ("--atol", atol), ("--dt", dt), ("--step", step)):
         if value is not None and not value > 0:
             raise click.UsageError(f"{name} must be positive")
@@ -219,6 +258,7 @@ class _Progress:
 @main.command()
 @MODEL
 @SCENE
+@ADHOC
 @ALGEBRA
 @click.option("--backend", type=click.Choice(["c", "python"]), default="c")
 @click.option("--solvers", "solver_list", default=None, metavar="A,B,...",
@@ -244,10 +284,11 @@ class _Progress:
 @click.option("-o", "output", default=None, metavar="DIR",
               help="Directory for accuracy.csv and accuracy.png (gains.csv, gains.png with "
                    "--gains); default: accuracy-MODEL[-SCENE].")
-def accuracy(model, scene, algebra, backend, solver_list, rtols, steps, reference, gains,
-             repeats, timeout, t_end, dt, params, no_plot, output):
+def accuracy(model, scene, outputs, effects, algebra, backend, solver_list, rtols, steps,
+             reference, gains, repeats, timeout, t_end, dt, params, no_plot, output):
     """Measure each solver's error and cost on the model: table, CSV and work-precision plot."""
-    compiled = _build(model, scene, algebra=algebra, program=True, residual_outputs=True)
+    compiled = _build(model, scene, algebra=algebra, program=True, residual_outputs=True,
+                      outputs=outputs, effects=effects)
     overrides = _parse_params(params, compiled)
     names = [n.strip() for n in solver_list.split(",")] if solver_list else None
     for n in names or []:

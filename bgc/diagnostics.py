@@ -1,22 +1,34 @@
 """Source spans and model diagnostics: `path:line:col: error: message`, the line, carets."""
 from __future__ import annotations
 
+import difflib
 from dataclasses import dataclass, field
 
 
 @dataclass(frozen=True)
+class Origin:
+    """Text that is not the model file but is reported like it: an option's value on the
+    command line (`--outputs`), an argument of the API."""
+
+    name: str
+    text: str
+
+
+@dataclass(frozen=True)
 class Span:
-    """A region of one source file; lines and columns are 1-based, end exclusive."""
+    """A region of one source file; lines and columns are 1-based, end exclusive.  origin:
+    None for the model file, else the text the span is in."""
 
     line: int
     col: int
     end_line: int
     end_col: int
+    origin: Origin | None = field(default=None, compare=False)
 
     def join(self, other: "Span") -> "Span":
         start = min((self.line, self.col), (other.line, other.col))
         end = max((self.end_line, self.end_col), (other.end_line, other.end_col))
-        return Span(start[0], start[1], end[0], end[1])
+        return Span(start[0], start[1], end[0], end[1], self.origin)
 
 
 
@@ -101,13 +113,26 @@ def _excerpt(source_lines, span: Span) -> list[str]:
     return [gutter + text, caret]
 
 
-def format_diagnostic(d: Diagnostic, path: str, source: str | None) -> str:
+def _located(span: Span | None, path: str, source: str | None) -> tuple[str, list[str]]:
+    """`path:line:col` and the source lines the span is in (an origin's, when it has one)."""
+    if span is not None and span.origin is not None:
+        path, source = span.origin.name, span.origin.text
     lines = source.splitlines() if source is not None else []
-    where = f"{path}:{d.span.line}:{d.span.col}" if d.span else path
+    return (f"{path}:{span.line}:{span.col}" if span else path), lines
+
+
+def format_diagnostic(d: Diagnostic, path: str, source: str | None) -> str:
+    where, lines = _located(d.span, path, source)
     out = [f"{where}: {d.severity}: {d.message}"]
     out += _excerpt(lines, d.span)
     for n in d.notes:
-        nwhere = f"{path}:{n.span.line}:{n.span.col}" if n.span else path
+        nwhere, nlines = _located(n.span, path, source)
         out.append(f"{nwhere}: note: {n.message}")
-        out += _excerpt(lines, n.span)
+        out += _excerpt(nlines, n.span)
     return "\n".join(out)
+
+
+def did_you_mean(name: str, candidates) -> str:
+    """' (did you mean 'x'?)' for the closest candidate, or ''."""
+    close = difflib.get_close_matches(name, sorted(set(candidates)), n=1, cutoff=0.6)
+    return f" (did you mean '{close[0]}'?)" if close else ""

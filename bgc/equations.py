@@ -19,7 +19,7 @@ import sympy as sp
 
 from .algebra import solve_for
 from .causality import CausalGraph
-from .diagnostics import Collector, ModelError, Span, fail
+from .diagnostics import Collector, ModelError, Span, did_you_mean, fail
 from .graph import TIME, Element, Graph, part_name, var, variable_name
 
 
@@ -398,8 +398,9 @@ def _invert(equation, unknown, el: Element):
 # ---------------------------------------------------------------- outputs
 
 
-def _outputs(b: _Builder, refs) -> tuple[OutputDef, ...]:
+def _outputs(b: _Builder, refs, left_out=()) -> tuple[OutputDef, ...]:
     states = {st.symbol: st for st in b.states}
+    why = dict(left_out)
     if refs is None:
         return tuple(OutputDef(st.name, st.symbol, st.span) for st in b.states)
     targets = {eq.target for eq in b.equations}
@@ -408,6 +409,10 @@ def _outputs(b: _Builder, refs) -> tuple[OutputDef, ...]:
     diags = Collector()
     out = []
     for ref in refs:
+        if ref.owner in why:
+            diags.error(ref.span, f"output '{ref.text}' is left out by this scene's effects: "
+                                  f"'{ref.owner}' {_reason(why[ref.owner])}")
+            continue
         try:
             for name, part in _expand(ref, b.g):
                 out.append(OutputDef(name, _output_expr(part, b.g, states, targets, constraints,
@@ -416,6 +421,11 @@ def _outputs(b: _Builder, refs) -> tuple[OutputDef, ...]:
             diags.items.extend(exc.diagnostics)
     diags.raise_if_errors()
     return tuple(out)
+
+
+def _reason(why: str) -> str:
+    return "is " + why if why.startswith("tagged") else (
+        "is left out: " + why)
 
 
 def _expand(ref, g: Graph) -> list:
@@ -442,9 +452,16 @@ def _output_expr(ref, g: Graph, states, targets, constraints, params):
         sym = var(ref.owner)
         if sym in states or sym in targets or ref.owner in params:
             return sym
-        fail(ref.span, f"unknown output '{ref.owner}'")
+        if ref.owner in g.by_name or ref.owner in g.vector_by_name:
+            hint = f" ('{ref.owner}' is an element: name one of its variables, e.g. " \
+                   f"{ref.owner}.{'p' if _kind_of(ref.owner, g) == 'I' else 'e'})"
+        else:
+            names = [s.name for s in g.signals] + list(params) + [v.name for v in g.vectors]
+            hint = did_you_mean(ref.owner, names)
+        fail(ref.span, f"unknown output '{ref.owner}'{hint}")
     if ref.owner not in g.by_name:
-        fail(ref.span, f"unknown element '{ref.owner}' in outputs")
+        names = [el.origin or el.name for el in g.elements]
+        fail(ref.span, f"unknown element '{ref.owner}' in outputs{did_you_mean(ref.owner, names)}")
     if ref.field in ("lambda", "residual"):
         c = constraints.get(ref.owner)
         if c is None:
@@ -453,7 +470,19 @@ def _output_expr(ref, g: Graph, states, targets, constraints, params):
     sym = var(variable_name(ref.owner, ref.field))
     if ref.field in ("e", "f", "p", "q") and (sym in states or sym in targets):
         return sym
-    fail(ref.span, f"'{ref.owner}' has no variable '{ref.field}'")
+    have = [f for f in ("e", "f", "p", "q")
+            if var(variable_name(ref.owner, f)) in states or var(variable_name(ref.owner, f))
+            in targets] + (["lambda", "residual"] if ref.owner in constraints else [])
+    fail(ref.span, f"'{g.by_name[ref.owner].origin or ref.owner}' has no variable '{ref.field}'"
+                   + (f" (it has: {', '.join(have)})" if have else ""))
+
+
+def _kind_of(name, g: Graph) -> str | None:
+    el = g.by_name.get(name)
+    if el is None:
+        v = g.vector_by_name.get(name)
+        el = g.by_name.get(part_name(name, 0)) if v is not None else None
+    return el.kind if el is not None else None
 
 
 def build_equations(cg: CausalGraph) -> EquationSystem:
@@ -480,7 +509,7 @@ def build_equations(cg: CausalGraph) -> EquationSystem:
                    for p in g.parameters)
     run = Run(s.scene, s.t0, s.t_end, s.dt, s.solver, s.rtol, s.atol, s.step)
     return EquationSystem(g.name, params, tuple(b.states), tuple(b.equations),
-                          tuple(b.constraints), tuple(b.stores), _outputs(b, s.outputs), run,
+                          tuple(b.constraints), tuple(b.stores), _outputs(b, s.outputs, s.left_out), run,
                           tuple(g.warnings),
                           tuple((name, tuple(b.hamiltonian.get(name, ()))) for name in b.fields))
 

@@ -13,7 +13,7 @@ from functools import cached_property
 
 import sympy as sp
 
-from .diagnostics import Collector, Note, Span
+from .diagnostics import Collector, Note, Span, did_you_mean
 from .kinds import KINDS
 
 TIME = sp.Symbol("t", real=True)
@@ -150,6 +150,22 @@ class Scene:
     solver: tuple[str, tuple[tuple[str, Expr], ...], Span] | None
     sets: tuple[tuple[str, Expr, Span], ...]
     span: Span
+    effect_spans: tuple[Span, ...] = ()  # one per name of `effects`
+
+
+def model_effects(elements) -> tuple[str, ...]:
+    """The effects the model tags its declarations with, in order of first use."""
+    return tuple(dict.fromkeys(e for el in elements for e in el.effects))
+
+
+def check_effect_names(names, spans, known, diags: Collector, where: str) -> None:
+    """Each effect a scene names must tag something in the model: a misspelt one would
+    otherwise leave out, silently, everything tagged with the one meant."""
+    for name, span in zip(names, spans):
+        if name not in known:
+            listed = ", ".join(known) if known else "none: nothing is tagged with @EFFECT"
+            diags.error(span, f"unknown effect '{name}' in {where}{did_you_mean(name, known)}; "
+                              f"the model's effects: {listed}")
 
 
 @dataclass(frozen=True)

@@ -6,8 +6,10 @@ from functools import lru_cache
 from lark import Lark, Token, Transformer_NonRecursive, Tree, v_args
 from lark.exceptions import UnexpectedCharacters, UnexpectedEOF, UnexpectedInput, UnexpectedToken
 
+from dataclasses import replace
+
 from . import ast
-from .diagnostics import Note, Span, fail
+from .diagnostics import ModelError, Note, Origin, Span, fail
 from .resources import resource_dir
 
 MAX_SOURCE_BYTES = 1 << 20  # 1 MiB: larger input is refused, not attempted
@@ -45,7 +47,8 @@ class _BracketPostLex:
 def _lark() -> Lark:
     text = (resource_dir("grammar") / "bg.lark").read_text(encoding="utf-8")
     return Lark(text, parser="lalr", lexer="contextual", postlex=_BracketPostLex(),
-                propagate_positions=True, maybe_placeholders=True)
+                propagate_positions=True, maybe_placeholders=True,
+                start=["start", "option_outputs", "option_effects"])
 
 
 def _span(meta) -> Span:
@@ -151,6 +154,9 @@ class _ToAst(Transformer_NonRecursive):
 
     def scene_outputs(self, meta, c):
         return ast.SceneOutputs(tuple(c), _span(meta))
+
+    def option_outputs(self, meta, c):
+        return tuple(c)
 
     def outref(self, meta, c):
         index = int(c[2]) if c[2] is not None else None
@@ -303,10 +309,54 @@ def parse(source: str, path: str = "<model>") -> ast.Model:
         fail(None, f"model file too large (the limit is {MAX_SOURCE_BYTES} bytes)")
     text = source if source.endswith("\n") else source + "\n"
     try:
-        tree = _lark().parse(text)
+        tree = _lark().parse(text, start="start")
     except (UnexpectedEOF, UnexpectedToken, UnexpectedCharacters) as exc:
         _syntax_error(exc, source)
     except UnexpectedInput as exc:  # any other lark input error
         _syntax_error(exc, source)
     _check_nesting(tree)
     return ast.Model(_ToAst().transform(tree), path)
+
+
+MAX_OPTION_CHARS = 1 << 16
+
+
+def _located_at(value, origin: Origin):
+    """value (an OutRef, Ident or SceneEffects) with its spans in `origin`."""
+    span = replace(value.span, origin=origin)
+    if isinstance(value, ast.SceneEffects):
+        names = None if value.names is None else tuple(_located_at(n, origin)
+                                                       for n in value.names)
+        return ast.SceneEffects(names, span)
+    return replace(value, span=span)
+
+
+def parse_option(kind: str, text: str, name: str):
+    """A scene's outputs or effects given outside the model (`--outputs x,rod.lambda`,
+    `--effects gravity` or `none`), parsed by the model grammar's own rules: a tuple of OutRefs,
+    or an ast.SceneEffects.  Errors are located in the option's text, reported as `name`."""
+    origin = Origin(name, text)
+    if len(text) > MAX_OPTION_CHARS:
+        fail(Span(1, 1, 1, 2, origin), f"{name} is too long ({len(text)} characters; the limit "
+                                       f"is {MAX_OPTION_CHARS})")
+    if "\n" in text or "\r" in text:
+        fail(Span(1, 1, 1, 2, origin), f"{name} must be one line")
+    start = {"outputs": "option_outputs", "effects": "option_effects"}[kind]
+    try:
+        try:
+            tree = _lark().parse(text, start=start)
+        except UnexpectedInput as exc:
+            _syntax_error(exc, text)
+    except ModelError as exc:
+        hint = {"outputs": "outputs separated by commas, e.g. x, rod.lambda, q[1]",
+                "effects": "effect names separated by commas, or none"}[kind]
+        raise ModelError([replace(d, span=d.span and replace(d.span, origin=origin),
+                                  message=d.message.split(", expected")[0] + f"; {name} takes "
+                                  + hint,
+                                  notes=tuple(replace(n, span=n.span and replace(
+                                      n.span, origin=origin)) for n in d.notes))
+                          for d in exc.diagnostics]) from None
+    value = _ToAst().transform(tree)
+    if kind == "outputs":
+        return tuple(_located_at(r, origin) for r in value)
+    return _located_at(value, origin)

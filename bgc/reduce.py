@@ -456,26 +456,27 @@ def _needed(sys: _System) -> tuple[list[sp.Symbol], list[StateVar]]:
     """The targets the outputs need (deriving der() equations on demand), and the states."""
     needed: set = set()
     kept: set = set()
-    todo: list = []
+    todo: list = []  # (symbol, the span of what needs it)
     for o in sys.es.outputs:
-        todo.extend(reversed(sys.symbols(o.expr)))
+        todo.extend((u, o.span) for u in reversed(sys.symbols(o.expr)))
     while todo:
-        s = todo.pop()
+        s, span = todo.pop()
         if s in needed or s is TIME or s in sys.params:
             continue
         if s in sys.states:
             if s not in kept:
                 kept.add(s)
-                todo.append(der(s))
+                todo.append((der(s), span))
             continue
         eq = sys.eqs.get(s)
         if eq is None:
             v = sys.derivative_of(s)
             if v is None or v not in sys.eqs:
-                raise AssertionError(f"bgc bug: '{s}' has no equation")  # pragma: no cover
+                fail(span, f"'{s.name}' is not determined in this scene: nothing sets it (a "
+                           "junction without bonds?)")
             eq = sys.differentiate(v)
         needed.add(s)
-        todo.extend(reversed(sys.symbols(eq.expr)))
+        todo.extend((u, eq.span) for u in reversed(sys.symbols(eq.expr)))
     targets = sorted(needed, key=lambda s: sys.order[s])
     states = [st for st in sys.es.states if st.symbol in kept]
     return targets, states

@@ -1,8 +1,13 @@
 """Stable text dumps of the intermediate values: `bgc check` and `bgc equations`."""
 from __future__ import annotations
 
+from collections import Counter
+from dataclasses import dataclass
+
 import sympy as sp
 
+from . import ir
+from .graph import model_effects
 from .reduce import Block, explicit_forms
 
 TWO_PORTS = ("TF", "MTF", "GY", "MGY")
@@ -26,13 +31,132 @@ def _s(expr) -> str:
 
 def _header(compiled) -> list[str]:
     s = compiled.settings
-    return [f"model {compiled.graph.name}" + (f", scene {s.scene}" if s.scene
-                                              else ", default scene")]
+    line = f"model {compiled.graph.name}" + (f", scene {s.scene}" if s.scene
+                                             else ", default scene")
+    if s.given:
+        line += f" ({' and '.join(s.given)} given ad hoc)"
+    return [line]
 
 
-def check_report(compiled) -> str:
+# ---------------------------------------------------------------- what a scene saves
+
+OP_KINDS = ("add", "neg", "mul", "div", "call", "solve")
+
+
+@dataclass(frozen=True)
+class SceneSummary:
+    """A scene against the full model (all effects, every state an output): what it leaves
+    out with its effects, what its outputs do not need (pruned), and the operations of the
+    generated right side and outputs (counted on the IR, bgc.ir.count_ops) in both."""
+
+    effects_in: tuple[str, ...]
+    effects_out: tuple[str, ...]
+    left_out: tuple[tuple[str, tuple[str, ...]], ...]  # (why, the declared names) left out
+    correctors_off: tuple[tuple[str, tuple[str, ...]], ...]  # (junction, its effects)
+    states_kept: tuple[str, ...]
+    states_pruned: tuple[str, ...]  # in the scene's physics, needed by no output
+    states_out: tuple[str, ...]  # left out with the effects
+    full_states: int
+    blocks_kept: tuple  # the scene's BlockInfos
+    blocks_pruned: tuple  # the full model's BlockInfos the scene's outputs do not need
+    blocks_out: tuple  # ... that come from elements left out with the effects
+    unknowns: tuple[int, int]  # algebraic unknowns: the scene's, the full model's
+    ops: dict  # {("scene" | "full", "rhs" | "outputs"): Counter}
+
+
+def _base_names(graph) -> set:
+    return {el.origin or el.name for el in graph.elements} | {s.name for s in graph.signals}
+
+
+def scene_summary(compiled, full) -> SceneSummary:
+    """compiled: a scene (with its program); full: the same model's default scene."""
+    known = model_effects(full.graph.elements)
+    chosen = compiled.settings.effects
+    effects_in = known if chosen is None else tuple(e for e in known if e in chosen)
+    groups: dict[str, list[str]] = {}
+    for name, why in compiled.settings.left_out:
+        groups.setdefault(why, []).append(name)
+    left_out = tuple((why, tuple(names)) for why, names in groups.items())
+    by_name = compiled.graph.by_name
+    correctors_off = tuple(dict.fromkeys(
+        (el.origin or el.name, el.effects) for el in full.graph.elements
+        if el.constraint is not None and el.constraint.corrector != "none"
+        and el.name in by_name and by_name[el.name].constraint.corrector == "none"))
+    in_physics = {st.name for st in compiled.system.states}
+    kept = tuple(st.name for st in compiled.reduced.states)
+    full_states = [st.name for st in full.reduced.states]
+    kept_unknowns = {u for b in compiled.reduced.blocks for u in b.unknowns}
+    names = _base_names(compiled.graph)
+    pruned, out = [], []
+    for b in full.reduced.blocks:
+        if kept_unknowns.intersection(b.unknowns):
+            continue
+        (pruned if all(o in names for o in b.origins) else out).append(b)
+    ops = {}
+    for key, c in (("scene", compiled), ("full", full)):
+        for fn in ("rhs", "outputs"):
+            ops[key, fn] = ir.count_ops(c.program, (fn,))
+    return SceneSummary(
+        effects_in, tuple(e for e in known if e not in effects_in), left_out,
+        correctors_off, kept,
+        tuple(compiled.reduced.pruned), tuple(n for n in full_states if n not in in_physics),
+        len(full_states), tuple(compiled.reduced.blocks), tuple(pruned), tuple(out),
+        (sum(len(b.unknowns) for b in compiled.reduced.blocks),
+         sum(len(b.unknowns) for b in full.reduced.blocks)), ops)
+
+
+def _total(c: Counter) -> int:
+    return sum(c[k] for k in OP_KINDS)
+
+
+def _summary_lines(sm: SceneSummary) -> list[str]:
+    lines = ["scene against the full model (all effects, every state an output):"]
+    lines.append(f"  effects in: {', '.join(sm.effects_in) or 'none'}; left out: "
+                 f"{', '.join(sm.effects_out) or 'none'}")
+    if sm.left_out:
+        lines.append("  left out:")
+        lines += [f"    {why}: {', '.join(names)}" for why, names in sm.left_out]
+    if sm.correctors_off:
+        lines.append("  correctors set to none with their effects: " + ", ".join(
+            f"{name} ({' '.join('@' + e for e in effects)})"
+            for name, effects in sm.correctors_off))
+    lines.append(f"  states: {len(sm.states_kept)} of {sm.full_states} integrated")
+    if sm.states_out:
+        lines.append(f"    left out with the effects ({len(sm.states_out)}): "
+                     + ", ".join(sm.states_out))
+    if sm.states_pruned:
+        lines.append(f"    pruned, no output needs them ({len(sm.states_pruned)}): "
+                     + ", ".join(sm.states_pruned))
+    lines.append(f"  algebraic blocks: {len(sm.blocks_kept)} kept; algebraic unknowns "
+                 f"{sm.unknowns[0]} of {sm.unknowns[1]}")
+
+    def blocks(bs):
+        return "; ".join(f"{', '.join(b.unknowns)} (through {', '.join(b.origins)})" for b in bs)
+
+    if sm.blocks_pruned:
+        lines.append(f"    pruned, no output needs them ({len(sm.blocks_pruned)}): "
+                     + blocks(sm.blocks_pruned))
+    if sm.blocks_out:
+        lines.append(f"    left out with the effects ({len(sm.blocks_out)}): "
+                     + blocks(sm.blocks_out))
+    lines.append("  operations of the generated code (full model -> this scene):")
+    lines.append(f"    {'':8}{'right side':^19}{'outputs':^19}".rstrip())
+    kinds = [k for k in OP_KINDS if any(sm.ops[key][k] for key in sm.ops)]
+    for k in kinds + ["total"]:
+        cells = []
+        for fn in ("rhs", "outputs"):
+            a, b = ((_total(sm.ops[w, fn]) if k == "total" else sm.ops[w, fn][k])
+                    for w in ("full", "scene"))
+            cells.append(f"{a:>8} -> {b:<7}")
+        lines.append(f"    {k:8}{cells[0]}{cells[1]}".rstrip())
+    return lines
+
+
+def check_report(compiled, summary: SceneSummary | None = None) -> str:
     g, cg, r = compiled.graph, compiled.causal, compiled.reduced
     lines = _header(compiled)
+    if summary is not None:
+        lines += _summary_lines(summary)
     lines.append(f"states ({len(r.states)}):")
     lines += [f"  {st.name}  {KINDS[st.kind]}" for st in r.states]
     if r.pruned:
@@ -62,15 +186,31 @@ def check_report(compiled) -> str:
                          f"{kind}, {METHODS[b.method]}")
     if r.constraints:
         lines.append("constraints:")
+        kept = {st.symbol for st in r.states}
         for k in r.constraints:
             how = "detected" if k.detected else "declared"
             gains = f"({', '.join(_s(g) for g in k.gains)})" if k.gains else ""
-            lines.append(f"  {k.junction}: {k.kind} ({how}), corrector {k.corrector}{gains}")
+            pruned = "" if _constraint_kept(k, kept, r) else \
+                "; pruned: no output needs it or its states"
+            lines.append(f"  {k.junction}: {k.kind} ({how}), corrector {k.corrector}{gains}"
+                         f"{pruned}")
             if k.phi is not None:
                 lines.append(f"    Phi = {_s(k.phi)}")
             lines.append(f"    {'dPhi/dt' if k.kind == 'holonomic' else 'Phi'} = {_s(k.balance)}")
     lines.append(f"warnings: {len(r.warnings)}")
     return "\n".join(lines) + "\n"
+
+
+def _constraint_kept(k, kept_states, reduced) -> bool:
+    """Whether the constraint's multiplier is computed: some step or block defines it."""
+    for step in reduced.steps:
+        if isinstance(step, Block):
+            if k.multiplier in step.unknowns or any(a.target == k.multiplier
+                                                    for a in step.body):
+                return True
+        elif step.target == k.multiplier:
+            return True
+    return False
 
 
 def _causality_lines(g, cg) -> list[str]:
@@ -158,3 +298,46 @@ def equations_latex(compiled) -> str:
 
 def _tex_name(name: str) -> str:
     return r"\mathrm{" + name.replace("_", r"\_") + "}"
+
+
+# ---------------------------------------------------------------- bgc scenes
+
+
+def _text_of(expr, lines) -> str:
+    """An expression as the model wrote it (one line), else as bgc reads it."""
+    sp_ = expr.span
+    if sp_ is not None and sp_.origin is None and sp_.line == sp_.end_line \
+            and 1 <= sp_.line <= len(lines):
+        return lines[sp_.line - 1][sp_.col - 1:sp_.end_col - 1]
+    return _s(expr.value)
+
+
+def scenes_report(graph, source: str) -> str:
+    lines = source.splitlines()
+    known = model_effects(graph.elements)
+    n = len(graph.scenes)
+    out = [f"model {graph.name}: {n} scene{'s' * (n != 1)}; effects: "
+           f"{', '.join(known) or 'none'}"]
+    out.append("default scene (no --scene): every effect, every state an output, "
+               "time 0 .. 10 every 0.01")
+    for sc in graph.scenes:
+        out.append(f"scene {sc.name}" + (f": {sc.doc}" if sc.doc else ""))
+        if sc.effects is None:
+            out.append("  effects: all")
+        else:
+            left = [e for e in known if e not in sc.effects]
+            out.append(f"  effects: {', '.join(sc.effects) or 'none'}"
+                       + (f" (left out: {', '.join(left)})" if left else ""))
+        out.append("  outputs: " + (", ".join(r.text for r in sc.outputs) if sc.outputs
+                                    else "every state"))
+        if sc.time is not None:
+            start, stop, every = sc.time
+            out.append(f"  time {_text_of(start, lines)} .. {_text_of(stop, lines)}"
+                       + (f" every {_text_of(every, lines)}" if every is not None else ""))
+        if sc.solver is not None:
+            name, opts, _ = sc.solver
+            args = ", ".join(f"{k} = {_text_of(v, lines)}" for k, v in opts)
+            out.append(f"  solver {name}" + (f"({args})" if args else ""))
+        for pname, expr, _ in sc.sets:
+            out.append(f"  set {pname} = {_text_of(expr, lines)}")
+    return "\n".join(out) + "\n"

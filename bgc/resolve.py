@@ -15,7 +15,7 @@ import sympy as sp
 
 from . import ast
 from .diagnostics import Collector, ModelError, Note, Span, fail
-from .graph import (TIME, Bond, Constraint, Element, Expr, Graph, Parameter, Scene, Signal,
+from .graph import (TIME, check_effect_names, model_effects, Bond, Constraint, Element, Expr, Graph, Parameter, Scene, Signal,
                     check_ports, part_name, var, variable_name)
 from .kinds import KINDS
 
@@ -571,8 +571,9 @@ def _bonds(model, elements, params, signals, diags: Collector):
     return bonds
 
 
-def _scene(d: ast.SceneDecl, scope: _Scope, diags: Collector) -> Scene:
+def _scene(d: ast.SceneDecl, scope: _Scope, known_effects, diags: Collector) -> Scene:
     effects = effects_span = outputs = time = solver = None
+    effect_spans = ()
     sets = []
     scope.params_only = True
     try:
@@ -580,6 +581,9 @@ def _scene(d: ast.SceneDecl, scope: _Scope, diags: Collector) -> Scene:
             if isinstance(s, ast.SceneEffects):
                 effects = () if s.names is None else tuple(n.name for n in s.names)
                 effects_span = s.span
+                effect_spans = () if s.names is None else tuple(n.span for n in s.names)
+                check_effect_names(effects, effect_spans, known_effects, diags,
+                                   f"scene '{d.name.name}'")
             elif isinstance(s, ast.SceneOutputs):
                 outputs = s.refs
             elif isinstance(s, ast.SceneTime):
@@ -596,7 +600,7 @@ def _scene(d: ast.SceneDecl, scope: _Scope, diags: Collector) -> Scene:
     finally:
         scope.params_only = False
     return Scene(d.name.name, d.doc, effects, effects_span, outputs, time, solver, tuple(sets),
-                 d.span)
+                 d.span, effect_spans)
 
 
 def resolve(model: ast.Model) -> Graph:
@@ -611,13 +615,14 @@ def resolve(model: ast.Model) -> Graph:
     bonds = _bonds(model, elements, params, signals, diags)
     check_ports(els, bonds, diags)
     scenes, scene_names = [], {}
+    known_effects = model_effects(els)
     for d in (d for d in model.decls if isinstance(d, ast.SceneDecl)):
         if d.name.name in scene_names:
             diags.error(d.name.span, f"scene '{d.name.name}' is declared twice",
                         Note(scene_names[d.name.name], "first declaration"))
             continue
         scene_names[d.name.name] = d.name.span
-        sc = _guard(diags, _scene, d, scope, diags)
+        sc = _guard(diags, _scene, d, scope, known_effects, diags)
         if sc:
             scenes.append(sc)
     diags.raise_if_errors()

@@ -8,8 +8,8 @@ from dataclasses import dataclass, replace
 import sympy as sp
 
 from . import solvers
-from .diagnostics import Collector, Note, fail
-from .graph import Expr, Graph, check_ports, var
+from .diagnostics import Collector, Note, did_you_mean, fail
+from .graph import Expr, Graph, check_effect_names, check_ports, model_effects, var
 
 SOLVER_OPTIONS = ("rtol", "atol", "step")
 DEFAULT_TIME = (0.0, 10.0, 0.01)
@@ -28,6 +28,20 @@ class Settings:
     atol: float
     step: float | None
     sets: tuple[tuple[str, Expr], ...]  # parameter default overrides
+    given: tuple[str, ...] = ()  # what was given outside the model: "effects", "outputs"
+    effects: tuple[str, ...] | None = None  # the effects in (None: all)
+    left_out: tuple[tuple[str, str], ...] = ()  # (declared name, why) of what effects left out
+
+
+@dataclass(frozen=True)
+class Override:
+    """A scene made on the fly (`--outputs`, `--effects`, or the API's outputs=, effects=):
+    what it gives replaces the named scene's (or the default scene's) outputs or effects.
+    outputs: OutRefs; effects: an ast.SceneEffects (names None: `none`); None: not given.
+    Both come from bgc.parser.parse_option, so their spans point into the option's text."""
+
+    outputs: tuple | None = None
+    effects: object | None = None
 
 
 @dataclass(frozen=True)
@@ -42,21 +56,61 @@ def _tagged_out(effects, chosen) -> bool:
     return chosen is not None and any(e not in chosen for e in effects)
 
 
-def _apply_effects(graph: Graph, chosen) -> Graph:
-    keep, dropped = [], {}
+def _base(name: str) -> str:
+    """The declared name of a part (`mass[1]` -> `mass`)."""
+    return name.split("[", 1)[0]
+
+
+def _apply_effects(graph: Graph, chosen) -> tuple[Graph, dict]:
+    """The graph without what the chosen effects leave out, and {declared name: why} of
+    everything left out: elements tagged with other effects (a stabilised constraint's tag
+    tags its corrector, which falls back to none); then junctions whose bonds are all gone
+    (a junction, or a constraint, on nothing); then signals that read what is left out."""
+    if chosen is None:
+        return graph, {}
+    keep, why, notes = [], {}, {}
     for el in graph.elements:
         if not _tagged_out(el.effects, chosen):
             keep.append(el)
         elif el.constraint is not None and el.constraint.corrector != "none":
-            # An effect on a stabilised constraint tags its corrector, which falls back to none.
             c = replace(el.constraint, corrector="none", gains=())
             keep.append(replace(el, constraint=c, effects=()))
         else:
-            dropped[el.name] = el
-    bonds = tuple(b for b in graph.bonds if b.src not in dropped and b.dst not in dropped)
-    g = replace(graph, elements=tuple(keep), bonds=bonds)
-    _check_references(g, dropped)
-    return g
+            base = _base(el.name)
+            why[base] = "tagged " + " ".join("@" + e for e in el.effects)
+            notes[base] = el.name_span
+    gone = {el.name for el in graph.elements} - {el.name for el in keep}
+    bonds = tuple(b for b in graph.bonds if b.src not in gone and b.dst not in gone)
+    had = {n for b in graph.bonds for n in (b.src, b.dst)}
+    has = {n for b in bonds for n in (b.src, b.dst)}
+    emptied = [el for el in keep if el.is_junction and el.name in had and el.name not in has]
+    for el in emptied:
+        why.setdefault(_base(el.name), "its bonds are all left out")
+        notes.setdefault(_base(el.name), el.name_span)
+    keep = [el for el in keep if _base(el.name) not in why]
+    signals = _signals_kept(graph.signals, why, notes)
+    g = replace(graph, elements=tuple(keep), bonds=bonds, signals=signals)
+    _check_references(g, why, notes)
+    return g, why
+
+
+def _signals_kept(signals, why: dict, notes: dict) -> tuple:
+    """The signals that read nothing left out, directly or through other signals (a worklist
+    over who reads whom: linear in the model)."""
+    readers: dict[str, list] = {}
+    for s in signals:
+        for owner, _ in s.expr.refs:
+            readers.setdefault(owner, []).append(s)
+    todo = list(why)
+    while todo:
+        owner = todo.pop()
+        for s in readers.get(owner, ()):
+            base = _base(s.name)
+            if base not in why:
+                why[base] = f"reads '{owner}', left out"
+                notes[base] = s.span
+                todo.append(base)
+    return tuple(s for s in signals if _base(s.name) not in why)
 
 
 def _exprs_of(graph: Graph):
@@ -72,14 +126,13 @@ def _exprs_of(graph: Graph):
         yield s.expr
 
 
-def _check_references(graph: Graph, dropped):
+def _check_references(graph: Graph, why: dict, notes: dict):
     diags = Collector()
     for expr in _exprs_of(graph):
         for owner, span in expr.refs:
-            if owner in dropped:
+            if owner in why:
                 diags.error(span, f"'{owner}' is left out by this scene's effects but is used here",
-                            Note(dropped[owner].name_span, f"'{owner}' is tagged "
-                                 + " ".join("@" + e for e in dropped[owner].effects)))
+                            Note(notes[owner], f"'{owner}' is left out: {why[owner]}"))
     check_ports(graph.elements, graph.bonds, diags)
     diags.raise_if_errors()
 
@@ -143,22 +196,40 @@ def _check_laws(graph: Graph, params: dict):
     diags.raise_if_errors()
 
 
-def apply_scene(graph: Graph, name: str | None) -> Scenario:
-    """The graph as scene `name` sees it (None: the default scene, all effects, every state)."""
-    if name is None:
-        t0, t1, dt = DEFAULT_TIME
-        solver, rtol, atol = DEFAULT_SOLVER
-        _check_laws(graph, parameter_values(graph))
-        return Scenario(graph, Settings(None, None, t0, t1, dt, solver, rtol, atol, None, ()))
-    scene = next((s for s in graph.scenes if s.name == name), None)
-    if scene is None:
-        known = ", ".join(s.name for s in graph.scenes) or "none"
-        fail(None, f"no scene named '{name}' in model '{graph.name}' (scenes: {known})")
-    g = _apply_effects(graph, scene.effects)
-    params = parameter_values(g, tuple((n, e) for n, e, _ in scene.sets))
+def _effects(graph: Graph, scene, override) -> tuple[str, ...] | None:
+    effects = scene.effects if scene is not None else None
+    if override is not None and override.effects is not None:
+        given = override.effects
+        names = () if given.names is None else tuple(n.name for n in given.names)
+        diags = Collector()
+        check_effect_names(names, [n.span for n in given.names or ()],
+                           model_effects(graph.elements), diags, given.span.origin.name
+                           if given.span.origin else "the given effects")
+        diags.raise_if_errors()
+        effects = names
+    return effects
+
+
+def apply_scene(graph: Graph, name: str | None, override: Override | None = None) -> Scenario:
+    """The graph as scene `name` sees it (None: the default scene, all effects, every state),
+    with the outputs and effects of `override` in place of the scene's when it gives them."""
+    scene = None
+    if name is not None:
+        scene = next((s for s in graph.scenes if s.name == name), None)
+        if scene is None:
+            known = ", ".join(s.name for s in graph.scenes) or "none"
+            fail(None, f"no scene named '{name}' in model '{graph.name}'"
+                       f"{did_you_mean(name, [s.name for s in graph.scenes])} (scenes: {known})")
+    given = tuple(k for k in ("effects", "outputs")
+                  if override is not None and getattr(override, k) is not None)
+    effects = _effects(graph, scene, override)
+    outputs = override.outputs if "outputs" in given else (scene.outputs if scene else None)
+    g, left_out = _apply_effects(graph, effects)
+    sets = tuple((n, e) for n, e, _ in scene.sets) if scene else ()
+    params = parameter_values(g, sets)
     _check_laws(g, params)
     t0, t1, dt = DEFAULT_TIME
-    if scene.time is not None:
+    if scene is not None and scene.time is not None:
         t0, t1 = _number(scene.time[0], params), _number(scene.time[1], params)
         if scene.time[2] is not None:
             dt = _number(scene.time[2], params)
@@ -168,7 +239,6 @@ def apply_scene(graph: Graph, name: str | None) -> Scenario:
             fail(scene.time[2].span, "the output interval must be positive")
         if scene.time[2] is None:
             dt = (t1 - t0) / 1000
-    solver, rtol, atol, step = _solver(scene.solver, params)
-    sets = tuple((n, e) for n, e, _ in scene.sets)
-    return Scenario(g, Settings(scene.name, scene.outputs, t0, t1, dt, solver, rtol, atol, step,
-                                sets))
+    solver, rtol, atol, step = _solver(scene.solver if scene else None, params)
+    return Scenario(g, Settings(name, outputs, t0, t1, dt, solver, rtol, atol, step, sets, given,
+                                effects, tuple(left_out.items())))

@@ -1,7 +1,7 @@
 """The references of benchmarks/solvers.py and the models it runs, no timing: the RC pair's
 closed form against expm and SciPy, the right sides the baselines use against the generated
 modules', and models/rc_pair.bg and models/van_der_pol.bg simulated by bgc (Python backend,
-rodas4) against the closed form and SciPy's Radau."""
+rodas4) against the closed form and SciPy's Radau.  And benchmarks/scenes.py's counts."""
 import importlib.util
 import sys
 from pathlib import Path
@@ -16,9 +16,9 @@ pytest.importorskip("scipy")
 ROOT = Path(__file__).resolve().parent.parent
 
 
-def _benchmark():
-    spec = importlib.util.spec_from_file_location("bench_solvers",
-                                                  ROOT / "benchmarks" / "solvers.py")
+def _benchmark(name="solvers"):
+    spec = importlib.util.spec_from_file_location(f"bench_{name}",
+                                                  ROOT / "benchmarks" / f"{name}.py")
     module = importlib.util.module_from_spec(spec)
     sys.modules[spec.name] = module  # for its dataclasses
     spec.loader.exec_module(module)
@@ -83,3 +83,19 @@ def test_van_der_pol_model_matches_radau():
     ref = solve_ivp(f, (0.0, 2.0), y0, method="Radau", jac=jac, t_eval=t, rtol=1e-9, atol=1e-9)
     assert ref.success and ref.y[0].min() < -1.9  # through the jump
     assert np.all(_scaled_error(Y, ref.y.T) < 1e-5), _scaled_error(Y, ref.y.T)
+
+
+def test_scenes_benchmark_counts_the_generated_programs():
+    """benchmarks/scenes.py's static columns, no timing: its states are the generated modules'
+    STATES, and swing (same effects as everything) only prunes."""
+    scenes = _benchmark("scenes")
+    full, everything, swing = scenes.describe_all(ROOT / "models" / "gantry_crane.bg",
+                                                  ["everything", "swing"])
+    for row in (everything, swing):
+        assert row.states == len(_module("gantry_crane.bg", row.scene).STATES)
+    assert (full.physics, everything.physics, swing.physics) == (
+        "all effects", "-1 effect", "= everything")
+    assert everything.effects_out == swing.effects_out == ("given_drive",)
+    assert (swing.states, swing.pruned, swing.out) == (everything.states - 4, 4, 0)
+    assert 0 < swing.rhs_ops < everything.rhs_ops and 0 < swing.c_bytes < everything.c_bytes
+    assert full.multipliers == swing.multipliers == 1 and full.out_ops == 0

@@ -373,8 +373,10 @@ def test_scene_set_overrides_parameter_default():
     ("model a\nparameter k = 1\nscene s { set q = 1 }\n", "'q' is not one"),
     ("model a\nparameter k = t\n", "'t' cannot be used here"),
     ("model a\nparameter k = j\nparameter j = 1\n", "used before it is defined"),
-    ("model a\nj : 1\nm : I(1) @x\nj -> m\nsignal s = m.f\nscene n { effects none }\n",
-     "left out by this scene"),
+    ("model a\nj : 1\nm : I(1) @x\nj -> m\nsignal s = m.f\nscene n { effects none; outputs s }\n",
+     "output 's' is left out by this scene's effects"),
+    ("model a\nj : 1\nm : I(1) @x\nj -> m\nsrc : MSe(m.f)\nk : 1\nm2 : I(1)\nsrc -> k -> m2\n"
+     "scene n { effects none }\n", "'m' is left out by this scene's effects but is used here"),
 ])
 def test_located_model_errors(text, message):
     name = "n" if "scene n" in text else ("s" if "scene s" in text else None)
