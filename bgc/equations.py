@@ -470,9 +470,9 @@ def _output_expr(ref, g: Graph, states, targets, constraints, params):
     sym = var(variable_name(ref.owner, ref.field))
     if ref.field in ("e", "f", "p", "q") and (sym in states or sym in targets):
         return sym
-    have = [f for f in ("e", "f", "p", "q")
-            if var(variable_name(ref.owner, f)) in states or var(variable_name(ref.owner, f))
-            in targets] + (["lambda", "residual"] if ref.owner in constraints else [])
+    defined = states.keys() | targets
+    have = [f for f in ("e", "f", "p", "q") if var(variable_name(ref.owner, f)) in defined] + \
+        (["lambda", "residual"] if ref.owner in constraints else [])
     fail(ref.span, f"'{g.by_name[ref.owner].origin or ref.owner}' has no variable '{ref.field}'"
                    + (f" (it has: {', '.join(have)})" if have else ""))
 

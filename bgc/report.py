@@ -186,11 +186,11 @@ def check_report(compiled, summary: SceneSummary | None = None) -> str:
                          f"{kind}, {METHODS[b.method]}")
     if r.constraints:
         lines.append("constraints:")
-        kept = {st.symbol for st in r.states}
+        computed = _computed(r)
         for k in r.constraints:
             how = "detected" if k.detected else "declared"
             gains = f"({', '.join(_s(g) for g in k.gains)})" if k.gains else ""
-            pruned = "" if _constraint_kept(k, kept, r) else \
+            pruned = "" if k.multiplier in computed else \
                 "; pruned: no output needs it or its states"
             lines.append(f"  {k.junction}: {k.kind} ({how}), corrector {k.corrector}{gains}"
                          f"{pruned}")
@@ -201,16 +201,16 @@ def check_report(compiled, summary: SceneSummary | None = None) -> str:
     return "\n".join(lines) + "\n"
 
 
-def _constraint_kept(k, kept_states, reduced) -> bool:
-    """Whether the constraint's multiplier is computed: some step or block defines it."""
+def _computed(reduced) -> set:
+    """Every variable the program's steps define (blocks: their unknowns and body)."""
+    out = set()
     for step in reduced.steps:
         if isinstance(step, Block):
-            if k.multiplier in step.unknowns or any(a.target == k.multiplier
-                                                    for a in step.body):
-                return True
-        elif step.target == k.multiplier:
-            return True
-    return False
+            out.update(step.unknowns)
+            out.update(a.target for a in step.body)
+        else:
+            out.add(step.target)
+    return out
 
 
 def _causality_lines(g, cg) -> list[str]:
