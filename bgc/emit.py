@@ -235,7 +235,7 @@ def emit_c(program: Program, chunk_ops: int = ir.CHUNK_OPS) -> dict[str, str]:
     printer = CPrinter(len(program.states), fields, program.n_consts)
     ws = _workspace(program, chunk_ops)
     writer = _Writer(program, ws, printer, "c")
-    context = _common_context(program, ws, c_string_literal)
+    context = _common_context(program, ws, c_string_literal, True)
     context.update(
         param_fields=fields,
         param_defaults=[printer.doprint(p.default) for p in program.params],
@@ -257,7 +257,7 @@ def emit_python(program: Program, chunk_ops: int = ir.CHUNK_OPS) -> dict[str, st
     n, m, k = len(program.states), len(program.params), program.n_consts
     fast, ieee = PythonPrinter(n, m, n_consts=k), PythonPrinter(n, m, ieee=True, n_consts=k)
     ws = _workspace(program, chunk_ops)
-    context = _common_context(program, ws, py_string_literal)
+    context = _common_context(program, ws, py_string_literal, False)
     variants = {}
     for label, printer in (("fast", fast), ("ieee", ieee)):
         writer = _Writer(program, ws, printer, "python")
@@ -354,10 +354,101 @@ def _block_names(program: Program, limit: int = 6) -> list[str]:
     return out
 
 
+# ---------------------------------------------------------------- small blocks, unrolled
+
+UNROLL_MAX = 400  # a static plan of at most this many entries + updates is unrolled
+
+
+def _unrolled_lu(k: int, lu, area: _BlockArea, c: bool) -> dict | None:
+    """Block k's static LU and its solve as straight-line code (C or Python), or None when the
+    plan is dense or long (the runtime's loops over the plan then do it).  The same floating-
+    point operations in the same order as the runtime's bgc_lu_static and _solve (so the
+    results are the same to the bit), without the loops' index lookups: for the small blocks
+    of constrained mechanisms those cost more than the arithmetic.  factor(v): 0 / True, or
+    1 / False when a pivot fails its test (the runtime then factors densely); lsolve(v, b):
+    b := A^-1 b with the factors at v."""
+    if lu.dense or lu.m == 0 or lu.nnz + len(lu.upd) + len(lu.lpos) > UNROLL_MAX:
+        return None
+    semi = ";" if c else ""
+    L, S = area.lu, area.save
+
+    def at(q):
+        return f"v[{L + q}]"
+
+    def fabs(e):
+        return f"fabs({e})" if c else f"abs({e})"
+
+    def largest(terms):  # the runtime's fold: bgc_max(...bgc_max(start, t0)..., tn)
+        if len(terms) == 1:
+            return terms[0]
+        if c:
+            text = terms[0]
+            for t in terms[1:]:
+                text = f"bgc_max({text}, {t})"
+            return text
+        return f"max({', '.join(terms)})"
+
+    factor, decl = [], []
+    rows: list[list[int]] = [[] for _ in range(lu.m)]
+    for q, i in enumerate(lu.prow):
+        rows[i].append(q)
+    for i, qs in enumerate(rows):
+        factor.append(_decl(c, f"s{i}", largest(["0.0"] + [fabs(f"v[{S + q}]") for q in qs])))
+    if c:
+        factor += [f"v[{L + q}] = v[{S + q}];" for q in range(lu.nnz)]
+    else:
+        factor.append(f"v[{L}:{L + lu.nnz}] = v[{S}:{S + lu.nnz}]")
+    fail = "return 1;" if c else "return False"
+    finite = "isfinite" if c else "math.isfinite"
+    if lu.symmetric:
+        factor.append(_decl(c, "sign", f"-1.0 if {at(lu.diag[0])} < 0.0 else 1.0" if not c
+                            else f"{at(lu.diag[0])} < 0.0 ? -1.0 : 1.0"))
+    q = 0
+    for kk in range(lu.m):
+        pivot = at(lu.diag[kk])
+        below = range(lu.lptr[kk], lu.lptr[kk + 1])
+        if lu.symmetric:
+            test = f"sign * {pivot} > 1e-14 * s{kk}"
+        elif below:  # (with nothing below, the threshold test holds for every finite pivot)
+            big = largest([fabs(pivot)] + [fabs(at(lu.lpos[l])) for l in below])
+            test = (f"{fabs(pivot)} >= 0.1 * {big} {'&&' if c else 'and'} "
+                    f"{fabs(pivot)} > 1e-14 * s{kk}")
+        else:
+            test = f"{fabs(pivot)} > 1e-14 * s{kk}"
+        if c:
+            factor += [f"if (!({test}) || !isfinite({pivot}))", f"    {fail}"]
+        else:
+            factor += [f"if not ({test}) or not {finite}({pivot}):", f"    {fail}"]
+        for l in below:
+            target = at(lu.lpos[l])
+            factor.append(f"{target} = {target} / {pivot}{semi}")
+            for u in range(lu.uptr[kk], lu.uptr[kk + 1]):
+                factor.append(f"{at(lu.upd[q])} -= {target} * {at(lu.upos[u])}{semi}")
+                q += 1
+    factor.append("return 0;" if c else "return True")
+    solve = []
+    x = (lambda i: f"b[{i}]") if c else (lambda i: f"v[xb + {i}]")
+    for kk in range(lu.m):
+        for l in range(lu.lptr[kk], lu.lptr[kk + 1]):
+            solve.append(f"{x(lu.lrow[l])} -= {at(lu.lpos[l])} * {x(kk)}{semi}")
+    for kk in reversed(range(lu.m)):
+        terms = "".join(f" - {at(lu.upos[u])} * {x(lu.ucol[u])}"
+                        for u in range(lu.uptr[kk], lu.uptr[kk + 1]))
+        value = f"({x(kk)}{terms}) / {at(lu.diag[kk])}" if terms else f"{x(kk)} / {at(lu.diag[kk])}"
+        solve.append(f"{x(kk)} = {value}{semi}")
+    prefix = "bgc_" if c else "_"
+    return {"factor": f"{prefix}block{k}_factor", "lsolve": f"{prefix}block{k}_lsolve",
+            "factor_lines": factor, "lsolve_lines": solve}
+
+
+def _decl(c: bool, name: str, value: str) -> str:
+    return f"const double {name} = {value};" if c else f"{name} = {value}"
+
+
 # ---------------------------------------------------------------- context
 
 
-def _common_context(program: Program, ws: _Workspace, literal) -> dict:
+def _common_context(program: Program, ws: _Workspace, literal, c: bool) -> dict:
     jac = program.jacobian
     color_ptr, color_cols, col_ptr, col_rows = [0], [], [0], []
     for cols in jac.colors:
@@ -377,9 +468,14 @@ def _common_context(program: Program, ws: _Workspace, literal) -> dict:
         fields = [str(lu.m), str(int(lu.dense)), str(int(lu.symmetric)), str(lu.nnz)] + pointers
         offsets = [area.save, area.lu, area.dense, area.b, area.scale, area.z, area.r, area.zt,
                    area.rt, area.piv, area.how]
+        unrolled = _unrolled_lu(k, lu, area, c)
+        functions = [unrolled["factor"], unrolled["lsolve"]] if unrolled else \
+            (["NULL", "NULL"] if c else ["None", "None"])
         blocks.append({
             "flat": _list(flat),
-            "init": "{ { " + ", ".join(fields) + " }, " + ", ".join(map(str, offsets)) + " }",
+            "init": "{ { " + ", ".join(fields) + " }, " + ", ".join(map(str, offsets))
+                    + ", " + ", ".join(functions) + " }",
+            "unrolled": unrolled, "functions": functions,
             "m": lu.m, "dense": lu.dense, "symmetric": lu.symmetric, "nnz": lu.nnz,
             "offsets": offsets,
             "arrays": {key: list(getattr(lu, key)) for key in PLAN_ARRAYS},

@@ -167,6 +167,10 @@ typedef struct bgc_block {
     bgc_lu_plan lu;
     int save, lu_off, dense, b, scale, z, r, zt, rt;
     int piv, how;
+    /* A small static plan unrolled in the model part (else NULL): factor(w->v) does what
+       bgc_lu_static does on the matrix at .save, 0 or 1; lsolve(w->v, b) the solve. */
+    int (*factor)(double *v);
+    void (*lsolve)(const double *v, double *b);
 } bgc_block;
 /* A Newton block's residuals r at z (and, if J is not NULL, its Jacobian at the positions of
    the block's plan); nonzero if a block inside failed. */

@@ -173,20 +173,27 @@ static void bgc_lu_static_solve(const bgc_lu_plan *pl, const double *lu, double 
     }
 }
 
-/* Factors block k's matrix (assembled at .save): the static order, else densely with
-   partial pivoting.  Records which in .how; -1 if the matrix is singular. */
+/* Factors block k's matrix (assembled at .save): the static order (unrolled in the model
+   part when the plan is small), else densely with partial pivoting.  Records which in .how;
+   -1 if the matrix is singular. */
 static int bgc_block_factor(bgc_work *w, const bgc_block *b)
 {
     const bgc_lu_plan *pl = &b->lu;
     double *save = w->v + b->save, *lu = w->v + b->lu_off, *dense = w->v + b->dense;
     double *scale = w->v + b->scale;
     int *piv = w->iv + b->piv, q, how = 0;
+    if (b->factor && b->factor(w->v) == 0) {
+        w->iv[b->how] = 0;
+        return 0;
+    }
     bgc_row_scales(pl, save, scale);
     if (!pl->dense) {
-        memcpy(lu, save, (size_t)pl->nnz * sizeof *lu);
-        if (bgc_lu_static(pl, lu, scale) == 0) {
-            w->iv[b->how] = 0;
-            return 0;
+        if (!b->factor) {
+            memcpy(lu, save, (size_t)pl->nnz * sizeof *lu);
+            if (bgc_lu_static(pl, lu, scale) == 0) {
+                w->iv[b->how] = 0;
+                return 0;
+            }
         }
         for (q = 0; q < pl->m * pl->m; q++)
             dense[q] = 0.0;
@@ -203,7 +210,9 @@ static int bgc_block_factor(bgc_work *w, const bgc_block *b)
 
 static void bgc_block_lsolve(bgc_work *w, const bgc_block *b, double *rhs)
 {
-    if (w->iv[b->how] == 0)
+    if (w->iv[b->how] == 0 && b->lsolve)
+        b->lsolve(w->v, rhs);
+    else if (w->iv[b->how] == 0)
         bgc_lu_static_solve(&b->lu, w->v + b->lu_off, rhs);
     else
         bgc_lu_dense_solve(b->lu.m, w->v + b->dense, w->iv + b->piv, rhs);

@@ -50,6 +50,30 @@ _EPS = sys.float_info.epsilon
 _WORK_DOUBLES = 180
 _WORK_INTS = 3
 _BLOCK_NAMES = ["wheel.lambda, axle.lambda"]
+
+
+def _block0_factor(v):
+    """Block 0's LU in its plan's static order, unrolled: False if a pivot fails its test."""
+    s0 = max(0.0, abs(v[156]), abs(v[157]))
+    s1 = max(0.0, abs(v[158]), abs(v[159]))
+    v[160:164] = v[156:160]
+    sign = -1.0 if v[160] < 0.0 else 1.0
+    if not (sign * v[160] > 1e-14 * s0) or not math.isfinite(v[160]):
+        return False
+    v[162] = v[162] / v[160]
+    v[163] -= v[162] * v[161]
+    if not (sign * v[163] > 1e-14 * s1) or not math.isfinite(v[163]):
+        return False
+    return True
+
+
+def _block0_lsolve(v, xb):
+    """v[xb:xb + m] := A^-1 v[xb:xb + m] with the factors _block0_factor left in v."""
+    v[xb + 1] -= v[162] * v[xb + 0]
+    v[xb + 1] = v[xb + 1] / v[163]
+    v[xb + 0] = (v[xb + 0] - v[161] * v[xb + 1]) / v[160]
+
+
 # Per algebraic block: its factorization plan (bgc/sparse.py) and its storage in the workspace.
 _BLOCKS = [
     (2, False, True, 4,
@@ -63,7 +87,7 @@ _BLOCKS = [
      (3,),  # upd
      (0, 0, 1, 1),  # prow
      (0, 1, 0, 1),  # pcol
-     156, 160, 164, 168, 170, 172, 174, 176, 178, 0, 2),
+     156, 160, 164, 168, 170, 172, 174, 176, 178, 0, 2, _block0_factor, _block0_lsolve),
 ]
 # The Jacobian's structure: the columns of each colour, the rows of each column.
 _JAC_COLORS = [(0,), (1,), (2,), (3,), (4,), (5,), (6,), (7,)]

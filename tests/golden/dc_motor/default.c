@@ -180,7 +180,7 @@ static const int bgc_velocity_movable[BGC_DIM(BGC_NUM_STATES)] = { 1, 1, 1 };
 
 /* The algebraic blocks solved here: factorization plans (bgc/sparse.py) and storage. */
 static const bgc_block bgc_blocks[BGC_DIM(BGC_NUM_BLOCKS)] = {
-    { { 0, 0, 0, 0, NULL, NULL, NULL, NULL, NULL, NULL, NULL, NULL, NULL, NULL }, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0 }
+    { { 0, 0, 0, 0, NULL, NULL, NULL, NULL, NULL, NULL, NULL, NULL, NULL, NULL }, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, NULL, NULL }
 };
 
 /* The Jacobian's structure: the columns of each colour (evaluated by one bgc_jvp), and the

@@ -155,8 +155,25 @@ static const int bgc_velocity_movable[BGC_DIM(BGC_NUM_STATES)] = { 1 };
 
 /* The algebraic blocks solved here: factorization plans (bgc/sparse.py) and storage. */
 static const int bgc_block0_plan[] = { 0, 0, 0, 0, 0, 0, 0 };
+
+/* Block 0's LU in its plan's static order, unrolled: 0, or 1 if a pivot fails its test. */
+static int bgc_block0_factor(double *v)
+{
+    const double s0 = bgc_max(0.0, fabs(v[26]));
+    v[27] = v[26];
+    if (!(fabs(v[27]) > 1e-14 * s0) || !isfinite(v[27]))
+        return 1;
+    return 0;
+}
+
+/* b := A^-1 b with the factors bgc_block0_factor left in v. */
+static void bgc_block0_lsolve(const double *v, double *b)
+{
+    b[0] = b[0] / v[27];
+}
+
 static const bgc_block bgc_blocks[BGC_DIM(BGC_NUM_BLOCKS)] = {
-    { { 1, 0, 0, 1, bgc_block0_plan + 0, bgc_block0_plan + 1, NULL, NULL, bgc_block0_plan + 3, NULL, NULL, NULL, bgc_block0_plan + 5, bgc_block0_plan + 6 }, 26, 27, 28, 29, 30, 31, 32, 33, 34, 0, 1 },
+    { { 1, 0, 0, 1, bgc_block0_plan + 0, bgc_block0_plan + 1, NULL, NULL, bgc_block0_plan + 3, NULL, NULL, NULL, bgc_block0_plan + 5, bgc_block0_plan + 6 }, 26, 27, 28, 29, 30, 31, 32, 33, 34, 0, 1, bgc_block0_factor, bgc_block0_lsolve },
 };
 
 /* The Jacobian's structure: the columns of each colour (evaluated by one bgc_jvp), and the

@@ -50,6 +50,22 @@ _EPS = sys.float_info.epsilon
 _WORK_DOUBLES = 33
 _WORK_INTS = 2
 _BLOCK_NAMES = ["e[loop->d1]"]
+
+
+def _block0_factor(v):
+    """Block 0's LU in its plan's static order, unrolled: False if a pivot fails its test."""
+    s0 = max(0.0, abs(v[24]))
+    v[25:26] = v[24:25]
+    if not (abs(v[25]) > 1e-14 * s0) or not math.isfinite(v[25]):
+        return False
+    return True
+
+
+def _block0_lsolve(v, xb):
+    """v[xb:xb + m] := A^-1 v[xb:xb + m] with the factors _block0_factor left in v."""
+    v[xb + 0] = v[xb + 0] / v[25]
+
+
 # Per algebraic block: its factorization plan (bgc/sparse.py) and its storage in the workspace.
 _BLOCKS = [
     (1, False, False, 1,
@@ -63,7 +79,7 @@ _BLOCKS = [
      (),  # upd
      (0,),  # prow
      (0,),  # pcol
-     24, 25, 26, 27, 28, 29, 30, 31, 32, 0, 1),
+     24, 25, 26, 27, 28, 29, 30, 31, 32, 0, 1, _block0_factor, _block0_lsolve),
 ]
 # The Jacobian's structure: the columns of each colour, the rows of each column.
 _JAC_COLORS = [(0,)]

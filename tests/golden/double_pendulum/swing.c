@@ -211,8 +211,36 @@ static const int bgc_velocity_movable[BGC_DIM(BGC_NUM_STATES)] = { 1, 1, 1, 1, 0
 
 /* The algebraic blocks solved here: factorization plans (bgc/sparse.py) and storage. */
 static const int bgc_block0_plan[] = { 0, 3, 0, 1, 1, 2, 1, 0, 1, 1, 1, 1, 3, 0, 0, 1, 1, 0, 1, 0, 1 };
+
+/* Block 0's LU in its plan's static order, unrolled: 0, or 1 if a pivot fails its test. */
+static int bgc_block0_factor(double *v)
+{
+    const double s0 = bgc_max(bgc_max(0.0, fabs(v[152])), fabs(v[153]));
+    const double s1 = bgc_max(bgc_max(0.0, fabs(v[154])), fabs(v[155]));
+    v[156] = v[152];
+    v[157] = v[153];
+    v[158] = v[154];
+    v[159] = v[155];
+    const double sign = v[156] < 0.0 ? -1.0 : 1.0;
+    if (!(sign * v[156] > 1e-14 * s0) || !isfinite(v[156]))
+        return 1;
+    v[158] = v[158] / v[156];
+    v[159] -= v[158] * v[157];
+    if (!(sign * v[159] > 1e-14 * s1) || !isfinite(v[159]))
+        return 1;
+    return 0;
+}
+
+/* b := A^-1 b with the factors bgc_block0_factor left in v. */
+static void bgc_block0_lsolve(const double *v, double *b)
+{
+    b[1] -= v[158] * b[0];
+    b[1] = b[1] / v[159];
+    b[0] = (b[0] - v[157] * b[1]) / v[156];
+}
+
 static const bgc_block bgc_blocks[BGC_DIM(BGC_NUM_BLOCKS)] = {
-    { { 2, 0, 1, 4, bgc_block0_plan + 0, bgc_block0_plan + 2, bgc_block0_plan + 5, bgc_block0_plan + 6, bgc_block0_plan + 7, bgc_block0_plan + 10, bgc_block0_plan + 11, bgc_block0_plan + 12, bgc_block0_plan + 13, bgc_block0_plan + 17 }, 152, 156, 160, 164, 166, 168, 170, 172, 174, 0, 2 },
+    { { 2, 0, 1, 4, bgc_block0_plan + 0, bgc_block0_plan + 2, bgc_block0_plan + 5, bgc_block0_plan + 6, bgc_block0_plan + 7, bgc_block0_plan + 10, bgc_block0_plan + 11, bgc_block0_plan + 12, bgc_block0_plan + 13, bgc_block0_plan + 17 }, 152, 156, 160, 164, 166, 168, 170, 172, 174, 0, 2, bgc_block0_factor, bgc_block0_lsolve },
 };
 
 /* The Jacobian's structure: the columns of each colour (evaluated by one bgc_jvp), and the

@@ -50,6 +50,30 @@ _EPS = sys.float_info.epsilon
 _WORK_DOUBLES = 176
 _WORK_INTS = 3
 _BLOCK_NAMES = ["rods.lambda[0], rods.lambda[1]"]
+
+
+def _block0_factor(v):
+    """Block 0's LU in its plan's static order, unrolled: False if a pivot fails its test."""
+    s0 = max(0.0, abs(v[152]), abs(v[153]))
+    s1 = max(0.0, abs(v[154]), abs(v[155]))
+    v[156:160] = v[152:156]
+    sign = -1.0 if v[156] < 0.0 else 1.0
+    if not (sign * v[156] > 1e-14 * s0) or not math.isfinite(v[156]):
+        return False
+    v[158] = v[158] / v[156]
+    v[159] -= v[158] * v[157]
+    if not (sign * v[159] > 1e-14 * s1) or not math.isfinite(v[159]):
+        return False
+    return True
+
+
+def _block0_lsolve(v, xb):
+    """v[xb:xb + m] := A^-1 v[xb:xb + m] with the factors _block0_factor left in v."""
+    v[xb + 1] -= v[158] * v[xb + 0]
+    v[xb + 1] = v[xb + 1] / v[159]
+    v[xb + 0] = (v[xb + 0] - v[157] * v[xb + 1]) / v[156]
+
+
 # Per algebraic block: its factorization plan (bgc/sparse.py) and its storage in the workspace.
 _BLOCKS = [
     (2, False, True, 4,
@@ -63,7 +87,7 @@ _BLOCKS = [
      (3,),  # upd
      (0, 0, 1, 1),  # prow
      (0, 1, 0, 1),  # pcol
-     152, 156, 160, 164, 166, 168, 170, 172, 174, 0, 2),
+     152, 156, 160, 164, 166, 168, 170, 172, 174, 0, 2, _block0_factor, _block0_lsolve),
 ]
 # The Jacobian's structure: the columns of each colour, the rows of each column.
 _JAC_COLORS = [(0,), (1,), (2,), (3,), (4,), (5,), (6,), (7,)]

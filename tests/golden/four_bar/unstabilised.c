@@ -281,8 +281,46 @@ static const int bgc_velocity_movable[BGC_DIM(BGC_NUM_STATES)] = { 1, 1, 1, 1, 0
 
 /* The algebraic blocks solved here: factorization plans (bgc/sparse.py) and storage. */
 static const int bgc_block0_plan[] = { 0, 3, 6, 0, 1, 2, 2, 2, 5, 1, 2, 0, 1, 2, 2, 1, 4, 1, 2, 3, 6, 0, 0, 1, 1, 1, 2, 2, 0, 1, 0, 1, 2, 1, 2 };
+
+/* Block 0's LU in its plan's static order, unrolled: 0, or 1 if a pivot fails its test. */
+static int bgc_block0_factor(double *v)
+{
+    const double s0 = bgc_max(bgc_max(0.0, fabs(v[155])), fabs(v[156]));
+    const double s1 = bgc_max(bgc_max(bgc_max(0.0, fabs(v[157])), fabs(v[158])), fabs(v[159]));
+    const double s2 = bgc_max(bgc_max(0.0, fabs(v[160])), fabs(v[161]));
+    v[162] = v[155];
+    v[163] = v[156];
+    v[164] = v[157];
+    v[165] = v[158];
+    v[166] = v[159];
+    v[167] = v[160];
+    v[168] = v[161];
+    const double sign = v[162] < 0.0 ? -1.0 : 1.0;
+    if (!(sign * v[162] > 1e-14 * s0) || !isfinite(v[162]))
+        return 1;
+    v[164] = v[164] / v[162];
+    v[165] -= v[164] * v[163];
+    if (!(sign * v[165] > 1e-14 * s1) || !isfinite(v[165]))
+        return 1;
+    v[167] = v[167] / v[165];
+    v[168] -= v[167] * v[166];
+    if (!(sign * v[168] > 1e-14 * s2) || !isfinite(v[168]))
+        return 1;
+    return 0;
+}
+
+/* b := A^-1 b with the factors bgc_block0_factor left in v. */
+static void bgc_block0_lsolve(const double *v, double *b)
+{
+    b[1] -= v[164] * b[0];
+    b[2] -= v[167] * b[1];
+    b[2] = b[2] / v[168];
+    b[1] = (b[1] - v[166] * b[2]) / v[165];
+    b[0] = (b[0] - v[163] * b[1]) / v[162];
+}
+
 static const bgc_block bgc_blocks[BGC_DIM(BGC_NUM_BLOCKS)] = {
-    { { 3, 0, 1, 7, bgc_block0_plan + 0, bgc_block0_plan + 3, bgc_block0_plan + 7, bgc_block0_plan + 9, bgc_block0_plan + 11, bgc_block0_plan + 15, bgc_block0_plan + 17, bgc_block0_plan + 19, bgc_block0_plan + 21, bgc_block0_plan + 28 }, 155, 162, 169, 178, 181, 184, 187, 190, 193, 0, 3 },
+    { { 3, 0, 1, 7, bgc_block0_plan + 0, bgc_block0_plan + 3, bgc_block0_plan + 7, bgc_block0_plan + 9, bgc_block0_plan + 11, bgc_block0_plan + 15, bgc_block0_plan + 17, bgc_block0_plan + 19, bgc_block0_plan + 21, bgc_block0_plan + 28 }, 155, 162, 169, 178, 181, 184, 187, 190, 193, 0, 3, bgc_block0_factor, bgc_block0_lsolve },
 };
 
 /* The Jacobian's structure: the columns of each colour (evaluated by one bgc_jvp), and the

@@ -50,6 +50,37 @@ _EPS = sys.float_info.epsilon
 _WORK_DOUBLES = 196
 _WORK_INTS = 4
 _BLOCK_NAMES = ["rods.lambda[0], rods.lambda[1], rods.lambda[2]"]
+
+
+def _block0_factor(v):
+    """Block 0's LU in its plan's static order, unrolled: False if a pivot fails its test."""
+    s0 = max(0.0, abs(v[155]), abs(v[156]))
+    s1 = max(0.0, abs(v[157]), abs(v[158]), abs(v[159]))
+    s2 = max(0.0, abs(v[160]), abs(v[161]))
+    v[162:169] = v[155:162]
+    sign = -1.0 if v[162] < 0.0 else 1.0
+    if not (sign * v[162] > 1e-14 * s0) or not math.isfinite(v[162]):
+        return False
+    v[164] = v[164] / v[162]
+    v[165] -= v[164] * v[163]
+    if not (sign * v[165] > 1e-14 * s1) or not math.isfinite(v[165]):
+        return False
+    v[167] = v[167] / v[165]
+    v[168] -= v[167] * v[166]
+    if not (sign * v[168] > 1e-14 * s2) or not math.isfinite(v[168]):
+        return False
+    return True
+
+
+def _block0_lsolve(v, xb):
+    """v[xb:xb + m] := A^-1 v[xb:xb + m] with the factors _block0_factor left in v."""
+    v[xb + 1] -= v[164] * v[xb + 0]
+    v[xb + 2] -= v[167] * v[xb + 1]
+    v[xb + 2] = v[xb + 2] / v[168]
+    v[xb + 1] = (v[xb + 1] - v[166] * v[xb + 2]) / v[165]
+    v[xb + 0] = (v[xb + 0] - v[163] * v[xb + 1]) / v[162]
+
+
 # Per algebraic block: its factorization plan (bgc/sparse.py) and its storage in the workspace.
 _BLOCKS = [
     (3, False, True, 7,
@@ -63,7 +94,7 @@ _BLOCKS = [
      (3, 6),  # upd
      (0, 0, 1, 1, 1, 2, 2),  # prow
      (0, 1, 0, 1, 2, 1, 2),  # pcol
-     155, 162, 169, 178, 181, 184, 187, 190, 193, 0, 3),
+     155, 162, 169, 178, 181, 184, 187, 190, 193, 0, 3, _block0_factor, _block0_lsolve),
 ]
 # The Jacobian's structure: the columns of each colour, the rows of each column.
 _JAC_COLORS = [(0,), (1,), (2,), (3,), (4,), (5,), (6,), (7,)]

@@ -50,6 +50,29 @@ _EPS = sys.float_info.epsilon
 _WORK_DOUBLES = 233
 _WORK_INTS = 3
 _BLOCK_NAMES = ["rod.lambda, e[shaft->rotor]"]
+
+
+def _block0_factor(v):
+    """Block 0's LU in its plan's static order, unrolled: False if a pivot fails its test."""
+    s0 = max(0.0, abs(v[209]), abs(v[210]))
+    s1 = max(0.0, abs(v[211]), abs(v[212]))
+    v[213:217] = v[209:213]
+    if not (abs(v[213]) >= 0.1 * max(abs(v[213]), abs(v[215])) and abs(v[213]) > 1e-14 * s0) or not math.isfinite(v[213]):
+        return False
+    v[215] = v[215] / v[213]
+    v[216] -= v[215] * v[214]
+    if not (abs(v[216]) > 1e-14 * s1) or not math.isfinite(v[216]):
+        return False
+    return True
+
+
+def _block0_lsolve(v, xb):
+    """v[xb:xb + m] := A^-1 v[xb:xb + m] with the factors _block0_factor left in v."""
+    v[xb + 1] -= v[215] * v[xb + 0]
+    v[xb + 1] = v[xb + 1] / v[216]
+    v[xb + 0] = (v[xb + 0] - v[214] * v[xb + 1]) / v[213]
+
+
 # Per algebraic block: its factorization plan (bgc/sparse.py) and its storage in the workspace.
 _BLOCKS = [
     (2, False, False, 4,
@@ -63,7 +86,7 @@ _BLOCKS = [
      (3,),  # upd
      (0, 0, 1, 1),  # prow
      (0, 1, 0, 1),  # pcol
-     209, 213, 217, 221, 223, 225, 227, 229, 231, 0, 2),
+     209, 213, 217, 221, 223, 225, 227, 229, 231, 0, 2, _block0_factor, _block0_lsolve),
 ]
 # The Jacobian's structure: the columns of each colour, the rows of each column.
 _JAC_COLORS = [(0, 9), (1, 7, 10), (2, 8), (3,), (4,), (5,), (6,)]

@@ -306,8 +306,35 @@ static const int bgc_velocity_movable[BGC_DIM(BGC_NUM_STATES)] = { 1, 1, 1, 1, 0
 
 /* The algebraic blocks solved here: factorization plans (bgc/sparse.py) and storage. */
 static const int bgc_block0_plan[] = { 0, 3, 0, 1, 1, 2, 1, 0, 1, 1, 1, 1, 3, 0, 0, 1, 1, 0, 1, 0, 1 };
+
+/* Block 0's LU in its plan's static order, unrolled: 0, or 1 if a pivot fails its test. */
+static int bgc_block0_factor(double *v)
+{
+    const double s0 = bgc_max(bgc_max(0.0, fabs(v[207])), fabs(v[208]));
+    const double s1 = bgc_max(bgc_max(0.0, fabs(v[209])), fabs(v[210]));
+    v[211] = v[207];
+    v[212] = v[208];
+    v[213] = v[209];
+    v[214] = v[210];
+    if (!(fabs(v[211]) >= 0.1 * bgc_max(fabs(v[211]), fabs(v[213])) && fabs(v[211]) > 1e-14 * s0) || !isfinite(v[211]))
+        return 1;
+    v[213] = v[213] / v[211];
+    v[214] -= v[213] * v[212];
+    if (!(fabs(v[214]) > 1e-14 * s1) || !isfinite(v[214]))
+        return 1;
+    return 0;
+}
+
+/* b := A^-1 b with the factors bgc_block0_factor left in v. */
+static void bgc_block0_lsolve(const double *v, double *b)
+{
+    b[1] -= v[213] * b[0];
+    b[1] = b[1] / v[214];
+    b[0] = (b[0] - v[212] * b[1]) / v[211];
+}
+
 static const bgc_block bgc_blocks[BGC_DIM(BGC_NUM_BLOCKS)] = {
-    { { 2, 0, 0, 4, bgc_block0_plan + 0, bgc_block0_plan + 2, bgc_block0_plan + 5, bgc_block0_plan + 6, bgc_block0_plan + 7, bgc_block0_plan + 10, bgc_block0_plan + 11, bgc_block0_plan + 12, bgc_block0_plan + 13, bgc_block0_plan + 17 }, 207, 211, 215, 219, 221, 223, 225, 227, 229, 0, 2 },
+    { { 2, 0, 0, 4, bgc_block0_plan + 0, bgc_block0_plan + 2, bgc_block0_plan + 5, bgc_block0_plan + 6, bgc_block0_plan + 7, bgc_block0_plan + 10, bgc_block0_plan + 11, bgc_block0_plan + 12, bgc_block0_plan + 13, bgc_block0_plan + 17 }, 207, 211, 215, 219, 221, 223, 225, 227, 229, 0, 2, bgc_block0_factor, bgc_block0_lsolve },
 };
 
 /* The Jacobian's structure: the columns of each colour (evaluated by one bgc_jvp), and the

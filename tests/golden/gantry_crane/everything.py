@@ -50,6 +50,29 @@ _EPS = sys.float_info.epsilon
 _WORK_DOUBLES = 231
 _WORK_INTS = 3
 _BLOCK_NAMES = ["rod.lambda, e[shaft->rotor]"]
+
+
+def _block0_factor(v):
+    """Block 0's LU in its plan's static order, unrolled: False if a pivot fails its test."""
+    s0 = max(0.0, abs(v[207]), abs(v[208]))
+    s1 = max(0.0, abs(v[209]), abs(v[210]))
+    v[211:215] = v[207:211]
+    if not (abs(v[211]) >= 0.1 * max(abs(v[211]), abs(v[213])) and abs(v[211]) > 1e-14 * s0) or not math.isfinite(v[211]):
+        return False
+    v[213] = v[213] / v[211]
+    v[214] -= v[213] * v[212]
+    if not (abs(v[214]) > 1e-14 * s1) or not math.isfinite(v[214]):
+        return False
+    return True
+
+
+def _block0_lsolve(v, xb):
+    """v[xb:xb + m] := A^-1 v[xb:xb + m] with the factors _block0_factor left in v."""
+    v[xb + 1] -= v[213] * v[xb + 0]
+    v[xb + 1] = v[xb + 1] / v[214]
+    v[xb + 0] = (v[xb + 0] - v[212] * v[xb + 1]) / v[211]
+
+
 # Per algebraic block: its factorization plan (bgc/sparse.py) and its storage in the workspace.
 _BLOCKS = [
     (2, False, False, 4,
@@ -63,7 +86,7 @@ _BLOCKS = [
      (3,),  # upd
      (0, 0, 1, 1),  # prow
      (0, 1, 0, 1),  # pcol
-     207, 211, 215, 219, 221, 223, 225, 227, 229, 0, 2),
+     207, 211, 215, 219, 221, 223, 225, 227, 229, 0, 2, _block0_factor, _block0_lsolve),
 ]
 # The Jacobian's structure: the columns of each colour, the rows of each column.
 _JAC_COLORS = [(0, 9), (1, 7, 10), (2, 8), (3,), (4,), (5,), (6,)]

@@ -287,8 +287,35 @@ static const int bgc_velocity_movable[BGC_DIM(BGC_NUM_STATES)] = { 1, 1, 1, 0, 0
 
 /* The algebraic blocks solved here: factorization plans (bgc/sparse.py) and storage. */
 static const int bgc_block0_plan[] = { 0, 3, 0, 1, 1, 2, 1, 0, 1, 1, 1, 1, 3, 0, 0, 1, 1, 0, 1, 0, 1 };
+
+/* Block 0's LU in its plan's static order, unrolled: 0, or 1 if a pivot fails its test. */
+static int bgc_block0_factor(double *v)
+{
+    const double s0 = bgc_max(bgc_max(0.0, fabs(v[112])), fabs(v[113]));
+    const double s1 = bgc_max(bgc_max(0.0, fabs(v[114])), fabs(v[115]));
+    v[116] = v[112];
+    v[117] = v[113];
+    v[118] = v[114];
+    v[119] = v[115];
+    if (!(fabs(v[116]) >= 0.1 * bgc_max(fabs(v[116]), fabs(v[118])) && fabs(v[116]) > 1e-14 * s0) || !isfinite(v[116]))
+        return 1;
+    v[118] = v[118] / v[116];
+    v[119] -= v[118] * v[117];
+    if (!(fabs(v[119]) > 1e-14 * s1) || !isfinite(v[119]))
+        return 1;
+    return 0;
+}
+
+/* b := A^-1 b with the factors bgc_block0_factor left in v. */
+static void bgc_block0_lsolve(const double *v, double *b)
+{
+    b[1] -= v[118] * b[0];
+    b[1] = b[1] / v[119];
+    b[0] = (b[0] - v[117] * b[1]) / v[116];
+}
+
 static const bgc_block bgc_blocks[BGC_DIM(BGC_NUM_BLOCKS)] = {
-    { { 2, 0, 0, 4, bgc_block0_plan + 0, bgc_block0_plan + 2, bgc_block0_plan + 5, bgc_block0_plan + 6, bgc_block0_plan + 7, bgc_block0_plan + 10, bgc_block0_plan + 11, bgc_block0_plan + 12, bgc_block0_plan + 13, bgc_block0_plan + 17 }, 112, 116, 120, 124, 126, 128, 130, 132, 134, 0, 2 },
+    { { 2, 0, 0, 4, bgc_block0_plan + 0, bgc_block0_plan + 2, bgc_block0_plan + 5, bgc_block0_plan + 6, bgc_block0_plan + 7, bgc_block0_plan + 10, bgc_block0_plan + 11, bgc_block0_plan + 12, bgc_block0_plan + 13, bgc_block0_plan + 17 }, 112, 116, 120, 124, 126, 128, 130, 132, 134, 0, 2, bgc_block0_factor, bgc_block0_lsolve },
 };
 
 /* The Jacobian's structure: the columns of each colour (evaluated by one bgc_jvp), and the

@@ -50,6 +50,29 @@ _EPS = sys.float_info.epsilon
 _WORK_DOUBLES = 136
 _WORK_INTS = 3
 _BLOCK_NAMES = ["rod.lambda, e[shaft->rotor]"]
+
+
+def _block0_factor(v):
+    """Block 0's LU in its plan's static order, unrolled: False if a pivot fails its test."""
+    s0 = max(0.0, abs(v[112]), abs(v[113]))
+    s1 = max(0.0, abs(v[114]), abs(v[115]))
+    v[116:120] = v[112:116]
+    if not (abs(v[116]) >= 0.1 * max(abs(v[116]), abs(v[118])) and abs(v[116]) > 1e-14 * s0) or not math.isfinite(v[116]):
+        return False
+    v[118] = v[118] / v[116]
+    v[119] -= v[118] * v[117]
+    if not (abs(v[119]) > 1e-14 * s1) or not math.isfinite(v[119]):
+        return False
+    return True
+
+
+def _block0_lsolve(v, xb):
+    """v[xb:xb + m] := A^-1 v[xb:xb + m] with the factors _block0_factor left in v."""
+    v[xb + 1] -= v[118] * v[xb + 0]
+    v[xb + 1] = v[xb + 1] / v[119]
+    v[xb + 0] = (v[xb + 0] - v[117] * v[xb + 1]) / v[116]
+
+
 # Per algebraic block: its factorization plan (bgc/sparse.py) and its storage in the workspace.
 _BLOCKS = [
     (2, False, False, 4,
@@ -63,7 +86,7 @@ _BLOCKS = [
      (3,),  # upd
      (0, 0, 1, 1),  # prow
      (0, 1, 0, 1),  # pcol
-     112, 116, 120, 124, 126, 128, 130, 132, 134, 0, 2),
+     112, 116, 120, 124, 126, 128, 130, 132, 134, 0, 2, _block0_factor, _block0_lsolve),
 ]
 # The Jacobian's structure: the columns of each colour, the rows of each column.
 _JAC_COLORS = [(0,), (1,), (2,), (3,), (4,), (5,)]

@@ -50,6 +50,29 @@ _EPS = sys.float_info.epsilon
 _WORK_DOUBLES = 187
 _WORK_INTS = 3
 _BLOCK_NAMES = ["rod.lambda, e[shaft->rotor]"]
+
+
+def _block0_factor(v):
+    """Block 0's LU in its plan's static order, unrolled: False if a pivot fails its test."""
+    s0 = max(0.0, abs(v[163]), abs(v[164]))
+    s1 = max(0.0, abs(v[165]), abs(v[166]))
+    v[167:171] = v[163:167]
+    if not (abs(v[167]) >= 0.1 * max(abs(v[167]), abs(v[169])) and abs(v[167]) > 1e-14 * s0) or not math.isfinite(v[167]):
+        return False
+    v[169] = v[169] / v[167]
+    v[170] -= v[169] * v[168]
+    if not (abs(v[170]) > 1e-14 * s1) or not math.isfinite(v[170]):
+        return False
+    return True
+
+
+def _block0_lsolve(v, xb):
+    """v[xb:xb + m] := A^-1 v[xb:xb + m] with the factors _block0_factor left in v."""
+    v[xb + 1] -= v[169] * v[xb + 0]
+    v[xb + 1] = v[xb + 1] / v[170]
+    v[xb + 0] = (v[xb + 0] - v[168] * v[xb + 1]) / v[167]
+
+
 # Per algebraic block: its factorization plan (bgc/sparse.py) and its storage in the workspace.
 _BLOCKS = [
     (2, False, False, 4,
@@ -63,7 +86,7 @@ _BLOCKS = [
      (3,),  # upd
      (0, 0, 1, 1),  # prow
      (0, 1, 0, 1),  # pcol
-     163, 167, 171, 175, 177, 179, 181, 183, 185, 0, 2),
+     163, 167, 171, 175, 177, 179, 181, 183, 185, 0, 2, _block0_factor, _block0_lsolve),
 ]
 # The Jacobian's structure: the columns of each colour, the rows of each column.
 _JAC_COLORS = [(0, 7), (1, 8), (2,), (3,), (4,), (5,), (6,)]

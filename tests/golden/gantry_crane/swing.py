@@ -50,6 +50,29 @@ _EPS = sys.float_info.epsilon
 _WORK_DOUBLES = 153
 _WORK_INTS = 3
 _BLOCK_NAMES = ["rod.lambda, e[shaft->rotor]"]
+
+
+def _block0_factor(v):
+    """Block 0's LU in its plan's static order, unrolled: False if a pivot fails its test."""
+    s0 = max(0.0, abs(v[129]), abs(v[130]))
+    s1 = max(0.0, abs(v[131]), abs(v[132]))
+    v[133:137] = v[129:133]
+    if not (abs(v[133]) >= 0.1 * max(abs(v[133]), abs(v[135])) and abs(v[133]) > 1e-14 * s0) or not math.isfinite(v[133]):
+        return False
+    v[135] = v[135] / v[133]
+    v[136] -= v[135] * v[134]
+    if not (abs(v[136]) > 1e-14 * s1) or not math.isfinite(v[136]):
+        return False
+    return True
+
+
+def _block0_lsolve(v, xb):
+    """v[xb:xb + m] := A^-1 v[xb:xb + m] with the factors _block0_factor left in v."""
+    v[xb + 1] -= v[135] * v[xb + 0]
+    v[xb + 1] = v[xb + 1] / v[136]
+    v[xb + 0] = (v[xb + 0] - v[134] * v[xb + 1]) / v[133]
+
+
 # Per algebraic block: its factorization plan (bgc/sparse.py) and its storage in the workspace.
 _BLOCKS = [
     (2, False, False, 4,
@@ -63,7 +86,7 @@ _BLOCKS = [
      (3,),  # upd
      (0, 0, 1, 1),  # prow
      (0, 1, 0, 1),  # pcol
-     129, 133, 137, 141, 143, 145, 147, 149, 151, 0, 2),
+     129, 133, 137, 141, 143, 145, 147, 149, 151, 0, 2, _block0_factor, _block0_lsolve),
 ]
 # The Jacobian's structure: the columns of each colour, the rows of each column.
 _JAC_COLORS = [(0,), (1,), (2,), (3,), (4,), (5,), (6,)]

@@ -295,8 +295,35 @@ static const int bgc_velocity_movable[BGC_DIM(BGC_NUM_STATES)] = { 1, 1, 1, 1, 0
 
 /* The algebraic blocks solved here: factorization plans (bgc/sparse.py) and storage. */
 static const int bgc_block0_plan[] = { 0, 3, 0, 1, 1, 2, 1, 0, 1, 1, 1, 1, 3, 0, 0, 1, 1, 0, 1, 0, 1 };
+
+/* Block 0's LU in its plan's static order, unrolled: 0, or 1 if a pivot fails its test. */
+static int bgc_block0_factor(double *v)
+{
+    const double s0 = bgc_max(bgc_max(0.0, fabs(v[164])), fabs(v[165]));
+    const double s1 = bgc_max(bgc_max(0.0, fabs(v[166])), fabs(v[167]));
+    v[168] = v[164];
+    v[169] = v[165];
+    v[170] = v[166];
+    v[171] = v[167];
+    if (!(fabs(v[168]) >= 0.1 * bgc_max(fabs(v[168]), fabs(v[170])) && fabs(v[168]) > 1e-14 * s0) || !isfinite(v[168]))
+        return 1;
+    v[170] = v[170] / v[168];
+    v[171] -= v[170] * v[169];
+    if (!(fabs(v[171]) > 1e-14 * s1) || !isfinite(v[171]))
+        return 1;
+    return 0;
+}
+
+/* b := A^-1 b with the factors bgc_block0_factor left in v. */
+static void bgc_block0_lsolve(const double *v, double *b)
+{
+    b[1] -= v[170] * b[0];
+    b[1] = b[1] / v[171];
+    b[0] = (b[0] - v[169] * b[1]) / v[168];
+}
+
 static const bgc_block bgc_blocks[BGC_DIM(BGC_NUM_BLOCKS)] = {
-    { { 2, 0, 0, 4, bgc_block0_plan + 0, bgc_block0_plan + 2, bgc_block0_plan + 5, bgc_block0_plan + 6, bgc_block0_plan + 7, bgc_block0_plan + 10, bgc_block0_plan + 11, bgc_block0_plan + 12, bgc_block0_plan + 13, bgc_block0_plan + 17 }, 164, 168, 172, 176, 178, 180, 182, 184, 186, 0, 2 },
+    { { 2, 0, 0, 4, bgc_block0_plan + 0, bgc_block0_plan + 2, bgc_block0_plan + 5, bgc_block0_plan + 6, bgc_block0_plan + 7, bgc_block0_plan + 10, bgc_block0_plan + 11, bgc_block0_plan + 12, bgc_block0_plan + 13, bgc_block0_plan + 17 }, 164, 168, 172, 176, 178, 180, 182, 184, 186, 0, 2, bgc_block0_factor, bgc_block0_lsolve },
 };
 
 /* The Jacobian's structure: the columns of each colour (evaluated by one bgc_jvp), and the

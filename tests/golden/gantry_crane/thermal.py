@@ -50,6 +50,29 @@ _EPS = sys.float_info.epsilon
 _WORK_DOUBLES = 188
 _WORK_INTS = 3
 _BLOCK_NAMES = ["rod.lambda, e[shaft->rotor]"]
+
+
+def _block0_factor(v):
+    """Block 0's LU in its plan's static order, unrolled: False if a pivot fails its test."""
+    s0 = max(0.0, abs(v[164]), abs(v[165]))
+    s1 = max(0.0, abs(v[166]), abs(v[167]))
+    v[168:172] = v[164:168]
+    if not (abs(v[168]) >= 0.1 * max(abs(v[168]), abs(v[170])) and abs(v[168]) > 1e-14 * s0) or not math.isfinite(v[168]):
+        return False
+    v[170] = v[170] / v[168]
+    v[171] -= v[170] * v[169]
+    if not (abs(v[171]) > 1e-14 * s1) or not math.isfinite(v[171]):
+        return False
+    return True
+
+
+def _block0_lsolve(v, xb):
+    """v[xb:xb + m] := A^-1 v[xb:xb + m] with the factors _block0_factor left in v."""
+    v[xb + 1] -= v[170] * v[xb + 0]
+    v[xb + 1] = v[xb + 1] / v[171]
+    v[xb + 0] = (v[xb + 0] - v[169] * v[xb + 1]) / v[168]
+
+
 # Per algebraic block: its factorization plan (bgc/sparse.py) and its storage in the workspace.
 _BLOCKS = [
     (2, False, False, 4,
@@ -63,7 +86,7 @@ _BLOCKS = [
      (3,),  # upd
      (0, 0, 1, 1),  # prow
      (0, 1, 0, 1),  # pcol
-     164, 168, 172, 176, 178, 180, 182, 184, 186, 0, 2),
+     164, 168, 172, 176, 178, 180, 182, 184, 186, 0, 2, _block0_factor, _block0_lsolve),
 ]
 # The Jacobian's structure: the columns of each colour, the rows of each column.
 _JAC_COLORS = [(0,), (1, 7), (2, 8), (3,), (4,), (5,), (6,)]

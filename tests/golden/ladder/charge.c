@@ -177,8 +177,35 @@ static const int bgc_velocity_movable[BGC_DIM(BGC_NUM_STATES)] = { 1 };
 
 /* The algebraic blocks solved here: factorization plans (bgc/sparse.py) and storage. */
 static const int bgc_block0_plan[] = { 0, 3, 0, 1, 1, 2, 1, 0, 1, 1, 1, 1, 3, 0, 0, 1, 1, 0, 1, 0, 1 };
+
+/* Block 0's LU in its plan's static order, unrolled: 0, or 1 if a pivot fails its test. */
+static int bgc_block0_factor(double *v)
+{
+    const double s0 = bgc_max(bgc_max(0.0, fabs(v[24])), fabs(v[25]));
+    const double s1 = bgc_max(bgc_max(0.0, fabs(v[26])), fabs(v[27]));
+    v[28] = v[24];
+    v[29] = v[25];
+    v[30] = v[26];
+    v[31] = v[27];
+    if (!(fabs(v[28]) >= 0.1 * bgc_max(fabs(v[28]), fabs(v[30])) && fabs(v[28]) > 1e-14 * s0) || !isfinite(v[28]))
+        return 1;
+    v[30] = v[30] / v[28];
+    v[31] -= v[30] * v[29];
+    if (!(fabs(v[31]) > 1e-14 * s1) || !isfinite(v[31]))
+        return 1;
+    return 0;
+}
+
+/* b := A^-1 b with the factors bgc_block0_factor left in v. */
+static void bgc_block0_lsolve(const double *v, double *b)
+{
+    b[1] -= v[30] * b[0];
+    b[1] = b[1] / v[31];
+    b[0] = (b[0] - v[29] * b[1]) / v[28];
+}
+
 static const bgc_block bgc_blocks[BGC_DIM(BGC_NUM_BLOCKS)] = {
-    { { 2, 0, 0, 4, bgc_block0_plan + 0, bgc_block0_plan + 2, bgc_block0_plan + 5, bgc_block0_plan + 6, bgc_block0_plan + 7, bgc_block0_plan + 10, bgc_block0_plan + 11, bgc_block0_plan + 12, bgc_block0_plan + 13, bgc_block0_plan + 17 }, 24, 28, 32, 36, 38, 40, 42, 44, 46, 0, 2 },
+    { { 2, 0, 0, 4, bgc_block0_plan + 0, bgc_block0_plan + 2, bgc_block0_plan + 5, bgc_block0_plan + 6, bgc_block0_plan + 7, bgc_block0_plan + 10, bgc_block0_plan + 11, bgc_block0_plan + 12, bgc_block0_plan + 13, bgc_block0_plan + 17 }, 24, 28, 32, 36, 38, 40, 42, 44, 46, 0, 2, bgc_block0_factor, bgc_block0_lsolve },
 };
 
 /* The Jacobian's structure: the columns of each colour (evaluated by one bgc_jvp), and the

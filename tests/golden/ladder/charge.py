@@ -50,6 +50,29 @@ _EPS = sys.float_info.epsilon
 _WORK_DOUBLES = 48
 _WORK_INTS = 3
 _BLOCK_NAMES = ["e[s1->n2], e[s3->n4]"]
+
+
+def _block0_factor(v):
+    """Block 0's LU in its plan's static order, unrolled: False if a pivot fails its test."""
+    s0 = max(0.0, abs(v[24]), abs(v[25]))
+    s1 = max(0.0, abs(v[26]), abs(v[27]))
+    v[28:32] = v[24:28]
+    if not (abs(v[28]) >= 0.1 * max(abs(v[28]), abs(v[30])) and abs(v[28]) > 1e-14 * s0) or not math.isfinite(v[28]):
+        return False
+    v[30] = v[30] / v[28]
+    v[31] -= v[30] * v[29]
+    if not (abs(v[31]) > 1e-14 * s1) or not math.isfinite(v[31]):
+        return False
+    return True
+
+
+def _block0_lsolve(v, xb):
+    """v[xb:xb + m] := A^-1 v[xb:xb + m] with the factors _block0_factor left in v."""
+    v[xb + 1] -= v[30] * v[xb + 0]
+    v[xb + 1] = v[xb + 1] / v[31]
+    v[xb + 0] = (v[xb + 0] - v[29] * v[xb + 1]) / v[28]
+
+
 # Per algebraic block: its factorization plan (bgc/sparse.py) and its storage in the workspace.
 _BLOCKS = [
     (2, False, False, 4,
@@ -63,7 +86,7 @@ _BLOCKS = [
      (3,),  # upd
      (0, 0, 1, 1),  # prow
      (0, 1, 0, 1),  # pcol
-     24, 28, 32, 36, 38, 40, 42, 44, 46, 0, 2),
+     24, 28, 32, 36, 38, 40, 42, 44, 46, 0, 2, _block0_factor, _block0_lsolve),
 ]
 # The Jacobian's structure: the columns of each colour, the rows of each column.
 _JAC_COLORS = [(0,)]

@@ -50,6 +50,29 @@ _EPS = sys.float_info.epsilon
 _WORK_DOUBLES = 43
 _WORK_INTS = 3
 _BLOCK_NAMES = ["e[s1->n2], e[s3->n4]"]
+
+
+def _block0_factor(v):
+    """Block 0's LU in its plan's static order, unrolled: False if a pivot fails its test."""
+    s0 = max(0.0, abs(v[19]), abs(v[20]))
+    s1 = max(0.0, abs(v[21]), abs(v[22]))
+    v[23:27] = v[19:23]
+    if not (abs(v[23]) >= 0.1 * max(abs(v[23]), abs(v[25])) and abs(v[23]) > 1e-14 * s0) or not math.isfinite(v[23]):
+        return False
+    v[25] = v[25] / v[23]
+    v[26] -= v[25] * v[24]
+    if not (abs(v[26]) > 1e-14 * s1) or not math.isfinite(v[26]):
+        return False
+    return True
+
+
+def _block0_lsolve(v, xb):
+    """v[xb:xb + m] := A^-1 v[xb:xb + m] with the factors _block0_factor left in v."""
+    v[xb + 1] -= v[25] * v[xb + 0]
+    v[xb + 1] = v[xb + 1] / v[26]
+    v[xb + 0] = (v[xb + 0] - v[24] * v[xb + 1]) / v[23]
+
+
 # Per algebraic block: its factorization plan (bgc/sparse.py) and its storage in the workspace.
 _BLOCKS = [
     (2, False, False, 4,
@@ -63,7 +86,7 @@ _BLOCKS = [
      (3,),  # upd
      (0, 0, 1, 1),  # prow
      (0, 1, 0, 1),  # pcol
-     19, 23, 27, 31, 33, 35, 37, 39, 41, 0, 2),
+     19, 23, 27, 31, 33, 35, 37, 39, 41, 0, 2, _block0_factor, _block0_lsolve),
 ]
 # The Jacobian's structure: the columns of each colour, the rows of each column.
 _JAC_COLORS = [(0,)]

@@ -359,8 +359,96 @@ static const int bgc_velocity_movable[BGC_DIM(BGC_NUM_STATES)] = { 1, 1, 0, 0, 1
 
 /* The algebraic blocks solved here: factorization plans (bgc/sparse.py) and storage. */
 static const int bgc_block0_plan[] = { 0, 3, 6, 9, 12, 15, 18, 21, 0, 1, 2, 3, 4, 5, 6, 7, 7, 2, 5, 8, 11, 14, 17, 20, 1, 2, 3, 4, 5, 6, 7, 0, 1, 2, 3, 4, 5, 6, 7, 7, 1, 4, 7, 10, 13, 16, 19, 1, 2, 3, 4, 5, 6, 7, 3, 6, 9, 12, 15, 18, 21, 0, 0, 1, 1, 1, 2, 2, 2, 3, 3, 3, 4, 4, 4, 5, 5, 5, 6, 6, 6, 7, 7, 0, 1, 0, 1, 2, 1, 2, 3, 2, 3, 4, 3, 4, 5, 4, 5, 6, 5, 6, 7, 6, 7 };
+
+/* Block 0's LU in its plan's static order, unrolled: 0, or 1 if a pivot fails its test. */
+static int bgc_block0_factor(double *v)
+{
+    const double s0 = bgc_max(bgc_max(0.0, fabs(v[776])), fabs(v[777]));
+    const double s1 = bgc_max(bgc_max(bgc_max(0.0, fabs(v[778])), fabs(v[779])), fabs(v[780]));
+    const double s2 = bgc_max(bgc_max(bgc_max(0.0, fabs(v[781])), fabs(v[782])), fabs(v[783]));
+    const double s3 = bgc_max(bgc_max(bgc_max(0.0, fabs(v[784])), fabs(v[785])), fabs(v[786]));
+    const double s4 = bgc_max(bgc_max(bgc_max(0.0, fabs(v[787])), fabs(v[788])), fabs(v[789]));
+    const double s5 = bgc_max(bgc_max(bgc_max(0.0, fabs(v[790])), fabs(v[791])), fabs(v[792]));
+    const double s6 = bgc_max(bgc_max(bgc_max(0.0, fabs(v[793])), fabs(v[794])), fabs(v[795]));
+    const double s7 = bgc_max(bgc_max(0.0, fabs(v[796])), fabs(v[797]));
+    v[798] = v[776];
+    v[799] = v[777];
+    v[800] = v[778];
+    v[801] = v[779];
+    v[802] = v[780];
+    v[803] = v[781];
+    v[804] = v[782];
+    v[805] = v[783];
+    v[806] = v[784];
+    v[807] = v[785];
+    v[808] = v[786];
+    v[809] = v[787];
+    v[810] = v[788];
+    v[811] = v[789];
+    v[812] = v[790];
+    v[813] = v[791];
+    v[814] = v[792];
+    v[815] = v[793];
+    v[816] = v[794];
+    v[817] = v[795];
+    v[818] = v[796];
+    v[819] = v[797];
+    const double sign = v[798] < 0.0 ? -1.0 : 1.0;
+    if (!(sign * v[798] > 1e-14 * s0) || !isfinite(v[798]))
+        return 1;
+    v[800] = v[800] / v[798];
+    v[801] -= v[800] * v[799];
+    if (!(sign * v[801] > 1e-14 * s1) || !isfinite(v[801]))
+        return 1;
+    v[803] = v[803] / v[801];
+    v[804] -= v[803] * v[802];
+    if (!(sign * v[804] > 1e-14 * s2) || !isfinite(v[804]))
+        return 1;
+    v[806] = v[806] / v[804];
+    v[807] -= v[806] * v[805];
+    if (!(sign * v[807] > 1e-14 * s3) || !isfinite(v[807]))
+        return 1;
+    v[809] = v[809] / v[807];
+    v[810] -= v[809] * v[808];
+    if (!(sign * v[810] > 1e-14 * s4) || !isfinite(v[810]))
+        return 1;
+    v[812] = v[812] / v[810];
+    v[813] -= v[812] * v[811];
+    if (!(sign * v[813] > 1e-14 * s5) || !isfinite(v[813]))
+        return 1;
+    v[815] = v[815] / v[813];
+    v[816] -= v[815] * v[814];
+    if (!(sign * v[816] > 1e-14 * s6) || !isfinite(v[816]))
+        return 1;
+    v[818] = v[818] / v[816];
+    v[819] -= v[818] * v[817];
+    if (!(sign * v[819] > 1e-14 * s7) || !isfinite(v[819]))
+        return 1;
+    return 0;
+}
+
+/* b := A^-1 b with the factors bgc_block0_factor left in v. */
+static void bgc_block0_lsolve(const double *v, double *b)
+{
+    b[1] -= v[800] * b[0];
+    b[2] -= v[803] * b[1];
+    b[3] -= v[806] * b[2];
+    b[4] -= v[809] * b[3];
+    b[5] -= v[812] * b[4];
+    b[6] -= v[815] * b[5];
+    b[7] -= v[818] * b[6];
+    b[7] = b[7] / v[819];
+    b[6] = (b[6] - v[817] * b[7]) / v[816];
+    b[5] = (b[5] - v[814] * b[6]) / v[813];
+    b[4] = (b[4] - v[811] * b[5]) / v[810];
+    b[3] = (b[3] - v[808] * b[4]) / v[807];
+    b[2] = (b[2] - v[805] * b[3]) / v[804];
+    b[1] = (b[1] - v[802] * b[2]) / v[801];
+    b[0] = (b[0] - v[799] * b[1]) / v[798];
+}
+
 static const bgc_block bgc_blocks[BGC_DIM(BGC_NUM_BLOCKS)] = {
-    { { 8, 0, 1, 22, bgc_block0_plan + 0, bgc_block0_plan + 8, bgc_block0_plan + 17, bgc_block0_plan + 24, bgc_block0_plan + 31, bgc_block0_plan + 40, bgc_block0_plan + 47, bgc_block0_plan + 54, bgc_block0_plan + 61, bgc_block0_plan + 83 }, 776, 798, 820, 884, 892, 900, 908, 916, 924, 0, 8 },
+    { { 8, 0, 1, 22, bgc_block0_plan + 0, bgc_block0_plan + 8, bgc_block0_plan + 17, bgc_block0_plan + 24, bgc_block0_plan + 31, bgc_block0_plan + 40, bgc_block0_plan + 47, bgc_block0_plan + 54, bgc_block0_plan + 61, bgc_block0_plan + 83 }, 776, 798, 820, 884, 892, 900, 908, 916, 924, 0, 8, bgc_block0_factor, bgc_block0_lsolve },
 };
 
 /* The Jacobian's structure: the columns of each colour (evaluated by one bgc_jvp), and the

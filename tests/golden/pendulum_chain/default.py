@@ -50,6 +50,72 @@ _EPS = sys.float_info.epsilon
 _WORK_DOUBLES = 932
 _WORK_INTS = 9
 _BLOCK_NAMES = ["rod1.lambda, rod2.lambda, rod3.lambda, rod4.lambda, rod5.lambda, rod6.lambda, and 2 more"]
+
+
+def _block0_factor(v):
+    """Block 0's LU in its plan's static order, unrolled: False if a pivot fails its test."""
+    s0 = max(0.0, abs(v[776]), abs(v[777]))
+    s1 = max(0.0, abs(v[778]), abs(v[779]), abs(v[780]))
+    s2 = max(0.0, abs(v[781]), abs(v[782]), abs(v[783]))
+    s3 = max(0.0, abs(v[784]), abs(v[785]), abs(v[786]))
+    s4 = max(0.0, abs(v[787]), abs(v[788]), abs(v[789]))
+    s5 = max(0.0, abs(v[790]), abs(v[791]), abs(v[792]))
+    s6 = max(0.0, abs(v[793]), abs(v[794]), abs(v[795]))
+    s7 = max(0.0, abs(v[796]), abs(v[797]))
+    v[798:820] = v[776:798]
+    sign = -1.0 if v[798] < 0.0 else 1.0
+    if not (sign * v[798] > 1e-14 * s0) or not math.isfinite(v[798]):
+        return False
+    v[800] = v[800] / v[798]
+    v[801] -= v[800] * v[799]
+    if not (sign * v[801] > 1e-14 * s1) or not math.isfinite(v[801]):
+        return False
+    v[803] = v[803] / v[801]
+    v[804] -= v[803] * v[802]
+    if not (sign * v[804] > 1e-14 * s2) or not math.isfinite(v[804]):
+        return False
+    v[806] = v[806] / v[804]
+    v[807] -= v[806] * v[805]
+    if not (sign * v[807] > 1e-14 * s3) or not math.isfinite(v[807]):
+        return False
+    v[809] = v[809] / v[807]
+    v[810] -= v[809] * v[808]
+    if not (sign * v[810] > 1e-14 * s4) or not math.isfinite(v[810]):
+        return False
+    v[812] = v[812] / v[810]
+    v[813] -= v[812] * v[811]
+    if not (sign * v[813] > 1e-14 * s5) or not math.isfinite(v[813]):
+        return False
+    v[815] = v[815] / v[813]
+    v[816] -= v[815] * v[814]
+    if not (sign * v[816] > 1e-14 * s6) or not math.isfinite(v[816]):
+        return False
+    v[818] = v[818] / v[816]
+    v[819] -= v[818] * v[817]
+    if not (sign * v[819] > 1e-14 * s7) or not math.isfinite(v[819]):
+        return False
+    return True
+
+
+def _block0_lsolve(v, xb):
+    """v[xb:xb + m] := A^-1 v[xb:xb + m] with the factors _block0_factor left in v."""
+    v[xb + 1] -= v[800] * v[xb + 0]
+    v[xb + 2] -= v[803] * v[xb + 1]
+    v[xb + 3] -= v[806] * v[xb + 2]
+    v[xb + 4] -= v[809] * v[xb + 3]
+    v[xb + 5] -= v[812] * v[xb + 4]
+    v[xb + 6] -= v[815] * v[xb + 5]
+    v[xb + 7] -= v[818] * v[xb + 6]
+    v[xb + 7] = v[xb + 7] / v[819]
+    v[xb + 6] = (v[xb + 6] - v[817] * v[xb + 7]) / v[816]
+    v[xb + 5] = (v[xb + 5] - v[814] * v[xb + 6]) / v[813]
+    v[xb + 4] = (v[xb + 4] - v[811] * v[xb + 5]) / v[810]
+    v[xb + 3] = (v[xb + 3] - v[808] * v[xb + 4]) / v[807]
+    v[xb + 2] = (v[xb + 2] - v[805] * v[xb + 3]) / v[804]
+    v[xb + 1] = (v[xb + 1] - v[802] * v[xb + 2]) / v[801]
+    v[xb + 0] = (v[xb + 0] - v[799] * v[xb + 1]) / v[798]
+
+
 # Per algebraic block: its factorization plan (bgc/sparse.py) and its storage in the workspace.
 _BLOCKS = [
     (8, False, True, 22,
@@ -63,7 +129,7 @@ _BLOCKS = [
      (3, 6, 9, 12, 15, 18, 21),  # upd
      (0, 0, 1, 1, 1, 2, 2, 2, 3, 3, 3, 4, 4, 4, 5, 5, 5, 6, 6, 6, 7, 7),  # prow
      (0, 1, 0, 1, 2, 1, 2, 3, 2, 3, 4, 3, 4, 5, 4, 5, 6, 5, 6, 7, 6, 7),  # pcol
-     776, 798, 820, 884, 892, 900, 908, 916, 924, 0, 8),
+     776, 798, 820, 884, 892, 900, 908, 916, 924, 0, 8, _block0_factor, _block0_lsolve),
 ]
 # The Jacobian's structure: the columns of each colour, the rows of each column.
 _JAC_COLORS = [(0,), (1,), (2,), (3,), (4,), (5,), (6,), (7,), (8,), (9,), (10,), (11,), (12,), (13,), (14,), (15,), (16,), (17,), (18,), (19,), (20,), (21,), (22,), (23,), (24,), (25,), (26,), (27,), (28,), (29,), (30,), (31,)]

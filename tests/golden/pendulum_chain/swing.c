@@ -343,8 +343,96 @@ static const int bgc_velocity_movable[BGC_DIM(BGC_NUM_STATES)] = { 1, 1, 0, 0, 1
 
 /* The algebraic blocks solved here: factorization plans (bgc/sparse.py) and storage. */
 static const int bgc_block0_plan[] = { 0, 3, 6, 9, 12, 15, 18, 21, 0, 1, 2, 3, 4, 5, 6, 7, 7, 2, 5, 8, 11, 14, 17, 20, 1, 2, 3, 4, 5, 6, 7, 0, 1, 2, 3, 4, 5, 6, 7, 7, 1, 4, 7, 10, 13, 16, 19, 1, 2, 3, 4, 5, 6, 7, 3, 6, 9, 12, 15, 18, 21, 0, 0, 1, 1, 1, 2, 2, 2, 3, 3, 3, 4, 4, 4, 5, 5, 5, 6, 6, 6, 7, 7, 0, 1, 0, 1, 2, 1, 2, 3, 2, 3, 4, 3, 4, 5, 4, 5, 6, 5, 6, 7, 6, 7 };
+
+/* Block 0's LU in its plan's static order, unrolled: 0, or 1 if a pivot fails its test. */
+static int bgc_block0_factor(double *v)
+{
+    const double s0 = bgc_max(bgc_max(0.0, fabs(v[760])), fabs(v[761]));
+    const double s1 = bgc_max(bgc_max(bgc_max(0.0, fabs(v[762])), fabs(v[763])), fabs(v[764]));
+    const double s2 = bgc_max(bgc_max(bgc_max(0.0, fabs(v[765])), fabs(v[766])), fabs(v[767]));
+    const double s3 = bgc_max(bgc_max(bgc_max(0.0, fabs(v[768])), fabs(v[769])), fabs(v[770]));
+    const double s4 = bgc_max(bgc_max(bgc_max(0.0, fabs(v[771])), fabs(v[772])), fabs(v[773]));
+    const double s5 = bgc_max(bgc_max(bgc_max(0.0, fabs(v[774])), fabs(v[775])), fabs(v[776]));
+    const double s6 = bgc_max(bgc_max(bgc_max(0.0, fabs(v[777])), fabs(v[778])), fabs(v[779]));
+    const double s7 = bgc_max(bgc_max(0.0, fabs(v[780])), fabs(v[781]));
+    v[782] = v[760];
+    v[783] = v[761];
+    v[784] = v[762];
+    v[785] = v[763];
+    v[786] = v[764];
+    v[787] = v[765];
+    v[788] = v[766];
+    v[789] = v[767];
+    v[790] = v[768];
+    v[791] = v[769];
+    v[792] = v[770];
+    v[793] = v[771];
+    v[794] = v[772];
+    v[795] = v[773];
+    v[796] = v[774];
+    v[797] = v[775];
+    v[798] = v[776];
+    v[799] = v[777];
+    v[800] = v[778];
+    v[801] = v[779];
+    v[802] = v[780];
+    v[803] = v[781];
+    const double sign = v[782] < 0.0 ? -1.0 : 1.0;
+    if (!(sign * v[782] > 1e-14 * s0) || !isfinite(v[782]))
+        return 1;
+    v[784] = v[784] / v[782];
+    v[785] -= v[784] * v[783];
+    if (!(sign * v[785] > 1e-14 * s1) || !isfinite(v[785]))
+        return 1;
+    v[787] = v[787] / v[785];
+    v[788] -= v[787] * v[786];
+    if (!(sign * v[788] > 1e-14 * s2) || !isfinite(v[788]))
+        return 1;
+    v[790] = v[790] / v[788];
+    v[791] -= v[790] * v[789];
+    if (!(sign * v[791] > 1e-14 * s3) || !isfinite(v[791]))
+        return 1;
+    v[793] = v[793] / v[791];
+    v[794] -= v[793] * v[792];
+    if (!(sign * v[794] > 1e-14 * s4) || !isfinite(v[794]))
+        return 1;
+    v[796] = v[796] / v[794];
+    v[797] -= v[796] * v[795];
+    if (!(sign * v[797] > 1e-14 * s5) || !isfinite(v[797]))
+        return 1;
+    v[799] = v[799] / v[797];
+    v[800] -= v[799] * v[798];
+    if (!(sign * v[800] > 1e-14 * s6) || !isfinite(v[800]))
+        return 1;
+    v[802] = v[802] / v[800];
+    v[803] -= v[802] * v[801];
+    if (!(sign * v[803] > 1e-14 * s7) || !isfinite(v[803]))
+        return 1;
+    return 0;
+}
+
+/* b := A^-1 b with the factors bgc_block0_factor left in v. */
+static void bgc_block0_lsolve(const double *v, double *b)
+{
+    b[1] -= v[784] * b[0];
+    b[2] -= v[787] * b[1];
+    b[3] -= v[790] * b[2];
+    b[4] -= v[793] * b[3];
+    b[5] -= v[796] * b[4];
+    b[6] -= v[799] * b[5];
+    b[7] -= v[802] * b[6];
+    b[7] = b[7] / v[803];
+    b[6] = (b[6] - v[801] * b[7]) / v[800];
+    b[5] = (b[5] - v[798] * b[6]) / v[797];
+    b[4] = (b[4] - v[795] * b[5]) / v[794];
+    b[3] = (b[3] - v[792] * b[4]) / v[791];
+    b[2] = (b[2] - v[789] * b[3]) / v[788];
+    b[1] = (b[1] - v[786] * b[2]) / v[785];
+    b[0] = (b[0] - v[783] * b[1]) / v[782];
+}
+
 static const bgc_block bgc_blocks[BGC_DIM(BGC_NUM_BLOCKS)] = {
-    { { 8, 0, 1, 22, bgc_block0_plan + 0, bgc_block0_plan + 8, bgc_block0_plan + 17, bgc_block0_plan + 24, bgc_block0_plan + 31, bgc_block0_plan + 40, bgc_block0_plan + 47, bgc_block0_plan + 54, bgc_block0_plan + 61, bgc_block0_plan + 83 }, 760, 782, 804, 868, 876, 884, 892, 900, 908, 0, 8 },
+    { { 8, 0, 1, 22, bgc_block0_plan + 0, bgc_block0_plan + 8, bgc_block0_plan + 17, bgc_block0_plan + 24, bgc_block0_plan + 31, bgc_block0_plan + 40, bgc_block0_plan + 47, bgc_block0_plan + 54, bgc_block0_plan + 61, bgc_block0_plan + 83 }, 760, 782, 804, 868, 876, 884, 892, 900, 908, 0, 8, bgc_block0_factor, bgc_block0_lsolve },
 };
 
 /* The Jacobian's structure: the columns of each colour (evaluated by one bgc_jvp), and the

@@ -50,6 +50,72 @@ _EPS = sys.float_info.epsilon
 _WORK_DOUBLES = 916
 _WORK_INTS = 9
 _BLOCK_NAMES = ["rod1.lambda, rod2.lambda, rod3.lambda, rod4.lambda, rod5.lambda, rod6.lambda, and 2 more"]
+
+
+def _block0_factor(v):
+    """Block 0's LU in its plan's static order, unrolled: False if a pivot fails its test."""
+    s0 = max(0.0, abs(v[760]), abs(v[761]))
+    s1 = max(0.0, abs(v[762]), abs(v[763]), abs(v[764]))
+    s2 = max(0.0, abs(v[765]), abs(v[766]), abs(v[767]))
+    s3 = max(0.0, abs(v[768]), abs(v[769]), abs(v[770]))
+    s4 = max(0.0, abs(v[771]), abs(v[772]), abs(v[773]))
+    s5 = max(0.0, abs(v[774]), abs(v[775]), abs(v[776]))
+    s6 = max(0.0, abs(v[777]), abs(v[778]), abs(v[779]))
+    s7 = max(0.0, abs(v[780]), abs(v[781]))
+    v[782:804] = v[760:782]
+    sign = -1.0 if v[782] < 0.0 else 1.0
+    if not (sign * v[782] > 1e-14 * s0) or not math.isfinite(v[782]):
+        return False
+    v[784] = v[784] / v[782]
+    v[785] -= v[784] * v[783]
+    if not (sign * v[785] > 1e-14 * s1) or not math.isfinite(v[785]):
+        return False
+    v[787] = v[787] / v[785]
+    v[788] -= v[787] * v[786]
+    if not (sign * v[788] > 1e-14 * s2) or not math.isfinite(v[788]):
+        return False
+    v[790] = v[790] / v[788]
+    v[791] -= v[790] * v[789]
+    if not (sign * v[791] > 1e-14 * s3) or not math.isfinite(v[791]):
+        return False
+    v[793] = v[793] / v[791]
+    v[794] -= v[793] * v[792]
+    if not (sign * v[794] > 1e-14 * s4) or not math.isfinite(v[794]):
+        return False
+    v[796] = v[796] / v[794]
+    v[797] -= v[796] * v[795]
+    if not (sign * v[797] > 1e-14 * s5) or not math.isfinite(v[797]):
+        return False
+    v[799] = v[799] / v[797]
+    v[800] -= v[799] * v[798]
+    if not (sign * v[800] > 1e-14 * s6) or not math.isfinite(v[800]):
+        return False
+    v[802] = v[802] / v[800]
+    v[803] -= v[802] * v[801]
+    if not (sign * v[803] > 1e-14 * s7) or not math.isfinite(v[803]):
+        return False
+    return True
+
+
+def _block0_lsolve(v, xb):
+    """v[xb:xb + m] := A^-1 v[xb:xb + m] with the factors _block0_factor left in v."""
+    v[xb + 1] -= v[784] * v[xb + 0]
+    v[xb + 2] -= v[787] * v[xb + 1]
+    v[xb + 3] -= v[790] * v[xb + 2]
+    v[xb + 4] -= v[793] * v[xb + 3]
+    v[xb + 5] -= v[796] * v[xb + 4]
+    v[xb + 6] -= v[799] * v[xb + 5]
+    v[xb + 7] -= v[802] * v[xb + 6]
+    v[xb + 7] = v[xb + 7] / v[803]
+    v[xb + 6] = (v[xb + 6] - v[801] * v[xb + 7]) / v[800]
+    v[xb + 5] = (v[xb + 5] - v[798] * v[xb + 6]) / v[797]
+    v[xb + 4] = (v[xb + 4] - v[795] * v[xb + 5]) / v[794]
+    v[xb + 3] = (v[xb + 3] - v[792] * v[xb + 4]) / v[791]
+    v[xb + 2] = (v[xb + 2] - v[789] * v[xb + 3]) / v[788]
+    v[xb + 1] = (v[xb + 1] - v[786] * v[xb + 2]) / v[785]
+    v[xb + 0] = (v[xb + 0] - v[783] * v[xb + 1]) / v[782]
+
+
 # Per algebraic block: its factorization plan (bgc/sparse.py) and its storage in the workspace.
 _BLOCKS = [
     (8, False, True, 22,
@@ -63,7 +129,7 @@ _BLOCKS = [
      (3, 6, 9, 12, 15, 18, 21),  # upd
      (0, 0, 1, 1, 1, 2, 2, 2, 3, 3, 3, 4, 4, 4, 5, 5, 5, 6, 6, 6, 7, 7),  # prow
      (0, 1, 0, 1, 2, 1, 2, 3, 2, 3, 4, 3, 4, 5, 4, 5, 6, 5, 6, 7, 6, 7),  # pcol
-     760, 782, 804, 868, 876, 884, 892, 900, 908, 0, 8),
+     760, 782, 804, 868, 876, 884, 892, 900, 908, 0, 8, _block0_factor, _block0_lsolve),
 ]
 # The Jacobian's structure: the columns of each colour, the rows of each column.
 _JAC_COLORS = [(0,), (1,), (2,), (3,), (4,), (5,), (6,), (7,), (8,), (9,), (10,), (11,), (12,), (13,), (14,), (15,), (16,), (17,), (18,), (19,), (20,), (21,), (22,), (23,), (24,), (25,), (26,), (27,), (28,), (29,), (30,), (31,)]

@@ -225,7 +225,7 @@ def _heaviside(a, at_zero):
 class _Block:
     __slots__ = ("m", "dense", "symmetric", "nnz", "diag", "lptr", "lpos", "lrow", "uptr", "upos", "ucol",
                  "upd", "prow", "pcol", "save", "lu", "dense_off", "b", "scale", "z", "r", "zt",
-                 "rt", "piv", "how")
+                 "rt", "piv", "how", "factor", "lsolve")
 
     def __init__(self, values):
         for key, value in zip(self.__slots__, values):
@@ -342,15 +342,20 @@ def _lu_static_solve(b, a, base, x, xbase):
 
 
 def _block_factor(w, b):
-    """Factor the matrix assembled at b.save: the static order, else densely; False if
-    singular.  Records which in w.iv[b.how]."""
+    """Factor the matrix assembled at b.save: the static order (unrolled in the model part
+    when the plan is small: b.factor), else densely; False if singular.  Records which in
+    w.iv[b.how]."""
     v = w.v
+    if b.factor is not None and b.factor(v):
+        w.iv[b.how] = 0
+        return True
     scale = _row_scales(b, v, b.save)
     if not b.dense:
-        v[b.lu:b.lu + b.nnz] = v[b.save:b.save + b.nnz]
-        if _lu_static(b, v, b.lu, scale):
-            w.iv[b.how] = 0
-            return True
+        if b.factor is None:
+            v[b.lu:b.lu + b.nnz] = v[b.save:b.save + b.nnz]
+            if _lu_static(b, v, b.lu, scale):
+                w.iv[b.how] = 0
+                return True
         m = b.m
         v[b.dense_off:b.dense_off + m * m] = [0.0] * (m * m)
         for q in range(b.nnz):
@@ -362,7 +367,9 @@ def _block_factor(w, b):
 
 
 def _block_lsolve(w, b, xbase):
-    if w.iv[b.how] == 0:
+    if w.iv[b.how] == 0 and b.lsolve is not None:
+        b.lsolve(w.v, xbase)
+    elif w.iv[b.how] == 0:
         _lu_static_solve(b, w.v, b.lu, w.v, xbase)
     else:
         _lu_dense_solve(b.m, w.v, b.dense_off, w.iv, b.piv, w.v, xbase)

@@ -173,8 +173,36 @@ static const int bgc_velocity_movable[BGC_DIM(BGC_NUM_STATES)] = { 1, 1, 1, 1 };
 
 /* The algebraic blocks solved here: factorization plans (bgc/sparse.py) and storage. */
 static const int bgc_block0_plan[] = { 0, 3, 0, 1, 1, 2, 1, 0, 1, 1, 1, 1, 3, 0, 0, 1, 1, 0, 1, 0, 1 };
+
+/* Block 0's LU in its plan's static order, unrolled: 0, or 1 if a pivot fails its test. */
+static int bgc_block0_factor(double *v)
+{
+    const double s0 = bgc_max(bgc_max(0.0, fabs(v[76])), fabs(v[77]));
+    const double s1 = bgc_max(bgc_max(0.0, fabs(v[78])), fabs(v[79]));
+    v[80] = v[76];
+    v[81] = v[77];
+    v[82] = v[78];
+    v[83] = v[79];
+    const double sign = v[80] < 0.0 ? -1.0 : 1.0;
+    if (!(sign * v[80] > 1e-14 * s0) || !isfinite(v[80]))
+        return 1;
+    v[82] = v[82] / v[80];
+    v[83] -= v[82] * v[81];
+    if (!(sign * v[83] > 1e-14 * s1) || !isfinite(v[83]))
+        return 1;
+    return 0;
+}
+
+/* b := A^-1 b with the factors bgc_block0_factor left in v. */
+static void bgc_block0_lsolve(const double *v, double *b)
+{
+    b[1] -= v[82] * b[0];
+    b[1] = b[1] / v[83];
+    b[0] = (b[0] - v[81] * b[1]) / v[80];
+}
+
 static const bgc_block bgc_blocks[BGC_DIM(BGC_NUM_BLOCKS)] = {
-    { { 2, 0, 1, 4, bgc_block0_plan + 0, bgc_block0_plan + 2, bgc_block0_plan + 5, bgc_block0_plan + 6, bgc_block0_plan + 7, bgc_block0_plan + 10, bgc_block0_plan + 11, bgc_block0_plan + 12, bgc_block0_plan + 13, bgc_block0_plan + 17 }, 76, 80, 84, 88, 90, 92, 94, 96, 98, 0, 2 },
+    { { 2, 0, 1, 4, bgc_block0_plan + 0, bgc_block0_plan + 2, bgc_block0_plan + 5, bgc_block0_plan + 6, bgc_block0_plan + 7, bgc_block0_plan + 10, bgc_block0_plan + 11, bgc_block0_plan + 12, bgc_block0_plan + 13, bgc_block0_plan + 17 }, 76, 80, 84, 88, 90, 92, 94, 96, 98, 0, 2, bgc_block0_factor, bgc_block0_lsolve },
 };
 
 /* The Jacobian's structure: the columns of each colour (evaluated by one bgc_jvp), and the

@@ -50,6 +50,30 @@ _EPS = sys.float_info.epsilon
 _WORK_DOUBLES = 100
 _WORK_INTS = 3
 _BLOCK_NAMES = ["f[w->arm[0]], f[w->arm[1]]"]
+
+
+def _block0_factor(v):
+    """Block 0's LU in its plan's static order, unrolled: False if a pivot fails its test."""
+    s0 = max(0.0, abs(v[76]), abs(v[77]))
+    s1 = max(0.0, abs(v[78]), abs(v[79]))
+    v[80:84] = v[76:80]
+    sign = -1.0 if v[80] < 0.0 else 1.0
+    if not (sign * v[80] > 1e-14 * s0) or not math.isfinite(v[80]):
+        return False
+    v[82] = v[82] / v[80]
+    v[83] -= v[82] * v[81]
+    if not (sign * v[83] > 1e-14 * s1) or not math.isfinite(v[83]):
+        return False
+    return True
+
+
+def _block0_lsolve(v, xb):
+    """v[xb:xb + m] := A^-1 v[xb:xb + m] with the factors _block0_factor left in v."""
+    v[xb + 1] -= v[82] * v[xb + 0]
+    v[xb + 1] = v[xb + 1] / v[83]
+    v[xb + 0] = (v[xb + 0] - v[81] * v[xb + 1]) / v[80]
+
+
 # Per algebraic block: its factorization plan (bgc/sparse.py) and its storage in the workspace.
 _BLOCKS = [
     (2, False, True, 4,
@@ -63,7 +87,7 @@ _BLOCKS = [
      (3,),  # upd
      (0, 0, 1, 1),  # prow
      (0, 1, 0, 1),  # pcol
-     76, 80, 84, 88, 90, 92, 94, 96, 98, 0, 2),
+     76, 80, 84, 88, 90, 92, 94, 96, 98, 0, 2, _block0_factor, _block0_lsolve),
 ]
 # The Jacobian's structure: the columns of each colour, the rows of each column.
 _JAC_COLORS = [(0,), (1,), (2,), (3,)]
