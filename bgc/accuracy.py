@@ -441,9 +441,10 @@ def csv_text(result: Result) -> str:
     return "\n".join(out) + "\n"
 
 
-def plot(result: Result, path: str, gains: bool = False) -> None:
+def plot(result: Result, path, gains: bool = False) -> None:
     """Work-precision (error against time, log-log, one line per solver) and error against
-    right-side calls; with gains, drift and error against the gain."""
+    right-side calls; with gains, drift and error against the gain.  As PNG, to path (a file
+    name or a binary file)."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -488,5 +489,5 @@ def plot(result: Result, path: str, gains: bool = False) -> None:
     fig.suptitle(f"{os.path.basename(result.model)}, scene {result.scene or '(default)'}, "
                  f"{result.backend} backend")
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    fig.savefig(path, dpi=110, format="png")
     plt.close(fig)

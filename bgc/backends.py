@@ -5,15 +5,21 @@ BackendError with the compiler's messages.
 """
 from __future__ import annotations
 
+import atexit
+import codecs
+import functools
 import hashlib
 import importlib.util
 import json
 import os
 import shlex
 import shutil
+import signal
 import subprocess
 import sys
 import tempfile
+import threading
+from dataclasses import dataclass
 from pathlib import Path
 from types import ModuleType
 
@@ -27,10 +33,25 @@ class BackendError(RuntimeError):
 
 
 def cache_dir() -> Path:
-    """$BGC_CACHE_DIR, else ~/.cache/bgc (created on demand)."""
+    """$BGC_CACHE_DIR, else ~/.cache/bgc (created on demand); a private temporary directory,
+    with a warning, when that one cannot be written."""
     path = Path(os.environ.get("BGC_CACHE_DIR") or Path.home() / ".cache" / "bgc")
-    path.mkdir(parents=True, exist_ok=True)
-    return path
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+        if os.access(path, os.W_OK | os.X_OK):
+            return path
+    except OSError:
+        pass
+    return _private_cache(str(path))
+
+
+@functools.lru_cache(maxsize=None)
+def _private_cache(unusable: str) -> Path:
+    print(f"warning: the cache directory {unusable} cannot be written; compiling into a "
+          "temporary directory (set BGC_CACHE_DIR)", file=sys.stderr)
+    tmp = tempfile.TemporaryDirectory(prefix="bgc-cache-")
+    atexit.register(tmp.cleanup)
+    return Path(tmp.name)
 
 
 def c_compiler(cc: str | None = None) -> list[str]:
@@ -43,33 +64,129 @@ def have_c_compiler(cc: str | None = None) -> bool:
     return bool(command) and shutil.which(command[0]) is not None
 
 
+@functools.lru_cache(maxsize=None)
+def compiler_identity(command: tuple[str, ...]) -> str:
+    """What names the compiler in the cache key: its resolved path, size and modification
+    time, and what `--version` prints (so an upgraded or different compiler builds anew)."""
+    where = shutil.which(command[0]) if command else None
+    facts = [str(where)]
+    if where:
+        info = os.stat(where)
+        facts.append(f"{info.st_size}:{info.st_mtime_ns}")
+        try:
+            done = subprocess.run([*command, "--version"], capture_output=True, text=True,
+                                  timeout=30)
+            facts.append(done.stdout)
+        except (OSError, subprocess.SubprocessError):
+            pass
+    return "\n".join(facts)
+
+
 def compile_c(source: str, cc: str | None = None, flags: tuple[str, ...] = C_FLAGS) -> Path:
-    """The executable built from source, from the cache when the same source, compiler and
-    flags were built before.  Written atomically (temporary file, then os.replace)."""
+    """The executable built from source, from the cache when the same source was built before
+    with the same compiler (compiler_identity) and flags, and the cached file is still the one
+    built (its SHA-256, kept beside it, checked before each use).  Written atomically
+    (temporary file, then os.replace), so concurrent builds are safe."""
     command = c_compiler(cc)
     if not command:
         raise BackendError("no C compiler given")
-    key = hashlib.sha256(json.dumps([source, command, list(flags), list(C_LIBS)]).encode())
-    exe = cache_dir() / f"bgc-{key.hexdigest()[:40]}{_EXE_SUFFIX}"
-    if exe.is_file():
+    key = hashlib.sha256(json.dumps([source, command, list(flags), list(C_LIBS),
+                                     compiler_identity(tuple(command))]).encode())
+    cache = cache_dir()
+    exe = cache / f"bgc-{key.hexdigest()[:40]}{_EXE_SUFFIX}"
+    digest = exe.with_name(exe.name + ".sha256")
+    if exe.is_file() and digest.is_file() and digest.read_text().strip() == _sha256(exe):
         return exe
-    with tempfile.TemporaryDirectory(dir=cache_dir(), prefix="build-") as tmp:
+    with tempfile.TemporaryDirectory(dir=cache, prefix="build-") as tmp:
         src, out = Path(tmp) / "model.c", Path(tmp) / f"model{_EXE_SUFFIX}"
         src.write_text(source, encoding="utf-8")
-        _run_compiler([*command, *flags, str(src), "-o", str(out), *C_LIBS])
+        _run_compiler([*command, *flags, str(src), "-o", str(out), *C_LIBS], Path(tmp))
+        (Path(tmp) / "sha256").write_text(_sha256(out) + "\n")
         os.replace(out, exe)
+        os.replace(Path(tmp) / "sha256", digest)
     return exe
 
 
-def _run_compiler(argv: list[str]) -> None:
-    try:
-        done = subprocess.run(argv, capture_output=True, text=True)
-    except OSError as error:
-        raise BackendError(f"cannot run the C compiler {argv[0]!r}: {error}") from error
-    if done.returncode != 0:
+def _sha256(path: Path) -> str:
+    return hashlib.sha256(path.read_bytes()).hexdigest()
+
+
+def _run_compiler(argv: list[str], workdir: Path) -> None:
+    """Runs the compiler; BackendError if it fails: a broken or missing compiler when it cannot
+    build a trivial program either (told as such), else a bug in bgc."""
+    done = _compile(argv)
+    if done.returncode == 0:
+        return
+    trivial = workdir / "trivial.c"
+    trivial.write_text("int main(void) { return 0; }\n")
+    check = _compile([argv[0], *C_FLAGS, str(trivial), "-o", str(workdir / "trivial")])
+    if check.returncode != 0:
         raise BackendError(
-            f"the C compiler failed on generated code (a bug in bgc), status {done.returncode}:\n"
-            f"$ {shlex.join(argv)}\n{done.stderr}")
+            f"the C compiler does not work: '{shlex.join(argv[:1])}' cannot build a trivial "
+            f"program either (status {check.returncode}).  Set CC to a working C99 compiler, or "
+            f"use --backend python.\n$ {shlex.join(argv)}\n{done.stderr}".rstrip())
+    raise BackendError(
+        f"the C compiler failed on generated code (a bug in bgc), status {done.returncode}:\n"
+        f"$ {shlex.join(argv)}\n{done.stderr}".rstrip())
+
+
+def _compile(argv: list[str]) -> subprocess.CompletedProcess:
+    try:
+        return subprocess.run(argv, capture_output=True, text=True)
+    except OSError as error:
+        raise BackendError(f"cannot run the C compiler {argv[0]!r}: {error.strerror}.  Set CC "
+                           "to a working C99 compiler, or use --backend python.") from None
+
+
+@dataclass
+class Finished:
+    """How a program run by run_streaming ended: its exit status, its stderr, and the signal
+    (SIGINT, SIGTERM) that interrupted it, else 0."""
+    code: int
+    stderr: str
+    signal: int = 0
+
+
+def run_streaming(argv: list[str], stdout) -> Finished:
+    """Runs argv with its standard output going to `stdout` as it is written (a file with a
+    descriptor gets it directly; anything else with write() is fed in chunks), so memory does
+    not grow with the output.  SIGINT and SIGTERM received meanwhile are passed on to the
+    program, which stops at its next step with its rows written; a second one kills it."""
+    try:
+        fd = stdout.fileno()
+    except (AttributeError, OSError, ValueError):
+        fd = None
+    got: list[int] = []
+    with tempfile.TemporaryFile() as err:
+        if fd is not None:
+            stdout.flush()
+        proc = subprocess.Popen(argv, stdout=fd if fd is not None else subprocess.PIPE,
+                                stderr=err)
+
+        def forward(sig, frame):
+            if got:
+                proc.kill()
+            else:
+                got.append(sig)
+                proc.send_signal(sig)
+
+        replaced = []
+        if threading.current_thread() is threading.main_thread():
+            replaced = [(sig, signal.signal(sig, forward))
+                        for sig in (signal.SIGINT, signal.SIGTERM)]
+        try:
+            if fd is None:  # a text stream without a descriptor (a test's captured output)
+                decoder = codecs.getincrementaldecoder("utf-8")("replace")
+                for chunk in iter(lambda: proc.stdout.read(1 << 16), b""):
+                    stdout.write(decoder.decode(chunk))
+                stdout.write(decoder.decode(b"", final=True))
+                proc.stdout.close()
+            code = proc.wait()
+        finally:
+            for sig, handler in replaced:
+                signal.signal(sig, handler)
+        err.seek(0)
+        return Finished(code, err.read().decode("utf-8", "replace"), got[0] if got else 0)
 
 
 def run_c(exe: Path | str, args=(), timeout: float | None = None) -> tuple[int, str, str]:
@@ -100,6 +217,13 @@ def load_python_module(source: str, name: str | None = None) -> ModuleType:
         finally:
             sys.dont_write_bytecode = dont_write
     return module
+
+
+def python_program(source: str, directory: str) -> list[str]:
+    """The command that runs generated Python as a program, written into `directory`."""
+    path = Path(directory) / "model.py"
+    path.write_text(source, encoding="utf-8")
+    return [sys.executable, str(path)]
 
 
 def run_python(source: str, args=(), timeout: float | None = None) -> tuple[int, str, str]:

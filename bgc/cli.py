@@ -11,7 +11,7 @@ from pathlib import Path
 import click
 
 from . import accuracy as acc
-from . import api, backends, solvers, stability
+from . import api, backends, outfile, solvers, stability
 from .diagnostics import format_diagnostic
 from .emit import emit_c, emit_python
 from .report import check_report, equations_latex, equations_text
@@ -42,26 +42,23 @@ def _build(model, scene, project_initial=False, algebra="auto", program=True,
     return compiled
 
 
-def _file_mode() -> int:
-    """The mode a new file gets from open() under the current umask (mkstemp's is 0600)."""
-    umask = os.umask(0)
-    os.umask(umask)
-    return 0o666 & ~umask
-
-
 def _write_atomic(path: str, text: str):
-    """Write all of `text` or nothing: a temp file beside `path`, then rename."""
-    target = Path(path)
-    fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", dir=target.parent or ".")
+    """Write all of `text` or nothing (bgc.outfile)."""
     try:
-        with os.fdopen(fd, "w", encoding="utf-8", newline="") as fh:
-            fh.write(text)
-        os.chmod(tmp, _file_mode())
-        os.replace(tmp, target)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
+        outfile.write_atomic(path, text)
+    except outfile.OutputError as error:
+        click.echo(f"error: {error}", err=True)
+        sys.exit(1)
+
+
+def _output_file(ctx, param, value):
+    """-o: a file that can be written, checked before any work (a usage error if not)."""
+    if value is not None:
+        try:
+            outfile.check_target(value)
+        except outfile.OutputError as error:
+            raise click.BadParameter(str(error), ctx, param) from None
+    return value
 
 
 def _parse_params(values, compiled) -> dict:
@@ -103,7 +100,19 @@ ALGEBRA = click.option("--algebra", type=click.Choice(list(api.ALGEBRA)), defaul
                             "generated code.")
 
 
-@click.group(context_settings={"help_option_names": ["-h", "--help"]})
+class _Group(click.Group):
+    """The commands; a C toolchain that fails (bgc.backends.BackendError) is reported as such,
+    exit 1, without a traceback."""
+
+    def invoke(self, ctx):
+        try:
+            return super().invoke(ctx)
+        except backends.BackendError as error:
+            click.echo(f"error: {error}", err=True)
+            ctx.exit(1)
+
+
+@click.group(cls=_Group, context_settings={"help_option_names": ["-h", "--help"]})
 @click.version_option(package_name="bgc")
 def main():
     """bgc: compile bond-graph models (.bg) to equations, C and Python, and simulate them."""
@@ -154,7 +163,8 @@ def equations(model, scene, outputs, effects, algebra, fmt):
 @ADHOC
 @ALGEBRA
 @click.option("--target", type=click.Choice(["c", "python"]), default="c")
-@click.option("-o", "output", default=None, help="Output file (default: stdout).")
+@click.option("-o", "output", default=None, callback=_output_file,
+              help="Output file (default: stdout).")
 @click.option("--project-initial", is_flag=True, help="Project initial values onto the "
                                                       "constraints instead of refusing them.")
 def compile(model, scene, outputs, effects, algebra, target, output, project_initial):
@@ -189,7 +199,9 @@ def compile(model, scene, outputs, effects, algebra, target, output, project_ini
 @click.option("--stats", is_flag=True, help="Print the solver's counters (steps, rejected "
                                             "steps, right-side calls, Jacobians, "
                                             "factorisations, solves) to stderr.")
-@click.option("-o", "output", default=None, help="CSV file (default: stdout).")
+@click.option("-o", "output", default=None, callback=_output_file,
+              help="CSV file (default: stdout), written as the run goes and renamed into "
+                   "place at its end; a failed run keeps the rows it computed.")
 def simulate(model, scene, outputs, effects, algebra, backend, solver, rtol, atol, t_end, dt,
              step, params, project_initial, stats, output):
     """Simulate and write CSV."""
@@ -207,19 +219,56 @@ def simulate(model, scene, outputs, effects, algebra, backend, solver, rtol, ato
     if backend == "c" and not backends.have_c_compiler():
         click.echo("warning: no C compiler found (cc or $CC); using the Python backend", err=True)
         backend = "python"
-    if backend == "c":
-        (text,) = emit_c(compiled.program).values()
-        code, out, err = backends.run_c(backends.compile_c(text), args)
-    else:
-        (text,) = emit_python(compiled.program).values()
-        code, out, err = backends.run_python(text, args)
-    if err:
-        click.echo(err, err=True, nl=False)
-    if output and (code == 0 or out):
-        _write_atomic(output, out)
-    elif not output:
-        click.echo(out, nl=False)
-    sys.exit(0 if code == 0 else 1)
+    with tempfile.TemporaryDirectory(prefix="bgc-") as tmp:
+        if backend == "c":
+            (text,) = emit_c(compiled.program).values()
+            argv = [str(backends.compile_c(text))]
+        else:
+            (text,) = emit_python(compiled.program).values()
+            argv = backends.python_program(text, tmp)
+        sys.exit(_run(argv + list(map(str, args)), output))
+
+
+def _run(argv: list[str], output: str | None) -> int:
+    """Runs a generated program, its CSV streamed to `output` (else stdout); the exit status:
+    0, 1 if the run failed, 128 + the signal if one interrupted it.  A failed run's rows are
+    kept, and the last line on stderr says so."""
+    if not output:
+        done = backends.run_streaming(argv, sys.stdout)
+        click.echo(done.stderr, err=True, nl=False)
+        return 0 if done.code == 0 else 128 + done.signal if done.signal else 1
+    try:
+        part = outfile.Partial(output)
+    except outfile.OutputError as error:
+        click.echo(f"error: {error}", err=True)
+        return 1
+    with part:
+        done = backends.run_streaming(argv, part.file)
+        click.echo(done.stderr, err=True, nl=False)
+        if done.code == 0:
+            part.commit()
+            return 0
+        part.file.flush()
+        last = _last_row_time(part.tmp)
+        if last is None:
+            click.echo(f"bgc: no rows computed; nothing written to {output}", err=True)
+        else:
+            part.keep()
+            click.echo(f"bgc: the run stopped; the rows up to t = {last} are in {output}",
+                       err=True)
+    return 128 + done.signal if done.signal else 1
+
+
+def _last_row_time(path: Path) -> str | None:
+    """The time of the last complete row of a CSV (its header aside), or None if it has none."""
+    with open(path, "rb") as f:
+        size = f.seek(0, os.SEEK_END)
+        f.seek(max(0, size - 4096))
+        lines = f.read().split(b"\n")
+    rows = [line for line in lines[:-1] if line and not line.startswith(b"t,")]
+    if not rows:
+        return None
+    return rows[-1].split(b",", 1)[0].decode("ascii", "replace")
 
 
 def _numbers(text: str | None, option: str) -> list[float] | None:
@@ -350,15 +399,9 @@ def accuracy(model, scene, outputs, effects, algebra, backend, solver_list, rtol
                        "written", err=True)
         else:
             png = directory / f"{base}.png"
-            fd, tmp = tempfile.mkstemp(prefix=f".{png.name}.", suffix=".png", dir=directory)
-            os.close(fd)
-            try:
-                acc.plot(result, tmp, gains=gain_values is not None)
-                os.chmod(tmp, _file_mode())
-                os.replace(tmp, png)
-            finally:
-                if os.path.exists(tmp):
-                    os.unlink(tmp)
+            with outfile.Partial(png) as part:
+                acc.plot(result, part.file, gains=gain_values is not None)
+                part.commit()
             written.append(str(png))
     click.echo(f"wrote {', '.join(written)}", err=True)
 

@@ -407,15 +407,12 @@ def _pendulum_work():
 
     compiled = bgc.build(ROOT / "models" / "pendulum.bg", "swing")
     module = load_python_module(next(iter(emit_python(compiled.program).values())))
-    p = module._with_constants(module._param_values({}))
-    x0 = module._init(p)
     references = {}
 
     def work(solver, tol, dt=None):
-        st, rows = module._new_stats(), []
-        s = module._settings(solver=solver, rtol=tol, atol=tol, dt=dt)
-        module._integrate(s, p, x0, lambda t, x, y: rows.append((t, y[0], y[1])), st)
-        rows = np.array(rows)
+        st = {}
+        rows = np.array([(t, y[0], y[1]) for t, y in
+                         module.rows(solver=solver, rtol=tol, atol=tol, dt=dt, stats=st)])
         if dt not in references:
             references[dt] = np.array(pendulum_reference(rows[:, 0])[:2]).T
         err = np.max(np.abs(rows[:, 1:] - references[dt]), axis=1)

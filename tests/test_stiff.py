@@ -161,12 +161,10 @@ def _run(make, backend, **options):
     built = _built(make, backend)
     params = dict(options.pop("params", ()))
     if backend == "python":
-        s = built._settings(**options)
-        p = built._with_constants(built._param_values(built._overrides(params)))
-        times, rows, st = [], [], built._new_stats()
-        built._integrate(s, p, built._init(p), lambda t, x, y: (times.append(t), rows.append(y)),
-                         st)
-        return np.array(times), np.array(rows), _parse_stats(built._stats_line(st))
+        st = {}
+        out = list(built.rows(params=params, stats=st, **options))
+        return (np.array([t for t, _ in out]), np.array([y for _, y in out]),
+                _parse_stats(built._stats_line(st)))
     args = ["--stats"]
     for name, value in params.items():
         args += ["-p", f"{name}={value!r}"]

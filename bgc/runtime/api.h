@@ -107,6 +107,11 @@ int bgc_check_settings(const bgc_settings *s, char *msg, size_t msg_size);
 int bgc_simulate(const bgc_settings *s, const bgc_params *p, const double *x0, bgc_sink sink,
                  void *ctx, bgc_stats *stats, char *msg, size_t msg_size);
 
+/* Asks a run in progress to stop at its next accepted step, as a failure ("interrupted by
+   signal sig"), keeping the rows written so far.  Async-signal-safe: a signal handler may call
+   it (the program's main does, for SIGINT and SIGTERM).  0 clears the request. */
+void bgc_request_stop(int sig);
+
 /* -------------------------------------------- between the model part and the runtime --- */
 static inline double bgc_sq(double a) { return a * a; }
 static inline double bgc_min(double a, double b) { return b < a ? b : a; }

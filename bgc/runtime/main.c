@@ -489,6 +489,12 @@ static int bgc_parse_args(int argc, char **argv, bgc_settings *s, bgc_params *p,
     return -1;
 }
 
+/* SIGINT, SIGTERM: the run stops at its next step, as a failure, its rows written. */
+static void bgc_on_signal(int sig)
+{
+    bgc_request_stop(sig);
+}
+
 int main(int argc, char **argv)
 {
     bgc_settings s;
@@ -526,6 +532,8 @@ int main(int argc, char **argv)
     if (bgc_check_constraints(s.t0, x0, &p, stderr))
         return BGC_ERR_CONSTRAINT;
 
+    signal(SIGINT, bgc_on_signal);
+    signal(SIGTERM, bgc_on_signal);
     bgc_out.file = stdout;
     bgc_csv_header(stdout);
     rc = bgc_simulate(&s, &p, x0, bgc_csv_row, &bgc_out, &st, msg, sizeof msg);

@@ -524,25 +524,60 @@ def _initial_state(s, p, project_initial):
     return x0
 
 
-def simulate(t_end=None, dt=None, solver=None, rtol=None, atol=None, params=None, step=None,
-             project_initial=False):
-    """Runs the model; returns (t, Y) with Y[k] the outputs at t[k].  None: the scene's value."""
+def rows(t_end=None, dt=None, solver=None, rtol=None, atol=None, params=None, step=None,
+         project_initial=False, stats=None):
+    """Runs the model, yielding each output row (t, y) as it is computed (y a list ordered as
+    OUTPUTS): memory does not grow with the run's length.  A failure raises SimulationError
+    after the rows before it (its .times and .rows are then empty: they were yielded).
+    stats: a dict that receives the solver's counters."""
     s = _settings(t_end, dt, solver, rtol, atol, step)
     p = _with_constants(_param_values(_overrides(params)))
     x0 = _initial_state(s, p, project_initial)
-    times, rows = [], []
-
-    def sink(t, x, y):
-        times.append(t)
-        rows.append(y)
-
+    st = _new_stats() if stats is None else stats
+    st.update(_new_stats())
     try:
-        _integrate(s, p, x0, sink, _new_stats())
+        for t, y in _integrate(s, p, x0, st):
+            yield t, y
     except _Failure as failure:
-        raise SimulationError(str(failure), failure.t, numpy.array(times, dtype=float),
-                              numpy.array(rows, dtype=float).reshape(len(times), len(OUTPUTS)))
+        raise SimulationError(str(failure), failure.t, numpy.zeros(0),
+                              numpy.zeros((0, len(OUTPUTS)))) from None
+
+
+def simulate(t_end=None, dt=None, solver=None, rtol=None, atol=None, params=None, step=None,
+             project_initial=False, out=None):
+    """Runs the model; returns (t, Y) with Y[k] the outputs at t[k].  None: the scene's value.
+    out: a file name or a text file: the CSV is written there row by row as the run goes
+    (header first, as the program writes it) and nothing is kept: returns the number of rows."""
+    run = rows(t_end, dt, solver, rtol, atol, params, step, project_initial)
+    if out is not None:
+        return _stream(run, out)
+    times, values = [], []
+    try:
+        for t, y in run:
+            times.append(t)
+            values.append(y)
+    except SimulationError as error:
+        raise SimulationError(str(error), error.t, numpy.array(times, dtype=float),
+                              numpy.array(values, dtype=float).reshape(len(times), len(OUTPUTS))) \
+            from None
     return (numpy.array(times, dtype=float),
-            numpy.array(rows, dtype=float).reshape(len(times), len(OUTPUTS)))
+            numpy.array(values, dtype=float).reshape(len(times), len(OUTPUTS)))
+
+
+def _stream(run, out):
+    if not hasattr(out, "write"):
+        with open(out, "w", encoding="utf-8", newline="") as f:
+            return _stream(run, f)
+    out.write(",".join(["t"] + OUTPUTS) + "\n")
+    count = 0
+    for t, y in run:
+        out.write(_row_text(t, y))
+        count += 1
+    return count
+
+
+def _row_text(t, y):
+    return ",".join(["%.17g" % t] + ["%.17g" % v for v in y]) + "\n"
 
 
 # ---------------------------------------------------------------- command line
@@ -648,9 +683,14 @@ def _parse_args(argv):
     return options, given, flags
 
 
-def _write_rows(out, times, rows):
-    out.write("".join(
-        ",".join(["%.17g" % t] + ["%.17g" % v for v in y]) + "\n" for t, y in zip(times, rows)))
+def _stop_on_signals():
+    """SIGINT and SIGTERM stop the run at its next step, its rows written (as the C program
+    does); the handlers they replace, to restore.  None outside the main thread."""
+    replaced = []
+    if threading.current_thread() is threading.main_thread():
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            replaced.append((sig, signal.signal(sig, lambda number, frame: request_stop(number))))
+    return replaced
 
 
 def main(argv=None):
@@ -678,16 +718,20 @@ def main(argv=None):
     except SimulationError as error:
         sys.stderr.write("error: %s\n" % error)
         return 3
-    times, rows = [], []
     stats = _new_stats()
     failure = None
-    try:
-        _integrate(s, p, x0, lambda t, x, y: (times.append(t), rows.append(y)), stats)
-    except _Failure as error:
-        failure = error
     out = sys.stdout
     out.write(",".join(["t"] + OUTPUTS) + "\n")
-    _write_rows(out, times, rows)
+    handlers = _stop_on_signals()
+    try:
+        for t, y in _integrate(s, p, x0, stats):
+            out.write(_row_text(t, y))
+    except _Failure as error:
+        failure = error
+    finally:
+        for sig, handler in handlers:
+            signal.signal(sig, handler)
+        request_stop(0)
     out.flush()
     if "--stats" in flags:
         sys.stderr.write(_stats_line(stats) + "\n")

@@ -41,6 +41,24 @@ static int bgc_fail_step(char *msg, size_t msg_size, double t, double h, int wor
     return BGC_ERR_RUNTIME;
 }
 
+static volatile sig_atomic_t bgc_stop_signal = 0;
+
+void bgc_request_stop(int sig)
+{
+    bgc_stop_signal = (sig_atomic_t)sig;
+}
+
+/* Counts an accepted step ending at t; BGC_ERR_RUNTIME and a message if a stop was asked. */
+static int bgc_accept(bgc_stats *st, char *msg, size_t msg_size, double t)
+{
+    st->steps++;
+    if (bgc_stop_signal) {
+        snprintf(msg, msg_size, "at t = %.17g: interrupted by signal %d", t, (int)bgc_stop_signal);
+        return BGC_ERR_RUNTIME;
+    }
+    return 0;
+}
+
 static int bgc_fail_block(char *msg, size_t msg_size, const bgc_work *w)
 {
     bgc_work_message(w, msg, msg_size);
@@ -222,11 +240,10 @@ static int bgc_fixed_step(bgc_run *r, const bgc_erk *m, double t, double h, doub
     r->st->rhs += m->stages;
     bgc_combine(ys, y, h, m->b, 1, m->stages, k);
     memcpy(y, ys, sizeof(double) * N);
-    r->st->steps++;
     l = bgc_first_nonfinite(y, N);
     if (l >= 0)
         return bgc_fail(r->msg, r->msg_size, t + h, "state", bgc_state_names[l]);
-    return 0;
+    return bgc_accept(r->st, r->msg, r->msg_size, t + h);
 }
 
 /* Number of fixed steps of size about h in span: steps of h, the last one shorter. */
@@ -471,12 +488,14 @@ static int bgc_run_erk(bgc_run *r, const bgc_method *method, double *y)
         hnew = fixed ? s->step : h / fac;
         if (err <= 1.0) {
             facold = bgc_max(err, 1e-4);
-            r->st->steps++;
             i = bgc_first_nonfinite(y1, N);
             if (i >= 0) {
                 rc = bgc_fail(r->msg, r->msg_size, tph, "state", bgc_state_names[i]);
                 goto done;
             }
+            rc = bgc_accept(r->st, r->msg, r->msg_size, tph);
+            if (rc)
+                goto done;
             if (m->fsal && !fsal_first) {
                 r->st->rhs++;
                 if (bgc_model_rhs(tph, y1, r->p, r->w, k + (size_t)last_stage * D)) {

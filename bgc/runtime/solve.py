@@ -42,6 +42,22 @@ def _fail_step(t, h, worst):
     return _Failure(message, t)
 
 
+_STOP = [0]  # a signal's number: the run stops at its next accepted step (request_stop)
+
+
+def request_stop(sig):
+    """Asks a run in progress to stop at its next accepted step, as a failure ("interrupted by
+    signal sig"), the rows before it kept; a signal handler may call it.  0 clears it."""
+    _STOP[0] = sig
+
+
+def _accept(st, t):
+    """Counts an accepted step ending at t; raises _Failure if a stop was asked."""
+    st["steps"] += 1
+    if _STOP[0]:
+        raise _Failure("at t = %.17g: interrupted by signal %d" % (t, _STOP[0]), t)
+
+
 def _block_failed(failure):
     return _Failure(str(failure), failure.t)
 
@@ -64,16 +80,15 @@ class _Stiff(Exception):
 
 
 class _Run:
-    """A run in progress (see bgc_run in the C runtime): a run function integrates from
-    (run.t, y) to s.t_end, hands the output times run.kout .. run.nout to the sink as it
-    passes them, keeps run.t and run.y at its last accepted step, and returns; or raises
-    _Failure, _Stiff (run.h: its last step size)."""
+    """A run in progress (see bgc_run in the C runtime): a run function is a generator that
+    integrates from (run.t, y) to s.t_end, yields the rows (t, outputs) of the output times
+    run.kout .. run.nout as it passes them, keeps run.t and run.y at its last accepted step,
+    and returns; or raises _Failure, _Stiff (run.h: its last step size)."""
 
-    __slots__ = ("s", "p", "w", "sink", "st", "nout", "kout", "t", "h", "y",
-                 "detect_stiffness")
+    __slots__ = ("s", "p", "w", "st", "nout", "kout", "t", "h", "y", "detect_stiffness")
 
-    def __init__(self, s, p, w, sink, st, y):
-        self.s, self.p, self.w, self.sink, self.st = s, p, w, sink, st
+    def __init__(self, s, p, w, st, y):
+        self.s, self.p, self.w, self.st = s, p, w, st
         self.nout, self.kout = _output_count(s), 1
         self.t, self.h, self.y = s.t0, 0.0, y
         self.detect_stiffness = False
@@ -103,7 +118,7 @@ class _Run:
         j = _first_nonfinite(y)
         if j >= 0:
             raise _fail(t, "output", OUTPUTS[j])
-        self.sink(t, x, y)
+        yield t, y
 
     def emit_step(self, t, h, tph, y1, dense):
         """The output times in (t, tph] after an accepted step: tph from y1, the others from
@@ -114,11 +129,11 @@ class _Run:
             if tk > tph:
                 break
             if tk == tph:
-                self.emit(tk, y1)
+                yield from self.emit(tk, y1)
             else:
                 if at is None:
                     at = dense()
-                self.emit(tk, at((tk - t) / h))
+                yield from self.emit(tk, at((tk - t) / h))
             self.kout += 1
 
 
@@ -365,12 +380,12 @@ def _run_fixed(run, m, y):
                 raise _block_failed(failure) from None
             run.st["rhs"] += stages
             y = combine(y, h, plan.b, K)
-            run.st["steps"] += 1
             i = _first_nonfinite(y)
             if i >= 0:
                 raise _fail(t1, "state", STATES[i])
+            _accept(run.st, t1)
             run.t, run.y = t1, y
-        run.emit(tb, y)
+        yield from run.emit(tb, y)
         run.kout += 1
         ta = tb
 
@@ -514,17 +529,17 @@ def _run_erk(run, m, y):
         hnew = s.step if fixed else h / fac
         if err <= 1.0:
             facold = max(err, 1e-4)
-            st["steps"] += 1
             i = _first_nonfinite(y1)
             if i >= 0:
                 raise _fail(tph, "state", STATES[i])
+            _accept(st, tph)
             try:
                 if fsal and not fsal_first:
                     st["rhs"] += 1
                     K[last_stage] = fv(tph, y1)
             except _BlockFailure as failure:
                 raise _block_failed(failure) from None
-            run.emit_step(t, h, tph, y1, _erk_dense(run, m, plan, t, h, y, list(K)))
+            yield from run.emit_step(t, h, tph, y1, _erk_dense(run, m, plan, t, h, y, list(K)))
             if run.detect_stiffness and stiff_i >= 0 and ystiff is not None:
                 # h |f(Y_i) - f(Y_j)| / |Y_i - Y_j| for two stages at the same time
                 num = V.distance2(K[stiff_j], K[stiff_i])
@@ -570,41 +585,52 @@ def _run_family(run, name):
     m = _METHODS[name]
     family = m["family"]
     if family == "fixed":
-        _run_fixed(run, m, run.y)
+        yield from _run_fixed(run, m, run.y)
     elif family == "erk":
-        _run_erk(run, m, run.y)
+        yield from _run_erk(run, m, run.y)
     elif family == "rosenbrock":
-        _run_rosenbrock(run, m, numpy.asarray(run.y, dtype=float))
+        yield from _run_rosenbrock(run, m, numpy.asarray(run.y, dtype=float))
     elif family == "radau5":
-        _run_radau5(run, m, numpy.asarray(run.y, dtype=float))
+        yield from _run_radau5(run, m, numpy.asarray(run.y, dtype=float))
     else:
         raise ValueError("solver '%s' cannot run by itself" % name)
 
 
-def _integrate(s, p, x0, sink, st):
-    """Runs the solver; st["cpu"]: the processor seconds it took."""
-    start = time.process_time()
+def _integrate(s, p, x0, st):
+    """Runs the solver: yields the rows (t, outputs) as it computes them; st["cpu"]: the
+    processor seconds it took (the consumer's time between rows excluded)."""
+    cpu = 0.0
+    rows = _integrate_from(s, p, x0, st)
     try:
-        _integrate_from(s, p, x0, sink, st)
+        while True:
+            start = time.process_time()
+            try:
+                row = next(rows)
+            except StopIteration:
+                return
+            finally:
+                cpu += time.process_time() - start
+                st["cpu"] = cpu
+            yield row
     finally:
-        st["cpu"] = time.process_time() - start
+        rows.close()
 
 
-def _integrate_from(s, p, x0, sink, st):
+def _integrate_from(s, p, x0, st):
     y = numpy.array(x0, dtype=float)
     i = _first_nonfinite(y)
     if i >= 0:
         raise _fail(s.t0, "state", STATES[i])
-    run = _Run(s, p, _Work(s.rtol, s.atol), sink, st, y)
-    run.emit(s.t0, y)
+    run = _Run(s, p, _Work(s.rtol, s.atol), st, y)
+    yield from run.emit(s.t0, y)
     m = _METHODS[s.solver]
     if m["family"] != "auto":
-        _run_family(run, s.solver)
+        yield from _run_family(run, s.solver)
         return
     run.detect_stiffness = True
     try:
-        _run_family(run, m["explicit"])
+        yield from _run_family(run, m["explicit"])
     except _Stiff:
         st["switched"], st["t_switch"] = True, run.t
         run.detect_stiffness = False
-        _run_family(run, m["stiff"])
+        yield from _run_family(run, m["stiff"])

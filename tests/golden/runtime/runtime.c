@@ -123,6 +123,11 @@ int bgc_check_settings(const bgc_settings *s, char *msg, size_t msg_size);
 int bgc_simulate(const bgc_settings *s, const bgc_params *p, const double *x0, bgc_sink sink,
                  void *ctx, bgc_stats *stats, char *msg, size_t msg_size);
 
+/* Asks a run in progress to stop at its next accepted step, as a failure ("interrupted by
+   signal sig"), keeping the rows written so far.  Async-signal-safe: a signal handler may call
+   it (the program's main does, for SIGINT and SIGTERM).  0 clears the request. */
+void bgc_request_stop(int sig);
+
 /* -------------------------------------------- between the model part and the runtime --- */
 static inline double bgc_sq(double a) { return a * a; }
 static inline double bgc_min(double a, double b) { return b < a ? b : a; }
@@ -854,6 +859,24 @@ static int bgc_fail_step(char *msg, size_t msg_size, double t, double h, int wor
     return BGC_ERR_RUNTIME;
 }
 
+static volatile sig_atomic_t bgc_stop_signal = 0;
+
+void bgc_request_stop(int sig)
+{
+    bgc_stop_signal = (sig_atomic_t)sig;
+}
+
+/* Counts an accepted step ending at t; BGC_ERR_RUNTIME and a message if a stop was asked. */
+static int bgc_accept(bgc_stats *st, char *msg, size_t msg_size, double t)
+{
+    st->steps++;
+    if (bgc_stop_signal) {
+        snprintf(msg, msg_size, "at t = %.17g: interrupted by signal %d", t, (int)bgc_stop_signal);
+        return BGC_ERR_RUNTIME;
+    }
+    return 0;
+}
+
 static int bgc_fail_block(char *msg, size_t msg_size, const bgc_work *w)
 {
     bgc_work_message(w, msg, msg_size);
@@ -1035,11 +1058,10 @@ static int bgc_fixed_step(bgc_run *r, const bgc_erk *m, double t, double h, doub
     r->st->rhs += m->stages;
     bgc_combine(ys, y, h, m->b, 1, m->stages, k);
     memcpy(y, ys, sizeof(double) * N);
-    r->st->steps++;
     l = bgc_first_nonfinite(y, N);
     if (l >= 0)
         return bgc_fail(r->msg, r->msg_size, t + h, "state", bgc_state_names[l]);
-    return 0;
+    return bgc_accept(r->st, r->msg, r->msg_size, t + h);
 }
 
 /* Number of fixed steps of size about h in span: steps of h, the last one shorter. */
@@ -1284,12 +1306,14 @@ static int bgc_run_erk(bgc_run *r, const bgc_method *method, double *y)
         hnew = fixed ? s->step : h / fac;
         if (err <= 1.0) {
             facold = bgc_max(err, 1e-4);
-            r->st->steps++;
             i = bgc_first_nonfinite(y1, N);
             if (i >= 0) {
                 rc = bgc_fail(r->msg, r->msg_size, tph, "state", bgc_state_names[i]);
                 goto done;
             }
+            rc = bgc_accept(r->st, r->msg, r->msg_size, tph);
+            if (rc)
+                goto done;
             if (m->fsal && !fsal_first) {
                 r->st->rhs++;
                 if (bgc_model_rhs(tph, y1, r->p, r->w, k + (size_t)last_stage * D)) {
@@ -1922,7 +1946,9 @@ static int bgc_run_rosenbrock(bgc_run *r, const bgc_method *method, double *y)
             hacc = h;
             erracc = bgc_max(1e-2, err);
             accepted++;
-            r->st->steps++;
+            rc = bgc_accept(r->st, r->msg, r->msg_size, tph);
+            if (rc)
+                goto done;
             rc = bgc_emit_step(r, t, h, tph, y1, bgc_ros_prepare, bgc_ros_dense_at, &dense, yout);
             if (rc)
                 goto done;
@@ -2346,7 +2372,9 @@ static int bgc_run_radau5(bgc_run *r, const bgc_method *method, double *y)
             bgc_radau_poly(m, z1, z2, z3, b);
             memcpy(zlast, z3, sizeof(double) * N);
             hold = h;
-            r->st->steps++;
+            rc = bgc_accept(r->st, r->msg, r->msg_size, tph);
+            if (rc)
+                goto done;
             rc = bgc_emit_step(r, t, h, tph, y1, NULL, bgc_radau_dense_at, &dense, yout);
             if (rc)
                 goto done;
@@ -2880,6 +2908,12 @@ static int bgc_parse_args(int argc, char **argv, bgc_settings *s, bgc_params *p,
     return -1;
 }
 
+/* SIGINT, SIGTERM: the run stops at its next step, as a failure, its rows written. */
+static void bgc_on_signal(int sig)
+{
+    bgc_request_stop(sig);
+}
+
 int main(int argc, char **argv)
 {
     bgc_settings s;
@@ -2917,6 +2951,8 @@ int main(int argc, char **argv)
     if (bgc_check_constraints(s.t0, x0, &p, stderr))
         return BGC_ERR_CONSTRAINT;
 
+    signal(SIGINT, bgc_on_signal);
+    signal(SIGTERM, bgc_on_signal);
     bgc_out.file = stdout;
     bgc_csv_header(stdout);
     rc = bgc_simulate(&s, &p, x0, bgc_csv_row, &bgc_out, &st, msg, sizeof msg);

@@ -693,25 +693,60 @@ def _initial_state(s, p, project_initial):
     return x0
 
 
-def simulate(t_end=None, dt=None, solver=None, rtol=None, atol=None, params=None, step=None,
-             project_initial=False):
-    """Runs the model; returns (t, Y) with Y[k] the outputs at t[k].  None: the scene's value."""
+def rows(t_end=None, dt=None, solver=None, rtol=None, atol=None, params=None, step=None,
+         project_initial=False, stats=None):
+    """Runs the model, yielding each output row (t, y) as it is computed (y a list ordered as
+    OUTPUTS): memory does not grow with the run's length.  A failure raises SimulationError
+    after the rows before it (its .times and .rows are then empty: they were yielded).
+    stats: a dict that receives the solver's counters."""
     s = _settings(t_end, dt, solver, rtol, atol, step)
     p = _with_constants(_param_values(_overrides(params)))
     x0 = _initial_state(s, p, project_initial)
-    times, rows = [], []
-
-    def sink(t, x, y):
-        times.append(t)
-        rows.append(y)
-
+    st = _new_stats() if stats is None else stats
+    st.update(_new_stats())
     try:
-        _integrate(s, p, x0, sink, _new_stats())
+        for t, y in _integrate(s, p, x0, st):
+            yield t, y
     except _Failure as failure:
-        raise SimulationError(str(failure), failure.t, numpy.array(times, dtype=float),
-                              numpy.array(rows, dtype=float).reshape(len(times), len(OUTPUTS)))
+        raise SimulationError(str(failure), failure.t, numpy.zeros(0),
+                              numpy.zeros((0, len(OUTPUTS)))) from None
+
+
+def simulate(t_end=None, dt=None, solver=None, rtol=None, atol=None, params=None, step=None,
+             project_initial=False, out=None):
+    """Runs the model; returns (t, Y) with Y[k] the outputs at t[k].  None: the scene's value.
+    out: a file name or a text file: the CSV is written there row by row as the run goes
+    (header first, as the program writes it) and nothing is kept: returns the number of rows."""
+    run = rows(t_end, dt, solver, rtol, atol, params, step, project_initial)
+    if out is not None:
+        return _stream(run, out)
+    times, values = [], []
+    try:
+        for t, y in run:
+            times.append(t)
+            values.append(y)
+    except SimulationError as error:
+        raise SimulationError(str(error), error.t, numpy.array(times, dtype=float),
+                              numpy.array(values, dtype=float).reshape(len(times), len(OUTPUTS))) \
+            from None
     return (numpy.array(times, dtype=float),
-            numpy.array(rows, dtype=float).reshape(len(times), len(OUTPUTS)))
+            numpy.array(values, dtype=float).reshape(len(times), len(OUTPUTS)))
+
+
+def _stream(run, out):
+    if not hasattr(out, "write"):
+        with open(out, "w", encoding="utf-8", newline="") as f:
+            return _stream(run, f)
+    out.write(",".join(["t"] + OUTPUTS) + "\n")
+    count = 0
+    for t, y in run:
+        out.write(_row_text(t, y))
+        count += 1
+    return count
+
+
+def _row_text(t, y):
+    return ",".join(["%.17g" % t] + ["%.17g" % v for v in y]) + "\n"
 
 
 # ---------------------------------------------------------------- command line
@@ -817,9 +852,14 @@ def _parse_args(argv):
     return options, given, flags
 
 
-def _write_rows(out, times, rows):
-    out.write("".join(
-        ",".join(["%.17g" % t] + ["%.17g" % v for v in y]) + "\n" for t, y in zip(times, rows)))
+def _stop_on_signals():
+    """SIGINT and SIGTERM stop the run at its next step, its rows written (as the C program
+    does); the handlers they replace, to restore.  None outside the main thread."""
+    replaced = []
+    if threading.current_thread() is threading.main_thread():
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            replaced.append((sig, signal.signal(sig, lambda number, frame: request_stop(number))))
+    return replaced
 
 
 def main(argv=None):
@@ -847,16 +887,20 @@ def main(argv=None):
     except SimulationError as error:
         sys.stderr.write("error: %s\n" % error)
         return 3
-    times, rows = [], []
     stats = _new_stats()
     failure = None
-    try:
-        _integrate(s, p, x0, lambda t, x, y: (times.append(t), rows.append(y)), stats)
-    except _Failure as error:
-        failure = error
     out = sys.stdout
     out.write(",".join(["t"] + OUTPUTS) + "\n")
-    _write_rows(out, times, rows)
+    handlers = _stop_on_signals()
+    try:
+        for t, y in _integrate(s, p, x0, stats):
+            out.write(_row_text(t, y))
+    except _Failure as error:
+        failure = error
+    finally:
+        for sig, handler in handlers:
+            signal.signal(sig, handler)
+        request_stop(0)
     out.flush()
     if "--stats" in flags:
         sys.stderr.write(_stats_line(stats) + "\n")
@@ -911,6 +955,22 @@ def _fail_step(t, h, worst):
     return _Failure(message, t)
 
 
+_STOP = [0]  # a signal's number: the run stops at its next accepted step (request_stop)
+
+
+def request_stop(sig):
+    """Asks a run in progress to stop at its next accepted step, as a failure ("interrupted by
+    signal sig"), the rows before it kept; a signal handler may call it.  0 clears it."""
+    _STOP[0] = sig
+
+
+def _accept(st, t):
+    """Counts an accepted step ending at t; raises _Failure if a stop was asked."""
+    st["steps"] += 1
+    if _STOP[0]:
+        raise _Failure("at t = %.17g: interrupted by signal %d" % (t, _STOP[0]), t)
+
+
 def _block_failed(failure):
     return _Failure(str(failure), failure.t)
 
@@ -933,16 +993,15 @@ class _Stiff(Exception):
 
 
 class _Run:
-    """A run in progress (see bgc_run in the C runtime): a run function integrates from
-    (run.t, y) to s.t_end, hands the output times run.kout .. run.nout to the sink as it
-    passes them, keeps run.t and run.y at its last accepted step, and returns; or raises
-    _Failure, _Stiff (run.h: its last step size)."""
+    """A run in progress (see bgc_run in the C runtime): a run function is a generator that
+    integrates from (run.t, y) to s.t_end, yields the rows (t, outputs) of the output times
+    run.kout .. run.nout as it passes them, keeps run.t and run.y at its last accepted step,
+    and returns; or raises _Failure, _Stiff (run.h: its last step size)."""
 
-    __slots__ = ("s", "p", "w", "sink", "st", "nout", "kout", "t", "h", "y",
-                 "detect_stiffness")
+    __slots__ = ("s", "p", "w", "st", "nout", "kout", "t", "h", "y", "detect_stiffness")
 
-    def __init__(self, s, p, w, sink, st, y):
-        self.s, self.p, self.w, self.sink, self.st = s, p, w, sink, st
+    def __init__(self, s, p, w, st, y):
+        self.s, self.p, self.w, self.st = s, p, w, st
         self.nout, self.kout = _output_count(s), 1
         self.t, self.h, self.y = s.t0, 0.0, y
         self.detect_stiffness = False
@@ -972,7 +1031,7 @@ class _Run:
         j = _first_nonfinite(y)
         if j >= 0:
             raise _fail(t, "output", OUTPUTS[j])
-        self.sink(t, x, y)
+        yield t, y
 
     def emit_step(self, t, h, tph, y1, dense):
         """The output times in (t, tph] after an accepted step: tph from y1, the others from
@@ -983,11 +1042,11 @@ class _Run:
             if tk > tph:
                 break
             if tk == tph:
-                self.emit(tk, y1)
+                yield from self.emit(tk, y1)
             else:
                 if at is None:
                     at = dense()
-                self.emit(tk, at((tk - t) / h))
+                yield from self.emit(tk, at((tk - t) / h))
             self.kout += 1
 
 
@@ -1234,12 +1293,12 @@ def _run_fixed(run, m, y):
                 raise _block_failed(failure) from None
             run.st["rhs"] += stages
             y = combine(y, h, plan.b, K)
-            run.st["steps"] += 1
             i = _first_nonfinite(y)
             if i >= 0:
                 raise _fail(t1, "state", STATES[i])
+            _accept(run.st, t1)
             run.t, run.y = t1, y
-        run.emit(tb, y)
+        yield from run.emit(tb, y)
         run.kout += 1
         ta = tb
 
@@ -1383,17 +1442,17 @@ def _run_erk(run, m, y):
         hnew = s.step if fixed else h / fac
         if err <= 1.0:
             facold = max(err, 1e-4)
-            st["steps"] += 1
             i = _first_nonfinite(y1)
             if i >= 0:
                 raise _fail(tph, "state", STATES[i])
+            _accept(st, tph)
             try:
                 if fsal and not fsal_first:
                     st["rhs"] += 1
                     K[last_stage] = fv(tph, y1)
             except _BlockFailure as failure:
                 raise _block_failed(failure) from None
-            run.emit_step(t, h, tph, y1, _erk_dense(run, m, plan, t, h, y, list(K)))
+            yield from run.emit_step(t, h, tph, y1, _erk_dense(run, m, plan, t, h, y, list(K)))
             if run.detect_stiffness and stiff_i >= 0 and ystiff is not None:
                 # h |f(Y_i) - f(Y_j)| / |Y_i - Y_j| for two stages at the same time
                 num = V.distance2(K[stiff_j], K[stiff_i])
@@ -1439,44 +1498,55 @@ def _run_family(run, name):
     m = _METHODS[name]
     family = m["family"]
     if family == "fixed":
-        _run_fixed(run, m, run.y)
+        yield from _run_fixed(run, m, run.y)
     elif family == "erk":
-        _run_erk(run, m, run.y)
+        yield from _run_erk(run, m, run.y)
     elif family == "rosenbrock":
-        _run_rosenbrock(run, m, numpy.asarray(run.y, dtype=float))
+        yield from _run_rosenbrock(run, m, numpy.asarray(run.y, dtype=float))
     elif family == "radau5":
-        _run_radau5(run, m, numpy.asarray(run.y, dtype=float))
+        yield from _run_radau5(run, m, numpy.asarray(run.y, dtype=float))
     else:
         raise ValueError("solver '%s' cannot run by itself" % name)
 
 
-def _integrate(s, p, x0, sink, st):
-    """Runs the solver; st["cpu"]: the processor seconds it took."""
-    start = time.process_time()
+def _integrate(s, p, x0, st):
+    """Runs the solver: yields the rows (t, outputs) as it computes them; st["cpu"]: the
+    processor seconds it took (the consumer's time between rows excluded)."""
+    cpu = 0.0
+    rows = _integrate_from(s, p, x0, st)
     try:
-        _integrate_from(s, p, x0, sink, st)
+        while True:
+            start = time.process_time()
+            try:
+                row = next(rows)
+            except StopIteration:
+                return
+            finally:
+                cpu += time.process_time() - start
+                st["cpu"] = cpu
+            yield row
     finally:
-        st["cpu"] = time.process_time() - start
+        rows.close()
 
 
-def _integrate_from(s, p, x0, sink, st):
+def _integrate_from(s, p, x0, st):
     y = numpy.array(x0, dtype=float)
     i = _first_nonfinite(y)
     if i >= 0:
         raise _fail(s.t0, "state", STATES[i])
-    run = _Run(s, p, _Work(s.rtol, s.atol), sink, st, y)
-    run.emit(s.t0, y)
+    run = _Run(s, p, _Work(s.rtol, s.atol), st, y)
+    yield from run.emit(s.t0, y)
     m = _METHODS[s.solver]
     if m["family"] != "auto":
-        _run_family(run, s.solver)
+        yield from _run_family(run, s.solver)
         return
     run.detect_stiffness = True
     try:
-        _run_family(run, m["explicit"])
+        yield from _run_family(run, m["explicit"])
     except _Stiff:
         st["switched"], st["t_switch"] = True, run.t
         run.detect_stiffness = False
-        _run_family(run, m["stiff"])
+        yield from _run_family(run, m["stiff"])
 
 
 # ================================================================== stiff ===
@@ -1682,8 +1752,8 @@ def _run_rosenbrock(run, m, y):
                 hnew = h / fac
             hacc, erracc = h, max(1e-2, err)
             accepted += 1
-            st["steps"] += 1
-            run.emit_step(t, h, tph, y1, _rosenbrock_dense(y, y1, K, H))
+            _accept(st, tph)
+            yield from run.emit_step(t, h, tph, y1, _rosenbrock_dense(y, y1, K, H))
             y, t = y1, tph
             run.t, run.y = t, y
             fresh, nsing, bad = True, 0, -1
@@ -1940,8 +2010,8 @@ def _run_radau5(run, m, y):
                 raise _fail(tph, "state", STATES[i])
             b = _radau_poly(c1, c2, Z[0], Z[1], Z[2])
             zlast, hold = Z[2], h
-            st["steps"] += 1
-            run.emit_step(t, h, tph, y1, _radau_dense(y, c1, c2, b))
+            _accept(st, tph)
+            yield from run.emit_step(t, h, tph, y1, _radau_dense(y, c1, c2, b))
             y, t = y1, tph
             run.t, run.y = t, y
             nsing, bad, caljac = 0, -1, False

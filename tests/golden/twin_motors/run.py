@@ -15,13 +15,18 @@ Importable:
   jacobian(t, x, p) -> J  d rhs / d x, shape (len(STATES), len(STATES)), derived symbolically
                           through the algebraic solves; jvp(t, x, p, v) -> J v
   simulate(t_end=None, dt=None, solver=None, rtol=None, atol=None, params=None,
-           step=None, project_initial=False) -> (t, Y), Y of shape (len(t), len(OUTPUTS));
-           None means the compiled scene's setting; params maps names to overrides.
+           step=None, project_initial=False, out=None) -> (t, Y), Y of shape
+           (len(t), len(OUTPUTS)); None means the compiled scene's setting; params maps
+           names to overrides; out: a file name or text file to write the CSV to row by row
+           instead (nothing kept; returns the number of rows)
+  rows(...same arguments, stats=None)  a generator of the rows (t, y) as they are computed
   SimulationError (.t, .times, .rows: the rows computed before it), ConstraintError,
   BlockError (an algebraic block solved numerically failed in rhs/outputs/jacobian)
 """
 import math
+import signal
 import sys
+import threading
 
 import numpy
 

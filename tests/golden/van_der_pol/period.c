@@ -11,16 +11,21 @@
  *   interval is shorter than dt); numbers as printf("%.17g").  Exit status: 0 success,
  *   1 initial conditions violate a constraint (or --project-initial failed), 2 usage
  *   error, 3 runtime failure (non-finite value, step size too small, an algebraic block
- *   singular or not converging, write error).
+ *   singular or not converging, write error, interrupted by SIGINT or SIGTERM: the run
+ *   stops at its next step, its rows written).
  *
  * As a library (compile with -DBGC_NO_MAIN): the API section below.
  */
 #if defined(__clang__)
 #pragma STDC FP_CONTRACT OFF
 #endif
+#if defined(__FAST_MATH__) && !defined(BGC_ALLOW_FAST_MATH)
+#error "compiled with -ffast-math, which removes the run's checks for non-finite values and the IEEE arithmetic its results rely on: compile without it (or define BGC_ALLOW_FAST_MATH to accept that)"
+#endif
 #include <float.h>
 #include <limits.h>
 #include <math.h>
+#include <signal.h>
 #include <stddef.h>
 #include <stdio.h>
 #include <stdlib.h>
