@@ -90,7 +90,7 @@ def pendulum_rhs():
 
 
 def output_grid(t_end: float) -> np.ndarray:
-    """t0 + k dt while below t_end, then t_end (the CSV convention of INTERFACES.md)."""
+    """t0 + k dt while below t_end, then t_end (the CSV convention of docs/cli.md)."""
     n = int(np.ceil(t_end / DT - 1e-6))
     return np.append(np.arange(n) * DT, t_end)
 

@@ -353,7 +353,7 @@ def _potential(coeffs, a0, span, name):
         rest = a - partial(P, z)
         if rest == 0 or is_zero(rest):
             continue
-        term = sp.integrate(sp.expand(rest), z)
+        term = sp.integrate(sp.expand(rest), z, conds="none")  # no Piecewise on parameters
         if term.has(sp.Integral):
             fail(span, f"cannot integrate the balance of '{name}' symbolically: give "
                        "'phi = ...' on the junction")

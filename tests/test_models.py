@@ -11,7 +11,7 @@ independent ways:
 max|bgc - ref| <= 1e-6 * max(1, max|ref|). tests/test_reference_selfcheck.py checks
 that the closed forms and the ODE references agree with each other (it needs no bgc).
 
-Sign conventions follow LANGUAGE.md: the half-arrow points the way power flows; at a
+Sign conventions follow docs/language.md: the half-arrow points the way power flows; at a
 1-junction the efforts of the bonds pointing in sum to those of the bonds pointing out;
 at a 0-junction likewise for flows; TF/MTF: e_in = n e_out, f_out = n f_in;
 GY: e_in = r f_out, e_out = r f_in; a constraint 0-junction's flow balance (in minus out)
