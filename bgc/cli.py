@@ -229,14 +229,21 @@ def simulate(model, scene, outputs, effects, algebra, backend, solver, rtol, ato
         sys.exit(_run(argv + list(map(str, args)), output))
 
 
+def _status(done: backends.Finished) -> int:
+    """bgc's exit status for a program's: 0; 2 for settings it refused (a usage error);
+    128 + the signal that interrupted it; else 1 (a failed run, a violated constraint)."""
+    if done.signal:
+        return 128 + done.signal
+    return done.code if done.code in (0, 2) else 1
+
+
 def _run(argv: list[str], output: str | None) -> int:
-    """Runs a generated program, its CSV streamed to `output` (else stdout); the exit status:
-    0, 1 if the run failed, 128 + the signal if one interrupted it.  A failed run's rows are
-    kept, and the last line on stderr says so."""
+    """Runs a generated program, its CSV streamed to `output` (else stdout); the exit status
+    (_status).  A failed run's rows are kept, and the last line on stderr says so."""
     if not output:
         done = backends.run_streaming(argv, sys.stdout)
         click.echo(done.stderr, err=True, nl=False)
-        return 0 if done.code == 0 else 128 + done.signal if done.signal else 1
+        return _status(done)
     try:
         part = outfile.Partial(output)
     except outfile.OutputError as error:
@@ -251,12 +258,13 @@ def _run(argv: list[str], output: str | None) -> int:
         part.file.flush()
         last = _last_row_time(part.tmp)
         if last is None:
-            click.echo(f"bgc: no rows computed; nothing written to {output}", err=True)
+            if done.code != 2:  # (refused settings: a usage error, said as such)
+                click.echo(f"bgc: no rows computed; nothing written to {output}", err=True)
         else:
             part.keep()
             click.echo(f"bgc: the run stopped; the rows up to t = {last} are in {output}",
                        err=True)
-    return 128 + done.signal if done.signal else 1
+    return _status(done)
 
 
 def _last_row_time(path: Path) -> str | None:
