@@ -208,11 +208,12 @@ def compile(model, target: str = "c", scene: str | None = None,
 
 
 def run_args(t_end=None, dt=None, solver=None, rtol=None, atol=None, step=None, params=None,
-             project_initial=False) -> list[str]:
+             project_initial=False, max_steps=None) -> list[str]:
     """The generated program's command line for these settings."""
     args = []
     for flag, value in (("--t-end", t_end), ("--dt", dt), ("--solver", solver),
-                        ("--rtol", rtol), ("--atol", atol), ("--step", step)):
+                        ("--rtol", rtol), ("--atol", atol), ("--step", step),
+                        ("--max-steps", max_steps)):
         if value is not None:
             args += [flag, repr(value) if isinstance(value, float) else str(value)]
     for name, value in (params or {}).items():
@@ -223,13 +224,14 @@ def run_args(t_end=None, dt=None, solver=None, rtol=None, atol=None, step=None, 
 
 
 BACKENDS = ("c", "python")
-SIMULATE_OPTIONS = ("t_end", "dt", "solver", "rtol", "atol", "step", "params", "project_initial")
+SIMULATE_OPTIONS = ("t_end", "dt", "solver", "rtol", "atol", "step", "params", "project_initial",
+                    "max_steps")
 
 
 def simulate(model, scene: str | None = None, backend: str = "c", algebra: str = "auto",
              outputs=None, effects=None, **options):
     """Simulate; returns (t, Y, names).  outputs, effects: an ad-hoc scene (see build).
-    options: t_end, dt, solver, rtol, atol, step, params, project_initial.  backend "c" falls
+    options: t_end, dt, solver, rtol, atol, step, params, project_initial, max_steps.  backend "c" falls
     back to "python" when there is no C compiler."""
     if backend not in BACKENDS:
         raise ValueError(f"backend must be one of {', '.join(BACKENDS)}, not {backend!r}")

@@ -193,6 +193,10 @@ def compile(model, scene, outputs, effects, algebra, target, output, project_ini
 @click.option("--step", type=float, default=None,
               help="Step of the fixed-step solvers (default: dt); for an adaptive solver, "
                    "fixed steps of this size without error control.")
+@click.option("--max-steps", type=click.IntRange(0, 10**15), default=None,
+              help="The most steps between two output times: a run that needs more stops "
+                   "with a message (a step size running away); 0: no limit.  [default: "
+                   "100000]")
 @click.option("-p", "params", multiple=True, metavar="NAME=VALUE", help="Parameter override.")
 @click.option("--project-initial", is_flag=True, help="Project initial values onto the "
                                                       "constraints instead of refusing them.")
@@ -203,7 +207,7 @@ def compile(model, scene, outputs, effects, algebra, target, output, project_ini
               help="CSV file (default: stdout), written as the run goes and renamed into "
                    "place at its end; a failed run keeps the rows it computed.")
 def simulate(model, scene, outputs, effects, algebra, backend, solver, rtol, atol, t_end, dt,
-             step, params, project_initial, stats, output):
+             step, max_steps, params, project_initial, stats, output):
     """Simulate and write CSV."""
     compiled = _build(model, scene, project_initial, algebra, outputs=outputs, effects=effects)
     for name, value in (("--rtol", rtol), ("--atol", atol), ("--dt", dt), ("--step", step)):
@@ -211,7 +215,7 @@ def simulate(model, scene, outputs, effects, algebra, backend, solver, rtol, ato
             raise click.UsageError(f"{name} must be positive")
     overrides = _parse_params(params, compiled)
     args = api.run_args(t_end, dt, solver, rtol, atol, step, overrides,
-                        project_initial) + (["--stats"] if stats else [])
+                        project_initial, max_steps) + (["--stats"] if stats else [])
     s = compiled.settings
     for message in stability.warnings_for_run(compiled, solver or s.solver, step or s.step,
                                               dt or s.dt, overrides):

@@ -3,6 +3,7 @@
    (BGC_NUM_*) and the parameter struct; the functions below are defined further down. */
 
 #define BGC_DIM(n) ((n) > 0 ? (n) : 1) /* array size for n elements, n may be 0 */
+#define BGC_COUNT(a) ((int)(sizeof(a) / sizeof((a)[0]))) /* elements of an array */
 
 enum { BGC_OK = 0, BGC_ERR_CONSTRAINT = 1, BGC_ERR_USAGE = 2, BGC_ERR_RUNTIME = 3 };
 /* How an algebraic block failed (bgc_work.failure). */
@@ -83,7 +84,10 @@ typedef struct bgc_settings {
     int solver;           /* BGC_SOLVER_<NAME> */
     double rtol, atol;    /* error control of the adaptive solvers (and the Newton tolerance) */
     double step;          /* fixed step of the fixed-step solvers; 0: dt */
+    long max_steps;       /* the most steps accepted between two output times (a run that
+                             needs more fails: a runaway step size); 0: no limit */
 } bgc_settings;
+#define BGC_MAX_STEPS 100000L /* max_steps unless set */
 typedef struct bgc_stats {
     long steps, rejected, rhs; /* accepted steps, rejected steps, right-side calls */
     long jac, lu, solves;      /* stiff solvers: Jacobians, LU factorisations, linear solves */

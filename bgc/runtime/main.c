@@ -344,7 +344,7 @@ static void bgc_csv_header(FILE *f)
 
 static const char bgc_usage[] =
     " [--t-end T] [--dt DT] [--solver NAME] [--rtol R] [--atol A]\n"
-    "       [--step H] [-p NAME=VALUE ...] [--project-initial] [--stats]\n";
+    "       [--step H] [--max-steps N] [-p NAME=VALUE ...] [--project-initial] [--stats]\n";
 
 static void bgc_print_usage(FILE *f)
 {
@@ -366,10 +366,11 @@ static void bgc_help(void)
            "  --rtol R           relative tolerance of the adaptive solvers (%.17g)\n"
            "  --atol A           absolute tolerance of the adaptive solvers (%.17g)\n"
            "  --step H           step of the fixed-step solvers (default: dt)\n"
+           "  --max-steps N      the most steps between two output times (%ld; 0: no limit)\n"
            "  -p NAME=VALUE      set a parameter; derived parameters follow\n"
            "  --project-initial  project the initial state onto the constraints\n"
            "  --stats            print the solver's counters to stderr\n",
-           s.t_end, s.t0, s.dt, bgc_solver_names[s.solver], s.rtol, s.atol);
+           s.t_end, s.t0, s.dt, bgc_solver_names[s.solver], s.rtol, s.atol, s.max_steps);
     printf("solvers:\n");
     for (j = 0; j < BGC_NUM_SOLVERS; j++)
         printf("  %-8s %s\n", bgc_methods[j].name, bgc_methods[j].summary);
@@ -436,6 +437,17 @@ static int bgc_apply_option(const char *name, const char *value, bgc_settings *s
         return bgc_parse_param(value, p, given);
     if (strcmp(name, "--solver") == 0)
         return bgc_parse_solver(value, &s->solver);
+    if (strcmp(name, "--max-steps") == 0) {
+        double n;
+        if (bgc_parse_number(name, value, &n))
+            return -1;
+        if (n >= 0.0 && n <= 1e15 && n == floor(n)) {
+            s->max_steps = (long)n;
+            return 0;
+        }
+        fprintf(stderr, "error: --max-steps must be a whole number from 0 (no limit) to 1e15\n");
+        return -1;
+    }
     if (strcmp(name, "--step") == 0) {
         if (bgc_parse_number(name, value, &s->step))
             return -1;
@@ -455,7 +467,7 @@ static int bgc_parse_args(int argc, char **argv, bgc_settings *s, bgc_params *p,
                           int *project, int *stats)
 {
     static const char *const with_value[] = { "--t-end", "--dt", "--solver", "--rtol",
-                                              "--atol", "--step", "-p" };
+                                              "--atol", "--step", "--max-steps", "-p" };
     int i, k;
     for (i = 1; i < argc; i++) {
         const char *arg = argv[i], *eq = strncmp(arg, "--", 2) == 0 ? strchr(arg, '=') : NULL;
@@ -469,10 +481,10 @@ static int bgc_parse_args(int argc, char **argv, bgc_settings *s, bgc_params *p,
             *(arg[2] == 'p' ? project : stats) = 1;
             continue;
         }
-        for (k = 0; k < 7; k++)
+        for (k = 0; k < BGC_COUNT(with_value); k++)
             if (strlen(with_value[k]) == len && strncmp(arg, with_value[k], len) == 0)
                 break;
-        if (k == 7) {
+        if (k == BGC_COUNT(with_value)) {
             fprintf(stderr, "error: unknown option '%s'\n", arg);
             bgc_print_usage(stderr);
             return BGC_ERR_USAGE;

@@ -374,7 +374,11 @@ int bgc_check_constraints(double t, const double *x, const bgc_params *p, FILE *
         if (fabs(r[k]) <= 1e-9 * s[k])
             continue;
         bad++;
-        if (err)
+        if (err && !isfinite(r[k]))
+            fprintf(err, "error: at t = %.17g: the %s residual of constraint '%s' is not finite: "
+                    "the model is undefined at the initial state with these parameters (a zero "
+                    "mass, say)\n", t, bgc_constraint_levels[k], bgc_constraint_names[k]);
+        else if (err)
             fprintf(err, "error: initial conditions violate constraint '%s' (%s): residual = %.17g\n",
                     bgc_constraint_names[k], bgc_constraint_levels[k], r[k]);
     }
@@ -500,6 +504,7 @@ void bgc_settings_default(bgc_settings *s)
     s->rtol = BGC_SCENE_RTOL;
     s->atol = BGC_SCENE_ATOL;
     s->step = BGC_SCENE_STEP;
+    s->max_steps = BGC_MAX_STEPS;
 }
 
 int bgc_check_settings(const bgc_settings *s, char *msg, size_t msg_size)
@@ -516,6 +521,8 @@ int bgc_check_settings(const bgc_settings *s, char *msg, size_t msg_size)
         bad = "--rtol and --atol must be positive";
     else if (s->step < 0.0)
         bad = "--step must be positive";
+    else if (s->max_steps < 0)
+        bad = "--max-steps must not be negative";
     else if (s->solver < 0 || s->solver >= BGC_NUM_SOLVERS)
         bad = "unknown solver";
     else if (!((s->t_end - s->t0) / s->dt <= 1e9))

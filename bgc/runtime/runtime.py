@@ -373,8 +373,11 @@ def _check_constraints(t, x, p):
     """Messages for the violated constraint rows at (t, x)."""
     r, s = _residual(t, x, p), _scale(t, x, p)
     return [
-        "initial conditions violate constraint '%s' (%s): residual = %.17g"
-        % (CONSTRAINTS[k][0], CONSTRAINTS[k][1], r[k])
+        ("initial conditions violate constraint '%s' (%s): residual = %.17g"
+         % (CONSTRAINTS[k][0], CONSTRAINTS[k][1], r[k])) if math.isfinite(r[k]) else
+        ("at t = %.17g: the %s residual of constraint '%s' is not finite: the model is undefined "
+         "at the initial state with these parameters (a zero mass, say)"
+         % (t, CONSTRAINTS[k][1], CONSTRAINTS[k][0]))
         for k in range(len(CONSTRAINTS))
         if not abs(r[k]) <= 1e-9 * s[k]
     ]
@@ -454,16 +457,22 @@ def _project_initial(t, x, p):
 
 
 class _Settings:
-    __slots__ = ("t0", "t_end", "dt", "solver", "rtol", "atol", "step")
+    __slots__ = ("t0", "t_end", "dt", "solver", "rtol", "atol", "step", "max_steps")
 
     def __init__(self, **values):
         for key in self.__slots__:
             setattr(self, key, values[key])
 
 
-def _settings(t_end=None, dt=None, solver=None, rtol=None, atol=None, step=None):
-    given = {"t_end": t_end, "dt": dt, "solver": solver, "rtol": rtol, "atol": atol, "step": step}
-    values = dict(SCENE, **{k: v for k, v in given.items() if v is not None})
+MAX_STEPS = 100000  # the most steps accepted between two output times, unless set (0: no limit)
+
+
+def _settings(t_end=None, dt=None, solver=None, rtol=None, atol=None, step=None,
+              max_steps=None):
+    given = {"t_end": t_end, "dt": dt, "solver": solver, "rtol": rtol, "atol": atol, "step": step,
+             "max_steps": max_steps}
+    values = dict(SCENE, max_steps=MAX_STEPS)
+    values.update((k, v) for k, v in given.items() if v is not None)
     for key in ("t0", "t_end", "dt", "rtol", "atol"):
         values[key] = float(values[key])
     values["step"] = 0.0 if values["step"] is None else float(values["step"])
@@ -485,6 +494,8 @@ def _check_settings(s):
         return "--rtol and --atol must be positive"
     if s.step < 0.0:
         return "--step must be positive"
+    if not (s.max_steps >= 0 and s.max_steps == int(s.max_steps)):
+        return "--max-steps must be a whole number from 0 (no limit) to 1e15"
     if s.solver not in SOLVERS:
         return "unknown solver"
     if not (s.t_end - s.t0) / s.dt <= 1e9:
@@ -525,12 +536,12 @@ def _initial_state(s, p, project_initial):
 
 
 def rows(t_end=None, dt=None, solver=None, rtol=None, atol=None, params=None, step=None,
-         project_initial=False, stats=None):
+         project_initial=False, stats=None, max_steps=None):
     """Runs the model, yielding each output row (t, y) as it is computed (y a list ordered as
     OUTPUTS): memory does not grow with the run's length.  A failure raises SimulationError
     after the rows before it (its .times and .rows are then empty: they were yielded).
     stats: a dict that receives the solver's counters."""
-    s = _settings(t_end, dt, solver, rtol, atol, step)
+    s = _settings(t_end, dt, solver, rtol, atol, step, max_steps)
     p = _with_constants(_param_values(_overrides(params)))
     x0 = _initial_state(s, p, project_initial)
     st = _new_stats() if stats is None else stats
@@ -544,11 +555,12 @@ def rows(t_end=None, dt=None, solver=None, rtol=None, atol=None, params=None, st
 
 
 def simulate(t_end=None, dt=None, solver=None, rtol=None, atol=None, params=None, step=None,
-             project_initial=False, out=None):
+             project_initial=False, out=None, max_steps=None):
     """Runs the model; returns (t, Y) with Y[k] the outputs at t[k].  None: the scene's value.
     out: a file name or a text file: the CSV is written there row by row as the run goes
     (header first, as the program writes it) and nothing is kept: returns the number of rows."""
-    run = rows(t_end, dt, solver, rtol, atol, params, step, project_initial)
+    run = rows(t_end, dt, solver, rtol, atol, params, step, project_initial,
+               max_steps=max_steps)
     if out is not None:
         return _stream(run, out)
     times, values = [], []
@@ -584,9 +596,9 @@ def _row_text(t, y):
 
 USAGE = (
     " [--t-end T] [--dt DT] [--solver NAME] [--rtol R] [--atol A]\n"
-    "       [--step H] [-p NAME=VALUE ...] [--project-initial] [--stats]\n"
+    "       [--step H] [--max-steps N] [-p NAME=VALUE ...] [--project-initial] [--stats]\n"
 )
-_WITH_VALUE = ("--t-end", "--dt", "--solver", "--rtol", "--atol", "--step", "-p")
+_WITH_VALUE = ("--t-end", "--dt", "--solver", "--rtol", "--atol", "--step", "--max-steps", "-p")
 _NUMBER_CHARS = frozenset("0123456789+-.eE")
 
 
@@ -608,6 +620,8 @@ def _help():
         "  --rtol R           relative tolerance of the adaptive solvers (%.17g)" % s.rtol,
         "  --atol A           absolute tolerance of the adaptive solvers (%.17g)" % s.atol,
         "  --step H           step of the fixed-step solvers (default: dt)",
+        "  --max-steps N      the most steps between two output times (%d; 0: no limit)"
+        % s.max_steps,
         "  -p NAME=VALUE      set a parameter; derived parameters follow",
         "  --project-initial  project the initial state onto the constraints",
         "  --stats            print the solver's counters to stderr",
@@ -653,6 +667,12 @@ def _apply_option(name, value, options, given):
         options["step"] = _parse_number(name, value)
         if not options["step"] > 0.0:
             raise _UsageError("error: --step must be positive\n")
+    elif name == "--max-steps":
+        n = _parse_number(name, value)
+        if not (0.0 <= n <= 1e15 and n == math.floor(n)):
+            raise _UsageError(
+                "error: --max-steps must be a whole number from 0 (no limit) to 1e15\n")
+        options["max_steps"] = int(n)
     else:
         options[name[2:].replace("-", "_")] = _parse_number(name, value)
 

@@ -48,17 +48,6 @@ void bgc_request_stop(int sig)
     bgc_stop_signal = (sig_atomic_t)sig;
 }
 
-/* Counts an accepted step ending at t; BGC_ERR_RUNTIME and a message if a stop was asked. */
-static int bgc_accept(bgc_stats *st, char *msg, size_t msg_size, double t)
-{
-    st->steps++;
-    if (bgc_stop_signal) {
-        snprintf(msg, msg_size, "at t = %.17g: interrupted by signal %d", t, (int)bgc_stop_signal);
-        return BGC_ERR_RUNTIME;
-    }
-    return 0;
-}
-
 static int bgc_fail_block(char *msg, size_t msg_size, const bgc_work *w)
 {
     bgc_work_message(w, msg, msg_size);
@@ -88,6 +77,8 @@ typedef struct bgc_run {
     long nout, kout;
     double t, h;
     int detect_stiffness;
+    long steps_out;  /* st->steps at the last output, at t_out */
+    double t_out;
 } bgc_run;
 #define BGC_STIFF (-1)
 
@@ -101,7 +92,28 @@ static int bgc_emit(bgc_run *r, double t, const double *x)
     j = bgc_first_nonfinite(y, BGC_NUM_OUTPUTS);
     if (j >= 0)
         return bgc_fail(r->msg, r->msg_size, t, "output", bgc_output_names[j]);
+    r->steps_out = r->st->steps;
+    r->t_out = t;
     return r->sink ? r->sink(r->ctx, t, x, y) : 0;
+}
+
+/* Counts an accepted step ending at t; BGC_ERR_RUNTIME and a message if a stop was asked or
+   the step budget since the last output is spent. */
+static int bgc_accept(bgc_run *r, double t)
+{
+    r->st->steps++;
+    if (bgc_stop_signal) {
+        snprintf(r->msg, r->msg_size, "at t = %.17g: interrupted by signal %d", t,
+                 (int)bgc_stop_signal);
+        return BGC_ERR_RUNTIME;
+    }
+    if (r->s->max_steps > 0 && r->st->steps - r->steps_out > r->s->max_steps) {
+        snprintf(r->msg, r->msg_size, "at t = %.17g: step budget spent: %ld steps since the "
+                 "output at t = %.17g (the step size runs away; --max-steps raises the budget)",
+                 t, r->s->max_steps, r->t_out);
+        return BGC_ERR_RUNTIME;
+    }
+    return 0;
 }
 
 /* A method's continuous extension: the state at t + theta h of the step just accepted. */
@@ -243,7 +255,7 @@ static int bgc_fixed_step(bgc_run *r, const bgc_erk *m, double t, double h, doub
     l = bgc_first_nonfinite(y, N);
     if (l >= 0)
         return bgc_fail(r->msg, r->msg_size, t + h, "state", bgc_state_names[l]);
-    return bgc_accept(r->st, r->msg, r->msg_size, t + h);
+    return bgc_accept(r, t + h);
 }
 
 /* Number of fixed steps of size about h in span: steps of h, the last one shorter. */
@@ -493,7 +505,7 @@ static int bgc_run_erk(bgc_run *r, const bgc_method *method, double *y)
                 rc = bgc_fail(r->msg, r->msg_size, tph, "state", bgc_state_names[i]);
                 goto done;
             }
-            rc = bgc_accept(r->st, r->msg, r->msg_size, tph);
+            rc = bgc_accept(r, tph);
             if (rc)
                 goto done;
             if (m->fsal && !fsal_first) {
@@ -633,6 +645,8 @@ int bgc_simulate(const bgc_settings *s, const bgc_params *p, const double *x0, b
     r.t = s->t0;
     r.h = 0.0;
     r.detect_stiffness = 0;
+    r.steps_out = stats->steps;
+    r.t_out = s->t0;
     y = r.w->v + BGC_WORK_Y0;
     bgc_params_update(&q);
     for (i = 0; i < BGC_NUM_STATES; i++)

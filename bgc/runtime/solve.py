@@ -51,11 +51,16 @@ def request_stop(sig):
     _STOP[0] = sig
 
 
-def _accept(st, t):
-    """Counts an accepted step ending at t; raises _Failure if a stop was asked."""
-    st["steps"] += 1
+def _accept(run, t):
+    """Counts an accepted step ending at t; raises _Failure if a stop was asked or the step
+    budget since the last output is spent."""
+    run.st["steps"] += 1
     if _STOP[0]:
         raise _Failure("at t = %.17g: interrupted by signal %d" % (t, _STOP[0]), t)
+    if run.s.max_steps > 0 and run.st["steps"] - run.steps_out > run.s.max_steps:
+        raise _Failure("at t = %.17g: step budget spent: %d steps since the output at t = %.17g "
+                       "(the step size runs away; --max-steps raises the budget)"
+                       % (t, run.s.max_steps, run.t_out), t)
 
 
 def _block_failed(failure):
@@ -85,10 +90,12 @@ class _Run:
     run.kout .. run.nout as it passes them, keeps run.t and run.y at its last accepted step,
     and returns; or raises _Failure, _Stiff (run.h: its last step size)."""
 
-    __slots__ = ("s", "p", "w", "st", "nout", "kout", "t", "h", "y", "detect_stiffness")
+    __slots__ = ("s", "p", "w", "st", "nout", "kout", "t", "h", "y", "detect_stiffness",
+                 "steps_out", "t_out")
 
     def __init__(self, s, p, w, st, y):
         self.s, self.p, self.w, self.st = s, p, w, st
+        self.steps_out, self.t_out = st["steps"], s.t0  # the steps at the last output, its t
         self.nout, self.kout = _output_count(s), 1
         self.t, self.h, self.y = s.t0, 0.0, y
         self.detect_stiffness = False
@@ -118,6 +125,7 @@ class _Run:
         j = _first_nonfinite(y)
         if j >= 0:
             raise _fail(t, "output", OUTPUTS[j])
+        self.steps_out, self.t_out = self.st["steps"], t
         yield t, y
 
     def emit_step(self, t, h, tph, y1, dense):
@@ -147,9 +155,11 @@ def _initial_step(run, q, y, f0, hmax):
     s = run.s
     y, f0 = numpy.asarray(y, dtype=float), numpy.asarray(f0, dtype=float)
     sk = s.atol + s.rtol * numpy.abs(y)
-    dnf = float(numpy.sum((f0 / sk) ** 2))
-    dny = float(numpy.sum((y / sk) ** 2))
-    h = 1e-6 if (dnf <= 1e-10 or dny <= 1e-10) else math.sqrt(dny / dnf) * 0.01
+    with numpy.errstate(all="ignore"):  # IEEE as in C: an overflow gives inf, then h = 0
+        dnf = numpy.sum((f0 / sk) ** 2)
+        dny = numpy.sum((y / sk) ** 2)
+        h = 1e-6 if (dnf <= 1e-10 or dny <= 1e-10) else float(numpy.sqrt(dny / dnf) * 0.01)
+        dnf = float(dnf)
     h = min(h, hmax)
     run.st["rhs"] += 1
     try:
@@ -157,7 +167,7 @@ def _initial_step(run, q, y, f0, hmax):
     except _BlockFailure:
         return h  # a block failed there: start small, the step control takes over
     with numpy.errstate(all="ignore"):
-        der2 = math.sqrt(float(numpy.sum(((f1 - f0) / sk) ** 2))) / h
+        der2 = float(numpy.sqrt(numpy.sum(((f1 - f0) / sk) ** 2)) / numpy.float64(h))
     der12 = max(math.sqrt(dnf), abs(der2))  # a NaN der2 is ignored
     h1 = max(1e-6, h * 1e-3) if der12 <= 1e-15 else (0.01 / der12) ** (1.0 / q)
     if not h1 > 0.0:
@@ -383,7 +393,7 @@ def _run_fixed(run, m, y):
             i = _first_nonfinite(y)
             if i >= 0:
                 raise _fail(t1, "state", STATES[i])
-            _accept(run.st, t1)
+            _accept(run, t1)
             run.t, run.y = t1, y
         yield from run.emit(tb, y)
         run.kout += 1
@@ -532,7 +542,7 @@ def _run_erk(run, m, y):
             i = _first_nonfinite(y1)
             if i >= 0:
                 raise _fail(tph, "state", STATES[i])
-            _accept(st, tph)
+            _accept(run, tph)
             try:
                 if fsal and not fsal_first:
                     st["rhs"] += 1

@@ -465,7 +465,7 @@ static int bgc_run_rosenbrock(bgc_run *r, const bgc_method *method, double *y)
             hacc = h;
             erracc = bgc_max(1e-2, err);
             accepted++;
-            rc = bgc_accept(r->st, r->msg, r->msg_size, tph);
+            rc = bgc_accept(r, tph);
             if (rc)
                 goto done;
             rc = bgc_emit_step(r, t, h, tph, y1, bgc_ros_prepare, bgc_ros_dense_at, &dense, yout);
@@ -891,7 +891,7 @@ static int bgc_run_radau5(bgc_run *r, const bgc_method *method, double *y)
             bgc_radau_poly(m, z1, z2, z3, b);
             memcpy(zlast, z3, sizeof(double) * N);
             hold = h;
-            rc = bgc_accept(r->st, r->msg, r->msg_size, tph);
+            rc = bgc_accept(r, tph);
             if (rc)
                 goto done;
             rc = bgc_emit_step(r, t, h, tph, y1, NULL, bgc_radau_dense_at, &dense, yout);

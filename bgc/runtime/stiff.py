@@ -201,7 +201,7 @@ def _run_rosenbrock(run, m, y):
                 hnew = h / fac
             hacc, erracc = h, max(1e-2, err)
             accepted += 1
-            _accept(st, tph)
+            _accept(run, tph)
             yield from run.emit_step(t, h, tph, y1, _rosenbrock_dense(y, y1, K, H))
             y, t = y1, tph
             run.t, run.y = t, y
@@ -459,7 +459,7 @@ def _run_radau5(run, m, y):
                 raise _fail(tph, "state", STATES[i])
             b = _radau_poly(c1, c2, Z[0], Z[1], Z[2])
             zlast, hold = Z[2], h
-            _accept(st, tph)
+            _accept(run, tph)
             yield from run.emit_step(t, h, tph, y1, _radau_dense(y, c1, c2, b))
             y, t = y1, tph
             run.t, run.y = t, y

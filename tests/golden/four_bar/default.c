@@ -4,7 +4,7 @@
  *
  * As a program:
  *   ./four_bar [--t-end T] [--dt DT] [--solver NAME] [--rtol R] [--atol A]
- *        [--step H] [-p NAME=VALUE ...] [--project-initial] [--stats]
+ *        [--step H] [--max-steps N] [-p NAME=VALUE ...] [--project-initial] [--stats]
  *   writes CSV to stdout: a header "t,<outputs>", then one row per output time
  *   t0 + k*dt (k = 0, 1, ...) below t_end, then a last row at exactly t_end (the grid
  *   point is replaced by t_end when it lies within 1e-6*dt of it, otherwise the last

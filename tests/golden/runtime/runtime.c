@@ -19,6 +19,7 @@ enum {
    (BGC_NUM_*) and the parameter struct; the functions below are defined further down. */
 
 #define BGC_DIM(n) ((n) > 0 ? (n) : 1) /* array size for n elements, n may be 0 */
+#define BGC_COUNT(a) ((int)(sizeof(a) / sizeof((a)[0]))) /* elements of an array */
 
 enum { BGC_OK = 0, BGC_ERR_CONSTRAINT = 1, BGC_ERR_USAGE = 2, BGC_ERR_RUNTIME = 3 };
 /* How an algebraic block failed (bgc_work.failure). */
@@ -99,7 +100,10 @@ typedef struct bgc_settings {
     int solver;           /* BGC_SOLVER_<NAME> */
     double rtol, atol;    /* error control of the adaptive solvers (and the Newton tolerance) */
     double step;          /* fixed step of the fixed-step solvers; 0: dt */
+    long max_steps;       /* the most steps accepted between two output times (a run that
+                             needs more fails: a runaway step size); 0: no limit */
 } bgc_settings;
+#define BGC_MAX_STEPS 100000L /* max_steps unless set */
 typedef struct bgc_stats {
     long steps, rejected, rhs; /* accepted steps, rejected steps, right-side calls */
     long jac, lu, solves;      /* stiff solvers: Jacobians, LU factorisations, linear solves */
@@ -663,7 +667,11 @@ int bgc_check_constraints(double t, const double *x, const bgc_params *p, FILE *
         if (fabs(r[k]) <= 1e-9 * s[k])
             continue;
         bad++;
-        if (err)
+        if (err && !isfinite(r[k]))
+            fprintf(err, "error: at t = %.17g: the %s residual of constraint '%s' is not finite: "
+                    "the model is undefined at the initial state with these parameters (a zero "
+                    "mass, say)\n", t, bgc_constraint_levels[k], bgc_constraint_names[k]);
+        else if (err)
             fprintf(err, "error: initial conditions violate constraint '%s' (%s): residual = %.17g\n",
                     bgc_constraint_names[k], bgc_constraint_levels[k], r[k]);
     }
@@ -789,6 +797,7 @@ void bgc_settings_default(bgc_settings *s)
     s->rtol = BGC_SCENE_RTOL;
     s->atol = BGC_SCENE_ATOL;
     s->step = BGC_SCENE_STEP;
+    s->max_steps = BGC_MAX_STEPS;
 }
 
 int bgc_check_settings(const bgc_settings *s, char *msg, size_t msg_size)
@@ -805,6 +814,8 @@ int bgc_check_settings(const bgc_settings *s, char *msg, size_t msg_size)
         bad = "--rtol and --atol must be positive";
     else if (s->step < 0.0)
         bad = "--step must be positive";
+    else if (s->max_steps < 0)
+        bad = "--max-steps must not be negative";
     else if (s->solver < 0 || s->solver >= BGC_NUM_SOLVERS)
         bad = "unknown solver";
     else if (!((s->t_end - s->t0) / s->dt <= 1e9))
@@ -866,17 +877,6 @@ void bgc_request_stop(int sig)
     bgc_stop_signal = (sig_atomic_t)sig;
 }
 
-/* Counts an accepted step ending at t; BGC_ERR_RUNTIME and a message if a stop was asked. */
-static int bgc_accept(bgc_stats *st, char *msg, size_t msg_size, double t)
-{
-    st->steps++;
-    if (bgc_stop_signal) {
-        snprintf(msg, msg_size, "at t = %.17g: interrupted by signal %d", t, (int)bgc_stop_signal);
-        return BGC_ERR_RUNTIME;
-    }
-    return 0;
-}
-
 static int bgc_fail_block(char *msg, size_t msg_size, const bgc_work *w)
 {
     bgc_work_message(w, msg, msg_size);
@@ -906,6 +906,8 @@ typedef struct bgc_run {
     long nout, kout;
     double t, h;
     int detect_stiffness;
+    long steps_out;  /* st->steps at the last output, at t_out */
+    double t_out;
 } bgc_run;
 #define BGC_STIFF (-1)
 
@@ -919,7 +921,28 @@ static int bgc_emit(bgc_run *r, double t, const double *x)
     j = bgc_first_nonfinite(y, BGC_NUM_OUTPUTS);
     if (j >= 0)
         return bgc_fail(r->msg, r->msg_size, t, "output", bgc_output_names[j]);
+    r->steps_out = r->st->steps;
+    r->t_out = t;
     return r->sink ? r->sink(r->ctx, t, x, y) : 0;
+}
+
+/* Counts an accepted step ending at t; BGC_ERR_RUNTIME and a message if a stop was asked or
+   the step budget since the last output is spent. */
+static int bgc_accept(bgc_run *r, double t)
+{
+    r->st->steps++;
+    if (bgc_stop_signal) {
+        snprintf(r->msg, r->msg_size, "at t = %.17g: interrupted by signal %d", t,
+                 (int)bgc_stop_signal);
+        return BGC_ERR_RUNTIME;
+    }
+    if (r->s->max_steps > 0 && r->st->steps - r->steps_out > r->s->max_steps) {
+        snprintf(r->msg, r->msg_size, "at t = %.17g: step budget spent: %ld steps since the "
+                 "output at t = %.17g (the step size runs away; --max-steps raises the budget)",
+                 t, r->s->max_steps, r->t_out);
+        return BGC_ERR_RUNTIME;
+    }
+    return 0;
 }
 
 /* A method's continuous extension: the state at t + theta h of the step just accepted. */
@@ -1061,7 +1084,7 @@ static int bgc_fixed_step(bgc_run *r, const bgc_erk *m, double t, double h, doub
     l = bgc_first_nonfinite(y, N);
     if (l >= 0)
         return bgc_fail(r->msg, r->msg_size, t + h, "state", bgc_state_names[l]);
-    return bgc_accept(r->st, r->msg, r->msg_size, t + h);
+    return bgc_accept(r, t + h);
 }
 
 /* Number of fixed steps of size about h in span: steps of h, the last one shorter. */
@@ -1311,7 +1334,7 @@ static int bgc_run_erk(bgc_run *r, const bgc_method *method, double *y)
                 rc = bgc_fail(r->msg, r->msg_size, tph, "state", bgc_state_names[i]);
                 goto done;
             }
-            rc = bgc_accept(r->st, r->msg, r->msg_size, tph);
+            rc = bgc_accept(r, tph);
             if (rc)
                 goto done;
             if (m->fsal && !fsal_first) {
@@ -1451,6 +1474,8 @@ int bgc_simulate(const bgc_settings *s, const bgc_params *p, const double *x0, b
     r.t = s->t0;
     r.h = 0.0;
     r.detect_stiffness = 0;
+    r.steps_out = stats->steps;
+    r.t_out = s->t0;
     y = r.w->v + BGC_WORK_Y0;
     bgc_params_update(&q);
     for (i = 0; i < BGC_NUM_STATES; i++)
@@ -1946,7 +1971,7 @@ static int bgc_run_rosenbrock(bgc_run *r, const bgc_method *method, double *y)
             hacc = h;
             erracc = bgc_max(1e-2, err);
             accepted++;
-            rc = bgc_accept(r->st, r->msg, r->msg_size, tph);
+            rc = bgc_accept(r, tph);
             if (rc)
                 goto done;
             rc = bgc_emit_step(r, t, h, tph, y1, bgc_ros_prepare, bgc_ros_dense_at, &dense, yout);
@@ -2372,7 +2397,7 @@ static int bgc_run_radau5(bgc_run *r, const bgc_method *method, double *y)
             bgc_radau_poly(m, z1, z2, z3, b);
             memcpy(zlast, z3, sizeof(double) * N);
             hold = h;
-            rc = bgc_accept(r->st, r->msg, r->msg_size, tph);
+            rc = bgc_accept(r, tph);
             if (rc)
                 goto done;
             rc = bgc_emit_step(r, t, h, tph, y1, NULL, bgc_radau_dense_at, &dense, yout);
@@ -2763,7 +2788,7 @@ static void bgc_csv_header(FILE *f)
 
 static const char bgc_usage[] =
     " [--t-end T] [--dt DT] [--solver NAME] [--rtol R] [--atol A]\n"
-    "       [--step H] [-p NAME=VALUE ...] [--project-initial] [--stats]\n";
+    "       [--step H] [--max-steps N] [-p NAME=VALUE ...] [--project-initial] [--stats]\n";
 
 static void bgc_print_usage(FILE *f)
 {
@@ -2785,10 +2810,11 @@ static void bgc_help(void)
            "  --rtol R           relative tolerance of the adaptive solvers (%.17g)\n"
            "  --atol A           absolute tolerance of the adaptive solvers (%.17g)\n"
            "  --step H           step of the fixed-step solvers (default: dt)\n"
+           "  --max-steps N      the most steps between two output times (%ld; 0: no limit)\n"
            "  -p NAME=VALUE      set a parameter; derived parameters follow\n"
            "  --project-initial  project the initial state onto the constraints\n"
            "  --stats            print the solver's counters to stderr\n",
-           s.t_end, s.t0, s.dt, bgc_solver_names[s.solver], s.rtol, s.atol);
+           s.t_end, s.t0, s.dt, bgc_solver_names[s.solver], s.rtol, s.atol, s.max_steps);
     printf("solvers:\n");
     for (j = 0; j < BGC_NUM_SOLVERS; j++)
         printf("  %-8s %s\n", bgc_methods[j].name, bgc_methods[j].summary);
@@ -2855,6 +2881,17 @@ static int bgc_apply_option(const char *name, const char *value, bgc_settings *s
         return bgc_parse_param(value, p, given);
     if (strcmp(name, "--solver") == 0)
         return bgc_parse_solver(value, &s->solver);
+    if (strcmp(name, "--max-steps") == 0) {
+        double n;
+        if (bgc_parse_number(name, value, &n))
+            return -1;
+        if (n >= 0.0 && n <= 1e15 && n == floor(n)) {
+            s->max_steps = (long)n;
+            return 0;
+        }
+        fprintf(stderr, "error: --max-steps must be a whole number from 0 (no limit) to 1e15\n");
+        return -1;
+    }
     if (strcmp(name, "--step") == 0) {
         if (bgc_parse_number(name, value, &s->step))
             return -1;
@@ -2874,7 +2911,7 @@ static int bgc_parse_args(int argc, char **argv, bgc_settings *s, bgc_params *p,
                           int *project, int *stats)
 {
     static const char *const with_value[] = { "--t-end", "--dt", "--solver", "--rtol",
-                                              "--atol", "--step", "-p" };
+                                              "--atol", "--step", "--max-steps", "-p" };
     int i, k;
     for (i = 1; i < argc; i++) {
         const char *arg = argv[i], *eq = strncmp(arg, "--", 2) == 0 ? strchr(arg, '=') : NULL;
@@ -2888,10 +2925,10 @@ static int bgc_parse_args(int argc, char **argv, bgc_settings *s, bgc_params *p,
             *(arg[2] == 'p' ? project : stats) = 1;
             continue;
         }
-        for (k = 0; k < 7; k++)
+        for (k = 0; k < BGC_COUNT(with_value); k++)
             if (strlen(with_value[k]) == len && strncmp(arg, with_value[k], len) == 0)
                 break;
-        if (k == 7) {
+        if (k == BGC_COUNT(with_value)) {
             fprintf(stderr, "error: unknown option '%s'\n", arg);
             bgc_print_usage(stderr);
             return BGC_ERR_USAGE;

@@ -542,8 +542,11 @@ def _check_constraints(t, x, p):
     """Messages for the violated constraint rows at (t, x)."""
     r, s = _residual(t, x, p), _scale(t, x, p)
     return [
-        "initial conditions violate constraint '%s' (%s): residual = %.17g"
-        % (CONSTRAINTS[k][0], CONSTRAINTS[k][1], r[k])
+        ("initial conditions violate constraint '%s' (%s): residual = %.17g"
+         % (CONSTRAINTS[k][0], CONSTRAINTS[k][1], r[k])) if math.isfinite(r[k]) else
+        ("at t = %.17g: the %s residual of constraint '%s' is not finite: the model is undefined "
+         "at the initial state with these parameters (a zero mass, say)"
+         % (t, CONSTRAINTS[k][1], CONSTRAINTS[k][0]))
         for k in range(len(CONSTRAINTS))
         if not abs(r[k]) <= 1e-9 * s[k]
     ]
@@ -623,16 +626,22 @@ def _project_initial(t, x, p):
 
 
 class _Settings:
-    __slots__ = ("t0", "t_end", "dt", "solver", "rtol", "atol", "step")
+    __slots__ = ("t0", "t_end", "dt", "solver", "rtol", "atol", "step", "max_steps")
 
     def __init__(self, **values):
         for key in self.__slots__:
             setattr(self, key, values[key])
 
 
-def _settings(t_end=None, dt=None, solver=None, rtol=None, atol=None, step=None):
-    given = {"t_end": t_end, "dt": dt, "solver": solver, "rtol": rtol, "atol": atol, "step": step}
-    values = dict(SCENE, **{k: v for k, v in given.items() if v is not None})
+MAX_STEPS = 100000  # the most steps accepted between two output times, unless set (0: no limit)
+
+
+def _settings(t_end=None, dt=None, solver=None, rtol=None, atol=None, step=None,
+              max_steps=None):
+    given = {"t_end": t_end, "dt": dt, "solver": solver, "rtol": rtol, "atol": atol, "step": step,
+             "max_steps": max_steps}
+    values = dict(SCENE, max_steps=MAX_STEPS)
+    values.update((k, v) for k, v in given.items() if v is not None)
     for key in ("t0", "t_end", "dt", "rtol", "atol"):
         values[key] = float(values[key])
     values["step"] = 0.0 if values["step"] is None else float(values["step"])
@@ -654,6 +663,8 @@ def _check_settings(s):
         return "--rtol and --atol must be positive"
     if s.step < 0.0:
         return "--step must be positive"
+    if not (s.max_steps >= 0 and s.max_steps == int(s.max_steps)):
+        return "--max-steps must be a whole number from 0 (no limit) to 1e15"
     if s.solver not in SOLVERS:
         return "unknown solver"
     if not (s.t_end - s.t0) / s.dt <= 1e9:
@@ -694,12 +705,12 @@ def _initial_state(s, p, project_initial):
 
 
 def rows(t_end=None, dt=None, solver=None, rtol=None, atol=None, params=None, step=None,
-         project_initial=False, stats=None):
+         project_initial=False, stats=None, max_steps=None):
     """Runs the model, yielding each output row (t, y) as it is computed (y a list ordered as
     OUTPUTS): memory does not grow with the run's length.  A failure raises SimulationError
     after the rows before it (its .times and .rows are then empty: they were yielded).
     stats: a dict that receives the solver's counters."""
-    s = _settings(t_end, dt, solver, rtol, atol, step)
+    s = _settings(t_end, dt, solver, rtol, atol, step, max_steps)
     p = _with_constants(_param_values(_overrides(params)))
     x0 = _initial_state(s, p, project_initial)
     st = _new_stats() if stats is None else stats
@@ -713,11 +724,12 @@ def rows(t_end=None, dt=None, solver=None, rtol=None, atol=None, params=None, st
 
 
 def simulate(t_end=None, dt=None, solver=None, rtol=None, atol=None, params=None, step=None,
-             project_initial=False, out=None):
+             project_initial=False, out=None, max_steps=None):
     """Runs the model; returns (t, Y) with Y[k] the outputs at t[k].  None: the scene's value.
     out: a file name or a text file: the CSV is written there row by row as the run goes
     (header first, as the program writes it) and nothing is kept: returns the number of rows."""
-    run = rows(t_end, dt, solver, rtol, atol, params, step, project_initial)
+    run = rows(t_end, dt, solver, rtol, atol, params, step, project_initial,
+               max_steps=max_steps)
     if out is not None:
         return _stream(run, out)
     times, values = [], []
@@ -753,9 +765,9 @@ def _row_text(t, y):
 
 USAGE = (
     " [--t-end T] [--dt DT] [--solver NAME] [--rtol R] [--atol A]\n"
-    "       [--step H] [-p NAME=VALUE ...] [--project-initial] [--stats]\n"
+    "       [--step H] [--max-steps N] [-p NAME=VALUE ...] [--project-initial] [--stats]\n"
 )
-_WITH_VALUE = ("--t-end", "--dt", "--solver", "--rtol", "--atol", "--step", "-p")
+_WITH_VALUE = ("--t-end", "--dt", "--solver", "--rtol", "--atol", "--step", "--max-steps", "-p")
 _NUMBER_CHARS = frozenset("0123456789+-.eE")
 
 
@@ -777,6 +789,8 @@ def _help():
         "  --rtol R           relative tolerance of the adaptive solvers (%.17g)" % s.rtol,
         "  --atol A           absolute tolerance of the adaptive solvers (%.17g)" % s.atol,
         "  --step H           step of the fixed-step solvers (default: dt)",
+        "  --max-steps N      the most steps between two output times (%d; 0: no limit)"
+        % s.max_steps,
         "  -p NAME=VALUE      set a parameter; derived parameters follow",
         "  --project-initial  project the initial state onto the constraints",
         "  --stats            print the solver's counters to stderr",
@@ -822,6 +836,12 @@ def _apply_option(name, value, options, given):
         options["step"] = _parse_number(name, value)
         if not options["step"] > 0.0:
             raise _UsageError("error: --step must be positive\n")
+    elif name == "--max-steps":
+        n = _parse_number(name, value)
+        if not (0.0 <= n <= 1e15 and n == math.floor(n)):
+            raise _UsageError(
+                "error: --max-steps must be a whole number from 0 (no limit) to 1e15\n")
+        options["max_steps"] = int(n)
     else:
         options[name[2:].replace("-", "_")] = _parse_number(name, value)
 
@@ -964,11 +984,16 @@ def request_stop(sig):
     _STOP[0] = sig
 
 
-def _accept(st, t):
-    """Counts an accepted step ending at t; raises _Failure if a stop was asked."""
-    st["steps"] += 1
+def _accept(run, t):
+    """Counts an accepted step ending at t; raises _Failure if a stop was asked or the step
+    budget since the last output is spent."""
+    run.st["steps"] += 1
     if _STOP[0]:
         raise _Failure("at t = %.17g: interrupted by signal %d" % (t, _STOP[0]), t)
+    if run.s.max_steps > 0 and run.st["steps"] - run.steps_out > run.s.max_steps:
+        raise _Failure("at t = %.17g: step budget spent: %d steps since the output at t = %.17g "
+                       "(the step size runs away; --max-steps raises the budget)"
+                       % (t, run.s.max_steps, run.t_out), t)
 
 
 def _block_failed(failure):
@@ -998,10 +1023,12 @@ class _Run:
     run.kout .. run.nout as it passes them, keeps run.t and run.y at its last accepted step,
     and returns; or raises _Failure, _Stiff (run.h: its last step size)."""
 
-    __slots__ = ("s", "p", "w", "st", "nout", "kout", "t", "h", "y", "detect_stiffness")
+    __slots__ = ("s", "p", "w", "st", "nout", "kout", "t", "h", "y", "detect_stiffness",
+                 "steps_out", "t_out")
 
     def __init__(self, s, p, w, st, y):
         self.s, self.p, self.w, self.st = s, p, w, st
+        self.steps_out, self.t_out = st["steps"], s.t0  # the steps at the last output, its t
         self.nout, self.kout = _output_count(s), 1
         self.t, self.h, self.y = s.t0, 0.0, y
         self.detect_stiffness = False
@@ -1031,6 +1058,7 @@ class _Run:
         j = _first_nonfinite(y)
         if j >= 0:
             raise _fail(t, "output", OUTPUTS[j])
+        self.steps_out, self.t_out = self.st["steps"], t
         yield t, y
 
     def emit_step(self, t, h, tph, y1, dense):
@@ -1060,9 +1088,11 @@ def _initial_step(run, q, y, f0, hmax):
     s = run.s
     y, f0 = numpy.asarray(y, dtype=float), numpy.asarray(f0, dtype=float)
     sk = s.atol + s.rtol * numpy.abs(y)
-    dnf = float(numpy.sum((f0 / sk) ** 2))
-    dny = float(numpy.sum((y / sk) ** 2))
-    h = 1e-6 if (dnf <= 1e-10 or dny <= 1e-10) else math.sqrt(dny / dnf) * 0.01
+    with numpy.errstate(all="ignore"):  # IEEE as in C: an overflow gives inf, then h = 0
+        dnf = numpy.sum((f0 / sk) ** 2)
+        dny = numpy.sum((y / sk) ** 2)
+        h = 1e-6 if (dnf <= 1e-10 or dny <= 1e-10) else float(numpy.sqrt(dny / dnf) * 0.01)
+        dnf = float(dnf)
     h = min(h, hmax)
     run.st["rhs"] += 1
     try:
@@ -1070,7 +1100,7 @@ def _initial_step(run, q, y, f0, hmax):
     except _BlockFailure:
         return h  # a block failed there: start small, the step control takes over
     with numpy.errstate(all="ignore"):
-        der2 = math.sqrt(float(numpy.sum(((f1 - f0) / sk) ** 2))) / h
+        der2 = float(numpy.sqrt(numpy.sum(((f1 - f0) / sk) ** 2)) / numpy.float64(h))
     der12 = max(math.sqrt(dnf), abs(der2))  # a NaN der2 is ignored
     h1 = max(1e-6, h * 1e-3) if der12 <= 1e-15 else (0.01 / der12) ** (1.0 / q)
     if not h1 > 0.0:
@@ -1296,7 +1326,7 @@ def _run_fixed(run, m, y):
             i = _first_nonfinite(y)
             if i >= 0:
                 raise _fail(t1, "state", STATES[i])
-            _accept(run.st, t1)
+            _accept(run, t1)
             run.t, run.y = t1, y
         yield from run.emit(tb, y)
         run.kout += 1
@@ -1445,7 +1475,7 @@ def _run_erk(run, m, y):
             i = _first_nonfinite(y1)
             if i >= 0:
                 raise _fail(tph, "state", STATES[i])
-            _accept(st, tph)
+            _accept(run, tph)
             try:
                 if fsal and not fsal_first:
                     st["rhs"] += 1
@@ -1752,7 +1782,7 @@ def _run_rosenbrock(run, m, y):
                 hnew = h / fac
             hacc, erracc = h, max(1e-2, err)
             accepted += 1
-            _accept(st, tph)
+            _accept(run, tph)
             yield from run.emit_step(t, h, tph, y1, _rosenbrock_dense(y, y1, K, H))
             y, t = y1, tph
             run.t, run.y = t, y
@@ -2010,7 +2040,7 @@ def _run_radau5(run, m, y):
                 raise _fail(tph, "state", STATES[i])
             b = _radau_poly(c1, c2, Z[0], Z[1], Z[2])
             zlast, hold = Z[2], h
-            _accept(st, tph)
+            _accept(run, tph)
             yield from run.emit_step(t, h, tph, y1, _radau_dense(y, c1, c2, b))
             y, t = y1, tph
             run.t, run.y = t, y
