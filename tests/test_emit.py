@@ -6,7 +6,9 @@ generated C and Python are checked against mathematics, and against each other.
 from __future__ import annotations
 
 import ast
+import contextlib
 import dataclasses
+import io
 import math
 import os
 import re
@@ -393,15 +395,18 @@ print(h.hexdigest())
 
 
 def test_emit_is_byte_identical_under_hash_seeds():
-    digests = set()
-    for seed in ("0", "1", "12345"):
-        env = dict(os.environ, PYTHONHASHSEED=seed,
-                   PYTHONPATH=os.pathsep.join([str(HERE), str(HERE.parent)]))
-        done = subprocess.run([sys.executable, "-c", _DIGEST_SCRIPT], capture_output=True,
-                              text=True, env=env, cwd=HERE)
-        assert done.returncode == 0, done.stderr
-        digests.add(done.stdout.strip())
-    assert len(digests) == 1
+    """The emitter's output for hand-built models in a process with a fixed hash seed and in
+    this one (whose seed is random, or another fixed one)."""
+    seed = "12345" if os.environ.get("PYTHONHASHSEED") != "12345" else "1"
+    env = dict(os.environ, PYTHONHASHSEED=seed,
+               PYTHONPATH=os.pathsep.join([str(HERE), str(HERE.parent)]))
+    done = subprocess.run([sys.executable, "-c", _DIGEST_SCRIPT], capture_output=True,
+                          text=True, env=env, cwd=HERE)
+    assert done.returncode == 0, done.stderr
+    here = io.StringIO()
+    with contextlib.redirect_stdout(here):
+        exec(compile(_DIGEST_SCRIPT, "<digest>", "exec"), {})
+    assert done.stdout == here.getvalue()
 
 
 def test_no_stamps_in_generated_code():
