@@ -410,6 +410,7 @@ static int bgc_batch_main(int argc, char **argv)
             return BGC_ERR_USAGE;
         }
     }
+    memset(&p, 0, sizeof p); /* every field, a placeholder of a model without parameters too */
     bgc_settings_default(&s);
     bgc_params_defaults(&p, NULL);
     rc = bgc_parse_args(n, rest, &s, &p, given, &project, &stats);
