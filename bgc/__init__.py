@@ -4,8 +4,8 @@
     t, Y, names = bgc.simulate("models/pendulum.bg", scene="swing")
 """
 from .api import (BgcModelError, Compiled, SimulationFailed, build, check, compile, equations,
-                  load, simulate)
+                  load, simulate, sweep)
 
 __version__ = "0.1.0"
 __all__ = ["BgcModelError", "Compiled", "SimulationFailed", "build", "check", "compile",
-           "equations", "load", "simulate"]
+           "equations", "load", "simulate", "sweep"]

@@ -231,8 +231,8 @@ SIMULATE_OPTIONS = ("t_end", "dt", "solver", "rtol", "atol", "step", "params", "
 def simulate(model, scene: str | None = None, backend: str = "c", algebra: str = "auto",
              outputs=None, effects=None, **options):
     """Simulate; returns (t, Y, names).  outputs, effects: an ad-hoc scene (see build).
-    options: t_end, dt, solver, rtol, atol, step, params, project_initial, max_steps.  backend "c" falls
-    back to "python" when there is no C compiler."""
+    options: t_end, dt, solver, rtol, atol, step, params, project_initial, max_steps.
+    backend "c" falls back to "python" when there is no C compiler."""
     if backend not in BACKENDS:
         raise ValueError(f"backend must be one of {', '.join(BACKENDS)}, not {backend!r}")
     unknown = sorted(set(options) - set(SIMULATE_OPTIONS))
@@ -272,3 +272,46 @@ def _parse_csv(text: str):
     names = lines[0].split(",")[1:]
     data = np.loadtxt(io.StringIO("\n".join(lines[1:])), delimiter=",", ndmin=2)
     return data[:, 0], data[:, 1:], names
+
+
+def sweep(model, scene: str | None = None, grid=None, sample=None, vary=None, seed: int = 0,
+          metrics=(), client=None, workers: int | None = None, batch_size: int | None = None,
+          backend: str = "c", algebra: str = "auto", timing: bool = True, progress=None,
+          on_batch=None, trajectories: bool = False, **options):
+    """Many runs of one compiled program (docs/sweeps.md); returns a sweeps.Table.  model: a
+    path, a Source, or a Compiled (then scene and algebra are its own).
+    grid: {name: "A:B:linN" | "A:B:logN" | "V1,V2,.." | [values]}, the Cartesian product with
+    the first name slowest; or sample=n with vary={name: "uniform(A,B)" | "normal(MU,SIGMA)" |
+    "loguniform(A,B)"} and seed.  metrics: ["final:x", "max:rod.residual", ...].  client: a
+    dask.distributed.Client to run the batches on; else workers=N: a LocalCluster of N
+    processes for this sweep; else serially in this process.  options: as simulate's
+    (params are the fixed ones)."""
+    from . import sweeps as sw
+    if backend not in BACKENDS:
+        raise ValueError(f"backend must be one of {', '.join(BACKENDS)}, not {backend!r}")
+    unknown = sorted(set(options) - set(SIMULATE_OPTIONS))
+    if unknown:
+        raise TypeError(f"sweep() got unknown options: {', '.join(unknown)}")
+    names, values = sw.runs_from(grid, sample, vary, seed)
+    compiled = model if isinstance(model, Compiled) else \
+        build(model, scene, options.get("project_initial", False), algebra)
+    program = compiled.program
+    sw.check_names(names, [p.name for p in program.params], options.get("params") or {})
+    (py_text,) = emit_python(program).values()
+    metrics = tuple(sw.parse_metric(m, list(program.outputs)) for m in metrics)
+    c_text = next(iter(emit_c(program).values())) if backend == "c" else None
+    prog = sw.make_program(c_text, py_text, run_args(**options), metrics)
+    lines = [sw.run_line(names, v) for v in values]
+    own = None
+    if client is None and workers:
+        client = own = sw.local_client(workers)
+    size = batch_size or sw.default_batch_size(
+        len(lines), len(client.scheduler_info()["workers"]) if client is not None else 1)
+    try:
+        results = sw.run(prog, lines, size, client, trajectories, progress, on_batch)
+    finally:
+        if own is not None:
+            cluster = own.cluster
+            own.close()
+            cluster.close()
+    return sw.table(names, values, metrics, results, timing)

@@ -1,4 +1,4 @@
-"""The command line: `bgc check|equations|compile|simulate|accuracy`.  The only module that uses click
+"""The command line: `bgc check|equations|compile|simulate|accuracy|sweep`.  The only module that uses click
 and the only one that writes files.  Model errors exit 1 with a located report, usage errors 2."""
 from __future__ import annotations
 
@@ -6,6 +6,7 @@ import math
 import os
 import sys
 import tempfile
+import time
 from pathlib import Path
 
 import click
@@ -416,6 +417,128 @@ def accuracy(model, scene, outputs, effects, algebra, backend, solver_list, rtol
                 part.commit()
             written.append(str(png))
     click.echo(f"wrote {', '.join(written)}", err=True)
+
+
+@main.command()
+@MODEL
+@SCENE
+@ALGEBRA
+@click.option("--grid", "grids", multiple=True, metavar="NAME=A:B:linN|logN|V1,V2,..",
+              help="A grid axis: N points from A to B, evenly or geometrically spaced, or the "
+                   "values listed; the grid is their product, the first axis slowest.")
+@click.option("--sample", type=int, default=None, metavar="N",
+              help="N runs drawn at random (with --vary and --seed) instead of a grid.")
+@click.option("--vary", "varies", multiple=True,
+              metavar="NAME=uniform(A,B)|normal(MU,SIGMA)|loguniform(A,B)",
+              help="A parameter of the sample and its distribution.")
+@click.option("--seed", type=int, default=0, show_default=True, help="The sample's seed.")
+@click.option("--metric", "metrics", multiple=True, metavar="KIND:OUTPUT",
+              help="A column: KIND one of final, max, min, maxabs, rms (per output row) of "
+                   "an output.  steps, rejected, rhs and cpu are always there.")
+@click.option("--backend", type=click.Choice(["c", "python"]), default="c")
+@click.option("--solver", type=click.Choice(solvers.NAMES), default=None)
+@click.option("--rtol", type=float, default=None)
+@click.option("--atol", type=float, default=None)
+@click.option("--t-end", type=float, default=None)
+@click.option("--dt", type=float, default=None, help="Output interval.")
+@click.option("--step", type=float, default=None, help="Step of the fixed-step solvers.")
+@click.option("-p", "params", multiple=True, metavar="NAME=VALUE",
+              help="A fixed parameter for every run.")
+@click.option("--project-initial", is_flag=True)
+@click.option("--workers", type=click.IntRange(0, 4096), default=None,
+              help="Processes of the local Dask cluster (default: the cores); 0: run the "
+                   "batches one after the other in this process.")
+@click.option("--scheduler", default=None, metavar="ADDRESS",
+              help="Run the batches on this Dask cluster (tcp://host:8786) instead.")
+@click.option("--batch-size", type=click.IntRange(1, 1_000_000), default=None,
+              help="Runs per task (one program process each); default: about four tasks "
+                   "per worker, at most 1000 runs.")
+@click.option("--trajectories", default=None, metavar="DIR",
+              help="Also keep each run's CSV, as DIR/run-NNNNNN.csv.")
+@click.option("--no-timing", is_flag=True, help="Leave out the cpu column (the table is "
+                                                "then the same whatever runs it).")
+@click.option("-o", "output", default=None, callback=_output_file,
+              help="CSV file for the table (default: stdout).")
+def sweep(model, scene, algebra, grids, sample, varies, seed, metrics, backend, solver, rtol,
+          atol, t_end, dt, step, params, project_initial, workers, scheduler, batch_size,
+          trajectories, no_timing, output):
+    """Run the model for many parameter sets (a grid or a seeded sample), compiled once, in
+    batches on Dask or serially; write one table: run, parameters, metrics, counters, status,
+    message.  A run that fails is a row with its status and message; see docs/sweeps.md."""
+    from . import sweeps as sw
+    try:
+        grid = dict(sw.parse_grid_axis(g) for g in grids) if grids else None
+        vary = {v[0]: f"{v[1]}({v[2]!r},{v[3]!r})" for v in map(sw.parse_distribution, varies)}
+        if sample is not None and grids:
+            raise sw.SweepError("give --grid or --sample, not both")
+        if sample is None and not grids:
+            raise sw.SweepError("give --grid or --sample with --vary")
+        if varies and sample is None:
+            raise sw.SweepError("--vary needs --sample")
+        if workers is not None and scheduler:
+            raise sw.SweepError("--workers and --scheduler exclude each other")
+        for name, value in (("--rtol", rtol), ("--atol", atol), ("--dt", dt), ("--step", step)):
+            if value is not None and not value > 0:
+                raise sw.SweepError(f"{name} must be positive")
+        if trajectories:
+            Path(trajectories).mkdir(parents=True, exist_ok=True)
+            outfile.check_target(Path(trajectories) / "run-000000.csv")
+    except (sw.SweepError, OSError, outfile.OutputError) as error:
+        raise click.UsageError(str(error)) from None
+    compiled = _build(model, scene, project_initial, algebra)
+    overrides = _parse_params(params, compiled)
+    if backend == "c" and not backends.have_c_compiler():
+        click.echo("warning: no C compiler found (cc or $CC); using the Python backend", err=True)
+        backend = "python"
+    client, own = None, False
+    if scheduler or workers != 0:
+        if not sw.have_dask():
+            click.echo("note: dask.distributed is not installed (pip install 'bgc[sweep]'); "
+                       "running the batches serially in this process", err=True)
+        elif scheduler:
+            from distributed import Client
+            try:
+                client = Client(scheduler, timeout=30)
+            except OSError as error:
+                click.echo(f"error: cannot reach the scheduler {scheduler}: {error}", err=True)
+                sys.exit(1)
+        else:
+            client, own = sw.local_client(workers), True
+
+    def keep(result):
+        for run, text in (result.trajectories or {}).items():
+            _write_atomic(str(Path(trajectories) / f"run-{run:06d}.csv"), text)
+
+    start = time.perf_counter()
+    try:
+        table = api.sweep(compiled, scene, grid=grid,
+                          sample=sample, vary=vary or None, seed=seed, metrics=metrics,
+                          client=client, batch_size=batch_size, backend=backend,
+                          algebra=algebra, timing=not no_timing,
+                          progress=sw.stderr_progress(), on_batch=keep if trajectories else None,
+                          trajectories=bool(trajectories), t_end=t_end, dt=dt, solver=solver,
+                          rtol=rtol, atol=atol, step=step, params=overrides,
+                          project_initial=project_initial)
+    except sw.SweepError as error:
+        raise click.UsageError(str(error)) from None
+    except sw.BatchFailed as error:
+        click.echo(f"error: {error}", err=True)
+        sys.exit(1)
+    finally:
+        if own:
+            cluster = client.cluster
+            client.close()
+            cluster.close()
+        elif client is not None:
+            client.close()
+    wall = time.perf_counter() - start
+    text = table.to_csv()
+    if output:
+        _write_atomic(output, text)
+    else:
+        click.echo(text, nl=False)
+    click.echo(f"bgc sweep: {len(table)} runs, {table.failures()} failed, {wall:.2f} s "
+               f"({len(table) / wall:.0f} runs/s)", err=True)
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -344,7 +344,8 @@ static void bgc_csv_header(FILE *f)
 
 static const char bgc_usage[] =
     " [--t-end T] [--dt DT] [--solver NAME] [--rtol R] [--atol A]\n"
-    "       [--step H] [--max-steps N] [-p NAME=VALUE ...] [--project-initial] [--stats]\n";
+    "       [--step H] [--max-steps N] [-p NAME=VALUE ...] [--project-initial] [--stats]\n"
+    "       [--batch FILE|- [--metric KIND:OUTPUT ...] [--trajectories DIR]]\n";
 
 static void bgc_print_usage(FILE *f)
 {
@@ -369,7 +370,12 @@ static void bgc_help(void)
            "  --max-steps N      the most steps between two output times (%ld; 0: no limit)\n"
            "  -p NAME=VALUE      set a parameter; derived parameters follow\n"
            "  --project-initial  project the initial state onto the constraints\n"
-           "  --stats            print the solver's counters to stderr\n",
+           "  --stats            print the solver's counters to stderr\n"
+           "  --batch FILE       one run per line of FILE (- for stdin): NAME=VALUE words;\n"
+           "                     writes a CSV row per run: run,status,metrics,steps,rejected,\n"
+           "                     rhs,cpu,message\n"
+           "  --metric K:OUTPUT  with --batch: a column, K one of final, max, min, maxabs, rms\n"
+           "  --trajectories DIR with --batch: each run's CSV also to DIR/run-NNNNNN.csv\n",
            s.t_end, s.t0, s.dt, bgc_solver_names[s.solver], s.rtol, s.atol, s.max_steps);
     printf("solvers:\n");
     for (j = 0; j < BGC_NUM_SOLVERS; j++)
@@ -507,6 +513,8 @@ static void bgc_on_signal(int sig)
     bgc_request_stop(sig);
 }
 
+static int bgc_batch_main(int argc, char **argv); /* --batch: below (batch.c) */
+
 int main(int argc, char **argv)
 {
     bgc_settings s;
@@ -517,6 +525,9 @@ int main(int argc, char **argv)
     char msg[1024];
     int project = 0, stats = 0, rc, i;
 
+    rc = bgc_batch_main(argc, argv);
+    if (rc >= 0)
+        return rc;
     bgc_settings_default(&s);
     rc = bgc_parse_args(argc, argv, &s, &p, given, &project, &stats);
     if (rc >= 0)

@@ -597,6 +597,7 @@ def _row_text(t, y):
 USAGE = (
     " [--t-end T] [--dt DT] [--solver NAME] [--rtol R] [--atol A]\n"
     "       [--step H] [--max-steps N] [-p NAME=VALUE ...] [--project-initial] [--stats]\n"
+    "       [--batch FILE|- [--metric KIND:OUTPUT ...] [--trajectories DIR]]\n"
 )
 _WITH_VALUE = ("--t-end", "--dt", "--solver", "--rtol", "--atol", "--step", "--max-steps", "-p")
 _NUMBER_CHARS = frozenset("0123456789+-.eE")
@@ -625,6 +626,11 @@ def _help():
         "  -p NAME=VALUE      set a parameter; derived parameters follow",
         "  --project-initial  project the initial state onto the constraints",
         "  --stats            print the solver's counters to stderr",
+        "  --batch FILE       one run per line of FILE (- for stdin): NAME=VALUE words;",
+        "                     writes a CSV row per run: run,status,metrics,steps,rejected,",
+        "                     rhs,cpu,message",
+        "  --metric K:OUTPUT  with --batch: a column, K one of final, max, min, maxabs, rms",
+        "  --trajectories DIR with --batch: each run's CSV also to DIR/run-NNNNNN.csv",
         "solvers:",
     ]
     lines += ["  %-8s %s" % (name, m["summary"]) for name, m in _METHODS.items()]
@@ -716,6 +722,8 @@ def _stop_on_signals():
 def main(argv=None):
     """The command line; returns the exit status."""
     argv = sys.argv[1:] if argv is None else list(argv)
+    if any(a == "--batch" or a.startswith("--batch=") for a in argv):
+        return _batch_main(argv)  # batch.py
     try:
         parsed = _parse_args(argv)
     except _UsageError as error:
