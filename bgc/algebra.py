@@ -3,7 +3,8 @@
 Nothing here calls a general SymPy solver: an equation is inverted only where its inverse is
 clean by construction (degree one in the unknown, or the unknown occurring once under
 functions with a real inverse), so the work is bounded by the size of the expression and can
-never hang.  Everything else is left to a numeric solve in the generated code.
+never hang; an expression larger than bgc.resources allows is not inverted, tested or
+expanded at all.  Everything else is left to a numeric solve in the generated code.
 """
 from __future__ import annotations
 
@@ -13,6 +14,7 @@ import mpmath  # SymPy's own dependency: the 30-digit determinant of is_singular
 import sympy as sp
 
 from .differentiate import partial
+from .resources import MAX_EXPANDED_TERMS, expanded_terms, fits
 
 # f(u) = w  ->  u = inverse(w), for functions that are bijections of the reals (or of their
 # range onto the reals, where the inverse then gives NaN outside the range, as it should).
@@ -32,8 +34,8 @@ def linear_solution(equation: sp.Expr, unknown: sp.Symbol) -> sp.Expr | None:
         return None
     rest = equation - a * unknown
     if rest.has(unknown):
-        rest = sp.expand(rest)
-        if rest.has(unknown):
+        rest = _expand(rest)
+        if rest is None or rest.has(unknown):
             return None
     if a.is_Add and a.free_symbols and sp.count_ops(a) + sp.count_ops(rest) < 40:
         return sp.cancel(-rest / a)  # tidy a compound coefficient; a monomial divides cleanly
@@ -90,9 +92,17 @@ def _occurrences(expr: sp.Expr, symbol: sp.Symbol) -> int:
 
 
 def solve_for(equation: sp.Expr, unknown: sp.Symbol) -> sp.Expr | None:
-    """A clean closed form of the unknown from equation == 0, or None (see the module doc)."""
+    """A clean closed form of the unknown from equation == 0, or None (see the module doc;
+    None too for an equation beyond bgc.resources' limits)."""
+    if not fits(equation):
+        return None
     return linear_solution(equation, unknown) if _degree_one(equation, unknown) \
         else peel(equation, unknown)
+
+
+def _expand(expr):
+    """sp.expand(expr), or None when that would build more than MAX_EXPANDED_TERMS terms."""
+    return sp.expand(expr) if expanded_terms(expr) <= MAX_EXPANDED_TERMS else None
 
 
 def _degree_one(equation, unknown) -> bool:
@@ -104,8 +114,12 @@ def is_zero(expr: sp.Expr, points: int = 3, seed: int = 0) -> bool:
     """Whether expr is identically zero: structurally after cancellation, or else by its value
     at random points in 30-digit arithmetic (zero at several random points of an analytic
     function of real arguments, it is zero: the probability of a false 'zero' is nil).
-    Cheap and bounded, unlike simplify."""
-    expr = sp.expand(expr) if expr.is_Add or expr.is_Mul else expr
+    Cheap and bounded, unlike simplify; False for an expression too large to test."""
+    if not fits(expr):
+        return False
+    if expr.is_Add or expr.is_Mul:
+        expanded = _expand(expr)
+        expr = expr if expanded is None else expanded
     if expr == 0:
         return True
     if not expr.free_symbols:
@@ -130,7 +144,10 @@ def is_singular(rows: int, entries, points: int = 3, seed: int = 0) -> bool:
     """Whether the square matrix with these (row, column, expression) entries is singular
     whatever the values of its symbols: its determinant, at random points in 30-digit
     arithmetic, below 1e-20 of Hadamard's bound (the product of the rows' norms).  A
-    determinant that vanishes at several random points vanishes identically."""
+    determinant that vanishes at several random points vanishes identically.  False when an
+    entry is too large to evaluate (bgc.resources.fits)."""
+    if not all(fits(e) for _, _, e in entries):
+        return False
     rng = random.Random(seed)
     symbols = sorted(set().union(*[e.free_symbols for _, _, e in entries]) if entries else (),
                      key=str)
@@ -158,7 +175,7 @@ def is_symmetric(entries, points: int = 2, seed: int = 1) -> bool:
     whatever the values of its symbols: its pattern, and its values at random points to 1e-12
     relative (two analytic functions equal at random points are equal)."""
     values = {(i, j): e for i, j, e in entries}
-    if any((j, i) not in values for i, j in values):
+    if any((j, i) not in values for i, j in values) or not all(map(fits, values.values())):
         return False
     pairs = [(i, j) for i, j in values if i < j]
     if not pairs:
