@@ -3,17 +3,19 @@ from __future__ import annotations
 
 from functools import lru_cache
 
+from dataclasses import replace
+
 from lark import Lark, Token, Transformer_NonRecursive, Tree, v_args
 from lark.exceptions import UnexpectedCharacters, UnexpectedEOF, UnexpectedInput, UnexpectedToken
 
-from dataclasses import replace
-
 from . import ast
 from .diagnostics import ModelError, Note, Origin, Span, fail
-from .resources import resource_dir
+from .resources import (MAX_DIMENSION, MAX_NESTING, MAX_OPTION_CHARS, MAX_SOURCE_BYTES,
+                        resource_dir)
 
-MAX_SOURCE_BYTES = 1 << 20  # 1 MiB: larger input is refused, not attempted
-MAX_NESTING = 100  # levels of nested brackets / operators of different kinds
+# Reserved: none of these can name anything (docs/semantics.md, "Names").
+KEYWORDS = frozenset("""model parameter signal integral init constraint holonomic nonholonomic
+    corrector pid pd none phi scene effects outputs time every solver set""".split())
 
 # Friendly names for terminals in "expected ..." messages.
 _TERMINAL_NAMES = {
@@ -27,13 +29,16 @@ _TERMINAL_NAMES = {
 
 
 class _BracketPostLex:
-    """Drop newlines inside ( ) and [ ]: they do not end a statement there."""
+    """Drop newlines inside ( ) and [ ]: they do not end a statement there.  Refuse a keyword
+    where a name stands (the contextual lexer reads it as a NAME where no keyword fits)."""
 
     always_accept = ("_NL",)
 
     def process(self, stream):
         depth = 0
         for tok in stream:
+            if tok.type == "NAME" and tok in KEYWORDS:
+                _keyword_as_name(tok)
             if tok.type in ("LPAR", "LSQB"):
                 depth += 1
             elif tok.type in ("RPAR", "RSQB"):
@@ -49,6 +54,19 @@ def _lark() -> Lark:
     return Lark(text, parser="lalr", lexer="contextual", postlex=_BracketPostLex(),
                 propagate_positions=True, maybe_placeholders=True,
                 start=["start", "option_outputs", "option_effects"])
+
+
+def _whole(tok: Token, what: str) -> int:
+    """An INT token's value, refused above MAX_DIMENSION (before int() reads its digits)."""
+    digits = str(tok).lstrip("0")
+    if len(digits) > len(str(MAX_DIMENSION)) or int(digits or 0) > MAX_DIMENSION:
+        shown = digits if len(digits) <= 20 else digits[:20] + "..."
+        fail(_tspan(tok), f"{what} {shown} is too large (the limit is {MAX_DIMENSION})")
+    return int(digits or 0)
+
+
+def _keyword_as_name(tok: Token):
+    fail(_tspan(tok), f"'{tok}' is a keyword: it cannot be a name")
 
 
 def _span(meta) -> Span:
@@ -97,7 +115,8 @@ class _ToAst(Transformer_NonRecursive):
                                _doc(rest[-1]), _span(meta))
 
     def dim(self, meta, c):
-        return ast.Dim(int(c[0]), int(c[1]) if c[1] is not None else None, _span(meta))
+        return ast.Dim(_whole(c[0], "dimension"), _whole(c[1], "dimension") if c[1] is not None
+                       else None, _span(meta))
 
     def args(self, meta, c):
         return tuple(c)
@@ -159,7 +178,7 @@ class _ToAst(Transformer_NonRecursive):
         return tuple(c)
 
     def outref(self, meta, c):
-        index = int(c[2]) if c[2] is not None else None
+        index = _whole(c[2], "index") if c[2] is not None else None
         return ast.OutRef(str(c[0]), str(c[1]) if c[1] is not None else None, index, _span(meta))
 
     def scene_time(self, meta, c):
@@ -274,6 +293,9 @@ def _syntax_error(exc: UnexpectedInput, source: str):
     line, col = max(exc.line, 1), max(exc.column, 1)
     if isinstance(exc, UnexpectedToken):
         tok = exc.token
+        before = (exc.token_history or [None])[-1]
+        if before is not None and str(before) in KEYWORDS and str(tok) in (":", "->"):
+            _keyword_as_name(before)  # `scene : 1`, `model -> j`: a keyword declared or bonded
         if tok.type == "$END":
             lines = source.splitlines() or [""]
             line, col = len(lines), len(lines[-1]) + 1
@@ -294,7 +316,7 @@ def _syntax_error(exc: UnexpectedInput, source: str):
 
 def decode(data: bytes) -> str:
     if len(data) > MAX_SOURCE_BYTES:
-        fail(None, f"model file too large ({len(data)} bytes; the limit is {MAX_SOURCE_BYTES})")
+        fail(None, f"model file too large (more than {MAX_SOURCE_BYTES} bytes)")
     try:
         return data.decode("utf-8")
     except UnicodeDecodeError as exc:
@@ -306,7 +328,7 @@ def decode(data: bytes) -> str:
 def parse(source: str, path: str = "<model>") -> ast.Model:
     """Parse `source` into an ast.Model; raises ModelError with a located diagnostic."""
     if len(source.encode("utf-8")) > MAX_SOURCE_BYTES:
-        fail(None, f"model file too large (the limit is {MAX_SOURCE_BYTES} bytes)")
+        fail(None, f"model file too large (more than {MAX_SOURCE_BYTES} bytes)")
     text = source if source.endswith("\n") else source + "\n"
     try:
         tree = _lark().parse(text, start="start")
@@ -318,7 +340,6 @@ def parse(source: str, path: str = "<model>") -> ast.Model:
     return ast.Model(_ToAst().transform(tree), path)
 
 
-MAX_OPTION_CHARS = 1 << 16
 
 
 def _located_at(value, origin: Origin):

@@ -10,6 +10,7 @@ product, so that a sum of n terms costs n, not n^2.
 from __future__ import annotations
 
 import math
+import sys
 
 import sympy as sp
 
@@ -18,6 +19,7 @@ from .diagnostics import Collector, ModelError, Note, Span, fail
 from .graph import (TIME, check_effect_names, model_effects, Bond, Constraint, Element, Expr, Graph, Parameter, Scene, Signal,
                     check_ports, part_name, var, variable_name)
 from .kinds import KINDS
+from .resources import MAX_LITERAL_DIGITS
 
 FUNCTIONS = {  # name -> (sympy function, arity)
     "sin": (sp.sin, 1), "cos": (sp.cos, 1), "tan": (sp.tan, 1), "asin": (sp.asin, 1),
@@ -30,7 +32,8 @@ FUNCTIONS = {  # name -> (sympy function, arity)
 FIELDS_ONE_PORT = ("e", "f")
 MAX_EXACT_INTEGER = 2 ** 53  # integral literals up to this are exact SymPy integers
 MAX_EXACT_POWER = 64  # number ** integer with a larger exponent is computed in floating point
-LOG10_MAX_DOUBLE = math.log10(1.7976931348623157e308)
+LOG10_MAX_DOUBLE = math.log10(sys.float_info.max)
+MIN_NORMAL_DOUBLE = sys.float_info.min
 
 
 class _Scope:
@@ -58,6 +61,8 @@ class _ExprBuilder:
             fail(node.span, "expression is not finite (division by zero?)")
         if value.has(sp.I):
             fail(node.span, "expression is not a real number")
+        for number in sorted(value.atoms(sp.Number), key=abs):
+            _check_double(number, node.span)
         return Expr(value, tuple(self.refs), node.span)
 
     def _evaluate(self, root):
@@ -106,7 +111,7 @@ class _ExprBuilder:
             return
         factors = []
         for (s, n), v in zip(operands, values):
-            if s < 0 and v == 0:
+            if s < 0 and v.is_zero:
                 fail(n.span, "division by zero")
             factors.append(v if s > 0 else 1 / v)
         done.append(sp.Mul(*factors))
@@ -134,7 +139,10 @@ class _ExprBuilder:
         if any(_is_matrix(a) for a in args):
             fail(node.span, f"{node.func}() takes scalars, not vectors or matrices")
         func, _ = FUNCTIONS[node.func]
-        done.append(func(*args))
+        value = func(*args)
+        if not value.free_symbols and not value.is_Number:
+            _check_constant(value, node.span)
+        done.append(value)
 
     def _vector(self, node: ast.Vector, done):
         """[a, b, ...]: a column vector of scalars, or a matrix whose rows are [..] vectors."""
@@ -270,7 +278,7 @@ def _matrix_chain(additive, operands, values):
         if sign < 0:
             if _is_matrix(v):
                 fail(n.span, "division by a vector or a matrix")
-            if v == 0:
+            if v.is_zero:
                 fail(n.span, "division by zero")
             acc = acc / v
         elif _is_matrix(acc) and _is_matrix(v):
@@ -313,7 +321,7 @@ def _number(node: ast.Num):
     text = node.text
     if text.isdigit():
         digits = text.lstrip("0")
-        if len(digits) > 309:  # before int(): Python refuses to read more than 4300 digits
+        if len(digits) > MAX_LITERAL_DIGITS:  # before int(), which refuses over 4300 digits
             fail(node.span, f"number {text[:20]}... does not fit a double")
         value = int(text)
         if value <= MAX_EXACT_INTEGER:
@@ -323,7 +331,7 @@ def _number(node: ast.Num):
         x = float(text)  # the grammar admits decimal numbers only
     if not math.isfinite(x):
         fail(node.span, f"number {text} does not fit a double")
-    if x != 0.0 and abs(x) < 2.2250738585072014e-308:
+    if x != 0.0 and abs(x) < MIN_NORMAL_DOUBLE:
         fail(node.span, f"number {text} is too small for a normal double")
     if x.is_integer() and abs(x) <= MAX_EXACT_INTEGER:
         return sp.Integer(int(x))  # 2.0 is the integer 2: no 1.0*x in the equations
@@ -331,10 +339,11 @@ def _number(node: ast.Num):
 
 
 def _number_power(a, b, span):
-    """a ** b for numbers, refused when it does not fit a double (before computing it)."""
+    """a ** b for numbers, refused when it does not fit a double, decided from the magnitude
+    before computing it; exact only for small integer exponents, else in floating point."""
     if a.is_negative and not b.is_Integer:
         fail(span, "expression is not a real number (a negative number to a fractional power)")
-    if a == 0:
+    if a.is_zero:
         if b.is_negative:
             fail(span, "division by zero (0 to a negative power)")
         return sp.Integer(0) if b != 0 else sp.Integer(1)
@@ -343,7 +352,38 @@ def _number_power(a, b, span):
         fail(span, "number does not fit a double")
     if b.is_Integer and abs(int(b)) <= MAX_EXACT_POWER and (a.is_Rational or abs(magnitude) < 300):
         return a ** b
-    return sp.Float(math.pow(float(a), float(b)))
+    try:
+        x = math.pow(float(a), float(b))
+    except OverflowError:  # at the edge of the range, where the magnitude test rounds
+        fail(span, "number does not fit a double")
+    if abs(x) < MIN_NORMAL_DOUBLE:
+        fail(span, "number is too small for a normal double (it would be 0)")
+    return sp.Float(x)
+
+
+def _check_double(number, span):
+    """A constant that the generated code would compute as inf or 0 is refused."""
+    try:
+        x = float(number)
+    except OverflowError:
+        x = math.inf
+    if not math.isfinite(x):
+        fail(span, "number does not fit a double")
+    if number != 0 and abs(x) < MIN_NORMAL_DOUBLE:
+        fail(span, "number is too small for a normal double (it would be 0)")
+
+
+def _check_constant(value, span):
+    """A function of numbers (exp(1000), asin(2)) must be a real number that fits a double,
+    as the generated code computes it (one call at a time, in doubles)."""
+    try:
+        z = complex(value.evalf(20))
+    except (OverflowError, TypeError, ValueError):
+        fail(span, "value does not fit a double")
+    if z.imag != 0:
+        fail(span, "expression is not a real number")
+    if not math.isfinite(z.real):
+        fail(span, "value does not fit a double")
 
 
 def _fields_of(decl: ast.ElementDecl) -> tuple[str, ...]:
