@@ -352,8 +352,8 @@ class _Builder:
         n = el.value.value.xreplace(self._defaults)
         if n.is_number and n.is_zero:
             fail(el.value.span, f"{el.kind}({el.value.value}) of '{el.origin or el.name}' is "
-                                "singular in its causality: the causality divides by its value, "
-                                "which is 0 at the given parameters")
+                                "singular: its causality divides by its value, 0 at the given "
+                                "parameters")
 
     # ------------------------------------------------------------ junctions
     def junction(self, el: Element):

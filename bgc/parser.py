@@ -6,7 +6,8 @@ from functools import lru_cache
 from dataclasses import replace
 
 from lark import Lark, Token, Transformer_NonRecursive, Tree, v_args
-from lark.exceptions import UnexpectedCharacters, UnexpectedEOF, UnexpectedInput, UnexpectedToken
+from lark.exceptions import (UnexpectedCharacters, UnexpectedEOF, UnexpectedInput,
+                             UnexpectedToken, VisitError)
 
 from . import ast
 from .diagnostics import ModelError, Note, Origin, Span, fail
@@ -296,6 +297,8 @@ def _syntax_error(exc: UnexpectedInput, source: str):
         before = (exc.token_history or [None])[-1]
         if before is not None and str(before) in KEYWORDS and str(tok) in (":", "->"):
             _keyword_as_name(before)  # `scene : 1`, `model -> j`: a keyword declared or bonded
+        if tok.type != "NAME" and str(tok) in KEYWORDS and "NAME" in (exc.expected or ()):
+            _keyword_as_name(tok)  # `set : 0`: a keyword where only a name fits
         if tok.type == "$END":
             lines = source.splitlines() or [""]
             line, col = len(lines), len(lines[-1]) + 1
@@ -310,7 +313,7 @@ def _syntax_error(exc: UnexpectedInput, source: str):
         width = 1
     opened = _unclosed_bracket(source, line, col)
     notes = [Note(opened, "this bracket is not closed (a newline inside brackets does not end "
-                          "a statement)")] if opened else []
+                          "a statement)")] if opened and opened.line < line else []
     fail(Span(line, col, line, col + width), msg, *notes)
 
 
@@ -337,7 +340,17 @@ def parse(source: str, path: str = "<model>") -> ast.Model:
     except UnexpectedInput as exc:  # any other lark input error
         _syntax_error(exc, source)
     _check_nesting(tree)
-    return ast.Model(_ToAst().transform(tree), path)
+    return ast.Model(_transform(tree), path)
+
+
+def _transform(tree):
+    """The AST of a parse tree; the model errors that building it finds, as they are."""
+    try:
+        return _ToAst().transform(tree)
+    except VisitError as exc:
+        if isinstance(exc.orig_exc, ModelError):
+            raise exc.orig_exc from None
+        raise
 
 
 
@@ -377,7 +390,11 @@ def parse_option(kind: str, text: str, name: str):
                                   notes=tuple(replace(n, span=n.span and replace(
                                       n.span, origin=origin)) for n in d.notes))
                           for d in exc.diagnostics]) from None
-    value = _ToAst().transform(tree)
+    try:
+        value = _transform(tree)
+    except ModelError as exc:
+        raise ModelError([replace(d, span=replace(d.span, origin=origin))
+                          for d in exc.diagnostics]) from None
     if kind == "outputs":
         return tuple(_located_at(r, origin) for r in value)
     return _located_at(value, origin)

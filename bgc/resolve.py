@@ -19,7 +19,7 @@ from .diagnostics import Collector, ModelError, Note, Span, fail
 from .graph import (TIME, check_effect_names, model_effects, Bond, Constraint, Element, Expr, Graph, Parameter, Scene, Signal,
                     check_ports, part_name, var, variable_name)
 from .kinds import KINDS
-from .resources import MAX_LITERAL_DIGITS
+from .resources import MAX_LITERAL_DIGITS, MAX_MATRIX_ENTRIES
 
 FUNCTIONS = {  # name -> (sympy function, arity)
     "sin": (sp.sin, 1), "cos": (sp.cos, 1), "tan": (sp.tan, 1), "asin": (sp.asin, 1),
@@ -46,6 +46,15 @@ class _Scope:
         self.local: dict[str, sp.Symbol] = {}
         self.params_only = False
         self.visible_params: set[str] | None = None
+        self.entries = 0  # of the vectors and matrices built so far, over the whole model
+
+    def charge(self, n: int, span: Span):
+        """Count n more vector or matrix entries against MAX_MATRIX_ENTRIES, before or as
+        they are built: each operation on vectors costs what it builds."""
+        self.entries += n
+        if self.entries > MAX_MATRIX_ENTRIES:
+            fail(span, f"the model is too large: its expressions build more than "
+                       f"{MAX_MATRIX_ENTRIES} vector and matrix entries in all")
 
 
 class _ExprBuilder:
@@ -73,6 +82,8 @@ class _ExprBuilder:
             action, node = todo.pop()
             if action is not None:
                 action(node, done)
+                if _is_matrix(done[-1]):
+                    self.scope.charge(len(done[-1]), root.span)
                 continue
             if isinstance(node, ast.BinOp) and node.op in "+-*/":
                 operands = _chain(node)
@@ -96,6 +107,8 @@ class _ExprBuilder:
                 todo.extend(((None, node.index), (None, node.base)))
             else:
                 done.append(self._leaf(node))
+                if _is_matrix(done[-1]):
+                    self.scope.charge(len(done[-1]), root.span)
         (value,) = done
         return value
 
@@ -104,7 +117,7 @@ class _ExprBuilder:
         values = done[len(done) - len(operands):]
         del done[len(done) - len(operands):]
         if any(_is_matrix(v) for v in values):
-            done.append(_matrix_chain(additive, operands, values))
+            done.append(_matrix_chain(additive, operands, values, self.scope))
             return
         if additive:
             done.append(sp.Add(*[v if s > 0 else -v for (s, _), v in zip(operands, values)]))
@@ -134,6 +147,7 @@ class _ExprBuilder:
                 args = list(args[0])
             if any(_is_matrix(a) for a in args):
                 fail(node.span, "diag() takes scalars, or one vector")
+            self.scope.charge(len(args) ** 2, node.span)
             done.append(sp.ImmutableMatrix(sp.diag(*args)))
             return
         if any(_is_matrix(a) for a in args):
@@ -264,8 +278,9 @@ def _dim_of(decl) -> int | None:
     return None if n == 1 and d.n == 1 else n
 
 
-def _matrix_chain(additive, operands, values):
-    """A chain of + and - (or * and /) with vectors or matrices among its operands."""
+def _matrix_chain(additive, operands, values, scope: _Scope):
+    """A chain of + and - (or * and /) with vectors or matrices among its operands; a matrix
+    product is charged to the scope before it is computed."""
     (_, first), acc = operands[0], values[0]
     if additive:
         acc = acc if operands[0][0] > 0 else -acc
@@ -284,6 +299,7 @@ def _matrix_chain(additive, operands, values):
         elif _is_matrix(acc) and _is_matrix(v):
             if acc.cols != v.rows:
                 fail(n.span, f"cannot multiply {_shape(acc)} by {_shape(v)}")
+            scope.charge(acc.rows * acc.cols * v.cols, n.span)
             acc = acc * v
         else:
             acc = acc * v

@@ -20,7 +20,8 @@ MAX_NESTING = 100  # levels of nested brackets / operators of different kinds
 MAX_OPTION_CHARS = 1 << 16  # --outputs, --effects
 MAX_LITERAL_DIGITS = 309  # an integer literal longer than this does not fit a double
 MAX_DIMENSION = 10_000  # KIND[n]: the components of one multiport
-MAX_SCALAR_PARTS = 100_000  # the scalar elements and signals a model flattens into
+MAX_SCALAR_PARTS = 50_000  # scalar elements, signals and bonds once multiports are split
+MAX_MATRIX_ENTRIES = 100_000  # vector and matrix entries (and products) the expressions build
 MAX_OUTPUT_ROWS = 10 ** 9  # rows of one run's CSV (the generated programs refuse more too)
 
 # symbolic work: one expression as SymPy walks it (a tree, shared subexpressions counted
