@@ -1,4 +1,5 @@
-"""Small symbolic helpers that more than one stage uses: inverting a law, testing for zero.
+"""Small symbolic helpers that more than one stage uses: inverting a law, testing for zero,
+antiderivatives of constraint balances, and the language's min() and max().
 
 Nothing here calls a general SymPy solver: an equation is inverted only where its inverse is
 clean by construction (degree one in the unknown, or the unknown occurring once under
@@ -24,6 +25,36 @@ _INVERSES = {
     sp.sinh: sp.asinh,
     sp.tanh: sp.atanh,
 }
+
+
+class _Extremum(sp.Function):
+    """The least or greatest of the arguments as written: numbers are folded, nothing else is
+    compared or merged.  (SymPy's own Min and Max compare every pair of arguments through the
+    assumptions system and merge nested ones: minutes for a hundred arguments.)"""
+
+    @classmethod
+    def eval(cls, *args):
+        numbers = [a for a in args if a.is_Number]
+        if len(numbers) == len(args):
+            return cls.pick(numbers)
+        if len(numbers) > 1:
+            return cls(*[a for a in args if not a.is_Number], cls.pick(numbers))
+        return None
+
+    def fdiff(self, argindex=1):
+        """Heaviside of how far the argument leads the others (1/2 at a tie), as SymPy's."""
+        others = self.args[:argindex - 1] + self.args[argindex:]
+        rest = others[0] if len(others) == 1 else self.func(*others)
+        lead = self.args[argindex - 1] - rest
+        return sp.Heaviside(lead if isinstance(self, Max) else -lead)
+
+
+class Max(_Extremum):
+    pick = staticmethod(max)
+
+
+class Min(_Extremum):
+    pick = staticmethod(min)
 
 
 def linear_solution(equation: sp.Expr, unknown: sp.Symbol) -> sp.Expr | None:
@@ -98,6 +129,55 @@ def solve_for(equation: sp.Expr, unknown: sp.Symbol) -> sp.Expr | None:
         return None
     return linear_solution(equation, unknown) if _degree_one(equation, unknown) \
         else peel(equation, unknown)
+
+
+_LINEAR_ARGUMENT = {  # f(a z + b) -> its antiderivative times a
+    sp.sin: lambda u: -sp.cos(u), sp.cos: sp.sin, sp.exp: sp.exp,
+    sp.sinh: sp.cosh, sp.cosh: sp.sinh,
+}
+
+
+def antiderivative(expr: sp.Expr, z: sp.Symbol) -> sp.Expr | None:
+    """An antiderivative of expr in z, term by term after expansion, for terms that are a
+    factor free of z times z^r, (a z + b)^r, or sin, cos, exp, sinh or cosh of a z + b (a, b
+    free of z).  None for anything else, or beyond bgc.resources' limits: no general
+    integrator runs, so the work is bounded by the size of expr."""
+    if not fits(expr):
+        return None
+    expanded = _expand(expr)
+    if expanded is None:
+        return None
+    out = []
+    for term in sp.Add.make_args(expanded):
+        free, inside = term.as_independent(z, as_Add=False)
+        part = _antiderivative_of_factor(inside, z)
+        if part is None:
+            return None
+        out.append(free * part)
+    return sp.Add(*out)
+
+
+def _antiderivative_of_factor(f, z):
+    if f == 1:
+        return z
+    if f.is_Pow:
+        base, r = f.args
+        slope = _slope(base, z)
+        if slope is None or r.has(z):
+            return None
+        return sp.log(base) / slope if r == -1 else base ** (r + 1) / (slope * (r + 1))
+    if f == z:
+        return z ** 2 / 2
+    if type(f) in _LINEAR_ARGUMENT and len(f.args) == 1:
+        slope = _slope(f.args[0], z)
+        return None if slope is None else _LINEAR_ARGUMENT[type(f)](f.args[0]) / slope
+    return None
+
+
+def _slope(u, z):
+    """a when u = a z + b with a, b free of z (a != 0), else None."""
+    a = partial(u, z)
+    return a if a != 0 and not a.has(z) else None
 
 
 def _expand(expr):

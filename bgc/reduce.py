@@ -29,7 +29,7 @@ from dataclasses import dataclass, field
 import sympy as sp
 
 from . import blt
-from .algebra import is_singular, is_symmetric, is_zero, solve_for
+from .algebra import antiderivative, is_singular, is_symmetric, is_zero, solve_for
 from .diagnostics import Collector, ModelError, Span, fail, warning
 from .differentiate import directional, partial
 from .equations import (TIME, ConstraintDef, Equation, EquationSystem, OutputDef, ParameterDef,
@@ -357,8 +357,8 @@ def _potential(coeffs, a0, span, name):
         rest = a - partial(P, z)
         if rest == 0 or is_zero(rest):
             continue
-        term = sp.integrate(sp.expand(rest), z)
-        if term.has(sp.Integral):
+        term = antiderivative(rest, z)
+        if term is None:
             fail(span, f"cannot integrate the balance of '{name}' symbolically: give "
                        "'phi = ...' on the junction")
         P += term

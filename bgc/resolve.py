@@ -15,18 +15,19 @@ import sys
 import sympy as sp
 
 from . import ast
+from .algebra import Max, Min
 from .diagnostics import Collector, ModelError, Note, Span, fail
 from .graph import (TIME, check_effect_names, model_effects, Bond, Constraint, Element, Expr, Graph, Parameter, Scene, Signal,
                     check_ports, part_name, var, variable_name)
 from .kinds import KINDS
-from .resources import MAX_LITERAL_DIGITS, MAX_MATRIX_ENTRIES
+from .resources import MAX_EXTREMUM_ARGUMENTS, MAX_LITERAL_DIGITS, MAX_MATRIX_ENTRIES
 
 FUNCTIONS = {  # name -> (sympy function, arity)
     "sin": (sp.sin, 1), "cos": (sp.cos, 1), "tan": (sp.tan, 1), "asin": (sp.asin, 1),
     "acos": (sp.acos, 1), "atan": (sp.atan, 1), "atan2": (sp.atan2, 2), "sinh": (sp.sinh, 1),
     "cosh": (sp.cosh, 1), "tanh": (sp.tanh, 1), "exp": (sp.exp, 1), "log": (sp.log, 1),
-    "sqrt": (sp.sqrt, 1), "abs": (sp.Abs, 1), "sign": (sp.sign, 1), "min": (sp.Min, None),
-    "max": (sp.Max, None),
+    "sqrt": (sp.sqrt, 1), "abs": (sp.Abs, 1), "sign": (sp.sign, 1), "min": (Min, None),
+    "max": (Max, None),
 }
 
 FIELDS_ONE_PORT = ("e", "f")
@@ -201,6 +202,9 @@ class _ExprBuilder:
                             f"got {len(node.args)}")
         if arity is None and len(node.args) < 2:
             fail(node.span, f"{node.func}() takes at least 2 arguments")
+        if arity is None and len(node.args) > MAX_EXTREMUM_ARGUMENTS:
+            fail(node.span, f"{node.func}() takes at most {MAX_EXTREMUM_ARGUMENTS} arguments, "
+                            f"got {len(node.args)} (nest them for more)")
 
     def _leaf(self, node):
         if isinstance(node, ast.Num):

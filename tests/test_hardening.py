@@ -2,6 +2,7 @@
 or are refused with a located message; limits are checked before the work; exit codes follow
 click's convention (1 for the model, 2 for the command line); the API refuses bad arguments at
 the call.  The diagnostics on models alone are in tests/errors/."""
+import math
 import re
 from pathlib import Path
 
@@ -12,7 +13,7 @@ from lark.lexer import PatternStr
 
 import bgc
 from bgc import backends
-from bgc.algebra import is_zero, solve_for
+from bgc.algebra import antiderivative, is_zero, solve_for
 from bgc.api import Source
 from bgc.cli import main
 from bgc.emit import emit_python
@@ -81,6 +82,18 @@ def test_a_signal_400_deep_in_every_report():
     assert module.rhs(t, [0.0], [a])[0] == pytest.approx(expected, rel=1e-14)
 
 
+def test_min_and_max_of_32_arguments():
+    """SymPy's Max would compare every pair through its assumptions (minutes); bgc's is
+    built as written, and the generated code computes it."""
+    terms = ", ".join(f"sin({k}*t)" for k in range(1, 32))
+    text = source_with(f"max(mass.p, {terms}) - min(t, mass.p, 0.25)")
+    (code,) = emit_python(build(text).program).values()
+    module = backends.load_python_module(code)
+    t, p = 0.7, 0.3
+    expected = max([p] + [math.sin(k * t) for k in range(1, 32)]) - min(t, p, 0.25)
+    assert module.rhs(t, [p], [])[0] == pytest.approx(expected, rel=1e-15)
+
+
 # ------------------------------------------------------------------ symbolic work, bounded
 
 
@@ -137,6 +150,18 @@ def test_inverting_a_law_never_expands_without_bound():
     assert solve_for((f + 1) * (q + 1) ** 100000 - f * (q + 1) ** 100000 + f - e, f) is None
     assert is_zero((q + 1) ** 2 - q ** 2 - 2 * q - 1)
     assert not is_zero((q + 1) ** 100000 - q ** 100000)
+
+
+def test_antiderivatives_by_rules_only():
+    """What a holonomic balance needs, checked by differentiating back; no general integrator
+    (SymPy's can run for minutes on 1/(x^5 + x + 1)): the rest is None, a located error
+    asking for `phi = ...` (tests/errors/integral_not_closed.bg)."""
+    x, y, a = sp.symbols("x y a", real=True)
+    for e in (2 * x - 2 * y, sp.sqrt(a ** 2 - sp.sin(y) ** 2), 3 * x ** 2 * y + sp.cos(2 * x + 1),
+              sp.sqrt(x + 1), 1 / (x + 1), sp.exp(-x) + sp.sinh(3 * x)):
+        assert sp.simplify(sp.diff(antiderivative(e, x), x) - e) == 0, e
+    for e in (1 / (x ** 5 + x + 1), x * sp.sin(x), sp.log(x), 2 ** x):
+        assert antiderivative(e, x) is None, e
 
 
 # ------------------------------------------------------------------ input, read with a bound
