@@ -65,7 +65,7 @@ def linear_solution(equation: sp.Expr, unknown: sp.Symbol) -> sp.Expr | None:
         return None
     rest = equation - a * unknown
     if rest.has(unknown):
-        rest = _expand(rest)
+        rest = expand_bounded(rest)
         if rest is None or rest.has(unknown):
             return None
     if a.is_Add and a.free_symbols and sp.count_ops(a) + sp.count_ops(rest) < 40:
@@ -142,9 +142,7 @@ def antiderivative(expr: sp.Expr, z: sp.Symbol) -> sp.Expr | None:
     factor free of z times z^r, (a z + b)^r, or sin, cos, exp, sinh or cosh of a z + b (a, b
     free of z).  None for anything else, or beyond bgc.resources' limits: no general
     integrator runs, so the work is bounded by the size of expr."""
-    if not fits(expr):
-        return None
-    expanded = _expand(expr)
+    expanded = expand_bounded(expr)
     if expanded is None:
         return None
     out = []
@@ -180,9 +178,12 @@ def _slope(u, z):
     return a if a != 0 and not a.has(z) else None
 
 
-def _expand(expr):
-    """sp.expand(expr), or None when that would build more than MAX_EXPANDED_TERMS terms."""
-    return sp.expand(expr) if expanded_terms(expr) <= MAX_EXPANDED_TERMS else None
+def expand_bounded(expr):
+    """sp.expand(expr), or None when expr is beyond bgc.resources' limits or its expansion
+    would build more than MAX_EXPANDED_TERMS terms."""
+    if not fits(expr) or expanded_terms(expr) > MAX_EXPANDED_TERMS:
+        return None
+    return sp.expand(expr)
 
 
 def _degree_one(equation, unknown) -> bool:
@@ -198,7 +199,7 @@ def is_zero(expr: sp.Expr, points: int = 3, seed: int = 0) -> bool:
     if not fits(expr):
         return False
     if expr.is_Add or expr.is_Mul:
-        expanded = _expand(expr)
+        expanded = expand_bounded(expr)
         expr = expr if expanded is None else expanded
     if expr == 0:
         return True
@@ -224,9 +225,9 @@ def is_singular(rows: int, entries, points: int = 3, seed: int = 0) -> bool:
     """Whether the square matrix with these (row, column, expression) entries is singular
     whatever the values of its symbols: its determinant, at random points in 30-digit
     arithmetic, below 1e-20 of Hadamard's bound (the product of the rows' norms).  A
-    determinant that vanishes at several random points vanishes identically.  False when an
-    entry is too large to evaluate (bgc.resources.fits)."""
-    if not all(fits(e) for _, _, e in entries):
+    determinant that vanishes at several random points vanishes identically.  False when the
+    entries together are too large to evaluate (bgc.resources.fits)."""
+    if not fits(sp.Tuple(*(e for _, _, e in entries))):
         return False
     rng = random.Random(seed)
     symbols = sorted(set().union(*[e.free_symbols for _, _, e in entries]) if entries else (),
@@ -255,7 +256,7 @@ def is_symmetric(entries, points: int = 2, seed: int = 1) -> bool:
     whatever the values of its symbols: its pattern, and its values at random points to 1e-12
     relative (two analytic functions equal at random points are equal)."""
     values = {(i, j): e for i, j, e in entries}
-    if any((j, i) not in values for i, j in values) or not all(map(fits, values.values())):
+    if any((j, i) not in values for i, j in values) or not fits(sp.Tuple(*values.values())):
         return False
     pairs = [(i, j) for i, j in values if i < j]
     if not pairs:

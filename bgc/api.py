@@ -162,20 +162,24 @@ def _choice(name: str, value, allowed):
 
 
 def check_scenes(compiled: Compiled):
-    """Build every scene of compiled's model (to the reduce stage, with its algebra), so that
-    `bgc check` without a scene answers for all of them: BgcModelError with the errors of
-    each scene that fails, a note naming the scene unless the error is in it."""
+    """Build every scene of compiled's model (to the reduce stage, with its algebra; the text
+    parsed once more, not once per scene), so that `bgc check` without a scene answers for all
+    of them: BgcModelError with the errors of each scene that fails, a note naming the scene
+    unless the error is in it.  compiled is a build of the model's text that succeeded."""
+    src = compiled.source
+    graph = flatten(resolve(parse(src.text, src.path)))
     diagnostics = []
-    for sc in compiled.graph.scenes:
+    for sc in graph.scenes:
         try:
-            build(compiled.source, sc.name, algebra=compiled.reduced.algebra, program=False)
-        except BgcModelError as exc:
+            causal = assign_causality(apply_scene(graph, sc.name))
+            reduce(build_equations(causal), False, compiled.reduced.algebra)
+        except ModelError as exc:
             for d in exc.diagnostics:
                 inside = d.span is not None and sc.span.line <= d.span.line <= sc.span.end_line
                 diagnostics.append(d if inside else replace(
                     d, notes=d.notes + (Note(sc.span, f"in scene '{sc.name}'"),)))
     if diagnostics:
-        raise BgcModelError(ModelError(diagnostics), compiled.source)
+        raise BgcModelError(ModelError(diagnostics), src)
 
 
 class _Clock:

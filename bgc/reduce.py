@@ -29,13 +29,15 @@ from dataclasses import dataclass, field
 import sympy as sp
 
 from . import blt
-from .algebra import antiderivative, is_singular, is_symmetric, is_zero, solve_for
+from .algebra import (antiderivative, expand_bounded, is_singular, is_symmetric, is_zero,
+                      solve_for)
 from .diagnostics import Collector, ModelError, Span, fail, warning
 from .differentiate import directional, partial
 from .equations import (TIME, ConstraintDef, Equation, EquationSystem, OutputDef, ParameterDef,
                         Run, StateVar, der)
 from .graph import var
-from .resources import MAX_EXPRESSION_DEPTH, MAX_EXPRESSION_NODES, SYMBOLIC_MAX_BLOCK, fits
+from .resources import (MAX_EXPANDED_TERMS, MAX_EXPRESSION_DEPTH, MAX_EXPRESSION_NODES,
+                        SYMBOLIC_MAX_BLOCK, fits)
 
 RELATIVE_TOLERANCE = 1e-9
 ALGEBRA = ("auto", "symbolic", "numeric")
@@ -316,7 +318,10 @@ class _Coordinates:
         coeffs = {q: coeffs[q] for q in self.coords if q in coeffs}
         if any(co.free_symbols & rates.keys() for co in coeffs.values()):
             return None, "it is not linear in the coordinate rates"
-        a0 = sp.expand(balance.xreplace({r: 0 for r in rates}))
+        a0 = expand_bounded(balance.xreplace({r: 0 for r in rates}))
+        if a0 is None:
+            fail(c.name_span, f"the flow balance of constraint junction '{c.junction}' is too "
+                              f"large to expand (more than {MAX_EXPANDED_TERMS} terms)")
         return (coeffs, a0, self.coords), None
 
 

@@ -20,7 +20,8 @@ from .diagnostics import Collector, ModelError, Note, Span, fail
 from .graph import (TIME, check_effect_names, model_effects, Bond, Constraint, Element, Expr, Graph, Parameter, Scene, Signal,
                     check_ports, part_name, var, variable_name)
 from .kinds import KINDS
-from .resources import MAX_EXTREMUM_ARGUMENTS, MAX_LITERAL_DIGITS, MAX_MATRIX_ENTRIES
+from .resources import (MAX_EXTREMUM_ARGUMENTS, MAX_LITERAL_DIGITS, MAX_MATRIX_ENTRIES,
+                        MAX_SCENES)
 
 FUNCTIONS = {  # name -> (sympy function, arity)
     "sin": (sp.sin, 1), "cos": (sp.cos, 1), "tan": (sp.tan, 1), "asin": (sp.asin, 1),
@@ -677,6 +678,10 @@ def resolve(model: ast.Model) -> Graph:
     scenes, scene_names = [], {}
     known_effects = model_effects(els)
     for d in (d for d in model.decls if isinstance(d, ast.SceneDecl)):
+        if len(scene_names) == MAX_SCENES:
+            diags.error(d.name.span, f"a model has at most {MAX_SCENES} scenes (each is "
+                                     "checked in full)")
+            break
         if d.name.name in scene_names:
             diags.error(d.name.span, f"scene '{d.name.name}' is declared twice",
                         Note(scene_names[d.name.name], "first declaration"))

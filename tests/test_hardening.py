@@ -177,6 +177,12 @@ def test_an_endless_or_huge_file_is_refused_after_a_bounded_read(tmp_path):
                                 f"{MAX_SOURCE_BYTES} bytes)\n"
 
 
+def test_at_most_100_scenes():
+    text = "model m\nj : 0\nc : C(1)\nj -> c\n" + "".join(f"scene s{k} {{ }}\n"
+                                                            for k in range(101))
+    assert error_of(text).startswith("inline.bg:105:7: error: a model has at most 100 scenes")
+
+
 # ------------------------------------------------------------------ keywords
 
 
