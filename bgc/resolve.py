@@ -86,6 +86,8 @@ class _ExprBuilder:
                 action(node, done)
                 if _is_matrix(done[-1]):
                     self.scope.charge(len(done[-1]), root.span)
+                elif done[-1].is_Number:  # before a function can take it: sinh(1e308)
+                    _check_double(done[-1], _span_of(node))
                 continue
             if isinstance(node, ast.BinOp) and node.op in "+-*/":
                 operands = _chain(node)
@@ -332,6 +334,14 @@ def _chain(node: ast.BinOp):
         else:
             out.append((sign, n))
     return out
+
+
+def _span_of(item) -> Span:
+    """The span of what an action of _evaluate built: a node, or a chain (see _combine)."""
+    if isinstance(item, tuple):
+        operands = item[1]
+        return operands[0][1].span.join(operands[-1][1].span)
+    return item.span
 
 
 def _negate(node, done):

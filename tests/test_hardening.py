@@ -4,6 +4,7 @@ click's convention (1 for the model, 2 for the command line); the API refuses ba
 the call.  The diagnostics on models alone are in tests/errors/."""
 import math
 import re
+import shlex
 from pathlib import Path
 
 import pytest
@@ -288,22 +289,43 @@ def test_an_unknown_scene_is_an_argument_error_located_in_the_name():
 
 # ------------------------------------------------------------------ docs/errors.md
 
-DOC_EXAMPLE = re.compile(r"```bg\n(.*?)```\ngives `([^`]*)`", re.S)
+FENCE = re.compile(r"^```([^\n]*)\n(.*?)^```\n", re.S | re.M)
 
 
 def test_every_example_in_docs_errors_gives_its_message(tmp_path, monkeypatch):
-    """Each model of docs/errors.md (options on a first line `# bgc check ...`) gives the
-    message written under it, as the first error or warning of `bgc check`."""
-    examples = DOC_EXAMPLE.findall((Path(__file__).parent.parent / "docs" / "errors.md")
-                                   .read_text(encoding="utf-8"))
-    assert len(examples) > 100
+    """docs/errors.md, block by block in its own directory: `bgc check` refuses a
+    `bg error="TEXT" [scene=S]` model with TEXT (`:LINE:COL: error: ...`) as its first line
+    after the file's name, passes a plain `bg` model and prints the warning of the `text` block
+    after it; `bg file=NAME` saves the model; `sh status=N` runs `bgc` lines to exit N, with the
+    `text` block after it as the first line of the report."""
+    page = (Path(__file__).parent.parent / "docs" / "errors.md").read_text(encoding="utf-8")
+    found = [(shlex.split(info), text) for info, text in FENCE.findall(page)]
     monkeypatch.chdir(tmp_path)
-    for model, message in examples:
-        first = model.splitlines()[0]
-        args = first.split()[3:] if first.startswith("# bgc check") else []
-        Path("m.bg").write_text(model, encoding="utf-8")
-        result = CliRunner().invoke(main, ["check", "m.bg", *args])
-        said = [line for line in result.stderr.splitlines()
-                if ": error: " in line or ": warning: " in line]
-        assert said and said[0] == message, (model, result.stderr)
-        assert result.exit_code == (0 if ": warning: " in message else 1)
+    checked = 0
+    for k, (info, text) in enumerate(found):
+        after = found[k + 1] if k + 1 < len(found) and found[k + 1][0] == ["text"] else None
+        opts = dict(w.partition("=")[::2] for w in info[1:])
+        if info[:1] == ["bg"]:
+            name = opts.get("file") or "m.bg"
+            Path(name).write_text(text, encoding="utf-8")
+            args = ["check", name] + (["--scene", opts["scene"]] if "scene" in opts else [])
+            code, said = _check(args)
+            if "error" in opts:
+                assert code == 1 and said == name + opts["error"], (text, said)
+            else:
+                assert code == 0 and (after is None or said == after[1].splitlines()[0]), said
+            checked += 1
+        elif info[:1] == ["sh"]:
+            for line in text.splitlines():
+                code, said = _check(shlex.split(line)[1:])
+                assert code == int(opts.get("status", 0)), line
+                assert after is None or said == after[1].splitlines()[0], said
+    assert checked > 100
+
+
+def _check(args) -> tuple[int, str | None]:
+    """The exit status of bgc with args, and the first error or warning it printed."""
+    result = CliRunner().invoke(main, args)
+    said = [line for line in result.stderr.splitlines()
+            if ": error: " in line or ": warning: " in line]
+    return result.exit_code, said[0] if said else None
