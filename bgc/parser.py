@@ -353,8 +353,6 @@ def _transform(tree):
         raise
 
 
-
-
 def _located_at(value, origin: Origin):
     """value (an OutRef, Ident or SceneEffects) with its spans in `origin`."""
     span = replace(value.span, origin=origin)

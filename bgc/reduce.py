@@ -49,6 +49,7 @@ SYMMETRY_CHECK_MAX = 200  # ... and up to this size: symmetry (LDL^T-like elimin
 MAX_DERIVATIVE_ORDER = 3
 SOLVED_WITH_BLOCK = "(solved with its block)"
 TOO_LARGE = "(too large to write out)"
+NOT_FINITE = (sp.zoo, sp.nan, sp.oo, -sp.oo)
 
 
 # ---------------------------------------------------------------- the result
@@ -806,9 +807,6 @@ def reduce(es: EquationSystem, project_initial: bool = False, algebra: str = "au
     if not project_initial:
         check_initial(reduced)
     return _with_init_warnings(reduced, sys, eliminated)
-
-
-NOT_FINITE = (sp.zoo, sp.nan, sp.oo, -sp.oo)
 
 
 def _check_constants(steps, sys: _System):

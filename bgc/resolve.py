@@ -400,7 +400,7 @@ def _check_double(number, span):
         x = math.inf
     if not math.isfinite(x):
         fail(span, "number does not fit a double")
-    if number != 0 and abs(x) < MIN_NORMAL_DOUBLE:
+    if not number.is_zero and abs(x) < MIN_NORMAL_DOUBLE:
         fail(span, "number is too small for a normal double (it would be 0)")
 
 
