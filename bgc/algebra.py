@@ -1,9 +1,11 @@
-"""Small symbolic helpers that more than one stage uses: inverting a law, testing for zero.
+"""Small symbolic helpers that more than one stage uses: inverting a law, testing for zero,
+antiderivatives of constraint balances, and the language's min() and max().
 
 Nothing here calls a general SymPy solver: an equation is inverted only where its inverse is
 clean by construction (degree one in the unknown, or the unknown occurring once under
 functions with a real inverse), so the work is bounded by the size of the expression and can
-never hang.  Everything else is left to a numeric solve in the generated code.
+never hang; an expression larger than bgc.resources allows is not inverted, tested or
+expanded at all.  Everything else is left to a numeric solve in the generated code.
 """
 from __future__ import annotations
 
@@ -13,6 +15,7 @@ import mpmath  # SymPy's own dependency: the 30-digit determinant of is_singular
 import sympy as sp
 
 from .differentiate import partial
+from .resources import MAX_EXPANDED_TERMS, expanded_terms, fits
 
 # f(u) = w  ->  u = inverse(w), for functions that are bijections of the reals (or of their
 # range onto the reals, where the inverse then gives NaN outside the range, as it should).
@@ -24,6 +27,36 @@ _INVERSES = {
 }
 
 
+class _Extremum(sp.Function):
+    """The least or greatest of the arguments as written: numbers are folded, nothing else is
+    compared or merged.  (SymPy's own Min and Max compare every pair of arguments through the
+    assumptions system and merge nested ones: minutes for a hundred arguments.)"""
+
+    @classmethod
+    def eval(cls, *args):
+        numbers = [a for a in args if a.is_Number]
+        if len(numbers) == len(args):
+            return cls.pick(numbers)
+        if len(numbers) > 1:
+            return cls(*[a for a in args if not a.is_Number], cls.pick(numbers))
+        return None
+
+    def fdiff(self, argindex=1):
+        """Heaviside of how far the argument leads the others (1/2 at a tie), as SymPy's."""
+        others = self.args[:argindex - 1] + self.args[argindex:]
+        rest = others[0] if len(others) == 1 else self.func(*others)
+        lead = self.args[argindex - 1] - rest
+        return sp.Heaviside(lead if isinstance(self, Max) else -lead)
+
+
+class Max(_Extremum):
+    pick = staticmethod(max)
+
+
+class Min(_Extremum):
+    pick = staticmethod(min)
+
+
 def linear_solution(equation: sp.Expr, unknown: sp.Symbol) -> sp.Expr | None:
     """The solution of equation == 0 when it has degree one in unknown with a coefficient
     free of it: -(equation - a*unknown)/a.  None otherwise."""
@@ -32,8 +65,8 @@ def linear_solution(equation: sp.Expr, unknown: sp.Symbol) -> sp.Expr | None:
         return None
     rest = equation - a * unknown
     if rest.has(unknown):
-        rest = sp.expand(rest)
-        if rest.has(unknown):
+        rest = expand_bounded(rest)
+        if rest is None or rest.has(unknown):
             return None
     if a.is_Add and a.free_symbols and sp.count_ops(a) + sp.count_ops(rest) < 40:
         return sp.cancel(-rest / a)  # tidy a compound coefficient; a monomial divides cleanly
@@ -90,9 +123,67 @@ def _occurrences(expr: sp.Expr, symbol: sp.Symbol) -> int:
 
 
 def solve_for(equation: sp.Expr, unknown: sp.Symbol) -> sp.Expr | None:
-    """A clean closed form of the unknown from equation == 0, or None (see the module doc)."""
+    """A clean closed form of the unknown from equation == 0, or None (see the module doc;
+    None too for an equation beyond bgc.resources' limits)."""
+    if not fits(equation):
+        return None
     return linear_solution(equation, unknown) if _degree_one(equation, unknown) \
         else peel(equation, unknown)
+
+
+_LINEAR_ARGUMENT = {  # f(a z + b) -> its antiderivative times a
+    sp.sin: lambda u: -sp.cos(u), sp.cos: sp.sin, sp.exp: sp.exp,
+    sp.sinh: sp.cosh, sp.cosh: sp.sinh,
+}
+
+
+def antiderivative(expr: sp.Expr, z: sp.Symbol) -> sp.Expr | None:
+    """An antiderivative of expr in z, term by term after expansion, for terms that are a
+    factor free of z times z^r, (a z + b)^r, or sin, cos, exp, sinh or cosh of a z + b (a, b
+    free of z).  None for anything else, or beyond bgc.resources' limits: no general
+    integrator runs, so the work is bounded by the size of expr."""
+    expanded = expand_bounded(expr)
+    if expanded is None:
+        return None
+    out = []
+    for term in sp.Add.make_args(expanded):
+        free, inside = term.as_independent(z, as_Add=False)
+        part = _antiderivative_of_factor(inside, z)
+        if part is None:
+            return None
+        out.append(free * part)
+    return sp.Add(*out)
+
+
+def _antiderivative_of_factor(f, z):
+    if f == 1:
+        return z
+    if f.is_Pow:
+        base, r = f.args
+        slope = _slope(base, z)
+        if slope is None or r.has(z):
+            return None
+        return sp.log(base) / slope if r == -1 else base ** (r + 1) / (slope * (r + 1))
+    if f == z:
+        return z ** 2 / 2
+    if type(f) in _LINEAR_ARGUMENT and len(f.args) == 1:
+        slope = _slope(f.args[0], z)
+        return None if slope is None else _LINEAR_ARGUMENT[type(f)](f.args[0]) / slope
+    return None
+
+
+def _slope(u, z):
+    """a when u = a z + b with a, b free of z (a != 0), else None."""
+    a = partial(u, z)
+    return a if a != 0 and not a.has(z) else None
+
+
+def expand_bounded(expr):
+    """sp.expand(expr), or None when expr is beyond bgc.resources' limits or its expansion
+    would build more than MAX_EXPANDED_TERMS terms."""
+    if not fits(expr) or expanded_terms(expr) > MAX_EXPANDED_TERMS:
+        return None
+    return sp.expand(expr)
 
 
 def _degree_one(equation, unknown) -> bool:
@@ -104,8 +195,12 @@ def is_zero(expr: sp.Expr, points: int = 3, seed: int = 0) -> bool:
     """Whether expr is identically zero: structurally after cancellation, or else by its value
     at random points in 30-digit arithmetic (zero at several random points of an analytic
     function of real arguments, it is zero: the probability of a false 'zero' is nil).
-    Cheap and bounded, unlike simplify."""
-    expr = sp.expand(expr) if expr.is_Add or expr.is_Mul else expr
+    Cheap and bounded, unlike simplify; False for an expression too large to test."""
+    if not fits(expr):
+        return False
+    if expr.is_Add or expr.is_Mul:
+        expanded = expand_bounded(expr)
+        expr = expr if expanded is None else expanded
     if expr == 0:
         return True
     if not expr.free_symbols:
@@ -130,7 +225,10 @@ def is_singular(rows: int, entries, points: int = 3, seed: int = 0) -> bool:
     """Whether the square matrix with these (row, column, expression) entries is singular
     whatever the values of its symbols: its determinant, at random points in 30-digit
     arithmetic, below 1e-20 of Hadamard's bound (the product of the rows' norms).  A
-    determinant that vanishes at several random points vanishes identically."""
+    determinant that vanishes at several random points vanishes identically.  False when the
+    entries together are too large to evaluate (bgc.resources.fits)."""
+    if not fits(sp.Tuple(*(e for _, _, e in entries))):
+        return False
     rng = random.Random(seed)
     symbols = sorted(set().union(*[e.free_symbols for _, _, e in entries]) if entries else (),
                      key=str)
@@ -158,7 +256,7 @@ def is_symmetric(entries, points: int = 2, seed: int = 1) -> bool:
     whatever the values of its symbols: its pattern, and its values at random points to 1e-12
     relative (two analytic functions equal at random points are equal)."""
     values = {(i, j): e for i, j, e in entries}
-    if any((j, i) not in values for i, j in values):
+    if any((j, i) not in values for i, j in values) or not fits(sp.Tuple(*values.values())):
         return False
     pairs = [(i, j) for i, j in values if i < j]
     if not pairs:

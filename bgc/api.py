@@ -3,15 +3,15 @@ equations -> reduce -> lower -> emit.  `bgc.cli` and the tests use exactly these
 from __future__ import annotations
 
 import io
+import math
 import time
-from dataclasses import dataclass
-from pathlib import Path
+from dataclasses import dataclass, replace
 
 import numpy as np
 
-from . import ast, backends
+from . import ast, backends, solvers
 from .causality import CausalGraph, assign_causality
-from .diagnostics import ModelError, format_diagnostic
+from .diagnostics import ModelError, Note, format_diagnostic
 from .emit import emit_c, emit_python
 from .flatten import flatten
 from .equations import EquationSystem, build_equations, with_residual_outputs
@@ -22,6 +22,7 @@ from .parser import decode, parse, parse_option
 from .reduce import ALGEBRA, Reduced, reduce
 from .report import SceneSummary, check_report, scenes_report, equations_latex, equations_text, scene_summary
 from .resolve import resolve
+from .resources import MAX_OUTPUT_ROWS, read_bounded
 from .scene import Override, Settings, apply_scene
 
 
@@ -65,12 +66,23 @@ class BgcModelError(Exception):
                                    for d in error.diagnostics))
 
 
+class BgcArgumentError(BgcModelError, ValueError):
+    """An argument that the model refuses (a scene it does not have, outputs or effects it
+    does not know), reported in the argument's own text; the command line exits 2 for it."""
+
+
+def _model_error(exc: ModelError, source: Source) -> BgcModelError:
+    """BgcArgumentError when every error is located in an argument, else BgcModelError."""
+    outside = all(d.span is not None and d.span.origin is not None for d in exc.diagnostics)
+    return (BgcArgumentError if outside else BgcModelError)(exc, source)
+
+
 def load(path, text: str | None = None) -> Source:
     """Read a model file (UTF-8, size-limited); `text` gives the source directly."""
     path = str(path)
     if text is None:
         try:
-            data = Path(path).read_bytes()
+            data = read_bounded(path)
         except OSError as exc:
             raise FileNotFoundError(f"{path}: cannot read: {exc.strerror}") from None
         try:
@@ -112,22 +124,25 @@ def scene_override(outputs=None, effects=None, names=("outputs=", "effects=")) -
 def build(model, scene: str | None = None, project_initial: bool = False,
           algebra: str = "auto", program: bool = True,
           residual_outputs: bool = False, outputs=None, effects=None,
-          option_names=("outputs=", "effects=")) -> Compiled:
+          option_names=("outputs=", "effects=", "scene=")) -> Compiled:
     """Run the pipeline up to the program IR (program=False: up to the reduce stage, all that
     `check` and `equations` need; Compiled.program is then None).  residual_outputs: every
     constraint's residual `J.residual` is an output too (after the scene's), for reports on
     the drift.  outputs, effects: an ad-hoc scene, replacing the scene's (see
-    scene_override); option_names: how errors name them (the CLI's `--outputs`)."""
-    if algebra not in ALGEBRA:
-        raise ValueError(f"algebra must be one of {', '.join(ALGEBRA)}, not {algebra!r}")
+    scene_override); option_names: how errors name outputs, effects and scene (the CLI's
+    `--outputs`).  Raises BgcModelError, or BgcArgumentError for a scene, outputs or effects
+    that the model refuses; ValueError or TypeError for an argument wrong in itself."""
+    _choice("algebra", algebra, ALGEBRA)
+    if scene is not None and not isinstance(scene, str):
+        raise TypeError(f"scene must be a string or None, not {type(scene).__name__}")
     src = _source(model)
     clock = _Clock()
     try:
-        override = scene_override(outputs, effects, option_names)
+        override = scene_override(outputs, effects, option_names[:2])
         ast_ = clock("parse", parse, src.text, src.path)
         graph = clock("resolve", resolve, ast_)
         graph = clock("flatten", flatten, graph)
-        scenario = clock("scene", apply_scene, graph, scene, override)
+        scenario = clock("scene", apply_scene, graph, scene, override, option_names[2])
         causal = clock("causality", assign_causality, scenario)
         system = clock("equations", build_equations, causal)
         if residual_outputs:
@@ -135,8 +150,36 @@ def build(model, scene: str | None = None, project_initial: bool = False,
         reduced = clock("reduce", reduce, system, project_initial, algebra)
         ir_program = clock("lower", lower, reduced) if program else None
     except ModelError as exc:
-        raise BgcModelError(exc, src) from None
+        raise _model_error(exc, src) from None
     return Compiled(src, causal, system, reduced, ir_program, tuple(clock.times))
+
+
+def _choice(name: str, value, allowed):
+    """ValueError, naming the allowed values, for an argument that is not one of them."""
+    if not isinstance(value, str) or value not in allowed:
+        raise ValueError(f"{name} must be one of {', '.join(map(repr, allowed))}, "
+                         f"not {value!r}")
+
+
+def check_scenes(compiled: Compiled):
+    """Build every scene of compiled's model (to the reduce stage, with its algebra; the text
+    parsed once more, not once per scene), so that `bgc check` without a scene answers for all
+    of them: BgcModelError with the errors of each scene that fails, a note naming the scene
+    unless the error is in it.  compiled is a build of the model's text that succeeded."""
+    src = compiled.source
+    graph = flatten(resolve(parse(src.text, src.path)))
+    diagnostics = []
+    for sc in graph.scenes:
+        try:
+            causal = assign_causality(apply_scene(graph, sc.name))
+            reduce(build_equations(causal), False, compiled.reduced.algebra)
+        except ModelError as exc:
+            for d in exc.diagnostics:
+                inside = d.span is not None and sc.span.line <= d.span.line <= sc.span.end_line
+                diagnostics.append(d if inside else replace(
+                    d, notes=d.notes + (Note(sc.span, f"in scene '{sc.name}'"),)))
+    if diagnostics:
+        raise BgcModelError(ModelError(diagnostics), src)
 
 
 class _Clock:
@@ -167,11 +210,14 @@ def summary(compiled: Compiled) -> SceneSummary | None:
 
 def check(model, scene: str | None = None, algebra: str = "auto", outputs=None,
           effects=None) -> str:
-    """`bgc check`: with a scene (or outputs, effects) it also compares with the full model."""
-    compiled = build(model, scene, algebra=algebra, program=scene is not None
-                     or outputs is not None or effects is not None, outputs=outputs,
+    """`bgc check`: with a scene (or outputs, effects) it also compares with the full model;
+    without, it checks every scene of the model too (check_scenes)."""
+    adhoc = scene is not None or outputs is not None or effects is not None
+    compiled = build(model, scene, algebra=algebra, program=adhoc, outputs=outputs,
                      effects=effects)
-    return check_report(compiled, summary(compiled) if compiled.program is not None else None)
+    if not adhoc:
+        check_scenes(compiled)
+    return check_report(compiled, summary(compiled) if adhoc else None)
 
 
 def scenes(model) -> str:
@@ -184,10 +230,13 @@ def scenes(model) -> str:
     return scenes_report(graph, src.text)
 
 
+FORMATS = ("text", "latex")
+
+
 def equations(model, scene: str | None = None, format: str = "text",
               algebra: str = "auto", outputs=None, effects=None) -> str:
-    if format not in ("text", "latex"):
-        raise ValueError(f"format must be 'text' or 'latex', not {format!r}")
+    """`bgc equations`: the reduced equations as text or LaTeX."""
+    _choice("format", format, FORMATS)
     compiled = build(model, scene, algebra=algebra, program=False, outputs=outputs,
                      effects=effects)
     return equations_latex(compiled) if format == "latex" else equations_text(compiled)
@@ -200,8 +249,7 @@ def compile(model, target: str = "c", scene: str | None = None,
             project_initial: bool = False, algebra: str = "auto", outputs=None,
             effects=None) -> dict[str, str]:
     """Standalone source code: {filename: text}."""
-    if target not in TARGETS:
-        raise ValueError(f"target must be one of {', '.join(TARGETS)}, not {target!r}")
+    _choice("target", target, TARGETS)
     program = build(model, scene, project_initial, algebra, outputs=outputs,
                     effects=effects).program
     return emit_c(program) if target == "c" else emit_python(program)
@@ -233,13 +281,21 @@ def simulate(model, scene: str | None = None, backend: str = "c", algebra: str =
     """Simulate; returns (t, Y, names).  outputs, effects: an ad-hoc scene (see build).
     options: t_end, dt, solver, rtol, atol, step, params, project_initial, max_steps.
     backend "c" falls back to "python" when there is no C compiler."""
-    if backend not in BACKENDS:
-        raise ValueError(f"backend must be one of {', '.join(BACKENDS)}, not {backend!r}")
+    _choice("backend", backend, BACKENDS)
     unknown = sorted(set(options) - set(SIMULATE_OPTIONS))
     if unknown:
         raise TypeError(f"simulate() got unknown options: {', '.join(unknown)}")
+    check_run_options(options)
     compiled = build(model, scene, options.get("project_initial", False), algebra,
                      outputs=outputs, effects=effects)
+    names = [p.name for p in compiled.program.params]
+    for name in options.get("params") or {}:
+        if name not in names:
+            raise ValueError(f"unknown parameter {name!r} (parameters: "
+                             f"{', '.join(names) or 'none'})")
+    problem = run_span_problem(compiled.settings, options.get("t_end"), options.get("dt"))
+    if problem:
+        raise ValueError(problem)
     if backend == "c" and not backends.have_c_compiler():
         backend = "python"
     if backend == "python":
@@ -250,6 +306,47 @@ def simulate(model, scene: str | None = None, backend: str = "c", algebra: str =
     if code != 0:
         raise SimulationFailed(err.strip(), out)
     return _parse_csv(out)
+
+
+def check_run_options(options: dict):
+    """ValueError for a run setting that is wrong whatever the model: an unknown solver, a
+    tolerance, interval or step that is not a positive finite number, a non-finite end time
+    or parameter value.  What depends on the model (the end time against the start, the
+    parameters' names) is checked once it is built."""
+    if options.get("solver") is not None:
+        _choice("solver", options["solver"], solvers.NAMES)
+    for key in ("rtol", "atol", "dt", "step", "t_end"):
+        value = options.get(key)
+        if value is None:
+            continue
+        if isinstance(value, bool) or not isinstance(value, (int, float)) \
+                or not math.isfinite(value) or (key != "t_end" and not value > 0):
+            what = "a finite number" if key == "t_end" else "a positive finite number"
+            raise ValueError(f"{key} must be {what}, not {value!r}")
+    steps = options.get("max_steps")
+    if steps is not None and (isinstance(steps, bool) or not isinstance(steps, int)
+                              or not 0 <= steps <= 10**15):
+        raise ValueError(f"max_steps must be a whole number from 0 (no limit) to 1e15, "
+                         f"not {steps!r}")
+    params = options.get("params") or {}
+    if not isinstance(params, dict):
+        raise TypeError("params must be a dict of parameter names to numbers")
+    for name, value in params.items():
+        if isinstance(value, bool) or not isinstance(value, (int, float)) \
+                or not math.isfinite(value):
+            raise ValueError(f"parameter {name!r} must be a finite number, not {value!r}")
+
+
+def run_span_problem(settings: Settings, t_end=None, dt=None) -> str | None:
+    """What is wrong with a run to t_end every dt (None: the scene's) from the scene's start,
+    or None."""
+    t_end = settings.t_end if t_end is None else t_end
+    dt = settings.dt if dt is None else dt
+    if not t_end > settings.t0:
+        return f"the end time {t_end!r} is not after the start time {settings.t0!r}"
+    if not (t_end - settings.t0) / dt <= MAX_OUTPUT_ROWS:
+        return f"more than {MAX_OUTPUT_ROWS:.0e} output rows: the output interval is too small"
+    return None
 
 
 class SimulationFailed(RuntimeError):
@@ -287,8 +384,7 @@ def sweep(model, scene: str | None = None, grid=None, sample=None, vary=None, se
     processes for this sweep; else serially in this process.  options: as simulate's
     (params are the fixed ones)."""
     from . import sweeps as sw
-    if backend not in BACKENDS:
-        raise ValueError(f"backend must be one of {', '.join(BACKENDS)}, not {backend!r}")
+    _choice("backend", backend, BACKENDS)
     unknown = sorted(set(options) - set(SIMULATE_OPTIONS))
     if unknown:
         raise TypeError(f"sweep() got unknown options: {', '.join(unknown)}")

@@ -24,12 +24,13 @@ def _warn(compiled: api.Compiled):
 
 
 def _or_exit(call, *args):
-    """call(*args), or the model's located errors (or an unreadable file) on stderr, exit 1."""
+    """call(*args), or the model's located errors (or an unreadable file) on stderr, exit 1;
+    exit 2 when they are in an option's value instead (--scene, --outputs, --effects)."""
     try:
         return call(*args)
     except api.BgcModelError as exc:
         click.echo(str(exc), err=True)
-        sys.exit(1)
+        sys.exit(2 if isinstance(exc, api.BgcArgumentError) else 1)
     except FileNotFoundError as exc:
         click.echo(f"error: {exc}", err=True)
         sys.exit(1)
@@ -38,9 +39,35 @@ def _or_exit(call, *args):
 def _build(model, scene, project_initial=False, algebra="auto", program=True,
            residual_outputs=False, outputs=None, effects=None) -> api.Compiled:
     compiled = _or_exit(api.build, model, scene, project_initial, algebra, program,
-                        residual_outputs, outputs, effects, ("--outputs", "--effects"))
+                        residual_outputs, outputs, effects, ("--outputs", "--effects", "--scene"))
     _warn(compiled)
     return compiled
+
+
+class _Number(click.ParamType):
+    """A finite number, positive when asked; anything else is a usage error (exit 2)."""
+
+    def __init__(self, positive: bool):
+        self.positive = positive
+        self.name = "positive finite number" if positive else "finite number"
+
+    def convert(self, value, param, ctx):
+        try:
+            x = float(value)
+        except (TypeError, ValueError):
+            x = math.nan
+        if not math.isfinite(x) or (self.positive and not x > 0):
+            self.fail(f"{value!r} is not a {self.name}", param, ctx)
+        return x
+
+
+POSITIVE, FINITE = _Number(positive=True), _Number(positive=False)
+
+
+def _check_span(compiled, t_end, dt):
+    problem = api.run_span_problem(compiled.settings, t_end, dt)
+    if problem:
+        raise click.UsageError(problem)
 
 
 def _write_atomic(path: str, text: str):
@@ -76,10 +103,12 @@ def _parse_params(values, compiled) -> dict:
             out[name] = float(value)
         except ValueError:
             raise click.UsageError(f"-p {name}: '{value}' is not a number") from None
+        if not math.isfinite(out[name]):
+            raise click.UsageError(f"-p {name}: '{value}' is not a finite number")
     return out
 
 
-MODEL = click.argument("model", type=click.Path(dir_okay=False))
+MODEL = click.argument("model", type=click.Path(exists=True, dir_okay=False))
 SCENE = click.option("--scene", "-s", default=None, help="Scene to use (default: all effects, "
                                                          "every state as an output).")
 
@@ -131,6 +160,8 @@ def check(model, scene, outputs, effects, algebra):
     adhoc = scene is not None or outputs is not None or effects is not None
     compiled = _build(model, scene, algebra=algebra, program=adhoc, outputs=outputs,
                       effects=effects)
+    if not adhoc:
+        _or_exit(api.check_scenes, compiled)
     summary = api.summary(compiled) if adhoc else None
     if adhoc and summary is None:
         click.echo("note: the full model (all effects) does not compile, so this scene is not "
@@ -187,11 +218,11 @@ def compile(model, scene, outputs, effects, algebra, target, output, project_ini
 @click.option("--backend", type=click.Choice(["c", "python"]), default="c")
 @click.option("--solver", type=click.Choice(solvers.NAMES), default=None,
               help="The solver (default: the scene's); see docs/solvers.md.")
-@click.option("--rtol", type=float, default=None)
-@click.option("--atol", type=float, default=None)
-@click.option("--t-end", type=float, default=None)
-@click.option("--dt", type=float, default=None, help="Output interval.")
-@click.option("--step", type=float, default=None,
+@click.option("--rtol", type=POSITIVE, default=None)
+@click.option("--atol", type=POSITIVE, default=None)
+@click.option("--t-end", type=FINITE, default=None)
+@click.option("--dt", type=POSITIVE, default=None, help="Output interval.")
+@click.option("--step", type=POSITIVE, default=None,
               help="Step of the fixed-step solvers (default: dt); for an adaptive solver, "
                    "fixed steps of this size without error control.")
 @click.option("--max-steps", type=click.IntRange(0, 10**15), default=None,
@@ -211,9 +242,7 @@ def simulate(model, scene, outputs, effects, algebra, backend, solver, rtol, ato
              step, max_steps, params, project_initial, stats, output):
     """Simulate and write CSV."""
     compiled = _build(model, scene, project_initial, algebra, outputs=outputs, effects=effects)
-    for name, value in (("--rtol", rtol), ("--atol", atol), ("--dt", dt), ("--step", step)):
-        if value is not None and not value > 0:
-            raise click.UsageError(f"{name} must be positive")
+    _check_span(compiled, t_end, dt)
     overrides = _parse_params(params, compiled)
     args = api.run_args(t_end, dt, solver, rtol, atol, step, overrides,
                         project_initial, max_steps) + (["--stats"] if stats else [])
@@ -337,10 +366,10 @@ class _Progress:
               help="Sweep the corrector gains instead: every gain parameter set to each value.")
 @click.option("--repeats", type=click.IntRange(1, 100), default=3, show_default=True,
               help="Timing runs per point (the best is kept).")
-@click.option("--timeout", type=float, default=60.0, show_default=True,
+@click.option("--timeout", type=POSITIVE, default=60.0, show_default=True,
               help="Seconds a run may take; a solver that exceeds it skips its harder points.")
-@click.option("--t-end", type=float, default=None)
-@click.option("--dt", type=float, default=None, help="Output interval.")
+@click.option("--t-end", type=FINITE, default=None)
+@click.option("--dt", type=POSITIVE, default=None, help="Output interval.")
 @click.option("-p", "params", multiple=True, metavar="NAME=VALUE", help="Parameter override.")
 @click.option("--no-plot", is_flag=True, help="Do not write the PNG.")
 @click.option("-o", "output", default=None, metavar="DIR",
@@ -349,9 +378,6 @@ class _Progress:
 def accuracy(model, scene, outputs, effects, algebra, backend, solver_list, rtols, steps,
              reference, gains, repeats, timeout, t_end, dt, params, no_plot, output):
     """Measure each solver's error and cost on the model: table, CSV and work-precision plot."""
-    compiled = _build(model, scene, algebra=algebra, program=True, residual_outputs=True,
-                      outputs=outputs, effects=effects)
-    overrides = _parse_params(params, compiled)
     names = [n.strip() for n in solver_list.split(",")] if solver_list else None
     for n in names or []:
         if n not in solvers.SOLVERS:
@@ -362,6 +388,10 @@ def accuracy(model, scene, outputs, effects, algebra, backend, solver_list, rtol
     for option, vals in (("--rtols", rtol_values), ("--steps", step_values)):
         if vals and not all(v > 0 for v in vals):
             raise click.UsageError(f"{option} must be positive")
+    compiled = _build(model, scene, algebra=algebra, program=True, residual_outputs=True,
+                      outputs=outputs, effects=effects)
+    _check_span(compiled, t_end, dt)
+    overrides = _parse_params(params, compiled)
     if backend == "c" and not backends.have_c_compiler():
         click.echo("warning: no C compiler found (cc or $CC); using the Python backend", err=True)
         backend = "python"
@@ -437,11 +467,11 @@ def accuracy(model, scene, outputs, effects, algebra, backend, solver_list, rtol
                    "an output.  steps, rejected, rhs and cpu are always there.")
 @click.option("--backend", type=click.Choice(["c", "python"]), default="c")
 @click.option("--solver", type=click.Choice(solvers.NAMES), default=None)
-@click.option("--rtol", type=float, default=None)
-@click.option("--atol", type=float, default=None)
-@click.option("--t-end", type=float, default=None)
-@click.option("--dt", type=float, default=None, help="Output interval.")
-@click.option("--step", type=float, default=None, help="Step of the fixed-step solvers.")
+@click.option("--rtol", type=POSITIVE, default=None)
+@click.option("--atol", type=POSITIVE, default=None)
+@click.option("--t-end", type=FINITE, default=None)
+@click.option("--dt", type=POSITIVE, default=None, help="Output interval.")
+@click.option("--step", type=POSITIVE, default=None, help="Step of the fixed-step solvers.")
 @click.option("-p", "params", multiple=True, metavar="NAME=VALUE",
               help="A fixed parameter for every run.")
 @click.option("--project-initial", is_flag=True)

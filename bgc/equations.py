@@ -21,6 +21,7 @@ from .algebra import solve_for
 from .causality import CausalGraph
 from .diagnostics import Collector, ModelError, Span, did_you_mean, fail
 from .graph import TIME, Element, Graph, part_name, var, variable_name
+from .scene import parameter_values
 
 
 def der(symbol: sp.Symbol) -> sp.Symbol:
@@ -124,6 +125,8 @@ class _Builder:
     def __init__(self, cg: CausalGraph):
         self.g: Graph = cg.graph
         self.effort_by = cg.effort_by
+        self.sets = cg.settings.sets
+        self._defaults = None
         self.equations: list[Equation] = []
         self.states: list[StateVar] = []
         self.stores: list[Store] = []
@@ -323,20 +326,34 @@ class _Builder:
         ea, fa, eb, fb = bond_effort(a.label), bond_flow(a.label), bond_effort(b.label), \
             bond_flow(b.label)
         n = el.value.value
+        divides = self.effort_by[ia] != el.name
+        if divides:
+            self._check_divisor(el)
         if el.spec.role == "transformer":
-            if self.effort_by[ia] == el.name:  # e_in = n e_out, f_out = n f_in
+            if not divides:  # e_in = n e_out, f_out = n f_in
                 self.emit(ea, n * eb, el, el.span)
                 self.emit(fb, n * fa, el, el.span)
             else:
                 self.emit(eb, ea / n, el, el.span)
                 self.emit(fa, fb / n, el, el.span)
         else:
-            if self.effort_by[ia] == el.name:  # e_in = r f_out, e_out = r f_in
+            if not divides:  # e_in = r f_out, e_out = r f_in
                 self.emit(ea, n * fb, el, el.span)
                 self.emit(eb, n * fa, el, el.span)
             else:
                 self.emit(fb, ea / n, el, el.span)
                 self.emit(fa, eb / n, el, el.span)
+
+    def _check_divisor(self, el: Element):
+        """A two-port whose causality divides by its modulus: a modulus that is 0 at the
+        given parameters is a model error (a modulated one that passes 0 stops the run)."""
+        if self._defaults is None:
+            self._defaults = parameter_values(self.g, self.sets)
+        n = el.value.value.xreplace(self._defaults)
+        if n.is_number and n.is_zero:
+            fail(el.value.span, f"{el.kind}({el.value.value}) of '{el.origin or el.name}' is "
+                                "singular: its causality divides by its value, 0 at the given "
+                                "parameters")
 
     # ------------------------------------------------------------ junctions
     def junction(self, el: Element):

@@ -30,10 +30,12 @@ from dataclasses import replace
 
 import sympy as sp
 
+from .algebra import is_zero
 from .diagnostics import Collector, ModelError, fail
 from .graph import (Bond, Constraint, Element, Expr, Graph, Multibond, Signal, Vector,
                     part_name)
 from .kinds import KINDS
+from .resources import MAX_SCALAR_PARTS
 
 TWO_PORT_JUNCTIONS = {"transformer": ("1", "0"), "gyrator": ("1", "1")}
 
@@ -99,7 +101,8 @@ def _coupled_field(el: Element, n: int) -> list[Element]:
     what = {"I": "mass matrix", "C": "capacitance matrix", "R": "resistance matrix"}[el.kind]
     for i in range(n):
         for j in range(i):
-            if el.kind != "R" and sp.expand(v[i, j] - v[j, i]) != 0:
+            d = v[i, j] - v[j, i]
+            if el.kind != "R" and d != 0 and not is_zero(d):
                 fail(el.value.span, f"the {what} of '{el.name}' is not symmetric: entries "
                                     f"[{i}][{j}] and [{j}][{i}] differ")
     inits = None
@@ -116,17 +119,18 @@ def _coupled_field(el: Element, n: int) -> list[Element]:
 
 def _junction(el: Element, n: int) -> list[Element]:
     c = el.constraint
+    if c is not None:
+        gains = [_rows(g, n, f"a gain of '{el.name}'", False) for g in c.gains]
+        if c.annotation is not None:
+            which, e = c.annotation
+            values = _rows(e, n, f"the '{which}' of '{el.name}'", False)
     parts = []
     for i in range(n):
         ci = None
         if c is not None:
-            gains = tuple(_part(g, _rows(g, n, f"a gain of '{el.name}'", False)[i])
-                          for g in c.gains)
-            ann = None
-            if c.annotation is not None:
-                which, e = c.annotation
-                ann = (which, _part(e, _rows(e, n, f"the '{which}' of '{el.name}'", False)[i]))
-            ci = replace(c, gains=gains, annotation=ann)
+            ann = None if c.annotation is None else (which, _part(e, values[i]))
+            ci = replace(c, gains=tuple(_part(g, rows[i]) for g, rows in zip(c.gains, gains)),
+                         annotation=ann)
         parts.append(replace(el, name=part_name(el.name, i), constraint=ci, dim=None,
                              origin=el.name))
     return parts
@@ -137,28 +141,49 @@ def _two_port(el: Element, n: int, m: int) -> tuple[list[Element], list[Bond]]:
     v = el.value.value
     if not _is_matrix(v):
         if n != m:
-            fail(el.value.span, f"'{el.name}' maps {n} to {m}: its modulus is an {m}x{n} "
+            fail(el.value.span, f"'{el.name}' maps {n} to {m}: its modulus is a {m}x{n} "
                                 "matrix, not a scalar")
-        v = sp.eye(n) * v
-    if v.shape != (m, n):
-        fail(el.value.span, f"'{el.name}' ({el.kind}[{n}->{m}]) takes an {m}x{n} matrix; this "
+        entries = [(i, i, v) for i in range(n)] if v != 0 else []
+    elif v.shape != (m, n):
+        fail(el.value.span, f"'{el.name}' ({el.kind}[{n}->{m}]) takes a {m}x{n} matrix; this "
                             f"one is {v.rows}x{v.cols}")
+    else:  # a matrix written out (or made by diag()): its entries are bounded by the text
+        entries = [(i, j, v[i, j]) for i in range(m) for j in range(n) if v[i, j] != 0]
     left, right = TWO_PORT_JUNCTIONS[el.spec.role]
     scalar_kind = "MTF" if el.spec.role == "transformer" else "MGY"
     common = dict(value=None, law=None, init=None, constraint=None, dim=None, origin=el.name)
     ins = [replace(el, name=f"{el.name}.in[{j}]", kind=left, **common) for j in range(n)]
     outs = [replace(el, name=f"{el.name}.out[{i}]", kind=right, **common) for i in range(m)]
     parts, bonds = ins + outs, []
-    for i in range(m):
-        for j in range(n):
-            if v[i, j] == 0:
-                continue
-            name = f"{el.name}[{i},{j}]"
-            parts.append(replace(el, name=name, kind=scalar_kind, law=None, init=None,
-                                 value=_part(el.value, v[i, j]), dim=None, origin=el.name))
-            bonds.append(Bond(ins[j].name, name, f"{ins[j].name}->{name}", el.span))
-            bonds.append(Bond(name, outs[i].name, f"{name}->{outs[i].name}", el.span))
+    for i, j, value in entries:
+        name = f"{el.name}[{i},{j}]"
+        parts.append(replace(el, name=name, kind=scalar_kind, law=None, init=None,
+                             value=_part(el.value, value), dim=None, origin=el.name))
+        bonds.append(Bond(ins[j].name, name, f"{ins[j].name}->{name}", el.span))
+        bonds.append(Bond(name, outs[i].name, f"{name}->{outs[i].name}", el.span))
     return parts, bonds
+
+
+def _check_size(g: Graph):
+    """Refuse, before making them, more scalar parts than MAX_SCALAR_PARTS in all (a two-port
+    counts its junctions and its entries, a bond its components)."""
+    total = 0
+    for item in list(g.elements) + list(g.signals) + list(g.bonds):
+        dim = getattr(item, "dim", None)
+        if isinstance(item, Bond):
+            total += _port(g.by_name[item.src], True)[0]
+        elif isinstance(item, Element) and dim is not None and not item.is_junction \
+                and item.spec.ports == 2:
+            n, m = dim
+            v = item.value.value
+            total += n + m + (len(v) if _is_matrix(v) else n)
+        elif dim is not None:
+            total += dim[0] if isinstance(dim, tuple) else dim
+        else:
+            total += 1
+        if total > MAX_SCALAR_PARTS:
+            fail(item.span, f"the model is too large: more than {MAX_SCALAR_PARTS} scalar "
+                            "elements, signals and bonds once its multiports are split")
 
 
 def _port(el: Element, as_source: bool) -> tuple[int, bool]:
@@ -197,6 +222,7 @@ def flatten(g: Graph) -> Graph:
                 diags.items.extend(exc.diagnostics)
         diags.raise_if_errors()
         return g
+    _check_size(g)
     elements: list[Element] = []
     bonds: list[Bond] = []
     vectors: list[Vector] = []

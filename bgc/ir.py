@@ -9,9 +9,10 @@ A Program is a few functions, each a list of statements over these symbols:
   v[i]         IndexedBase("v")[i]    component i of the direction of `jvp`
   w0, w1, ...  Symbol("w<k>")         program variables, each assigned once
 and the functions sin cos tan asin acos atan atan2 sinh cosh tanh asinh atanh exp log sqrt
-Abs sign Min Max Heaviside, Pow, Rational, Float, Integer, pi, E.  Model names never occur in
-expressions, so nothing a model author writes reaches generated code except through the name
-strings (states, outputs, params, block unknowns), which the emitters escape as literals.
+Abs sign Min Max (bgc.algebra's) Heaviside, Pow, Rational, Float, Integer, pi, E.  Model names
+never occur in expressions, so nothing a model author writes reaches generated code except
+through the name strings (states, outputs, params, block unknowns), which the emitters escape
+as literals.
 
 Statements (the kinds both emitters render):
   Assign(w, expr)            w = expr
@@ -30,6 +31,7 @@ from dataclasses import dataclass, field
 
 import sympy as sp
 
+from .algebra import Max, Min
 from .sparse import LUPlan
 
 T = sp.Symbol("t")
@@ -39,6 +41,10 @@ C = sp.IndexedBase("c")
 V = sp.IndexedBase("v")
 FUNCTIONS = ("sin", "cos", "tan", "asin", "acos", "atan", "atan2", "sinh", "cosh", "tanh",
              "asinh", "atanh", "exp", "log", "sqrt", "Abs", "sign", "Min", "Max", "Heaviside")
+
+
+CLASSES = {name: {"Min": Min, "Max": Max}.get(name) or getattr(sp, name)
+           for name in FUNCTIONS if name != "sqrt"}  # sqrt is a Pow
 
 
 def W(k: int) -> sp.Symbol:

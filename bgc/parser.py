@@ -3,17 +3,20 @@ from __future__ import annotations
 
 from functools import lru_cache
 
-from lark import Lark, Token, Transformer_NonRecursive, Tree, v_args
-from lark.exceptions import UnexpectedCharacters, UnexpectedEOF, UnexpectedInput, UnexpectedToken
-
 from dataclasses import replace
+
+from lark import Lark, Token, Transformer_NonRecursive, Tree, v_args
+from lark.exceptions import (UnexpectedCharacters, UnexpectedEOF, UnexpectedInput,
+                             UnexpectedToken, VisitError)
 
 from . import ast
 from .diagnostics import ModelError, Note, Origin, Span, fail
-from .resources import resource_dir
+from .resources import (MAX_DIMENSION, MAX_NESTING, MAX_OPTION_CHARS, MAX_SOURCE_BYTES,
+                        resource_dir)
 
-MAX_SOURCE_BYTES = 1 << 20  # 1 MiB: larger input is refused, not attempted
-MAX_NESTING = 100  # levels of nested brackets / operators of different kinds
+# Reserved: none of these can name anything (docs/semantics.md, "Names").
+KEYWORDS = frozenset("""model parameter signal integral init constraint holonomic nonholonomic
+    corrector pid pd none phi scene effects outputs time every solver set""".split())
 
 # Friendly names for terminals in "expected ..." messages.
 _TERMINAL_NAMES = {
@@ -27,13 +30,16 @@ _TERMINAL_NAMES = {
 
 
 class _BracketPostLex:
-    """Drop newlines inside ( ) and [ ]: they do not end a statement there."""
+    """Drop newlines inside ( ) and [ ]: they do not end a statement there.  Refuse a keyword
+    where a name stands (the contextual lexer reads it as a NAME where no keyword fits)."""
 
     always_accept = ("_NL",)
 
     def process(self, stream):
         depth = 0
         for tok in stream:
+            if tok.type == "NAME" and tok in KEYWORDS:
+                _keyword_as_name(tok)
             if tok.type in ("LPAR", "LSQB"):
                 depth += 1
             elif tok.type in ("RPAR", "RSQB"):
@@ -49,6 +55,19 @@ def _lark() -> Lark:
     return Lark(text, parser="lalr", lexer="contextual", postlex=_BracketPostLex(),
                 propagate_positions=True, maybe_placeholders=True,
                 start=["start", "option_outputs", "option_effects"])
+
+
+def _whole(tok: Token, what: str) -> int:
+    """An INT token's value, refused above MAX_DIMENSION (before int() reads its digits)."""
+    digits = str(tok).lstrip("0")
+    if len(digits) > len(str(MAX_DIMENSION)) or int(digits or 0) > MAX_DIMENSION:
+        shown = digits if len(digits) <= 20 else digits[:20] + "..."
+        fail(_tspan(tok), f"{what} {shown} is too large (the limit is {MAX_DIMENSION})")
+    return int(digits or 0)
+
+
+def _keyword_as_name(tok: Token):
+    fail(_tspan(tok), f"'{tok}' is a keyword: it cannot be a name")
 
 
 def _span(meta) -> Span:
@@ -97,7 +116,8 @@ class _ToAst(Transformer_NonRecursive):
                                _doc(rest[-1]), _span(meta))
 
     def dim(self, meta, c):
-        return ast.Dim(int(c[0]), int(c[1]) if c[1] is not None else None, _span(meta))
+        return ast.Dim(_whole(c[0], "dimension"), _whole(c[1], "dimension") if c[1] is not None
+                       else None, _span(meta))
 
     def args(self, meta, c):
         return tuple(c)
@@ -159,7 +179,7 @@ class _ToAst(Transformer_NonRecursive):
         return tuple(c)
 
     def outref(self, meta, c):
-        index = int(c[2]) if c[2] is not None else None
+        index = _whole(c[2], "index") if c[2] is not None else None
         return ast.OutRef(str(c[0]), str(c[1]) if c[1] is not None else None, index, _span(meta))
 
     def scene_time(self, meta, c):
@@ -274,6 +294,11 @@ def _syntax_error(exc: UnexpectedInput, source: str):
     line, col = max(exc.line, 1), max(exc.column, 1)
     if isinstance(exc, UnexpectedToken):
         tok = exc.token
+        before = (exc.token_history or [None])[-1]
+        if before is not None and str(before) in KEYWORDS and str(tok) in (":", "->"):
+            _keyword_as_name(before)  # `scene : 1`, `model -> j`: a keyword declared or bonded
+        if tok.type != "NAME" and str(tok) in KEYWORDS and "NAME" in (exc.expected or ()):
+            _keyword_as_name(tok)  # `set : 0`: a keyword where only a name fits
         if tok.type == "$END":
             lines = source.splitlines() or [""]
             line, col = len(lines), len(lines[-1]) + 1
@@ -288,13 +313,13 @@ def _syntax_error(exc: UnexpectedInput, source: str):
         width = 1
     opened = _unclosed_bracket(source, line, col)
     notes = [Note(opened, "this bracket is not closed (a newline inside brackets does not end "
-                          "a statement)")] if opened else []
+                          "a statement)")] if opened and opened.line < line else []
     fail(Span(line, col, line, col + width), msg, *notes)
 
 
 def decode(data: bytes) -> str:
     if len(data) > MAX_SOURCE_BYTES:
-        fail(None, f"model file too large ({len(data)} bytes; the limit is {MAX_SOURCE_BYTES})")
+        fail(None, f"model file too large (more than {MAX_SOURCE_BYTES} bytes)")
     try:
         return data.decode("utf-8")
     except UnicodeDecodeError as exc:
@@ -306,7 +331,7 @@ def decode(data: bytes) -> str:
 def parse(source: str, path: str = "<model>") -> ast.Model:
     """Parse `source` into an ast.Model; raises ModelError with a located diagnostic."""
     if len(source.encode("utf-8")) > MAX_SOURCE_BYTES:
-        fail(None, f"model file too large (the limit is {MAX_SOURCE_BYTES} bytes)")
+        fail(None, f"model file too large (more than {MAX_SOURCE_BYTES} bytes)")
     text = source if source.endswith("\n") else source + "\n"
     try:
         tree = _lark().parse(text, start="start")
@@ -315,10 +340,17 @@ def parse(source: str, path: str = "<model>") -> ast.Model:
     except UnexpectedInput as exc:  # any other lark input error
         _syntax_error(exc, source)
     _check_nesting(tree)
-    return ast.Model(_ToAst().transform(tree), path)
+    return ast.Model(_transform(tree), path)
 
 
-MAX_OPTION_CHARS = 1 << 16
+def _transform(tree):
+    """The AST of a parse tree; the model errors that building it finds, as they are."""
+    try:
+        return _ToAst().transform(tree)
+    except VisitError as exc:
+        if isinstance(exc.orig_exc, ModelError):
+            raise exc.orig_exc from None
+        raise
 
 
 def _located_at(value, origin: Origin):
@@ -356,7 +388,11 @@ def parse_option(kind: str, text: str, name: str):
                                   notes=tuple(replace(n, span=n.span and replace(
                                       n.span, origin=origin)) for n in d.notes))
                           for d in exc.diagnostics]) from None
-    value = _ToAst().transform(tree)
+    try:
+        value = _transform(tree)
+    except ModelError as exc:
+        raise ModelError([replace(d, span=replace(d.span, origin=origin))
+                          for d in exc.diagnostics]) from None
     if kind == "outputs":
         return tuple(_located_at(r, origin) for r in value)
     return _located_at(value, origin)

@@ -27,8 +27,8 @@ import sympy as sp
 from sympy.printing.c import C99CodePrinter
 from sympy.printing.pycode import PythonCodePrinter
 
-from bgc.ir import C, FUNCTIONS, P, T, V, X, as_expr
-_CLASSES = tuple(getattr(sp, name) for name in FUNCTIONS if name != "sqrt")  # sqrt is a Pow
+from bgc.ir import C, CLASSES, FUNCTIONS, P, T, V, X, as_expr
+_CLASSES = tuple(CLASSES.values())
 _ARITY = {"atan2": (2, 2), "Min": (2, None), "Max": (2, None), "Heaviside": (1, 2)}
 _TEMP = re.compile(r"w[0-9]+\Z")
 MAX_EXPANDED_POWER = 4  # x**n for 2 <= n <= 4 prints as x*x*...

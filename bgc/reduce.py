@@ -29,12 +29,15 @@ from dataclasses import dataclass, field
 import sympy as sp
 
 from . import blt
-from .algebra import is_singular, is_symmetric, is_zero, solve_for
+from .algebra import (antiderivative, expand_bounded, is_singular, is_symmetric, is_zero,
+                      solve_for)
 from .diagnostics import Collector, ModelError, Span, fail, warning
 from .differentiate import directional, partial
 from .equations import (TIME, ConstraintDef, Equation, EquationSystem, OutputDef, ParameterDef,
                         Run, StateVar, der)
 from .graph import var
+from .resources import (MAX_EXPANDED_TERMS, MAX_EXPRESSION_DEPTH, MAX_EXPRESSION_NODES,
+                        SYMBOLIC_MAX_BLOCK, fits)
 
 RELATIVE_TOLERANCE = 1e-9
 ALGEBRA = ("auto", "symbolic", "numeric")
@@ -44,6 +47,9 @@ SUBSTITUTE_MAX_BODY = 40  # a nonlinear block of one unknown: body small enough 
 SINGULAR_CHECK_MAX = 40  # linear blocks up to this size: determinant tested at compile time
 SYMMETRY_CHECK_MAX = 200  # ... and up to this size: symmetry (LDL^T-like elimination) tested
 MAX_DERIVATIVE_ORDER = 3
+SOLVED_WITH_BLOCK = "(solved with its block)"
+TOO_LARGE = "(too large to write out)"
+NOT_FINITE = (sp.zoo, sp.nan, sp.oo, -sp.oo)
 
 
 # ---------------------------------------------------------------- the result
@@ -124,7 +130,8 @@ class Reduced:
     constraints: tuple[ConstraintInfo, ...]
     rows: tuple[ConstraintRow, ...]
     blocks: tuple[BlockInfo, ...]
-    eliminated: tuple[tuple[str, sp.Expr | None], ...]  # derivative causality: state = expr
+    eliminated: tuple[tuple[str, sp.Expr | str], ...]  # derivative causality: state = expr,
+    # or why it is not written out (SOLVED_WITH_BLOCK, TOO_LARGE)
     run: Run
     algebra: str
     warnings: tuple = ()
@@ -312,7 +319,10 @@ class _Coordinates:
         coeffs = {q: coeffs[q] for q in self.coords if q in coeffs}
         if any(co.free_symbols & rates.keys() for co in coeffs.values()):
             return None, "it is not linear in the coordinate rates"
-        a0 = sp.expand(balance.xreplace({r: 0 for r in rates}))
+        a0 = expand_bounded(balance.xreplace({r: 0 for r in rates}))
+        if a0 is None:
+            fail(c.name_span, f"the flow balance of constraint junction '{c.junction}' is too "
+                              f"large to expand (more than {MAX_EXPANDED_TERMS} terms)")
         return (coeffs, a0, self.coords), None
 
 
@@ -353,8 +363,8 @@ def _potential(coeffs, a0, span, name):
         rest = a - partial(P, z)
         if rest == 0 or is_zero(rest):
             continue
-        term = sp.integrate(sp.expand(rest), z, conds="none")  # no Piecewise on parameters
-        if term.has(sp.Integral):
+        term = antiderivative(rest, z)
+        if term is None:
             fail(span, f"cannot integrate the balance of '{name}' symbolically: give "
                        "'phi = ...' on the junction")
         P += term
@@ -413,6 +423,13 @@ def _constraint(c, sys, defs, coordinates, multipliers, memo, diags) -> Constrai
     except _Cycle:
         fail(c.name_span, f"the balance of constraint junction '{c.junction}' depends on an "
                           "algebraic loop; not supported")
+    if not fits(in_states):
+        fail(c.name_span, f"the flow balance of constraint junction '{c.junction}', written in "
+                          "the states, is too large for symbolic work (bgc's limits: "
+                          f"{MAX_EXPRESSION_NODES} operations, {MAX_EXPRESSION_DEPTH} levels)")
+    if in_states.has(*NOT_FINITE):
+        fail(c.name_span, f"the flow balance of constraint junction '{c.junction}' is not "
+                          "finite (a division by zero?)")
     if in_states.free_symbols & multipliers:
         fail(c.span, f"the flow balance of constraint junction '{c.junction}' depends on a "
                      "multiplier directly (a resistive path?): declare it as a plain junction")
@@ -635,17 +652,33 @@ class _Blocks:
         return A, defs, memo
 
     def _symbolic_linear(self, z, body, prelude, matrix, rhs, origins, span) -> str:
-        A, defs, memo = self._matrix_in_outer(z, prelude, matrix, origins, span)
+        """Solve the block in closed form, or say "lu" (auto) when it is too large to; the
+        size is checked before each step of symbolic work (bgc.resources)."""
         m = len(z)
+        if m > SYMBOLIC_MAX_BLOCK:
+            return self._too_large(z, origins, span, f"more than {SYMBOLIC_MAX_BLOCK} unknowns")
+        A, defs, memo = self._matrix_in_outer(z, prelude, matrix, origins, span)
         b = sp.Matrix([_leaf(e, defs, lambda s: s in defs, memo) for e in rhs])
-        if self.algebra == "auto" and sum(sp.count_ops(e) for e in list(A) + list(b)) \
-                > SYMBOLIC_MAX_OPS:
-            return "lu"
+        entries = list(A) + list(b)
+        if not all(map(fits, entries)) or (self.algebra == "auto" and sum(
+                sp.count_ops(e) for e in entries) > SYMBOLIC_MAX_OPS):
+            return self._too_large(z, origins, span, "its coefficients are too large")
         sol = [b[0] / A[0, 0]] if m == 1 else list(A.LUsolve(b))
+        if not all(map(fits, sol)):
+            return self._too_large(z, origins, span, "its solution is too large")
         for s, value in zip(z, sol):
             self.steps.append(Assign(s, _tidy(value)))
         self.steps.extend(body)
         return "symbolic"
+
+    def _too_large(self, z, origins, span, why) -> str:
+        """"lu" in auto; with --algebra symbolic, a located error."""
+        if self.algebra == "symbolic":
+            names = ", ".join(f"'{o}'" for o in origins)
+            fail(span, f"the linear equations through {names} are too large to solve "
+                       f"symbolically ({len(z)} unknowns; {why}); let bgc solve them "
+                       "numerically (--algebra auto or numeric)")
+        return "lu"
 
     # -- nonlinear blocks
 
@@ -653,7 +686,7 @@ class _Blocks:
         if len(z) == 1 and len(body) <= SUBSTITUTE_MAX_BODY:
             defs = {a.target: a.expr for a in body}
             r = _leaf(residuals[0], defs, lambda s: s in defs)
-            sol = solve_for(r, z[0])
+            sol = solve_for(r, z[0])  # None too when r is beyond bgc.resources' limits
             if sol is not None:
                 self.steps.append(Assign(z[0], sol))
                 self.steps.extend(body)
@@ -745,7 +778,8 @@ def _linear_parts(expr, zdep):
 
 
 def _tidy(expr):
-    return sp.factor_terms(sp.cancel(expr)) if sp.count_ops(expr) < 300 else expr
+    return sp.factor_terms(sp.cancel(expr)) if fits(expr, 600) and sp.count_ops(expr) < 300 \
+        else expr
 
 
 # ---------------------------------------------------------------- main
@@ -761,6 +795,7 @@ def reduce(es: EquationSystem, project_initial: bool = False, algebra: str = "au
     targets, kept = _needed(sys)
     blocks = _Blocks(sys, algebra)
     blocks.run(targets)
+    _check_constants(blocks.steps, sys)
     rows = _rows(sys, infos, kept)
     kept_symbols = {st.symbol for st in kept}
     pruned = tuple(st.name for st in es.states if st.symbol not in kept_symbols)
@@ -774,6 +809,38 @@ def reduce(es: EquationSystem, project_initial: bool = False, algebra: str = "au
     return _with_init_warnings(reduced, sys, eliminated)
 
 
+def _check_constants(steps, sys: _System):
+    """The variables that are numbers put into what reads them, forward, as the lowering stage
+    does: an expression that then is not finite (1/s where s = 0 is an equation of the model)
+    is a located error, not an infinity in the generated code."""
+    known: dict = {}
+
+    def put(expr, eq: Equation):
+        used = expr.free_symbols & known.keys()
+        if not used:
+            return expr
+        value = expr.xreplace({u: known[u] for u in used})
+        if value.has(*NOT_FINITE):
+            names = ", ".join(f"{u.name} = {known[u]}" for u in sorted(used, key=lambda u: u.name))
+            fail(eq.span, f"'{eq.origin}' is not finite where {names} (a division by zero?)")
+        return value
+
+    for step in steps:
+        if isinstance(step, Assign):
+            assigns, uses, eq = [step], [], sys.eqs[step.target]
+        else:
+            assigns = list(step.prelude) + list(step.body) + list(step.tangents)
+            uses = list(step.residuals) + list(step.rhs) + [e for _, _, e in step.matrix] + \
+                [e for _, _, e in step.jacobian]
+            eq = sys.eqs[step.unknowns[0]]
+        for a in assigns:
+            value = put(a.expr, sys.eqs.get(a.target, eq))
+            if value.is_Number:
+                known[a.target] = value
+        for e in uses:
+            put(e, eq)
+
+
 def _eliminated(sys: _System):
     defs = _explicit_defs(sys)
 
@@ -782,11 +849,15 @@ def _eliminated(sys: _System):
 
     out = []
     for st in sys.es.stores:
+        if st.state not in defs:
+            out.append((st.state.name, SOLVED_WITH_BLOCK))
+            continue
         try:
-            out.append((st.state.name, _leaf(st.state, defs, expandable)
-                        if st.state in defs else None))
+            expr = _leaf(st.state, defs, expandable)
         except _Cycle:
-            out.append((st.state.name, None))
+            out.append((st.state.name, SOLVED_WITH_BLOCK))
+            continue
+        out.append((st.state.name, expr if fits(expr) else TOO_LARGE))
     return tuple(out)
 
 
@@ -863,7 +934,7 @@ def _with_init_warnings(reduced: Reduced, sys: _System, eliminated) -> Reduced:
     out = []
     for s in stores:
         expr = implied_of.get(s.state.name)
-        if expr is None:
+        if not isinstance(expr, sp.Basic):
             continue
         implied = float(expr.xreplace(values))
         given = float(s.given_init.xreplace(values))
@@ -919,7 +990,7 @@ def _explicit(root, defs, memo, max_ops):
             stack.extend((u, False) for u in inner)
             continue
         value = expr.xreplace({u: memo[u] for u in expr.free_symbols if u in defs})
-        if sp.count_ops(value) > max_ops:
+        if not fits(value) or sp.count_ops(value) > max_ops:
             raise _Cycle(s)
         memo[s] = value
     return memo[root]

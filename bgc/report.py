@@ -173,7 +173,7 @@ def check_report(compiled, summary: SceneSummary | None = None) -> str:
             lines.append(f"  {name}: {how}")
     if r.eliminated:
         lines.append("derivative causality (dependent states, eliminated):")
-        lines += [f"  {name} = {_s(e) if e is not None else '(solved with its block)'}"
+        lines += [f"  {name} = {_s(e) if isinstance(e, sp.Basic) else e}"
                   for name, e in r.eliminated]
     if r.blocks:
         lines.append("algebraic blocks:")

@@ -10,27 +10,32 @@ product, so that a sum of n terms costs n, not n^2.
 from __future__ import annotations
 
 import math
+import sys
 
 import sympy as sp
 
 from . import ast
+from .algebra import Max, Min
 from .diagnostics import Collector, ModelError, Note, Span, fail
 from .graph import (TIME, check_effect_names, model_effects, Bond, Constraint, Element, Expr, Graph, Parameter, Scene, Signal,
                     check_ports, part_name, var, variable_name)
 from .kinds import KINDS
+from .resources import (MAX_EXTREMUM_ARGUMENTS, MAX_LITERAL_DIGITS, MAX_MATRIX_ENTRIES,
+                        MAX_SCENES)
 
 FUNCTIONS = {  # name -> (sympy function, arity)
     "sin": (sp.sin, 1), "cos": (sp.cos, 1), "tan": (sp.tan, 1), "asin": (sp.asin, 1),
     "acos": (sp.acos, 1), "atan": (sp.atan, 1), "atan2": (sp.atan2, 2), "sinh": (sp.sinh, 1),
     "cosh": (sp.cosh, 1), "tanh": (sp.tanh, 1), "exp": (sp.exp, 1), "log": (sp.log, 1),
-    "sqrt": (sp.sqrt, 1), "abs": (sp.Abs, 1), "sign": (sp.sign, 1), "min": (sp.Min, None),
-    "max": (sp.Max, None),
+    "sqrt": (sp.sqrt, 1), "abs": (sp.Abs, 1), "sign": (sp.sign, 1), "min": (Min, None),
+    "max": (Max, None),
 }
 
 FIELDS_ONE_PORT = ("e", "f")
 MAX_EXACT_INTEGER = 2 ** 53  # integral literals up to this are exact SymPy integers
 MAX_EXACT_POWER = 64  # number ** integer with a larger exponent is computed in floating point
-LOG10_MAX_DOUBLE = math.log10(1.7976931348623157e308)
+LOG10_MAX_DOUBLE = math.log10(sys.float_info.max)
+MIN_NORMAL_DOUBLE = sys.float_info.min
 
 
 class _Scope:
@@ -43,6 +48,15 @@ class _Scope:
         self.local: dict[str, sp.Symbol] = {}
         self.params_only = False
         self.visible_params: set[str] | None = None
+        self.entries = 0  # of the vectors and matrices built so far, over the whole model
+
+    def charge(self, n: int, span: Span):
+        """Count n more vector or matrix entries against MAX_MATRIX_ENTRIES, before or as
+        they are built: each operation on vectors costs what it builds."""
+        self.entries += n
+        if self.entries > MAX_MATRIX_ENTRIES:
+            fail(span, f"the model is too large: its expressions build more than "
+                       f"{MAX_MATRIX_ENTRIES} vector and matrix entries in all")
 
 
 class _ExprBuilder:
@@ -58,6 +72,8 @@ class _ExprBuilder:
             fail(node.span, "expression is not finite (division by zero?)")
         if value.has(sp.I):
             fail(node.span, "expression is not a real number")
+        for number in sorted(value.atoms(sp.Number), key=abs):
+            _check_double(number, node.span)
         return Expr(value, tuple(self.refs), node.span)
 
     def _evaluate(self, root):
@@ -68,6 +84,10 @@ class _ExprBuilder:
             action, node = todo.pop()
             if action is not None:
                 action(node, done)
+                if _is_matrix(done[-1]):
+                    self.scope.charge(len(done[-1]), root.span)
+                elif done[-1].is_Number:  # before a function can take it: sinh(1e308)
+                    _check_double(done[-1], _span_of(node))
                 continue
             if isinstance(node, ast.BinOp) and node.op in "+-*/":
                 operands = _chain(node)
@@ -91,6 +111,8 @@ class _ExprBuilder:
                 todo.extend(((None, node.index), (None, node.base)))
             else:
                 done.append(self._leaf(node))
+                if _is_matrix(done[-1]):
+                    self.scope.charge(len(done[-1]), root.span)
         (value,) = done
         return value
 
@@ -99,14 +121,14 @@ class _ExprBuilder:
         values = done[len(done) - len(operands):]
         del done[len(done) - len(operands):]
         if any(_is_matrix(v) for v in values):
-            done.append(_matrix_chain(additive, operands, values))
+            done.append(_matrix_chain(additive, operands, values, self.scope))
             return
         if additive:
             done.append(sp.Add(*[v if s > 0 else -v for (s, _), v in zip(operands, values)]))
             return
         factors = []
         for (s, n), v in zip(operands, values):
-            if s < 0 and v == 0:
+            if s < 0 and v.is_zero:
                 fail(n.span, "division by zero")
             factors.append(v if s > 0 else 1 / v)
         done.append(sp.Mul(*factors))
@@ -129,12 +151,16 @@ class _ExprBuilder:
                 args = list(args[0])
             if any(_is_matrix(a) for a in args):
                 fail(node.span, "diag() takes scalars, or one vector")
+            self.scope.charge(len(args) ** 2, node.span)
             done.append(sp.ImmutableMatrix(sp.diag(*args)))
             return
         if any(_is_matrix(a) for a in args):
             fail(node.span, f"{node.func}() takes scalars, not vectors or matrices")
         func, _ = FUNCTIONS[node.func]
-        done.append(func(*args))
+        value = func(*args)
+        if not value.free_symbols and not value.is_Number:
+            _check_constant(value, node.span)
+        done.append(value)
 
     def _vector(self, node: ast.Vector, done):
         """[a, b, ...]: a column vector of scalars, or a matrix whose rows are [..] vectors."""
@@ -179,6 +205,9 @@ class _ExprBuilder:
                             f"got {len(node.args)}")
         if arity is None and len(node.args) < 2:
             fail(node.span, f"{node.func}() takes at least 2 arguments")
+        if arity is None and len(node.args) > MAX_EXTREMUM_ARGUMENTS:
+            fail(node.span, f"{node.func}() takes at most {MAX_EXTREMUM_ARGUMENTS} arguments, "
+                            f"got {len(node.args)} (nest them for more)")
 
     def _leaf(self, node):
         if isinstance(node, ast.Num):
@@ -256,8 +285,9 @@ def _dim_of(decl) -> int | None:
     return None if n == 1 and d.n == 1 else n
 
 
-def _matrix_chain(additive, operands, values):
-    """A chain of + and - (or * and /) with vectors or matrices among its operands."""
+def _matrix_chain(additive, operands, values, scope: _Scope):
+    """A chain of + and - (or * and /) with vectors or matrices among its operands; a matrix
+    product is charged to the scope before it is computed."""
     (_, first), acc = operands[0], values[0]
     if additive:
         acc = acc if operands[0][0] > 0 else -acc
@@ -270,12 +300,13 @@ def _matrix_chain(additive, operands, values):
         if sign < 0:
             if _is_matrix(v):
                 fail(n.span, "division by a vector or a matrix")
-            if v == 0:
+            if v.is_zero:
                 fail(n.span, "division by zero")
             acc = acc / v
         elif _is_matrix(acc) and _is_matrix(v):
             if acc.cols != v.rows:
                 fail(n.span, f"cannot multiply {_shape(acc)} by {_shape(v)}")
+            scope.charge(acc.rows * acc.cols * v.cols, n.span)
             acc = acc * v
         else:
             acc = acc * v
@@ -305,6 +336,14 @@ def _chain(node: ast.BinOp):
     return out
 
 
+def _span_of(item) -> Span:
+    """The span of what an action of _evaluate built: a node, or a chain (see _combine)."""
+    if isinstance(item, tuple):
+        operands = item[1]
+        return operands[0][1].span.join(operands[-1][1].span)
+    return item.span
+
+
 def _negate(node, done):
     done.append(-done.pop())
 
@@ -313,7 +352,7 @@ def _number(node: ast.Num):
     text = node.text
     if text.isdigit():
         digits = text.lstrip("0")
-        if len(digits) > 309:  # before int(): Python refuses to read more than 4300 digits
+        if len(digits) > MAX_LITERAL_DIGITS:  # before int(), which refuses over 4300 digits
             fail(node.span, f"number {text[:20]}... does not fit a double")
         value = int(text)
         if value <= MAX_EXACT_INTEGER:
@@ -323,7 +362,7 @@ def _number(node: ast.Num):
         x = float(text)  # the grammar admits decimal numbers only
     if not math.isfinite(x):
         fail(node.span, f"number {text} does not fit a double")
-    if x != 0.0 and abs(x) < 2.2250738585072014e-308:
+    if x != 0.0 and abs(x) < MIN_NORMAL_DOUBLE:
         fail(node.span, f"number {text} is too small for a normal double")
     if x.is_integer() and abs(x) <= MAX_EXACT_INTEGER:
         return sp.Integer(int(x))  # 2.0 is the integer 2: no 1.0*x in the equations
@@ -331,10 +370,11 @@ def _number(node: ast.Num):
 
 
 def _number_power(a, b, span):
-    """a ** b for numbers, refused when it does not fit a double (before computing it)."""
+    """a ** b for numbers, refused when it does not fit a double, decided from the magnitude
+    before computing it; exact only for small integer exponents, else in floating point."""
     if a.is_negative and not b.is_Integer:
         fail(span, "expression is not a real number (a negative number to a fractional power)")
-    if a == 0:
+    if a.is_zero:
         if b.is_negative:
             fail(span, "division by zero (0 to a negative power)")
         return sp.Integer(0) if b != 0 else sp.Integer(1)
@@ -343,7 +383,38 @@ def _number_power(a, b, span):
         fail(span, "number does not fit a double")
     if b.is_Integer and abs(int(b)) <= MAX_EXACT_POWER and (a.is_Rational or abs(magnitude) < 300):
         return a ** b
-    return sp.Float(math.pow(float(a), float(b)))
+    try:
+        x = math.pow(float(a), float(b))
+    except OverflowError:  # at the edge of the range, where the magnitude test rounds
+        fail(span, "number does not fit a double")
+    if abs(x) < MIN_NORMAL_DOUBLE:
+        fail(span, "number is too small for a normal double (it would be 0)")
+    return sp.Float(x)
+
+
+def _check_double(number, span):
+    """A constant that the generated code would compute as inf or 0 is refused."""
+    try:
+        x = float(number)
+    except OverflowError:
+        x = math.inf
+    if not math.isfinite(x):
+        fail(span, "number does not fit a double")
+    if not number.is_zero and abs(x) < MIN_NORMAL_DOUBLE:
+        fail(span, "number is too small for a normal double (it would be 0)")
+
+
+def _check_constant(value, span):
+    """A function of numbers (exp(1000), asin(2)) must be a real number that fits a double,
+    as the generated code computes it (one call at a time, in doubles)."""
+    try:
+        z = complex(value.evalf(20))
+    except (OverflowError, TypeError, ValueError):
+        fail(span, "value does not fit a double")
+    if z.imag != 0:
+        fail(span, "expression is not a real number")
+    if not math.isfinite(z.real):
+        fail(span, "value does not fit a double")
 
 
 def _fields_of(decl: ast.ElementDecl) -> tuple[str, ...]:
@@ -617,6 +688,10 @@ def resolve(model: ast.Model) -> Graph:
     scenes, scene_names = [], {}
     known_effects = model_effects(els)
     for d in (d for d in model.decls if isinstance(d, ast.SceneDecl)):
+        if len(scene_names) == MAX_SCENES:
+            diags.error(d.name.span, f"a model has at most {MAX_SCENES} scenes (each is "
+                                     "checked in full)")
+            break
         if d.name.name in scene_names:
             diags.error(d.name.span, f"scene '{d.name.name}' is declared twice",
                         Note(scene_names[d.name.name], "first declaration"))

@@ -8,8 +8,9 @@ from dataclasses import dataclass, replace
 import sympy as sp
 
 from . import solvers
-from .diagnostics import Collector, Note, did_you_mean, fail
+from .diagnostics import Collector, Note, Origin, Span, did_you_mean, fail
 from .graph import Expr, Graph, check_effect_names, check_ports, model_effects, var
+from .resources import MAX_OUTPUT_ROWS
 
 SOLVER_OPTIONS = ("rtol", "atol", "step")
 DEFAULT_TIME = (0.0, 10.0, 0.01)
@@ -210,16 +211,19 @@ def _effects(graph: Graph, scene, override) -> tuple[str, ...] | None:
     return effects
 
 
-def apply_scene(graph: Graph, name: str | None, override: Override | None = None) -> Scenario:
+def apply_scene(graph: Graph, name: str | None, override: Override | None = None,
+                option: str = "scene") -> Scenario:
     """The graph as scene `name` sees it (None: the default scene, all effects, every state),
-    with the outputs and effects of `override` in place of the scene's when it gives them."""
+    with the outputs and effects of `override` in place of the scene's when it gives them.
+    An unknown name is an error located in the name itself, which errors call `option`."""
     scene = None
     if name is not None:
         scene = next((s for s in graph.scenes if s.name == name), None)
         if scene is None:
             known = ", ".join(s.name for s in graph.scenes) or "none"
-            fail(None, f"no scene named '{name}' in model '{graph.name}'"
-                       f"{did_you_mean(name, [s.name for s in graph.scenes])} (scenes: {known})")
+            fail(Span(1, 1, 1, len(name) + 1, Origin(option, name)),
+                 f"no scene named '{name}' in model '{graph.name}'"
+                 f"{did_you_mean(name, [s.name for s in graph.scenes])} (scenes: {known})")
     given = tuple(k for k in ("effects", "outputs")
                   if override is not None and getattr(override, k) is not None)
     effects = _effects(graph, scene, override)
@@ -239,6 +243,9 @@ def apply_scene(graph: Graph, name: str | None, override: Override | None = None
             fail(scene.time[2].span, "the output interval must be positive")
         if scene.time[2] is None:
             dt = (t1 - t0) / 1000
+        elif not (t1 - t0) / dt <= MAX_OUTPUT_ROWS:
+            fail(scene.time[2].span, f"more than {MAX_OUTPUT_ROWS:.0e} output rows: the output "
+                                     "interval is too small for the time span")
     solver, rtol, atol, step = _solver(scene.solver if scene else None, params)
     return Scenario(g, Settings(name, outputs, t0, t1, dt, solver, rtol, atol, step, sets, given,
                                 effects, tuple(left_out.items())))

@@ -24,6 +24,7 @@ from bgc import backends, solvers
 from bgc.backends import BackendError, compile_c, have_c_compiler, load_python_module, run_c
 from bgc.emit import (POW10_RANGE, EmitError, c_param_fields, c_string_literal, emit_c,
                       emit_python, pow10_table)
+from bgc.algebra import Max, Min
 from bgc.ir import C, ConstraintRow, Function, P, Param, SceneSettings, Store, T, X
 from bgc.ir import expressions as ir_expressions
 from bgc.lower import explicit_program, hoist_constants
@@ -107,7 +108,7 @@ def functions_model():
     a = T / 10 - sp.Rational(1, 2)  # in [-0.5, 0.5] for t in [0, 10]
     exprs = [sp.sin(a), sp.cos(a), sp.tan(a), sp.asin(a), sp.acos(a), sp.atan(a),
              sp.atan2(a, 1 + T), sp.sinh(a), sp.cosh(a), sp.tanh(a), sp.exp(a), sp.log(2 + a),
-             sp.sqrt(1 + a), sp.Abs(a), sp.sign(a), sp.Min(a, X[0], T), sp.Max(a, X[0] / 10),
+             sp.sqrt(1 + a), sp.Abs(a), sp.sign(a), Min(a, X[0], T), Max(a, X[0] / 10),
              sp.Heaviside(a), (1 + a) ** sp.Rational(3, 2), (2 + a) ** -3, 1 / sp.sqrt(2 + a),
              (a + 1) ** 2, X[0] ** 5, sp.pi * sp.E * a]
     names = [f"f{i}" for i in range(len(exprs))]

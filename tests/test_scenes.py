@@ -83,18 +83,18 @@ def test_a_misspelt_effect_in_a_scene_is_a_located_error_with_a_suggestion():
      "unknown element 'rood' in outputs (did you mean 'rod'?)"),
     (["--outputs", "xx"], "--outputs:1:1:", "unknown output 'xx' (did you mean 'x'?)"),
     (["--outputs", "x,,y"], "--outputs:1:3:", "syntax error: unexpected ','"),
-    (["--scene", "swng"], "error:", "no scene named 'swng' in model 'pendulum' (did you mean "
-                                    "'swing'?)"),
+    (["--scene", "swng"], "--scene:1:1:", "no scene named 'swng' in model 'pendulum' (did you "
+                                          "mean 'swing'?)"),
 ])
 def test_command_line_scene_errors_are_located_and_write_nothing(tmp_path, args, where, message):
+    """Errors in an option's value: located in its text, and usage errors (exit 2)."""
     out = tmp_path / "out.csv"
     result = CliRunner().invoke(main, ["simulate", str(PENDULUM), "--backend", "python",
                                        "-o", str(out)] + args)
-    assert result.exit_code == 1, result.output
-    assert result.stderr.startswith(where) if where != "error:" else "error:" in result.stderr
+    assert result.exit_code == 2, result.output
+    assert result.stderr.startswith(where)
     assert message in result.stderr
-    if where.startswith("--"):
-        assert "\n   1 | " in result.stderr and "^" in result.stderr  # the option's text, a caret
+    assert "\n   1 | " in result.stderr and "^" in result.stderr  # the option's text, a caret
     assert "Traceback" not in result.stderr and not out.exists()
 
 
