@@ -4,14 +4,13 @@ function of the explicit solvers against their closed forms, and the warnings of
 No test asserts a time."""
 import csv
 import math
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 from bgc import api, backends, solvers, stability
+from conftest import run_bgc
 from test_simulate import pendulum_reference
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -20,8 +19,7 @@ needs_cc = pytest.mark.skipif(not backends.have_c_compiler(), reason="no C compi
 
 
 def bgc(*args, cwd=None):
-    return subprocess.run([sys.executable, "-m", "bgc", *map(str, args)], capture_output=True,
-                          text=True, cwd=cwd)
+    return run_bgc(*args, cwd=cwd)
 
 
 def read_rows(path):

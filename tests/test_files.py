@@ -13,11 +13,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from click.testing import CliRunner
 
 from bgc import backends
-from bgc.cli import main
-from conftest import MODELS
+from conftest import MODELS, run_bgc
 
 needs_cc = pytest.mark.skipif(not backends.have_c_compiler(), reason="no C compiler")
 BACKENDS = ["python"] + (["c"] if backends.have_c_compiler() else [])
@@ -32,24 +30,8 @@ scene s { outputs z; time 0 .. 1e5 every 0.001; solver rk4(step = 0.001) }
 """
 
 
-class Done:
-    def __init__(self, returncode, stdout, stderr):
-        self.returncode, self.stdout, self.stderr = returncode, stdout, stderr
-
-
 def bgc(*args, cwd, env=None, umask=None):
-    """The command line in this process (click's runner), in directory cwd, with environment
-    variables env set and the umask given."""
-    old_dir, old_mask = os.getcwd(), os.umask(0o022 if umask is None else umask)
-    os.chdir(cwd)
-    try:
-        result = CliRunner().invoke(main, [str(a) for a in args], env=env)
-    finally:
-        os.chdir(old_dir)
-        os.umask(old_mask)
-    if result.exception and not isinstance(result.exception, SystemExit):
-        raise result.exception
-    return Done(result.exit_code, result.stdout, result.stderr)
+    return run_bgc(*args, cwd=cwd, env=env, umask=umask)
 
 
 def _leftovers(directory: Path) -> list[str]:

@@ -1,7 +1,5 @@
 """End-to-end: the paper's pendulum simulated by both backends against SciPy at tight
 tolerance (computed here from eq. 9 / eq. 12 typed by hand), the CLI, and run-time failures."""
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -11,6 +9,7 @@ from scipy.integrate import solve_ivp
 import bgc
 from bgc import backends
 from bgc.api import Source
+from conftest import run_bgc
 
 ROOT = Path(__file__).resolve().parent.parent
 PENDULUM = ROOT / "models" / "pendulum.bg"
@@ -83,8 +82,7 @@ def test_backends_agree():
 
 
 def run_cli(*args, cwd=None):
-    return subprocess.run([sys.executable, "-m", "bgc", *args], capture_output=True, text=True,
-                          cwd=cwd or ROOT)
+    return run_bgc(*args, cwd=cwd or ROOT)
 
 
 def test_cli_simulate_to_csv(tmp_path):
