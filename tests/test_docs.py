@@ -22,8 +22,8 @@ an info string, a language followed by words `key` or `key=value` (a value may b
 A page's blocks run in order in a fresh directory, where `models` is the repository's models/
 directory.  A `bgc` command without shell syntax runs in this process (click's CliRunner);
 any other line runs in bash, with `bgc` and `python` on the PATH.  For speed, C is compiled
-without optimisation: bgc's C backend with -O0 (cached as usual), and `-O2` in a command line
-reads `-O0`; the generated code's results do not depend on it (tests/test_emit.py and the
+without optimisation: bgc's C backend with -O0 ($BGC_CFLAGS, set in conftest.py), and `-O2`
+in a command line reads `-O0`; the generated code's results do not depend on it (test_emit and the
 golden files test the code itself).  Marks that leave a block unrun or partly run (fragment,
 dry-run, skip) are counted, and their number is bounded below (MAX_MARKS).
 No numbers are copied from bgc's output: commands must succeed, and where a page states a
@@ -42,7 +42,7 @@ from pathlib import Path
 import pytest
 from click.testing import CliRunner
 
-from bgc import api, backends
+from bgc import api
 from bgc.cli import main
 from bgc.parser import parse
 
@@ -53,7 +53,6 @@ KEYS = {"bg": {"file", "fragment", "error", "scene"}, "sh": {"status", "dry-run"
         "python": set(), "text": set(), "c": {"file"}}
 # Blocks left unrun or partly run, at most (keep them few: every other example runs).
 MAX_MARKS = {"fragment": 4, "dry-run": 2, "skip": 1}
-QUICK_C = ("-O0", "-std=c99")  # bgc compiles with -O2; -O0 builds four times faster
 SHELL_SYNTAX = re.compile(r"[|&;<>()$`]")
 FENCE = re.compile(r"^(?P<indent> {0,3})(?P<fence>`{3,}|~{3,})(?P<info>[^`]*)$")
 
@@ -314,9 +313,6 @@ def run_block(page: Page, block: Block):
 @pytest.mark.parametrize("page", PAGES, ids=lambda p: str(p.relative_to(ROOT)))
 def test_page(page, tmp_path, monkeypatch):
     """A page's blocks, in order, in one working directory."""
-    compile_c = backends.compile_c
-    monkeypatch.setattr(backends, "compile_c", lambda source, cc=None, flags=QUICK_C:
-                        compile_c(source, cc, flags))
     monkeypatch.chdir(tmp_path)
     state = Page(tmp_path)
     for block in blocks(page):
