@@ -2,25 +2,42 @@
 and the only one that writes files.  Model errors exit 1 with a located report, usage errors 2."""
 from __future__ import annotations
 
+import hashlib
 import math
 import os
 import sys
-import tempfile
 import time
 from pathlib import Path
 
 import click
 
-from . import accuracy as acc
-from . import api, backends, outfile, solvers, stability
-from .diagnostics import format_diagnostic
-from .emit import emit_c, emit_python
-from .report import check_report, equations_latex, equations_text
+from . import backends, outfile, run, solvers, warm
+from .resources import read_bounded
 
 
-def _warn(compiled: api.Compiled):
-    for d in compiled.warnings:
-        click.echo(format_diagnostic(d, compiled.source.path, compiled.source.text), err=True)
+class _Later:
+    """A module imported on first use: the compiler's modules import SymPy (about a second),
+    which `bgc --help` and a warm `bgc simulate` (bgc.warm) never need."""
+
+    def __init__(self, name: str):
+        self._name = name
+
+    def __getattr__(self, attr):
+        import importlib
+        return getattr(importlib.import_module(self._name, __package__), attr)
+
+
+acc, api, stability = _Later(".accuracy"), _Later(".api"), _Later(".stability")
+emit, report, diagnostics = _Later(".emit"), _Later(".report"), _Later(".diagnostics")
+
+
+def _warnings_text(compiled) -> str:
+    return "".join(diagnostics.format_diagnostic(d, compiled.source.path, compiled.source.text)
+                   + "\n" for d in compiled.warnings)
+
+
+def _warn(compiled):
+    click.echo(_warnings_text(compiled), err=True, nl=False)
 
 
 def _or_exit(call, *args):
@@ -37,7 +54,7 @@ def _or_exit(call, *args):
 
 
 def _build(model, scene, project_initial=False, algebra="auto", program=True,
-           residual_outputs=False, outputs=None, effects=None) -> api.Compiled:
+           residual_outputs=False, outputs=None, effects=None):
     compiled = _or_exit(api.build, model, scene, project_initial, algebra, program,
                         residual_outputs, outputs, effects, ("--outputs", "--effects", "--scene"))
     _warn(compiled)
@@ -65,7 +82,7 @@ POSITIVE, FINITE = _Number(positive=True), _Number(positive=False)
 
 
 def _check_span(compiled, t_end, dt):
-    problem = api.run_span_problem(compiled.settings, t_end, dt)
+    problem = run.run_span_problem(compiled.settings, t_end, dt)
     if problem:
         raise click.UsageError(problem)
 
@@ -89,8 +106,9 @@ def _output_file(ctx, param, value):
     return value
 
 
-def _parse_params(values, compiled) -> dict:
-    names = {p.name for p in compiled.program.params}
+def _parse_params(values, names) -> dict:
+    """-p NAME=VALUE items as {name: value}; names: the model's parameters."""
+    names = set(names)
     out = {}
     for item in values:
         name, sep, value = item.partition("=")
@@ -123,7 +141,7 @@ def ADHOC(f):
                              "need is computed.")(f)
 
 
-ALGEBRA = click.option("--algebra", type=click.Choice(list(api.ALGEBRA)), default="auto",
+ALGEBRA = click.option("--algebra", type=click.Choice(list(run.ALGEBRA)), default="auto",
                        show_default=True,
                        help="How algebraic blocks are solved: symbolically when linear and "
                             "small (auto), always symbolically, or always numerically in the "
@@ -166,7 +184,7 @@ def check(model, scene, outputs, effects, algebra):
     if adhoc and summary is None:
         click.echo("note: the full model (all effects) does not compile, so this scene is not "
                    "compared with it", err=True)
-    click.echo(check_report(compiled, summary), nl=False)
+    click.echo(report.check_report(compiled, summary), nl=False)
 
 
 @main.command()
@@ -186,7 +204,8 @@ def equations(model, scene, outputs, effects, algebra, fmt):
     """Print the reduced equations, multipliers included."""
     compiled = _build(model, scene, algebra=algebra, program=False, outputs=outputs,
                       effects=effects)
-    click.echo((equations_latex if fmt == "latex" else equations_text)(compiled), nl=False)
+    click.echo((report.equations_latex if fmt == "latex" else report.equations_text)(compiled),
+               nl=False)
 
 
 @main.command()
@@ -202,7 +221,7 @@ def equations(model, scene, outputs, effects, algebra, fmt):
 def compile(model, scene, outputs, effects, algebra, target, output, project_initial):
     """Emit standalone C or Python source code."""
     compiled = _build(model, scene, project_initial, algebra, outputs=outputs, effects=effects)
-    files = (emit_c if target == "c" else emit_python)(compiled.program)
+    files = (emit.emit_c if target == "c" else emit.emit_python)(compiled.program)
     (text,) = files.values()
     if output:
         _write_atomic(output, text)
@@ -240,27 +259,65 @@ def compile(model, scene, outputs, effects, algebra, target, output, project_ini
                    "place at its end; a failed run keeps the rows it computed.")
 def simulate(model, scene, outputs, effects, algebra, backend, solver, rtol, atol, t_end, dt,
              step, max_steps, params, project_initial, stats, output):
-    """Simulate and write CSV."""
-    compiled = _build(model, scene, project_initial, algebra, outputs=outputs, effects=effects)
-    _check_span(compiled, t_end, dt)
-    overrides = _parse_params(params, compiled)
-    args = api.run_args(t_end, dt, solver, rtol, atol, step, overrides,
-                        project_initial, max_steps) + (["--stats"] if stats else [])
-    s = compiled.settings
-    for message in stability.warnings_for_run(compiled, solver or s.solver, step or s.step,
-                                              dt or s.dt, overrides):
-        click.echo(message, err=True)
+    """Simulate and write CSV.  A model compiled before with the same options runs at once
+    (bgc.warm); otherwise it is compiled, and the result kept for the next run."""
     if backend == "c" and not backends.have_c_compiler():
         click.echo("warning: no C compiler found (cc or $CC); using the Python backend", err=True)
         backend = "python"
-    with tempfile.TemporaryDirectory(prefix="bgc-") as tmp:
-        if backend == "c":
-            (text,) = emit_c(compiled.program).values()
-            argv = [str(backends.compile_c(text))]
-        else:
-            (text,) = emit_python(compiled.program).values()
-            argv = backends.python_program(text, tmp)
-        sys.exit(_run(argv + list(map(str, args)), output))
+    request = warm.Request(model, scene, outputs, effects, algebra, project_initial, backend)
+    found = warm.lookup(request)
+    if found is not None and found[0].correctors and _fixed_step(solver or found[0].solver, step):
+        found = None  # (bgc.stability's check of the step needs the compiled model)
+    if found is None:
+        record, program, compiled = _compile_for_run(request, model, scene, outputs, effects,
+                                                     algebra, project_initial, backend)
+    else:
+        (record, program), compiled = found, None
+        click.echo(record.warnings, err=True, nl=False)
+    problem = run.run_span_problem(record, t_end, dt)
+    if problem:
+        raise click.UsageError(problem)
+    overrides = _parse_params(params, record.params)
+    args = run.run_args(t_end, dt, solver, rtol, atol, step, overrides,
+                        project_initial, max_steps) + (["--stats"] if stats else [])
+    if compiled is not None and record.correctors:
+        for message in stability.warnings_for_run(compiled, solver or record.solver,
+                                                  step or record.step, dt or record.dt,
+                                                  overrides):
+            click.echo(message, err=True)
+    sys.exit(_run(warm.argv(record, program) + list(map(str, args)), output))
+
+
+def _fixed_step(solver: str, step) -> bool:
+    """Whether a run takes fixed steps (bgc.stability.fixed_step_of)."""
+    return step is not None or solvers.get(solver).family == "fixed"
+
+
+def _compile_for_run(request, model, scene, outputs, effects, algebra, project_initial,
+                     backend):
+    """The cold path: build the model, compile its program into the cache, keep a warm
+    record of it; (record, program path)."""
+    try:
+        data = read_bounded(model)
+    except OSError as exc:
+        click.echo(f"error: {model}: cannot read: {exc.strerror}", err=True)
+        sys.exit(1)
+    source = _or_exit(api.source_from_bytes, model, data)
+    compiled = _build(source, scene, project_initial, algebra, outputs=outputs, effects=effects)
+    if backend == "c":
+        (text,) = emit.emit_c(compiled.program).values()
+        program = backends.compile_c(text)
+    else:
+        (text,) = emit.emit_python(compiled.program).values()
+        program = backends.cache_python(text)
+    s = compiled.settings
+    record = warm.Record(
+        program=program.name, sha256=hashlib.sha256(program.read_bytes()).hexdigest(),
+        warnings=_warnings_text(compiled), params=tuple(p.name for p in compiled.program.params),
+        t0=s.t0, t_end=s.t_end, dt=s.dt, solver=s.solver, step=s.step,
+        correctors=any(c.corrector in ("pid", "pd") for c in compiled.reduced.constraints))
+    warm.store(request, data, record)
+    return record, program, compiled
 
 
 def _status(done: backends.Finished) -> int:
@@ -391,7 +448,7 @@ def accuracy(model, scene, outputs, effects, algebra, backend, solver_list, rtol
     compiled = _build(model, scene, algebra=algebra, program=True, residual_outputs=True,
                       outputs=outputs, effects=effects)
     _check_span(compiled, t_end, dt)
-    overrides = _parse_params(params, compiled)
+    overrides = _parse_params(params, [p.name for p in compiled.program.params])
     if backend == "c" and not backends.have_c_compiler():
         click.echo("warning: no C compiler found (cc or $CC); using the Python backend", err=True)
         backend = "python"
@@ -516,7 +573,7 @@ def sweep(model, scene, algebra, grids, sample, varies, seed, metrics, backend, 
     except (sw.SweepError, OSError, outfile.OutputError) as error:
         raise click.UsageError(str(error)) from None
     compiled = _build(model, scene, project_initial, algebra)
-    overrides = _parse_params(params, compiled)
+    overrides = _parse_params(params, [p.name for p in compiled.program.params])
     if backend == "c" and not backends.have_c_compiler():
         click.echo("warning: no C compiler found (cc or $CC); using the Python backend", err=True)
         backend = "python"
