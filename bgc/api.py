@@ -79,7 +79,17 @@ def _model_error(exc: ModelError, source: Source) -> BgcModelError:
     return (BgcArgumentError if outside else BgcModelError)(exc, source)
 
 
-def load(path, text: str | None = None) -> Source:
+def load(path, text: str | None = None, scene: str | None = None, backend: str = "c",
+         algebra: str = "auto", outputs=None, effects=None, project_initial: bool = False):
+    """A model for interactive use (bgc.model.Model, which is also a Source): the file read
+    now (UTF-8, size-limited; `text` gives the source directly), built on first use with the
+    scene and options given."""
+    from .model import Model
+    return Model(read_source(path, text), scene, backend, algebra, outputs, effects,
+                 project_initial)
+
+
+def read_source(path, text: str | None = None) -> Source:
     """Read a model file (UTF-8, size-limited); `text` gives the source directly."""
     path = str(path)
     if text is None:
@@ -100,7 +110,7 @@ def source_from_bytes(path: str, data: bytes) -> Source:
 
 
 def _source(model) -> Source:
-    return model if isinstance(model, Source) else load(model)
+    return Source(model.path, model.text) if isinstance(model, Source) else read_source(model)
 
 
 def _option_text(value, what: str) -> str:
