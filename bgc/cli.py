@@ -545,7 +545,8 @@ def accuracy(model, scene, outputs, effects, algebra, backend, solver_list, rtol
 @click.option("--no-timing", is_flag=True, help="Leave out the cpu column (the table is "
                                                 "then the same whatever runs it).")
 @click.option("-o", "output", default=None, callback=_output_file,
-              help="CSV file for the table (default: stdout).")
+              help="The table's file (default: stdout, as CSV): CSV, or Parquet when the name "
+                   "ends in .parquet (pip install 'bgc[parquet]').")
 def sweep(model, scene, algebra, grids, sample, varies, seed, metrics, backend, solver, rtol,
           atol, t_end, dt, step, params, project_initial, workers, scheduler, batch_size,
           trajectories, no_timing, output):
@@ -553,6 +554,10 @@ def sweep(model, scene, algebra, grids, sample, varies, seed, metrics, backend, 
     batches on Dask or serially; write one table: run, parameters, metrics, counters, status,
     message.  A run that fails is a row with its status and message; see docs/sweeps.md."""
     from . import sweeps as sw
+    parquet = bool(output) and output.lower().endswith(".parquet")
+    if parquet and not sw.have_pyarrow():
+        raise click.UsageError("writing Parquet needs pyarrow: pip install 'bgc[parquet]' "
+                               "(or write CSV: -o FILE.csv)")
     try:
         grid = dict(sw.parse_grid_axis(g) for g in grids) if grids else None
         vary = {v[0]: f"{v[1]}({v[2]!r},{v[3]!r})" for v in map(sw.parse_distribution, varies)}
@@ -619,11 +624,16 @@ def sweep(model, scene, algebra, grids, sample, varies, seed, metrics, backend, 
         elif client is not None:
             client.close()
     wall = time.perf_counter() - start
-    text = table.to_csv()
-    if output:
-        _write_atomic(output, text)
+    if parquet:
+        try:
+            table.to_parquet(output)
+        except outfile.OutputError as error:
+            click.echo(f"error: {error}", err=True)
+            sys.exit(1)
+    elif output:
+        _write_atomic(output, table.to_csv())
     else:
-        click.echo(text, nl=False)
+        click.echo(table.to_csv(), nl=False)
     click.echo(f"bgc sweep: {len(table)} runs, {table.failures()} failed, {wall:.2f} s "
                f"({len(table) / wall:.0f} runs/s)", err=True)
 
