@@ -638,5 +638,56 @@ def sweep(model, scene, algebra, grids, sample, varies, seed, metrics, backend, 
                f"({len(table) / wall:.0f} runs/s)", err=True)
 
 
+# ---------------------------------------------------------------- bgc draw
+
+
+def _drawing_target(ctx, param, value):
+    """-o for `bgc draw`: FILE.dot, FILE.svg or FILE.png (the extension says which; `-` is
+    DOT on stdout), checked before any work; anything else is a usage error."""
+    from . import draw as drawing
+    if value is None or value == "-":
+        return value
+    if drawing.format_of(value) is None:
+        raise click.BadParameter(f"'{value}': a drawing is written as FILE.dot, FILE.svg or "
+                                 "FILE.png (the extension says which), or - for DOT on stdout",
+                                 ctx, param)
+    return _output_file(ctx, param, value)
+
+
+@main.command()
+@MODEL
+@SCENE
+@ADHOC
+@click.option("-o", "output", default=None, callback=_drawing_target,
+              metavar="FILE.dot|FILE.svg|FILE.png|-",
+              help="The drawing: DOT (needs nothing), or SVG or PNG made by Graphviz's `dot` "
+                   "(default: DOT on stdout).")
+def draw(model, scene, outputs, effects, output):
+    """Draw the bond graph with its causal strokes as Graphviz DOT, SVG or PNG: half-arrows
+    for power, the stroke where the effort is received, multibonds as double lines, the
+    constraint correctors as block diagrams, what the scene leaves out in grey."""
+    from . import draw as drawing
+    fmt = "dot" if output in (None, "-") else drawing.format_of(output)
+    if fmt != "dot" and not drawing.have_graphviz():
+        click.echo(f"error: {drawing.GRAPHVIZ_HELP}", err=True)
+        sys.exit(1)
+    compiled = _build(model, scene, program=False, outputs=outputs, effects=effects)
+    text = drawing.draw_dot(compiled)
+    if fmt == "dot":
+        if output in (None, "-"):
+            click.echo(text, nl=False)
+        else:
+            _write_atomic(output, text)
+        return
+    try:
+        data = drawing.render(text, fmt)
+        with outfile.Partial(output) as part:
+            part.file.write(data)
+            part.commit()
+    except (drawing.GraphvizMissing, drawing.GraphvizFailed, outfile.OutputError) as error:
+        click.echo(f"error: {error}", err=True)
+        sys.exit(1)
+
+
 if __name__ == "__main__":  # pragma: no cover
     main()

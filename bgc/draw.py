@@ -57,18 +57,21 @@ class GraphvizFailed(RuntimeError):
 # ---------------------------------------------------------------- escaping
 
 _CONTROL = re.compile(r"[\x00-\x08\x0b\x0c\x0e-\x1f\x7f\ud800-\udfff\ufffe\uffff]")
+BACKSLASH = "\u29f5"  # ⧵, shown for a backslash
 
 
 def _clean(text: str) -> str:
-    """Text without the characters XML and DOT cannot hold; line breaks become spaces."""
+    """Text without the characters XML and DOT cannot hold (line breaks become spaces), and
+    without backslashes, shown as ⧵: Graphviz expands \\N, \\G, \\n, ... in labels and
+    tooltips, and how a doubled backslash reads differs between its versions and attributes."""
     text = text.replace("\r\n", " ").replace("\r", " ").replace("\n", " ").replace("\t", " ")
-    return _CONTROL.sub("", text)
+    return _CONTROL.sub("", text).replace("\\", BACKSLASH)
 
 
 def _quoted(text: str) -> str:
-    """A DOT double-quoted string holding `text` literally: backslashes are doubled (so no
-    escString sequence such as \\N or \\G is expanded) and quotes escaped."""
-    return '"' + _clean(text).replace("\\", "\\\\").replace('"', '\\"') + '"'
+    """A DOT double-quoted string showing `text`: quotes escaped, & as &amp; (Graphviz reads
+    entities in labels), no backslash left (_clean)."""
+    return '"' + _clean(text).replace("&", "&amp;").replace('"', '\\"') + '"'
 
 
 def _html(text: str) -> str:
@@ -81,8 +84,8 @@ def _html(text: str) -> str:
 
 
 def _attrs(**attrs) -> str:
-    """[key=value, ...] in the order given; a value wrapped in <...> by _label is HTML, any
-    other is quoted."""
+    """[key=value, ...] in the order given (None: left out); an _Html value is an HTML label,
+    any other a quoted string."""
     items = []
     for key, value in attrs.items():
         if value is None:
@@ -179,6 +182,14 @@ class DrawnBond:
     mixed: bool = False
 
 
+def _port_dim(el: Element) -> int:
+    """The dimension of the port a bond leaves element el by."""
+    if el.dim is None:
+        return 1
+    n, m = el.dim
+    return m if not el.is_junction and el.spec.ports == 2 else n
+
+
 def drawn_bonds(compiled, written: Graph | None = None) -> tuple[DrawnBond, ...]:
     """Every bond of the model as written, in order, with its causal stroke: at the end that
     receives the effort, the other end being the one the causality stage says sets it (for a
@@ -194,9 +205,9 @@ def drawn_bonds(compiled, written: Graph | None = None) -> tuple[DrawnBond, ...]
 
     out = []
     for b in written.bonds:
-        mb = vector.get(b.label)
+        mb = vector.get(b.label)  # (not there when the scene left the bond out)
         parts = mb.parts if mb is not None else (b.label,)
-        dim = mb.dim if mb is not None else 1
+        dim = _port_dim(written.by_name[b.src])
         if not all(p in index for p in parts):
             out.append(DrawnBond(b.label, b.src, b.dst, dim, None, True))
             continue
@@ -227,7 +238,10 @@ class _Dot:
         self.add(f"{_quoted(a)} -> {_quoted(b)} {_attrs(**attrs)};")
 
 
-def _bond_edge(dot: _Dot, b: DrawnBond, left_out: bool):
+def _bond_edge(dot: _Dot, b: DrawnBond):
+    """A bond: dir=both, the half-arrow (lvee) at its head, the stroke (tee) at the end that
+    receives the effort, nearest the node; a multibond as a double line with its dimension."""
+    left_out = b.left_out
     head = "tee" if b.stroke == b.dst else ""
     tail = "tee" if b.stroke == b.src else "none"
     attrs = dict(dir="both", arrowhead=head + "lvee", arrowtail=tail, arrowsize="1.0",
@@ -269,158 +283,173 @@ def _gain(text: str, square: bool = False, factor: str = "") -> str:
     return f"{factor}{inner}²" if square else f"{factor}{inner}"
 
 
-def _corrector(dot: _Dot, el: Element, kind: str, corrector: str, off: str | None, lines,
-               grey: bool):
+def _corrector(dot: _Dot, el: Element, kind: str, off: str | None, lines, grey: bool):
     """The block diagram of a constraint junction's corrector (figures 3, 4, 7, 8): the
     junction's balance B, d/dt B, the gains on B and on its integral, summed to 0, which the
-    multiplier is found to satisfy; `off`: why the scene set the corrector to none."""
-    c = el.constraint
-    name = el.name
-    dual = el.kind == "1"
+    multiplier is found to satisfy, drawn back into the junction.  off: why the scene turned
+    the corrector off (its gains are then grey)."""
+    c, name = el.constraint, el.name
     holonomic = kind == "holonomic"
     b_text = "dΦ/dt" if holonomic else "Φ"
-    what = "effort" if dual else "flow"
-    title = f"corrector {c.corrector}" + (
-        "(" + ", ".join(_text(g, lines) for g in c.gains) + ")" if c.gains else "")
+    what = "effort" if el.kind == "1" else "flow"
+    gains = [_text(g, lines) for g in c.gains]
+    title = f"corrector {c.corrector}" + (f"({', '.join(gains)})" if gains else "")
     if off:
         title += f": left out ({off})"
+    colour = GREY if grey else SIGNAL
     dot.add(f"subgraph {_quoted('cluster corrector ' + name)} {{")
     dot.depth += 1
     dot.add(f"label={_quoted(title)}; fontsize=10; fontname={_quoted(FONT)}; "
-            f"style=\"rounded,dashed\"; color={_quoted(GREY if grey else SIGNAL)}; "
-            f"fontcolor={_quoted(GREY if grey else SIGNAL)};")
+            f"style=\"rounded,dashed\"; color={_quoted(colour)}; fontcolor={_quoted(colour)};")
     ids = {k: f"{name}:{k}" for k in ("B", "d", "k1", "int", "k2", "sum")}
-    box = dict(shape="box", fontsize="11", height="0.3", color=GREY if grey else SIGNAL)
     dot.node(ids["B"], shape="plaintext", label=_label(b_text, f"{what} balance of {name}", grey),
              tooltip=f"the {what} balance of {name}: {b_text} ({kind})")
-    dot.node(ids["d"], label=_label("d/dt", None, grey), **box)
+    dot.node(ids["d"], label=_label("d/dt", None, grey), shape="box", fontsize="11",
+             height="0.3", color=colour)
     dot.node(ids["sum"], shape="circle", label=_label("Σ = 0", None, grey), fontsize="10",
-             width="0.5", fixedsize="true", color=GREY if grey else SIGNAL,
+             width="0.5", fixedsize="true", color=colour,
              tooltip=f"the multiplier {name}.lambda makes this sum 0")
     _signal_edge(dot, ids["B"], ids["d"], grey)
-    d_label = "d²Φ/dt²" if holonomic else "dΦ/dt"
-    _signal_edge(dot, ids["d"], ids["sum"], grey, label=d_label, fontsize="9")
-    used = c.corrector if not off else c.corrector
-    gains = [_text(g, lines) for g in c.gains]
+    _signal_edge(dot, ids["d"], ids["sum"], grey, label="d²Φ/dt²" if holonomic else "dΦ/dt",
+                 fontsize="9")
     gone = grey or off is not None
-    gbox = dict(box, color=GREY if gone else SIGNAL)
-    if used == "pid":
-        dot.node(ids["k1"], label=_label(_gain(gains[0], factor="2·"), None, gone), **gbox)
-        dot.node(ids["int"], label=_label("∫", None, gone), **gbox)
-        dot.node(ids["k2"], label=_label(_gain(gains[1], square=True), None, gone), **gbox)
-        _signal_edge(dot, ids["B"], ids["k1"], gone)
-        _signal_edge(dot, ids["k1"], ids["sum"], gone)
-        _signal_edge(dot, ids["B"], ids["int"], gone)
-        _signal_edge(dot, ids["int"], ids["k2"], gone, label="Φ", fontsize="9")
-        _signal_edge(dot, ids["k2"], ids["sum"], gone)
-        ann = c.annotation
-        text = (_text(ann[1], lines) if ann[0] == "init" else "Φ = " + _text(ann[1], lines)) \
-            if ann else "Φ(0) = 0"
-        _init_arrow(dot, ids["int"], text, gone, "the integrator's initial condition: the "
-                                                 "constant term of the geometric constraint")
-    elif used == "pd":
-        dot.node(ids["k1"], label=_label(_gain(gains[0]), None, gone), **gbox)
+    box = dict(shape="box", fontsize="11", height="0.3", color=GREY if gone else SIGNAL)
+    if c.corrector == "pid":
+        dot.node(ids["k1"], label=_label(_gain(gains[0], factor="2·"), None, gone), **box)
+        dot.node(ids["int"], label=_label("∫", None, gone), **box)
+        dot.node(ids["k2"], label=_label(_gain(gains[1], square=True), None, gone), **box)
+        for a, b, extra in (("B", "k1", {}), ("k1", "sum", {}), ("B", "int", {}),
+                            ("int", "k2", dict(label="Φ", fontsize="9")), ("k2", "sum", {})):
+            _signal_edge(dot, ids[a], ids[b], gone, **extra)
+        _init_arrow(dot, ids["int"], _annotation(c, lines) or "Φ(0) = 0", gone,
+                    "the integrator's initial condition: the constant term of the geometric "
+                    "constraint")
+    elif c.corrector == "pd":
+        dot.node(ids["k1"], label=_label(_gain(gains[0]), None, gone), **box)
         _signal_edge(dot, ids["B"], ids["k1"], gone)
         _signal_edge(dot, ids["k1"], ids["sum"], gone)
     dot.depth -= 1
     dot.add("}")
     _signal_edge(dot, name, ids["B"], grey)  # outside the cluster: the junction is not in it
-    lam = "λ (flow)" if dual else "λ"
-    _signal_edge(dot, ids["sum"], name, grey, label=lam, fontsize="10", constraint="false",
-                 tooltip=f"{name}.lambda, the multiplier")
+    _signal_edge(dot, ids["sum"], name, grey, label="λ (flow)" if what == "effort" else "λ",
+                 fontsize="10", constraint="false", tooltip=f"{name}.lambda, the multiplier")
 
 
-def draw_dot(compiled) -> str:
-    """The bond graph of `compiled` (a bgc.api.Compiled) as Graphviz DOT text."""
-    written = _written(compiled)
-    lines = compiled.source.text.splitlines()
+def _annotation(c, lines) -> str | None:
+    """A holonomic constraint's initial-condition annotation as the drawing shows it."""
+    if c.annotation is None:
+        return None
+    which, expr = c.annotation
+    return _text(expr, lines) if which == "init" else "Φ = " + _text(expr, lines)
+
+
+@dataclass(frozen=True)
+class _Scene:
+    """What the drawing needs of the compiled scene, by declared name."""
+
+    kept: frozenset  # elements the scene keeps
+    why: dict  # left out -> why
+    kinds: dict  # constraint junction -> holonomic | nonholonomic, as the compiler found
+    correctors: dict  # constraint junction -> its corrector in this scene
+
+
+def _scene(compiled) -> _Scene:
     g = compiled.graph
-    settings = compiled.settings
-    why = dict(settings.left_out)
-    kept = {el.origin or el.name for el in g.elements}
+
+    def base(name):
+        el = g.by_name.get(name)
+        return (el.origin or name) if el is not None else name
+
     kinds = {}
     for k in compiled.reduced.constraints:
-        el = g.by_name.get(k.junction)
-        kinds.setdefault((el.origin or el.name) if el is not None else k.junction, k.kind)
-    corrector_now = {(el.origin or el.name): el.constraint.corrector for el in g.elements
-                     if el.constraint is not None}
-    bonds = drawn_bonds(compiled, written)
+        kinds.setdefault(base(k.junction), k.kind)
+    correctors = {base(el.name): el.constraint.corrector for el in g.elements
+                  if el.constraint is not None}
+    return _Scene(frozenset(base(el.name) for el in g.elements),
+                  dict(compiled.settings.left_out), kinds, correctors)
 
-    dot = _Dot()
-    title = f"{written.name}" + (f": {written.doc}" if written.doc else "")
+
+def _title(written: Graph, settings) -> str:
     where = f"scene {settings.scene}" if settings.scene else "default scene"
     if "effects" in settings.given:
         where += ", effects " + (", ".join(settings.effects) or "none")
-    title += f"  ({where})"
-    out = ["// bgc draw: the bond graph with its causal strokes (docs/cli.md)",
-           f"digraph {_quoted(written.name)} {{"]
-    dot.lines = out
-    dot.add(f"graph [rankdir=LR, nodesep=0.45, ranksep=0.6, fontname={_quoted(FONT)}, "
-            f"fontsize=12, labelloc=t, label={_quoted(title)}];")
-    dot.add(f"node [fontname={_quoted(FONT)}, fontsize=13, margin=\"0.04,0.02\"];")
-    dot.add(f"edge [fontname={_quoted(FONT)}, fontsize=10];")
+    return written.name + (f": {written.doc}" if written.doc else "") + f"  ({where})"
 
+
+def _elements(dot: _Dot, written: Graph, sc: _Scene, lines):
     for el in written.elements:
-        grey = el.name not in kept
-        attrs = dict(shape="plaintext", label=_element_label(el, lines, grey))
+        grey = el.name not in sc.kept
         tip = el.doc or ""
         if grey:
-            tip = (tip + "; " if tip else "") + f"left out by the scene: {why.get(el.name, '')}"
-        dot.node(el.name, tooltip=tip or el.name, **attrs)
+            tip = (tip + "; " if tip else "") + f"left out by the scene: {sc.why.get(el.name, '')}"
+        dot.node(el.name, tooltip=tip or el.name, shape="plaintext",
+                 label=_element_label(el, lines, grey))
 
-    for b in bonds:
-        _bond_edge(dot, b, b.left_out)
 
-    signals = {s.name for s in written.signals}
-    elements = written.by_name
+def _signals(dot: _Dot, written: Graph, sc: _Scene, lines):
+    """Signals as blocks (an integrator with its initial value), with an arrow from what each
+    reads; then an arrow from each signal or element an element's value reads (modulation)."""
+    names = {s.name for s in written.signals} | set(written.by_name)
     for s in written.signals:
-        grey = s.name in why
-        tip = f"signal {s.name}" + (f": left out by the scene: {why[s.name]}" if grey else "")
+        grey = s.name in sc.why
+        tip = f"signal {s.name}" + (f": left out by the scene: {sc.why[s.name]}" if grey else "")
         box = dict(shape="box", fontsize="12", height="0.3", color=GREY if grey else SIGNAL,
                    style="dashed" if grey else None, tooltip=tip)
         if s.is_integral:
-            dot.node(s.name, label=_label("∫", s.name + (f" [{s.dim}]" if s.dim else ""),
-                                          grey), **box)
-            _init_arrow(dot, s.name, _text(s.init, lines), grey,
-                        f"the initial value of {s.name}")
-            expr = s.expr
+            dim = f" [{s.dim}]" if s.dim else ""
+            dot.node(s.name, label=_label("∫", s.name + dim, grey), **box)
+            _init_arrow(dot, s.name, _text(s.init, lines), grey, f"the initial value of {s.name}")
         else:
             dot.node(s.name, label=_label(f"{s.name} = {_text(s.expr, lines)}", None, grey),
                      **box)
-            expr = s.expr
-        for owner in dict.fromkeys(o for o, _ in expr.refs):
-            if owner in elements or owner in signals:
-                _signal_edge(dot, owner, s.name, grey or owner in why)
-
+        for owner in dict.fromkeys(o for o, _ in s.expr.refs):
+            if owner in names:
+                _signal_edge(dot, owner, s.name, grey or owner in sc.why)
     for el in written.elements:
-        grey = el.name not in kept
-        refs = []
-        for e in (el.value, el.law and el.law[1]):
-            if e is not None:
-                refs += [o for o, _ in e.refs]
+        refs = [o for e in (el.value, el.law and el.law[1]) if e is not None for o, _ in e.refs]
         for owner in dict.fromkeys(refs):
-            if (owner in signals or owner in elements) and owner != el.name:
-                _signal_edge(dot, owner, el.name, grey or owner in why, style="dashed"
-                             if grey or owner in why else None)
+            if owner in names and owner != el.name:
+                _signal_edge(dot, owner, el.name, el.name not in sc.kept or owner in sc.why)
 
+
+def _constraints(dot: _Dot, written: Graph, sc: _Scene, lines):
     for el in written.elements:
         c = el.constraint
         if c is None:
             continue
-        grey = el.name not in kept
-        kind = kinds.get(el.name) or c.kind or "holonomic"
-        now = corrector_now.get(el.name, c.corrector)
+        grey = el.name not in sc.kept
+        kind = sc.kinds.get(el.name) or c.kind or (
+            "nonholonomic" if c.corrector == "pd" else "holonomic")
         off = None
-        if c.corrector != "none" and now == "none":
+        if c.corrector != "none" and sc.correctors.get(el.name, c.corrector) == "none":
             off = "tagged " + " ".join("@" + e for e in el.effects)
-        _corrector(dot, el, kind, c.corrector, off, lines, grey)
-        if c.annotation is not None:
-            which, expr = c.annotation
-            text = _text(expr, lines) if which == "init" else "Φ = " + _text(expr, lines)
+        _corrector(dot, el, kind, off, lines, grey)
+        text = _annotation(c, lines)
+        if text is not None:
             _init_arrow(dot, el.name, text, grey, "the geometric constraint's initial "
                                                   "condition (the paper's figure 9)")
-    out.append("}")
-    return "\n".join(out) + "\n"
+
+
+def draw_dot(compiled) -> str:
+    """The bond graph of `compiled` (a bgc.api.Compiled) as Graphviz DOT text: the model as
+    written, in the compiled scene, with the causal strokes its causality stage assigned."""
+    written = _written(compiled)
+    lines = compiled.source.text.splitlines()
+    sc = _scene(compiled)
+    dot = _Dot()
+    dot.lines = ["// bgc draw: the bond graph with its causal strokes (docs/cli.md)",
+                 f"digraph {_quoted(written.name)} {{"]
+    dot.add(f"graph [rankdir=LR, nodesep=0.45, ranksep=0.6, fontname={_quoted(FONT)}, "
+            f"fontsize=12, labelloc=t, label={_quoted(_title(written, compiled.settings))}];")
+    dot.add(f"node [fontname={_quoted(FONT)}, fontsize=13, margin=\"0.04,0.02\"];")
+    dot.add(f"edge [fontname={_quoted(FONT)}, fontsize=10];")
+    _elements(dot, written, sc, lines)
+    for b in drawn_bonds(compiled, written):
+        _bond_edge(dot, b)
+    _signals(dot, written, sc, lines)
+    _constraints(dot, written, sc, lines)
+    dot.lines.append("}")
+    return "\n".join(dot.lines) + "\n"
 
 
 # ---------------------------------------------------------------- rendering
