@@ -98,3 +98,16 @@ def test_a_model_is_a_source_and_its_errors_come_at_first_use():
     assert bgc.check(m, scene="swing") == m.check()
     latex = m.equations("latex")
     assert latex._repr_latex_().startswith("$$") and "rod" in repr(m)
+
+
+def test_draw_gives_the_dot_text_and_an_svg_jupyter_shows(pendulum):
+    import shutil
+
+    from bgc import draw
+    dot = pendulum.draw("dot")
+    assert dot == draw.draw_dot(pendulum.compiled)
+    if shutil.which("dot"):
+        svg = pendulum.draw()
+        assert "<svg" in svg._repr_svg_() and "rod" in svg
+    with pytest.raises(ValueError, match="format must be one of"):
+        pendulum.draw("pdf")
