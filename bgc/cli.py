@@ -37,9 +37,13 @@ def _or_exit(call, *args):
 
 
 def _build(model, scene, project_initial=False, algebra="auto", program=True,
-           residual_outputs=False, outputs=None, effects=None) -> api.Compiled:
+           residual_outputs=False, outputs=None, effects=None,
+           allow_inconsistent=False) -> api.Compiled:
+    if project_initial and allow_inconsistent:
+        raise click.UsageError("--project-initial and --allow-inconsistent exclude each other")
     compiled = _or_exit(api.build, model, scene, project_initial, algebra, program,
-                        residual_outputs, outputs, effects, ("--outputs", "--effects", "--scene"))
+                        residual_outputs, outputs, effects, ("--outputs", "--effects", "--scene"),
+                        allow_inconsistent)
     _warn(compiled)
     return compiled
 
@@ -130,6 +134,10 @@ ALGEBRA = click.option("--algebra", type=click.Choice(list(api.ALGEBRA)), defaul
                             "generated code.")
 
 
+ALLOW_HELP = ("Start from initial values that violate the constraints, neither refusing nor "
+              "projecting them: the correctors pull the drift back (docs/stability.md).")
+
+
 class _Group(click.Group):
     """The commands; a C toolchain that fails (bgc.backends.BackendError) is reported as such,
     exit 1, without a traceback."""
@@ -199,9 +207,12 @@ def equations(model, scene, outputs, effects, algebra, fmt):
               help="Output file (default: stdout).")
 @click.option("--project-initial", is_flag=True, help="Project initial values onto the "
                                                       "constraints instead of refusing them.")
-def compile(model, scene, outputs, effects, algebra, target, output, project_initial):
+@click.option("--allow-inconsistent", is_flag=True, help=ALLOW_HELP)
+def compile(model, scene, outputs, effects, algebra, target, output, project_initial,
+            allow_inconsistent):
     """Emit standalone C or Python source code."""
-    compiled = _build(model, scene, project_initial, algebra, outputs=outputs, effects=effects)
+    compiled = _build(model, scene, project_initial, algebra, outputs=outputs, effects=effects,
+                      allow_inconsistent=allow_inconsistent)
     files = (emit_c if target == "c" else emit_python)(compiled.program)
     (text,) = files.values()
     if output:
@@ -232,6 +243,7 @@ def compile(model, scene, outputs, effects, algebra, target, output, project_ini
 @click.option("-p", "params", multiple=True, metavar="NAME=VALUE", help="Parameter override.")
 @click.option("--project-initial", is_flag=True, help="Project initial values onto the "
                                                       "constraints instead of refusing them.")
+@click.option("--allow-inconsistent", is_flag=True, help=ALLOW_HELP)
 @click.option("--stats", is_flag=True, help="Print the solver's counters (steps, rejected "
                                             "steps, right-side calls, Jacobians, "
                                             "factorisations, solves) to stderr.")
@@ -239,13 +251,14 @@ def compile(model, scene, outputs, effects, algebra, target, output, project_ini
               help="CSV file (default: stdout), written as the run goes and renamed into "
                    "place at its end; a failed run keeps the rows it computed.")
 def simulate(model, scene, outputs, effects, algebra, backend, solver, rtol, atol, t_end, dt,
-             step, max_steps, params, project_initial, stats, output):
+             step, max_steps, params, project_initial, allow_inconsistent, stats, output):
     """Simulate and write CSV."""
-    compiled = _build(model, scene, project_initial, algebra, outputs=outputs, effects=effects)
+    compiled = _build(model, scene, project_initial, algebra, outputs=outputs, effects=effects,
+                      allow_inconsistent=allow_inconsistent)
     _check_span(compiled, t_end, dt)
     overrides = _parse_params(params, compiled)
-    args = api.run_args(t_end, dt, solver, rtol, atol, step, overrides,
-                        project_initial, max_steps) + (["--stats"] if stats else [])
+    args = api.run_args(t_end, dt, solver, rtol, atol, step, overrides, project_initial,
+                        max_steps, allow_inconsistent) + (["--stats"] if stats else [])
     s = compiled.settings
     for message in stability.warnings_for_run(compiled, solver or s.solver, step or s.step,
                                               dt or s.dt, overrides):
