@@ -57,15 +57,21 @@ class Run:
     def __init__(self, code, out, err):
         self.code, self.out = code, out
         self.err = err.strip().splitlines()
-        lines = out.splitlines()
-        self.names = lines[0].split(",")[1:] if lines else []
-        self.data = np.loadtxt(lines[1:], delimiter=",", ndmin=2) if len(lines) > 1 \
-            else np.zeros((0, len(self.names) + 1))
         stats = [ln for ln in self.err if ln.startswith("stats:")]
         self.stats = {k: float(v) for k, v in (w.split("=") for w in stats[0].split()[1:])} \
             if stats else {}
         messages = [ln for ln in self.err if not ln.startswith("stats:")]
         self.last = messages[-1] if messages else ""
+
+    @functools.cached_property
+    def names(self):
+        return self.out.split("\n", 1)[0].split(",")[1:]
+
+    @functools.cached_property
+    def data(self):
+        lines = self.out.splitlines()[1:]
+        return np.loadtxt(lines, delimiter=",", ndmin=2) if lines else \
+            np.zeros((0, len(self.names) + 1))
 
     @property
     def t(self):
@@ -222,6 +228,18 @@ def test_allow_inconsistent_is_the_same_in_both_backends():
         assert both.code == 2
         assert both.last == ("error: --project-initial and --allow-inconsistent exclude each "
                              "other")
+
+
+def test_allow_inconsistent_in_batch_mode(tmp_path):
+    """--batch (what `bgc sweep` runs): each run is refused or started as the flag says."""
+    lines = tmp_path / "runs.txt"
+    lines.write_text("r0=1\nr0=1.001\n", encoding="utf-8")
+    for b in (["python", "c"] if HAVE_C else ["python"]):
+        for flag, status in (([], "constraint"), (["--allow-inconsistent"], "ok")):
+            r = run(OFFSET, "settle", b, "--batch", lines, "--t-end", 0.1, *flag)
+            assert r.code == 0
+            rows = r.out.splitlines()[1:]
+            assert [row.split(",")[1] for row in rows] == ["ok", status], r.out
 
 
 def test_allow_inconsistent_through_the_api_and_the_command_line(tmp_path):
