@@ -25,7 +25,7 @@ from .resolve import resolve
 from .resources import MAX_OUTPUT_ROWS, read_bounded  # noqa: F401 (re-exported)
 from .scene import Override, Settings, apply_scene
 from .run import (ALGEBRA, BACKENDS, FORMATS, SIMULATE_OPTIONS, TARGETS, check_run_options,
-                  choice as _choice, run_args, run_span_problem)
+                  choice as _choice, exclusive, run_args, run_span_problem)
 
 
 @dataclass(frozen=True)
@@ -80,13 +80,14 @@ def _model_error(exc: ModelError, source: Source) -> BgcModelError:
 
 
 def load(path, text: str | None = None, scene: str | None = None, backend: str = "c",
-         algebra: str = "auto", outputs=None, effects=None, project_initial: bool = False):
+         algebra: str = "auto", outputs=None, effects=None, project_initial: bool = False,
+         allow_inconsistent: bool = False):
     """A model for interactive use (bgc.model.Model, which is also a Source): the file read
     now (UTF-8, size-limited; `text` gives the source directly), built on first use with the
     scene and options given."""
     from .model import Model
     return Model(read_source(path, text), scene, backend, algebra, outputs, effects,
-                 project_initial)
+                 project_initial, allow_inconsistent)
 
 
 def read_source(path, text: str | None = None) -> Source:
@@ -141,15 +142,19 @@ def scene_override(outputs=None, effects=None, names=("outputs=", "effects=")) -
 def build(model, scene: str | None = None, project_initial: bool = False,
           algebra: str = "auto", program: bool = True,
           residual_outputs: bool = False, outputs=None, effects=None,
-          option_names=("outputs=", "effects=", "scene=")) -> Compiled:
+          option_names=("outputs=", "effects=", "scene="),
+          allow_inconsistent: bool = False) -> Compiled:
     """Run the pipeline up to the program IR (program=False: up to the reduce stage, all that
     `check` and `equations` need; Compiled.program is then None).  residual_outputs: every
     constraint's residual `J.residual` is an output too (after the scene's), for reports on
     the drift.  outputs, effects: an ad-hoc scene, replacing the scene's (see
     scene_override); option_names: how errors name outputs, effects and scene (the CLI's
-    `--outputs`).  Raises BgcModelError, or BgcArgumentError for a scene, outputs or effects
-    that the model refuses; ValueError or TypeError for an argument wrong in itself."""
+    `--outputs`).  project_initial, allow_inconsistent: initial values that violate a
+    constraint are not refused here (the program projects them, or starts from them).
+    Raises BgcModelError, or BgcArgumentError for a scene, outputs or effects that the model
+    refuses; ValueError or TypeError for an argument wrong in itself."""
     _choice("algebra", algebra, ALGEBRA)
+    exclusive(project_initial, allow_inconsistent)
     if scene is not None and not isinstance(scene, str):
         raise TypeError(f"scene must be a string or None, not {type(scene).__name__}")
     src = _source(model)
@@ -164,7 +169,8 @@ def build(model, scene: str | None = None, project_initial: bool = False,
         system = clock("equations", build_equations, causal)
         if residual_outputs:
             system = with_residual_outputs(system)
-        reduced = clock("reduce", reduce, system, project_initial, algebra)
+        reduced = clock("reduce", reduce, system, project_initial or allow_inconsistent,
+                        algebra)
         ir_program = clock("lower", lower, reduced) if program else None
     except ModelError as exc:
         raise _model_error(exc, src) from None
@@ -253,18 +259,20 @@ def equations(model, scene: str | None = None, format: str = "text",
 
 def compile(model, target: str = "c", scene: str | None = None,
             project_initial: bool = False, algebra: str = "auto", outputs=None,
-            effects=None) -> dict[str, str]:
+            effects=None, allow_inconsistent: bool = False) -> dict[str, str]:
     """Standalone source code: {filename: text}."""
     _choice("target", target, TARGETS)
     program = build(model, scene, project_initial, algebra, outputs=outputs,
-                    effects=effects).program
+                    effects=effects, allow_inconsistent=allow_inconsistent).program
     return emit_c(program) if target == "c" else emit_python(program)
 
 
 def simulate(model, scene: str | None = None, backend: str = "c", algebra: str = "auto",
              outputs=None, effects=None, **options):
     """Simulate; returns (t, Y, names).  outputs, effects: an ad-hoc scene (see build).
-    options: t_end, dt, solver, rtol, atol, step, params, project_initial, max_steps.
+    options: t_end, dt, solver, rtol, atol, step, params, project_initial, max_steps,
+    allow_inconsistent (start from initial values that violate the constraints, neither
+    refused nor projected: the correctors pull them back).
     backend "c" falls back to "python" when there is no C compiler."""
     _choice("backend", backend, BACKENDS)
     unknown = sorted(set(options) - set(SIMULATE_OPTIONS))
@@ -272,7 +280,8 @@ def simulate(model, scene: str | None = None, backend: str = "c", algebra: str =
         raise TypeError(f"simulate() got unknown options: {', '.join(unknown)}")
     check_run_options(options)
     compiled = build(model, scene, options.get("project_initial", False), algebra,
-                     outputs=outputs, effects=effects)
+                     outputs=outputs, effects=effects,
+                     allow_inconsistent=options.get("allow_inconsistent", False))
     names = [p.name for p in compiled.program.params]
     for name in options.get("params") or {}:
         if name not in names:
@@ -334,7 +343,8 @@ def sweep(model, scene: str | None = None, grid=None, sample=None, vary=None, se
         raise TypeError(f"sweep() got unknown options: {', '.join(unknown)}")
     names, values = sw.runs_from(grid, sample, vary, seed)
     compiled = model if isinstance(model, Compiled) else \
-        build(model, scene, options.get("project_initial", False), algebra)
+        build(model, scene, options.get("project_initial", False), algebra,
+              allow_inconsistent=options.get("allow_inconsistent", False))
     program = compiled.program
     sw.check_names(names, [p.name for p in program.params], options.get("params") or {})
     (py_text,) = emit_python(program).values()

@@ -54,9 +54,12 @@ def _or_exit(call, *args):
 
 
 def _build(model, scene, project_initial=False, algebra="auto", program=True,
-           residual_outputs=False, outputs=None, effects=None):
+           residual_outputs=False, outputs=None, effects=None, allow_inconsistent=False):
+    if project_initial and allow_inconsistent:
+        raise click.UsageError("--project-initial and --allow-inconsistent exclude each other")
     compiled = _or_exit(api.build, model, scene, project_initial, algebra, program,
-                        residual_outputs, outputs, effects, ("--outputs", "--effects", "--scene"))
+                        residual_outputs, outputs, effects, ("--outputs", "--effects", "--scene"),
+                        allow_inconsistent)
     _warn(compiled)
     return compiled
 
@@ -148,6 +151,10 @@ ALGEBRA = click.option("--algebra", type=click.Choice(list(run.ALGEBRA)), defaul
                             "generated code.")
 
 
+ALLOW_HELP = ("Start from initial values that violate the constraints, neither refusing nor "
+              "projecting them: the correctors pull the drift back (docs/stability.md).")
+
+
 class _Group(click.Group):
     """The commands; a C toolchain that fails (bgc.backends.BackendError) is reported as such,
     exit 1, without a traceback."""
@@ -218,9 +225,12 @@ def equations(model, scene, outputs, effects, algebra, fmt):
               help="Output file (default: stdout).")
 @click.option("--project-initial", is_flag=True, help="Project initial values onto the "
                                                       "constraints instead of refusing them.")
-def compile(model, scene, outputs, effects, algebra, target, output, project_initial):
+@click.option("--allow-inconsistent", is_flag=True, help=ALLOW_HELP)
+def compile(model, scene, outputs, effects, algebra, target, output, project_initial,
+            allow_inconsistent):
     """Emit standalone C or Python source code."""
-    compiled = _build(model, scene, project_initial, algebra, outputs=outputs, effects=effects)
+    compiled = _build(model, scene, project_initial, algebra, outputs=outputs, effects=effects,
+                      allow_inconsistent=allow_inconsistent)
     files = (emit.emit_c if target == "c" else emit.emit_python)(compiled.program)
     (text,) = files.values()
     if output:
@@ -251,6 +261,7 @@ def compile(model, scene, outputs, effects, algebra, target, output, project_ini
 @click.option("-p", "params", multiple=True, metavar="NAME=VALUE", help="Parameter override.")
 @click.option("--project-initial", is_flag=True, help="Project initial values onto the "
                                                       "constraints instead of refusing them.")
+@click.option("--allow-inconsistent", is_flag=True, help=ALLOW_HELP)
 @click.option("--stats", is_flag=True, help="Print the solver's counters (steps, rejected "
                                             "steps, right-side calls, Jacobians, "
                                             "factorisations, solves) to stderr.")
@@ -258,19 +269,21 @@ def compile(model, scene, outputs, effects, algebra, target, output, project_ini
               help="CSV file (default: stdout), written as the run goes and renamed into "
                    "place at its end; a failed run keeps the rows it computed.")
 def simulate(model, scene, outputs, effects, algebra, backend, solver, rtol, atol, t_end, dt,
-             step, max_steps, params, project_initial, stats, output):
+             step, max_steps, params, project_initial, allow_inconsistent, stats, output):
     """Simulate and write CSV.  A model compiled before with the same options runs at once
     (bgc.warm); otherwise it is compiled, and the result kept for the next run."""
+    if project_initial and allow_inconsistent:
+        raise click.UsageError("--project-initial and --allow-inconsistent exclude each other")
     if backend == "c" and not backends.have_c_compiler():
         click.echo("warning: no C compiler found (cc or $CC); using the Python backend", err=True)
         backend = "python"
-    request = warm.Request(model, scene, outputs, effects, algebra, project_initial, backend)
+    request = warm.Request(model, scene, outputs, effects, algebra, project_initial,
+                           allow_inconsistent, backend)
     found = warm.lookup(request)
     if found is not None and found[0].correctors and _fixed_step(solver or found[0].solver, step):
         found = None  # (bgc.stability's check of the step needs the compiled model)
     if found is None:
-        record, program, compiled = _compile_for_run(request, model, scene, outputs, effects,
-                                                     algebra, project_initial, backend)
+        record, program, compiled = _compile_for_run(request)
     else:
         (record, program), compiled = found, None
         click.echo(record.warnings, err=True, nl=False)
@@ -278,8 +291,8 @@ def simulate(model, scene, outputs, effects, algebra, backend, solver, rtol, ato
     if problem:
         raise click.UsageError(problem)
     overrides = _parse_params(params, record.params)
-    args = run.run_args(t_end, dt, solver, rtol, atol, step, overrides,
-                        project_initial, max_steps) + (["--stats"] if stats else [])
+    args = run.run_args(t_end, dt, solver, rtol, atol, step, overrides, project_initial,
+                        max_steps, allow_inconsistent) + (["--stats"] if stats else [])
     if compiled is not None and record.correctors:
         for message in stability.warnings_for_run(compiled, solver or record.solver,
                                                   step or record.step, dt or record.dt,
@@ -293,18 +306,19 @@ def _fixed_step(solver: str, step) -> bool:
     return step is not None or solvers.get(solver).family == "fixed"
 
 
-def _compile_for_run(request, model, scene, outputs, effects, algebra, project_initial,
-                     backend):
+def _compile_for_run(request: warm.Request):
     """The cold path: build the model, compile its program into the cache, keep a warm
-    record of it; (record, program path)."""
+    record of it; (record, program path, the compiled model)."""
+    r = request
     try:
-        data = read_bounded(model)
+        data = read_bounded(r.model)
     except OSError as exc:
-        click.echo(f"error: {model}: cannot read: {exc.strerror}", err=True)
+        click.echo(f"error: {r.model}: cannot read: {exc.strerror}", err=True)
         sys.exit(1)
-    source = _or_exit(api.source_from_bytes, model, data)
-    compiled = _build(source, scene, project_initial, algebra, outputs=outputs, effects=effects)
-    if backend == "c":
+    source = _or_exit(api.source_from_bytes, r.model, data)
+    compiled = _build(source, r.scene, r.project_initial, r.algebra, outputs=r.outputs,
+                      effects=r.effects, allow_inconsistent=r.allow_inconsistent)
+    if r.backend == "c":
         (text,) = emit.emit_c(compiled.program).values()
         program = backends.compile_c(text)
     else:

@@ -87,14 +87,15 @@ class Model(api.Source):
 
     def __init__(self, source: api.Source, scene: str | None = None, backend: str = "c",
                  algebra: str = "auto", outputs=None, effects=None,
-                 project_initial: bool = False):
+                 project_initial: bool = False, allow_inconsistent: bool = False):
         run.choice("backend", backend, run.BACKENDS)
         run.choice("algebra", algebra, run.ALGEBRA)
+        run.exclusive(project_initial, allow_inconsistent)
         object.__setattr__(self, "path", source.path)
         object.__setattr__(self, "text", source.text)
         object.__setattr__(self, "_options", dict(
             scene=scene, backend=backend, algebra=algebra, outputs=outputs, effects=effects,
-            project_initial=bool(project_initial)))
+            project_initial=bool(project_initial), allow_inconsistent=bool(allow_inconsistent)))
 
     @property
     def scene(self) -> str | None:
@@ -109,7 +110,8 @@ class Model(api.Source):
         """Every stage's value (bgc.build)."""
         o = self._options
         return api.build(api.Source(self.path, self.text), o["scene"], o["project_initial"],
-                         o["algebra"], outputs=o["outputs"], effects=o["effects"])
+                         o["algebra"], outputs=o["outputs"], effects=o["effects"],
+                         allow_inconsistent=o["allow_inconsistent"])
 
     @functools.cached_property
     def _module(self):
@@ -157,11 +159,12 @@ class Model(api.Source):
         """The state vector a run starts from, with these parameter values: the model's
         initial values, projected onto the constraints if the Model was loaded with
         project_initial=True (a run refuses values that violate a constraint otherwise:
-        ConstraintError)."""
+        ConstraintError, unless the Model was loaded with allow_inconsistent=True)."""
         m = self._module
         p = m._with_constants(self._p(params))
-        return np.array(m._initial_state(m._settings(), p, self._options["project_initial"]),
-                        dtype=float)
+        o = self._options
+        return np.array(m._initial_state(m._settings(), p, o["project_initial"],
+                                         o["allow_inconsistent"]), dtype=float)
 
     @property
     def x0(self) -> np.ndarray:
@@ -186,8 +189,9 @@ class Model(api.Source):
         options = {k: v for k, v in dict(t_end=t_end, dt=dt, solver=solver, rtol=rtol,
                                           atol=atol, step=step, max_steps=max_steps,
                                           params=params).items() if v is not None}
-        if self._options["project_initial"]:
-            options["project_initial"] = True
+        for flag in ("project_initial", "allow_inconsistent"):
+            if self._options[flag]:
+                options[flag] = True
         run.check_run_options(options)
         unknown = sorted(set(params or {}) - set(self.parameters))
         if unknown:

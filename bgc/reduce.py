@@ -915,8 +915,8 @@ def check_initial(reduced: Reduced):
                 else "Phi (nonholonomic)"
             diags.error(c.name_span, f"initial conditions violate constraint '{row.junction}': "
                                      f"{what} = {r:.6g} (relative {abs(r) / s if s else r:.3g}, "
-                                     f"tolerance {RELATIVE_TOLERANCE:g}); fix the initial values "
-                                     "or use --project-initial")
+                                     f"tolerance {RELATIVE_TOLERANCE:g}); fix the initial values, "
+                                     "or use --project-initial or --allow-inconsistent")
     diags.raise_if_errors()
 
 

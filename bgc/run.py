@@ -14,7 +14,7 @@ BACKENDS = ("c", "python")  # what runs a simulation
 TARGETS = ("c", "python")  # what `compile` writes
 FORMATS = ("text", "latex")  # what `equations` prints
 SIMULATE_OPTIONS = ("t_end", "dt", "solver", "rtol", "atol", "step", "params", "project_initial",
-                    "max_steps")
+                    "max_steps", "allow_inconsistent")
 
 
 def choice(name: str, value, allowed):
@@ -24,8 +24,14 @@ def choice(name: str, value, allowed):
                          f"not {value!r}")
 
 
+def exclusive(project_initial, allow_inconsistent):
+    """ValueError if both ways of treating inconsistent initial values are asked for."""
+    if project_initial and allow_inconsistent:
+        raise ValueError("project_initial and allow_inconsistent exclude each other")
+
+
 def run_args(t_end=None, dt=None, solver=None, rtol=None, atol=None, step=None, params=None,
-             project_initial=False, max_steps=None) -> list[str]:
+             project_initial=False, max_steps=None, allow_inconsistent=False) -> list[str]:
     """The generated program's command line for these settings."""
     args = []
     for flag, value in (("--t-end", t_end), ("--dt", dt), ("--solver", solver),
@@ -37,6 +43,8 @@ def run_args(t_end=None, dt=None, solver=None, rtol=None, atol=None, step=None, 
         args += ["-p", f"{name}={float(value)!r}"]
     if project_initial:
         args.append("--project-initial")
+    if allow_inconsistent:
+        args.append("--allow-inconsistent")
     return args
 
 
@@ -60,6 +68,7 @@ def check_run_options(options: dict):
                               or not 0 <= steps <= 10**15):
         raise ValueError(f"max_steps must be a whole number from 0 (no limit) to 1e15, "
                          f"not {steps!r}")
+    exclusive(options.get("project_initial"), options.get("allow_inconsistent"))
     params = options.get("params") or {}
     if not isinstance(params, dict):
         raise TypeError("params must be a dict of parameter names to numbers")

@@ -10,8 +10,8 @@ end, output interval, solver and step, and whether a constraint has a pid or pd 
 A record's key is the SHA-256 of everything its contents depend on: this record format, bgc's
 version and the size and modification time of every file bgc is made of (so an edited or
 upgraded bgc misses), the model's path as given (it appears in the warnings) and the SHA-256 of
-its bytes, the scene and ad-hoc scene options, the algebra, --project-initial, the backend, and
-the C compiler's resolved path, size and modification time with $CC and the flags (or, for the
+its bytes, the scene and ad-hoc scene options, the algebra, --project-initial and
+--allow-inconsistent, the backend, and the C compiler's resolved path, size and modification time with $CC and the flags (or, for the
 Python backend, the interpreter).  Nothing in the key is a timestamp of the model: the same
 text under the same name hits, whatever its mtime.
 
@@ -48,6 +48,7 @@ class Request:
     effects: str | None
     algebra: str
     project_initial: bool
+    allow_inconsistent: bool
     backend: str
 
 

@@ -68,6 +68,9 @@ void bgc_velocity_jac(double t, const double *x, const bgc_params *p, double *J)
 
 /* Number of violated constraint rows at (t, x); each is reported on err if err != NULL. */
 int bgc_check_constraints(double t, const double *x, const bgc_params *p, FILE *err);
+/* The same for a run that starts off its constraints on purpose (--allow-inconsistent): only
+   the rows whose residual is not finite (the model undefined there) count. */
+int bgc_check_constraints_finite(double t, const double *x, const bgc_params *p, FILE *err);
 /* Gauss-Newton minimum-norm projection of x onto the position rows, then onto the velocity
    rows (moving only velocity-movable states).  0 on success, else BGC_ERR_CONSTRAINT
    with a message in msg. */

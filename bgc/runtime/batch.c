@@ -176,9 +176,10 @@ static int bgc_batch_line(char *line, bgc_params *p, int *given, char *msg, size
     return 0;
 }
 
-/* The violated constraint rows at (t, x) as one message; their number. */
-static int bgc_batch_constraints(double t, const double *x, const bgc_params *p, char *msg,
-                                 size_t msg_size)
+/* The violated constraint rows at (t, x) as one message (with allow, as for
+   --allow-inconsistent, only those not finite); their number. */
+static int bgc_batch_constraints(double t, const double *x, const bgc_params *p, int allow,
+                                 char *msg, size_t msg_size)
 {
     double r[BGC_DIM(BGC_NUM_CONSTRAINTS)] = { 0.0 }, s[BGC_DIM(BGC_NUM_CONSTRAINTS)] = { 0.0 };
     bgc_params q = *p;
@@ -189,7 +190,7 @@ static int bgc_batch_constraints(double t, const double *x, const bgc_params *p,
     bgc_scale(t, x, &q, s);
     msg[0] = '\0';
     for (k = 0; k < BGC_NUM_CONSTRAINTS; k++) {
-        if (fabs(r[k]) <= 1e-9 * s[k])
+        if (fabs(r[k]) <= 1e-9 * s[k] || (allow && isfinite(r[k])))
             continue;
         if (used < msg_size)
             used += (size_t)snprintf(msg + used, msg_size - used,
@@ -224,9 +225,9 @@ static const char *bgc_batch_run(const bgc_settings *s, bgc_params p, int *given
                  bgc_state_names[i]);
         return "failed";
     }
-    if (project && bgc_project_initial(s->t0, x0, &p, msg, msg_size))
+    if (project == 1 && bgc_project_initial(s->t0, x0, &p, msg, msg_size))
         return "constraint";
-    if (bgc_batch_constraints(s->t0, x0, &p, msg, msg_size))
+    if (bgc_batch_constraints(s->t0, x0, &p, project == 2, msg, msg_size))
         return "constraint";
     if (bgc_simulate(s, &p, x0, bgc_batch_row, b, st, msg, msg_size))
         return "failed";

@@ -51,7 +51,7 @@ def _line_overrides(run):
     return given
 
 
-def _batch_run(s, base, project, run, specs, trajectory):
+def _batch_run(s, base, project, run, specs, trajectory, allow=False):
     """One run: (status, message, metric values, stats)."""
     st = _new_stats()
     nan = [math.nan] * len(specs)
@@ -62,7 +62,7 @@ def _batch_run(s, base, project, run, specs, trajectory):
         return "invalid", str(error), nan, st
     p = _with_constants(_param_values(given))
     try:
-        x0 = _initial_state(s, p, project)
+        x0 = _initial_state(s, p, project, allow)
     except SimulationError as error:
         return "failed", str(error), nan, st
     except ConstraintError as error:
@@ -106,12 +106,14 @@ def _batch_run(s, base, project, run, specs, trajectory):
 
 def batch_rows(runs, metrics=(), t_end=None, dt=None, solver=None, rtol=None, atol=None,
                params=None, step=None, project_initial=False, trajectories=None,
-               max_steps=None):
+               max_steps=None, allow_inconsistent=False):
     """Runs each of `runs` (a line of NAME=VALUE words, or a dict {name: value}) on top of the
     defaults and `params`, yielding one dict per run as it completes: run (its number from 0),
     status (ok, failed, constraint, invalid), each metric ("KIND:OUTPUT", see METRIC_KINDS),
     steps, rejected, rhs, cpu, message.  trajectories: a directory for each run's CSV
     (run-NNNNNN.csv).  ValueError for bad settings or metrics, before any run."""
+    if project_initial and allow_inconsistent:
+        raise ValueError("project_initial and allow_inconsistent exclude each other")
     s = _settings(t_end, dt, solver, rtol, atol, step, max_steps)
     base = _overrides(params)
     specs = [_metric_spec(m) for m in metrics]
@@ -122,7 +124,8 @@ def batch_rows(runs, metrics=(), t_end=None, dt=None, solver=None, rtol=None, at
         path = None
         if trajectories is not None:
             path = "%s/run-%06d.csv" % (trajectories, index)
-        status, message, values, st = _batch_run(s, base, project_initial, run, specs, path)
+        status, message, values, st = _batch_run(s, base, project_initial, run, specs, path,
+                                                 allow_inconsistent)
         row = {"run": index, "status": status}
         row.update(zip(metrics, values))
         row.update(steps=st["steps"], rejected=st["rejected"], rhs=st["rhs"], cpu=st["cpu"],
@@ -195,6 +198,7 @@ def _batch_main(argv):
     try:
         for row in batch_rows((line for line in source), metrics, params=params,
                               project_initial="--project-initial" in flags,
+                              allow_inconsistent="--allow-inconsistent" in flags,
                               trajectories=own["--trajectories"], **options):
             out.write("%d,%s%s,%d,%d,%d,%.17g,%s\n" % (
                 row["run"], row["status"], "".join(",%.17g" % row[m] for m in metrics),

@@ -344,7 +344,8 @@ static void bgc_csv_header(FILE *f)
 
 static const char bgc_usage[] =
     " [--t-end T] [--dt DT] [--solver NAME] [--rtol R] [--atol A]\n"
-    "       [--step H] [--max-steps N] [-p NAME=VALUE ...] [--project-initial] [--stats]\n"
+    "       [--step H] [--max-steps N] [-p NAME=VALUE ...] [--stats]\n"
+    "       [--project-initial | --allow-inconsistent]\n"
     "       [--batch FILE|- [--metric KIND:OUTPUT ...] [--trajectories DIR]]\n";
 
 static void bgc_print_usage(FILE *f)
@@ -370,6 +371,8 @@ static void bgc_help(void)
            "  --max-steps N      the most steps between two output times (%ld; 0: no limit)\n"
            "  -p NAME=VALUE      set a parameter; derived parameters follow\n"
            "  --project-initial  project the initial state onto the constraints\n"
+           "  --allow-inconsistent  start from an initial state that violates the constraints\n"
+           "                     (the correctors pull it back): neither refused nor projected\n"
            "  --stats            print the solver's counters to stderr\n"
            "  --batch FILE       one run per line of FILE (- for stdin): NAME=VALUE words;\n"
            "                     writes a CSV row per run: run,status,metrics,steps,rejected,\n"
@@ -468,7 +471,8 @@ static int bgc_apply_option(const char *name, const char *value, bgc_settings *s
                                                                       : &s->atol);
 }
 
-/* -1 to run, else the exit status: 0 after --help, 2 after a usage error. */
+/* -1 to run, else the exit status: 0 after --help, 2 after a usage error.  *project: 1 with
+   --project-initial, 2 with --allow-inconsistent (they exclude each other). */
 static int bgc_parse_args(int argc, char **argv, bgc_settings *s, bgc_params *p, int *given,
                           int *project, int *stats)
 {
@@ -483,8 +487,18 @@ static int bgc_parse_args(int argc, char **argv, bgc_settings *s, bgc_params *p,
             bgc_help();
             return 0;
         }
-        if (strcmp(arg, "--project-initial") == 0 || strcmp(arg, "--stats") == 0) {
-            *(arg[2] == 'p' ? project : stats) = 1;
+        if (strcmp(arg, "--project-initial") == 0 || strcmp(arg, "--allow-inconsistent") == 0) {
+            const int mode = arg[2] == 'p' ? 1 : 2;
+            if (*project && *project != mode) {
+                fprintf(stderr, "error: --project-initial and --allow-inconsistent exclude each "
+                        "other\n");
+                return BGC_ERR_USAGE;
+            }
+            *project = mode;
+            continue;
+        }
+        if (strcmp(arg, "--stats") == 0) {
+            *stats = 1;
             continue;
         }
         for (k = 0; k < BGC_COUNT(with_value); k++)
@@ -548,11 +562,12 @@ int main(int argc, char **argv)
         fprintf(stderr, "error: at t = %.17g: state '%s' is not finite\n", s.t0, bgc_state_names[i]);
         return BGC_ERR_RUNTIME;
     }
-    if (project && bgc_project_initial(s.t0, x0, &p, msg, sizeof msg)) {
+    if (project == 1 && bgc_project_initial(s.t0, x0, &p, msg, sizeof msg)) {
         fprintf(stderr, "error: %s\n", msg);
         return BGC_ERR_CONSTRAINT;
     }
-    if (bgc_check_constraints(s.t0, x0, &p, stderr))
+    if ((project == 2 ? bgc_check_constraints_finite : bgc_check_constraints)(s.t0, x0, &p,
+                                                                              stderr))
         return BGC_ERR_CONSTRAINT;
 
     signal(SIGINT, bgc_on_signal);

@@ -84,6 +84,9 @@ void bgc_velocity_jac(double t, const double *x, const bgc_params *p, double *J)
 
 /* Number of violated constraint rows at (t, x); each is reported on err if err != NULL. */
 int bgc_check_constraints(double t, const double *x, const bgc_params *p, FILE *err);
+/* The same for a run that starts off its constraints on purpose (--allow-inconsistent): only
+   the rows whose residual is not finite (the model undefined there) count. */
+int bgc_check_constraints_finite(double t, const double *x, const bgc_params *p, FILE *err);
 /* Gauss-Newton minimum-norm projection of x onto the position rows, then onto the velocity
    rows (moving only velocity-movable states).  0 on success, else BGC_ERR_CONSTRAINT
    with a message in msg. */
@@ -655,7 +658,8 @@ int bgc_jvp(double t, const double *x, const bgc_params *p, bgc_work *w, const d
 
 /* ========================================================= constraints === */
 
-int bgc_check_constraints(double t, const double *x, const bgc_params *p, FILE *err)
+/* The rows that fail at (t, x): violated or not finite, or with allow only not finite. */
+static int bgc_check_rows(double t, const double *x, const bgc_params *p, int allow, FILE *err)
 {
     double r[BGC_DIM(BGC_NUM_CONSTRAINTS)] = { 0.0 }, s[BGC_DIM(BGC_NUM_CONSTRAINTS)] = { 0.0 };
     bgc_params q = *p;
@@ -664,7 +668,7 @@ int bgc_check_constraints(double t, const double *x, const bgc_params *p, FILE *
     bgc_residual(t, x, &q, r);
     bgc_scale(t, x, &q, s);
     for (k = 0; k < BGC_NUM_CONSTRAINTS; k++) {
-        if (fabs(r[k]) <= 1e-9 * s[k])
+        if (fabs(r[k]) <= 1e-9 * s[k] || (allow && isfinite(r[k])))
             continue;
         bad++;
         if (err && !isfinite(r[k]))
@@ -676,6 +680,16 @@ int bgc_check_constraints(double t, const double *x, const bgc_params *p, FILE *
                     bgc_constraint_names[k], bgc_constraint_levels[k], r[k]);
     }
     return bad;
+}
+
+int bgc_check_constraints(double t, const double *x, const bgc_params *p, FILE *err)
+{
+    return bgc_check_rows(t, x, p, 0, err);
+}
+
+int bgc_check_constraints_finite(double t, const double *x, const bgc_params *p, FILE *err)
+{
+    return bgc_check_rows(t, x, p, 1, err);
 }
 
 /* Solves A z = b (A m x m row-major, both overwritten, z in b) by Gaussian elimination with
@@ -2788,7 +2802,8 @@ static void bgc_csv_header(FILE *f)
 
 static const char bgc_usage[] =
     " [--t-end T] [--dt DT] [--solver NAME] [--rtol R] [--atol A]\n"
-    "       [--step H] [--max-steps N] [-p NAME=VALUE ...] [--project-initial] [--stats]\n"
+    "       [--step H] [--max-steps N] [-p NAME=VALUE ...] [--stats]\n"
+    "       [--project-initial | --allow-inconsistent]\n"
     "       [--batch FILE|- [--metric KIND:OUTPUT ...] [--trajectories DIR]]\n";
 
 static void bgc_print_usage(FILE *f)
@@ -2814,6 +2829,8 @@ static void bgc_help(void)
            "  --max-steps N      the most steps between two output times (%ld; 0: no limit)\n"
            "  -p NAME=VALUE      set a parameter; derived parameters follow\n"
            "  --project-initial  project the initial state onto the constraints\n"
+           "  --allow-inconsistent  start from an initial state that violates the constraints\n"
+           "                     (the correctors pull it back): neither refused nor projected\n"
            "  --stats            print the solver's counters to stderr\n"
            "  --batch FILE       one run per line of FILE (- for stdin): NAME=VALUE words;\n"
            "                     writes a CSV row per run: run,status,metrics,steps,rejected,\n"
@@ -2912,7 +2929,8 @@ static int bgc_apply_option(const char *name, const char *value, bgc_settings *s
                                                                       : &s->atol);
 }
 
-/* -1 to run, else the exit status: 0 after --help, 2 after a usage error. */
+/* -1 to run, else the exit status: 0 after --help, 2 after a usage error.  *project: 1 with
+   --project-initial, 2 with --allow-inconsistent (they exclude each other). */
 static int bgc_parse_args(int argc, char **argv, bgc_settings *s, bgc_params *p, int *given,
                           int *project, int *stats)
 {
@@ -2927,8 +2945,18 @@ static int bgc_parse_args(int argc, char **argv, bgc_settings *s, bgc_params *p,
             bgc_help();
             return 0;
         }
-        if (strcmp(arg, "--project-initial") == 0 || strcmp(arg, "--stats") == 0) {
-            *(arg[2] == 'p' ? project : stats) = 1;
+        if (strcmp(arg, "--project-initial") == 0 || strcmp(arg, "--allow-inconsistent") == 0) {
+            const int mode = arg[2] == 'p' ? 1 : 2;
+            if (*project && *project != mode) {
+                fprintf(stderr, "error: --project-initial and --allow-inconsistent exclude each "
+                        "other\n");
+                return BGC_ERR_USAGE;
+            }
+            *project = mode;
+            continue;
+        }
+        if (strcmp(arg, "--stats") == 0) {
+            *stats = 1;
             continue;
         }
         for (k = 0; k < BGC_COUNT(with_value); k++)
@@ -2992,11 +3020,12 @@ int main(int argc, char **argv)
         fprintf(stderr, "error: at t = %.17g: state '%s' is not finite\n", s.t0, bgc_state_names[i]);
         return BGC_ERR_RUNTIME;
     }
-    if (project && bgc_project_initial(s.t0, x0, &p, msg, sizeof msg)) {
+    if (project == 1 && bgc_project_initial(s.t0, x0, &p, msg, sizeof msg)) {
         fprintf(stderr, "error: %s\n", msg);
         return BGC_ERR_CONSTRAINT;
     }
-    if (bgc_check_constraints(s.t0, x0, &p, stderr))
+    if ((project == 2 ? bgc_check_constraints_finite : bgc_check_constraints)(s.t0, x0, &p,
+                                                                              stderr))
         return BGC_ERR_CONSTRAINT;
 
     signal(SIGINT, bgc_on_signal);
@@ -3197,9 +3226,10 @@ static int bgc_batch_line(char *line, bgc_params *p, int *given, char *msg, size
     return 0;
 }
 
-/* The violated constraint rows at (t, x) as one message; their number. */
-static int bgc_batch_constraints(double t, const double *x, const bgc_params *p, char *msg,
-                                 size_t msg_size)
+/* The violated constraint rows at (t, x) as one message (with allow, as for
+   --allow-inconsistent, only those not finite); their number. */
+static int bgc_batch_constraints(double t, const double *x, const bgc_params *p, int allow,
+                                 char *msg, size_t msg_size)
 {
     double r[BGC_DIM(BGC_NUM_CONSTRAINTS)] = { 0.0 }, s[BGC_DIM(BGC_NUM_CONSTRAINTS)] = { 0.0 };
     bgc_params q = *p;
@@ -3210,7 +3240,7 @@ static int bgc_batch_constraints(double t, const double *x, const bgc_params *p,
     bgc_scale(t, x, &q, s);
     msg[0] = '\0';
     for (k = 0; k < BGC_NUM_CONSTRAINTS; k++) {
-        if (fabs(r[k]) <= 1e-9 * s[k])
+        if (fabs(r[k]) <= 1e-9 * s[k] || (allow && isfinite(r[k])))
             continue;
         if (used < msg_size)
             used += (size_t)snprintf(msg + used, msg_size - used,
@@ -3245,9 +3275,9 @@ static const char *bgc_batch_run(const bgc_settings *s, bgc_params p, int *given
                  bgc_state_names[i]);
         return "failed";
     }
-    if (project && bgc_project_initial(s->t0, x0, &p, msg, msg_size))
+    if (project == 1 && bgc_project_initial(s->t0, x0, &p, msg, msg_size))
         return "constraint";
-    if (bgc_batch_constraints(s->t0, x0, &p, msg, msg_size))
+    if (bgc_batch_constraints(s->t0, x0, &p, project == 2, msg, msg_size))
         return "constraint";
     if (bgc_simulate(s, &p, x0, bgc_batch_row, b, st, msg, msg_size))
         return "failed";

@@ -538,8 +538,9 @@ PARAMETERS = dict(zip(_PARAM_NAMES, _param_values({})))
 # ---------------------------------------------------------------- constraints
 
 
-def _check_constraints(t, x, p):
-    """Messages for the violated constraint rows at (t, x)."""
+def _check_constraints(t, x, p, allow=False):
+    """Messages for the violated constraint rows at (t, x); with allow (a run started off its
+    constraints on purpose, --allow-inconsistent) only for the rows that are not finite."""
     r, s = _residual(t, x, p), _scale(t, x, p)
     return [
         ("initial conditions violate constraint '%s' (%s): residual = %.17g"
@@ -548,7 +549,7 @@ def _check_constraints(t, x, p):
          "at the initial state with these parameters (a zero mass, say)"
          % (t, CONSTRAINTS[k][1], CONSTRAINTS[k][0]))
         for k in range(len(CONSTRAINTS))
-        if not abs(r[k]) <= 1e-9 * s[k]
+        if not (abs(r[k]) <= 1e-9 * s[k] or (allow and math.isfinite(r[k])))
     ]
 
 
@@ -684,9 +685,10 @@ def _overrides(params):
     return given
 
 
-def _initial_state(s, p, project_initial):
-    """x0 for the run: initialised, checked finite, projected if asked, constraints checked.
-    p: the parameters and their constants."""
+def _initial_state(s, p, project_initial, allow_inconsistent=False):
+    """x0 for the run: initialised, checked finite, projected if asked, constraints checked
+    (only for finite residuals with allow_inconsistent).  p: the parameters and their
+    constants."""
     j = _first_nonfinite(p[:len(_PARAM_NAMES)])
     if j >= 0:
         raise SimulationError("parameter '%s' is not finite" % _PARAM_NAMES[j], s.t0,
@@ -698,21 +700,25 @@ def _initial_state(s, p, project_initial):
                               numpy.zeros((0, len(OUTPUTS))))
     if project_initial:
         _project_initial(s.t0, x0, p)
-    messages = _check_constraints(s.t0, x0, p)
+    messages = _check_constraints(s.t0, x0, p, allow_inconsistent)
     if messages:
         raise ConstraintError("; ".join(messages), messages)
     return x0
 
 
 def rows(t_end=None, dt=None, solver=None, rtol=None, atol=None, params=None, step=None,
-         project_initial=False, stats=None, max_steps=None):
+         project_initial=False, stats=None, max_steps=None, allow_inconsistent=False):
     """Runs the model, yielding each output row (t, y) as it is computed (y a list ordered as
     OUTPUTS): memory does not grow with the run's length.  A failure raises SimulationError
     after the rows before it (its .times and .rows are then empty: they were yielded).
-    stats: a dict that receives the solver's counters."""
+    stats: a dict that receives the solver's counters.  allow_inconsistent: start from
+    initial values that violate the constraints, neither refused nor projected (the
+    correctors pull them back); it excludes project_initial."""
+    if project_initial and allow_inconsistent:
+        raise ValueError("project_initial and allow_inconsistent exclude each other")
     s = _settings(t_end, dt, solver, rtol, atol, step, max_steps)
     p = _with_constants(_param_values(_overrides(params)))
-    x0 = _initial_state(s, p, project_initial)
+    x0 = _initial_state(s, p, project_initial, allow_inconsistent)
     st = _new_stats() if stats is None else stats
     st.update(_new_stats())
     try:
@@ -724,12 +730,12 @@ def rows(t_end=None, dt=None, solver=None, rtol=None, atol=None, params=None, st
 
 
 def simulate(t_end=None, dt=None, solver=None, rtol=None, atol=None, params=None, step=None,
-             project_initial=False, out=None, max_steps=None):
+             project_initial=False, out=None, max_steps=None, allow_inconsistent=False):
     """Runs the model; returns (t, Y) with Y[k] the outputs at t[k].  None: the scene's value.
     out: a file name or a text file: the CSV is written there row by row as the run goes
     (header first, as the program writes it) and nothing is kept: returns the number of rows."""
     run = rows(t_end, dt, solver, rtol, atol, params, step, project_initial,
-               max_steps=max_steps)
+               max_steps=max_steps, allow_inconsistent=allow_inconsistent)
     if out is not None:
         return _stream(run, out)
     times, values = [], []
@@ -765,7 +771,8 @@ def _row_text(t, y):
 
 USAGE = (
     " [--t-end T] [--dt DT] [--solver NAME] [--rtol R] [--atol A]\n"
-    "       [--step H] [--max-steps N] [-p NAME=VALUE ...] [--project-initial] [--stats]\n"
+    "       [--step H] [--max-steps N] [-p NAME=VALUE ...] [--stats]\n"
+    "       [--project-initial | --allow-inconsistent]\n"
     "       [--batch FILE|- [--metric KIND:OUTPUT ...] [--trajectories DIR]]\n"
 )
 _WITH_VALUE = ("--t-end", "--dt", "--solver", "--rtol", "--atol", "--step", "--max-steps", "-p")
@@ -794,6 +801,8 @@ def _help():
         % s.max_steps,
         "  -p NAME=VALUE      set a parameter; derived parameters follow",
         "  --project-initial  project the initial state onto the constraints",
+        "  --allow-inconsistent  start from an initial state that violates the constraints",
+        "                     (the correctors pull it back): neither refused nor projected",
         "  --stats            print the solver's counters to stderr",
         "  --batch FILE       one run per line of FILE (- for stdin): NAME=VALUE words;",
         "                     writes a CSV row per run: run,status,metrics,steps,rejected,",
@@ -861,8 +870,11 @@ def _parse_args(argv):
         if arg in ("-h", "--help"):
             _help()
             return None
-        if arg in ("--project-initial", "--stats"):
+        if arg in ("--project-initial", "--allow-inconsistent", "--stats"):
             flags.add(arg)
+            if {"--project-initial", "--allow-inconsistent"} <= flags:
+                raise _UsageError(
+                    "error: --project-initial and --allow-inconsistent exclude each other\n")
             i += 1
             continue
         name, eq, value = arg.partition("=") if arg.startswith("--") else (arg, "", "")
@@ -908,7 +920,8 @@ def main(argv=None):
         return 2
     p = _with_constants(_param_values(given))
     try:
-        x0 = _initial_state(s, p, "--project-initial" in flags)
+        x0 = _initial_state(s, p, "--project-initial" in flags,
+                            "--allow-inconsistent" in flags)
     except ConstraintError as error:
         sys.stderr.write("".join("error: %s\n" % m for m in error.messages))
         return 1
@@ -2136,7 +2149,7 @@ def _line_overrides(run):
     return given
 
 
-def _batch_run(s, base, project, run, specs, trajectory):
+def _batch_run(s, base, project, run, specs, trajectory, allow=False):
     """One run: (status, message, metric values, stats)."""
     st = _new_stats()
     nan = [math.nan] * len(specs)
@@ -2147,7 +2160,7 @@ def _batch_run(s, base, project, run, specs, trajectory):
         return "invalid", str(error), nan, st
     p = _with_constants(_param_values(given))
     try:
-        x0 = _initial_state(s, p, project)
+        x0 = _initial_state(s, p, project, allow)
     except SimulationError as error:
         return "failed", str(error), nan, st
     except ConstraintError as error:
@@ -2191,12 +2204,14 @@ def _batch_run(s, base, project, run, specs, trajectory):
 
 def batch_rows(runs, metrics=(), t_end=None, dt=None, solver=None, rtol=None, atol=None,
                params=None, step=None, project_initial=False, trajectories=None,
-               max_steps=None):
+               max_steps=None, allow_inconsistent=False):
     """Runs each of `runs` (a line of NAME=VALUE words, or a dict {name: value}) on top of the
     defaults and `params`, yielding one dict per run as it completes: run (its number from 0),
     status (ok, failed, constraint, invalid), each metric ("KIND:OUTPUT", see METRIC_KINDS),
     steps, rejected, rhs, cpu, message.  trajectories: a directory for each run's CSV
     (run-NNNNNN.csv).  ValueError for bad settings or metrics, before any run."""
+    if project_initial and allow_inconsistent:
+        raise ValueError("project_initial and allow_inconsistent exclude each other")
     s = _settings(t_end, dt, solver, rtol, atol, step, max_steps)
     base = _overrides(params)
     specs = [_metric_spec(m) for m in metrics]
@@ -2207,7 +2222,8 @@ def batch_rows(runs, metrics=(), t_end=None, dt=None, solver=None, rtol=None, at
         path = None
         if trajectories is not None:
             path = "%s/run-%06d.csv" % (trajectories, index)
-        status, message, values, st = _batch_run(s, base, project_initial, run, specs, path)
+        status, message, values, st = _batch_run(s, base, project_initial, run, specs, path,
+                                                 allow_inconsistent)
         row = {"run": index, "status": status}
         row.update(zip(metrics, values))
         row.update(steps=st["steps"], rejected=st["rejected"], rhs=st["rhs"], cpu=st["cpu"],
@@ -2280,6 +2296,7 @@ def _batch_main(argv):
     try:
         for row in batch_rows((line for line in source), metrics, params=params,
                               project_initial="--project-initial" in flags,
+                              allow_inconsistent="--allow-inconsistent" in flags,
                               trajectories=own["--trajectories"], **options):
             out.write("%d,%s%s,%d,%d,%d,%.17g,%s\n" % (
                 row["run"], row["status"], "".join(",%.17g" % row[m] for m in metrics),
