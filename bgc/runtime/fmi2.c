@@ -649,7 +649,8 @@ BGC_FMI_EXPORT fmi2Status fmi2GetDirectionalDerivative(fmi2Component c,
     size_t i;
     if (!m)
         return fmi2Error;
-    if ((nKnown > 0 && (!vKnown_ref || !dvKnown)) || (nUnknown > 0 && (!vUnknown_ref || !dvUnknown)))
+    if ((nKnown > 0 && (!vKnown_ref || !dvKnown))
+        || (nUnknown > 0 && (!vUnknown_ref || !dvUnknown)))
         return bgc_fmi_refuse(m, fn, "no array given");
     for (k = 0; k < BGC_NUM_STATES; k++)
         m->v[k] = 0.0;
