@@ -259,12 +259,18 @@ def equations(model, scene: str | None = None, format: str = "text",
 
 def compile(model, target: str = "c", scene: str | None = None,
             project_initial: bool = False, algebra: str = "auto", outputs=None,
-            effects=None, allow_inconsistent: bool = False) -> dict[str, str]:
-    """Standalone source code: {filename: text}."""
+            effects=None, allow_inconsistent: bool = False) -> dict[str, str | bytes]:
+    """Standalone source code: {filename: text}; target "fmu": {"<id>.fmu": the bytes of an
+    FMI 2.0 FMU for Model Exchange and Co-Simulation} (bgc.fmu; needs a C compiler:
+    bgc.backends.BackendError without one; bgc.fmu.FmuError for a model an FMU cannot hold)."""
     _choice("target", target, TARGETS)
-    program = build(model, scene, project_initial, algebra, outputs=outputs,
-                    effects=effects, allow_inconsistent=allow_inconsistent).program
-    return emit_c(program) if target == "c" else emit_python(program)
+    compiled = build(model, scene, project_initial, algebra, outputs=outputs, effects=effects,
+                     allow_inconsistent=allow_inconsistent)
+    if target == "fmu":
+        from . import fmu
+        return {fmu.file_name(compiled): fmu.build_fmu(compiled, project_initial,
+                                                       allow_inconsistent=allow_inconsistent)}
+    return emit_c(compiled.program) if target == "c" else emit_python(compiled.program)
 
 
 def simulate(model, scene: str | None = None, backend: str = "c", algebra: str = "auto",

@@ -120,10 +120,11 @@ def _sha256(path: Path) -> str:
     return hashlib.sha256(path.read_bytes()).hexdigest()
 
 
-def _run_compiler(argv: list[str], workdir: Path) -> None:
-    """Runs the compiler; BackendError if it fails: a broken or missing compiler when it cannot
-    build a trivial program either (told as such), else a bug in bgc."""
-    done = _compile(argv)
+def _run_compiler(argv: list[str], workdir: Path, cwd: Path | None = None) -> None:
+    """Runs the compiler (in directory cwd, if given); BackendError if it fails: a broken or
+    missing compiler when it cannot build a trivial program either (told as such), else a bug
+    in bgc."""
+    done = _compile(argv, cwd)
     if done.returncode == 0:
         return
     trivial = workdir / "trivial.c"
@@ -139,9 +140,9 @@ def _run_compiler(argv: list[str], workdir: Path) -> None:
         f"$ {shlex.join(argv)}\n{done.stderr}".rstrip())
 
 
-def _compile(argv: list[str]) -> subprocess.CompletedProcess:
+def _compile(argv: list[str], cwd: Path | None = None) -> subprocess.CompletedProcess:
     try:
-        return subprocess.run(argv, capture_output=True, text=True)
+        return subprocess.run(argv, capture_output=True, text=True, cwd=cwd)
     except OSError as error:
         raise BackendError(f"cannot run the C compiler {argv[0]!r}: {error.strerror}.  Set CC "
                            "to a working C99 compiler, or use --backend python.") from None

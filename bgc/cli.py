@@ -90,8 +90,8 @@ def _check_span(compiled, t_end, dt):
         raise click.UsageError(problem)
 
 
-def _write_atomic(path: str, text: str):
-    """Write all of `text` or nothing (bgc.outfile)."""
+def _write_atomic(path: str, text: str | bytes):
+    """Write all of `text` (or bytes) or nothing (bgc.outfile)."""
     try:
         outfile.write_atomic(path, text)
     except outfile.OutputError as error:
@@ -220,7 +220,9 @@ def equations(model, scene, outputs, effects, algebra, fmt):
 @SCENE
 @ADHOC
 @ALGEBRA
-@click.option("--target", type=click.Choice(["c", "python"]), default="c")
+@click.option("--target", type=click.Choice(list(run.TARGETS)), default="c",
+              help="fmu: an FMI 2.0 FMU for Model Exchange and Co-Simulation, built with the "
+                   "C compiler (needs -o NAME.fmu).")
 @click.option("-o", "output", default=None, callback=_output_file,
               help="Output file (default: stdout).")
 @click.option("--project-initial", is_flag=True, help="Project initial values onto the "
@@ -228,9 +230,21 @@ def equations(model, scene, outputs, effects, algebra, fmt):
 @click.option("--allow-inconsistent", is_flag=True, help=ALLOW_HELP)
 def compile(model, scene, outputs, effects, algebra, target, output, project_initial,
             allow_inconsistent):
-    """Emit standalone C or Python source code."""
+    """Emit standalone C or Python source code, or an FMU."""
+    if target == "fmu" and not output:
+        raise click.UsageError("--target fmu writes a zip archive: name it with -o NAME.fmu")
     compiled = _build(model, scene, project_initial, algebra, outputs=outputs, effects=effects,
                       allow_inconsistent=allow_inconsistent)
+    if target == "fmu":
+        from . import fmu
+        try:
+            data = fmu.build_fmu(compiled, project_initial,
+                                 allow_inconsistent=allow_inconsistent)
+        except fmu.FmuError as error:
+            click.echo(f"error: {error}", err=True)
+            sys.exit(1)
+        _write_atomic(output, data)
+        return
     files = (emit.emit_c if target == "c" else emit.emit_python)(compiled.program)
     (text,) = files.values()
     if output:

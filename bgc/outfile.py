@@ -69,8 +69,8 @@ class Partial:
             self.discard()
 
 
-def write_atomic(path: str | os.PathLike, text: str) -> None:
-    """All of `text` (UTF-8) at `path`, or nothing."""
+def write_atomic(path: str | os.PathLike, text: str | bytes) -> None:
+    """All of `text` (UTF-8; or bytes as they are) at `path`, or nothing."""
     with Partial(path) as out:
-        out.file.write(text.encode("utf-8"))
+        out.file.write(text if isinstance(text, bytes) else text.encode("utf-8"))
         out.commit()

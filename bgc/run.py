@@ -11,7 +11,7 @@ from .resources import MAX_OUTPUT_ROWS
 
 ALGEBRA = ("auto", "symbolic", "numeric")  # how algebraic blocks are solved (bgc.reduce)
 BACKENDS = ("c", "python")  # what runs a simulation
-TARGETS = ("c", "python")  # what `compile` writes
+TARGETS = ("c", "python", "fmu")  # what `compile` writes (fmu: bgc/fmu.py)
 FORMATS = ("text", "latex")  # what `equations` prints
 SIMULATE_OPTIONS = ("t_end", "dt", "solver", "rtol", "atol", "step", "params", "project_initial",
                     "max_steps", "allow_inconsistent")

@@ -114,6 +114,14 @@ int bgc_check_settings(const bgc_settings *s, char *msg, size_t msg_size);
 int bgc_simulate(const bgc_settings *s, const bgc_params *p, const double *x0, bgc_sink sink,
                  void *ctx, bgc_stats *stats, char *msg, size_t msg_size);
 
+/* bgc_simulate in steps: integrates x from s->t0 to s->t_end in the caller's workspace w
+   (bgc_work_new), so that consecutive calls continue one run as far as the algebraic blocks
+   go (each Newton block starts from its last solution); the solver itself starts afresh,
+   with a new first step.  x is updated to the state at s->t_end (on failure, at the last
+   accepted step).  Returns as bgc_simulate; stats are added to, its cpu included. */
+int bgc_advance(const bgc_settings *s, const bgc_params *p, bgc_work *w, double *x,
+                bgc_sink sink, void *ctx, bgc_stats *stats, char *msg, size_t msg_size);
+
 /* Asks a run in progress to stop at its next accepted step, as a failure ("interrupted by
    signal sig"), keeping the rows written so far.  Async-signal-safe: a signal handler may call
    it (the program's main does, for SIGINT and SIGTERM).  0 clears the request. */

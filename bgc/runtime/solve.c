@@ -618,21 +618,19 @@ static int bgc_run_family(bgc_run *r, int solver, double *y)
     }
 }
 
-int bgc_simulate(const bgc_settings *s, const bgc_params *p, const double *x0, bgc_sink sink,
-                 void *ctx, bgc_stats *stats, char *msg, size_t msg_size)
+/* Integrates y (the state at s->t0, in the workspace w) to s->t_end: bgc_simulate's run,
+   in a workspace the caller keeps. */
+static int bgc_integrate(const bgc_settings *s, const bgc_params *p, bgc_work *w, double *y,
+                         bgc_sink sink, void *ctx, bgc_stats *stats, char *msg, size_t msg_size)
 {
-    const clock_t start = clock();
     bgc_params q = *p;
     bgc_run r;
-    double *y;
     int i, rc = bgc_check_settings(s, msg, msg_size);
     if (rc)
         return rc;
-    r.w = bgc_work_new();
-    if (!r.w)
-        return bgc_fail_memory(msg, msg_size);
-    r.w->rtol = s->rtol;
-    r.w->atol = s->atol;
+    w->rtol = s->rtol;
+    w->atol = s->atol;
+    r.w = w;
     r.s = s;
     r.p = &q;
     r.sink = sink;
@@ -647,30 +645,54 @@ int bgc_simulate(const bgc_settings *s, const bgc_params *p, const double *x0, b
     r.detect_stiffness = 0;
     r.steps_out = stats->steps;
     r.t_out = s->t0;
-    y = r.w->v + BGC_WORK_Y0;
     bgc_params_update(&q);
-    for (i = 0; i < BGC_NUM_STATES; i++)
-        y[i] = x0[i];
     i = bgc_first_nonfinite(y, BGC_NUM_STATES);
-    if (i >= 0) {
-        rc = bgc_fail(msg, msg_size, s->t0, "state", bgc_state_names[i]);
-    } else {
-        rc = bgc_emit(&r, s->t0, y);
-        if (rc == 0 && bgc_methods[s->solver].family == BGC_FAMILY_AUTO) {
-            const bgc_method *m = &bgc_methods[s->solver];
-            r.detect_stiffness = 1;
-            rc = bgc_run_family(&r, m->explicit_solver, y);
-            if (rc == BGC_STIFF) {
-                stats->switched = 1;
-                stats->t_switch = r.t;
-                r.detect_stiffness = 0;
-                rc = bgc_run_family(&r, m->stiff_solver, y);
-            }
-        } else if (rc == 0) {
-            rc = bgc_run_family(&r, s->solver, y);
+    if (i >= 0)
+        return bgc_fail(msg, msg_size, s->t0, "state", bgc_state_names[i]);
+    rc = bgc_emit(&r, s->t0, y);
+    if (rc == 0 && bgc_methods[s->solver].family == BGC_FAMILY_AUTO) {
+        const bgc_method *m = &bgc_methods[s->solver];
+        r.detect_stiffness = 1;
+        rc = bgc_run_family(&r, m->explicit_solver, y);
+        if (rc == BGC_STIFF) {
+            stats->switched = 1;
+            stats->t_switch = r.t;
+            r.detect_stiffness = 0;
+            rc = bgc_run_family(&r, m->stiff_solver, y);
         }
+    } else if (rc == 0) {
+        rc = bgc_run_family(&r, s->solver, y);
     }
-    bgc_work_free(r.w);
+    return rc;
+}
+
+int bgc_simulate(const bgc_settings *s, const bgc_params *p, const double *x0, bgc_sink sink,
+                 void *ctx, bgc_stats *stats, char *msg, size_t msg_size)
+{
+    const clock_t start = clock();
+    bgc_work *w;
+    int rc = bgc_check_settings(s, msg, msg_size);
+    if (rc)
+        return rc;
+    w = bgc_work_new();
+    if (!w)
+        return bgc_fail_memory(msg, msg_size);
+    memcpy(w->v + BGC_WORK_Y0, x0, sizeof(double) * BGC_NUM_STATES);
+    rc = bgc_integrate(s, p, w, w->v + BGC_WORK_Y0, sink, ctx, stats, msg, msg_size);
+    bgc_work_free(w);
     stats->cpu = (double)(clock() - start) / CLOCKS_PER_SEC;
+    return rc;
+}
+
+int bgc_advance(const bgc_settings *s, const bgc_params *p, bgc_work *w, double *x,
+                bgc_sink sink, void *ctx, bgc_stats *stats, char *msg, size_t msg_size)
+{
+    const clock_t start = clock();
+    double *y = w->v + BGC_WORK_Y0;
+    int rc;
+    memcpy(y, x, sizeof(double) * BGC_NUM_STATES);
+    rc = bgc_integrate(s, p, w, y, sink, ctx, stats, msg, msg_size);
+    memcpy(x, y, sizeof(double) * BGC_NUM_STATES);
+    stats->cpu += (double)(clock() - start) / CLOCKS_PER_SEC;
     return rc;
 }

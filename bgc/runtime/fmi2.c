@@ -1,0 +1,1009 @@
+/* ========================================================================= FMI 2.0 === */
+/* The FMU's interface: the functions of FMI 2.0 (Model Exchange and Co-Simulation) over the
+   model part and the runtime above (bgc/runtime/fmi2.c, inlined verbatim after them by
+   bgc/fmu.py).  It uses from the FMU part before it: BGC_FMI_GUID, BGC_FMI_PROJECT_INITIAL,
+   bgc_fmi_output_state (the state each output is, or -1) and, when BGC_FMI_OUTPUT_JVP is 1,
+   bgc_fmi_outputs_jvp (the outputs' derivative along a direction of the states).
+
+   Value references (all Real), as modelDescription.xml lists them:
+     [0, P)                  parameter j            (P = BGC_NUM_PARAMS)
+     [P, P + N)              state i                (N = BGC_NUM_STATES)
+     [P + N, P + 2N)         the derivative of state i
+     [P + 2N, P + 2N + M)    output k               (M = BGC_NUM_OUTPUTS; an output that is a
+                                                     state is that state's variable instead)
+   Parameters are "fixed": set before fmi2ExitInitializationMode; a parameter that is not set
+   follows its default expression (which may use the parameters before it).  The states are
+   computed from the parameters when initialisation ends (and checked against the model's
+   constraints).  Model Exchange: the environment integrates the states; there are no events.
+   Co-Simulation: fmi2DoStep integrates with the scene's solver (bgc_advance).
+
+   The declarations below are written from the text of the FMI 2.0 standard (its sections on
+   the platform types and the common functions): the types, the status and kind enumerations,
+   the callbacks and the event information, with the standard's names and layouts. */
+
+#include <stdarg.h>
+
+#if defined(_WIN32)
+#define BGC_FMI_EXPORT __declspec(dllexport)
+#elif defined(__GNUC__)
+#define BGC_FMI_EXPORT __attribute__((visibility("default")))
+#else
+#define BGC_FMI_EXPORT
+#endif
+
+/* ------------------------------------------------------------ the FMI types --- */
+typedef void *fmi2Component;            /* an instance, as fmi2Instantiate returns it */
+typedef void *fmi2ComponentEnvironment; /* the environment's pointer, handed back to it */
+typedef void *fmi2FMUstate;             /* a saved state (not supported here) */
+typedef unsigned int fmi2ValueReference;
+typedef double fmi2Real;
+typedef int fmi2Integer;
+typedef int fmi2Boolean;
+typedef char fmi2Char;
+typedef const fmi2Char *fmi2String;
+typedef char fmi2Byte;
+#define fmi2True 1
+#define fmi2False 0
+
+typedef enum { fmi2OK, fmi2Warning, fmi2Discard, fmi2Error, fmi2Fatal, fmi2Pending } fmi2Status;
+typedef enum { fmi2ModelExchange, fmi2CoSimulation } fmi2Type;
+typedef enum {
+    fmi2DoStepStatus,
+    fmi2PendingStatus,
+    fmi2LastSuccessfulTime,
+    fmi2Terminated
+} fmi2StatusKind;
+
+/* The environment's functions: the logger takes a printf format and its arguments. */
+typedef void (*fmi2CallbackLogger)(fmi2ComponentEnvironment env, fmi2String instanceName,
+                                   fmi2Status status, fmi2String category, fmi2String message,
+                                   ...);
+typedef void *(*fmi2CallbackAllocateMemory)(size_t nobj, size_t size);
+typedef void (*fmi2CallbackFreeMemory)(void *obj);
+typedef void (*fmi2StepFinished)(fmi2ComponentEnvironment env, fmi2Status status);
+typedef struct {
+    const fmi2CallbackLogger logger;
+    const fmi2CallbackAllocateMemory allocateMemory;
+    const fmi2CallbackFreeMemory freeMemory;
+    const fmi2StepFinished stepFinished;
+    const fmi2ComponentEnvironment componentEnvironment;
+} fmi2CallbackFunctions;
+
+typedef struct {
+    fmi2Boolean newDiscreteStatesNeeded;
+    fmi2Boolean terminateSimulation;
+    fmi2Boolean nominalsOfContinuousStatesChanged;
+    fmi2Boolean valuesOfContinuousStatesChanged;
+    fmi2Boolean nextEventTimeDefined;
+    fmi2Real nextEventTime;
+} fmi2EventInfo;
+
+/* ------------------------------------------------------------- an instance --- */
+
+enum {
+    BGC_FMI_INSTANTIATED, /* parameters may be set */
+    BGC_FMI_INIT,         /* initialisation mode: parameters may still be set */
+    BGC_FMI_EVENT,        /* Model Exchange: event mode */
+    BGC_FMI_CONTINUOUS,   /* Model Exchange: continuous-time mode */
+    BGC_FMI_STEP,         /* Co-Simulation: between steps */
+    BGC_FMI_TERMINATED,
+    BGC_FMI_FAILED        /* after an error: only fmi2Reset and fmi2FreeInstance help */
+};
+
+#define BGC_FMI_VR_STATES ((fmi2ValueReference)BGC_NUM_PARAMS)
+#define BGC_FMI_VR_DERIVATIVES (BGC_FMI_VR_STATES + (fmi2ValueReference)BGC_NUM_STATES)
+#define BGC_FMI_VR_OUTPUTS (BGC_FMI_VR_DERIVATIVES + (fmi2ValueReference)BGC_NUM_STATES)
+#define BGC_FMI_VR_END (BGC_FMI_VR_OUTPUTS + (fmi2ValueReference)BGC_NUM_OUTPUTS)
+
+typedef struct bgc_fmi {
+    fmi2Type type;
+    int phase;
+    char *name;
+    fmi2CallbackLogger logger;
+    fmi2ComponentEnvironment env;
+    int logging;
+    bgc_params p;
+    int given[BGC_DIM(BGC_NUM_PARAMS)]; /* set through fmi2SetReal (else the default) */
+    int fresh;                          /* p (and, before initialisation ends, x) are current */
+    bgc_work *w;
+    double t;
+    double rtol;                        /* Co-Simulation: the solver's (the scene's, or the
+                                           tolerance of fmi2SetupExperiment) */
+    double x[BGC_DIM(BGC_NUM_STATES)];
+    double dx[BGC_DIM(BGC_NUM_STATES)];
+    double y[BGC_DIM(BGC_NUM_OUTPUTS)];
+    double v[BGC_DIM(BGC_NUM_STATES)];  /* a direction, for directional derivatives */
+    double jv[BGC_DIM(BGC_NUM_STATES)];
+    double jy[BGC_DIM(BGC_NUM_OUTPUTS)];
+    int dx_ok, y_ok;                    /* dx, y are those of (t, x) */
+    int stiff;                          /* Co-Simulation, solver auto: its stiff phase began */
+    bgc_stats st;
+} bgc_fmi;
+
+/* Reports to the environment's logger: errors always, the rest when logging is on.  The text
+   goes as an argument of "%s", never as the format (it may hold names from the model). */
+static void bgc_fmi_log(const bgc_fmi *m, fmi2Status status, const char *fmt, ...)
+{
+    static const char *const categories[] = { "logAll", "logStatusWarning", "logStatusDiscard",
+                                              "logStatusError", "logStatusError", "logAll" };
+    char text[1024];
+    va_list ap;
+    if (!m->logger || (!m->logging && status < fmi2Error))
+        return;
+    va_start(ap, fmt);
+    vsnprintf(text, sizeof text, fmt, ap);
+    va_end(ap);
+    m->logger(m->env, m->name, status, categories[status], "%s", text);
+}
+
+/* fmi2Error, logged: the call is not allowed now, or its arguments are wrong. */
+static fmi2Status bgc_fmi_refuse(const bgc_fmi *m, const char *fn, const char *why)
+{
+    bgc_fmi_log(m, fmi2Error, "%s: %s", fn, why);
+    return fmi2Error;
+}
+
+/* The instance, or NULL if c is NULL or fn is not allowed in its phase (mask: 1 << phase) or
+   for its type (1: Model Exchange only, 2: Co-Simulation only, 0: both). */
+static bgc_fmi *bgc_fmi_get(fmi2Component c, const char *fn, int mask, int only)
+{
+    bgc_fmi *m = (bgc_fmi *)c;
+    if (!m)
+        return NULL;
+    if (only && m->type != (only == 1 ? fmi2ModelExchange : fmi2CoSimulation)) {
+        bgc_fmi_log(m, fmi2Error, "%s: not a function of %s", fn,
+                    m->type == fmi2ModelExchange ? "Model Exchange" : "Co-Simulation");
+        return NULL;
+    }
+    if (!(mask & (1 << m->phase))) {
+        bgc_fmi_log(m, fmi2Error, "%s: not allowed %s", fn,
+                    m->phase == BGC_FMI_FAILED ? "after an error (fmi2Reset starts again)"
+                    : m->phase == BGC_FMI_TERMINATED ? "after fmi2Terminate"
+                    : m->phase == BGC_FMI_INSTANTIATED || m->phase == BGC_FMI_INIT
+                    ? "before initialisation has ended" : "in this mode");
+        return NULL;
+    }
+    return m;
+}
+
+#define BGC_FMI_ANY (~0)
+#define BGC_FMI_SETUP ((1 << BGC_FMI_INSTANTIATED) | (1 << BGC_FMI_INIT))
+#define BGC_FMI_RUNNING ((1 << BGC_FMI_EVENT) | (1 << BGC_FMI_CONTINUOUS) | (1 << BGC_FMI_STEP))
+#define BGC_FMI_VALUES (BGC_FMI_SETUP | BGC_FMI_RUNNING | (1 << BGC_FMI_TERMINATED) \
+                        | (1 << BGC_FMI_FAILED))
+
+/* Parameters and states from the parameters set so far (before initialisation ends). */
+static void bgc_fmi_refresh(bgc_fmi *m)
+{
+    if (m->fresh)
+        return;
+    bgc_params_defaults(&m->p, m->given);
+    if (m->phase == BGC_FMI_INSTANTIATED || m->phase == BGC_FMI_INIT)
+        bgc_init(&m->p, m->x);
+    m->dx_ok = m->y_ok = 0;
+    m->fresh = 1;
+}
+
+static void bgc_fmi_start(bgc_fmi *m)
+{
+    int j;
+    for (j = 0; j < BGC_NUM_PARAMS; j++)
+        m->given[j] = 0;
+    memset(&m->p, 0, sizeof m->p);
+    memset(&m->st, 0, sizeof m->st);
+    m->phase = BGC_FMI_INSTANTIATED;
+    m->fresh = 0;
+    m->t = BGC_SCENE_T0;
+    m->rtol = BGC_SCENE_RTOL;
+    m->stiff = 0;
+    m->w->rtol = BGC_SCENE_RTOL;
+    m->w->atol = BGC_SCENE_ATOL;
+    bgc_fmi_refresh(m);
+}
+
+/* The model's failure (an algebraic block), logged: Model Exchange discards the point (the
+   integrator may try a smaller step), Co-Simulation's caller gets an error. */
+static fmi2Status bgc_fmi_model_failed(bgc_fmi *m, const char *fn)
+{
+    const fmi2Status status = m->type == fmi2ModelExchange ? fmi2Discard : fmi2Error;
+    char msg[512];
+    bgc_work_message(m->w, msg, sizeof msg);
+    bgc_fmi_log(m, status, "%s: %s", fn, msg);
+    return status;
+}
+
+static int bgc_fmi_derivatives(bgc_fmi *m)
+{
+    if (!m->dx_ok && bgc_rhs(m->t, m->x, &m->p, m->w, m->dx))
+        return 1;
+    m->dx_ok = 1;
+    return 0;
+}
+
+static int bgc_fmi_outputs(bgc_fmi *m)
+{
+    if (!m->y_ok && bgc_outputs(m->t, m->x, &m->p, m->w, m->y))
+        return 1;
+    m->y_ok = 1;
+    return 0;
+}
+
+/* --------------------------------------------------------- common functions --- */
+
+BGC_FMI_EXPORT const char *fmi2GetTypesPlatform(void)
+{
+    return "default";
+}
+
+BGC_FMI_EXPORT const char *fmi2GetVersion(void)
+{
+    return "2.0";
+}
+
+BGC_FMI_EXPORT fmi2Status fmi2SetDebugLogging(fmi2Component c, fmi2Boolean loggingOn,
+                                              size_t nCategories, const fmi2String categories[])
+{
+    static const char *const known[] = { "logStatusWarning", "logStatusDiscard",
+                                         "logStatusError", "logAll" };
+    bgc_fmi *m = bgc_fmi_get(c, "fmi2SetDebugLogging", BGC_FMI_ANY, 0);
+    size_t i;
+    int k, found;
+    if (!m)
+        return fmi2Error;
+    for (i = 0; i < nCategories; i++) {
+        found = 0;
+        for (k = 0; k < BGC_COUNT(known); k++)
+            found |= categories[i] && strcmp(categories[i], known[k]) == 0;
+        if (!found)
+            return bgc_fmi_refuse(m, "fmi2SetDebugLogging", "unknown log category (the "
+                                  "FMU's: logStatusWarning, logStatusDiscard, logStatusError, "
+                                  "logAll)");
+    }
+    m->logging = loggingOn != fmi2False;
+    return fmi2OK;
+}
+
+BGC_FMI_EXPORT fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType,
+                                             fmi2String fmuGUID, fmi2String fmuResourceLocation,
+                                             const fmi2CallbackFunctions *functions,
+                                             fmi2Boolean visible, fmi2Boolean loggingOn)
+{
+    bgc_fmi *m;
+    const char *why = NULL;
+    size_t len;
+    (void)fmuResourceLocation;
+    (void)visible;
+    if (!functions)
+        return NULL;
+    if (!instanceName || !instanceName[0])
+        why = "the instance name is empty";
+    else if (fmuType != fmi2ModelExchange && fmuType != fmi2CoSimulation)
+        why = "unknown FMU type";
+    else if (!fmuGUID || strcmp(fmuGUID, BGC_FMI_GUID) != 0)
+        why = "the GUID is not this FMU's (modelDescription.xml and the binary differ)";
+    if (why) {
+        if (functions->logger)
+            functions->logger(functions->componentEnvironment, instanceName ? instanceName : "",
+                              fmi2Error, "logStatusError", "fmi2Instantiate: %s", why);
+        return NULL;
+    }
+    m = (bgc_fmi *)calloc(1, sizeof *m);
+    len = strlen(instanceName);
+    if (m)
+        m->name = (char *)malloc(len + 1);
+    if (m)
+        m->w = bgc_work_new();
+    if (!m || !m->name || !m->w) {
+        if (m) {
+            free(m->name);
+            bgc_work_free(m->w);
+        }
+        free(m);
+        if (functions->logger)
+            functions->logger(functions->componentEnvironment, instanceName, fmi2Error,
+                              "logStatusError", "fmi2Instantiate: out of memory");
+        return NULL;
+    }
+    memcpy(m->name, instanceName, len + 1);
+    m->type = fmuType;
+    m->logger = functions->logger;
+    m->env = functions->componentEnvironment;
+    m->logging = loggingOn != fmi2False;
+    bgc_fmi_start(m);
+    return m;
+}
+
+BGC_FMI_EXPORT void fmi2FreeInstance(fmi2Component c)
+{
+    bgc_fmi *m = (bgc_fmi *)c;
+    if (!m)
+        return;
+    bgc_work_free(m->w);
+    free(m->name);
+    free(m);
+}
+
+BGC_FMI_EXPORT fmi2Status fmi2SetupExperiment(fmi2Component c, fmi2Boolean toleranceDefined,
+                                              fmi2Real tolerance, fmi2Real startTime,
+                                              fmi2Boolean stopTimeDefined, fmi2Real stopTime)
+{
+    bgc_fmi *m = bgc_fmi_get(c, "fmi2SetupExperiment", 1 << BGC_FMI_INSTANTIATED, 0);
+    (void)stopTimeDefined;
+    (void)stopTime;
+    if (!m)
+        return fmi2Error;
+    if (!isfinite(startTime))
+        return bgc_fmi_refuse(m, "fmi2SetupExperiment", "the start time is not finite");
+    if (toleranceDefined && !(tolerance > 0.0 && isfinite(tolerance)))
+        return bgc_fmi_refuse(m, "fmi2SetupExperiment", "the tolerance is not positive");
+    m->t = startTime;
+    m->rtol = toleranceDefined ? tolerance : BGC_SCENE_RTOL;
+    m->dx_ok = m->y_ok = 0;
+    return fmi2OK;
+}
+
+BGC_FMI_EXPORT fmi2Status fmi2EnterInitializationMode(fmi2Component c)
+{
+    bgc_fmi *m = bgc_fmi_get(c, "fmi2EnterInitializationMode", 1 << BGC_FMI_INSTANTIATED, 0);
+    if (!m)
+        return fmi2Error;
+    m->phase = BGC_FMI_INIT;
+    m->fresh = 0;
+    return fmi2OK;
+}
+
+/* Names the first constraint row violated at (t, x), as the generated program does. */
+static fmi2Status bgc_fmi_constraints(bgc_fmi *m)
+{
+    double r[BGC_DIM(BGC_NUM_CONSTRAINTS)] = { 0.0 }, s[BGC_DIM(BGC_NUM_CONSTRAINTS)] = { 0.0 };
+    int k;
+    if (BGC_NUM_CONSTRAINTS == 0)
+        return fmi2OK;
+    if ((BGC_FMI_ALLOW_INCONSISTENT ? bgc_check_constraints_finite
+                                    : bgc_check_constraints)(m->t, m->x, &m->p, NULL) == 0)
+        return fmi2OK;
+    bgc_residual(m->t, m->x, &m->p, r);
+    bgc_scale(m->t, m->x, &m->p, s);
+    for (k = 0; k < BGC_NUM_CONSTRAINTS; k++)
+        if (!(fabs(r[k]) <= 1e-9 * s[k]))
+            break;
+    k = k < BGC_NUM_CONSTRAINTS ? k : 0;
+    bgc_fmi_log(m, fmi2Error, "fmi2ExitInitializationMode: the initial state violates "
+                "constraint '%s' (%s): residual = %.17g%s", bgc_constraint_names[k],
+                bgc_constraint_levels[k], r[k], isfinite(r[k]) ? "" : " (the model is "
+                "undefined at the initial state with these parameters)");
+    return fmi2Error;
+}
+
+BGC_FMI_EXPORT fmi2Status fmi2ExitInitializationMode(fmi2Component c)
+{
+    bgc_fmi *m = bgc_fmi_get(c, "fmi2ExitInitializationMode", 1 << BGC_FMI_INIT, 0);
+    char msg[512];
+    int i;
+    if (!m)
+        return fmi2Error;
+    bgc_fmi_refresh(m);
+    for (i = 0; i < BGC_NUM_PARAMS; i++)
+        if (!isfinite(*bgc_param_ref(&m->p, i)))
+            return bgc_fmi_refuse(m, "fmi2ExitInitializationMode", "a parameter is not finite");
+    i = bgc_first_nonfinite(m->x, BGC_NUM_STATES);
+    if (i >= 0) {
+        bgc_fmi_log(m, fmi2Error, "fmi2ExitInitializationMode: state '%s' is not finite",
+                    bgc_state_names[i]);
+        return fmi2Error;
+    }
+    if (BGC_FMI_PROJECT_INITIAL && BGC_NUM_CONSTRAINTS > 0
+        && bgc_project_initial(m->t, m->x, &m->p, msg, sizeof msg)) {
+        bgc_fmi_log(m, fmi2Error, "fmi2ExitInitializationMode: %s", msg);
+        return fmi2Error;
+    }
+    if (bgc_fmi_constraints(m) != fmi2OK)
+        return fmi2Error;
+    m->dx_ok = m->y_ok = 0;
+    m->phase = m->type == fmi2ModelExchange ? BGC_FMI_EVENT : BGC_FMI_STEP;
+    return fmi2OK;
+}
+
+BGC_FMI_EXPORT fmi2Status fmi2Terminate(fmi2Component c)
+{
+    bgc_fmi *m = bgc_fmi_get(c, "fmi2Terminate", BGC_FMI_RUNNING, 0);
+    if (!m)
+        return fmi2Error;
+    m->phase = BGC_FMI_TERMINATED;
+    return fmi2OK;
+}
+
+BGC_FMI_EXPORT fmi2Status fmi2Reset(fmi2Component c)
+{
+    bgc_fmi *m = bgc_fmi_get(c, "fmi2Reset", BGC_FMI_ANY, 0);
+    bgc_work *w;
+    if (!m)
+        return fmi2Error;
+    w = bgc_work_new(); /* a fresh workspace: Newton blocks start as in a new instance */
+    if (!w)
+        return bgc_fmi_refuse(m, "fmi2Reset", "out of memory");
+    bgc_work_free(m->w);
+    m->w = w;
+    bgc_fmi_start(m);
+    return fmi2OK;
+}
+
+/* ----------------------------------------------------------------- values --- */
+
+/* The position of vr among the n references from lo, or -1. */
+static int bgc_fmi_in(fmi2ValueReference vr, fmi2ValueReference lo, int n)
+{
+    const long k = (long)vr - (long)lo;
+    return k >= 0 && k < (long)n ? (int)k : -1;
+}
+
+/* The value of vr at the instance's (t, x): 0, 1 for an unknown reference, 2 if the model
+   failed (an algebraic block). */
+static int bgc_fmi_value(bgc_fmi *m, fmi2ValueReference vr, double *out)
+{
+    int k;
+    bgc_fmi_refresh(m);
+    if ((k = bgc_fmi_in(vr, 0, BGC_NUM_PARAMS)) >= 0) {
+        *out = *bgc_param_ref(&m->p, k);
+    } else if ((k = bgc_fmi_in(vr, BGC_FMI_VR_STATES, BGC_NUM_STATES)) >= 0) {
+        *out = m->x[k];
+    } else if ((k = bgc_fmi_in(vr, BGC_FMI_VR_DERIVATIVES, BGC_NUM_STATES)) >= 0) {
+        if (bgc_fmi_derivatives(m))
+            return 2;
+        *out = m->dx[k];
+    } else if ((k = bgc_fmi_in(vr, BGC_FMI_VR_OUTPUTS, BGC_NUM_OUTPUTS)) >= 0) {
+        if (bgc_fmi_output_state[k] >= 0) {
+            *out = m->x[bgc_fmi_output_state[k]];
+        } else {
+            if (bgc_fmi_outputs(m))
+                return 2;
+            *out = m->y[k];
+        }
+    } else {
+        return 1;
+    }
+    return 0;
+}
+
+BGC_FMI_EXPORT fmi2Status fmi2GetReal(fmi2Component c, const fmi2ValueReference vr[],
+                                      size_t nvr, fmi2Real value[])
+{
+    bgc_fmi *m = bgc_fmi_get(c, "fmi2GetReal", BGC_FMI_VALUES, 0);
+    size_t i;
+    if (!m)
+        return fmi2Error;
+    if (nvr > 0 && (!vr || !value))
+        return bgc_fmi_refuse(m, "fmi2GetReal", "no array given");
+    for (i = 0; i < nvr; i++) {
+        const int rc = bgc_fmi_value(m, vr[i], &value[i]);
+        if (rc == 1) {
+            bgc_fmi_log(m, fmi2Error, "fmi2GetReal: unknown value reference %u", vr[i]);
+            return fmi2Error;
+        }
+        if (rc == 2)
+            return bgc_fmi_model_failed(m, "fmi2GetReal");
+    }
+    return fmi2OK;
+}
+
+BGC_FMI_EXPORT fmi2Status fmi2SetReal(fmi2Component c, const fmi2ValueReference vr[],
+                                      size_t nvr, const fmi2Real value[])
+{
+    bgc_fmi *m = bgc_fmi_get(c, "fmi2SetReal", BGC_FMI_ANY, 0);
+    size_t i;
+    if (!m)
+        return fmi2Error;
+    if (nvr > 0 && (!vr || !value))
+        return bgc_fmi_refuse(m, "fmi2SetReal", "no array given");
+    for (i = 0; i < nvr; i++) {
+        if (bgc_fmi_in(vr[i], 0, BGC_NUM_PARAMS) < 0) {
+            bgc_fmi_log(m, fmi2Error, "fmi2SetReal: value reference %u is not a parameter (the "
+                        "states start from the parameters; Model Exchange sets them with "
+                        "fmi2SetContinuousStates)", vr[i]);
+            return fmi2Error;
+        }
+        if (m->phase != BGC_FMI_INSTANTIATED && m->phase != BGC_FMI_INIT) {
+            bgc_fmi_log(m, fmi2Error, "fmi2SetReal: parameter '%s' is fixed once "
+                        "initialisation has ended", bgc_param_names[vr[i]]);
+            return fmi2Error;
+        }
+        if (!isfinite(value[i])) {
+            bgc_fmi_log(m, fmi2Error, "fmi2SetReal: parameter '%s' must be finite",
+                        bgc_param_names[vr[i]]);
+            return fmi2Error;
+        }
+    }
+    for (i = 0; i < nvr; i++) {
+        *bgc_param_ref(&m->p, (int)vr[i]) = value[i];
+        m->given[vr[i]] = 1;
+    }
+    if (nvr > 0)
+        m->fresh = 0;
+    return fmi2OK;
+}
+
+/* The FMU has no Integer, Boolean or String variables: only empty requests succeed. */
+static fmi2Status bgc_fmi_none(fmi2Component c, const char *fn, size_t nvr)
+{
+    bgc_fmi *m = bgc_fmi_get(c, fn, BGC_FMI_ANY, 0);
+    if (!m)
+        return fmi2Error;
+    return nvr == 0 ? fmi2OK : bgc_fmi_refuse(m, fn, "the FMU has no variables of this type");
+}
+
+BGC_FMI_EXPORT fmi2Status fmi2GetInteger(fmi2Component c, const fmi2ValueReference vr[],
+                                         size_t nvr, fmi2Integer value[])
+{
+    (void)vr;
+    (void)value;
+    return bgc_fmi_none(c, "fmi2GetInteger", nvr);
+}
+
+BGC_FMI_EXPORT fmi2Status fmi2GetBoolean(fmi2Component c, const fmi2ValueReference vr[],
+                                         size_t nvr, fmi2Boolean value[])
+{
+    (void)vr;
+    (void)value;
+    return bgc_fmi_none(c, "fmi2GetBoolean", nvr);
+}
+
+BGC_FMI_EXPORT fmi2Status fmi2GetString(fmi2Component c, const fmi2ValueReference vr[],
+                                        size_t nvr, fmi2String value[])
+{
+    (void)vr;
+    (void)value;
+    return bgc_fmi_none(c, "fmi2GetString", nvr);
+}
+
+BGC_FMI_EXPORT fmi2Status fmi2SetInteger(fmi2Component c, const fmi2ValueReference vr[],
+                                         size_t nvr, const fmi2Integer value[])
+{
+    (void)vr;
+    (void)value;
+    return bgc_fmi_none(c, "fmi2SetInteger", nvr);
+}
+
+BGC_FMI_EXPORT fmi2Status fmi2SetBoolean(fmi2Component c, const fmi2ValueReference vr[],
+                                         size_t nvr, const fmi2Boolean value[])
+{
+    (void)vr;
+    (void)value;
+    return bgc_fmi_none(c, "fmi2SetBoolean", nvr);
+}
+
+BGC_FMI_EXPORT fmi2Status fmi2SetString(fmi2Component c, const fmi2ValueReference vr[],
+                                        size_t nvr, const fmi2String value[])
+{
+    (void)vr;
+    (void)value;
+    return bgc_fmi_none(c, "fmi2SetString", nvr);
+}
+
+/* ------------------------------------------- FMU states (not supported) --- */
+
+static fmi2Status bgc_fmi_no_state(fmi2Component c, const char *fn)
+{
+    bgc_fmi *m = bgc_fmi_get(c, fn, BGC_FMI_ANY, 0);
+    if (m)
+        bgc_fmi_log(m, fmi2Error, "%s: the FMU cannot save its state "
+                    "(canGetAndSetFMUstate=\"false\")", fn);
+    return fmi2Error;
+}
+
+BGC_FMI_EXPORT fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate *FMUstate)
+{
+    (void)FMUstate;
+    return bgc_fmi_no_state(c, "fmi2GetFMUstate");
+}
+
+BGC_FMI_EXPORT fmi2Status fmi2SetFMUstate(fmi2Component c, fmi2FMUstate FMUstate)
+{
+    (void)FMUstate;
+    return bgc_fmi_no_state(c, "fmi2SetFMUstate");
+}
+
+BGC_FMI_EXPORT fmi2Status fmi2FreeFMUstate(fmi2Component c, fmi2FMUstate *FMUstate)
+{
+    (void)FMUstate;
+    return bgc_fmi_no_state(c, "fmi2FreeFMUstate");
+}
+
+BGC_FMI_EXPORT fmi2Status fmi2SerializedFMUstateSize(fmi2Component c, fmi2FMUstate FMUstate,
+                                                     size_t *size)
+{
+    (void)FMUstate;
+    (void)size;
+    return bgc_fmi_no_state(c, "fmi2SerializedFMUstateSize");
+}
+
+BGC_FMI_EXPORT fmi2Status fmi2SerializeFMUstate(fmi2Component c, fmi2FMUstate FMUstate,
+                                                fmi2Byte serializedState[], size_t size)
+{
+    (void)FMUstate;
+    (void)serializedState;
+    (void)size;
+    return bgc_fmi_no_state(c, "fmi2SerializeFMUstate");
+}
+
+BGC_FMI_EXPORT fmi2Status fmi2DeSerializeFMUstate(fmi2Component c,
+                                                  const fmi2Byte serializedState[], size_t size,
+                                                  fmi2FMUstate *FMUstate)
+{
+    (void)serializedState;
+    (void)size;
+    (void)FMUstate;
+    return bgc_fmi_no_state(c, "fmi2DeSerializeFMUstate");
+}
+
+/* ------------------------------------------------- directional derivatives --- */
+
+/* d unknowns = J d knowns, the knowns states, the unknowns derivatives (the right side's
+   Jacobian, bgc_jvp), states or outputs (bgc_fmi_outputs_jvp), at the instance's (t, x). */
+BGC_FMI_EXPORT fmi2Status fmi2GetDirectionalDerivative(fmi2Component c,
+                                                       const fmi2ValueReference vUnknown_ref[],
+                                                       size_t nUnknown,
+                                                       const fmi2ValueReference vKnown_ref[],
+                                                       size_t nKnown, const fmi2Real dvKnown[],
+                                                       fmi2Real dvUnknown[])
+{
+    static const char fn[] = "fmi2GetDirectionalDerivative";
+    bgc_fmi *m = bgc_fmi_get(c, fn, BGC_FMI_RUNNING | (1 << BGC_FMI_TERMINATED), 0);
+    int need_dx = 0, need_y = 0, k;
+    size_t i;
+    if (!m)
+        return fmi2Error;
+    if ((nKnown > 0 && (!vKnown_ref || !dvKnown))
+        || (nUnknown > 0 && (!vUnknown_ref || !dvUnknown)))
+        return bgc_fmi_refuse(m, fn, "no array given");
+    for (k = 0; k < BGC_NUM_STATES; k++)
+        m->v[k] = 0.0;
+    for (i = 0; i < nKnown; i++) {
+        k = bgc_fmi_in(vKnown_ref[i], BGC_FMI_VR_STATES, BGC_NUM_STATES);
+        if (k < 0) {
+            bgc_fmi_log(m, fmi2Error, "%s: value reference %u: the FMU gives derivatives with "
+                        "respect to the states only", fn, vKnown_ref[i]);
+            return fmi2Error;
+        }
+        m->v[k] += dvKnown[i];
+    }
+    for (i = 0; i < nUnknown; i++) {
+        const fmi2ValueReference r = vUnknown_ref[i];
+        if (bgc_fmi_in(r, BGC_FMI_VR_DERIVATIVES, BGC_NUM_STATES) >= 0) {
+            need_dx = 1;
+        } else if ((k = bgc_fmi_in(r, BGC_FMI_VR_OUTPUTS, BGC_NUM_OUTPUTS)) >= 0) {
+            need_y |= bgc_fmi_output_state[k] < 0;
+        } else if (bgc_fmi_in(r, BGC_FMI_VR_STATES, BGC_NUM_STATES) < 0) {
+            bgc_fmi_log(m, fmi2Error, "%s: value reference %u: the FMU gives the derivatives of "
+                        "state derivatives, states and outputs only", fn, r);
+            return fmi2Error;
+        }
+    }
+    if (need_dx && bgc_jvp(m->t, m->x, &m->p, m->w, m->v, m->jv))
+        return bgc_fmi_model_failed(m, fn);
+#if BGC_FMI_OUTPUT_JVP
+    if (need_y && bgc_fmi_outputs_jvp(m->t, m->x, &m->p, m->v, m->jy))
+        return bgc_fmi_model_failed(m, fn);
+#else
+    if (need_y)
+        return bgc_fmi_refuse(m, fn, "the outputs of this model are computed through algebraic "
+                              "blocks, whose derivatives the FMU does not give");
+#endif
+    for (i = 0; i < nUnknown; i++) {
+        const fmi2ValueReference r = vUnknown_ref[i];
+        if ((k = bgc_fmi_in(r, BGC_FMI_VR_STATES, BGC_NUM_STATES)) >= 0)
+            dvUnknown[i] = m->v[k];
+        else if ((k = bgc_fmi_in(r, BGC_FMI_VR_DERIVATIVES, BGC_NUM_STATES)) >= 0)
+            dvUnknown[i] = m->jv[k];
+        else if ((k = bgc_fmi_in(r, BGC_FMI_VR_OUTPUTS, BGC_NUM_OUTPUTS)) >= 0)
+            dvUnknown[i] = bgc_fmi_output_state[k] >= 0 ? m->v[bgc_fmi_output_state[k]]
+                                                        : m->jy[k];
+    }
+    return fmi2OK;
+}
+
+/* ---------------------------------------------------------- Model Exchange --- */
+
+BGC_FMI_EXPORT fmi2Status fmi2EnterEventMode(fmi2Component c)
+{
+    bgc_fmi *m = bgc_fmi_get(c, "fmi2EnterEventMode",
+                             (1 << BGC_FMI_EVENT) | (1 << BGC_FMI_CONTINUOUS), 1);
+    if (!m)
+        return fmi2Error;
+    m->phase = BGC_FMI_EVENT;
+    return fmi2OK;
+}
+
+BGC_FMI_EXPORT fmi2Status fmi2NewDiscreteStates(fmi2Component c, fmi2EventInfo *eventInfo)
+{
+    bgc_fmi *m = bgc_fmi_get(c, "fmi2NewDiscreteStates", 1 << BGC_FMI_EVENT, 1);
+    if (!m)
+        return fmi2Error;
+    if (!eventInfo)
+        return bgc_fmi_refuse(m, "fmi2NewDiscreteStates", "no event information given");
+    eventInfo->newDiscreteStatesNeeded = fmi2False;
+    eventInfo->terminateSimulation = fmi2False;
+    eventInfo->nominalsOfContinuousStatesChanged = fmi2False;
+    eventInfo->valuesOfContinuousStatesChanged = fmi2False;
+    eventInfo->nextEventTimeDefined = fmi2False;
+    eventInfo->nextEventTime = 0.0;
+    return fmi2OK;
+}
+
+BGC_FMI_EXPORT fmi2Status fmi2EnterContinuousTimeMode(fmi2Component c)
+{
+    bgc_fmi *m = bgc_fmi_get(c, "fmi2EnterContinuousTimeMode", 1 << BGC_FMI_EVENT, 1);
+    if (!m)
+        return fmi2Error;
+    m->phase = BGC_FMI_CONTINUOUS;
+    return fmi2OK;
+}
+
+BGC_FMI_EXPORT fmi2Status fmi2CompletedIntegratorStep(fmi2Component c,
+                                                      fmi2Boolean noSetFMUStatePriorToCurrentPoint,
+                                                      fmi2Boolean *enterEventMode,
+                                                      fmi2Boolean *terminateSimulation)
+{
+    bgc_fmi *m = bgc_fmi_get(c, "fmi2CompletedIntegratorStep", 1 << BGC_FMI_CONTINUOUS, 1);
+    (void)noSetFMUStatePriorToCurrentPoint;
+    if (!m)
+        return fmi2Error;
+    if (enterEventMode)
+        *enterEventMode = fmi2False;
+    if (terminateSimulation)
+        *terminateSimulation = fmi2False;
+    return fmi2OK;
+}
+
+BGC_FMI_EXPORT fmi2Status fmi2SetTime(fmi2Component c, fmi2Real time)
+{
+    bgc_fmi *m = bgc_fmi_get(c, "fmi2SetTime",
+                             (1 << BGC_FMI_EVENT) | (1 << BGC_FMI_CONTINUOUS), 1);
+    if (!m)
+        return fmi2Error;
+    if (!isfinite(time))
+        return bgc_fmi_refuse(m, "fmi2SetTime", "the time is not finite");
+    if (time != m->t)
+        m->dx_ok = m->y_ok = 0;
+    m->t = time;
+    return fmi2OK;
+}
+
+/* nx must be the number of states. */
+static bgc_fmi *bgc_fmi_states(fmi2Component c, const char *fn, int mask, const void *a,
+                               size_t nx)
+{
+    bgc_fmi *m = bgc_fmi_get(c, fn, mask, 1);
+    if (m && nx != (size_t)BGC_NUM_STATES) {
+        bgc_fmi_log(m, fmi2Error, "%s: the FMU has %d states, not %lu", fn, BGC_NUM_STATES,
+                    (unsigned long)nx);
+        return NULL;
+    }
+    if (m && nx > 0 && !a) {
+        bgc_fmi_log(m, fmi2Error, "%s: no array given", fn);
+        return NULL;
+    }
+    return m;
+}
+
+BGC_FMI_EXPORT fmi2Status fmi2SetContinuousStates(fmi2Component c, const fmi2Real x[], size_t nx)
+{
+    bgc_fmi *m = bgc_fmi_states(c, "fmi2SetContinuousStates",
+                                (1 << BGC_FMI_EVENT) | (1 << BGC_FMI_CONTINUOUS), x, nx);
+    size_t i;
+    if (!m)
+        return fmi2Error;
+    for (i = 0; i < nx; i++)
+        m->x[i] = x[i];
+    m->dx_ok = m->y_ok = 0;
+    return fmi2OK;
+}
+
+BGC_FMI_EXPORT fmi2Status fmi2GetDerivatives(fmi2Component c, fmi2Real derivatives[], size_t nx)
+{
+    bgc_fmi *m = bgc_fmi_states(c, "fmi2GetDerivatives", BGC_FMI_VALUES, derivatives, nx);
+    size_t i;
+    if (!m)
+        return fmi2Error;
+    bgc_fmi_refresh(m);
+    if (bgc_fmi_derivatives(m))
+        return bgc_fmi_model_failed(m, "fmi2GetDerivatives");
+    for (i = 0; i < nx; i++)
+        derivatives[i] = m->dx[i];
+    return fmi2OK;
+}
+
+BGC_FMI_EXPORT fmi2Status fmi2GetEventIndicators(fmi2Component c, fmi2Real eventIndicators[],
+                                                 size_t ni)
+{
+    bgc_fmi *m = bgc_fmi_get(c, "fmi2GetEventIndicators", BGC_FMI_VALUES, 1);
+    (void)eventIndicators;
+    if (!m)
+        return fmi2Error;
+    return ni == 0 ? fmi2OK
+                   : bgc_fmi_refuse(m, "fmi2GetEventIndicators", "the FMU has no event indicators");
+}
+
+BGC_FMI_EXPORT fmi2Status fmi2GetContinuousStates(fmi2Component c, fmi2Real x[], size_t nx)
+{
+    bgc_fmi *m = bgc_fmi_states(c, "fmi2GetContinuousStates", BGC_FMI_VALUES, x, nx);
+    size_t i;
+    if (!m)
+        return fmi2Error;
+    bgc_fmi_refresh(m);
+    for (i = 0; i < nx; i++)
+        x[i] = m->x[i];
+    return fmi2OK;
+}
+
+BGC_FMI_EXPORT fmi2Status fmi2GetNominalsOfContinuousStates(fmi2Component c, fmi2Real x_nominal[],
+                                                            size_t nx)
+{
+    bgc_fmi *m = bgc_fmi_states(c, "fmi2GetNominalsOfContinuousStates", BGC_FMI_ANY, x_nominal,
+                                nx);
+    size_t i;
+    if (!m)
+        return fmi2Error;
+    for (i = 0; i < nx; i++)
+        x_nominal[i] = 1.0;
+    return fmi2OK;
+}
+
+/* ------------------------------------------------------------ Co-Simulation --- */
+
+/* Keeps the outputs of the run's last output time (the step's end). */
+static int bgc_fmi_sink(void *ctx, double t, const double *x, const double *y)
+{
+    bgc_fmi *m = (bgc_fmi *)ctx;
+    int k;
+    (void)t;
+    (void)x;
+    for (k = 0; k < BGC_NUM_OUTPUTS; k++)
+        m->y[k] = y[k];
+    return 0;
+}
+
+BGC_FMI_EXPORT fmi2Status fmi2DoStep(fmi2Component c, fmi2Real currentCommunicationPoint,
+                                     fmi2Real communicationStepSize,
+                                     fmi2Boolean noSetFMUStatePriorToCurrentPoint)
+{
+    static const char fn[] = "fmi2DoStep";
+    bgc_fmi *m = bgc_fmi_get(c, fn, 1 << BGC_FMI_STEP, 2);
+    const bgc_method *method;
+    bgc_settings s;
+    char msg[512];
+    int rc;
+    (void)noSetFMUStatePriorToCurrentPoint;
+    if (!m)
+        return fmi2Error;
+    if (!(communicationStepSize >= 0.0 && isfinite(communicationStepSize)))
+        return bgc_fmi_refuse(m, fn, "the step size must be a finite number, not negative");
+    if (fabs(currentCommunicationPoint - m->t) > 1e-9 * bgc_max(1.0, fabs(m->t))) {
+        bgc_fmi_log(m, fmi2Error, "%s: the communication point %.17g is not the FMU's time "
+                    "%.17g", fn, currentCommunicationPoint, m->t);
+        return fmi2Error;
+    }
+    if (communicationStepSize == 0.0)
+        return fmi2OK;
+    bgc_settings_default(&s);
+    s.t0 = currentCommunicationPoint; /* the environment's clock: no drift from summing steps */
+    s.t_end = currentCommunicationPoint + communicationStepSize;
+    s.dt = communicationStepSize;
+    s.rtol = m->rtol;
+    method = &bgc_methods[s.solver];
+    if (method->family == BGC_FAMILY_AUTO && m->stiff)
+        s.solver = method->stiff_solver; /* once stiff, as within one run */
+    if (s.step == 0.0 && bgc_methods[s.solver].family == BGC_FAMILY_FIXED)
+        s.step = BGC_SCENE_DT; /* the fixed step of the scene's run, whatever the interval */
+    m->st.switched = 0;
+    rc = bgc_advance(&s, &m->p, m->w, m->x, bgc_fmi_sink, m, &m->st, msg, sizeof msg);
+    m->stiff |= m->st.switched;
+    m->dx_ok = 0;
+    if (rc) {
+        m->y_ok = 0;
+        m->phase = BGC_FMI_FAILED;
+        bgc_fmi_log(m, fmi2Error, "%s: %s", fn, msg);
+        return fmi2Error;
+    }
+    m->t = s.t_end;
+    m->y_ok = 1;
+    return fmi2OK;
+}
+
+BGC_FMI_EXPORT fmi2Status fmi2CancelStep(fmi2Component c)
+{
+    bgc_fmi *m = bgc_fmi_get(c, "fmi2CancelStep", BGC_FMI_ANY, 2);
+    return m ? bgc_fmi_refuse(m, "fmi2CancelStep", "fmi2DoStep never runs asynchronously")
+             : fmi2Error;
+}
+
+BGC_FMI_EXPORT fmi2Status fmi2SetRealInputDerivatives(fmi2Component c,
+                                                      const fmi2ValueReference vr[], size_t nvr,
+                                                      const fmi2Integer order[],
+                                                      const fmi2Real value[])
+{
+    (void)vr;
+    (void)order;
+    (void)value;
+    return bgc_fmi_none(c, "fmi2SetRealInputDerivatives", nvr);
+}
+
+BGC_FMI_EXPORT fmi2Status fmi2GetRealOutputDerivatives(fmi2Component c,
+                                                       const fmi2ValueReference vr[], size_t nvr,
+                                                       const fmi2Integer order[], fmi2Real value[])
+{
+    bgc_fmi *m = bgc_fmi_get(c, "fmi2GetRealOutputDerivatives", BGC_FMI_ANY, 2);
+    (void)vr;
+    (void)order;
+    (void)value;
+    if (!m)
+        return fmi2Error;
+    return nvr == 0 ? fmi2OK
+                    : bgc_fmi_refuse(m, "fmi2GetRealOutputDerivatives",
+                                     "the FMU gives no output derivatives "
+                                     "(maxOutputDerivativeOrder=\"0\")");
+}
+
+/* fmi2DoStep never returns fmi2Pending: the status is asked for only after it has. */
+BGC_FMI_EXPORT fmi2Status fmi2GetStatus(fmi2Component c, const fmi2StatusKind s,
+                                        fmi2Status *value)
+{
+    bgc_fmi *m = bgc_fmi_get(c, "fmi2GetStatus", BGC_FMI_ANY, 2);
+    (void)s;
+    (void)value;
+    if (!m)
+        return fmi2Error;
+    bgc_fmi_log(m, fmi2Discard, "fmi2GetStatus: fmi2DoStep never returns fmi2Pending");
+    return fmi2Discard;
+}
+
+BGC_FMI_EXPORT fmi2Status fmi2GetRealStatus(fmi2Component c, const fmi2StatusKind s,
+                                            fmi2Real *value)
+{
+    bgc_fmi *m = bgc_fmi_get(c, "fmi2GetRealStatus", BGC_FMI_ANY, 2);
+    if (!m)
+        return fmi2Error;
+    if (s != fmi2LastSuccessfulTime || !value) {
+        bgc_fmi_log(m, fmi2Discard, "fmi2GetRealStatus: only fmi2LastSuccessfulTime");
+        return fmi2Discard;
+    }
+    *value = m->t;
+    return fmi2OK;
+}
+
+BGC_FMI_EXPORT fmi2Status fmi2GetIntegerStatus(fmi2Component c, const fmi2StatusKind s,
+                                               fmi2Integer *value)
+{
+    bgc_fmi *m = bgc_fmi_get(c, "fmi2GetIntegerStatus", BGC_FMI_ANY, 2);
+    (void)s;
+    (void)value;
+    if (!m)
+        return fmi2Error;
+    bgc_fmi_log(m, fmi2Discard, "fmi2GetIntegerStatus: no integer status");
+    return fmi2Discard;
+}
+
+BGC_FMI_EXPORT fmi2Status fmi2GetBooleanStatus(fmi2Component c, const fmi2StatusKind s,
+                                               fmi2Boolean *value)
+{
+    bgc_fmi *m = bgc_fmi_get(c, "fmi2GetBooleanStatus", BGC_FMI_ANY, 2);
+    if (!m)
+        return fmi2Error;
+    if (s != fmi2Terminated || !value) {
+        bgc_fmi_log(m, fmi2Discard, "fmi2GetBooleanStatus: only fmi2Terminated");
+        return fmi2Discard;
+    }
+    *value = fmi2False; /* the FMU never asks to end the simulation */
+    return fmi2OK;
+}
+
+BGC_FMI_EXPORT fmi2Status fmi2GetStringStatus(fmi2Component c, const fmi2StatusKind s,
+                                              fmi2String *value)
+{
+    bgc_fmi *m = bgc_fmi_get(c, "fmi2GetStringStatus", BGC_FMI_ANY, 2);
+    (void)s;
+    (void)value;
+    if (!m)
+        return fmi2Error;
+    bgc_fmi_log(m, fmi2Discard, "fmi2GetStringStatus: no string status");
+    return fmi2Discard;
+}

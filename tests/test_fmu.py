@@ -1,0 +1,296 @@
+"""FMU export (`bgc compile --target fmu`): FMPy validates the pendulum's and the RLC's FMUs,
+simulates them as Model Exchange (its CVODE) and as Co-Simulation (bgc's solver inside), and
+the trajectories match bgc's own run of the same build; parameters set through FMPy change
+the RLC as its closed-form solution says; the directional derivatives are the Jacobians
+written out by hand; model text is escaped in the XML.  FMPy is an optional test dependency
+(the `test` extra)."""
+import ctypes
+import shutil
+import subprocess
+import xml.etree.ElementTree as ET
+import zipfile
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from bgc import api, backends, fmu
+from bgc.emit import emit_c
+from conftest import run_bgc
+
+fmpy = pytest.importorskip("fmpy")
+from fmpy.fmi2 import FMU2Model  # noqa: E402
+from fmpy.validation import validate_fmu  # noqa: E402
+
+if not backends.have_c_compiler():
+    pytest.skip("FMU export builds its binary with a C compiler", allow_module_level=True)
+
+ROOT = Path(__file__).resolve().parent.parent
+T_END = 2.0  # the runs compared: 200 output intervals of 0.01
+RLC = dict(V0=1.0, resistance=0.5, inductance=1.0, capacitance=0.25, q0=0.1, i0=-0.2)
+PENDULUM = dict(m=1.0, l=1.0, g=9.81, theta0=0.5, alpha=5.0, beta=5.0)  # models/pendulum.bg
+
+
+@pytest.fixture(scope="module")
+def built(tmp_path_factory):
+    """Each model built once: its Compiled, its FMU (the RLC's through the command line, the
+    pendulum's through api.compile) and bgc's own run of the same program to T_END."""
+    tmp = tmp_path_factory.mktemp("fmu")
+    out = {}
+    for name, scene in (("rlc", "step"), ("pendulum", "swing")):
+        model = ROOT / "models" / f"{name}.bg"
+        compiled = api.build(model, scene)
+        path = tmp / f"{name}.fmu"
+        if name == "rlc":
+            done = run_bgc("compile", model, "--scene", scene, "--target", "fmu", "-o", path)
+            assert done.returncode == 0, done.stderr
+        else:
+            ((file, data),) = api.compile(model, "fmu", scene).items()
+            assert file == "pendulum.fmu"
+            path.write_bytes(data)
+        (text,) = emit_c(compiled.program).values()
+        code, csv, err = backends.run_c(backends.compile_c(text), ["--t-end", str(T_END)])
+        assert code == 0, err
+        out[name] = (compiled, path, api._parse_csv(csv))
+    return out
+
+
+def simulate(path, kind, **options):
+    if kind == "ModelExchange":
+        options.setdefault("relative_tolerance", 1e-11)  # CVODE; the FMU's own is 1e-10
+    return fmpy.simulate_fmu(str(path), fmi_type=kind, stop_time=T_END, output_interval=0.01,
+                             **options)
+
+
+def relative_difference(got, ref):
+    return np.max(np.abs(got - ref)) / np.max(np.abs(ref))
+
+
+@pytest.mark.parametrize("name", ["rlc", "pendulum"])
+def test_fmpy_validates(built, name):
+    assert validate_fmu(str(built[name][1])) == []
+
+
+@pytest.mark.parametrize("kind", ["ModelExchange", "CoSimulation"])
+@pytest.mark.parametrize("name", ["rlc", "pendulum"])
+def test_trajectories_match_bgc(built, name, kind):
+    _, path, (t, Y, names) = built[name]
+    result = simulate(path, kind)
+    assert np.array_equal(result["time"], t)
+    for k, output in enumerate(names):
+        if output == "rod.residual":  # Phi = x^2 + y^2 - l^2: zero up to the drift
+            assert np.max(np.abs(result[output])) < 1e-8
+        else:
+            assert relative_difference(result[output], Y[:, k]) < 1e-6, output
+
+
+def rlc_closed_form(t, V0, resistance, inductance, capacitance, q0, i0):
+    """The series RLC's charge and current, underdamped: L q'' + R q' + q/C = V0."""
+    alpha = resistance / (2 * inductance)
+    wd = np.sqrt(1 / (inductance * capacitance) - alpha**2)
+    a = q0 - capacitance * V0
+    b = (i0 + alpha * a) / wd
+    e = np.exp(-alpha * t)
+    q = capacitance * V0 + e * (a * np.cos(wd * t) + b * np.sin(wd * t))
+    i = e * ((b * wd - alpha * a) * np.cos(wd * t) - (a * wd + alpha * b) * np.sin(wd * t))
+    return q, i
+
+
+@pytest.mark.parametrize("kind", ["ModelExchange", "CoSimulation"])
+def test_parameters_set_through_fmpy(built, kind):
+    """A different resistance and inductance (and the initial flux linkage L i0 following
+    the inductance): the closed form with those values."""
+    changed = dict(RLC, resistance=1.0, inductance=0.5)
+    result = simulate(built["rlc"][1], kind,
+                      start_values={"resistance": 1.0, "inductance": 0.5})
+    q, i = rlc_closed_form(result["time"], **changed)
+    assert relative_difference(result["cap.q"], q) < 1e-6
+    assert relative_difference(result["ind.p"], changed["inductance"] * i) < 1e-6
+    assert relative_difference(result["cap.e"], q / changed["capacitance"]) < 1e-6
+    assert relative_difference(result["res.e"], changed["resistance"] * i) < 1e-6
+    assert relative_difference(q, rlc_closed_form(result["time"], **RLC)[0]) > 0.01
+
+
+def test_variables_agree_with_the_model(built):
+    for name, params in (("rlc", RLC), ("pendulum", PENDULUM)):
+        compiled, path, (_, _, outputs) = built[name]
+        md = fmpy.read_model_description(str(path))
+        assert md.fmiVersion == "2.0" and md.numberOfEventIndicators == 0
+        assert md.modelExchange.modelIdentifier == md.coSimulation.modelIdentifier == name
+        assert md.modelExchange.providesDirectionalDerivative
+        assert not md.modelExchange.canGetAndSetFMUstate
+        # the parameters as the model file declares them, settable before initialisation
+        got = {v.name: float(v.start) for v in md.modelVariables if v.causality == "parameter"}
+        assert got == params
+        assert all(v.variability == "fixed" for v in md.modelVariables
+                   if v.causality == "parameter")
+        # the continuous states in the order of the derivatives: the model's states
+        states = [d.variable.derivative.name for d in md.derivatives]
+        assert states == list(compiled.program.states)
+        assert [d.variable.name for d in md.derivatives] == [f"der({s})" for s in states]
+        assert {v.name for v in md.modelVariables if v.causality == "output"} == set(outputs)
+        assert {u.variable.name for u in md.outputs} == set(outputs)
+        with zipfile.ZipFile(path) as z:
+            assert sorted(z.namelist()) == sorted([
+                "modelDescription.xml", f"binaries/linux64/{name}.so", f"sources/{name}.c"])
+            assert md.guid in z.read(f"sources/{name}.c").decode()
+    rlc = fmpy.read_model_description(str(built["rlc"][1]))
+    units = {v.name: v.unit for v in rlc.modelVariables}
+    assert units["V0"] == "V" and units["resistance"] == "ohm"
+    # dq/dt = i = p/L depends on the flux linkage only; dp/dt = V0 - R p/L - q/C on both
+    deps = {d.variable.name: sorted(v.name for v in d.dependencies) for d in rlc.derivatives}
+    assert deps == {"der(ind.p)": ["cap.q", "ind.p"], "der(cap.q)": ["ind.p"]}
+
+
+def test_same_xml_and_sources_every_time(built):
+    compiled = built["pendulum"][0]
+    first, second = fmu.fmu_texts(compiled), fmu.fmu_texts(compiled)
+    assert first[1:] == second[1:]
+    with zipfile.ZipFile(built["pendulum"][1]) as z:
+        assert z.read("modelDescription.xml").decode() == first[1]
+
+
+def instantiate(path, md, kind="ModelExchange"):
+    unzip = fmpy.extract(str(path))
+    ident = (md.modelExchange if kind == "ModelExchange" else md.coSimulation).modelIdentifier
+    model = FMU2Model(guid=md.guid, unzipDirectory=unzip, modelIdentifier=ident,
+                      instanceName="test")
+    model.instantiate()
+    return model, unzip
+
+
+def test_directional_derivatives(built):
+    """RLC, states (p, q): dp/dt = V0 - R p/L - q/C, dq/dt = p/L; outputs cap.e = q/C,
+    ind.f = p/L.  Pendulum: rod.residual = x^2 + y^2 - l^2."""
+    path = built["rlc"][1]
+    md = fmpy.read_model_description(str(path))
+    vr = {v.name: v.valueReference for v in md.modelVariables}
+    model, unzip = instantiate(path, md)
+    try:
+        model.setupExperiment(startTime=0.0)
+        model.setReal([vr["resistance"], vr["inductance"]], [1.5, 0.5])
+        model.enterInitializationMode()
+        model.exitInitializationMode()
+        model.enterContinuousTimeMode()
+        R, L, C = 1.5, 0.5, RLC["capacitance"]
+        unknowns = [vr["der(ind.p)"], vr["der(cap.q)"], vr["cap.e"], vr["ind.f"], vr["cap.q"]]
+        dp = model.getDirectionalDerivative(unknowns, [vr["ind.p"]], [1.0])
+        dq = model.getDirectionalDerivative(unknowns, [vr["cap.q"]], [1.0])
+        assert np.allclose(dp, [-R / L, 1 / L, 0.0, 1 / L, 0.0], rtol=1e-14, atol=0)
+        assert np.allclose(dq, [-1 / C, 0.0, 1 / C, 0.0, 1.0], rtol=1e-14, atol=0)
+        # parameters are fixed once initialisation has ended
+        with pytest.raises(Exception):
+            model.setReal([vr["resistance"]], [2.0])
+        model.terminate()
+    finally:
+        model.freeInstance()
+        shutil.rmtree(unzip, ignore_errors=True)
+
+    path = built["pendulum"][1]
+    md = fmpy.read_model_description(str(path))
+    vr = {v.name: v.valueReference for v in md.modelVariables}
+    model, unzip = instantiate(path, md)
+    try:
+        model.setupExperiment(startTime=0.0)
+        model.setReal([vr["theta0"]], [0.3])
+        model.enterInitializationMode()
+        model.exitInitializationMode()
+        x, y = model.getReal([vr["x"], vr["y"]])
+        assert np.allclose([x, y], [np.sin(0.3), np.cos(0.3)], rtol=1e-15)
+        grad = model.getDirectionalDerivative([vr["rod.residual"]], [vr["x"], vr["y"]],
+                                              [1.0, 2.0])
+        assert np.isclose(grad[0], 2 * x + 2 * 2 * y, rtol=1e-14)
+        model.terminate()
+    finally:
+        model.freeInstance()
+        shutil.rmtree(unzip, ignore_errors=True)
+
+
+NO_STATES = """model wire "a source and a resistor: no states"
+parameter V = 2.0
+src : Se(V)
+j : 1
+r : R(4.0)
+src -> j
+j -> r
+"""
+
+
+def test_only_the_fmi_functions_are_exported_and_the_sources_build(built, tmp_path):
+    """The binary exports the FMI functions and nothing of bgc's; the sources compile as C99
+    with every warning an error: the pendulum's, the diode's (its outputs go through a Newton
+    block, so the FMU gives no output derivatives) and a model without states."""
+    path = built["pendulum"][1]
+    with zipfile.ZipFile(path) as z:
+        z.extractall(tmp_path)
+    lib = ctypes.CDLL(str(tmp_path / "binaries" / "linux64" / "pendulum.so"))
+    assert hasattr(lib, "fmi2DoStep") and hasattr(lib, "fmi2GetDirectionalDerivative")
+    assert not hasattr(lib, "bgc_simulate") and not hasattr(lib, "bgc_rhs")
+    sources = [tmp_path / "sources" / "pendulum.c"]
+    for name, model in (("diode", api.load(ROOT / "models" / "diode.bg")),
+                        ("wire", api.load("wire.bg", NO_STATES))):
+        description, _, source = fmu.fmu_texts(api.build(model, "charge" if name == "diode"
+                                                          else None))
+        assert description.directional == (name != "diode")
+        sources.append(tmp_path / f"{name}.c")
+        sources[-1].write_text(source, encoding="utf-8")
+    for source in sources:
+        done = subprocess.run([*backends.c_compiler(), "-std=c99", "-Wall", "-Wextra",
+                               "-pedantic", "-Werror", "-fsyntax-only", str(source)],
+                              capture_output=True, text=True)
+        assert done.returncode == 0, done.stderr
+
+
+def test_model_text_is_escaped(tmp_path):
+    """Doc strings with XML's special characters and a control character: the XML parses and
+    says what the model says."""
+    text = ('model odd "a <b> & \\"c\\" ]]> %s\x01"\n'
+            'parameter k = 2.0 "spring <k> [N/m]"\n'
+            'parameter m = 2*k "mass & co [kg]"\n'
+            'j : 1\n'
+            'mass : I(m) init f = 1 "a \\"mass\\""\n'
+            'spring : C(1/k)\n'
+            'j -> mass\nj -> spring\n')
+    compiled = api.build(api.load("odd.bg", text))
+    _, xml, _ = fmu.fmu_texts(compiled)
+    root = ET.fromstring(xml.encode("utf-8"))
+    assert root.get("description") == 'a <b> & "c" ]]> %s\ufffd'
+    variables = {v.get("name"): v for v in root.iter("ScalarVariable")}
+    assert variables["k"].get("description") == "spring <k> [N/m]"
+    assert variables["k"].find("Real").get("unit") == "N/m"
+    assert variables["m"].find("Real").get("start") == "4.0"  # its default, 2 k
+    assert variables["mass.p"].get("description").endswith('(a "mass")')
+    (tmp_path / "modelDescription.xml").write_text(xml, encoding="utf-8")
+    assert validate_fmu(str(tmp_path)) == []
+
+
+def test_command_line_errors(tmp_path):
+    done = run_bgc("compile", ROOT / "models" / "rlc.bg", "--target", "fmu")
+    assert done.returncode == 2 and "-o NAME.fmu" in done.stderr
+    done = run_bgc("compile", ROOT / "models" / "pendulum.bg", "--outputs", "x, m",
+                   "--target", "fmu", "-o", tmp_path / "p.fmu")
+    assert done.returncode == 1 and "output 'm' is a parameter" in done.stderr
+    assert not (tmp_path / "p.fmu").exists() and list(tmp_path.iterdir()) == []
+    with pytest.raises(ValueError, match="target"):
+        api.compile(ROOT / "models" / "rlc.bg", "fmu2")
+
+
+def test_an_inconsistent_start_when_asked_for(tmp_path):
+    """compile --target fmu --allow-inconsistent: the FMU starts off the constraint as the
+    program does with --allow-inconsistent (and follows the same trajectory)."""
+    model = ROOT / "tests" / "models" / "pendulum_offset.bg"
+    path = tmp_path / "offset.fmu"
+    done = run_bgc("compile", model, "--target", "fmu", "--allow-inconsistent", "-o", path,
+                   "--outputs", "x, y")
+    assert done.returncode == 0, done.stderr
+    options = dict(start_values={"r0": 1.05}, stop_time=1.0, output_interval=0.01)
+    got = fmpy.simulate_fmu(str(path), fmi_type="CoSimulation", **options)
+    compiled = api.build(model, allow_inconsistent=True, outputs="x, y")
+    (text,) = emit_c(compiled.program).values()
+    code, csv, err = backends.run_c(backends.compile_c(text), [
+        "--t-end", "1", "--dt", "0.01", "-p", "r0=1.05", "--allow-inconsistent"])
+    assert code == 0, err
+    t, Y, names = api._parse_csv(csv)
+    assert abs(Y[0, 0] ** 2 + Y[0, 1] ** 2 - 1.05 ** 2) < 1e-12  # off the rod (l = 1)
+    for k, name in enumerate(names):
+        assert relative_difference(got[name], Y[:, k]) < 1e-6, name
