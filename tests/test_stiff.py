@@ -209,7 +209,7 @@ def test_stiff_rc_pair_matches_the_closed_form(backend, solver):
 @pytest.mark.parametrize("solver", STIFF)
 def test_van_der_pol_mu_1e5_matches_scipy(backend, solver):
     """One period and a little more; SciPy's Radau at rtol 1e-10 is the reference.  An rtol of
-    1e-6 keeps the error within 5e-5 of each column's scale (measured: 7e-6 at most, y2 near
+    1e-6 keeps the error within 5e-5 of each column's scale (measured: 8.6e-6 at most, y2 near
     the jump that ends the period)."""
     tr, ref = van_der_pol_reference()
     t, Y, st = _run(van_der_pol, backend, solver=solver, t_end=2.0, dt=0.02, rtol=1e-6,
@@ -220,6 +220,15 @@ def test_van_der_pol_mu_1e5_matches_scipy(backend, solver):
     assert np.all(err < 5e-5), err
     assert st["jac"] > 0 and st["lu"] > 0 and st["solves"] >= 3 * st["steps"]
     assert st["steps"] < 3000, st
+    if solver == "radau5":
+        # loose tolerances: Radau IIA's step error lies far below its estimate, so the error
+        # stays under rtol / 3 -- unless Newton stops short (after one iteration, on a
+        # contraction rate the step's new matrices need not have): then 7.6e-2 at rtol 1e-2
+        # and 2.3e-3 at 1e-3.  Measured now: 9.1e-4 and 7.9e-5.
+        for rtol in (1e-2, 1e-3):
+            _, Y, _ = _run(van_der_pol, backend, solver=solver, t_end=2.0, dt=0.02, rtol=rtol,
+                           atol=rtol * 1e-3)
+            assert np.all(_scaled_error(Y, ref) < rtol / 3), (rtol, _scaled_error(Y, ref))
 
 
 @pytest.mark.parametrize("backend", BACKENDS)

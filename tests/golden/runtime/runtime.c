@@ -2092,16 +2092,22 @@ static void bgc_radau_dense_at(const void *dctx, double theta, double *yout)
    (gamma/h I - J) dW1 = (T^-1 F)_1 - gamma/h W1 and, for dW2 + i dW3, the complex system
    ((alpha + i beta)/h I - J) with the right side (T^-1 F)_2 + i (T^-1 F)_3
    - (alpha + i beta)/h (W2 + i W3): one real and one complex factorisation per h and J.
-   Tolerances as RADAU5 transforms them: rtol' = 0.1 rtol^(2/3), atol' = rtol' atol / rtol,
-   weights atol' + rtol' |y| at the step's start.  Newton: at most 7 iterations from the
-   previous step's collocation polynomial (zero on the first step), convergence rate theta,
-   stop when theta/(1 - theta) |dW| <= fnewt = max(10 eps/rtol', min(0.03, rtol'^(1/2)));
+   Tolerances as RADAU5 transforms them: rtol' = 0.1 rtol^(2/3), atol' = rtol' atol / rtol;
+   Newton's weights atol' + rtol' |y| at the step's start.  Newton: at most 7 iterations from
+   the previous step's collocation polynomial (zero on the first step), convergence rate
+   theta, stop when theta/(1 - theta) |dW| <= fnewt = max(10 eps/rtol', min(0.03,
+   rtol'^(1/2))), theta the rate of this step's iterations; after one iteration (the previous
+   step's theta) only if h and J are the previous step's (RADAU5 allows it on any step: after
+   a change of h the old rate does not hold, and the stages' Newton error of up to fnewt
+   times the tolerance can exceed the method's far smaller local error);
    theta >= 0.99 or no convergence: h / 2; a predicted miss of fnewt within 7 iterations: h
    shrunk accordingly.  Error estimate: (gamma/h I - J) err = f(t, y) + sum_j e_j Z_j / h,
-   refined once with f(t, y + err) on the first step and after a rejection.  Step control:
-   Gustafsson's with safety min(safe, safe (1 + 2 * 7) / (newton + 2 * 7)), hnew/h in
-   [fac_min, fac_max].  J is recomputed when the contraction was poorer than 0.001, the
-   matrices are refactored unless hnew/h stays in [1, 1.2] (h is then kept).  Outputs by the
+   refined once with f(t, y + err) on the first step and after a rejection, in Hairer's norm
+   with the weights atol' + rtol' max(|y|, |y1|) of the other solvers.  Step control:
+   Gustafsson's, both the standard and the predictive factor with the safety
+   min(safe, safe (1 + 2 * 7) / (newton + 2 * 7)) (RADAU5 uses safe in the predictive one),
+   hnew/h in [fac_min, fac_max].  J is recomputed when the contraction was poorer than 0.001,
+   the matrices are refactored unless hnew/h stays in [1, 1.2] (h is then kept).  Outputs by the
    collocation polynomial.  Counts: each real or complex factorisation and each real or
    complex solve.  With s->step > 0: steps of that size, no error estimate, and Newton's
    failure (after a fresh Jacobian) ends the run. */
@@ -2117,17 +2123,17 @@ static int bgc_run_radau5(bgc_run *r, const bgc_method *method, double *y)
     const double cfac = method->safe * (double)(1 + 2 * NIT);
     const double *T = m->T, *Ti = m->Ti;
     const double t_start = r->t;
-    double *mem = malloc(((size_t)2 * D * D + (size_t)17 * D) * sizeof *mem);
+    double *mem = malloc(((size_t)2 * D * D + (size_t)18 * D) * sizeof *mem);
     bgc_cplx *cmem = malloc(((size_t)D * D + (size_t)D) * sizeof *cmem);
     int *piv = malloc((size_t)2 * D * sizeof *piv);
     double *J, *E1, *z1, *z2, *z3, *w1, *w2, *w3, *f0, *scal, *ys, *y1, *yout, *b, *zlast;
-    double *cont, *f2;
+    double *cont, *f2, *ew;
     bgc_cplx *E2, *zc;
     double t = r->t, h = 0.0, hnew, hfact = 0.0, hold = 0.0, hacc = 0.0, erracc = 1.0;
     double faccon = 1.0, theta = thet, thqold = 1.0, dynold = 1.0, hhfac = 0.5;
     long n_fixed = 0, k_fixed = 0;
     int i, l, rc = 0, reject = 0, last = 0, first = 1, needjac = 1, caljac = 0;
-    int accepted = 0, nsing = 0, worst = -1, bad = -1, bad_kind = 0, newt = 0;
+    int accepted = 0, nsing = 0, worst = -1, bad = -1, bad_kind = 0, newt = 0, refactored = 0;
     bgc_radau_dense dense;
 
     if (!mem || !cmem || !piv) {
@@ -2151,6 +2157,7 @@ static int bgc_run_radau5(bgc_run *r, const bgc_method *method, double *y)
     zlast = b + 3 * (size_t)D;
     cont = zlast + D;
     f2 = cont + D;
+    ew = f2 + D;
     E2 = cmem;
     zc = E2 + (size_t)D * D;
     for (l = 0; l < 3 * D; l++)
@@ -2221,6 +2228,7 @@ static int bgc_run_radau5(bgc_run *r, const bgc_method *method, double *y)
         betan = m->beta / h;
 
         /* gamma/h I - J and (alpha + i beta)/h I - J, factored (unless they are h's already) */
+        refactored = h != hfact;
         if (h != hfact) {
             int singular;
             for (l = 0; l < N * N; l++) {
@@ -2352,7 +2360,9 @@ static int bgc_run_radau5(bgc_run *r, const bgc_method *method, double *y)
                 z2[l] = T[3] * a1 + T[4] * a2 + T[5] * a3;
                 z3[l] = T[6] * a1 + T[7] * a2 + T[8] * a3;
             }
-            if (faccon * dyno <= fnewt)
+            /* converged; after one iteration only on the previous step's matrices, whose
+               contraction faccon measured */
+            if ((newt > 1 || !refactored) && faccon * dyno <= fnewt)
                 break;
         }
         if (failed) {
@@ -2388,10 +2398,11 @@ static int bgc_run_radau5(bgc_run *r, const bgc_method *method, double *y)
             for (l = 0; l < N; l++) {
                 f2[l] = (m->e[0] * z1[l] + m->e[1] * z2[l] + m->e[2] * z3[l]) / h;
                 cont[l] = f2[l] + f0[l];
+                ew[l] = atol + rtol * bgc_max(fabs(y[l]), fabs(y[l] + z3[l]));
             }
             bgc_stiff_lu_solve(N, E1, piv, cont);
             r->st->solves++;
-            err = bgc_max(bgc_stiff_norm(cont, scal, &worst), 1e-10);
+            err = bgc_max(bgc_stiff_norm(cont, ew, &worst), 1e-10);
             if (err >= 1.0 && (first || reject)) { /* refined: f at y + err */
                 for (l = 0; l < N; l++)
                     ys[l] = y[l] + cont[l];
@@ -2401,7 +2412,7 @@ static int bgc_run_radau5(bgc_run *r, const bgc_method *method, double *y)
                         cont[l] = yout[l] + f2[l];
                     bgc_stiff_lu_solve(N, E1, piv, cont);
                     r->st->solves++;
-                    err = bgc_max(bgc_stiff_norm(cont, scal, &worst), 1e-10);
+                    err = bgc_max(bgc_stiff_norm(cont, ew, &worst), 1e-10);
                 }
             }
             if (err != err || err > DBL_MAX) {
@@ -2424,7 +2435,7 @@ static int bgc_run_radau5(bgc_run *r, const bgc_method *method, double *y)
             first = 0;
             accepted++;
             if (accepted > 1) {
-                double facgus = (hacc / h) * pow(err * err / erracc, expo) / method->safe;
+                double facgus = (hacc / h) * pow(err * err / erracc, expo) / fac;
                 facgus = bgc_max(1.0 / method->fac_max, bgc_min(1.0 / method->fac_min, facgus));
                 quot = bgc_max(quot, facgus);
                 hnew = h / quot;

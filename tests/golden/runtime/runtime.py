@@ -1912,6 +1912,7 @@ def _run_radau5(run, m, y):
         fac1, alphn, betan = gamma / h, alpha / h, beta / h
 
         # gamma/h I - J and (alpha + i beta)/h I - J, inverted (unless they are h's already)
+        refactored = h != hfact
         if h != hfact:
             st["lu"] += 1
             E1inv = _stiff_inverse(identity * fac1 - J)
@@ -1993,7 +1994,8 @@ def _run_radau5(run, m, y):
             dynold = max(dyno, _EPS)
             W = W + dW
             Z = T @ W
-            if faccon * dyno <= fnewt:
+            # converged; after one iteration only on the previous step's matrices
+            if (newt > 1 or not refactored) and faccon * dyno <= fnewt:
                 break
         if failed:
             if fixed:
@@ -2021,7 +2023,8 @@ def _run_radau5(run, m, y):
                 f2 = (ew[0] * Z[0] + ew[1] * Z[1] + ew[2] * Z[2]) / h
                 cont = E1inv @ (f2 + f0)
                 st["solves"] += 1
-                err, worst_now = _stiff_norm(cont, scal)
+                wt = atol + rtol * numpy.maximum(numpy.abs(y), numpy.abs(y + Z[2]))
+                err, worst_now = _stiff_norm(cont, wt)
                 err = max(err, 1e-10)
                 if err >= 1.0 and (first or reject):  # refined: f at y + err
                     st["rhs"] += 1
@@ -2032,7 +2035,7 @@ def _run_radau5(run, m, y):
                     if f1 is not None:
                         cont = E1inv @ (f1 + f2)
                         st["solves"] += 1
-                        err, worst_now = _stiff_norm(cont, scal)
+                        err, worst_now = _stiff_norm(cont, wt)
                         err = max(err, 1e-10)
             worst = worst_now if worst_now >= 0 else worst
             if err != err or err == math.inf:
@@ -2050,7 +2053,7 @@ def _run_radau5(run, m, y):
             first = False
             accepted += 1
             if accepted > 1:
-                facgus = (hacc / h) * (err * err / erracc) ** expo / safe
+                facgus = (hacc / h) * (err * err / erracc) ** expo / fac
                 facgus = max(1.0 / fac_max, min(1.0 / fac_min, facgus))
                 quot = max(quot, facgus)
                 hnew = h / quot
