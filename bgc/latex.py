@@ -214,6 +214,11 @@ def _pythagoras_add(add: sp.Add) -> sp.Expr:
     return sp.Add(*[t for i, t in enumerate(terms) if i not in used], *new)
 
 
+def _negated_sum(e) -> bool:
+    """-(a + b) as factor_terms leaves it unevaluated (printed "- (a + b)"): to be a - b."""
+    return e.is_Mul and len(e.args) == 2 and e.args[0] == -1 and e.args[1].is_Add
+
+
 def tidy(expr):
     """expr with its sums of squared sines and cosines reduced and common factors pulled out
     (factor_terms); as it is when it is past the limits."""
@@ -221,7 +226,7 @@ def tidy(expr):
         return expr
     if expr.has(sp.sin, sp.cos):
         expr = expr.replace(lambda e: e.is_Add, _pythagoras_add)
-    expr = sp.factor_terms(expr)
+    expr = sp.factor_terms(expr).replace(_negated_sum, lambda e: sp.Mul(*e.args))
     if expr.has(sp.sin, sp.cos):
         expr = expr.replace(lambda e: e.is_Add, _pythagoras_add)
     return expr
