@@ -19,11 +19,13 @@ from .graph import Graph
 from .ir import Program
 from .lower import lower
 from .parser import decode, parse, parse_option
-from .reduce import ALGEBRA, Reduced, reduce
+from .reduce import Reduced, reduce
 from .report import SceneSummary, check_report, scenes_report, equations_latex, equations_text, scene_summary
 from .resolve import resolve
-from .resources import MAX_OUTPUT_ROWS, read_bounded
+from .resources import MAX_OUTPUT_ROWS, read_bounded  # noqa: F401 (re-exported)
 from .scene import Override, Settings, apply_scene
+from .run import (ALGEBRA, BACKENDS, FORMATS, SIMULATE_OPTIONS, TARGETS, check_run_options,
+                  choice as _choice, run_args, run_span_problem)
 
 
 @dataclass(frozen=True)
@@ -77,7 +79,17 @@ def _model_error(exc: ModelError, source: Source) -> BgcModelError:
     return (BgcArgumentError if outside else BgcModelError)(exc, source)
 
 
-def load(path, text: str | None = None) -> Source:
+def load(path, text: str | None = None, scene: str | None = None, backend: str = "c",
+         algebra: str = "auto", outputs=None, effects=None, project_initial: bool = False):
+    """A model for interactive use (bgc.model.Model, which is also a Source): the file read
+    now (UTF-8, size-limited; `text` gives the source directly), built on first use with the
+    scene and options given."""
+    from .model import Model
+    return Model(read_source(path, text), scene, backend, algebra, outputs, effects,
+                 project_initial)
+
+
+def read_source(path, text: str | None = None) -> Source:
     """Read a model file (UTF-8, size-limited); `text` gives the source directly."""
     path = str(path)
     if text is None:
@@ -85,15 +97,20 @@ def load(path, text: str | None = None) -> Source:
             data = read_bounded(path)
         except OSError as exc:
             raise FileNotFoundError(f"{path}: cannot read: {exc.strerror}") from None
-        try:
-            text = decode(data)
-        except ModelError as exc:
-            raise BgcModelError(exc, Source(path, data.decode("utf-8", "replace"))) from None
+        return source_from_bytes(path, data)
     return Source(path, text)
 
 
+def source_from_bytes(path: str, data: bytes) -> Source:
+    """A model file's bytes as a Source (BgcModelError if they are not a model's text)."""
+    try:
+        return Source(path, decode(data))
+    except ModelError as exc:
+        raise BgcModelError(exc, Source(path, data.decode("utf-8", "replace"))) from None
+
+
 def _source(model) -> Source:
-    return model if isinstance(model, Source) else load(model)
+    return Source(model.path, model.text) if isinstance(model, Source) else read_source(model)
 
 
 def _option_text(value, what: str) -> str:
@@ -152,13 +169,6 @@ def build(model, scene: str | None = None, project_initial: bool = False,
     except ModelError as exc:
         raise _model_error(exc, src) from None
     return Compiled(src, causal, system, reduced, ir_program, tuple(clock.times))
-
-
-def _choice(name: str, value, allowed):
-    """ValueError, naming the allowed values, for an argument that is not one of them."""
-    if not isinstance(value, str) or value not in allowed:
-        raise ValueError(f"{name} must be one of {', '.join(map(repr, allowed))}, "
-                         f"not {value!r}")
 
 
 def check_scenes(compiled: Compiled):
@@ -230,7 +240,6 @@ def scenes(model) -> str:
     return scenes_report(graph, src.text)
 
 
-FORMATS = ("text", "latex")
 
 
 def equations(model, scene: str | None = None, format: str = "text",
@@ -242,9 +251,6 @@ def equations(model, scene: str | None = None, format: str = "text",
     return equations_latex(compiled) if format == "latex" else equations_text(compiled)
 
 
-TARGETS = ("c", "python")
-
-
 def compile(model, target: str = "c", scene: str | None = None,
             project_initial: bool = False, algebra: str = "auto", outputs=None,
             effects=None) -> dict[str, str]:
@@ -253,27 +259,6 @@ def compile(model, target: str = "c", scene: str | None = None,
     program = build(model, scene, project_initial, algebra, outputs=outputs,
                     effects=effects).program
     return emit_c(program) if target == "c" else emit_python(program)
-
-
-def run_args(t_end=None, dt=None, solver=None, rtol=None, atol=None, step=None, params=None,
-             project_initial=False, max_steps=None) -> list[str]:
-    """The generated program's command line for these settings."""
-    args = []
-    for flag, value in (("--t-end", t_end), ("--dt", dt), ("--solver", solver),
-                        ("--rtol", rtol), ("--atol", atol), ("--step", step),
-                        ("--max-steps", max_steps)):
-        if value is not None:
-            args += [flag, repr(value) if isinstance(value, float) else str(value)]
-    for name, value in (params or {}).items():
-        args += ["-p", f"{name}={float(value)!r}"]
-    if project_initial:
-        args.append("--project-initial")
-    return args
-
-
-BACKENDS = ("c", "python")
-SIMULATE_OPTIONS = ("t_end", "dt", "solver", "rtol", "atol", "step", "params", "project_initial",
-                    "max_steps")
 
 
 def simulate(model, scene: str | None = None, backend: str = "c", algebra: str = "auto",
@@ -306,47 +291,6 @@ def simulate(model, scene: str | None = None, backend: str = "c", algebra: str =
     if code != 0:
         raise SimulationFailed(err.strip(), out)
     return _parse_csv(out)
-
-
-def check_run_options(options: dict):
-    """ValueError for a run setting that is wrong whatever the model: an unknown solver, a
-    tolerance, interval or step that is not a positive finite number, a non-finite end time
-    or parameter value.  What depends on the model (the end time against the start, the
-    parameters' names) is checked once it is built."""
-    if options.get("solver") is not None:
-        _choice("solver", options["solver"], solvers.NAMES)
-    for key in ("rtol", "atol", "dt", "step", "t_end"):
-        value = options.get(key)
-        if value is None:
-            continue
-        if isinstance(value, bool) or not isinstance(value, (int, float)) \
-                or not math.isfinite(value) or (key != "t_end" and not value > 0):
-            what = "a finite number" if key == "t_end" else "a positive finite number"
-            raise ValueError(f"{key} must be {what}, not {value!r}")
-    steps = options.get("max_steps")
-    if steps is not None and (isinstance(steps, bool) or not isinstance(steps, int)
-                              or not 0 <= steps <= 10**15):
-        raise ValueError(f"max_steps must be a whole number from 0 (no limit) to 1e15, "
-                         f"not {steps!r}")
-    params = options.get("params") or {}
-    if not isinstance(params, dict):
-        raise TypeError("params must be a dict of parameter names to numbers")
-    for name, value in params.items():
-        if isinstance(value, bool) or not isinstance(value, (int, float)) \
-                or not math.isfinite(value):
-            raise ValueError(f"parameter {name!r} must be a finite number, not {value!r}")
-
-
-def run_span_problem(settings: Settings, t_end=None, dt=None) -> str | None:
-    """What is wrong with a run to t_end every dt (None: the scene's) from the scene's start,
-    or None."""
-    t_end = settings.t_end if t_end is None else t_end
-    dt = settings.dt if dt is None else dt
-    if not t_end > settings.t0:
-        return f"the end time {t_end!r} is not after the start time {settings.t0!r}"
-    if not (t_end - settings.t0) / dt <= MAX_OUTPUT_ROWS:
-        return f"more than {MAX_OUTPUT_ROWS:.0e} output rows: the output interval is too small"
-    return None
 
 
 class SimulationFailed(RuntimeError):
@@ -411,3 +355,16 @@ def sweep(model, scene: str | None = None, grid=None, sample=None, vary=None, se
             own.close()
             cluster.close()
     return sw.table(names, values, metrics, results, timing)
+
+
+def _export():
+    """Put the API's names on the package (bgc/__init__.py imports this module on first use):
+    `bgc.equations` is this module's function, not the stage module of the same name that
+    importing this module has just set there."""
+    import sys
+    package = sys.modules[__package__]
+    for name in package.__all__:
+        setattr(package, name, globals()[name])
+
+
+_export()

@@ -256,6 +256,20 @@ def load_python_module(source: str, name: str | None = None) -> ModuleType:
     return module
 
 
+def cache_python(source: str) -> Path:
+    """Generated Python as a file in the cache (named by its SHA-256, checked before reuse,
+    written atomically), for the warm runs of bgc.warm."""
+    digest = hashlib.sha256(source.encode("utf-8")).hexdigest()
+    path = cache_dir() / f"bgc-{digest[:40]}.py"
+    if path.is_file() and _sha256(path) == digest:
+        return path
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=".build-", suffix=".py")
+    with os.fdopen(fd, "w", encoding="utf-8", newline="") as f:
+        f.write(source)
+    os.replace(tmp, path)
+    return path
+
+
 def python_program(source: str, directory: str) -> list[str]:
     """The command that runs generated Python as a program, written into `directory`."""
     path = Path(directory) / "model.py"

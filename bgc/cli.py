@@ -3,25 +3,42 @@ and the only one that writes files.  Model errors exit 1 with a located report, 
 from __future__ import annotations
 
 import contextlib
+import hashlib
 import math
 import os
 import sys
-import tempfile
 import time
 from pathlib import Path
 
 import click
 
-from . import accuracy as acc
-from . import api, backends, outfile, solvers, stability
-from .diagnostics import format_diagnostic
-from .emit import emit_c, emit_python
-from .report import check_report, equations_latex, equations_text
+from . import backends, outfile, run, solvers, warm
+from .resources import read_bounded
 
 
-def _warn(compiled: api.Compiled):
-    for d in compiled.warnings:
-        click.echo(format_diagnostic(d, compiled.source.path, compiled.source.text), err=True)
+class _Later:
+    """A module imported on first use: the compiler's modules import SymPy (about a second),
+    which `bgc --help` and a warm `bgc simulate` (bgc.warm) never need."""
+
+    def __init__(self, name: str):
+        self._name = name
+
+    def __getattr__(self, attr):
+        import importlib
+        return getattr(importlib.import_module(self._name, __package__), attr)
+
+
+acc, api, stability = _Later(".accuracy"), _Later(".api"), _Later(".stability")
+emit, report, diagnostics = _Later(".emit"), _Later(".report"), _Later(".diagnostics")
+
+
+def _warnings_text(compiled) -> str:
+    return "".join(diagnostics.format_diagnostic(d, compiled.source.path, compiled.source.text)
+                   + "\n" for d in compiled.warnings)
+
+
+def _warn(compiled):
+    click.echo(_warnings_text(compiled), err=True, nl=False)
 
 
 def _or_exit(call, *args):
@@ -38,7 +55,7 @@ def _or_exit(call, *args):
 
 
 def _build(model, scene, project_initial=False, algebra="auto", program=True,
-           residual_outputs=False, outputs=None, effects=None) -> api.Compiled:
+           residual_outputs=False, outputs=None, effects=None):
     compiled = _or_exit(api.build, model, scene, project_initial, algebra, program,
                         residual_outputs, outputs, effects, ("--outputs", "--effects", "--scene"))
     _warn(compiled)
@@ -66,7 +83,7 @@ POSITIVE, FINITE = _Number(positive=True), _Number(positive=False)
 
 
 def _check_span(compiled, t_end, dt):
-    problem = api.run_span_problem(compiled.settings, t_end, dt)
+    problem = run.run_span_problem(compiled.settings, t_end, dt)
     if problem:
         raise click.UsageError(problem)
 
@@ -106,8 +123,9 @@ def _plot_file(ctx, param, value):
     return value
 
 
-def _parse_params(values, compiled) -> dict:
-    names = {p.name for p in compiled.program.params}
+def _parse_params(values, names) -> dict:
+    """-p NAME=VALUE items as {name: value}; names: the model's parameters."""
+    names = set(names)
     out = {}
     for item in values:
         name, sep, value = item.partition("=")
@@ -140,7 +158,7 @@ def ADHOC(f):
                              "need is computed.")(f)
 
 
-ALGEBRA = click.option("--algebra", type=click.Choice(list(api.ALGEBRA)), default="auto",
+ALGEBRA = click.option("--algebra", type=click.Choice(list(run.ALGEBRA)), default="auto",
                        show_default=True,
                        help="How algebraic blocks are solved: symbolically when linear and "
                             "small (auto), always symbolically, or always numerically in the "
@@ -183,7 +201,7 @@ def check(model, scene, outputs, effects, algebra):
     if adhoc and summary is None:
         click.echo("note: the full model (all effects) does not compile, so this scene is not "
                    "compared with it", err=True)
-    click.echo(check_report(compiled, summary), nl=False)
+    click.echo(report.check_report(compiled, summary), nl=False)
 
 
 @main.command()
@@ -203,7 +221,8 @@ def equations(model, scene, outputs, effects, algebra, fmt):
     """Print the reduced equations, multipliers included."""
     compiled = _build(model, scene, algebra=algebra, program=False, outputs=outputs,
                       effects=effects)
-    click.echo((equations_latex if fmt == "latex" else equations_text)(compiled), nl=False)
+    click.echo((report.equations_latex if fmt == "latex" else report.equations_text)(compiled),
+               nl=False)
 
 
 @main.command()
@@ -219,7 +238,7 @@ def equations(model, scene, outputs, effects, algebra, fmt):
 def compile(model, scene, outputs, effects, algebra, target, output, project_initial):
     """Emit standalone C or Python source code."""
     compiled = _build(model, scene, project_initial, algebra, outputs=outputs, effects=effects)
-    files = (emit_c if target == "c" else emit_python)(compiled.program)
+    files = (emit.emit_c if target == "c" else emit.emit_python)(compiled.program)
     (text,) = files.values()
     if output:
         _write_atomic(output, text)
@@ -260,44 +279,92 @@ def compile(model, scene, outputs, effects, algebra, target, output, project_ini
                    "or .pdf; needs matplotlib: pip install 'bgc[plot]').")
 def simulate(model, scene, outputs, effects, algebra, backend, solver, rtol, atol, t_end, dt,
              step, max_steps, params, project_initial, stats, output, plot_file):
-    """Simulate and write CSV.  On a terminal, a run that takes more than a second shows
-    its progress on stderr."""
-    compiled = _build(model, scene, project_initial, algebra, outputs=outputs, effects=effects)
-    _check_span(compiled, t_end, dt)
-    overrides = _parse_params(params, compiled)
-    args = api.run_args(t_end, dt, solver, rtol, atol, step, overrides,
-                        project_initial, max_steps) + (["--stats"] if stats else [])
-    s = compiled.settings
-    for message in stability.warnings_for_run(compiled, solver or s.solver, step or s.step,
-                                              dt or s.dt, overrides):
-        click.echo(message, err=True)
+    """Simulate and write CSV.  A model compiled before with the same options runs at once
+    (bgc.warm); otherwise it is compiled, and the result kept for the next run.  On a
+    terminal, a run that takes more than a second shows its progress on stderr."""
     if backend == "c" and not backends.have_c_compiler():
         click.echo("warning: no C compiler found (cc or $CC); using the Python backend", err=True)
         backend = "python"
+    request = warm.Request(model, scene, outputs, effects, algebra, project_initial, backend)
+    found = warm.lookup(request)
+    if found is not None and found[0].correctors and _fixed_step(solver or found[0].solver, step):
+        found = None  # (bgc.stability's check of the step needs the compiled model)
+    if found is None:
+        record, program, compiled = _compile_for_run(request, model, scene, outputs, effects,
+                                                     algebra, project_initial, backend)
+    else:
+        (record, program), compiled = found, None
+        click.echo(record.warnings, err=True, nl=False)
+    problem = run.run_span_problem(record, t_end, dt)
+    if problem:
+        raise click.UsageError(problem)
+    overrides = _parse_params(params, record.params)
+    args = run.run_args(t_end, dt, solver, rtol, atol, step, overrides,
+                        project_initial, max_steps) + (["--stats"] if stats else [])
+    if compiled is not None and record.correctors:
+        for message in stability.warnings_for_run(compiled, solver or record.solver,
+                                                  step or record.step, dt or record.dt,
+                                                  overrides):
+            click.echo(message, err=True)
+    import tempfile
     with tempfile.TemporaryDirectory(prefix="bgc-") as tmp:
-        if backend == "c":
-            (text,) = emit_c(compiled.program).values()
-            argv = [str(backends.compile_c(text))]
-        else:
-            (text,) = emit_python(compiled.program).values()
-            argv = backends.python_program(text, tmp)
         copy = Path(tmp) / "run.csv" if plot_file and not output else None
         # (not while the CSV itself goes to the terminal: the bar would cut its lines)
         progress = _RunProgress() if sys.stderr.isatty() and (
             output or not sys.stdout.isatty()) else None
-        status, rows = _run(argv + list(map(str, args)) + ["--progress"] * bool(progress),
-                            output, copy, progress)
+        status, rows = _run(warm.argv(record, program) + list(map(str, args))
+                            + ["--progress"] * bool(progress), output, copy, progress)
         if progress is not None:
             progress.close()
         if plot_file:
-            status = _plot(compiled, output or copy, plot_file, status, rows)
-        sys.exit(status)
+            status = _plot(record, output or copy, plot_file, status, rows)
+    sys.exit(status)
 
 
-def _plot(compiled, csv, target: str, status: int, rows: bool) -> int:
-    """The run's plot (bgc.plot) from its CSV, written atomically; a failed run's rows are
-    plotted too (the title says where it stopped), a run without rows has no plot.  The exit
-    status: the run's, or 1 if the plot could not be written."""
+def _fixed_step(solver: str, step) -> bool:
+    """Whether a run takes fixed steps (bgc.stability.fixed_step_of)."""
+    return step is not None or solvers.get(solver).family == "fixed"
+
+
+def _compile_for_run(request, model, scene, outputs, effects, algebra, project_initial,
+                     backend):
+    """The cold path: build the model, compile its program into the cache, keep a warm
+    record of it; (record, program path)."""
+    try:
+        data = read_bounded(model)
+    except OSError as exc:
+        click.echo(f"error: {model}: cannot read: {exc.strerror}", err=True)
+        sys.exit(1)
+    source = _or_exit(api.source_from_bytes, model, data)
+    compiled = _build(source, scene, project_initial, algebra, outputs=outputs, effects=effects)
+    if backend == "c":
+        (text,) = emit.emit_c(compiled.program).values()
+        program = backends.compile_c(text)
+    else:
+        (text,) = emit.emit_python(compiled.program).values()
+        program = backends.cache_python(text)
+    s = compiled.settings
+    record = warm.Record(
+        program=program.name, sha256=hashlib.sha256(program.read_bytes()).hexdigest(),
+        warnings=_warnings_text(compiled), params=tuple(p.name for p in compiled.program.params),
+        t0=s.t0, t_end=s.t_end, dt=s.dt, solver=s.solver, step=s.step,
+        correctors=any(c.corrector in ("pid", "pd") for c in compiled.reduced.constraints),
+        **_plot_record(compiled))
+    warm.store(request, data, record)
+    return record, program, compiled
+
+
+def _plot_record(compiled) -> dict:
+    """The warm record's fields for a plot of the run (bgc.plot.describe)."""
+    from . import plot
+    return plot.describe(compiled)
+
+
+def _plot(record, csv, target: str, status: int, rows: bool) -> int:
+    """The run's plot (bgc.plot) from its CSV, written atomically, with what the warm record
+    says of the model's outputs; a failed run's rows are plotted too (the title says where it
+    stopped), a run without rows has no plot.  The exit status: the run's, or 1 if the plot
+    could not be written."""
     from . import plot
     if not rows:
         if status != 2:  # (refused settings: a usage error, said as such)
@@ -305,10 +372,10 @@ def _plot(compiled, csv, target: str, status: int, rows: bool) -> int:
         return status
     try:
         table = plot.read_csv(csv)
-        cols = plot.columns(compiled, table.names)
+        cols = [plot.Column(*c) for c in record.plot_columns]
         with outfile.Partial(target) as part:
             plot.plot_run(table, cols, part.file, plot.check_format(target),
-                          plot.title_lines(compiled), stopped=status != 0)
+                          list(record.plot_title), stopped=status != 0)
             part.commit()
     except (plot.PlotError, outfile.OutputError, OSError) as error:
         click.echo(f"error: no plot written: {error}", err=True)
@@ -499,7 +566,7 @@ def accuracy(model, scene, outputs, effects, algebra, backend, solver_list, rtol
     compiled = _build(model, scene, algebra=algebra, program=True, residual_outputs=True,
                       outputs=outputs, effects=effects)
     _check_span(compiled, t_end, dt)
-    overrides = _parse_params(params, compiled)
+    overrides = _parse_params(params, [p.name for p in compiled.program.params])
     if backend == "c" and not backends.have_c_compiler():
         click.echo("warning: no C compiler found (cc or $CC); using the Python backend", err=True)
         backend = "python"
@@ -596,7 +663,8 @@ def accuracy(model, scene, outputs, effects, algebra, backend, solver_list, rtol
 @click.option("--no-timing", is_flag=True, help="Leave out the cpu column (the table is "
                                                 "then the same whatever runs it).")
 @click.option("-o", "output", default=None, callback=_output_file,
-              help="CSV file for the table (default: stdout).")
+              help="The table's file (default: stdout, as CSV): CSV, or Parquet when the name "
+                   "ends in .parquet (pip install 'bgc[parquet]').")
 def sweep(model, scene, algebra, grids, sample, varies, seed, metrics, backend, solver, rtol,
           atol, t_end, dt, step, params, project_initial, workers, scheduler, batch_size,
           trajectories, no_timing, output):
@@ -604,6 +672,10 @@ def sweep(model, scene, algebra, grids, sample, varies, seed, metrics, backend, 
     batches on Dask or serially; write one table: run, parameters, metrics, counters, status,
     message.  A run that fails is a row with its status and message; see docs/sweeps.md."""
     from . import sweeps as sw
+    parquet = bool(output) and output.lower().endswith(".parquet")
+    if parquet and not sw.have_pyarrow():
+        raise click.UsageError("writing Parquet needs pyarrow: pip install 'bgc[parquet]' "
+                               "(or write CSV: -o FILE.csv)")
     try:
         grid = dict(sw.parse_grid_axis(g) for g in grids) if grids else None
         vary = {v[0]: f"{v[1]}({v[2]!r},{v[3]!r})" for v in map(sw.parse_distribution, varies)}
@@ -624,7 +696,7 @@ def sweep(model, scene, algebra, grids, sample, varies, seed, metrics, backend, 
     except (sw.SweepError, OSError, outfile.OutputError) as error:
         raise click.UsageError(str(error)) from None
     compiled = _build(model, scene, project_initial, algebra)
-    overrides = _parse_params(params, compiled)
+    overrides = _parse_params(params, [p.name for p in compiled.program.params])
     if backend == "c" and not backends.have_c_compiler():
         click.echo("warning: no C compiler found (cc or $CC); using the Python backend", err=True)
         backend = "python"
@@ -670,13 +742,69 @@ def sweep(model, scene, algebra, grids, sample, varies, seed, metrics, backend, 
         elif client is not None:
             client.close()
     wall = time.perf_counter() - start
-    text = table.to_csv()
-    if output:
-        _write_atomic(output, text)
+    if parquet:
+        try:
+            table.to_parquet(output)
+        except outfile.OutputError as error:
+            click.echo(f"error: {error}", err=True)
+            sys.exit(1)
+    elif output:
+        _write_atomic(output, table.to_csv())
     else:
-        click.echo(text, nl=False)
+        click.echo(table.to_csv(), nl=False)
     click.echo(f"bgc sweep: {len(table)} runs, {table.failures()} failed, {wall:.2f} s "
                f"({len(table) / wall:.0f} runs/s)", err=True)
+
+
+# ---------------------------------------------------------------- bgc draw
+
+
+def _drawing_target(ctx, param, value):
+    """-o for `bgc draw`: FILE.dot, FILE.svg or FILE.png (the extension says which; `-` is
+    DOT on stdout), checked before any work; anything else is a usage error."""
+    from . import draw as drawing
+    if value is None or value == "-":
+        return value
+    if drawing.format_of(value) is None:
+        raise click.BadParameter(f"'{value}': a drawing is written as FILE.dot, FILE.svg or "
+                                 "FILE.png (the extension says which), or - for DOT on stdout",
+                                 ctx, param)
+    return _output_file(ctx, param, value)
+
+
+@main.command()
+@MODEL
+@SCENE
+@ADHOC
+@click.option("-o", "output", default=None, callback=_drawing_target,
+              metavar="FILE.dot|FILE.svg|FILE.png|-",
+              help="The drawing: DOT (needs nothing), or SVG or PNG made by Graphviz's `dot` "
+                   "(default: DOT on stdout).")
+def draw(model, scene, outputs, effects, output):
+    """Draw the bond graph with its causal strokes as Graphviz DOT, SVG or PNG: half-arrows
+    for power, the stroke where the effort is received, multibonds as double lines, the
+    constraint correctors as block diagrams, what the scene leaves out in grey."""
+    from . import draw as drawing
+    fmt = "dot" if output in (None, "-") else drawing.format_of(output)
+    if fmt != "dot" and not drawing.have_graphviz():
+        click.echo(f"error: {drawing.GRAPHVIZ_HELP}", err=True)
+        sys.exit(1)
+    compiled = _build(model, scene, program=False, outputs=outputs, effects=effects)
+    text = drawing.draw_dot(compiled)
+    if fmt == "dot":
+        if output in (None, "-"):
+            click.echo(text, nl=False)
+        else:
+            _write_atomic(output, text)
+        return
+    try:
+        data = drawing.render(text, fmt)
+        with outfile.Partial(output) as part:
+            part.file.write(data)
+            part.commit()
+    except (drawing.GraphvizMissing, drawing.GraphvizFailed, outfile.OutputError) as error:
+        click.echo(f"error: {error}", err=True)
+        sys.exit(1)
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -211,6 +211,16 @@ def read_csv(path, max_points: int = MAX_POINTS) -> Table:
 # ---------------------------------------------------------------- the figure
 
 
+def describe(compiled) -> dict:
+    """What a plot of a run of `compiled` needs, as plain data (kept in bgc.warm's record, so
+    that a warm run plots without the pipeline): plot_title, plot_columns (Column fields)."""
+    names = compiled.program.outputs if compiled.program is not None else \
+        [o.name for o in compiled.reduced.outputs]  # (the CSV's columns after t)
+    return {"plot_title": tuple(title_lines(compiled)),
+            "plot_columns": tuple((c.name, c.kind, c.doc, c.unit)
+                                  for c in columns(compiled, names))}
+
+
 def title_lines(compiled) -> list[str]:
     g, s = compiled.graph, compiled.settings
     scene = next((sc for sc in g.scenes if sc.name == s.scene), None)

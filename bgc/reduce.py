@@ -36,11 +36,11 @@ from .differentiate import directional, partial
 from .equations import (TIME, ConstraintDef, Equation, EquationSystem, OutputDef, ParameterDef,
                         Run, StateVar, der)
 from .graph import var
+from .run import ALGEBRA
 from .resources import (MAX_EXPANDED_TERMS, MAX_EXPRESSION_DEPTH, MAX_EXPRESSION_NODES,
                         SYMBOLIC_MAX_BLOCK, fits)
 
 RELATIVE_TOLERANCE = 1e-9
-ALGEBRA = ("auto", "symbolic", "numeric")
 SYMBOLIC_MAX_UNKNOWNS = 1  # auto: linear blocks up to this size are solved symbolically ...
 SYMBOLIC_MAX_OPS = 400  # ... when their matrix and right side are no bigger than this
 SUBSTITUTE_MAX_BODY = 40  # a nonlinear block of one unknown: body small enough to substitute

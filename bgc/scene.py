@@ -90,7 +90,10 @@ def _apply_effects(graph: Graph, chosen) -> tuple[Graph, dict]:
         notes.setdefault(_base(el.name), el.name_span)
     keep = [el for el in keep if _base(el.name) not in why]
     signals = _signals_kept(graph.signals, why, notes)
-    g = replace(graph, elements=tuple(keep), bonds=bonds, signals=signals)
+    labels = {b.label for b in bonds}
+    multibonds = tuple(mb for mb in graph.multibonds if all(p in labels for p in mb.parts))
+    g = replace(graph, elements=tuple(keep), bonds=bonds, signals=signals,
+                multibonds=multibonds)
     _check_references(g, why, notes)
     return g, why
 

@@ -284,6 +284,33 @@ class Table:
         return text
 
 
+    def to_arrow(self):
+        """The table as a pyarrow.Table (numbers as float64, integers as int64, status and
+        message as strings); needs pyarrow (pip install 'bgc[parquet]')."""
+        import pyarrow as pa
+        arrays = {}
+        for name, col in self.columns.items():
+            if isinstance(col, np.ndarray):
+                arrays[name] = pa.array(col)
+            else:
+                arrays[name] = pa.array([str(v) for v in col], type=pa.string())
+        return pa.table(arrays)
+
+    def to_parquet(self, path) -> None:
+        """The table as a Parquet file, written atomically (pip install 'bgc[parquet]')."""
+        import pyarrow.parquet as pq
+        from . import outfile
+        table = self.to_arrow()
+        with outfile.Partial(path) as out:
+            pq.write_table(table, out.file)
+            out.commit()
+
+
+def have_pyarrow() -> bool:
+    import importlib.util
+    return importlib.util.find_spec("pyarrow") is not None
+
+
 def _cell(name, value) -> str:
     if name == "message":
         return '"' + str(value).replace('"', '""') + '"'

@@ -15,6 +15,8 @@ an info string, a language followed by words `key` or `key=value` (a value may b
   sh dry-run          commands too slow for the tests (`bgc accuracy`): each is parsed as
                       bgc would parse it and its model built for its scene, but not run
   sh skip="REASON"    not run at all, for the reason given
+  sh needs=PROGRAM    run only where PROGRAM is on the PATH (Graphviz's `dot` for `bgc draw`
+                      to SVG or PNG), else not run: an optional tool, not a slow command
   python              run; a page's python blocks share one namespace
   c file=NAME         saved as NAME for a later sh block
   text, c             output and listings: not run
@@ -34,6 +36,7 @@ from __future__ import annotations
 import os
 import re
 import shlex
+import shutil
 import subprocess
 import sys
 from collections import Counter
@@ -49,7 +52,8 @@ from bgc.parser import parse
 ROOT = Path(__file__).resolve().parent.parent
 PAGES = [ROOT / "README.md"] + sorted((ROOT / "docs").glob("*.md"))
 LANGUAGES = {"bg", "sh", "python", "text", "c"}
-KEYS = {"bg": {"file", "fragment", "error", "scene"}, "sh": {"status", "dry-run", "skip"},
+KEYS = {"bg": {"file", "fragment", "error", "scene"},
+        "sh": {"status", "dry-run", "skip", "needs"},
         "python": set(), "text": set(), "c": {"file"}}
 # Blocks left unrun or partly run, at most (keep them few: every other example runs).
 MAX_MARKS = {"fragment": 4, "dry-run": 2, "skip": 1}
@@ -300,7 +304,8 @@ def run_block(page: Page, block: Block):
                 if str(getattr(module, "__file__", None) or "").startswith(str(page.dir)):
                     del sys.modules[name]
             sys.modules.update(hidden)
-    elif block.lang == "sh" and "skip" not in block.opts:
+    elif block.lang == "sh" and "skip" not in block.opts and \
+            shutil.which(block.opts.get("needs", "sh")) is not None:
         want = int(block.opts.get("status", 0))
         for line in commands(block.text):
             if "dry-run" in block.opts:

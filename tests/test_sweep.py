@@ -150,6 +150,25 @@ def test_cli_sweep_table_and_trajectories(tmp_path, monkeypatch):
                                   "-p", "alpha=10", "-p", "beta=3", "-o", str(single)])
     assert result.exit_code == 0
     assert (traj / "run-000003.csv").read_bytes() == single.read_bytes()
+    # the same table as Parquet: the same columns and values (pyarrow reads it back)
+    try:
+        import pyarrow.parquet as pq
+    except ImportError:
+        pq = None
+    if pq is not None:
+        pq_out = tmp_path / "t.parquet"
+        result = runner.invoke(main, args[:-5] + ["-o", str(pq_out), "--no-timing"])
+        assert result.exit_code == 0, result.output
+        read = pq.read_table(pq_out).to_pydict()
+        assert list(read) == lines[0].split(",")
+        for i, line in enumerate(lines[1:]):
+            cells = line.split(",")
+            assert read["run"][i] == int(cells[0]) and read["status"][i] == cells[7]
+            assert read["final:x"][i] == float(cells[3])  # %.17g: the same double
+    monkeypatch.setattr(sweeps, "have_pyarrow", lambda: False)
+    result = runner.invoke(main, args[:-5] + ["-o", str(tmp_path / "u.parquet")])
+    assert result.exit_code == 2 and "pip install 'bgc[parquet]'" in result.output
+    assert not (tmp_path / "u.parquet").exists()
     for bad in (["--grid", "alpha=1:2:log"], ["--sample", "3"], ["--grid", "alpha=1",
                 "--sample", "2"], ["--grid", "nosuch=1"], ["--grid", "alpha=1", "-p",
                 "alpha=2"], ["--grid", "alpha=1", "--metric", "max:nosuch"]):

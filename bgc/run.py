@@ -1,0 +1,81 @@
+"""A run's settings as the generated programs take them, and the choices the command line
+offers.  Light on purpose (the standard library and bgc.solvers only, no SymPy, no numpy): the
+command line's help, its warm path (bgc.warm) and the API all read it, and a warm
+`bgc simulate` must not pay for the compiler's imports."""
+from __future__ import annotations
+
+import math
+
+from . import solvers
+from .resources import MAX_OUTPUT_ROWS
+
+ALGEBRA = ("auto", "symbolic", "numeric")  # how algebraic blocks are solved (bgc.reduce)
+BACKENDS = ("c", "python")  # what runs a simulation
+TARGETS = ("c", "python")  # what `compile` writes
+FORMATS = ("text", "latex")  # what `equations` prints
+SIMULATE_OPTIONS = ("t_end", "dt", "solver", "rtol", "atol", "step", "params", "project_initial",
+                    "max_steps")
+
+
+def choice(name: str, value, allowed):
+    """ValueError, naming the allowed values, for an argument that is not one of them."""
+    if not isinstance(value, str) or value not in allowed:
+        raise ValueError(f"{name} must be one of {', '.join(map(repr, allowed))}, "
+                         f"not {value!r}")
+
+
+def run_args(t_end=None, dt=None, solver=None, rtol=None, atol=None, step=None, params=None,
+             project_initial=False, max_steps=None) -> list[str]:
+    """The generated program's command line for these settings."""
+    args = []
+    for flag, value in (("--t-end", t_end), ("--dt", dt), ("--solver", solver),
+                        ("--rtol", rtol), ("--atol", atol), ("--step", step),
+                        ("--max-steps", max_steps)):
+        if value is not None:
+            args += [flag, repr(value) if isinstance(value, float) else str(value)]
+    for name, value in (params or {}).items():
+        args += ["-p", f"{name}={float(value)!r}"]
+    if project_initial:
+        args.append("--project-initial")
+    return args
+
+
+def check_run_options(options: dict):
+    """ValueError for a run setting that is wrong whatever the model: an unknown solver, a
+    tolerance, interval or step that is not a positive finite number, a non-finite end time
+    or parameter value.  What depends on the model (the end time against the start, the
+    parameters' names) is checked once it is built."""
+    if options.get("solver") is not None:
+        choice("solver", options["solver"], solvers.NAMES)
+    for key in ("rtol", "atol", "dt", "step", "t_end"):
+        value = options.get(key)
+        if value is None:
+            continue
+        if isinstance(value, bool) or not isinstance(value, (int, float)) \
+                or not math.isfinite(value) or (key != "t_end" and not value > 0):
+            what = "a finite number" if key == "t_end" else "a positive finite number"
+            raise ValueError(f"{key} must be {what}, not {value!r}")
+    steps = options.get("max_steps")
+    if steps is not None and (isinstance(steps, bool) or not isinstance(steps, int)
+                              or not 0 <= steps <= 10**15):
+        raise ValueError(f"max_steps must be a whole number from 0 (no limit) to 1e15, "
+                         f"not {steps!r}")
+    params = options.get("params") or {}
+    if not isinstance(params, dict):
+        raise TypeError("params must be a dict of parameter names to numbers")
+    for name, value in params.items():
+        if isinstance(value, bool) or not isinstance(value, (int, float)) \
+                or not math.isfinite(value):
+            raise ValueError(f"parameter {name!r} must be a finite number, not {value!r}")
+
+
+def run_span_problem(settings, t_end=None, dt=None) -> str | None:
+    """What is wrong with a run to t_end every dt (None: the scene's) from the scene's start
+    (settings: anything with t0, t_end and dt), or None."""
+    t_end = settings.t_end if t_end is None else t_end
+    dt = settings.dt if dt is None else dt
+    if not t_end > settings.t0:
+        return f"the end time {t_end!r} is not after the start time {settings.t0!r}"
+    if not (t_end - settings.t0) / dt <= MAX_OUTPUT_ROWS:
+        return f"more than {MAX_OUTPUT_ROWS:.0e} output rows: the output interval is too small"
+    return None

@@ -1,0 +1,161 @@
+"""Warm runs: `bgc simulate` of a model it has compiled before starts the cached program at
+once, without importing SymPy or running the pipeline again.
+
+After a cold run the command line stores a *record* in the cache directory
+(bgc.backends.cache_dir): which program the model compiled to (the file's name and SHA-256)
+and what the command line needs from the compiled model to run it exactly as the cold path
+would — the warnings the model gave (as printed), the parameters' names, the scene's start,
+end, output interval, solver and step, whether a constraint has a pid or pd corrector, and
+what `--plot` says of the model and its outputs (bgc.plot.describe).
+
+A record's key is the SHA-256 of everything its contents depend on: this record format, bgc's
+version and the size and modification time of every file bgc is made of (so an edited or
+upgraded bgc misses), the model's path as given (it appears in the warnings) and the SHA-256 of
+its bytes, the scene and ad-hoc scene options, the algebra, --project-initial, the backend, and
+the C compiler's resolved path, size and modification time with $CC and the flags (or, for the
+Python backend, the interpreter).  Nothing in the key is a timestamp of the model: the same
+text under the same name hits, whatever its mtime.
+
+A record is used only if it reads as one (anything else is a miss) and the program it names is
+still the file that was built (its SHA-256 is checked before each use, like the program cache
+itself).  Records are written to a temporary file and renamed into place, so concurrent runs
+are safe: each sees a whole record or none.
+
+This module imports the standard library only (and bgc.backends, bgc.resources, which do too).
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import shutil
+import sys
+import tempfile
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+from . import backends
+from .resources import read_bounded
+
+FORMAT = 2  # of the record; change it when its fields change
+
+
+@dataclass(frozen=True)
+class Request:
+    """What a `bgc simulate` compiles: the model and every option that changes the program."""
+    model: str
+    scene: str | None
+    outputs: str | None
+    effects: str | None
+    algebra: str
+    project_initial: bool
+    backend: str
+
+
+@dataclass(frozen=True)
+class Record:
+    program: str  # the file's name in the cache directory
+    sha256: str
+    warnings: str  # the model's warnings, as the cold path printed them
+    params: tuple[str, ...]
+    t0: float
+    t_end: float
+    dt: float
+    solver: str
+    step: float | None
+    correctors: bool  # a constraint has a pid or pd corrector (bgc.stability's warnings)
+    plot_title: tuple[str, ...] = ()  # for --plot (bgc.plot.describe)
+    plot_columns: tuple[tuple, ...] = ()  # (name, kind, doc, unit) of each output
+
+
+def _installation() -> list:
+    """bgc's files (package, runtime, grammar, templates): name, size, modification time."""
+    from .resources import _HERE, resource_dir
+    dirs = [_HERE, _HERE / "runtime"]
+    for name in ("grammar", "templates"):
+        try:
+            dirs.append(resource_dir(name))
+        except FileNotFoundError:
+            pass
+    facts = []
+    for d in dirs:
+        try:
+            entries = sorted(os.scandir(d), key=lambda e: e.name)
+        except OSError:
+            continue
+        for e in entries:
+            if e.is_file() and not e.name.endswith((".pyc", ".pyo")):
+                info = e.stat()
+                facts.append([str(d), e.name, info.st_size, info.st_mtime_ns])
+    return facts
+
+
+def _toolchain(backend: str) -> list:
+    if backend == "python":
+        return ["python", sys.executable, sys.version]
+    command = backends.c_compiler()
+    where = shutil.which(command[0]) if command else None
+    facts = ["c", command, list(backends.c_flags()), str(where)]
+    if where:
+        info = os.stat(where)
+        facts.append([info.st_size, info.st_mtime_ns])
+    return facts
+
+
+def key(request: Request, source: bytes) -> str:
+    from . import __version__
+    parts = [FORMAT, __version__, _installation(), hashlib.sha256(source).hexdigest(),
+             asdict(request), _toolchain(request.backend)]
+    return hashlib.sha256(json.dumps(parts, sort_keys=True).encode()).hexdigest()
+
+
+def _record_path(digest: str) -> Path:
+    return backends.cache_dir() / f"warm-{digest[:40]}.json"
+
+
+def lookup(request: Request) -> tuple[Record, Path] | None:
+    """The record of an earlier cold run of this request, and the program it names; None if
+    there is none, the record is unreadable, or the program is no longer the one built."""
+    try:
+        source = read_bounded(request.model)
+    except OSError:
+        return None
+    path = _record_path(key(request, source))
+    try:
+        data = json.loads(path.read_text(encoding="utf-8"))
+        if data.pop("format") != FORMAT:
+            return None
+        data["params"] = tuple(data["params"])
+        data["plot_title"] = tuple(data["plot_title"])
+        data["plot_columns"] = tuple(map(tuple, data["plot_columns"]))
+        record = Record(**data)
+        program = path.parent / record.program
+        if Path(record.program).name != record.program or \
+                hashlib.sha256(program.read_bytes()).hexdigest() != record.sha256:
+            return None
+    except (OSError, ValueError, TypeError, KeyError, AttributeError):
+        return None
+    return record, program
+
+
+def store(request: Request, source: bytes, record: Record) -> None:
+    """Keep `record` for this request (atomically; a failure to write is not an error: the
+    next run is cold again)."""
+    path = _record_path(key(request, source))
+    try:
+        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=".warm-", suffix=".tmp")
+        with os.fdopen(fd, "w", encoding="utf-8") as f:
+            json.dump({"format": FORMAT, **asdict(record)}, f, sort_keys=True)
+        os.replace(tmp, path)
+    except OSError:
+        try:
+            os.unlink(tmp)
+        except (OSError, UnboundLocalError):
+            pass
+
+
+def argv(record: Record, program: Path) -> list[str]:
+    """The command that starts the record's program."""
+    if program.suffix == ".py":
+        return [sys.executable, str(program)]
+    return [str(program)]
