@@ -237,8 +237,8 @@ def tidy(expr):
 
 @dataclass(frozen=True)
 class Row:
-    """One line of the align environment: `lhs &= rhs` (rhs the expression printed), or an
-    \\intertext when rhs is None."""
+    """One line of the align environment: `lhs &= rhs` (rhs the expression printed), or, when
+    rhs is None, lhs as it is (a block's heading)."""
     lhs: str
     rhs: object
 
@@ -259,23 +259,17 @@ class LatexSystem:
             if r.rhs is not None:
                 for s in r.rhs.free_symbols:
                     symbol_names[s] = self.names[s.name]
-        lines = []
-        for r in self.rows:
-            if r.rhs is None:
-                lines.append(r.lhs)
-            else:
-                lines.append(f"{r.lhs} &= {sp.latex(r.rhs, symbol_names=symbol_names)}")
-        body = ""
-        for k, line in enumerate(lines):
-            last = k == len(lines) - 1 or lines[k + 1].startswith(r"\intertext")
-            body += line + ("" if last or line.startswith(r"\intertext") else r" \\") + "\n"
-        return f"% {self.header}\n\\begin{{align}}\n{body}\\end{{align}}\n"
+        lines = [r.lhs if r.rhs is None else
+                 f"{r.lhs} &= {sp.latex(r.rhs, symbol_names=symbol_names)}" for r in self.rows]
+        body = " \\\\\n".join(lines)
+        return f"% {self.header}\n\\begin{{align}}\n{body}\n\\end{{align}}\n"
 
 
 def latex_system(compiled, header: str) -> LatexSystem:
     """The rows of `bgc equations --format latex`: the state equations, the multipliers and
     the other outputs, each right side in the states, parameters and t; or, when blocks are
-    solved in the generated code, the program in its evaluation order."""
+    solved in the generated code, the program in its evaluation order (a block headed by a
+    row `& \\text{block k, ...}`)."""
     r = compiled.reduced
     multipliers = [k.multiplier for k in r.constraints]
     states = {st.symbol for st in r.states}
@@ -311,8 +305,8 @@ def latex_system(compiled, header: str) -> LatexSystem:
     for lhs, rhs in pairs:
         if rhs is None:
             index, how, unknowns = lhs
-            rows.append(Row(rf"\intertext{{block {index}, solved numerically ({how}) for "
-                            + ", ".join(f"${tex[u.name]}$" for u in unknowns) + ":}", None))
+            rows.append(Row(rf"& \text{{block {index}, solved numerically ({how}), for }} "
+                            + ", ".join(tex[u.name] for u in unknowns) + ":", None))
         elif isinstance(lhs, sp.Symbol):
             rows.append(Row(tex[lhs.name], rhs))
         else:
