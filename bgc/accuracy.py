@@ -445,9 +445,8 @@ def plot(result: Result, path, gains: bool = False) -> None:
     """Work-precision (error against time, log-log, one line per solver) and error against
     right-side calls; with gains, drift and error against the gain.  As PNG, to path (a file
     name or a binary file)."""
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from .plot import pyplot, save, style
+    plt = pyplot()
     from matplotlib.ticker import NullFormatter
 
     fig, axes = plt.subplots(1, 3 if gains else 2, figsize=(15 if gains else 11, 4.5))
@@ -483,11 +482,10 @@ def plot(result: Result, path, gains: bool = False) -> None:
         for ax in ([axes[1]] if gains else axes):
             ax.axhline(result.floor, color="0.6", ls=":", lw=1)
     for ax in axes:
-        ax.grid(True, which="both", alpha=0.3)
+        style(ax)
         ax.xaxis.set_minor_formatter(NullFormatter())
     axes[0].legend(fontsize=8)
     fig.suptitle(f"{os.path.basename(result.model)}, scene {result.scene or '(default)'}, "
                  f"{result.backend} backend")
     fig.tight_layout()
-    fig.savefig(path, dpi=110, format="png")
-    plt.close(fig)
+    save(fig, path, "png")

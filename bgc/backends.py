@@ -157,11 +157,32 @@ class Finished:
     signal: int = 0
 
 
-def run_streaming(argv: list[str], stdout) -> Finished:
+PROGRESS_PREFIX = b"bgc-progress "
+
+
+def _read_stderr(pipe, err, progress) -> None:
+    """A program's stderr, line by line: `bgc-progress T T0 T_END` lines to progress(t, t0,
+    t_end), the others into err."""
+    for line in iter(pipe.readline, b""):
+        if line.startswith(PROGRESS_PREFIX):
+            try:
+                t, t0, t_end = map(float, line[len(PROGRESS_PREFIX):].split())
+            except ValueError:
+                err.write(line)
+            else:
+                progress(t, t0, t_end)
+        else:
+            err.write(line)
+    pipe.close()
+
+
+def run_streaming(argv: list[str], stdout, progress=None) -> Finished:
     """Runs argv with its standard output going to `stdout` as it is written (a file with a
     descriptor gets it directly; anything else with write() is fed in chunks), so memory does
     not grow with the output.  SIGINT and SIGTERM received meanwhile are passed on to the
-    program, which stops at its next step with its rows written; a second one kills it."""
+    program, which stops at its next step with its rows written; a second one kills it.
+    progress: called with (t, t0, t_end) for each progress line the program writes on stderr
+    (run with --progress), which then is not in .stderr."""
     try:
         fd = stdout.fileno()
     except (AttributeError, OSError, ValueError):
@@ -171,7 +192,12 @@ def run_streaming(argv: list[str], stdout) -> Finished:
         if fd is not None:
             stdout.flush()
         proc = subprocess.Popen(argv, stdout=fd if fd is not None else subprocess.PIPE,
-                                stderr=err)
+                                stderr=err if progress is None else subprocess.PIPE)
+        reader = None
+        if progress is not None:
+            reader = threading.Thread(target=_read_stderr, args=(proc.stderr, err, progress),
+                                      daemon=True)
+            reader.start()
 
         def forward(sig, frame):
             if got:
@@ -192,6 +218,8 @@ def run_streaming(argv: list[str], stdout) -> Finished:
                 stdout.write(decoder.decode(b"", final=True))
                 proc.stdout.close()
             code = proc.wait()
+            if reader is not None:
+                reader.join()
         finally:
             for sig, handler in replaced:
                 signal.signal(sig, handler)

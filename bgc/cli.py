@@ -2,6 +2,7 @@
 and the only one that writes files.  Model errors exit 1 with a located report, usage errors 2."""
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import math
 import os
@@ -106,6 +107,22 @@ def _output_file(ctx, param, value):
             outfile.check_target(value)
         except outfile.OutputError as error:
             raise click.BadParameter(str(error), ctx, param) from None
+    return value
+
+
+def _plot_file(ctx, param, value):
+    """--plot: a file name bgc writes figures to, where a file can be written, and matplotlib
+    there; checked before any work (a usage error if not)."""
+    if value is not None:
+        from . import plot
+        try:
+            plot.check_format(value)
+            outfile.check_target(value)
+        except (plot.PlotError, outfile.OutputError) as error:
+            raise click.BadParameter(str(error), ctx, param) from None
+        missing = plot.matplotlib_missing()
+        if missing:
+            raise click.BadParameter(missing, ctx, param)
     return value
 
 
@@ -282,10 +299,15 @@ def compile(model, scene, outputs, effects, algebra, target, output, project_ini
 @click.option("-o", "output", default=None, callback=_output_file,
               help="CSV file (default: stdout), written as the run goes and renamed into "
                    "place at its end; a failed run keeps the rows it computed.")
+@click.option("--plot", "plot_file", default=None, metavar="FILE.png", callback=_plot_file,
+              help="Also draw the run's outputs, one panel per kind, into FILE (.png, .svg "
+                   "or .pdf; needs matplotlib: pip install 'bgc[plot]').")
 def simulate(model, scene, outputs, effects, algebra, backend, solver, rtol, atol, t_end, dt,
-             step, max_steps, params, project_initial, allow_inconsistent, stats, output):
+             step, max_steps, params, project_initial, allow_inconsistent, stats, output,
+             plot_file):
     """Simulate and write CSV.  A model compiled before with the same options runs at once
-    (bgc.warm); otherwise it is compiled, and the result kept for the next run."""
+    (bgc.warm); otherwise it is compiled, and the result kept for the next run.  On a
+    terminal, a run that takes more than a second shows its progress on stderr."""
     if project_initial and allow_inconsistent:
         raise click.UsageError("--project-initial and --allow-inconsistent exclude each other")
     if backend == "c" and not backends.have_c_compiler():
@@ -312,7 +334,27 @@ def simulate(model, scene, outputs, effects, algebra, backend, solver, rtol, ato
                                                   step or record.step, dt or record.dt,
                                                   overrides):
             click.echo(message, err=True)
-    sys.exit(_run(warm.argv(record, program) + list(map(str, args)), output))
+    with _scratch(plot_file and not output) as tmp:
+        copy = Path(tmp) / "run.csv" if tmp else None  # (the CSV that --plot reads)
+        # (not while the CSV itself goes to the terminal: the bar would cut its lines)
+        progress = _RunProgress() if sys.stderr.isatty() and (
+            output or not sys.stdout.isatty()) else None
+        status, rows = _run(warm.argv(record, program) + list(map(str, args))
+                            + ["--progress"] * bool(progress), output, copy, progress)
+        if progress is not None:
+            progress.close()
+        if plot_file:
+            status = _plot(record, output or copy, plot_file, status, rows)
+    sys.exit(status)
+
+
+def _scratch(needed: bool):
+    """A temporary directory if needed, else None (a run does not create one for nothing)."""
+    if not needed:
+        import contextlib
+        return contextlib.nullcontext(None)
+    import tempfile
+    return tempfile.TemporaryDirectory(prefix="bgc-")
 
 
 def _fixed_step(solver: str, step) -> bool:
@@ -343,9 +385,54 @@ def _compile_for_run(request: warm.Request):
         program=program.name, sha256=hashlib.sha256(program.read_bytes()).hexdigest(),
         warnings=_warnings_text(compiled), params=tuple(p.name for p in compiled.program.params),
         t0=s.t0, t_end=s.t_end, dt=s.dt, solver=s.solver, step=s.step,
-        correctors=any(c.corrector in ("pid", "pd") for c in compiled.reduced.constraints))
+        correctors=any(c.corrector in ("pid", "pd") for c in compiled.reduced.constraints),
+        **_plot_record(compiled))
     warm.store(request, data, record)
     return record, program, compiled
+
+
+def _plot_record(compiled) -> dict:
+    """The warm record's fields for a plot of the run (bgc.plot.describe)."""
+    from . import plot
+    return plot.describe(compiled)
+
+
+def _plot(record, csv, target: str, status: int, rows: bool) -> int:
+    """The run's plot (bgc.plot) from its CSV, written atomically, with what the warm record
+    says of the model's outputs; a failed run's rows are plotted too (the title says where it
+    stopped), a run without rows has no plot.  The exit status: the run's, or 1 if the plot
+    could not be written."""
+    from . import plot
+    if not rows:
+        if status != 2:  # (refused settings: a usage error, said as such)
+            click.echo(f"bgc: no rows computed; no plot written to {target}", err=True)
+        return status
+    try:
+        table = plot.read_csv(csv)
+        cols = [plot.Column(*c) for c in record.plot_columns]
+        with outfile.Partial(target) as part:
+            plot.plot_run(table, cols, part.file, plot.check_format(target),
+                          list(record.plot_title), stopped=status != 0)
+            part.commit()
+    except (plot.PlotError, outfile.OutputError, OSError) as error:
+        click.echo(f"error: no plot written: {error}", err=True)
+        return status or 1
+    return status
+
+
+class _Tee:
+    """stdout, and a copy of what is written to it in a file (the CSV a plot reads)."""
+
+    def __init__(self, stream, path: Path):
+        self.stream, self.copy = stream, open(path, "w", encoding="utf-8", newline="")
+
+    def write(self, text: str) -> None:
+        self.stream.write(text)
+        self.copy.write(text)
+
+    def flush(self) -> None:
+        self.stream.flush()
+        self.copy.flush()
 
 
 def _status(done: backends.Finished) -> int:
@@ -356,24 +443,29 @@ def _status(done: backends.Finished) -> int:
     return done.code if done.code in (0, 2) else 1
 
 
-def _run(argv: list[str], output: str | None) -> int:
-    """Runs a generated program, its CSV streamed to `output` (else stdout); the exit status
-    (_status).  A failed run's rows are kept, and the last line on stderr says so."""
+def _run(argv: list[str], output: str | None, copy: Path | None = None,
+         progress=None) -> tuple[int, bool]:
+    """Runs a generated program, its CSV streamed to `output` (else stdout, and a copy into
+    `copy` if given); the exit status (_status), and whether rows were written.  A failed
+    run's rows are kept, and the last line on stderr says so.  progress: a _RunProgress for
+    the program's progress lines (it runs with --progress)."""
     if not output:
-        done = backends.run_streaming(argv, sys.stdout)
+        sink = sys.stdout if copy is None else _Tee(sys.stdout, copy)
+        with sink.copy if copy is not None else contextlib.nullcontext():
+            done = backends.run_streaming(argv, sink, progress)
         click.echo(done.stderr, err=True, nl=False)
-        return _status(done)
+        return _status(done), copy is not None and _last_row_time(copy) is not None
     try:
         part = outfile.Partial(output)
     except outfile.OutputError as error:
         click.echo(f"error: {error}", err=True)
-        return 1
+        return 1, False
     with part:
-        done = backends.run_streaming(argv, part.file)
+        done = backends.run_streaming(argv, part.file, progress)
         click.echo(done.stderr, err=True, nl=False)
         if done.code == 0:
             part.commit()
-            return 0
+            return 0, True
         part.file.flush()
         last = _last_row_time(part.tmp)
         if last is None:
@@ -383,7 +475,7 @@ def _run(argv: list[str], output: str | None) -> int:
             part.keep()
             click.echo(f"bgc: the run stopped; the rows up to t = {last} are in {output}",
                        err=True)
-    return _status(done)
+    return _status(done), last is not None
 
 
 def _last_row_time(path: Path) -> str | None:
@@ -417,7 +509,7 @@ class _Progress:
     def __init__(self):
         self.live = sys.stderr.isatty()
 
-    def __call__(self, text, done=None, total=None):
+    def __call__(self, text, done=None, total=None, start=0):
         if not self.live:
             return
         if text is None:
@@ -425,10 +517,45 @@ class _Progress:
         else:
             bar = ""
             if total:
-                filled = int(30 * done / total)
-                bar = f"[{'#' * filled}{'.' * (30 - filled)}] {done}/{total} "
+                filled = min(30, max(0, int(30 * (done - start) / (total - start))))
+                bar = f"[{'#' * filled}{'.' * (30 - filled)}] {done:.6g}/{total:.6g} "
             sys.stderr.write(f"\r\033[K{bar}{text}")
         sys.stderr.flush()
+
+
+def _seconds(s: float) -> str:
+    return f"{s:.1f} s" if s < 10 else f"{s:.0f} s" if s < 120 else f"{s / 60:.0f} min"
+
+
+PROGRESS_AFTER = 1.0  # seconds a run takes before `bgc simulate` shows its progress
+
+
+class _RunProgress:
+    """`bgc simulate`'s progress bar: the program's progress lines (t, t0, t_end) drawn by
+    _Progress once the run has taken `after` seconds (PROGRESS_AFTER), on a terminal only;
+    close() clears it."""
+
+    def __init__(self, after: float | None = None, clock=time.monotonic, bar=None):
+        self.after = PROGRESS_AFTER if after is None else after
+        self.clock = clock
+        self.start = clock()
+        self.bar = bar or _Progress()
+        self.shown = False
+
+    def __call__(self, t: float, t0: float, t_end: float) -> None:
+        elapsed = self.clock() - self.start
+        if elapsed < self.after or not t_end > t0:
+            return
+        frac = min(1.0, max(0.0, (t - t0) / (t_end - t0)))
+        eta = elapsed / frac * (1 - frac) if frac > 0 else math.nan
+        self.bar(f"t, {100 * frac:.0f}%, {_seconds(elapsed)}, ETA "
+                 f"{_seconds(eta) if math.isfinite(eta) else '?'}", t, t_end, t0)
+        self.shown = True
+
+    def close(self) -> None:
+        if self.shown:
+            self.bar(None)
+            self.shown = False
 
 
 @main.command()

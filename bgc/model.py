@@ -72,7 +72,11 @@ class Equations(str):
     """Equations as text; LaTeX ones display as such in Jupyter."""
 
     def _repr_latex_(self):
-        return f"$$\n{self}\n$$" if self.lstrip().startswith("\\begin") else None
+        body = "\n".join(line for line in self.splitlines() if not line.startswith("%"))
+        if not body.lstrip().startswith("\\begin"):
+            return None
+        body = body.replace("{align}", "{aligned}")  # (align is not allowed inside $$)
+        return f"$$\n{body}\n$$"
 
 
 class SVG(str):

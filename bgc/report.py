@@ -286,18 +286,9 @@ def equations_text(compiled) -> str:
 
 
 def equations_latex(compiled) -> str:
-    r = compiled.reduced
-    multipliers = [k.multiplier for k in r.constraints]
-    forms = explicit_forms(r, list(r.rates) + multipliers) or {}
-    rows = [rf"\frac{{d}}{{dt}} {_tex_name(st.name)} &= {sp.latex(forms.get(d, d))}"
-            for st, d in zip(r.states, r.rates)]
-    rows += [rf"\lambda_{{\mathrm{{{k.junction}}}}} &= "
-             rf"{sp.latex(forms.get(k.multiplier, k.multiplier))}" for k in r.constraints]
-    return "\\begin{aligned}\n" + " \\\\\n".join(rows) + "\n\\end{aligned}\n"
-
-
-def _tex_name(name: str) -> str:
-    return r"\mathrm{" + name.replace("_", r"\_") + "}"
+    """The equations as LaTeX in the paper's notation (bgc/latex.py)."""
+    from .latex import latex_system
+    return latex_system(compiled, _header(compiled)[0]).text()
 
 
 # ---------------------------------------------------------------- bgc scenes

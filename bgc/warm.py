@@ -5,7 +5,8 @@ After a cold run the command line stores a *record* in the cache directory
 (bgc.backends.cache_dir): which program the model compiled to (the file's name and SHA-256)
 and what the command line needs from the compiled model to run it exactly as the cold path
 would — the warnings the model gave (as printed), the parameters' names, the scene's start,
-end, output interval, solver and step, and whether a constraint has a pid or pd corrector.
+end, output interval, solver and step, whether a constraint has a pid or pd corrector, and
+what `--plot` says of the model and its outputs (bgc.plot.describe).
 
 A record's key is the SHA-256 of everything its contents depend on: this record format, bgc's
 version and the size and modification time of every file bgc is made of (so an edited or
@@ -36,7 +37,7 @@ from pathlib import Path
 from . import backends
 from .resources import read_bounded
 
-FORMAT = 1  # of the record; change it when its fields change
+FORMAT = 2  # of the record; change it when its fields change
 
 
 @dataclass(frozen=True)
@@ -64,6 +65,8 @@ class Record:
     solver: str
     step: float | None
     correctors: bool  # a constraint has a pid or pd corrector (bgc.stability's warnings)
+    plot_title: tuple[str, ...] = ()  # for --plot (bgc.plot.describe)
+    plot_columns: tuple[tuple, ...] = ()  # (name, kind, doc, unit) of each output
 
 
 def _installation() -> list:
@@ -124,6 +127,8 @@ def lookup(request: Request) -> tuple[Record, Path] | None:
         if data.pop("format") != FORMAT:
             return None
         data["params"] = tuple(data["params"])
+        data["plot_title"] = tuple(data["plot_title"])
+        data["plot_columns"] = tuple(map(tuple, data["plot_columns"]))
         record = Record(**data)
         program = path.parent / record.program
         if Path(record.program).name != record.program or \

@@ -315,11 +315,36 @@ static void bgc_put_number(bgc_writer *w, double v)
     w->len += (size_t)bgc_fmt17(w->buf + w->len, v);
 }
 
+/* --progress: a line "bgc-progress T T0 T_END" on stderr at the first row, then as the rows
+   pass at most ten a second of processor time (bgc simulate draws them as a bar); off by
+   default.  The clock is read once per thousandth of the time span at most. */
+static struct bgc_progress {
+    int on, lines;
+    double t0, t_end, next;
+    clock_t last;
+} bgc_progress;
+
+static void bgc_progress_row(double t)
+{
+    clock_t now;
+    if (t < bgc_progress.next)
+        return;
+    bgc_progress.next = t + (bgc_progress.t_end - bgc_progress.t0) / 1000.0;
+    now = clock();
+    if (bgc_progress.lines && (double)(now - bgc_progress.last) < 0.1 * CLOCKS_PER_SEC)
+        return;
+    bgc_progress.lines++;
+    bgc_progress.last = now;
+    fprintf(stderr, "bgc-progress %.17g %.17g %.17g\n", t, bgc_progress.t0, bgc_progress.t_end);
+}
+
 static int bgc_csv_row(void *ctx, double t, const double *x, const double *y)
 {
     bgc_writer *w = (bgc_writer *)ctx;
     int j;
     (void)x;
+    if (bgc_progress.on)
+        bgc_progress_row(t);
     bgc_put_number(w, t);
     for (j = 0; j < BGC_NUM_OUTPUTS; j++) {
         w->buf[w->len++] = ',';
@@ -344,7 +369,7 @@ static void bgc_csv_header(FILE *f)
 
 static const char bgc_usage[] =
     " [--t-end T] [--dt DT] [--solver NAME] [--rtol R] [--atol A]\n"
-    "       [--step H] [--max-steps N] [-p NAME=VALUE ...] [--stats]\n"
+    "       [--step H] [--max-steps N] [-p NAME=VALUE ...] [--stats] [--progress]\n"
     "       [--project-initial | --allow-inconsistent]\n"
     "       [--batch FILE|- [--metric KIND:OUTPUT ...] [--trajectories DIR]]\n";
 
@@ -374,6 +399,7 @@ static void bgc_help(void)
            "  --allow-inconsistent  start from an initial state that violates the constraints\n"
            "                     (the correctors pull it back): neither refused nor projected\n"
            "  --stats            print the solver's counters to stderr\n"
+           "  --progress         report the progress on stderr: lines bgc-progress T T0 T_END\n"
            "  --batch FILE       one run per line of FILE (- for stdin): NAME=VALUE words;\n"
            "                     writes a CSV row per run: run,status,metrics,steps,rejected,\n"
            "                     rhs,cpu,message\n"
@@ -487,6 +513,10 @@ static int bgc_parse_args(int argc, char **argv, bgc_settings *s, bgc_params *p,
             bgc_help();
             return 0;
         }
+        if (strcmp(arg, "--progress") == 0) {
+            bgc_progress.on = 1;
+            continue;
+        }
         if (strcmp(arg, "--project-initial") == 0 || strcmp(arg, "--allow-inconsistent") == 0) {
             const int mode = arg[2] == 'p' ? 1 : 2;
             if (*project && *project != mode) {
@@ -574,6 +604,8 @@ int main(int argc, char **argv)
     signal(SIGTERM, bgc_on_signal);
     bgc_out.file = stdout;
     bgc_csv_header(stdout);
+    bgc_progress.t0 = bgc_progress.next = s.t0;
+    bgc_progress.t_end = s.t_end;
     rc = bgc_simulate(&s, &p, x0, bgc_csv_row, &bgc_out, &st, msg, sizeof msg);
     bgc_flush(&bgc_out);
     if (fflush(stdout) != 0 || bgc_out.failed) {

@@ -771,7 +771,7 @@ def _row_text(t, y):
 
 USAGE = (
     " [--t-end T] [--dt DT] [--solver NAME] [--rtol R] [--atol A]\n"
-    "       [--step H] [--max-steps N] [-p NAME=VALUE ...] [--stats]\n"
+    "       [--step H] [--max-steps N] [-p NAME=VALUE ...] [--stats] [--progress]\n"
     "       [--project-initial | --allow-inconsistent]\n"
     "       [--batch FILE|- [--metric KIND:OUTPUT ...] [--trajectories DIR]]\n"
 )
@@ -804,6 +804,7 @@ def _help():
         "  --allow-inconsistent  start from an initial state that violates the constraints",
         "                     (the correctors pull it back): neither refused nor projected",
         "  --stats            print the solver's counters to stderr",
+        "  --progress         report the progress on stderr: lines bgc-progress T T0 T_END",
         "  --batch FILE       one run per line of FILE (- for stdin): NAME=VALUE words;",
         "                     writes a CSV row per run: run,status,metrics,steps,rejected,",
         "                     rhs,cpu,message",
@@ -870,7 +871,7 @@ def _parse_args(argv):
         if arg in ("-h", "--help"):
             _help()
             return None
-        if arg in ("--project-initial", "--allow-inconsistent", "--stats"):
+        if arg in ("--project-initial", "--allow-inconsistent", "--stats", "--progress"):
             flags.add(arg)
             if {"--project-initial", "--allow-inconsistent"} <= flags:
                 raise _UsageError(
@@ -898,6 +899,20 @@ def _stop_on_signals():
         for sig in (signal.SIGINT, signal.SIGTERM):
             replaced.append((sig, signal.signal(sig, lambda number, frame: request_stop(number))))
     return replaced
+
+
+def _progress_reporter(s):
+    """--progress: a line "bgc-progress T T0 T_END" on stderr at the first row, then as the
+    rows pass at most ten a second (bgc simulate draws them as a bar)."""
+    last = [None]
+
+    def report(t):
+        now = time.monotonic()  # (time: imported by solve.py, below)
+        if last[0] is None or now - last[0] >= 0.1:
+            last[0] = now
+            sys.stderr.write("bgc-progress %.17g %.17g %.17g\n" % (t, s.t0, s.t_end))
+            sys.stderr.flush()
+    return report
 
 
 def main(argv=None):
@@ -933,9 +948,12 @@ def main(argv=None):
     out = sys.stdout
     out.write(",".join(["t"] + OUTPUTS) + "\n")
     handlers = _stop_on_signals()
+    progress = _progress_reporter(s) if "--progress" in flags else None
     try:
         for t, y in _integrate(s, p, x0, stats):
             out.write(_row_text(t, y))
+            if progress is not None:
+                progress(t)
     except _Failure as error:
         failure = error
     finally:
