@@ -344,3 +344,55 @@ def _failure(make, backend, **options):
     assert code == 3, err
     message = err.strip()
     return message, float(message.split("at t = ")[1].split(":")[0])
+
+
+def _c_stiff_lu_is_singular(E) -> bool:
+    """bgc_stiff_lu / bgc_stiff_zlu of bgc/runtime/stiff.c, transcribed loop for loop in plain
+    Python floats: True when a column has no nonzero pivot."""
+    a = [list(row) for row in E]
+    n = len(a)
+    size = (lambda v: abs(v.real) + abs(v.imag)) if a and isinstance(a[0][0], complex) else abs
+    for k in range(n):
+        big, p = size(a[k][k]), k
+        for i in range(k + 1, n):
+            if size(a[i][k]) > big:
+                big, p = size(a[i][k]), i
+        if big == 0.0:
+            return True
+        a[k], a[p] = a[p], a[k]
+        for i in range(k + 1, n):
+            l = a[i][k] / a[k][k]
+            a[i][k] = l
+            if l != 0.0:
+                for j in range(k + 1, n):
+                    a[i][j] -= l * a[k][j]
+    return False
+
+
+def test_python_runtime_finds_singular_iteration_matrices_as_c_does():
+    """The Python runtime's singularity test (stiff.py) is the C runtime's factorisation: on
+    random real matrices with zeros, repeated rows, 1e308, 1e-308 and NaN, the same verdict
+    as the C loops transcribed above.  (Complex matrices, radau5's E2, follow the same loops,
+    but whether a near-singular one rounds to an exact zero pivot depends on how complex
+    quotients are rounded, which differs between C99's Annex G and numpy: only a structurally
+    singular one is checked.)"""
+    import random
+    singular = _built(rc_pair, "python")._stiff_singular
+    rng = random.Random(3)
+    values = [0.0, 1.0, -1.0, 2.0, 0.5, 1e308, -1e308, 1e-308, float("nan")]
+    seen = set()
+    for trial in range(3000):
+        n = rng.randint(1, 5)
+        E = np.array([[rng.choice(values) for _ in range(n)] for _ in range(n)])
+        if n > 1 and rng.random() < 0.4:
+            E[rng.randrange(n)] = E[rng.randrange(n)]
+        with np.errstate(all="ignore"):
+            try:
+                expected = _c_stiff_lu_is_singular(E.tolist())
+            except ZeroDivisionError:  # (a NaN pivot in Python floats; C goes on with NaN)
+                continue
+            assert singular(E) == expected, E
+        seen.add(expected)
+    assert seen == {True, False}
+    E2 = np.array([[1 + 2j, 0, 3j], [2 - 1j, 0, 1], [0.5j, 0, 2 + 2j]])
+    assert singular(E2) and not singular(E2 + np.eye(3))

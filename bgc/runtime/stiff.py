@@ -1,11 +1,12 @@
 # ================================================================== stiff ===
 # The stiff families: Rosenbrock methods in Hairer's transformed form (RODAS's design, any
 # tableau of the family) and Radau IIA of order 5 (RADAU5's design), as bgc_run_rosenbrock and
-# bgc_run_radau5 in the C runtime (see there).  Linear algebra: each iteration matrix is
-# inverted once per factorisation with numpy.linalg.inv (LAPACK's LU with partial pivoting;
-# an exactly zero pivot raises LinAlgError, the C runtime's singular matrix) and every solve is
-# a matrix-vector product with the inverse.  The results agree with C's within rounding, not
-# bit for bit.
+# bgc_run_radau5 in the C runtime (see there).  Linear algebra: whether an iteration matrix is
+# singular is decided as the C runtime decides it (its LU factorisation with partial
+# pivoting, done here row-vectorised in the same operations: an exactly zero pivot column is
+# singular), so both backends stop on the same matrices; a matrix that is not is inverted
+# once per factorisation with numpy.linalg.inv and every solve is a matrix-vector product with
+# the inverse.  The results agree with C's within rounding, not bit for bit.
 
 
 def _stiff_norm(v, w):
@@ -40,8 +41,39 @@ def _stiff_fail_singular(name, t, h):
                     % (t, name, h), t)
 
 
+def _stiff_singular(E):
+    """Whether bgc_stiff_lu (bgc_stiff_zlu for a complex E) finds a column without a nonzero
+    pivot: the same pivots (the first largest |a_ik|, |re| + |im| for complex), the same
+    eliminations (rows whose multiplier is zero left alone)."""
+    a = numpy.array(E)
+    n = a.shape[0]
+    size = (lambda v: numpy.abs(v.real) + numpy.abs(v.imag)) if a.dtype.kind == "c" \
+        else numpy.abs
+    with numpy.errstate(all="ignore"):
+        for k in range(n):
+            column = size(a[k:, k])
+            # C's scan: from |a_kk|, the first entry larger than the largest so far (a NaN
+            # is never larger, and a NaN |a_kk| stays)
+            p = k
+            if column[0] == column[0] and len(column) > 1:
+                rest = numpy.where(column[1:] == column[1:], column[1:], -1.0)
+                if rest.max() > column[0]:
+                    p = k + 1 + int(numpy.argmax(rest))
+            if column[p - k] == 0.0:
+                return True
+            if p != k:
+                a[[k, p]] = a[[p, k]]
+            lower = a[k + 1:, k] / a[k, k]
+            rows = numpy.nonzero(lower != 0.0)[0] + k + 1
+            if len(rows):
+                a[rows, k + 1:] -= lower[rows - k - 1, None] * a[k, k + 1:]
+    return False
+
+
 def _stiff_inverse(E):
-    """E^-1, or None if E is singular (an exactly zero pivot)."""
+    """E^-1, or None if E is singular (as the C runtime's factorisation finds it)."""
+    if _stiff_singular(E):
+        return None
     try:
         with numpy.errstate(all="ignore"):
             return numpy.linalg.inv(E)
