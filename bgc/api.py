@@ -3,13 +3,12 @@ equations -> reduce -> lower -> emit.  `bgc.cli` and the tests use exactly these
 from __future__ import annotations
 
 import io
-import math
 import time
 from dataclasses import dataclass, replace
 
 import numpy as np
 
-from . import ast, backends, solvers
+from . import backends
 from .causality import CausalGraph, assign_causality
 from .diagnostics import ModelError, Note, format_diagnostic
 from .emit import emit_c, emit_python
@@ -22,7 +21,7 @@ from .parser import decode, parse, parse_option
 from .reduce import Reduced, reduce
 from .report import SceneSummary, check_report, scenes_report, equations_latex, equations_text, scene_summary
 from .resolve import resolve
-from .resources import MAX_OUTPUT_ROWS, read_bounded  # noqa: F401 (re-exported)
+from .resources import read_bounded
 from .scene import Override, Settings, apply_scene
 from .run import (ALGEBRA, BACKENDS, FORMATS, SIMULATE_OPTIONS, TARGETS, check_run_options,
                   choice as _choice, exclusive, run_args, run_span_problem)

@@ -753,8 +753,8 @@ def sweep(model, scene, algebra, grids, sample, varies, seed, metrics, backend, 
             client, own = sw.local_client(workers), True
 
     def keep(result):
-        for run, text in (result.trajectories or {}).items():
-            _write_atomic(str(Path(trajectories) / f"run-{run:06d}.csv"), text)
+        for number, text in (result.trajectories or {}).items():
+            _write_atomic(str(Path(trajectories) / f"run-{number:06d}.csv"), text)
 
     start = time.perf_counter()
     try:

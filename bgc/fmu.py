@@ -235,31 +235,7 @@ def _variable_doc(graph, name: str) -> str | None:
 
 def _state_dependence(f: ir.Function, size: int) -> list[tuple[int, ...]]:
     """The states each result of f may depend on (structurally, through its solves), sorted."""
-    deps: dict = {}
-
-    def mask(e) -> int:
-        bits = 0
-        for a in e.atoms(sp.Indexed):
-            if a.base == ir.X:
-                bits |= 1 << int(a.indices[0])
-        for s in e.free_symbols:
-            bits |= deps.get(s, 0)
-        return bits
-
-    rows = [0] * size
-    for s in f.body:
-        if isinstance(s, ir.Assign):
-            deps[s.target] = mask(s.expr)
-        elif isinstance(s, ir.Store):
-            rows[s.index] = mask(s.expr)
-        else:
-            exprs = ir.expressions(s) + (ir.inner_expressions(s)
-                                         if isinstance(s, ir.Newton) else [])
-            bits = 0
-            for e in exprs:
-                bits |= mask(e)
-            for d in ir.defines(s):
-                deps[d] = bits
+    rows = ir.state_masks(f, size)
     return [tuple(j for j in range(bits.bit_length()) if bits >> j & 1) for bits in rows]
 
 

@@ -171,6 +171,36 @@ def defines(s) -> tuple[sp.Symbol, ...]:
     return ()
 
 
+def state_masks(f: Function, size: int) -> list[int]:
+    """For each result f stores (Store index 0..size-1), the states it may depend on, as a bit
+    mask: structurally, through assignments, and through solves (every unknown of a block
+    depends on everything the block reads).  One pass over the body."""
+    deps: dict = {}
+
+    def mask(e) -> int:
+        bits = 0
+        for a in e.atoms(sp.Indexed):
+            if a.base == X:
+                bits |= 1 << int(a.indices[0])
+        for sym in e.free_symbols:
+            bits |= deps.get(sym, 0)
+        return bits
+
+    rows = [0] * size
+    for s in f.body:
+        if isinstance(s, Assign):
+            deps[s.target] = mask(s.expr)
+        elif isinstance(s, Store):
+            rows[s.index] = mask(s.expr)
+        else:
+            bits = 0
+            for e in expressions(s) + (inner_expressions(s) if isinstance(s, Newton) else []):
+                bits |= mask(e)
+            for d in defines(s):
+                deps[d] = bits
+    return rows
+
+
 def uses(s) -> set:
     """The symbols a statement reads from before it."""
     if isinstance(s, Newton):

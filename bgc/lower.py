@@ -485,30 +485,7 @@ def jacobian_pattern(rhs: Function, n: int, blocks) -> JacobianPattern:
     """Structural dependence of each derivative on each state (through solves: every unknown
     of a block depends on everything the block reads), and a greedy colouring of the columns
     in order (no two columns of a colour share a row)."""
-    deps: dict = {}
-
-    def mask(e):
-        m = 0
-        for a in e.atoms(sp.Indexed):
-            if a.base == X:
-                m |= 1 << int(a.indices[0])
-        for s in e.free_symbols:
-            m |= deps.get(s, 0)
-        return m
-
-    rows = [0] * n
-    for s in rhs.body:
-        if isinstance(s, Assign):
-            deps[s.target] = mask(s.expr)
-        elif isinstance(s, Store):
-            rows[s.index] = mask(s.expr)
-        elif isinstance(s, (Solve, Newton, Resolve)):
-            m = 0
-            exprs = ir.expressions(s) + (ir.inner_expressions(s) if isinstance(s, Newton) else [])
-            for e in exprs:
-                m |= mask(e)
-            for d in ir.defines(s):
-                deps[d] = m
+    rows = ir.state_masks(rhs, n)
     columns = [[] for _ in range(n)]
     for i, m in enumerate(rows):
         j = 0
