@@ -687,6 +687,7 @@ def accuracy(model, scene, outputs, effects, algebra, backend, solver_list, rtol
 @click.option("-p", "params", multiple=True, metavar="NAME=VALUE",
               help="A fixed parameter for every run.")
 @click.option("--project-initial", is_flag=True)
+@click.option("--allow-inconsistent", is_flag=True, help=ALLOW_HELP)
 @click.option("--workers", type=click.IntRange(0, 4096), default=None,
               help="Processes of the local Dask cluster (default: the cores); 0: run the "
                    "batches one after the other in this process.")
@@ -703,8 +704,8 @@ def accuracy(model, scene, outputs, effects, algebra, backend, solver_list, rtol
               help="The table's file (default: stdout, as CSV): CSV, or Parquet when the name "
                    "ends in .parquet (pip install 'bgc[parquet]').")
 def sweep(model, scene, algebra, grids, sample, varies, seed, metrics, backend, solver, rtol,
-          atol, t_end, dt, step, params, project_initial, workers, scheduler, batch_size,
-          trajectories, no_timing, output):
+          atol, t_end, dt, step, params, project_initial, allow_inconsistent, workers, scheduler,
+          batch_size, trajectories, no_timing, output):
     """Run the model for many parameter sets (a grid or a seeded sample), compiled once, in
     batches on Dask or serially; write one table: run, parameters, metrics, counters, status,
     message.  A run that fails is a row with its status and message; see docs/sweeps.md."""
@@ -732,7 +733,8 @@ def sweep(model, scene, algebra, grids, sample, varies, seed, metrics, backend, 
             outfile.check_target(Path(trajectories) / "run-000000.csv")
     except (sw.SweepError, OSError, outfile.OutputError) as error:
         raise click.UsageError(str(error)) from None
-    compiled = _build(model, scene, project_initial, algebra)
+    compiled = _build(model, scene, project_initial, algebra,
+                      allow_inconsistent=allow_inconsistent)
     overrides = _parse_params(params, [p.name for p in compiled.program.params])
     if backend == "c" and not backends.have_c_compiler():
         click.echo("warning: no C compiler found (cc or $CC); using the Python backend", err=True)
@@ -765,7 +767,8 @@ def sweep(model, scene, algebra, grids, sample, varies, seed, metrics, backend, 
                           progress=sw.stderr_progress(), on_batch=keep if trajectories else None,
                           trajectories=bool(trajectories), t_end=t_end, dt=dt, solver=solver,
                           rtol=rtol, atol=atol, step=step, params=overrides,
-                          project_initial=project_initial)
+                          project_initial=project_initial,
+                          allow_inconsistent=allow_inconsistent)
     except sw.SweepError as error:
         raise click.UsageError(str(error)) from None
     except sw.BatchFailed as error:

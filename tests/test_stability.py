@@ -262,6 +262,14 @@ def test_allow_inconsistent_through_the_api_and_the_command_line(tmp_path):
                      allow_inconsistent=True, project_initial=True)
     both = run_bgc("simulate", path, "--allow-inconsistent", "--project-initial")
     assert both.returncode == 2 and "exclude each other" in both.stderr
+    # bgc sweep takes the flag too: the run that starts off the rod is a row, not a refusal
+    swept = run_bgc("sweep", path, "-s", "settle", "--grid", "vr0=0,0.01", "--metric",
+                    "final:rod.residual", "--t-end", "0.5", "--workers", "0", "--backend",
+                    "python", "--no-timing", "--allow-inconsistent")
+    assert swept.returncode == 0, swept.stderr
+    rows = [line.split(",") for line in swept.stdout.splitlines()[1:]]
+    assert [r[-2] for r in rows] == ["ok", "ok"]
+    assert float(rows[0][2]) == pytest.approx(want[-1], rel=1e-4)
 
 
 # ---------------------------------------------------------------- 3. energy
