@@ -388,7 +388,7 @@ def _unrolled_lu(k: int, lu, area: _BlockArea, c: bool) -> dict | None:
             return text
         return f"max({', '.join(terms)})"
 
-    factor, decl = [], []
+    factor = []
     rows: list[list[int]] = [[] for _ in range(lu.m)]
     for q, i in enumerate(lu.prow):
         rows[i].append(q)

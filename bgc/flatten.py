@@ -32,9 +32,7 @@ import sympy as sp
 
 from .algebra import is_zero
 from .diagnostics import Collector, ModelError, fail
-from .graph import (Bond, Constraint, Element, Expr, Graph, Multibond, Signal, Vector,
-                    part_name)
-from .kinds import KINDS
+from .graph import Bond, Element, Expr, Graph, Multibond, Signal, Vector, part_name
 from .resources import MAX_SCALAR_PARTS
 
 TWO_PORT_JUNCTIONS = {"transformer": ("1", "0"), "gyrator": ("1", "1")}

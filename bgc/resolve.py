@@ -288,7 +288,7 @@ def _dim_of(decl) -> int | None:
 def _matrix_chain(additive, operands, values, scope: _Scope):
     """A chain of + and - (or * and /) with vectors or matrices among its operands; a matrix
     product is charged to the scope before it is computed."""
-    (_, first), acc = operands[0], values[0]
+    acc = values[0]
     if additive:
         acc = acc if operands[0][0] > 0 else -acc
         for (sign, n), v in zip(operands[1:], values[1:]):
