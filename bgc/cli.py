@@ -339,7 +339,7 @@ def simulate(model, scene, outputs, effects, algebra, backend, solver, rtol, ato
         # (not while the CSV itself goes to the terminal: the bar would cut its lines)
         progress = _RunProgress() if sys.stderr.isatty() and (
             output or not sys.stdout.isatty()) else None
-        status, rows = _run(warm.argv(record, program) + list(map(str, args))
+        status, rows = _run(warm.argv(program) + list(map(str, args))
                             + ["--progress"] * bool(progress), output, copy, progress)
         if progress is not None:
             progress.close()

@@ -155,8 +155,8 @@ def store(request: Request, source: bytes, record: Record) -> None:
             pass
 
 
-def argv(record: Record, program: Path) -> list[str]:
-    """The command that starts the record's program."""
+def argv(program: Path) -> list[str]:
+    """The command that starts a cached program (a C executable, or generated Python)."""
     if program.suffix == ".py":
         return [sys.executable, str(program)]
     return [str(program)]
