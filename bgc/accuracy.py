@@ -455,17 +455,20 @@ def plot(result: Result, path, gains: bool = False) -> None:
         if p.status == "ok" and p.error_max is not None:
             key = (p.solver, p.setting, p.value) if gains else p.solver
             groups.setdefault(key, []).append(p)
-    for key, pts in groups.items():
+    markers = "osD^vP"  # with the ten colours of the cycle: 60 lines tell apart
+    for k, (key, pts) in enumerate(groups.items()):
         label = f"{key[0]} {key[1]}={key[2]:.3g}" if gains else key
+        look = {"label": label, "color": f"C{k % 10}", "marker": markers[k // 10 % 6],
+                "ls": "-"}
         if gains:
             xs = [p.gain for p in pts]
-            axes[0].loglog(xs, [max(p.residual or 0.0, 1e-300) for p in pts], "o-", label=label)
-            axes[1].loglog(xs, [max(p.error_max, 1e-300) for p in pts], "o-", label=label)
-            axes[2].loglog(xs, [p.rhs for p in pts], "o-", label=label)
+            axes[0].loglog(xs, [max(p.residual or 0.0, 1e-300) for p in pts], **look)
+            axes[1].loglog(xs, [max(p.error_max, 1e-300) for p in pts], **look)
+            axes[2].loglog(xs, [p.rhs for p in pts], **look)
         else:
             pts = [p for p in pts if p.cpu]
-            axes[0].loglog([p.cpu for p in pts], [p.error_max for p in pts], "o-", label=label)
-            axes[1].loglog([p.rhs for p in pts], [p.error_max for p in pts], "o-", label=label)
+            axes[0].loglog([p.cpu for p in pts], [p.error_max for p in pts], **look)
+            axes[1].loglog([p.rhs for p in pts], [p.error_max for p in pts], **look)
     if gains:
         axes[0].set(xlabel="corrector gain", ylabel="max |constraint residual|",
                     title="drift against gain")

@@ -660,6 +660,7 @@ def solver_tables_c() -> str:
     """The solvers' coefficients and descriptions as C data (the same in every program)."""
     out = ["/* ====================================================== solver tables === */",
            "/* Printed from bgc/solvers.py. */"]
+    radau_sets: dict = {}
     for s in solvers.SOLVER_LIST:
         tab, ident = s.tableau, f"bgc_{s.name}"
         if isinstance(tab, solvers.ERKTableau):
@@ -685,13 +686,24 @@ def solver_tables_c() -> str:
             out.append(f"static const bgc_rosenbrock {ident}_ros = {{ {st}, {len(tab.dense)}, "
                        f"{_number(tab.gamma)}, {ident}_c, {ident}_d, {ident}_a, {ident}_C, "
                        f"{ident}_m, {ident}_e, {ident}_H }};")
-        elif isinstance(tab, solvers.RadauTableau):
-            out.append(_c_array(f"{ident}_T", [v for row in tab.T for v in row])
-                       + _c_array(f"{ident}_Ti", [v for row in tab.Ti for v in row])
-                       + _c_array(f"{ident}_e", tab.e))
-            out.append(f"static const bgc_radau {ident}_radau = {{ {_number(tab.c1)}, "
-                       f"{_number(tab.c2)}, {_number(tab.gamma)}, {_number(tab.alpha)}, "
-                       f"{_number(tab.beta)}, {ident}_T, {ident}_Ti, {ident}_e }};")
+        elif s.family == "radau":  # the stage sets' arrays once, then the solver's sets
+            for set_ in tab:
+                sid = f"bgc_radau_s{set_.stages}"
+                if sid in radau_sets:
+                    assert radau_sets[sid] is set_, "one tableau per stage count"
+                    continue
+                radau_sets[sid] = set_
+                out.append(_c_array(f"{sid}_c", set_.c) + _c_array(f"{sid}_alpha", set_.alpha)
+                           + _c_array(f"{sid}_beta", set_.beta)
+                           + _c_array(f"{sid}_T", [v for row in set_.T for v in row])
+                           + _c_array(f"{sid}_Ti", [v for row in set_.Ti for v in row])
+                           + _c_array(f"{sid}_e", set_.e))
+            out.append(f"static const bgc_radau {ident}_radau[{len(tab)}] = {{")
+            for set_ in tab:
+                sid = f"bgc_radau_s{set_.stages}"
+                out.append(f"    {{ {set_.stages}, {_number(set_.gamma)}, {sid}_c, {sid}_alpha, "
+                           f"{sid}_beta, {sid}_T, {sid}_Ti, {sid}_e }},")
+            out.append("};")
     out.append("const char *const bgc_solver_names[BGC_NUM_SOLVERS] = {")
     out += [f"    {c_string_literal(s.name)}," for s in solvers.SOLVER_LIST]
     out.append("};")
@@ -702,8 +714,8 @@ def solver_tables_c() -> str:
         erk = f"&bgc_{s.name}_erk" if isinstance(s.tableau, solvers.ERKTableau) else "NULL"
         ros = (f"&bgc_{s.name}_ros" if isinstance(s.tableau, solvers.RosenbrockTableau)
                else "NULL")
-        radau = (f"&bgc_{s.name}_radau" if isinstance(s.tableau, solvers.RadauTableau)
-                 else "NULL")
+        radau = (f"bgc_{s.name}_radau, {len(s.tableau)}" if s.family == "radau"
+                 else "NULL, 0")
         phases = ((solvers.index(s.explicit), solvers.index(s.stiff)) if s.family == "auto"
                   else (-1, -1))
         out.append(
@@ -747,13 +759,14 @@ def solver_tables_python() -> str:
                 d=_py_tuple(tab.d), a="(" + ", ".join(_py_tuple(r) for r in tab.a) + ",)",
                 C="(" + ", ".join(_py_tuple(r) for r in tab.C) + ",)", m=_py_tuple(tab.m),
                 e=_py_tuple(tab.e), H="(" + ", ".join(_py_tuple(r) for r in tab.dense) + ",)")
-        elif isinstance(tab, solvers.RadauTableau):  # a dict of its own: 'beta' is taken
-            radau = {"c1": _number(tab.c1), "c2": _number(tab.c2), "gamma": _number(tab.gamma),
-                     "alpha": _number(tab.alpha), "beta": _number(tab.beta),
-                     "T": "(" + ", ".join(_py_tuple(r) for r in tab.T) + ",)",
-                     "Ti": "(" + ", ".join(_py_tuple(r) for r in tab.Ti) + ",)",
-                     "e": _py_tuple(tab.e)}
-            fields["radau"] = "{" + ", ".join(f"{k!r}: {v}" for k, v in radau.items()) + "}"
+        elif s.family == "radau":  # dicts of their own: 'beta' is taken
+            fields["radau"] = "(" + "".join(
+                "{" + ", ".join(f"{k!r}: {v}" for k, v in {
+                    "s": str(t.stages), "c": _py_tuple(t.c), "gamma": _number(t.gamma),
+                    "alpha": _py_tuple(t.alpha), "beta": _py_tuple(t.beta),
+                    "T": "(" + ", ".join(_py_tuple(r) for r in t.T) + ",)",
+                    "Ti": "(" + ", ".join(_py_tuple(r) for r in t.Ti) + ",)",
+                    "e": _py_tuple(t.e)}.items()) + "}, " for t in tab) + ")"
         if s.stiffness:
             fields["stiffness"] = (f"({s.stiffness.stage_i}, {s.stiffness.stage_j}, "
                                    f"{_number(s.stiffness.bound)})")

@@ -19,9 +19,13 @@ Families:
   rosenbrock  linearly implicit (Rosenbrock-Wanner) in Hairer's transformed form: each stage
               solves (I/(gamma h) - J) k_i = f(t + c_i h, y + sum a_ij k_j)
               + sum C_ij k_j / h + h d_i df/dt with the Jacobian J of the step's start.
-  radau5      Radau IIA of order 5 (three stages), Hairer's RADAU5 design: simplified Newton on
-              the transformed stage system (one real, one complex factorisation), Jacobian and
-              factorisation reuse, error estimate by an extra solve, collocation dense output.
+  radau       Radau IIA (s = 3, 5 or 7 stages, order 2s - 1), Hairer's RADAU5 and RADAU design:
+              simplified Newton on the transformed stage system (one real and (s - 1)/2
+              complex factorisations), Jacobian and factorisation reuse, error estimate by an
+              extra solve, collocation dense output.  The tableau is a tuple of stage sets,
+              lowest first; with more than one the order varies (RADAU's strategy: up while the
+              Newton iteration contracts fast and the step size settles, down when it
+              contracts slowly or fails); a fixed step (--step) runs the first.
   auto        explicit until its stiffness test fires, then the stiff method named in `stiff`.
 """
 from __future__ import annotations
@@ -94,27 +98,29 @@ class RosenbrockTableau:
 
 @dataclass(frozen=True)
 class RadauTableau:
-    """Radau IIA of order 5 (three stages, nodes c1, c2, 1) in RADAU5's transformed form.
-    Lambda = T^-1 A^-1 T = [[gamma, 0, 0], [0, alpha, -beta], [0, beta, alpha]] for the Butcher
-    matrix A: the stage increments Z = T W decouple into one real system (gamma/h I - J) and one
-    complex system ((alpha + i beta)/h I - J).  T's first column is the real eigenvector of A^-1
-    (unit length), its other columns the real and minus the imaginary part of the eigenvector of
-    alpha + i beta scaled to a third component 1 (Hairer's scaling: the Newton norms are taken
-    on W).  T and Ti = T^-1 are 3 x 3, row by row.  e: the error estimate's weights:
-    (gamma/h I - J) err = f(t, y) + sum_j e_j Z_j / h."""
+    """Radau IIA with s stages (s odd; order 2s - 1) in RADAU's transformed form.  Nodes c
+    (c_s = 1); Lambda = T^-1 A^-1 T = diag(gamma, [[alpha_1, -beta_1], [beta_1, alpha_1]], ...)
+    for the Butcher matrix A: the stage increments Z = T W decouple into one real system
+    (gamma/h I - J) and (s - 1)/2 complex systems ((alpha_k + i beta_k)/h I - J).  T's first
+    column is the real eigenvector of A^-1 (unit length, last component positive), then for
+    each pair the real and minus the imaginary part of the eigenvector of alpha_k + i beta_k
+    scaled to a last component 1 (Hairer's scaling: the Newton norms are taken on W); pairs by
+    increasing alpha.  T and Ti = T^-1 are s x s, row by row.  e: the error estimate's weights,
+    (gamma/h I - J) err = f(t, y) + sum_j e_j Z_j / h: the difference to an embedded formula of
+    order s on the nodes 0, c with the weight 1/gamma on f(t, y), filtered by
+    (I - h/gamma J)^-1 (Hairer & Wanner II, IV.8)."""
 
-    c1: Fraction
-    c2: Fraction
+    c: tuple
     gamma: Fraction
-    alpha: Fraction
-    beta: Fraction
+    alpha: tuple
+    beta: tuple
     T: tuple
     Ti: tuple
     e: tuple
 
     @property
     def stages(self) -> int:
-        return 3
+        return len(self.c)
 
 
 @dataclass(frozen=True)
@@ -147,7 +153,7 @@ class Stiffness:
 @dataclass(frozen=True)
 class Solver:
     name: str
-    family: str  # fixed | erk | rosenbrock | radau5 | auto
+    family: str  # fixed | erk | rosenbrock | radau | auto
     order: int
     summary: str
     tableau: object = None
@@ -585,16 +591,15 @@ _RODAS5P = RosenbrockTableau(
                 "-0.15582684282751913", "4.883087185713722")),
 )
 
-# Radau IIA of order 5 as in Hairer & Wanner's RADAU5: nodes (4 -+ sqrt 6)/10 and 1, the
-# eigenvalues of A^-1 (gamma real, alpha +- i beta), the transformation T (see RadauTableau),
-# and the error estimate's weights e = (-(13 + 7 sqrt 6)/3, (-13 + 7 sqrt 6)/3, -1/3); to 30
-# digits.
-_RADAU5 = RadauTableau(
-    c1=_q("0.155051025721682190180271592529"),
-    c2=_q("0.644948974278317809819728407471"),
+# Radau IIA with 3 stages (order 5) as in Hairer & Wanner's RADAU5: nodes (4 -+ sqrt 6)/10 and
+# 1, the eigenvalues of A^-1 (gamma real, alpha +- i beta), the transformation T (see
+# RadauTableau), and the error estimate's weights e = (-(13 + 7 sqrt 6)/3, (-13 + 7 sqrt 6)/3,
+# -1/3); to 30 digits.
+_RADAU_3 = RadauTableau(
+    c=_row("0.155051025721682190180271592529", "0.644948974278317809819728407471", "1"),
     gamma=_q("3.63783425274449573220841851358"),
-    alpha=_q("2.68108287362775213389579074321"),
-    beta=_q("3.05043019924741056942637762479"),
+    alpha=_row("2.68108287362775213389579074321"),
+    beta=_row("3.05043019924741056942637762479"),
     T=(_row("0.0912323948708929427915481352494", "-0.141255295020954208427990383808",
             "-0.0300291941051474244918611170891"),
        _row("0.241717932707107018957474779310", "0.204129352293799931995990810298",
@@ -610,11 +615,122 @@ _RADAU5 = RadauTableau(
            "-1/3"),
 )
 
+# With 5 stages (order 9) and 7 stages (order 13), as Hairer's RADAU uses them: the same
+# quantities, to 30 digits, from the nodes (the zeros of d^(s-1)/dx^(s-1) x^(s-1) (x - 1)^s)
+# and the collocation conditions (tests/test_radau.py derives them again in 50-digit
+# arithmetic).
+_RADAU_5 = RadauTableau(
+    c=_row("0.0571041961145176821931211925541", "0.276843013638123827680045997686",
+           "0.583590432368916820056697668663", "0.860240135656219447847912918875", "1"),
+    gamma=_q("6.28670475172927664517315334187"),
+    alpha=_row("3.6556943254635722582432079601", "5.70095329867178941917021536897"),
+    beta=_row("6.54373689936007729402107150939", "3.21026560030854988842501065297"),
+    T=(_row("0.0125175862205010458901356760368", "-0.0102420478179088270700863300669",
+            "0.0476738772902957238631839478592", "-0.0114785152552295147079415554122",
+            "-0.0140198588928754102810778942935"),
+       _row("0.00149167015189538242900444775236", "0.0501728645173710581629913802626",
+            "-0.0943318191816114369806569003364", "-0.00766883074918016288515687679204",
+            "0.0247085784265185268125252053778"),
+       _row("0.0729818763880871486226572997037", "-0.23053953404341794672142186218",
+            "0.102703045380125899792210456947", "0.0193984639988289509112232896408",
+            "0.0818003537037511708363908122288"),
+       _row("0.380091440003568104126439184355", "0.377893902248861249543862293746",
+            "0.466744130332494359289559582965", "0.407601171280199066621662370219",
+            "0.199682427886802525936540566022"),
+       _row("0.921978973681210488488254647416", "1.0", "0.0", "1.0", "0.0")),
+    Ti=(_row("30.0415677215444016277146611632", "13.8651078562714131651762946846",
+             "3.48000277479518556182840016972", "-1.03200879782526342277108071215",
+             "0.804303045073989917475330383606"),
+       _row("5.3441864378349115988953103041", "4.59361556775916100445407449818",
+            "-3.03636032345942429864615756872", "1.05066019023145886385983615715",
+            "-0.272778611864296270538614649997"),
+       _row("3.74805980743980486005103450189", "-3.98496573634388466725226385805",
+            "-1.0444156416080187929422473231", "1.18409856813794848723102038838",
+            "-0.449917770156780368898811918314"),
+       _row("-33.0418802135190000080614469426", "-17.3769534790635670194549806059",
+            "-0.172129063254005561151528806428", "-0.0991697779825426425881662214017",
+            "0.531228115838306667184911422606"),
+       _row("-8.61144397987529197770008251257", "9.69999140952880823133589405342",
+            "1.91472863969687428485137560339", "2.41869200608494002642656343408",
+            "-1.04746348793533741869443299921")),
+    e=_row("-27.7809339440646373047872078172", "3.64147849804921315271165508774",
+           "-1.2525477211691187204906524943", "0.592003167184542872566205223775", "-0.2"),
+)
+_RADAU_7 = RadauTableau(
+    c=_row("0.0293164271597848919720502769132", "0.148078599668484291849976852496",
+           "0.336984690281154299097052972081", "0.558671518771550132081393341806",
+           "0.769233862030054500916883360116", "0.92694567131974111485187396582", "1"),
+    gamma=_q("8.9368327884052163373020969133"),
+    alpha=_row("4.37869356150680600252334919269", "7.14105521918764010577498142572",
+               "8.51183482510294572305062092495"),
+    beta=_row("10.1696932837950116273183544188", "6.62304592263927597062055811591",
+              "3.28101362432505883003594252704"),
+    T=(_row("0.0021537546273105264228275190655", "0.0215675513513207733869142269538",
+            "0.00878356792514414440732555660043", "-0.0040551614523310238981984470409",
+            "0.00442723275326828547967807873499", "-0.00123864618795287405637686870391",
+            "-0.00276061748054385249954800379097"),
+       _row("-0.00160002507788042852683067347985", "-0.0381316481344115466944201512445",
+            "-0.0215255605940068755238494349164", "0.00841556827655958923717700333157",
+            "-0.00403194957022454949230429372587", "-6.66663533939633818176047897403e-5",
+            "0.00318547482516620984874835878223"),
+       _row("0.00405910730194768309165024146217", "0.0573965089393817153975680203881",
+            "0.0588505292084267910561208969866", "-0.00856043106160343206017727185391",
+            "-0.00692321266502390892414068519049", "-0.00235218098294333834053519532556",
+            "0.000416907772529756269140888030599"),
+       _row("0.0157504880793768442034586734055", "-0.0382146935969683504846411337659",
+            "-0.165736811272943851241241116256", "-0.0373712423023844574190702119163",
+            "0.00823900729850771940449868235564", "0.00311507115234617525272547086289",
+            "0.0251166049134388219283638234714"),
+       _row("0.112977661024220807608615842313", "-0.249174212465263686330825594009",
+            "0.273563305798662321213236935135", "0.00536676137918177009427930181088",
+            "0.19321111610126201443121122562", "0.101717732481715146808078931324",
+            "0.0950450203560462282103892144486"),
+       _row("0.458381043183931501028085939964", "0.53158464908362842920505009943",
+            "0.486322836617572894056685295353", "0.526574226458449262914091192639",
+            "0.275534394989625814192875938763", "0.521751945274765285294609453182",
+            "0.128071944635543894414114939511"),
+       _row("0.881391578353818376313498879127", "1.0", "0.0", "1.0", "0.0", "1.0", "0.0")),
+    Ti=(_row("258.131926319982229276108947425", "189.073763081398508951976143411",
+             "49.0873148179301311944474703373", "4.11064746966142841811238518636",
+             "4.05344788931556330417512803838", "-3.11275536660734607655357698926",
+             "1.64677491355844465016894934801"),
+       _row("-3.00739016945129213173149353792", "-11.0158660787657713291120393665",
+            "1.48779945613165628148618248665", "2.13038815955928245943197208333",
+            "-1.81614108681756562482220455159", "1.13432558789516110008277908421",
+            "-0.414699045943303531993049422296"),
+       _row("-8.44196318832108468175691559414", "-0.650525274057515002816904045893",
+            "6.94067073036987647880408175445", "-3.2050475255978984315650279916",
+            "1.071280943546478589782795627", "-0.354850749121622187972972761074",
+            "0.0919854913278655415440864884207"),
+       _row("74.6783322350226997715286176267", "87.4085889799008164020396362924",
+            "4.02415873737999787701407840794", "-3.71480631515836418663873823811",
+            "-3.43009398598231735074090769131", "2.69660480976531237885262500231",
+            "-0.938692743607546193356785681772"),
+       _row("58.3565288519065772423731088607", "-10.0687739578001809632495544546",
+            "-30.3663888425666712081087189214", "-1.02002086518486598502718784312",
+            "-0.112417500378424962126670249922", "1.89064083100037762279966919418",
+            "-0.971648639383148228217233127549"),
+       _row("-299.186248028252096678636425239", "-243.04074536874479118190056523",
+            "-48.7771040780378692121909344887", "-2.03867190574193440528015205293",
+            "1.67356023986108494426829042309", "-1.0873740320571061644555969255",
+            "0.901938249296099373842715514839"),
+       _row("-93.0765028974353059115719452637", "23.8816310562811442770319002318",
+            "39.2788807308138438271015646137", "14.3889156854910800698761307425",
+            "-3.51043839939936122108708432481", "4.863284885566180701214910587",
+            "-2.2464827295912399164004692484")),
+    e=_row("-54.3744368941286145145837103697", "7.00002400425918651204068363735",
+           "-2.35566109198755719225604586776", "1.13228906610613438638449290828",
+           "-0.64689132676735871186734522244", "0.387533385375352377424782057106",
+           "-0.142857142857142857142857142857"),
+)
+
 
 # ---------------------------------------------------------------- the registry
 
 _HAIRER_I = "Hairer, Norsett & Wanner, Solving Ordinary Differential Equations I (1993)"
 _HAIRER_II = "Hairer & Wanner, Solving Ordinary Differential Equations II (1996)"
+_HAIRER_1999 = ("Hairer & Wanner, Stiff differential equations solved by Radau methods, "
+                "Journal of Computational and Applied Mathematics 111 (1999)")
 _STEINEBACH = ("Steinebach, Construction of Rosenbrock-Wanner method Rodas5P and numerical "
                "benchmarks within the Julia Differential Equations package, BIT Numerical "
                "Mathematics 63 (2023)")
@@ -636,21 +752,34 @@ SOLVER_LIST = (
     Solver("rodas4", "rosenbrock", 4,
            "Rosenbrock 4(3), L-stable, stiff; the Jacobian every step", _RODAS4,
            Control(0.9, 0.2, 6.0, 0.0, 4), uses_jacobian=True, references=(_HAIRER_II,)),
-    Solver("radau5", "radau5", 5,
+    Solver("radau5", "radau", 5,
            "Radau IIA of order 5, implicit, L-stable, stiff; Jacobian and factorisations "
-           "reused", _RADAU5, Control(0.9, 0.2, 8.0, 0.0, 4), uses_jacobian=True,
+           "reused", (_RADAU_3,), Control(0.9, 0.2, 8.0, 0.0, 4), uses_jacobian=True,
            references=(_HAIRER_II,)),
     Solver("rodas5p", "rosenbrock", 5,
            "Rosenbrock 5(4), L-stable, stiff; the Jacobian every step", _RODAS5P,
            Control(0.9, 0.2, 6.0, 0.0, 5), uses_jacobian=True, references=(_STEINEBACH,)),
+    Solver("radau9", "radau", 9,
+           "Radau IIA of order 9 (5 stages), implicit, L-stable, stiff: tight tolerances",
+           (_RADAU_5,), Control(0.9, 0.2, 8.0, 0.0, 4), uses_jacobian=True,
+           references=(_HAIRER_II, _HAIRER_1999)),
+    Solver("radau13", "radau", 13,
+           "Radau IIA of order 13 (7 stages), implicit, L-stable, stiff: very tight tolerances",
+           (_RADAU_7,), Control(0.9, 0.2, 8.0, 0.0, 4), uses_jacobian=True,
+           references=(_HAIRER_II, _HAIRER_1999)),
+    Solver("radau", "radau", 13,
+           "Radau IIA of variable order 5, 9, 13 (Hairer's RADAU): the order follows the "
+           "Newton iteration's convergence; stiff, any tolerance",
+           (_RADAU_3, _RADAU_5, _RADAU_7), Control(0.9, 0.2, 8.0, 0.0, 4),
+           uses_jacobian=True, references=(_HAIRER_II, _HAIRER_1999)),
     Solver("auto", "auto", 5,
-           "dopri5 until its stiffness test fires, then rodas4 for the rest of the run",
-           None, explicit="dopri5", stiff="rodas4", uses_jacobian=True),
+           "dopri5 until its stiffness test fires, then radau (variable order) for the rest "
+           "of the run", None, explicit="dopri5", stiff="radau", uses_jacobian=True),
 )
 
 SOLVERS = {s.name: s for s in SOLVER_LIST}
 NAMES = tuple(SOLVERS)
-FAMILIES = ("fixed", "erk", "rosenbrock", "radau5", "auto")
+FAMILIES = ("fixed", "erk", "rosenbrock", "radau", "auto")
 DEFAULT = "dopri5"
 
 

@@ -142,9 +142,11 @@ static inline double bgc_heaviside(double a, double at_zero)
    b and e (NULL: fixed step) and e2 (NULL: one estimate) over the first `stages`; the last of
    those is f(t + h, y1) if fsal; P[all x degree]: the dense output's polynomials.
    rosenbrock: Hairer's transformed coefficients (see bgc/solvers.py).
-   radau: Radau IIA of order 5 in RADAU5's transformed form: nodes c1, c2, 1; the eigenvalues
-   gamma and alpha +- i beta of A^-1; T and Ti = T^-1 (3 x 3, row-major) with
-   Ti A^-1 T = [gamma 0 0; 0 alpha -beta; 0 beta alpha]; e: the error estimate's weights. */
+   radau: Radau IIA with s stages in RADAU's transformed form: nodes c (c[s-1] = 1); the
+   eigenvalues gamma and alpha_k +- i beta_k (k < (s-1)/2) of A^-1; T and Ti = T^-1 (s x s,
+   row-major) with Ti A^-1 T = diag(gamma, [alpha_k -beta_k; beta_k alpha_k], ...); e: the
+   error estimate's weights.  A solver has one stage set (fixed order) or several (variable
+   order, lowest first). */
 typedef struct bgc_erk {
     int stages, all, fsal, degree;
     const double *c, *a, *b, *e, *e2, *P;
@@ -155,10 +157,12 @@ typedef struct bgc_rosenbrock {
     const double *c, *d, *a, *C, *m, *e, *H; /* a, C: stages x stages, H: dense_rows x stages */
 } bgc_rosenbrock;
 typedef struct bgc_radau {
-    double c1, c2, gamma, alpha, beta;
-    const double *T, *Ti, *e;
+    int s;
+    double gamma;
+    const double *c, *alpha, *beta, *T, *Ti, *e;
 } bgc_radau;
-enum { BGC_FAMILY_FIXED, BGC_FAMILY_ERK, BGC_FAMILY_ROSENBROCK, BGC_FAMILY_RADAU5,
+#define BGC_RADAU_MAX_STAGES 7
+enum { BGC_FAMILY_FIXED, BGC_FAMILY_ERK, BGC_FAMILY_ROSENBROCK, BGC_FAMILY_RADAU,
        BGC_FAMILY_AUTO };
 typedef struct bgc_method {
     const char *name, *summary;
@@ -171,7 +175,8 @@ typedef struct bgc_method {
     int stiff_i, stiff_j;                /* erk: the stiffness test's stages (-1: none) */
     double stiff_bound;
     int explicit_solver, stiff_solver;   /* auto: the two phases (-1: not auto) */
-    const bgc_radau *radau;              /* radau5: its constants (NULL: another family) */
+    const bgc_radau *radau;              /* radau: its stage sets (NULL: another family) */
+    int radau_sets;                      /* ... and how many */
 } bgc_method;
 
 /* A block's factorization plan (bgc/sparse.py): static order, or dense (partial pivoting). */

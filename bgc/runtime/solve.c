@@ -598,7 +598,7 @@ void bgc_print_stats(FILE *f, const bgc_stats *st)
 }
 
 static int bgc_run_rosenbrock(bgc_run *r, const bgc_method *method, double *y);
-static int bgc_run_radau5(bgc_run *r, const bgc_method *method, double *y);
+static int bgc_run_radau(bgc_run *r, const bgc_method *method, double *y);
 
 static int bgc_run_family(bgc_run *r, int solver, double *y)
 {
@@ -610,8 +610,8 @@ static int bgc_run_family(bgc_run *r, int solver, double *y)
         return bgc_run_erk(r, m, y);
     case BGC_FAMILY_ROSENBROCK:
         return bgc_run_rosenbrock(r, m, y);
-    case BGC_FAMILY_RADAU5:
-        return bgc_run_radau5(r, m, y);
+    case BGC_FAMILY_RADAU:
+        return bgc_run_radau(r, m, y);
     default:
         snprintf(r->msg, r->msg_size, "solver '%s' cannot run by itself", m->name);
         return BGC_ERR_USAGE;

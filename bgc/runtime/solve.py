@@ -600,8 +600,8 @@ def _run_family(run, name):
         yield from _run_erk(run, m, run.y)
     elif family == "rosenbrock":
         yield from _run_rosenbrock(run, m, numpy.asarray(run.y, dtype=float))
-    elif family == "radau5":
-        yield from _run_radau5(run, m, numpy.asarray(run.y, dtype=float))
+    elif family == "radau":
+        yield from _run_radau(run, m, numpy.asarray(run.y, dtype=float))
     else:
         raise ValueError("solver '%s' cannot run by itself" % name)
 

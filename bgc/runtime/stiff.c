@@ -1,6 +1,7 @@
 /* ============================================================== stiff === */
 /* The stiff families: Rosenbrock methods in Hairer's transformed form (RODAS's design, any
-   tableau of the family) and Radau IIA of order 5 (RADAU5's design), both with the Jacobian
+   tableau of the family) and Radau IIA with 3, 5 or 7 stages, of fixed or variable order
+   (RADAU5's and RADAU's design), both with the Jacobian
    that bgc_jacobian derives symbolically and dense LU factorisations of their own (below). */
 #include <complex.h>
 #undef I /* C99 7.3.1: the program may undefine it; _Complex_I is used below */
@@ -497,30 +498,40 @@ done:
     return rc;
 }
 
-/* ------------------------------------------------------- Radau IIA (RADAU5) --- */
+/* ------------------------------------------------------- Radau IIA (RADAU) --- */
 
-/* The collocation polynomial of an accepted step through (0, 0), (c1, Z1), (c2, Z2), (1, Z3)
-   in Newton's form: u(theta) = theta (b1 + (theta - c1) (b2 + (theta - c2) b3)); the state
-   is y0 + u(theta).  b: 3 x D. */
-static void bgc_radau_poly(const bgc_radau *m, const double *z1, const double *z2,
-                           const double *z3, double *b)
+/* The collocation polynomial of an accepted step through (0, 0) and (c_i, Z_i) in Newton's
+   form: u(theta) = theta (b1 + (theta - c1) (b2 + ... + (theta - c_{s-1}) b_s)); the state is
+   y0 + u(theta).  z, b: s x D. */
+static void bgc_radau_poly(const bgc_radau *m, const double *z, double *b)
 {
     enum { N = BGC_NUM_STATES, D = BGC_DIM(BGC_NUM_STATES) };
-    int l;
+    const int ns = m->s;
+    int l, j, k;
     for (l = 0; l < N; l++) {
-        const double d01 = z1[l] / m->c1, d12 = (z2[l] - z1[l]) / (m->c2 - m->c1);
-        const double d23 = (z3[l] - z2[l]) / (1.0 - m->c2);
-        const double d012 = (d12 - d01) / m->c2, d123 = (d23 - d12) / (1.0 - m->c1);
-        b[l] = d01;
-        b[D + l] = d012;
-        b[2 * D + l] = d123 - d012;
+        double d[BGC_RADAU_MAX_STAGES + 1], x[BGC_RADAU_MAX_STAGES + 1];
+        d[0] = 0.0;
+        x[0] = 0.0;
+        for (k = 0; k < ns; k++) {
+            d[k + 1] = z[(size_t)k * D + l];
+            x[k + 1] = m->c[k];
+        }
+        for (j = 1; j <= ns; j++) /* divided differences, in place */
+            for (k = ns; k >= j; k--)
+                d[k] = (d[k] - d[k - 1]) / (x[k] - x[k - j]);
+        for (k = 0; k < ns; k++)
+            b[(size_t)k * D + l] = d[k + 1];
     }
 }
 
 static double bgc_radau_u(const bgc_radau *m, const double *b, int l, double theta)
 {
     enum { D = BGC_DIM(BGC_NUM_STATES) };
-    return theta * (b[l] + (theta - m->c1) * (b[D + l] + (theta - m->c2) * b[2 * D + l]));
+    int k = m->s - 1;
+    double acc = b[(size_t)k * D + l];
+    while (k-- > 0)
+        acc = b[(size_t)k * D + l] + (theta - m->c[k]) * acc;
+    return theta * acc;
 }
 
 typedef struct bgc_radau_dense {
@@ -537,84 +548,116 @@ static void bgc_radau_dense_at(const void *dctx, double theta, double *yout)
         yout[l] = d->y[l] + bgc_radau_u(d->m, d->b, l, theta);
 }
 
-/* Radau IIA of order 5 after Hairer's RADAU5.  The stage increments Z_i = Y_i - y solve
-   Z = h (A x I) F(Z); with W = (T^-1 x I) Z the simplified Newton iteration decouples into
-   (gamma/h I - J) dW1 = (T^-1 F)_1 - gamma/h W1 and, for dW2 + i dW3, the complex system
-   ((alpha + i beta)/h I - J) with the right side (T^-1 F)_2 + i (T^-1 F)_3
-   - (alpha + i beta)/h (W2 + i W3): one real and one complex factorisation per h and J.
-   Tolerances as RADAU5 transforms them: rtol' = 0.1 rtol^(2/3), atol' = rtol' atol / rtol;
-   Newton's weights atol' + rtol' |y| at the step's start.  Newton: at most 7 iterations from
-   the previous step's collocation polynomial (zero on the first step), convergence rate
-   theta, stop when theta/(1 - theta) |dW| <= fnewt = max(10 eps/rtol', min(0.03,
-   rtol'^(1/2))), theta the rate of this step's iterations; after one iteration (the previous
-   step's theta) only if h and J are the previous step's (RADAU5 allows it on any step: after
-   a change of h the old rate does not hold, and the stages' Newton error of up to fnewt
-   times the tolerance can exceed the method's far smaller local error);
-   theta >= 0.99 or no convergence: h / 2; a predicted miss of fnewt within 7 iterations: h
-   shrunk accordingly.  Error estimate: (gamma/h I - J) err = f(t, y) + sum_j e_j Z_j / h,
-   refined once with f(t, y + err) on the first step and after a rejection, in Hairer's norm
-   with the weights atol' + rtol' max(|y|, |y1|) of the other solvers.  Step control:
-   Gustafsson's, both the standard and the predictive factor with the safety
-   min(safe, safe (1 + 2 * 7) / (newton + 2 * 7)) (RADAU5 uses safe in the predictive one),
-   hnew/h in [fac_min, fac_max].  J is recomputed when the contraction was poorer than 0.001,
-   the matrices are refactored unless hnew/h stays in [1, 1.2] (h is then kept).  Outputs by the
-   collocation polynomial.  Counts: each real or complex factorisation and each real or
-   complex solve.  With s->step > 0: steps of that size, no error estimate, and Newton's
-   failure (after a fresh Jacobian) ends the run. */
-static int bgc_run_radau5(bgc_run *r, const bgc_method *method, double *y)
+/* What follows from a stage set: its Newton budget, RADAU's tolerances for it and its
+   exponents. */
+typedef struct bgc_radau_use {
+    const bgc_radau *m;
+    int ns, pairs, nit;
+    double rtol, atol, fnewt, cfac, expo;
+} bgc_radau_use;
+
+static void bgc_radau_configure(bgc_radau_use *u, const bgc_method *method,
+                                const bgc_settings *s, int set)
 {
-    enum { N = BGC_NUM_STATES, D = BGC_DIM(BGC_NUM_STATES), NIT = 7 };
-    const bgc_radau *m = method->radau;
+    const bgc_radau *m = &method->radau[set];
+    const double expm = (double)(m->s + 1) / (2.0 * (double)m->s), en = 1.0 / expm - 1.0;
+    u->m = m;
+    u->ns = m->s;
+    u->pairs = (m->s - 1) / 2;
+    u->nit = 7 + 5 * ((m->s - 3) / 2);
+    u->rtol = 0.1 * pow(s->rtol, expm);
+    u->atol = u->rtol * (s->atol / s->rtol);
+    u->fnewt = bgc_max(10.0 * DBL_EPSILON / u->rtol,
+                       bgc_min(0.03, en == 0.5 ? sqrt(u->rtol) : pow(u->rtol, en)));
+    u->cfac = method->safe * (double)(1 + 2 * u->nit);
+    u->expo = 1.0 / (double)(m->s + 1);
+}
+
+/* Radau IIA after Hairer's RADAU5 and RADAU, with s = 3, 5 or 7 stages (order 2s - 1).  The
+   stage increments Z_i = Y_i - y solve Z = h (A x I) F(Z); with W = (T^-1 x I) Z the simplified
+   Newton iteration decouples into (gamma/h I - J) dW_1 = (T^-1 F)_1 - gamma/h W_1 and, for each
+   complex pair k, dW_2k + i dW_2k+1 from ((alpha_k + i beta_k)/h I - J) with the right side
+   (T^-1 F)_2k + i (T^-1 F)_2k+1 - (alpha_k + i beta_k)/h (W_2k + i W_2k+1): one real and
+   (s - 1)/2 complex factorisations per h and J.
+   Tolerances as RADAU transforms them: rtol' = 0.1 rtol^((s+1)/(2s)), atol' = rtol' atol / rtol;
+   Newton's weights atol' + rtol' |y| at the step's start.  Newton: at most 7, 12 or 17
+   iterations (s = 3, 5, 7) from the previous step's collocation polynomial (zero on the first
+   step and after an order change), convergence rate theta, stop when
+   theta/(1 - theta) |dW| <= fnewt = max(10 eps/rtol', min(0.03, rtol'^(1/e - 1))),
+   e = (s+1)/(2s); after one iteration (the previous step's theta) only if h and J are the
+   previous step's (RADAU5 allows it on any step: after a change of h the old rate does not
+   hold, and the stages' Newton error of up to fnewt times the tolerance can exceed the
+   method's far smaller local error); theta >= 0.99 or no convergence: h / 2; a predicted miss
+   of fnewt within the budget: h shrunk accordingly.  Error estimate:
+   (gamma/h I - J) err = f(t, y) + sum_j e_j Z_j / h, refined once with f(t, y + err) on the
+   first step and after a rejection, in Hairer's norm with the weights
+   atol' + rtol' max(|y|, |y1|) of the other solvers.  Step control: Gustafsson's, both the
+   standard and the predictive factor (not on the first step of a new order) with the safety
+   min(safe, safe (1 + 2 nit) / (newton + 2 nit)), err^(1/(s+1)), hnew/h in
+   [fac_min, fac_max].  J is recomputed when the contraction was poorer than 0.001, the
+   matrices are refactored unless hnew/h stays in [1, 1.2] (h is then kept).
+   Variable order (several stage sets, adaptive steps): RADAU's strategy, looked at whenever
+   the matrices are to be factored (and every 10 steps at a kept h): thetat = min(10,
+   max(theta, thetat / 2)) smooths the last Newton contraction; the order goes up one set when
+   thetat <= 0.002 after more than one iteration, h changes by less than 20 % and 10 steps
+   have passed since the last change; down when thetat >= 0.8, after a Newton failure or a
+   singular matrix, or after a Newton-predicted cut of h by half or more.
+   Outputs by the collocation polynomial.  Counts: each real or complex factorisation and
+   each real or complex solve.  With s->step > 0: steps of that size at the first stage set,
+   no error estimate, and Newton's failure (after a fresh Jacobian) ends the run. */
+static int bgc_run_radau(bgc_run *r, const bgc_method *method, double *y)
+{
+    enum { N = BGC_NUM_STATES, D = BGC_DIM(BGC_NUM_STATES), SMAX = BGC_RADAU_MAX_STAGES };
     const bgc_settings *s = r->s;
-    const int fixed = s->step > 0.0;
-    const double hmax = s->t_end - s->t0, expo = 1.0 / (double)method->q, thet = 0.001;
-    const double rtol = 0.1 * pow(s->rtol, 2.0 / 3.0), atol = rtol * (s->atol / s->rtol);
-    const double fnewt = bgc_max(10.0 * DBL_EPSILON / rtol, bgc_min(0.03, sqrt(rtol)));
-    const double cfac = method->safe * (double)(1 + 2 * NIT);
-    const double *T = m->T, *Ti = m->Ti;
+    const int fixed = s->step > 0.0, variable = method->radau_sets > 1 && !fixed;
+    const double hmax = s->t_end - s->t0, thet = 0.001;
     const double t_start = r->t;
-    double *mem = malloc(((size_t)2 * D * D + (size_t)18 * D) * sizeof *mem);
-    bgc_cplx *cmem = malloc(((size_t)D * D + (size_t)D) * sizeof *cmem);
-    int *piv = malloc((size_t)2 * D * sizeof *piv);
-    double *J, *E1, *z1, *z2, *z3, *w1, *w2, *w3, *f0, *scal, *ys, *y1, *yout, *b, *zlast;
-    double *cont, *f2, *ew;
-    bgc_cplx *E2, *zc;
+    int smax = 0, pmax, set = 0, since = 0, change = 0, unexp = 0, unexn = 0, recheck = 0;
+    double *mem = NULL, *J, *E1, *Z, *W, *b, *dw, *f0, *scal, *ys, *y1, *yout, *zlast, *cont;
+    double *f2, *ew;
+    bgc_cplx *cmem = NULL, *Ec, *zc;
+    int *piv = NULL;
     double t = r->t, h = 0.0, hnew, hfact = 0.0, hold = 0.0, hacc = 0.0, erracc = 1.0;
-    double faccon = 1.0, theta = thet, thqold = 1.0, dynold = 1.0, hhfac = 0.5;
+    double faccon = 1.0, theta = thet, thetat = 0.0, thqold = 1.0, dynold = 1.0, hhfac = 0.5;
     long n_fixed = 0, k_fixed = 0;
-    int i, l, rc = 0, reject = 0, last = 0, first = 1, needjac = 1, caljac = 0;
+    int i, j, k, l, rc = 0, reject = 0, last = 0, first = 1, needjac = 1, caljac = 0;
     int accepted = 0, nsing = 0, worst = -1, bad = -1, bad_kind = 0, newt = 0, refactored = 0;
+    bgc_radau_use u;
     bgc_radau_dense dense;
 
+    for (k = 0; k < method->radau_sets; k++)
+        smax = method->radau[k].s > smax ? method->radau[k].s : smax;
+    pmax = (smax - 1) / 2;
+    mem = malloc(((size_t)2 * D * D + (size_t)(4 * smax + 11) * D) * sizeof *mem);
+    cmem = malloc(((size_t)pmax * D * D + (size_t)pmax * D + 1) * sizeof *cmem);
+    piv = malloc((size_t)(1 + pmax) * D * sizeof *piv + sizeof *piv);
     if (!mem || !cmem || !piv) {
         rc = bgc_fail_memory(r->msg, r->msg_size);
         goto done;
     }
     J = mem;
     E1 = J + (size_t)D * D;
-    z1 = E1 + (size_t)D * D;
-    z2 = z1 + D;
-    z3 = z2 + D;
-    w1 = z3 + D;
-    w2 = w1 + D;
-    w3 = w2 + D;
-    f0 = w3 + D;
+    Z = E1 + (size_t)D * D; /* smax x D */
+    W = Z + (size_t)smax * D; /* smax x D */
+    b = W + (size_t)smax * D; /* smax x D */
+    zlast = b + (size_t)smax * D;
+    dw = zlast + D;
+    f0 = dw + D;
     scal = f0 + D;
     ys = scal + D;
     y1 = ys + D;
     yout = y1 + D;
-    b = yout + D; /* 3 D */
-    zlast = b + 3 * (size_t)D;
-    cont = zlast + D;
+    cont = yout + D;
     f2 = cont + D;
     ew = f2 + D;
-    E2 = cmem;
-    zc = E2 + (size_t)D * D;
-    for (l = 0; l < 3 * D; l++)
+    Ec = cmem; /* pmax x D x D */
+    zc = Ec + (size_t)pmax * D * D; /* pmax x D */
+    for (l = 0; l < smax * D; l++)
         b[l] = 0.0;
     for (l = 0; l < D; l++)
         zlast[l] = 0.0;
-    dense.m = m;
+    bgc_radau_configure(&u, method, s, set);
+    dense.m = u.m;
     dense.y = y;
     dense.b = b;
     if (r->kout > r->nout)
@@ -637,12 +680,14 @@ static int bgc_run_radau5(bgc_run *r, const bgc_method *method, double *y)
         goto done;
     }
     for (l = 0; l < N; l++)
-        scal[l] = atol + rtol * fabs(y[l]);
+        scal[l] = u.atol + u.rtol * fabs(y[l]);
     if (!fixed)
         h = r->h > 0.0 ? bgc_min(r->h, hmax) : bgc_initial_step(r, method->q, y, f0, hmax, ys, y1);
 
     for (;;) {
-        double tph, err = 0.0, fac1, alphn, betan, dyno = 0.0, quot, fac;
+        const bgc_radau *m;
+        const double *T, *Ti;
+        double tph, err = 0.0, fac1, alphn[SMAX], betan[SMAX], dyno = 0.0, quot, fac;
         int failed = 0;
         if (needjac) {
             r->st->jac++;
@@ -673,27 +718,56 @@ static int bgc_run_radau5(bgc_run *r, const bgc_method *method, double *y)
             }
             tph = last ? s->t_end : t + h;
         }
-        fac1 = m->gamma / h;
-        alphn = m->alpha / h;
-        betan = m->beta / h;
 
-        /* gamma/h I - J and (alpha + i beta)/h I - J, factored (unless they are h's already) */
+        /* the order, whenever the matrices are to be factored (variable order only) */
+        if (variable && (h != hfact || recheck)) {
+            const double hquot = hold > 0.0 ? h / hold : 0.0;
+            int next = set;
+            since++;
+            thetat = bgc_min(10.0, bgc_max(theta, 0.5 * thetat));
+            if (newt > 1 && thetat <= 0.002 && hquot > 0.8 && hquot < 1.2 && since > 10
+                && set + 1 < method->radau_sets)
+                next = set + 1;
+            if ((thetat >= 0.8 || unexp || unexn) && set > 0)
+                next = set - 1;
+            unexp = unexn = recheck = 0;
+            if (next != set) {
+                set = next;
+                bgc_radau_configure(&u, method, s, set);
+                since = 1;
+                change = 1;
+                hfact = 0.0;
+                for (l = 0; l < N; l++)
+                    scal[l] = u.atol + u.rtol * fabs(y[l]);
+            }
+        }
+        m = u.m;
+        T = m->T;
+        Ti = m->Ti;
+        fac1 = m->gamma / h;
+        for (k = 0; k < u.pairs; k++) {
+            alphn[k] = m->alpha[k] / h;
+            betan[k] = m->beta[k] / h;
+        }
+
+        /* gamma/h I - J and (alpha_k + i beta_k)/h I - J, factored (unless they are h's) */
         refactored = h != hfact;
         if (h != hfact) {
             int singular;
-            for (l = 0; l < N * N; l++) {
+            for (l = 0; l < N * N; l++)
                 E1[l] = -J[l];
-                E2[l] = -J[l];
-            }
-            for (l = 0; l < N; l++) {
+            for (l = 0; l < N; l++)
                 E1[(size_t)l * N + l] += fac1;
-                E2[(size_t)l * N + l] += alphn + betan * _Complex_I;
-            }
             r->st->lu++;
             singular = bgc_stiff_lu(N, E1, piv);
-            if (!singular) {
+            for (k = 0; k < u.pairs && !singular; k++) {
+                bgc_cplx *E = Ec + (size_t)k * D * D;
+                for (l = 0; l < N * N; l++)
+                    E[l] = -J[l];
+                for (l = 0; l < N; l++)
+                    E[(size_t)l * N + l] += alphn[k] + betan[k] * _Complex_I;
                 r->st->lu++;
-                singular = bgc_stiff_zlu(N, E2, piv + D);
+                singular = bgc_stiff_zlu(N, E, piv + (size_t)(1 + k) * D);
             }
             if (singular) {
                 hfact = 0.0;
@@ -702,6 +776,7 @@ static int bgc_run_radau5(bgc_run *r, const bgc_method *method, double *y)
                     goto done;
                 }
                 bad = -3;
+                unexp = 1;
                 h *= 0.5;
                 reject = 1;
                 last = 0;
@@ -713,21 +788,20 @@ static int bgc_run_radau5(bgc_run *r, const bgc_method *method, double *y)
         }
 
         /* starting values: the last step's collocation polynomial, extrapolated */
-        if (first) {
-            for (l = 0; l < N; l++)
-                z1[l] = z2[l] = z3[l] = w1[l] = w2[l] = w3[l] = 0.0;
+        if (first || change) {
+            for (l = 0; l < u.ns * D; l++)
+                Z[l] = W[l] = 0.0;
         } else {
             const double q = h / hold;
             for (l = 0; l < N; l++) {
-                const double a1 = bgc_radau_u(m, b, l, 1.0 + m->c1 * q) - zlast[l];
-                const double a2 = bgc_radau_u(m, b, l, 1.0 + m->c2 * q) - zlast[l];
-                const double a3 = bgc_radau_u(m, b, l, 1.0 + q) - zlast[l];
-                z1[l] = a1;
-                z2[l] = a2;
-                z3[l] = a3;
-                w1[l] = Ti[0] * a1 + Ti[1] * a2 + Ti[2] * a3;
-                w2[l] = Ti[3] * a1 + Ti[4] * a2 + Ti[5] * a3;
-                w3[l] = Ti[6] * a1 + Ti[7] * a2 + Ti[8] * a3;
+                for (i = 0; i < u.ns; i++)
+                    Z[(size_t)i * D + l] = bgc_radau_u(m, b, l, 1.0 + m->c[i] * q) - zlast[l];
+                for (i = 0; i < u.ns; i++) {
+                    double acc = Ti[(size_t)i * u.ns] * Z[l];
+                    for (j = 1; j < u.ns; j++)
+                        acc += Ti[(size_t)i * u.ns + j] * Z[(size_t)j * D + l];
+                    W[(size_t)i * D + l] = acc;
+                }
             }
         }
 
@@ -737,14 +811,14 @@ static int bgc_run_radau5(bgc_run *r, const bgc_method *method, double *y)
         theta = thet;
         for (;;) {
             double sum = 0.0;
-            if (newt >= NIT) {
+            if (newt >= u.nit) {
                 failed = 2;
                 break;
             }
-            /* z_i <- f(t + c_i h, y + z_i) */
-            for (i = 0; i < 3 && !failed; i++) {
-                double *zi = i == 0 ? z1 : (i == 1 ? z2 : z3);
-                const double ti = i == 0 ? t + m->c1 * h : (i == 1 ? t + m->c2 * h : tph);
+            /* Z_i <- f(t + c_i h, y + Z_i) */
+            for (i = 0; i < u.ns && !failed; i++) {
+                double *zi = Z + (size_t)i * D;
+                const double ti = i == u.ns - 1 ? tph : t + m->c[i] * h;
                 for (l = 0; l < N; l++)
                     ys[l] = y[l] + zi[l];
                 r->st->rhs++;
@@ -760,37 +834,55 @@ static int bgc_run_radau5(bgc_run *r, const bgc_method *method, double *y)
             if (failed)
                 break;
             for (l = 0; l < N; l++) {
-                const double a1 = z1[l], a2 = z2[l], a3 = z3[l];
-                z1[l] = Ti[0] * a1 + Ti[1] * a2 + Ti[2] * a3 - fac1 * w1[l];
-                zc[l] = (Ti[3] * a1 + Ti[4] * a2 + Ti[5] * a3 - (alphn * w2[l] - betan * w3[l]))
-                        + (Ti[6] * a1 + Ti[7] * a2 + Ti[8] * a3 - (betan * w2[l] + alphn * w3[l]))
-                              * _Complex_I;
+                double g[SMAX];
+                for (i = 0; i < u.ns; i++) {
+                    double acc = Ti[(size_t)i * u.ns] * Z[l];
+                    for (j = 1; j < u.ns; j++)
+                        acc += Ti[(size_t)i * u.ns + j] * Z[(size_t)j * D + l];
+                    g[i] = acc;
+                }
+                dw[l] = g[0] - fac1 * W[l];
+                for (k = 0; k < u.pairs; k++) {
+                    const double w2 = W[(size_t)(2 * k + 1) * D + l];
+                    const double w3 = W[(size_t)(2 * k + 2) * D + l];
+                    zc[(size_t)k * D + l] = (g[2 * k + 1] - (alphn[k] * w2 - betan[k] * w3))
+                                            + (g[2 * k + 2] - (betan[k] * w2 + alphn[k] * w3))
+                                                  * _Complex_I;
+                }
             }
-            bgc_stiff_lu_solve(N, E1, piv, z1);
-            bgc_stiff_zlu_solve(N, E2, piv + D, zc);
-            r->st->solves += 2;
+            bgc_stiff_lu_solve(N, E1, piv, dw);
+            for (k = 0; k < u.pairs; k++)
+                bgc_stiff_zlu_solve(N, Ec + (size_t)k * D * D, piv + (size_t)(1 + k) * D,
+                                    zc + (size_t)k * D);
+            r->st->solves += 1 + u.pairs;
             newt++;
             for (l = 0; l < N; l++) {
-                const double q1 = z1[l] / scal[l], q2 = creal(zc[l]) / scal[l];
-                const double q3 = cimag(zc[l]) / scal[l];
-                sum += q1 * q1 + q2 * q2 + q3 * q3;
+                const double q1 = dw[l] / scal[l];
+                double part = q1 * q1;
+                for (k = 0; k < u.pairs; k++) {
+                    const double qr = creal(zc[(size_t)k * D + l]) / scal[l];
+                    const double qi = cimag(zc[(size_t)k * D + l]) / scal[l];
+                    part += qr * qr;
+                    part += qi * qi;
+                }
+                sum += part;
             }
-            dyno = N > 0 ? sqrt(sum / (double)(3 * N)) : 0.0;
+            dyno = N > 0 ? sqrt(sum / (double)(u.ns * N)) : 0.0;
             if (dyno != dyno || dyno > DBL_MAX) {
                 failed = 2;
                 break;
             }
-            if (newt > 1 && newt < NIT) {
+            if (newt > 1 && newt < u.nit) {
                 const double thq = dyno / dynold;
                 theta = newt == 2 ? thq : sqrt(thq * thqold);
                 thqold = thq;
                 if (theta < 0.99) {
                     const double dyth = theta / (1.0 - theta) * dyno
-                                        * pow(theta, (double)(NIT - 1 - newt)) / fnewt;
+                                        * pow(theta, (double)(u.nit - 1 - newt)) / u.fnewt;
                     faccon = theta / (1.0 - theta);
                     if (dyth >= 1.0 && !fixed) { /* too slow: a smaller step converges sooner */
                         const double qnewt = bgc_max(1e-4, bgc_min(20.0, dyth));
-                        hhfac = 0.8 * pow(qnewt, -1.0 / (4.0 + (double)(NIT - 1 - newt)));
+                        hhfac = 0.8 * pow(qnewt, -1.0 / (4.0 + (double)(u.nit - 1 - newt)));
                         failed = 3;
                         break;
                     }
@@ -801,18 +893,23 @@ static int bgc_run_radau5(bgc_run *r, const bgc_method *method, double *y)
             }
             dynold = bgc_max(dyno, DBL_EPSILON);
             for (l = 0; l < N; l++) {
-                const double a1 = w1[l] + z1[l], a2 = w2[l] + creal(zc[l]);
-                const double a3 = w3[l] + cimag(zc[l]);
-                w1[l] = a1;
-                w2[l] = a2;
-                w3[l] = a3;
-                z1[l] = T[0] * a1 + T[1] * a2 + T[2] * a3;
-                z2[l] = T[3] * a1 + T[4] * a2 + T[5] * a3;
-                z3[l] = T[6] * a1 + T[7] * a2 + T[8] * a3;
+                double a[SMAX];
+                a[0] = W[l] + dw[l];
+                for (k = 0; k < u.pairs; k++) {
+                    a[2 * k + 1] = W[(size_t)(2 * k + 1) * D + l] + creal(zc[(size_t)k * D + l]);
+                    a[2 * k + 2] = W[(size_t)(2 * k + 2) * D + l] + cimag(zc[(size_t)k * D + l]);
+                }
+                for (i = 0; i < u.ns; i++) {
+                    double acc = T[(size_t)i * u.ns] * a[0];
+                    W[(size_t)i * D + l] = a[i];
+                    for (j = 1; j < u.ns; j++)
+                        acc += T[(size_t)i * u.ns + j] * a[j];
+                    Z[(size_t)i * D + l] = acc;
+                }
             }
             /* converged; after one iteration only on the previous step's matrices, whose
                contraction faccon measured */
-            if ((newt > 1 || !refactored) && faccon * dyno <= fnewt)
+            if ((newt > 1 || !refactored) && faccon * dyno <= u.fnewt)
                 break;
         }
         if (failed) {
@@ -835,6 +932,10 @@ static int bgc_run_radau5(bgc_run *r, const bgc_method *method, double *y)
             }
             if (failed != 1)
                 bad = -4;
+            if (failed == 3)
+                unexn = hhfac <= 0.5;
+            else
+                unexp = 1;
             h *= failed == 3 ? hhfac : 0.5;
             reject = 1;
             last = 0;
@@ -845,10 +946,14 @@ static int bgc_run_radau5(bgc_run *r, const bgc_method *method, double *y)
 
         /* the error estimate */
         if (!fixed) {
+            const double *zs = Z + (size_t)(u.ns - 1) * D;
             for (l = 0; l < N; l++) {
-                f2[l] = (m->e[0] * z1[l] + m->e[1] * z2[l] + m->e[2] * z3[l]) / h;
+                double acc = m->e[0] * Z[l];
+                for (j = 1; j < u.ns; j++)
+                    acc += m->e[j] * Z[(size_t)j * D + l];
+                f2[l] = acc / h;
                 cont[l] = f2[l] + f0[l];
-                ew[l] = atol + rtol * bgc_max(fabs(y[l]), fabs(y[l] + z3[l]));
+                ew[l] = u.atol + u.rtol * bgc_max(fabs(y[l]), fabs(y[l] + zs[l]));
             }
             bgc_stiff_lu_solve(N, E1, piv, cont);
             r->st->solves++;
@@ -867,6 +972,7 @@ static int bgc_run_radau5(bgc_run *r, const bgc_method *method, double *y)
             }
             if (err != err || err > DBL_MAX) {
                 bad = -1;
+                unexp = 1;
                 h *= 0.5;
                 reject = 1;
                 last = 0;
@@ -877,30 +983,33 @@ static int bgc_run_radau5(bgc_run *r, const bgc_method *method, double *y)
         }
 
         /* step control: Gustafsson's, the safety factor scaled by the Newton iterations */
-        fac = bgc_min(method->safe, cfac / (double)(newt + 2 * NIT));
+        fac = bgc_min(method->safe, u.cfac / (double)(newt + 2 * u.nit));
         quot = bgc_max(1.0 / method->fac_max,
-                       bgc_min(1.0 / method->fac_min, pow(err, expo) / fac));
+                       bgc_min(1.0 / method->fac_min, pow(err, u.expo) / fac));
         hnew = h / quot;
         if (err < 1.0) {
+            const double *zs = Z + (size_t)(u.ns - 1) * D;
             first = 0;
             accepted++;
-            if (accepted > 1) {
-                double facgus = (hacc / h) * pow(err * err / erracc, expo) / fac;
+            if (accepted > 1 && !change) {
+                double facgus = (hacc / h) * pow(err * err / erracc, u.expo) / fac;
                 facgus = bgc_max(1.0 / method->fac_max, bgc_min(1.0 / method->fac_min, facgus));
                 quot = bgc_max(quot, facgus);
                 hnew = h / quot;
             }
+            change = 0;
             hacc = h;
             erracc = bgc_max(1e-2, err);
             for (l = 0; l < N; l++)
-                y1[l] = y[l] + z3[l];
+                y1[l] = y[l] + zs[l];
             i = bgc_first_nonfinite(y1, N);
             if (i >= 0) {
                 rc = bgc_fail(r->msg, r->msg_size, tph, "state", bgc_state_names[i]);
                 goto done;
             }
-            bgc_radau_poly(m, z1, z2, z3, b);
-            memcpy(zlast, z3, sizeof(double) * N);
+            bgc_radau_poly(m, Z, b);
+            dense.m = m;
+            memcpy(zlast, zs, sizeof(double) * N);
             hold = h;
             rc = bgc_accept(r, tph);
             if (rc)
@@ -917,7 +1026,7 @@ static int bgc_run_radau5(bgc_run *r, const bgc_method *method, double *y)
             if (last)
                 goto done;
             for (l = 0; l < N; l++)
-                scal[l] = atol + rtol * fabs(y[l]);
+                scal[l] = u.atol + u.rtol * fabs(y[l]);
             r->st->rhs++;
             if (bgc_model_rhs(t, y, r->p, r->w, f0)) {
                 rc = bgc_fail_block(r->msg, r->msg_size, r->w);
@@ -928,8 +1037,11 @@ static int bgc_run_radau5(bgc_run *r, const bgc_method *method, double *y)
             if (reject)
                 hnew = bgc_min(hnew, h);
             reject = 0;
-            if (theta <= thet && hnew / h >= 1.0 && hnew / h <= 1.2)
-                hnew = h; /* keep h and the factorisations */
+            if (theta <= thet && hnew / h >= 1.0 && hnew / h <= 1.2) {
+                hnew = h; /* keep h and the factorisations ... */
+                if (variable && ++since >= 10 && set + 1 < method->radau_sets)
+                    recheck = 1; /* ... but look at the order now and then */
+            }
             needjac = theta > thet;
             h = hnew;
         } else {

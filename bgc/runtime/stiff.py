@@ -1,12 +1,13 @@
 # ================================================================== stiff ===
 # The stiff families: Rosenbrock methods in Hairer's transformed form (RODAS's design, any
-# tableau of the family) and Radau IIA of order 5 (RADAU5's design), as bgc_run_rosenbrock and
-# bgc_run_radau5 in the C runtime (see there).  Linear algebra: whether an iteration matrix is
-# singular is decided as the C runtime decides it (its LU factorisation with partial
-# pivoting, done here row-vectorised in the same operations: an exactly zero pivot column is
-# singular), so both backends stop on the same matrices; a matrix that is not is inverted
-# once per factorisation with numpy.linalg.inv and every solve is a matrix-vector product with
-# the inverse.  The results agree with C's within rounding, not bit for bit.
+# tableau of the family) and Radau IIA with 3, 5 or 7 stages, of fixed or variable order
+# (RADAU5's and RADAU's design), as bgc_run_rosenbrock and bgc_run_radau in the C runtime (see
+# there).  Linear algebra: whether an iteration matrix is singular is decided as the C runtime
+# decides it (its LU factorisation with partial pivoting, done here row-vectorised in the same
+# operations: an exactly zero pivot column is singular), so both backends stop on the same
+# matrices; a matrix that is not is inverted once per factorisation with numpy.linalg.inv and
+# every solve is a matrix-vector product with the inverse.  The results agree with C's within
+# rounding, not bit for bit.
 
 
 def _stiff_norm(v, w):
@@ -269,57 +270,81 @@ def _rosenbrock_dense(y, y1, K, H):
 # ---------------------------------------------------------------- Radau IIA (RADAU5)
 
 
-def _radau_poly(c1, c2, z1, z2, z3):
-    """The collocation polynomial through (0, 0), (c1, Z1), (c2, Z2), (1, Z3) in Newton's form:
-    u(theta) = theta (b1 + (theta - c1) (b2 + (theta - c2) b3))."""
-    d01 = z1 / c1
-    d12 = (z2 - z1) / (c2 - c1)
-    d23 = (z3 - z2) / (1.0 - c2)
-    d012 = (d12 - d01) / c2
-    d123 = (d23 - d12) / (1.0 - c1)
-    return d01, d012, d123 - d012
+def _radau_poly(c, Z):
+    """The collocation polynomial through (0, 0) and (c_i, Z_i) in Newton's form:
+    u(theta) = theta (b_1 + (theta - c_1) (b_2 + ... + (theta - c_{s-1}) b_s)); b: s x N."""
+    x = (0.0,) + tuple(c)
+    d = [numpy.zeros(_N)] + [Z[i] for i in range(len(c))]
+    s = len(c)
+    with numpy.errstate(all="ignore"):
+        for j in range(1, s + 1):  # divided differences, in place
+            for k in range(s, j - 1, -1):
+                d[k] = (d[k] - d[k - 1]) / (x[k] - x[k - j])
+    return d[1:]
 
 
-def _radau_u(c1, c2, b, theta):
-    return theta * (b[0] + (theta - c1) * (b[1] + (theta - c2) * b[2]))
+def _radau_u(c, b, theta):
+    k = len(b) - 1
+    acc = b[k]
+    while k > 0:
+        k -= 1
+        acc = b[k] + (theta - c[k]) * acc
+    return theta * acc
 
 
-def _run_radau5(run, m, y):
-    """Radau IIA of order 5 after Hairer's RADAU5 (see bgc_run_radau5 in the C runtime)."""
+class _RadauUse:
+    """What follows from a stage set (see bgc_radau_configure in the C runtime)."""
+
+    def __init__(self, m, s, k):
+        rd = m["radau"][k]
+        self.ns, self.c, self.gamma = rd["s"], rd["c"], rd["gamma"]
+        self.alpha, self.beta, self.e = rd["alpha"], rd["beta"], rd["e"]
+        self.T, self.Ti = numpy.array(rd["T"]), numpy.array(rd["Ti"])
+        self.pairs = (self.ns - 1) // 2
+        self.nit = 7 + 5 * ((self.ns - 3) // 2)
+        expm = (self.ns + 1) / (2.0 * self.ns)
+        en = 1.0 / expm - 1.0
+        self.rtol = 0.1 * s.rtol ** expm
+        self.atol = self.rtol * (s.atol / s.rtol)
+        self.fnewt = max(10.0 * _EPS / self.rtol,
+                         min(0.03, math.sqrt(self.rtol) if en == 0.5 else self.rtol ** en))
+        self.cfac = m["safe"] * (1 + 2 * self.nit)
+        self.expo = 1.0 / (self.ns + 1)
+
+
+def _run_radau(run, m, y):
+    """Radau IIA after Hairer's RADAU5 and RADAU, fixed or variable order (see bgc_run_radau in
+    the C runtime)."""
     s, st = run.s, run.st
     if run.kout > run.nout:
         return
     name = _method_name(m)
-    rd = m["radau"]
-    c1, c2, gamma, alpha, beta = rd["c1"], rd["c2"], rd["gamma"], rd["alpha"], rd["beta"]
-    T, Ti, ew = numpy.array(rd["T"]), numpy.array(rd["Ti"]), rd["e"]
     safe, fac_min, fac_max = m["safe"], m["fac_min"], m["fac_max"]
-    expo = 1.0 / m["q"]
-    nit, thet = 7, 0.001
+    thet = 0.001
     fixed = s.step > 0.0
+    nsets = len(m["radau"])
+    variable = nsets > 1 and not fixed
     hmax = s.t_end - s.t0
-    # Hairer's tolerances for RADAU5 and its Newton tolerance
-    rtol = 0.1 * s.rtol ** (2.0 / 3.0)
-    atol = rtol * (s.atol / s.rtol)
-    fnewt = max(10.0 * _EPS / rtol, min(0.03, math.sqrt(rtol)))
-    cfac = safe * (1 + 2 * nit)
+    k_set, since, change, unexp, unexn, recheck = 0, 0, False, False, False, False
+    u = _RadauUse(m, s, k_set)
     t_start = t = run.t
     h, hfact, hold, hacc, erracc = 0.0, 0.0, 0.0, 0.0, 1.0
-    faccon, theta, thqold, dynold, hhfac = 1.0, thet, 1.0, 1.0, 0.5
+    faccon, theta, thetat, thqold, dynold, hhfac = 1.0, thet, 0.0, 1.0, 1.0, 0.5
     reject = last = caljac = False
     first = needjac = True
     accepted, nsing, k_fixed, n_fixed, newt = 0, 0, 0, 0, 0
     worst, bad, bad_kind, block_failure = -1, -1, "", None
     identity = numpy.eye(_N)
-    J = E1inv = E2inv = None
-    b = (numpy.zeros(_N),) * 3
+    J = E1inv = None
+    Ecinv = []
+    b = [numpy.zeros(_N)] * u.ns
     zlast = numpy.zeros(_N)
     if fixed:
         n_fixed = _substeps(s.t_end - t_start, s.step)
         if n_fixed < 0:
             raise _fail_step(t, s.step, -1)
     f0 = _stiff_start(run, t, y)
-    scal = atol + rtol * numpy.abs(y)
+    scal = u.atol + u.rtol * numpy.abs(y)
     if not fixed:
         h = min(run.h, hmax) if run.h > 0.0 else _initial_step(run, m["q"], y, f0, hmax)
     while True:
@@ -339,36 +364,60 @@ def _run_radau5(run, m, y):
                 h = s.t_end - t
                 last = True
             tph = s.t_end if last else t + h
-        fac1, alphn, betan = gamma / h, alpha / h, beta / h
 
-        # gamma/h I - J and (alpha + i beta)/h I - J, inverted (unless they are h's already)
+        # the order, whenever the matrices are to be factored (variable order only)
+        if variable and (h != hfact or recheck):
+            hquot = h / hold if hold > 0.0 else 0.0
+            nxt = k_set
+            since += 1
+            thetat = min(10.0, max(theta, 0.5 * thetat))
+            if (newt > 1 and thetat <= 0.002 and 0.8 < hquot < 1.2 and since > 10
+                    and k_set + 1 < nsets):
+                nxt = k_set + 1
+            if (thetat >= 0.8 or unexp or unexn) and k_set > 0:
+                nxt = k_set - 1
+            unexp = unexn = recheck = False
+            if nxt != k_set:
+                k_set = nxt
+                u = _RadauUse(m, s, k_set)
+                since, change, hfact = 1, True, 0.0
+                scal = u.atol + u.rtol * numpy.abs(y)
+        c, T, Ti, ns = u.c, u.T, u.Ti, u.ns
+        fac1 = u.gamma / h
+        alphn = [a / h for a in u.alpha]
+        betan = [bb / h for bb in u.beta]
+
+        # gamma/h I - J and (alpha_k + i beta_k)/h I - J, inverted (unless they are h's)
         refactored = h != hfact
         if h != hfact:
             st["lu"] += 1
             E1inv = _stiff_inverse(identity * fac1 - J)
-            E2inv = None
-            if E1inv is not None:
+            Ecinv = []
+            singular = E1inv is None
+            for k in range(u.pairs):
+                if singular:
+                    break
                 st["lu"] += 1
-                E2inv = _stiff_inverse(identity * complex(alphn, betan) - J)
-            if E2inv is None:
+                inv = _stiff_inverse(identity * complex(alphn[k], betan[k]) - J)
+                singular = inv is None
+                Ecinv.append(inv)
+            if singular:
                 hfact = 0.0
                 nsing += 1
                 if fixed or nsing == 5:
                     raise _stiff_fail_singular(name, t, h)
-                bad, h, reject, last = -3, h * 0.5, True, False
+                bad, unexp, h, reject, last = -3, True, h * 0.5, True, False
                 st["rejected"] += 1
                 needjac = not caljac
                 continue
             hfact = h
 
         # starting values: the last step's collocation polynomial, extrapolated
-        if first:
-            Z = numpy.zeros((3, _N))
+        if first or change:
+            Z = numpy.zeros((ns, _N))
         else:
             q = h / hold
-            Z = numpy.array([_radau_u(c1, c2, b, 1.0 + c1 * q) - zlast,
-                             _radau_u(c1, c2, b, 1.0 + c2 * q) - zlast,
-                             _radau_u(c1, c2, b, 1.0 + q) - zlast])
+            Z = numpy.array([_radau_u(c, b, 1.0 + c[i] * q) - zlast for i in range(ns)])
         W = Ti @ Z
 
         # the simplified Newton iteration
@@ -376,12 +425,13 @@ def _run_radau5(run, m, y):
         faccon = max(faccon, _EPS) ** 0.8
         theta = thet
         while True:
-            if newt >= nit:
+            if newt >= u.nit:
                 failed = 2
                 break
-            F = numpy.empty((3, _N))
+            F = numpy.empty((ns, _N))
             try:
-                for i, ti in enumerate((t + c1 * h, t + c2 * h, tph)):
+                for i in range(ns):
+                    ti = tph if i == ns - 1 else t + c[i] * h
                     st["rhs"] += 1
                     F[i] = run.f(ti, y + Z[i])
                     j = _first_nonfinite(F[i])
@@ -394,28 +444,31 @@ def _run_radau5(run, m, y):
                 break
             with numpy.errstate(all="ignore"):
                 G = Ti @ F
-                g1 = G[0] - fac1 * W[0]
-                g2 = G[1] - (alphn * W[1] - betan * W[2])
-                g3 = G[2] - (betan * W[1] + alphn * W[2])
-                dw1 = E1inv @ g1
-                dwc = E2inv @ (g2 + 1j * g3)
-                dW = numpy.array([dw1, dwc.real, dwc.imag])
-                st["solves"] += 2
+                dW = numpy.empty((ns, _N))
+                dW[0] = E1inv @ (G[0] - fac1 * W[0])
+                for k in range(u.pairs):
+                    w2, w3 = W[2 * k + 1], W[2 * k + 2]
+                    g2 = G[2 * k + 1] - (alphn[k] * w2 - betan[k] * w3)
+                    g3 = G[2 * k + 2] - (betan[k] * w2 + alphn[k] * w3)
+                    dwc = Ecinv[k] @ (g2 + 1j * g3)
+                    dW[2 * k + 1], dW[2 * k + 2] = dwc.real, dwc.imag
+                st["solves"] += 1 + u.pairs
                 newt += 1
-                dyno = math.sqrt(float(numpy.sum((dW / scal) ** 2)) / (3 * _N)) if _N else 0.0
+                dyno = (math.sqrt(float(numpy.sum((dW / scal) ** 2)) / (ns * _N)) if _N
+                        else 0.0)
             if dyno != dyno or dyno == math.inf:
                 failed = 2
                 break
-            if 1 < newt < nit:
+            if 1 < newt < u.nit:
                 thq = dyno / dynold
                 theta = thq if newt == 2 else math.sqrt(thq * thqold)
                 thqold = thq
                 if theta < 0.99:
                     faccon = theta / (1.0 - theta)
-                    dyth = faccon * dyno * theta ** (nit - 1 - newt) / fnewt
+                    dyth = faccon * dyno * theta ** (u.nit - 1 - newt) / u.fnewt
                     if dyth >= 1.0 and not fixed:  # too slow: a smaller step converges sooner
                         qnewt = max(1e-4, min(20.0, dyth))
-                        hhfac = 0.8 * qnewt ** (-1.0 / (4.0 + nit - 1 - newt))
+                        hhfac = 0.8 * qnewt ** (-1.0 / (4.0 + u.nit - 1 - newt))
                         failed = 3
                         break
                 else:
@@ -425,7 +478,7 @@ def _run_radau5(run, m, y):
             W = W + dW
             Z = T @ W
             # converged; after one iteration only on the previous step's matrices
-            if (newt > 1 or not refactored) and faccon * dyno <= fnewt:
+            if (newt > 1 or not refactored) and faccon * dyno <= u.fnewt:
                 break
         if failed:
             if fixed:
@@ -440,6 +493,10 @@ def _run_radau5(run, m, y):
                                "the fixed step h = %.3g" % (t, name, h), t)
             if failed != 1:
                 bad = -4
+            if failed == 3:
+                unexn = hhfac <= 0.5
+            else:
+                unexp = True
             h *= hhfac if failed == 3 else 0.5
             reject, last = True, False
             st["rejected"] += 1
@@ -450,10 +507,10 @@ def _run_radau5(run, m, y):
         err = 0.0
         if not fixed:
             with numpy.errstate(all="ignore"):
-                f2 = (ew[0] * Z[0] + ew[1] * Z[1] + ew[2] * Z[2]) / h
+                f2 = sum(u.e[j] * Z[j] for j in range(ns)) / h
                 cont = E1inv @ (f2 + f0)
                 st["solves"] += 1
-                wt = atol + rtol * numpy.maximum(numpy.abs(y), numpy.abs(y + Z[2]))
+                wt = u.atol + u.rtol * numpy.maximum(numpy.abs(y), numpy.abs(y + Z[ns - 1]))
                 err, worst_now = _stiff_norm(cont, wt)
                 err = max(err, 1e-10)
                 if err >= 1.0 and (first or reject):  # refined: f at y + err
@@ -469,39 +526,40 @@ def _run_radau5(run, m, y):
                         err = max(err, 1e-10)
             worst = worst_now if worst_now >= 0 else worst
             if err != err or err == math.inf:
-                bad = -1
+                bad, unexp = -1, True
                 h, reject, last = h * 0.5, True, False
                 st["rejected"] += 1
                 needjac = not caljac
                 continue
 
         # step control: Gustafsson's, the safety factor scaled by the Newton iterations
-        fac = min(safe, cfac / (newt + 2 * nit))
-        quot = max(1.0 / fac_max, min(1.0 / fac_min, err ** expo / fac))
+        fac = min(safe, u.cfac / (newt + 2 * u.nit))
+        quot = max(1.0 / fac_max, min(1.0 / fac_min, err ** u.expo / fac))
         hnew = h / quot
         if err < 1.0:
             first = False
             accepted += 1
-            if accepted > 1:
-                facgus = (hacc / h) * (err * err / erracc) ** expo / fac
+            if accepted > 1 and not change:
+                facgus = (hacc / h) * (err * err / erracc) ** u.expo / fac
                 facgus = max(1.0 / fac_max, min(1.0 / fac_min, facgus))
                 quot = max(quot, facgus)
                 hnew = h / quot
+            change = False
             hacc, erracc = h, max(1e-2, err)
-            y1 = y + Z[2]
+            y1 = y + Z[ns - 1]
             i = _first_nonfinite(y1)
             if i >= 0:
                 raise _fail(tph, "state", STATES[i])
-            b = _radau_poly(c1, c2, Z[0], Z[1], Z[2])
-            zlast, hold = Z[2], h
+            b = _radau_poly(c, Z)
+            zlast, hold = Z[ns - 1], h
             _accept(run, tph)
-            yield from run.emit_step(t, h, tph, y1, _radau_dense(y, c1, c2, b))
+            yield from run.emit_step(t, h, tph, y1, _radau_dense(y, c, b))
             y, t = y1, tph
             run.t, run.y = t, y
             nsing, bad, caljac = 0, -1, False
             if last:
                 return
-            scal = atol + rtol * numpy.abs(y)
+            scal = u.atol + u.rtol * numpy.abs(y)
             st["rhs"] += 1
             try:
                 f0 = run.f(t, y)
@@ -513,7 +571,10 @@ def _run_radau5(run, m, y):
                 hnew = min(hnew, h)
             reject = False
             if theta <= thet and 1.0 <= hnew / h <= 1.2:
-                hnew = h  # keep h and the factorisations
+                hnew = h  # keep h and the factorisations ...
+                since += 1
+                if variable and since >= 10 and k_set + 1 < nsets:
+                    recheck = True  # ... but look at the order now and then
             needjac = theta > thet
             h = hnew
         else:
@@ -523,7 +584,7 @@ def _run_radau5(run, m, y):
             needjac = not caljac
 
 
-def _radau_dense(y, c1, c2, b):
+def _radau_dense(y, c, b):
     def prepare():
-        return lambda theta: y + _radau_u(c1, c2, b, theta)
+        return lambda theta: y + _radau_u(c, b, theta)
     return prepare

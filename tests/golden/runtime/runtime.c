@@ -1,7 +1,7 @@
 /* ============================================================ solvers === */
 /* The solvers (bgc/solvers.py); their tables follow the API section. */
-#define BGC_NUM_SOLVERS 9
-#define BGC_SOLVER_LIST "euler, rk4, dopri5, vern7, dop853, rodas4, radau5, rodas5p or auto"
+#define BGC_NUM_SOLVERS 12
+#define BGC_SOLVER_LIST "euler, rk4, dopri5, vern7, dop853, rodas4, radau5, rodas5p, radau9, radau13, radau or auto"
 enum {
     BGC_SOLVER_EULER = 0,
     BGC_SOLVER_RK4 = 1,
@@ -11,7 +11,10 @@ enum {
     BGC_SOLVER_RODAS4 = 5,
     BGC_SOLVER_RADAU5 = 6,
     BGC_SOLVER_RODAS5P = 7,
-    BGC_SOLVER_AUTO = 8,
+    BGC_SOLVER_RADAU9 = 8,
+    BGC_SOLVER_RADAU13 = 9,
+    BGC_SOLVER_RADAU = 10,
+    BGC_SOLVER_AUTO = 11,
 };
 
 /* ======================================================================= API === */
@@ -158,9 +161,11 @@ static inline double bgc_heaviside(double a, double at_zero)
    b and e (NULL: fixed step) and e2 (NULL: one estimate) over the first `stages`; the last of
    those is f(t + h, y1) if fsal; P[all x degree]: the dense output's polynomials.
    rosenbrock: Hairer's transformed coefficients (see bgc/solvers.py).
-   radau: Radau IIA of order 5 in RADAU5's transformed form: nodes c1, c2, 1; the eigenvalues
-   gamma and alpha +- i beta of A^-1; T and Ti = T^-1 (3 x 3, row-major) with
-   Ti A^-1 T = [gamma 0 0; 0 alpha -beta; 0 beta alpha]; e: the error estimate's weights. */
+   radau: Radau IIA with s stages in RADAU's transformed form: nodes c (c[s-1] = 1); the
+   eigenvalues gamma and alpha_k +- i beta_k (k < (s-1)/2) of A^-1; T and Ti = T^-1 (s x s,
+   row-major) with Ti A^-1 T = diag(gamma, [alpha_k -beta_k; beta_k alpha_k], ...); e: the
+   error estimate's weights.  A solver has one stage set (fixed order) or several (variable
+   order, lowest first). */
 typedef struct bgc_erk {
     int stages, all, fsal, degree;
     const double *c, *a, *b, *e, *e2, *P;
@@ -171,10 +176,12 @@ typedef struct bgc_rosenbrock {
     const double *c, *d, *a, *C, *m, *e, *H; /* a, C: stages x stages, H: dense_rows x stages */
 } bgc_rosenbrock;
 typedef struct bgc_radau {
-    double c1, c2, gamma, alpha, beta;
-    const double *T, *Ti, *e;
+    int s;
+    double gamma;
+    const double *c, *alpha, *beta, *T, *Ti, *e;
 } bgc_radau;
-enum { BGC_FAMILY_FIXED, BGC_FAMILY_ERK, BGC_FAMILY_ROSENBROCK, BGC_FAMILY_RADAU5,
+#define BGC_RADAU_MAX_STAGES 7
+enum { BGC_FAMILY_FIXED, BGC_FAMILY_ERK, BGC_FAMILY_ROSENBROCK, BGC_FAMILY_RADAU,
        BGC_FAMILY_AUTO };
 typedef struct bgc_method {
     const char *name, *summary;
@@ -187,7 +194,8 @@ typedef struct bgc_method {
     int stiff_i, stiff_j;                /* erk: the stiffness test's stages (-1: none) */
     double stiff_bound;
     int explicit_solver, stiff_solver;   /* auto: the two phases (-1: not auto) */
-    const bgc_radau *radau;              /* radau5: its constants (NULL: another family) */
+    const bgc_radau *radau;              /* radau: its stage sets (NULL: another family) */
+    int radau_sets;                      /* ... and how many */
 } bgc_method;
 
 /* A block's factorization plan (bgc/sparse.py): static order, or dense (partial pivoting). */
@@ -265,11 +273,16 @@ static const double bgc_rodas4_e[6] = { 0.0, 0.0, 0.0, 0.0, 0.0, 1.0 };
 static const double bgc_rodas4_H[12] = { 10.12623508344586, -7.487995877610167, -34.80091861555747, -7.992771707568823, 1.025137723295662, 0.0, -0.6762803392801253, 6.087714651680015, 16.43084320892478, 24.76722511418386, -6.594389125716872, 0.0 };
 
 static const bgc_rosenbrock bgc_rodas4_ros = { 6, 2, 0.25, bgc_rodas4_c, bgc_rodas4_d, bgc_rodas4_a, bgc_rodas4_C, bgc_rodas4_m, bgc_rodas4_e, bgc_rodas4_H };
-static const double bgc_radau5_T[9] = { 0.09123239487089295, -0.1412552950209542, -0.030029194105147424, 0.241717932707107, 0.20412935229379994, 0.3829421127572619, 0.966048182615093, 1.0, 0.0 };
-static const double bgc_radau5_Ti[9] = { 4.325579890063155, 0.33919925181580984, 0.5417705399358749, -4.178718591551905, -0.32768282076106237, 0.47662355450055044, -0.5028726349457868, 2.571926949855605, -0.5960392048282249 };
-static const double bgc_radau5_e[3] = { -10.048809399827416, 1.382142733160749, -0.3333333333333333 };
+static const double bgc_radau_s3_c[3] = { 0.1550510257216822, 0.6449489742783178, 1.0 };
+static const double bgc_radau_s3_alpha[1] = { 2.6810828736277523 };
+static const double bgc_radau_s3_beta[1] = { 3.0504301992474105 };
+static const double bgc_radau_s3_T[9] = { 0.09123239487089295, -0.1412552950209542, -0.030029194105147424, 0.241717932707107, 0.20412935229379994, 0.3829421127572619, 0.966048182615093, 1.0, 0.0 };
+static const double bgc_radau_s3_Ti[9] = { 4.325579890063155, 0.33919925181580984, 0.5417705399358749, -4.178718591551905, -0.32768282076106237, 0.47662355450055044, -0.5028726349457868, 2.571926949855605, -0.5960392048282249 };
+static const double bgc_radau_s3_e[3] = { -10.048809399827416, 1.382142733160749, -0.3333333333333333 };
 
-static const bgc_radau bgc_radau5_radau = { 0.1550510257216822, 0.6449489742783178, 3.637834252744496, 2.6810828736277523, 3.0504301992474105, bgc_radau5_T, bgc_radau5_Ti, bgc_radau5_e };
+static const bgc_radau bgc_radau5_radau[1] = {
+    { 3, 3.637834252744496, bgc_radau_s3_c, bgc_radau_s3_alpha, bgc_radau_s3_beta, bgc_radau_s3_T, bgc_radau_s3_Ti, bgc_radau_s3_e },
+};
 static const double bgc_rodas5p_c[8] = { 0.0, 0.6358126895828704, 0.4095798393397535, 0.9769306725060716, 0.4288403609558664, 1.0, 1.0, 1.0 };
 static const double bgc_rodas5p_d[8] = { 0.21193756319429014, -0.42387512638858027, -0.3384627126235924, 1.8046452872882734, 2.325825639765069, 0.0, 0.0, 0.0 };
 static const double bgc_rodas5p_a[64] = { 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 3.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 2.849394379747939, 0.45842242204463923, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, -6.954028509809101, 2.489845061869568, -10.358996098473584, 0.0, 0.0, 0.0, 0.0, 0.0, 2.8029986275628964, 0.5072464736228206, -0.3988312541770524, -0.04721187230404641, 0.0, 0.0, 0.0, 0.0, -7.502846399306121, 2.561846144803919, -11.627539656261098, -0.18268767659942256, 0.030198172008377946, 0.0, 0.0, 0.0, -7.502846399306121, 2.561846144803919, -11.627539656261098, -0.18268767659942256, 0.030198172008377946, 1.0, 0.0, 0.0, -7.502846399306121, 2.561846144803919, -11.627539656261098, -0.18268767659942256, 0.030198172008377946, 1.0, 1.0, 0.0 };
@@ -279,6 +292,31 @@ static const double bgc_rodas5p_e[8] = { 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0 
 static const double bgc_rodas5p_H[24] = { 25.948786856663858, -2.5579724845846235, 10.433815404888879, -2.3679251022685204, 0.524948541321073, 1.1241088310450404, 0.4272876194431874, -0.17202221070155493, -9.91568850695171, -0.9689944594115154, 3.0438037242978453, -24.495224566215796, 20.176138334709044, 15.98066361424651, -6.789040303419874, -6.710236069923372, 11.419903575922262, 2.8879645146136994, 72.92137995996029, 80.12511834622643, -52.072871366152654, -59.78993625266729, -0.15582684282751913, 4.883087185713722 };
 
 static const bgc_rosenbrock bgc_rodas5p_ros = { 8, 3, 0.21193756319429014, bgc_rodas5p_c, bgc_rodas5p_d, bgc_rodas5p_a, bgc_rodas5p_C, bgc_rodas5p_m, bgc_rodas5p_e, bgc_rodas5p_H };
+static const double bgc_radau_s5_c[5] = { 0.05710419611451768, 0.2768430136381238, 0.5835904323689168, 0.8602401356562195, 1.0 };
+static const double bgc_radau_s5_alpha[2] = { 3.655694325463572, 5.70095329867179 };
+static const double bgc_radau_s5_beta[2] = { 6.543736899360077, 3.2102656003085497 };
+static const double bgc_radau_s5_T[25] = { 0.012517586220501045, -0.010242047817908826, 0.04767387729029572, -0.011478515255229515, -0.01401985889287541, 0.0014916701518953824, 0.05017286451737106, -0.09433181918161143, -0.007668830749180163, 0.024708578426518527, 0.07298187638808715, -0.23053953404341795, 0.1027030453801259, 0.01939846399882895, 0.08180035370375117, 0.3800914400035681, 0.37789390224886127, 0.46674413033249434, 0.40760117128019907, 0.19968242788680252, 0.9219789736812105, 1.0, 0.0, 1.0, 0.0 };
+static const double bgc_radau_s5_Ti[25] = { 30.0415677215444, 13.865107856271413, 3.4800027747951856, -1.0320087978252634, 0.8043030450739899, 5.344186437834912, 4.593615567759161, -3.0363603234594243, 1.050660190231459, -0.27277861186429625, 3.748059807439805, -3.984965736343885, -1.0444156416080188, 1.1840985681379486, -0.44991777015678036, -33.041880213519, -17.376953479063566, -0.17212906325400557, -0.09916977798254265, 0.5312281158383066, -8.611443979875292, 9.699991409528808, 1.9147286396968743, 2.41869200608494, -1.0474634879353375 };
+static const double bgc_radau_s5_e[5] = { -27.78093394406464, 3.641478498049213, -1.2525477211691187, 0.5920031671845428, -0.2 };
+
+static const bgc_radau bgc_radau9_radau[1] = {
+    { 5, 6.2867047517292765, bgc_radau_s5_c, bgc_radau_s5_alpha, bgc_radau_s5_beta, bgc_radau_s5_T, bgc_radau_s5_Ti, bgc_radau_s5_e },
+};
+static const double bgc_radau_s7_c[7] = { 0.029316427159784893, 0.1480785996684843, 0.3369846902811543, 0.5586715187715501, 0.7692338620300545, 0.9269456713197411, 1.0 };
+static const double bgc_radau_s7_alpha[3] = { 4.378693561506806, 7.14105521918764, 8.511834825102946 };
+static const double bgc_radau_s7_beta[3] = { 10.169693283795011, 6.623045922639276, 3.281013624325059 };
+static const double bgc_radau_s7_T[49] = { 0.0021537546273105264, 0.021567551351320772, 0.008783567925144144, -0.004055161452331024, 0.004427232753268285, -0.0012386461879528741, -0.0027606174805438525, -0.0016000250778804286, -0.03813164813441155, -0.021525560594006874, 0.00841556827655959, -0.00403194957022455, -6.666635339396339e-05, 0.00318547482516621, 0.004059107301947683, 0.05739650893938172, 0.05885052920842679, -0.008560431061603433, -0.006923212665023909, -0.0023521809829433384, 0.00041690777252975626, 0.015750488079376845, -0.03821469359696835, -0.16573681127294385, -0.03737124230238446, 0.00823900729850772, 0.0031150711523461752, 0.025116604913438822, 0.11297766102422081, -0.2491742124652637, 0.27356330579866234, 0.0053667613791817705, 0.19321111610126201, 0.10171773248171515, 0.09504502035604623, 0.4583810431839315, 0.5315846490836285, 0.4863228366175729, 0.5265742264584493, 0.27553439498962584, 0.5217519452747653, 0.1280719446355439, 0.8813915783538184, 1.0, 0.0, 1.0, 0.0, 1.0, 0.0 };
+static const double bgc_radau_s7_Ti[49] = { 258.13192631998226, 189.0737630813985, 49.08731481793013, 4.110647469661428, 4.053447889315564, -3.112755366607346, 1.6467749135584446, -3.007390169451292, -11.015866078765772, 1.4877994561316563, 2.1303881595592826, -1.8161410868175656, 1.134325587895161, -0.41469904594330353, -8.441963188321084, -0.650525274057515, 6.9406707303698765, -3.2050475255978985, 1.0712809435464785, -0.3548507491216222, 0.09198549132786554, 74.6783322350227, 87.40858897990081, 4.024158737379998, -3.714806315158364, -3.4300939859823174, 2.6966048097653124, -0.9386927436075462, 58.356528851906575, -10.06877395780018, -30.36638884256667, -1.020020865184866, -0.11241750037842496, 1.8906408310003777, -0.9716486393831483, -299.1862480282521, -243.04074536874478, -48.77710407803787, -2.0386719057419342, 1.673560239861085, -1.0873740320571061, 0.9019382492960993, -93.0765028974353, 23.881631056281144, 39.278880730813846, 14.38891568549108, -3.5104383993993613, 4.8632848855661805, -2.2464827295912397 };
+static const double bgc_radau_s7_e[7] = { -54.374436894128614, 7.000024004259187, -2.355661091987557, 1.1322890661061344, -0.6468913267673587, 0.38753338537535237, -0.14285714285714285 };
+
+static const bgc_radau bgc_radau13_radau[1] = {
+    { 7, 8.936832788405216, bgc_radau_s7_c, bgc_radau_s7_alpha, bgc_radau_s7_beta, bgc_radau_s7_T, bgc_radau_s7_Ti, bgc_radau_s7_e },
+};
+static const bgc_radau bgc_radau_radau[3] = {
+    { 3, 3.637834252744496, bgc_radau_s3_c, bgc_radau_s3_alpha, bgc_radau_s3_beta, bgc_radau_s3_T, bgc_radau_s3_Ti, bgc_radau_s3_e },
+    { 5, 6.2867047517292765, bgc_radau_s5_c, bgc_radau_s5_alpha, bgc_radau_s5_beta, bgc_radau_s5_T, bgc_radau_s5_Ti, bgc_radau_s5_e },
+    { 7, 8.936832788405216, bgc_radau_s7_c, bgc_radau_s7_alpha, bgc_radau_s7_beta, bgc_radau_s7_T, bgc_radau_s7_Ti, bgc_radau_s7_e },
+};
 const char *const bgc_solver_names[BGC_NUM_SOLVERS] = {
     "euler",
     "rk4",
@@ -288,18 +326,24 @@ const char *const bgc_solver_names[BGC_NUM_SOLVERS] = {
     "rodas4",
     "radau5",
     "rodas5p",
+    "radau9",
+    "radau13",
+    "radau",
     "auto",
 };
 static const bgc_method bgc_methods[BGC_NUM_SOLVERS] = {
-    { "euler", "explicit Euler, fixed step", BGC_FAMILY_FIXED, 1, &bgc_euler_erk, NULL, 0.9, 0.2, 10.0, 0.0, 1, 0.75, -1, -1, 0.0, -1, -1, NULL },
-    { "rk4", "classical Runge-Kutta, fixed step", BGC_FAMILY_FIXED, 4, &bgc_rk4_erk, NULL, 0.9, 0.2, 10.0, 0.0, 4, 0.75, -1, -1, 0.0, -1, -1, NULL },
-    { "dopri5", "Dormand-Prince 5(4), adaptive, dense output of order 4", BGC_FAMILY_ERK, 5, &bgc_dopri5_erk, NULL, 0.9, 0.2, 10.0, 0.04, 5, 0.75, 5, 6, 3.25, -1, -1, NULL },
-    { "vern7", "Verner 7(6), adaptive, dense output of order 7: moderate to tight tolerances", BGC_FAMILY_ERK, 7, &bgc_vern7_erk, NULL, 0.9, 0.333, 6.0, 0.04, 7, 0.75, -1, -1, 0.0, -1, -1, NULL },
-    { "dop853", "Dormand-Prince 8(5,3), adaptive, dense output of order 7: tight tolerances", BGC_FAMILY_ERK, 8, &bgc_dop853_erk, NULL, 0.9, 0.333, 6.0, 0.04, 8, 0.2, -1, -1, 0.0, -1, -1, NULL },
-    { "rodas4", "Rosenbrock 4(3), L-stable, stiff; the Jacobian every step", BGC_FAMILY_ROSENBROCK, 4, NULL, &bgc_rodas4_ros, 0.9, 0.2, 6.0, 0.0, 4, 0.75, -1, -1, 0.0, -1, -1, NULL },
-    { "radau5", "Radau IIA of order 5, implicit, L-stable, stiff; Jacobian and factorisations reused", BGC_FAMILY_RADAU5, 5, NULL, NULL, 0.9, 0.2, 8.0, 0.0, 4, 0.75, -1, -1, 0.0, -1, -1, &bgc_radau5_radau },
-    { "rodas5p", "Rosenbrock 5(4), L-stable, stiff; the Jacobian every step", BGC_FAMILY_ROSENBROCK, 5, NULL, &bgc_rodas5p_ros, 0.9, 0.2, 6.0, 0.0, 5, 0.75, -1, -1, 0.0, -1, -1, NULL },
-    { "auto", "dopri5 until its stiffness test fires, then rodas4 for the rest of the run", BGC_FAMILY_AUTO, 5, NULL, NULL, 0.9, 0.2, 10.0, 0.0, 5, 0.75, -1, -1, 0.0, 2, 5, NULL },
+    { "euler", "explicit Euler, fixed step", BGC_FAMILY_FIXED, 1, &bgc_euler_erk, NULL, 0.9, 0.2, 10.0, 0.0, 1, 0.75, -1, -1, 0.0, -1, -1, NULL, 0 },
+    { "rk4", "classical Runge-Kutta, fixed step", BGC_FAMILY_FIXED, 4, &bgc_rk4_erk, NULL, 0.9, 0.2, 10.0, 0.0, 4, 0.75, -1, -1, 0.0, -1, -1, NULL, 0 },
+    { "dopri5", "Dormand-Prince 5(4), adaptive, dense output of order 4", BGC_FAMILY_ERK, 5, &bgc_dopri5_erk, NULL, 0.9, 0.2, 10.0, 0.04, 5, 0.75, 5, 6, 3.25, -1, -1, NULL, 0 },
+    { "vern7", "Verner 7(6), adaptive, dense output of order 7: moderate to tight tolerances", BGC_FAMILY_ERK, 7, &bgc_vern7_erk, NULL, 0.9, 0.333, 6.0, 0.04, 7, 0.75, -1, -1, 0.0, -1, -1, NULL, 0 },
+    { "dop853", "Dormand-Prince 8(5,3), adaptive, dense output of order 7: tight tolerances", BGC_FAMILY_ERK, 8, &bgc_dop853_erk, NULL, 0.9, 0.333, 6.0, 0.04, 8, 0.2, -1, -1, 0.0, -1, -1, NULL, 0 },
+    { "rodas4", "Rosenbrock 4(3), L-stable, stiff; the Jacobian every step", BGC_FAMILY_ROSENBROCK, 4, NULL, &bgc_rodas4_ros, 0.9, 0.2, 6.0, 0.0, 4, 0.75, -1, -1, 0.0, -1, -1, NULL, 0 },
+    { "radau5", "Radau IIA of order 5, implicit, L-stable, stiff; Jacobian and factorisations reused", BGC_FAMILY_RADAU, 5, NULL, NULL, 0.9, 0.2, 8.0, 0.0, 4, 0.75, -1, -1, 0.0, -1, -1, bgc_radau5_radau, 1 },
+    { "rodas5p", "Rosenbrock 5(4), L-stable, stiff; the Jacobian every step", BGC_FAMILY_ROSENBROCK, 5, NULL, &bgc_rodas5p_ros, 0.9, 0.2, 6.0, 0.0, 5, 0.75, -1, -1, 0.0, -1, -1, NULL, 0 },
+    { "radau9", "Radau IIA of order 9 (5 stages), implicit, L-stable, stiff: tight tolerances", BGC_FAMILY_RADAU, 9, NULL, NULL, 0.9, 0.2, 8.0, 0.0, 4, 0.75, -1, -1, 0.0, -1, -1, bgc_radau9_radau, 1 },
+    { "radau13", "Radau IIA of order 13 (7 stages), implicit, L-stable, stiff: very tight tolerances", BGC_FAMILY_RADAU, 13, NULL, NULL, 0.9, 0.2, 8.0, 0.0, 4, 0.75, -1, -1, 0.0, -1, -1, bgc_radau13_radau, 1 },
+    { "radau", "Radau IIA of variable order 5, 9, 13 (Hairer's RADAU): the order follows the Newton iteration's convergence; stiff, any tolerance", BGC_FAMILY_RADAU, 13, NULL, NULL, 0.9, 0.2, 8.0, 0.0, 4, 0.75, -1, -1, 0.0, -1, -1, bgc_radau_radau, 3 },
+    { "auto", "dopri5 until its stiffness test fires, then radau (variable order) for the rest of the run", BGC_FAMILY_AUTO, 5, NULL, NULL, 0.9, 0.2, 10.0, 0.0, 5, 0.75, -1, -1, 0.0, 2, 10, NULL, 0 },
 };
 
 /* ====================================================================== runtime === */
@@ -1449,7 +1493,7 @@ void bgc_print_stats(FILE *f, const bgc_stats *st)
 }
 
 static int bgc_run_rosenbrock(bgc_run *r, const bgc_method *method, double *y);
-static int bgc_run_radau5(bgc_run *r, const bgc_method *method, double *y);
+static int bgc_run_radau(bgc_run *r, const bgc_method *method, double *y);
 
 static int bgc_run_family(bgc_run *r, int solver, double *y)
 {
@@ -1461,8 +1505,8 @@ static int bgc_run_family(bgc_run *r, int solver, double *y)
         return bgc_run_erk(r, m, y);
     case BGC_FAMILY_ROSENBROCK:
         return bgc_run_rosenbrock(r, m, y);
-    case BGC_FAMILY_RADAU5:
-        return bgc_run_radau5(r, m, y);
+    case BGC_FAMILY_RADAU:
+        return bgc_run_radau(r, m, y);
     default:
         snprintf(r->msg, r->msg_size, "solver '%s' cannot run by itself", m->name);
         return BGC_ERR_USAGE;
@@ -2047,30 +2091,40 @@ done:
     return rc;
 }
 
-/* ------------------------------------------------------- Radau IIA (RADAU5) --- */
+/* ------------------------------------------------------- Radau IIA (RADAU) --- */
 
-/* The collocation polynomial of an accepted step through (0, 0), (c1, Z1), (c2, Z2), (1, Z3)
-   in Newton's form: u(theta) = theta (b1 + (theta - c1) (b2 + (theta - c2) b3)); the state
-   is y0 + u(theta).  b: 3 x D. */
-static void bgc_radau_poly(const bgc_radau *m, const double *z1, const double *z2,
-                           const double *z3, double *b)
+/* The collocation polynomial of an accepted step through (0, 0) and (c_i, Z_i) in Newton's
+   form: u(theta) = theta (b1 + (theta - c1) (b2 + ... + (theta - c_{s-1}) b_s)); the state is
+   y0 + u(theta).  z, b: s x D. */
+static void bgc_radau_poly(const bgc_radau *m, const double *z, double *b)
 {
     enum { N = BGC_NUM_STATES, D = BGC_DIM(BGC_NUM_STATES) };
-    int l;
+    const int ns = m->s;
+    int l, j, k;
     for (l = 0; l < N; l++) {
-        const double d01 = z1[l] / m->c1, d12 = (z2[l] - z1[l]) / (m->c2 - m->c1);
-        const double d23 = (z3[l] - z2[l]) / (1.0 - m->c2);
-        const double d012 = (d12 - d01) / m->c2, d123 = (d23 - d12) / (1.0 - m->c1);
-        b[l] = d01;
-        b[D + l] = d012;
-        b[2 * D + l] = d123 - d012;
+        double d[BGC_RADAU_MAX_STAGES + 1], x[BGC_RADAU_MAX_STAGES + 1];
+        d[0] = 0.0;
+        x[0] = 0.0;
+        for (k = 0; k < ns; k++) {
+            d[k + 1] = z[(size_t)k * D + l];
+            x[k + 1] = m->c[k];
+        }
+        for (j = 1; j <= ns; j++) /* divided differences, in place */
+            for (k = ns; k >= j; k--)
+                d[k] = (d[k] - d[k - 1]) / (x[k] - x[k - j]);
+        for (k = 0; k < ns; k++)
+            b[(size_t)k * D + l] = d[k + 1];
     }
 }
 
 static double bgc_radau_u(const bgc_radau *m, const double *b, int l, double theta)
 {
     enum { D = BGC_DIM(BGC_NUM_STATES) };
-    return theta * (b[l] + (theta - m->c1) * (b[D + l] + (theta - m->c2) * b[2 * D + l]));
+    int k = m->s - 1;
+    double acc = b[(size_t)k * D + l];
+    while (k-- > 0)
+        acc = b[(size_t)k * D + l] + (theta - m->c[k]) * acc;
+    return theta * acc;
 }
 
 typedef struct bgc_radau_dense {
@@ -2087,84 +2141,116 @@ static void bgc_radau_dense_at(const void *dctx, double theta, double *yout)
         yout[l] = d->y[l] + bgc_radau_u(d->m, d->b, l, theta);
 }
 
-/* Radau IIA of order 5 after Hairer's RADAU5.  The stage increments Z_i = Y_i - y solve
-   Z = h (A x I) F(Z); with W = (T^-1 x I) Z the simplified Newton iteration decouples into
-   (gamma/h I - J) dW1 = (T^-1 F)_1 - gamma/h W1 and, for dW2 + i dW3, the complex system
-   ((alpha + i beta)/h I - J) with the right side (T^-1 F)_2 + i (T^-1 F)_3
-   - (alpha + i beta)/h (W2 + i W3): one real and one complex factorisation per h and J.
-   Tolerances as RADAU5 transforms them: rtol' = 0.1 rtol^(2/3), atol' = rtol' atol / rtol;
-   Newton's weights atol' + rtol' |y| at the step's start.  Newton: at most 7 iterations from
-   the previous step's collocation polynomial (zero on the first step), convergence rate
-   theta, stop when theta/(1 - theta) |dW| <= fnewt = max(10 eps/rtol', min(0.03,
-   rtol'^(1/2))), theta the rate of this step's iterations; after one iteration (the previous
-   step's theta) only if h and J are the previous step's (RADAU5 allows it on any step: after
-   a change of h the old rate does not hold, and the stages' Newton error of up to fnewt
-   times the tolerance can exceed the method's far smaller local error);
-   theta >= 0.99 or no convergence: h / 2; a predicted miss of fnewt within 7 iterations: h
-   shrunk accordingly.  Error estimate: (gamma/h I - J) err = f(t, y) + sum_j e_j Z_j / h,
-   refined once with f(t, y + err) on the first step and after a rejection, in Hairer's norm
-   with the weights atol' + rtol' max(|y|, |y1|) of the other solvers.  Step control:
-   Gustafsson's, both the standard and the predictive factor with the safety
-   min(safe, safe (1 + 2 * 7) / (newton + 2 * 7)) (RADAU5 uses safe in the predictive one),
-   hnew/h in [fac_min, fac_max].  J is recomputed when the contraction was poorer than 0.001,
-   the matrices are refactored unless hnew/h stays in [1, 1.2] (h is then kept).  Outputs by the
-   collocation polynomial.  Counts: each real or complex factorisation and each real or
-   complex solve.  With s->step > 0: steps of that size, no error estimate, and Newton's
-   failure (after a fresh Jacobian) ends the run. */
-static int bgc_run_radau5(bgc_run *r, const bgc_method *method, double *y)
+/* What follows from a stage set: its Newton budget, RADAU's tolerances for it and its
+   exponents. */
+typedef struct bgc_radau_use {
+    const bgc_radau *m;
+    int ns, pairs, nit;
+    double rtol, atol, fnewt, cfac, expo;
+} bgc_radau_use;
+
+static void bgc_radau_configure(bgc_radau_use *u, const bgc_method *method,
+                                const bgc_settings *s, int set)
 {
-    enum { N = BGC_NUM_STATES, D = BGC_DIM(BGC_NUM_STATES), NIT = 7 };
-    const bgc_radau *m = method->radau;
+    const bgc_radau *m = &method->radau[set];
+    const double expm = (double)(m->s + 1) / (2.0 * (double)m->s), en = 1.0 / expm - 1.0;
+    u->m = m;
+    u->ns = m->s;
+    u->pairs = (m->s - 1) / 2;
+    u->nit = 7 + 5 * ((m->s - 3) / 2);
+    u->rtol = 0.1 * pow(s->rtol, expm);
+    u->atol = u->rtol * (s->atol / s->rtol);
+    u->fnewt = bgc_max(10.0 * DBL_EPSILON / u->rtol,
+                       bgc_min(0.03, en == 0.5 ? sqrt(u->rtol) : pow(u->rtol, en)));
+    u->cfac = method->safe * (double)(1 + 2 * u->nit);
+    u->expo = 1.0 / (double)(m->s + 1);
+}
+
+/* Radau IIA after Hairer's RADAU5 and RADAU, with s = 3, 5 or 7 stages (order 2s - 1).  The
+   stage increments Z_i = Y_i - y solve Z = h (A x I) F(Z); with W = (T^-1 x I) Z the simplified
+   Newton iteration decouples into (gamma/h I - J) dW_1 = (T^-1 F)_1 - gamma/h W_1 and, for each
+   complex pair k, dW_2k + i dW_2k+1 from ((alpha_k + i beta_k)/h I - J) with the right side
+   (T^-1 F)_2k + i (T^-1 F)_2k+1 - (alpha_k + i beta_k)/h (W_2k + i W_2k+1): one real and
+   (s - 1)/2 complex factorisations per h and J.
+   Tolerances as RADAU transforms them: rtol' = 0.1 rtol^((s+1)/(2s)), atol' = rtol' atol / rtol;
+   Newton's weights atol' + rtol' |y| at the step's start.  Newton: at most 7, 12 or 17
+   iterations (s = 3, 5, 7) from the previous step's collocation polynomial (zero on the first
+   step and after an order change), convergence rate theta, stop when
+   theta/(1 - theta) |dW| <= fnewt = max(10 eps/rtol', min(0.03, rtol'^(1/e - 1))),
+   e = (s+1)/(2s); after one iteration (the previous step's theta) only if h and J are the
+   previous step's (RADAU5 allows it on any step: after a change of h the old rate does not
+   hold, and the stages' Newton error of up to fnewt times the tolerance can exceed the
+   method's far smaller local error); theta >= 0.99 or no convergence: h / 2; a predicted miss
+   of fnewt within the budget: h shrunk accordingly.  Error estimate:
+   (gamma/h I - J) err = f(t, y) + sum_j e_j Z_j / h, refined once with f(t, y + err) on the
+   first step and after a rejection, in Hairer's norm with the weights
+   atol' + rtol' max(|y|, |y1|) of the other solvers.  Step control: Gustafsson's, both the
+   standard and the predictive factor (not on the first step of a new order) with the safety
+   min(safe, safe (1 + 2 nit) / (newton + 2 nit)), err^(1/(s+1)), hnew/h in
+   [fac_min, fac_max].  J is recomputed when the contraction was poorer than 0.001, the
+   matrices are refactored unless hnew/h stays in [1, 1.2] (h is then kept).
+   Variable order (several stage sets, adaptive steps): RADAU's strategy, looked at whenever
+   the matrices are to be factored (and every 10 steps at a kept h): thetat = min(10,
+   max(theta, thetat / 2)) smooths the last Newton contraction; the order goes up one set when
+   thetat <= 0.002 after more than one iteration, h changes by less than 20 % and 10 steps
+   have passed since the last change; down when thetat >= 0.8, after a Newton failure or a
+   singular matrix, or after a Newton-predicted cut of h by half or more.
+   Outputs by the collocation polynomial.  Counts: each real or complex factorisation and
+   each real or complex solve.  With s->step > 0: steps of that size at the first stage set,
+   no error estimate, and Newton's failure (after a fresh Jacobian) ends the run. */
+static int bgc_run_radau(bgc_run *r, const bgc_method *method, double *y)
+{
+    enum { N = BGC_NUM_STATES, D = BGC_DIM(BGC_NUM_STATES), SMAX = BGC_RADAU_MAX_STAGES };
     const bgc_settings *s = r->s;
-    const int fixed = s->step > 0.0;
-    const double hmax = s->t_end - s->t0, expo = 1.0 / (double)method->q, thet = 0.001;
-    const double rtol = 0.1 * pow(s->rtol, 2.0 / 3.0), atol = rtol * (s->atol / s->rtol);
-    const double fnewt = bgc_max(10.0 * DBL_EPSILON / rtol, bgc_min(0.03, sqrt(rtol)));
-    const double cfac = method->safe * (double)(1 + 2 * NIT);
-    const double *T = m->T, *Ti = m->Ti;
+    const int fixed = s->step > 0.0, variable = method->radau_sets > 1 && !fixed;
+    const double hmax = s->t_end - s->t0, thet = 0.001;
     const double t_start = r->t;
-    double *mem = malloc(((size_t)2 * D * D + (size_t)18 * D) * sizeof *mem);
-    bgc_cplx *cmem = malloc(((size_t)D * D + (size_t)D) * sizeof *cmem);
-    int *piv = malloc((size_t)2 * D * sizeof *piv);
-    double *J, *E1, *z1, *z2, *z3, *w1, *w2, *w3, *f0, *scal, *ys, *y1, *yout, *b, *zlast;
-    double *cont, *f2, *ew;
-    bgc_cplx *E2, *zc;
+    int smax = 0, pmax, set = 0, since = 0, change = 0, unexp = 0, unexn = 0, recheck = 0;
+    double *mem = NULL, *J, *E1, *Z, *W, *b, *dw, *f0, *scal, *ys, *y1, *yout, *zlast, *cont;
+    double *f2, *ew;
+    bgc_cplx *cmem = NULL, *Ec, *zc;
+    int *piv = NULL;
     double t = r->t, h = 0.0, hnew, hfact = 0.0, hold = 0.0, hacc = 0.0, erracc = 1.0;
-    double faccon = 1.0, theta = thet, thqold = 1.0, dynold = 1.0, hhfac = 0.5;
+    double faccon = 1.0, theta = thet, thetat = 0.0, thqold = 1.0, dynold = 1.0, hhfac = 0.5;
     long n_fixed = 0, k_fixed = 0;
-    int i, l, rc = 0, reject = 0, last = 0, first = 1, needjac = 1, caljac = 0;
+    int i, j, k, l, rc = 0, reject = 0, last = 0, first = 1, needjac = 1, caljac = 0;
     int accepted = 0, nsing = 0, worst = -1, bad = -1, bad_kind = 0, newt = 0, refactored = 0;
+    bgc_radau_use u;
     bgc_radau_dense dense;
 
+    for (k = 0; k < method->radau_sets; k++)
+        smax = method->radau[k].s > smax ? method->radau[k].s : smax;
+    pmax = (smax - 1) / 2;
+    mem = malloc(((size_t)2 * D * D + (size_t)(4 * smax + 11) * D) * sizeof *mem);
+    cmem = malloc(((size_t)pmax * D * D + (size_t)pmax * D + 1) * sizeof *cmem);
+    piv = malloc((size_t)(1 + pmax) * D * sizeof *piv + sizeof *piv);
     if (!mem || !cmem || !piv) {
         rc = bgc_fail_memory(r->msg, r->msg_size);
         goto done;
     }
     J = mem;
     E1 = J + (size_t)D * D;
-    z1 = E1 + (size_t)D * D;
-    z2 = z1 + D;
-    z3 = z2 + D;
-    w1 = z3 + D;
-    w2 = w1 + D;
-    w3 = w2 + D;
-    f0 = w3 + D;
+    Z = E1 + (size_t)D * D; /* smax x D */
+    W = Z + (size_t)smax * D; /* smax x D */
+    b = W + (size_t)smax * D; /* smax x D */
+    zlast = b + (size_t)smax * D;
+    dw = zlast + D;
+    f0 = dw + D;
     scal = f0 + D;
     ys = scal + D;
     y1 = ys + D;
     yout = y1 + D;
-    b = yout + D; /* 3 D */
-    zlast = b + 3 * (size_t)D;
-    cont = zlast + D;
+    cont = yout + D;
     f2 = cont + D;
     ew = f2 + D;
-    E2 = cmem;
-    zc = E2 + (size_t)D * D;
-    for (l = 0; l < 3 * D; l++)
+    Ec = cmem; /* pmax x D x D */
+    zc = Ec + (size_t)pmax * D * D; /* pmax x D */
+    for (l = 0; l < smax * D; l++)
         b[l] = 0.0;
     for (l = 0; l < D; l++)
         zlast[l] = 0.0;
-    dense.m = m;
+    bgc_radau_configure(&u, method, s, set);
+    dense.m = u.m;
     dense.y = y;
     dense.b = b;
     if (r->kout > r->nout)
@@ -2187,12 +2273,14 @@ static int bgc_run_radau5(bgc_run *r, const bgc_method *method, double *y)
         goto done;
     }
     for (l = 0; l < N; l++)
-        scal[l] = atol + rtol * fabs(y[l]);
+        scal[l] = u.atol + u.rtol * fabs(y[l]);
     if (!fixed)
         h = r->h > 0.0 ? bgc_min(r->h, hmax) : bgc_initial_step(r, method->q, y, f0, hmax, ys, y1);
 
     for (;;) {
-        double tph, err = 0.0, fac1, alphn, betan, dyno = 0.0, quot, fac;
+        const bgc_radau *m;
+        const double *T, *Ti;
+        double tph, err = 0.0, fac1, alphn[SMAX], betan[SMAX], dyno = 0.0, quot, fac;
         int failed = 0;
         if (needjac) {
             r->st->jac++;
@@ -2223,27 +2311,56 @@ static int bgc_run_radau5(bgc_run *r, const bgc_method *method, double *y)
             }
             tph = last ? s->t_end : t + h;
         }
-        fac1 = m->gamma / h;
-        alphn = m->alpha / h;
-        betan = m->beta / h;
 
-        /* gamma/h I - J and (alpha + i beta)/h I - J, factored (unless they are h's already) */
+        /* the order, whenever the matrices are to be factored (variable order only) */
+        if (variable && (h != hfact || recheck)) {
+            const double hquot = hold > 0.0 ? h / hold : 0.0;
+            int next = set;
+            since++;
+            thetat = bgc_min(10.0, bgc_max(theta, 0.5 * thetat));
+            if (newt > 1 && thetat <= 0.002 && hquot > 0.8 && hquot < 1.2 && since > 10
+                && set + 1 < method->radau_sets)
+                next = set + 1;
+            if ((thetat >= 0.8 || unexp || unexn) && set > 0)
+                next = set - 1;
+            unexp = unexn = recheck = 0;
+            if (next != set) {
+                set = next;
+                bgc_radau_configure(&u, method, s, set);
+                since = 1;
+                change = 1;
+                hfact = 0.0;
+                for (l = 0; l < N; l++)
+                    scal[l] = u.atol + u.rtol * fabs(y[l]);
+            }
+        }
+        m = u.m;
+        T = m->T;
+        Ti = m->Ti;
+        fac1 = m->gamma / h;
+        for (k = 0; k < u.pairs; k++) {
+            alphn[k] = m->alpha[k] / h;
+            betan[k] = m->beta[k] / h;
+        }
+
+        /* gamma/h I - J and (alpha_k + i beta_k)/h I - J, factored (unless they are h's) */
         refactored = h != hfact;
         if (h != hfact) {
             int singular;
-            for (l = 0; l < N * N; l++) {
+            for (l = 0; l < N * N; l++)
                 E1[l] = -J[l];
-                E2[l] = -J[l];
-            }
-            for (l = 0; l < N; l++) {
+            for (l = 0; l < N; l++)
                 E1[(size_t)l * N + l] += fac1;
-                E2[(size_t)l * N + l] += alphn + betan * _Complex_I;
-            }
             r->st->lu++;
             singular = bgc_stiff_lu(N, E1, piv);
-            if (!singular) {
+            for (k = 0; k < u.pairs && !singular; k++) {
+                bgc_cplx *E = Ec + (size_t)k * D * D;
+                for (l = 0; l < N * N; l++)
+                    E[l] = -J[l];
+                for (l = 0; l < N; l++)
+                    E[(size_t)l * N + l] += alphn[k] + betan[k] * _Complex_I;
                 r->st->lu++;
-                singular = bgc_stiff_zlu(N, E2, piv + D);
+                singular = bgc_stiff_zlu(N, E, piv + (size_t)(1 + k) * D);
             }
             if (singular) {
                 hfact = 0.0;
@@ -2252,6 +2369,7 @@ static int bgc_run_radau5(bgc_run *r, const bgc_method *method, double *y)
                     goto done;
                 }
                 bad = -3;
+                unexp = 1;
                 h *= 0.5;
                 reject = 1;
                 last = 0;
@@ -2263,21 +2381,20 @@ static int bgc_run_radau5(bgc_run *r, const bgc_method *method, double *y)
         }
 
         /* starting values: the last step's collocation polynomial, extrapolated */
-        if (first) {
-            for (l = 0; l < N; l++)
-                z1[l] = z2[l] = z3[l] = w1[l] = w2[l] = w3[l] = 0.0;
+        if (first || change) {
+            for (l = 0; l < u.ns * D; l++)
+                Z[l] = W[l] = 0.0;
         } else {
             const double q = h / hold;
             for (l = 0; l < N; l++) {
-                const double a1 = bgc_radau_u(m, b, l, 1.0 + m->c1 * q) - zlast[l];
-                const double a2 = bgc_radau_u(m, b, l, 1.0 + m->c2 * q) - zlast[l];
-                const double a3 = bgc_radau_u(m, b, l, 1.0 + q) - zlast[l];
-                z1[l] = a1;
-                z2[l] = a2;
-                z3[l] = a3;
-                w1[l] = Ti[0] * a1 + Ti[1] * a2 + Ti[2] * a3;
-                w2[l] = Ti[3] * a1 + Ti[4] * a2 + Ti[5] * a3;
-                w3[l] = Ti[6] * a1 + Ti[7] * a2 + Ti[8] * a3;
+                for (i = 0; i < u.ns; i++)
+                    Z[(size_t)i * D + l] = bgc_radau_u(m, b, l, 1.0 + m->c[i] * q) - zlast[l];
+                for (i = 0; i < u.ns; i++) {
+                    double acc = Ti[(size_t)i * u.ns] * Z[l];
+                    for (j = 1; j < u.ns; j++)
+                        acc += Ti[(size_t)i * u.ns + j] * Z[(size_t)j * D + l];
+                    W[(size_t)i * D + l] = acc;
+                }
             }
         }
 
@@ -2287,14 +2404,14 @@ static int bgc_run_radau5(bgc_run *r, const bgc_method *method, double *y)
         theta = thet;
         for (;;) {
             double sum = 0.0;
-            if (newt >= NIT) {
+            if (newt >= u.nit) {
                 failed = 2;
                 break;
             }
-            /* z_i <- f(t + c_i h, y + z_i) */
-            for (i = 0; i < 3 && !failed; i++) {
-                double *zi = i == 0 ? z1 : (i == 1 ? z2 : z3);
-                const double ti = i == 0 ? t + m->c1 * h : (i == 1 ? t + m->c2 * h : tph);
+            /* Z_i <- f(t + c_i h, y + Z_i) */
+            for (i = 0; i < u.ns && !failed; i++) {
+                double *zi = Z + (size_t)i * D;
+                const double ti = i == u.ns - 1 ? tph : t + m->c[i] * h;
                 for (l = 0; l < N; l++)
                     ys[l] = y[l] + zi[l];
                 r->st->rhs++;
@@ -2310,37 +2427,55 @@ static int bgc_run_radau5(bgc_run *r, const bgc_method *method, double *y)
             if (failed)
                 break;
             for (l = 0; l < N; l++) {
-                const double a1 = z1[l], a2 = z2[l], a3 = z3[l];
-                z1[l] = Ti[0] * a1 + Ti[1] * a2 + Ti[2] * a3 - fac1 * w1[l];
-                zc[l] = (Ti[3] * a1 + Ti[4] * a2 + Ti[5] * a3 - (alphn * w2[l] - betan * w3[l]))
-                        + (Ti[6] * a1 + Ti[7] * a2 + Ti[8] * a3 - (betan * w2[l] + alphn * w3[l]))
-                              * _Complex_I;
+                double g[SMAX];
+                for (i = 0; i < u.ns; i++) {
+                    double acc = Ti[(size_t)i * u.ns] * Z[l];
+                    for (j = 1; j < u.ns; j++)
+                        acc += Ti[(size_t)i * u.ns + j] * Z[(size_t)j * D + l];
+                    g[i] = acc;
+                }
+                dw[l] = g[0] - fac1 * W[l];
+                for (k = 0; k < u.pairs; k++) {
+                    const double w2 = W[(size_t)(2 * k + 1) * D + l];
+                    const double w3 = W[(size_t)(2 * k + 2) * D + l];
+                    zc[(size_t)k * D + l] = (g[2 * k + 1] - (alphn[k] * w2 - betan[k] * w3))
+                                            + (g[2 * k + 2] - (betan[k] * w2 + alphn[k] * w3))
+                                                  * _Complex_I;
+                }
             }
-            bgc_stiff_lu_solve(N, E1, piv, z1);
-            bgc_stiff_zlu_solve(N, E2, piv + D, zc);
-            r->st->solves += 2;
+            bgc_stiff_lu_solve(N, E1, piv, dw);
+            for (k = 0; k < u.pairs; k++)
+                bgc_stiff_zlu_solve(N, Ec + (size_t)k * D * D, piv + (size_t)(1 + k) * D,
+                                    zc + (size_t)k * D);
+            r->st->solves += 1 + u.pairs;
             newt++;
             for (l = 0; l < N; l++) {
-                const double q1 = z1[l] / scal[l], q2 = creal(zc[l]) / scal[l];
-                const double q3 = cimag(zc[l]) / scal[l];
-                sum += q1 * q1 + q2 * q2 + q3 * q3;
+                const double q1 = dw[l] / scal[l];
+                double part = q1 * q1;
+                for (k = 0; k < u.pairs; k++) {
+                    const double qr = creal(zc[(size_t)k * D + l]) / scal[l];
+                    const double qi = cimag(zc[(size_t)k * D + l]) / scal[l];
+                    part += qr * qr;
+                    part += qi * qi;
+                }
+                sum += part;
             }
-            dyno = N > 0 ? sqrt(sum / (double)(3 * N)) : 0.0;
+            dyno = N > 0 ? sqrt(sum / (double)(u.ns * N)) : 0.0;
             if (dyno != dyno || dyno > DBL_MAX) {
                 failed = 2;
                 break;
             }
-            if (newt > 1 && newt < NIT) {
+            if (newt > 1 && newt < u.nit) {
                 const double thq = dyno / dynold;
                 theta = newt == 2 ? thq : sqrt(thq * thqold);
                 thqold = thq;
                 if (theta < 0.99) {
                     const double dyth = theta / (1.0 - theta) * dyno
-                                        * pow(theta, (double)(NIT - 1 - newt)) / fnewt;
+                                        * pow(theta, (double)(u.nit - 1 - newt)) / u.fnewt;
                     faccon = theta / (1.0 - theta);
                     if (dyth >= 1.0 && !fixed) { /* too slow: a smaller step converges sooner */
                         const double qnewt = bgc_max(1e-4, bgc_min(20.0, dyth));
-                        hhfac = 0.8 * pow(qnewt, -1.0 / (4.0 + (double)(NIT - 1 - newt)));
+                        hhfac = 0.8 * pow(qnewt, -1.0 / (4.0 + (double)(u.nit - 1 - newt)));
                         failed = 3;
                         break;
                     }
@@ -2351,18 +2486,23 @@ static int bgc_run_radau5(bgc_run *r, const bgc_method *method, double *y)
             }
             dynold = bgc_max(dyno, DBL_EPSILON);
             for (l = 0; l < N; l++) {
-                const double a1 = w1[l] + z1[l], a2 = w2[l] + creal(zc[l]);
-                const double a3 = w3[l] + cimag(zc[l]);
-                w1[l] = a1;
-                w2[l] = a2;
-                w3[l] = a3;
-                z1[l] = T[0] * a1 + T[1] * a2 + T[2] * a3;
-                z2[l] = T[3] * a1 + T[4] * a2 + T[5] * a3;
-                z3[l] = T[6] * a1 + T[7] * a2 + T[8] * a3;
+                double a[SMAX];
+                a[0] = W[l] + dw[l];
+                for (k = 0; k < u.pairs; k++) {
+                    a[2 * k + 1] = W[(size_t)(2 * k + 1) * D + l] + creal(zc[(size_t)k * D + l]);
+                    a[2 * k + 2] = W[(size_t)(2 * k + 2) * D + l] + cimag(zc[(size_t)k * D + l]);
+                }
+                for (i = 0; i < u.ns; i++) {
+                    double acc = T[(size_t)i * u.ns] * a[0];
+                    W[(size_t)i * D + l] = a[i];
+                    for (j = 1; j < u.ns; j++)
+                        acc += T[(size_t)i * u.ns + j] * a[j];
+                    Z[(size_t)i * D + l] = acc;
+                }
             }
             /* converged; after one iteration only on the previous step's matrices, whose
                contraction faccon measured */
-            if ((newt > 1 || !refactored) && faccon * dyno <= fnewt)
+            if ((newt > 1 || !refactored) && faccon * dyno <= u.fnewt)
                 break;
         }
         if (failed) {
@@ -2385,6 +2525,10 @@ static int bgc_run_radau5(bgc_run *r, const bgc_method *method, double *y)
             }
             if (failed != 1)
                 bad = -4;
+            if (failed == 3)
+                unexn = hhfac <= 0.5;
+            else
+                unexp = 1;
             h *= failed == 3 ? hhfac : 0.5;
             reject = 1;
             last = 0;
@@ -2395,10 +2539,14 @@ static int bgc_run_radau5(bgc_run *r, const bgc_method *method, double *y)
 
         /* the error estimate */
         if (!fixed) {
+            const double *zs = Z + (size_t)(u.ns - 1) * D;
             for (l = 0; l < N; l++) {
-                f2[l] = (m->e[0] * z1[l] + m->e[1] * z2[l] + m->e[2] * z3[l]) / h;
+                double acc = m->e[0] * Z[l];
+                for (j = 1; j < u.ns; j++)
+                    acc += m->e[j] * Z[(size_t)j * D + l];
+                f2[l] = acc / h;
                 cont[l] = f2[l] + f0[l];
-                ew[l] = atol + rtol * bgc_max(fabs(y[l]), fabs(y[l] + z3[l]));
+                ew[l] = u.atol + u.rtol * bgc_max(fabs(y[l]), fabs(y[l] + zs[l]));
             }
             bgc_stiff_lu_solve(N, E1, piv, cont);
             r->st->solves++;
@@ -2417,6 +2565,7 @@ static int bgc_run_radau5(bgc_run *r, const bgc_method *method, double *y)
             }
             if (err != err || err > DBL_MAX) {
                 bad = -1;
+                unexp = 1;
                 h *= 0.5;
                 reject = 1;
                 last = 0;
@@ -2427,30 +2576,33 @@ static int bgc_run_radau5(bgc_run *r, const bgc_method *method, double *y)
         }
 
         /* step control: Gustafsson's, the safety factor scaled by the Newton iterations */
-        fac = bgc_min(method->safe, cfac / (double)(newt + 2 * NIT));
+        fac = bgc_min(method->safe, u.cfac / (double)(newt + 2 * u.nit));
         quot = bgc_max(1.0 / method->fac_max,
-                       bgc_min(1.0 / method->fac_min, pow(err, expo) / fac));
+                       bgc_min(1.0 / method->fac_min, pow(err, u.expo) / fac));
         hnew = h / quot;
         if (err < 1.0) {
+            const double *zs = Z + (size_t)(u.ns - 1) * D;
             first = 0;
             accepted++;
-            if (accepted > 1) {
-                double facgus = (hacc / h) * pow(err * err / erracc, expo) / fac;
+            if (accepted > 1 && !change) {
+                double facgus = (hacc / h) * pow(err * err / erracc, u.expo) / fac;
                 facgus = bgc_max(1.0 / method->fac_max, bgc_min(1.0 / method->fac_min, facgus));
                 quot = bgc_max(quot, facgus);
                 hnew = h / quot;
             }
+            change = 0;
             hacc = h;
             erracc = bgc_max(1e-2, err);
             for (l = 0; l < N; l++)
-                y1[l] = y[l] + z3[l];
+                y1[l] = y[l] + zs[l];
             i = bgc_first_nonfinite(y1, N);
             if (i >= 0) {
                 rc = bgc_fail(r->msg, r->msg_size, tph, "state", bgc_state_names[i]);
                 goto done;
             }
-            bgc_radau_poly(m, z1, z2, z3, b);
-            memcpy(zlast, z3, sizeof(double) * N);
+            bgc_radau_poly(m, Z, b);
+            dense.m = m;
+            memcpy(zlast, zs, sizeof(double) * N);
             hold = h;
             rc = bgc_accept(r, tph);
             if (rc)
@@ -2467,7 +2619,7 @@ static int bgc_run_radau5(bgc_run *r, const bgc_method *method, double *y)
             if (last)
                 goto done;
             for (l = 0; l < N; l++)
-                scal[l] = atol + rtol * fabs(y[l]);
+                scal[l] = u.atol + u.rtol * fabs(y[l]);
             r->st->rhs++;
             if (bgc_model_rhs(t, y, r->p, r->w, f0)) {
                 rc = bgc_fail_block(r->msg, r->msg_size, r->w);
@@ -2478,8 +2630,11 @@ static int bgc_run_radau5(bgc_run *r, const bgc_method *method, double *y)
             if (reject)
                 hnew = bgc_min(hnew, h);
             reject = 0;
-            if (theta <= thet && hnew / h >= 1.0 && hnew / h <= 1.2)
-                hnew = h; /* keep h and the factorisations */
+            if (theta <= thet && hnew / h >= 1.0 && hnew / h <= 1.2) {
+                hnew = h; /* keep h and the factorisations ... */
+                if (variable && ++since >= 10 && set + 1 < method->radau_sets)
+                    recheck = 1; /* ... but look at the order now and then */
+            }
             needjac = theta > thet;
             h = hnew;
         } else {

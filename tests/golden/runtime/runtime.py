@@ -118,7 +118,7 @@ _METHODS = {
         'H': ((10.12623508344586, -7.487995877610167, -34.80091861555747, -7.992771707568823, 1.025137723295662, 0.0), (-0.6762803392801253, 6.087714651680015, 16.43084320892478, 24.76722511418386, -6.594389125716872, 0.0),),
     },
     'radau5': {
-        'family': 'radau5',
+        'family': 'radau',
         'order': 5,
         'summary': 'Radau IIA of order 5, implicit, L-stable, stiff; Jacobian and factorisations reused',
         'safe': 0.9,
@@ -127,7 +127,7 @@ _METHODS = {
         'beta': 0.0,
         'q': 4,
         'expo_beta': 0.75,
-        'radau': {'c1': 0.1550510257216822, 'c2': 0.6449489742783178, 'gamma': 3.637834252744496, 'alpha': 2.6810828736277523, 'beta': 3.0504301992474105, 'T': ((0.09123239487089295, -0.1412552950209542, -0.030029194105147424), (0.241717932707107, 0.20412935229379994, 0.3829421127572619), (0.966048182615093, 1.0, 0.0),), 'Ti': ((4.325579890063155, 0.33919925181580984, 0.5417705399358749), (-4.178718591551905, -0.32768282076106237, 0.47662355450055044), (-0.5028726349457868, 2.571926949855605, -0.5960392048282249),), 'e': (-10.048809399827416, 1.382142733160749, -0.3333333333333333)},
+        'radau': ({'s': 3, 'c': (0.1550510257216822, 0.6449489742783178, 1.0), 'gamma': 3.637834252744496, 'alpha': (2.6810828736277523,), 'beta': (3.0504301992474105,), 'T': ((0.09123239487089295, -0.1412552950209542, -0.030029194105147424), (0.241717932707107, 0.20412935229379994, 0.3829421127572619), (0.966048182615093, 1.0, 0.0),), 'Ti': ((4.325579890063155, 0.33919925181580984, 0.5417705399358749), (-4.178718591551905, -0.32768282076106237, 0.47662355450055044), (-0.5028726349457868, 2.571926949855605, -0.5960392048282249),), 'e': (-10.048809399827416, 1.382142733160749, -0.3333333333333333)}, ),
     },
     'rodas5p': {
         'family': 'rosenbrock',
@@ -149,10 +149,46 @@ _METHODS = {
         'e': (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0),
         'H': ((25.948786856663858, -2.5579724845846235, 10.433815404888879, -2.3679251022685204, 0.524948541321073, 1.1241088310450404, 0.4272876194431874, -0.17202221070155493), (-9.91568850695171, -0.9689944594115154, 3.0438037242978453, -24.495224566215796, 20.176138334709044, 15.98066361424651, -6.789040303419874, -6.710236069923372), (11.419903575922262, 2.8879645146136994, 72.92137995996029, 80.12511834622643, -52.072871366152654, -59.78993625266729, -0.15582684282751913, 4.883087185713722),),
     },
+    'radau9': {
+        'family': 'radau',
+        'order': 9,
+        'summary': 'Radau IIA of order 9 (5 stages), implicit, L-stable, stiff: tight tolerances',
+        'safe': 0.9,
+        'fac_min': 0.2,
+        'fac_max': 8.0,
+        'beta': 0.0,
+        'q': 4,
+        'expo_beta': 0.75,
+        'radau': ({'s': 5, 'c': (0.05710419611451768, 0.2768430136381238, 0.5835904323689168, 0.8602401356562195, 1.0), 'gamma': 6.2867047517292765, 'alpha': (3.655694325463572, 5.70095329867179), 'beta': (6.543736899360077, 3.2102656003085497), 'T': ((0.012517586220501045, -0.010242047817908826, 0.04767387729029572, -0.011478515255229515, -0.01401985889287541), (0.0014916701518953824, 0.05017286451737106, -0.09433181918161143, -0.007668830749180163, 0.024708578426518527), (0.07298187638808715, -0.23053953404341795, 0.1027030453801259, 0.01939846399882895, 0.08180035370375117), (0.3800914400035681, 0.37789390224886127, 0.46674413033249434, 0.40760117128019907, 0.19968242788680252), (0.9219789736812105, 1.0, 0.0, 1.0, 0.0),), 'Ti': ((30.0415677215444, 13.865107856271413, 3.4800027747951856, -1.0320087978252634, 0.8043030450739899), (5.344186437834912, 4.593615567759161, -3.0363603234594243, 1.050660190231459, -0.27277861186429625), (3.748059807439805, -3.984965736343885, -1.0444156416080188, 1.1840985681379486, -0.44991777015678036), (-33.041880213519, -17.376953479063566, -0.17212906325400557, -0.09916977798254265, 0.5312281158383066), (-8.611443979875292, 9.699991409528808, 1.9147286396968743, 2.41869200608494, -1.0474634879353375),), 'e': (-27.78093394406464, 3.641478498049213, -1.2525477211691187, 0.5920031671845428, -0.2)}, ),
+    },
+    'radau13': {
+        'family': 'radau',
+        'order': 13,
+        'summary': 'Radau IIA of order 13 (7 stages), implicit, L-stable, stiff: very tight tolerances',
+        'safe': 0.9,
+        'fac_min': 0.2,
+        'fac_max': 8.0,
+        'beta': 0.0,
+        'q': 4,
+        'expo_beta': 0.75,
+        'radau': ({'s': 7, 'c': (0.029316427159784893, 0.1480785996684843, 0.3369846902811543, 0.5586715187715501, 0.7692338620300545, 0.9269456713197411, 1.0), 'gamma': 8.936832788405216, 'alpha': (4.378693561506806, 7.14105521918764, 8.511834825102946), 'beta': (10.169693283795011, 6.623045922639276, 3.281013624325059), 'T': ((0.0021537546273105264, 0.021567551351320772, 0.008783567925144144, -0.004055161452331024, 0.004427232753268285, -0.0012386461879528741, -0.0027606174805438525), (-0.0016000250778804286, -0.03813164813441155, -0.021525560594006874, 0.00841556827655959, -0.00403194957022455, -6.666635339396339e-05, 0.00318547482516621), (0.004059107301947683, 0.05739650893938172, 0.05885052920842679, -0.008560431061603433, -0.006923212665023909, -0.0023521809829433384, 0.00041690777252975626), (0.015750488079376845, -0.03821469359696835, -0.16573681127294385, -0.03737124230238446, 0.00823900729850772, 0.0031150711523461752, 0.025116604913438822), (0.11297766102422081, -0.2491742124652637, 0.27356330579866234, 0.0053667613791817705, 0.19321111610126201, 0.10171773248171515, 0.09504502035604623), (0.4583810431839315, 0.5315846490836285, 0.4863228366175729, 0.5265742264584493, 0.27553439498962584, 0.5217519452747653, 0.1280719446355439), (0.8813915783538184, 1.0, 0.0, 1.0, 0.0, 1.0, 0.0),), 'Ti': ((258.13192631998226, 189.0737630813985, 49.08731481793013, 4.110647469661428, 4.053447889315564, -3.112755366607346, 1.6467749135584446), (-3.007390169451292, -11.015866078765772, 1.4877994561316563, 2.1303881595592826, -1.8161410868175656, 1.134325587895161, -0.41469904594330353), (-8.441963188321084, -0.650525274057515, 6.9406707303698765, -3.2050475255978985, 1.0712809435464785, -0.3548507491216222, 0.09198549132786554), (74.6783322350227, 87.40858897990081, 4.024158737379998, -3.714806315158364, -3.4300939859823174, 2.6966048097653124, -0.9386927436075462), (58.356528851906575, -10.06877395780018, -30.36638884256667, -1.020020865184866, -0.11241750037842496, 1.8906408310003777, -0.9716486393831483), (-299.1862480282521, -243.04074536874478, -48.77710407803787, -2.0386719057419342, 1.673560239861085, -1.0873740320571061, 0.9019382492960993), (-93.0765028974353, 23.881631056281144, 39.278880730813846, 14.38891568549108, -3.5104383993993613, 4.8632848855661805, -2.2464827295912397),), 'e': (-54.374436894128614, 7.000024004259187, -2.355661091987557, 1.1322890661061344, -0.6468913267673587, 0.38753338537535237, -0.14285714285714285)}, ),
+    },
+    'radau': {
+        'family': 'radau',
+        'order': 13,
+        'summary': "Radau IIA of variable order 5, 9, 13 (Hairer's RADAU): the order follows the Newton iteration's convergence; stiff, any tolerance",
+        'safe': 0.9,
+        'fac_min': 0.2,
+        'fac_max': 8.0,
+        'beta': 0.0,
+        'q': 4,
+        'expo_beta': 0.75,
+        'radau': ({'s': 3, 'c': (0.1550510257216822, 0.6449489742783178, 1.0), 'gamma': 3.637834252744496, 'alpha': (2.6810828736277523,), 'beta': (3.0504301992474105,), 'T': ((0.09123239487089295, -0.1412552950209542, -0.030029194105147424), (0.241717932707107, 0.20412935229379994, 0.3829421127572619), (0.966048182615093, 1.0, 0.0),), 'Ti': ((4.325579890063155, 0.33919925181580984, 0.5417705399358749), (-4.178718591551905, -0.32768282076106237, 0.47662355450055044), (-0.5028726349457868, 2.571926949855605, -0.5960392048282249),), 'e': (-10.048809399827416, 1.382142733160749, -0.3333333333333333)}, {'s': 5, 'c': (0.05710419611451768, 0.2768430136381238, 0.5835904323689168, 0.8602401356562195, 1.0), 'gamma': 6.2867047517292765, 'alpha': (3.655694325463572, 5.70095329867179), 'beta': (6.543736899360077, 3.2102656003085497), 'T': ((0.012517586220501045, -0.010242047817908826, 0.04767387729029572, -0.011478515255229515, -0.01401985889287541), (0.0014916701518953824, 0.05017286451737106, -0.09433181918161143, -0.007668830749180163, 0.024708578426518527), (0.07298187638808715, -0.23053953404341795, 0.1027030453801259, 0.01939846399882895, 0.08180035370375117), (0.3800914400035681, 0.37789390224886127, 0.46674413033249434, 0.40760117128019907, 0.19968242788680252), (0.9219789736812105, 1.0, 0.0, 1.0, 0.0),), 'Ti': ((30.0415677215444, 13.865107856271413, 3.4800027747951856, -1.0320087978252634, 0.8043030450739899), (5.344186437834912, 4.593615567759161, -3.0363603234594243, 1.050660190231459, -0.27277861186429625), (3.748059807439805, -3.984965736343885, -1.0444156416080188, 1.1840985681379486, -0.44991777015678036), (-33.041880213519, -17.376953479063566, -0.17212906325400557, -0.09916977798254265, 0.5312281158383066), (-8.611443979875292, 9.699991409528808, 1.9147286396968743, 2.41869200608494, -1.0474634879353375),), 'e': (-27.78093394406464, 3.641478498049213, -1.2525477211691187, 0.5920031671845428, -0.2)}, {'s': 7, 'c': (0.029316427159784893, 0.1480785996684843, 0.3369846902811543, 0.5586715187715501, 0.7692338620300545, 0.9269456713197411, 1.0), 'gamma': 8.936832788405216, 'alpha': (4.378693561506806, 7.14105521918764, 8.511834825102946), 'beta': (10.169693283795011, 6.623045922639276, 3.281013624325059), 'T': ((0.0021537546273105264, 0.021567551351320772, 0.008783567925144144, -0.004055161452331024, 0.004427232753268285, -0.0012386461879528741, -0.0027606174805438525), (-0.0016000250778804286, -0.03813164813441155, -0.021525560594006874, 0.00841556827655959, -0.00403194957022455, -6.666635339396339e-05, 0.00318547482516621), (0.004059107301947683, 0.05739650893938172, 0.05885052920842679, -0.008560431061603433, -0.006923212665023909, -0.0023521809829433384, 0.00041690777252975626), (0.015750488079376845, -0.03821469359696835, -0.16573681127294385, -0.03737124230238446, 0.00823900729850772, 0.0031150711523461752, 0.025116604913438822), (0.11297766102422081, -0.2491742124652637, 0.27356330579866234, 0.0053667613791817705, 0.19321111610126201, 0.10171773248171515, 0.09504502035604623), (0.4583810431839315, 0.5315846490836285, 0.4863228366175729, 0.5265742264584493, 0.27553439498962584, 0.5217519452747653, 0.1280719446355439), (0.8813915783538184, 1.0, 0.0, 1.0, 0.0, 1.0, 0.0),), 'Ti': ((258.13192631998226, 189.0737630813985, 49.08731481793013, 4.110647469661428, 4.053447889315564, -3.112755366607346, 1.6467749135584446), (-3.007390169451292, -11.015866078765772, 1.4877994561316563, 2.1303881595592826, -1.8161410868175656, 1.134325587895161, -0.41469904594330353), (-8.441963188321084, -0.650525274057515, 6.9406707303698765, -3.2050475255978985, 1.0712809435464785, -0.3548507491216222, 0.09198549132786554), (74.6783322350227, 87.40858897990081, 4.024158737379998, -3.714806315158364, -3.4300939859823174, 2.6966048097653124, -0.9386927436075462), (58.356528851906575, -10.06877395780018, -30.36638884256667, -1.020020865184866, -0.11241750037842496, 1.8906408310003777, -0.9716486393831483), (-299.1862480282521, -243.04074536874478, -48.77710407803787, -2.0386719057419342, 1.673560239861085, -1.0873740320571061, 0.9019382492960993), (-93.0765028974353, 23.881631056281144, 39.278880730813846, 14.38891568549108, -3.5104383993993613, 4.8632848855661805, -2.2464827295912397),), 'e': (-54.374436894128614, 7.000024004259187, -2.355661091987557, 1.1322890661061344, -0.6468913267673587, 0.38753338537535237, -0.14285714285714285)}, ),
+    },
     'auto': {
         'family': 'auto',
         'order': 5,
-        'summary': 'dopri5 until its stiffness test fires, then rodas4 for the rest of the run',
+        'summary': 'dopri5 until its stiffness test fires, then radau (variable order) for the rest of the run',
         'safe': 0.9,
         'fac_min': 0.2,
         'fac_max': 10.0,
@@ -160,11 +196,11 @@ _METHODS = {
         'q': 5,
         'expo_beta': 0.75,
         'explicit': 'dopri5',
-        'stiff': 'rodas4',
+        'stiff': 'radau',
     },
 }
 SOLVERS = tuple(_METHODS)
-_SOLVER_LIST = 'euler, rk4, dopri5, vern7, dop853, rodas4, radau5, rodas5p or auto'
+_SOLVER_LIST = 'euler, rk4, dopri5, vern7, dop853, rodas4, radau5, rodas5p, radau9, radau13, radau or auto'
 
 
 # ====================================================================== runtime ===
@@ -1572,8 +1608,8 @@ def _run_family(run, name):
         yield from _run_erk(run, m, run.y)
     elif family == "rosenbrock":
         yield from _run_rosenbrock(run, m, numpy.asarray(run.y, dtype=float))
-    elif family == "radau5":
-        yield from _run_radau5(run, m, numpy.asarray(run.y, dtype=float))
+    elif family == "radau":
+        yield from _run_radau(run, m, numpy.asarray(run.y, dtype=float))
     else:
         raise ValueError("solver '%s' cannot run by itself" % name)
 
@@ -1889,57 +1925,81 @@ def _rosenbrock_dense(y, y1, K, H):
 # ---------------------------------------------------------------- Radau IIA (RADAU5)
 
 
-def _radau_poly(c1, c2, z1, z2, z3):
-    """The collocation polynomial through (0, 0), (c1, Z1), (c2, Z2), (1, Z3) in Newton's form:
-    u(theta) = theta (b1 + (theta - c1) (b2 + (theta - c2) b3))."""
-    d01 = z1 / c1
-    d12 = (z2 - z1) / (c2 - c1)
-    d23 = (z3 - z2) / (1.0 - c2)
-    d012 = (d12 - d01) / c2
-    d123 = (d23 - d12) / (1.0 - c1)
-    return d01, d012, d123 - d012
+def _radau_poly(c, Z):
+    """The collocation polynomial through (0, 0) and (c_i, Z_i) in Newton's form:
+    u(theta) = theta (b_1 + (theta - c_1) (b_2 + ... + (theta - c_{s-1}) b_s)); b: s x N."""
+    x = (0.0,) + tuple(c)
+    d = [numpy.zeros(_N)] + [Z[i] for i in range(len(c))]
+    s = len(c)
+    with numpy.errstate(all="ignore"):
+        for j in range(1, s + 1):  # divided differences, in place
+            for k in range(s, j - 1, -1):
+                d[k] = (d[k] - d[k - 1]) / (x[k] - x[k - j])
+    return d[1:]
 
 
-def _radau_u(c1, c2, b, theta):
-    return theta * (b[0] + (theta - c1) * (b[1] + (theta - c2) * b[2]))
+def _radau_u(c, b, theta):
+    k = len(b) - 1
+    acc = b[k]
+    while k > 0:
+        k -= 1
+        acc = b[k] + (theta - c[k]) * acc
+    return theta * acc
 
 
-def _run_radau5(run, m, y):
-    """Radau IIA of order 5 after Hairer's RADAU5 (see bgc_run_radau5 in the C runtime)."""
+class _RadauUse:
+    """What follows from a stage set (see bgc_radau_configure in the C runtime)."""
+
+    def __init__(self, m, s, k):
+        rd = m["radau"][k]
+        self.ns, self.c, self.gamma = rd["s"], rd["c"], rd["gamma"]
+        self.alpha, self.beta, self.e = rd["alpha"], rd["beta"], rd["e"]
+        self.T, self.Ti = numpy.array(rd["T"]), numpy.array(rd["Ti"])
+        self.pairs = (self.ns - 1) // 2
+        self.nit = 7 + 5 * ((self.ns - 3) // 2)
+        expm = (self.ns + 1) / (2.0 * self.ns)
+        en = 1.0 / expm - 1.0
+        self.rtol = 0.1 * s.rtol ** expm
+        self.atol = self.rtol * (s.atol / s.rtol)
+        self.fnewt = max(10.0 * _EPS / self.rtol,
+                         min(0.03, math.sqrt(self.rtol) if en == 0.5 else self.rtol ** en))
+        self.cfac = m["safe"] * (1 + 2 * self.nit)
+        self.expo = 1.0 / (self.ns + 1)
+
+
+def _run_radau(run, m, y):
+    """Radau IIA after Hairer's RADAU5 and RADAU, fixed or variable order (see bgc_run_radau in
+    the C runtime)."""
     s, st = run.s, run.st
     if run.kout > run.nout:
         return
     name = _method_name(m)
-    rd = m["radau"]
-    c1, c2, gamma, alpha, beta = rd["c1"], rd["c2"], rd["gamma"], rd["alpha"], rd["beta"]
-    T, Ti, ew = numpy.array(rd["T"]), numpy.array(rd["Ti"]), rd["e"]
     safe, fac_min, fac_max = m["safe"], m["fac_min"], m["fac_max"]
-    expo = 1.0 / m["q"]
-    nit, thet = 7, 0.001
+    thet = 0.001
     fixed = s.step > 0.0
+    nsets = len(m["radau"])
+    variable = nsets > 1 and not fixed
     hmax = s.t_end - s.t0
-    # Hairer's tolerances for RADAU5 and its Newton tolerance
-    rtol = 0.1 * s.rtol ** (2.0 / 3.0)
-    atol = rtol * (s.atol / s.rtol)
-    fnewt = max(10.0 * _EPS / rtol, min(0.03, math.sqrt(rtol)))
-    cfac = safe * (1 + 2 * nit)
+    k_set, since, change, unexp, unexn, recheck = 0, 0, False, False, False, False
+    u = _RadauUse(m, s, k_set)
     t_start = t = run.t
     h, hfact, hold, hacc, erracc = 0.0, 0.0, 0.0, 0.0, 1.0
-    faccon, theta, thqold, dynold, hhfac = 1.0, thet, 1.0, 1.0, 0.5
+    faccon, theta, thetat, thqold, dynold, hhfac = 1.0, thet, 0.0, 1.0, 1.0, 0.5
     reject = last = caljac = False
     first = needjac = True
     accepted, nsing, k_fixed, n_fixed, newt = 0, 0, 0, 0, 0
     worst, bad, bad_kind, block_failure = -1, -1, "", None
     identity = numpy.eye(_N)
-    J = E1inv = E2inv = None
-    b = (numpy.zeros(_N),) * 3
+    J = E1inv = None
+    Ecinv = []
+    b = [numpy.zeros(_N)] * u.ns
     zlast = numpy.zeros(_N)
     if fixed:
         n_fixed = _substeps(s.t_end - t_start, s.step)
         if n_fixed < 0:
             raise _fail_step(t, s.step, -1)
     f0 = _stiff_start(run, t, y)
-    scal = atol + rtol * numpy.abs(y)
+    scal = u.atol + u.rtol * numpy.abs(y)
     if not fixed:
         h = min(run.h, hmax) if run.h > 0.0 else _initial_step(run, m["q"], y, f0, hmax)
     while True:
@@ -1959,36 +2019,60 @@ def _run_radau5(run, m, y):
                 h = s.t_end - t
                 last = True
             tph = s.t_end if last else t + h
-        fac1, alphn, betan = gamma / h, alpha / h, beta / h
 
-        # gamma/h I - J and (alpha + i beta)/h I - J, inverted (unless they are h's already)
+        # the order, whenever the matrices are to be factored (variable order only)
+        if variable and (h != hfact or recheck):
+            hquot = h / hold if hold > 0.0 else 0.0
+            nxt = k_set
+            since += 1
+            thetat = min(10.0, max(theta, 0.5 * thetat))
+            if (newt > 1 and thetat <= 0.002 and 0.8 < hquot < 1.2 and since > 10
+                    and k_set + 1 < nsets):
+                nxt = k_set + 1
+            if (thetat >= 0.8 or unexp or unexn) and k_set > 0:
+                nxt = k_set - 1
+            unexp = unexn = recheck = False
+            if nxt != k_set:
+                k_set = nxt
+                u = _RadauUse(m, s, k_set)
+                since, change, hfact = 1, True, 0.0
+                scal = u.atol + u.rtol * numpy.abs(y)
+        c, T, Ti, ns = u.c, u.T, u.Ti, u.ns
+        fac1 = u.gamma / h
+        alphn = [a / h for a in u.alpha]
+        betan = [bb / h for bb in u.beta]
+
+        # gamma/h I - J and (alpha_k + i beta_k)/h I - J, inverted (unless they are h's)
         refactored = h != hfact
         if h != hfact:
             st["lu"] += 1
             E1inv = _stiff_inverse(identity * fac1 - J)
-            E2inv = None
-            if E1inv is not None:
+            Ecinv = []
+            singular = E1inv is None
+            for k in range(u.pairs):
+                if singular:
+                    break
                 st["lu"] += 1
-                E2inv = _stiff_inverse(identity * complex(alphn, betan) - J)
-            if E2inv is None:
+                inv = _stiff_inverse(identity * complex(alphn[k], betan[k]) - J)
+                singular = inv is None
+                Ecinv.append(inv)
+            if singular:
                 hfact = 0.0
                 nsing += 1
                 if fixed or nsing == 5:
                     raise _stiff_fail_singular(name, t, h)
-                bad, h, reject, last = -3, h * 0.5, True, False
+                bad, unexp, h, reject, last = -3, True, h * 0.5, True, False
                 st["rejected"] += 1
                 needjac = not caljac
                 continue
             hfact = h
 
         # starting values: the last step's collocation polynomial, extrapolated
-        if first:
-            Z = numpy.zeros((3, _N))
+        if first or change:
+            Z = numpy.zeros((ns, _N))
         else:
             q = h / hold
-            Z = numpy.array([_radau_u(c1, c2, b, 1.0 + c1 * q) - zlast,
-                             _radau_u(c1, c2, b, 1.0 + c2 * q) - zlast,
-                             _radau_u(c1, c2, b, 1.0 + q) - zlast])
+            Z = numpy.array([_radau_u(c, b, 1.0 + c[i] * q) - zlast for i in range(ns)])
         W = Ti @ Z
 
         # the simplified Newton iteration
@@ -1996,12 +2080,13 @@ def _run_radau5(run, m, y):
         faccon = max(faccon, _EPS) ** 0.8
         theta = thet
         while True:
-            if newt >= nit:
+            if newt >= u.nit:
                 failed = 2
                 break
-            F = numpy.empty((3, _N))
+            F = numpy.empty((ns, _N))
             try:
-                for i, ti in enumerate((t + c1 * h, t + c2 * h, tph)):
+                for i in range(ns):
+                    ti = tph if i == ns - 1 else t + c[i] * h
                     st["rhs"] += 1
                     F[i] = run.f(ti, y + Z[i])
                     j = _first_nonfinite(F[i])
@@ -2014,28 +2099,31 @@ def _run_radau5(run, m, y):
                 break
             with numpy.errstate(all="ignore"):
                 G = Ti @ F
-                g1 = G[0] - fac1 * W[0]
-                g2 = G[1] - (alphn * W[1] - betan * W[2])
-                g3 = G[2] - (betan * W[1] + alphn * W[2])
-                dw1 = E1inv @ g1
-                dwc = E2inv @ (g2 + 1j * g3)
-                dW = numpy.array([dw1, dwc.real, dwc.imag])
-                st["solves"] += 2
+                dW = numpy.empty((ns, _N))
+                dW[0] = E1inv @ (G[0] - fac1 * W[0])
+                for k in range(u.pairs):
+                    w2, w3 = W[2 * k + 1], W[2 * k + 2]
+                    g2 = G[2 * k + 1] - (alphn[k] * w2 - betan[k] * w3)
+                    g3 = G[2 * k + 2] - (betan[k] * w2 + alphn[k] * w3)
+                    dwc = Ecinv[k] @ (g2 + 1j * g3)
+                    dW[2 * k + 1], dW[2 * k + 2] = dwc.real, dwc.imag
+                st["solves"] += 1 + u.pairs
                 newt += 1
-                dyno = math.sqrt(float(numpy.sum((dW / scal) ** 2)) / (3 * _N)) if _N else 0.0
+                dyno = (math.sqrt(float(numpy.sum((dW / scal) ** 2)) / (ns * _N)) if _N
+                        else 0.0)
             if dyno != dyno or dyno == math.inf:
                 failed = 2
                 break
-            if 1 < newt < nit:
+            if 1 < newt < u.nit:
                 thq = dyno / dynold
                 theta = thq if newt == 2 else math.sqrt(thq * thqold)
                 thqold = thq
                 if theta < 0.99:
                     faccon = theta / (1.0 - theta)
-                    dyth = faccon * dyno * theta ** (nit - 1 - newt) / fnewt
+                    dyth = faccon * dyno * theta ** (u.nit - 1 - newt) / u.fnewt
                     if dyth >= 1.0 and not fixed:  # too slow: a smaller step converges sooner
                         qnewt = max(1e-4, min(20.0, dyth))
-                        hhfac = 0.8 * qnewt ** (-1.0 / (4.0 + nit - 1 - newt))
+                        hhfac = 0.8 * qnewt ** (-1.0 / (4.0 + u.nit - 1 - newt))
                         failed = 3
                         break
                 else:
@@ -2045,7 +2133,7 @@ def _run_radau5(run, m, y):
             W = W + dW
             Z = T @ W
             # converged; after one iteration only on the previous step's matrices
-            if (newt > 1 or not refactored) and faccon * dyno <= fnewt:
+            if (newt > 1 or not refactored) and faccon * dyno <= u.fnewt:
                 break
         if failed:
             if fixed:
@@ -2060,6 +2148,10 @@ def _run_radau5(run, m, y):
                                "the fixed step h = %.3g" % (t, name, h), t)
             if failed != 1:
                 bad = -4
+            if failed == 3:
+                unexn = hhfac <= 0.5
+            else:
+                unexp = True
             h *= hhfac if failed == 3 else 0.5
             reject, last = True, False
             st["rejected"] += 1
@@ -2070,10 +2162,10 @@ def _run_radau5(run, m, y):
         err = 0.0
         if not fixed:
             with numpy.errstate(all="ignore"):
-                f2 = (ew[0] * Z[0] + ew[1] * Z[1] + ew[2] * Z[2]) / h
+                f2 = sum(u.e[j] * Z[j] for j in range(ns)) / h
                 cont = E1inv @ (f2 + f0)
                 st["solves"] += 1
-                wt = atol + rtol * numpy.maximum(numpy.abs(y), numpy.abs(y + Z[2]))
+                wt = u.atol + u.rtol * numpy.maximum(numpy.abs(y), numpy.abs(y + Z[ns - 1]))
                 err, worst_now = _stiff_norm(cont, wt)
                 err = max(err, 1e-10)
                 if err >= 1.0 and (first or reject):  # refined: f at y + err
@@ -2089,39 +2181,40 @@ def _run_radau5(run, m, y):
                         err = max(err, 1e-10)
             worst = worst_now if worst_now >= 0 else worst
             if err != err or err == math.inf:
-                bad = -1
+                bad, unexp = -1, True
                 h, reject, last = h * 0.5, True, False
                 st["rejected"] += 1
                 needjac = not caljac
                 continue
 
         # step control: Gustafsson's, the safety factor scaled by the Newton iterations
-        fac = min(safe, cfac / (newt + 2 * nit))
-        quot = max(1.0 / fac_max, min(1.0 / fac_min, err ** expo / fac))
+        fac = min(safe, u.cfac / (newt + 2 * u.nit))
+        quot = max(1.0 / fac_max, min(1.0 / fac_min, err ** u.expo / fac))
         hnew = h / quot
         if err < 1.0:
             first = False
             accepted += 1
-            if accepted > 1:
-                facgus = (hacc / h) * (err * err / erracc) ** expo / fac
+            if accepted > 1 and not change:
+                facgus = (hacc / h) * (err * err / erracc) ** u.expo / fac
                 facgus = max(1.0 / fac_max, min(1.0 / fac_min, facgus))
                 quot = max(quot, facgus)
                 hnew = h / quot
+            change = False
             hacc, erracc = h, max(1e-2, err)
-            y1 = y + Z[2]
+            y1 = y + Z[ns - 1]
             i = _first_nonfinite(y1)
             if i >= 0:
                 raise _fail(tph, "state", STATES[i])
-            b = _radau_poly(c1, c2, Z[0], Z[1], Z[2])
-            zlast, hold = Z[2], h
+            b = _radau_poly(c, Z)
+            zlast, hold = Z[ns - 1], h
             _accept(run, tph)
-            yield from run.emit_step(t, h, tph, y1, _radau_dense(y, c1, c2, b))
+            yield from run.emit_step(t, h, tph, y1, _radau_dense(y, c, b))
             y, t = y1, tph
             run.t, run.y = t, y
             nsing, bad, caljac = 0, -1, False
             if last:
                 return
-            scal = atol + rtol * numpy.abs(y)
+            scal = u.atol + u.rtol * numpy.abs(y)
             st["rhs"] += 1
             try:
                 f0 = run.f(t, y)
@@ -2133,7 +2226,10 @@ def _run_radau5(run, m, y):
                 hnew = min(hnew, h)
             reject = False
             if theta <= thet and 1.0 <= hnew / h <= 1.2:
-                hnew = h  # keep h and the factorisations
+                hnew = h  # keep h and the factorisations ...
+                since += 1
+                if variable and since >= 10 and k_set + 1 < nsets:
+                    recheck = True  # ... but look at the order now and then
             needjac = theta > thet
             h = hnew
         else:
@@ -2143,9 +2239,9 @@ def _run_radau5(run, m, y):
             needjac = not caljac
 
 
-def _radau_dense(y, c1, c2, b):
+def _radau_dense(y, c, b):
     def prepare():
-        return lambda theta: y + _radau_u(c1, c2, b, theta)
+        return lambda theta: y + _radau_u(c, b, theta)
     return prepare
 
 
