@@ -8,7 +8,6 @@ on Van der Pol, and its order changes seen in its steps."""
 from math import comb
 
 import mpmath
-import numpy as np
 import pytest
 
 from bgc import solvers
