@@ -292,15 +292,22 @@ def test_auto_switches_to_radau_on_the_rc_pair(backend):
 
 
 def test_backends_agree():
+    """The two runtimes decide steps on rounding-level differences (C solves with LU factors,
+    Python multiplies by inverses), and Van der Pol's jumps amplify them: the runs agree to
+    within the tolerance, not bit for bit.  With 7 stages the step sequences part earliest
+    (measured at rtol 1e-6: radau13 137 and 142 steps, outputs 7.3e-7 apart; radau 345 steps
+    in both, 1.4e-7 apart; radau5 and radau9 the same steps, 1.3e-11 and 2.8e-10 apart)."""
     if "c" not in BACKENDS:
         pytest.skip("no C compiler")
-    for solver in STIFF:
+    for solver in STIFF + ["radau9", "radau13"]:
         options = dict(solver=solver, t_end=2.0, dt=0.02, rtol=1e-6, atol=1e-6)
         tc, yc, stc = _run(van_der_pol, "c", **options)
         tp, yp, stp = _run(van_der_pol, "python", **options)
+        loose = solver == "radau13"
         assert np.array_equal(tc, tp)
-        assert np.all(_scaled_error(yc, yp) < 1e-6), _scaled_error(yc, yp)
-        assert abs(stc["steps"] - stp["steps"]) <= 0.02 * stc["steps"] + 2, (stc, stp)
+        assert np.all(_scaled_error(yc, yp) < (1e-5 if loose else 1e-6)), _scaled_error(yc, yp)
+        assert abs(stc["steps"] - stp["steps"]) <= (0.05 if loose else 0.02) * stc["steps"] + 2, \
+            (solver, stc, stp)
 
 
 # ---------------------------------------------------------------- failures

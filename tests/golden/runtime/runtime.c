@@ -1594,7 +1594,8 @@ int bgc_advance(const bgc_settings *s, const bgc_params *p, bgc_work *w, double 
 
 /* ============================================================== stiff === */
 /* The stiff families: Rosenbrock methods in Hairer's transformed form (RODAS's design, any
-   tableau of the family) and Radau IIA of order 5 (RADAU5's design), both with the Jacobian
+   tableau of the family) and Radau IIA with 3, 5 or 7 stages, of fixed or variable order
+   (RADAU5's and RADAU's design), both with the Jacobian
    that bgc_jacobian derives symbolically and dense LU factorisations of their own (below). */
 #include <complex.h>
 #undef I /* C99 7.3.1: the program may undefine it; _Complex_I is used below */

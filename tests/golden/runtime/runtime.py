@@ -1656,13 +1656,14 @@ def _integrate_from(s, p, x0, st):
 
 # ================================================================== stiff ===
 # The stiff families: Rosenbrock methods in Hairer's transformed form (RODAS's design, any
-# tableau of the family) and Radau IIA of order 5 (RADAU5's design), as bgc_run_rosenbrock and
-# bgc_run_radau5 in the C runtime (see there).  Linear algebra: whether an iteration matrix is
-# singular is decided as the C runtime decides it (its LU factorisation with partial
-# pivoting, done here row-vectorised in the same operations: an exactly zero pivot column is
-# singular), so both backends stop on the same matrices; a matrix that is not is inverted
-# once per factorisation with numpy.linalg.inv and every solve is a matrix-vector product with
-# the inverse.  The results agree with C's within rounding, not bit for bit.
+# tableau of the family) and Radau IIA with 3, 5 or 7 stages, of fixed or variable order
+# (RADAU5's and RADAU's design), as bgc_run_rosenbrock and bgc_run_radau in the C runtime (see
+# there).  Linear algebra: whether an iteration matrix is singular is decided as the C runtime
+# decides it (its LU factorisation with partial pivoting, done here row-vectorised in the same
+# operations: an exactly zero pivot column is singular), so both backends stop on the same
+# matrices; a matrix that is not is inverted once per factorisation with numpy.linalg.inv and
+# every solve is a matrix-vector product with the inverse.  The results agree with C's within
+# rounding, not bit for bit.
 
 
 def _stiff_norm(v, w):
