@@ -89,6 +89,8 @@ typedef struct bgc_settings {
     double step;          /* fixed step of the fixed-step solvers; 0: dt */
     long max_steps;       /* the most steps accepted between two output times (a run that
                              needs more fails: a runaway step size); 0: no limit */
+    double h0;            /* adaptive solvers: the first step to try; 0: estimated */
+    int order0;           /* radau: the order to start at (5, 9 or 13); 0: 5 */
 } bgc_settings;
 #define BGC_MAX_STEPS 100000L /* max_steps unless set */
 typedef struct bgc_stats {
@@ -97,6 +99,9 @@ typedef struct bgc_stats {
     int switched;              /* auto: 1 once it has switched to its stiff method ... */
     double t_switch;           /* ... at this time */
     double cpu;                /* processor seconds bgc_simulate took (clock()) */
+    double h_next;             /* adaptive solvers: the step they would take after the run's
+                                  end (set, not added to; 0: none) ... */
+    int order_next;            /* ... and radau the order (0: another solver) */
 } bgc_stats;
 /* Called at every output time with the state and the outputs; nonzero stops the run. */
 typedef int (*bgc_sink)(void *ctx, double t, const double *x, const double *y);
@@ -116,8 +121,9 @@ int bgc_simulate(const bgc_settings *s, const bgc_params *p, const double *x0, b
 
 /* bgc_simulate in steps: integrates x from s->t0 to s->t_end in the caller's workspace w
    (bgc_work_new), so that consecutive calls continue one run as far as the algebraic blocks
-   go (each Newton block starts from its last solution); the solver itself starts afresh,
-   with a new first step.  x is updated to the state at s->t_end (on failure, at the last
+   go (each Newton block starts from its last solution); the solver itself starts afresh:
+   with s->h0 and s->order0 set to the previous call's stats->h_next and ->order_next it goes
+   on with its step size (and radau with its order), else with a new first step.  x is updated to the state at s->t_end (on failure, at the last
    accepted step).  Returns as bgc_simulate; stats are added to, its cpu included. */
 int bgc_advance(const bgc_settings *s, const bgc_params *p, bgc_work *w, double *x,
                 bgc_sink sink, void *ctx, bgc_stats *stats, char *msg, size_t msg_size);

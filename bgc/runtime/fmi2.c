@@ -15,7 +15,8 @@
    follows its default expression (which may use the parameters before it).  The states are
    computed from the parameters when initialisation ends (and checked against the model's
    constraints).  Model Exchange: the environment integrates the states; there are no events.
-   Co-Simulation: fmi2DoStep integrates with the scene's solver (bgc_advance).
+   Co-Simulation: fmi2DoStep integrates with the scene's solver (bgc_advance), which goes on
+   with the step size it had reached at the last communication point.
 
    The declarations below are written from the text of the FMI 2.0 standard (its sections on
    the platform types and the common functions): the types, the status and kind enumerations,
@@ -889,6 +890,9 @@ BGC_FMI_EXPORT fmi2Status fmi2DoStep(fmi2Component c, fmi2Real currentCommunicat
     s.t_end = currentCommunicationPoint + communicationStepSize;
     s.dt = communicationStepSize;
     s.rtol = m->rtol;
+    /* the step size (and radau's order) go on from the last communication point */
+    s.h0 = m->st.h_next;
+    s.order0 = m->st.order_next;
     method = &bgc_methods[s.solver];
     if (method->family == BGC_FAMILY_AUTO && m->stiff)
         s.solver = method->stiff_solver; /* once stiff, as within one run */

@@ -516,13 +516,15 @@ void bgc_settings_default(bgc_settings *s)
     s->atol = BGC_SCENE_ATOL;
     s->step = BGC_SCENE_STEP;
     s->max_steps = BGC_MAX_STEPS;
+    s->h0 = 0.0;
+    s->order0 = 0;
 }
 
 int bgc_check_settings(const bgc_settings *s, char *msg, size_t msg_size)
 {
     const char *bad = NULL;
     if (!(isfinite(s->t0) && isfinite(s->t_end) && isfinite(s->dt) && isfinite(s->rtol)
-          && isfinite(s->atol) && isfinite(s->step)))
+          && isfinite(s->atol) && isfinite(s->step) && isfinite(s->h0)))
         bad = "settings must be finite numbers";
     else if (!(s->dt > 0.0))
         bad = "--dt must be positive";
@@ -532,6 +534,8 @@ int bgc_check_settings(const bgc_settings *s, char *msg, size_t msg_size)
         bad = "--rtol and --atol must be positive";
     else if (s->step < 0.0)
         bad = "--step must be positive";
+    else if (s->h0 < 0.0)
+        bad = "the first step must not be negative";
     else if (s->max_steps < 0)
         bad = "--max-steps must not be negative";
     else if (s->solver < 0 || s->solver >= BGC_NUM_SOLVERS)

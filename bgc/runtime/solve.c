@@ -362,7 +362,7 @@ static int bgc_run_erk(bgc_run *r, const bgc_method *method, double *y)
     const int fixed = s->step > 0.0;
     double *mem = malloc((size_t)(m->all + 5 + m->degree) * D * sizeof *mem);
     double *k, *ys, *y1, *yout, *ystiff, *e2v, *q;
-    double t = r->t, h, hnew, facold = 1e-4;
+    double t = r->t, h, hnew, facold = 1e-4, wanted = 0.0;
     int i, l, rc, reject = 0, last = 0, worst = -1, bad = -1, bad_kind = 0, failed;
     int stiff_count = 0, nonstiff_count = 0;
     bgc_erk_dense dense;
@@ -413,6 +413,7 @@ static int bgc_run_erk(bgc_run *r, const bgc_method *method, double *y)
                 rc = bgc_fail_step(r->msg, r->msg_size, t, h, worst);
             goto done;
         }
+        wanted = h;
         if (t + 1.01 * h - s->t_end > 0.0) {
             h = s->t_end - t;
             last = 1;
@@ -556,8 +557,11 @@ static int bgc_run_erk(bgc_run *r, const bgc_method *method, double *y)
             memcpy(y, y1, sizeof(double) * N);
             t = tph;
             r->t = t;
-            if (last)
+            if (last) {
+                if (!fixed) /* the step to go on with: the controller's, or the one cut short */
+                    r->st->h_next = bgc_max(hnew, wanted);
                 goto done;
+            }
             if (fabs(hnew) > hmax && !fixed)
                 hnew = hmax;
             if (reject)
@@ -641,7 +645,9 @@ static int bgc_integrate(const bgc_settings *s, const bgc_params *p, bgc_work *w
     r.nout = bgc_output_count(s);
     r.kout = 1;
     r.t = s->t0;
-    r.h = 0.0;
+    r.h = s->h0;
+    stats->h_next = 0.0;
+    stats->order_next = 0;
     r.detect_stiffness = 0;
     r.steps_out = stats->steps;
     r.t_out = s->t0;

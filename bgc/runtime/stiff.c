@@ -261,7 +261,7 @@ static int bgc_run_rosenbrock(bgc_run *r, const bgc_method *method, double *y)
     double *mem = malloc(((size_t)2 * D * D + (size_t)(S + 5 + R) * D) * sizeof *mem);
     int *piv = malloc((size_t)D * sizeof *piv);
     double *J, *E, *k, *f0, *ft, *ys, *y1, *yout, *q2, *q3; /* q2: dense.q, R rows */
-    double t = r->t, h = 0.0, hnew, hacc = 0.0, erracc = 1.0;
+    double t = r->t, h = 0.0, hnew, hacc = 0.0, erracc = 1.0, wanted = 0.0;
     long n_fixed = 0, k_fixed = 0;
     int i, j, l, rc = 0, reject = 0, last = 0, fresh = 1, accepted = 0, nsing = 0;
     int worst = -1, bad = -1, bad_kind = 0;
@@ -345,6 +345,7 @@ static int bgc_run_rosenbrock(bgc_run *r, const bgc_method *method, double *y)
                 rc = bgc_stiff_fail_step(r, method->name, t, h, bad, bad_kind, worst);
                 goto done;
             }
+            wanted = h;
             if (t + 1.01 * h - s->t_end > 0.0) {
                 h = s->t_end - t;
                 last = 1;
@@ -478,8 +479,11 @@ static int bgc_run_rosenbrock(bgc_run *r, const bgc_method *method, double *y)
             fresh = 1;
             nsing = 0;
             bad = -1;
-            if (last)
+            if (last) {
+                if (!fixed) /* the step to go on with: the controller's, or the one cut short */
+                    r->st->h_next = bgc_max(hnew, wanted);
                 goto done;
+            }
             k_fixed++;
             hnew = bgc_min(hnew, hmax);
             if (reject)
@@ -618,6 +622,7 @@ static int bgc_run_radau(bgc_run *r, const bgc_method *method, double *y)
     bgc_cplx *cmem = NULL, *Ec, *zc;
     int *piv = NULL;
     double t = r->t, h = 0.0, hnew, hfact = 0.0, hold = 0.0, hacc = 0.0, erracc = 1.0;
+    double wanted = 0.0;
     double faccon = 1.0, theta = thet, thetat = 0.0, thqold = 1.0, dynold = 1.0, hhfac = 0.5;
     long n_fixed = 0, k_fixed = 0;
     int i, j, k, l, rc = 0, reject = 0, last = 0, first = 1, needjac = 1, caljac = 0;
@@ -625,8 +630,13 @@ static int bgc_run_radau(bgc_run *r, const bgc_method *method, double *y)
     bgc_radau_use u;
     bgc_radau_dense dense;
 
-    for (k = 0; k < method->radau_sets; k++)
+    for (k = 0; k < method->radau_sets; k++) {
         smax = method->radau[k].s > smax ? method->radau[k].s : smax;
+        if (variable && 2 * method->radau[k].s - 1 == s->order0) {
+            set = k; /* going on from an earlier run: at its order, free to change it */
+            since = 10;
+        }
+    }
     pmax = (smax - 1) / 2;
     mem = malloc(((size_t)2 * D * D + (size_t)(4 * smax + 11) * D) * sizeof *mem);
     cmem = malloc(((size_t)pmax * D * D + (size_t)pmax * D + 1) * sizeof *cmem);
@@ -712,6 +722,7 @@ static int bgc_run_radau(bgc_run *r, const bgc_method *method, double *y)
                 rc = bgc_stiff_fail_step(r, method->name, t, h, bad, bad_kind, worst);
                 goto done;
             }
+            wanted = h;
             if (t + 1.01 * h - s->t_end > 0.0) {
                 h = s->t_end - t;
                 last = 1;
@@ -1023,8 +1034,13 @@ static int bgc_run_radau(bgc_run *r, const bgc_method *method, double *y)
             nsing = 0;
             bad = -1;
             caljac = 0;
-            if (last)
+            if (last) {
+                if (!fixed) { /* the step to go on with: the controller's, or the one cut short */
+                    r->st->h_next = bgc_max(hnew, wanted);
+                    r->st->order_next = 2 * u.ns - 1;
+                }
                 goto done;
+            }
             for (l = 0; l < N; l++)
                 scal[l] = u.atol + u.rtol * fabs(y[l]);
             r->st->rhs++;

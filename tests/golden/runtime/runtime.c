@@ -108,6 +108,8 @@ typedef struct bgc_settings {
     double step;          /* fixed step of the fixed-step solvers; 0: dt */
     long max_steps;       /* the most steps accepted between two output times (a run that
                              needs more fails: a runaway step size); 0: no limit */
+    double h0;            /* adaptive solvers: the first step to try; 0: estimated */
+    int order0;           /* radau: the order to start at (5, 9 or 13); 0: 5 */
 } bgc_settings;
 #define BGC_MAX_STEPS 100000L /* max_steps unless set */
 typedef struct bgc_stats {
@@ -116,6 +118,9 @@ typedef struct bgc_stats {
     int switched;              /* auto: 1 once it has switched to its stiff method ... */
     double t_switch;           /* ... at this time */
     double cpu;                /* processor seconds bgc_simulate took (clock()) */
+    double h_next;             /* adaptive solvers: the step they would take after the run's
+                                  end (set, not added to; 0: none) ... */
+    int order_next;            /* ... and radau the order (0: another solver) */
 } bgc_stats;
 /* Called at every output time with the state and the outputs; nonzero stops the run. */
 typedef int (*bgc_sink)(void *ctx, double t, const double *x, const double *y);
@@ -135,8 +140,9 @@ int bgc_simulate(const bgc_settings *s, const bgc_params *p, const double *x0, b
 
 /* bgc_simulate in steps: integrates x from s->t0 to s->t_end in the caller's workspace w
    (bgc_work_new), so that consecutive calls continue one run as far as the algebraic blocks
-   go (each Newton block starts from its last solution); the solver itself starts afresh,
-   with a new first step.  x is updated to the state at s->t_end (on failure, at the last
+   go (each Newton block starts from its last solution); the solver itself starts afresh:
+   with s->h0 and s->order0 set to the previous call's stats->h_next and ->order_next it goes
+   on with its step size (and radau with its order), else with a new first step.  x is updated to the state at s->t_end (on failure, at the last
    accepted step).  Returns as bgc_simulate; stats are added to, its cpu included. */
 int bgc_advance(const bgc_settings *s, const bgc_params *p, bgc_work *w, double *x,
                 bgc_sink sink, void *ctx, bgc_stats *stats, char *msg, size_t msg_size);
@@ -864,13 +870,15 @@ void bgc_settings_default(bgc_settings *s)
     s->atol = BGC_SCENE_ATOL;
     s->step = BGC_SCENE_STEP;
     s->max_steps = BGC_MAX_STEPS;
+    s->h0 = 0.0;
+    s->order0 = 0;
 }
 
 int bgc_check_settings(const bgc_settings *s, char *msg, size_t msg_size)
 {
     const char *bad = NULL;
     if (!(isfinite(s->t0) && isfinite(s->t_end) && isfinite(s->dt) && isfinite(s->rtol)
-          && isfinite(s->atol) && isfinite(s->step)))
+          && isfinite(s->atol) && isfinite(s->step) && isfinite(s->h0)))
         bad = "settings must be finite numbers";
     else if (!(s->dt > 0.0))
         bad = "--dt must be positive";
@@ -880,6 +888,8 @@ int bgc_check_settings(const bgc_settings *s, char *msg, size_t msg_size)
         bad = "--rtol and --atol must be positive";
     else if (s->step < 0.0)
         bad = "--step must be positive";
+    else if (s->h0 < 0.0)
+        bad = "the first step must not be negative";
     else if (s->max_steps < 0)
         bad = "--max-steps must not be negative";
     else if (s->solver < 0 || s->solver >= BGC_NUM_SOLVERS)
@@ -1257,7 +1267,7 @@ static int bgc_run_erk(bgc_run *r, const bgc_method *method, double *y)
     const int fixed = s->step > 0.0;
     double *mem = malloc((size_t)(m->all + 5 + m->degree) * D * sizeof *mem);
     double *k, *ys, *y1, *yout, *ystiff, *e2v, *q;
-    double t = r->t, h, hnew, facold = 1e-4;
+    double t = r->t, h, hnew, facold = 1e-4, wanted = 0.0;
     int i, l, rc, reject = 0, last = 0, worst = -1, bad = -1, bad_kind = 0, failed;
     int stiff_count = 0, nonstiff_count = 0;
     bgc_erk_dense dense;
@@ -1308,6 +1318,7 @@ static int bgc_run_erk(bgc_run *r, const bgc_method *method, double *y)
                 rc = bgc_fail_step(r->msg, r->msg_size, t, h, worst);
             goto done;
         }
+        wanted = h;
         if (t + 1.01 * h - s->t_end > 0.0) {
             h = s->t_end - t;
             last = 1;
@@ -1451,8 +1462,11 @@ static int bgc_run_erk(bgc_run *r, const bgc_method *method, double *y)
             memcpy(y, y1, sizeof(double) * N);
             t = tph;
             r->t = t;
-            if (last)
+            if (last) {
+                if (!fixed) /* the step to go on with: the controller's, or the one cut short */
+                    r->st->h_next = bgc_max(hnew, wanted);
                 goto done;
+            }
             if (fabs(hnew) > hmax && !fixed)
                 hnew = hmax;
             if (reject)
@@ -1536,7 +1550,9 @@ static int bgc_integrate(const bgc_settings *s, const bgc_params *p, bgc_work *w
     r.nout = bgc_output_count(s);
     r.kout = 1;
     r.t = s->t0;
-    r.h = 0.0;
+    r.h = s->h0;
+    stats->h_next = 0.0;
+    stats->order_next = 0;
     r.detect_stiffness = 0;
     r.steps_out = stats->steps;
     r.t_out = s->t0;
@@ -1855,7 +1871,7 @@ static int bgc_run_rosenbrock(bgc_run *r, const bgc_method *method, double *y)
     double *mem = malloc(((size_t)2 * D * D + (size_t)(S + 5 + R) * D) * sizeof *mem);
     int *piv = malloc((size_t)D * sizeof *piv);
     double *J, *E, *k, *f0, *ft, *ys, *y1, *yout, *q2, *q3; /* q2: dense.q, R rows */
-    double t = r->t, h = 0.0, hnew, hacc = 0.0, erracc = 1.0;
+    double t = r->t, h = 0.0, hnew, hacc = 0.0, erracc = 1.0, wanted = 0.0;
     long n_fixed = 0, k_fixed = 0;
     int i, j, l, rc = 0, reject = 0, last = 0, fresh = 1, accepted = 0, nsing = 0;
     int worst = -1, bad = -1, bad_kind = 0;
@@ -1939,6 +1955,7 @@ static int bgc_run_rosenbrock(bgc_run *r, const bgc_method *method, double *y)
                 rc = bgc_stiff_fail_step(r, method->name, t, h, bad, bad_kind, worst);
                 goto done;
             }
+            wanted = h;
             if (t + 1.01 * h - s->t_end > 0.0) {
                 h = s->t_end - t;
                 last = 1;
@@ -2072,8 +2089,11 @@ static int bgc_run_rosenbrock(bgc_run *r, const bgc_method *method, double *y)
             fresh = 1;
             nsing = 0;
             bad = -1;
-            if (last)
+            if (last) {
+                if (!fixed) /* the step to go on with: the controller's, or the one cut short */
+                    r->st->h_next = bgc_max(hnew, wanted);
                 goto done;
+            }
             k_fixed++;
             hnew = bgc_min(hnew, hmax);
             if (reject)
@@ -2212,6 +2232,7 @@ static int bgc_run_radau(bgc_run *r, const bgc_method *method, double *y)
     bgc_cplx *cmem = NULL, *Ec, *zc;
     int *piv = NULL;
     double t = r->t, h = 0.0, hnew, hfact = 0.0, hold = 0.0, hacc = 0.0, erracc = 1.0;
+    double wanted = 0.0;
     double faccon = 1.0, theta = thet, thetat = 0.0, thqold = 1.0, dynold = 1.0, hhfac = 0.5;
     long n_fixed = 0, k_fixed = 0;
     int i, j, k, l, rc = 0, reject = 0, last = 0, first = 1, needjac = 1, caljac = 0;
@@ -2219,8 +2240,13 @@ static int bgc_run_radau(bgc_run *r, const bgc_method *method, double *y)
     bgc_radau_use u;
     bgc_radau_dense dense;
 
-    for (k = 0; k < method->radau_sets; k++)
+    for (k = 0; k < method->radau_sets; k++) {
         smax = method->radau[k].s > smax ? method->radau[k].s : smax;
+        if (variable && 2 * method->radau[k].s - 1 == s->order0) {
+            set = k; /* going on from an earlier run: at its order, free to change it */
+            since = 10;
+        }
+    }
     pmax = (smax - 1) / 2;
     mem = malloc(((size_t)2 * D * D + (size_t)(4 * smax + 11) * D) * sizeof *mem);
     cmem = malloc(((size_t)pmax * D * D + (size_t)pmax * D + 1) * sizeof *cmem);
@@ -2306,6 +2332,7 @@ static int bgc_run_radau(bgc_run *r, const bgc_method *method, double *y)
                 rc = bgc_stiff_fail_step(r, method->name, t, h, bad, bad_kind, worst);
                 goto done;
             }
+            wanted = h;
             if (t + 1.01 * h - s->t_end > 0.0) {
                 h = s->t_end - t;
                 last = 1;
@@ -2617,8 +2644,13 @@ static int bgc_run_radau(bgc_run *r, const bgc_method *method, double *y)
             nsing = 0;
             bad = -1;
             caljac = 0;
-            if (last)
+            if (last) {
+                if (!fixed) { /* the step to go on with: the controller's, or the one cut short */
+                    r->st->h_next = bgc_max(hnew, wanted);
+                    r->st->order_next = 2 * u.ns - 1;
+                }
                 goto done;
+            }
             for (l = 0; l < N; l++)
                 scal[l] = u.atol + u.rtol * fabs(y[l]);
             r->st->rhs++;
@@ -3218,7 +3250,7 @@ int main(int argc, char **argv)
 {
     bgc_settings s;
     bgc_params p;
-    bgc_stats st = { 0, 0, 0, 0, 0, 0, 0, 0.0, 0.0 };
+    bgc_stats st = { 0, 0, 0, 0, 0, 0, 0, 0.0, 0.0, 0.0, 0 };
     int given[BGC_DIM(BGC_NUM_PARAMS)] = { 0 };
     double x0[BGC_DIM(BGC_NUM_STATES)] = { 0.0 };
     char msg[1024];
@@ -3588,7 +3620,7 @@ static int bgc_batch_loop(FILE *in, const bgc_settings *s, const bgc_params *bas
     bgc_put_text(&bgc_out, ",steps,rejected,rhs,cpu,message\n");
     while (fgets(bgc_line, sizeof bgc_line, in)) {
         const size_t len = strlen(bgc_line);
-        bgc_stats st = { 0, 0, 0, 0, 0, 0, 0, 0.0, 0.0 };
+        bgc_stats st = { 0, 0, 0, 0, 0, 0, 0, 0.0, 0.0, 0.0, 0 };
         const char *status;
         int c, too_long = len + 1 == sizeof bgc_line && bgc_line[len - 1] != '\n';
         if (too_long)
