@@ -267,8 +267,8 @@ def model_description(d: Description, guid: str) -> str:
                  generationTool="bgc",
                  variableNamingConvention="structured" if d.structured else "flat",
                  numberOfEventIndicators=0) + ">"]
-    common = dict(canNotUseMemoryManagementFunctions="true", canGetAndSetFMUstate="false",
-                  canSerializeFMUstate="false")
+    common = dict(canNotUseMemoryManagementFunctions="true", canGetAndSetFMUstate="true",
+                  canSerializeFMUstate="true")
     sources = ["    <SourceFiles>", f'      <File name="{_text(ident)}.c"/>', "    </SourceFiles>"]
     lines.append("  <ModelExchange" + _attrs(
         modelIdentifier=ident, completedIntegratorStepNotNeeded="true", **common,

@@ -19,7 +19,7 @@ from bgc.emit import emit_c
 from conftest import run_bgc
 
 fmpy = pytest.importorskip("fmpy")
-from fmpy.fmi2 import FMU2Model  # noqa: E402
+from fmpy.fmi2 import FMU2Model, FMU2Slave  # noqa: E402
 from fmpy.validation import validate_fmu  # noqa: E402
 
 if not backends.have_c_compiler():
@@ -118,7 +118,8 @@ def test_variables_agree_with_the_model(built):
         assert md.fmiVersion == "2.0" and md.numberOfEventIndicators == 0
         assert md.modelExchange.modelIdentifier == md.coSimulation.modelIdentifier == name
         assert md.modelExchange.providesDirectionalDerivative
-        assert not md.modelExchange.canGetAndSetFMUstate
+        for kind in (md.modelExchange, md.coSimulation):
+            assert kind.canGetAndSetFMUstate and kind.canSerializeFMUstate
         # the parameters as the model file declares them, settable before initialisation
         got = {v.name: float(v.start) for v in md.modelVariables if v.causality == "parameter"}
         assert got == params
@@ -204,6 +205,76 @@ def test_directional_derivatives(built):
     finally:
         model.freeInstance()
         shutil.rmtree(unzip, ignore_errors=True)
+
+
+def test_fmu_state_rolls_back_and_serialises(built):
+    """Co-Simulation of the pendulum in steps of 0.01: the state saved at t = 1 (and its bytes,
+    deserialised) brings the FMU back there, and the next 100 steps repeat bit for bit; they
+    follow bgc's own run.  Model Exchange: a saved state restores the time and the states.
+    A state of the other FMU type, or bytes that are not a state, are refused."""
+    path = built["pendulum"][1]
+    _, _, (t_ref, Y_ref, names) = built["pendulum"]
+    md = fmpy.read_model_description(str(path))
+    vr = {v.name: v.valueReference for v in md.modelVariables}
+    unzip = fmpy.extract(str(path))
+    slave = FMU2Slave(guid=md.guid, unzipDirectory=unzip,
+                      modelIdentifier=md.coSimulation.modelIdentifier, instanceName="cs")
+    model = None
+    try:
+        slave.instantiate()
+        slave.setupExperiment(startTime=0.0)
+        slave.enterInitializationMode()
+        slave.exitInitializationMode()
+        refs = [vr["x"], vr["y"]]
+
+        def run(k0, n):
+            out = []
+            for k in range(k0, k0 + n):
+                slave.doStep(k * 0.01, 0.01)
+                out.append(slave.getReal(refs))
+            return np.array(out)
+
+        run(0, 100)
+        state = slave.getFMUState()
+        blob = slave.serializeFMUState(state)
+        first = run(100, 100)
+        slave.setFMUState(state)
+        assert np.array_equal(run(100, 100), first)
+        restored = slave.deserializeFMUState(blob)
+        slave.setFMUState(restored)
+        assert np.array_equal(run(100, 100), first)
+        columns = [names.index("x"), names.index("y")]
+        assert np.allclose(t_ref[101:201], np.arange(101, 201) * 0.01, atol=1e-12)
+        assert relative_difference(first, Y_ref[101:201][:, columns]) < 1e-6
+        # refused: bytes that are not a state, and a state of the other FMU type
+        with pytest.raises(Exception):
+            slave.deserializeFMUState(bytes(len(blob)))
+        model, unzip_me = instantiate(path, md)
+        model.setupExperiment(startTime=0.0)
+        model.enterInitializationMode()
+        model.exitInitializationMode()
+        with pytest.raises(Exception):
+            model.setFMUState(state)
+        model.enterContinuousTimeMode()
+        model.setTime(0.25)
+        array = ctypes.c_double * 4
+        model.setContinuousStates(array(0.5, -0.5, 0.25, 0.75), 4)
+        saved = model.getFMUState()
+        model.setTime(0.5)
+        model.setContinuousStates(array(1.0, 2.0, 3.0, 4.0), 4)
+        model.setFMUState(saved)
+        x = array()
+        model.getContinuousStates(x, 4)
+        assert list(x) == [0.5, -0.5, 0.25, 0.75]
+        model.freeFMUState(saved)
+        slave.freeFMUState(state)
+        slave.freeFMUState(restored)
+    finally:
+        slave.freeInstance()
+        shutil.rmtree(unzip, ignore_errors=True)
+        if model is not None:
+            model.freeInstance()
+            shutil.rmtree(unzip_me, ignore_errors=True)
 
 
 NO_STATES = """model wire "a source and a resistor: no states"

@@ -35,7 +35,7 @@
 /* ------------------------------------------------------------ the FMI types --- */
 typedef void *fmi2Component;            /* an instance, as fmi2Instantiate returns it */
 typedef void *fmi2ComponentEnvironment; /* the environment's pointer, handed back to it */
-typedef void *fmi2FMUstate;             /* a saved state (not supported here) */
+typedef void *fmi2FMUstate;             /* a saved state (bgc_fmi_saved below) */
 typedef unsigned int fmi2ValueReference;
 typedef double fmi2Real;
 typedef int fmi2Integer;
@@ -580,60 +580,196 @@ BGC_FMI_EXPORT fmi2Status fmi2SetString(fmi2Component c, const fmi2ValueReferenc
     return bgc_fmi_none(c, "fmi2SetString", nvr);
 }
 
-/* ------------------------------------------- FMU states (not supported) --- */
+/* ------------------------------------------------------------- FMU states --- */
 
-static fmi2Status bgc_fmi_no_state(fmi2Component c, const char *fn)
+/* A saved state: everything an instance's future depends on -- its phase, time, parameters
+   (and which were set), states and cached values, the Co-Simulation solver's step size, order
+   and counters, and the workspace (the algebraic blocks' last solutions, the starting values
+   of their Newton iterations).  Serialised as its bytes after a header that names this FMU
+   (its GUID) and the layout's size: it deserialises only into the same binary. */
+typedef struct bgc_fmi_saved {
+    char magic[8];                      /* "bgcFMUs" */
+    char guid[64];                      /* BGC_FMI_GUID */
+    unsigned long size;                 /* sizeof(bgc_fmi_saved) */
+    int type, phase, fresh, stiff, dx_ok, y_ok;
+    double t, rtol;
+    bgc_params p;
+    int given[BGC_DIM(BGC_NUM_PARAMS)];
+    double x[BGC_DIM(BGC_NUM_STATES)], dx[BGC_DIM(BGC_NUM_STATES)];
+    double y[BGC_DIM(BGC_NUM_OUTPUTS)];
+    bgc_stats st;
+    double wrtol, watol;
+    double wv[BGC_DIM(BGC_WORK_DOUBLES)];
+    int wiv[BGC_DIM(BGC_WORK_INTS)];
+} bgc_fmi_saved;
+
+static void bgc_fmi_save(const bgc_fmi *m, bgc_fmi_saved *s)
 {
-    bgc_fmi *m = bgc_fmi_get(c, fn, BGC_FMI_ANY, 0);
-    if (m)
-        bgc_fmi_log(m, fmi2Error, "%s: the FMU cannot save its state "
-                    "(canGetAndSetFMUstate=\"false\")", fn);
-    return fmi2Error;
+    memset(s, 0, sizeof *s);
+    memcpy(s->magic, "bgcFMUs", 8);
+    strncpy(s->guid, BGC_FMI_GUID, sizeof s->guid - 1);
+    s->size = (unsigned long)sizeof *s;
+    s->type = (int)m->type;
+    s->phase = m->phase;
+    s->fresh = m->fresh;
+    s->stiff = m->stiff;
+    s->dx_ok = m->dx_ok;
+    s->y_ok = m->y_ok;
+    s->t = m->t;
+    s->rtol = m->rtol;
+    s->p = m->p;
+    memcpy(s->given, m->given, sizeof s->given);
+    memcpy(s->x, m->x, sizeof s->x);
+    memcpy(s->dx, m->dx, sizeof s->dx);
+    memcpy(s->y, m->y, sizeof s->y);
+    s->st = m->st;
+    s->wrtol = m->w->rtol;
+    s->watol = m->w->atol;
+    memcpy(s->wv, m->w->v, sizeof s->wv);
+    memcpy(s->wiv, m->w->iv, sizeof s->wiv);
 }
+
+static void bgc_fmi_restore(bgc_fmi *m, const bgc_fmi_saved *s)
+{
+    m->phase = s->phase;
+    m->fresh = s->fresh;
+    m->stiff = s->stiff;
+    m->dx_ok = s->dx_ok;
+    m->y_ok = s->y_ok;
+    m->t = s->t;
+    m->rtol = s->rtol;
+    m->p = s->p;
+    memcpy(m->given, s->given, sizeof s->given);
+    memcpy(m->x, s->x, sizeof s->x);
+    memcpy(m->dx, s->dx, sizeof s->dx);
+    memcpy(m->y, s->y, sizeof s->y);
+    m->st = s->st;
+    m->w->rtol = s->wrtol;
+    m->w->atol = s->watol;
+    memcpy(m->w->v, s->wv, sizeof s->wv);
+    memcpy(m->w->iv, s->wiv, sizeof s->wiv);
+    m->w->block = 0;
+    m->w->failure = 0;
+}
+
+static int bgc_fmi_saved_ours(const bgc_fmi_saved *s)
+{
+    return memcmp(s->magic, "bgcFMUs", 8) == 0 && s->size == (unsigned long)sizeof *s
+           && strncmp(s->guid, BGC_FMI_GUID, sizeof s->guid) == 0;
+}
+
+/* Whether s is a state of this FMU, for an instance of type `type`; why not in *why. */
+static int bgc_fmi_saved_ok(const bgc_fmi_saved *s, int type, const char **why)
+{
+    if (!bgc_fmi_saved_ours(s))
+        *why = "not a state of this FMU";
+    else if (s->type != type)
+        *why = "a state of the other FMU type (Model Exchange / Co-Simulation)";
+    else if (s->phase == BGC_FMI_FAILED)
+        *why = "a state after an error";
+    else
+        return 1;
+    return 0;
+}
+
+#define BGC_FMI_SAVABLE (BGC_FMI_ANY & ~(1 << BGC_FMI_FAILED))
 
 BGC_FMI_EXPORT fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate *FMUstate)
 {
-    (void)FMUstate;
-    return bgc_fmi_no_state(c, "fmi2GetFMUstate");
+    bgc_fmi *m = bgc_fmi_get(c, "fmi2GetFMUstate", BGC_FMI_SAVABLE, 0);
+    bgc_fmi_saved *s;
+    if (!m)
+        return fmi2Error;
+    if (!FMUstate)
+        return bgc_fmi_refuse(m, "fmi2GetFMUstate", "no place for the state");
+    s = (bgc_fmi_saved *)*FMUstate; /* not NULL: overwrite that state (FMI 2.0, 2.1.8) */
+    if (s) {
+        if (!bgc_fmi_saved_ours(s))
+            return bgc_fmi_refuse(m, "fmi2GetFMUstate", "not a state of this FMU");
+    } else if (!(s = (bgc_fmi_saved *)malloc(sizeof *s))) {
+        return bgc_fmi_refuse(m, "fmi2GetFMUstate", "out of memory");
+    }
+    bgc_fmi_save(m, s);
+    *FMUstate = s;
+    return fmi2OK;
 }
 
 BGC_FMI_EXPORT fmi2Status fmi2SetFMUstate(fmi2Component c, fmi2FMUstate FMUstate)
 {
-    (void)FMUstate;
-    return bgc_fmi_no_state(c, "fmi2SetFMUstate");
+    bgc_fmi *m = bgc_fmi_get(c, "fmi2SetFMUstate", BGC_FMI_ANY, 0);
+    const char *why = NULL;
+    if (!m)
+        return fmi2Error;
+    if (!FMUstate)
+        return bgc_fmi_refuse(m, "fmi2SetFMUstate", "no state given");
+    if (!bgc_fmi_saved_ok((const bgc_fmi_saved *)FMUstate, (int)m->type, &why))
+        return bgc_fmi_refuse(m, "fmi2SetFMUstate", why);
+    bgc_fmi_restore(m, (const bgc_fmi_saved *)FMUstate);
+    return fmi2OK;
 }
 
 BGC_FMI_EXPORT fmi2Status fmi2FreeFMUstate(fmi2Component c, fmi2FMUstate *FMUstate)
 {
-    (void)FMUstate;
-    return bgc_fmi_no_state(c, "fmi2FreeFMUstate");
+    bgc_fmi *m = bgc_fmi_get(c, "fmi2FreeFMUstate", BGC_FMI_ANY, 0);
+    if (!m)
+        return fmi2Error;
+    if (FMUstate) {
+        free(*FMUstate);
+        *FMUstate = NULL;
+    }
+    return fmi2OK;
 }
 
 BGC_FMI_EXPORT fmi2Status fmi2SerializedFMUstateSize(fmi2Component c, fmi2FMUstate FMUstate,
                                                      size_t *size)
 {
-    (void)FMUstate;
-    (void)size;
-    return bgc_fmi_no_state(c, "fmi2SerializedFMUstateSize");
+    bgc_fmi *m = bgc_fmi_get(c, "fmi2SerializedFMUstateSize", BGC_FMI_ANY, 0);
+    if (!m)
+        return fmi2Error;
+    if (!FMUstate || !size)
+        return bgc_fmi_refuse(m, "fmi2SerializedFMUstateSize", "no state or no size given");
+    *size = sizeof(bgc_fmi_saved);
+    return fmi2OK;
 }
 
 BGC_FMI_EXPORT fmi2Status fmi2SerializeFMUstate(fmi2Component c, fmi2FMUstate FMUstate,
                                                 fmi2Byte serializedState[], size_t size)
 {
-    (void)FMUstate;
-    (void)serializedState;
-    (void)size;
-    return bgc_fmi_no_state(c, "fmi2SerializeFMUstate");
+    bgc_fmi *m = bgc_fmi_get(c, "fmi2SerializeFMUstate", BGC_FMI_ANY, 0);
+    if (!m)
+        return fmi2Error;
+    if (!FMUstate || !serializedState)
+        return bgc_fmi_refuse(m, "fmi2SerializeFMUstate", "no state or no buffer given");
+    if (size < sizeof(bgc_fmi_saved))
+        return bgc_fmi_refuse(m, "fmi2SerializeFMUstate",
+                              "the buffer is smaller than fmi2SerializedFMUstateSize says");
+    memcpy(serializedState, FMUstate, sizeof(bgc_fmi_saved));
+    return fmi2OK;
 }
 
 BGC_FMI_EXPORT fmi2Status fmi2DeSerializeFMUstate(fmi2Component c,
                                                   const fmi2Byte serializedState[], size_t size,
                                                   fmi2FMUstate *FMUstate)
 {
-    (void)serializedState;
-    (void)size;
-    (void)FMUstate;
-    return bgc_fmi_no_state(c, "fmi2DeSerializeFMUstate");
+    bgc_fmi *m = bgc_fmi_get(c, "fmi2DeSerializeFMUstate", BGC_FMI_ANY, 0);
+    bgc_fmi_saved *s;
+    const char *why = NULL;
+    if (!m)
+        return fmi2Error;
+    if (!serializedState || !FMUstate)
+        return bgc_fmi_refuse(m, "fmi2DeSerializeFMUstate", "no bytes or no place given");
+    if (size != sizeof(bgc_fmi_saved))
+        return bgc_fmi_refuse(m, "fmi2DeSerializeFMUstate", "not a state of this FMU (size)");
+    s = (bgc_fmi_saved *)malloc(sizeof *s);
+    if (!s)
+        return bgc_fmi_refuse(m, "fmi2DeSerializeFMUstate", "out of memory");
+    memcpy(s, serializedState, sizeof *s);
+    if (!bgc_fmi_saved_ok(s, (int)m->type, &why)) {
+        free(s);
+        return bgc_fmi_refuse(m, "fmi2DeSerializeFMUstate", why);
+    }
+    *FMUstate = s;
+    return fmi2OK;
 }
 
 /* ------------------------------------------------- directional derivatives --- */
