@@ -565,7 +565,7 @@ BGT_SCRIPT = r"""
 import json, sys, time
 import sympy as sp
 import BondGraphTools as bgt
-from BondGraphTools.version import version
+from BondGraphTools.version import __version__ as version
 
 n, state, values = int(sys.argv[1]), json.loads(sys.argv[2]), json.loads(sys.argv[3])
 m, c, b, F = sp.symbols("m c b F")  # c = 1/k: BondGraphTools takes a symbol, not 1/k
