@@ -552,6 +552,20 @@ static void bgc_radau_dense_at(const void *dctx, double theta, double *yout)
         yout[l] = d->y[l] + bgc_radau_u(d->m, d->b, l, theta);
 }
 
+/* out[i so] = sum_j M[i ns + j] v[j sv] for i < ns (M: ns x ns, row-major), summed in the
+   order of j: the stage transformations T and T^-1 applied to one component. */
+static void bgc_radau_mul(const double *M, int ns, const double *v, size_t sv, double *out,
+                          size_t so)
+{
+    int i, j;
+    for (i = 0; i < ns; i++) {
+        double acc = M[(size_t)i * ns] * v[0];
+        for (j = 1; j < ns; j++)
+            acc += M[(size_t)i * ns + j] * v[(size_t)j * sv];
+        out[(size_t)i * so] = acc;
+    }
+}
+
 /* What follows from a stage set: its Newton budget, RADAU's tolerances for it and its
    exponents. */
 typedef struct bgc_radau_use {
@@ -807,12 +821,7 @@ static int bgc_run_radau(bgc_run *r, const bgc_method *method, double *y)
             for (l = 0; l < N; l++) {
                 for (i = 0; i < u.ns; i++)
                     Z[(size_t)i * D + l] = bgc_radau_u(m, b, l, 1.0 + m->c[i] * q) - zlast[l];
-                for (i = 0; i < u.ns; i++) {
-                    double acc = Ti[(size_t)i * u.ns] * Z[l];
-                    for (j = 1; j < u.ns; j++)
-                        acc += Ti[(size_t)i * u.ns + j] * Z[(size_t)j * D + l];
-                    W[(size_t)i * D + l] = acc;
-                }
+                bgc_radau_mul(Ti, u.ns, Z + l, D, W + l, D);
             }
         }
 
@@ -846,12 +855,7 @@ static int bgc_run_radau(bgc_run *r, const bgc_method *method, double *y)
                 break;
             for (l = 0; l < N; l++) {
                 double g[SMAX];
-                for (i = 0; i < u.ns; i++) {
-                    double acc = Ti[(size_t)i * u.ns] * Z[l];
-                    for (j = 1; j < u.ns; j++)
-                        acc += Ti[(size_t)i * u.ns + j] * Z[(size_t)j * D + l];
-                    g[i] = acc;
-                }
+                bgc_radau_mul(Ti, u.ns, Z + l, D, g, 1);
                 dw[l] = g[0] - fac1 * W[l];
                 for (k = 0; k < u.pairs; k++) {
                     const double w2 = W[(size_t)(2 * k + 1) * D + l];
@@ -910,13 +914,9 @@ static int bgc_run_radau(bgc_run *r, const bgc_method *method, double *y)
                     a[2 * k + 1] = W[(size_t)(2 * k + 1) * D + l] + creal(zc[(size_t)k * D + l]);
                     a[2 * k + 2] = W[(size_t)(2 * k + 2) * D + l] + cimag(zc[(size_t)k * D + l]);
                 }
-                for (i = 0; i < u.ns; i++) {
-                    double acc = T[(size_t)i * u.ns] * a[0];
+                for (i = 0; i < u.ns; i++)
                     W[(size_t)i * D + l] = a[i];
-                    for (j = 1; j < u.ns; j++)
-                        acc += T[(size_t)i * u.ns + j] * a[j];
-                    Z[(size_t)i * D + l] = acc;
-                }
+                bgc_radau_mul(T, u.ns, a, 1, Z + l, D);
             }
             /* converged; after one iteration only on the previous step's matrices, whose
                contraction faccon measured */
