@@ -223,16 +223,6 @@ def measure(program: Runs, settings: RunSettings, point: Point, ref: Trajectory,
     return traj
 
 
-def sweep_points(solver_names, rtols, step_divisions, dt) -> list[Point]:
-    pts = []
-    for name in solver_names:
-        if solvers.get(name).family == "fixed":
-            pts += [Point(name, "step", dt / k) for k in step_divisions]
-        else:
-            pts += [Point(name, "rtol", r) for r in rtols]
-    return pts
-
-
 def plan(compiled: Compiled, names=None, rtols=None, steps=None, dt=None) -> list[Point]:
     """`bgc accuracy`'s points: each solver (names; default: all) at each tolerance (rtols;
     default DEFAULT_RTOLS) or, fixed-step, each step (steps; default dt / 1 .. dt / 32, dt:
