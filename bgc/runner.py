@@ -118,14 +118,19 @@ def _status(code: int, signal: int = 0) -> int:
     return code if code in (0, 2) else 1
 
 
-def run(program: Program, settings: RunSettings, sink=None, progress=None, stats: bool = False,
-        timeout: float | None = None) -> Result:
-    """Runs program with settings.  sink: a file (or anything with write()) that the CSV
-    streams into as the run goes, SIGINT and SIGTERM passed on to the program (the command
-    line); None: the CSV comes back in Result.csv.  progress: called with (t, t0, t_end) as the
-    run goes.  stats: the program prints its counters (Result.stats).  timeout: seconds, then
-    the run is stopped (status -1).  A program loaded in this process returns its arrays, and
-    its errors are raised (the generated module's SimulationError, ValueError)."""
+def run(program, settings: RunSettings | None = None, sink=None, progress=None,
+        stats: bool = False, timeout: float | None = None, backend: str = "c") -> Result:
+    """Runs program (a Program, or a bgc.api.Compiled, prepared here for `backend` after
+    choose_backend) with settings (None: its own).  sink: a file (or anything with write())
+    that the CSV streams into as the run goes, SIGINT and SIGTERM passed on to the program
+    (the command line); None: the CSV comes back in Result.csv.  progress: called with
+    (t, t0, t_end) as the run goes.  stats: the program prints its counters (Result.stats).
+    timeout: seconds, then the run is stopped (status -1).  A program loaded in this process
+    returns its arrays, and its errors are raised (the generated module's SimulationError,
+    ValueError)."""
+    if not isinstance(program, Program):
+        program = prepare(program, choose_backend(backend)[0])
+    settings = program.defaults if settings is None else settings
     if program.module is not None:
         t, values = program.module.simulate(**settings.options(program.defaults))
         return Result(0, t=t, values=values)

@@ -74,3 +74,9 @@ def test_in_this_process_a_run_gives_arrays_and_raises_its_errors():
     assert t[-1] == 1.0 and Y.shape == (len(t), len(program.outputs))
     with pytest.raises(ValueError):
         runner.run(program, SCENE.with_options(dt=-1.0))
+
+
+def test_a_compiled_model_runs_as_it_is_with_its_scene_settings():
+    result = bgc.api.run(bgc.build(RLC, "step"), backend="python")
+    t, Y = bgc.api.arrays(result)
+    assert t[0] == 0.0 and t[-1] == 10.0 and result.status == 0
