@@ -67,8 +67,9 @@ class RunSettings:
         compiled with), as the keyword arguments of the generated module's simulate().  Only
         the changes, so that a run with the scene's settings starts the program exactly as it
         always has."""
-        out = {f.name: getattr(self, f.name) for f in fields(self)
-               if f.name not in ("t0", "scene") and getattr(self, f.name) != getattr(defaults, f.name)}
+        changed = [f.name for f in fields(self) if f.name not in ("t0", "scene")
+                   and getattr(self, f.name) != getattr(defaults, f.name)]
+        out = {name: getattr(self, name) for name in changed}
         if "params" in out:
             out["params"] = dict(self.params)
         return out

@@ -21,8 +21,8 @@ still the file that was built (its SHA-256 is checked before each use, like the 
 itself).  Records are written to a temporary file and renamed into place, so concurrent runs
 are safe: each sees a whole record or none.
 
-This module imports the standard library only (and bgc.backends, bgc.resources, bgc.run and
-bgc.runner, which do too).
+This module imports the standard library only (and bgc.backends, bgc.resources, bgc.run,
+bgc.runner and bgc.solvers, which do too; bgc.plot when a cold run makes a record).
 """
 from __future__ import annotations
 
