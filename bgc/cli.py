@@ -124,14 +124,18 @@ def _plot_file(ctx, param, value):
     return value
 
 
-def _parse_params(values) -> dict:
-    """-p NAME=VALUE items as {name: value}; the names are checked against the model's
-    parameters with the run's settings (bgc.run.parameter_overrides)."""
+def _parse_params(values, names) -> dict:
+    """-p NAME=VALUE items as {name: value}, each checked in turn (its form, its name against
+    the model's parameters `names` with bgc.run.parameter_overrides, its value)."""
     out = {}
     for item in values:
         name, sep, value = item.partition("=")
         if not sep:
             raise click.UsageError(f"-p expects NAME=VALUE, got '{item}'")
+        try:
+            run.parameter_overrides({name: value}, names)
+        except ValueError as error:
+            raise click.UsageError(str(error)) from None
         try:
             out[name] = float(value)
         except ValueError:
@@ -143,11 +147,7 @@ def _parse_params(values) -> dict:
 
 def _overrides(values, compiled) -> dict:
     """-p NAME=VALUE items checked against compiled's parameters: {name: value}."""
-    try:
-        return dict(run.parameter_overrides(
-            _parse_params(values), sorted(p.name for p in compiled.program.params)))
-    except ValueError as error:
-        raise click.UsageError(str(error)) from None
+    return _parse_params(values, sorted(p.name for p in compiled.program.params))
 
 
 MODEL = click.argument("model", type=click.Path(exists=True, dir_okay=False))
@@ -326,9 +326,13 @@ def simulate(model, scene, outputs, effects, algebra, backend, solver, rtol, ato
         (record, path), compiled = found, None
         program = warm.program(record, path)
         click.echo(record.warnings, err=True, nl=False)
+    problem = run.run_span_problem(record.settings, t_end, dt)  # (before -p, as always)
+    if problem:
+        raise click.UsageError(problem)
+    names = sorted(record.params)
     try:
         settings = runner.settings_for(
-            record.settings, sorted(record.params), _parse_params(params), t_end=t_end, dt=dt,
+            record.settings, names, _parse_params(params, names), t_end=t_end, dt=dt,
             solver=solver, rtol=rtol, atol=atol, step=step, max_steps=max_steps,
             project_initial=project_initial, allow_inconsistent=allow_inconsistent)
     except ValueError as error:
