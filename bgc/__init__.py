@@ -3,8 +3,10 @@
     import bgc
     t, Y, names = bgc.simulate("models/pendulum.bg", scene="swing")
 
-The API (bgc.api) is imported on first use of one of its names, so that `bgc --help` and a
-warm `bgc simulate` (bgc.warm) start without importing SymPy.
+The API (bgc.api; bgc.model for `load`) is imported on first use of one of its names, so that
+`bgc --help` and a warm `bgc simulate` (bgc.warm) start without importing SymPy.  The names are
+served here and never written over a submodule: no module of bgc has an API function's name
+(the equations stage is bgc.system, so `bgc.equations` is always the function).
 """
 __version__ = "0.1.0"
 __all__ = ["BgcArgumentError", "BgcModelError", "Compiled", "SimulationFailed", "build", "check",
@@ -12,12 +14,14 @@ __all__ = ["BgcArgumentError", "BgcModelError", "Compiled", "SimulationFailed", 
 
 
 def __getattr__(name):
-    if name in __all__:
+    if name == "load":
+        from .model import load as value
+    elif name in __all__:
         from . import api
         value = getattr(api, name)
-        globals()[name] = value
-        return value
-    raise AttributeError(f"module 'bgc' has no attribute {name!r}")
+    else:
+        raise AttributeError(f"module 'bgc' has no attribute {name!r}")
+    return value  # (not stored: the package's attributes are its modules' and these)
 
 
 def __dir__():

@@ -24,18 +24,15 @@ import io
 import math
 import os
 import re
-import subprocess
-import sys
-import tempfile
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
 import sympy as sp
 
-from . import backends, solvers
-from .api import Compiled, run_args
-from .emit import emit_c, emit_python
+from . import runner, solvers
+from .api import Compiled
+from .run import RunSettings
 from .stability import fixed_step_checks, fixed_step_of
 
 DEFAULT_RTOLS = tuple(10.0 ** -k for k in range(3, 11))
@@ -82,52 +79,6 @@ class Result:
 # ---------------------------------------------------------------- running the program
 
 
-class Program:
-    """The compiled scene as a runnable program, built once."""
-
-    def __init__(self, compiled: Compiled, backend: str, timeout: float):
-        self.timeout = timeout
-        self.backend = backend
-        self._tmp = None
-        if backend == "c":
-            (text,) = emit_c(compiled.program).values()
-            self.argv = [str(backends.compile_c(text))]
-        else:
-            (text,) = emit_python(compiled.program).values()
-            self._tmp = tempfile.TemporaryDirectory(prefix="bgc-accuracy-")
-            path = Path(self._tmp.name) / "model.py"
-            path.write_text(text, encoding="utf-8")
-            self.argv = [sys.executable, str(path)]
-
-    def close(self):
-        if self._tmp is not None:
-            self._tmp.cleanup()
-
-    def run(self, args: list[str]) -> tuple[int, str, str]:
-        """(status, stdout, stderr); a run over the time budget is status -1."""
-        try:
-            done = subprocess.run(self.argv + [*args, "--stats"], capture_output=True,
-                                  text=True, timeout=self.timeout)
-        except subprocess.TimeoutExpired:
-            return -1, "", f"stopped after {self.timeout:g} s (the time budget per run)"
-        return done.returncode, done.stdout, done.stderr
-
-
-def _stats(stderr: str) -> dict:
-    for line in stderr.splitlines():
-        if line.startswith("stats:"):
-            return {k: v for k, _, v in (part.partition("=") for part in line.split()[1:])}
-    return {}
-
-
-def _error_line(stderr: str) -> str:
-    lines = stderr.strip().splitlines()
-    errors = [ln for ln in lines if ln.startswith("error:")]
-    if errors:
-        return errors[-1][len("error:"):].strip()
-    return lines[-1] if lines else "failed"
-
-
 def _is_residual(name: str) -> bool:
     """A constraint residual's column: `rod.residual`, or `rod.residual[i]` of an array."""
     return re.fullmatch(r".*\.residual(\[[0-9]+\])?", name) is not None
@@ -152,10 +103,20 @@ class Trajectory:
     message: str
 
 
-def run_once(program: Program, settings: dict) -> Trajectory:
-    code, out, err = program.run(run_args(**settings))
-    names, data = parse_csv(out)
-    return Trajectory(names, data, _stats(err), code, "" if code == 0 else _error_line(err))
+@dataclass(frozen=True)
+class Runs:
+    """The compiled scene as a runnable program (built once), and the time budget of a run."""
+
+    program: runner.Program
+    timeout: float
+
+
+def run_once(runs: Runs, settings: RunSettings) -> Trajectory:
+    """One run, with its counters (bgc.runner.run)."""
+    done = runner.run(runs.program, settings, stats=True, timeout=runs.timeout)
+    names, data = parse_csv(done.csv)
+    return Trajectory(names, data, done.stats, done.status,
+                      "" if done.status == 0 else done.message)
 
 
 # ---------------------------------------------------------------- errors
@@ -208,26 +169,29 @@ def load_reference(path: str, names: list[str], times: np.ndarray) -> Trajectory
 # ---------------------------------------------------------------- the sweep
 
 
-def _is_stiff(program: Program, base: dict) -> bool:
+def _ratio(base: RunSettings) -> float:
+    """atol / rtol: the scene's, kept as rtol is swept."""
+    return base.atol / base.rtol
+
+
+def _tolerance(base: RunSettings, solver: str, rtol: float) -> RunSettings:
+    return replace(base, solver=solver, rtol=rtol, atol=rtol * _ratio(base))
+
+
+def _is_stiff(program: Runs, base: RunSettings) -> bool:
     """Whether `auto` switches to its stiff method at rtol 1e-6 (Hairer's stiffness test)."""
-    t = run_once(program, _settings(base, solver="auto", rtol=1e-6, atol=1e-6 * base["_ratio"]))
+    t = run_once(program, _tolerance(base, "auto", 1e-6))
     return "stiff_from" in t.stats
 
 
-def _settings(base: dict, **kw) -> dict:
-    s = {k: v for k, v in base.items() if not k.startswith("_")}
-    s.update(kw)
-    return s
-
-
-def make_references(program: Program, base: dict, progress) -> tuple[dict, str, float]:
+def make_references(program: Runs, base: RunSettings, progress) -> tuple[dict, str, float]:
     """{method: Trajectory} for the two reference methods, a description, and their
     disagreement (the error floor)."""
     stiff = _is_stiff(program, base)
     refs, parts = {}, []
     for name, rtol in REFERENCES[stiff]:
         progress(f"reference {name} rtol={rtol:g}")
-        t = run_once(program, _settings(base, solver=name, rtol=rtol, atol=rtol * base["_ratio"]))
+        t = run_once(program, _tolerance(base, name, rtol))
         if t.status != 0:
             raise AccuracyError(f"the reference run ({name}, rtol {rtol:g}) failed: {t.message}")
         refs[name] = t
@@ -238,7 +202,7 @@ def make_references(program: Program, base: dict, progress) -> tuple[dict, str, 
     return refs, what, floor
 
 
-def measure(program: Program, settings: dict, point: Point, ref: Trajectory, repeats: int,
+def measure(program: Runs, settings: RunSettings, point: Point, ref: Trajectory, repeats: int,
             span: float) -> Trajectory:
     """Fill `point` from one full run and `repeats` timing runs."""
     traj = run_once(program, settings)
@@ -252,21 +216,55 @@ def measure(program: Program, settings: dict, point: Point, ref: Trajectory, rep
     point.error_final, point.error_max, point.residual = compare(traj, ref)
     best = math.inf
     for _ in range(repeats):
-        t = run_once(program, dict(settings, dt=span))
+        t = run_once(program, replace(settings, dt=span))
         if t.status == 0 and "cpu" in t.stats:
             best = min(best, float(t.stats["cpu"]))
     point.cpu = best if best < math.inf else None
     return traj
 
 
-def sweep_points(solver_names, rtols, step_divisions, dt) -> list[Point]:
-    pts = []
-    for name in solver_names:
-        if solvers.get(name).family == "fixed":
-            pts += [Point(name, "step", dt / k) for k in step_divisions]
+def plan(compiled: Compiled, names=None, rtols=None, steps=None, dt=None) -> list[Point]:
+    """`bgc accuracy`'s points: each solver (names; default: all) at each tolerance (rtols;
+    default DEFAULT_RTOLS) or, fixed-step, each step (steps; default dt / 1 .. dt / 32, dt:
+    the output interval, default the scene's)."""
+    out_dt = dt or compiled.settings.dt
+    points = []
+    for n in names or list(solvers.NAMES):
+        if solvers.get(n).family == "fixed":
+            hs = steps or [out_dt / k for k in DEFAULT_STEP_DIVISIONS]
+            points += [Point(n, "step", h) for h in hs]
         else:
-            pts += [Point(name, "rtol", r) for r in rtols]
-    return pts
+            points += [Point(n, "rtol", r) for r in (rtols or DEFAULT_RTOLS)]
+    return points
+
+
+def plan_gains(compiled: Compiled, names=None, rtols=None, steps=None,
+               dt=None) -> list[tuple[str, str, float]]:
+    """`bgc accuracy --gains`'s (solver, setting, value) at each gain: each solver (names;
+    default the scene's and rk4) at each tolerance (default the scene's) or each step
+    (default the scene's, else the output interval)."""
+    s = compiled.settings
+    chosen = names or [s.solver] + (["rk4"] if s.solver != "rk4" else [])
+    settings = []
+    for n in chosen:
+        if solvers.get(n).family == "fixed":
+            settings += [(n, "step", h) for h in (steps or [s.step or dt or s.dt])]
+        else:
+            settings += [(n, "rtol", r) for r in (rtols or [s.rtol])]
+    return settings
+
+
+def _base(compiled: Compiled, backend: str, timeout: float, params, t_end, dt):
+    """The program (built once), the runs' common settings, the span of the timing runs."""
+    runs = Runs(runner.prepare(compiled, backend), timeout)
+    base = runs.program.defaults.with_options(t_end=t_end, dt=dt, params=dict(params or {}))
+    return runs, base, base.t_end - base.t0
+
+
+def _point_settings(base: RunSettings, solver: str, setting: str, value: float) -> RunSettings:
+    if setting == "rtol":
+        return _tolerance(base, solver, value)
+    return replace(base, solver=solver, step=value)
 
 
 def run_sweep(compiled: Compiled, points: list[Point], backend: str = "c", repeats: int = 3,
@@ -275,42 +273,29 @@ def run_sweep(compiled: Compiled, points: list[Point], backend: str = "c", repea
               progress=None) -> Result:
     """Run every point (in order; a solver's failure skips its later, harder points)."""
     progress = progress or (lambda text, done=None, total=None: None)
-    s = compiled.settings
-    base = {"t_end": t_end if t_end is not None else s.t_end, "dt": dt if dt is not None else s.dt,
-            "params": params or {}, "_ratio": s.atol / s.rtol}
-    span = base["t_end"] - s.t0
-    program = Program(compiled, backend, timeout)
-    try:
-        if reference_csv:
-            probe = run_once(program, _settings(base, solver="dop853", rtol=1e-3,
-                                                atol=1e-3 * base["_ratio"], t_end=base["t_end"]))
-            refs = {None: load_reference(reference_csv, probe.names, probe.data[:, 0])}
-            what, floor = f"{reference_csv} (given)", None
-        else:
-            refs, what, floor = make_references(program, base, progress)
-        result = Result(compiled.source.path, s.scene, backend, what, floor)
-        failed: set = set()
-        for k, pt in enumerate(points):
-            progress(f"{pt.solver} {pt.setting}={pt.value:.3g}", k, len(points))
-            key = (pt.solver, pt.gain)
-            if key in failed:
-                pt.status = "skipped (an easier setting failed)"
-                result.points.append(pt)
-                continue
-            run = _settings(base, solver=pt.solver, params=dict(base["params"]))
-            if pt.setting == "rtol":
-                run.update(rtol=pt.value, atol=pt.value * base["_ratio"])
-            else:
-                run.update(step=pt.value)
-            ref = _reference_for(refs, pt.solver)
-            measure(program, run, pt, ref, repeats, span)
-            if pt.status != "ok":
-                failed.add(key)
+    program, base, span = _base(compiled, backend, timeout, params, t_end, dt)
+    if reference_csv:
+        probe = run_once(program, _tolerance(base, "dop853", 1e-3))
+        refs = {None: load_reference(reference_csv, probe.names, probe.data[:, 0])}
+        what, floor = f"{reference_csv} (given)", None
+    else:
+        refs, what, floor = make_references(program, base, progress)
+    result = Result(compiled.source.path, compiled.settings.scene, backend, what, floor)
+    failed: set = set()
+    for k, pt in enumerate(points):
+        progress(f"{pt.solver} {pt.setting}={pt.value:.3g}", k, len(points))
+        key = (pt.solver, pt.gain)
+        if key in failed:
+            pt.status = "skipped (an easier setting failed)"
             result.points.append(pt)
-        progress(None)
-        return result
-    finally:
-        program.close()
+            continue
+        run = _point_settings(base, pt.solver, pt.setting, pt.value)
+        measure(program, run, pt, _reference_for(refs, pt.solver), repeats, span)
+        if pt.status != "ok":
+            failed.add(key)
+        result.points.append(pt)
+    progress(None)
+    return result
 
 
 def _reference_for(refs: dict, solver: str) -> Trajectory:
@@ -352,43 +337,32 @@ def run_gains(compiled: Compiled, gains: list[float], solver_settings: list[tupl
     drift, error against a reference at that gain, cost; fixed steps also |R(h lambda)|."""
     progress = progress or (lambda text, done=None, total=None: None)
     names = gain_parameters(compiled)
-    s = compiled.settings
-    base = {"t_end": t_end if t_end is not None else s.t_end, "dt": dt if dt is not None else s.dt,
-            "params": dict(params or {}), "_ratio": s.atol / s.rtol}
-    span = base["t_end"] - s.t0
-    program = Program(compiled, backend, timeout)
+    program, base, span = _base(compiled, backend, timeout, params, t_end, dt)
     result = None
-    try:
-        total = len(gains) * len(solver_settings)
-        k = 0
-        for g in gains:
-            over = dict(base["params"], **{n: g for n in names})
-            gbase = dict(base, params=over)
-            refs, what, floor = make_references(program, gbase, progress)
-            if result is None:
-                result = Result(compiled.source.path, s.scene, backend, what, floor)
-            else:
-                result.floor = max(result.floor or 0.0, floor)
-            for name, setting, value in solver_settings:
-                progress(f"gain {g:g}: {name} {setting}={value:.3g}", k, total)
-                k += 1
-                pt = Point(name, setting, value, gain=g)
-                run = _settings(gbase, solver=name)
-                if setting == "rtol":
-                    run.update(rtol=value, atol=value * base["_ratio"])
-                else:
-                    run.update(step=value)
-                h = fixed_step_of(name, run.get("step"), base["dt"])
-                if h is not None:
-                    checks = fixed_step_checks(compiled, name, h, over)
-                    if checks:
-                        pt.amplification = max(c.amplification for c in checks)
-                measure(program, run, pt, _reference_for(refs, name), repeats, span)
-                result.points.append(pt)
-        progress(None)
-        return result
-    finally:
-        program.close()
+    total = len(gains) * len(solver_settings)
+    k = 0
+    for g in gains:
+        over = dict(base.params, **{n: g for n in names})
+        gbase = base.with_options(params=over)
+        refs, what, floor = make_references(program, gbase, progress)
+        if result is None:
+            result = Result(compiled.source.path, compiled.settings.scene, backend, what, floor)
+        else:
+            result.floor = max(result.floor or 0.0, floor)
+        for name, setting, value in solver_settings:
+            progress(f"gain {g:g}: {name} {setting}={value:.3g}", k, total)
+            k += 1
+            pt = Point(name, setting, value, gain=g)
+            run = _point_settings(gbase, name, setting, value)
+            h = fixed_step_of(name, value if setting == "step" else None, base.dt)
+            if h is not None:
+                checks = fixed_step_checks(compiled, name, h, over)
+                if checks:
+                    pt.amplification = max(c.amplification for c in checks)
+            measure(program, run, pt, _reference_for(refs, name), repeats, span)
+            result.points.append(pt)
+    progress(None)
+    return result
 
 
 # ---------------------------------------------------------------- reports

@@ -1,5 +1,7 @@
-"""The pipeline as functions: load -> parse -> resolve -> flatten -> scene -> causality ->
-equations -> reduce -> lower -> emit.  `bgc.cli` and the tests use exactly these."""
+"""The pipeline as functions: parse -> resolve -> flatten -> scene -> causality -> equations
+(bgc.system) -> reduce -> lower -> emit, and runs of the result (bgc.runner's run, the one way
+bgc runs a program).  `bgc.cli`, bgc.model and the tests use exactly these.  bgc.load, the
+notebook's entry, is bgc.model's (it returns a Model, which is built with this module)."""
 from __future__ import annotations
 
 import io
@@ -8,12 +10,11 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from . import backends
 from .causality import CausalGraph, assign_causality
 from .diagnostics import ModelError, Note, format_diagnostic
 from .emit import emit_c, emit_python
 from .flatten import flatten
-from .equations import EquationSystem, build_equations, with_residual_outputs
+from .system import EquationSystem, build_equations, with_residual_outputs
 from .graph import Graph
 from .ir import Program
 from .lower import lower
@@ -24,7 +25,10 @@ from .resolve import resolve
 from .resources import read_bounded
 from .scene import Override, Settings, apply_scene
 from .run import (ALGEBRA, BACKENDS, FORMATS, SIMULATE_OPTIONS, TARGETS, check_run_options,
-                  choice as _choice, exclusive, run_args, run_span_problem)
+                  choice as _choice, exclusive)
+from .run import RunSettings, run_args  # noqa: F401  (the API's, from bgc.run)
+# the one run function and its helpers (bgc.runner), as the API offers them
+from .runner import Result, choose_backend, prepare, run, settings_for
 
 
 @dataclass(frozen=True)
@@ -76,17 +80,6 @@ def _model_error(exc: ModelError, source: Source) -> BgcModelError:
     """BgcArgumentError when every error is located in an argument, else BgcModelError."""
     outside = all(d.span is not None and d.span.origin is not None for d in exc.diagnostics)
     return (BgcArgumentError if outside else BgcModelError)(exc, source)
-
-
-def load(path, text: str | None = None, scene: str | None = None, backend: str = "c",
-         algebra: str = "auto", outputs=None, effects=None, project_initial: bool = False,
-         allow_inconsistent: bool = False):
-    """A model for interactive use (bgc.model.Model, which is also a Source): the file read
-    now (UTF-8, size-limited; `text` gives the source directly), built on first use with the
-    scene and options given."""
-    from .model import Model
-    return Model(read_source(path, text), scene, backend, algebra, outputs, effects,
-                 project_initial, allow_inconsistent)
 
 
 def read_source(path, text: str | None = None) -> Source:
@@ -287,24 +280,22 @@ def simulate(model, scene: str | None = None, backend: str = "c", algebra: str =
     compiled = build(model, scene, options.get("project_initial", False), algebra,
                      outputs=outputs, effects=effects,
                      allow_inconsistent=options.get("allow_inconsistent", False))
-    names = [p.name for p in compiled.program.params]
-    for name in options.get("params") or {}:
-        if name not in names:
-            raise ValueError(f"unknown parameter {name!r} (parameters: "
-                             f"{', '.join(names) or 'none'})")
-    problem = run_span_problem(compiled.settings, options.get("t_end"), options.get("dt"))
-    if problem:
-        raise ValueError(problem)
-    if backend == "c" and not backends.have_c_compiler():
-        backend = "python"
-    if backend == "python":
-        return _simulate_python(compiled, options)
-    (text,) = emit_c(compiled.program).values()
-    exe = backends.compile_c(text)
-    code, out, err = backends.run_c(exe, run_args(**options))
-    if code != 0:
-        raise SimulationFailed(err.strip(), out)
-    return _parse_csv(out)
+    program = compiled.program
+    settings = settings_for(program.scene, [p.name for p in program.params], **options)
+    backend, _ = choose_backend(backend)
+    ran = prepare(compiled, backend, in_process=True)
+    result = run(ran, settings)
+    return (*arrays(result), list(ran.outputs))
+
+
+def arrays(result: Result):
+    """A run's rows as numpy arrays (t, Y); SimulationFailed if it failed."""
+    if result.t is not None:
+        return np.asarray(result.t), np.asarray(result.values)
+    if result.status != 0:
+        raise SimulationFailed(result.stderr.strip(), result.csv)
+    t, Y, _ = _parse_csv(result.csv)
+    return t, Y
 
 
 class SimulationFailed(RuntimeError):
@@ -313,13 +304,6 @@ class SimulationFailed(RuntimeError):
     def __init__(self, message: str, partial_csv: str = ""):
         super().__init__(message)
         self.partial_csv = partial_csv
-
-
-def _simulate_python(compiled, options):
-    (text,) = emit_python(compiled.program).values()
-    module = backends.load_python_module(text)
-    t, Y = module.simulate(**options)
-    return np.asarray(t), np.asarray(Y), list(module.OUTPUTS)
 
 
 def _parse_csv(text: str):
@@ -341,6 +325,8 @@ def sweep(model, scene: str | None = None, grid=None, sample=None, vary=None, se
     dask.distributed.Client to run the batches on; else workers=N: a LocalCluster of N
     processes for this sweep; else serially in this process.  options: as simulate's
     (params are the fixed ones)."""
+    import contextlib
+
     from . import sweeps as sw
     _choice("backend", backend, BACKENDS)
     unknown = sorted(set(options) - set(SIMULATE_OPTIONS))
@@ -352,34 +338,17 @@ def sweep(model, scene: str | None = None, grid=None, sample=None, vary=None, se
               allow_inconsistent=options.get("allow_inconsistent", False))
     program = compiled.program
     sw.check_names(names, [p.name for p in program.params], options.get("params") or {})
+    backend, _ = choose_backend(backend)
+    settings = program.scene.with_options(**options)
     (py_text,) = emit_python(program).values()
     metrics = tuple(sw.parse_metric(m, list(program.outputs)) for m in metrics)
     c_text = next(iter(emit_c(program).values())) if backend == "c" else None
-    prog = sw.make_program(c_text, py_text, run_args(**options), metrics)
+    prog = sw.make_program(c_text, py_text, settings.args(program.scene), metrics)
     lines = [sw.run_line(names, v) for v in values]
-    own = None
-    if client is None and workers:
-        client = own = sw.local_client(workers)
-    size = batch_size or sw.default_batch_size(
-        len(lines), len(client.scheduler_info()["workers"]) if client is not None else 1)
-    try:
+    session = sw.dask_client(workers=workers) if client is None and workers else \
+        contextlib.nullcontext(client)
+    with session as client:
+        size = batch_size or sw.default_batch_size(
+            len(lines), len(client.scheduler_info()["workers"]) if client is not None else 1)
         results = sw.run(prog, lines, size, client, trajectories, progress, on_batch)
-    finally:
-        if own is not None:
-            cluster = own.cluster
-            own.close()
-            cluster.close()
     return sw.table(names, values, metrics, results, timing)
-
-
-def _export():
-    """Put the API's names on the package (bgc/__init__.py imports this module on first use):
-    `bgc.equations` is this module's function, not the stage module of the same name that
-    importing this module has just set there."""
-    import sys
-    package = sys.modules[__package__]
-    for name in package.__all__:
-        setattr(package, name, globals()[name])
-
-
-_export()

@@ -3,16 +3,14 @@ and the only one that writes files.  Model errors exit 1 with a located report, 
 from __future__ import annotations
 
 import contextlib
-import hashlib
 import math
-import os
 import sys
 import time
 from pathlib import Path
 
 import click
 
-from . import backends, outfile, run, solvers, warm
+from . import backends, outfile, run, runner, solvers, warm
 from .resources import read_bounded
 
 
@@ -127,16 +125,17 @@ def _plot_file(ctx, param, value):
 
 
 def _parse_params(values, names) -> dict:
-    """-p NAME=VALUE items as {name: value}; names: the model's parameters."""
-    names = set(names)
+    """-p NAME=VALUE items as {name: value}, each checked in turn (its form, its name against
+    the model's parameters `names` with bgc.run.parameter_overrides, its value)."""
     out = {}
     for item in values:
         name, sep, value = item.partition("=")
         if not sep:
             raise click.UsageError(f"-p expects NAME=VALUE, got '{item}'")
-        if name not in names:
-            raise click.UsageError(f"unknown parameter '{name}' (parameters: "
-                                   f"{', '.join(sorted(names)) or 'none'})")
+        try:
+            run.parameter_overrides({name: value}, names)
+        except ValueError as error:
+            raise click.UsageError(str(error)) from None
         try:
             out[name] = float(value)
         except ValueError:
@@ -144,6 +143,11 @@ def _parse_params(values, names) -> dict:
         if not math.isfinite(out[name]):
             raise click.UsageError(f"-p {name}: '{value}' is not a finite number")
     return out
+
+
+def _overrides(values, compiled) -> dict:
+    """-p NAME=VALUE items checked against compiled's parameters: {name: value}."""
+    return _parse_params(values, sorted(p.name for p in compiled.program.params))
 
 
 MODEL = click.argument("model", type=click.Path(exists=True, dir_okay=False))
@@ -310,37 +314,39 @@ def simulate(model, scene, outputs, effects, algebra, backend, solver, rtol, ato
     terminal, a run that takes more than a second shows its progress on stderr."""
     if project_initial and allow_inconsistent:
         raise click.UsageError("--project-initial and --allow-inconsistent exclude each other")
-    if backend == "c" and not backends.have_c_compiler():
-        click.echo("warning: no C compiler found (cc or $CC); using the Python backend", err=True)
-        backend = "python"
+    backend = _backend(backend)
     request = warm.Request(model, scene, outputs, effects, algebra, project_initial,
                            allow_inconsistent, backend)
     found = warm.lookup(request)
-    if found is not None and found[0].correctors and _fixed_step(solver or found[0].solver, step):
-        found = None  # (bgc.stability's check of the step needs the compiled model)
+    if found is not None and warm.needs_model(found[0], solver, step):
+        found = None
     if found is None:
         record, program, compiled = _compile_for_run(request)
     else:
-        (record, program), compiled = found, None
+        (record, path), compiled = found, None
+        program = warm.program(record, path)
         click.echo(record.warnings, err=True, nl=False)
-    problem = run.run_span_problem(record, t_end, dt)
+    problem = run.run_span_problem(record.settings, t_end, dt)  # (before -p, as always)
     if problem:
         raise click.UsageError(problem)
-    overrides = _parse_params(params, record.params)
-    args = run.run_args(t_end, dt, solver, rtol, atol, step, overrides, project_initial,
-                        max_steps, allow_inconsistent) + (["--stats"] if stats else [])
+    names = sorted(record.params)
+    try:
+        settings = runner.settings_for(
+            record.settings, names, _parse_params(params, names), t_end=t_end, dt=dt,
+            solver=solver, rtol=rtol, atol=atol, step=step, max_steps=max_steps,
+            project_initial=project_initial, allow_inconsistent=allow_inconsistent)
+    except ValueError as error:
+        raise click.UsageError(str(error)) from None
     if compiled is not None and record.correctors:
-        for message in stability.warnings_for_run(compiled, solver or record.solver,
-                                                  step or record.step, dt or record.dt,
-                                                  overrides):
+        for message in stability.warnings_for_run(compiled, settings.solver, settings.step,
+                                                  settings.dt, dict(settings.params)):
             click.echo(message, err=True)
     with _scratch(plot_file and not output) as tmp:
         copy = Path(tmp) / "run.csv" if tmp else None  # (the CSV that --plot reads)
         # (not while the CSV itself goes to the terminal: the bar would cut its lines)
         progress = _RunProgress() if sys.stderr.isatty() and (
             output or not sys.stdout.isatty()) else None
-        status, rows = _run(warm.argv(program) + list(map(str, args))
-                            + ["--progress"] * bool(progress), output, copy, progress)
+        status, rows = _run(program, settings, stats, output, copy, progress)
         if progress is not None:
             progress.close()
         if plot_file:
@@ -348,23 +354,25 @@ def simulate(model, scene, outputs, effects, algebra, backend, solver, rtol, ato
     sys.exit(status)
 
 
+def _backend(backend: str) -> str:
+    """The backend that runs (bgc.runner.choose_backend), its fallback said on stderr."""
+    backend, warning = runner.choose_backend(backend)
+    if warning:
+        click.echo(warning, err=True)
+    return backend
+
+
 def _scratch(needed: bool):
     """A temporary directory if needed, else None (a run does not create one for nothing)."""
     if not needed:
-        import contextlib
         return contextlib.nullcontext(None)
     import tempfile
     return tempfile.TemporaryDirectory(prefix="bgc-")
 
 
-def _fixed_step(solver: str, step) -> bool:
-    """Whether a run takes fixed steps (bgc.stability.fixed_step_of)."""
-    return step is not None or solvers.get(solver).family == "fixed"
-
-
 def _compile_for_run(request: warm.Request):
     """The cold path: build the model, compile its program into the cache, keep a warm
-    record of it; (record, program path, the compiled model)."""
+    record of it; (record, program, the compiled model)."""
     r = request
     try:
         data = read_bounded(r.model)
@@ -374,27 +382,10 @@ def _compile_for_run(request: warm.Request):
     source = _or_exit(api.source_from_bytes, r.model, data)
     compiled = _build(source, r.scene, r.project_initial, r.algebra, outputs=r.outputs,
                       effects=r.effects, allow_inconsistent=r.allow_inconsistent)
-    if r.backend == "c":
-        (text,) = emit.emit_c(compiled.program).values()
-        program = backends.compile_c(text)
-    else:
-        (text,) = emit.emit_python(compiled.program).values()
-        program = backends.cache_python(text)
-    s = compiled.settings
-    record = warm.Record(
-        program=program.name, sha256=hashlib.sha256(program.read_bytes()).hexdigest(),
-        warnings=_warnings_text(compiled), params=tuple(p.name for p in compiled.program.params),
-        t0=s.t0, t_end=s.t_end, dt=s.dt, solver=s.solver, step=s.step,
-        correctors=any(c.corrector in ("pid", "pd") for c in compiled.reduced.constraints),
-        **_plot_record(compiled))
+    program = runner.prepare(compiled, r.backend)
+    record = warm.record_for(compiled, program, _warnings_text(compiled))
     warm.store(request, data, record)
     return record, program, compiled
-
-
-def _plot_record(compiled) -> dict:
-    """The warm record's fields for a plot of the run (bgc.plot.describe)."""
-    from . import plot
-    return plot.describe(compiled)
 
 
 def _plot(record, csv, target: str, status: int, rows: bool) -> int:
@@ -435,59 +426,39 @@ class _Tee:
         self.copy.flush()
 
 
-def _status(done: backends.Finished) -> int:
-    """bgc's exit status for a program's: 0; 2 for settings it refused (a usage error);
-    128 + the signal that interrupted it; else 1 (a failed run, a violated constraint)."""
-    if done.signal:
-        return 128 + done.signal
-    return done.code if done.code in (0, 2) else 1
-
-
-def _run(argv: list[str], output: str | None, copy: Path | None = None,
+def _run(program, settings, stats: bool, output: str | None, copy: Path | None = None,
          progress=None) -> tuple[int, bool]:
-    """Runs a generated program, its CSV streamed to `output` (else stdout, and a copy into
-    `copy` if given); the exit status (_status), and whether rows were written.  A failed
+    """Runs the program (bgc.runner.run), its CSV streamed to `output` (else stdout, and a
+    copy into `copy` if given); the exit status, and whether rows were written.  A failed
     run's rows are kept, and the last line on stderr says so.  progress: a _RunProgress for
-    the program's progress lines (it runs with --progress)."""
+    the program's progress lines."""
     if not output:
         sink = sys.stdout if copy is None else _Tee(sys.stdout, copy)
         with sink.copy if copy is not None else contextlib.nullcontext():
-            done = backends.run_streaming(argv, sink, progress)
+            done = runner.run(program, settings, sink, progress, stats)
         click.echo(done.stderr, err=True, nl=False)
-        return _status(done), copy is not None and _last_row_time(copy) is not None
+        return done.status, copy is not None and outfile.last_row_time(copy) is not None
     try:
         part = outfile.Partial(output)
     except outfile.OutputError as error:
         click.echo(f"error: {error}", err=True)
         return 1, False
     with part:
-        done = backends.run_streaming(argv, part.file, progress)
+        done = runner.run(program, settings, part.file, progress, stats)
         click.echo(done.stderr, err=True, nl=False)
-        if done.code == 0:
+        if done.status == 0:
             part.commit()
             return 0, True
         part.file.flush()
-        last = _last_row_time(part.tmp)
+        last = outfile.last_row_time(part.tmp)
         if last is None:
-            if done.code != 2:  # (refused settings: a usage error, said as such)
+            if done.status != 2:  # (refused settings: a usage error, said as such)
                 click.echo(f"bgc: no rows computed; nothing written to {output}", err=True)
         else:
             part.keep()
             click.echo(f"bgc: the run stopped; the rows up to t = {last} are in {output}",
                        err=True)
-    return _status(done), last is not None
-
-
-def _last_row_time(path: Path) -> str | None:
-    """The time of the last complete row of a CSV (its header aside), or None if it has none."""
-    with open(path, "rb") as f:
-        size = f.seek(0, os.SEEK_END)
-        f.seek(max(0, size - 4096))
-        lines = f.read().split(b"\n")
-    rows = [line for line in lines[:-1] if line and not line.startswith(b"t,")]
-    if not rows:
-        return None
-    return rows[-1].split(b",", 1)[0].decode("ascii", "replace")
+    return done.status, last is not None
 
 
 def _numbers(text: str | None, option: str) -> list[float] | None:
@@ -603,39 +574,22 @@ def accuracy(model, scene, outputs, effects, algebra, backend, solver_list, rtol
     compiled = _build(model, scene, algebra=algebra, program=True, residual_outputs=True,
                       outputs=outputs, effects=effects)
     _check_span(compiled, t_end, dt)
-    overrides = _parse_params(params, [p.name for p in compiled.program.params])
-    if backend == "c" and not backends.have_c_compiler():
-        click.echo("warning: no C compiler found (cc or $CC); using the Python backend", err=True)
-        backend = "python"
-    s = compiled.settings
-    out_dt = dt or s.dt
+    overrides = _overrides(params, compiled)
+    backend = _backend(backend)
     stem = Path(model).stem + (f"-{scene}" if scene else "")
     directory = Path(output or f"accuracy-{stem}")
     progress = _Progress()
     try:
         if gain_values is not None:
-            chosen = names or [s.solver] + (["rk4"] if s.solver != "rk4" else [])
-            settings = []
-            for n in chosen:
-                if solvers.get(n).family == "fixed":
-                    settings += [(n, "step", h) for h in (step_values or [s.step or out_dt])]
-                else:
-                    settings += [(n, "rtol", r) for r in (rtol_values or [s.rtol])]
-            result = acc.run_gains(compiled, gain_values, settings, backend, repeats, t_end, dt,
-                                   overrides, timeout, progress)
+            result = acc.run_gains(compiled, gain_values,
+                                   acc.plan_gains(compiled, names, rtol_values, step_values, dt),
+                                   backend, repeats, t_end, dt, overrides, timeout, progress)
             base = "gains"
         else:
-            chosen = names or list(solvers.NAMES)
-            divisions = acc.DEFAULT_STEP_DIVISIONS
-            points = []
-            for n in chosen:
-                if solvers.get(n).family == "fixed":
-                    hs = step_values or [out_dt / k for k in divisions]
-                    points += [acc.Point(n, "step", h) for h in hs]
-                else:
-                    points += [acc.Point(n, "rtol", r) for r in (rtol_values or acc.DEFAULT_RTOLS)]
-            result = acc.run_sweep(compiled, points, backend, repeats, reference, overrides,
-                                   t_end, dt, timeout, progress)
+            result = acc.run_sweep(compiled, acc.plan(compiled, names, rtol_values, step_values,
+                                                      dt),
+                                   backend, repeats, reference, overrides, t_end, dt, timeout,
+                                   progress)
             base = "accuracy"
     except acc.AccuracyError as exc:
         progress(None)
@@ -735,52 +689,34 @@ def sweep(model, scene, algebra, grids, sample, varies, seed, metrics, backend, 
         raise click.UsageError(str(error)) from None
     compiled = _build(model, scene, project_initial, algebra,
                       allow_inconsistent=allow_inconsistent)
-    overrides = _parse_params(params, [p.name for p in compiled.program.params])
-    if backend == "c" and not backends.have_c_compiler():
-        click.echo("warning: no C compiler found (cc or $CC); using the Python backend", err=True)
-        backend = "python"
-    client, own = None, False
-    if scheduler or workers != 0:
-        if not sw.have_dask():
-            click.echo("note: dask.distributed is not installed (pip install 'bgc[sweep]'); "
-                       "running the batches serially in this process", err=True)
-        elif scheduler:
-            from distributed import Client
-            try:
-                client = Client(scheduler, timeout=30)
-            except OSError as error:
-                click.echo(f"error: cannot reach the scheduler {scheduler}: {error}", err=True)
-                sys.exit(1)
-        else:
-            client, own = sw.local_client(workers), True
-
+    overrides = _overrides(params, compiled)
+    backend = _backend(backend)
     def keep(result):
         for number, text in (result.trajectories or {}).items():
             _write_atomic(str(Path(trajectories) / f"run-{number:06d}.csv"), text)
 
-    start = time.perf_counter()
     try:
-        table = api.sweep(compiled, scene, grid=grid,
-                          sample=sample, vary=vary or None, seed=seed, metrics=metrics,
-                          client=client, batch_size=batch_size, backend=backend,
-                          algebra=algebra, timing=not no_timing,
-                          progress=sw.stderr_progress(), on_batch=keep if trajectories else None,
-                          trajectories=bool(trajectories), t_end=t_end, dt=dt, solver=solver,
-                          rtol=rtol, atol=atol, step=step, params=overrides,
-                          project_initial=project_initial,
-                          allow_inconsistent=allow_inconsistent)
+        with sw.dask_client(scheduler, workers, lambda text: click.echo(text, err=True)) \
+                as client:
+            start = time.perf_counter()  # (the cluster's start apart)
+            table = api.sweep(compiled, scene, grid=grid,
+                              sample=sample, vary=vary or None, seed=seed, metrics=metrics,
+                              client=client, batch_size=batch_size, backend=backend,
+                              algebra=algebra, timing=not no_timing,
+                              progress=sw.stderr_progress(),
+                              on_batch=keep if trajectories else None,
+                              trajectories=bool(trajectories), t_end=t_end, dt=dt,
+                              solver=solver, rtol=rtol, atol=atol, step=step, params=overrides,
+                              project_initial=project_initial,
+                              allow_inconsistent=allow_inconsistent)
+    except sw.SchedulerUnreachable as error:
+        click.echo(f"error: {error}", err=True)
+        sys.exit(1)
     except sw.SweepError as error:
         raise click.UsageError(str(error)) from None
     except sw.BatchFailed as error:
         click.echo(f"error: {error}", err=True)
         sys.exit(1)
-    finally:
-        if own:
-            cluster = client.cluster
-            client.close()
-            cluster.close()
-        elif client is not None:
-            client.close()
     wall = time.perf_counter() - start
     if parquet:
         try:

@@ -32,6 +32,7 @@ from dataclasses import dataclass, field
 import sympy as sp
 
 from .algebra import Max, Min
+from .run import RunSettings
 from .sparse import LUPlan
 
 T = sp.Symbol("t")
@@ -240,15 +241,7 @@ class ConstraintRow:
     level: str  # "position" (holonomic Phi) or "velocity" (dPhi/dt, or nonholonomic Phi)
 
 
-@dataclass(frozen=True)
-class SceneSettings:
-    t0: float
-    t_end: float
-    dt: float
-    solver: str  # euler | rk4 | dopri5
-    rtol: float
-    atol: float
-    step: float | None  # fixed step for euler/rk4; None: dt
+SceneSettings = RunSettings  # the scene's settings: bgc.run's one type of them
 
 
 @dataclass(frozen=True)

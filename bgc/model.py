@@ -15,7 +15,17 @@ import functools
 
 import numpy as np
 
-from . import api, backends, run
+from . import api, run, runner
+
+
+def load(path, text: str | None = None, scene: str | None = None, backend: str = "c",
+         algebra: str = "auto", outputs=None, effects=None, project_initial: bool = False,
+         allow_inconsistent: bool = False) -> Model:
+    """A model for interactive use (a Model, which is also a Source): the file read now
+    (UTF-8, size-limited; `text` gives the source directly), built on first use with the
+    scene and options given."""
+    return Model(api.read_source(path, text), scene, backend, algebra, outputs, effects,
+                 project_initial, allow_inconsistent)
 
 
 class Trajectory:
@@ -118,16 +128,17 @@ class Model(api.Source):
                          allow_inconsistent=o["allow_inconsistent"])
 
     @functools.cached_property
+    def _python(self) -> runner.Program:
+        """The generated Python, loaded in this process (runs, parameters, the right side)."""
+        return runner.prepare(self.compiled, "python", in_process=True)
+
+    @property
     def _module(self):
-        from .emit import emit_python
-        (text,) = emit_python(self.compiled.program).values()
-        return backends.load_python_module(text)
+        return self._python.module
 
     @functools.cached_property
-    def _program(self):
-        from .emit import emit_c
-        (text,) = emit_c(self.compiled.program).values()
-        return backends.compile_c(text)
+    def _c(self) -> runner.Program:
+        return runner.prepare(self.compiled, "c")
 
     @property
     def name(self) -> str:
@@ -149,9 +160,9 @@ class Model(api.Source):
         return dict(self._module.PARAMETERS)
 
     @property
-    def settings(self):
+    def settings(self) -> run.RunSettings:
         """The scene's run settings: t0, t_end, dt, solver, rtol, atol, step."""
-        return self.compiled.settings
+        return self.compiled.settings.run
 
     def _p(self, params):
         """The parameter vector, ordered as `parameters`."""
@@ -190,30 +201,17 @@ class Model(api.Source):
         unless given ("c" falls back to "python" without a C compiler)."""
         backend = self.backend if backend is None else backend
         run.choice("backend", backend, run.BACKENDS)
-        options = {k: v for k, v in dict(t_end=t_end, dt=dt, solver=solver, rtol=rtol,
-                                          atol=atol, step=step, max_steps=max_steps,
-                                          params=params).items() if v is not None}
-        for flag in ("project_initial", "allow_inconsistent"):
-            if self._options[flag]:
-                options[flag] = True
+        options = dict(t_end=t_end, dt=dt, solver=solver, rtol=rtol, atol=atol, step=step,
+                       max_steps=max_steps, params=params,
+                       project_initial=self._options["project_initial"] or None,
+                       allow_inconsistent=self._options["allow_inconsistent"] or None)
         run.check_run_options(options)
-        unknown = sorted(set(params or {}) - set(self.parameters))
-        if unknown:
-            raise ValueError(f"unknown parameter {unknown[0]!r} (parameters: "
-                             f"{', '.join(self.parameters)})")
-        problem = run.run_span_problem(self.settings, t_end, dt)
-        if problem:
-            raise ValueError(problem)
-        if backend == "c" and not backends.have_c_compiler():
-            backend = "python"
-        if backend == "python":
-            t, Y = self._module.simulate(**options)
-            return Trajectory(t, Y, self.outputs)
-        code, out, err = backends.run_c(self._program, run.run_args(**options))
-        if code != 0:
-            raise api.SimulationFailed(err.strip(), out)
-        t, Y, names = api._parse_csv(out)
-        return Trajectory(t, Y, names)
+        program = self.compiled.program
+        settings = runner.settings_for(program.scene, [p.name for p in program.params],
+                                       **options)
+        backend, _ = runner.choose_backend(backend)
+        result = runner.run(self._python if backend == "python" else self._c, settings)
+        return Trajectory(*api.arrays(result), self.outputs)
 
     def equations(self, format: str = "text") -> Equations:
         """The reduced equations, as `bgc equations` prints them; format "text" or "latex"."""

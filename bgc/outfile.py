@@ -74,3 +74,16 @@ def write_atomic(path: str | os.PathLike, text: str | bytes) -> None:
     with Partial(path) as out:
         out.file.write(text if isinstance(text, bytes) else text.encode("utf-8"))
         out.commit()
+
+
+def last_row_time(path: str | os.PathLike) -> str | None:
+    """The time of the last complete row of a CSV (its header aside), or None if it has none:
+    what a failed run's kept file holds, as the command line reports it."""
+    with open(path, "rb") as f:
+        size = f.seek(0, os.SEEK_END)
+        f.seek(max(0, size - 4096))
+        lines = f.read().split(b"\n")
+    rows = [line for line in lines[:-1] if line and not line.startswith(b"t,")]
+    if not rows:
+        return None
+    return rows[-1].split(b",", 1)[0].decode("ascii", "replace")

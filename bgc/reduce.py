@@ -33,7 +33,7 @@ from .algebra import (antiderivative, expand_bounded, is_singular, is_symmetric,
                       solve_for)
 from .diagnostics import Collector, ModelError, Span, fail, warning
 from .differentiate import directional, partial
-from .equations import (TIME, ConstraintDef, Equation, EquationSystem, OutputDef, ParameterDef,
+from .system import (TIME, ConstraintDef, Equation, EquationSystem, OutputDef, ParameterDef,
                         Run, StateVar, der)
 from .graph import var
 from .run import ALGEBRA

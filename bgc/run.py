@@ -1,10 +1,12 @@
-"""A run's settings as the generated programs take them, and the choices the command line
+"""A run's settings (RunSettings: the one type for them, from the scene's defaults to what a
+generated program is started with), the checks on them, and the choices the command line
 offers.  Light on purpose (the standard library and bgc.solvers only, no SymPy, no numpy): the
 command line's help, its warm path (bgc.warm) and the API all read it, and a warm
 `bgc simulate` must not pay for the compiler's imports."""
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass, fields, replace
 
 from . import solvers
 from .resources import MAX_OUTPUT_ROWS
@@ -30,9 +32,66 @@ def exclusive(project_initial, allow_inconsistent):
         raise ValueError("project_initial and allow_inconsistent exclude each other")
 
 
+@dataclass(frozen=True)
+class RunSettings:
+    """Everything that decides a run, in one value: the scene's numbers (a scene's defaults are
+    a RunSettings, compiled into its program; bgc.ir.Program.scene is one), and the options a
+    run gives over them (`with_options`, by dataclasses.replace).  The first seven fields are
+    the scene's, in the order the IR has always built them."""
+
+    t0: float
+    t_end: float
+    dt: float
+    solver: str
+    rtol: float
+    atol: float
+    step: float | None = None  # the fixed step; None: dt
+    max_steps: int | None = None  # between two output times; None: the program's (100000)
+    params: tuple[tuple[str, float], ...] = ()  # parameter overrides, in the order given
+    project_initial: bool = False
+    allow_inconsistent: bool = False
+    scene: str | None = None  # the scene's name (reports; not a run option)
+
+    def with_options(self, **options) -> RunSettings:
+        """These settings with the options given (None: keep this one's); params a dict."""
+        given = {k: v for k, v in options.items() if v is not None}
+        if "params" in given:
+            given["params"] = tuple(dict(given["params"]).items())
+        for flag in ("project_initial", "allow_inconsistent"):
+            if flag in given:
+                given[flag] = bool(given[flag])
+        return replace(self, **given)
+
+    def options(self, defaults: RunSettings) -> dict:
+        """What these settings change against a program's own (`defaults`, the scene it was
+        compiled with), as the keyword arguments of the generated module's simulate().  Only
+        the changes, so that a run with the scene's settings starts the program exactly as it
+        always has."""
+        changed = [f.name for f in fields(self) if f.name not in ("t0", "scene")
+                   and getattr(self, f.name) != getattr(defaults, f.name)]
+        out = {name: getattr(self, name) for name in changed}
+        if "params" in out:
+            out["params"] = dict(self.params)
+        return out
+
+    def args(self, defaults: RunSettings) -> list[str]:
+        """The generated program's command line for these settings (see options)."""
+        return run_args(**self.options(defaults))
+
+
+def parameter_overrides(given, names) -> tuple[tuple[str, float], ...]:
+    """Parameter overrides ({name: value}) checked against the program's parameters, `names`
+    (in the order the message lists them): the one check of -p and params=."""
+    for name in given or {}:
+        if name not in names:
+            raise ValueError(f"unknown parameter {name!r} (parameters: "
+                             f"{', '.join(names) or 'none'})")
+    return tuple((given or {}).items())
+
+
 def run_args(t_end=None, dt=None, solver=None, rtol=None, atol=None, step=None, params=None,
              project_initial=False, max_steps=None, allow_inconsistent=False) -> list[str]:
-    """The generated program's command line for these settings."""
+    """The generated program's command line for these options (None: the program's own)."""
     args = []
     for flag, value in (("--t-end", t_end), ("--dt", dt), ("--solver", solver),
                         ("--rtol", rtol), ("--atol", atol), ("--step", step),

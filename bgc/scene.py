@@ -11,27 +11,34 @@ from . import solvers
 from .diagnostics import Collector, Note, Origin, Span, did_you_mean, fail
 from .graph import Expr, Graph, check_effect_names, check_ports, model_effects, var
 from .resources import MAX_OUTPUT_ROWS
+from .run import RunSettings
 
 SOLVER_OPTIONS = ("rtol", "atol", "step")
 DEFAULT_TIME = (0.0, 10.0, 0.01)
 DEFAULT_SOLVER = (solvers.DEFAULT, 1e-6, 1e-9)
 
 
+def _run_field(name: str) -> property:
+    return property(lambda self: getattr(self.run, name), doc=f"the scene's run.{name}")
+
+
 @dataclass(frozen=True)
 class Settings:
+    """What a scene chose: its outputs and effects, its parameter values, and its run's
+    settings (a bgc.run.RunSettings: the one type of those); .t0, .t_end, .dt, .solver, .rtol,
+    .atol and .step read the run's."""
+
     scene: str | None
     outputs: tuple | None  # OutRefs; None: every state
-    t0: float
-    t_end: float
-    dt: float
-    solver: str
-    rtol: float
-    atol: float
-    step: float | None
+    run: RunSettings
     sets: tuple[tuple[str, Expr], ...]  # parameter default overrides
     given: tuple[str, ...] = ()  # what was given outside the model: "effects", "outputs"
     effects: tuple[str, ...] | None = None  # the effects in (None: all)
     left_out: tuple[tuple[str, str], ...] = ()  # (declared name, why) of what effects left out
+
+    t0, t_end, dt = _run_field("t0"), _run_field("t_end"), _run_field("dt")
+    solver, rtol, atol, step = (_run_field("solver"), _run_field("rtol"), _run_field("atol"),
+                                _run_field("step"))
 
 
 @dataclass(frozen=True)
@@ -152,13 +159,24 @@ def _number(expr: Expr, params: dict) -> float:
     return x
 
 
-def parameter_values(graph: Graph, sets=()) -> dict:
-    """Numeric default value of every parameter (with scene overrides), in order."""
-    overrides = dict(sets)
+def parameter_values(graph: Graph, sets=(), overrides: dict | None = None) -> dict:
+    """Every parameter's value, in order: an override (a run's -p) as given, else the scene's
+    `set` over the model's default, computed from the ones before it (as the generated code
+    does): the one evaluation of parameters outside the generated code.  Without overrides
+    the model's own values are checked (a located error if one is not a finite number); with
+    them (bgc.stability, for a run) the values are what the run computes."""
+    given = overrides or {}
+    chosen = dict(sets)
     values = {}
     for p in graph.parameters:
-        expr = overrides.get(p.name, p.expr)
+        if p.name in given:
+            values[var(p.name)] = sp.Float(float(given[p.name]))
+            continue
+        expr = chosen.get(p.name, p.expr)
         v = expr.value.xreplace(values)
+        if overrides is not None:
+            values[var(p.name)] = sp.Float(float(v))
+            continue
         try:
             x = float(v)
         except TypeError:
@@ -250,5 +268,6 @@ def apply_scene(graph: Graph, name: str | None, override: Override | None = None
             fail(scene.time[2].span, f"more than {MAX_OUTPUT_ROWS:.0e} output rows: the output "
                                      "interval is too small for the time span")
     solver, rtol, atol, step = _solver(scene.solver if scene else None, params)
-    return Scenario(g, Settings(name, outputs, t0, t1, dt, solver, rtol, atol, step, sets, given,
-                                effects, tuple(left_out.items())))
+    run = RunSettings(t0, t1, dt, solver, rtol, atol, step, scene=name)
+    return Scenario(g, Settings(name, outputs, run, sets, given, effects,
+                                tuple(left_out.items())))

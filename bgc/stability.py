@@ -19,10 +19,9 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-import sympy as sp
 
 from . import solvers
-from .graph import var
+from .scene import parameter_values as scene_parameter_values
 
 
 @dataclass(frozen=True)
@@ -37,17 +36,8 @@ class CorrectorModes:
 
 def parameter_values(compiled, overrides: dict | None = None) -> dict:
     """Every parameter's value: command-line overrides over the scene's over the defaults,
-    derived parameters recomputed from the ones before them (as the generated code does)."""
-    overrides = overrides or {}
-    sets = dict(compiled.settings.sets)
-    values: dict = {}
-    for p in compiled.graph.parameters:
-        if p.name in overrides:
-            values[var(p.name)] = sp.Float(float(overrides[p.name]))
-        else:
-            expr = sets.get(p.name, p.expr)
-            values[var(p.name)] = sp.Float(float(expr.value.xreplace(values)))
-    return values
+    derived parameters recomputed from the ones before them (bgc.scene.parameter_values)."""
+    return scene_parameter_values(compiled.graph, compiled.settings.sets, overrides or {})
 
 
 def corrector_modes(compiled, overrides: dict | None = None) -> list[CorrectorModes]:

@@ -17,6 +17,7 @@ Specifications are parsed here by hand (never eval):
 """
 from __future__ import annotations
 
+import contextlib
 import csv
 import functools
 import hashlib
@@ -34,7 +35,7 @@ from pathlib import Path
 
 import numpy as np
 
-from . import backends
+from . import backends, runner
 
 METRIC_KINDS = ("final", "max", "min", "maxabs", "rms")
 COUNTERS = ("steps", "rejected", "rhs")
@@ -51,6 +52,10 @@ class SweepError(ValueError):
 
 class BatchFailed(RuntimeError):
     """A batch's program did not run to its end (a broken toolchain, a killed process)."""
+
+
+class SchedulerUnreachable(RuntimeError):
+    """The Dask scheduler asked for cannot be reached (the message says which and why)."""
 
 
 # ---------------------------------------------------------------- specifications
@@ -207,10 +212,12 @@ def run_batch(program: SweepProgram, first: int, lines: tuple[str, ...],
               trajectories: bool = False) -> BatchResult:
     """Runs one batch in one process of the program: pure and idempotent (a Dask task)."""
     with tempfile.TemporaryDirectory(prefix="bgc-sweep-") as tmp:
-        if program.c_source is not None and backends.have_c_compiler():
-            argv, backend = [_executable(program.c_source)], "c"
+        # (on the worker: a worker without a C compiler runs the Python program)
+        backend, _ = runner.choose_backend("c" if program.c_source is not None else "python")
+        if backend == "c":
+            argv = [_executable(program.c_source)]
         else:
-            argv, backend = backends.python_program(program.python_source, tmp), "python"
+            argv = backends.python_program(program.python_source, tmp)
         argv += ["--batch", "-", *program.args]
         for m in program.metrics:
             argv += ["--metric", m]
@@ -394,6 +401,45 @@ def local_client(workers: int | None):
                            processes=True, dashboard_address=None,
                            silence_logs=logging.ERROR)
     return Client(cluster)
+
+
+NO_DASK = ("note: dask.distributed is not installed (pip install 'bgc[sweep]'); running the "
+           "batches serially in this process")
+
+
+@contextlib.contextmanager
+def dask_client(scheduler: str | None = None, workers: int | None = None, note=None):
+    """The Dask client a sweep's batches run on, closed (with its cluster, if it made one) at
+    the end: a connection to `scheduler` (SchedulerUnreachable if it does not answer), else a
+    LocalCluster of `workers` processes (None: the cores); None, to run the batches serially
+    in this process, for workers=0, or when dask.distributed is missing and there is a
+    note(text) to say so (without one that is an ImportError)."""
+    if not scheduler and workers == 0:
+        yield None
+        return
+    if note is not None and not have_dask():
+        note(NO_DASK)
+        yield None
+        return
+    if scheduler:
+        from distributed import Client
+        try:
+            client = Client(scheduler, timeout=30)
+        except OSError as error:
+            raise SchedulerUnreachable(f"cannot reach the scheduler {scheduler}: {error}") \
+                from None
+        try:
+            yield client
+        finally:
+            client.close()
+        return
+    client = local_client(workers)
+    try:
+        yield client
+    finally:
+        cluster = client.cluster
+        client.close()
+        cluster.close()
 
 
 def have_dask() -> bool:

@@ -4,9 +4,9 @@ once, without importing SymPy or running the pipeline again.
 After a cold run the command line stores a *record* in the cache directory
 (bgc.backends.cache_dir): which program the model compiled to (the file's name and SHA-256)
 and what the command line needs from the compiled model to run it exactly as the cold path
-would — the warnings the model gave (as printed), the parameters' names, the scene's start,
-end, output interval, solver and step, whether a constraint has a pid or pd corrector, and
-what `--plot` says of the model and its outputs (bgc.plot.describe).
+would — the warnings the model gave (as printed), the parameters' names, the scene's settings (the
+bgc.run.RunSettings compiled into the program), whether a constraint has a pid or pd
+corrector, and what `--plot` says of the model and its outputs (bgc.plot.describe).
 
 A record's key is the SHA-256 of everything its contents depend on: this record format, bgc's
 version and the size and modification time of every file bgc is made of (so an edited or
@@ -21,7 +21,8 @@ still the file that was built (its SHA-256 is checked before each use, like the 
 itself).  Records are written to a temporary file and renamed into place, so concurrent runs
 are safe: each sees a whole record or none.
 
-This module imports the standard library only (and bgc.backends, bgc.resources, which do too).
+This module imports the standard library only (and bgc.backends, bgc.resources, bgc.run,
+bgc.runner and bgc.solvers, which do too; bgc.plot when a cold run makes a record).
 """
 from __future__ import annotations
 
@@ -34,10 +35,11 @@ import tempfile
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
-from . import backends
+from . import backends, runner, solvers
 from .resources import read_bounded
+from .run import RunSettings
 
-FORMAT = 2  # of the record; change it when its fields change
+FORMAT = 3  # of the record; change it when its fields change
 
 
 @dataclass(frozen=True)
@@ -59,11 +61,7 @@ class Record:
     sha256: str
     warnings: str  # the model's warnings, as the cold path printed them
     params: tuple[str, ...]
-    t0: float
-    t_end: float
-    dt: float
-    solver: str
-    step: float | None
+    settings: RunSettings  # the scene's, compiled into the program
     correctors: bool  # a constraint has a pid or pd corrector (bgc.stability's warnings)
     plot_title: tuple[str, ...] = ()  # for --plot (bgc.plot.describe)
     plot_columns: tuple[tuple, ...] = ()  # (name, kind, doc, unit) of each output
@@ -127,6 +125,7 @@ def lookup(request: Request) -> tuple[Record, Path] | None:
         if data.pop("format") != FORMAT:
             return None
         data["params"] = tuple(data["params"])
+        data["settings"] = RunSettings(**dict(data["settings"], params=()))
         data["plot_title"] = tuple(data["plot_title"])
         data["plot_columns"] = tuple(map(tuple, data["plot_columns"]))
         record = Record(**data)
@@ -155,8 +154,26 @@ def store(request: Request, source: bytes, record: Record) -> None:
             pass
 
 
-def argv(program: Path) -> list[str]:
-    """The command that starts a cached program (a C executable, or generated Python)."""
-    if program.suffix == ".py":
-        return [sys.executable, str(program)]
-    return [str(program)]
+def program(record: Record, path: Path) -> runner.Program:
+    """The cached program a record names, to run (bgc.runner)."""
+    return runner.Program("python" if path.suffix == ".py" else "c", record.settings,
+                          record.params, path=path)
+
+
+def needs_model(record: Record, solver: str | None, step) -> bool:
+    """Whether a run with these options needs the compiled model, which a warm run does not
+    have: a fixed-step run of a model with a pid or pd corrector (bgc.stability checks the
+    step against the corrector, on the model)."""
+    fixed = step is not None or solvers.get(solver or record.settings.solver).family == "fixed"
+    return record.correctors and fixed
+
+
+def record_for(compiled, program: runner.Program, warnings: str) -> Record:
+    """The record of a cold run: compiled (bgc.api.Compiled) prepared as program, whose
+    warnings printed as `warnings`."""
+    from . import plot
+    return Record(
+        program=program.path.name, sha256=hashlib.sha256(program.path.read_bytes()).hexdigest(),
+        warnings=warnings, params=program.params, settings=program.defaults,
+        correctors=any(c.corrector in ("pid", "pd") for c in compiled.reduced.constraints),
+        **plot.describe(compiled))

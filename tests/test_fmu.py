@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+import bgc
 from bgc import api, backends, fmu
 from bgc.emit import emit_c
 from conftest import run_bgc
@@ -298,8 +299,8 @@ def test_only_the_fmi_functions_are_exported_and_the_sources_build(built, tmp_pa
     assert hasattr(lib, "fmi2DoStep") and hasattr(lib, "fmi2GetDirectionalDerivative")
     assert not hasattr(lib, "bgc_simulate") and not hasattr(lib, "bgc_rhs")
     sources = [tmp_path / "sources" / "pendulum.c"]
-    for name, model in (("diode", api.load(ROOT / "models" / "diode.bg")),
-                        ("wire", api.load("wire.bg", NO_STATES))):
+    for name, model in (("diode", bgc.load(ROOT / "models" / "diode.bg")),
+                        ("wire", bgc.load("wire.bg", NO_STATES))):
         description, _, source = fmu.fmu_texts(api.build(model, "charge" if name == "diode"
                                                           else None))
         assert description.directional == (name != "diode")
@@ -322,7 +323,7 @@ def test_model_text_is_escaped(tmp_path):
             'mass : I(m) init f = 1 "a \\"mass\\""\n'
             'spring : C(1/k)\n'
             'j -> mass\nj -> spring\n')
-    compiled = api.build(api.load("odd.bg", text))
+    compiled = api.build(bgc.load("odd.bg", text))
     _, xml, _ = fmu.fmu_texts(compiled)
     root = ET.fromstring(xml.encode("utf-8"))
     assert root.get("description") == 'a <b> & "c" ]]> %s\ufffd'

@@ -69,7 +69,8 @@ def test_a_warm_run_equals_the_cold_run_and_an_edit_misses(tmp_path, cache):
     records = sorted(cache.glob("warm-*.json"))
     assert len(records) == 1
     record = json.loads(records[0].read_text())
-    assert record["params"] == ["V", "R", "C"] and record["solver"] and not record["correctors"]
+    assert record["params"] == ["V", "R", "C"] and record["settings"]["solver"] \
+        and not record["correctors"]
 
     warm = run_bgc(*args)
     assert (warm.returncode, warm.stdout, warm.stderr) == (0, cold.stdout, cold.stderr)

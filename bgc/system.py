@@ -1,4 +1,6 @@
-"""Stage 5, equations: CausalGraph -> EquationSystem, the causal bond graph as equations.
+"""Stage 5, equations (bgc.system, so that `bgc.equations` is the API's function and no
+module of the same name shadows it): CausalGraph -> EquationSystem, the causal bond graph as
+equations.
 
 Every bond k has symbols e[k] and f[k]; each node contributes one equation for each variable
 its causality makes it compute.  An equation is *explicit*, `target = expr`, or *implicit*,
@@ -21,6 +23,7 @@ from .algebra import solve_for
 from .causality import CausalGraph
 from .diagnostics import Collector, ModelError, Span, did_you_mean, fail
 from .graph import TIME, Element, Graph, part_name, var, variable_name
+from .run import RunSettings
 from .scene import parameter_values
 
 
@@ -93,18 +96,7 @@ class ParameterDef:
     span: Span
 
 
-@dataclass(frozen=True)
-class Run:
-    """The numbers of the scene's run."""
-
-    scene: str | None
-    t0: float
-    t_end: float
-    dt: float
-    solver: str
-    rtol: float
-    atol: float
-    step: float | None
+Run = RunSettings  # the name bgc.reduce imports the run's settings by
 
 
 @dataclass(frozen=True)
@@ -116,7 +108,7 @@ class EquationSystem:
     constraints: tuple[ConstraintDef, ...]
     stores: tuple[Store, ...]
     outputs: tuple[OutputDef, ...]
-    run: Run
+    run: RunSettings  # the scene's
     warnings: tuple = ()
     fields: tuple = ()  # (field, coordinates of the Hamiltonian correction) of coupled I fields
 
@@ -524,7 +516,7 @@ def build_equations(cg: CausalGraph) -> EquationSystem:
     sets = {name: expr for name, expr in s.sets}
     params = tuple(ParameterDef(p.name, sets.get(p.name, p.expr).value, p.span)
                    for p in g.parameters)
-    run = Run(s.scene, s.t0, s.t_end, s.dt, s.solver, s.rtol, s.atol, s.step)
+    run = s.run
     return EquationSystem(g.name, params, tuple(b.states), tuple(b.equations),
                           tuple(b.constraints), tuple(b.stores), _outputs(b, s.outputs, s.left_out), run,
                           tuple(g.warnings),
@@ -540,5 +532,5 @@ def with_residual_outputs(es: EquationSystem) -> EquationSystem:
 
 
 __all__ = ["TIME", "Equation", "EquationSystem", "StateVar", "ConstraintDef", "Store",
-           "OutputDef", "ParameterDef", "Run", "build_equations", "with_residual_outputs", "der", "bond_effort",
+           "OutputDef", "ParameterDef", "build_equations", "with_residual_outputs", "der", "bond_effort",
            "bond_flow"]

@@ -1,0 +1,146 @@
+"""Running a generated program: the one place bgc runs a simulation.  The command line (cold and
+warm), bgc.simulate, Model.simulate, `bgc accuracy` and `bgc sweep` all come here for the
+backend (and the fallback when there is no C compiler), the run's settings (a
+bgc.run.RunSettings over the program's own, parameter overrides checked once) and the run.
+
+A Program is a generated program ready to run: a file in the cache started as a process (C, or
+Python), or generated Python loaded in this process (the API's Python backend, whose errors
+are the module's own exceptions).  run() starts it with the settings that differ from the ones
+it was compiled with, so that a run with the scene's settings starts it exactly as bgc always
+has.  The rows go to a sink (the command line's file or stdout, which it owns) or come back
+as text; the caller decides what a failure means (bgc.api raises, the command line keeps the
+rows and says so, bgc.accuracy records it).
+
+Light on purpose, like bgc.run: the standard library and bgc.backends only at import (a warm
+`bgc simulate` runs through here without importing SymPy or numpy); the emitter is imported
+only to prepare a program from a compiled model.
+"""
+from __future__ import annotations
+
+import subprocess
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+
+from . import backends
+from .run import RunSettings, parameter_overrides, run_span_problem
+
+NO_C_COMPILER = "warning: no C compiler found (cc or $CC); using the Python backend"
+
+
+def choose_backend(backend: str) -> tuple[str, str | None]:
+    """The backend that runs, and the warning to print about it (None: nothing to say): "c"
+    falls back to "python" when there is no C compiler."""
+    if backend == "c" and not backends.have_c_compiler():
+        return "python", NO_C_COMPILER
+    return backend, None
+
+
+@dataclass(frozen=True)
+class Program:
+    """A generated program ready to run."""
+
+    backend: str  # "c" or "python"
+    defaults: RunSettings  # the scene's settings, compiled into it
+    params: tuple[str, ...]  # its parameters, in order
+    outputs: tuple[str, ...] = ()
+    path: Path | None = None  # the file started as a process (C executable or Python)
+    module: object = None  # or: generated Python loaded in this process
+
+    def argv(self) -> list[str]:
+        """The command that starts it."""
+        if self.path.suffix == ".py":
+            return [sys.executable, str(self.path)]
+        return [str(self.path)]
+
+
+def prepare(compiled, backend: str, in_process: bool = False) -> Program:
+    """compiled's program (bgc.api.Compiled), emitted and built for `backend` (the C program
+    into the cache; Python into the cache, or loaded in this process when in_process)."""
+    from .emit import emit_c, emit_python
+    p = compiled.program
+    facts = dict(defaults=p.scene, params=tuple(q.name for q in p.params), outputs=p.outputs)
+    if backend == "c":
+        (text,) = emit_c(p).values()
+        return Program("c", path=backends.compile_c(text), **facts)
+    (text,) = emit_python(p).values()
+    if in_process:
+        return Program("python", module=backends.load_python_module(text), **facts)
+    return Program("python", path=backends.cache_python(text), **facts)
+
+
+def settings_for(defaults: RunSettings, names, params: dict | None = None,
+                 **options) -> RunSettings:
+    """A run's settings: a program's own (`defaults`, its scene's) with the options given
+    (None: its own) and the parameter overrides, checked against its parameters (`names`, in
+    the order an error lists them) and its scene's start (ValueError, for people)."""
+    overrides = parameter_overrides(params, names)
+    settings = defaults.with_options(params=dict(overrides), **options)
+    problem = run_span_problem(settings)
+    if problem:
+        raise ValueError(problem)
+    return settings
+
+
+@dataclass(frozen=True)
+class Result:
+    """How a run ended.  status is bgc's exit status for it: 0; 2 for settings the program
+    refused (a usage error); 128 + the signal that interrupted it; -1 over the time budget;
+    else 1 (a failed run, a violated constraint)."""
+
+    status: int
+    stderr: str = ""  # the program's messages (progress lines apart)
+    csv: str | None = None  # the rows as the program wrote them, when no sink took them
+    t: object = None  # in this process: the times and the rows (the module's arrays)
+    values: object = None
+
+    @property
+    def stats(self) -> dict:
+        """The counters of a run with stats=True: {name: text}."""
+        for line in self.stderr.splitlines():
+            if line.startswith("stats:"):
+                return {k: v for k, _, v in (part.partition("=") for part in line.split()[1:])}
+        return {}
+
+    @property
+    def message(self) -> str:
+        """A failed run's last error, without its `error:`."""
+        lines = self.stderr.strip().splitlines()
+        errors = [ln for ln in lines if ln.startswith("error:")]
+        if errors:
+            return errors[-1][len("error:"):].strip()
+        return lines[-1] if lines else "failed"
+
+
+def _status(code: int, signal: int = 0) -> int:
+    if signal:
+        return 128 + signal
+    return code if code in (0, 2) else 1
+
+
+def run(program, settings: RunSettings | None = None, sink=None, progress=None,
+        stats: bool = False, timeout: float | None = None, backend: str = "c") -> Result:
+    """Runs program (a Program, or a bgc.api.Compiled, prepared here for `backend` after
+    choose_backend) with settings (None: its own).  sink: a file (or anything with write())
+    that the CSV streams into as the run goes, SIGINT and SIGTERM passed on to the program
+    (the command line); None: the CSV comes back in Result.csv.  progress: called with
+    (t, t0, t_end) as the run goes.  stats: the program prints its counters (Result.stats).
+    timeout: seconds, then the run is stopped (status -1).  A program loaded in this process
+    returns its arrays, and its errors are raised (the generated module's SimulationError,
+    ValueError)."""
+    if not isinstance(program, Program):
+        program = prepare(program, choose_backend(backend)[0])
+    settings = program.defaults if settings is None else settings
+    if program.module is not None:
+        t, values = program.module.simulate(**settings.options(program.defaults))
+        return Result(0, t=t, values=values)
+    argv = program.argv() + settings.args(program.defaults) + ["--stats"] * stats \
+        + ["--progress"] * (progress is not None)
+    if sink is not None:
+        done = backends.run_streaming(argv, sink, progress)
+        return Result(_status(done.code, done.signal), done.stderr)
+    try:
+        done = subprocess.run(argv, capture_output=True, text=True, timeout=timeout)
+    except subprocess.TimeoutExpired:
+        return Result(-1, f"stopped after {timeout:g} s (the time budget per run)", "")
+    return Result(_status(done.returncode), done.stderr, done.stdout)
