@@ -305,19 +305,24 @@ def functions(reduced: Reduced) -> dict:
     symbols).  Each is built from the sorted steps by the same passes (pruning from its
     results, mapping, constants, temporaries), so a new function is a new entry here."""
     states = [st.symbol for st in reduced.states]
-    n, rows, t0 = len(states), reduced.rows, sp.Float(reduced.run.t0)
+    rows, t0 = reduced.rows, sp.Float(reduced.run.t0)
     position = [r.expr for r in rows if r.level == "position"]
     velocity = [r.expr for r in rows if r.level == "velocity"]
+    return _specs([st.init.xreplace({TIME: t0}) for st in reduced.states], reduced.rates,
+                  [o.expr for o in reduced.outputs], [r.expr for r in rows],
+                  [r.scale for r in rows], (len(position) * len(states),
+                                            _row_jacobian(position, states)),
+                  (len(velocity) * len(states), _row_jacobian(velocity, states)))
+
+
+def _specs(init, rhs, outputs, residual, scale, position_jac, velocity_jac) -> dict:
+    """The functions every program has; the constraint rows' Jacobians as (size, stores)."""
     txp = ("t", "x", "p")
-    return {
-        "init": (("p",), n, _stores(st.init.xreplace({TIME: t0}) for st in reduced.states)),
-        "rhs": (txp, n, _stores(reduced.rates)),
-        "outputs": (txp, len(reduced.outputs), _stores(o.expr for o in reduced.outputs)),
-        "residual": (txp, len(rows), _stores(r.expr for r in rows)),
-        "scale": (txp, len(rows), _stores(r.scale for r in rows)),
-        "position_jac": (txp, len(position) * n, _row_jacobian(position, states)),
-        "velocity_jac": (txp, len(velocity) * n, _row_jacobian(velocity, states)),
-    }
+    return {"init": (("p",), len(init), _stores(init)), "rhs": (txp, len(rhs), _stores(rhs)),
+            "outputs": (txp, len(outputs), _stores(outputs)),
+            "residual": (txp, len(residual), _stores(residual)),
+            "scale": (txp, len(scale), _stores(scale)),
+            "position_jac": (txp, *position_jac), "velocity_jac": (txp, *velocity_jac)}
 
 
 TANGENTS = {"jvp": "rhs"}  # derived functions: name -> the function differentiated along v
@@ -426,13 +431,8 @@ def explicit_program(name, states, params, outputs, init, rhs, out, scene,
     tests and for code that builds models without the front end.  jvp is derived as for
     compiled models."""
     n = len(states)
-    txp = ("t", "x", "p")
-    specs = {"init": (("p",), n, _stores(init)), "rhs": (txp, n, _stores(rhs)),
-             "outputs": (txp, len(out), _stores(out)),
-             "residual": (txp, len(residual), _stores(residual)),
-             "scale": (txp, len(scale), _stores(scale)),
-             "position_jac": (txp, len(position_jac), _stores(position_jac)),
-             "velocity_jac": (txp, len(velocity_jac), _stores(velocity_jac))}
+    specs = _specs(init, rhs, out, residual, scale, (len(position_jac), _stores(position_jac)),
+                   (len(velocity_jac), _stores(velocity_jac)))
     mapper = _Mapper({})
     fns = _build(mapper, (), specs, n)
     movable = tuple(velocity_movable) if velocity_movable is not None else (True,) * n
