@@ -561,6 +561,7 @@ class _Blocks:
         self.owner.update((a.target, eq) for a in prelude)
 
     def _newton(self, index, z, body, residuals, eq):
+        """The block as one Newton statement: its body, residuals and Jacobian."""
         tangents, jacobian = self._jacobian(z, body, residuals)
         lu = self._plan(index, z, "newton", jacobian, False, eq)
         self.steps.append(Newton(len(self.plans) - 1, tuple(z[c] for c in lu.col_of), body,
