@@ -81,7 +81,7 @@ import bgc  # noqa: E402
 from bgc import backends, ir  # noqa: E402
 from bgc.emit import c_runtime_parts, emit_c  # noqa: E402
 from bgc.graph import model_effects  # noqa: E402
-from bgc.reduce import Block  # noqa: E402
+from bgc.ir import defines  # noqa: E402
 from bgc.report import OP_KINDS  # noqa: E402
 
 MODEL = ROOT / "models" / "gantry_crane.bg"
@@ -144,11 +144,7 @@ def multipliers_computed(reduced) -> int:
     """Constraint multipliers that some step or block of the right side defines."""
     defined = set()
     for step in reduced.steps:
-        if isinstance(step, Block):
-            defined.update(step.unknowns)
-            defined.update(a.target for a in step.body)
-        else:
-            defined.add(step.target)
+        defined.update(defines(step))
     return sum(1 for k in reduced.constraints if k.multiplier in defined)
 
 

@@ -29,7 +29,8 @@ POW10_RANGE = (-24, 56)  # powers of ten for the C number formatter: |v| in abou
 C_RUNTIME = ("runtime.c", "drive.c", "erk.c", "stiff.c", "main.c", "batch.c")  # bgc/runtime/, in this order
 PYTHON_RUNTIME = ("runtime.py", "solve.py", "stiff.py", "batch.py")
 PLAN_ARRAYS = ("diag", "lptr", "lpos", "lrow", "uptr", "upos", "ucol", "upd", "prow", "pcol")
-MODEL_FUNCTIONS = ("rhs", "outputs", "jvp")  # take the workspace, may solve blocks
+MODEL_FUNCTIONS = ("rhs", "outputs", "jvp")  # take the workspace, may solve blocks; so do
+#                                               a program's extra functions (bgc.lower.with_tangent)
 PLAIN_FUNCTIONS = ("residual", "scale", "position_jac", "velocity_jac")
 SPARSE_FUNCTIONS = ("position_jac", "velocity_jac")  # store their nonzero entries only
 
@@ -78,7 +79,7 @@ def _workspace(program: Program, chunk_ops: int) -> _Workspace:
     jac = y + max(len(program.outputs), 1)
     slots = jac + 2 * n
     layouts = {name: ir.layout(program.function(name).body, slots, chunk_ops)
-               for name in MODEL_FUNCTIONS}
+               for name in _model_functions(program)}
     top = slots + max((len(lay.slot) for lay in layouts.values()), default=0)
     areas, ints = [], 0
     for bp in program.blocks:
@@ -239,7 +240,8 @@ def emit_c(program: Program, chunk_ops: int = ir.CHUNK_OPS) -> dict[str, str]:
     context.update(
         param_fields=fields,
         param_defaults=[printer.doprint(p.default) for p in program.params],
-        model={name: _function_context(writer, name, "out") for name in MODEL_FUNCTIONS},
+        model={name: _function_context(writer, name, "out")
+               for name in _model_functions(program)},
         plain={name: _plain_lines(writer, name, "out") for name in PLAIN_FUNCTIONS},
         plain_sizes={name: program.function(name).size for name in PLAIN_FUNCTIONS},
         sparse=SPARSE_FUNCTIONS,
@@ -277,6 +279,11 @@ def emit_python(program: Program, chunk_ops: int = ir.CHUNK_OPS) -> dict[str, st
         runtime=python_runtime(),
     )
     return {f"{context['ident']}.py": _render("python_module.py.j2", context)}
+
+
+def _model_functions(program: Program) -> tuple[str, ...]:
+    """rhs, outputs, jvp, then the program's extra functions (C only: an FMU's outputs_jvp)."""
+    return MODEL_FUNCTIONS + tuple(k for k in program.functions if k not in ir.FUNCTION_NAMES)
 
 
 # ---------------------------------------------------------------- literals and names
@@ -532,6 +539,7 @@ def _validate(program: Program) -> None:
              "residual": len(program.constraints), "scale": len(program.constraints),
              "position_jac": len(program.position_rows) * n,
              "velocity_jac": len(program.velocity_rows) * n}
+    sizes.update((k, f.size) for k, f in program.functions.items() if k not in sizes)
     for name, size in sizes.items():
         f = program.function(name)
         if f.size != size:

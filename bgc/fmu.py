@@ -38,9 +38,8 @@ from pathlib import Path
 import sympy as sp
 
 from . import backends, ir
-from .differentiate import directional
-from .emit import _runtime_text, c_param_fields, c_string_literal, emit_c, identifier
-from .printers import CPrinter
+from .emit import _runtime_text, c_string_literal, emit_c, identifier
+from .lower import with_tangent
 
 GUID_PLACEHOLDER = "{00000000-0000-0000-0000-000000000000}"
 SHARED_FLAGS = ("-shared", "-fPIC", "-fvisibility=hidden")
@@ -93,7 +92,6 @@ class Description:
     derivatives: tuple[tuple[int, tuple[int, ...]], ...]
     initial_unknowns: tuple[int, ...]
     units: tuple[str, ...]
-    directional: bool  # Model Exchange's directional derivatives cover outputs and derivatives
     experiment: ir.SceneSettings
     structured: bool
 
@@ -118,10 +116,9 @@ def platform() -> tuple[str, str]:
 # ---------------------------------------------------------------- the description
 
 
-def describe(compiled, output_tangents: bool | None = None) -> Description:
+def describe(compiled) -> Description:
     """The variables and the model structure of compiled's program (a build with its
-    program); output_tangents: whether the FMU gives the outputs' derivatives (None: find
-    out, outputs_jvp_c)."""
+    program)."""
     program = compiled.program
     graph = compiled.graph
     n, m = len(program.states), len(program.params)
@@ -184,8 +181,6 @@ def describe(compiled, output_tangents: bool | None = None) -> Description:
         outputs=tuple(sorted(outputs.items())),
         derivatives=tuple((der_pos[i], tuple(sorted(rows[i]))) for i in range(n)),
         initial_unknowns=tuple(initial), units=tuple(units),
-        directional=(outputs_jvp_c(program) is not None) if output_tangents is None
-        else output_tangents,
         experiment=program.scene,
         structured=all(_STRUCTURED.match(v) for v in names))
 
@@ -272,7 +267,7 @@ def model_description(d: Description, guid: str) -> str:
     sources = ["    <SourceFiles>", f'      <File name="{_text(ident)}.c"/>', "    </SourceFiles>"]
     lines.append("  <ModelExchange" + _attrs(
         modelIdentifier=ident, completedIntegratorStepNotNeeded="true", **common,
-        providesDirectionalDerivative="true" if d.directional else "false") + ">")
+        providesDirectionalDerivative="true") + ">")
     lines += sources + ["  </ModelExchange>"]
     lines.append("  <CoSimulation" + _attrs(
         modelIdentifier=ident, canHandleVariableCommunicationStepSize="true",
@@ -318,52 +313,17 @@ def model_description(d: Description, guid: str) -> str:
 # ---------------------------------------------------------------- the C source
 
 
-def outputs_jvp_c(program) -> str | None:
-    """The C function bgc_fmi_outputs_jvp: the outputs' derivative along a direction v of the
-    states, derived forward statement by statement from the outputs function; None when that
-    function solves algebraic blocks (their tangents need the factors of the model's
-    workspace)."""
-    f = program.function("outputs")
-    if any(not isinstance(s, (ir.Assign, ir.Store)) for s in f.body):
-        return None
-    printer = CPrinter(len(program.states), c_param_fields(tuple(p.name for p in program.params)),
-                       program.n_consts)
-    used = [int(s.target.name[1:]) for s in f.body if isinstance(s, ir.Assign)]
-    fresh = max(used, default=-1) + 1
-    tangents = {ir.X[i]: ir.V[i] for i in range(len(program.states))}
-    steps = []  # (name, expression)
-    stores = []
-    for s in f.body:
-        if isinstance(s, ir.Assign):
-            steps.append((s.target, s.expr))
-            d = directional(s.expr, tangents)
-            if d != 0:
-                tangents[s.target] = ir.W(fresh)
-                steps.append((ir.W(fresh), d))
-                fresh += 1
-        else:
-            stores.append((s.index, directional(s.expr, tangents)))
-    needed = set()
-    for _, e in stores:
-        needed |= e.free_symbols
-    kept = []
-    for target, e in reversed(steps):  # only what the stores read
-        if target in needed:
-            kept.append((target, e))
-            needed |= e.free_symbols
-    lines = [f"    const double {t.name} = {printer.doprint(e)};" for t, e in reversed(kept)]
-    lines += [f"    out[{k}] = {printer.doprint(e)};" for k, e in stores]
-    head = ("static int bgc_fmi_outputs_jvp(double t, const double *x, const bgc_params *p, "
-            "const double *v,\n                               double *out)")
-    return "\n".join([head, "{", "    (void)t;", "    (void)x;", "    (void)p;", "    (void)v;",
-                      "    (void)out;", *lines, "    return 0;", "}"]) + "\n"
+def fmu_program(program) -> ir.Program:
+    """The program with the model functions only an FMU needs: outputs_jvp, the outputs'
+    derivative along a direction v of the states (fmi2GetDirectionalDerivative)."""
+    return with_tangent(program, "outputs", "outputs_jvp")
 
 
 def fmu_source(program, guid: str, project_initial: bool = False,
-               jvp: str | None = None, allow_inconsistent: bool = False) -> str:
-    """The FMU's one C file: the generated program, the FMU part (with jvp, the outputs'
-    tangent function outputs_jvp_c gives, if any), bgc/runtime/fmi2.c."""
-    (text,) = emit_c(program).values()
+               allow_inconsistent: bool = False) -> str:
+    """The FMU's one C file: the generated program (fmu_program's, its main left out), the
+    FMU part, bgc/runtime/fmi2.c."""
+    (text,) = emit_c(fmu_program(program)).values()
     states = {name: i for i, name in enumerate(program.states)}
     out_state = [str(states.get(o, -1)) for o in program.outputs] or ["-1"]
     ident = model_identifier(program.name)
@@ -378,13 +338,10 @@ def fmu_source(program, guid: str, project_initial: bool = False,
         f"#define BGC_FMI_GUID {c_string_literal(guid)}",
         f"#define BGC_FMI_PROJECT_INITIAL {int(project_initial)}",
         f"#define BGC_FMI_ALLOW_INCONSISTENT {int(allow_inconsistent)}",
-        f"#define BGC_FMI_OUTPUT_JVP {int(jvp is not None)}",
         "/* The state each output is (-1: an output of its own). */",
         "static const int bgc_fmi_output_state[BGC_DIM(BGC_NUM_OUTPUTS)] = { "
         + ", ".join(out_state) + " };",
     ]
-    if jvp is not None:
-        part += ["/* The outputs' derivative along v (a direction of the states). */", jvp]
     return "\n".join(head) + "\n" + text + "\n" + "\n".join(part) + "\n" + \
         _runtime_text("fmi2.c")
 
@@ -398,11 +355,9 @@ def make_guid(*texts: str) -> str:
 def fmu_texts(compiled, project_initial: bool = False,
               allow_inconsistent: bool = False) -> tuple[Description, str, str]:
     """(description, modelDescription.xml, the C source), the GUID derived from both."""
-    jvp = outputs_jvp_c(compiled.program)
-    d = describe(compiled, jvp is not None)
+    d = describe(compiled)
     xml = model_description(d, GUID_PLACEHOLDER)
-    source = fmu_source(compiled.program, GUID_PLACEHOLDER, project_initial, jvp,
-                        allow_inconsistent)
+    source = fmu_source(compiled.program, GUID_PLACEHOLDER, project_initial, allow_inconsistent)
     guid = make_guid(xml, source)
     return d, xml.replace(GUID_PLACEHOLDER, guid), source.replace(GUID_PLACEHOLDER, guid)
 

@@ -14,7 +14,9 @@ never occur in expressions, so nothing a model author writes reaches generated c
 through the name strings (states, outputs, params, block unknowns), which the emitters escape
 as literals.
 
-Statements (the kinds both emitters render):
+Statements, the one vocabulary from bgc.reduce to the emitters (reduce writes them over model
+symbols, bgc.lower maps them to the symbols above; pruning, mapping, differentiation and the
+emitters all walk the same kinds):
   Assign(w, expr)            w = expr
   Store(k, expr)             result[k] = expr (a state derivative, an output, x0[k], ...)
   Solve(block, z, A, b)      A z = b for the unknowns z: A's entries in the order of the
@@ -23,6 +25,10 @@ Statements (the kinds both emitters render):
                              (assignments given z), residuals, tangents and Jacobian entries
   Resolve(block, dz, rhs)    J dz = rhs with the factors the block's last solve left (the
                              tangent of a block in `jvp`)
+A block is an index into the blocks' plans (BlockPlan: its LU plan and the (row, unknown) of
+each matrix entry); Solve's and Newton's unknowns are in the plan's column order, their right
+sides and residuals in its row order.  `defines` and `uses` are the one def/use analysis,
+`prune` the one dead-code pass, `map_statement` the one rewrite of a statement's expressions.
 """
 from __future__ import annotations
 
@@ -97,6 +103,22 @@ def substitute(expr, mapping: dict, memo: dict | None = None):
             continue
         memo[e] = rebuild(e, [memo[a] for a in e.args])
     return memo[expr]
+
+
+def trivial(e) -> bool:
+    """A number, a symbol, or a negated symbol: substituted where it is used, never assigned."""
+    if e.is_Number or e.is_Symbol or e.is_Indexed:
+        return True
+    return e.is_Mul and len(e.args) == 2 and e.args[0] == -1 and (e.args[1].is_Symbol
+                                                                   or e.args[1].is_Indexed)
+
+
+def integral_floats(e):
+    """Floats with an integral value as integers (1.0*x is x), exact either way."""
+    floats = [f for f in e.atoms(sp.Float) if float(f).is_integer() and abs(float(f)) < 2 ** 53]
+    if not floats:
+        return e
+    return e.xreplace({f: sp.Integer(int(f)) for f in floats})
 
 
 # ---------------------------------------------------------------- statements
@@ -216,12 +238,59 @@ def uses(s) -> set:
     return out
 
 
+def prune(body) -> tuple:
+    """The statements the stores need, in order: the one pruning pass (backwards, from the
+    results), for every function at every level (model symbols in bgc.lower, IR symbols after
+    it).  A Resolve needs its block's last Solve or Newton (whose factors it reuses) besides
+    its own inputs."""
+    needed = set()
+    factored = set()  # blocks whose factors a kept Resolve uses
+    keep = []
+    for s in reversed(body):
+        if isinstance(s, Store) or any(d in needed for d in defines(s)) or (
+                isinstance(s, (Solve, Newton)) and s.block in factored):
+            keep.append(s)
+            needed |= uses(s)
+            if isinstance(s, Resolve):
+                factored.add(s.block)
+            elif isinstance(s, (Solve, Newton)):
+                factored.discard(s.block)
+    keep.reverse()
+    return tuple(keep)
+
+
+def positions(order) -> list[int]:
+    """The inverse permutation: positions(order)[k] is where k is in order (a plan's row_of
+    and col_of give, for each position, the residual or unknown reduce numbered)."""
+    at = [0] * len(order)
+    for pos, k in enumerate(order):
+        at[k] = pos
+    return at
+
+
+def map_statement(s, fn):
+    """s with fn applied to every expression it holds (its targets unchanged)."""
+    if isinstance(s, Assign):
+        return Assign(s.target, fn(s.expr))
+    if isinstance(s, Store):
+        return Store(s.index, fn(s.expr))
+    if isinstance(s, Solve):
+        return Solve(s.block, s.unknowns, tuple(fn(e) for e in s.matrix),
+                     tuple(fn(e) for e in s.rhs))
+    if isinstance(s, Resolve):
+        return Resolve(s.block, s.targets, tuple(fn(e) for e in s.rhs))
+    return Newton(s.block, s.unknowns, tuple(Assign(a.target, fn(a.expr)) for a in s.body),
+                  tuple(fn(e) for e in s.residuals),
+                  tuple(Assign(a.target, fn(a.expr)) for a in s.tangents),
+                  tuple(fn(e) for e in s.jacobian), s.final_factor)
+
+
 # ---------------------------------------------------------------- the program
 
 
 @dataclass(frozen=True)
 class Function:
-    name: str  # consts init rhs outputs jvp residual scale position_jac velocity_jac
+    name: str  # consts init rhs outputs jvp residual scale position_jac velocity_jac, ...
     args: tuple[str, ...]  # of t, x, p, v
     size: int  # of its result array
     body: tuple
@@ -250,6 +319,8 @@ class BlockPlan:
     unknowns: tuple[str, ...]  # display names
     method: str  # "lu" | "newton"
     lu: LUPlan
+    pattern: tuple[tuple[int, int], ...] = ()  # (residual, unknown) of each matrix entry, in
+    #                                            the order of Solve.matrix, Newton.jacobian
 
 
 @dataclass(frozen=True)
@@ -274,7 +345,8 @@ class Program:
     constraints: tuple[ConstraintRow, ...]
     velocity_movable: tuple[bool, ...]
     scene: SceneSettings
-    functions: dict  # name -> Function, for every name of FUNCTION_NAMES
+    functions: dict  # name -> Function: every name of FUNCTION_NAMES, then any others
+    #                  (an FMU's outputs_jvp; the C emitter renders them as it renders jvp)
     blocks: tuple[BlockPlan, ...] = ()
     jacobian: JacobianPattern = JacobianPattern((), ())
 

@@ -22,7 +22,7 @@ import sympy as sp
 
 from . import resources
 from .graph import variable_name
-from .reduce import Block, explicit_forms
+from .reduce import BlockInfo, explicit_forms, shown_steps
 
 GREEK = frozenset(
     "alpha beta gamma delta epsilon zeta eta theta iota kappa lambda mu nu xi pi rho sigma "
@@ -282,8 +282,8 @@ def latex_system(compiled, header: str) -> LatexSystem:
         pairs += [(d, forms[d]) for d in r.rates]
         pairs += [(m, forms[m]) for m in multipliers + shown if forms[m] != m]
     else:
-        for step in r.steps:
-            if isinstance(step, Block):
+        for step in shown_steps(r):
+            if isinstance(step, BlockInfo):
                 how = "LU" if step.method == "lu" else "Newton's method"
                 pairs.append(((step.index, how, step.unknowns), None))
                 pairs += [(0, e) for e in step.residuals]
@@ -296,7 +296,7 @@ def latex_system(compiled, header: str) -> LatexSystem:
         if isinstance(lhs, sp.Symbol):
             symbols.add(lhs.name)
         elif rhs is None:
-            symbols.update(u.name for u in lhs[2])
+            symbols.update(lhs[2])
         if rhs is not None:
             symbols.update(s.name for s in rhs.free_symbols)
     names = tex_names(sorted(symbols), coordinates(compiled.graph))
@@ -306,7 +306,7 @@ def latex_system(compiled, header: str) -> LatexSystem:
         if rhs is None:
             index, how, unknowns = lhs
             rows.append(Row(rf"& \text{{block {index}, solved numerically ({how}), for }} "
-                            + ", ".join(tex[u.name] for u in unknowns) + ":", None))
+                            + ", ".join(tex[u] for u in unknowns) + ":", None))
         elif isinstance(lhs, sp.Symbol):
             rows.append(Row(tex[lhs.name], rhs))
         else:

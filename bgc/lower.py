@@ -1,195 +1,48 @@
 """Stage 7, lower: Reduced -> Program, the IR the emitters print (bgc.ir).
 
-1. Each function takes from the sorted steps only what its results need (dead-code
-   elimination from the results backwards): `rhs` the state derivatives, `outputs` the scene's
-   outputs.
-2. `jvp`, the Jacobian of the right side times a direction v, is derived from `rhs` by forward
-   differentiation, statement by statement: an assignment's tangent is the directional
-   derivative of its expression; through a linear block A z = b the tangent solves
-   A dz = db - dA z with A's factors; through a Newton block dz = -J^-1 (dr/du du), J at the
-   solution.  `jacobian()` of the generated code evaluates jvp once per colour of the columns.
-3. Model symbols become IR symbols (states x[i], parameters p[j], the rest w<k>); an assignment
-   that only renames or negates is propagated, not emitted.
-4. Subexpressions of the parameters alone become constants c[k]; repeated subexpressions
+reduce hands on its sorted steps already as IR statements (Assign, Solve, Newton) over model
+symbols; every function of the program is built from them by the same passes:
+
+1. `functions` lists each function by its results (Store statements); `TANGENTS` the ones
+   derived by forward differentiation (`jvp` from `rhs`; bgc.differentiate.tangent).  A new
+   function (an event's indicators, a reset) is a new entry there, nothing else.
+2. Each takes from the steps only what its results need (bgc.ir.prune, backwards).
+3. Model symbols become IR symbols (states x[i], parameters p[j], the rest w<k>, numbered as
+   first met); an assignment that only renames or negates is propagated, not emitted; blocks
+   are numbered in the order the functions first use them.
+4. The tangents are derived on the IR functions; `jacobian()` of the generated code evaluates
+   jvp once per colour of the columns.  `with_tangent` derives one more on a finished program
+   (the FMU's outputs_jvp).
+5. Subexpressions of the parameters alone become constants c[k]; repeated subexpressions
    within a function become temporaries (value numbering, linear in the code's size).
-5. Every block gets its factorization plan (bgc.sparse).
 """
 from __future__ import annotations
+
+from dataclasses import replace
 
 import sympy as sp
 
 from . import ir
-from .blt import perfect_matching
-from .differentiate import directional, partial
-from .ir import (C, P, T, V, X, Assign, BlockPlan, ConstraintRow, Function, JacobianPattern,
-                 Newton, Param, Program, Resolve, SceneSettings, Solve, Store, as_expr)
-from .reduce import Assign as RAssign
-from .reduce import Block, Reduced
-from .sparse import plan as lu_plan
+from .differentiate import partial, tangent
 from .graph import TIME, var
-
-
-# ---------------------------------------------------------------- model-level statements
-# Before symbols are mapped, a function is a list of these, over model symbols:
-#   RAssign(target, expr)              (from bgc.reduce)
-#   ("solve", Block)                   the unknowns of a linear block
-#   ("newton", Block, final_factor)    the unknowns and body of a nonlinear block
-#   ("resolve", Block, targets, rhs)   a tangent solve with the block's factors
-#   ("store", index, expr)
-
-
-def _flatten(steps):
-    out = []
-    for s in steps:
-        if isinstance(s, Block) and s.method == "lu":
-            out.extend(s.prelude)
-            out.append(("solve", s))
-            out.extend(s.body)
-        elif isinstance(s, Block):
-            out.append(("newton", s, False))
-        else:
-            out.append(s)
-    return out
-
-
-def _defined(s):
-    if isinstance(s, RAssign):
-        return (s.target,)
-    if s[0] == "solve":
-        return s[1].unknowns
-    if s[0] == "newton":
-        return s[1].unknowns + tuple(a.target for a in s[1].body)
-    if s[0] == "resolve":
-        return s[2]
-    return ()
-
-
-def _read(s) -> set:
-    if isinstance(s, RAssign):
-        return s.expr.free_symbols
-    if s[0] == "store":
-        return s[2].free_symbols
-    if s[0] == "solve":
-        b = s[1]
-        out = set()
-        for e in [e for _, _, e in b.matrix] + list(b.rhs):
-            out |= e.free_symbols
-        return out
-    if s[0] == "resolve":
-        out = set()
-        for e in s[3]:
-            out |= e.free_symbols
-        return out
-    b = s[1]
-    inner = set(b.unknowns) | {a.target for a in b.body} | {a.target for a in b.tangents}
-    out = set()
-    for e in [a.expr for a in b.body] + list(b.residuals) + [a.expr for a in b.tangents] + \
-            [e for _, _, e in b.jacobian]:
-        out |= e.free_symbols
-    return out - inner
-
-
-def _select(statements, needed: set) -> list:
-    """The statements that the needed symbols depend on, in order (stores always kept)."""
-    keep = []
-    needed = set(needed)
-    for s in reversed(statements):
-        if not isinstance(s, RAssign) and s[0] == "store":
-            keep.append(s)
-            needed |= _read(s)
-        elif any(d in needed for d in _defined(s)):
-            keep.append(s)
-            needed |= _read(s)
-    keep.reverse()
-    return keep
-
-
-# ---------------------------------------------------------------- forward differentiation
-
-
-class _Tangents:
-    """The jvp statements of a function: each primal statement followed by its tangent."""
-
-    def __init__(self, seeds: dict):
-        self.tan = dict(seeds)  # symbol -> its tangent (a symbol or an expression)
-        self.fresh = 0
-
-    def symbol(self, s, prefix="d"):
-        self.fresh += 1
-        return sp.Symbol(f"{prefix}[{s.name}]#{self.fresh}", real=True)
-
-    def of(self, expr):
-        return directional(expr, {u: self.tan[u] for u in expr.free_symbols if u in self.tan})
-
-    def bind(self, target, value, out, prefix="d"):
-        """target's tangent is value: a new assignment unless it is zero or a symbol."""
-        if value == 0:
-            return
-        if value.is_Symbol or value.is_Indexed:
-            self.tan[target] = value
-            return
-        d = self.symbol(target, prefix)
-        out.append(RAssign(d, value))
-        self.tan[target] = d
-
-    def program(self, statements) -> list:
-        out = []
-        for s in statements:
-            if isinstance(s, RAssign):
-                out.append(s)
-                self.bind(s.target, self.of(s.expr), out)
-            elif s[0] == "store":
-                out.append(("store", s[1], self.of(s[2])))
-            elif s[0] == "solve":
-                out.append(s)
-                self._solve(s[1], out)
-            elif s[0] == "newton":
-                out.append(("newton", s[1], True))
-                self._newton(s[1], out)
-        return out
-
-    def _solve(self, b: Block, out):
-        dA = {(i, k): self.of(e) for i, k, e in b.matrix}
-        rows = []
-        for i, rhs in enumerate(b.rhs):
-            row = self.of(rhs) - sp.Add(*[dA[(ii, k)] * b.unknowns[k]
-                                          for (ii, k) in dA if ii == i and dA[(ii, k)] != 0])
-            rows.append(row)
-        self._resolve(b, rows, out)
-
-    def _newton(self, b: Block, out):
-        # partial tangents of the body with z held, then dz = -J^-1 dr, then full tangents
-        held = _Tangents({})
-        held.tan = dict(self.tan)
-        held.fresh = self.fresh
-        for a in b.body:
-            held.bind(a.target, held.of(a.expr), out, prefix="h")
-        self.fresh = held.fresh
-        rows = [-held.of(r) for r in b.residuals]
-        self._resolve(b, rows, out)
-        for a in b.body:
-            self.bind(a.target, self.of(a.expr), out)
-
-    def _resolve(self, b: Block, rows, out):
-        if all(r == 0 for r in rows):
-            return
-        targets = tuple(self.symbol(z) for z in b.unknowns)
-        out.append(("resolve", b, targets, tuple(rows)))
-        for z, d in zip(b.unknowns, targets):
-            self.tan[z] = d
+from .ir import (C, P, T, V, X, Assign, BlockPlan, ConstraintRow, Function, JacobianPattern,
+                 Newton, Param, Program, SceneSettings, Solve, Store, as_expr)
+from .reduce import Reduced
 
 
 # ---------------------------------------------------------------- mapping to the IR
 
 
 class _Mapper:
-    """Model symbols to IR symbols, with copy propagation; blocks to plans."""
+    """Model symbols to IR symbols, with copy propagation; the blocks numbered in the order the
+    functions first use them."""
 
-    def __init__(self, base: dict):
+    def __init__(self, base: dict, plans=()):
         self.sub = dict(base)  # model symbol -> what it is in the IR (a symbol or expression)
         self.names: dict = {}  # model symbol -> its program variable, the same in every function
         self.count = 0
-        self.blocks: dict = {}  # reduce Block.index -> position in plans
+        self.reduced_plans = plans
+        self.blocks: dict = {}  # reduce's plan index -> the program's
         self.plans: list[BlockPlan] = []
         self.mapped: dict = {}  # model expression -> IR expression
 
@@ -204,129 +57,62 @@ class _Mapper:
 
     def expr(self, e):
         """e in the IR's symbols.  A model symbol means the same in every function, so an
-        expression that rhs, outputs and jvp share is mapped once."""
+        expression that several functions share is mapped once."""
         done = self.mapped.get(e)
         if done is None:
-            done = self.mapped[e] = _integral_floats(ir.substitute(e, self.sub))
+            done = self.mapped[e] = ir.integral_floats(ir.substitute(e, self.sub))
         return done
 
-    def assign(self, a: RAssign, out, propagate=True):
+    def assign(self, a: Assign, out, propagate=True):
         e = self.expr(a.expr)
-        if propagate and _trivial(e):
+        if propagate and ir.trivial(e):
             self.sub[a.target] = e
             return
         out.append(Assign(self.target(a.target), e))
 
-    def plan(self, b: Block):
-        if b.index not in self.blocks:
-            entries = b.matrix if b.method == "lu" else b.jacobian
-            pattern = [(i, k) for i, k, _ in entries]
-            cols = [[k for (i, k) in pattern if i == r] for r in range(len(b.unknowns))]
-            matching = perfect_matching(len(b.unknowns), cols)
-            if matching is None:  # pragma: no cover - reduce checked the structure
-                raise AssertionError("bgc bug: a block without a matching reached lower")
-            self.blocks[b.index] = len(self.plans)
-            self.plans.append(BlockPlan(b.index, tuple(z.name for z in b.unknowns), b.method,
-                                        lu_plan(len(b.unknowns), pattern, matching,
-                                                b.symmetric)))
-        return self.blocks[b.index]
+    def block(self, k: int) -> int:
+        if k not in self.blocks:
+            self.blocks[k] = len(self.plans)
+            self.plans.append(self.reduced_plans[k])
+        return self.blocks[k]
+
+    def unknowns(self, s):
+        """The unknowns' program variables, numbered in the block's own order (as reduce found
+        them), listed in the plan's."""
+        for pos in ir.positions(self.reduced_plans[s.block].lu.col_of):
+            self.target(s.unknowns[pos])
+        return tuple(self.sub[u] for u in s.unknowns)
 
     def function(self, name, args, statements, size) -> Function:
         body = []
         for s in statements:
-            if isinstance(s, RAssign):
+            if isinstance(s, Assign):
                 self.assign(s, body)
-            elif s[0] == "store":
-                body.append(Store(s[1], self.expr(s[2])))
-            elif s[0] == "solve":
-                self._solve(s[1], body)
-            elif s[0] == "newton":
-                self._newton(s[1], s[2], body)
-            elif s[0] == "resolve":
-                k = self.plan(s[1])
-                lu = self.plans[k].lu
-                rhs = tuple(self.expr(s[3][lu.row_of[r]]) for r in range(lu.m))
-                targets = tuple(self.target(t) for t in s[2])
-                body.append(Resolve(k, tuple(targets[lu.col_of[c]] for c in range(lu.m)), rhs))
+            elif isinstance(s, Store):
+                body.append(Store(s.index, self.expr(s.expr)))
+            elif isinstance(s, Solve):
+                k = self.block(s.block)
+                matrix = tuple(self.expr(e) for e in s.matrix)
+                rhs = tuple(self.expr(e) for e in s.rhs)
+                body.append(Solve(k, self.unknowns(s), matrix, rhs))
+            else:
+                body.append(self._newton(s))
         return Function(name, args, size, tuple(body))
 
-    def _solve(self, b: Block, body):
-        k = self.plan(b)
-        lu = self.plans[k].lu
-        matrix = tuple(self.expr(e) for _, _, e in b.matrix)
-        rhs = tuple(self.expr(b.rhs[lu.row_of[r]]) for r in range(lu.m))
-        z = tuple(self.target(u) for u in b.unknowns)
-        body.append(Solve(k, tuple(z[lu.col_of[c]] for c in range(lu.m)), matrix, rhs))
-
-    def _newton(self, b: Block, final, body):
-        k = self.plan(b)
-        lu = self.plans[k].lu
-        z = tuple(self.target(u) for u in b.unknowns)
+    def _newton(self, s: Newton) -> Newton:
+        k = self.block(s.block)
+        z = self.unknowns(s)
         inner: list = []
-        for a in b.body:
+        for a in s.body:
             self.assign(a, inner, propagate=False)
         tangents: list = []
-        for a in b.tangents:
+        for a in s.tangents:
             self.assign(a, tangents)
-        residuals = tuple(self.expr(r) for r in b.residuals)
-        jacobian = tuple(self.expr(e) for _, _, e in b.jacobian)
-        body.append(Newton(k, tuple(z[lu.col_of[c]] for c in range(lu.m)), tuple(inner),
-                           tuple(residuals[lu.row_of[r]] for r in range(lu.m)), tuple(tangents),
-                           jacobian, final))
-
-
-def _trivial(e) -> bool:
-    """A number, a symbol, or a negated symbol: propagated instead of assigned."""
-    if e.is_Number or e.is_Symbol or e.is_Indexed:
-        return True
-    return e.is_Mul and len(e.args) == 2 and e.args[0] == -1 and (e.args[1].is_Symbol
-                                                                   or e.args[1].is_Indexed)
-
-
-def _integral_floats(e):
-    """Floats with an integral value as integers (1.0*x is x), exact either way."""
-    floats = [f for f in e.atoms(sp.Float) if float(f).is_integer() and abs(float(f)) < 2 ** 53]
-    if not floats:
-        return e
-    return e.xreplace({f: sp.Integer(int(f)) for f in floats})
+        return Newton(k, z, tuple(inner), tuple(self.expr(r) for r in s.residuals),
+                      tuple(tangents), tuple(self.expr(e) for e in s.jacobian))
 
 
 # ---------------------------------------------------------------- passes on IR functions
-
-
-def _dead_code(f: Function) -> Function:
-    """The statements the stores need, backwards; a Resolve needs the factors of its block's
-    solve as well as its own inputs."""
-    needed = set()
-    factored = set()  # blocks whose factors a kept Resolve uses
-    keep = []
-    for s in reversed(f.body):
-        if isinstance(s, Store) or any(d in needed for d in ir.defines(s)) or (
-                isinstance(s, (Solve, Newton)) and s.block in factored):
-            keep.append(s)
-            needed |= ir.uses(s)
-            if isinstance(s, Resolve):
-                factored.add(s.block)
-            elif isinstance(s, (Solve, Newton)):
-                factored.discard(s.block)
-    keep.reverse()
-    return Function(f.name, f.args, f.size, tuple(keep))
-
-
-def _map_statement(s, fn):
-    if isinstance(s, Assign):
-        return Assign(s.target, fn(s.expr))
-    if isinstance(s, Store):
-        return Store(s.index, fn(s.expr))
-    if isinstance(s, Solve):
-        return Solve(s.block, s.unknowns, tuple(fn(e) for e in s.matrix),
-                     tuple(fn(e) for e in s.rhs))
-    if isinstance(s, Resolve):
-        return Resolve(s.block, s.targets, tuple(fn(e) for e in s.rhs))
-    return Newton(s.block, s.unknowns, tuple(Assign(a.target, fn(a.expr)) for a in s.body),
-                  tuple(fn(e) for e in s.residuals),
-                  tuple(Assign(a.target, fn(a.expr)) for a in s.tangents),
-                  tuple(fn(e) for e in s.jacobian), s.final_factor)
 
 
 def hoist_constants(functions: list[Function]) -> tuple[tuple[sp.Expr, ...], list[Function]]:
@@ -387,7 +173,7 @@ def hoist_constants(functions: list[Function]) -> tuple[tuple[sp.Expr, ...], lis
         new, fixed, uses_p = info[e]
         return constant(e, uses_p) if fixed else new
 
-    out = [Function(f.name, f.args, f.size, tuple(_map_statement(s, visit) for s in f.body))
+    out = [Function(f.name, f.args, f.size, tuple(ir.map_statement(s, visit) for s in f.body))
            for f in functions]
     return tuple(pool), out
 
@@ -456,7 +242,7 @@ def common_subexpressions(f: Function, start: int) -> tuple[Function, int]:
                     done[n] = value
             return done.get(e, names.get(e, e))
 
-        new = _map_statement(s, rewrite) if not isinstance(s, Newton) else s
+        new = ir.map_statement(s, rewrite) if not isinstance(s, Newton) else s
         body.extend(pending)
         body.append(new)
     return Function(f.name, f.args, f.size, tuple(body)), count
@@ -469,9 +255,9 @@ def _propagate_copies(f: Function) -> Function:
     body = []
     for s in f.body:
         if sub:
-            s = _map_statement(s, lambda e: ir.substitute(e, sub) if e.free_symbols & sub.keys()
+            s = ir.map_statement(s, lambda e: ir.substitute(e, sub) if e.free_symbols & sub.keys()
                                else e)
-        if isinstance(s, Assign) and _trivial(s.expr):
+        if isinstance(s, Assign) and ir.trivial(s.expr):
             sub[s.target] = s.expr
             continue
         body.append(s)
@@ -514,47 +300,49 @@ def jacobian_pattern(rhs: Function, n: int, blocks) -> JacobianPattern:
 # ---------------------------------------------------------------- the stage
 
 
+def functions(reduced: Reduced) -> dict:
+    """The program's functions as their results: name -> (arguments, size, stores over model
+    symbols).  Each is built from the sorted steps by the same passes (pruning from its
+    results, mapping, constants, temporaries), so a new function is a new entry here."""
+    states = [st.symbol for st in reduced.states]
+    rows, t0 = reduced.rows, sp.Float(reduced.run.t0)
+    position = [r.expr for r in rows if r.level == "position"]
+    velocity = [r.expr for r in rows if r.level == "velocity"]
+    return _specs([st.init.xreplace({TIME: t0}) for st in reduced.states], reduced.rates,
+                  [o.expr for o in reduced.outputs], [r.expr for r in rows],
+                  [r.scale for r in rows], (len(position) * len(states),
+                                            _row_jacobian(position, states)),
+                  (len(velocity) * len(states), _row_jacobian(velocity, states)))
+
+
+def _specs(init, rhs, outputs, residual, scale, position_jac, velocity_jac) -> dict:
+    """The functions every program has; the constraint rows' Jacobians as (size, stores)."""
+    txp = ("t", "x", "p")
+    return {"init": (("p",), len(init), _stores(init)), "rhs": (txp, len(rhs), _stores(rhs)),
+            "outputs": (txp, len(outputs), _stores(outputs)),
+            "residual": (txp, len(residual), _stores(residual)),
+            "scale": (txp, len(scale), _stores(scale)),
+            "position_jac": (txp, *position_jac), "velocity_jac": (txp, *velocity_jac)}
+
+
+TANGENTS = {"jvp": "rhs"}  # derived functions: name -> the function differentiated along v
+
+
+def _stores(exprs) -> list[Store]:
+    return [Store(k, as_expr(e)) for k, e in enumerate(exprs)]
+
+
 def lower(reduced: Reduced) -> Program:
     """The program of a reduced system."""
     states = [st.symbol for st in reduced.states]
     base = {TIME: T}
-    for i, s in enumerate(states):
-        base[s] = X[i]
-    for j, prm in enumerate(reduced.parameters):
-        base[var(prm.name)] = P[j]
-    steps = _flatten(reduced.steps)
-    n = len(states)
-    rhs = _select(steps, set(reduced.rates)) + [("store", i, r)
-                                                for i, r in enumerate(reduced.rates)]
-    outs = _select(steps, set().union(*[o.expr.free_symbols for o in reduced.outputs])
-                   if reduced.outputs else set()) + \
-        [("store", j, o.expr) for j, o in enumerate(reduced.outputs)]
-    directions = {s: sp.Symbol(f"v[{s.name}]", real=True) for s in states}
-    jvp = _Tangents(directions).program(rhs)
-    mapper = _Mapper(base)
-    for i, s in enumerate(states):
-        mapper.sub[directions[s]] = V[i]
-    t0 = sp.Float(reduced.run.t0)
-    init = [("store", i, st.init.xreplace({TIME: t0})) for i, st in enumerate(reduced.states)]
+    base.update((s, X[i]) for i, s in enumerate(states))
+    base.update((var(prm.name), P[j]) for j, prm in enumerate(reduced.parameters))
+    mapper = _Mapper(base, reduced.plans)
     rows = reduced.rows
-    position = [r.expr for r in rows if r.level == "position"]
-    velocity = [r.expr for r in rows if r.level == "velocity"]
-    functions = {
-        "init": mapper.function("init", ("p",), init, n),
-        "rhs": mapper.function("rhs", ("t", "x", "p"), rhs, n),
-        "outputs": mapper.function("outputs", ("t", "x", "p"), outs, len(reduced.outputs)),
-        "jvp": mapper.function("jvp", ("t", "x", "p", "v"), jvp, n),
-        "residual": mapper.function("residual", ("t", "x", "p"),
-                                    [("store", k, r.expr) for k, r in enumerate(rows)],
-                                    len(rows)),
-        "scale": mapper.function("scale", ("t", "x", "p"),
-                                 [("store", k, r.scale) for k, r in enumerate(rows)], len(rows)),
-        "position_jac": mapper.function("position_jac", ("t", "x", "p"),
-                                        _row_jacobian(position, states), len(position) * n),
-        "velocity_jac": mapper.function("velocity_jac", ("t", "x", "p"),
-                                        _row_jacobian(velocity, states), len(velocity) * n),
-    }
+    fns = _build(mapper, reduced.steps, functions(reduced), len(states))
     params = tuple(Param(p.name, mapper.expr(p.expr)) for p in reduced.parameters)
+    position = [r.expr for r in rows if r.level == "position"]
     in_position = set().union(*[e.free_symbols for e in position]) if position else set()
     movable = tuple(s not in in_position for s in states)
     run = reduced.run
@@ -562,10 +350,47 @@ def lower(reduced: Reduced) -> Program:
     return finish(reduced.name, tuple(st.name for st in reduced.states), params,
                   tuple(o.name for o in reduced.outputs),
                   tuple(ConstraintRow(r.junction, r.level) for r in rows), movable, scene,
-                  functions, tuple(mapper.plans), mapper.count)
+                  fns, tuple(mapper.plans), mapper.count)
 
 
-def _row_jacobian(rows, states):
+def _build(mapper: _Mapper, steps, specs: dict, n: int) -> dict:
+    """Each function from what its results need of the steps, in the IR's symbols; then the
+    tangents (after the primal functions, so that their variables are numbered after)."""
+    steps = list(steps)
+    out = {name: mapper.function(name, args, ir.prune(steps + stores), size)
+           for name, (args, size, stores) in specs.items()}
+    for name, of in TANGENTS.items():
+        out[name], mapper.count = tangent(out[of], name, {X[i]: V[i] for i in range(n)},
+                                          mapper.plans, mapper.count)
+    return _ordered(out)
+
+
+def _ordered(functions: dict) -> dict:
+    """The functions in the IR's order, then any others: the order numbers the constants and
+    the temporaries."""
+    rank = {k: i for i, k in enumerate(ir.FUNCTION_NAMES)}
+    return {k: functions[k] for k in sorted(functions, key=lambda k: rank.get(k, len(rank)))}
+
+
+def with_tangent(program: Program, of: str, name: str) -> Program:
+    """program with one more function, `name`: the derivative of function `of` along v (the
+    FMU's outputs_jvp), derived, pruned and simplified by the passes of every function."""
+    f = program.function(of)
+    fresh = 1 + max((int(w.name[1:]) for s in f.body for w in _defined_all(s)), default=-1)
+    g, count = tangent(f, name, {X[i]: V[i] for i in range(len(program.states))},
+                       program.blocks, fresh)
+    g, _ = common_subexpressions(Function(name, g.args, g.size, ir.prune(g.body)), count)
+    return replace(program, functions={**program.functions, name: _propagate_copies(g)})
+
+
+def _defined_all(s):
+    """Every program variable a statement defines, a Newton block's inner ones included."""
+    if isinstance(s, Newton):
+        return ir.defines(s) + tuple(a.target for a in s.tangents)
+    return ir.defines(s)
+
+
+def _row_jacobian(rows, states) -> list[Store]:
     """The nonzero entries of d row / d x, row-major (the caller zeroes the rest): only the
     states that occur in a row are differentiated, so the work is the rows' size, not
     rows x states."""
@@ -575,26 +400,25 @@ def _row_jacobian(rows, states):
         for s in sorted((s for s in r.free_symbols if s in index), key=index.get):
             d = partial(r, s)
             if d != 0:
-                out.append(("store", k * len(states) + index[s], d))
+                out.append(Store(k * len(states) + index[s], d))
     return out
-
-
-HOISTED = ("rhs", "outputs", "jvp", "residual", "scale", "position_jac", "velocity_jac")
 
 
 def finish(name, states, params, outputs, constraints, movable, scene, functions, plans,
            count) -> Program:
-    """The passes every program goes through: dead code, constants, temporaries, the
-    Jacobian's pattern."""
-    functions = {k: _dead_code(f) for k, f in functions.items()}
-    consts, hoisted = hoist_constants([functions[k] for k in HOISTED])
-    functions.update(zip(HOISTED, hoisted))
+    """The passes every program goes through: pruning, constants (of every function but
+    init, which runs once per parameter set anyway), temporaries, the Jacobian's pattern."""
+    functions = {k: Function(f.name, f.args, f.size, ir.prune(f.body))
+                 for k, f in functions.items()}
+    hoisted = [k for k in functions if k != "init"]
+    consts, done = hoist_constants([functions[k] for k in hoisted])
+    functions.update(zip(hoisted, done))
     functions["consts"] = Function("consts", ("p",), len(consts),
                                    tuple(Store(k, c) for k, c in enumerate(consts)))
     for k in list(functions):
         functions[k], count = common_subexpressions(functions[k], count)
         functions[k] = _propagate_copies(functions[k])
-    functions = {k: functions[k] for k in ir.FUNCTION_NAMES}
+    functions = _ordered(functions)
     pattern = jacobian_pattern(functions["rhs"], len(states), plans)
     return Program(name, states, params, outputs, constraints, movable, scene, functions,
                    tuple(plans), pattern)
@@ -607,25 +431,10 @@ def explicit_program(name, states, params, outputs, init, rhs, out, scene,
     tests and for code that builds models without the front end.  jvp is derived as for
     compiled models."""
     n = len(states)
+    specs = _specs(init, rhs, out, residual, scale, (len(position_jac), _stores(position_jac)),
+                   (len(velocity_jac), _stores(velocity_jac)))
     mapper = _Mapper({})
-    for i in range(n):
-        mapper.sub[V[i]] = V[i]
-    rhs_s = [("store", i, as_expr(e)) for i, e in enumerate(rhs)]
-    jvp = _Tangents({X[i]: V[i] for i in range(n)}).program(rhs_s)
-    functions = {
-        "init": mapper.function("init", ("p",), [("store", i, as_expr(e))
-                                                 for i, e in enumerate(init)], n),
-        "rhs": mapper.function("rhs", ("t", "x", "p"), rhs_s, n),
-        "outputs": mapper.function("outputs", ("t", "x", "p"),
-                                   [("store", j, as_expr(e)) for j, e in enumerate(out)],
-                                   len(out)),
-        "jvp": mapper.function("jvp", ("t", "x", "p", "v"), jvp, n),
-    }
-    for key, exprs in (("residual", residual), ("scale", scale), ("position_jac", position_jac),
-                       ("velocity_jac", velocity_jac)):
-        functions[key] = mapper.function(key, ("t", "x", "p"),
-                                         [("store", k, as_expr(e)) for k, e in enumerate(exprs)],
-                                         len(exprs))
+    fns = _build(mapper, (), specs, n)
     movable = tuple(velocity_movable) if velocity_movable is not None else (True,) * n
     return finish(name, tuple(states), tuple(params), tuple(outputs), tuple(constraints),
-                  movable, scene, functions, (), mapper.count)
+                  movable, scene, fns, (), mapper.count)

@@ -1,4 +1,5 @@
-"""Stage 6, reduce: EquationSystem -> Reduced, a sorted program of assignments and blocks.
+"""Stage 6, reduce: EquationSystem -> Reduced, a sorted program of bgc.ir statements over the
+model's symbols (Assign, and Solve or Newton for the blocks solved numerically).
 
 1. Constraints (the paper's sections 2-4): each constraint junction's balance is written in the
    coordinates that integral signals integrate; the integrability test decides holonomic or
@@ -17,8 +18,9 @@
    given z.  Each block is then solved
    - symbolically when it is linear and small, or a single equation with a clean inverse;
    - else numerically in the generated code: A z = b by LU when linear (A and b emitted as
-     expressions, derived forward through the block), Newton's method with the block's
-     symbolic Jacobian when not.
+     expressions, derived forward through the block: the coefficients' assignments, then a
+     Solve, then the block's body), Newton's method with the block's symbolic Jacobian when
+     not (a Newton statement); each with its factorization plan (bgc.sparse).
    `algebra="symbolic"|"numeric"` forces either path.
 5. The initial conditions are checked against the constraints.
 """
@@ -29,6 +31,7 @@ from dataclasses import dataclass
 import sympy as sp
 
 from . import blt
+from .ir import Assign, BlockPlan, Newton, Solve, defines
 from .algebra import (antiderivative, expand_bounded, is_singular, is_symmetric, is_zero,
                       solve_for)
 from .diagnostics import Collector, ModelError, Span, fail, warning
@@ -39,6 +42,7 @@ from .graph import var
 from .run import ALGEBRA
 from .resources import (MAX_EXPANDED_TERMS, MAX_EXPRESSION_DEPTH, MAX_EXPRESSION_NODES,
                         SYMBOLIC_MAX_BLOCK, fits)
+from .sparse import plan as lu_plan
 
 RELATIVE_TOLERANCE = 1e-9
 SYMBOLIC_MAX_UNKNOWNS = 1  # auto: linear blocks up to this size are solved symbolically ...
@@ -56,33 +60,6 @@ NOT_FINITE = (sp.zoo, sp.nan, sp.oo, -sp.oo)
 
 
 @dataclass(frozen=True)
-class Assign:
-    target: sp.Symbol
-    expr: sp.Expr
-
-
-@dataclass(frozen=True)
-class Block:
-    """Unknowns z determined by residuals(z) = 0; body: the block's other variables, explicit
-    given z, in order.  method "lu": A z = b with A = matrix (i, j, expr) and b = rhs, both over
-    variables computed before the block and the `prelude` assignments; "newton": the Jacobian
-    d residuals / d z is `jacobian`, its entries over z, the body and `tangents` (assignments
-    computed after the body at each iterate)."""
-
-    index: int  # 1-based, in evaluation order, as reports name it
-    unknowns: tuple[sp.Symbol, ...]
-    body: tuple[Assign, ...]
-    residuals: tuple[sp.Expr, ...]
-    method: str  # "lu" | "newton"
-    prelude: tuple[Assign, ...] = ()
-    matrix: tuple[tuple[int, int, sp.Expr], ...] = ()
-    rhs: tuple[sp.Expr, ...] = ()
-    tangents: tuple[Assign, ...] = ()
-    jacobian: tuple[tuple[int, int, sp.Expr], ...] = ()
-    symmetric: bool = False  # A = A^T whatever the state (with a full diagonal)
-
-
-@dataclass(frozen=True)
 class BlockInfo:
     """What `bgc check` says of a block: its unknowns, where it comes from, how it is solved."""
 
@@ -92,6 +69,9 @@ class BlockInfo:
     linear: bool
     method: str  # symbolic | lu | newton
     span: Span
+    residuals: tuple[sp.Expr, ...] = ()  # a numeric block's equations, as reports show them:
+    body: tuple[Assign, ...] = ()  # 0 = residuals(z), where body (explicit given z)
+    internal: frozenset = frozenset()  # the variables its statements define besides z
 
 
 @dataclass(frozen=True)
@@ -124,7 +104,8 @@ class Reduced:
     parameters: tuple[ParameterDef, ...]
     states: tuple[StateVar, ...]  # kept: integrated, in the system's order
     pruned: tuple[str, ...]  # states not integrated because no output needs them
-    steps: tuple[Assign | Block, ...]  # evaluation order
+    steps: tuple  # bgc.ir statements over model symbols (Assign, Solve, Newton), in order
+    plans: tuple[BlockPlan, ...]  # of the numeric blocks: Solve.block, Newton.block index it
     rates: tuple[sp.Symbol, ...]  # der(x) of each kept state, computed by the steps
     outputs: tuple[OutputDef, ...]
     constraints: tuple[ConstraintInfo, ...]
@@ -506,8 +487,11 @@ class _Blocks:
     def __init__(self, sys: _System, algebra: str):
         self.sys = sys
         self.algebra = algebra
-        self.steps: list = []
+        self.steps: list = []  # bgc.ir statements over model symbols
+        self.plans: list[BlockPlan] = []
         self.infos: list[BlockInfo] = []
+        self.plan_eq: list = []  # per plan, and per variable a block introduces (its
+        self.owner: dict = {}  # coefficients, its Jacobian's tangents): the block's equation
         self.fresh = 0
 
     def symbol(self, hint: str) -> sp.Symbol:
@@ -542,29 +526,62 @@ class _Blocks:
         self._check_structure(z, body, residuals, origins, span)
         partials = _partials(z, body, residuals)
         linear = partials is not None
+        prelude = ()
         method = self._choose(z, linear)
         if linear:
             prelude, matrix, rhs = self._linear_system(z, body, residuals, partials)
             if method == "symbolic":
                 method = self._symbolic_linear(z, body, prelude, matrix, rhs, origins, span)
             if method == "lu":
-                symmetric = False
-                if len(z) <= SYMMETRY_CHECK_MAX:
-                    A, _, _ = self._matrix_in_outer(z, prelude, matrix, origins, span)
-                    entries = [(i, k, A[i, k]) for i, k, _ in matrix]
-                    symmetric = all(any(i == k == d for i, k, _ in matrix)
-                                    for d in range(len(z))) and is_symmetric(entries)
-                self.steps.append(Block(index, z, body, residuals, "lu", prelude, matrix, rhs,
-                                        symmetric=symmetric))
+                self._lu(index, z, body, prelude, matrix, rhs, origins, span, tear_eqs[0])
         else:
             if method == "symbolic":
                 method = self._symbolic_nonlinear(z, body, residuals, origins, span)
             if method == "newton":
-                tangents, jacobian = self._jacobian(z, body, residuals)
-                self.steps.append(Block(index, z, body, residuals, "newton",
-                                        tangents=tangents, jacobian=jacobian))
+                self._newton(index, z, body, residuals, tear_eqs[0])
+        numeric = method in ("lu", "newton")
+        internal = frozenset(a.target for a in body + prelude) if method == "lu" else frozenset()
         self.infos.append(BlockInfo(index, tuple(s.name for s in z), origins, linear, method,
-                                    span))
+                                    span, residuals if numeric else (), body if numeric else (),
+                                    internal))
+
+    def _lu(self, index, z, body, prelude, matrix, rhs, origins, span, eq):
+        """A z = b as statements: the coefficients (prelude), the Solve, the body."""
+        symmetric = False
+        if len(z) <= SYMMETRY_CHECK_MAX:
+            A, _, _ = self._matrix_in_outer(z, prelude, matrix, origins, span)
+            entries = [(i, k, A[i, k]) for i, k, _ in matrix]
+            symmetric = len({i for i, k, _ in matrix if i == k}) == len(z) and \
+                is_symmetric(entries)
+        lu = self._plan(index, z, "lu", matrix, symmetric, eq)
+        self.steps.extend(prelude)
+        self.steps.append(Solve(len(self.plans) - 1, tuple(z[c] for c in lu.col_of),
+                                tuple(e for _, _, e in matrix), tuple(rhs[r] for r in lu.row_of)))
+        self.steps.extend(body)
+        self.owner.update((a.target, eq) for a in prelude)
+
+    def _newton(self, index, z, body, residuals, eq):
+        """The block as one Newton statement: its body, residuals and Jacobian."""
+        tangents, jacobian = self._jacobian(z, body, residuals)
+        lu = self._plan(index, z, "newton", jacobian, False, eq)
+        self.steps.append(Newton(len(self.plans) - 1, tuple(z[c] for c in lu.col_of), body,
+                                 tuple(residuals[r] for r in lu.row_of), tangents,
+                                 tuple(e for _, _, e in jacobian)))
+        self.owner.update((a.target, eq) for a in tangents)
+
+    def _plan(self, index, z, method, entries, symmetric, eq):
+        """The block's factorization plan (bgc.sparse), on the structure of its entries."""
+        pattern = tuple((i, k) for i, k, _ in entries)
+        cols = [[] for _ in z]
+        for i, k in pattern:
+            cols[i].append(k)
+        matching = blt.perfect_matching(len(z), cols)
+        if matching is None:  # pragma: no cover - _check_structure found one
+            raise AssertionError("bgc bug: a block without a matching")
+        lu = lu_plan(len(z), list(pattern), matching, symmetric)
+        self.plans.append(BlockPlan(index, tuple(s.name for s in z), method, lu, pattern))
+        self.plan_eq.append(eq)
+        return lu
 
     def _choose(self, z, linear) -> str:
         if self.algebra == "numeric":
@@ -598,28 +615,9 @@ class _Blocks:
     # -- linear blocks
 
     def _linear_system(self, z, body, residuals, partials):
-        """A z = b: A by forward differentiation through the body (tangent variables for the
-        intermediate coefficients, so that the work stays linear in the body), b = -r(0)."""
+        """A z = b: A by forward differentiation through the body, b = -r(0)."""
         prelude: list[Assign] = []
-        tangent: dict = {}  # (symbol, k) -> coefficient d symbol / d z_k
-        for k, s in enumerate(z):
-            tangent[(s, k)] = sp.Integer(1)
-        zdep = {s: [k] for k, s in enumerate(z)}
-        for a, parts in zip(body, partials[0]):
-            ks = sorted({k for u in parts for k in zdep[u]})
-            zdep[a.target] = ks
-            for k in ks:
-                coeff = sp.Add(*[d * tangent[(u, k)] for u, d in parts.items()
-                                 if (u, k) in tangent])
-                tangent[(a.target, k)] = self._named(coeff, prelude, "dz")
-        matrix = []
-        for i, parts in enumerate(partials[1]):
-            ks = sorted({k for u in parts for k in zdep[u]})
-            for k in ks:
-                entry = sp.Add(*[d * tangent[(u, k)] for u, d in parts.items()
-                                 if (u, k) in tangent])
-                if entry != 0:
-                    matrix.append((i, k, entry))
+        matrix = self._forward(z, body, partials, prelude)
         at_zero = {s: sp.Integer(0) for s in z}
         for a in body:
             value = a.expr.xreplace(at_zero)
@@ -702,25 +700,44 @@ class _Blocks:
         """d residuals / d z by forward differentiation through the body: tangent assignments
         (over z, the body and what precedes the block) and the nonzero entries."""
         tangents: list[Assign] = []
-        tangent: dict = {(s, k): sp.Integer(1) for k, s in enumerate(z)}
+        jacobian = self._forward(z, body, _all_partials(z, body, residuals), tangents)
+        return tuple(tangents), jacobian
+
+    def _forward(self, z, body, partials, out):
+        """The entries (i, k, d r_i / d z_k) by forward differentiation through the body: the
+        intermediate coefficients d v / d z_k are variables assigned in out, so that the work
+        stays linear in the body.  partials: {u: d expr / d u} of each body assignment and
+        each residual (_partials, _all_partials)."""
+        tangent = {(s, k): sp.Integer(1) for k, s in enumerate(z)}
         zdep = {s: [k] for k, s in enumerate(z)}
-        for a in body:
-            parts = {u: partial(a.expr, u) for u in a.expr.free_symbols if u in zdep}
-            ks = sorted({k for u in parts for k in zdep[u]})
-            zdep[a.target] = ks
+        for a, parts in zip(body, partials[0]):
+            zdep[a.target] = ks = sorted({k for u in parts for k in zdep[u]})
             for k in ks:
-                coeff = sp.Add(*[d * tangent[(u, k)] for u, d in parts.items()
-                                 if (u, k) in tangent])
-                tangent[(a.target, k)] = self._named(coeff, tangents, "dz")
-        jacobian = []
-        for i, r in enumerate(residuals):
-            parts = {u: partial(r, u) for u in r.free_symbols if u in zdep}
+                tangent[(a.target, k)] = self._named(_chain(parts, tangent, k), out, "dz")
+        entries = []
+        for i, parts in enumerate(partials[1]):
             for k in sorted({k for u in parts for k in zdep[u]}):
-                entry = sp.Add(*[d * tangent[(u, k)] for u, d in parts.items()
-                                 if (u, k) in tangent])
+                entry = _chain(parts, tangent, k)
                 if entry != 0:
-                    jacobian.append((i, k, entry))
-        return tuple(tangents), tuple(jacobian)
+                    entries.append((i, k, entry))
+        return tuple(entries)
+
+
+def _chain(parts, tangent, k):
+    """d expr / d z_k from expr's partials and its inputs' tangents."""
+    return sp.Add(*[d * tangent[(u, k)] for u, d in parts.items() if (u, k) in tangent])
+
+
+def _all_partials(z, body, residuals):
+    """{u: d expr / d u} over the block's variables (z and the body before expr) of each body
+    assignment and each residual."""
+    inner = set(z)
+    body_parts = []
+    for a in body:
+        body_parts.append({u: partial(a.expr, u) for u in a.expr.free_symbols if u in inner})
+        inner.add(a.target)
+    return body_parts, [{u: partial(r, u) for u in r.free_symbols if u in inner}
+                        for r in residuals]
 
 
 def _inputs_of_nonlinearities(eqs, comp) -> frozenset:
@@ -795,12 +812,13 @@ def reduce(es: EquationSystem, project_initial: bool = False, algebra: str = "au
     targets, kept = _needed(sys)
     blocks = _Blocks(sys, algebra)
     blocks.run(targets)
-    _check_constants(blocks.steps, sys)
+    _check_constants(blocks, sys)
     rows = _rows(sys, infos, kept)
     kept_symbols = {st.symbol for st in kept}
     pruned = tuple(st.name for st in es.states if st.symbol not in kept_symbols)
     eliminated = _eliminated(sys)
     reduced = Reduced(es.name, es.parameters, tuple(kept), pruned, tuple(blocks.steps),
+                      tuple(blocks.plans),
                       tuple(der(st.symbol) for st in kept), es.outputs, tuple(infos),
                       tuple(rows), tuple(blocks.infos), eliminated, es.run, algebra,
                       tuple(es.warnings) + tuple(diags.warnings))
@@ -809,7 +827,7 @@ def reduce(es: EquationSystem, project_initial: bool = False, algebra: str = "au
     return _with_init_warnings(reduced, sys, eliminated)
 
 
-def _check_constants(steps, sys: _System):
+def _check_constants(blocks: _Blocks, sys: _System):
     """The variables that are numbers put into what reads them, forward, as the lowering stage
     does: an expression that then is not finite (1/s where s = 0 is an equation of the model)
     is a located error, not an infinity in the generated code."""
@@ -825,16 +843,17 @@ def _check_constants(steps, sys: _System):
             fail(eq.span, f"'{eq.origin}' is not finite where {names} (a division by zero?)")
         return value
 
-    for step in steps:
+    for step in blocks.steps:
         if isinstance(step, Assign):
-            assigns, uses, eq = [step], [], sys.eqs[step.target]
+            assigns, uses = [step], []
+            eq = sys.eqs.get(step.target) or blocks.owner[step.target]
         else:
-            assigns = list(step.prelude) + list(step.body) + list(step.tangents)
-            uses = list(step.residuals) + list(step.rhs) + [e for _, _, e in step.matrix] + \
-                [e for _, _, e in step.jacobian]
-            eq = sys.eqs[step.unknowns[0]]
+            eq = blocks.plan_eq[step.block]
+            assigns = list(step.body) + list(step.tangents) if isinstance(step, Newton) else []
+            uses = list(step.residuals) + list(step.jacobian) if isinstance(step, Newton) \
+                else list(step.matrix) + list(step.rhs)
         for a in assigns:
-            value = put(a.expr, sys.eqs.get(a.target, eq))
+            value = put(a.expr, sys.eqs.get(a.target) or blocks.owner.get(a.target, eq))
             if value.is_Number:
                 known[a.target] = value
         for e in uses:
@@ -948,17 +967,27 @@ def _with_init_warnings(reduced: Reduced, sys: _System, eliminated) -> Reduced:
 # ---------------------------------------------------------------- explicit forms (reports)
 
 
+def shown_steps(reduced: Reduced):
+    """The steps as reports show them: the assignments, and in place of each numeric block's
+    statements its BlockInfo (its equations, 0 = residuals where body)."""
+    hidden = set().union(*(b.internal for b in reduced.blocks))
+    for s in reduced.steps:
+        if not isinstance(s, Assign):
+            yield reduced.blocks[reduced.plans[s.block].index - 1]
+        elif s.target not in hidden:
+            yield s
+
+
 def explicit_forms(reduced: Reduced, symbols, max_ops: int = 3000) -> dict | None:
     """Each symbol in the states, parameters and t alone (every assignment substituted), or
     None when a block is solved numerically on the way or an expression grows beyond max_ops:
     the equations are then shown as the program that computes them."""
     defs = {}
     for step in reduced.steps:
-        if isinstance(step, Block):
-            for s in step.unknowns + tuple(a.target for a in step.body):
-                defs[s] = None
-        else:
+        if isinstance(step, Assign):
             defs[step.target] = step.expr
+        else:
+            defs.update((s, None) for s in defines(step))
     memo: dict = {}
     out = {}
     for s in symbols:
@@ -996,6 +1025,6 @@ def _explicit(root, defs, memo, max_ops):
     return memo[root]
 
 
-__all__ = ["Assign", "Block", "BlockInfo", "ConstraintInfo", "ConstraintRow", "Reduced",
+__all__ = ["BlockInfo", "shown_steps", "ConstraintInfo", "ConstraintRow", "Reduced",
            "reduce", "check_initial", "explicit_forms", "initial_values", "parameter_values",
            "scale_of", "ALGEBRA"]

@@ -8,7 +8,8 @@ import sympy as sp
 
 from . import ir
 from .graph import model_effects
-from .reduce import Block, explicit_forms
+from .ir import defines
+from .reduce import BlockInfo, explicit_forms, shown_steps
 
 TWO_PORTS = ("TF", "MTF", "GY", "MGY")
 
@@ -205,11 +206,7 @@ def _computed(reduced) -> set:
     """Every variable the program's steps define (blocks: their unknowns and body)."""
     out = set()
     for step in reduced.steps:
-        if isinstance(step, Block):
-            out.update(step.unknowns)
-            out.update(a.target for a in step.body)
-        else:
-            out.add(step.target)
+        out.update(defines(step))
     return out
 
 
@@ -269,9 +266,9 @@ def equations_text(compiled) -> str:
         lines += [f"  {o.name} = {_s(forms[o.expr])}" for o in r.outputs]
         return "\n".join(lines) + "\n"
     lines.append("program (in evaluation order; blocks solved numerically in the generated code):")
-    for step in r.steps:
-        if isinstance(step, Block):
-            z = ", ".join(u.name for u in step.unknowns)
+    for step in shown_steps(r):
+        if isinstance(step, BlockInfo):
+            z = ", ".join(step.unknowns)
             how = "A z = b, LU" if step.method == "lu" else "Newton's method"
             lines.append(f"  block {step.index} ({how}) for {z}:")
             lines += [f"    0 = {_s(e)}" for e in step.residuals]

@@ -2,8 +2,8 @@
 /* The FMU's interface: the functions of FMI 2.0 (Model Exchange and Co-Simulation) over the
    model part and the runtime above (bgc/runtime/fmi2.c, inlined verbatim after them by
    bgc/fmu.py).  It uses from the FMU part before it: BGC_FMI_GUID, BGC_FMI_PROJECT_INITIAL,
-   bgc_fmi_output_state (the state each output is, or -1) and, when BGC_FMI_OUTPUT_JVP is 1,
-   bgc_fmi_outputs_jvp (the outputs' derivative along a direction of the states).
+   bgc_fmi_output_state (the state each output is, or -1); from the model part
+   bgc_model_outputs_jvp (the outputs' derivative along a direction of the states).
 
    Value references (all Real), as modelDescription.xml lists them:
      [0, P)                  parameter j            (P = BGC_NUM_PARAMS)
@@ -775,7 +775,7 @@ BGC_FMI_EXPORT fmi2Status fmi2DeSerializeFMUstate(fmi2Component c,
 /* ------------------------------------------------- directional derivatives --- */
 
 /* d unknowns = J d knowns, the knowns states, the unknowns derivatives (the right side's
-   Jacobian, bgc_jvp), states or outputs (bgc_fmi_outputs_jvp), at the instance's (t, x). */
+   Jacobian, bgc_jvp), states or outputs (bgc_model_outputs_jvp), at the instance's (t, x). */
 BGC_FMI_EXPORT fmi2Status fmi2GetDirectionalDerivative(fmi2Component c,
                                                        const fmi2ValueReference vUnknown_ref[],
                                                        size_t nUnknown,
@@ -817,14 +817,8 @@ BGC_FMI_EXPORT fmi2Status fmi2GetDirectionalDerivative(fmi2Component c,
     }
     if (need_dx && bgc_jvp(m->t, m->x, &m->p, m->w, m->v, m->jv))
         return bgc_fmi_model_failed(m, fn);
-#if BGC_FMI_OUTPUT_JVP
-    if (need_y && bgc_fmi_outputs_jvp(m->t, m->x, &m->p, m->v, m->jy))
+    if (need_y && bgc_model_outputs_jvp(m->t, m->x, &m->p, m->w, m->v, m->jy))
         return bgc_fmi_model_failed(m, fn);
-#else
-    if (need_y)
-        return bgc_fmi_refuse(m, fn, "the outputs of this model are computed through algebraic "
-                              "blocks, whose derivatives the FMU does not give");
-#endif
     for (i = 0; i < nUnknown; i++) {
         const fmi2ValueReference r = vUnknown_ref[i];
         if ((k = bgc_fmi_in(r, BGC_FMI_VR_STATES, BGC_NUM_STATES)) >= 0)

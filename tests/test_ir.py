@@ -1,0 +1,88 @@
+"""The code model between reduce and emit: one statement vocabulary (bgc.ir), one pruning
+pass, one forward-mode pass that every derived function comes from."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import sympy as sp
+
+from bgc import api, ir
+from bgc.differentiate import directional
+from bgc.ir import P, T, V, W, X, Assign, Newton, Param, Resolve, SceneSettings, Solve, Store
+from bgc.lower import explicit_program, with_tangent
+
+ROOT = Path(__file__).resolve().parent.parent
+SCENE = SceneSettings(0.0, 1.0, 0.1, "dopri5", 1e-6, 1e-9, None)
+
+
+def evaluate(f: ir.Function, values: dict) -> list:
+    """The results of a function without blocks, by substitution, statement by statement."""
+    env, out = dict(values), [None] * f.size
+    for s in f.body:
+        assert isinstance(s, (Assign, Store)), s
+        value = s.expr.xreplace(env)
+        if isinstance(s, Assign):
+            env[s.target] = value
+        else:
+            out[s.index] = value
+    return out
+
+
+def test_reduce_hands_on_ir_statements():
+    """A pendulum chain solved numerically: reduce's steps are IR statements over model
+    symbols, each block's statement indexing its plan, the unknowns in the plan's order."""
+    compiled = api.build(ROOT / "models" / "double_pendulum.bg", algebra="numeric")
+    steps, plans = compiled.reduced.steps, compiled.reduced.plans
+    assert {type(s) for s in steps} <= {Assign, Solve, Newton}
+    blocks = [s for s in steps if not isinstance(s, Assign)]
+    assert blocks and [s.block for s in blocks] == list(range(len(plans)))
+    for s in blocks:
+        lu = plans[s.block].lu
+        assert tuple(u.name for u in s.unknowns) == tuple(plans[s.block].unknowns[c]
+                                                          for c in lu.col_of)
+        if isinstance(s, Solve):
+            assert len(s.matrix) == len(plans[s.block].pattern) == len(lu.entries)
+
+
+def test_prune_keeps_what_the_stores_need():
+    """Backwards from the stores: an unused assignment goes, a Resolve keeps its block's Solve
+    though nothing reads the Solve's unknowns."""
+    a, b, z, dz = W(0), W(1), W(2), W(3)
+    body = (Assign(a, X[0] + 1), Assign(b, X[1] * 2),
+            Solve(0, (z,), (X[0],), (X[1],)), Resolve(0, (dz,), (V[0],)), Store(0, dz + b))
+    assert ir.prune(body) == body[1:]
+    assert ir.prune(body[:3] + (Store(0, b),)) == (body[1], Store(0, b))
+    assert ir.prune(body[:3] + (Store(0, z * a),)) == (body[0], body[2], Store(0, z * a))
+
+
+def test_output_tangents_are_the_outputs_directional_derivatives():
+    """with_tangent on a finished program (constants hoisted, temporaries named): the FMU's
+    outputs_jvp equals the derivative of each output along v."""
+    x0, x1, k = X[0], X[1], P[0]
+    outputs = [k * sp.sin(x0) * x1 + x0 ** 2, sp.exp(k * 2 * x1) * sp.sin(x0), x1]
+    program = explicit_program("m", ("a", "b"), (Param("k", sp.Float(1.5)),), ("y0", "y1", "y2"),
+                               [0, 0], [x1, -k * x0], outputs, SCENE)
+    derived = with_tangent(program, "outputs", "outputs_jvp")
+    assert set(derived.functions) == set(program.functions) | {"outputs_jvp"}
+    f = derived.function("outputs_jvp")
+    assert f.args == ("t", "x", "p", "v") and f.size == len(outputs)
+    point = {x0: sp.Rational(3, 10), x1: sp.Rational(-7, 10), V[0]: 2, V[1]: sp.Rational(1, 3),
+             k: sp.Rational(3, 2), T: 0}
+    consts = evaluate(derived.function("consts"), point)
+    point.update({ir.C[j]: c for j, c in enumerate(consts)})
+    got = evaluate(f, point)
+    for y, g in zip(outputs, got):
+        want = directional(y, {x0: V[0], x1: V[1]}).xreplace(point)
+        assert abs(float(g - want)) < 1e-12
+
+
+def test_output_tangents_go_through_a_newton_block():
+    """The diode's current is solved by Newton's method: its tangent function solves the block
+    with its final factors and resolves with them."""
+    compiled = api.build(ROOT / "models" / "diode.bg", "charge")
+    assert any(isinstance(s, Newton) for s in compiled.program.function("outputs").body)
+    f = with_tangent(compiled.program, "outputs", "outputs_jvp").function("outputs_jvp")
+    newtons = [s for s in f.body if isinstance(s, Newton)]
+    resolves = [s for s in f.body if isinstance(s, Resolve)]
+    assert newtons and all(s.final_factor for s in newtons)
+    assert {s.block for s in resolves} == {s.block for s in newtons}
