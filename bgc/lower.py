@@ -4,7 +4,7 @@ reduce hands on its sorted steps already as IR statements (Assign, Solve, Newton
 symbols; every function of the program is built from them by the same passes:
 
 1. `functions` lists each function by its results (Store statements); `TANGENTS` the ones
-   derived by forward differentiation (`jvp` from `rhs`; bgc.differentiate.tangent).  A new
+   derived by forward differentiation (`jvp` from `rhs`; bgc.tangent.tangent).  A new
    function (an event's indicators, a reset) is a new entry there, nothing else.
 2. Each takes from the steps only what its results need (bgc.ir.prune, backwards).
 3. Model symbols become IR symbols (states x[i], parameters p[j], the rest w<k>, numbered as
@@ -23,7 +23,8 @@ from dataclasses import replace
 import sympy as sp
 
 from . import ir
-from .differentiate import partial, tangent
+from .differentiate import partial
+from .tangent import tangent
 from .graph import TIME, var
 from .ir import (C, P, T, V, X, Assign, BlockPlan, ConstraintRow, Function, JacobianPattern,
                  Newton, Param, Program, SceneSettings, Solve, Store, as_expr)
