@@ -219,7 +219,10 @@ def _block_resolve(w, k, t):
 
 
 def _norm2(v, base, m):
-    return math.sqrt(sum(v[base + i] * v[base + i] for i in range(m)))
+    s = 0.0  # summed in C's order (the builtin sum is compensated from Python 3.12 on)
+    for i in range(base, base + m):
+        s += v[i] * v[i]
+    return math.sqrt(s)
 
 
 _NEWTON_MAXIT = 50

@@ -145,9 +145,37 @@ class _Run:
             self.kout += 1
 
 
+# Byte parity with the C runtime: sums in C's sequence (never numpy.sum, dot or @, whose
+# pairwise or SIMD order depends on the machine; never the builtin sum, compensated from
+# Python 3.12 on), bgc_max's choice for a NaN.
+
+def _seq_sum(v):
+    """0.0 + v_0 + v_1 + ... in this order, as C's `acc = 0.0; acc += v[l]` loops."""
+    return 0.0 + float(numpy.add.accumulate(v)[-1]) if len(v) else 0.0
+
+
+def _seq_minus(acc, terms):
+    """acc - terms_0 - terms_1 - ... in this order (C's back substitution)."""
+    if not len(terms):
+        return acc
+    return numpy.subtract.accumulate(numpy.concatenate(([acc], terms)))[-1]
+
+
+def _c_max(a, b):
+    """bgc_max element-wise: b where b > a, else a (a NaN b is never larger)."""
+    return numpy.where(b > a, b, a)
+
+
+def _worst(q):
+    """C's running `if (q > big)` from big = -1: the first largest non-NaN q_i, or -1."""
+    q = numpy.where(q == q, q, -1.0)
+    i = int(numpy.argmax(q)) if len(q) else -1
+    return i if i >= 0 and q[i] > -1.0 else -1
+
+
 def _weights(s, y, y1):
-    """Hairer's error-norm weights atol + rtol * max(|y_i|, |y1_i|)."""
-    return s.atol + s.rtol * numpy.maximum(numpy.abs(y), numpy.abs(y1))
+    """Hairer's error-norm weights atol + rtol * max(|y_i|, |y1_i|) (bgc_weight)."""
+    return s.atol + s.rtol * _c_max(numpy.abs(y), numpy.abs(y1))
 
 
 def _initial_step(run, q, y, f0, hmax):
@@ -156,10 +184,9 @@ def _initial_step(run, q, y, f0, hmax):
     y, f0 = numpy.asarray(y, dtype=float), numpy.asarray(f0, dtype=float)
     sk = s.atol + s.rtol * numpy.abs(y)
     with numpy.errstate(all="ignore"):  # IEEE as in C: an overflow gives inf, then h = 0
-        dnf = numpy.sum((f0 / sk) ** 2)
-        dny = numpy.sum((y / sk) ** 2)
-        h = 1e-6 if (dnf <= 1e-10 or dny <= 1e-10) else float(numpy.sqrt(dny / dnf) * 0.01)
-        dnf = float(dnf)
+        qf, qy = f0 / sk, y / sk
+        dnf, dny = _seq_sum(qf * qf), _seq_sum(qy * qy)
+        h = 1e-6 if (dnf <= 1e-10 or dny <= 1e-10) else math.sqrt(dny / dnf) * 0.01
     h = min(h, hmax)
     run.st["rhs"] += 1
     try:
@@ -167,7 +194,8 @@ def _initial_step(run, q, y, f0, hmax):
     except _BlockFailure:
         return h  # a block failed there: start small, the step control takes over
     with numpy.errstate(all="ignore"):
-        der2 = float(numpy.sqrt(numpy.sum(((f1 - f0) / sk) ** 2)) / numpy.float64(h))
+        d = (f1 - f0) / (s.atol + s.rtol * numpy.abs(y))
+        der2 = float(numpy.float64(math.sqrt(_seq_sum(d * d))) / numpy.float64(h))
     der12 = max(math.sqrt(dnf), abs(der2))  # a NaN der2 is ignored
     h1 = max(1e-6, h * 1e-3) if der12 <= 1e-15 else (0.01 / der12) ** (1.0 / q)
     if not h1 > 0.0:
@@ -289,7 +317,10 @@ class _ListVectors:
 
     @staticmethod
     def distance2(u, v):
-        return sum([(a - b) * (a - b) for a, b in zip(u, v)])
+        acc = 0.0
+        for a, b in zip(u, v):
+            acc += (a - b) * (a - b)
+        return acc
 
 
 class _ArrayVectors:
@@ -319,17 +350,20 @@ class _ArrayVectors:
 
     @staticmethod
     def error_sums(s, y, y1, e1, e2):
-        sk = s.atol + s.rtol * numpy.maximum(numpy.abs(y), numpy.abs(y1))
+        sk = _weights(s, y, y1)
         with numpy.errstate(all="ignore"):
-            sq = (e1 / sk) ** 2
-            err = float(numpy.sum(sq)) if _N else 0.0
-            worst = int(numpy.argmax(sq)) if _N and err == err else -1
-            err2 = float(numpy.sum((e2 / sk) ** 2)) if e2 is not None else 0.0
-        return err, worst, err2
+            sq = e1 / sk
+            sq = sq * sq
+            err = _seq_sum(sq)
+            q2 = e2 / sk if e2 is not None else None
+            err2 = _seq_sum(q2 * q2) if e2 is not None else 0.0
+        return err, _worst(sq), err2
 
     @staticmethod
     def distance2(u, v):
-        return float(numpy.sum((u - v) ** 2))
+        with numpy.errstate(all="ignore"):
+            d = u - v
+            return _seq_sum(d * d)
 
 
 _V = _ListVectors if _N <= _LIST_STATES else _ArrayVectors
@@ -338,12 +372,12 @@ _V = _ListVectors if _N <= _LIST_STATES else _ArrayVectors
 def _combine(weights, K, count):
     """sum_j weights[j] K[j] over j < count with a nonzero weight, left to right, for numpy
     vectors K[j] (the stiff solvers)."""
-    acc = None
+    acc = numpy.zeros(_N)  # C's acc = 0.0, then acc += a K_j
     for j in range(count):
         a = weights[j]
         if a != 0.0:
-            acc = a * K[j] if acc is None else acc + a * K[j]
-    return numpy.zeros(_N) if acc is None else acc
+            acc = acc + a * K[j]
+    return acc
 
 
 class _ErkPlan:
@@ -508,7 +542,7 @@ def _run_erk(run, m, y):
                 combine(None, 1.0, e2, K) if e2 else None)
         except (OverflowError, ValueError):  # an infinite stage: treated as NaN below
             err, worst_now, err2 = math.nan, -1, 0.0
-        if err == err:
+        if worst_now >= 0:  # C keeps the largest finite share even when the sum is NaN
             worst = worst_now
         if n == 0 or (fixed and err == err):
             err = 0.0  # fixed steps: accepted as they are (a non-finite stage fails below)

@@ -424,7 +424,10 @@ def _block_resolve(w, k, t):
 
 
 def _norm2(v, base, m):
-    return math.sqrt(sum(v[base + i] * v[base + i] for i in range(m)))
+    s = 0.0  # summed in C's order (the builtin sum is compensated from Python 3.12 on)
+    for i in range(base, base + m):
+        s += v[i] * v[i]
+    return math.sqrt(s)
 
 
 _NEWTON_MAXIT = 50
@@ -1153,9 +1156,37 @@ class _Run:
             self.kout += 1
 
 
+# Byte parity with the C runtime: sums in C's sequence (never numpy.sum, dot or @, whose
+# pairwise or SIMD order depends on the machine; never the builtin sum, compensated from
+# Python 3.12 on), bgc_max's choice for a NaN.
+
+def _seq_sum(v):
+    """0.0 + v_0 + v_1 + ... in this order, as C's `acc = 0.0; acc += v[l]` loops."""
+    return 0.0 + float(numpy.add.accumulate(v)[-1]) if len(v) else 0.0
+
+
+def _seq_minus(acc, terms):
+    """acc - terms_0 - terms_1 - ... in this order (C's back substitution)."""
+    if not len(terms):
+        return acc
+    return numpy.subtract.accumulate(numpy.concatenate(([acc], terms)))[-1]
+
+
+def _c_max(a, b):
+    """bgc_max element-wise: b where b > a, else a (a NaN b is never larger)."""
+    return numpy.where(b > a, b, a)
+
+
+def _worst(q):
+    """C's running `if (q > big)` from big = -1: the first largest non-NaN q_i, or -1."""
+    q = numpy.where(q == q, q, -1.0)
+    i = int(numpy.argmax(q)) if len(q) else -1
+    return i if i >= 0 and q[i] > -1.0 else -1
+
+
 def _weights(s, y, y1):
-    """Hairer's error-norm weights atol + rtol * max(|y_i|, |y1_i|)."""
-    return s.atol + s.rtol * numpy.maximum(numpy.abs(y), numpy.abs(y1))
+    """Hairer's error-norm weights atol + rtol * max(|y_i|, |y1_i|) (bgc_weight)."""
+    return s.atol + s.rtol * _c_max(numpy.abs(y), numpy.abs(y1))
 
 
 def _initial_step(run, q, y, f0, hmax):
@@ -1164,10 +1195,9 @@ def _initial_step(run, q, y, f0, hmax):
     y, f0 = numpy.asarray(y, dtype=float), numpy.asarray(f0, dtype=float)
     sk = s.atol + s.rtol * numpy.abs(y)
     with numpy.errstate(all="ignore"):  # IEEE as in C: an overflow gives inf, then h = 0
-        dnf = numpy.sum((f0 / sk) ** 2)
-        dny = numpy.sum((y / sk) ** 2)
-        h = 1e-6 if (dnf <= 1e-10 or dny <= 1e-10) else float(numpy.sqrt(dny / dnf) * 0.01)
-        dnf = float(dnf)
+        qf, qy = f0 / sk, y / sk
+        dnf, dny = _seq_sum(qf * qf), _seq_sum(qy * qy)
+        h = 1e-6 if (dnf <= 1e-10 or dny <= 1e-10) else math.sqrt(dny / dnf) * 0.01
     h = min(h, hmax)
     run.st["rhs"] += 1
     try:
@@ -1175,7 +1205,8 @@ def _initial_step(run, q, y, f0, hmax):
     except _BlockFailure:
         return h  # a block failed there: start small, the step control takes over
     with numpy.errstate(all="ignore"):
-        der2 = float(numpy.sqrt(numpy.sum(((f1 - f0) / sk) ** 2)) / numpy.float64(h))
+        d = (f1 - f0) / (s.atol + s.rtol * numpy.abs(y))
+        der2 = float(numpy.float64(math.sqrt(_seq_sum(d * d))) / numpy.float64(h))
     der12 = max(math.sqrt(dnf), abs(der2))  # a NaN der2 is ignored
     h1 = max(1e-6, h * 1e-3) if der12 <= 1e-15 else (0.01 / der12) ** (1.0 / q)
     if not h1 > 0.0:
@@ -1297,7 +1328,10 @@ class _ListVectors:
 
     @staticmethod
     def distance2(u, v):
-        return sum([(a - b) * (a - b) for a, b in zip(u, v)])
+        acc = 0.0
+        for a, b in zip(u, v):
+            acc += (a - b) * (a - b)
+        return acc
 
 
 class _ArrayVectors:
@@ -1327,17 +1361,20 @@ class _ArrayVectors:
 
     @staticmethod
     def error_sums(s, y, y1, e1, e2):
-        sk = s.atol + s.rtol * numpy.maximum(numpy.abs(y), numpy.abs(y1))
+        sk = _weights(s, y, y1)
         with numpy.errstate(all="ignore"):
-            sq = (e1 / sk) ** 2
-            err = float(numpy.sum(sq)) if _N else 0.0
-            worst = int(numpy.argmax(sq)) if _N and err == err else -1
-            err2 = float(numpy.sum((e2 / sk) ** 2)) if e2 is not None else 0.0
-        return err, worst, err2
+            sq = e1 / sk
+            sq = sq * sq
+            err = _seq_sum(sq)
+            q2 = e2 / sk if e2 is not None else None
+            err2 = _seq_sum(q2 * q2) if e2 is not None else 0.0
+        return err, _worst(sq), err2
 
     @staticmethod
     def distance2(u, v):
-        return float(numpy.sum((u - v) ** 2))
+        with numpy.errstate(all="ignore"):
+            d = u - v
+            return _seq_sum(d * d)
 
 
 _V = _ListVectors if _N <= _LIST_STATES else _ArrayVectors
@@ -1346,12 +1383,12 @@ _V = _ListVectors if _N <= _LIST_STATES else _ArrayVectors
 def _combine(weights, K, count):
     """sum_j weights[j] K[j] over j < count with a nonzero weight, left to right, for numpy
     vectors K[j] (the stiff solvers)."""
-    acc = None
+    acc = numpy.zeros(_N)  # C's acc = 0.0, then acc += a K_j
     for j in range(count):
         a = weights[j]
         if a != 0.0:
-            acc = a * K[j] if acc is None else acc + a * K[j]
-    return numpy.zeros(_N) if acc is None else acc
+            acc = acc + a * K[j]
+    return acc
 
 
 class _ErkPlan:
@@ -1516,7 +1553,7 @@ def _run_erk(run, m, y):
                 combine(None, 1.0, e2, K) if e2 else None)
         except (OverflowError, ValueError):  # an infinite stage: treated as NaN below
             err, worst_now, err2 = math.nan, -1, 0.0
-        if err == err:
+        if worst_now >= 0:  # C keeps the largest finite share even when the sum is NaN
             worst = worst_now
         if n == 0 or (fixed and err == err):
             err = 0.0  # fixed steps: accepted as they are (a non-finite stage fails below)
@@ -1658,23 +1695,272 @@ def _integrate_from(s, p, x0, st):
 # The stiff families: Rosenbrock methods in Hairer's transformed form (RODAS's design, any
 # tableau of the family) and Radau IIA with 3, 5 or 7 stages, of fixed or variable order
 # (RADAU5's and RADAU's design), as bgc_run_rosenbrock and bgc_run_radau in the C runtime (see
-# there).  Linear algebra: whether an iteration matrix is singular is decided as the C runtime
-# decides it (its LU factorisation with partial pivoting, done here row-vectorised in the same
-# operations: an exactly zero pivot column is singular), so both backends stop on the same
-# matrices; a matrix that is not is inverted once per factorisation with numpy.linalg.inv and
-# every solve is a matrix-vector product with the inverse.  The results agree with C's within
-# rounding, not bit for bit.
+# there).  Byte parity: every floating-point operation is the C runtime's, in C's order, so
+# both backends write the same bytes whatever BLAS or SIMD kernels numpy picks.  Hence no
+# numpy.sum, dot, @ or linalg here: sums run in C's sequence (_seq_sum, a subtract.accumulate),
+# the LU factorisations and solves are bgc_stiff_lu's and bgc_stiff_zlu's (row-vectorised
+# where C's loops are element-wise independent), and complex arithmetic is done on real and
+# imaginary parts as gcc compiles C99's: products (ac - bd) + i(ad + bc) with Annex G's
+# recovery of infinities (libgcc's __muldc3), quotients as libgcc's __divdc3 (GCC 12 and on).
 
 
 def _stiff_norm(v, w):
-    """sqrt(mean((v_i / w_i)^2)) (0 without states) and the component with the largest share."""
+    """bgc_stiff_norm: sqrt(mean((v_i / w_i)^2)) (0 without states) and the component with
+    the largest share (the first; -1 if every share is NaN)."""
     if _N == 0:
         return 0.0, -1
     with numpy.errstate(all="ignore"):
-        q = (v / w) ** 2
-        total = float(numpy.sum(q))
-    worst = int(numpy.argmax(q)) if total == total else -1
-    return math.sqrt(total / _N), worst
+        q = v / w
+        q = q * q
+    return math.sqrt(_seq_sum(q) / _N), _worst(q)
+
+
+# ---------------------------------------------------------------- complex arithmetic
+# A complex number is a pair of floats (or of float arrays): real and imaginary part.
+
+_RBIG = sys.float_info.max / 2
+_RMIN = sys.float_info.min
+_RMIN2 = sys.float_info.epsilon
+_RMINSCAL = 1.0 / sys.float_info.epsilon
+_RMAX2 = _RBIG * _RMIN2
+
+
+def _box(v):
+    """Annex G's boxing of an infinite part: +-1 if v is infinite, else +-0."""
+    return math.copysign(1.0 if math.isinf(v) else 0.0, v)
+
+
+def _muldc3(a, b, c, d):
+    """(a + ib)(c + id) as libgcc's __muldc3 (gcc's inline product where not both parts are
+    NaN), on floats."""
+    ac, bd, ad, bc = a * c, b * d, a * d, b * c
+    x, y = ac - bd, ad + bc
+    if x != x and y != y:  # recover infinities that came out as NaN + iNaN
+        recalc = False
+        if math.isinf(a) or math.isinf(b):
+            a, b = _box(a), _box(b)
+            c = math.copysign(0.0, c) if c != c else c
+            d = math.copysign(0.0, d) if d != d else d
+            recalc = True
+        if math.isinf(c) or math.isinf(d):
+            c, d = _box(c), _box(d)
+            a = math.copysign(0.0, a) if a != a else a
+            b = math.copysign(0.0, b) if b != b else b
+            recalc = True
+        if not recalc and any(math.isinf(v) for v in (ac, bd, ad, bc)):
+            a, b, c, d = (math.copysign(0.0, v) if v != v else v for v in (a, b, c, d))
+            recalc = True
+        if recalc:
+            x = math.inf * (a * c - b * d)
+            y = math.inf * (a * d + b * c)
+    return x, y
+
+
+def _divdc3(a, b, c, d):
+    """(a + ib) / (c + id) as libgcc's __divdc3 (GCC 12's: Smith's method with scaling), on
+    floats; where Python would raise on a division by zero, on numpy.float64 values (IEEE)."""
+    try:
+        return _divdc3_of(a, b, c, d)
+    except ZeroDivisionError:
+        with numpy.errstate(all="ignore"):
+            x, y = _divdc3_of(*(numpy.float64(v) for v in (a, b, c, d)))
+        return float(x), float(y)
+
+
+def _divdc3_of(a, b, c, d):
+    if abs(c) < abs(d):
+        if abs(d) >= _RBIG:
+            a, b, c, d = a / 2, b / 2, c / 2, d / 2
+        if abs(d) < _RMIN2 or _tiny(a, b, d):
+            a, b, c, d = a * _RMINSCAL, b * _RMINSCAL, c * _RMINSCAL, d * _RMINSCAL
+        ratio = c / d
+        denom = (c * ratio) + d
+        if abs(ratio) > _RMIN:
+            x, y = ((a * ratio) + b) / denom, ((b * ratio) - a) / denom
+        else:
+            x, y = ((c * (a / d)) + b) / denom, ((c * (b / d)) - a) / denom
+    else:
+        if abs(c) >= _RBIG:
+            a, b, c, d = a / 2, b / 2, c / 2, d / 2
+        if abs(c) < _RMIN2 or _tiny(a, b, c):
+            a, b, c, d = a * _RMINSCAL, b * _RMINSCAL, c * _RMINSCAL, d * _RMINSCAL
+        ratio = d / c
+        denom = (d * ratio) + c
+        if abs(ratio) > _RMIN:
+            x, y = ((b * ratio) + a) / denom, (b - (a * ratio)) / denom
+        else:
+            x, y = (a + (d * (b / c))) / denom, (b - (d * (a / c))) / denom
+    if x != x and y != y:  # recover infinities and zeros that came out as NaN + iNaN
+        if c == 0.0 and d == 0.0 and (a == a or b == b):
+            x, y = math.copysign(math.inf, c) * a, math.copysign(math.inf, c) * b
+        elif (math.isinf(a) or math.isinf(b)) and math.isfinite(c) and math.isfinite(d):
+            a, b = _box(a), _box(b)
+            x, y = math.inf * (a * c + b * d), math.inf * (b * c - a * d)
+        elif (math.isinf(c) or math.isinf(d)) and math.isfinite(a) and math.isfinite(b):
+            c, d = _box(c), _box(d)
+            x, y = 0.0 * (a * c + b * d), 0.0 * (b * c - a * d)
+    return x, y
+
+
+def _tiny(a, b, big):
+    """__divdc3's test for scaling up a small numerator (big: the divisor's larger part)."""
+    return ((abs(a) < _RMIN and abs(b) < _RMAX2 and abs(big) < _RMAX2)
+            or (abs(b) < _RMIN and abs(a) < _RMAX2 and abs(big) < _RMAX2))
+
+
+def _each(f, mask, x, y, *args):
+    """x, y with f(*args_i) at the elements where mask holds (the rare cases of the vector
+    complex operations, done one by one)."""
+    args = numpy.broadcast_arrays(*args)
+    x, y = numpy.array(x, dtype=float), numpy.array(y, dtype=float)
+    for i in zip(*numpy.nonzero(mask)):
+        x[i], y[i] = f(*(float(v[i]) for v in args))
+    return x, y
+
+
+def _cmul(a, b, c, d):
+    """(a + ib)(c + id) element-wise (arrays or floats): gcc's inline product, __muldc3 where
+    both parts are NaN."""
+    x, y = a * c - b * d, a * d + b * c
+    bad = (x != x) & (y != y)
+    return _each(_muldc3, bad, x, y, a, b, c, d) if bad.any() else (x, y)
+
+
+def _cdiv(a, b, c, d):
+    """(a + ib) / (c + id) for arrays a, b and floats c, d: __divdc3 without scaling (a
+    divisor of moderate size) vectorised, _divdc3 element by element otherwise."""
+    one = abs(c) < abs(d)  # scaled by d: ratio c / d
+    big = abs(d) if one else abs(c)
+    if not _RMIN2 <= big < _RBIG:
+        return _each(_divdc3, numpy.ones(numpy.shape(a), bool), a, a, a, b, c, d)
+    ratio = c / d if one else d / c
+    normal = abs(ratio) > _RMIN  # else (a real or imaginary divisor) the other order
+    if one:
+        denom = (c * ratio) + d
+        if normal:
+            x, y = ((a * ratio) + b) / denom, ((b * ratio) - a) / denom
+        else:
+            x, y = ((c * (a / d)) + b) / denom, ((c * (b / d)) - a) / denom
+    else:
+        denom = (d * ratio) + c
+        if normal:
+            x, y = ((b * ratio) + a) / denom, (b - (a * ratio)) / denom
+        else:
+            x, y = (a + (d * (b / c))) / denom, (b - (d * (a / c))) / denom
+    aa, ab = numpy.abs(a), numpy.abs(b)
+    odd = (x != x) & (y != y)
+    if big < _RMAX2:
+        odd |= ((aa < _RMIN) & (ab < _RMAX2)) | ((ab < _RMIN) & (aa < _RMAX2))
+    return _each(_divdc3, odd, x, y, a, b, c, d) if odd.any() else (x, y)
+
+
+# ---------------------------------------------------------------- dense linear algebra
+# bgc_stiff_lu and bgc_stiff_zlu: partial pivoting on the first largest |a_ik| (|re| + |im|
+# for complex), rows whose multiplier is zero left alone, a column without a nonzero pivot
+# singular (None); the elimination of row i, a_ij - l a_kj for j > k, is element-wise in C
+# and done here for all rows i at once.  The solves: all the row swaps, the column-oriented
+# forward substitution (vectorised), the back substitution's row sums in C's order.
+
+
+def _pivot(size):
+    """C's pivot search over a column's sizes from the diagonal: from |a_kk|, the first entry
+    larger than the largest so far (a NaN is never larger, and a NaN |a_kk| stays)."""
+    if len(size) < 2 or size[0] != size[0]:
+        return 0
+    rest = numpy.where(size[1:] == size[1:], size[1:], -1.0)
+    i = int(numpy.argmax(rest))
+    return i + 1 if rest[i] > size[0] else 0
+
+
+def _lu(a):
+    """bgc_stiff_lu on a (n x n, factored in place): the pivots, or None if singular."""
+    n = a.shape[0]
+    piv = []
+    with numpy.errstate(all="ignore"):
+        for k in range(n):
+            size = numpy.abs(a[k:, k])
+            p = k + _pivot(size)
+            piv.append(p)
+            if size[p - k] == 0.0:
+                return None
+            if p != k:
+                a[[k, p]] = a[[p, k]]
+            lower = a[k + 1:, k] / a[k, k]
+            a[k + 1:, k] = lower
+            rows = numpy.nonzero(lower != 0.0)[0]
+            if len(rows) == n - k - 1:
+                a[k + 1:, k + 1:] -= lower[:, None] * a[k, k + 1:]
+            elif len(rows):
+                a[rows + k + 1, k + 1:] -= lower[rows, None] * a[k, k + 1:]
+    return piv
+
+
+def _lu_solve(lu, piv, b):
+    """bgc_stiff_lu_solve: A^-1 b (a new vector) from _lu's factors (under the caller's
+    numpy.errstate, as _zlu_solve)."""
+    b = numpy.array(b, dtype=float)
+    n = len(b)
+    for k in range(n):
+        p = piv[k]
+        b[k], b[p] = b[p], b[k]
+    for k in range(n - 1):
+        bk = b[k]
+        if bk != 0.0:
+            b[k + 1:] -= lu[k + 1:, k] * bk
+    for k in range(n - 1, -1, -1):
+        b[k] = _seq_minus(b[k], lu[k, k + 1:] * b[k + 1:]) / lu[k, k]
+    return b
+
+
+def _zlu(ar, ai):
+    """bgc_stiff_zlu on ar + i ai (factored in place): the pivots, or None if singular."""
+    n = ar.shape[0]
+    piv = []
+    with numpy.errstate(all="ignore"):
+        for k in range(n):
+            size = numpy.abs(ar[k:, k]) + numpy.abs(ai[k:, k])
+            p = k + _pivot(size)
+            piv.append(p)
+            if size[p - k] == 0.0:
+                return None
+            if p != k:
+                ar[[k, p]], ai[[k, p]] = ar[[p, k]], ai[[p, k]]
+            lr, li = _cdiv(ar[k + 1:, k], ai[k + 1:, k], float(ar[k, k]), float(ai[k, k]))
+            ar[k + 1:, k], ai[k + 1:, k] = lr, li
+            rows = numpy.nonzero((lr != 0.0) | (li != 0.0))[0]
+            if len(rows):
+                pr, pi = _cmul(lr[rows, None], li[rows, None], ar[k, k + 1:], ai[k, k + 1:])
+                ar[rows + k + 1, k + 1:] -= pr
+                ai[rows + k + 1, k + 1:] -= pi
+    return piv
+
+
+def _zlu_solve(lur, lui, piv, br, bi):
+    """bgc_stiff_zlu_solve: A^-1 (br + i bi) (new vectors) from _zlu's factors."""
+    br, bi = numpy.array(br, dtype=float), numpy.array(bi, dtype=float)
+    n = len(br)
+    for k in range(n):
+        p = piv[k]
+        br[k], br[p] = br[p], br[k]
+        bi[k], bi[p] = bi[p], bi[k]
+    for k in range(n - 1):
+        xr, xi = float(br[k]), float(bi[k])
+        if xr != 0.0 or xi != 0.0:
+            pr, pi = _cmul(lur[k + 1:, k], lui[k + 1:, k], xr, xi)
+            br[k + 1:] -= pr
+            bi[k + 1:] -= pi
+    for k in range(n - 1, -1, -1):
+        pr, pi = _cmul(lur[k, k + 1:], lui[k, k + 1:], br[k + 1:], bi[k + 1:])
+        br[k], bi[k] = _divdc3(float(_seq_minus(br[k], pr)), float(_seq_minus(bi[k], pi)),
+                               float(lur[k, k]), float(lui[k, k]))
+    return br, bi
+
+
+def _real_matrix(J, diagonal):
+    """-J with `diagonal` added to its diagonal, as the C runtime forms it."""
+    E = -J
+    E[numpy.diag_indices(_N)] += diagonal
+    return E
 
 
 def _stiff_fail_step(name, t, h, bad, bad_kind, worst, block_failure):
@@ -1696,46 +1982,6 @@ def _stiff_fail_step(name, t, h, bad, bad_kind, worst, block_failure):
 def _stiff_fail_singular(name, t, h):
     return _Failure("at t = %.17g: %s: the iteration matrix is singular (h = %.3g)"
                     % (t, name, h), t)
-
-
-def _stiff_singular(E):
-    """Whether bgc_stiff_lu (bgc_stiff_zlu for a complex E) finds a column without a nonzero
-    pivot: the same pivots (the first largest |a_ik|, |re| + |im| for complex), the same
-    eliminations (rows whose multiplier is zero left alone)."""
-    a = numpy.array(E)
-    n = a.shape[0]
-    size = (lambda v: numpy.abs(v.real) + numpy.abs(v.imag)) if a.dtype.kind == "c" \
-        else numpy.abs
-    with numpy.errstate(all="ignore"):
-        for k in range(n):
-            column = size(a[k:, k])
-            # C's scan: from |a_kk|, the first entry larger than the largest so far (a NaN
-            # is never larger, and a NaN |a_kk| stays)
-            p = k
-            if column[0] == column[0] and len(column) > 1:
-                rest = numpy.where(column[1:] == column[1:], column[1:], -1.0)
-                if rest.max() > column[0]:
-                    p = k + 1 + int(numpy.argmax(rest))
-            if column[p - k] == 0.0:
-                return True
-            if p != k:
-                a[[k, p]] = a[[p, k]]
-            lower = a[k + 1:, k] / a[k, k]
-            rows = numpy.nonzero(lower != 0.0)[0] + k + 1
-            if len(rows):
-                a[rows, k + 1:] -= lower[rows - k - 1, None] * a[k, k + 1:]
-    return False
-
-
-def _stiff_inverse(E):
-    """E^-1, or None if E is singular (as the C runtime's factorisation finds it)."""
-    if _stiff_singular(E):
-        return None
-    try:
-        with numpy.errstate(all="ignore"):
-            return numpy.linalg.inv(E)
-    except numpy.linalg.LinAlgError:
-        return None
 
 
 def _method_name(m):
@@ -1792,7 +2038,6 @@ def _run_rosenbrock(run, m, y):
     reject = last = False
     fresh, accepted, nsing, k_fixed, n_fixed = True, 0, 0, 0, 0
     worst, bad, bad_kind, block_failure = -1, -1, "", None
-    identity = numpy.eye(_N)
     ft = numpy.zeros(_N)
     f0 = J = None
     if fixed:
@@ -1827,10 +2072,11 @@ def _run_rosenbrock(run, m, y):
                 last = True
             tph = s.t_end if last else t + h
 
-        # E = I/(gamma h) - J, inverted
+        # E = I/(gamma h) - J, factored
         st["lu"] += 1
-        Einv = _stiff_inverse(identity * (1.0 / (gamma * h)) - J)
-        if Einv is None:
+        E = _real_matrix(J, 1.0 / (gamma * h))
+        piv = _lu(E)
+        if piv is None:
             nsing += 1
             if fixed or nsing == 5:
                 raise _stiff_fail_singular(name, t, h)
@@ -1850,7 +2096,7 @@ def _run_rosenbrock(run, m, y):
                     rhs = rhs + _combine(C[i], K, i) / h
                     if not _AUTONOMOUS and d[i] != 0.0:
                         rhs = rhs + h * d[i] * ft
-                    K[i] = Einv @ rhs
+                    K[i] = _lu_solve(E, piv, rhs)
                     st["solves"] += 1
         except _BlockFailure as failure:  # an algebraic block failed in a stage
             if fixed:
@@ -1911,7 +2157,12 @@ def _run_rosenbrock(run, m, y):
 def _rosenbrock_dense(y, y1, K, H):
     """y(theta) = (1 - theta) y0 + theta (y1 + (1 - theta) (q_1 + theta (q_2 + ... theta q_R)))."""
     def prepare():
-        q = [_combine(row, K, len(K)) for row in H]
+        q = []
+        for row in H:  # every weight, zeros too, as bgc_ros_prepare
+            acc = numpy.zeros(_N)
+            for w, k in zip(row, K):
+                acc = acc + w * k
+            q.append(acc)
 
         def at(theta):
             s1 = 1.0 - theta
@@ -1937,6 +2188,15 @@ def _radau_poly(c, Z):
             for k in range(s, j - 1, -1):
                 d[k] = (d[k] - d[k - 1]) / (x[k] - x[k - j])
     return d[1:]
+
+
+def _radau_mul(M, V):
+    """bgc_radau_mul for every component: M (ns x ns) times the stages V (ns x N), each
+    M_i0 V_0 + M_i1 V_1 + ... in this order (all rows i at once)."""
+    acc = numpy.multiply.outer(M[:, 0], V[0])
+    for j in range(1, len(M)):
+        acc += numpy.multiply.outer(M[:, j], V[j])
+    return acc
 
 
 def _radau_u(c, b, theta):
@@ -1990,9 +2250,8 @@ def _run_radau(run, m, y):
     first = needjac = True
     accepted, nsing, k_fixed, n_fixed, newt = 0, 0, 0, 0, 0
     worst, bad, bad_kind, block_failure = -1, -1, "", None
-    identity = numpy.eye(_N)
-    J = E1inv = None
-    Ecinv = []
+    J = E1 = piv1 = None
+    Ec = []  # per complex pair: the factors' real and imaginary parts, the pivots
     b = [numpy.zeros(_N)] * u.ns
     zlast = numpy.zeros(_N)
     if fixed:
@@ -2043,20 +2302,25 @@ def _run_radau(run, m, y):
         alphn = [a / h for a in u.alpha]
         betan = [bb / h for bb in u.beta]
 
-        # gamma/h I - J and (alpha_k + i beta_k)/h I - J, inverted (unless they are h's)
+        # gamma/h I - J and (alpha_k + i beta_k)/h I - J, factored (unless they are h's); C
+        # adds alpha_k + beta_k _Complex_I, i.e. (alpha_k + beta_k 0) + i (0 + beta_k), to -J
         refactored = h != hfact
         if h != hfact:
             st["lu"] += 1
-            E1inv = _stiff_inverse(identity * fac1 - J)
-            Ecinv = []
-            singular = E1inv is None
+            E1 = _real_matrix(J, fac1)
+            piv1 = _lu(E1)
+            Ec = []
+            singular = piv1 is None
             for k in range(u.pairs):
                 if singular:
                     break
                 st["lu"] += 1
-                inv = _stiff_inverse(identity * complex(alphn[k], betan[k]) - J)
-                singular = inv is None
-                Ecinv.append(inv)
+                Er = _real_matrix(J, alphn[k] + betan[k] * 0.0)
+                Ei = numpy.zeros((_N, _N))
+                Ei[numpy.diag_indices(_N)] += betan[k]
+                pv = _zlu(Er, Ei)
+                singular = pv is None
+                Ec.append((Er, Ei, pv))
             if singular:
                 hfact = 0.0
                 nsing += 1
@@ -2070,11 +2334,12 @@ def _run_radau(run, m, y):
 
         # starting values: the last step's collocation polynomial, extrapolated
         if first or change:
-            Z = numpy.zeros((ns, _N))
+            Z, W = numpy.zeros((ns, _N)), numpy.zeros((ns, _N))
         else:
             q = h / hold
-            Z = numpy.array([_radau_u(c, b, 1.0 + c[i] * q) - zlast for i in range(ns)])
-        W = Ti @ Z
+            with numpy.errstate(all="ignore"):
+                Z = numpy.array([_radau_u(c, b, 1.0 + c[i] * q) - zlast for i in range(ns)])
+                W = _radau_mul(Ti, Z)
 
         # the simplified Newton iteration
         newt, failed = 0, 0
@@ -2099,19 +2364,24 @@ def _run_radau(run, m, y):
             if failed:
                 break
             with numpy.errstate(all="ignore"):
-                G = Ti @ F
+                G = _radau_mul(Ti, F)
                 dW = numpy.empty((ns, _N))
-                dW[0] = E1inv @ (G[0] - fac1 * W[0])
+                dW[0] = _lu_solve(E1, piv1, G[0] - fac1 * W[0])
                 for k in range(u.pairs):
                     w2, w3 = W[2 * k + 1], W[2 * k + 2]
                     g2 = G[2 * k + 1] - (alphn[k] * w2 - betan[k] * w3)
                     g3 = G[2 * k + 2] - (betan[k] * w2 + alphn[k] * w3)
-                    dwc = Ecinv[k] @ (g2 + 1j * g3)
-                    dW[2 * k + 1], dW[2 * k + 2] = dwc.real, dwc.imag
+                    # C's g2 + g3 _Complex_I: (g2 + g3 0) + i g3
+                    dW[2 * k + 1], dW[2 * k + 2] = _zlu_solve(*Ec[k], g2 + g3 * 0.0, g3)
                 st["solves"] += 1 + u.pairs
                 newt += 1
-                dyno = (math.sqrt(float(numpy.sum((dW / scal) ** 2)) / (ns * _N)) if _N
-                        else 0.0)
+                # per component dW_0^2 + dW_1^2 + ... (in units of scal), then over them
+                part = dW[0] / scal
+                part = part * part
+                for i in range(1, ns):
+                    q = dW[i] / scal
+                    part = part + q * q
+                dyno = math.sqrt(_seq_sum(part) / (ns * _N)) if _N else 0.0
             if dyno != dyno or dyno == math.inf:
                 failed = 2
                 break
@@ -2131,8 +2401,9 @@ def _run_radau(run, m, y):
                     failed = 2
                     break
             dynold = max(dyno, _EPS)
-            W = W + dW
-            Z = T @ W
+            with numpy.errstate(all="ignore"):
+                W = W + dW
+                Z = _radau_mul(T, W)
             # converged; after one iteration only on the previous step's matrices
             if (newt > 1 or not refactored) and faccon * dyno <= u.fnewt:
                 break
@@ -2163,10 +2434,13 @@ def _run_radau(run, m, y):
         err = 0.0
         if not fixed:
             with numpy.errstate(all="ignore"):
-                f2 = sum(u.e[j] * Z[j] for j in range(ns)) / h
-                cont = E1inv @ (f2 + f0)
+                f2 = u.e[0] * Z[0]
+                for j in range(1, ns):
+                    f2 = f2 + u.e[j] * Z[j]
+                f2 = f2 / h
+                cont = _lu_solve(E1, piv1, f2 + f0)
                 st["solves"] += 1
-                wt = u.atol + u.rtol * numpy.maximum(numpy.abs(y), numpy.abs(y + Z[ns - 1]))
+                wt = u.atol + u.rtol * _c_max(numpy.abs(y), numpy.abs(y + Z[ns - 1]))
                 err, worst_now = _stiff_norm(cont, wt)
                 err = max(err, 1e-10)
                 if err >= 1.0 and (first or reject):  # refined: f at y + err
@@ -2176,7 +2450,7 @@ def _run_radau(run, m, y):
                     except _BlockFailure:
                         f1 = None
                     if f1 is not None:
-                        cont = E1inv @ (f1 + f2)
+                        cont = _lu_solve(E1, piv1, f1 + f2)
                         st["solves"] += 1
                         err, worst_now = _stiff_norm(cont, wt)
                         err = max(err, 1e-10)
