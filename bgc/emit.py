@@ -26,7 +26,7 @@ from bgc.printers import CPrinter, PythonPrinter, float_literal
 from bgc.resources import resource_dir
 
 POW10_RANGE = (-24, 56)  # powers of ten for the C number formatter: |v| in about 1e-40..1e40
-C_RUNTIME = ("runtime.c", "solve.c", "stiff.c", "main.c", "batch.c")  # bgc/runtime/, in this order
+C_RUNTIME = ("runtime.c", "drive.c", "erk.c", "stiff.c", "main.c", "batch.c")  # bgc/runtime/, in this order
 PYTHON_RUNTIME = ("runtime.py", "solve.py", "stiff.py", "batch.py")
 PLAN_ARRAYS = ("diag", "lptr", "lpos", "lrow", "uptr", "upos", "ucol", "upd", "prow", "pcol")
 MODEL_FUNCTIONS = ("rhs", "outputs", "jvp")  # take the workspace, may solve blocks

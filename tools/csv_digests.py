@@ -50,8 +50,7 @@ def runs(path: Path, scene: str | None):
     if scene is not None:
         return
     for solver in solvers.NAMES:
-        if solvers.SOLVERS[solver].family != "fixed":
-            yield f"{solver}", ("--solver", solver, *SHORT)
+        yield f"{solver}", ("--solver", solver, *SHORT)
         yield f"{solver}-fixed", ("--solver", solver, *FIXED)
 
 

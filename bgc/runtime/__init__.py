@@ -1,3 +1,3 @@
 """bgc's runtimes: the model-independent code of every generated program, as plain source files
-inlined verbatim by bgc.emit: C (api.h, the declarations; runtime.c, solve.c, stiff.c, main.c)
-and Python (runtime.py, solve.py, stiff.py)."""
+inlined verbatim by bgc.emit: C (api.h, the declarations; runtime.c, drive.c, erk.c, stiff.c,
+main.c, batch.c) and Python (runtime.py, solve.py, stiff.py)."""

@@ -159,348 +159,301 @@ static double bgc_stiff_norm(const double *v, const double *w, int *worst)
     return N > 0 ? sqrt(sum / (double)N) : 0.0;
 }
 
-/* A step size below bgc_hmin: the message names what made the steps shrink. bad: -2 an
-   algebraic block failed, -3 the iteration matrix was singular, -4 Newton did not converge,
-   >= 0 a non-finite component (kind 1 a state, else a derivative), else the error test. */
-static int bgc_stiff_fail_step(bgc_run *r, const char *name, double t, double h, int bad,
-                               int bad_kind, int worst)
-{
-    if (bad == -2)
-        return bgc_fail_block(r->msg, r->msg_size, r->w);
-    if (bad == -3) {
-        snprintf(r->msg, r->msg_size,
-                 "at t = %.17g: %s: the iteration matrix is singular (step size down to h = %.3g)",
-                 t, name, h);
-        return BGC_ERR_RUNTIME;
-    }
-    if (bad == -4) {
-        snprintf(r->msg, r->msg_size,
-                 "at t = %.17g: %s: the Newton iteration does not converge (step size down to "
-                 "h = %.3g)", t, name, h);
-        return BGC_ERR_RUNTIME;
-    }
-    if (bad >= 0)
-        return bgc_fail(r->msg, r->msg_size, t, bad_kind == 1 ? "state" : "derivative of state",
-                        bgc_state_names[bad]);
-    return bgc_fail_step(r->msg, r->msg_size, t, h, worst);
-}
-
-static int bgc_stiff_fail_singular(bgc_run *r, const char *name, double t, double h)
+static int bgc_stiff_fail_singular(bgc_run *r, double t, double h)
 {
     snprintf(r->msg, r->msg_size, "at t = %.17g: %s: the iteration matrix is singular (h = %.3g)",
-             t, name, h);
+             t, r->method->name, h);
     return BGC_ERR_RUNTIME;
 }
 
-/* Fixed steps (s->step > 0): the grid t_start + k * step, the last step ending on t_end. */
-static double bgc_stiff_grid(const bgc_settings *s, double t_start, long k, long n)
+/* An attempt that failed (bad: how, bad_kind: what was not finite): half the step. */
+static void bgc_stiff_retry(bgc_outcome *o, double hnew, int bad, int bad_kind)
 {
-    return k >= n ? s->t_end : t_start + (double)k * s->step;
+    o->kind = BGC_STEP_RETRY;
+    o->hnew = hnew;
+    o->bad = bad;
+    o->bad_kind = bad_kind;
+}
+
+static void bgc_stiff_end(bgc_outcome *o, int rc)
+{
+    o->kind = BGC_STEP_END;
+    o->rc = rc;
 }
 
 /* ------------------------------------------------------- Rosenbrock methods --- */
-
-/* The dense output of a Rosenbrock step: y(theta) = (1 - theta) y0 + theta (y1 + (1 - theta)
-   (q_1 + theta (q_2 + ... + theta q_R))), q_r = sum_j H_rj k_j (formed when first needed). */
-typedef struct bgc_ros_dense {
-    const bgc_rosenbrock *m;
-    const double *y, *y1, *k;
-    double *q; /* R rows of D */
-} bgc_ros_dense;
-
-static int bgc_ros_prepare(void *dctx)
-{
-    enum { N = BGC_NUM_STATES, D = BGC_DIM(BGC_NUM_STATES) };
-    bgc_ros_dense *d = dctx;
-    const int S = d->m->stages, R = d->m->dense_rows;
-    int j, l, r;
-    for (r = 0; r < R; r++) {
-        const double *H = d->m->H + (size_t)r * S;
-        double *q = d->q + (size_t)r * D;
-        for (l = 0; l < N; l++) {
-            double acc = 0.0;
-            for (j = 0; j < S; j++)
-                acc += H[j] * d->k[(size_t)j * D + l];
-            q[l] = acc;
-        }
-    }
-    return 0;
-}
-
-static void bgc_ros_dense_at(const void *dctx, double theta, double *yout)
-{
-    enum { N = BGC_NUM_STATES, D = BGC_DIM(BGC_NUM_STATES) };
-    const bgc_ros_dense *d = dctx;
-    const int R = d->m->dense_rows;
-    const double s1 = 1.0 - theta;
-    int l, r;
-    for (l = 0; l < N; l++) {
-        double acc = d->q[(size_t)(R - 1) * D + l];
-        for (r = R - 2; r >= 0; r--)
-            acc = d->q[(size_t)r * D + l] + theta * acc;
-        yout[l] = s1 * d->y[l] + theta * (d->y1[l] + s1 * acc);
-    }
-}
 
 /* Rosenbrock methods as Hairer's RODAS: at every new point f(t, y), df/dt (a forward
    difference, unless the model is autonomous) and the Jacobian J; per step attempt one
    factorisation of E = I/(gamma h) - J and one solve per stage,
    E k_i = f(t + c_i h, y + sum_j a_ij k_j) + sum_j C_ij k_j / h + h d_i df/dt;
    y1 = y + sum m_j k_j, the error sum e_j k_j in Hairer's norm, Gustafsson's predictive step
-   control, outputs by the dense output.  A singular E, a failed block or a non-finite stage
-   halve the step.  With s->step > 0: steps of that size, accepted without error control. */
-static int bgc_run_rosenbrock(bgc_run *r, const bgc_method *method, double *y)
+   control, outputs by the dense output y(theta) = (1 - theta) y0 + theta (y1 + (1 - theta)
+   (q_1 + theta (q_2 + ... + theta q_R))), q_r = sum_j H_rj k_j (formed when first needed).
+   A singular E, a failed block or a non-finite stage halve the step.  On fixed steps: no
+   error control, and those failures end the run. */
+typedef struct bgc_ros_state {
+    bgc_run *r;
+    const bgc_rosenbrock *m;
+    int fixed, accepted, nsing, worst;
+    double hacc, erracc;
+    double *J, *E, *k, *f0, *ft, *ys, *q; /* q: R rows (the first two also the error's) */
+    int *piv;
+    const double *y, *y1; /* the step last accepted, for the dense output */
+} bgc_ros_state;
+
+/* f, df/dt and J at a new point (t, y); nonzero (message set) if that fails. */
+static int bgc_ros_point(bgc_ros_state *ms, bgc_run *r, double t, const double *y)
+{
+    enum { N = BGC_NUM_STATES };
+    int l, rc = bgc_start_rhs(r, t, y, ms->f0);
+    if (rc)
+        return rc;
+    if (!BGC_AUTONOMOUS) {
+        const double delta = sqrt(DBL_EPSILON * bgc_max(1e-5, fabs(t)));
+        r->st->rhs++;
+        if (bgc_model_rhs(t + delta, y, r->p, r->w, ms->ft))
+            return bgc_fail_block(r->msg, r->msg_size, r->w);
+        for (l = 0; l < N; l++)
+            ms->ft[l] = (ms->ft[l] - ms->f0[l]) / delta;
+    }
+    r->st->jac++;
+    if (bgc_jacobian(t, y, r->p, r->w, ms->J))
+        return bgc_fail_block(r->msg, r->msg_size, r->w);
+    return 0;
+}
+
+static void bgc_ros_finish(void *state)
+{
+    bgc_ros_state *ms = state;
+    free(ms->piv);
+    free(ms->J);
+    free(ms);
+}
+
+static void *bgc_ros_start(bgc_run *r, const double *y, double *h, int *rc)
 {
     enum { N = BGC_NUM_STATES, D = BGC_DIM(BGC_NUM_STATES) };
-    const bgc_rosenbrock *m = method->ros;
-    const bgc_settings *s = r->s;
-    const int S = m->stages, fixed = s->step > 0.0;
-    const int R = m->dense_rows > 2 ? m->dense_rows : 2; /* q2, q3 also hold the error */
-    const double hmax = s->t_end - s->t0, expo = 1.0 / (double)method->q;
-    const double t_start = r->t;
-    double *mem = malloc(((size_t)2 * D * D + (size_t)(S + 5 + R) * D) * sizeof *mem);
-    int *piv = malloc((size_t)D * sizeof *piv);
-    double *J, *E, *k, *f0, *ft, *ys, *y1, *yout, *q2, *q3; /* q2: dense.q, R rows */
-    double t = r->t, h = 0.0, hnew, hacc = 0.0, erracc = 1.0, wanted = 0.0;
-    long n_fixed = 0, k_fixed = 0;
-    int i, j, l, rc = 0, reject = 0, last = 0, fresh = 1, accepted = 0, nsing = 0;
-    int worst = -1, bad = -1, bad_kind = 0;
-    bgc_ros_dense dense;
-
-    if (!mem || !piv) {
-        rc = bgc_fail_memory(r->msg, r->msg_size);
-        goto done;
+    const bgc_rosenbrock *m = r->method->ros;
+    const int S = m->stages, R = m->dense_rows > 2 ? m->dense_rows : 2;
+    bgc_ros_state *ms = calloc(1, sizeof *ms);
+    double *mem = malloc(((size_t)2 * D * D + (size_t)(S + 3 + R) * D) * sizeof *mem);
+    int l, *piv = malloc((size_t)D * sizeof *piv);
+    if (!ms || !mem || !piv) {
+        free(ms);
+        free(mem);
+        free(piv);
+        *rc = bgc_fail_memory(r->msg, r->msg_size);
+        return NULL;
     }
-    J = mem;
-    E = J + (size_t)D * D;
-    k = E + (size_t)D * D;
-    f0 = k + (size_t)S * D;
-    ft = f0 + D;
-    ys = ft + D;
-    y1 = ys + D;
-    yout = y1 + D;
-    q2 = yout + D;
-    q3 = q2 + D;
+    ms->r = r;
+    ms->m = m;
+    ms->fixed = r->fixed;
+    ms->worst = -1;
+    ms->erracc = 1.0;
+    ms->piv = piv;
+    ms->J = mem;
+    ms->E = ms->J + (size_t)D * D;
+    ms->k = ms->E + (size_t)D * D;
+    ms->f0 = ms->k + (size_t)S * D;
+    ms->ft = ms->f0 + D;
+    ms->ys = ms->ft + D;
+    ms->q = ms->ys + D;
     for (l = 0; l < N; l++)
-        ft[l] = 0.0;
-    dense.m = m;
-    dense.y = y;
-    dense.y1 = y1;
-    dense.k = k;
-    dense.q = q2;
-    if (r->kout > r->nout)
-        goto done;
-    if (fixed) {
-        n_fixed = bgc_substeps(s->t_end - t_start, s->step);
-        if (n_fixed < 0) {
-            rc = bgc_fail_step(r->msg, r->msg_size, t, s->step, -1);
-            goto done;
-        }
+        ms->ft[l] = 0.0;
+    *rc = bgc_ros_point(ms, r, r->t, y);
+    if (*rc) {
+        bgc_ros_finish(ms);
+        return NULL;
     }
+    if (!ms->fixed)
+        *h = bgc_first_step(r, y, ms->f0, ms->ys, ms->q);
+    return ms;
+}
 
-    for (;;) {
-        double tph, err, fac;
-        int failed = 0;
-        if (fresh) { /* a new point: f, df/dt, J */
-            r->st->rhs++;
-            if (bgc_model_rhs(t, y, r->p, r->w, f0)) {
-                rc = bgc_fail_block(r->msg, r->msg_size, r->w);
-                goto done;
-            }
-            i = bgc_first_nonfinite(f0, N);
-            if (i >= 0) {
-                rc = bgc_fail(r->msg, r->msg_size, t, "derivative of state", bgc_state_names[i]);
-                goto done;
-            }
-            if (!BGC_AUTONOMOUS) {
-                const double delta = sqrt(DBL_EPSILON * bgc_max(1e-5, fabs(t)));
-                r->st->rhs++;
-                if (bgc_model_rhs(t + delta, y, r->p, r->w, ft)) {
-                    rc = bgc_fail_block(r->msg, r->msg_size, r->w);
-                    goto done;
-                }
-                for (l = 0; l < N; l++)
-                    ft[l] = (ft[l] - f0[l]) / delta;
-            }
-            r->st->jac++;
-            if (bgc_jacobian(t, y, r->p, r->w, J)) {
-                rc = bgc_fail_block(r->msg, r->msg_size, r->w);
-                goto done;
-            }
-            if (h == 0.0 && !fixed)
-                h = r->h > 0.0 ? bgc_min(r->h, hmax)
-                               : bgc_initial_step(r, method->q, y, f0, hmax, ys, y1);
-            fresh = 0;
-        }
-        if (fixed) {
-            last = k_fixed + 1 >= n_fixed;
-            tph = bgc_stiff_grid(s, t_start, k_fixed + 1, n_fixed);
-            h = tph - t;
-            if (!(h >= bgc_hmin(t))) {
-                rc = bgc_fail_step(r->msg, r->msg_size, t, h, -1);
-                goto done;
-            }
+/* The stages into k; nonzero if a block failed in one. */
+static int bgc_ros_stages(bgc_ros_state *ms, bgc_run *r, double t, double h, double tph,
+                          const double *y)
+{
+    enum { N = BGC_NUM_STATES, D = BGC_DIM(BGC_NUM_STATES) };
+    const bgc_rosenbrock *m = ms->m;
+    const int S = m->stages;
+    double *k = ms->k;
+    int i, j, l;
+    for (i = 0; i < S; i++) {
+        const double *a = m->a + (size_t)i * S, *C = m->C + (size_t)i * S;
+        double *ki = k + (size_t)i * D;
+        if (i == 0) {
+            for (l = 0; l < N; l++)
+                ki[l] = ms->f0[l];
         } else {
-            if (!(h >= bgc_hmin(t))) {
-                rc = bgc_stiff_fail_step(r, method->name, t, h, bad, bad_kind, worst);
-                goto done;
-            }
-            wanted = h;
-            if (t + 1.01 * h - s->t_end > 0.0) {
-                h = s->t_end - t;
-                last = 1;
-            }
-            tph = last ? s->t_end : t + h;
-        }
-
-        /* E = I/(gamma h) - J, factored */
-        for (l = 0; l < N * N; l++)
-            E[l] = -J[l];
-        for (l = 0; l < N; l++)
-            E[(size_t)l * N + l] += 1.0 / (m->gamma * h);
-        r->st->lu++;
-        if (bgc_stiff_lu(N, E, piv)) {
-            if (fixed || ++nsing == 5) {
-                rc = bgc_stiff_fail_singular(r, method->name, t, h);
-                goto done;
-            }
-            bad = -3;
-            h *= 0.5;
-            reject = 1;
-            last = 0;
-            r->st->rejected++;
-            continue;
-        }
-
-        /* the stages */
-        for (i = 0; i < S; i++) {
-            const double *a = m->a + (size_t)i * S, *C = m->C + (size_t)i * S;
-            double *ki = k + (size_t)i * D;
-            if (i == 0) {
-                for (l = 0; l < N; l++)
-                    ki[l] = f0[l];
-            } else {
-                for (l = 0; l < N; l++) {
-                    double acc = 0.0;
-                    for (j = 0; j < i; j++)
-                        if (a[j] != 0.0)
-                            acc += a[j] * k[(size_t)j * D + l];
-                    ys[l] = y[l] + acc;
-                }
-                r->st->rhs++;
-                failed = bgc_model_rhs(m->c[i] == 1.0 ? tph : t + m->c[i] * h, ys, r->p, r->w, ki);
-                if (failed)
-                    break;
-            }
             for (l = 0; l < N; l++) {
                 double acc = 0.0;
                 for (j = 0; j < i; j++)
-                    if (C[j] != 0.0)
-                        acc += C[j] * k[(size_t)j * D + l];
-                ki[l] += acc / h;
-                if (!BGC_AUTONOMOUS && m->d[i] != 0.0)
-                    ki[l] += h * m->d[i] * ft[l];
+                    if (a[j] != 0.0)
+                        acc += a[j] * k[(size_t)j * D + l];
+                ms->ys[l] = y[l] + acc;
             }
-            bgc_stiff_lu_solve(N, E, piv, ki);
-            r->st->solves++;
+            r->st->rhs++;
+            if (bgc_model_rhs(m->c[i] == 1.0 ? tph : t + m->c[i] * h, ms->ys, r->p, r->w, ki))
+                return 1;
         }
-        if (failed && fixed) {
-            rc = bgc_fail_block(r->msg, r->msg_size, r->w);
-            goto done;
-        }
-        if (failed) { /* an algebraic block failed in a stage */
-            bad = -2;
-            h *= 0.5;
-            reject = 1;
-            last = 0;
-            r->st->rejected++;
-            continue;
-        }
-
-        /* the solution, the error estimate (in q2) and Hairer's norm (weights in q3) */
         for (l = 0; l < N; l++) {
-            double acc = 0.0, e = 0.0;
-            for (j = 0; j < S; j++) {
-                const double kj = k[(size_t)j * D + l];
-                if (m->m[j] != 0.0)
-                    acc += m->m[j] * kj;
-                if (m->e[j] != 0.0)
-                    e += m->e[j] * kj;
-            }
-            y1[l] = y[l] + acc;
-            q2[l] = e;
-            q3[l] = bgc_weight(s, y[l], y1[l]);
+            double acc = 0.0;
+            for (j = 0; j < i; j++)
+                if (C[j] != 0.0)
+                    acc += C[j] * k[(size_t)j * D + l];
+            ki[l] += acc / h;
+            if (!BGC_AUTONOMOUS && m->d[i] != 0.0)
+                ki[l] += h * m->d[i] * ms->ft[l];
         }
-        err = bgc_stiff_norm(q2, q3, &worst);
-        i = bgc_first_nonfinite(y1, N);
-        if (err != err || err > DBL_MAX || i >= 0) {
-            if (fixed) {
-                rc = bgc_fail(r->msg, r->msg_size, tph, "state", bgc_state_names[i >= 0 ? i : 0]);
-                goto done;
-            }
-            bad = i;
-            bad_kind = 1;
-            for (j = 1; j < S && bad < 0; j++) {
-                bad = bgc_first_nonfinite(k + (size_t)j * D, N);
-                bad_kind = 2;
-            }
-            h *= 0.5;
-            reject = 1;
-            last = 0;
-            r->st->rejected++;
-            continue;
-        }
-        if (fixed)
-            err = 0.0;
-
-        /* Gustafsson's predictive controller (rodas.f) */
-        fac = bgc_max(1.0 / method->fac_max,
-                      bgc_min(1.0 / method->fac_min, pow(err, expo) / method->safe));
-        hnew = h / fac;
-        if (err <= 1.0) {
-            if (accepted > 0) {
-                double facgus = (hacc / h) * pow(err * err / erracc, expo) / method->safe;
-                facgus = bgc_max(1.0 / method->fac_max, bgc_min(1.0 / method->fac_min, facgus));
-                fac = bgc_max(fac, facgus);
-                hnew = h / fac;
-            }
-            hacc = h;
-            erracc = bgc_max(1e-2, err);
-            accepted++;
-            rc = bgc_accept(r, tph);
-            if (rc)
-                goto done;
-            rc = bgc_emit_step(r, t, h, tph, y1, bgc_ros_prepare, bgc_ros_dense_at, &dense, yout);
-            if (rc)
-                goto done;
-            memcpy(y, y1, sizeof(double) * N);
-            t = tph;
-            r->t = t;
-            fresh = 1;
-            nsing = 0;
-            bad = -1;
-            if (last) {
-                if (!fixed) /* the step to go on with: the controller's, or the one cut short */
-                    r->st->h_next = bgc_max(hnew, wanted);
-                goto done;
-            }
-            k_fixed++;
-            hnew = bgc_min(hnew, hmax);
-            if (reject)
-                hnew = bgc_min(hnew, h);
-            reject = 0;
-        } else {
-            reject = 1;
-            last = 0;
-            r->st->rejected++;
-        }
-        h = hnew;
+        bgc_stiff_lu_solve(N, ms->E, ms->piv, ki);
+        r->st->solves++;
     }
-done:
-    free(piv);
-    free(mem);
-    return rc;
+    return 0;
 }
+
+/* y1, and the error estimate's norm (the estimate in q's first row, the weights in its
+   second). */
+static double bgc_ros_solution(bgc_ros_state *ms, const bgc_settings *s, const double *y,
+                               double *y1)
+{
+    enum { N = BGC_NUM_STATES, D = BGC_DIM(BGC_NUM_STATES) };
+    const bgc_rosenbrock *m = ms->m;
+    double *q2 = ms->q, *q3 = ms->q + D;
+    int j, l;
+    for (l = 0; l < N; l++) {
+        double acc = 0.0, e = 0.0;
+        for (j = 0; j < m->stages; j++) {
+            const double kj = ms->k[(size_t)j * D + l];
+            if (m->m[j] != 0.0)
+                acc += m->m[j] * kj;
+            if (m->e[j] != 0.0)
+                e += m->e[j] * kj;
+        }
+        y1[l] = y[l] + acc;
+        q2[l] = e;
+        q3[l] = bgc_weight(s, y[l], y1[l]);
+    }
+    return bgc_stiff_norm(q2, q3, &ms->worst);
+}
+
+static void bgc_ros_step(void *state, bgc_run *r, double t, double h, double tph,
+                         const double *y, double *y1, bgc_outcome *o)
+{
+    enum { N = BGC_NUM_STATES, D = BGC_DIM(BGC_NUM_STATES) };
+    bgc_ros_state *ms = state;
+    const bgc_method *method = r->method;
+    const double expo = 1.0 / (double)method->q;
+    double err, fac;
+    int i, j, l;
+
+    /* E = I/(gamma h) - J, factored */
+    for (l = 0; l < N * N; l++)
+        ms->E[l] = -ms->J[l];
+    for (l = 0; l < N; l++)
+        ms->E[(size_t)l * N + l] += 1.0 / (ms->m->gamma * h);
+    r->st->lu++;
+    if (bgc_stiff_lu(N, ms->E, ms->piv)) {
+        if (ms->fixed || ++ms->nsing == 5)
+            bgc_stiff_end(o, bgc_stiff_fail_singular(r, t, h));
+        else
+            bgc_stiff_retry(o, h * 0.5, BGC_BAD_SINGULAR, 0);
+        return;
+    }
+    if (bgc_ros_stages(ms, r, t, h, tph, y)) { /* an algebraic block failed in a stage */
+        if (ms->fixed)
+            bgc_stiff_end(o, bgc_fail_block(r->msg, r->msg_size, r->w));
+        else
+            bgc_stiff_retry(o, h * 0.5, BGC_BAD_BLOCK, 0);
+        return;
+    }
+    err = bgc_ros_solution(ms, r->s, y, y1);
+    o->worst = ms->worst;
+    i = bgc_first_nonfinite(y1, N);
+    if (err != err || err > DBL_MAX || i >= 0) {
+        int bad = i, bad_kind = 1;
+        if (ms->fixed) {
+            bgc_stiff_end(o, bgc_fail(r->msg, r->msg_size, tph, "state",
+                                      bgc_state_names[i >= 0 ? i : 0]));
+            return;
+        }
+        for (j = 1; j < ms->m->stages && bad < 0; j++) {
+            bad = bgc_first_nonfinite(ms->k + (size_t)j * D, N);
+            bad_kind = 2;
+        }
+        bgc_stiff_retry(o, h * 0.5, bad, bad_kind);
+        return;
+    }
+    if (ms->fixed)
+        err = 0.0;
+
+    /* Gustafsson's predictive controller (rodas.f) */
+    fac = bgc_max(1.0 / method->fac_max,
+                  bgc_min(1.0 / method->fac_min, pow(err, expo) / method->safe));
+    o->hnew = h / fac;
+    if (err <= 1.0) {
+        if (ms->accepted > 0) {
+            double facgus = (ms->hacc / h) * pow(err * err / ms->erracc, expo) / method->safe;
+            facgus = bgc_max(1.0 / method->fac_max, bgc_min(1.0 / method->fac_min, facgus));
+            fac = bgc_max(fac, facgus);
+            o->hnew = h / fac;
+        }
+        ms->hacc = h;
+        ms->erracc = bgc_max(1e-2, err);
+        ms->accepted++;
+        ms->nsing = 0;
+        ms->y = y;
+        ms->y1 = y1;
+        o->kind = BGC_STEP_ACCEPT;
+    } else {
+        o->kind = BGC_STEP_REJECT;
+    }
+}
+
+static int bgc_ros_prepare(void *state)
+{
+    enum { N = BGC_NUM_STATES, D = BGC_DIM(BGC_NUM_STATES) };
+    bgc_ros_state *ms = state;
+    const int S = ms->m->stages, R = ms->m->dense_rows;
+    int j, l, r;
+    for (r = 0; r < R; r++) {
+        const double *H = ms->m->H + (size_t)r * S;
+        double *q = ms->q + (size_t)r * D;
+        for (l = 0; l < N; l++) {
+            double acc = 0.0;
+            for (j = 0; j < S; j++)
+                acc += H[j] * ms->k[(size_t)j * D + l];
+            q[l] = acc;
+        }
+    }
+    return 0;
+}
+
+static void bgc_ros_dense(const void *state, double theta, double *yout)
+{
+    enum { N = BGC_NUM_STATES, D = BGC_DIM(BGC_NUM_STATES) };
+    const bgc_ros_state *ms = state;
+    const int R = ms->m->dense_rows;
+    const double s1 = 1.0 - theta;
+    int l, r;
+    for (l = 0; l < N; l++) {
+        double acc = ms->q[(size_t)(R - 1) * D + l];
+        for (r = R - 2; r >= 0; r--)
+            acc = ms->q[(size_t)r * D + l] + theta * acc;
+        yout[l] = s1 * ms->y[l] + theta * (ms->y1[l] + s1 * acc);
+    }
+}
+
+/* The new point's evaluations (none after the run's last step). */
+static int bgc_ros_after(void *state, bgc_run *r, double tph, const double *y1, int last)
+{
+    return last ? 0 : bgc_ros_point(state, r, tph, y1);
+}
+
+static const bgc_family bgc_family_rosenbrock = {
+    bgc_ros_start, bgc_ros_step, NULL, bgc_ros_prepare, bgc_ros_dense, bgc_ros_after, NULL,
+    bgc_ros_finish, 1};
 
 /* ------------------------------------------------------- Radau IIA (RADAU) --- */
 
@@ -536,20 +489,6 @@ static double bgc_radau_u(const bgc_radau *m, const double *b, int l, double the
     while (k-- > 0)
         acc = b[(size_t)k * D + l] + (theta - m->c[k]) * acc;
     return theta * acc;
-}
-
-typedef struct bgc_radau_dense {
-    const bgc_radau *m;
-    const double *y, *b;
-} bgc_radau_dense;
-
-static void bgc_radau_dense_at(const void *dctx, double theta, double *yout)
-{
-    enum { N = BGC_NUM_STATES };
-    const bgc_radau_dense *d = dctx;
-    int l;
-    for (l = 0; l < N; l++)
-        yout[l] = d->y[l] + bgc_radau_u(d->m, d->b, l, theta);
 }
 
 /* out[i so] = sum_j M[i ns + j] v[j sv] for i < ns (M: ns x ns, row-major), summed in the
@@ -623,454 +562,488 @@ static void bgc_radau_configure(bgc_radau_use *u, const bgc_method *method,
    Outputs by the collocation polynomial.  Counts: each real or complex factorisation and
    each real or complex solve.  With s->step > 0: steps of that size at the first stage set,
    no error estimate, and Newton's failure (after a fresh Jacobian) ends the run. */
-static int bgc_run_radau(bgc_run *r, const bgc_method *method, double *y)
+typedef struct bgc_radau_state {
+    bgc_run *r;
+    const bgc_method *method;
+    int fixed, variable, smax, set, since, change, unexp, unexn, recheck;
+    int reject, first, needjac, caljac, accepted, nsing, worst, newt, refactored;
+    double hfact, hold, hacc, erracc, faccon, theta, thetat, thqold, dynold, hhfac;
+    double *J, *E1, *Z, *W, *b, *zlast, *dw, *f0, *scal, *ys, *tmp, *cont, *f2, *ew;
+    bgc_cplx *Ec, *zc;
+    int *piv;
+    bgc_radau_use u;
+    const bgc_radau *dm; /* the stage set ... */
+    const double *y;     /* ... and the start of the step last accepted (dense output) */
+} bgc_radau_state;
+#define BGC_RADAU_THET 0.001 /* recompute J when Newton contracted more slowly than this */
+
+static void bgc_radau_finish(void *state)
+{
+    bgc_radau_state *ms = state;
+    free(ms->piv);
+    free(ms->Ec);
+    free(ms->J);
+    free(ms);
+}
+
+/* The state with its storage, or NULL (no memory). */
+static bgc_radau_state *bgc_radau_new(bgc_run *r)
+{
+    enum { D = BGC_DIM(BGC_NUM_STATES) };
+    const bgc_method *method = r->method;
+    bgc_radau_state *ms = calloc(1, sizeof *ms);
+    int k, l, pmax, smax = 0;
+    for (k = 0; k < method->radau_sets; k++)
+        smax = method->radau[k].s > smax ? method->radau[k].s : smax;
+    pmax = (smax - 1) / 2;
+    if (!ms)
+        return NULL;
+    ms->J = malloc(((size_t)2 * D * D + (size_t)(3 * smax + 11) * D) * sizeof *ms->J);
+    ms->Ec = malloc(((size_t)pmax * D * D + (size_t)pmax * D + 1) * sizeof *ms->Ec);
+    ms->piv = malloc((size_t)(1 + pmax) * D * sizeof *ms->piv + sizeof *ms->piv);
+    if (!ms->J || !ms->Ec || !ms->piv) {
+        bgc_radau_finish(ms);
+        return NULL;
+    }
+    ms->smax = smax;
+    ms->E1 = ms->J + (size_t)D * D;
+    ms->Z = ms->E1 + (size_t)D * D; /* smax x D */
+    ms->W = ms->Z + (size_t)smax * D; /* smax x D */
+    ms->b = ms->W + (size_t)smax * D; /* smax x D */
+    ms->zlast = ms->b + (size_t)smax * D;
+    ms->dw = ms->zlast + D;
+    ms->f0 = ms->dw + D;
+    ms->scal = ms->f0 + D;
+    ms->ys = ms->scal + D;
+    ms->tmp = ms->ys + D;
+    ms->cont = ms->tmp + D;
+    ms->f2 = ms->cont + D;
+    ms->ew = ms->f2 + D;
+    ms->zc = ms->Ec + (size_t)pmax * D * D; /* pmax x D */
+    for (l = 0; l < smax * D; l++)
+        ms->b[l] = 0.0;
+    for (l = 0; l < D; l++)
+        ms->zlast[l] = 0.0;
+    return ms;
+}
+
+static void bgc_radau_scale(bgc_radau_state *ms, const double *y)
+{
+    int l;
+    for (l = 0; l < BGC_NUM_STATES; l++)
+        ms->scal[l] = ms->u.atol + ms->u.rtol * fabs(y[l]);
+}
+
+static void *bgc_radau_start(bgc_run *r, const double *y, double *h, int *rc)
+{
+    const bgc_method *method = r->method;
+    bgc_radau_state *ms = bgc_radau_new(r);
+    int k;
+    if (!ms) {
+        *rc = bgc_fail_memory(r->msg, r->msg_size);
+        return NULL;
+    }
+    ms->r = r;
+    ms->method = method;
+    ms->fixed = r->fixed;
+    ms->variable = method->radau_sets > 1 && !ms->fixed;
+    for (k = 0; k < method->radau_sets; k++)
+        if (ms->variable && 2 * method->radau[k].s - 1 == r->s->order0) {
+            ms->set = k; /* going on from an earlier run: at its order, free to change it */
+            ms->since = 10;
+        }
+    ms->first = ms->needjac = 1;
+    ms->worst = -1;
+    ms->erracc = ms->thqold = ms->dynold = ms->faccon = 1.0;
+    ms->theta = BGC_RADAU_THET;
+    ms->hhfac = 0.5;
+    bgc_radau_configure(&ms->u, method, r->s, ms->set);
+    ms->dm = ms->u.m;
+    *rc = bgc_start_rhs(r, r->t, y, ms->f0);
+    if (*rc) {
+        bgc_radau_finish(ms);
+        return NULL;
+    }
+    bgc_radau_scale(ms, y);
+    if (!ms->fixed)
+        *h = bgc_first_step(r, y, ms->f0, ms->ys, ms->tmp);
+    return ms;
+}
+
+/* The order, whenever the matrices are to be factored (variable order only). */
+static void bgc_radau_order(bgc_radau_state *ms, double h, const double *y)
+{
+    const double hquot = ms->hold > 0.0 ? h / ms->hold : 0.0;
+    int next = ms->set;
+    ms->since++;
+    ms->thetat = bgc_min(10.0, bgc_max(ms->theta, 0.5 * ms->thetat));
+    if (ms->newt > 1 && ms->thetat <= 0.002 && hquot > 0.8 && hquot < 1.2 && ms->since > 10
+        && ms->set + 1 < ms->method->radau_sets)
+        next = ms->set + 1;
+    if ((ms->thetat >= 0.8 || ms->unexp || ms->unexn) && ms->set > 0)
+        next = ms->set - 1;
+    ms->unexp = ms->unexn = ms->recheck = 0;
+    if (next != ms->set) {
+        ms->set = next;
+        bgc_radau_configure(&ms->u, ms->method, ms->r->s, ms->set);
+        ms->since = 1;
+        ms->change = 1;
+        ms->hfact = 0.0;
+        bgc_radau_scale(ms, y);
+    }
+}
+
+/* gamma/h I - J and (alpha_k + i beta_k)/h I - J, factored; nonzero if one is singular. */
+static int bgc_radau_factor(bgc_radau_state *ms, bgc_run *r, const double *alphn,
+                            const double *betan, double fac1)
+{
+    enum { N = BGC_NUM_STATES, D = BGC_DIM(BGC_NUM_STATES) };
+    int k, l, singular;
+    for (l = 0; l < N * N; l++)
+        ms->E1[l] = -ms->J[l];
+    for (l = 0; l < N; l++)
+        ms->E1[(size_t)l * N + l] += fac1;
+    r->st->lu++;
+    singular = bgc_stiff_lu(N, ms->E1, ms->piv);
+    for (k = 0; k < ms->u.pairs && !singular; k++) {
+        bgc_cplx *E = ms->Ec + (size_t)k * D * D;
+        for (l = 0; l < N * N; l++)
+            E[l] = -ms->J[l];
+        for (l = 0; l < N; l++)
+            E[(size_t)l * N + l] += alphn[k] + betan[k] * _Complex_I;
+        r->st->lu++;
+        singular = bgc_stiff_zlu(N, E, ms->piv + (size_t)(1 + k) * D);
+    }
+    return singular;
+}
+
+/* The simplified Newton iteration for the stage increments Z (W = T^-1 Z), from the last
+   step's collocation polynomial: 0 converged, 1 a stage failed (block or non-finite: *bad,
+   *bad_kind), 2 no convergence, 3 too slow (ms->hhfac: the step that would converge). */
+static int bgc_radau_newton(bgc_radau_state *ms, bgc_run *r, double t, double h, double tph,
+                            const double *y, const double *alphn, const double *betan,
+                            double fac1, int *bad, int *bad_kind)
 {
     enum { N = BGC_NUM_STATES, D = BGC_DIM(BGC_NUM_STATES), SMAX = BGC_RADAU_MAX_STAGES };
-    const bgc_settings *s = r->s;
-    const int fixed = s->step > 0.0, variable = method->radau_sets > 1 && !fixed;
-    const double hmax = s->t_end - s->t0, thet = 0.001;
-    const double t_start = r->t;
-    int smax = 0, pmax, set = 0, since = 0, change = 0, unexp = 0, unexn = 0, recheck = 0;
-    double *mem = NULL, *J, *E1, *Z, *W, *b, *dw, *f0, *scal, *ys, *y1, *yout, *zlast, *cont;
-    double *f2, *ew;
-    bgc_cplx *cmem = NULL, *Ec, *zc;
-    int *piv = NULL;
-    double t = r->t, h = 0.0, hnew, hfact = 0.0, hold = 0.0, hacc = 0.0, erracc = 1.0;
-    double wanted = 0.0;
-    double faccon = 1.0, theta = thet, thetat = 0.0, thqold = 1.0, dynold = 1.0, hhfac = 0.5;
-    long n_fixed = 0, k_fixed = 0;
-    int i, j, k, l, rc = 0, reject = 0, last = 0, first = 1, needjac = 1, caljac = 0;
-    int accepted = 0, nsing = 0, worst = -1, bad = -1, bad_kind = 0, newt = 0, refactored = 0;
-    bgc_radau_use u;
-    bgc_radau_dense dense;
-
-    for (k = 0; k < method->radau_sets; k++) {
-        smax = method->radau[k].s > smax ? method->radau[k].s : smax;
-        if (variable && 2 * method->radau[k].s - 1 == s->order0) {
-            set = k; /* going on from an earlier run: at its order, free to change it */
-            since = 10;
+    const bgc_radau_use *u = &ms->u;
+    const bgc_radau *m = u->m;
+    double *Z = ms->Z, *W = ms->W;
+    double dyno = 0.0;
+    int i, k, l;
+    if (ms->first || ms->change) {
+        for (l = 0; l < u->ns * D; l++)
+            Z[l] = W[l] = 0.0;
+    } else {
+        const double q = h / ms->hold;
+        for (l = 0; l < N; l++) {
+            for (i = 0; i < u->ns; i++)
+                Z[(size_t)i * D + l] = bgc_radau_u(m, ms->b, l, 1.0 + m->c[i] * q) - ms->zlast[l];
+            bgc_radau_mul(m->Ti, u->ns, Z + l, D, W + l, D);
         }
     }
-    pmax = (smax - 1) / 2;
-    mem = malloc(((size_t)2 * D * D + (size_t)(4 * smax + 11) * D) * sizeof *mem);
-    cmem = malloc(((size_t)pmax * D * D + (size_t)pmax * D + 1) * sizeof *cmem);
-    piv = malloc((size_t)(1 + pmax) * D * sizeof *piv + sizeof *piv);
-    if (!mem || !cmem || !piv) {
-        rc = bgc_fail_memory(r->msg, r->msg_size);
-        goto done;
-    }
-    J = mem;
-    E1 = J + (size_t)D * D;
-    Z = E1 + (size_t)D * D; /* smax x D */
-    W = Z + (size_t)smax * D; /* smax x D */
-    b = W + (size_t)smax * D; /* smax x D */
-    zlast = b + (size_t)smax * D;
-    dw = zlast + D;
-    f0 = dw + D;
-    scal = f0 + D;
-    ys = scal + D;
-    y1 = ys + D;
-    yout = y1 + D;
-    cont = yout + D;
-    f2 = cont + D;
-    ew = f2 + D;
-    Ec = cmem; /* pmax x D x D */
-    zc = Ec + (size_t)pmax * D * D; /* pmax x D */
-    for (l = 0; l < smax * D; l++)
-        b[l] = 0.0;
-    for (l = 0; l < D; l++)
-        zlast[l] = 0.0;
-    bgc_radau_configure(&u, method, s, set);
-    dense.m = u.m;
-    dense.y = y;
-    dense.b = b;
-    if (r->kout > r->nout)
-        goto done;
-    if (fixed) {
-        n_fixed = bgc_substeps(s->t_end - t_start, s->step);
-        if (n_fixed < 0) {
-            rc = bgc_fail_step(r->msg, r->msg_size, t, s->step, -1);
-            goto done;
-        }
-    }
-    r->st->rhs++;
-    if (bgc_model_rhs(t, y, r->p, r->w, f0)) {
-        rc = bgc_fail_block(r->msg, r->msg_size, r->w);
-        goto done;
-    }
-    i = bgc_first_nonfinite(f0, N);
-    if (i >= 0) {
-        rc = bgc_fail(r->msg, r->msg_size, t, "derivative of state", bgc_state_names[i]);
-        goto done;
-    }
-    for (l = 0; l < N; l++)
-        scal[l] = u.atol + u.rtol * fabs(y[l]);
-    if (!fixed)
-        h = r->h > 0.0 ? bgc_min(r->h, hmax) : bgc_initial_step(r, method->q, y, f0, hmax, ys, y1);
-
+    ms->newt = 0;
+    ms->faccon = pow(bgc_max(ms->faccon, DBL_EPSILON), 0.8);
+    ms->theta = BGC_RADAU_THET;
     for (;;) {
-        const bgc_radau *m;
-        const double *T, *Ti;
-        double tph, err = 0.0, fac1, alphn[SMAX], betan[SMAX], dyno = 0.0, quot, fac;
-        int failed = 0;
-        if (needjac) {
-            r->st->jac++;
-            if (bgc_jacobian(t, y, r->p, r->w, J)) {
-                rc = bgc_fail_block(r->msg, r->msg_size, r->w);
-                goto done;
-            }
-            needjac = 0;
-            caljac = 1;
-            hfact = 0.0;
-        }
-        if (fixed) {
-            last = k_fixed + 1 >= n_fixed;
-            tph = bgc_stiff_grid(s, t_start, k_fixed + 1, n_fixed);
-            h = tph - t;
-            if (!(h >= bgc_hmin(t))) {
-                rc = bgc_fail_step(r->msg, r->msg_size, t, h, -1);
-                goto done;
-            }
-        } else {
-            if (!(h >= bgc_hmin(t))) {
-                rc = bgc_stiff_fail_step(r, method->name, t, h, bad, bad_kind, worst);
-                goto done;
-            }
-            wanted = h;
-            if (t + 1.01 * h - s->t_end > 0.0) {
-                h = s->t_end - t;
-                last = 1;
-            }
-            tph = last ? s->t_end : t + h;
-        }
-
-        /* the order, whenever the matrices are to be factored (variable order only) */
-        if (variable && (h != hfact || recheck)) {
-            const double hquot = hold > 0.0 ? h / hold : 0.0;
-            int next = set;
-            since++;
-            thetat = bgc_min(10.0, bgc_max(theta, 0.5 * thetat));
-            if (newt > 1 && thetat <= 0.002 && hquot > 0.8 && hquot < 1.2 && since > 10
-                && set + 1 < method->radau_sets)
-                next = set + 1;
-            if ((thetat >= 0.8 || unexp || unexn) && set > 0)
-                next = set - 1;
-            unexp = unexn = recheck = 0;
-            if (next != set) {
-                set = next;
-                bgc_radau_configure(&u, method, s, set);
-                since = 1;
-                change = 1;
-                hfact = 0.0;
-                for (l = 0; l < N; l++)
-                    scal[l] = u.atol + u.rtol * fabs(y[l]);
-            }
-        }
-        m = u.m;
-        T = m->T;
-        Ti = m->Ti;
-        fac1 = m->gamma / h;
-        for (k = 0; k < u.pairs; k++) {
-            alphn[k] = m->alpha[k] / h;
-            betan[k] = m->beta[k] / h;
-        }
-
-        /* gamma/h I - J and (alpha_k + i beta_k)/h I - J, factored (unless they are h's) */
-        refactored = h != hfact;
-        if (h != hfact) {
-            int singular;
-            for (l = 0; l < N * N; l++)
-                E1[l] = -J[l];
+        double sum = 0.0;
+        if (ms->newt >= u->nit)
+            return 2;
+        /* Z_i <- f(t + c_i h, y + Z_i) */
+        for (i = 0; i < u->ns; i++) {
+            double *zi = Z + (size_t)i * D;
+            const double ti = i == u->ns - 1 ? tph : t + m->c[i] * h;
             for (l = 0; l < N; l++)
-                E1[(size_t)l * N + l] += fac1;
-            r->st->lu++;
-            singular = bgc_stiff_lu(N, E1, piv);
-            for (k = 0; k < u.pairs && !singular; k++) {
-                bgc_cplx *E = Ec + (size_t)k * D * D;
-                for (l = 0; l < N * N; l++)
-                    E[l] = -J[l];
-                for (l = 0; l < N; l++)
-                    E[(size_t)l * N + l] += alphn[k] + betan[k] * _Complex_I;
-                r->st->lu++;
-                singular = bgc_stiff_zlu(N, E, piv + (size_t)(1 + k) * D);
+                ms->ys[l] = y[l] + zi[l];
+            r->st->rhs++;
+            if (bgc_model_rhs(ti, ms->ys, r->p, r->w, zi)) {
+                *bad = BGC_BAD_BLOCK;
+                return 1;
             }
-            if (singular) {
-                hfact = 0.0;
-                if (fixed || ++nsing == 5) {
-                    rc = bgc_stiff_fail_singular(r, method->name, t, h);
-                    goto done;
-                }
-                bad = -3;
-                unexp = 1;
-                h *= 0.5;
-                reject = 1;
-                last = 0;
-                r->st->rejected++;
-                needjac = !caljac;
-                continue;
-            }
-            hfact = h;
-        }
-
-        /* starting values: the last step's collocation polynomial, extrapolated */
-        if (first || change) {
-            for (l = 0; l < u.ns * D; l++)
-                Z[l] = W[l] = 0.0;
-        } else {
-            const double q = h / hold;
-            for (l = 0; l < N; l++) {
-                for (i = 0; i < u.ns; i++)
-                    Z[(size_t)i * D + l] = bgc_radau_u(m, b, l, 1.0 + m->c[i] * q) - zlast[l];
-                bgc_radau_mul(Ti, u.ns, Z + l, D, W + l, D);
+            if ((l = bgc_first_nonfinite(zi, N)) >= 0) {
+                *bad = l;
+                *bad_kind = 2;
+                return 1;
             }
         }
-
-        /* the simplified Newton iteration */
-        newt = 0;
-        faccon = pow(bgc_max(faccon, DBL_EPSILON), 0.8);
-        theta = thet;
-        for (;;) {
-            double sum = 0.0;
-            if (newt >= u.nit) {
-                failed = 2;
-                break;
-            }
-            /* Z_i <- f(t + c_i h, y + Z_i) */
-            for (i = 0; i < u.ns && !failed; i++) {
-                double *zi = Z + (size_t)i * D;
-                const double ti = i == u.ns - 1 ? tph : t + m->c[i] * h;
-                for (l = 0; l < N; l++)
-                    ys[l] = y[l] + zi[l];
-                r->st->rhs++;
-                if (bgc_model_rhs(ti, ys, r->p, r->w, zi)) {
-                    failed = 1;
-                    bad = -2;
-                } else if ((l = bgc_first_nonfinite(zi, N)) >= 0) {
-                    failed = 1;
-                    bad = l;
-                    bad_kind = 2;
-                }
-            }
-            if (failed)
-                break;
-            for (l = 0; l < N; l++) {
-                double g[SMAX];
-                bgc_radau_mul(Ti, u.ns, Z + l, D, g, 1);
-                dw[l] = g[0] - fac1 * W[l];
-                for (k = 0; k < u.pairs; k++) {
-                    const double w2 = W[(size_t)(2 * k + 1) * D + l];
-                    const double w3 = W[(size_t)(2 * k + 2) * D + l];
-                    zc[(size_t)k * D + l] = (g[2 * k + 1] - (alphn[k] * w2 - betan[k] * w3))
+        for (l = 0; l < N; l++) {
+            double g[SMAX];
+            bgc_radau_mul(m->Ti, u->ns, Z + l, D, g, 1);
+            ms->dw[l] = g[0] - fac1 * W[l];
+            for (k = 0; k < u->pairs; k++) {
+                const double w2 = W[(size_t)(2 * k + 1) * D + l];
+                const double w3 = W[(size_t)(2 * k + 2) * D + l];
+                ms->zc[(size_t)k * D + l] = (g[2 * k + 1] - (alphn[k] * w2 - betan[k] * w3))
                                             + (g[2 * k + 2] - (betan[k] * w2 + alphn[k] * w3))
                                                   * _Complex_I;
-                }
             }
-            bgc_stiff_lu_solve(N, E1, piv, dw);
-            for (k = 0; k < u.pairs; k++)
-                bgc_stiff_zlu_solve(N, Ec + (size_t)k * D * D, piv + (size_t)(1 + k) * D,
-                                    zc + (size_t)k * D);
-            r->st->solves += 1 + u.pairs;
-            newt++;
-            for (l = 0; l < N; l++) {
-                const double q1 = dw[l] / scal[l];
-                double part = q1 * q1;
-                for (k = 0; k < u.pairs; k++) {
-                    const double qr = creal(zc[(size_t)k * D + l]) / scal[l];
-                    const double qi = cimag(zc[(size_t)k * D + l]) / scal[l];
-                    part += qr * qr;
-                    part += qi * qi;
-                }
-                sum += part;
-            }
-            dyno = N > 0 ? sqrt(sum / (double)(u.ns * N)) : 0.0;
-            if (dyno != dyno || dyno > DBL_MAX) {
-                failed = 2;
-                break;
-            }
-            if (newt > 1 && newt < u.nit) {
-                const double thq = dyno / dynold;
-                theta = newt == 2 ? thq : sqrt(thq * thqold);
-                thqold = thq;
-                if (theta < 0.99) {
-                    const double dyth = theta / (1.0 - theta) * dyno
-                                        * pow(theta, (double)(u.nit - 1 - newt)) / u.fnewt;
-                    faccon = theta / (1.0 - theta);
-                    if (dyth >= 1.0 && !fixed) { /* too slow: a smaller step converges sooner */
-                        const double qnewt = bgc_max(1e-4, bgc_min(20.0, dyth));
-                        hhfac = 0.8 * pow(qnewt, -1.0 / (4.0 + (double)(u.nit - 1 - newt)));
-                        failed = 3;
-                        break;
-                    }
-                } else {
-                    failed = 2;
-                    break;
-                }
-            }
-            dynold = bgc_max(dyno, DBL_EPSILON);
-            for (l = 0; l < N; l++) {
-                double a[SMAX];
-                a[0] = W[l] + dw[l];
-                for (k = 0; k < u.pairs; k++) {
-                    a[2 * k + 1] = W[(size_t)(2 * k + 1) * D + l] + creal(zc[(size_t)k * D + l]);
-                    a[2 * k + 2] = W[(size_t)(2 * k + 2) * D + l] + cimag(zc[(size_t)k * D + l]);
-                }
-                for (i = 0; i < u.ns; i++)
-                    W[(size_t)i * D + l] = a[i];
-                bgc_radau_mul(T, u.ns, a, 1, Z + l, D);
-            }
-            /* converged; after one iteration only on the previous step's matrices, whose
-               contraction faccon measured */
-            if ((newt > 1 || !refactored) && faccon * dyno <= u.fnewt)
-                break;
         }
-        if (failed) {
-            if (fixed) {
-                if (failed == 1) {
-                    rc = bad == -2 ? bgc_fail_block(r->msg, r->msg_size, r->w)
-                                   : bgc_fail(r->msg, r->msg_size, t, "derivative of state",
-                                              bgc_state_names[bad]);
-                    goto done;
-                }
-                if (!caljac) { /* once more with a fresh Jacobian */
-                    needjac = 1;
-                    continue;
-                }
-                snprintf(r->msg, r->msg_size,
-                         "at t = %.17g: %s: the Newton iteration does not converge with the "
-                         "fixed step h = %.3g", t, method->name, h);
-                rc = BGC_ERR_RUNTIME;
-                goto done;
+        bgc_stiff_lu_solve(N, ms->E1, ms->piv, ms->dw);
+        for (k = 0; k < u->pairs; k++)
+            bgc_stiff_zlu_solve(N, ms->Ec + (size_t)k * D * D, ms->piv + (size_t)(1 + k) * D,
+                                ms->zc + (size_t)k * D);
+        r->st->solves += 1 + u->pairs;
+        ms->newt++;
+        for (l = 0; l < N; l++) {
+            const double q1 = ms->dw[l] / ms->scal[l];
+            double part = q1 * q1;
+            for (k = 0; k < u->pairs; k++) {
+                const double qr = creal(ms->zc[(size_t)k * D + l]) / ms->scal[l];
+                const double qi = cimag(ms->zc[(size_t)k * D + l]) / ms->scal[l];
+                part += qr * qr;
+                part += qi * qi;
             }
-            if (failed != 1)
-                bad = -4;
-            if (failed == 3)
-                unexn = hhfac <= 0.5;
-            else
-                unexp = 1;
-            h *= failed == 3 ? hhfac : 0.5;
-            reject = 1;
-            last = 0;
-            r->st->rejected++;
-            needjac = !caljac;
-            continue;
+            sum += part;
         }
+        dyno = N > 0 ? sqrt(sum / (double)(u->ns * N)) : 0.0;
+        if (dyno != dyno || dyno > DBL_MAX)
+            return 2;
+        if (ms->newt > 1 && ms->newt < u->nit) {
+            const double thq = dyno / ms->dynold;
+            ms->theta = ms->newt == 2 ? thq : sqrt(thq * ms->thqold);
+            ms->thqold = thq;
+            if (ms->theta < 0.99) {
+                const double dyth = ms->theta / (1.0 - ms->theta) * dyno
+                                    * pow(ms->theta, (double)(u->nit - 1 - ms->newt)) / u->fnewt;
+                ms->faccon = ms->theta / (1.0 - ms->theta);
+                if (dyth >= 1.0 && !ms->fixed) { /* too slow: a smaller step converges sooner */
+                    const double qnewt = bgc_max(1e-4, bgc_min(20.0, dyth));
+                    ms->hhfac = 0.8 * pow(qnewt, -1.0 / (4.0 + (double)(u->nit - 1 - ms->newt)));
+                    return 3;
+                }
+            } else {
+                return 2;
+            }
+        }
+        ms->dynold = bgc_max(dyno, DBL_EPSILON);
+        for (l = 0; l < N; l++) {
+            double a[SMAX];
+            a[0] = W[l] + ms->dw[l];
+            for (k = 0; k < u->pairs; k++) {
+                a[2 * k + 1] = W[(size_t)(2 * k + 1) * D + l] + creal(ms->zc[(size_t)k * D + l]);
+                a[2 * k + 2] = W[(size_t)(2 * k + 2) * D + l] + cimag(ms->zc[(size_t)k * D + l]);
+            }
+            for (i = 0; i < u->ns; i++)
+                W[(size_t)i * D + l] = a[i];
+            bgc_radau_mul(m->T, u->ns, a, 1, Z + l, D);
+        }
+        /* converged; after one iteration only on the previous step's matrices, whose
+           contraction faccon measured */
+        if ((ms->newt > 1 || !ms->refactored) && ms->faccon * dyno <= u->fnewt)
+            return 0;
+    }
+}
 
-        /* the error estimate */
-        if (!fixed) {
-            const double *zs = Z + (size_t)(u.ns - 1) * D;
-            for (l = 0; l < N; l++) {
-                double acc = m->e[0] * Z[l];
-                for (j = 1; j < u.ns; j++)
-                    acc += m->e[j] * Z[(size_t)j * D + l];
-                f2[l] = acc / h;
-                cont[l] = f2[l] + f0[l];
-                ew[l] = u.atol + u.rtol * bgc_max(fabs(y[l]), fabs(y[l] + zs[l]));
-            }
-            bgc_stiff_lu_solve(N, E1, piv, cont);
+/* The error estimate: (gamma/h I - J) err = f(t, y) + sum_j e_j Z_j / h, refined once with
+   f(t, y + err) on the first step and after a rejection. */
+static double bgc_radau_error(bgc_radau_state *ms, bgc_run *r, double t, double h,
+                              const double *y)
+{
+    enum { N = BGC_NUM_STATES, D = BGC_DIM(BGC_NUM_STATES) };
+    const bgc_radau_use *u = &ms->u;
+    const bgc_radau *m = u->m;
+    const double *zs = ms->Z + (size_t)(u->ns - 1) * D;
+    double err;
+    int j, l;
+    for (l = 0; l < N; l++) {
+        double acc = m->e[0] * ms->Z[l];
+        for (j = 1; j < u->ns; j++)
+            acc += m->e[j] * ms->Z[(size_t)j * D + l];
+        ms->f2[l] = acc / h;
+        ms->cont[l] = ms->f2[l] + ms->f0[l];
+        ms->ew[l] = u->atol + u->rtol * bgc_max(fabs(y[l]), fabs(y[l] + zs[l]));
+    }
+    bgc_stiff_lu_solve(N, ms->E1, ms->piv, ms->cont);
+    r->st->solves++;
+    err = bgc_max(bgc_stiff_norm(ms->cont, ms->ew, &ms->worst), 1e-10);
+    if (err >= 1.0 && (ms->first || ms->reject)) { /* refined: f at y + err */
+        for (l = 0; l < N; l++)
+            ms->ys[l] = y[l] + ms->cont[l];
+        r->st->rhs++;
+        if (bgc_model_rhs(t, ms->ys, r->p, r->w, ms->tmp) == 0) {
+            for (l = 0; l < N; l++)
+                ms->cont[l] = ms->tmp[l] + ms->f2[l];
+            bgc_stiff_lu_solve(N, ms->E1, ms->piv, ms->cont);
             r->st->solves++;
-            err = bgc_max(bgc_stiff_norm(cont, ew, &worst), 1e-10);
-            if (err >= 1.0 && (first || reject)) { /* refined: f at y + err */
-                for (l = 0; l < N; l++)
-                    ys[l] = y[l] + cont[l];
-                r->st->rhs++;
-                if (bgc_model_rhs(t, ys, r->p, r->w, yout) == 0) {
-                    for (l = 0; l < N; l++)
-                        cont[l] = yout[l] + f2[l];
-                    bgc_stiff_lu_solve(N, E1, piv, cont);
-                    r->st->solves++;
-                    err = bgc_max(bgc_stiff_norm(cont, ew, &worst), 1e-10);
-                }
-            }
-            if (err != err || err > DBL_MAX) {
-                bad = -1;
-                unexp = 1;
-                h *= 0.5;
-                reject = 1;
-                last = 0;
-                r->st->rejected++;
-                needjac = !caljac;
-                continue;
-            }
-        }
-
-        /* step control: Gustafsson's, the safety factor scaled by the Newton iterations */
-        fac = bgc_min(method->safe, u.cfac / (double)(newt + 2 * u.nit));
-        quot = bgc_max(1.0 / method->fac_max,
-                       bgc_min(1.0 / method->fac_min, pow(err, u.expo) / fac));
-        hnew = h / quot;
-        if (err < 1.0) {
-            const double *zs = Z + (size_t)(u.ns - 1) * D;
-            first = 0;
-            accepted++;
-            if (accepted > 1 && !change) {
-                double facgus = (hacc / h) * pow(err * err / erracc, u.expo) / fac;
-                facgus = bgc_max(1.0 / method->fac_max, bgc_min(1.0 / method->fac_min, facgus));
-                quot = bgc_max(quot, facgus);
-                hnew = h / quot;
-            }
-            change = 0;
-            hacc = h;
-            erracc = bgc_max(1e-2, err);
-            for (l = 0; l < N; l++)
-                y1[l] = y[l] + zs[l];
-            i = bgc_first_nonfinite(y1, N);
-            if (i >= 0) {
-                rc = bgc_fail(r->msg, r->msg_size, tph, "state", bgc_state_names[i]);
-                goto done;
-            }
-            bgc_radau_poly(m, Z, b);
-            dense.m = m;
-            memcpy(zlast, zs, sizeof(double) * N);
-            hold = h;
-            rc = bgc_accept(r, tph);
-            if (rc)
-                goto done;
-            rc = bgc_emit_step(r, t, h, tph, y1, NULL, bgc_radau_dense_at, &dense, yout);
-            if (rc)
-                goto done;
-            memcpy(y, y1, sizeof(double) * N);
-            t = tph;
-            r->t = t;
-            nsing = 0;
-            bad = -1;
-            caljac = 0;
-            if (last) {
-                if (!fixed) { /* the step to go on with: the controller's, or the one cut short */
-                    r->st->h_next = bgc_max(hnew, wanted);
-                    r->st->order_next = 2 * u.ns - 1;
-                }
-                goto done;
-            }
-            for (l = 0; l < N; l++)
-                scal[l] = u.atol + u.rtol * fabs(y[l]);
-            r->st->rhs++;
-            if (bgc_model_rhs(t, y, r->p, r->w, f0)) {
-                rc = bgc_fail_block(r->msg, r->msg_size, r->w);
-                goto done;
-            }
-            k_fixed++;
-            hnew = bgc_min(hnew, hmax);
-            if (reject)
-                hnew = bgc_min(hnew, h);
-            reject = 0;
-            if (theta <= thet && hnew / h >= 1.0 && hnew / h <= 1.2) {
-                hnew = h; /* keep h and the factorisations ... */
-                if (variable && ++since >= 10 && set + 1 < method->radau_sets)
-                    recheck = 1; /* ... but look at the order now and then */
-            }
-            needjac = theta > thet;
-            h = hnew;
-        } else {
-            reject = 1;
-            last = 0;
-            r->st->rejected++;
-            h = first ? 0.1 * h : hnew;
-            needjac = !caljac;
+            err = bgc_max(bgc_stiff_norm(ms->cont, ms->ew, &ms->worst), 1e-10);
         }
     }
-done:
-    free(piv);
-    free(cmem);
-    free(mem);
-    return rc;
+    return err;
 }
+
+/* A failed attempt at an adaptive step: retried smaller, with a fresh Jacobian unless this
+   one is. */
+static void bgc_radau_retry(bgc_radau_state *ms, bgc_outcome *o, double hnew, int bad,
+                            int bad_kind)
+{
+    bgc_stiff_retry(o, hnew, bad, bad_kind);
+    ms->reject = 1;
+    ms->needjac = !ms->caljac;
+}
+
+/* Newton's failure on a fixed step: once more with a fresh Jacobian, else the end. */
+static void bgc_radau_fixed_failure(bgc_radau_state *ms, bgc_run *r, double t, double h,
+                                    int failed, int bad, bgc_outcome *o)
+{
+    if (failed == 1) {
+        bgc_stiff_end(o, bad == BGC_BAD_BLOCK ? bgc_fail_block(r->msg, r->msg_size, r->w)
+                         : bgc_fail(r->msg, r->msg_size, t, "derivative of state",
+                                    bgc_state_names[bad]));
+    } else if (!ms->caljac) {
+        ms->needjac = 1;
+        o->kind = BGC_STEP_AGAIN;
+    } else {
+        snprintf(r->msg, r->msg_size, "at t = %.17g: %s: the Newton iteration does not "
+                 "converge with the fixed step h = %.3g", t, ms->method->name, h);
+        bgc_stiff_end(o, BGC_ERR_RUNTIME);
+    }
+}
+
+/* Step control: Gustafsson's, the safety factor scaled by the Newton iterations. */
+static void bgc_radau_control(bgc_radau_state *ms, double h, double err, const double *y,
+                              double *y1, bgc_outcome *o)
+{
+    enum { N = BGC_NUM_STATES, D = BGC_DIM(BGC_NUM_STATES) };
+    const bgc_method *method = ms->method;
+    const bgc_radau_use *u = &ms->u;
+    const double fac = bgc_min(method->safe, u->cfac / (double)(ms->newt + 2 * u->nit));
+    double quot = bgc_max(1.0 / method->fac_max,
+                          bgc_min(1.0 / method->fac_min, pow(err, u->expo) / fac));
+    const double *zs = ms->Z + (size_t)(u->ns - 1) * D;
+    int l;
+    o->hnew = h / quot;
+    if (!(err < 1.0)) {
+        o->kind = BGC_STEP_REJECT;
+        o->hnew = ms->first ? 0.1 * h : o->hnew;
+        ms->reject = 1;
+        ms->needjac = !ms->caljac;
+        return;
+    }
+    ms->first = 0;
+    ms->accepted++;
+    if (ms->accepted > 1 && !ms->change) {
+        double facgus = (ms->hacc / h) * pow(err * err / ms->erracc, u->expo) / fac;
+        facgus = bgc_max(1.0 / method->fac_max, bgc_min(1.0 / method->fac_min, facgus));
+        quot = bgc_max(quot, facgus);
+        o->hnew = h / quot;
+    }
+    ms->change = 0;
+    ms->hacc = h;
+    ms->erracc = bgc_max(1e-2, err);
+    for (l = 0; l < N; l++)
+        y1[l] = y[l] + zs[l];
+    bgc_radau_poly(u->m, ms->Z, ms->b);
+    ms->dm = u->m;
+    ms->y = y;
+    memcpy(ms->zlast, zs, sizeof(double) * N);
+    ms->hold = h;
+    ms->reject = 0;
+    ms->nsing = 0;
+    ms->caljac = 0;
+    o->kind = BGC_STEP_ACCEPT;
+}
+
+static void bgc_radau_step(void *state, bgc_run *r, double t, double h, double tph,
+                           const double *y, double *y1, bgc_outcome *o)
+{
+    enum { SMAX = BGC_RADAU_MAX_STAGES };
+    bgc_radau_state *ms = state;
+    double err = 0.0, fac1, alphn[SMAX], betan[SMAX];
+    int k, failed, bad = BGC_BAD_NONE, bad_kind = 0;
+    if (ms->needjac) {
+        r->st->jac++;
+        if (bgc_jacobian(t, y, r->p, r->w, ms->J)) {
+            bgc_stiff_end(o, bgc_fail_block(r->msg, r->msg_size, r->w));
+            return;
+        }
+        ms->needjac = 0;
+        ms->caljac = 1;
+        ms->hfact = 0.0;
+    }
+    if (ms->variable && (h != ms->hfact || ms->recheck))
+        bgc_radau_order(ms, h, y);
+    fac1 = ms->u.m->gamma / h;
+    for (k = 0; k < ms->u.pairs; k++) {
+        alphn[k] = ms->u.m->alpha[k] / h;
+        betan[k] = ms->u.m->beta[k] / h;
+    }
+    ms->refactored = h != ms->hfact;
+    if (h != ms->hfact) {
+        if (bgc_radau_factor(ms, r, alphn, betan, fac1)) {
+            ms->hfact = 0.0;
+            if (ms->fixed || ++ms->nsing == 5) {
+                bgc_stiff_end(o, bgc_stiff_fail_singular(r, t, h));
+                return;
+            }
+            ms->unexp = 1;
+            bgc_radau_retry(ms, o, h * 0.5, BGC_BAD_SINGULAR, 0);
+            return;
+        }
+        ms->hfact = h;
+    }
+    failed = bgc_radau_newton(ms, r, t, h, tph, y, alphn, betan, fac1, &bad, &bad_kind);
+    o->worst = ms->worst;
+    if (failed && ms->fixed) {
+        bgc_radau_fixed_failure(ms, r, t, h, failed, bad, o);
+        return;
+    }
+    if (failed) {
+        if (failed == 3)
+            ms->unexn = ms->hhfac <= 0.5;
+        else
+            ms->unexp = 1;
+        bgc_radau_retry(ms, o, h * (failed == 3 ? ms->hhfac : 0.5),
+                        failed != 1 ? BGC_BAD_NEWTON : bad, bad_kind);
+        return;
+    }
+    if (!ms->fixed) {
+        err = bgc_radau_error(ms, r, t, h, y);
+        o->worst = ms->worst;
+        if (err != err || err > DBL_MAX) {
+            ms->unexp = 1;
+            bgc_radau_retry(ms, o, h * 0.5, BGC_BAD_NONE, 0);
+            return;
+        }
+    }
+    bgc_radau_control(ms, h, err, y, y1, o);
+}
+
+static void bgc_radau_dense(const void *state, double theta, double *yout)
+{
+    const bgc_radau_state *ms = state;
+    int l;
+    for (l = 0; l < BGC_NUM_STATES; l++)
+        yout[l] = ms->y[l] + bgc_radau_u(ms->dm, ms->b, l, theta);
+}
+
+/* The new point: its weights and f (after the run's last step, the order to go on with). */
+static int bgc_radau_after(void *state, bgc_run *r, double tph, const double *y1, int last)
+{
+    bgc_radau_state *ms = state;
+    if (last) {
+        if (!ms->fixed)
+            r->st->order_next = 2 * ms->u.ns - 1;
+        return 0;
+    }
+    bgc_radau_scale(ms, y1);
+    r->st->rhs++;
+    if (bgc_model_rhs(tph, y1, r->p, r->w, ms->f0))
+        return bgc_fail_block(r->msg, r->msg_size, r->w);
+    return 0;
+}
+
+/* h is kept (and the factorisations with it) while the controller asks for at most 20 %
+   more and Newton converged fast; J is recomputed when it converged slowly. */
+static void bgc_radau_next_h(void *state, double h, double *hnew)
+{
+    bgc_radau_state *ms = state;
+    if (ms->theta <= BGC_RADAU_THET && *hnew / h >= 1.0 && *hnew / h <= 1.2) {
+        *hnew = h;
+        if (ms->variable && ++ms->since >= 10 && ms->set + 1 < ms->method->radau_sets)
+            ms->recheck = 1; /* ... but look at the order now and then */
+    }
+    ms->needjac = ms->theta > BGC_RADAU_THET;
+}
+
+static const bgc_family bgc_family_radau = {
+    bgc_radau_start, bgc_radau_step, NULL, NULL, bgc_radau_dense, bgc_radau_after,
+    bgc_radau_next_h, bgc_radau_finish, 1};

@@ -903,11 +903,33 @@ int bgc_check_settings(const bgc_settings *s, char *msg, size_t msg_size)
 }
 
 
-/* ============================================================== solve === */
-/* The solvers' common machinery (output times, failures, the run state, the first step
-   size), the explicit Runge-Kutta family (fixed-step and embedded pairs, read from the
-   tables of bgc/solvers.py above) and bgc_simulate, which picks a family's run function.
-   The stiff families follow in bgc/runtime/stiff.c. */
+/* ============================================================== drive === */
+/* The step driver: everything a run does between two steps, for every solver.  A method
+   family (erk.c, stiff.c) supplies only its step and its own state (stages, Jacobian,
+   factorisations, order, step-size controller); the driver owns the output times and the
+   dense output, the last step's clamp onto t_end, the fixed-step grid, the smallest step, the
+   step budget and the stop request, the non-finite checks of the accepted state, the retries
+   after a failed attempt, the switch of `auto` to its stiff phase, and the statistics.
+   Adding a method is an entry in bgc/solvers.py plus, for a new family, a bgc_family.
+
+   The contract of a family (bgc_family below), in the order the driver calls it:
+     start     its state at (r->t, y): evaluations at the first point and, for an adaptive
+               run, the first step size (r->h if the run goes on from an earlier one, else
+               bgc_initial_step at the moment its evaluations call for);
+     step      one attempt from (t, y) over h to tph (tph is exactly t_end on the last step):
+               y1 and an outcome (accepted with the controller's next h; rejected by the error
+               test, or failed, with the h to retry; the same step again; or the end of the
+               run with a message);
+     accepted  after the driver has counted the step, before its outputs (FSAL stages);
+     dense     the state at t + theta h of the step just accepted (prepare: once, before the
+               first output time inside the step);
+     after     after the outputs, with y1 the new point: evaluations there, the stiffness test;
+     next_h    the next step once the driver has bounded it (a family may keep h);
+     finish    its state freed.
+   A located event (the hybrid models' hook) will end an accepted step early at t* in
+   (t, tph]: the driver hands on the outputs up to t*, takes the dense output there as the new
+   point, applies the event's resets and starts the family afresh (finish, then start), so
+   each method restarts from a clean history as after a discontinuity. */
 
 #include <time.h> /* clock(): the processor time bgc_simulate reports in its stats */
 
@@ -965,13 +987,13 @@ static int bgc_fail_memory(char *msg, size_t msg_size)
     return BGC_ERR_RUNTIME;
 }
 
-/* A run in progress: what every family's run function shares.  A run function integrates
-   from (r->t, y) to s->t_end, hands the output times k = r->kout .. r->nout to the sink as it
-   passes them (k = 0, the start, has been handed over before), keeps r->t and y at its last
-   accepted step, and returns 0, an error (message in r->msg), the sink's nonzero value, or
-   BGC_STIFF (an auto run's explicit phase found the problem stiff; r->h is its last step). */
+/* A run in progress, as the driver and the families share it: the run's settings, model and
+   sink, where the outputs are (k = kout .. nout still to hand over; k = 0, the start, has been
+   handed over before), the last accepted point r->t, and the step to start with (r->h: 0 for a
+   new estimate; after BGC_STIFF, the explicit phase's last step). */
 typedef struct bgc_run {
     const bgc_settings *s;
+    const bgc_method *method;
     const bgc_params *p;
     bgc_work *w;
     bgc_sink sink;
@@ -981,11 +1003,49 @@ typedef struct bgc_run {
     size_t msg_size;
     long nout, kout;
     double t, h;
+    int fixed;       /* steps on a grid, no error control (s->step > 0, or euler, rk4) */
     int detect_stiffness;
     long steps_out;  /* st->steps at the last output, at t_out */
     double t_out;
 } bgc_run;
-#define BGC_STIFF (-1)
+#define BGC_STIFF (-1) /* an auto run's explicit phase found the problem stiff */
+
+/* An attempted step's outcome. */
+enum {
+    BGC_STEP_ACCEPT, /* y1 is the new point; hnew the controller's next step */
+    BGC_STEP_REJECT, /* the error test failed: retry with hnew */
+    BGC_STEP_RETRY,  /* the attempt failed (bad says how): retry with hnew */
+    BGC_STEP_AGAIN,  /* the same step once more (a fresh Jacobian), not counted as rejected */
+    BGC_STEP_END     /* the run ends: rc and the message are set */
+};
+/* Why an attempt failed, for the message if the step size then falls below the smallest:
+   >= 0 a non-finite component (bad_kind 1 a state, else a derivative), -1 the error test,
+   -2 an algebraic block, -3 a singular iteration matrix, -4 Newton's iteration. */
+enum { BGC_BAD_NONE = -1, BGC_BAD_BLOCK = -2, BGC_BAD_SINGULAR = -3, BGC_BAD_NEWTON = -4 };
+typedef struct bgc_outcome {
+    int kind, rc;
+    double hnew;
+    int bad, bad_kind;
+    int worst; /* the component with the largest share of the last error estimate (-1) */
+} bgc_outcome;
+
+typedef struct bgc_family {
+    void *(*start)(bgc_run *r, const double *y, double *h, int *rc);
+    void (*step)(void *ms, bgc_run *r, double t, double h, double tph, const double *y,
+                 double *y1, bgc_outcome *o);
+    int (*accepted)(void *ms, bgc_run *r, double tph, const double *y1);
+    int (*prepare)(void *ms);
+    void (*dense)(const void *ms, double theta, double *yout);
+    int (*after)(void *ms, bgc_run *r, double tph, const double *y1, int last);
+    void (*next_h)(void *ms, double h, double *hnew);
+    void (*finish)(void *ms);
+    int span_grid; /* fixed steps: 1 the grid t_start + k step over the run, outputs by the
+                      dense output; 0 each output interval in steps of about `step` landing
+                      on its end (methods without a dense output) */
+} bgc_family;
+/* The families, defined with their steps in erk.c and stiff.c. */
+static const bgc_family bgc_family_fixed, bgc_family_erk, bgc_family_rosenbrock,
+    bgc_family_radau;
 
 /* Evaluates the outputs at (t, x), checks them and hands them to the sink. */
 static int bgc_emit(bgc_run *r, double t, const double *x)
@@ -1021,17 +1081,13 @@ static int bgc_accept(bgc_run *r, double t)
     return 0;
 }
 
-/* A method's continuous extension: the state at t + theta h of the step just accepted. */
-typedef void (*bgc_dense_fn)(const void *dctx, double theta, double *yout);
-
 /* After an accepted step from t to tph = t + h (exactly t_end on the last step): hands over
-   the output times in (t, tph], tph itself from y1 and the others through dense (prepare, if
-   not NULL, is called once before the first of them).  yout: N doubles of scratch. */
-static int bgc_emit_step(bgc_run *r, double t, double h, double tph, const double *y1,
-                         int (*prepare)(void *dctx), bgc_dense_fn dense, void *dctx,
-                         double *yout)
+   the output times in (t, tph], tph itself from y1 and the others through the family's dense
+   output (prepared once, before the first of them).  yout: N doubles of scratch. */
+static int bgc_emit_step(bgc_run *r, const bgc_family *f, void *ms, double t, double h,
+                         double tph, const double *y1, double *yout)
 {
-    int rc, prepared = prepare == NULL;
+    int rc, prepared = f->prepare == NULL;
     for (; r->kout <= r->nout; r->kout++) {
         const double tk = bgc_output_time(r->s, r->kout, r->nout);
         if (tk > tph)
@@ -1040,12 +1096,12 @@ static int bgc_emit_step(bgc_run *r, double t, double h, double tph, const doubl
             rc = bgc_emit(r, tk, y1);
         } else {
             if (!prepared) {
-                rc = prepare(dctx);
+                rc = f->prepare(ms);
                 if (rc)
                     return rc;
                 prepared = 1;
             }
-            dense(dctx, (tk - t) / h, yout);
+            f->dense(ms, (tk - t) / h, yout);
             rc = bgc_emit(r, tk, yout);
         }
         if (rc)
@@ -1060,12 +1116,14 @@ static inline double bgc_weight(const bgc_settings *s, double y, double y1)
     return s->atol + s->rtol * bgc_max(fabs(y), fabs(y1));
 }
 
-/* Hairer's initial step size guess (HINIT) for a method of order q; f1, y1: scratch. */
+/* Hairer's initial step size guess (HINIT) for a method of order q at (r->t, y) with
+   f0 = f(r->t, y); y1, f1: scratch. */
 static double bgc_initial_step(bgc_run *r, int q, const double *y, const double *f0,
-                               double hmax, double *y1, double *f1)
+                               double *y1, double *f1)
 {
     enum { N = BGC_NUM_STATES };
     const bgc_settings *s = r->s;
+    const double hmax = s->t_end - s->t0;
     double dnf = 0.0, dny = 0.0, der2 = 0.0, der12, h, h1;
     int i;
     for (i = 0; i < N; i++) {
@@ -1093,7 +1151,315 @@ static double bgc_initial_step(bgc_run *r, int q, const double *y, const double 
     return bgc_min(bgc_min(100.0 * h, h1), hmax);
 }
 
-/* ------------------------------------------------ explicit Runge-Kutta methods --- */
+/* The first step of an adaptive run: the earlier run's (bounded by the span), else HINIT. */
+static double bgc_first_step(bgc_run *r, const double *y, const double *f0, double *y1,
+                             double *f1)
+{
+    const double hmax = r->s->t_end - r->s->t0;
+    return r->h > 0.0 ? bgc_min(r->h, hmax)
+                      : bgc_initial_step(r, r->method->q, y, f0, y1, f1);
+}
+
+/* f(t, y) at the start of a step sequence: a failed block or a non-finite derivative ends
+   the run (nonzero, message set). */
+static int bgc_start_rhs(bgc_run *r, double t, const double *y, double *f)
+{
+    int i;
+    r->st->rhs++;
+    if (bgc_model_rhs(t, y, r->p, r->w, f))
+        return bgc_fail_block(r->msg, r->msg_size, r->w);
+    i = bgc_first_nonfinite(f, BGC_NUM_STATES);
+    return i >= 0 ? bgc_fail(r->msg, r->msg_size, t, "derivative of state", bgc_state_names[i])
+                  : 0;
+}
+
+/* A step size below bgc_hmin: the message names what made the steps shrink. */
+static int bgc_fail_small(bgc_run *r, double t, double h, int bad, int bad_kind, int worst)
+{
+    if (bad == BGC_BAD_BLOCK)
+        return bgc_fail_block(r->msg, r->msg_size, r->w);
+    if (bad == BGC_BAD_SINGULAR || bad == BGC_BAD_NEWTON) {
+        snprintf(r->msg, r->msg_size, "at t = %.17g: %s: %s (step size down to h = %.3g)", t,
+                 r->method->name, bad == BGC_BAD_SINGULAR ? "the iteration matrix is singular"
+                 : "the Newton iteration does not converge", h);
+        return BGC_ERR_RUNTIME;
+    }
+    if (bad >= 0)
+        return bgc_fail(r->msg, r->msg_size, t, bad_kind == 1 ? "state" : "derivative of state",
+                        bgc_state_names[bad]);
+    return bgc_fail_step(r->msg, r->msg_size, t, h, worst);
+}
+
+/* Number of fixed steps of size about h in span: steps of h, the last one shorter. */
+static long bgc_substeps(double span, double h)
+{
+    double q = span / h, m;
+    if (!(q < 1e15))
+        return -1;
+    m = ceil(q - 1e-6);
+    return m < 1.0 ? 1 : (long)m;
+}
+
+/* Where the driver is on a fixed-step grid: the k-th of n steps from ta (span grid: over the
+   run; else over the output interval ending at tb). */
+typedef struct bgc_grid {
+    double ta, tb, step;
+    long k, n;
+} bgc_grid;
+
+/* The fixed grid's next step from t: its end *tph and whether it is the run's last; nonzero
+   (message set) when the grid cannot be laid or the step is too small. */
+static int bgc_grid_next(bgc_run *r, const bgc_family *f, bgc_grid *g, double t, double *tph,
+                         int *last)
+{
+    if (g->k >= g->n) { /* a new grid: the run's, or the next output interval's */
+        g->ta = t;
+        g->tb = f->span_grid ? r->s->t_end : bgc_output_time(r->s, r->kout, r->nout);
+        g->k = 0;
+        g->n = bgc_substeps(g->tb - g->ta, g->step);
+        if (g->n < 0)
+            return bgc_fail_step(r->msg, r->msg_size, t, g->step, -1);
+    }
+    *tph = g->k + 1 >= g->n ? g->tb : g->ta + (double)(g->k + 1) * g->step;
+    *last = g->k + 1 >= g->n && (f->span_grid || r->kout >= r->nout);
+    if (!f->span_grid) /* each step from its grid point (the same value as the last end) */
+        t = g->ta + (double)g->k * g->step;
+    if (!(*tph - t >= bgc_hmin(t)))
+        return bgc_fail_step(r->msg, r->msg_size, t, *tph - t, -1);
+    return 0;
+}
+
+/* One family's run from (r->t, y) to s->t_end (the driver proper).  Keeps r->t and y at the
+   last accepted step; returns 0, an error (message set), the sink's nonzero value, or
+   BGC_STIFF (r->h then holds the explicit phase's next step). */
+static int bgc_drive(bgc_run *r, const bgc_family *f, double *y)
+{
+    enum { N = BGC_NUM_STATES, D = BGC_DIM(BGC_NUM_STATES) };
+    const bgc_settings *s = r->s;
+    const double hmax = s->t_end - s->t0;
+    double *mem = malloc((size_t)2 * D * sizeof *mem), *y1, *yout;
+    double t = r->t, h = 0.0, hnew, wanted = 0.0;
+    int i, rc = 0, reject = 0, last = 0, bad = BGC_BAD_NONE, bad_kind = 0;
+    bgc_grid grid = {0.0, 0.0, 0.0, 0, 0};
+    bgc_outcome o;
+    void *ms = NULL;
+
+    if (!mem)
+        return bgc_fail_memory(r->msg, r->msg_size);
+    y1 = mem;
+    yout = mem + D;
+    o.worst = -1;
+    grid.step = s->step > 0.0 ? s->step : s->dt;
+    if (r->kout > r->nout)
+        goto done;
+    ms = f->start(r, y, &h, &rc);
+    if (!ms)
+        goto done;
+    for (;;) {
+        double tph;
+        if (r->fixed) {
+            rc = bgc_grid_next(r, f, &grid, t, &tph, &last);
+            if (rc)
+                goto done;
+            h = tph - t;
+        } else {
+            if (!(h >= bgc_hmin(t))) {
+                rc = bgc_fail_small(r, t, h, bad, bad_kind, o.worst);
+                goto done;
+            }
+            wanted = h;
+            if (t + 1.01 * h - s->t_end > 0.0) {
+                h = s->t_end - t;
+                last = 1;
+            }
+            tph = last ? s->t_end : t + h;
+        }
+        f->step(ms, r, t, h, tph, y, y1, &o);
+        if (o.kind == BGC_STEP_END) {
+            rc = o.rc;
+            goto done;
+        }
+        if (o.kind == BGC_STEP_AGAIN)
+            continue;
+        if (o.kind != BGC_STEP_ACCEPT) {
+            if (o.kind == BGC_STEP_RETRY) {
+                bad = o.bad;
+                bad_kind = o.bad_kind;
+            }
+            reject = 1;
+            last = 0;
+            r->st->rejected++;
+            h = o.hnew;
+            continue;
+        }
+
+        /* accepted */
+        hnew = o.hnew;
+        i = bgc_first_nonfinite(y1, N);
+        if (i >= 0) {
+            rc = bgc_fail(r->msg, r->msg_size, tph, "state", bgc_state_names[i]);
+            goto done;
+        }
+        rc = bgc_accept(r, tph);
+        if (rc == 0 && f->accepted)
+            rc = f->accepted(ms, r, tph, y1);
+        if (rc == 0)
+            rc = bgc_emit_step(r, f, ms, t, h, tph, y1, yout);
+        if (rc == 0 && f->after)
+            rc = f->after(ms, r, tph, y1, last);
+        if (rc && rc != BGC_STIFF)
+            goto done;
+        memcpy(y, y1, sizeof(double) * N);
+        t = tph;
+        r->t = t;
+        grid.k++;
+        if (rc == BGC_STIFF) {
+            r->h = hnew;
+            goto done;
+        }
+        if (last) {
+            if (!r->fixed) /* the step to go on with: the controller's, or the one cut short */
+                r->st->h_next = bgc_max(hnew, wanted);
+            goto done;
+        }
+        if (!r->fixed)
+            hnew = bgc_min(hnew, hmax);
+        if (reject)
+            hnew = bgc_min(hnew, h);
+        reject = 0;
+        bad = BGC_BAD_NONE;
+        if (f->next_h)
+            f->next_h(ms, h, &hnew);
+        h = hnew;
+    }
+done:
+    if (ms)
+        f->finish(ms);
+    free(mem);
+    return rc;
+}
+
+/* ------------------------------------------------------------ bgc_simulate --- */
+
+int bgc_solver_index(const char *name)
+{
+    int k;
+    for (k = 0; k < BGC_NUM_SOLVERS; k++)
+        if (strcmp(name, bgc_solver_names[k]) == 0)
+            return k;
+    return -1;
+}
+
+void bgc_print_stats(FILE *f, const bgc_stats *st)
+{
+    fprintf(f, "stats: steps=%ld rejected=%ld rhs=%ld jac=%ld lu=%ld solves=%ld", st->steps,
+            st->rejected, st->rhs, st->jac, st->lu, st->solves);
+    if (st->switched)
+        fprintf(f, " stiff_from=%.17g", st->t_switch);
+    fprintf(f, " cpu=%.6e\n", st->cpu);
+}
+
+/* Runs solver number `solver` from (r->t, y) with the driver. */
+static int bgc_run_solver(bgc_run *r, int solver, double *y)
+{
+    static const bgc_family *const families[] = {
+        &bgc_family_fixed, &bgc_family_erk, &bgc_family_rosenbrock, &bgc_family_radau};
+    const bgc_method *m = &bgc_methods[solver];
+    if (m->family < 0 || m->family >= BGC_COUNT(families)) {
+        snprintf(r->msg, r->msg_size, "solver '%s' cannot run by itself", m->name);
+        return BGC_ERR_USAGE;
+    }
+    r->method = m;
+    r->fixed = r->s->step > 0.0 || m->family == BGC_FAMILY_FIXED;
+    return bgc_drive(r, families[m->family], y);
+}
+
+/* Integrates y (the state at s->t0, in the workspace w) to s->t_end: bgc_simulate's run,
+   in a workspace the caller keeps. */
+static int bgc_integrate(const bgc_settings *s, const bgc_params *p, bgc_work *w, double *y,
+                         bgc_sink sink, void *ctx, bgc_stats *stats, char *msg, size_t msg_size)
+{
+    bgc_params q = *p;
+    bgc_run r;
+    int i, rc = bgc_check_settings(s, msg, msg_size);
+    if (rc)
+        return rc;
+    w->rtol = s->rtol;
+    w->atol = s->atol;
+    r.w = w;
+    r.s = s;
+    r.method = &bgc_methods[s->solver];
+    r.p = &q;
+    r.sink = sink;
+    r.ctx = ctx;
+    r.st = stats;
+    r.msg = msg;
+    r.msg_size = msg_size;
+    r.nout = bgc_output_count(s);
+    r.kout = 1;
+    r.t = s->t0;
+    r.h = s->h0;
+    stats->h_next = 0.0;
+    stats->order_next = 0;
+    r.detect_stiffness = 0;
+    r.steps_out = stats->steps;
+    r.t_out = s->t0;
+    bgc_params_update(&q);
+    i = bgc_first_nonfinite(y, BGC_NUM_STATES);
+    if (i >= 0)
+        return bgc_fail(msg, msg_size, s->t0, "state", bgc_state_names[i]);
+    rc = bgc_emit(&r, s->t0, y);
+    if (rc == 0 && r.method->family == BGC_FAMILY_AUTO) {
+        const bgc_method *m = r.method;
+        r.detect_stiffness = 1;
+        rc = bgc_run_solver(&r, m->explicit_solver, y);
+        if (rc == BGC_STIFF) {
+            stats->switched = 1;
+            stats->t_switch = r.t;
+            r.detect_stiffness = 0;
+            rc = bgc_run_solver(&r, m->stiff_solver, y);
+        }
+    } else if (rc == 0) {
+        rc = bgc_run_solver(&r, s->solver, y);
+    }
+    return rc;
+}
+
+int bgc_simulate(const bgc_settings *s, const bgc_params *p, const double *x0, bgc_sink sink,
+                 void *ctx, bgc_stats *stats, char *msg, size_t msg_size)
+{
+    const clock_t start = clock();
+    bgc_work *w;
+    int rc = bgc_check_settings(s, msg, msg_size);
+    if (rc)
+        return rc;
+    w = bgc_work_new();
+    if (!w)
+        return bgc_fail_memory(msg, msg_size);
+    memcpy(w->v + BGC_WORK_Y0, x0, sizeof(double) * BGC_NUM_STATES);
+    rc = bgc_integrate(s, p, w, w->v + BGC_WORK_Y0, sink, ctx, stats, msg, msg_size);
+    bgc_work_free(w);
+    stats->cpu = (double)(clock() - start) / CLOCKS_PER_SEC;
+    return rc;
+}
+
+int bgc_advance(const bgc_settings *s, const bgc_params *p, bgc_work *w, double *x,
+                bgc_sink sink, void *ctx, bgc_stats *stats, char *msg, size_t msg_size)
+{
+    const clock_t start = clock();
+    double *y = w->v + BGC_WORK_Y0;
+    int rc;
+    memcpy(y, x, sizeof(double) * BGC_NUM_STATES);
+    rc = bgc_integrate(s, p, w, y, sink, ctx, stats, msg, msg_size);
+    memcpy(x, y, sizeof(double) * BGC_NUM_STATES);
+    stats->cpu += (double)(clock() - start) / CLOCKS_PER_SEC;
+    return rc;
+}
+
+/* ================================================================ erk === */
+/* The explicit Runge-Kutta family, read from the tables of bgc/solvers.py above: the
+   fixed-step methods (bgc_family_fixed) and the embedded pairs (bgc_family_erk), as steps
+   for the driver (drive.c). */
 
 /* out = y + h * sum_j w[j * stride] k_j over the stages j < count with a nonzero weight
    (y NULL: out = h * sum); summed stage by stage, left to right, as the Python runtime does.
@@ -1134,479 +1500,324 @@ static void bgc_erk_argument(const bgc_erk *m, int i, double h, const double *y,
     bgc_combine(ys, y, h, m->a + (size_t)i * m->all, 1, i, k);
 }
 
-/* One fixed step from (t, y) to t + h, in place; k: the stages, ys: scratch. */
-static int bgc_fixed_step(bgc_run *r, const bgc_erk *m, double t, double h, double *y,
-                          double *k, double *ys)
+/* An explicit method's state: its stages k (all of them, the dense output's included), the
+   stage argument ys, the error estimates, the dense output's polynomials q, the step last
+   accepted (t, h, from y) and the controller's memory. */
+typedef struct bgc_erk_state {
+    bgc_run *r;
+    const bgc_method *method;
+    const bgc_erk *m;
+    int fixed, fsal_first, worst, stiff_count, nonstiff_count;
+    double *k, *ys, *est, *ystiff, *e2v, *q;
+    double t, h, facold;
+    const double *y;
+} bgc_erk_state;
+
+static void bgc_erk_finish(void *state)
+{
+    bgc_erk_state *e = state;
+    free(e->k);
+    free(e);
+}
+
+/* The state, or NULL with *rc set (no memory). */
+static bgc_erk_state *bgc_erk_new(bgc_run *r, int *rc)
+{
+    enum { D = BGC_DIM(BGC_NUM_STATES) };
+    const bgc_erk *m = r->method->erk;
+    bgc_erk_state *e = calloc(1, sizeof *e);
+    double *mem = malloc((size_t)(m->all + 4 + m->degree) * D * sizeof *mem);
+    if (!e || !mem) {
+        free(e);
+        free(mem);
+        *rc = bgc_fail_memory(r->msg, r->msg_size);
+        return NULL;
+    }
+    e->r = r;
+    e->method = r->method;
+    e->m = m;
+    e->fixed = r->fixed;
+    e->fsal_first = m->fsal && m->e && m->e[m->stages - 1] != 0.0;
+    e->worst = -1;
+    e->facold = 1e-4;
+    e->k = mem;
+    e->ys = e->k + (size_t)m->all * D;
+    e->est = e->ys + D;
+    e->ystiff = e->est + D;
+    e->e2v = e->ystiff + D;
+    e->q = e->e2v + D;
+    return e;
+}
+
+/* ---------------------------------------------------------------- fixed step --- */
+
+/* The fixed-step methods: each step from f(t, y) afresh (no error estimate, no dense output:
+   the driver lands a step on every output time). */
+static void *bgc_fixed_start(bgc_run *r, const double *y, double *h, int *rc)
+{
+    (void)y;
+    (void)h;
+    return bgc_erk_new(r, rc);
+}
+
+static void bgc_fixed_step(void *state, bgc_run *r, double t, double h, double tph,
+                           const double *y, double *y1, bgc_outcome *o)
 {
     enum { N = BGC_NUM_STATES, D = BGC_DIM(BGC_NUM_STATES) };
+    bgc_erk_state *e = state;
+    const bgc_erk *m = e->m;
     int i, l;
+    (void)tph;
+    o->kind = BGC_STEP_END;
     for (i = 0; i < m->stages; i++) {
-        double *ki = k + (size_t)i * D;
-        if (i == 0) {
-            if (bgc_model_rhs(t, y, r->p, r->w, ki))
-                return bgc_fail_block(r->msg, r->msg_size, r->w);
-            l = bgc_first_nonfinite(ki, N);
-            if (l >= 0)
-                return bgc_fail(r->msg, r->msg_size, t, "derivative of state", bgc_state_names[l]);
-        } else {
-            bgc_erk_argument(m, i, h, y, k, ys);
-            if (bgc_model_rhs(t + m->c[i] * h, ys, r->p, r->w, ki))
-                return bgc_fail_block(r->msg, r->msg_size, r->w);
+        double *ki = e->k + (size_t)i * D;
+        if (i > 0)
+            bgc_erk_argument(m, i, h, y, e->k, e->ys);
+        if (bgc_model_rhs(i == 0 ? t : t + m->c[i] * h, i == 0 ? y : e->ys, r->p, r->w, ki)) {
+            o->rc = bgc_fail_block(r->msg, r->msg_size, r->w);
+            return;
+        }
+        l = i == 0 ? bgc_first_nonfinite(ki, N) : -1;
+        if (l >= 0) {
+            o->rc = bgc_fail(r->msg, r->msg_size, t, "derivative of state", bgc_state_names[l]);
+            return;
         }
     }
     r->st->rhs += m->stages;
-    bgc_combine(ys, y, h, m->b, 1, m->stages, k);
-    memcpy(y, ys, sizeof(double) * N);
-    l = bgc_first_nonfinite(y, N);
-    if (l >= 0)
-        return bgc_fail(r->msg, r->msg_size, t + h, "state", bgc_state_names[l]);
-    return bgc_accept(r, t + h);
+    bgc_combine(y1, y, h, m->b, 1, m->stages, e->k);
+    o->kind = BGC_STEP_ACCEPT;
+    o->hnew = h;
+    o->worst = -1;
 }
 
-/* Number of fixed steps of size about h in span: steps of h, the last one shorter. */
-static long bgc_substeps(double span, double h)
-{
-    double q = span / h, m;
-    if (!(q < 1e15))
-        return -1;
-    m = ceil(q - 1e-6);
-    return m < 1.0 ? 1 : (long)m;
-}
+static const bgc_family bgc_family_fixed = {
+    bgc_fixed_start, bgc_fixed_step, NULL, NULL, NULL, NULL, NULL, bgc_erk_finish, 0};
 
-/* Fixed-step methods: steps of s->step (or dt) that land exactly on every output time. */
-static int bgc_run_fixed(bgc_run *r, const bgc_method *method, double *y)
+/* ------------------------------------------------------------ embedded pairs --- */
+
+/* Embedded explicit pairs: Hairer's error norm and step-size controller (DOPRI5, DOP853),
+   outputs by the dense output: the extra stages, then q_d = h sum_i P[i][d] k_i,
+   y(theta) = y + theta (q_0 + theta (q_1 + ...)).  On fixed steps (s->step > 0) without
+   error control, to measure a method's order or its stability at a given step.  With
+   r->detect_stiffness, Hairer's stiffness test ends the phase with BGC_STIFF once it has
+   fired on 15 accepted steps. */
+static void *bgc_erk_start(bgc_run *r, const double *y, double *h, int *rc)
 {
     enum { D = BGC_DIM(BGC_NUM_STATES) };
-    const bgc_erk *m = method->erk;
-    const double hstep = r->s->step > 0.0 ? r->s->step : r->s->dt;
-    double *mem = malloc((size_t)(m->stages + 1) * D * sizeof *mem);
-    double ta = r->t;
-    long j;
-    int rc = mem ? 0 : bgc_fail_memory(r->msg, r->msg_size);
-    for (; r->kout <= r->nout && rc == 0; r->kout++) {
-        const double tb = bgc_output_time(r->s, r->kout, r->nout);
-        const long steps = bgc_substeps(tb - ta, hstep);
-        if (steps < 0) {
-            rc = bgc_fail_step(r->msg, r->msg_size, ta, hstep, -1);
-            break;
-        }
-        for (j = 0; j < steps && rc == 0; j++) {
-            const double t = ta + (double)j * hstep;
-            const double t1 = j + 1 == steps ? tb : ta + (double)(j + 1) * hstep;
-            if (!(t1 - t >= bgc_hmin(t)))
-                rc = bgc_fail_step(r->msg, r->msg_size, t, t1 - t, -1);
-            else
-                rc = bgc_fixed_step(r, m, t, t1 - t, y, mem + D, mem);
-            if (rc == 0)
-                r->t = t1;
-        }
-        if (rc == 0)
-            rc = bgc_emit(r, tb, y);
-        ta = tb;
+    bgc_erk_state *e = bgc_erk_new(r, rc);
+    if (!e)
+        return NULL;
+    *rc = bgc_start_rhs(r, r->t, y, e->k);
+    if (*rc) {
+        bgc_erk_finish(e);
+        return NULL;
     }
-    free(mem);
-    return rc;
+    if (!e->fixed)
+        *h = bgc_first_step(r, y, e->k, e->ys, e->k + D);
+    return e;
 }
 
-/* The dense output of an embedded pair: the extra stages, then q_d = h sum_i P[i][d] k_i,
-   y(theta) = y + theta (q_0 + theta (q_1 + ...)). */
-typedef struct bgc_erk_dense {
-    bgc_run *r;
-    const bgc_erk *m;
-    double t, h;
-    const double *y;
-    double *k, *ys, *q;
-    int failed;
-} bgc_erk_dense;
+/* Hairer's error norm: RMS of err_i / (atol + rtol * max(|y_i|, |y1_i|)); DOP853 combines
+   its two estimates.  *worst: the component with the largest share. */
+static double bgc_erk_error(bgc_erk_state *e, const bgc_settings *s, double h, const double *y,
+                            const double *y1)
+{
+    enum { N = BGC_NUM_STATES };
+    const bgc_erk *m = e->m;
+    double err = 0.0, err2 = 0.0, worst_q = -1.0;
+    int l;
+    bgc_combine(e->est, NULL, m->e2 ? 1.0 : h, m->e, 1, m->stages, e->k);
+    if (m->e2)
+        bgc_combine(e->e2v, NULL, 1.0, m->e2, 1, m->stages, e->k);
+    for (l = 0; l < N; l++) {
+        const double sk = bgc_weight(s, y[l], y1[l]);
+        const double qq = e->est[l] / sk;
+        err += qq * qq;
+        if (qq * qq > worst_q) {
+            worst_q = qq * qq;
+            e->worst = l;
+        }
+        if (m->e2)
+            err2 += (e->e2v[l] / sk) * (e->e2v[l] / sk);
+    }
+    if (N == 0 || (e->fixed && err == err))
+        return 0.0; /* fixed steps: accepted as they are (a non-finite stage fails below) */
+    if (m->e2) {
+        double deno = err + 0.01 * err2;
+        if (!(deno > 0.0))
+            deno = 1.0;
+        return fabs(h) * err * sqrt(1.0 / ((double)N * deno));
+    }
+    return sqrt(err / (double)N);
+}
 
-static int bgc_erk_prepare(void *dctx)
+/* A failed attempt: a step much smaller (or, on fixed steps, the end of the run). */
+static void bgc_erk_retry(bgc_erk_state *e, bgc_run *r, double h, double tph, const double *y1,
+                          int block, bgc_outcome *o)
 {
     enum { N = BGC_NUM_STATES, D = BGC_DIM(BGC_NUM_STATES) };
-    bgc_erk_dense *d = dctx;
-    const bgc_erk *m = d->m;
-    int i, j;
-    for (i = m->stages; i < m->all; i++) {
-        bgc_erk_argument(m, i, d->h, d->y, d->k, d->ys);
-        if (bgc_model_rhs(d->t + m->c[i] * d->h, d->ys, d->r->p, d->r->w, d->k + (size_t)i * D))
-            return bgc_fail_block(d->r->msg, d->r->msg_size, d->r->w);
-        d->r->st->rhs++;
+    int i;
+    if (e->fixed) {
+        i = block ? 0 : bgc_first_nonfinite(y1, N);
+        o->kind = BGC_STEP_END;
+        o->rc = block ? bgc_fail_block(r->msg, r->msg_size, r->w)
+                      : bgc_fail(r->msg, r->msg_size, tph, "state", bgc_state_names[i >= 0 ? i : 0]);
+        return;
     }
-    for (j = 0; j < m->degree; j++)
-        bgc_combine(d->q + (size_t)j * D, NULL, d->h, m->P + j, m->degree, m->all, d->k);
+    o->kind = BGC_STEP_RETRY;
+    o->hnew = h * e->method->fac_min;
+    if (block) {
+        o->bad = BGC_BAD_BLOCK;
+        return;
+    }
+    o->bad = bgc_first_nonfinite(y1, N);
+    o->bad_kind = 1;
+    for (i = 1; i < e->m->stages && o->bad < 0; i++) {
+        o->bad = bgc_first_nonfinite(e->k + (size_t)i * D, N);
+        o->bad_kind = 2;
+    }
+}
+
+static void bgc_erk_step(void *state, bgc_run *r, double t, double h, double tph,
+                         const double *y, double *y1, bgc_outcome *o)
+{
+    enum { D = BGC_DIM(BGC_NUM_STATES) };
+    bgc_erk_state *e = state;
+    const bgc_erk *m = e->m;
+    const bgc_method *method = e->method;
+    const int last_stage = m->stages - 1;
+    const double expo1 = 1.0 / (double)method->q - method->expo_beta * method->beta;
+    double err, fac11, fac;
+    int i, failed = 0;
+    for (i = 1; i < m->stages && !failed; i++) {
+        if (m->fsal && i == last_stage)
+            break; /* f(y1), below */
+        bgc_erk_argument(m, i, h, y, e->k, e->ys);
+        if (i == method->stiff_i)
+            memcpy(e->ystiff, e->ys, sizeof(double) * BGC_NUM_STATES);
+        failed = bgc_model_rhs(m->c[i] == 1.0 ? tph : t + m->c[i] * h, e->ys, r->p, r->w,
+                               e->k + (size_t)i * D);
+        r->st->rhs++;
+    }
+    if (!failed) {
+        bgc_combine(y1, y, h, m->b, 1, m->stages, e->k);
+        if (e->fsal_first) {
+            failed = bgc_model_rhs(tph, y1, r->p, r->w, e->k + (size_t)last_stage * D);
+            r->st->rhs++;
+        }
+    }
+    if (failed) { /* an algebraic block failed in a stage */
+        bgc_erk_retry(e, r, h, tph, y1, 1, o);
+        return;
+    }
+    err = bgc_erk_error(e, r->s, h, y, y1);
+    o->worst = e->worst;
+    if (err != err) { /* a non-finite stage */
+        bgc_erk_retry(e, r, h, tph, y1, 0, o);
+        return;
+    }
+    fac11 = pow(err, expo1);
+    fac = fac11 / pow(e->facold, method->beta);
+    fac = bgc_max(1.0 / method->fac_max, bgc_min(1.0 / method->fac_min, fac / method->safe));
+    if (err <= 1.0) {
+        e->facold = bgc_max(err, 1e-4);
+        e->t = t;
+        e->h = h;
+        e->y = y;
+        o->kind = BGC_STEP_ACCEPT;
+        o->hnew = e->fixed ? r->s->step : h / fac;
+    } else {
+        o->kind = BGC_STEP_REJECT;
+        o->hnew = h / bgc_min(1.0 / method->fac_min, fac11 / method->safe);
+    }
+}
+
+/* The last stage f(t + h, y1) of an FSAL pair whose estimate does not use it. */
+static int bgc_erk_accepted(void *state, bgc_run *r, double tph, const double *y1)
+{
+    enum { D = BGC_DIM(BGC_NUM_STATES) };
+    bgc_erk_state *e = state;
+    const bgc_erk *m = e->m;
+    if (!m->fsal || e->fsal_first)
+        return 0;
+    r->st->rhs++;
+    if (bgc_model_rhs(tph, y1, r->p, r->w, e->k + (size_t)(m->stages - 1) * D))
+        return bgc_fail_block(r->msg, r->msg_size, r->w);
     return 0;
 }
 
-static void bgc_erk_dense_at(const void *dctx, double theta, double *yout)
+static int bgc_erk_prepare(void *state)
+{
+    enum { D = BGC_DIM(BGC_NUM_STATES) };
+    bgc_erk_state *e = state;
+    const bgc_erk *m = e->m;
+    bgc_run *r = e->r;
+    int i, j;
+    for (i = m->stages; i < m->all; i++) {
+        bgc_erk_argument(m, i, e->h, e->y, e->k, e->ys);
+        if (bgc_model_rhs(e->t + m->c[i] * e->h, e->ys, r->p, r->w, e->k + (size_t)i * D))
+            return bgc_fail_block(r->msg, r->msg_size, r->w);
+        r->st->rhs++;
+    }
+    for (j = 0; j < m->degree; j++)
+        bgc_combine(e->q + (size_t)j * D, NULL, e->h, m->P + j, m->degree, m->all, e->k);
+    return 0;
+}
+
+static void bgc_erk_dense(const void *state, double theta, double *yout)
 {
     enum { N = BGC_NUM_STATES, D = BGC_DIM(BGC_NUM_STATES) };
-    const bgc_erk_dense *d = dctx;
-    const int deg = d->m->degree;
+    const bgc_erk_state *e = state;
+    const int deg = e->m->degree;
     int j, l;
     for (l = 0; l < N; l++) {
-        double acc = d->q[(size_t)(deg - 1) * D + l];
+        double acc = e->q[(size_t)(deg - 1) * D + l];
         for (j = deg - 2; j >= 0; j--)
-            acc = d->q[(size_t)j * D + l] + theta * acc;
-        yout[l] = d->y[l] + theta * acc;
+            acc = e->q[(size_t)j * D + l] + theta * acc;
+        yout[l] = e->y[l] + theta * acc;
     }
 }
 
-/* Embedded explicit pairs: adaptive steps (never shortened for output), Hairer's error norm
-   and step-size controller, outputs by the dense output; with s->step > 0, steps of that size
-   without error control (to measure a method's order, or its stability at a given step).
-   With r->detect_stiffness, Hairer's stiffness test ends the run with BGC_STIFF once it has
-   fired on 15 accepted steps. */
-static int bgc_run_erk(bgc_run *r, const bgc_method *method, double *y)
+/* After the outputs: Hairer's stiffness test, h |f(Y_i) - f(Y_j)| / |Y_i - Y_j| for two
+   stages at the same time, then f at the new point (the FSAL stage, or evaluated). */
+static int bgc_erk_after(void *state, bgc_run *r, double tph, const double *y1, int last)
 {
     enum { N = BGC_NUM_STATES, D = BGC_DIM(BGC_NUM_STATES) };
-    const bgc_erk *m = method->erk;
-    const bgc_settings *s = r->s;
+    bgc_erk_state *e = state;
+    const bgc_erk *m = e->m;
+    const bgc_method *method = e->method;
     const int last_stage = m->stages - 1;
-    const int fsal_first = m->fsal && m->e[last_stage] != 0.0; /* evaluate f(y1) before the estimate */
-    const double expo1 = 1.0 / (double)method->q - method->expo_beta * method->beta;
-    const double hmax = s->t_end - s->t0;
-    const int fixed = s->step > 0.0;
-    double *mem = malloc((size_t)(m->all + 5 + m->degree) * D * sizeof *mem);
-    double *k, *ys, *y1, *yout, *ystiff, *e2v, *q;
-    double t = r->t, h, hnew, facold = 1e-4, wanted = 0.0;
-    int i, l, rc, reject = 0, last = 0, worst = -1, bad = -1, bad_kind = 0, failed;
-    int stiff_count = 0, nonstiff_count = 0;
-    bgc_erk_dense dense;
-
-    if (!mem)
-        return bgc_fail_memory(r->msg, r->msg_size);
-    k = mem;
-    ys = k + (size_t)m->all * D;
-    y1 = ys + D;
-    yout = y1 + D;
-    ystiff = yout + D;
-    e2v = ystiff + D;
-    q = e2v + D;
-    dense.r = r;
-    dense.m = m;
-    dense.k = k;
-    dense.ys = ys;
-    dense.q = q;
-    rc = 0;
-    if (r->kout > r->nout)
-        goto done;
-    r->st->rhs++;
-    if (bgc_model_rhs(t, y, r->p, r->w, k)) {
-        rc = bgc_fail_block(r->msg, r->msg_size, r->w);
-        goto done;
-    }
-    i = bgc_first_nonfinite(k, N);
-    if (i >= 0) {
-        rc = bgc_fail(r->msg, r->msg_size, t, "derivative of state", bgc_state_names[i]);
-        goto done;
-    }
-    if (fixed)
-        h = s->step;
-    else if (r->h > 0.0)
-        h = bgc_min(r->h, hmax);
-    else
-        h = bgc_initial_step(r, method->q, y, k, hmax, ys, k + D);
-
-    for (;;) {
-        double tph, err = 0.0, err2 = 0.0, worst_q = -1.0, fac11, fac;
-        if (!(h >= bgc_hmin(t))) {
-            if (bad == -2)
-                rc = bgc_fail_block(r->msg, r->msg_size, r->w);
-            else if (bad >= 0)
-                rc = bgc_fail(r->msg, r->msg_size, t,
-                              bad_kind == 1 ? "state" : "derivative of state", bgc_state_names[bad]);
-            else
-                rc = bgc_fail_step(r->msg, r->msg_size, t, h, worst);
-            goto done;
-        }
-        wanted = h;
-        if (t + 1.01 * h - s->t_end > 0.0) {
-            h = s->t_end - t;
-            last = 1;
-        }
-        tph = last ? s->t_end : t + h;
-        failed = 0;
-        for (i = 1; i < m->stages && !failed; i++) {
-            if (m->fsal && i == last_stage)
-                break; /* f(y1), below */
-            bgc_erk_argument(m, i, h, y, k, ys);
-            if (i == method->stiff_i)
-                memcpy(ystiff, ys, sizeof(double) * N);
-            failed = bgc_model_rhs(m->c[i] == 1.0 ? tph : t + m->c[i] * h, ys, r->p, r->w,
-                                   k + (size_t)i * D);
-            r->st->rhs++;
-        }
-        if (!failed) {
-            bgc_combine(y1, y, h, m->b, 1, m->stages, k);
-            if (fsal_first) {
-                failed = bgc_model_rhs(tph, y1, r->p, r->w, k + (size_t)last_stage * D);
-                r->st->rhs++;
-            }
-        }
-        if (failed && fixed) {
-            rc = bgc_fail_block(r->msg, r->msg_size, r->w);
-            goto done;
-        }
-        if (failed) { /* an algebraic block failed in a stage: retry with a much smaller step */
-            bad = -2;
-            h = h * method->fac_min;
-            reject = 1;
-            last = 0;
-            r->st->rejected++;
-            continue;
-        }
-
-        /* Hairer's error norm: RMS of err_i / (atol + rtol * max(|y_i|, |y1_i|)); DOP853
-           combines its two estimates. */
-        bgc_combine(yout, NULL, m->e2 ? 1.0 : h, m->e, 1, m->stages, k);
-        if (m->e2)
-            bgc_combine(e2v, NULL, 1.0, m->e2, 1, m->stages, k);
+    int l;
+    if (r->detect_stiffness && method->stiff_i >= 0) {
+        const double *ki = e->k + (size_t)method->stiff_i * D;
+        const double *kj = e->k + (size_t)method->stiff_j * D;
+        const double *yj = method->stiff_j == last_stage ? y1 : e->ys;
+        double num = 0.0, den = 0.0;
         for (l = 0; l < N; l++) {
-            const double sk = bgc_weight(s, y[l], y1[l]);
-            const double qq = yout[l] / sk;
-            err += qq * qq;
-            if (qq * qq > worst_q) {
-                worst_q = qq * qq;
-                worst = l;
-            }
-            if (m->e2)
-                err2 += (e2v[l] / sk) * (e2v[l] / sk);
+            num += (kj[l] - ki[l]) * (kj[l] - ki[l]);
+            den += (yj[l] - e->ystiff[l]) * (yj[l] - e->ystiff[l]);
         }
-        if (N == 0 || (fixed && err == err)) {
-            err = 0.0; /* fixed steps: accepted as they are (a non-finite stage fails below) */
-        } else if (m->e2) {
-            double deno = err + 0.01 * err2;
-            if (!(deno > 0.0))
-                deno = 1.0;
-            err = fabs(h) * err * sqrt(1.0 / ((double)N * deno));
-        } else {
-            err = sqrt(err / (double)N);
+        if (den > 0.0 && e->h * sqrt(num / den) > method->stiff_bound) {
+            e->nonstiff_count = 0;
+            if (++e->stiff_count == 15)
+                return BGC_STIFF;
+        } else if (++e->nonstiff_count == 6) {
+            e->stiff_count = 0;
         }
-        if (err != err && fixed) {
-            i = bgc_first_nonfinite(y1, N);
-            rc = bgc_fail(r->msg, r->msg_size, tph, "state", bgc_state_names[i >= 0 ? i : 0]);
-            goto done;
-        }
-        if (err != err) { /* a non-finite stage: retry with a much smaller step */
-            bad = bgc_first_nonfinite(y1, N);
-            bad_kind = 1;
-            for (i = 1; i < m->stages && bad < 0; i++) {
-                bad = bgc_first_nonfinite(k + (size_t)i * D, N);
-                bad_kind = 2;
-            }
-            h = h * method->fac_min;
-            reject = 1;
-            last = 0;
-            r->st->rejected++;
-            continue;
-        }
-
-        fac11 = pow(err, expo1);
-        fac = fac11 / pow(facold, method->beta);
-        fac = bgc_max(1.0 / method->fac_max, bgc_min(1.0 / method->fac_min, fac / method->safe));
-        hnew = fixed ? s->step : h / fac;
-        if (err <= 1.0) {
-            facold = bgc_max(err, 1e-4);
-            i = bgc_first_nonfinite(y1, N);
-            if (i >= 0) {
-                rc = bgc_fail(r->msg, r->msg_size, tph, "state", bgc_state_names[i]);
-                goto done;
-            }
-            rc = bgc_accept(r, tph);
-            if (rc)
-                goto done;
-            if (m->fsal && !fsal_first) {
-                r->st->rhs++;
-                if (bgc_model_rhs(tph, y1, r->p, r->w, k + (size_t)last_stage * D)) {
-                    rc = bgc_fail_block(r->msg, r->msg_size, r->w);
-                    goto done;
-                }
-            }
-            dense.t = t;
-            dense.h = h;
-            dense.y = y;
-            rc = bgc_emit_step(r, t, h, tph, y1, bgc_erk_prepare, bgc_erk_dense_at, &dense, yout);
-            if (rc)
-                goto done;
-            if (r->detect_stiffness && method->stiff_i >= 0) {
-                /* h |f(Y_i) - f(Y_j)| / |Y_i - Y_j| for two stages at the same time */
-                const double *ki = k + (size_t)method->stiff_i * D;
-                const double *kj = k + (size_t)method->stiff_j * D;
-                const double *yj = method->stiff_j == last_stage ? y1 : ys;
-                double num = 0.0, den = 0.0;
-                for (l = 0; l < N; l++) {
-                    num += (kj[l] - ki[l]) * (kj[l] - ki[l]);
-                    den += (yj[l] - ystiff[l]) * (yj[l] - ystiff[l]);
-                }
-                if (den > 0.0 && h * sqrt(num / den) > method->stiff_bound) {
-                    nonstiff_count = 0;
-                    if (++stiff_count == 15) {
-                        memcpy(y, y1, sizeof(double) * N);
-                        r->t = tph;
-                        r->h = hnew;
-                        rc = BGC_STIFF;
-                        goto done;
-                    }
-                } else if (++nonstiff_count == 6) {
-                    stiff_count = 0;
-                }
-            }
-            if (m->fsal)
-                memcpy(k, k + (size_t)last_stage * D, sizeof(double) * N);
-            else if (!last) {
-                r->st->rhs++;
-                if (bgc_model_rhs(tph, y1, r->p, r->w, k)) {
-                    rc = bgc_fail_block(r->msg, r->msg_size, r->w);
-                    goto done;
-                }
-            }
-            memcpy(y, y1, sizeof(double) * N);
-            t = tph;
-            r->t = t;
-            if (last) {
-                if (!fixed) /* the step to go on with: the controller's, or the one cut short */
-                    r->st->h_next = bgc_max(hnew, wanted);
-                goto done;
-            }
-            if (fabs(hnew) > hmax && !fixed)
-                hnew = hmax;
-            if (reject)
-                hnew = bgc_min(hnew, h);
-            reject = 0;
-            bad = -1;
-        } else {
-            hnew = h / bgc_min(1.0 / method->fac_min, fac11 / method->safe);
-            reject = 1;
-            last = 0;
-            r->st->rejected++;
-        }
-        h = hnew;
     }
-done:
-    free(mem);
-    return rc;
-}
-
-/* ------------------------------------------------------------ bgc_simulate --- */
-
-int bgc_solver_index(const char *name)
-{
-    int k;
-    for (k = 0; k < BGC_NUM_SOLVERS; k++)
-        if (strcmp(name, bgc_solver_names[k]) == 0)
-            return k;
-    return -1;
-}
-
-void bgc_print_stats(FILE *f, const bgc_stats *st)
-{
-    fprintf(f, "stats: steps=%ld rejected=%ld rhs=%ld jac=%ld lu=%ld solves=%ld", st->steps,
-            st->rejected, st->rhs, st->jac, st->lu, st->solves);
-    if (st->switched)
-        fprintf(f, " stiff_from=%.17g", st->t_switch);
-    fprintf(f, " cpu=%.6e\n", st->cpu);
-}
-
-static int bgc_run_rosenbrock(bgc_run *r, const bgc_method *method, double *y);
-static int bgc_run_radau(bgc_run *r, const bgc_method *method, double *y);
-
-static int bgc_run_family(bgc_run *r, int solver, double *y)
-{
-    const bgc_method *m = &bgc_methods[solver];
-    switch (m->family) {
-    case BGC_FAMILY_FIXED:
-        return bgc_run_fixed(r, m, y);
-    case BGC_FAMILY_ERK:
-        return bgc_run_erk(r, m, y);
-    case BGC_FAMILY_ROSENBROCK:
-        return bgc_run_rosenbrock(r, m, y);
-    case BGC_FAMILY_RADAU:
-        return bgc_run_radau(r, m, y);
-    default:
-        snprintf(r->msg, r->msg_size, "solver '%s' cannot run by itself", m->name);
-        return BGC_ERR_USAGE;
+    if (m->fsal) {
+        memcpy(e->k, e->k + (size_t)last_stage * D, sizeof(double) * N);
+    } else if (!last) {
+        r->st->rhs++;
+        if (bgc_model_rhs(tph, y1, r->p, r->w, e->k))
+            return bgc_fail_block(r->msg, r->msg_size, r->w);
     }
+    return 0;
 }
 
-/* Integrates y (the state at s->t0, in the workspace w) to s->t_end: bgc_simulate's run,
-   in a workspace the caller keeps. */
-static int bgc_integrate(const bgc_settings *s, const bgc_params *p, bgc_work *w, double *y,
-                         bgc_sink sink, void *ctx, bgc_stats *stats, char *msg, size_t msg_size)
-{
-    bgc_params q = *p;
-    bgc_run r;
-    int i, rc = bgc_check_settings(s, msg, msg_size);
-    if (rc)
-        return rc;
-    w->rtol = s->rtol;
-    w->atol = s->atol;
-    r.w = w;
-    r.s = s;
-    r.p = &q;
-    r.sink = sink;
-    r.ctx = ctx;
-    r.st = stats;
-    r.msg = msg;
-    r.msg_size = msg_size;
-    r.nout = bgc_output_count(s);
-    r.kout = 1;
-    r.t = s->t0;
-    r.h = s->h0;
-    stats->h_next = 0.0;
-    stats->order_next = 0;
-    r.detect_stiffness = 0;
-    r.steps_out = stats->steps;
-    r.t_out = s->t0;
-    bgc_params_update(&q);
-    i = bgc_first_nonfinite(y, BGC_NUM_STATES);
-    if (i >= 0)
-        return bgc_fail(msg, msg_size, s->t0, "state", bgc_state_names[i]);
-    rc = bgc_emit(&r, s->t0, y);
-    if (rc == 0 && bgc_methods[s->solver].family == BGC_FAMILY_AUTO) {
-        const bgc_method *m = &bgc_methods[s->solver];
-        r.detect_stiffness = 1;
-        rc = bgc_run_family(&r, m->explicit_solver, y);
-        if (rc == BGC_STIFF) {
-            stats->switched = 1;
-            stats->t_switch = r.t;
-            r.detect_stiffness = 0;
-            rc = bgc_run_family(&r, m->stiff_solver, y);
-        }
-    } else if (rc == 0) {
-        rc = bgc_run_family(&r, s->solver, y);
-    }
-    return rc;
-}
-
-int bgc_simulate(const bgc_settings *s, const bgc_params *p, const double *x0, bgc_sink sink,
-                 void *ctx, bgc_stats *stats, char *msg, size_t msg_size)
-{
-    const clock_t start = clock();
-    bgc_work *w;
-    int rc = bgc_check_settings(s, msg, msg_size);
-    if (rc)
-        return rc;
-    w = bgc_work_new();
-    if (!w)
-        return bgc_fail_memory(msg, msg_size);
-    memcpy(w->v + BGC_WORK_Y0, x0, sizeof(double) * BGC_NUM_STATES);
-    rc = bgc_integrate(s, p, w, w->v + BGC_WORK_Y0, sink, ctx, stats, msg, msg_size);
-    bgc_work_free(w);
-    stats->cpu = (double)(clock() - start) / CLOCKS_PER_SEC;
-    return rc;
-}
-
-int bgc_advance(const bgc_settings *s, const bgc_params *p, bgc_work *w, double *x,
-                bgc_sink sink, void *ctx, bgc_stats *stats, char *msg, size_t msg_size)
-{
-    const clock_t start = clock();
-    double *y = w->v + BGC_WORK_Y0;
-    int rc;
-    memcpy(y, x, sizeof(double) * BGC_NUM_STATES);
-    rc = bgc_integrate(s, p, w, y, sink, ctx, stats, msg, msg_size);
-    memcpy(x, y, sizeof(double) * BGC_NUM_STATES);
-    stats->cpu += (double)(clock() - start) / CLOCKS_PER_SEC;
-    return rc;
-}
+static const bgc_family bgc_family_erk = {
+    bgc_erk_start, bgc_erk_step, bgc_erk_accepted, bgc_erk_prepare, bgc_erk_dense,
+    bgc_erk_after, NULL, bgc_erk_finish, 1};
 
 /* ============================================================== stiff === */
 /* The stiff families: Rosenbrock methods in Hairer's transformed form (RODAS's design, any
@@ -1769,348 +1980,301 @@ static double bgc_stiff_norm(const double *v, const double *w, int *worst)
     return N > 0 ? sqrt(sum / (double)N) : 0.0;
 }
 
-/* A step size below bgc_hmin: the message names what made the steps shrink. bad: -2 an
-   algebraic block failed, -3 the iteration matrix was singular, -4 Newton did not converge,
-   >= 0 a non-finite component (kind 1 a state, else a derivative), else the error test. */
-static int bgc_stiff_fail_step(bgc_run *r, const char *name, double t, double h, int bad,
-                               int bad_kind, int worst)
-{
-    if (bad == -2)
-        return bgc_fail_block(r->msg, r->msg_size, r->w);
-    if (bad == -3) {
-        snprintf(r->msg, r->msg_size,
-                 "at t = %.17g: %s: the iteration matrix is singular (step size down to h = %.3g)",
-                 t, name, h);
-        return BGC_ERR_RUNTIME;
-    }
-    if (bad == -4) {
-        snprintf(r->msg, r->msg_size,
-                 "at t = %.17g: %s: the Newton iteration does not converge (step size down to "
-                 "h = %.3g)", t, name, h);
-        return BGC_ERR_RUNTIME;
-    }
-    if (bad >= 0)
-        return bgc_fail(r->msg, r->msg_size, t, bad_kind == 1 ? "state" : "derivative of state",
-                        bgc_state_names[bad]);
-    return bgc_fail_step(r->msg, r->msg_size, t, h, worst);
-}
-
-static int bgc_stiff_fail_singular(bgc_run *r, const char *name, double t, double h)
+static int bgc_stiff_fail_singular(bgc_run *r, double t, double h)
 {
     snprintf(r->msg, r->msg_size, "at t = %.17g: %s: the iteration matrix is singular (h = %.3g)",
-             t, name, h);
+             t, r->method->name, h);
     return BGC_ERR_RUNTIME;
 }
 
-/* Fixed steps (s->step > 0): the grid t_start + k * step, the last step ending on t_end. */
-static double bgc_stiff_grid(const bgc_settings *s, double t_start, long k, long n)
+/* An attempt that failed (bad: how, bad_kind: what was not finite): half the step. */
+static void bgc_stiff_retry(bgc_outcome *o, double hnew, int bad, int bad_kind)
 {
-    return k >= n ? s->t_end : t_start + (double)k * s->step;
+    o->kind = BGC_STEP_RETRY;
+    o->hnew = hnew;
+    o->bad = bad;
+    o->bad_kind = bad_kind;
+}
+
+static void bgc_stiff_end(bgc_outcome *o, int rc)
+{
+    o->kind = BGC_STEP_END;
+    o->rc = rc;
 }
 
 /* ------------------------------------------------------- Rosenbrock methods --- */
-
-/* The dense output of a Rosenbrock step: y(theta) = (1 - theta) y0 + theta (y1 + (1 - theta)
-   (q_1 + theta (q_2 + ... + theta q_R))), q_r = sum_j H_rj k_j (formed when first needed). */
-typedef struct bgc_ros_dense {
-    const bgc_rosenbrock *m;
-    const double *y, *y1, *k;
-    double *q; /* R rows of D */
-} bgc_ros_dense;
-
-static int bgc_ros_prepare(void *dctx)
-{
-    enum { N = BGC_NUM_STATES, D = BGC_DIM(BGC_NUM_STATES) };
-    bgc_ros_dense *d = dctx;
-    const int S = d->m->stages, R = d->m->dense_rows;
-    int j, l, r;
-    for (r = 0; r < R; r++) {
-        const double *H = d->m->H + (size_t)r * S;
-        double *q = d->q + (size_t)r * D;
-        for (l = 0; l < N; l++) {
-            double acc = 0.0;
-            for (j = 0; j < S; j++)
-                acc += H[j] * d->k[(size_t)j * D + l];
-            q[l] = acc;
-        }
-    }
-    return 0;
-}
-
-static void bgc_ros_dense_at(const void *dctx, double theta, double *yout)
-{
-    enum { N = BGC_NUM_STATES, D = BGC_DIM(BGC_NUM_STATES) };
-    const bgc_ros_dense *d = dctx;
-    const int R = d->m->dense_rows;
-    const double s1 = 1.0 - theta;
-    int l, r;
-    for (l = 0; l < N; l++) {
-        double acc = d->q[(size_t)(R - 1) * D + l];
-        for (r = R - 2; r >= 0; r--)
-            acc = d->q[(size_t)r * D + l] + theta * acc;
-        yout[l] = s1 * d->y[l] + theta * (d->y1[l] + s1 * acc);
-    }
-}
 
 /* Rosenbrock methods as Hairer's RODAS: at every new point f(t, y), df/dt (a forward
    difference, unless the model is autonomous) and the Jacobian J; per step attempt one
    factorisation of E = I/(gamma h) - J and one solve per stage,
    E k_i = f(t + c_i h, y + sum_j a_ij k_j) + sum_j C_ij k_j / h + h d_i df/dt;
    y1 = y + sum m_j k_j, the error sum e_j k_j in Hairer's norm, Gustafsson's predictive step
-   control, outputs by the dense output.  A singular E, a failed block or a non-finite stage
-   halve the step.  With s->step > 0: steps of that size, accepted without error control. */
-static int bgc_run_rosenbrock(bgc_run *r, const bgc_method *method, double *y)
+   control, outputs by the dense output y(theta) = (1 - theta) y0 + theta (y1 + (1 - theta)
+   (q_1 + theta (q_2 + ... + theta q_R))), q_r = sum_j H_rj k_j (formed when first needed).
+   A singular E, a failed block or a non-finite stage halve the step.  On fixed steps: no
+   error control, and those failures end the run. */
+typedef struct bgc_ros_state {
+    bgc_run *r;
+    const bgc_rosenbrock *m;
+    int fixed, accepted, nsing, worst;
+    double hacc, erracc;
+    double *J, *E, *k, *f0, *ft, *ys, *q; /* q: R rows (the first two also the error's) */
+    int *piv;
+    const double *y, *y1; /* the step last accepted, for the dense output */
+} bgc_ros_state;
+
+/* f, df/dt and J at a new point (t, y); nonzero (message set) if that fails. */
+static int bgc_ros_point(bgc_ros_state *ms, bgc_run *r, double t, const double *y)
+{
+    enum { N = BGC_NUM_STATES };
+    int l, rc = bgc_start_rhs(r, t, y, ms->f0);
+    if (rc)
+        return rc;
+    if (!BGC_AUTONOMOUS) {
+        const double delta = sqrt(DBL_EPSILON * bgc_max(1e-5, fabs(t)));
+        r->st->rhs++;
+        if (bgc_model_rhs(t + delta, y, r->p, r->w, ms->ft))
+            return bgc_fail_block(r->msg, r->msg_size, r->w);
+        for (l = 0; l < N; l++)
+            ms->ft[l] = (ms->ft[l] - ms->f0[l]) / delta;
+    }
+    r->st->jac++;
+    if (bgc_jacobian(t, y, r->p, r->w, ms->J))
+        return bgc_fail_block(r->msg, r->msg_size, r->w);
+    return 0;
+}
+
+static void bgc_ros_finish(void *state)
+{
+    bgc_ros_state *ms = state;
+    free(ms->piv);
+    free(ms->J);
+    free(ms);
+}
+
+static void *bgc_ros_start(bgc_run *r, const double *y, double *h, int *rc)
 {
     enum { N = BGC_NUM_STATES, D = BGC_DIM(BGC_NUM_STATES) };
-    const bgc_rosenbrock *m = method->ros;
-    const bgc_settings *s = r->s;
-    const int S = m->stages, fixed = s->step > 0.0;
-    const int R = m->dense_rows > 2 ? m->dense_rows : 2; /* q2, q3 also hold the error */
-    const double hmax = s->t_end - s->t0, expo = 1.0 / (double)method->q;
-    const double t_start = r->t;
-    double *mem = malloc(((size_t)2 * D * D + (size_t)(S + 5 + R) * D) * sizeof *mem);
-    int *piv = malloc((size_t)D * sizeof *piv);
-    double *J, *E, *k, *f0, *ft, *ys, *y1, *yout, *q2, *q3; /* q2: dense.q, R rows */
-    double t = r->t, h = 0.0, hnew, hacc = 0.0, erracc = 1.0, wanted = 0.0;
-    long n_fixed = 0, k_fixed = 0;
-    int i, j, l, rc = 0, reject = 0, last = 0, fresh = 1, accepted = 0, nsing = 0;
-    int worst = -1, bad = -1, bad_kind = 0;
-    bgc_ros_dense dense;
-
-    if (!mem || !piv) {
-        rc = bgc_fail_memory(r->msg, r->msg_size);
-        goto done;
+    const bgc_rosenbrock *m = r->method->ros;
+    const int S = m->stages, R = m->dense_rows > 2 ? m->dense_rows : 2;
+    bgc_ros_state *ms = calloc(1, sizeof *ms);
+    double *mem = malloc(((size_t)2 * D * D + (size_t)(S + 3 + R) * D) * sizeof *mem);
+    int l, *piv = malloc((size_t)D * sizeof *piv);
+    if (!ms || !mem || !piv) {
+        free(ms);
+        free(mem);
+        free(piv);
+        *rc = bgc_fail_memory(r->msg, r->msg_size);
+        return NULL;
     }
-    J = mem;
-    E = J + (size_t)D * D;
-    k = E + (size_t)D * D;
-    f0 = k + (size_t)S * D;
-    ft = f0 + D;
-    ys = ft + D;
-    y1 = ys + D;
-    yout = y1 + D;
-    q2 = yout + D;
-    q3 = q2 + D;
+    ms->r = r;
+    ms->m = m;
+    ms->fixed = r->fixed;
+    ms->worst = -1;
+    ms->erracc = 1.0;
+    ms->piv = piv;
+    ms->J = mem;
+    ms->E = ms->J + (size_t)D * D;
+    ms->k = ms->E + (size_t)D * D;
+    ms->f0 = ms->k + (size_t)S * D;
+    ms->ft = ms->f0 + D;
+    ms->ys = ms->ft + D;
+    ms->q = ms->ys + D;
     for (l = 0; l < N; l++)
-        ft[l] = 0.0;
-    dense.m = m;
-    dense.y = y;
-    dense.y1 = y1;
-    dense.k = k;
-    dense.q = q2;
-    if (r->kout > r->nout)
-        goto done;
-    if (fixed) {
-        n_fixed = bgc_substeps(s->t_end - t_start, s->step);
-        if (n_fixed < 0) {
-            rc = bgc_fail_step(r->msg, r->msg_size, t, s->step, -1);
-            goto done;
-        }
+        ms->ft[l] = 0.0;
+    *rc = bgc_ros_point(ms, r, r->t, y);
+    if (*rc) {
+        bgc_ros_finish(ms);
+        return NULL;
     }
+    if (!ms->fixed)
+        *h = bgc_first_step(r, y, ms->f0, ms->ys, ms->q);
+    return ms;
+}
 
-    for (;;) {
-        double tph, err, fac;
-        int failed = 0;
-        if (fresh) { /* a new point: f, df/dt, J */
-            r->st->rhs++;
-            if (bgc_model_rhs(t, y, r->p, r->w, f0)) {
-                rc = bgc_fail_block(r->msg, r->msg_size, r->w);
-                goto done;
-            }
-            i = bgc_first_nonfinite(f0, N);
-            if (i >= 0) {
-                rc = bgc_fail(r->msg, r->msg_size, t, "derivative of state", bgc_state_names[i]);
-                goto done;
-            }
-            if (!BGC_AUTONOMOUS) {
-                const double delta = sqrt(DBL_EPSILON * bgc_max(1e-5, fabs(t)));
-                r->st->rhs++;
-                if (bgc_model_rhs(t + delta, y, r->p, r->w, ft)) {
-                    rc = bgc_fail_block(r->msg, r->msg_size, r->w);
-                    goto done;
-                }
-                for (l = 0; l < N; l++)
-                    ft[l] = (ft[l] - f0[l]) / delta;
-            }
-            r->st->jac++;
-            if (bgc_jacobian(t, y, r->p, r->w, J)) {
-                rc = bgc_fail_block(r->msg, r->msg_size, r->w);
-                goto done;
-            }
-            if (h == 0.0 && !fixed)
-                h = r->h > 0.0 ? bgc_min(r->h, hmax)
-                               : bgc_initial_step(r, method->q, y, f0, hmax, ys, y1);
-            fresh = 0;
-        }
-        if (fixed) {
-            last = k_fixed + 1 >= n_fixed;
-            tph = bgc_stiff_grid(s, t_start, k_fixed + 1, n_fixed);
-            h = tph - t;
-            if (!(h >= bgc_hmin(t))) {
-                rc = bgc_fail_step(r->msg, r->msg_size, t, h, -1);
-                goto done;
-            }
+/* The stages into k; nonzero if a block failed in one. */
+static int bgc_ros_stages(bgc_ros_state *ms, bgc_run *r, double t, double h, double tph,
+                          const double *y)
+{
+    enum { N = BGC_NUM_STATES, D = BGC_DIM(BGC_NUM_STATES) };
+    const bgc_rosenbrock *m = ms->m;
+    const int S = m->stages;
+    double *k = ms->k;
+    int i, j, l;
+    for (i = 0; i < S; i++) {
+        const double *a = m->a + (size_t)i * S, *C = m->C + (size_t)i * S;
+        double *ki = k + (size_t)i * D;
+        if (i == 0) {
+            for (l = 0; l < N; l++)
+                ki[l] = ms->f0[l];
         } else {
-            if (!(h >= bgc_hmin(t))) {
-                rc = bgc_stiff_fail_step(r, method->name, t, h, bad, bad_kind, worst);
-                goto done;
-            }
-            wanted = h;
-            if (t + 1.01 * h - s->t_end > 0.0) {
-                h = s->t_end - t;
-                last = 1;
-            }
-            tph = last ? s->t_end : t + h;
-        }
-
-        /* E = I/(gamma h) - J, factored */
-        for (l = 0; l < N * N; l++)
-            E[l] = -J[l];
-        for (l = 0; l < N; l++)
-            E[(size_t)l * N + l] += 1.0 / (m->gamma * h);
-        r->st->lu++;
-        if (bgc_stiff_lu(N, E, piv)) {
-            if (fixed || ++nsing == 5) {
-                rc = bgc_stiff_fail_singular(r, method->name, t, h);
-                goto done;
-            }
-            bad = -3;
-            h *= 0.5;
-            reject = 1;
-            last = 0;
-            r->st->rejected++;
-            continue;
-        }
-
-        /* the stages */
-        for (i = 0; i < S; i++) {
-            const double *a = m->a + (size_t)i * S, *C = m->C + (size_t)i * S;
-            double *ki = k + (size_t)i * D;
-            if (i == 0) {
-                for (l = 0; l < N; l++)
-                    ki[l] = f0[l];
-            } else {
-                for (l = 0; l < N; l++) {
-                    double acc = 0.0;
-                    for (j = 0; j < i; j++)
-                        if (a[j] != 0.0)
-                            acc += a[j] * k[(size_t)j * D + l];
-                    ys[l] = y[l] + acc;
-                }
-                r->st->rhs++;
-                failed = bgc_model_rhs(m->c[i] == 1.0 ? tph : t + m->c[i] * h, ys, r->p, r->w, ki);
-                if (failed)
-                    break;
-            }
             for (l = 0; l < N; l++) {
                 double acc = 0.0;
                 for (j = 0; j < i; j++)
-                    if (C[j] != 0.0)
-                        acc += C[j] * k[(size_t)j * D + l];
-                ki[l] += acc / h;
-                if (!BGC_AUTONOMOUS && m->d[i] != 0.0)
-                    ki[l] += h * m->d[i] * ft[l];
+                    if (a[j] != 0.0)
+                        acc += a[j] * k[(size_t)j * D + l];
+                ms->ys[l] = y[l] + acc;
             }
-            bgc_stiff_lu_solve(N, E, piv, ki);
-            r->st->solves++;
+            r->st->rhs++;
+            if (bgc_model_rhs(m->c[i] == 1.0 ? tph : t + m->c[i] * h, ms->ys, r->p, r->w, ki))
+                return 1;
         }
-        if (failed && fixed) {
-            rc = bgc_fail_block(r->msg, r->msg_size, r->w);
-            goto done;
-        }
-        if (failed) { /* an algebraic block failed in a stage */
-            bad = -2;
-            h *= 0.5;
-            reject = 1;
-            last = 0;
-            r->st->rejected++;
-            continue;
-        }
-
-        /* the solution, the error estimate (in q2) and Hairer's norm (weights in q3) */
         for (l = 0; l < N; l++) {
-            double acc = 0.0, e = 0.0;
-            for (j = 0; j < S; j++) {
-                const double kj = k[(size_t)j * D + l];
-                if (m->m[j] != 0.0)
-                    acc += m->m[j] * kj;
-                if (m->e[j] != 0.0)
-                    e += m->e[j] * kj;
-            }
-            y1[l] = y[l] + acc;
-            q2[l] = e;
-            q3[l] = bgc_weight(s, y[l], y1[l]);
+            double acc = 0.0;
+            for (j = 0; j < i; j++)
+                if (C[j] != 0.0)
+                    acc += C[j] * k[(size_t)j * D + l];
+            ki[l] += acc / h;
+            if (!BGC_AUTONOMOUS && m->d[i] != 0.0)
+                ki[l] += h * m->d[i] * ms->ft[l];
         }
-        err = bgc_stiff_norm(q2, q3, &worst);
-        i = bgc_first_nonfinite(y1, N);
-        if (err != err || err > DBL_MAX || i >= 0) {
-            if (fixed) {
-                rc = bgc_fail(r->msg, r->msg_size, tph, "state", bgc_state_names[i >= 0 ? i : 0]);
-                goto done;
-            }
-            bad = i;
-            bad_kind = 1;
-            for (j = 1; j < S && bad < 0; j++) {
-                bad = bgc_first_nonfinite(k + (size_t)j * D, N);
-                bad_kind = 2;
-            }
-            h *= 0.5;
-            reject = 1;
-            last = 0;
-            r->st->rejected++;
-            continue;
-        }
-        if (fixed)
-            err = 0.0;
-
-        /* Gustafsson's predictive controller (rodas.f) */
-        fac = bgc_max(1.0 / method->fac_max,
-                      bgc_min(1.0 / method->fac_min, pow(err, expo) / method->safe));
-        hnew = h / fac;
-        if (err <= 1.0) {
-            if (accepted > 0) {
-                double facgus = (hacc / h) * pow(err * err / erracc, expo) / method->safe;
-                facgus = bgc_max(1.0 / method->fac_max, bgc_min(1.0 / method->fac_min, facgus));
-                fac = bgc_max(fac, facgus);
-                hnew = h / fac;
-            }
-            hacc = h;
-            erracc = bgc_max(1e-2, err);
-            accepted++;
-            rc = bgc_accept(r, tph);
-            if (rc)
-                goto done;
-            rc = bgc_emit_step(r, t, h, tph, y1, bgc_ros_prepare, bgc_ros_dense_at, &dense, yout);
-            if (rc)
-                goto done;
-            memcpy(y, y1, sizeof(double) * N);
-            t = tph;
-            r->t = t;
-            fresh = 1;
-            nsing = 0;
-            bad = -1;
-            if (last) {
-                if (!fixed) /* the step to go on with: the controller's, or the one cut short */
-                    r->st->h_next = bgc_max(hnew, wanted);
-                goto done;
-            }
-            k_fixed++;
-            hnew = bgc_min(hnew, hmax);
-            if (reject)
-                hnew = bgc_min(hnew, h);
-            reject = 0;
-        } else {
-            reject = 1;
-            last = 0;
-            r->st->rejected++;
-        }
-        h = hnew;
+        bgc_stiff_lu_solve(N, ms->E, ms->piv, ki);
+        r->st->solves++;
     }
-done:
-    free(piv);
-    free(mem);
-    return rc;
+    return 0;
 }
+
+/* y1, and the error estimate's norm (the estimate in q's first row, the weights in its
+   second). */
+static double bgc_ros_solution(bgc_ros_state *ms, const bgc_settings *s, const double *y,
+                               double *y1)
+{
+    enum { N = BGC_NUM_STATES, D = BGC_DIM(BGC_NUM_STATES) };
+    const bgc_rosenbrock *m = ms->m;
+    double *q2 = ms->q, *q3 = ms->q + D;
+    int j, l;
+    for (l = 0; l < N; l++) {
+        double acc = 0.0, e = 0.0;
+        for (j = 0; j < m->stages; j++) {
+            const double kj = ms->k[(size_t)j * D + l];
+            if (m->m[j] != 0.0)
+                acc += m->m[j] * kj;
+            if (m->e[j] != 0.0)
+                e += m->e[j] * kj;
+        }
+        y1[l] = y[l] + acc;
+        q2[l] = e;
+        q3[l] = bgc_weight(s, y[l], y1[l]);
+    }
+    return bgc_stiff_norm(q2, q3, &ms->worst);
+}
+
+static void bgc_ros_step(void *state, bgc_run *r, double t, double h, double tph,
+                         const double *y, double *y1, bgc_outcome *o)
+{
+    enum { N = BGC_NUM_STATES, D = BGC_DIM(BGC_NUM_STATES) };
+    bgc_ros_state *ms = state;
+    const bgc_method *method = r->method;
+    const double expo = 1.0 / (double)method->q;
+    double err, fac;
+    int i, j, l;
+
+    /* E = I/(gamma h) - J, factored */
+    for (l = 0; l < N * N; l++)
+        ms->E[l] = -ms->J[l];
+    for (l = 0; l < N; l++)
+        ms->E[(size_t)l * N + l] += 1.0 / (ms->m->gamma * h);
+    r->st->lu++;
+    if (bgc_stiff_lu(N, ms->E, ms->piv)) {
+        if (ms->fixed || ++ms->nsing == 5)
+            bgc_stiff_end(o, bgc_stiff_fail_singular(r, t, h));
+        else
+            bgc_stiff_retry(o, h * 0.5, BGC_BAD_SINGULAR, 0);
+        return;
+    }
+    if (bgc_ros_stages(ms, r, t, h, tph, y)) { /* an algebraic block failed in a stage */
+        if (ms->fixed)
+            bgc_stiff_end(o, bgc_fail_block(r->msg, r->msg_size, r->w));
+        else
+            bgc_stiff_retry(o, h * 0.5, BGC_BAD_BLOCK, 0);
+        return;
+    }
+    err = bgc_ros_solution(ms, r->s, y, y1);
+    o->worst = ms->worst;
+    i = bgc_first_nonfinite(y1, N);
+    if (err != err || err > DBL_MAX || i >= 0) {
+        int bad = i, bad_kind = 1;
+        if (ms->fixed) {
+            bgc_stiff_end(o, bgc_fail(r->msg, r->msg_size, tph, "state",
+                                      bgc_state_names[i >= 0 ? i : 0]));
+            return;
+        }
+        for (j = 1; j < ms->m->stages && bad < 0; j++) {
+            bad = bgc_first_nonfinite(ms->k + (size_t)j * D, N);
+            bad_kind = 2;
+        }
+        bgc_stiff_retry(o, h * 0.5, bad, bad_kind);
+        return;
+    }
+    if (ms->fixed)
+        err = 0.0;
+
+    /* Gustafsson's predictive controller (rodas.f) */
+    fac = bgc_max(1.0 / method->fac_max,
+                  bgc_min(1.0 / method->fac_min, pow(err, expo) / method->safe));
+    o->hnew = h / fac;
+    if (err <= 1.0) {
+        if (ms->accepted > 0) {
+            double facgus = (ms->hacc / h) * pow(err * err / ms->erracc, expo) / method->safe;
+            facgus = bgc_max(1.0 / method->fac_max, bgc_min(1.0 / method->fac_min, facgus));
+            fac = bgc_max(fac, facgus);
+            o->hnew = h / fac;
+        }
+        ms->hacc = h;
+        ms->erracc = bgc_max(1e-2, err);
+        ms->accepted++;
+        ms->nsing = 0;
+        ms->y = y;
+        ms->y1 = y1;
+        o->kind = BGC_STEP_ACCEPT;
+    } else {
+        o->kind = BGC_STEP_REJECT;
+    }
+}
+
+static int bgc_ros_prepare(void *state)
+{
+    enum { N = BGC_NUM_STATES, D = BGC_DIM(BGC_NUM_STATES) };
+    bgc_ros_state *ms = state;
+    const int S = ms->m->stages, R = ms->m->dense_rows;
+    int j, l, r;
+    for (r = 0; r < R; r++) {
+        const double *H = ms->m->H + (size_t)r * S;
+        double *q = ms->q + (size_t)r * D;
+        for (l = 0; l < N; l++) {
+            double acc = 0.0;
+            for (j = 0; j < S; j++)
+                acc += H[j] * ms->k[(size_t)j * D + l];
+            q[l] = acc;
+        }
+    }
+    return 0;
+}
+
+static void bgc_ros_dense(const void *state, double theta, double *yout)
+{
+    enum { N = BGC_NUM_STATES, D = BGC_DIM(BGC_NUM_STATES) };
+    const bgc_ros_state *ms = state;
+    const int R = ms->m->dense_rows;
+    const double s1 = 1.0 - theta;
+    int l, r;
+    for (l = 0; l < N; l++) {
+        double acc = ms->q[(size_t)(R - 1) * D + l];
+        for (r = R - 2; r >= 0; r--)
+            acc = ms->q[(size_t)r * D + l] + theta * acc;
+        yout[l] = s1 * ms->y[l] + theta * (ms->y1[l] + s1 * acc);
+    }
+}
+
+/* The new point's evaluations (none after the run's last step). */
+static int bgc_ros_after(void *state, bgc_run *r, double tph, const double *y1, int last)
+{
+    return last ? 0 : bgc_ros_point(state, r, tph, y1);
+}
+
+static const bgc_family bgc_family_rosenbrock = {
+    bgc_ros_start, bgc_ros_step, NULL, bgc_ros_prepare, bgc_ros_dense, bgc_ros_after, NULL,
+    bgc_ros_finish, 1};
 
 /* ------------------------------------------------------- Radau IIA (RADAU) --- */
 
@@ -2146,20 +2310,6 @@ static double bgc_radau_u(const bgc_radau *m, const double *b, int l, double the
     while (k-- > 0)
         acc = b[(size_t)k * D + l] + (theta - m->c[k]) * acc;
     return theta * acc;
-}
-
-typedef struct bgc_radau_dense {
-    const bgc_radau *m;
-    const double *y, *b;
-} bgc_radau_dense;
-
-static void bgc_radau_dense_at(const void *dctx, double theta, double *yout)
-{
-    enum { N = BGC_NUM_STATES };
-    const bgc_radau_dense *d = dctx;
-    int l;
-    for (l = 0; l < N; l++)
-        yout[l] = d->y[l] + bgc_radau_u(d->m, d->b, l, theta);
 }
 
 /* out[i so] = sum_j M[i ns + j] v[j sv] for i < ns (M: ns x ns, row-major), summed in the
@@ -2233,457 +2383,491 @@ static void bgc_radau_configure(bgc_radau_use *u, const bgc_method *method,
    Outputs by the collocation polynomial.  Counts: each real or complex factorisation and
    each real or complex solve.  With s->step > 0: steps of that size at the first stage set,
    no error estimate, and Newton's failure (after a fresh Jacobian) ends the run. */
-static int bgc_run_radau(bgc_run *r, const bgc_method *method, double *y)
+typedef struct bgc_radau_state {
+    bgc_run *r;
+    const bgc_method *method;
+    int fixed, variable, smax, set, since, change, unexp, unexn, recheck;
+    int reject, first, needjac, caljac, accepted, nsing, worst, newt, refactored;
+    double hfact, hold, hacc, erracc, faccon, theta, thetat, thqold, dynold, hhfac;
+    double *J, *E1, *Z, *W, *b, *zlast, *dw, *f0, *scal, *ys, *tmp, *cont, *f2, *ew;
+    bgc_cplx *Ec, *zc;
+    int *piv;
+    bgc_radau_use u;
+    const bgc_radau *dm; /* the stage set ... */
+    const double *y;     /* ... and the start of the step last accepted (dense output) */
+} bgc_radau_state;
+#define BGC_RADAU_THET 0.001 /* recompute J when Newton contracted more slowly than this */
+
+static void bgc_radau_finish(void *state)
+{
+    bgc_radau_state *ms = state;
+    free(ms->piv);
+    free(ms->Ec);
+    free(ms->J);
+    free(ms);
+}
+
+/* The state with its storage, or NULL (no memory). */
+static bgc_radau_state *bgc_radau_new(bgc_run *r)
+{
+    enum { D = BGC_DIM(BGC_NUM_STATES) };
+    const bgc_method *method = r->method;
+    bgc_radau_state *ms = calloc(1, sizeof *ms);
+    int k, l, pmax, smax = 0;
+    for (k = 0; k < method->radau_sets; k++)
+        smax = method->radau[k].s > smax ? method->radau[k].s : smax;
+    pmax = (smax - 1) / 2;
+    if (!ms)
+        return NULL;
+    ms->J = malloc(((size_t)2 * D * D + (size_t)(3 * smax + 11) * D) * sizeof *ms->J);
+    ms->Ec = malloc(((size_t)pmax * D * D + (size_t)pmax * D + 1) * sizeof *ms->Ec);
+    ms->piv = malloc((size_t)(1 + pmax) * D * sizeof *ms->piv + sizeof *ms->piv);
+    if (!ms->J || !ms->Ec || !ms->piv) {
+        bgc_radau_finish(ms);
+        return NULL;
+    }
+    ms->smax = smax;
+    ms->E1 = ms->J + (size_t)D * D;
+    ms->Z = ms->E1 + (size_t)D * D; /* smax x D */
+    ms->W = ms->Z + (size_t)smax * D; /* smax x D */
+    ms->b = ms->W + (size_t)smax * D; /* smax x D */
+    ms->zlast = ms->b + (size_t)smax * D;
+    ms->dw = ms->zlast + D;
+    ms->f0 = ms->dw + D;
+    ms->scal = ms->f0 + D;
+    ms->ys = ms->scal + D;
+    ms->tmp = ms->ys + D;
+    ms->cont = ms->tmp + D;
+    ms->f2 = ms->cont + D;
+    ms->ew = ms->f2 + D;
+    ms->zc = ms->Ec + (size_t)pmax * D * D; /* pmax x D */
+    for (l = 0; l < smax * D; l++)
+        ms->b[l] = 0.0;
+    for (l = 0; l < D; l++)
+        ms->zlast[l] = 0.0;
+    return ms;
+}
+
+static void bgc_radau_scale(bgc_radau_state *ms, const double *y)
+{
+    int l;
+    for (l = 0; l < BGC_NUM_STATES; l++)
+        ms->scal[l] = ms->u.atol + ms->u.rtol * fabs(y[l]);
+}
+
+static void *bgc_radau_start(bgc_run *r, const double *y, double *h, int *rc)
+{
+    const bgc_method *method = r->method;
+    bgc_radau_state *ms = bgc_radau_new(r);
+    int k;
+    if (!ms) {
+        *rc = bgc_fail_memory(r->msg, r->msg_size);
+        return NULL;
+    }
+    ms->r = r;
+    ms->method = method;
+    ms->fixed = r->fixed;
+    ms->variable = method->radau_sets > 1 && !ms->fixed;
+    for (k = 0; k < method->radau_sets; k++)
+        if (ms->variable && 2 * method->radau[k].s - 1 == r->s->order0) {
+            ms->set = k; /* going on from an earlier run: at its order, free to change it */
+            ms->since = 10;
+        }
+    ms->first = ms->needjac = 1;
+    ms->worst = -1;
+    ms->erracc = ms->thqold = ms->dynold = ms->faccon = 1.0;
+    ms->theta = BGC_RADAU_THET;
+    ms->hhfac = 0.5;
+    bgc_radau_configure(&ms->u, method, r->s, ms->set);
+    ms->dm = ms->u.m;
+    *rc = bgc_start_rhs(r, r->t, y, ms->f0);
+    if (*rc) {
+        bgc_radau_finish(ms);
+        return NULL;
+    }
+    bgc_radau_scale(ms, y);
+    if (!ms->fixed)
+        *h = bgc_first_step(r, y, ms->f0, ms->ys, ms->tmp);
+    return ms;
+}
+
+/* The order, whenever the matrices are to be factored (variable order only). */
+static void bgc_radau_order(bgc_radau_state *ms, double h, const double *y)
+{
+    const double hquot = ms->hold > 0.0 ? h / ms->hold : 0.0;
+    int next = ms->set;
+    ms->since++;
+    ms->thetat = bgc_min(10.0, bgc_max(ms->theta, 0.5 * ms->thetat));
+    if (ms->newt > 1 && ms->thetat <= 0.002 && hquot > 0.8 && hquot < 1.2 && ms->since > 10
+        && ms->set + 1 < ms->method->radau_sets)
+        next = ms->set + 1;
+    if ((ms->thetat >= 0.8 || ms->unexp || ms->unexn) && ms->set > 0)
+        next = ms->set - 1;
+    ms->unexp = ms->unexn = ms->recheck = 0;
+    if (next != ms->set) {
+        ms->set = next;
+        bgc_radau_configure(&ms->u, ms->method, ms->r->s, ms->set);
+        ms->since = 1;
+        ms->change = 1;
+        ms->hfact = 0.0;
+        bgc_radau_scale(ms, y);
+    }
+}
+
+/* gamma/h I - J and (alpha_k + i beta_k)/h I - J, factored; nonzero if one is singular. */
+static int bgc_radau_factor(bgc_radau_state *ms, bgc_run *r, const double *alphn,
+                            const double *betan, double fac1)
+{
+    enum { N = BGC_NUM_STATES, D = BGC_DIM(BGC_NUM_STATES) };
+    int k, l, singular;
+    for (l = 0; l < N * N; l++)
+        ms->E1[l] = -ms->J[l];
+    for (l = 0; l < N; l++)
+        ms->E1[(size_t)l * N + l] += fac1;
+    r->st->lu++;
+    singular = bgc_stiff_lu(N, ms->E1, ms->piv);
+    for (k = 0; k < ms->u.pairs && !singular; k++) {
+        bgc_cplx *E = ms->Ec + (size_t)k * D * D;
+        for (l = 0; l < N * N; l++)
+            E[l] = -ms->J[l];
+        for (l = 0; l < N; l++)
+            E[(size_t)l * N + l] += alphn[k] + betan[k] * _Complex_I;
+        r->st->lu++;
+        singular = bgc_stiff_zlu(N, E, ms->piv + (size_t)(1 + k) * D);
+    }
+    return singular;
+}
+
+/* The simplified Newton iteration for the stage increments Z (W = T^-1 Z), from the last
+   step's collocation polynomial: 0 converged, 1 a stage failed (block or non-finite: *bad,
+   *bad_kind), 2 no convergence, 3 too slow (ms->hhfac: the step that would converge). */
+static int bgc_radau_newton(bgc_radau_state *ms, bgc_run *r, double t, double h, double tph,
+                            const double *y, const double *alphn, const double *betan,
+                            double fac1, int *bad, int *bad_kind)
 {
     enum { N = BGC_NUM_STATES, D = BGC_DIM(BGC_NUM_STATES), SMAX = BGC_RADAU_MAX_STAGES };
-    const bgc_settings *s = r->s;
-    const int fixed = s->step > 0.0, variable = method->radau_sets > 1 && !fixed;
-    const double hmax = s->t_end - s->t0, thet = 0.001;
-    const double t_start = r->t;
-    int smax = 0, pmax, set = 0, since = 0, change = 0, unexp = 0, unexn = 0, recheck = 0;
-    double *mem = NULL, *J, *E1, *Z, *W, *b, *dw, *f0, *scal, *ys, *y1, *yout, *zlast, *cont;
-    double *f2, *ew;
-    bgc_cplx *cmem = NULL, *Ec, *zc;
-    int *piv = NULL;
-    double t = r->t, h = 0.0, hnew, hfact = 0.0, hold = 0.0, hacc = 0.0, erracc = 1.0;
-    double wanted = 0.0;
-    double faccon = 1.0, theta = thet, thetat = 0.0, thqold = 1.0, dynold = 1.0, hhfac = 0.5;
-    long n_fixed = 0, k_fixed = 0;
-    int i, j, k, l, rc = 0, reject = 0, last = 0, first = 1, needjac = 1, caljac = 0;
-    int accepted = 0, nsing = 0, worst = -1, bad = -1, bad_kind = 0, newt = 0, refactored = 0;
-    bgc_radau_use u;
-    bgc_radau_dense dense;
-
-    for (k = 0; k < method->radau_sets; k++) {
-        smax = method->radau[k].s > smax ? method->radau[k].s : smax;
-        if (variable && 2 * method->radau[k].s - 1 == s->order0) {
-            set = k; /* going on from an earlier run: at its order, free to change it */
-            since = 10;
+    const bgc_radau_use *u = &ms->u;
+    const bgc_radau *m = u->m;
+    double *Z = ms->Z, *W = ms->W;
+    double dyno = 0.0;
+    int i, k, l;
+    if (ms->first || ms->change) {
+        for (l = 0; l < u->ns * D; l++)
+            Z[l] = W[l] = 0.0;
+    } else {
+        const double q = h / ms->hold;
+        for (l = 0; l < N; l++) {
+            for (i = 0; i < u->ns; i++)
+                Z[(size_t)i * D + l] = bgc_radau_u(m, ms->b, l, 1.0 + m->c[i] * q) - ms->zlast[l];
+            bgc_radau_mul(m->Ti, u->ns, Z + l, D, W + l, D);
         }
     }
-    pmax = (smax - 1) / 2;
-    mem = malloc(((size_t)2 * D * D + (size_t)(4 * smax + 11) * D) * sizeof *mem);
-    cmem = malloc(((size_t)pmax * D * D + (size_t)pmax * D + 1) * sizeof *cmem);
-    piv = malloc((size_t)(1 + pmax) * D * sizeof *piv + sizeof *piv);
-    if (!mem || !cmem || !piv) {
-        rc = bgc_fail_memory(r->msg, r->msg_size);
-        goto done;
-    }
-    J = mem;
-    E1 = J + (size_t)D * D;
-    Z = E1 + (size_t)D * D; /* smax x D */
-    W = Z + (size_t)smax * D; /* smax x D */
-    b = W + (size_t)smax * D; /* smax x D */
-    zlast = b + (size_t)smax * D;
-    dw = zlast + D;
-    f0 = dw + D;
-    scal = f0 + D;
-    ys = scal + D;
-    y1 = ys + D;
-    yout = y1 + D;
-    cont = yout + D;
-    f2 = cont + D;
-    ew = f2 + D;
-    Ec = cmem; /* pmax x D x D */
-    zc = Ec + (size_t)pmax * D * D; /* pmax x D */
-    for (l = 0; l < smax * D; l++)
-        b[l] = 0.0;
-    for (l = 0; l < D; l++)
-        zlast[l] = 0.0;
-    bgc_radau_configure(&u, method, s, set);
-    dense.m = u.m;
-    dense.y = y;
-    dense.b = b;
-    if (r->kout > r->nout)
-        goto done;
-    if (fixed) {
-        n_fixed = bgc_substeps(s->t_end - t_start, s->step);
-        if (n_fixed < 0) {
-            rc = bgc_fail_step(r->msg, r->msg_size, t, s->step, -1);
-            goto done;
-        }
-    }
-    r->st->rhs++;
-    if (bgc_model_rhs(t, y, r->p, r->w, f0)) {
-        rc = bgc_fail_block(r->msg, r->msg_size, r->w);
-        goto done;
-    }
-    i = bgc_first_nonfinite(f0, N);
-    if (i >= 0) {
-        rc = bgc_fail(r->msg, r->msg_size, t, "derivative of state", bgc_state_names[i]);
-        goto done;
-    }
-    for (l = 0; l < N; l++)
-        scal[l] = u.atol + u.rtol * fabs(y[l]);
-    if (!fixed)
-        h = r->h > 0.0 ? bgc_min(r->h, hmax) : bgc_initial_step(r, method->q, y, f0, hmax, ys, y1);
-
+    ms->newt = 0;
+    ms->faccon = pow(bgc_max(ms->faccon, DBL_EPSILON), 0.8);
+    ms->theta = BGC_RADAU_THET;
     for (;;) {
-        const bgc_radau *m;
-        const double *T, *Ti;
-        double tph, err = 0.0, fac1, alphn[SMAX], betan[SMAX], dyno = 0.0, quot, fac;
-        int failed = 0;
-        if (needjac) {
-            r->st->jac++;
-            if (bgc_jacobian(t, y, r->p, r->w, J)) {
-                rc = bgc_fail_block(r->msg, r->msg_size, r->w);
-                goto done;
-            }
-            needjac = 0;
-            caljac = 1;
-            hfact = 0.0;
-        }
-        if (fixed) {
-            last = k_fixed + 1 >= n_fixed;
-            tph = bgc_stiff_grid(s, t_start, k_fixed + 1, n_fixed);
-            h = tph - t;
-            if (!(h >= bgc_hmin(t))) {
-                rc = bgc_fail_step(r->msg, r->msg_size, t, h, -1);
-                goto done;
-            }
-        } else {
-            if (!(h >= bgc_hmin(t))) {
-                rc = bgc_stiff_fail_step(r, method->name, t, h, bad, bad_kind, worst);
-                goto done;
-            }
-            wanted = h;
-            if (t + 1.01 * h - s->t_end > 0.0) {
-                h = s->t_end - t;
-                last = 1;
-            }
-            tph = last ? s->t_end : t + h;
-        }
-
-        /* the order, whenever the matrices are to be factored (variable order only) */
-        if (variable && (h != hfact || recheck)) {
-            const double hquot = hold > 0.0 ? h / hold : 0.0;
-            int next = set;
-            since++;
-            thetat = bgc_min(10.0, bgc_max(theta, 0.5 * thetat));
-            if (newt > 1 && thetat <= 0.002 && hquot > 0.8 && hquot < 1.2 && since > 10
-                && set + 1 < method->radau_sets)
-                next = set + 1;
-            if ((thetat >= 0.8 || unexp || unexn) && set > 0)
-                next = set - 1;
-            unexp = unexn = recheck = 0;
-            if (next != set) {
-                set = next;
-                bgc_radau_configure(&u, method, s, set);
-                since = 1;
-                change = 1;
-                hfact = 0.0;
-                for (l = 0; l < N; l++)
-                    scal[l] = u.atol + u.rtol * fabs(y[l]);
-            }
-        }
-        m = u.m;
-        T = m->T;
-        Ti = m->Ti;
-        fac1 = m->gamma / h;
-        for (k = 0; k < u.pairs; k++) {
-            alphn[k] = m->alpha[k] / h;
-            betan[k] = m->beta[k] / h;
-        }
-
-        /* gamma/h I - J and (alpha_k + i beta_k)/h I - J, factored (unless they are h's) */
-        refactored = h != hfact;
-        if (h != hfact) {
-            int singular;
-            for (l = 0; l < N * N; l++)
-                E1[l] = -J[l];
+        double sum = 0.0;
+        if (ms->newt >= u->nit)
+            return 2;
+        /* Z_i <- f(t + c_i h, y + Z_i) */
+        for (i = 0; i < u->ns; i++) {
+            double *zi = Z + (size_t)i * D;
+            const double ti = i == u->ns - 1 ? tph : t + m->c[i] * h;
             for (l = 0; l < N; l++)
-                E1[(size_t)l * N + l] += fac1;
-            r->st->lu++;
-            singular = bgc_stiff_lu(N, E1, piv);
-            for (k = 0; k < u.pairs && !singular; k++) {
-                bgc_cplx *E = Ec + (size_t)k * D * D;
-                for (l = 0; l < N * N; l++)
-                    E[l] = -J[l];
-                for (l = 0; l < N; l++)
-                    E[(size_t)l * N + l] += alphn[k] + betan[k] * _Complex_I;
-                r->st->lu++;
-                singular = bgc_stiff_zlu(N, E, piv + (size_t)(1 + k) * D);
+                ms->ys[l] = y[l] + zi[l];
+            r->st->rhs++;
+            if (bgc_model_rhs(ti, ms->ys, r->p, r->w, zi)) {
+                *bad = BGC_BAD_BLOCK;
+                return 1;
             }
-            if (singular) {
-                hfact = 0.0;
-                if (fixed || ++nsing == 5) {
-                    rc = bgc_stiff_fail_singular(r, method->name, t, h);
-                    goto done;
-                }
-                bad = -3;
-                unexp = 1;
-                h *= 0.5;
-                reject = 1;
-                last = 0;
-                r->st->rejected++;
-                needjac = !caljac;
-                continue;
-            }
-            hfact = h;
-        }
-
-        /* starting values: the last step's collocation polynomial, extrapolated */
-        if (first || change) {
-            for (l = 0; l < u.ns * D; l++)
-                Z[l] = W[l] = 0.0;
-        } else {
-            const double q = h / hold;
-            for (l = 0; l < N; l++) {
-                for (i = 0; i < u.ns; i++)
-                    Z[(size_t)i * D + l] = bgc_radau_u(m, b, l, 1.0 + m->c[i] * q) - zlast[l];
-                bgc_radau_mul(Ti, u.ns, Z + l, D, W + l, D);
+            if ((l = bgc_first_nonfinite(zi, N)) >= 0) {
+                *bad = l;
+                *bad_kind = 2;
+                return 1;
             }
         }
-
-        /* the simplified Newton iteration */
-        newt = 0;
-        faccon = pow(bgc_max(faccon, DBL_EPSILON), 0.8);
-        theta = thet;
-        for (;;) {
-            double sum = 0.0;
-            if (newt >= u.nit) {
-                failed = 2;
-                break;
-            }
-            /* Z_i <- f(t + c_i h, y + Z_i) */
-            for (i = 0; i < u.ns && !failed; i++) {
-                double *zi = Z + (size_t)i * D;
-                const double ti = i == u.ns - 1 ? tph : t + m->c[i] * h;
-                for (l = 0; l < N; l++)
-                    ys[l] = y[l] + zi[l];
-                r->st->rhs++;
-                if (bgc_model_rhs(ti, ys, r->p, r->w, zi)) {
-                    failed = 1;
-                    bad = -2;
-                } else if ((l = bgc_first_nonfinite(zi, N)) >= 0) {
-                    failed = 1;
-                    bad = l;
-                    bad_kind = 2;
-                }
-            }
-            if (failed)
-                break;
-            for (l = 0; l < N; l++) {
-                double g[SMAX];
-                bgc_radau_mul(Ti, u.ns, Z + l, D, g, 1);
-                dw[l] = g[0] - fac1 * W[l];
-                for (k = 0; k < u.pairs; k++) {
-                    const double w2 = W[(size_t)(2 * k + 1) * D + l];
-                    const double w3 = W[(size_t)(2 * k + 2) * D + l];
-                    zc[(size_t)k * D + l] = (g[2 * k + 1] - (alphn[k] * w2 - betan[k] * w3))
+        for (l = 0; l < N; l++) {
+            double g[SMAX];
+            bgc_radau_mul(m->Ti, u->ns, Z + l, D, g, 1);
+            ms->dw[l] = g[0] - fac1 * W[l];
+            for (k = 0; k < u->pairs; k++) {
+                const double w2 = W[(size_t)(2 * k + 1) * D + l];
+                const double w3 = W[(size_t)(2 * k + 2) * D + l];
+                ms->zc[(size_t)k * D + l] = (g[2 * k + 1] - (alphn[k] * w2 - betan[k] * w3))
                                             + (g[2 * k + 2] - (betan[k] * w2 + alphn[k] * w3))
                                                   * _Complex_I;
-                }
             }
-            bgc_stiff_lu_solve(N, E1, piv, dw);
-            for (k = 0; k < u.pairs; k++)
-                bgc_stiff_zlu_solve(N, Ec + (size_t)k * D * D, piv + (size_t)(1 + k) * D,
-                                    zc + (size_t)k * D);
-            r->st->solves += 1 + u.pairs;
-            newt++;
-            for (l = 0; l < N; l++) {
-                const double q1 = dw[l] / scal[l];
-                double part = q1 * q1;
-                for (k = 0; k < u.pairs; k++) {
-                    const double qr = creal(zc[(size_t)k * D + l]) / scal[l];
-                    const double qi = cimag(zc[(size_t)k * D + l]) / scal[l];
-                    part += qr * qr;
-                    part += qi * qi;
-                }
-                sum += part;
-            }
-            dyno = N > 0 ? sqrt(sum / (double)(u.ns * N)) : 0.0;
-            if (dyno != dyno || dyno > DBL_MAX) {
-                failed = 2;
-                break;
-            }
-            if (newt > 1 && newt < u.nit) {
-                const double thq = dyno / dynold;
-                theta = newt == 2 ? thq : sqrt(thq * thqold);
-                thqold = thq;
-                if (theta < 0.99) {
-                    const double dyth = theta / (1.0 - theta) * dyno
-                                        * pow(theta, (double)(u.nit - 1 - newt)) / u.fnewt;
-                    faccon = theta / (1.0 - theta);
-                    if (dyth >= 1.0 && !fixed) { /* too slow: a smaller step converges sooner */
-                        const double qnewt = bgc_max(1e-4, bgc_min(20.0, dyth));
-                        hhfac = 0.8 * pow(qnewt, -1.0 / (4.0 + (double)(u.nit - 1 - newt)));
-                        failed = 3;
-                        break;
-                    }
-                } else {
-                    failed = 2;
-                    break;
-                }
-            }
-            dynold = bgc_max(dyno, DBL_EPSILON);
-            for (l = 0; l < N; l++) {
-                double a[SMAX];
-                a[0] = W[l] + dw[l];
-                for (k = 0; k < u.pairs; k++) {
-                    a[2 * k + 1] = W[(size_t)(2 * k + 1) * D + l] + creal(zc[(size_t)k * D + l]);
-                    a[2 * k + 2] = W[(size_t)(2 * k + 2) * D + l] + cimag(zc[(size_t)k * D + l]);
-                }
-                for (i = 0; i < u.ns; i++)
-                    W[(size_t)i * D + l] = a[i];
-                bgc_radau_mul(T, u.ns, a, 1, Z + l, D);
-            }
-            /* converged; after one iteration only on the previous step's matrices, whose
-               contraction faccon measured */
-            if ((newt > 1 || !refactored) && faccon * dyno <= u.fnewt)
-                break;
         }
-        if (failed) {
-            if (fixed) {
-                if (failed == 1) {
-                    rc = bad == -2 ? bgc_fail_block(r->msg, r->msg_size, r->w)
-                                   : bgc_fail(r->msg, r->msg_size, t, "derivative of state",
-                                              bgc_state_names[bad]);
-                    goto done;
-                }
-                if (!caljac) { /* once more with a fresh Jacobian */
-                    needjac = 1;
-                    continue;
-                }
-                snprintf(r->msg, r->msg_size,
-                         "at t = %.17g: %s: the Newton iteration does not converge with the "
-                         "fixed step h = %.3g", t, method->name, h);
-                rc = BGC_ERR_RUNTIME;
-                goto done;
+        bgc_stiff_lu_solve(N, ms->E1, ms->piv, ms->dw);
+        for (k = 0; k < u->pairs; k++)
+            bgc_stiff_zlu_solve(N, ms->Ec + (size_t)k * D * D, ms->piv + (size_t)(1 + k) * D,
+                                ms->zc + (size_t)k * D);
+        r->st->solves += 1 + u->pairs;
+        ms->newt++;
+        for (l = 0; l < N; l++) {
+            const double q1 = ms->dw[l] / ms->scal[l];
+            double part = q1 * q1;
+            for (k = 0; k < u->pairs; k++) {
+                const double qr = creal(ms->zc[(size_t)k * D + l]) / ms->scal[l];
+                const double qi = cimag(ms->zc[(size_t)k * D + l]) / ms->scal[l];
+                part += qr * qr;
+                part += qi * qi;
             }
-            if (failed != 1)
-                bad = -4;
-            if (failed == 3)
-                unexn = hhfac <= 0.5;
-            else
-                unexp = 1;
-            h *= failed == 3 ? hhfac : 0.5;
-            reject = 1;
-            last = 0;
-            r->st->rejected++;
-            needjac = !caljac;
-            continue;
+            sum += part;
         }
+        dyno = N > 0 ? sqrt(sum / (double)(u->ns * N)) : 0.0;
+        if (dyno != dyno || dyno > DBL_MAX)
+            return 2;
+        if (ms->newt > 1 && ms->newt < u->nit) {
+            const double thq = dyno / ms->dynold;
+            ms->theta = ms->newt == 2 ? thq : sqrt(thq * ms->thqold);
+            ms->thqold = thq;
+            if (ms->theta < 0.99) {
+                const double dyth = ms->theta / (1.0 - ms->theta) * dyno
+                                    * pow(ms->theta, (double)(u->nit - 1 - ms->newt)) / u->fnewt;
+                ms->faccon = ms->theta / (1.0 - ms->theta);
+                if (dyth >= 1.0 && !ms->fixed) { /* too slow: a smaller step converges sooner */
+                    const double qnewt = bgc_max(1e-4, bgc_min(20.0, dyth));
+                    ms->hhfac = 0.8 * pow(qnewt, -1.0 / (4.0 + (double)(u->nit - 1 - ms->newt)));
+                    return 3;
+                }
+            } else {
+                return 2;
+            }
+        }
+        ms->dynold = bgc_max(dyno, DBL_EPSILON);
+        for (l = 0; l < N; l++) {
+            double a[SMAX];
+            a[0] = W[l] + ms->dw[l];
+            for (k = 0; k < u->pairs; k++) {
+                a[2 * k + 1] = W[(size_t)(2 * k + 1) * D + l] + creal(ms->zc[(size_t)k * D + l]);
+                a[2 * k + 2] = W[(size_t)(2 * k + 2) * D + l] + cimag(ms->zc[(size_t)k * D + l]);
+            }
+            for (i = 0; i < u->ns; i++)
+                W[(size_t)i * D + l] = a[i];
+            bgc_radau_mul(m->T, u->ns, a, 1, Z + l, D);
+        }
+        /* converged; after one iteration only on the previous step's matrices, whose
+           contraction faccon measured */
+        if ((ms->newt > 1 || !ms->refactored) && ms->faccon * dyno <= u->fnewt)
+            return 0;
+    }
+}
 
-        /* the error estimate */
-        if (!fixed) {
-            const double *zs = Z + (size_t)(u.ns - 1) * D;
-            for (l = 0; l < N; l++) {
-                double acc = m->e[0] * Z[l];
-                for (j = 1; j < u.ns; j++)
-                    acc += m->e[j] * Z[(size_t)j * D + l];
-                f2[l] = acc / h;
-                cont[l] = f2[l] + f0[l];
-                ew[l] = u.atol + u.rtol * bgc_max(fabs(y[l]), fabs(y[l] + zs[l]));
-            }
-            bgc_stiff_lu_solve(N, E1, piv, cont);
+/* The error estimate: (gamma/h I - J) err = f(t, y) + sum_j e_j Z_j / h, refined once with
+   f(t, y + err) on the first step and after a rejection. */
+static double bgc_radau_error(bgc_radau_state *ms, bgc_run *r, double t, double h,
+                              const double *y)
+{
+    enum { N = BGC_NUM_STATES, D = BGC_DIM(BGC_NUM_STATES) };
+    const bgc_radau_use *u = &ms->u;
+    const bgc_radau *m = u->m;
+    const double *zs = ms->Z + (size_t)(u->ns - 1) * D;
+    double err;
+    int j, l;
+    for (l = 0; l < N; l++) {
+        double acc = m->e[0] * ms->Z[l];
+        for (j = 1; j < u->ns; j++)
+            acc += m->e[j] * ms->Z[(size_t)j * D + l];
+        ms->f2[l] = acc / h;
+        ms->cont[l] = ms->f2[l] + ms->f0[l];
+        ms->ew[l] = u->atol + u->rtol * bgc_max(fabs(y[l]), fabs(y[l] + zs[l]));
+    }
+    bgc_stiff_lu_solve(N, ms->E1, ms->piv, ms->cont);
+    r->st->solves++;
+    err = bgc_max(bgc_stiff_norm(ms->cont, ms->ew, &ms->worst), 1e-10);
+    if (err >= 1.0 && (ms->first || ms->reject)) { /* refined: f at y + err */
+        for (l = 0; l < N; l++)
+            ms->ys[l] = y[l] + ms->cont[l];
+        r->st->rhs++;
+        if (bgc_model_rhs(t, ms->ys, r->p, r->w, ms->tmp) == 0) {
+            for (l = 0; l < N; l++)
+                ms->cont[l] = ms->tmp[l] + ms->f2[l];
+            bgc_stiff_lu_solve(N, ms->E1, ms->piv, ms->cont);
             r->st->solves++;
-            err = bgc_max(bgc_stiff_norm(cont, ew, &worst), 1e-10);
-            if (err >= 1.0 && (first || reject)) { /* refined: f at y + err */
-                for (l = 0; l < N; l++)
-                    ys[l] = y[l] + cont[l];
-                r->st->rhs++;
-                if (bgc_model_rhs(t, ys, r->p, r->w, yout) == 0) {
-                    for (l = 0; l < N; l++)
-                        cont[l] = yout[l] + f2[l];
-                    bgc_stiff_lu_solve(N, E1, piv, cont);
-                    r->st->solves++;
-                    err = bgc_max(bgc_stiff_norm(cont, ew, &worst), 1e-10);
-                }
-            }
-            if (err != err || err > DBL_MAX) {
-                bad = -1;
-                unexp = 1;
-                h *= 0.5;
-                reject = 1;
-                last = 0;
-                r->st->rejected++;
-                needjac = !caljac;
-                continue;
-            }
-        }
-
-        /* step control: Gustafsson's, the safety factor scaled by the Newton iterations */
-        fac = bgc_min(method->safe, u.cfac / (double)(newt + 2 * u.nit));
-        quot = bgc_max(1.0 / method->fac_max,
-                       bgc_min(1.0 / method->fac_min, pow(err, u.expo) / fac));
-        hnew = h / quot;
-        if (err < 1.0) {
-            const double *zs = Z + (size_t)(u.ns - 1) * D;
-            first = 0;
-            accepted++;
-            if (accepted > 1 && !change) {
-                double facgus = (hacc / h) * pow(err * err / erracc, u.expo) / fac;
-                facgus = bgc_max(1.0 / method->fac_max, bgc_min(1.0 / method->fac_min, facgus));
-                quot = bgc_max(quot, facgus);
-                hnew = h / quot;
-            }
-            change = 0;
-            hacc = h;
-            erracc = bgc_max(1e-2, err);
-            for (l = 0; l < N; l++)
-                y1[l] = y[l] + zs[l];
-            i = bgc_first_nonfinite(y1, N);
-            if (i >= 0) {
-                rc = bgc_fail(r->msg, r->msg_size, tph, "state", bgc_state_names[i]);
-                goto done;
-            }
-            bgc_radau_poly(m, Z, b);
-            dense.m = m;
-            memcpy(zlast, zs, sizeof(double) * N);
-            hold = h;
-            rc = bgc_accept(r, tph);
-            if (rc)
-                goto done;
-            rc = bgc_emit_step(r, t, h, tph, y1, NULL, bgc_radau_dense_at, &dense, yout);
-            if (rc)
-                goto done;
-            memcpy(y, y1, sizeof(double) * N);
-            t = tph;
-            r->t = t;
-            nsing = 0;
-            bad = -1;
-            caljac = 0;
-            if (last) {
-                if (!fixed) { /* the step to go on with: the controller's, or the one cut short */
-                    r->st->h_next = bgc_max(hnew, wanted);
-                    r->st->order_next = 2 * u.ns - 1;
-                }
-                goto done;
-            }
-            for (l = 0; l < N; l++)
-                scal[l] = u.atol + u.rtol * fabs(y[l]);
-            r->st->rhs++;
-            if (bgc_model_rhs(t, y, r->p, r->w, f0)) {
-                rc = bgc_fail_block(r->msg, r->msg_size, r->w);
-                goto done;
-            }
-            k_fixed++;
-            hnew = bgc_min(hnew, hmax);
-            if (reject)
-                hnew = bgc_min(hnew, h);
-            reject = 0;
-            if (theta <= thet && hnew / h >= 1.0 && hnew / h <= 1.2) {
-                hnew = h; /* keep h and the factorisations ... */
-                if (variable && ++since >= 10 && set + 1 < method->radau_sets)
-                    recheck = 1; /* ... but look at the order now and then */
-            }
-            needjac = theta > thet;
-            h = hnew;
-        } else {
-            reject = 1;
-            last = 0;
-            r->st->rejected++;
-            h = first ? 0.1 * h : hnew;
-            needjac = !caljac;
+            err = bgc_max(bgc_stiff_norm(ms->cont, ms->ew, &ms->worst), 1e-10);
         }
     }
-done:
-    free(piv);
-    free(cmem);
-    free(mem);
-    return rc;
+    return err;
 }
+
+/* A failed attempt at an adaptive step: retried smaller, with a fresh Jacobian unless this
+   one is. */
+static void bgc_radau_retry(bgc_radau_state *ms, bgc_outcome *o, double hnew, int bad,
+                            int bad_kind)
+{
+    bgc_stiff_retry(o, hnew, bad, bad_kind);
+    ms->reject = 1;
+    ms->needjac = !ms->caljac;
+}
+
+/* Newton's failure on a fixed step: once more with a fresh Jacobian, else the end. */
+static void bgc_radau_fixed_failure(bgc_radau_state *ms, bgc_run *r, double t, double h,
+                                    int failed, int bad, bgc_outcome *o)
+{
+    if (failed == 1) {
+        bgc_stiff_end(o, bad == BGC_BAD_BLOCK ? bgc_fail_block(r->msg, r->msg_size, r->w)
+                         : bgc_fail(r->msg, r->msg_size, t, "derivative of state",
+                                    bgc_state_names[bad]));
+    } else if (!ms->caljac) {
+        ms->needjac = 1;
+        o->kind = BGC_STEP_AGAIN;
+    } else {
+        snprintf(r->msg, r->msg_size, "at t = %.17g: %s: the Newton iteration does not "
+                 "converge with the fixed step h = %.3g", t, ms->method->name, h);
+        bgc_stiff_end(o, BGC_ERR_RUNTIME);
+    }
+}
+
+/* Step control: Gustafsson's, the safety factor scaled by the Newton iterations. */
+static void bgc_radau_control(bgc_radau_state *ms, double h, double err, const double *y,
+                              double *y1, bgc_outcome *o)
+{
+    enum { N = BGC_NUM_STATES, D = BGC_DIM(BGC_NUM_STATES) };
+    const bgc_method *method = ms->method;
+    const bgc_radau_use *u = &ms->u;
+    const double fac = bgc_min(method->safe, u->cfac / (double)(ms->newt + 2 * u->nit));
+    double quot = bgc_max(1.0 / method->fac_max,
+                          bgc_min(1.0 / method->fac_min, pow(err, u->expo) / fac));
+    const double *zs = ms->Z + (size_t)(u->ns - 1) * D;
+    int l;
+    o->hnew = h / quot;
+    if (!(err < 1.0)) {
+        o->kind = BGC_STEP_REJECT;
+        o->hnew = ms->first ? 0.1 * h : o->hnew;
+        ms->reject = 1;
+        ms->needjac = !ms->caljac;
+        return;
+    }
+    ms->first = 0;
+    ms->accepted++;
+    if (ms->accepted > 1 && !ms->change) {
+        double facgus = (ms->hacc / h) * pow(err * err / ms->erracc, u->expo) / fac;
+        facgus = bgc_max(1.0 / method->fac_max, bgc_min(1.0 / method->fac_min, facgus));
+        quot = bgc_max(quot, facgus);
+        o->hnew = h / quot;
+    }
+    ms->change = 0;
+    ms->hacc = h;
+    ms->erracc = bgc_max(1e-2, err);
+    for (l = 0; l < N; l++)
+        y1[l] = y[l] + zs[l];
+    bgc_radau_poly(u->m, ms->Z, ms->b);
+    ms->dm = u->m;
+    ms->y = y;
+    memcpy(ms->zlast, zs, sizeof(double) * N);
+    ms->hold = h;
+    ms->reject = 0;
+    ms->nsing = 0;
+    ms->caljac = 0;
+    o->kind = BGC_STEP_ACCEPT;
+}
+
+static void bgc_radau_step(void *state, bgc_run *r, double t, double h, double tph,
+                           const double *y, double *y1, bgc_outcome *o)
+{
+    enum { SMAX = BGC_RADAU_MAX_STAGES };
+    bgc_radau_state *ms = state;
+    double err = 0.0, fac1, alphn[SMAX], betan[SMAX];
+    int k, failed, bad = BGC_BAD_NONE, bad_kind = 0;
+    if (ms->needjac) {
+        r->st->jac++;
+        if (bgc_jacobian(t, y, r->p, r->w, ms->J)) {
+            bgc_stiff_end(o, bgc_fail_block(r->msg, r->msg_size, r->w));
+            return;
+        }
+        ms->needjac = 0;
+        ms->caljac = 1;
+        ms->hfact = 0.0;
+    }
+    if (ms->variable && (h != ms->hfact || ms->recheck))
+        bgc_radau_order(ms, h, y);
+    fac1 = ms->u.m->gamma / h;
+    for (k = 0; k < ms->u.pairs; k++) {
+        alphn[k] = ms->u.m->alpha[k] / h;
+        betan[k] = ms->u.m->beta[k] / h;
+    }
+    ms->refactored = h != ms->hfact;
+    if (h != ms->hfact) {
+        if (bgc_radau_factor(ms, r, alphn, betan, fac1)) {
+            ms->hfact = 0.0;
+            if (ms->fixed || ++ms->nsing == 5) {
+                bgc_stiff_end(o, bgc_stiff_fail_singular(r, t, h));
+                return;
+            }
+            ms->unexp = 1;
+            bgc_radau_retry(ms, o, h * 0.5, BGC_BAD_SINGULAR, 0);
+            return;
+        }
+        ms->hfact = h;
+    }
+    failed = bgc_radau_newton(ms, r, t, h, tph, y, alphn, betan, fac1, &bad, &bad_kind);
+    o->worst = ms->worst;
+    if (failed && ms->fixed) {
+        bgc_radau_fixed_failure(ms, r, t, h, failed, bad, o);
+        return;
+    }
+    if (failed) {
+        if (failed == 3)
+            ms->unexn = ms->hhfac <= 0.5;
+        else
+            ms->unexp = 1;
+        bgc_radau_retry(ms, o, h * (failed == 3 ? ms->hhfac : 0.5),
+                        failed != 1 ? BGC_BAD_NEWTON : bad, bad_kind);
+        return;
+    }
+    if (!ms->fixed) {
+        err = bgc_radau_error(ms, r, t, h, y);
+        o->worst = ms->worst;
+        if (err != err || err > DBL_MAX) {
+            ms->unexp = 1;
+            bgc_radau_retry(ms, o, h * 0.5, BGC_BAD_NONE, 0);
+            return;
+        }
+    }
+    bgc_radau_control(ms, h, err, y, y1, o);
+}
+
+static void bgc_radau_dense(const void *state, double theta, double *yout)
+{
+    const bgc_radau_state *ms = state;
+    int l;
+    for (l = 0; l < BGC_NUM_STATES; l++)
+        yout[l] = ms->y[l] + bgc_radau_u(ms->dm, ms->b, l, theta);
+}
+
+/* The new point: its weights and f (after the run's last step, the order to go on with). */
+static int bgc_radau_after(void *state, bgc_run *r, double tph, const double *y1, int last)
+{
+    bgc_radau_state *ms = state;
+    if (last) {
+        if (!ms->fixed)
+            r->st->order_next = 2 * ms->u.ns - 1;
+        return 0;
+    }
+    bgc_radau_scale(ms, y1);
+    r->st->rhs++;
+    if (bgc_model_rhs(tph, y1, r->p, r->w, ms->f0))
+        return bgc_fail_block(r->msg, r->msg_size, r->w);
+    return 0;
+}
+
+/* h is kept (and the factorisations with it) while the controller asks for at most 20 %
+   more and Newton converged fast; J is recomputed when it converged slowly. */
+static void bgc_radau_next_h(void *state, double h, double *hnew)
+{
+    bgc_radau_state *ms = state;
+    if (ms->theta <= BGC_RADAU_THET && *hnew / h >= 1.0 && *hnew / h <= 1.2) {
+        *hnew = h;
+        if (ms->variable && ++ms->since >= 10 && ms->set + 1 < ms->method->radau_sets)
+            ms->recheck = 1; /* ... but look at the order now and then */
+    }
+    ms->needjac = ms->theta > BGC_RADAU_THET;
+}
+
+static const bgc_family bgc_family_radau = {
+    bgc_radau_start, bgc_radau_step, NULL, NULL, bgc_radau_dense, bgc_radau_after,
+    bgc_radau_next_h, bgc_radau_finish, 1};
 
 #ifndef BGC_NO_MAIN
 /* ================================================================ CSV === */

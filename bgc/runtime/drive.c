@@ -1,0 +1,558 @@
+/* ============================================================== drive === */
+/* The step driver: everything a run does between two steps, for every solver.  A method
+   family (erk.c, stiff.c) supplies only its step and its own state (stages, Jacobian,
+   factorisations, order, step-size controller); the driver owns the output times and the
+   dense output, the last step's clamp onto t_end, the fixed-step grid, the smallest step, the
+   step budget and the stop request, the non-finite checks of the accepted state, the retries
+   after a failed attempt, the switch of `auto` to its stiff phase, and the statistics.
+   Adding a method is an entry in bgc/solvers.py plus, for a new family, a bgc_family.
+
+   The contract of a family (bgc_family below), in the order the driver calls it:
+     start     its state at (r->t, y): evaluations at the first point and, for an adaptive
+               run, the first step size (r->h if the run goes on from an earlier one, else
+               bgc_initial_step at the moment its evaluations call for);
+     step      one attempt from (t, y) over h to tph (tph is exactly t_end on the last step):
+               y1 and an outcome (accepted with the controller's next h; rejected by the error
+               test, or failed, with the h to retry; the same step again; or the end of the
+               run with a message);
+     accepted  after the driver has counted the step, before its outputs (FSAL stages);
+     dense     the state at t + theta h of the step just accepted (prepare: once, before the
+               first output time inside the step);
+     after     after the outputs, with y1 the new point: evaluations there, the stiffness test;
+     next_h    the next step once the driver has bounded it (a family may keep h);
+     finish    its state freed.
+   A located event (the hybrid models' hook) will end an accepted step early at t* in
+   (t, tph]: the driver hands on the outputs up to t*, takes the dense output there as the new
+   point, applies the event's resets and starts the family afresh (finish, then start), so
+   each method restarts from a clean history as after a discontinuity. */
+
+#include <time.h> /* clock(): the processor time bgc_simulate reports in its stats */
+
+/* Output times: t0 + k*dt for k < n, and t_end for k = n (see the top of the file). */
+static long bgc_output_count(const bgc_settings *s)
+{
+    double n = ceil((s->t_end - s->t0) / s->dt - 1e-6);
+    return n > 0.0 ? (long)n : 0;
+}
+
+static double bgc_output_time(const bgc_settings *s, long k, long n)
+{
+    return k >= n ? s->t_end : s->t0 + (double)k * s->dt;
+}
+
+/* Steps below this are too small for floating point to resolve at t (16 units in the last
+   place of t; DBL_MIN at t = 0). */
+static double bgc_hmin(double t)
+{
+    return bgc_max(16.0 * DBL_EPSILON * fabs(t), DBL_MIN);
+}
+
+static int bgc_fail(char *msg, size_t msg_size, double t, const char *what, const char *name)
+{
+    snprintf(msg, msg_size, "at t = %.17g: %s '%s' is not finite", t, what, name);
+    return BGC_ERR_RUNTIME;
+}
+
+static int bgc_fail_step(char *msg, size_t msg_size, double t, double h, int worst)
+{
+    if (worst >= 0)
+        snprintf(msg, msg_size, "at t = %.17g: step size too small (h = %.3g), limited by state '%s'",
+                 t, h, bgc_state_names[worst]);
+    else
+        snprintf(msg, msg_size, "at t = %.17g: step size too small (h = %.3g)", t, h);
+    return BGC_ERR_RUNTIME;
+}
+
+static volatile sig_atomic_t bgc_stop_signal = 0;
+
+void bgc_request_stop(int sig)
+{
+    bgc_stop_signal = (sig_atomic_t)sig;
+}
+
+static int bgc_fail_block(char *msg, size_t msg_size, const bgc_work *w)
+{
+    bgc_work_message(w, msg, msg_size);
+    return BGC_ERR_RUNTIME;
+}
+
+static int bgc_fail_memory(char *msg, size_t msg_size)
+{
+    snprintf(msg, msg_size, "out of memory");
+    return BGC_ERR_RUNTIME;
+}
+
+/* A run in progress, as the driver and the families share it: the run's settings, model and
+   sink, where the outputs are (k = kout .. nout still to hand over; k = 0, the start, has been
+   handed over before), the last accepted point r->t, and the step to start with (r->h: 0 for a
+   new estimate; after BGC_STIFF, the explicit phase's last step). */
+typedef struct bgc_run {
+    const bgc_settings *s;
+    const bgc_method *method;
+    const bgc_params *p;
+    bgc_work *w;
+    bgc_sink sink;
+    void *ctx;
+    bgc_stats *st;
+    char *msg;
+    size_t msg_size;
+    long nout, kout;
+    double t, h;
+    int fixed;       /* steps on a grid, no error control (s->step > 0, or euler, rk4) */
+    int detect_stiffness;
+    long steps_out;  /* st->steps at the last output, at t_out */
+    double t_out;
+} bgc_run;
+#define BGC_STIFF (-1) /* an auto run's explicit phase found the problem stiff */
+
+/* An attempted step's outcome. */
+enum {
+    BGC_STEP_ACCEPT, /* y1 is the new point; hnew the controller's next step */
+    BGC_STEP_REJECT, /* the error test failed: retry with hnew */
+    BGC_STEP_RETRY,  /* the attempt failed (bad says how): retry with hnew */
+    BGC_STEP_AGAIN,  /* the same step once more (a fresh Jacobian), not counted as rejected */
+    BGC_STEP_END     /* the run ends: rc and the message are set */
+};
+/* Why an attempt failed, for the message if the step size then falls below the smallest:
+   >= 0 a non-finite component (bad_kind 1 a state, else a derivative), -1 the error test,
+   -2 an algebraic block, -3 a singular iteration matrix, -4 Newton's iteration. */
+enum { BGC_BAD_NONE = -1, BGC_BAD_BLOCK = -2, BGC_BAD_SINGULAR = -3, BGC_BAD_NEWTON = -4 };
+typedef struct bgc_outcome {
+    int kind, rc;
+    double hnew;
+    int bad, bad_kind;
+    int worst; /* the component with the largest share of the last error estimate (-1) */
+} bgc_outcome;
+
+typedef struct bgc_family {
+    void *(*start)(bgc_run *r, const double *y, double *h, int *rc);
+    void (*step)(void *ms, bgc_run *r, double t, double h, double tph, const double *y,
+                 double *y1, bgc_outcome *o);
+    int (*accepted)(void *ms, bgc_run *r, double tph, const double *y1);
+    int (*prepare)(void *ms);
+    void (*dense)(const void *ms, double theta, double *yout);
+    int (*after)(void *ms, bgc_run *r, double tph, const double *y1, int last);
+    void (*next_h)(void *ms, double h, double *hnew);
+    void (*finish)(void *ms);
+    int span_grid; /* fixed steps: 1 the grid t_start + k step over the run, outputs by the
+                      dense output; 0 each output interval in steps of about `step` landing
+                      on its end (methods without a dense output) */
+} bgc_family;
+/* The families, defined with their steps in erk.c and stiff.c. */
+static const bgc_family bgc_family_fixed, bgc_family_erk, bgc_family_rosenbrock,
+    bgc_family_radau;
+
+/* Evaluates the outputs at (t, x), checks them and hands them to the sink. */
+static int bgc_emit(bgc_run *r, double t, const double *x)
+{
+    double *y = r->w->v + BGC_WORK_Y;
+    int j;
+    if (bgc_model_outputs(t, x, r->p, r->w, y))
+        return bgc_fail_block(r->msg, r->msg_size, r->w);
+    j = bgc_first_nonfinite(y, BGC_NUM_OUTPUTS);
+    if (j >= 0)
+        return bgc_fail(r->msg, r->msg_size, t, "output", bgc_output_names[j]);
+    r->steps_out = r->st->steps;
+    r->t_out = t;
+    return r->sink ? r->sink(r->ctx, t, x, y) : 0;
+}
+
+/* Counts an accepted step ending at t; BGC_ERR_RUNTIME and a message if a stop was asked or
+   the step budget since the last output is spent. */
+static int bgc_accept(bgc_run *r, double t)
+{
+    r->st->steps++;
+    if (bgc_stop_signal) {
+        snprintf(r->msg, r->msg_size, "at t = %.17g: interrupted by signal %d", t,
+                 (int)bgc_stop_signal);
+        return BGC_ERR_RUNTIME;
+    }
+    if (r->s->max_steps > 0 && r->st->steps - r->steps_out > r->s->max_steps) {
+        snprintf(r->msg, r->msg_size, "at t = %.17g: step budget spent: %ld steps since the "
+                 "output at t = %.17g (the step size runs away; --max-steps raises the budget)",
+                 t, r->s->max_steps, r->t_out);
+        return BGC_ERR_RUNTIME;
+    }
+    return 0;
+}
+
+/* After an accepted step from t to tph = t + h (exactly t_end on the last step): hands over
+   the output times in (t, tph], tph itself from y1 and the others through the family's dense
+   output (prepared once, before the first of them).  yout: N doubles of scratch. */
+static int bgc_emit_step(bgc_run *r, const bgc_family *f, void *ms, double t, double h,
+                         double tph, const double *y1, double *yout)
+{
+    int rc, prepared = f->prepare == NULL;
+    for (; r->kout <= r->nout; r->kout++) {
+        const double tk = bgc_output_time(r->s, r->kout, r->nout);
+        if (tk > tph)
+            break;
+        if (tk == tph) {
+            rc = bgc_emit(r, tk, y1);
+        } else {
+            if (!prepared) {
+                rc = f->prepare(ms);
+                if (rc)
+                    return rc;
+                prepared = 1;
+            }
+            f->dense(ms, (tk - t) / h, yout);
+            rc = bgc_emit(r, tk, yout);
+        }
+        if (rc)
+            return rc;
+    }
+    return 0;
+}
+
+/* The error-norm weight of component i (Hairer's): atol + rtol * max(|y_i|, |y1_i|). */
+static inline double bgc_weight(const bgc_settings *s, double y, double y1)
+{
+    return s->atol + s->rtol * bgc_max(fabs(y), fabs(y1));
+}
+
+/* Hairer's initial step size guess (HINIT) for a method of order q at (r->t, y) with
+   f0 = f(r->t, y); y1, f1: scratch. */
+static double bgc_initial_step(bgc_run *r, int q, const double *y, const double *f0,
+                               double *y1, double *f1)
+{
+    enum { N = BGC_NUM_STATES };
+    const bgc_settings *s = r->s;
+    const double hmax = s->t_end - s->t0;
+    double dnf = 0.0, dny = 0.0, der2 = 0.0, der12, h, h1;
+    int i;
+    for (i = 0; i < N; i++) {
+        const double sk = s->atol + s->rtol * fabs(y[i]);
+        const double qf = f0[i] / sk, qy = y[i] / sk;
+        dnf += qf * qf;
+        dny += qy * qy;
+    }
+    h = (dnf <= 1e-10 || dny <= 1e-10) ? 1e-6 : sqrt(dny / dnf) * 0.01;
+    h = bgc_min(h, hmax);
+    for (i = 0; i < N; i++)
+        y1[i] = y[i] + h * f0[i];
+    r->st->rhs++;
+    if (bgc_model_rhs(r->t + h, y1, r->p, r->w, f1))
+        return h; /* a block failed there: start small, the step control takes over */
+    for (i = 0; i < N; i++) {
+        const double d = (f1[i] - f0[i]) / (s->atol + s->rtol * fabs(y[i]));
+        der2 += d * d;
+    }
+    der2 = sqrt(der2) / h;
+    der12 = bgc_max(sqrt(dnf), fabs(der2)); /* a NaN der2 is ignored */
+    h1 = der12 <= 1e-15 ? bgc_max(1e-6, h * 1e-3) : pow(0.01 / der12, 1.0 / (double)q);
+    if (!(h1 > 0.0))
+        h1 = h * 1e-3;
+    return bgc_min(bgc_min(100.0 * h, h1), hmax);
+}
+
+/* The first step of an adaptive run: the earlier run's (bounded by the span), else HINIT. */
+static double bgc_first_step(bgc_run *r, const double *y, const double *f0, double *y1,
+                             double *f1)
+{
+    const double hmax = r->s->t_end - r->s->t0;
+    return r->h > 0.0 ? bgc_min(r->h, hmax)
+                      : bgc_initial_step(r, r->method->q, y, f0, y1, f1);
+}
+
+/* f(t, y) at the start of a step sequence: a failed block or a non-finite derivative ends
+   the run (nonzero, message set). */
+static int bgc_start_rhs(bgc_run *r, double t, const double *y, double *f)
+{
+    int i;
+    r->st->rhs++;
+    if (bgc_model_rhs(t, y, r->p, r->w, f))
+        return bgc_fail_block(r->msg, r->msg_size, r->w);
+    i = bgc_first_nonfinite(f, BGC_NUM_STATES);
+    return i >= 0 ? bgc_fail(r->msg, r->msg_size, t, "derivative of state", bgc_state_names[i])
+                  : 0;
+}
+
+/* A step size below bgc_hmin: the message names what made the steps shrink. */
+static int bgc_fail_small(bgc_run *r, double t, double h, int bad, int bad_kind, int worst)
+{
+    if (bad == BGC_BAD_BLOCK)
+        return bgc_fail_block(r->msg, r->msg_size, r->w);
+    if (bad == BGC_BAD_SINGULAR || bad == BGC_BAD_NEWTON) {
+        snprintf(r->msg, r->msg_size, "at t = %.17g: %s: %s (step size down to h = %.3g)", t,
+                 r->method->name, bad == BGC_BAD_SINGULAR ? "the iteration matrix is singular"
+                 : "the Newton iteration does not converge", h);
+        return BGC_ERR_RUNTIME;
+    }
+    if (bad >= 0)
+        return bgc_fail(r->msg, r->msg_size, t, bad_kind == 1 ? "state" : "derivative of state",
+                        bgc_state_names[bad]);
+    return bgc_fail_step(r->msg, r->msg_size, t, h, worst);
+}
+
+/* Number of fixed steps of size about h in span: steps of h, the last one shorter. */
+static long bgc_substeps(double span, double h)
+{
+    double q = span / h, m;
+    if (!(q < 1e15))
+        return -1;
+    m = ceil(q - 1e-6);
+    return m < 1.0 ? 1 : (long)m;
+}
+
+/* Where the driver is on a fixed-step grid: the k-th of n steps from ta (span grid: over the
+   run; else over the output interval ending at tb). */
+typedef struct bgc_grid {
+    double ta, tb, step;
+    long k, n;
+} bgc_grid;
+
+/* The fixed grid's next step from t: its end *tph and whether it is the run's last; nonzero
+   (message set) when the grid cannot be laid or the step is too small. */
+static int bgc_grid_next(bgc_run *r, const bgc_family *f, bgc_grid *g, double t, double *tph,
+                         int *last)
+{
+    if (g->k >= g->n) { /* a new grid: the run's, or the next output interval's */
+        g->ta = t;
+        g->tb = f->span_grid ? r->s->t_end : bgc_output_time(r->s, r->kout, r->nout);
+        g->k = 0;
+        g->n = bgc_substeps(g->tb - g->ta, g->step);
+        if (g->n < 0)
+            return bgc_fail_step(r->msg, r->msg_size, t, g->step, -1);
+    }
+    *tph = g->k + 1 >= g->n ? g->tb : g->ta + (double)(g->k + 1) * g->step;
+    *last = g->k + 1 >= g->n && (f->span_grid || r->kout >= r->nout);
+    if (!f->span_grid) /* each step from its grid point (the same value as the last end) */
+        t = g->ta + (double)g->k * g->step;
+    if (!(*tph - t >= bgc_hmin(t)))
+        return bgc_fail_step(r->msg, r->msg_size, t, *tph - t, -1);
+    return 0;
+}
+
+/* One family's run from (r->t, y) to s->t_end (the driver proper).  Keeps r->t and y at the
+   last accepted step; returns 0, an error (message set), the sink's nonzero value, or
+   BGC_STIFF (r->h then holds the explicit phase's next step). */
+static int bgc_drive(bgc_run *r, const bgc_family *f, double *y)
+{
+    enum { N = BGC_NUM_STATES, D = BGC_DIM(BGC_NUM_STATES) };
+    const bgc_settings *s = r->s;
+    const double hmax = s->t_end - s->t0;
+    double *mem = malloc((size_t)2 * D * sizeof *mem), *y1, *yout;
+    double t = r->t, h = 0.0, hnew, wanted = 0.0;
+    int i, rc = 0, reject = 0, last = 0, bad = BGC_BAD_NONE, bad_kind = 0;
+    bgc_grid grid = {0.0, 0.0, 0.0, 0, 0};
+    bgc_outcome o;
+    void *ms = NULL;
+
+    if (!mem)
+        return bgc_fail_memory(r->msg, r->msg_size);
+    y1 = mem;
+    yout = mem + D;
+    o.worst = -1;
+    grid.step = s->step > 0.0 ? s->step : s->dt;
+    if (r->kout > r->nout)
+        goto done;
+    ms = f->start(r, y, &h, &rc);
+    if (!ms)
+        goto done;
+    for (;;) {
+        double tph;
+        if (r->fixed) {
+            rc = bgc_grid_next(r, f, &grid, t, &tph, &last);
+            if (rc)
+                goto done;
+            h = tph - t;
+        } else {
+            if (!(h >= bgc_hmin(t))) {
+                rc = bgc_fail_small(r, t, h, bad, bad_kind, o.worst);
+                goto done;
+            }
+            wanted = h;
+            if (t + 1.01 * h - s->t_end > 0.0) {
+                h = s->t_end - t;
+                last = 1;
+            }
+            tph = last ? s->t_end : t + h;
+        }
+        f->step(ms, r, t, h, tph, y, y1, &o);
+        if (o.kind == BGC_STEP_END) {
+            rc = o.rc;
+            goto done;
+        }
+        if (o.kind == BGC_STEP_AGAIN)
+            continue;
+        if (o.kind != BGC_STEP_ACCEPT) {
+            if (o.kind == BGC_STEP_RETRY) {
+                bad = o.bad;
+                bad_kind = o.bad_kind;
+            }
+            reject = 1;
+            last = 0;
+            r->st->rejected++;
+            h = o.hnew;
+            continue;
+        }
+
+        /* accepted */
+        hnew = o.hnew;
+        i = bgc_first_nonfinite(y1, N);
+        if (i >= 0) {
+            rc = bgc_fail(r->msg, r->msg_size, tph, "state", bgc_state_names[i]);
+            goto done;
+        }
+        rc = bgc_accept(r, tph);
+        if (rc == 0 && f->accepted)
+            rc = f->accepted(ms, r, tph, y1);
+        if (rc == 0)
+            rc = bgc_emit_step(r, f, ms, t, h, tph, y1, yout);
+        if (rc == 0 && f->after)
+            rc = f->after(ms, r, tph, y1, last);
+        if (rc && rc != BGC_STIFF)
+            goto done;
+        memcpy(y, y1, sizeof(double) * N);
+        t = tph;
+        r->t = t;
+        grid.k++;
+        if (rc == BGC_STIFF) {
+            r->h = hnew;
+            goto done;
+        }
+        if (last) {
+            if (!r->fixed) /* the step to go on with: the controller's, or the one cut short */
+                r->st->h_next = bgc_max(hnew, wanted);
+            goto done;
+        }
+        if (!r->fixed)
+            hnew = bgc_min(hnew, hmax);
+        if (reject)
+            hnew = bgc_min(hnew, h);
+        reject = 0;
+        bad = BGC_BAD_NONE;
+        if (f->next_h)
+            f->next_h(ms, h, &hnew);
+        h = hnew;
+    }
+done:
+    if (ms)
+        f->finish(ms);
+    free(mem);
+    return rc;
+}
+
+/* ------------------------------------------------------------ bgc_simulate --- */
+
+int bgc_solver_index(const char *name)
+{
+    int k;
+    for (k = 0; k < BGC_NUM_SOLVERS; k++)
+        if (strcmp(name, bgc_solver_names[k]) == 0)
+            return k;
+    return -1;
+}
+
+void bgc_print_stats(FILE *f, const bgc_stats *st)
+{
+    fprintf(f, "stats: steps=%ld rejected=%ld rhs=%ld jac=%ld lu=%ld solves=%ld", st->steps,
+            st->rejected, st->rhs, st->jac, st->lu, st->solves);
+    if (st->switched)
+        fprintf(f, " stiff_from=%.17g", st->t_switch);
+    fprintf(f, " cpu=%.6e\n", st->cpu);
+}
+
+/* Runs solver number `solver` from (r->t, y) with the driver. */
+static int bgc_run_solver(bgc_run *r, int solver, double *y)
+{
+    const bgc_method *m = &bgc_methods[solver];
+    r->method = m;
+    r->fixed = r->s->step > 0.0 || m->family == BGC_FAMILY_FIXED;
+    switch (m->family) {
+    case BGC_FAMILY_FIXED:
+        return bgc_drive(r, &bgc_family_fixed, y);
+    case BGC_FAMILY_ERK:
+        return bgc_drive(r, &bgc_family_erk, y);
+    case BGC_FAMILY_ROSENBROCK:
+        return bgc_drive(r, &bgc_family_rosenbrock, y);
+    case BGC_FAMILY_RADAU:
+        return bgc_drive(r, &bgc_family_radau, y);
+    default:
+        snprintf(r->msg, r->msg_size, "solver '%s' cannot run by itself", m->name);
+        return BGC_ERR_USAGE;
+    }
+}
+
+/* Integrates y (the state at s->t0, in the workspace w) to s->t_end: bgc_simulate's run,
+   in a workspace the caller keeps. */
+static int bgc_integrate(const bgc_settings *s, const bgc_params *p, bgc_work *w, double *y,
+                         bgc_sink sink, void *ctx, bgc_stats *stats, char *msg, size_t msg_size)
+{
+    bgc_params q = *p;
+    bgc_run r;
+    int i, rc = bgc_check_settings(s, msg, msg_size);
+    if (rc)
+        return rc;
+    w->rtol = s->rtol;
+    w->atol = s->atol;
+    r.w = w;
+    r.s = s;
+    r.method = &bgc_methods[s->solver];
+    r.p = &q;
+    r.sink = sink;
+    r.ctx = ctx;
+    r.st = stats;
+    r.msg = msg;
+    r.msg_size = msg_size;
+    r.nout = bgc_output_count(s);
+    r.kout = 1;
+    r.t = s->t0;
+    r.h = s->h0;
+    stats->h_next = 0.0;
+    stats->order_next = 0;
+    r.detect_stiffness = 0;
+    r.steps_out = stats->steps;
+    r.t_out = s->t0;
+    bgc_params_update(&q);
+    i = bgc_first_nonfinite(y, BGC_NUM_STATES);
+    if (i >= 0)
+        return bgc_fail(msg, msg_size, s->t0, "state", bgc_state_names[i]);
+    rc = bgc_emit(&r, s->t0, y);
+    if (rc == 0 && r.method->family == BGC_FAMILY_AUTO) {
+        const bgc_method *m = r.method;
+        r.detect_stiffness = 1;
+        rc = bgc_run_solver(&r, m->explicit_solver, y);
+        if (rc == BGC_STIFF) {
+            stats->switched = 1;
+            stats->t_switch = r.t;
+            r.detect_stiffness = 0;
+            rc = bgc_run_solver(&r, m->stiff_solver, y);
+        }
+    } else if (rc == 0) {
+        rc = bgc_run_solver(&r, s->solver, y);
+    }
+    return rc;
+}
+
+int bgc_simulate(const bgc_settings *s, const bgc_params *p, const double *x0, bgc_sink sink,
+                 void *ctx, bgc_stats *stats, char *msg, size_t msg_size)
+{
+    const clock_t start = clock();
+    bgc_work *w;
+    int rc = bgc_check_settings(s, msg, msg_size);
+    if (rc)
+        return rc;
+    w = bgc_work_new();
+    if (!w)
+        return bgc_fail_memory(msg, msg_size);
+    memcpy(w->v + BGC_WORK_Y0, x0, sizeof(double) * BGC_NUM_STATES);
+    rc = bgc_integrate(s, p, w, w->v + BGC_WORK_Y0, sink, ctx, stats, msg, msg_size);
+    bgc_work_free(w);
+    stats->cpu = (double)(clock() - start) / CLOCKS_PER_SEC;
+    return rc;
+}
+
+int bgc_advance(const bgc_settings *s, const bgc_params *p, bgc_work *w, double *x,
+                bgc_sink sink, void *ctx, bgc_stats *stats, char *msg, size_t msg_size)
+{
+    const clock_t start = clock();
+    double *y = w->v + BGC_WORK_Y0;
+    int rc;
+    memcpy(y, x, sizeof(double) * BGC_NUM_STATES);
+    rc = bgc_integrate(s, p, w, y, sink, ctx, stats, msg, msg_size);
+    memcpy(x, y, sizeof(double) * BGC_NUM_STATES);
+    stats->cpu += (double)(clock() - start) / CLOCKS_PER_SEC;
+    return rc;
+}
