@@ -506,9 +506,12 @@ def _project_initial(t, x, p):
 
 
 class _Settings:
-    __slots__ = ("t0", "t_end", "dt", "solver", "rtol", "atol", "step", "max_steps")
+    __slots__ = ("t0", "t_end", "dt", "solver", "rtol", "atol", "step", "max_steps", "h0",
+                 "order0")
 
     def __init__(self, **values):
+        values.setdefault("h0", 0.0)  # a run that goes on from an earlier one (bgc_settings):
+        values.setdefault("order0", 0)  # its step size and radau's order
         for key in self.__slots__:
             setattr(self, key, values[key])
 

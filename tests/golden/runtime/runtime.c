@@ -1362,16 +1362,22 @@ void bgc_print_stats(FILE *f, const bgc_stats *st)
 /* Runs solver number `solver` from (r->t, y) with the driver. */
 static int bgc_run_solver(bgc_run *r, int solver, double *y)
 {
-    static const bgc_family *const families[] = {
-        &bgc_family_fixed, &bgc_family_erk, &bgc_family_rosenbrock, &bgc_family_radau};
     const bgc_method *m = &bgc_methods[solver];
-    if (m->family < 0 || m->family >= BGC_COUNT(families)) {
+    r->method = m;
+    r->fixed = r->s->step > 0.0 || m->family == BGC_FAMILY_FIXED;
+    switch (m->family) {
+    case BGC_FAMILY_FIXED:
+        return bgc_drive(r, &bgc_family_fixed, y);
+    case BGC_FAMILY_ERK:
+        return bgc_drive(r, &bgc_family_erk, y);
+    case BGC_FAMILY_ROSENBROCK:
+        return bgc_drive(r, &bgc_family_rosenbrock, y);
+    case BGC_FAMILY_RADAU:
+        return bgc_drive(r, &bgc_family_radau, y);
+    default:
         snprintf(r->msg, r->msg_size, "solver '%s' cannot run by itself", m->name);
         return BGC_ERR_USAGE;
     }
-    r->method = m;
-    r->fixed = r->s->step > 0.0 || m->family == BGC_FAMILY_FIXED;
-    return bgc_drive(r, families[m->family], y);
 }
 
 /* Integrates y (the state at s->t0, in the workspace w) to s->t_end: bgc_simulate's run,
