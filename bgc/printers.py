@@ -301,16 +301,18 @@ class CPrinter(_ArithmeticPrinting, C99CodePrinter):
 
 _PY_FAST = {**{f: f"math.{f}" for f in FUNCTIONS}, "Abs": "abs", "sign": "_sign",
             "Min": "min", "Max": "max", "Heaviside": "_heaviside"}
-_PY_IEEE = {**_PY_FAST, **{f: f"numpy.{f}" for f in ("sin", "cos", "tan", "sinh", "cosh",
-                                                      "tanh", "exp", "log", "sqrt")},
-            "asin": "numpy.arcsin", "acos": "numpy.arccos", "atan": "numpy.arctan",
-            "atan2": "numpy.arctan2", "asinh": "numpy.arcsinh", "atanh": "numpy.arctanh"}
+_PY_IEEE = {**_PY_FAST, **{f: f"_c_{f}" for f in ("sin", "cos", "tan", "asin", "acos", "atan",
+                                                     "atan2", "sinh", "cosh", "tanh", "asinh",
+                                                     "atanh", "exp", "log", "sqrt")}}
 
 
 class PythonPrinter(_ArithmeticPrinting, PythonCodePrinter):
     """Python: x[i], p[j], and constant k as p[n_params + k] (the module's functions take the
     parameters followed by their constants); `ieee=False` uses math (fast, raises on domain
-    errors), `ieee=True` numpy on numpy.float64 values (inf/nan like C, for the fallback)."""
+    errors), `ieee=True` the runtime's _c_* functions on numpy.float64 values (the platform's
+    libm through math, as the C program's, with C's inf and nan where math raises; for the
+    fallback).  Squares are _sq(a) = a * a, as C's bgc_sq: a ** 2 on a float is libm's pow,
+    which now and then rounds differently."""
 
     def __init__(self, n_states: int, n_params: int, ieee: bool = False, n_consts: int = 0):
         super().__init__(n_states, n_params, n_consts)
@@ -326,7 +328,7 @@ class PythonPrinter(_ArithmeticPrinting, PythonCodePrinter):
         return f"{func}({', '.join(args)})"  # min(a, b, c) == min(min(a, b), c) exactly
 
     def _print_square(self, base):
-        return f"({self._print(base)})**2"
+        return f"_sq({self._print(base)})"
 
     def _print_pow_call(self, base, exp):
-        return f"{'numpy.power' if self._ieee else 'math.pow'}({base}, {exp})"
+        return f"{'_c_pow' if self._ieee else 'math.pow'}({base}, {exp})"

@@ -190,11 +190,14 @@ def test_printer_powers_and_numbers():
     assert c.doprint(X[0] ** 2) == "x[0]*x[0]"
     assert c.doprint(X[0] ** -2) == "1.0/(x[0]*x[0])"
     assert c.doprint((X[0] + X[1]) ** 2) == "bgc_sq(x[0] + x[1])"
-    assert py.doprint((X[0] + X[1]) ** 2) == "(x[0] + x[1])**2"
+    assert py.doprint((X[0] + X[1]) ** 2) == "_sq(x[0] + x[1])"  # a * a: ** 2 is libm's pow
     assert c.doprint(sp.sqrt(X[0])) == "sqrt(x[0])"
     assert c.doprint(X[0] ** sp.Rational(-1, 2)) == "1.0/sqrt(x[0])"
     assert c.doprint(X[0] ** 7) == "pow(x[0], 7.0)"
     assert py.doprint(X[0] ** 7) == "math.pow(x[0], 7.0)"
+    ieee = PythonPrinter(2, 1, ieee=True)  # the fallback: libm through math, C's inf and nan
+    assert ieee.doprint(X[0] ** 7) == "_c_pow(x[0], 7.0)"
+    assert ieee.doprint(sp.exp(X[0]) + sp.tanh(X[1])) == "_c_exp(x[0]) + _c_tanh(x[1])"
     assert c.doprint(X[0] / 3) == "x[0]/3.0"
     assert c.doprint(P[0] * X[0] / 2) == "0.5*p->p_k*x[0]"
     assert c.doprint(sp.Float(0.1) * T) == "0.10000000000000001*t"

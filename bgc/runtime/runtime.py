@@ -50,6 +50,51 @@ def _heaviside(a, at_zero):
     return 1.0 if a > 0.0 else (0.0 if a < 0.0 else (at_zero if a == 0.0 else a))
 
 
+def _sq(a):
+    return a * a  # as C's bgc_sq (a ** 2 on a float is libm's pow, not always a * a)
+
+
+# The model functions' IEEE variant (run when the math variant raised) calls these: the C
+# program's functions, bit for bit.  math calls the platform's libm, as C does (numpy's exp,
+# log, power, tanh, ... are SIMD kernels of their own that round differently); where math
+# raises, C99 Annex F's result.  numpy.float64 results keep the arithmetic around them IEEE.
+
+def _libm(f, fails):
+    def call(*args):
+        try:
+            return numpy.float64(f(*args))
+        except (ValueError, OverflowError):
+            return numpy.float64(fails(*args))
+    return call
+
+
+def _pow_fails(x, y):
+    """C's pow(x, y) where math.pow raises: x < 0, y not an integer: nan; an overflow or
+    0 to a negative power: inf, negative for a negative x and an odd integer y."""
+    if x < 0.0 and y != math.floor(y):
+        return math.nan
+    odd = y == math.floor(y) and math.fmod(y, 2.0) != 0.0
+    return math.copysign(math.inf, x) if odd else math.inf
+
+
+_c_exp = _libm(math.exp, lambda x: math.inf)
+_c_log = _libm(math.log, lambda x: -math.inf if x == 0.0 else math.nan)
+_c_sqrt = _libm(math.sqrt, lambda x: math.nan)
+_c_sin = _libm(math.sin, lambda x: math.nan)
+_c_cos = _libm(math.cos, lambda x: math.nan)
+_c_tan = _libm(math.tan, lambda x: math.nan)
+_c_asin = _libm(math.asin, lambda x: math.nan)
+_c_acos = _libm(math.acos, lambda x: math.nan)
+_c_atan = _libm(math.atan, lambda x: math.nan)
+_c_atan2 = _libm(math.atan2, lambda y, x: math.nan)
+_c_sinh = _libm(math.sinh, lambda x: math.copysign(math.inf, x))
+_c_cosh = _libm(math.cosh, lambda x: math.inf)
+_c_tanh = _libm(math.tanh, lambda x: math.nan)
+_c_asinh = _libm(math.asinh, lambda x: math.nan)
+_c_atanh = _libm(math.atanh, lambda x: math.copysign(math.inf, x) if abs(x) == 1.0 else math.nan)
+_c_pow = _libm(math.pow, _pow_fails)
+
+
 # ---------------------------------------------------------------- workspace
 
 
@@ -219,7 +264,10 @@ def _block_resolve(w, k, t):
 
 
 def _norm2(v, base, m):
-    return math.sqrt(sum(v[base + i] * v[base + i] for i in range(m)))
+    s = 0.0  # summed in C's order (the builtin sum is compensated from Python 3.12 on)
+    for i in range(base, base + m):
+        s += v[i] * v[i]
+    return math.sqrt(s)
 
 
 _NEWTON_MAXIT = 50
@@ -458,9 +506,12 @@ def _project_initial(t, x, p):
 
 
 class _Settings:
-    __slots__ = ("t0", "t_end", "dt", "solver", "rtol", "atol", "step", "max_steps")
+    __slots__ = ("t0", "t_end", "dt", "solver", "rtol", "atol", "step", "max_steps", "h0",
+                 "order0")
 
     def __init__(self, **values):
+        values.setdefault("h0", 0.0)  # a run that goes on from an earlier one (bgc_settings):
+        values.setdefault("order0", 0)  # its step size and radau's order
         for key in self.__slots__:
             setattr(self, key, values[key])
 

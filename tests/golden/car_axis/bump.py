@@ -365,18 +365,18 @@ def _rhs_0_ieee(t, x, p, w, out):
         x = numpy.asarray(x, dtype=numpy.float64)
         p = numpy.asarray(p, dtype=numpy.float64)
         w148 = t*p[5]
-        w149 = numpy.sin(w148)
+        w149 = _c_sin(w148)
         w0 = w149*p[4]
         w150 = -w0*w0 + p[10]
-        w1 = numpy.sqrt(w150)
-        w151 = numpy.cos(w148)*p[11]
+        w1 = _c_sqrt(w150)
+        w151 = _c_cos(w148)*p[11]
         w3 = -w0*w151/w1
         w152 = x[5]*x[5]
         w153 = x[4]*x[4]
-        w4 = numpy.sqrt(w152 + w153)
+        w4 = _c_sqrt(w152 + w153)
         w154 = -w1 + x[6]
         w155 = -w0 + x[7]
-        w5 = numpy.sqrt(w154*w154 + w155*w155)
+        w5 = _c_sqrt(w154*w154 + w155*w155)
         w6 = p[12]*x[0]
         w156 = -w4 + p[3]
         w7 = w156*x[4]/w4
@@ -385,8 +385,8 @@ def _rhs_0_ieee(t, x, p, w, out):
         w10 = w0*w9
         w11 = w151*x[5] + w3*x[4]
         w12 = w10 + w11 + w8
-        w13 = numpy.sqrt(w149*w149*p[13] + p[10])*x[4] + w149*p[4]*x[5]
-        w15 = -w0*w151/numpy.sqrt(w150)
+        w13 = _c_sqrt(w149*w149*p[13] + p[10])*x[4] + w149*p[4]*x[5]
+        w15 = -w0*w151/_c_sqrt(w150)
         w17 = w156*x[5]/w4
         w157 = -2.0*x[6] + 2.0*x[4]
         w18 = w157*w6
@@ -586,18 +586,18 @@ def _outputs_0_ieee(t, x, p, w, out):
         x = numpy.asarray(x, dtype=numpy.float64)
         p = numpy.asarray(p, dtype=numpy.float64)
         w162 = t*p[5]
-        w163 = numpy.sin(w162)
+        w163 = _c_sin(w162)
         w0 = w163*p[4]
         w164 = -w0*w0 + p[10]
-        w1 = numpy.sqrt(w164)
-        w165 = numpy.cos(w162)*p[11]
+        w1 = _c_sqrt(w164)
+        w165 = _c_cos(w162)*p[11]
         w3 = -w0*w165/w1
         w166 = x[5]*x[5]
         w167 = x[4]*x[4]
-        w4 = numpy.sqrt(w166 + w167)
+        w4 = _c_sqrt(w166 + w167)
         w168 = -w1 + x[6]
         w169 = -w0 + x[7]
-        w5 = numpy.sqrt(w168*w168 + w169*w169)
+        w5 = _c_sqrt(w168*w168 + w169*w169)
         w6 = p[12]*x[0]
         w170 = -w4 + p[3]
         w7 = w170*x[4]/w4
@@ -606,8 +606,8 @@ def _outputs_0_ieee(t, x, p, w, out):
         w10 = w0*w9
         w11 = w165*x[5] + w3*x[4]
         w12 = w10 + w11 + w8
-        w13 = numpy.sqrt(w163*w163*p[13] + p[10])*x[4] + w163*p[4]*x[5]
-        w15 = -w0*w165/numpy.sqrt(w164)
+        w13 = _c_sqrt(w163*w163*p[13] + p[10])*x[4] + w163*p[4]*x[5]
+        w15 = -w0*w165/_c_sqrt(w164)
         w17 = w170*x[5]/w4
         w171 = -2.0*x[6] + 2.0*x[4]
         w18 = w171*w6
@@ -876,24 +876,24 @@ def _jvp_0_ieee(t, x, p, w, v, out):
         x = numpy.asarray(x, dtype=numpy.float64)
         p = numpy.asarray(p, dtype=numpy.float64)
         w176 = t*p[5]
-        w177 = numpy.sin(w176)
+        w177 = _c_sin(w176)
         w0 = w177*p[4]
         w178 = -w0*w0 + p[10]
-        w1 = numpy.sqrt(w178)
-        w179 = numpy.cos(w176)*p[11]
+        w1 = _c_sqrt(w178)
+        w179 = _c_cos(w176)*p[11]
         w3 = -w0*w179/w1
         w180 = x[5]*x[5]
         w181 = x[4]*x[4]
         w182 = w180 + w181
-        w4 = numpy.sqrt(w182)
+        w4 = _c_sqrt(w182)
         w183 = 2.0*v[5]*x[5]
         w184 = 2.0*v[4]*x[4]
-        w82 = (w183 + w184)*(0.5/numpy.sqrt(w182))
+        w82 = (w183 + w184)*(0.5/_c_sqrt(w182))
         w185 = -w1 + x[6]
         w186 = -w0 + x[7]
         w187 = w185*w185 + w186*w186
-        w5 = numpy.sqrt(w187)
-        w83 = ((-2.0*w0 + 2.0*x[7])*v[7] + (-2.0*w1 + 2.0*x[6])*v[6])*(0.5/numpy.sqrt(w187))
+        w5 = _c_sqrt(w187)
+        w83 = ((-2.0*w0 + 2.0*x[7])*v[7] + (-2.0*w1 + 2.0*x[6])*v[6])*(0.5/_c_sqrt(w187))
         w6 = p[12]*x[0]
         w84 = p[12]*v[0]
         w188 = -w4 + p[3]
@@ -910,10 +910,10 @@ def _jvp_0_ieee(t, x, p, w, v, out):
         w89 = w179*v[5] + w3*v[4]
         w12 = w10 + w11 + w8
         w90 = w86 + w88 + w89
-        w190 = numpy.sqrt(w177*w177*p[13] + p[10])
+        w190 = _c_sqrt(w177*w177*p[13] + p[10])
         w13 = w190*x[4] + w177*p[4]*x[5]
         w91 = w190*v[4] + w177*p[4]*v[5]
-        w15 = -w0*w179/numpy.sqrt(w178)
+        w15 = -w0*w179/_c_sqrt(w178)
         w17 = w188*x[5]/w4
         w92 = w188*v[5]/w4 - w82*x[5]/w4 - w188*w189*w82*x[5]
         w191 = -2.0*x[6] + 2.0*x[4]
@@ -1075,12 +1075,12 @@ def _residual_into_ieee(t, x, p, out):
         x = numpy.asarray(x, dtype=numpy.float64)
         p = numpy.asarray(p, dtype=numpy.float64)
         w205 = t*p[5]
-        w206 = numpy.sin(w205)
+        w206 = _c_sin(w205)
         w207 = w206*w206*p[13] + p[10]
-        w208 = numpy.sqrt(w207)
+        w208 = _c_sqrt(w207)
         out[0] = w208*x[4] + w206*p[4]*x[5]
-        w209 = numpy.cos(w205)
-        out[1] = w206*p[20]*x[1] + w208*p[12]*x[0] + (w209*p[11]*x[5] + w206*w209*p[21]*x[4]/numpy.sqrt(w207))
+        w209 = _c_cos(w205)
+        out[1] = w206*p[20]*x[1] + w208*p[12]*x[0] + (w209*p[11]*x[5] + w206*w209*p[21]*x[4]/_c_sqrt(w207))
         out[2] = x[4]*x[4] + x[5]*x[5] + (x[6]*x[6] + x[7]*x[7]) + (-2.0*x[4]*x[6] - 2.0*x[5]*x[7] + p[15])
         out[3] = (-2.0*x[4] + 2.0*x[6])*p[12]*x[2] + (-2.0*x[5] + 2.0*x[7])*p[12]*x[3] + ((-2.0*x[6] + 2.0*x[4])*p[12]*x[0] + (-2.0*x[7] + 2.0*x[5])*p[12]*x[1])
 
@@ -1113,12 +1113,12 @@ def _scale_into_ieee(t, x, p, out):
         x = numpy.asarray(x, dtype=numpy.float64)
         p = numpy.asarray(p, dtype=numpy.float64)
         w210 = t*p[5]
-        w211 = numpy.sin(w210)
+        w211 = _c_sin(w210)
         w212 = w211*w211*p[13] + p[10]
-        w213 = numpy.sqrt(w212)
+        w213 = _c_sqrt(w212)
         out[0] = abs(w213*x[4]) + abs(w211*p[4]*x[5])
-        w214 = numpy.cos(w210)
-        out[1] = abs(w211*p[20]*x[1]) + abs(w213*p[12]*x[0]) + (abs(w214*p[11]*x[5]) + abs(w211*w214*p[21]*x[4]/numpy.sqrt(w212)))
+        w214 = _c_cos(w210)
+        out[1] = abs(w211*p[20]*x[1]) + abs(w213*p[12]*x[0]) + (abs(w214*p[11]*x[5]) + abs(w211*w214*p[21]*x[4]/_c_sqrt(w212)))
         out[2] = abs(x[4]*x[4]) + abs(x[5]*x[5]) + (abs(x[6]*x[6]) + abs(x[7]*x[7])) + (abs(-2.0*x[4]*x[6]) + abs(-2.0*x[5]*x[7]) + p[22])
         out[3] = abs((-2.0*x[4] + 2.0*x[6])*p[12]*x[2]) + abs((-2.0*x[5] + 2.0*x[7])*p[12]*x[3]) + (abs((-2.0*x[6] + 2.0*x[4])*p[12]*x[0]) + abs((-2.0*x[7] + 2.0*x[5])*p[12]*x[1]))
 
@@ -1148,8 +1148,8 @@ def _position_jac_into_ieee(t, x, p, out):
         t = numpy.float64(t)
         x = numpy.asarray(x, dtype=numpy.float64)
         p = numpy.asarray(p, dtype=numpy.float64)
-        w215 = numpy.sin(t*p[5])
-        out[4] = numpy.sqrt(w215*w215*p[13] + p[10])
+        w215 = _c_sin(t*p[5])
+        out[4] = _c_sqrt(w215*w215*p[13] + p[10])
         out[5] = w215*p[4]
         out[12] = -2.0*x[6] + 2.0*x[4]
         out[13] = -2.0*x[7] + 2.0*x[5]
@@ -1192,12 +1192,12 @@ def _velocity_jac_into_ieee(t, x, p, out):
         x = numpy.asarray(x, dtype=numpy.float64)
         p = numpy.asarray(p, dtype=numpy.float64)
         w216 = t*p[5]
-        w217 = numpy.sin(w216)
+        w217 = _c_sin(w216)
         w218 = w217*w217*p[13] + p[10]
-        out[0] = numpy.sqrt(w218)*p[12]
+        out[0] = _c_sqrt(w218)*p[12]
         out[1] = w217*p[20]
-        w219 = numpy.cos(w216)
-        out[4] = w217*w219*p[21]/numpy.sqrt(w218)
+        w219 = _c_cos(w216)
+        out[4] = w217*w219*p[21]/_c_sqrt(w218)
         out[5] = w219*p[11]
         out[8] = (-2.0*x[6] + 2.0*x[4])*p[12]
         out[9] = (-2.0*x[7] + 2.0*x[5])*p[12]

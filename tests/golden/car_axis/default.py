@@ -365,18 +365,18 @@ def _rhs_0_ieee(t, x, p, w, out):
         x = numpy.asarray(x, dtype=numpy.float64)
         p = numpy.asarray(p, dtype=numpy.float64)
         w148 = t*p[5]
-        w149 = numpy.sin(w148)
+        w149 = _c_sin(w148)
         w0 = w149*p[4]
         w150 = -w0*w0 + p[10]
-        w1 = numpy.sqrt(w150)
-        w151 = numpy.cos(w148)*p[11]
+        w1 = _c_sqrt(w150)
+        w151 = _c_cos(w148)*p[11]
         w3 = -w0*w151/w1
         w152 = x[5]*x[5]
         w153 = x[4]*x[4]
-        w4 = numpy.sqrt(w152 + w153)
+        w4 = _c_sqrt(w152 + w153)
         w154 = -w1 + x[6]
         w155 = -w0 + x[7]
-        w5 = numpy.sqrt(w154*w154 + w155*w155)
+        w5 = _c_sqrt(w154*w154 + w155*w155)
         w6 = p[12]*x[0]
         w156 = -w4 + p[3]
         w7 = w156*x[4]/w4
@@ -385,8 +385,8 @@ def _rhs_0_ieee(t, x, p, w, out):
         w10 = w0*w9
         w11 = w151*x[5] + w3*x[4]
         w12 = w10 + w11 + w8
-        w13 = numpy.sqrt(w149*w149*p[13] + p[10])*x[4] + w149*p[4]*x[5]
-        w15 = -w0*w151/numpy.sqrt(w150)
+        w13 = _c_sqrt(w149*w149*p[13] + p[10])*x[4] + w149*p[4]*x[5]
+        w15 = -w0*w151/_c_sqrt(w150)
         w17 = w156*x[5]/w4
         w157 = -2.0*x[6] + 2.0*x[4]
         w18 = w157*w6
@@ -698,24 +698,24 @@ def _jvp_0_ieee(t, x, p, w, v, out):
         x = numpy.asarray(x, dtype=numpy.float64)
         p = numpy.asarray(p, dtype=numpy.float64)
         w162 = t*p[5]
-        w163 = numpy.sin(w162)
+        w163 = _c_sin(w162)
         w0 = w163*p[4]
         w164 = -w0*w0 + p[10]
-        w1 = numpy.sqrt(w164)
-        w165 = numpy.cos(w162)*p[11]
+        w1 = _c_sqrt(w164)
+        w165 = _c_cos(w162)*p[11]
         w3 = -w0*w165/w1
         w166 = x[5]*x[5]
         w167 = x[4]*x[4]
         w168 = w166 + w167
-        w4 = numpy.sqrt(w168)
+        w4 = _c_sqrt(w168)
         w169 = 2.0*v[5]*x[5]
         w170 = 2.0*v[4]*x[4]
-        w82 = (w169 + w170)*(0.5/numpy.sqrt(w168))
+        w82 = (w169 + w170)*(0.5/_c_sqrt(w168))
         w171 = -w1 + x[6]
         w172 = -w0 + x[7]
         w173 = w171*w171 + w172*w172
-        w5 = numpy.sqrt(w173)
-        w83 = ((-2.0*w0 + 2.0*x[7])*v[7] + (-2.0*w1 + 2.0*x[6])*v[6])*(0.5/numpy.sqrt(w173))
+        w5 = _c_sqrt(w173)
+        w83 = ((-2.0*w0 + 2.0*x[7])*v[7] + (-2.0*w1 + 2.0*x[6])*v[6])*(0.5/_c_sqrt(w173))
         w6 = p[12]*x[0]
         w84 = p[12]*v[0]
         w174 = -w4 + p[3]
@@ -732,10 +732,10 @@ def _jvp_0_ieee(t, x, p, w, v, out):
         w89 = w165*v[5] + w3*v[4]
         w12 = w10 + w11 + w8
         w90 = w86 + w88 + w89
-        w176 = numpy.sqrt(w163*w163*p[13] + p[10])
+        w176 = _c_sqrt(w163*w163*p[13] + p[10])
         w13 = w176*x[4] + w163*p[4]*x[5]
         w91 = w176*v[4] + w163*p[4]*v[5]
-        w15 = -w0*w165/numpy.sqrt(w164)
+        w15 = -w0*w165/_c_sqrt(w164)
         w17 = w174*x[5]/w4
         w92 = w174*v[5]/w4 - w82*x[5]/w4 - w174*w175*w82*x[5]
         w177 = -2.0*x[6] + 2.0*x[4]
@@ -897,12 +897,12 @@ def _residual_into_ieee(t, x, p, out):
         x = numpy.asarray(x, dtype=numpy.float64)
         p = numpy.asarray(p, dtype=numpy.float64)
         w191 = t*p[5]
-        w192 = numpy.sin(w191)
+        w192 = _c_sin(w191)
         w193 = w192*w192*p[13] + p[10]
-        w194 = numpy.sqrt(w193)
+        w194 = _c_sqrt(w193)
         out[0] = w194*x[4] + w192*p[4]*x[5]
-        w195 = numpy.cos(w191)
-        out[1] = w192*p[20]*x[1] + w194*p[12]*x[0] + (w195*p[11]*x[5] + w192*w195*p[21]*x[4]/numpy.sqrt(w193))
+        w195 = _c_cos(w191)
+        out[1] = w192*p[20]*x[1] + w194*p[12]*x[0] + (w195*p[11]*x[5] + w192*w195*p[21]*x[4]/_c_sqrt(w193))
         out[2] = x[4]*x[4] + x[5]*x[5] + (x[6]*x[6] + x[7]*x[7]) + (-2.0*x[4]*x[6] - 2.0*x[5]*x[7] + p[15])
         out[3] = (-2.0*x[4] + 2.0*x[6])*p[12]*x[2] + (-2.0*x[5] + 2.0*x[7])*p[12]*x[3] + ((-2.0*x[6] + 2.0*x[4])*p[12]*x[0] + (-2.0*x[7] + 2.0*x[5])*p[12]*x[1])
 
@@ -935,12 +935,12 @@ def _scale_into_ieee(t, x, p, out):
         x = numpy.asarray(x, dtype=numpy.float64)
         p = numpy.asarray(p, dtype=numpy.float64)
         w196 = t*p[5]
-        w197 = numpy.sin(w196)
+        w197 = _c_sin(w196)
         w198 = w197*w197*p[13] + p[10]
-        w199 = numpy.sqrt(w198)
+        w199 = _c_sqrt(w198)
         out[0] = abs(w199*x[4]) + abs(w197*p[4]*x[5])
-        w200 = numpy.cos(w196)
-        out[1] = abs(w197*p[20]*x[1]) + abs(w199*p[12]*x[0]) + (abs(w200*p[11]*x[5]) + abs(w197*w200*p[21]*x[4]/numpy.sqrt(w198)))
+        w200 = _c_cos(w196)
+        out[1] = abs(w197*p[20]*x[1]) + abs(w199*p[12]*x[0]) + (abs(w200*p[11]*x[5]) + abs(w197*w200*p[21]*x[4]/_c_sqrt(w198)))
         out[2] = abs(x[4]*x[4]) + abs(x[5]*x[5]) + (abs(x[6]*x[6]) + abs(x[7]*x[7])) + (abs(-2.0*x[4]*x[6]) + abs(-2.0*x[5]*x[7]) + p[22])
         out[3] = abs((-2.0*x[4] + 2.0*x[6])*p[12]*x[2]) + abs((-2.0*x[5] + 2.0*x[7])*p[12]*x[3]) + (abs((-2.0*x[6] + 2.0*x[4])*p[12]*x[0]) + abs((-2.0*x[7] + 2.0*x[5])*p[12]*x[1]))
 
@@ -970,8 +970,8 @@ def _position_jac_into_ieee(t, x, p, out):
         t = numpy.float64(t)
         x = numpy.asarray(x, dtype=numpy.float64)
         p = numpy.asarray(p, dtype=numpy.float64)
-        w201 = numpy.sin(t*p[5])
-        out[4] = numpy.sqrt(w201*w201*p[13] + p[10])
+        w201 = _c_sin(t*p[5])
+        out[4] = _c_sqrt(w201*w201*p[13] + p[10])
         out[5] = w201*p[4]
         out[12] = -2.0*x[6] + 2.0*x[4]
         out[13] = -2.0*x[7] + 2.0*x[5]
@@ -1014,12 +1014,12 @@ def _velocity_jac_into_ieee(t, x, p, out):
         x = numpy.asarray(x, dtype=numpy.float64)
         p = numpy.asarray(p, dtype=numpy.float64)
         w202 = t*p[5]
-        w203 = numpy.sin(w202)
+        w203 = _c_sin(w202)
         w204 = w203*w203*p[13] + p[10]
-        out[0] = numpy.sqrt(w204)*p[12]
+        out[0] = _c_sqrt(w204)*p[12]
         out[1] = w203*p[20]
-        w205 = numpy.cos(w202)
-        out[4] = w203*w205*p[21]/numpy.sqrt(w204)
+        w205 = _c_cos(w202)
+        out[4] = w203*w205*p[21]/_c_sqrt(w204)
         out[5] = w205*p[11]
         out[8] = (-2.0*x[6] + 2.0*x[4])*p[12]
         out[9] = (-2.0*x[7] + 2.0*x[5])*p[12]

@@ -369,18 +369,18 @@ def _rhs_0_ieee(t, x, p, w, out):
         x = numpy.asarray(x, dtype=numpy.float64)
         p = numpy.asarray(p, dtype=numpy.float64)
         w156 = t*p[5]
-        w157 = numpy.sin(w156)
+        w157 = _c_sin(w156)
         w0 = w157*p[4]
         w158 = -w0*w0 + p[10]
-        w1 = numpy.sqrt(w158)
-        w159 = numpy.cos(w156)*p[11]
+        w1 = _c_sqrt(w158)
+        w159 = _c_cos(w156)*p[11]
         w3 = -w0*w159/w1
         w160 = x[5]*x[5]
         w161 = x[4]*x[4]
-        w4 = numpy.sqrt(w160 + w161)
+        w4 = _c_sqrt(w160 + w161)
         w162 = -w1 + x[6]
         w163 = -w0 + x[7]
-        w5 = numpy.sqrt(w162*w162 + w163*w163)
+        w5 = _c_sqrt(w162*w162 + w163*w163)
         w6 = p[12]*x[0]
         w164 = -w4 + p[3]
         w7 = w164*x[4]/w4
@@ -390,8 +390,8 @@ def _rhs_0_ieee(t, x, p, w, out):
         w11 = w10 + w8
         w12 = w159*x[5] + w3*x[4]
         w13 = w11 + w12
-        w14 = numpy.sqrt(w157*w157*p[13] + p[10])*x[4] + w157*p[4]*x[5]
-        w16 = -w0*w159/numpy.sqrt(w158)
+        w14 = _c_sqrt(w157*w157*p[13] + p[10])*x[4] + w157*p[4]*x[5]
+        w16 = -w0*w159/_c_sqrt(w158)
         w18 = w164*x[5]/w4
         w165 = -2.0*x[6] + 2.0*x[4]
         w19 = w165*w6
@@ -596,18 +596,18 @@ def _outputs_0_ieee(t, x, p, w, out):
         x = numpy.asarray(x, dtype=numpy.float64)
         p = numpy.asarray(p, dtype=numpy.float64)
         w170 = t*p[5]
-        w171 = numpy.sin(w170)
+        w171 = _c_sin(w170)
         w0 = w171*p[4]
         w172 = -w0*w0 + p[10]
-        w1 = numpy.sqrt(w172)
-        w173 = numpy.cos(w170)*p[11]
+        w1 = _c_sqrt(w172)
+        w173 = _c_cos(w170)*p[11]
         w3 = -w0*w173/w1
         w174 = x[5]*x[5]
         w175 = x[4]*x[4]
-        w4 = numpy.sqrt(w174 + w175)
+        w4 = _c_sqrt(w174 + w175)
         w176 = -w1 + x[6]
         w177 = -w0 + x[7]
-        w5 = numpy.sqrt(w176*w176 + w177*w177)
+        w5 = _c_sqrt(w176*w176 + w177*w177)
         w6 = p[12]*x[0]
         w178 = -w4 + p[3]
         w7 = w178*x[4]/w4
@@ -617,8 +617,8 @@ def _outputs_0_ieee(t, x, p, w, out):
         w11 = w10 + w8
         w12 = w173*x[5] + w3*x[4]
         w13 = w11 + w12
-        w14 = numpy.sqrt(w171*w171*p[13] + p[10])*x[4] + w171*p[4]*x[5]
-        w16 = -w0*w173/numpy.sqrt(w172)
+        w14 = _c_sqrt(w171*w171*p[13] + p[10])*x[4] + w171*p[4]*x[5]
+        w16 = -w0*w173/_c_sqrt(w172)
         w18 = w178*x[5]/w4
         w179 = -2.0*x[6] + 2.0*x[4]
         w19 = w179*w6
@@ -894,24 +894,24 @@ def _jvp_0_ieee(t, x, p, w, v, out):
         x = numpy.asarray(x, dtype=numpy.float64)
         p = numpy.asarray(p, dtype=numpy.float64)
         w184 = t*p[5]
-        w185 = numpy.sin(w184)
+        w185 = _c_sin(w184)
         w0 = w185*p[4]
         w186 = -w0*w0 + p[10]
-        w1 = numpy.sqrt(w186)
-        w187 = numpy.cos(w184)*p[11]
+        w1 = _c_sqrt(w186)
+        w187 = _c_cos(w184)*p[11]
         w3 = -w0*w187/w1
         w188 = x[5]*x[5]
         w189 = x[4]*x[4]
         w190 = w188 + w189
-        w4 = numpy.sqrt(w190)
+        w4 = _c_sqrt(w190)
         w191 = 2.0*v[5]*x[5]
         w192 = 2.0*v[4]*x[4]
-        w86 = (w191 + w192)*(0.5/numpy.sqrt(w190))
+        w86 = (w191 + w192)*(0.5/_c_sqrt(w190))
         w193 = -w1 + x[6]
         w194 = -w0 + x[7]
         w195 = w193*w193 + w194*w194
-        w5 = numpy.sqrt(w195)
-        w87 = ((-2.0*w0 + 2.0*x[7])*v[7] + (-2.0*w1 + 2.0*x[6])*v[6])*(0.5/numpy.sqrt(w195))
+        w5 = _c_sqrt(w195)
+        w87 = ((-2.0*w0 + 2.0*x[7])*v[7] + (-2.0*w1 + 2.0*x[6])*v[6])*(0.5/_c_sqrt(w195))
         w6 = p[12]*x[0]
         w88 = p[12]*v[0]
         w196 = -w4 + p[3]
@@ -930,10 +930,10 @@ def _jvp_0_ieee(t, x, p, w, v, out):
         w94 = w187*v[5] + w3*v[4]
         w13 = w11 + w12
         w95 = w93 + w94
-        w198 = numpy.sqrt(w185*w185*p[13] + p[10])
+        w198 = _c_sqrt(w185*w185*p[13] + p[10])
         w14 = w198*x[4] + w185*p[4]*x[5]
         w96 = w198*v[4] + w185*p[4]*v[5]
-        w16 = -w0*w187/numpy.sqrt(w186)
+        w16 = -w0*w187/_c_sqrt(w186)
         w18 = w196*x[5]/w4
         w97 = w196*v[5]/w4 - w86*x[5]/w4 - w196*w197*w86*x[5]
         w199 = -2.0*x[6] + 2.0*x[4]
@@ -1099,12 +1099,12 @@ def _residual_into_ieee(t, x, p, out):
         x = numpy.asarray(x, dtype=numpy.float64)
         p = numpy.asarray(p, dtype=numpy.float64)
         w213 = t*p[5]
-        w214 = numpy.sin(w213)
+        w214 = _c_sin(w213)
         w215 = w214*w214*p[13] + p[10]
-        w216 = numpy.sqrt(w215)
+        w216 = _c_sqrt(w215)
         out[0] = w216*x[4] + w214*p[4]*x[5]
-        w217 = numpy.cos(w213)
-        out[1] = w214*p[20]*x[1] + w216*p[12]*x[0] + (w217*p[11]*x[5] + w214*w217*p[21]*x[4]/numpy.sqrt(w215))
+        w217 = _c_cos(w213)
+        out[1] = w214*p[20]*x[1] + w216*p[12]*x[0] + (w217*p[11]*x[5] + w214*w217*p[21]*x[4]/_c_sqrt(w215))
         out[2] = x[4]*x[4] + x[5]*x[5] + (x[6]*x[6] + x[7]*x[7]) + (-2.0*x[4]*x[6] - 2.0*x[5]*x[7] + p[15])
         out[3] = (-2.0*x[4] + 2.0*x[6])*p[12]*x[2] + (-2.0*x[5] + 2.0*x[7])*p[12]*x[3] + ((-2.0*x[6] + 2.0*x[4])*p[12]*x[0] + (-2.0*x[7] + 2.0*x[5])*p[12]*x[1])
 
@@ -1137,12 +1137,12 @@ def _scale_into_ieee(t, x, p, out):
         x = numpy.asarray(x, dtype=numpy.float64)
         p = numpy.asarray(p, dtype=numpy.float64)
         w218 = t*p[5]
-        w219 = numpy.sin(w218)
+        w219 = _c_sin(w218)
         w220 = w219*w219*p[13] + p[10]
-        w221 = numpy.sqrt(w220)
+        w221 = _c_sqrt(w220)
         out[0] = abs(w221*x[4]) + abs(w219*p[4]*x[5])
-        w222 = numpy.cos(w218)
-        out[1] = abs(w219*p[20]*x[1]) + abs(w221*p[12]*x[0]) + (abs(w222*p[11]*x[5]) + abs(w219*w222*p[21]*x[4]/numpy.sqrt(w220)))
+        w222 = _c_cos(w218)
+        out[1] = abs(w219*p[20]*x[1]) + abs(w221*p[12]*x[0]) + (abs(w222*p[11]*x[5]) + abs(w219*w222*p[21]*x[4]/_c_sqrt(w220)))
         out[2] = abs(x[4]*x[4]) + abs(x[5]*x[5]) + (abs(x[6]*x[6]) + abs(x[7]*x[7])) + (abs(-2.0*x[4]*x[6]) + abs(-2.0*x[5]*x[7]) + p[22])
         out[3] = abs((-2.0*x[4] + 2.0*x[6])*p[12]*x[2]) + abs((-2.0*x[5] + 2.0*x[7])*p[12]*x[3]) + (abs((-2.0*x[6] + 2.0*x[4])*p[12]*x[0]) + abs((-2.0*x[7] + 2.0*x[5])*p[12]*x[1]))
 
@@ -1172,8 +1172,8 @@ def _position_jac_into_ieee(t, x, p, out):
         t = numpy.float64(t)
         x = numpy.asarray(x, dtype=numpy.float64)
         p = numpy.asarray(p, dtype=numpy.float64)
-        w223 = numpy.sin(t*p[5])
-        out[4] = numpy.sqrt(w223*w223*p[13] + p[10])
+        w223 = _c_sin(t*p[5])
+        out[4] = _c_sqrt(w223*w223*p[13] + p[10])
         out[5] = w223*p[4]
         out[12] = -2.0*x[6] + 2.0*x[4]
         out[13] = -2.0*x[7] + 2.0*x[5]
@@ -1216,12 +1216,12 @@ def _velocity_jac_into_ieee(t, x, p, out):
         x = numpy.asarray(x, dtype=numpy.float64)
         p = numpy.asarray(p, dtype=numpy.float64)
         w224 = t*p[5]
-        w225 = numpy.sin(w224)
+        w225 = _c_sin(w224)
         w226 = w225*w225*p[13] + p[10]
-        out[0] = numpy.sqrt(w226)*p[12]
+        out[0] = _c_sqrt(w226)*p[12]
         out[1] = w225*p[20]
-        w227 = numpy.cos(w224)
-        out[4] = w225*w227*p[21]/numpy.sqrt(w226)
+        w227 = _c_cos(w224)
+        out[4] = w225*w227*p[21]/_c_sqrt(w226)
         out[5] = w227*p[11]
         out[8] = (-2.0*x[6] + 2.0*x[4])*p[12]
         out[9] = (-2.0*x[7] + 2.0*x[5])*p[12]

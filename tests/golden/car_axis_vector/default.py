@@ -369,18 +369,18 @@ def _rhs_0_ieee(t, x, p, w, out):
         x = numpy.asarray(x, dtype=numpy.float64)
         p = numpy.asarray(p, dtype=numpy.float64)
         w156 = t*p[5]
-        w157 = numpy.sin(w156)
+        w157 = _c_sin(w156)
         w0 = w157*p[4]
         w158 = -w0*w0 + p[10]
-        w1 = numpy.sqrt(w158)
-        w159 = numpy.cos(w156)*p[11]
+        w1 = _c_sqrt(w158)
+        w159 = _c_cos(w156)*p[11]
         w3 = -w0*w159/w1
         w160 = x[5]*x[5]
         w161 = x[4]*x[4]
-        w4 = numpy.sqrt(w160 + w161)
+        w4 = _c_sqrt(w160 + w161)
         w162 = -w1 + x[6]
         w163 = -w0 + x[7]
-        w5 = numpy.sqrt(w162*w162 + w163*w163)
+        w5 = _c_sqrt(w162*w162 + w163*w163)
         w6 = p[12]*x[0]
         w164 = -w4 + p[3]
         w7 = w164*x[4]/w4
@@ -390,8 +390,8 @@ def _rhs_0_ieee(t, x, p, w, out):
         w11 = w10 + w8
         w12 = w159*x[5] + w3*x[4]
         w13 = w11 + w12
-        w14 = numpy.sqrt(w157*w157*p[13] + p[10])*x[4] + w157*p[4]*x[5]
-        w16 = -w0*w159/numpy.sqrt(w158)
+        w14 = _c_sqrt(w157*w157*p[13] + p[10])*x[4] + w157*p[4]*x[5]
+        w16 = -w0*w159/_c_sqrt(w158)
         w18 = w164*x[5]/w4
         w165 = -2.0*x[6] + 2.0*x[4]
         w19 = w165*w6
@@ -712,24 +712,24 @@ def _jvp_0_ieee(t, x, p, w, v, out):
         x = numpy.asarray(x, dtype=numpy.float64)
         p = numpy.asarray(p, dtype=numpy.float64)
         w170 = t*p[5]
-        w171 = numpy.sin(w170)
+        w171 = _c_sin(w170)
         w0 = w171*p[4]
         w172 = -w0*w0 + p[10]
-        w1 = numpy.sqrt(w172)
-        w173 = numpy.cos(w170)*p[11]
+        w1 = _c_sqrt(w172)
+        w173 = _c_cos(w170)*p[11]
         w3 = -w0*w173/w1
         w174 = x[5]*x[5]
         w175 = x[4]*x[4]
         w176 = w174 + w175
-        w4 = numpy.sqrt(w176)
+        w4 = _c_sqrt(w176)
         w177 = 2.0*v[5]*x[5]
         w178 = 2.0*v[4]*x[4]
-        w86 = (w177 + w178)*(0.5/numpy.sqrt(w176))
+        w86 = (w177 + w178)*(0.5/_c_sqrt(w176))
         w179 = -w1 + x[6]
         w180 = -w0 + x[7]
         w181 = w179*w179 + w180*w180
-        w5 = numpy.sqrt(w181)
-        w87 = ((-2.0*w0 + 2.0*x[7])*v[7] + (-2.0*w1 + 2.0*x[6])*v[6])*(0.5/numpy.sqrt(w181))
+        w5 = _c_sqrt(w181)
+        w87 = ((-2.0*w0 + 2.0*x[7])*v[7] + (-2.0*w1 + 2.0*x[6])*v[6])*(0.5/_c_sqrt(w181))
         w6 = p[12]*x[0]
         w88 = p[12]*v[0]
         w182 = -w4 + p[3]
@@ -748,10 +748,10 @@ def _jvp_0_ieee(t, x, p, w, v, out):
         w94 = w173*v[5] + w3*v[4]
         w13 = w11 + w12
         w95 = w93 + w94
-        w184 = numpy.sqrt(w171*w171*p[13] + p[10])
+        w184 = _c_sqrt(w171*w171*p[13] + p[10])
         w14 = w184*x[4] + w171*p[4]*x[5]
         w96 = w184*v[4] + w171*p[4]*v[5]
-        w16 = -w0*w173/numpy.sqrt(w172)
+        w16 = -w0*w173/_c_sqrt(w172)
         w18 = w182*x[5]/w4
         w97 = w182*v[5]/w4 - w86*x[5]/w4 - w182*w183*w86*x[5]
         w185 = -2.0*x[6] + 2.0*x[4]
@@ -917,12 +917,12 @@ def _residual_into_ieee(t, x, p, out):
         x = numpy.asarray(x, dtype=numpy.float64)
         p = numpy.asarray(p, dtype=numpy.float64)
         w199 = t*p[5]
-        w200 = numpy.sin(w199)
+        w200 = _c_sin(w199)
         w201 = w200*w200*p[13] + p[10]
-        w202 = numpy.sqrt(w201)
+        w202 = _c_sqrt(w201)
         out[0] = w202*x[4] + w200*p[4]*x[5]
-        w203 = numpy.cos(w199)
-        out[1] = w200*p[20]*x[1] + w202*p[12]*x[0] + (w203*p[11]*x[5] + w200*w203*p[21]*x[4]/numpy.sqrt(w201))
+        w203 = _c_cos(w199)
+        out[1] = w200*p[20]*x[1] + w202*p[12]*x[0] + (w203*p[11]*x[5] + w200*w203*p[21]*x[4]/_c_sqrt(w201))
         out[2] = x[4]*x[4] + x[5]*x[5] + (x[6]*x[6] + x[7]*x[7]) + (-2.0*x[4]*x[6] - 2.0*x[5]*x[7] + p[15])
         out[3] = (-2.0*x[4] + 2.0*x[6])*p[12]*x[2] + (-2.0*x[5] + 2.0*x[7])*p[12]*x[3] + ((-2.0*x[6] + 2.0*x[4])*p[12]*x[0] + (-2.0*x[7] + 2.0*x[5])*p[12]*x[1])
 
@@ -955,12 +955,12 @@ def _scale_into_ieee(t, x, p, out):
         x = numpy.asarray(x, dtype=numpy.float64)
         p = numpy.asarray(p, dtype=numpy.float64)
         w204 = t*p[5]
-        w205 = numpy.sin(w204)
+        w205 = _c_sin(w204)
         w206 = w205*w205*p[13] + p[10]
-        w207 = numpy.sqrt(w206)
+        w207 = _c_sqrt(w206)
         out[0] = abs(w207*x[4]) + abs(w205*p[4]*x[5])
-        w208 = numpy.cos(w204)
-        out[1] = abs(w205*p[20]*x[1]) + abs(w207*p[12]*x[0]) + (abs(w208*p[11]*x[5]) + abs(w205*w208*p[21]*x[4]/numpy.sqrt(w206)))
+        w208 = _c_cos(w204)
+        out[1] = abs(w205*p[20]*x[1]) + abs(w207*p[12]*x[0]) + (abs(w208*p[11]*x[5]) + abs(w205*w208*p[21]*x[4]/_c_sqrt(w206)))
         out[2] = abs(x[4]*x[4]) + abs(x[5]*x[5]) + (abs(x[6]*x[6]) + abs(x[7]*x[7])) + (abs(-2.0*x[4]*x[6]) + abs(-2.0*x[5]*x[7]) + p[22])
         out[3] = abs((-2.0*x[4] + 2.0*x[6])*p[12]*x[2]) + abs((-2.0*x[5] + 2.0*x[7])*p[12]*x[3]) + (abs((-2.0*x[6] + 2.0*x[4])*p[12]*x[0]) + abs((-2.0*x[7] + 2.0*x[5])*p[12]*x[1]))
 
@@ -990,8 +990,8 @@ def _position_jac_into_ieee(t, x, p, out):
         t = numpy.float64(t)
         x = numpy.asarray(x, dtype=numpy.float64)
         p = numpy.asarray(p, dtype=numpy.float64)
-        w209 = numpy.sin(t*p[5])
-        out[4] = numpy.sqrt(w209*w209*p[13] + p[10])
+        w209 = _c_sin(t*p[5])
+        out[4] = _c_sqrt(w209*w209*p[13] + p[10])
         out[5] = w209*p[4]
         out[12] = -2.0*x[6] + 2.0*x[4]
         out[13] = -2.0*x[7] + 2.0*x[5]
@@ -1034,12 +1034,12 @@ def _velocity_jac_into_ieee(t, x, p, out):
         x = numpy.asarray(x, dtype=numpy.float64)
         p = numpy.asarray(p, dtype=numpy.float64)
         w210 = t*p[5]
-        w211 = numpy.sin(w210)
+        w211 = _c_sin(w210)
         w212 = w211*w211*p[13] + p[10]
-        out[0] = numpy.sqrt(w212)*p[12]
+        out[0] = _c_sqrt(w212)*p[12]
         out[1] = w211*p[20]
-        w213 = numpy.cos(w210)
-        out[4] = w211*w213*p[21]/numpy.sqrt(w212)
+        w213 = _c_cos(w210)
+        out[4] = w211*w213*p[21]/_c_sqrt(w212)
         out[5] = w213*p[11]
         out[8] = (-2.0*x[6] + 2.0*x[4])*p[12]
         out[9] = (-2.0*x[7] + 2.0*x[5])*p[12]

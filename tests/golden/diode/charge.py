@@ -198,12 +198,12 @@ def _rhs_block0_ieee(t, x, p, w, z, zo, r, ro, J, jo):
         t = numpy.float64(t)
         x = numpy.asarray(x, dtype=numpy.float64)
         p = numpy.asarray(p, dtype=numpy.float64)
-        wv[23] = (numpy.exp(z[zo + 0]*p[6]) - 1.0)*p[2]
+        wv[23] = (_c_exp(z[zo + 0]*p[6]) - 1.0)*p[2]
         wv[24] = wv[23]
         wv[25] = wv[24]*p[1]
         r[ro + 0] = wv[21] + z[zo + 0] + (wv[25] + p[7])
         if J is not None:
-            w5 = numpy.exp(z[zo + 0]*p[6])*p[8]
+            w5 = _c_exp(z[zo + 0]*p[6])*p[8]
             w6 = w5*p[1]
             J[jo + 0] = w6 + 1.0
 
@@ -257,12 +257,12 @@ def _outputs_block0_ieee(t, x, p, w, z, zo, r, ro, J, jo):
         t = numpy.float64(t)
         x = numpy.asarray(x, dtype=numpy.float64)
         p = numpy.asarray(p, dtype=numpy.float64)
-        wv[23] = (numpy.exp(z[zo + 0]*p[6]) - 1.0)*p[2]
+        wv[23] = (_c_exp(z[zo + 0]*p[6]) - 1.0)*p[2]
         wv[24] = wv[23]
         wv[25] = wv[24]*p[1]
         r[ro + 0] = wv[21] + z[zo + 0] + (wv[25] + p[7])
         if J is not None:
-            w5 = numpy.exp(z[zo + 0]*p[6])*p[8]
+            w5 = _c_exp(z[zo + 0]*p[6])*p[8]
             w6 = w5*p[1]
             J[jo + 0] = w6 + 1.0
 
@@ -320,12 +320,12 @@ def _jvp_block0_ieee(t, x, p, w, z, zo, r, ro, J, jo):
         t = numpy.float64(t)
         x = numpy.asarray(x, dtype=numpy.float64)
         p = numpy.asarray(p, dtype=numpy.float64)
-        wv[23] = (numpy.exp(z[zo + 0]*p[6]) - 1.0)*p[2]
+        wv[23] = (_c_exp(z[zo + 0]*p[6]) - 1.0)*p[2]
         wv[24] = wv[23]
         wv[25] = wv[24]*p[1]
         r[ro + 0] = wv[21] + z[zo + 0] + (wv[25] + p[7])
         if J is not None:
-            w5 = numpy.exp(z[zo + 0]*p[6])*p[8]
+            w5 = _c_exp(z[zo + 0]*p[6])*p[8]
             w6 = w5*p[1]
             J[jo + 0] = w6 + 1.0
 
@@ -359,7 +359,7 @@ def _jvp_0_ieee(t, x, p, w, v, out):
         wv[29] = -w7
         _block_resolve(w, 0, t)
         w8 = wv[29]
-        w9 = w8*numpy.exp(wv[31]*p[6])*p[8]
+        w9 = w8*_c_exp(wv[31]*p[6])*p[8]
         out[0] = w9
 
 

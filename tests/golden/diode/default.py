@@ -198,12 +198,12 @@ def _rhs_block0_ieee(t, x, p, w, z, zo, r, ro, J, jo):
         t = numpy.float64(t)
         x = numpy.asarray(x, dtype=numpy.float64)
         p = numpy.asarray(p, dtype=numpy.float64)
-        wv[21] = (numpy.exp(z[zo + 0]*p[6]) - 1.0)*p[2]
+        wv[21] = (_c_exp(z[zo + 0]*p[6]) - 1.0)*p[2]
         wv[22] = wv[21]
         wv[23] = wv[22]*p[1]
         r[ro + 0] = wv[19] + z[zo + 0] + (wv[23] + p[7])
         if J is not None:
-            w5 = numpy.exp(z[zo + 0]*p[6])*p[8]
+            w5 = _c_exp(z[zo + 0]*p[6])*p[8]
             w6 = w5*p[1]
             J[jo + 0] = w6 + 1.0
 
@@ -280,12 +280,12 @@ def _jvp_block0_ieee(t, x, p, w, z, zo, r, ro, J, jo):
         t = numpy.float64(t)
         x = numpy.asarray(x, dtype=numpy.float64)
         p = numpy.asarray(p, dtype=numpy.float64)
-        wv[21] = (numpy.exp(z[zo + 0]*p[6]) - 1.0)*p[2]
+        wv[21] = (_c_exp(z[zo + 0]*p[6]) - 1.0)*p[2]
         wv[22] = wv[21]
         wv[23] = wv[22]*p[1]
         r[ro + 0] = wv[19] + z[zo + 0] + (wv[23] + p[7])
         if J is not None:
-            w5 = numpy.exp(z[zo + 0]*p[6])*p[8]
+            w5 = _c_exp(z[zo + 0]*p[6])*p[8]
             w6 = w5*p[1]
             J[jo + 0] = w6 + 1.0
 
@@ -319,7 +319,7 @@ def _jvp_0_ieee(t, x, p, w, v, out):
         wv[27] = -w7
         _block_resolve(w, 0, t)
         w8 = wv[27]
-        w9 = w8*numpy.exp(wv[29]*p[6])*p[8]
+        w9 = w8*_c_exp(wv[29]*p[6])*p[8]
         out[0] = w9
 
 

@@ -232,12 +232,12 @@ def _init_into_ieee(p, out):
         out[1] = 0.0
         out[2] = 0.0
         out[3] = 0.0
-        w122 = numpy.sin(p[5])*p[2]
+        w122 = _c_sin(p[5])*p[2]
         out[4] = w122
-        w123 = numpy.cos(p[5])*p[2]
+        w123 = _c_cos(p[5])*p[2]
         out[5] = w123
-        out[6] = w122 + numpy.sin(p[6])*p[3]
-        out[7] = w123 + numpy.cos(p[6])*p[3]
+        out[6] = w122 + _c_sin(p[6])*p[3]
+        out[7] = w123 + _c_cos(p[6])*p[3]
 
 
 

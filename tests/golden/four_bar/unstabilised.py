@@ -140,7 +140,7 @@ def _fill_params(p, given):
         if 11 not in given:
             p[11] = math.sin(p[7])*p[2]
         if 12 not in given:
-            p[12] = math.sqrt((-p[10] + p[5])**2 + p[11]*p[11])
+            p[12] = math.sqrt(_sq(-p[10] + p[5]) + p[11]*p[11])
         if 13 not in given:
             p[13] = (-p[10] + p[5])/p[12]
         if 14 not in given:
@@ -182,11 +182,11 @@ def _fill_params_ieee(p, given):
         if 9 not in given:
             p[9] = 10.0
         if 10 not in given:
-            p[10] = numpy.cos(p[7])*p[2]
+            p[10] = _c_cos(p[7])*p[2]
         if 11 not in given:
-            p[11] = numpy.sin(p[7])*p[2]
+            p[11] = _c_sin(p[7])*p[2]
         if 12 not in given:
-            p[12] = numpy.sqrt((-p[10] + p[5])**2 + p[11]*p[11])
+            p[12] = _c_sqrt(_sq(-p[10] + p[5]) + p[11]*p[11])
         if 13 not in given:
             p[13] = (-p[10] + p[5])/p[12]
         if 14 not in given:
@@ -194,7 +194,7 @@ def _fill_params_ieee(p, given):
         if 15 not in given:
             p[15] = (p[3]*p[3] + p[12]*p[12] - p[4]*p[4])*(0.5/p[12])
         if 16 not in given:
-            p[16] = numpy.sqrt(p[3]*p[3] - p[15]*p[15])
+            p[16] = _c_sqrt(p[3]*p[3] - p[15]*p[15])
         if 17 not in given:
             p[17] = p[13]*p[15] - p[14]*p[16] + p[10]
         if 18 not in given:

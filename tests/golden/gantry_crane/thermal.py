@@ -297,8 +297,8 @@ def _init_into_ieee(p, out):
         out[2] = 0.0
         out[3] = 0.0
         out[4] = 0.0
-        out[5] = numpy.sin(p[13])*p[11]
-        out[6] = numpy.cos(p[13])*p[11]
+        out[5] = _c_sin(p[13])*p[11]
+        out[6] = _c_cos(p[13])*p[11]
         out[7] = p[16]*p[17]
         out[8] = p[16]*p[19]
 

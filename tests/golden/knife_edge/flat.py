@@ -111,7 +111,7 @@ def _fill_params_ieee(p, given):
         if 3 not in given:
             p[3] = 0.29999999999999999
         if 4 not in given:
-            p[4] = numpy.sin(p[3])*p[2]
+            p[4] = _c_sin(p[3])*p[2]
         if 5 not in given:
             p[5] = 0.5
         if 6 not in given:
@@ -166,8 +166,8 @@ def _init_into(p, out):
 def _init_into_ieee(p, out):
     with numpy.errstate(all="ignore"):
         p = numpy.asarray(p, dtype=numpy.float64)
-        out[0] = numpy.cos(p[7])*p[0]*p[5]
-        out[1] = numpy.sin(p[7])*p[0]*p[5]
+        out[0] = _c_cos(p[7])*p[0]*p[5]
+        out[1] = _c_sin(p[7])*p[0]*p[5]
         out[2] = p[1]*p[6]
         out[3] = p[8]
         out[4] = p[9]
@@ -213,10 +213,10 @@ def _rhs_0_ieee(t, x, p, w, out):
         x = numpy.asarray(x, dtype=numpy.float64)
         p = numpy.asarray(p, dtype=numpy.float64)
         w0 = p[11]*x[0]
-        w18 = numpy.sin(x[5])
+        w18 = _c_sin(x[5])
         w1 = -w0*w18
         w2 = p[11]*x[1]
-        w19 = numpy.cos(x[5])
+        w19 = _c_cos(x[5])
         w3 = w19*w2
         w4 = w1 + w3
         w5 = p[12]*x[2]
@@ -267,10 +267,10 @@ def _outputs_0_ieee(t, x, p, w, out):
         x = numpy.asarray(x, dtype=numpy.float64)
         p = numpy.asarray(p, dtype=numpy.float64)
         w0 = p[11]*x[0]
-        w20 = numpy.sin(x[5])
+        w20 = _c_sin(x[5])
         w1 = -w0*w20
         w2 = p[11]*x[1]
-        w21 = numpy.cos(x[5])
+        w21 = _c_cos(x[5])
         w3 = w2*w21
         w4 = w1 + w3
         w5 = p[12]*x[2]
@@ -329,9 +329,9 @@ def _jvp_0_ieee(t, x, p, w, v, out):
         p = numpy.asarray(p, dtype=numpy.float64)
         w0 = p[11]*x[0]
         w9 = p[11]*v[0]
-        w22 = numpy.sin(x[5])
+        w22 = _c_sin(x[5])
         w1 = -w0*w22
-        w23 = numpy.cos(x[5])
+        w23 = _c_cos(x[5])
         w10 = -w22*w9 - w0*w23*v[5]
         w2 = p[11]*x[1]
         w11 = p[11]*v[1]
@@ -370,7 +370,7 @@ def _residual_into_ieee(t, x, p, out):
         t = numpy.float64(t)
         x = numpy.asarray(x, dtype=numpy.float64)
         p = numpy.asarray(p, dtype=numpy.float64)
-        out[0] = numpy.cos(x[5])*p[11]*x[1] + numpy.sin(x[5])*p[13]*x[0]
+        out[0] = _c_cos(x[5])*p[11]*x[1] + _c_sin(x[5])*p[13]*x[0]
 
 
 
@@ -392,7 +392,7 @@ def _scale_into_ieee(t, x, p, out):
         t = numpy.float64(t)
         x = numpy.asarray(x, dtype=numpy.float64)
         p = numpy.asarray(p, dtype=numpy.float64)
-        out[0] = abs(numpy.cos(x[5])*p[11]*x[1]) + abs(numpy.sin(x[5])*p[13]*x[0])
+        out[0] = abs(_c_cos(x[5])*p[11]*x[1]) + abs(_c_sin(x[5])*p[13]*x[0])
 
 
 
@@ -440,9 +440,9 @@ def _velocity_jac_into_ieee(t, x, p, out):
         t = numpy.float64(t)
         x = numpy.asarray(x, dtype=numpy.float64)
         p = numpy.asarray(p, dtype=numpy.float64)
-        w24 = numpy.sin(x[5])
+        w24 = _c_sin(x[5])
         out[0] = w24*p[13]
-        w25 = numpy.cos(x[5])
+        w25 = _c_cos(x[5])
         out[1] = w25*p[11]
         out[5] = w24*p[13]*x[1] + w25*p[13]*x[0]
 

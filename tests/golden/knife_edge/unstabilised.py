@@ -111,7 +111,7 @@ def _fill_params_ieee(p, given):
         if 3 not in given:
             p[3] = 0.29999999999999999
         if 4 not in given:
-            p[4] = numpy.sin(p[3])*p[2]
+            p[4] = _c_sin(p[3])*p[2]
         if 5 not in given:
             p[5] = 0.5
         if 6 not in given:
@@ -170,8 +170,8 @@ def _init_into(p, out):
 def _init_into_ieee(p, out):
     with numpy.errstate(all="ignore"):
         p = numpy.asarray(p, dtype=numpy.float64)
-        out[0] = numpy.cos(p[7])*p[0]*p[5]
-        out[1] = numpy.sin(p[7])*p[0]*p[5]
+        out[0] = _c_cos(p[7])*p[0]*p[5]
+        out[1] = _c_sin(p[7])*p[0]*p[5]
         out[2] = p[1]*p[6]
         out[3] = p[8]
         out[4] = p[9]
@@ -217,8 +217,8 @@ def _rhs_0_ieee(t, x, p, w, out):
         w0 = p[11]*x[0]
         w1 = p[12]*x[2]
         w2 = p[11]*x[1]
-        w17 = numpy.sin(x[5])
-        w18 = numpy.cos(x[5])
+        w17 = _c_sin(x[5])
+        w18 = _c_cos(x[5])
         w4 = (w18*p[13] + w0*w1*w18*p[14] + w1*w17*w2*p[14])/(w17*w17 + w18*w18)
         w5 = -w17*w4
         w6 = w18*w4
@@ -269,8 +269,8 @@ def _outputs_0_ieee(t, x, p, w, out):
         w0 = p[11]*x[0]
         w1 = p[12]*x[2]
         w2 = p[11]*x[1]
-        w19 = numpy.sin(x[5])
-        w20 = numpy.cos(x[5])
+        w19 = _c_sin(x[5])
+        w20 = _c_cos(x[5])
         w4 = (w20*p[13] + w0*w1*w20*p[14] + w1*w19*w2*p[14])/(w19*w19 + w20*w20)
         w8 = -w0*w19
         w9 = w2*w20
@@ -327,8 +327,8 @@ def _jvp_0_ieee(t, x, p, w, v, out):
         w12 = p[12]*v[2]
         w2 = p[11]*x[1]
         w13 = p[11]*v[1]
-        w21 = numpy.sin(x[5])
-        w22 = numpy.cos(x[5])
+        w21 = _c_sin(x[5])
+        w22 = _c_cos(x[5])
         w4 = (w22*p[13] + w0*w1*w22*p[14] + w1*w2*w21*p[14])/(w21*w21 + w22*w22)
         w14 = (-w21*p[13]*v[5] + w0*w12*w22*p[14] + (w1*w11*w22*p[14] + w1*w13*w21*p[14]) + (w12*w2*w21*p[14] + w0*w1*w21*p[0]*v[5] + w1*w2*w22*p[14]*v[5]))/(w21*w21 + w22*w22)
         w15 = -w14*w21 - w22*w4*v[5]
@@ -358,7 +358,7 @@ def _residual_into_ieee(t, x, p, out):
         t = numpy.float64(t)
         x = numpy.asarray(x, dtype=numpy.float64)
         p = numpy.asarray(p, dtype=numpy.float64)
-        out[0] = numpy.cos(x[5])*p[11]*x[1] + numpy.sin(x[5])*p[15]*x[0]
+        out[0] = _c_cos(x[5])*p[11]*x[1] + _c_sin(x[5])*p[15]*x[0]
 
 
 
@@ -380,7 +380,7 @@ def _scale_into_ieee(t, x, p, out):
         t = numpy.float64(t)
         x = numpy.asarray(x, dtype=numpy.float64)
         p = numpy.asarray(p, dtype=numpy.float64)
-        out[0] = abs(numpy.cos(x[5])*p[11]*x[1]) + abs(numpy.sin(x[5])*p[15]*x[0])
+        out[0] = abs(_c_cos(x[5])*p[11]*x[1]) + abs(_c_sin(x[5])*p[15]*x[0])
 
 
 
@@ -428,9 +428,9 @@ def _velocity_jac_into_ieee(t, x, p, out):
         t = numpy.float64(t)
         x = numpy.asarray(x, dtype=numpy.float64)
         p = numpy.asarray(p, dtype=numpy.float64)
-        w23 = numpy.sin(x[5])
+        w23 = _c_sin(x[5])
         out[0] = w23*p[15]
-        w24 = numpy.cos(x[5])
+        w24 = _c_cos(x[5])
         out[1] = w24*p[11]
         out[5] = w23*p[15]*x[1] + w24*p[15]*x[0]
 

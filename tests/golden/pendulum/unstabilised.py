@@ -154,8 +154,8 @@ def _init_into_ieee(p, out):
         p = numpy.asarray(p, dtype=numpy.float64)
         out[0] = 0.0
         out[1] = 0.0
-        out[2] = numpy.sin(p[3])*p[1]
-        out[3] = numpy.cos(p[3])*p[1]
+        out[2] = _c_sin(p[3])*p[1]
+        out[3] = _c_cos(p[3])*p[1]
 
 
 

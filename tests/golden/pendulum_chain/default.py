@@ -219,37 +219,37 @@ def _fill_params_ieee(p, given):
         if 6 not in given:
             p[6] = 0.14999999999999999
         if 7 not in given:
-            p[7] = numpy.sin(p[5])*p[1]
+            p[7] = _c_sin(p[5])*p[1]
         if 8 not in given:
-            p[8] = numpy.cos(p[5])*p[1]
+            p[8] = _c_cos(p[5])*p[1]
         if 9 not in given:
-            p[9] = numpy.sin(p[5] + p[6])*p[1] + p[7]
+            p[9] = _c_sin(p[5] + p[6])*p[1] + p[7]
         if 10 not in given:
-            p[10] = numpy.cos(p[5] + p[6])*p[1] + p[8]
+            p[10] = _c_cos(p[5] + p[6])*p[1] + p[8]
         if 11 not in given:
-            p[11] = numpy.sin(2.0*p[6] + p[5])*p[1] + p[9]
+            p[11] = _c_sin(2.0*p[6] + p[5])*p[1] + p[9]
         if 12 not in given:
-            p[12] = numpy.cos(2.0*p[6] + p[5])*p[1] + p[10]
+            p[12] = _c_cos(2.0*p[6] + p[5])*p[1] + p[10]
         if 13 not in given:
-            p[13] = numpy.sin(3.0*p[6] + p[5])*p[1] + p[11]
+            p[13] = _c_sin(3.0*p[6] + p[5])*p[1] + p[11]
         if 14 not in given:
-            p[14] = numpy.cos(3.0*p[6] + p[5])*p[1] + p[12]
+            p[14] = _c_cos(3.0*p[6] + p[5])*p[1] + p[12]
         if 15 not in given:
-            p[15] = numpy.sin(4.0*p[6] + p[5])*p[1] + p[13]
+            p[15] = _c_sin(4.0*p[6] + p[5])*p[1] + p[13]
         if 16 not in given:
-            p[16] = numpy.cos(4.0*p[6] + p[5])*p[1] + p[14]
+            p[16] = _c_cos(4.0*p[6] + p[5])*p[1] + p[14]
         if 17 not in given:
-            p[17] = numpy.sin(5.0*p[6] + p[5])*p[1] + p[15]
+            p[17] = _c_sin(5.0*p[6] + p[5])*p[1] + p[15]
         if 18 not in given:
-            p[18] = numpy.cos(5.0*p[6] + p[5])*p[1] + p[16]
+            p[18] = _c_cos(5.0*p[6] + p[5])*p[1] + p[16]
         if 19 not in given:
-            p[19] = numpy.sin(6.0*p[6] + p[5])*p[1] + p[17]
+            p[19] = _c_sin(6.0*p[6] + p[5])*p[1] + p[17]
         if 20 not in given:
-            p[20] = numpy.cos(6.0*p[6] + p[5])*p[1] + p[18]
+            p[20] = _c_cos(6.0*p[6] + p[5])*p[1] + p[18]
         if 21 not in given:
-            p[21] = numpy.sin(7.0*p[6] + p[5])*p[1] + p[19]
+            p[21] = _c_sin(7.0*p[6] + p[5])*p[1] + p[19]
         if 22 not in given:
-            p[22] = numpy.cos(7.0*p[6] + p[5])*p[1] + p[20]
+            p[22] = _c_cos(7.0*p[6] + p[5])*p[1] + p[20]
         return [float(v) for v in p]
 
 

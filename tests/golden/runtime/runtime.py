@@ -255,6 +255,51 @@ def _heaviside(a, at_zero):
     return 1.0 if a > 0.0 else (0.0 if a < 0.0 else (at_zero if a == 0.0 else a))
 
 
+def _sq(a):
+    return a * a  # as C's bgc_sq (a ** 2 on a float is libm's pow, not always a * a)
+
+
+# The model functions' IEEE variant (run when the math variant raised) calls these: the C
+# program's functions, bit for bit.  math calls the platform's libm, as C does (numpy's exp,
+# log, power, tanh, ... are SIMD kernels of their own that round differently); where math
+# raises, C99 Annex F's result.  numpy.float64 results keep the arithmetic around them IEEE.
+
+def _libm(f, fails):
+    def call(*args):
+        try:
+            return numpy.float64(f(*args))
+        except (ValueError, OverflowError):
+            return numpy.float64(fails(*args))
+    return call
+
+
+def _pow_fails(x, y):
+    """C's pow(x, y) where math.pow raises: x < 0, y not an integer: nan; an overflow or
+    0 to a negative power: inf, negative for a negative x and an odd integer y."""
+    if x < 0.0 and y != math.floor(y):
+        return math.nan
+    odd = y == math.floor(y) and math.fmod(y, 2.0) != 0.0
+    return math.copysign(math.inf, x) if odd else math.inf
+
+
+_c_exp = _libm(math.exp, lambda x: math.inf)
+_c_log = _libm(math.log, lambda x: -math.inf if x == 0.0 else math.nan)
+_c_sqrt = _libm(math.sqrt, lambda x: math.nan)
+_c_sin = _libm(math.sin, lambda x: math.nan)
+_c_cos = _libm(math.cos, lambda x: math.nan)
+_c_tan = _libm(math.tan, lambda x: math.nan)
+_c_asin = _libm(math.asin, lambda x: math.nan)
+_c_acos = _libm(math.acos, lambda x: math.nan)
+_c_atan = _libm(math.atan, lambda x: math.nan)
+_c_atan2 = _libm(math.atan2, lambda y, x: math.nan)
+_c_sinh = _libm(math.sinh, lambda x: math.copysign(math.inf, x))
+_c_cosh = _libm(math.cosh, lambda x: math.inf)
+_c_tanh = _libm(math.tanh, lambda x: math.nan)
+_c_asinh = _libm(math.asinh, lambda x: math.nan)
+_c_atanh = _libm(math.atanh, lambda x: math.copysign(math.inf, x) if abs(x) == 1.0 else math.nan)
+_c_pow = _libm(math.pow, _pow_fails)
+
+
 # ---------------------------------------------------------------- workspace
 
 
@@ -424,7 +469,10 @@ def _block_resolve(w, k, t):
 
 
 def _norm2(v, base, m):
-    return math.sqrt(sum(v[base + i] * v[base + i] for i in range(m)))
+    s = 0.0  # summed in C's order (the builtin sum is compensated from Python 3.12 on)
+    for i in range(base, base + m):
+        s += v[i] * v[i]
+    return math.sqrt(s)
 
 
 _NEWTON_MAXIT = 50
@@ -663,9 +711,12 @@ def _project_initial(t, x, p):
 
 
 class _Settings:
-    __slots__ = ("t0", "t_end", "dt", "solver", "rtol", "atol", "step", "max_steps")
+    __slots__ = ("t0", "t_end", "dt", "solver", "rtol", "atol", "step", "max_steps", "h0",
+                 "order0")
 
     def __init__(self, **values):
+        values.setdefault("h0", 0.0)  # a run that goes on from an earlier one (bgc_settings):
+        values.setdefault("order0", 0)  # its step size and radau's order
         for key in self.__slots__:
             setattr(self, key, values[key])
 
@@ -1007,11 +1058,11 @@ def main(argv=None):
 
 
 # ================================================================== solve ===
-# The solvers' common machinery, the explicit Runge-Kutta family (read from _METHODS, printed
-# from bgc/solvers.py) and _integrate, which picks a family's run function; the stiff
-# families follow (bgc/runtime/stiff.py).  The explicit solvers keep small states as lists
-# and large ones as numpy vectors (see _LIST_STATES); the arithmetic is the C runtime's, in
-# the same order.
+# The step driver (_drive, as bgc_drive in the C runtime's drive.c: see there for the
+# contract between the driver and a method family), the explicit Runge-Kutta families (read
+# from _METHODS, printed from bgc/solvers.py) and _integrate; the stiff families follow
+# (bgc/runtime/stiff.py).  The explicit solvers keep small states as lists and large ones as
+# numpy vectors (see _LIST_STATES); the arithmetic is the C runtime's, in the same order.
 
 import time  # process_time(): the processor time a run reports in its stats
 
@@ -1077,7 +1128,7 @@ def _block_failed(failure):
 
 def _new_stats():
     return {"steps": 0, "rejected": 0, "rhs": 0, "jac": 0, "lu": 0, "solves": 0,
-            "switched": False, "t_switch": 0.0, "cpu": 0.0}
+            "switched": False, "t_switch": 0.0, "cpu": 0.0, "h_next": 0.0, "order_next": 0}
 
 
 def _stats_line(st):
@@ -1099,14 +1150,15 @@ class _Run:
     and returns; or raises _Failure, _Stiff (run.h: its last step size)."""
 
     __slots__ = ("s", "p", "w", "st", "nout", "kout", "t", "h", "y", "detect_stiffness",
-                 "steps_out", "t_out")
+                 "steps_out", "t_out", "m", "name", "fixed")
 
     def __init__(self, s, p, w, st, y):
         self.s, self.p, self.w, self.st = s, p, w, st
         self.steps_out, self.t_out = st["steps"], s.t0  # the steps at the last output, its t
         self.nout, self.kout = _output_count(s), 1
-        self.t, self.h, self.y = s.t0, 0.0, y
+        self.t, self.h, self.y = s.t0, s.h0, y
         self.detect_stiffness = False
+        self.m, self.name, self.fixed = None, "", False  # the method running, see _run_solver
 
     def f(self, t, y):
         """dy/dt as a numpy vector; a failed algebraic block raises _BlockFailure."""
@@ -1138,7 +1190,7 @@ class _Run:
 
     def emit_step(self, t, h, tph, y1, dense):
         """The output times in (t, tph] after an accepted step: tph from y1, the others from
-        dense(theta), a function that dense_at() prepares on first use."""
+        at(theta), the function that dense() prepares on first use."""
         at = None
         while self.kout <= self.nout:
             tk = _output_time(self.s, self.kout, self.nout)
@@ -1153,9 +1205,37 @@ class _Run:
             self.kout += 1
 
 
+# Byte parity with the C runtime: sums in C's sequence (never numpy.sum, dot or @, whose
+# pairwise or SIMD order depends on the machine; never the builtin sum, compensated from
+# Python 3.12 on), bgc_max's choice for a NaN.
+
+def _seq_sum(v):
+    """0.0 + v_0 + v_1 + ... in this order, as C's `acc = 0.0; acc += v[l]` loops."""
+    return 0.0 + float(numpy.add.accumulate(v)[-1]) if len(v) else 0.0
+
+
+def _seq_minus(acc, terms):
+    """acc - terms_0 - terms_1 - ... in this order (C's back substitution)."""
+    if not len(terms):
+        return acc
+    return numpy.subtract.accumulate(numpy.concatenate(([acc], terms)))[-1]
+
+
+def _c_max(a, b):
+    """bgc_max element-wise: b where b > a, else a (a NaN b is never larger)."""
+    return numpy.where(b > a, b, a)
+
+
+def _worst(q):
+    """C's running `if (q > big)` from big = -1: the first largest non-NaN q_i, or -1."""
+    q = numpy.where(q == q, q, -1.0)
+    i = int(numpy.argmax(q)) if len(q) else -1
+    return i if i >= 0 and q[i] > -1.0 else -1
+
+
 def _weights(s, y, y1):
-    """Hairer's error-norm weights atol + rtol * max(|y_i|, |y1_i|)."""
-    return s.atol + s.rtol * numpy.maximum(numpy.abs(y), numpy.abs(y1))
+    """Hairer's error-norm weights atol + rtol * max(|y_i|, |y1_i|) (bgc_weight)."""
+    return s.atol + s.rtol * _c_max(numpy.abs(y), numpy.abs(y1))
 
 
 def _initial_step(run, q, y, f0, hmax):
@@ -1164,10 +1244,9 @@ def _initial_step(run, q, y, f0, hmax):
     y, f0 = numpy.asarray(y, dtype=float), numpy.asarray(f0, dtype=float)
     sk = s.atol + s.rtol * numpy.abs(y)
     with numpy.errstate(all="ignore"):  # IEEE as in C: an overflow gives inf, then h = 0
-        dnf = numpy.sum((f0 / sk) ** 2)
-        dny = numpy.sum((y / sk) ** 2)
-        h = 1e-6 if (dnf <= 1e-10 or dny <= 1e-10) else float(numpy.sqrt(dny / dnf) * 0.01)
-        dnf = float(dnf)
+        qf, qy = f0 / sk, y / sk
+        dnf, dny = _seq_sum(qf * qf), _seq_sum(qy * qy)
+        h = 1e-6 if (dnf <= 1e-10 or dny <= 1e-10) else math.sqrt(dny / dnf) * 0.01
     h = min(h, hmax)
     run.st["rhs"] += 1
     try:
@@ -1175,7 +1254,8 @@ def _initial_step(run, q, y, f0, hmax):
     except _BlockFailure:
         return h  # a block failed there: start small, the step control takes over
     with numpy.errstate(all="ignore"):
-        der2 = float(numpy.sqrt(numpy.sum(((f1 - f0) / sk) ** 2)) / numpy.float64(h))
+        d = (f1 - f0) / (s.atol + s.rtol * numpy.abs(y))
+        der2 = float(numpy.float64(math.sqrt(_seq_sum(d * d))) / numpy.float64(h))
     der12 = max(math.sqrt(dnf), abs(der2))  # a NaN der2 is ignored
     h1 = max(1e-6, h * 1e-3) if der12 <= 1e-15 else (0.01 / der12) ** (1.0 / q)
     if not h1 > 0.0:
@@ -1297,7 +1377,10 @@ class _ListVectors:
 
     @staticmethod
     def distance2(u, v):
-        return sum([(a - b) * (a - b) for a, b in zip(u, v)])
+        acc = 0.0
+        for a, b in zip(u, v):
+            acc += (a - b) * (a - b)
+        return acc
 
 
 class _ArrayVectors:
@@ -1327,17 +1410,20 @@ class _ArrayVectors:
 
     @staticmethod
     def error_sums(s, y, y1, e1, e2):
-        sk = s.atol + s.rtol * numpy.maximum(numpy.abs(y), numpy.abs(y1))
+        sk = _weights(s, y, y1)
         with numpy.errstate(all="ignore"):
-            sq = (e1 / sk) ** 2
-            err = float(numpy.sum(sq)) if _N else 0.0
-            worst = int(numpy.argmax(sq)) if _N and err == err else -1
-            err2 = float(numpy.sum((e2 / sk) ** 2)) if e2 is not None else 0.0
-        return err, worst, err2
+            sq = e1 / sk
+            sq = sq * sq
+            err = _seq_sum(sq)
+            q2 = e2 / sk if e2 is not None else None
+            err2 = _seq_sum(q2 * q2) if e2 is not None else 0.0
+        return err, _worst(sq), err2
 
     @staticmethod
     def distance2(u, v):
-        return float(numpy.sum((u - v) ** 2))
+        with numpy.errstate(all="ignore"):
+            d = u - v
+            return _seq_sum(d * d)
 
 
 _V = _ListVectors if _N <= _LIST_STATES else _ArrayVectors
@@ -1346,12 +1432,12 @@ _V = _ListVectors if _N <= _LIST_STATES else _ArrayVectors
 def _combine(weights, K, count):
     """sum_j weights[j] K[j] over j < count with a nonzero weight, left to right, for numpy
     vectors K[j] (the stiff solvers)."""
-    acc = None
+    acc = numpy.zeros(_N)  # C's acc = 0.0, then acc += a K_j
     for j in range(count):
         a = weights[j]
         if a != 0.0:
-            acc = a * K[j] if acc is None else acc + a * K[j]
-    return numpy.zeros(_N) if acc is None else acc
+            acc = acc + a * K[j]
+    return acc
 
 
 class _ErkPlan:
@@ -1367,47 +1453,6 @@ class _ErkPlan:
         self.P = [_weighted(P, len(P), d) for d in range(len(P[0]))] if P else []
 
 
-def _run_fixed(run, m, y):
-    s, V = run.s, _V
-    hstep = s.step if s.step > 0.0 else s.dt
-    ta = run.t
-    stages, c = m["stages"], m["c"]
-    plan = _ErkPlan(m)
-    combine = V.combine
-    y = V.vec(y)
-    K = [None] * stages
-    while run.kout <= run.nout:
-        tb = _output_time(s, run.kout, run.nout)
-        steps = _substeps(tb - ta, hstep)
-        if steps < 0:
-            raise _fail_step(ta, hstep, -1)
-        for j in range(steps):
-            t = ta + j * hstep
-            t1 = tb if j + 1 == steps else ta + (j + 1) * hstep
-            h = t1 - t
-            if not h >= _hmin(t):
-                raise _fail_step(t, h, -1)
-            try:
-                K[0] = run.fv(t, y)
-                i = _first_nonfinite(K[0])
-                if i >= 0:
-                    raise _fail(t, "derivative of state", STATES[i])
-                for i in range(1, stages):
-                    K[i] = run.fv(t + c[i] * h, combine(y, h, plan.a[i], K))
-            except _BlockFailure as failure:
-                raise _block_failed(failure) from None
-            run.st["rhs"] += stages
-            y = combine(y, h, plan.b, K)
-            i = _first_nonfinite(y)
-            if i >= 0:
-                raise _fail(t1, "state", STATES[i])
-            _accept(run, t1)
-            run.t, run.y = t1, y
-        yield from run.emit(tb, y)
-        run.kout += 1
-        ta = tb
-
-
 def _substeps(span, h):
     r = span / h
     if not r < 1e15:
@@ -1416,202 +1461,346 @@ def _substeps(span, h):
     return 1 if m < 1 else m
 
 
-def _erk_dense(run, m, plan, t, h, y, K):
-    """The dense output of an accepted step: the extra stages, then
-    y(theta) = y + theta (q_0 + theta (q_1 + ...)), q_d = h sum_i P[i][d] K_i."""
-    def prepare():
-        c, combine = m["c"], _V.combine
-        try:
-            for i in range(m["stages"], len(c)):
-                K[i] = run.fv(t + c[i] * h, combine(y, h, plan.a[i], K))
-                run.st["rhs"] += 1
-        except _BlockFailure as failure:
-            raise _block_failed(failure) from None
-        q = [combine(None, h, pairs, K) for pairs in plan.P]
-        horner = _V.horner
-        return lambda theta: horner(y, q, theta)
-    return prepare
+# ---------------------------------------------------------------- the step driver
+# A family is a class: __init__(run), start(y) -> the first step (None on a grid), step(t,
+# h, tph, y) -> (outcome, y1, hnew, why), accepted(tph, y1), dense() -> at(theta), after(tph,
+# y1, last) -> True when the stiffness test fired, next_h(h, hnew) -> hnew, span_grid; a
+# failure that ends the run raises _Failure.  Outcomes as drive.c's; why = (bad, bad_kind,
+# block failure) after a failed attempt: bad >= 0 a non-finite component (bad_kind names its
+# kind), -1 the error test, -2 a block, -3 a singular matrix, -4 Newton.
+
+_ACCEPT, _REJECT, _RETRY, _AGAIN = 0, 1, 2, 3
 
 
-def _run_erk(run, m, y):
-    """Embedded explicit pairs: adaptive steps (never shortened for output), Hairer's error
-    norm and controller, outputs by the dense output; with s.step > 0, steps of that size
-    without error control.  With run.detect_stiffness, Hairer's stiffness test raises _Stiff
-    once it has fired on 15 accepted steps."""
-    s, st, V = run.s, run.st, _V
+def _fail_small(run, t, h, bad, bad_kind, failure, worst):
+    """A step size below _hmin: the message names what made the steps shrink."""
+    if bad == -2:
+        return _block_failed(failure)
+    if bad in (-3, -4):
+        what = ("the iteration matrix is singular" if bad == -3
+                else "the Newton iteration does not converge")
+        return _Failure("at t = %.17g: %s: %s (step size down to h = %.3g)"
+                        % (t, run.name, what, h), t)
+    if bad >= 0:
+        return _fail(t, bad_kind, STATES[bad])
+    return _fail_step(t, h, worst)
+
+
+class _Grid:
+    """Where a fixed-step run is: the k-th of n steps from ta to tb (the run's end on a span
+    grid, else the output interval's)."""
+
+    def __init__(self, run, span):
+        s = run.s
+        self.run, self.span = run, span
+        self.step = s.step if s.step > 0.0 else s.dt
+        self.ta = self.tb = 0.0
+        self.k = self.n = 0
+
+    def next(self, t):
+        """The next step's end from t and whether it is the run's last."""
+        run = self.run
+        if self.k >= self.n:
+            self.ta, self.k = t, 0
+            self.tb = run.s.t_end if self.span else _output_time(run.s, run.kout, run.nout)
+            self.n = _substeps(self.tb - self.ta, self.step)
+            if self.n < 0:
+                raise _fail_step(t, self.step, -1)
+        end = self.k + 1 >= self.n
+        tph = self.tb if end else self.ta + (self.k + 1) * self.step
+        last = end and (self.span or run.kout >= run.nout)
+        if not self.span:  # each step from its grid point (the same value as the last end)
+            t = self.ta + self.k * self.step
+        if not tph - t >= _hmin(t):
+            raise _fail_step(t, tph - t, -1)
+        return tph, last
+
+
+def _drive(run, family, y):
+    """One family's run from (run.t, y) to s.t_end: yields the rows as it passes them, keeps
+    run.t and run.y at the last accepted step; raises _Failure, or _Stiff (run.h: the
+    explicit phase's next step)."""
+    s, st = run.s, run.st
     if run.kout > run.nout:
         return
-    stages, c, e = m["stages"], m["c"], m["e"]
-    plan = _ErkPlan(m)
-    combine, error_sums, fv = V.combine, V.error_sums, run.fv
-    last_stage = stages - 1
-    fsal = m["fsal"]
-    fsal_first = fsal and e[last_stage] != 0.0
-    safe, fac_min, fac_max, beta = m["safe"], m["fac_min"], m["fac_max"], m["beta"]
-    expo1 = 1.0 / m["q"] - m["expo_beta"] * beta
-    stiff_i, stiff_j, stiff_bound = m.get("stiffness", (-1, -1, 0.0))
     hmax = s.t_end - s.t0
-    fixed = s.step > 0.0
-    t, facold = run.t, 1e-4
-    reject, last, worst, bad, bad_kind = False, False, -1, -1, ""
-    block_failure = None
-    stiff_count = nonstiff_count = 0
-    n = _N
-    y = V.vec(y)
-    K = [None] * len(c)
-    st["rhs"] += 1
-    try:
-        K[0] = fv(t, y)
-    except _BlockFailure as failure:
-        raise _block_failed(failure) from None
-    i = _first_nonfinite(K[0])
-    if i >= 0:
-        raise _fail(t, "derivative of state", STATES[i])
-    if fixed:
-        h = s.step
-    elif run.h > 0.0:
-        h = min(run.h, hmax)
-    else:
-        h = _initial_step(run, m["q"], y, K[0], hmax)
+    fam = family(run)
+    h = fam.start(y)
+    t = run.t
+    reject = last = False
+    bad, bad_kind, failure, wanted = -1, "", None, 0.0
+    grid = _Grid(run, fam.span_grid)
     while True:
-        if not h >= _hmin(t):
-            if bad == -2:
-                raise _block_failed(block_failure)
-            if bad >= 0:
-                raise _fail(t, bad_kind, STATES[bad])
-            raise _fail_step(t, h, worst)
-        if t + 1.01 * h - s.t_end > 0.0:
-            h = s.t_end - t
-            last = True
-        tph = s.t_end if last else t + h
-        ystiff = None
-        try:
-            for i in range(1, stages):
-                if fsal and i == last_stage:
-                    break
-                ys = combine(y, h, plan.a[i], K)
-                if i == stiff_i:
-                    ystiff = ys
-                K[i] = fv(tph if c[i] == 1.0 else t + c[i] * h, ys)
-                st["rhs"] += 1
-            y1 = combine(y, h, plan.b, K)
-            if fsal_first:
-                st["rhs"] += 1
-                K[last_stage] = fv(tph, y1)
-        except _BlockFailure as failure:  # retry with a much smaller step
-            if fixed:
-                raise _block_failed(failure) from None
-            bad, block_failure = -2, failure
-            h = h * fac_min
+        if run.fixed:
+            tph, last = grid.next(t)
+            h = tph - t
+        else:
+            if not h >= _hmin(t):
+                raise _fail_small(run, t, h, bad, bad_kind, failure, fam.worst)
+            wanted = h
+            if t + 1.01 * h - s.t_end > 0.0:
+                h = s.t_end - t
+                last = True
+            tph = s.t_end if last else t + h
+        outcome, y1, hnew, why = fam.step(t, h, tph, y)
+        if outcome == _AGAIN:
+            continue
+        if outcome != _ACCEPT:
+            if outcome == _RETRY:
+                bad, bad_kind, failure = why
             reject, last = True, False
             st["rejected"] += 1
+            h = hnew
             continue
+        i = _first_nonfinite(y1)
+        if i >= 0:
+            raise _fail(tph, "state", STATES[i])
+        _accept(run, tph)
+        fam.accepted(tph, y1)
+        yield from run.emit_step(t, h, tph, y1, fam.dense)
+        y, t = y1, tph
+        run.t, run.y = t, y
+        grid.k += 1
+        if fam.after(tph, y1, last):
+            run.h = hnew
+            raise _Stiff()
+        if last:
+            if not run.fixed:  # the step to go on with: the controller's, or the one cut short
+                st["h_next"] = max(hnew, wanted)
+            return
+        if not run.fixed:
+            hnew = min(hnew, hmax)
+        if reject:
+            hnew = min(hnew, h)
+        reject, bad = False, -1
+        h = fam.next_h(h, hnew)
 
-        # Hairer's error norm: RMS of err_i / (atol + rtol * max(|y_i|, |y1_i|)); DOP853
-        # combines its two estimates.
+
+class _Family:
+    """What a family does not need to do (see _drive)."""
+
+    span_grid = True
+    worst = -1
+    dense = None  # no output time falls inside a step of a family without a dense output
+
+    def accepted(self, tph, y1):
+        pass
+
+    def after(self, tph, y1, last):
+        return False
+
+    def next_h(self, h, hnew):
+        return hnew
+
+
+# ---------------------------------------------------------------- explicit Runge-Kutta
+
+
+class _FixedSteps(_Family):
+    """The fixed-step methods: each step from f(t, y) afresh (no error estimate, no dense
+    output: the driver lands a step on every output time)."""
+
+    span_grid = False
+
+    def __init__(self, run):
+        m = run.m
+        self.run, self.stages, self.c = run, m["stages"], m["c"]
+        self.plan = _ErkPlan(m)
+
+    def start(self, y):
+        return None
+
+    def step(self, t, h, tph, y):
+        run, c, combine = self.run, self.c, _V.combine
+        y = _V.vec(y)
+        K = [None] * self.stages
+        try:
+            K[0] = run.fv(t, y)
+            i = _first_nonfinite(K[0])
+            if i >= 0:
+                raise _fail(t, "derivative of state", STATES[i])
+            for i in range(1, self.stages):
+                K[i] = run.fv(t + c[i] * h, combine(y, h, self.plan.a[i], K))
+        except _BlockFailure as failure:
+            raise _block_failed(failure) from None
+        run.st["rhs"] += self.stages
+        return _ACCEPT, combine(y, h, self.plan.b, K), h, None
+
+
+class _Erk(_Family):
+    """Embedded explicit pairs (bgc_family_erk): Hairer's error norm and controller, outputs
+    by the dense output; on fixed steps no error control.  With run.detect_stiffness,
+    Hairer's stiffness test fires _Stiff once it has held on 15 accepted steps."""
+
+    def __init__(self, run):
+        m = run.m
+        self.run, self.m, self.plan = run, m, _ErkPlan(m)
+        self.stages, self.c = m["stages"], m["c"]
+        self.last_stage = self.stages - 1
+        self.fsal = m["fsal"]
+        self.fsal_first = self.fsal and m["e"][self.last_stage] != 0.0
+        self.stiff_i, self.stiff_j, self.stiff_bound = m.get("stiffness", (-1, -1, 0.0))
+        self.expo1 = 1.0 / m["q"] - m["expo_beta"] * m["beta"]
+        self.facold = 1e-4
+        self.stiff_count = self.nonstiff_count = 0
+        self.K = [None] * len(self.c)
+        self.t = self.h = 0.0
+        self.y = self.ys = self.ystiff = None
+
+    def start(self, y):
+        run = self.run
+        run.st["rhs"] += 1
+        try:
+            self.K[0] = run.fv(run.t, _V.vec(y))
+        except _BlockFailure as failure:
+            raise _block_failed(failure) from None
+        i = _first_nonfinite(self.K[0])
+        if i >= 0:
+            raise _fail(run.t, "derivative of state", STATES[i])
+        if run.fixed:
+            return None
+        hmax = run.s.t_end - run.s.t0
+        return min(run.h, hmax) if run.h > 0.0 else _initial_step(run, self.m["q"], y,
+                                                                   self.K[0], hmax)
+
+    def _error(self, h, y, y1):
+        """Hairer's error norm (DOP853 combines its two estimates); NaN for an infinite
+        stage."""
+        s, plan, combine, K = self.run.s, self.plan, _V.combine, self.K
         e2 = plan.e2
         try:
-            err, worst_now, err2 = error_sums(
+            err, worst, err2 = _V.error_sums(
                 s, y, y1, combine(None, 1.0 if e2 else h, plan.e, K),
                 combine(None, 1.0, e2, K) if e2 else None)
         except (OverflowError, ValueError):  # an infinite stage: treated as NaN below
-            err, worst_now, err2 = math.nan, -1, 0.0
+            return math.nan
         if err == err:
-            worst = worst_now
-        if n == 0 or (fixed and err == err):
-            err = 0.0  # fixed steps: accepted as they are (a non-finite stage fails below)
-        elif e2:
+            self.worst = worst
+        if _N == 0 or (self.run.fixed and err == err):
+            return 0.0  # fixed steps: accepted as they are (a non-finite stage fails below)
+        if e2:
             deno = err + 0.01 * err2
             if not deno > 0.0:
                 deno = 1.0
-            err = abs(h) * err * math.sqrt(1.0 / (n * deno))
-        else:
-            err = math.sqrt(err / n)
-        if err != err and fixed:
-            raise _fail(tph, "state", STATES[max(_first_nonfinite(y1), 0)])
-        if err != err:  # a non-finite stage: retry with a much smaller step
-            bad, bad_kind = _first_nonfinite(y1), "state"
-            for i in range(1, stages):
-                if bad >= 0:
-                    break
-                if K[i] is not None:
-                    bad, bad_kind = _first_nonfinite(K[i]), "derivative of state"
-            h = h * fac_min
-            reject, last = True, False
-            st["rejected"] += 1
-            continue
+            return abs(h) * err * math.sqrt(1.0 / (_N * deno))
+        return math.sqrt(err / _N)
 
-        fac11 = err ** expo1
-        fac = fac11 / facold ** beta
+    def _retry(self, h, tph, y1, failure):
+        """A failed attempt: a much smaller step (on fixed steps, the end of the run)."""
+        run = self.run
+        if run.fixed:
+            if failure is not None:
+                raise _block_failed(failure) from None
+            raise _fail(tph, "state", STATES[max(_first_nonfinite(y1), 0)])
+        if failure is not None:
+            return _RETRY, None, h * self.m["fac_min"], (-2, "", failure)
+        bad, bad_kind = _first_nonfinite(y1), "state"
+        for i in range(1, self.stages):
+            if bad >= 0:
+                break
+            if self.K[i] is not None:
+                bad, bad_kind = _first_nonfinite(self.K[i]), "derivative of state"
+        return _RETRY, None, h * self.m["fac_min"], (bad, bad_kind, None)
+
+    def step(self, t, h, tph, y):
+        run, m, K, c = self.run, self.m, self.K, self.c
+        st, combine, fv = run.st, _V.combine, run.fv
+        y = _V.vec(y)
+        y1 = None
+        try:
+            for i in range(1, self.stages):
+                if self.fsal and i == self.last_stage:
+                    break
+                ys = combine(y, h, self.plan.a[i], K)
+                if i == self.stiff_i:
+                    self.ystiff = ys
+                self.ys = ys
+                K[i] = fv(tph if c[i] == 1.0 else t + c[i] * h, ys)
+                st["rhs"] += 1
+            y1 = combine(y, h, self.plan.b, K)
+            if self.fsal_first:
+                st["rhs"] += 1
+                K[self.last_stage] = fv(tph, y1)
+        except _BlockFailure as failure:  # an algebraic block failed in a stage
+            return self._retry(h, tph, y1, failure)
+        err = self._error(h, y, y1)
+        if err != err:  # a non-finite stage
+            return self._retry(h, tph, y1, None)
+        safe, fac_min, fac_max, beta = m["safe"], m["fac_min"], m["fac_max"], m["beta"]
+        fac11 = err ** self.expo1
+        fac = fac11 / self.facold ** beta
         fac = max(1.0 / fac_max, min(1.0 / fac_min, fac / safe))
-        hnew = s.step if fixed else h / fac
         if err <= 1.0:
-            facold = max(err, 1e-4)
-            i = _first_nonfinite(y1)
-            if i >= 0:
-                raise _fail(tph, "state", STATES[i])
-            _accept(run, tph)
+            self.facold = max(err, 1e-4)
+            self.t, self.h, self.y = t, h, y
+            return _ACCEPT, y1, run.s.step if run.fixed else h / fac, None
+        return _REJECT, None, h / min(1.0 / fac_min, fac11 / safe), None
+
+    def accepted(self, tph, y1):
+        """The last stage f(t + h, y1) of an FSAL pair whose estimate does not use it."""
+        if self.fsal and not self.fsal_first:
+            self.run.st["rhs"] += 1
             try:
-                if fsal and not fsal_first:
-                    st["rhs"] += 1
-                    K[last_stage] = fv(tph, y1)
+                self.K[self.last_stage] = self.run.fv(tph, y1)
             except _BlockFailure as failure:
                 raise _block_failed(failure) from None
-            yield from run.emit_step(t, h, tph, y1, _erk_dense(run, m, plan, t, h, y, list(K)))
-            if run.detect_stiffness and stiff_i >= 0 and ystiff is not None:
-                # h |f(Y_i) - f(Y_j)| / |Y_i - Y_j| for two stages at the same time
-                num = V.distance2(K[stiff_j], K[stiff_i])
-                den = V.distance2(y1 if stiff_j == last_stage else ys, ystiff)
-                if den > 0.0 and h * math.sqrt(num / den) > stiff_bound:
-                    nonstiff_count = 0
-                    stiff_count += 1
-                    if stiff_count == 15:
-                        run.t, run.y, run.h = tph, y1, hnew
-                        raise _Stiff()
-                else:
-                    nonstiff_count += 1
-                    if nonstiff_count == 6:
-                        stiff_count = 0
-            try:
-                if fsal:
-                    K[0] = K[last_stage]
-                elif not last:
-                    st["rhs"] += 1
-                    K[0] = fv(tph, y1)
-            except _BlockFailure as failure:
-                raise _block_failed(failure) from None
-            y, t = y1, tph
-            run.t, run.y = t, y
-            if last:
-                return
-            if abs(hnew) > hmax and not fixed:
-                hnew = hmax
-            if reject:
-                hnew = min(hnew, h)
-            reject, bad = False, -1
-        else:
-            hnew = h / min(1.0 / fac_min, fac11 / safe)
-            reject, last = True, False
-            st["rejected"] += 1
-        h = hnew
+
+    def dense(self):
+        """The dense output: the extra stages, then y(theta) = y + theta (q_0 + theta (q_1 +
+        ...)), q_d = h sum_i P[i][d] K_i."""
+        run, t, h, y, K = self.run, self.t, self.h, self.y, self.K
+        c, combine = self.c, _V.combine
+        try:
+            for i in range(self.stages, len(c)):
+                K[i] = run.fv(t + c[i] * h, combine(y, h, self.plan.a[i], K))
+                run.st["rhs"] += 1
+        except _BlockFailure as failure:
+            raise _block_failed(failure) from None
+        q = [combine(None, h, pairs, K) for pairs in self.plan.P]
+        horner = _V.horner
+        return lambda theta: horner(y, q, theta)
+
+    def after(self, tph, y1, last):
+        """Hairer's stiffness test, h |f(Y_i) - f(Y_j)| / |Y_i - Y_j| for two stages at the
+        same time; then f at the new point (the FSAL stage, or evaluated)."""
+        run, K = self.run, self.K
+        if run.detect_stiffness and self.stiff_i >= 0 and self.ystiff is not None:
+            num = _V.distance2(K[self.stiff_j], K[self.stiff_i])
+            den = _V.distance2(y1 if self.stiff_j == self.last_stage else self.ys, self.ystiff)
+            if den > 0.0 and self.h * math.sqrt(num / den) > self.stiff_bound:
+                self.nonstiff_count = 0
+                self.stiff_count += 1
+                if self.stiff_count == 15:
+                    return True
+            else:
+                self.nonstiff_count += 1
+                if self.nonstiff_count == 6:
+                    self.stiff_count = 0
+        try:
+            if self.fsal:
+                K[0] = K[self.last_stage]
+            elif not last:
+                run.st["rhs"] += 1
+                K[0] = run.fv(tph, y1)
+        except _BlockFailure as failure:
+            raise _block_failed(failure) from None
+        return False
 
 
 # ---------------------------------------------------------------- integrate
 
 
-def _run_family(run, name):
+def _run_solver(run, name):
+    """Runs solver `name` from (run.t, run.y) with the driver."""
     m = _METHODS[name]
-    family = m["family"]
-    if family == "fixed":
-        yield from _run_fixed(run, m, run.y)
-    elif family == "erk":
-        yield from _run_erk(run, m, run.y)
-    elif family == "rosenbrock":
-        yield from _run_rosenbrock(run, m, numpy.asarray(run.y, dtype=float))
-    elif family == "radau":
-        yield from _run_radau(run, m, numpy.asarray(run.y, dtype=float))
-    else:
+    family = {"fixed": _FixedSteps, "erk": _Erk, "rosenbrock": _Rosenbrock,
+              "radau": _Radau}.get(m["family"])
+    if family is None:
         raise ValueError("solver '%s' cannot run by itself" % name)
+    run.m, run.name = m, name
+    run.fixed = run.s.step > 0.0 or m["family"] == "fixed"
+    y = run.y if family in (_FixedSteps, _Erk) else numpy.asarray(run.y, dtype=float)
+    yield from _drive(run, family, y)
 
 
 def _integrate(s, p, x0, st):
@@ -1640,112 +1829,296 @@ def _integrate_from(s, p, x0, st):
     if i >= 0:
         raise _fail(s.t0, "state", STATES[i])
     run = _Run(s, p, _Work(s.rtol, s.atol), st, y)
+    st["h_next"], st["order_next"] = 0.0, 0
     yield from run.emit(s.t0, y)
     m = _METHODS[s.solver]
     if m["family"] != "auto":
-        yield from _run_family(run, s.solver)
+        yield from _run_solver(run, s.solver)
         return
     run.detect_stiffness = True
     try:
-        yield from _run_family(run, m["explicit"])
+        yield from _run_solver(run, m["explicit"])
     except _Stiff:
         st["switched"], st["t_switch"] = True, run.t
         run.detect_stiffness = False
-        yield from _run_family(run, m["stiff"])
+        yield from _run_solver(run, m["stiff"])
 
 
 # ================================================================== stiff ===
 # The stiff families: Rosenbrock methods in Hairer's transformed form (RODAS's design, any
 # tableau of the family) and Radau IIA with 3, 5 or 7 stages, of fixed or variable order
 # (RADAU5's and RADAU's design), as bgc_run_rosenbrock and bgc_run_radau in the C runtime (see
-# there).  Linear algebra: whether an iteration matrix is singular is decided as the C runtime
-# decides it (its LU factorisation with partial pivoting, done here row-vectorised in the same
-# operations: an exactly zero pivot column is singular), so both backends stop on the same
-# matrices; a matrix that is not is inverted once per factorisation with numpy.linalg.inv and
-# every solve is a matrix-vector product with the inverse.  The results agree with C's within
-# rounding, not bit for bit.
+# there).  Byte parity: every floating-point operation is the C runtime's, in C's order, so
+# both backends write the same bytes whatever BLAS or SIMD kernels numpy picks.  Hence no
+# numpy.sum, dot, @ or linalg here: sums run in C's sequence (_seq_sum, a subtract.accumulate),
+# the LU factorisations and solves are bgc_stiff_lu's and bgc_stiff_zlu's (row-vectorised
+# where C's loops are element-wise independent), and complex arithmetic is done on real and
+# imaginary parts as gcc compiles C99's: products (ac - bd) + i(ad + bc) with Annex G's
+# recovery of infinities (libgcc's __muldc3), quotients as libgcc's __divdc3 (GCC 12 and on).
 
 
 def _stiff_norm(v, w):
-    """sqrt(mean((v_i / w_i)^2)) (0 without states) and the component with the largest share."""
+    """bgc_stiff_norm: sqrt(mean((v_i / w_i)^2)) (0 without states) and the component with
+    the largest share (the first; -1 if every share is NaN)."""
     if _N == 0:
         return 0.0, -1
     with numpy.errstate(all="ignore"):
-        q = (v / w) ** 2
-        total = float(numpy.sum(q))
-    worst = int(numpy.argmax(q)) if total == total else -1
-    return math.sqrt(total / _N), worst
+        q = v / w
+        q = q * q
+    return math.sqrt(_seq_sum(q) / _N), _worst(q)
 
 
-def _stiff_fail_step(name, t, h, bad, bad_kind, worst, block_failure):
-    """A step size below _hmin: the message names what made the steps shrink (bad: -2 a failed
-    block, -3 a singular matrix, -4 Newton, >= 0 a non-finite component, else the error)."""
-    if bad == -2:
-        return _block_failed(block_failure)
-    if bad == -3:
-        return _Failure("at t = %.17g: %s: the iteration matrix is singular (step size down to "
-                        "h = %.3g)" % (t, name, h), t)
-    if bad == -4:
-        return _Failure("at t = %.17g: %s: the Newton iteration does not converge (step size "
-                        "down to h = %.3g)" % (t, name, h), t)
-    if bad >= 0:
-        return _fail(t, bad_kind, STATES[bad])
-    return _fail_step(t, h, worst)
+# ---------------------------------------------------------------- complex arithmetic
+# A complex number is a pair of floats (or of float arrays): real and imaginary part.
+
+_RBIG = sys.float_info.max / 2
+_RMIN = sys.float_info.min
+_RMIN2 = sys.float_info.epsilon
+_RMINSCAL = 1.0 / sys.float_info.epsilon
+_RMAX2 = _RBIG * _RMIN2
+
+
+def _box(v):
+    """Annex G's boxing of an infinite part: +-1 if v is infinite, else +-0."""
+    return math.copysign(1.0 if math.isinf(v) else 0.0, v)
+
+
+def _muldc3(a, b, c, d):
+    """(a + ib)(c + id) as libgcc's __muldc3 (gcc's inline product where not both parts are
+    NaN), on floats."""
+    ac, bd, ad, bc = a * c, b * d, a * d, b * c
+    x, y = ac - bd, ad + bc
+    if x != x and y != y:  # recover infinities that came out as NaN + iNaN
+        recalc = False
+        if math.isinf(a) or math.isinf(b):
+            a, b = _box(a), _box(b)
+            c = math.copysign(0.0, c) if c != c else c
+            d = math.copysign(0.0, d) if d != d else d
+            recalc = True
+        if math.isinf(c) or math.isinf(d):
+            c, d = _box(c), _box(d)
+            a = math.copysign(0.0, a) if a != a else a
+            b = math.copysign(0.0, b) if b != b else b
+            recalc = True
+        if not recalc and any(math.isinf(v) for v in (ac, bd, ad, bc)):
+            a, b, c, d = (math.copysign(0.0, v) if v != v else v for v in (a, b, c, d))
+            recalc = True
+        if recalc:
+            x = math.inf * (a * c - b * d)
+            y = math.inf * (a * d + b * c)
+    return x, y
+
+
+def _divdc3(a, b, c, d):
+    """(a + ib) / (c + id) as libgcc's __divdc3 (GCC 12's: Smith's method with scaling), on
+    floats; where Python would raise on a division by zero, on numpy.float64 values (IEEE)."""
+    try:
+        return _divdc3_of(a, b, c, d)
+    except ZeroDivisionError:
+        with numpy.errstate(all="ignore"):
+            x, y = _divdc3_of(*(numpy.float64(v) for v in (a, b, c, d)))
+        return float(x), float(y)
+
+
+def _divdc3_of(a, b, c, d):
+    if abs(c) < abs(d):
+        if abs(d) >= _RBIG:
+            a, b, c, d = a / 2, b / 2, c / 2, d / 2
+        if abs(d) < _RMIN2 or _tiny(a, b, d):
+            a, b, c, d = a * _RMINSCAL, b * _RMINSCAL, c * _RMINSCAL, d * _RMINSCAL
+        ratio = c / d
+        denom = (c * ratio) + d
+        if abs(ratio) > _RMIN:
+            x, y = ((a * ratio) + b) / denom, ((b * ratio) - a) / denom
+        else:
+            x, y = ((c * (a / d)) + b) / denom, ((c * (b / d)) - a) / denom
+    else:
+        if abs(c) >= _RBIG:
+            a, b, c, d = a / 2, b / 2, c / 2, d / 2
+        if abs(c) < _RMIN2 or _tiny(a, b, c):
+            a, b, c, d = a * _RMINSCAL, b * _RMINSCAL, c * _RMINSCAL, d * _RMINSCAL
+        ratio = d / c
+        denom = (d * ratio) + c
+        if abs(ratio) > _RMIN:
+            x, y = ((b * ratio) + a) / denom, (b - (a * ratio)) / denom
+        else:
+            x, y = (a + (d * (b / c))) / denom, (b - (d * (a / c))) / denom
+    if x != x and y != y:  # recover infinities and zeros that came out as NaN + iNaN
+        if c == 0.0 and d == 0.0 and (a == a or b == b):
+            x, y = math.copysign(math.inf, c) * a, math.copysign(math.inf, c) * b
+        elif (math.isinf(a) or math.isinf(b)) and math.isfinite(c) and math.isfinite(d):
+            a, b = _box(a), _box(b)
+            x, y = math.inf * (a * c + b * d), math.inf * (b * c - a * d)
+        elif (math.isinf(c) or math.isinf(d)) and math.isfinite(a) and math.isfinite(b):
+            c, d = _box(c), _box(d)
+            x, y = 0.0 * (a * c + b * d), 0.0 * (b * c - a * d)
+    return x, y
+
+
+def _tiny(a, b, big):
+    """__divdc3's test for scaling up a small numerator (big: the divisor's larger part)."""
+    return ((abs(a) < _RMIN and abs(b) < _RMAX2 and abs(big) < _RMAX2)
+            or (abs(b) < _RMIN and abs(a) < _RMAX2 and abs(big) < _RMAX2))
+
+
+def _each(f, mask, x, y, *args):
+    """x, y with f(*args_i) at the elements where mask holds (the rare cases of the vector
+    complex operations, done one by one)."""
+    args = numpy.broadcast_arrays(*args)
+    x, y = numpy.array(x, dtype=float), numpy.array(y, dtype=float)
+    for i in zip(*numpy.nonzero(mask)):
+        x[i], y[i] = f(*(float(v[i]) for v in args))
+    return x, y
+
+
+def _cmul(a, b, c, d):
+    """(a + ib)(c + id) element-wise (arrays or floats): gcc's inline product, __muldc3 where
+    both parts are NaN."""
+    x, y = a * c - b * d, a * d + b * c
+    bad = (x != x) & (y != y)
+    return _each(_muldc3, bad, x, y, a, b, c, d) if bad.any() else (x, y)
+
+
+def _cdiv(a, b, c, d):
+    """(a + ib) / (c + id) for arrays a, b and floats c, d: __divdc3 without scaling (a
+    divisor of moderate size) vectorised, _divdc3 element by element otherwise."""
+    one = abs(c) < abs(d)  # scaled by d: ratio c / d
+    big = abs(d) if one else abs(c)
+    if not _RMIN2 <= big < _RBIG:
+        return _each(_divdc3, numpy.ones(numpy.shape(a), bool), a, a, a, b, c, d)
+    ratio = c / d if one else d / c
+    normal = abs(ratio) > _RMIN  # else (a real or imaginary divisor) the other order
+    if one:
+        denom = (c * ratio) + d
+        if normal:
+            x, y = ((a * ratio) + b) / denom, ((b * ratio) - a) / denom
+        else:
+            x, y = ((c * (a / d)) + b) / denom, ((c * (b / d)) - a) / denom
+    else:
+        denom = (d * ratio) + c
+        if normal:
+            x, y = ((b * ratio) + a) / denom, (b - (a * ratio)) / denom
+        else:
+            x, y = (a + (d * (b / c))) / denom, (b - (d * (a / c))) / denom
+    aa, ab = numpy.abs(a), numpy.abs(b)
+    odd = (x != x) & (y != y)
+    if big < _RMAX2:
+        odd |= ((aa < _RMIN) & (ab < _RMAX2)) | ((ab < _RMIN) & (aa < _RMAX2))
+    return _each(_divdc3, odd, x, y, a, b, c, d) if odd.any() else (x, y)
+
+
+# ---------------------------------------------------------------- dense linear algebra
+# bgc_stiff_lu and bgc_stiff_zlu: partial pivoting on the first largest |a_ik| (|re| + |im|
+# for complex), rows whose multiplier is zero left alone, a column without a nonzero pivot
+# singular (None); the elimination of row i, a_ij - l a_kj for j > k, is element-wise in C
+# and done here for all rows i at once.  The solves: all the row swaps, the column-oriented
+# forward substitution (vectorised), the back substitution's row sums in C's order.
+
+
+def _pivot(size):
+    """C's pivot search over a column's sizes from the diagonal: from |a_kk|, the first entry
+    larger than the largest so far (a NaN is never larger, and a NaN |a_kk| stays)."""
+    if len(size) < 2 or size[0] != size[0]:
+        return 0
+    rest = numpy.where(size[1:] == size[1:], size[1:], -1.0)
+    i = int(numpy.argmax(rest))
+    return i + 1 if rest[i] > size[0] else 0
+
+
+def _lu(a):
+    """bgc_stiff_lu on a (n x n, factored in place): the pivots, or None if singular."""
+    n = a.shape[0]
+    piv = []
+    with numpy.errstate(all="ignore"):
+        for k in range(n):
+            size = numpy.abs(a[k:, k])
+            p = k + _pivot(size)
+            piv.append(p)
+            if size[p - k] == 0.0:
+                return None
+            if p != k:
+                a[[k, p]] = a[[p, k]]
+            lower = a[k + 1:, k] / a[k, k]
+            a[k + 1:, k] = lower
+            rows = numpy.nonzero(lower != 0.0)[0]
+            if len(rows) == n - k - 1:
+                a[k + 1:, k + 1:] -= lower[:, None] * a[k, k + 1:]
+            elif len(rows):
+                a[rows + k + 1, k + 1:] -= lower[rows, None] * a[k, k + 1:]
+    return piv
+
+
+def _lu_solve(lu, piv, b):
+    """bgc_stiff_lu_solve: A^-1 b (a new vector) from _lu's factors (under the caller's
+    numpy.errstate, as _zlu_solve)."""
+    b = numpy.array(b, dtype=float)
+    n = len(b)
+    for k in range(n):
+        p = piv[k]
+        b[k], b[p] = b[p], b[k]
+    for k in range(n - 1):
+        bk = b[k]
+        if bk != 0.0:
+            b[k + 1:] -= lu[k + 1:, k] * bk
+    for k in range(n - 1, -1, -1):
+        b[k] = _seq_minus(b[k], lu[k, k + 1:] * b[k + 1:]) / lu[k, k]
+    return b
+
+
+def _zlu(ar, ai):
+    """bgc_stiff_zlu on ar + i ai (factored in place): the pivots, or None if singular."""
+    n = ar.shape[0]
+    piv = []
+    with numpy.errstate(all="ignore"):
+        for k in range(n):
+            size = numpy.abs(ar[k:, k]) + numpy.abs(ai[k:, k])
+            p = k + _pivot(size)
+            piv.append(p)
+            if size[p - k] == 0.0:
+                return None
+            if p != k:
+                ar[[k, p]], ai[[k, p]] = ar[[p, k]], ai[[p, k]]
+            lr, li = _cdiv(ar[k + 1:, k], ai[k + 1:, k], float(ar[k, k]), float(ai[k, k]))
+            ar[k + 1:, k], ai[k + 1:, k] = lr, li
+            rows = numpy.nonzero((lr != 0.0) | (li != 0.0))[0]
+            if len(rows):
+                pr, pi = _cmul(lr[rows, None], li[rows, None], ar[k, k + 1:], ai[k, k + 1:])
+                ar[rows + k + 1, k + 1:] -= pr
+                ai[rows + k + 1, k + 1:] -= pi
+    return piv
+
+
+def _zlu_solve(lur, lui, piv, br, bi):
+    """bgc_stiff_zlu_solve: A^-1 (br + i bi) (new vectors) from _zlu's factors."""
+    br, bi = numpy.array(br, dtype=float), numpy.array(bi, dtype=float)
+    n = len(br)
+    for k in range(n):
+        p = piv[k]
+        br[k], br[p] = br[p], br[k]
+        bi[k], bi[p] = bi[p], bi[k]
+    for k in range(n - 1):
+        xr, xi = float(br[k]), float(bi[k])
+        if xr != 0.0 or xi != 0.0:
+            pr, pi = _cmul(lur[k + 1:, k], lui[k + 1:, k], xr, xi)
+            br[k + 1:] -= pr
+            bi[k + 1:] -= pi
+    for k in range(n - 1, -1, -1):
+        pr, pi = _cmul(lur[k, k + 1:], lui[k, k + 1:], br[k + 1:], bi[k + 1:])
+        br[k], bi[k] = _divdc3(float(_seq_minus(br[k], pr)), float(_seq_minus(bi[k], pi)),
+                               float(lur[k, k]), float(lui[k, k]))
+    return br, bi
+
+
+def _real_matrix(J, diagonal):
+    """-J with `diagonal` added to its diagonal, as the C runtime forms it."""
+    E = -J
+    E[numpy.diag_indices(_N)] += diagonal
+    return E
 
 
 def _stiff_fail_singular(name, t, h):
     return _Failure("at t = %.17g: %s: the iteration matrix is singular (h = %.3g)"
                     % (t, name, h), t)
-
-
-def _stiff_singular(E):
-    """Whether bgc_stiff_lu (bgc_stiff_zlu for a complex E) finds a column without a nonzero
-    pivot: the same pivots (the first largest |a_ik|, |re| + |im| for complex), the same
-    eliminations (rows whose multiplier is zero left alone)."""
-    a = numpy.array(E)
-    n = a.shape[0]
-    size = (lambda v: numpy.abs(v.real) + numpy.abs(v.imag)) if a.dtype.kind == "c" \
-        else numpy.abs
-    with numpy.errstate(all="ignore"):
-        for k in range(n):
-            column = size(a[k:, k])
-            # C's scan: from |a_kk|, the first entry larger than the largest so far (a NaN
-            # is never larger, and a NaN |a_kk| stays)
-            p = k
-            if column[0] == column[0] and len(column) > 1:
-                rest = numpy.where(column[1:] == column[1:], column[1:], -1.0)
-                if rest.max() > column[0]:
-                    p = k + 1 + int(numpy.argmax(rest))
-            if column[p - k] == 0.0:
-                return True
-            if p != k:
-                a[[k, p]] = a[[p, k]]
-            lower = a[k + 1:, k] / a[k, k]
-            rows = numpy.nonzero(lower != 0.0)[0] + k + 1
-            if len(rows):
-                a[rows, k + 1:] -= lower[rows - k - 1, None] * a[k, k + 1:]
-    return False
-
-
-def _stiff_inverse(E):
-    """E^-1, or None if E is singular (as the C runtime's factorisation finds it)."""
-    if _stiff_singular(E):
-        return None
-    try:
-        with numpy.errstate(all="ignore"):
-            return numpy.linalg.inv(E)
-    except numpy.linalg.LinAlgError:
-        return None
-
-
-def _method_name(m):
-    """The solver's name for messages (m is one of _METHODS' entries)."""
-    return next(name for name, entry in _METHODS.items() if entry is m)
-
-
-def _stiff_grid(s, t_start, k, n):
-    """Fixed steps: the grid t_start + k * step, the last step ending on t_end."""
-    return s.t_end if k >= n else t_start + k * s.step
 
 
 def _stiff_jacobian(run, t, y):
@@ -1771,99 +2144,83 @@ def _stiff_start(run, t, y):
     return f0
 
 
+def _first_step(run, y, f0):
+    """The first step of an adaptive run: the earlier run's (bounded by the span), else
+    HINIT."""
+    hmax = run.s.t_end - run.s.t0
+    return min(run.h, hmax) if run.h > 0.0 else _initial_step(run, run.m["q"], y, f0, hmax)
+
+
 # ---------------------------------------------------------------- Rosenbrock methods
 
 
-def _run_rosenbrock(run, m, y):
-    """Rosenbrock methods as Hairer's RODAS (see bgc_run_rosenbrock in the C runtime)."""
-    s, st = run.s, run.st
-    if run.kout > run.nout:
-        return
-    name = _method_name(m)
-    stages, gamma = m["stages"], m["gamma"]
-    c, d, a, C = m["c"], m["d"], m["a"], m["C"]
-    mw, ew, H = m["m"], m["e"], m["H"]
-    safe, fac_min, fac_max = m["safe"], m["fac_min"], m["fac_max"]
-    expo = 1.0 / m["q"]
-    fixed = s.step > 0.0
-    hmax = s.t_end - s.t0
-    t_start = t = run.t
-    h, hacc, erracc = 0.0, 0.0, 1.0
-    reject = last = False
-    fresh, accepted, nsing, k_fixed, n_fixed = True, 0, 0, 0, 0
-    worst, bad, bad_kind, block_failure = -1, -1, "", None
-    identity = numpy.eye(_N)
-    ft = numpy.zeros(_N)
-    f0 = J = None
-    if fixed:
-        n_fixed = _substeps(s.t_end - t_start, s.step)
-        if n_fixed < 0:
-            raise _fail_step(t, s.step, -1)
-    while True:
-        if fresh:  # a new point: f, df/dt, J
-            f0 = _stiff_start(run, t, y)
-            if not _AUTONOMOUS:
-                delta = math.sqrt(_EPS * max(1e-5, abs(t)))
-                st["rhs"] += 1
-                try:
-                    ft = (run.f(t + delta, y) - f0) / delta
-                except _BlockFailure as failure:
-                    raise _block_failed(failure) from None
-            J = _stiff_jacobian(run, t, y)
-            if h == 0.0 and not fixed:
-                h = min(run.h, hmax) if run.h > 0.0 else _initial_step(run, m["q"], y, f0, hmax)
-            fresh = False
-        if fixed:
-            last = k_fixed + 1 >= n_fixed
-            tph = _stiff_grid(s, t_start, k_fixed + 1, n_fixed)
-            h = tph - t
-            if not h >= _hmin(t):
-                raise _fail_step(t, h, -1)
-        else:
-            if not h >= _hmin(t):
-                raise _stiff_fail_step(name, t, h, bad, bad_kind, worst, block_failure)
-            if t + 1.01 * h - s.t_end > 0.0:
-                h = s.t_end - t
-                last = True
-            tph = s.t_end if last else t + h
+class _Rosenbrock(_Family):
+    """Rosenbrock methods as Hairer's RODAS (bgc_family_rosenbrock in the C runtime)."""
 
-        # E = I/(gamma h) - J, inverted
+    def __init__(self, run):
+        self.run, self.m = run, run.m
+        self.accepted_steps, self.nsing = 0, 0
+        self.hacc, self.erracc = 0.0, 1.0
+        self.ft = numpy.zeros(_N)
+        self.f0 = self.J = self.K = self.y = self.y1 = None
+
+    def _point(self, t, y):
+        """f, df/dt and J at a new point."""
+        run = self.run
+        self.f0 = _stiff_start(run, t, y)
+        if not _AUTONOMOUS:
+            delta = math.sqrt(_EPS * max(1e-5, abs(t)))
+            run.st["rhs"] += 1
+            try:
+                self.ft = (run.f(t + delta, y) - self.f0) / delta
+            except _BlockFailure as failure:
+                raise _block_failed(failure) from None
+        self.J = _stiff_jacobian(run, t, y)
+
+    def start(self, y):
+        self._point(self.run.t, y)
+        return None if self.run.fixed else _first_step(self.run, y, self.f0)
+
+    def _stages(self, t, h, tph, y, E, piv):
+        m, run = self.m, self.run
+        c, d, a, C = m["c"], m["d"], m["a"], m["C"]
+        K = [None] * m["stages"]
+        with numpy.errstate(all="ignore"):
+            for i in range(m["stages"]):
+                if i == 0:
+                    rhs = self.f0.copy()
+                else:
+                    run.st["rhs"] += 1
+                    rhs = run.f(tph if c[i] == 1.0 else t + c[i] * h, y + _combine(a[i], K, i))
+                rhs = rhs + _combine(C[i], K, i) / h
+                if not _AUTONOMOUS and d[i] != 0.0:
+                    rhs = rhs + h * d[i] * self.ft
+                K[i] = _lu_solve(E, piv, rhs)
+                run.st["solves"] += 1
+        return K
+
+    def step(self, t, h, tph, y):
+        run, m, st = self.run, self.m, self.run.st
+        fixed = run.fixed
         st["lu"] += 1
-        Einv = _stiff_inverse(identity * (1.0 / (gamma * h)) - J)
-        if Einv is None:
-            nsing += 1
-            if fixed or nsing == 5:
-                raise _stiff_fail_singular(name, t, h)
-            bad, h, reject, last = -3, h * 0.5, True, False
-            st["rejected"] += 1
-            continue
-
-        K = [None] * stages
+        E = _real_matrix(self.J, 1.0 / (m["gamma"] * h))
+        piv = _lu(E)
+        if piv is None:
+            if fixed or self.nsing + 1 == 5:
+                raise _stiff_fail_singular(run.name, t, h)
+            self.nsing += 1
+            return _RETRY, None, h * 0.5, (-3, "", None)
         try:
-            with numpy.errstate(all="ignore"):
-                for i in range(stages):
-                    if i == 0:
-                        rhs = f0.copy()
-                    else:
-                        st["rhs"] += 1
-                        rhs = run.f(tph if c[i] == 1.0 else t + c[i] * h, y + _combine(a[i], K, i))
-                    rhs = rhs + _combine(C[i], K, i) / h
-                    if not _AUTONOMOUS and d[i] != 0.0:
-                        rhs = rhs + h * d[i] * ft
-                    K[i] = Einv @ rhs
-                    st["solves"] += 1
+            K = self._stages(t, h, tph, y, E, piv)
         except _BlockFailure as failure:  # an algebraic block failed in a stage
             if fixed:
                 raise _block_failed(failure) from None
-            bad, block_failure = -2, failure
-            h, reject, last = h * 0.5, True, False
-            st["rejected"] += 1
-            continue
-
+            return _RETRY, None, h * 0.5, (-2, "", failure)
+        stages = m["stages"]
         with numpy.errstate(all="ignore"):
-            y1 = y + _combine(mw, K, stages)
-            err, worst_now = _stiff_norm(_combine(ew, K, stages), _weights(s, y, y1))
-        worst = worst_now if worst_now >= 0 else worst
+            y1 = y + _combine(m["m"], K, stages)
+            err, worst = _stiff_norm(_combine(m["e"], K, stages), _weights(run.s, y, y1))
+        self.worst = worst if worst >= 0 else self.worst
         i = _first_nonfinite(y1)
         if err != err or err == math.inf or i >= 0:
             if fixed:
@@ -1873,45 +2230,36 @@ def _run_rosenbrock(run, m, y):
                 if bad >= 0:
                     break
                 bad, bad_kind = _first_nonfinite(K[j]), "derivative of state"
-            h, reject, last = h * 0.5, True, False
-            st["rejected"] += 1
-            continue
+            return _RETRY, None, h * 0.5, (bad, bad_kind, None)
         if fixed:
             err = 0.0
 
         # Gustafsson's predictive controller (rodas.f)
+        safe, fac_min, fac_max, expo = m["safe"], m["fac_min"], m["fac_max"], 1.0 / m["q"]
         fac = max(1.0 / fac_max, min(1.0 / fac_min, err ** expo / safe))
         hnew = h / fac
-        if err <= 1.0:
-            if accepted > 0:
-                facgus = (hacc / h) * (err * err / erracc) ** expo / safe
-                facgus = max(1.0 / fac_max, min(1.0 / fac_min, facgus))
-                fac = max(fac, facgus)
-                hnew = h / fac
-            hacc, erracc = h, max(1e-2, err)
-            accepted += 1
-            _accept(run, tph)
-            yield from run.emit_step(t, h, tph, y1, _rosenbrock_dense(y, y1, K, H))
-            y, t = y1, tph
-            run.t, run.y = t, y
-            fresh, nsing, bad = True, 0, -1
-            if last:
-                return
-            k_fixed += 1
-            hnew = min(hnew, hmax)
-            if reject:
-                hnew = min(hnew, h)
-            reject = False
-        else:
-            reject, last = True, False
-            st["rejected"] += 1
-        h = hnew
+        if err > 1.0:
+            return _REJECT, None, hnew, None
+        if self.accepted_steps > 0:
+            facgus = (self.hacc / h) * (err * err / self.erracc) ** expo / safe
+            facgus = max(1.0 / fac_max, min(1.0 / fac_min, facgus))
+            fac = max(fac, facgus)
+            hnew = h / fac
+        self.hacc, self.erracc = h, max(1e-2, err)
+        self.accepted_steps += 1
+        self.nsing = 0
+        self.K, self.y, self.y1 = K, y, y1
+        return _ACCEPT, y1, hnew, None
 
-
-def _rosenbrock_dense(y, y1, K, H):
-    """y(theta) = (1 - theta) y0 + theta (y1 + (1 - theta) (q_1 + theta (q_2 + ... theta q_R)))."""
-    def prepare():
-        q = [_combine(row, K, len(K)) for row in H]
+    def dense(self):
+        """y(theta) = (1 - theta) y0 + theta (y1 + (1 - theta) (q_1 + theta (q_2 + ...)))."""
+        y, y1, K = self.y, self.y1, self.K
+        q = []
+        for row in self.m["H"]:  # every weight, zeros too, as bgc_ros_prepare
+            acc = numpy.zeros(_N)
+            for w, k in zip(row, K):
+                acc = acc + w * k
+            q.append(acc)
 
         def at(theta):
             s1 = 1.0 - theta
@@ -1920,7 +2268,11 @@ def _rosenbrock_dense(y, y1, K, H):
                 acc = qr + theta * acc
             return s1 * y + theta * (y1 + s1 * acc)
         return at
-    return prepare
+
+    def after(self, tph, y1, last):
+        if not last:
+            self._point(tph, y1)
+        return False
 
 
 # ---------------------------------------------------------------- Radau IIA (RADAU5)
@@ -1937,6 +2289,15 @@ def _radau_poly(c, Z):
             for k in range(s, j - 1, -1):
                 d[k] = (d[k] - d[k - 1]) / (x[k] - x[k - j])
     return d[1:]
+
+
+def _radau_mul(M, V):
+    """bgc_radau_mul for every component: M (ns x ns) times the stages V (ns x N), each
+    M_i0 V_0 + M_i1 V_1 + ... in this order (all rows i at once)."""
+    acc = numpy.multiply.outer(M[:, 0], V[0])
+    for j in range(1, len(M)):
+        acc += numpy.multiply.outer(M[:, j], V[j])
+    return acc
 
 
 def _radau_u(c, b, theta):
@@ -1968,282 +2329,304 @@ class _RadauUse:
         self.expo = 1.0 / (self.ns + 1)
 
 
-def _run_radau(run, m, y):
-    """Radau IIA after Hairer's RADAU5 and RADAU, fixed or variable order (see bgc_run_radau in
-    the C runtime)."""
-    s, st = run.s, run.st
-    if run.kout > run.nout:
-        return
-    name = _method_name(m)
-    safe, fac_min, fac_max = m["safe"], m["fac_min"], m["fac_max"]
-    thet = 0.001
-    fixed = s.step > 0.0
-    nsets = len(m["radau"])
-    variable = nsets > 1 and not fixed
-    hmax = s.t_end - s.t0
-    k_set, since, change, unexp, unexn, recheck = 0, 0, False, False, False, False
-    u = _RadauUse(m, s, k_set)
-    t_start = t = run.t
-    h, hfact, hold, hacc, erracc = 0.0, 0.0, 0.0, 0.0, 1.0
-    faccon, theta, thetat, thqold, dynold, hhfac = 1.0, thet, 0.0, 1.0, 1.0, 0.5
-    reject = last = caljac = False
-    first = needjac = True
-    accepted, nsing, k_fixed, n_fixed, newt = 0, 0, 0, 0, 0
-    worst, bad, bad_kind, block_failure = -1, -1, "", None
-    identity = numpy.eye(_N)
-    J = E1inv = None
-    Ecinv = []
-    b = [numpy.zeros(_N)] * u.ns
-    zlast = numpy.zeros(_N)
-    if fixed:
-        n_fixed = _substeps(s.t_end - t_start, s.step)
-        if n_fixed < 0:
-            raise _fail_step(t, s.step, -1)
-    f0 = _stiff_start(run, t, y)
-    scal = u.atol + u.rtol * numpy.abs(y)
-    if not fixed:
-        h = min(run.h, hmax) if run.h > 0.0 else _initial_step(run, m["q"], y, f0, hmax)
-    while True:
-        if needjac:
-            J = _stiff_jacobian(run, t, y)
-            needjac, caljac, hfact = False, True, 0.0
-        if fixed:
-            last = k_fixed + 1 >= n_fixed
-            tph = _stiff_grid(s, t_start, k_fixed + 1, n_fixed)
-            h = tph - t
-            if not h >= _hmin(t):
-                raise _fail_step(t, h, -1)
-        else:
-            if not h >= _hmin(t):
-                raise _stiff_fail_step(name, t, h, bad, bad_kind, worst, block_failure)
-            if t + 1.01 * h - s.t_end > 0.0:
-                h = s.t_end - t
-                last = True
-            tph = s.t_end if last else t + h
+_THET = 0.001  # recompute J when Newton contracted more slowly than this
 
-        # the order, whenever the matrices are to be factored (variable order only)
-        if variable and (h != hfact or recheck):
-            hquot = h / hold if hold > 0.0 else 0.0
-            nxt = k_set
-            since += 1
-            thetat = min(10.0, max(theta, 0.5 * thetat))
-            if (newt > 1 and thetat <= 0.002 and 0.8 < hquot < 1.2 and since > 10
-                    and k_set + 1 < nsets):
-                nxt = k_set + 1
-            if (thetat >= 0.8 or unexp or unexn) and k_set > 0:
-                nxt = k_set - 1
-            unexp = unexn = recheck = False
-            if nxt != k_set:
-                k_set = nxt
-                u = _RadauUse(m, s, k_set)
-                since, change, hfact = 1, True, 0.0
-                scal = u.atol + u.rtol * numpy.abs(y)
-        c, T, Ti, ns = u.c, u.T, u.Ti, u.ns
-        fac1 = u.gamma / h
-        alphn = [a / h for a in u.alpha]
-        betan = [bb / h for bb in u.beta]
 
-        # gamma/h I - J and (alpha_k + i beta_k)/h I - J, inverted (unless they are h's)
-        refactored = h != hfact
-        if h != hfact:
+class _Radau(_Family):
+    """Radau IIA after Hairer's RADAU5 and RADAU, fixed or variable order (bgc_family_radau
+    in the C runtime)."""
+
+    def __init__(self, run):
+        m, s = run.m, run.s
+        self.run, self.m = run, m
+        self.nsets = len(m["radau"])
+        self.variable = self.nsets > 1 and not run.fixed
+        self.k_set, self.since = 0, 0
+        for k, rd in enumerate(m["radau"]):
+            if self.variable and 2 * rd["s"] - 1 == s.order0:
+                self.k_set, self.since = k, 10  # going on from an earlier run at its order
+        self.change = self.unexp = self.unexn = self.recheck = False
+        self.u = _RadauUse(m, s, self.k_set)
+        self.hfact = self.hold = self.hacc = 0.0
+        self.erracc = 1.0
+        self.faccon, self.theta, self.thetat = 1.0, _THET, 0.0
+        self.thqold, self.dynold, self.hhfac = 1.0, 1.0, 0.5
+        self.reject = self.caljac = self.refactored = False
+        self.first = self.needjac = True
+        self.accepted_steps, self.nsing, self.newt = 0, 0, 0
+        self.J = self.E1 = self.piv1 = self.f0 = self.scal = None
+        self.Ec = []  # per complex pair: the factors' real and imaginary parts, the pivots
+        self.b = [numpy.zeros(_N)] * self.u.ns
+        self.zlast = numpy.zeros(_N)
+        self.Z = self.W = self.y = self.dc = None
+
+    def start(self, y):
+        run, u = self.run, self.u
+        self.f0 = _stiff_start(run, run.t, y)
+        self.scal = u.atol + u.rtol * numpy.abs(y)
+        return None if run.fixed else _first_step(run, y, self.f0)
+
+    def _order(self, h, y):
+        """The order, whenever the matrices are to be factored (variable order only)."""
+        hquot = h / self.hold if self.hold > 0.0 else 0.0
+        nxt = self.k_set
+        self.since += 1
+        self.thetat = min(10.0, max(self.theta, 0.5 * self.thetat))
+        if (self.newt > 1 and self.thetat <= 0.002 and 0.8 < hquot < 1.2 and self.since > 10
+                and self.k_set + 1 < self.nsets):
+            nxt = self.k_set + 1
+        if (self.thetat >= 0.8 or self.unexp or self.unexn) and self.k_set > 0:
+            nxt = self.k_set - 1
+        self.unexp = self.unexn = self.recheck = False
+        if nxt != self.k_set:
+            self.k_set = nxt
+            self.u = u = _RadauUse(self.m, self.run.s, nxt)
+            self.since, self.change, self.hfact = 1, True, 0.0
+            self.scal = u.atol + u.rtol * numpy.abs(y)
+
+    def _factor(self, fac1, alphn, betan):
+        """gamma/h I - J and (alpha_k + i beta_k)/h I - J, factored; False if one is singular.
+        C adds alpha_k + beta_k _Complex_I, i.e. (alpha_k + beta_k 0) + i (0 + beta_k), to
+        -J."""
+        st = self.run.st
+        st["lu"] += 1
+        self.E1 = _real_matrix(self.J, fac1)
+        self.piv1 = _lu(self.E1)
+        self.Ec = []
+        if self.piv1 is None:
+            return False
+        for k in range(self.u.pairs):
             st["lu"] += 1
-            E1inv = _stiff_inverse(identity * fac1 - J)
-            Ecinv = []
-            singular = E1inv is None
-            for k in range(u.pairs):
-                if singular:
-                    break
-                st["lu"] += 1
-                inv = _stiff_inverse(identity * complex(alphn[k], betan[k]) - J)
-                singular = inv is None
-                Ecinv.append(inv)
-            if singular:
-                hfact = 0.0
-                nsing += 1
-                if fixed or nsing == 5:
-                    raise _stiff_fail_singular(name, t, h)
-                bad, unexp, h, reject, last = -3, True, h * 0.5, True, False
-                st["rejected"] += 1
-                needjac = not caljac
-                continue
-            hfact = h
+            Er = _real_matrix(self.J, alphn[k] + betan[k] * 0.0)
+            Ei = numpy.zeros((_N, _N))
+            Ei[numpy.diag_indices(_N)] += betan[k]
+            pv = _zlu(Er, Ei)
+            if pv is None:
+                return False
+            self.Ec.append((Er, Ei, pv))
+        return True
 
-        # starting values: the last step's collocation polynomial, extrapolated
-        if first or change:
-            Z = numpy.zeros((ns, _N))
+    def _newton(self, t, h, tph, y, fac1, alphn, betan):
+        """The simplified Newton iteration from the last step's collocation polynomial: 0
+        converged (self.Z), else (1, why) a stage failed, 2 no convergence, 3 too slow
+        (self.hhfac: the step that would converge)."""
+        run, u, st = self.run, self.u, self.run.st
+        c, ns, scal = u.c, u.ns, self.scal
+        if self.first or self.change:
+            Z, W = numpy.zeros((ns, _N)), numpy.zeros((ns, _N))
         else:
-            q = h / hold
-            Z = numpy.array([_radau_u(c, b, 1.0 + c[i] * q) - zlast for i in range(ns)])
-        W = Ti @ Z
-
-        # the simplified Newton iteration
-        newt, failed = 0, 0
-        faccon = max(faccon, _EPS) ** 0.8
-        theta = thet
+            q = h / self.hold
+            with numpy.errstate(all="ignore"):
+                Z = numpy.array([_radau_u(c, self.b, 1.0 + c[i] * q) - self.zlast
+                                 for i in range(ns)])
+                W = _radau_mul(u.Ti, Z)
+        self.newt = 0
+        self.faccon = max(self.faccon, _EPS) ** 0.8
+        self.theta = _THET
         while True:
-            if newt >= u.nit:
-                failed = 2
-                break
+            if self.newt >= u.nit:
+                return 2, None
             F = numpy.empty((ns, _N))
             try:
                 for i in range(ns):
-                    ti = tph if i == ns - 1 else t + c[i] * h
                     st["rhs"] += 1
-                    F[i] = run.f(ti, y + Z[i])
+                    F[i] = run.f(tph if i == ns - 1 else t + c[i] * h, y + Z[i])
                     j = _first_nonfinite(F[i])
                     if j >= 0:
-                        failed, bad, bad_kind = 1, j, "derivative of state"
-                        break
+                        return 1, (j, "derivative of state", None)
             except _BlockFailure as failure:
-                failed, bad, block_failure = 1, -2, failure
-            if failed:
-                break
+                return 1, (-2, "", failure)
             with numpy.errstate(all="ignore"):
-                G = Ti @ F
+                G = _radau_mul(u.Ti, F)
                 dW = numpy.empty((ns, _N))
-                dW[0] = E1inv @ (G[0] - fac1 * W[0])
+                dW[0] = _lu_solve(self.E1, self.piv1, G[0] - fac1 * W[0])
                 for k in range(u.pairs):
                     w2, w3 = W[2 * k + 1], W[2 * k + 2]
                     g2 = G[2 * k + 1] - (alphn[k] * w2 - betan[k] * w3)
                     g3 = G[2 * k + 2] - (betan[k] * w2 + alphn[k] * w3)
-                    dwc = Ecinv[k] @ (g2 + 1j * g3)
-                    dW[2 * k + 1], dW[2 * k + 2] = dwc.real, dwc.imag
+                    # C's g2 + g3 _Complex_I: (g2 + g3 0) + i g3
+                    dW[2 * k + 1], dW[2 * k + 2] = _zlu_solve(*self.Ec[k], g2 + g3 * 0.0, g3)
                 st["solves"] += 1 + u.pairs
-                newt += 1
-                dyno = (math.sqrt(float(numpy.sum((dW / scal) ** 2)) / (ns * _N)) if _N
-                        else 0.0)
+                self.newt += 1
+                # per component dW_0^2 + dW_1^2 + ... (in units of scal), then over them
+                part = dW[0] / scal
+                part = part * part
+                for i in range(1, ns):
+                    q = dW[i] / scal
+                    part = part + q * q
+                dyno = math.sqrt(_seq_sum(part) / (ns * _N)) if _N else 0.0
             if dyno != dyno or dyno == math.inf:
-                failed = 2
-                break
+                return 2, None
+            newt = self.newt
             if 1 < newt < u.nit:
-                thq = dyno / dynold
-                theta = thq if newt == 2 else math.sqrt(thq * thqold)
-                thqold = thq
+                thq = dyno / self.dynold
+                self.theta = thq if newt == 2 else math.sqrt(thq * self.thqold)
+                self.thqold = thq
+                theta = self.theta
                 if theta < 0.99:
-                    faccon = theta / (1.0 - theta)
-                    dyth = faccon * dyno * theta ** (u.nit - 1 - newt) / u.fnewt
-                    if dyth >= 1.0 and not fixed:  # too slow: a smaller step converges sooner
+                    self.faccon = theta / (1.0 - theta)
+                    dyth = self.faccon * dyno * theta ** (u.nit - 1 - newt) / u.fnewt
+                    if dyth >= 1.0 and not run.fixed:  # a smaller step converges sooner
                         qnewt = max(1e-4, min(20.0, dyth))
-                        hhfac = 0.8 * qnewt ** (-1.0 / (4.0 + u.nit - 1 - newt))
-                        failed = 3
-                        break
+                        self.hhfac = 0.8 * qnewt ** (-1.0 / (4.0 + u.nit - 1 - newt))
+                        return 3, None
                 else:
-                    failed = 2
-                    break
-            dynold = max(dyno, _EPS)
-            W = W + dW
-            Z = T @ W
-            # converged; after one iteration only on the previous step's matrices
-            if (newt > 1 or not refactored) and faccon * dyno <= u.fnewt:
-                break
-        if failed:
-            if fixed:
-                if failed == 1:
-                    if bad == -2:
-                        raise _block_failed(block_failure)
-                    raise _fail(t, bad_kind, STATES[bad])
-                if not caljac:  # once more with a fresh Jacobian
-                    needjac = True
-                    continue
-                raise _Failure("at t = %.17g: %s: the Newton iteration does not converge with "
-                               "the fixed step h = %.3g" % (t, name, h), t)
-            if failed != 1:
-                bad = -4
-            if failed == 3:
-                unexn = hhfac <= 0.5
-            else:
-                unexp = True
-            h *= hhfac if failed == 3 else 0.5
-            reject, last = True, False
-            st["rejected"] += 1
-            needjac = not caljac
-            continue
-
-        # the error estimate
-        err = 0.0
-        if not fixed:
+                    return 2, None
+            self.dynold = max(dyno, _EPS)
             with numpy.errstate(all="ignore"):
-                f2 = sum(u.e[j] * Z[j] for j in range(ns)) / h
-                cont = E1inv @ (f2 + f0)
-                st["solves"] += 1
-                wt = u.atol + u.rtol * numpy.maximum(numpy.abs(y), numpy.abs(y + Z[ns - 1]))
-                err, worst_now = _stiff_norm(cont, wt)
-                err = max(err, 1e-10)
-                if err >= 1.0 and (first or reject):  # refined: f at y + err
-                    st["rhs"] += 1
-                    try:
-                        f1 = run.f(t, y + cont)
-                    except _BlockFailure:
-                        f1 = None
-                    if f1 is not None:
-                        cont = E1inv @ (f1 + f2)
-                        st["solves"] += 1
-                        err, worst_now = _stiff_norm(cont, wt)
-                        err = max(err, 1e-10)
-            worst = worst_now if worst_now >= 0 else worst
-            if err != err or err == math.inf:
-                bad, unexp = -1, True
-                h, reject, last = h * 0.5, True, False
-                st["rejected"] += 1
-                needjac = not caljac
-                continue
+                W = W + dW
+                Z = _radau_mul(u.T, W)
+            self.Z = Z
+            # converged; after one iteration only on the previous step's matrices
+            if (newt > 1 or not self.refactored) and self.faccon * dyno <= u.fnewt:
+                return 0, None
 
-        # step control: Gustafsson's, the safety factor scaled by the Newton iterations
-        fac = min(safe, u.cfac / (newt + 2 * u.nit))
+    def _error(self, t, h, y):
+        """The error estimate, refined once with f(t, y + err) on the first step and after a
+        rejection."""
+        run, u, Z = self.run, self.u, self.Z
+        ns = u.ns
+        with numpy.errstate(all="ignore"):
+            f2 = u.e[0] * Z[0]
+            for j in range(1, ns):
+                f2 = f2 + u.e[j] * Z[j]
+            f2 = f2 / h
+            cont = _lu_solve(self.E1, self.piv1, f2 + self.f0)
+            run.st["solves"] += 1
+            wt = u.atol + u.rtol * _c_max(numpy.abs(y), numpy.abs(y + Z[ns - 1]))
+            err, worst = _stiff_norm(cont, wt)
+            err = max(err, 1e-10)
+            if err >= 1.0 and (self.first or self.reject):  # refined: f at y + err
+                run.st["rhs"] += 1
+                try:
+                    f1 = run.f(t, y + cont)
+                except _BlockFailure:
+                    f1 = None
+                if f1 is not None:
+                    cont = _lu_solve(self.E1, self.piv1, f1 + f2)
+                    run.st["solves"] += 1
+                    err, worst = _stiff_norm(cont, wt)
+                    err = max(err, 1e-10)
+        self.worst = worst if worst >= 0 else self.worst
+        return err
+
+    def _retry(self, hnew, why):
+        """A failed attempt: retried smaller, with a fresh Jacobian unless this one is."""
+        self.reject = True
+        self.needjac = not self.caljac
+        return _RETRY, None, hnew, why
+
+    def _fixed_failure(self, t, h, failed, why):
+        """Newton's failure on a fixed step: once more with a fresh Jacobian, else the end."""
+        if failed == 1:
+            bad, bad_kind, failure = why
+            if bad == -2:
+                raise _block_failed(failure)
+            raise _fail(t, bad_kind, STATES[bad])
+        if not self.caljac:
+            self.needjac = True
+            return _AGAIN, None, h, None
+        raise _Failure("at t = %.17g: %s: the Newton iteration does not converge with the "
+                       "fixed step h = %.3g" % (t, self.run.name, h), t)
+
+    def _control(self, h, err, y):
+        """Step control: Gustafsson's, the safety factor scaled by the Newton iterations."""
+        m, u = self.m, self.u
+        safe, fac_min, fac_max = m["safe"], m["fac_min"], m["fac_max"]
+        fac = min(safe, u.cfac / (self.newt + 2 * u.nit))
         quot = max(1.0 / fac_max, min(1.0 / fac_min, err ** u.expo / fac))
         hnew = h / quot
-        if err < 1.0:
-            first = False
-            accepted += 1
-            if accepted > 1 and not change:
-                facgus = (hacc / h) * (err * err / erracc) ** u.expo / fac
-                facgus = max(1.0 / fac_max, min(1.0 / fac_min, facgus))
-                quot = max(quot, facgus)
-                hnew = h / quot
-            change = False
-            hacc, erracc = h, max(1e-2, err)
-            y1 = y + Z[ns - 1]
-            i = _first_nonfinite(y1)
-            if i >= 0:
-                raise _fail(tph, "state", STATES[i])
-            b = _radau_poly(c, Z)
-            zlast, hold = Z[ns - 1], h
-            _accept(run, tph)
-            yield from run.emit_step(t, h, tph, y1, _radau_dense(y, c, b))
-            y, t = y1, tph
-            run.t, run.y = t, y
-            nsing, bad, caljac = 0, -1, False
-            if last:
-                return
-            scal = u.atol + u.rtol * numpy.abs(y)
-            st["rhs"] += 1
-            try:
-                f0 = run.f(t, y)
-            except _BlockFailure as failure:
-                raise _block_failed(failure) from None
-            k_fixed += 1
-            hnew = min(hnew, hmax)
-            if reject:
-                hnew = min(hnew, h)
-            reject = False
-            if theta <= thet and 1.0 <= hnew / h <= 1.2:
-                hnew = h  # keep h and the factorisations ...
-                since += 1
-                if variable and since >= 10 and k_set + 1 < nsets:
-                    recheck = True  # ... but look at the order now and then
-            needjac = theta > thet
-            h = hnew
-        else:
-            reject, last = True, False
-            st["rejected"] += 1
-            h = 0.1 * h if first else hnew
-            needjac = not caljac
+        if not err < 1.0:
+            self.reject = True
+            self.needjac = not self.caljac
+            return _REJECT, None, 0.1 * h if self.first else hnew, None
+        self.first = False
+        self.accepted_steps += 1
+        if self.accepted_steps > 1 and not self.change:
+            facgus = (self.hacc / h) * (err * err / self.erracc) ** u.expo / fac
+            facgus = max(1.0 / fac_max, min(1.0 / fac_min, facgus))
+            quot = max(quot, facgus)
+            hnew = h / quot
+        self.change = False
+        self.hacc, self.erracc = h, max(1e-2, err)
+        Z = self.Z
+        y1 = y + Z[u.ns - 1]
+        self.b, self.dc, self.y = _radau_poly(u.c, Z), u.c, y
+        self.zlast, self.hold = Z[u.ns - 1], h
+        self.reject = self.caljac = False
+        self.nsing = 0
+        return _ACCEPT, y1, hnew, None
 
+    def step(self, t, h, tph, y):
+        run = self.run
+        if self.needjac:
+            self.J = _stiff_jacobian(run, t, y)
+            self.needjac, self.caljac, self.hfact = False, True, 0.0
+        if self.variable and (h != self.hfact or self.recheck):
+            self._order(h, y)
+        u = self.u
+        fac1 = u.gamma / h
+        alphn = [a / h for a in u.alpha]
+        betan = [bb / h for bb in u.beta]
+        self.refactored = h != self.hfact
+        if h != self.hfact:
+            if not self._factor(fac1, alphn, betan):
+                self.hfact = 0.0
+                if run.fixed or self.nsing + 1 == 5:
+                    raise _stiff_fail_singular(run.name, t, h)
+                self.nsing += 1
+                self.unexp = True
+                return self._retry(h * 0.5, (-3, "", None))
+            self.hfact = h
+        failed, why = self._newton(t, h, tph, y, fac1, alphn, betan)
+        if failed and run.fixed:
+            return self._fixed_failure(t, h, failed, why)
+        if failed:
+            if failed == 3:
+                self.unexn = self.hhfac <= 0.5
+            else:
+                self.unexp = True
+            return self._retry(h * (self.hhfac if failed == 3 else 0.5),
+                               why if failed == 1 else (-4, "", None))
+        err = 0.0
+        if not run.fixed:
+            err = self._error(t, h, y)
+            if err != err or err == math.inf:
+                self.unexp = True
+                return self._retry(h * 0.5, (-1, "", None))
+        return self._control(h, err, y)
 
-def _radau_dense(y, c, b):
-    def prepare():
+    def dense(self):
+        y, c, b = self.y, self.dc, self.b
         return lambda theta: y + _radau_u(c, b, theta)
-    return prepare
+
+    def after(self, tph, y1, last):
+        """The new point: its weights and f (after the run's last step, the order to go on
+        with)."""
+        run, u = self.run, self.u
+        if last:
+            if not run.fixed:
+                run.st["order_next"] = 2 * u.ns - 1
+            return False
+        self.scal = u.atol + u.rtol * numpy.abs(y1)
+        run.st["rhs"] += 1
+        try:
+            self.f0 = run.f(tph, y1)
+        except _BlockFailure as failure:
+            raise _block_failed(failure) from None
+        return False
+
+    def next_h(self, h, hnew):
+        """h is kept (and the factorisations with it) while the controller asks for at most
+        20 % more and Newton converged fast; J is recomputed when it converged slowly."""
+        if self.theta <= _THET and 1.0 <= hnew / h <= 1.2:
+            hnew = h
+            if self.variable:
+                self.since += 1
+                if self.since >= 10 and self.k_set + 1 < self.nsets:
+                    self.recheck = True  # ... but look at the order now and then
+        self.needjac = self.theta > _THET
+        return hnew
 
 
 # ====================================================================== batch ===

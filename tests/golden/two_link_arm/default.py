@@ -237,9 +237,9 @@ def _rhs_0_ieee(t, x, p, w, out):
         t = numpy.float64(t)
         x = numpy.asarray(x, dtype=numpy.float64)
         p = numpy.asarray(p, dtype=numpy.float64)
-        w0 = numpy.sin(x[2])*p[7]
+        w0 = _c_sin(x[2])*p[7]
         w12 = -x[3] + x[2]
-        w13 = numpy.cos(w12)*p[9]
+        w13 = _c_cos(w12)*p[9]
         wv[76] = p[8]
         wv[77] = w13
         wv[78] = w13
@@ -249,8 +249,8 @@ def _rhs_0_ieee(t, x, p, w, out):
         _block_solve(w, 0, t)
         w1 = wv[88]
         w2 = wv[89]
-        w3 = numpy.sin(x[3])*p[11]
-        w14 = numpy.sin(w12)
+        w3 = _c_sin(x[3])*p[11]
+        w14 = _c_sin(w12)
         w4 = w0 + w1*w14*w2*p[12]
         w5 = w3 + w1*w14*w2*p[9]
         out[0] = w4
@@ -334,9 +334,9 @@ def _jvp_0_ieee(t, x, p, w, v, out):
         t = numpy.float64(t)
         x = numpy.asarray(x, dtype=numpy.float64)
         p = numpy.asarray(p, dtype=numpy.float64)
-        w6 = numpy.cos(x[2])*p[7]*v[2]
+        w6 = _c_cos(x[2])*p[7]*v[2]
         w15 = -x[3] + x[2]
-        w16 = numpy.cos(w15)
+        w16 = _c_cos(w15)
         w17 = w16*p[9]
         wv[76] = p[8]
         wv[77] = w17
@@ -347,14 +347,14 @@ def _jvp_0_ieee(t, x, p, w, v, out):
         _block_solve(w, 0, t)
         w1 = wv[88]
         w2 = wv[89]
-        w18 = numpy.sin(w15)
+        w18 = _c_sin(w15)
         w19 = -v[3] + v[2]
         wv[88] = w18*w19*w2*p[9] + v[0]
         wv[89] = w1*w18*w19*p[9] + v[1]
         _block_resolve(w, 0, t)
         w7 = wv[88]
         w8 = wv[89]
-        w9 = numpy.cos(x[3])*p[11]*v[3]
+        w9 = _c_cos(x[3])*p[11]*v[3]
         w10 = w6 + w1*w18*w8*p[12] + (w18*w2*w7*p[12] + w1*w16*w19*w2*p[12])
         w11 = w9 + w1*w18*w8*p[9] + (w18*w2*w7*p[9] + w1*w16*w19*w2*p[9])
         out[0] = w10
