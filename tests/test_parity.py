@@ -1,5 +1,5 @@
 """Byte parity: the Python module writes the C program's CSV bytes, for every solver, adaptive
-and with fixed steps, on explicit and stiff models of 4 to 256 states (the lists and the numpy
+and with fixed steps, on explicit and stiff models of 1 to 256 states (the lists and the numpy
 vectors of the explicit solvers, real and complex LU factorisations of every size), a model
 with exp in its right side; and the stats line's counters agree.  The C program is the
 reference: the Python runtime performs its floating-point operations in its order, so no

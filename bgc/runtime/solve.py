@@ -157,8 +157,8 @@ def _seq_sum(v):
 
 def _seq_minus(acc, terms):
     """acc - terms_0 - terms_1 - ... in this order (C's back substitution)."""
-    if not len(terms):
-        return acc
+    if len(terms) < 2:
+        return acc - terms[0] if len(terms) else acc
     return numpy.subtract.accumulate(numpy.concatenate(([acc], terms)))[-1]
 
 

@@ -190,6 +190,8 @@ def _lu(a):
             piv.append(p)
             if size[p - k] == 0.0:
                 return None
+            if k + 1 == n:
+                break
             if p != k:
                 a[[k, p]] = a[[p, k]]
             lower = a[k + 1:, k] / a[k, k]
@@ -230,6 +232,8 @@ def _zlu(ar, ai):
             piv.append(p)
             if size[p - k] == 0.0:
                 return None
+            if k + 1 == n:
+                break
             if p != k:
                 ar[[k, p]], ai[[k, p]] = ar[[p, k]], ai[[p, k]]
             lr, li = _cdiv(ar[k + 1:, k], ai[k + 1:, k], float(ar[k, k]), float(ai[k, k]))
@@ -257,9 +261,11 @@ def _zlu_solve(lur, lui, piv, br, bi):
             br[k + 1:] -= pr
             bi[k + 1:] -= pi
     for k in range(n - 1, -1, -1):
-        pr, pi = _cmul(lur[k, k + 1:], lui[k, k + 1:], br[k + 1:], bi[k + 1:])
-        br[k], bi[k] = _divdc3(float(_seq_minus(br[k], pr)), float(_seq_minus(bi[k], pi)),
-                               float(lur[k, k]), float(lui[k, k]))
+        xr, xi = float(br[k]), float(bi[k])
+        if k + 1 < n:
+            pr, pi = _cmul(lur[k, k + 1:], lui[k, k + 1:], br[k + 1:], bi[k + 1:])
+            xr, xi = float(_seq_minus(xr, pr)), float(_seq_minus(xi, pi))
+        br[k], bi[k] = _divdc3(xr, xi, float(lur[k, k]), float(lui[k, k]))
     return br, bi
 
 
