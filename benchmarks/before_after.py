@@ -117,9 +117,9 @@ def git(*args: str, cwd: Path = ROOT) -> str:
                           text=True).stdout.strip()
 
 
-def checkout(ref: str, parent: Path) -> Path:
+def checkout(ref: str, parent: Path, side: str) -> Path:
     """ref checked out (detached) in a new worktree under parent."""
-    tree = parent / f"tree-{re.sub(r'[^A-Za-z0-9_.-]', '_', ref)}"
+    tree = parent / f"{side}-{re.sub(r'[^A-Za-z0-9_.-]', '_', ref)}"
     git("worktree", "add", "--detach", "--quiet", str(tree), ref)
     return tree
 
@@ -362,8 +362,8 @@ def main(argv=None) -> None:
         work = Path(tmp)
         trees = {}
         try:
-            trees["before"] = checkout(args.before, work)
-            trees["after"] = ROOT if args.after == "worktree" else checkout(args.after, work)
+            trees["before"] = checkout(args.before, work, "before")
+            trees["after"] = ROOT if args.after == "worktree" else checkout(args.after, work, "after")
             run(args, chosen, trees, work, cc)
         finally:
             for tree in trees.values():
