@@ -99,3 +99,33 @@ def test_scenes_benchmark_counts_the_generated_programs():
     assert (swing.states, swing.pruned, swing.out) == (everything.states - 4, 4, 0)
     assert 0 < swing.rhs_ops < everything.rhs_ops and 0 < swing.c_bytes < everything.c_bytes
     assert full.multipliers == swing.multipliers == 1 and full.out_ops == 0
+
+
+def test_before_after_lists_its_cases(capsys):
+    """benchmarks/before_after.py's argument parsing and case list, nothing built or timed."""
+    before_after = _benchmark("before_after")
+    args = before_after.parse(["--before", "HEAD", "--quick"])
+    assert (args.after, args.repeats) == ("worktree", 2)
+    before_after.main(["--before", "HEAD", "--quick", "--list"])
+    listed = capsys.readouterr().out.splitlines()
+    assert len(listed) == 6 and listed[0].startswith("pendulum dopri5 c: model models/pendulum.bg")
+    full = before_after.cases(quick=False)
+    assert {c.backend for c in full} == {"c", "python"} and len(full) == 18
+
+
+@pytest.mark.skipif(not (ROOT / ".git").exists(), reason="not a git checkout")
+def test_before_after_removes_its_worktree_on_failure(monkeypatch):
+    """The temporary worktree of --before goes even when the measurement fails."""
+    before_after = _benchmark("before_after")
+    seen = {}
+
+    def fail(args, chosen, trees, work, cc):
+        seen.update(trees)
+        assert (trees["before"] / "bgc" / "__init__.py").is_file()
+        raise RuntimeError("stop")
+
+    monkeypatch.setattr(before_after, "run", fail)
+    with pytest.raises(RuntimeError, match="stop"):
+        before_after.main(["--before", "HEAD", "--quick"])
+    assert seen["after"] == ROOT and not seen["before"].exists()
+    assert str(seen["before"]) not in before_after.git("worktree", "list")
