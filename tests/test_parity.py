@@ -19,6 +19,8 @@ from bgc import backends, solvers
 from bgc.api import Source
 from bgc.emit import emit_c, emit_python
 
+from cbits import C_IO
+
 ROOT = Path(__file__).resolve().parent.parent
 pytestmark = pytest.mark.skipif(not backends.have_c_compiler(), reason="no C compiler")
 
@@ -105,23 +107,7 @@ def test_python_writes_the_c_programs_bytes(programs):
 
 LIBM = r"""
 #include <math.h>
-#include <stdio.h>
-#include <stdlib.h>
-#include <string.h>
-static double rd(void)
-{
-    unsigned long long u;
-    double d;
-    if (scanf("%llx", &u) != 1) exit(9);
-    memcpy(&d, &u, 8);
-    return d;
-}
-static void wr(double d)
-{
-    unsigned long long u;
-    memcpy(&u, &d, 8);
-    printf("%llx ", u);
-}
+""" + C_IO + r"""
 int main(void)
 {
     int n;

@@ -4,10 +4,143 @@
    (RADAU5's and RADAU's design), both with the Jacobian
    that bgc_jacobian derives symbolically and dense LU factorisations of their own (below). */
 #include <complex.h>
-#undef I /* C99 7.3.1: the program may undefine it; _Complex_I is used below */
+#undef I /* C99 7.3.1: the program may undefine it */
 #undef complex
 
 typedef double _Complex bgc_cplx;
+
+/* ------------------------------------------------------ complex arithmetic --- */
+/* Products and quotients written out, so that the results do not depend on the compiler's
+   runtime library (clang's compiler-rt rounds quotients differently from libgcc): the product
+   as gcc compiles it, (ac - bd) + i(ad + bc) with Annex G's recovery of infinities that came
+   out as NaN + iNaN (libgcc's __muldc3), the quotient as libgcc's __divdc3 of GCC 12 and later
+   (Smith's method, scaled).  With gcc these are the bits of its own `*` and `/`; the Python
+   runtime does the same operations (_muldc3, _divdc3 in stiff.py). */
+
+/* re + i im, exactly (C99 has no CMPLX; a complex is an array of its two parts, 6.2.5). */
+static bgc_cplx bgc_cmake(double re, double im)
+{
+    union {
+        bgc_cplx z;
+        double part[2];
+    } u;
+    u.part[0] = re;
+    u.part[1] = im;
+    return u.z;
+}
+
+/* Annex G's boxing of a part: +-1 if it is infinite, else +-0. */
+static double bgc_box(double v)
+{
+    return copysign(isinf(v) ? 1.0 : 0.0, v);
+}
+
+static double bgc_unnan(double v)
+{
+    return isnan(v) ? copysign(0.0, v) : v;
+}
+
+static bgc_cplx bgc_cmul(bgc_cplx z, bgc_cplx w)
+{
+    double a = creal(z), b = cimag(z), c = creal(w), d = cimag(w);
+    const double ac = a * c, bd = b * d, ad = a * d, bc = b * c;
+    double x = ac - bd, y = ad + bc;
+    if (isnan(x) && isnan(y)) {
+        int recalc = 0;
+        if (isinf(a) || isinf(b)) {
+            a = bgc_box(a);
+            b = bgc_box(b);
+            c = bgc_unnan(c);
+            d = bgc_unnan(d);
+            recalc = 1;
+        }
+        if (isinf(c) || isinf(d)) {
+            c = bgc_box(c);
+            d = bgc_box(d);
+            a = bgc_unnan(a);
+            b = bgc_unnan(b);
+            recalc = 1;
+        }
+        if (!recalc && (isinf(ac) || isinf(bd) || isinf(ad) || isinf(bc))) {
+            a = bgc_unnan(a);
+            b = bgc_unnan(b);
+            c = bgc_unnan(c);
+            d = bgc_unnan(d);
+            recalc = 1;
+        }
+        if (recalc) {
+            x = INFINITY * (a * c - b * d);
+            y = INFINITY * (a * d + b * c);
+        }
+    }
+    return bgc_cmake(x, y);
+}
+
+/* __divdc3's scaling of a small numerator (big: the divisor's larger part). */
+static int bgc_ctiny(double a, double b, double big)
+{
+    const double rmax2 = DBL_MAX / 2 * DBL_EPSILON;
+    return (fabs(a) < DBL_MIN && fabs(b) < rmax2 && fabs(big) < rmax2)
+           || (fabs(b) < DBL_MIN && fabs(a) < rmax2 && fabs(big) < rmax2);
+}
+
+static bgc_cplx bgc_cdiv(bgc_cplx z, bgc_cplx w)
+{
+    const double rbig = DBL_MAX / 2, rminscal = 1.0 / DBL_EPSILON;
+    double a = creal(z), b = cimag(z), c = creal(w), d = cimag(w), ratio, denom, x, y;
+    const int by_d = fabs(c) < fabs(d);
+    const double big = by_d ? fabs(d) : fabs(c);
+    if (big >= rbig) {
+        a = a / 2;
+        b = b / 2;
+        c = c / 2;
+        d = d / 2;
+    }
+    if ((by_d ? fabs(d) : fabs(c)) < DBL_EPSILON || bgc_ctiny(a, b, by_d ? d : c)) {
+        a = a * rminscal;
+        b = b * rminscal;
+        c = c * rminscal;
+        d = d * rminscal;
+    }
+    if (by_d) {
+        ratio = c / d;
+        denom = (c * ratio) + d;
+        if (fabs(ratio) > DBL_MIN) {
+            x = ((a * ratio) + b) / denom;
+            y = ((b * ratio) - a) / denom;
+        } else {
+            x = ((c * (a / d)) + b) / denom;
+            y = ((c * (b / d)) - a) / denom;
+        }
+    } else {
+        ratio = d / c;
+        denom = (d * ratio) + c;
+        if (fabs(ratio) > DBL_MIN) {
+            x = ((b * ratio) + a) / denom;
+            y = (b - (a * ratio)) / denom;
+        } else {
+            x = (a + (d * (b / c))) / denom;
+            y = (b - (d * (a / c))) / denom;
+        }
+    }
+    if (isnan(x) && isnan(y)) { /* infinities and zeros that came out as NaN + iNaN */
+        if (c == 0.0 && d == 0.0 && (!isnan(a) || !isnan(b))) {
+            x = copysign(INFINITY, c) * a;
+            y = copysign(INFINITY, c) * b;
+        } else if ((isinf(a) || isinf(b)) && isfinite(c) && isfinite(d)) {
+            a = bgc_box(a);
+            b = bgc_box(b);
+            x = INFINITY * (a * c + b * d);
+            y = INFINITY * (b * c - a * d);
+        } else if ((isinf(c) || isinf(d)) && isfinite(a) && isfinite(b)) {
+            c = bgc_box(c);
+            d = bgc_box(d);
+            x = 0.0 * (a * c + b * d);
+            y = 0.0 * (b * c - a * d);
+        }
+    }
+    return bgc_cmake(x, y);
+}
 
 /* ------------------------------------------------------ dense linear algebra --- */
 
@@ -43,7 +176,7 @@ static int bgc_stiff_lu(int n, double *a, int *piv)
             ai[k] = l;
             if (l != 0.0)
                 for (j = k + 1; j < n; j++)
-                    ai[j] -= l * ak[j];
+                    ai[j] -= bgc_cmul(l, ak[j]);
         }
     }
     return 0;
@@ -64,14 +197,14 @@ static void bgc_stiff_lu_solve(int n, const double *lu, const int *piv, double *
         const double bk = b[k];
         if (bk != 0.0)
             for (i = k + 1; i < n; i++)
-                b[i] -= lu[(size_t)i * n + k] * bk;
+                b[i] -= bgc_cmul(lu[(size_t)i * n + k], bk);
     }
     for (k = n - 1; k >= 0; k--) {
         const double *row = lu + (size_t)k * n;
         double acc = b[k];
         for (i = k + 1; i < n; i++)
-            acc -= row[i] * b[i];
-        b[k] = acc / row[k];
+            acc -= bgc_cmul(row[i], b[i]);
+        b[k] = bgc_cdiv(acc, row[k]);
     }
 }
 
@@ -106,11 +239,11 @@ static int bgc_stiff_zlu(int n, bgc_cplx *a, int *piv)
         }
         for (i = k + 1; i < n; i++) {
             bgc_cplx *ai = a + (size_t)i * n;
-            const bgc_cplx l = ai[k] / ak[k];
+            const bgc_cplx l = bgc_cdiv(ai[k], ak[k]);
             ai[k] = l;
             if (l != 0.0)
                 for (j = k + 1; j < n; j++)
-                    ai[j] -= l * ak[j];
+                    ai[j] -= bgc_cmul(l, ak[j]);
         }
     }
     return 0;
@@ -130,14 +263,14 @@ static void bgc_stiff_zlu_solve(int n, const bgc_cplx *lu, const int *piv, bgc_c
         const bgc_cplx bk = b[k];
         if (bk != 0.0)
             for (i = k + 1; i < n; i++)
-                b[i] -= lu[(size_t)i * n + k] * bk;
+                b[i] -= bgc_cmul(lu[(size_t)i * n + k], bk);
     }
     for (k = n - 1; k >= 0; k--) {
         const bgc_cplx *row = lu + (size_t)k * n;
         bgc_cplx acc = b[k];
         for (i = k + 1; i < n; i++)
-            acc -= row[i] * b[i];
-        b[k] = acc / row[k];
+            acc -= bgc_cmul(row[i], b[i]);
+        b[k] = bgc_cdiv(acc, row[k]);
     }
 }
 
@@ -710,7 +843,7 @@ static int bgc_radau_factor(bgc_radau_state *ms, bgc_run *r, const double *alphn
         for (l = 0; l < N * N; l++)
             E[l] = -ms->J[l];
         for (l = 0; l < N; l++)
-            E[(size_t)l * N + l] += alphn[k] + betan[k] * _Complex_I;
+            E[(size_t)l * N + l] += bgc_cmake(alphn[k] + betan[k] * 0.0, betan[k]);
         r->st->lu++;
         singular = bgc_stiff_zlu(N, E, ms->piv + (size_t)(1 + k) * D);
     }
@@ -772,9 +905,9 @@ static int bgc_radau_newton(bgc_radau_state *ms, bgc_run *r, double t, double h,
             for (k = 0; k < u->pairs; k++) {
                 const double w2 = W[(size_t)(2 * k + 1) * D + l];
                 const double w3 = W[(size_t)(2 * k + 2) * D + l];
-                ms->zc[(size_t)k * D + l] = (g[2 * k + 1] - (alphn[k] * w2 - betan[k] * w3))
-                                            + (g[2 * k + 2] - (betan[k] * w2 + alphn[k] * w3))
-                                                  * _Complex_I;
+                const double re = g[2 * k + 1] - (alphn[k] * w2 - betan[k] * w3);
+                const double im = g[2 * k + 2] - (betan[k] * w2 + alphn[k] * w3);
+                ms->zc[(size_t)k * D + l] = bgc_cmake(re + im * 0.0, im); /* re + im I */
             }
         }
         bgc_stiff_lu_solve(N, ms->E1, ms->piv, ms->dw);

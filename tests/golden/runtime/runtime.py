@@ -1853,8 +1853,9 @@ def _integrate_from(s, p, x0, st):
 # numpy.sum, dot, @ or linalg here: sums run in C's sequence (_seq_sum, a subtract.accumulate),
 # the LU factorisations and solves are bgc_stiff_lu's and bgc_stiff_zlu's (row-vectorised
 # where C's loops are element-wise independent), and complex arithmetic is done on real and
-# imaginary parts as gcc compiles C99's: products (ac - bd) + i(ad + bc) with Annex G's
-# recovery of infinities (libgcc's __muldc3), quotients as libgcc's __divdc3 (GCC 12 and on).
+# imaginary parts as the C runtime's bgc_cmul and bgc_cdiv write it out: products (ac - bd) +
+# i(ad + bc) with Annex G's recovery of infinities (libgcc's __muldc3), quotients as GCC 12's
+# libgcc __divdc3.
 
 
 def _stiff_norm(v, w):
