@@ -40,40 +40,43 @@ static double bgc_unnan(double v)
     return isnan(v) ? copysign(0.0, v) : v;
 }
 
-static bgc_cplx bgc_cmul(bgc_cplx z, bgc_cplx w)
+/* __muldc3's recovery of the infinities that came out as NaN + iNaN (rare: apart, so that the
+   common product stays inline as gcc's does). */
+static bgc_cplx bgc_cmul_nan(double a, double b, double c, double d)
 {
-    double a = creal(z), b = cimag(z), c = creal(w), d = cimag(w);
     const double ac = a * c, bd = b * d, ad = a * d, bc = b * c;
-    double x = ac - bd, y = ad + bc;
-    if (isnan(x) && isnan(y)) {
-        int recalc = 0;
-        if (isinf(a) || isinf(b)) {
-            a = bgc_box(a);
-            b = bgc_box(b);
-            c = bgc_unnan(c);
-            d = bgc_unnan(d);
-            recalc = 1;
-        }
-        if (isinf(c) || isinf(d)) {
-            c = bgc_box(c);
-            d = bgc_box(d);
-            a = bgc_unnan(a);
-            b = bgc_unnan(b);
-            recalc = 1;
-        }
-        if (!recalc && (isinf(ac) || isinf(bd) || isinf(ad) || isinf(bc))) {
-            a = bgc_unnan(a);
-            b = bgc_unnan(b);
-            c = bgc_unnan(c);
-            d = bgc_unnan(d);
-            recalc = 1;
-        }
-        if (recalc) {
-            x = INFINITY * (a * c - b * d);
-            y = INFINITY * (a * d + b * c);
-        }
+    int recalc = 0;
+    if (isinf(a) || isinf(b)) {
+        a = bgc_box(a);
+        b = bgc_box(b);
+        c = bgc_unnan(c);
+        d = bgc_unnan(d);
+        recalc = 1;
     }
-    return bgc_cmake(x, y);
+    if (isinf(c) || isinf(d)) {
+        c = bgc_box(c);
+        d = bgc_box(d);
+        a = bgc_unnan(a);
+        b = bgc_unnan(b);
+        recalc = 1;
+    }
+    if (!recalc && (isinf(ac) || isinf(bd) || isinf(ad) || isinf(bc))) {
+        a = bgc_unnan(a);
+        b = bgc_unnan(b);
+        c = bgc_unnan(c);
+        d = bgc_unnan(d);
+        recalc = 1;
+    }
+    if (recalc)
+        return bgc_cmake(INFINITY * (a * c - b * d), INFINITY * (a * d + b * c));
+    return bgc_cmake(ac - bd, ad + bc);
+}
+
+static inline bgc_cplx bgc_cmul(bgc_cplx z, bgc_cplx w)
+{
+    const double a = creal(z), b = cimag(z), c = creal(w), d = cimag(w);
+    const double x = a * c - b * d, y = a * d + b * c;
+    return isnan(x) && isnan(y) ? bgc_cmul_nan(a, b, c, d) : bgc_cmake(x, y);
 }
 
 /* __divdc3's scaling of a small numerator (big: the divisor's larger part). */
@@ -176,7 +179,7 @@ static int bgc_stiff_lu(int n, double *a, int *piv)
             ai[k] = l;
             if (l != 0.0)
                 for (j = k + 1; j < n; j++)
-                    ai[j] -= bgc_cmul(l, ak[j]);
+                    ai[j] -= l * ak[j];
         }
     }
     return 0;
@@ -197,14 +200,14 @@ static void bgc_stiff_lu_solve(int n, const double *lu, const int *piv, double *
         const double bk = b[k];
         if (bk != 0.0)
             for (i = k + 1; i < n; i++)
-                b[i] -= bgc_cmul(lu[(size_t)i * n + k], bk);
+                b[i] -= lu[(size_t)i * n + k] * bk;
     }
     for (k = n - 1; k >= 0; k--) {
         const double *row = lu + (size_t)k * n;
         double acc = b[k];
         for (i = k + 1; i < n; i++)
-            acc -= bgc_cmul(row[i], b[i]);
-        b[k] = bgc_cdiv(acc, row[k]);
+            acc -= row[i] * b[i];
+        b[k] = acc / row[k];
     }
 }
 
