@@ -27,7 +27,6 @@ from bgc.resources import resource_dir
 
 POW10_RANGE = (-24, 56)  # powers of ten for the C number formatter: |v| in about 1e-40..1e40
 C_RUNTIME = ("runtime.c", "drive.c", "erk.c", "stiff.c", "main.c", "batch.c")  # bgc/runtime/, in this order
-PYTHON_RUNTIME = ("runtime.py", "solve.py", "stiff.py", "batch.py")
 PLAN_ARRAYS = ("diag", "lptr", "lpos", "lrow", "uptr", "upos", "ucol", "upd", "prow", "pcol")
 MODEL_FUNCTIONS = ("rhs", "outputs", "jvp")  # take the workspace, may solve blocks; so do
 #                                               a program's extra functions (bgc.lower.with_tangent)
@@ -613,9 +612,11 @@ def c_runtime_parts() -> dict[str, str]:
 
 
 def python_runtime() -> str:
-    """The model-independent end of a generated Python module: the solver tables and the
-    runtime files."""
-    return "\n\n".join([solver_tables_python()] + [_runtime_text(f) for f in PYTHON_RUNTIME])
+    """The model-independent start of a generated Python module, after its docstring: the
+    runtime (bgc/runtime/runtime.py, verbatim: a module of its own, whose contract with the
+    model part heads it) and the solver tables; the model part follows and replaces the
+    runtime's neutral model names."""
+    return _runtime_text("runtime.py") + "\n\n" + solver_tables_python()
 
 
 def _runtime_text(name: str) -> str:

@@ -397,7 +397,7 @@ def _c_stiff_lu_is_singular(E) -> bool:
 
 
 def test_python_runtime_finds_singular_iteration_matrices_as_c_does():
-    """The Python runtime's factorisation (stiff.py) is the C runtime's: on random real
+    """The Python runtime's factorisation (_lu, _zlu) is the C runtime's: on random real
     matrices with zeros, repeated rows, 1e308, 1e-308 and NaN, the same verdict as the C loops
     transcribed above (tests/test_lu.py compares the factors bit for bit with the C runtime's,
     complex ones too)."""

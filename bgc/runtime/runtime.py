@@ -1,7 +1,163 @@
 # ====================================================================== runtime ===
-# bgc's runtime: model-independent, the same in every generated module (bgc/runtime/runtime.py,
-# inlined verbatim).  It uses the model part above: the sizes, _rhs, _out and _jvp, the blocks'
-# plans and the Jacobian's colouring; it does the same arithmetic as the C runtime.
+# bgc's Python runtime: model-independent, the same in every generated module.  This file is a
+# module of its own (imported by the tests, linted) and the text bgc.emit.python_runtime()
+# inlines verbatim, so a generated module stays one file that needs only numpy.  A generated
+# module is, in order: its docstring, this file, the solver tables (_METHODS, SOLVERS,
+# _SOLVER_LIST, printed from bgc/solvers.py), the model part (templates/python_module.py.j2),
+# then `_bind_model()` and the `main()` call.  The model part comes after the runtime so that
+# its definitions replace the neutral ones below by ordinary rebinding of module globals: the
+# solver path reads _N, _rhs, ... as plain globals, as fast as if the runtime had none.  The
+# runtime is the C runtime's api.h contract in Python and does the C runtime's arithmetic in
+# the same order (docs/architecture.md, "Byte parity").
+#
+# ---------------------------------------------------------------- the contract
+# (a) What the model part provides (each defined below with a neutral value: a model of no
+#     states, parameters, outputs, constraints or blocks; a module that defines fewer names
+#     than these is not a model).  Lists are ordered as the arrays that use them.
+#
+#   MODEL                 str: the model's display name
+#   STATES, OUTPUTS       lists of str: the states' and outputs' display names
+#   CONSTRAINTS           list of (junction: str, level: "position" | "velocity"), per row
+#   SCENE                 dict: t0, t_end, dt, solver, rtol, atol (floats, solver a name of
+#                         SOLVERS) and step (a float, or None: adaptive)
+#   _IDENT                str: the identifier the module was generated as (the CSV's name)
+#   _PARAM_NAMES          list of str: the parameters' names
+#   _N                    int: len(STATES)
+#   _AUTONOMOUS           bool: the right side does not read t
+#   _POSITION_ROWS, _VELOCITY_ROWS  lists of int: the constraint rows of each level
+#   _VELOCITY_MOVABLE     list of bool per state: projection onto the velocity rows may move it
+#   _WORK_DOUBLES, _WORK_INTS  int: the workspace's sizes (_Work: w.v, w.iv)
+#   _BLOCK_NAMES          list of str per algebraic block solved numerically: its unknowns
+#   _BLOCKS               list per block of the fields of _Block (its size, its factorisation
+#                         plan from bgc/sparse.py, its offsets in the workspace and its unrolled
+#                         factor and solve functions or None)
+#   _JAC_COLORS           list of tuples of int: the Jacobian's columns of each colour
+#   _JAC_COLUMNS          list of tuples of int: the rows each column of the Jacobian touches
+#   _fill_params(p, given) -> p
+#                         sets p[j] (a list of floats, ordered as _PARAM_NAMES) to parameter
+#                         j's default for every j not in the set given, in order
+#   _constants(p) -> list of float: the constants computed from the parameters p
+#   _init(p) -> list of _N floats: the initial state
+#   _rhs(t, x, p, w, out), _out(t, x, p, w, out), _jvp(t, x, p, w, v, out)
+#                         dx/dt, the outputs, J v (J = d rhs / d x) into out; x a list or
+#                         numpy array of _N floats, p the parameters followed by the constants
+#                         (_with_constants), w a _Work; return nothing; raise _BlockFailure
+#                         when an algebraic block fails (through _block_solve, _newton)
+#   _residual(t, x, p), _scale(t, x, p) -> list: r and s per constraint row (|r| <= 1e-9 s)
+#   _position_jac(t, x, p), _velocity_jac(t, x, p) -> list: the rows' Jacobians, row-major
+#   _METHODS, SOLVERS, _SOLVER_LIST  the solver tables: name -> dict of the family, its step
+#                         control and tableau; the names in order; their help text
+#
+# (b) What the runtime provides: to users, the names in __all__ (the generated module's
+#     docstring describes them); to the model part's generated code, the names in
+#     _MODEL_HELPERS below (math and numpy too), which bgc's code printers and templates
+#     emit calls to: _sq, _sign, _heaviside, the libm wrappers _c_* with C's infinities and
+#     NaNs, the algebraic-block solves _block_solve, _block_resolve, _newton (which read
+#     _BLOCK_TABLE and the workspace _Work; they raise _BlockFailure), and _bind_model.
+#
+# _bind_model() derives the runtime's tables from the model part (the blocks, PARAMETERS, the
+# explicit solvers' vector kind); the generated module calls it after its model part, and a
+# test that binds a model of its own by assigning the names above calls it too.
+
+import math
+import signal
+import sys
+import threading
+import time  # process_time(): the processor time a run reports in its stats
+
+import numpy
+
+__all__ = [
+    "MODEL", "STATES", "OUTPUTS", "CONSTRAINTS", "SCENE", "PARAMETERS", "SOLVERS", "MAX_STEPS",
+    "USAGE", "METRIC_KINDS", "BATCH_COLUMNS",
+    "rhs", "outputs", "jvp", "jacobian", "simulate", "rows", "batch", "batch_rows", "main",
+    "request_stop", "SimulationError", "ConstraintError", "BlockError",
+]
+_MODEL_HELPERS = (
+    "_sq", "_sign", "_heaviside", "_c_exp", "_c_log", "_c_sqrt", "_c_sin", "_c_cos", "_c_tan",
+    "_c_asin", "_c_acos", "_c_atan", "_c_atan2", "_c_sinh", "_c_cosh", "_c_tanh", "_c_asinh",
+    "_c_atanh", "_c_pow", "_block_solve", "_block_resolve", "_newton", "_bind_model",
+)
+# (a)'s names, for the tests that check both sides of the contract (tests/test_pyruntime.py).
+_MODEL_NAMES = (
+    "MODEL", "STATES", "OUTPUTS", "CONSTRAINTS", "SCENE", "_IDENT", "_PARAM_NAMES", "_N",
+    "_AUTONOMOUS", "_POSITION_ROWS", "_VELOCITY_ROWS", "_VELOCITY_MOVABLE", "_WORK_DOUBLES",
+    "_WORK_INTS", "_BLOCK_NAMES", "_BLOCKS", "_JAC_COLORS", "_JAC_COLUMNS", "_fill_params",
+    "_constants", "_init", "_rhs", "_out", "_jvp", "_residual", "_scale", "_position_jac",
+    "_velocity_jac", "_METHODS", "SOLVERS", "_SOLVER_LIST",
+)
+
+# ---------------------------------------------------------------- the model part's names
+# Neutral values (see the contract above); the model part redefines every one of them.
+
+MODEL = ""
+STATES = []
+OUTPUTS = []
+CONSTRAINTS = []
+SCENE = {"t0": 0.0, "t_end": 1.0, "dt": 0.1, "solver": "dopri5", "rtol": 1e-6, "atol": 1e-9,
+         "step": None}
+_IDENT = "model"
+_PARAM_NAMES = []
+_N = 0
+_AUTONOMOUS = True
+_POSITION_ROWS = []
+_VELOCITY_ROWS = []
+_VELOCITY_MOVABLE = []
+_WORK_DOUBLES = 0
+_WORK_INTS = 0
+_BLOCK_NAMES = []
+_BLOCKS = []
+_JAC_COLORS = []
+_JAC_COLUMNS = []
+_METHODS = {}
+SOLVERS = ()
+_SOLVER_LIST = ""
+
+
+def _fill_params(p, given):
+    return p
+
+
+def _constants(p):
+    return []
+
+
+def _init(p):
+    return []
+
+
+def _rhs(t, x, p, w, out):
+    pass
+
+
+def _out(t, x, p, w, out):
+    pass
+
+
+def _jvp(t, x, p, w, v, out):
+    pass
+
+
+def _residual(t, x, p):
+    return []
+
+
+def _scale(t, x, p):
+    return []
+
+
+def _position_jac(t, x, p):
+    return []
+
+
+def _velocity_jac(t, x, p):
+    return []
+
+
+# ---------------------------------------------------------------- the runtime
+
+_EPS = sys.float_info.epsilon
+
 
 
 class SimulationError(RuntimeError):
@@ -108,7 +264,7 @@ class _Block:
             setattr(self, key, value)
 
 
-_BLOCK_TABLE = [_Block(row) for row in _BLOCKS]
+_BLOCK_TABLE = []  # _Block per entry of _BLOCKS (_bind_model)
 
 
 class _Work:
@@ -411,7 +567,6 @@ def _with_constants(p):
     return list(p) + _constants(p)
 
 
-PARAMETERS = dict(zip(_PARAM_NAMES, _param_values({})))
 
 
 # ---------------------------------------------------------------- constraints
@@ -789,7 +944,7 @@ def _progress_reporter(s):
     last = [None]
 
     def report(t):
-        now = time.monotonic()  # (time: imported by solve.py, below)
+        now = time.monotonic()
         if last[0] is None or now - last[0] >= 0.1:
             last[0] = now
             sys.stderr.write("bgc-progress %.17g %.17g %.17g\n" % (t, s.t0, s.t_end))
@@ -801,7 +956,7 @@ def main(argv=None):
     """The command line; returns the exit status."""
     argv = sys.argv[1:] if argv is None else list(argv)
     if any(a == "--batch" or a.startswith("--batch=") for a in argv):
-        return _batch_main(argv)  # batch.py
+        return _batch_main(argv)  # (batch mode, at the end)
     try:
         parsed = _parse_args(argv)
     except _UsageError as error:
@@ -850,3 +1005,1815 @@ def main(argv=None):
         return 3
     return 0
 
+
+# ================================================================== solve ===
+# The step driver (_drive, as bgc_drive in the C runtime's drive.c: see there for the
+# contract between the driver and a method family), the explicit Runge-Kutta families (read
+# from _METHODS, printed from bgc/solvers.py) and _integrate; the stiff families follow
+# (section stiff).  The explicit solvers keep small states as lists and large ones as
+# numpy vectors (see _LIST_STATES); the arithmetic is the C runtime's, in the same order.
+
+def _output_count(s):
+    n = math.ceil((s.t_end - s.t0) / s.dt - 1e-6)
+    return n if n > 0 else 0
+
+
+def _output_time(s, k, n):
+    return s.t_end if k >= n else s.t0 + k * s.dt
+
+
+def _hmin(t):
+    """Steps below this are too small to resolve at t (16 ulps of t; the least normal at 0)."""
+    return max(16.0 * _EPS * abs(t), sys.float_info.min)
+
+
+def _first_nonfinite(v):
+    for i, a in enumerate(v):
+        if not math.isfinite(a):
+            return i
+    return -1
+
+
+def _fail(t, what, name):
+    return _Failure("at t = %.17g: %s '%s' is not finite" % (t, what, name), t)
+
+
+def _fail_step(t, h, worst):
+    if worst >= 0:
+        message = "at t = %.17g: step size too small (h = %.3g), limited by state '%s'" % (
+            t, h, STATES[worst])
+    else:
+        message = "at t = %.17g: step size too small (h = %.3g)" % (t, h)
+    return _Failure(message, t)
+
+
+_STOP = [0]  # a signal's number: the run stops at its next accepted step (request_stop)
+
+
+def request_stop(sig):
+    """Asks a run in progress to stop at its next accepted step, as a failure ("interrupted by
+    signal sig"), the rows before it kept; a signal handler may call it.  0 clears it."""
+    _STOP[0] = sig
+
+
+def _accept(run, t):
+    """Counts an accepted step ending at t; raises _Failure if a stop was asked or the step
+    budget since the last output is spent."""
+    run.st["steps"] += 1
+    if _STOP[0]:
+        raise _Failure("at t = %.17g: interrupted by signal %d" % (t, _STOP[0]), t)
+    if run.s.max_steps > 0 and run.st["steps"] - run.steps_out > run.s.max_steps:
+        raise _Failure("at t = %.17g: step budget spent: %d steps since the output at t = %.17g "
+                       "(the step size runs away; --max-steps raises the budget)"
+                       % (t, run.s.max_steps, run.t_out), t)
+
+
+def _block_failed(failure):
+    return _Failure(str(failure), failure.t)
+
+
+def _new_stats():
+    return {"steps": 0, "rejected": 0, "rhs": 0, "jac": 0, "lu": 0, "solves": 0,
+            "switched": False, "t_switch": 0.0, "cpu": 0.0, "h_next": 0.0, "order_next": 0}
+
+
+def _stats_line(st):
+    line = ("stats: steps=%(steps)d rejected=%(rejected)d rhs=%(rhs)d jac=%(jac)d lu=%(lu)d "
+            "solves=%(solves)d" % st)
+    if st["switched"]:
+        line += " stiff_from=%.17g" % st["t_switch"]
+    return line + " cpu=%.6e" % st["cpu"]
+
+
+class _Stiff(Exception):
+    """An auto run's explicit phase found the problem stiff."""
+
+
+class _Run:
+    """A run in progress (see bgc_run in the C runtime): a run function is a generator that
+    integrates from (run.t, y) to s.t_end, yields the rows (t, outputs) of the output times
+    run.kout .. run.nout as it passes them, keeps run.t and run.y at its last accepted step,
+    and returns; or raises _Failure, _Stiff (run.h: its last step size)."""
+
+    __slots__ = ("s", "p", "w", "st", "nout", "kout", "t", "h", "y", "detect_stiffness",
+                 "steps_out", "t_out", "m", "name", "fixed")
+
+    def __init__(self, s, p, w, st, y):
+        self.s, self.p, self.w, self.st = s, p, w, st
+        self.steps_out, self.t_out = st["steps"], s.t0  # the steps at the last output, its t
+        self.nout, self.kout = _output_count(s), 1
+        self.t, self.h, self.y = s.t0, s.h0, y
+        self.detect_stiffness = False
+        self.m, self.name, self.fixed = None, "", False  # the method running, see _run_solver
+
+    def f(self, t, y):
+        """dy/dt as a numpy vector; a failed algebraic block raises _BlockFailure."""
+        out = [0.0] * _N
+        _rhs(t, y.tolist(), self.p, self.w, out)
+        return numpy.array(out, dtype=float)
+
+    def fv(self, t, y):
+        """dy/dt for the explicit solvers, in _V's kind of vector."""
+        if _V is _ArrayVectors:
+            return self.f(t, y)
+        out = [0.0] * _N
+        _rhs(t, y, self.p, self.w, out)
+        return out
+
+    def emit(self, t, x):
+        if isinstance(x, numpy.ndarray):
+            x = x.tolist()
+        y = [0.0] * len(OUTPUTS)
+        try:
+            _out(t, x, self.p, self.w, y)
+        except _BlockFailure as failure:
+            raise _block_failed(failure) from None
+        j = _first_nonfinite(y)
+        if j >= 0:
+            raise _fail(t, "output", OUTPUTS[j])
+        self.steps_out, self.t_out = self.st["steps"], t
+        yield t, y
+
+    def emit_step(self, t, h, tph, y1, dense):
+        """The output times in (t, tph] after an accepted step: tph from y1, the others from
+        at(theta), the function that dense() prepares on first use."""
+        at = None
+        while self.kout <= self.nout:
+            tk = _output_time(self.s, self.kout, self.nout)
+            if tk > tph:
+                break
+            if tk == tph:
+                yield from self.emit(tk, y1)
+            else:
+                if at is None:
+                    at = dense()
+                yield from self.emit(tk, at((tk - t) / h))
+            self.kout += 1
+
+
+# Byte parity with the C runtime: sums in C's sequence (never numpy.sum, dot or @, whose
+# pairwise or SIMD order depends on the machine; never the builtin sum, compensated from
+# Python 3.12 on), bgc_max's choice for a NaN.
+
+def _seq_sum(v):
+    """0.0 + v_0 + v_1 + ... in this order, as C's `acc = 0.0; acc += v[l]` loops."""
+    return 0.0 + float(numpy.add.accumulate(v)[-1]) if len(v) else 0.0
+
+
+def _seq_minus(acc, terms):
+    """acc - terms_0 - terms_1 - ... in this order (C's back substitution)."""
+    if len(terms) < 2:
+        return acc - terms[0] if len(terms) else acc
+    return numpy.subtract.accumulate(numpy.concatenate(([acc], terms)))[-1]
+
+
+def _c_max(a, b):
+    """bgc_max element-wise: b where b > a, else a (a NaN b is never larger)."""
+    return numpy.where(b > a, b, a)
+
+
+def _worst(q):
+    """C's running `if (q > big)` from big = -1: the first largest non-NaN q_i, or -1."""
+    q = numpy.where(q == q, q, -1.0)
+    i = int(numpy.argmax(q)) if len(q) else -1
+    return i if i >= 0 and q[i] > -1.0 else -1
+
+
+def _weights(s, y, y1):
+    """Hairer's error-norm weights atol + rtol * max(|y_i|, |y1_i|) (bgc_weight)."""
+    return s.atol + s.rtol * _c_max(numpy.abs(y), numpy.abs(y1))
+
+
+def _initial_step(run, q, y, f0, hmax):
+    """Hairer's initial step size guess (HINIT) for a method of order q."""
+    s = run.s
+    y, f0 = numpy.asarray(y, dtype=float), numpy.asarray(f0, dtype=float)
+    sk = s.atol + s.rtol * numpy.abs(y)
+    with numpy.errstate(all="ignore"):  # IEEE as in C: an overflow gives inf, then h = 0
+        qf, qy = f0 / sk, y / sk
+        dnf, dny = _seq_sum(qf * qf), _seq_sum(qy * qy)
+        h = 1e-6 if (dnf <= 1e-10 or dny <= 1e-10) else math.sqrt(dny / dnf) * 0.01
+    h = min(h, hmax)
+    run.st["rhs"] += 1
+    try:
+        f1 = run.f(run.t + h, y + h * f0)
+    except _BlockFailure:
+        return h  # a block failed there: start small, the step control takes over
+    with numpy.errstate(all="ignore"):
+        d = (f1 - f0) / (s.atol + s.rtol * numpy.abs(y))
+        der2 = float(numpy.float64(math.sqrt(_seq_sum(d * d))) / numpy.float64(h))
+    der12 = max(math.sqrt(dnf), abs(der2))  # a NaN der2 is ignored
+    h1 = max(1e-6, h * 1e-3) if der12 <= 1e-15 else (0.01 / der12) ** (1.0 / q)
+    if not h1 > 0.0:
+        h1 = h * 1e-3
+    return min(min(100.0 * h, h1), hmax)
+
+
+# ---------------------------------------------------------------- explicit Runge-Kutta
+# An explicit step's cost beside the model's right side is a few vector operations per
+# stage.  On a handful of states a numpy call costs more than a list comprehension over the
+# whole vector, so the explicit solvers keep their states as lists up to _LIST_STATES states
+# and as numpy vectors above; both kits compute the same values in the same order as the C
+# runtime (bgc_combine: stage by stage, left to right).
+
+_LIST_STATES = 48
+
+
+def _weighted(w, count, stride=None):
+    """The (weight, stage) pairs of w[j] (w[j][stride]) over j < count, zero weights dropped."""
+    pairs = []
+    for j in range(min(count, len(w))):
+        a = w[j] if stride is None else w[j][stride]
+        if a != 0.0:
+            pairs.append((a, j))
+    return tuple(pairs)
+
+
+def _list_terms(acc, pairs, K):
+    """acc + a_0 K_j0 + ... (up to four pairs, left to right; acc None: no acc)."""
+    n = len(pairs)
+    (a, i) = pairs[0]
+    if n == 1:
+        if acc is None:
+            return [a * u for u in K[i]]
+        return [s + a * u for s, u in zip(acc, K[i])]
+    (b, j) = pairs[1]
+    if n == 2:
+        if acc is None:
+            return [a * u + b * v for u, v in zip(K[i], K[j])]
+        return [s + a * u + b * v for s, u, v in zip(acc, K[i], K[j])]
+    (c, k) = pairs[2]
+    if n == 3:
+        if acc is None:
+            return [a * u + b * v + c * w for u, v, w in zip(K[i], K[j], K[k])]
+        return [s + a * u + b * v + c * w for s, u, v, w in zip(acc, K[i], K[j], K[k])]
+    (d, l) = pairs[3]
+    if acc is None:
+        return [a * u + b * v + c * w + d * x for u, v, w, x in zip(K[i], K[j], K[k], K[l])]
+    return [s + a * u + b * v + c * w + d * x
+            for s, u, v, w, x in zip(acc, K[i], K[j], K[k], K[l])]
+
+
+def _list_terms_into(y, h, pairs, K):
+    """y + h * (a_0 K_j0 + ...) for up to four pairs, in one comprehension."""
+    n = len(pairs)
+    (a, i) = pairs[0]
+    if n == 1:
+        return [z + h * (a * u) for z, u in zip(y, K[i])]
+    (b, j) = pairs[1]
+    if n == 2:
+        return [z + h * (a * u + b * v) for z, u, v in zip(y, K[i], K[j])]
+    (c, k) = pairs[2]
+    if n == 3:
+        return [z + h * (a * u + b * v + c * w) for z, u, v, w in zip(y, K[i], K[j], K[k])]
+    (d, l) = pairs[3]
+    return [z + h * (a * u + b * v + c * w + d * x)
+            for z, u, v, w, x in zip(y, K[i], K[j], K[k], K[l])]
+
+
+class _ListVectors:
+    """States as Python lists."""
+
+    @staticmethod
+    def vec(x):
+        return x.tolist() if isinstance(x, numpy.ndarray) else x
+
+    @staticmethod
+    def combine(y, h, pairs, K):
+        """y + h * sum a K_j over the pairs (y None: h * sum), four terms per comprehension."""
+        n = len(pairs)
+        if n == 0:
+            acc = [0.0] * _N
+        elif n <= 4 and y is not None:
+            return _list_terms_into(y, h, pairs, K)
+        else:
+            acc = _list_terms(None, pairs[:4], K)
+            for k in range(4, n, 4):
+                acc = _list_terms(acc, pairs[k:k + 4], K)
+        if y is None:
+            return [h * u for u in acc]
+        return [u + h * v for u, v in zip(y, acc)]
+
+    @staticmethod
+    def horner(y, q, theta):
+        """y + theta (q_0 + theta (q_1 + ...))."""
+        acc = q[-1]
+        for qd in reversed(q[:-1]):
+            acc = [u + theta * v for u, v in zip(qd, acc)]
+        return [u + theta * v for u, v in zip(y, acc)]
+
+    @staticmethod
+    def error_sums(s, y, y1, e1, e2):
+        """sum (e1_i / sk_i)^2, its largest term's index, and sum (e2_i / sk_i)^2 (e2 may be
+        None), sk_i = atol + rtol * max(|y_i|, |y1_i|)."""
+        rtol, atol = s.rtol, s.atol
+        err = err2 = 0.0
+        worst, worst_q = -1, -1.0
+        for i in range(_N):
+            sk = atol + rtol * max(abs(y[i]), abs(y1[i]))
+            qq = e1[i] / sk
+            qq = qq * qq
+            err += qq
+            if qq > worst_q:
+                worst, worst_q = i, qq
+            if e2 is not None:
+                q2 = e2[i] / sk
+                err2 += q2 * q2
+        return err, worst, err2
+
+    @staticmethod
+    def distance2(u, v):
+        acc = 0.0
+        for a, b in zip(u, v):
+            acc += (a - b) * (a - b)
+        return acc
+
+
+class _ArrayVectors:
+    """States as numpy vectors."""
+
+    @staticmethod
+    def vec(x):
+        return numpy.asarray(x, dtype=float)
+
+    @staticmethod
+    def combine(y, h, pairs, K):
+        if pairs:
+            a, j = pairs[0]
+            acc = a * K[j]
+            for a, j in pairs[1:]:
+                acc = acc + a * K[j]
+        else:
+            acc = numpy.zeros(_N)
+        return h * acc if y is None else y + h * acc
+
+    @staticmethod
+    def horner(y, q, theta):
+        acc = q[-1]
+        for qd in reversed(q[:-1]):
+            acc = qd + theta * acc
+        return y + theta * acc
+
+    @staticmethod
+    def error_sums(s, y, y1, e1, e2):
+        sk = _weights(s, y, y1)
+        with numpy.errstate(all="ignore"):
+            sq = e1 / sk
+            sq = sq * sq
+            err = _seq_sum(sq)
+            q2 = e2 / sk if e2 is not None else None
+            err2 = _seq_sum(q2 * q2) if e2 is not None else 0.0
+        return err, _worst(sq), err2
+
+    @staticmethod
+    def distance2(u, v):
+        with numpy.errstate(all="ignore"):
+            d = u - v
+            return _seq_sum(d * d)
+
+
+_V = _ListVectors  # the vectors for _N states: lists up to _LIST_STATES (_bind_model)
+
+
+def _combine(weights, K, count):
+    """sum_j weights[j] K[j] over j < count with a nonzero weight, left to right, for numpy
+    vectors K[j] (the stiff solvers)."""
+    acc = numpy.zeros(_N)  # C's acc = 0.0, then acc += a K_j
+    for j in range(count):
+        a = weights[j]
+        if a != 0.0:
+            acc = acc + a * K[j]
+    return acc
+
+
+class _ErkPlan:
+    """A tableau's nonzero weights, ready for _V.combine."""
+
+    def __init__(self, m):
+        stages, c = m["stages"], m["c"]
+        self.a = [_weighted(m["a"][i], i) for i in range(len(c))]
+        self.b = _weighted(m["b"], stages)
+        self.e = _weighted(m["e"], stages) if "e" in m else ()
+        self.e2 = _weighted(m["e2"], stages) if m.get("e2") else None
+        P = m.get("P")
+        self.P = [_weighted(P, len(P), d) for d in range(len(P[0]))] if P else []
+
+
+def _substeps(span, h):
+    r = span / h
+    if not r < 1e15:
+        return -1
+    m = math.ceil(r - 1e-6)
+    return 1 if m < 1 else m
+
+
+# ---------------------------------------------------------------- the step driver
+# A family is a class: __init__(run), start(y) -> the first step (None on a grid), step(t,
+# h, tph, y) -> (outcome, y1, hnew, why), accepted(tph, y1), dense() -> at(theta), after(tph,
+# y1, last) -> True when the stiffness test fired, next_h(h, hnew) -> hnew, span_grid; a
+# failure that ends the run raises _Failure.  Outcomes as drive.c's; why = (bad, bad_kind,
+# block failure) after a failed attempt: bad >= 0 a non-finite component (bad_kind names its
+# kind), -1 the error test, -2 a block, -3 a singular matrix, -4 Newton.
+
+_ACCEPT, _REJECT, _RETRY, _AGAIN = 0, 1, 2, 3
+
+
+def _fail_small(run, t, h, bad, bad_kind, failure, worst):
+    """A step size below _hmin: the message names what made the steps shrink."""
+    if bad == -2:
+        return _block_failed(failure)
+    if bad in (-3, -4):
+        what = ("the iteration matrix is singular" if bad == -3
+                else "the Newton iteration does not converge")
+        return _Failure("at t = %.17g: %s: %s (step size down to h = %.3g)"
+                        % (t, run.name, what, h), t)
+    if bad >= 0:
+        return _fail(t, bad_kind, STATES[bad])
+    return _fail_step(t, h, worst)
+
+
+class _Grid:
+    """Where a fixed-step run is: the k-th of n steps from ta to tb (the run's end on a span
+    grid, else the output interval's)."""
+
+    def __init__(self, run, span):
+        s = run.s
+        self.run, self.span = run, span
+        self.step = s.step if s.step > 0.0 else s.dt
+        self.ta = self.tb = 0.0
+        self.k = self.n = 0
+
+    def next(self, t):
+        """The next step's end from t and whether it is the run's last."""
+        run = self.run
+        if self.k >= self.n:
+            self.ta, self.k = t, 0
+            self.tb = run.s.t_end if self.span else _output_time(run.s, run.kout, run.nout)
+            self.n = _substeps(self.tb - self.ta, self.step)
+            if self.n < 0:
+                raise _fail_step(t, self.step, -1)
+        end = self.k + 1 >= self.n
+        tph = self.tb if end else self.ta + (self.k + 1) * self.step
+        last = end and (self.span or run.kout >= run.nout)
+        if not self.span:  # each step from its grid point (the same value as the last end)
+            t = self.ta + self.k * self.step
+        if not tph - t >= _hmin(t):
+            raise _fail_step(t, tph - t, -1)
+        return tph, last
+
+
+def _drive(run, family, y):
+    """One family's run from (run.t, y) to s.t_end: yields the rows as it passes them, keeps
+    run.t and run.y at the last accepted step; raises _Failure, or _Stiff (run.h: the
+    explicit phase's next step)."""
+    s, st = run.s, run.st
+    if run.kout > run.nout:
+        return
+    hmax = s.t_end - s.t0
+    fam = family(run)
+    h = fam.start(y)
+    t = run.t
+    reject = last = False
+    bad, bad_kind, failure, wanted = -1, "", None, 0.0
+    grid = _Grid(run, fam.span_grid)
+    while True:
+        if run.fixed:
+            tph, last = grid.next(t)
+            h = tph - t
+        else:
+            if not h >= _hmin(t):
+                raise _fail_small(run, t, h, bad, bad_kind, failure, fam.worst)
+            wanted = h
+            if t + 1.01 * h - s.t_end > 0.0:
+                h = s.t_end - t
+                last = True
+            tph = s.t_end if last else t + h
+        outcome, y1, hnew, why = fam.step(t, h, tph, y)
+        if outcome == _AGAIN:
+            continue
+        if outcome != _ACCEPT:
+            if outcome == _RETRY:
+                bad, bad_kind, failure = why
+            reject, last = True, False
+            st["rejected"] += 1
+            h = hnew
+            continue
+        i = _first_nonfinite(y1)
+        if i >= 0:
+            raise _fail(tph, "state", STATES[i])
+        _accept(run, tph)
+        fam.accepted(tph, y1)
+        yield from run.emit_step(t, h, tph, y1, fam.dense)
+        y, t = y1, tph
+        run.t, run.y = t, y
+        grid.k += 1
+        if fam.after(tph, y1, last):
+            run.h = hnew
+            raise _Stiff()
+        if last:
+            if not run.fixed:  # the step to go on with: the controller's, or the one cut short
+                st["h_next"] = max(hnew, wanted)
+            return
+        if not run.fixed:
+            hnew = min(hnew, hmax)
+        if reject:
+            hnew = min(hnew, h)
+        reject, bad = False, -1
+        h = fam.next_h(h, hnew)
+
+
+class _Family:
+    """What a family does not need to do (see _drive)."""
+
+    span_grid = True
+    worst = -1
+    dense = None  # no output time falls inside a step of a family without a dense output
+
+    def accepted(self, tph, y1):
+        pass
+
+    def after(self, tph, y1, last):
+        return False
+
+    def next_h(self, h, hnew):
+        return hnew
+
+
+# ---------------------------------------------------------------- explicit Runge-Kutta
+
+
+class _FixedSteps(_Family):
+    """The fixed-step methods: each step from f(t, y) afresh (no error estimate, no dense
+    output: the driver lands a step on every output time)."""
+
+    span_grid = False
+
+    def __init__(self, run):
+        m = run.m
+        self.run, self.stages, self.c = run, m["stages"], m["c"]
+        self.plan = _ErkPlan(m)
+
+    def start(self, y):
+        return None
+
+    def step(self, t, h, tph, y):
+        run, c, combine = self.run, self.c, _V.combine
+        y = _V.vec(y)
+        K = [None] * self.stages
+        try:
+            K[0] = run.fv(t, y)
+            i = _first_nonfinite(K[0])
+            if i >= 0:
+                raise _fail(t, "derivative of state", STATES[i])
+            for i in range(1, self.stages):
+                K[i] = run.fv(t + c[i] * h, combine(y, h, self.plan.a[i], K))
+        except _BlockFailure as failure:
+            raise _block_failed(failure) from None
+        run.st["rhs"] += self.stages
+        return _ACCEPT, combine(y, h, self.plan.b, K), h, None
+
+
+class _Erk(_Family):
+    """Embedded explicit pairs (bgc_family_erk): Hairer's error norm and controller, outputs
+    by the dense output; on fixed steps no error control.  With run.detect_stiffness,
+    Hairer's stiffness test fires _Stiff once it has held on 15 accepted steps."""
+
+    def __init__(self, run):
+        m = run.m
+        self.run, self.m, self.plan = run, m, _ErkPlan(m)
+        self.stages, self.c = m["stages"], m["c"]
+        self.last_stage = self.stages - 1
+        self.fsal = m["fsal"]
+        self.fsal_first = self.fsal and m["e"][self.last_stage] != 0.0
+        self.stiff_i, self.stiff_j, self.stiff_bound = m.get("stiffness", (-1, -1, 0.0))
+        self.expo1 = 1.0 / m["q"] - m["expo_beta"] * m["beta"]
+        self.facold = 1e-4
+        self.stiff_count = self.nonstiff_count = 0
+        self.K = [None] * len(self.c)
+        self.t = self.h = 0.0
+        self.y = self.ys = self.ystiff = None
+
+    def start(self, y):
+        run = self.run
+        run.st["rhs"] += 1
+        try:
+            self.K[0] = run.fv(run.t, _V.vec(y))
+        except _BlockFailure as failure:
+            raise _block_failed(failure) from None
+        i = _first_nonfinite(self.K[0])
+        if i >= 0:
+            raise _fail(run.t, "derivative of state", STATES[i])
+        if run.fixed:
+            return None
+        hmax = run.s.t_end - run.s.t0
+        return min(run.h, hmax) if run.h > 0.0 else _initial_step(run, self.m["q"], y,
+                                                                   self.K[0], hmax)
+
+    def _error(self, h, y, y1):
+        """Hairer's error norm (DOP853 combines its two estimates); NaN for an infinite
+        stage."""
+        s, plan, combine, K = self.run.s, self.plan, _V.combine, self.K
+        e2 = plan.e2
+        try:
+            err, worst, err2 = _V.error_sums(
+                s, y, y1, combine(None, 1.0 if e2 else h, plan.e, K),
+                combine(None, 1.0, e2, K) if e2 else None)
+        except (OverflowError, ValueError):  # an infinite stage: treated as NaN below
+            return math.nan
+        if err == err:
+            self.worst = worst
+        if _N == 0 or (self.run.fixed and err == err):
+            return 0.0  # fixed steps: accepted as they are (a non-finite stage fails below)
+        if e2:
+            deno = err + 0.01 * err2
+            if not deno > 0.0:
+                deno = 1.0
+            return abs(h) * err * math.sqrt(1.0 / (_N * deno))
+        return math.sqrt(err / _N)
+
+    def _retry(self, h, tph, y1, failure):
+        """A failed attempt: a much smaller step (on fixed steps, the end of the run)."""
+        run = self.run
+        if run.fixed:
+            if failure is not None:
+                raise _block_failed(failure) from None
+            raise _fail(tph, "state", STATES[max(_first_nonfinite(y1), 0)])
+        if failure is not None:
+            return _RETRY, None, h * self.m["fac_min"], (-2, "", failure)
+        bad, bad_kind = _first_nonfinite(y1), "state"
+        for i in range(1, self.stages):
+            if bad >= 0:
+                break
+            if self.K[i] is not None:
+                bad, bad_kind = _first_nonfinite(self.K[i]), "derivative of state"
+        return _RETRY, None, h * self.m["fac_min"], (bad, bad_kind, None)
+
+    def step(self, t, h, tph, y):
+        run, m, K, c = self.run, self.m, self.K, self.c
+        st, combine, fv = run.st, _V.combine, run.fv
+        y = _V.vec(y)
+        y1 = None
+        try:
+            for i in range(1, self.stages):
+                if self.fsal and i == self.last_stage:
+                    break
+                ys = combine(y, h, self.plan.a[i], K)
+                if i == self.stiff_i:
+                    self.ystiff = ys
+                self.ys = ys
+                K[i] = fv(tph if c[i] == 1.0 else t + c[i] * h, ys)
+                st["rhs"] += 1
+            y1 = combine(y, h, self.plan.b, K)
+            if self.fsal_first:
+                st["rhs"] += 1
+                K[self.last_stage] = fv(tph, y1)
+        except _BlockFailure as failure:  # an algebraic block failed in a stage
+            return self._retry(h, tph, y1, failure)
+        err = self._error(h, y, y1)
+        if err != err:  # a non-finite stage
+            return self._retry(h, tph, y1, None)
+        safe, fac_min, fac_max, beta = m["safe"], m["fac_min"], m["fac_max"], m["beta"]
+        fac11 = err ** self.expo1
+        fac = fac11 / self.facold ** beta
+        fac = max(1.0 / fac_max, min(1.0 / fac_min, fac / safe))
+        if err <= 1.0:
+            self.facold = max(err, 1e-4)
+            self.t, self.h, self.y = t, h, y
+            return _ACCEPT, y1, run.s.step if run.fixed else h / fac, None
+        return _REJECT, None, h / min(1.0 / fac_min, fac11 / safe), None
+
+    def accepted(self, tph, y1):
+        """The last stage f(t + h, y1) of an FSAL pair whose estimate does not use it."""
+        if self.fsal and not self.fsal_first:
+            self.run.st["rhs"] += 1
+            try:
+                self.K[self.last_stage] = self.run.fv(tph, y1)
+            except _BlockFailure as failure:
+                raise _block_failed(failure) from None
+
+    def dense(self):
+        """The dense output: the extra stages, then y(theta) = y + theta (q_0 + theta (q_1 +
+        ...)), q_d = h sum_i P[i][d] K_i."""
+        run, t, h, y, K = self.run, self.t, self.h, self.y, self.K
+        c, combine = self.c, _V.combine
+        try:
+            for i in range(self.stages, len(c)):
+                K[i] = run.fv(t + c[i] * h, combine(y, h, self.plan.a[i], K))
+                run.st["rhs"] += 1
+        except _BlockFailure as failure:
+            raise _block_failed(failure) from None
+        q = [combine(None, h, pairs, K) for pairs in self.plan.P]
+        horner = _V.horner
+        return lambda theta: horner(y, q, theta)
+
+    def after(self, tph, y1, last):
+        """Hairer's stiffness test, h |f(Y_i) - f(Y_j)| / |Y_i - Y_j| for two stages at the
+        same time; then f at the new point (the FSAL stage, or evaluated)."""
+        run, K = self.run, self.K
+        if run.detect_stiffness and self.stiff_i >= 0 and self.ystiff is not None:
+            num = _V.distance2(K[self.stiff_j], K[self.stiff_i])
+            den = _V.distance2(y1 if self.stiff_j == self.last_stage else self.ys, self.ystiff)
+            if den > 0.0 and self.h * math.sqrt(num / den) > self.stiff_bound:
+                self.nonstiff_count = 0
+                self.stiff_count += 1
+                if self.stiff_count == 15:
+                    return True
+            else:
+                self.nonstiff_count += 1
+                if self.nonstiff_count == 6:
+                    self.stiff_count = 0
+        try:
+            if self.fsal:
+                K[0] = K[self.last_stage]
+            elif not last:
+                run.st["rhs"] += 1
+                K[0] = run.fv(tph, y1)
+        except _BlockFailure as failure:
+            raise _block_failed(failure) from None
+        return False
+
+
+# ---------------------------------------------------------------- integrate
+
+
+def _run_solver(run, name):
+    """Runs solver `name` from (run.t, run.y) with the driver."""
+    m = _METHODS[name]
+    family = {"fixed": _FixedSteps, "erk": _Erk, "rosenbrock": _Rosenbrock,
+              "radau": _Radau}.get(m["family"])
+    if family is None:
+        raise ValueError("solver '%s' cannot run by itself" % name)
+    run.m, run.name = m, name
+    run.fixed = run.s.step > 0.0 or m["family"] == "fixed"
+    y = run.y if family in (_FixedSteps, _Erk) else numpy.asarray(run.y, dtype=float)
+    yield from _drive(run, family, y)
+
+
+def _integrate(s, p, x0, st):
+    """Runs the solver: yields the rows (t, outputs) as it computes them; st["cpu"]: the
+    processor seconds it took (the consumer's time between rows excluded)."""
+    cpu = 0.0
+    rows = _integrate_from(s, p, x0, st)
+    try:
+        while True:
+            start = time.process_time()
+            try:
+                row = next(rows)
+            except StopIteration:
+                return
+            finally:
+                cpu += time.process_time() - start
+                st["cpu"] = cpu
+            yield row
+    finally:
+        rows.close()
+
+
+def _integrate_from(s, p, x0, st):
+    y = numpy.array(x0, dtype=float)
+    i = _first_nonfinite(y)
+    if i >= 0:
+        raise _fail(s.t0, "state", STATES[i])
+    run = _Run(s, p, _Work(s.rtol, s.atol), st, y)
+    st["h_next"], st["order_next"] = 0.0, 0
+    yield from run.emit(s.t0, y)
+    m = _METHODS[s.solver]
+    if m["family"] != "auto":
+        yield from _run_solver(run, s.solver)
+        return
+    run.detect_stiffness = True
+    try:
+        yield from _run_solver(run, m["explicit"])
+    except _Stiff:
+        st["switched"], st["t_switch"] = True, run.t
+        run.detect_stiffness = False
+        yield from _run_solver(run, m["stiff"])
+
+
+# ================================================================== stiff ===
+# The stiff families: Rosenbrock methods in Hairer's transformed form (RODAS's design, any
+# tableau of the family) and Radau IIA with 3, 5 or 7 stages, of fixed or variable order
+# (RADAU5's and RADAU's design), as bgc_run_rosenbrock and bgc_run_radau in the C runtime (see
+# there).  Byte parity: every floating-point operation is the C runtime's, in C's order, so
+# both backends write the same bytes whatever BLAS or SIMD kernels numpy picks.  Hence no
+# numpy.sum, dot, @ or linalg here: sums run in C's sequence (_seq_sum, a subtract.accumulate),
+# the LU factorisations and solves are bgc_stiff_lu's and bgc_stiff_zlu's (row-vectorised
+# where C's loops are element-wise independent), and complex arithmetic is done on real and
+# imaginary parts as the C runtime's bgc_cmul and bgc_cdiv write it out: products (ac - bd) +
+# i(ad + bc) with Annex G's recovery of infinities (libgcc's __muldc3), quotients as GCC 12's
+# libgcc __divdc3.
+
+
+def _stiff_norm(v, w):
+    """bgc_stiff_norm: sqrt(mean((v_i / w_i)^2)) (0 without states) and the component with
+    the largest share (the first; -1 if every share is NaN)."""
+    if _N == 0:
+        return 0.0, -1
+    with numpy.errstate(all="ignore"):
+        q = v / w
+        q = q * q
+    return math.sqrt(_seq_sum(q) / _N), _worst(q)
+
+
+# ---------------------------------------------------------------- complex arithmetic
+# A complex number is a pair of floats (or of float arrays): real and imaginary part.
+
+_RBIG = sys.float_info.max / 2
+_RMIN = sys.float_info.min
+_RMIN2 = sys.float_info.epsilon
+_RMINSCAL = 1.0 / sys.float_info.epsilon
+_RMAX2 = _RBIG * _RMIN2
+
+
+def _box(v):
+    """Annex G's boxing of an infinite part: +-1 if v is infinite, else +-0."""
+    return math.copysign(1.0 if math.isinf(v) else 0.0, v)
+
+
+def _muldc3(a, b, c, d):
+    """(a + ib)(c + id) as libgcc's __muldc3 (gcc's inline product where not both parts are
+    NaN), on floats."""
+    ac, bd, ad, bc = a * c, b * d, a * d, b * c
+    x, y = ac - bd, ad + bc
+    if x != x and y != y:  # recover infinities that came out as NaN + iNaN
+        recalc = False
+        if math.isinf(a) or math.isinf(b):
+            a, b = _box(a), _box(b)
+            c = math.copysign(0.0, c) if c != c else c
+            d = math.copysign(0.0, d) if d != d else d
+            recalc = True
+        if math.isinf(c) or math.isinf(d):
+            c, d = _box(c), _box(d)
+            a = math.copysign(0.0, a) if a != a else a
+            b = math.copysign(0.0, b) if b != b else b
+            recalc = True
+        if not recalc and any(math.isinf(v) for v in (ac, bd, ad, bc)):
+            a, b, c, d = (math.copysign(0.0, v) if v != v else v for v in (a, b, c, d))
+            recalc = True
+        if recalc:
+            x = math.inf * (a * c - b * d)
+            y = math.inf * (a * d + b * c)
+    return x, y
+
+
+def _divdc3(a, b, c, d):
+    """(a + ib) / (c + id) as libgcc's __divdc3 (GCC 12's: Smith's method with scaling), on
+    floats; where Python would raise on a division by zero, on numpy.float64 values (IEEE)."""
+    try:
+        return _divdc3_of(a, b, c, d)
+    except ZeroDivisionError:
+        with numpy.errstate(all="ignore"):
+            x, y = _divdc3_of(*(numpy.float64(v) for v in (a, b, c, d)))
+        return float(x), float(y)
+
+
+def _divdc3_of(a, b, c, d):
+    if abs(c) < abs(d):
+        if abs(d) >= _RBIG:
+            a, b, c, d = a / 2, b / 2, c / 2, d / 2
+        if abs(d) < _RMIN2 or _tiny(a, b, d):
+            a, b, c, d = a * _RMINSCAL, b * _RMINSCAL, c * _RMINSCAL, d * _RMINSCAL
+        ratio = c / d
+        denom = (c * ratio) + d
+        if abs(ratio) > _RMIN:
+            x, y = ((a * ratio) + b) / denom, ((b * ratio) - a) / denom
+        else:
+            x, y = ((c * (a / d)) + b) / denom, ((c * (b / d)) - a) / denom
+    else:
+        if abs(c) >= _RBIG:
+            a, b, c, d = a / 2, b / 2, c / 2, d / 2
+        if abs(c) < _RMIN2 or _tiny(a, b, c):
+            a, b, c, d = a * _RMINSCAL, b * _RMINSCAL, c * _RMINSCAL, d * _RMINSCAL
+        ratio = d / c
+        denom = (d * ratio) + c
+        if abs(ratio) > _RMIN:
+            x, y = ((b * ratio) + a) / denom, (b - (a * ratio)) / denom
+        else:
+            x, y = (a + (d * (b / c))) / denom, (b - (d * (a / c))) / denom
+    if x != x and y != y:  # recover infinities and zeros that came out as NaN + iNaN
+        if c == 0.0 and d == 0.0 and (a == a or b == b):
+            x, y = math.copysign(math.inf, c) * a, math.copysign(math.inf, c) * b
+        elif (math.isinf(a) or math.isinf(b)) and math.isfinite(c) and math.isfinite(d):
+            a, b = _box(a), _box(b)
+            x, y = math.inf * (a * c + b * d), math.inf * (b * c - a * d)
+        elif (math.isinf(c) or math.isinf(d)) and math.isfinite(a) and math.isfinite(b):
+            c, d = _box(c), _box(d)
+            x, y = 0.0 * (a * c + b * d), 0.0 * (b * c - a * d)
+    return x, y
+
+
+def _tiny(a, b, big):
+    """__divdc3's test for scaling up a small numerator (big: the divisor's larger part)."""
+    return ((abs(a) < _RMIN and abs(b) < _RMAX2 and abs(big) < _RMAX2)
+            or (abs(b) < _RMIN and abs(a) < _RMAX2 and abs(big) < _RMAX2))
+
+
+def _each(f, mask, x, y, *args):
+    """x, y with f(*args_i) at the elements where mask holds (the rare cases of the vector
+    complex operations, done one by one)."""
+    args = numpy.broadcast_arrays(*args)
+    x, y = numpy.array(x, dtype=float), numpy.array(y, dtype=float)
+    for i in zip(*numpy.nonzero(mask)):
+        x[i], y[i] = f(*(float(v[i]) for v in args))
+    return x, y
+
+
+def _cmul(a, b, c, d):
+    """(a + ib)(c + id) element-wise (arrays or floats): gcc's inline product, __muldc3 where
+    both parts are NaN."""
+    x, y = a * c - b * d, a * d + b * c
+    bad = (x != x) & (y != y)
+    return _each(_muldc3, bad, x, y, a, b, c, d) if bad.any() else (x, y)
+
+
+def _cdiv(a, b, c, d):
+    """(a + ib) / (c + id) for arrays a, b and floats c, d: __divdc3 without scaling (a
+    divisor of moderate size) vectorised, _divdc3 element by element otherwise."""
+    one = abs(c) < abs(d)  # scaled by d: ratio c / d
+    big = abs(d) if one else abs(c)
+    if not _RMIN2 <= big < _RBIG:
+        return _each(_divdc3, numpy.ones(numpy.shape(a), bool), a, a, a, b, c, d)
+    ratio = c / d if one else d / c
+    normal = abs(ratio) > _RMIN  # else (a real or imaginary divisor) the other order
+    if one:
+        denom = (c * ratio) + d
+        if normal:
+            x, y = ((a * ratio) + b) / denom, ((b * ratio) - a) / denom
+        else:
+            x, y = ((c * (a / d)) + b) / denom, ((c * (b / d)) - a) / denom
+    else:
+        denom = (d * ratio) + c
+        if normal:
+            x, y = ((b * ratio) + a) / denom, (b - (a * ratio)) / denom
+        else:
+            x, y = (a + (d * (b / c))) / denom, (b - (d * (a / c))) / denom
+    aa, ab = numpy.abs(a), numpy.abs(b)
+    odd = (x != x) & (y != y)
+    if big < _RMAX2:
+        odd |= ((aa < _RMIN) & (ab < _RMAX2)) | ((ab < _RMIN) & (aa < _RMAX2))
+    return _each(_divdc3, odd, x, y, a, b, c, d) if odd.any() else (x, y)
+
+
+# ---------------------------------------------------------------- dense linear algebra
+# bgc_stiff_lu and bgc_stiff_zlu: partial pivoting on the first largest |a_ik| (|re| + |im|
+# for complex), rows whose multiplier is zero left alone, a column without a nonzero pivot
+# singular (None); the elimination of row i, a_ij - l a_kj for j > k, is element-wise in C
+# and done here for all rows i at once.  The solves: all the row swaps, the column-oriented
+# forward substitution (vectorised), the back substitution's row sums in C's order.
+
+
+def _pivot(size):
+    """C's pivot search over a column's sizes from the diagonal: from |a_kk|, the first entry
+    larger than the largest so far (a NaN is never larger, and a NaN |a_kk| stays)."""
+    if len(size) < 2 or size[0] != size[0]:
+        return 0
+    rest = numpy.where(size[1:] == size[1:], size[1:], -1.0)
+    i = int(numpy.argmax(rest))
+    return i + 1 if rest[i] > size[0] else 0
+
+
+def _lu(a):
+    """bgc_stiff_lu on a (n x n, factored in place): the pivots, or None if singular."""
+    n = a.shape[0]
+    piv = []
+    with numpy.errstate(all="ignore"):
+        for k in range(n):
+            size = numpy.abs(a[k:, k])
+            p = k + _pivot(size)
+            piv.append(p)
+            if size[p - k] == 0.0:
+                return None
+            if k + 1 == n:
+                break
+            if p != k:
+                a[[k, p]] = a[[p, k]]
+            lower = a[k + 1:, k] / a[k, k]
+            a[k + 1:, k] = lower
+            rows = numpy.nonzero(lower != 0.0)[0]
+            if len(rows) == n - k - 1:
+                a[k + 1:, k + 1:] -= lower[:, None] * a[k, k + 1:]
+            elif len(rows):
+                a[rows + k + 1, k + 1:] -= lower[rows, None] * a[k, k + 1:]
+    return piv
+
+
+def _lu_solve(lu, piv, b):
+    """bgc_stiff_lu_solve: A^-1 b (a new vector) from _lu's factors (under the caller's
+    numpy.errstate, as _zlu_solve)."""
+    b = numpy.array(b, dtype=float)
+    n = len(b)
+    for k in range(n):
+        p = piv[k]
+        b[k], b[p] = b[p], b[k]
+    for k in range(n - 1):
+        bk = b[k]
+        if bk != 0.0:
+            b[k + 1:] -= lu[k + 1:, k] * bk
+    for k in range(n - 1, -1, -1):
+        b[k] = _seq_minus(b[k], lu[k, k + 1:] * b[k + 1:]) / lu[k, k]
+    return b
+
+
+def _zlu(ar, ai):
+    """bgc_stiff_zlu on ar + i ai (factored in place): the pivots, or None if singular."""
+    n = ar.shape[0]
+    piv = []
+    with numpy.errstate(all="ignore"):
+        for k in range(n):
+            size = numpy.abs(ar[k:, k]) + numpy.abs(ai[k:, k])
+            p = k + _pivot(size)
+            piv.append(p)
+            if size[p - k] == 0.0:
+                return None
+            if k + 1 == n:
+                break
+            if p != k:
+                ar[[k, p]], ai[[k, p]] = ar[[p, k]], ai[[p, k]]
+            lr, li = _cdiv(ar[k + 1:, k], ai[k + 1:, k], float(ar[k, k]), float(ai[k, k]))
+            ar[k + 1:, k], ai[k + 1:, k] = lr, li
+            rows = numpy.nonzero((lr != 0.0) | (li != 0.0))[0]
+            if len(rows):
+                pr, pi = _cmul(lr[rows, None], li[rows, None], ar[k, k + 1:], ai[k, k + 1:])
+                ar[rows + k + 1, k + 1:] -= pr
+                ai[rows + k + 1, k + 1:] -= pi
+    return piv
+
+
+def _zlu_solve(lur, lui, piv, br, bi):
+    """bgc_stiff_zlu_solve: A^-1 (br + i bi) (new vectors) from _zlu's factors."""
+    br, bi = numpy.array(br, dtype=float), numpy.array(bi, dtype=float)
+    n = len(br)
+    for k in range(n):
+        p = piv[k]
+        br[k], br[p] = br[p], br[k]
+        bi[k], bi[p] = bi[p], bi[k]
+    for k in range(n - 1):
+        xr, xi = float(br[k]), float(bi[k])
+        if xr != 0.0 or xi != 0.0:
+            pr, pi = _cmul(lur[k + 1:, k], lui[k + 1:, k], xr, xi)
+            br[k + 1:] -= pr
+            bi[k + 1:] -= pi
+    for k in range(n - 1, -1, -1):
+        xr, xi = float(br[k]), float(bi[k])
+        if k + 1 < n:
+            pr, pi = _cmul(lur[k, k + 1:], lui[k, k + 1:], br[k + 1:], bi[k + 1:])
+            xr, xi = float(_seq_minus(xr, pr)), float(_seq_minus(xi, pi))
+        br[k], bi[k] = _divdc3(xr, xi, float(lur[k, k]), float(lui[k, k]))
+    return br, bi
+
+
+def _real_matrix(J, diagonal):
+    """-J with `diagonal` added to its diagonal, as the C runtime forms it."""
+    E = -J
+    E[numpy.diag_indices(_N)] += diagonal
+    return E
+
+
+def _stiff_fail_singular(name, t, h):
+    return _Failure("at t = %.17g: %s: the iteration matrix is singular (h = %.3g)"
+                    % (t, name, h), t)
+
+
+def _stiff_jacobian(run, t, y):
+    J = numpy.zeros((_N, _N))
+    run.st["jac"] += 1
+    try:
+        _jacobian_into(t, y.tolist(), run.p, run.w, J)
+    except _BlockFailure as failure:
+        raise _block_failed(failure) from None
+    return J
+
+
+def _stiff_start(run, t, y):
+    """f(t, y) at the start of a run or after an accepted step: a failure ends the run."""
+    run.st["rhs"] += 1
+    try:
+        f0 = run.f(t, y)
+    except _BlockFailure as failure:
+        raise _block_failed(failure) from None
+    i = _first_nonfinite(f0)
+    if i >= 0:
+        raise _fail(t, "derivative of state", STATES[i])
+    return f0
+
+
+def _first_step(run, y, f0):
+    """The first step of an adaptive run: the earlier run's (bounded by the span), else
+    HINIT."""
+    hmax = run.s.t_end - run.s.t0
+    return min(run.h, hmax) if run.h > 0.0 else _initial_step(run, run.m["q"], y, f0, hmax)
+
+
+# ---------------------------------------------------------------- Rosenbrock methods
+
+
+class _Rosenbrock(_Family):
+    """Rosenbrock methods as Hairer's RODAS (bgc_family_rosenbrock in the C runtime)."""
+
+    def __init__(self, run):
+        self.run, self.m = run, run.m
+        self.accepted_steps, self.nsing = 0, 0
+        self.hacc, self.erracc = 0.0, 1.0
+        self.ft = numpy.zeros(_N)
+        self.f0 = self.J = self.K = self.y = self.y1 = None
+
+    def _point(self, t, y):
+        """f, df/dt and J at a new point."""
+        run = self.run
+        self.f0 = _stiff_start(run, t, y)
+        if not _AUTONOMOUS:
+            delta = math.sqrt(_EPS * max(1e-5, abs(t)))
+            run.st["rhs"] += 1
+            try:
+                self.ft = (run.f(t + delta, y) - self.f0) / delta
+            except _BlockFailure as failure:
+                raise _block_failed(failure) from None
+        self.J = _stiff_jacobian(run, t, y)
+
+    def start(self, y):
+        self._point(self.run.t, y)
+        return None if self.run.fixed else _first_step(self.run, y, self.f0)
+
+    def _stages(self, t, h, tph, y, E, piv):
+        m, run = self.m, self.run
+        c, d, a, C = m["c"], m["d"], m["a"], m["C"]
+        K = [None] * m["stages"]
+        with numpy.errstate(all="ignore"):
+            for i in range(m["stages"]):
+                if i == 0:
+                    rhs = self.f0.copy()
+                else:
+                    run.st["rhs"] += 1
+                    rhs = run.f(tph if c[i] == 1.0 else t + c[i] * h, y + _combine(a[i], K, i))
+                rhs = rhs + _combine(C[i], K, i) / h
+                if not _AUTONOMOUS and d[i] != 0.0:
+                    rhs = rhs + h * d[i] * self.ft
+                K[i] = _lu_solve(E, piv, rhs)
+                run.st["solves"] += 1
+        return K
+
+    def step(self, t, h, tph, y):
+        run, m, st = self.run, self.m, self.run.st
+        fixed = run.fixed
+        st["lu"] += 1
+        E = _real_matrix(self.J, 1.0 / (m["gamma"] * h))
+        piv = _lu(E)
+        if piv is None:
+            if fixed or self.nsing + 1 == 5:
+                raise _stiff_fail_singular(run.name, t, h)
+            self.nsing += 1
+            return _RETRY, None, h * 0.5, (-3, "", None)
+        try:
+            K = self._stages(t, h, tph, y, E, piv)
+        except _BlockFailure as failure:  # an algebraic block failed in a stage
+            if fixed:
+                raise _block_failed(failure) from None
+            return _RETRY, None, h * 0.5, (-2, "", failure)
+        stages = m["stages"]
+        with numpy.errstate(all="ignore"):
+            y1 = y + _combine(m["m"], K, stages)
+            err, worst = _stiff_norm(_combine(m["e"], K, stages), _weights(run.s, y, y1))
+        self.worst = worst if worst >= 0 else self.worst
+        i = _first_nonfinite(y1)
+        if err != err or err == math.inf or i >= 0:
+            if fixed:
+                raise _fail(tph, "state", STATES[max(i, 0)])
+            bad, bad_kind = i, "state"
+            for j in range(1, stages):
+                if bad >= 0:
+                    break
+                bad, bad_kind = _first_nonfinite(K[j]), "derivative of state"
+            return _RETRY, None, h * 0.5, (bad, bad_kind, None)
+        if fixed:
+            err = 0.0
+
+        # Gustafsson's predictive controller (rodas.f)
+        safe, fac_min, fac_max, expo = m["safe"], m["fac_min"], m["fac_max"], 1.0 / m["q"]
+        fac = max(1.0 / fac_max, min(1.0 / fac_min, err ** expo / safe))
+        hnew = h / fac
+        if err > 1.0:
+            return _REJECT, None, hnew, None
+        if self.accepted_steps > 0:
+            facgus = (self.hacc / h) * (err * err / self.erracc) ** expo / safe
+            facgus = max(1.0 / fac_max, min(1.0 / fac_min, facgus))
+            fac = max(fac, facgus)
+            hnew = h / fac
+        self.hacc, self.erracc = h, max(1e-2, err)
+        self.accepted_steps += 1
+        self.nsing = 0
+        self.K, self.y, self.y1 = K, y, y1
+        return _ACCEPT, y1, hnew, None
+
+    def dense(self):
+        """y(theta) = (1 - theta) y0 + theta (y1 + (1 - theta) (q_1 + theta (q_2 + ...)))."""
+        y, y1, K = self.y, self.y1, self.K
+        q = []
+        for row in self.m["H"]:  # every weight, zeros too, as bgc_ros_prepare
+            acc = numpy.zeros(_N)
+            for w, k in zip(row, K):
+                acc = acc + w * k
+            q.append(acc)
+
+        def at(theta):
+            s1 = 1.0 - theta
+            acc = q[-1]
+            for qr in q[-2::-1]:
+                acc = qr + theta * acc
+            return s1 * y + theta * (y1 + s1 * acc)
+        return at
+
+    def after(self, tph, y1, last):
+        if not last:
+            self._point(tph, y1)
+        return False
+
+
+# ---------------------------------------------------------------- Radau IIA (RADAU5)
+
+
+def _radau_poly(c, Z):
+    """The collocation polynomial through (0, 0) and (c_i, Z_i) in Newton's form:
+    u(theta) = theta (b_1 + (theta - c_1) (b_2 + ... + (theta - c_{s-1}) b_s)); b: s x N."""
+    x = (0.0,) + tuple(c)
+    d = [numpy.zeros(_N)] + [Z[i] for i in range(len(c))]
+    s = len(c)
+    with numpy.errstate(all="ignore"):
+        for j in range(1, s + 1):  # divided differences, in place
+            for k in range(s, j - 1, -1):
+                d[k] = (d[k] - d[k - 1]) / (x[k] - x[k - j])
+    return d[1:]
+
+
+def _radau_mul(M, V):
+    """bgc_radau_mul for every component: M (ns x ns) times the stages V (ns x N), each
+    M_i0 V_0 + M_i1 V_1 + ... in this order (all rows i at once)."""
+    acc = numpy.multiply.outer(M[:, 0], V[0])
+    for j in range(1, len(M)):
+        acc += numpy.multiply.outer(M[:, j], V[j])
+    return acc
+
+
+def _radau_u(c, b, theta):
+    k = len(b) - 1
+    acc = b[k]
+    while k > 0:
+        k -= 1
+        acc = b[k] + (theta - c[k]) * acc
+    return theta * acc
+
+
+class _RadauUse:
+    """What follows from a stage set (see bgc_radau_configure in the C runtime)."""
+
+    def __init__(self, m, s, k):
+        rd = m["radau"][k]
+        self.ns, self.c, self.gamma = rd["s"], rd["c"], rd["gamma"]
+        self.alpha, self.beta, self.e = rd["alpha"], rd["beta"], rd["e"]
+        self.T, self.Ti = numpy.array(rd["T"]), numpy.array(rd["Ti"])
+        self.pairs = (self.ns - 1) // 2
+        self.nit = 7 + 5 * ((self.ns - 3) // 2)
+        expm = (self.ns + 1) / (2.0 * self.ns)
+        en = 1.0 / expm - 1.0
+        self.rtol = 0.1 * s.rtol ** expm
+        self.atol = self.rtol * (s.atol / s.rtol)
+        self.fnewt = max(10.0 * _EPS / self.rtol,
+                         min(0.03, math.sqrt(self.rtol) if en == 0.5 else self.rtol ** en))
+        self.cfac = m["safe"] * (1 + 2 * self.nit)
+        self.expo = 1.0 / (self.ns + 1)
+
+
+_THET = 0.001  # recompute J when Newton contracted more slowly than this
+
+
+class _Radau(_Family):
+    """Radau IIA after Hairer's RADAU5 and RADAU, fixed or variable order (bgc_family_radau
+    in the C runtime)."""
+
+    def __init__(self, run):
+        m, s = run.m, run.s
+        self.run, self.m = run, m
+        self.nsets = len(m["radau"])
+        self.variable = self.nsets > 1 and not run.fixed
+        self.k_set, self.since = 0, 0
+        for k, rd in enumerate(m["radau"]):
+            if self.variable and 2 * rd["s"] - 1 == s.order0:
+                self.k_set, self.since = k, 10  # going on from an earlier run at its order
+        self.change = self.unexp = self.unexn = self.recheck = False
+        self.u = _RadauUse(m, s, self.k_set)
+        self.hfact = self.hold = self.hacc = 0.0
+        self.erracc = 1.0
+        self.faccon, self.theta, self.thetat = 1.0, _THET, 0.0
+        self.thqold, self.dynold, self.hhfac = 1.0, 1.0, 0.5
+        self.reject = self.caljac = self.refactored = False
+        self.first = self.needjac = True
+        self.accepted_steps, self.nsing, self.newt = 0, 0, 0
+        self.J = self.E1 = self.piv1 = self.f0 = self.scal = None
+        self.Ec = []  # per complex pair: the factors' real and imaginary parts, the pivots
+        self.b = [numpy.zeros(_N)] * self.u.ns
+        self.zlast = numpy.zeros(_N)
+        self.Z = self.W = self.y = self.dc = None
+
+    def start(self, y):
+        run, u = self.run, self.u
+        self.f0 = _stiff_start(run, run.t, y)
+        self.scal = u.atol + u.rtol * numpy.abs(y)
+        return None if run.fixed else _first_step(run, y, self.f0)
+
+    def _order(self, h, y):
+        """The order, whenever the matrices are to be factored (variable order only)."""
+        hquot = h / self.hold if self.hold > 0.0 else 0.0
+        nxt = self.k_set
+        self.since += 1
+        self.thetat = min(10.0, max(self.theta, 0.5 * self.thetat))
+        if (self.newt > 1 and self.thetat <= 0.002 and 0.8 < hquot < 1.2 and self.since > 10
+                and self.k_set + 1 < self.nsets):
+            nxt = self.k_set + 1
+        if (self.thetat >= 0.8 or self.unexp or self.unexn) and self.k_set > 0:
+            nxt = self.k_set - 1
+        self.unexp = self.unexn = self.recheck = False
+        if nxt != self.k_set:
+            self.k_set = nxt
+            self.u = u = _RadauUse(self.m, self.run.s, nxt)
+            self.since, self.change, self.hfact = 1, True, 0.0
+            self.scal = u.atol + u.rtol * numpy.abs(y)
+
+    def _factor(self, fac1, alphn, betan):
+        """gamma/h I - J and (alpha_k + i beta_k)/h I - J, factored; False if one is singular.
+        C adds alpha_k + beta_k _Complex_I, i.e. (alpha_k + beta_k 0) + i (0 + beta_k), to
+        -J."""
+        st = self.run.st
+        st["lu"] += 1
+        self.E1 = _real_matrix(self.J, fac1)
+        self.piv1 = _lu(self.E1)
+        self.Ec = []
+        if self.piv1 is None:
+            return False
+        for k in range(self.u.pairs):
+            st["lu"] += 1
+            Er = _real_matrix(self.J, alphn[k] + betan[k] * 0.0)
+            Ei = numpy.zeros((_N, _N))
+            Ei[numpy.diag_indices(_N)] += betan[k]
+            pv = _zlu(Er, Ei)
+            if pv is None:
+                return False
+            self.Ec.append((Er, Ei, pv))
+        return True
+
+    def _newton(self, t, h, tph, y, fac1, alphn, betan):
+        """The simplified Newton iteration from the last step's collocation polynomial: 0
+        converged (self.Z), else (1, why) a stage failed, 2 no convergence, 3 too slow
+        (self.hhfac: the step that would converge)."""
+        run, u, st = self.run, self.u, self.run.st
+        c, ns, scal = u.c, u.ns, self.scal
+        if self.first or self.change:
+            Z, W = numpy.zeros((ns, _N)), numpy.zeros((ns, _N))
+        else:
+            q = h / self.hold
+            with numpy.errstate(all="ignore"):
+                Z = numpy.array([_radau_u(c, self.b, 1.0 + c[i] * q) - self.zlast
+                                 for i in range(ns)])
+                W = _radau_mul(u.Ti, Z)
+        self.newt = 0
+        self.faccon = max(self.faccon, _EPS) ** 0.8
+        self.theta = _THET
+        while True:
+            if self.newt >= u.nit:
+                return 2, None
+            F = numpy.empty((ns, _N))
+            try:
+                for i in range(ns):
+                    st["rhs"] += 1
+                    F[i] = run.f(tph if i == ns - 1 else t + c[i] * h, y + Z[i])
+                    j = _first_nonfinite(F[i])
+                    if j >= 0:
+                        return 1, (j, "derivative of state", None)
+            except _BlockFailure as failure:
+                return 1, (-2, "", failure)
+            with numpy.errstate(all="ignore"):
+                G = _radau_mul(u.Ti, F)
+                dW = numpy.empty((ns, _N))
+                dW[0] = _lu_solve(self.E1, self.piv1, G[0] - fac1 * W[0])
+                for k in range(u.pairs):
+                    w2, w3 = W[2 * k + 1], W[2 * k + 2]
+                    g2 = G[2 * k + 1] - (alphn[k] * w2 - betan[k] * w3)
+                    g3 = G[2 * k + 2] - (betan[k] * w2 + alphn[k] * w3)
+                    # C's g2 + g3 _Complex_I: (g2 + g3 0) + i g3
+                    dW[2 * k + 1], dW[2 * k + 2] = _zlu_solve(*self.Ec[k], g2 + g3 * 0.0, g3)
+                st["solves"] += 1 + u.pairs
+                self.newt += 1
+                # per component dW_0^2 + dW_1^2 + ... (in units of scal), then over them
+                part = dW[0] / scal
+                part = part * part
+                for i in range(1, ns):
+                    q = dW[i] / scal
+                    part = part + q * q
+                dyno = math.sqrt(_seq_sum(part) / (ns * _N)) if _N else 0.0
+            if dyno != dyno or dyno == math.inf:
+                return 2, None
+            newt = self.newt
+            if 1 < newt < u.nit:
+                thq = dyno / self.dynold
+                self.theta = thq if newt == 2 else math.sqrt(thq * self.thqold)
+                self.thqold = thq
+                theta = self.theta
+                if theta < 0.99:
+                    self.faccon = theta / (1.0 - theta)
+                    dyth = self.faccon * dyno * theta ** (u.nit - 1 - newt) / u.fnewt
+                    if dyth >= 1.0 and not run.fixed:  # a smaller step converges sooner
+                        qnewt = max(1e-4, min(20.0, dyth))
+                        self.hhfac = 0.8 * qnewt ** (-1.0 / (4.0 + u.nit - 1 - newt))
+                        return 3, None
+                else:
+                    return 2, None
+            self.dynold = max(dyno, _EPS)
+            with numpy.errstate(all="ignore"):
+                W = W + dW
+                Z = _radau_mul(u.T, W)
+            self.Z = Z
+            # converged; after one iteration only on the previous step's matrices
+            if (newt > 1 or not self.refactored) and self.faccon * dyno <= u.fnewt:
+                return 0, None
+
+    def _error(self, t, h, y):
+        """The error estimate, refined once with f(t, y + err) on the first step and after a
+        rejection."""
+        run, u, Z = self.run, self.u, self.Z
+        ns = u.ns
+        with numpy.errstate(all="ignore"):
+            f2 = u.e[0] * Z[0]
+            for j in range(1, ns):
+                f2 = f2 + u.e[j] * Z[j]
+            f2 = f2 / h
+            cont = _lu_solve(self.E1, self.piv1, f2 + self.f0)
+            run.st["solves"] += 1
+            wt = u.atol + u.rtol * _c_max(numpy.abs(y), numpy.abs(y + Z[ns - 1]))
+            err, worst = _stiff_norm(cont, wt)
+            err = max(err, 1e-10)
+            if err >= 1.0 and (self.first or self.reject):  # refined: f at y + err
+                run.st["rhs"] += 1
+                try:
+                    f1 = run.f(t, y + cont)
+                except _BlockFailure:
+                    f1 = None
+                if f1 is not None:
+                    cont = _lu_solve(self.E1, self.piv1, f1 + f2)
+                    run.st["solves"] += 1
+                    err, worst = _stiff_norm(cont, wt)
+                    err = max(err, 1e-10)
+        self.worst = worst if worst >= 0 else self.worst
+        return err
+
+    def _retry(self, hnew, why):
+        """A failed attempt: retried smaller, with a fresh Jacobian unless this one is."""
+        self.reject = True
+        self.needjac = not self.caljac
+        return _RETRY, None, hnew, why
+
+    def _fixed_failure(self, t, h, failed, why):
+        """Newton's failure on a fixed step: once more with a fresh Jacobian, else the end."""
+        if failed == 1:
+            bad, bad_kind, failure = why
+            if bad == -2:
+                raise _block_failed(failure)
+            raise _fail(t, bad_kind, STATES[bad])
+        if not self.caljac:
+            self.needjac = True
+            return _AGAIN, None, h, None
+        raise _Failure("at t = %.17g: %s: the Newton iteration does not converge with the "
+                       "fixed step h = %.3g" % (t, self.run.name, h), t)
+
+    def _control(self, h, err, y):
+        """Step control: Gustafsson's, the safety factor scaled by the Newton iterations."""
+        m, u = self.m, self.u
+        safe, fac_min, fac_max = m["safe"], m["fac_min"], m["fac_max"]
+        fac = min(safe, u.cfac / (self.newt + 2 * u.nit))
+        quot = max(1.0 / fac_max, min(1.0 / fac_min, err ** u.expo / fac))
+        hnew = h / quot
+        if not err < 1.0:
+            self.reject = True
+            self.needjac = not self.caljac
+            return _REJECT, None, 0.1 * h if self.first else hnew, None
+        self.first = False
+        self.accepted_steps += 1
+        if self.accepted_steps > 1 and not self.change:
+            facgus = (self.hacc / h) * (err * err / self.erracc) ** u.expo / fac
+            facgus = max(1.0 / fac_max, min(1.0 / fac_min, facgus))
+            quot = max(quot, facgus)
+            hnew = h / quot
+        self.change = False
+        self.hacc, self.erracc = h, max(1e-2, err)
+        Z = self.Z
+        y1 = y + Z[u.ns - 1]
+        self.b, self.dc, self.y = _radau_poly(u.c, Z), u.c, y
+        self.zlast, self.hold = Z[u.ns - 1], h
+        self.reject = self.caljac = False
+        self.nsing = 0
+        return _ACCEPT, y1, hnew, None
+
+    def step(self, t, h, tph, y):
+        run = self.run
+        if self.needjac:
+            self.J = _stiff_jacobian(run, t, y)
+            self.needjac, self.caljac, self.hfact = False, True, 0.0
+        if self.variable and (h != self.hfact or self.recheck):
+            self._order(h, y)
+        u = self.u
+        fac1 = u.gamma / h
+        alphn = [a / h for a in u.alpha]
+        betan = [bb / h for bb in u.beta]
+        self.refactored = h != self.hfact
+        if h != self.hfact:
+            if not self._factor(fac1, alphn, betan):
+                self.hfact = 0.0
+                if run.fixed or self.nsing + 1 == 5:
+                    raise _stiff_fail_singular(run.name, t, h)
+                self.nsing += 1
+                self.unexp = True
+                return self._retry(h * 0.5, (-3, "", None))
+            self.hfact = h
+        failed, why = self._newton(t, h, tph, y, fac1, alphn, betan)
+        if failed and run.fixed:
+            return self._fixed_failure(t, h, failed, why)
+        if failed:
+            if failed == 3:
+                self.unexn = self.hhfac <= 0.5
+            else:
+                self.unexp = True
+            return self._retry(h * (self.hhfac if failed == 3 else 0.5),
+                               why if failed == 1 else (-4, "", None))
+        err = 0.0
+        if not run.fixed:
+            err = self._error(t, h, y)
+            if err != err or err == math.inf:
+                self.unexp = True
+                return self._retry(h * 0.5, (-1, "", None))
+        return self._control(h, err, y)
+
+    def dense(self):
+        y, c, b = self.y, self.dc, self.b
+        return lambda theta: y + _radau_u(c, b, theta)
+
+    def after(self, tph, y1, last):
+        """The new point: its weights and f (after the run's last step, the order to go on
+        with)."""
+        run, u = self.run, self.u
+        if last:
+            if not run.fixed:
+                run.st["order_next"] = 2 * u.ns - 1
+            return False
+        self.scal = u.atol + u.rtol * numpy.abs(y1)
+        run.st["rhs"] += 1
+        try:
+            self.f0 = run.f(tph, y1)
+        except _BlockFailure as failure:
+            raise _block_failed(failure) from None
+        return False
+
+    def next_h(self, h, hnew):
+        """h is kept (and the factorisations with it) while the controller asks for at most
+        20 % more and Newton converged fast; J is recomputed when it converged slowly."""
+        if self.theta <= _THET and 1.0 <= hnew / h <= 1.2:
+            hnew = h
+            if self.variable:
+                self.since += 1
+                if self.since >= 10 and self.k_set + 1 < self.nsets:
+                    self.recheck = True  # ... but look at the order now and then
+        self.needjac = self.theta > _THET
+        return hnew
+
+
+# ====================================================================== batch ===
+# Batch mode, as the C program's (bgc/runtime/batch.c, which describes it): many runs in one
+# process, each from the same state as a new process (fresh parameters, workspace, Newton
+# starting values and counters), one result per run; a run that fails is a result too.
+
+METRIC_KINDS = ("final", "max", "min", "maxabs", "rms")
+BATCH_COLUMNS = ("run", "status", "steps", "rejected", "rhs", "cpu", "message")  # + metrics
+
+
+class _LineError(Exception):
+    pass
+
+
+def _metric_spec(spec):
+    """KIND:OUTPUT as (kind, output index); ValueError if it is not one."""
+    kind, colon, output = spec.partition(":")
+    if not colon or kind not in METRIC_KINDS:
+        raise ValueError("--metric expects KIND:OUTPUT with KIND one of final, max, min, "
+                         "maxabs, rms; got '%s'" % spec)
+    if output not in OUTPUTS:
+        raise ValueError("--metric %s: '%s' is not an output" % (spec, output))
+    return kind, OUTPUTS.index(output)
+
+
+def _line_overrides(run):
+    """A run's parameters {index: value}: from a line of NAME=VALUE words, or a dict."""
+    if isinstance(run, dict):
+        words = [(str(k), v) for k, v in run.items()]
+    else:
+        text = run.replace("\t", " ").replace("\r", " ").replace("\n", " ")
+        words = []
+        for word in text.split(" "):
+            if word:
+                name, eq, value = word.partition("=")
+                if not eq or not name:
+                    raise _LineError("expected NAME=VALUE, got '%s'" % word[:200])
+                words.append((name, value))
+    given = {}
+    for name, value in words:
+        if name not in _PARAM_NAMES:
+            raise _LineError("unknown parameter '%s'" % name[:200])
+        if isinstance(value, str):
+            try:
+                value = _parse_number(name, value)
+            except _UsageError:
+                raise _LineError("invalid value for %s: '%s'" % (name, value[:200])) from None
+        value = float(value)
+        if not math.isfinite(value):
+            raise _LineError("invalid value for %s: '%r'" % (name, value))
+        given[_PARAM_NAMES.index(name)] = value
+    return given
+
+
+def _batch_run(s, base, project, run, specs, trajectory, allow=False):
+    """One run: (status, message, metric values, stats)."""
+    st = _new_stats()
+    nan = [math.nan] * len(specs)
+    try:
+        given = dict(base)
+        given.update(_line_overrides(run))
+    except _LineError as error:
+        return "invalid", str(error), nan, st
+    p = _with_constants(_param_values(given))
+    try:
+        x0 = _initial_state(s, p, project, allow)
+    except SimulationError as error:
+        return "failed", str(error), nan, st
+    except ConstraintError as error:
+        return "constraint", "; ".join(error.messages), nan, st
+    acc = [0.0] * len(specs)
+    count = 0
+    out = None
+    if trajectory is not None:
+        out = open(trajectory, "w", encoding="utf-8", newline="")
+        out.write(",".join(["t"] + OUTPUTS) + "\n")
+    try:
+        for t, y in _integrate(s, p, x0, st):
+            for k, (kind, j) in enumerate(specs):
+                v = y[j]
+                if kind == "final":
+                    acc[k] = v
+                elif kind == "max":
+                    if count == 0 or v > acc[k]:
+                        acc[k] = v
+                elif kind == "min":
+                    if count == 0 or v < acc[k]:
+                        acc[k] = v
+                elif kind == "maxabs":
+                    if count == 0 or abs(v) > acc[k]:
+                        acc[k] = abs(v)
+                else:
+                    acc[k] = v * v if count == 0 else acc[k] + v * v
+            count += 1
+            if out is not None:
+                out.write(_row_text(t, y))
+    except _Failure as failure:
+        return "failed", str(failure), nan, st
+    finally:
+        if out is not None:
+            out.close()
+    if count == 0:
+        return "ok", "", nan, st
+    values = [math.sqrt(a / count) if kind == "rms" else a for a, (kind, j) in zip(acc, specs)]
+    return "ok", "", values, st
+
+
+def batch_rows(runs, metrics=(), t_end=None, dt=None, solver=None, rtol=None, atol=None,
+               params=None, step=None, project_initial=False, trajectories=None,
+               max_steps=None, allow_inconsistent=False):
+    """Runs each of `runs` (a line of NAME=VALUE words, or a dict {name: value}) on top of the
+    defaults and `params`, yielding one dict per run as it completes: run (its number from 0),
+    status (ok, failed, constraint, invalid), each metric ("KIND:OUTPUT", see METRIC_KINDS),
+    steps, rejected, rhs, cpu, message.  trajectories: a directory for each run's CSV
+    (run-NNNNNN.csv).  ValueError for bad settings or metrics, before any run."""
+    if project_initial and allow_inconsistent:
+        raise ValueError("project_initial and allow_inconsistent exclude each other")
+    s = _settings(t_end, dt, solver, rtol, atol, step, max_steps)
+    base = _overrides(params)
+    specs = [_metric_spec(m) for m in metrics]
+    index = 0
+    for run in runs:
+        if isinstance(run, str) and run.startswith("#"):
+            continue
+        path = None
+        if trajectories is not None:
+            path = "%s/run-%06d.csv" % (trajectories, index)
+        status, message, values, st = _batch_run(s, base, project_initial, run, specs, path,
+                                                 allow_inconsistent)
+        row = {"run": index, "status": status}
+        row.update(zip(metrics, values))
+        row.update(steps=st["steps"], rejected=st["rejected"], rhs=st["rhs"], cpu=st["cpu"],
+                   message=message)
+        index += 1
+        yield row
+        if _STOP[0]:
+            return
+
+
+def batch(runs, metrics=(), **options):
+    """batch_rows as a list."""
+    return list(batch_rows(runs, metrics, **options))
+
+
+def _quoted(text):
+    return '"' + text.replace('"', '""').replace("\n", " ").replace("\r", " ") + '"'
+
+
+def _batch_main(argv):
+    """The program with --batch (see bgc/runtime/batch.c); the exit status."""
+    rest, own = [], {"--batch": None, "--trajectories": None}
+    metrics = []
+    i = 0
+    while i < len(argv):
+        name, eq, value = argv[i].partition("=")
+        if name not in ("--batch", "--metric", "--trajectories"):
+            rest.append(argv[i])
+            i += 1
+            continue
+        if not eq:
+            if i + 1 >= len(argv):
+                sys.stderr.write("error: option '%s' needs a value\n" % argv[i])
+                return 2
+            i += 1
+            value = argv[i]
+        if name == "--metric":
+            metrics.append(value)
+        else:
+            own[name] = value
+        i += 1
+    try:
+        parsed = _parse_args(rest)
+        for m in metrics:
+            _metric_spec(m)
+    except _UsageError as error:
+        sys.stderr.write(str(error))
+        return 2
+    except ValueError as error:
+        sys.stderr.write("error: %s\n" % error)
+        return 2
+    if parsed is None:
+        return 0
+    options, given, flags = parsed
+    try:
+        _settings(**options)
+    except ValueError as error:
+        sys.stderr.write("error: %s\n" % error)
+        return 2
+    params = {_PARAM_NAMES[j]: v for j, v in given.items()}
+    try:
+        source = sys.stdin if own["--batch"] == "-" else open(own["--batch"], encoding="utf-8")
+    except OSError:
+        sys.stderr.write("error: cannot read '%s'\n" % own["--batch"])
+        return 2
+    out = sys.stdout
+    out.write(",".join(["run", "status"] + metrics + ["steps", "rejected", "rhs", "cpu",
+                                                       "message"]) + "\n")
+    handlers = _stop_on_signals()
+    try:
+        for row in batch_rows((line for line in source), metrics, params=params,
+                              project_initial="--project-initial" in flags,
+                              allow_inconsistent="--allow-inconsistent" in flags,
+                              trajectories=own["--trajectories"], **options):
+            out.write("%d,%s%s,%d,%d,%d,%.17g,%s\n" % (
+                row["run"], row["status"], "".join(",%.17g" % row[m] for m in metrics),
+                row["steps"], row["rejected"], row["rhs"], row["cpu"],
+                _quoted(row["message"])))
+    finally:
+        for sig, handler in handlers:
+            signal.signal(sig, handler)
+        stopped = _STOP[0]
+        request_stop(0)
+        if source is not sys.stdin:
+            source.close()
+    out.flush()
+    if stopped:
+        sys.stderr.write("error: interrupted by signal %d\n" % stopped)
+        return 3
+    return 0
+
+
+# ---------------------------------------------------------------- binding
+
+
+def _bind_model():
+    """Derives the runtime's tables from the model part's names (the contract above): call it
+    after (re)defining them."""
+    global PARAMETERS, _V
+    _BLOCK_TABLE[:] = [_Block(row) for row in _BLOCKS]
+    PARAMETERS = dict(zip(_PARAM_NAMES, _param_values({})))
+    _V = _ListVectors if _N <= _LIST_STATES else _ArrayVectors
+    _WORK.clear()  # a workspace of the model's sizes, made when first needed
+
+
+PARAMETERS = {}
+_bind_model()

@@ -23,13 +23,13 @@ Importable:
   SimulationError (.t, .times, .rows: the rows computed before it), ConstraintError,
   BlockError (an algebraic block solved numerically failed in rhs/outputs/jacobian)
 """
-import math
-import signal
-import sys
-import threading
 
-import numpy
 
+[runtime: python]
+
+
+# ====================================================================== model ===
+# The model part: its names replace the runtime's neutral ones (the contract at its head).
 MODEL = "car_axis_vector"
 STATES = ["mass.p[0]", "mass.p[1]", "mass.p[2]", "mass.p[3]", "q[0]", "q[1]", "q[2]", "q[3]"]
 OUTPUTS = ["q[0]", "q[1]", "q[2]", "q[3]", "mass.p[0]", "mass.p[1]", "mass.p[2]", "mass.p[3]", "links.lambda[0]", "links.lambda[1]", "links.residual[0]", "links.residual[1]"]
@@ -51,7 +51,6 @@ _AUTONOMOUS = False  # the right side does not read t
 _POSITION_ROWS = [0, 2]
 _VELOCITY_ROWS = [1, 3]
 _VELOCITY_MOVABLE = [True, True, True, True, False, False, False, False]
-_EPS = sys.float_info.epsilon
 _WORK_DOUBLES = 180
 _WORK_INTS = 3
 _BLOCK_NAMES = ["links.lambda[0], links.lambda[1]"]
@@ -1240,8 +1239,7 @@ def _velocity_jac(t, x, p):
     return [float(v) for v in out]
 
 
-[runtime: python]
-
+_bind_model()
 
 
 if __name__ == "__main__":

@@ -23,13 +23,13 @@ Importable:
   SimulationError (.t, .times, .rows: the rows computed before it), ConstraintError,
   BlockError (an algebraic block solved numerically failed in rhs/outputs/jacobian)
 """
-import math
-import signal
-import sys
-import threading
 
-import numpy
 
+[runtime: python]
+
+
+# ====================================================================== model ===
+# The model part: its names replace the runtime's neutral ones (the contract at its head).
 MODEL = "double_pendulum"
 STATES = ["mx1.p", "my1.p", "mx2.p", "my2.p", "x1", "y1", "x2", "y2"]
 OUTPUTS = ["mx1.p", "my1.p", "mx2.p", "my2.p", "x1", "y1", "x2", "y2"]
@@ -51,7 +51,6 @@ _AUTONOMOUS = True  # the right side does not read t
 _POSITION_ROWS = [0, 2]
 _VELOCITY_ROWS = [1, 3]
 _VELOCITY_MOVABLE = [True, True, True, True, False, False, False, False]
-_EPS = sys.float_info.epsilon
 _WORK_DOUBLES = 176
 _WORK_INTS = 3
 _BLOCK_NAMES = ["rod1.lambda, rod2.lambda"]
@@ -898,8 +897,7 @@ def _velocity_jac(t, x, p):
     return [float(v) for v in out]
 
 
-[runtime: python]
-
+_bind_model()
 
 
 if __name__ == "__main__":

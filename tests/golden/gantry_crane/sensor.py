@@ -23,13 +23,13 @@ Importable:
   SimulationError (.t, .times, .rows: the rows computed before it), ConstraintError,
   BlockError (an algebraic block solved numerically failed in rhs/outputs/jacobian)
 """
-import math
-import signal
-import sys
-import threading
 
-import numpy
 
+[runtime: python]
+
+
+# ====================================================================== model ===
+# The model part: its names replace the runtime's neutral ones (the contract at its head).
 MODEL = "gantry_crane"
 STATES = ["ind.p", "rotor.p", "mx.p", "my.p", "s", "x", "y", "lf.p", "cf.q"]
 OUTPUTS = ["cf.e"]
@@ -51,7 +51,6 @@ _AUTONOMOUS = True  # the right side does not read t
 _POSITION_ROWS = [0]
 _VELOCITY_ROWS = [1]
 _VELOCITY_MOVABLE = [True, True, True, True, False, False, False, True, True]
-_EPS = sys.float_info.epsilon
 _WORK_DOUBLES = 187
 _WORK_INTS = 3
 _BLOCK_NAMES = ["rod.lambda, e[shaft->rotor]"]
@@ -787,8 +786,7 @@ def _velocity_jac(t, x, p):
     return [float(v) for v in out]
 
 
-[runtime: python]
-
+_bind_model()
 
 
 if __name__ == "__main__":

@@ -23,13 +23,13 @@ Importable:
   SimulationError (.t, .times, .rows: the rows computed before it), ConstraintError,
   BlockError (an algebraic block solved numerically failed in rhs/outputs/jacobian)
 """
-import math
-import signal
-import sys
-import threading
 
-import numpy
 
+[runtime: python]
+
+
+# ====================================================================== model ===
+# The model part: its names replace the runtime's neutral ones (the contract at its head).
 MODEL = "knife_edge"
 STATES = ["mx.p", "my.p", "spin.p", "x", "y", "th"]
 OUTPUTS = ["x", "y", "th", "vx.f", "vy.f", "blade.lambda", "blade.residual"]
@@ -51,7 +51,6 @@ _AUTONOMOUS = True  # the right side does not read t
 _POSITION_ROWS = []
 _VELOCITY_ROWS = [0]
 _VELOCITY_MOVABLE = [True, True, True, True, True, True]
-_EPS = sys.float_info.epsilon
 _WORK_DOUBLES = 115
 _WORK_INTS = 0
 _BLOCK_NAMES = []
@@ -454,8 +453,7 @@ def _velocity_jac(t, x, p):
     return [float(v) for v in out]
 
 
-[runtime: python]
-
+_bind_model()
 
 
 if __name__ == "__main__":

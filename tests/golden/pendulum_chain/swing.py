@@ -23,13 +23,13 @@ Importable:
   SimulationError (.t, .times, .rows: the rows computed before it), ConstraintError,
   BlockError (an algebraic block solved numerically failed in rhs/outputs/jacobian)
 """
-import math
-import signal
-import sys
-import threading
 
-import numpy
 
+[runtime: python]
+
+
+# ====================================================================== model ===
+# The model part: its names replace the runtime's neutral ones (the contract at its head).
 MODEL = "chain8"
 STATES = ["mx1.p", "my1.p", "x1", "y1", "mx2.p", "my2.p", "x2", "y2", "mx3.p", "my3.p", "x3", "y3", "mx4.p", "my4.p", "x4", "y4", "mx5.p", "my5.p", "x5", "y5", "mx6.p", "my6.p", "x6", "y6", "mx7.p", "my7.p", "x7", "y7", "mx8.p", "my8.p", "x8", "y8"]
 OUTPUTS = ["x1", "y1", "x2", "y2", "x3", "y3", "x4", "y4", "x5", "y5", "x6", "y6", "x7", "y7", "x8", "y8"]
@@ -51,7 +51,6 @@ _AUTONOMOUS = True  # the right side does not read t
 _POSITION_ROWS = [0, 2, 4, 6, 8, 10, 12, 14]
 _VELOCITY_ROWS = [1, 3, 5, 7, 9, 11, 13, 15]
 _VELOCITY_MOVABLE = [True, True, False, False, True, True, False, False, True, True, False, False, True, True, False, False, True, True, False, False, True, True, False, False, True, True, False, False, True, True, False, False]
-_EPS = sys.float_info.epsilon
 _WORK_DOUBLES = 916
 _WORK_INTS = 9
 _BLOCK_NAMES = ["rod1.lambda, rod2.lambda, rod3.lambda, rod4.lambda, rod5.lambda, rod6.lambda, and 2 more"]
@@ -3025,8 +3024,7 @@ def _velocity_jac(t, x, p):
     return [float(v) for v in out]
 
 
-[runtime: python]
-
+_bind_model()
 
 
 if __name__ == "__main__":

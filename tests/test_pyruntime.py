@@ -1,0 +1,224 @@
+"""The Python runtime (bgc/runtime/runtime.py) on its own: a module that imports what it uses,
+passes pyflakes, and runs a small model bound by hand through its contract (the names its
+head lists), no model compiled.  The generated modules' behaviour is tested elsewhere
+(test_python.py, test_parity.py, ...); these tests pin the contract and a few pieces."""
+import importlib.util
+import io
+import itertools
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+from pyflakes import api as pyflakes_api
+from pyflakes import reporter as pyflakes_reporter
+
+from bgc.emit import solver_tables_python
+
+ROOT = Path(__file__).resolve().parent.parent
+RUNTIME = ROOT / "bgc" / "runtime" / "runtime.py"
+GOLDEN = ROOT / "tests" / "golden"
+_COUNT = itertools.count()
+
+
+def fresh_runtime():
+    """A new copy of the runtime module (binding a model changes its globals) with the solver
+    tables, as a generated module has them."""
+    spec = importlib.util.spec_from_file_location(f"_bgc_pyruntime_{next(_COUNT)}", RUNTIME)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    exec(solver_tables_python(), vars(module))
+    return module
+
+
+def bind(rt, **names):
+    """Binds a model as a generated module does: its names replace the runtime's, then
+    _bind_model()."""
+    unknown = set(names) - set(rt._MODEL_NAMES)
+    assert not unknown, unknown
+    vars(rt).update(names)
+    rt._bind_model()
+    return rt
+
+
+def decay(rt, k=1.0, **extra):
+    """dx/dt = -k x, x(0) = 1, output x; k a parameter."""
+    def fill(p, given):
+        if 0 not in given:
+            p[0] = k
+        return p
+
+    def rhs(t, x, p, w, out):
+        out[0] = -p[0] * x[0]
+
+    def out(t, x, p, w, out):
+        out[0] = x[0]
+
+    def jvp(t, x, p, w, v, out):
+        out[0] = -p[0] * v[0]
+
+    names = dict(MODEL="decay", STATES=["x"], OUTPUTS=["x"], _IDENT="decay", _N=1,
+                 _PARAM_NAMES=["k"], _VELOCITY_MOVABLE=[True], _JAC_COLORS=[(0,)],
+                 _JAC_COLUMNS=[(0,)], _fill_params=fill, _init=lambda p: [1.0], _rhs=rhs,
+                 _out=out, _jvp=jvp,
+                 SCENE={"t0": 0.0, "t_end": 2.0, "dt": 0.5, "solver": "dopri5", "rtol": 1e-10,
+                        "atol": 1e-12, "step": None})
+    names.update(extra)
+    return bind(rt, **names)
+
+
+def _flakes(text, name):
+    out, err = io.StringIO(), io.StringIO()
+    pyflakes_api.check(text, name, pyflakes_reporter.Reporter(out, err))
+    return (out.getvalue() + err.getvalue()).splitlines()
+
+
+# ---------------------------------------------------------------- the contract
+
+
+def test_runtime_passes_pyflakes():
+    """No undefined name, unused import or variable: the runtime imports what it uses and
+    defines every name of the model part it reads (its contract)."""
+    assert _flakes(RUNTIME.read_text(encoding="utf-8"), str(RUNTIME)) == []
+
+
+def test_runtime_alone_is_a_model_of_no_states():
+    """Imported alone, the runtime's neutral model runs: rows of t and no outputs."""
+    rt = fresh_runtime()
+    assert rt.PARAMETERS == {} and rt._BLOCK_TABLE == []
+    t, Y = rt.simulate(t_end=1.0, dt=0.25)
+    assert t.tolist() == [0.0, 0.25, 0.5, 0.75, 1.0] and Y.shape == (5, 0)
+    for name in rt.__all__ + list(rt._MODEL_HELPERS) + list(rt._MODEL_NAMES):
+        assert hasattr(rt, name), name
+
+
+def _model_parts():
+    """Each model's golden module (its other scenes differ in SCENE's values only)."""
+    return sorted(GOLDEN.glob("*/default.py"))
+
+
+def test_generated_model_parts_keep_the_contract():
+    """Each golden model part defines every name the contract asks of it, and uses nothing of
+    the runtime's beyond the contract's names and the helpers it lists (_MODEL_HELPERS)."""
+    rt = fresh_runtime()
+    allowed = set(rt._MODEL_NAMES) | set(rt._MODEL_HELPERS) | set(rt.__all__) | {
+        "math", "numpy", "sys"}
+    parts = list(_model_parts())
+    assert parts
+    for path in parts:
+        text = path.read_text(encoding="utf-8")
+        assert "[runtime: python]" in text, path
+        undefined = {line.split("undefined name ")[1].strip("'")
+                     for line in _flakes(text.replace("[runtime: python]", "pass"), str(path))
+                     if "undefined name" in line}
+        assert undefined <= allowed, (path, undefined - allowed)
+        for name in rt._MODEL_NAMES:
+            if name not in ("_METHODS", "SOLVERS", "_SOLVER_LIST"):  # the runtime golden's
+                assert f"\n{name} = " in text or f"\ndef {name}(" in text, (path, name)
+
+
+# ---------------------------------------------------------------- a model bound by hand
+
+
+@pytest.mark.parametrize("solver", ["dopri5", "rodas4", "radau5"])
+def test_decay_follows_exp(solver):
+    """dx/dt = -x through simulate, an explicit and two stiff solvers (the stiff ones through
+    the Jacobian's colouring of jvp)."""
+    rt = decay(fresh_runtime())
+    assert rt.PARAMETERS == {"k": 1.0}
+    t, Y = rt.simulate(solver=solver)
+    assert t.tolist() == [0.0, 0.5, 1.0, 1.5, 2.0]
+    assert np.allclose(Y[:, 0], [math.exp(-v) for v in t], rtol=1e-7, atol=0.0)
+    t, Y = rt.simulate(solver=solver, params={"k": 2.0}, t_end=1.0)
+    assert abs(Y[-1, 0] - math.exp(-2.0)) < 1e-7
+
+
+def test_integrate_on_a_fixed_grid():
+    """_integrate directly: rk4 with --step 0.01 takes 100 steps to t = 1, within rk4's error."""
+    rt = decay(fresh_runtime())
+    s = rt._settings(t_end=1.0, dt=0.25, solver="rk4", step=0.01)
+    p = rt._with_constants(rt._param_values({}))
+    st = rt._new_stats()
+    rows = list(rt._integrate(s, p, [1.0], st))
+    assert [t for t, _ in rows] == [0.0, 0.25, 0.5, 0.75, 1.0]
+    assert st["steps"] == 100 and st["rhs"] == 400
+    for t, y in rows:
+        assert abs(y[0] - math.exp(-t)) < 1e-9
+
+
+def test_output_grid():
+    """Rows at t0 + k dt below t_end and at t_end exactly; a grid point within 1e-6 dt of
+    t_end is replaced by it."""
+    rt = fresh_runtime()
+    s = rt._settings(t_end=1.0, dt=0.3)
+    n = rt._output_count(s)
+    assert n == 4
+    assert [rt._output_time(s, k, n) for k in range(n + 1)] == [0.0, 0.3, 0.6, 0.8999999999999999, 1.0]
+    s = rt._settings(t_end=0.9 + 1e-9, dt=0.3)
+    assert rt._output_count(s) == 3
+    assert rt._output_time(s, 3, 3) == 0.9 + 1e-9
+
+
+def test_substeps():
+    rt = fresh_runtime()
+    assert rt._substeps(1.0, 0.1) == 10  # 10.000000000000002 steps: not an 11th sliver
+    assert rt._substeps(1.05, 0.1) == 11
+    assert rt._substeps(0.05, 0.1) == 1
+    assert rt._substeps(1e20, 1.0) == -1  # too many
+
+
+def test_failures_name_the_state():
+    """_Failure messages as the C program's, and a run that blows up (dx/dt = x^2 from 1, which
+    ends at t = 1) raises SimulationError with the rows before it."""
+    rt = decay(fresh_runtime())
+    assert str(rt._fail(0.5, "state", "x")) == "at t = 0.5: state 'x' is not finite"
+    failure = rt._fail_step(2.0, 1e-20, 0)
+    assert isinstance(failure, rt._Failure) and failure.t == 2.0
+    assert str(failure) == "at t = 2: step size too small (h = 1e-20), limited by state 'x'"
+
+    def blow_up(t, x, p, w, out):
+        out[0] = x[0] * x[0]
+
+    bind(rt, _rhs=blow_up)
+    with pytest.raises(rt.SimulationError) as error:
+        rt.simulate(t_end=2.0, dt=0.25)
+    assert str(error.value).startswith("at t = 0.99") and 0.99 < error.value.t < 1.0
+    assert error.value.times.tolist() == [0.0, 0.25, 0.5, 0.75]
+
+
+# ---------------------------------------------------------------- pieces
+
+
+def test_seq_sum_is_c_order():
+    """Left to right from 0.0, as C's loop: not compensated (math.fsum gives 1)."""
+    rt = fresh_runtime()
+    assert rt._seq_sum(np.array([1e16, 1.0, -1e16])) == 0.0
+    assert rt._seq_sum(np.array([1.0, 1e16, -1e16])) == 0.0
+    assert rt._seq_sum(np.array([])) == 0.0
+    assert rt._seq_sum(np.array([0.1, 0.2, 0.3])) == (0.1 + 0.2) + 0.3
+
+
+def test_lu_solves_and_detects_singular():
+    rt = fresh_runtime()
+    A = np.array([[0.0, 2.0, 1.0], [1.0, 1.0, 0.0], [3.0, 0.0, 1.0]])
+    b = np.array([1.0, 2.0, 3.0])
+    lu = A.copy()
+    piv = rt._lu(lu)
+    assert piv is not None and piv[0] == 2  # the largest of column 0
+    x = rt._lu_solve(lu, piv, b)
+    assert np.allclose(A @ x, b, rtol=0.0, atol=1e-14)
+    assert rt._lu(np.array([[1.0, 2.0], [2.0, 4.0]])) is None
+    assert rt._lu(np.zeros((1, 1))) is None
+
+
+def test_libm_wrappers_give_c_values():
+    """_c_*: math's value as numpy.float64, and C's inf or nan where math raises."""
+    rt = fresh_runtime()
+    assert rt._c_exp(1.0) == math.exp(1.0) and isinstance(rt._c_exp(1.0), np.float64)
+    assert rt._c_exp(1000.0) == math.inf and rt._c_exp(-1000.0) == 0.0
+    assert rt._c_log(0.0) == -math.inf and math.isnan(rt._c_log(-1.0))
+    assert math.isnan(rt._c_sqrt(-1.0)) and math.isnan(rt._c_asin(2.0))
+    assert rt._c_atanh(1.0) == math.inf and rt._c_atanh(-1.0) == -math.inf
+    assert rt._c_sinh(1000.0) == math.inf and rt._c_sinh(-1000.0) == -math.inf
+    assert rt._c_cosh(-1000.0) == math.inf
+    assert rt._sq(3.0) == 9.0
