@@ -1842,7 +1842,7 @@ typedef double _Complex bgc_cplx;
    as gcc compiles it, (ac - bd) + i(ad + bc) with Annex G's recovery of infinities that came
    out as NaN + iNaN (libgcc's __muldc3), the quotient as libgcc's __divdc3 of GCC 12 and later
    (Smith's method, scaled).  With gcc these are the bits of its own `*` and `/`; the Python
-   runtime does the same operations (_muldc3, _divdc3 in stiff.py). */
+   runtime does the same operations (_muldc3, _divdc3 in runtime.py). */
 
 /* re + i im, exactly (C99 has no CMPLX; a complex is an array of its two parts, 6.2.5). */
 static bgc_cplx bgc_cmake(double re, double im)
