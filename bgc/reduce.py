@@ -930,8 +930,9 @@ def _initial_value(st, params: dict, t0) -> float:
         x = math.nan
     if not math.isfinite(x):
         if value.is_Float and value.is_finite:  # computed exactly, beyond a double's range
+            shown = mpmath.nstr(mpmath.mpf(value), 3)
             fail(st.span, f"the initial state of '{st.name}' does not fit a double: it is "
-                          f"{mpmath.nstr(mpmath.mpf(value), 3)} at the given parameters")
+                          f"{shown} at the given parameters (choose smaller values)")
         fail(st.span, f"the initial state of '{st.name}' is not finite: it is {value} at the "
                       "given parameters")
     return x

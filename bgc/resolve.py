@@ -18,7 +18,7 @@ from . import ast
 from .algebra import Max, Min
 from .diagnostics import Collector, ModelError, Note, Span, fail
 from .graph import (TIME, check_effect_names, model_effects, Bond, Constraint, Element, Expr, Graph, Parameter, Scene, Signal,
-                    check_ports, part_name, var, variable_name)
+                    check_ports, part_name, var, variable_name, written)
 from .kinds import KINDS
 from .resources import (MAX_EXTREMUM_ARGUMENTS, MAX_LITERAL_DIGITS, MAX_MATRIX_ENTRIES,
                         MAX_SCENES, MAX_SYMBOLIC_EXPONENT)
@@ -415,14 +415,9 @@ def _check_exponents(value, span):
     1000).  Checked on the built expression, since products and powers merge (x^40 * x^40)."""
     for p in sorted(value.atoms(sp.Pow), key=sp.default_sort_key):
         if p.exp.is_Integer and abs(int(p.exp)) > MAX_SYMBOLIC_EXPONENT and not p.base.is_Number:
-            fail(span, f"the power {_shown(p)} has too large an exponent for symbolic work "
+            fail(span, f"the power {written(p)} has too large an exponent for symbolic work "
                        f"(at most {MAX_SYMBOLIC_EXPONENT}); give the exponent as a parameter "
                        "to have the power computed numerically")
-
-
-def _shown(expr) -> str:
-    """expr as the language writes it (^ for powers)."""
-    return str(expr).replace("**", "^")
 
 
 def _check_constant(value, span):

@@ -9,7 +9,8 @@ import sympy as sp
 
 from . import solvers
 from .diagnostics import Collector, ModelError, Note, Origin, Span, did_you_mean, fail
-from .graph import Expr, Graph, check_effect_names, check_ports, model_effects, var
+from .graph import (Expr, Graph, check_effect_names, check_ports, model_effects, var,
+                    written)
 from .resources import MAX_OUTPUT_ROWS
 from .run import RunSettings
 
@@ -246,13 +247,13 @@ def constant_value(value, params: dict, span, what: str) -> float:
         x = float(v)
     except TypeError:  # a complex number, or not a number at all
         if _is_complex(v):
-            fail(span, f"{what} evaluates to a complex number: {_shown(value)}"
-                       f"{_at(value, params)}")
+            fail(span, f"{what} evaluates to a complex number: {written(value)}"
+                       f"{_at(value, params)}{_why_complex(value, params)}")
         x = math.nan
     except (OverflowError, ValueError):
         x = math.inf
     if not math.isfinite(x):
-        fail(span, f"{what} is not finite: {_shown(value)}{_at(value, params)} "
+        fail(span, f"{what} is not finite: {written(value)}{_at(value, params)} "
                    "(a division by zero, or a number beyond a double?)")
     return x
 
@@ -265,16 +266,32 @@ def _is_complex(v) -> bool:
     return z.imag != 0 and math.isfinite(z.real) and math.isfinite(z.imag)
 
 
+def _why_complex(value, params: dict) -> str:
+    """' (|a| > 1)': where value leaves the reals, the innermost function that does."""
+    for sub in sp.postorder_traversal(value):
+        if isinstance(sub, (sp.asin, sp.acos)):
+            inside, why = sub.args[0], f"|{written(sub.args[0])}| > 1"
+        elif isinstance(sub, sp.log):
+            inside, why = sub.args[0], f"{written(sub.args[0])} < 0"
+        elif sub.is_Pow and not sub.exp.is_Integer:
+            root = "a square root" if sub.exp == sp.Rational(1, 2) else "a fractional power"
+            inside, why = sub.base, f"{written(sub.base)} < 0 under {root}"
+        else:
+            continue
+        try:
+            x = float(inside.xreplace(params))
+        except (TypeError, OverflowError):
+            continue
+        if (abs(x) > 1) if isinstance(sub, (sp.asin, sp.acos)) else (x < 0):
+            return f" ({why})"
+    return ""
+
+
 def _at(value, params: dict) -> str:
     """' with a = 2, b = -1': the parameters value reads, as they are here."""
     used = sorted(value.free_symbols & params.keys(), key=lambda s: s.name)
     return " with " + ", ".join(f"{s.name} = {float(params[s]):.17g}" for s in used) if used \
         else ""
-
-
-def _shown(value) -> str:
-    """value as the language writes it (^ for powers)."""
-    return str(value).replace("**", "^")
 
 
 def _effects(graph: Graph, scene, override) -> tuple[str, ...] | None:
