@@ -24,6 +24,11 @@ def var(name: str) -> sp.Symbol:
     return sp.Symbol(name, real=True)
 
 
+def written(expr) -> str:
+    """expr as the language writes it, for messages (^ for powers)."""
+    return str(expr).replace("**", "^")
+
+
 @dataclass(frozen=True)
 class Expr:
     """A resolved expression and the model names it refers to (for later checks)."""

@@ -26,8 +26,10 @@ model's symbols (Assign, and Solve or Newton for the blocks solved numerically).
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
+import mpmath  # SymPy's own: a number beyond a double, shown
 import sympy as sp
 
 from . import blt
@@ -824,6 +826,8 @@ def reduce(es: EquationSystem, project_initial: bool = False, algebra: str = "au
                       tuple(es.warnings) + tuple(diags.warnings))
     if not project_initial:
         check_initial(reduced)
+    else:
+        initial_values(reduced)  # every initial state a double, projected or not
     return _with_init_warnings(reduced, sys, eliminated)
 
 
@@ -838,9 +842,12 @@ def _check_constants(blocks: _Blocks, sys: _System):
         if not used:
             return expr
         value = expr.xreplace({u: known[u] for u in used})
+        names = ", ".join(f"{u.name} = {known[u]}" for u in sorted(used, key=lambda u: u.name))
         if value.has(*NOT_FINITE):
-            names = ", ".join(f"{u.name} = {known[u]}" for u in sorted(used, key=lambda u: u.name))
             fail(eq.span, f"'{eq.origin}' is not finite where {names} (a division by zero?)")
+        if value.has(sp.I):  # a negative constant to a fractional power: no real value
+            fail(eq.span, f"'{eq.origin}' is a complex number where {names} (a negative number "
+                          "to a fractional power?)")
         return value
 
     for step in blocks.steps:
@@ -909,9 +916,26 @@ def initial_values(reduced: Reduced) -> dict:
     """Numeric parameters, initial states and t0 at the scene's defaults."""
     params = parameter_values(reduced.parameters)
     t0 = sp.Float(reduced.run.t0)
-    x0 = {st.symbol: sp.Float(float(st.init.xreplace(params).xreplace({TIME: t0})))
-          for st in reduced.states}
+    x0 = {st.symbol: sp.Float(_initial_value(st, params, t0)) for st in reduced.states}
     return {**params, **x0, TIME: t0}
+
+
+def _initial_value(st, params: dict, t0) -> float:
+    """A state's initial value as a double: C(1e308) init e = -10 gives q = -1e309, which
+    no double holds, a located error here rather than an infinity in the generated code."""
+    value = st.init.xreplace(params).xreplace({TIME: t0})
+    try:
+        x = float(value)
+    except (TypeError, OverflowError):
+        x = math.nan
+    if not math.isfinite(x):
+        if value.is_Float and value.is_finite:  # computed exactly, beyond a double's range
+            shown = mpmath.nstr(mpmath.mpf(value), 3)
+            fail(st.span, f"the initial state of '{st.name}' does not fit a double: it is "
+                          f"{shown} at the given parameters (choose smaller values)")
+        fail(st.span, f"the initial state of '{st.name}' is not finite: it is {value} at the "
+                      "given parameters")
+    return x
 
 
 def parameter_values(parameters) -> dict:

@@ -18,10 +18,10 @@ from . import ast
 from .algebra import Max, Min
 from .diagnostics import Collector, ModelError, Note, Span, fail
 from .graph import (TIME, check_effect_names, model_effects, Bond, Constraint, Element, Expr, Graph, Parameter, Scene, Signal,
-                    check_ports, part_name, var, variable_name)
+                    check_ports, part_name, var, variable_name, written)
 from .kinds import KINDS
 from .resources import (MAX_EXTREMUM_ARGUMENTS, MAX_LITERAL_DIGITS, MAX_MATRIX_ENTRIES,
-                        MAX_SCENES)
+                        MAX_SCENES, MAX_SYMBOLIC_EXPONENT)
 
 FUNCTIONS = {  # name -> (sympy function, arity)
     "sin": (sp.sin, 1), "cos": (sp.cos, 1), "tan": (sp.tan, 1), "asin": (sp.asin, 1),
@@ -74,6 +74,7 @@ class _ExprBuilder:
             fail(node.span, "expression is not a real number")
         for number in sorted(value.atoms(sp.Number), key=abs):
             _check_double(number, node.span)
+        _check_exponents(value, node.span)
         return Expr(value, tuple(self.refs), node.span)
 
     def _evaluate(self, root):
@@ -357,7 +358,11 @@ def _number(node: ast.Num):
         value = int(text)
         if value <= MAX_EXACT_INTEGER:
             return sp.Integer(value)
-        x = float(value)
+        try:
+            x = float(value)  # rounded to the nearest double, as the docs say
+        except OverflowError:  # 309 digits beyond 1.8e308
+            fail(node.span, f"number {text[:20]}... does not fit a double (the largest is "
+                            "about 1.8e308)")
     else:
         x = float(text)  # the grammar admits decimal numbers only
     if not math.isfinite(x):
@@ -402,6 +407,17 @@ def _check_double(number, span):
         fail(span, "number does not fit a double")
     if not number.is_zero and abs(x) < MIN_NORMAL_DOUBLE:
         fail(span, "number is too small for a normal double (it would be 0)")
+
+
+def _check_exponents(value, span):
+    """x^n with n a whole number beyond MAX_SYMBOLIC_EXPONENT is refused before any symbolic
+    work on it: SymPy's assumptions expand it to decide whether it is real (minutes for n =
+    1000).  Checked on the built expression, since products and powers merge (x^40 * x^40)."""
+    for p in sorted(value.atoms(sp.Pow), key=sp.default_sort_key):
+        if p.exp.is_Integer and abs(int(p.exp)) > MAX_SYMBOLIC_EXPONENT and not p.base.is_Number:
+            fail(span, f"the power {written(p)} has too large an exponent for symbolic work "
+                       f"(at most {MAX_SYMBOLIC_EXPONENT}); give the exponent as a parameter "
+                       "to have the power computed numerically")
 
 
 def _check_constant(value, span):

@@ -31,6 +31,8 @@ MAX_OUTPUT_ROWS = 10 ** 9  # rows of one run's CSV (the generated programs refus
 MAX_EXPRESSION_NODES = 20_000
 MAX_EXPRESSION_DEPTH = 200
 MAX_EXPANDED_TERMS = 5_000  # the terms that expanding products and powers may produce
+MAX_SYMBOLIC_EXPONENT = 64  # of x^n, n an integer: SymPy expands (re + i im)^n to decide
+#                             whether a power is real, minutes for n = 1000
 SYMBOLIC_MAX_BLOCK = 12  # unknowns of a block that `--algebra symbolic` solves by LU
 
 

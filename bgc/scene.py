@@ -8,8 +8,9 @@ from dataclasses import dataclass, replace
 import sympy as sp
 
 from . import solvers
-from .diagnostics import Collector, Note, Origin, Span, did_you_mean, fail
-from .graph import Expr, Graph, check_effect_names, check_ports, model_effects, var
+from .diagnostics import Collector, ModelError, Note, Origin, Span, did_you_mean, fail
+from .graph import (Expr, Graph, check_effect_names, check_ports, model_effects, var,
+                    written)
 from .resources import MAX_OUTPUT_ROWS
 from .run import RunSettings
 
@@ -179,8 +180,8 @@ def parameter_values(graph: Graph, sets=(), overrides: dict | None = None) -> di
             continue
         try:
             x = float(v)
-        except TypeError:
-            fail(expr.span, f"parameter '{p.name}' does not evaluate to a number")
+        except TypeError:  # complex (asin(a), a = 2), or not a number: say which
+            x = constant_value(expr.value, values, expr.span, f"parameter '{p.name}'")
         if not math.isfinite(x):
             fail(expr.span, f"parameter '{p.name}' is not finite ({x})")
         values[var(p.name)] = sp.Float(x)
@@ -206,16 +207,91 @@ def _solver(scene_solver, params) -> tuple:
 
 
 def _check_laws(graph: Graph, params: dict):
-    """A storage law singular at the given parameter values (I(0), C(0)) is a model error."""
+    """Laws and initial values that are numbers once the parameters are put in must be real,
+    finite doubles (asin(a) with a = 2 is not), and a storage law must not be singular at the
+    given parameter values (I(0), C(0))."""
     diags = Collector()
     for el in graph.elements:
-        if el.value is None or el.is_junction or el.spec.role != "storage":
-            continue
-        v = el.value.value.xreplace(params)
-        if v.is_number and float(v) == 0.0:
+        if el.init is not None:
+            _guard_value(diags, el.init[1], params, f"the initial value of '{el.name}'")
+        if el.value is None or el.is_junction or isinstance(el.value.value, sp.MatrixBase):
+            continue  # (a coupled field's matrix: flatten checks it)
+        if el.value.value.free_symbols - params.keys():
+            continue  # a law of time or of signals: the generated code checks it as it runs
+        x = _guard_value(diags, el.value, params, f"the law of '{el.name}'")
+        if x == 0.0 and el.spec.role == "storage":
             diags.error(el.value.span, f"{el.kind}({el.value.value}) of '{el.name}' is singular: "
                                        "its value is 0 at the given parameters")
+    for sig in graph.signals:
+        if sig.init is not None:
+            _guard_value(diags, sig.init, params, f"the initial value of '{sig.name}'")
     diags.raise_if_errors()
+
+
+def _guard_value(diags: Collector, expr: Expr, params: dict, what: str) -> float | None:
+    try:
+        return constant_value(expr.value, params, expr.span, what)
+    except ModelError as exc:
+        diags.items.extend(exc.diagnostics)
+        return None
+
+
+def constant_value(value, params: dict, span, what: str) -> float:
+    """The double that value (parameters only) takes at these parameter values; a located
+    error naming the parameters when it is a complex number or not finite."""
+    try:
+        v = value.xreplace(params)
+    except TypeError:  # SymPy refused to build it: atan2(0, 1/a) at a = 0 compares a NaN
+        v = sp.nan
+    try:
+        x = float(v)
+    except TypeError:  # a complex number, or not a number at all
+        if _is_complex(v):
+            fail(span, f"{what} evaluates to a complex number: {written(value)}"
+                       f"{_at(value, params)}{_why_complex(value, params)}")
+        x = math.nan
+    except (OverflowError, ValueError):
+        x = math.inf
+    if not math.isfinite(x):
+        fail(span, f"{what} is not finite: {written(value)}{_at(value, params)} "
+                   "(a division by zero, or a number beyond a double?)")
+    return x
+
+
+def _is_complex(v) -> bool:
+    try:
+        z = complex(v.evalf(20))
+    except (TypeError, ValueError, OverflowError):
+        return False
+    return z.imag != 0 and math.isfinite(z.real) and math.isfinite(z.imag)
+
+
+def _why_complex(value, params: dict) -> str:
+    """' (|a| > 1)': where value leaves the reals, the innermost function that does."""
+    for sub in sp.postorder_traversal(value):
+        if isinstance(sub, (sp.asin, sp.acos)):
+            inside, why = sub.args[0], f"|{written(sub.args[0])}| > 1"
+        elif isinstance(sub, sp.log):
+            inside, why = sub.args[0], f"{written(sub.args[0])} < 0"
+        elif sub.is_Pow and not sub.exp.is_Integer:
+            root = "a square root" if sub.exp == sp.Rational(1, 2) else "a fractional power"
+            inside, why = sub.base, f"{written(sub.base)} < 0 under {root}"
+        else:
+            continue
+        try:
+            x = float(inside.xreplace(params))
+        except (TypeError, OverflowError):
+            continue
+        if (abs(x) > 1) if isinstance(sub, (sp.asin, sp.acos)) else (x < 0):
+            return f" ({why})"
+    return ""
+
+
+def _at(value, params: dict) -> str:
+    """' with a = 2, b = -1': the parameters value reads, as they are here."""
+    used = sorted(value.free_symbols & params.keys(), key=lambda s: s.name)
+    return " with " + ", ".join(f"{s.name} = {float(params[s]):.17g}" for s in used) if used \
+        else ""
 
 
 def _effects(graph: Graph, scene, override) -> tuple[str, ...] | None:

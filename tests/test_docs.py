@@ -19,7 +19,10 @@ an info string, a language followed by words `key` or `key=value` (a value may b
                       to SVG or PNG), else not run: an optional tool, not a slow command
   python              run; a page's python blocks share one namespace
   c file=NAME         saved as NAME for a later sh block
-  text, c             output and listings: not run
+  text output=STREAM  what the last command of the sh block before it writes on STREAM
+                      (stdout or stderr): compared with it, the processor seconds (`cpu=`)
+                      masked
+  text, c             other output and listings: not run
 
 A page's blocks run in order in a fresh directory, where `models` is the repository's models/
 directory.  A `bgc` command without shell syntax runs in this process (click's CliRunner);
@@ -28,8 +31,9 @@ without optimisation: bgc's C backend with -O0 ($BGC_CFLAGS, set in conftest.py)
 in a command line reads `-O0`; the generated code's results do not depend on it (test_emit and the
 golden files test the code itself).  Marks that leave a block unrun or partly run (fragment,
 dry-run, skip) are counted, and their number is bounded below (MAX_MARKS).
-No numbers are copied from bgc's output: commands must succeed, and where a page states a
-result (a closed form) its python block checks it independently.
+No numbers are copied from bgc's output unchecked: commands must succeed, where a page states
+a result (a closed form) its python block checks it independently, and output a page shows is
+marked `output=` and compared.
 """
 from __future__ import annotations
 
@@ -54,7 +58,7 @@ PAGES = [ROOT / "README.md"] + sorted((ROOT / "docs").glob("*.md"))
 LANGUAGES = {"bg", "sh", "python", "text", "c"}
 KEYS = {"bg": {"file", "fragment", "error", "scene"},
         "sh": {"status", "dry-run", "skip", "needs"},
-        "python": set(), "text": set(), "c": {"file"}}
+        "python": set(), "text": {"output"}, "c": {"file"}}
 # Blocks left unrun or partly run, at most (keep them few: every other example runs).
 MAX_MARKS = {"fragment": 4, "dry-run": 2, "skip": 1}
 SHELL_SYNTAX = re.compile(r"[|&;<>()$`]")
@@ -202,6 +206,7 @@ class Page:
         self.namespace = {"__name__": "__docs__"}
         self.runner = _runner()
         self.models = 0
+        self.last = None  # {"stdout": ..., "stderr": ...} of the last command run
 
 
 def _runner() -> CliRunner:
@@ -229,6 +234,7 @@ def run_bgc(page: Page, args: list[str]) -> tuple[int, str]:
     result = page.runner.invoke(main, args, catch_exceptions=True)
     if result.exception is not None and not isinstance(result.exception, SystemExit):
         raise result.exception
+    page.last = {"stdout": result.stdout, "stderr": result.stderr}
     return result.exit_code, result.stderr
 
 
@@ -239,7 +245,20 @@ def run_command(page: Page, line: str) -> tuple[int, str]:
     line = re.sub(r"(?<=\s)-O2(?=\s)", "-O0", line)
     done = subprocess.run(["bash", "-c", line], cwd=page.dir, env=page.env,
                           capture_output=True, text=True, timeout=120)
+    page.last = {"stdout": done.stdout, "stderr": done.stderr}
     return done.returncode, done.stderr
+
+
+CPU = re.compile(r"(?<=cpu=)\S+")  # processor seconds: the one figure that varies run to run
+
+
+def check_output(page: Page, block: Block):
+    """A text block marked output=STREAM shows what the last command wrote on STREAM."""
+    stream = block.opts["output"]
+    assert stream in ("stdout", "stderr"), f"{block}: output=stdout or output=stderr"
+    assert page.last is not None, f"{block}: no command ran before this output"
+    shown, actual = (CPU.sub("*", t).rstrip("\n") for t in (block.text, page.last[stream]))
+    assert shown == actual, f"{block}: the page shows\n{shown}\nbut the command wrote\n{actual}"
 
 
 def dry_run(page: Page, line: str):
@@ -285,6 +304,8 @@ def run_bg(page: Page, block: Block):
 def run_block(page: Page, block: Block):
     if block.lang == "bg":
         run_bg(page, block)
+    elif block.lang == "text" and "output" in block.opts:
+        check_output(page, block)
     elif block.lang == "c" and "file" in block.opts:
         (page.dir / block.opts["file"]).write_text(block.text, encoding="utf-8")
     elif block.lang == "python":

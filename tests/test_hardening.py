@@ -329,3 +329,24 @@ def _check(args) -> tuple[int, str | None]:
     said = [line for line in result.stderr.splitlines()
             if ": error: " in line or ": warning: " in line]
     return result.exit_code, said[0] if said else None
+
+
+def test_a_literal_within_the_range_of_a_double_is_rounded():
+    """309 digits fit a double up to about 1.8e308 (rounded to the nearest); beyond, an error
+    (tests/errors/literal_beyond_double.bg)."""
+    text = "model m\nparameter a = 1" + "0" * 308 + "\nj : 0\nc : C(a)\nj -> c\n"
+    (p,) = build(text).reduced.parameters
+    assert float(p.expr) == 1e308
+
+
+def test_an_initial_state_beyond_a_double_is_refused_when_projected_too():
+    text = "model m\nj : 0\nc : C(1e308) init e = -10\nj -> c\n"
+    assert "the initial state of 'c.q' does not fit a double" in \
+        error_of(text, project_initial=True)
+
+
+def test_exponents_up_to_the_limit_are_kept():
+    """x^64 is symbolic work bgc does; x^65 is refused, also when a product merges powers."""
+    law = "model m\nparameter a = 0.5\nj : 0\nc : C({})\nj -> c\n"
+    build(law.format("1 + a^64"))
+    assert "the power a^80 has too large an exponent" in error_of(law.format("a^40 * a^40"))
