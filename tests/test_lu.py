@@ -254,7 +254,7 @@ def _real_cases(rng):
 
 
 def _complex_cases(rng):
-    cases = [rng.normal(size=(n, n)) + 1j * rng.normal(size=(n, n)) for n in (1, 2, 4, 7, 12)]
+    cases = [rng.normal(size=(n, n)) + 1j * rng.normal(size=(n, n)) for n in (1, 2, 4, 7, 12, 16)]
     n = 6  # the Radau matrices: (alpha + i beta)/h on the diagonal, -J real elsewhere
     cases.append(np.diag(np.full(n, 3.5 + 2.1j)) - rng.normal(size=(n, n)))
     A = rng.normal(size=(5, 5)) + 1j * rng.normal(size=(5, 5))

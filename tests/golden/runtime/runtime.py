@@ -1972,9 +1972,136 @@ def _pivot(size):
     return i + 1 if rest[i] > size[0] else 0
 
 
+# A small matrix is factored and solved in plain floats, line by line as the C loops read:
+# the same operations (Python's float arithmetic is IEEE double, and a pivot is never zero),
+# without a numpy call per row, which on a few states costs more than the arithmetic.
+_SMALL_LU = 12
+
+
+def _lu_small(a):
+    """bgc_stiff_lu on the rows of a (lists of floats, factored in place)."""
+    n = len(a)
+    piv = []
+    for k in range(n):
+        ak = a[k]
+        big, p = abs(ak[k]), k
+        for i in range(k + 1, n):
+            if abs(a[i][k]) > big:
+                big, p = abs(a[i][k]), i
+        piv.append(p)
+        if big == 0.0:
+            return None
+        if p != k:
+            a[k], a[p] = a[p], a[k]
+            ak = a[k]
+        for i in range(k + 1, n):
+            ai = a[i]
+            lower = ai[k] / ak[k]
+            ai[k] = lower
+            if lower != 0.0:
+                for j in range(k + 1, n):
+                    ai[j] -= lower * ak[j]
+    return piv
+
+
+def _lu_solve_small(lu, piv, b):
+    """bgc_stiff_lu_solve on lists."""
+    n = len(b)
+    for k in range(n):
+        p = piv[k]
+        b[k], b[p] = b[p], b[k]
+    for k in range(n):
+        bk = b[k]
+        if bk != 0.0:
+            for i in range(k + 1, n):
+                b[i] -= lu[i][k] * bk
+    for k in range(n - 1, -1, -1):
+        row = lu[k]
+        acc = b[k]
+        for i in range(k + 1, n):
+            acc -= row[i] * b[i]
+        b[k] = acc / row[k]
+    return b
+
+
+def _zlu_small(ar, ai):
+    """bgc_stiff_zlu on the rows of ar + i ai (lists of floats, factored in place)."""
+    n = len(ar)
+    piv = []
+    for k in range(n):
+        big, p = abs(ar[k][k]) + abs(ai[k][k]), k
+        for i in range(k + 1, n):
+            size = abs(ar[i][k]) + abs(ai[i][k])
+            if size > big:
+                big, p = size, i
+        piv.append(p)
+        if big == 0.0:
+            return None
+        if p != k:
+            ar[k], ar[p] = ar[p], ar[k]
+            ai[k], ai[p] = ai[p], ai[k]
+        akr, aki = ar[k], ai[k]
+        for i in range(k + 1, n):
+            rr, ri = ar[i], ai[i]
+            lr, li = _divdc3(rr[k], ri[k], akr[k], aki[k])
+            rr[k], ri[k] = lr, li
+            if lr != 0.0 or li != 0.0:
+                for j in range(k + 1, n):
+                    pr, pi = _muldc3(lr, li, akr[j], aki[j])
+                    rr[j] -= pr
+                    ri[j] -= pi
+    return piv
+
+
+def _zlu_solve_small(lur, lui, piv, br, bi):
+    """bgc_stiff_zlu_solve on lists."""
+    n = len(br)
+    for k in range(n):
+        p = piv[k]
+        br[k], br[p] = br[p], br[k]
+        bi[k], bi[p] = bi[p], bi[k]
+    for k in range(n):
+        xr, xi = br[k], bi[k]
+        if xr != 0.0 or xi != 0.0:
+            for i in range(k + 1, n):
+                pr, pi = _muldc3(lur[i][k], lui[i][k], xr, xi)
+                br[i] -= pr
+                bi[i] -= pi
+    for k in range(n - 1, -1, -1):
+        rr, ri = lur[k], lui[k]
+        xr, xi = br[k], bi[k]
+        for i in range(k + 1, n):
+            pr, pi = _muldc3(rr[i], ri[i], br[i], bi[i])
+            xr -= pr
+            xi -= pi
+        br[k], bi[k] = _divdc3(xr, xi, rr[k], ri[k])
+    return br, bi
+
+
+class _SmallLU:
+    """The factors of a small matrix as lists (what _lu returns as its "pivots" then carries
+    them), so that each solve runs in plain floats too."""
+
+    __slots__ = ("piv", "rows", "imag")
+
+    def __init__(self, piv, rows, imag=None):
+        self.piv, self.rows, self.imag = piv, rows, imag
+
+    def __getitem__(self, k):
+        return self.piv[k]
+
+    def __len__(self):
+        return len(self.piv)
+
+
 def _lu(a):
     """bgc_stiff_lu on a (n x n, factored in place): the pivots, or None if singular."""
     n = a.shape[0]
+    if n <= _SMALL_LU:
+        rows = a.tolist()
+        piv = _lu_small(rows)
+        a[:, :] = rows
+        return None if piv is None else _SmallLU(piv, rows)
     piv = []
     with numpy.errstate(all="ignore"):
         for k in range(n):
@@ -2000,6 +2127,9 @@ def _lu(a):
 def _lu_solve(lu, piv, b):
     """bgc_stiff_lu_solve: A^-1 b (a new vector) from _lu's factors (under the caller's
     numpy.errstate, as _zlu_solve)."""
+    if isinstance(piv, _SmallLU):
+        return numpy.array(_lu_solve_small(piv.rows, piv.piv, numpy.asarray(b, dtype=float)
+                                           .tolist()))
     b = numpy.array(b, dtype=float)
     n = len(b)
     for k in range(n):
@@ -2017,6 +2147,11 @@ def _lu_solve(lu, piv, b):
 def _zlu(ar, ai):
     """bgc_stiff_zlu on ar + i ai (factored in place): the pivots, or None if singular."""
     n = ar.shape[0]
+    if n <= _SMALL_LU:
+        rows, imag = ar.tolist(), ai.tolist()
+        piv = _zlu_small(rows, imag)
+        ar[:, :], ai[:, :] = rows, imag
+        return None if piv is None else _SmallLU(piv, rows, imag)
     piv = []
     with numpy.errstate(all="ignore"):
         for k in range(n):
@@ -2041,6 +2176,11 @@ def _zlu(ar, ai):
 
 def _zlu_solve(lur, lui, piv, br, bi):
     """bgc_stiff_zlu_solve: A^-1 (br + i bi) (new vectors) from _zlu's factors."""
+    if isinstance(piv, _SmallLU):
+        xr, xi = _zlu_solve_small(piv.rows, piv.imag, piv.piv,
+                                  numpy.asarray(br, dtype=float).tolist(),
+                                  numpy.asarray(bi, dtype=float).tolist())
+        return numpy.array(xr), numpy.array(xi)
     br, bi = numpy.array(br, dtype=float), numpy.array(bi, dtype=float)
     n = len(br)
     for k in range(n):
