@@ -39,9 +39,9 @@ from .algebra import (antiderivative, expand_bounded, is_singular, is_symmetric,
 from .diagnostics import Collector, ModelError, Span, fail, warning
 from .differentiate import directional, partial
 from .system import (TIME, ConstraintDef, Equation, EquationSystem, OutputDef, ParameterDef,
-                        Run, StateVar, der)
+                     StateVar, der)
 from .graph import var
-from .run import ALGEBRA
+from .run import ALGEBRA, RunSettings
 from .resources import (MAX_EXPANDED_TERMS, MAX_EXPRESSION_DEPTH, MAX_EXPRESSION_NODES,
                         SYMBOLIC_MAX_BLOCK, fits)
 from .sparse import plan as lu_plan
@@ -115,7 +115,7 @@ class Reduced:
     blocks: tuple[BlockInfo, ...]
     eliminated: tuple[tuple[str, sp.Expr | str], ...]  # derivative causality: state = expr,
     # or why it is not written out (SOLVED_WITH_BLOCK, TOO_LARGE)
-    run: Run
+    run: RunSettings
     algebra: str
     warnings: tuple = ()
 

@@ -96,8 +96,6 @@ class ParameterDef:
     span: Span
 
 
-Run = RunSettings  # the name bgc.reduce imports the run's settings by
-
 
 @dataclass(frozen=True)
 class EquationSystem:

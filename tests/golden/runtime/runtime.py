@@ -1603,11 +1603,7 @@ class _Erk(_Family):
         i = _first_nonfinite(self.K[0])
         if i >= 0:
             raise _fail(run.t, "derivative of state", STATES[i])
-        if run.fixed:
-            return None
-        hmax = run.s.t_end - run.s.t0
-        return min(run.h, hmax) if run.h > 0.0 else _initial_step(run, self.m["q"], y,
-                                                                   self.K[0], hmax)
+        return None if run.fixed else _first_step(run, y, self.K[0])
 
     def _error(self, h, y, y1):
         """Hairer's error norm (DOP853 combines its two estimates); NaN for an infinite
