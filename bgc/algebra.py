@@ -246,7 +246,11 @@ def is_singular(rows: int, entries, points: int = 3, seed: int = 0) -> bool:
                 bound *= mpmath.sqrt(sum(a[i, j] ** 2 for j in range(rows)))
             if bound == 0:
                 continue
-            if abs(mpmath.det(a)) > mpmath.mpf("1e-20") * bound:
+            try:
+                det = mpmath.det(a)
+            except (TypeError, ZeroDivisionError):  # no pivot in a column: singular here
+                continue
+            if abs(det) > mpmath.mpf("1e-20") * bound:
                 return False
     return True
 

@@ -18,13 +18,13 @@ symbols; every function of the program is built from them by the same passes:
 """
 from __future__ import annotations
 
-from dataclasses import replace
+from dataclasses import dataclass, replace
 
 import sympy as sp
 
 from . import ir
 from .differentiate import partial
-from .tangent import tangent
+from .tangent import jacobian, tangent
 from .graph import TIME, var
 from .ir import (C, P, T, V, X, Assign, BlockPlan, ConstraintRow, Function, JacobianPattern,
                  Newton, Param, Program, SceneSettings, Solve, Store, as_expr)
@@ -309,11 +309,25 @@ def functions(reduced: Reduced) -> dict:
     rows, t0 = reduced.rows, sp.Float(reduced.run.t0)
     position = [r.expr for r in rows if r.level == "position"]
     velocity = [r.expr for r in rows if r.level == "velocity"]
+    leaves = {TIME} | set(states) | {var(p.name) for p in reduced.parameters}
+
+    def jacobian(exprs):
+        size = len(exprs) * len(states)
+        if all(e.free_symbols <= leaves for e in exprs):
+            return size, _row_jacobian(exprs, states)
+        return size, _Through(tuple(exprs))  # rows that read a block's unknowns
+
     return _specs([st.init.xreplace({TIME: t0}) for st in reduced.states], reduced.rates,
                   [o.expr for o in reduced.outputs], [r.expr for r in rows],
-                  [r.scale for r in rows], (len(position) * len(states),
-                                            _row_jacobian(position, states)),
-                  (len(velocity) * len(states), _row_jacobian(velocity, states)))
+                  [r.scale for r in rows], jacobian(position), jacobian(velocity))
+
+
+@dataclass(frozen=True)
+class _Through:
+    """The rows of a Jacobian that is derived through the steps (bgc.tangent.jacobian): the
+    rows read the unknowns of a block (the flows of a coupled field), not the states alone."""
+
+    rows: tuple
 
 
 def _specs(init, rhs, outputs, residual, scale, position_jac, velocity_jac) -> dict:
@@ -358,8 +372,14 @@ def _build(mapper: _Mapper, steps, specs: dict, n: int) -> dict:
     """Each function from what its results need of the steps, in the IR's symbols; then the
     tangents (after the primal functions, so that their variables are numbered after)."""
     steps = list(steps)
-    out = {name: mapper.function(name, args, ir.prune(steps + stores), size)
-           for name, (args, size, stores) in specs.items()}
+    out = {}
+    for name, (args, size, stores) in specs.items():
+        if isinstance(stores, _Through):
+            rows = mapper.function(name, args, ir.prune(steps + _stores(stores.rows)),
+                                   len(stores.rows))
+            out[name], mapper.count = jacobian(rows, name, n, mapper.plans, mapper.count)
+        else:
+            out[name] = mapper.function(name, args, ir.prune(steps + stores), size)
     for name, of in TANGENTS.items():
         out[name], mapper.count = tangent(out[of], name, {X[i]: V[i] for i in range(n)},
                                           mapper.plans, mapper.count)

@@ -32,8 +32,8 @@ from dataclasses import dataclass
 import mpmath  # SymPy's own: a number beyond a double, shown
 import sympy as sp
 
-from . import blt
-from .ir import Assign, BlockPlan, Newton, Solve, defines
+from . import blt, ir
+from .ir import Assign, BlockPlan, Newton, Solve, Store, defines
 from .algebra import (antiderivative, expand_bounded, is_singular, is_symmetric, is_zero,
                       solve_for)
 from .diagnostics import Collector, ModelError, Span, fail, warning
@@ -242,7 +242,8 @@ class _Coordinates:
         self.others = set(sys.states) - set(self.coords)
         frozen = set()
         for st in self.integrals:
-            frozen |= {_alias_end(u, defs) for u in sys.eqs[der(st.symbol)].expr.free_symbols}
+            frozen |= {_alias_end(u, defs, sys.eqs)
+                       for u in sys.eqs[der(st.symbol)].expr.free_symbols}
         self.frozen = frozen
         self.memo: dict = {}
         self.solved: dict = {}
@@ -313,10 +314,13 @@ def _multipliers(sys):
     return [c.multiplier for c in sys.es.constraints]
 
 
-def _alias_end(s, defs):
-    """What s is a plain alias of at the end of its chain (vx.f -> f[vx->mx])."""
+def _alias_end(s, defs, eqs):
+    """What s is a plain alias of at the end of its chain (vx.f -> f[vx->mx]): an explicitly
+    defined symbol, or the unknown of an implicit equation (a flow of a coupled I field, which
+    solves M f = p with the others)."""
     seen = {s}
-    while isinstance(defs.get(s), sp.Symbol) and defs[s] in defs and defs[s] not in seen:
+    while isinstance(defs.get(s), sp.Symbol) and defs[s] not in seen and \
+            (defs[s] in defs or (defs[s] in eqs and not eqs[defs[s]].explicit)):
         s = defs[s]
         seen.add(s)
     return s
@@ -646,6 +650,12 @@ class _Blocks:
         for i, k, e in matrix:
             A[i, k] = _leaf(e, defs, lambda s: s in defs, memo)
         if m <= SINGULAR_CHECK_MAX and is_singular(m, [(i, k, A[i, k]) for i, k, _ in matrix]):
+            rows = _dependent_rows(self.sys, z, _at_random_point(A))
+            if rows:
+                fail(rows[0].name_span, f"the constraint rows {_listed(rows)} are not "
+                                        "independent, whatever the state: their multipliers "
+                                        "cannot be determined.  Remove the rows that repeat "
+                                        "or combine the others")
             names = ", ".join(f"'{o}'" for o in origins)
             fail(span, f"the equations through {names} are singular: "
                        f"{', '.join(s.name for s in z)} cannot be determined")
@@ -723,6 +733,44 @@ class _Blocks:
                 if entry != 0:
                     entries.append((i, k, entry))
         return tuple(entries)
+
+
+def _at_random_point(A: sp.Matrix):
+    """A's values at a random point of its symbols (a seeded generator: the same point every
+    run), as floats; None where it is not real there."""
+    import random
+
+    rng = random.Random(1)
+    symbols = sorted(A.free_symbols, key=lambda s: s.name)
+    point = {s: sp.Float(rng.uniform(0.3, 1.7)) for s in symbols}
+    try:
+        return [[float(A[i, k].xreplace(point)) for k in range(A.cols)] for i in range(A.rows)]
+    except (TypeError, ValueError):
+        return None
+
+
+def _dependent_rows(sys: _System, z, values) -> list:
+    """The constraint junctions whose multipliers are among the unknowns z of a singular block
+    and take part in its dependence (nonzero in a null vector of its matrix, given as rows of
+    floats): the rows that are not independent."""
+    import numpy
+
+    by_multiplier = {c.multiplier: c for c in sys.es.constraints}
+    involved = [k for k, u in enumerate(z) if u in by_multiplier]
+    if not involved or values is None:
+        return []
+    A = numpy.array(values, dtype=float)
+    if not numpy.all(numpy.isfinite(A)):
+        return []
+    _, sv, vt = numpy.linalg.svd(A)
+    null = vt[-1]
+    big = numpy.abs(null).max()
+    rows = [by_multiplier[z[k]] for k in involved if abs(null[k]) > 1e-6 * big]
+    return rows or [by_multiplier[z[k]] for k in involved]
+
+
+def _listed(rows) -> str:
+    return ", ".join(f"'{c.junction}'" for c in rows)
 
 
 def _chain(parts, tangent, k):
@@ -945,13 +993,96 @@ def parameter_values(parameters) -> dict:
     return values
 
 
+class _NotNumeric(Exception):
+    """An expression that the initial values do not make a number (a Newton block's unknown)."""
+
+
+def _number(expr, values) -> float:
+    try:
+        return float(expr.xreplace(values))
+    except TypeError:
+        raise _NotNumeric(expr) from None
+
+
+def evaluate(reduced: Reduced, values: dict, exprs) -> list[float]:
+    """exprs at the given values of the parameters, states and time, through the steps they
+    need: the rows of a constraint on a coupled field read its flows, which solve M(q) f = p.
+    Raises _NotNumeric where a step cannot be evaluated here, ModelError where a linear block
+    is singular at these values (naming its equations)."""
+    import numpy  # only models whose rows go through a block come here
+
+    body = ir.prune(list(reduced.steps) + [Store(k, e) for k, e in enumerate(exprs)])
+    v = dict(values)
+    out = [0.0] * len(exprs)
+    for s in body:
+        if isinstance(s, Assign):
+            v[s.target] = sp.Float(_number(s.expr, v))
+        elif isinstance(s, Store):
+            out[s.index] = _number(s.expr, v)
+        elif isinstance(s, Solve):
+            plan = reduced.plans[s.block]
+            m = len(s.unknowns)
+            A = numpy.zeros((m, m))
+            for (i, k), e in zip(plan.pattern, s.matrix):
+                A[i, k] = _number(e, v)
+            b = numpy.zeros(m)
+            for r, e in zip(plan.lu.row_of, s.rhs):
+                b[r] = _number(e, v)
+            if not numpy.all(numpy.isfinite(A)) or numpy.linalg.matrix_rank(A) < m:
+                _singular_at_start(reduced, plan, s, A)
+            z = numpy.linalg.solve(A, b)
+            for c, u in zip(plan.lu.col_of, s.unknowns):
+                v[u] = sp.Float(float(z[c]))
+        else:
+            raise _NotNumeric(s)
+    return out
+
+
+def _singular_at_start(reduced: Reduced, plan: BlockPlan, s: Solve, A):
+    """A located error for a linear block that is singular at the initial state: the constraint
+    rows that lose their independence there, or the block's equations."""
+    info = reduced.blocks[plan.index - 1]
+    z = [None] * len(s.unknowns)
+    for c, u in zip(plan.lu.col_of, s.unknowns):
+        z[c] = u
+    by_multiplier = {c.multiplier: c for c in reduced.constraints}
+    if any(u in by_multiplier for u in z):
+        import numpy
+
+        rows = []
+        if numpy.all(numpy.isfinite(A)):
+            null = numpy.linalg.svd(A)[2][-1]
+            big = numpy.abs(null).max()
+            rows = [by_multiplier[u] for k, u in enumerate(z)
+                    if u in by_multiplier and abs(null[k]) > 1e-6 * big]
+        rows = rows or [by_multiplier[u] for u in z if u in by_multiplier]
+        if len(rows) == 1:
+            fail(rows[0].name_span, f"constraint {_listed(rows)} has a zero Jacobian at the "
+                                    "initial state (a singular configuration): its multiplier "
+                                    "cannot be determined.  Start from another configuration")
+        fail(rows[0].name_span, f"the constraint rows {_listed(rows)} are not independent at "
+                                "the initial state (their Jacobian loses rank there, a "
+                                "singular configuration): their multipliers cannot be "
+                                "determined.  Start from another configuration, or remove a "
+                                "row that repeats or combines the others")
+    fail(info.span, f"block {plan.index} ({', '.join(info.unknowns)}) is singular at the "
+                    "initial state: its equations do not determine its unknowns there (through "
+                    f"{', '.join(info.origins)})")
+
+
 def check_initial(reduced: Reduced):
     values = initial_values(reduced)
     diags = Collector()
     kinds = {c.junction: c for c in reduced.constraints}
-    for row in reduced.rows:
-        r = float(row.expr.xreplace(values))
-        s = float(row.scale.xreplace(values))
+    rows = reduced.rows
+    try:
+        numbers = evaluate(reduced, values, [r.expr for r in rows] + [r.scale for r in rows])
+        if reduced.constraints:  # the multipliers' block, solvable at the start?
+            evaluate(reduced, values, reduced.rates)
+    except _NotNumeric:
+        return  # a row through a Newton block: the generated program checks it
+    for k, row in enumerate(rows):
+        r, s = numbers[k], numbers[len(rows) + k]
         if abs(r) > RELATIVE_TOLERANCE * s:
             c = kinds[row.junction]
             what = "Phi" if row.level == "position" else "dPhi/dt" if c.kind == "holonomic" \

@@ -1,0 +1,229 @@
+"""Constraint junctions on coupled inertia fields: the source paper's general form
+M(q) q'' = Q - G(q)^T lambda, with the field's flows solving M(q) f = p and the multipliers
+solving the augmented system [M G^T; G 0] in the generated code.
+
+References, each independent of bgc:
+- Andrews' squeezing mechanism against the IVP Test Set's published solution at t = 0.03
+  (computed by its authors with PSIDE at tolerance 1e-14), and against the same mechanism
+  written as seven free bodies with diagonal masses and twenty pin constraints;
+- the two-link arm with its tip on a vertical line against Lagrange's equations with the
+  multiplier, typed here and integrated by SciPy at tight tolerance;
+- a start off the constraint against the corrector's own law in closed form.
+"""
+from pathlib import Path
+
+import numpy as np
+import pytest
+from scipy.integrate import solve_ivp
+
+from bgc import api, backends
+from conftest import run_bgc
+
+ROOT = Path(__file__).resolve().parent.parent
+MODELS = ROOT / "models"
+TEST_MODELS = Path(__file__).parent / "models"
+needs_cc = pytest.mark.skipif(not backends.have_c_compiler(), reason="no C compiler")
+
+# The IVP Test Set, problem "andrews": q(0.03), the seven joint angles, and lambda(0.03).
+ANDREWS_Q = [0.1581077119629904e+2, -0.1575637105984298e+2, 0.4082224013073101e-1,
+             -0.5347301163226948e+0, 0.5244099658805304e+0, 0.5347301163226948e+0,
+             0.1048080741042263e+1]
+ANDREWS_LAMBDA = [0.1991753333731910e+3, -0.2975531228015052e+2, 0.2306654119098399e+2,
+                  0.3145271365475927e+2, 0.2264249232082739e+2, 0.1161740700019673e+2]
+
+
+def _columns(csv_text: str):
+    lines = csv_text.strip().splitlines()
+    names = lines[0].split(",")
+    data = np.array([[float(v) for v in line.split(",")] for line in lines[1:]])
+    return names, data
+
+
+def _simulate(tmp_path, model, *args, backend="c"):
+    out = tmp_path / f"{model.stem}-{backend}-{len(list(tmp_path.iterdir()))}.csv"
+    r = run_bgc("simulate", str(model), "--backend", backend, "-o", str(out), *args)
+    assert r.returncode == 0, r.stderr
+    assert "Traceback" not in r.stderr
+    return out.read_bytes()
+
+
+@needs_cc
+@pytest.mark.parametrize("solver", ["radau5", "dopri5"])
+def test_andrews_in_relative_angles_matches_the_test_set(tmp_path, solver):
+    """The 7 x 7 M(q) on one I field, six holonomic constraints through G(q): every angle at
+    t = 0.03 within 1e-6 relative of the published solution, with a stiff and an explicit
+    solver; the multipliers within 1e-5 (the reference's own accuracy in lambda, an index-3
+    variable, is about 1e-6)."""
+    text = _simulate(tmp_path, MODELS / "andrews.bg", "--scene", "squeeze", "--solver", solver)
+    names, data = _columns(text.decode())
+    assert data[-1, 0] == pytest.approx(0.03, abs=1e-15)
+    q = data[-1, [names.index(f"q[{i}]") for i in range(7)]]
+    lam = data[-1, [names.index(f"c.lambda[{i}]") for i in range(6)]]
+    assert np.max(np.abs(q - ANDREWS_Q) / np.abs(ANDREWS_Q)) < 1e-6
+    assert np.max(np.abs(lam - ANDREWS_LAMBDA) / np.abs(ANDREWS_LAMBDA)) < 1e-5
+    residual = data[:, [names.index(f"c.residual[{i}]") for i in range(6)]]
+    assert np.abs(residual).max() < 1e-9  # the loops stay closed (lengths ~ 0.03 m)
+
+
+@needs_cc
+def test_andrews_backends_write_the_same_bytes(tmp_path):
+    c = _simulate(tmp_path, MODELS / "andrews.bg", "--scene", "squeeze", "--solver", "dopri5")
+    py = _simulate(tmp_path, MODELS / "andrews.bg", "--scene", "squeeze", "--solver", "dopri5",
+                   backend="python")
+    assert c == py
+
+
+@needs_cc
+def test_andrews_with_a_field_equals_andrews_with_point_masses(tmp_path):
+    """The same mechanism written twice: 7 joint angles with M(q) and 6 constraints, and 21
+    absolute coordinates with diagonal masses and 20 pin constraints.  The joint angles agree
+    to 1e-8 over the whole run."""
+    tight = ("--scene", "squeeze", "--rtol", "1e-12", "--atol", "1e-12")
+    names_r, rel = _columns(_simulate(tmp_path, MODELS / "andrews.bg", *tight).decode())
+    names_b, bod = _columns(_simulate(tmp_path, TEST_MODELS / "andrews_bodies.bg",
+                                      *tight).decode())
+    assert np.array_equal(rel[:, 0], bod[:, 0]) and len(rel) == 31
+    q = rel[:, [names_r.index(f"q[{i}]") for i in range(7)]]
+    angles = bod[:, [names_b.index(f"angles[{i}]") for i in range(7)]]
+    assert np.abs(q - angles).max() < 1e-8
+
+
+# ---------------------------------------------------------------- the arm on a line
+
+M1, M2, L1, L2, G, TH1, TH2, GAIN = 1.0, 0.5, 1.0, 0.7, 9.81, 0.2, 1.2, 10.0
+
+
+def _arm_reference(t, corrector: str):
+    """Lagrange's equations of the double pendulum in its angles with the tip held on the line
+    x = x0 (Phi = l1 sin th1 + l2 sin th2 - x0): [M G^T; G 0] [a; lambda] = [r; c], with
+    c = -dG/dt w minus the corrector's terms; DOP853 at rtol 1e-12."""
+    x0 = L1 * np.sin(TH1) + L2 * np.sin(TH2)
+
+    def f(_, z):
+        a, b, wa, wb = z
+        c, s = np.cos(a - b), np.sin(a - b)
+        M = np.array([[(M1 + M2) * L1**2, M2 * L1 * L2 * c], [M2 * L1 * L2 * c, M2 * L2**2]])
+        r = np.array([-M2 * L1 * L2 * s * wb**2 - (M1 + M2) * G * L1 * np.sin(a),
+                      M2 * L1 * L2 * s * wa**2 - M2 * G * L2 * np.sin(b)])
+        Gq = np.array([L1 * np.cos(a), L2 * np.cos(b)])
+        phi = L1 * np.sin(a) + L2 * np.sin(b) - x0
+        dphi = Gq @ [wa, wb]
+        rhs = L1 * np.sin(a) * wa**2 + L2 * np.sin(b) * wb**2  # -dG/dt w
+        if corrector == "pid":
+            rhs -= 2 * GAIN * dphi + GAIN**2 * phi
+        elif corrector == "pd":
+            rhs -= GAIN * dphi
+        K = np.zeros((3, 3))
+        K[:2, :2], K[:2, 2], K[2, :2] = M, Gq, Gq
+        acc = np.linalg.solve(K, [*r, rhs])
+        return [wa, wb, acc[0], acc[1]]
+
+    sol = solve_ivp(f, (t[0], t[-1]), [TH1, TH2, 0.0, 0.0], method="DOP853", rtol=1e-12,
+                    atol=1e-12, t_eval=t)
+    return sol.y[:2].T
+
+
+@needs_cc
+@pytest.mark.parametrize("model, scene, corrector", [
+    ("two_link_arm_wall.bg", "held", "pid"),
+    ("two_link_arm_wall.bg", "unstabilised", "none"),
+    ("two_link_arm_slot.bg", "held", "pd"),
+    ("two_link_arm_slot.bg", "unstabilised", "none"),
+])
+def test_arm_with_its_tip_on_a_line(tmp_path, model, scene, corrector):
+    """Holonomic (PID corrector, or none) and non-holonomic (PD, or none): the angles follow
+    Lagrange's equations with the multiplier, and the drift stays within the tolerance's
+    reach."""
+    path = (MODELS if model == "two_link_arm_wall.bg" else TEST_MODELS) / model
+    names, data = _columns(_simulate(tmp_path, path, "--scene", scene).decode())
+    th = data[:, [names.index("th[0]"), names.index("th[1]")]]
+    ref = _arm_reference(data[:, 0], corrector)
+    assert np.abs(th - ref).max() < 1e-7
+    assert th[:, 1].max() - th[:, 1].min() > 0.5  # it does move
+    assert np.abs(data[:, names.index("wall.residual")]).max() < 1e-9
+
+
+@needs_cc
+def test_arm_projected_onto_the_constraint_in_both_backends(tmp_path):
+    """Momenta that violate dPhi/dt = 0 (init p = [1, 0.2]) projected before the run: the first
+    row's flows f = M(th)^-1 p give G f = 0, and the backends agree byte for byte."""
+    text = (MODELS / "two_link_arm_wall.bg").read_text().replace(
+        "m2*l2^2]]) \"the links' inertia\"", "m2*l2^2]]) init p = [1, 0.2]")
+    model = tmp_path / "arm_moving.bg"
+    model.write_text(text)
+    r = run_bgc("check", str(model))
+    assert r.returncode == 1 and "initial conditions violate constraint 'wall'" in r.stderr
+    c = _simulate(tmp_path, model, "--scene", "held", "--project-initial")
+    py = _simulate(tmp_path, model, "--scene", "held", "--project-initial", backend="python")
+    assert c == py
+    names, data = _columns(c.decode())
+    a, b = data[0, names.index("th[0]")], data[0, names.index("th[1]")]
+    p = data[0, [names.index("arm.p[0]"), names.index("arm.p[1]")]]
+    M = np.array([[(M1 + M2) * L1**2, M2 * L1 * L2 * np.cos(a - b)],
+                  [M2 * L1 * L2 * np.cos(a - b), M2 * L2**2]])
+    f = np.linalg.solve(M, p)
+    assert (a, b) == (TH1, TH2)  # the positions already held
+    assert abs(L1 * np.cos(a) * f[0] + L2 * np.cos(b) * f[1]) < 1e-9 * np.abs(f).max()
+    assert np.abs(p).max() > 0.1
+
+
+@needs_cc
+@pytest.mark.parametrize("backend", ["c", "python"])
+def test_arm_started_off_the_constraint_follows_the_correctors_law(tmp_path, backend):
+    """--allow-inconsistent with a velocity that violates the constraint: with the PID
+    corrector (alpha = beta = 10, critically damped) Phi'' + 2 alpha Phi' + beta^2 Phi = 0 from
+    Phi = 0, Phi' = v0 gives Phi = v0 t exp(-10 t)."""
+    text = (MODELS / "two_link_arm_wall.bg").read_text().replace(
+        "m2*l2^2]]) \"the links' inertia\"", "m2*l2^2]]) init p = [1, 0.2]")
+    model = tmp_path / "arm_moving.bg"
+    model.write_text(text)
+    names, data = _columns(_simulate(tmp_path, model, "--scene", "held", "--allow-inconsistent",
+                                     backend=backend).decode())
+    a, b = TH1, TH2
+    M = np.array([[(M1 + M2) * L1**2, M2 * L1 * L2 * np.cos(a - b)],
+                  [M2 * L1 * L2 * np.cos(a - b), M2 * L2**2]])
+    f = np.linalg.solve(M, [1.0, 0.2])
+    v0 = L1 * np.cos(a) * f[0] + L2 * np.cos(b) * f[1]
+    t = data[:, 0]
+    phi = data[:, names.index("wall.residual")]
+    assert np.abs(phi - v0 * t * np.exp(-GAIN * t)).max() < 1e-8 * abs(v0)
+
+
+@needs_cc
+def test_a_constant_full_mass_matrix_under_a_constraint(tmp_path):
+    """I[2]([[2, .5], [.5, 1]]) with one linear constraint x1 + 2 x2 = 0 and forces
+    (1, 0): the motion stays on the line, and its acceleration is constant, from the
+    augmented system solved here: [M g^T; g 0] [a; lambda] = [F; 0]."""
+    model = tmp_path / "full.bg"
+    model.write_text("""model full
+v : 1[2]
+mass : I[2]([[2, 0.5], [0.5, 1]])
+push : Se[2]([1, 0])
+line : MTF[2->1]([[1, 2]])
+c : 0[1] constraint holonomic(init = [0]) corrector pid(3, 3)
+signal x[2] = integral(v.f, init = [0, 0])
+push -> v -> mass
+v -> line -> c
+scene run { outputs x, c.lambda
+  time 0 .. 1 every 0.25
+  solver dopri5(rtol = 1e-10, atol = 1e-12) }
+""")
+    names, data = _columns(_simulate(tmp_path, model, "--scene", "run").decode())
+    K = np.array([[2, 0.5, 1], [0.5, 1, 2], [1, 2, 0]])
+    a = np.linalg.solve(K, [1, 0, 0])
+    t = data[:, 0]
+    x = data[:, [names.index("x[0]"), names.index("x[1]")]]
+    assert np.abs(x - 0.5 * np.outer(t**2, a[:2])).max() < 1e-10
+    assert np.abs(data[:, names.index("c.lambda")] - a[2]).max() < 1e-10
+
+
+def test_rows_through_the_field_are_checked_at_compile_time(tmp_path):
+    """The initial-value check evaluates dPhi/dt through M(q) f = p at compile time and names
+    the constraint."""
+    text = (MODELS / "two_link_arm_wall.bg").read_text().replace(
+        "m2*l2^2]]) \"the links' inertia\"", "m2*l2^2]]) init p = [1, 0.2]")
+    model = tmp_path / "arm_moving.bg"
+    model.write_text(text)
+    with pytest.raises(api.BgcModelError) as err:
+        api.build(model)
+    assert "initial conditions violate constraint 'wall': dPhi/dt = " in str(err.value)
