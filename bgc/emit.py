@@ -30,8 +30,9 @@ C_RUNTIME = ("runtime.c", "drive.c", "erk.c", "stiff.c", "main.c", "batch.c")  #
 PLAN_ARRAYS = ("diag", "lptr", "lpos", "lrow", "uptr", "upos", "ucol", "upd", "prow", "pcol")
 MODEL_FUNCTIONS = ("rhs", "outputs", "jvp")  # take the workspace, may solve blocks; so do
 #                                               a program's extra functions (bgc.lower.with_tangent)
-PLAIN_FUNCTIONS = ("residual", "scale", "position_jac", "velocity_jac")
-SPARSE_FUNCTIONS = ("position_jac", "velocity_jac")  # store their nonzero entries only
+PLAIN_FUNCTIONS = ("residual", "scale", "position_jac", "velocity_jac", "velocity_metric")
+SPARSE_FUNCTIONS = ("position_jac", "velocity_jac", "velocity_metric")  # store their nonzero
+#                                                                         entries only
 
 
 class EmitError(ValueError):
@@ -555,7 +556,8 @@ def _validate(program: Program) -> None:
     sizes = {"init": n, "rhs": n, "jvp": n, "outputs": len(program.outputs),
              "residual": len(program.constraints), "scale": len(program.constraints),
              "position_jac": len(program.position_rows) * n,
-             "velocity_jac": len(program.velocity_rows) * n}
+             "velocity_jac": len(program.velocity_rows) * n,
+             "velocity_metric": len(program.velocity_rows) * n}
     sizes.update((k, f.size) for k, f in program.functions.items() if k not in sizes)
     for name, size in sizes.items():
         f = program.function(name)

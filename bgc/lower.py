@@ -317,9 +317,15 @@ def functions(reduced: Reduced) -> dict:
             return size, _row_jacobian(exprs, states)
         return size, _Through(tuple(exprs))  # rows that read a block's unknowns
 
-    return _specs([st.init.xreplace({TIME: t0}) for st in reduced.states], reduced.rates,
-                  [o.expr for o in reduced.outputs], [r.expr for r in rows],
-                  [r.scale for r in rows], jacobian(position), jacobian(velocity))
+    index = {s: i for i, s in enumerate(states)}
+    metric = [Store(k * len(states) + index[p], d)
+              for k, r in enumerate(r for r in rows if r.level == "velocity")
+              for p, d in r.weights if d != 0]
+    specs = _specs([st.init.xreplace({TIME: t0}) for st in reduced.states], reduced.rates,
+                   [o.expr for o in reduced.outputs], [r.expr for r in rows],
+                   [r.scale for r in rows], jacobian(position), jacobian(velocity))
+    specs["velocity_metric"] = (("t", "x", "p"), len(velocity) * len(states), metric)
+    return specs
 
 
 @dataclass(frozen=True)
@@ -328,6 +334,18 @@ class _Through:
     rows read the unknowns of a block (the flows of a coupled field), not the states alone."""
 
     rows: tuple
+
+
+def velocity_movable(rows, states) -> tuple[bool, ...]:
+    """The states that the projection onto the velocity rows moves: the momenta those rows
+    read (by the kinetic metric, see bgc.reduce's _Weights), the positions held; when they
+    read no momentum (a constraint on other stores), every state the position rows leave."""
+    position = [r.expr for r in rows if r.level == "position"]
+    in_position = set().union(*[e.free_symbols for e in position]) if position else set()
+    weighed = {p for r in rows for p, d in r.weights if d != 0}
+    if weighed:
+        return tuple(s in weighed and s not in in_position for s in states)
+    return tuple(s not in in_position for s in states)
 
 
 def _specs(init, rhs, outputs, residual, scale, position_jac, velocity_jac) -> dict:
@@ -357,9 +375,7 @@ def lower(reduced: Reduced) -> Program:
     rows = reduced.rows
     fns = _build(mapper, reduced.steps, functions(reduced), len(states))
     params = tuple(Param(p.name, mapper.expr(p.expr)) for p in reduced.parameters)
-    position = [r.expr for r in rows if r.level == "position"]
-    in_position = set().union(*[e.free_symbols for e in position]) if position else set()
-    movable = tuple(s not in in_position for s in states)
+    movable = velocity_movable(rows, states)
     run = reduced.run
     scene = SceneSettings(run.t0, run.t_end, run.dt, run.solver, run.rtol, run.atol, run.step)
     return finish(reduced.name, tuple(st.name for st in reduced.states), params,
@@ -447,13 +463,16 @@ def finish(name, states, params, outputs, constraints, movable, scene, functions
 
 def explicit_program(name, states, params, outputs, init, rhs, out, scene,
                      constraints=(), residual=(), scale=(), position_jac=(), velocity_jac=(),
-                     velocity_movable=None) -> Program:
+                     velocity_movable=None, velocity_metric=None) -> Program:
     """A program from explicit expressions over the IR's own symbols (x[i], p[j], t): for
     tests and for code that builds models without the front end.  jvp is derived as for
-    compiled models."""
+    compiled models; the velocity projection's metric is the identity unless given (as the
+    rows of velocity_jac times M)."""
     n = len(states)
     specs = _specs(init, rhs, out, residual, scale, (len(position_jac), _stores(position_jac)),
                    (len(velocity_jac), _stores(velocity_jac)))
+    metric = velocity_jac if velocity_metric is None else velocity_metric
+    specs["velocity_metric"] = (("t", "x", "p"), len(metric), _stores(metric))
     mapper = _Mapper({})
     fns = _build(mapper, (), specs, n)
     movable = tuple(velocity_movable) if velocity_movable is not None else (True,) * n

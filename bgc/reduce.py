@@ -98,6 +98,8 @@ class ConstraintRow:
     level: str  # "position" (holonomic Phi) or "velocity" (dPhi/dt, or nonholonomic Phi)
     expr: sp.Expr
     scale: sp.Expr  # the row holds when |expr| <= 1e-9 * scale
+    weights: tuple = ()  # velocity rows: (p, d row / d v) of each momentum p whose velocity v
+    #                      the row reads; the projection moves p by M(q) in these directions
 
 
 @dataclass(frozen=True)
@@ -940,6 +942,8 @@ def _rows(sys, infos, kept) -> list[ConstraintRow]:
     integrate are left out)."""
     kept_symbols = {st.symbol for st in kept}
     all_states = set(sys.states)
+    balances = {c.junction: c.balance for c in sys.es.constraints}
+    weigh = _Weights(sys)
     rows = []
     for c in infos:
         levels = ([("position", c.phi)] if c.kind == "holonomic" else []) + \
@@ -947,8 +951,44 @@ def _rows(sys, infos, kept) -> list[ConstraintRow]:
         for level, expr in levels:
             if (expr.free_symbols & all_states) - kept_symbols:
                 continue
-            rows.append(ConstraintRow(c.junction, level, expr, scale_of(expr)))
+            weights = weigh(balances[c.junction]) if level == "velocity" else ()
+            rows.append(ConstraintRow(c.junction, level, expr, scale_of(expr), weights))
     return rows
+
+
+class _Weights:
+    """The velocity rows' derivatives by the velocities of the momenta they read: a row is
+    the balance of its junction's flows, written here in those velocities (the flows of the
+    I elements held as they are), differentiated by each, then written in the states.  With
+    them the projection onto the velocity rows moves the momenta by the kinetic metric: the
+    smallest change of kinetic energy, as an impulse of the constraint would, which for a
+    coupled field is dp = G^T mu whatever M(q) is."""
+
+    def __init__(self, sys: _System):
+        self.sys = sys
+        self.defs = _explicit_defs(sys)
+        self.momenta = [(p, f, sign) for p, f, sign in sys.es.momenta if p in sys.states]
+        self.frozen = {f for _, f, _ in self.momenta}
+        self.memo: dict = {}
+        self.memo_all: dict = {}
+
+    def __call__(self, balance) -> tuple:
+        defs, sys = self.defs, self.sys
+
+        def held(s):
+            return s in defs and s not in self.frozen and not sys.is_leaf(s)
+
+        try:
+            in_flows = _leaf(defs[balance], defs, held, self.memo)
+            out = []
+            for p, f, sign in self.momenta:
+                if f in in_flows.free_symbols:
+                    d = sign * partial(in_flows, f)
+                    out.append((p, _leaf(d, defs, lambda s: s in defs and not sys.is_leaf(s),
+                                         self.memo_all)))
+        except _Cycle:
+            return ()
+        return tuple(out)
 
 
 def scale_of(expr):

@@ -109,6 +109,8 @@ class EquationSystem:
     run: RunSettings  # the scene's
     warnings: tuple = ()
     fields: tuple = ()  # (field, coordinates of the Hamiltonian correction) of coupled I fields
+    momenta: tuple = ()  # (p, f, sign) of each I state in integral causality: its velocity
+    #                      is sign * f, f a bond flow (the projection's kinetic metric)
 
 
 class _Builder:
@@ -123,6 +125,7 @@ class _Builder:
         self.constraints: list[ConstraintDef] = []
         self.fields: dict[str, None] = {}  # coupled I fields, in order
         self.hamiltonian: dict[str, list[str]] = {}  # ... whose M depends on own coordinates
+        self.momenta: list = []
         self._integrals = None
 
     def emit(self, target, expr, el: Element | str, span, explicit=True):
@@ -207,6 +210,7 @@ class _Builder:
         if integral:
             if st == "p":
                 self.emit(f, s * law, el, el.span)
+                self.momenta.append((state, f, s))
                 rate = e
             else:
                 self.emit(e, law, el, el.span)
@@ -243,13 +247,15 @@ class _Builder:
             fail(el.span, f"'{origin}' is a coupled I field (a non-diagonal mass matrix) and its "
                           f"component {i} gets derivative causality (its flow is imposed): not "
                           "supported; impose the flow on a scalar element instead")
-        flows, own = [], None
+        flows, own, sign = [], None, 1
         for j in range(n):
             part = part_name(origin, j)
             ((_, b),) = self.incident(part)
             flows.append((1 if b.dst == part else -1) * bond_flow(b.label))
-            own = bond_flow(b.label) if j == i else own
+            if j == i:
+                own, sign = bond_flow(b.label), (1 if b.dst == part else -1)
         state = var(variable_name(el.name, "p"))
+        self.momenta.append((state, own, sign))
         self.emit(own, sp.Add(*[M[i, j] * flows[j] for j in range(n)]) - state, el, el.span,
                   explicit=False)
         rate = e
@@ -518,7 +524,8 @@ def build_equations(cg: CausalGraph) -> EquationSystem:
     return EquationSystem(g.name, params, tuple(b.states), tuple(b.equations),
                           tuple(b.constraints), tuple(b.stores), _outputs(b, s.outputs, s.left_out), run,
                           tuple(g.warnings),
-                          tuple((name, tuple(b.hamiltonian.get(name, ()))) for name in b.fields))
+                          tuple((name, tuple(b.hamiltonian.get(name, ()))) for name in b.fields),
+                          tuple(b.momenta))
 
 
 def with_residual_outputs(es: EquationSystem) -> EquationSystem:

@@ -333,16 +333,16 @@ void bgc_params_defaults(bgc_params *p, const int *given)
 void bgc_params_update(bgc_params *p)
 {
     p->c[0] = -2.0*p->p_da*p->p_rr;
-    const double w673 = p->p_da*p->p_da;
-    p->c[1] = w673 + p->p_rr*p->p_rr;
+    const double w684 = p->p_da*p->p_da;
+    p->c[1] = w684 + p->p_rr*p->p_rr;
     p->c[2] = p->p_m1*p->p_ra*p->p_ra + p->p_i1 + p->p_i2;
     p->c[3] = -p->p_da*p->p_rr;
-    p->c[4] = w673;
-    p->c[5] = w673*p->p_m2 + p->p_i2;
+    p->c[4] = w684;
+    p->c[5] = w684*p->p_m2 + p->p_i2;
     p->c[6] = -p->p_rr;
-    const double w674 = p->p_sb*p->p_sb;
-    const double w675 = p->p_sa*p->p_sa;
-    p->c[7] = 1.0/(w674*p->p_m3 + w675*p->p_m3 + p->p_i3);
+    const double w685 = p->p_sb*p->p_sb;
+    const double w686 = p->p_sa*p->p_sa;
+    p->c[7] = 1.0/(w685*p->p_m3 + w686*p->p_m3 + p->p_i3);
     p->c[8] = -p->p_ss;
     p->c[9] = -p->p_d;
     p->c[10] = -p->p_xb;
@@ -353,36 +353,36 @@ void bgc_params_update(bgc_params *p)
     p->c[15] = -p->p_l0;
     p->c[16] = -p->p_c0;
     p->c[17] = -p->p_sd;
-    const double w676 = -p->p_ea + p->p_ee;
-    const double w677 = w676*w676;
-    p->c[18] = w677*p->p_m4 + p->p_i4;
-    p->c[19] = w676*p->p_zt;
-    p->c[20] = w677;
-    p->c[21] = 2.0*w676*p->p_zt;
-    p->c[22] = w677 + p->p_zt*p->p_zt;
+    const double w687 = -p->p_ea + p->p_ee;
+    const double w688 = w687*w687;
+    p->c[18] = w688*p->p_m4 + p->p_i4;
+    p->c[19] = w687*p->p_zt;
+    p->c[20] = w688;
+    p->c[21] = 2.0*w687*p->p_zt;
+    p->c[22] = w688 + p->p_zt*p->p_zt;
     p->c[23] = (p->p_ta*p->p_ta + p->p_tb*p->p_tb)*p->p_m5 + p->p_i4 + p->p_i5;
     p->c[24] = -p->p_ee;
     p->c[25] = -p->p_zt;
     p->c[26] = -p->p_xa;
     p->c[27] = -p->p_ya;
-    const double w678 = -p->p_fa + p->p_zf;
-    const double w679 = w678*w678;
-    p->c[28] = w679*p->p_m6 + p->p_i6;
-    p->c[29] = -w678*p->p_u;
-    p->c[30] = w679;
-    p->c[31] = -2.0*w678*p->p_u;
-    p->c[32] = w679 + p->p_u*p->p_u;
+    const double w689 = -p->p_fa + p->p_zf;
+    const double w690 = w689*w689;
+    p->c[28] = w690*p->p_m6 + p->p_i6;
+    p->c[29] = -w689*p->p_u;
+    p->c[30] = w690;
+    p->c[31] = -2.0*w689*p->p_u;
+    p->c[32] = w690 + p->p_u*p->p_u;
     p->c[33] = (p->p_ua*p->p_ua + p->p_ub*p->p_ub)*p->p_m7 + p->p_i6 + p->p_i7;
     p->c[34] = -p->p_u;
     p->c[35] = -p->p_zf;
     p->c[36] = p->p_m2*p->p_da*p->p_rr;
-    p->c[37] = w676*p->p_zt*p->p_m4;
-    p->c[38] = -w678*p->p_u*p->p_m6;
-    p->c[39] = (w674 + w675)*p->p_m3 + p->p_i3;
-    p->c[40] = -w676*p->p_zt*p->p_m4;
-    p->c[41] = -2.0*w676*p->p_zt*p->p_m4;
-    p->c[42] = w678*p->p_u*p->p_m6;
-    p->c[43] = 2.0*w678*p->p_u*p->p_m6;
+    p->c[37] = w687*p->p_zt*p->p_m4;
+    p->c[38] = -w689*p->p_u*p->p_m6;
+    p->c[39] = (w685 + w686)*p->p_m3 + p->p_i3;
+    p->c[40] = -w687*p->p_zt*p->p_m4;
+    p->c[41] = -2.0*w687*p->p_zt*p->p_m4;
+    p->c[42] = w689*p->p_u*p->p_m6;
+    p->c[43] = 2.0*w689*p->p_u*p->p_m6;
     p->c[44] = -p->p_beta*p->p_beta;
     p->c[45] = -2.0*p->p_alpha;
     p->c[46] = -p->p_m2*p->p_da*p->p_rr;
@@ -390,8 +390,8 @@ void bgc_params_update(bgc_params *p)
     p->c[48] = -2.0*p->p_xc;
     p->c[49] = -2.0*p->p_yc;
     p->c[50] = 2.0*p->p_m2*p->p_da*p->p_rr;
-    p->c[51] = 2.0*w676*p->p_zt*p->p_m4;
-    p->c[52] = -2.0*w678*p->p_u*p->p_m6;
+    p->c[51] = 2.0*w687*p->p_zt*p->p_m4;
+    p->c[52] = -2.0*w689*p->p_u*p->p_m6;
     p->c[53] = -2.0*p->p_ss;
     p->c[54] = 2.0*p->p_ss;
     p->c[55] = fabs(-p->p_xb);
@@ -2087,6 +2087,48 @@ void bgc_velocity_jac(double t, const double *x, const bgc_params *p, double *ou
     for (k = 0; k < 84; k++)
         out[k] = NAN;
     bgc_work_free(w);
+}
+
+void bgc_velocity_metric(double t, const double *x, const bgc_params *p, double *out)
+{
+    (void)t;
+    (void)x;
+    (void)p;
+    (void)out;
+    memset(out, 0, 84 * sizeof *out); /* the nonzero entries follow */
+    const double w673 = x[7] + x[8];
+    const double w674 = sin(w673)*p->p_d;
+    const double w675 = w674 + sin(x[7])*p->c[6];
+    out[0] = w675;
+    out[1] = w674;
+    out[2] = cos(x[9])*p->c[8];
+    const double w676 = cos(w673)*p->c[9];
+    const double w677 = w676 + cos(x[7])*p->p_rr;
+    out[14] = w677;
+    out[15] = w676;
+    out[16] = sin(x[9])*p->c[8];
+    out[28] = w675;
+    out[29] = w674;
+    const double w678 = x[10] + x[11];
+    const double w679 = cos(w678)*p->c[24];
+    out[31] = w679;
+    out[32] = w679 + sin(x[11])*p->p_zt;
+    out[42] = w677;
+    out[43] = w676;
+    const double w680 = sin(w678)*p->c[24];
+    out[45] = w680;
+    out[46] = w680 + cos(x[11])*p->c[25];
+    out[56] = w675;
+    out[57] = w674;
+    const double w681 = x[12] + x[13];
+    const double w682 = sin(w681)*p->p_zf;
+    out[61] = w682;
+    out[62] = w682 + cos(x[13])*p->c[34];
+    out[70] = w677;
+    out[71] = w676;
+    const double w683 = cos(w681)*p->c[35];
+    out[75] = w683;
+    out[76] = w683 + sin(x[13])*p->c[34];
 }
 
 [runtime: runtime]

@@ -575,16 +575,16 @@ def _fill_params_ieee(p, given):
 def _constants_into(p, out):
     try:
         out[0] = -2.0*p[22]*p[25]
-        w673 = p[22]*p[22]
-        out[1] = w673 + p[25]*p[25]
+        w684 = p[22]*p[22]
+        out[1] = w684 + p[25]*p[25]
         out[2] = p[0]*p[26]*p[26] + p[14] + p[15]
         out[3] = -p[22]*p[25]
-        out[4] = w673
-        out[5] = w673*p[1] + p[15]
+        out[4] = w684
+        out[5] = w684*p[1] + p[15]
         out[6] = -p[25]
-        w674 = p[30]*p[30]
-        w675 = p[29]*p[29]
-        out[7] = 1.0/(w674*p[2] + w675*p[2] + p[16])
+        w685 = p[30]*p[30]
+        w686 = p[29]*p[29]
+        out[7] = 1.0/(w685*p[2] + w686*p[2] + p[16])
         out[8] = -p[28]
         out[9] = -p[21]
         out[10] = -p[9]
@@ -595,36 +595,36 @@ def _constants_into(p, out):
         out[15] = -p[27]
         out[16] = -p[13]
         out[17] = -p[32]
-        w676 = -p[24] + p[23]
-        w677 = w676*w676
-        out[18] = w677*p[3] + p[17]
-        out[19] = w676*p[39]
-        out[20] = w677
-        out[21] = 2.0*w676*p[39]
-        out[22] = w677 + p[39]*p[39]
+        w687 = -p[24] + p[23]
+        w688 = w687*w687
+        out[18] = w688*p[3] + p[17]
+        out[19] = w687*p[39]
+        out[20] = w688
+        out[21] = 2.0*w687*p[39]
+        out[22] = w688 + p[39]*p[39]
         out[23] = (p[33]*p[33] + p[34]*p[34])*p[4] + p[17] + p[18]
         out[24] = -p[23]
         out[25] = -p[39]
         out[26] = -p[7]
         out[27] = -p[8]
-        w678 = -p[40] + p[38]
-        w679 = w678*w678
-        out[28] = w679*p[5] + p[19]
-        out[29] = -w678*p[35]
-        out[30] = w679
-        out[31] = -2.0*w678*p[35]
-        out[32] = w679 + p[35]*p[35]
+        w689 = -p[40] + p[38]
+        w690 = w689*w689
+        out[28] = w690*p[5] + p[19]
+        out[29] = -w689*p[35]
+        out[30] = w690
+        out[31] = -2.0*w689*p[35]
+        out[32] = w690 + p[35]*p[35]
         out[33] = (p[36]*p[36] + p[37]*p[37])*p[6] + p[19] + p[20]
         out[34] = -p[35]
         out[35] = -p[38]
         out[36] = p[1]*p[22]*p[25]
-        out[37] = w676*p[39]*p[3]
-        out[38] = -w678*p[35]*p[5]
-        out[39] = (w674 + w675)*p[2] + p[16]
-        out[40] = -w676*p[39]*p[3]
-        out[41] = -2.0*w676*p[39]*p[3]
-        out[42] = w678*p[35]*p[5]
-        out[43] = 2.0*w678*p[35]*p[5]
+        out[37] = w687*p[39]*p[3]
+        out[38] = -w689*p[35]*p[5]
+        out[39] = (w685 + w686)*p[2] + p[16]
+        out[40] = -w687*p[39]*p[3]
+        out[41] = -2.0*w687*p[39]*p[3]
+        out[42] = w689*p[35]*p[5]
+        out[43] = 2.0*w689*p[35]*p[5]
         out[44] = -p[43]*p[43]
         out[45] = -2.0*p[42]
         out[46] = -p[1]*p[22]*p[25]
@@ -632,8 +632,8 @@ def _constants_into(p, out):
         out[48] = -2.0*p[11]
         out[49] = -2.0*p[12]
         out[50] = 2.0*p[1]*p[22]*p[25]
-        out[51] = 2.0*w676*p[39]*p[3]
-        out[52] = -2.0*w678*p[35]*p[5]
+        out[51] = 2.0*w687*p[39]*p[3]
+        out[52] = -2.0*w689*p[35]*p[5]
         out[53] = -2.0*p[28]
         out[54] = 2.0*p[28]
         out[55] = abs(-p[9])
@@ -648,16 +648,16 @@ def _constants_into_ieee(p, out):
     with numpy.errstate(all="ignore"):
         p = numpy.asarray(p, dtype=numpy.float64)
         out[0] = -2.0*p[22]*p[25]
-        w673 = p[22]*p[22]
-        out[1] = w673 + p[25]*p[25]
+        w684 = p[22]*p[22]
+        out[1] = w684 + p[25]*p[25]
         out[2] = p[0]*p[26]*p[26] + p[14] + p[15]
         out[3] = -p[22]*p[25]
-        out[4] = w673
-        out[5] = w673*p[1] + p[15]
+        out[4] = w684
+        out[5] = w684*p[1] + p[15]
         out[6] = -p[25]
-        w674 = p[30]*p[30]
-        w675 = p[29]*p[29]
-        out[7] = 1.0/(w674*p[2] + w675*p[2] + p[16])
+        w685 = p[30]*p[30]
+        w686 = p[29]*p[29]
+        out[7] = 1.0/(w685*p[2] + w686*p[2] + p[16])
         out[8] = -p[28]
         out[9] = -p[21]
         out[10] = -p[9]
@@ -668,36 +668,36 @@ def _constants_into_ieee(p, out):
         out[15] = -p[27]
         out[16] = -p[13]
         out[17] = -p[32]
-        w676 = -p[24] + p[23]
-        w677 = w676*w676
-        out[18] = w677*p[3] + p[17]
-        out[19] = w676*p[39]
-        out[20] = w677
-        out[21] = 2.0*w676*p[39]
-        out[22] = w677 + p[39]*p[39]
+        w687 = -p[24] + p[23]
+        w688 = w687*w687
+        out[18] = w688*p[3] + p[17]
+        out[19] = w687*p[39]
+        out[20] = w688
+        out[21] = 2.0*w687*p[39]
+        out[22] = w688 + p[39]*p[39]
         out[23] = (p[33]*p[33] + p[34]*p[34])*p[4] + p[17] + p[18]
         out[24] = -p[23]
         out[25] = -p[39]
         out[26] = -p[7]
         out[27] = -p[8]
-        w678 = -p[40] + p[38]
-        w679 = w678*w678
-        out[28] = w679*p[5] + p[19]
-        out[29] = -w678*p[35]
-        out[30] = w679
-        out[31] = -2.0*w678*p[35]
-        out[32] = w679 + p[35]*p[35]
+        w689 = -p[40] + p[38]
+        w690 = w689*w689
+        out[28] = w690*p[5] + p[19]
+        out[29] = -w689*p[35]
+        out[30] = w690
+        out[31] = -2.0*w689*p[35]
+        out[32] = w690 + p[35]*p[35]
         out[33] = (p[36]*p[36] + p[37]*p[37])*p[6] + p[19] + p[20]
         out[34] = -p[35]
         out[35] = -p[38]
         out[36] = p[1]*p[22]*p[25]
-        out[37] = w676*p[39]*p[3]
-        out[38] = -w678*p[35]*p[5]
-        out[39] = (w674 + w675)*p[2] + p[16]
-        out[40] = -w676*p[39]*p[3]
-        out[41] = -2.0*w676*p[39]*p[3]
-        out[42] = w678*p[35]*p[5]
-        out[43] = 2.0*w678*p[35]*p[5]
+        out[37] = w687*p[39]*p[3]
+        out[38] = -w689*p[35]*p[5]
+        out[39] = (w685 + w686)*p[2] + p[16]
+        out[40] = -w687*p[39]*p[3]
+        out[41] = -2.0*w687*p[39]*p[3]
+        out[42] = w689*p[35]*p[5]
+        out[43] = 2.0*w689*p[35]*p[5]
         out[44] = -p[43]*p[43]
         out[45] = -2.0*p[42]
         out[46] = -p[1]*p[22]*p[25]
@@ -705,8 +705,8 @@ def _constants_into_ieee(p, out):
         out[48] = -2.0*p[11]
         out[49] = -2.0*p[12]
         out[50] = 2.0*p[1]*p[22]*p[25]
-        out[51] = 2.0*w676*p[39]*p[3]
-        out[52] = -2.0*w678*p[35]*p[5]
+        out[51] = 2.0*w687*p[39]*p[3]
+        out[52] = -2.0*w689*p[35]*p[5]
         out[53] = -2.0*p[28]
         out[54] = 2.0*p[28]
         out[55] = abs(-p[9])
@@ -3011,6 +3011,92 @@ def _velocity_jac_into_ieee(t, x, p, out):
 def _velocity_jac(t, x, p):
     out = [0.0] * 84
     _velocity_jac_into(t, x, p, out)
+    return [float(v) for v in out]
+
+
+def _velocity_metric_into(t, x, p, out):
+    try:
+        w673 = x[7] + x[8]
+        w674 = math.sin(w673)*p[21]
+        w675 = w674 + math.sin(x[7])*p[50]
+        out[0] = w675
+        out[1] = w674
+        out[2] = math.cos(x[9])*p[52]
+        w676 = math.cos(w673)*p[53]
+        w677 = w676 + math.cos(x[7])*p[25]
+        out[14] = w677
+        out[15] = w676
+        out[16] = math.sin(x[9])*p[52]
+        out[28] = w675
+        out[29] = w674
+        w678 = x[10] + x[11]
+        w679 = math.cos(w678)*p[68]
+        out[31] = w679
+        out[32] = w679 + math.sin(x[11])*p[39]
+        out[42] = w677
+        out[43] = w676
+        w680 = math.sin(w678)*p[68]
+        out[45] = w680
+        out[46] = w680 + math.cos(x[11])*p[69]
+        out[56] = w675
+        out[57] = w674
+        w681 = x[12] + x[13]
+        w682 = math.sin(w681)*p[38]
+        out[61] = w682
+        out[62] = w682 + math.cos(x[13])*p[78]
+        out[70] = w677
+        out[71] = w676
+        w683 = math.cos(w681)*p[79]
+        out[75] = w683
+        out[76] = w683 + math.sin(x[13])*p[78]
+    except (ArithmeticError, ValueError):
+        return _velocity_metric_into_ieee(t, x, p, out)
+
+
+def _velocity_metric_into_ieee(t, x, p, out):
+    with numpy.errstate(all="ignore"):
+        t = numpy.float64(t)
+        x = numpy.asarray(x, dtype=numpy.float64)
+        p = numpy.asarray(p, dtype=numpy.float64)
+        w673 = x[7] + x[8]
+        w674 = _c_sin(w673)*p[21]
+        w675 = w674 + _c_sin(x[7])*p[50]
+        out[0] = w675
+        out[1] = w674
+        out[2] = _c_cos(x[9])*p[52]
+        w676 = _c_cos(w673)*p[53]
+        w677 = w676 + _c_cos(x[7])*p[25]
+        out[14] = w677
+        out[15] = w676
+        out[16] = _c_sin(x[9])*p[52]
+        out[28] = w675
+        out[29] = w674
+        w678 = x[10] + x[11]
+        w679 = _c_cos(w678)*p[68]
+        out[31] = w679
+        out[32] = w679 + _c_sin(x[11])*p[39]
+        out[42] = w677
+        out[43] = w676
+        w680 = _c_sin(w678)*p[68]
+        out[45] = w680
+        out[46] = w680 + _c_cos(x[11])*p[69]
+        out[56] = w675
+        out[57] = w674
+        w681 = x[12] + x[13]
+        w682 = _c_sin(w681)*p[38]
+        out[61] = w682
+        out[62] = w682 + _c_cos(x[13])*p[78]
+        out[70] = w677
+        out[71] = w676
+        w683 = _c_cos(w681)*p[79]
+        out[75] = w683
+        out[76] = w683 + _c_sin(x[13])*p[78]
+
+
+
+def _velocity_metric(t, x, p):
+    out = [0.0] * 84
+    _velocity_metric_into(t, x, p, out)
     return [float(v) for v in out]
 
 

@@ -345,16 +345,16 @@ void bgc_params_defaults(bgc_params *p, const int *given)
 void bgc_params_update(bgc_params *p)
 {
     p->c[0] = -2.0*p->p_da*p->p_rr;
-    const double w737 = p->p_da*p->p_da;
-    p->c[1] = w737 + p->p_rr*p->p_rr;
+    const double w748 = p->p_da*p->p_da;
+    p->c[1] = w748 + p->p_rr*p->p_rr;
     p->c[2] = p->p_m1*p->p_ra*p->p_ra + p->p_i1 + p->p_i2;
     p->c[3] = -p->p_da*p->p_rr;
-    p->c[4] = w737;
-    p->c[5] = w737*p->p_m2 + p->p_i2;
+    p->c[4] = w748;
+    p->c[5] = w748*p->p_m2 + p->p_i2;
     p->c[6] = -p->p_rr;
-    const double w738 = p->p_sb*p->p_sb;
-    const double w739 = p->p_sa*p->p_sa;
-    p->c[7] = 1.0/(w738*p->p_m3 + w739*p->p_m3 + p->p_i3);
+    const double w749 = p->p_sb*p->p_sb;
+    const double w750 = p->p_sa*p->p_sa;
+    p->c[7] = 1.0/(w749*p->p_m3 + w750*p->p_m3 + p->p_i3);
     p->c[8] = -p->p_ss;
     p->c[9] = -p->p_d;
     p->c[10] = -p->p_xb;
@@ -365,36 +365,36 @@ void bgc_params_update(bgc_params *p)
     p->c[15] = -p->p_l0;
     p->c[16] = -p->p_c0;
     p->c[17] = -p->p_sd;
-    const double w740 = -p->p_ea + p->p_ee;
-    const double w741 = w740*w740;
-    p->c[18] = w741*p->p_m4 + p->p_i4;
-    p->c[19] = w740*p->p_zt;
-    p->c[20] = w741;
-    p->c[21] = 2.0*w740*p->p_zt;
-    p->c[22] = w741 + p->p_zt*p->p_zt;
+    const double w751 = -p->p_ea + p->p_ee;
+    const double w752 = w751*w751;
+    p->c[18] = w752*p->p_m4 + p->p_i4;
+    p->c[19] = w751*p->p_zt;
+    p->c[20] = w752;
+    p->c[21] = 2.0*w751*p->p_zt;
+    p->c[22] = w752 + p->p_zt*p->p_zt;
     p->c[23] = (p->p_ta*p->p_ta + p->p_tb*p->p_tb)*p->p_m5 + p->p_i4 + p->p_i5;
     p->c[24] = -p->p_ee;
     p->c[25] = -p->p_zt;
     p->c[26] = -p->p_xa;
     p->c[27] = -p->p_ya;
-    const double w742 = -p->p_fa + p->p_zf;
-    const double w743 = w742*w742;
-    p->c[28] = w743*p->p_m6 + p->p_i6;
-    p->c[29] = -w742*p->p_u;
-    p->c[30] = w743;
-    p->c[31] = -2.0*w742*p->p_u;
-    p->c[32] = w743 + p->p_u*p->p_u;
+    const double w753 = -p->p_fa + p->p_zf;
+    const double w754 = w753*w753;
+    p->c[28] = w754*p->p_m6 + p->p_i6;
+    p->c[29] = -w753*p->p_u;
+    p->c[30] = w754;
+    p->c[31] = -2.0*w753*p->p_u;
+    p->c[32] = w754 + p->p_u*p->p_u;
     p->c[33] = (p->p_ua*p->p_ua + p->p_ub*p->p_ub)*p->p_m7 + p->p_i6 + p->p_i7;
     p->c[34] = -p->p_u;
     p->c[35] = -p->p_zf;
     p->c[36] = p->p_m2*p->p_da*p->p_rr;
-    p->c[37] = w740*p->p_zt*p->p_m4;
-    p->c[38] = -w742*p->p_u*p->p_m6;
-    p->c[39] = (w738 + w739)*p->p_m3 + p->p_i3;
-    p->c[40] = -w740*p->p_zt*p->p_m4;
-    p->c[41] = -2.0*w740*p->p_zt*p->p_m4;
-    p->c[42] = w742*p->p_u*p->p_m6;
-    p->c[43] = 2.0*w742*p->p_u*p->p_m6;
+    p->c[37] = w751*p->p_zt*p->p_m4;
+    p->c[38] = -w753*p->p_u*p->p_m6;
+    p->c[39] = (w749 + w750)*p->p_m3 + p->p_i3;
+    p->c[40] = -w751*p->p_zt*p->p_m4;
+    p->c[41] = -2.0*w751*p->p_zt*p->p_m4;
+    p->c[42] = w753*p->p_u*p->p_m6;
+    p->c[43] = 2.0*w753*p->p_u*p->p_m6;
     p->c[44] = -p->p_beta*p->p_beta;
     p->c[45] = -2.0*p->p_alpha;
     p->c[46] = -p->p_m2*p->p_da*p->p_rr;
@@ -402,8 +402,8 @@ void bgc_params_update(bgc_params *p)
     p->c[48] = -2.0*p->p_xc;
     p->c[49] = -2.0*p->p_yc;
     p->c[50] = 2.0*p->p_m2*p->p_da*p->p_rr;
-    p->c[51] = 2.0*w740*p->p_zt*p->p_m4;
-    p->c[52] = -2.0*w742*p->p_u*p->p_m6;
+    p->c[51] = 2.0*w751*p->p_zt*p->p_m4;
+    p->c[52] = -2.0*w753*p->p_u*p->p_m6;
     p->c[53] = -2.0*p->p_ss;
     p->c[54] = 2.0*p->p_ss;
     p->c[55] = fabs(-p->p_xb);
@@ -2330,6 +2330,48 @@ void bgc_velocity_jac(double t, const double *x, const bgc_params *p, double *ou
     for (k = 0; k < 84; k++)
         out[k] = NAN;
     bgc_work_free(w);
+}
+
+void bgc_velocity_metric(double t, const double *x, const bgc_params *p, double *out)
+{
+    (void)t;
+    (void)x;
+    (void)p;
+    (void)out;
+    memset(out, 0, 84 * sizeof *out); /* the nonzero entries follow */
+    const double w737 = x[7] + x[8];
+    const double w738 = sin(w737)*p->p_d;
+    const double w739 = w738 + sin(x[7])*p->c[6];
+    out[0] = w739;
+    out[1] = w738;
+    out[2] = cos(x[9])*p->c[8];
+    const double w740 = cos(w737)*p->c[9];
+    const double w741 = w740 + cos(x[7])*p->p_rr;
+    out[14] = w741;
+    out[15] = w740;
+    out[16] = sin(x[9])*p->c[8];
+    out[28] = w739;
+    out[29] = w738;
+    const double w742 = x[10] + x[11];
+    const double w743 = cos(w742)*p->c[24];
+    out[31] = w743;
+    out[32] = w743 + sin(x[11])*p->p_zt;
+    out[42] = w741;
+    out[43] = w740;
+    const double w744 = sin(w742)*p->c[24];
+    out[45] = w744;
+    out[46] = w744 + cos(x[11])*p->c[25];
+    out[56] = w739;
+    out[57] = w738;
+    const double w745 = x[12] + x[13];
+    const double w746 = sin(w745)*p->p_zf;
+    out[61] = w746;
+    out[62] = w746 + cos(x[13])*p->c[34];
+    out[70] = w741;
+    out[71] = w740;
+    const double w747 = cos(w745)*p->c[35];
+    out[75] = w747;
+    out[76] = w747 + sin(x[13])*p->c[34];
 }
 
 [runtime: runtime]

@@ -575,16 +575,16 @@ def _fill_params_ieee(p, given):
 def _constants_into(p, out):
     try:
         out[0] = -2.0*p[22]*p[25]
-        w737 = p[22]*p[22]
-        out[1] = w737 + p[25]*p[25]
+        w748 = p[22]*p[22]
+        out[1] = w748 + p[25]*p[25]
         out[2] = p[0]*p[26]*p[26] + p[14] + p[15]
         out[3] = -p[22]*p[25]
-        out[4] = w737
-        out[5] = w737*p[1] + p[15]
+        out[4] = w748
+        out[5] = w748*p[1] + p[15]
         out[6] = -p[25]
-        w738 = p[30]*p[30]
-        w739 = p[29]*p[29]
-        out[7] = 1.0/(w738*p[2] + w739*p[2] + p[16])
+        w749 = p[30]*p[30]
+        w750 = p[29]*p[29]
+        out[7] = 1.0/(w749*p[2] + w750*p[2] + p[16])
         out[8] = -p[28]
         out[9] = -p[21]
         out[10] = -p[9]
@@ -595,36 +595,36 @@ def _constants_into(p, out):
         out[15] = -p[27]
         out[16] = -p[13]
         out[17] = -p[32]
-        w740 = -p[24] + p[23]
-        w741 = w740*w740
-        out[18] = w741*p[3] + p[17]
-        out[19] = w740*p[39]
-        out[20] = w741
-        out[21] = 2.0*w740*p[39]
-        out[22] = w741 + p[39]*p[39]
+        w751 = -p[24] + p[23]
+        w752 = w751*w751
+        out[18] = w752*p[3] + p[17]
+        out[19] = w751*p[39]
+        out[20] = w752
+        out[21] = 2.0*w751*p[39]
+        out[22] = w752 + p[39]*p[39]
         out[23] = (p[33]*p[33] + p[34]*p[34])*p[4] + p[17] + p[18]
         out[24] = -p[23]
         out[25] = -p[39]
         out[26] = -p[7]
         out[27] = -p[8]
-        w742 = -p[40] + p[38]
-        w743 = w742*w742
-        out[28] = w743*p[5] + p[19]
-        out[29] = -w742*p[35]
-        out[30] = w743
-        out[31] = -2.0*w742*p[35]
-        out[32] = w743 + p[35]*p[35]
+        w753 = -p[40] + p[38]
+        w754 = w753*w753
+        out[28] = w754*p[5] + p[19]
+        out[29] = -w753*p[35]
+        out[30] = w754
+        out[31] = -2.0*w753*p[35]
+        out[32] = w754 + p[35]*p[35]
         out[33] = (p[36]*p[36] + p[37]*p[37])*p[6] + p[19] + p[20]
         out[34] = -p[35]
         out[35] = -p[38]
         out[36] = p[1]*p[22]*p[25]
-        out[37] = w740*p[39]*p[3]
-        out[38] = -w742*p[35]*p[5]
-        out[39] = (w738 + w739)*p[2] + p[16]
-        out[40] = -w740*p[39]*p[3]
-        out[41] = -2.0*w740*p[39]*p[3]
-        out[42] = w742*p[35]*p[5]
-        out[43] = 2.0*w742*p[35]*p[5]
+        out[37] = w751*p[39]*p[3]
+        out[38] = -w753*p[35]*p[5]
+        out[39] = (w749 + w750)*p[2] + p[16]
+        out[40] = -w751*p[39]*p[3]
+        out[41] = -2.0*w751*p[39]*p[3]
+        out[42] = w753*p[35]*p[5]
+        out[43] = 2.0*w753*p[35]*p[5]
         out[44] = -p[43]*p[43]
         out[45] = -2.0*p[42]
         out[46] = -p[1]*p[22]*p[25]
@@ -632,8 +632,8 @@ def _constants_into(p, out):
         out[48] = -2.0*p[11]
         out[49] = -2.0*p[12]
         out[50] = 2.0*p[1]*p[22]*p[25]
-        out[51] = 2.0*w740*p[39]*p[3]
-        out[52] = -2.0*w742*p[35]*p[5]
+        out[51] = 2.0*w751*p[39]*p[3]
+        out[52] = -2.0*w753*p[35]*p[5]
         out[53] = -2.0*p[28]
         out[54] = 2.0*p[28]
         out[55] = abs(-p[9])
@@ -648,16 +648,16 @@ def _constants_into_ieee(p, out):
     with numpy.errstate(all="ignore"):
         p = numpy.asarray(p, dtype=numpy.float64)
         out[0] = -2.0*p[22]*p[25]
-        w737 = p[22]*p[22]
-        out[1] = w737 + p[25]*p[25]
+        w748 = p[22]*p[22]
+        out[1] = w748 + p[25]*p[25]
         out[2] = p[0]*p[26]*p[26] + p[14] + p[15]
         out[3] = -p[22]*p[25]
-        out[4] = w737
-        out[5] = w737*p[1] + p[15]
+        out[4] = w748
+        out[5] = w748*p[1] + p[15]
         out[6] = -p[25]
-        w738 = p[30]*p[30]
-        w739 = p[29]*p[29]
-        out[7] = 1.0/(w738*p[2] + w739*p[2] + p[16])
+        w749 = p[30]*p[30]
+        w750 = p[29]*p[29]
+        out[7] = 1.0/(w749*p[2] + w750*p[2] + p[16])
         out[8] = -p[28]
         out[9] = -p[21]
         out[10] = -p[9]
@@ -668,36 +668,36 @@ def _constants_into_ieee(p, out):
         out[15] = -p[27]
         out[16] = -p[13]
         out[17] = -p[32]
-        w740 = -p[24] + p[23]
-        w741 = w740*w740
-        out[18] = w741*p[3] + p[17]
-        out[19] = w740*p[39]
-        out[20] = w741
-        out[21] = 2.0*w740*p[39]
-        out[22] = w741 + p[39]*p[39]
+        w751 = -p[24] + p[23]
+        w752 = w751*w751
+        out[18] = w752*p[3] + p[17]
+        out[19] = w751*p[39]
+        out[20] = w752
+        out[21] = 2.0*w751*p[39]
+        out[22] = w752 + p[39]*p[39]
         out[23] = (p[33]*p[33] + p[34]*p[34])*p[4] + p[17] + p[18]
         out[24] = -p[23]
         out[25] = -p[39]
         out[26] = -p[7]
         out[27] = -p[8]
-        w742 = -p[40] + p[38]
-        w743 = w742*w742
-        out[28] = w743*p[5] + p[19]
-        out[29] = -w742*p[35]
-        out[30] = w743
-        out[31] = -2.0*w742*p[35]
-        out[32] = w743 + p[35]*p[35]
+        w753 = -p[40] + p[38]
+        w754 = w753*w753
+        out[28] = w754*p[5] + p[19]
+        out[29] = -w753*p[35]
+        out[30] = w754
+        out[31] = -2.0*w753*p[35]
+        out[32] = w754 + p[35]*p[35]
         out[33] = (p[36]*p[36] + p[37]*p[37])*p[6] + p[19] + p[20]
         out[34] = -p[35]
         out[35] = -p[38]
         out[36] = p[1]*p[22]*p[25]
-        out[37] = w740*p[39]*p[3]
-        out[38] = -w742*p[35]*p[5]
-        out[39] = (w738 + w739)*p[2] + p[16]
-        out[40] = -w740*p[39]*p[3]
-        out[41] = -2.0*w740*p[39]*p[3]
-        out[42] = w742*p[35]*p[5]
-        out[43] = 2.0*w742*p[35]*p[5]
+        out[37] = w751*p[39]*p[3]
+        out[38] = -w753*p[35]*p[5]
+        out[39] = (w749 + w750)*p[2] + p[16]
+        out[40] = -w751*p[39]*p[3]
+        out[41] = -2.0*w751*p[39]*p[3]
+        out[42] = w753*p[35]*p[5]
+        out[43] = 2.0*w753*p[35]*p[5]
         out[44] = -p[43]*p[43]
         out[45] = -2.0*p[42]
         out[46] = -p[1]*p[22]*p[25]
@@ -705,8 +705,8 @@ def _constants_into_ieee(p, out):
         out[48] = -2.0*p[11]
         out[49] = -2.0*p[12]
         out[50] = 2.0*p[1]*p[22]*p[25]
-        out[51] = 2.0*w740*p[39]*p[3]
-        out[52] = -2.0*w742*p[35]*p[5]
+        out[51] = 2.0*w751*p[39]*p[3]
+        out[52] = -2.0*w753*p[35]*p[5]
         out[53] = -2.0*p[28]
         out[54] = 2.0*p[28]
         out[55] = abs(-p[9])
@@ -3465,6 +3465,92 @@ def _velocity_jac_into_ieee(t, x, p, out):
 def _velocity_jac(t, x, p):
     out = [0.0] * 84
     _velocity_jac_into(t, x, p, out)
+    return [float(v) for v in out]
+
+
+def _velocity_metric_into(t, x, p, out):
+    try:
+        w737 = x[7] + x[8]
+        w738 = math.sin(w737)*p[21]
+        w739 = w738 + math.sin(x[7])*p[50]
+        out[0] = w739
+        out[1] = w738
+        out[2] = math.cos(x[9])*p[52]
+        w740 = math.cos(w737)*p[53]
+        w741 = w740 + math.cos(x[7])*p[25]
+        out[14] = w741
+        out[15] = w740
+        out[16] = math.sin(x[9])*p[52]
+        out[28] = w739
+        out[29] = w738
+        w742 = x[10] + x[11]
+        w743 = math.cos(w742)*p[68]
+        out[31] = w743
+        out[32] = w743 + math.sin(x[11])*p[39]
+        out[42] = w741
+        out[43] = w740
+        w744 = math.sin(w742)*p[68]
+        out[45] = w744
+        out[46] = w744 + math.cos(x[11])*p[69]
+        out[56] = w739
+        out[57] = w738
+        w745 = x[12] + x[13]
+        w746 = math.sin(w745)*p[38]
+        out[61] = w746
+        out[62] = w746 + math.cos(x[13])*p[78]
+        out[70] = w741
+        out[71] = w740
+        w747 = math.cos(w745)*p[79]
+        out[75] = w747
+        out[76] = w747 + math.sin(x[13])*p[78]
+    except (ArithmeticError, ValueError):
+        return _velocity_metric_into_ieee(t, x, p, out)
+
+
+def _velocity_metric_into_ieee(t, x, p, out):
+    with numpy.errstate(all="ignore"):
+        t = numpy.float64(t)
+        x = numpy.asarray(x, dtype=numpy.float64)
+        p = numpy.asarray(p, dtype=numpy.float64)
+        w737 = x[7] + x[8]
+        w738 = _c_sin(w737)*p[21]
+        w739 = w738 + _c_sin(x[7])*p[50]
+        out[0] = w739
+        out[1] = w738
+        out[2] = _c_cos(x[9])*p[52]
+        w740 = _c_cos(w737)*p[53]
+        w741 = w740 + _c_cos(x[7])*p[25]
+        out[14] = w741
+        out[15] = w740
+        out[16] = _c_sin(x[9])*p[52]
+        out[28] = w739
+        out[29] = w738
+        w742 = x[10] + x[11]
+        w743 = _c_cos(w742)*p[68]
+        out[31] = w743
+        out[32] = w743 + _c_sin(x[11])*p[39]
+        out[42] = w741
+        out[43] = w740
+        w744 = _c_sin(w742)*p[68]
+        out[45] = w744
+        out[46] = w744 + _c_cos(x[11])*p[69]
+        out[56] = w739
+        out[57] = w738
+        w745 = x[12] + x[13]
+        w746 = _c_sin(w745)*p[38]
+        out[61] = w746
+        out[62] = w746 + _c_cos(x[13])*p[78]
+        out[70] = w741
+        out[71] = w740
+        w747 = _c_cos(w745)*p[79]
+        out[75] = w747
+        out[76] = w747 + _c_sin(x[13])*p[78]
+
+
+
+def _velocity_metric(t, x, p):
+    out = [0.0] * 84
+    _velocity_metric_into(t, x, p, out)
     return [float(v) for v in out]
 
 

@@ -165,21 +165,21 @@ void bgc_params_defaults(bgc_params *p, const int *given)
 
 void bgc_params_update(bgc_params *p)
 {
-    const double w206 = p->p_L*p->p_L;
-    p->c[0] = w206;
+    const double w207 = p->p_L*p->p_L;
+    p->c[0] = w207;
     p->c[1] = p->p_r*p->p_w;
     p->c[2] = 1.0/p->p_k;
-    const double w207 = p->p_r*p->p_r;
-    p->c[3] = -w207;
+    const double w208 = p->p_r*p->p_r;
+    p->c[3] = -w208;
     p->c[4] = -p->p_g*p->p_k;
-    p->c[5] = -w206;
+    p->c[5] = -w207;
     p->c[6] = -p->p_r*p->p_w*p->p_w;
     p->c[7] = -1.0/p->p_k;
     p->c[8] = -p->p_beta*p->p_beta;
     p->c[9] = -2.0*p->p_alpha;
     p->c[10] = p->p_r/p->p_k;
-    p->c[11] = -w207*p->p_w;
-    p->c[12] = fabs(-w206);
+    p->c[11] = -w208*p->p_w;
+    p->c[12] = fabs(-w207);
     p->c[13] = -2.0/p->p_k;
     p->c[14] = 2.0/p->p_k;
 }
@@ -671,6 +671,22 @@ void bgc_velocity_jac(double t, const double *x, const bgc_params *p, double *ou
     out[13] = p->c[13]*x[3] + p->c[14]*x[1];
     out[14] = p->c[13]*x[0] + p->c[14]*x[2];
     out[15] = p->c[13]*x[1] + p->c[14]*x[3];
+}
+
+void bgc_velocity_metric(double t, const double *x, const bgc_params *p, double *out)
+{
+    (void)t;
+    (void)x;
+    (void)p;
+    (void)out;
+    memset(out, 0, 16 * sizeof *out); /* the nonzero entries follow */
+    const double w206 = sin(t*p->p_w);
+    out[0] = sqrt(w206*w206*p->c[3] + p->c[0]);
+    out[1] = w206*p->p_r;
+    out[8] = -2.0*x[6] + 2.0*x[4];
+    out[9] = -2.0*x[7] + 2.0*x[5];
+    out[10] = -2.0*x[4] + 2.0*x[6];
+    out[11] = -2.0*x[5] + 2.0*x[7];
 }
 
 [runtime: runtime]

@@ -160,21 +160,21 @@ def _fill_params_ieee(p, given):
 
 def _constants_into(p, out):
     try:
-        w228 = p[2]*p[2]
-        out[0] = w228
+        w229 = p[2]*p[2]
+        out[0] = w229
         out[1] = p[4]*p[5]
         out[2] = 1.0/p[9]
-        w229 = p[4]*p[4]
-        out[3] = -w229
+        w230 = p[4]*p[4]
+        out[3] = -w230
         out[4] = -p[6]*p[9]
-        out[5] = -w228
+        out[5] = -w229
         out[6] = -p[4]*p[5]*p[5]
         out[7] = -1.0/p[9]
         out[8] = -p[8]*p[8]
         out[9] = -2.0*p[7]
         out[10] = p[4]/p[9]
-        out[11] = -w229*p[5]
-        out[12] = abs(-w228)
+        out[11] = -w230*p[5]
+        out[12] = abs(-w229)
         out[13] = -2.0/p[9]
         out[14] = 2.0/p[9]
     except (ArithmeticError, ValueError):
@@ -184,21 +184,21 @@ def _constants_into(p, out):
 def _constants_into_ieee(p, out):
     with numpy.errstate(all="ignore"):
         p = numpy.asarray(p, dtype=numpy.float64)
-        w228 = p[2]*p[2]
-        out[0] = w228
+        w229 = p[2]*p[2]
+        out[0] = w229
         out[1] = p[4]*p[5]
         out[2] = 1.0/p[9]
-        w229 = p[4]*p[4]
-        out[3] = -w229
+        w230 = p[4]*p[4]
+        out[3] = -w230
         out[4] = -p[6]*p[9]
-        out[5] = -w228
+        out[5] = -w229
         out[6] = -p[4]*p[5]*p[5]
         out[7] = -1.0/p[9]
         out[8] = -p[8]*p[8]
         out[9] = -2.0*p[7]
         out[10] = p[4]/p[9]
-        out[11] = -w229*p[5]
-        out[12] = abs(-w228)
+        out[11] = -w230*p[5]
+        out[12] = abs(-w229)
         out[13] = -2.0/p[9]
         out[14] = 2.0/p[9]
 
@@ -1236,6 +1236,40 @@ def _velocity_jac_into_ieee(t, x, p, out):
 def _velocity_jac(t, x, p):
     out = [0.0] * 16
     _velocity_jac_into(t, x, p, out)
+    return [float(v) for v in out]
+
+
+def _velocity_metric_into(t, x, p, out):
+    try:
+        w228 = math.sin(t*p[5])
+        out[0] = math.sqrt(w228*w228*p[13] + p[10])
+        out[1] = w228*p[4]
+        out[8] = -2.0*x[6] + 2.0*x[4]
+        out[9] = -2.0*x[7] + 2.0*x[5]
+        out[10] = -2.0*x[4] + 2.0*x[6]
+        out[11] = -2.0*x[5] + 2.0*x[7]
+    except (ArithmeticError, ValueError):
+        return _velocity_metric_into_ieee(t, x, p, out)
+
+
+def _velocity_metric_into_ieee(t, x, p, out):
+    with numpy.errstate(all="ignore"):
+        t = numpy.float64(t)
+        x = numpy.asarray(x, dtype=numpy.float64)
+        p = numpy.asarray(p, dtype=numpy.float64)
+        w228 = _c_sin(t*p[5])
+        out[0] = _c_sqrt(w228*w228*p[13] + p[10])
+        out[1] = w228*p[4]
+        out[8] = -2.0*x[6] + 2.0*x[4]
+        out[9] = -2.0*x[7] + 2.0*x[5]
+        out[10] = -2.0*x[4] + 2.0*x[6]
+        out[11] = -2.0*x[5] + 2.0*x[7]
+
+
+
+def _velocity_metric(t, x, p):
+    out = [0.0] * 16
+    _velocity_metric_into(t, x, p, out)
     return [float(v) for v in out]
 
 

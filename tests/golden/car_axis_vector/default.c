@@ -165,21 +165,21 @@ void bgc_params_defaults(bgc_params *p, const int *given)
 
 void bgc_params_update(bgc_params *p)
 {
-    const double w214 = p->p_L*p->p_L;
-    p->c[0] = w214;
+    const double w215 = p->p_L*p->p_L;
+    p->c[0] = w215;
     p->c[1] = p->p_r*p->p_w;
     p->c[2] = 1.0/p->p_k;
-    const double w215 = p->p_r*p->p_r;
-    p->c[3] = -w215;
+    const double w216 = p->p_r*p->p_r;
+    p->c[3] = -w216;
     p->c[4] = -p->p_g*p->p_k;
-    p->c[5] = -w214;
+    p->c[5] = -w215;
     p->c[6] = -p->p_r*p->p_w*p->p_w;
     p->c[7] = -1.0/p->p_k;
     p->c[8] = -p->p_beta*p->p_beta;
     p->c[9] = -2.0*p->p_alpha;
     p->c[10] = p->p_r/p->p_k;
-    p->c[11] = -w215*p->p_w;
-    p->c[12] = fabs(-w214);
+    p->c[11] = -w216*p->p_w;
+    p->c[12] = fabs(-w215);
     p->c[13] = -2.0/p->p_k;
     p->c[14] = 2.0/p->p_k;
 }
@@ -681,6 +681,22 @@ void bgc_velocity_jac(double t, const double *x, const bgc_params *p, double *ou
     out[13] = p->c[13]*x[3] + p->c[14]*x[1];
     out[14] = p->c[13]*x[0] + p->c[14]*x[2];
     out[15] = p->c[13]*x[1] + p->c[14]*x[3];
+}
+
+void bgc_velocity_metric(double t, const double *x, const bgc_params *p, double *out)
+{
+    (void)t;
+    (void)x;
+    (void)p;
+    (void)out;
+    memset(out, 0, 16 * sizeof *out); /* the nonzero entries follow */
+    const double w214 = sin(t*p->p_w);
+    out[0] = sqrt(w214*w214*p->c[3] + p->c[0]);
+    out[1] = w214*p->p_r;
+    out[8] = -2.0*x[6] + 2.0*x[4];
+    out[9] = -2.0*x[7] + 2.0*x[5];
+    out[10] = -2.0*x[4] + 2.0*x[6];
+    out[11] = -2.0*x[5] + 2.0*x[7];
 }
 
 [runtime: runtime]

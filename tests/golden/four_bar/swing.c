@@ -792,5 +792,22 @@ void bgc_velocity_jac(double t, const double *x, const bgc_params *p, double *ou
     out[23] = w217;
 }
 
+void bgc_velocity_metric(double t, const double *x, const bgc_params *p, double *out)
+{
+    (void)t;
+    (void)x;
+    (void)p;
+    (void)out;
+    memset(out, 0, 24 * sizeof *out); /* the nonzero entries follow */
+    out[0] = 2.0*x[4];
+    out[1] = 2.0*x[5];
+    out[8] = -2.0*x[6] + 2.0*x[4];
+    out[9] = -2.0*x[7] + 2.0*x[5];
+    out[10] = -2.0*x[4] + 2.0*x[6];
+    out[11] = -2.0*x[5] + 2.0*x[7];
+    out[18] = 2.0*x[6] + p->c[5];
+    out[19] = 2.0*x[7];
+}
+
 [runtime: runtime]
 

@@ -1064,6 +1064,42 @@ def _velocity_jac(t, x, p):
     return [float(v) for v in out]
 
 
+def _velocity_metric_into(t, x, p, out):
+    try:
+        out[0] = 2.0*x[4]
+        out[1] = 2.0*x[5]
+        out[8] = -2.0*x[6] + 2.0*x[4]
+        out[9] = -2.0*x[7] + 2.0*x[5]
+        out[10] = -2.0*x[4] + 2.0*x[6]
+        out[11] = -2.0*x[5] + 2.0*x[7]
+        out[18] = 2.0*x[6] + p[23]
+        out[19] = 2.0*x[7]
+    except (ArithmeticError, ValueError):
+        return _velocity_metric_into_ieee(t, x, p, out)
+
+
+def _velocity_metric_into_ieee(t, x, p, out):
+    with numpy.errstate(all="ignore"):
+        t = numpy.float64(t)
+        x = numpy.asarray(x, dtype=numpy.float64)
+        p = numpy.asarray(p, dtype=numpy.float64)
+        out[0] = 2.0*x[4]
+        out[1] = 2.0*x[5]
+        out[8] = -2.0*x[6] + 2.0*x[4]
+        out[9] = -2.0*x[7] + 2.0*x[5]
+        out[10] = -2.0*x[4] + 2.0*x[6]
+        out[11] = -2.0*x[5] + 2.0*x[7]
+        out[18] = 2.0*x[6] + p[23]
+        out[19] = 2.0*x[7]
+
+
+
+def _velocity_metric(t, x, p):
+    out = [0.0] * 24
+    _velocity_metric_into(t, x, p, out)
+    return [float(v) for v in out]
+
+
 _bind_model()
 
 

@@ -309,7 +309,7 @@ double *bgc_param_ref(bgc_params *p, int j)
 
 static const int bgc_position_rows[BGC_DIM(BGC_NUM_POSITION_ROWS)] = { 0 };
 static const int bgc_velocity_rows[BGC_DIM(BGC_NUM_VELOCITY_ROWS)] = { 1 };
-static const int bgc_velocity_movable[BGC_DIM(BGC_NUM_STATES)] = { 1, 1, 1, 1, 0, 0, 0, 1, 1, 1, 1 };
+static const int bgc_velocity_movable[BGC_DIM(BGC_NUM_STATES)] = { 0, 1, 1, 1, 0, 0, 0, 0, 0, 0, 0 };
 
 /* The algebraic blocks solved here: factorization plans (bgc/sparse.py) and storage. */
 static const int bgc_block0_plan[] = { 0, 3, 0, 1, 1, 2, 1, 0, 1, 1, 1, 1, 3, 0, 0, 1, 1, 0, 1, 0, 1 };
@@ -641,6 +641,18 @@ void bgc_velocity_jac(double t, const double *x, const bgc_params *p, double *ou
     out[4] = p->c[19]*x[2] + p->c[20]*x[1];
     out[5] = p->c[16]*x[2] + p->c[21]*x[1];
     out[6] = p->c[16]*x[3];
+}
+
+void bgc_velocity_metric(double t, const double *x, const bgc_params *p, double *out)
+{
+    (void)t;
+    (void)x;
+    (void)p;
+    (void)out;
+    memset(out, 0, 11 * sizeof *out); /* the nonzero entries follow */
+    out[1] = (-2.0*x[5] + 2.0*x[4])*p->p_rd;
+    out[2] = -2.0*x[4] + 2.0*x[5];
+    out[3] = 2.0*x[6];
 }
 
 [runtime: runtime]

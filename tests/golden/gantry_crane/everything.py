@@ -50,7 +50,7 @@ _N = 11
 _AUTONOMOUS = True  # the right side does not read t
 _POSITION_ROWS = [0]
 _VELOCITY_ROWS = [1]
-_VELOCITY_MOVABLE = [True, True, True, True, False, False, False, True, True, True, True]
+_VELOCITY_MOVABLE = [False, True, True, True, False, False, False, False, False, False, False]
 _WORK_DOUBLES = 231
 _WORK_INTS = 3
 _BLOCK_NAMES = ["rod.lambda, e[shaft->rotor]"]
@@ -941,6 +941,32 @@ def _velocity_jac_into_ieee(t, x, p, out):
 def _velocity_jac(t, x, p):
     out = [0.0] * 11
     _velocity_jac_into(t, x, p, out)
+    return [float(v) for v in out]
+
+
+def _velocity_metric_into(t, x, p, out):
+    try:
+        out[1] = (-2.0*x[5] + 2.0*x[4])*p[7]
+        out[2] = -2.0*x[4] + 2.0*x[5]
+        out[3] = 2.0*x[6]
+    except (ArithmeticError, ValueError):
+        return _velocity_metric_into_ieee(t, x, p, out)
+
+
+def _velocity_metric_into_ieee(t, x, p, out):
+    with numpy.errstate(all="ignore"):
+        t = numpy.float64(t)
+        x = numpy.asarray(x, dtype=numpy.float64)
+        p = numpy.asarray(p, dtype=numpy.float64)
+        out[1] = (-2.0*x[5] + 2.0*x[4])*p[7]
+        out[2] = -2.0*x[4] + 2.0*x[5]
+        out[3] = 2.0*x[6]
+
+
+
+def _velocity_metric(t, x, p):
+    out = [0.0] * 11
+    _velocity_metric_into(t, x, p, out)
     return [float(v) for v in out]
 
 

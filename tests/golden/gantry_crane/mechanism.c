@@ -600,5 +600,17 @@ void bgc_velocity_jac(double t, const double *x, const bgc_params *p, double *ou
     out[5] = p->c[7]*x[2];
 }
 
+void bgc_velocity_metric(double t, const double *x, const bgc_params *p, double *out)
+{
+    (void)t;
+    (void)x;
+    (void)p;
+    (void)out;
+    memset(out, 0, 6 * sizeof *out); /* the nonzero entries follow */
+    out[0] = (-2.0*x[4] + 2.0*x[3])*p->p_rd;
+    out[1] = -2.0*x[3] + 2.0*x[4];
+    out[2] = 2.0*x[5];
+}
+
 [runtime: runtime]
 

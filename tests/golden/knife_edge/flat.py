@@ -50,7 +50,7 @@ _N = 6
 _AUTONOMOUS = True  # the right side does not read t
 _POSITION_ROWS = []
 _VELOCITY_ROWS = [0]
-_VELOCITY_MOVABLE = [True, True, True, True, True, True]
+_VELOCITY_MOVABLE = [True, True, False, False, False, False]
 _WORK_DOUBLES = 115
 _WORK_INTS = 0
 _BLOCK_NAMES = []
@@ -450,6 +450,30 @@ def _velocity_jac_into_ieee(t, x, p, out):
 def _velocity_jac(t, x, p):
     out = [0.0] * 6
     _velocity_jac_into(t, x, p, out)
+    return [float(v) for v in out]
+
+
+def _velocity_metric_into(t, x, p, out):
+    try:
+        out[0] = -math.sin(x[5])
+        out[1] = math.cos(x[5])
+    except (ArithmeticError, ValueError):
+        return _velocity_metric_into_ieee(t, x, p, out)
+
+
+def _velocity_metric_into_ieee(t, x, p, out):
+    with numpy.errstate(all="ignore"):
+        t = numpy.float64(t)
+        x = numpy.asarray(x, dtype=numpy.float64)
+        p = numpy.asarray(p, dtype=numpy.float64)
+        out[0] = -_c_sin(x[5])
+        out[1] = _c_cos(x[5])
+
+
+
+def _velocity_metric(t, x, p):
+    out = [0.0] * 6
+    _velocity_metric_into(t, x, p, out)
     return [float(v) for v in out]
 
 

@@ -332,5 +332,16 @@ void bgc_velocity_jac(double t, const double *x, const bgc_params *p, double *ou
     out[3] = p->c[7]*x[1];
 }
 
+void bgc_velocity_metric(double t, const double *x, const bgc_params *p, double *out)
+{
+    (void)t;
+    (void)x;
+    (void)p;
+    (void)out;
+    memset(out, 0, 4 * sizeof *out); /* the nonzero entries follow */
+    out[0] = 2.0*x[2];
+    out[1] = 2.0*x[3];
+}
+
 [runtime: runtime]
 

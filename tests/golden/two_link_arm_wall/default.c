@@ -628,5 +628,16 @@ void bgc_velocity_jac(double t, const double *x, const bgc_params *p, double *ou
     bgc_work_free(w);
 }
 
+void bgc_velocity_metric(double t, const double *x, const bgc_params *p, double *out)
+{
+    (void)t;
+    (void)x;
+    (void)p;
+    (void)out;
+    memset(out, 0, 4 * sizeof *out); /* the nonzero entries follow */
+    out[0] = cos(x[2])*p->p_l1;
+    out[1] = cos(x[3])*p->p_l2;
+}
+
 [runtime: runtime]
 
