@@ -22,6 +22,7 @@ import sympy as sp
 from .algebra import solve_for
 from .causality import CausalGraph
 from .diagnostics import Collector, ModelError, Span, did_you_mean, fail
+from .differentiate import partial
 from .graph import TIME, Element, Graph, part_name, var, variable_name
 from .run import RunSettings
 from .scene import parameter_values
@@ -126,6 +127,7 @@ class _Builder:
         self.fields: dict[str, None] = {}  # coupled I fields, in order
         self.hamiltonian: dict[str, list[str]] = {}  # ... whose M depends on own coordinates
         self.momenta: list = []
+        self._field_entries: dict = {}
         self._integrals = None
 
     def emit(self, target, expr, el: Element | str, span, explicit=True):
@@ -260,15 +262,29 @@ class _Builder:
                   explicit=False)
         rate = e
         coordinate = self._coordinate_of(part_name(origin, i))
-        if coordinate is not None and M.has(coordinate):
-            dM = M.diff(coordinate)
-            rate = e + sp.Rational(1, 2) * sp.Add(*[flows[j] * dM[j, k] * flows[k]
-                                                     for j in range(n) for k in range(n)])
+        entries = self._entries_with(origin, M).get(coordinate, ())
+        if coordinate is not None and entries:
+            # 1/2 f^T (dM/dq) f over the entries that hold q only (bgc's own derivative, entry
+            # by entry: the work is the entries, not n^2 per coordinate)
+            rate = e + sp.Rational(1, 2) * sp.Add(*[flows[j] * partial(M[j, k], coordinate) *
+                                                     flows[k] for j, k in entries])
             self.hamiltonian.setdefault(origin, []).append(str(coordinate))
         self.fields.setdefault(origin, None)
         init = el.init[1].value if el.init is not None else sp.Integer(0)
         self.states.append(StateVar(state, variable_name(el.name, "p"), init, el.kind, el.span))
         self.emit(der(state), rate, el, el.span)
+
+    def _entries_with(self, origin, M) -> dict:
+        """For a field's matrix: symbol -> the (row, column) of the entries it occurs in, in
+        order; worked out once per field."""
+        if origin not in self._field_entries:
+            where: dict = {}
+            for j in range(M.rows):
+                for k in range(M.cols):
+                    for sym in sorted(M[j, k].free_symbols, key=lambda x: x.name):
+                        where.setdefault(sym, []).append((j, k))
+            self._field_entries[origin] = where
+        return self._field_entries[origin]
 
     def coupled_capacitor(self, el, f, s, sets_effort):
         """Part i of a C field with a full matrix K: the charge q_i is a state and the efforts
