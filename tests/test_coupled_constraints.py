@@ -97,7 +97,7 @@ def _arm_reference(t, corrector: str):
     """Lagrange's equations of the double pendulum in its angles with the tip held on the line
     x = x0 (Phi = l1 sin th1 + l2 sin th2 - x0): [M G^T; G 0] [a; lambda] = [r; c], with
     c = -dG/dt w minus the corrector's terms; DOP853 at rtol 1e-12."""
-    x0 = L1 * np.sin(TH1) + L2 * np.sin(TH2)
+    x0 = float(L1 * np.sin(TH1) + L2 * np.sin(TH2))
 
     def f(_, z):
         a, b, wa, wb = z
@@ -284,3 +284,118 @@ def test_slider_crank_in_joint_coordinates(tmp_path):
     r, l = SC["r"], SC["l"]
     x = r * np.cos(q[:, 0]) + np.sqrt(l**2 - (r * np.sin(q[:, 0]))**2)
     assert np.abs(q[:, 2] - x).max() < 1e-10
+
+
+# ---------------------------------------------------------------- a moving line, a sliding block
+
+ARM = """model arm
+parameter m1 = 1.0
+parameter m2 = 0.5
+parameter l1 = 1.0
+parameter l2 = 0.7
+parameter g = 9.81
+w : 1[2]
+arm : I[2]([[(m1 + m2)*l1^2, m2*l1*l2*cos(th[0] - th[1])],
+            [m2*l1*l2*cos(th[0] - th[1]), m2*l2^2]])
+gravity : MSe[2]([-(m1 + m2)*g*l1*sin(th[0]), -m2*g*l2*sin(th[1])])
+tip : MTF[2->1]([[l1*cos(th[0]), l2*cos(th[1])]])
+signal th[2] = integral(w.f, init = [0.2, 1.2])
+gravity -> w -> arm
+w -> tip -> wall
+"""
+
+
+def _arm_with(extra_coordinates, constraint, t):
+    """The arm's Lagrange equations with extra point masses (their masses, forces) and one
+    constraint Phi(q, t) given as (phi, G(q), dG/dt w, d2phi/dt2 at fixed q, dphi/dt at fixed
+    q); PID corrector 10, 10; DOP853 at rtol 1e-12."""
+    masses = [m for m, _ in extra_coordinates]
+
+    def f(time, z):
+        n = 2 + len(masses)
+        q, w = z[:n], z[n:]
+        a, b = q[0], q[1]
+        c, s = np.cos(a - b), np.sin(a - b)
+        M = np.zeros((n, n))
+        M[:2, :2] = [[(M1 + M2) * L1**2, M2 * L1 * L2 * c], [M2 * L1 * L2 * c, M2 * L2**2]]
+        for k, m in enumerate(masses):
+            M[2 + k, 2 + k] = m
+        r = np.zeros(n)
+        r[:2] = [-M2 * L1 * L2 * s * w[1]**2 - (M1 + M2) * G * L1 * np.sin(a),
+                 M2 * L1 * L2 * s * w[0]**2 - M2 * G * L2 * np.sin(b)]
+        phi, Gq, dGw, phi_tt, phi_t = constraint(time, q, w)
+        dphi = Gq @ w + phi_t
+        K = np.zeros((n + 1, n + 1))
+        K[:n, :n], K[:n, n], K[n, :n] = M, Gq, Gq
+        acc = np.linalg.solve(K, [*r, -dGw - phi_tt - 2 * GAIN * dphi - GAIN**2 * phi])
+        return [*w, *acc[:n]]
+
+    z0 = [TH1, TH2] + [x for _, x in extra_coordinates]
+    sol = solve_ivp(f, (t[0], t[-1]), z0 + [0.0] * len(z0), method="DOP853", rtol=1e-12,
+                    atol=1e-12, t_eval=t)
+    return sol.y[:len(z0)].T
+
+
+@needs_cc
+def test_a_time_dependent_constraint_on_a_coupled_field(tmp_path):
+    """The line moves: x = x0 + A (1 - cos w t), its rate given by a flow source on the
+    junction (the paper's Phi(q; t)); the annotation gives Phi with its time term."""
+    A, W = 0.1, 3.0
+    x0 = float(L1 * np.sin(TH1) + L2 * np.sin(TH2))
+    model = tmp_path / "moving.bg"
+    model.write_text(ARM + f"""parameter x0 = {x0!r}
+parameter A = {A!r}
+parameter omega = {W!r}
+wall : 0 constraint holonomic(phi = l1*sin(th[0]) + l2*sin(th[1]) - x0 - A*(1 - cos(omega*t))) corrector pid(10, 10)
+line : MSf(A*omega*sin(omega*t))
+wall -> line
+scene run {{ outputs th, wall.residual
+  time 0 .. 2 every 0.02
+  solver dopri5(rtol = 1e-10, atol = 1e-12) }}
+""")
+    names, data = _columns(_simulate(tmp_path, model, "--scene", "run").decode())
+
+    def constraint(time, q, w):
+        a, b = q
+        Gq = np.array([L1 * np.cos(a), L2 * np.cos(b)])
+        phi = L1 * np.sin(a) + L2 * np.sin(b) - x0 - A * (1 - np.cos(W * time))
+        dGw = -L1 * np.sin(a) * w[0]**2 - L2 * np.sin(b) * w[1]**2
+        return phi, Gq, dGw, -A * W**2 * np.cos(W * time), -A * W * np.sin(W * time)
+
+    ref = _arm_with([], constraint, data[:, 0])
+    th = data[:, [names.index("th[0]"), names.index("th[1]")]]
+    assert np.abs(th - ref).max() < 1e-7
+    assert np.abs(data[:, names.index("wall.residual")]).max() < 1e-9
+
+
+@needs_cc
+def test_a_field_and_a_point_mass_on_one_junction(tmp_path):
+    """The arm's tip pinned (horizontally) to a block of mass 2 that slides freely: one
+    junction whose balance holds the field's flows and the block's velocity."""
+    x0 = float(L1 * np.sin(TH1) + L2 * np.sin(TH2))
+    model = tmp_path / "block.bg"
+    model.write_text(ARM + f"""vb : 1
+block : I(2)
+signal xb = integral(vb.f, init = {x0!r})
+wall : 0 constraint corrector pid(10, 10)
+vb -> block
+wall -> vb
+scene run {{ outputs th, xb, wall.residual
+  time 0 .. 2 every 0.02
+  solver dopri5(rtol = 1e-10, atol = 1e-12) }}
+""")
+    r = run_bgc("check", str(model))
+    assert r.returncode == 0 and "wall: holonomic (detected)" in r.stdout, r.stdout + r.stderr
+    names, data = _columns(_simulate(tmp_path, model, "--scene", "run").decode())
+
+    def constraint(time, q, w):
+        a, b, xb = q
+        Gq = np.array([L1 * np.cos(a), L2 * np.cos(b), -1.0])
+        phi = L1 * np.sin(a) + L2 * np.sin(b) - xb
+        dGw = -L1 * np.sin(a) * w[0]**2 - L2 * np.sin(b) * w[1]**2
+        return phi, Gq, dGw, 0.0, 0.0
+
+    ref = _arm_with([(2.0, x0)], constraint, data[:, 0])
+    got = data[:, [names.index("th[0]"), names.index("th[1]"), names.index("xb")]]
+    assert np.abs(got - ref).max() < 1e-7
+    assert np.abs(got[:, 2] - x0).max() > 0.01  # the block moves
