@@ -27,7 +27,7 @@ model's symbols (Assign, and Solve or Newton for the blocks solved numerically).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import mpmath  # SymPy's own: a number beyond a double, shown
 import sympy as sp
@@ -305,7 +305,7 @@ class _Coordinates:
         coeffs = {q: coeffs[q] for q in self.coords if q in coeffs}
         if any(co.free_symbols & rates.keys() for co in coeffs.values()):
             return None, "it is not linear in the coordinate rates"
-        a0 = expand_bounded(balance.xreplace({r: 0 for r in rates}))
+        a0 = expand_bounded(balance.xreplace({r: sp.Integer(0) for r in rates}))
         if a0 is None:
             fail(c.name_span, f"the flow balance of constraint junction '{c.junction}' is too "
                               f"large to expand (more than {MAX_EXPANDED_TERMS} terms)")
@@ -953,7 +953,12 @@ def _rows(sys, infos, kept) -> list[ConstraintRow]:
                 continue
             weights = weigh(balances[c.junction]) if level == "velocity" else ()
             rows.append(ConstraintRow(c.junction, level, expr, scale_of(expr), weights))
-    return rows
+    # A velocity row's terms may all vanish where it holds (the tip's sideways velocity, one
+    # term): its scale then also counts the speeds of the momenta the velocity rows read,
+    # through its weights, so that it holds to 1e-9 of the system's motion, not of nothing.
+    speeds = weigh.speeds({p for r in rows for p, _ in r.weights})
+    return [replace(r, scale=r.scale + sp.Add(*[sp.Abs(d, evaluate=False) for _, d in r.weights])
+                    * speeds) if r.weights and speeds != 0 else r for r in rows]
 
 
 class _Weights:
@@ -989,6 +994,17 @@ class _Weights:
         except _Cycle:
             return ()
         return tuple(out)
+
+    def speeds(self, moved) -> sp.Expr:
+        """The sum of the magnitudes of the velocities of the momenta in moved, in the states
+        (a coupled field's through its block)."""
+        defs, sys = self.defs, self.sys
+        try:
+            return sp.Add(*[sp.Abs(_leaf(sign * f, defs, lambda s: s in defs and
+                                         not sys.is_leaf(s), self.memo_all), evaluate=False)
+                            for p, f, sign in self.momenta if p in moved])
+        except _Cycle:
+            return sp.Integer(0)
 
 
 def scale_of(expr):

@@ -399,3 +399,46 @@ scene run {{ outputs th, xb, wall.residual
     got = data[:, [names.index("th[0]"), names.index("th[1]"), names.index("xb")]]
     assert np.abs(got - ref).max() < 1e-7
     assert np.abs(got[:, 2] - x0).max() > 0.01  # the block moves
+
+
+@needs_cc
+def test_point_masses_and_a_coupled_field_project_alike(tmp_path):
+    """The kinetic metric does not depend on the coordinates: the arm in joint angles (a
+    coupled field, the tip constraint only) and the same arm as two point masses in Cartesian
+    coordinates (two rods and the tip), started with the same joint rates, which move the tip
+    sideways, project onto the same velocities of the masses."""
+    w0 = np.array([0.8, -0.3])
+    a, b = TH1, TH2
+    M = np.array([[(M1 + M2) * L1**2, M2 * L1 * L2 * np.cos(a - b)],
+                  [M2 * L1 * L2 * np.cos(a - b), M2 * L2**2]])
+    p0 = M @ w0
+    joint = tmp_path / "joint.bg"
+    joint.write_text((MODELS / "two_link_arm_wall.bg").read_text().replace(
+        "m2*l2^2]]) \"the links' inertia\"", f"m2*l2^2]]) init p = [{float(p0[0])!r}, {float(p0[1])!r}]"))
+    v1 = np.array([L1 * np.cos(a) * w0[0], -L1 * np.sin(a) * w0[0]])
+    v2 = v1 + [L2 * np.cos(b) * w0[1], -L2 * np.sin(b) * w0[1]]
+    text = (MODELS / "double_pendulum.bg").read_text()
+    text = text.replace("theta1 = 0.5", f"theta1 = {TH1!r}").replace(
+        "theta2 = 1.0", f"theta2 = {TH2!r}")
+    for name, mass, v in (("mx1", "m1", v1[0]), ("my1", "m1", v1[1]), ("mx2", "m2", v2[0]),
+                          ("my2", "m2", v2[1])):
+        text = text.replace(f"{name} : I({mass})", f"{name} : I({mass}) init f = {float(v)!r}")
+    text = text.replace("scene swing", """tip : 0 constraint holonomic(init = -l1*sin(theta1) - l2*sin(theta2)) corrector pid(alpha, beta)
+t2 : TF(1)
+vx2 -> t2 -> tip
+scene projected { outputs mx1.f, my1.f, mx2.f, my2.f; time 0 .. 0.01 every 0.01 }
+scene swing""")
+    cartesian = tmp_path / "cartesian.bg"
+    cartesian.write_text(text)
+    names_c, cart = _columns(_simulate(tmp_path, cartesian, "--scene", "projected",
+                                       "--project-initial").decode())
+    names_j, arm = _columns(_simulate(tmp_path, joint, "--scene", "held", "--t-end", "0.01",
+                                      "--project-initial").decode())
+    pa = arm[0, [names_j.index("arm.p[0]"), names_j.index("arm.p[1]")]]
+    w = np.linalg.solve(M, pa)
+    u1 = np.array([L1 * np.cos(a) * w[0], -L1 * np.sin(a) * w[0]])
+    u2 = u1 + [L2 * np.cos(b) * w[1], -L2 * np.sin(b) * w[1]]
+    got = cart[0, [names_c.index(n) for n in ("mx1.f", "my1.f", "mx2.f", "my2.f")]]
+    assert abs(u2[0]) < 1e-9 and abs(got[2]) < 1e-9  # the tip no longer moves sideways
+    assert np.abs(got - [*u1, *u2]).max() < 1e-9
+    assert np.abs(got - [*v1, *v2]).max() > 0.1  # and the projection did move them

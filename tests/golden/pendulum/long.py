@@ -366,7 +366,7 @@ def _residual(t, x, p):
 def _scale_into(t, x, p, out):
     try:
         out[0] = abs(x[2]*x[2]) + abs(x[3]*x[3]) + p[14]
-        out[1] = abs(p[13]*x[0]*x[2]) + abs(p[13]*x[1]*x[3])
+        out[1] = (abs(p[6]*x[0]) + abs(p[6]*x[1]))*(abs(2.0*x[2]) + abs(2.0*x[3])) + abs(p[13]*x[0]*x[2]) + abs(p[13]*x[1]*x[3])
     except (ArithmeticError, ValueError):
         return _scale_into_ieee(t, x, p, out)
 
@@ -377,7 +377,7 @@ def _scale_into_ieee(t, x, p, out):
         x = numpy.asarray(x, dtype=numpy.float64)
         p = numpy.asarray(p, dtype=numpy.float64)
         out[0] = abs(x[2]*x[2]) + abs(x[3]*x[3]) + p[14]
-        out[1] = abs(p[13]*x[0]*x[2]) + abs(p[13]*x[1]*x[3])
+        out[1] = (abs(p[6]*x[0]) + abs(p[6]*x[1]))*(abs(2.0*x[2]) + abs(2.0*x[3])) + abs(p[13]*x[0]*x[2]) + abs(p[13]*x[1]*x[3])
 
 
 

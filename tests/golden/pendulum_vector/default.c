@@ -296,7 +296,7 @@ void bgc_scale(double t, const double *x, const bgc_params *p, double *out)
     (void)p;
     (void)out;
     out[0] = fabs(x[2]*x[2]) + fabs(x[3]*x[3]) + p->c[8];
-    out[1] = fabs(p->c[7]*x[0]*x[2]) + fabs(p->c[7]*x[1]*x[3]);
+    out[1] = (fabs(p->c[0]*x[0]) + fabs(p->c[0]*x[1]))*(fabs(2.0*x[2]) + fabs(2.0*x[3])) + fabs(p->c[7]*x[0]*x[2]) + fabs(p->c[7]*x[1]*x[3]);
 }
 
 void bgc_position_jac(double t, const double *x, const bgc_params *p, double *out)

@@ -662,12 +662,15 @@ void bgc_scale(double t, const double *x, const bgc_params *p, double *out)
     const double w4 = p->c[5]*x[2];
     const double w141 = cos(x[4]);
     const double w142 = cos(x[3]);
-    out[0] = fabs(-x[5]) + fabs(w141*p->p_l) + fabs(w142*p->p_r);
-    const double w143 = sin(x[4]);
-    const double w144 = sin(x[3]);
-    out[1] = fabs(-w4) + fabs(w0*w144*p->c[3]) + fabs(w1*w143*p->c[4]);
-    out[2] = fabs(w143*p->c[4]) + fabs(w144*p->p_r);
-    out[3] = fabs(w0*w142*p->p_r) + fabs(w1*w141*p->c[4]);
+    const double w143 = fabs(w142*p->p_r);
+    out[0] = w143 + fabs(-x[5]) + fabs(w141*p->p_l);
+    const double w144 = sin(x[4]);
+    const double w145 = sin(x[3]);
+    const double w146 = fabs(w0) + fabs(w1) + fabs(w4);
+    const double w147 = fabs(w144*p->c[4]);
+    out[1] = w146*(w147 + fabs(-1.0) + fabs(w145*p->c[3])) + fabs(-w4) + (fabs(w0*w145*p->c[3]) + fabs(w1*w144*p->c[4]));
+    out[2] = w147 + fabs(w145*p->p_r);
+    out[3] = w146*(w143 + fabs(w141*p->c[4])) + fabs(w0*w142*p->p_r) + fabs(w1*w141*p->c[4]);
     bgc_work_free(w);
     return;
     fail:
@@ -703,11 +706,11 @@ void bgc_velocity_jac(double t, const double *x, const bgc_params *p, double *ou
     if (!w)
         goto fail;
     wv = w->v;
-    const double w145 = x[3] + x[4];
-    const double w146 = cos(w145)*p->c[1];
+    const double w148 = x[3] + x[4];
+    const double w149 = cos(w148)*p->c[1];
     wv[114] = p->c[0];
-    wv[115] = w146;
-    wv[116] = w146;
+    wv[115] = w149;
+    wv[116] = w149;
     wv[117] = p->c[2];
     wv[126] = x[0];
     wv[127] = x[1];
@@ -721,40 +724,40 @@ void bgc_velocity_jac(double t, const double *x, const bgc_params *p, double *ou
         goto fail;
     const double w43 = wv[126];
     const double w44 = wv[127];
-    const double w147 = sin(x[4]);
-    const double w148 = sin(x[3]);
-    out[0] = w147*w44*p->c[4] + w148*w43*p->c[3];
-    const double w149 = cos(x[4]);
-    const double w150 = cos(x[3]);
-    out[6] = w149*w44*p->c[4] + w150*w43*p->p_r;
+    const double w150 = sin(x[4]);
+    const double w151 = sin(x[3]);
+    out[0] = w150*w44*p->c[4] + w151*w43*p->c[3];
+    const double w152 = cos(x[4]);
+    const double w153 = cos(x[3]);
+    out[6] = w152*w44*p->c[4] + w153*w43*p->p_r;
     wv[126] = 0.0;
     wv[127] = 1.0;
     if (bgc_block_resolve(w, 0, t))
         goto fail;
     const double w45 = wv[126];
     const double w46 = wv[127];
-    out[1] = w147*w46*p->c[4] + w148*w45*p->c[3];
-    out[7] = w149*w46*p->c[4] + w150*w45*p->p_r;
+    out[1] = w150*w46*p->c[4] + w151*w45*p->c[3];
+    out[7] = w152*w46*p->c[4] + w153*w45*p->p_r;
     out[2] = -p->c[5];
-    const double w151 = sin(w145);
-    const double w152 = w1*w151*p->c[1];
-    const double w153 = w0*w151*p->c[1];
-    wv[126] = w152;
-    wv[127] = w153;
+    const double w154 = sin(w148);
+    const double w155 = w1*w154*p->c[1];
+    const double w156 = w0*w154*p->c[1];
+    wv[126] = w155;
+    wv[127] = w156;
     if (bgc_block_resolve(w, 0, t))
         goto fail;
     const double w48 = wv[126];
     const double w49 = wv[127];
-    out[3] = w0*w150*p->c[3] + w147*w49*p->c[4] + w148*w48*p->c[3];
-    out[9] = w0*w148*p->c[3] + w149*w49*p->c[4] + w150*w48*p->p_r;
-    wv[126] = w152;
-    wv[127] = w153;
+    out[3] = w0*w153*p->c[3] + w150*w49*p->c[4] + w151*w48*p->c[3];
+    out[9] = w0*w151*p->c[3] + w152*w49*p->c[4] + w153*w48*p->p_r;
+    wv[126] = w155;
+    wv[127] = w156;
     if (bgc_block_resolve(w, 0, t))
         goto fail;
     const double w50 = wv[126];
     const double w51 = wv[127];
-    out[4] = w1*w149*p->c[4] + w147*w51*p->c[4] + w148*w50*p->c[3];
-    out[10] = w1*w147*p->p_l + w149*w51*p->c[4] + w150*w50*p->p_r;
+    out[4] = w1*w152*p->c[4] + w150*w51*p->c[4] + w151*w50*p->c[3];
+    out[10] = w1*w150*p->p_l + w152*w51*p->c[4] + w153*w50*p->p_r;
     bgc_work_free(w);
     return;
     fail:

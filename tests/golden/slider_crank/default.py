@@ -856,12 +856,15 @@ def _scale_into(t, x, p, out):
         w4 = p[17]*x[2]
         w141 = math.cos(x[4])
         w142 = math.cos(x[3])
-        out[0] = abs(-x[5]) + abs(w141*p[1]) + abs(w142*p[0])
-        w143 = math.sin(x[4])
-        w144 = math.sin(x[3])
-        out[1] = abs(-w4) + abs(w0*w144*p[15]) + abs(w1*w143*p[16])
-        out[2] = abs(w143*p[16]) + abs(w144*p[0])
-        out[3] = abs(w0*w142*p[0]) + abs(w1*w141*p[16])
+        w143 = abs(w142*p[0])
+        out[0] = w143 + abs(-x[5]) + abs(w141*p[1])
+        w144 = math.sin(x[4])
+        w145 = math.sin(x[3])
+        w146 = abs(w0) + abs(w1) + abs(w4)
+        w147 = abs(w144*p[16])
+        out[1] = w146*(w147 + abs(-1.0) + abs(w145*p[15])) + abs(-w4) + (abs(w0*w145*p[15]) + abs(w1*w144*p[16]))
+        out[2] = w147 + abs(w145*p[0])
+        out[3] = w146*(w143 + abs(w141*p[16])) + abs(w0*w142*p[0]) + abs(w1*w141*p[16])
     except (ArithmeticError, ValueError):
         return _scale_into_ieee(t, x, p, out)
 
@@ -886,12 +889,15 @@ def _scale_into_ieee(t, x, p, out):
         w4 = p[17]*x[2]
         w141 = _c_cos(x[4])
         w142 = _c_cos(x[3])
-        out[0] = abs(-x[5]) + abs(w141*p[1]) + abs(w142*p[0])
-        w143 = _c_sin(x[4])
-        w144 = _c_sin(x[3])
-        out[1] = abs(-w4) + abs(w0*w144*p[15]) + abs(w1*w143*p[16])
-        out[2] = abs(w143*p[16]) + abs(w144*p[0])
-        out[3] = abs(w0*w142*p[0]) + abs(w1*w141*p[16])
+        w143 = abs(w142*p[0])
+        out[0] = w143 + abs(-x[5]) + abs(w141*p[1])
+        w144 = _c_sin(x[4])
+        w145 = _c_sin(x[3])
+        w146 = abs(w0) + abs(w1) + abs(w4)
+        w147 = abs(w144*p[16])
+        out[1] = w146*(w147 + abs(-1.0) + abs(w145*p[15])) + abs(-w4) + (abs(w0*w145*p[15]) + abs(w1*w144*p[16]))
+        out[2] = w147 + abs(w145*p[0])
+        out[3] = w146*(w143 + abs(w141*p[16])) + abs(w0*w142*p[0]) + abs(w1*w141*p[16])
 
 
 
@@ -935,11 +941,11 @@ def _velocity_jac_into(t, x, p, out):
     try:
         w = _Work()
         wv = w.v
-        w145 = x[3] + x[4]
-        w146 = math.cos(w145)*p[13]
+        w148 = x[3] + x[4]
+        w149 = math.cos(w148)*p[13]
         wv[114] = p[12]
-        wv[115] = w146
-        wv[116] = w146
+        wv[115] = w149
+        wv[116] = w149
         wv[117] = p[14]
         wv[126] = x[0]
         wv[127] = x[1]
@@ -951,37 +957,37 @@ def _velocity_jac_into(t, x, p, out):
         _block_resolve(w, 0, t)
         w43 = wv[126]
         w44 = wv[127]
-        w147 = math.sin(x[4])
-        w148 = math.sin(x[3])
-        out[0] = w147*w44*p[16] + w148*w43*p[15]
-        w149 = math.cos(x[4])
-        w150 = math.cos(x[3])
-        out[6] = w149*w44*p[16] + w150*w43*p[0]
+        w150 = math.sin(x[4])
+        w151 = math.sin(x[3])
+        out[0] = w150*w44*p[16] + w151*w43*p[15]
+        w152 = math.cos(x[4])
+        w153 = math.cos(x[3])
+        out[6] = w152*w44*p[16] + w153*w43*p[0]
         wv[126] = 0.0
         wv[127] = 1.0
         _block_resolve(w, 0, t)
         w45 = wv[126]
         w46 = wv[127]
-        out[1] = w147*w46*p[16] + w148*w45*p[15]
-        out[7] = w149*w46*p[16] + w150*w45*p[0]
+        out[1] = w150*w46*p[16] + w151*w45*p[15]
+        out[7] = w152*w46*p[16] + w153*w45*p[0]
         out[2] = -p[17]
-        w151 = math.sin(w145)
-        w152 = w1*w151*p[13]
-        w153 = w0*w151*p[13]
-        wv[126] = w152
-        wv[127] = w153
+        w154 = math.sin(w148)
+        w155 = w1*w154*p[13]
+        w156 = w0*w154*p[13]
+        wv[126] = w155
+        wv[127] = w156
         _block_resolve(w, 0, t)
         w48 = wv[126]
         w49 = wv[127]
-        out[3] = w0*w150*p[15] + w147*w49*p[16] + w148*w48*p[15]
-        out[9] = w0*w148*p[15] + w149*w49*p[16] + w150*w48*p[0]
-        wv[126] = w152
-        wv[127] = w153
+        out[3] = w0*w153*p[15] + w150*w49*p[16] + w151*w48*p[15]
+        out[9] = w0*w151*p[15] + w152*w49*p[16] + w153*w48*p[0]
+        wv[126] = w155
+        wv[127] = w156
         _block_resolve(w, 0, t)
         w50 = wv[126]
         w51 = wv[127]
-        out[4] = w1*w149*p[16] + w147*w51*p[16] + w148*w50*p[15]
-        out[10] = w1*w147*p[1] + w149*w51*p[16] + w150*w50*p[0]
+        out[4] = w1*w152*p[16] + w150*w51*p[16] + w151*w50*p[15]
+        out[10] = w1*w150*p[1] + w152*w51*p[16] + w153*w50*p[0]
     except (ArithmeticError, ValueError):
         return _velocity_jac_into_ieee(t, x, p, out)
 
@@ -993,11 +999,11 @@ def _velocity_jac_into_ieee(t, x, p, out):
         p = numpy.asarray(p, dtype=numpy.float64)
         w = _Work()
         wv = w.v
-        w145 = x[3] + x[4]
-        w146 = _c_cos(w145)*p[13]
+        w148 = x[3] + x[4]
+        w149 = _c_cos(w148)*p[13]
         wv[114] = p[12]
-        wv[115] = w146
-        wv[116] = w146
+        wv[115] = w149
+        wv[116] = w149
         wv[117] = p[14]
         wv[126] = x[0]
         wv[127] = x[1]
@@ -1009,37 +1015,37 @@ def _velocity_jac_into_ieee(t, x, p, out):
         _block_resolve(w, 0, t)
         w43 = wv[126]
         w44 = wv[127]
-        w147 = _c_sin(x[4])
-        w148 = _c_sin(x[3])
-        out[0] = w147*w44*p[16] + w148*w43*p[15]
-        w149 = _c_cos(x[4])
-        w150 = _c_cos(x[3])
-        out[6] = w149*w44*p[16] + w150*w43*p[0]
+        w150 = _c_sin(x[4])
+        w151 = _c_sin(x[3])
+        out[0] = w150*w44*p[16] + w151*w43*p[15]
+        w152 = _c_cos(x[4])
+        w153 = _c_cos(x[3])
+        out[6] = w152*w44*p[16] + w153*w43*p[0]
         wv[126] = 0.0
         wv[127] = 1.0
         _block_resolve(w, 0, t)
         w45 = wv[126]
         w46 = wv[127]
-        out[1] = w147*w46*p[16] + w148*w45*p[15]
-        out[7] = w149*w46*p[16] + w150*w45*p[0]
+        out[1] = w150*w46*p[16] + w151*w45*p[15]
+        out[7] = w152*w46*p[16] + w153*w45*p[0]
         out[2] = -p[17]
-        w151 = _c_sin(w145)
-        w152 = w1*w151*p[13]
-        w153 = w0*w151*p[13]
-        wv[126] = w152
-        wv[127] = w153
+        w154 = _c_sin(w148)
+        w155 = w1*w154*p[13]
+        w156 = w0*w154*p[13]
+        wv[126] = w155
+        wv[127] = w156
         _block_resolve(w, 0, t)
         w48 = wv[126]
         w49 = wv[127]
-        out[3] = w0*w150*p[15] + w147*w49*p[16] + w148*w48*p[15]
-        out[9] = w0*w148*p[15] + w149*w49*p[16] + w150*w48*p[0]
-        wv[126] = w152
-        wv[127] = w153
+        out[3] = w0*w153*p[15] + w150*w49*p[16] + w151*w48*p[15]
+        out[9] = w0*w151*p[15] + w152*w49*p[16] + w153*w48*p[0]
+        wv[126] = w155
+        wv[127] = w156
         _block_resolve(w, 0, t)
         w50 = wv[126]
         w51 = wv[127]
-        out[4] = w1*w149*p[16] + w147*w51*p[16] + w148*w50*p[15]
-        out[10] = w1*w147*p[1] + w149*w51*p[16] + w150*w50*p[0]
+        out[4] = w1*w152*p[16] + w150*w51*p[16] + w151*w50*p[15]
+        out[10] = w1*w150*p[1] + w152*w51*p[16] + w153*w50*p[0]
 
 
 

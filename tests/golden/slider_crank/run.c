@@ -736,12 +736,15 @@ void bgc_scale(double t, const double *x, const bgc_params *p, double *out)
     const double w4 = p->c[5]*x[2];
     const double w156 = cos(x[4]);
     const double w157 = cos(x[3]);
-    out[0] = fabs(-x[5]) + fabs(w156*p->p_l) + fabs(w157*p->p_r);
-    const double w158 = sin(x[4]);
-    const double w159 = sin(x[3]);
-    out[1] = fabs(-w4) + fabs(w0*w159*p->c[3]) + fabs(w1*w158*p->c[4]);
-    out[2] = fabs(w158*p->c[4]) + fabs(w159*p->p_r);
-    out[3] = fabs(w0*w157*p->p_r) + fabs(w1*w156*p->c[4]);
+    const double w158 = fabs(w157*p->p_r);
+    out[0] = w158 + fabs(-x[5]) + fabs(w156*p->p_l);
+    const double w159 = sin(x[4]);
+    const double w160 = sin(x[3]);
+    const double w161 = fabs(w0) + fabs(w1) + fabs(w4);
+    const double w162 = fabs(w159*p->c[4]);
+    out[1] = w161*(w162 + fabs(-1.0) + fabs(w160*p->c[3])) + fabs(-w4) + (fabs(w0*w160*p->c[3]) + fabs(w1*w159*p->c[4]));
+    out[2] = w162 + fabs(w160*p->p_r);
+    out[3] = w161*(w158 + fabs(w156*p->c[4])) + fabs(w0*w157*p->p_r) + fabs(w1*w156*p->c[4]);
     bgc_work_free(w);
     return;
     fail:
@@ -777,11 +780,11 @@ void bgc_velocity_jac(double t, const double *x, const bgc_params *p, double *ou
     if (!w)
         goto fail;
     wv = w->v;
-    const double w160 = x[3] + x[4];
-    const double w161 = cos(w160)*p->c[1];
+    const double w163 = x[3] + x[4];
+    const double w164 = cos(w163)*p->c[1];
     wv[118] = p->c[0];
-    wv[119] = w161;
-    wv[120] = w161;
+    wv[119] = w164;
+    wv[120] = w164;
     wv[121] = p->c[2];
     wv[130] = x[0];
     wv[131] = x[1];
@@ -795,40 +798,40 @@ void bgc_velocity_jac(double t, const double *x, const bgc_params *p, double *ou
         goto fail;
     const double w43 = wv[130];
     const double w44 = wv[131];
-    const double w162 = sin(x[4]);
-    const double w163 = sin(x[3]);
-    out[0] = w162*w44*p->c[4] + w163*w43*p->c[3];
-    const double w164 = cos(x[4]);
-    const double w165 = cos(x[3]);
-    out[6] = w164*w44*p->c[4] + w165*w43*p->p_r;
+    const double w165 = sin(x[4]);
+    const double w166 = sin(x[3]);
+    out[0] = w165*w44*p->c[4] + w166*w43*p->c[3];
+    const double w167 = cos(x[4]);
+    const double w168 = cos(x[3]);
+    out[6] = w167*w44*p->c[4] + w168*w43*p->p_r;
     wv[130] = 0.0;
     wv[131] = 1.0;
     if (bgc_block_resolve(w, 0, t))
         goto fail;
     const double w45 = wv[130];
     const double w46 = wv[131];
-    out[1] = w162*w46*p->c[4] + w163*w45*p->c[3];
-    out[7] = w164*w46*p->c[4] + w165*w45*p->p_r;
+    out[1] = w165*w46*p->c[4] + w166*w45*p->c[3];
+    out[7] = w167*w46*p->c[4] + w168*w45*p->p_r;
     out[2] = -p->c[5];
-    const double w166 = sin(w160);
-    const double w167 = w1*w166*p->c[1];
-    const double w168 = w0*w166*p->c[1];
-    wv[130] = w167;
-    wv[131] = w168;
+    const double w169 = sin(w163);
+    const double w170 = w1*w169*p->c[1];
+    const double w171 = w0*w169*p->c[1];
+    wv[130] = w170;
+    wv[131] = w171;
     if (bgc_block_resolve(w, 0, t))
         goto fail;
     const double w48 = wv[130];
     const double w49 = wv[131];
-    out[3] = w0*w165*p->c[3] + w162*w49*p->c[4] + w163*w48*p->c[3];
-    out[9] = w0*w163*p->c[3] + w164*w49*p->c[4] + w165*w48*p->p_r;
-    wv[130] = w167;
-    wv[131] = w168;
+    out[3] = w0*w168*p->c[3] + w165*w49*p->c[4] + w166*w48*p->c[3];
+    out[9] = w0*w166*p->c[3] + w167*w49*p->c[4] + w168*w48*p->p_r;
+    wv[130] = w170;
+    wv[131] = w171;
     if (bgc_block_resolve(w, 0, t))
         goto fail;
     const double w50 = wv[130];
     const double w51 = wv[131];
-    out[4] = w1*w164*p->c[4] + w162*w51*p->c[4] + w163*w50*p->c[3];
-    out[10] = w1*w162*p->p_l + w164*w51*p->c[4] + w165*w50*p->p_r;
+    out[4] = w1*w167*p->c[4] + w165*w51*p->c[4] + w166*w50*p->c[3];
+    out[10] = w1*w165*p->p_l + w167*w51*p->c[4] + w168*w50*p->p_r;
     bgc_work_free(w);
     return;
     fail:

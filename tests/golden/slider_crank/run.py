@@ -992,12 +992,15 @@ def _scale_into(t, x, p, out):
         w4 = p[17]*x[2]
         w156 = math.cos(x[4])
         w157 = math.cos(x[3])
-        out[0] = abs(-x[5]) + abs(w156*p[1]) + abs(w157*p[0])
-        w158 = math.sin(x[4])
-        w159 = math.sin(x[3])
-        out[1] = abs(-w4) + abs(w0*w159*p[15]) + abs(w1*w158*p[16])
-        out[2] = abs(w158*p[16]) + abs(w159*p[0])
-        out[3] = abs(w0*w157*p[0]) + abs(w1*w156*p[16])
+        w158 = abs(w157*p[0])
+        out[0] = w158 + abs(-x[5]) + abs(w156*p[1])
+        w159 = math.sin(x[4])
+        w160 = math.sin(x[3])
+        w161 = abs(w0) + abs(w1) + abs(w4)
+        w162 = abs(w159*p[16])
+        out[1] = w161*(w162 + abs(-1.0) + abs(w160*p[15])) + abs(-w4) + (abs(w0*w160*p[15]) + abs(w1*w159*p[16]))
+        out[2] = w162 + abs(w160*p[0])
+        out[3] = w161*(w158 + abs(w156*p[16])) + abs(w0*w157*p[0]) + abs(w1*w156*p[16])
     except (ArithmeticError, ValueError):
         return _scale_into_ieee(t, x, p, out)
 
@@ -1022,12 +1025,15 @@ def _scale_into_ieee(t, x, p, out):
         w4 = p[17]*x[2]
         w156 = _c_cos(x[4])
         w157 = _c_cos(x[3])
-        out[0] = abs(-x[5]) + abs(w156*p[1]) + abs(w157*p[0])
-        w158 = _c_sin(x[4])
-        w159 = _c_sin(x[3])
-        out[1] = abs(-w4) + abs(w0*w159*p[15]) + abs(w1*w158*p[16])
-        out[2] = abs(w158*p[16]) + abs(w159*p[0])
-        out[3] = abs(w0*w157*p[0]) + abs(w1*w156*p[16])
+        w158 = abs(w157*p[0])
+        out[0] = w158 + abs(-x[5]) + abs(w156*p[1])
+        w159 = _c_sin(x[4])
+        w160 = _c_sin(x[3])
+        w161 = abs(w0) + abs(w1) + abs(w4)
+        w162 = abs(w159*p[16])
+        out[1] = w161*(w162 + abs(-1.0) + abs(w160*p[15])) + abs(-w4) + (abs(w0*w160*p[15]) + abs(w1*w159*p[16]))
+        out[2] = w162 + abs(w160*p[0])
+        out[3] = w161*(w158 + abs(w156*p[16])) + abs(w0*w157*p[0]) + abs(w1*w156*p[16])
 
 
 
@@ -1071,11 +1077,11 @@ def _velocity_jac_into(t, x, p, out):
     try:
         w = _Work()
         wv = w.v
-        w160 = x[3] + x[4]
-        w161 = math.cos(w160)*p[13]
+        w163 = x[3] + x[4]
+        w164 = math.cos(w163)*p[13]
         wv[118] = p[12]
-        wv[119] = w161
-        wv[120] = w161
+        wv[119] = w164
+        wv[120] = w164
         wv[121] = p[14]
         wv[130] = x[0]
         wv[131] = x[1]
@@ -1087,37 +1093,37 @@ def _velocity_jac_into(t, x, p, out):
         _block_resolve(w, 0, t)
         w43 = wv[130]
         w44 = wv[131]
-        w162 = math.sin(x[4])
-        w163 = math.sin(x[3])
-        out[0] = w162*w44*p[16] + w163*w43*p[15]
-        w164 = math.cos(x[4])
-        w165 = math.cos(x[3])
-        out[6] = w164*w44*p[16] + w165*w43*p[0]
+        w165 = math.sin(x[4])
+        w166 = math.sin(x[3])
+        out[0] = w165*w44*p[16] + w166*w43*p[15]
+        w167 = math.cos(x[4])
+        w168 = math.cos(x[3])
+        out[6] = w167*w44*p[16] + w168*w43*p[0]
         wv[130] = 0.0
         wv[131] = 1.0
         _block_resolve(w, 0, t)
         w45 = wv[130]
         w46 = wv[131]
-        out[1] = w162*w46*p[16] + w163*w45*p[15]
-        out[7] = w164*w46*p[16] + w165*w45*p[0]
+        out[1] = w165*w46*p[16] + w166*w45*p[15]
+        out[7] = w167*w46*p[16] + w168*w45*p[0]
         out[2] = -p[17]
-        w166 = math.sin(w160)
-        w167 = w1*w166*p[13]
-        w168 = w0*w166*p[13]
-        wv[130] = w167
-        wv[131] = w168
+        w169 = math.sin(w163)
+        w170 = w1*w169*p[13]
+        w171 = w0*w169*p[13]
+        wv[130] = w170
+        wv[131] = w171
         _block_resolve(w, 0, t)
         w48 = wv[130]
         w49 = wv[131]
-        out[3] = w0*w165*p[15] + w162*w49*p[16] + w163*w48*p[15]
-        out[9] = w0*w163*p[15] + w164*w49*p[16] + w165*w48*p[0]
-        wv[130] = w167
-        wv[131] = w168
+        out[3] = w0*w168*p[15] + w165*w49*p[16] + w166*w48*p[15]
+        out[9] = w0*w166*p[15] + w167*w49*p[16] + w168*w48*p[0]
+        wv[130] = w170
+        wv[131] = w171
         _block_resolve(w, 0, t)
         w50 = wv[130]
         w51 = wv[131]
-        out[4] = w1*w164*p[16] + w162*w51*p[16] + w163*w50*p[15]
-        out[10] = w1*w162*p[1] + w164*w51*p[16] + w165*w50*p[0]
+        out[4] = w1*w167*p[16] + w165*w51*p[16] + w166*w50*p[15]
+        out[10] = w1*w165*p[1] + w167*w51*p[16] + w168*w50*p[0]
     except (ArithmeticError, ValueError):
         return _velocity_jac_into_ieee(t, x, p, out)
 
@@ -1129,11 +1135,11 @@ def _velocity_jac_into_ieee(t, x, p, out):
         p = numpy.asarray(p, dtype=numpy.float64)
         w = _Work()
         wv = w.v
-        w160 = x[3] + x[4]
-        w161 = _c_cos(w160)*p[13]
+        w163 = x[3] + x[4]
+        w164 = _c_cos(w163)*p[13]
         wv[118] = p[12]
-        wv[119] = w161
-        wv[120] = w161
+        wv[119] = w164
+        wv[120] = w164
         wv[121] = p[14]
         wv[130] = x[0]
         wv[131] = x[1]
@@ -1145,37 +1151,37 @@ def _velocity_jac_into_ieee(t, x, p, out):
         _block_resolve(w, 0, t)
         w43 = wv[130]
         w44 = wv[131]
-        w162 = _c_sin(x[4])
-        w163 = _c_sin(x[3])
-        out[0] = w162*w44*p[16] + w163*w43*p[15]
-        w164 = _c_cos(x[4])
-        w165 = _c_cos(x[3])
-        out[6] = w164*w44*p[16] + w165*w43*p[0]
+        w165 = _c_sin(x[4])
+        w166 = _c_sin(x[3])
+        out[0] = w165*w44*p[16] + w166*w43*p[15]
+        w167 = _c_cos(x[4])
+        w168 = _c_cos(x[3])
+        out[6] = w167*w44*p[16] + w168*w43*p[0]
         wv[130] = 0.0
         wv[131] = 1.0
         _block_resolve(w, 0, t)
         w45 = wv[130]
         w46 = wv[131]
-        out[1] = w162*w46*p[16] + w163*w45*p[15]
-        out[7] = w164*w46*p[16] + w165*w45*p[0]
+        out[1] = w165*w46*p[16] + w166*w45*p[15]
+        out[7] = w167*w46*p[16] + w168*w45*p[0]
         out[2] = -p[17]
-        w166 = _c_sin(w160)
-        w167 = w1*w166*p[13]
-        w168 = w0*w166*p[13]
-        wv[130] = w167
-        wv[131] = w168
+        w169 = _c_sin(w163)
+        w170 = w1*w169*p[13]
+        w171 = w0*w169*p[13]
+        wv[130] = w170
+        wv[131] = w171
         _block_resolve(w, 0, t)
         w48 = wv[130]
         w49 = wv[131]
-        out[3] = w0*w165*p[15] + w162*w49*p[16] + w163*w48*p[15]
-        out[9] = w0*w163*p[15] + w164*w49*p[16] + w165*w48*p[0]
-        wv[130] = w167
-        wv[131] = w168
+        out[3] = w0*w168*p[15] + w165*w49*p[16] + w166*w48*p[15]
+        out[9] = w0*w166*p[15] + w167*w49*p[16] + w168*w48*p[0]
+        wv[130] = w170
+        wv[131] = w171
         _block_resolve(w, 0, t)
         w50 = wv[130]
         w51 = wv[131]
-        out[4] = w1*w164*p[16] + w162*w51*p[16] + w163*w50*p[15]
-        out[10] = w1*w162*p[1] + w164*w51*p[16] + w165*w50*p[0]
+        out[4] = w1*w167*p[16] + w165*w51*p[16] + w166*w50*p[15]
+        out[10] = w1*w165*p[1] + w167*w51*p[16] + w168*w50*p[0]
 
 
 

@@ -544,7 +544,9 @@ void bgc_scale(double t, const double *x, const bgc_params *p, double *out)
     const double w0 = wv[88];
     const double w1 = wv[89];
     out[0] = fabs(sin(x[2])*p->p_l1) + fabs(sin(x[3])*p->p_l2) + p->c[13];
-    out[1] = fabs(w0*cos(x[2])*p->p_l1) + fabs(w1*cos(x[3])*p->p_l2);
+    const double w97 = cos(x[3]);
+    const double w98 = cos(x[2]);
+    out[1] = (fabs(w0) + fabs(w1))*(fabs(w97*p->p_l2) + fabs(w98*p->p_l1)) + fabs(w0*w98*p->p_l1) + fabs(w1*w97*p->p_l2);
     bgc_work_free(w);
     return;
     fail:
@@ -577,11 +579,11 @@ void bgc_velocity_jac(double t, const double *x, const bgc_params *p, double *ou
     if (!w)
         goto fail;
     wv = w->v;
-    const double w97 = -x[3] + x[2];
-    const double w98 = cos(w97)*p->c[1];
+    const double w99 = -x[3] + x[2];
+    const double w100 = cos(w99)*p->c[1];
     wv[76] = p->c[0];
-    wv[77] = w98;
-    wv[78] = w98;
+    wv[77] = w100;
+    wv[78] = w100;
     wv[79] = p->c[2];
     wv[88] = x[0];
     wv[89] = x[1];
@@ -595,31 +597,31 @@ void bgc_velocity_jac(double t, const double *x, const bgc_params *p, double *ou
         goto fail;
     const double w26 = wv[88];
     const double w27 = wv[89];
-    const double w99 = cos(x[3]);
-    const double w100 = cos(x[2]);
-    out[0] = w100*w26*p->p_l1 + w27*w99*p->p_l2;
+    const double w101 = cos(x[3]);
+    const double w102 = cos(x[2]);
+    out[0] = w101*w27*p->p_l2 + w102*w26*p->p_l1;
     wv[88] = 0.0;
     wv[89] = 1.0;
     if (bgc_block_resolve(w, 0, t))
         goto fail;
     const double w28 = wv[88];
     const double w29 = wv[89];
-    out[1] = w100*w28*p->p_l1 + w29*w99*p->p_l2;
-    const double w101 = sin(w97);
-    wv[88] = w1*w101*p->c[1];
-    wv[89] = w0*w101*p->c[1];
+    out[1] = w101*w29*p->p_l2 + w102*w28*p->p_l1;
+    const double w103 = sin(w99);
+    wv[88] = w1*w103*p->c[1];
+    wv[89] = w0*w103*p->c[1];
     if (bgc_block_resolve(w, 0, t))
         goto fail;
     const double w30 = wv[88];
     const double w31 = wv[89];
-    out[2] = w0*sin(x[2])*p->c[7] + w100*w30*p->p_l1 + w31*w99*p->p_l2;
-    wv[88] = w1*w101*p->c[6];
-    wv[89] = w0*w101*p->c[6];
+    out[2] = w0*sin(x[2])*p->c[7] + w101*w31*p->p_l2 + w102*w30*p->p_l1;
+    wv[88] = w1*w103*p->c[6];
+    wv[89] = w0*w103*p->c[6];
     if (bgc_block_resolve(w, 0, t))
         goto fail;
     const double w32 = wv[88];
     const double w33 = wv[89];
-    out[3] = w1*sin(x[3])*p->c[8] + w100*w32*p->p_l1 + w33*w99*p->p_l2;
+    out[3] = w1*sin(x[3])*p->c[8] + w101*w33*p->p_l2 + w102*w32*p->p_l1;
     bgc_work_free(w);
     return;
     fail:

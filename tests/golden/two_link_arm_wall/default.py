@@ -693,7 +693,9 @@ def _scale_into(t, x, p, out):
         w0 = wv[88]
         w1 = wv[89]
         out[0] = abs(math.sin(x[2])*p[2]) + abs(math.sin(x[3])*p[3]) + p[23]
-        out[1] = abs(w0*math.cos(x[2])*p[2]) + abs(w1*math.cos(x[3])*p[3])
+        w97 = math.cos(x[3])
+        w98 = math.cos(x[2])
+        out[1] = (abs(w0) + abs(w1))*(abs(w97*p[3]) + abs(w98*p[2])) + abs(w0*w98*p[2]) + abs(w1*w97*p[3])
     except (ArithmeticError, ValueError):
         return _scale_into_ieee(t, x, p, out)
 
@@ -716,7 +718,9 @@ def _scale_into_ieee(t, x, p, out):
         w0 = wv[88]
         w1 = wv[89]
         out[0] = abs(_c_sin(x[2])*p[2]) + abs(_c_sin(x[3])*p[3]) + p[23]
-        out[1] = abs(w0*_c_cos(x[2])*p[2]) + abs(w1*_c_cos(x[3])*p[3])
+        w97 = _c_cos(x[3])
+        w98 = _c_cos(x[2])
+        out[1] = (abs(w0) + abs(w1))*(abs(w97*p[3]) + abs(w98*p[2])) + abs(w0*w98*p[2]) + abs(w1*w97*p[3])
 
 
 
@@ -754,11 +758,11 @@ def _velocity_jac_into(t, x, p, out):
     try:
         w = _Work()
         wv = w.v
-        w97 = -x[3] + x[2]
-        w98 = math.cos(w97)*p[11]
+        w99 = -x[3] + x[2]
+        w100 = math.cos(w99)*p[11]
         wv[76] = p[10]
-        wv[77] = w98
-        wv[78] = w98
+        wv[77] = w100
+        wv[78] = w100
         wv[79] = p[12]
         wv[88] = x[0]
         wv[89] = x[1]
@@ -770,28 +774,28 @@ def _velocity_jac_into(t, x, p, out):
         _block_resolve(w, 0, t)
         w26 = wv[88]
         w27 = wv[89]
-        w99 = math.cos(x[3])
-        w100 = math.cos(x[2])
-        out[0] = w100*w26*p[2] + w27*w99*p[3]
+        w101 = math.cos(x[3])
+        w102 = math.cos(x[2])
+        out[0] = w101*w27*p[3] + w102*w26*p[2]
         wv[88] = 0.0
         wv[89] = 1.0
         _block_resolve(w, 0, t)
         w28 = wv[88]
         w29 = wv[89]
-        out[1] = w100*w28*p[2] + w29*w99*p[3]
-        w101 = math.sin(w97)
-        wv[88] = w1*w101*p[11]
-        wv[89] = w0*w101*p[11]
+        out[1] = w101*w29*p[3] + w102*w28*p[2]
+        w103 = math.sin(w99)
+        wv[88] = w1*w103*p[11]
+        wv[89] = w0*w103*p[11]
         _block_resolve(w, 0, t)
         w30 = wv[88]
         w31 = wv[89]
-        out[2] = w0*math.sin(x[2])*p[17] + w100*w30*p[2] + w31*w99*p[3]
-        wv[88] = w1*w101*p[16]
-        wv[89] = w0*w101*p[16]
+        out[2] = w0*math.sin(x[2])*p[17] + w101*w31*p[3] + w102*w30*p[2]
+        wv[88] = w1*w103*p[16]
+        wv[89] = w0*w103*p[16]
         _block_resolve(w, 0, t)
         w32 = wv[88]
         w33 = wv[89]
-        out[3] = w1*math.sin(x[3])*p[18] + w100*w32*p[2] + w33*w99*p[3]
+        out[3] = w1*math.sin(x[3])*p[18] + w101*w33*p[3] + w102*w32*p[2]
     except (ArithmeticError, ValueError):
         return _velocity_jac_into_ieee(t, x, p, out)
 
@@ -803,11 +807,11 @@ def _velocity_jac_into_ieee(t, x, p, out):
         p = numpy.asarray(p, dtype=numpy.float64)
         w = _Work()
         wv = w.v
-        w97 = -x[3] + x[2]
-        w98 = _c_cos(w97)*p[11]
+        w99 = -x[3] + x[2]
+        w100 = _c_cos(w99)*p[11]
         wv[76] = p[10]
-        wv[77] = w98
-        wv[78] = w98
+        wv[77] = w100
+        wv[78] = w100
         wv[79] = p[12]
         wv[88] = x[0]
         wv[89] = x[1]
@@ -819,28 +823,28 @@ def _velocity_jac_into_ieee(t, x, p, out):
         _block_resolve(w, 0, t)
         w26 = wv[88]
         w27 = wv[89]
-        w99 = _c_cos(x[3])
-        w100 = _c_cos(x[2])
-        out[0] = w100*w26*p[2] + w27*w99*p[3]
+        w101 = _c_cos(x[3])
+        w102 = _c_cos(x[2])
+        out[0] = w101*w27*p[3] + w102*w26*p[2]
         wv[88] = 0.0
         wv[89] = 1.0
         _block_resolve(w, 0, t)
         w28 = wv[88]
         w29 = wv[89]
-        out[1] = w100*w28*p[2] + w29*w99*p[3]
-        w101 = _c_sin(w97)
-        wv[88] = w1*w101*p[11]
-        wv[89] = w0*w101*p[11]
+        out[1] = w101*w29*p[3] + w102*w28*p[2]
+        w103 = _c_sin(w99)
+        wv[88] = w1*w103*p[11]
+        wv[89] = w0*w103*p[11]
         _block_resolve(w, 0, t)
         w30 = wv[88]
         w31 = wv[89]
-        out[2] = w0*_c_sin(x[2])*p[17] + w100*w30*p[2] + w31*w99*p[3]
-        wv[88] = w1*w101*p[16]
-        wv[89] = w0*w101*p[16]
+        out[2] = w0*_c_sin(x[2])*p[17] + w101*w31*p[3] + w102*w30*p[2]
+        wv[88] = w1*w103*p[16]
+        wv[89] = w0*w103*p[16]
         _block_resolve(w, 0, t)
         w32 = wv[88]
         w33 = wv[89]
-        out[3] = w1*_c_sin(x[3])*p[18] + w100*w32*p[2] + w33*w99*p[3]
+        out[3] = w1*_c_sin(x[3])*p[18] + w101*w33*p[3] + w102*w32*p[2]
 
 
 

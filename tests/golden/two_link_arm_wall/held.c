@@ -593,7 +593,9 @@ void bgc_scale(double t, const double *x, const bgc_params *p, double *out)
     const double w0 = wv[90];
     const double w1 = wv[91];
     out[0] = fabs(sin(x[2])*p->p_l1) + fabs(sin(x[3])*p->p_l2) + p->c[13];
-    out[1] = fabs(w0*cos(x[2])*p->p_l1) + fabs(w1*cos(x[3])*p->p_l2);
+    const double w107 = cos(x[3]);
+    const double w108 = cos(x[2]);
+    out[1] = (fabs(w0) + fabs(w1))*(fabs(w107*p->p_l2) + fabs(w108*p->p_l1)) + fabs(w0*w108*p->p_l1) + fabs(w1*w107*p->p_l2);
     bgc_work_free(w);
     return;
     fail:
@@ -626,11 +628,11 @@ void bgc_velocity_jac(double t, const double *x, const bgc_params *p, double *ou
     if (!w)
         goto fail;
     wv = w->v;
-    const double w107 = -x[3] + x[2];
-    const double w108 = cos(w107)*p->c[1];
+    const double w109 = -x[3] + x[2];
+    const double w110 = cos(w109)*p->c[1];
     wv[78] = p->c[0];
-    wv[79] = w108;
-    wv[80] = w108;
+    wv[79] = w110;
+    wv[80] = w110;
     wv[81] = p->c[2];
     wv[90] = x[0];
     wv[91] = x[1];
@@ -644,31 +646,31 @@ void bgc_velocity_jac(double t, const double *x, const bgc_params *p, double *ou
         goto fail;
     const double w26 = wv[90];
     const double w27 = wv[91];
-    const double w109 = cos(x[3]);
-    const double w110 = cos(x[2]);
-    out[0] = w109*w27*p->p_l2 + w110*w26*p->p_l1;
+    const double w111 = cos(x[3]);
+    const double w112 = cos(x[2]);
+    out[0] = w111*w27*p->p_l2 + w112*w26*p->p_l1;
     wv[90] = 0.0;
     wv[91] = 1.0;
     if (bgc_block_resolve(w, 0, t))
         goto fail;
     const double w28 = wv[90];
     const double w29 = wv[91];
-    out[1] = w109*w29*p->p_l2 + w110*w28*p->p_l1;
-    const double w111 = sin(w107);
-    wv[90] = w1*w111*p->c[1];
-    wv[91] = w0*w111*p->c[1];
+    out[1] = w111*w29*p->p_l2 + w112*w28*p->p_l1;
+    const double w113 = sin(w109);
+    wv[90] = w1*w113*p->c[1];
+    wv[91] = w0*w113*p->c[1];
     if (bgc_block_resolve(w, 0, t))
         goto fail;
     const double w30 = wv[90];
     const double w31 = wv[91];
-    out[2] = w0*sin(x[2])*p->c[7] + w109*w31*p->p_l2 + w110*w30*p->p_l1;
-    wv[90] = w1*w111*p->c[6];
-    wv[91] = w0*w111*p->c[6];
+    out[2] = w0*sin(x[2])*p->c[7] + w111*w31*p->p_l2 + w112*w30*p->p_l1;
+    wv[90] = w1*w113*p->c[6];
+    wv[91] = w0*w113*p->c[6];
     if (bgc_block_resolve(w, 0, t))
         goto fail;
     const double w32 = wv[90];
     const double w33 = wv[91];
-    out[3] = w1*sin(x[3])*p->c[8] + w109*w33*p->p_l2 + w110*w32*p->p_l1;
+    out[3] = w1*sin(x[3])*p->c[8] + w111*w33*p->p_l2 + w112*w32*p->p_l1;
     bgc_work_free(w);
     return;
     fail:

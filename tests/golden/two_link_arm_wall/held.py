@@ -783,7 +783,9 @@ def _scale_into(t, x, p, out):
         w0 = wv[90]
         w1 = wv[91]
         out[0] = abs(math.sin(x[2])*p[2]) + abs(math.sin(x[3])*p[3]) + p[23]
-        out[1] = abs(w0*math.cos(x[2])*p[2]) + abs(w1*math.cos(x[3])*p[3])
+        w107 = math.cos(x[3])
+        w108 = math.cos(x[2])
+        out[1] = (abs(w0) + abs(w1))*(abs(w107*p[3]) + abs(w108*p[2])) + abs(w0*w108*p[2]) + abs(w1*w107*p[3])
     except (ArithmeticError, ValueError):
         return _scale_into_ieee(t, x, p, out)
 
@@ -806,7 +808,9 @@ def _scale_into_ieee(t, x, p, out):
         w0 = wv[90]
         w1 = wv[91]
         out[0] = abs(_c_sin(x[2])*p[2]) + abs(_c_sin(x[3])*p[3]) + p[23]
-        out[1] = abs(w0*_c_cos(x[2])*p[2]) + abs(w1*_c_cos(x[3])*p[3])
+        w107 = _c_cos(x[3])
+        w108 = _c_cos(x[2])
+        out[1] = (abs(w0) + abs(w1))*(abs(w107*p[3]) + abs(w108*p[2])) + abs(w0*w108*p[2]) + abs(w1*w107*p[3])
 
 
 
@@ -844,11 +848,11 @@ def _velocity_jac_into(t, x, p, out):
     try:
         w = _Work()
         wv = w.v
-        w107 = -x[3] + x[2]
-        w108 = math.cos(w107)*p[11]
+        w109 = -x[3] + x[2]
+        w110 = math.cos(w109)*p[11]
         wv[78] = p[10]
-        wv[79] = w108
-        wv[80] = w108
+        wv[79] = w110
+        wv[80] = w110
         wv[81] = p[12]
         wv[90] = x[0]
         wv[91] = x[1]
@@ -860,28 +864,28 @@ def _velocity_jac_into(t, x, p, out):
         _block_resolve(w, 0, t)
         w26 = wv[90]
         w27 = wv[91]
-        w109 = math.cos(x[3])
-        w110 = math.cos(x[2])
-        out[0] = w109*w27*p[3] + w110*w26*p[2]
+        w111 = math.cos(x[3])
+        w112 = math.cos(x[2])
+        out[0] = w111*w27*p[3] + w112*w26*p[2]
         wv[90] = 0.0
         wv[91] = 1.0
         _block_resolve(w, 0, t)
         w28 = wv[90]
         w29 = wv[91]
-        out[1] = w109*w29*p[3] + w110*w28*p[2]
-        w111 = math.sin(w107)
-        wv[90] = w1*w111*p[11]
-        wv[91] = w0*w111*p[11]
+        out[1] = w111*w29*p[3] + w112*w28*p[2]
+        w113 = math.sin(w109)
+        wv[90] = w1*w113*p[11]
+        wv[91] = w0*w113*p[11]
         _block_resolve(w, 0, t)
         w30 = wv[90]
         w31 = wv[91]
-        out[2] = w0*math.sin(x[2])*p[17] + w109*w31*p[3] + w110*w30*p[2]
-        wv[90] = w1*w111*p[16]
-        wv[91] = w0*w111*p[16]
+        out[2] = w0*math.sin(x[2])*p[17] + w111*w31*p[3] + w112*w30*p[2]
+        wv[90] = w1*w113*p[16]
+        wv[91] = w0*w113*p[16]
         _block_resolve(w, 0, t)
         w32 = wv[90]
         w33 = wv[91]
-        out[3] = w1*math.sin(x[3])*p[18] + w109*w33*p[3] + w110*w32*p[2]
+        out[3] = w1*math.sin(x[3])*p[18] + w111*w33*p[3] + w112*w32*p[2]
     except (ArithmeticError, ValueError):
         return _velocity_jac_into_ieee(t, x, p, out)
 
@@ -893,11 +897,11 @@ def _velocity_jac_into_ieee(t, x, p, out):
         p = numpy.asarray(p, dtype=numpy.float64)
         w = _Work()
         wv = w.v
-        w107 = -x[3] + x[2]
-        w108 = _c_cos(w107)*p[11]
+        w109 = -x[3] + x[2]
+        w110 = _c_cos(w109)*p[11]
         wv[78] = p[10]
-        wv[79] = w108
-        wv[80] = w108
+        wv[79] = w110
+        wv[80] = w110
         wv[81] = p[12]
         wv[90] = x[0]
         wv[91] = x[1]
@@ -909,28 +913,28 @@ def _velocity_jac_into_ieee(t, x, p, out):
         _block_resolve(w, 0, t)
         w26 = wv[90]
         w27 = wv[91]
-        w109 = _c_cos(x[3])
-        w110 = _c_cos(x[2])
-        out[0] = w109*w27*p[3] + w110*w26*p[2]
+        w111 = _c_cos(x[3])
+        w112 = _c_cos(x[2])
+        out[0] = w111*w27*p[3] + w112*w26*p[2]
         wv[90] = 0.0
         wv[91] = 1.0
         _block_resolve(w, 0, t)
         w28 = wv[90]
         w29 = wv[91]
-        out[1] = w109*w29*p[3] + w110*w28*p[2]
-        w111 = _c_sin(w107)
-        wv[90] = w1*w111*p[11]
-        wv[91] = w0*w111*p[11]
+        out[1] = w111*w29*p[3] + w112*w28*p[2]
+        w113 = _c_sin(w109)
+        wv[90] = w1*w113*p[11]
+        wv[91] = w0*w113*p[11]
         _block_resolve(w, 0, t)
         w30 = wv[90]
         w31 = wv[91]
-        out[2] = w0*_c_sin(x[2])*p[17] + w109*w31*p[3] + w110*w30*p[2]
-        wv[90] = w1*w111*p[16]
-        wv[91] = w0*w111*p[16]
+        out[2] = w0*_c_sin(x[2])*p[17] + w111*w31*p[3] + w112*w30*p[2]
+        wv[90] = w1*w113*p[16]
+        wv[91] = w0*w113*p[16]
         _block_resolve(w, 0, t)
         w32 = wv[90]
         w33 = wv[91]
-        out[3] = w1*_c_sin(x[3])*p[18] + w109*w33*p[3] + w110*w32*p[2]
+        out[3] = w1*_c_sin(x[3])*p[18] + w111*w33*p[3] + w112*w32*p[2]
 
 
 

@@ -574,7 +574,9 @@ void bgc_scale(double t, const double *x, const bgc_params *p, double *out)
     const double w0 = wv[90];
     const double w1 = wv[91];
     out[0] = fabs(sin(x[2])*p->p_l1) + fabs(sin(x[3])*p->p_l2) + p->c[11];
-    out[1] = fabs(w0*cos(x[2])*p->p_l1) + fabs(w1*cos(x[3])*p->p_l2);
+    const double w98 = cos(x[3]);
+    const double w99 = cos(x[2]);
+    out[1] = (fabs(w0) + fabs(w1))*(fabs(w98*p->p_l2) + fabs(w99*p->p_l1)) + fabs(w0*w99*p->p_l1) + fabs(w1*w98*p->p_l2);
     bgc_work_free(w);
     return;
     fail:
@@ -607,11 +609,11 @@ void bgc_velocity_jac(double t, const double *x, const bgc_params *p, double *ou
     if (!w)
         goto fail;
     wv = w->v;
-    const double w98 = -x[3] + x[2];
-    const double w99 = cos(w98)*p->c[1];
+    const double w100 = -x[3] + x[2];
+    const double w101 = cos(w100)*p->c[1];
     wv[78] = p->c[0];
-    wv[79] = w99;
-    wv[80] = w99;
+    wv[79] = w101;
+    wv[80] = w101;
     wv[81] = p->c[2];
     wv[90] = x[0];
     wv[91] = x[1];
@@ -625,31 +627,31 @@ void bgc_velocity_jac(double t, const double *x, const bgc_params *p, double *ou
         goto fail;
     const double w23 = wv[90];
     const double w24 = wv[91];
-    const double w100 = cos(x[3]);
-    const double w101 = cos(x[2]);
-    out[0] = w100*w24*p->p_l2 + w101*w23*p->p_l1;
+    const double w102 = cos(x[3]);
+    const double w103 = cos(x[2]);
+    out[0] = w102*w24*p->p_l2 + w103*w23*p->p_l1;
     wv[90] = 0.0;
     wv[91] = 1.0;
     if (bgc_block_resolve(w, 0, t))
         goto fail;
     const double w25 = wv[90];
     const double w26 = wv[91];
-    out[1] = w100*w26*p->p_l2 + w101*w25*p->p_l1;
-    const double w102 = sin(w98);
-    wv[90] = w1*w102*p->c[1];
-    wv[91] = w0*w102*p->c[1];
+    out[1] = w102*w26*p->p_l2 + w103*w25*p->p_l1;
+    const double w104 = sin(w100);
+    wv[90] = w1*w104*p->c[1];
+    wv[91] = w0*w104*p->c[1];
     if (bgc_block_resolve(w, 0, t))
         goto fail;
     const double w27 = wv[90];
     const double w28 = wv[91];
-    out[2] = w0*sin(x[2])*p->c[6] + w100*w28*p->p_l2 + w101*w27*p->p_l1;
-    wv[90] = w1*w102*p->c[5];
-    wv[91] = w0*w102*p->c[5];
+    out[2] = w0*sin(x[2])*p->c[6] + w102*w28*p->p_l2 + w103*w27*p->p_l1;
+    wv[90] = w1*w104*p->c[5];
+    wv[91] = w0*w104*p->c[5];
     if (bgc_block_resolve(w, 0, t))
         goto fail;
     const double w29 = wv[90];
     const double w30 = wv[91];
-    out[3] = w1*sin(x[3])*p->c[7] + w100*w30*p->p_l2 + w101*w29*p->p_l1;
+    out[3] = w1*sin(x[3])*p->c[7] + w102*w30*p->p_l2 + w103*w29*p->p_l1;
     bgc_work_free(w);
     return;
     fail:

@@ -745,7 +745,9 @@ def _scale_into(t, x, p, out):
         w0 = wv[90]
         w1 = wv[91]
         out[0] = abs(math.sin(x[2])*p[2]) + abs(math.sin(x[3])*p[3]) + p[21]
-        out[1] = abs(w0*math.cos(x[2])*p[2]) + abs(w1*math.cos(x[3])*p[3])
+        w98 = math.cos(x[3])
+        w99 = math.cos(x[2])
+        out[1] = (abs(w0) + abs(w1))*(abs(w98*p[3]) + abs(w99*p[2])) + abs(w0*w99*p[2]) + abs(w1*w98*p[3])
     except (ArithmeticError, ValueError):
         return _scale_into_ieee(t, x, p, out)
 
@@ -768,7 +770,9 @@ def _scale_into_ieee(t, x, p, out):
         w0 = wv[90]
         w1 = wv[91]
         out[0] = abs(_c_sin(x[2])*p[2]) + abs(_c_sin(x[3])*p[3]) + p[21]
-        out[1] = abs(w0*_c_cos(x[2])*p[2]) + abs(w1*_c_cos(x[3])*p[3])
+        w98 = _c_cos(x[3])
+        w99 = _c_cos(x[2])
+        out[1] = (abs(w0) + abs(w1))*(abs(w98*p[3]) + abs(w99*p[2])) + abs(w0*w99*p[2]) + abs(w1*w98*p[3])
 
 
 
@@ -806,11 +810,11 @@ def _velocity_jac_into(t, x, p, out):
     try:
         w = _Work()
         wv = w.v
-        w98 = -x[3] + x[2]
-        w99 = math.cos(w98)*p[11]
+        w100 = -x[3] + x[2]
+        w101 = math.cos(w100)*p[11]
         wv[78] = p[10]
-        wv[79] = w99
-        wv[80] = w99
+        wv[79] = w101
+        wv[80] = w101
         wv[81] = p[12]
         wv[90] = x[0]
         wv[91] = x[1]
@@ -822,28 +826,28 @@ def _velocity_jac_into(t, x, p, out):
         _block_resolve(w, 0, t)
         w23 = wv[90]
         w24 = wv[91]
-        w100 = math.cos(x[3])
-        w101 = math.cos(x[2])
-        out[0] = w100*w24*p[3] + w101*w23*p[2]
+        w102 = math.cos(x[3])
+        w103 = math.cos(x[2])
+        out[0] = w102*w24*p[3] + w103*w23*p[2]
         wv[90] = 0.0
         wv[91] = 1.0
         _block_resolve(w, 0, t)
         w25 = wv[90]
         w26 = wv[91]
-        out[1] = w100*w26*p[3] + w101*w25*p[2]
-        w102 = math.sin(w98)
-        wv[90] = w1*w102*p[11]
-        wv[91] = w0*w102*p[11]
+        out[1] = w102*w26*p[3] + w103*w25*p[2]
+        w104 = math.sin(w100)
+        wv[90] = w1*w104*p[11]
+        wv[91] = w0*w104*p[11]
         _block_resolve(w, 0, t)
         w27 = wv[90]
         w28 = wv[91]
-        out[2] = w0*math.sin(x[2])*p[16] + w100*w28*p[3] + w101*w27*p[2]
-        wv[90] = w1*w102*p[15]
-        wv[91] = w0*w102*p[15]
+        out[2] = w0*math.sin(x[2])*p[16] + w102*w28*p[3] + w103*w27*p[2]
+        wv[90] = w1*w104*p[15]
+        wv[91] = w0*w104*p[15]
         _block_resolve(w, 0, t)
         w29 = wv[90]
         w30 = wv[91]
-        out[3] = w1*math.sin(x[3])*p[17] + w100*w30*p[3] + w101*w29*p[2]
+        out[3] = w1*math.sin(x[3])*p[17] + w102*w30*p[3] + w103*w29*p[2]
     except (ArithmeticError, ValueError):
         return _velocity_jac_into_ieee(t, x, p, out)
 
@@ -855,11 +859,11 @@ def _velocity_jac_into_ieee(t, x, p, out):
         p = numpy.asarray(p, dtype=numpy.float64)
         w = _Work()
         wv = w.v
-        w98 = -x[3] + x[2]
-        w99 = _c_cos(w98)*p[11]
+        w100 = -x[3] + x[2]
+        w101 = _c_cos(w100)*p[11]
         wv[78] = p[10]
-        wv[79] = w99
-        wv[80] = w99
+        wv[79] = w101
+        wv[80] = w101
         wv[81] = p[12]
         wv[90] = x[0]
         wv[91] = x[1]
@@ -871,28 +875,28 @@ def _velocity_jac_into_ieee(t, x, p, out):
         _block_resolve(w, 0, t)
         w23 = wv[90]
         w24 = wv[91]
-        w100 = _c_cos(x[3])
-        w101 = _c_cos(x[2])
-        out[0] = w100*w24*p[3] + w101*w23*p[2]
+        w102 = _c_cos(x[3])
+        w103 = _c_cos(x[2])
+        out[0] = w102*w24*p[3] + w103*w23*p[2]
         wv[90] = 0.0
         wv[91] = 1.0
         _block_resolve(w, 0, t)
         w25 = wv[90]
         w26 = wv[91]
-        out[1] = w100*w26*p[3] + w101*w25*p[2]
-        w102 = _c_sin(w98)
-        wv[90] = w1*w102*p[11]
-        wv[91] = w0*w102*p[11]
+        out[1] = w102*w26*p[3] + w103*w25*p[2]
+        w104 = _c_sin(w100)
+        wv[90] = w1*w104*p[11]
+        wv[91] = w0*w104*p[11]
         _block_resolve(w, 0, t)
         w27 = wv[90]
         w28 = wv[91]
-        out[2] = w0*_c_sin(x[2])*p[16] + w100*w28*p[3] + w101*w27*p[2]
-        wv[90] = w1*w102*p[15]
-        wv[91] = w0*w102*p[15]
+        out[2] = w0*_c_sin(x[2])*p[16] + w102*w28*p[3] + w103*w27*p[2]
+        wv[90] = w1*w104*p[15]
+        wv[91] = w0*w104*p[15]
         _block_resolve(w, 0, t)
         w29 = wv[90]
         w30 = wv[91]
-        out[3] = w1*_c_sin(x[3])*p[17] + w100*w30*p[3] + w101*w29*p[2]
+        out[3] = w1*_c_sin(x[3])*p[17] + w102*w30*p[3] + w103*w29*p[2]
 
 
 
