@@ -1054,10 +1054,62 @@ class _NotNumeric(Exception):
 
 
 def _number(expr, values) -> float:
+    """expr in doubles, given the doubles of its symbols (values: symbol -> float); a walk of
+    the tree without SymPy's arithmetic (the check at the start evaluates a whole model once).
+    Raises _NotNumeric for a symbol without a value; NaN where a function is undefined."""
+    done: dict = {}
+    stack = [(expr, False)]
+    while stack:
+        e, ready = stack.pop()
+        if e in done:
+            continue
+        if not ready:
+            if e.is_Symbol:
+                if e not in values:
+                    raise _NotNumeric(e)
+                done[e] = values[e]
+            elif e.is_Number or e.is_NumberSymbol:
+                done[e] = float(e)
+            else:
+                stack.append((e, True))
+                stack.extend((a, False) for a in e.args if a not in done)
+            continue
+        done[e] = _apply(e, [done[a] for a in e.args])
+    return done[expr]
+
+
+_FLOAT_FUNCTIONS = {"sin": math.sin, "cos": math.cos, "tan": math.tan, "asin": math.asin,
+                    "acos": math.acos, "atan": math.atan, "atan2": math.atan2,
+                    "sinh": math.sinh, "cosh": math.cosh, "tanh": math.tanh,
+                    "asinh": math.asinh, "atanh": math.atanh, "exp": math.exp, "log": math.log,
+                    "Abs": abs}
+
+
+def _apply(e, args) -> float:
     try:
-        return float(expr.xreplace(values))
-    except TypeError:
-        raise _NotNumeric(expr) from None
+        if e.is_Add:
+            return math.fsum(args)
+        if e.is_Mul:
+            out = 1.0
+            for a in args:
+                out *= a
+            return out
+        if e.is_Pow:
+            return math.pow(args[0], args[1])
+        name = type(e).__name__
+        if name in _FLOAT_FUNCTIONS:
+            return _FLOAT_FUNCTIONS[name](*args)
+        if name == "sign":
+            return math.copysign(1.0, args[0]) if args[0] != 0 else 0.0
+        if name == "Heaviside":
+            return 1.0 if args[0] > 0 else 0.0 if args[0] < 0 else 0.5
+        if name == "Min":
+            return min(args)
+        if name == "Max":
+            return max(args)
+    except (ValueError, OverflowError, ZeroDivisionError):
+        return math.nan
+    raise _NotNumeric(e)
 
 
 def evaluate(reduced: Reduced, values: dict, exprs) -> list[float]:
@@ -1068,11 +1120,16 @@ def evaluate(reduced: Reduced, values: dict, exprs) -> list[float]:
     import numpy  # only models whose rows go through a block come here
 
     body = ir.prune(list(reduced.steps) + [Store(k, e) for k, e in enumerate(exprs)])
-    v = dict(values)
+    v = {}
+    for k, value in values.items():
+        try:
+            v[k] = float(value)
+        except TypeError:
+            raise _NotNumeric(k) from None
     out = [0.0] * len(exprs)
     for s in body:
         if isinstance(s, Assign):
-            v[s.target] = sp.Float(_number(s.expr, v))
+            v[s.target] = _number(s.expr, v)
         elif isinstance(s, Store):
             out[s.index] = _number(s.expr, v)
         elif isinstance(s, Solve):
@@ -1088,7 +1145,7 @@ def evaluate(reduced: Reduced, values: dict, exprs) -> list[float]:
                 _singular_at_start(reduced, plan, s, A)
             z = numpy.linalg.solve(A, b)
             for c, u in zip(plan.lu.col_of, s.unknowns):
-                v[u] = sp.Float(float(z[c]))
+                v[u] = float(z[c])
         else:
             raise _NotNumeric(s)
     return out
