@@ -3,8 +3,10 @@
     python benchmarks/compile_scale.py [--quick] [--families a,b] [--repeats N]
                                        [--plot FILE.png] [--bondgraphtools PYTHON]
 
-The models are the four families of benchmarks/families.py (pendulum_chain compiled with its
-scene "swing", the others with the default scene), each at a range of sizes.  For every model:
+The models are the families of benchmarks/families.py (the chains compiled with their scene
+"swing", the others with the default scene), each at a range of sizes; link_chain_field is the
+constraint on a coupled field: an n-link chain in its link angles, one full n x n M(q), its end
+held on a line.  For every model:
 
   stages   bgc.build(...).timings (parse, resolve, flatten, scene, causality, equations, reduce, lower)
            and emit_c, timed inside a fresh Python process (this script run with the hidden
@@ -83,6 +85,7 @@ SIZES = {
     "mass_chain": (10, 30, 100, 300, 1000),
     "rc_ladder": (10, 30, 100, 300, 600, 1000),
     "resistor_ladder": (2, 4, 8, 16, 32, 64),
+    "link_chain_field": (2, 4, 8, 16, 32),
 }
 QUICK_SIZES = {
     "pendulum_chain": (2, 8, 16),
@@ -90,8 +93,9 @@ QUICK_SIZES = {
     "mass_chain": (10, 100),
     "rc_ladder": (10, 100),
     "resistor_ladder": (4, 16),
+    "link_chain_field": (2, 8),
 }
-SCENES = {"pendulum_chain": "swing", "pendulum_chain_vector": "swing"}
+SCENES = {"pendulum_chain": "swing", "pendulum_chain_vector": "swing", "link_chain_field": "swing"}
 STAGES = ("parse", "resolve", "flatten", "scene", "causality", "equations", "reduce", "lower",
           "emit")
 ARITHMETIC = ("add", "mul", "div", "call", "neg")
@@ -721,7 +725,8 @@ def plot(rows: list[Row], path: str) -> None:
     import matplotlib.pyplot as plt
 
     fig, (ax_compile, ax_cc) = plt.subplots(1, 2, figsize=(12, 4.8), sharey=True)
-    colors = dict(zip(SIZES, ("tab:blue", "tab:purple", "tab:orange", "tab:green", "tab:red")))
+    colors = dict(zip(SIZES, ("tab:blue", "tab:purple", "tab:orange", "tab:green", "tab:red",
+                              "tab:brown")))
     for (family, tool) in dict.fromkeys((r.family, r.tool) for r in rows):
         mine = sorted((r for r in rows if (r.family, r.tool) == (family, tool)),
                       key=lambda r: r.size)

@@ -166,10 +166,51 @@ def pendulum_chain_vector(n: int, theta0: float = 0.5, dtheta: float = 0.15) -> 
     return "\n".join(lines) + "\n"
 
 
+def link_chain_field(n: int, theta0: float = 0.5, dtheta: float = 0.15) -> str:
+    """An n-link pendulum chain in its link angles (each from the downward vertical), a point
+    mass m at each link's end: one I field whose n x n mass matrix is full and depends on every
+    angle, M_ij = m l^2 (n - max(i, j)) cos(th_i - th_j) (0-based: the masses beyond both links),
+    and one closing constraint, the last mass held on the vertical line through its start,
+    Phi = l sum sin(th_i) - x0, through its 1 x n Jacobian.  The constraint on a coupled field:
+    bgc solves M(q) f = p and the augmented system [M G^T; G 0] in the generated code."""
+    angles = [theta0 + k * dtheta for k in range(n)]
+    rows = []
+    for i in range(n):
+        row = []
+        for j in range(n):
+            count = n - max(i, j)
+            row.append(f"{count}*m*l^2" if i == j else
+                       f"{count}*m*l^2*cos(th[{i}] - th[{j}])")
+        rows.append("[" + ", ".join(row) + "]")
+    forces = ", ".join(f"-{n - i}*m*g*l*sin(th[{i}])" for i in range(n))
+    jac = ", ".join(f"l*cos(th[{i}])" for i in range(n))
+    tip = " + ".join(f"l*sin(th[{i}])" for i in range(n))
+    lines = [
+        f'model link_chain{n} "{n}-link chain in its link angles: a full {n} x {n} M(q), '
+        'its end held on a line"',
+        "parameter m = 1.0", "parameter l = 1.0", "parameter g = 9.81",
+        "parameter alpha = 10.0", "parameter beta = 10.0",
+        f"parameter x0 = {sum(__import__('math').sin(a) for a in angles)!r}",
+        f"w : 1[{n}]",
+        f"links : I[{n}]([{', '.join(rows)}])",
+        f"gravity : MSe[{n}]([{forces}])",
+        f"tip : MTF[{n}->1]([[{jac}]])",
+        f"wall : 0[1] constraint holonomic(phi = [{tip} - x0]) corrector pid(alpha, beta)",
+        f"signal th[{n}] = integral(w.f, init = [{', '.join(repr(a) for a in angles)}])",
+        "gravity -> w -> links",
+        "w -> tip -> wall",
+        "",
+        "scene swing { outputs th; time 0 .. 5 every 0.01; "
+        "solver dopri5(rtol = 1e-10, atol = 1e-12) }",
+    ]
+    return "\n".join(lines) + "\n"
+
+
 FAMILIES = {
     "pendulum_chain": pendulum_chain,
     "pendulum_chain_vector": pendulum_chain_vector,
     "mass_chain": mass_chain,
     "rc_ladder": rc_ladder,
     "resistor_ladder": resistor_ladder,
+    "link_chain_field": link_chain_field,
 }

@@ -223,10 +223,13 @@ def is_zero(expr: sp.Expr, points: int = 3, seed: int = 0) -> bool:
 
 def is_singular(rows: int, entries, points: int = 3, seed: int = 0) -> bool:
     """Whether the square matrix with these (row, column, expression) entries is singular
-    whatever the values of its symbols: its determinant, at random points in 30-digit
-    arithmetic, below 1e-20 of Hadamard's bound (the product of the rows' norms).  A
-    determinant that vanishes at several random points vanishes identically.  False when the
-    entries together are too large to evaluate (bgc.resources.fits)."""
+    whatever the values of its symbols: at random points, in 30-digit arithmetic, its rows
+    scaled to unit length, elimination with partial pivoting meets a pivot below 1e-20 (a
+    rank lost to the working precision's rounding, not to conditioning: the determinant
+    against Hadamard's bound, tried before, falls below any fixed threshold as the matrix
+    grows, a 32 x 32 mass matrix of a chain well within it).  A matrix singular at several
+    random points is singular identically.  False when the entries together are too large to
+    evaluate (bgc.resources.fits)."""
     if not fits(sp.Tuple(*(e for _, _, e in entries))):
         return False
     rng = random.Random(seed)
@@ -241,14 +244,34 @@ def is_singular(rows: int, entries, points: int = 3, seed: int = 0) -> bool:
                     a[i, j] = mpmath.mpf(sp.Float(e.xreplace(values).evalf(30), 30))
                 except (TypeError, ValueError):
                     return False  # not a real number there: no conclusion
-            bound = mpmath.mpf(1)
-            for i in range(rows):
-                bound *= mpmath.sqrt(sum(a[i, j] ** 2 for j in range(rows)))
-            if bound == 0:
-                continue
-            if abs(mpmath.det(a)) > mpmath.mpf("1e-20") * bound:
+            if not _loses_rank(a, rows):
                 return False
     return True
+
+
+def _loses_rank(a, n: int) -> bool:
+    """Elimination with partial pivoting of the n x n mpmath matrix a, its rows first scaled to
+    unit length: whether a pivot falls below 1e-20 (a zero row counts)."""
+    tiny = mpmath.mpf("1e-20")
+    for i in range(n):
+        norm = mpmath.sqrt(sum(a[i, j] ** 2 for j in range(n)))
+        if norm == 0:
+            return True
+        for j in range(n):
+            a[i, j] /= norm
+    for k in range(n):
+        piv = max(range(k, n), key=lambda i: abs(a[i, k]))
+        if abs(a[piv, k]) < tiny:
+            return True
+        if piv != k:
+            for j in range(n):
+                a[k, j], a[piv, j] = a[piv, j], a[k, j]
+        for i in range(k + 1, n):
+            f = a[i, k] / a[k, k]
+            if f:
+                for j in range(k + 1, n):
+                    a[i, j] -= f * a[k, j]
+    return False
 
 
 def is_symmetric(entries, points: int = 2, seed: int = 1) -> bool:

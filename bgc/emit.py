@@ -30,8 +30,9 @@ C_RUNTIME = ("runtime.c", "drive.c", "erk.c", "stiff.c", "main.c", "batch.c")  #
 PLAN_ARRAYS = ("diag", "lptr", "lpos", "lrow", "uptr", "upos", "ucol", "upd", "prow", "pcol")
 MODEL_FUNCTIONS = ("rhs", "outputs", "jvp")  # take the workspace, may solve blocks; so do
 #                                               a program's extra functions (bgc.lower.with_tangent)
-PLAIN_FUNCTIONS = ("residual", "scale", "position_jac", "velocity_jac")
-SPARSE_FUNCTIONS = ("position_jac", "velocity_jac")  # store their nonzero entries only
+PLAIN_FUNCTIONS = ("residual", "scale", "position_jac", "velocity_jac", "velocity_metric")
+SPARSE_FUNCTIONS = ("position_jac", "velocity_jac", "velocity_metric")  # store their nonzero
+#                                                                         entries only
 
 
 class EmitError(ValueError):
@@ -107,6 +108,7 @@ class _Writer:
         self.c = lang == "c"
         self.function = ""  # the IR function being written (names its Newton functions)
         self.used: set = set()  # the symbols the function reads
+        self.on_failure = "return 1;"  # C: what a failed block solve does
 
     def newton_name(self, block: int) -> str:
         return (f"bgc_{self.function}_block{block}" if self.c
@@ -152,7 +154,7 @@ class _Writer:
             call = "bgc_block_solve" if isinstance(s, Solve) else "bgc_block_resolve"
             if self.c:
                 lines.append(f"if ({call}(w, {s.block}, {t_name}))")
-                lines.append("    return 1;")
+                lines.append(f"    {self.on_failure}")
             else:
                 lines.append(f"_{call[4:]}(w, {s.block}, {t_name})")
             targets = s.unknowns if isinstance(s, Solve) else s.targets
@@ -218,10 +220,27 @@ def _function_context(writer: _Writer, name: str, out_name: str) -> dict:
 
 
 def _plain_lines(writer: _Writer, name: str, out_name: str) -> list[str]:
+    """A function without the workspace argument.  The constraint rows of a field whose flows
+    solve M(q) f = p read a linear block: such a function makes a workspace of its own for the
+    block's storage (it runs at the start of a run, not per step), and its results are NaN if
+    the block is singular."""
     writer.printer.names = {}
+    f = writer.program.function(name)
+    writer.used = set().union(*[ir.uses(s) for s in f.body]) if f.body else set()
+    solves = any(isinstance(s, (Solve, Resolve)) for s in f.body)
+    writer.on_failure = "goto fail;"
     lines = []
-    for s in writer.program.function(name).body:
+    if solves:
+        lines += ["bgc_work *w = bgc_work_new(); /* its algebraic blocks' storage */",
+                  "double *wv;", "int k;", "if (!w)", "    goto fail;", "wv = w->v;"] \
+            if writer.c else ["w = _Work()", "wv = w.v"]
+    for s in f.body:
         lines += writer.statement(s, out_name)
+    if solves and writer.c:
+        lines += ["bgc_work_free(w);", "return;", "fail:",
+                  f"for (k = 0; k < {max(f.size, 1)}; k++)", f"    {out_name}[k] = NAN;",
+                  "bgc_work_free(w);"]
+    writer.on_failure = "return 1;"
     return lines
 
 
@@ -537,7 +556,8 @@ def _validate(program: Program) -> None:
     sizes = {"init": n, "rhs": n, "jvp": n, "outputs": len(program.outputs),
              "residual": len(program.constraints), "scale": len(program.constraints),
              "position_jac": len(program.position_rows) * n,
-             "velocity_jac": len(program.velocity_rows) * n}
+             "velocity_jac": len(program.velocity_rows) * n,
+             "velocity_metric": len(program.velocity_rows) * n}
     sizes.update((k, f.size) for k, f in program.functions.items() if k not in sizes)
     for name, size in sizes.items():
         f = program.function(name)
@@ -559,7 +579,10 @@ def _validate(program: Program) -> None:
     for name in ("init", "consts"):
         if _uses_more_than_parameters(program.function(name)):
             raise EmitError(f"the {name} function may use parameters only")
-    for name in PLAIN_FUNCTIONS + ("init", "consts"):
+    for name in PLAIN_FUNCTIONS:
+        if any(isinstance(s, Newton) for s in program.function(name).body):
+            raise EmitError(f"the {name} function cannot solve nonlinear blocks")
+    for name in ("init", "consts"):
         if any(not isinstance(s, (Assign, Store)) for s in program.function(name).body):
             raise EmitError(f"the {name} function cannot solve algebraic blocks")
     for j, param in enumerate(program.params):

@@ -53,6 +53,20 @@ def _scalar(e: Expr | None, what: str) -> Expr | None:
     return e
 
 
+def _one_row(el: Element) -> Element:
+    """A scalar constraint junction (also 0[1]) whose annotation or gains are written as
+    vectors of one row: their entry."""
+    c = el.constraint
+    if c is None:
+        return el
+    gains = [_part(g, _rows(g, 1, f"a gain of '{el.name}'", False)[0]) for g in c.gains]
+    ann = c.annotation
+    if ann is not None:
+        which, e = ann
+        ann = (which, _part(e, _rows(e, 1, f"the '{which}' of '{el.name}'", False)[0]))
+    return replace(el, constraint=replace(c, gains=tuple(gains), annotation=ann))
+
+
 def _rows(e: Expr, n: int, what: str, diagonal_ok: bool) -> list:
     """The n component values of a multiport's value: a scalar broadcast, a vector of n, or
     (diagonal_ok) a diagonal n x n matrix."""
@@ -213,13 +227,15 @@ def flatten(g: Graph) -> Graph:
     """The scalar graph of g (g itself when it has no multiport and no vector signal)."""
     diags = Collector()
     if not any(el.dim for el in g.elements) and not any(s.dim for s in g.signals):
+        elements = []
         for el in g.elements:
             try:
                 _scalar(el.value, f"'{el.name}'")
+                elements.append(_one_row(el))
             except ModelError as exc:
                 diags.items.extend(exc.diagnostics)
         diags.raise_if_errors()
-        return g
+        return replace(g, elements=tuple(elements)) if elements != list(g.elements) else g
     _check_size(g)
     elements: list[Element] = []
     bonds: list[Bond] = []
@@ -228,7 +244,7 @@ def flatten(g: Graph) -> Graph:
         try:
             if el.dim is None:
                 _scalar(el.value, f"'{el.name}'")
-                elements.append(el)
+                elements.append(_one_row(el))
                 continue
             n, m = el.dim
             vectors.append(Vector(el.name, "element", m, el.kind, el.constraint is not None))

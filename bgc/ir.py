@@ -290,7 +290,8 @@ def map_statement(s, fn):
 
 @dataclass(frozen=True)
 class Function:
-    name: str  # consts init rhs outputs jvp residual scale position_jac velocity_jac, ...
+    name: str  # consts init rhs outputs jvp residual scale position_jac velocity_jac
+    #            velocity_metric, ...
     args: tuple[str, ...]  # of t, x, p, v
     size: int  # of its result array
     body: tuple
@@ -333,7 +334,7 @@ class JacobianPattern:
 
 
 FUNCTION_NAMES = ("consts", "init", "rhs", "outputs", "jvp", "residual", "scale",
-                  "position_jac", "velocity_jac")
+                  "position_jac", "velocity_jac", "velocity_metric")
 
 
 @dataclass(frozen=True)

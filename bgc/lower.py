@@ -18,13 +18,13 @@ symbols; every function of the program is built from them by the same passes:
 """
 from __future__ import annotations
 
-from dataclasses import replace
+from dataclasses import dataclass, replace
 
 import sympy as sp
 
 from . import ir
 from .differentiate import partial
-from .tangent import tangent
+from .tangent import jacobian, tangent
 from .graph import TIME, var
 from .ir import (C, P, T, V, X, Assign, BlockPlan, ConstraintRow, Function, JacobianPattern,
                  Newton, Param, Program, SceneSettings, Solve, Store, as_expr)
@@ -309,11 +309,43 @@ def functions(reduced: Reduced) -> dict:
     rows, t0 = reduced.rows, sp.Float(reduced.run.t0)
     position = [r.expr for r in rows if r.level == "position"]
     velocity = [r.expr for r in rows if r.level == "velocity"]
-    return _specs([st.init.xreplace({TIME: t0}) for st in reduced.states], reduced.rates,
-                  [o.expr for o in reduced.outputs], [r.expr for r in rows],
-                  [r.scale for r in rows], (len(position) * len(states),
-                                            _row_jacobian(position, states)),
-                  (len(velocity) * len(states), _row_jacobian(velocity, states)))
+    leaves = {TIME} | set(states) | {var(p.name) for p in reduced.parameters}
+
+    def jacobian(exprs):
+        size = len(exprs) * len(states)
+        if all(e.free_symbols <= leaves for e in exprs):
+            return size, _row_jacobian(exprs, states)
+        return size, _Through(tuple(exprs))  # rows that read a block's unknowns
+
+    index = {s: i for i, s in enumerate(states)}
+    metric = [Store(k * len(states) + index[p], d)
+              for k, r in enumerate(r for r in rows if r.level == "velocity")
+              for p, d in r.weights if d != 0]
+    specs = _specs([st.init.xreplace({TIME: t0}) for st in reduced.states], reduced.rates,
+                   [o.expr for o in reduced.outputs], [r.expr for r in rows],
+                   [r.scale for r in rows], jacobian(position), jacobian(velocity))
+    specs["velocity_metric"] = (("t", "x", "p"), len(velocity) * len(states), metric)
+    return specs
+
+
+@dataclass(frozen=True)
+class _Through:
+    """The rows of a Jacobian that is derived through the steps (bgc.tangent.jacobian): the
+    rows read the unknowns of a block (the flows of a coupled field), not the states alone."""
+
+    rows: tuple
+
+
+def velocity_movable(rows, states) -> tuple[bool, ...]:
+    """The states that the projection onto the velocity rows moves: the momenta those rows
+    read (by the kinetic metric, see bgc.reduce's _Weights), the positions held; when they
+    read no momentum (a constraint on other stores), every state the position rows leave."""
+    position = [r.expr for r in rows if r.level == "position"]
+    in_position = set().union(*[e.free_symbols for e in position]) if position else set()
+    weighed = {p for r in rows for p, d in r.weights if d != 0}
+    if weighed:
+        return tuple(s in weighed and s not in in_position for s in states)
+    return tuple(s not in in_position for s in states)
 
 
 def _specs(init, rhs, outputs, residual, scale, position_jac, velocity_jac) -> dict:
@@ -343,9 +375,7 @@ def lower(reduced: Reduced) -> Program:
     rows = reduced.rows
     fns = _build(mapper, reduced.steps, functions(reduced), len(states))
     params = tuple(Param(p.name, mapper.expr(p.expr)) for p in reduced.parameters)
-    position = [r.expr for r in rows if r.level == "position"]
-    in_position = set().union(*[e.free_symbols for e in position]) if position else set()
-    movable = tuple(s not in in_position for s in states)
+    movable = velocity_movable(rows, states)
     run = reduced.run
     scene = SceneSettings(run.t0, run.t_end, run.dt, run.solver, run.rtol, run.atol, run.step)
     return finish(reduced.name, tuple(st.name for st in reduced.states), params,
@@ -358,8 +388,14 @@ def _build(mapper: _Mapper, steps, specs: dict, n: int) -> dict:
     """Each function from what its results need of the steps, in the IR's symbols; then the
     tangents (after the primal functions, so that their variables are numbered after)."""
     steps = list(steps)
-    out = {name: mapper.function(name, args, ir.prune(steps + stores), size)
-           for name, (args, size, stores) in specs.items()}
+    out = {}
+    for name, (args, size, stores) in specs.items():
+        if isinstance(stores, _Through):
+            rows = mapper.function(name, args, ir.prune(steps + _stores(stores.rows)),
+                                   len(stores.rows))
+            out[name], mapper.count = jacobian(rows, name, n, mapper.plans, mapper.count)
+        else:
+            out[name] = mapper.function(name, args, ir.prune(steps + stores), size)
     for name, of in TANGENTS.items():
         out[name], mapper.count = tangent(out[of], name, {X[i]: V[i] for i in range(n)},
                                           mapper.plans, mapper.count)
@@ -427,13 +463,16 @@ def finish(name, states, params, outputs, constraints, movable, scene, functions
 
 def explicit_program(name, states, params, outputs, init, rhs, out, scene,
                      constraints=(), residual=(), scale=(), position_jac=(), velocity_jac=(),
-                     velocity_movable=None) -> Program:
+                     velocity_movable=None, velocity_metric=None) -> Program:
     """A program from explicit expressions over the IR's own symbols (x[i], p[j], t): for
     tests and for code that builds models without the front end.  jvp is derived as for
-    compiled models."""
+    compiled models; the velocity projection's metric is the identity unless given (as the
+    rows of velocity_jac times M)."""
     n = len(states)
     specs = _specs(init, rhs, out, residual, scale, (len(position_jac), _stores(position_jac)),
                    (len(velocity_jac), _stores(velocity_jac)))
+    metric = velocity_jac if velocity_metric is None else velocity_metric
+    specs["velocity_metric"] = (("t", "x", "p"), len(metric), _stores(metric))
     mapper = _Mapper({})
     fns = _build(mapper, (), specs, n)
     movable = tuple(velocity_movable) if velocity_movable is not None else (True,) * n

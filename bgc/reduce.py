@@ -27,13 +27,13 @@ model's symbols (Assign, and Solve or Newton for the blocks solved numerically).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import mpmath  # SymPy's own: a number beyond a double, shown
 import sympy as sp
 
-from . import blt
-from .ir import Assign, BlockPlan, Newton, Solve, defines
+from . import blt, ir
+from .ir import Assign, BlockPlan, Newton, Solve, Store, defines
 from .algebra import (antiderivative, expand_bounded, is_singular, is_symmetric, is_zero,
                       solve_for)
 from .diagnostics import Collector, ModelError, Span, fail, warning
@@ -98,6 +98,8 @@ class ConstraintRow:
     level: str  # "position" (holonomic Phi) or "velocity" (dPhi/dt, or nonholonomic Phi)
     expr: sp.Expr
     scale: sp.Expr  # the row holds when |expr| <= 1e-9 * scale
+    weights: tuple = ()  # velocity rows: (p, d row / d v) of each momentum p whose velocity v
+    #                      the row reads; the projection moves p by M(q) in these directions
 
 
 @dataclass(frozen=True)
@@ -242,7 +244,8 @@ class _Coordinates:
         self.others = set(sys.states) - set(self.coords)
         frozen = set()
         for st in self.integrals:
-            frozen |= {_alias_end(u, defs) for u in sys.eqs[der(st.symbol)].expr.free_symbols}
+            frozen |= {_alias_end(u, defs, sys.eqs)
+                       for u in sys.eqs[der(st.symbol)].expr.free_symbols}
         self.frozen = frozen
         self.memo: dict = {}
         self.solved: dict = {}
@@ -302,7 +305,7 @@ class _Coordinates:
         coeffs = {q: coeffs[q] for q in self.coords if q in coeffs}
         if any(co.free_symbols & rates.keys() for co in coeffs.values()):
             return None, "it is not linear in the coordinate rates"
-        a0 = expand_bounded(balance.xreplace({r: 0 for r in rates}))
+        a0 = expand_bounded(balance.xreplace({r: sp.Integer(0) for r in rates}))
         if a0 is None:
             fail(c.name_span, f"the flow balance of constraint junction '{c.junction}' is too "
                               f"large to expand (more than {MAX_EXPANDED_TERMS} terms)")
@@ -313,10 +316,13 @@ def _multipliers(sys):
     return [c.multiplier for c in sys.es.constraints]
 
 
-def _alias_end(s, defs):
-    """What s is a plain alias of at the end of its chain (vx.f -> f[vx->mx])."""
+def _alias_end(s, defs, eqs):
+    """What s is a plain alias of at the end of its chain (vx.f -> f[vx->mx]): an explicitly
+    defined symbol, or the unknown of an implicit equation (a flow of a coupled I field, which
+    solves M f = p with the others)."""
     seen = {s}
-    while isinstance(defs.get(s), sp.Symbol) and defs[s] in defs and defs[s] not in seen:
+    while isinstance(defs.get(s), sp.Symbol) and defs[s] not in seen and \
+            (defs[s] in defs or (defs[s] in eqs and not eqs[defs[s]].explicit)):
         s = defs[s]
         seen.add(s)
     return s
@@ -646,6 +652,12 @@ class _Blocks:
         for i, k, e in matrix:
             A[i, k] = _leaf(e, defs, lambda s: s in defs, memo)
         if m <= SINGULAR_CHECK_MAX and is_singular(m, [(i, k, A[i, k]) for i, k, _ in matrix]):
+            rows = _dependent_rows(self.sys, z, _at_random_point(A))
+            if rows:
+                fail(rows[0].name_span, f"the constraint rows {_listed(rows)} are not "
+                                        "independent, whatever the state: their multipliers "
+                                        "cannot be determined.  Remove the rows that repeat "
+                                        "or combine the others")
             names = ", ".join(f"'{o}'" for o in origins)
             fail(span, f"the equations through {names} are singular: "
                        f"{', '.join(s.name for s in z)} cannot be determined")
@@ -723,6 +735,44 @@ class _Blocks:
                 if entry != 0:
                     entries.append((i, k, entry))
         return tuple(entries)
+
+
+def _at_random_point(A: sp.Matrix):
+    """A's values at a random point of its symbols (a seeded generator: the same point every
+    run), as floats; None where it is not real there."""
+    import random
+
+    rng = random.Random(1)
+    symbols = sorted(A.free_symbols, key=lambda s: s.name)
+    point = {s: sp.Float(rng.uniform(0.3, 1.7)) for s in symbols}
+    try:
+        return [[float(A[i, k].xreplace(point)) for k in range(A.cols)] for i in range(A.rows)]
+    except (TypeError, ValueError):
+        return None
+
+
+def _dependent_rows(sys: _System, z, values) -> list:
+    """The constraint junctions whose multipliers are among the unknowns z of a singular block
+    and take part in its dependence (nonzero in a null vector of its matrix, given as rows of
+    floats): the rows that are not independent."""
+    import numpy
+
+    by_multiplier = {c.multiplier: c for c in sys.es.constraints}
+    involved = [k for k, u in enumerate(z) if u in by_multiplier]
+    if not involved or values is None:
+        return []
+    A = numpy.array(values, dtype=float)
+    if not numpy.all(numpy.isfinite(A)):
+        return []
+    _, sv, vt = numpy.linalg.svd(A)
+    null = vt[-1]
+    big = numpy.abs(null).max()
+    rows = [by_multiplier[z[k]] for k in involved if abs(null[k]) > 1e-6 * big]
+    return rows or [by_multiplier[z[k]] for k in involved]
+
+
+def _listed(rows) -> str:
+    return ", ".join(f"'{c.junction}'" for c in rows)
 
 
 def _chain(parts, tangent, k):
@@ -892,6 +942,8 @@ def _rows(sys, infos, kept) -> list[ConstraintRow]:
     integrate are left out)."""
     kept_symbols = {st.symbol for st in kept}
     all_states = set(sys.states)
+    balances = {c.junction: c.balance for c in sys.es.constraints}
+    weigh = _Weights(sys)
     rows = []
     for c in infos:
         levels = ([("position", c.phi)] if c.kind == "holonomic" else []) + \
@@ -899,8 +951,60 @@ def _rows(sys, infos, kept) -> list[ConstraintRow]:
         for level, expr in levels:
             if (expr.free_symbols & all_states) - kept_symbols:
                 continue
-            rows.append(ConstraintRow(c.junction, level, expr, scale_of(expr)))
-    return rows
+            weights = weigh(balances[c.junction]) if level == "velocity" else ()
+            rows.append(ConstraintRow(c.junction, level, expr, scale_of(expr), weights))
+    # A velocity row's terms may all vanish where it holds (the tip's sideways velocity, one
+    # term): its scale then also counts the speeds of the momenta the velocity rows read,
+    # through its weights, so that it holds to 1e-9 of the system's motion, not of nothing.
+    speeds = weigh.speeds({p for r in rows for p, _ in r.weights})
+    return [replace(r, scale=r.scale + sp.Add(*[sp.Abs(d, evaluate=False) for _, d in r.weights])
+                    * speeds) if r.weights and speeds != 0 else r for r in rows]
+
+
+class _Weights:
+    """The velocity rows' derivatives by the velocities of the momenta they read: a row is
+    the balance of its junction's flows, written here in those velocities (the flows of the
+    I elements held as they are), differentiated by each, then written in the states.  With
+    them the projection onto the velocity rows moves the momenta by the kinetic metric: the
+    smallest change of kinetic energy, as an impulse of the constraint would, which for a
+    coupled field is dp = G^T mu whatever M(q) is."""
+
+    def __init__(self, sys: _System):
+        self.sys = sys
+        self.defs = _explicit_defs(sys)
+        self.momenta = [(p, f, sign) for p, f, sign in sys.es.momenta if p in sys.states]
+        self.frozen = {f for _, f, _ in self.momenta}
+        self.memo: dict = {}
+        self.memo_all: dict = {}
+
+    def __call__(self, balance) -> tuple:
+        defs, sys = self.defs, self.sys
+
+        def held(s):
+            return s in defs and s not in self.frozen and not sys.is_leaf(s)
+
+        try:
+            in_flows = _leaf(defs[balance], defs, held, self.memo)
+            out = []
+            for p, f, sign in self.momenta:
+                if f in in_flows.free_symbols:
+                    d = sign * partial(in_flows, f)
+                    out.append((p, _leaf(d, defs, lambda s: s in defs and not sys.is_leaf(s),
+                                         self.memo_all)))
+        except _Cycle:
+            return ()
+        return tuple(out)
+
+    def speeds(self, moved) -> sp.Expr:
+        """The sum of the magnitudes of the velocities of the momenta in moved, in the states
+        (a coupled field's through its block)."""
+        defs, sys = self.defs, self.sys
+        try:
+            return sp.Add(*[sp.Abs(_leaf(sign * f, defs, lambda s: s in defs and
+                                         not sys.is_leaf(s), self.memo_all), evaluate=False)
+                            for p, f, sign in self.momenta if p in moved])
+        except _Cycle:
+            return sp.Integer(0)
 
 
 def scale_of(expr):
@@ -945,13 +1049,153 @@ def parameter_values(parameters) -> dict:
     return values
 
 
+class _NotNumeric(Exception):
+    """An expression that the initial values do not make a number (a Newton block's unknown)."""
+
+
+def _number(expr, values) -> float:
+    """expr in doubles, given the doubles of its symbols (values: symbol -> float); a walk of
+    the tree without SymPy's arithmetic (the check at the start evaluates a whole model once).
+    Raises _NotNumeric for a symbol without a value; NaN where a function is undefined."""
+    done: dict = {}
+    stack = [(expr, False)]
+    while stack:
+        e, ready = stack.pop()
+        if e in done:
+            continue
+        if not ready:
+            if e.is_Symbol:
+                if e not in values:
+                    raise _NotNumeric(e)
+                done[e] = values[e]
+            elif e.is_Number or e.is_NumberSymbol:
+                done[e] = float(e)
+            else:
+                stack.append((e, True))
+                stack.extend((a, False) for a in e.args if a not in done)
+            continue
+        done[e] = _apply(e, [done[a] for a in e.args])
+    return done[expr]
+
+
+_FLOAT_FUNCTIONS = {"sin": math.sin, "cos": math.cos, "tan": math.tan, "asin": math.asin,
+                    "acos": math.acos, "atan": math.atan, "atan2": math.atan2,
+                    "sinh": math.sinh, "cosh": math.cosh, "tanh": math.tanh,
+                    "asinh": math.asinh, "atanh": math.atanh, "exp": math.exp, "log": math.log,
+                    "Abs": abs}
+
+
+def _apply(e, args) -> float:
+    try:
+        if e.is_Add:
+            return math.fsum(args)
+        if e.is_Mul:
+            out = 1.0
+            for a in args:
+                out *= a
+            return out
+        if e.is_Pow:
+            return math.pow(args[0], args[1])
+        name = type(e).__name__
+        if name in _FLOAT_FUNCTIONS:
+            return _FLOAT_FUNCTIONS[name](*args)
+        if name == "sign":
+            return math.copysign(1.0, args[0]) if args[0] != 0 else 0.0
+        if name == "Heaviside":
+            return 1.0 if args[0] > 0 else 0.0 if args[0] < 0 else 0.5
+        if name == "Min":
+            return min(args)
+        if name == "Max":
+            return max(args)
+    except (ValueError, OverflowError, ZeroDivisionError):
+        return math.nan
+    raise _NotNumeric(e)
+
+
+def evaluate(reduced: Reduced, values: dict, exprs) -> list[float]:
+    """exprs at the given values of the parameters, states and time, through the steps they
+    need: the rows of a constraint on a coupled field read its flows, which solve M(q) f = p.
+    Raises _NotNumeric where a step cannot be evaluated here, ModelError where a linear block
+    is singular at these values (naming its equations)."""
+    import numpy  # only models whose rows go through a block come here
+
+    body = ir.prune(list(reduced.steps) + [Store(k, e) for k, e in enumerate(exprs)])
+    v = {}
+    for k, value in values.items():
+        try:
+            v[k] = float(value)
+        except TypeError:
+            raise _NotNumeric(k) from None
+    out = [0.0] * len(exprs)
+    for s in body:
+        if isinstance(s, Assign):
+            v[s.target] = _number(s.expr, v)
+        elif isinstance(s, Store):
+            out[s.index] = _number(s.expr, v)
+        elif isinstance(s, Solve):
+            plan = reduced.plans[s.block]
+            m = len(s.unknowns)
+            A = numpy.zeros((m, m))
+            for (i, k), e in zip(plan.pattern, s.matrix):
+                A[i, k] = _number(e, v)
+            b = numpy.zeros(m)
+            for r, e in zip(plan.lu.row_of, s.rhs):
+                b[r] = _number(e, v)
+            if not numpy.all(numpy.isfinite(A)) or numpy.linalg.matrix_rank(A) < m:
+                _singular_at_start(reduced, plan, s, A)
+            z = numpy.linalg.solve(A, b)
+            for c, u in zip(plan.lu.col_of, s.unknowns):
+                v[u] = float(z[c])
+        else:
+            raise _NotNumeric(s)
+    return out
+
+
+def _singular_at_start(reduced: Reduced, plan: BlockPlan, s: Solve, A):
+    """A located error for a linear block that is singular at the initial state: the constraint
+    rows that lose their independence there, or the block's equations."""
+    info = reduced.blocks[plan.index - 1]
+    z = [None] * len(s.unknowns)
+    for c, u in zip(plan.lu.col_of, s.unknowns):
+        z[c] = u
+    by_multiplier = {c.multiplier: c for c in reduced.constraints}
+    if any(u in by_multiplier for u in z):
+        import numpy
+
+        rows = []
+        if numpy.all(numpy.isfinite(A)):
+            null = numpy.linalg.svd(A)[2][-1]
+            big = numpy.abs(null).max()
+            rows = [by_multiplier[u] for k, u in enumerate(z)
+                    if u in by_multiplier and abs(null[k]) > 1e-6 * big]
+        rows = rows or [by_multiplier[u] for u in z if u in by_multiplier]
+        if len(rows) == 1:
+            fail(rows[0].name_span, f"constraint {_listed(rows)} has a zero Jacobian at the "
+                                    "initial state (a singular configuration): its multiplier "
+                                    "cannot be determined.  Start from another configuration")
+        fail(rows[0].name_span, f"the constraint rows {_listed(rows)} are not independent at "
+                                "the initial state (their Jacobian loses rank there, a "
+                                "singular configuration): their multipliers cannot be "
+                                "determined.  Start from another configuration, or remove a "
+                                "row that repeats or combines the others")
+    fail(info.span, f"block {plan.index} ({', '.join(info.unknowns)}) is singular at the "
+                    "initial state: its equations do not determine its unknowns there (through "
+                    f"{', '.join(info.origins)})")
+
+
 def check_initial(reduced: Reduced):
     values = initial_values(reduced)
     diags = Collector()
     kinds = {c.junction: c for c in reduced.constraints}
-    for row in reduced.rows:
-        r = float(row.expr.xreplace(values))
-        s = float(row.scale.xreplace(values))
+    rows = reduced.rows
+    try:
+        numbers = evaluate(reduced, values, [r.expr for r in rows] + [r.scale for r in rows])
+        if reduced.constraints:  # the multipliers' block, solvable at the start?
+            evaluate(reduced, values, reduced.rates)
+    except _NotNumeric:
+        return  # a row through a Newton block: the generated program checks it
+    for k, row in enumerate(rows):
+        r, s = numbers[k], numbers[len(rows) + k]
         if abs(r) > RELATIVE_TOLERANCE * s:
             c = kinds[row.junction]
             what = "Phi" if row.level == "position" else "dPhi/dt" if c.kind == "holonomic" \

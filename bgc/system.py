@@ -22,6 +22,7 @@ import sympy as sp
 from .algebra import solve_for
 from .causality import CausalGraph
 from .diagnostics import Collector, ModelError, Span, did_you_mean, fail
+from .differentiate import partial
 from .graph import TIME, Element, Graph, part_name, var, variable_name
 from .run import RunSettings
 from .scene import parameter_values
@@ -109,6 +110,8 @@ class EquationSystem:
     run: RunSettings  # the scene's
     warnings: tuple = ()
     fields: tuple = ()  # (field, coordinates of the Hamiltonian correction) of coupled I fields
+    momenta: tuple = ()  # (p, f, sign) of each I state in integral causality: its velocity
+    #                      is sign * f, f a bond flow (the projection's kinetic metric)
 
 
 class _Builder:
@@ -123,6 +126,8 @@ class _Builder:
         self.constraints: list[ConstraintDef] = []
         self.fields: dict[str, None] = {}  # coupled I fields, in order
         self.hamiltonian: dict[str, list[str]] = {}  # ... whose M depends on own coordinates
+        self.momenta: list = []
+        self._field_entries: dict = {}
         self._integrals = None
 
     def emit(self, target, expr, el: Element | str, span, explicit=True):
@@ -207,6 +212,7 @@ class _Builder:
         if integral:
             if st == "p":
                 self.emit(f, s * law, el, el.span)
+                self.momenta.append((state, f, s))
                 rate = e
             else:
                 self.emit(e, law, el, el.span)
@@ -243,26 +249,42 @@ class _Builder:
             fail(el.span, f"'{origin}' is a coupled I field (a non-diagonal mass matrix) and its "
                           f"component {i} gets derivative causality (its flow is imposed): not "
                           "supported; impose the flow on a scalar element instead")
-        flows, own = [], None
+        flows, own, sign = [], None, 1
         for j in range(n):
             part = part_name(origin, j)
             ((_, b),) = self.incident(part)
             flows.append((1 if b.dst == part else -1) * bond_flow(b.label))
-            own = bond_flow(b.label) if j == i else own
+            if j == i:
+                own, sign = bond_flow(b.label), (1 if b.dst == part else -1)
         state = var(variable_name(el.name, "p"))
+        self.momenta.append((state, own, sign))
         self.emit(own, sp.Add(*[M[i, j] * flows[j] for j in range(n)]) - state, el, el.span,
                   explicit=False)
         rate = e
         coordinate = self._coordinate_of(part_name(origin, i))
-        if coordinate is not None and M.has(coordinate):
-            dM = M.diff(coordinate)
-            rate = e + sp.Rational(1, 2) * sp.Add(*[flows[j] * dM[j, k] * flows[k]
-                                                     for j in range(n) for k in range(n)])
+        entries = self._entries_with(origin, M).get(coordinate, ())
+        if coordinate is not None and entries:
+            # 1/2 f^T (dM/dq) f over the entries that hold q only (bgc's own derivative, entry
+            # by entry: the work is the entries, not n^2 per coordinate)
+            rate = e + sp.Rational(1, 2) * sp.Add(*[flows[j] * partial(M[j, k], coordinate) *
+                                                     flows[k] for j, k in entries])
             self.hamiltonian.setdefault(origin, []).append(str(coordinate))
         self.fields.setdefault(origin, None)
         init = el.init[1].value if el.init is not None else sp.Integer(0)
         self.states.append(StateVar(state, variable_name(el.name, "p"), init, el.kind, el.span))
         self.emit(der(state), rate, el, el.span)
+
+    def _entries_with(self, origin, M) -> dict:
+        """For a field's matrix: symbol -> the (row, column) of the entries it occurs in, in
+        order; worked out once per field."""
+        if origin not in self._field_entries:
+            where: dict = {}
+            for j in range(M.rows):
+                for k in range(M.cols):
+                    for sym in sorted(M[j, k].free_symbols, key=lambda x: x.name):
+                        where.setdefault(sym, []).append((j, k))
+            self._field_entries[origin] = where
+        return self._field_entries[origin]
 
     def coupled_capacitor(self, el, f, s, sets_effort):
         """Part i of a C field with a full matrix K: the charge q_i is a state and the efforts
@@ -518,7 +540,8 @@ def build_equations(cg: CausalGraph) -> EquationSystem:
     return EquationSystem(g.name, params, tuple(b.states), tuple(b.equations),
                           tuple(b.constraints), tuple(b.stores), _outputs(b, s.outputs, s.left_out), run,
                           tuple(g.warnings),
-                          tuple((name, tuple(b.hamiltonian.get(name, ()))) for name in b.fields))
+                          tuple((name, tuple(b.hamiltonian.get(name, ()))) for name in b.fields),
+                          tuple(b.momenta))
 
 
 def with_residual_outputs(es: EquationSystem) -> EquationSystem:

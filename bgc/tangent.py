@@ -105,3 +105,32 @@ class _Forward:
         self.out.append(ir.Resolve(s.block, targets, tuple(rows)))
         self.tan.update(zip(s.unknowns, targets))
 
+
+
+def jacobian(f: ir.Function, name: str, n: int, plans, fresh: int) -> tuple[ir.Function, int]:
+    """The function `name` (f's arguments) whose result k*n + j is d(result k of f)/dx_j, its
+    nonzero entries stored (the caller zeroes the rest): f's statements once, then for each
+    state j that f reads, their tangents along the unit vector e_j (through a linear block by
+    its factors, one Resolve per column).  For the constraint rows that read the flows of a
+    coupled field, which solve M(q) f = p."""
+    reads = set().union(*[e.free_symbols | set(e.atoms(sp.Indexed))
+                          for s in f.body for e in ir.expressions(s)]) if f.body else set()
+    primal = [replace(s, final_factor=True) if isinstance(s, ir.Newton) else s
+              for s in f.body if not isinstance(s, ir.Store)]
+    out = list(primal)
+    for j in range(n):
+        if ir.X[j] not in reads:
+            continue
+        forward = _Forward({ir.X[j]: sp.Integer(1)}, plans, fresh)
+        for s in f.body:
+            if isinstance(s, ir.Store):
+                d = forward.of(s.expr)
+                if d != 0:
+                    forward.out.append(ir.Store(s.index * n + j, ir.integral_floats(d)))
+                continue
+            mark = len(forward.out)
+            forward.statement(s)
+            del forward.out[mark]  # s itself, which the primal part has
+        out += forward.out
+        fresh = forward.fresh
+    return ir.Function(name, f.args, f.size * n, tuple(out)), fresh

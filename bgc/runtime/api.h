@@ -53,7 +53,9 @@ void bgc_work_message(const bgc_work *w, char *msg, size_t msg_size);
    bgc_work_message).  bgc_jvp gives jv = J v for the Jacobian J = d rhs / d x, and
    bgc_jacobian J itself (row-major, BGC_NUM_STATES squared), both derived symbolically
    through the algebraic solves.  r and s per constraint row; the constraint Jacobians
-   row-major (rows x BGC_NUM_STATES) for the position rows and for the velocity rows.  Row k
+   row-major (rows x BGC_NUM_STATES) for the position rows and for the velocity rows, and the
+   velocity rows' Jacobian times the projection's metric (K = J M: the rows' derivatives by
+   the velocities of the momenta they read, the mass matrix's inverse weighing).  Row k
    holds when |r[k]| <= 1e-9 * s[k]. */
 void bgc_init(const bgc_params *p, double *x0);
 int bgc_rhs(double t, const double *x, const bgc_params *p, bgc_work *w, double *dx);
@@ -65,6 +67,7 @@ void bgc_residual(double t, const double *x, const bgc_params *p, double *r);
 void bgc_scale(double t, const double *x, const bgc_params *p, double *s);
 void bgc_position_jac(double t, const double *x, const bgc_params *p, double *J);
 void bgc_velocity_jac(double t, const double *x, const bgc_params *p, double *J);
+void bgc_velocity_metric(double t, const double *x, const bgc_params *p, double *K);
 
 /* Number of violated constraint rows at (t, x); each is reported on err if err != NULL. */
 int bgc_check_constraints(double t, const double *x, const bgc_params *p, FILE *err);
@@ -72,7 +75,8 @@ int bgc_check_constraints(double t, const double *x, const bgc_params *p, FILE *
    the rows whose residual is not finite (the model undefined there) count. */
 int bgc_check_constraints_finite(double t, const double *x, const bgc_params *p, FILE *err);
 /* Gauss-Newton minimum-norm projection of x onto the position rows, then onto the velocity
-   rows (moving only velocity-movable states).  0 on success, else BGC_ERR_CONSTRAINT
+   rows (moving only velocity-movable states, the momenta, by the kinetic metric: the least
+   change of kinetic energy).  0 on success, else BGC_ERR_CONSTRAINT
    with a message in msg. */
 int bgc_project_initial(double t, double *x, const bgc_params *p, char *msg, size_t msg_size);
 

@@ -438,13 +438,18 @@ static int bgc_solve(int m, double *A, double *b)
 }
 
 /* Projects x onto the m rows (indices rows[]) whose Jacobian jac() gives; only the states
-   with movable[i] (all if movable is NULL) change.  0, or -1 singular, -2 no convergence. */
+   with movable[i] (all if movable is NULL) change.  With a metric W (metric() gives K = J W^-1,
+   NULL for the identity) the step is the least change of x^T W x: dx = -K^T (K J^T)^-1 r.
+   0, or -1 singular, -2 no convergence. */
+typedef void (*bgc_rows_fn)(double, const double *, const bgc_params *, double *);
+
 static int bgc_project_rows(double t, double *x, const bgc_params *p, const int *rows, int m,
-                            void (*jac)(double, const double *, const bgc_params *, double *),
-                            const int *movable)
+                            bgc_rows_fn jac, bgc_rows_fn metric, const int *movable)
 {
     enum { N = BGC_NUM_STATES, M = BGC_DIM(BGC_NUM_CONSTRAINTS) };
     double r[M] = { 0.0 }, s[M] = { 0.0 }, z[M] = { 0.0 }, A[M * M] = { 0.0 }, J[M * BGC_DIM(N)] = { 0.0 };
+    double Kw[M * BGC_DIM(N)] = { 0.0 };
+    const double *K = metric ? Kw : J;
     int it, i, j, k;
     for (it = 0;; it++) {
         int holds = 1;
@@ -460,15 +465,17 @@ static int bgc_project_rows(double t, double *x, const bgc_params *p, const int 
         if (it == 50)
             return -2;
         jac(t, x, p, J);
+        if (metric)
+            metric(t, x, p, Kw);
         for (i = 0; i < m; i++)
             for (k = 0; k < N; k++)
                 if (movable && !movable[k])
-                    J[i * N + k] = 0.0;
+                    J[i * N + k] = Kw[i * N + k] = 0.0;
         for (i = 0; i < m; i++)
             for (j = 0; j < m; j++) {
                 double sum = 0.0;
                 for (k = 0; k < N; k++)
-                    sum += J[i * N + k] * J[j * N + k];
+                    sum += K[i * N + k] * J[j * N + k];
                 A[i * m + j] = sum;
             }
         if (bgc_solve(m, A, z))
@@ -476,7 +483,7 @@ static int bgc_project_rows(double t, double *x, const bgc_params *p, const int 
         for (k = 0; k < N; k++) {
             double dx = 0.0;
             for (i = 0; i < m; i++)
-                dx += J[i * N + k] * z[i];
+                dx += K[i * N + k] * z[i];
             x[k] -= dx;
         }
     }
@@ -491,10 +498,10 @@ int bgc_project_initial(double t, double *x, const bgc_params *p, char *msg, siz
     int rc;
     bgc_params_update(&q);
     rc = bgc_project_rows(t, x, &q, bgc_position_rows, BGC_NUM_POSITION_ROWS, bgc_position_jac,
-                          NULL);
+                          NULL, NULL);
     if (rc == 0) {
         rc = bgc_project_rows(t, x, &q, bgc_velocity_rows, BGC_NUM_VELOCITY_ROWS,
-                              bgc_velocity_jac, bgc_velocity_movable);
+                              bgc_velocity_jac, bgc_velocity_metric, bgc_velocity_movable);
         level = "velocity";
     }
     if (rc == 0)

@@ -169,21 +169,21 @@ void bgc_params_defaults(bgc_params *p, const int *given)
 
 void bgc_params_update(bgc_params *p)
 {
-    const double w220 = p->p_L*p->p_L;
-    p->c[0] = w220;
+    const double w226 = p->p_L*p->p_L;
+    p->c[0] = w226;
     p->c[1] = p->p_r*p->p_w;
     p->c[2] = 1.0/p->p_k;
-    const double w221 = p->p_r*p->p_r;
-    p->c[3] = -w221;
+    const double w227 = p->p_r*p->p_r;
+    p->c[3] = -w227;
     p->c[4] = -p->p_g*p->p_k;
-    p->c[5] = -w220;
+    p->c[5] = -w226;
     p->c[6] = -p->p_r*p->p_w*p->p_w;
     p->c[7] = -1.0/p->p_k;
     p->c[8] = -p->p_beta*p->p_beta;
     p->c[9] = -2.0*p->p_alpha;
     p->c[10] = p->p_r/p->p_k;
-    p->c[11] = -w221*p->p_w;
-    p->c[12] = fabs(-w220);
+    p->c[11] = -w227*p->p_w;
+    p->c[12] = fabs(-w226);
     p->c[13] = -2.0/p->p_k;
     p->c[14] = 2.0/p->p_k;
 }
@@ -721,9 +721,14 @@ void bgc_scale(double t, const double *x, const bgc_params *p, double *out)
     const double w213 = sqrt(w212);
     out[0] = fabs(w213*x[4]) + fabs(w211*p->p_r*x[5]);
     const double w214 = cos(w210);
-    out[1] = fabs(w211*p->c[10]*x[1]) + fabs(w213*p->c[2]*x[0]) + (fabs(w214*p->c[1]*x[5]) + fabs(w211*w214*p->c[11]*x[4]/sqrt(w212)));
+    const double w215 = fabs(p->c[2]*x[0]) + fabs(p->c[2]*x[1]) + (fabs(p->c[2]*x[2]) + fabs(p->c[2]*x[3]));
+    out[1] = w215*(fabs(w213) + fabs(w211*p->p_r)) + fabs(w211*p->c[10]*x[1]) + fabs(w213*p->c[2]*x[0]) + (fabs(w214*p->c[1]*x[5]) + fabs(w211*w214*p->c[11]*x[4]/sqrt(w212)));
     out[2] = fabs(x[4]*x[4]) + fabs(x[5]*x[5]) + (fabs(x[6]*x[6]) + fabs(x[7]*x[7])) + (fabs(-2.0*x[4]*x[6]) + fabs(-2.0*x[5]*x[7]) + p->c[12]);
-    out[3] = fabs((-2.0*x[4] + 2.0*x[6])*p->c[2]*x[2]) + fabs((-2.0*x[5] + 2.0*x[7])*p->c[2]*x[3]) + (fabs((-2.0*x[6] + 2.0*x[4])*p->c[2]*x[0]) + fabs((-2.0*x[7] + 2.0*x[5])*p->c[2]*x[1]));
+    const double w216 = -2.0*x[7] + 2.0*x[5];
+    const double w217 = -2.0*x[6] + 2.0*x[4];
+    const double w218 = -2.0*x[5] + 2.0*x[7];
+    const double w219 = -2.0*x[4] + 2.0*x[6];
+    out[3] = w215*(fabs(w216) + fabs(w217) + (fabs(w218) + fabs(w219))) + fabs(w216*p->c[2]*x[1]) + fabs(w217*p->c[2]*x[0]) + (fabs(w218*p->c[2]*x[3]) + fabs(w219*p->c[2]*x[2]));
 }
 
 void bgc_position_jac(double t, const double *x, const bgc_params *p, double *out)
@@ -733,9 +738,9 @@ void bgc_position_jac(double t, const double *x, const bgc_params *p, double *ou
     (void)p;
     (void)out;
     memset(out, 0, 16 * sizeof *out); /* the nonzero entries follow */
-    const double w215 = sin(t*p->p_w);
-    out[4] = sqrt(w215*w215*p->c[3] + p->c[0]);
-    out[5] = w215*p->p_r;
+    const double w220 = sin(t*p->p_w);
+    out[4] = sqrt(w220*w220*p->c[3] + p->c[0]);
+    out[5] = w220*p->p_r;
     out[12] = -2.0*x[6] + 2.0*x[4];
     out[13] = -2.0*x[7] + 2.0*x[5];
     out[14] = -2.0*x[4] + 2.0*x[6];
@@ -749,14 +754,14 @@ void bgc_velocity_jac(double t, const double *x, const bgc_params *p, double *ou
     (void)p;
     (void)out;
     memset(out, 0, 16 * sizeof *out); /* the nonzero entries follow */
-    const double w216 = t*p->p_w;
-    const double w217 = sin(w216);
-    const double w218 = w217*w217*p->c[3] + p->c[0];
-    out[0] = sqrt(w218)*p->c[2];
-    out[1] = w217*p->c[10];
-    const double w219 = cos(w216);
-    out[4] = w217*w219*p->c[11]/sqrt(w218);
-    out[5] = w219*p->c[1];
+    const double w221 = t*p->p_w;
+    const double w222 = sin(w221);
+    const double w223 = w222*w222*p->c[3] + p->c[0];
+    out[0] = sqrt(w223)*p->c[2];
+    out[1] = w222*p->c[10];
+    const double w224 = cos(w221);
+    out[4] = w222*w224*p->c[11]/sqrt(w223);
+    out[5] = w224*p->c[1];
     out[8] = (-2.0*x[6] + 2.0*x[4])*p->c[2];
     out[9] = (-2.0*x[7] + 2.0*x[5])*p->c[2];
     out[10] = (-2.0*x[4] + 2.0*x[6])*p->c[2];
@@ -765,6 +770,22 @@ void bgc_velocity_jac(double t, const double *x, const bgc_params *p, double *ou
     out[13] = p->c[13]*x[3] + p->c[14]*x[1];
     out[14] = p->c[13]*x[0] + p->c[14]*x[2];
     out[15] = p->c[13]*x[1] + p->c[14]*x[3];
+}
+
+void bgc_velocity_metric(double t, const double *x, const bgc_params *p, double *out)
+{
+    (void)t;
+    (void)x;
+    (void)p;
+    (void)out;
+    memset(out, 0, 16 * sizeof *out); /* the nonzero entries follow */
+    const double w225 = sin(t*p->p_w);
+    out[0] = sqrt(w225*w225*p->c[3] + p->c[0]);
+    out[1] = w225*p->p_r;
+    out[8] = -2.0*x[6] + 2.0*x[4];
+    out[9] = -2.0*x[7] + 2.0*x[5];
+    out[10] = -2.0*x[4] + 2.0*x[6];
+    out[11] = -2.0*x[5] + 2.0*x[7];
 }
 
 [runtime: runtime]

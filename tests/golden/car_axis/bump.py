@@ -160,21 +160,21 @@ def _fill_params_ieee(p, given):
 
 def _constants_into(p, out):
     try:
-        w220 = p[2]*p[2]
-        out[0] = w220
+        w226 = p[2]*p[2]
+        out[0] = w226
         out[1] = p[4]*p[5]
         out[2] = 1.0/p[9]
-        w221 = p[4]*p[4]
-        out[3] = -w221
+        w227 = p[4]*p[4]
+        out[3] = -w227
         out[4] = -p[6]*p[9]
-        out[5] = -w220
+        out[5] = -w226
         out[6] = -p[4]*p[5]*p[5]
         out[7] = -1.0/p[9]
         out[8] = -p[8]*p[8]
         out[9] = -2.0*p[7]
         out[10] = p[4]/p[9]
-        out[11] = -w221*p[5]
-        out[12] = abs(-w220)
+        out[11] = -w227*p[5]
+        out[12] = abs(-w226)
         out[13] = -2.0/p[9]
         out[14] = 2.0/p[9]
     except (ArithmeticError, ValueError):
@@ -184,21 +184,21 @@ def _constants_into(p, out):
 def _constants_into_ieee(p, out):
     with numpy.errstate(all="ignore"):
         p = numpy.asarray(p, dtype=numpy.float64)
-        w220 = p[2]*p[2]
-        out[0] = w220
+        w226 = p[2]*p[2]
+        out[0] = w226
         out[1] = p[4]*p[5]
         out[2] = 1.0/p[9]
-        w221 = p[4]*p[4]
-        out[3] = -w221
+        w227 = p[4]*p[4]
+        out[3] = -w227
         out[4] = -p[6]*p[9]
-        out[5] = -w220
+        out[5] = -w226
         out[6] = -p[4]*p[5]*p[5]
         out[7] = -1.0/p[9]
         out[8] = -p[8]*p[8]
         out[9] = -2.0*p[7]
         out[10] = p[4]/p[9]
-        out[11] = -w221*p[5]
-        out[12] = abs(-w220)
+        out[11] = -w227*p[5]
+        out[12] = abs(-w226)
         out[13] = -2.0/p[9]
         out[14] = 2.0/p[9]
 
@@ -1099,9 +1099,14 @@ def _scale_into(t, x, p, out):
         w213 = math.sqrt(w212)
         out[0] = abs(w213*x[4]) + abs(w211*p[4]*x[5])
         w214 = math.cos(w210)
-        out[1] = abs(w211*p[20]*x[1]) + abs(w213*p[12]*x[0]) + (abs(w214*p[11]*x[5]) + abs(w211*w214*p[21]*x[4]/math.sqrt(w212)))
+        w215 = abs(p[12]*x[0]) + abs(p[12]*x[1]) + (abs(p[12]*x[2]) + abs(p[12]*x[3]))
+        out[1] = w215*(abs(w213) + abs(w211*p[4])) + abs(w211*p[20]*x[1]) + abs(w213*p[12]*x[0]) + (abs(w214*p[11]*x[5]) + abs(w211*w214*p[21]*x[4]/math.sqrt(w212)))
         out[2] = abs(x[4]*x[4]) + abs(x[5]*x[5]) + (abs(x[6]*x[6]) + abs(x[7]*x[7])) + (abs(-2.0*x[4]*x[6]) + abs(-2.0*x[5]*x[7]) + p[22])
-        out[3] = abs((-2.0*x[4] + 2.0*x[6])*p[12]*x[2]) + abs((-2.0*x[5] + 2.0*x[7])*p[12]*x[3]) + (abs((-2.0*x[6] + 2.0*x[4])*p[12]*x[0]) + abs((-2.0*x[7] + 2.0*x[5])*p[12]*x[1]))
+        w216 = -2.0*x[7] + 2.0*x[5]
+        w217 = -2.0*x[6] + 2.0*x[4]
+        w218 = -2.0*x[5] + 2.0*x[7]
+        w219 = -2.0*x[4] + 2.0*x[6]
+        out[3] = w215*(abs(w216) + abs(w217) + (abs(w218) + abs(w219))) + abs(w216*p[12]*x[1]) + abs(w217*p[12]*x[0]) + (abs(w218*p[12]*x[3]) + abs(w219*p[12]*x[2]))
     except (ArithmeticError, ValueError):
         return _scale_into_ieee(t, x, p, out)
 
@@ -1117,9 +1122,14 @@ def _scale_into_ieee(t, x, p, out):
         w213 = _c_sqrt(w212)
         out[0] = abs(w213*x[4]) + abs(w211*p[4]*x[5])
         w214 = _c_cos(w210)
-        out[1] = abs(w211*p[20]*x[1]) + abs(w213*p[12]*x[0]) + (abs(w214*p[11]*x[5]) + abs(w211*w214*p[21]*x[4]/_c_sqrt(w212)))
+        w215 = abs(p[12]*x[0]) + abs(p[12]*x[1]) + (abs(p[12]*x[2]) + abs(p[12]*x[3]))
+        out[1] = w215*(abs(w213) + abs(w211*p[4])) + abs(w211*p[20]*x[1]) + abs(w213*p[12]*x[0]) + (abs(w214*p[11]*x[5]) + abs(w211*w214*p[21]*x[4]/_c_sqrt(w212)))
         out[2] = abs(x[4]*x[4]) + abs(x[5]*x[5]) + (abs(x[6]*x[6]) + abs(x[7]*x[7])) + (abs(-2.0*x[4]*x[6]) + abs(-2.0*x[5]*x[7]) + p[22])
-        out[3] = abs((-2.0*x[4] + 2.0*x[6])*p[12]*x[2]) + abs((-2.0*x[5] + 2.0*x[7])*p[12]*x[3]) + (abs((-2.0*x[6] + 2.0*x[4])*p[12]*x[0]) + abs((-2.0*x[7] + 2.0*x[5])*p[12]*x[1]))
+        w216 = -2.0*x[7] + 2.0*x[5]
+        w217 = -2.0*x[6] + 2.0*x[4]
+        w218 = -2.0*x[5] + 2.0*x[7]
+        w219 = -2.0*x[4] + 2.0*x[6]
+        out[3] = w215*(abs(w216) + abs(w217) + (abs(w218) + abs(w219))) + abs(w216*p[12]*x[1]) + abs(w217*p[12]*x[0]) + (abs(w218*p[12]*x[3]) + abs(w219*p[12]*x[2]))
 
 
 
@@ -1131,9 +1141,9 @@ def _scale(t, x, p):
 
 def _position_jac_into(t, x, p, out):
     try:
-        w215 = math.sin(t*p[5])
-        out[4] = math.sqrt(w215*w215*p[13] + p[10])
-        out[5] = w215*p[4]
+        w220 = math.sin(t*p[5])
+        out[4] = math.sqrt(w220*w220*p[13] + p[10])
+        out[5] = w220*p[4]
         out[12] = -2.0*x[6] + 2.0*x[4]
         out[13] = -2.0*x[7] + 2.0*x[5]
         out[14] = -2.0*x[4] + 2.0*x[6]
@@ -1147,9 +1157,9 @@ def _position_jac_into_ieee(t, x, p, out):
         t = numpy.float64(t)
         x = numpy.asarray(x, dtype=numpy.float64)
         p = numpy.asarray(p, dtype=numpy.float64)
-        w215 = _c_sin(t*p[5])
-        out[4] = _c_sqrt(w215*w215*p[13] + p[10])
-        out[5] = w215*p[4]
+        w220 = _c_sin(t*p[5])
+        out[4] = _c_sqrt(w220*w220*p[13] + p[10])
+        out[5] = w220*p[4]
         out[12] = -2.0*x[6] + 2.0*x[4]
         out[13] = -2.0*x[7] + 2.0*x[5]
         out[14] = -2.0*x[4] + 2.0*x[6]
@@ -1165,14 +1175,14 @@ def _position_jac(t, x, p):
 
 def _velocity_jac_into(t, x, p, out):
     try:
-        w216 = t*p[5]
-        w217 = math.sin(w216)
-        w218 = w217*w217*p[13] + p[10]
-        out[0] = math.sqrt(w218)*p[12]
-        out[1] = w217*p[20]
-        w219 = math.cos(w216)
-        out[4] = w217*w219*p[21]/math.sqrt(w218)
-        out[5] = w219*p[11]
+        w221 = t*p[5]
+        w222 = math.sin(w221)
+        w223 = w222*w222*p[13] + p[10]
+        out[0] = math.sqrt(w223)*p[12]
+        out[1] = w222*p[20]
+        w224 = math.cos(w221)
+        out[4] = w222*w224*p[21]/math.sqrt(w223)
+        out[5] = w224*p[11]
         out[8] = (-2.0*x[6] + 2.0*x[4])*p[12]
         out[9] = (-2.0*x[7] + 2.0*x[5])*p[12]
         out[10] = (-2.0*x[4] + 2.0*x[6])*p[12]
@@ -1190,14 +1200,14 @@ def _velocity_jac_into_ieee(t, x, p, out):
         t = numpy.float64(t)
         x = numpy.asarray(x, dtype=numpy.float64)
         p = numpy.asarray(p, dtype=numpy.float64)
-        w216 = t*p[5]
-        w217 = _c_sin(w216)
-        w218 = w217*w217*p[13] + p[10]
-        out[0] = _c_sqrt(w218)*p[12]
-        out[1] = w217*p[20]
-        w219 = _c_cos(w216)
-        out[4] = w217*w219*p[21]/_c_sqrt(w218)
-        out[5] = w219*p[11]
+        w221 = t*p[5]
+        w222 = _c_sin(w221)
+        w223 = w222*w222*p[13] + p[10]
+        out[0] = _c_sqrt(w223)*p[12]
+        out[1] = w222*p[20]
+        w224 = _c_cos(w221)
+        out[4] = w222*w224*p[21]/_c_sqrt(w223)
+        out[5] = w224*p[11]
         out[8] = (-2.0*x[6] + 2.0*x[4])*p[12]
         out[9] = (-2.0*x[7] + 2.0*x[5])*p[12]
         out[10] = (-2.0*x[4] + 2.0*x[6])*p[12]
@@ -1212,6 +1222,40 @@ def _velocity_jac_into_ieee(t, x, p, out):
 def _velocity_jac(t, x, p):
     out = [0.0] * 16
     _velocity_jac_into(t, x, p, out)
+    return [float(v) for v in out]
+
+
+def _velocity_metric_into(t, x, p, out):
+    try:
+        w225 = math.sin(t*p[5])
+        out[0] = math.sqrt(w225*w225*p[13] + p[10])
+        out[1] = w225*p[4]
+        out[8] = -2.0*x[6] + 2.0*x[4]
+        out[9] = -2.0*x[7] + 2.0*x[5]
+        out[10] = -2.0*x[4] + 2.0*x[6]
+        out[11] = -2.0*x[5] + 2.0*x[7]
+    except (ArithmeticError, ValueError):
+        return _velocity_metric_into_ieee(t, x, p, out)
+
+
+def _velocity_metric_into_ieee(t, x, p, out):
+    with numpy.errstate(all="ignore"):
+        t = numpy.float64(t)
+        x = numpy.asarray(x, dtype=numpy.float64)
+        p = numpy.asarray(p, dtype=numpy.float64)
+        w225 = _c_sin(t*p[5])
+        out[0] = _c_sqrt(w225*w225*p[13] + p[10])
+        out[1] = w225*p[4]
+        out[8] = -2.0*x[6] + 2.0*x[4]
+        out[9] = -2.0*x[7] + 2.0*x[5]
+        out[10] = -2.0*x[4] + 2.0*x[6]
+        out[11] = -2.0*x[5] + 2.0*x[7]
+
+
+
+def _velocity_metric(t, x, p):
+    out = [0.0] * 16
+    _velocity_metric_into(t, x, p, out)
     return [float(v) for v in out]
 
 

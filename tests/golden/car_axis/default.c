@@ -165,21 +165,21 @@ void bgc_params_defaults(bgc_params *p, const int *given)
 
 void bgc_params_update(bgc_params *p)
 {
-    const double w206 = p->p_L*p->p_L;
-    p->c[0] = w206;
+    const double w212 = p->p_L*p->p_L;
+    p->c[0] = w212;
     p->c[1] = p->p_r*p->p_w;
     p->c[2] = 1.0/p->p_k;
-    const double w207 = p->p_r*p->p_r;
-    p->c[3] = -w207;
+    const double w213 = p->p_r*p->p_r;
+    p->c[3] = -w213;
     p->c[4] = -p->p_g*p->p_k;
-    p->c[5] = -w206;
+    p->c[5] = -w212;
     p->c[6] = -p->p_r*p->p_w*p->p_w;
     p->c[7] = -1.0/p->p_k;
     p->c[8] = -p->p_beta*p->p_beta;
     p->c[9] = -2.0*p->p_alpha;
     p->c[10] = p->p_r/p->p_k;
-    p->c[11] = -w207*p->p_w;
-    p->c[12] = fabs(-w206);
+    p->c[11] = -w213*p->p_w;
+    p->c[12] = fabs(-w212);
     p->c[13] = -2.0/p->p_k;
     p->c[14] = 2.0/p->p_k;
 }
@@ -627,9 +627,14 @@ void bgc_scale(double t, const double *x, const bgc_params *p, double *out)
     const double w199 = sqrt(w198);
     out[0] = fabs(w199*x[4]) + fabs(w197*p->p_r*x[5]);
     const double w200 = cos(w196);
-    out[1] = fabs(w197*p->c[10]*x[1]) + fabs(w199*p->c[2]*x[0]) + (fabs(w200*p->c[1]*x[5]) + fabs(w197*w200*p->c[11]*x[4]/sqrt(w198)));
+    const double w201 = fabs(p->c[2]*x[0]) + fabs(p->c[2]*x[1]) + (fabs(p->c[2]*x[2]) + fabs(p->c[2]*x[3]));
+    out[1] = w201*(fabs(w199) + fabs(w197*p->p_r)) + fabs(w197*p->c[10]*x[1]) + fabs(w199*p->c[2]*x[0]) + (fabs(w200*p->c[1]*x[5]) + fabs(w197*w200*p->c[11]*x[4]/sqrt(w198)));
     out[2] = fabs(x[4]*x[4]) + fabs(x[5]*x[5]) + (fabs(x[6]*x[6]) + fabs(x[7]*x[7])) + (fabs(-2.0*x[4]*x[6]) + fabs(-2.0*x[5]*x[7]) + p->c[12]);
-    out[3] = fabs((-2.0*x[4] + 2.0*x[6])*p->c[2]*x[2]) + fabs((-2.0*x[5] + 2.0*x[7])*p->c[2]*x[3]) + (fabs((-2.0*x[6] + 2.0*x[4])*p->c[2]*x[0]) + fabs((-2.0*x[7] + 2.0*x[5])*p->c[2]*x[1]));
+    const double w202 = -2.0*x[7] + 2.0*x[5];
+    const double w203 = -2.0*x[6] + 2.0*x[4];
+    const double w204 = -2.0*x[5] + 2.0*x[7];
+    const double w205 = -2.0*x[4] + 2.0*x[6];
+    out[3] = w201*(fabs(w202) + fabs(w203) + (fabs(w204) + fabs(w205))) + fabs(w202*p->c[2]*x[1]) + fabs(w203*p->c[2]*x[0]) + (fabs(w204*p->c[2]*x[3]) + fabs(w205*p->c[2]*x[2]));
 }
 
 void bgc_position_jac(double t, const double *x, const bgc_params *p, double *out)
@@ -639,9 +644,9 @@ void bgc_position_jac(double t, const double *x, const bgc_params *p, double *ou
     (void)p;
     (void)out;
     memset(out, 0, 16 * sizeof *out); /* the nonzero entries follow */
-    const double w201 = sin(t*p->p_w);
-    out[4] = sqrt(w201*w201*p->c[3] + p->c[0]);
-    out[5] = w201*p->p_r;
+    const double w206 = sin(t*p->p_w);
+    out[4] = sqrt(w206*w206*p->c[3] + p->c[0]);
+    out[5] = w206*p->p_r;
     out[12] = -2.0*x[6] + 2.0*x[4];
     out[13] = -2.0*x[7] + 2.0*x[5];
     out[14] = -2.0*x[4] + 2.0*x[6];
@@ -655,14 +660,14 @@ void bgc_velocity_jac(double t, const double *x, const bgc_params *p, double *ou
     (void)p;
     (void)out;
     memset(out, 0, 16 * sizeof *out); /* the nonzero entries follow */
-    const double w202 = t*p->p_w;
-    const double w203 = sin(w202);
-    const double w204 = w203*w203*p->c[3] + p->c[0];
-    out[0] = sqrt(w204)*p->c[2];
-    out[1] = w203*p->c[10];
-    const double w205 = cos(w202);
-    out[4] = w203*w205*p->c[11]/sqrt(w204);
-    out[5] = w205*p->c[1];
+    const double w207 = t*p->p_w;
+    const double w208 = sin(w207);
+    const double w209 = w208*w208*p->c[3] + p->c[0];
+    out[0] = sqrt(w209)*p->c[2];
+    out[1] = w208*p->c[10];
+    const double w210 = cos(w207);
+    out[4] = w208*w210*p->c[11]/sqrt(w209);
+    out[5] = w210*p->c[1];
     out[8] = (-2.0*x[6] + 2.0*x[4])*p->c[2];
     out[9] = (-2.0*x[7] + 2.0*x[5])*p->c[2];
     out[10] = (-2.0*x[4] + 2.0*x[6])*p->c[2];
@@ -671,6 +676,22 @@ void bgc_velocity_jac(double t, const double *x, const bgc_params *p, double *ou
     out[13] = p->c[13]*x[3] + p->c[14]*x[1];
     out[14] = p->c[13]*x[0] + p->c[14]*x[2];
     out[15] = p->c[13]*x[1] + p->c[14]*x[3];
+}
+
+void bgc_velocity_metric(double t, const double *x, const bgc_params *p, double *out)
+{
+    (void)t;
+    (void)x;
+    (void)p;
+    (void)out;
+    memset(out, 0, 16 * sizeof *out); /* the nonzero entries follow */
+    const double w211 = sin(t*p->p_w);
+    out[0] = sqrt(w211*w211*p->c[3] + p->c[0]);
+    out[1] = w211*p->p_r;
+    out[8] = -2.0*x[6] + 2.0*x[4];
+    out[9] = -2.0*x[7] + 2.0*x[5];
+    out[10] = -2.0*x[4] + 2.0*x[6];
+    out[11] = -2.0*x[5] + 2.0*x[7];
 }
 
 [runtime: runtime]

@@ -160,21 +160,21 @@ def _fill_params_ieee(p, given):
 
 def _constants_into(p, out):
     try:
-        w206 = p[2]*p[2]
-        out[0] = w206
+        w212 = p[2]*p[2]
+        out[0] = w212
         out[1] = p[4]*p[5]
         out[2] = 1.0/p[9]
-        w207 = p[4]*p[4]
-        out[3] = -w207
+        w213 = p[4]*p[4]
+        out[3] = -w213
         out[4] = -p[6]*p[9]
-        out[5] = -w206
+        out[5] = -w212
         out[6] = -p[4]*p[5]*p[5]
         out[7] = -1.0/p[9]
         out[8] = -p[8]*p[8]
         out[9] = -2.0*p[7]
         out[10] = p[4]/p[9]
-        out[11] = -w207*p[5]
-        out[12] = abs(-w206)
+        out[11] = -w213*p[5]
+        out[12] = abs(-w212)
         out[13] = -2.0/p[9]
         out[14] = 2.0/p[9]
     except (ArithmeticError, ValueError):
@@ -184,21 +184,21 @@ def _constants_into(p, out):
 def _constants_into_ieee(p, out):
     with numpy.errstate(all="ignore"):
         p = numpy.asarray(p, dtype=numpy.float64)
-        w206 = p[2]*p[2]
-        out[0] = w206
+        w212 = p[2]*p[2]
+        out[0] = w212
         out[1] = p[4]*p[5]
         out[2] = 1.0/p[9]
-        w207 = p[4]*p[4]
-        out[3] = -w207
+        w213 = p[4]*p[4]
+        out[3] = -w213
         out[4] = -p[6]*p[9]
-        out[5] = -w206
+        out[5] = -w212
         out[6] = -p[4]*p[5]*p[5]
         out[7] = -1.0/p[9]
         out[8] = -p[8]*p[8]
         out[9] = -2.0*p[7]
         out[10] = p[4]/p[9]
-        out[11] = -w207*p[5]
-        out[12] = abs(-w206)
+        out[11] = -w213*p[5]
+        out[12] = abs(-w212)
         out[13] = -2.0/p[9]
         out[14] = 2.0/p[9]
 
@@ -921,9 +921,14 @@ def _scale_into(t, x, p, out):
         w199 = math.sqrt(w198)
         out[0] = abs(w199*x[4]) + abs(w197*p[4]*x[5])
         w200 = math.cos(w196)
-        out[1] = abs(w197*p[20]*x[1]) + abs(w199*p[12]*x[0]) + (abs(w200*p[11]*x[5]) + abs(w197*w200*p[21]*x[4]/math.sqrt(w198)))
+        w201 = abs(p[12]*x[0]) + abs(p[12]*x[1]) + (abs(p[12]*x[2]) + abs(p[12]*x[3]))
+        out[1] = w201*(abs(w199) + abs(w197*p[4])) + abs(w197*p[20]*x[1]) + abs(w199*p[12]*x[0]) + (abs(w200*p[11]*x[5]) + abs(w197*w200*p[21]*x[4]/math.sqrt(w198)))
         out[2] = abs(x[4]*x[4]) + abs(x[5]*x[5]) + (abs(x[6]*x[6]) + abs(x[7]*x[7])) + (abs(-2.0*x[4]*x[6]) + abs(-2.0*x[5]*x[7]) + p[22])
-        out[3] = abs((-2.0*x[4] + 2.0*x[6])*p[12]*x[2]) + abs((-2.0*x[5] + 2.0*x[7])*p[12]*x[3]) + (abs((-2.0*x[6] + 2.0*x[4])*p[12]*x[0]) + abs((-2.0*x[7] + 2.0*x[5])*p[12]*x[1]))
+        w202 = -2.0*x[7] + 2.0*x[5]
+        w203 = -2.0*x[6] + 2.0*x[4]
+        w204 = -2.0*x[5] + 2.0*x[7]
+        w205 = -2.0*x[4] + 2.0*x[6]
+        out[3] = w201*(abs(w202) + abs(w203) + (abs(w204) + abs(w205))) + abs(w202*p[12]*x[1]) + abs(w203*p[12]*x[0]) + (abs(w204*p[12]*x[3]) + abs(w205*p[12]*x[2]))
     except (ArithmeticError, ValueError):
         return _scale_into_ieee(t, x, p, out)
 
@@ -939,9 +944,14 @@ def _scale_into_ieee(t, x, p, out):
         w199 = _c_sqrt(w198)
         out[0] = abs(w199*x[4]) + abs(w197*p[4]*x[5])
         w200 = _c_cos(w196)
-        out[1] = abs(w197*p[20]*x[1]) + abs(w199*p[12]*x[0]) + (abs(w200*p[11]*x[5]) + abs(w197*w200*p[21]*x[4]/_c_sqrt(w198)))
+        w201 = abs(p[12]*x[0]) + abs(p[12]*x[1]) + (abs(p[12]*x[2]) + abs(p[12]*x[3]))
+        out[1] = w201*(abs(w199) + abs(w197*p[4])) + abs(w197*p[20]*x[1]) + abs(w199*p[12]*x[0]) + (abs(w200*p[11]*x[5]) + abs(w197*w200*p[21]*x[4]/_c_sqrt(w198)))
         out[2] = abs(x[4]*x[4]) + abs(x[5]*x[5]) + (abs(x[6]*x[6]) + abs(x[7]*x[7])) + (abs(-2.0*x[4]*x[6]) + abs(-2.0*x[5]*x[7]) + p[22])
-        out[3] = abs((-2.0*x[4] + 2.0*x[6])*p[12]*x[2]) + abs((-2.0*x[5] + 2.0*x[7])*p[12]*x[3]) + (abs((-2.0*x[6] + 2.0*x[4])*p[12]*x[0]) + abs((-2.0*x[7] + 2.0*x[5])*p[12]*x[1]))
+        w202 = -2.0*x[7] + 2.0*x[5]
+        w203 = -2.0*x[6] + 2.0*x[4]
+        w204 = -2.0*x[5] + 2.0*x[7]
+        w205 = -2.0*x[4] + 2.0*x[6]
+        out[3] = w201*(abs(w202) + abs(w203) + (abs(w204) + abs(w205))) + abs(w202*p[12]*x[1]) + abs(w203*p[12]*x[0]) + (abs(w204*p[12]*x[3]) + abs(w205*p[12]*x[2]))
 
 
 
@@ -953,9 +963,9 @@ def _scale(t, x, p):
 
 def _position_jac_into(t, x, p, out):
     try:
-        w201 = math.sin(t*p[5])
-        out[4] = math.sqrt(w201*w201*p[13] + p[10])
-        out[5] = w201*p[4]
+        w206 = math.sin(t*p[5])
+        out[4] = math.sqrt(w206*w206*p[13] + p[10])
+        out[5] = w206*p[4]
         out[12] = -2.0*x[6] + 2.0*x[4]
         out[13] = -2.0*x[7] + 2.0*x[5]
         out[14] = -2.0*x[4] + 2.0*x[6]
@@ -969,9 +979,9 @@ def _position_jac_into_ieee(t, x, p, out):
         t = numpy.float64(t)
         x = numpy.asarray(x, dtype=numpy.float64)
         p = numpy.asarray(p, dtype=numpy.float64)
-        w201 = _c_sin(t*p[5])
-        out[4] = _c_sqrt(w201*w201*p[13] + p[10])
-        out[5] = w201*p[4]
+        w206 = _c_sin(t*p[5])
+        out[4] = _c_sqrt(w206*w206*p[13] + p[10])
+        out[5] = w206*p[4]
         out[12] = -2.0*x[6] + 2.0*x[4]
         out[13] = -2.0*x[7] + 2.0*x[5]
         out[14] = -2.0*x[4] + 2.0*x[6]
@@ -987,14 +997,14 @@ def _position_jac(t, x, p):
 
 def _velocity_jac_into(t, x, p, out):
     try:
-        w202 = t*p[5]
-        w203 = math.sin(w202)
-        w204 = w203*w203*p[13] + p[10]
-        out[0] = math.sqrt(w204)*p[12]
-        out[1] = w203*p[20]
-        w205 = math.cos(w202)
-        out[4] = w203*w205*p[21]/math.sqrt(w204)
-        out[5] = w205*p[11]
+        w207 = t*p[5]
+        w208 = math.sin(w207)
+        w209 = w208*w208*p[13] + p[10]
+        out[0] = math.sqrt(w209)*p[12]
+        out[1] = w208*p[20]
+        w210 = math.cos(w207)
+        out[4] = w208*w210*p[21]/math.sqrt(w209)
+        out[5] = w210*p[11]
         out[8] = (-2.0*x[6] + 2.0*x[4])*p[12]
         out[9] = (-2.0*x[7] + 2.0*x[5])*p[12]
         out[10] = (-2.0*x[4] + 2.0*x[6])*p[12]
@@ -1012,14 +1022,14 @@ def _velocity_jac_into_ieee(t, x, p, out):
         t = numpy.float64(t)
         x = numpy.asarray(x, dtype=numpy.float64)
         p = numpy.asarray(p, dtype=numpy.float64)
-        w202 = t*p[5]
-        w203 = _c_sin(w202)
-        w204 = w203*w203*p[13] + p[10]
-        out[0] = _c_sqrt(w204)*p[12]
-        out[1] = w203*p[20]
-        w205 = _c_cos(w202)
-        out[4] = w203*w205*p[21]/_c_sqrt(w204)
-        out[5] = w205*p[11]
+        w207 = t*p[5]
+        w208 = _c_sin(w207)
+        w209 = w208*w208*p[13] + p[10]
+        out[0] = _c_sqrt(w209)*p[12]
+        out[1] = w208*p[20]
+        w210 = _c_cos(w207)
+        out[4] = w208*w210*p[21]/_c_sqrt(w209)
+        out[5] = w210*p[11]
         out[8] = (-2.0*x[6] + 2.0*x[4])*p[12]
         out[9] = (-2.0*x[7] + 2.0*x[5])*p[12]
         out[10] = (-2.0*x[4] + 2.0*x[6])*p[12]
@@ -1034,6 +1044,40 @@ def _velocity_jac_into_ieee(t, x, p, out):
 def _velocity_jac(t, x, p):
     out = [0.0] * 16
     _velocity_jac_into(t, x, p, out)
+    return [float(v) for v in out]
+
+
+def _velocity_metric_into(t, x, p, out):
+    try:
+        w211 = math.sin(t*p[5])
+        out[0] = math.sqrt(w211*w211*p[13] + p[10])
+        out[1] = w211*p[4]
+        out[8] = -2.0*x[6] + 2.0*x[4]
+        out[9] = -2.0*x[7] + 2.0*x[5]
+        out[10] = -2.0*x[4] + 2.0*x[6]
+        out[11] = -2.0*x[5] + 2.0*x[7]
+    except (ArithmeticError, ValueError):
+        return _velocity_metric_into_ieee(t, x, p, out)
+
+
+def _velocity_metric_into_ieee(t, x, p, out):
+    with numpy.errstate(all="ignore"):
+        t = numpy.float64(t)
+        x = numpy.asarray(x, dtype=numpy.float64)
+        p = numpy.asarray(p, dtype=numpy.float64)
+        w211 = _c_sin(t*p[5])
+        out[0] = _c_sqrt(w211*w211*p[13] + p[10])
+        out[1] = w211*p[4]
+        out[8] = -2.0*x[6] + 2.0*x[4]
+        out[9] = -2.0*x[7] + 2.0*x[5]
+        out[10] = -2.0*x[4] + 2.0*x[6]
+        out[11] = -2.0*x[5] + 2.0*x[7]
+
+
+
+def _velocity_metric(t, x, p):
+    out = [0.0] * 16
+    _velocity_metric_into(t, x, p, out)
     return [float(v) for v in out]
 
 

@@ -169,21 +169,21 @@ void bgc_params_defaults(bgc_params *p, const int *given)
 
 void bgc_params_update(bgc_params *p)
 {
-    const double w228 = p->p_L*p->p_L;
-    p->c[0] = w228;
+    const double w234 = p->p_L*p->p_L;
+    p->c[0] = w234;
     p->c[1] = p->p_r*p->p_w;
     p->c[2] = 1.0/p->p_k;
-    const double w229 = p->p_r*p->p_r;
-    p->c[3] = -w229;
+    const double w235 = p->p_r*p->p_r;
+    p->c[3] = -w235;
     p->c[4] = -p->p_g*p->p_k;
-    p->c[5] = -w228;
+    p->c[5] = -w234;
     p->c[6] = -p->p_r*p->p_w*p->p_w;
     p->c[7] = -1.0/p->p_k;
     p->c[8] = -p->p_beta*p->p_beta;
     p->c[9] = -2.0*p->p_alpha;
     p->c[10] = p->p_r/p->p_k;
-    p->c[11] = -w229*p->p_w;
-    p->c[12] = fabs(-w228);
+    p->c[11] = -w235*p->p_w;
+    p->c[12] = fabs(-w234);
     p->c[13] = -2.0/p->p_k;
     p->c[14] = 2.0/p->p_k;
 }
@@ -733,9 +733,14 @@ void bgc_scale(double t, const double *x, const bgc_params *p, double *out)
     const double w221 = sqrt(w220);
     out[0] = fabs(w221*x[4]) + fabs(w219*p->p_r*x[5]);
     const double w222 = cos(w218);
-    out[1] = fabs(w219*p->c[10]*x[1]) + fabs(w221*p->c[2]*x[0]) + (fabs(w222*p->c[1]*x[5]) + fabs(w219*w222*p->c[11]*x[4]/sqrt(w220)));
+    const double w223 = fabs(p->c[2]*x[0]) + fabs(p->c[2]*x[1]) + (fabs(p->c[2]*x[2]) + fabs(p->c[2]*x[3]));
+    out[1] = w223*(fabs(w221) + fabs(w219*p->p_r)) + fabs(w219*p->c[10]*x[1]) + fabs(w221*p->c[2]*x[0]) + (fabs(w222*p->c[1]*x[5]) + fabs(w219*w222*p->c[11]*x[4]/sqrt(w220)));
     out[2] = fabs(x[4]*x[4]) + fabs(x[5]*x[5]) + (fabs(x[6]*x[6]) + fabs(x[7]*x[7])) + (fabs(-2.0*x[4]*x[6]) + fabs(-2.0*x[5]*x[7]) + p->c[12]);
-    out[3] = fabs((-2.0*x[4] + 2.0*x[6])*p->c[2]*x[2]) + fabs((-2.0*x[5] + 2.0*x[7])*p->c[2]*x[3]) + (fabs((-2.0*x[6] + 2.0*x[4])*p->c[2]*x[0]) + fabs((-2.0*x[7] + 2.0*x[5])*p->c[2]*x[1]));
+    const double w224 = -2.0*x[7] + 2.0*x[5];
+    const double w225 = -2.0*x[6] + 2.0*x[4];
+    const double w226 = -2.0*x[5] + 2.0*x[7];
+    const double w227 = -2.0*x[4] + 2.0*x[6];
+    out[3] = w223*(fabs(w224) + fabs(w225) + (fabs(w226) + fabs(w227))) + fabs(w224*p->c[2]*x[1]) + fabs(w225*p->c[2]*x[0]) + (fabs(w226*p->c[2]*x[3]) + fabs(w227*p->c[2]*x[2]));
 }
 
 void bgc_position_jac(double t, const double *x, const bgc_params *p, double *out)
@@ -745,9 +750,9 @@ void bgc_position_jac(double t, const double *x, const bgc_params *p, double *ou
     (void)p;
     (void)out;
     memset(out, 0, 16 * sizeof *out); /* the nonzero entries follow */
-    const double w223 = sin(t*p->p_w);
-    out[4] = sqrt(w223*w223*p->c[3] + p->c[0]);
-    out[5] = w223*p->p_r;
+    const double w228 = sin(t*p->p_w);
+    out[4] = sqrt(w228*w228*p->c[3] + p->c[0]);
+    out[5] = w228*p->p_r;
     out[12] = -2.0*x[6] + 2.0*x[4];
     out[13] = -2.0*x[7] + 2.0*x[5];
     out[14] = -2.0*x[4] + 2.0*x[6];
@@ -761,14 +766,14 @@ void bgc_velocity_jac(double t, const double *x, const bgc_params *p, double *ou
     (void)p;
     (void)out;
     memset(out, 0, 16 * sizeof *out); /* the nonzero entries follow */
-    const double w224 = t*p->p_w;
-    const double w225 = sin(w224);
-    const double w226 = w225*w225*p->c[3] + p->c[0];
-    out[0] = sqrt(w226)*p->c[2];
-    out[1] = w225*p->c[10];
-    const double w227 = cos(w224);
-    out[4] = w225*w227*p->c[11]/sqrt(w226);
-    out[5] = w227*p->c[1];
+    const double w229 = t*p->p_w;
+    const double w230 = sin(w229);
+    const double w231 = w230*w230*p->c[3] + p->c[0];
+    out[0] = sqrt(w231)*p->c[2];
+    out[1] = w230*p->c[10];
+    const double w232 = cos(w229);
+    out[4] = w230*w232*p->c[11]/sqrt(w231);
+    out[5] = w232*p->c[1];
     out[8] = (-2.0*x[6] + 2.0*x[4])*p->c[2];
     out[9] = (-2.0*x[7] + 2.0*x[5])*p->c[2];
     out[10] = (-2.0*x[4] + 2.0*x[6])*p->c[2];
@@ -777,6 +782,22 @@ void bgc_velocity_jac(double t, const double *x, const bgc_params *p, double *ou
     out[13] = p->c[13]*x[3] + p->c[14]*x[1];
     out[14] = p->c[13]*x[0] + p->c[14]*x[2];
     out[15] = p->c[13]*x[1] + p->c[14]*x[3];
+}
+
+void bgc_velocity_metric(double t, const double *x, const bgc_params *p, double *out)
+{
+    (void)t;
+    (void)x;
+    (void)p;
+    (void)out;
+    memset(out, 0, 16 * sizeof *out); /* the nonzero entries follow */
+    const double w233 = sin(t*p->p_w);
+    out[0] = sqrt(w233*w233*p->c[3] + p->c[0]);
+    out[1] = w233*p->p_r;
+    out[8] = -2.0*x[6] + 2.0*x[4];
+    out[9] = -2.0*x[7] + 2.0*x[5];
+    out[10] = -2.0*x[4] + 2.0*x[6];
+    out[11] = -2.0*x[5] + 2.0*x[7];
 }
 
 [runtime: runtime]

@@ -160,21 +160,21 @@ def _fill_params_ieee(p, given):
 
 def _constants_into(p, out):
     try:
-        w228 = p[2]*p[2]
-        out[0] = w228
+        w234 = p[2]*p[2]
+        out[0] = w234
         out[1] = p[4]*p[5]
         out[2] = 1.0/p[9]
-        w229 = p[4]*p[4]
-        out[3] = -w229
+        w235 = p[4]*p[4]
+        out[3] = -w235
         out[4] = -p[6]*p[9]
-        out[5] = -w228
+        out[5] = -w234
         out[6] = -p[4]*p[5]*p[5]
         out[7] = -1.0/p[9]
         out[8] = -p[8]*p[8]
         out[9] = -2.0*p[7]
         out[10] = p[4]/p[9]
-        out[11] = -w229*p[5]
-        out[12] = abs(-w228)
+        out[11] = -w235*p[5]
+        out[12] = abs(-w234)
         out[13] = -2.0/p[9]
         out[14] = 2.0/p[9]
     except (ArithmeticError, ValueError):
@@ -184,21 +184,21 @@ def _constants_into(p, out):
 def _constants_into_ieee(p, out):
     with numpy.errstate(all="ignore"):
         p = numpy.asarray(p, dtype=numpy.float64)
-        w228 = p[2]*p[2]
-        out[0] = w228
+        w234 = p[2]*p[2]
+        out[0] = w234
         out[1] = p[4]*p[5]
         out[2] = 1.0/p[9]
-        w229 = p[4]*p[4]
-        out[3] = -w229
+        w235 = p[4]*p[4]
+        out[3] = -w235
         out[4] = -p[6]*p[9]
-        out[5] = -w228
+        out[5] = -w234
         out[6] = -p[4]*p[5]*p[5]
         out[7] = -1.0/p[9]
         out[8] = -p[8]*p[8]
         out[9] = -2.0*p[7]
         out[10] = p[4]/p[9]
-        out[11] = -w229*p[5]
-        out[12] = abs(-w228)
+        out[11] = -w235*p[5]
+        out[12] = abs(-w234)
         out[13] = -2.0/p[9]
         out[14] = 2.0/p[9]
 
@@ -1123,9 +1123,14 @@ def _scale_into(t, x, p, out):
         w221 = math.sqrt(w220)
         out[0] = abs(w221*x[4]) + abs(w219*p[4]*x[5])
         w222 = math.cos(w218)
-        out[1] = abs(w219*p[20]*x[1]) + abs(w221*p[12]*x[0]) + (abs(w222*p[11]*x[5]) + abs(w219*w222*p[21]*x[4]/math.sqrt(w220)))
+        w223 = abs(p[12]*x[0]) + abs(p[12]*x[1]) + (abs(p[12]*x[2]) + abs(p[12]*x[3]))
+        out[1] = w223*(abs(w221) + abs(w219*p[4])) + abs(w219*p[20]*x[1]) + abs(w221*p[12]*x[0]) + (abs(w222*p[11]*x[5]) + abs(w219*w222*p[21]*x[4]/math.sqrt(w220)))
         out[2] = abs(x[4]*x[4]) + abs(x[5]*x[5]) + (abs(x[6]*x[6]) + abs(x[7]*x[7])) + (abs(-2.0*x[4]*x[6]) + abs(-2.0*x[5]*x[7]) + p[22])
-        out[3] = abs((-2.0*x[4] + 2.0*x[6])*p[12]*x[2]) + abs((-2.0*x[5] + 2.0*x[7])*p[12]*x[3]) + (abs((-2.0*x[6] + 2.0*x[4])*p[12]*x[0]) + abs((-2.0*x[7] + 2.0*x[5])*p[12]*x[1]))
+        w224 = -2.0*x[7] + 2.0*x[5]
+        w225 = -2.0*x[6] + 2.0*x[4]
+        w226 = -2.0*x[5] + 2.0*x[7]
+        w227 = -2.0*x[4] + 2.0*x[6]
+        out[3] = w223*(abs(w224) + abs(w225) + (abs(w226) + abs(w227))) + abs(w224*p[12]*x[1]) + abs(w225*p[12]*x[0]) + (abs(w226*p[12]*x[3]) + abs(w227*p[12]*x[2]))
     except (ArithmeticError, ValueError):
         return _scale_into_ieee(t, x, p, out)
 
@@ -1141,9 +1146,14 @@ def _scale_into_ieee(t, x, p, out):
         w221 = _c_sqrt(w220)
         out[0] = abs(w221*x[4]) + abs(w219*p[4]*x[5])
         w222 = _c_cos(w218)
-        out[1] = abs(w219*p[20]*x[1]) + abs(w221*p[12]*x[0]) + (abs(w222*p[11]*x[5]) + abs(w219*w222*p[21]*x[4]/_c_sqrt(w220)))
+        w223 = abs(p[12]*x[0]) + abs(p[12]*x[1]) + (abs(p[12]*x[2]) + abs(p[12]*x[3]))
+        out[1] = w223*(abs(w221) + abs(w219*p[4])) + abs(w219*p[20]*x[1]) + abs(w221*p[12]*x[0]) + (abs(w222*p[11]*x[5]) + abs(w219*w222*p[21]*x[4]/_c_sqrt(w220)))
         out[2] = abs(x[4]*x[4]) + abs(x[5]*x[5]) + (abs(x[6]*x[6]) + abs(x[7]*x[7])) + (abs(-2.0*x[4]*x[6]) + abs(-2.0*x[5]*x[7]) + p[22])
-        out[3] = abs((-2.0*x[4] + 2.0*x[6])*p[12]*x[2]) + abs((-2.0*x[5] + 2.0*x[7])*p[12]*x[3]) + (abs((-2.0*x[6] + 2.0*x[4])*p[12]*x[0]) + abs((-2.0*x[7] + 2.0*x[5])*p[12]*x[1]))
+        w224 = -2.0*x[7] + 2.0*x[5]
+        w225 = -2.0*x[6] + 2.0*x[4]
+        w226 = -2.0*x[5] + 2.0*x[7]
+        w227 = -2.0*x[4] + 2.0*x[6]
+        out[3] = w223*(abs(w224) + abs(w225) + (abs(w226) + abs(w227))) + abs(w224*p[12]*x[1]) + abs(w225*p[12]*x[0]) + (abs(w226*p[12]*x[3]) + abs(w227*p[12]*x[2]))
 
 
 
@@ -1155,9 +1165,9 @@ def _scale(t, x, p):
 
 def _position_jac_into(t, x, p, out):
     try:
-        w223 = math.sin(t*p[5])
-        out[4] = math.sqrt(w223*w223*p[13] + p[10])
-        out[5] = w223*p[4]
+        w228 = math.sin(t*p[5])
+        out[4] = math.sqrt(w228*w228*p[13] + p[10])
+        out[5] = w228*p[4]
         out[12] = -2.0*x[6] + 2.0*x[4]
         out[13] = -2.0*x[7] + 2.0*x[5]
         out[14] = -2.0*x[4] + 2.0*x[6]
@@ -1171,9 +1181,9 @@ def _position_jac_into_ieee(t, x, p, out):
         t = numpy.float64(t)
         x = numpy.asarray(x, dtype=numpy.float64)
         p = numpy.asarray(p, dtype=numpy.float64)
-        w223 = _c_sin(t*p[5])
-        out[4] = _c_sqrt(w223*w223*p[13] + p[10])
-        out[5] = w223*p[4]
+        w228 = _c_sin(t*p[5])
+        out[4] = _c_sqrt(w228*w228*p[13] + p[10])
+        out[5] = w228*p[4]
         out[12] = -2.0*x[6] + 2.0*x[4]
         out[13] = -2.0*x[7] + 2.0*x[5]
         out[14] = -2.0*x[4] + 2.0*x[6]
@@ -1189,14 +1199,14 @@ def _position_jac(t, x, p):
 
 def _velocity_jac_into(t, x, p, out):
     try:
-        w224 = t*p[5]
-        w225 = math.sin(w224)
-        w226 = w225*w225*p[13] + p[10]
-        out[0] = math.sqrt(w226)*p[12]
-        out[1] = w225*p[20]
-        w227 = math.cos(w224)
-        out[4] = w225*w227*p[21]/math.sqrt(w226)
-        out[5] = w227*p[11]
+        w229 = t*p[5]
+        w230 = math.sin(w229)
+        w231 = w230*w230*p[13] + p[10]
+        out[0] = math.sqrt(w231)*p[12]
+        out[1] = w230*p[20]
+        w232 = math.cos(w229)
+        out[4] = w230*w232*p[21]/math.sqrt(w231)
+        out[5] = w232*p[11]
         out[8] = (-2.0*x[6] + 2.0*x[4])*p[12]
         out[9] = (-2.0*x[7] + 2.0*x[5])*p[12]
         out[10] = (-2.0*x[4] + 2.0*x[6])*p[12]
@@ -1214,14 +1224,14 @@ def _velocity_jac_into_ieee(t, x, p, out):
         t = numpy.float64(t)
         x = numpy.asarray(x, dtype=numpy.float64)
         p = numpy.asarray(p, dtype=numpy.float64)
-        w224 = t*p[5]
-        w225 = _c_sin(w224)
-        w226 = w225*w225*p[13] + p[10]
-        out[0] = _c_sqrt(w226)*p[12]
-        out[1] = w225*p[20]
-        w227 = _c_cos(w224)
-        out[4] = w225*w227*p[21]/_c_sqrt(w226)
-        out[5] = w227*p[11]
+        w229 = t*p[5]
+        w230 = _c_sin(w229)
+        w231 = w230*w230*p[13] + p[10]
+        out[0] = _c_sqrt(w231)*p[12]
+        out[1] = w230*p[20]
+        w232 = _c_cos(w229)
+        out[4] = w230*w232*p[21]/_c_sqrt(w231)
+        out[5] = w232*p[11]
         out[8] = (-2.0*x[6] + 2.0*x[4])*p[12]
         out[9] = (-2.0*x[7] + 2.0*x[5])*p[12]
         out[10] = (-2.0*x[4] + 2.0*x[6])*p[12]
@@ -1236,6 +1246,40 @@ def _velocity_jac_into_ieee(t, x, p, out):
 def _velocity_jac(t, x, p):
     out = [0.0] * 16
     _velocity_jac_into(t, x, p, out)
+    return [float(v) for v in out]
+
+
+def _velocity_metric_into(t, x, p, out):
+    try:
+        w233 = math.sin(t*p[5])
+        out[0] = math.sqrt(w233*w233*p[13] + p[10])
+        out[1] = w233*p[4]
+        out[8] = -2.0*x[6] + 2.0*x[4]
+        out[9] = -2.0*x[7] + 2.0*x[5]
+        out[10] = -2.0*x[4] + 2.0*x[6]
+        out[11] = -2.0*x[5] + 2.0*x[7]
+    except (ArithmeticError, ValueError):
+        return _velocity_metric_into_ieee(t, x, p, out)
+
+
+def _velocity_metric_into_ieee(t, x, p, out):
+    with numpy.errstate(all="ignore"):
+        t = numpy.float64(t)
+        x = numpy.asarray(x, dtype=numpy.float64)
+        p = numpy.asarray(p, dtype=numpy.float64)
+        w233 = _c_sin(t*p[5])
+        out[0] = _c_sqrt(w233*w233*p[13] + p[10])
+        out[1] = w233*p[4]
+        out[8] = -2.0*x[6] + 2.0*x[4]
+        out[9] = -2.0*x[7] + 2.0*x[5]
+        out[10] = -2.0*x[4] + 2.0*x[6]
+        out[11] = -2.0*x[5] + 2.0*x[7]
+
+
+
+def _velocity_metric(t, x, p):
+    out = [0.0] * 16
+    _velocity_metric_into(t, x, p, out)
     return [float(v) for v in out]
 
 

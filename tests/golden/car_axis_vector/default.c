@@ -165,21 +165,21 @@ void bgc_params_defaults(bgc_params *p, const int *given)
 
 void bgc_params_update(bgc_params *p)
 {
-    const double w214 = p->p_L*p->p_L;
-    p->c[0] = w214;
+    const double w220 = p->p_L*p->p_L;
+    p->c[0] = w220;
     p->c[1] = p->p_r*p->p_w;
     p->c[2] = 1.0/p->p_k;
-    const double w215 = p->p_r*p->p_r;
-    p->c[3] = -w215;
+    const double w221 = p->p_r*p->p_r;
+    p->c[3] = -w221;
     p->c[4] = -p->p_g*p->p_k;
-    p->c[5] = -w214;
+    p->c[5] = -w220;
     p->c[6] = -p->p_r*p->p_w*p->p_w;
     p->c[7] = -1.0/p->p_k;
     p->c[8] = -p->p_beta*p->p_beta;
     p->c[9] = -2.0*p->p_alpha;
     p->c[10] = p->p_r/p->p_k;
-    p->c[11] = -w215*p->p_w;
-    p->c[12] = fabs(-w214);
+    p->c[11] = -w221*p->p_w;
+    p->c[12] = fabs(-w220);
     p->c[13] = -2.0/p->p_k;
     p->c[14] = 2.0/p->p_k;
 }
@@ -637,9 +637,14 @@ void bgc_scale(double t, const double *x, const bgc_params *p, double *out)
     const double w207 = sqrt(w206);
     out[0] = fabs(w207*x[4]) + fabs(w205*p->p_r*x[5]);
     const double w208 = cos(w204);
-    out[1] = fabs(w205*p->c[10]*x[1]) + fabs(w207*p->c[2]*x[0]) + (fabs(w208*p->c[1]*x[5]) + fabs(w205*w208*p->c[11]*x[4]/sqrt(w206)));
+    const double w209 = fabs(p->c[2]*x[0]) + fabs(p->c[2]*x[1]) + (fabs(p->c[2]*x[2]) + fabs(p->c[2]*x[3]));
+    out[1] = w209*(fabs(w207) + fabs(w205*p->p_r)) + fabs(w205*p->c[10]*x[1]) + fabs(w207*p->c[2]*x[0]) + (fabs(w208*p->c[1]*x[5]) + fabs(w205*w208*p->c[11]*x[4]/sqrt(w206)));
     out[2] = fabs(x[4]*x[4]) + fabs(x[5]*x[5]) + (fabs(x[6]*x[6]) + fabs(x[7]*x[7])) + (fabs(-2.0*x[4]*x[6]) + fabs(-2.0*x[5]*x[7]) + p->c[12]);
-    out[3] = fabs((-2.0*x[4] + 2.0*x[6])*p->c[2]*x[2]) + fabs((-2.0*x[5] + 2.0*x[7])*p->c[2]*x[3]) + (fabs((-2.0*x[6] + 2.0*x[4])*p->c[2]*x[0]) + fabs((-2.0*x[7] + 2.0*x[5])*p->c[2]*x[1]));
+    const double w210 = -2.0*x[7] + 2.0*x[5];
+    const double w211 = -2.0*x[6] + 2.0*x[4];
+    const double w212 = -2.0*x[5] + 2.0*x[7];
+    const double w213 = -2.0*x[4] + 2.0*x[6];
+    out[3] = w209*(fabs(w210) + fabs(w211) + (fabs(w212) + fabs(w213))) + fabs(w210*p->c[2]*x[1]) + fabs(w211*p->c[2]*x[0]) + (fabs(w212*p->c[2]*x[3]) + fabs(w213*p->c[2]*x[2]));
 }
 
 void bgc_position_jac(double t, const double *x, const bgc_params *p, double *out)
@@ -649,9 +654,9 @@ void bgc_position_jac(double t, const double *x, const bgc_params *p, double *ou
     (void)p;
     (void)out;
     memset(out, 0, 16 * sizeof *out); /* the nonzero entries follow */
-    const double w209 = sin(t*p->p_w);
-    out[4] = sqrt(w209*w209*p->c[3] + p->c[0]);
-    out[5] = w209*p->p_r;
+    const double w214 = sin(t*p->p_w);
+    out[4] = sqrt(w214*w214*p->c[3] + p->c[0]);
+    out[5] = w214*p->p_r;
     out[12] = -2.0*x[6] + 2.0*x[4];
     out[13] = -2.0*x[7] + 2.0*x[5];
     out[14] = -2.0*x[4] + 2.0*x[6];
@@ -665,14 +670,14 @@ void bgc_velocity_jac(double t, const double *x, const bgc_params *p, double *ou
     (void)p;
     (void)out;
     memset(out, 0, 16 * sizeof *out); /* the nonzero entries follow */
-    const double w210 = t*p->p_w;
-    const double w211 = sin(w210);
-    const double w212 = w211*w211*p->c[3] + p->c[0];
-    out[0] = sqrt(w212)*p->c[2];
-    out[1] = w211*p->c[10];
-    const double w213 = cos(w210);
-    out[4] = w211*w213*p->c[11]/sqrt(w212);
-    out[5] = w213*p->c[1];
+    const double w215 = t*p->p_w;
+    const double w216 = sin(w215);
+    const double w217 = w216*w216*p->c[3] + p->c[0];
+    out[0] = sqrt(w217)*p->c[2];
+    out[1] = w216*p->c[10];
+    const double w218 = cos(w215);
+    out[4] = w216*w218*p->c[11]/sqrt(w217);
+    out[5] = w218*p->c[1];
     out[8] = (-2.0*x[6] + 2.0*x[4])*p->c[2];
     out[9] = (-2.0*x[7] + 2.0*x[5])*p->c[2];
     out[10] = (-2.0*x[4] + 2.0*x[6])*p->c[2];
@@ -681,6 +686,22 @@ void bgc_velocity_jac(double t, const double *x, const bgc_params *p, double *ou
     out[13] = p->c[13]*x[3] + p->c[14]*x[1];
     out[14] = p->c[13]*x[0] + p->c[14]*x[2];
     out[15] = p->c[13]*x[1] + p->c[14]*x[3];
+}
+
+void bgc_velocity_metric(double t, const double *x, const bgc_params *p, double *out)
+{
+    (void)t;
+    (void)x;
+    (void)p;
+    (void)out;
+    memset(out, 0, 16 * sizeof *out); /* the nonzero entries follow */
+    const double w219 = sin(t*p->p_w);
+    out[0] = sqrt(w219*w219*p->c[3] + p->c[0]);
+    out[1] = w219*p->p_r;
+    out[8] = -2.0*x[6] + 2.0*x[4];
+    out[9] = -2.0*x[7] + 2.0*x[5];
+    out[10] = -2.0*x[4] + 2.0*x[6];
+    out[11] = -2.0*x[5] + 2.0*x[7];
 }
 
 [runtime: runtime]

@@ -160,21 +160,21 @@ def _fill_params_ieee(p, given):
 
 def _constants_into(p, out):
     try:
-        w214 = p[2]*p[2]
-        out[0] = w214
+        w220 = p[2]*p[2]
+        out[0] = w220
         out[1] = p[4]*p[5]
         out[2] = 1.0/p[9]
-        w215 = p[4]*p[4]
-        out[3] = -w215
+        w221 = p[4]*p[4]
+        out[3] = -w221
         out[4] = -p[6]*p[9]
-        out[5] = -w214
+        out[5] = -w220
         out[6] = -p[4]*p[5]*p[5]
         out[7] = -1.0/p[9]
         out[8] = -p[8]*p[8]
         out[9] = -2.0*p[7]
         out[10] = p[4]/p[9]
-        out[11] = -w215*p[5]
-        out[12] = abs(-w214)
+        out[11] = -w221*p[5]
+        out[12] = abs(-w220)
         out[13] = -2.0/p[9]
         out[14] = 2.0/p[9]
     except (ArithmeticError, ValueError):
@@ -184,21 +184,21 @@ def _constants_into(p, out):
 def _constants_into_ieee(p, out):
     with numpy.errstate(all="ignore"):
         p = numpy.asarray(p, dtype=numpy.float64)
-        w214 = p[2]*p[2]
-        out[0] = w214
+        w220 = p[2]*p[2]
+        out[0] = w220
         out[1] = p[4]*p[5]
         out[2] = 1.0/p[9]
-        w215 = p[4]*p[4]
-        out[3] = -w215
+        w221 = p[4]*p[4]
+        out[3] = -w221
         out[4] = -p[6]*p[9]
-        out[5] = -w214
+        out[5] = -w220
         out[6] = -p[4]*p[5]*p[5]
         out[7] = -1.0/p[9]
         out[8] = -p[8]*p[8]
         out[9] = -2.0*p[7]
         out[10] = p[4]/p[9]
-        out[11] = -w215*p[5]
-        out[12] = abs(-w214)
+        out[11] = -w221*p[5]
+        out[12] = abs(-w220)
         out[13] = -2.0/p[9]
         out[14] = 2.0/p[9]
 
@@ -941,9 +941,14 @@ def _scale_into(t, x, p, out):
         w207 = math.sqrt(w206)
         out[0] = abs(w207*x[4]) + abs(w205*p[4]*x[5])
         w208 = math.cos(w204)
-        out[1] = abs(w205*p[20]*x[1]) + abs(w207*p[12]*x[0]) + (abs(w208*p[11]*x[5]) + abs(w205*w208*p[21]*x[4]/math.sqrt(w206)))
+        w209 = abs(p[12]*x[0]) + abs(p[12]*x[1]) + (abs(p[12]*x[2]) + abs(p[12]*x[3]))
+        out[1] = w209*(abs(w207) + abs(w205*p[4])) + abs(w205*p[20]*x[1]) + abs(w207*p[12]*x[0]) + (abs(w208*p[11]*x[5]) + abs(w205*w208*p[21]*x[4]/math.sqrt(w206)))
         out[2] = abs(x[4]*x[4]) + abs(x[5]*x[5]) + (abs(x[6]*x[6]) + abs(x[7]*x[7])) + (abs(-2.0*x[4]*x[6]) + abs(-2.0*x[5]*x[7]) + p[22])
-        out[3] = abs((-2.0*x[4] + 2.0*x[6])*p[12]*x[2]) + abs((-2.0*x[5] + 2.0*x[7])*p[12]*x[3]) + (abs((-2.0*x[6] + 2.0*x[4])*p[12]*x[0]) + abs((-2.0*x[7] + 2.0*x[5])*p[12]*x[1]))
+        w210 = -2.0*x[7] + 2.0*x[5]
+        w211 = -2.0*x[6] + 2.0*x[4]
+        w212 = -2.0*x[5] + 2.0*x[7]
+        w213 = -2.0*x[4] + 2.0*x[6]
+        out[3] = w209*(abs(w210) + abs(w211) + (abs(w212) + abs(w213))) + abs(w210*p[12]*x[1]) + abs(w211*p[12]*x[0]) + (abs(w212*p[12]*x[3]) + abs(w213*p[12]*x[2]))
     except (ArithmeticError, ValueError):
         return _scale_into_ieee(t, x, p, out)
 
@@ -959,9 +964,14 @@ def _scale_into_ieee(t, x, p, out):
         w207 = _c_sqrt(w206)
         out[0] = abs(w207*x[4]) + abs(w205*p[4]*x[5])
         w208 = _c_cos(w204)
-        out[1] = abs(w205*p[20]*x[1]) + abs(w207*p[12]*x[0]) + (abs(w208*p[11]*x[5]) + abs(w205*w208*p[21]*x[4]/_c_sqrt(w206)))
+        w209 = abs(p[12]*x[0]) + abs(p[12]*x[1]) + (abs(p[12]*x[2]) + abs(p[12]*x[3]))
+        out[1] = w209*(abs(w207) + abs(w205*p[4])) + abs(w205*p[20]*x[1]) + abs(w207*p[12]*x[0]) + (abs(w208*p[11]*x[5]) + abs(w205*w208*p[21]*x[4]/_c_sqrt(w206)))
         out[2] = abs(x[4]*x[4]) + abs(x[5]*x[5]) + (abs(x[6]*x[6]) + abs(x[7]*x[7])) + (abs(-2.0*x[4]*x[6]) + abs(-2.0*x[5]*x[7]) + p[22])
-        out[3] = abs((-2.0*x[4] + 2.0*x[6])*p[12]*x[2]) + abs((-2.0*x[5] + 2.0*x[7])*p[12]*x[3]) + (abs((-2.0*x[6] + 2.0*x[4])*p[12]*x[0]) + abs((-2.0*x[7] + 2.0*x[5])*p[12]*x[1]))
+        w210 = -2.0*x[7] + 2.0*x[5]
+        w211 = -2.0*x[6] + 2.0*x[4]
+        w212 = -2.0*x[5] + 2.0*x[7]
+        w213 = -2.0*x[4] + 2.0*x[6]
+        out[3] = w209*(abs(w210) + abs(w211) + (abs(w212) + abs(w213))) + abs(w210*p[12]*x[1]) + abs(w211*p[12]*x[0]) + (abs(w212*p[12]*x[3]) + abs(w213*p[12]*x[2]))
 
 
 
@@ -973,9 +983,9 @@ def _scale(t, x, p):
 
 def _position_jac_into(t, x, p, out):
     try:
-        w209 = math.sin(t*p[5])
-        out[4] = math.sqrt(w209*w209*p[13] + p[10])
-        out[5] = w209*p[4]
+        w214 = math.sin(t*p[5])
+        out[4] = math.sqrt(w214*w214*p[13] + p[10])
+        out[5] = w214*p[4]
         out[12] = -2.0*x[6] + 2.0*x[4]
         out[13] = -2.0*x[7] + 2.0*x[5]
         out[14] = -2.0*x[4] + 2.0*x[6]
@@ -989,9 +999,9 @@ def _position_jac_into_ieee(t, x, p, out):
         t = numpy.float64(t)
         x = numpy.asarray(x, dtype=numpy.float64)
         p = numpy.asarray(p, dtype=numpy.float64)
-        w209 = _c_sin(t*p[5])
-        out[4] = _c_sqrt(w209*w209*p[13] + p[10])
-        out[5] = w209*p[4]
+        w214 = _c_sin(t*p[5])
+        out[4] = _c_sqrt(w214*w214*p[13] + p[10])
+        out[5] = w214*p[4]
         out[12] = -2.0*x[6] + 2.0*x[4]
         out[13] = -2.0*x[7] + 2.0*x[5]
         out[14] = -2.0*x[4] + 2.0*x[6]
@@ -1007,14 +1017,14 @@ def _position_jac(t, x, p):
 
 def _velocity_jac_into(t, x, p, out):
     try:
-        w210 = t*p[5]
-        w211 = math.sin(w210)
-        w212 = w211*w211*p[13] + p[10]
-        out[0] = math.sqrt(w212)*p[12]
-        out[1] = w211*p[20]
-        w213 = math.cos(w210)
-        out[4] = w211*w213*p[21]/math.sqrt(w212)
-        out[5] = w213*p[11]
+        w215 = t*p[5]
+        w216 = math.sin(w215)
+        w217 = w216*w216*p[13] + p[10]
+        out[0] = math.sqrt(w217)*p[12]
+        out[1] = w216*p[20]
+        w218 = math.cos(w215)
+        out[4] = w216*w218*p[21]/math.sqrt(w217)
+        out[5] = w218*p[11]
         out[8] = (-2.0*x[6] + 2.0*x[4])*p[12]
         out[9] = (-2.0*x[7] + 2.0*x[5])*p[12]
         out[10] = (-2.0*x[4] + 2.0*x[6])*p[12]
@@ -1032,14 +1042,14 @@ def _velocity_jac_into_ieee(t, x, p, out):
         t = numpy.float64(t)
         x = numpy.asarray(x, dtype=numpy.float64)
         p = numpy.asarray(p, dtype=numpy.float64)
-        w210 = t*p[5]
-        w211 = _c_sin(w210)
-        w212 = w211*w211*p[13] + p[10]
-        out[0] = _c_sqrt(w212)*p[12]
-        out[1] = w211*p[20]
-        w213 = _c_cos(w210)
-        out[4] = w211*w213*p[21]/_c_sqrt(w212)
-        out[5] = w213*p[11]
+        w215 = t*p[5]
+        w216 = _c_sin(w215)
+        w217 = w216*w216*p[13] + p[10]
+        out[0] = _c_sqrt(w217)*p[12]
+        out[1] = w216*p[20]
+        w218 = _c_cos(w215)
+        out[4] = w216*w218*p[21]/_c_sqrt(w217)
+        out[5] = w218*p[11]
         out[8] = (-2.0*x[6] + 2.0*x[4])*p[12]
         out[9] = (-2.0*x[7] + 2.0*x[5])*p[12]
         out[10] = (-2.0*x[4] + 2.0*x[6])*p[12]
@@ -1054,6 +1064,40 @@ def _velocity_jac_into_ieee(t, x, p, out):
 def _velocity_jac(t, x, p):
     out = [0.0] * 16
     _velocity_jac_into(t, x, p, out)
+    return [float(v) for v in out]
+
+
+def _velocity_metric_into(t, x, p, out):
+    try:
+        w219 = math.sin(t*p[5])
+        out[0] = math.sqrt(w219*w219*p[13] + p[10])
+        out[1] = w219*p[4]
+        out[8] = -2.0*x[6] + 2.0*x[4]
+        out[9] = -2.0*x[7] + 2.0*x[5]
+        out[10] = -2.0*x[4] + 2.0*x[6]
+        out[11] = -2.0*x[5] + 2.0*x[7]
+    except (ArithmeticError, ValueError):
+        return _velocity_metric_into_ieee(t, x, p, out)
+
+
+def _velocity_metric_into_ieee(t, x, p, out):
+    with numpy.errstate(all="ignore"):
+        t = numpy.float64(t)
+        x = numpy.asarray(x, dtype=numpy.float64)
+        p = numpy.asarray(p, dtype=numpy.float64)
+        w219 = _c_sin(t*p[5])
+        out[0] = _c_sqrt(w219*w219*p[13] + p[10])
+        out[1] = w219*p[4]
+        out[8] = -2.0*x[6] + 2.0*x[4]
+        out[9] = -2.0*x[7] + 2.0*x[5]
+        out[10] = -2.0*x[4] + 2.0*x[6]
+        out[11] = -2.0*x[5] + 2.0*x[7]
+
+
+
+def _velocity_metric(t, x, p):
+    out = [0.0] * 16
+    _velocity_metric_into(t, x, p, out)
     return [float(v) for v in out]
 
 

@@ -157,20 +157,20 @@ def _fill_params_ieee(p, given):
 def _constants_into(p, out):
     try:
         out[0] = 1.0/p[0]
-        w151 = -p[2]*p[2]
-        out[1] = w151
+        w156 = -p[2]*p[2]
+        out[1] = w156
         out[2] = p[0]*p[4]
         out[3] = 1.0/p[1]
-        w152 = -p[3]*p[3]
-        out[4] = w152
+        w157 = -p[3]*p[3]
+        out[4] = w157
         out[5] = p[1]*p[4]
         out[6] = -1.0/p[1]
         out[7] = -1.0/p[0]
         out[8] = -p[8]*p[8]
         out[9] = -2.0*p[7]
         out[10] = 2.0/p[0]
-        out[11] = abs(w151)
-        out[12] = abs(w152)
+        out[11] = abs(w156)
+        out[12] = abs(w157)
         out[13] = -2.0/p[1]
         out[14] = -2.0/p[0]
         out[15] = 2.0/p[1]
@@ -182,20 +182,20 @@ def _constants_into_ieee(p, out):
     with numpy.errstate(all="ignore"):
         p = numpy.asarray(p, dtype=numpy.float64)
         out[0] = 1.0/p[0]
-        w151 = -p[2]*p[2]
-        out[1] = w151
+        w156 = -p[2]*p[2]
+        out[1] = w156
         out[2] = p[0]*p[4]
         out[3] = 1.0/p[1]
-        w152 = -p[3]*p[3]
-        out[4] = w152
+        w157 = -p[3]*p[3]
+        out[4] = w157
         out[5] = p[1]*p[4]
         out[6] = -1.0/p[1]
         out[7] = -1.0/p[0]
         out[8] = -p[8]*p[8]
         out[9] = -2.0*p[7]
         out[10] = 2.0/p[0]
-        out[11] = abs(w151)
-        out[12] = abs(w152)
+        out[11] = abs(w156)
+        out[12] = abs(w157)
         out[13] = -2.0/p[1]
         out[14] = -2.0/p[0]
         out[15] = 2.0/p[1]
@@ -790,9 +790,14 @@ def _scale_into(t, x, p, out):
         w147 = abs(x[5]*x[5])
         w148 = abs(x[4]*x[4])
         out[0] = w147 + w148 + p[20]
-        out[1] = abs(p[19]*x[0]*x[4]) + abs(p[19]*x[1]*x[5])
+        w149 = abs(p[9]*x[0]) + abs(p[9]*x[1]) + (abs(p[12]*x[2]) + abs(p[12]*x[3]))
+        out[1] = w149*(abs(2.0*x[4]) + abs(2.0*x[5])) + abs(p[19]*x[0]*x[4]) + abs(p[19]*x[1]*x[5])
         out[2] = w147 + w148 + (abs(x[6]*x[6]) + abs(x[7]*x[7])) + (abs(-2.0*x[4]*x[6]) + abs(-2.0*x[5]*x[7]) + p[21])
-        out[3] = abs((-2.0*x[4] + 2.0*x[6])*p[12]*x[2]) + abs((-2.0*x[5] + 2.0*x[7])*p[12]*x[3]) + (abs((-2.0*x[6] + 2.0*x[4])*p[9]*x[0]) + abs((-2.0*x[7] + 2.0*x[5])*p[9]*x[1]))
+        w150 = -2.0*x[7] + 2.0*x[5]
+        w151 = -2.0*x[6] + 2.0*x[4]
+        w152 = -2.0*x[5] + 2.0*x[7]
+        w153 = -2.0*x[4] + 2.0*x[6]
+        out[3] = w149*(abs(w150) + abs(w151) + (abs(w152) + abs(w153))) + abs(w150*p[9]*x[1]) + abs(w151*p[9]*x[0]) + (abs(w152*p[12]*x[3]) + abs(w153*p[12]*x[2]))
     except (ArithmeticError, ValueError):
         return _scale_into_ieee(t, x, p, out)
 
@@ -805,9 +810,14 @@ def _scale_into_ieee(t, x, p, out):
         w147 = abs(x[5]*x[5])
         w148 = abs(x[4]*x[4])
         out[0] = w147 + w148 + p[20]
-        out[1] = abs(p[19]*x[0]*x[4]) + abs(p[19]*x[1]*x[5])
+        w149 = abs(p[9]*x[0]) + abs(p[9]*x[1]) + (abs(p[12]*x[2]) + abs(p[12]*x[3]))
+        out[1] = w149*(abs(2.0*x[4]) + abs(2.0*x[5])) + abs(p[19]*x[0]*x[4]) + abs(p[19]*x[1]*x[5])
         out[2] = w147 + w148 + (abs(x[6]*x[6]) + abs(x[7]*x[7])) + (abs(-2.0*x[4]*x[6]) + abs(-2.0*x[5]*x[7]) + p[21])
-        out[3] = abs((-2.0*x[4] + 2.0*x[6])*p[12]*x[2]) + abs((-2.0*x[5] + 2.0*x[7])*p[12]*x[3]) + (abs((-2.0*x[6] + 2.0*x[4])*p[9]*x[0]) + abs((-2.0*x[7] + 2.0*x[5])*p[9]*x[1]))
+        w150 = -2.0*x[7] + 2.0*x[5]
+        w151 = -2.0*x[6] + 2.0*x[4]
+        w152 = -2.0*x[5] + 2.0*x[7]
+        w153 = -2.0*x[4] + 2.0*x[6]
+        out[3] = w149*(abs(w150) + abs(w151) + (abs(w152) + abs(w153))) + abs(w150*p[9]*x[1]) + abs(w151*p[9]*x[0]) + (abs(w152*p[12]*x[3]) + abs(w153*p[12]*x[2]))
 
 
 
@@ -853,16 +863,16 @@ def _velocity_jac_into(t, x, p, out):
     try:
         out[0] = p[19]*x[4]
         out[1] = p[19]*x[5]
-        w149 = p[19]*x[0]
-        out[4] = w149
-        w150 = p[19]*x[1]
-        out[5] = w150
+        w154 = p[19]*x[0]
+        out[4] = w154
+        w155 = p[19]*x[1]
+        out[5] = w155
         out[8] = (-2.0*x[6] + 2.0*x[4])*p[9]
         out[9] = (-2.0*x[7] + 2.0*x[5])*p[9]
         out[10] = (-2.0*x[4] + 2.0*x[6])*p[12]
         out[11] = (-2.0*x[5] + 2.0*x[7])*p[12]
-        out[12] = w149 + p[22]*x[2]
-        out[13] = w150 + p[22]*x[3]
+        out[12] = w154 + p[22]*x[2]
+        out[13] = w155 + p[22]*x[3]
         out[14] = p[23]*x[0] + p[24]*x[2]
         out[15] = p[23]*x[1] + p[24]*x[3]
     except (ArithmeticError, ValueError):
@@ -876,16 +886,16 @@ def _velocity_jac_into_ieee(t, x, p, out):
         p = numpy.asarray(p, dtype=numpy.float64)
         out[0] = p[19]*x[4]
         out[1] = p[19]*x[5]
-        w149 = p[19]*x[0]
-        out[4] = w149
-        w150 = p[19]*x[1]
-        out[5] = w150
+        w154 = p[19]*x[0]
+        out[4] = w154
+        w155 = p[19]*x[1]
+        out[5] = w155
         out[8] = (-2.0*x[6] + 2.0*x[4])*p[9]
         out[9] = (-2.0*x[7] + 2.0*x[5])*p[9]
         out[10] = (-2.0*x[4] + 2.0*x[6])*p[12]
         out[11] = (-2.0*x[5] + 2.0*x[7])*p[12]
-        out[12] = w149 + p[22]*x[2]
-        out[13] = w150 + p[22]*x[3]
+        out[12] = w154 + p[22]*x[2]
+        out[13] = w155 + p[22]*x[3]
         out[14] = p[23]*x[0] + p[24]*x[2]
         out[15] = p[23]*x[1] + p[24]*x[3]
 
@@ -894,6 +904,38 @@ def _velocity_jac_into_ieee(t, x, p, out):
 def _velocity_jac(t, x, p):
     out = [0.0] * 16
     _velocity_jac_into(t, x, p, out)
+    return [float(v) for v in out]
+
+
+def _velocity_metric_into(t, x, p, out):
+    try:
+        out[0] = 2.0*x[4]
+        out[1] = 2.0*x[5]
+        out[8] = -2.0*x[6] + 2.0*x[4]
+        out[9] = -2.0*x[7] + 2.0*x[5]
+        out[10] = -2.0*x[4] + 2.0*x[6]
+        out[11] = -2.0*x[5] + 2.0*x[7]
+    except (ArithmeticError, ValueError):
+        return _velocity_metric_into_ieee(t, x, p, out)
+
+
+def _velocity_metric_into_ieee(t, x, p, out):
+    with numpy.errstate(all="ignore"):
+        t = numpy.float64(t)
+        x = numpy.asarray(x, dtype=numpy.float64)
+        p = numpy.asarray(p, dtype=numpy.float64)
+        out[0] = 2.0*x[4]
+        out[1] = 2.0*x[5]
+        out[8] = -2.0*x[6] + 2.0*x[4]
+        out[9] = -2.0*x[7] + 2.0*x[5]
+        out[10] = -2.0*x[4] + 2.0*x[6]
+        out[11] = -2.0*x[5] + 2.0*x[7]
+
+
+
+def _velocity_metric(t, x, p):
+    out = [0.0] * 16
+    _velocity_metric_into(t, x, p, out)
     return [float(v) for v in out]
 
 

@@ -162,20 +162,20 @@ void bgc_params_defaults(bgc_params *p, const int *given)
 void bgc_params_update(bgc_params *p)
 {
     p->c[0] = 1.0/p->p_m1;
-    const double w157 = -p->p_l1*p->p_l1;
-    p->c[1] = w157;
+    const double w162 = -p->p_l1*p->p_l1;
+    p->c[1] = w162;
     p->c[2] = p->p_m1*p->p_g;
     p->c[3] = 1.0/p->p_m2;
-    const double w158 = -p->p_l2*p->p_l2;
-    p->c[4] = w158;
+    const double w163 = -p->p_l2*p->p_l2;
+    p->c[4] = w163;
     p->c[5] = p->p_m2*p->p_g;
     p->c[6] = -1.0/p->p_m1;
     p->c[7] = -1.0/p->p_m2;
     p->c[8] = -p->p_beta*p->p_beta;
     p->c[9] = -2.0*p->p_alpha;
     p->c[10] = 2.0/p->p_m1;
-    p->c[11] = fabs(w157);
-    p->c[12] = fabs(w158);
+    p->c[11] = fabs(w162);
+    p->c[12] = fabs(w163);
     p->c[13] = -2.0/p->p_m2;
     p->c[14] = -2.0/p->p_m1;
     p->c[15] = 2.0/p->p_m2;
@@ -618,9 +618,14 @@ void bgc_scale(double t, const double *x, const bgc_params *p, double *out)
     const double w153 = fabs(x[5]*x[5]);
     const double w154 = fabs(x[4]*x[4]);
     out[0] = w153 + w154 + p->c[11];
-    out[1] = fabs(p->c[10]*x[0]*x[4]) + fabs(p->c[10]*x[1]*x[5]);
+    const double w155 = fabs(p->c[0]*x[0]) + fabs(p->c[0]*x[1]) + (fabs(p->c[3]*x[2]) + fabs(p->c[3]*x[3]));
+    out[1] = w155*(fabs(2.0*x[4]) + fabs(2.0*x[5])) + fabs(p->c[10]*x[0]*x[4]) + fabs(p->c[10]*x[1]*x[5]);
     out[2] = w153 + w154 + (fabs(x[6]*x[6]) + fabs(x[7]*x[7])) + (fabs(-2.0*x[4]*x[6]) + fabs(-2.0*x[5]*x[7]) + p->c[12]);
-    out[3] = fabs((-2.0*x[4] + 2.0*x[6])*p->c[3]*x[2]) + fabs((-2.0*x[5] + 2.0*x[7])*p->c[3]*x[3]) + (fabs((-2.0*x[6] + 2.0*x[4])*p->c[0]*x[0]) + fabs((-2.0*x[7] + 2.0*x[5])*p->c[0]*x[1]));
+    const double w156 = -2.0*x[7] + 2.0*x[5];
+    const double w157 = -2.0*x[6] + 2.0*x[4];
+    const double w158 = -2.0*x[5] + 2.0*x[7];
+    const double w159 = -2.0*x[4] + 2.0*x[6];
+    out[3] = w155*(fabs(w156) + fabs(w157) + (fabs(w158) + fabs(w159))) + fabs(w156*p->c[0]*x[1]) + fabs(w157*p->c[0]*x[0]) + (fabs(w158*p->c[3]*x[3]) + fabs(w159*p->c[3]*x[2]));
 }
 
 void bgc_position_jac(double t, const double *x, const bgc_params *p, double *out)
@@ -647,18 +652,33 @@ void bgc_velocity_jac(double t, const double *x, const bgc_params *p, double *ou
     memset(out, 0, 16 * sizeof *out); /* the nonzero entries follow */
     out[0] = p->c[10]*x[4];
     out[1] = p->c[10]*x[5];
-    const double w155 = p->c[10]*x[0];
-    out[4] = w155;
-    const double w156 = p->c[10]*x[1];
-    out[5] = w156;
+    const double w160 = p->c[10]*x[0];
+    out[4] = w160;
+    const double w161 = p->c[10]*x[1];
+    out[5] = w161;
     out[8] = (-2.0*x[6] + 2.0*x[4])*p->c[0];
     out[9] = (-2.0*x[7] + 2.0*x[5])*p->c[0];
     out[10] = (-2.0*x[4] + 2.0*x[6])*p->c[3];
     out[11] = (-2.0*x[5] + 2.0*x[7])*p->c[3];
-    out[12] = w155 + p->c[13]*x[2];
-    out[13] = w156 + p->c[13]*x[3];
+    out[12] = w160 + p->c[13]*x[2];
+    out[13] = w161 + p->c[13]*x[3];
     out[14] = p->c[14]*x[0] + p->c[15]*x[2];
     out[15] = p->c[14]*x[1] + p->c[15]*x[3];
+}
+
+void bgc_velocity_metric(double t, const double *x, const bgc_params *p, double *out)
+{
+    (void)t;
+    (void)x;
+    (void)p;
+    (void)out;
+    memset(out, 0, 16 * sizeof *out); /* the nonzero entries follow */
+    out[0] = 2.0*x[4];
+    out[1] = 2.0*x[5];
+    out[8] = -2.0*x[6] + 2.0*x[4];
+    out[9] = -2.0*x[7] + 2.0*x[5];
+    out[10] = -2.0*x[4] + 2.0*x[6];
+    out[11] = -2.0*x[5] + 2.0*x[7];
 }
 
 [runtime: runtime]

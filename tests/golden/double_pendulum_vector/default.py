@@ -157,20 +157,20 @@ def _fill_params_ieee(p, given):
 def _constants_into(p, out):
     try:
         out[0] = 1.0/p[0]
-        w152 = -p[2]*p[2]
-        out[1] = w152
+        w157 = -p[2]*p[2]
+        out[1] = w157
         out[2] = p[0]*p[4]
         out[3] = 1.0/p[1]
-        w153 = -p[3]*p[3]
-        out[4] = w153
+        w158 = -p[3]*p[3]
+        out[4] = w158
         out[5] = p[1]*p[4]
         out[6] = -1.0/p[0]
         out[7] = -1.0/p[1]
         out[8] = -p[8]*p[8]
         out[9] = -2.0*p[7]
         out[10] = 2.0/p[0]
-        out[11] = abs(w152)
-        out[12] = abs(w153)
+        out[11] = abs(w157)
+        out[12] = abs(w158)
         out[13] = -2.0/p[1]
         out[14] = -2.0/p[0]
         out[15] = 2.0/p[1]
@@ -182,20 +182,20 @@ def _constants_into_ieee(p, out):
     with numpy.errstate(all="ignore"):
         p = numpy.asarray(p, dtype=numpy.float64)
         out[0] = 1.0/p[0]
-        w152 = -p[2]*p[2]
-        out[1] = w152
+        w157 = -p[2]*p[2]
+        out[1] = w157
         out[2] = p[0]*p[4]
         out[3] = 1.0/p[1]
-        w153 = -p[3]*p[3]
-        out[4] = w153
+        w158 = -p[3]*p[3]
+        out[4] = w158
         out[5] = p[1]*p[4]
         out[6] = -1.0/p[0]
         out[7] = -1.0/p[1]
         out[8] = -p[8]*p[8]
         out[9] = -2.0*p[7]
         out[10] = 2.0/p[0]
-        out[11] = abs(w152)
-        out[12] = abs(w153)
+        out[11] = abs(w157)
+        out[12] = abs(w158)
         out[13] = -2.0/p[1]
         out[14] = -2.0/p[0]
         out[15] = 2.0/p[1]
@@ -792,9 +792,14 @@ def _scale_into(t, x, p, out):
         w148 = abs(x[5]*x[5])
         w149 = abs(x[4]*x[4])
         out[0] = w148 + w149 + p[20]
-        out[1] = abs(p[19]*x[0]*x[4]) + abs(p[19]*x[1]*x[5])
+        w150 = abs(p[9]*x[0]) + abs(p[9]*x[1]) + (abs(p[12]*x[2]) + abs(p[12]*x[3]))
+        out[1] = w150*(abs(2.0*x[4]) + abs(2.0*x[5])) + abs(p[19]*x[0]*x[4]) + abs(p[19]*x[1]*x[5])
         out[2] = w148 + w149 + (abs(x[6]*x[6]) + abs(x[7]*x[7])) + (abs(-2.0*x[4]*x[6]) + abs(-2.0*x[5]*x[7]) + p[21])
-        out[3] = abs((-2.0*x[4] + 2.0*x[6])*p[12]*x[2]) + abs((-2.0*x[5] + 2.0*x[7])*p[12]*x[3]) + (abs((-2.0*x[6] + 2.0*x[4])*p[9]*x[0]) + abs((-2.0*x[7] + 2.0*x[5])*p[9]*x[1]))
+        w151 = -2.0*x[7] + 2.0*x[5]
+        w152 = -2.0*x[6] + 2.0*x[4]
+        w153 = -2.0*x[5] + 2.0*x[7]
+        w154 = -2.0*x[4] + 2.0*x[6]
+        out[3] = w150*(abs(w151) + abs(w152) + (abs(w153) + abs(w154))) + abs(w151*p[9]*x[1]) + abs(w152*p[9]*x[0]) + (abs(w153*p[12]*x[3]) + abs(w154*p[12]*x[2]))
     except (ArithmeticError, ValueError):
         return _scale_into_ieee(t, x, p, out)
 
@@ -807,9 +812,14 @@ def _scale_into_ieee(t, x, p, out):
         w148 = abs(x[5]*x[5])
         w149 = abs(x[4]*x[4])
         out[0] = w148 + w149 + p[20]
-        out[1] = abs(p[19]*x[0]*x[4]) + abs(p[19]*x[1]*x[5])
+        w150 = abs(p[9]*x[0]) + abs(p[9]*x[1]) + (abs(p[12]*x[2]) + abs(p[12]*x[3]))
+        out[1] = w150*(abs(2.0*x[4]) + abs(2.0*x[5])) + abs(p[19]*x[0]*x[4]) + abs(p[19]*x[1]*x[5])
         out[2] = w148 + w149 + (abs(x[6]*x[6]) + abs(x[7]*x[7])) + (abs(-2.0*x[4]*x[6]) + abs(-2.0*x[5]*x[7]) + p[21])
-        out[3] = abs((-2.0*x[4] + 2.0*x[6])*p[12]*x[2]) + abs((-2.0*x[5] + 2.0*x[7])*p[12]*x[3]) + (abs((-2.0*x[6] + 2.0*x[4])*p[9]*x[0]) + abs((-2.0*x[7] + 2.0*x[5])*p[9]*x[1]))
+        w151 = -2.0*x[7] + 2.0*x[5]
+        w152 = -2.0*x[6] + 2.0*x[4]
+        w153 = -2.0*x[5] + 2.0*x[7]
+        w154 = -2.0*x[4] + 2.0*x[6]
+        out[3] = w150*(abs(w151) + abs(w152) + (abs(w153) + abs(w154))) + abs(w151*p[9]*x[1]) + abs(w152*p[9]*x[0]) + (abs(w153*p[12]*x[3]) + abs(w154*p[12]*x[2]))
 
 
 
@@ -855,16 +865,16 @@ def _velocity_jac_into(t, x, p, out):
     try:
         out[0] = p[19]*x[4]
         out[1] = p[19]*x[5]
-        w150 = p[19]*x[0]
-        out[4] = w150
-        w151 = p[19]*x[1]
-        out[5] = w151
+        w155 = p[19]*x[0]
+        out[4] = w155
+        w156 = p[19]*x[1]
+        out[5] = w156
         out[8] = (-2.0*x[6] + 2.0*x[4])*p[9]
         out[9] = (-2.0*x[7] + 2.0*x[5])*p[9]
         out[10] = (-2.0*x[4] + 2.0*x[6])*p[12]
         out[11] = (-2.0*x[5] + 2.0*x[7])*p[12]
-        out[12] = w150 + p[22]*x[2]
-        out[13] = w151 + p[22]*x[3]
+        out[12] = w155 + p[22]*x[2]
+        out[13] = w156 + p[22]*x[3]
         out[14] = p[23]*x[0] + p[24]*x[2]
         out[15] = p[23]*x[1] + p[24]*x[3]
     except (ArithmeticError, ValueError):
@@ -878,16 +888,16 @@ def _velocity_jac_into_ieee(t, x, p, out):
         p = numpy.asarray(p, dtype=numpy.float64)
         out[0] = p[19]*x[4]
         out[1] = p[19]*x[5]
-        w150 = p[19]*x[0]
-        out[4] = w150
-        w151 = p[19]*x[1]
-        out[5] = w151
+        w155 = p[19]*x[0]
+        out[4] = w155
+        w156 = p[19]*x[1]
+        out[5] = w156
         out[8] = (-2.0*x[6] + 2.0*x[4])*p[9]
         out[9] = (-2.0*x[7] + 2.0*x[5])*p[9]
         out[10] = (-2.0*x[4] + 2.0*x[6])*p[12]
         out[11] = (-2.0*x[5] + 2.0*x[7])*p[12]
-        out[12] = w150 + p[22]*x[2]
-        out[13] = w151 + p[22]*x[3]
+        out[12] = w155 + p[22]*x[2]
+        out[13] = w156 + p[22]*x[3]
         out[14] = p[23]*x[0] + p[24]*x[2]
         out[15] = p[23]*x[1] + p[24]*x[3]
 
@@ -896,6 +906,38 @@ def _velocity_jac_into_ieee(t, x, p, out):
 def _velocity_jac(t, x, p):
     out = [0.0] * 16
     _velocity_jac_into(t, x, p, out)
+    return [float(v) for v in out]
+
+
+def _velocity_metric_into(t, x, p, out):
+    try:
+        out[0] = 2.0*x[4]
+        out[1] = 2.0*x[5]
+        out[8] = -2.0*x[6] + 2.0*x[4]
+        out[9] = -2.0*x[7] + 2.0*x[5]
+        out[10] = -2.0*x[4] + 2.0*x[6]
+        out[11] = -2.0*x[5] + 2.0*x[7]
+    except (ArithmeticError, ValueError):
+        return _velocity_metric_into_ieee(t, x, p, out)
+
+
+def _velocity_metric_into_ieee(t, x, p, out):
+    with numpy.errstate(all="ignore"):
+        t = numpy.float64(t)
+        x = numpy.asarray(x, dtype=numpy.float64)
+        p = numpy.asarray(p, dtype=numpy.float64)
+        out[0] = 2.0*x[4]
+        out[1] = 2.0*x[5]
+        out[8] = -2.0*x[6] + 2.0*x[4]
+        out[9] = -2.0*x[7] + 2.0*x[5]
+        out[10] = -2.0*x[4] + 2.0*x[6]
+        out[11] = -2.0*x[5] + 2.0*x[7]
+
+
+
+def _velocity_metric(t, x, p):
+    out = [0.0] * 16
+    _velocity_metric_into(t, x, p, out)
     return [float(v) for v in out]
 
 

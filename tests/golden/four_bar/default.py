@@ -204,16 +204,16 @@ def _fill_params_ieee(p, given):
 def _constants_into(p, out):
     try:
         out[0] = 1.0/p[0]
-        w214 = -p[2]*p[2]
-        out[1] = w214
+        w220 = -p[2]*p[2]
+        out[1] = w220
         out[2] = p[0]*p[6]
         out[3] = 1.0/p[1]
-        w215 = -p[3]*p[3]
-        out[4] = w215
+        w221 = -p[3]*p[3]
+        out[4] = w221
         out[5] = -2.0*p[5]
-        w216 = -p[4]*p[4]
-        w217 = p[5]*p[5]
-        out[6] = w216 + w217
+        w222 = -p[4]*p[4]
+        w223 = p[5]*p[5]
+        out[6] = w222 + w223
         out[7] = p[1]*p[6]
         out[8] = -1.0/p[0]
         out[9] = -1.0/p[1]
@@ -221,9 +221,9 @@ def _constants_into(p, out):
         out[11] = -2.0*p[8]
         out[12] = 2.0/p[0]
         out[13] = 2.0/p[1]
-        out[14] = abs(w214)
-        out[15] = abs(w215)
-        out[16] = abs(w216) + abs(w217)
+        out[14] = abs(w220)
+        out[15] = abs(w221)
+        out[16] = abs(w222) + abs(w223)
         out[17] = -2.0/p[1]
         out[18] = -2.0/p[0]
     except (ArithmeticError, ValueError):
@@ -234,16 +234,16 @@ def _constants_into_ieee(p, out):
     with numpy.errstate(all="ignore"):
         p = numpy.asarray(p, dtype=numpy.float64)
         out[0] = 1.0/p[0]
-        w214 = -p[2]*p[2]
-        out[1] = w214
+        w220 = -p[2]*p[2]
+        out[1] = w220
         out[2] = p[0]*p[6]
         out[3] = 1.0/p[1]
-        w215 = -p[3]*p[3]
-        out[4] = w215
+        w221 = -p[3]*p[3]
+        out[4] = w221
         out[5] = -2.0*p[5]
-        w216 = -p[4]*p[4]
-        w217 = p[5]*p[5]
-        out[6] = w216 + w217
+        w222 = -p[4]*p[4]
+        w223 = p[5]*p[5]
+        out[6] = w222 + w223
         out[7] = p[1]*p[6]
         out[8] = -1.0/p[0]
         out[9] = -1.0/p[1]
@@ -251,9 +251,9 @@ def _constants_into_ieee(p, out):
         out[11] = -2.0*p[8]
         out[12] = 2.0/p[0]
         out[13] = 2.0/p[1]
-        out[14] = abs(w214)
-        out[15] = abs(w215)
-        out[16] = abs(w216) + abs(w217)
+        out[14] = abs(w220)
+        out[15] = abs(w221)
+        out[16] = abs(w222) + abs(w223)
         out[17] = -2.0/p[1]
         out[18] = -2.0/p[0]
 
@@ -1025,13 +1025,19 @@ def _scale_into(t, x, p, out):
         w206 = abs(x[5]*x[5])
         w207 = abs(x[4]*x[4])
         out[0] = w206 + w207 + p[33]
-        out[1] = abs(p[31]*x[0]*x[4]) + abs(p[31]*x[1]*x[5])
-        w208 = abs(x[7]*x[7])
-        w209 = abs(x[6]*x[6])
-        out[2] = w206 + w207 + (w208 + w209) + (abs(-2.0*x[4]*x[6]) + abs(-2.0*x[5]*x[7]) + p[34])
-        out[3] = abs((-2.0*x[4] + 2.0*x[6])*p[22]*x[2]) + abs((-2.0*x[5] + 2.0*x[7])*p[22]*x[3]) + (abs((-2.0*x[6] + 2.0*x[4])*p[19]*x[0]) + abs((-2.0*x[7] + 2.0*x[5])*p[19]*x[1]))
-        out[4] = w208 + w209 + (abs(p[24]*x[6]) + p[35])
-        out[5] = abs((2.0*x[6] + p[24])*p[22]*x[2]) + abs(p[32]*x[3]*x[7])
+        w208 = abs(p[19]*x[0]) + abs(p[19]*x[1]) + (abs(p[22]*x[2]) + abs(p[22]*x[3]))
+        out[1] = w208*(abs(2.0*x[4]) + abs(2.0*x[5])) + abs(p[31]*x[0]*x[4]) + abs(p[31]*x[1]*x[5])
+        w209 = abs(x[7]*x[7])
+        w210 = abs(x[6]*x[6])
+        out[2] = w206 + w207 + (w209 + w210) + (abs(-2.0*x[4]*x[6]) + abs(-2.0*x[5]*x[7]) + p[34])
+        w211 = -2.0*x[7] + 2.0*x[5]
+        w212 = -2.0*x[6] + 2.0*x[4]
+        w213 = -2.0*x[5] + 2.0*x[7]
+        w214 = -2.0*x[4] + 2.0*x[6]
+        out[3] = w208*(abs(w211) + abs(w212) + (abs(w213) + abs(w214))) + abs(w211*p[19]*x[1]) + abs(w212*p[19]*x[0]) + (abs(w213*p[22]*x[3]) + abs(w214*p[22]*x[2]))
+        out[4] = w209 + w210 + (abs(p[24]*x[6]) + p[35])
+        w215 = 2.0*x[6] + p[24]
+        out[5] = w208*(abs(w215) + abs(2.0*x[7])) + abs(w215*p[22]*x[2]) + abs(p[32]*x[3]*x[7])
     except (ArithmeticError, ValueError):
         return _scale_into_ieee(t, x, p, out)
 
@@ -1044,13 +1050,19 @@ def _scale_into_ieee(t, x, p, out):
         w206 = abs(x[5]*x[5])
         w207 = abs(x[4]*x[4])
         out[0] = w206 + w207 + p[33]
-        out[1] = abs(p[31]*x[0]*x[4]) + abs(p[31]*x[1]*x[5])
-        w208 = abs(x[7]*x[7])
-        w209 = abs(x[6]*x[6])
-        out[2] = w206 + w207 + (w208 + w209) + (abs(-2.0*x[4]*x[6]) + abs(-2.0*x[5]*x[7]) + p[34])
-        out[3] = abs((-2.0*x[4] + 2.0*x[6])*p[22]*x[2]) + abs((-2.0*x[5] + 2.0*x[7])*p[22]*x[3]) + (abs((-2.0*x[6] + 2.0*x[4])*p[19]*x[0]) + abs((-2.0*x[7] + 2.0*x[5])*p[19]*x[1]))
-        out[4] = w208 + w209 + (abs(p[24]*x[6]) + p[35])
-        out[5] = abs((2.0*x[6] + p[24])*p[22]*x[2]) + abs(p[32]*x[3]*x[7])
+        w208 = abs(p[19]*x[0]) + abs(p[19]*x[1]) + (abs(p[22]*x[2]) + abs(p[22]*x[3]))
+        out[1] = w208*(abs(2.0*x[4]) + abs(2.0*x[5])) + abs(p[31]*x[0]*x[4]) + abs(p[31]*x[1]*x[5])
+        w209 = abs(x[7]*x[7])
+        w210 = abs(x[6]*x[6])
+        out[2] = w206 + w207 + (w209 + w210) + (abs(-2.0*x[4]*x[6]) + abs(-2.0*x[5]*x[7]) + p[34])
+        w211 = -2.0*x[7] + 2.0*x[5]
+        w212 = -2.0*x[6] + 2.0*x[4]
+        w213 = -2.0*x[5] + 2.0*x[7]
+        w214 = -2.0*x[4] + 2.0*x[6]
+        out[3] = w208*(abs(w211) + abs(w212) + (abs(w213) + abs(w214))) + abs(w211*p[19]*x[1]) + abs(w212*p[19]*x[0]) + (abs(w213*p[22]*x[3]) + abs(w214*p[22]*x[2]))
+        out[4] = w209 + w210 + (abs(p[24]*x[6]) + p[35])
+        w215 = 2.0*x[6] + p[24]
+        out[5] = w208*(abs(w215) + abs(2.0*x[7])) + abs(w215*p[22]*x[2]) + abs(p[32]*x[3]*x[7])
 
 
 
@@ -1100,24 +1112,24 @@ def _velocity_jac_into(t, x, p, out):
     try:
         out[0] = p[31]*x[4]
         out[1] = p[31]*x[5]
-        w210 = p[31]*x[0]
-        out[4] = w210
-        w211 = p[31]*x[1]
-        out[5] = w211
+        w216 = p[31]*x[0]
+        out[4] = w216
+        w217 = p[31]*x[1]
+        out[5] = w217
         out[8] = (-2.0*x[6] + 2.0*x[4])*p[19]
         out[9] = (-2.0*x[7] + 2.0*x[5])*p[19]
         out[10] = (-2.0*x[4] + 2.0*x[6])*p[22]
         out[11] = (-2.0*x[5] + 2.0*x[7])*p[22]
-        out[12] = w210 + p[36]*x[2]
-        out[13] = w211 + p[36]*x[3]
-        w212 = p[32]*x[2]
-        out[14] = w212 + p[37]*x[0]
-        w213 = p[32]*x[3]
-        out[15] = w213 + p[37]*x[1]
+        out[12] = w216 + p[36]*x[2]
+        out[13] = w217 + p[36]*x[3]
+        w218 = p[32]*x[2]
+        out[14] = w218 + p[37]*x[0]
+        w219 = p[32]*x[3]
+        out[15] = w219 + p[37]*x[1]
         out[18] = (2.0*x[6] + p[24])*p[22]
         out[19] = p[32]*x[7]
-        out[22] = w212
-        out[23] = w213
+        out[22] = w218
+        out[23] = w219
     except (ArithmeticError, ValueError):
         return _velocity_jac_into_ieee(t, x, p, out)
 
@@ -1129,30 +1141,66 @@ def _velocity_jac_into_ieee(t, x, p, out):
         p = numpy.asarray(p, dtype=numpy.float64)
         out[0] = p[31]*x[4]
         out[1] = p[31]*x[5]
-        w210 = p[31]*x[0]
-        out[4] = w210
-        w211 = p[31]*x[1]
-        out[5] = w211
+        w216 = p[31]*x[0]
+        out[4] = w216
+        w217 = p[31]*x[1]
+        out[5] = w217
         out[8] = (-2.0*x[6] + 2.0*x[4])*p[19]
         out[9] = (-2.0*x[7] + 2.0*x[5])*p[19]
         out[10] = (-2.0*x[4] + 2.0*x[6])*p[22]
         out[11] = (-2.0*x[5] + 2.0*x[7])*p[22]
-        out[12] = w210 + p[36]*x[2]
-        out[13] = w211 + p[36]*x[3]
-        w212 = p[32]*x[2]
-        out[14] = w212 + p[37]*x[0]
-        w213 = p[32]*x[3]
-        out[15] = w213 + p[37]*x[1]
+        out[12] = w216 + p[36]*x[2]
+        out[13] = w217 + p[36]*x[3]
+        w218 = p[32]*x[2]
+        out[14] = w218 + p[37]*x[0]
+        w219 = p[32]*x[3]
+        out[15] = w219 + p[37]*x[1]
         out[18] = (2.0*x[6] + p[24])*p[22]
         out[19] = p[32]*x[7]
-        out[22] = w212
-        out[23] = w213
+        out[22] = w218
+        out[23] = w219
 
 
 
 def _velocity_jac(t, x, p):
     out = [0.0] * 24
     _velocity_jac_into(t, x, p, out)
+    return [float(v) for v in out]
+
+
+def _velocity_metric_into(t, x, p, out):
+    try:
+        out[0] = 2.0*x[4]
+        out[1] = 2.0*x[5]
+        out[8] = -2.0*x[6] + 2.0*x[4]
+        out[9] = -2.0*x[7] + 2.0*x[5]
+        out[10] = -2.0*x[4] + 2.0*x[6]
+        out[11] = -2.0*x[5] + 2.0*x[7]
+        out[18] = 2.0*x[6] + p[24]
+        out[19] = 2.0*x[7]
+    except (ArithmeticError, ValueError):
+        return _velocity_metric_into_ieee(t, x, p, out)
+
+
+def _velocity_metric_into_ieee(t, x, p, out):
+    with numpy.errstate(all="ignore"):
+        t = numpy.float64(t)
+        x = numpy.asarray(x, dtype=numpy.float64)
+        p = numpy.asarray(p, dtype=numpy.float64)
+        out[0] = 2.0*x[4]
+        out[1] = 2.0*x[5]
+        out[8] = -2.0*x[6] + 2.0*x[4]
+        out[9] = -2.0*x[7] + 2.0*x[5]
+        out[10] = -2.0*x[4] + 2.0*x[6]
+        out[11] = -2.0*x[5] + 2.0*x[7]
+        out[18] = 2.0*x[6] + p[24]
+        out[19] = 2.0*x[7]
+
+
+
+def _velocity_metric(t, x, p):
+    out = [0.0] * 24
+    _velocity_metric_into(t, x, p, out)
     return [float(v) for v in out]
 
 

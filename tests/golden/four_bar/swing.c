@@ -209,16 +209,16 @@ void bgc_params_defaults(bgc_params *p, const int *given)
 void bgc_params_update(bgc_params *p)
 {
     p->c[0] = 1.0/p->p_m1;
-    const double w218 = -p->p_a*p->p_a;
-    p->c[1] = w218;
+    const double w224 = -p->p_a*p->p_a;
+    p->c[1] = w224;
     p->c[2] = p->p_m1*p->p_g;
     p->c[3] = 1.0/p->p_m2;
-    const double w219 = -p->p_b*p->p_b;
-    p->c[4] = w219;
+    const double w225 = -p->p_b*p->p_b;
+    p->c[4] = w225;
     p->c[5] = -2.0*p->p_d;
-    const double w220 = -p->p_c*p->p_c;
-    const double w221 = p->p_d*p->p_d;
-    p->c[6] = w220 + w221;
+    const double w226 = -p->p_c*p->p_c;
+    const double w227 = p->p_d*p->p_d;
+    p->c[6] = w226 + w227;
     p->c[7] = p->p_m2*p->p_g;
     p->c[8] = -1.0/p->p_m1;
     p->c[9] = -1.0/p->p_m2;
@@ -226,9 +226,9 @@ void bgc_params_update(bgc_params *p)
     p->c[11] = -2.0*p->p_alpha;
     p->c[12] = 2.0/p->p_m1;
     p->c[13] = 2.0/p->p_m2;
-    p->c[14] = fabs(w218);
-    p->c[15] = fabs(w219);
-    p->c[16] = fabs(w220) + fabs(w221);
+    p->c[14] = fabs(w224);
+    p->c[15] = fabs(w225);
+    p->c[16] = fabs(w226) + fabs(w227);
     p->c[17] = -2.0/p->p_m2;
     p->c[18] = -2.0/p->p_m1;
 }
@@ -737,13 +737,19 @@ void bgc_scale(double t, const double *x, const bgc_params *p, double *out)
     const double w210 = fabs(x[5]*x[5]);
     const double w211 = fabs(x[4]*x[4]);
     out[0] = w210 + w211 + p->c[14];
-    out[1] = fabs(p->c[12]*x[0]*x[4]) + fabs(p->c[12]*x[1]*x[5]);
-    const double w212 = fabs(x[7]*x[7]);
-    const double w213 = fabs(x[6]*x[6]);
-    out[2] = w210 + w211 + (w212 + w213) + (fabs(-2.0*x[4]*x[6]) + fabs(-2.0*x[5]*x[7]) + p->c[15]);
-    out[3] = fabs((-2.0*x[4] + 2.0*x[6])*p->c[3]*x[2]) + fabs((-2.0*x[5] + 2.0*x[7])*p->c[3]*x[3]) + (fabs((-2.0*x[6] + 2.0*x[4])*p->c[0]*x[0]) + fabs((-2.0*x[7] + 2.0*x[5])*p->c[0]*x[1]));
-    out[4] = w212 + w213 + (fabs(p->c[5]*x[6]) + p->c[16]);
-    out[5] = fabs((2.0*x[6] + p->c[5])*p->c[3]*x[2]) + fabs(p->c[13]*x[3]*x[7]);
+    const double w212 = fabs(p->c[0]*x[0]) + fabs(p->c[0]*x[1]) + (fabs(p->c[3]*x[2]) + fabs(p->c[3]*x[3]));
+    out[1] = w212*(fabs(2.0*x[4]) + fabs(2.0*x[5])) + fabs(p->c[12]*x[0]*x[4]) + fabs(p->c[12]*x[1]*x[5]);
+    const double w213 = fabs(x[7]*x[7]);
+    const double w214 = fabs(x[6]*x[6]);
+    out[2] = w210 + w211 + (w213 + w214) + (fabs(-2.0*x[4]*x[6]) + fabs(-2.0*x[5]*x[7]) + p->c[15]);
+    const double w215 = -2.0*x[7] + 2.0*x[5];
+    const double w216 = -2.0*x[6] + 2.0*x[4];
+    const double w217 = -2.0*x[5] + 2.0*x[7];
+    const double w218 = -2.0*x[4] + 2.0*x[6];
+    out[3] = w212*(fabs(w215) + fabs(w216) + (fabs(w217) + fabs(w218))) + fabs(w215*p->c[0]*x[1]) + fabs(w216*p->c[0]*x[0]) + (fabs(w217*p->c[3]*x[3]) + fabs(w218*p->c[3]*x[2]));
+    out[4] = w213 + w214 + (fabs(p->c[5]*x[6]) + p->c[16]);
+    const double w219 = 2.0*x[6] + p->c[5];
+    out[5] = w212*(fabs(w219) + fabs(2.0*x[7])) + fabs(w219*p->c[3]*x[2]) + fabs(p->c[13]*x[3]*x[7]);
 }
 
 void bgc_position_jac(double t, const double *x, const bgc_params *p, double *out)
@@ -772,24 +778,41 @@ void bgc_velocity_jac(double t, const double *x, const bgc_params *p, double *ou
     memset(out, 0, 24 * sizeof *out); /* the nonzero entries follow */
     out[0] = p->c[12]*x[4];
     out[1] = p->c[12]*x[5];
-    const double w214 = p->c[12]*x[0];
-    out[4] = w214;
-    const double w215 = p->c[12]*x[1];
-    out[5] = w215;
+    const double w220 = p->c[12]*x[0];
+    out[4] = w220;
+    const double w221 = p->c[12]*x[1];
+    out[5] = w221;
     out[8] = (-2.0*x[6] + 2.0*x[4])*p->c[0];
     out[9] = (-2.0*x[7] + 2.0*x[5])*p->c[0];
     out[10] = (-2.0*x[4] + 2.0*x[6])*p->c[3];
     out[11] = (-2.0*x[5] + 2.0*x[7])*p->c[3];
-    out[12] = w214 + p->c[17]*x[2];
-    out[13] = w215 + p->c[17]*x[3];
-    const double w216 = p->c[13]*x[2];
-    out[14] = w216 + p->c[18]*x[0];
-    const double w217 = p->c[13]*x[3];
-    out[15] = w217 + p->c[18]*x[1];
+    out[12] = w220 + p->c[17]*x[2];
+    out[13] = w221 + p->c[17]*x[3];
+    const double w222 = p->c[13]*x[2];
+    out[14] = w222 + p->c[18]*x[0];
+    const double w223 = p->c[13]*x[3];
+    out[15] = w223 + p->c[18]*x[1];
     out[18] = (2.0*x[6] + p->c[5])*p->c[3];
     out[19] = p->c[13]*x[7];
-    out[22] = w216;
-    out[23] = w217;
+    out[22] = w222;
+    out[23] = w223;
+}
+
+void bgc_velocity_metric(double t, const double *x, const bgc_params *p, double *out)
+{
+    (void)t;
+    (void)x;
+    (void)p;
+    (void)out;
+    memset(out, 0, 24 * sizeof *out); /* the nonzero entries follow */
+    out[0] = 2.0*x[4];
+    out[1] = 2.0*x[5];
+    out[8] = -2.0*x[6] + 2.0*x[4];
+    out[9] = -2.0*x[7] + 2.0*x[5];
+    out[10] = -2.0*x[4] + 2.0*x[6];
+    out[11] = -2.0*x[5] + 2.0*x[7];
+    out[18] = 2.0*x[6] + p->c[5];
+    out[19] = 2.0*x[7];
 }
 
 [runtime: runtime]

@@ -204,16 +204,16 @@ def _fill_params_ieee(p, given):
 def _constants_into(p, out):
     try:
         out[0] = 1.0/p[0]
-        w218 = -p[2]*p[2]
-        out[1] = w218
+        w224 = -p[2]*p[2]
+        out[1] = w224
         out[2] = p[0]*p[6]
         out[3] = 1.0/p[1]
-        w219 = -p[3]*p[3]
-        out[4] = w219
+        w225 = -p[3]*p[3]
+        out[4] = w225
         out[5] = -2.0*p[5]
-        w220 = -p[4]*p[4]
-        w221 = p[5]*p[5]
-        out[6] = w220 + w221
+        w226 = -p[4]*p[4]
+        w227 = p[5]*p[5]
+        out[6] = w226 + w227
         out[7] = p[1]*p[6]
         out[8] = -1.0/p[0]
         out[9] = -1.0/p[1]
@@ -221,9 +221,9 @@ def _constants_into(p, out):
         out[11] = -2.0*p[8]
         out[12] = 2.0/p[0]
         out[13] = 2.0/p[1]
-        out[14] = abs(w218)
-        out[15] = abs(w219)
-        out[16] = abs(w220) + abs(w221)
+        out[14] = abs(w224)
+        out[15] = abs(w225)
+        out[16] = abs(w226) + abs(w227)
         out[17] = -2.0/p[1]
         out[18] = -2.0/p[0]
     except (ArithmeticError, ValueError):
@@ -234,16 +234,16 @@ def _constants_into_ieee(p, out):
     with numpy.errstate(all="ignore"):
         p = numpy.asarray(p, dtype=numpy.float64)
         out[0] = 1.0/p[0]
-        w218 = -p[2]*p[2]
-        out[1] = w218
+        w224 = -p[2]*p[2]
+        out[1] = w224
         out[2] = p[0]*p[6]
         out[3] = 1.0/p[1]
-        w219 = -p[3]*p[3]
-        out[4] = w219
+        w225 = -p[3]*p[3]
+        out[4] = w225
         out[5] = -2.0*p[5]
-        w220 = -p[4]*p[4]
-        w221 = p[5]*p[5]
-        out[6] = w220 + w221
+        w226 = -p[4]*p[4]
+        w227 = p[5]*p[5]
+        out[6] = w226 + w227
         out[7] = p[1]*p[6]
         out[8] = -1.0/p[0]
         out[9] = -1.0/p[1]
@@ -251,9 +251,9 @@ def _constants_into_ieee(p, out):
         out[11] = -2.0*p[8]
         out[12] = 2.0/p[0]
         out[13] = 2.0/p[1]
-        out[14] = abs(w218)
-        out[15] = abs(w219)
-        out[16] = abs(w220) + abs(w221)
+        out[14] = abs(w224)
+        out[15] = abs(w225)
+        out[16] = abs(w226) + abs(w227)
         out[17] = -2.0/p[1]
         out[18] = -2.0/p[0]
 
@@ -1045,13 +1045,19 @@ def _scale_into(t, x, p, out):
         w210 = abs(x[5]*x[5])
         w211 = abs(x[4]*x[4])
         out[0] = w210 + w211 + p[33]
-        out[1] = abs(p[31]*x[0]*x[4]) + abs(p[31]*x[1]*x[5])
-        w212 = abs(x[7]*x[7])
-        w213 = abs(x[6]*x[6])
-        out[2] = w210 + w211 + (w212 + w213) + (abs(-2.0*x[4]*x[6]) + abs(-2.0*x[5]*x[7]) + p[34])
-        out[3] = abs((-2.0*x[4] + 2.0*x[6])*p[22]*x[2]) + abs((-2.0*x[5] + 2.0*x[7])*p[22]*x[3]) + (abs((-2.0*x[6] + 2.0*x[4])*p[19]*x[0]) + abs((-2.0*x[7] + 2.0*x[5])*p[19]*x[1]))
-        out[4] = w212 + w213 + (abs(p[24]*x[6]) + p[35])
-        out[5] = abs((2.0*x[6] + p[24])*p[22]*x[2]) + abs(p[32]*x[3]*x[7])
+        w212 = abs(p[19]*x[0]) + abs(p[19]*x[1]) + (abs(p[22]*x[2]) + abs(p[22]*x[3]))
+        out[1] = w212*(abs(2.0*x[4]) + abs(2.0*x[5])) + abs(p[31]*x[0]*x[4]) + abs(p[31]*x[1]*x[5])
+        w213 = abs(x[7]*x[7])
+        w214 = abs(x[6]*x[6])
+        out[2] = w210 + w211 + (w213 + w214) + (abs(-2.0*x[4]*x[6]) + abs(-2.0*x[5]*x[7]) + p[34])
+        w215 = -2.0*x[7] + 2.0*x[5]
+        w216 = -2.0*x[6] + 2.0*x[4]
+        w217 = -2.0*x[5] + 2.0*x[7]
+        w218 = -2.0*x[4] + 2.0*x[6]
+        out[3] = w212*(abs(w215) + abs(w216) + (abs(w217) + abs(w218))) + abs(w215*p[19]*x[1]) + abs(w216*p[19]*x[0]) + (abs(w217*p[22]*x[3]) + abs(w218*p[22]*x[2]))
+        out[4] = w213 + w214 + (abs(p[24]*x[6]) + p[35])
+        w219 = 2.0*x[6] + p[24]
+        out[5] = w212*(abs(w219) + abs(2.0*x[7])) + abs(w219*p[22]*x[2]) + abs(p[32]*x[3]*x[7])
     except (ArithmeticError, ValueError):
         return _scale_into_ieee(t, x, p, out)
 
@@ -1064,13 +1070,19 @@ def _scale_into_ieee(t, x, p, out):
         w210 = abs(x[5]*x[5])
         w211 = abs(x[4]*x[4])
         out[0] = w210 + w211 + p[33]
-        out[1] = abs(p[31]*x[0]*x[4]) + abs(p[31]*x[1]*x[5])
-        w212 = abs(x[7]*x[7])
-        w213 = abs(x[6]*x[6])
-        out[2] = w210 + w211 + (w212 + w213) + (abs(-2.0*x[4]*x[6]) + abs(-2.0*x[5]*x[7]) + p[34])
-        out[3] = abs((-2.0*x[4] + 2.0*x[6])*p[22]*x[2]) + abs((-2.0*x[5] + 2.0*x[7])*p[22]*x[3]) + (abs((-2.0*x[6] + 2.0*x[4])*p[19]*x[0]) + abs((-2.0*x[7] + 2.0*x[5])*p[19]*x[1]))
-        out[4] = w212 + w213 + (abs(p[24]*x[6]) + p[35])
-        out[5] = abs((2.0*x[6] + p[24])*p[22]*x[2]) + abs(p[32]*x[3]*x[7])
+        w212 = abs(p[19]*x[0]) + abs(p[19]*x[1]) + (abs(p[22]*x[2]) + abs(p[22]*x[3]))
+        out[1] = w212*(abs(2.0*x[4]) + abs(2.0*x[5])) + abs(p[31]*x[0]*x[4]) + abs(p[31]*x[1]*x[5])
+        w213 = abs(x[7]*x[7])
+        w214 = abs(x[6]*x[6])
+        out[2] = w210 + w211 + (w213 + w214) + (abs(-2.0*x[4]*x[6]) + abs(-2.0*x[5]*x[7]) + p[34])
+        w215 = -2.0*x[7] + 2.0*x[5]
+        w216 = -2.0*x[6] + 2.0*x[4]
+        w217 = -2.0*x[5] + 2.0*x[7]
+        w218 = -2.0*x[4] + 2.0*x[6]
+        out[3] = w212*(abs(w215) + abs(w216) + (abs(w217) + abs(w218))) + abs(w215*p[19]*x[1]) + abs(w216*p[19]*x[0]) + (abs(w217*p[22]*x[3]) + abs(w218*p[22]*x[2]))
+        out[4] = w213 + w214 + (abs(p[24]*x[6]) + p[35])
+        w219 = 2.0*x[6] + p[24]
+        out[5] = w212*(abs(w219) + abs(2.0*x[7])) + abs(w219*p[22]*x[2]) + abs(p[32]*x[3]*x[7])
 
 
 
@@ -1120,24 +1132,24 @@ def _velocity_jac_into(t, x, p, out):
     try:
         out[0] = p[31]*x[4]
         out[1] = p[31]*x[5]
-        w214 = p[31]*x[0]
-        out[4] = w214
-        w215 = p[31]*x[1]
-        out[5] = w215
+        w220 = p[31]*x[0]
+        out[4] = w220
+        w221 = p[31]*x[1]
+        out[5] = w221
         out[8] = (-2.0*x[6] + 2.0*x[4])*p[19]
         out[9] = (-2.0*x[7] + 2.0*x[5])*p[19]
         out[10] = (-2.0*x[4] + 2.0*x[6])*p[22]
         out[11] = (-2.0*x[5] + 2.0*x[7])*p[22]
-        out[12] = w214 + p[36]*x[2]
-        out[13] = w215 + p[36]*x[3]
-        w216 = p[32]*x[2]
-        out[14] = w216 + p[37]*x[0]
-        w217 = p[32]*x[3]
-        out[15] = w217 + p[37]*x[1]
+        out[12] = w220 + p[36]*x[2]
+        out[13] = w221 + p[36]*x[3]
+        w222 = p[32]*x[2]
+        out[14] = w222 + p[37]*x[0]
+        w223 = p[32]*x[3]
+        out[15] = w223 + p[37]*x[1]
         out[18] = (2.0*x[6] + p[24])*p[22]
         out[19] = p[32]*x[7]
-        out[22] = w216
-        out[23] = w217
+        out[22] = w222
+        out[23] = w223
     except (ArithmeticError, ValueError):
         return _velocity_jac_into_ieee(t, x, p, out)
 
@@ -1149,30 +1161,66 @@ def _velocity_jac_into_ieee(t, x, p, out):
         p = numpy.asarray(p, dtype=numpy.float64)
         out[0] = p[31]*x[4]
         out[1] = p[31]*x[5]
-        w214 = p[31]*x[0]
-        out[4] = w214
-        w215 = p[31]*x[1]
-        out[5] = w215
+        w220 = p[31]*x[0]
+        out[4] = w220
+        w221 = p[31]*x[1]
+        out[5] = w221
         out[8] = (-2.0*x[6] + 2.0*x[4])*p[19]
         out[9] = (-2.0*x[7] + 2.0*x[5])*p[19]
         out[10] = (-2.0*x[4] + 2.0*x[6])*p[22]
         out[11] = (-2.0*x[5] + 2.0*x[7])*p[22]
-        out[12] = w214 + p[36]*x[2]
-        out[13] = w215 + p[36]*x[3]
-        w216 = p[32]*x[2]
-        out[14] = w216 + p[37]*x[0]
-        w217 = p[32]*x[3]
-        out[15] = w217 + p[37]*x[1]
+        out[12] = w220 + p[36]*x[2]
+        out[13] = w221 + p[36]*x[3]
+        w222 = p[32]*x[2]
+        out[14] = w222 + p[37]*x[0]
+        w223 = p[32]*x[3]
+        out[15] = w223 + p[37]*x[1]
         out[18] = (2.0*x[6] + p[24])*p[22]
         out[19] = p[32]*x[7]
-        out[22] = w216
-        out[23] = w217
+        out[22] = w222
+        out[23] = w223
 
 
 
 def _velocity_jac(t, x, p):
     out = [0.0] * 24
     _velocity_jac_into(t, x, p, out)
+    return [float(v) for v in out]
+
+
+def _velocity_metric_into(t, x, p, out):
+    try:
+        out[0] = 2.0*x[4]
+        out[1] = 2.0*x[5]
+        out[8] = -2.0*x[6] + 2.0*x[4]
+        out[9] = -2.0*x[7] + 2.0*x[5]
+        out[10] = -2.0*x[4] + 2.0*x[6]
+        out[11] = -2.0*x[5] + 2.0*x[7]
+        out[18] = 2.0*x[6] + p[24]
+        out[19] = 2.0*x[7]
+    except (ArithmeticError, ValueError):
+        return _velocity_metric_into_ieee(t, x, p, out)
+
+
+def _velocity_metric_into_ieee(t, x, p, out):
+    with numpy.errstate(all="ignore"):
+        t = numpy.float64(t)
+        x = numpy.asarray(x, dtype=numpy.float64)
+        p = numpy.asarray(p, dtype=numpy.float64)
+        out[0] = 2.0*x[4]
+        out[1] = 2.0*x[5]
+        out[8] = -2.0*x[6] + 2.0*x[4]
+        out[9] = -2.0*x[7] + 2.0*x[5]
+        out[10] = -2.0*x[4] + 2.0*x[6]
+        out[11] = -2.0*x[5] + 2.0*x[7]
+        out[18] = 2.0*x[6] + p[24]
+        out[19] = 2.0*x[7]
+
+
+
+def _velocity_metric(t, x, p):
+    out = [0.0] * 24
+    _velocity_metric_into(t, x, p, out)
     return [float(v) for v in out]
 
 

@@ -215,18 +215,18 @@ void bgc_params_update(bgc_params *p)
     p->c[4] = -2.0*p->p_d;
     p->c[5] = -1.0/p->p_m1;
     p->c[6] = -1.0/p->p_m2;
-    const double w181 = -p->p_a*p->p_a;
-    p->c[7] = w181;
-    const double w182 = -p->p_b*p->p_b;
-    p->c[8] = w182;
-    const double w183 = -p->p_c*p->p_c;
-    const double w184 = p->p_d*p->p_d;
-    p->c[9] = w183 + w184;
+    const double w187 = -p->p_a*p->p_a;
+    p->c[7] = w187;
+    const double w188 = -p->p_b*p->p_b;
+    p->c[8] = w188;
+    const double w189 = -p->p_c*p->p_c;
+    const double w190 = p->p_d*p->p_d;
+    p->c[9] = w189 + w190;
     p->c[10] = 2.0/p->p_m1;
     p->c[11] = 2.0/p->p_m2;
-    p->c[12] = fabs(w181);
-    p->c[13] = fabs(w182);
-    p->c[14] = fabs(w183) + fabs(w184);
+    p->c[12] = fabs(w187);
+    p->c[13] = fabs(w188);
+    p->c[14] = fabs(w189) + fabs(w190);
     p->c[15] = -2.0/p->p_m2;
     p->c[16] = -2.0/p->p_m1;
 }
@@ -681,13 +681,19 @@ void bgc_scale(double t, const double *x, const bgc_params *p, double *out)
     const double w173 = fabs(x[5]*x[5]);
     const double w174 = fabs(x[4]*x[4]);
     out[0] = w173 + w174 + p->c[12];
-    out[1] = fabs(p->c[10]*x[0]*x[4]) + fabs(p->c[10]*x[1]*x[5]);
-    const double w175 = fabs(x[7]*x[7]);
-    const double w176 = fabs(x[6]*x[6]);
-    out[2] = w173 + w174 + (w175 + w176) + (fabs(-2.0*x[4]*x[6]) + fabs(-2.0*x[5]*x[7]) + p->c[13]);
-    out[3] = fabs((-2.0*x[4] + 2.0*x[6])*p->c[2]*x[2]) + fabs((-2.0*x[5] + 2.0*x[7])*p->c[2]*x[3]) + (fabs((-2.0*x[6] + 2.0*x[4])*p->c[0]*x[0]) + fabs((-2.0*x[7] + 2.0*x[5])*p->c[0]*x[1]));
-    out[4] = w175 + w176 + (fabs(p->c[4]*x[6]) + p->c[14]);
-    out[5] = fabs((2.0*x[6] + p->c[4])*p->c[2]*x[2]) + fabs(p->c[11]*x[3]*x[7]);
+    const double w175 = fabs(p->c[0]*x[0]) + fabs(p->c[0]*x[1]) + (fabs(p->c[2]*x[2]) + fabs(p->c[2]*x[3]));
+    out[1] = w175*(fabs(2.0*x[4]) + fabs(2.0*x[5])) + fabs(p->c[10]*x[0]*x[4]) + fabs(p->c[10]*x[1]*x[5]);
+    const double w176 = fabs(x[7]*x[7]);
+    const double w177 = fabs(x[6]*x[6]);
+    out[2] = w173 + w174 + (w176 + w177) + (fabs(-2.0*x[4]*x[6]) + fabs(-2.0*x[5]*x[7]) + p->c[13]);
+    const double w178 = -2.0*x[7] + 2.0*x[5];
+    const double w179 = -2.0*x[6] + 2.0*x[4];
+    const double w180 = -2.0*x[5] + 2.0*x[7];
+    const double w181 = -2.0*x[4] + 2.0*x[6];
+    out[3] = w175*(fabs(w178) + fabs(w179) + (fabs(w180) + fabs(w181))) + fabs(w178*p->c[0]*x[1]) + fabs(w179*p->c[0]*x[0]) + (fabs(w180*p->c[2]*x[3]) + fabs(w181*p->c[2]*x[2]));
+    out[4] = w176 + w177 + (fabs(p->c[4]*x[6]) + p->c[14]);
+    const double w182 = 2.0*x[6] + p->c[4];
+    out[5] = w175*(fabs(w182) + fabs(2.0*x[7])) + fabs(w182*p->c[2]*x[2]) + fabs(p->c[11]*x[3]*x[7]);
 }
 
 void bgc_position_jac(double t, const double *x, const bgc_params *p, double *out)
@@ -716,24 +722,41 @@ void bgc_velocity_jac(double t, const double *x, const bgc_params *p, double *ou
     memset(out, 0, 24 * sizeof *out); /* the nonzero entries follow */
     out[0] = p->c[10]*x[4];
     out[1] = p->c[10]*x[5];
-    const double w177 = p->c[10]*x[0];
-    out[4] = w177;
-    const double w178 = p->c[10]*x[1];
-    out[5] = w178;
+    const double w183 = p->c[10]*x[0];
+    out[4] = w183;
+    const double w184 = p->c[10]*x[1];
+    out[5] = w184;
     out[8] = (-2.0*x[6] + 2.0*x[4])*p->c[0];
     out[9] = (-2.0*x[7] + 2.0*x[5])*p->c[0];
     out[10] = (-2.0*x[4] + 2.0*x[6])*p->c[2];
     out[11] = (-2.0*x[5] + 2.0*x[7])*p->c[2];
-    out[12] = w177 + p->c[15]*x[2];
-    out[13] = w178 + p->c[15]*x[3];
-    const double w179 = p->c[11]*x[2];
-    out[14] = w179 + p->c[16]*x[0];
-    const double w180 = p->c[11]*x[3];
-    out[15] = w180 + p->c[16]*x[1];
+    out[12] = w183 + p->c[15]*x[2];
+    out[13] = w184 + p->c[15]*x[3];
+    const double w185 = p->c[11]*x[2];
+    out[14] = w185 + p->c[16]*x[0];
+    const double w186 = p->c[11]*x[3];
+    out[15] = w186 + p->c[16]*x[1];
     out[18] = (2.0*x[6] + p->c[4])*p->c[2];
     out[19] = p->c[11]*x[7];
-    out[22] = w179;
-    out[23] = w180;
+    out[22] = w185;
+    out[23] = w186;
+}
+
+void bgc_velocity_metric(double t, const double *x, const bgc_params *p, double *out)
+{
+    (void)t;
+    (void)x;
+    (void)p;
+    (void)out;
+    memset(out, 0, 24 * sizeof *out); /* the nonzero entries follow */
+    out[0] = 2.0*x[4];
+    out[1] = 2.0*x[5];
+    out[8] = -2.0*x[6] + 2.0*x[4];
+    out[9] = -2.0*x[7] + 2.0*x[5];
+    out[10] = -2.0*x[4] + 2.0*x[6];
+    out[11] = -2.0*x[5] + 2.0*x[7];
+    out[18] = 2.0*x[6] + p->c[4];
+    out[19] = 2.0*x[7];
 }
 
 [runtime: runtime]

@@ -210,18 +210,18 @@ def _constants_into(p, out):
         out[4] = -2.0*p[5]
         out[5] = -1.0/p[0]
         out[6] = -1.0/p[1]
-        w181 = -p[2]*p[2]
-        out[7] = w181
-        w182 = -p[3]*p[3]
-        out[8] = w182
-        w183 = -p[4]*p[4]
-        w184 = p[5]*p[5]
-        out[9] = w183 + w184
+        w187 = -p[2]*p[2]
+        out[7] = w187
+        w188 = -p[3]*p[3]
+        out[8] = w188
+        w189 = -p[4]*p[4]
+        w190 = p[5]*p[5]
+        out[9] = w189 + w190
         out[10] = 2.0/p[0]
         out[11] = 2.0/p[1]
-        out[12] = abs(w181)
-        out[13] = abs(w182)
-        out[14] = abs(w183) + abs(w184)
+        out[12] = abs(w187)
+        out[13] = abs(w188)
+        out[14] = abs(w189) + abs(w190)
         out[15] = -2.0/p[1]
         out[16] = -2.0/p[0]
     except (ArithmeticError, ValueError):
@@ -238,18 +238,18 @@ def _constants_into_ieee(p, out):
         out[4] = -2.0*p[5]
         out[5] = -1.0/p[0]
         out[6] = -1.0/p[1]
-        w181 = -p[2]*p[2]
-        out[7] = w181
-        w182 = -p[3]*p[3]
-        out[8] = w182
-        w183 = -p[4]*p[4]
-        w184 = p[5]*p[5]
-        out[9] = w183 + w184
+        w187 = -p[2]*p[2]
+        out[7] = w187
+        w188 = -p[3]*p[3]
+        out[8] = w188
+        w189 = -p[4]*p[4]
+        w190 = p[5]*p[5]
+        out[9] = w189 + w190
         out[10] = 2.0/p[0]
         out[11] = 2.0/p[1]
-        out[12] = abs(w181)
-        out[13] = abs(w182)
-        out[14] = abs(w183) + abs(w184)
+        out[12] = abs(w187)
+        out[13] = abs(w188)
+        out[14] = abs(w189) + abs(w190)
         out[15] = -2.0/p[1]
         out[16] = -2.0/p[0]
 
@@ -933,13 +933,19 @@ def _scale_into(t, x, p, out):
         w173 = abs(x[5]*x[5])
         w174 = abs(x[4]*x[4])
         out[0] = w173 + w174 + p[31]
-        out[1] = abs(p[29]*x[0]*x[4]) + abs(p[29]*x[1]*x[5])
-        w175 = abs(x[7]*x[7])
-        w176 = abs(x[6]*x[6])
-        out[2] = w173 + w174 + (w175 + w176) + (abs(-2.0*x[4]*x[6]) + abs(-2.0*x[5]*x[7]) + p[32])
-        out[3] = abs((-2.0*x[4] + 2.0*x[6])*p[21]*x[2]) + abs((-2.0*x[5] + 2.0*x[7])*p[21]*x[3]) + (abs((-2.0*x[6] + 2.0*x[4])*p[19]*x[0]) + abs((-2.0*x[7] + 2.0*x[5])*p[19]*x[1]))
-        out[4] = w175 + w176 + (abs(p[23]*x[6]) + p[33])
-        out[5] = abs((2.0*x[6] + p[23])*p[21]*x[2]) + abs(p[30]*x[3]*x[7])
+        w175 = abs(p[19]*x[0]) + abs(p[19]*x[1]) + (abs(p[21]*x[2]) + abs(p[21]*x[3]))
+        out[1] = w175*(abs(2.0*x[4]) + abs(2.0*x[5])) + abs(p[29]*x[0]*x[4]) + abs(p[29]*x[1]*x[5])
+        w176 = abs(x[7]*x[7])
+        w177 = abs(x[6]*x[6])
+        out[2] = w173 + w174 + (w176 + w177) + (abs(-2.0*x[4]*x[6]) + abs(-2.0*x[5]*x[7]) + p[32])
+        w178 = -2.0*x[7] + 2.0*x[5]
+        w179 = -2.0*x[6] + 2.0*x[4]
+        w180 = -2.0*x[5] + 2.0*x[7]
+        w181 = -2.0*x[4] + 2.0*x[6]
+        out[3] = w175*(abs(w178) + abs(w179) + (abs(w180) + abs(w181))) + abs(w178*p[19]*x[1]) + abs(w179*p[19]*x[0]) + (abs(w180*p[21]*x[3]) + abs(w181*p[21]*x[2]))
+        out[4] = w176 + w177 + (abs(p[23]*x[6]) + p[33])
+        w182 = 2.0*x[6] + p[23]
+        out[5] = w175*(abs(w182) + abs(2.0*x[7])) + abs(w182*p[21]*x[2]) + abs(p[30]*x[3]*x[7])
     except (ArithmeticError, ValueError):
         return _scale_into_ieee(t, x, p, out)
 
@@ -952,13 +958,19 @@ def _scale_into_ieee(t, x, p, out):
         w173 = abs(x[5]*x[5])
         w174 = abs(x[4]*x[4])
         out[0] = w173 + w174 + p[31]
-        out[1] = abs(p[29]*x[0]*x[4]) + abs(p[29]*x[1]*x[5])
-        w175 = abs(x[7]*x[7])
-        w176 = abs(x[6]*x[6])
-        out[2] = w173 + w174 + (w175 + w176) + (abs(-2.0*x[4]*x[6]) + abs(-2.0*x[5]*x[7]) + p[32])
-        out[3] = abs((-2.0*x[4] + 2.0*x[6])*p[21]*x[2]) + abs((-2.0*x[5] + 2.0*x[7])*p[21]*x[3]) + (abs((-2.0*x[6] + 2.0*x[4])*p[19]*x[0]) + abs((-2.0*x[7] + 2.0*x[5])*p[19]*x[1]))
-        out[4] = w175 + w176 + (abs(p[23]*x[6]) + p[33])
-        out[5] = abs((2.0*x[6] + p[23])*p[21]*x[2]) + abs(p[30]*x[3]*x[7])
+        w175 = abs(p[19]*x[0]) + abs(p[19]*x[1]) + (abs(p[21]*x[2]) + abs(p[21]*x[3]))
+        out[1] = w175*(abs(2.0*x[4]) + abs(2.0*x[5])) + abs(p[29]*x[0]*x[4]) + abs(p[29]*x[1]*x[5])
+        w176 = abs(x[7]*x[7])
+        w177 = abs(x[6]*x[6])
+        out[2] = w173 + w174 + (w176 + w177) + (abs(-2.0*x[4]*x[6]) + abs(-2.0*x[5]*x[7]) + p[32])
+        w178 = -2.0*x[7] + 2.0*x[5]
+        w179 = -2.0*x[6] + 2.0*x[4]
+        w180 = -2.0*x[5] + 2.0*x[7]
+        w181 = -2.0*x[4] + 2.0*x[6]
+        out[3] = w175*(abs(w178) + abs(w179) + (abs(w180) + abs(w181))) + abs(w178*p[19]*x[1]) + abs(w179*p[19]*x[0]) + (abs(w180*p[21]*x[3]) + abs(w181*p[21]*x[2]))
+        out[4] = w176 + w177 + (abs(p[23]*x[6]) + p[33])
+        w182 = 2.0*x[6] + p[23]
+        out[5] = w175*(abs(w182) + abs(2.0*x[7])) + abs(w182*p[21]*x[2]) + abs(p[30]*x[3]*x[7])
 
 
 
@@ -1008,24 +1020,24 @@ def _velocity_jac_into(t, x, p, out):
     try:
         out[0] = p[29]*x[4]
         out[1] = p[29]*x[5]
-        w177 = p[29]*x[0]
-        out[4] = w177
-        w178 = p[29]*x[1]
-        out[5] = w178
+        w183 = p[29]*x[0]
+        out[4] = w183
+        w184 = p[29]*x[1]
+        out[5] = w184
         out[8] = (-2.0*x[6] + 2.0*x[4])*p[19]
         out[9] = (-2.0*x[7] + 2.0*x[5])*p[19]
         out[10] = (-2.0*x[4] + 2.0*x[6])*p[21]
         out[11] = (-2.0*x[5] + 2.0*x[7])*p[21]
-        out[12] = w177 + p[34]*x[2]
-        out[13] = w178 + p[34]*x[3]
-        w179 = p[30]*x[2]
-        out[14] = w179 + p[35]*x[0]
-        w180 = p[30]*x[3]
-        out[15] = w180 + p[35]*x[1]
+        out[12] = w183 + p[34]*x[2]
+        out[13] = w184 + p[34]*x[3]
+        w185 = p[30]*x[2]
+        out[14] = w185 + p[35]*x[0]
+        w186 = p[30]*x[3]
+        out[15] = w186 + p[35]*x[1]
         out[18] = (2.0*x[6] + p[23])*p[21]
         out[19] = p[30]*x[7]
-        out[22] = w179
-        out[23] = w180
+        out[22] = w185
+        out[23] = w186
     except (ArithmeticError, ValueError):
         return _velocity_jac_into_ieee(t, x, p, out)
 
@@ -1037,30 +1049,66 @@ def _velocity_jac_into_ieee(t, x, p, out):
         p = numpy.asarray(p, dtype=numpy.float64)
         out[0] = p[29]*x[4]
         out[1] = p[29]*x[5]
-        w177 = p[29]*x[0]
-        out[4] = w177
-        w178 = p[29]*x[1]
-        out[5] = w178
+        w183 = p[29]*x[0]
+        out[4] = w183
+        w184 = p[29]*x[1]
+        out[5] = w184
         out[8] = (-2.0*x[6] + 2.0*x[4])*p[19]
         out[9] = (-2.0*x[7] + 2.0*x[5])*p[19]
         out[10] = (-2.0*x[4] + 2.0*x[6])*p[21]
         out[11] = (-2.0*x[5] + 2.0*x[7])*p[21]
-        out[12] = w177 + p[34]*x[2]
-        out[13] = w178 + p[34]*x[3]
-        w179 = p[30]*x[2]
-        out[14] = w179 + p[35]*x[0]
-        w180 = p[30]*x[3]
-        out[15] = w180 + p[35]*x[1]
+        out[12] = w183 + p[34]*x[2]
+        out[13] = w184 + p[34]*x[3]
+        w185 = p[30]*x[2]
+        out[14] = w185 + p[35]*x[0]
+        w186 = p[30]*x[3]
+        out[15] = w186 + p[35]*x[1]
         out[18] = (2.0*x[6] + p[23])*p[21]
         out[19] = p[30]*x[7]
-        out[22] = w179
-        out[23] = w180
+        out[22] = w185
+        out[23] = w186
 
 
 
 def _velocity_jac(t, x, p):
     out = [0.0] * 24
     _velocity_jac_into(t, x, p, out)
+    return [float(v) for v in out]
+
+
+def _velocity_metric_into(t, x, p, out):
+    try:
+        out[0] = 2.0*x[4]
+        out[1] = 2.0*x[5]
+        out[8] = -2.0*x[6] + 2.0*x[4]
+        out[9] = -2.0*x[7] + 2.0*x[5]
+        out[10] = -2.0*x[4] + 2.0*x[6]
+        out[11] = -2.0*x[5] + 2.0*x[7]
+        out[18] = 2.0*x[6] + p[23]
+        out[19] = 2.0*x[7]
+    except (ArithmeticError, ValueError):
+        return _velocity_metric_into_ieee(t, x, p, out)
+
+
+def _velocity_metric_into_ieee(t, x, p, out):
+    with numpy.errstate(all="ignore"):
+        t = numpy.float64(t)
+        x = numpy.asarray(x, dtype=numpy.float64)
+        p = numpy.asarray(p, dtype=numpy.float64)
+        out[0] = 2.0*x[4]
+        out[1] = 2.0*x[5]
+        out[8] = -2.0*x[6] + 2.0*x[4]
+        out[9] = -2.0*x[7] + 2.0*x[5]
+        out[10] = -2.0*x[4] + 2.0*x[6]
+        out[11] = -2.0*x[5] + 2.0*x[7]
+        out[18] = 2.0*x[6] + p[23]
+        out[19] = 2.0*x[7]
+
+
+
+def _velocity_metric(t, x, p):
+    out = [0.0] * 24
+    _velocity_metric_into(t, x, p, out)
     return [float(v) for v in out]
 
 

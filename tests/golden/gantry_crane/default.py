@@ -50,7 +50,7 @@ _N = 11
 _AUTONOMOUS = True  # the right side does not read t
 _POSITION_ROWS = [0]
 _VELOCITY_ROWS = [1]
-_VELOCITY_MOVABLE = [True, True, True, True, False, False, False, True, True, True, True]
+_VELOCITY_MOVABLE = [False, True, True, True, False, False, False, False, False, False, False]
 _WORK_DOUBLES = 233
 _WORK_INTS = 3
 _BLOCK_NAMES = ["rod.lambda, e[shaft->rotor]"]
@@ -218,8 +218,8 @@ def _constants_into(p, out):
         out[0] = 1.0/p[2]
         out[1] = 1.0/p[4]
         out[2] = 1.0/p[10]
-        w112 = -p[11]*p[11]
-        out[3] = w112
+        w114 = -p[11]*p[11]
+        out[3] = w114
         out[4] = p[10]*p[12]
         out[5] = -1.0/p[10]
         out[6] = -p[15]*p[15]
@@ -234,7 +234,7 @@ def _constants_into(p, out):
         out[15] = 2.0*p[1]
         out[16] = 2.0/p[10]
         out[17] = p[7]/p[4]
-        out[18] = abs(w112)
+        out[18] = abs(w114)
         out[19] = -2.0/p[10]
         out[20] = 2.0*p[7]/p[4]
         out[21] = -2.0*p[7]/p[4]
@@ -248,8 +248,8 @@ def _constants_into_ieee(p, out):
         out[0] = 1.0/p[2]
         out[1] = 1.0/p[4]
         out[2] = 1.0/p[10]
-        w112 = -p[11]*p[11]
-        out[3] = w112
+        w114 = -p[11]*p[11]
+        out[3] = w114
         out[4] = p[10]*p[12]
         out[5] = -1.0/p[10]
         out[6] = -p[15]*p[15]
@@ -264,7 +264,7 @@ def _constants_into_ieee(p, out):
         out[15] = 2.0*p[1]
         out[16] = 2.0/p[10]
         out[17] = p[7]/p[4]
-        out[18] = abs(w112)
+        out[18] = abs(w114)
         out[19] = -2.0/p[10]
         out[20] = 2.0*p[7]/p[4]
         out[21] = -2.0*p[7]/p[4]
@@ -783,7 +783,9 @@ def _residual(t, x, p):
 def _scale_into(t, x, p, out):
     try:
         out[0] = abs(x[4]*x[4]) + abs(x[5]*x[5]) + abs(x[6]*x[6]) + (abs(-2.0*x[4]*x[5]) + p[42])
-        out[1] = abs((-2.0*x[4] + 2.0*x[5])*p[26]*x[2]) + abs((-2.0*x[5] + 2.0*x[4])*p[41]*x[1]) + abs(p[40]*x[3]*x[6])
+        w112 = -2.0*x[5] + 2.0*x[4]
+        w113 = -2.0*x[4] + 2.0*x[5]
+        out[1] = (abs(w113) + abs(2.0*x[6]) + abs(w112*p[7]))*(abs(p[25]*x[1]) + abs(p[26]*x[2]) + abs(p[26]*x[3])) + abs(w112*p[41]*x[1]) + (abs(w113*p[26]*x[2]) + abs(p[40]*x[3]*x[6]))
     except (ArithmeticError, ValueError):
         return _scale_into_ieee(t, x, p, out)
 
@@ -794,7 +796,9 @@ def _scale_into_ieee(t, x, p, out):
         x = numpy.asarray(x, dtype=numpy.float64)
         p = numpy.asarray(p, dtype=numpy.float64)
         out[0] = abs(x[4]*x[4]) + abs(x[5]*x[5]) + abs(x[6]*x[6]) + (abs(-2.0*x[4]*x[5]) + p[42])
-        out[1] = abs((-2.0*x[4] + 2.0*x[5])*p[26]*x[2]) + abs((-2.0*x[5] + 2.0*x[4])*p[41]*x[1]) + abs(p[40]*x[3]*x[6])
+        w112 = -2.0*x[5] + 2.0*x[4]
+        w113 = -2.0*x[4] + 2.0*x[5]
+        out[1] = (abs(w113) + abs(2.0*x[6]) + abs(w112*p[7]))*(abs(p[25]*x[1]) + abs(p[26]*x[2]) + abs(p[26]*x[3])) + abs(w112*p[41]*x[1]) + (abs(w113*p[26]*x[2]) + abs(p[40]*x[3]*x[6]))
 
 
 
@@ -859,6 +863,32 @@ def _velocity_jac_into_ieee(t, x, p, out):
 def _velocity_jac(t, x, p):
     out = [0.0] * 11
     _velocity_jac_into(t, x, p, out)
+    return [float(v) for v in out]
+
+
+def _velocity_metric_into(t, x, p, out):
+    try:
+        out[1] = (-2.0*x[5] + 2.0*x[4])*p[7]
+        out[2] = -2.0*x[4] + 2.0*x[5]
+        out[3] = 2.0*x[6]
+    except (ArithmeticError, ValueError):
+        return _velocity_metric_into_ieee(t, x, p, out)
+
+
+def _velocity_metric_into_ieee(t, x, p, out):
+    with numpy.errstate(all="ignore"):
+        t = numpy.float64(t)
+        x = numpy.asarray(x, dtype=numpy.float64)
+        p = numpy.asarray(p, dtype=numpy.float64)
+        out[1] = (-2.0*x[5] + 2.0*x[4])*p[7]
+        out[2] = -2.0*x[4] + 2.0*x[5]
+        out[3] = 2.0*x[6]
+
+
+
+def _velocity_metric(t, x, p):
+    out = [0.0] * 11
+    _velocity_metric_into(t, x, p, out)
     return [float(v) for v in out]
 
 

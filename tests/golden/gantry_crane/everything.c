@@ -224,8 +224,8 @@ void bgc_params_update(bgc_params *p)
     p->c[0] = 1.0/p->p_La;
     p->c[1] = 1.0/p->p_Jr;
     p->c[2] = 1.0/p->p_m;
-    const double w114 = -p->p_l*p->p_l;
-    p->c[3] = w114;
+    const double w116 = -p->p_l*p->p_l;
+    p->c[3] = w116;
     p->c[4] = p->p_m*p->p_g;
     p->c[5] = -1.0/p->p_m;
     p->c[6] = -p->p_beta*p->p_beta;
@@ -240,7 +240,7 @@ void bgc_params_update(bgc_params *p)
     p->c[15] = 2.0*p->p_Ra;
     p->c[16] = 2.0/p->p_m;
     p->c[17] = p->p_rd/p->p_Jr;
-    p->c[18] = fabs(w114);
+    p->c[18] = fabs(w116);
     p->c[19] = -2.0/p->p_m;
     p->c[20] = 2.0*p->p_rd/p->p_Jr;
     p->c[21] = -2.0*p->p_rd/p->p_Jr;
@@ -307,7 +307,7 @@ double *bgc_param_ref(bgc_params *p, int j)
 
 static const int bgc_position_rows[BGC_DIM(BGC_NUM_POSITION_ROWS)] = { 0 };
 static const int bgc_velocity_rows[BGC_DIM(BGC_NUM_VELOCITY_ROWS)] = { 1 };
-static const int bgc_velocity_movable[BGC_DIM(BGC_NUM_STATES)] = { 1, 1, 1, 1, 0, 0, 0, 1, 1, 1, 1 };
+static const int bgc_velocity_movable[BGC_DIM(BGC_NUM_STATES)] = { 0, 1, 1, 1, 0, 0, 0, 0, 0, 0, 0 };
 
 /* The algebraic blocks solved here: factorization plans (bgc/sparse.py) and storage. */
 static const int bgc_block0_plan[] = { 0, 3, 0, 1, 1, 2, 1, 0, 1, 1, 1, 1, 3, 0, 0, 1, 1, 0, 1, 0, 1 };
@@ -653,7 +653,9 @@ void bgc_scale(double t, const double *x, const bgc_params *p, double *out)
     (void)p;
     (void)out;
     out[0] = fabs(x[4]*x[4]) + fabs(x[5]*x[5]) + fabs(x[6]*x[6]) + (fabs(-2.0*x[4]*x[5]) + p->c[18]);
-    out[1] = fabs((-2.0*x[4] + 2.0*x[5])*p->c[2]*x[2]) + fabs((-2.0*x[5] + 2.0*x[4])*p->c[17]*x[1]) + fabs(p->c[16]*x[3]*x[6]);
+    const double w114 = -2.0*x[5] + 2.0*x[4];
+    const double w115 = -2.0*x[4] + 2.0*x[5];
+    out[1] = (fabs(w115) + fabs(2.0*x[6]) + fabs(w114*p->p_rd))*(fabs(p->c[1]*x[1]) + fabs(p->c[2]*x[2]) + fabs(p->c[2]*x[3])) + fabs(w114*p->c[17]*x[1]) + (fabs(w115*p->c[2]*x[2]) + fabs(p->c[16]*x[3]*x[6]));
 }
 
 void bgc_position_jac(double t, const double *x, const bgc_params *p, double *out)
@@ -681,6 +683,18 @@ void bgc_velocity_jac(double t, const double *x, const bgc_params *p, double *ou
     out[4] = p->c[19]*x[2] + p->c[20]*x[1];
     out[5] = p->c[16]*x[2] + p->c[21]*x[1];
     out[6] = p->c[16]*x[3];
+}
+
+void bgc_velocity_metric(double t, const double *x, const bgc_params *p, double *out)
+{
+    (void)t;
+    (void)x;
+    (void)p;
+    (void)out;
+    memset(out, 0, 11 * sizeof *out); /* the nonzero entries follow */
+    out[1] = (-2.0*x[5] + 2.0*x[4])*p->p_rd;
+    out[2] = -2.0*x[4] + 2.0*x[5];
+    out[3] = 2.0*x[6];
 }
 
 [runtime: runtime]

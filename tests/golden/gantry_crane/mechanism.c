@@ -213,15 +213,15 @@ void bgc_params_update(bgc_params *p)
 {
     p->c[0] = 1.0/p->p_Jr;
     p->c[1] = 1.0/p->p_m;
-    const double w77 = -p->p_l*p->p_l;
-    p->c[2] = w77;
+    const double w79 = -p->p_l*p->p_l;
+    p->c[2] = w79;
     p->c[3] = p->p_m*p->p_g;
     p->c[4] = -1.0/p->p_m;
     p->c[5] = -p->p_beta*p->p_beta;
     p->c[6] = -2.0*p->p_alpha;
     p->c[7] = 2.0/p->p_m;
     p->c[8] = p->p_rd/p->p_Jr;
-    p->c[9] = fabs(w77);
+    p->c[9] = fabs(w79);
     p->c[10] = -2.0/p->p_m;
     p->c[11] = 2.0*p->p_rd/p->p_Jr;
     p->c[12] = -2.0*p->p_rd/p->p_Jr;
@@ -570,7 +570,9 @@ void bgc_scale(double t, const double *x, const bgc_params *p, double *out)
     (void)p;
     (void)out;
     out[0] = fabs(x[3]*x[3]) + fabs(x[4]*x[4]) + fabs(x[5]*x[5]) + (fabs(-2.0*x[3]*x[4]) + p->c[9]);
-    out[1] = fabs((-2.0*x[3] + 2.0*x[4])*p->c[1]*x[1]) + fabs((-2.0*x[4] + 2.0*x[3])*p->c[8]*x[0]) + fabs(p->c[7]*x[2]*x[5]);
+    const double w77 = -2.0*x[4] + 2.0*x[3];
+    const double w78 = -2.0*x[3] + 2.0*x[4];
+    out[1] = (fabs(w78) + fabs(2.0*x[5]) + fabs(w77*p->p_rd))*(fabs(p->c[0]*x[0]) + fabs(p->c[1]*x[1]) + fabs(p->c[1]*x[2])) + fabs(w77*p->c[8]*x[0]) + (fabs(w78*p->c[1]*x[1]) + fabs(p->c[7]*x[2]*x[5]));
 }
 
 void bgc_position_jac(double t, const double *x, const bgc_params *p, double *out)
@@ -598,6 +600,18 @@ void bgc_velocity_jac(double t, const double *x, const bgc_params *p, double *ou
     out[3] = p->c[10]*x[1] + p->c[11]*x[0];
     out[4] = p->c[7]*x[1] + p->c[12]*x[0];
     out[5] = p->c[7]*x[2];
+}
+
+void bgc_velocity_metric(double t, const double *x, const bgc_params *p, double *out)
+{
+    (void)t;
+    (void)x;
+    (void)p;
+    (void)out;
+    memset(out, 0, 6 * sizeof *out); /* the nonzero entries follow */
+    out[0] = (-2.0*x[4] + 2.0*x[3])*p->p_rd;
+    out[1] = -2.0*x[3] + 2.0*x[4];
+    out[2] = 2.0*x[5];
 }
 
 [runtime: runtime]

@@ -217,15 +217,15 @@ def _constants_into(p, out):
     try:
         out[0] = 1.0/p[4]
         out[1] = 1.0/p[10]
-        w77 = -p[11]*p[11]
-        out[2] = w77
+        w79 = -p[11]*p[11]
+        out[2] = w79
         out[3] = p[10]*p[12]
         out[4] = -1.0/p[10]
         out[5] = -p[15]*p[15]
         out[6] = -2.0*p[14]
         out[7] = 2.0/p[10]
         out[8] = p[7]/p[4]
-        out[9] = abs(w77)
+        out[9] = abs(w79)
         out[10] = -2.0/p[10]
         out[11] = 2.0*p[7]/p[4]
         out[12] = -2.0*p[7]/p[4]
@@ -238,15 +238,15 @@ def _constants_into_ieee(p, out):
         p = numpy.asarray(p, dtype=numpy.float64)
         out[0] = 1.0/p[4]
         out[1] = 1.0/p[10]
-        w77 = -p[11]*p[11]
-        out[2] = w77
+        w79 = -p[11]*p[11]
+        out[2] = w79
         out[3] = p[10]*p[12]
         out[4] = -1.0/p[10]
         out[5] = -p[15]*p[15]
         out[6] = -2.0*p[14]
         out[7] = 2.0/p[10]
         out[8] = p[7]/p[4]
-        out[9] = abs(w77)
+        out[9] = abs(w79)
         out[10] = -2.0/p[10]
         out[11] = 2.0*p[7]/p[4]
         out[12] = -2.0*p[7]/p[4]
@@ -719,7 +719,9 @@ def _residual(t, x, p):
 def _scale_into(t, x, p, out):
     try:
         out[0] = abs(x[3]*x[3]) + abs(x[4]*x[4]) + abs(x[5]*x[5]) + (abs(-2.0*x[3]*x[4]) + p[33])
-        out[1] = abs((-2.0*x[3] + 2.0*x[4])*p[25]*x[1]) + abs((-2.0*x[4] + 2.0*x[3])*p[32]*x[0]) + abs(p[31]*x[2]*x[5])
+        w77 = -2.0*x[4] + 2.0*x[3]
+        w78 = -2.0*x[3] + 2.0*x[4]
+        out[1] = (abs(w78) + abs(2.0*x[5]) + abs(w77*p[7]))*(abs(p[24]*x[0]) + abs(p[25]*x[1]) + abs(p[25]*x[2])) + abs(w77*p[32]*x[0]) + (abs(w78*p[25]*x[1]) + abs(p[31]*x[2]*x[5]))
     except (ArithmeticError, ValueError):
         return _scale_into_ieee(t, x, p, out)
 
@@ -730,7 +732,9 @@ def _scale_into_ieee(t, x, p, out):
         x = numpy.asarray(x, dtype=numpy.float64)
         p = numpy.asarray(p, dtype=numpy.float64)
         out[0] = abs(x[3]*x[3]) + abs(x[4]*x[4]) + abs(x[5]*x[5]) + (abs(-2.0*x[3]*x[4]) + p[33])
-        out[1] = abs((-2.0*x[3] + 2.0*x[4])*p[25]*x[1]) + abs((-2.0*x[4] + 2.0*x[3])*p[32]*x[0]) + abs(p[31]*x[2]*x[5])
+        w77 = -2.0*x[4] + 2.0*x[3]
+        w78 = -2.0*x[3] + 2.0*x[4]
+        out[1] = (abs(w78) + abs(2.0*x[5]) + abs(w77*p[7]))*(abs(p[24]*x[0]) + abs(p[25]*x[1]) + abs(p[25]*x[2])) + abs(w77*p[32]*x[0]) + (abs(w78*p[25]*x[1]) + abs(p[31]*x[2]*x[5]))
 
 
 
@@ -795,6 +799,32 @@ def _velocity_jac_into_ieee(t, x, p, out):
 def _velocity_jac(t, x, p):
     out = [0.0] * 6
     _velocity_jac_into(t, x, p, out)
+    return [float(v) for v in out]
+
+
+def _velocity_metric_into(t, x, p, out):
+    try:
+        out[0] = (-2.0*x[4] + 2.0*x[3])*p[7]
+        out[1] = -2.0*x[3] + 2.0*x[4]
+        out[2] = 2.0*x[5]
+    except (ArithmeticError, ValueError):
+        return _velocity_metric_into_ieee(t, x, p, out)
+
+
+def _velocity_metric_into_ieee(t, x, p, out):
+    with numpy.errstate(all="ignore"):
+        t = numpy.float64(t)
+        x = numpy.asarray(x, dtype=numpy.float64)
+        p = numpy.asarray(p, dtype=numpy.float64)
+        out[0] = (-2.0*x[4] + 2.0*x[3])*p[7]
+        out[1] = -2.0*x[3] + 2.0*x[4]
+        out[2] = 2.0*x[5]
+
+
+
+def _velocity_metric(t, x, p):
+    out = [0.0] * 6
+    _velocity_metric_into(t, x, p, out)
     return [float(v) for v in out]
 
 

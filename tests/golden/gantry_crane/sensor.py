@@ -50,7 +50,7 @@ _N = 9
 _AUTONOMOUS = True  # the right side does not read t
 _POSITION_ROWS = [0]
 _VELOCITY_ROWS = [1]
-_VELOCITY_MOVABLE = [True, True, True, True, False, False, False, True, True]
+_VELOCITY_MOVABLE = [False, True, True, True, False, False, False, False, False]
 _WORK_DOUBLES = 187
 _WORK_INTS = 3
 _BLOCK_NAMES = ["rod.lambda, e[shaft->rotor]"]
@@ -218,8 +218,8 @@ def _constants_into(p, out):
         out[0] = 1.0/p[2]
         out[1] = 1.0/p[4]
         out[2] = 1.0/p[10]
-        w95 = -p[11]*p[11]
-        out[3] = w95
+        w97 = -p[11]*p[11]
+        out[3] = w97
         out[4] = p[10]*p[12]
         out[5] = -1.0/p[10]
         out[6] = -p[15]*p[15]
@@ -228,7 +228,7 @@ def _constants_into(p, out):
         out[9] = 1.0/p[23]
         out[10] = 2.0/p[10]
         out[11] = p[7]/p[4]
-        out[12] = abs(w95)
+        out[12] = abs(w97)
         out[13] = -2.0/p[10]
         out[14] = 2.0*p[7]/p[4]
         out[15] = -2.0*p[7]/p[4]
@@ -242,8 +242,8 @@ def _constants_into_ieee(p, out):
         out[0] = 1.0/p[2]
         out[1] = 1.0/p[4]
         out[2] = 1.0/p[10]
-        w95 = -p[11]*p[11]
-        out[3] = w95
+        w97 = -p[11]*p[11]
+        out[3] = w97
         out[4] = p[10]*p[12]
         out[5] = -1.0/p[10]
         out[6] = -p[15]*p[15]
@@ -252,7 +252,7 @@ def _constants_into_ieee(p, out):
         out[9] = 1.0/p[23]
         out[10] = 2.0/p[10]
         out[11] = p[7]/p[4]
-        out[12] = abs(w95)
+        out[12] = abs(w97)
         out[13] = -2.0/p[10]
         out[14] = 2.0*p[7]/p[4]
         out[15] = -2.0*p[7]/p[4]
@@ -707,7 +707,9 @@ def _residual(t, x, p):
 def _scale_into(t, x, p, out):
     try:
         out[0] = abs(x[4]*x[4]) + abs(x[5]*x[5]) + abs(x[6]*x[6]) + (abs(-2.0*x[4]*x[5]) + p[36])
-        out[1] = abs((-2.0*x[4] + 2.0*x[5])*p[26]*x[2]) + abs((-2.0*x[5] + 2.0*x[4])*p[35]*x[1]) + abs(p[34]*x[3]*x[6])
+        w95 = -2.0*x[5] + 2.0*x[4]
+        w96 = -2.0*x[4] + 2.0*x[5]
+        out[1] = (abs(w96) + abs(2.0*x[6]) + abs(w95*p[7]))*(abs(p[25]*x[1]) + abs(p[26]*x[2]) + abs(p[26]*x[3])) + abs(w95*p[35]*x[1]) + (abs(w96*p[26]*x[2]) + abs(p[34]*x[3]*x[6]))
     except (ArithmeticError, ValueError):
         return _scale_into_ieee(t, x, p, out)
 
@@ -718,7 +720,9 @@ def _scale_into_ieee(t, x, p, out):
         x = numpy.asarray(x, dtype=numpy.float64)
         p = numpy.asarray(p, dtype=numpy.float64)
         out[0] = abs(x[4]*x[4]) + abs(x[5]*x[5]) + abs(x[6]*x[6]) + (abs(-2.0*x[4]*x[5]) + p[36])
-        out[1] = abs((-2.0*x[4] + 2.0*x[5])*p[26]*x[2]) + abs((-2.0*x[5] + 2.0*x[4])*p[35]*x[1]) + abs(p[34]*x[3]*x[6])
+        w95 = -2.0*x[5] + 2.0*x[4]
+        w96 = -2.0*x[4] + 2.0*x[5]
+        out[1] = (abs(w96) + abs(2.0*x[6]) + abs(w95*p[7]))*(abs(p[25]*x[1]) + abs(p[26]*x[2]) + abs(p[26]*x[3])) + abs(w95*p[35]*x[1]) + (abs(w96*p[26]*x[2]) + abs(p[34]*x[3]*x[6]))
 
 
 
@@ -783,6 +787,32 @@ def _velocity_jac_into_ieee(t, x, p, out):
 def _velocity_jac(t, x, p):
     out = [0.0] * 9
     _velocity_jac_into(t, x, p, out)
+    return [float(v) for v in out]
+
+
+def _velocity_metric_into(t, x, p, out):
+    try:
+        out[1] = (-2.0*x[5] + 2.0*x[4])*p[7]
+        out[2] = -2.0*x[4] + 2.0*x[5]
+        out[3] = 2.0*x[6]
+    except (ArithmeticError, ValueError):
+        return _velocity_metric_into_ieee(t, x, p, out)
+
+
+def _velocity_metric_into_ieee(t, x, p, out):
+    with numpy.errstate(all="ignore"):
+        t = numpy.float64(t)
+        x = numpy.asarray(x, dtype=numpy.float64)
+        p = numpy.asarray(p, dtype=numpy.float64)
+        out[1] = (-2.0*x[5] + 2.0*x[4])*p[7]
+        out[2] = -2.0*x[4] + 2.0*x[5]
+        out[3] = 2.0*x[6]
+
+
+
+def _velocity_metric(t, x, p):
+    out = [0.0] * 9
+    _velocity_metric_into(t, x, p, out)
     return [float(v) for v in out]
 
 

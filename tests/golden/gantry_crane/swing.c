@@ -214,15 +214,15 @@ void bgc_params_update(bgc_params *p)
     p->c[0] = 1.0/p->p_La;
     p->c[1] = 1.0/p->p_Jr;
     p->c[2] = 1.0/p->p_m;
-    const double w85 = -p->p_l*p->p_l;
-    p->c[3] = w85;
+    const double w87 = -p->p_l*p->p_l;
+    p->c[3] = w87;
     p->c[4] = p->p_m*p->p_g;
     p->c[5] = -1.0/p->p_m;
     p->c[6] = -p->p_beta*p->p_beta;
     p->c[7] = -2.0*p->p_alpha;
     p->c[8] = 2.0/p->p_m;
     p->c[9] = p->p_rd/p->p_Jr;
-    p->c[10] = fabs(w85);
+    p->c[10] = fabs(w87);
     p->c[11] = -2.0/p->p_m;
     p->c[12] = 2.0*p->p_rd/p->p_Jr;
     p->c[13] = -2.0*p->p_rd/p->p_Jr;
@@ -289,7 +289,7 @@ double *bgc_param_ref(bgc_params *p, int j)
 
 static const int bgc_position_rows[BGC_DIM(BGC_NUM_POSITION_ROWS)] = { 0 };
 static const int bgc_velocity_rows[BGC_DIM(BGC_NUM_VELOCITY_ROWS)] = { 1 };
-static const int bgc_velocity_movable[BGC_DIM(BGC_NUM_STATES)] = { 1, 1, 1, 1, 0, 0, 0 };
+static const int bgc_velocity_movable[BGC_DIM(BGC_NUM_STATES)] = { 0, 1, 1, 1, 0, 0, 0 };
 
 /* The algebraic blocks solved here: factorization plans (bgc/sparse.py) and storage. */
 static const int bgc_block0_plan[] = { 0, 3, 0, 1, 1, 2, 1, 0, 1, 1, 1, 1, 3, 0, 0, 1, 1, 0, 1, 0, 1 };
@@ -546,7 +546,9 @@ void bgc_scale(double t, const double *x, const bgc_params *p, double *out)
     (void)p;
     (void)out;
     out[0] = fabs(x[4]*x[4]) + fabs(x[5]*x[5]) + fabs(x[6]*x[6]) + (fabs(-2.0*x[4]*x[5]) + p->c[10]);
-    out[1] = fabs((-2.0*x[4] + 2.0*x[5])*p->c[2]*x[2]) + fabs((-2.0*x[5] + 2.0*x[4])*p->c[9]*x[1]) + fabs(p->c[8]*x[3]*x[6]);
+    const double w85 = -2.0*x[5] + 2.0*x[4];
+    const double w86 = -2.0*x[4] + 2.0*x[5];
+    out[1] = (fabs(w86) + fabs(2.0*x[6]) + fabs(w85*p->p_rd))*(fabs(p->c[1]*x[1]) + fabs(p->c[2]*x[2]) + fabs(p->c[2]*x[3])) + fabs(w85*p->c[9]*x[1]) + (fabs(w86*p->c[2]*x[2]) + fabs(p->c[8]*x[3]*x[6]));
 }
 
 void bgc_position_jac(double t, const double *x, const bgc_params *p, double *out)
@@ -574,6 +576,18 @@ void bgc_velocity_jac(double t, const double *x, const bgc_params *p, double *ou
     out[4] = p->c[11]*x[2] + p->c[12]*x[1];
     out[5] = p->c[8]*x[2] + p->c[13]*x[1];
     out[6] = p->c[8]*x[3];
+}
+
+void bgc_velocity_metric(double t, const double *x, const bgc_params *p, double *out)
+{
+    (void)t;
+    (void)x;
+    (void)p;
+    (void)out;
+    memset(out, 0, 7 * sizeof *out); /* the nonzero entries follow */
+    out[1] = (-2.0*x[5] + 2.0*x[4])*p->p_rd;
+    out[2] = -2.0*x[4] + 2.0*x[5];
+    out[3] = 2.0*x[6];
 }
 
 [runtime: runtime]

@@ -50,7 +50,7 @@ _N = 7
 _AUTONOMOUS = True  # the right side does not read t
 _POSITION_ROWS = [0]
 _VELOCITY_ROWS = [1]
-_VELOCITY_MOVABLE = [True, True, True, True, False, False, False]
+_VELOCITY_MOVABLE = [False, True, True, True, False, False, False]
 _WORK_DOUBLES = 153
 _WORK_INTS = 3
 _BLOCK_NAMES = ["rod.lambda, e[shaft->rotor]"]
@@ -218,15 +218,15 @@ def _constants_into(p, out):
         out[0] = 1.0/p[2]
         out[1] = 1.0/p[4]
         out[2] = 1.0/p[10]
-        w85 = -p[11]*p[11]
-        out[3] = w85
+        w87 = -p[11]*p[11]
+        out[3] = w87
         out[4] = p[10]*p[12]
         out[5] = -1.0/p[10]
         out[6] = -p[15]*p[15]
         out[7] = -2.0*p[14]
         out[8] = 2.0/p[10]
         out[9] = p[7]/p[4]
-        out[10] = abs(w85)
+        out[10] = abs(w87)
         out[11] = -2.0/p[10]
         out[12] = 2.0*p[7]/p[4]
         out[13] = -2.0*p[7]/p[4]
@@ -240,15 +240,15 @@ def _constants_into_ieee(p, out):
         out[0] = 1.0/p[2]
         out[1] = 1.0/p[4]
         out[2] = 1.0/p[10]
-        w85 = -p[11]*p[11]
-        out[3] = w85
+        w87 = -p[11]*p[11]
+        out[3] = w87
         out[4] = p[10]*p[12]
         out[5] = -1.0/p[10]
         out[6] = -p[15]*p[15]
         out[7] = -2.0*p[14]
         out[8] = 2.0/p[10]
         out[9] = p[7]/p[4]
-        out[10] = abs(w85)
+        out[10] = abs(w87)
         out[11] = -2.0/p[10]
         out[12] = 2.0*p[7]/p[4]
         out[13] = -2.0*p[7]/p[4]
@@ -673,7 +673,9 @@ def _residual(t, x, p):
 def _scale_into(t, x, p, out):
     try:
         out[0] = abs(x[4]*x[4]) + abs(x[5]*x[5]) + abs(x[6]*x[6]) + (abs(-2.0*x[4]*x[5]) + p[34])
-        out[1] = abs((-2.0*x[4] + 2.0*x[5])*p[26]*x[2]) + abs((-2.0*x[5] + 2.0*x[4])*p[33]*x[1]) + abs(p[32]*x[3]*x[6])
+        w85 = -2.0*x[5] + 2.0*x[4]
+        w86 = -2.0*x[4] + 2.0*x[5]
+        out[1] = (abs(w86) + abs(2.0*x[6]) + abs(w85*p[7]))*(abs(p[25]*x[1]) + abs(p[26]*x[2]) + abs(p[26]*x[3])) + abs(w85*p[33]*x[1]) + (abs(w86*p[26]*x[2]) + abs(p[32]*x[3]*x[6]))
     except (ArithmeticError, ValueError):
         return _scale_into_ieee(t, x, p, out)
 
@@ -684,7 +686,9 @@ def _scale_into_ieee(t, x, p, out):
         x = numpy.asarray(x, dtype=numpy.float64)
         p = numpy.asarray(p, dtype=numpy.float64)
         out[0] = abs(x[4]*x[4]) + abs(x[5]*x[5]) + abs(x[6]*x[6]) + (abs(-2.0*x[4]*x[5]) + p[34])
-        out[1] = abs((-2.0*x[4] + 2.0*x[5])*p[26]*x[2]) + abs((-2.0*x[5] + 2.0*x[4])*p[33]*x[1]) + abs(p[32]*x[3]*x[6])
+        w85 = -2.0*x[5] + 2.0*x[4]
+        w86 = -2.0*x[4] + 2.0*x[5]
+        out[1] = (abs(w86) + abs(2.0*x[6]) + abs(w85*p[7]))*(abs(p[25]*x[1]) + abs(p[26]*x[2]) + abs(p[26]*x[3])) + abs(w85*p[33]*x[1]) + (abs(w86*p[26]*x[2]) + abs(p[32]*x[3]*x[6]))
 
 
 
@@ -749,6 +753,32 @@ def _velocity_jac_into_ieee(t, x, p, out):
 def _velocity_jac(t, x, p):
     out = [0.0] * 7
     _velocity_jac_into(t, x, p, out)
+    return [float(v) for v in out]
+
+
+def _velocity_metric_into(t, x, p, out):
+    try:
+        out[1] = (-2.0*x[5] + 2.0*x[4])*p[7]
+        out[2] = -2.0*x[4] + 2.0*x[5]
+        out[3] = 2.0*x[6]
+    except (ArithmeticError, ValueError):
+        return _velocity_metric_into_ieee(t, x, p, out)
+
+
+def _velocity_metric_into_ieee(t, x, p, out):
+    with numpy.errstate(all="ignore"):
+        t = numpy.float64(t)
+        x = numpy.asarray(x, dtype=numpy.float64)
+        p = numpy.asarray(p, dtype=numpy.float64)
+        out[1] = (-2.0*x[5] + 2.0*x[4])*p[7]
+        out[2] = -2.0*x[4] + 2.0*x[5]
+        out[3] = 2.0*x[6]
+
+
+
+def _velocity_metric(t, x, p):
+    out = [0.0] * 7
+    _velocity_metric_into(t, x, p, out)
     return [float(v) for v in out]
 
 

@@ -215,8 +215,8 @@ void bgc_params_update(bgc_params *p)
     p->c[0] = 1.0/p->p_La;
     p->c[1] = 1.0/p->p_Jr;
     p->c[2] = 1.0/p->p_m;
-    const double w102 = -p->p_l*p->p_l;
-    p->c[3] = w102;
+    const double w104 = -p->p_l*p->p_l;
+    p->c[3] = w104;
     p->c[4] = p->p_m*p->p_g;
     p->c[5] = -1.0/p->p_m;
     p->c[6] = -p->p_beta*p->p_beta;
@@ -229,7 +229,7 @@ void bgc_params_update(bgc_params *p)
     p->c[13] = 2.0*p->p_Ra;
     p->c[14] = 2.0/p->p_m;
     p->c[15] = p->p_rd/p->p_Jr;
-    p->c[16] = fabs(w102);
+    p->c[16] = fabs(w104);
     p->c[17] = -2.0/p->p_m;
     p->c[18] = 2.0*p->p_rd/p->p_Jr;
     p->c[19] = -2.0*p->p_rd/p->p_Jr;
@@ -296,7 +296,7 @@ double *bgc_param_ref(bgc_params *p, int j)
 
 static const int bgc_position_rows[BGC_DIM(BGC_NUM_POSITION_ROWS)] = { 0 };
 static const int bgc_velocity_rows[BGC_DIM(BGC_NUM_VELOCITY_ROWS)] = { 1 };
-static const int bgc_velocity_movable[BGC_DIM(BGC_NUM_STATES)] = { 1, 1, 1, 1, 0, 0, 0, 1, 1 };
+static const int bgc_velocity_movable[BGC_DIM(BGC_NUM_STATES)] = { 0, 1, 1, 1, 0, 0, 0, 0, 0 };
 
 /* The algebraic blocks solved here: factorization plans (bgc/sparse.py) and storage. */
 static const int bgc_block0_plan[] = { 0, 3, 0, 1, 1, 2, 1, 0, 1, 1, 1, 1, 3, 0, 0, 1, 1, 0, 1, 0, 1 };
@@ -577,7 +577,9 @@ void bgc_scale(double t, const double *x, const bgc_params *p, double *out)
     (void)p;
     (void)out;
     out[0] = fabs(x[4]*x[4]) + fabs(x[5]*x[5]) + fabs(x[6]*x[6]) + (fabs(-2.0*x[4]*x[5]) + p->c[16]);
-    out[1] = fabs((-2.0*x[4] + 2.0*x[5])*p->c[2]*x[2]) + fabs((-2.0*x[5] + 2.0*x[4])*p->c[15]*x[1]) + fabs(p->c[14]*x[3]*x[6]);
+    const double w102 = -2.0*x[5] + 2.0*x[4];
+    const double w103 = -2.0*x[4] + 2.0*x[5];
+    out[1] = (fabs(w103) + fabs(2.0*x[6]) + fabs(w102*p->p_rd))*(fabs(p->c[1]*x[1]) + fabs(p->c[2]*x[2]) + fabs(p->c[2]*x[3])) + fabs(w102*p->c[15]*x[1]) + (fabs(w103*p->c[2]*x[2]) + fabs(p->c[14]*x[3]*x[6]));
 }
 
 void bgc_position_jac(double t, const double *x, const bgc_params *p, double *out)
@@ -605,6 +607,18 @@ void bgc_velocity_jac(double t, const double *x, const bgc_params *p, double *ou
     out[4] = p->c[17]*x[2] + p->c[18]*x[1];
     out[5] = p->c[14]*x[2] + p->c[19]*x[1];
     out[6] = p->c[14]*x[3];
+}
+
+void bgc_velocity_metric(double t, const double *x, const bgc_params *p, double *out)
+{
+    (void)t;
+    (void)x;
+    (void)p;
+    (void)out;
+    memset(out, 0, 9 * sizeof *out); /* the nonzero entries follow */
+    out[1] = (-2.0*x[5] + 2.0*x[4])*p->p_rd;
+    out[2] = -2.0*x[4] + 2.0*x[5];
+    out[3] = 2.0*x[6];
 }
 
 [runtime: runtime]

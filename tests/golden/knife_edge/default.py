@@ -50,7 +50,7 @@ _N = 6
 _AUTONOMOUS = True  # the right side does not read t
 _POSITION_ROWS = []
 _VELOCITY_ROWS = [0]
-_VELOCITY_MOVABLE = [True, True, True, True, True, True]
+_VELOCITY_MOVABLE = [True, True, False, False, False, False]
 _WORK_DOUBLES = 114
 _WORK_INTS = 0
 _BLOCK_NAMES = []
@@ -369,7 +369,9 @@ def _residual(t, x, p):
 
 def _scale_into(t, x, p, out):
     try:
-        out[0] = abs(math.cos(x[5])*p[11]*x[1]) + abs(math.sin(x[5])*p[16]*x[0])
+        w24 = math.sin(x[5])
+        w25 = math.cos(x[5])
+        out[0] = (abs(w25) + abs(-w24))*(abs(p[11]*x[0]) + abs(p[11]*x[1])) + abs(w24*p[16]*x[0]) + abs(w25*p[11]*x[1])
     except (ArithmeticError, ValueError):
         return _scale_into_ieee(t, x, p, out)
 
@@ -379,7 +381,9 @@ def _scale_into_ieee(t, x, p, out):
         t = numpy.float64(t)
         x = numpy.asarray(x, dtype=numpy.float64)
         p = numpy.asarray(p, dtype=numpy.float64)
-        out[0] = abs(_c_cos(x[5])*p[11]*x[1]) + abs(_c_sin(x[5])*p[16]*x[0])
+        w24 = _c_sin(x[5])
+        w25 = _c_cos(x[5])
+        out[0] = (abs(w25) + abs(-w24))*(abs(p[11]*x[0]) + abs(p[11]*x[1])) + abs(w24*p[16]*x[0]) + abs(w25*p[11]*x[1])
 
 
 
@@ -413,11 +417,11 @@ def _position_jac(t, x, p):
 
 def _velocity_jac_into(t, x, p, out):
     try:
-        w24 = math.sin(x[5])
-        out[0] = w24*p[16]
-        w25 = math.cos(x[5])
-        out[1] = w25*p[11]
-        out[5] = w24*p[16]*x[1] + w25*p[16]*x[0]
+        w26 = math.sin(x[5])
+        out[0] = w26*p[16]
+        w27 = math.cos(x[5])
+        out[1] = w27*p[11]
+        out[5] = w26*p[16]*x[1] + w27*p[16]*x[0]
     except (ArithmeticError, ValueError):
         return _velocity_jac_into_ieee(t, x, p, out)
 
@@ -427,17 +431,41 @@ def _velocity_jac_into_ieee(t, x, p, out):
         t = numpy.float64(t)
         x = numpy.asarray(x, dtype=numpy.float64)
         p = numpy.asarray(p, dtype=numpy.float64)
-        w24 = _c_sin(x[5])
-        out[0] = w24*p[16]
-        w25 = _c_cos(x[5])
-        out[1] = w25*p[11]
-        out[5] = w24*p[16]*x[1] + w25*p[16]*x[0]
+        w26 = _c_sin(x[5])
+        out[0] = w26*p[16]
+        w27 = _c_cos(x[5])
+        out[1] = w27*p[11]
+        out[5] = w26*p[16]*x[1] + w27*p[16]*x[0]
 
 
 
 def _velocity_jac(t, x, p):
     out = [0.0] * 6
     _velocity_jac_into(t, x, p, out)
+    return [float(v) for v in out]
+
+
+def _velocity_metric_into(t, x, p, out):
+    try:
+        out[0] = -math.sin(x[5])
+        out[1] = math.cos(x[5])
+    except (ArithmeticError, ValueError):
+        return _velocity_metric_into_ieee(t, x, p, out)
+
+
+def _velocity_metric_into_ieee(t, x, p, out):
+    with numpy.errstate(all="ignore"):
+        t = numpy.float64(t)
+        x = numpy.asarray(x, dtype=numpy.float64)
+        p = numpy.asarray(p, dtype=numpy.float64)
+        out[0] = -_c_sin(x[5])
+        out[1] = _c_cos(x[5])
+
+
+
+def _velocity_metric(t, x, p):
+    out = [0.0] * 6
+    _velocity_metric_into(t, x, p, out)
     return [float(v) for v in out]
 
 

@@ -202,7 +202,7 @@ double *bgc_param_ref(bgc_params *p, int j)
 
 static const int bgc_position_rows[BGC_DIM(BGC_NUM_POSITION_ROWS)] = { 0 };
 static const int bgc_velocity_rows[BGC_DIM(BGC_NUM_VELOCITY_ROWS)] = { 0 };
-static const int bgc_velocity_movable[BGC_DIM(BGC_NUM_STATES)] = { 1, 1, 1, 1, 1, 1 };
+static const int bgc_velocity_movable[BGC_DIM(BGC_NUM_STATES)] = { 1, 1, 0, 0, 0, 0 };
 
 /* The algebraic blocks solved here: factorization plans (bgc/sparse.py) and storage. */
 static const bgc_block bgc_blocks[BGC_DIM(BGC_NUM_BLOCKS)] = {
@@ -329,7 +329,9 @@ void bgc_scale(double t, const double *x, const bgc_params *p, double *out)
     (void)x;
     (void)p;
     (void)out;
-    out[0] = fabs(cos(x[5])*p->c[0]*x[1]) + fabs(sin(x[5])*p->c[4]*x[0]);
+    const double w23 = sin(x[5]);
+    const double w24 = cos(x[5]);
+    out[0] = (fabs(w24) + fabs(-w23))*(fabs(p->c[0]*x[0]) + fabs(p->c[0]*x[1])) + fabs(w23*p->c[4]*x[0]) + fabs(w24*p->c[0]*x[1]);
 }
 
 void bgc_position_jac(double t, const double *x, const bgc_params *p, double *out)
@@ -347,11 +349,22 @@ void bgc_velocity_jac(double t, const double *x, const bgc_params *p, double *ou
     (void)p;
     (void)out;
     memset(out, 0, 6 * sizeof *out); /* the nonzero entries follow */
-    const double w23 = sin(x[5]);
-    out[0] = w23*p->c[4];
-    const double w24 = cos(x[5]);
-    out[1] = w24*p->c[0];
-    out[5] = w23*p->c[4]*x[1] + w24*p->c[4]*x[0];
+    const double w25 = sin(x[5]);
+    out[0] = w25*p->c[4];
+    const double w26 = cos(x[5]);
+    out[1] = w26*p->c[0];
+    out[5] = w25*p->c[4]*x[1] + w26*p->c[4]*x[0];
+}
+
+void bgc_velocity_metric(double t, const double *x, const bgc_params *p, double *out)
+{
+    (void)t;
+    (void)x;
+    (void)p;
+    (void)out;
+    memset(out, 0, 6 * sizeof *out); /* the nonzero entries follow */
+    out[0] = -sin(x[5]);
+    out[1] = cos(x[5]);
 }
 
 [runtime: runtime]

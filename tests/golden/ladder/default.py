@@ -440,6 +440,28 @@ def _velocity_jac(t, x, p):
     return [float(v) for v in out]
 
 
+def _velocity_metric_into(t, x, p, out):
+    try:
+        pass
+    except (ArithmeticError, ValueError):
+        return _velocity_metric_into_ieee(t, x, p, out)
+
+
+def _velocity_metric_into_ieee(t, x, p, out):
+    with numpy.errstate(all="ignore"):
+        t = numpy.float64(t)
+        x = numpy.asarray(x, dtype=numpy.float64)
+        p = numpy.asarray(p, dtype=numpy.float64)
+        pass
+
+
+
+def _velocity_metric(t, x, p):
+    out = [0.0] * 0
+    _velocity_metric_into(t, x, p, out)
+    return [float(v) for v in out]
+
+
 _bind_model()
 
 

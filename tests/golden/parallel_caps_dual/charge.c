@@ -294,5 +294,14 @@ void bgc_velocity_jac(double t, const double *x, const bgc_params *p, double *ou
     out[1] = p->c[6];
 }
 
+void bgc_velocity_metric(double t, const double *x, const bgc_params *p, double *out)
+{
+    (void)t;
+    (void)x;
+    (void)p;
+    (void)out;
+    memset(out, 0, 2 * sizeof *out); /* the nonzero entries follow */
+}
+
 [runtime: runtime]
 

@@ -305,7 +305,7 @@ void bgc_scale(double t, const double *x, const bgc_params *p, double *out)
     (void)p;
     (void)out;
     out[0] = fabs(x[2]*x[2]) + fabs(x[3]*x[3]) + p->c[8];
-    out[1] = fabs(p->c[7]*x[0]*x[2]) + fabs(p->c[7]*x[1]*x[3]);
+    out[1] = (fabs(p->c[0]*x[0]) + fabs(p->c[0]*x[1]))*(fabs(2.0*x[2]) + fabs(2.0*x[3])) + fabs(p->c[7]*x[0]*x[2]) + fabs(p->c[7]*x[1]*x[3]);
 }
 
 void bgc_position_jac(double t, const double *x, const bgc_params *p, double *out)
@@ -330,6 +330,17 @@ void bgc_velocity_jac(double t, const double *x, const bgc_params *p, double *ou
     out[1] = p->c[7]*x[3];
     out[2] = p->c[7]*x[0];
     out[3] = p->c[7]*x[1];
+}
+
+void bgc_velocity_metric(double t, const double *x, const bgc_params *p, double *out)
+{
+    (void)t;
+    (void)x;
+    (void)p;
+    (void)out;
+    memset(out, 0, 4 * sizeof *out); /* the nonzero entries follow */
+    out[0] = 2.0*x[2];
+    out[1] = 2.0*x[3];
 }
 
 [runtime: runtime]

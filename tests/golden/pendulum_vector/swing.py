@@ -366,7 +366,7 @@ def _residual(t, x, p):
 def _scale_into(t, x, p, out):
     try:
         out[0] = abs(x[2]*x[2]) + abs(x[3]*x[3]) + p[14]
-        out[1] = abs(p[13]*x[0]*x[2]) + abs(p[13]*x[1]*x[3])
+        out[1] = (abs(p[6]*x[0]) + abs(p[6]*x[1]))*(abs(2.0*x[2]) + abs(2.0*x[3])) + abs(p[13]*x[0]*x[2]) + abs(p[13]*x[1]*x[3])
     except (ArithmeticError, ValueError):
         return _scale_into_ieee(t, x, p, out)
 
@@ -377,7 +377,7 @@ def _scale_into_ieee(t, x, p, out):
         x = numpy.asarray(x, dtype=numpy.float64)
         p = numpy.asarray(p, dtype=numpy.float64)
         out[0] = abs(x[2]*x[2]) + abs(x[3]*x[3]) + p[14]
-        out[1] = abs(p[13]*x[0]*x[2]) + abs(p[13]*x[1]*x[3])
+        out[1] = (abs(p[6]*x[0]) + abs(p[6]*x[1]))*(abs(2.0*x[2]) + abs(2.0*x[3])) + abs(p[13]*x[0]*x[2]) + abs(p[13]*x[1]*x[3])
 
 
 
@@ -436,6 +436,30 @@ def _velocity_jac_into_ieee(t, x, p, out):
 def _velocity_jac(t, x, p):
     out = [0.0] * 4
     _velocity_jac_into(t, x, p, out)
+    return [float(v) for v in out]
+
+
+def _velocity_metric_into(t, x, p, out):
+    try:
+        out[0] = 2.0*x[2]
+        out[1] = 2.0*x[3]
+    except (ArithmeticError, ValueError):
+        return _velocity_metric_into_ieee(t, x, p, out)
+
+
+def _velocity_metric_into_ieee(t, x, p, out):
+    with numpy.errstate(all="ignore"):
+        t = numpy.float64(t)
+        x = numpy.asarray(x, dtype=numpy.float64)
+        p = numpy.asarray(p, dtype=numpy.float64)
+        out[0] = 2.0*x[2]
+        out[1] = 2.0*x[3]
+
+
+
+def _velocity_metric(t, x, p):
+    out = [0.0] * 4
+    _velocity_metric_into(t, x, p, out)
     return [float(v) for v in out]
 
 

@@ -72,7 +72,9 @@ void bgc_work_message(const bgc_work *w, char *msg, size_t msg_size);
    bgc_work_message).  bgc_jvp gives jv = J v for the Jacobian J = d rhs / d x, and
    bgc_jacobian J itself (row-major, BGC_NUM_STATES squared), both derived symbolically
    through the algebraic solves.  r and s per constraint row; the constraint Jacobians
-   row-major (rows x BGC_NUM_STATES) for the position rows and for the velocity rows.  Row k
+   row-major (rows x BGC_NUM_STATES) for the position rows and for the velocity rows, and the
+   velocity rows' Jacobian times the projection's metric (K = J M: the rows' derivatives by
+   the velocities of the momenta they read, the mass matrix's inverse weighing).  Row k
    holds when |r[k]| <= 1e-9 * s[k]. */
 void bgc_init(const bgc_params *p, double *x0);
 int bgc_rhs(double t, const double *x, const bgc_params *p, bgc_work *w, double *dx);
@@ -84,6 +86,7 @@ void bgc_residual(double t, const double *x, const bgc_params *p, double *r);
 void bgc_scale(double t, const double *x, const bgc_params *p, double *s);
 void bgc_position_jac(double t, const double *x, const bgc_params *p, double *J);
 void bgc_velocity_jac(double t, const double *x, const bgc_params *p, double *J);
+void bgc_velocity_metric(double t, const double *x, const bgc_params *p, double *K);
 
 /* Number of violated constraint rows at (t, x); each is reported on err if err != NULL. */
 int bgc_check_constraints(double t, const double *x, const bgc_params *p, FILE *err);
@@ -91,7 +94,8 @@ int bgc_check_constraints(double t, const double *x, const bgc_params *p, FILE *
    the rows whose residual is not finite (the model undefined there) count. */
 int bgc_check_constraints_finite(double t, const double *x, const bgc_params *p, FILE *err);
 /* Gauss-Newton minimum-norm projection of x onto the position rows, then onto the velocity
-   rows (moving only velocity-movable states).  0 on success, else BGC_ERR_CONSTRAINT
+   rows (moving only velocity-movable states, the momenta, by the kinetic metric: the least
+   change of kinetic energy).  0 on success, else BGC_ERR_CONSTRAINT
    with a message in msg. */
 int bgc_project_initial(double t, double *x, const bgc_params *p, char *msg, size_t msg_size);
 
@@ -792,13 +796,18 @@ static int bgc_solve(int m, double *A, double *b)
 }
 
 /* Projects x onto the m rows (indices rows[]) whose Jacobian jac() gives; only the states
-   with movable[i] (all if movable is NULL) change.  0, or -1 singular, -2 no convergence. */
+   with movable[i] (all if movable is NULL) change.  With a metric W (metric() gives K = J W^-1,
+   NULL for the identity) the step is the least change of x^T W x: dx = -K^T (K J^T)^-1 r.
+   0, or -1 singular, -2 no convergence. */
+typedef void (*bgc_rows_fn)(double, const double *, const bgc_params *, double *);
+
 static int bgc_project_rows(double t, double *x, const bgc_params *p, const int *rows, int m,
-                            void (*jac)(double, const double *, const bgc_params *, double *),
-                            const int *movable)
+                            bgc_rows_fn jac, bgc_rows_fn metric, const int *movable)
 {
     enum { N = BGC_NUM_STATES, M = BGC_DIM(BGC_NUM_CONSTRAINTS) };
     double r[M] = { 0.0 }, s[M] = { 0.0 }, z[M] = { 0.0 }, A[M * M] = { 0.0 }, J[M * BGC_DIM(N)] = { 0.0 };
+    double Kw[M * BGC_DIM(N)] = { 0.0 };
+    const double *K = metric ? Kw : J;
     int it, i, j, k;
     for (it = 0;; it++) {
         int holds = 1;
@@ -814,15 +823,17 @@ static int bgc_project_rows(double t, double *x, const bgc_params *p, const int 
         if (it == 50)
             return -2;
         jac(t, x, p, J);
+        if (metric)
+            metric(t, x, p, Kw);
         for (i = 0; i < m; i++)
             for (k = 0; k < N; k++)
                 if (movable && !movable[k])
-                    J[i * N + k] = 0.0;
+                    J[i * N + k] = Kw[i * N + k] = 0.0;
         for (i = 0; i < m; i++)
             for (j = 0; j < m; j++) {
                 double sum = 0.0;
                 for (k = 0; k < N; k++)
-                    sum += J[i * N + k] * J[j * N + k];
+                    sum += K[i * N + k] * J[j * N + k];
                 A[i * m + j] = sum;
             }
         if (bgc_solve(m, A, z))
@@ -830,7 +841,7 @@ static int bgc_project_rows(double t, double *x, const bgc_params *p, const int 
         for (k = 0; k < N; k++) {
             double dx = 0.0;
             for (i = 0; i < m; i++)
-                dx += J[i * N + k] * z[i];
+                dx += K[i * N + k] * z[i];
             x[k] -= dx;
         }
     }
@@ -845,10 +856,10 @@ int bgc_project_initial(double t, double *x, const bgc_params *p, char *msg, siz
     int rc;
     bgc_params_update(&q);
     rc = bgc_project_rows(t, x, &q, bgc_position_rows, BGC_NUM_POSITION_ROWS, bgc_position_jac,
-                          NULL);
+                          NULL, NULL);
     if (rc == 0) {
         rc = bgc_project_rows(t, x, &q, bgc_velocity_rows, BGC_NUM_VELOCITY_ROWS,
-                              bgc_velocity_jac, bgc_velocity_movable);
+                              bgc_velocity_jac, bgc_velocity_metric, bgc_velocity_movable);
         level = "velocity";
     }
     if (rc == 0)

@@ -45,6 +45,8 @@
 #                         when an algebraic block fails (through _block_solve, _newton)
 #   _residual(t, x, p), _scale(t, x, p) -> list: r and s per constraint row (|r| <= 1e-9 s)
 #   _position_jac(t, x, p), _velocity_jac(t, x, p) -> list: the rows' Jacobians, row-major
+#   _velocity_metric(t, x, p) -> list: the velocity rows' Jacobian times the mass matrix (the
+#                         projection's kinetic metric), row-major
 #   _METHODS, SOLVERS, _SOLVER_LIST  the solver tables: name -> dict of the family, its step
 #                         control and tableau; the names in order; their help text
 #
@@ -53,7 +55,8 @@
 #     _MODEL_HELPERS below (math and numpy too), which bgc's code printers and templates
 #     emit calls to: _sq, _sign, _heaviside, the libm wrappers _c_* with C's infinities and
 #     NaNs, the algebraic-block solves _block_solve, _block_resolve, _newton (which read
-#     _BLOCK_TABLE and the workspace _Work; they raise _BlockFailure), and _bind_model.
+#     _BLOCK_TABLE and the workspace _Work; they raise _BlockFailure), _Work itself (the
+#     constraint rows of a coupled field make one for their block), and _bind_model.
 #
 # _bind_model() derives the runtime's tables from the model part (the blocks, PARAMETERS, the
 # explicit solvers' vector kind); the generated module calls it after its model part, and a
@@ -76,7 +79,7 @@ __all__ = [
 _MODEL_HELPERS = (
     "_sq", "_sign", "_heaviside", "_c_exp", "_c_log", "_c_sqrt", "_c_sin", "_c_cos", "_c_tan",
     "_c_asin", "_c_acos", "_c_atan", "_c_atan2", "_c_sinh", "_c_cosh", "_c_tanh", "_c_asinh",
-    "_c_atanh", "_c_pow", "_block_solve", "_block_resolve", "_newton", "_bind_model",
+    "_c_atanh", "_c_pow", "_block_solve", "_block_resolve", "_newton", "_Work", "_bind_model",
 )
 # (a)'s names, for the tests that check both sides of the contract (tests/test_pyruntime.py).
 _MODEL_NAMES = (
@@ -84,7 +87,7 @@ _MODEL_NAMES = (
     "_AUTONOMOUS", "_POSITION_ROWS", "_VELOCITY_ROWS", "_VELOCITY_MOVABLE", "_WORK_DOUBLES",
     "_WORK_INTS", "_BLOCK_NAMES", "_BLOCKS", "_JAC_COLORS", "_JAC_COLUMNS", "_fill_params",
     "_constants", "_init", "_rhs", "_out", "_jvp", "_residual", "_scale", "_position_jac",
-    "_velocity_jac", "_METHODS", "SOLVERS", "_SOLVER_LIST",
+    "_velocity_jac", "_velocity_metric", "_METHODS", "SOLVERS", "_SOLVER_LIST",
 )
 
 # ---------------------------------------------------------------- the model part's names
@@ -151,6 +154,10 @@ def _position_jac(t, x, p):
 
 
 def _velocity_jac(t, x, p):
+    return []
+
+
+def _velocity_metric(t, x, p):
     return []
 
 
@@ -616,8 +623,9 @@ def _solve(m, A, b):
     return b
 
 
-def _project_rows(t, x, p, rows, jac, movable):
-    """Gauss-Newton minimum-norm projection onto rows; None or the reason it failed."""
+def _project_rows(t, x, p, rows, jac, metric, movable):
+    """Gauss-Newton minimum-norm projection onto rows, in the metric W that metric() gives as
+    K = J W^-1 (None: the identity); None or the reason it failed."""
     m, n = len(rows), _N
     for it in range(51):
         r, s = _residual(t, x, p), _scale(t, x, p)
@@ -627,30 +635,34 @@ def _project_rows(t, x, p, rows, jac, movable):
         if it == 50:
             return "no convergence after 50 iterations"
         J = jac(t, x, p)
+        K = J if metric is None else metric(t, x, p)
         if movable is not None:
             J = [0.0 if not movable[c % n] else v for c, v in enumerate(J)]
+            K = J if metric is None else [0.0 if not movable[c % n] else v
+                                          for c, v in enumerate(K)]
         A = [0.0] * (m * m)
         for i in range(m):
             for j in range(m):
                 total = 0.0
                 for k in range(n):
-                    total += J[i * n + k] * J[j * n + k]
+                    total += K[i * n + k] * J[j * n + k]
                 A[i * m + j] = total
         if _solve(m, A, z) is None:
             return "the constraint Jacobian is singular"
         for k in range(n):
             dx = 0.0
             for i in range(m):
-                dx += J[i * n + k] * z[i]
+                dx += K[i * n + k] * z[i]
             x[k] -= dx
     return None
 
 
 def _project_initial(t, x, p):
-    why = _project_rows(t, x, p, _POSITION_ROWS, _position_jac, None)
+    why = _project_rows(t, x, p, _POSITION_ROWS, _position_jac, None, None)
     level = "position"
     if why is None:
-        why = _project_rows(t, x, p, _VELOCITY_ROWS, _velocity_jac, _VELOCITY_MOVABLE)
+        why = _project_rows(t, x, p, _VELOCITY_ROWS, _velocity_jac, _velocity_metric,
+                            _VELOCITY_MOVABLE)
         level = "velocity"
     if why is not None:
         raise ConstraintError(

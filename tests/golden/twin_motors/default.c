@@ -365,5 +365,13 @@ void bgc_velocity_jac(double t, const double *x, const bgc_params *p, double *ou
     (void)out;
 }
 
+void bgc_velocity_metric(double t, const double *x, const bgc_params *p, double *out)
+{
+    (void)t;
+    (void)x;
+    (void)p;
+    (void)out;
+}
+
 [runtime: runtime]
 
