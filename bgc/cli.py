@@ -107,7 +107,7 @@ def _write_atomic(path: str, text: str | bytes):
         _fail(str(error))
 
 
-def _stdout_lost(error: OSError, what: str = " stdout"):
+def _stdout_lost(error: OSError):
     """stdout could not be written (a full disk, a closed pipe): one line, exit 1.  What is
     left in stdout's buffer goes nowhere, so that leaving does not fail (and say so) again."""
     try:
@@ -120,7 +120,7 @@ def _stdout_lost(error: OSError, what: str = " stdout"):
         os.close(null)
     except (OSError, ValueError, AttributeError, io.UnsupportedOperation):
         pass
-    _fail(f"cannot write{what}: {outfile.reason(error)}")
+    _fail(f"cannot write stdout: {outfile.reason(error)}")
 
 
 def _echo(text: str):
@@ -249,9 +249,22 @@ class _Group(click.Group):
         except OSError as error:
             if error.errno not in WRITE_ERRNOS:
                 raise
-            if error.filename is None:  # (a stream: stdout, say; a file has its name)
-                _stdout_lost(error, "")
-            _fail(f"cannot write '{error.filename}': {outfile.reason(error)}")
+            if error.filename is not None:
+                _fail(f"cannot write '{error.filename}': {outfile.reason(error)}")
+            if _from_echo(error):  # (click writing help or a usage line to stdout)
+                _stdout_lost(error)
+            _fail(f"a write failed: {outfile.reason(error)}")
+
+
+def _from_echo(error: BaseException) -> bool:
+    """Whether the error was raised by click.echo (a write to stdout, or stderr)."""
+    tb = error.__traceback__
+    while tb is not None:
+        code = tb.tb_frame.f_code
+        if code.co_name == "echo" and code.co_filename == click.utils.__file__:
+            return True
+        tb = tb.tb_next
+    return False
 
 
 @click.group(cls=_Group, context_settings={"help_option_names": ["-h", "--help"]})
