@@ -421,7 +421,8 @@ def simulate(model, scene, outputs, effects, algebra, backend, solver, rtol, ato
         for message in stability.warnings_for_run(compiled, settings.solver, settings.step,
                                                   settings.dt, dict(settings.params)):
             click.echo(message, err=True)
-    with _scratch(plot_file and not output) as tmp:
+    # (--plot reads the CSV back: from a copy when it goes to stdout, a device or a FIFO)
+    with _scratch(plot_file and (not output or outfile.destination(output)[1])) as tmp:
         copy = Path(tmp) / "run.csv" if tmp else None  # (the CSV that --plot reads)
         # (not while the CSV itself goes to the terminal: the bar would cut its lines)
         progress = _RunProgress() if sys.stderr.isatty() and (
@@ -430,7 +431,7 @@ def simulate(model, scene, outputs, effects, algebra, backend, solver, rtol, ato
         if progress is not None:
             progress.close()
         if plot_file:
-            status = _plot(record, output or copy, plot_file, status, rows)
+            status = _plot(record, copy or output, plot_file, status, rows)
     sys.exit(status)
 
 
@@ -523,8 +524,13 @@ def _run(program, settings, stats: bool, output: str | None, copy: Path | None =
         click.echo(f"bgc: error: {error}", err=True)
         return 1, False
     with part:
-        done = runner.run(program, settings, part.file, progress, stats)
-        last = part.rows_end()
+        sink = part.file
+        if part.direct and copy is not None:  # (a device or a FIFO, and a copy for --plot)
+            sink = _Tee(io.TextIOWrapper(part.file, encoding="utf-8", newline="",
+                                         write_through=True), copy)
+        with sink.copy if sink is not part.file else contextlib.nullcontext():
+            done = runner.run(program, settings, sink, progress, stats)
+        last = part.rows_end() if copy is None else outfile.last_row_time(copy)
         _say(done, f"'{output}'", last)
         try:
             if done.status == 0:
@@ -532,7 +538,7 @@ def _run(program, settings, stats: bool, output: str | None, copy: Path | None =
                 return 0, True
             if part.direct:  # (a device or a FIFO has what it was given)
                 part.commit()
-                return done.status, False
+                return done.status, last is not None
             if last is None:
                 if done.status != 2:  # (refused settings: a usage error, said as such)
                     click.echo(f"bgc: no rows computed; nothing written to {output}", err=True)

@@ -13,10 +13,12 @@ What is asserted is behaviour: exit statuses, the messages' lines, file types (o
 Runs are the warm path of `bgc simulate` (the programs built once, by the fixture), in
 processes of their own where a descriptor, a limit or a signal needs one.
 """
+import importlib.util
 import os
 import resource
 import shutil
 import signal
+import socket
 import stat
 import subprocess
 import sys
@@ -164,9 +166,30 @@ def test_a_device_is_written_into_and_never_replaced(tmp_path, warm):
         code, err = finish(bgc_process(warm, "--t-end", "1", "--backend", backend, "-o", node,
                                        cwd=tmp_path))
         assert code == 0 and err == []
+    plotted = []
+    if importlib.util.find_spec("matplotlib") is not None:  # (--plot reads a copy of the CSV)
+        done = run_bgc("simulate", warm[0], "-s", "s", "--t-end", "1", "-o", node, "--plot",
+                       "run.png", cwd=tmp_path, env={"BGC_CACHE_DIR": warm[1]["BGC_CACHE_DIR"]})
+        assert done.returncode == 0, done.stderr
+        assert (tmp_path / "run.png").read_bytes().startswith(b"\x89PNG")
+        plotted = ["run.png"]
     info = os.stat(node)
     assert stat.S_ISCHR(info.st_mode) and info.st_rdev == os.makedev(1, 3)
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["null"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["null", *plotted]
+
+
+@pytest.mark.skipif(not hasattr(socket, "AF_UNIX"), reason="no UNIX sockets here")
+def test_a_socket_or_a_directory_is_refused_before_any_work(tmp_path):
+    (tmp_path / "m.bg").write_text(DECAY)
+    with socket.socket(socket.AF_UNIX) as server:
+        try:
+            server.bind(str(tmp_path / "sock"))
+        except OSError as error:
+            pytest.skip(f"cannot make a socket here: {error}")
+        for target, why in (("sock", "it is a socket"), (".", "it is a directory")):
+            done = run_bgc("compile", "m.bg", "-o", target, cwd=tmp_path)
+            assert done.returncode == 2 and why in done.stderr, done.stderr
+    assert stat.S_ISSOCK(os.lstat(tmp_path / "sock").st_mode)
 
 
 def _read_fifo(path: Path, into: list):
