@@ -251,17 +251,20 @@ class _Group(click.Group):
                 raise
             if error.filename is not None:
                 _fail(f"cannot write '{error.filename}': {outfile.reason(error)}")
-            if _from_echo(error):  # (click writing help or a usage line to stdout)
+            if _raised_in(error, click.utils.__file__, "echo"):  # (click's help or usage line)
                 _stdout_lost(error)
+            if _raised_in(error, backends.__file__):
+                _fail(f"cannot write the compile cache {backends.cache_dir()}: "
+                      f"{outfile.reason(error)}")
             _fail(f"a write failed: {outfile.reason(error)}")
 
 
-def _from_echo(error: BaseException) -> bool:
-    """Whether the error was raised by click.echo (a write to stdout, or stderr)."""
+def _raised_in(error: BaseException, filename: str, function: str | None = None) -> bool:
+    """Whether the error was raised through the module `filename` (its `function`)."""
     tb = error.__traceback__
     while tb is not None:
         code = tb.tb_frame.f_code
-        if code.co_name == "echo" and code.co_filename == click.utils.__file__:
+        if code.co_filename == filename and function in (None, code.co_name):
             return True
         tb = tb.tb_next
     return False

@@ -323,6 +323,17 @@ def test_a_full_disk_keeps_whole_rows_and_nothing_else(small_disk, warm, backend
     assert list(small_disk.iterdir()) == []
 
 
+def test_a_full_disk_under_the_compile_cache_is_one_line(small_disk, tmp_path):
+    (tmp_path / "m.bg").write_text(DECAY)
+    (small_disk / "fill").write_bytes(b"\0" * 60 * 1024)
+    for backend in BACKENDS:
+        done = run_bgc("simulate", "m.bg", "-s", "s", "--t-end", "0.1", "--backend", backend,
+                       cwd=tmp_path, env={"BGC_CACHE_DIR": str(small_disk / "cache")})
+        assert done.returncode == 1 and done.stdout == ""
+        assert done.stderr == f"bgc: error: cannot write the compile cache {small_disk}/cache: " \
+                              "No space left on device\n"
+
+
 # ------------------------------------------------------------------ kill signals
 
 
