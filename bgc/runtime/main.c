@@ -598,6 +598,7 @@ int main(int argc, char **argv)
     char msg[1024];
     int project = 0, stats = 0, rc, i;
 
+    bgc_die_with_parent();
     rc = bgc_batch_main(argc, argv);
     if (rc >= 0)
         return rc;
@@ -631,7 +632,6 @@ int main(int argc, char **argv)
 
     signal(SIGINT, bgc_on_signal);
     signal(SIGTERM, bgc_on_signal);
-    bgc_die_with_parent();
     bgc_out.file = stdout;
     bgc_csv_header(stdout);
     bgc_progress.t0 = bgc_progress.next = s.t0;

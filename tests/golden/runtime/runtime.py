@@ -986,6 +986,7 @@ def _progress_reporter(s):
 def main(argv=None):
     """The command line; returns the exit status."""
     argv = sys.argv[1:] if argv is None else list(argv)
+    _die_with_parent()
     if any(a == "--batch" or a.startswith("--batch=") for a in argv):
         return _batch_main(argv)  # (batch mode, at the end)
     try:
@@ -1015,7 +1016,6 @@ def main(argv=None):
     failure = lost = None
     out = sys.stdout
     handlers = _stop_on_signals()
-    _die_with_parent()
     progress = _progress_reporter(s) if "--progress" in flags else None
     try:
         out.write(",".join(["t"] + OUTPUTS) + "\n")
