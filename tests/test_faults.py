@@ -310,6 +310,15 @@ def test_a_file_size_limit_keeps_whole_rows(tmp_path, warm, backend):
     _check_kept(tmp_path, "out.csv", err, "File too large", LIMIT)
 
 
+def test_a_file_size_limit_on_compile_leaves_no_file(tmp_path, warm):
+    done = subprocess.run([sys.executable, "-m", "bgc", "compile", str(warm[0]), "-o", "m.c"],
+                          cwd=tmp_path, env=warm[1], capture_output=True, text=True,
+                          preexec_fn=_limit_file_size)
+    assert (done.returncode, done.stderr) == (1, "bgc: error: cannot write 'm.c': File too "
+                                                 "large\n")
+    assert list(tmp_path.iterdir()) == []
+
+
 @pytest.mark.parametrize("backend", BACKENDS)
 def test_a_full_disk_keeps_whole_rows_and_nothing_else(small_disk, warm, backend):
     code, err = finish(bgc_process(warm, "--backend", backend, "-o", "small/out.csv",
@@ -368,6 +377,24 @@ def test_a_program_killed_by_a_signal_is_told_and_its_rows_kept_whole(tmp_path, 
         f"bgc: error: the generated program was killed by {sig.name} at t = {t}",
         f"bgc: the run stopped; the rows up to t = {t} are in out.csv"]
     assert hidden(tmp_path) == []
+
+
+@needs_proc
+def test_a_killed_program_writing_to_stdout_leaves_whole_rows_in_a_file_there(tmp_path, warm):
+    """`bgc simulate > out.csv` (the file opened to write only, as a shell does)."""
+    out = tmp_path / "out.csv"
+    with open(out, "wb") as sink:
+        proc = bgc_process(warm, "--backend", BACKENDS[-1], cwd=tmp_path, stdout=sink)
+        deadline = time.monotonic() + 60
+        while not (children(proc.pid) and out.stat().st_size > 20_000):
+            assert time.monotonic() < deadline and proc.poll() is None
+            time.sleep(0.02)
+        os.kill(children(proc.pid)[0], signal.SIGKILL)
+        code, err = finish(proc)
+    data = rows(out)
+    t = err[-1].split("t = ")[1]
+    assert code == 1 and float(t) == data[-1][0]
+    assert err[-1] == f"bgc: error: the generated program was killed by SIGKILL at t = {t}"
 
 
 # ------------------------------------------------------------------ the output grid
