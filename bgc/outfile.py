@@ -48,9 +48,7 @@ def _stat(path) -> os.stat_result | None:
     """os.stat through symbolic links; None if nothing is there (or a link leads nowhere)."""
     try:
         return os.stat(path)
-    except (FileNotFoundError, NotADirectoryError):
-        return None
-    except OSError:
+    except (OSError, ValueError):  # (missing, a link to nowhere or in a loop, a NUL in it)
         return None
 
 
@@ -100,8 +98,8 @@ def check_target(path: str | os.PathLike, inputs=()) -> Path:
 
 def destination(path: str | os.PathLike) -> tuple[Path, bool]:
     """Where the data for `path` goes, and whether straight into it (a character device or a
-    FIFO) rather than by a hidden file renamed into place: the path itself, or the file a
-    symbolic link leads to (a link's own parent when the path has no links)."""
+    FIFO) rather than by a hidden file beside it renamed into place: the path itself, or, for
+    a symbolic link, the file it leads to (which need not exist yet)."""
     target = Path(path)
     if target.is_symlink():
         target = Path(os.path.realpath(target))
