@@ -1056,9 +1056,10 @@ def main(argv=None):
 # numpy vectors (see _LIST_STATES); the arithmetic is the C runtime's, in the same order.
 
 def _output_count(s):
-    """As bgc_output_count: at least 1, so that t0 and t_end are rows whatever dt."""
+    """As bgc_output_count: at least 1 when t_end > t0, so that t0 and t_end are rows whatever
+    dt; 0 when they are the same time (one row)."""
     n = math.ceil((s.t_end - s.t0) / s.dt - 1e-6)
-    return n if n > 1 else 1
+    return n if n > 1 else 1 if s.t_end > s.t0 else 0
 
 
 def _output_time(s, k, n):
