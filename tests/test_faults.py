@@ -146,6 +146,11 @@ def test_an_output_that_is_the_model_is_refused_under_any_name(tmp_path):
     done = run_bgc("simulate", "m.bg", "-s", "s", "-o", "x.png", "--plot", "./x.png",
                    cwd=tmp_path)
     assert done.returncode == 1 and done.stderr.startswith("bgc: error: cannot write")
+    (tmp_path / "sub" / "accuracy.csv").write_text("t,z\n0,1\n")  # (a reference CSV)
+    done = run_bgc("accuracy", "m.bg", "-s", "s", "--reference", "sub/accuracy.csv", "-o",
+                   "sub", cwd=tmp_path)
+    assert done.returncode == 1 and "it is the reference" in done.stderr, done.stderr
+    assert (tmp_path / "sub" / "accuracy.csv").read_text() == "t,z\n0,1\n"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["d.dot", "hard.bg", "link.bg",
                                                           "m.bg", "sub"]
 
