@@ -293,7 +293,10 @@ def arrays(result: Result):
     if result.t is not None:
         return np.asarray(result.t), np.asarray(result.values)
     if result.status != 0:
-        raise SimulationFailed(result.stderr.strip(), result.csv)
+        csv = result.csv or ""
+        raise SimulationFailed(result.stderr.strip() or result.message,
+                               csv[:csv.rfind("\n") + 1])  # (whole rows: a killed program's
+        #                                                    last one may be cut)
     t, Y, _ = _parse_csv(result.csv)
     return t, Y
 

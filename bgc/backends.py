@@ -150,14 +150,27 @@ def _compile(argv: list[str], cwd: Path | None = None) -> subprocess.CompletedPr
 
 @dataclass
 class Finished:
-    """How a program run by run_streaming ended: its exit status, its stderr, and the signal
-    (SIGINT, SIGTERM) that interrupted it, else 0."""
+    """How a program run by run_streaming ended: its exit status (-N: killed by signal N), its
+    stderr, the signal (SIGINT, SIGTERM) that interrupted bgc and was passed on, else 0; the
+    write to a sink without a descriptor that failed (then the program was stopped), and the
+    last whole line such a sink was given (for the time of the last row)."""
     code: int
     stderr: str
     signal: int = 0
+    sink_error: OSError | None = None
+    last_line: str = ""
 
 
 PROGRESS_PREFIX = b"bgc-progress "
+PARENT_ENV = "BGC_PARENT_PID"  # a generated program started by bgc dies with it (see child_env)
+
+
+def child_env() -> dict:
+    """The environment a generated program is started with: bgc's own, and its process id in
+    BGC_PARENT_PID, which the program reads to die with bgc rather than run on as an orphan
+    when bgc is killed (SIGKILL can be neither caught nor passed on): the C program on Linux
+    by prctl(PR_SET_PDEATHSIG), the Python module by watching its parent."""
+    return dict(os.environ, **{PARENT_ENV: str(os.getpid())})
 
 
 def _read_stderr(pipe, err, progress) -> None:
@@ -176,13 +189,42 @@ def _read_stderr(pipe, err, progress) -> None:
     pipe.close()
 
 
+def _feed_lines(pipe, stdout) -> tuple[str, OSError | None]:
+    """A program's stdout into a text sink without a descriptor, whole lines only (a cut last
+    line is dropped); the last line given, and the error of a write that failed (then the
+    rest is read and dropped, so that the program is not blocked)."""
+    decoder = codecs.getincrementaldecoder("utf-8")("replace")
+    pending, last, failed = "", "", None
+    for chunk in iter(lambda: pipe.read(1 << 16), b""):
+        if failed is not None:
+            continue
+        pending += decoder.decode(chunk)
+        cut = pending.rfind("\n") + 1
+        if cut:
+            lines, pending = pending[:cut], pending[cut:]
+            try:
+                stdout.write(lines)
+            except OSError as error:
+                failed = error
+                continue
+            last = lines[lines.rfind("\n", 0, len(lines) - 1) + 1:-1]
+    pipe.close()
+    return last, failed
+
+
 def run_streaming(argv: list[str], stdout, progress=None) -> Finished:
     """Runs argv with its standard output going to `stdout` as it is written (a file with a
-    descriptor gets it directly; anything else with write() is fed in chunks), so memory does
-    not grow with the output.  SIGINT and SIGTERM received meanwhile are passed on to the
-    program, which stops at its next step with its rows written; a second one kills it.
-    progress: called with (t, t0, t_end) for each progress line the program writes on stderr
-    (run with --progress), which then is not in .stderr."""
+    descriptor gets it directly; anything else with write() is fed whole lines), so memory
+    does not grow with the output.  SIGINT and SIGTERM received meanwhile are passed on to the
+    program, which stops at its next step with its rows written; a second one kills it.  A
+    sink without a descriptor that cannot be written stops the program.  progress: called
+    with (t, t0, t_end) for each progress line the program writes on stderr (run with
+    --progress), which then is not in .stderr.
+
+    The program starts with bgc's signal dispositions (restore_signals=False): SIGPIPE and
+    SIGXFSZ ignored, as Python has them, so that a closed pipe or a file size limit is a write
+    error the program reports (and stops at), not a death by signal; and with child_env(), so
+    that it dies with bgc."""
     try:
         fd = stdout.fileno()
     except (AttributeError, OSError, ValueError):
@@ -192,7 +234,8 @@ def run_streaming(argv: list[str], stdout, progress=None) -> Finished:
         if fd is not None:
             stdout.flush()
         proc = subprocess.Popen(argv, stdout=fd if fd is not None else subprocess.PIPE,
-                                stderr=err if progress is None else subprocess.PIPE)
+                                stderr=err if progress is None else subprocess.PIPE,
+                                env=child_env(), restore_signals=False)
         reader = None
         if progress is not None:
             reader = threading.Thread(target=_read_stderr, args=(proc.stderr, err, progress),
@@ -210,13 +253,10 @@ def run_streaming(argv: list[str], stdout, progress=None) -> Finished:
         if threading.current_thread() is threading.main_thread():
             replaced = [(sig, signal.signal(sig, forward))
                         for sig in (signal.SIGINT, signal.SIGTERM)]
+        last, failed = "", None
         try:
             if fd is None:  # a text stream without a descriptor (a test's captured output)
-                decoder = codecs.getincrementaldecoder("utf-8")("replace")
-                for chunk in iter(lambda: proc.stdout.read(1 << 16), b""):
-                    stdout.write(decoder.decode(chunk))
-                stdout.write(decoder.decode(b"", final=True))
-                proc.stdout.close()
+                last, failed = _feed_lines(proc.stdout, _Stopping(stdout, proc))
             code = proc.wait()
             if reader is not None:
                 reader.join()
@@ -224,13 +264,28 @@ def run_streaming(argv: list[str], stdout, progress=None) -> Finished:
             for sig, handler in replaced:
                 signal.signal(sig, handler)
         err.seek(0)
-        return Finished(code, err.read().decode("utf-8", "replace"), got[0] if got else 0)
+        return Finished(code, err.read().decode("utf-8", "replace"), got[0] if got else 0,
+                        failed, last)
+
+
+class _Stopping:
+    """A sink that stops the program when a write to it fails (the error raised on)."""
+
+    def __init__(self, sink, proc):
+        self.sink, self.proc = sink, proc
+
+    def write(self, text: str) -> None:
+        try:
+            self.sink.write(text)
+        except OSError:
+            self.proc.kill()
+            raise
 
 
 def run_c(exe: Path | str, args=(), timeout: float | None = None) -> tuple[int, str, str]:
     """Runs a compiled model: (returncode, stdout, stderr)."""
     done = subprocess.run([str(exe), *map(str, args)], capture_output=True, text=True,
-                          timeout=timeout)
+                          timeout=timeout, env=child_env())
     return done.returncode, done.stdout, done.stderr
 
 

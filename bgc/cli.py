@@ -3,7 +3,10 @@ and the only one that writes files.  Model errors exit 1 with a located report, 
 from __future__ import annotations
 
 import contextlib
+import errno
+import io
 import math
+import os
 import sys
 import time
 from pathlib import Path
@@ -89,13 +92,44 @@ def _check_span(compiled, t_end, dt):
         raise click.UsageError(problem)
 
 
+def _fail(message: str):
+    """bgc's own error, one line on stderr, exit 1."""
+    click.echo(f"bgc: error: {message}", err=True)
+    sys.exit(1)
+
+
 def _write_atomic(path: str, text: str | bytes):
-    """Write all of `text` (or bytes) or nothing (bgc.outfile)."""
+    """Write all of `text` (or bytes) or nothing (bgc.outfile); a write that fails (a full
+    disk) is one line, exit 1."""
     try:
         outfile.write_atomic(path, text)
     except outfile.OutputError as error:
-        click.echo(f"error: {error}", err=True)
-        sys.exit(1)
+        _fail(str(error))
+
+
+def _stdout_lost(error: OSError):
+    """stdout could not be written (a full disk, a closed pipe): one line, exit 1.  What is
+    left in stdout's buffer goes nowhere, so that leaving does not fail (and say so) again."""
+    try:
+        sys.stdout.flush()
+    except (OSError, ValueError):
+        pass
+    try:
+        null = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(null, sys.stdout.fileno())
+        os.close(null)
+    except (OSError, ValueError, AttributeError, io.UnsupportedOperation):
+        pass
+    _fail(f"cannot write stdout: {outfile.reason(error)}")
+
+
+def _echo(text: str):
+    """text on stdout, flushed; a write that fails is _stdout_lost."""
+    try:
+        click.echo(text, nl=False)
+        sys.stdout.flush()
+    except OSError as error:
+        _stdout_lost(error)
 
 
 def _output_file(ctx, param, value):
@@ -106,6 +140,24 @@ def _output_file(ctx, param, value):
         except outfile.OutputError as error:
             raise click.BadParameter(str(error), ctx, param) from None
     return value
+
+
+def _not_an_input(model: str, *outputs, others=()):
+    """Each output given (None: none) must not be a file the command reads: the model (under
+    any name: another path, a symbolic or hard link), or `others` ((what, path) pairs); else
+    one line, exit 1, before any work.  Nor may two outputs be the same file."""
+    inputs = [("the model file", model), *others]
+    given = [o for o in outputs if o is not None]
+    for i, output in enumerate(given):
+        try:
+            outfile.check_target(output, inputs)
+        except outfile.OutputIsInput as error:
+            _fail(str(error))
+        except outfile.OutputError:
+            pass  # (said by the option's own check)
+        inputs.append(("another output of this command", output))
+        if any(os.path.abspath(output) == os.path.abspath(o) for o in given[:i]):
+            _fail(f"cannot write '{output}' twice: name different output files")
 
 
 def _plot_file(ctx, param, value):
@@ -176,9 +228,13 @@ ALLOW_HELP = ("Start from initial values that violate the constraints, neither r
               "projecting them: the correctors pull the drift back (docs/stability.md).")
 
 
+WRITE_ERRNOS = (errno.ENOSPC, errno.EDQUOT, errno.EFBIG, errno.EIO, errno.EPIPE, errno.EROFS)
+
+
 class _Group(click.Group):
     """The commands; a C toolchain that fails (bgc.backends.BackendError) is reported as such,
-    exit 1, without a traceback."""
+    exit 1, without a traceback; so is a write that fails where no command caught it (a full
+    disk under the cache, a closed stdout while click writes help): one line, exit 1."""
 
     def invoke(self, ctx):
         try:
@@ -186,6 +242,32 @@ class _Group(click.Group):
         except backends.BackendError as error:
             click.echo(f"error: {error}", err=True)
             ctx.exit(1)
+
+    def main(self, *args, **kwargs):
+        try:
+            return super().main(*args, **kwargs)
+        except OSError as error:
+            if error.errno not in WRITE_ERRNOS:
+                raise
+            if error.filename is not None:
+                _fail(f"cannot write '{error.filename}': {outfile.reason(error)}")
+            if _raised_in(error, click.utils.__file__, "echo"):  # (click's help or usage line)
+                _stdout_lost(error)
+            if _raised_in(error, backends.__file__):
+                _fail(f"cannot write the compile cache {backends.cache_dir()}: "
+                      f"{outfile.reason(error)}")
+            _fail(f"a write failed: {outfile.reason(error)}")
+
+
+def _raised_in(error: BaseException, filename: str, function: str | None = None) -> bool:
+    """Whether the error was raised through the module `filename` (its `function`)."""
+    tb = error.__traceback__
+    while tb is not None:
+        code = tb.tb_frame.f_code
+        if code.co_filename == filename and function in (None, code.co_name):
+            return True
+        tb = tb.tb_next
+    return False
 
 
 @click.group(cls=_Group, context_settings={"help_option_names": ["-h", "--help"]})
@@ -212,14 +294,14 @@ def check(model, scene, outputs, effects, algebra):
     if adhoc and summary is None:
         click.echo("note: the full model (all effects) does not compile, so this scene is not "
                    "compared with it", err=True)
-    click.echo(report.check_report(compiled, summary), nl=False)
+    _echo(report.check_report(compiled, summary))
 
 
 @main.command()
 @MODEL
 def scenes(model):
     """List the scenes: their docs, effects, outputs, time spans, solvers and settings."""
-    click.echo(_or_exit(api.scenes, model), nl=False)
+    _echo(_or_exit(api.scenes, model))
 
 
 @main.command()
@@ -232,8 +314,7 @@ def equations(model, scene, outputs, effects, algebra, fmt):
     """Print the reduced equations, multipliers included."""
     compiled = _build(model, scene, algebra=algebra, program=False, outputs=outputs,
                       effects=effects)
-    click.echo((report.equations_latex if fmt == "latex" else report.equations_text)(compiled),
-               nl=False)
+    _echo((report.equations_latex if fmt == "latex" else report.equations_text)(compiled))
 
 
 @main.command()
@@ -252,6 +333,7 @@ def equations(model, scene, outputs, effects, algebra, fmt):
 def compile(model, scene, outputs, effects, algebra, target, output, project_initial,
             allow_inconsistent):
     """Emit standalone C or Python source code, or an FMU."""
+    _not_an_input(model, output)
     if target == "fmu" and not output:
         raise click.UsageError("--target fmu writes a zip archive: name it with -o NAME.fmu")
     compiled = _build(model, scene, project_initial, algebra, outputs=outputs, effects=effects,
@@ -271,7 +353,7 @@ def compile(model, scene, outputs, effects, algebra, target, output, project_ini
     if output:
         _write_atomic(output, text)
     else:
-        click.echo(text, nl=False)
+        _echo(text)
 
 
 @main.command()
@@ -312,6 +394,7 @@ def simulate(model, scene, outputs, effects, algebra, backend, solver, rtol, ato
     """Simulate and write CSV.  A model compiled before with the same options runs at once
     (bgc.warm); otherwise it is compiled, and the result kept for the next run.  On a
     terminal, a run that takes more than a second shows its progress on stderr."""
+    _not_an_input(model, output, plot_file)
     if project_initial and allow_inconsistent:
         raise click.UsageError("--project-initial and --allow-inconsistent exclude each other")
     backend = _backend(backend)
@@ -341,7 +424,8 @@ def simulate(model, scene, outputs, effects, algebra, backend, solver, rtol, ato
         for message in stability.warnings_for_run(compiled, settings.solver, settings.step,
                                                   settings.dt, dict(settings.params)):
             click.echo(message, err=True)
-    with _scratch(plot_file and not output) as tmp:
+    # (--plot reads the CSV back: from a copy when it goes to stdout, a device or a FIFO)
+    with _scratch(plot_file and (not output or outfile.destination(output)[1])) as tmp:
         copy = Path(tmp) / "run.csv" if tmp else None  # (the CSV that --plot reads)
         # (not while the CSV itself goes to the terminal: the bar would cut its lines)
         progress = _RunProgress() if sys.stderr.isatty() and (
@@ -350,7 +434,7 @@ def simulate(model, scene, outputs, effects, algebra, backend, solver, rtol, ato
         if progress is not None:
             progress.close()
         if plot_file:
-            status = _plot(record, output or copy, plot_file, status, rows)
+            status = _plot(record, copy or output, plot_file, status, rows)
     sys.exit(status)
 
 
@@ -402,8 +486,11 @@ def _plot(record, csv, target: str, status: int, rows: bool) -> int:
         table = plot.read_csv(csv)
         cols = [plot.Column(*c) for c in record.plot_columns]
         with outfile.Partial(target) as part:
-            plot.plot_run(table, cols, part.file, plot.check_format(target),
-                          list(record.plot_title), stopped=status != 0)
+            try:
+                plot.plot_run(table, cols, part.file, plot.check_format(target),
+                              list(record.plot_title), stopped=status != 0)
+            except OSError as error:
+                raise part.failed(error) from None
             part.commit()
     except (plot.PlotError, outfile.OutputError, OSError) as error:
         click.echo(f"error: no plot written: {error}", err=True)
@@ -430,35 +517,77 @@ def _run(program, settings, stats: bool, output: str | None, copy: Path | None =
          progress=None) -> tuple[int, bool]:
     """Runs the program (bgc.runner.run), its CSV streamed to `output` (else stdout, and a
     copy into `copy` if given); the exit status, and whether rows were written.  A failed
-    run's rows are kept, and the last line on stderr says so.  progress: a _RunProgress for
-    the program's progress lines."""
+    run's rows are kept, cut back to the last whole row, and the last line on stderr says so.
+    progress: a _RunProgress for the program's progress lines."""
     if not output:
-        sink = sys.stdout if copy is None else _Tee(sys.stdout, copy)
-        with sink.copy if copy is not None else contextlib.nullcontext():
-            done = runner.run(program, settings, sink, progress, stats)
-        click.echo(done.stderr, err=True, nl=False)
-        return done.status, copy is not None and outfile.last_row_time(copy) is not None
+        return _run_to_stdout(program, settings, stats, copy, progress)
     try:
         part = outfile.Partial(output)
     except outfile.OutputError as error:
-        click.echo(f"error: {error}", err=True)
+        click.echo(f"bgc: error: {error}", err=True)
         return 1, False
     with part:
-        done = runner.run(program, settings, part.file, progress, stats)
-        click.echo(done.stderr, err=True, nl=False)
-        if done.status == 0:
-            part.commit()
-            return 0, True
-        part.file.flush()
-        last = outfile.last_row_time(part.tmp)
-        if last is None:
-            if done.status != 2:  # (refused settings: a usage error, said as such)
-                click.echo(f"bgc: no rows computed; nothing written to {output}", err=True)
-        else:
+        sink = part.file
+        if part.direct and copy is not None:  # (a device or a FIFO, and a copy for --plot)
+            sink = _Tee(io.TextIOWrapper(part.file, encoding="utf-8", newline="",
+                                         write_through=True), copy)
+        with sink.copy if sink is not part.file else contextlib.nullcontext():
+            done = runner.run(program, settings, sink, progress, stats)
+        last = part.rows_end() if copy is None else outfile.last_row_time(copy)
+        _say(done, f"'{output}'", last)
+        try:
+            if done.status == 0:
+                part.commit()
+                return 0, True
+            if part.direct:  # (a device or a FIFO has what it was given)
+                part.commit()
+                return done.status, last is not None
+            if last is None:
+                if done.status != 2:  # (refused settings: a usage error, said as such)
+                    click.echo(f"bgc: no rows computed; nothing written to {output}", err=True)
+                return done.status, False
             part.keep()
-            click.echo(f"bgc: the run stopped; the rows up to t = {last} are in {output}",
-                       err=True)
-    return done.status, last is not None
+        except outfile.OutputError as error:
+            _fail(str(error))
+        click.echo(f"bgc: the run stopped; the rows up to t = {last} are in {output}",
+                   err=True)
+    return done.status, True
+
+
+def _run_to_stdout(program, settings, stats, copy, progress) -> tuple[int, bool]:
+    """_run with the CSV on stdout: a regular file there (`> out.csv`) is cut back to its last
+    whole row if the run fails, as a named file is."""
+    sink = sys.stdout if copy is None else _Tee(sys.stdout, copy)
+    try:
+        fd = sys.stdout.fileno()
+        sys.stdout.flush()
+        start = outfile.offset(fd)
+    except (OSError, ValueError, AttributeError, io.UnsupportedOperation):
+        fd = start = None  # (a pipe, a test's captured output)
+    with sink.copy if copy is not None else contextlib.nullcontext():
+        done = runner.run(program, settings, sink, progress, stats)
+    if fd is not None:
+        if done.status != 0:
+            outfile.cut_to_whole_rows(fd, start)
+        last = outfile.last_row_time_fd(fd, start)
+    else:
+        last = outfile.last_row_time_text(done.last_line + "\n")
+    _say(done, "stdout", last)
+    if done.write_error is not None:
+        _stdout_lost(OSError(0, done.write_error))
+    return done.status, copy is not None and outfile.last_row_time(copy) is not None
+
+
+def _say(done, where: str, last: str | None) -> None:
+    """The program's messages on stderr, and bgc's own line for a program killed by a signal
+    (at the time of its last row, if known) or a CSV that could not be written."""
+    click.echo(done.messages, err=True, nl=False)
+    if done.killed:
+        at = f" at t = {last}" if last is not None else ""
+        click.echo(f"bgc: error: the generated program was killed by "
+                   f"{runner.signal_name(done.killed)}{at}", err=True)
+    if done.write_error is not None and where != "stdout":
+        click.echo(f"bgc: error: cannot write {where}: {done.write_error}", err=True)
 
 
 def _numbers(text: str | None, option: str) -> list[float] | None:
@@ -561,6 +690,11 @@ class _RunProgress:
 def accuracy(model, scene, outputs, effects, algebra, backend, solver_list, rtols, steps,
              reference, gains, repeats, timeout, t_end, dt, params, no_plot, output):
     """Measure each solver's error and cost on the model: table, CSV and work-precision plot."""
+    stem = Path(model).stem + (f"-{scene}" if scene else "")
+    directory = Path(output or f"accuracy-{stem}")
+    base = "gains" if gains is not None else "accuracy"
+    _not_an_input(model, str(directory / f"{base}.csv"), str(directory / f"{base}.png"),
+                  others=[("the reference", reference)] if reference else ())
     names = [n.strip() for n in solver_list.split(",")] if solver_list else None
     for n in names or []:
         if n not in solvers.SOLVERS:
@@ -576,8 +710,6 @@ def accuracy(model, scene, outputs, effects, algebra, backend, solver_list, rtol
     _check_span(compiled, t_end, dt)
     overrides = _overrides(params, compiled)
     backend = _backend(backend)
-    stem = Path(model).stem + (f"-{scene}" if scene else "")
-    directory = Path(output or f"accuracy-{stem}")
     progress = _Progress()
     try:
         if gain_values is not None:
@@ -596,7 +728,7 @@ def accuracy(model, scene, outputs, effects, algebra, backend, solver_list, rtol
         click.echo(f"error: {exc}", err=True)
         sys.exit(1)
     text = acc.table(result, gains=gain_values is not None)
-    click.echo(text, nl=False)
+    _echo(text)
     directory.mkdir(parents=True, exist_ok=True)
     _write_atomic(str(directory / f"{base}.csv"), acc.csv_text(result))
     written = [str(directory / f"{base}.csv")]
@@ -608,9 +740,15 @@ def accuracy(model, scene, outputs, effects, algebra, backend, solver_list, rtol
                        "written", err=True)
         else:
             png = directory / f"{base}.png"
-            with outfile.Partial(png) as part:
-                acc.plot(result, part.file, gains=gain_values is not None)
-                part.commit()
+            try:
+                with outfile.Partial(png) as part:
+                    try:
+                        acc.plot(result, part.file, gains=gain_values is not None)
+                    except OSError as error:
+                        raise part.failed(error) from None
+                    part.commit()
+            except outfile.OutputError as error:
+                _fail(str(error))
             written.append(str(png))
     click.echo(f"wrote {', '.join(written)}", err=True)
 
@@ -664,6 +802,7 @@ def sweep(model, scene, algebra, grids, sample, varies, seed, metrics, backend, 
     batches on Dask or serially; write one table: run, parameters, metrics, counters, status,
     message.  A run that fails is a row with its status and message; see docs/sweeps.md."""
     from . import sweeps as sw
+    _not_an_input(model, output)
     parquet = bool(output) and output.lower().endswith(".parquet")
     if parquet and not sw.have_pyarrow():
         raise click.UsageError("writing Parquet needs pyarrow: pip install 'bgc[parquet]' "
@@ -727,7 +866,7 @@ def sweep(model, scene, algebra, grids, sample, varies, seed, metrics, backend, 
     elif output:
         _write_atomic(output, table.to_csv())
     else:
-        click.echo(table.to_csv(), nl=False)
+        _echo(table.to_csv())
     click.echo(f"bgc sweep: {len(table)} runs, {table.failures()} failed, {wall:.2f} s "
                f"({len(table) / wall:.0f} runs/s)", err=True)
 
@@ -761,6 +900,7 @@ def draw(model, scene, outputs, effects, output):
     for power, the stroke where the effort is received, multibonds as double lines, the
     constraint correctors as block diagrams, what the scene leaves out in grey."""
     from . import draw as drawing
+    _not_an_input(model, None if output == "-" else output)
     fmt = "dot" if output in (None, "-") else drawing.format_of(output)
     if fmt != "dot" and not drawing.have_graphviz():
         click.echo(f"error: {drawing.GRAPHVIZ_HELP}", err=True)
@@ -769,18 +909,16 @@ def draw(model, scene, outputs, effects, output):
     text = drawing.draw_dot(compiled)
     if fmt == "dot":
         if output in (None, "-"):
-            click.echo(text, nl=False)
+            _echo(text)
         else:
             _write_atomic(output, text)
         return
     try:
         data = drawing.render(text, fmt)
-        with outfile.Partial(output) as part:
-            part.file.write(data)
-            part.commit()
-    except (drawing.GraphvizMissing, drawing.GraphvizFailed, outfile.OutputError) as error:
+    except (drawing.GraphvizMissing, drawing.GraphvizFailed) as error:
         click.echo(f"error: {error}", err=True)
         sys.exit(1)
+    _write_atomic(output, data)
 
 
 if __name__ == "__main__":  # pragma: no cover

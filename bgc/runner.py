@@ -17,12 +17,13 @@ only to prepare a program from a compiled model.
 """
 from __future__ import annotations
 
+import signal
 import subprocess
 import sys
 from dataclasses import dataclass
 from pathlib import Path
 
-from . import backends
+from . import backends, outfile
 from .run import RunSettings, parameter_overrides, run_span_problem
 
 NO_C_COMPILER = "warning: no C compiler found (cc or $CC); using the Python backend"
@@ -82,17 +83,24 @@ def settings_for(defaults: RunSettings, names, params: dict | None = None,
     return settings
 
 
+WRITE_FAILED = "error: cannot write the output: "  # how a generated program says so (then why)
+
+
 @dataclass(frozen=True)
 class Result:
     """How a run ended.  status is bgc's exit status for it: 0; 2 for settings the program
     refused (a usage error); 128 + the signal that interrupted it; -1 over the time budget;
-    else 1 (a failed run, a violated constraint)."""
+    else 1 (a failed run, a violated constraint, a program killed by a signal, a CSV that
+    could not be written)."""
 
     status: int
     stderr: str = ""  # the program's messages (progress lines apart)
     csv: str | None = None  # the rows as the program wrote them, when no sink took them
     t: object = None  # in this process: the times and the rows (the module's arrays)
     values: object = None
+    killed: int = 0  # the signal that killed the program (not one bgc passed on), else 0
+    write_error: str | None = None  # why the CSV could not be written ("No space left ...")
+    last_line: str = ""  # the last whole line a sink without a descriptor was given
 
     @property
     def stats(self) -> dict:
@@ -105,11 +113,37 @@ class Result:
     @property
     def message(self) -> str:
         """A failed run's last error, without its `error:`."""
+        if self.killed:
+            return f"the generated program was killed by {signal_name(self.killed)}"
         lines = self.stderr.strip().splitlines()
         errors = [ln for ln in lines if ln.startswith("error:")]
         if errors:
             return errors[-1][len("error:"):].strip()
         return lines[-1] if lines else "failed"
+
+    @property
+    def messages(self) -> str:
+        """The program's stderr as the command line shows it: the report of a write that
+        failed taken out (the command line says it with the file's name)."""
+        if self.write_error is None:
+            return self.stderr
+        return "".join(line for line in self.stderr.splitlines(keepends=True)
+                       if not line.startswith(WRITE_FAILED))
+
+
+def signal_name(number: int) -> str:
+    """SIGKILL for 9 (the number itself for a signal Python does not name)."""
+    try:
+        return signal.Signals(number).name
+    except ValueError:
+        return f"signal {number}"
+
+
+def _write_error(stderr: str) -> str | None:
+    for line in stderr.splitlines():
+        if line.startswith(WRITE_FAILED):
+            return line[len(WRITE_FAILED):].strip()
+    return None
 
 
 def _status(code: int, signal: int = 0) -> int:
@@ -138,9 +172,16 @@ def run(program, settings: RunSettings | None = None, sink=None, progress=None,
         + ["--progress"] * (progress is not None)
     if sink is not None:
         done = backends.run_streaming(argv, sink, progress)
-        return Result(_status(done.code, done.signal), done.stderr)
+        failed = done.sink_error
+        write_error = outfile.reason(failed) if failed is not None else _write_error(done.stderr)
+        killed = -done.code if done.code < 0 and not done.signal and failed is None else 0
+        return Result(_status(done.code, done.signal), done.stderr, killed=killed,
+                      write_error=write_error, last_line=done.last_line)
     try:
-        done = subprocess.run(argv, capture_output=True, text=True, timeout=timeout)
+        done = subprocess.run(argv, capture_output=True, text=True, timeout=timeout,
+                              env=backends.child_env())
     except subprocess.TimeoutExpired:
         return Result(-1, f"stopped after {timeout:g} s (the time budget per run)", "")
-    return Result(_status(done.returncode), done.stderr, done.stdout)
+    return Result(_status(done.returncode), done.stderr, done.stdout,
+                  killed=max(0, -done.returncode), write_error=_write_error(done.stderr))
+

@@ -28,11 +28,13 @@
 
 #include <time.h> /* clock(): the processor time bgc_simulate reports in its stats */
 
-/* Output times: t0 + k*dt for k < n, and t_end for k = n (see the top of the file). */
+/* Output times: t0 + k*dt for k < n, and t_end for k = n (see the top of the file); n is at
+   least 1 when t_end > t0, so that t0 and t_end are rows whatever dt (a dt beyond the span
+   included); 0 when they are the same time (one row). */
 static long bgc_output_count(const bgc_settings *s)
 {
     double n = ceil((s->t_end - s->t0) / s->dt - 1e-6);
-    return n > 0.0 ? (long)n : 0;
+    return n > 1.0 ? (long)n : s->t_end > s->t0 ? 1 : 0;
 }
 
 static double bgc_output_time(const bgc_settings *s, long k, long n)

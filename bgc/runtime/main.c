@@ -1,4 +1,9 @@
 #ifndef BGC_NO_MAIN
+#include <errno.h>
+#if defined(__linux__)
+#include <sys/prctl.h> /* PR_SET_PDEATHSIG: bgc_die_with_parent */
+#include <unistd.h>    /* getppid */
+#endif
 /* ================================================================ CSV === */
 
 /* Numbers are written exactly as printf("%.17g") writes them (NaN as "nan"), in integer
@@ -295,7 +300,7 @@ static int bgc_fmt17(char *buf, double v)
 typedef struct bgc_writer {
     FILE *file;
     size_t len;
-    int failed;
+    int failed; /* a write failed: the errno it gave (-1 if none was set) */
     char buf[1 << 16];
 } bgc_writer;
 
@@ -303,8 +308,9 @@ static bgc_writer bgc_out;
 
 static void bgc_flush(bgc_writer *w)
 {
-    if (w->len && fwrite(w->buf, 1, w->len, w->file) != w->len)
-        w->failed = 1;
+    errno = 0;
+    if (w->len && fwrite(w->buf, 1, w->len, w->file) != w->len && !w->failed)
+        w->failed = errno ? errno : -1;
     w->len = 0;
 }
 
@@ -557,6 +563,29 @@ static void bgc_on_signal(int sig)
     bgc_request_stop(sig);
 }
 
+/* Started by bgc (BGC_PARENT_PID in the environment: bgc's process id), the program dies
+   with it instead of running on as an orphan when bgc is killed: on Linux, the kernel sends
+   it SIGKILL when its parent ends (and it ends at once if the parent did before).  Run by
+   anything else, or elsewhere, this does nothing. */
+static void bgc_die_with_parent(void)
+{
+#if defined(__linux__) && defined(PR_SET_PDEATHSIG) && defined(SIGKILL)
+    const char *parent = getenv("BGC_PARENT_PID");
+    if (parent == NULL || *parent == '\0')
+        return;
+    prctl(PR_SET_PDEATHSIG, SIGKILL);
+    if ((long)getppid() != strtol(parent, NULL, 10))
+        raise(SIGKILL);
+#endif
+}
+
+/* The write error's message: "cannot write the output: REASON" (bgc simulate reads it). */
+static void bgc_write_failed(int err)
+{
+    fprintf(stderr, "error: cannot write the output: %s\n",
+            err > 0 ? strerror(err) : "write error");
+}
+
 static int bgc_batch_main(int argc, char **argv); /* --batch: below (batch.c) */
 
 int main(int argc, char **argv)
@@ -569,6 +598,7 @@ int main(int argc, char **argv)
     char msg[1024];
     int project = 0, stats = 0, rc, i;
 
+    bgc_die_with_parent();
     rc = bgc_batch_main(argc, argv);
     if (rc >= 0)
         return rc;
@@ -608,8 +638,11 @@ int main(int argc, char **argv)
     bgc_progress.t_end = s.t_end;
     rc = bgc_simulate(&s, &p, x0, bgc_csv_row, &bgc_out, &st, msg, sizeof msg);
     bgc_flush(&bgc_out);
-    if (fflush(stdout) != 0 || bgc_out.failed) {
-        fprintf(stderr, "error: cannot write the output\n");
+    errno = 0;
+    if (fflush(stdout) != 0 && !bgc_out.failed)
+        bgc_out.failed = errno ? errno : -1;
+    if (bgc_out.failed) {
+        bgc_write_failed(bgc_out.failed);
         return BGC_ERR_RUNTIME;
     }
     if (stats)

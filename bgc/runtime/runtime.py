@@ -63,6 +63,7 @@
 # test that binds a model of its own by assigning the names above calls it too.
 
 import math
+import os
 import signal
 import sys
 import threading
@@ -950,6 +951,36 @@ def _stop_on_signals():
     return replaced
 
 
+def _die_with_parent():
+    """Started by bgc (BGC_PARENT_PID in the environment: bgc's process id), the program dies
+    with it instead of running on as an orphan when bgc is killed: a thread watches the parent
+    and ends the process when it has gone (as bgc_die_with_parent in the C program).  Run by
+    anything else, this does nothing."""
+    try:
+        parent = int(os.environ.get("BGC_PARENT_PID", ""))
+    except ValueError:
+        return
+
+    def watch():
+        while os.getppid() == parent:
+            time.sleep(0.2)
+        os.kill(os.getpid(), getattr(signal, "SIGKILL", signal.SIGTERM))
+
+    threading.Thread(target=watch, daemon=True).start()
+
+
+def _write_failed(error):
+    """The CSV could not be written: the message bgc simulate reads ("cannot write the output:
+    REASON"); what stdout still holds goes nowhere, so that leaving does not fail again."""
+    sys.stderr.write("error: cannot write the output: %s\n" % (error.strerror or error))
+    try:
+        null = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(null, sys.stdout.fileno())
+        os.close(null)
+    except (OSError, ValueError, AttributeError):
+        pass
+
+
 def _progress_reporter(s):
     """--progress: a line "bgc-progress T T0 T_END" on stderr at the first row, then as the
     rows pass at most ten a second (bgc simulate draws them as a bar)."""
@@ -967,6 +998,7 @@ def _progress_reporter(s):
 def main(argv=None):
     """The command line; returns the exit status."""
     argv = sys.argv[1:] if argv is None else list(argv)
+    _die_with_parent()
     if any(a == "--batch" or a.startswith("--batch=") for a in argv):
         return _batch_main(argv)  # (batch mode, at the end)
     try:
@@ -993,23 +1025,33 @@ def main(argv=None):
         sys.stderr.write("error: %s\n" % error)
         return 3
     stats = _new_stats()
-    failure = None
+    failure = lost = None
     out = sys.stdout
-    out.write(",".join(["t"] + OUTPUTS) + "\n")
     handlers = _stop_on_signals()
     progress = _progress_reporter(s) if "--progress" in flags else None
     try:
+        out.write(",".join(["t"] + OUTPUTS) + "\n")
         for t, y in _integrate(s, p, x0, stats):
             out.write(_row_text(t, y))
             if progress is not None:
                 progress(t)
+        out.flush()
     except _Failure as error:
         failure = error
+    except OSError as error:  # the CSV cannot be written (a full disk, a closed pipe)
+        lost = error
     finally:
         for sig, handler in handlers:
             signal.signal(sig, handler)
         request_stop(0)
-    out.flush()
+    if failure is not None:
+        try:
+            out.flush()
+        except OSError as error:
+            lost = error
+    if lost is not None:
+        _write_failed(lost)
+        return 3
     if "--stats" in flags:
         sys.stderr.write(_stats_line(stats) + "\n")
     if failure is not None:
@@ -1026,8 +1068,10 @@ def main(argv=None):
 # numpy vectors (see _LIST_STATES); the arithmetic is the C runtime's, in the same order.
 
 def _output_count(s):
+    """As bgc_output_count: at least 1 when t_end > t0, so that t0 and t_end are rows whatever
+    dt; 0 when they are the same time (one row)."""
     n = math.ceil((s.t_end - s.t0) / s.dt - 1e-6)
-    return n if n > 0 else 0
+    return n if n > 1 else 1 if s.t_end > s.t0 else 0
 
 
 def _output_time(s, k, n):

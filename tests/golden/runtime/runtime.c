@@ -944,11 +944,13 @@ int bgc_check_settings(const bgc_settings *s, char *msg, size_t msg_size)
 
 #include <time.h> /* clock(): the processor time bgc_simulate reports in its stats */
 
-/* Output times: t0 + k*dt for k < n, and t_end for k = n (see the top of the file). */
+/* Output times: t0 + k*dt for k < n, and t_end for k = n (see the top of the file); n is at
+   least 1 when t_end > t0, so that t0 and t_end are rows whatever dt (a dt beyond the span
+   included); 0 when they are the same time (one row). */
 static long bgc_output_count(const bgc_settings *s)
 {
     double n = ceil((s->t_end - s->t0) / s->dt - 1e-6);
-    return n > 0.0 ? (long)n : 0;
+    return n > 1.0 ? (long)n : s->t_end > s->t0 ? 1 : 0;
 }
 
 static double bgc_output_time(const bgc_settings *s, long k, long n)
@@ -3023,6 +3025,11 @@ static const bgc_family bgc_family_radau = {
     bgc_radau_next_h, bgc_radau_finish, 1};
 
 #ifndef BGC_NO_MAIN
+#include <errno.h>
+#if defined(__linux__)
+#include <sys/prctl.h> /* PR_SET_PDEATHSIG: bgc_die_with_parent */
+#include <unistd.h>    /* getppid */
+#endif
 /* ================================================================ CSV === */
 
 /* Numbers are written exactly as printf("%.17g") writes them (NaN as "nan"), in integer
@@ -3319,7 +3326,7 @@ static int bgc_fmt17(char *buf, double v)
 typedef struct bgc_writer {
     FILE *file;
     size_t len;
-    int failed;
+    int failed; /* a write failed: the errno it gave (-1 if none was set) */
     char buf[1 << 16];
 } bgc_writer;
 
@@ -3327,8 +3334,9 @@ static bgc_writer bgc_out;
 
 static void bgc_flush(bgc_writer *w)
 {
-    if (w->len && fwrite(w->buf, 1, w->len, w->file) != w->len)
-        w->failed = 1;
+    errno = 0;
+    if (w->len && fwrite(w->buf, 1, w->len, w->file) != w->len && !w->failed)
+        w->failed = errno ? errno : -1;
     w->len = 0;
 }
 
@@ -3581,6 +3589,29 @@ static void bgc_on_signal(int sig)
     bgc_request_stop(sig);
 }
 
+/* Started by bgc (BGC_PARENT_PID in the environment: bgc's process id), the program dies
+   with it instead of running on as an orphan when bgc is killed: on Linux, the kernel sends
+   it SIGKILL when its parent ends (and it ends at once if the parent did before).  Run by
+   anything else, or elsewhere, this does nothing. */
+static void bgc_die_with_parent(void)
+{
+#if defined(__linux__) && defined(PR_SET_PDEATHSIG) && defined(SIGKILL)
+    const char *parent = getenv("BGC_PARENT_PID");
+    if (parent == NULL || *parent == '\0')
+        return;
+    prctl(PR_SET_PDEATHSIG, SIGKILL);
+    if ((long)getppid() != strtol(parent, NULL, 10))
+        raise(SIGKILL);
+#endif
+}
+
+/* The write error's message: "cannot write the output: REASON" (bgc simulate reads it). */
+static void bgc_write_failed(int err)
+{
+    fprintf(stderr, "error: cannot write the output: %s\n",
+            err > 0 ? strerror(err) : "write error");
+}
+
 static int bgc_batch_main(int argc, char **argv); /* --batch: below (batch.c) */
 
 int main(int argc, char **argv)
@@ -3593,6 +3624,7 @@ int main(int argc, char **argv)
     char msg[1024];
     int project = 0, stats = 0, rc, i;
 
+    bgc_die_with_parent();
     rc = bgc_batch_main(argc, argv);
     if (rc >= 0)
         return rc;
@@ -3632,8 +3664,11 @@ int main(int argc, char **argv)
     bgc_progress.t_end = s.t_end;
     rc = bgc_simulate(&s, &p, x0, bgc_csv_row, &bgc_out, &st, msg, sizeof msg);
     bgc_flush(&bgc_out);
-    if (fflush(stdout) != 0 || bgc_out.failed) {
-        fprintf(stderr, "error: cannot write the output\n");
+    errno = 0;
+    if (fflush(stdout) != 0 && !bgc_out.failed)
+        bgc_out.failed = errno ? errno : -1;
+    if (bgc_out.failed) {
+        bgc_write_failed(bgc_out.failed);
         return BGC_ERR_RUNTIME;
     }
     if (stats)
