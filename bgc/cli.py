@@ -346,7 +346,13 @@ def simulate(model, scene, outputs, effects, algebra, backend, solver, rtol, ato
         # (not while the CSV itself goes to the terminal: the bar would cut its lines)
         progress = _RunProgress() if sys.stderr.isatty() and (
             output or not sys.stdout.isatty()) else None
-        status, rows = _run(program, settings, stats, output, copy, progress)
+        try:
+            status, rows = _run(program, settings, stats, output, copy, progress)
+        except backends.CannotStart:  # (a warm program damaged behind its checksum: evicted)
+            if compiled is not None:
+                raise
+            record, program, compiled = _compile_for_run(request)
+            status, rows = _run(program, settings, stats, output, copy, progress)
         if progress is not None:
             progress.close()
         if plot_file:
