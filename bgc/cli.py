@@ -348,9 +348,7 @@ def simulate(model, scene, outputs, effects, algebra, backend, solver, rtol, ato
             output or not sys.stdout.isatty()) else None
         try:
             status, rows = _run(program, settings, stats, output, copy, progress)
-        except backends.CannotStart:  # (a warm program damaged behind its checksum: evicted)
-            if compiled is not None:
-                raise
+        except backends.CannotStart:  # (damaged behind its checksum: evicted, built again)
             record, program, compiled = _compile_for_run(request)
             status, rows = _run(program, settings, stats, output, copy, progress)
         if progress is not None:
