@@ -13,7 +13,13 @@ process's start and exit included) and the median CPU time of the child (user + 
   program cached      the same, with the warm records deleted before each run: the pipeline
                       runs (SymPy imported, the equations derived), the C program comes from
                       the cache (what every run cost before warm runs)
-  cold                an empty cache before each run: the pipeline and the C compiler
+  cold, runtime kept  the cache emptied before each run but for the runtime object (bgc
+                      builds the model-independent runtime once per machine and links each
+                      model's part with it): the pipeline and the model part's compile
+  cold                an empty cache before each run: the pipeline and the C compiler, the
+                      runtime built too
+  cold, standalone    the same, the program built as one file, runtime included (as every
+                      cold run was before the runtime was built once): the baseline
 
 The target (issue 12): a warm simulate of the pendulum under 0.15 s wall, `bgc --help` under
 0.2 s.  `bgc` is the console script on PATH if there is one, else `python -m bgc`.
@@ -41,6 +47,12 @@ def _bgc() -> list[str]:
     return [script] if script else [sys.executable, "-m", "bgc"]
 
 
+def _standalone() -> list[str]:
+    """bgc with the runtime never linked: every program built as the standalone file."""
+    return [sys.executable, "-c", "import sys, bgc.emit; bgc.emit.linkable = lambda p: False; "
+            "from bgc.cli import main; sys.argv[0] = 'bgc'; main()"]
+
+
 def _timed(argv, env, before=None, runs=20):
     walls, cpus = [], []
     for _ in range(runs):
@@ -61,7 +73,7 @@ def _timed(argv, env, before=None, runs=20):
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--runs", type=int, default=20)
-    ap.add_argument("--cold-runs", type=int, default=3)
+    ap.add_argument("--cold-runs", type=int, default=5)
     ap.add_argument("--model", default=str(ROOT / "models" / "pendulum.bg"))
     ap.add_argument("--scene", default=None)
     args = ap.parse_args(argv)
@@ -73,7 +85,8 @@ def main(argv=None):
         simulate = [*_bgc(), "simulate", args.model, "-o", out] + \
             (["--scene", args.scene] if args.scene else [])
         subprocess.run(simulate, env=env, check=True, capture_output=True)
-        (program,) = [p for p in cache.glob("bgc-*") if p.suffix not in (".sha256", ".py")]
+        (program,) = [p for p in cache.glob("bgc-*")
+                      if p.suffix not in (".sha256", ".py", ".o")]
         scene_args = []  # the program runs its own scene: the one it was compiled for
 
         def forget_records():
@@ -83,21 +96,30 @@ def main(argv=None):
         def empty_cache():
             shutil.rmtree(cache, ignore_errors=True)
 
+        def keep_runtime():
+            for path in cache.iterdir():
+                if not path.name.startswith("bgc-runtime-"):
+                    path.unlink()
+
+        standalone = [*_standalone(), *simulate[len(_bgc()):]]
+
         rows = [
             ("program alone", _timed([str(program), *scene_args], env, runs=args.runs)),
             ("bgc --help", _timed([*_bgc(), "--help"], env, runs=args.runs)),
             ("warm simulate", _timed(simulate, env, runs=args.runs)),
             ("program cached", _timed(simulate, env, forget_records, runs=args.cold_runs)),
+            ("cold, runtime kept", _timed(simulate, env, keep_runtime, runs=args.cold_runs)),
             ("cold", _timed(simulate, env, empty_cache, runs=args.cold_runs)),
+            ("cold, standalone", _timed(standalone, env, empty_cache, runs=args.cold_runs)),
         ]
     print(f"machine:  {machine.processor()}, {os.cpu_count()} cores, load average "
           f"{machine.load_average()}")
     print(f"bgc:      {' '.join(_bgc())}")
     print(f"model:    {args.model}" + (f" scene {args.scene}" if args.scene else "") +
-          f"; {args.runs} runs each ({args.cold_runs} for the last two rows)")
-    print(f"{'':18}{'best wall [s]':>15}{'median wall [s]':>17}{'median cpu [s]':>16}")
+          f"; {args.runs} runs each ({args.cold_runs} for the last four rows)")
+    print(f"{'':20}{'best wall [s]':>15}{'median wall [s]':>17}{'median cpu [s]':>16}")
     for name, (best, median, cpu) in rows:
-        print(f"{name:18}{best:15.3f}{median:17.3f}{cpu:16.3f}")
+        print(f"{name:20}{best:15.3f}{median:17.3f}{cpu:16.3f}")
     warm = dict(rows)["warm simulate"]
     helps = dict(rows)["bgc --help"]
     print(f"warm simulate: best {warm[0]:.3f} s, median {warm[1]:.3f} s (target < 0.15 s): "
