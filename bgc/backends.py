@@ -36,14 +36,24 @@ class BackendError(RuntimeError):
 def cache_dir() -> Path:
     """$BGC_CACHE_DIR, else ~/.cache/bgc (created on demand); a private temporary directory,
     with a warning, when that one cannot be written."""
-    path = Path(os.environ.get("BGC_CACHE_DIR") or Path.home() / ".cache" / "bgc")
+    return own_cache_dir() or _private_cache(str(_cache_path()))
+
+
+def _cache_path() -> Path:
+    return Path(os.environ.get("BGC_CACHE_DIR") or Path.home() / ".cache" / "bgc")
+
+
+def own_cache_dir() -> Path | None:
+    """The cache directory (created on demand) if it can be written, else None (and nothing
+    said): for what is only worth keeping there (bgc.parser's tables)."""
+    path = _cache_path()
     try:
         path.mkdir(parents=True, exist_ok=True)
         if os.access(path, os.W_OK | os.X_OK):
             return path
     except OSError:
         pass
-    return _private_cache(str(path))
+    return None
 
 
 @functools.lru_cache(maxsize=None)
@@ -183,6 +193,19 @@ def _cached(name: str, executable: bool, build) -> Path:
         raise BackendError(f"cannot write into the compile cache {cache}: "
                            f"{error.strerror or error}") from None
     return path
+
+
+def write_cached(path: Path, write) -> None:
+    """A file of the cache that is not a program (the parser's tables, bgc.parser): write(f)
+    into a temporary file beside it, then renamed into place whole."""
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=".build-", suffix=".tmp")
+    try:
+        with os.fdopen(fd, "wb") as f:
+            write(f)
+        os.replace(tmp, path)
+    except BaseException:
+        os.unlink(tmp)
+        raise
 
 
 def _digest_path(path: Path) -> Path:
