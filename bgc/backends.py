@@ -183,7 +183,7 @@ def _cached(name: str, executable: bool, build) -> Path:
             digest = Path(tmp) / "sha256"
             digest.write_text(_sha256(built) + "\n")
             if executable:
-                os.chmod(built, os.stat(built).st_mode | 0o111)
+                os.chmod(built, os.stat(built).st_mode | stat.S_IXUSR)
             for target in (path, _digest_path(path)):
                 if target.is_dir() and not target.is_symlink():
                     shutil.rmtree(target, ignore_errors=True)

@@ -192,6 +192,19 @@ def test_a_cache_where_programs_cannot_start_is_told_in_one_line(cache, tmp_path
         "BGC_CACHE_DIR" in done.stderr
 
 
+def test_a_full_disk_while_building_is_told_in_one_line(cache, tmp_path, monkeypatch):
+    import errno
+
+    def full(*args, **kwargs):
+        raise OSError(errno.ENOSPC, "No space left on device")
+    monkeypatch.setattr(backends, "_run_compiler", full)
+    done = _simulate(tmp_path, None, "-o", "out.csv")
+    assert done.returncode == 1 and not (tmp_path / "out.csv").exists()
+    assert done.stderr == f"error: cannot write into the compile cache {cache}: No space left " \
+                          "on device\n"
+    assert [p.name for p in cache.iterdir() if not p.name.startswith("lark-")] == []
+
+
 # ---------------------------------------------------------------- runs at once
 
 
