@@ -212,16 +212,17 @@ def _digest_path(path: Path) -> Path:
     return path.with_name(path.name + ".sha256")
 
 
-def usable(path: Path, executable: bool = True) -> bool:
+def usable(path: Path, executable: bool = True, sha256: str | None = None) -> bool:
     """Whether a file of the cache is one bgc built and can use: a regular file (not a link
     nor a directory), executable if it is a program, whose SHA-256 is the one kept beside it
-    (NAME.sha256).  Anything else is built again."""
+    (NAME.sha256) and, if given, sha256.  Anything else is built again."""
     try:
         if not stat.S_ISREG(os.lstat(path).st_mode):
             return False
         if executable and not os.access(path, os.X_OK):
             return False
-        return _digest_path(path).read_text(encoding="ascii").strip() == _sha256(path)
+        kept = _digest_path(path).read_text(encoding="ascii").strip()
+        return (sha256 is None or kept == sha256) and kept == _sha256(path)
     except (OSError, ValueError):
         return False
 
