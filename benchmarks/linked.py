@@ -28,7 +28,7 @@ import machine  # noqa: E402
 CASES = [  # model, arguments
     ("van_der_pol", ("--solver", "radau", "--t-end", "3000", "--dt", "10")),
     ("van_der_pol", ("--solver", "rodas5p", "--t-end", "3000", "--dt", "10")),
-    ("van_der_pol", ("--solver", "dopri5", "--t-end", "300", "--dt", "10")),
+    ("van_der_pol", ("--solver", "dopri5", "-p", "mu=1", "--t-end", "3000", "--dt", "10")),
     ("pendulum", ("--solver", "dopri5", "--t-end", "2000", "--dt", "10", "--rtol", "1e-10")),
     ("pendulum_chain", ("--solver", "radau5", "--t-end", "50", "--dt", "1")),
     ("pendulum_chain", ("--solver", "dopri5", "--t-end", "200", "--dt", "1")),
