@@ -8,8 +8,6 @@ import io
 import time
 from dataclasses import dataclass, replace
 
-import numpy as np
-
 from .causality import CausalGraph, assign_causality
 from .diagnostics import ModelError, Note, format_diagnostic
 from .emit import emit_c, emit_python
@@ -291,6 +289,7 @@ def simulate(model, scene: str | None = None, backend: str = "c", algebra: str =
 def arrays(result: Result):
     """A run's rows as numpy arrays (t, Y); SimulationFailed if it failed."""
     if result.t is not None:
+        import numpy as np  # (not at import: the command line's compile does not need it)
         return np.asarray(result.t), np.asarray(result.values)
     if result.status != 0:
         csv = result.csv or ""
@@ -312,6 +311,7 @@ class SimulationFailed(RuntimeError):
 def _parse_csv(text: str):
     lines = text.splitlines()
     names = lines[0].split(",")[1:]
+    import numpy as np
     data = np.loadtxt(io.StringIO("\n".join(lines[1:])), delimiter=",", ndmin=2)
     return data[:, 0], data[:, 1:], names
 

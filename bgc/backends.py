@@ -15,6 +15,7 @@ import os
 import shlex
 import shutil
 import signal
+import stat
 import subprocess
 import sys
 import tempfile
@@ -35,14 +36,24 @@ class BackendError(RuntimeError):
 def cache_dir() -> Path:
     """$BGC_CACHE_DIR, else ~/.cache/bgc (created on demand); a private temporary directory,
     with a warning, when that one cannot be written."""
-    path = Path(os.environ.get("BGC_CACHE_DIR") or Path.home() / ".cache" / "bgc")
+    return own_cache_dir() or _private_cache(str(_cache_path()))
+
+
+def _cache_path() -> Path:
+    return Path(os.environ.get("BGC_CACHE_DIR") or Path.home() / ".cache" / "bgc")
+
+
+def own_cache_dir() -> Path | None:
+    """The cache directory (created on demand) if it can be written, else None (and nothing
+    said): for what is only worth keeping there (bgc.parser's tables)."""
+    path = _cache_path()
     try:
         path.mkdir(parents=True, exist_ok=True)
         if os.access(path, os.W_OK | os.X_OK):
             return path
     except OSError:
         pass
-    return _private_cache(str(path))
+    return None
 
 
 @functools.lru_cache(maxsize=None)
@@ -92,28 +103,141 @@ def c_flags() -> tuple[str, ...]:
 
 def compile_c(source: str, cc: str | None = None, flags: tuple[str, ...] | None = None) -> Path:
     """The executable built from source, from the cache when the same source was built before
-    with the same compiler (compiler_identity) and flags, and the cached file is still the one
-    built (its SHA-256, kept beside it, checked before each use).  Written atomically
-    (temporary file, then os.replace), so concurrent builds are safe."""
+    with the same compiler (compiler_identity) and flags, and the cached file is still one it
+    can run (usable).  Written atomically (temporary file, then os.replace), so concurrent
+    builds are safe."""
+    command, flags, identity = _toolchain(cc, flags)
+    key = _key([source, command, list(flags), list(C_LIBS), identity])
+    return _cached(f"bgc-{key}{_EXE_SUFFIX}", True, lambda tmp: _build(
+        tmp, command, flags, "model.c", source, [f"model{_EXE_SUFFIX}"], C_LIBS))
+
+
+def compile_c_linked(model: str, runtime: str, cc: str | None = None,
+                     flags: tuple[str, ...] | None = None) -> Path:
+    """The executable of a model part (bgc.emit.emit_c(..., linked=True)) linked with the
+    runtime unit (bgc.emit.c_runtime_unit).  The runtime is compiled once per machine: into
+    the cache as an object file keyed by its source, the compiler (compiler_identity) and the
+    flags; each model then costs only its own part.  Both are cached and checked as compile_c's
+    programs are; an object that does not link is built again, once."""
+    command, flags, identity = _toolchain(cc, flags)
+    runtime_key = _key(["runtime", runtime, command, list(flags), identity])
+    key = _key(["linked", model, runtime_key, command, list(flags), list(C_LIBS), identity])
+    runtime_name = f"bgc-runtime-{runtime_key}.o"
+
+    def runtime_object() -> Path:
+        return _cached(runtime_name, False, lambda tmp: _build(
+            tmp, command, flags, "runtime.c", runtime, ["-c", "runtime.o"]))
+
+    def link(tmp: Path) -> Path:
+        objects = [str(runtime_object())]
+        try:
+            return _build(tmp, command, flags, "model.c", model,
+                          [f"model{_EXE_SUFFIX}", *objects], C_LIBS)
+        except BackendError:
+            evict(Path(objects[0]))  # (a runtime object damaged behind its checksum)
+            return _build(tmp, command, flags, "model.c", model,
+                          [f"model{_EXE_SUFFIX}", str(runtime_object())], C_LIBS)
+
+    return _cached(f"bgc-{key}{_EXE_SUFFIX}", True, link)
+
+
+def _toolchain(cc, flags) -> tuple[list[str], tuple[str, ...], str]:
     command = c_compiler(cc)
     if not command:
         raise BackendError("no C compiler given")
     flags = c_flags() if flags is None else tuple(flags)
-    key = hashlib.sha256(json.dumps([source, command, list(flags), list(C_LIBS),
-                                     compiler_identity(tuple(command))]).encode())
+    return command, flags, compiler_identity(tuple(command))
+
+
+def _key(parts: list) -> str:
+    return hashlib.sha256(json.dumps(parts).encode()).hexdigest()[:40]
+
+
+def _build(tmp: Path, command, flags, name: str, source: str, out_args: list[str],
+           libs=()) -> Path:
+    """Compiles source (written to tmp/name) in directory tmp: `command flags name -o ARGS
+    libs`, ARGS[0] the output (or `-c OUT`); the output's path.  File names are relative, so
+    two builds of the same source give the same bytes."""
+    (tmp / name).write_text(source, encoding="utf-8")
+    if out_args[0] == "-c":
+        argv, out = [*command, *flags, "-c", name, "-o", out_args[1]], out_args[1]
+    else:
+        argv, out = [*command, *flags, name, "-o", *out_args, *libs], out_args[0]
+    _run_compiler(argv, tmp, cwd=tmp)
+    return tmp / out
+
+
+def _cached(name: str, executable: bool, build) -> Path:
+    """cache_dir()/name if it is usable; else build(a temporary directory in the cache) and
+    the file it returns put in place with its SHA-256 beside it (both renamed into place, so
+    no half-written file is ever seen under its name).  Whatever stands in the way (a
+    directory, a file that cannot run) is replaced; a cache that cannot be written is a
+    BackendError."""
     cache = cache_dir()
-    exe = cache / f"bgc-{key.hexdigest()[:40]}{_EXE_SUFFIX}"
-    digest = exe.with_name(exe.name + ".sha256")
-    if exe.is_file() and digest.is_file() and digest.read_text().strip() == _sha256(exe):
-        return exe
-    with tempfile.TemporaryDirectory(dir=cache, prefix="build-") as tmp:
-        src, out = Path(tmp) / "model.c", Path(tmp) / f"model{_EXE_SUFFIX}"
-        src.write_text(source, encoding="utf-8")
-        _run_compiler([*command, *flags, str(src), "-o", str(out), *C_LIBS], Path(tmp))
-        (Path(tmp) / "sha256").write_text(_sha256(out) + "\n")
-        os.replace(out, exe)
-        os.replace(Path(tmp) / "sha256", digest)
-    return exe
+    path = cache / name
+    if usable(path, executable):
+        return path
+    try:
+        with tempfile.TemporaryDirectory(dir=cache, prefix="build-") as tmp:
+            built = build(Path(tmp))
+            digest = Path(tmp) / "sha256"
+            digest.write_text(_sha256(built) + "\n")
+            if executable:
+                os.chmod(built, os.stat(built).st_mode | stat.S_IXUSR)
+            for target in (path, _digest_path(path)):
+                if target.is_dir() and not target.is_symlink():
+                    shutil.rmtree(target, ignore_errors=True)
+            os.replace(digest, _digest_path(path))
+            os.replace(built, path)
+    except OSError as error:
+        raise BackendError(f"cannot write into the compile cache {cache}: "
+                           f"{error.strerror or error}") from None
+    return path
+
+
+def write_cached(path: Path, write) -> None:
+    """A file of the cache that is not a program (the parser's tables, bgc.parser): write(f)
+    into a temporary file beside it, then renamed into place whole."""
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=".build-", suffix=".tmp")
+    try:
+        with os.fdopen(fd, "wb") as f:
+            write(f)
+        os.replace(tmp, path)
+    except BaseException:
+        os.unlink(tmp)
+        raise
+
+
+def _digest_path(path: Path) -> Path:
+    return path.with_name(path.name + ".sha256")
+
+
+def usable(path: Path, executable: bool = True, sha256: str | None = None) -> bool:
+    """Whether a file of the cache is one bgc built and can use: a regular file (not a link
+    nor a directory), executable if it is a program, whose SHA-256 is the one kept beside it
+    (NAME.sha256) and, if given, sha256.  Anything else is built again."""
+    try:
+        if not stat.S_ISREG(os.lstat(path).st_mode):
+            return False
+        if executable and not os.access(path, os.X_OK):
+            return False
+        kept = _digest_path(path).read_text(encoding="ascii").strip()
+        return (sha256 is None or kept == sha256) and kept == _sha256(path)
+    except (OSError, ValueError):
+        return False
+
+
+def evict(path: Path) -> None:
+    """Removes a file of the cache (and its digest) that turned out unusable: a program that
+    could not be started, an object that did not link; the next use builds it again."""
+    for target in (path, _digest_path(path)):
+        try:
+            if target.is_dir() and not target.is_symlink():
+                shutil.rmtree(target, ignore_errors=True)
+            else:
+                target.unlink()
+        except OSError:
+            pass
 
 
 def _sha256(path: Path) -> str:
@@ -146,6 +270,49 @@ def _compile(argv: list[str], cwd: Path | None = None) -> subprocess.CompletedPr
     except OSError as error:
         raise BackendError(f"cannot run the C compiler {argv[0]!r}: {error.strerror}.  Set CC "
                            "to a working C99 compiler, or use --backend python.") from None
+
+
+class CannotStart(BackendError):
+    """A program that could not be started (its file is not a program this machine runs, or
+    not allowed to run); one in the cache is removed from it, so the next use builds it
+    again."""
+
+    def __init__(self, argv: list[str], error: OSError):
+        self.path = Path(argv[0])
+        where = self.path.parent
+        evicted = where.is_dir() and where.resolve() == cache_dir().resolve()
+        if evicted:
+            evict(self.path)
+        super().__init__(
+            f"cannot start the program {self.path}: {error.strerror or error}"
+            + ("; it was removed from the compile cache (if it was just built, the cache "
+               "directory may be on a file system that does not allow programs: set "
+               "BGC_CACHE_DIR)" if evicted else ""))
+
+
+def _start(argv: list[str], **options) -> subprocess.Popen:
+    """A generated program started with child_env() (it dies with bgc) and bgc's signal
+    dispositions (see run_streaming)."""
+    options.setdefault("env", child_env())
+    options.setdefault("restore_signals", False)
+    try:
+        return subprocess.Popen(argv, **options)
+    except OSError as error:
+        raise CannotStart(argv, error) from None
+
+
+def run_captured(argv: list[str], timeout: float | None = None) -> subprocess.CompletedProcess:
+    """Runs argv to its end: its status, stdout and stderr as text (subprocess.run's result);
+    CannotStart if it cannot be started; subprocess.TimeoutExpired after timeout seconds
+    (the program killed)."""
+    with _start(argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True) as proc:
+        try:
+            out, err = proc.communicate(timeout=timeout)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.communicate()
+            raise
+    return subprocess.CompletedProcess(argv, proc.returncode, out, err)
 
 
 @dataclass
@@ -233,9 +400,8 @@ def run_streaming(argv: list[str], stdout, progress=None) -> Finished:
     with tempfile.TemporaryFile() as err:
         if fd is not None:
             stdout.flush()
-        proc = subprocess.Popen(argv, stdout=fd if fd is not None else subprocess.PIPE,
-                                stderr=err if progress is None else subprocess.PIPE,
-                                env=child_env(), restore_signals=False)
+        proc = _start(argv, stdout=fd if fd is not None else subprocess.PIPE,
+                      stderr=err if progress is None else subprocess.PIPE)
         reader = None
         if progress is not None:
             reader = threading.Thread(target=_read_stderr, args=(proc.stderr, err, progress),
@@ -284,8 +450,7 @@ class _Stopping:
 
 def run_c(exe: Path | str, args=(), timeout: float | None = None) -> tuple[int, str, str]:
     """Runs a compiled model: (returncode, stdout, stderr)."""
-    done = subprocess.run([str(exe), *map(str, args)], capture_output=True, text=True,
-                          timeout=timeout, env=child_env())
+    done = run_captured([str(exe), *map(str, args)], timeout)
     return done.returncode, done.stdout, done.stderr
 
 
@@ -316,14 +481,12 @@ def cache_python(source: str) -> Path:
     """Generated Python as a file in the cache (named by its SHA-256, checked before reuse,
     written atomically), for the warm runs of bgc.warm."""
     digest = hashlib.sha256(source.encode("utf-8")).hexdigest()
-    path = cache_dir() / f"bgc-{digest[:40]}.py"
-    if path.is_file() and _sha256(path) == digest:
-        return path
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=".build-", suffix=".py")
-    with os.fdopen(fd, "w", encoding="utf-8", newline="") as f:
-        f.write(source)
-    os.replace(tmp, path)
-    return path
+
+    def write(tmp: Path) -> Path:
+        (tmp / "model.py").write_text(source, encoding="utf-8", newline="")
+        return tmp / "model.py"
+
+    return _cached(f"bgc-{digest[:40]}.py", False, write)
 
 
 def python_program(source: str, directory: str) -> list[str]:

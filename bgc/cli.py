@@ -430,7 +430,11 @@ def simulate(model, scene, outputs, effects, algebra, backend, solver, rtol, ato
         # (not while the CSV itself goes to the terminal: the bar would cut its lines)
         progress = _RunProgress() if sys.stderr.isatty() and (
             output or not sys.stdout.isatty()) else None
-        status, rows = _run(program, settings, stats, output, copy, progress)
+        try:
+            status, rows = _run(program, settings, stats, output, copy, progress)
+        except backends.CannotStart:  # (damaged behind its checksum: evicted, built again)
+            record, program, compiled = _compile_for_run(request)
+            status, rows = _run(program, settings, stats, output, copy, progress)
         if progress is not None:
             progress.close()
         if plot_file:

@@ -247,8 +247,10 @@ def _plain_lines(writer: _Writer, name: str, out_name: str) -> list[str]:
 # ---------------------------------------------------------------- C
 
 
-def emit_c(program: Program, chunk_ops: int = ir.CHUNK_OPS) -> dict[str, str]:
-    """The standalone C99 program: {"<name>.c": text}."""
+def emit_c(program: Program, chunk_ops: int = ir.CHUNK_OPS, linked: bool = False) \
+        -> dict[str, str]:
+    """The standalone C99 program: {"<name>.c": text}.  linked: the model part alone, to be
+    linked with the runtime built once (c_runtime_unit; see linkable)."""
     _validate(program)
     fields = c_param_fields(tuple(p.name for p in program.params))
     printer = CPrinter(len(program.states), fields, program.n_consts)
@@ -268,6 +270,8 @@ def emit_c(program: Program, chunk_ops: int = ir.CHUNK_OPS) -> dict[str, str]:
         scene=_scene_context(program, c_string_literal, step_none="0.0"),
         **c_runtime_parts(),
     )
+    if linked:
+        context["runtime"] = _link_definitions()
     return {f"{context['ident']}.c": _render("c_program.c.j2", context)}
 
 
@@ -648,6 +652,146 @@ def _runtime_text(name: str) -> str:
 
 def _render(template: str, context: dict) -> str:
     return _environment().get_template(template).render(**context)
+
+
+# ---------------------------------------------------------------- the runtime built once
+#
+# `bgc simulate` does not compile the runtime with every model: it compiles it once into the
+# cache (bgc.backends.compile_c_linked) and links each model's part with it.  The runtime's
+# files are the ones a standalone program inlines, unchanged; what they read of the model at
+# compile time there (its sizes and scene as macros, its tables and model functions as static
+# names, the parameter struct) the runtime unit reads from the model's object at run time:
+#   - the model part exports each of them under a bgc_link_ name (_link_definitions, in place
+#     of the runtime a standalone program carries);
+#   - the runtime unit declares those and maps the model's names onto them with macros
+#     (_link_declarations), and is the runtime's text with three mechanical rewrites
+#     (_unit_text): a local enum of model sizes becomes const ints, a zero-initialised
+#     array of a model size a variable-length array set with memset, and the API's arrays of
+#     a model size extern arrays of unknown size;
+#   - the parameter struct, which the runtime copies and keeps by value, is an array of
+#     LINK_PARAMS doubles in the runtime (the model's struct is all doubles, so its fields
+#     are the first ones); a model with more is built standalone (linkable).
+# The same compiler and flags build both units, so the arithmetic is the same instructions as
+# in a standalone program (tools/csv_digests.py --c-build compares the CSV bytes).
+
+LINK_PARAMS = 16384  # the most doubles (parameters and constants) a linked model may have
+LINK_INTS = ("NUM_STATES", "NUM_PARAMS", "NUM_CONSTANTS", "NUM_OUTPUTS", "NUM_CONSTRAINTS",
+             "NUM_POSITION_ROWS", "NUM_VELOCITY_ROWS", "NUM_BLOCKS", "AUTONOMOUS",
+             "WORK_DOUBLES", "WORK_INTS", "WORK_Y0", "WORK_STAGES", "WORK_Y", "WORK_JAC",
+             "JAC_COLORS", "SCENE_SOLVER")
+LINK_DOUBLES = ("SCENE_T0", "SCENE_T_END", "SCENE_DT", "SCENE_RTOL", "SCENE_ATOL", "SCENE_STEP")
+LINK_TABLES = (("bgc_block", "blocks"), ("int", "jac_color_ptr"), ("int", "jac_color_cols"),
+               ("int", "jac_col_ptr"), ("int", "jac_col_rows"), ("int", "position_rows"),
+               ("int", "velocity_rows"), ("int", "velocity_movable"))
+LINK_FUNCTIONS = (("rhs", ""), ("outputs", ""), ("jvp", "const double *v, "))
+_MODEL_ARGS = "double t, const double *x, const bgc_params *p, bgc_work *w, "
+_MODEL_SIZE = r"\bBGC_(?:" + "|".join(LINK_INTS + LINK_DOUBLES) + r")\b"
+
+
+def linkable(program: Program) -> bool:
+    """Whether the program's parameter struct fits the runtime built once (LINK_PARAMS)."""
+    return max(len(program.params), 1) + max(program.n_consts, 1) <= LINK_PARAMS
+
+
+def _link_function(name: str, extra: str) -> tuple[str, str]:
+    """The prototype of a model function as the runtime unit calls it, and its call."""
+    call = "t, x, p, w, " + ("v, " if extra else "") + "out"
+    return f"int bgc_link_{name}({_MODEL_ARGS}{extra}double *out)", call
+
+
+@functools.lru_cache(maxsize=None)
+def _link_definitions() -> str:
+    """What a linked model part ends with instead of the runtime: its sizes, scene, tables and
+    model functions under the names the runtime unit reads."""
+    out = ["/* ===================================================================== link === */",
+           "/* The runtime is built once and linked with this part (bgc/emit.py, c_runtime_unit):",
+           "   what it reads of the model, under the names it reads. */",
+           f"typedef char bgc_link_params_fit[sizeof(bgc_params) <= {LINK_PARAMS} * sizeof(double)"
+           " ? 1 : -1];"]
+    out += [f"const int bgc_link_{m.lower()} = BGC_{m};" for m in LINK_INTS]
+    out += [f"const double bgc_link_{m.lower()} = BGC_{m};" for m in LINK_DOUBLES]
+    out += [f"const {t} *const bgc_link_{name} = bgc_{name};" for t, name in LINK_TABLES]
+    for name, extra in LINK_FUNCTIONS:
+        proto, call = _link_function(name, extra)
+        out += [proto, "{", f"    return bgc_model_{name}({call});", "}"]
+    out += ["#ifndef BGC_NO_MAIN", "const char *const bgc_link_ident = bgc_ident;", "#endif"]
+    return "\n".join(out) + "\n"
+
+
+def _link_declarations() -> tuple[str, str]:
+    """The runtime unit's view of a linked model part: before the API, its sizes and the
+    parameter struct; after it, its tables and model functions."""
+    sizes = ["/* ==================================================================== model === */",
+             "/* The model part this runtime is linked with (bgc/emit.py, _link_definitions). */"]
+    for kind, names in (("int", LINK_INTS), ("double", LINK_DOUBLES)):
+        for m in names:
+            sizes += [f"extern const {kind} bgc_link_{m.lower()};",
+                      f"#define BGC_{m} bgc_link_{m.lower()}"]
+    sizes += ["/* The model's parameter struct is its parameters' and constants' doubles. */",
+              f"typedef struct bgc_params {{ double v[{LINK_PARAMS}]; }} bgc_params;"]
+    tables = []
+    for t, name in LINK_TABLES:
+        tables += [f"extern const {t} *const bgc_link_{name};",
+                   f"#define bgc_{name} bgc_link_{name}"]
+    for name, extra in LINK_FUNCTIONS:
+        tables += [_link_function(name, extra)[0] + ";",
+                   f"#define bgc_model_{name} bgc_link_{name}"]
+    tables += ["extern const char *const bgc_link_ident;", "#define bgc_ident bgc_link_ident"]
+    return "\n".join(sizes) + "\n", "\n".join(tables) + "\n"
+
+
+@functools.lru_cache(maxsize=None)
+def c_runtime_unit() -> str:
+    """The runtime built once: one C99 translation unit, the same for every model (its
+    SHA-256 is part of its cache key), linked with a model part emit_c(..., linked=True)."""
+    sizes, tables = _link_declarations()
+    return "".join([
+        "/* bgc's runtime, built once and linked with each model's part (bgc/emit.py). */\n",
+        _environment().get_template("c_prelude.c.j2").render(), sizes, solver_enum_c(),
+        _unit_text(_runtime_text("api.h")), tables, "\n", solver_tables_c(), "\n",
+        "\n".join(_unit_text(_runtime_text(f)) for f in C_RUNTIME)])
+
+
+def _unit_text(text: str) -> str:
+    """A runtime file as the runtime unit compiles it, where the model's sizes are variables
+    (see above): each line rewritten by _unit_line; `names`, the enum constants made variables
+    so far (N, D, M: a zeroed array of such a size is rewritten too)."""
+    names: set = set()
+    return "".join(_unit_line(line, names) for line in text.splitlines(keepends=True))
+
+
+_ENUM = re.compile(r"^(\s*)enum \{ (.*) \};(.*\n?)$")
+_ZEROED = re.compile(r"^(\s*)(double|int) ((?:\w+\[[^\]=]+\] = \{ 0(?:\.0)? \}(?:, )?)+);(\n?)$")
+_EXTERN_ARRAY = re.compile(r"^(extern .*)\[BGC_DIM\(BGC_NUM_\w+\)\];")
+
+
+def _unit_line(line: str, names: set) -> str:
+    m = _EXTERN_ARRAY.match(line)
+    if m:
+        return _EXTERN_ARRAY.sub(r"\1[];", line)
+    m = _ENUM.match(line)
+    if m and _model_sized(m.group(2), names):
+        indent, body, rest = m.groups()
+        items = body.split(", ")
+        sized = [i for i in items if _model_sized(i, names)]
+        names.update(i.split(" = ")[0] for i in sized)
+        fixed = [i for i in items if i not in sized]
+        return (f"{indent}const int {', '.join(sized)};"
+                + (f" enum {{ {', '.join(fixed)} }};" if fixed else "") + rest)
+    m = _ZEROED.match(line)
+    if m and _model_sized(m.group(3), names):
+        indent, kind, decls, end = m.groups()
+        arrays = [d.split(" = ")[0] for d in decls.split("}, ")]
+        zero = " ".join(f"memset({a.split('[')[0]}, 0, sizeof {a.split('[')[0]});" for a in arrays)
+        return f"{indent}{kind} {', '.join(arrays)};{end}{indent}{zero}{end}"
+    return line
+
+
+def _model_sized(text: str, names: set) -> bool:
+    """Whether a C expression reads one of the model's sizes (a macro, or an enum constant
+    made from one)."""
+    return bool(re.search(_MODEL_SIZE, text)) or any(
+        re.search(rf"\b{re.escape(n)}\b", text) for n in names)
 
 
 # ---------------------------------------------------------------- the solver tables

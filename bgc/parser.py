@@ -49,12 +49,42 @@ class _BracketPostLex:
             yield tok
 
 
+_LARK_OPTIONS = dict(parser="lalr", lexer="contextual", propagate_positions=True,
+                     maybe_placeholders=True, start=["start", "option_outputs", "option_effects"])
+
+
 @lru_cache(maxsize=1)
 def _lark() -> Lark:
+    """The parser.  Building its LALR tables takes a tenth of a second or more, every cold
+    `bgc simulate`; they are kept in the compile cache (bgc.backends.own_cache_dir) under the
+    SHA-256 of the grammar, the options and the versions of lark and Python, and read back
+    (anything unreadable is built again)."""
+    import hashlib
+    import pickle
+    import sys
+
+    import lark
+
+    from . import backends
     text = (resource_dir("grammar") / "bg.lark").read_text(encoding="utf-8")
-    return Lark(text, parser="lalr", lexer="contextual", postlex=_BracketPostLex(),
-                propagate_positions=True, maybe_placeholders=True,
-                start=["start", "option_outputs", "option_effects"])
+    key = hashlib.sha256(repr((text, _LARK_OPTIONS, lark.__version__, sys.version_info[:2]))
+                         .encode()).hexdigest()[:40]
+    cache = backends.own_cache_dir()
+    if cache is None:
+        return Lark(text, postlex=_BracketPostLex(), **_LARK_OPTIONS)
+    path = cache / f"lark-{key}.pickle"
+    try:
+        with open(path, "rb") as f:
+            return Lark.__new__(Lark)._load(f, postlex=_BracketPostLex(),
+                                            propagate_positions=True)
+    except Exception:  # noqa: BLE001  (missing, damaged or of another lark: built again)
+        pass
+    parser = Lark(text, postlex=_BracketPostLex(), **_LARK_OPTIONS)
+    try:
+        backends.write_cached(path, lambda f: parser.save(f, ("postlex",)))
+    except (OSError, pickle.PicklingError):
+        pass
+    return parser
 
 
 def _whole(tok: Token, what: str) -> int:

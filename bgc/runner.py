@@ -58,16 +58,27 @@ class Program:
 def prepare(compiled, backend: str, in_process: bool = False) -> Program:
     """compiled's program (bgc.api.Compiled), emitted and built for `backend` (the C program
     into the cache; Python into the cache, or loaded in this process when in_process)."""
-    from .emit import emit_c, emit_python
+    from .emit import emit_python
     p = compiled.program
     facts = dict(defaults=p.scene, params=tuple(q.name for q in p.params), outputs=p.outputs)
     if backend == "c":
-        (text,) = emit_c(p).values()
-        return Program("c", path=backends.compile_c(text), **facts)
+        return Program("c", path=c_executable(p), **facts)
     (text,) = emit_python(p).values()
     if in_process:
         return Program("python", module=backends.load_python_module(text), **facts)
     return Program("python", path=backends.cache_python(text), **facts)
+
+
+def c_executable(program) -> Path:
+    """The C executable of a program (bgc.ir.Program), built into the cache: its model part
+    linked with the runtime built once (bgc.emit.c_runtime_unit), or, for a model whose
+    parameters do not fit that runtime (bgc.emit.linkable), the standalone program."""
+    from .emit import c_runtime_unit, emit_c, linkable
+    if linkable(program):
+        (text,) = emit_c(program, linked=True).values()
+        return backends.compile_c_linked(text, c_runtime_unit())
+    (text,) = emit_c(program).values()
+    return backends.compile_c(text)
 
 
 def settings_for(defaults: RunSettings, names, params: dict | None = None,
@@ -162,8 +173,18 @@ def run(program, settings: RunSettings | None = None, sink=None, progress=None,
     timeout: seconds, then the run is stopped (status -1).  A program loaded in this process
     returns its arrays, and its errors are raised (the generated module's SimulationError,
     ValueError)."""
-    if not isinstance(program, Program):
-        program = prepare(program, choose_backend(backend)[0])
+    if isinstance(program, Program):
+        return _run(program, settings, sink, progress, stats, timeout)
+    compiled = program
+    program = prepare(compiled, choose_backend(backend)[0])
+    try:
+        return _run(program, settings, sink, progress, stats, timeout)
+    except backends.CannotStart:  # (a cached program damaged behind its checksum: evicted)
+        return _run(prepare(compiled, program.backend), settings, sink, progress, stats,
+                    timeout)
+
+
+def _run(program: Program, settings, sink, progress, stats, timeout) -> Result:
     settings = program.defaults if settings is None else settings
     if program.module is not None:
         t, values = program.module.simulate(**settings.options(program.defaults))
@@ -178,8 +199,7 @@ def run(program, settings: RunSettings | None = None, sink=None, progress=None,
         return Result(_status(done.code, done.signal), done.stderr, killed=killed,
                       write_error=write_error, last_line=done.last_line)
     try:
-        done = subprocess.run(argv, capture_output=True, text=True, timeout=timeout,
-                              env=backends.child_env())
+        done = backends.run_captured(argv, timeout)
     except subprocess.TimeoutExpired:
         return Result(-1, f"stopped after {timeout:g} s (the time budget per run)", "")
     return Result(_status(done.returncode), done.stderr, done.stdout,

@@ -18,8 +18,6 @@ import cmath
 import math
 from dataclasses import dataclass
 
-import numpy as np
-
 from . import solvers
 from .scene import parameter_values as scene_parameter_values
 
@@ -64,6 +62,7 @@ def stability_function(name: str):
     tab = solvers.get(name).tableau
     if not isinstance(tab, solvers.ERKTableau):
         return None
+    import numpy as np  # (not at import: a run's warnings without a fixed step need none)
     s = len(tab.b)
     A = np.zeros((s, s))
     for i, row in enumerate(tab.a[:s]):

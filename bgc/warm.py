@@ -17,9 +17,11 @@ Python backend, the interpreter).  Nothing in the key is a timestamp of the mode
 text under the same name hits, whatever its mtime.
 
 A record is used only if it reads as one (anything else is a miss) and the program it names is
-still the file that was built (its SHA-256 is checked before each use, like the program cache
-itself).  Records are written to a temporary file and renamed into place, so concurrent runs
-are safe: each sees a whole record or none.
+still the file that was built and can run (bgc.backends.usable: a regular file, executable, its
+SHA-256 the one recorded; like the program cache itself); a program that still cannot be
+started is removed from the cache and the run goes the cold way (bgc.cli).  Records are
+written to a temporary file and renamed into place, so concurrent runs are safe: each sees a
+whole record or none.
 
 This module imports the standard library only (and bgc.backends, bgc.resources, bgc.run,
 bgc.runner and bgc.solvers, which do too; bgc.plot when a cold run makes a record).
@@ -130,8 +132,8 @@ def lookup(request: Request) -> tuple[Record, Path] | None:
         data["plot_columns"] = tuple(map(tuple, data["plot_columns"]))
         record = Record(**data)
         program = path.parent / record.program
-        if Path(record.program).name != record.program or \
-                hashlib.sha256(program.read_bytes()).hexdigest() != record.sha256:
+        if Path(record.program).name != record.program or not backends.usable(
+                program, executable=program.suffix != ".py", sha256=record.sha256):
             return None
     except (OSError, ValueError, TypeError, KeyError, AttributeError):
         return None
