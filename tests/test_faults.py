@@ -344,8 +344,10 @@ def test_a_full_disk_under_the_compile_cache_is_one_line(small_disk, tmp_path):
         done = run_bgc("simulate", "m.bg", "-s", "s", "--t-end", "0.1", "--backend", backend,
                        cwd=tmp_path, env={"BGC_CACHE_DIR": str(small_disk / "cache")})
         assert done.returncode == 1 and done.stdout == ""
-        assert done.stderr == f"bgc: error: cannot write the compile cache {small_disk}/cache: " \
+        assert done.stderr == f"error: cannot write into the compile cache {small_disk}/cache: " \
                               "No space left on device\n"
+        assert [p.name for p in (small_disk / "cache").iterdir()
+                if p.name.startswith(".build")] == []  # no temporary left behind
 
 
 # ------------------------------------------------------------------ kill signals
