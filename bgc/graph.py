@@ -44,6 +44,7 @@ class Parameter:
     expr: Expr
     doc: str | None
     span: Span
+    unit: str | None = None  # `unit "kg"`
 
 
 @dataclass(frozen=True)
@@ -98,6 +99,7 @@ class Signal:
     init: Expr | None  # integral blocks: the state's initial value
     span: Span
     dim: int | None = None  # a vector signal (before flatten)
+    unit: str | None = None  # `unit "m"`
 
     @property
     def is_integral(self) -> bool:

@@ -217,6 +217,8 @@ class _ExprBuilder:
             return self._name(node)
         if isinstance(node, ast.Field):
             return self._field(node)
+        if isinstance(node, ast.Member):
+            fail(node.span, f"'.{node.name}' follows something that is not a name")
         fail(node.span, "unexpected expression")
 
     def _name(self, node: ast.Name):
@@ -501,7 +503,7 @@ def _parameters(params, scope: _Scope, diags: Collector):
             e = None
         seen.add(name)
         if e is not None:
-            out.append(Parameter(name, e, d.doc, d.span))
+            out.append(Parameter(name, e, d.doc, d.span, d.unit))
     scope.params_only, scope.visible_params = False, None
     return out
 
@@ -620,7 +622,7 @@ def _signal(d, scope, diags) -> Signal:
         finally:
             scope.params_only = False
         _check_size(init, n, f"the initial value of '{d.name.name}'", broadcast=True)
-    return Signal(d.name.name, expr, init, d.span, n)
+    return Signal(d.name.name, expr, init, d.span, n, d.unit)
 
 
 def _check_size(e: Expr, n: int | None, what: str, broadcast: bool = False) -> None:
