@@ -548,9 +548,15 @@ class _Instantiate:
         return ("node", scope.prefix + ".".join(segs)), span
 
     # ------------------------------------------------------------ ports
+    def _span(self, k: int) -> Span:
+        _, _, sa, sb, _ = self.edges[k]
+        return sa.join(sb)
+
     def fuse(self):
         """Each port joins its inner and outer bond into one; the bonds that result, in the
         order of their first part."""
+        if self.diags.errors:  # (an instance left out: its ports would be reported unbonded)
+            return
         at: dict = {}
         for k, (a, b, _, _, _) in enumerate(self.edges):
             for end in (a, b):
@@ -567,9 +573,9 @@ class _Instantiate:
                                                 "free end to a zero source)")
                     ok = False
                 elif len(ks) > 1:
-                    self.diags.error(self.edges[ks[1]][2], f"port '{name}' is bonded more than "
-                                                          f"once {where}",
-                                     Note(self.edges[ks[0]][2], "the first bond"))
+                    self.diags.error(self._span(ks[1]), f"port '{name}' is bonded more than "
+                                                        f"once {where}",
+                                     Note(self._span(ks[0]), "the first bond"))
                     ok = False
             if not ok or len(sides[True]) != 1 or len(sides[False]) != 1:
                 continue

@@ -222,12 +222,12 @@ class _ToAst(Transformer_NonRecursive):
         return ast.Corrector("none", (), _span(meta))
 
     def signal_decl(self, meta, c):
-        (name, index), dim, expr, unit = c
-        return ast.SignalDecl(name, dim, expr, _span(meta), unit, index)
+        name, dim, expr, unit = c
+        return ast.SignalDecl(_ident(name), dim, expr, _span(meta), unit)
 
     def integral_decl(self, meta, c):
-        (name, index), dim, expr, init, unit = c
-        return ast.IntegralDecl(name, dim, expr, init, _span(meta), unit, index)
+        name, dim, expr, init, unit = c
+        return ast.IntegralDecl(_ident(name), dim, expr, init, _span(meta), unit)
 
     def path(self, meta, c):
         if all(index is None for _, index in c):
