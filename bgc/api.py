@@ -194,7 +194,8 @@ def check_scenes(compiled: Compiled):
             reduce(build_equations(causal), False, compiled.reduced.algebra)
         except ModelError as exc:
             for d in exc.diagnostics:
-                inside = d.span is not None and sc.span.line <= d.span.line <= sc.span.end_line
+                inside = d.span is not None and not d.span.chain and d.span.origin is None \
+                    and sc.span.line <= d.span.line <= sc.span.end_line
                 diagnostics.append(d if inside else replace(
                     d, notes=d.notes + (Note(sc.span, f"in scene '{sc.name}'"),)))
     if diagnostics:

@@ -71,6 +71,7 @@ class Element:
     name_span: Span
     dim: tuple[int, int] | None = None  # multiport (n in, m out; n == m but for MTF/MGY)
     origin: str | None = None  # after flatten: the multiport this scalar part comes from
+    order: int = 0  # its declaration's place in the (instantiated) model, among all declarations
 
     @property
     def is_junction(self) -> bool:
@@ -100,6 +101,7 @@ class Signal:
     span: Span
     dim: int | None = None  # a vector signal (before flatten)
     unit: str | None = None  # `unit "m"`
+    order: int = 0  # its declaration's place in the (instantiated) model, among all declarations
 
     @property
     def is_integral(self) -> bool:

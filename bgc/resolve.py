@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import math
 import sys
+from dataclasses import replace
 
 import sympy as sp
 
@@ -699,8 +700,11 @@ def resolve(model: ast.Model) -> Graph:
     params, signals, elements = _collect_names(model, diags)
     scope = _Scope(params, signals, elements)
     parameters = _parameters(params, scope, diags)
-    els = [e for e in (_guard(diags, _element, d, scope, diags) for d in elements.values()) if e]
-    sigs = [s for s in (_guard(diags, _signal, d, scope, diags) for d in signals.values()) if s]
+    order = {id(d): k for k, d in enumerate(model.decls)}
+    els = [replace(e, order=order[id(d)]) for d, e in
+           ((d, _guard(diags, _element, d, scope, diags)) for d in elements.values()) if e]
+    sigs = [replace(s, order=order[id(d)]) for d, s in
+            ((d, _guard(diags, _signal, d, scope, diags)) for d in signals.values()) if s]
     bonds = _bonds(model, elements, params, signals, diags)
     check_ports(els, bonds, diags)
     scenes, scene_names = [], {}
