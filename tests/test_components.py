@@ -514,6 +514,6 @@ s -> b.a
 def test_names_from_the_model_stay_out_of_the_generated_code():
     c = build(LADDER, "run")
     (code,) = emit_c(c.program).values()
-    fields = re.findall(r"p->([^\s;,)]+)", code)
+    fields = re.findall(r"p->(\w+)", code)
     assert "p_s_1__r" in fields and all(re.fullmatch(r"\w+(\[\d+\])?", f) for f in fields)
     assert "s[1].r" not in re.sub(r'"(?:\\.|[^"\\\n])*"|/\*.*?\*/', "", code, flags=re.S)
