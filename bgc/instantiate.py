@@ -224,9 +224,14 @@ class _Instantiate:
             candidates = [Path(p) / name for p in dirs]
             shown = name
         path = next((c for c in candidates if c.is_file()), None)
+        if path is None and d.file is not None:
+            fail(top.sp(d.span), f"cannot find the library file '{d.file}' (a path relative to "
+                                 "the file that imports it)")
         if path is None:
-            where = ", ".join(str(c.parent) for c in candidates)
-            fail(top.sp(d.span), f"cannot find the library {shown} (looked in: {where})")
+            beside = "the model" if f.origin is None else "the library"
+            fail(top.sp(d.span), f"cannot find the library '{d.name.name}': there is no {shown} "
+                                 f"beside {beside}, in the directories of $BGC_PATH, or in bgc's "
+                                 "standard library")
         key = str(path.resolve())
         lib = self.files.get(key)
         if lib is None:

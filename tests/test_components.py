@@ -517,3 +517,82 @@ def test_names_from_the_model_stay_out_of_the_generated_code():
     fields = re.findall(r"p->(\w+)", code)
     assert "p_s_1__r" in fields and all(re.fullmatch(r"\w+(\[\d+\])?", f) for f in fields)
     assert "s[1].r" not in re.sub(r'"(?:\\.|[^"\\\n])*"|/\*.*?\*/', "", code, flags=re.S)
+
+
+# ------------------------------------------------------------------ libraries
+HYD = """library hyd "hydraulic parts"
+component orifice(r = 1 unit "Pa*s/m^3") "a linear restriction" {
+  port a : hydraulic
+  res : R(r)
+  a -> res
+}
+component pipe(r = 1, l = 0.1) "a restriction and the fluid's inertia" {
+  port a : hydraulic
+  port b : hydraulic
+  j : 1
+  fluid : I(l)
+  a -> j
+  j -> fluid
+  o : orifice(r = r)
+  j -> o.a
+  j -> b
+}
+"""
+
+CIRCUIT = """model circuit
+import {what}
+pump : Se(1)
+p1 : {alias}.pipe(r = 2)
+tank : C(1)
+pump -> p1.a
+p1.b -> tank
+"""
+
+
+def _library_model(tmp_path, what, alias, lib_dir=None):
+    tmp_path.mkdir(exist_ok=True)
+    (lib_dir or tmp_path).mkdir(exist_ok=True)
+    ((lib_dir or tmp_path) / "hyd.bg").write_text(HYD)
+    model = tmp_path / "circuit.bg"
+    model.write_text(CIRCUIT.format(what=what, alias=alias))
+    return model
+
+
+@pytest.mark.parametrize("what, alias", [("hyd", "hyd"), ("hyd as h", "h"),
+                                         ('"hyd.bg" as h', "h")])
+def test_imports_beside_the_model(tmp_path, what, alias):
+    c = bgc.build(_library_model(tmp_path, what, alias), program=False)
+    assert [s.name for s in c.reduced.states] == ["p1.fluid.p", "tank.q"]
+    assert {p.name: p.unit for p in c.graph.parameters}["p1.o.r"] == "Pa*s/m^3"
+
+
+def test_imports_search_bgc_path_after_the_model_directory(tmp_path, monkeypatch):
+    model = _library_model(tmp_path / "m", "hyd", "hyd", lib_dir=tmp_path / "libs")
+    monkeypatch.setenv("BGC_PATH", str(tmp_path / "libs"))
+    assert len(bgc.build(model, program=False).reduced.states) == 2
+    (tmp_path / "m" / "hyd.bg").write_text(HYD.replace("fluid : I(l)", "fluid : C(l)"))
+    assert bgc.build(model, program=False).reduced.states[0].name == "p1.fluid.q"  # beside wins
+    monkeypatch.delenv("BGC_PATH")
+    (tmp_path / "m" / "hyd.bg").unlink()
+    with pytest.raises(bgc.BgcModelError, match="cannot find the library 'hyd'"):
+        bgc.build(model, program=False)
+
+
+def test_an_error_inside_a_library_names_its_file_and_the_instances(tmp_path):
+    model = _library_model(tmp_path, "hyd", "hyd")
+    (tmp_path / "hyd.bg").write_text(HYD.replace("res : R(r)", "res : R(r*rr)"))
+    with pytest.raises(bgc.BgcModelError) as info:
+        bgc.build(model, program=False)
+    lines = str(info.value).splitlines()
+    assert lines[0] == f"{tmp_path / 'hyd.bg'}:4:13: error: unknown name 'p1.o.rr'"
+    assert [ln for ln in lines if "note:" in ln] == [
+        f"{tmp_path / 'hyd.bg'}:14:3: note: in instance p1.o",
+        f"{model}:4:1: note: in instance p1"]
+
+
+def test_a_library_holds_components_only(tmp_path):
+    model = _library_model(tmp_path, "hyd", "hyd")
+    (tmp_path / "hyd.bg").write_text(HYD + "x : C(1)\n")
+    with pytest.raises(bgc.BgcModelError, match="a library holds only components, constants "
+                                                "and imports"):
+        bgc.build(model, program=False)
