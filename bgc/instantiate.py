@@ -79,7 +79,8 @@ class _Scope:
     def sp(self, span: Span | None) -> Span | None:
         if span is None or (not self.chain and self.file.origin is None):
             return span
-        return replace(span, origin=self.file.origin, chain=self.chain)
+        return Span(span.line, span.col, span.end_line, span.end_col, self.file.origin,
+                    self.chain)
 
 
 # ---------------------------------------------------------------- compile-time integers
@@ -166,6 +167,7 @@ class _Instantiate:
         self.ports: dict = {}  # flat port name -> _Port
         self.files: dict = {}  # resolved library path -> _File
         self.top = {id(d) for d in model.decls}  # the model file's top-level statements
+        self.dims: dict = {}  # flat element name -> (dimension of its in side, of its out side)
 
     # ------------------------------------------------------------ counting
     def charge(self, n: int, span):
@@ -188,6 +190,10 @@ class _Instantiate:
         for d in f.decls:
             if isinstance(d, ast.ComponentDecl):
                 name = d.name.name
+                if name in KINDS:
+                    self.diags.error(top.sp(d.name.span), f"'{name}' is an element kind: a "
+                                                          "component needs another name")
+                    continue
                 if name in f.components:
                     self.diags.error(top.sp(d.name.span), f"component '{name}' is declared twice")
                     continue
@@ -510,6 +516,9 @@ class _Instantiate:
             args = tuple(ast.Arg(rw.map(a.law), rw.expr(a.expr, own if a.law else ()),
                                  scope.sp(a.span)) for a in stmt.args)
             effects = rw.map(stmt.effects) + scope.effects
+            n = stmt.dim.n if stmt.dim else 1
+            m = stmt.dim.m if stmt.dim and stmt.dim.m is not None else n
+            self.dims[name.name] = (n, m)
             out = replace(rw.map(replace(stmt, args=())), name=name, args=args,
                           effects=effects, index=None)
         elif isinstance(stmt, ast.SceneDecl):
@@ -553,6 +562,22 @@ class _Instantiate:
         return ("node", scope.prefix + ".".join(segs)), span
 
     # ------------------------------------------------------------ ports
+    def check_dimensions(self, src: str, dst: str, ports, span: Span):
+        """A vector port `a[n]` carries a bond of n; a scalar port a scalar bond."""
+        if not ports:
+            return
+        n = self.dims.get(src, (None, None))[1]
+        m = self.dims.get(dst, (None, None))[0]
+        if n is None or n != m:
+            return  # (unknown ends are reported by resolve, unequal ones by flatten)
+        for port in ports:
+            if port.dim != n:
+                self.diags.error(span, f"port '{port.name}' has dimension {port.dim}, but the "
+                                       f"bond through it joins '{src}' and '{dst}', of "
+                                       f"dimension {n}",
+                                 Note(port.span, f"'{port.name}' is declared here"))
+                return
+
     def _span(self, k: int) -> Span:
         _, _, sa, sb, _ = self.edges[k]
         return sa.join(sb)
@@ -605,7 +630,7 @@ class _Instantiate:
             if a[0] == "port":
                 continue
             seen.add(k)
-            best, cur, domain = (depth, sa, sb), k, None
+            best, cur, domain, through = (depth, sa, sb), k, None, []
             while True:
                 _, b, sb_k, _, _ = self.edges[cur]
                 if b[0] != "port":
@@ -622,12 +647,14 @@ class _Instantiate:
                                          Note(domain.span, f"'{domain.name}' is declared here"),
                                          Note(port.span, f"'{port.name}' is declared here"))
                     domain = port
+                through.append(port)
                 cur = other[(b[1], cur)]
                 seen.add(cur)
                 d = self.edges[cur][4]
                 if d < best[0]:
                     best = (d, self.edges[cur][2], self.edges[cur][3])
             end = self.edges[cur][1]
+            self.check_dimensions(a[1], end[1], through, best[1].join(best[2]))
             if cur == k:
                 self.out.append(ast.BondChain((ast.Ident(a[1], sa), ast.Ident(b[1], sb)),
                                               sa.join(sb)))
@@ -651,6 +678,9 @@ class _Port:
     scope: _Scope
 
 
+_FIELDS: dict = {}  # a node type -> its fields' names, in order
+
+
 class _Rewriter:
     """One scope's expressions made flat: names to paths, constants to numbers."""
 
@@ -668,8 +698,10 @@ class _Rewriter:
                              ast.BinOp, ast.Neg, ast.Vector)):
             return self.expr(node)
         if is_dataclass(node) and not isinstance(node, type):
-            return replace(node, **{f.name: self.map(getattr(node, f.name))
-                                    for f in fields(node)})
+            names = _FIELDS.get(type(node))
+            if names is None:
+                names = _FIELDS[type(node)] = tuple(f.name for f in fields(node))
+            return type(node)(*[self.map(getattr(node, n)) for n in names])
         return node
 
     def expr(self, node, own=()):
