@@ -3,6 +3,7 @@ its twin written out flat by hand (the same equations, simplify(a - b) == 0, and
 generated code but for names), a component model against SciPy, and the limits."""
 import re
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -10,12 +11,17 @@ import sympy as sp
 from click.testing import CliRunner
 
 import bgc
+from bgc import backends
 from bgc.api import Source
 from bgc.cli import main
 from bgc.emit import c_param_fields, emit_c, emit_python
 from bgc.graph import var
 from bgc.reduce import explicit_forms
 from bgc.resources import MAX_INSTANCE_DEPTH
+
+
+ROOT = Path(__file__).resolve().parent.parent
+COMPONENT_CHAIN = ROOT / "tests" / "models" / "pendulum_chain_components.bg"
 
 
 def build(text, scene=None, consts=(), **kw):
@@ -596,3 +602,20 @@ def test_a_library_holds_components_only(tmp_path):
     with pytest.raises(bgc.BgcModelError, match="a library holds only components, constants "
                                                 "and imports"):
         bgc.build(model, program=False)
+
+
+# ------------------------------------------------------------------ the pendulum chain
+@pytest.mark.parametrize("backend", ["python"] + (["c"] if backends.have_c_compiler() else []))
+def test_the_pendulum_chain_as_a_component_gives_the_same_numbers(backend):
+    """tests/models/pendulum_chain_components.bg (a `link` component and a for loop, under 40
+    lines) against models/pendulum_chain.bg (187 lines, generated): every value of the CSV the
+    same, bit for bit; only the columns' names differ (link[1].x for x1)."""
+    text = COMPONENT_CHAIN.read_text()
+    assert len(text.splitlines()) < 40
+    kw = dict(t_end=1.0, backend=backend)
+    t, Y, names = bgc.simulate(str(COMPONENT_CHAIN), "swing", **kw)
+    t0, Y0, names0 = bgc.simulate(str(ROOT / "models" / "pendulum_chain.bg"), "swing", **kw)
+    assert names == [f"link[{k}].{c}" for k in range(1, 9) for c in "xy"]
+    assert names0 == [f"{c}{k}" for k in range(1, 9) for c in "xy"]
+    np.testing.assert_array_equal(t, t0)
+    np.testing.assert_array_equal(Y, Y0)
