@@ -99,7 +99,8 @@ def _const(node, env: dict, scope: _Scope, what: str) -> int:
                 value = float(text)
             except ValueError:
                 value = None
-            if value is None or value != int(value):
+            if value is None or value != value or abs(value) == float("inf") \
+                    or value != int(value):
                 fail(scope.sp(node.span), f"{what} must be a whole number, not {text}")
             return _bounded(int(value), node, scope)
         if len(text.lstrip("0")) > 16:
