@@ -128,8 +128,8 @@ class Model(api.Source):
         """Every stage's value (bgc.build)."""
         o = self._options
         return api.build(api.Source(self.path, self.text, self.consts), o["scene"],
-                         o["project_initial"], o["algebra"], outputs=o["outputs"], effects=o["effects"],
-                         allow_inconsistent=o["allow_inconsistent"])
+                         o["project_initial"], o["algebra"], outputs=o["outputs"],
+                         effects=o["effects"], allow_inconsistent=o["allow_inconsistent"])
 
     @functools.cached_property
     def _python(self) -> runner.Program:
