@@ -447,11 +447,11 @@ class _Instantiate:
         """The component's parameters of one instance: parameters (or signals, when the
         argument reads one) named by the instance's path."""
         decl, parent, comp = child.decl, child.parent, child.comp
-        given, positional = {}, 0
+        given, positional, named = {}, 0, False
         names = [p.name.name for p in comp.params]
         for arg in decl.args:
             if arg.law is None:
-                if given and any(a.law is not None for a in decl.args[:positional + 1]):
+                if named:
                     fail(parent.sp(arg.span), "positional arguments come before named ones")
                 if positional >= len(names):
                     fail(parent.sp(arg.span), f"component '{comp.name.name}' takes "
@@ -459,6 +459,7 @@ class _Instantiate:
                 key = names[positional]
                 positional += 1
             else:
+                named = True
                 key = arg.law.name
                 if key not in names:
                     listed = ", ".join(names) or "none"
