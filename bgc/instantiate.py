@@ -71,6 +71,7 @@ class _Scope:
     table: dict = field(default_factory=dict)  # local name -> kind
     children: dict = field(default_factory=dict)  # local instance name -> _Scope
     signal_params: set = field(default_factory=set)  # parameters bound to signals
+    first: dict = field(default_factory=dict)  # local name -> span of its first declaration
 
     @property
     def path(self) -> str:
@@ -347,8 +348,12 @@ class _Instantiate:
                         ast.PortDecl: "port"}[type(stmt)]
             old = scope.table.get(name)
             if old is not None and ("instance" in (old, kind) or "port" in (old, kind)):
-                fail(scope.sp(stmt.name.span), f"'{name}' is declared twice")
+                first = scope.first.get(name)
+                fail(scope.sp(stmt.name.span), f"'{scope.prefix + name}' is declared twice",
+                     *([Note(first, f"first declaration of '{scope.prefix + name}'")]
+                       if first else []))
             scope.table.setdefault(name, kind)
+            scope.first.setdefault(name, scope.sp(stmt.name.span))
 
     def local_name(self, scope: _Scope, stmt, env) -> str:
         index = getattr(stmt, "index", None)
@@ -723,7 +728,7 @@ class _Rewriter:
         if isinstance(node, ast.Field):
             return self.path(node.owner.split(".") + [node.field], node)
         if isinstance(node, ast.Member):
-            return self.path(self.segments(node), node)
+            return self.path(self.try_segments(node, strict=True), node)
         if isinstance(node, ast.Index):
             segs = self.try_segments(node)
             if segs is not None:
@@ -741,10 +746,6 @@ class _Rewriter:
         if isinstance(node, ast.Vector):
             return ast.Vector(tuple(self.expr(a, own) for a in node.items), sp(node.span))
         return self.map(node)
-
-    def segments(self, node) -> list:
-        segs = self.try_segments(node, strict=True)
-        return segs
 
     def try_segments(self, node, strict=False):
         """The path a node names (`link[2].rod` -> ["link[2]", "rod"]), or None."""
