@@ -31,7 +31,7 @@ from dataclasses import dataclass, field, fields, is_dataclass, replace
 from pathlib import Path
 
 from . import ast
-from .diagnostics import Collector, ModelError, Note, Origin, Span, did_you_mean, fail
+from .diagnostics import Collector, ModelError, Note, Origin, Span, did_you_mean, error, fail
 from .kinds import KINDS
 from .resources import MAX_DIMENSION, MAX_GENERATED, MAX_INSTANCE_DEPTH, read_bounded
 
@@ -40,6 +40,10 @@ LIBRARY = Path(__file__).resolve().parent / "library"  # bgc's standard library
 MAX_CONSTANT = 2 ** 53  # the magnitude of a compile-time integer
 STRUCTURE = (ast.ComponentDecl, ast.ConstantDecl, ast.ForBlock, ast.IfBlock, ast.ImportDecl,
              ast.PortDecl, ast.LibraryDecl)
+
+
+class _TooLarge(ModelError):
+    """The model makes more than MAX_GENERATED statements: the stage stops at once."""
 
 
 # ---------------------------------------------------------------- files and components
@@ -175,8 +179,9 @@ class _Instantiate:
     def charge(self, n: int, span):
         self.generated += n
         if self.generated > MAX_GENERATED:
-            fail(span, f"the model is too large: its components and 'for' loops make more than "
-                       f"{MAX_GENERATED} declarations and bonds")
+            raise _TooLarge([error(span, f"the model is too large: its components and 'for' "
+                                         f"loops make more than {MAX_GENERATED} declarations "
+                                         "and bonds")])
 
     # ------------------------------------------------------------ files
     def main_file(self) -> _File:
@@ -283,6 +288,8 @@ class _Instantiate:
     def guard(self, fn, *args):
         try:
             return fn(*args)
+        except _TooLarge:
+            raise  # (the one error: nothing more is looked at)
         except ModelError as exc:
             self.diags.items.extend(exc.diagnostics)
             return None
