@@ -218,7 +218,7 @@ FIELDS = {"e": "effort", "f": "flow", "p": "generalized momentum",
 def _variable_doc(graph, name: str) -> str | None:
     """What a variable is, with its element's doc string: "ind.p" -> "generalized momentum
     of ind (inductor: ...)", "mass.p[2]" -> "... of mass[2] (...)"; None for a signal."""
-    head, dot, rest = name.partition(".")
+    head, dot, rest = name.rpartition(".")  # (a path: `s[1].cap.q` is variable q of s[1].cap)
     if not dot:
         return None
     m = re.fullmatch(r"(.*?)(\[[0-9]+\])?", rest)
