@@ -433,6 +433,9 @@ def test_paths_in_the_csv_header_and_in_overrides(tmp_path):
     assert header == "t,s[1].cap.q,s[3].cap.e,s[2].res.f"
     base = bgc.simulate(Source("l.bg", LADDER), "run", backend="python")
     assert float(second.split(",")[3]) != pytest.approx(base[1][1, 2])
+    result = CliRunner().invoke(main, ["simulate", str(path), "--outputs", "s[2].cap.e, s[1].r",
+                                       "--backend", "python", "--t-end", "0.5"])
+    assert result.exit_code == 0 and result.stdout.startswith("t,s[2].cap.e,s[1].r\n")
     result = CliRunner().invoke(main, ["equations", str(path), "--scene", "run", "--format",
                                        "latex"])
     assert result.exit_code == 0 and r"\mathrm{s[1].cap.q}" in result.output
