@@ -233,6 +233,7 @@ class PortDecl:
     dim: Dim | None
     domain: Ident | None
     span: Span
+    unit: str | None = None
 
 
 @dataclass(frozen=True)
@@ -326,3 +327,4 @@ class SceneDecl:
 class Model:
     decls: tuple
     path: str
+    ports: tuple = ()  # after instantiate: graph.Port, one per port of every instance

@@ -120,6 +120,18 @@ class Vector:
 
 
 @dataclass(frozen=True)
+class Port:
+    """A port of an instance, as declared: where a bond crossed its boundary (the bond itself
+    is one bond of the flat graph)."""
+
+    name: str  # its path, `p1.a`
+    dim: int
+    domain: str | None
+    unit: str | None
+    span: Span
+
+
+@dataclass(frozen=True)
 class Multibond:
     """A vector bond as written, and the scalar bonds flatten made of it."""
 
@@ -190,6 +202,7 @@ class Graph:
     warnings: tuple = ()
     vectors: tuple = ()  # after flatten: Vector, one per multiport element or vector signal
     multibonds: tuple = ()  # after flatten: Multibond, one per vector bond
+    ports: tuple = ()  # Port, one per port of every instance (components, docs/language.md)
 
     @cached_property
     def vector_by_name(self) -> dict:

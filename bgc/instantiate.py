@@ -32,6 +32,7 @@ from pathlib import Path
 
 from . import ast
 from .diagnostics import Collector, ModelError, Note, Origin, Span, did_you_mean, error, fail
+from .graph import Port
 from .kinds import KINDS
 from .resources import MAX_DIMENSION, MAX_GENERATED, MAX_INSTANCE_DEPTH, read_bounded
 
@@ -403,7 +404,7 @@ class _Instantiate:
         self.emit(root)
         self.fuse()
         self.diags.raise_if_errors()
-        return ast.Model(tuple(self.out), self.model.path)
+        return ast.Model(tuple(self.out), self.model.path, tuple(self.ports.values()))
 
     def child(self, parent: _Scope, stmt: ast.ElementDecl, env) -> _Scope:
         name = self.local_name(parent, stmt, env)
@@ -512,9 +513,9 @@ class _Instantiate:
             return
         if isinstance(stmt, ast.PortDecl):
             name = scope.prefix + stmt.name.name
-            self.ports[name] = _Port(name, stmt.dim.n if stmt.dim else 1,
-                                     stmt.domain.name if stmt.domain else None,
-                                     scope.sp(stmt.span), scope)
+            self.ports[name] = Port(name, stmt.dim.n if stmt.dim else 1,
+                                    stmt.domain.name if stmt.domain else None, stmt.unit,
+                                    scope.sp(stmt.span))
             return
         name = None
         if isinstance(stmt, (ast.ParamDecl, ast.SignalDecl, ast.IntegralDecl, ast.ElementDecl)):
@@ -681,15 +682,6 @@ class _Instantiate:
                 self.diags.error(sa.join(sb), "this bond joins ports only: no element at either "
                                               "end of the bonds it is part of")
                 break
-
-
-@dataclass
-class _Port:
-    name: str
-    dim: int
-    domain: str | None
-    span: Span
-    scope: _Scope
 
 
 _FIELDS: dict = {}  # a node type -> its fields' names, in order

@@ -142,7 +142,7 @@ class _ToAst(Transformer_NonRecursive):
 
     def port_decl(self, meta, c):
         return ast.PortDecl(_ident(c[0]), c[1], _ident(c[2]) if c[2] is not None else None,
-                            _span(meta))
+                            _span(meta), c[3])
 
     def constant_decl(self, meta, c):
         return ast.ConstantDecl(_ident(c[0]), c[1], _span(meta))

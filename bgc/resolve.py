@@ -724,4 +724,5 @@ def resolve(model: ast.Model) -> Graph:
             scenes.append(sc)
     diags.raise_if_errors()
     return Graph(mdecl.name.name, mdecl.doc, model.path, tuple(parameters), tuple(els),
-                 tuple(bonds), tuple(sigs), tuple(scenes), diags.warnings)
+                 tuple(bonds), tuple(sigs), tuple(scenes), diags.warnings,
+                 ports=tuple(model.ports))

@@ -88,7 +88,7 @@ LADDER = """model ladder "three RC sections"
 parameter V = 2.0
 parameter r0 = 1.5
 component section(r = 1.0 unit "ohm", c = 0.5 unit "F") {
-  port a : electrical
+  port a : electrical unit "V"
   port b : electrical
   node : 0
   link : 1
@@ -158,6 +158,8 @@ def test_ports_for_and_parameters_against_the_flat_twin():
     assert list(a.program.outputs) == ["s[1].cap.q", "s[3].cap.e", "s[2].res.f"]
     units = {p.name: p.unit for p in a.graph.parameters}
     assert units["s[2].r"] == "ohm" and units["s[3].c"] == "F" and units["V"] is None
+    assert [(p.name, p.domain) for p in a.graph.ports][:3] == [
+        ("s[1].a", "electrical"), ("s[1].b", "electrical"), ("s[2].a", "electrical")]
 
 
 def test_rc_ladder_against_scipy():
