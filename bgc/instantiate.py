@@ -39,6 +39,7 @@ from .resources import MAX_DIMENSION, MAX_GENERATED, MAX_INSTANCE_DEPTH, read_bo
 LIBRARY = Path(__file__).resolve().parent / "library"  # bgc's standard library
 
 MAX_CONSTANT = 2 ** 53  # the magnitude of a compile-time integer
+MAX_LIBRARIES = 100  # files one model imports, directly or not
 STRUCTURE = (ast.ComponentDecl, ast.ConstantDecl, ast.ForBlock, ast.IfBlock, ast.ImportDecl,
              ast.PortDecl, ast.LibraryDecl)
 
@@ -170,8 +171,8 @@ class _Instantiate:
         self.diags = Collector()
         self.generated = 0
         self.out: list = []  # the flat declarations
-        self.edges: list = []  # (src end, dst end, span, scope depth)
-        self.ports: dict = {}  # flat port name -> _Port
+        self.edges: list = []  # (src end, dst end, src span, dst span, depth of its scope)
+        self.ports: dict = {}  # flat port name -> graph.Port
         self.files: dict = {}  # resolved library path -> _File
         self.top = {id(d) for d in model.decls}  # the model file's top-level statements
         self.dims: dict = {}  # flat element name -> (dimension of its in side, of its out side)
@@ -247,14 +248,13 @@ class _Instantiate:
                                  f"beside {beside}, in the directories of $BGC_PATH, or in bgc's "
                                  "standard library")
         key = str(path.resolve())
-        lib = self.files.get(key)
+        if key not in self.files:
+            if len(self.files) >= MAX_LIBRARIES:
+                fail(top.sp(d.span), f"too many libraries imported (at most {MAX_LIBRARIES})")
+            self.files[key] = None  # being read: an import cycle ends here
+            self.files[key] = self.parse_library(path, d, top)
+        lib = self.files[key]
         if lib is None:
-            if len(self.files) >= 100:
-                fail(top.sp(d.span), "too many libraries imported (at most 100)")
-            self.files[key] = None  # being loaded: an import cycle ends here
-            lib = self.parse_library(path, d, top)
-            self.files[key] = lib
-        elif lib is None:
             fail(top.sp(d.span), f"library {shown} imports itself (through its imports)")
         if any(k.startswith(alias + ".") for k in f.components):
             fail(top.sp(d.span), f"'{alias}' names two imports")

@@ -624,3 +624,13 @@ def test_the_pendulum_chain_as_a_component_gives_the_same_numbers(backend):
     assert names0 == [f"{c}{k}" for k in range(1, 9) for c in "xy"]
     np.testing.assert_array_equal(t, t0)
     np.testing.assert_array_equal(Y, Y0)
+
+
+def test_an_import_cycle_is_an_error(tmp_path):
+    (tmp_path / "a.bg").write_text("library a\nimport b\n"
+                                   "component x() { port p; r : R(1); p -> r }\n")
+    (tmp_path / "b.bg").write_text("library b\nimport a\n")
+    model = tmp_path / "m.bg"
+    model.write_text("model m\nimport a\ns : Se(1)\nq : a.x()\ns -> q.p\n")
+    with pytest.raises(bgc.BgcModelError, match="library a.bg imports itself"):
+        bgc.build(model, program=False)
