@@ -306,43 +306,48 @@ class _Instantiate:
             if stmt is None:
                 stack.pop()
                 continue
-            env = top[1]
-            if isinstance(stmt, ast.ConstantDecl):
-                if scope.comp is None and id(stmt) in self.top:
-                    continue  # the file's constants: already in env
-                env = dict(env)
-                self.guard(self.constant, stmt, env, scope, False)
-                top[1] = env
-            elif isinstance(stmt, ast.ForBlock):
-                what = f"a bound of 'for {stmt.var.name}'"
-                a = _const(stmt.start, env, scope, what)
-                b = _const(stmt.stop, env, scope, what)
-                count = max(0, b - a + 1)
-                self.charge(count * max(1, len(stmt.body)), scope.sp(stmt.span))
-                for i in range(b, a - 1, -1):
-                    stack.append([iter(stmt.body), {**env, stmt.var.name: i}])
-            elif isinstance(stmt, ast.IfBlock):
-                chosen = next((body for cond, body in stmt.branches
-                               if _condition(cond, env, scope)), stmt.orelse)
-                if chosen:
-                    stack.append([iter(chosen), env])
-            elif isinstance(stmt, ast.ImportDecl):
-                if scope.comp is not None or id(stmt) not in self.top:
-                    fail(scope.sp(stmt.span), "'import' belongs at the top of a file")
-            elif isinstance(stmt, ast.ComponentDecl):
-                continue
-            elif isinstance(stmt, ast.LibraryDecl):
-                fail(scope.sp(stmt.span), f"'{stmt.name.name}' is a library: it holds "
-                                          "components for models to import, and cannot be "
-                                          "built itself")
-            elif isinstance(stmt, ast.PortDecl) and scope.comp is None:
-                fail(scope.sp(stmt.span), "'port' declares where bonds cross a component's "
-                                          "boundary; a model has no ports")
-            else:
-                self.charge(1, scope.sp(getattr(stmt, "span", None)))
-                scope.items.append((stmt, env))
+            self.guard(self.generate, scope, stmt, top, stack)
         for stmt, env in scope.items:
             self.guard(self.declare, scope, stmt, env)
+
+    def generate(self, scope: _Scope, stmt, top: list, stack: list):
+        """One statement of a body: kept (with its constants), or what it generates pushed
+        on the stack of bodies to read."""
+        env = top[1]
+        if isinstance(stmt, ast.ConstantDecl):
+            if scope.comp is None and id(stmt) in self.top:
+                return  # the file's constants: already in env
+            env = dict(env)
+            self.guard(self.constant, stmt, env, scope, False)
+            top[1] = env
+        elif isinstance(stmt, ast.ForBlock):
+            what = f"a bound of 'for {stmt.var.name}'"
+            a = _const(stmt.start, env, scope, what)
+            b = _const(stmt.stop, env, scope, what)
+            count = max(0, b - a + 1)
+            self.charge(count * max(1, len(stmt.body)), scope.sp(stmt.span))
+            for i in range(b, a - 1, -1):
+                stack.append([iter(stmt.body), {**env, stmt.var.name: i}])
+        elif isinstance(stmt, ast.IfBlock):
+            chosen = next((body for cond, body in stmt.branches
+                           if _condition(cond, env, scope)), stmt.orelse)
+            if chosen:
+                stack.append([iter(chosen), env])
+        elif isinstance(stmt, ast.ImportDecl):
+            if scope.comp is not None or id(stmt) not in self.top:
+                fail(scope.sp(stmt.span), "'import' belongs at the top of a file")
+        elif isinstance(stmt, ast.ComponentDecl):
+            return
+        elif isinstance(stmt, ast.LibraryDecl):
+            fail(scope.sp(stmt.span), f"'{stmt.name.name}' is a library: it holds "
+                                      "components for models to import, and cannot be "
+                                      "built itself")
+        elif isinstance(stmt, ast.PortDecl) and scope.comp is None:
+            fail(scope.sp(stmt.span), "'port' declares where bonds cross a component's "
+                                      "boundary; a model has no ports")
+        else:
+            self.charge(1, scope.sp(getattr(stmt, "span", None)))
+            scope.items.append((stmt, env))
 
     def declare(self, scope: _Scope, stmt, env):
         if isinstance(stmt, (ast.ParamDecl, ast.SignalDecl, ast.IntegralDecl, ast.ElementDecl,
@@ -391,7 +396,7 @@ class _Instantiate:
         self.diags.raise_if_errors()
         self.guard(self.expand, root, main.decls, dict(main.constants))
         self.diags.raise_if_errors()
-        # instances, breadth first: each one's body expanded once
+        # the instances, depth first: each one's body expanded once
         todo = [root]
         while todo:
             scope = todo.pop()
