@@ -169,19 +169,20 @@ def _consts(ctx, param, values) -> tuple:
     return tuple(sorted(out.items()))
 
 
-def _model_arg(f):
-    """The model file, and --const NAME=VALUE for its constants (a Source when given)."""
+def _model_arg(f, as_source: bool = True):
+    """The model file, and --const NAME=VALUE for its constants: given, the command gets the
+    model as a Source that carries them (as_source), or the values as `consts`."""
     f = click.argument("model", type=click.Path(exists=True, dir_okay=False))(f)
     f = click.option("--const", "consts", multiple=True, metavar="NAME=VALUE",
                      callback=_consts, help="A value for one of the model's constants "
                                             "(`constant N = 8`).")(f)
+    if not as_source:
+        return f
 
     @functools.wraps(f)
     def command(*args, consts=(), **kwargs):
-        if consts and kwargs.get("model") is not None and f.__name__ != "simulate":
+        if consts:
             kwargs["model"] = _or_exit(_source_with, kwargs["model"], consts)
-        elif f.__name__ == "simulate":
-            kwargs["consts"] = consts
         return f(*args, **kwargs)
     return command
 
@@ -191,6 +192,7 @@ def _source_with(path, consts) -> api.Source:
 
 
 MODEL = _model_arg
+MODEL_PATH = functools.partial(_model_arg, as_source=False)  # simulate (its cache reads the file)
 SCENE = click.option("--scene", "-s", default=None, help="Scene to use (default: all effects, "
                                                          "every state as an output).")
 
@@ -315,7 +317,7 @@ def compile(model, scene, outputs, effects, algebra, target, output, project_ini
 
 
 @main.command()
-@MODEL
+@MODEL_PATH
 @SCENE
 @ADHOC
 @ALGEBRA
@@ -348,7 +350,7 @@ def compile(model, scene, outputs, effects, algebra, target, output, project_ini
                    "or .pdf; needs matplotlib: pip install 'bgc[plot]').")
 def simulate(model, scene, outputs, effects, algebra, backend, solver, rtol, atol, t_end, dt,
              step, max_steps, params, project_initial, allow_inconsistent, stats, output,
-             plot_file, consts=()):
+             plot_file, consts):
     """Simulate and write CSV.  A model compiled before with the same options runs at once
     (bgc.warm); otherwise it is compiled, and the result kept for the next run.  On a
     terminal, a run that takes more than a second shows its progress on stderr."""
