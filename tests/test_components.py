@@ -76,7 +76,11 @@ def assert_twins(component_text, flat_text, scene=None):
     names = _renaming(a, b)
     for x, y in zip(rates(a), rates(b)):
         assert sp.simplify(x.xreplace(names) - y) == 0, (x, y)
-    assert len(a.program.outputs) == len(b.program.outputs)
+    assert len(a.reduced.outputs) == len(b.reduced.outputs)
+    oa = explicit_forms(a.reduced, [o.expr for o in a.reduced.outputs])
+    ob = explicit_forms(b.reduced, [o.expr for o in b.reduced.outputs])
+    for x, y in zip(a.reduced.outputs, b.reduced.outputs):
+        assert sp.simplify(oa[x.expr].xreplace(names) - ob[y.expr]) == 0, (x, y)
     for emit in (emit_c, emit_python):
         (ca,), (cb,) = emit(a.program).values(), emit(b.program).values()
         assert _renamed_code(ca, a, b) == cb
