@@ -15,6 +15,7 @@ from .flatten import flatten
 from .system import EquationSystem, build_equations, with_residual_outputs
 from .graph import Graph
 from .ir import Program
+from .instantiate import instantiate
 from .lower import lower
 from .parser import decode, parse, parse_option
 from .reduce import Reduced, reduce
@@ -33,6 +34,13 @@ from .runner import Result, choose_backend, prepare, run, settings_for
 class Source:
     path: str
     text: str
+    consts: tuple = ()  # ((name, value), ...): values for the model's constants (--const)
+
+
+def front(src: Source):
+    """The parse and instantiate stages: the model's text as a flat AST (components
+    instantiated, `for` and `if` expanded, constants replaced by their values)."""
+    return instantiate(parse(src.text, src.path), dict(src.consts))
 
 
 @dataclass(frozen=True)
@@ -101,7 +109,9 @@ def source_from_bytes(path: str, data: bytes) -> Source:
 
 
 def _source(model) -> Source:
-    return Source(model.path, model.text) if isinstance(model, Source) else read_source(model)
+    if isinstance(model, Source):
+        return Source(model.path, model.text, tuple(getattr(model, "consts", ())))
+    return read_source(model)
 
 
 def _option_text(value, what: str) -> str:
@@ -152,6 +162,7 @@ def build(model, scene: str | None = None, project_initial: bool = False,
     try:
         override = scene_override(outputs, effects, option_names[:2])
         ast_ = clock("parse", parse, src.text, src.path)
+        ast_ = clock("instantiate", instantiate, ast_, dict(src.consts))
         graph = clock("resolve", resolve, ast_)
         graph = clock("flatten", flatten, graph)
         scenario = clock("scene", apply_scene, graph, scene, override, option_names[2])
@@ -173,7 +184,7 @@ def check_scenes(compiled: Compiled):
     of them: BgcModelError with the errors of each scene that fails, a note naming the scene
     unless the error is in it.  compiled is a build of the model's text that succeeded."""
     src = compiled.source
-    graph = flatten(resolve(parse(src.text, src.path)))
+    graph = flatten(resolve(front(src)))
     diagnostics = []
     for sc in graph.scenes:
         try:
@@ -181,7 +192,8 @@ def check_scenes(compiled: Compiled):
             reduce(build_equations(causal), False, compiled.reduced.algebra)
         except ModelError as exc:
             for d in exc.diagnostics:
-                inside = d.span is not None and sc.span.line <= d.span.line <= sc.span.end_line
+                inside = d.span is not None and not d.span.chain and d.span.origin is None \
+                    and sc.span.line <= d.span.line <= sc.span.end_line
                 diagnostics.append(d if inside else replace(
                     d, notes=d.notes + (Note(sc.span, f"in scene '{sc.name}'"),)))
     if diagnostics:
@@ -230,7 +242,7 @@ def scenes(model) -> str:
     """`bgc scenes`: the model's scenes with their docs, effects, outputs and settings."""
     src = _source(model)
     try:
-        graph = resolve(parse(src.text, src.path))
+        graph = resolve(front(src))
     except ModelError as exc:
         raise BgcModelError(exc, src) from None
     return scenes_report(graph, src.text)

@@ -57,6 +57,33 @@ class Index:
 
 
 @dataclass(frozen=True)
+class Member:
+    """BASE.NAME where BASE is not a plain path (`link[i].tip`): resolved to a Field or a
+    Name by the instantiate stage, once the index is a constant."""
+
+    base: object
+    name: str
+    span: Span
+
+
+@dataclass(frozen=True)
+class Compare:
+    """A relation of compile-time constants (`if i > 1`)."""
+
+    op: str
+    left: object
+    right: object
+    span: Span
+
+
+@dataclass(frozen=True)
+class BoolOp:
+    op: str  # and | or | not
+    items: tuple
+    span: Span
+
+
+@dataclass(frozen=True)
 class Vector:
     items: tuple
     span: Span
@@ -118,6 +145,7 @@ class ParamDecl:
     expr: object
     doc: str | None
     span: Span
+    unit: str | None = None
 
 
 @dataclass(frozen=True)
@@ -131,6 +159,7 @@ class ElementDecl:
     constraint: ConstraintSpec | None
     doc: str | None
     span: Span
+    index: object = None  # `link[i] : ...`: the index expression (instantiate resolves it)
 
     @property
     def is_junction(self) -> bool:
@@ -143,6 +172,8 @@ class SignalDecl:
     dim: Dim | None
     expr: object
     span: Span
+    unit: str | None = None
+    index: object = None
 
 
 @dataclass(frozen=True)
@@ -152,11 +183,87 @@ class IntegralDecl:
     expr: object
     init: object
     span: Span
+    unit: str | None = None
+    index: object = None
+
+
+@dataclass(frozen=True)
+class PathRef:
+    """A bond's end with indexed segments (`link[i-1].tip`): ((name Ident, index expr or
+    None), ...); the instantiate stage makes it an Ident naming the path."""
+
+    parts: tuple
+    span: Span
 
 
 @dataclass(frozen=True)
 class BondChain:
-    nodes: tuple[Ident, ...]
+    nodes: tuple  # Ident (a plain path `a` or `p1.a`) or PathRef
+    span: Span
+
+
+# ---------------------------------------------------------------- components and generation
+@dataclass(frozen=True)
+class LibraryDecl:
+    name: Ident
+    doc: str | None
+    span: Span
+
+
+@dataclass(frozen=True)
+class ComponentParam:
+    name: Ident
+    default: object | None
+    unit: str | None
+    span: Span
+
+
+@dataclass(frozen=True)
+class ComponentDecl:
+    name: Ident
+    params: tuple[ComponentParam, ...]
+    doc: str | None
+    body: tuple
+    span: Span
+
+
+@dataclass(frozen=True)
+class PortDecl:
+    name: Ident
+    dim: Dim | None
+    domain: Ident | None
+    span: Span
+    unit: str | None = None
+
+
+@dataclass(frozen=True)
+class ConstantDecl:
+    name: Ident
+    expr: object
+    span: Span
+
+
+@dataclass(frozen=True)
+class ForBlock:
+    var: Ident
+    start: object
+    stop: object
+    body: tuple
+    span: Span
+
+
+@dataclass(frozen=True)
+class IfBlock:
+    branches: tuple  # ((condition, body), ...): if, then each elif
+    orelse: tuple | None
+    span: Span
+
+
+@dataclass(frozen=True)
+class ImportDecl:
+    name: Ident | None  # import NAME
+    file: str | None  # import "file.bg"
+    alias: Ident | None
     span: Span
 
 
@@ -220,3 +327,4 @@ class SceneDecl:
 class Model:
     decls: tuple
     path: str
+    ports: tuple = ()  # after instantiate: graph.Port, one per port of every instance

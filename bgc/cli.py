@@ -4,11 +4,13 @@ from __future__ import annotations
 
 import contextlib
 import errno
+import functools
 import io
 import math
 import os
 import sys
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import click
@@ -202,7 +204,47 @@ def _overrides(values, compiled) -> dict:
     return _parse_params(values, sorted(p.name for p in compiled.program.params))
 
 
-MODEL = click.argument("model", type=click.Path(exists=True, dir_okay=False))
+def _consts(ctx, param, values) -> tuple:
+    """--const NAME=VALUE items as ((name, int value), ...)."""
+    out = {}
+    for item in values:
+        name, sep, value = item.partition("=")
+        if not sep or not name.isidentifier():
+            raise click.BadParameter(f"expects NAME=VALUE, got '{item}'", ctx, param)
+        try:
+            out[name] = int(value.strip())
+        except ValueError:
+            raise click.BadParameter(f"{name}: '{value}' is not a whole number", ctx,
+                                     param) from None
+        if abs(out[name]) > 2 ** 53:
+            raise click.BadParameter(f"{name}: {value} is too large", ctx, param)
+    return tuple(sorted(out.items()))
+
+
+def _model_arg(f, as_source: bool = True):
+    """The model file, and --const NAME=VALUE for its constants: given, the command gets the
+    model as a Source that carries them (as_source), or the values as `consts`."""
+    f = click.argument("model", type=click.Path(exists=True, dir_okay=False))(f)
+    f = click.option("--const", "consts", multiple=True, metavar="NAME=VALUE",
+                     callback=_consts, help="A value for one of the model's constants "
+                                            "(`constant N = 8`).")(f)
+    if not as_source:
+        return f
+
+    @functools.wraps(f)
+    def command(*args, consts=(), **kwargs):
+        if consts:
+            kwargs["model"] = _or_exit(_source_with, kwargs["model"], consts)
+        return f(*args, **kwargs)
+    return command
+
+
+def _source_with(path, consts) -> api.Source:
+    return replace(api.read_source(path), consts=consts)
+
+
+MODEL = _model_arg
+MODEL_PATH = functools.partial(_model_arg, as_source=False)  # simulate (its cache reads the file)
 SCENE = click.option("--scene", "-s", default=None, help="Scene to use (default: all effects, "
                                                          "every state as an output).")
 
@@ -357,7 +399,7 @@ def compile(model, scene, outputs, effects, algebra, target, output, project_ini
 
 
 @main.command()
-@MODEL
+@MODEL_PATH
 @SCENE
 @ADHOC
 @ALGEBRA
@@ -390,7 +432,7 @@ def compile(model, scene, outputs, effects, algebra, target, output, project_ini
                    "or .pdf; needs matplotlib: pip install 'bgc[plot]').")
 def simulate(model, scene, outputs, effects, algebra, backend, solver, rtol, atol, t_end, dt,
              step, max_steps, params, project_initial, allow_inconsistent, stats, output,
-             plot_file):
+             plot_file, consts):
     """Simulate and write CSV.  A model compiled before with the same options runs at once
     (bgc.warm); otherwise it is compiled, and the result kept for the next run.  On a
     terminal, a run that takes more than a second shows its progress on stderr."""
@@ -399,7 +441,7 @@ def simulate(model, scene, outputs, effects, algebra, backend, solver, rtol, ato
         raise click.UsageError("--project-initial and --allow-inconsistent exclude each other")
     backend = _backend(backend)
     request = warm.Request(model, scene, outputs, effects, algebra, project_initial,
-                           allow_inconsistent, backend)
+                           allow_inconsistent, backend, consts)
     found = warm.lookup(request)
     if found is not None and warm.needs_model(found[0], solver, step):
         found = None
@@ -467,7 +509,7 @@ def _compile_for_run(request: warm.Request):
     except OSError as exc:
         click.echo(f"error: {r.model}: cannot read: {exc.strerror}", err=True)
         sys.exit(1)
-    source = _or_exit(api.source_from_bytes, r.model, data)
+    source = replace(_or_exit(api.source_from_bytes, r.model, data), consts=r.consts)
     compiled = _build(source, r.scene, r.project_initial, r.algebra, outputs=r.outputs,
                       effects=r.effects, allow_inconsistent=r.allow_inconsistent)
     program = runner.prepare(compiled, r.backend)

@@ -24,11 +24,14 @@ class Span:
     end_line: int
     end_col: int
     origin: Origin | None = field(default=None, compare=False)
+    # inside a component: the chain of instances that led here, innermost first, as
+    # ((instance path, span of the instance's declaration), ...)
+    chain: tuple = field(default=(), compare=False)
 
     def join(self, other: "Span") -> "Span":
         start = min((self.line, self.col), (other.line, other.col))
         end = max((self.end_line, self.end_col), (other.end_line, other.end_col))
-        return Span(start[0], start[1], end[0], end[1], self.origin)
+        return Span(start[0], start[1], end[0], end[1], self.origin, self.chain)
 
 
 
@@ -125,11 +128,18 @@ def format_diagnostic(d: Diagnostic, path: str, source: str | None) -> str:
     where, lines = _located(d.span, path, source)
     out = [f"{where}: {d.severity}: {d.message}"]
     out += _excerpt(lines, d.span)
-    for n in d.notes:
+    for n in d.notes + instance_notes(d.span):
         nwhere, nlines = _located(n.span, path, source)
         out.append(f"{nwhere}: note: {n.message}")
         out += _excerpt(nlines, n.span)
     return "\n".join(out)
+
+
+def instance_notes(span: Span | None) -> tuple[Note, ...]:
+    """One note per level of the chain of instances a span inside a component came from."""
+    if span is None:
+        return ()
+    return tuple(Note(at, f"in instance {path}") for path, at in span.chain)
 
 
 def did_you_mean(name: str, candidates) -> str:

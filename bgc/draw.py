@@ -117,9 +117,9 @@ def _label(main: str, sub: str | None = None, grey: bool = False) -> _Html:
 
 def _written(compiled) -> Graph:
     """The graph as the model text writes it: multiports whole, every effect in."""
-    from .parser import parse
+    from .api import front
     from .resolve import resolve
-    return resolve(parse(compiled.source.text, compiled.source.path))
+    return resolve(front(compiled.source))
 
 
 def _text(expr, lines: list[str]) -> str:

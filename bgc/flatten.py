@@ -288,7 +288,8 @@ def flatten(g: Graph) -> Graph:
                                                                  f"'{s.name}'", False)
         for i in range(s.dim):
             signals.append(Signal(part_name(s.name, i), _part(s.expr, values[i]),
-                                  None if inits is None else _part(s.init, inits[i]), s.span))
+                                  None if inits is None else _part(s.init, inits[i]), s.span,
+                                  unit=s.unit, order=s.order))
     diags.raise_if_errors()
     return replace(g, elements=tuple(elements), bonds=tuple(bonds), signals=tuple(signals),
                    vectors=tuple(vectors), multibonds=tuple(multibonds))

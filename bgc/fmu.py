@@ -130,13 +130,14 @@ def describe(compiled) -> Description:
                            "parameter or an output; leave it out of the outputs "
                            "(the parameter is in the FMU)")
     docs = {p.name: p.doc for p in graph.parameters}
+    declared_units = {p.name: p.unit for p in graph.parameters}
     outputs_of_state = {state_index[o]: k for k, o in enumerate(program.outputs)
                         if o in state_index}
     variables: list[Variable] = []
     units: dict[str, None] = {}
     for j, (p, value) in enumerate(zip(program.params, _parameter_values(program))):
         doc = docs.get(p.name)
-        unit = _unit(doc)
+        unit = declared_units.get(p.name) or _unit(doc)
         if unit:
             units[unit] = None
         variables.append(Variable(p.name, j, "parameter", "fixed", "exact", doc, value, unit))
@@ -217,7 +218,7 @@ FIELDS = {"e": "effort", "f": "flow", "p": "generalized momentum",
 def _variable_doc(graph, name: str) -> str | None:
     """What a variable is, with its element's doc string: "ind.p" -> "generalized momentum
     of ind (inductor: ...)", "mass.p[2]" -> "... of mass[2] (...)"; None for a signal."""
-    head, dot, rest = name.partition(".")
+    head, dot, rest = name.rpartition(".")  # (a path: `s[1].cap.q` is variable q of s[1].cap)
     if not dot:
         return None
     m = re.fullmatch(r"(.*?)(\[[0-9]+\])?", rest)

@@ -44,6 +44,7 @@ class Parameter:
     expr: Expr
     doc: str | None
     span: Span
+    unit: str | None = None  # `unit "kg"`
 
 
 @dataclass(frozen=True)
@@ -70,6 +71,7 @@ class Element:
     name_span: Span
     dim: tuple[int, int] | None = None  # multiport (n in, m out; n == m but for MTF/MGY)
     origin: str | None = None  # after flatten: the multiport this scalar part comes from
+    order: int = 0  # its declaration's place in the (instantiated) model, among all declarations
 
     @property
     def is_junction(self) -> bool:
@@ -98,6 +100,8 @@ class Signal:
     init: Expr | None  # integral blocks: the state's initial value
     span: Span
     dim: int | None = None  # a vector signal (before flatten)
+    unit: str | None = None  # `unit "m"`
+    order: int = 0  # its declaration's place in the (instantiated) model, among all declarations
 
     @property
     def is_integral(self) -> bool:
@@ -113,6 +117,18 @@ class Vector:
     dim: int  # its components (a multiport's one-port side, or its output side)
     kind: str  # the element's kind, "signal" for signals
     constraint: bool = False
+
+
+@dataclass(frozen=True)
+class Port:
+    """A port of an instance, as declared: where a bond crossed its boundary (the bond itself
+    is one bond of the flat graph)."""
+
+    name: str  # its path, `p1.a`
+    dim: int
+    domain: str | None
+    unit: str | None
+    span: Span
 
 
 @dataclass(frozen=True)
@@ -186,6 +202,7 @@ class Graph:
     warnings: tuple = ()
     vectors: tuple = ()  # after flatten: Vector, one per multiport element or vector signal
     multibonds: tuple = ()  # after flatten: Multibond, one per vector bond
+    ports: tuple = ()  # Port, one per port of every instance (components, docs/language.md)
 
     @cached_property
     def vector_by_name(self) -> dict:

@@ -20,11 +20,14 @@ from . import api, run, runner
 
 def load(path, text: str | None = None, scene: str | None = None, backend: str = "c",
          algebra: str = "auto", outputs=None, effects=None, project_initial: bool = False,
-         allow_inconsistent: bool = False) -> Model:
+         allow_inconsistent: bool = False, consts=None) -> Model:
     """A model for interactive use (a Model, which is also a Source): the file read now
     (UTF-8, size-limited; `text` gives the source directly), built on first use with the
-    scene and options given."""
-    return Model(api.read_source(path, text), scene, backend, algebra, outputs, effects,
+    scene and options given; consts: {name: whole number} for the model's constants."""
+    source = api.read_source(path, text)
+    if consts:
+        source = api.Source(source.path, source.text, tuple(sorted(dict(consts).items())))
+    return Model(source, scene, backend, algebra, outputs, effects,
                  project_initial, allow_inconsistent)
 
 
@@ -107,6 +110,7 @@ class Model(api.Source):
         run.exclusive(project_initial, allow_inconsistent)
         object.__setattr__(self, "path", source.path)
         object.__setattr__(self, "text", source.text)
+        object.__setattr__(self, "consts", tuple(getattr(source, "consts", ())))
         object.__setattr__(self, "_options", dict(
             scene=scene, backend=backend, algebra=algebra, outputs=outputs, effects=effects,
             project_initial=bool(project_initial), allow_inconsistent=bool(allow_inconsistent)))
@@ -123,9 +127,9 @@ class Model(api.Source):
     def compiled(self) -> api.Compiled:
         """Every stage's value (bgc.build)."""
         o = self._options
-        return api.build(api.Source(self.path, self.text), o["scene"], o["project_initial"],
-                         o["algebra"], outputs=o["outputs"], effects=o["effects"],
-                         allow_inconsistent=o["allow_inconsistent"])
+        return api.build(api.Source(self.path, self.text, self.consts), o["scene"],
+                         o["project_initial"], o["algebra"], outputs=o["outputs"],
+                         effects=o["effects"], allow_inconsistent=o["allow_inconsistent"])
 
     @functools.cached_property
     def _python(self) -> runner.Program:

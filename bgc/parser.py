@@ -16,7 +16,8 @@ from .resources import (MAX_DIMENSION, MAX_NESTING, MAX_OPTION_CHARS, MAX_SOURCE
 
 # Reserved: none of these can name anything (docs/semantics.md, "Names").
 KEYWORDS = frozenset("""model parameter signal integral init constraint holonomic nonholonomic
-    corrector pid pd none phi scene effects outputs time every solver set""".split())
+    corrector pid pd none phi scene effects outputs time every solver set
+    library component port constant for in if elif else and or not import as unit""".split())
 
 # Friendly names for terminals in "expected ..." messages.
 _TERMINAL_NAMES = {
@@ -129,21 +130,88 @@ class _ToAst(Transformer_NonRecursive):
     def model_decl(self, meta, c):
         return ast.ModelDecl(_ident(c[0]), _doc(c[1]), _span(meta))
 
+    def library_decl(self, meta, c):
+        return ast.LibraryDecl(_ident(c[0]), _doc(c[1]), _span(meta))
+
     def param_decl(self, meta, c):
-        return ast.ParamDecl(_ident(c[0]), c[1], _doc(c[2]), _span(meta))
+        return ast.ParamDecl(_ident(c[0]), c[1], _doc(c[3]), _span(meta), c[2])
+
+    def unit(self, meta, c):
+        return _doc(c[0])
+
+    def decl_name(self, meta, c):
+        return (_ident(c[0]), c[1])
+
+    def qname(self, meta, c):
+        return ast.Ident(".".join(str(t) for t in c), _span(meta))
 
     def element_decl(self, meta, c):
-        name, kind, dim, args, *rest = c
+        (name, index), kind, dim, args, *rest = c
         inits = tuple(x for x in rest if isinstance(x, ast.InitClause))
         effects = tuple(x for x in rest if isinstance(x, ast.Ident))
-        return ast.ElementDecl(_ident(name), _ident(kind), dim, tuple(args or ()), inits,
-                               effects, None, _doc(rest[-1]), _span(meta))
+        return ast.ElementDecl(name, kind, dim, tuple(args or ()), inits,
+                               effects, None, _doc(rest[-1]), _span(meta), index)
 
     def junction_decl(self, meta, c):
-        name, kind, dim, constraint, *rest = c
+        (name, index), kind, dim, constraint, *rest = c
         effects = tuple(x for x in rest if isinstance(x, ast.Ident))
-        return ast.ElementDecl(_ident(name), _ident(kind), dim, (), (), effects, constraint,
-                               _doc(rest[-1]), _span(meta))
+        return ast.ElementDecl(name, _ident(kind), dim, (), (), effects, constraint,
+                               _doc(rest[-1]), _span(meta), index)
+
+    # components and generation
+    def component_decl(self, meta, c):
+        name, params, doc, *body = c
+        return ast.ComponentDecl(_ident(name), tuple(params or ()), _doc(doc), tuple(body),
+                                 _span(meta))
+
+    def cparams(self, meta, c):
+        return tuple(c)
+
+    def cparam(self, meta, c):
+        return ast.ComponentParam(_ident(c[0]), c[1], c[2], _span(meta))
+
+    def port_decl(self, meta, c):
+        return ast.PortDecl(_ident(c[0]), c[1], _ident(c[2]) if c[2] is not None else None,
+                            _span(meta), c[3])
+
+    def constant_decl(self, meta, c):
+        return ast.ConstantDecl(_ident(c[0]), c[1], _span(meta))
+
+    def for_block(self, meta, c):
+        return ast.ForBlock(_ident(c[0]), c[1], c[2], tuple(c[3:]), _span(meta))
+
+    def if_block(self, meta, c):
+        cond, *rest = c
+        body = tuple(x for x in rest if not isinstance(x, tuple) and x is not None)
+        branches = [(cond, body)] + [(x[1], x[2]) for x in rest
+                                     if isinstance(x, tuple) and x[0] == "elif"]
+        orelse = next((x[1] for x in rest if isinstance(x, tuple) and x[0] == "else"), None)
+        return ast.IfBlock(tuple(branches), orelse, _span(meta))
+
+    def elif_part(self, meta, c):
+        return ("elif", c[0], tuple(c[1:]))
+
+    def else_part(self, meta, c):
+        return ("else", tuple(c))
+
+    def compare(self, meta, c):
+        return ast.Compare(str(c[1]), c[0], c[2], _span(meta))
+
+    def cond_or(self, meta, c):
+        return ast.BoolOp("or", tuple(c), _span(meta))
+
+    def cond_and(self, meta, c):
+        return ast.BoolOp("and", tuple(c), _span(meta))
+
+    def cond_not(self, meta, c):
+        return ast.BoolOp("not", tuple(c), _span(meta))
+
+    def import_name(self, meta, c):
+        return ast.ImportDecl(_ident(c[0]), None, _ident(c[1]) if c[1] is not None else None,
+                              _span(meta))
+
+    def import_file(self, meta, c):
+        return ast.ImportDecl(None, _doc(c[0]), _ident(c[1]), _span(meta))
 
     def dim(self, meta, c):
         return ast.Dim(_whole(c[0], "dimension"), _whole(c[1], "dimension") if c[1] is not None
@@ -184,13 +252,20 @@ class _ToAst(Transformer_NonRecursive):
         return ast.Corrector("none", (), _span(meta))
 
     def signal_decl(self, meta, c):
-        return ast.SignalDecl(_ident(c[0]), c[1], c[2], _span(meta))
+        name, dim, expr, unit = c
+        return ast.SignalDecl(_ident(name), dim, expr, _span(meta), unit)
 
     def integral_decl(self, meta, c):
-        return ast.IntegralDecl(_ident(c[0]), c[1], c[2], c[3], _span(meta))
+        name, dim, expr, init, unit = c
+        return ast.IntegralDecl(_ident(name), dim, expr, init, _span(meta), unit)
+
+    def path(self, meta, c):
+        if all(index is None for _, index in c):
+            return ast.Ident(".".join(n.name for n, _ in c), _span(meta))
+        return ast.PathRef(tuple(c), _span(meta))
 
     def bond_chain(self, meta, c):
-        return ast.BondChain(tuple(_ident(t) for t in c), _span(meta))
+        return ast.BondChain(tuple(c), _span(meta))
 
     # scenes
     def scene_decl(self, meta, c):
@@ -209,8 +284,16 @@ class _ToAst(Transformer_NonRecursive):
         return tuple(c)
 
     def outref(self, meta, c):
-        index = _whole(c[2], "index") if c[2] is not None else None
-        return ast.OutRef(str(c[0]), str(c[1]) if c[1] is not None else None, index, _span(meta))
+        """a, a[1], a.f, a.f[1], p1.res.e, arm.link[2].rod.lambda: the last name a field when
+        there is more than one, the last index the output's."""
+        *head, (last, index) = c
+        text = lambda segs: ".".join(n + (f"[{i}]" if i is not None else "") for n, i in segs)
+        if not head:
+            return ast.OutRef(last, None, index, _span(meta))
+        return ast.OutRef(text(head), last, index, _span(meta))
+
+    def outseg(self, meta, c):
+        return (str(c[0]), _whole(c[1], "index") if c[1] is not None else None)
 
     def scene_time(self, meta, c):
         return ast.SceneTime(c[0], c[1], c[2], _span(meta))
@@ -223,7 +306,7 @@ class _ToAst(Transformer_NonRecursive):
         return (_ident(c[0]), c[1])
 
     def scene_set(self, meta, c):
-        return ast.SceneSet(_ident(c[0]), c[1], _span(meta))
+        return ast.SceneSet(c[0], c[1], _span(meta))
 
     # expressions
     def number(self, meta, c):
@@ -232,8 +315,13 @@ class _ToAst(Transformer_NonRecursive):
     def name(self, meta, c):
         return ast.Name(str(c[0]), _span(meta))
 
-    def field(self, meta, c):
-        return ast.Field(str(c[0]), str(c[1]), _span(meta))
+    def member(self, meta, c):
+        base, name = c
+        if isinstance(base, ast.Name):
+            return ast.Field(base.name, str(name), _span(meta))
+        if isinstance(base, ast.Field):
+            return ast.Field(f"{base.owner}.{base.field}", str(name), _span(meta))
+        return ast.Member(base, str(name), _span(meta))
 
     def call(self, meta, c):
         return ast.Call(str(c[0]), tuple(x for x in c[1:] if x is not None), _span(meta))

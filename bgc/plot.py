@@ -35,8 +35,8 @@ KINDS = {  # group: (panel title, the quantity on its axis)
     "residual": ("constraint residuals", "residual Φ"),
     "parameter": ("parameters", "value"),
 }
-_VARIABLE = re.compile(r"([A-Za-z_][A-Za-z0-9_]*)\.([a-z]+)(?:\[([0-9]+)\])?")
-_INDEXED = re.compile(r"([A-Za-z_][A-Za-z0-9_]*)\[([0-9]+)\]")
+_VARIABLE = re.compile(r"([A-Za-z_][A-Za-z0-9_.\[\]]*)\.([a-z]+)(?:\[([0-9]+)\])?")
+_INDEXED = re.compile(r"([A-Za-z_][A-Za-z0-9_.\[\]]*)\[([0-9]+)\]")
 _UNIT = re.compile(r"^(.*?)\s*\[([^\[\]]+)\]\s*$")
 
 
@@ -131,6 +131,7 @@ def columns(compiled, names) -> list[Column]:
     """What each CSV column of a run of `compiled` is (see the module's doc)."""
     graph = compiled.graph
     params = {p.name: p for p in graph.parameters}
+    signals = {s.name: s for s in graph.signals}
     out = []
     for name in names:
         m = _VARIABLE.fullmatch(name)
@@ -146,9 +147,10 @@ def columns(compiled, names) -> list[Column]:
         base = plain.group(1) if plain else name
         if base in params:
             doc, unit = _doc_unit(params[base].doc)
-            out.append(Column(name, "parameter", doc, unit))
+            out.append(Column(name, "parameter", doc, params[base].unit or unit))
         else:
-            out.append(Column(name, "signal", None, None))
+            sig = signals.get(name) or signals.get(base)
+            out.append(Column(name, "signal", None, sig.unit if sig is not None else None))
     return out
 
 

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import math
 import sys
+from dataclasses import replace
 
 import sympy as sp
 
@@ -217,6 +218,8 @@ class _ExprBuilder:
             return self._name(node)
         if isinstance(node, ast.Field):
             return self._field(node)
+        if isinstance(node, ast.Member):
+            fail(node.span, f"'.{node.name}' follows something that is not a name")
         fail(node.span, "unexpected expression")
 
     def _name(self, node: ast.Name):
@@ -501,7 +504,7 @@ def _parameters(params, scope: _Scope, diags: Collector):
             e = None
         seen.add(name)
         if e is not None:
-            out.append(Parameter(name, e, d.doc, d.span))
+            out.append(Parameter(name, e, d.doc, d.span, d.unit))
     scope.params_only, scope.visible_params = False, None
     return out
 
@@ -620,7 +623,7 @@ def _signal(d, scope, diags) -> Signal:
         finally:
             scope.params_only = False
         _check_size(init, n, f"the initial value of '{d.name.name}'", broadcast=True)
-    return Signal(d.name.name, expr, init, d.span, n)
+    return Signal(d.name.name, expr, init, d.span, n, d.unit)
 
 
 def _check_size(e: Expr, n: int | None, what: str, broadcast: bool = False) -> None:
@@ -697,8 +700,11 @@ def resolve(model: ast.Model) -> Graph:
     params, signals, elements = _collect_names(model, diags)
     scope = _Scope(params, signals, elements)
     parameters = _parameters(params, scope, diags)
-    els = [e for e in (_guard(diags, _element, d, scope, diags) for d in elements.values()) if e]
-    sigs = [s for s in (_guard(diags, _signal, d, scope, diags) for d in signals.values()) if s]
+    order = {id(d): k for k, d in enumerate(model.decls)}
+    els = [replace(e, order=order[id(d)]) for d, e in
+           ((d, _guard(diags, _element, d, scope, diags)) for d in elements.values()) if e]
+    sigs = [replace(s, order=order[id(d)]) for d, s in
+            ((d, _guard(diags, _signal, d, scope, diags)) for d in signals.values()) if s]
     bonds = _bonds(model, elements, params, signals, diags)
     check_ports(els, bonds, diags)
     scenes, scene_names = [], {}
@@ -718,4 +724,5 @@ def resolve(model: ast.Model) -> Graph:
             scenes.append(sc)
     diags.raise_if_errors()
     return Graph(mdecl.name.name, mdecl.doc, model.path, tuple(parameters), tuple(els),
-                 tuple(bonds), tuple(sigs), tuple(scenes), diags.warnings)
+                 tuple(bonds), tuple(sigs), tuple(scenes), diags.warnings,
+                 ports=tuple(model.ports))

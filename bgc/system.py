@@ -437,7 +437,10 @@ def _outputs(b: _Builder, refs, left_out=()) -> tuple[OutputDef, ...]:
     params = {p.name for p in b.g.parameters}
     diags = Collector()
     out = []
+    names = {s.name for s in b.g.signals} | params | {v.name for v in b.g.vectors
+                                                      if v.what == "signal"} | set(why)
     for ref in refs:
+        ref = _signal_path(ref, b.g, names)
         if ref.owner in why:
             diags.error(ref.span, f"output '{ref.text}' is left out by this scene's effects: "
                                   f"'{ref.owner}' {_reason(why[ref.owner])}")
@@ -450,6 +453,15 @@ def _outputs(b: _Builder, refs, left_out=()) -> tuple[OutputDef, ...]:
             diags.items.extend(exc.diagnostics)
     diags.raise_if_errors()
     return tuple(out)
+
+
+def _signal_path(ref, g: Graph, names):
+    """`p1.x` written as an output, x a signal (or parameter) of instance p1: the name
+    `p1.x`, not variable x of an element p1."""
+    if ref.field is None or ref.owner in g.by_name or ref.owner in g.vector_by_name:
+        return ref
+    name = f"{ref.owner}.{ref.field}"
+    return replace(ref, owner=name, field=None) if name in names else ref
 
 
 def _reason(why: str) -> str:
@@ -518,8 +530,7 @@ def build_equations(cg: CausalGraph) -> EquationSystem:
     b = _Builder(cg)
     g = cg.graph
     diags = Collector()
-    for item in sorted(list(g.elements) + list(g.signals),
-                       key=lambda d: (d.span.line, d.span.col)):
+    for item in sorted(list(g.elements) + list(g.signals), key=lambda d: d.order):
         try:
             if not isinstance(item, Element):
                 b.signal(item)

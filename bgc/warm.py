@@ -29,6 +29,7 @@ bgc.runner and bgc.solvers, which do too; bgc.plot when a cold run makes a recor
 from __future__ import annotations
 
 import hashlib
+import re
 import json
 import os
 import shutil
@@ -55,6 +56,7 @@ class Request:
     project_initial: bool
     allow_inconsistent: bool
     backend: str
+    consts: tuple = ()  # --const NAME=VALUE, as ((name, value), ...)
 
 
 @dataclass(frozen=True)
@@ -103,6 +105,9 @@ def _toolchain(backend: str) -> list:
     return facts
 
 
+IMPORT = re.compile(rb"^[ \t]*import\b", re.MULTILINE)
+
+
 def key(request: Request, source: bytes) -> str:
     from . import __version__
     parts = [FORMAT, __version__, _installation(), hashlib.sha256(source).hexdigest(),
@@ -120,6 +125,8 @@ def lookup(request: Request) -> tuple[Record, Path] | None:
     try:
         source = read_bounded(request.model)
     except OSError:
+        return None
+    if IMPORT.search(source):  # its libraries are other files: compiled cold, every time
         return None
     path = _record_path(key(request, source))
     try:
