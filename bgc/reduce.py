@@ -302,7 +302,7 @@ class _Coordinates:
         coeffs = {q: coeffs[q] for q in self.coords if q in coeffs}
         if any(co.free_symbols & rates.keys() for co in coeffs.values()):
             return None, "it is not linear in the coordinate rates"
-        a0 = expand_bounded(balance.xreplace({r: 0 for r in rates}))
+        a0 = expand_bounded(balance.xreplace({r: sp.S.Zero for r in rates}))
         if a0 is None:
             fail(c.name_span, f"the flow balance of constraint junction '{c.junction}' is too "
                               f"large to expand (more than {MAX_EXPANDED_TERMS} terms)")

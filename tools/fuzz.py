@@ -573,32 +573,62 @@ def _csv_problem(path: Path) -> str | None:
     return None
 
 
-def simulate_case(data: bytes, backend: str, time_limit: float, t_end: str = "0.05") -> dict:
+def _simulate_in_process(tmp: str, args: list[str], env: dict):
+    """bgc simulate ARGS with click's runner in directory tmp: (exit status, stderr, failure
+    or None).  (For the suite: no interpreter start, no second SymPy import.)"""
+    from click.testing import CliRunner
+
+    from bgc.cli import main
+
+    cwd = os.getcwd()
+    os.chdir(tmp)
+    try:
+        result = CliRunner().invoke(main, args, env=env)
+    finally:
+        os.chdir(cwd)
+    exc = result.exception
+    if exc is not None and not isinstance(exc, SystemExit):
+        return None, "".join(traceback.format_exception(exc)), \
+            f"{type(exc).__name__} at {_innermost_bgc_frame(exc)}"
+    return result.exit_code, result.stderr, None
+
+
+def simulate_case(data: bytes, backend: str, time_limit: float, t_end: str = "0.05",
+                  in_process: bool = False) -> dict:
     """`bgc simulate m.bg --backend B --t-end T -o out.csv` in a directory of its own, with a
-    cache of its own; {"exit", "stderr", "failure"}."""
+    cache of its own, as a subprocess (in_process: with click's runner, no time limit);
+    {"exit", "stderr", "failure"}."""
     with tempfile.TemporaryDirectory(prefix="bgcfuzz-sim-") as tmp:
         Path(tmp, "m.bg").write_bytes(data)
-        env = dict(os.environ, BGC_CACHE_DIR=str(Path(tmp, "cache")),
-                   PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
-        env.setdefault("BGC_CFLAGS", "-O0 -std=c99")
-        cmd = [sys.executable, "-m", "bgc", "simulate", "m.bg", "--backend", backend,
-               "--t-end", t_end, "-o", "out.csv"]
-        proc = subprocess.Popen(cmd, cwd=tmp, env=env, stdout=subprocess.PIPE,
-                                stderr=subprocess.PIPE, start_new_session=True)
-        try:
-            _, err = proc.communicate(timeout=time_limit)
-        except subprocess.TimeoutExpired:
-            os.killpg(proc.pid, signal.SIGKILL)
-            proc.communicate()
-            return {"exit": None, "stderr": "", "failure": f"simulate {backend}: hang"}
-        finally:
-            try:  # the generated program, if it outlived bgc (an orphan)
+        env = {"BGC_CACHE_DIR": str(Path(tmp, "cache")),
+               "BGC_CFLAGS": os.environ.get("BGC_CFLAGS", "-O0 -std=c99")}
+        args = ["simulate", "m.bg", "--backend", backend, "--t-end", t_end, "-o", "out.csv"]
+        orphan = False
+        if in_process:
+            code, stderr, raised = _simulate_in_process(tmp, args, env)
+            if raised:
+                return {"exit": None, "stderr": stderr[-4000:],
+                        "failure": f"simulate {backend}: {raised}"}
+        else:
+            env = dict(os.environ, **env, PYTHONPATH=str(ROOT) + os.pathsep
+                       + os.environ.get("PYTHONPATH", ""))
+            proc = subprocess.Popen([sys.executable, "-m", "bgc", *args], cwd=tmp, env=env,
+                                    stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                                    start_new_session=True)
+            try:
+                _, err = proc.communicate(timeout=time_limit)
+            except subprocess.TimeoutExpired:
                 os.killpg(proc.pid, signal.SIGKILL)
-                orphan = True
-            except ProcessLookupError:
-                orphan = False
-        stderr = err.decode("utf-8", "replace")
-        code = proc.returncode
+                proc.communicate()
+                return {"exit": None, "stderr": "", "failure": f"simulate {backend}: hang"}
+            finally:
+                try:  # the generated program, if it outlived bgc (an orphan)
+                    os.killpg(proc.pid, signal.SIGKILL)
+                    orphan = True
+                except ProcessLookupError:
+                    pass
+            stderr = err.decode("utf-8", "replace")
+            code = proc.returncode
         out = Path(tmp, "out.csv")
         left = sorted(p for p in os.listdir(tmp) if p not in ("m.bg", "out.csv", "cache"))
         failure = None
@@ -648,7 +678,8 @@ def _ddmin(parts: list[str], fails, budget_end: float) -> list[str]:
 
 
 def minimise(data: bytes, still_fails, seconds: float = 180.0) -> bytes:
-    """data made smaller by ddmin on lines, then on tokens; still_fails(bytes) -> bool."""
+    """data made smaller by ddmin on lines, then on tokens, then on characters (once small);
+    still_fails(bytes) -> bool.  Stops after `seconds` with the smallest failing data found."""
     end = time.monotonic() + seconds
     text = data.decode("utf-8", "surrogateescape")
     enc = lambda s: s.encode("utf-8", "surrogateescape")  # noqa: E731
@@ -656,7 +687,10 @@ def minimise(data: bytes, still_fails, seconds: float = 180.0) -> bytes:
     lines = _ddmin(lines, lambda ps: still_fails(enc("".join(ps))), end)
     tokens = TOKEN.findall("".join(lines))
     tokens = _ddmin(tokens, lambda ps: still_fails(enc("".join(ps))), end)
-    return enc("".join(tokens))
+    chars = list("".join(tokens))  # (inside comments, strings and numbers too)
+    if len(chars) <= 4000:
+        chars = _ddmin(chars, lambda ps: still_fails(enc("".join(ps))), end)
+    return enc("".join(chars))
 
 
 def _slug(signature: str) -> str:
