@@ -40,7 +40,7 @@ from .diagnostics import Collector, ModelError, Span, fail, warning
 from .differentiate import directional, partial
 from .system import (TIME, ConstraintDef, Equation, EquationSystem, OutputDef, ParameterDef,
                      StateVar, der)
-from .graph import var
+from .graph import var, written
 from .run import ALGEBRA, RunSettings
 from .resources import (MAX_EXPANDED_TERMS, MAX_EXPRESSION_DEPTH, MAX_EXPRESSION_NODES,
                         SYMBOLIC_MAX_BLOCK, fits)
@@ -352,8 +352,10 @@ def _potential(coeffs, a0, span, name):
                        "'phi = ...' on the junction")
         P += term
     zero = {z: 0 for z, _ in comps}
-    P = sp.expand(P - P.xreplace(zero))
-    return P
+    at_zero = P.xreplace(zero)
+    if at_zero.has(*NOT_FINITE):  # log(q): no value at q = 0 to measure the constant from
+        return sp.expand(P), False
+    return sp.expand(P - at_zero), True
 
 
 def _phi(c: ConstraintDef, form, sys: _System):
@@ -370,12 +372,22 @@ def _phi(c: ConstraintDef, form, sys: _System):
                 fail(span, f"phi of '{c.junction}' does not match its flow balance: "
                            f"d(phi)/d{z} = {partial(phi, z)}, the balance has {a}")
         return phi, None
-    P = _potential(coeffs, a0, c.span, c.junction)
+    P, from_zero = _potential(coeffs, a0, c.span, c.junction)
     if c.annotation is not None:
+        if not from_zero:
+            fail(c.annotation[2], f"'init' of '{c.junction}' is Phi where the coordinates are "
+                                  f"0, but Phi = {written(P)} + constant has no value there: give "
+                                  "'phi = ...' on the junction, or leave the constant to the "
+                                  "initial state")
         return P + c.annotation[1], None
     t0 = sp.Float(sys.es.run.t0)
     init = {st.symbol: st.init for st in sys.es.states}
     const = -P.xreplace(init).xreplace({TIME: t0})
+    if const.has(*NOT_FINITE) or const.has(sp.I):
+        fail(c.name_span, f"constraint '{c.junction}' has no 'init = ...' or 'phi = ...', and "
+                          f"Phi = {written(P)} + constant has no finite real value at the "
+                          "initial state to take the constant from: give 'phi = ...' or "
+                          "fix the initial values")
     msg = (f"constraint '{c.junction}' has no 'init = ...' or 'phi = ...': the geometric "
            f"constant is taken from the initial state (Phi = {P + const})")
     return P + const, msg
@@ -950,10 +962,18 @@ def check_initial(reduced: Reduced):
     diags = Collector()
     kinds = {c.junction: c for c in reduced.constraints}
     for row in reduced.rows:
-        r = float(row.expr.xreplace(values))
-        s = float(row.scale.xreplace(values))
+        c = kinds[row.junction]
+        try:
+            r = float(row.expr.xreplace(values))
+            s = float(row.scale.xreplace(values))
+        except TypeError:  # complex, or not a number (log(q) at q = 0)
+            r = s = math.nan
+        if not (math.isfinite(r) and math.isfinite(s)):
+            diags.error(c.name_span, f"constraint '{row.junction}' has no finite real value "
+                                     f"at the initial values: {written(row.expr)} (fix the "
+                                     "initial values)")
+            continue
         if abs(r) > RELATIVE_TOLERANCE * s:
-            c = kinds[row.junction]
             what = "Phi" if row.level == "position" else "dPhi/dt" if c.kind == "holonomic" \
                 else "Phi (nonholonomic)"
             diags.error(c.name_span, f"initial conditions violate constraint '{row.junction}': "
