@@ -351,7 +351,7 @@ def _potential(coeffs, a0, span, name):
             fail(span, f"cannot integrate the balance of '{name}' symbolically: give "
                        "'phi = ...' on the junction")
         P += term
-    zero = {z: 0 for z, _ in comps}
+    zero = {z: sp.S.Zero for z, _ in comps}
     at_zero = P.xreplace(zero)
     if at_zero.has(*NOT_FINITE):  # log(q): no value at q = 0 to measure the constant from
         return sp.expand(P), False

@@ -734,6 +734,12 @@ def main(argv=None) -> int:
     if a.worker:
         _worker_main()
         return 0
+    def stop(signum, frame):
+        raise KeyboardInterrupt
+    # (a run in the background of a shell starts with SIGINT ignored: TERM stops it too, with
+    # its summary)
+    signal.signal(signal.SIGINT, stop)
+    signal.signal(signal.SIGTERM, stop)
     a.out.mkdir(parents=True, exist_ok=True)
     log = open(a.out / "log.txt", "a", encoding="utf-8")
     rng = random.Random(a.seed)
