@@ -181,7 +181,8 @@ def parameter_values(graph: Graph, sets=(), overrides: dict | None = None,
         expr = chosen.get(p.name, p.expr)
         inside = beyond_double(expr.value, values)
         if inside is not None:
-            fail(expr.span, f"parameter '{p.name}' is not finite (inf{_inside(inside, expr.value)})")
+            fail(expr.span,
+                 f"parameter '{p.name}' is not finite (inf{_inside(inside, expr.value)})")
         v = expr.value.xreplace(values)
         if overrides is not None:
             values[var(p.name)] = sp.Float(float(v))

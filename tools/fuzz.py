@@ -213,7 +213,8 @@ class Gen:
         tf, c = self.name("tf"), self.name("rod")
         self.emit(f"{tf} : MTF({self.expr(2, [x] + self.params)})")
         kind = r.choice(["", " holonomic", " nonholonomic"])
-        ann = r.choice(["", f"(init = {self.expr(1)})", f"(phi = {self.expr(2, [x] + self.params)})"])
+        ann = r.choice(["", f"(init = {self.expr(1)})",
+                        f"(phi = {self.expr(2, [x] + self.params)})"])
         corr = r.choice(["", " corrector none", f" corrector pid({self.expr(1)}, {self.expr(1)})"]
                         + ([f" corrector pd({self.expr(1)})"] if "non" in kind else []))
         self.emit(f"{c} : 0 constraint{kind}{ann}{corr}{self.tag()}")
@@ -265,20 +266,24 @@ class Gen:
         r = self.rng
         body = []
         if self.effects and r.random() < 0.6:
-            body.append("effects " + ", ".join(r.sample(self.effects, r.randint(1, len(self.effects)))))
+            chosen = r.sample(self.effects, r.randint(1, len(self.effects)))
+            body.append("effects " + ", ".join(chosen))
         elif r.random() < 0.2:
             body.append("effects none")
         if self.outputs and r.random() < 0.7:
-            body.append("outputs " + ", ".join(r.sample(self.outputs, r.randint(1, min(3, len(self.outputs))))))
+            chosen = r.sample(self.outputs, r.randint(1, min(3, len(self.outputs))))
+            body.append("outputs " + ", ".join(chosen))
         if r.random() < 0.7:
             t1 = r.choice(["1", "0.1", "10", self.expr(1), "1e308", "0"])
             body.append(f"time {r.choice(['0', '0', '1', self.expr(1)])} .. {t1}"
-                        + (f" every {r.choice(['0.01', '0.1', self.expr(1)] + (['1e-320'] if self.wild else []))}"
+                        + (" every " + r.choice(['0.01', '0.1', self.expr(1)]
+                                                + (['1e-320'] if self.wild else []))
                            if r.random() < 0.6 else ""))
         if r.random() < 0.5:
             kw = ", ".join(f"{k} = {r.choice(['1e-6', '1e-3', '0.01', self.expr(1), '0', '1e308'])}"
                            for k in r.sample(["rtol", "atol", "step", "foo"], r.randint(0, 2)))
-            body.append(f"solver {r.choice(SOLVERS[:-1] if not self.wild else SOLVERS)}" + (f"({kw})" if kw or r.random() < 0.3 else ""))
+            name = r.choice(SOLVERS[:-1] if not self.wild else SOLVERS)
+            body.append(f"solver {name}" + (f"({kw})" if kw or r.random() < 0.3 else ""))
         if self.params and r.random() < 0.5:
             body.append(f"set {r.choice(self.params)} = {self.expr(2, [])}")
         sep = r.choice(["\n  ", "; "])
@@ -558,7 +563,7 @@ class Worker:
         return res
 
 
-# ------------------------------------------------------------------------- simulate, as a subprocess
+# ------------------------------------------------------------------------- simulate
 
 def _csv_problem(path: Path) -> str | None:
     data = path.read_bytes()
@@ -790,7 +795,8 @@ def main(argv=None) -> int:
                         s = simulate_case(data, backend, a.sim_time_limit)
                         if s["failure"]:
                             record(s["failure"], i, how, data, s,
-                                   lambda d, b=backend: simulate_case(d, b, a.sim_time_limit)["failure"])
+                                   lambda d, b=backend: simulate_case(
+                                       d, b, a.sim_time_limit)["failure"])
             if (i + 1) % 500 == 0:
                 el = time.monotonic() - start
                 say(f"{i + 1} cases, {counts}, {sum(f['count'] for f in failures.values())} "
