@@ -14,11 +14,11 @@ What counts as a failure:
   an exit status other than 0, 1 and 2 (2 only for a usage error: `Usage:` or `Error:` from
   the option parser), a death by a signal of bgc or of the generated program (bgc reports it
   as 128 + the signal), a run longer than --sim-time-limit; exit 1 without a message; a CSV
-  that ends in a cut row or whose rows have fewer or more columns than its header; a partial
-  file left beside it.
+  that ends in a cut row or whose rows have fewer or more columns than its header, or that
+  holds a NaN or an infinity; a partial file left beside it; a process that outlives bgc.
 
 Each failure's signature (its kind, the exception's type and the innermost frame in bgc) is
-minimised once by delta debugging, on lines then on tokens, keeping the same signature, and
+minimised once by delta debugging, on lines, tokens, then characters, keeping the signature, and
 written as tests/fuzz_regressions/NAME.bg with NAME.note (what failed, the seed and the case).
 The summary (cases, failures by signature) is printed at the end and written to OUT/summary.json.
 
@@ -575,6 +575,8 @@ def _csv_problem(path: Path) -> str | None:
     width = lines[0].count(",")
     if any(line.count(",") != width for line in lines[1:]):
         return "a CSV row of the wrong width"
+    if re.search(r"(^|,)[-+]?(nan|inf)", "\n".join(lines[1:]), re.I | re.M):
+        return "a non-finite value in the CSV"  # (the programs stop on one, with a message)
     return None
 
 
