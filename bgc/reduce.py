@@ -999,8 +999,11 @@ def _with_init_warnings(reduced: Reduced, sys: _System, eliminated) -> Reduced:
         expr = implied_of.get(s.state.name)
         if not isinstance(expr, sp.Basic):
             continue
-        implied = float(expr.xreplace(values))
-        given = float(s.given_init.xreplace(values))
+        try:
+            implied = float(expr.xreplace(values))
+            given = float(s.given_init.xreplace(values))
+        except TypeError:  # no real value at the start (a ratio 1/t at t = 0): nothing to
+            continue       # compare (the run says where the state is not finite)
         if abs(implied - given) > RELATIVE_TOLERANCE * max(abs(implied), abs(given), 1e-300):
             out.append(warning(s.init_span, f"'{s.element}' is in derivative causality: its "
                                             f"state is {implied:.6g} at the start, not the "
