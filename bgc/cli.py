@@ -331,8 +331,9 @@ def simulate(model, scene, outputs, effects, algebra, backend, solver, rtol, ato
         raise click.UsageError(problem)
     names = sorted(record.params)
     given = _parse_params(params, names)
-    _or_exit(api.check_parameters, model, scene, given, outputs, effects,
-             ("--outputs", "--effects"))
+    if given:  # (bgc.api imports SymPy: a warm run without -p does without)
+        _or_exit(api.check_parameters, model, scene, given, outputs, effects,
+                 ("--outputs", "--effects"))
     try:
         settings = runner.settings_for(
             record.settings, names, given, t_end=t_end, dt=dt,
