@@ -37,6 +37,8 @@ class _Extremum(sp.Function):
     @classmethod
     def eval(cls, *args):
         numbers = [a for a in args if a.is_Number]
+        if any(a is sp.nan for a in numbers):  # (SymPy refuses to compare a NaN)
+            return sp.nan
         if len(numbers) == len(args):
             return cls.pick(numbers)
         if len(numbers) > 1:
