@@ -9,6 +9,8 @@ expanded at all.  Everything else is left to a numeric solve in the generated co
 """
 from __future__ import annotations
 
+import cmath
+import math
 import random
 
 import mpmath  # SymPy's own dependency: the 30-digit determinant of is_singular
@@ -35,10 +37,20 @@ class _Extremum(sp.Function):
     @classmethod
     def eval(cls, *args):
         numbers = [a for a in args if a.is_Number]
+        if any(a is sp.nan for a in numbers):  # (SymPy refuses to compare a NaN)
+            return sp.nan
         if len(numbers) == len(args):
             return cls.pick(numbers)
         if len(numbers) > 1:
             return cls(*[a for a in args if not a.is_Number], cls.pick(numbers))
+        return None
+
+    def _eval_evalf(self, prec):
+        """The numeric value once every argument has one (max(a*exp(3), 5) at a = 2): float()
+        and evalf() of an extremum of constants, which SymPy cannot compute by itself."""
+        args = [a._eval_evalf(prec) if not a.is_Number else a for a in self.args]
+        if all(a is not None and a.is_Number for a in args):
+            return sp.nan if any(a is sp.nan for a in args) else self.pick(args)
         return None
 
     def fdiff(self, argindex=1):
@@ -297,3 +309,70 @@ def is_symmetric(entries, points: int = 2, seed: int = 1) -> bool:
             if not abs(a - b) <= 1e-12 * (abs(a) + abs(b)):
                 return False
     return True
+
+
+# ---------------------------------------------------------------- evaluation in doubles
+
+_COMPLEX_FUNCTIONS = {
+    sp.sin: cmath.sin, sp.cos: cmath.cos, sp.tan: cmath.tan, sp.asin: cmath.asin,
+    sp.acos: cmath.acos, sp.atan: cmath.atan, sp.sinh: cmath.sinh, sp.cosh: cmath.cosh,
+    sp.tanh: cmath.tanh, sp.exp: cmath.exp, sp.log: cmath.log,
+}
+
+
+class _Beyond(Exception):
+    """A value beyond a double's range: .node, the subexpression that takes it."""
+
+    def __init__(self, node):
+        super().__init__(node)
+        self.node = node
+
+
+def _in_doubles(e, values: dict) -> complex:
+    """e in complex doubles, node by node as the generated code computes it (NaN where a value
+    is undefined or unknown); _Beyond as soon as one is infinite."""
+    args = [_in_doubles(a, values) for a in e.args]  # every argument, even after a NaN
+    try:
+        if not args:
+            z = complex(values[e] if e in values else e) if e.is_number or e in values \
+                else complex(math.nan)
+        elif e.is_Add:
+            z = sum(args, 0j)
+        elif e.is_Mul:
+            z = 1 + 0j
+            for a in args:
+                z *= a
+        elif e.is_Pow:
+            base, exp = args
+            z = base ** (exp.real if exp.imag == 0 else exp)
+        elif e.func in _COMPLEX_FUNCTIONS:
+            z = _COMPLEX_FUNCTIONS[e.func](args[0])
+        elif all(a.imag == 0 for a in args) and isinstance(e, (sp.Abs, sp.sign, sp.atan2,
+                                                                  _Extremum)):
+            x = [a.real for a in args]
+            z = complex(abs(x[0]) if isinstance(e, sp.Abs) else math.atan2(*x)
+                        if isinstance(e, sp.atan2) else math.copysign(1.0, x[0]) if x[0] != 0
+                        else 0.0 if isinstance(e, sp.sign) else e.pick(x))
+        else:
+            z = complex(math.nan)
+    except OverflowError:
+        raise _Beyond(e) from None
+    except (ZeroDivisionError, ValueError, TypeError):
+        z = complex(math.nan)
+    if math.isinf(z.real) or math.isinf(z.imag):
+        raise _Beyond(e)
+    return z
+
+
+def beyond_double(expr, values: dict):
+    """The first subexpression of expr (or expr itself) that at these values (symbol -> number)
+    is beyond a double's range (exp(b) at b = 1e12), computed in doubles one node at a time as
+    the generated code does; None if there is none.  Checked before SymPy evaluates such an
+    expression: its floats have no range, and sin(exp(1e12)) needs pi to a trillion bits."""
+    try:
+        _in_doubles(expr, values)
+    except _Beyond as beyond:
+        return beyond.node
+    except RecursionError:
+        return None
+    return None

@@ -22,7 +22,7 @@ from .reduce import Reduced, reduce
 from .report import SceneSummary, check_report, scenes_report, equations_latex, equations_text, scene_summary
 from .resolve import resolve
 from .resources import read_bounded
-from .scene import Override, Settings, apply_scene
+from .scene import Override, Settings, apply_scene, check_parameters as check_parameters_of
 from .run import (ALGEBRA, BACKENDS, FORMATS, SIMULATE_OPTIONS, TARGETS, check_run_options,
                   choice as _choice, exclusive)
 from .run import RunSettings, run_args  # noqa: F401  (the API's, from bgc.run)
@@ -176,6 +176,26 @@ def build(model, scene: str | None = None, project_initial: bool = False,
     except ModelError as exc:
         raise _model_error(exc, src) from None
     return Compiled(src, causal, system, reduced, ir_program, tuple(clock.times))
+
+
+def check_parameters(model, scene: str | None, params: dict, outputs=None, effects=None,
+                     option_names=("outputs=", "effects=")) -> None:
+    """Parameter values of a run (name -> float: `bgc simulate -p`) against the model: a
+    parameter computed from them, or a law or initial value of parameters only, that becomes
+    complex or not finite is a BgcModelError located where the model computes it, with a note
+    naming the values given (the run would otherwise start from NaN)."""
+    if not params:
+        return
+    src = _source(model)
+    try:
+        graph = flatten(resolve(parse(src.text, src.path)))
+        check_parameters_of(graph, scene, scene_override(outputs, effects, option_names),
+                            {name: float(v) for name, v in params.items()})
+    except ModelError as exc:
+        shown = ", ".join(f"{k}={v:.17g}" for k, v in params.items())
+        raise BgcModelError(ModelError([replace(d, notes=d.notes + (
+            Note(None, f"with the parameter values given for the run: {shown}"),))
+            for d in exc.diagnostics]), src) from None
 
 
 def check_scenes(compiled: Compiled):

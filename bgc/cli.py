@@ -455,9 +455,13 @@ def simulate(model, scene, outputs, effects, algebra, backend, solver, rtol, ato
     if problem:
         raise click.UsageError(problem)
     names = sorted(record.params)
+    given = _parse_params(params, names)
+    if given:  # (bgc.api imports SymPy: a warm run without -p does without)
+        _or_exit(api.check_parameters, model, scene, given, outputs, effects,
+                 ("--outputs", "--effects"))
     try:
         settings = runner.settings_for(
-            record.settings, names, _parse_params(params, names), t_end=t_end, dt=dt,
+            record.settings, names, given, t_end=t_end, dt=dt,
             solver=solver, rtol=rtol, atol=atol, step=step, max_steps=max_steps,
             project_initial=project_initial, allow_inconsistent=allow_inconsistent)
     except ValueError as error:

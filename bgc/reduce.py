@@ -40,7 +40,7 @@ from .diagnostics import Collector, ModelError, Span, fail, warning
 from .differentiate import directional, partial
 from .system import (TIME, ConstraintDef, Equation, EquationSystem, OutputDef, ParameterDef,
                      StateVar, der)
-from .graph import var
+from .graph import var, written
 from .run import ALGEBRA, RunSettings
 from .resources import (MAX_EXPANDED_TERMS, MAX_EXPRESSION_DEPTH, MAX_EXPRESSION_NODES,
                         SYMBOLIC_MAX_BLOCK, fits)
@@ -357,9 +357,11 @@ def _potential(coeffs, a0, span, name):
             fail(span, f"cannot integrate the balance of '{name}' symbolically: give "
                        "'phi = ...' on the junction")
         P += term
-    zero = {z: 0 for z, _ in comps}
-    P = sp.expand(P - P.xreplace(zero))
-    return P
+    zero = {z: sp.S.Zero for z, _ in comps}
+    at_zero = P.xreplace(zero)
+    if at_zero.has(*NOT_FINITE):  # log(q): no value at q = 0 to measure the constant from
+        return sp.expand(P), False
+    return sp.expand(P - at_zero), True
 
 
 def _phi(c: ConstraintDef, form, sys: _System):
@@ -376,12 +378,22 @@ def _phi(c: ConstraintDef, form, sys: _System):
                 fail(span, f"phi of '{c.junction}' does not match its flow balance: "
                            f"d(phi)/d{z} = {partial(phi, z)}, the balance has {a}")
         return phi, None
-    P = _potential(coeffs, a0, c.span, c.junction)
+    P, from_zero = _potential(coeffs, a0, c.span, c.junction)
     if c.annotation is not None:
+        if not from_zero:
+            fail(c.annotation[2], f"'init' of '{c.junction}' is Phi where the coordinates are "
+                                  f"0, but Phi = {written(P)} + constant has no value there: give "
+                                  "'phi = ...' on the junction, or leave the constant to the "
+                                  "initial state")
         return P + c.annotation[1], None
     t0 = sp.Float(sys.es.run.t0)
     init = {st.symbol: st.init for st in sys.es.states}
     const = -P.xreplace(init).xreplace({TIME: t0})
+    if const.has(*NOT_FINITE) or const.has(sp.I):
+        fail(c.name_span, f"constraint '{c.junction}' has no 'init = ...' or 'phi = ...', and "
+                          f"Phi = {written(P)} + constant has no finite real value at the "
+                          "initial state to take the constant from: give 'phi = ...' or "
+                          "fix the initial values")
     msg = (f"constraint '{c.junction}' has no 'init = ...' or 'phi = ...': the geometric "
            f"constant is taken from the initial state (Phi = {P + const})")
     return P + const, msg
@@ -1141,7 +1153,9 @@ def evaluate(reduced: Reduced, values: dict, exprs) -> list[float]:
             b = numpy.zeros(m)
             for r, e in zip(plan.lu.row_of, s.rhs):
                 b[r] = _number(e, v)
-            if not numpy.all(numpy.isfinite(A)) or numpy.linalg.matrix_rank(A) < m:
+            if not numpy.all(numpy.isfinite(A)):
+                raise _NotNumeric(s)
+            if numpy.linalg.matrix_rank(A) < m:
                 _singular_at_start(reduced, plan, s, A)
             z = numpy.linalg.solve(A, b)
             for c, u in zip(plan.lu.col_of, s.unknowns):
@@ -1190,14 +1204,17 @@ def check_initial(reduced: Reduced):
     rows = reduced.rows
     try:
         numbers = evaluate(reduced, values, [r.expr for r in rows] + [r.scale for r in rows])
-        if reduced.constraints:  # the multipliers' block, solvable at the start?
-            evaluate(reduced, values, reduced.rates)
     except _NotNumeric:
         return  # a row through a Newton block: the generated program checks it
     for k, row in enumerate(rows):
+        c = kinds[row.junction]
         r, s = numbers[k], numbers[len(rows) + k]
+        if not (math.isfinite(r) and math.isfinite(s)):  # log(q) at q = 0, sqrt of a negative
+            diags.error(c.name_span, f"constraint '{row.junction}' has no finite real value "
+                                     f"at the initial values: {written(row.expr)} (fix the "
+                                     "initial values)")
+            continue
         if abs(r) > RELATIVE_TOLERANCE * s:
-            c = kinds[row.junction]
             what = "Phi" if row.level == "position" else "dPhi/dt" if c.kind == "holonomic" \
                 else "Phi (nonholonomic)"
             diags.error(c.name_span, f"initial conditions violate constraint '{row.junction}': "
@@ -1205,6 +1222,11 @@ def check_initial(reduced: Reduced):
                                      f"tolerance {RELATIVE_TOLERANCE:g}); fix the initial values, "
                                      "or use --project-initial or --allow-inconsistent")
     diags.raise_if_errors()
+    if reduced.constraints:  # the multipliers' block: solvable at the start?
+        try:
+            evaluate(reduced, values, reduced.rates)
+        except _NotNumeric:
+            pass  # through a Newton block, or not finite there: the generated program says
 
 
 def _with_init_warnings(reduced: Reduced, sys: _System, eliminated) -> Reduced:
@@ -1223,8 +1245,11 @@ def _with_init_warnings(reduced: Reduced, sys: _System, eliminated) -> Reduced:
         expr = implied_of.get(s.state.name)
         if not isinstance(expr, sp.Basic):
             continue
-        implied = float(expr.xreplace(values))
-        given = float(s.given_init.xreplace(values))
+        try:
+            implied = float(expr.xreplace(values))
+            given = float(s.given_init.xreplace(values))
+        except TypeError:  # no real value at the start (a ratio 1/t at t = 0): nothing to
+            continue       # compare (the run says where the state is not finite)
         if abs(implied - given) > RELATIVE_TOLERANCE * max(abs(implied), abs(given), 1e-300):
             out.append(warning(s.init_span, f"'{s.element}' is in derivative causality: its "
                                             f"state is {implied:.6g} at the start, not the "

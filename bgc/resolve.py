@@ -142,6 +142,17 @@ class _ExprBuilder:
             fail(node.span, "'^' takes scalars, not vectors or matrices")
         if a.is_Number and b.is_Number:
             done.append(_number_power(a, b, node.span))
+        elif a.is_number and b.is_Rational and max(abs(b.p), b.q) > MAX_EXACT_POWER:
+            # a constant that is not a number yet (sqrt(15)) to a large exact exponent: SymPy
+            # would compute 15^(18^64/2) exactly (forever); in floating point, as for numbers
+            try:
+                x = float(a)
+            except (TypeError, OverflowError):
+                fail(node.span, "value does not fit a double")
+            done.append(_number_power(sp.Float(x), b, node.span))
+        elif b.is_Rational and abs(b) > MAX_SYMBOLIC_EXPONENT:
+            # refused before SymPy builds it: (15/p)^(3^17) would compute 15^(3^17) exactly
+            _refuse_exponent(sp.Pow(a, b, evaluate=False), node.span)
         else:
             done.append(a ** b)
 
@@ -418,9 +429,13 @@ def _check_exponents(value, span):
     1000).  Checked on the built expression, since products and powers merge (x^40 * x^40)."""
     for p in sorted(value.atoms(sp.Pow), key=sp.default_sort_key):
         if p.exp.is_Integer and abs(int(p.exp)) > MAX_SYMBOLIC_EXPONENT and not p.base.is_Number:
-            fail(span, f"the power {written(p)} has too large an exponent for symbolic work "
-                       f"(at most {MAX_SYMBOLIC_EXPONENT}); give the exponent as a parameter "
-                       "to have the power computed numerically")
+            _refuse_exponent(p, span)
+
+
+def _refuse_exponent(p, span):
+    fail(span, f"the power {written(p)} has too large an exponent for symbolic work "
+               f"(at most {MAX_SYMBOLIC_EXPONENT}); give the exponent as a parameter "
+               "to have the power computed numerically")
 
 
 def _check_constant(value, span):

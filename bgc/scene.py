@@ -8,6 +8,7 @@ from dataclasses import dataclass, replace
 import sympy as sp
 
 from . import solvers
+from .algebra import beyond_double
 from .diagnostics import Collector, ModelError, Note, Origin, Span, did_you_mean, fail
 from .graph import (Expr, Graph, check_effect_names, check_ports, model_effects, var,
                     written)
@@ -150,6 +151,8 @@ def _check_references(graph: Graph, why: dict, notes: dict):
 
 
 def _number(expr: Expr, params: dict) -> float:
+    if beyond_double(expr.value, params) is not None:
+        fail(expr.span, "value is not finite")
     value = expr.value.xreplace(params)
     try:
         x = float(value)
@@ -160,13 +163,15 @@ def _number(expr: Expr, params: dict) -> float:
     return x
 
 
-def parameter_values(graph: Graph, sets=(), overrides: dict | None = None) -> dict:
+def parameter_values(graph: Graph, sets=(), overrides: dict | None = None,
+                     given: dict | None = None) -> dict:
     """Every parameter's value, in order: an override (a run's -p) as given, else the scene's
     `set` over the model's default, computed from the ones before it (as the generated code
     does): the one evaluation of parameters outside the generated code.  Without overrides
     the model's own values are checked (a located error if one is not a finite number); with
-    them (bgc.stability, for a run) the values are what the run computes."""
-    given = overrides or {}
+    them (bgc.stability, for a run) the values are what the run computes.  given: values
+    (a run's -p) that replace the model's as overrides do, the others checked all the same."""
+    given = overrides or given or {}
     chosen = dict(sets)
     values = {}
     for p in graph.parameters:
@@ -174,6 +179,10 @@ def parameter_values(graph: Graph, sets=(), overrides: dict | None = None) -> di
             values[var(p.name)] = sp.Float(float(given[p.name]))
             continue
         expr = chosen.get(p.name, p.expr)
+        inside = beyond_double(expr.value, values)
+        if inside is not None:
+            fail(expr.span,
+                 f"parameter '{p.name}' is not finite (inf{_inside(inside, expr.value)})")
         v = expr.value.xreplace(values)
         if overrides is not None:
             values[var(p.name)] = sp.Float(float(v))
@@ -186,6 +195,18 @@ def parameter_values(graph: Graph, sets=(), overrides: dict | None = None) -> di
             fail(expr.span, f"parameter '{p.name}' is not finite ({x})")
         values[var(p.name)] = sp.Float(x)
     return values
+
+
+def check_parameters(graph: Graph, name: str | None, override: Override | None,
+                     given: dict) -> None:
+    """A run's parameter values `given` (name -> float, from -p) in scene `name`: the
+    parameters computed from them, and the laws and initial values of parameters only, must
+    still be finite real numbers; the located errors of the model's own values otherwise
+    (they show the values, so they name the parameters)."""
+    scene = next((s for s in graph.scenes if s.name == name), None)
+    g, _ = _apply_effects(graph, _effects(graph, scene, override))
+    sets = tuple((n, e) for n, e, _ in scene.sets) if scene else ()
+    _check_laws(g, parameter_values(g, sets, given=given))
 
 
 def _solver(scene_solver, params) -> tuple:
@@ -239,6 +260,10 @@ def _guard_value(diags: Collector, expr: Expr, params: dict, what: str) -> float
 def constant_value(value, params: dict, span, what: str) -> float:
     """The double that value (parameters only) takes at these parameter values; a located
     error naming the parameters when it is a complex number or not finite."""
+    inside = beyond_double(value, params)
+    if inside is not None:
+        fail(span, f"{what} is not finite: {written(value)}{_at(value, params)} (inf"
+                   f"{_inside(inside, value)})")
     try:
         v = value.xreplace(params)
     except TypeError:  # SymPy refused to build it: atan2(0, 1/a) at a = 0 compares a NaN
@@ -256,6 +281,11 @@ def constant_value(value, params: dict, span, what: str) -> float:
         fail(span, f"{what} is not finite: {written(value)}{_at(value, params)} "
                    "(a division by zero, or a number beyond a double?)")
     return x
+
+
+def _inside(node, whole) -> str:
+    """': exp(b) is beyond a double' when a part of the expression is, not all of it."""
+    return "" if node == whole else f": {written(node)} is beyond a double"
 
 
 def _is_complex(v) -> bool:

@@ -12,7 +12,8 @@ mode draws fresh examples, as many as BGC_FUZZ_EXAMPLES says for each of the two
     BGC_FUZZ_EXAMPLES=100000 python -m pytest -q -n 0 -s tests/test_fuzz.py
 
 Time is bounded by bgc's own limits (bgc/resources.py); the alarm below only turns a hang into
-a failure instead of a stuck test run.
+a failure instead of a stuck test run.  The fuzzing harness of the long runs, with simulation
+and minimisation, is tools/fuzz.py (tests/test_fuzz_harness.py, docs/fuzzing.md).
 """
 import os
 import re

@@ -1,0 +1,166 @@
+"""The fuzzing harness (tools/fuzz.py) in the suite: a short seeded campaign, and every
+regression file it found replayed.
+
+The campaign is the long run's, made small: models generated from the grammar and mutations of
+every shipped model through `bgc check` in this process, a few of the accepted ones through
+`bgc simulate` in both backends.  Any exception other than the command's exit, an exit status
+other than 0 and 1 (check), a model error without a location, a traceback in the output, a
+file left behind, a cut CSV row is a failure (tools/fuzz.py says which).  The long run:
+
+    python tools/fuzz.py --seed 28 --cases 100000 --simulate-every 8
+
+tests/fuzz_regressions/: the failures the harness found, minimised, once fixed.  Each must give
+exit 0, or exit 1 with a located error; NAME.err, when there is one, is the first line it
+must give.
+"""
+import importlib.util
+import os
+import random
+import re
+import signal
+from contextlib import contextmanager
+from pathlib import Path
+
+import pytest
+from click.testing import CliRunner
+
+from bgc.cli import main
+from conftest import have_cc
+
+ROOT = Path(__file__).resolve().parent.parent
+REGRESSIONS = ROOT / "tests" / "fuzz_regressions"
+SEED = 2028
+CASES = 300  # through check
+SIMULATED = 2  # accepted models through simulate, in each backend
+SAFETY_SECONDS = 60  # per case: turns a hang into a failure instead of a stuck suite
+
+
+def _load_harness():
+    spec = importlib.util.spec_from_file_location("bgc_fuzz_harness", ROOT / "tools" / "fuzz.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+fuzz = _load_harness()
+
+
+@contextmanager
+def _alarm(seconds):
+    def expire(signum, frame):
+        raise AssertionError(f"a case took more than {seconds} s")
+    previous = signal.signal(signal.SIGALRM, expire)
+    signal.setitimer(signal.ITIMER_REAL, seconds)
+    try:
+        yield
+    finally:
+        signal.setitimer(signal.ITIMER_REAL, 0)
+        signal.signal(signal.SIGALRM, previous)
+
+
+def _campaign():
+    """The seeded cases: [(index, how, bytes)], the same on every run."""
+    rng = random.Random(SEED)
+    seeds = fuzz.seed_models()
+    return [(i, *fuzz.case(rng, seeds, i)) for i in range(CASES)]
+
+
+def test_the_generators_cover_the_language():
+    """The campaign reaches what it claims: every shipped model mutated, generated models
+    that bgc accepts, every function, arrays, constraints and scenes."""
+    cases = _campaign()
+    text = "\n".join(d.decode("utf-8", "replace") for _, _, d in cases)
+    for f in fuzz.FUNCTIONS:
+        assert f + "(" in text, f
+    for construct in ("constraint", "MTF[", "0[", "scene ", "integral(", "@", "GY(", "\r\n"):
+        assert construct in text, construct
+    assert {how for _, how, _ in cases} >= {"generated", "generated+mutated"}
+    assert len({how for _, how, _ in cases if how.startswith("mutated ")}) >= 10
+
+
+def test_seeded_campaign_check_and_simulate(tmp_path):
+    accepted, failures = [], []
+    for i, how, data in _campaign():
+        with _alarm(SAFETY_SECONDS):
+            res = fuzz.check_case(data)
+        if res["failure"]:
+            failures.append((i, how, res["failure"], res["stderr"][-2000:],
+                             data.decode("utf-8", "replace")))
+        elif res["exit"] == 0:
+            accepted.append(data)
+    assert not failures, failures[0]
+    assert len(accepted) >= SIMULATED
+    backends = ["python"] + (["c"] if have_cc() else [])
+    for data in accepted[:SIMULATED]:
+        for backend in backends:
+            res = fuzz.simulate_case(data, backend, SAFETY_SECONDS, in_process=True)
+            assert res["failure"] is None, (backend, res, data.decode())
+            assert res["exit"] in (0, 1), res
+
+
+def test_a_failure_is_minimised_and_written(tmp_path):
+    """The minimiser keeps the failure's signature: here 'the text has a NUL byte and a
+    division', a stand-in for a bug, from a whole model down to those two tokens."""
+    data = (ROOT / "models" / "rlc.bg").read_bytes().replace(b"\n", b"\n\x00", 1) + b"x = 1/2\n"
+    small = fuzz.minimise(data, lambda d: b"\x00" in d and b"/" in d, seconds=30)
+    assert b"\x00" in small and b"/" in small and len(small) <= 3
+    path = fuzz.write_regression(tmp_path, "check: ValueError at x.py:f", small, "mutated",
+                                 1, 7, data)
+    assert path.read_bytes() == small
+    note = path.with_suffix(".note").read_text()
+    assert "check: ValueError at x.py:f" in note and "--seed 1, case 7" in note
+
+
+REPLAYED = sorted(p.name for p in REGRESSIONS.glob("*.bg"))
+LOCATED = re.compile(r"^tests/fuzz_regressions/[^:]+\.bg(:\d+:\d+)?: error: ", re.M)
+
+
+@pytest.mark.parametrize("name", REPLAYED)
+def test_regression_replayed(name, monkeypatch):
+    monkeypatch.chdir(ROOT)
+    path = f"tests/fuzz_regressions/{name}"
+    with _alarm(SAFETY_SECONDS):
+        result = CliRunner().invoke(main, ["check", path])
+    if result.exception is not None and not isinstance(result.exception, SystemExit):
+        raise result.exception
+    assert result.exit_code in (0, 1), result.output
+    assert "Traceback" not in result.stderr
+    if result.exit_code == 1:
+        assert LOCATED.search(result.stderr), result.stderr
+    expected = REGRESSIONS / name.replace(".bg", ".err")
+    if expected.exists():
+        assert result.exit_code == 1
+        first = next(line for line in result.stderr.splitlines() if ": error: " in line)
+        assert first == expected.read_text(encoding="utf-8").strip()
+
+
+def test_parameter_given_on_the_command_line_that_makes_a_law_complex(tmp_path):
+    """`-p a=2` for `C(asin(a))`: a located error naming the value, exit 1; not a traceback,
+    not a run from NaN (the model's own value a = 0.5 is fine)."""
+    model = tmp_path / "m.bg"
+    model.write_text("model m\nparameter a = 0.5\nparameter b = a\nj : 0\nc : C(asin(b))\n"
+                     "r : R(2)\nj -> c\nj -> r\nk : 0\ne : C(1) init q = sqrt(a)\n"
+                     "s : R(1)\nk -> e\nk -> s\n", encoding="utf-8")
+    env = {"BGC_CACHE_DIR": str(tmp_path / "cache")}
+    runner = CliRunner()
+    cwd = os.getcwd()
+    os.chdir(tmp_path)
+    try:
+        ok = runner.invoke(main, ["simulate", "m.bg", "--backend", "python", "--t-end", "0.01"],
+                           env=env)
+        bad = runner.invoke(main, ["simulate", "m.bg", "--backend", "python", "--t-end", "0.01",
+                                   "-p", "a=2", "-o", "out.csv"], env=env)
+        neg = runner.invoke(main, ["simulate", "m.bg", "--backend", "python", "--t-end", "0.01",
+                                   "-p", "a=-2"], env=env)
+    finally:
+        os.chdir(cwd)
+    assert ok.exit_code == 0, ok.output
+    assert bad.exception is None or isinstance(bad.exception, SystemExit)
+    assert bad.exit_code == 1, bad.output
+    assert bad.stderr.startswith("m.bg:5:7: error: the law of 'c' evaluates to a complex number: "
+                                 "asin(b) with b = 2 (|b| > 1)"), bad.stderr
+    assert "m.bg: note: with the parameter values given for the run: a=2" in bad.stderr
+    assert not (tmp_path / "out.csv").exists()
+    assert neg.exit_code == 1
+    assert "m.bg:10:19: error: the initial value of 'e' evaluates to a complex number: sqrt(a) " \
+           "with a = -2" in neg.stderr

@@ -1,0 +1,820 @@
+#!/usr/bin/env python3
+"""Fuzzing bgc: models generated from the grammar and mutations of every shipped model, through
+`bgc check` in process and, for a sample, through `bgc simulate` in both backends.
+
+    python tools/fuzz.py --seed 1 --cases 100000 --simulate-every 50 --out fuzz-out
+
+What counts as a failure:
+- check (run in a worker process, the function the command line calls, click's runner around
+  it): an exception other than the command's exit; an exit status other than 0 and 1; exit 1
+  without a located error (`m.bg:LINE:COL: error:` or `m.bg: error:`); a traceback in the
+  output; a file left behind; a case that runs longer than --time-limit (a hang: the worker is
+  killed and started again, the harness goes on);
+- simulate (bgc as a subprocess, C and Python backends, a short --t-end): a traceback on stderr;
+  an exit status other than 0, 1 and 2 (2 only for a usage error: `Usage:` or `Error:` from
+  the option parser), a death by a signal of bgc or of the generated program (bgc reports it
+  as 128 + the signal), a run longer than --sim-time-limit; exit 1 without a message; a CSV
+  that ends in a cut row or whose rows have fewer or more columns than its header, or that
+  holds a NaN or an infinity; a partial file left beside it; a process that outlives bgc.
+
+Each failure's signature (its kind, the exception's type and the innermost frame in bgc) is
+minimised once by delta debugging, on lines, tokens, then characters, keeping the signature, and
+written as tests/fuzz_regressions/NAME.bg with NAME.note (what failed, the seed and the case).
+The summary (cases, failures by signature) is printed at the end and written to OUT/summary.json.
+
+The generators are importable (tests/test_fuzz_harness.py runs a short seeded campaign in
+process): generate(rng), mutate(rng, text), case(rng, seeds, i) and check_case(data).
+"""
+from __future__ import annotations
+
+import argparse
+import base64
+import json
+import os
+import random
+import re
+import select
+import shutil
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+import traceback
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+SEED_DIRS = (ROOT / "models", ROOT / "tests" / "models")
+REGRESSIONS = ROOT / "tests" / "fuzz_regressions"
+
+# ------------------------------------------------------------------------- generation
+
+FUNCTIONS = {"sin": 1, "cos": 1, "tan": 1, "asin": 1, "acos": 1, "atan": 1, "atan2": 2,
+             "sinh": 1, "cosh": 1, "tanh": 1, "exp": 1, "log": 1, "sqrt": 1, "abs": 1,
+             "sign": 1, "min": 2, "max": 2}
+EXTREME = ("1e308", "1.7976931348623157e308", "1e309", "1e-320", "4.9e-324", "1e-400", "0",
+           "0.0", "-0", "-0.0", "2", "1" * 20, "9007199254740993", "9" * 309, "1" * 310,
+           "1e-308", "2.2250738585072014e-308", "123456789012345678901234567890", "1000",
+           "0.5", "1e8", "64", "65", "1024")
+NAN_MAKERS = ("0/0", "log(0)", "sqrt(-1)", "asin(2)", "acos(-3)", "1e308*10", "exp(1000)",
+              "exp(1000) - exp(1000)", "1/0", "0^0", "0^-1", "(-8)^(1/3)", "log(-1)",
+              "atan2(0, 0)", "tan(asin(1))", "1e308^2", "(-1)^0.5", "sign(0)/0",
+              "min(1e308*10, 0)", "max(0/0, 1)", "1/sinh(0.25^1000) - 1", "2^1024",
+              "0.5^2^2^2^2", "10^-400")
+TAME = ("sin", "cos", "atan", "tanh", "abs", "min", "max", "exp", "cosh", "sign", "atan2")
+KINDS_1 = ("Se", "Sf", "MSe", "MSf", "I", "C", "R")
+SOLVERS = ("dopri5", "dop853", "rk4", "euler", "radau5", "rodas4", "auto", "nope")
+UNICODE = ("é", "π", "ℌ", "𝑥", "x\u0301", "Ω", "ﬁ", "\u200b", "\u00a0", "٣", "１", "—", "≤",
+           "\u202e", "\ud800", "\U0001f600", "µ")
+
+
+class Gen:
+    """One random model: names it has declared, so that expressions mostly refer to them."""
+
+    def __init__(self, rng: random.Random):
+        self.rng = rng
+        self.params: list[str] = []
+        self.values: list[str] = []  # fields and signals usable in laws: j.f, x, q[0] ...
+        self.lines: list[str] = []
+        self.effects: list[str] = []
+        self.outputs: list[str] = []
+        self.n = 0
+        self.wild = rng.choice([0.0, 0.0, 0.0, 0.01, 0.05])  # how often a number is extreme
+
+    def name(self, prefix: str) -> str:
+        self.n += 1
+        return f"{prefix}{self.n}"
+
+    def number(self) -> str:
+        r = self.rng
+        x = r.random()
+        if x < self.wild:
+            return r.choice(EXTREME)
+        if x < 0.5:
+            return str(r.randint(0, 20))
+        return repr(round(r.uniform(0.01, 10), r.randint(0, 4)))
+
+    def expr(self, depth: int = 3, names=None, vector: int = 0) -> str:
+        """An expression over numbers and names (names: None = parameters only)."""
+        r = self.rng
+        pool = self.params if names is None else names
+        if vector:
+            return "[" + ", ".join(self.expr(depth - 1, names) for _ in range(vector)) + "]"
+        if depth <= 0 or r.random() < 0.3:
+            if pool and r.random() < 0.55:
+                return r.choice(pool)
+            if r.random() < self.wild / 3:
+                return r.choice(NAN_MAKERS)
+            return self.number()
+        k = r.random()
+        if k < 0.35:
+            op = r.choice(["+", "-", "*", "/", "^", "**", "+", "*"])
+            a, b = self.expr(depth - 1, names), self.expr(depth - 1, names)
+            if op in ("^", "**") and (r.random() < 0.6 or not self.wild):
+                b = r.choice(["2", "3", "0.5", "-1", "1000", "64", "65", "-2", "1/3", "2.5"]
+                             if self.wild else ["2", "3", "-2"])
+            return f"{a} {op} {b}" if r.random() < 0.5 else f"({a}) {op} ({b})"
+        if k < 0.45:
+            return f"-{self.expr(depth - 1, names)}"
+        if k < 0.85:
+            f = r.choice(list(FUNCTIONS) if self.wild else TAME)
+            n = FUNCTIONS[f] + (r.randint(0, 3) if f in ("min", "max") else 0)
+            if r.random() < self.wild:
+                n += r.choice([-1, 1])
+            return f"{f}({', '.join(self.expr(depth - 1, names) for _ in range(max(n, 0)))})"
+        if k < 0.9:
+            n = r.randint(1, 12)
+            return "(" * n + self.expr(depth - 1, names) + ")" * n
+        return f"({self.expr(depth - 1, names)})"
+
+    def law_names(self):
+        return self.params + self.values + ["t"]
+
+    def emit(self, line: str):
+        self.lines.append(line)
+
+    def tag(self) -> str:
+        r = self.rng
+        if r.random() < 0.15:
+            e = r.choice(["friction", "gravity", "load", "drive"])
+            self.effects.append(e)
+            return f" @{e}"
+        return ""
+
+    def doc(self) -> str:
+        return ' "a doc"' if self.rng.random() < 0.1 else ""
+
+    # -- pieces
+    def parameter(self):
+        p = self.name("p")
+        self.emit(f"parameter {p} = {self.expr(2)}{self.doc()}")
+        self.params.append(p)
+
+    def one_port(self, junction: str, jtype: str, kind: str | None = None):
+        r = self.rng
+        if kind is None:  # what the junction can take, most of the time
+            if self.wild and r.random() < 0.3:
+                kind = r.choice(KINDS_1)
+            else:
+                kind = r.choice(["R", "R", "Se", "MSe", "I"] if jtype == "1"
+                                else ["R", "R", "Sf", "MSf", "C"])
+        e = self.name(kind.lower())
+        init = ""
+        if kind in ("I", "C") and r.random() < 0.6:
+            arg = (f"f = p * ({self.expr(2, self.params + ['p'])})" if kind == "I" and
+                   r.random() < 0.2 else f"e = q * ({self.expr(2, self.params + ['q'])})"
+                   if kind == "C" and r.random() < 0.3 else self.expr(2))
+            if r.random() < 0.5:
+                init = f" init {r.choice('pf' if kind == 'I' else 'qe')} = {self.expr(2)}"
+                if kind == "I" and r.random() < 0.5:
+                    init = f" init f = {self.expr(2)}"
+        elif kind == "R" and r.random() < 0.4:
+            v = r.choice("ef")
+            arg = f"{'f' if v == 'e' else 'e'} = {v} * ({self.expr(2, self.params + [v])})"
+        elif kind in ("MSe", "MSf"):
+            arg = self.expr(3, self.law_names())
+        else:
+            arg = self.expr(2)
+        self.emit(f"{e} : {kind}({arg}){init}{self.tag()}{self.doc()}")
+        if kind in ("Se", "Sf", "MSe", "MSf") and r.random() < 0.8:
+            self.emit(f"{e} -> {junction}")
+        else:
+            self.emit(f"{junction} -> {e}")
+        if kind in ("I", "C", "R"):
+            self.outputs.append(f"{e}.{r.choice('ef')}")
+        if kind in ("I", "C"):
+            self.values.append(f"{e}.{'p' if kind == 'I' else 'q'}")
+        return e
+
+    def junction(self, kind: str | None = None) -> str:
+        kind = kind or self.rng.choice("01")
+        j = self.name("j")
+        self.emit(f"{j} : {kind}{self.doc()}")
+        self.values.append(f"{j}.{'f' if kind == '1' else 'e'}")
+        return j
+
+    def two_port(self, a: str, b: str):
+        r = self.rng
+        kind = r.choice(["TF", "GY", "MTF", "MGY"])
+        x = self.name(kind.lower())
+        arg = self.expr(2, self.law_names() if kind[0] == "M" else None)
+        self.emit(f"{x} : {kind}({arg}){self.tag()}")
+        self.emit(f"{a} -> {x} -> {b}")
+
+    def constraint(self):
+        """A pendulum-like constraint: a 1-junction (velocity), a mass, an integral position
+        and a constraint junction reached through an MTF."""
+        r = self.rng
+        v, m, x = self.name("v"), self.name("m"), self.name("x")
+        self.emit(f"{v} : 1")
+        self.emit(f"{m} : I({self.expr(1)})")
+        self.emit(f"{v} -> {m}")
+        self.emit(f"signal {x} = integral({v}.f, init = {self.expr(1)})")
+        tf, c = self.name("tf"), self.name("rod")
+        self.emit(f"{tf} : MTF({self.expr(2, [x] + self.params)})")
+        kind = r.choice(["", " holonomic", " nonholonomic"])
+        ann = r.choice(["", f"(init = {self.expr(1)})",
+                        f"(phi = {self.expr(2, [x] + self.params)})"])
+        corr = r.choice(["", " corrector none", f" corrector pid({self.expr(1)}, {self.expr(1)})"]
+                        + ([f" corrector pd({self.expr(1)})"] if "non" in kind else []))
+        self.emit(f"{c} : 0 constraint{kind}{ann}{corr}{self.tag()}")
+        self.emit(f"{v} -> {tf} -> {c}")
+        if r.random() < 0.7:
+            s = self.name("se")
+            self.emit(f"{s} : Se({self.expr(2)})")
+            self.emit(f"{s} -> {v}")
+        self.values.append(x)
+        self.outputs += [x, f"{c}.lambda"]
+
+    def array(self):
+        """Multibonds: a junction array, a mass field, sources, a matrix transformer onto a
+        constraint array (the car axis's shape), an integral signal vector."""
+        r = self.rng
+        n, m = r.randint(2, 4), r.randint(2, 3)
+        v, mass, q = self.name("v"), self.name("mass"), self.name("q")
+        self.emit(f"{v} : 1[{n}]")
+        self.emit(f"{mass} : I[{n}]({self.expr(1)})" + (
+            f" init f = {self.expr(1, vector=n)}" if r.random() < 0.6 else ""))
+        self.emit(f"{v} -> {mass}")
+        self.emit(f"signal {q}[{n}] = integral({v}.f, init = {self.expr(1, vector=n)})")
+        qs = [f"{q}[{i}]" for i in range(n)] + self.params
+        if r.random() < 0.7:
+            w = self.name("w")
+            self.emit(f"{w} : Se[{n}]({self.expr(1, vector=n)}){self.tag()}")
+            self.emit(f"{w} -> {v}")
+        if r.random() < 0.5:
+            s = self.name("spring")
+            self.emit(f"{s} : MSe[{n}]({self.expr(2, qs, vector=n)})")
+            self.emit(f"{s} -> {v}")
+        if r.random() < 0.6:
+            J, links = self.name("J"), self.name("links")
+            rows = ", ".join(self.expr(1, qs, vector=n) for _ in range(m))
+            self.emit(f"{J} : MTF[{n}->{m}]([{rows}])")
+            corr = r.choice(["", " corrector none", " corrector pid(5, 5)"])
+            init = r.choice(["", f"(init = {self.expr(1, vector=m)})"])
+            self.emit(f"{links} : 0[{m}] constraint holonomic{init}{corr}")
+            self.emit(f"{v} -> {J} -> {links}")
+            self.outputs.append(f"{links}.lambda[{r.randint(0, m)}]")
+        self.outputs.append(f"{q}[{r.randint(0, n)}]")
+
+    def signal(self):
+        s = self.name("s")
+        self.emit(f"signal {s} = {self.expr(3, self.law_names())}")
+        self.values.append(s)
+
+    def scene(self):
+        r = self.rng
+        body = []
+        if self.effects and r.random() < 0.6:
+            chosen = r.sample(self.effects, r.randint(1, len(self.effects)))
+            body.append("effects " + ", ".join(chosen))
+        elif r.random() < 0.2:
+            body.append("effects none")
+        if self.outputs and r.random() < 0.7:
+            chosen = r.sample(self.outputs, r.randint(1, min(3, len(self.outputs))))
+            body.append("outputs " + ", ".join(chosen))
+        if r.random() < 0.7:
+            t1 = r.choice(["1", "0.1", "10", self.expr(1), "1e308", "0"])
+            body.append(f"time {r.choice(['0', '0', '1', self.expr(1)])} .. {t1}"
+                        + (" every " + r.choice(['0.01', '0.1', self.expr(1)]
+                                                + (['1e-320'] if self.wild else []))
+                           if r.random() < 0.6 else ""))
+        if r.random() < 0.5:
+            kw = ", ".join(f"{k} = {r.choice(['1e-6', '1e-3', '0.01', self.expr(1), '0', '1e308'])}"
+                           for k in r.sample(["rtol", "atol", "step", "foo"], r.randint(0, 2)))
+            name = r.choice(SOLVERS[:-1] if not self.wild else SOLVERS)
+            body.append(f"solver {name}" + (f"({kw})" if kw or r.random() < 0.3 else ""))
+        if self.params and r.random() < 0.5:
+            body.append(f"set {r.choice(self.params)} = {self.expr(2, [])}")
+        sep = r.choice(["\n  ", "; "])
+        self.emit(f"scene {self.name('sc')}{self.doc()} {{{sep}{sep.join(body)}\n}}")
+
+
+def generate(rng: random.Random) -> str:
+    """A model from the grammar, built so that most of it resolves and reaches causality,
+    equations and code: parameters, junctions with one-ports and two-ports between them,
+    constraints, multibond arrays, signals, scenes."""
+    g = Gen(rng)
+    g.emit(rng.choice(["model m", "model m \"doc\"", "model fuzz"]))
+    for _ in range(rng.randint(0, 4)):
+        g.parameter()
+    junctions = [g.junction() for _ in range(rng.randint(1, 3))]
+    kinds = {j: g.lines[-len(junctions) + k].split(" : ")[1][0] for k, j in enumerate(junctions)}
+    for j in junctions:  # a storage element on each: effort or flow set by one bond
+        if rng.random() < 0.9:
+            g.one_port(j, kinds[j], "I" if kinds[j] == "1" else "C")
+    for a, b in zip(junctions, junctions[1:]):
+        if rng.random() < 0.7:
+            g.two_port(a, b)
+        else:
+            g.emit(f"{a} -> {b}")
+    for _ in range(rng.randint(1, 4)):
+        j = rng.choice(junctions)
+        g.one_port(j, kinds[j])
+    if rng.random() < 0.3:
+        g.signal()
+    if rng.random() < 0.25:
+        g.constraint()
+    if rng.random() < 0.2:
+        g.array()
+    for _ in range(rng.randint(0, 2)):
+        g.scene()
+    head, lines = g.lines[:1], g.lines[1:]
+    if rng.random() < 0.1:
+        rng.shuffle(lines)
+    lines = head + lines
+    return rng.choice(["\n", "\n", "; "]).join(lines) + "\n"
+
+
+# ------------------------------------------------------------------------- mutation
+
+TOKEN = re.compile(r'"(?:\\.|[^"\\\n])*"|#[^\n]*|[A-Za-z_][A-Za-z0-9_]*'
+                   r'|[0-9]*\.?[0-9]+(?:[eE][+-]?\d+)?|->|\*\*|\.\.|\s+|.', re.S)
+ODD = ("(", ")", "[", "]", "{", "}", "->", ";", "\n", ":", "=", "^", "@", ".", ",", '"', "\\",
+       "#", "\x00", "\ufeff", "0", "-", "*", "**", "/", " ", "\t", "\r", "..", "init", "every",
+       "constraint", "scene", "signal", "integral", "[1]", "[2->1]", "[0]", "\\\n")
+NUMBER = re.compile(r"[0-9]*\.?[0-9]+(?:[eE][+-]?\d+)?$")
+NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]*$")
+
+
+def _nest(rng, token: str) -> str:
+    n = rng.choice([5, 50, 99, 100, 101, 150, 300, 1000])
+    how = rng.randrange(5)
+    if how == 0:
+        return "(" * n + token + ")" * n
+    if how == 1:
+        return "-" * n + token
+    if how == 2:
+        return "sin(" * n + token + ")" * n
+    if how == 3:
+        return "[" * n + token + "]" * n
+    return " + ".join([token] * n)
+
+
+def mutate(rng: random.Random, text: str) -> str:
+    """text with a few token-level edits (delete, duplicate, swap, insert, replace a number
+    with an extreme one, a name with unicode or a keyword, nest deeply), sometimes whole-text
+    edits (CRLF, a BOM, NUL bytes, truncation)."""
+    tokens = TOKEN.findall(text) or [""]
+    for _ in range(rng.choice([1, 1, 1, 2, 2, 3, 4, 8])):
+        i = rng.randrange(len(tokens))
+        tok = tokens[i]
+        how = rng.randrange(10)
+        if how == 0:
+            del tokens[i]
+        elif how == 1:
+            tokens.insert(i, tok)
+        elif how == 2:
+            j = rng.randrange(len(tokens))
+            tokens[i], tokens[j] = tokens[j], tokens[i]
+        elif how == 3:
+            tokens.insert(i, rng.choice(ODD))
+        elif how == 4:  # an extreme number or a nan-maker for a number
+            nums = [k for k, t in enumerate(tokens) if NUMBER.match(t)]
+            k = rng.choice(nums) if nums else i
+            tokens[k] = rng.choice(EXTREME + NAN_MAKERS)
+        elif how == 5:  # a name becomes another name of the model, a keyword or unicode
+            names = [k for k, t in enumerate(tokens) if NAME.match(t)]
+            k = rng.choice(names) if names else i
+            pool = [t for t in tokens if NAME.match(t)] or ["x"]
+            tokens[k] = rng.choice([rng.choice(pool), rng.choice(pool), rng.choice(UNICODE),
+                                    tokens[k] + rng.choice(UNICODE), rng.choice(
+                                        ["init", "t", "model", "lambda", "e", "f", "p", "q"])])
+        elif how == 6:  # deep nesting around a number or a name
+            cand = [k for k, t in enumerate(tokens) if NUMBER.match(t) or NAME.match(t)]
+            k = rng.choice(cand) if cand else i
+            tokens[k] = _nest(rng, tokens[k])
+        elif how == 7:  # a function around a number or name
+            cand = [k for k, t in enumerate(tokens) if NUMBER.match(t) or NAME.match(t)]
+            k = rng.choice(cand) if cand else i
+            f = rng.choice(list(FUNCTIONS))
+            tokens[k] = f"{f}({', '.join([tokens[k]] * FUNCTIONS[f])})"
+        elif how == 8:  # an operator changed
+            ops = [k for k, t in enumerate(tokens) if t in ("+", "-", "*", "/", "^", "**")]
+            if ops:
+                tokens[rng.choice(ops)] = rng.choice(["+", "-", "*", "/", "^", "**", "^1000*"])
+        else:
+            tokens.insert(i, "".join(rng.choice(UNICODE + ODD) for _ in range(rng.randint(1, 3))))
+        if not tokens:
+            tokens = [""]
+    out = "".join(tokens)
+    x = rng.random()
+    if x < 0.04:
+        out = out.replace("\n", "\r\n")
+    elif x < 0.07:
+        out = "\ufeff" + out
+    elif x < 0.09:
+        k = rng.randrange(len(out) + 1)
+        out = out[:k] + "\x00" + out[k:]
+    elif x < 0.13:
+        out = out[:rng.randrange(len(out) + 1)]
+    elif x < 0.14:
+        out = out.replace("\n", "\r")
+    return out
+
+
+def seed_models() -> dict[str, str]:
+    """Every shipped model: models/ and tests/models/ (by file name)."""
+    out = {}
+    for d in SEED_DIRS:
+        for p in sorted(d.glob("*.bg")):
+            out[f"{d.relative_to(ROOT)}/{p.name}"] = p.read_text(encoding="utf-8")
+    return out
+
+
+def to_bytes(text: str, rng: random.Random | None = None) -> bytes:
+    data = text.encode("utf-8", "surrogatepass")
+    if rng is not None and rng.random() < 0.01:  # bytes that are not UTF-8
+        k = rng.randrange(len(data) + 1)
+        data = data[:k] + rng.choice([b"\xff", b"\xc3", b"\xe2\x82", b"\x80\x80"]) + data[k:]
+    return data
+
+
+def case(rng: random.Random, seeds: dict[str, str], i: int) -> tuple[str, bytes]:
+    """Case number i: (how it was made, its bytes).  Even cases are generated, odd ones are
+    mutations of a shipped model (or, one time in four, of a generated one)."""
+    if i % 2 == 0:
+        text = generate(rng)
+        if rng.random() < 0.25:
+            text = mutate(rng, text)
+            return "generated+mutated", to_bytes(text, rng)
+        return "generated", to_bytes(text, rng)
+    if rng.random() < 0.25:
+        return "generated+mutated", to_bytes(mutate(rng, generate(rng)), rng)
+    name = rng.choice(sorted(seeds))
+    return f"mutated {name}", to_bytes(mutate(rng, seeds[name]), rng)
+
+
+# ------------------------------------------------------------------------- check, in process
+
+LOCATED = re.compile(r"^m\.bg(:\d+:\d+)?: error: ", re.M)  # (after warnings, if any)
+
+
+def _innermost_bgc_frame(exc: BaseException) -> str:
+    frames = traceback.extract_tb(exc.__traceback__)
+    inside = [f for f in frames if f"{os.sep}bgc{os.sep}" in f.filename]
+    f = (inside or frames or [None])[-1]
+    return f"{Path(f.filename).name}:{f.name}" if f else "?"
+
+
+def check_case(data: bytes, args=("check", "m.bg")) -> dict:
+    """`bgc check m.bg` on data, in a directory of its own (also the working directory), with
+    click's runner (the function the command line calls, in this process).  Returns
+    {"exit", "stderr", "failure"}: failure None, or the failure's signature."""
+    from click.testing import CliRunner
+
+    from bgc.cli import main
+
+    cwd = os.getcwd()
+    with tempfile.TemporaryDirectory(prefix="bgcfuzz-") as tmp:
+        Path(tmp, "m.bg").write_bytes(data)
+        os.chdir(tmp)
+        try:
+            result = CliRunner().invoke(main, list(args))
+            left = sorted(os.listdir(tmp))
+        finally:
+            os.chdir(cwd)
+    exc = result.exception
+    stderr = result.stderr
+    failure = None
+    if exc is not None and not isinstance(exc, SystemExit):
+        failure = f"check: {type(exc).__name__} at {_innermost_bgc_frame(exc)}"
+        stderr += "".join(traceback.format_exception(exc))
+    elif result.exit_code not in (0, 1):
+        failure = f"check: exit {result.exit_code}"
+    elif "Traceback" in stderr or "Traceback" in result.stdout:
+        failure = "check: traceback in the output"
+    elif result.exit_code == 1 and not LOCATED.search(stderr):
+        failure = "check: exit 1 without a located error"
+    elif left != ["m.bg"]:
+        failure = "check: files left behind"
+    return {"exit": result.exit_code, "stderr": stderr[-4000:], "failure": failure}
+
+
+def _worker_main():
+    """The worker: reads one case a line (JSON, the bytes in base64), answers one line."""
+    import bgc.cli  # noqa: F401  (imported once, before the first case)
+    out = sys.stdout
+    sys.stdout = sys.stderr  # whatever else prints must not break the protocol
+    for line in sys.stdin:
+        req = json.loads(line)
+        res = check_case(base64.b64decode(req["data"]), tuple(req.get("args", ("check", "m.bg"))))
+        out.write(json.dumps(res) + "\n")
+        out.flush()
+
+
+class Worker:
+    """A process running check_case, killed and started again when a case exceeds the time
+    limit (a hang) or the worker dies; restarted every `recycle` cases (SymPy's caches)."""
+
+    def __init__(self, time_limit: float, recycle: int = 2000):
+        self.time_limit, self.recycle = time_limit, recycle
+        self.proc = None
+        self.done = 0
+
+    def _start(self):
+        env = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
+        self.proc = subprocess.Popen([sys.executable, str(Path(__file__).resolve()), "--worker"],
+                                     stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                                     stderr=subprocess.DEVNULL, env=env, start_new_session=True)
+        self.done = 0
+
+    def stop(self):
+        if self.proc is not None:
+            try:
+                os.killpg(self.proc.pid, signal.SIGKILL)
+            except ProcessLookupError:
+                pass
+            self.proc.wait()
+            for f in (self.proc.stdin, self.proc.stdout):
+                try:
+                    f.close()
+                except OSError:
+                    pass
+            self.proc = None
+
+    def run(self, data: bytes, args=("check", "m.bg")) -> dict:
+        if self.proc is None or self.done >= self.recycle:
+            self.stop()
+            self._start()
+        self.done += 1
+        req = json.dumps({"data": base64.b64encode(data).decode(), "args": list(args)}) + "\n"
+        start = time.monotonic()
+        try:
+            self.proc.stdin.write(req.encode())
+            self.proc.stdin.flush()
+        except BrokenPipeError:
+            self.stop()
+            return {"exit": None, "stderr": "", "failure": "check: the worker died"}
+        # the first case of a worker includes its start (imports): allowed 20 s more
+        limit = self.time_limit + (20 if self.done == 1 else 0)
+        ready, _, _ = select.select([self.proc.stdout], [], [], limit)
+        if not ready:
+            self.stop()
+            return {"exit": None, "stderr": "", "failure": "check: hang",
+                    "seconds": time.monotonic() - start}
+        line = self.proc.stdout.readline()
+        if not line:
+            code = self.proc.wait()
+            self.stop()
+            return {"exit": code, "stderr": "", "failure": f"check: the worker died ({code})"}
+        res = json.loads(line)
+        res["seconds"] = time.monotonic() - start
+        return res
+
+
+# ------------------------------------------------------------------------- simulate
+
+def _csv_problem(path: Path) -> str | None:
+    data = path.read_bytes()
+    if not data:
+        return "an empty CSV"
+    if not data.endswith(b"\n"):
+        return "a CSV that ends in a cut row"
+    lines = data.decode("utf-8", "replace").splitlines()
+    width = lines[0].count(",")
+    if any(line.count(",") != width for line in lines[1:]):
+        return "a CSV row of the wrong width"
+    if re.search(r"(^|,)[-+]?(nan|inf)", "\n".join(lines[1:]), re.I | re.M):
+        return "a non-finite value in the CSV"  # (the programs stop on one, with a message)
+    return None
+
+
+def _simulate_in_process(tmp: str, args: list[str], env: dict):
+    """bgc simulate ARGS with click's runner in directory tmp: (exit status, stderr, failure
+    or None).  (For the suite: no interpreter start, no second SymPy import.)"""
+    from click.testing import CliRunner
+
+    from bgc.cli import main
+
+    cwd = os.getcwd()
+    os.chdir(tmp)
+    try:
+        result = CliRunner().invoke(main, args, env=env)
+    finally:
+        os.chdir(cwd)
+    exc = result.exception
+    if exc is not None and not isinstance(exc, SystemExit):
+        return None, "".join(traceback.format_exception(exc)), \
+            f"{type(exc).__name__} at {_innermost_bgc_frame(exc)}"
+    return result.exit_code, result.stderr, None
+
+
+def simulate_case(data: bytes, backend: str, time_limit: float, t_end: str = "0.05",
+                  in_process: bool = False) -> dict:
+    """`bgc simulate m.bg --backend B --t-end T -o out.csv` in a directory of its own, with a
+    cache of its own, as a subprocess (in_process: with click's runner, no time limit);
+    {"exit", "stderr", "failure"}."""
+    with tempfile.TemporaryDirectory(prefix="bgcfuzz-sim-") as tmp:
+        Path(tmp, "m.bg").write_bytes(data)
+        env = {"BGC_CACHE_DIR": str(Path(tmp, "cache")),
+               "BGC_CFLAGS": os.environ.get("BGC_CFLAGS", "-O0 -std=c99")}
+        args = ["simulate", "m.bg", "--backend", backend, "--t-end", t_end, "-o", "out.csv"]
+        orphan = False
+        if in_process:
+            code, stderr, raised = _simulate_in_process(tmp, args, env)
+            if raised:
+                return {"exit": None, "stderr": stderr[-4000:],
+                        "failure": f"simulate {backend}: {raised}"}
+        else:
+            env = dict(os.environ, **env, PYTHONPATH=str(ROOT) + os.pathsep
+                       + os.environ.get("PYTHONPATH", ""))
+            proc = subprocess.Popen([sys.executable, "-m", "bgc", *args], cwd=tmp, env=env,
+                                    stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                                    start_new_session=True)
+            try:
+                _, err = proc.communicate(timeout=time_limit)
+            except subprocess.TimeoutExpired:
+                os.killpg(proc.pid, signal.SIGKILL)
+                proc.communicate()
+                return {"exit": None, "stderr": "", "failure": f"simulate {backend}: hang"}
+            finally:
+                try:  # the generated program, if it outlived bgc (an orphan)
+                    os.killpg(proc.pid, signal.SIGKILL)
+                    orphan = True
+                except ProcessLookupError:
+                    pass
+            stderr = err.decode("utf-8", "replace")
+            code = proc.returncode
+        out = Path(tmp, "out.csv")
+        left = sorted(p for p in os.listdir(tmp) if p not in ("m.bg", "out.csv", "cache"))
+        failure = None
+        if code < 0:
+            failure = f"simulate {backend}: bgc killed by signal {-code}"
+        elif "Traceback" in stderr:
+            last = [l for l in stderr.splitlines() if l.strip()][-1:]
+            kind = last[0].split(":")[0] if last else "?"
+            failure = f"simulate {backend}: traceback ({kind})"
+        elif code not in (0, 1, 2):
+            failure = f"simulate {backend}: exit {code}"
+        elif code == 2 and not re.search(r"^(Usage:|Error:)", stderr, re.M):
+            failure = f"simulate {backend}: exit 2 without a usage error"
+        elif code == 1 and not stderr.strip():
+            failure = f"simulate {backend}: exit 1 without a message"
+        elif code == 0 and not out.exists():
+            failure = f"simulate {backend}: exit 0 without the CSV"
+        elif out.exists() and _csv_problem(out):
+            failure = f"simulate {backend}: {_csv_problem(out)}"
+        elif left:
+            failure = f"simulate {backend}: files left behind"
+        elif orphan:
+            failure = f"simulate {backend}: a process outlived bgc"
+        return {"exit": code, "stderr": stderr[-4000:], "failure": failure}
+
+
+# ------------------------------------------------------------------------- minimisation
+
+def _ddmin(parts: list[str], fails, budget_end: float) -> list[str]:
+    """Delta debugging: a smaller list of parts whose join still fails (the same way)."""
+    n = 2
+    while len(parts) >= 2 and time.monotonic() < budget_end:
+        chunk = max(1, len(parts) // n)
+        reduced = False
+        for start in range(0, len(parts), chunk):
+            if time.monotonic() >= budget_end:
+                break
+            candidate = parts[:start] + parts[start + chunk:]
+            if candidate and fails(candidate):
+                parts, n, reduced = candidate, max(n - 1, 2), True
+                break
+        if not reduced:
+            if chunk == 1:
+                break
+            n = min(len(parts), n * 2)
+    return parts
+
+
+def minimise(data: bytes, still_fails, seconds: float = 180.0) -> bytes:
+    """data made smaller by ddmin on lines, then on tokens, then on characters (once small);
+    still_fails(bytes) -> bool.  Stops after `seconds` with the smallest failing data found."""
+    end = time.monotonic() + seconds
+    text = data.decode("utf-8", "surrogateescape")
+    enc = lambda s: s.encode("utf-8", "surrogateescape")  # noqa: E731
+    lines = text.splitlines(keepends=True)
+    lines = _ddmin(lines, lambda ps: still_fails(enc("".join(ps))), end)
+    tokens = TOKEN.findall("".join(lines))
+    tokens = _ddmin(tokens, lambda ps: still_fails(enc("".join(ps))), end)
+    chars = list("".join(tokens))  # (inside comments, strings and numbers too)
+    if len(chars) <= 4000:
+        chars = _ddmin(chars, lambda ps: still_fails(enc("".join(ps))), end)
+    return enc("".join(chars))
+
+
+def _slug(signature: str) -> str:
+    return re.sub(r"[^a-z0-9]+", "_", signature.lower()).strip("_")[:60]
+
+
+def write_regression(directory: Path, signature: str, data: bytes, how: str, seed: int,
+                     index: int, original: bytes) -> Path:
+    directory.mkdir(parents=True, exist_ok=True)
+    stem = _slug(signature)
+    path = directory / f"{stem}.bg"
+    k = 2
+    while path.exists():
+        path, k = directory / f"{stem}_{k}.bg", k + 1
+    path.write_bytes(data)
+    path.with_suffix(".note").write_text(
+        f"failure: {signature}\nfound by: tools/fuzz.py --seed {seed}, case {index} ({how})\n"
+        f"the case before minimisation ({len(original)} bytes):\n"
+        + original.decode("utf-8", "backslashreplace") + "\n", encoding="utf-8")
+    return path
+
+
+# ------------------------------------------------------------------------- the campaign
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--cases", type=int, default=1000)
+    ap.add_argument("--simulate-every", type=int, default=50, metavar="K",
+                    help="simulate every K-th case that check accepts (0: never)")
+    ap.add_argument("--time-limit", type=float, default=30.0, help="seconds per check")
+    ap.add_argument("--sim-time-limit", type=float, default=120.0,
+                    help="seconds per simulate (compilation included)")
+    ap.add_argument("--out", type=Path, default=Path("fuzz-out"),
+                    help="the log, the failing cases as found, summary.json")
+    ap.add_argument("--regressions", type=Path, default=REGRESSIONS,
+                    help="where minimised failures go")
+    ap.add_argument("--no-minimise", action="store_true")
+    ap.add_argument("--worker", action="store_true", help=argparse.SUPPRESS)
+    a = ap.parse_args(argv)
+    if a.worker:
+        _worker_main()
+        return 0
+    def stop(signum, frame):
+        raise KeyboardInterrupt
+    # (a run in the background of a shell starts with SIGINT ignored: TERM stops it too, with
+    # its summary)
+    signal.signal(signal.SIGINT, stop)
+    signal.signal(signal.SIGTERM, stop)
+    a.out.mkdir(parents=True, exist_ok=True)
+    log = open(a.out / "log.txt", "a", encoding="utf-8")
+    rng = random.Random(a.seed)
+    seeds = seed_models()
+    worker = Worker(a.time_limit)
+    counts = {"check": 0, "check_ok": 0, "check_error": 0, "simulate": 0, "simulate_c": 0,
+              "simulate_python": 0}
+    failures: dict[str, dict] = {}
+    accepted = 0
+    start = time.monotonic()
+
+    def say(msg):
+        print(msg, flush=True)
+        log.write(msg + "\n")
+        log.flush()
+
+    def record(signature, i, how, data, res, rerun):
+        entry = failures.setdefault(signature, {"count": 0, "first_case": i, "regression": None})
+        entry["count"] += 1
+        raw = a.out / "failures" / f"{i:07d}.bg"
+        raw.parent.mkdir(exist_ok=True)
+        raw.write_bytes(data)
+        say(f"case {i} ({how}): FAILURE {signature}\n{res.get('stderr', '')[-1500:]}")
+        if entry["count"] == 1 and not a.no_minimise:
+            small = minimise(data, lambda d: rerun(d) == signature,
+                             seconds=60 if "hang" in signature else 180)
+            path = write_regression(a.regressions, signature, small, how, a.seed, i, data)
+            entry["regression"] = str(path)
+            say(f"  minimised to {len(small)} bytes: {path}")
+
+    try:
+        for i in range(a.cases):
+            how, data = case(rng, seeds, i)
+            res = worker.run(data)
+            counts["check"] += 1
+            if res["failure"]:
+                record(res["failure"], i, how, data, res, lambda d: worker.run(d)["failure"])
+                continue
+            counts["check_ok" if res["exit"] == 0 else "check_error"] += 1
+            if res.get("seconds", 0) > 5:
+                say(f"case {i} ({how}): slow check, {res['seconds']:.1f} s")
+            if res["exit"] == 0:
+                accepted += 1
+                if a.simulate_every and accepted % a.simulate_every == 0:
+                    counts["simulate"] += 1
+                    for backend in ("c", "python"):
+                        counts[f"simulate_{backend}"] += 1
+                        s = simulate_case(data, backend, a.sim_time_limit)
+                        if s["failure"]:
+                            record(s["failure"], i, how, data, s,
+                                   lambda d, b=backend: simulate_case(
+                                       d, b, a.sim_time_limit)["failure"])
+            if (i + 1) % 500 == 0:
+                el = time.monotonic() - start
+                say(f"{i + 1} cases, {counts}, {sum(f['count'] for f in failures.values())} "
+                    f"failures ({len(failures)} kinds), {el:.0f} s")
+    except KeyboardInterrupt:
+        say("interrupted")
+    finally:
+        worker.stop()
+        summary = {"seed": a.seed, "cases_requested": a.cases, **counts,
+                   "seconds": round(time.monotonic() - start),
+                   "failures": failures}
+        (a.out / "summary.json").write_text(json.dumps(summary, indent=1) + "\n")
+        say(json.dumps(summary, indent=1))
+        log.close()
+    return 1 if failures else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
