@@ -188,7 +188,7 @@ def check_parameters(model, scene: str | None, params: dict, outputs=None, effec
         return
     src = _source(model)
     try:
-        graph = flatten(resolve(parse(src.text, src.path)))
+        graph = flatten(resolve(front(src)))
         check_parameters_of(graph, scene, scene_override(outputs, effects, option_names),
                             {name: float(v) for name, v in params.items()})
     except ModelError as exc:
