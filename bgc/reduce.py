@@ -664,7 +664,7 @@ class _Blocks:
         for i, k, e in matrix:
             A[i, k] = _leaf(e, defs, lambda s: s in defs, memo)
         if m <= SINGULAR_CHECK_MAX and is_singular(m, [(i, k, A[i, k]) for i, k, _ in matrix]):
-            rows = _dependent_rows(self.sys, z, _at_random_point(A))
+            rows = _dependent_rows(self.sys.es.constraints, z, _at_random_point(A))
             if rows:
                 fail(rows[0].name_span, f"the constraint rows {_listed(rows)} are not "
                                         "independent, whatever the state: their multipliers "
@@ -763,24 +763,25 @@ def _at_random_point(A: sp.Matrix):
         return None
 
 
-def _dependent_rows(sys: _System, z, values) -> list:
-    """The constraint junctions whose multipliers are among the unknowns z of a singular block
-    and take part in its dependence (nonzero in a null vector of its matrix, given as rows of
-    floats): the rows that are not independent."""
+def _dependent_rows(constraints, z, values) -> list:
+    """The constraints (ConstraintDef or ConstraintInfo) whose multipliers are among the
+    unknowns z of a singular block and take part in its dependence: nonzero in a null vector of
+    its matrix (values: its entries as floats, None if unknown).  All the block's multipliers
+    when the vector cannot say; none when it has no multiplier."""
     import numpy
 
-    by_multiplier = {c.multiplier: c for c in sys.es.constraints}
+    by_multiplier = {c.multiplier: c for c in constraints}
     involved = [k for k, u in enumerate(z) if u in by_multiplier]
-    if not involved or values is None:
+    if not involved:
         return []
-    A = numpy.array(values, dtype=float)
-    if not numpy.all(numpy.isfinite(A)):
-        return []
-    _, sv, vt = numpy.linalg.svd(A)
-    null = vt[-1]
-    big = numpy.abs(null).max()
-    rows = [by_multiplier[z[k]] for k in involved if abs(null[k]) > 1e-6 * big]
-    return rows or [by_multiplier[z[k]] for k in involved]
+    A = None if values is None else numpy.array(values, dtype=float)
+    if A is not None and numpy.all(numpy.isfinite(A)):
+        null = numpy.linalg.svd(A)[2][-1]
+        big = numpy.abs(null).max()
+        rows = [by_multiplier[z[k]] for k in involved if abs(null[k]) > 1e-6 * big]
+        if rows:
+            return rows
+    return [by_multiplier[z[k]] for k in involved]
 
 
 def _listed(rows) -> str:
@@ -1172,17 +1173,8 @@ def _singular_at_start(reduced: Reduced, plan: BlockPlan, s: Solve, A):
     z = [None] * len(s.unknowns)
     for c, u in zip(plan.lu.col_of, s.unknowns):
         z[c] = u
-    by_multiplier = {c.multiplier: c for c in reduced.constraints}
-    if any(u in by_multiplier for u in z):
-        import numpy
-
-        rows = []
-        if numpy.all(numpy.isfinite(A)):
-            null = numpy.linalg.svd(A)[2][-1]
-            big = numpy.abs(null).max()
-            rows = [by_multiplier[u] for k, u in enumerate(z)
-                    if u in by_multiplier and abs(null[k]) > 1e-6 * big]
-        rows = rows or [by_multiplier[u] for u in z if u in by_multiplier]
+    rows = _dependent_rows(reduced.constraints, z, A)
+    if rows:
         if len(rows) == 1:
             fail(rows[0].name_span, f"constraint {_listed(rows)} has a zero Jacobian at the "
                                     "initial state (a singular configuration): its multiplier "
