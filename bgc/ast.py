@@ -84,6 +84,15 @@ class BoolOp:
 
 
 @dataclass(frozen=True)
+class IfExpr:
+    """`if C1 then A elif C2 then B else D`: ((condition, value), ...) and the else value."""
+
+    branches: tuple
+    orelse: object
+    span: Span
+
+
+@dataclass(frozen=True)
 class Vector:
     items: tuple
     span: Span
@@ -264,6 +273,42 @@ class ImportDecl:
     name: Ident | None  # import NAME
     file: str | None  # import "file.bg"
     alias: Ident | None
+    span: Span
+
+
+# ---------------------------------------------------------------- events
+@dataclass(frozen=True)
+class DiscreteDecl:
+    """`discrete NAME = EXPR`: piecewise constant, changed only by when-blocks."""
+
+    name: Ident
+    expr: object
+    doc: str | None
+    span: Span
+
+
+@dataclass(frozen=True)
+class Reinit:
+    """`reinit X = EXPR` in a when-block: a state's value after the event."""
+
+    target: Ident
+    expr: object
+    span: Span
+
+
+@dataclass(frozen=True)
+class DiscreteAssign:
+    """`NAME = EXPR` in a when-block: a discrete variable's value after the event."""
+
+    name: Ident
+    expr: object
+    span: Span
+
+
+@dataclass(frozen=True)
+class WhenBlock:
+    condition: object
+    stmts: tuple  # Reinit | DiscreteAssign
     span: Span
 
 

@@ -417,13 +417,22 @@ def compile(model, scene, outputs, effects, algebra, target, output, project_ini
               help="The most steps between two output times: a run that needs more stops "
                    "with a message (a step size running away); 0: no limit.  [default: "
                    "100000]")
+@click.option("--max-step", type=POSITIVE, default=None,
+              help="The adaptive solvers' largest step (default: the scene's hmax, else no "
+                   "bound but the span).")
 @click.option("-p", "params", multiple=True, metavar="NAME=VALUE", help="Parameter override.")
 @click.option("--project-initial", is_flag=True, help="Project initial values onto the "
                                                       "constraints instead of refusing them.")
 @click.option("--allow-inconsistent", is_flag=True, help=ALLOW_HELP)
 @click.option("--stats", is_flag=True, help="Print the solver's counters (steps, rejected "
                                             "steps, right-side calls, Jacobians, "
-                                            "factorisations, solves) to stderr.")
+                                            "factorisations, solves, events) to stderr.")
+@click.option("--event-rows", is_flag=True,
+              help="Two more rows at each event: its left and right limits.")
+@click.option("--events", "events_file", default=None, metavar="FILE.csv",
+              callback=_output_file,
+              help="The event log: t,event,change, a row per change at an event (docs/"
+                   "hybrid.md); a failed run keeps the events before it.")
 @click.option("-o", "output", default=None, callback=_output_file,
               help="CSV file (default: stdout), written as the run goes and renamed into "
                    "place at its end; a failed run keeps the rows it computed.")
@@ -431,12 +440,12 @@ def compile(model, scene, outputs, effects, algebra, target, output, project_ini
               help="Also draw the run's outputs, one panel per kind, into FILE (.png, .svg "
                    "or .pdf; needs matplotlib: pip install 'bgc[plot]').")
 def simulate(model, scene, outputs, effects, algebra, backend, solver, rtol, atol, t_end, dt,
-             step, max_steps, params, project_initial, allow_inconsistent, stats, output,
-             plot_file, consts):
+             step, max_steps, max_step, params, project_initial, allow_inconsistent, stats,
+             event_rows, events_file, output, plot_file, consts):
     """Simulate and write CSV.  A model compiled before with the same options runs at once
     (bgc.warm); otherwise it is compiled, and the result kept for the next run.  On a
     terminal, a run that takes more than a second shows its progress on stderr."""
-    _not_an_input(model, output, plot_file)
+    _not_an_input(model, output, plot_file, events_file)
     if project_initial and allow_inconsistent:
         raise click.UsageError("--project-initial and --allow-inconsistent exclude each other")
     backend = _backend(backend)
@@ -463,9 +472,34 @@ def simulate(model, scene, outputs, effects, algebra, backend, solver, rtol, ato
         settings = runner.settings_for(
             record.settings, names, given, t_end=t_end, dt=dt,
             solver=solver, rtol=rtol, atol=atol, step=step, max_steps=max_steps,
-            project_initial=project_initial, allow_inconsistent=allow_inconsistent)
+            project_initial=project_initial, allow_inconsistent=allow_inconsistent,
+            max_step=max_step, event_rows=event_rows or None)
     except ValueError as error:
         raise click.UsageError(str(error)) from None
+    with _scratch(events_file is not None) as logs:
+        if logs:
+            settings = replace(settings, events=str(Path(logs) / "events.csv"))
+        status = _simulate_run(settings, record, program, compiled, request, stats, output,
+                               plot_file)
+        if logs:
+            status = _keep_events(Path(logs) / "events.csv", events_file, status)
+    sys.exit(status)
+
+
+def _keep_events(log: Path, target: str, status: int) -> int:
+    """The run's event log, moved to its place (a failed run's too: the events before it)."""
+    if not log.exists():
+        return status
+    try:
+        outfile.write_atomic(target, log.read_bytes())
+    except (outfile.OutputError, OSError) as error:
+        click.echo(f"error: no event log written to {target}: {error}", err=True)
+        return status or 1
+    return status
+
+
+def _simulate_run(settings, record, program, compiled, request, stats, output, plot_file):
+    """simulate's run proper (the CSV, the plot); its exit status."""
     if compiled is not None and record.correctors:
         for message in stability.warnings_for_run(compiled, settings.solver, settings.step,
                                                   settings.dt, dict(settings.params)):
@@ -485,7 +519,7 @@ def simulate(model, scene, outputs, effects, algebra, backend, solver, rtol, ato
             progress.close()
         if plot_file:
             status = _plot(record, copy or output, plot_file, status, rows)
-    sys.exit(status)
+    return status
 
 
 def _backend(backend: str) -> str:

@@ -36,9 +36,15 @@ def directional(expr: sp.Expr, tangents: dict) -> sp.Expr:
         if e.is_Atom or not e.args:
             done[e] = ZERO
             continue
+        kids = [p.expr for p in e.args] if isinstance(e, sp.Piecewise) else e.args
         if not ready:
             stack.append((e, True))
-            stack.extend((a, False) for a in e.args if a not in done)
+            stack.extend((a, False) for a in kids if a not in done)
+            continue
+        if isinstance(e, sp.Piecewise):  # the conditions are constant between events
+            d = [done[a] for a in kids]
+            done[e] = ZERO if all(x == 0 for x in d) else sp.Piecewise(
+                *[(x, p.cond) for x, p in zip(d, e.args)])
             continue
         done[e] = _rule(e, [done[a] for a in e.args])
     return done[expr]

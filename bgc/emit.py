@@ -286,7 +286,8 @@ def emit_python(program: Program, chunk_ops: int = ir.CHUNK_OPS) -> dict[str, st
     for label, printer in (("fast", fast), ("ieee", ieee)):
         writer = _Writer(program, ws, printer, "python")
         variants[label] = {
-            "model": {name: _function_context(writer, name, "out") for name in MODEL_FUNCTIONS},
+            "model": {name: _function_context(writer, name, "out")
+                      for name in _model_functions(program, c=False)},
             "plain": {name: _plain_lines(writer, name, "out") for name in PLAIN_FUNCTIONS},
             "consts": _plain_lines(writer, "consts", "out"),
             "init": _plain_lines(writer, "init", "out"),
@@ -303,9 +304,12 @@ def emit_python(program: Program, chunk_ops: int = ir.CHUNK_OPS) -> dict[str, st
     return {f"{context['ident']}.py": _render("python_module.py.j2", context)}
 
 
-def _model_functions(program: Program) -> tuple[str, ...]:
-    """rhs, outputs, jvp, then the program's extra functions (C only: an FMU's outputs_jvp)."""
-    return MODEL_FUNCTIONS + tuple(k for k in program.functions if k not in ir.FUNCTION_NAMES)
+def _model_functions(program: Program, c: bool = True) -> tuple[str, ...]:
+    """rhs, outputs, jvp, the event functions of a program with events, then the program's
+    extra functions (C only: an FMU's outputs_jvp)."""
+    out = MODEL_FUNCTIONS + (ir.EVENT_FUNCTIONS if program.events is not None else ())
+    return out + (tuple(k for k in program.functions if k not in ir.FUNCTION_NAMES
+                        and k not in ir.EVENT_FUNCTIONS) if c else ())
 
 
 # ---------------------------------------------------------------- literals and names
@@ -510,6 +514,7 @@ def _common_context(program: Program, ws: _Workspace, literal, c: bool) -> dict:
             "arrays": {key: list(getattr(lu, key)) for key in PLAN_ARRAYS},
         })
     return {
+        "events": _events_context(program, literal),
         "ident": identifier(program.name),
         "model_name": literal(program.name),
         "ident_literal": literal(identifier(program.name)),
@@ -549,7 +554,18 @@ def _scene_context(program: Program, literal, step_none: str) -> dict:
         "rtol": float_literal(sc.rtol),
         "atol": float_literal(sc.atol),
         "step": step_none if sc.step is None else float_literal(sc.step),
+        "hmax": None if sc.max_step is None else float_literal(sc.max_step),
     }
+
+
+def _events_context(program: Program, literal) -> dict | None:
+    """The sizes and tables of a program's events (None: it has none, nor their code)."""
+    ev = program.events
+    if ev is None:
+        return None
+    return {"indicators": ev.indicators, "timers": ev.timers, "discrete": ev.discrete,
+            "strict": [int(x) for x in ev.strict], "names": [literal(n) for n in ev.names],
+            "kinds": "".join(k[0] for k in ev.kinds)}
 
 
 # ---------------------------------------------------------------- validation
@@ -678,24 +694,29 @@ LINK_PARAMS = 16384  # the most doubles (parameters and constants) a linked mode
 LINK_INTS = ("NUM_STATES", "NUM_PARAMS", "NUM_CONSTANTS", "NUM_OUTPUTS", "NUM_CONSTRAINTS",
              "NUM_POSITION_ROWS", "NUM_VELOCITY_ROWS", "NUM_BLOCKS", "AUTONOMOUS",
              "WORK_DOUBLES", "WORK_INTS", "WORK_Y0", "WORK_STAGES", "WORK_Y", "WORK_JAC",
-             "JAC_COLORS", "SCENE_SOLVER")
-LINK_DOUBLES = ("SCENE_T0", "SCENE_T_END", "SCENE_DT", "SCENE_RTOL", "SCENE_ATOL", "SCENE_STEP")
+             "JAC_COLORS", "SCENE_SOLVER", "NUM_INDICATORS", "NUM_TIMERS", "NUM_DISCRETE",
+             "DISCRETE_OFFSET")
+LINK_DOUBLES = ("SCENE_T0", "SCENE_T_END", "SCENE_DT", "SCENE_RTOL", "SCENE_ATOL", "SCENE_STEP",
+                "SCENE_HMAX")
 LINK_TABLES = (("bgc_block", "blocks"), ("int", "jac_color_ptr"), ("int", "jac_color_cols"),
                ("int", "jac_col_ptr"), ("int", "jac_col_rows"), ("int", "position_rows"),
-               ("int", "velocity_rows"), ("int", "velocity_movable"))
-LINK_FUNCTIONS = (("rhs", ""), ("outputs", ""), ("jvp", "const double *v, "))
+               ("int", "velocity_rows"), ("int", "velocity_movable"),
+               ("int", "indicator_strict"), ("char *const", "discrete_names"))
+LINK_FUNCTIONS = (("rhs", ""), ("outputs", ""), ("jvp", "const double *v, "), ("events", ""),
+                  ("next_time", ""), ("update", "const double *r, "))
 _MODEL_ARGS = "double t, const double *x, const bgc_params *p, bgc_work *w, "
 _MODEL_SIZE = r"\bBGC_(?:" + "|".join(LINK_INTS + LINK_DOUBLES) + r")\b"
 
 
 def linkable(program: Program) -> bool:
     """Whether the program's parameter struct fits the runtime built once (LINK_PARAMS)."""
-    return max(len(program.params), 1) + max(program.n_consts, 1) <= LINK_PARAMS
+    discrete = program.events.discrete if program.events is not None else 0
+    return max(len(program.params), 1) + max(program.n_consts, 1) + discrete <= LINK_PARAMS
 
 
 def _link_function(name: str, extra: str) -> tuple[str, str]:
     """The prototype of a model function as the runtime unit calls it, and its call."""
-    call = "t, x, p, w, " + ("v, " if extra else "") + "out"
+    call = "t, x, p, w, " + (extra.split("*")[1].rstrip(", ") + ", " if extra else "") + "out"
     return f"int bgc_link_{name}({_MODEL_ARGS}{extra}double *out)", call
 
 
@@ -707,7 +728,7 @@ def _link_definitions() -> str:
            "/* The runtime is built once and linked with this part (bgc/emit.py, c_runtime_unit):",
            "   what it reads of the model, under the names it reads. */",
            f"typedef char bgc_link_params_fit[sizeof(bgc_params) <= {LINK_PARAMS} * sizeof(double)"
-           " ? 1 : -1];"]
+           " ? 1 : -1];", "#ifndef BGC_SCENE_HMAX", "#define BGC_SCENE_HMAX 0.0", "#endif"]
     out += [f"const int bgc_link_{m.lower()} = BGC_{m};" for m in LINK_INTS]
     out += [f"const double bgc_link_{m.lower()} = BGC_{m};" for m in LINK_DOUBLES]
     out += [f"const {t} *const bgc_link_{name} = bgc_{name};" for t, name in LINK_TABLES]

@@ -121,6 +121,10 @@ def describe(compiled) -> Description:
     program)."""
     program = compiled.program
     graph = compiled.graph
+    if program.events is not None:
+        raise FmuError("this scene has events (when-blocks, relations, step, pulse or square): "
+                       "an FMU does not export them yet (no event indicators); simulate it "
+                       "with bgc, or write the switching with noevent() where it is smooth")
     n, m = len(program.states), len(program.params)
     state_index = {name: i for i, name in enumerate(program.states)}
     param_names = {p.name for p in program.params}

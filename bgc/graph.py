@@ -203,6 +203,10 @@ class Graph:
     vectors: tuple = ()  # after flatten: Vector, one per multiport element or vector signal
     multibonds: tuple = ()  # after flatten: Multibond, one per vector bond
     ports: tuple = ()  # Port, one per port of every instance (components, docs/language.md)
+    relations: tuple = ()  # bgc.events: Relation, Square, Discrete, When (docs/hybrid.md)
+    squares: tuple = ()
+    discretes: tuple = ()
+    whens: tuple = ()
 
     @cached_property
     def vector_by_name(self) -> dict:

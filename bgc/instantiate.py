@@ -351,14 +351,14 @@ class _Instantiate:
 
     def declare(self, scope: _Scope, stmt, env):
         if isinstance(stmt, (ast.ParamDecl, ast.SignalDecl, ast.IntegralDecl, ast.ElementDecl,
-                             ast.PortDecl)):
+                             ast.PortDecl, ast.DiscreteDecl)):
             name = self.local_name(scope, stmt, env)
             if isinstance(stmt, ast.ElementDecl) and self.is_instance(scope, stmt):
                 kind = "instance"
             else:
                 kind = {ast.ParamDecl: "parameter", ast.SignalDecl: "signal",
                         ast.IntegralDecl: "signal", ast.ElementDecl: "element",
-                        ast.PortDecl: "port"}[type(stmt)]
+                        ast.PortDecl: "port", ast.DiscreteDecl: "signal"}[type(stmt)]
             old = scope.table.get(name)
             if old is not None and ("instance" in (old, kind) or "port" in (old, kind)):
                 first = scope.first.get(name)
@@ -523,7 +523,8 @@ class _Instantiate:
                                     scope.sp(stmt.span))
             return
         name = None
-        if isinstance(stmt, (ast.ParamDecl, ast.SignalDecl, ast.IntegralDecl, ast.ElementDecl)):
+        if isinstance(stmt, (ast.ParamDecl, ast.SignalDecl, ast.IntegralDecl, ast.ElementDecl,
+                             ast.DiscreteDecl)):
             name = ast.Ident(scope.prefix + self.local_name(scope, stmt, env),
                              scope.sp(stmt.name.span))
         if isinstance(stmt, ast.ElementDecl):
@@ -543,10 +544,17 @@ class _Instantiate:
                           effects=effects, index=None)
         elif isinstance(stmt, ast.SceneDecl):
             out = rw.map(stmt)
-        elif isinstance(stmt, (ast.ParamDecl, ast.SignalDecl, ast.IntegralDecl)):
+        elif isinstance(stmt, (ast.ParamDecl, ast.SignalDecl, ast.IntegralDecl,
+                               ast.DiscreteDecl)):
             out = replace(rw.map(stmt), name=name)
             if hasattr(out, "index"):
                 out = replace(out, index=None)
+        elif isinstance(stmt, ast.WhenBlock):  # its targets are names of this scope
+            out = replace(rw.map(stmt), stmts=tuple(
+                replace(rw.map(st), **{"target" if isinstance(st, ast.Reinit) else "name":
+                                       rw.target(st.target if isinstance(st, ast.Reinit)
+                                                 else st.name)})
+                for st in stmt.stmts))
         else:
             out = rw.map(stmt)
         self.out.append(out)
@@ -750,6 +758,12 @@ class _Rewriter:
         if isinstance(node, ast.Vector):
             return ast.Vector(tuple(self.expr(a, own) for a in node.items), sp(node.span))
         return self.map(node)
+
+    def target(self, ident: ast.Ident) -> ast.Ident:
+        """A when-block's target (a state `b.p`, `x`, or a discrete variable) by its path."""
+        node = self.path(ident.name.split("."), ident)
+        text = node.name if isinstance(node, ast.Name) else f"{node.owner}.{node.field}"
+        return ast.Ident(text, node.span)
 
     def try_segments(self, node, strict=False):
         """The path a node names (`link[2].rod` -> ["link[2]", "rod"]), or None."""

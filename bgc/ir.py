@@ -7,9 +7,17 @@ A Program is a few functions, each a list of statements over these symbols:
   c[k]         IndexedBase("c")[k]    constant k: result k of the `consts` function (parameters
                                       only), computed once whenever they are set
   v[i]         IndexedBase("v")[i]    component i of the direction of `jvp`
+  d[k]         IndexedBase("d")[k]    discrete value k (bgc.events): a relation's frozen value
+                                      (0 or 1), a square wave's, a discrete variable's; set
+                                      only at events, read by every function
+  r[k]         IndexedBase("r")[k]    `update`'s input: the new value of state relation k
+                                      (from the located crossing), r[n] 1 at the run's start
   w0, w1, ...  Symbol("w<k>")         program variables, each assigned once
 and the functions sin cos tan asin acos atan atan2 sinh cosh tanh asinh atanh exp log sqrt
-Abs sign Min Max (bgc.algebra's) Heaviside, Pow, Rational, Float, Integer, pi, E.  Model names
+Abs sign Min Max (bgc.algebra's) Heaviside, Pow, Rational, Float, Integer, pi, E; the
+conditional Piecewise over relations (< <= > >= == !=) and And, Or, Not (booleans are never
+stored: a condition chooses a value); and SquareWave, SquareNext (a square wave's value at t
+and its next edge after t, computed by the runtimes).  Model names
 never occur in expressions, so nothing a model author writes reaches generated code except
 through the name strings (states, outputs, params, block unknowns), which the emitters escape
 as literals.
@@ -46,12 +54,33 @@ X = sp.IndexedBase("x")
 P = sp.IndexedBase("p")
 C = sp.IndexedBase("c")
 V = sp.IndexedBase("v")
+D = sp.IndexedBase("d")
+R = sp.IndexedBase("r")
+
+
+class SquareWave(sp.Function):
+    """SquareWave(t, period, duty, t0): 1 on [t0 + k period, t0 + (k + duty) period) for
+    integers k >= 0, else 0; at an edge, the value after it (the runtimes' bgc_square)."""
+
+    nargs = 4
+
+
+class SquareNext(sp.Function):
+    """SquareNext(t, period, duty, t0): the first edge of the square wave after t."""
+
+    nargs = 4
 FUNCTIONS = ("sin", "cos", "tan", "asin", "acos", "atan", "atan2", "sinh", "cosh", "tanh",
              "asinh", "atanh", "exp", "log", "sqrt", "Abs", "sign", "Min", "Max", "Heaviside")
 
 
 CLASSES = {name: {"Min": Min, "Max": Max}.get(name) or getattr(sp, name)
            for name in FUNCTIONS if name != "sqrt"}  # sqrt is a Pow
+
+
+def is_number_node(e) -> bool:
+    """Whether e is a number-valued node (not a condition, nor a Piecewise's (value,
+    condition) pair): only those become constants or temporaries."""
+    return isinstance(e, sp.Expr) and not isinstance(e, sp.core.relational.Relational)
 
 
 def W(k: int) -> sp.Symbol:
@@ -335,6 +364,28 @@ class JacobianPattern:
 
 FUNCTION_NAMES = ("consts", "init", "rhs", "outputs", "jvp", "residual", "scale",
                   "position_jac", "velocity_jac", "velocity_metric")
+EVENT_FUNCTIONS = ("events", "next_time", "update")  # a program with events has them too
+
+
+@dataclass(frozen=True)
+class Events:
+    """What the runtimes need to know of a program's events (bgc.events): the discrete values
+    d are the state relations' (their indicators g = events(), in the same order), then the
+    time relations', the discrete relations', the square waves' and the discrete variables'.
+    A state relation holds when g > 0 (strict) or g >= 0."""
+
+    strict: tuple[bool, ...]  # per state relation (indicator)
+    timers: int  # results of next_time: the time relations' times, the square waves' edges
+    names: tuple[str, ...]  # per discrete value: what the event log calls it
+    kinds: tuple[str, ...]  # per discrete value: "relation" | "square" | "discrete"
+
+    @property
+    def indicators(self) -> int:
+        return len(self.strict)
+
+    @property
+    def discrete(self) -> int:
+        return len(self.names)
 
 
 @dataclass(frozen=True)
@@ -350,6 +401,7 @@ class Program:
     #                  (an FMU's outputs_jvp; the C emitter renders them as it renders jvp)
     blocks: tuple[BlockPlan, ...] = ()
     jacobian: JacobianPattern = JacobianPattern((), ())
+    events: Events | None = None  # None: the program has no events (and none of their code)
 
     def function(self, name: str) -> Function:
         return self.functions[name]

@@ -290,7 +290,9 @@ def latex_system(compiled, header: str) -> LatexSystem:
                 pairs += [(a.target, a.expr) for a in step.body]
             else:
                 pairs.append((step.target, step.expr))
-    pairs = [(lhs, tidy(rhs) if rhs is not None else None) for lhs, rhs in pairs]
+    relations = {q.symbol: q.relation for q in getattr(compiled.graph, "relations", ())}
+    pairs = [(lhs, tidy(rhs.xreplace(relations)) if rhs is not None else None)
+             for lhs, rhs in pairs]  # (a relation as written, not its frozen value)
     symbols = set()
     for lhs, rhs in pairs:
         if isinstance(lhs, sp.Symbol):

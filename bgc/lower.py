@@ -22,11 +22,11 @@ from dataclasses import dataclass, replace
 
 import sympy as sp
 
-from . import ir
+from . import events, ir
 from .differentiate import partial
 from .tangent import jacobian, tangent
 from .graph import TIME, var
-from .ir import (C, P, T, V, X, Assign, BlockPlan, ConstraintRow, Function, JacobianPattern,
+from .ir import (C, D, P, R, T, V, X, Assign, BlockPlan, ConstraintRow, Function, JacobianPattern,
                  Newton, Param, Program, SceneSettings, Solve, Store, as_expr)
 from .reduce import Reduced
 
@@ -129,7 +129,7 @@ def hoist_constants(functions: list[Function]) -> tuple[tuple[sp.Expr, ...], lis
     info: dict = {}  # node -> (rewritten, parameter-only, uses a parameter)
 
     def constant(e, uses_p):
-        if e.is_Atom or e.is_Indexed or not uses_p:
+        if e.is_Atom or e.is_Indexed or not uses_p or not ir.is_number_node(e):
             return e
         if e not in pool:
             pool[e] = C[len(pool)]
@@ -180,7 +180,7 @@ def hoist_constants(functions: list[Function]) -> tuple[tuple[sp.Expr, ...], lis
 
 
 def _worth_a_temporary(e) -> bool:
-    if e.is_Atom or e.is_Indexed:
+    if e.is_Atom or e.is_Indexed or not ir.is_number_node(e):
         return False
     if e.is_Mul and len(e.args) == 2 and e.args[0].is_Number and (e.args[1].is_Atom
                                                                    or e.args[1].is_Indexed):
@@ -325,7 +325,35 @@ def functions(reduced: Reduced) -> dict:
                    [o.expr for o in reduced.outputs], [r.expr for r in rows],
                    [r.scale for r in rows], jacobian(position), jacobian(velocity))
     specs["velocity_metric"] = (("t", "x", "p"), len(velocity) * len(states), metric)
+    sel = reduced.events
+    if sel is not None:
+        txp = ("t", "x", "p")
+        specs["events"] = (txp, len(sel.state), _stores([r.indicator for r in sel.state]))
+        times = events.next_times(sel)
+        specs["next_time"] = (txp, len(times), _stores(times))
+        update = events.update_stores(sel, reduced.states)
+        specs["update"] = (("t", "x", "p", "r"), len(update), _stores(update))
     return specs
+
+
+def _event_symbols(sel) -> dict:
+    """The events' model symbols in the IR: a relation's frozen value is d[k] != 0, a square
+    wave's or a discrete variable's d[k]; update's inputs r[k], r[n] != 0 at the start."""
+    out = {}
+    for k, sym in enumerate(sel.slots()):
+        out[sym] = sp.Ne(D[k], 0) if sym.name.startswith("event#") else D[k]
+    for k in range(len(sel.state)):
+        out[events.new_value(k)] = R[k]
+    out[events.FIRST] = sp.Ne(R[len(sel.state)], 0)
+    return out
+
+
+def _events_info(sel) -> ir.Events | None:
+    if sel is None:
+        return None
+    names, kinds = events.log_names(sel)
+    return ir.Events(tuple(events.strict(r) for r in sel.state),
+                     len(sel.time) + len(sel.squares), names, kinds)
 
 
 @dataclass(frozen=True)
@@ -371,17 +399,20 @@ def lower(reduced: Reduced) -> Program:
     base = {TIME: T}
     base.update((s, X[i]) for i, s in enumerate(states))
     base.update((var(prm.name), P[j]) for j, prm in enumerate(reduced.parameters))
+    if reduced.events is not None:
+        base.update(_event_symbols(reduced.events))
     mapper = _Mapper(base, reduced.plans)
     rows = reduced.rows
     fns = _build(mapper, reduced.steps, functions(reduced), len(states))
     params = tuple(Param(p.name, mapper.expr(p.expr)) for p in reduced.parameters)
     movable = velocity_movable(rows, states)
     run = reduced.run
-    scene = SceneSettings(run.t0, run.t_end, run.dt, run.solver, run.rtol, run.atol, run.step)
+    scene = SceneSettings(run.t0, run.t_end, run.dt, run.solver, run.rtol, run.atol, run.step,
+                          max_step=run.max_step)
     return finish(reduced.name, tuple(st.name for st in reduced.states), params,
                   tuple(o.name for o in reduced.outputs),
                   tuple(ConstraintRow(r.junction, r.level) for r in rows), movable, scene,
-                  fns, tuple(mapper.plans), mapper.count)
+                  fns, tuple(mapper.plans), mapper.count, _events_info(reduced.events))
 
 
 def _build(mapper: _Mapper, steps, specs: dict, n: int) -> dict:
@@ -442,7 +473,7 @@ def _row_jacobian(rows, states) -> list[Store]:
 
 
 def finish(name, states, params, outputs, constraints, movable, scene, functions, plans,
-           count) -> Program:
+           count, events_info=None) -> Program:
     """The passes every program goes through: pruning, constants (of every function but
     init, which runs once per parameter set anyway), temporaries, the Jacobian's pattern."""
     functions = {k: Function(f.name, f.args, f.size, ir.prune(f.body))
@@ -458,7 +489,7 @@ def finish(name, states, params, outputs, constraints, movable, scene, functions
     functions = _ordered(functions)
     pattern = jacobian_pattern(functions["rhs"], len(states), plans)
     return Program(name, states, params, outputs, constraints, movable, scene, functions,
-                   tuple(plans), pattern)
+                   tuple(plans), pattern, events_info)
 
 
 def explicit_program(name, states, params, outputs, init, rhs, out, scene,

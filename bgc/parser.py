@@ -17,7 +17,8 @@ from .resources import (MAX_DIMENSION, MAX_NESTING, MAX_OPTION_CHARS, MAX_SOURCE
 # Reserved: none of these can name anything (docs/semantics.md, "Names").
 KEYWORDS = frozenset("""model parameter signal integral init constraint holonomic nonholonomic
     corrector pid pd none phi scene effects outputs time every solver set
-    library component port constant for in if elif else and or not import as unit""".split())
+    library component port constant for in if elif else and or not import as unit
+    then when reinit discrete""".split())
 
 # Friendly names for terminals in "expected ..." messages.
 _TERMINAL_NAMES = {
@@ -193,6 +194,26 @@ class _ToAst(Transformer_NonRecursive):
 
     def else_part(self, meta, c):
         return ("else", tuple(c))
+
+    def if_expr(self, meta, c):
+        cond, value, *rest = c
+        branches = ((cond, value),) + tuple(x for x in rest[:-1])
+        return ast.IfExpr(branches, rest[-1], _span(meta))
+
+    def elif_expr(self, meta, c):
+        return (c[0], c[1])
+
+    def discrete_decl(self, meta, c):
+        return ast.DiscreteDecl(_ident(c[0]), c[1], _doc(c[2]), _span(meta))
+
+    def when_block(self, meta, c):
+        return ast.WhenBlock(c[0], tuple(x for x in c[1:] if x is not None), _span(meta))
+
+    def reinit_stmt(self, meta, c):
+        return ast.Reinit(c[0], c[1], _span(meta))
+
+    def assign_stmt(self, meta, c):
+        return ast.DiscreteAssign(_ident(c[0]), c[1], _span(meta))
 
     def compare(self, meta, c):
         return ast.Compare(str(c[1]), c[0], c[2], _span(meta))

@@ -27,10 +27,17 @@ import sympy as sp
 from sympy.printing.c import C99CodePrinter
 from sympy.printing.pycode import PythonCodePrinter
 
-from bgc.ir import C, CLASSES, FUNCTIONS, P, T, V, X, as_expr
+from sympy.core.relational import Relational
+from sympy.functions.elementary.piecewise import ExprCondPair
+from sympy.logic.boolalg import And, BooleanFalse, BooleanTrue, Not, Or
+
+from bgc.ir import C, CLASSES, FUNCTIONS, D, P, R, T, V, X, SquareNext, SquareWave, as_expr
 _CLASSES = tuple(CLASSES.values())
 _ARITY = {"atan2": (2, 2), "Min": (2, None), "Max": (2, None), "Heaviside": (1, 2)}
 _TEMP = re.compile(r"w[0-9]+\Z")
+_CONDITIONALS = (sp.Piecewise, ExprCondPair, Relational, And, Or, Not, BooleanTrue,
+                 BooleanFalse)
+_RELOPS = {"<": "<", "<=": "<=", ">": ">", ">=": ">=", "==": "==", "!=": "!="}
 MAX_EXPANDED_POWER = 4  # x**n for 2 <= n <= 4 prints as x*x*...
 
 PREC_ADD, PREC_MUL, PREC_ATOM = 1, 2, 3
@@ -73,12 +80,17 @@ def check_expression(expr: sp.Basic, n_states: int, n_params: int, n_consts: int
         elif type(e) in _CLASSES:
             _check_arity(e)
             stack.extend(e.args)
+        elif isinstance(e, _CONDITIONALS) or type(e) in (SquareWave, SquareNext):
+            if isinstance(e, Relational) and e.rel_op not in _RELOPS:
+                raise UnsupportedExpressionError(f"cannot print {e}")
+            stack.extend(e.args)
         else:
             raise UnsupportedExpressionError(f"cannot print {type(e).__name__}: {e}")
 
 
 def _check_indexed(expr: sp.Indexed, n_states: int, n_params: int, n_consts: int) -> None:
-    sizes = {X.name: n_states, P.name: n_params, C.name: n_consts, V.name: n_states}
+    sizes = {X.name: n_states, P.name: n_params, C.name: n_consts, V.name: n_states,
+             D.name: 2 ** 31, R.name: 2 ** 31}  # d and r: the program's event sizes
     if expr.base.name not in sizes or len(expr.indices) != 1:
         raise UnsupportedExpressionError(f"unexpected indexed variable {expr}")
     index = expr.indices[0]
@@ -147,6 +159,20 @@ class _ArithmeticPrinting:
             return self._print_power(expr)
         if type(expr) in _CLASSES:
             return self._print_call(expr)
+        if isinstance(expr, sp.Piecewise):
+            return self._print_piecewise(expr)
+        if isinstance(expr, Relational):
+            return f"({self._print(expr.lhs)} {_RELOPS[expr.rel_op]} {self._print(expr.rhs)})"
+        if isinstance(expr, (And, Or)):
+            op = self.LOGIC["and" if isinstance(expr, And) else "or"]
+            return "(" + f" {op} ".join(self._print(a) for a in expr.args) + ")"
+        if isinstance(expr, Not):
+            return f"({self.LOGIC['not']}{self._print(expr.args[0])})"
+        if isinstance(expr, (BooleanTrue, BooleanFalse)):
+            return self.LOGIC["true" if isinstance(expr, BooleanTrue) else "false"]
+        if type(expr) in (SquareWave, SquareNext):
+            name = self.FUNCTION_NAMES["SquareWave" if type(expr) is SquareWave else "SquareNext"]
+            return f"{name}({', '.join(self._print(a) for a in expr.args)})"
         if isinstance(expr, sp.Rational):
             return float_literal(int(expr.p) / int(expr.q))
         if isinstance(expr, sp.Float) or expr in (sp.pi, sp.E):
@@ -256,7 +282,22 @@ class _ArithmeticPrinting:
             text = f"{func}({text}, {arg})"
         return text
 
+    def _print_piecewise(self, expr: sp.Piecewise) -> str:
+        """if c1 then a elif c2 then b else d, nested from the last branch out."""
+        pairs = list(expr.args)
+        if pairs[-1].cond != sp.true:
+            raise UnsupportedExpressionError(f"a conditional without an else: {expr}")
+        text = self._print(pairs[-1].expr)
+        for p in reversed(pairs[:-1]):
+            text = self._conditional(self._print(p.cond), self._print(p.expr), text)
+        return text
+
     # -- language hooks
+
+    LOGIC: dict = {}
+
+    def _conditional(self, cond: str, then: str, orelse: str) -> str:
+        raise NotImplementedError
 
     def _print_index(self, base: sp.IndexedBase, index: int) -> str:
         raise NotImplementedError
@@ -276,7 +317,12 @@ class CPrinter(_ArithmeticPrinting, C99CodePrinter):
     carries them), helpers bgc_sq/bgc_sign/... ."""
 
     FUNCTION_NAMES = {**{f: f for f in FUNCTIONS}, "Abs": "fabs", "sign": "bgc_sign",
-                      "Min": "bgc_min", "Max": "bgc_max", "Heaviside": "bgc_heaviside"}
+                      "Min": "bgc_min", "Max": "bgc_max", "Heaviside": "bgc_heaviside",
+                      "SquareWave": "bgc_square", "SquareNext": "bgc_square_next"}
+    LOGIC = {"and": "&&", "or": "||", "not": "!", "true": "1", "false": "0"}
+
+    def _conditional(self, cond, then, orelse):
+        return f"({cond} ? {then} : {orelse})"
 
     def __init__(self, n_states: int, param_fields: tuple[str, ...], n_consts: int = 0):
         super().__init__(n_states, len(param_fields), n_consts)
@@ -287,6 +333,10 @@ class CPrinter(_ArithmeticPrinting, C99CodePrinter):
             return f"{base.name}[{index}]"
         if base.name == C.name:
             return f"p->c[{index}]"
+        if base.name == D.name:
+            return f"p->d[{index}]"
+        if base.name == R.name:
+            return f"r[{index}]"
         return f"p->{self._param_fields[index]}"
 
     def _print_square(self, base):
@@ -300,7 +350,8 @@ class CPrinter(_ArithmeticPrinting, C99CodePrinter):
 
 
 _PY_FAST = {**{f: f"math.{f}" for f in FUNCTIONS}, "Abs": "abs", "sign": "_sign",
-            "Min": "min", "Max": "max", "Heaviside": "_heaviside"}
+            "Min": "min", "Max": "max", "Heaviside": "_heaviside", "SquareWave": "_square",
+            "SquareNext": "_square_next"}
 _PY_IEEE = {**_PY_FAST, **{f: f"_c_{f}" for f in ("sin", "cos", "tan", "asin", "acos", "atan",
                                                      "atan2", "sinh", "cosh", "tanh", "asinh",
                                                      "atanh", "exp", "log", "sqrt")}}
@@ -319,10 +370,17 @@ class PythonPrinter(_ArithmeticPrinting, PythonCodePrinter):
         self._ieee = ieee
         self.FUNCTION_NAMES = _PY_IEEE if ieee else _PY_FAST
 
+    LOGIC = {"and": "and", "or": "or", "not": "not ", "true": "True", "false": "False"}
+
+    def _conditional(self, cond, then, orelse):
+        return f"({then} if {cond} else {orelse})"
+
     def _print_index(self, base, index):
         if base.name == C.name:
             return f"p[{self._n_params + index}]"
-        return f"{base.name}[{index}]"  # x, p or v, checked
+        if base.name == D.name:  # after the parameters and the constants
+            return f"p[{self._n_params + self._n_consts + index}]"
+        return f"{base.name}[{index}]"  # x, p, v or r, checked
 
     def _print_extremum(self, func, args):
         return f"{func}({', '.join(args)})"  # min(a, b, c) == min(min(a, b), c) exactly

@@ -38,6 +38,7 @@ from .algebra import (antiderivative, expand_bounded, is_singular, is_symmetric,
                       solve_for)
 from .diagnostics import Collector, ModelError, Span, fail, warning
 from .differentiate import directional, partial
+from . import events
 from .system import (TIME, ConstraintDef, Equation, EquationSystem, OutputDef, ParameterDef,
                      StateVar, der)
 from .graph import var, written
@@ -120,6 +121,7 @@ class Reduced:
     run: RunSettings
     algebra: str
     warnings: tuple = ()
+    events: object = None  # bgc.events.Selected, or None: no events
 
 
 # ---------------------------------------------------------------- equations by target
@@ -133,7 +135,8 @@ class _System:
         self.eqs: dict[sp.Symbol, Equation] = {}
         self.order: dict[sp.Symbol, int] = {}
         self.states = {st.symbol: st for st in es.states}
-        self.params = {var(p.name) for p in es.parameters}
+        self.parameters = {var(p.name) for p in es.parameters}
+        self.params = self.parameters | events.leaves(es.events)  # constant between events
         self.by_name: dict[str, sp.Symbol] = {}
         diags = Collector()
         for eq in es.equations:
@@ -470,13 +473,14 @@ def _residual_asked(es, c) -> bool:
 # ---------------------------------------------------------------- what the outputs need
 
 
-def _needed(sys: _System) -> tuple[list[sp.Symbol], list[StateVar]]:
-    """The targets the outputs need (deriving der() equations on demand), and the states."""
+def _needed(sys: _System, roots=()) -> tuple[list[sp.Symbol], list[StateVar]]:
+    """The targets the outputs (and the events' roots: (expr, span)) need (deriving der()
+    equations on demand), and the states."""
     needed: set = set()
     kept: set = set()
     todo: list = []  # (symbol, the span of what needs it)
-    for o in sys.es.outputs:
-        todo.extend((u, o.span) for u in reversed(sys.symbols(o.expr)))
+    for expr, span in [(o.expr, o.span) for o in sys.es.outputs] + list(roots):
+        todo.extend((u, span) for u in reversed(sys.symbols(expr)))
     while todo:
         s, span = todo.pop()
         if s in needed or s is TIME or s in sys.params:
@@ -875,6 +879,9 @@ def reduce(es: EquationSystem, project_initial: bool = False, algebra: str = "au
     infos = _constraints(sys, diags)
     diags.raise_if_errors()
     targets, kept = _needed(sys)
+    selected = None
+    if any(es.events):
+        targets, kept, selected = _with_events(sys, targets, kept)
     blocks = _Blocks(sys, algebra)
     blocks.run(targets)
     _check_constants(blocks, sys)
@@ -886,12 +893,32 @@ def reduce(es: EquationSystem, project_initial: bool = False, algebra: str = "au
                       tuple(blocks.plans),
                       tuple(der(st.symbol) for st in kept), es.outputs, tuple(infos),
                       tuple(rows), tuple(blocks.infos), eliminated, es.run, algebra,
-                      tuple(es.warnings) + tuple(diags.warnings))
+                      tuple(es.warnings) + tuple(diags.warnings), selected)
     if not project_initial:
         check_initial(reduced)
     else:
         initial_values(reduced)  # every initial state a double, projected or not
     return _with_init_warnings(reduced, sys, eliminated)
+
+
+def _with_events(sys: _System, targets, kept):
+    """The targets and states once the events the scene needs are counted in (what they read
+    is computed too, and a kept when-block's state is kept), and those events."""
+    selected = None
+    for _ in range(len(sys.es.events[3]) + 2):
+        used = set()
+        for t in targets:
+            used |= sys.eqs[t].expr.free_symbols
+        for o in sys.es.outputs:
+            used |= o.expr.free_symbols
+        new = events.select(sys.es.events, used, {st.symbol: st for st in kept},
+                            sys.parameters)
+        if new == selected:
+            break
+        selected = new
+        targets, kept = _needed(sys, selected.roots())
+    events.check(selected, sys.es)
+    return targets, kept, (None if selected.empty else selected)
 
 
 def _check_constants(blocks: _Blocks, sys: _System):

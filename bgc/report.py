@@ -25,6 +25,22 @@ class _Printer(sp.printing.str.StrPrinter):
     def _print_Float(self, expr):
         return repr(float(expr))
 
+    def _print_Piecewise(self, expr):
+        """As the language writes it: if C then A elif C2 then B else D."""
+        pairs = list(expr.args)
+        text = "if " + " elif ".join(f"{self._print(p.cond)} then {self._print(p.expr)}"
+                                     for p in pairs[:-1])
+        return f"({text} else {self._print(pairs[-1].expr)})"
+
+    def _print_And(self, expr):
+        return "(" + " and ".join(self._print(a) for a in expr.args) + ")"
+
+    def _print_Or(self, expr):
+        return "(" + " or ".join(self._print(a) for a in expr.args) + ")"
+
+    def _print_Not(self, expr):
+        return f"not {self._print(expr.args[0])}"
+
 
 def _s(expr) -> str:
     return _Printer({"order": "lex"}).doprint(expr)
@@ -153,6 +169,24 @@ def _summary_lines(sm: SceneSummary) -> list[str]:
     return lines
 
 
+def _event_lines(sel) -> list[str]:
+    """The scene's events (docs/hybrid.md): each condition and what kind of event it is, the
+    square waves, the discrete variables and the when-blocks."""
+    if sel is None:
+        return []
+    out = ["events:"]
+    out += [f"  {r.text}  (state event: located on the step's dense output)" for r in sel.state]
+    out += [f"  {r.text}  (time event at t = {_s(at)})" for r, at, _ in sel.time]
+    out += [f"  {r.text}  (changes at events only)" for r in sel.discrete]
+    out += [f"  {q.text}  (time events at its edges)" for q in sel.squares]
+    out += [f"  discrete {d.name} = {_s(d.init)}" for d in sel.discretes]
+    for w in sel.whens:
+        acts = "; ".join(f"{'reinit ' if a.kind == 'reinit' else ''}{a.name} = {_s(a.expr)}"
+                         for a in w.actions)
+        out.append(f"  when {w.text} {{ {acts} }}")
+    return out
+
+
 def check_report(compiled, summary: SceneSummary | None = None) -> str:
     g, cg, r = compiled.graph, compiled.causal, compiled.reduced
     lines = _header(compiled)
@@ -172,6 +206,7 @@ def check_report(compiled, summary: SceneSummary | None = None) -> str:
                    f"{', '.join(coords)}") if coords else \
                 "its matrix does not depend on its own coordinates"
             lines.append(f"  {name}: {how}")
+    lines += _event_lines(r.events)
     if r.eliminated:
         lines.append("derivative causality (dependent states, eliminated):")
         lines += [f"  {name} = {_s(e) if isinstance(e, sp.Basic) else e}"
@@ -245,8 +280,19 @@ def _causality_lines(g, cg) -> list[str]:
     return lines
 
 
+def _relations(compiled) -> dict:
+    """Each relation's symbol -> the relation, for reports (docs/hybrid.md)."""
+    g = compiled.graph
+    return {r.symbol: r.relation for r in getattr(g, "relations", ())}
+
+
 def equations_text(compiled) -> str:
     r = compiled.reduced
+    shown = _relations(compiled)
+
+    def _s(expr) -> str:  # (the relations as written, in place of their frozen values)
+        return _Printer({"order": "lex"}).doprint(expr.xreplace(shown) if shown else expr)
+
     lines = _header(compiled)
     lines.append("parameters:")
     lines += [f"  {p.name} = {_s(p.expr)}" for p in r.parameters]

@@ -20,6 +20,8 @@ from .algebra import Max, Min
 from .diagnostics import Collector, ModelError, Note, Span, fail
 from .graph import (TIME, check_effect_names, model_effects, Bond, Constraint, Element, Expr, Graph, Parameter, Scene, Signal,
                     check_ports, part_name, var, variable_name, written)
+from .events import (INITIAL, RELATIONS, SOURCES, Action, Discrete, EventTable, When,
+                     is_condition)
 from .kinds import KINDS
 from .resources import (MAX_EXTREMUM_ARGUMENTS, MAX_LITERAL_DIGITS, MAX_MATRIX_ENTRIES,
                         MAX_SCENES, MAX_SYMBOLIC_EXPONENT)
@@ -50,6 +52,10 @@ class _Scope:
         self.params_only = False
         self.visible_params: set[str] | None = None
         self.entries = 0  # of the vectors and matrices built so far, over the whole model
+        self.discretes: dict = {}  # name -> DiscreteDecl
+        self.events = EventTable()  # the relations and time sources met, numbered in order
+        self.owner: str | None = None  # the element whose law is being built
+        self.when_condition = False  # building a when-block's condition (initial() allowed)
 
     def charge(self, n: int, span: Span):
         """Count n more vector or matrix entries against MAX_MATRIX_ENTRIES, before or as
@@ -66,9 +72,16 @@ class _ExprBuilder:
         self.diags = diags
         self.refs: list = []
 
-    def build(self, node) -> Expr:
+    def build(self, node, condition: bool = False) -> Expr:
+        """The expression of node: a number (a condition if asked: a `when` block's)."""
         self.refs = []
+        self.noevent = 0
         value = self._evaluate(node)
+        if condition and not self._is_bool(value):
+            fail(node.span, "a condition is needed here (a relation such as x > 0), "
+                            "not a number")
+        if not condition:
+            self._number_operand(value, node)
         if value.has(sp.zoo, sp.nan, sp.oo, -sp.oo):
             fail(node.span, "expression is not finite (division by zero?)")
         if value.has(sp.I):
@@ -86,6 +99,8 @@ class _ExprBuilder:
             action, node = todo.pop()
             if action is not None:
                 action(node, done)
+                if not done or self._is_bool(done[-1]):
+                    continue
                 if _is_matrix(done[-1]):
                     self.scope.charge(len(done[-1]), root.span)
                 elif done[-1].is_Number:  # before a function can take it: sinh(1e308)
@@ -101,10 +116,31 @@ class _ExprBuilder:
             elif isinstance(node, ast.Neg):
                 todo.append((_negate, node))
                 todo.append((None, node.operand))
+            elif isinstance(node, ast.Call) and node.func == "noevent":
+                if len(node.args) != 1:
+                    fail(node.span, f"noevent() takes 1 argument, got {len(node.args)}")
+                todo.append((self._end_noevent, node))
+                todo.append((None, node.args[0]))
+                todo.append((self._begin_noevent, node))
+            elif isinstance(node, ast.Call) and node.func in SOURCES:
+                self._check_source(node)
+                todo.append((self._source, node))
+                todo.extend((None, a) for a in reversed(node.args))
             elif isinstance(node, ast.Call):
                 self._check_call(node)
                 todo.append((self._apply, node))
                 todo.extend((None, a) for a in reversed(node.args))
+            elif isinstance(node, ast.Compare):
+                todo.append((self._compare, node))
+                todo.extend(((None, node.right), (None, node.left)))
+            elif isinstance(node, ast.BoolOp):
+                todo.append((self._boolop, node))
+                todo.extend((None, a) for a in reversed(node.items))
+            elif isinstance(node, ast.IfExpr):
+                todo.append((self._ifexpr, node))
+                todo.append((None, node.orelse))
+                for cond, value in reversed(node.branches):
+                    todo.extend(((None, value), (None, cond)))
             elif isinstance(node, ast.Vector):
                 todo.append((self._vector, node))
                 todo.extend((None, a) for a in reversed(node.items))
@@ -118,10 +154,126 @@ class _ExprBuilder:
         (value,) = done
         return value
 
+    # -- conditions (docs/hybrid.md)
+
+    def _is_bool(self, v) -> bool:
+        return is_condition(v)
+
+    def _number_operand(self, v, node):
+        if self._is_bool(v):
+            fail(node.span, "a condition is not a number: write 'if C then 1 else 0' for "
+                            "its value")
+
+    def _condition_operand(self, v, node):
+        if not self._is_bool(v):
+            fail(node.span, "a condition is needed here (a relation such as x > 0), not a "
+                            "number")
+
+    def _begin_noevent(self, node, done):
+        self.noevent += 1
+
+    def _end_noevent(self, node, done):
+        self.noevent -= 1
+        self._number_operand(done[-1], node.args[0])
+
+    def _compare(self, node: ast.Compare, done):
+        b = done.pop()
+        a = done.pop()
+        for v, n in ((a, node.left), (b, node.right)):
+            self._number_operand(v, n)
+            if _is_matrix(v):
+                fail(n.span, f"a relation compares scalars, not {_shape(v)}")
+        rel = RELATIONS[node.op](a, b)
+        if rel in (sp.true, sp.false) or not rel.free_symbols - self._constants():
+            done.append(rel)  # of parameters alone: no event
+            return
+        if self.noevent:
+            done.append(rel)  # evaluated as it is, at every call
+            return
+        if node.op in ("==", "!=") and not rel.free_symbols <= self._constants() | set(
+                var(n) for n in self.scope.discretes):
+            fail(node.span, f"'{node.op}' on a quantity that varies continuously is almost "
+                            "never exactly true; write a crossing with <, <=, > or >=")
+        done.append(self.scope.events.relation(rel, node, self.scope.owner))
+
+    def _constants(self) -> set:
+        return {var(n) for n in self.scope.params}
+
+    def _boolop(self, node: ast.BoolOp, done):
+        items = done[len(done) - len(node.items):]
+        del done[len(done) - len(node.items):]
+        for v, n in zip(items, node.items):
+            self._condition_operand(v, n)
+        op = {"and": sp.And, "or": sp.Or, "not": sp.Not}[node.op]
+        done.append(op(*items))
+
+    def _ifexpr(self, node: ast.IfExpr, done):
+        n = 2 * len(node.branches) + 1
+        items = done[len(done) - n:]
+        del done[len(done) - n:]
+        pairs = []
+        for k, (cond, value) in enumerate(node.branches):
+            c, v = items[2 * k], items[2 * k + 1]
+            self._condition_operand(c, cond)
+            self._number_operand(v, value)
+            pairs.append((v, c))
+        orelse = items[-1]
+        self._number_operand(orelse, node.orelse)
+        values = [v for v, _ in pairs] + [orelse]
+        if any(_is_matrix(v) for v in values):
+            fail(node.span, "the branches of 'if' are scalars (write one 'if' per entry)")
+        done.append(sp.Piecewise(*pairs, (orelse, True)))
+
+    def _check_source(self, node: ast.Call):
+        low, high = SOURCES[node.func]
+        if not low <= len(node.args) <= high:
+            want = str(low) if low == high else f"{low} or {high}"
+            fail(node.span, f"{node.func}() takes {want} argument{'s' * (high > 1)}, got "
+                            f"{len(node.args)}")
+        if self.scope.params_only:
+            fail(node.span, f"{node.func}() varies in time: only parameters are allowed here")
+
+    def _source(self, node: ast.Call, done):
+        """step, ramp, pulse, square: their time events; initial()."""
+        n = len(node.args)
+        args = done[len(done) - n:] if n else []
+        del done[len(done) - n:]
+        for a, sub in zip(args, node.args):
+            self._number_operand(a, sub)
+            if _is_matrix(a) or a.free_symbols - self._constants():
+                fail(sub.span, f"the arguments of {node.func}() are parameters or numbers")
+        if node.func == "initial":
+            if not self.scope.when_condition:
+                fail(node.span, "initial() is a when-block's condition (true at the start of "
+                                "a run only)")
+            done.append(INITIAL)
+            return
+        ev = self.scope.events
+        if node.func == "square":
+            period, duty = args[0], args[1]
+            t0 = args[2] if n > 2 else sp.Integer(0)
+            if period.is_Number and not period > 0:
+                fail(node.args[0].span, "the period of square() must be positive")
+            if duty.is_Number and not 0 <= duty <= 1:
+                fail(node.args[1].span, "the duty of square() is a fraction, from 0 to 1")
+            done.append(ev.square(period, duty, t0, node))
+            return
+        on = ev.relation(sp.GreaterThan(TIME, args[0]), node, None)
+        if node.func == "step":
+            done.append(sp.Piecewise((sp.Integer(1), on), (sp.Integer(0), True)))
+        elif node.func == "ramp":
+            done.append(sp.Piecewise((TIME - args[0], on), (sp.Integer(0), True)))
+        else:  # pulse(t0, width)
+            off = ev.relation(sp.GreaterThan(TIME, args[0] + args[1]), node, None)
+            done.append(sp.Piecewise((sp.Integer(1), sp.And(on, sp.Not(off))),
+                                     (sp.Integer(0), True)))
+
     def _combine(self, item, done):
         additive, operands = item
         values = done[len(done) - len(operands):]
         del done[len(done) - len(operands):]
+        for (_, n), v in zip(operands, values):
+            self._number_operand(v, n)
         if any(_is_matrix(v) for v in values):
             done.append(_matrix_chain(additive, operands, values, self.scope))
             return
@@ -138,6 +290,8 @@ class _ExprBuilder:
     def _power(self, node, done):
         b = done.pop()
         a = done.pop()
+        self._number_operand(a, node.left)
+        self._number_operand(b, node.right)
         if _is_matrix(a) or _is_matrix(b):
             fail(node.span, "'^' takes scalars, not vectors or matrices")
         if a.is_Number and b.is_Number:
@@ -159,6 +313,8 @@ class _ExprBuilder:
     def _apply(self, node, done):
         args = done[len(done) - len(node.args):]
         del done[len(done) - len(node.args):]
+        for a, sub in zip(args, node.args):
+            self._number_operand(a, sub)
         if node.func == "diag":
             if len(args) == 1 and _is_matrix(args[0]) and args[0].cols == 1:
                 args = list(args[0])
@@ -179,6 +335,8 @@ class _ExprBuilder:
         """[a, b, ...]: a column vector of scalars, or a matrix whose rows are [..] vectors."""
         items = done[len(done) - len(node.items):]
         del done[len(done) - len(node.items):]
+        for v, sub in zip(items, node.items):
+            self._number_operand(v, sub)
         if not any(_is_matrix(v) for v in items):
             done.append(sp.ImmutableMatrix(len(items), 1, list(items)))
             return
@@ -245,6 +403,12 @@ class _ExprBuilder:
             if s.visible_params is not None and node.name not in s.visible_params:
                 fail(node.span, f"parameter '{node.name}' is used before it is defined",
                      Note(s.params[node.name].span, f"'{node.name}' is defined here"))
+            self.refs.append((node.name, node.span))
+            return var(node.name)
+        if node.name in s.discretes:
+            if s.params_only:
+                fail(node.span, f"'{node.name}' is a discrete variable: only parameters are "
+                                "allowed here")
             self.refs.append((node.name, node.span))
             return var(node.name)
         if node.name in s.signals:
@@ -360,6 +524,8 @@ def _span_of(item) -> Span:
 
 
 def _negate(node, done):
+    if is_condition(done[-1]):
+        fail(node.span, "a condition is not a number: write 'not C' to negate it")
     done.append(-done.pop())
 
 
@@ -471,7 +637,8 @@ def _fields_of(decl: ast.ElementDecl) -> tuple[str, ...]:
 def _collect_names(model: ast.Model, diags: Collector):
     params, signals, elements, first = {}, {}, {}, {}
     for d in model.decls:
-        if isinstance(d, (ast.ParamDecl, ast.SignalDecl, ast.IntegralDecl, ast.ElementDecl)):
+        if isinstance(d, (ast.ParamDecl, ast.SignalDecl, ast.IntegralDecl, ast.ElementDecl,
+                          ast.DiscreteDecl)):
             name = d.name.name
             if name == "t":
                 diags.error(d.name.span, "'t' is time and cannot be declared")
@@ -481,6 +648,8 @@ def _collect_names(model: ast.Model, diags: Collector):
                             Note(first[name], f"first declaration of '{name}'"))
                 continue
             first[name] = d.name.span
+            if isinstance(d, ast.DiscreteDecl):
+                continue  # resolve() collects them (names taken here, so checked once)
             table = (params if isinstance(d, ast.ParamDecl) else
                      signals if isinstance(d, (ast.SignalDecl, ast.IntegralDecl)) else elements)
             table[name] = d
@@ -573,10 +742,89 @@ def _with_own_vars(d, scope, diags, node) -> Expr:
     if spec.state:
         own[spec.state] = var(f"{d.name.name}.{spec.state}")
     scope.local = own
+    scope.owner = d.name.name
     try:
         return _ExprBuilder(scope, diags).build(node)
     finally:
         scope.local = {}
+        scope.owner = None
+
+
+# ---------------------------------------------------------------- events
+
+
+def _discretes(model: ast.Model, scope: _Scope, diags: Collector) -> list[Discrete]:
+    out = []
+    for d in (d for d in model.decls if isinstance(d, ast.DiscreteDecl)):
+        if d.name.name == "t" or d.name.name in scope.params or d.name.name in \
+                scope.signals or d.name.name in scope.elements:
+            continue  # reported by _collect_names
+        scope.discretes[d.name.name] = d
+    for name, d in scope.discretes.items():
+        scope.params_only = True
+        try:
+            e = _guard(diags, _ExprBuilder(scope, diags).build, d.expr)
+        finally:
+            scope.params_only = False
+        if e is not None and _is_matrix(e.value):
+            diags.error(d.expr.span, f"discrete variable '{name}' is a scalar, but this is "
+                                     f"{_shape(e.value)}")
+        elif e is not None:
+            out.append(Discrete(name, var(name), e.value, d.doc, d.span))
+    return out
+
+
+def _when(d: ast.WhenBlock, scope: _Scope, diags: Collector) -> When:
+    scope.when_condition = True
+    try:
+        cond = _ExprBuilder(scope, diags).build(d.condition, condition=True)
+    finally:
+        scope.when_condition = False
+    actions, seen = [], {}
+    for st in d.stmts:
+        if isinstance(st, ast.Reinit):
+            name = st.target.name
+            sym = _state_symbol(name, st.target.span, scope)
+            kind = "reinit"
+        else:
+            name = st.name.name
+            if name not in scope.discretes:
+                what = ("a parameter" if name in scope.params else "a signal" if name in
+                        scope.signals else None)
+                hint = f" ('{name}' is {what}; a state takes 'reinit')" if what else ""
+                fail(st.name.span, f"'{name}' is not a discrete variable: a when-block assigns "
+                                   f"discrete variables and reinits states{hint}")
+            sym, kind = var(name), "assign"
+        if name in seen:
+            fail(st.span, f"'{name}' is set twice in this when-block",
+                 Note(seen[name], "first here"))
+        seen[name] = st.span
+        expr = _ExprBuilder(scope, diags).build(st.expr)
+        if _is_matrix(expr.value):
+            fail(st.expr.span, f"'{name}' is a scalar, but this is {_shape(expr.value)}")
+        actions.append(Action(kind, name, sym, expr.value, st.span))
+    shown = cond.value.xreplace({r.symbol: r.relation for r in scope.events.relations})
+    return When(cond.value, written(shown).replace("initial#", "initial()"), tuple(actions),
+                d.span)
+
+
+def _state_symbol(name: str, span: Span, scope: _Scope):
+    """The symbol of a state named in a reinit: X.p of an I, X.q of a C, or an integral signal."""
+    owner, _, fld = name.rpartition(".")
+    if not owner:
+        d = scope.signals.get(name)
+        if isinstance(d, ast.IntegralDecl) and d.dim is None:
+            return var(name)
+        if name in scope.discretes:
+            fail(span, f"'{name}' is a discrete variable: assign it without 'reinit'")
+        fail(span, f"'{name}' is not a state: reinit takes X.p of an I, X.q of a C, or an "
+                   "integral signal")
+    d = scope.elements.get(owner)
+    spec = KINDS.get(d.kind.name) if d is not None else None
+    if spec is None or not spec.state or spec.state != fld or d.dim is not None:
+        fail(span, f"'{name}' is not a state: reinit takes X.p of an I, X.q of a C, or an "
+                   "integral signal")
+    return var(name)
 
 
 def _init(d, spec, scope, diags):
@@ -715,12 +963,15 @@ def resolve(model: ast.Model) -> Graph:
     params, signals, elements = _collect_names(model, diags)
     scope = _Scope(params, signals, elements)
     parameters = _parameters(params, scope, diags)
+    discretes = _discretes(model, scope, diags)
     order = {id(d): k for k, d in enumerate(model.decls)}
     els = [replace(e, order=order[id(d)]) for d, e in
            ((d, _guard(diags, _element, d, scope, diags)) for d in elements.values()) if e]
     sigs = [replace(s, order=order[id(d)]) for d, s in
             ((d, _guard(diags, _signal, d, scope, diags)) for d in signals.values()) if s]
     bonds = _bonds(model, elements, params, signals, diags)
+    whens = [w for w in (_guard(diags, _when, d, scope, diags) for d in model.decls
+                         if isinstance(d, ast.WhenBlock)) if w]
     check_ports(els, bonds, diags)
     scenes, scene_names = [], {}
     known_effects = model_effects(els)
@@ -740,4 +991,6 @@ def resolve(model: ast.Model) -> Graph:
     diags.raise_if_errors()
     return Graph(mdecl.name.name, mdecl.doc, model.path, tuple(parameters), tuple(els),
                  tuple(bonds), tuple(sigs), tuple(scenes), diags.warnings,
-                 ports=tuple(model.ports))
+                 ports=tuple(model.ports), relations=tuple(scope.events.relations),
+                 squares=tuple(scope.events.squares), discretes=tuple(discretes),
+                 whens=tuple(whens))

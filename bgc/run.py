@@ -6,6 +6,7 @@ command line's help, its warm path (bgc.warm) and the API all read it, and a war
 from __future__ import annotations
 
 import math
+import os
 from dataclasses import dataclass, fields, replace
 
 from . import solvers
@@ -16,7 +17,7 @@ BACKENDS = ("c", "python")  # what runs a simulation
 TARGETS = ("c", "python", "fmu")  # what `compile` writes (fmu: bgc/fmu.py)
 FORMATS = ("text", "latex")  # what `equations` prints
 SIMULATE_OPTIONS = ("t_end", "dt", "solver", "rtol", "atol", "step", "params", "project_initial",
-                    "max_steps", "allow_inconsistent")
+                    "max_steps", "allow_inconsistent", "max_step", "event_rows", "events")
 
 
 def choice(name: str, value, allowed):
@@ -51,13 +52,16 @@ class RunSettings:
     project_initial: bool = False
     allow_inconsistent: bool = False
     scene: str | None = None  # the scene's name (reports; not a run option)
+    max_step: float | None = None  # the adaptive solvers' largest step (a scene's hmax)
+    event_rows: bool = False  # two rows at each event: its left and right limits
+    events: str | None = None  # the event log's file (t,event,change)
 
     def with_options(self, **options) -> RunSettings:
         """These settings with the options given (None: keep this one's); params a dict."""
         given = {k: v for k, v in options.items() if v is not None}
         if "params" in given:
             given["params"] = tuple(dict(given["params"]).items())
-        for flag in ("project_initial", "allow_inconsistent"):
+        for flag in ("project_initial", "allow_inconsistent", "event_rows"):
             if flag in given:
                 given[flag] = bool(given[flag])
         return replace(self, **given)
@@ -90,12 +94,14 @@ def parameter_overrides(given, names) -> tuple[tuple[str, float], ...]:
 
 
 def run_args(t_end=None, dt=None, solver=None, rtol=None, atol=None, step=None, params=None,
-             project_initial=False, max_steps=None, allow_inconsistent=False) -> list[str]:
+             project_initial=False, max_steps=None, allow_inconsistent=False, max_step=None,
+             event_rows=False, events=None) -> list[str]:
     """The generated program's command line for these options (None: the program's own)."""
     args = []
     for flag, value in (("--t-end", t_end), ("--dt", dt), ("--solver", solver),
                         ("--rtol", rtol), ("--atol", atol), ("--step", step),
-                        ("--max-steps", max_steps)):
+                        ("--max-steps", max_steps), ("--max-step", max_step),
+                        ("--events", None if events is None else os.fspath(events))):
         if value is not None:
             args += [flag, repr(value) if isinstance(value, float) else str(value)]
     for name, value in (params or {}).items():
@@ -104,6 +110,8 @@ def run_args(t_end=None, dt=None, solver=None, rtol=None, atol=None, step=None, 
         args.append("--project-initial")
     if allow_inconsistent:
         args.append("--allow-inconsistent")
+    if event_rows:
+        args.append("--event-rows")
     return args
 
 
@@ -114,7 +122,10 @@ def check_run_options(options: dict):
     parameters' names) is checked once it is built."""
     if options.get("solver") is not None:
         choice("solver", options["solver"], solvers.NAMES)
-    for key in ("rtol", "atol", "dt", "step", "t_end"):
+    events = options.get("events")
+    if events is not None and not isinstance(events, (str, os.PathLike)):
+        raise TypeError("events must be a file name (the event log's CSV)")
+    for key in ("rtol", "atol", "dt", "step", "t_end", "max_step"):
         value = options.get(key)
         if value is None:
             continue

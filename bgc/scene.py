@@ -15,7 +15,7 @@ from .graph import (Expr, Graph, check_effect_names, check_ports, model_effects,
 from .resources import MAX_OUTPUT_ROWS
 from .run import RunSettings
 
-SOLVER_OPTIONS = ("rtol", "atol", "step")
+SOLVER_OPTIONS = ("rtol", "atol", "step", "hmax")
 DEFAULT_TIME = (0.0, 10.0, 0.01)
 DEFAULT_SOLVER = (solvers.DEFAULT, 1e-6, 1e-9)
 
@@ -213,7 +213,7 @@ def _solver(scene_solver, params) -> tuple:
     name, rtol, atol = DEFAULT_SOLVER
     step = None
     if scene_solver is None:
-        return name, rtol, atol, step
+        return name, rtol, atol, step, None
     name, opts, span = scene_solver
     if name not in solvers.SOLVERS:
         fail(span, f"unknown solver '{name}' (known: {', '.join(solvers.NAMES)})")
@@ -224,7 +224,8 @@ def _solver(scene_solver, params) -> tuple:
         values[key] = _number(expr, params)
         if values[key] <= 0:
             fail(expr.span, f"solver option '{key}' must be positive")
-    return name, values.get("rtol", rtol), values.get("atol", atol), values.get("step")
+    return name, values.get("rtol", rtol), values.get("atol", atol), values.get("step"), \
+        values.get("hmax")
 
 
 def _check_laws(graph: Graph, params: dict):
@@ -373,7 +374,7 @@ def apply_scene(graph: Graph, name: str | None, override: Override | None = None
         elif not (t1 - t0) / dt <= MAX_OUTPUT_ROWS:
             fail(scene.time[2].span, f"more than {MAX_OUTPUT_ROWS:.0e} output rows: the output "
                                      "interval is too small for the time span")
-    solver, rtol, atol, step = _solver(scene.solver if scene else None, params)
-    run = RunSettings(t0, t1, dt, solver, rtol, atol, step, scene=name)
+    solver, rtol, atol, step, hmax = _solver(scene.solver if scene else None, params)
+    run = RunSettings(t0, t1, dt, solver, rtol, atol, step, scene=name, max_step=hmax)
     return Scenario(g, Settings(name, outputs, run, sets, given, effects,
                                 tuple(left_out.items())))

@@ -112,6 +112,7 @@ class EquationSystem:
     fields: tuple = ()  # (field, coordinates of the Hamiltonian correction) of coupled I fields
     momenta: tuple = ()  # (p, f, sign) of each I state in integral causality: its velocity
     #                      is sign * f, f a bond flow (the projection's kinetic metric)
+    events: tuple = ((), (), (), ())  # bgc.events: relations, squares, discretes, whens
 
 
 class _Builder:
@@ -552,7 +553,7 @@ def build_equations(cg: CausalGraph) -> EquationSystem:
                           tuple(b.constraints), tuple(b.stores), _outputs(b, s.outputs, s.left_out), run,
                           tuple(g.warnings),
                           tuple((name, tuple(b.hamiltonian.get(name, ()))) for name in b.fields),
-                          tuple(b.momenta))
+                          tuple(b.momenta), (g.relations, g.squares, g.discretes, g.whens))
 
 
 def with_residual_outputs(es: EquationSystem) -> EquationSystem:

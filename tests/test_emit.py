@@ -228,11 +228,26 @@ def test_printer_layout_for_latency():
 
 def test_printer_refuses_unsupported():
     c = CPrinter(1, ())
-    for bad in (sp.Symbol("y"), sp.Piecewise((1, X[0] > 0), (0, True)), sp.oo * X[0],
+    for bad in (sp.Symbol("y"), sp.Piecewise((1, X[0] > 0)), sp.oo * X[0],
                 sp.floor(X[0]), X[1], P[0], sp.IndexedBase("q")[0], sp.I * X[0],
                 sp.Function("f")(X[0]), sp.nan, sp.zoo):
         with pytest.raises(UnsupportedExpressionError):
             c.doprint(bad)
+
+
+def test_printers_write_conditionals_alike():
+    """A conditional (the language's if/elif/else over relations, bgc.events) prints as nested
+    conditional expressions in both languages, and a condition is never a number."""
+    e = sp.Piecewise((X[0], sp.And(X[0] > 1, sp.Not(sp.Eq(P[0], 2)))), (2 * X[0], X[0] <= -1),
+                     (0, True))
+    c, py = CPrinter(1, ("k",)), PythonPrinter(1, 1)
+    assert c.doprint(e) == \
+        "(((x[0] > 1.0) && (p->k != 2.0)) ? x[0] : ((x[0] <= -1.0) ? 2.0*x[0] : 0.0))"
+    assert py.doprint(e) == \
+        "(x[0] if ((x[0] > 1.0) and (p[0] != 2.0)) else (2.0*x[0] if (x[0] <= -1.0) " \
+        "else 0.0))"
+    for x0, want in ((2.0, 2.0), (-3.0, -6.0), (0.0, 0.0)):
+        assert eval(py.doprint(e), {"x": [x0], "p": [1.0]}) == want  # noqa: S307 (test)
 
 
 def test_c_string_literal_escapes():

@@ -40,6 +40,9 @@ typedef struct bgc_work {
     int block;          /* after a failure: the block (1-based, as bgc_block_names) ... */
     int failure;        /* ... and how: BGC_BLOCK_SINGULAR, _DIVERGED or _NONFINITE */
     double t;           /* ... and when */
+    double *d;          /* a model with events: the discrete values between two calls of
+                           bgc_advance (BGC_NUM_DISCRETE) ... */
+    int started;        /* ... once set by the event iteration at the run's start */
 } bgc_work;
 bgc_work *bgc_work_new(void);
 void bgc_work_free(bgc_work *w);
@@ -95,6 +98,12 @@ typedef struct bgc_settings {
                              needs more fails: a runaway step size); 0: no limit */
     double h0;            /* adaptive solvers: the first step to try; 0: estimated */
     int order0;           /* radau: the order to start at (5, 9 or 13); 0: 5 */
+    double hmax;          /* adaptive solvers: the largest step; 0: no bound but the span */
+    int event_rows;       /* 1: two rows at each event, its left and right limits */
+    /* Called for each change at an event (what: a condition as written, a state or a
+       discrete variable; change: what it became); nonzero stops the run.  NULL: none. */
+    int (*on_event)(void *ctx, double t, const char *what, const char *change);
+    void *event_ctx;
 } bgc_settings;
 #define BGC_MAX_STEPS 100000L /* max_steps unless set */
 typedef struct bgc_stats {
@@ -106,6 +115,7 @@ typedef struct bgc_stats {
     double h_next;             /* adaptive solvers: the step they would take after the run's
                                   end (set, not added to; 0: none) ... */
     int order_next;            /* ... and radau the order (0: another solver) */
+    long events;               /* events handled (the start's event iteration not counted) */
 } bgc_stats;
 /* Called at every output time with the state and the outputs; nonzero stops the run. */
 typedef int (*bgc_sink)(void *ctx, double t, const double *x, const double *y);
@@ -137,6 +147,44 @@ int bgc_advance(const bgc_settings *s, const bgc_params *p, bgc_work *w, double 
    it (the program's main does, for SIGINT and SIGTERM).  0 clears the request. */
 void bgc_request_stop(int sig);
 
+/* Events (docs/hybrid.md).  A model with events defines, before this section, the sizes
+   BGC_NUM_INDICATORS (its state relations: g = bgc_model_events, the relation holding when
+   g > 0, or g >= 0 where bgc_indicator_strict is 0), BGC_NUM_TIMERS (the results of
+   bgc_model_next_time: time events, of which the runtime steps onto the first after t) and
+   BGC_NUM_DISCRETE (the discrete values d: the relations' frozen values, the state relations'
+   first, then square waves and discrete variables, named by bgc_discrete_names), and
+   BGC_DISCRETE_OFFSET, where d is in its parameter struct (in doubles).  bgc_model_update
+   gives the state and d after one pass of an event iteration from r (the state relations'
+   values at the event, then 1 at the start of a run, else 0).  A model without events gets
+   the neutral ones below. */
+#ifndef BGC_NUM_DISCRETE
+#define BGC_NUM_INDICATORS 0
+#define BGC_NUM_TIMERS 0
+#define BGC_NUM_DISCRETE 0
+#define BGC_DISCRETE_OFFSET 0
+static const int bgc_indicator_strict[1] = { 0 };
+static const char *const bgc_discrete_names[1] = { "" };
+static inline int bgc_model_events(double t, const double *x, const bgc_params *p,
+                                   bgc_work *w, double *out)
+{
+    (void)t, (void)x, (void)p, (void)w, (void)out;
+    return 0;
+}
+static inline int bgc_model_next_time(double t, const double *x, const bgc_params *p,
+                                      bgc_work *w, double *out)
+{
+    (void)t, (void)x, (void)p, (void)w, (void)out;
+    return 0;
+}
+static inline int bgc_model_update(double t, const double *x, const bgc_params *p,
+                                   bgc_work *w, const double *r, double *out)
+{
+    (void)t, (void)x, (void)p, (void)w, (void)r, (void)out;
+    return 0;
+}
+#endif
+#define BGC_MAX_EVENT_ITERATIONS 100 /* events at one instant before a run stops (Zeno) */
+
 /* -------------------------------------------- between the model part and the runtime --- */
 static inline double bgc_sq(double a) { return a * a; }
 static inline double bgc_min(double a, double b) { return b < a ? b : a; }
@@ -145,6 +193,41 @@ static inline double bgc_sign(double a) { return a > 0.0 ? 1.0 : (a < 0.0 ? -1.0
 static inline double bgc_heaviside(double a, double at_zero)
 {
     return a > 0.0 ? 1.0 : (a < 0.0 ? 0.0 : (a == 0.0 ? at_zero : a));
+}
+/* square(period, duty, t0): the period k >= 0 that holds t (its edges t0 + k period and
+   t0 + (k + duty) period computed as written, so that the value at an edge is the value
+   after it, and the next edge is the time the driver steps onto). */
+static inline double bgc_square_period(double t, double period, double t0)
+{
+    double k = floor((t - t0) / period);
+    if (k < 0.0)
+        k = 0.0;
+    while (k > 0.0 && t0 + k * period > t)
+        k -= 1.0;
+    while (t0 + (k + 1.0) * period <= t)
+        k += 1.0;
+    return k;
+}
+static inline double bgc_square(double t, double period, double duty, double t0)
+{
+    double k;
+    if (!(period > 0.0) || !isfinite(t))
+        return NAN;
+    if (t < t0)
+        return 0.0;
+    k = bgc_square_period(t, period, t0);
+    return t < t0 + (k + duty) * period ? 1.0 : 0.0;
+}
+static inline double bgc_square_next(double t, double period, double duty, double t0)
+{
+    double k, down;
+    if (!(period > 0.0) || !isfinite(t))
+        return NAN;
+    if (t < t0)
+        return t0;
+    k = bgc_square_period(t, period, t0);
+    down = t0 + (k + duty) * period;
+    return t < down ? down : t0 + (k + 1.0) * period;
 }
 
 /* A solver as bgc/solvers.py describes it (the tables are printed below this section).

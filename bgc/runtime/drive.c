@@ -104,6 +104,14 @@ typedef struct bgc_run {
     int detect_stiffness;
     long steps_out;  /* st->steps at the last output, at t_out */
     double t_out;
+    /* events (a model with BGC_NUM_DISCRETE > 0): */
+    double *d;       /* the discrete values, in the run's parameter copy */
+    double *g;       /* the indicators at r->t */
+    double *ev;      /* scratch: indicators (2 x BGC_NUM_INDICATORS), update's input and
+                        output, a state and two derivatives */
+    double t_next;   /* the first time event after r->t (INFINITY: none) */
+    double t_event;  /* the last event's time, and how many events in a row came ... */
+    long chain;      /* ... closer to the one before than the solver resolves */
 } bgc_run;
 #define BGC_STIFF (-1) /* an auto run's explicit phase found the problem stiff */
 
@@ -178,28 +186,83 @@ static int bgc_accept(bgc_run *r, double t)
     return 0;
 }
 
-/* After an accepted step from t to tph = t + h (exactly t_end on the last step): hands over
-   the output times in (t, tph], tph itself from y1 and the others through the family's dense
-   output (prepared once, before the first of them).  yout: N doubles of scratch. */
-static int bgc_emit_step(bgc_run *r, const bgc_family *f, void *ms, double t, double h,
-                         double tph, const double *y1, double *yout)
+/* The run's event scratch (r->ev): the indicators at both ends of a bracket and inside it,
+   update's input and output, and the Hermite interpolant's two derivatives. */
+#define BGC_EV_GA(r) ((r)->ev)
+#define BGC_EV_GB(r) ((r)->ev + BGC_NUM_INDICATORS)
+#define BGC_EV_IN(r) ((r)->ev + 2 * BGC_NUM_INDICATORS)
+#define BGC_EV_OUT(r) (BGC_EV_IN(r) + BGC_NUM_INDICATORS + 1)
+#define BGC_EV_GM(r) (BGC_EV_OUT(r) + BGC_NUM_STATES + BGC_NUM_DISCRETE)
+#define BGC_EV_F0(r) (BGC_EV_GM(r) + BGC_NUM_INDICATORS)
+#define BGC_EV_SIZE (4 * BGC_NUM_INDICATORS + 1 + 3 * BGC_NUM_STATES + BGC_NUM_DISCRETE)
+
+/* The state inside the step just accepted, from t over h to tph (y at t, y1 at tph): the
+   family's dense output (prepared once), or for a family without one (the fixed-step
+   methods, for event location only) the cubic Hermite interpolant of y, y1 and the
+   derivatives there. */
+typedef struct bgc_dense {
+    const bgc_family *f;
+    void *ms;
+    double t, h, tph;
+    const double *y, *y1;
+    int prepared;
+    double *f0, *f1; /* the Hermite interpolant's derivatives (NULL until needed) */
+} bgc_dense;
+
+static int bgc_dense_at(bgc_run *r, bgc_dense *c, double tk, double *out)
 {
-    int rc, prepared = f->prepare == NULL;
+    enum { N = BGC_NUM_STATES };
+    int i, rc;
+    if (tk == c->tph) {
+        memcpy(out, c->y1, sizeof(double) * N);
+        return 0;
+    }
+    if (c->f->dense) {
+        if (!c->prepared && c->f->prepare) {
+            rc = c->f->prepare(c->ms);
+            if (rc)
+                return rc;
+        }
+        c->prepared = 1;
+        c->f->dense(c->ms, (tk - c->t) / c->h, out);
+        return 0;
+    }
+    if (!c->f0) {
+        c->f0 = BGC_EV_F0(r);
+        c->f1 = c->f0 + N;
+        r->st->rhs += 2;
+        if (bgc_model_rhs(c->t, c->y, r->p, r->w, c->f0)
+            || bgc_model_rhs(c->tph, c->y1, r->p, r->w, c->f1))
+            return bgc_fail_block(r->msg, r->msg_size, r->w);
+    }
+    {
+        const double th = (tk - c->t) / c->h, h = c->h;
+        for (i = 0; i < N; i++) {
+            const double dy = c->y1[i] - c->y[i];
+            out[i] = (1.0 - th) * c->y[i] + th * c->y1[i]
+                     + th * (th - 1.0) * ((1.0 - 2.0 * th) * dy + (th - 1.0) * h * c->f0[i]
+                                          + th * h * c->f1[i]);
+        }
+    }
+    return 0;
+}
+
+/* After an accepted step: hands over the output times in (c->t, until] (until itself
+   excluded if !inclusive), tph from y1, the others through the dense output.  yout: N
+   doubles of scratch. */
+static int bgc_emit_step(bgc_run *r, bgc_dense *c, double until, int inclusive, double *yout)
+{
+    int rc;
     for (; r->kout <= r->nout; r->kout++) {
         const double tk = bgc_output_time(r->s, r->kout, r->nout);
-        if (tk > tph)
+        if (tk > until || (tk == until && !inclusive))
             break;
-        if (tk == tph) {
-            rc = bgc_emit(r, tk, y1);
+        if (tk == c->tph) {
+            rc = bgc_emit(r, tk, c->y1);
         } else {
-            if (!prepared) {
-                rc = f->prepare(ms);
-                if (rc)
-                    return rc;
-                prepared = 1;
-            }
-            f->dense(ms, (tk - t) / h, yout);
-            rc = bgc_emit(r, tk, yout);
+            rc = bgc_dense_at(r, c, tk, yout);
+            if (rc == 0)
+                rc = bgc_emit(r, tk, yout);
         }
         if (rc)
             return rc;
@@ -213,6 +276,13 @@ static inline double bgc_weight(const bgc_settings *s, double y, double y1)
     return s->atol + s->rtol * bgc_max(fabs(y), fabs(y1));
 }
 
+/* The largest step: the run's span, and --max-step if set. */
+static double bgc_hmax(const bgc_settings *s)
+{
+    const double span = s->t_end - s->t0;
+    return s->hmax > 0.0 ? bgc_min(span, s->hmax) : span;
+}
+
 /* Hairer's initial step size guess (HINIT) for a method of order q at (r->t, y) with
    f0 = f(r->t, y); y1, f1: scratch. */
 static double bgc_initial_step(bgc_run *r, int q, const double *y, const double *f0,
@@ -220,7 +290,7 @@ static double bgc_initial_step(bgc_run *r, int q, const double *y, const double 
 {
     enum { N = BGC_NUM_STATES };
     const bgc_settings *s = r->s;
-    const double hmax = s->t_end - s->t0;
+    const double hmax = bgc_hmax(s);
     double dnf = 0.0, dny = 0.0, der2 = 0.0, der12, h, h1;
     int i;
     for (i = 0; i < N; i++) {
@@ -252,7 +322,7 @@ static double bgc_initial_step(bgc_run *r, int q, const double *y, const double 
 static double bgc_first_step(bgc_run *r, const double *y, const double *f0, double *y1,
                              double *f1)
 {
-    const double hmax = r->s->t_end - r->s->t0;
+    const double hmax = bgc_hmax(r->s);
     return r->h > 0.0 ? bgc_min(r->h, hmax)
                       : bgc_initial_step(r, r->method->q, y, f0, y1, f1);
 }
@@ -326,6 +396,240 @@ static int bgc_grid_next(bgc_run *r, const bgc_family *f, bgc_grid *g, double t,
     return 0;
 }
 
+/* ------------------------------------------------------------------ events --- */
+/* A model's events (docs/hybrid.md): the driver checks the state relations' indicators at
+   the end of every accepted step, locates the first change of a relation's value on the
+   step's dense output (Illinois' variant of the secant method, to 1e-12 relative in t), and
+   ends the step there; it steps onto time events exactly; at an event it runs the event
+   iteration (bgc_model_update until nothing changes) and starts the method afresh. */
+
+/* Whether state relation k holds for indicator value g. */
+static int bgc_holds(int k, double g)
+{
+    return bgc_indicator_strict[k] ? g > 0.0 : g >= 0.0;
+}
+
+/* The first state relation whose value at g differs from its frozen value d, or -1. */
+static int bgc_changed(const bgc_run *r, const double *g)
+{
+    int k;
+    for (k = 0; k < BGC_NUM_INDICATORS; k++)
+        if (bgc_holds(k, g[k]) != (r->d[k] != 0.0))
+            return k;
+    return -1;
+}
+
+static int bgc_indicators(bgc_run *r, double t, const double *x, double *g)
+{
+    int k;
+    if (bgc_model_events(t, x, r->p, r->w, g))
+        return bgc_fail_block(r->msg, r->msg_size, r->w);
+    for (k = 0; k < BGC_NUM_INDICATORS; k++)
+        if (!isfinite(g[k]))
+            return bgc_fail(r->msg, r->msg_size, t, "event condition", bgc_discrete_names[k]);
+    return 0;
+}
+
+/* The first time event after t: the least result of next_time beyond t (INFINITY: none). */
+static int bgc_next_time(bgc_run *r, double t, const double *x)
+{
+    enum { M = BGC_DIM(BGC_NUM_TIMERS) };
+    double tau[M];
+    int k;
+    r->t_next = INFINITY;
+    if (BGC_NUM_TIMERS == 0)
+        return 0;
+    if (bgc_model_next_time(t, x, r->p, r->w, tau))
+        return bgc_fail_block(r->msg, r->msg_size, r->w);
+    for (k = 0; k < BGC_NUM_TIMERS; k++)
+        if (tau[k] > t && tau[k] < r->t_next)
+            r->t_next = tau[k];
+    return 0;
+}
+
+static int bgc_log(bgc_run *r, double t, const char *what, const char *change)
+{
+    return r->s->on_event ? r->s->on_event(r->s->event_ctx, t, what, change) : 0;
+}
+
+/* The event iteration at (t, x): bgc_model_update until the state and the discrete values
+   stop changing (start: the run's first, at t0, which sets every discrete value and logs
+   nothing); r->g the indicators there after it. */
+static int bgc_event_iteration(bgc_run *r, double t, double *x, int start)
+{
+    enum { N = BGC_NUM_STATES, G = BGC_NUM_INDICATORS, ND = BGC_NUM_DISCRETE };
+    double *g = r->g, *in = BGC_EV_IN(r), *out = BGC_EV_OUT(r);
+    char change[96];
+    int it, i, k, rc, changed = 1;
+    for (it = 0; changed; it++) {
+        if (it == BGC_MAX_EVENT_ITERATIONS) {
+            snprintf(r->msg, r->msg_size, "at t = %.17g: chattering: the event iteration "
+                     "does not settle after %d passes (a Zeno model?)", t, it);
+            return BGC_ERR_RUNTIME;
+        }
+        rc = bgc_indicators(r, t, x, g);
+        if (rc)
+            return rc;
+        for (k = 0; k < G; k++)
+            in[k] = bgc_holds(k, g[k]) ? 1.0 : 0.0;
+        in[G] = start && it == 0 ? 1.0 : 0.0;
+        if (bgc_model_update(t, x, r->p, r->w, in, out))
+            return bgc_fail_block(r->msg, r->msg_size, r->w);
+        changed = 0;
+        for (i = 0; i < N; i++) {
+            if (!isfinite(out[i]))
+                return bgc_fail(r->msg, r->msg_size, t, "state after the event",
+                                bgc_state_names[i]);
+            if (out[i] != x[i]) {
+                changed = 1;
+                if (!start) {
+                    snprintf(change, sizeof change, "%.17g -> %.17g", x[i], out[i]);
+                    rc = bgc_log(r, t, bgc_state_names[i], change);
+                    if (rc)
+                        return rc;
+                }
+                x[i] = out[i];
+            }
+        }
+        for (k = 0; k < ND; k++) {
+            const double v = out[N + k];
+            if (!isfinite(v))
+                return bgc_fail(r->msg, r->msg_size, t, "discrete value", bgc_discrete_names[k]);
+            if (v != r->d[k]) {
+                changed = 1;
+                if (!start) {
+                    snprintf(change, sizeof change, "%.17g -> %.17g", r->d[k], v);
+                    rc = bgc_log(r, t, bgc_discrete_names[k], change);
+                    if (rc)
+                        return rc;
+                }
+                r->d[k] = v;
+            }
+        }
+    }
+    return 0;
+}
+
+/* Whether the step just accepted, from c->t to c->tph, holds an event: 0 none; 1 at *te
+   (<= tph), the state there in ye; else an error.  A time event is due when the step ends
+   on it; a state relation whose value at tph differs from its frozen one is located. */
+static int bgc_find_event(bgc_run *r, bgc_dense *c, double *te, double *ye)
+{
+    enum { G = BGC_NUM_INDICATORS };
+    double *ga = BGC_EV_GA(r), *gb = BGC_EV_GB(r), *gm = BGC_EV_GM(r);
+    double ta = c->t, tb = c->tph, wa = 1.0, wb = 1.0;
+    int rc, it, moved = 0;
+    const int due = c->tph >= r->t_next;
+    if (G > 0) {
+        rc = bgc_indicators(r, tb, c->y1, gb);
+        if (rc)
+            return -rc;
+    }
+    if (G == 0 || bgc_changed(r, gb) < 0) {
+        if (!due)
+            return 0;
+        *te = c->tph;
+        memcpy(ye, c->y1, sizeof(double) * BGC_NUM_STATES);
+        return 1;
+    }
+    memcpy(ga, r->g, sizeof(double) * G);
+    for (it = 0; it < 200; it++) {
+        const double scale = bgc_max(fabs(ta), fabs(tb));
+        const double tol = bgc_max(1e-12 * scale, bgc_max(4.0 * DBL_EPSILON * scale, DBL_MIN));
+        double frac = 1.0, tm;
+        int k, side;
+        if (tb - ta <= tol)
+            break;
+        for (k = 0; k < G; k++) {
+            if (bgc_holds(k, gb[k]) != (r->d[k] != 0.0)) {
+                const double a = wa * ga[k], b = wb * gb[k];
+                double q = a / (a - b);
+                if (!(q >= 0.0 && q <= 1.0))
+                    q = 0.5;
+                if (q < frac)
+                    frac = q;
+            }
+        }
+        if (it >= 100)
+            frac = 0.5; /* bisection, should the secant stall */
+        tm = ta + frac * (tb - ta);
+        tm = bgc_max(tm, ta + 0.5 * tol);
+        tm = bgc_min(tm, tb - 0.5 * tol);
+        rc = bgc_dense_at(r, c, tm, ye);
+        if (rc == 0)
+            rc = bgc_indicators(r, tm, ye, gm);
+        if (rc)
+            return -rc;
+        side = bgc_changed(r, gm) >= 0 ? 1 : -1;
+        if (side > 0) { /* the change is in (ta, tm]: Illinois halves the end that stays */
+            tb = tm;
+            memcpy(gb, gm, sizeof(double) * G);
+            wb = 1.0;
+            wa = moved > 0 ? 0.5 * wa : 1.0;
+        } else {
+            ta = tm;
+            memcpy(ga, gm, sizeof(double) * G);
+            wa = 1.0;
+            wb = moved < 0 ? 0.5 * wb : 1.0;
+        }
+        moved = side;
+    }
+    *te = tb;
+    rc = bgc_dense_at(r, c, tb, ye);
+    return rc ? -rc : 1;
+}
+
+/* An event at (t, x): the left limit's row (--event-rows), the event iteration, the right
+   limit's row; then the next time event.  Stops a run whose events come closer together
+   than it can resolve, BGC_MAX_EVENT_ITERATIONS in a row. */
+static int bgc_handle_event(bgc_run *r, double t, double *x)
+{
+    const double scale = bgc_max(fabs(t), fabs(r->t_event));
+    int rc = 0;
+    r->st->events++;
+    if (t - r->t_event <= bgc_max(1e-12 * scale, bgc_hmin(t)))
+        r->chain++;
+    else
+        r->chain = 0;
+    r->t_event = t;
+    if (r->chain >= BGC_MAX_EVENT_ITERATIONS) {
+        snprintf(r->msg, r->msg_size, "at t = %.17g: chattering: %ld events in a row, each "
+                 "within 1e-12 relative of the one before (a Zeno model: the switching "
+                 "outruns the time's resolution)", t, r->chain);
+        return BGC_ERR_RUNTIME;
+    }
+    if (r->s->event_rows)
+        rc = bgc_emit(r, t, x);
+    if (rc == 0)
+        rc = bgc_event_iteration(r, t, x, 0);
+    if (rc == 0 && r->s->event_rows)
+        rc = bgc_emit(r, t, x);
+    if (rc == 0)
+        rc = bgc_next_time(r, t, x);
+    return rc;
+}
+
+/* After the step that ended at an event at (t, y): the event, the rows at t (its right limit;
+   those within the time's resolution of t too), and the family started afresh at t (*ms
+   NULL: the run is over, or failed). */
+static int bgc_after_event(bgc_run *r, const bgc_family *f, double t, double *y, void **ms,
+                           double *h)
+{
+    int rc = bgc_handle_event(r, t, y);
+    for (; rc == 0 && r->kout <= r->nout; r->kout++) {
+        const double tk = bgc_output_time(r->s, r->kout, r->nout);
+        if (tk - t > bgc_hmin(t))
+            break;
+        rc = bgc_emit(r, tk, y);
+    }
+    r->t = t;
+    if (rc || t >= r->s->t_end || r->kout > r->nout)
+        return rc;
+    r->h = 0.0;
+    *ms = f->start(r, y, h, &rc);
+    return rc;
+}
+
 /* One family's run from (r->t, y) to s->t_end (the driver proper).  Keeps r->t and y at the
    last accepted step; returns 0, an error (message set), the sink's nonzero value, or
    BGC_STIFF (r->h then holds the explicit phase's next step). */
@@ -333,10 +637,10 @@ static int bgc_drive(bgc_run *r, const bgc_family *f, double *y)
 {
     enum { N = BGC_NUM_STATES, D = BGC_DIM(BGC_NUM_STATES) };
     const bgc_settings *s = r->s;
-    const double hmax = s->t_end - s->t0;
-    double *mem = malloc((size_t)2 * D * sizeof *mem), *y1, *yout;
+    const double hmax = bgc_hmax(s);
+    double *mem = malloc((size_t)3 * D * sizeof *mem), *y1, *yout, *ye;
     double t = r->t, h = 0.0, hnew, wanted = 0.0;
-    int i, rc = 0, reject = 0, last = 0, bad = BGC_BAD_NONE, bad_kind = 0;
+    int i, rc = 0, reject = 0, last = 0, bad = BGC_BAD_NONE, bad_kind = 0, at_event = 0;
     bgc_grid grid = {0.0, 0.0, 0.0, 0, 0};
     bgc_outcome o;
     void *ms = NULL;
@@ -345,6 +649,7 @@ static int bgc_drive(bgc_run *r, const bgc_family *f, double *y)
         return bgc_fail_memory(r->msg, r->msg_size);
     y1 = mem;
     yout = mem + D;
+    ye = mem + 2 * D;
     o.worst = -1;
     grid.step = s->step > 0.0 ? s->step : s->dt;
     if (r->kout > r->nout)
@@ -354,10 +659,31 @@ static int bgc_drive(bgc_run *r, const bgc_family *f, double *y)
         goto done;
     for (;;) {
         double tph;
+        bgc_dense c;
+        if (r->t_next - t <= bgc_hmin(t)) { /* a time event closer than a step can be */
+            t = r->t_next;
+            at_event = 1;
+        }
+        if (at_event) { /* the event at (t, y); the method starts afresh after it */
+            at_event = 0;
+            f->finish(ms);
+            ms = NULL;
+            rc = bgc_after_event(r, f, t, y, &ms, &h);
+            if (rc || !ms)
+                goto done;
+            grid.k = grid.n; /* a new grid from the event */
+            reject = last = 0;
+            bad = BGC_BAD_NONE;
+            continue;
+        }
         if (r->fixed) {
             rc = bgc_grid_next(r, f, &grid, t, &tph, &last);
             if (rc)
                 goto done;
+            if (r->t_next < tph) { /* a time event inside: the step ends on it */
+                tph = r->t_next;
+                last = 0;
+            }
             h = tph - t;
         } else {
             if (!(h >= bgc_hmin(t))) {
@@ -365,11 +691,16 @@ static int bgc_drive(bgc_run *r, const bgc_family *f, double *y)
                 goto done;
             }
             wanted = h;
-            if (t + 1.01 * h - s->t_end > 0.0) {
-                h = s->t_end - t;
-                last = 1;
+            if (r->t_next < s->t_end && t + 1.01 * h - r->t_next > 0.0) {
+                h = r->t_next - t; /* onto the time event */
+                tph = r->t_next;
+            } else {
+                if (t + 1.01 * h - s->t_end > 0.0) {
+                    h = s->t_end - t;
+                    last = 1;
+                }
+                tph = last ? s->t_end : t + h;
             }
-            tph = last ? s->t_end : t + h;
         }
         f->step(ms, r, t, h, tph, y, y1, &o);
         if (o.kind == BGC_STEP_END) {
@@ -400,8 +731,36 @@ static int bgc_drive(bgc_run *r, const bgc_family *f, double *y)
         rc = bgc_accept(r, tph);
         if (rc == 0 && f->accepted)
             rc = f->accepted(ms, r, tph, y1);
-        if (rc == 0)
-            rc = bgc_emit_step(r, f, ms, t, h, tph, y1, yout);
+        if (rc)
+            goto done;
+        c.f = f;
+        c.ms = ms;
+        c.t = t;
+        c.h = h;
+        c.tph = tph;
+        c.y = y;
+        c.y1 = y1;
+        c.prepared = f->prepare == NULL;
+        c.f0 = c.f1 = NULL;
+        if (BGC_NUM_DISCRETE > 0) {
+            double te = tph;
+            const int found = bgc_find_event(r, &c, &te, ye);
+            if (found < 0) {
+                rc = -found;
+                goto done;
+            }
+            if (found) { /* the step ends at the event; the method starts afresh there */
+                rc = bgc_emit_step(r, &c, te, 0, yout);
+                if (rc)
+                    goto done;
+                memcpy(y, ye, sizeof(double) * N);
+                t = te;
+                at_event = 1;
+                continue;
+            }
+            memcpy(r->g, BGC_EV_GB(r), sizeof(double) * BGC_NUM_INDICATORS);
+        }
+        rc = bgc_emit_step(r, &c, tph, 1, yout);
         if (rc == 0 && f->after)
             rc = f->after(ms, r, tph, y1, last);
         if (rc && rc != BGC_STIFF)
@@ -453,6 +812,8 @@ void bgc_print_stats(FILE *f, const bgc_stats *st)
             st->rejected, st->rhs, st->jac, st->lu, st->solves);
     if (st->switched)
         fprintf(f, " stiff_from=%.17g", st->t_switch);
+    if (BGC_NUM_DISCRETE > 0)
+        fprintf(f, " events=%ld", st->events);
     fprintf(f, " cpu=%.6e\n", st->cpu);
 }
 
@@ -507,10 +868,30 @@ static int bgc_integrate(const bgc_settings *s, const bgc_params *p, bgc_work *w
     r.detect_stiffness = 0;
     r.steps_out = stats->steps;
     r.t_out = s->t0;
+    r.t_next = INFINITY;
+    r.t_event = -INFINITY;
+    r.chain = 0;
+    r.d = (double *)&q + BGC_DISCRETE_OFFSET;
+    r.g = r.ev = NULL;
     bgc_params_update(&q);
     i = bgc_first_nonfinite(y, BGC_NUM_STATES);
     if (i >= 0)
         return bgc_fail(msg, msg_size, s->t0, "state", bgc_state_names[i]);
+    if (BGC_NUM_DISCRETE > 0) {
+        r.g = malloc(sizeof(double) * (size_t)(BGC_NUM_INDICATORS + BGC_EV_SIZE));
+        if (!r.g)
+            return bgc_fail_memory(msg, msg_size);
+        r.ev = r.g + BGC_NUM_INDICATORS;
+        memcpy(r.d, w->d, sizeof(double) * BGC_NUM_DISCRETE);
+        rc = bgc_event_iteration(&r, s->t0, y, !w->started);
+        w->started = 1;
+        if (rc == 0)
+            rc = bgc_next_time(&r, s->t0, y);
+        if (rc) {
+            free(r.g);
+            return rc;
+        }
+    }
     rc = bgc_emit(&r, s->t0, y);
     if (rc == 0 && r.method->family == BGC_FAMILY_AUTO) {
         const bgc_method *m = r.method;
@@ -524,6 +905,10 @@ static int bgc_integrate(const bgc_settings *s, const bgc_params *p, bgc_work *w
         }
     } else if (rc == 0) {
         rc = bgc_run_solver(&r, s->solver, y);
+    }
+    if (BGC_NUM_DISCRETE > 0) {
+        memcpy(w->d, r.d, sizeof(double) * BGC_NUM_DISCRETE);
+        free(r.g);
     }
     return rc;
 }

@@ -373,10 +373,51 @@ static void bgc_csv_header(FILE *f)
 
 /* ======================================================== command line === */
 
+/* The event log (--events FILE): a header t,event,change, then a row per change at an event
+   (a field with a comma, a quote or a line break quoted as CSV quotes it). */
+static struct {
+    const char *path;
+    FILE *file;
+    int failed;
+} bgc_event_log = { NULL, NULL, 0 };
+
+static void bgc_csv_field(FILE *f, const char *text)
+{
+    const char *c;
+    if (strpbrk(text, ",\"\r\n") == NULL) {
+        fputs(text, f);
+        return;
+    }
+    fputc('"', f);
+    for (c = text; *c; c++) {
+        if (*c == '"')
+            fputc('"', f);
+        fputc(*c, f);
+    }
+    fputc('"', f);
+}
+
+static int bgc_log_event(void *ctx, double t, const char *what, const char *change)
+{
+    FILE *f = (FILE *)ctx;
+    fprintf(f, "%.17g,", t);
+    bgc_csv_field(f, what);
+    fputc(',', f);
+    bgc_csv_field(f, change);
+    if (fputc('\n', f) == EOF) {
+        bgc_event_log.failed = errno ? errno : -1;
+        return BGC_ERR_RUNTIME;
+    }
+    return 0;
+}
+
+
+
 static const char bgc_usage[] =
     " [--t-end T] [--dt DT] [--solver NAME] [--rtol R] [--atol A]\n"
     "       [--step H] [--max-steps N] [-p NAME=VALUE ...] [--stats] [--progress]\n"
     "       [--project-initial | --allow-inconsistent]\n"
+    "       [--max-step H] [--event-rows] [--events FILE]\n"
     "       [--batch FILE|- [--metric KIND:OUTPUT ...] [--trajectories DIR]]\n";
 
 static void bgc_print_usage(FILE *f)
@@ -400,6 +441,9 @@ static void bgc_help(void)
            "  --atol A           absolute tolerance of the adaptive solvers (%.17g)\n"
            "  --step H           step of the fixed-step solvers (default: dt)\n"
            "  --max-steps N      the most steps between two output times (%ld; 0: no limit)\n"
+           "  --max-step H       the adaptive solvers' largest step (default: no bound)\n"
+           "  --event-rows       two rows at each event: its left and right limits\n"
+           "  --events FILE      the event log: t,event,change, a row per change\n"
            "  -p NAME=VALUE      set a parameter; derived parameters follow\n"
            "  --project-initial  project the initial state onto the constraints\n"
            "  --allow-inconsistent  start from an initial state that violates the constraints\n"
@@ -489,6 +533,18 @@ static int bgc_apply_option(const char *name, const char *value, bgc_settings *s
         fprintf(stderr, "error: --max-steps must be a whole number from 0 (no limit) to 1e15\n");
         return -1;
     }
+    if (strcmp(name, "--max-step") == 0) {
+        if (bgc_parse_number(name, value, &s->hmax))
+            return -1;
+        if (s->hmax > 0.0)
+            return 0;
+        fprintf(stderr, "error: --max-step must be positive\n");
+        return -1;
+    }
+    if (strcmp(name, "--events") == 0) {
+        bgc_event_log.path = value;
+        return 0;
+    }
     if (strcmp(name, "--step") == 0) {
         if (bgc_parse_number(name, value, &s->step))
             return -1;
@@ -509,7 +565,8 @@ static int bgc_parse_args(int argc, char **argv, bgc_settings *s, bgc_params *p,
                           int *project, int *stats)
 {
     static const char *const with_value[] = { "--t-end", "--dt", "--solver", "--rtol",
-                                              "--atol", "--step", "--max-steps", "-p" };
+                                              "--atol", "--step", "--max-steps", "-p",
+                                              "--max-step", "--events" };
     int i, k;
     for (i = 1; i < argc; i++) {
         const char *arg = argv[i], *eq = strncmp(arg, "--", 2) == 0 ? strchr(arg, '=') : NULL;
@@ -535,6 +592,10 @@ static int bgc_parse_args(int argc, char **argv, bgc_settings *s, bgc_params *p,
         }
         if (strcmp(arg, "--stats") == 0) {
             *stats = 1;
+            continue;
+        }
+        if (strcmp(arg, "--event-rows") == 0) {
+            s->event_rows = 1;
             continue;
         }
         for (k = 0; k < BGC_COUNT(with_value); k++)
@@ -592,7 +653,7 @@ int main(int argc, char **argv)
 {
     bgc_settings s;
     bgc_params p;
-    bgc_stats st = { 0, 0, 0, 0, 0, 0, 0, 0.0, 0.0, 0.0, 0 };
+    bgc_stats st = { 0, 0, 0, 0, 0, 0, 0, 0.0, 0.0, 0.0, 0, 0 };
     int given[BGC_DIM(BGC_NUM_PARAMS)] = { 0 };
     double x0[BGC_DIM(BGC_NUM_STATES)] = { 0.0 };
     char msg[1024];
@@ -630,6 +691,17 @@ int main(int argc, char **argv)
                                                                               stderr))
         return BGC_ERR_CONSTRAINT;
 
+    if (bgc_event_log.path) {
+        bgc_event_log.file = fopen(bgc_event_log.path, "w");
+        if (!bgc_event_log.file) {
+            fprintf(stderr, "error: cannot write the event log '%s': %s\n", bgc_event_log.path,
+                    strerror(errno));
+            return BGC_ERR_USAGE;
+        }
+        fputs("t,event,change\n", bgc_event_log.file);
+        s.on_event = bgc_log_event;
+        s.event_ctx = bgc_event_log.file;
+    }
     signal(SIGINT, bgc_on_signal);
     signal(SIGTERM, bgc_on_signal);
     bgc_out.file = stdout;
@@ -641,6 +713,10 @@ int main(int argc, char **argv)
     errno = 0;
     if (fflush(stdout) != 0 && !bgc_out.failed)
         bgc_out.failed = errno ? errno : -1;
+    if (bgc_event_log.file && fclose(bgc_event_log.file) != 0 && !bgc_event_log.failed)
+        bgc_event_log.failed = errno ? errno : -1;
+    if (bgc_event_log.failed && !bgc_out.failed)
+        bgc_out.failed = bgc_event_log.failed;
     if (bgc_out.failed) {
         bgc_write_failed(bgc_out.failed);
         return BGC_ERR_RUNTIME;

@@ -3,6 +3,10 @@
    inlined verbatim).  It uses the model part above: the sizes, bgc_model_rhs, _outputs and
    _jvp, the blocks' plans and the Jacobian's colouring. */
 
+#ifndef BGC_SCENE_HMAX
+#define BGC_SCENE_HMAX 0.0 /* the scene bounds no step */
+#endif
+
 /* ========================================================== parameters === */
 
 int bgc_param_index(const char *name)
@@ -23,7 +27,8 @@ bgc_work *bgc_work_new(void)
         return NULL;
     w->v = (double *)calloc(BGC_DIM(BGC_WORK_DOUBLES), sizeof *w->v);
     w->iv = (int *)calloc(BGC_DIM(BGC_WORK_INTS), sizeof *w->iv);
-    if (!w->v || !w->iv) {
+    w->d = (double *)calloc(BGC_DIM(BGC_NUM_DISCRETE), sizeof *w->d);
+    if (!w->v || !w->iv || !w->d) {
         bgc_work_free(w);
         return NULL;
     }
@@ -38,6 +43,7 @@ void bgc_work_free(bgc_work *w)
         return;
     free(w->v);
     free(w->iv);
+    free(w->d);
     free(w);
 }
 
@@ -525,14 +531,20 @@ void bgc_settings_default(bgc_settings *s)
     s->max_steps = BGC_MAX_STEPS;
     s->h0 = 0.0;
     s->order0 = 0;
+    s->hmax = BGC_SCENE_HMAX;
+    s->event_rows = 0;
+    s->on_event = NULL;
+    s->event_ctx = NULL;
 }
 
 int bgc_check_settings(const bgc_settings *s, char *msg, size_t msg_size)
 {
     const char *bad = NULL;
     if (!(isfinite(s->t0) && isfinite(s->t_end) && isfinite(s->dt) && isfinite(s->rtol)
-          && isfinite(s->atol) && isfinite(s->step) && isfinite(s->h0)))
+          && isfinite(s->atol) && isfinite(s->step) && isfinite(s->h0) && isfinite(s->hmax)))
         bad = "settings must be finite numbers";
+    else if (s->hmax < 0.0)
+        bad = "--max-step must be positive (0: no bound)";
     else if (!(s->dt > 0.0))
         bad = "--dt must be positive";
     else if (s->t_end < s->t0)

@@ -59,6 +59,9 @@ typedef struct bgc_work {
     int block;          /* after a failure: the block (1-based, as bgc_block_names) ... */
     int failure;        /* ... and how: BGC_BLOCK_SINGULAR, _DIVERGED or _NONFINITE */
     double t;           /* ... and when */
+    double *d;          /* a model with events: the discrete values between two calls of
+                           bgc_advance (BGC_NUM_DISCRETE) ... */
+    int started;        /* ... once set by the event iteration at the run's start */
 } bgc_work;
 bgc_work *bgc_work_new(void);
 void bgc_work_free(bgc_work *w);
@@ -114,6 +117,12 @@ typedef struct bgc_settings {
                              needs more fails: a runaway step size); 0: no limit */
     double h0;            /* adaptive solvers: the first step to try; 0: estimated */
     int order0;           /* radau: the order to start at (5, 9 or 13); 0: 5 */
+    double hmax;          /* adaptive solvers: the largest step; 0: no bound but the span */
+    int event_rows;       /* 1: two rows at each event, its left and right limits */
+    /* Called for each change at an event (what: a condition as written, a state or a
+       discrete variable; change: what it became); nonzero stops the run.  NULL: none. */
+    int (*on_event)(void *ctx, double t, const char *what, const char *change);
+    void *event_ctx;
 } bgc_settings;
 #define BGC_MAX_STEPS 100000L /* max_steps unless set */
 typedef struct bgc_stats {
@@ -125,6 +134,7 @@ typedef struct bgc_stats {
     double h_next;             /* adaptive solvers: the step they would take after the run's
                                   end (set, not added to; 0: none) ... */
     int order_next;            /* ... and radau the order (0: another solver) */
+    long events;               /* events handled (the start's event iteration not counted) */
 } bgc_stats;
 /* Called at every output time with the state and the outputs; nonzero stops the run. */
 typedef int (*bgc_sink)(void *ctx, double t, const double *x, const double *y);
@@ -156,6 +166,44 @@ int bgc_advance(const bgc_settings *s, const bgc_params *p, bgc_work *w, double 
    it (the program's main does, for SIGINT and SIGTERM).  0 clears the request. */
 void bgc_request_stop(int sig);
 
+/* Events (docs/hybrid.md).  A model with events defines, before this section, the sizes
+   BGC_NUM_INDICATORS (its state relations: g = bgc_model_events, the relation holding when
+   g > 0, or g >= 0 where bgc_indicator_strict is 0), BGC_NUM_TIMERS (the results of
+   bgc_model_next_time: time events, of which the runtime steps onto the first after t) and
+   BGC_NUM_DISCRETE (the discrete values d: the relations' frozen values, the state relations'
+   first, then square waves and discrete variables, named by bgc_discrete_names), and
+   BGC_DISCRETE_OFFSET, where d is in its parameter struct (in doubles).  bgc_model_update
+   gives the state and d after one pass of an event iteration from r (the state relations'
+   values at the event, then 1 at the start of a run, else 0).  A model without events gets
+   the neutral ones below. */
+#ifndef BGC_NUM_DISCRETE
+#define BGC_NUM_INDICATORS 0
+#define BGC_NUM_TIMERS 0
+#define BGC_NUM_DISCRETE 0
+#define BGC_DISCRETE_OFFSET 0
+static const int bgc_indicator_strict[1] = { 0 };
+static const char *const bgc_discrete_names[1] = { "" };
+static inline int bgc_model_events(double t, const double *x, const bgc_params *p,
+                                   bgc_work *w, double *out)
+{
+    (void)t, (void)x, (void)p, (void)w, (void)out;
+    return 0;
+}
+static inline int bgc_model_next_time(double t, const double *x, const bgc_params *p,
+                                      bgc_work *w, double *out)
+{
+    (void)t, (void)x, (void)p, (void)w, (void)out;
+    return 0;
+}
+static inline int bgc_model_update(double t, const double *x, const bgc_params *p,
+                                   bgc_work *w, const double *r, double *out)
+{
+    (void)t, (void)x, (void)p, (void)w, (void)r, (void)out;
+    return 0;
+}
+#endif
+#define BGC_MAX_EVENT_ITERATIONS 100 /* events at one instant before a run stops (Zeno) */
+
 /* -------------------------------------------- between the model part and the runtime --- */
 static inline double bgc_sq(double a) { return a * a; }
 static inline double bgc_min(double a, double b) { return b < a ? b : a; }
@@ -164,6 +212,41 @@ static inline double bgc_sign(double a) { return a > 0.0 ? 1.0 : (a < 0.0 ? -1.0
 static inline double bgc_heaviside(double a, double at_zero)
 {
     return a > 0.0 ? 1.0 : (a < 0.0 ? 0.0 : (a == 0.0 ? at_zero : a));
+}
+/* square(period, duty, t0): the period k >= 0 that holds t (its edges t0 + k period and
+   t0 + (k + duty) period computed as written, so that the value at an edge is the value
+   after it, and the next edge is the time the driver steps onto). */
+static inline double bgc_square_period(double t, double period, double t0)
+{
+    double k = floor((t - t0) / period);
+    if (k < 0.0)
+        k = 0.0;
+    while (k > 0.0 && t0 + k * period > t)
+        k -= 1.0;
+    while (t0 + (k + 1.0) * period <= t)
+        k += 1.0;
+    return k;
+}
+static inline double bgc_square(double t, double period, double duty, double t0)
+{
+    double k;
+    if (!(period > 0.0) || !isfinite(t))
+        return NAN;
+    if (t < t0)
+        return 0.0;
+    k = bgc_square_period(t, period, t0);
+    return t < t0 + (k + duty) * period ? 1.0 : 0.0;
+}
+static inline double bgc_square_next(double t, double period, double duty, double t0)
+{
+    double k, down;
+    if (!(period > 0.0) || !isfinite(t))
+        return NAN;
+    if (t < t0)
+        return t0;
+    k = bgc_square_period(t, period, t0);
+    down = t0 + (k + duty) * period;
+    return t < down ? down : t0 + (k + 1.0) * period;
 }
 
 /* A solver as bgc/solvers.py describes it (the tables are printed below this section).
@@ -361,6 +444,10 @@ static const bgc_method bgc_methods[BGC_NUM_SOLVERS] = {
    inlined verbatim).  It uses the model part above: the sizes, bgc_model_rhs, _outputs and
    _jvp, the blocks' plans and the Jacobian's colouring. */
 
+#ifndef BGC_SCENE_HMAX
+#define BGC_SCENE_HMAX 0.0 /* the scene bounds no step */
+#endif
+
 /* ========================================================== parameters === */
 
 int bgc_param_index(const char *name)
@@ -381,7 +468,8 @@ bgc_work *bgc_work_new(void)
         return NULL;
     w->v = (double *)calloc(BGC_DIM(BGC_WORK_DOUBLES), sizeof *w->v);
     w->iv = (int *)calloc(BGC_DIM(BGC_WORK_INTS), sizeof *w->iv);
-    if (!w->v || !w->iv) {
+    w->d = (double *)calloc(BGC_DIM(BGC_NUM_DISCRETE), sizeof *w->d);
+    if (!w->v || !w->iv || !w->d) {
         bgc_work_free(w);
         return NULL;
     }
@@ -396,6 +484,7 @@ void bgc_work_free(bgc_work *w)
         return;
     free(w->v);
     free(w->iv);
+    free(w->d);
     free(w);
 }
 
@@ -883,14 +972,20 @@ void bgc_settings_default(bgc_settings *s)
     s->max_steps = BGC_MAX_STEPS;
     s->h0 = 0.0;
     s->order0 = 0;
+    s->hmax = BGC_SCENE_HMAX;
+    s->event_rows = 0;
+    s->on_event = NULL;
+    s->event_ctx = NULL;
 }
 
 int bgc_check_settings(const bgc_settings *s, char *msg, size_t msg_size)
 {
     const char *bad = NULL;
     if (!(isfinite(s->t0) && isfinite(s->t_end) && isfinite(s->dt) && isfinite(s->rtol)
-          && isfinite(s->atol) && isfinite(s->step) && isfinite(s->h0)))
+          && isfinite(s->atol) && isfinite(s->step) && isfinite(s->h0) && isfinite(s->hmax)))
         bad = "settings must be finite numbers";
+    else if (s->hmax < 0.0)
+        bad = "--max-step must be positive (0: no bound)";
     else if (!(s->dt > 0.0))
         bad = "--dt must be positive";
     else if (s->t_end < s->t0)
@@ -1020,6 +1115,14 @@ typedef struct bgc_run {
     int detect_stiffness;
     long steps_out;  /* st->steps at the last output, at t_out */
     double t_out;
+    /* events (a model with BGC_NUM_DISCRETE > 0): */
+    double *d;       /* the discrete values, in the run's parameter copy */
+    double *g;       /* the indicators at r->t */
+    double *ev;      /* scratch: indicators (2 x BGC_NUM_INDICATORS), update's input and
+                        output, a state and two derivatives */
+    double t_next;   /* the first time event after r->t (INFINITY: none) */
+    double t_event;  /* the last event's time, and how many events in a row came ... */
+    long chain;      /* ... closer to the one before than the solver resolves */
 } bgc_run;
 #define BGC_STIFF (-1) /* an auto run's explicit phase found the problem stiff */
 
@@ -1094,28 +1197,83 @@ static int bgc_accept(bgc_run *r, double t)
     return 0;
 }
 
-/* After an accepted step from t to tph = t + h (exactly t_end on the last step): hands over
-   the output times in (t, tph], tph itself from y1 and the others through the family's dense
-   output (prepared once, before the first of them).  yout: N doubles of scratch. */
-static int bgc_emit_step(bgc_run *r, const bgc_family *f, void *ms, double t, double h,
-                         double tph, const double *y1, double *yout)
+/* The run's event scratch (r->ev): the indicators at both ends of a bracket and inside it,
+   update's input and output, and the Hermite interpolant's two derivatives. */
+#define BGC_EV_GA(r) ((r)->ev)
+#define BGC_EV_GB(r) ((r)->ev + BGC_NUM_INDICATORS)
+#define BGC_EV_IN(r) ((r)->ev + 2 * BGC_NUM_INDICATORS)
+#define BGC_EV_OUT(r) (BGC_EV_IN(r) + BGC_NUM_INDICATORS + 1)
+#define BGC_EV_GM(r) (BGC_EV_OUT(r) + BGC_NUM_STATES + BGC_NUM_DISCRETE)
+#define BGC_EV_F0(r) (BGC_EV_GM(r) + BGC_NUM_INDICATORS)
+#define BGC_EV_SIZE (4 * BGC_NUM_INDICATORS + 1 + 3 * BGC_NUM_STATES + BGC_NUM_DISCRETE)
+
+/* The state inside the step just accepted, from t over h to tph (y at t, y1 at tph): the
+   family's dense output (prepared once), or for a family without one (the fixed-step
+   methods, for event location only) the cubic Hermite interpolant of y, y1 and the
+   derivatives there. */
+typedef struct bgc_dense {
+    const bgc_family *f;
+    void *ms;
+    double t, h, tph;
+    const double *y, *y1;
+    int prepared;
+    double *f0, *f1; /* the Hermite interpolant's derivatives (NULL until needed) */
+} bgc_dense;
+
+static int bgc_dense_at(bgc_run *r, bgc_dense *c, double tk, double *out)
 {
-    int rc, prepared = f->prepare == NULL;
+    enum { N = BGC_NUM_STATES };
+    int i, rc;
+    if (tk == c->tph) {
+        memcpy(out, c->y1, sizeof(double) * N);
+        return 0;
+    }
+    if (c->f->dense) {
+        if (!c->prepared && c->f->prepare) {
+            rc = c->f->prepare(c->ms);
+            if (rc)
+                return rc;
+        }
+        c->prepared = 1;
+        c->f->dense(c->ms, (tk - c->t) / c->h, out);
+        return 0;
+    }
+    if (!c->f0) {
+        c->f0 = BGC_EV_F0(r);
+        c->f1 = c->f0 + N;
+        r->st->rhs += 2;
+        if (bgc_model_rhs(c->t, c->y, r->p, r->w, c->f0)
+            || bgc_model_rhs(c->tph, c->y1, r->p, r->w, c->f1))
+            return bgc_fail_block(r->msg, r->msg_size, r->w);
+    }
+    {
+        const double th = (tk - c->t) / c->h, h = c->h;
+        for (i = 0; i < N; i++) {
+            const double dy = c->y1[i] - c->y[i];
+            out[i] = (1.0 - th) * c->y[i] + th * c->y1[i]
+                     + th * (th - 1.0) * ((1.0 - 2.0 * th) * dy + (th - 1.0) * h * c->f0[i]
+                                          + th * h * c->f1[i]);
+        }
+    }
+    return 0;
+}
+
+/* After an accepted step: hands over the output times in (c->t, until] (until itself
+   excluded if !inclusive), tph from y1, the others through the dense output.  yout: N
+   doubles of scratch. */
+static int bgc_emit_step(bgc_run *r, bgc_dense *c, double until, int inclusive, double *yout)
+{
+    int rc;
     for (; r->kout <= r->nout; r->kout++) {
         const double tk = bgc_output_time(r->s, r->kout, r->nout);
-        if (tk > tph)
+        if (tk > until || (tk == until && !inclusive))
             break;
-        if (tk == tph) {
-            rc = bgc_emit(r, tk, y1);
+        if (tk == c->tph) {
+            rc = bgc_emit(r, tk, c->y1);
         } else {
-            if (!prepared) {
-                rc = f->prepare(ms);
-                if (rc)
-                    return rc;
-                prepared = 1;
-            }
-            f->dense(ms, (tk - t) / h, yout);
-            rc = bgc_emit(r, tk, yout);
+            rc = bgc_dense_at(r, c, tk, yout);
+            if (rc == 0)
+                rc = bgc_emit(r, tk, yout);
         }
         if (rc)
             return rc;
@@ -1129,6 +1287,13 @@ static inline double bgc_weight(const bgc_settings *s, double y, double y1)
     return s->atol + s->rtol * bgc_max(fabs(y), fabs(y1));
 }
 
+/* The largest step: the run's span, and --max-step if set. */
+static double bgc_hmax(const bgc_settings *s)
+{
+    const double span = s->t_end - s->t0;
+    return s->hmax > 0.0 ? bgc_min(span, s->hmax) : span;
+}
+
 /* Hairer's initial step size guess (HINIT) for a method of order q at (r->t, y) with
    f0 = f(r->t, y); y1, f1: scratch. */
 static double bgc_initial_step(bgc_run *r, int q, const double *y, const double *f0,
@@ -1136,7 +1301,7 @@ static double bgc_initial_step(bgc_run *r, int q, const double *y, const double 
 {
     enum { N = BGC_NUM_STATES };
     const bgc_settings *s = r->s;
-    const double hmax = s->t_end - s->t0;
+    const double hmax = bgc_hmax(s);
     double dnf = 0.0, dny = 0.0, der2 = 0.0, der12, h, h1;
     int i;
     for (i = 0; i < N; i++) {
@@ -1168,7 +1333,7 @@ static double bgc_initial_step(bgc_run *r, int q, const double *y, const double 
 static double bgc_first_step(bgc_run *r, const double *y, const double *f0, double *y1,
                              double *f1)
 {
-    const double hmax = r->s->t_end - r->s->t0;
+    const double hmax = bgc_hmax(r->s);
     return r->h > 0.0 ? bgc_min(r->h, hmax)
                       : bgc_initial_step(r, r->method->q, y, f0, y1, f1);
 }
@@ -1242,6 +1407,240 @@ static int bgc_grid_next(bgc_run *r, const bgc_family *f, bgc_grid *g, double t,
     return 0;
 }
 
+/* ------------------------------------------------------------------ events --- */
+/* A model's events (docs/hybrid.md): the driver checks the state relations' indicators at
+   the end of every accepted step, locates the first change of a relation's value on the
+   step's dense output (Illinois' variant of the secant method, to 1e-12 relative in t), and
+   ends the step there; it steps onto time events exactly; at an event it runs the event
+   iteration (bgc_model_update until nothing changes) and starts the method afresh. */
+
+/* Whether state relation k holds for indicator value g. */
+static int bgc_holds(int k, double g)
+{
+    return bgc_indicator_strict[k] ? g > 0.0 : g >= 0.0;
+}
+
+/* The first state relation whose value at g differs from its frozen value d, or -1. */
+static int bgc_changed(const bgc_run *r, const double *g)
+{
+    int k;
+    for (k = 0; k < BGC_NUM_INDICATORS; k++)
+        if (bgc_holds(k, g[k]) != (r->d[k] != 0.0))
+            return k;
+    return -1;
+}
+
+static int bgc_indicators(bgc_run *r, double t, const double *x, double *g)
+{
+    int k;
+    if (bgc_model_events(t, x, r->p, r->w, g))
+        return bgc_fail_block(r->msg, r->msg_size, r->w);
+    for (k = 0; k < BGC_NUM_INDICATORS; k++)
+        if (!isfinite(g[k]))
+            return bgc_fail(r->msg, r->msg_size, t, "event condition", bgc_discrete_names[k]);
+    return 0;
+}
+
+/* The first time event after t: the least result of next_time beyond t (INFINITY: none). */
+static int bgc_next_time(bgc_run *r, double t, const double *x)
+{
+    enum { M = BGC_DIM(BGC_NUM_TIMERS) };
+    double tau[M];
+    int k;
+    r->t_next = INFINITY;
+    if (BGC_NUM_TIMERS == 0)
+        return 0;
+    if (bgc_model_next_time(t, x, r->p, r->w, tau))
+        return bgc_fail_block(r->msg, r->msg_size, r->w);
+    for (k = 0; k < BGC_NUM_TIMERS; k++)
+        if (tau[k] > t && tau[k] < r->t_next)
+            r->t_next = tau[k];
+    return 0;
+}
+
+static int bgc_log(bgc_run *r, double t, const char *what, const char *change)
+{
+    return r->s->on_event ? r->s->on_event(r->s->event_ctx, t, what, change) : 0;
+}
+
+/* The event iteration at (t, x): bgc_model_update until the state and the discrete values
+   stop changing (start: the run's first, at t0, which sets every discrete value and logs
+   nothing); r->g the indicators there after it. */
+static int bgc_event_iteration(bgc_run *r, double t, double *x, int start)
+{
+    enum { N = BGC_NUM_STATES, G = BGC_NUM_INDICATORS, ND = BGC_NUM_DISCRETE };
+    double *g = r->g, *in = BGC_EV_IN(r), *out = BGC_EV_OUT(r);
+    char change[96];
+    int it, i, k, rc, changed = 1;
+    for (it = 0; changed; it++) {
+        if (it == BGC_MAX_EVENT_ITERATIONS) {
+            snprintf(r->msg, r->msg_size, "at t = %.17g: chattering: the event iteration "
+                     "does not settle after %d passes (a Zeno model?)", t, it);
+            return BGC_ERR_RUNTIME;
+        }
+        rc = bgc_indicators(r, t, x, g);
+        if (rc)
+            return rc;
+        for (k = 0; k < G; k++)
+            in[k] = bgc_holds(k, g[k]) ? 1.0 : 0.0;
+        in[G] = start && it == 0 ? 1.0 : 0.0;
+        if (bgc_model_update(t, x, r->p, r->w, in, out))
+            return bgc_fail_block(r->msg, r->msg_size, r->w);
+        changed = 0;
+        for (i = 0; i < N; i++) {
+            if (!isfinite(out[i]))
+                return bgc_fail(r->msg, r->msg_size, t, "state after the event",
+                                bgc_state_names[i]);
+            if (out[i] != x[i]) {
+                changed = 1;
+                if (!start) {
+                    snprintf(change, sizeof change, "%.17g -> %.17g", x[i], out[i]);
+                    rc = bgc_log(r, t, bgc_state_names[i], change);
+                    if (rc)
+                        return rc;
+                }
+                x[i] = out[i];
+            }
+        }
+        for (k = 0; k < ND; k++) {
+            const double v = out[N + k];
+            if (!isfinite(v))
+                return bgc_fail(r->msg, r->msg_size, t, "discrete value", bgc_discrete_names[k]);
+            if (v != r->d[k]) {
+                changed = 1;
+                if (!start) {
+                    snprintf(change, sizeof change, "%.17g -> %.17g", r->d[k], v);
+                    rc = bgc_log(r, t, bgc_discrete_names[k], change);
+                    if (rc)
+                        return rc;
+                }
+                r->d[k] = v;
+            }
+        }
+    }
+    return 0;
+}
+
+/* Whether the step just accepted, from c->t to c->tph, holds an event: 0 none; 1 at *te
+   (<= tph), the state there in ye; else an error.  A time event is due when the step ends
+   on it; a state relation whose value at tph differs from its frozen one is located. */
+static int bgc_find_event(bgc_run *r, bgc_dense *c, double *te, double *ye)
+{
+    enum { G = BGC_NUM_INDICATORS };
+    double *ga = BGC_EV_GA(r), *gb = BGC_EV_GB(r), *gm = BGC_EV_GM(r);
+    double ta = c->t, tb = c->tph, wa = 1.0, wb = 1.0;
+    int rc, it, moved = 0;
+    const int due = c->tph >= r->t_next;
+    if (G > 0) {
+        rc = bgc_indicators(r, tb, c->y1, gb);
+        if (rc)
+            return -rc;
+    }
+    if (G == 0 || bgc_changed(r, gb) < 0) {
+        if (!due)
+            return 0;
+        *te = c->tph;
+        memcpy(ye, c->y1, sizeof(double) * BGC_NUM_STATES);
+        return 1;
+    }
+    memcpy(ga, r->g, sizeof(double) * G);
+    for (it = 0; it < 200; it++) {
+        const double scale = bgc_max(fabs(ta), fabs(tb));
+        const double tol = bgc_max(1e-12 * scale, bgc_max(4.0 * DBL_EPSILON * scale, DBL_MIN));
+        double frac = 1.0, tm;
+        int k, side;
+        if (tb - ta <= tol)
+            break;
+        for (k = 0; k < G; k++) {
+            if (bgc_holds(k, gb[k]) != (r->d[k] != 0.0)) {
+                const double a = wa * ga[k], b = wb * gb[k];
+                double q = a / (a - b);
+                if (!(q >= 0.0 && q <= 1.0))
+                    q = 0.5;
+                if (q < frac)
+                    frac = q;
+            }
+        }
+        if (it >= 100)
+            frac = 0.5; /* bisection, should the secant stall */
+        tm = ta + frac * (tb - ta);
+        tm = bgc_max(tm, ta + 0.5 * tol);
+        tm = bgc_min(tm, tb - 0.5 * tol);
+        rc = bgc_dense_at(r, c, tm, ye);
+        if (rc == 0)
+            rc = bgc_indicators(r, tm, ye, gm);
+        if (rc)
+            return -rc;
+        side = bgc_changed(r, gm) >= 0 ? 1 : -1;
+        if (side > 0) { /* the change is in (ta, tm]: Illinois halves the end that stays */
+            tb = tm;
+            memcpy(gb, gm, sizeof(double) * G);
+            wb = 1.0;
+            wa = moved > 0 ? 0.5 * wa : 1.0;
+        } else {
+            ta = tm;
+            memcpy(ga, gm, sizeof(double) * G);
+            wa = 1.0;
+            wb = moved < 0 ? 0.5 * wb : 1.0;
+        }
+        moved = side;
+    }
+    *te = tb;
+    rc = bgc_dense_at(r, c, tb, ye);
+    return rc ? -rc : 1;
+}
+
+/* An event at (t, x): the left limit's row (--event-rows), the event iteration, the right
+   limit's row; then the next time event.  Stops a run whose events come closer together
+   than it can resolve, BGC_MAX_EVENT_ITERATIONS in a row. */
+static int bgc_handle_event(bgc_run *r, double t, double *x)
+{
+    const double scale = bgc_max(fabs(t), fabs(r->t_event));
+    int rc = 0;
+    r->st->events++;
+    if (t - r->t_event <= bgc_max(1e-12 * scale, bgc_hmin(t)))
+        r->chain++;
+    else
+        r->chain = 0;
+    r->t_event = t;
+    if (r->chain >= BGC_MAX_EVENT_ITERATIONS) {
+        snprintf(r->msg, r->msg_size, "at t = %.17g: chattering: %ld events in a row, each "
+                 "within 1e-12 relative of the one before (a Zeno model: the switching "
+                 "outruns the time's resolution)", t, r->chain);
+        return BGC_ERR_RUNTIME;
+    }
+    if (r->s->event_rows)
+        rc = bgc_emit(r, t, x);
+    if (rc == 0)
+        rc = bgc_event_iteration(r, t, x, 0);
+    if (rc == 0 && r->s->event_rows)
+        rc = bgc_emit(r, t, x);
+    if (rc == 0)
+        rc = bgc_next_time(r, t, x);
+    return rc;
+}
+
+/* After the step that ended at an event at (t, y): the event, the rows at t (its right limit;
+   those within the time's resolution of t too), and the family started afresh at t (*ms
+   NULL: the run is over, or failed). */
+static int bgc_after_event(bgc_run *r, const bgc_family *f, double t, double *y, void **ms,
+                           double *h)
+{
+    int rc = bgc_handle_event(r, t, y);
+    for (; rc == 0 && r->kout <= r->nout; r->kout++) {
+        const double tk = bgc_output_time(r->s, r->kout, r->nout);
+        if (tk - t > bgc_hmin(t))
+            break;
+        rc = bgc_emit(r, tk, y);
+    }
+    r->t = t;
+    if (rc || t >= r->s->t_end || r->kout > r->nout)
+        return rc;
+    r->h = 0.0;
+    *ms = f->start(r, y, h, &rc);
+    return rc;
+}
+
 /* One family's run from (r->t, y) to s->t_end (the driver proper).  Keeps r->t and y at the
    last accepted step; returns 0, an error (message set), the sink's nonzero value, or
    BGC_STIFF (r->h then holds the explicit phase's next step). */
@@ -1249,10 +1648,10 @@ static int bgc_drive(bgc_run *r, const bgc_family *f, double *y)
 {
     enum { N = BGC_NUM_STATES, D = BGC_DIM(BGC_NUM_STATES) };
     const bgc_settings *s = r->s;
-    const double hmax = s->t_end - s->t0;
-    double *mem = malloc((size_t)2 * D * sizeof *mem), *y1, *yout;
+    const double hmax = bgc_hmax(s);
+    double *mem = malloc((size_t)3 * D * sizeof *mem), *y1, *yout, *ye;
     double t = r->t, h = 0.0, hnew, wanted = 0.0;
-    int i, rc = 0, reject = 0, last = 0, bad = BGC_BAD_NONE, bad_kind = 0;
+    int i, rc = 0, reject = 0, last = 0, bad = BGC_BAD_NONE, bad_kind = 0, at_event = 0;
     bgc_grid grid = {0.0, 0.0, 0.0, 0, 0};
     bgc_outcome o;
     void *ms = NULL;
@@ -1261,6 +1660,7 @@ static int bgc_drive(bgc_run *r, const bgc_family *f, double *y)
         return bgc_fail_memory(r->msg, r->msg_size);
     y1 = mem;
     yout = mem + D;
+    ye = mem + 2 * D;
     o.worst = -1;
     grid.step = s->step > 0.0 ? s->step : s->dt;
     if (r->kout > r->nout)
@@ -1270,10 +1670,31 @@ static int bgc_drive(bgc_run *r, const bgc_family *f, double *y)
         goto done;
     for (;;) {
         double tph;
+        bgc_dense c;
+        if (r->t_next - t <= bgc_hmin(t)) { /* a time event closer than a step can be */
+            t = r->t_next;
+            at_event = 1;
+        }
+        if (at_event) { /* the event at (t, y); the method starts afresh after it */
+            at_event = 0;
+            f->finish(ms);
+            ms = NULL;
+            rc = bgc_after_event(r, f, t, y, &ms, &h);
+            if (rc || !ms)
+                goto done;
+            grid.k = grid.n; /* a new grid from the event */
+            reject = last = 0;
+            bad = BGC_BAD_NONE;
+            continue;
+        }
         if (r->fixed) {
             rc = bgc_grid_next(r, f, &grid, t, &tph, &last);
             if (rc)
                 goto done;
+            if (r->t_next < tph) { /* a time event inside: the step ends on it */
+                tph = r->t_next;
+                last = 0;
+            }
             h = tph - t;
         } else {
             if (!(h >= bgc_hmin(t))) {
@@ -1281,11 +1702,16 @@ static int bgc_drive(bgc_run *r, const bgc_family *f, double *y)
                 goto done;
             }
             wanted = h;
-            if (t + 1.01 * h - s->t_end > 0.0) {
-                h = s->t_end - t;
-                last = 1;
+            if (r->t_next < s->t_end && t + 1.01 * h - r->t_next > 0.0) {
+                h = r->t_next - t; /* onto the time event */
+                tph = r->t_next;
+            } else {
+                if (t + 1.01 * h - s->t_end > 0.0) {
+                    h = s->t_end - t;
+                    last = 1;
+                }
+                tph = last ? s->t_end : t + h;
             }
-            tph = last ? s->t_end : t + h;
         }
         f->step(ms, r, t, h, tph, y, y1, &o);
         if (o.kind == BGC_STEP_END) {
@@ -1316,8 +1742,36 @@ static int bgc_drive(bgc_run *r, const bgc_family *f, double *y)
         rc = bgc_accept(r, tph);
         if (rc == 0 && f->accepted)
             rc = f->accepted(ms, r, tph, y1);
-        if (rc == 0)
-            rc = bgc_emit_step(r, f, ms, t, h, tph, y1, yout);
+        if (rc)
+            goto done;
+        c.f = f;
+        c.ms = ms;
+        c.t = t;
+        c.h = h;
+        c.tph = tph;
+        c.y = y;
+        c.y1 = y1;
+        c.prepared = f->prepare == NULL;
+        c.f0 = c.f1 = NULL;
+        if (BGC_NUM_DISCRETE > 0) {
+            double te = tph;
+            const int found = bgc_find_event(r, &c, &te, ye);
+            if (found < 0) {
+                rc = -found;
+                goto done;
+            }
+            if (found) { /* the step ends at the event; the method starts afresh there */
+                rc = bgc_emit_step(r, &c, te, 0, yout);
+                if (rc)
+                    goto done;
+                memcpy(y, ye, sizeof(double) * N);
+                t = te;
+                at_event = 1;
+                continue;
+            }
+            memcpy(r->g, BGC_EV_GB(r), sizeof(double) * BGC_NUM_INDICATORS);
+        }
+        rc = bgc_emit_step(r, &c, tph, 1, yout);
         if (rc == 0 && f->after)
             rc = f->after(ms, r, tph, y1, last);
         if (rc && rc != BGC_STIFF)
@@ -1369,6 +1823,8 @@ void bgc_print_stats(FILE *f, const bgc_stats *st)
             st->rejected, st->rhs, st->jac, st->lu, st->solves);
     if (st->switched)
         fprintf(f, " stiff_from=%.17g", st->t_switch);
+    if (BGC_NUM_DISCRETE > 0)
+        fprintf(f, " events=%ld", st->events);
     fprintf(f, " cpu=%.6e\n", st->cpu);
 }
 
@@ -1423,10 +1879,30 @@ static int bgc_integrate(const bgc_settings *s, const bgc_params *p, bgc_work *w
     r.detect_stiffness = 0;
     r.steps_out = stats->steps;
     r.t_out = s->t0;
+    r.t_next = INFINITY;
+    r.t_event = -INFINITY;
+    r.chain = 0;
+    r.d = (double *)&q + BGC_DISCRETE_OFFSET;
+    r.g = r.ev = NULL;
     bgc_params_update(&q);
     i = bgc_first_nonfinite(y, BGC_NUM_STATES);
     if (i >= 0)
         return bgc_fail(msg, msg_size, s->t0, "state", bgc_state_names[i]);
+    if (BGC_NUM_DISCRETE > 0) {
+        r.g = malloc(sizeof(double) * (size_t)(BGC_NUM_INDICATORS + BGC_EV_SIZE));
+        if (!r.g)
+            return bgc_fail_memory(msg, msg_size);
+        r.ev = r.g + BGC_NUM_INDICATORS;
+        memcpy(r.d, w->d, sizeof(double) * BGC_NUM_DISCRETE);
+        rc = bgc_event_iteration(&r, s->t0, y, !w->started);
+        w->started = 1;
+        if (rc == 0)
+            rc = bgc_next_time(&r, s->t0, y);
+        if (rc) {
+            free(r.g);
+            return rc;
+        }
+    }
     rc = bgc_emit(&r, s->t0, y);
     if (rc == 0 && r.method->family == BGC_FAMILY_AUTO) {
         const bgc_method *m = r.method;
@@ -1440,6 +1916,10 @@ static int bgc_integrate(const bgc_settings *s, const bgc_params *p, bgc_work *w
         }
     } else if (rc == 0) {
         rc = bgc_run_solver(&r, s->solver, y);
+    }
+    if (BGC_NUM_DISCRETE > 0) {
+        memcpy(w->d, r.d, sizeof(double) * BGC_NUM_DISCRETE);
+        free(r.g);
     }
     return rc;
 }
@@ -3399,10 +3879,51 @@ static void bgc_csv_header(FILE *f)
 
 /* ======================================================== command line === */
 
+/* The event log (--events FILE): a header t,event,change, then a row per change at an event
+   (a field with a comma, a quote or a line break quoted as CSV quotes it). */
+static struct {
+    const char *path;
+    FILE *file;
+    int failed;
+} bgc_event_log = { NULL, NULL, 0 };
+
+static void bgc_csv_field(FILE *f, const char *text)
+{
+    const char *c;
+    if (strpbrk(text, ",\"\r\n") == NULL) {
+        fputs(text, f);
+        return;
+    }
+    fputc('"', f);
+    for (c = text; *c; c++) {
+        if (*c == '"')
+            fputc('"', f);
+        fputc(*c, f);
+    }
+    fputc('"', f);
+}
+
+static int bgc_log_event(void *ctx, double t, const char *what, const char *change)
+{
+    FILE *f = (FILE *)ctx;
+    fprintf(f, "%.17g,", t);
+    bgc_csv_field(f, what);
+    fputc(',', f);
+    bgc_csv_field(f, change);
+    if (fputc('\n', f) == EOF) {
+        bgc_event_log.failed = errno ? errno : -1;
+        return BGC_ERR_RUNTIME;
+    }
+    return 0;
+}
+
+
+
 static const char bgc_usage[] =
     " [--t-end T] [--dt DT] [--solver NAME] [--rtol R] [--atol A]\n"
     "       [--step H] [--max-steps N] [-p NAME=VALUE ...] [--stats] [--progress]\n"
     "       [--project-initial | --allow-inconsistent]\n"
+    "       [--max-step H] [--event-rows] [--events FILE]\n"
     "       [--batch FILE|- [--metric KIND:OUTPUT ...] [--trajectories DIR]]\n";
 
 static void bgc_print_usage(FILE *f)
@@ -3426,6 +3947,9 @@ static void bgc_help(void)
            "  --atol A           absolute tolerance of the adaptive solvers (%.17g)\n"
            "  --step H           step of the fixed-step solvers (default: dt)\n"
            "  --max-steps N      the most steps between two output times (%ld; 0: no limit)\n"
+           "  --max-step H       the adaptive solvers' largest step (default: no bound)\n"
+           "  --event-rows       two rows at each event: its left and right limits\n"
+           "  --events FILE      the event log: t,event,change, a row per change\n"
            "  -p NAME=VALUE      set a parameter; derived parameters follow\n"
            "  --project-initial  project the initial state onto the constraints\n"
            "  --allow-inconsistent  start from an initial state that violates the constraints\n"
@@ -3515,6 +4039,18 @@ static int bgc_apply_option(const char *name, const char *value, bgc_settings *s
         fprintf(stderr, "error: --max-steps must be a whole number from 0 (no limit) to 1e15\n");
         return -1;
     }
+    if (strcmp(name, "--max-step") == 0) {
+        if (bgc_parse_number(name, value, &s->hmax))
+            return -1;
+        if (s->hmax > 0.0)
+            return 0;
+        fprintf(stderr, "error: --max-step must be positive\n");
+        return -1;
+    }
+    if (strcmp(name, "--events") == 0) {
+        bgc_event_log.path = value;
+        return 0;
+    }
     if (strcmp(name, "--step") == 0) {
         if (bgc_parse_number(name, value, &s->step))
             return -1;
@@ -3535,7 +4071,8 @@ static int bgc_parse_args(int argc, char **argv, bgc_settings *s, bgc_params *p,
                           int *project, int *stats)
 {
     static const char *const with_value[] = { "--t-end", "--dt", "--solver", "--rtol",
-                                              "--atol", "--step", "--max-steps", "-p" };
+                                              "--atol", "--step", "--max-steps", "-p",
+                                              "--max-step", "--events" };
     int i, k;
     for (i = 1; i < argc; i++) {
         const char *arg = argv[i], *eq = strncmp(arg, "--", 2) == 0 ? strchr(arg, '=') : NULL;
@@ -3561,6 +4098,10 @@ static int bgc_parse_args(int argc, char **argv, bgc_settings *s, bgc_params *p,
         }
         if (strcmp(arg, "--stats") == 0) {
             *stats = 1;
+            continue;
+        }
+        if (strcmp(arg, "--event-rows") == 0) {
+            s->event_rows = 1;
             continue;
         }
         for (k = 0; k < BGC_COUNT(with_value); k++)
@@ -3618,7 +4159,7 @@ int main(int argc, char **argv)
 {
     bgc_settings s;
     bgc_params p;
-    bgc_stats st = { 0, 0, 0, 0, 0, 0, 0, 0.0, 0.0, 0.0, 0 };
+    bgc_stats st = { 0, 0, 0, 0, 0, 0, 0, 0.0, 0.0, 0.0, 0, 0 };
     int given[BGC_DIM(BGC_NUM_PARAMS)] = { 0 };
     double x0[BGC_DIM(BGC_NUM_STATES)] = { 0.0 };
     char msg[1024];
@@ -3656,6 +4197,17 @@ int main(int argc, char **argv)
                                                                               stderr))
         return BGC_ERR_CONSTRAINT;
 
+    if (bgc_event_log.path) {
+        bgc_event_log.file = fopen(bgc_event_log.path, "w");
+        if (!bgc_event_log.file) {
+            fprintf(stderr, "error: cannot write the event log '%s': %s\n", bgc_event_log.path,
+                    strerror(errno));
+            return BGC_ERR_USAGE;
+        }
+        fputs("t,event,change\n", bgc_event_log.file);
+        s.on_event = bgc_log_event;
+        s.event_ctx = bgc_event_log.file;
+    }
     signal(SIGINT, bgc_on_signal);
     signal(SIGTERM, bgc_on_signal);
     bgc_out.file = stdout;
@@ -3667,6 +4219,10 @@ int main(int argc, char **argv)
     errno = 0;
     if (fflush(stdout) != 0 && !bgc_out.failed)
         bgc_out.failed = errno ? errno : -1;
+    if (bgc_event_log.file && fclose(bgc_event_log.file) != 0 && !bgc_event_log.failed)
+        bgc_event_log.failed = errno ? errno : -1;
+    if (bgc_event_log.failed && !bgc_out.failed)
+        bgc_out.failed = bgc_event_log.failed;
     if (bgc_out.failed) {
         bgc_write_failed(bgc_out.failed);
         return BGC_ERR_RUNTIME;
@@ -3992,7 +4548,7 @@ static int bgc_batch_loop(FILE *in, const bgc_settings *s, const bgc_params *bas
     bgc_put_text(&bgc_out, ",steps,rejected,rhs,cpu,message\n");
     while (fgets(bgc_line, sizeof bgc_line, in)) {
         const size_t len = strlen(bgc_line);
-        bgc_stats st = { 0, 0, 0, 0, 0, 0, 0, 0.0, 0.0, 0.0, 0 };
+        bgc_stats st = { 0, 0, 0, 0, 0, 0, 0, 0.0, 0.0, 0.0, 0, 0 };
         const char *status;
         int c, too_long = len + 1 == sizeof bgc_line && bgc_line[len - 1] != '\n';
         if (too_long)

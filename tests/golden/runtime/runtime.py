@@ -47,6 +47,15 @@
 #   _position_jac(t, x, p), _velocity_jac(t, x, p) -> list: the rows' Jacobians, row-major
 #   _velocity_metric(t, x, p) -> list: the velocity rows' Jacobian times the mass matrix (the
 #                         projection's kinetic metric), row-major
+#   _INDICATOR_STRICT     list of bool per state relation (a model with events, docs/hybrid.md):
+#                         it holds when its indicator is > 0 (True) or >= 0
+#   _NUM_TIMERS           int: the results of _next_time
+#   _DISCRETE_NAMES       list of str per discrete value d (the event log's names); d follows
+#                         the constants in p
+#   _events(t, x, p, w, out), _next_time(t, x, p, w, out), _update(t, x, p, w, r, out)
+#                         the indicators; the time events' next times; the state and d after
+#                         one pass of the event iteration (r: the state relations' values, then
+#                         1.0 at the run's start) (C's bgc_model_events, _next_time, _update)
 #   _METHODS, SOLVERS, _SOLVER_LIST  the solver tables: name -> dict of the family, its step
 #                         control and tableau; the names in order; their help text
 #
@@ -81,6 +90,7 @@ _MODEL_HELPERS = (
     "_sq", "_sign", "_heaviside", "_c_exp", "_c_log", "_c_sqrt", "_c_sin", "_c_cos", "_c_tan",
     "_c_asin", "_c_acos", "_c_atan", "_c_atan2", "_c_sinh", "_c_cosh", "_c_tanh", "_c_asinh",
     "_c_atanh", "_c_pow", "_block_solve", "_block_resolve", "_newton", "_Work", "_bind_model",
+    "_square", "_square_next",
 )
 # (a)'s names, for the tests that check both sides of the contract (tests/test_pyruntime.py).
 _MODEL_NAMES = (
@@ -116,6 +126,9 @@ _JAC_COLUMNS = []
 _METHODS = {}
 SOLVERS = ()
 _SOLVER_LIST = ""
+_INDICATOR_STRICT = []
+_NUM_TIMERS = 0
+_DISCRETE_NAMES = []
 
 
 def _fill_params(p, given):
@@ -160,6 +173,18 @@ def _velocity_jac(t, x, p):
 
 def _velocity_metric(t, x, p):
     return []
+
+
+def _events(t, x, p, w, out):
+    pass
+
+
+def _next_time(t, x, p, w, out):
+    pass
+
+
+def _update(t, x, p, w, r, out):
+    pass
 
 
 # ---------------------------------------------------------------- the runtime
@@ -216,6 +241,39 @@ def _heaviside(a, at_zero):
 
 def _sq(a):
     return a * a  # as C's bgc_sq (a ** 2 on a float is libm's pow, not always a * a)
+
+
+def _square_period(t, period, t0):
+    """bgc_square_period: the period k >= 0 that holds t, its edges computed as written."""
+    k = float(math.floor((t - t0) / period))
+    if k < 0.0:
+        k = 0.0
+    while k > 0.0 and t0 + k * period > t:
+        k -= 1.0
+    while t0 + (k + 1.0) * period <= t:
+        k += 1.0
+    return k
+
+
+def _square(t, period, duty, t0):
+    """square(period, duty, t0) at t (the value after an edge at t), as bgc_square."""
+    if not period > 0.0 or not math.isfinite(t):
+        return math.nan
+    if t < t0:
+        return 0.0
+    k = _square_period(t, period, t0)
+    return 1.0 if t < t0 + (k + duty) * period else 0.0
+
+
+def _square_next(t, period, duty, t0):
+    """The square wave's first edge after t, as bgc_square_next."""
+    if not period > 0.0 or not math.isfinite(t):
+        return math.nan
+    if t < t0:
+        return t0
+    k = _square_period(t, period, t0)
+    down = t0 + (k + duty) * period
+    return down if t < down else t0 + (k + 1.0) * period
 
 
 # The model functions' IEEE variant (run when the math variant raised) calls these: the C
@@ -279,11 +337,13 @@ class _Work:
     """The model functions' workspace: values shared between their parts, the blocks' storage
     (each Newton block's last solution is its next starting value), the Newton tolerance."""
 
-    __slots__ = ("v", "iv", "rtol", "atol")
+    __slots__ = ("v", "iv", "rtol", "atol", "d", "started")
 
     def __init__(self, rtol=None, atol=None):
         self.v = [0.0] * max(_WORK_DOUBLES, 1)
         self.iv = [0] * max(_WORK_INTS, 1)
+        self.d = [0.0] * len(_DISCRETE_NAMES)  # the discrete values between runs (bgc_work)
+        self.started = False
         self.rtol = SCENE["rtol"] if rtol is None else rtol
         self.atol = SCENE["atol"] if atol is None else atol
 
@@ -572,7 +632,7 @@ def _param_values(overrides):
 def _with_constants(p):
     """The parameters followed by the constants computed from them, as the model functions
     take them."""
-    return list(p) + _constants(p)
+    return list(p) + _constants(p) + [0.0] * len(_DISCRETE_NAMES)
 
 
 
@@ -675,11 +735,14 @@ def _project_initial(t, x, p):
 
 class _Settings:
     __slots__ = ("t0", "t_end", "dt", "solver", "rtol", "atol", "step", "max_steps", "h0",
-                 "order0")
+                 "order0", "hmax", "event_rows", "on_event")
 
     def __init__(self, **values):
         values.setdefault("h0", 0.0)  # a run that goes on from an earlier one (bgc_settings):
         values.setdefault("order0", 0)  # its step size and radau's order
+        values.setdefault("hmax", float(SCENE.get("hmax") or 0.0))  # events (docs/hybrid.md)
+        values.setdefault("event_rows", False)
+        values.setdefault("on_event", None)
         for key in self.__slots__:
             setattr(self, key, values[key])
 
@@ -688,14 +751,16 @@ MAX_STEPS = 100000  # the most steps accepted between two output times, unless s
 
 
 def _settings(t_end=None, dt=None, solver=None, rtol=None, atol=None, step=None,
-              max_steps=None):
+              max_steps=None, max_step=None, event_rows=False, on_event=None):
     given = {"t_end": t_end, "dt": dt, "solver": solver, "rtol": rtol, "atol": atol, "step": step,
-             "max_steps": max_steps}
-    values = dict(SCENE, max_steps=MAX_STEPS)
+             "max_steps": max_steps, "hmax": max_step}
+    values = dict(SCENE, max_steps=MAX_STEPS, event_rows=bool(event_rows), on_event=on_event)
+    values["hmax"] = float(values.get("hmax") or 0.0)
     values.update((k, v) for k, v in given.items() if v is not None)
     for key in ("t0", "t_end", "dt", "rtol", "atol"):
         values[key] = float(values[key])
     values["step"] = 0.0 if values["step"] is None else float(values["step"])
+    values["hmax"] = float(values["hmax"])
     s = _Settings(**values)
     message = _check_settings(s)
     if message:
@@ -704,8 +769,10 @@ def _settings(t_end=None, dt=None, solver=None, rtol=None, atol=None, step=None,
 
 
 def _check_settings(s):
-    if not all(math.isfinite(v) for v in (s.t0, s.t_end, s.dt, s.rtol, s.atol, s.step)):
+    if not all(math.isfinite(v) for v in (s.t0, s.t_end, s.dt, s.rtol, s.atol, s.step, s.hmax)):
         return "settings must be finite numbers"
+    if s.hmax < 0.0:
+        return "--max-step must be positive (0: no bound)"
     if not s.dt > 0.0:
         return "--dt must be positive"
     if s.t_end < s.t0:
@@ -757,16 +824,29 @@ def _initial_state(s, p, project_initial, allow_inconsistent=False):
 
 
 def rows(t_end=None, dt=None, solver=None, rtol=None, atol=None, params=None, step=None,
-         project_initial=False, stats=None, max_steps=None, allow_inconsistent=False):
+         project_initial=False, stats=None, max_steps=None, allow_inconsistent=False,
+         max_step=None, event_rows=False, events=None):
     """Runs the model, yielding each output row (t, y) as it is computed (y a list ordered as
     OUTPUTS): memory does not grow with the run's length.  A failure raises SimulationError
     after the rows before it (its .times and .rows are then empty: they were yielded).
     stats: a dict that receives the solver's counters.  allow_inconsistent: start from
     initial values that violate the constraints, neither refused nor projected (the
-    correctors pull them back); it excludes project_initial."""
+    correctors pull them back); it excludes project_initial.  max_step: the adaptive solvers'
+    largest step; event_rows: two rows at each event (its left and right limits); events: a
+    list that receives (t, event, change) for every change at an event, or a file name that
+    receives them as CSV (the program's --events)."""
     if project_initial and allow_inconsistent:
         raise ValueError("project_initial and allow_inconsistent exclude each other")
-    s = _settings(t_end, dt, solver, rtol, atol, step, max_steps)
+    log = None
+    if events is None or isinstance(events, list):
+        on_event = (lambda t, what, change: events.append((t, what, change))) \
+            if events is not None else None
+    else:  # a file name: the event log's CSV, as --events writes it
+        log = open(events, "w", encoding="utf-8", newline="")
+        log.write("t,event,change\n")
+        on_event = _event_writer(log)
+    s = _settings(t_end, dt, solver, rtol, atol, step, max_steps, max_step, event_rows,
+                  on_event)
     p = _with_constants(_param_values(_overrides(params)))
     x0 = _initial_state(s, p, project_initial, allow_inconsistent)
     st = _new_stats() if stats is None else stats
@@ -777,15 +857,21 @@ def rows(t_end=None, dt=None, solver=None, rtol=None, atol=None, params=None, st
     except _Failure as failure:
         raise SimulationError(str(failure), failure.t, numpy.zeros(0),
                               numpy.zeros((0, len(OUTPUTS)))) from None
+    finally:
+        if log is not None:
+            log.close()
 
 
 def simulate(t_end=None, dt=None, solver=None, rtol=None, atol=None, params=None, step=None,
-             project_initial=False, out=None, max_steps=None, allow_inconsistent=False):
+             project_initial=False, out=None, max_steps=None, allow_inconsistent=False,
+             max_step=None, event_rows=False, events=None):
     """Runs the model; returns (t, Y) with Y[k] the outputs at t[k].  None: the scene's value.
     out: a file name or a text file: the CSV is written there row by row as the run goes
-    (header first, as the program writes it) and nothing is kept: returns the number of rows."""
+    (header first, as the program writes it) and nothing is kept: returns the number of rows.
+    max_step, event_rows, events: as rows()."""
     run = rows(t_end, dt, solver, rtol, atol, params, step, project_initial,
-               max_steps=max_steps, allow_inconsistent=allow_inconsistent)
+               max_steps=max_steps, allow_inconsistent=allow_inconsistent, max_step=max_step,
+               event_rows=event_rows, events=events)
     if out is not None:
         return _stream(run, out)
     times, values = [], []
@@ -823,9 +909,11 @@ USAGE = (
     " [--t-end T] [--dt DT] [--solver NAME] [--rtol R] [--atol A]\n"
     "       [--step H] [--max-steps N] [-p NAME=VALUE ...] [--stats] [--progress]\n"
     "       [--project-initial | --allow-inconsistent]\n"
+    "       [--max-step H] [--event-rows] [--events FILE]\n"
     "       [--batch FILE|- [--metric KIND:OUTPUT ...] [--trajectories DIR]]\n"
 )
-_WITH_VALUE = ("--t-end", "--dt", "--solver", "--rtol", "--atol", "--step", "--max-steps", "-p")
+_WITH_VALUE = ("--t-end", "--dt", "--solver", "--rtol", "--atol", "--step", "--max-steps", "-p",
+               "--max-step", "--events")
 _NUMBER_CHARS = frozenset("0123456789+-.eE")
 
 
@@ -849,6 +937,9 @@ def _help():
         "  --step H           step of the fixed-step solvers (default: dt)",
         "  --max-steps N      the most steps between two output times (%d; 0: no limit)"
         % s.max_steps,
+        "  --max-step H       the adaptive solvers' largest step (default: no bound)",
+        "  --event-rows       two rows at each event: its left and right limits",
+        "  --events FILE      the event log: t,event,change, a row per change",
         "  -p NAME=VALUE      set a parameter; derived parameters follow",
         "  --project-initial  project the initial state onto the constraints",
         "  --allow-inconsistent  start from an initial state that violates the constraints",
@@ -902,6 +993,12 @@ def _apply_option(name, value, options, given):
         options["step"] = _parse_number(name, value)
         if not options["step"] > 0.0:
             raise _UsageError("error: --step must be positive\n")
+    elif name == "--max-step":
+        options["max_step"] = _parse_number(name, value)
+        if not options["max_step"] > 0.0:
+            raise _UsageError("error: --max-step must be positive\n")
+    elif name == "--events":
+        options["events"] = value
     elif name == "--max-steps":
         n = _parse_number(name, value)
         if not (0.0 <= n <= 1e15 and n == math.floor(n)):
@@ -921,7 +1018,8 @@ def _parse_args(argv):
         if arg in ("-h", "--help"):
             _help()
             return None
-        if arg in ("--project-initial", "--allow-inconsistent", "--stats", "--progress"):
+        if arg in ("--project-initial", "--allow-inconsistent", "--stats", "--progress",
+                   "--event-rows"):
             flags.add(arg)
             if {"--project-initial", "--allow-inconsistent"} <= flags:
                 raise _UsageError(
@@ -939,6 +1037,19 @@ def _parse_args(argv):
         _apply_option(name, value, options, given)
         i += 1
     return options, given, flags
+
+
+def _csv_field(text):
+    if any(c in text for c in ',"\r\n'):
+        return '"' + text.replace('"', '""') + '"'
+    return text
+
+
+def _event_writer(f):
+    """The event log's rows (--events), as the C program writes them."""
+    def write(t, what, change):
+        f.write("%.17g,%s,%s\n" % (t, _csv_field(what), _csv_field(change)))
+    return write
 
 
 def _stop_on_signals():
@@ -1009,8 +1120,9 @@ def main(argv=None):
     if parsed is None:
         return 0
     options, given, flags = parsed
+    log_path = options.pop("events", None)
     try:
-        s = _settings(**options)
+        s = _settings(event_rows="--event-rows" in flags, **options)
     except ValueError as error:
         sys.stderr.write("error: %s\n" % error)
         return 2
@@ -1024,6 +1136,16 @@ def main(argv=None):
     except SimulationError as error:
         sys.stderr.write("error: %s\n" % error)
         return 3
+    log = None
+    if log_path is not None:
+        try:
+            log = open(log_path, "w", encoding="utf-8", newline="")
+        except OSError as error:
+            sys.stderr.write("error: cannot write the event log '%s': %s\n"
+                             % (log_path, error.strerror or error))
+            return 2
+        log.write("t,event,change\n")
+        s.on_event = _event_writer(log)
     stats = _new_stats()
     failure = lost = None
     out = sys.stdout
@@ -1044,6 +1166,11 @@ def main(argv=None):
         for sig, handler in handlers:
             signal.signal(sig, handler)
         request_stop(0)
+        if log is not None:
+            try:
+                log.close()
+            except OSError as error:
+                lost = lost or error
     if failure is not None:
         try:
             out.flush()
@@ -1130,7 +1257,8 @@ def _block_failed(failure):
 
 def _new_stats():
     return {"steps": 0, "rejected": 0, "rhs": 0, "jac": 0, "lu": 0, "solves": 0,
-            "switched": False, "t_switch": 0.0, "cpu": 0.0, "h_next": 0.0, "order_next": 0}
+            "switched": False, "t_switch": 0.0, "cpu": 0.0, "h_next": 0.0, "order_next": 0,
+            "events": 0}
 
 
 def _stats_line(st):
@@ -1138,6 +1266,8 @@ def _stats_line(st):
             "solves=%(solves)d" % st)
     if st["switched"]:
         line += " stiff_from=%.17g" % st["t_switch"]
+    if _DISCRETE_NAMES:
+        line += " events=%d" % st["events"]
     return line + " cpu=%.6e" % st["cpu"]
 
 
@@ -1152,7 +1282,8 @@ class _Run:
     and returns; or raises _Failure, _Stiff (run.h: its last step size)."""
 
     __slots__ = ("s", "p", "w", "st", "nout", "kout", "t", "h", "y", "detect_stiffness",
-                 "steps_out", "t_out", "m", "name", "fixed")
+                 "steps_out", "t_out", "m", "name", "fixed", "doff", "g", "t_next", "t_event",
+                 "chain")
 
     def __init__(self, s, p, w, st, y):
         self.s, self.p, self.w, self.st = s, p, w, st
@@ -1161,6 +1292,11 @@ class _Run:
         self.t, self.h, self.y = s.t0, s.h0, y
         self.detect_stiffness = False
         self.m, self.name, self.fixed = None, "", False  # the method running, see _run_solver
+        # events (bgc_run's): d at p[doff:], the indicators at run.t, the next time event,
+        # the last event's time and the events in a row closer than the resolution
+        self.doff = len(p) - len(_DISCRETE_NAMES)
+        self.g = []
+        self.t_next, self.t_event, self.chain = math.inf, -math.inf, 0
 
     def f(self, t, y):
         """dy/dt as a numpy vector; a failed algebraic block raises _BlockFailure."""
@@ -1190,21 +1326,221 @@ class _Run:
         self.steps_out, self.t_out = self.st["steps"], t
         yield t, y
 
-    def emit_step(self, t, h, tph, y1, dense):
-        """The output times in (t, tph] after an accepted step: tph from y1, the others from
-        at(theta), the function that dense() prepares on first use."""
-        at = None
+    def emit_step(self, c, until, inclusive=True):
+        """The output times in (c.t, until] (until excluded if not inclusive) after an
+        accepted step: c.tph from c.y1, the others from the dense output (bgc_emit_step)."""
         while self.kout <= self.nout:
             tk = _output_time(self.s, self.kout, self.nout)
-            if tk > tph:
+            if tk > until or (tk == until and not inclusive):
                 break
-            if tk == tph:
-                yield from self.emit(tk, y1)
-            else:
-                if at is None:
-                    at = dense()
-                yield from self.emit(tk, at((tk - t) / h))
+            yield from self.emit(tk, c.y1 if tk == c.tph else c.at(tk))
             self.kout += 1
+
+
+class _Dense:
+    """The state inside the step just accepted (bgc_dense): the family's dense output, or
+    the cubic Hermite interpolant for a family without one (event location only)."""
+
+    __slots__ = ("run", "dense", "t", "h", "tph", "y", "y1", "fn", "f0", "f1")
+
+    def __init__(self, run, dense, t, h, tph, y, y1):
+        self.run, self.dense, self.t, self.h, self.tph, self.y, self.y1 = \
+            run, dense, t, h, tph, y, y1
+        self.fn = self.f0 = self.f1 = None
+
+    def at(self, tk):
+        if tk == self.tph:
+            return self.y1
+        if self.dense is not None:
+            if self.fn is None:
+                self.fn = self.dense()
+            return self.fn((tk - self.t) / self.h)
+        run = self.run
+        if self.f0 is None:
+            run.st["rhs"] += 2
+            try:
+                self.f0 = _as_list(run.f(self.t, numpy.asarray(self.y, dtype=float)))
+                self.f1 = _as_list(run.f(self.tph, numpy.asarray(self.y1, dtype=float)))
+            except _BlockFailure as failure:
+                raise _block_failed(failure) from None
+        th, h = (tk - self.t) / self.h, self.h
+        y, y1, f0, f1 = _as_list(self.y), _as_list(self.y1), self.f0, self.f1
+        return [(1.0 - th) * y[i] + th * y1[i]
+                + th * (th - 1.0) * ((1.0 - 2.0 * th) * (y1[i] - y[i]) + (th - 1.0) * h * f0[i]
+                                     + th * h * f1[i]) for i in range(_N)]
+
+
+def _as_list(v):
+    return v.tolist() if isinstance(v, numpy.ndarray) else list(v)
+
+
+# ---------------------------------------------------------------- events
+# A model's events (docs/hybrid.md), as the C runtime's drive.c handles them: the indicators
+# checked at the end of every accepted step, the first change of a state relation located on
+# the dense output (Illinois), time events stepped onto, the event iteration at an event.
+
+MAX_EVENT_ITERATIONS = 100
+
+
+def _holds(k, g):
+    return g > 0.0 if _INDICATOR_STRICT[k] else g >= 0.0
+
+
+def _changed(run, g):
+    p, off = run.p, run.doff
+    for k in range(len(_INDICATOR_STRICT)):
+        if _holds(k, g[k]) != (p[off + k] != 0.0):
+            return k
+    return -1
+
+
+def _indicators(run, t, x):
+    g = [0.0] * len(_INDICATOR_STRICT)
+    try:
+        _events(t, _as_list(x), run.p, run.w, g)
+    except _BlockFailure as failure:
+        raise _block_failed(failure) from None
+    for k, v in enumerate(g):
+        if not math.isfinite(v):
+            raise _fail(t, "event condition", _DISCRETE_NAMES[k])
+    return g
+
+
+def _set_next_time(run, t, x):
+    run.t_next = math.inf
+    if not _NUM_TIMERS:
+        return
+    tau = [0.0] * _NUM_TIMERS
+    try:
+        _next_time(t, _as_list(x), run.p, run.w, tau)
+    except _BlockFailure as failure:
+        raise _block_failed(failure) from None
+    for v in tau:
+        if v > t and v < run.t_next:
+            run.t_next = v
+
+
+def _log(run, t, what, change):
+    if run.s.on_event is not None:
+        run.s.on_event(t, what, change)
+
+
+def _event_iteration(run, t, x, start):
+    """bgc_event_iteration: update until nothing changes; x (a list) is updated; run.g the
+    indicators there after it."""
+    G, p, off = len(_INDICATOR_STRICT), run.p, run.doff
+    changed, it = True, 0
+    while changed:
+        if it == MAX_EVENT_ITERATIONS:
+            raise _Failure("at t = %.17g: chattering: the event iteration does not settle "
+                           "after %d passes (a Zeno model?)" % (t, it), t)
+        g = _indicators(run, t, x)
+        r = [1.0 if _holds(k, g[k]) else 0.0 for k in range(G)]
+        r.append(1.0 if start and it == 0 else 0.0)
+        out = [0.0] * (_N + len(_DISCRETE_NAMES))
+        try:
+            _update(t, x, p, run.w, r, out)
+        except _BlockFailure as failure:
+            raise _block_failed(failure) from None
+        changed = False
+        for i in range(_N):
+            if not math.isfinite(out[i]):
+                raise _fail(t, "state after the event", STATES[i])
+            if out[i] != x[i]:
+                changed = True
+                if not start:
+                    _log(run, t, STATES[i], "%.17g -> %.17g" % (x[i], out[i]))
+                x[i] = out[i]
+        for k in range(len(_DISCRETE_NAMES)):
+            v = out[_N + k]
+            if not math.isfinite(v):
+                raise _fail(t, "discrete value", _DISCRETE_NAMES[k])
+            if v != p[off + k]:
+                changed = True
+                if not start:
+                    _log(run, t, _DISCRETE_NAMES[k], "%.17g -> %.17g" % (p[off + k], v))
+                p[off + k] = v
+        it += 1
+    run.g = g
+
+
+def _find_event(run, c):
+    """bgc_find_event: None, or (te, the state there: a list)."""
+    G = len(_INDICATOR_STRICT)
+    due = c.tph >= run.t_next
+    gb = _indicators(run, c.tph, c.y1) if G else []
+    if not G or _changed(run, gb) < 0:
+        if due:
+            return c.tph, _as_list(c.y1)
+        run.g = gb
+        return None
+    ga, ta, tb, wa, wb, moved = list(run.g), c.t, c.tph, 1.0, 1.0, 0
+    p, off = run.p, run.doff
+    for it in range(200):
+        scale = max(abs(ta), abs(tb))
+        tol = max(1e-12 * scale, max(4.0 * _EPS * scale, sys.float_info.min))
+        if tb - ta <= tol:
+            break
+        frac = 1.0
+        for k in range(G):
+            if _holds(k, gb[k]) != (p[off + k] != 0.0):
+                a, b = wa * ga[k], wb * gb[k]
+                with numpy.errstate(all="ignore"):
+                    q = float(numpy.float64(a) / numpy.float64(a - b))
+                if not (q >= 0.0 and q <= 1.0):
+                    q = 0.5
+                if q < frac:
+                    frac = q
+        if it >= 100:
+            frac = 0.5
+        tm = ta + frac * (tb - ta)
+        tm = max(tm, ta + 0.5 * tol)
+        tm = min(tm, tb - 0.5 * tol)
+        gm = _indicators(run, tm, c.at(tm))
+        if _changed(run, gm) >= 0:
+            tb, gb, wb = tm, gm, 1.0
+            wa = 0.5 * wa if moved > 0 else 1.0
+            moved = 1
+        else:
+            ta, ga, wa = tm, gm, 1.0
+            wb = 0.5 * wb if moved < 0 else 1.0
+            moved = -1
+    return tb, _as_list(c.at(tb))
+
+
+def _after_event(run, t, x):
+    """bgc_after_event: the event, the rows at t (its right limit; those within the time's
+    resolution of t too)."""
+    yield from _handle_event(run, t, x)
+    while run.kout <= run.nout:
+        tk = _output_time(run.s, run.kout, run.nout)
+        if tk - t > _hmin(t):
+            break
+        yield from run.emit(tk, x)
+        run.kout += 1
+    run.t = t
+
+
+def _handle_event(run, t, x):
+    """bgc_handle_event: the rows at the event (--event-rows), its iteration, the next time
+    event; a run whose events come closer than it resolves stops."""
+    run.st["events"] += 1
+    scale = max(abs(t), abs(run.t_event))
+    if t - run.t_event <= max(1e-12 * scale, _hmin(t)):
+        run.chain += 1
+    else:
+        run.chain = 0
+    run.t_event = t
+    if run.chain >= MAX_EVENT_ITERATIONS:
+        raise _Failure("at t = %.17g: chattering: %d events in a row, each within 1e-12 "
+                       "relative of the one before (a Zeno model: the switching outruns the "
+                       "time's resolution)" % (t, run.chain), t)
+    if run.s.event_rows:
+        yield from run.emit(t, x)
+    _event_iteration(run, t, x, False)
+    if run.s.event_rows:
+        yield from run.emit(t, x)
+    _set_next_time(run, t, x)
 
 
 # Byte parity with the C runtime: sums in C's sequence (never numpy.sum, dot or @, whose
@@ -1518,6 +1854,12 @@ class _Grid:
         return tph, last
 
 
+def _hmax(s):
+    """bgc_hmax: the run's span, and --max-step if set."""
+    span = s.t_end - s.t0
+    return min(span, s.hmax) if s.hmax > 0.0 else span
+
+
 def _drive(run, family, y):
     """One family's run from (run.t, y) to s.t_end: yields the rows as it passes them, keeps
     run.t and run.y at the last accepted step; raises _Failure, or _Stiff (run.h: the
@@ -1525,25 +1867,50 @@ def _drive(run, family, y):
     s, st = run.s, run.st
     if run.kout > run.nout:
         return
-    hmax = s.t_end - s.t0
+    hmax = _hmax(s)
+    events = bool(_DISCRETE_NAMES)
     fam = family(run)
     h = fam.start(y)
     t = run.t
     reject = last = False
     bad, bad_kind, failure, wanted = -1, "", None, 0.0
     grid = _Grid(run, fam.span_grid)
+    at_event = False
     while True:
+        if run.t_next - t <= _hmin(t):  # a time event closer than a step can be
+            t, at_event = run.t_next, True
+        if at_event:  # the event at (t, y); the method starts afresh after it
+            at_event = False
+            x = _as_list(y)
+            yield from _after_event(run, t, x)
+            y = x if isinstance(y, list) else numpy.array(x, dtype=float)
+            run.y = y
+            if t >= s.t_end or run.kout > run.nout:
+                return
+            run.h = 0.0
+            fam = family(run)
+            h = fam.start(y)
+            grid.k = grid.n  # a new grid from the event
+            reject = last = False
+            bad = -1
+            continue
         if run.fixed:
             tph, last = grid.next(t)
+            if run.t_next < tph:  # a time event inside: the step ends on it
+                tph, last = run.t_next, False
             h = tph - t
         else:
             if not h >= _hmin(t):
                 raise _fail_small(run, t, h, bad, bad_kind, failure, fam.worst)
             wanted = h
-            if t + 1.01 * h - s.t_end > 0.0:
-                h = s.t_end - t
-                last = True
-            tph = s.t_end if last else t + h
+            if run.t_next < s.t_end and t + 1.01 * h - run.t_next > 0.0:
+                h = run.t_next - t  # onto the time event
+                tph = run.t_next
+            else:
+                if t + 1.01 * h - s.t_end > 0.0:
+                    h = s.t_end - t
+                    last = True
+                tph = s.t_end if last else t + h
         outcome, y1, hnew, why = fam.step(t, h, tph, y)
         if outcome == _AGAIN:
             continue
@@ -1559,7 +1926,16 @@ def _drive(run, family, y):
             raise _fail(tph, "state", STATES[i])
         _accept(run, tph)
         fam.accepted(tph, y1)
-        yield from run.emit_step(t, h, tph, y1, fam.dense)
+        c = _Dense(run, fam.dense, t, h, tph, y, y1)
+        if events:
+            found = _find_event(run, c)
+            if found is not None:  # the step ends at the event
+                te, ye = found
+                yield from run.emit_step(c, te, False)
+                y = ye if isinstance(y, list) else numpy.array(ye, dtype=float)
+                t, at_event = te, True
+                continue
+        yield from run.emit_step(c, tph)
         y, t = y1, tph
         run.t, run.y = t, y
         grid.k += 1
@@ -1821,13 +2197,29 @@ def _integrate(s, p, x0, st):
         rows.close()
 
 
-def _integrate_from(s, p, x0, st):
+def _integrate_from(s, p, x0, st, w=None):
     y = numpy.array(x0, dtype=float)
     i = _first_nonfinite(y)
     if i >= 0:
         raise _fail(s.t0, "state", STATES[i])
-    run = _Run(s, p, _Work(s.rtol, s.atol), st, y)
+    run = _Run(s, p, _Work(s.rtol, s.atol) if w is None else w, st, y)
     st["h_next"], st["order_next"] = 0.0, 0
+    if _DISCRETE_NAMES:  # the event iteration at the start (bgc_integrate)
+        w = run.w
+        p[run.doff:] = w.d
+        x = y.tolist()
+        _event_iteration(run, s.t0, x, not w.started)
+        w.started = True
+        _set_next_time(run, s.t0, x)
+        y = run.y = numpy.array(x, dtype=float)
+    try:
+        yield from _integrate_run(run, s, y, st)
+    finally:
+        if _DISCRETE_NAMES:
+            run.w.d = p[run.doff:]
+
+
+def _integrate_run(run, s, y, st):
     yield from run.emit(s.t0, y)
     m = _METHODS[s.solver]
     if m["family"] != "auto":
@@ -2292,7 +2684,7 @@ def _stiff_start(run, t, y):
 def _first_step(run, y, f0):
     """The first step of an adaptive run: the earlier run's (bounded by the span), else
     HINIT."""
-    hmax = run.s.t_end - run.s.t0
+    hmax = _hmax(run.s)
     return min(run.h, hmax) if run.h > 0.0 else _initial_step(run, run.m["q"], y, f0, hmax)
 
 

@@ -1,0 +1,323 @@
+"""Events: the relations that switch a model, its time sources, discrete variables and
+when-blocks (docs/hybrid.md), from the resolve stage to the program's event functions.
+
+The resolve stage meets a relation of varying quantities (`x > 0`, `step(t0)`'s `t >= t0`)
+and registers it here: the expression gets a boolean symbol in its place, the relation's
+value *frozen* between events, so that the right side is smooth within a step and the
+solver never integrates across a switch.  What changes the frozen values:
+
+  state relation    reads the states: its indicator g = lhs - rhs is evaluated at the end of
+                    every step; a change of the relation's value there is located on the
+                    step's dense output and the step ends at the crossing;
+  time relation     a relation linear in t with parameters alone (t >= t0): its time is known
+                    in advance, t* = -b/a, and the solver steps onto it exactly;
+  discrete relation reads discrete variables and parameters alone: it changes only at events;
+  square wave       `square(period, duty, t0)`: a value 0 or 1 whose edges are time events.
+
+At an event the program's `update` function gives the state and the discrete values after
+it: every relation's new value (a state relation's from the located crossing), the when-
+blocks that fire (their condition became true: a rising edge), their reinits and
+assignments, all computed from the values just before (the left limit).  The driver calls it
+again until nothing changes (an event iteration, at most MAX_ITERATIONS).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import sympy as sp
+from sympy.core.relational import Relational
+from sympy.logic.boolalg import BooleanAtom, BooleanFunction
+
+from .diagnostics import Span
+from .graph import TIME, written
+
+RELATIONS = {"<": sp.StrictLessThan, "<=": sp.LessThan, ">": sp.StrictGreaterThan,
+             ">=": sp.GreaterThan, "==": sp.Eq, "!=": sp.Ne}
+SOURCES = {"step": (1, 1), "ramp": (1, 1), "pulse": (2, 2), "square": (2, 3),
+           "initial": (0, 0)}  # name -> (fewest, most) arguments
+INITIAL = sp.Symbol("initial#")  # initial(): true in the event iteration at the start only
+MAX_ITERATIONS = 100  # events at one instant before a run stops as chattering (Zeno)
+
+
+def is_condition(v) -> bool:
+    """Whether a built value is a condition (a boolean), not a number."""
+    if isinstance(v, (Relational, BooleanFunction, BooleanAtom)):
+        return True
+    return isinstance(v, sp.Symbol) and (v is INITIAL or v.name.startswith("event#"))
+
+
+@dataclass(frozen=True)
+class Relation:
+    symbol: sp.Symbol  # the relation's frozen value (a boolean symbol)
+    relation: sp.Basic  # over model symbols
+    text: str  # as the event log names it
+    span: Span
+    owner: str | None  # the element whose law holds it (its own e, f read through the bond)
+
+    @property
+    def indicator(self) -> sp.Expr:
+        """g: the relation holds when g > 0 (> and >=) or g < 0 (< and <=)."""
+        return self.relation.lhs - self.relation.rhs
+
+
+@dataclass(frozen=True)
+class Square:
+    symbol: sp.Symbol  # its value, 0 or 1
+    period: sp.Expr
+    duty: sp.Expr
+    t0: sp.Expr
+    text: str
+    span: Span
+
+
+@dataclass(frozen=True)
+class Discrete:
+    name: str
+    symbol: sp.Symbol
+    init: sp.Expr  # parameters only
+    doc: str | None
+    span: Span
+
+
+@dataclass(frozen=True)
+class Action:
+    kind: str  # "reinit" | "assign"
+    name: str  # the state or the discrete variable, as written
+    symbol: sp.Symbol
+    expr: sp.Expr
+    span: Span
+
+
+@dataclass(frozen=True)
+class When:
+    condition: sp.Basic  # over relation symbols, INITIAL and parameters
+    text: str
+    actions: tuple[Action, ...]
+    span: Span
+
+
+@dataclass
+class EventTable:
+    """The relations and square waves of a model, numbered in the order they are met."""
+
+    relations: list = field(default_factory=list)
+    squares: list = field(default_factory=list)
+    _index: dict = field(default_factory=dict)
+
+    def relation(self, rel, node, owner) -> sp.Symbol:
+        key = (rel, owner)
+        if key not in self._index:
+            sym = sp.Symbol(f"event#{len(self.relations)}")
+            text = written(rel)
+            if getattr(node, "func", None):  # step(1): t >= 1
+                text = f"{node.func}: {text}"
+            self.relations.append(Relation(sym, rel, text, node.span, owner))
+            self._index[key] = sym
+        return self._index[key]
+
+    def square(self, period, duty, t0, node) -> sp.Symbol:
+        key = ("square", period, duty, t0)
+        if key not in self._index:
+            sym = sp.Symbol(f"square#{len(self.squares)}", real=True)
+            text = f"square({written(period)}, {written(duty)}, {written(t0)})"
+            self.squares.append(Square(sym, period, duty, t0, text, node.span))
+            self._index[key] = sym
+        return self._index[key]
+
+
+# ---------------------------------------------------------------- the scene's events
+
+
+FIRST = sp.Symbol("first#")  # update's r[n]: 1 in the event iteration at the start of a run
+
+
+def new_value(k: int) -> sp.Symbol:
+    """update's r[k]: state relation k's value at the event (from the located crossing)."""
+    return sp.Symbol(f"new#{k}")
+
+
+@dataclass(frozen=True)
+class Selected:
+    """The events a scene needs, in the order of their discrete values (ir.Events)."""
+
+    state: tuple[Relation, ...]  # read the states: indicators, located crossings
+    time: tuple[tuple[Relation, sp.Expr, sp.Basic], ...]  # (relation, its time, its value
+    #                                                        after that time: a condition)
+    discrete: tuple[Relation, ...]  # of discrete variables and parameters
+    squares: tuple[Square, ...]
+    discretes: tuple[Discrete, ...]
+    whens: tuple[When, ...]
+
+    @property
+    def empty(self) -> bool:
+        return not (self.state or self.time or self.discrete or self.squares or self.discretes
+                    or self.whens)
+
+    def roots(self) -> list:
+        """(expression, span) the steps must compute for the events: the indicators, the
+        discrete relations' sides, the when-blocks' right sides."""
+        out = [(r.indicator, r.span) for r in self.state + self.discrete]
+        out += [(a.expr, a.span) for w in self.whens for a in w.actions]
+        return out
+
+    def slots(self) -> list:
+        """Every discrete value's symbol, in the order of d."""
+        return [r.symbol for r in self.state] + [r.symbol for r, _, _ in self.time] + \
+            [r.symbol for r in self.discrete] + [s.symbol for s in self.squares] + \
+            [d.symbol for d in self.discretes]
+
+
+def select(graph_events, used: set, states: dict, params: set) -> Selected:
+    """The relations, square waves, discrete variables and when-blocks that what the scene
+    computes (`used`: the symbols its steps and outputs read) needs; states: the kept states'
+    symbols -> StateVar.  The when-blocks kept are those that set a kept state or a discrete
+    variable something reads; what they read is then used too."""
+    relations, squares, discretes, whens = graph_events
+    used = set(used)
+    kept: list = []
+    while True:
+        for r in relations:  # what a relation reads is read too (a discrete variable)
+            if r.symbol in used:
+                used |= r.relation.free_symbols
+        more = [w for w in whens if w not in kept and any(
+            a.symbol in states if a.kind == "reinit" else a.symbol in used for a in w.actions)]
+        if not more:
+            break
+        kept += more
+        for w in more:
+            used |= w.condition.free_symbols
+            for a in w.actions:
+                used |= a.expr.free_symbols
+    kept = [w for w in whens if w in kept]
+    discrete_symbols = {d.symbol for d in discretes}
+    state, time, discrete = [], [], []
+    for r in relations:
+        if r.symbol not in used:
+            continue
+        free = r.relation.free_symbols
+        if free <= params | discrete_symbols:
+            discrete.append(r)
+            continue
+        timed = _time_event(r, params) if free <= params | {TIME} else None
+        if timed is not None:
+            time.append((r, *timed))
+        else:
+            state.append(_oriented(r))
+    return Selected(tuple(state), tuple(time), tuple(discrete),
+                    tuple(s for s in squares if s.symbol in used),
+                    tuple(d for d in discretes if d.symbol in used), tuple(kept))
+
+
+def _oriented(r: Relation) -> Relation:
+    """r with its indicator oriented to hold when g > 0 (or >= 0): x < y becomes y > x."""
+    rel = r.relation
+    if isinstance(rel, (sp.StrictLessThan, sp.LessThan)):
+        flipped = (sp.StrictGreaterThan if isinstance(rel, sp.StrictLessThan) else
+                   sp.GreaterThan)(rel.rhs, rel.lhs, evaluate=False)
+        return Relation(r.symbol, flipped, r.text, r.span, r.owner)
+    return r
+
+
+def strict(r: Relation) -> bool:
+    return isinstance(r.relation, sp.StrictGreaterThan)
+
+
+def _time_event(r: Relation, params: set):
+    """(t*, value after t*) of a relation a t + b > 0 (a, b of parameters, a != 0), else
+    None (a relation of t that is not linear: located as a state relation)."""
+    from .differentiate import partial
+    rel = r.relation
+    g = rel.lhs - rel.rhs
+    a = partial(g, TIME)
+    if TIME in a.free_symbols or a == 0:
+        return None
+    b = sp.expand(g - a * TIME)
+    if TIME in b.free_symbols:
+        return None
+    at = -b / a
+    rising = sp.StrictGreaterThan(a, 0)
+    if isinstance(rel, (sp.StrictLessThan, sp.LessThan)):
+        rising = sp.Not(rising)
+    after = sp.Or(sp.And(rising, sp.GreaterThan(TIME, at)),
+                  sp.And(sp.Not(rising), sp.StrictLessThan(TIME, at)))
+    return at, after
+
+
+def _bit(cond) -> sp.Expr:
+    return sp.Piecewise((sp.Integer(1), cond), (sp.Integer(0), True))
+
+
+def update_stores(sel: Selected, states) -> tuple[list, list]:
+    """update's results over model symbols: the state after the event iteration's step (one
+    per state, ordered as states), then each discrete value; and the event-time values each
+    when-block's condition reads.  Every right side reads the values before the event."""
+    new: dict = {}
+    for k, r in enumerate(sel.state):
+        new[r.symbol] = sp.Ne(new_value(k), 0)
+    for r, _, after in sel.time:
+        new[r.symbol] = after
+    for r in sel.discrete:
+        new[r.symbol] = r.relation
+    old = {sym: sp.Or(sp.And(FIRST, cond), sp.And(sp.Not(FIRST), sym))
+           for sym, cond in new.items()}
+    fires = []
+    for w in sel.whens:
+        now = w.condition.xreplace({**new, INITIAL: FIRST})
+        before = w.condition.xreplace({**old, INITIAL: sp.false})
+        fires.append(sp.And(now, sp.Not(before)))
+    values: dict = {}
+    for w, fire in zip(sel.whens, fires):
+        for a in w.actions:
+            values.setdefault(a.symbol, []).append((a.expr, fire))
+    out = []
+    for st in states:
+        out.append(sp.Piecewise(*values[st.symbol], (st.symbol, True))
+                   if st.symbol in values else st.symbol)
+    for sym in [r.symbol for r in sel.state] + [r.symbol for r, _, _ in sel.time] + \
+            [r.symbol for r in sel.discrete]:
+        out.append(_bit(new[sym]))
+    for s in sel.squares:
+        from .ir import SquareWave
+        out.append(SquareWave(TIME, s.period, s.duty, s.t0))
+    for d in sel.discretes:
+        start = sp.Piecewise((d.init, FIRST), (d.symbol, True))
+        out.append(sp.Piecewise(*values[d.symbol], (start, True)) if d.symbol in values
+                   else start)
+    return out
+
+
+def next_times(sel: Selected) -> list:
+    from .ir import SquareNext
+    return [at for _, at, _ in sel.time] + \
+        [SquareNext(TIME, s.period, s.duty, s.t0) for s in sel.squares]
+
+
+def log_names(sel: Selected) -> tuple[tuple[str, ...], tuple[str, ...]]:
+    names = [r.text for r in sel.state] + [r.text for r, _, _ in sel.time] + \
+        [r.text for r in sel.discrete] + [s.text for s in sel.squares] + \
+        [d.name for d in sel.discretes]
+    kinds = ["relation"] * (len(sel.state) + len(sel.time) + len(sel.discrete)) + \
+        ["square"] * len(sel.squares) + ["discrete"] * len(sel.discretes)
+    return tuple(names), tuple(kinds)
+
+
+def leaves(graph_events) -> set:
+    """The symbols that are constant between events: relations' values, square waves,
+    discrete variables (the equations treat them as parameters)."""
+    relations, squares, discretes, _ = graph_events
+    return {r.symbol for r in relations} | {s.symbol for s in squares} | \
+        {d.symbol for d in discretes} | {INITIAL}
+
+
+def check(sel: Selected | None, es) -> None:
+    """A kept when-block may not reinit a state that the scene's causality makes dependent."""
+    if sel is None:
+        return
+    from .diagnostics import fail
+    dependent = {s.state: s for s in es.stores}
+    for w in sel.whens:
+        for a in w.actions:
+            if a.kind == "reinit" and a.symbol in dependent:
+                fail(a.span, f"'{a.name}' cannot be reinit: '{dependent[a.symbol].element}' is "
+                             "in derivative causality, so its state follows from the rest of "
+                             "the model")

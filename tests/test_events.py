@@ -1,0 +1,354 @@
+"""Events (docs/hybrid.md): relations and conditionals, time events (step, pulse, square),
+when-blocks with reinit and discrete variables, located in every solver, in both backends
+with the same bytes.  References: closed forms and SciPy computed here."""
+import csv
+import io
+import math
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings, strategies as st
+
+import bgc
+from bgc import runner
+from bgc.api import Source
+
+from conftest import have_cc
+
+BALL = """model ball "a ball dropped on a floor, bouncing by a when-block"
+parameter m = 1.0
+parameter g = 9.81
+parameter e = 0.8
+parameter h0 = 1.0
+w : Se(-m*g)
+b : I(m)
+signal x = integral(b.f, init = h0)
+w -> j
+j : 1
+j -> b
+when x < 0 {
+  reinit b.p = -e*b.p
+}
+scene drop { time 0 .. 3 every 0.01; outputs x, b.p }
+"""
+
+LAG = """model lag "a first-order lag driven by a short pulse"
+parameter tau = 0.5
+parameter t0 = 1.7
+parameter width = 0.05
+signal x = integral(-x/tau + pulse(t0, width), init = 0)
+scene run { time 0 .. 3 every 0.1; outputs x }
+"""
+
+PWM = """model pwm "an RL load driven by a PWM voltage"
+parameter V = 12.0
+parameter R = 2.0
+parameter L = 0.01
+parameter period = 0.001
+parameter duty = 0.3
+u : MSe(V*square(period, duty))
+r : R(R)
+l : I(L)
+u -> j
+j : 1
+j -> r
+j -> l
+scene run { time 0 .. 0.2 every 0.001; outputs l.p; solver dopri5(rtol = 1e-10, atol = 1e-12) }
+"""
+
+BACKENDS = ["c", "python"] if have_cc() else ["python"]
+
+
+def build(text, scene=None):
+    return bgc.build(Source("inline.bg", text), scene)
+
+
+def run_csv(compiled, backend, **options) -> str:
+    """The run's CSV as the program writes it."""
+    program = runner.prepare(compiled, backend)
+    names = [p.name for p in compiled.program.params]
+    settings = runner.settings_for(compiled.program.scene, names, **options)
+    result = runner.run(program, settings)
+    assert result.status == 0, result.stderr
+    return result.csv
+
+
+def table(text):
+    rows = list(csv.reader(io.StringIO(text)))
+    return rows[0], np.array([[float(v) for v in r] for r in rows[1:]])
+
+
+def events_of(path):
+    with open(path, newline="") as f:
+        rows = list(csv.reader(f))
+    assert rows[0] == ["t", "event", "change"]
+    return rows[1:]
+
+
+# ---------------------------------------------------------------- the bouncing ball
+
+
+def bounce_times(n, g=9.81, h0=1.0, e=0.8):
+    """Closed form: the first impact at sqrt(2 h0 / g), then each flight 2 e^k v1 / g."""
+    t = math.sqrt(2 * h0 / g)
+    v = g * t
+    out = [(t, v)]
+    for _ in range(n - 1):
+        v *= e
+        t += 2 * v / g
+        out.append((t, v))
+    return out
+
+
+@pytest.mark.parametrize("solver", ["dopri5", "radau5", "auto"])
+def test_bouncing_ball_when_reinit(solver, tmp_path):
+    """Each impact located to 1e-10 in t; the speed after it e times the speed before."""
+    compiled = build(BALL, "drop")
+    texts = []
+    for backend in BACKENDS:
+        log = tmp_path / f"{backend}.csv"
+        texts.append(run_csv(compiled, backend, solver=solver, events=str(log)))
+        impacts = [r for r in events_of(log) if r[0] and r[1] == "b.p"]
+        want = bounce_times(len(impacts))
+        assert len(impacts) == 6  # in 3 s
+        for (t, change), (t_ref, v_ref) in zip([(float(r[0]), r[2]) for r in impacts], want):
+            before, after = (float(v) for v in change.split(" -> "))
+            assert abs(t - t_ref) <= 1e-10 * t_ref
+            assert abs(before + v_ref) <= 1e-6 * v_ref  # falling at -v
+            assert abs(after - 0.8 * v_ref) <= 1e-6 * v_ref
+    assert len(set(texts)) == 1  # the same bytes in both backends
+    head, y = table(texts[0])
+    flight = [(t, v) for t, v in bounce_times(6)]
+    # between the bounces the height is the free flight's parabola
+    t1, v1 = flight[0]
+    k = np.searchsorted(y[:, 0], t1)
+    up = 0.8 * v1
+    seg = y[k:k + 40]
+    assert np.allclose(seg[:, 1], up * (seg[:, 0] - t1) - 9.81 / 2 * (seg[:, 0] - t1) ** 2,
+                       rtol=0, atol=1e-9)
+
+
+def test_event_rows_hold_both_limits(tmp_path):
+    compiled = build(BALL, "drop")
+    text = run_csv(compiled, BACKENDS[0], event_rows=True)
+    head, y = table(text)
+    t1, v1 = bounce_times(1)[0]
+    at = np.flatnonzero(np.abs(y[:, 0] - t1) <= 1e-10)
+    # the impact's left and right limits; then, 3e-13 later, the ball back above the floor
+    # (x < 0 false again: an event that changes nothing but the relation)
+    assert len(at) == 4 and y[at[2], 0] > y[at[1], 0]
+    assert y[at[0], 2] == pytest.approx(-v1, rel=1e-7) and y[at[1], 2] == pytest.approx(
+        0.8 * v1, rel=1e-7)
+
+
+# ---------------------------------------------------------------- time events
+
+
+def lag_reference(t, tau, t0, width):
+    if t < t0:
+        return 0.0
+    if t < t0 + width:
+        return tau * (1 - math.exp(-(t - t0) / tau))
+    return tau * (1 - math.exp(-width / tau)) * math.exp(-(t - t0 - width) / tau)
+
+
+@pytest.mark.parametrize("solver", ["dopri5", "radau5", "rodas5p", "auto", "rk4"])
+def test_a_short_pulse_is_never_stepped_over(solver):
+    compiled = build(LAG, "run")
+    step = {"step": 0.01} if solver == "rk4" else {}  # (fixed steps: a step ends on each edge)
+    texts = [run_csv(compiled, b, solver=solver, **step) for b in BACKENDS]
+    assert len(set(texts)) == 1
+    _, y = table(texts[0])
+    ref = np.array([lag_reference(t, 0.5, 1.7, 0.05) for t in y[:, 0]])
+    assert np.max(np.abs(y[:, 1] - ref)) <= 1e-6 * np.max(ref)
+
+
+@settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(t0=st.floats(0.05, 2.9), width=st.floats(1e-6, 0.3),
+       solver=st.sampled_from(["dopri5", "radau5", "auto"]))
+def test_pulses_anywhere_property(t0, width, solver):
+    """Wherever the pulse falls and however short it is, its effect is in the result."""
+    compiled = _lag()
+    text = run_csv(compiled, BACKENDS[0], solver=solver, params={"t0": t0, "width": width},
+                   rtol=1e-9, atol=1e-12)
+    _, y = table(text)
+    ref = np.array([lag_reference(t, 0.5, t0, width) for t in y[:, 0]])
+    peak = 0.5 * (1 - math.exp(-width / 0.5))  # stepped over, the error would be all of it
+    assert np.max(np.abs(y[:, 1] - ref)) <= 2e-5 * peak
+
+
+_LAG = []
+
+
+def _lag():
+    if not _LAG:
+        _LAG.append(build(LAG, "run"))
+    return _LAG[0]
+
+
+def test_pwm_rl_circuit_against_its_piecewise_exponentials():
+    """200 periods of a PWM voltage on an RL load: the current at every output time against
+    the exact piecewise solution (each edge a time event)."""
+    compiled = build(PWM, "run")
+    texts = [run_csv(compiled, b) for b in BACKENDS]
+    assert len(set(texts)) == 1
+    _, y = table(texts[0])
+    V, R, L, T, D = 12.0, 2.0, 0.01, 0.001, 0.3
+
+    def current(t):
+        i, s = 0.0, 0.0  # march the exact solution edge by edge
+        k = 0
+        while True:
+            on_end, off_end = (k + D) * T, (k + 1) * T
+            if t <= on_end:
+                return V / R + (i - V / R) * math.exp(-(t - s) * R / L)
+            i = V / R + (i - V / R) * math.exp(-(on_end - s) * R / L)
+            s = on_end
+            if t <= off_end:
+                return i * math.exp(-(t - s) * R / L)
+            i *= math.exp(-(off_end - s) * R / L)
+            s = off_end
+            k += 1
+
+    ref = np.array([L * current(t) for t in y[:, 0]])  # l.p = L i
+    assert np.max(np.abs(y[:, 1] - ref)) <= 1e-6 * np.max(np.abs(ref))
+
+
+def test_max_step_bounds_every_step():
+    compiled = build(LAG, "run")
+    program = runner.prepare(compiled, BACKENDS[0])
+    names = [p.name for p in compiled.program.params]
+    for h in (None, 0.01):
+        settings = runner.settings_for(compiled.program.scene, names, max_step=h)
+        result = runner.run(program, settings, stats=True)
+        steps = int(result.stats["steps"])
+        if h:
+            assert steps >= 3.0 / h
+        else:
+            assert steps < 100
+
+
+# ---------------------------------------------------------------- conditionals, discrete
+
+
+def test_if_elif_else_and_discrete_variables(tmp_path):
+    """A thermostat: the heater switches on below 19 and off above 21 (a discrete mode set
+    by when-blocks); the temperature between the switchings is the closed-form exponential."""
+    text = """model thermostat
+parameter C = 1.0
+parameter k = 0.1
+parameter P = 5.0
+parameter Ta = 10.0
+discrete heat = 1
+signal T = integral((if heat > 0.5 then P else 0) - k*(T - Ta), init = 20)
+when T > 21 { heat = 0 }
+when T < 19 { heat = 1 }
+scene run { time 0 .. 60 every 0.5; outputs T; solver dopri5(rtol = 1e-10, atol = 1e-12) }
+"""
+    compiled = build(text, "run")
+    logs = [tmp_path / f"{b}.csv" for b in BACKENDS]
+    texts = [run_csv(compiled, b, events=str(log)) for b, log in zip(BACKENDS, logs)]
+    assert len(set(texts)) == 1
+    switches = [(float(r[0]), r[2]) for r in events_of(logs[0]) if r[1] == "heat"]
+    # T' = P - k (T - Ta) heating, -k (T - Ta) cooling: the switching times in closed form
+    k, P, Ta = 0.1, 5.0, 10.0
+    hot = Ta + P / k
+    t, T, want = 0.0, 20.0, []
+    heating = True
+    while t < 60:
+        target = 21.0 if heating else 19.0
+        end = hot if heating else Ta
+        t += math.log((T - end) / (target - end)) / k
+        if t > 60:
+            break
+        want.append((t, "1 -> 0" if heating else "0 -> 1"))
+        T, heating = target, not heating
+    assert [c for _, c in switches] == [c for _, c in want]
+    for (t_got, _), (t_ref, _) in zip(switches, want):
+        assert abs(t_got - t_ref) <= 1e-9 * t_ref
+
+
+def test_chattering_stops_with_a_message():
+    text = """model chatter
+discrete n = 0
+signal x = integral(n, init = 0)
+when t >= 1 { n = 1 }
+when n > 0.5 { n = 0 }
+when n < 0.5 and t >= 1 { n = 1 }
+scene run { time 0 .. 2; outputs x }
+"""
+    compiled = build(text, "run")
+    for backend in BACKENDS:
+        program = runner.prepare(compiled, backend)
+        result = runner.run(program, None)
+        assert result.status == 1
+        assert "at t = 1: chattering" in result.message
+
+
+@pytest.mark.parametrize("text, message", [
+    ("signal y = integral(1, init = 0)\nwhen y { reinit y = 0 }",
+     "a condition is needed here (a relation such as x > 0), not a number"),
+    ("signal y = integral(1, init = 0)\nsignal z = y > 1",
+     "a condition is not a number: write 'if C then 1 else 0' for its value"),
+    ("parameter a = 1\nsignal y = integral(1, init = 0)\nwhen y > 1 { reinit a = 0 }",
+     "'a' is not a state: reinit takes X.p of an I, X.q of a C, or an integral signal"),
+    ("signal y = integral(1, init = 0)\nwhen y > 1 { y = 0 }",
+     "'y' is not a discrete variable: a when-block assigns discrete variables and reinits "
+     "states ('y' is a signal; a state takes 'reinit')"),
+    ("signal y = integral(if initial() then 1 else 0, init = 0)",
+     "initial() is a when-block's condition (true at the start of a run only)"),
+    ("signal y = integral(1, init = 0)\nsignal z = if y == 1 then 1 else 0",
+     "'==' on a quantity that varies continuously is almost never exactly true"),
+    ("signal y = integral(step(1, 2), init = 0)", "step() takes 1 argument, got 2"),
+    ("signal y = integral(square(0, 0.5), init = 0)",
+     "the period of square() must be positive"),
+])
+def test_located_errors(text, message):
+    with pytest.raises(bgc.BgcModelError) as info:
+        build("model m\n" + text + "\n")
+    assert message in str(info.value)
+    assert str(info.value).startswith("inline.bg:")
+
+
+def test_events_inside_a_component_take_its_paths(tmp_path):
+    text = """model c
+component lagc(tau = 0.5, t0 = 1.0) {
+  signal x = integral(-x/tau + step(t0), init = 0)
+  discrete n = 0
+  when x > 0.2 { n = 1 }
+  signal y = n
+}
+a : lagc(tau = 0.5)
+scene run { time 0 .. 3 every 0.5; outputs a.x, a.y; solver dopri5(rtol = 1e-12, atol = 1e-14) }
+"""
+    log = tmp_path / "events.csv"
+    csv_text = run_csv(build(text, "run"), BACKENDS[0], events=str(log))
+    rows = events_of(log)
+    assert [r[1:] for r in rows] == [["step: t >= a.t0", "0 -> 1"], ["a.x > 0.2", "0 -> 1"],
+                                     ["a.n", "0 -> 1"]]
+    t_cross = 1 - 0.5 * math.log(1 - 0.2 / 0.5)  # 0.5 (1 - exp(-(t - 1) / 0.5)) = 0.2
+    assert abs(float(rows[1][0]) - t_cross) <= 1e-10 * t_cross
+    _, y = table(csv_text)
+    assert list(y[:, 2]) == [0, 0, 0, 1, 1, 1, 1]
+
+
+def test_reports_show_the_events():
+    from bgc.report import check_report, equations_text
+    compiled = build(LAG, "run")
+    report = check_report(compiled)
+    assert "events:\n  pulse: t >= t0  (time event at t = t0)\n" \
+           "  pulse: t >= t0 + width  (time event at t = t0 + width)" in report
+    text = equations_text(build(BALL.replace("outputs x, b.p", "outputs x"), "drop"))
+    assert "d(x)/dt = b.p/m" in text
+    eq = equations_text(build("""model m
+parameter a = 1
+signal x = integral(if x < 1 then a elif x < 2 then 2*a else 0, init = 0)
+scene s { time 0 .. 1; outputs x }
+""", "s"))
+    assert "d(x)/dt = (if x < 1 then a elif x < 2 then 2*a else 0)" in eq
+
+
+def test_an_fmu_refuses_events_for_now():
+    from bgc import fmu
+    with pytest.raises(fmu.FmuError, match="has events"):
+        fmu.describe(build(LAG, "run"))
