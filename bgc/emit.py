@@ -286,7 +286,8 @@ def emit_python(program: Program, chunk_ops: int = ir.CHUNK_OPS) -> dict[str, st
     for label, printer in (("fast", fast), ("ieee", ieee)):
         writer = _Writer(program, ws, printer, "python")
         variants[label] = {
-            "model": {name: _function_context(writer, name, "out") for name in MODEL_FUNCTIONS},
+            "model": {name: _function_context(writer, name, "out")
+                      for name in _model_functions(program)},
             "plain": {name: _plain_lines(writer, name, "out") for name in PLAIN_FUNCTIONS},
             "consts": _plain_lines(writer, "consts", "out"),
             "init": _plain_lines(writer, "init", "out"),
@@ -304,7 +305,8 @@ def emit_python(program: Program, chunk_ops: int = ir.CHUNK_OPS) -> dict[str, st
 
 
 def _model_functions(program: Program) -> tuple[str, ...]:
-    """rhs, outputs, jvp, then the program's extra functions (C only: an FMU's outputs_jvp)."""
+    """rhs, outputs, jvp, then the program's extra functions (bgc.lower.with_tangent: an FMU's
+    outputs_jvp; bgc.operating's, in the Python module)."""
     return MODEL_FUNCTIONS + tuple(k for k in program.functions if k not in ir.FUNCTION_NAMES)
 
 
