@@ -18,31 +18,12 @@ from bgc.cli import main
 ROOT = Path(__file__).resolve().parent.parent
 PENDULUM = str(ROOT / "models" / "pendulum.bg")
 
-MSD = """\
-model msd "mass, spring and damper driven by a force"
-parameter m = 2.0
-parameter k = 50.0
-parameter c = 3.0
-parameter F = 0.0
-v : 1
-mass : I(m) init p = 0.4
-spring : C(1/k)
-damper : R(c)
-force : Se(F)
-force -> v
-v -> mass
-v -> spring
-v -> damper
-scene motion { outputs spring.q, v.f; time 0 .. 1 every 0.1 }
-"""
 M, K, CD = 2.0, 50.0, 3.0
 
 
 @pytest.fixture
-def msd(tmp_path):
-    path = tmp_path / "msd.bg"
-    path.write_text(MSD, encoding="utf-8")
-    return str(path)
+def msd():
+    return str(ROOT / "tests" / "models" / "msd.bg")
 
 
 def cli(*args):

@@ -14,33 +14,7 @@ from bgc.cli import main
 ROOT = Path(__file__).resolve().parent.parent
 PENDULUM = str(ROOT / "models" / "pendulum.bg")
 
-TANKS = """\
-model tanks "two tanks in series fed by a pump, draining through valves"
-parameter Q = 0.002
-parameter A1 = 0.5
-parameter A2 = 0.3
-parameter rho_g = 9810.0
-parameter k1 = 2e-5
-parameter k2 = 3e-5
-pump : Sf(Q)
-top : 0
-low : 0
-tank1 : C(A1/rho_g) init q = 0.05
-tank2 : C(A2/rho_g) init q = 0.01
-pipe : 1
-valve1 : R(f = k1*sign(e)*sqrt(abs(e)))
-valve2 : R(f = k2*sign(e)*sqrt(abs(e)))
-pump -> top
-top -> tank1
-top -> pipe
-pipe -> valve1
-pipe -> low
-low -> tank2
-low -> valve2
-signal h1 = tank1.q/A1
-signal h2 = tank2.q/A2
-scene fill { outputs h1, h2; time 0 .. 2000 every 10 }
-"""
+TANKS = str(ROOT / "tests" / "models" / "two_tanks.bg")
 
 FALLING = """\
 model falling "a mass under a constant force"
@@ -75,7 +49,7 @@ def tank_levels(Q=0.002, rho_g=9810.0, k1=2e-5, k2=3e-5):
 
 
 def test_two_tanks_reach_their_closed_form_levels(tmp_path):
-    model = write(tmp_path, "tanks.bg", TANKS)
+    model = TANKS
     out = tmp_path / "eq.json"
     result = cli("steady", model, "--scene", "fill", "--json", str(out))
     assert result.exit_code == 0, result.output
@@ -89,7 +63,7 @@ def test_two_tanks_reach_their_closed_form_levels(tmp_path):
 
 
 def test_parameters_move_the_equilibrium(tmp_path):
-    model = write(tmp_path, "tanks.bg", TANKS)
+    model = TANKS
     eq = bgc.steady(model, params={"Q": 0.001, "k2": 4e-5})
     h1, h2 = tank_levels(Q=0.001, k2=4e-5)
     states = dict(eq.states)
@@ -125,6 +99,6 @@ def test_a_free_mass_rests_where_it_is(tmp_path):
 
 
 def test_errors(tmp_path):
-    model = write(tmp_path, "tanks.bg", TANKS)
+    model = TANKS
     assert cli("steady", model, "-p", "nope=1").exit_code == 2
     assert cli("steady", model, "--scene", "nope").exit_code == 2
