@@ -206,3 +206,20 @@ def test_model_error_is_located(tmp_path):
     assert result.exit_code == 1
     assert f"{bad}:2:" in result.output and "error:" in result.output
     assert not out.exists()
+
+
+def test_an_input_reaches_the_parameters_computed_from_it(tmp_path):
+    """c = 2 zeta sqrt(k m): with zeta the input, B = d(dp/dt)/d zeta = -2 sqrt(k m) p/m."""
+    path = tmp_path / "damped.bg"
+    path.write_text("model damped; parameter m = 2.0; parameter k = 50.0; parameter zeta = 0.1\n"
+                    "parameter c = 2*zeta*sqrt(k*m); v : 1; mass : I(m) init p = 0.4\n"
+                    "spring : C(1/k); damper : R(c); v -> mass; v -> spring; v -> damper\n",
+                    encoding="utf-8")
+    lin = bgc.linearize(str(path), inputs=["zeta"], outputs=["v.f"])
+    ip = lin.states.index("mass.p")
+    expected = np.zeros(2)
+    expected[ip] = -2 * math.sqrt(K * M) * 0.4 / M
+    assert np.allclose(lin.B[:, 0], expected, rtol=1e-14, atol=0)
+    assert np.array_equal(lin.D, [[0.0]])
+    # overridden, c no longer follows zeta
+    assert not np.any(bgc.linearize(str(path), inputs=["zeta"], params={"c": 1.0}).B)
