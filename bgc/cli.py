@@ -1031,7 +1031,7 @@ def _analysis_params(model, scene, params, analysed, outputs=None, effects=None)
               help="The inputs: parameters, each taken as a signal held at its value (the "
                    "model declares no inputs yet).  [default: none; B and D have no columns]")
 @click.option("-p", "params", multiple=True, metavar="NAME=VALUE", help="Parameter override.")
-@click.option("-o", "output", default=None, callback=_matrices_file,
+@click.option("-o", "output", default=None, callback=_matrices_file, metavar="FILE",
               help="Write the matrices, eigenvalues and the point to FILE.json, .npz or .csv.")
 @click.option("--bode", "bode_file", default=None, metavar="FILE.png", callback=_plot_file,
               help="Draw the Bode plot of every input-output pair into FILE (.png, .svg or "

@@ -103,6 +103,15 @@ def test_pendulum_bottom_equilibrium_in_independent_coordinates():
     assert lin.states == ("mx.p", "x")  # y and my.p follow from the rod
 
 
+def test_pendulum_balanced_at_the_top():
+    """Started near the top, the nearest equilibrium is the inverted one: +-sqrt(g/l), real."""
+    lin = bgc.linearize(PENDULUM, scene="swing", at="steady", params={"theta0": 3.0})
+    assert dict(lin.point)["y"] == pytest.approx(-1.0, abs=1e-12)
+    w = math.sqrt(9.81)
+    assert np.allclose(lin.eigenvalues, [-w, w], atol=1e-9)
+    assert np.allclose(lin.corrector_eigenvalues, [-5, -5], atol=1e-6)  # a double root
+
+
 def test_pendulum_started_at_the_bottom_other_parameters(tmp_path):
     out = tmp_path / "p.json"
     result = cli("linearize", PENDULUM, "--scene", "swing", "-p", "theta0=0", "-p", "l=2",
