@@ -10,12 +10,16 @@ served here and never written over a submodule: no module of bgc has an API func
 """
 __version__ = "0.1.0"
 __all__ = ["BgcArgumentError", "BgcModelError", "Compiled", "SimulationFailed", "build", "check",
-           "compile", "equations", "load", "simulate", "sweep"]
+           "compile", "equations", "linearize", "load", "simulate", "steady", "sweep"]
 
 
 def __getattr__(name):
     if name == "load":
         from .model import load as value
+    elif name == "linearize":
+        from .linear import linearize as value
+    elif name == "steady":
+        from .equilibrium import steady as value
     elif name in __all__:
         from . import api
         value = getattr(api, name)

@@ -1,4 +1,4 @@
-"""The command line: `bgc check|equations|compile|simulate|accuracy|sweep`.  The only module that uses click
+"""The command line: `bgc check|equations|compile|simulate|accuracy|sweep|linearize|steady`.  The only module that uses click
 and the only one that writes files.  Model errors exit 1 with a located report, usage errors 2."""
 from __future__ import annotations
 
@@ -1003,6 +1003,123 @@ def draw(model, scene, outputs, effects, output):
         click.echo(f"error: {error}", err=True)
         sys.exit(1)
     _write_atomic(output, data)
+
+
+# ---------------------------------------------------------------- analyses
+
+
+analysis, linear, equilibria = _Later(".operating"), _Later(".linear"), _Later(".equilibrium")
+
+
+def _analysed(call, *args):
+    """call(*args) of an analysis: the model's errors as _or_exit says them, an argument the
+    analysis refuses a usage error (exit 2), an analysis that cannot be done one line, exit 1."""
+    try:
+        return _or_exit(call, *args)
+    except analysis.AnalysisArgumentError as error:
+        raise click.UsageError(str(error)) from None
+    except analysis.AnalysisError as error:
+        _fail(str(error))
+
+
+def _at(ctx, param, value):
+    """--at: t=TIME or steady, checked before any work."""
+    try:
+        linear.parse_at(value)
+    except ValueError as error:
+        raise click.BadParameter(str(error), ctx, param) from None
+    return value
+
+
+def _matrices_file(ctx, param, value):
+    """-o of linearize: FILE.json, .npz or .csv where a file can be written."""
+    if value is not None:
+        try:
+            linear.check_format(value)
+        except ValueError as error:
+            raise click.BadParameter(str(error), ctx, param) from None
+    return _output_file(ctx, param, value)
+
+
+def _names(value) -> tuple:
+    return tuple(v.strip() for v in value.split(",") if v.strip()) if value else ()
+
+
+def _analysis_params(model, scene, params, analysed, outputs=None, effects=None) -> dict:
+    """-p items checked against the analysis program's parameters and the model's laws."""
+    given = _parse_params(params, sorted(p.name for p in analysed.compiled.program.params))
+    if given:
+        _or_exit(api.check_parameters, model, scene, given, outputs, effects,
+                 ("--outputs", "--effects"))
+    return given
+
+
+@main.command()
+@MODEL
+@SCENE
+@ADHOC
+@click.option("--at", default=None, metavar="t=TIME|steady", callback=_at,
+              help="The operating point: the state of the scene's run at TIME, or an "
+                   "equilibrium (bgc steady).  [default: the initial state]")
+@click.option("--inputs", default=None, metavar="U1,U2,..",
+              help="The inputs: parameters, each taken as a signal held at its value (the "
+                   "model declares no inputs yet).  [default: none; B and D have no columns]")
+@click.option("-p", "params", multiple=True, metavar="NAME=VALUE", help="Parameter override.")
+@click.option("-o", "output", default=None, callback=_matrices_file, metavar="FILE",
+              help="Write the matrices, eigenvalues and the point to FILE.json, .npz or .csv.")
+@click.option("--bode", "bode_file", default=None, metavar="FILE.png", callback=_plot_file,
+              help="Draw the Bode plot of every input-output pair into FILE (.png, .svg or "
+                   ".pdf; needs matplotlib: pip install 'bgc[plot]').")
+def linearize(model, scene, outputs, effects, at, inputs, params, output, bode_file):
+    """Linearise: A, B, C, D from the Jacobians the compiler derives; constrained models in
+    independent coordinates, the correctors' artificial modes apart.  Prints the eigenvalues
+    with their natural frequencies and damping ratios."""
+    _not_an_input(model, output, bode_file)
+    names = _names(inputs)
+    if bode_file and not names:
+        raise click.UsageError("--bode needs an input: name one with --inputs (a parameter)")
+    analysed = _analysed(analysis.build, model, scene, outputs, effects, names)
+    _warn(analysed.compiled)
+    given = _analysis_params(model, scene, params, analysed, outputs, effects)
+    evaluator = _analysed(analysis.Evaluator, analysed, given)
+    point = _analysed(linear.operating_point, evaluator, at,
+                      lambda T: linear.run_to(evaluator, given, T))
+    result = _analysed(linear.linearization, evaluator, *point)
+    if output:
+        _write_atomic(output, linear.render(result, linear.check_format(output)))
+    if bode_file:
+        from . import plot
+        with outfile.Partial(bode_file) as part:
+            try:
+                linear.bode(result, part.file, plot.check_format(bode_file))
+            except OSError as error:
+                _fail(str(part.failed(error)))
+            part.commit()
+    _echo(linear.modes_table(result))
+
+
+@main.command()
+@MODEL
+@SCENE
+@click.option("-p", "params", multiple=True, metavar="NAME=VALUE", help="Parameter override.")
+@click.option("--json", "json_file", default=None, callback=_output_file, metavar="FILE",
+              help="Also write the equilibrium to FILE as JSON.")
+def steady(model, scene, params, json_file):
+    """An equilibrium by Newton's method on the right side, with the exact Jacobian: one
+    line per state, multiplier and constraint residual, then the residual max |dx/dt|; no
+    equilibrium found: exit 1 and why."""
+    _not_an_input(model, json_file)
+    analysed = _analysed(analysis.build, model, scene)
+    _warn(analysed.compiled)
+    given = _analysis_params(model, scene, params, analysed)
+    found = _analysed(equilibria.solve, _analysed(analysis.Evaluator, analysed, given))
+    if found.free:
+        click.echo(f"note: the Jacobian is singular ({found.free} free direction"
+                   f"{'s' if found.free > 1 else ''}): the equilibria form a family; this is "
+                   "the one nearest the initial state", err=True)
+    if json_file:
+        _write_atomic(json_file, linear.json_lines(found.as_dict()))
+    _echo(found.lines())
 
 
 if __name__ == "__main__":  # pragma: no cover

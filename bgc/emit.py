@@ -287,7 +287,7 @@ def emit_python(program: Program, chunk_ops: int = ir.CHUNK_OPS) -> dict[str, st
         writer = _Writer(program, ws, printer, "python")
         variants[label] = {
             "model": {name: _function_context(writer, name, "out")
-                      for name in _model_functions(program, c=False)},
+                      for name in _model_functions(program)},
             "plain": {name: _plain_lines(writer, name, "out") for name in PLAIN_FUNCTIONS},
             "consts": _plain_lines(writer, "consts", "out"),
             "init": _plain_lines(writer, "init", "out"),
@@ -304,12 +304,13 @@ def emit_python(program: Program, chunk_ops: int = ir.CHUNK_OPS) -> dict[str, st
     return {f"{context['ident']}.py": _render("python_module.py.j2", context)}
 
 
-def _model_functions(program: Program, c: bool = True) -> tuple[str, ...]:
+def _model_functions(program: Program) -> tuple[str, ...]:
     """rhs, outputs, jvp, the event functions of a program with events, then the program's
-    extra functions (C only: an FMU's outputs_jvp)."""
+    extra functions (bgc.lower.with_tangent: an FMU's outputs_jvp; bgc.operating's, in the
+    Python module)."""
     out = MODEL_FUNCTIONS + (ir.EVENT_FUNCTIONS if program.events is not None else ())
-    return out + (tuple(k for k in program.functions if k not in ir.FUNCTION_NAMES
-                        and k not in ir.EVENT_FUNCTIONS) if c else ())
+    return out + tuple(k for k in program.functions if k not in ir.FUNCTION_NAMES
+                       and k not in ir.EVENT_FUNCTIONS)
 
 
 # ---------------------------------------------------------------- literals and names

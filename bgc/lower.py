@@ -440,13 +440,16 @@ def _ordered(functions: dict) -> dict:
     return {k: functions[k] for k in sorted(functions, key=lambda k: rank.get(k, len(rank)))}
 
 
-def with_tangent(program: Program, of: str, name: str) -> Program:
+def with_tangent(program: Program, of: str, name: str, seeds: dict | None = None) -> Program:
     """program with one more function, `name`: the derivative of function `of` along v (the
-    FMU's outputs_jvp), derived, pruned and simplified by the passes of every function."""
+    FMU's outputs_jvp), derived, pruned and simplified by the passes of every function.
+    seeds: the tangents of the symbols (default: x along v; bgc.operating seeds a parameter
+    and the constants computed from it)."""
     f = program.function(of)
     fresh = 1 + max((int(w.name[1:]) for s in f.body for w in _defined_all(s)), default=-1)
-    g, count = tangent(f, name, {X[i]: V[i] for i in range(len(program.states))},
-                       program.blocks, fresh)
+    if seeds is None:
+        seeds = {X[i]: V[i] for i in range(len(program.states))}
+    g, count = tangent(f, name, seeds, program.blocks, fresh)
     g, _ = common_subexpressions(Function(name, g.args, g.size, ir.prune(g.body)), count)
     return replace(program, functions={**program.functions, name: _propagate_copies(g)})
 

@@ -1,0 +1,191 @@
+"""A compiled model evaluated at one operating point, for the analyses (bgc.linearize,
+bgc.steady): the right side, its Jacobian, the outputs and their derivative, the derivatives
+with respect to the inputs, and the constraint rows' Jacobians, all computed by the generated
+Python module from the derivatives the compiler derives symbolically (bgc.tangent), never by
+finite differences.
+
+The analysis program is the scene's with every state kept (a state that no output needs is
+not pruned: A is the model's, whatever the outputs) and, after the outputs asked for, every
+state as an output (so that a run to a time T gives the state there) and every constraint's
+multiplier.  Its extra functions (bgc.lower.with_tangent) are the outputs' derivative along
+v (`outputs_jvp`) and, for each input, the right side's and the outputs' derivative with
+respect to it.
+
+Inputs: until the language declares inputs, an input is a parameter.  Its value is held at
+the parameter's value and the derivative is taken through everything computed from it (the
+parameters defined from it, unless overridden, and the constants of the generated code).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from . import api, backends
+from .differentiate import directional
+from .emit import emit_python
+from .ir import C, P, Assign, Store, substitute
+from .lower import with_tangent
+
+
+class AnalysisError(Exception):
+    """The analysis cannot be done at this point (the message says why, for people)."""
+
+
+class AnalysisArgumentError(AnalysisError, ValueError):
+    """An argument the model refuses (an input that is not a parameter): a usage error."""
+
+
+@dataclass(frozen=True)
+class Analysed:
+    """The compiled model of an analysis and what the user asked of it."""
+
+    compiled: api.Compiled  # the analysis program (every state kept)
+    outputs: tuple[str, ...]  # the output columns asked for (the first of the program's)
+    inputs: tuple[str, ...]  # parameter names
+    multipliers: tuple[str, ...]  # the multiplier columns of the program's outputs
+    residuals: tuple[str, ...]  # the constraint residual columns
+
+
+def _scene_outputs(model, scene, outputs, effects):
+    """The output columns of the scene (or of --outputs), the states, and the multipliers and
+    residuals of its constraints: one build to find them."""
+    first = api.build(model, scene, outputs=outputs, effects=effects,
+                      option_names=("--outputs", "--effects", "--scene"))
+    asked = first.program.outputs
+    states = tuple(first.program.states) + tuple(first.reduced.pruned)
+    junctions = [c.junction for c in first.reduced.constraints]
+    return first, asked, states, tuple(f"{j}.lambda" for j in junctions), \
+        tuple(f"{j}.residual" for j in junctions)
+
+
+def build(model, scene=None, outputs=None, effects=None, inputs=()) -> Analysed:
+    """The analysis program of model's scene (see the module's doc); raises api's errors."""
+    first, asked, states, lambdas, residuals = _scene_outputs(model, scene, outputs, effects)
+    extra = [s for s in states + lambdas + residuals if s not in asked]
+    names = ", ".join(list(asked) + extra) if asked or extra else None
+    compiled = api.build(first.source, scene, outputs=names, effects=effects,
+                         option_names=("--outputs", "--effects", "--scene"))
+    params = [p.name for p in compiled.program.params]
+    for u in inputs:
+        if u not in params:
+            raise AnalysisArgumentError(
+                f"unknown input '{u}': the model declares no inputs yet, and an input must be "
+                f"one of its parameters ({', '.join(params) or 'it has none'})")
+    if len(set(inputs)) != len(inputs):
+        raise AnalysisArgumentError("an input is named twice")
+    outs = compiled.program.outputs
+    return Analysed(compiled, tuple(asked), tuple(inputs),
+                    tuple(o for o in outs if o.split("[")[0] in lambdas),
+                    tuple(o for o in outs if o.split("[")[0] in residuals))
+
+
+def parameter_seeds(program, j: int, given=()) -> dict:
+    """The tangents of the parameters and of the generated code's constants with respect to
+    parameter j: 1 for p[j], the derivative of each parameter defined from it (unless
+    overridden: `given` names those) and of each constant computed from them."""
+    dp = {P[j]: 1}
+    for i, par in enumerate(program.params):
+        if i > j and par.name not in given:
+            d = directional(par.default, dp)
+            if d != 0:
+                dp[P[i]] = d
+    seeds, env = dict(dp), {}
+    for s in program.function("consts").body:
+        if isinstance(s, Assign):
+            env[s.target] = substitute(s.expr, env)
+        elif isinstance(s, Store):
+            d = directional(substitute(s.expr, env), dp)
+            if d != 0:
+                seeds[C[s.index]] = d
+    return seeds
+
+
+class Evaluator:
+    """The analysis program's generated Python module, at given parameter values."""
+
+    def __init__(self, analysed: Analysed, params: dict | None = None):
+        params = dict(params or {})
+        program = analysed.compiled.program
+        prog = with_tangent(program, "outputs", "outputs_jvp")
+        index = {p.name: k for k, p in enumerate(program.params)}
+        for k, u in enumerate(analysed.inputs):
+            seeds = parameter_seeds(program, index[u], params)
+            prog = with_tangent(prog, "rhs", f"rhs_du{k}", seeds)
+            prog = with_tangent(prog, "outputs", f"outputs_du{k}", seeds)
+        (text,) = emit_python(prog).values()
+        self.module = m = backends.load_python_module(text)
+        self.analysed = analysed
+        self.states = tuple(program.states)
+        self.all_outputs = tuple(program.outputs)
+        self.n = len(self.states)
+        self.constraints = tuple(program.constraints)
+        self.p = m._param_values(m._overrides(params))
+        self.pc = m._with_constants(self.p)
+        self.t0 = float(m.SCENE["t0"])
+
+    def _call(self, function, t, x, size, v=None):
+        m = self.module
+        try:
+            out = m._public(function, t, x, self.p, size,
+                            *(() if v is None else (list(v),)))
+        except m.BlockError as error:
+            raise AnalysisError(f"at t = {t:.17g}: {error}") from None
+        return np.asarray(out, dtype=float)
+
+    def initial(self) -> np.ndarray:
+        """The scene's initial state (its constraints checked, as a run checks them)."""
+        m = self.module
+        try:
+            return np.asarray(m._initial_state(m._settings(), self.pc, False), dtype=float)
+        except (m.ConstraintError, m.SimulationError) as error:
+            raise AnalysisError(str(error)) from None
+
+    def rhs(self, t, x) -> np.ndarray:
+        return self._call(self.module._rhs, t, x, self.n)
+
+    def jacobian(self, t, x) -> np.ndarray:
+        m = self.module
+        try:
+            return m.jacobian(t, x, self.p)
+        except m.BlockError as error:
+            raise AnalysisError(f"at t = {t:.17g}: {error}") from None
+
+    def outputs(self, t, x) -> np.ndarray:
+        return self._call(self.module._out, t, x, len(self.all_outputs))
+
+    def output_jacobian(self, t, x) -> np.ndarray:
+        """d outputs / d x, column by column (the outputs' derivative along each unit vector)."""
+        cols = []
+        for j in range(self.n):
+            e = np.zeros(self.n)
+            e[j] = 1.0
+            cols.append(self._call(self.module._outputs_jvp, t, x, len(self.all_outputs), e))
+        return np.array(cols).T.reshape(len(self.all_outputs), self.n)
+
+    def input_jacobians(self, t, x) -> tuple[np.ndarray, np.ndarray]:
+        """(d rhs / d u, d outputs / d u), one column per input."""
+        k = len(self.analysed.inputs)
+        B, D = np.zeros((self.n, k)), np.zeros((len(self.all_outputs), k))
+        zero = np.zeros(self.n)
+        for j in range(k):
+            B[:, j] = self._call(getattr(self.module, f"_rhs_du{j}"), t, x, self.n, zero)
+            D[:, j] = self._call(getattr(self.module, f"_outputs_du{j}"), t, x,
+                                 len(self.all_outputs), zero)
+        return B, D
+
+    def constraint_rows(self, t, x) -> tuple[np.ndarray, np.ndarray]:
+        """(G, r): the Jacobian of the constraint rows (position rows, then velocity rows) and
+        their residuals in the same order."""
+        m, n = self.module, self.n
+        xs = [float(v) for v in x]
+        pos = np.asarray(m._position_jac(t, xs, self.pc)).reshape(-1, n)
+        vel = np.asarray(m._velocity_jac(t, xs, self.pc)).reshape(-1, n)
+        r = np.asarray(m._residual(t, xs, self.pc), dtype=float)
+        order = list(m._POSITION_ROWS) + list(m._VELOCITY_ROWS)
+        return np.vstack([pos, vel]).reshape(len(order), n), r[order]
+
+    def constraint_names(self) -> list[str]:
+        rows = [c for c in self.constraints if c.level == "position"] + \
+            [c for c in self.constraints if c.level == "velocity"]
+        return [f"{c.junction} ({c.level})" for c in rows]

@@ -1,0 +1,104 @@
+"""`bgc steady` and bgc.steady: equilibria against closed forms (two tanks in series, the
+pendulum's bottom), a family of equilibria (a free mass), and a model without one."""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+from click.testing import CliRunner
+
+import bgc
+from bgc.cli import main
+
+ROOT = Path(__file__).resolve().parent.parent
+PENDULUM = str(ROOT / "models" / "pendulum.bg")
+
+TANKS = str(ROOT / "tests" / "models" / "two_tanks.bg")
+
+FALLING = """\
+model falling "a mass under a constant force"
+parameter m = 2.0
+parameter F = 3.0
+v : 1
+mass : I(m)
+push : Se(F)
+push -> v
+v -> mass
+signal x = integral(v.f, init = 0.5)
+"""
+
+
+def cli(*args):
+    result = CliRunner().invoke(main, list(args))
+    assert "Traceback" not in result.output
+    return result
+
+
+def write(tmp_path, name, text):
+    path = tmp_path / name
+    path.write_text(text, encoding="utf-8")
+    return str(path)
+
+
+def tank_levels(Q=0.002, rho_g=9810.0, k1=2e-5, k2=3e-5):
+    """At rest the pump's flow goes through both valves: Q = k2 sqrt(p2) = k1 sqrt(p1 - p2)."""
+    p2 = (Q / k2) ** 2
+    p1 = p2 + (Q / k1) ** 2
+    return p1 / rho_g, p2 / rho_g
+
+
+def test_two_tanks_reach_their_closed_form_levels(tmp_path):
+    model = TANKS
+    out = tmp_path / "eq.json"
+    result = cli("steady", model, "--scene", "fill", "--json", str(out))
+    assert result.exit_code == 0, result.output
+    values = dict(line.split(" = ") for line in result.output.splitlines())
+    h1, h2 = tank_levels()
+    assert float(values["tank1.q"]) / 0.5 == pytest.approx(h1, rel=1e-12)
+    assert float(values["tank2.q"]) / 0.3 == pytest.approx(h2, rel=1e-12)
+    assert float(values["residual"]) <= 1e-15
+    d = json.loads(out.read_text())
+    assert d["states"]["tank1.q"] == float(values["tank1.q"])
+
+
+def test_parameters_move_the_equilibrium(tmp_path):
+    model = TANKS
+    eq = bgc.steady(model, params={"Q": 0.001, "k2": 4e-5})
+    h1, h2 = tank_levels(Q=0.001, k2=4e-5)
+    states = dict(eq.states)
+    assert states["tank1.q"] / 0.5 == pytest.approx(h1, rel=1e-12)
+    assert states["tank2.q"] / 0.3 == pytest.approx(h2, rel=1e-12)
+
+
+def test_pendulum_hangs_with_its_multiplier():
+    eq = bgc.steady(PENDULUM, scene="swing")
+    s = dict(eq.states)
+    m, g, l = 1.0, 9.81, 1.0
+    assert s["x"] == pytest.approx(0, abs=1e-12) and s["y"] == pytest.approx(l, abs=1e-12)
+    # at rest the rod carries the weight: 2 y lambda = m g (the MTF's modulus is 2y)
+    assert dict(eq.multipliers)["rod.lambda"] == pytest.approx(m * g / (2 * l), rel=1e-12)
+    assert abs(dict(eq.constraint_residuals)["rod.residual"]) <= 1e-12
+
+
+def test_no_equilibrium_is_said(tmp_path):
+    model = write(tmp_path, "falling.bg", FALLING)
+    out = tmp_path / "eq.json"
+    result = cli("steady", model, "--json", str(out))
+    assert result.exit_code == 1
+    assert "no equilibrium" in result.output and "mass.p" in result.output
+    assert not out.exists()
+
+
+def test_a_free_mass_rests_where_it_is(tmp_path):
+    model = write(tmp_path, "falling.bg", FALLING)
+    result = cli("steady", model, "-p", "F=0")
+    assert result.exit_code == 0, result.output
+    assert "x = 0.5\n" in result.output  # the nearest of the family: the initial position
+    assert "family" in result.output
+
+
+def test_errors(tmp_path):
+    model = TANKS
+    assert cli("steady", model, "-p", "nope=1").exit_code == 2
+    assert cli("steady", model, "--scene", "nope").exit_code == 2
