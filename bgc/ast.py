@@ -135,10 +135,11 @@ class Corrector:
 
 @dataclass(frozen=True)
 class ConstraintSpec:
-    kind: Ident | None  # holonomic | nonholonomic | None (detect)
+    kind: Ident | None  # holonomic | nonholonomic | unilateral | None (detect)
     annotation: tuple | None  # ("init" | "phi", expr, span)
     corrector: Corrector | None
     span: Span
+    restitution: object = None  # unilateral: restitution(E)
 
 
 @dataclass(frozen=True)

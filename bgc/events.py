@@ -74,9 +74,11 @@ class Square:
 class Discrete:
     name: str
     symbol: sp.Symbol
-    init: sp.Expr  # parameters only
+    init: sp.Expr  # parameters only (a mode's: the states too)
     doc: str | None
     span: Span
+    next: sp.Expr | None = None  # a mode (bgc.contact): its value after each pass of the
+    #                              event iteration, from the relations' values then
 
 
 @dataclass(frozen=True)
@@ -128,7 +130,8 @@ class EventTable:
 # ---------------------------------------------------------------- the scene's events
 
 
-FIRST = sp.Symbol("first#")  # update's r[n]: 1 in the event iteration at the start of a run
+FIRST = sp.Symbol("first#")
+TOLERANCE = sp.Symbol("atol#")  # the run's absolute tolerance: a switch's dead band  # update's r[n]: 1 in the event iteration at the start of a run
 
 
 def new_value(k: int) -> sp.Symbol:
@@ -158,6 +161,7 @@ class Selected:
         discrete relations' sides, the when-blocks' right sides."""
         out = [(r.indicator, r.span) for r in self.state + self.discrete]
         out += [(a.expr, a.span) for w in self.whens for a in w.actions]
+        out += [(d.init, d.span) for d in self.discretes if d.next is not None]
         return out
 
     def slots(self) -> list:
@@ -179,6 +183,9 @@ def select(graph_events, used: set, states: dict, params: set) -> Selected:
         for r in relations:  # what a relation reads is read too (a discrete variable)
             if r.symbol in used:
                 used |= r.relation.free_symbols
+        for d in discretes:  # and what a mode's next value reads
+            if d.symbol in used and d.next is not None:
+                used |= d.next.free_symbols | d.init.free_symbols
         more = [w for w in whens if w not in kept and any(
             a.symbol in states if a.kind == "reinit" else a.symbol in used for a in w.actions)]
         if not more:
@@ -280,7 +287,8 @@ def update_stores(sel: Selected, states) -> tuple[list, list]:
         from .ir import SquareWave
         out.append(SquareWave(TIME, s.period, s.duty, s.t0))
     for d in sel.discretes:
-        start = sp.Piecewise((d.init, FIRST), (d.symbol, True))
+        start = sp.Piecewise((d.init, FIRST), (d.symbol if d.next is None else
+                                               d.next.xreplace(new), True))
         out.append(sp.Piecewise(*values[d.symbol], (start, True)) if d.symbol in values
                    else start)
     return out
@@ -306,7 +314,7 @@ def leaves(graph_events) -> set:
     discrete variables (the equations treat them as parameters)."""
     relations, squares, discretes, _ = graph_events
     return {r.symbol for r in relations} | {s.symbol for s in squares} | \
-        {d.symbol for d in discretes} | {INITIAL}
+        {d.symbol for d in discretes} | {INITIAL, TOLERANCE}
 
 
 def check(sel: Selected | None, es) -> None:

@@ -55,6 +55,7 @@ class Constraint:
     gains: tuple[Expr, ...]
     corrector_span: Span | None
     span: Span
+    restitution: Expr | None = None  # unilateral (docs/hybrid.md): E of Newton's impact law
 
 
 @dataclass(frozen=True)

@@ -10,6 +10,7 @@ A Program is a few functions, each a list of statements over these symbols:
   d[k]         IndexedBase("d")[k]    discrete value k (bgc.events): a relation's frozen value
                                       (0 or 1), a square wave's, a discrete variable's; set
                                       only at events, read by every function
+  atol         Symbol("atol")         the run's absolute tolerance (the workspace's)
   r[k]         IndexedBase("r")[k]    `update`'s input: the new value of state relation k
                                       (from the located crossing), r[n] 1 at the run's start
   w0, w1, ...  Symbol("w<k>")         program variables, each assigned once
@@ -56,6 +57,7 @@ C = sp.IndexedBase("c")
 V = sp.IndexedBase("v")
 D = sp.IndexedBase("d")
 R = sp.IndexedBase("r")
+ATOL = sp.Symbol("atol")  # the run's absolute tolerance (a switched element's dead band)
 
 
 class SquareWave(sp.Function):

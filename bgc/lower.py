@@ -345,6 +345,7 @@ def _event_symbols(sel) -> dict:
     for k in range(len(sel.state)):
         out[events.new_value(k)] = R[k]
     out[events.FIRST] = sp.Ne(R[len(sel.state)], 0)
+    out[events.TOLERANCE] = ir.ATOL
     return out
 
 

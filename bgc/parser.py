@@ -18,7 +18,7 @@ from .resources import (MAX_DIMENSION, MAX_NESTING, MAX_OPTION_CHARS, MAX_SOURCE
 KEYWORDS = frozenset("""model parameter signal integral init constraint holonomic nonholonomic
     corrector pid pd none phi scene effects outputs time every solver set
     library component port constant for in if elif else and or not import as unit
-    then when reinit discrete""".split())
+    then when reinit discrete unilateral restitution""".split())
 
 # Friendly names for terminals in "expected ..." messages.
 _TERMINAL_NAMES = {
@@ -153,6 +153,13 @@ class _ToAst(Transformer_NonRecursive):
         return ast.ElementDecl(name, kind, dim, tuple(args or ()), inits,
                                effects, None, _doc(rest[-1]), _span(meta), index)
 
+    def bare_element(self, meta, c):
+        """`d : D`: an element without arguments (the ideal diode)."""
+        (name, index), kind, *rest = c
+        effects = tuple(x for x in rest if isinstance(x, ast.Ident))
+        return ast.ElementDecl(name, kind, None, (), (), effects, None, _doc(rest[-1]),
+                               _span(meta), index)
+
     def junction_decl(self, meta, c):
         (name, index), kind, dim, constraint, *rest = c
         effects = tuple(x for x in rest if isinstance(x, ast.Ident))
@@ -255,7 +262,10 @@ class _ToAst(Transformer_NonRecursive):
 
     def constraint(self, meta, c):
         kind = _ident(c[0]) if c[0] is not None else None
-        return ast.ConstraintSpec(kind, c[1], c[2], _span(meta))
+        return ast.ConstraintSpec(kind, c[1], c[3], _span(meta), c[2])
+
+    def restitution(self, meta, c):
+        return c[0]
 
     def annotation(self, meta, c):
         return (str(c[0]), c[1], _span(meta))

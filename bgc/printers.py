@@ -31,7 +31,8 @@ from sympy.core.relational import Relational
 from sympy.functions.elementary.piecewise import ExprCondPair
 from sympy.logic.boolalg import And, BooleanFalse, BooleanTrue, Not, Or
 
-from bgc.ir import C, CLASSES, FUNCTIONS, D, P, R, T, V, X, SquareNext, SquareWave, as_expr
+from bgc.ir import (ATOL, C, CLASSES, FUNCTIONS, D, P, R, T, V, X, SquareNext, SquareWave,
+                    as_expr)
 _CLASSES = tuple(CLASSES.values())
 _ARITY = {"atan2": (2, 2), "Min": (2, None), "Max": (2, None), "Heaviside": (1, 2)}
 _TEMP = re.compile(r"w[0-9]+\Z")
@@ -70,7 +71,7 @@ def check_expression(expr: sp.Basic, n_states: int, n_params: int, n_consts: int
         if isinstance(e, sp.Indexed):
             _check_indexed(e, n_states, n_params, n_consts)
         elif isinstance(e, sp.Symbol):
-            if e.name != T.name and not _TEMP.match(e.name):
+            if e.name not in (T.name, ATOL.name) and not _TEMP.match(e.name):
                 raise UnsupportedExpressionError(f"unexpected symbol {e.name!r}")
         elif isinstance(e, (sp.Integer, sp.Rational, sp.Float)) or e in (sp.pi, sp.E):
             if isinstance(e, sp.Float):
@@ -149,6 +150,8 @@ class _ArithmeticPrinting:
     def _print(self, expr, **kwargs):
         if isinstance(expr, sp.Indexed):
             return self._print_index(expr.base, int(expr.indices[0]))
+        if expr == ATOL:
+            return self.ATOL
         if isinstance(expr, sp.Symbol):
             return self.names.get(expr, expr.name)
         if isinstance(expr, sp.Add):
@@ -320,6 +323,7 @@ class CPrinter(_ArithmeticPrinting, C99CodePrinter):
                       "Min": "bgc_min", "Max": "bgc_max", "Heaviside": "bgc_heaviside",
                       "SquareWave": "bgc_square", "SquareNext": "bgc_square_next"}
     LOGIC = {"and": "&&", "or": "||", "not": "!", "true": "1", "false": "0"}
+    ATOL = "w->atol"
 
     def _conditional(self, cond, then, orelse):
         return f"({cond} ? {then} : {orelse})"
@@ -371,6 +375,7 @@ class PythonPrinter(_ArithmeticPrinting, PythonCodePrinter):
         self.FUNCTION_NAMES = _PY_IEEE if ieee else _PY_FAST
 
     LOGIC = {"and": "and", "or": "or", "not": "not ", "true": "True", "false": "False"}
+    ATOL = "w.atol"
 
     def _conditional(self, cond, then, orelse):
         return f"({then} if {cond} else {orelse})"

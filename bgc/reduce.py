@@ -38,7 +38,7 @@ from .algebra import (antiderivative, expand_bounded, is_singular, is_symmetric,
                       solve_for)
 from .diagnostics import Collector, ModelError, Span, fail, warning
 from .differentiate import directional, partial
-from . import events
+from . import contact, events
 from .system import (TIME, ConstraintDef, Equation, EquationSystem, OutputDef, ParameterDef,
                      StateVar, der)
 from .graph import var, written
@@ -439,7 +439,10 @@ def _constraint(c, sys, defs, coordinates, multipliers, memo, diags) -> Constrai
                      "multiplier directly (a resistive path?): declare it as a plain junction")
     form, reason = coordinates.form(c)
     integrable = form is not None and _integrable(*form)
-    kind, detected = c.kind, c.kind is None
+    unilateral = c.kind == "unilateral"
+    switched = c.kind in contact.SWITCHED  # a one-port that is a constraint in one mode
+    kind, detected = ("holonomic" if unilateral else "nonholonomic" if switched else c.kind), \
+        c.kind is None
     if kind is None:
         kind = "holonomic" if integrable else "nonholonomic"
     if kind == "holonomic" and not integrable:
@@ -461,9 +464,13 @@ def _constraint(c, sys, defs, coordinates, multipliers, memo, diags) -> Constrai
         law = dB + gains[0] * B
     else:
         law = dB
+    if unilateral or switched:  # active: the constraint's law; else no force (bgc.contact)
+        free = c.multiplier - (c.gains[0] * contact.direction(c) if c.kind == "friction" else 0)
+        law = sp.Piecewise((law, sp.Ne(contact.active(c), 0)), (free, True))
     sys.add(Equation(c.multiplier, law, False, c.junction, c.span))
-    return ConstraintInfo(c.junction, kind, detected, c.corrector, c.gains, phi, in_states,
-                          c.multiplier, c.span, c.name_span)
+    return ConstraintInfo(c.junction, c.kind if unilateral or switched else kind, detected,
+                          c.corrector, c.gains, phi, in_states, c.multiplier, c.span,
+                          c.name_span)
 
 
 def _residual_asked(es, c) -> bool:
@@ -878,6 +885,11 @@ def reduce(es: EquationSystem, project_initial: bool = False, algebra: str = "au
     diags = Collector()
     infos = _constraints(sys, diags)
     diags.raise_if_errors()
+    if any(c.kind == "unilateral" or c.kind in contact.SWITCHED for c in infos):
+        es = contact.with_contact_events(sys, infos, _Weights(sys), _explicit_defs(sys), _leaf,
+                                         _Cycle)
+        sys.es = es
+        sys.params = sys.parameters | events.leaves(es.events)
     targets, kept = _needed(sys)
     selected = None
     if any(es.events):
@@ -986,6 +998,8 @@ def _rows(sys, infos, kept) -> list[ConstraintRow]:
     weigh = _Weights(sys)
     rows = []
     for c in infos:
+        if c.kind == "unilateral" or c.kind in contact.SWITCHED:
+            continue  # a gap, or a mode: not an equality, checked by its events (bgc.contact)
         levels = ([("position", c.phi)] if c.kind == "holonomic" else []) + \
             [("velocity", c.balance)]
         for level, expr in levels:

@@ -232,7 +232,8 @@ def check_report(compiled, summary: SceneSummary | None = None) -> str:
                          f"{pruned}")
             if k.phi is not None:
                 lines.append(f"    Phi = {_s(k.phi)}")
-            lines.append(f"    {'dPhi/dt' if k.kind == 'holonomic' else 'Phi'} = {_s(k.balance)}")
+            level = "dPhi/dt" if k.kind in ("holonomic", "unilateral") else "Phi"
+            lines.append(f"    {level} = {_s(k.balance)}")
     lines.append(f"warnings: {len(r.warnings)}")
     return "\n".join(lines) + "\n"
 

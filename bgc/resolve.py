@@ -619,6 +619,8 @@ def _check_constant(value, span):
 
 def _fields_of(decl: ast.ElementDecl) -> tuple[str, ...]:
     k = decl.kind.name
+    if k in SWITCHED:
+        return FIELDS_ONE_PORT
     if k == "0":
         base = ("e",)
     elif k == "1":
@@ -700,6 +702,8 @@ def _element(d: ast.ElementDecl, scope: _Scope, diags: Collector) -> Element | N
         constraint = _constraint(d, scope) if d.constraint is not None else None
         return Element(d.name.name, kname, None, None, None, tuple(e.name for e in d.effects),
                        constraint, d.doc, d.span, d.name.span, dim)
+    if kname in SWITCHED:
+        return _switched(d, scope, diags)
     if kname not in KINDS:
         if kname.isdigit():
             fail(d.kind.span, f"unknown junction kind '{kname}': junctions are 0 or 1")
@@ -719,6 +723,39 @@ def _element(d: ast.ElementDecl, scope: _Scope, diags: Collector) -> Element | N
     init = _init(d, spec, scope, diags)
     return Element(d.name.name, kname, value, law, init, tuple(e.name for e in d.effects),
                    None, d.doc, d.span, d.name.span, dim)
+
+
+SWITCHED = {"D": 0, "Fr": 2}  # switched one-ports (docs/hybrid.md) -> their arguments
+
+
+def _switched(d: ast.ElementDecl, scope: _Scope, diags: Collector) -> Element:
+    """A switched one-port as the constraint junction it is in one of its modes: the ideal
+    diode `D` blocks as a junction whose flow balance (its one bond's flow) must stay zero,
+    its effort the multiplier, and conducts as a junction of effort zero (bgc.contact)."""
+    kname = d.kind.name
+    if d.dim is not None:
+        fail(d.dim.span, f"{kname} is a scalar one-port")
+    if len(d.args) != SWITCHED[kname]:
+        if kname == "D":
+            fail(d.span, f"D takes no arguments: write '{d.name.name} : D'")
+        fail(d.span, f"{kname} takes {SWITCHED[kname]} arguments, Fr(Fc, Fs): the sliding "
+                     f"and the sticking friction force, got {len(d.args)}")
+    if d.inits:
+        fail(d.inits[0].span, f"{kname} has no state to initialise")
+    gains = ()
+    if kname == "Fr":
+        if any(a.law is not None for a in d.args):
+            fail(d.span, "Fr takes its forces as plain arguments: Fr(Fc, Fs)")
+        gains = tuple(_ExprBuilder(scope, diags).build(a.expr) for a in d.args)
+        for g in gains:
+            if _is_matrix(g.value):
+                fail(g.span, "a friction force is a scalar")
+            if g.value.is_Number and g.value < 0:
+                fail(g.span, "a friction force is not negative")
+    constraint = Constraint({"D": "diode", "Fr": "friction"}[kname], None, "none", gains, None,
+                            d.span)
+    return Element(d.name.name, "0", None, None, None, tuple(e.name for e in d.effects),
+                   constraint, d.doc, d.span, d.name.span, None, origin=None)
 
 
 def _element_dim(d: ast.ElementDecl) -> tuple[int, int] | None:
@@ -860,16 +897,38 @@ def _constraint(d: ast.ElementDecl, scope) -> Constraint:
             annotation = (which, _ExprBuilder(scope, None).build(node))
         finally:
             scope.params_only = False
+    restitution = None
+    if kind == "unilateral":
+        if annotation is None or annotation[0] != "phi":
+            fail(c.span, "a unilateral constraint gives its gap, which must stay >= 0: "
+                         "constraint unilateral(phi = EXPR)")
+        if d.dim is not None and (d.dim.n != 1 or (d.dim.m or 1) != 1):
+            fail(d.dim.span, "a unilateral constraint junction is scalar (one gap per "
+                             "junction; arrays of them are not supported yet)")
+        scope.params_only = True
+        try:
+            restitution = _ExprBuilder(scope, None).build(c.restitution) \
+                if c.restitution is not None else None
+        finally:
+            scope.params_only = False
+        if restitution is not None and restitution.value.is_Number and not \
+                0 <= restitution.value <= 1:
+            fail(restitution.span, "the coefficient of restitution is from 0 to 1")
+    elif c.restitution is not None:
+        fail(c.restitution.span, "restitution(E) belongs to unilateral constraints: "
+                                 "constraint unilateral(phi = ...) restitution(E)")
     corr = c.corrector
     name, gains, cspan = "none", (), None
     if corr is not None:
         name, cspan = corr.kind, corr.span
+        if name == "pd" and kind == "unilateral":
+            fail(corr.span, "a unilateral constraint takes a pid(alpha, beta) corrector, not pd")
         if name == "pid" and kind == "nonholonomic":
             fail(corr.span, "a nonholonomic constraint takes a pd(gamma) corrector, not pid")
         if name == "pd" and kind == "holonomic":
             fail(corr.span, "a holonomic constraint takes a pid(alpha, beta) corrector, not pd")
         gains = tuple(_ExprBuilder(scope, None).build(a) for a in corr.args)
-    return Constraint(kind, annotation, name, gains, cspan, c.span)
+    return Constraint(kind, annotation, name, gains, cspan, c.span, restitution)
 
 
 def _signal(d, scope, diags) -> Signal:

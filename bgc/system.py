@@ -71,6 +71,7 @@ class ConstraintDef:
     residual: sp.Symbol  # X.residual: Phi (holonomic) or the balance (nonholonomic)
     span: Span
     name_span: Span
+    restitution: sp.Expr | None = None  # unilateral: E (0 when not given)
 
 
 @dataclass(frozen=True)
@@ -400,13 +401,16 @@ class _Builder:
         balance = var(variable_name(el.name, "balance"))
         self.emit(balance, sp.Add(*[sigma[i] * through(b.label) for i, b in bonds]), el,
                   el.span)
+        if el.constraint.kind in ("diode", "friction"):  # a switched one-port: its flow
+            self.emit(var(variable_name(el.name, "f")), balance, el, el.span)
         c = el.constraint
         ann = None
         if c.annotation is not None:
             ann = (c.annotation[0], c.annotation[1].value, c.annotation[1].span)
         self.constraints.append(ConstraintDef(
             el.name, c.kind, c.corrector, tuple(g.value for g in c.gains), ann, lam, balance,
-            var(variable_name(el.name, "residual")), el.span, el.name_span))
+            var(variable_name(el.name, "residual")), el.span, el.name_span,
+            c.restitution.value if c.restitution is not None else None))
 
     def signal(self, s):
         if s.is_integral:

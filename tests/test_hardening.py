@@ -190,7 +190,7 @@ def test_at_most_100_scenes():
 def test_the_keywords_are_the_grammars():
     words = {t.pattern.value for t in _lark().terminals
              if isinstance(t.pattern, PatternStr) and t.pattern.value.isidentifier()}
-    assert words | {"holonomic", "nonholonomic", "init", "phi"} == KEYWORDS
+    assert words | {"holonomic", "nonholonomic", "unilateral", "init", "phi"} == KEYWORDS
 
 
 @pytest.mark.parametrize("text, where", [

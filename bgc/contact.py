@@ -1,0 +1,206 @@
+"""Unilateral constraint junctions (docs/hybrid.md): contact, impact and release as events.
+
+`J : 0 constraint unilateral(phi = EXPR) restitution(E) corrector pid(a, b)` keeps Phi >= 0.
+It is the paper's holonomic constraint junction with a mode, a discrete value `J.active`:
+
+  inactive  no force: lambda = 0 (the multiplier's equation is lambda = 0);
+  active    the holonomic junction: Phi'' + 2 a Phi' + b^2 Phi = 0 determines lambda.
+
+Its events, built here as the language's own (relations, discrete variables, when-blocks),
+so that the step driver and the event iteration handle them as any other:
+
+  contact   inactive and Phi < 0: an impact.  The momenta of the storages on the junction's
+            bonds jump by an impulse along the constraint's direction, the least change of
+            kinetic energy that gives Phi'+ = -E Phi'- (Newton's law of restitution) while the
+            bilateral constraint junctions on the same storages keep Phi'+ = 0 (a rod stays
+            rigid when its bob strikes a wall): with G the rows' derivatives by the momenta
+            and K by the velocities (bgc.reduce's _Weights: the kinetic metric),
+            (G K^T) Lambda = target - Phi', dp = K^T Lambda.  When the rebound is too small to
+            leave the surface (E = 0, or below 1e-6 of the largest impact speed so far) the
+            junction becomes active instead: contact that stays closed.
+  release   active and lambda would pull: the free motion would separate (lambda times
+            d Phi''/d lambda below zero); the junction becomes inactive.
+"""
+from __future__ import annotations
+
+from dataclasses import replace
+
+import sympy as sp
+
+from .algebra import Max
+from .diagnostics import fail
+from .differentiate import partial
+from .events import TOLERANCE, Action, Discrete, Relation, When
+from .graph import var
+from .system import der
+
+SWITCHED = ("diode", "friction")  # one-ports that are constraint junctions in one of their modes
+MAX_IMPACT_ROWS = 3  # rows that take part in one impact, solved symbolically
+REST = sp.Float(1e-6)  # a rebound below this fraction of the largest impact speed stays put
+
+
+def direction(c) -> sp.Symbol:
+    """A friction element's sliding direction, +1 or -1."""
+    return var(f"{c.junction}.dir")
+
+
+def active(c) -> sp.Symbol:
+    """The discrete value that says whether junction c is in contact."""
+    return var(f"{c.junction}.active")
+
+
+def with_contact_events(sys, infos, weigh, defs, leaf, cycle):
+    """The equation system with the events of its unilateral junctions and switched one-ports
+    added; leaf, cycle: bgc.reduce's leaf forms (an expression written in the states) and
+    the exception they raise on an algebraic loop."""
+    relations, squares, discretes, whens = (list(x) for x in sys.es.events)
+    cdefs = {c.junction: c for c in sys.es.constraints}
+    states = {st.symbol: st for st in sys.es.states}
+    order = {st.symbol: k for k, st in enumerate(sys.es.states)}
+    bilateral = [i for i in infos if i.kind in ("holonomic", "nonholonomic")]
+    memo: dict = {}
+
+    def expandable(s):
+        return s in defs and not sys.is_leaf(s)
+
+    for info in (i for i in infos if i.kind in SWITCHED):
+        c = cdefs[info.junction]
+        K_d = dict(weigh(c.balance))
+        if not K_d:
+            fail(c.name_span, f"'{c.junction}': its flow is not the velocity of I elements in "
+                              "integral causality; this is not supported yet")
+        block = _impulse(c, info.balance, K_d, sp.Integer(0), bilateral, cdefs, weigh, order)[0]
+        switch = _diode if info.kind == "diode" else _friction
+        relations, discretes, whens = switch(c, info, block, states, relations, discretes,
+                                             whens)
+    for info in (i for i in infos if i.kind == "unilateral"):
+        c = cdefs[info.junction]
+        J = c.junction
+        on = sp.Ne(active(c), 0)
+        E = c.restitution if c.restitution is not None else sp.Integer(0)
+        v = info.balance  # Phi' in the states
+        K_u = dict(weigh(c.balance))
+        if not K_u:
+            fail(c.name_span, f"unilateral constraint '{J}': its flows are not the velocities "
+                              "of I elements in integral causality (an impact moves momenta); "
+                              "this is not supported yet")
+        target = sp.Piecewise((-E * v, v < 0), (v, True))
+        new_p, moved, G = _impulse(c, v, K_u, target, bilateral, cdefs, weigh, order)
+        try:  # d Phi''/d lambda: Phi' in the momenta, times each momentum's rate by lambda
+            rates = {p: leaf(sys.eqs[der(p)].expr, defs, expandable, memo) for p in moved}
+        except (cycle, KeyError):
+            fail(c.name_span, f"unilateral constraint '{J}': the forces on its storages could "
+                              "not be written in the states (an algebraic loop); not "
+                              "supported yet")
+        pull = sp.Add(*[G[i] * partial(rates[p], c.multiplier) for i, p in enumerate(moved)])
+        n = len(relations)
+        touch = Relation(sp.Symbol(f"event#{n}"), sp.StrictGreaterThan(
+            sp.Piecewise((-info.phi, sp.Not(on)), (sp.Integer(-1), True)), 0),
+            f"{J}: contact (phi < 0)", c.name_span, None)
+        leave = Relation(sp.Symbol(f"event#{n + 1}"), sp.StrictGreaterThan(
+            sp.Piecewise((-pull * c.multiplier, on), (sp.Integer(-1), True)), 0),
+            f"{J}: release (lambda would pull)", c.name_span, None)
+        relations += [touch, leave]
+        fastest = var(f"{J}.vmax")
+        speed = sp.Abs(v)
+        top = Max(fastest, speed)
+        stays = sp.Piecewise((sp.Integer(1), sp.And(v < 0, E * speed <= REST * top)),
+                             (sp.Integer(0), True))
+        discretes += [
+            Discrete(f"{J}.active", active(c),
+                     sp.Piecewise((sp.Integer(1), info.phi <= 0), (sp.Integer(0), True)),
+                     "1: in contact", c.name_span),
+            Discrete(f"{J}.vmax", fastest, sp.Integer(0), "the largest impact speed so far",
+                     c.name_span)]
+        impact = tuple(Action("reinit", states[p].name, p, new_p[p], c.span) for p in moved) + (
+            Action("assign", f"{J}.active", active(c), stays, c.span),
+            Action("assign", f"{J}.vmax", fastest, top, c.span))
+        whens += [When(touch.symbol, touch.text, impact, c.span),
+                  When(leave.symbol, leave.text,
+                       (Action("assign", f"{J}.active", active(c), sp.Integer(0), c.span),),
+                       c.span)]
+    return replace(sys.es, events=(tuple(relations), tuple(squares), tuple(discretes),
+                                   tuple(whens)))
+
+
+def _impulse(c, v, K_v, target, bilateral, cdefs, weigh, order):
+    """The momenta after the impulse that brings row v (its derivatives by the velocities
+    K_v) to target while the bilateral rows on the same storages stay at zero, by the least
+    change of kinetic energy: {p: new p}, the momenta moved, v's derivatives by them."""
+    rows = [(v, K_v, target)]
+    for b in bilateral:
+        K_b = dict(weigh(cdefs[b.junction].balance))
+        if set(K_b) & set(K_v):
+            rows.append((b.balance, K_b, sp.Integer(0)))
+    if len(rows) > MAX_IMPACT_ROWS:
+        fail(c.name_span, f"'{c.junction}': {len(rows)} constraint rows take part in its "
+                          f"impulse; at most {MAX_IMPACT_ROWS} are supported")
+    moved = sorted(set().union(*[set(K) for _, K, _ in rows]), key=order.get)
+    G = [[partial(row, p) for p in moved] for row, _, _ in rows]
+    K = [[Kr.get(p, sp.Integer(0)) for p in moved] for _, Kr, _ in rows]
+    m = len(rows)
+    A = sp.Matrix(m, m, lambda j, k: sp.Add(*[G[j][i] * K[k][i] for i in range(len(moved))]))
+    impulse = A.LUsolve(sp.Matrix([t - row for row, _, t in rows]))
+    new_p = {p: p + sp.Add(*[K[k][i] * impulse[k] for k in range(m)])
+             for i, p in enumerate(moved)}
+    return new_p, moved, G[0]
+
+
+def _diode(c, info, block, states, relations, discretes, whens):
+    """The ideal diode's mode, `D.active` (1: blocking, its flow held at zero by its
+    multiplier, the effort; 0: conducting, its effort zero).  A mode, not a when-block: after
+    each pass of the event iteration it blocks where its flow would turn negative and conducts
+    where its effort would turn positive, so that the start takes whichever mode the state
+    calls for (where e = f = 0 both are right: it starts blocking)."""
+    J = c.junction
+    blocking = sp.Ne(active(c), 0)
+    n = len(relations)
+    forward = Relation(sp.Symbol(f"event#{n}"), sp.StrictGreaterThan(
+        sp.Piecewise((c.multiplier, blocking), (sp.Integer(-1), True)), 0),
+        f"{J}: forward (e > 0)", c.name_span, None)
+    # (reverse below 10 atol: at the start of conduction the flow is zero to rounding)
+    reverse = Relation(sp.Symbol(f"event#{n + 1}"), sp.StrictGreaterThan(
+        sp.Piecewise((-info.balance - 10 * TOLERANCE, sp.Not(blocking)), (sp.Integer(-1), True)),
+        0), f"{J}: reverse (f < 0)", c.name_span, None)
+    mode = Discrete(f"{J}.blocking", active(c),
+                    sp.Piecewise((sp.Integer(0), info.balance > 0), (sp.Integer(1), True)),
+                    "1: blocking, 0: conducting", c.name_span,
+                    sp.Piecewise((sp.Integer(0), forward.symbol), (sp.Integer(1), reverse.symbol),
+                                 (active(c), True)))
+    # blocking, the storages that carried its flow take the state that stops it
+    transfer = When(reverse.symbol, reverse.text, tuple(
+        Action("reinit", states[p].name, p, new, c.span) for p, new in block.items()), c.span)
+    return relations + [forward, reverse], discretes + [mode], whens + [transfer]
+
+
+def _friction(c, info, stop, states, relations, discretes, whens):
+    """Dry friction `Fr(Fc, Fs)`: its mode `F.stick` (1: sticking, its flow held at zero, its
+    effort the multiplier; 0: sliding, effort Fc times its direction `F.dir`, +1 or -1).
+    Sliding, it sticks where its flow would reverse (below 10 atol), the storages then taking
+    the state that stops it; sticking, it breaks away where the force that holds it exceeds
+    Fs, and slides the way that force pushes.  The multiplier's law while sliding is
+    lambda = Fc dir, from the constraint junction's (bgc.reduce)."""
+    J = c.junction
+    Fc, Fs = c.gains
+    stick = sp.Ne(active(c), 0)
+    way = var(f"{J}.dir")
+    n = len(relations)
+    slows = Relation(sp.Symbol(f"event#{n}"), sp.StrictGreaterThan(
+        sp.Piecewise((-way * info.balance - 10 * TOLERANCE, sp.Not(stick)),
+                     (sp.Integer(-1), True)), 0), f"{J}: stops (f reverses)", c.name_span, None)
+    breaks = Relation(sp.Symbol(f"event#{n + 1}"), sp.StrictGreaterThan(
+        sp.Piecewise((sp.Abs(c.multiplier) - Fs, stick), (sp.Integer(-1), True)), 0),
+        f"{J}: breaks away (|e| > Fs)", c.name_span, None)
+    mode = Discrete(f"{J}.stick", active(c),
+                    sp.Piecewise((sp.Integer(1), sp.Eq(info.balance, 0)), (sp.Integer(0), True)),
+                    "1: sticking, 0: sliding", c.name_span,
+                    sp.Piecewise((sp.Integer(0), breaks.symbol), (sp.Integer(1), slows.symbol),
+                                 (active(c), True)))
+    direction = Discrete(f"{J}.dir", way,
+                         sp.Piecewise((sp.Integer(-1), info.balance < 0), (sp.Integer(1), True)),
+                         "the sliding direction", c.name_span,
+                         sp.Piecewise((sp.sign(c.multiplier), breaks.symbol), (way, True)))
+    transfer = When(slows.symbol, slows.text, tuple(
+        Action("reinit", states[p].name, p, new, c.span) for p, new in stop.items()), c.span)
+    return relations + [slows, breaks], discretes + [mode, direction], whens + [transfer]
+

@@ -1,0 +1,258 @@
+"""Unilateral constraint junctions (docs/hybrid.md): impacts by Newton's law of restitution
+through the kinetic metric, contact that stays closed, release; against closed forms and a
+SciPy reference integrated here."""
+import csv
+import io
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+from scipy.integrate import solve_ivp
+
+import bgc
+from bgc import runner
+from bgc.api import Source
+
+from conftest import have_cc
+
+ROOT = Path(__file__).resolve().parent.parent
+BACKENDS = ["c", "python"] if have_cc() else ["python"]
+
+BALL = """model uball "a ball on a floor: a unilateral constraint"
+parameter m = 1.0
+parameter g = 9.81
+parameter e = 0.8
+parameter h0 = 1.0
+w : Se(-m*g)
+b : I(m)
+signal x = integral(j.f, init = h0)
+w -> j
+j : 1
+j -> b
+j -> floor
+floor : 0 constraint unilateral(phi = x) restitution(e) corrector pid(10, 10)
+scene drop { time 0 .. 6 every 0.01; outputs x, b.p, floor.lambda }
+"""
+
+
+def run(compiled, backend, log, **options):
+    program = runner.prepare(compiled, backend)
+    names = [p.name for p in compiled.program.params]
+    settings = runner.settings_for(compiled.program.scene, names, events=str(log), **options)
+    result = runner.run(program, settings)
+    assert result.status == 0, result.stderr
+    rows = list(csv.reader(io.StringIO(result.csv)))
+    with open(log, newline="") as f:
+        events = list(csv.reader(f))[1:]
+    return result.csv, np.array([[float(v) for v in r] for r in rows[1:]]), events
+
+
+@pytest.mark.parametrize("solver", ["dopri5", "radau5"])
+def test_a_ball_bounces_then_rests_on_the_floor(solver, tmp_path):
+    compiled = bgc.build(Source("ball.bg", BALL), "drop")
+    outs = [run(compiled, b, tmp_path / f"{b}.csv", solver=solver, rtol=1e-10, atol=1e-12)
+            for b in BACKENDS]
+    assert len({o[0] for o in outs}) == 1  # the same bytes in both backends
+    _, y, events = outs[0]
+    impacts = [(float(t), c) for t, what, c in events if what == "b.p"]
+    g, e = 9.81, 0.8
+    t_ref = math.sqrt(2 / g)
+    v = g * t_ref
+    for t, change in impacts[:20]:  # closed form: flights of 2 e^k v1 / g
+        before, after = (float(s) for s in change.split(" -> "))
+        assert abs(t - t_ref) <= 1e-9 * t_ref
+        assert abs(before + v) <= 1e-6 * v and abs(after - e * v) <= 1e-6 * v
+        v *= e
+        t_ref += 2 * v / g
+    # the bounces pile up before t1 + 2 v1 e / (g (1 - e)); then the floor holds the ball
+    t1 = math.sqrt(2 / g)
+    t_rest = t1 + 2 * g * t1 * e / (g * (1 - e))
+    rest = [float(t) for t, what, c in events if what == "floor.active" and c == "0 -> 1"]
+    assert len(rest) == 1 and 0 < t_rest - rest[0] < 1e-4
+    late = y[y[:, 0] > t_rest + 1.5]  # (the corrector closes the last gap by its law)
+    assert np.all(np.abs(late[:, 1]) < 1e-8)  # on the floor
+    assert np.allclose(late[:, 3], -9.81, rtol=1e-6)  # the floor carries m g
+
+
+def pendulum_reference(t_out, theta0=0.5, l=1.0, g=9.81, d=0.2, e=0.7):
+    """The rigid pendulum in its angle, with the wall at l sin(theta) = -d: SciPy at tight
+    tolerance, stopped at each impact and restarted with theta' reversed times e."""
+    wall = math.asin(-d / l)
+
+    def f(t, s):
+        return [s[1], -g / l * math.sin(s[0])]
+
+    def hit(t, s):
+        return s[0] - wall
+    hit.terminal, hit.direction = True, -1
+    t0, s, impacts, xs = 0.0, [theta0, 0.0], [], []
+    grid = list(t_out)
+    while t0 < t_out[-1]:
+        sol = solve_ivp(f, (t0, t_out[-1]), s, events=hit, rtol=1e-12, atol=1e-12,
+                        dense_output=True, method="DOP853")
+        end = sol.t[-1]
+        while grid and grid[0] <= end:
+            xs.append(l * math.sin(sol.sol(grid.pop(0))[0]))
+        if sol.status != 1:
+            break
+        t0, s = end, [wall, -e * sol.y_events[0][0][1]]
+        impacts.append(t0)
+    return np.array(xs), impacts
+
+
+def test_the_papers_pendulum_strikes_a_wall(tmp_path):
+    """The rod stays rigid at each impact: theta' reverses times e (and the rod's own
+    Baumgarte junction keeps its length)."""
+    compiled = bgc.build(ROOT / "models" / "pendulum_wall.bg", "strike")
+    outs = [run(compiled, b, tmp_path / f"{b}.csv") for b in BACKENDS]
+    assert len({o[0] for o in outs}) == 1
+    _, y, events = outs[0]
+    x_ref, impacts_ref = pendulum_reference(list(y[:, 0]))
+    assert np.max(np.abs(y[:, 1] - x_ref)) <= 1e-6
+    impacts = sorted({float(t) for t, what, c in events if what == "mx.p"})
+    assert len(impacts) == len(impacts_ref) >= 3
+    assert np.allclose(impacts, impacts_ref, rtol=1e-8)
+    assert np.allclose(y[:, 1] ** 2 + y[:, 2] ** 2, 1.0, atol=1e-8)  # the rod, rigid
+    assert np.all(y[:, 1] >= -0.2 - 1e-9)  # never through the wall
+
+
+def test_unilateral_misuse_is_located():
+    def error(text):
+        with pytest.raises(bgc.BgcModelError) as info:
+            bgc.build(Source("m.bg", "model m\nsignal x = integral(1, init = 1)\n" + text))
+        return str(info.value)
+    assert "a unilateral constraint gives its gap" in error(
+        "j : 0 constraint unilateral restitution(0.5)\n")
+    assert "restitution(E) belongs to unilateral constraints" in error(
+        "j : 0 constraint holonomic(phi = x) restitution(0.5)\n")
+    assert "the coefficient of restitution is from 0 to 1" in error(
+        "j : 0 constraint unilateral(phi = x) restitution(2)\n")
+
+
+RECTIFIER = """model rectifier "a half-wave rectifier: an ideal diode and an RL load"
+parameter V = 10.0
+parameter w = 314.159
+parameter R = 10.0
+parameter L = 0.05
+u : MSe(V*sin(w*t))
+d : D
+r : R(R)
+l : I(L)
+u -> j
+j : 1
+j -> d
+j -> r
+j -> l
+scene run { time 0 .. 0.06 every 0.0005; outputs l.p, d.e, d.f
+            solver SOLVER(rtol = 1e-10, atol = 1e-12, hmax = 0.001) }
+"""
+# (hmax: while the diode blocks the state is at rest and a stiff solver's steps grow long; the
+# source's sign, which turns the diode on, must not change twice within one of them)
+
+
+def rectifier_reference(t_out, V=10.0, w=314.159, R=10.0, L=0.05):
+    """Conducting, L i' = V sin(w t) - R i, until i falls to zero; then blocking until the
+    source turns positive again (i = 0 there): SciPy at tight tolerance, piece by piece."""
+    t0, out = 0.0, np.zeros(len(t_out))
+    while t0 < t_out[-1]:
+        def zero(t, y):
+            return y[0]
+        zero.terminal, zero.direction = True, -1
+        sol = solve_ivp(lambda t, y: [(V * math.sin(w * t) - R * y[0]) / L], (t0, t_out[-1]),
+                        [0.0], events=zero, rtol=1e-12, atol=1e-14, dense_output=True,
+                        first_step=1e-6)
+        mask = (t_out >= t0) & (t_out <= sol.t[-1])
+        if mask.any():
+            out[mask] = sol.sol(t_out[mask])[0]
+        if sol.status != 1:
+            break
+        t0 = 2 * math.pi * (math.floor(sol.t[-1] * w / (2 * math.pi)) + 1) / w
+    return out
+
+
+@pytest.mark.parametrize("solver", ["dopri5", "radau5"])
+def test_a_half_wave_rectifier_with_an_ideal_diode(solver, tmp_path):
+    """The diode conducts while the current flows forward, blocks when it would reverse (the
+    inductor's current held at zero), and conducts again when the source turns positive."""
+    compiled = bgc.build(Source("rect.bg", RECTIFIER.replace("SOLVER", solver)), "run")
+    outs = [run(compiled, b, tmp_path / f"{b}.csv") for b in BACKENDS]
+    assert len({o[0] for o in outs}) == 1
+    _, y, events = outs[0]
+    i = y[:, 1] / 0.05
+    ref = rectifier_reference(y[:, 0])
+    assert np.max(np.abs(i - ref)) <= 1e-6 * np.max(ref)
+    blocking = [float(t) for t, what, c in events if what == "d.blocking" and c == "0 -> 1"]
+    assert len(blocking) == 3  # once per period
+    on = i > 1e-9
+    assert np.all(np.abs(y[on, 2]) <= 1e-12)  # conducting: e = 0
+    assert np.all(y[~on, 2] <= 1e-9)  # blocking: e <= 0
+    assert np.all(i >= -1e-9)  # never backwards
+
+
+STICK_SLIP = """model stickslip "a mass on a spring, dragged by a moving belt through dry friction"
+parameter M = 1.0
+parameter K = 10.0
+parameter vb = 0.5 "belt speed"
+parameter Fc = 2.0 "sliding friction"
+parameter Fs = 3.0 "sticking friction"
+m : I(M)
+k : C(1/K)
+belt : Sf(-vb)
+fr : Fr(Fc, Fs)
+v : 1
+v -> m
+v -> k
+v -> s
+s : 0
+belt -> s
+s -> fr
+scene run { time 0 .. 10 every 0.01; outputs k.q, m.p, fr.e
+            solver SOLVER(rtol = 1e-10, atol = 1e-12, hmax = 0.05) }
+"""
+
+
+def stick_slip_reference(t_out, M=1.0, K=10.0, vb=0.5, Fc=2.0, Fs=3.0):
+    """Sliding, M v' = -K x - Fc sign(v - vb), until v meets the belt; stuck, x' = vb while
+    the spring's pull K |x| stays within Fs, then sliding the way the spring pulls."""
+    out = np.zeros(len(t_out))
+    t0, x, v, sticks = 0.0, 0.0, 0.0, []
+    s = -1.0 if v < vb else 1.0
+    while t0 < t_out[-1]:
+        def meet(t, y):
+            return y[1] - vb
+        meet.terminal, meet.direction = True, (1 if s < 0 else -1)  # (not where it leaves)
+        sol = solve_ivp(lambda t, y: [y[1], (-K * y[0] - Fc * s) / M], (t0, t_out[-1]), [x, v],
+                        events=meet, rtol=1e-12, atol=1e-14, dense_output=True,
+                        first_step=1e-6)
+        mask = (t_out >= t0) & (t_out <= sol.t[-1])
+        if mask.any():
+            out[mask] = sol.sol(t_out[mask])[0]
+        if sol.status != 1:
+            break
+        t0, x = sol.t[-1], sol.y[0][-1]
+        if abs(K * x) > Fs:  # passes the belt's speed without sticking
+            v, s = vb, -s
+            continue
+        sticks.append(t0)
+        t1 = t0 + (math.copysign(Fs, vb) / K - x) / vb  # stuck until K x reaches Fs
+        mask = (t_out >= t0) & (t_out <= t1)
+        out[mask] = x + vb * (t_out[mask] - t0)
+        t0, x, v = t1, math.copysign(Fs, vb) / K, vb
+        s = -math.copysign(1.0, x)
+    return out, sticks
+
+
+@pytest.mark.parametrize("solver", ["dopri5", "radau5"])
+def test_stick_slip_on_a_moving_belt(solver, tmp_path):
+    compiled = bgc.build(Source("stick.bg", STICK_SLIP.replace("SOLVER", solver)), "run")
+    outs = [run(compiled, b, tmp_path / f"{b}.csv") for b in BACKENDS]
+    assert len({o[0] for o in outs}) == 1
+    _, y, events = outs[0]
+    ref, sticks = stick_slip_reference(y[:, 0])
+    assert np.max(np.abs(y[:, 1] - ref)) <= 1e-6 * np.max(np.abs(ref))
+    got = [float(t) for t, what, c in events if what == "fr.stick" and c == "0 -> 1"]
+    assert len(got) == len(sticks) >= 4
+    assert np.allclose(got, sticks, rtol=1e-8)
+    stuck = np.abs(y[:, 2] / 1.0 - 0.5) < 1e-9  # m.p / M on the belt
+    assert np.all(np.abs(y[stuck, 3]) <= 3.0 + 1e-9)  # held within Fs
