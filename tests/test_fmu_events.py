@@ -137,9 +137,8 @@ def test_trajectories_match_bgc_and_the_closed_forms(built, name, kind):
     path, (t, bgc_run), _ = built[name]
     interval = MODELS[name][2]
     extra = ["heat"] if name == "thermostat" else []
-    result = simulate(path, kind, interval, record_events=False,
-                      output=[*bgc_run, *extra]) if kind == "ModelExchange" else \
-        simulate(path, kind, interval, output=[*bgc_run, *extra])
+    grid_only = {"record_events": False} if kind == "ModelExchange" else {}
+    result = simulate(path, kind, interval, output=[*bgc_run, *extra], **grid_only)
     assert np.allclose(result["time"], t, rtol=0, atol=1e-12)
     reference = REFERENCES[name](t)
     for output, values in bgc_run.items():
@@ -336,3 +335,24 @@ def test_the_sources_build_without_warnings(tmp_path):
                                "-pedantic", "-Werror", "-fsyntax-only", str(path)],
                               capture_output=True, text=True)
         assert done.returncode == 0, done.stderr
+
+
+TOGGLE = """model toggle "a discrete value that never settles once x passes 1/2"
+discrete n = 0
+signal x = integral(1 + n, init = 0)
+when n > 0.5 { n = 0 }
+when n < 0.5 and x > 0.5 { n = 1 }
+scene run { time 0 .. 1 every 0.1; outputs x }
+"""
+
+
+def test_an_event_iteration_that_does_not_settle_fails_with_a_message(tmp_path):
+    """Both FMU types stop at the event (x = 1/2) with bgc's message in the log."""
+    path = tmp_path / "toggle.fmu"
+    path.write_bytes(fmu.build_fmu(build(TOGGLE, "run")))
+    for kind, fn in (("ModelExchange", "fmi2NewDiscreteStates"), ("CoSimulation", "fmi2DoStep")):
+        log = []
+        with pytest.raises(Exception, match=fn):
+            fmpy.simulate_fmu(str(path), fmi_type=kind, logger=lambda *a: log.append(a))
+        (message,) = [a[4].decode() for a in log if a[2] == 3]  # fmi2Error
+        assert message.startswith(f"{fn}: at t = 0.5") and "chattering" in message, message
