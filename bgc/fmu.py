@@ -13,7 +13,11 @@ The variables, their value references as bgc/runtime/fmi2.c numbers them:
   states       "local" (or "output" when the scene outputs the state), initial "calculated":
                computed from the parameters when initialisation ends;
   derivatives  der(<state>), with the `derivative` attribute naming their state;
-  outputs      the scene's other outputs, causality "output".
+  outputs      the scene's other outputs, causality "output";
+  discrete     the model's discrete variables (`discrete heat = 1`), "local", variability
+               "discrete": set at events.
+A model with events has an event indicator per state relation (numberOfEventIndicators) and
+time events (fmi2NewDiscreteStates' nextEventTime); bgc/runtime/fmi2.c says how.
 Descriptions come from the model's doc strings, a parameter's unit from a trailing
 "[unit]" in its doc string; every text from the model is escaped.
 
@@ -72,7 +76,7 @@ class Variable:
     name: str
     vr: int
     causality: str  # parameter | local | output
-    variability: str  # fixed | continuous
+    variability: str  # fixed | continuous | discrete
     initial: str  # exact | calculated
     description: str | None = None
     start: float | None = None
@@ -94,6 +98,8 @@ class Description:
     units: tuple[str, ...]
     experiment: ir.SceneSettings
     structured: bool
+    indicators: int = 0  # event indicators: the state relations
+    discrete: tuple[int, ...] = ()  # each discrete variable's place among the discrete values
 
 
 def model_identifier(name: str) -> str:
@@ -121,10 +127,7 @@ def describe(compiled) -> Description:
     program)."""
     program = compiled.program
     graph = compiled.graph
-    if program.events is not None:
-        raise FmuError("this scene has events (when-blocks, relations, step, pulse or square): "
-                       "an FMU does not export them yet (no event indicators); simulate it "
-                       "with bgc, or write the switching with noevent() where it is smooth")
+    events = program.events or ir.Events((), 0, (), ())
     n, m = len(program.states), len(program.params)
     state_index = {name: i for i, name in enumerate(program.states)}
     param_names = {p.name for p in program.params}
@@ -165,6 +168,11 @@ def describe(compiled) -> Description:
         out_pos[k] = len(variables) + 1
         variables.append(Variable(name, m + 2 * n + k, "output", "continuous", "calculated",
                                   _variable_doc(graph, name)))
+    discrete = tuple(k for k, kind in enumerate(events.kinds) if kind == "discrete")
+    for k, place in enumerate(discrete):
+        variables.append(Variable(events.names[place], m + 2 * n + len(program.outputs) + k,
+                                  "local", "discrete", "calculated",
+                                  "a discrete variable, set at events"))
     names = [v.name for v in variables]
     if len(set(names)) != len(names):
         twice = sorted({x for x in names if names.count(x) > 1})
@@ -187,7 +195,8 @@ def describe(compiled) -> Description:
         derivatives=tuple((der_pos[i], tuple(sorted(rows[i]))) for i in range(n)),
         initial_unknowns=tuple(initial), units=tuple(units),
         experiment=program.scene,
-        structured=all(_STRUCTURED.match(v) for v in names))
+        structured=all(_STRUCTURED.match(v) for v in names),
+        indicators=events.indicators, discrete=discrete)
 
 
 def _parameter_values(program) -> list[float]:
@@ -266,12 +275,13 @@ def model_description(d: Description, guid: str) -> str:
                  fmiVersion="2.0", modelName=d.name, guid=guid, description=d.doc,
                  generationTool="bgc",
                  variableNamingConvention="structured" if d.structured else "flat",
-                 numberOfEventIndicators=0) + ">"]
+                 numberOfEventIndicators=d.indicators) + ">"]
     common = dict(canNotUseMemoryManagementFunctions="true", canGetAndSetFMUstate="true",
                   canSerializeFMUstate="true")
     sources = ["    <SourceFiles>", f'      <File name="{_text(ident)}.c"/>', "    </SourceFiles>"]
     lines.append("  <ModelExchange" + _attrs(
-        modelIdentifier=ident, completedIntegratorStepNotNeeded="true", **common,
+        modelIdentifier=ident, completedIntegratorStepNotNeeded=str(d.indicators == 0).lower(),
+        **common,
         providesDirectionalDerivative="true") + ">")
     lines += sources + ["  </ModelExchange>"]
     lines.append("  <CoSimulation" + _attrs(
@@ -325,9 +335,9 @@ def fmu_program(program) -> ir.Program:
 
 
 def fmu_source(program, guid: str, project_initial: bool = False,
-               allow_inconsistent: bool = False) -> str:
+               allow_inconsistent: bool = False, discrete: tuple[int, ...] = ()) -> str:
     """The FMU's one C file: the generated program (fmu_program's, its main left out), the
-    FMU part, bgc/runtime/fmi2.c."""
+    FMU part, bgc/runtime/fmi2.c; discrete: Description.discrete."""
     (text,) = emit_c(fmu_program(program)).values()
     states = {name: i for i, name in enumerate(program.states)}
     out_state = [str(states.get(o, -1)) for o in program.outputs] or ["-1"]
@@ -346,6 +356,10 @@ def fmu_source(program, guid: str, project_initial: bool = False,
         "/* The state each output is (-1: an output of its own). */",
         "static const int bgc_fmi_output_state[BGC_DIM(BGC_NUM_OUTPUTS)] = { "
         + ", ".join(out_state) + " };",
+        "/* Where each discrete variable is among the discrete values d. */",
+        f"#define BGC_FMI_NUM_DISCRETE_VARS {len(discrete)}",
+        "static const int bgc_fmi_discrete[BGC_DIM(BGC_FMI_NUM_DISCRETE_VARS)] = { "
+        + ", ".join(map(str, discrete or (0,))) + " };",
     ]
     return "\n".join(head) + "\n" + text + "\n" + "\n".join(part) + "\n" + \
         _runtime_text("fmi2.c")
@@ -362,7 +376,8 @@ def fmu_texts(compiled, project_initial: bool = False,
     """(description, modelDescription.xml, the C source), the GUID derived from both."""
     d = describe(compiled)
     xml = model_description(d, GUID_PLACEHOLDER)
-    source = fmu_source(compiled.program, GUID_PLACEHOLDER, project_initial, allow_inconsistent)
+    source = fmu_source(compiled.program, GUID_PLACEHOLDER, project_initial, allow_inconsistent,
+                        d.discrete)
     guid = make_guid(xml, source)
     return d, xml.replace(GUID_PLACEHOLDER, guid), source.replace(GUID_PLACEHOLDER, guid)
 

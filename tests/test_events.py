@@ -346,9 +346,3 @@ signal x = integral(if x < 1 then a elif x < 2 then 2*a else 0, init = 0)
 scene s { time 0 .. 1; outputs x }
 """, "s"))
     assert "d(x)/dt = (if x < 1 then a elif x < 2 then 2*a else 0)" in eq
-
-
-def test_an_fmu_refuses_events_for_now():
-    from bgc import fmu
-    with pytest.raises(fmu.FmuError, match="has events"):
-        fmu.describe(build(LAG, "run"))

@@ -2,8 +2,10 @@
 /* The FMU's interface: the functions of FMI 2.0 (Model Exchange and Co-Simulation) over the
    model part and the runtime above (bgc/runtime/fmi2.c, inlined verbatim after them by
    bgc/fmu.py).  It uses from the FMU part before it: BGC_FMI_GUID, BGC_FMI_PROJECT_INITIAL,
-   bgc_fmi_output_state (the state each output is, or -1); from the model part
-   bgc_model_outputs_jvp (the outputs' derivative along a direction of the states).
+   bgc_fmi_output_state (the state each output is, or -1), BGC_FMI_NUM_DISCRETE_VARS and
+   bgc_fmi_discrete (where each discrete variable is among the discrete values d); from the
+   model part bgc_model_outputs_jvp (the outputs' derivative along a direction of the states);
+   from the runtime the event iteration of bgc/runtime/drive.c (the same translation unit).
 
    Value references (all Real), as modelDescription.xml lists them:
      [0, P)                  parameter j            (P = BGC_NUM_PARAMS)
@@ -11,12 +13,29 @@
      [P + N, P + 2N)         the derivative of state i
      [P + 2N, P + 2N + M)    output k               (M = BGC_NUM_OUTPUTS; an output that is a
                                                      state is that state's variable instead)
+     [P + 2N + M, ... + D)   discrete variable k    (D = BGC_FMI_NUM_DISCRETE_VARS)
    Parameters are "fixed": set before fmi2ExitInitializationMode; a parameter that is not set
    follows its default expression (which may use the parameters before it).  The states are
    computed from the parameters when initialisation ends (and checked against the model's
-   constraints).  Model Exchange: the environment integrates the states; there are no events.
-   Co-Simulation: fmi2DoStep integrates with the scene's solver (bgc_advance), which goes on
-   with the step size it had reached at the last communication point.
+   constraints).  Model Exchange: the environment integrates the states.  Co-Simulation:
+   fmi2DoStep integrates with the scene's solver (bgc_advance), which goes on with the step
+   size it had reached at the last communication point.
+
+   Events (a model with BGC_NUM_DISCRETE > 0, docs/hybrid.md).  fmi2ExitInitializationMode
+   runs the start's event iteration (both types).  Model Exchange: event indicator k is the
+   state relation k's indicator g (the relation holds when g > 0 if it is strict, g >= 0 if
+   not), except where g is exactly 0: there it is BGC_FMI_ZERO on the side of the relation's
+   value (-BGC_FMI_ZERO for a strict relation, which does not hold, +BGC_FMI_ZERO for another,
+   which does).  So an indicator is > 0 exactly when its relation holds, and never 0: the
+   relation changes its value exactly when the indicator changes sign, which is FMI's state
+   event, and a root finder that stops where an indicator is 0 (CVODE does) never stops at
+   a point where the relation has not changed yet.
+   fmi2NewDiscreteStates runs the event iteration at the instance's (t, x) until nothing
+   changes (newDiscreteStatesNeeded is never set), says whether it changed the states, and
+   gives the next time event; fmi2CompletedIntegratorStep asks for event mode when a state
+   relation's value differs from its frozen one (an event the environment did not locate, at
+   the step's end rather than never).  Co-Simulation: fmi2DoStep's run locates and handles the
+   events inside the step, as bgc's own runs do; the discrete values go on from step to step.
 
    The declarations below are written from the text of the FMI 2.0 standard (its sections on
    the platform types and the common functions): the types, the status and kind enumerations,
@@ -94,7 +113,7 @@ enum {
 #define BGC_FMI_VR_STATES ((fmi2ValueReference)BGC_NUM_PARAMS)
 #define BGC_FMI_VR_DERIVATIVES (BGC_FMI_VR_STATES + (fmi2ValueReference)BGC_NUM_STATES)
 #define BGC_FMI_VR_OUTPUTS (BGC_FMI_VR_DERIVATIVES + (fmi2ValueReference)BGC_NUM_STATES)
-#define BGC_FMI_VR_END (BGC_FMI_VR_OUTPUTS + (fmi2ValueReference)BGC_NUM_OUTPUTS)
+#define BGC_FMI_VR_DISCRETE (BGC_FMI_VR_OUTPUTS + (fmi2ValueReference)BGC_NUM_OUTPUTS)
 
 typedef struct bgc_fmi {
     fmi2Type type;
@@ -119,7 +138,17 @@ typedef struct bgc_fmi {
     int dx_ok, y_ok;                    /* dx, y are those of (t, x) */
     int stiff;                          /* Co-Simulation, solver auto: its stiff phase began */
     bgc_stats st;
+    int x_changed;                      /* the start's event iteration changed the states
+                                           (the first fmi2NewDiscreteStates says so) */
+    double g[BGC_DIM(BGC_NUM_INDICATORS)];
+    double ev[BGC_DIM(BGC_NUM_INDICATORS + BGC_EV_SIZE)]; /* the event iteration's scratch */
 } bgc_fmi;
+
+#define BGC_FMI_ZERO 1e-300 /* an indicator's size where g is 0 (a product with another
+                                  indicator's value does not underflow to 0) */
+
+/* The discrete values d of the instance's model functions (in its parameters). */
+#define BGC_FMI_D(m) ((double *)&(m)->p + BGC_DISCRETE_OFFSET)
 
 /* Reports to the environment's logger: errors always, the rest when logging is on.  The text
    goes as an argument of "%s", never as the format (it may hold names from the model). */
@@ -197,6 +226,7 @@ static void bgc_fmi_start(bgc_fmi *m)
     m->t = BGC_SCENE_T0;
     m->rtol = BGC_SCENE_RTOL;
     m->stiff = 0;
+    m->x_changed = 0;
     m->w->rtol = BGC_SCENE_RTOL;
     m->w->atol = BGC_SCENE_ATOL;
     bgc_fmi_refresh(m);
@@ -227,6 +257,73 @@ static int bgc_fmi_outputs(bgc_fmi *m)
         return 1;
     m->y_ok = 1;
     return 0;
+}
+
+/* ------------------------------------------------------------------- events --- */
+
+/* Logs each change at an event (when logging is on): its time, what changed and how. */
+static int bgc_fmi_on_event(void *ctx, double t, const char *what, const char *change)
+{
+    bgc_fmi_log((const bgc_fmi *)ctx, fmi2OK, "event at t = %.17g: %s: %s", t, what, change);
+    return 0;
+}
+
+/* The event iteration of the runtime (bgc/runtime/drive.c) at the instance's (t, x), start:
+   the run's first (the discrete values then start from the workspace's); the discrete values
+   kept in the workspace too, where Co-Simulation's runs take them from.  *x_changed: whether
+   the states changed; *t_next: the next time event (INFINITY: none).  A failure (chattering,
+   a value that is not finite) is logged, and the instance has failed. */
+static fmi2Status bgc_fmi_event_iteration(bgc_fmi *m, const char *fn, int start, int *x_changed,
+                                          double *t_next)
+{
+    double x0[BGC_DIM(BGC_NUM_STATES)];
+    bgc_settings s;
+    bgc_run r;
+    char msg[512];
+    int i, rc;
+    *x_changed = 0;
+    *t_next = INFINITY;
+    if (BGC_NUM_DISCRETE == 0)
+        return fmi2OK;
+    bgc_settings_default(&s);
+    s.on_event = bgc_fmi_on_event;
+    s.event_ctx = m;
+    memset(&r, 0, sizeof r);
+    r.s = &s;
+    r.p = &m->p;
+    r.w = m->w;
+    r.msg = msg;
+    r.msg_size = sizeof msg;
+    r.t = m->t;
+    r.d = BGC_FMI_D(m);
+    r.g = m->g;
+    r.ev = m->ev;
+    memcpy(x0, m->x, sizeof x0);
+    if (start)
+        memcpy(r.d, m->w->d, sizeof(double) * BGC_NUM_DISCRETE);
+    rc = bgc_event_iteration(&r, m->t, m->x, start);
+    if (rc == 0)
+        rc = bgc_next_time(&r, m->t, m->x);
+    memcpy(m->w->d, r.d, sizeof(double) * BGC_NUM_DISCRETE);
+    m->w->started = 1;
+    m->dx_ok = m->y_ok = 0;
+    if (rc) {
+        m->phase = BGC_FMI_FAILED;
+        bgc_fmi_log(m, fmi2Error, "%s: %s", fn, msg);
+        return fmi2Error;
+    }
+    for (i = 0; i < BGC_NUM_STATES; i++)
+        *x_changed |= x0[i] != m->x[i];
+    *t_next = r.t_next;
+    return fmi2OK;
+}
+
+/* The state relations' indicators at the instance's (t, x) in m->g; nonzero if the model
+   failed (an algebraic block). */
+static int bgc_fmi_indicators(bgc_fmi *m)
+{
+    bgc_fmi_refresh(m);
+    return BGC_NUM_INDICATORS > 0 && bgc_model_events(m->t, m->x, &m->p, m->w, m->g);
 }
 
 /* --------------------------------------------------------- common functions --- */
@@ -380,6 +477,7 @@ BGC_FMI_EXPORT fmi2Status fmi2ExitInitializationMode(fmi2Component c)
 {
     bgc_fmi *m = bgc_fmi_get(c, "fmi2ExitInitializationMode", 1 << BGC_FMI_INIT, 0);
     char msg[512];
+    double t_next;
     int i;
     if (!m)
         return fmi2Error;
@@ -401,6 +499,8 @@ BGC_FMI_EXPORT fmi2Status fmi2ExitInitializationMode(fmi2Component c)
     if (bgc_fmi_constraints(m) != fmi2OK)
         return fmi2Error;
     m->dx_ok = m->y_ok = 0;
+    if (bgc_fmi_event_iteration(m, "fmi2ExitInitializationMode", 1, &m->x_changed, &t_next))
+        return fmi2Error;
     m->phase = m->type == fmi2ModelExchange ? BGC_FMI_EVENT : BGC_FMI_STEP;
     return fmi2OK;
 }
@@ -460,6 +560,8 @@ static int bgc_fmi_value(bgc_fmi *m, fmi2ValueReference vr, double *out)
                 return 2;
             *out = m->y[k];
         }
+    } else if ((k = bgc_fmi_in(vr, BGC_FMI_VR_DISCRETE, BGC_FMI_NUM_DISCRETE_VARS)) >= 0) {
+        *out = BGC_FMI_D(m)[bgc_fmi_discrete[k]];
     } else {
         return 1;
     }
@@ -591,7 +693,7 @@ typedef struct bgc_fmi_saved {
     char magic[8];                      /* "bgcFMUs" */
     char guid[64];                      /* BGC_FMI_GUID */
     unsigned long size;                 /* sizeof(bgc_fmi_saved) */
-    int type, phase, fresh, stiff, dx_ok, y_ok;
+    int type, phase, fresh, stiff, dx_ok, y_ok, x_changed, wstarted;
     double t, rtol;
     bgc_params p;
     int given[BGC_DIM(BGC_NUM_PARAMS)];
@@ -601,6 +703,7 @@ typedef struct bgc_fmi_saved {
     double wrtol, watol;
     double wv[BGC_DIM(BGC_WORK_DOUBLES)];
     int wiv[BGC_DIM(BGC_WORK_INTS)];
+    double wd[BGC_DIM(BGC_NUM_DISCRETE)];
 } bgc_fmi_saved;
 
 static void bgc_fmi_save(const bgc_fmi *m, bgc_fmi_saved *s)
@@ -615,6 +718,8 @@ static void bgc_fmi_save(const bgc_fmi *m, bgc_fmi_saved *s)
     s->stiff = m->stiff;
     s->dx_ok = m->dx_ok;
     s->y_ok = m->y_ok;
+    s->x_changed = m->x_changed;
+    s->wstarted = m->w->started;
     s->t = m->t;
     s->rtol = m->rtol;
     s->p = m->p;
@@ -627,6 +732,7 @@ static void bgc_fmi_save(const bgc_fmi *m, bgc_fmi_saved *s)
     s->watol = m->w->atol;
     memcpy(s->wv, m->w->v, sizeof s->wv);
     memcpy(s->wiv, m->w->iv, sizeof s->wiv);
+    memcpy(s->wd, m->w->d, sizeof(double) * BGC_NUM_DISCRETE);
 }
 
 static void bgc_fmi_restore(bgc_fmi *m, const bgc_fmi_saved *s)
@@ -636,6 +742,8 @@ static void bgc_fmi_restore(bgc_fmi *m, const bgc_fmi_saved *s)
     m->stiff = s->stiff;
     m->dx_ok = s->dx_ok;
     m->y_ok = s->y_ok;
+    m->x_changed = s->x_changed;
+    m->w->started = s->wstarted;
     m->t = s->t;
     m->rtol = s->rtol;
     m->p = s->p;
@@ -648,6 +756,7 @@ static void bgc_fmi_restore(bgc_fmi *m, const bgc_fmi_saved *s)
     m->w->atol = s->watol;
     memcpy(m->w->v, s->wv, sizeof s->wv);
     memcpy(m->w->iv, s->wiv, sizeof s->wiv);
+    memcpy(m->w->d, s->wd, sizeof(double) * BGC_NUM_DISCRETE);
     m->w->block = 0;
     m->w->failure = 0;
 }
@@ -844,19 +953,27 @@ BGC_FMI_EXPORT fmi2Status fmi2EnterEventMode(fmi2Component c)
     return fmi2OK;
 }
 
+/* The event iteration until nothing changes, all in one call. */
 BGC_FMI_EXPORT fmi2Status fmi2NewDiscreteStates(fmi2Component c, fmi2EventInfo *eventInfo)
 {
-    bgc_fmi *m = bgc_fmi_get(c, "fmi2NewDiscreteStates", 1 << BGC_FMI_EVENT, 1);
+    static const char fn[] = "fmi2NewDiscreteStates";
+    bgc_fmi *m = bgc_fmi_get(c, fn, 1 << BGC_FMI_EVENT, 1);
+    double t_next;
+    int changed;
     if (!m)
         return fmi2Error;
     if (!eventInfo)
-        return bgc_fmi_refuse(m, "fmi2NewDiscreteStates", "no event information given");
+        return bgc_fmi_refuse(m, fn, "no event information given");
+    bgc_fmi_refresh(m);
+    if (bgc_fmi_event_iteration(m, fn, 0, &changed, &t_next))
+        return fmi2Error;
     eventInfo->newDiscreteStatesNeeded = fmi2False;
     eventInfo->terminateSimulation = fmi2False;
     eventInfo->nominalsOfContinuousStatesChanged = fmi2False;
-    eventInfo->valuesOfContinuousStatesChanged = fmi2False;
-    eventInfo->nextEventTimeDefined = fmi2False;
-    eventInfo->nextEventTime = 0.0;
+    eventInfo->valuesOfContinuousStatesChanged = changed || m->x_changed;
+    eventInfo->nextEventTimeDefined = isfinite(t_next) ? fmi2True : fmi2False;
+    eventInfo->nextEventTime = isfinite(t_next) ? t_next : 0.0;
+    m->x_changed = 0;
     return fmi2OK;
 }
 
@@ -875,11 +992,16 @@ BGC_FMI_EXPORT fmi2Status fmi2CompletedIntegratorStep(fmi2Component c,
                                                       fmi2Boolean *terminateSimulation)
 {
     bgc_fmi *m = bgc_fmi_get(c, "fmi2CompletedIntegratorStep", 1 << BGC_FMI_CONTINUOUS, 1);
+    int k, missed = 0;
     (void)noSetFMUStatePriorToCurrentPoint;
     if (!m)
         return fmi2Error;
+    if (bgc_fmi_indicators(m))
+        return bgc_fmi_model_failed(m, "fmi2CompletedIntegratorStep");
+    for (k = 0; k < BGC_NUM_INDICATORS; k++)
+        missed |= bgc_holds(k, m->g[k]) != (BGC_FMI_D(m)[k] != 0.0);
     if (enterEventMode)
-        *enterEventMode = fmi2False;
+        *enterEventMode = missed ? fmi2True : fmi2False;
     if (terminateSimulation)
         *terminateSimulation = fmi2False;
     return fmi2OK;
@@ -946,12 +1068,24 @@ BGC_FMI_EXPORT fmi2Status fmi2GetDerivatives(fmi2Component c, fmi2Real derivativ
 BGC_FMI_EXPORT fmi2Status fmi2GetEventIndicators(fmi2Component c, fmi2Real eventIndicators[],
                                                  size_t ni)
 {
-    bgc_fmi *m = bgc_fmi_get(c, "fmi2GetEventIndicators", BGC_FMI_VALUES, 1);
-    (void)eventIndicators;
+    static const char fn[] = "fmi2GetEventIndicators";
+    bgc_fmi *m = bgc_fmi_get(c, fn, BGC_FMI_VALUES, 1);
+    int k;
     if (!m)
         return fmi2Error;
-    return ni == 0 ? fmi2OK
-                   : bgc_fmi_refuse(m, "fmi2GetEventIndicators", "the FMU has no event indicators");
+    if (ni != (size_t)BGC_NUM_INDICATORS) {
+        bgc_fmi_log(m, fmi2Error, "%s: the FMU has %d event indicators, not %lu", fn,
+                    BGC_NUM_INDICATORS, (unsigned long)ni);
+        return fmi2Error;
+    }
+    if (ni > 0 && !eventIndicators)
+        return bgc_fmi_refuse(m, fn, "no array given");
+    if (bgc_fmi_indicators(m))
+        return bgc_fmi_model_failed(m, fn);
+    for (k = 0; k < BGC_NUM_INDICATORS; k++) /* > 0 exactly when the relation holds */
+        eventIndicators[k] = m->g[k] != 0.0 ? m->g[k]
+                             : bgc_indicator_strict[k] ? -BGC_FMI_ZERO : BGC_FMI_ZERO;
+    return fmi2OK;
 }
 
 BGC_FMI_EXPORT fmi2Status fmi2GetContinuousStates(fmi2Component c, fmi2Real x[], size_t nx)
@@ -1030,6 +1164,7 @@ BGC_FMI_EXPORT fmi2Status fmi2DoStep(fmi2Component c, fmi2Real currentCommunicat
         s.step = BGC_SCENE_DT; /* the fixed step of the scene's run, whatever the interval */
     m->st.switched = 0;
     rc = bgc_advance(&s, &m->p, m->w, m->x, bgc_fmi_sink, m, &m->st, msg, sizeof msg);
+    memcpy(BGC_FMI_D(m), m->w->d, sizeof(double) * BGC_NUM_DISCRETE); /* for fmi2GetReal */
     m->stiff |= m->st.switched;
     m->dx_ok = 0;
     if (rc) {

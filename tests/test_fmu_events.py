@@ -1,0 +1,358 @@
+"""FMU export of models with events (docs/hybrid.md): a bouncing ball (a state event and a
+reinit), a thermostat (two state relations, one strict and one not, and a discrete variable)
+and a first-order lag hit by a pulse (time events).  FMPy validates the FMUs; its Model
+Exchange simulation (CVODE locating the event indicators' sign changes, stepping onto
+nextEventTime, FMPy's event loop) and the Co-Simulation (bgc's solver inside fmi2DoStep,
+events in the middle of a communication step) match bgc's own run of the model and the
+closed-form solutions, the event times included."""
+import ctypes
+import csv
+import math
+import shutil
+import subprocess
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import bgc
+from bgc import backends, fmu
+from bgc.api import Source
+
+fmpy = pytest.importorskip("fmpy")
+from fmpy.fmi2 import FMU2Model, FMU2Slave  # noqa: E402
+from fmpy.validation import validate_fmu  # noqa: E402
+
+from test_docs import blocks  # noqa: E402
+from test_events import BALL, LAG, bounce_times, build, lag_reference  # noqa: E402
+
+if not backends.have_c_compiler():
+    pytest.skip("FMU export builds its binary with a C compiler", allow_module_level=True)
+
+TIGHT = "; solver dopri5(rtol = 1e-10, atol = 1e-12) }"
+# docs/hybrid.md's thermostat, its second relation not strict (at T = 19 it holds)
+THERMOSTAT = next(b.text for b in blocks(Path(__file__).parent.parent / "docs" / "hybrid.md")
+                  if b.opts.get("file") == "thermostat.bg").replace("T < 19", "T <= 19")
+MODELS = {  # text, scene, output interval
+    "ball": (BALL.replace(" }\n", TIGHT + "\n"), "drop", 0.01),
+    "thermostat": (THERMOSTAT, "day", 0.5),
+    "lag": (LAG.replace(" }\n", TIGHT + "\n"), "run", 0.1),
+}
+
+
+@pytest.fixture(scope="module")
+def built(tmp_path_factory):
+    """Each model's FMU, and bgc's own run of it (its scene) with the event log."""
+    tmp = tmp_path_factory.mktemp("fmu_events")
+    out = {}
+    for name, (text, scene, _) in MODELS.items():
+        compiled = build(text, scene)
+        path = tmp / f"{name}.fmu"
+        path.write_bytes(fmu.build_fmu(compiled))
+        log = tmp / f"{name}.csv"
+        t, Y, names = bgc.simulate(Source(f"{name}.bg", text), scene, events=str(log))
+        with open(log, newline="") as f:
+            events = [(float(r[0]), r[1], r[2]) for r in list(csv.reader(f))[1:]]
+        out[name] = path, (t, dict(zip(names, Y.T))), events
+    return out
+
+
+# ---------------------------------------------------------------- closed forms
+
+
+def ball_reference(t, m=1.0, g=9.81, h0=1.0, e=0.8):
+    """Height and momentum: a free fall, then parabolas from each impact (the right limits)."""
+    x, p = h0 - g * t**2 / 2, -m * g * t
+    for t_k, v_k in bounce_times(12):
+        after = t >= t_k
+        s = t - t_k
+        x = np.where(after, e * v_k * s - g * s**2 / 2, x)
+        p = np.where(after, m * (e * v_k - g * s), p)
+    return {"x": x, "b.p": p}
+
+
+def thermostat_switches(t_end, k=0.1, P=5.0, Ta=10.0):
+    """(time, the temperature's approach, T there) of each switching, heating from 20."""
+    t, T, heating, out = 0.0, 20.0, True, [(0.0, Ta + P / k, 20.0)]
+    while True:
+        target, end = (21.0, Ta + P / k) if heating else (19.0, Ta)
+        t += math.log((T - end) / (target - end)) / k
+        if t > t_end:
+            return out
+        heating = not heating
+        T = target
+        out.append((t, Ta + P / k if heating else Ta, T))
+
+
+def thermostat_reference(t, k=0.1):
+    """T on a grid from the piecewise exponentials, and the heater's mode."""
+    T, heat = np.empty_like(t), np.empty_like(t)
+    for t_s, end, T_s in thermostat_switches(t[-1]):
+        after = t >= t_s
+        T[after] = end + (T_s - end) * np.exp(-k * (t[after] - t_s))
+        heat[after] = 1.0 if end > 21 else 0.0
+    return {"T": T, "heat": heat}
+
+
+REFERENCES = {
+    "ball": ball_reference,
+    "thermostat": thermostat_reference,
+    "lag": lambda t: {"x": np.array([lag_reference(s, 0.5, 1.7, 0.05) for s in t])},
+}
+
+
+def relative_difference(got, ref):
+    return np.max(np.abs(got - ref)) / np.max(np.abs(ref))
+
+
+def simulate(path, kind, interval, **options):
+    if kind == "ModelExchange":
+        options.setdefault("relative_tolerance", 1e-12)  # CVODE's (its atol the same)
+    return fmpy.simulate_fmu(str(path), fmi_type=kind, output_interval=interval, **options)
+
+
+# ---------------------------------------------------------------- the tests
+
+
+def test_fmpy_validates_and_the_description_has_the_events(built):
+    indicators = {"ball": 1, "thermostat": 2, "lag": 0}
+    for name, (path, _, _) in built.items():
+        assert validate_fmu(str(path)) == [], name
+        md = fmpy.read_model_description(str(path))
+        assert md.numberOfEventIndicators == indicators[name]
+        # a step event only where there are state relations (fmi2CompletedIntegratorStep)
+        assert md.modelExchange.needsCompletedIntegratorStep == (indicators[name] > 0)
+    md = fmpy.read_model_description(str(built["thermostat"][0]))
+    (heat,) = [v for v in md.modelVariables if v.name == "heat"]
+    assert (heat.causality, heat.variability, heat.initial) == ("local", "discrete", "calculated")
+
+
+@pytest.mark.parametrize("kind", ["ModelExchange", "CoSimulation"])
+@pytest.mark.parametrize("name", list(MODELS))
+def test_trajectories_match_bgc_and_the_closed_forms(built, name, kind):
+    """On the output grid (the events between its points): FMPy's run of the FMU against
+    bgc's run of the model and against the closed form.  The thermostat's heater, a discrete
+    variable, is in the FMU's variables and follows its modes (Co-Simulation: it persists
+    from one fmi2DoStep to the next)."""
+    path, (t, bgc_run), _ = built[name]
+    interval = MODELS[name][2]
+    extra = ["heat"] if name == "thermostat" else []
+    grid_only = {"record_events": False} if kind == "ModelExchange" else {}
+    result = simulate(path, kind, interval, output=[*bgc_run, *extra], **grid_only)
+    assert np.allclose(result["time"], t, rtol=0, atol=1e-12)
+    reference = REFERENCES[name](t)
+    for output, values in bgc_run.items():
+        assert relative_difference(result[output], values) < 1e-6, output
+        assert relative_difference(result[output], reference[output]) < 1e-6, output
+    if extra:
+        assert np.array_equal(result["heat"], reference["heat"])
+        assert 0 < reference["heat"].sum() < len(t)
+
+
+def event_rows(result):
+    """FMPy's rows at each event (recorded twice: its left and right limits)."""
+    t = result["time"]
+    k = np.flatnonzero(t[1:] == t[:-1])
+    return t[k], result[k], result[k + 1]
+
+
+def test_model_exchange_locates_the_events(built):
+    """The impacts, the switchings and the pulse's edges where FMPy's Model Exchange run
+    handled them: at the closed-form times and at bgc's own (1e-9 relative: the times CVODE
+    locates at its tolerance 1e-12); the momentum reversed as the reinit says."""
+    path, _, log = built["ball"]
+    result = simulate(path, "ModelExchange", 0.01)
+    times, left, right = event_rows(result)
+    impacts = right["b.p"] > left["b.p"]
+    want = bounce_times(int(impacts.sum()))
+    assert len(want) == 6 == len([e for e in log if e[1] == "b.p"])
+    for t, before, after, (t_ref, v_ref), logged in zip(
+            times[impacts], left[impacts], right[impacts], want,
+            [e for e in log if e[1] == "b.p"]):
+        assert abs(t - t_ref) <= 1e-9 * t_ref and abs(t - logged[0]) <= 1e-9 * t_ref
+        assert abs(before["b.p"] + v_ref) <= 1e-6 * v_ref
+        assert abs(after["b.p"] - 0.8 * v_ref) <= 1e-6 * v_ref
+
+    path, _, log = built["thermostat"]
+    result = simulate(path, "ModelExchange", 0.5, output=["T", "heat"])
+    times, left, right = event_rows(result)
+    switched = left["heat"] != right["heat"]
+    want = thermostat_switches(60.0)[1:]
+    logged = [e for e in log if e[1] == "heat"]
+    assert len(want) == switched.sum() == len(logged) > 5
+    for t, before, (t_ref, _, T_ref), e in zip(times[switched], left[switched], want, logged):
+        assert abs(t - t_ref) <= 1e-9 * t_ref and abs(t - e[0]) <= 1e-9 * t_ref
+        assert abs(before["T"] - T_ref) <= 1e-9 * T_ref
+        if T_ref > 20:  # T >= 21 holds from there: the heater is off after the event
+            assert before["T"] >= 21.0
+
+    path, _, log = built["lag"]
+    result = simulate(path, "ModelExchange", 0.1)
+    times, _, _ = event_rows(result)
+    assert [e[0] for e in log if e[2] == "0 -> 1"] == [1.7, 1.7 + 0.05]
+    # FMPy steps onto nextEventTime, or onto its output point when that is as close as
+    # 1e-9 relative (17 * 0.1 is 1.7000000000000002)
+    assert np.allclose(times, [1.7, 1.7 + 0.05], rtol=1e-15, atol=0)
+
+
+def test_the_fmi_functions_of_events(built):
+    """Called one by one: the start's event iteration and the initialization's event mode;
+    the indicators (> 0 exactly where the relation holds: at g = 0 a strict relation's is
+    slightly negative, another's slightly positive); a step event where a relation changed
+    unseen; the event iteration's reinit; the time events' nextEventTime."""
+    fmus = []
+
+    def instantiate(name):
+        path = built[name][0]
+        md = fmpy.read_model_description(str(path))
+        unzip = fmpy.extract(str(path))
+        model = FMU2Model(guid=md.guid, unzipDirectory=unzip,
+                          modelIdentifier=md.modelExchange.modelIdentifier, instanceName=name)
+        fmus.append((model, unzip))
+        model.instantiate()
+        model.setupExperiment(startTime=0.0)
+        model.enterInitializationMode()
+        model.exitInitializationMode()
+        vr = {v.name: v.valueReference for v in md.modelVariables}
+        return model, vr
+
+    def states(model, *x):
+        model.setContinuousStates((ctypes.c_double * len(x))(*x), len(x))
+
+    def indicators(model, n):
+        z = (ctypes.c_double * n)()
+        model.getEventIndicators(z, n)
+        return list(z)
+
+    def derivatives(model, n):
+        dx = (ctypes.c_double * n)()
+        model.getDerivatives(dx, n)
+        return list(dx)
+
+    try:
+        ball, vr = instantiate("ball")  # states (b.p, x); the relation x < 0, g = -x
+        info = ball.newDiscreteStates()
+        assert info == (False, False, False, False, False, 0.0)
+        ball.enterContinuousTimeMode()
+        assert indicators(ball, 1) == [-1.0]
+        states(ball, -1.0, 0.0)
+        (z,) = indicators(ball, 1)
+        assert z < 0 and z > -1e-250  # x = 0: x < 0 does not hold
+        assert ball.completedIntegratorStep() == (False, False)
+        states(ball, -3.0, -0.01)
+        assert ball.completedIntegratorStep() == (True, False)  # crossed, not located
+        ball.enterEventMode()
+        assert ball.newDiscreteStates()[3]  # valuesOfContinuousStatesChanged
+        assert list(ball.getReal([vr["b.p"], vr["x"]])) == [-0.8 * -3.0, -0.01]
+        ball.enterContinuousTimeMode()
+        assert ball.completedIntegratorStep() == (False, False)
+
+        room, vr = instantiate("thermostat")  # T > 21, T <= 19 (not strict)
+        assert room.getReal([vr["heat"]]) == [1.0]  # the start's event iteration
+        room.newDiscreteStates()
+        room.enterContinuousTimeMode()
+        assert indicators(room, 2) == [-1.0, -1.0]
+        states(room, 21.0)
+        z = indicators(room, 2)
+        assert -1e-250 < z[0] < 0 and z[1] == -2.0  # T = 21: T > 21 does not hold
+        states(room, 21.5)
+        room.enterEventMode()
+        room.newDiscreteStates()
+        assert room.getReal([vr["heat"]]) == [0.0]
+        room.enterContinuousTimeMode()
+        states(room, 19.0)
+        z = indicators(room, 2)
+        assert z[0] == -2.0 and 0 < z[1] < 1e-250  # T = 19: T <= 19 holds
+        assert room.completedIntegratorStep() == (True, False)
+        room.enterEventMode()
+        assert not room.newDiscreteStates()[3]  # the heater on, the state as it was
+        assert room.getReal([vr["heat"], vr["T"]]) == [1.0, 19.0]
+
+        lag, _ = instantiate("lag")
+        assert lag.newDiscreteStates()[4:] == (True, 1.7)
+        lag.enterContinuousTimeMode()
+        lag.setTime(1.7)
+        lag.enterEventMode()
+        assert lag.newDiscreteStates()[4:] == (True, 1.7 + 0.05)
+        lag.enterContinuousTimeMode()
+        (dx,) = derivatives(lag, 1)
+        assert dx == 1.0  # x = 0 and the pulse on
+    finally:
+        for model, unzip in fmus:
+            model.freeInstance()
+            shutil.rmtree(unzip, ignore_errors=True)
+
+
+def test_cosimulation_state_rolls_back_across_events(built):
+    """The thermostat in Co-Simulation, steps of 0.5: the state saved at t = 5 (and its
+    bytes) brings back the heater's mode too, and the next 40 steps repeat bit for bit."""
+    path = built["thermostat"][0]
+    md = fmpy.read_model_description(str(path))
+    vr = {v.name: v.valueReference for v in md.modelVariables}
+    unzip = fmpy.extract(str(path))
+    slave = FMU2Slave(guid=md.guid, unzipDirectory=unzip,
+                      modelIdentifier=md.coSimulation.modelIdentifier, instanceName="cs")
+    try:
+        slave.instantiate()
+        slave.setupExperiment(startTime=0.0)
+        slave.enterInitializationMode()
+        slave.exitInitializationMode()
+
+        def run(k0, n):
+            out = []
+            for k in range(k0, k0 + n):
+                slave.doStep(k * 0.5, 0.5)
+                out.append(slave.getReal([vr["T"], vr["heat"]]))
+            return np.array(out)
+
+        run(0, 10)
+        state = slave.getFMUState()
+        blob = slave.serializeFMUState(state)
+        first = run(10, 40)
+        assert len(set(first[:, 1])) == 2  # the heater switched within these steps
+        slave.setFMUState(state)
+        assert np.array_equal(run(10, 40), first)
+        slave.setFMUState(slave.deserializeFMUState(blob))
+        assert np.array_equal(run(10, 40), first)
+        t = np.arange(11, 51) * 0.5
+        reference = thermostat_reference(np.concatenate([[0.0], t]))
+        assert relative_difference(first[:, 0], reference["T"][1:]) < 1e-8
+        assert np.array_equal(first[:, 1], reference["heat"][1:])
+        slave.terminate()
+    finally:
+        slave.freeInstance()
+        shutil.rmtree(unzip, ignore_errors=True)
+
+
+def test_the_sources_build_without_warnings(tmp_path):
+    """The FMU's C file of each model with events compiles as C99 with every warning an
+    error."""
+    for name, (text, scene, _) in MODELS.items():
+        _, _, source = fmu.fmu_texts(build(text, scene))
+        path = tmp_path / f"{name}.c"
+        path.write_text(source, encoding="utf-8")
+        done = subprocess.run([*backends.c_compiler(), "-std=c99", "-Wall", "-Wextra",
+                               "-pedantic", "-Werror", "-fsyntax-only", str(path)],
+                              capture_output=True, text=True)
+        assert done.returncode == 0, done.stderr
+
+
+TOGGLE = """model toggle "a discrete value that never settles once x passes 1/2"
+discrete n = 0
+signal x = integral(1 + n, init = 0)
+when n > 0.5 { n = 0 }
+when n < 0.5 and x > 0.5 { n = 1 }
+scene run { time 0 .. 1 every 0.1; outputs x }
+"""
+
+
+def test_an_event_iteration_that_does_not_settle_fails_with_a_message(tmp_path):
+    """Both FMU types stop at the event (x = 1/2) with bgc's message in the log."""
+    path = tmp_path / "toggle.fmu"
+    path.write_bytes(fmu.build_fmu(build(TOGGLE, "run")))
+    for kind, fn in (("ModelExchange", "fmi2NewDiscreteStates"), ("CoSimulation", "fmi2DoStep")):
+        log = []
+        with pytest.raises(Exception, match=fn):
+            fmpy.simulate_fmu(str(path), fmi_type=kind, logger=lambda *a: log.append(a))
+        (message,) = [a[4].decode() for a in log if a[2] == 3]  # fmi2Error
+        assert message.startswith(f"{fn}: at t = 0.5") and "chattering" in message, message
