@@ -216,6 +216,7 @@ class ComponentParam:
     default: object | None
     unit: str | None
     span: Span
+    doc: str | None = None
 
 
 @dataclass(frozen=True)
@@ -234,6 +235,7 @@ class PortDecl:
     domain: Ident | None
     span: Span
     unit: str | None = None
+    doc: str | None = None
 
 
 @dataclass(frozen=True)

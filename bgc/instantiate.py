@@ -208,6 +208,10 @@ class _Instantiate:
                     continue
                 f.components[name] = d
                 f.owner[name] = f
+                for p in d.params:
+                    if p.name.name == "t":
+                        self.diags.error(top.sp(p.name.span), "'t' is time and cannot be "
+                                                              "declared")
             elif library and not isinstance(d, (ast.ConstantDecl, ast.ImportDecl,
                                                 ast.LibraryDecl)):
                 self.diags.error(top.sp(d.span), "a library holds only components, constants "
