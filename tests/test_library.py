@@ -380,3 +380,13 @@ def test_a_component_parameter_cannot_be_named_t():
                                                 "cannot be declared"):
         bgc.build(Source("inline.bg", "model m\ncomponent k(t = 1) { port p; s : Se(t); s -> p }"
                                       "\nx : k()\ny : C(1)\nx.p -> y\n"), program=False)
+
+
+def test_docs_library_md_is_generated_from_the_library():
+    """docs/library.md is tools/library_doc.py's output (run it after editing bgc/library)."""
+    import importlib.util
+    spec = importlib.util.spec_from_file_location("library_doc", ROOT / "tools" / "library_doc.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    assert (ROOT / "docs" / "library.md").read_text(encoding="utf-8") == module.page(), \
+        "docs/library.md is out of date: run python tools/library_doc.py"
