@@ -330,3 +330,4 @@ class Model:
     decls: tuple
     path: str
     ports: tuple = ()  # after instantiate: graph.Port, one per port of every instance
+    instances: tuple = ()  # after instantiate: graph.Instance, in declaration order

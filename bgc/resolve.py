@@ -740,4 +740,4 @@ def resolve(model: ast.Model) -> Graph:
     diags.raise_if_errors()
     return Graph(mdecl.name.name, mdecl.doc, model.path, tuple(parameters), tuple(els),
                  tuple(bonds), tuple(sigs), tuple(scenes), diags.warnings,
-                 ports=tuple(model.ports))
+                 ports=tuple(model.ports), instances=tuple(model.instances))
