@@ -18,6 +18,7 @@ import pytest
 from bgc import api, draw
 from bgc.report import check_report
 from conftest import MODELS, ROOT, run_bgc
+from test_components import CIRCUIT, HYD
 
 HAVE_DOT = shutil.which("dot") is not None
 PENDULUM = str(MODELS / "pendulum.bg")
@@ -396,35 +397,16 @@ def test_cli_svg_and_png(tmp_path):
 
 # ---------------------------------------------------------------- instances of components
 
-NESTED = """model circuit
-component orifice(r = 1) "a restriction" {
-  port a : hydraulic
-  res : R(r)
-  a -> res
-}
-component pipe(r = 1, l = 0.1) "a restriction and the fluid's inertia" {
-  port a : hydraulic
-  port b : hydraulic
-  j : 1
-  fluid : I(l)
-  a -> j
-  j -> fluid
-  o : orifice(r = r)
-  j -> o.a
-  j -> b
-}
-pump : Se(1)
-p1 : pipe(r = 2)
-tank : C(1)
-pump -> p1.a
-p1.b -> tank
-"""
+def _circuit(tmp_path):
+    """test_components' circuit: instance p1 of hyd.pipe, which holds p1.o, an orifice."""
+    (tmp_path / "hyd.bg").write_text(HYD)
+    path = tmp_path / "circuit.bg"
+    path.write_text(CIRCUIT.format(what="hyd", alias="hyd"))
+    return path
 
 
 def _nested(tmp_path, *args):
-    path = tmp_path / "circuit.bg"
-    path.write_text(NESTED)
-    done = run_bgc("draw", path, *args)
+    done = run_bgc("draw", _circuit(tmp_path), *args)
     assert done.returncode == 0, done.stderr
     return read_dot(done.stdout)
 
@@ -447,15 +429,13 @@ def test_depth_collapses_deeper_instances_into_boxes_with_their_ports(tmp_path):
     assert not g["clusters"] and set(g["nodes"]) == {"pump", "p1", "tank"}
     assert sorted((a, b) for a, b, _ in g["edges"]) == [("p1", "tank"), ("pump", "p1")]
     assert text_of(g["nodes"]["p1"]["label"]) == \
-        "p1 : pipe\nports a : hydraulic, b : hydraulic"
+        "p1 : hyd.pipe\nports a : hydraulic, b : hydraulic"
 
 
 def test_check_lists_the_instances(tmp_path):
-    path = tmp_path / "circuit.bg"
-    path.write_text(NESTED)
-    done = run_bgc("check", path)
+    done = run_bgc("check", _circuit(tmp_path))
     assert done.returncode == 0, done.stderr
     lines = done.stdout.splitlines()
     k = lines.index("instances (2):")
-    assert lines[k + 1:k + 3] == ["  p1  pipe, ports a : hydraulic, b : hydraulic",
+    assert lines[k + 1:k + 3] == ["  p1  hyd.pipe, ports a : hydraulic, b : hydraulic",
                                   "  p1.o  orifice, ports a : hydraulic"]
