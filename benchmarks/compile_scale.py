@@ -7,7 +7,7 @@ The models are the families of benchmarks/families.py (the chains compiled with 
 "swing", the others with the default scene), each at a range of sizes; link_chain_field is the
 constraint on a coupled field: an n-link chain in its link angles, one full n x n M(q), its end
 held on a line; rc_ladder_components is the RC ladder written with a component and a `for`
-loop, measured beside its flat twin rc_ladder_components_flat (the ratio of the two is printed,
+loop, measured beside its flat twin rc_ladder_flat_twin (the ratio of the two is printed,
 the target <= 1.2 at 1000 instances).  For every model:
 
   stages   bgc.build(...).timings (parse, instantiate, resolve, flatten, scene, causality,
@@ -90,7 +90,7 @@ SIZES = {
     "resistor_ladder": (2, 4, 8, 16, 32, 64),
     "link_chain_field": (2, 4, 8, 16, 32),
     "rc_ladder_components": (10, 30, 100, 300, 1000),
-    "rc_ladder_components_flat": (10, 30, 100, 300, 1000),
+    "rc_ladder_flat_twin": (10, 30, 100, 300, 1000),
 }
 QUICK_SIZES = {
     "pendulum_chain": (2, 8, 16),
@@ -100,7 +100,7 @@ QUICK_SIZES = {
     "resistor_ladder": (4, 16),
     "link_chain_field": (2, 8),
     "rc_ladder_components": (10, 100),
-    "rc_ladder_components_flat": (10, 100),
+    "rc_ladder_flat_twin": (10, 100),
 }
 SCENES = {"pendulum_chain": "swing", "pendulum_chain_vector": "swing", "link_chain_field": "swing"}
 STAGES = ("parse", "instantiate", "resolve", "flatten", "scene", "causality", "equations", "reduce", "lower",
@@ -109,7 +109,7 @@ ARITHMETIC = ("add", "mul", "div", "call", "neg")
 CFLAGS = ("-O2", "-std=c99")
 DRIVER_FLAGS = ("-D_POSIX_C_SOURCE=199309L",)
 TARGET_EXPONENT = 1.2
-TWINS = ("rc_ladder_components", "rc_ladder_components_flat")  # components, their flat twin
+TWINS = ("rc_ladder_components", "rc_ladder_flat_twin")  # components, their flat twin
 TARGET_TWIN_RATIO = 1.2  # the issue: 1000 instances compile within 1.2x their flat twin
 CHECK_TARGET = ("rc_ladder", 600, 3.0)  # the issue: `bgc check` under 3 s at 600 sections
 BGT_MASSES, BGT_TIMEOUT = 20, 600.0

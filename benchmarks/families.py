@@ -16,7 +16,7 @@ are written the way a modeller writes them, one element per line.
 - resistor_ladder(n): n sections of series and shunt resistors, each its own parameter, then
   a capacitor: one state behind a linear algebraic loop through all 2n resistors.
 - rc_ladder_components(n): the RC ladder written with a `section` component and a `for`
-  loop (n instances); rc_ladder_components_flat(n) is its flat twin, the same model written
+  loop (n instances); rc_ladder_flat_twin(n) is its flat twin, the same model written
   out by hand, for the cost of instantiating.
 """
 from __future__ import annotations
@@ -231,7 +231,7 @@ def rc_ladder_components(n: int) -> str:
     ]) + "\n"
 
 
-def rc_ladder_components_flat(n: int) -> str:
+def rc_ladder_flat_twin(n: int) -> str:
     """The flat twin of rc_ladder_components(n): the model its instances flatten to, written
     out by hand (the same parameters, elements and bonds, `s3_j` for `s[3].j`)."""
     lines = [
@@ -257,5 +257,5 @@ FAMILIES = {
     "resistor_ladder": resistor_ladder,
     "link_chain_field": link_chain_field,
     "rc_ladder_components": rc_ladder_components,
-    "rc_ladder_components_flat": rc_ladder_components_flat,
+    "rc_ladder_flat_twin": rc_ladder_flat_twin,
 }
