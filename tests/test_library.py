@@ -290,6 +290,35 @@ def test_a_four_bar_of_library_parts_matches_models_four_bar():
     assert np.abs(Y - Y0).max() < 1e-9
 
 
+def _lagrange(positions, angles, masses, inertias, q0, t, g=9.81):
+    """The motion in the coordinates q (sympy symbols, q0 their initial values, at rest) of
+    bodies with centres positions(q) and angles(q), from Lagrange's equations (y down)."""
+    q = sp.symbols(f"q0:{len(q0)}")
+    dq = sp.symbols(f"dq0:{len(q0)}")
+    r, a = positions(q), angles(q)
+    vel = [sp.Matrix(ri).jacobian(q) * sp.Matrix(dq) for ri in r]
+    w = [sp.Matrix([ai]).jacobian(q) * sp.Matrix(dq) for ai in a]
+    T = sum(m * (v.T * v)[0] / 2 + j * om[0] ** 2 / 2
+            for m, j, v, om in zip(masses, inertias, vel, w))
+    V = -g * sum(m * ri[1] for m, ri in zip(masses, r))
+    L = T - V
+    M = sp.hessian(T, dq)
+    rest = sp.Matrix([L.diff(d) for d in dq]).jacobian(q) * sp.Matrix(dq) \
+        - sp.Matrix([L.diff(x) for x in q])
+    f_M, f_rest = sp.lambdify([q, dq], M, "numpy"), sp.lambdify([q, dq], rest, "numpy")
+    n = len(q0)
+
+    def rhs(_, y):
+        acc = np.linalg.solve(np.array(f_M(y[:n], y[n:]), float),
+                              -np.array(f_rest(y[:n], y[n:]), float).ravel())
+        return np.concatenate([y[n:], acc])
+    return reference(rhs, list(q0) + [0.0] * n, t)
+
+
+def _rot(th, x, y):
+    return [sp.cos(th) * x - sp.sin(th) * y, sp.sin(th) * x + sp.cos(th) * y]
+
+
 SLIDER_CRANK = """model slider_crank_library "a slider-crank of three bodies, three pins and a guide"
 import planar as mb
 parameter r = 0.3; parameter l = 1.0; parameter g = 9.81; parameter theta0 = 0.4
@@ -309,21 +338,17 @@ slider.a -> wrist.b; slider.b -> guide.a
 
 
 def _slider_crank_reference(t):
-    """The crank angle from Lagrange's equation in that one coordinate (y down, gravity +y):
-    M(th) th'' + M'(th) th'^2 / 2 + V'(th) = 0."""
-    th = sp.Symbol("th")
-    r, l, g = 0.3, 1.0, 9.81
-    phi = sp.asin(-r * sp.sin(th) / l)
-    a = sp.Matrix([r * sp.cos(th), r * sp.sin(th)])
-    parts = [(2, 0.02, a / 2, th), (1, 0.1, a + l / 2 * sp.Matrix([sp.cos(phi), sp.sin(phi)]), phi),
-             (3, 0.05, sp.Matrix([r * sp.cos(th) + l * sp.cos(phi), 0]), sp.Integer(0))]
-    M = sum(m * (p.diff(th).T * p.diff(th))[0] + j * angle.diff(th) ** 2
-            for m, j, p, angle in parts)
-    V = -g * sum(m * p[1] for m, _, p, _ in parts)
-    f_M, f_dM, f_dV = (sp.lambdify(th, e, "math") for e in (M, M.diff(th), V.diff(th)))
-    sol = reference(lambda _, y: [y[1], -(f_dM(y[0]) * y[1] ** 2 / 2 + f_dV(y[0])) / f_M(y[0])],
-                    [0.4, 0.0], t)
-    return sol[:, 0]
+    """The crank angle from Lagrange's equation in that one coordinate (y down, gravity +y),
+    the rod's angle and the slider's position functions of it."""
+    r, l = 0.3, 1.0
+
+    def positions(q):
+        phi = sp.asin(-r * sp.sin(q[0]) / l)
+        a = [r * sp.cos(q[0]), r * sp.sin(q[0])]
+        return [[a[0] / 2, a[1] / 2], [a[0] + l / 2 * sp.cos(phi), a[1] + l / 2 * sp.sin(phi)],
+                [a[0] + l * sp.cos(phi), sp.Integer(0)]]
+    return _lagrange(positions, lambda q: [q[0], sp.asin(-r * sp.sin(q[0]) / l), sp.Integer(0)],
+                     [2, 1, 3], [0.02, 0.1, 0.05], [0.4], t)[:, 0]
 
 
 def test_a_slider_crank_of_library_parts_matches_its_lagrangian():
@@ -334,6 +359,61 @@ def test_a_slider_crank_of_library_parts_matches_its_lagrangian():
     phi = np.arcsin(-0.3 * np.sin(theta))
     np.testing.assert_allclose(Y[:, 1], 0.3 * np.cos(theta) + np.cos(phi), rtol=0, atol=1e-8)
     assert np.abs(Y[:, 2]).max() < 1e-9
+
+
+DOUBLE = """model double_compound "two bodies, pins off their axes in both directions"
+import planar as mb
+parameter th1 = 0.4; parameter th2 = -0.3
+parameter x1 = 0.1 - (cos(th1)*(-0.3) - sin(th1)*0.2)
+parameter y1 = -0.05 - (sin(th1)*(-0.3) + cos(th1)*0.2)
+parameter x2 = x1 + cos(th1)*0.25 - sin(th1)*(-0.15) - (cos(th2)*(-0.2) - sin(th2)*0.1)
+parameter y2 = y1 + sin(th1)*0.25 + cos(th1)*(-0.15) - (sin(th2)*(-0.2) + cos(th2)*0.1)
+upper : mb.body(m = 1.5, j = 0.04, x0 = x1, y0 = y1, th0 = th1, g = 9.81)
+lower : mb.body(m = 0.8, j = 0.02, x0 = x2, y0 = y2, th0 = th2, g = 9.81)
+top : mb.revolute_ground(th = upper.q[2], ax = -0.3, ay = 0.2, x = 0.1, y = -0.05)
+knee : mb.revolute(tha = upper.q[2], thb = lower.q[2], ax = 0.25, ay = -0.15, bx = -0.2,
+                   by = 0.1)
+free : mb.force()
+upper.a -> top.a; upper.b -> knee.a; lower.a -> knee.b; lower.b -> free.a
+"""
+
+
+def test_revolute_joints_off_the_axes_match_lagrange():
+    """Pins at points with both coordinates nonzero on both bodies: every term of the
+    revolute joints' Jacobians at work, against Lagrange's equations in the two angles."""
+    t, Y = simulate(DOUBLE, ["upper.q[2]", "lower.q[2]", "lower.q[0]"], t_end=1.0,
+                    rtol=1e-11, atol=1e-13)
+
+    def positions(q):
+        p1 = [0.1 - u for u in _rot(q[0], -0.3, 0.2)]
+        knee = [p + u for p, u in zip(p1, _rot(q[0], 0.25, -0.15))]
+        return [p1, [k - u for k, u in zip(knee, _rot(q[1], -0.2, 0.1))]]
+    ref = _lagrange(positions, lambda q: [q[0], q[1]], [1.5, 0.8], [0.04, 0.02],
+                    [0.4, -0.3], t)
+    np.testing.assert_allclose(Y[:, :2], ref[:, :2], rtol=0, atol=1e-8)
+    x2 = np.array([float(positions([a, b])[1][0]) for a, b in ref[:, :2]])
+    np.testing.assert_allclose(Y[:, 2], x2, rtol=0, atol=1e-8)
+
+
+INCLINE = """model incline
+import planar as mb
+parameter dir = 0.3; parameter s0 = 0.5
+block : mb.body(m = 2, j = 0.1, x0 = 0.2 + s0*cos(dir), y0 = -0.1 + s0*sin(dir), th0 = 0.25,
+                g = 9.81)
+guide : mb.prismatic_ground(x = 0.2, y = -0.1, dir = dir, th0 = 0.25)
+push : mb.force(fx = -3, fy = 1, tau = 5)
+block.a -> guide.a; block.b -> push.a
+"""
+
+
+def test_a_body_on_an_inclined_guide_slides_as_a_closed_form():
+    t, Y = simulate(INCLINE, ["block.q[0]", "block.q[1]", "block.q[2]"])
+    d = 0.3
+    acc = 9.81 * math.sin(d) + (-3 * math.cos(d) + 1 * math.sin(d)) / 2
+    s = 0.5 + acc * t ** 2 / 2
+    np.testing.assert_allclose(Y[:, 0], 0.2 + s * math.cos(d), rtol=0, atol=1e-9)
+    np.testing.assert_allclose(Y[:, 1], -0.1 + s * math.sin(d), rtol=0, atol=1e-9)
+    np.testing.assert_allclose(Y[:, 2], 0.25, rtol=0, atol=1e-9)  # the torque is held
 
 
 FREE_BODY = """model thrown
