@@ -513,7 +513,7 @@ class _Instantiate:
                 child.signal_params.add(name)
                 self.out.append(ast.SignalDecl(ident, None, expr, child.sp(p.span), p.unit))
             else:
-                self.out.append(ast.ParamDecl(ident, expr, None, child.sp(p.span), p.unit))
+                self.out.append(ast.ParamDecl(ident, expr, p.doc, child.sp(p.span), p.unit))
         return True
 
     def statement(self, scope: _Scope, stmt, env):
