@@ -6,9 +6,12 @@
 The models are the families of benchmarks/families.py (the chains compiled with their scene
 "swing", the others with the default scene), each at a range of sizes; link_chain_field is the
 constraint on a coupled field: an n-link chain in its link angles, one full n x n M(q), its end
-held on a line.  For every model:
+held on a line; rc_ladder_components is the RC ladder written with a component and a `for`
+loop, measured beside its flat twin rc_ladder_flat_twin (the ratio of the two is printed,
+the target <= 1.2 at 1000 instances).  For every model:
 
-  stages   bgc.build(...).timings (parse, resolve, flatten, scene, causality, equations, reduce, lower)
+  stages   bgc.build(...).timings (parse, instantiate, resolve, flatten, scene, causality,
+           equations, reduce, lower)
            and emit_c, timed inside a fresh Python process (this script run with the hidden
            option --one FAMILY N DIR, which prints JSON): SymPy caches what it has seen, so sizes
            built in one process would warm each other.  Median over the repeats.
@@ -86,6 +89,8 @@ SIZES = {
     "rc_ladder": (10, 30, 100, 300, 600, 1000),
     "resistor_ladder": (2, 4, 8, 16, 32, 64),
     "link_chain_field": (2, 4, 8, 16, 32),
+    "rc_ladder_components": (10, 30, 100, 300, 1000),
+    "rc_ladder_flat_twin": (10, 30, 100, 300, 1000),
 }
 QUICK_SIZES = {
     "pendulum_chain": (2, 8, 16),
@@ -94,14 +99,18 @@ QUICK_SIZES = {
     "rc_ladder": (10, 100),
     "resistor_ladder": (4, 16),
     "link_chain_field": (2, 8),
+    "rc_ladder_components": (10, 100),
+    "rc_ladder_flat_twin": (10, 100),
 }
 SCENES = {"pendulum_chain": "swing", "pendulum_chain_vector": "swing", "link_chain_field": "swing"}
-STAGES = ("parse", "resolve", "flatten", "scene", "causality", "equations", "reduce", "lower",
+STAGES = ("parse", "instantiate", "resolve", "flatten", "scene", "causality", "equations", "reduce", "lower",
           "emit")
 ARITHMETIC = ("add", "mul", "div", "call", "neg")
 CFLAGS = ("-O2", "-std=c99")
 DRIVER_FLAGS = ("-D_POSIX_C_SOURCE=199309L",)
 TARGET_EXPONENT = 1.2
+TWINS = ("rc_ladder_components", "rc_ladder_flat_twin")  # components, their flat twin
+TARGET_TWIN_RATIO = 1.2  # the issue: 1000 instances compile within 1.2x their flat twin
 CHECK_TARGET = ("rc_ladder", 600, 3.0)  # the issue: `bgc check` under 3 s at 600 sections
 BGT_MASSES, BGT_TIMEOUT = 20, 600.0
 BGT_REPORTED = ("BondGraphTools 0.4.6, 20-mass chain: 151 s reported by the issue that asked "
@@ -708,6 +717,28 @@ def fit_lines(rows: list[Row]) -> list[str]:
     return lines
 
 
+def twin_lines(rows: list[Row]) -> list[str]:
+    """The component model against its flat twin, size by size: in process and command."""
+    mine = {(r.family, r.size): r for r in rows if r.tool == "bgc" and r.family in TWINS}
+    sizes = sorted({n for f, n in mine if (TWINS[0], n) in mine and (TWINS[1], n) in mine})
+    if not sizes:
+        return []
+    lines = [f"{TWINS[0]} against {TWINS[1]} (target <= {TARGET_TWIN_RATIO:g} at the "
+             f"largest size):",
+             f"{'instances':>9}{'components':>12}{'flat':>8}{'ratio':>7}{'command':>9}"
+             f"{'flat':>8}{'ratio':>7}"]
+    for n in sizes:
+        a, b = mine[(TWINS[0], n)], mine[(TWINS[1], n)]
+        lines.append(f"{n:>9}{fmt(a.total, '.3f', 12)}{fmt(b.total, '.3f', 8)}"
+                     f"{fmt(a.total / b.total, '.2f', 7)}{fmt(a.command, '.3f', 9)}"
+                     f"{fmt(b.command, '.3f', 8)}{fmt(a.command / b.command, '.2f', 7)}")
+    a, b = mine[(TWINS[0], sizes[-1])], mine[(TWINS[1], sizes[-1])]
+    met = a.total <= TARGET_TWIN_RATIO * b.total
+    lines.append(f"at {sizes[-1]} instances: {a.total / b.total:.2f}x in process "
+                 f"({'met' if met else 'NOT MET'})")
+    return lines
+
+
 def check_line(rows: list[Row]) -> str | None:
     family, size, limit = CHECK_TARGET
     row = next((r for r in rows if (r.family, r.size, r.tool) == (family, size, "bgc")), None)
@@ -726,7 +757,7 @@ def plot(rows: list[Row], path: str) -> None:
 
     fig, (ax_compile, ax_cc) = plt.subplots(1, 2, figsize=(12, 4.8), sharey=True)
     colors = dict(zip(SIZES, ("tab:blue", "tab:purple", "tab:orange", "tab:green", "tab:red",
-                              "tab:brown")))
+                              "tab:brown", "tab:olive", "tab:cyan")))
     for (family, tool) in dict.fromkeys((r.family, r.tool) for r in rows):
         mine = sorted((r for r in rows if (r.family, r.tool) == (family, tool)),
                       key=lambda r: r.size)
@@ -855,6 +886,9 @@ def main(argv=None) -> int:
     line = check_line(rows)
     if line:
         print(f"\n{line}")
+    twins = twin_lines(rows)
+    if twins:
+        print("\n" + "\n".join(twins))
     if not ca:
         print("\nCasADi: not importable, its baselines were skipped")
     print()

@@ -15,6 +15,9 @@ are written the way a modeller writes them, one element per line.
   n states.
 - resistor_ladder(n): n sections of series and shunt resistors, each its own parameter, then
   a capacitor: one state behind a linear algebraic loop through all 2n resistors.
+- rc_ladder_components(n): the RC ladder written with a `section` component and a `for`
+  loop (n instances); rc_ladder_flat_twin(n) is its flat twin, the same model written
+  out by hand, for the cost of instantiating.
 """
 from __future__ import annotations
 
@@ -206,6 +209,46 @@ def link_chain_field(n: int, theta0: float = 0.5, dtheta: float = 0.15) -> str:
     return "\n".join(lines) + "\n"
 
 
+def rc_ladder_components(n: int) -> str:
+    """rc_ladder(n) written with a `section` component repeated by a `for` loop: n instances,
+    each with its own parameters r and c (parameters of the model, s[i].r); the last node's
+    free port is closed by a zero flow source."""
+    return "\n".join([
+        f'model rcc{n} "{n}-section RC ladder of components driven by a voltage source"',
+        f"constant N = {n}",
+        "parameter V0 = 1.0", "parameter R = 1.0", "parameter Cc = 0.01",
+        "component section(r, c) {",
+        "  port a; port b",
+        "  j : 1; res : R(r); n : 0; cap : C(c)",
+        "  a -> j -> n; j -> res; n -> cap; n -> b",
+        "}",
+        "src : Se(V0)",
+        "for i in 1..N { s[i] : section(R, Cc) }",
+        "src -> s[1].a",
+        "for i in 2..N { s[i-1].b -> s[i].a }",
+        "open : Sf(0)",
+        "s[N].b -> open",
+    ]) + "\n"
+
+
+def rc_ladder_flat_twin(n: int) -> str:
+    """The flat twin of rc_ladder_components(n): the model its instances flatten to, written
+    out by hand (the same parameters, elements and bonds, `s3_j` for `s[3].j`)."""
+    lines = [
+        f'model rcf{n} "{n}-section RC ladder, the flat twin of the component ladder"',
+        "parameter V0 = 1.0", "parameter R = 1.0", "parameter Cc = 0.01",
+        "src : Se(V0)",
+    ]
+    for i in range(1, n + 1):
+        s = f"s{i}_"
+        left = "src" if i == 1 else f"s{i - 1}_n"
+        lines += [f"parameter {s}r = R", f"parameter {s}c = Cc",
+                  f"{s}j : 1", f"{s}res : R({s}r)", f"{s}n : 0", f"{s}cap : C({s}c)",
+                  f"{left} -> {s}j -> {s}n", f"{s}j -> {s}res", f"{s}n -> {s}cap"]
+    lines += ["open : Sf(0)", f"s{n}_n -> open"]
+    return "\n".join(lines) + "\n"
+
+
 FAMILIES = {
     "pendulum_chain": pendulum_chain,
     "pendulum_chain_vector": pendulum_chain_vector,
@@ -213,4 +256,6 @@ FAMILIES = {
     "rc_ladder": rc_ladder,
     "resistor_ladder": resistor_ladder,
     "link_chain_field": link_chain_field,
+    "rc_ladder_components": rc_ladder_components,
+    "rc_ladder_flat_twin": rc_ladder_flat_twin,
 }

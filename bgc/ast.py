@@ -226,6 +226,7 @@ class ComponentParam:
     default: object | None
     unit: str | None
     span: Span
+    doc: str | None = None
 
 
 @dataclass(frozen=True)
@@ -244,6 +245,7 @@ class PortDecl:
     domain: Ident | None
     span: Span
     unit: str | None = None
+    doc: str | None = None
 
 
 @dataclass(frozen=True)
@@ -374,3 +376,4 @@ class Model:
     decls: tuple
     path: str
     ports: tuple = ()  # after instantiate: graph.Port, one per port of every instance
+    instances: tuple = ()  # after instantiate: graph.Instance, in declaration order

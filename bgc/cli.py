@@ -979,10 +979,15 @@ def _drawing_target(ctx, param, value):
               metavar="FILE.dot|FILE.svg|FILE.png|-",
               help="The drawing: DOT (needs nothing), or SVG or PNG made by Graphviz's `dot` "
                    "(default: DOT on stdout).")
-def draw(model, scene, outputs, effects, output):
+@click.option("--depth", type=click.IntRange(min=0), default=None, metavar="N",
+              help="Draw instances of components N levels deep as clusters and collapse the "
+                   "deeper ones into boxes with their ports (0: every instance a box; "
+                   "default: every level).")
+def draw(model, scene, outputs, effects, output, depth):
     """Draw the bond graph with its causal strokes as Graphviz DOT, SVG or PNG: half-arrows
     for power, the stroke where the effort is received, multibonds as double lines, the
-    constraint correctors as block diagrams, what the scene leaves out in grey."""
+    constraint correctors as block diagrams, what the scene leaves out in grey; each instance
+    of a component is a cluster."""
     from . import draw as drawing
     _not_an_input(model, None if output == "-" else output)
     fmt = "dot" if output in (None, "-") else drawing.format_of(output)
@@ -990,7 +995,7 @@ def draw(model, scene, outputs, effects, output):
         click.echo(f"error: {drawing.GRAPHVIZ_HELP}", err=True)
         sys.exit(1)
     compiled = _build(model, scene, program=False, outputs=outputs, effects=effects)
-    text = drawing.draw_dot(compiled)
+    text = drawing.draw_dot(compiled, depth)
     if fmt == "dot":
         if output in (None, "-"):
             _echo(text)

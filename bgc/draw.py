@@ -224,18 +224,84 @@ def drawn_bonds(compiled, written: Graph | None = None) -> tuple[DrawnBond, ...]
 
 
 class _Dot:
-    def __init__(self):
+    def __init__(self, boxes: dict | None = None):
         self.lines: list[str] = []
         self.depth = 1
+        self.boxes = boxes or {}  # collapsed instance path -> its box (with --depth)
+        self.seen: set = set()  # edges drawn to or from a box
 
     def add(self, text: str):
         self.lines.append("  " * self.depth + text)
 
+    def box(self, id_: str) -> str | None:
+        """The box of the collapsed instance a node is inside, if it is."""
+        return _owner(id_, self.boxes)
+
     def node(self, id_: str, **attrs):
-        self.add(f"{_quoted(id_)} {_attrs(**attrs)};")
+        if self.box(id_) is None:
+            self.add(f"{_quoted(id_)} {_attrs(**attrs)};")
 
     def edge(self, a: str, b: str, **attrs):
+        ba, bb = self.box(a), self.box(b)
+        if ba is not None or bb is not None:
+            a, b = ba or a, bb or b
+            attrs.pop("id", None)
+            key = (a, b, _attrs(**attrs))
+            if a == b or key in self.seen:
+                return  # (inside one box, or drawn already)
+            self.seen.add(key)
         self.add(f"{_quoted(a)} -> {_quoted(b)} {_attrs(**attrs)};")
+
+
+def _owner(name: str, paths) -> str | None:
+    """The innermost of the instance paths `paths` that `name` is inside of."""
+    k = len(name)
+    while True:
+        k = max(name.rfind(".", 0, k), -1)
+        if k <= 0:
+            return None
+        if name[:k] in paths:
+            return name[:k]
+
+
+def _instances(dot: _Dot, written: Graph, depth: int | None):
+    """One cluster per instance, holding the nodes of its elements and signals (a node first
+    named in a cluster is drawn in it); below `depth` levels, an instance is one box with its
+    ports instead."""
+    paths = {i.path: i for i in written.instances}
+    children: dict = {}
+    for inst in written.instances:
+        children.setdefault(_owner(inst.path, paths), []).append(inst)
+    nodes: dict = {}
+    for name in [el.name for el in written.elements] + [s.name for s in written.signals]:
+        nodes.setdefault(_owner(name, paths), []).append(name)
+    ports: dict = {}
+    for p in written.ports:
+        owner, _, local = p.name.rpartition(".")
+        ports.setdefault(owner, []).append(local + (f"[{p.dim}]" if p.dim > 1 else "")
+                                           + (f" : {p.domain}" if p.domain else ""))
+    stack = [(inst, 1) for inst in reversed(children.get(None, []))]
+    while stack:
+        inst, level = stack.pop()
+        if inst is None:
+            dot.depth -= 1
+            dot.add("}")
+            continue
+        title = f"{inst.path} : {inst.component}"
+        if depth is not None and level > depth:
+            listed = ports.get(inst.path)
+            sub = "ports " + ", ".join(listed) if listed else "no ports"
+            dot.node(inst.path, shape="box", style="rounded,filled", fillcolor="gray95",
+                     label=_label(title, sub), tooltip=inst.doc or title)
+            continue
+        dot.add(f"subgraph {_quoted('cluster ' + inst.path)} {{")
+        dot.depth += 1
+        dot.add(f"label={_quoted(title)}; tooltip={_quoted(inst.doc or title)}; fontsize=11; "
+                f"style=rounded; color=gray50;")
+        for name in nodes.get(inst.path, ()):
+            dot.add(f"{_quoted(name)};")
+        stack.append((None, level))
+        stack += [(c, level + 1) for c in reversed(children.get(inst.path, []))]
 
 
 def _bond_edge(dot: _Dot, b: DrawnBond):
@@ -415,7 +481,7 @@ def _signals(dot: _Dot, written: Graph, sc: _Scene, lines):
 def _constraints(dot: _Dot, written: Graph, sc: _Scene, lines):
     for el in written.elements:
         c = el.constraint
-        if c is None:
+        if c is None or dot.box(el.name) is not None:
             continue
         grey = el.name not in sc.kept
         kind = sc.kinds.get(el.name) or c.kind or (
@@ -430,19 +496,31 @@ def _constraints(dot: _Dot, written: Graph, sc: _Scene, lines):
                                                   "condition (the paper's figure 9)")
 
 
-def draw_dot(compiled) -> str:
+def draw_dot(compiled, depth: int | None = None) -> str:
     """The bond graph of `compiled` (a bgc.api.Compiled) as Graphviz DOT text: the model as
-    written, in the compiled scene, with the causal strokes its causality stage assigned."""
+    written, in the compiled scene, with the causal strokes its causality stage assigned;
+    each instance of a component a cluster, those more than `depth` levels down (0: every
+    instance) collapsed into boxes."""
     written = _written(compiled)
     lines = compiled.source.text.splitlines()
     sc = _scene(compiled)
-    dot = _Dot()
+    boxes = {}
+    if depth is not None:
+        paths = {i.path for i in written.instances}
+        for inst in written.instances:
+            level, up = 1, _owner(inst.path, paths)
+            while up is not None:
+                level, up = level + 1, _owner(up, paths)
+            if level == depth + 1:
+                boxes[inst.path] = inst.path
+    dot = _Dot(boxes)
     dot.lines = ["// bgc draw: the bond graph with its causal strokes (docs/cli.md)",
                  f"digraph {_quoted(written.name)} {{"]
     dot.add(f"graph [rankdir=LR, nodesep=0.45, ranksep=0.6, fontname={_quoted(FONT)}, "
             f"fontsize=12, labelloc=t, label={_quoted(_title(written, compiled.settings))}];")
     dot.add(f"node [fontname={_quoted(FONT)}, fontsize=13, margin=\"0.04,0.02\"];")
     dot.add(f"edge [fontname={_quoted(FONT)}, fontsize=10];")
+    _instances(dot, written, depth)
     _elements(dot, written, sc, lines)
     for b in drawn_bonds(compiled, written):
         _bond_edge(dot, b)

@@ -121,6 +121,17 @@ class Vector:
 
 
 @dataclass(frozen=True)
+class Instance:
+    """An instance of a component: its path, the component as the instantiating scope names
+    it (`hyd.pipe`), the component's doc string, and the instance's declaration."""
+
+    path: str
+    component: str
+    doc: str | None
+    span: Span
+
+
+@dataclass(frozen=True)
 class Port:
     """A port of an instance, as declared: where a bond crossed its boundary (the bond itself
     is one bond of the flat graph)."""
@@ -208,6 +219,7 @@ class Graph:
     squares: tuple = ()
     discretes: tuple = ()
     whens: tuple = ()
+    instances: tuple = ()  # Instance, one per instance of a component, in declaration order
 
     @cached_property
     def vector_by_name(self) -> dict:

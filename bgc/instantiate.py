@@ -32,7 +32,7 @@ from pathlib import Path
 
 from . import ast
 from .diagnostics import Collector, ModelError, Note, Origin, Span, did_you_mean, error, fail
-from .graph import Port
+from .graph import Instance, Port
 from .kinds import KINDS
 from .resources import MAX_DIMENSION, MAX_GENERATED, MAX_INSTANCE_DEPTH, read_bounded
 
@@ -173,6 +173,7 @@ class _Instantiate:
         self.out: list = []  # the flat declarations
         self.edges: list = []  # (src end, dst end, src span, dst span, depth of its scope)
         self.ports: dict = {}  # flat port name -> graph.Port
+        self.instances: list = []  # graph.Instance, in pre-order
         self.files: dict = {}  # resolved library path -> _File
         self.top = {id(d) for d in model.decls}  # the model file's top-level statements
         self.dims: dict = {}  # flat element name -> (dimension of its in side, of its out side)
@@ -208,6 +209,10 @@ class _Instantiate:
                     continue
                 f.components[name] = d
                 f.owner[name] = f
+                for p in d.params:
+                    if p.name.name == "t":
+                        self.diags.error(top.sp(p.name.span), "'t' is time and cannot be "
+                                                              "declared")
             elif library and not isinstance(d, (ast.ConstantDecl, ast.ImportDecl,
                                                 ast.LibraryDecl)):
                 self.diags.error(top.sp(d.span), "a library holds only components, constants "
@@ -409,7 +414,8 @@ class _Instantiate:
         self.emit(root)
         self.fuse()
         self.diags.raise_if_errors()
-        return ast.Model(tuple(self.out), self.model.path, tuple(self.ports.values()))
+        return ast.Model(tuple(self.out), self.model.path, tuple(self.ports.values()),
+                         tuple(self.instances))
 
     def child(self, parent: _Scope, stmt: ast.ElementDecl, env) -> _Scope:
         name = self.local_name(parent, stmt, env)
@@ -457,6 +463,8 @@ class _Instantiate:
             if isinstance(stmt, ast.ElementDecl) and self.is_instance(scope, stmt):
                 child = scope.children.get(self.guard(self.local_name, scope, stmt, env))
                 if child is not None and self.guard(self.arguments, child) is not None:
+                    self.instances.append(Instance(child.path, stmt.kind.name,
+                                                   child.comp.doc, child.chain[0][1]))
                     stack.append((child, iter(child.items)))
                 continue
             self.guard(self.statement, scope, stmt, env)
@@ -505,7 +513,7 @@ class _Instantiate:
                 child.signal_params.add(name)
                 self.out.append(ast.SignalDecl(ident, None, expr, child.sp(p.span), p.unit))
             else:
-                self.out.append(ast.ParamDecl(ident, expr, None, child.sp(p.span), p.unit))
+                self.out.append(ast.ParamDecl(ident, expr, p.doc, child.sp(p.span), p.unit))
         return True
 
     def statement(self, scope: _Scope, stmt, env):

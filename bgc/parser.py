@@ -176,11 +176,11 @@ class _ToAst(Transformer_NonRecursive):
         return tuple(c)
 
     def cparam(self, meta, c):
-        return ast.ComponentParam(_ident(c[0]), c[1], c[2], _span(meta))
+        return ast.ComponentParam(_ident(c[0]), c[1], c[2], _span(meta), _doc(c[3]))
 
     def port_decl(self, meta, c):
         return ast.PortDecl(_ident(c[0]), c[1], _ident(c[2]) if c[2] is not None else None,
-                            _span(meta), c[3])
+                            _span(meta), c[3], _doc(c[4]))
 
     def constant_decl(self, meta, c):
         return ast.ConstantDecl(_ident(c[0]), c[1], _span(meta))

@@ -4,13 +4,16 @@ shared look of bgc's figures (`bgc accuracy` uses it too).
 matplotlib is optional (`pip install 'bgc[plot]'`) and imported only when a figure is drawn,
 with the Agg backend (no display needed).
 
-A run's outputs are grouped by what they are, one panel each, in the order their first
-column comes in the CSV: signals (the model's coordinates and other signals), momenta p,
-displacements q, efforts e, flows f, multipliers λ, constraint residuals Φ, parameters.
+A run's outputs are grouped by unit where their units are known (a current and the voltage
+of a capacitor in two panels, two currents in one, whatever bond-graph variables they are),
+else by what they are: signals (the model's coordinates and other signals), momenta p,
+displacements q, efforts e, flows f, multipliers λ, constraint residuals Φ, parameters; one
+panel per group, in the order their first column comes in the CSV.
 A legend names each column with the doc string of its element; a doc string that ends in
 `[unit]` gives the unit of what the declaration names: a parameter's value, a 1-junction's
 common flow (and so the flow of a one-port bonded to it), a 0-junction's common effort (and
-so the effort of a one-port bonded to it).  A kind's columns of different units get a panel each.
+so the effort of a one-port bonded to it); a parameter's or a signal's `unit "..."` (a
+component's parameters included) gives theirs.
 """
 from __future__ import annotations
 
@@ -34,6 +37,7 @@ KINDS = {  # group: (panel title, the quantity on its axis)
     "lambda": ("constraint multipliers", "multiplier λ"),
     "residual": ("constraint residuals", "residual Φ"),
     "parameter": ("parameters", "value"),
+    "unit": ("in one unit", "value"),
 }
 _VARIABLE = re.compile(r"([A-Za-z_][A-Za-z0-9_.\[\]]*)\.([a-z]+)(?:\[([0-9]+)\])?")
 _INDEXED = re.compile(r"([A-Za-z_][A-Za-z0-9_.\[\]]*)\[([0-9]+)\]")
@@ -155,12 +159,12 @@ def columns(compiled, names) -> list[Column]:
 
 
 def panels(cols: list[Column]) -> list[tuple[str, list[Column]]]:
-    """The columns grouped by kind, and within a kind by unit where units are known (a
-    current and a speed are both flows, not one panel); each group where its first column
-    comes."""
+    """The columns grouped by unit where it is known (kind "unit": a current and a speed are
+    both flows, not one panel; a flow and a signal in amperes are one), the others by kind;
+    each group where its first column comes."""
     groups: dict[tuple, list[Column]] = {}
     for c in cols:
-        groups.setdefault((c.kind, c.unit), []).append(c)
+        groups.setdefault(("unit", c.unit) if c.unit else (c.kind, None), []).append(c)
     return [(kind, group) for (kind, _), group in groups.items()]
 
 
@@ -261,6 +265,8 @@ def figure(table: Table, cols: list[Column], heading: list[str], stopped: bool =
     for ax, (kind, group) in zip(axes[:, 0], groups):
         title, quantity = KINDS[kind]
         unit = group[0].unit  # (one per panel)
+        if kind == "unit":
+            title = f"in {_text(unit, 20)}"
         for c in group:
             label = _text(c.name) + (f" ({_text(c.doc, 40)})" if c.doc else "")
             ax.plot(table.t, table.values[index[c.name]], lw=1.2, label=label)

@@ -192,6 +192,17 @@ def check_report(compiled, summary: SceneSummary | None = None) -> str:
     lines = _header(compiled)
     if summary is not None:
         lines += _summary_lines(summary)
+    if g.instances:
+        lines.append(f"instances ({len(g.instances)}):")
+        ports: dict = {}
+        for p in g.ports:
+            owner, _, name = p.name.rpartition(".")
+            ports.setdefault(owner, []).append(name + (f"[{p.dim}]" if p.dim > 1 else "")
+                                               + (f" : {p.domain}" if p.domain else ""))
+        for inst in g.instances:
+            listed = ports.get(inst.path)
+            lines.append(f"  {inst.path}  {inst.component}"
+                         + (f", ports {', '.join(listed)}" if listed else ""))
     lines.append(f"states ({len(r.states)}):")
     lines += [f"  {st.name}  {KINDS[st.kind]}" for st in r.states]
     if r.pruned:

@@ -1050,6 +1050,6 @@ def resolve(model: ast.Model) -> Graph:
     diags.raise_if_errors()
     return Graph(mdecl.name.name, mdecl.doc, model.path, tuple(parameters), tuple(els),
                  tuple(bonds), tuple(sigs), tuple(scenes), diags.warnings,
-                 ports=tuple(model.ports), relations=tuple(scope.events.relations),
-                 squares=tuple(scope.events.squares), discretes=tuple(discretes),
-                 whens=tuple(whens))
+                 ports=tuple(model.ports), instances=tuple(model.instances),
+                 relations=tuple(scope.events.relations), squares=tuple(scope.events.squares),
+                 discretes=tuple(discretes), whens=tuple(whens))

@@ -21,7 +21,8 @@ from bgc.resources import MAX_INSTANCE_DEPTH
 
 
 ROOT = Path(__file__).resolve().parent.parent
-COMPONENT_CHAIN = ROOT / "tests" / "models" / "pendulum_chain_components.bg"
+COMPONENT_CHAIN = ROOT / "models" / "pendulum_chain.bg"
+FLAT_CHAIN = ROOT / "tests" / "models" / "pendulum_chain_flat.bg"
 
 
 def build(text, scene=None, consts=(), **kw):
@@ -616,14 +617,15 @@ def test_a_library_holds_components_only(tmp_path):
 # ------------------------------------------------------------------ the pendulum chain
 @pytest.mark.parametrize("backend", ["python"] + (["c"] if backends.have_c_compiler() else []))
 def test_the_pendulum_chain_as_a_component_gives_the_same_numbers(backend):
-    """tests/models/pendulum_chain_components.bg (a `link` component and a for loop, under 40
-    lines) against models/pendulum_chain.bg (187 lines, generated): every value of the CSV the
-    same, bit for bit; only the columns' names differ (link[1].x for x1)."""
+    """models/pendulum_chain.bg (a `link` component and a for loop, under 40 lines) against
+    its flat twin tests/models/pendulum_chain_flat.bg (187 lines, written out by
+    benchmarks/families.py): every value of the CSV the same, bit for bit; only the columns'
+    names differ (link[1].x for x1)."""
     text = COMPONENT_CHAIN.read_text()
     assert len(text.splitlines()) < 40
     kw = dict(t_end=1.0, backend=backend)
     t, Y, names = bgc.simulate(str(COMPONENT_CHAIN), "swing", **kw)
-    t0, Y0, names0 = bgc.simulate(str(ROOT / "models" / "pendulum_chain.bg"), "swing", **kw)
+    t0, Y0, names0 = bgc.simulate(str(FLAT_CHAIN), "swing", **kw)
     assert names == [f"link[{k}].{c}" for k in range(1, 9) for c in "xy"]
     assert names0 == [f"{c}{k}" for k in range(1, 9) for c in "xy"]
     np.testing.assert_array_equal(t, t0)

@@ -18,6 +18,7 @@ import pytest
 from bgc import api, draw
 from bgc.report import check_report
 from conftest import MODELS, ROOT, run_bgc
+from test_components import CIRCUIT, HYD
 
 HAVE_DOT = shutil.which("dot") is not None
 PENDULUM = str(MODELS / "pendulum.bg")
@@ -55,7 +56,8 @@ def tokens(text: str) -> list[tuple[str, str]]:
 
 def read_dot(text: str) -> dict:
     """{"nodes": {id: attrs}, "edges": [(tail, head, attrs)], "clusters": {name: [node ids]},
-    "graph": attrs} of a digraph made of node, edge, attribute and subgraph statements."""
+    "graph": attrs} of a digraph made of node, edge, attribute and subgraph statements (a
+    node named alone inside a subgraph, `"a.b";`, is a member of it, declared elsewhere)."""
     toks = tokens(text)
     assert toks[0] == ("id", "digraph") and toks[2] == ("p", "{")
     out = {"nodes": {}, "edges": [], "clusters": {}, "graph": {}}
@@ -95,6 +97,9 @@ def read_dot(text: str) -> dict:
         elif toks[i + 1] == ("p", "="):  # key=value; inside a subgraph
             i += 3
             i += 1 if toks[i] == ("p", ";") else 0
+        elif toks[i + 1] == ("p", ";") and stack:  # a node named in a cluster: drawn there
+            out["clusters"][stack[-1]].append(value)
+            i += 2
         elif toks[i + 1] == ("p", "->"):
             found, j = attrs(i + 3)
             out["edges"].append((value, toks[i + 2][1], found))
@@ -388,3 +393,49 @@ def test_cli_svg_and_png(tmp_path):
     assert done.returncode == 0, done.stderr
     assert (tmp_path / "p.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["p.png", "p.svg"]
+
+
+# ---------------------------------------------------------------- instances of components
+
+def _circuit(tmp_path):
+    """test_components' circuit: instance p1 of hyd.pipe, which holds p1.o, an orifice."""
+    (tmp_path / "hyd.bg").write_text(HYD)
+    path = tmp_path / "circuit.bg"
+    path.write_text(CIRCUIT.format(what="hyd", alias="hyd"))
+    return path
+
+
+def _nested(tmp_path, *args):
+    done = run_bgc("draw", _circuit(tmp_path), *args)
+    assert done.returncode == 0, done.stderr
+    return read_dot(done.stdout)
+
+
+def test_one_cluster_per_instance(tmp_path):
+    g = _nested(tmp_path)
+    assert g["clusters"]["cluster p1"] == ["p1.j", "p1.fluid"]
+    assert g["clusters"]["cluster p1.o"] == ["p1.o.res"]
+    assert {"p1.j", "p1.fluid", "p1.o.res", "pump", "tank"} <= set(g["nodes"])
+    assert ("p1.j", "p1.o.res") in [(a, b) for a, b, _ in g["edges"]]
+
+
+def test_depth_collapses_deeper_instances_into_boxes_with_their_ports(tmp_path):
+    g = _nested(tmp_path, "--depth", "1")
+    assert "cluster p1" in g["clusters"] and "cluster p1.o" not in g["clusters"]
+    assert "p1.o.res" not in g["nodes"]
+    assert text_of(g["nodes"]["p1.o"]["label"]) == "p1.o : orifice\nports a : hydraulic"
+    assert ("p1.j", "p1.o") in [(a, b) for a, b, _ in g["edges"]]
+    g = _nested(tmp_path, "--depth", "0")
+    assert not g["clusters"] and set(g["nodes"]) == {"pump", "p1", "tank"}
+    assert sorted((a, b) for a, b, _ in g["edges"]) == [("p1", "tank"), ("pump", "p1")]
+    assert text_of(g["nodes"]["p1"]["label"]) == \
+        "p1 : hyd.pipe\nports a : hydraulic, b : hydraulic"
+
+
+def test_check_lists_the_instances(tmp_path):
+    done = run_bgc("check", _circuit(tmp_path))
+    assert done.returncode == 0, done.stderr
+    lines = done.stdout.splitlines()
+    k = lines.index("instances (2):")
+    assert lines[k + 1:k + 3] == ["  p1  hyd.pipe, ports a : hydraulic, b : hydraulic",
+                                  "  p1.o  orifice, ports a : hydraulic"]

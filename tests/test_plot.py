@@ -45,9 +45,22 @@ def test_columns_kinds_docs_and_units():
     assert cols["J"].doc == "inertia"
     groups = [(kind, [c.name for c in group])
               for kind, group in plot.panels([cols[n] for n in names])]
-    assert groups == [("f", ["ind.f", "elec.f"]), ("f", ["rotor.f"]),
+    assert groups == [("unit", ["ind.f", "elec.f"]), ("unit", ["rotor.f"]),
                       ("p", ["ind.p", "rotor.p"]), ("signal", ["angle"]),
-                      ("parameter", ["J"]), ("parameter", ["V"])]
+                      ("unit", ["J"]), ("unit", ["V"])]
+
+
+def test_panels_group_by_unit_before_kind():
+    """Outputs of one declared unit share a panel whatever they are (a flow, a signal, a
+    component's parameter); the others are grouped by kind."""
+    text = ('model m\ncomponent src(v = 1 unit "V") { port p; s : Se(v); s -> p }\n'
+            'a : src(v = 2)\nn : 0 "node [V]"\nc : C(1)\na.p -> n\nn -> c\n'
+            'signal half = c.e/2 unit "V"\nsignal x = integral(c.e, init = 0)\n')
+    compiled = bgc.build(bgc.api.Source("m.bg", text), program=False)
+    names = ["a.v", "c.q", "c.e", "half", "x"]
+    groups = [(kind, [c.name for c in group])
+              for kind, group in plot.panels(plot.columns(compiled, names))]
+    assert groups == [("unit", ["a.v", "c.e", "half"]), ("q", ["c.q"]), ("signal", ["x"])]
 
 
 def test_read_csv_every_kth_row_and_the_last(tmp_path):

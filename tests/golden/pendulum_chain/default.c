@@ -34,15 +34,15 @@
 /* ================================================================= sizes === */
 
 #define BGC_NUM_STATES 32
-#define BGC_NUM_PARAMS 23
-#define BGC_NUM_CONSTANTS 9
+#define BGC_NUM_PARAMS 65
+#define BGC_NUM_CONSTANTS 74
 #define BGC_NUM_OUTPUTS 32
 #define BGC_NUM_CONSTRAINTS 16
 #define BGC_NUM_POSITION_ROWS 8
 #define BGC_NUM_VELOCITY_ROWS 8
 #define BGC_NUM_BLOCKS 1
 #define BGC_AUTONOMOUS 1 /* 1: the right side does not read t */
-#define BGC_WORK_DOUBLES 932
+#define BGC_WORK_DOUBLES 935
 #define BGC_WORK_INTS 9
 #define BGC_WORK_Y0 0
 #define BGC_WORK_STAGES 32
@@ -61,23 +61,65 @@ typedef struct bgc_params {
     double p_beta;
     double p_theta0;
     double p_dtheta;
-    double p_x1_0;
-    double p_y1_0;
-    double p_x2_0;
-    double p_y2_0;
-    double p_x3_0;
-    double p_y3_0;
-    double p_x4_0;
-    double p_y4_0;
-    double p_x5_0;
-    double p_y5_0;
-    double p_x6_0;
-    double p_y6_0;
-    double p_x7_0;
-    double p_y7_0;
-    double p_x8_0;
-    double p_y8_0;
-    double c[9];
+    double p_link_1__m;
+    double p_link_1__l;
+    double p_link_1__g;
+    double p_link_1__alpha;
+    double p_link_1__beta;
+    double p_link_1__x0;
+    double p_link_1__y0;
+    double p_link_1__xp;
+    double p_link_1__yp;
+    double p_link_2__m;
+    double p_link_2__l;
+    double p_link_2__g;
+    double p_link_2__alpha;
+    double p_link_2__beta;
+    double p_link_2__x0;
+    double p_link_2__y0;
+    double p_link_3__m;
+    double p_link_3__l;
+    double p_link_3__g;
+    double p_link_3__alpha;
+    double p_link_3__beta;
+    double p_link_3__x0;
+    double p_link_3__y0;
+    double p_link_4__m;
+    double p_link_4__l;
+    double p_link_4__g;
+    double p_link_4__alpha;
+    double p_link_4__beta;
+    double p_link_4__x0;
+    double p_link_4__y0;
+    double p_link_5__m;
+    double p_link_5__l;
+    double p_link_5__g;
+    double p_link_5__alpha;
+    double p_link_5__beta;
+    double p_link_5__x0;
+    double p_link_5__y0;
+    double p_link_6__m;
+    double p_link_6__l;
+    double p_link_6__g;
+    double p_link_6__alpha;
+    double p_link_6__beta;
+    double p_link_6__x0;
+    double p_link_6__y0;
+    double p_link_7__m;
+    double p_link_7__l;
+    double p_link_7__g;
+    double p_link_7__alpha;
+    double p_link_7__beta;
+    double p_link_7__x0;
+    double p_link_7__y0;
+    double p_link_8__m;
+    double p_link_8__l;
+    double p_link_8__g;
+    double p_link_8__alpha;
+    double p_link_8__beta;
+    double p_link_8__x0;
+    double p_link_8__y0;
+    double c[74];
 } bgc_params;
 
 [runtime: solver_enum]
@@ -91,38 +133,38 @@ static const char bgc_ident[] = "chain8"; /* the program's name in its usage */
 #endif
 const char *const bgc_model_name = "chain8";
 const char *const bgc_state_names[BGC_DIM(BGC_NUM_STATES)] = {
-    "mx1.p",
-    "my1.p",
-    "x1",
-    "y1",
-    "mx2.p",
-    "my2.p",
-    "x2",
-    "y2",
-    "mx3.p",
-    "my3.p",
-    "x3",
-    "y3",
-    "mx4.p",
-    "my4.p",
-    "x4",
-    "y4",
-    "mx5.p",
-    "my5.p",
-    "x5",
-    "y5",
-    "mx6.p",
-    "my6.p",
-    "x6",
-    "y6",
-    "mx7.p",
-    "my7.p",
-    "x7",
-    "y7",
-    "mx8.p",
-    "my8.p",
-    "x8",
-    "y8",
+    "link[1].mx.p",
+    "link[1].my.p",
+    "link[1].x",
+    "link[1].y",
+    "link[2].mx.p",
+    "link[2].my.p",
+    "link[2].x",
+    "link[2].y",
+    "link[3].mx.p",
+    "link[3].my.p",
+    "link[3].x",
+    "link[3].y",
+    "link[4].mx.p",
+    "link[4].my.p",
+    "link[4].x",
+    "link[4].y",
+    "link[5].mx.p",
+    "link[5].my.p",
+    "link[5].x",
+    "link[5].y",
+    "link[6].mx.p",
+    "link[6].my.p",
+    "link[6].x",
+    "link[6].y",
+    "link[7].mx.p",
+    "link[7].my.p",
+    "link[7].x",
+    "link[7].y",
+    "link[8].mx.p",
+    "link[8].my.p",
+    "link[8].x",
+    "link[8].y",
 };
 const char *const bgc_param_names[BGC_DIM(BGC_NUM_PARAMS)] = {
     "m",
@@ -132,74 +174,116 @@ const char *const bgc_param_names[BGC_DIM(BGC_NUM_PARAMS)] = {
     "beta",
     "theta0",
     "dtheta",
-    "x1_0",
-    "y1_0",
-    "x2_0",
-    "y2_0",
-    "x3_0",
-    "y3_0",
-    "x4_0",
-    "y4_0",
-    "x5_0",
-    "y5_0",
-    "x6_0",
-    "y6_0",
-    "x7_0",
-    "y7_0",
-    "x8_0",
-    "y8_0",
+    "link[1].m",
+    "link[1].l",
+    "link[1].g",
+    "link[1].alpha",
+    "link[1].beta",
+    "link[1].x0",
+    "link[1].y0",
+    "link[1].xp",
+    "link[1].yp",
+    "link[2].m",
+    "link[2].l",
+    "link[2].g",
+    "link[2].alpha",
+    "link[2].beta",
+    "link[2].x0",
+    "link[2].y0",
+    "link[3].m",
+    "link[3].l",
+    "link[3].g",
+    "link[3].alpha",
+    "link[3].beta",
+    "link[3].x0",
+    "link[3].y0",
+    "link[4].m",
+    "link[4].l",
+    "link[4].g",
+    "link[4].alpha",
+    "link[4].beta",
+    "link[4].x0",
+    "link[4].y0",
+    "link[5].m",
+    "link[5].l",
+    "link[5].g",
+    "link[5].alpha",
+    "link[5].beta",
+    "link[5].x0",
+    "link[5].y0",
+    "link[6].m",
+    "link[6].l",
+    "link[6].g",
+    "link[6].alpha",
+    "link[6].beta",
+    "link[6].x0",
+    "link[6].y0",
+    "link[7].m",
+    "link[7].l",
+    "link[7].g",
+    "link[7].alpha",
+    "link[7].beta",
+    "link[7].x0",
+    "link[7].y0",
+    "link[8].m",
+    "link[8].l",
+    "link[8].g",
+    "link[8].alpha",
+    "link[8].beta",
+    "link[8].x0",
+    "link[8].y0",
 };
 const char *const bgc_output_names[BGC_DIM(BGC_NUM_OUTPUTS)] = {
-    "mx1.p",
-    "my1.p",
-    "x1",
-    "y1",
-    "mx2.p",
-    "my2.p",
-    "x2",
-    "y2",
-    "mx3.p",
-    "my3.p",
-    "x3",
-    "y3",
-    "mx4.p",
-    "my4.p",
-    "x4",
-    "y4",
-    "mx5.p",
-    "my5.p",
-    "x5",
-    "y5",
-    "mx6.p",
-    "my6.p",
-    "x6",
-    "y6",
-    "mx7.p",
-    "my7.p",
-    "x7",
-    "y7",
-    "mx8.p",
-    "my8.p",
-    "x8",
-    "y8",
+    "link[1].mx.p",
+    "link[1].my.p",
+    "link[1].x",
+    "link[1].y",
+    "link[2].mx.p",
+    "link[2].my.p",
+    "link[2].x",
+    "link[2].y",
+    "link[3].mx.p",
+    "link[3].my.p",
+    "link[3].x",
+    "link[3].y",
+    "link[4].mx.p",
+    "link[4].my.p",
+    "link[4].x",
+    "link[4].y",
+    "link[5].mx.p",
+    "link[5].my.p",
+    "link[5].x",
+    "link[5].y",
+    "link[6].mx.p",
+    "link[6].my.p",
+    "link[6].x",
+    "link[6].y",
+    "link[7].mx.p",
+    "link[7].my.p",
+    "link[7].x",
+    "link[7].y",
+    "link[8].mx.p",
+    "link[8].my.p",
+    "link[8].x",
+    "link[8].y",
 };
 const char *const bgc_constraint_names[BGC_DIM(BGC_NUM_CONSTRAINTS)] = {
-    "rod1",
-    "rod1",
-    "rod2",
-    "rod2",
-    "rod3",
-    "rod3",
-    "rod4",
-    "rod4",
-    "rod5",
-    "rod5",
-    "rod6",
-    "rod6",
-    "rod7",
-    "rod7",
-    "rod8",
-    "rod8",
+    "link[1].rod",
+    "link[1].rod",
+    "link[2].rod",
+    "link[2].rod",
+    "link[3].rod",
+    "link[3].rod",
+    "link[4].rod",
+    "link[4].rod",
+    "link[5].rod",
+    "link[5].rod",
+    "link[6].rod",
+    "link[6].rod",
+    "link[7].rod",
+    "link[7].rod",
+    "link[8].rod",
+    "link[8].rod",
 };
 const char *const bgc_constraint_levels[BGC_DIM(BGC_NUM_CONSTRAINTS)] = {
     "position",
@@ -220,7 +304,7 @@ const char *const bgc_constraint_levels[BGC_DIM(BGC_NUM_CONSTRAINTS)] = {
     "velocity",
 };
 const char *const bgc_block_names[BGC_DIM(BGC_NUM_BLOCKS)] = {
-    "rod1.lambda, rod2.lambda, rod3.lambda, rod4.lambda, rod5.lambda, rod6.lambda, and 2 more",
+    "link[1].rod.lambda, link[2].rod.lambda, link[3].rod.lambda, link[4].rod.lambda, link[5].rod.lambda, link[6].rod.lambda, and 2 more",
 };
 
 /* ================================================================= scene === */
@@ -253,52 +337,208 @@ void bgc_params_defaults(bgc_params *p, const int *given)
     if (!given || !given[6])
         p->p_dtheta = 0.14999999999999999;
     if (!given || !given[7])
-        p->p_x1_0 = sin(p->p_theta0)*p->p_l;
+        p->p_link_1__m = p->p_m;
     if (!given || !given[8])
-        p->p_y1_0 = cos(p->p_theta0)*p->p_l;
+        p->p_link_1__l = p->p_l;
     if (!given || !given[9])
-        p->p_x2_0 = sin(p->p_theta0 + p->p_dtheta)*p->p_l + p->p_x1_0;
+        p->p_link_1__g = p->p_g;
     if (!given || !given[10])
-        p->p_y2_0 = cos(p->p_theta0 + p->p_dtheta)*p->p_l + p->p_y1_0;
+        p->p_link_1__alpha = p->p_alpha;
     if (!given || !given[11])
-        p->p_x3_0 = sin(2.0*p->p_dtheta + p->p_theta0)*p->p_l + p->p_x2_0;
+        p->p_link_1__beta = p->p_beta;
     if (!given || !given[12])
-        p->p_y3_0 = cos(2.0*p->p_dtheta + p->p_theta0)*p->p_l + p->p_y2_0;
+        p->p_link_1__x0 = sin(p->p_theta0)*p->p_l;
     if (!given || !given[13])
-        p->p_x4_0 = sin(3.0*p->p_dtheta + p->p_theta0)*p->p_l + p->p_x3_0;
+        p->p_link_1__y0 = cos(p->p_theta0)*p->p_l;
     if (!given || !given[14])
-        p->p_y4_0 = cos(3.0*p->p_dtheta + p->p_theta0)*p->p_l + p->p_y3_0;
+        p->p_link_1__xp = 0.0;
     if (!given || !given[15])
-        p->p_x5_0 = sin(4.0*p->p_dtheta + p->p_theta0)*p->p_l + p->p_x4_0;
+        p->p_link_1__yp = 0.0;
     if (!given || !given[16])
-        p->p_y5_0 = cos(4.0*p->p_dtheta + p->p_theta0)*p->p_l + p->p_y4_0;
+        p->p_link_2__m = p->p_m;
     if (!given || !given[17])
-        p->p_x6_0 = sin(5.0*p->p_dtheta + p->p_theta0)*p->p_l + p->p_x5_0;
+        p->p_link_2__l = p->p_l;
     if (!given || !given[18])
-        p->p_y6_0 = cos(5.0*p->p_dtheta + p->p_theta0)*p->p_l + p->p_y5_0;
+        p->p_link_2__g = p->p_g;
     if (!given || !given[19])
-        p->p_x7_0 = sin(6.0*p->p_dtheta + p->p_theta0)*p->p_l + p->p_x6_0;
+        p->p_link_2__alpha = p->p_alpha;
     if (!given || !given[20])
-        p->p_y7_0 = cos(6.0*p->p_dtheta + p->p_theta0)*p->p_l + p->p_y6_0;
+        p->p_link_2__beta = p->p_beta;
     if (!given || !given[21])
-        p->p_x8_0 = sin(7.0*p->p_dtheta + p->p_theta0)*p->p_l + p->p_x7_0;
+        p->p_link_2__x0 = sin(p->p_theta0 + p->p_dtheta)*p->p_l + p->p_link_1__x0;
     if (!given || !given[22])
-        p->p_y8_0 = cos(7.0*p->p_dtheta + p->p_theta0)*p->p_l + p->p_y7_0;
+        p->p_link_2__y0 = cos(p->p_theta0 + p->p_dtheta)*p->p_l + p->p_link_1__y0;
+    if (!given || !given[23])
+        p->p_link_3__m = p->p_m;
+    if (!given || !given[24])
+        p->p_link_3__l = p->p_l;
+    if (!given || !given[25])
+        p->p_link_3__g = p->p_g;
+    if (!given || !given[26])
+        p->p_link_3__alpha = p->p_alpha;
+    if (!given || !given[27])
+        p->p_link_3__beta = p->p_beta;
+    if (!given || !given[28])
+        p->p_link_3__x0 = sin(2.0*p->p_dtheta + p->p_theta0)*p->p_l + p->p_link_2__x0;
+    if (!given || !given[29])
+        p->p_link_3__y0 = cos(2.0*p->p_dtheta + p->p_theta0)*p->p_l + p->p_link_2__y0;
+    if (!given || !given[30])
+        p->p_link_4__m = p->p_m;
+    if (!given || !given[31])
+        p->p_link_4__l = p->p_l;
+    if (!given || !given[32])
+        p->p_link_4__g = p->p_g;
+    if (!given || !given[33])
+        p->p_link_4__alpha = p->p_alpha;
+    if (!given || !given[34])
+        p->p_link_4__beta = p->p_beta;
+    if (!given || !given[35])
+        p->p_link_4__x0 = sin(3.0*p->p_dtheta + p->p_theta0)*p->p_l + p->p_link_3__x0;
+    if (!given || !given[36])
+        p->p_link_4__y0 = cos(3.0*p->p_dtheta + p->p_theta0)*p->p_l + p->p_link_3__y0;
+    if (!given || !given[37])
+        p->p_link_5__m = p->p_m;
+    if (!given || !given[38])
+        p->p_link_5__l = p->p_l;
+    if (!given || !given[39])
+        p->p_link_5__g = p->p_g;
+    if (!given || !given[40])
+        p->p_link_5__alpha = p->p_alpha;
+    if (!given || !given[41])
+        p->p_link_5__beta = p->p_beta;
+    if (!given || !given[42])
+        p->p_link_5__x0 = sin(4.0*p->p_dtheta + p->p_theta0)*p->p_l + p->p_link_4__x0;
+    if (!given || !given[43])
+        p->p_link_5__y0 = cos(4.0*p->p_dtheta + p->p_theta0)*p->p_l + p->p_link_4__y0;
+    if (!given || !given[44])
+        p->p_link_6__m = p->p_m;
+    if (!given || !given[45])
+        p->p_link_6__l = p->p_l;
+    if (!given || !given[46])
+        p->p_link_6__g = p->p_g;
+    if (!given || !given[47])
+        p->p_link_6__alpha = p->p_alpha;
+    if (!given || !given[48])
+        p->p_link_6__beta = p->p_beta;
+    if (!given || !given[49])
+        p->p_link_6__x0 = sin(5.0*p->p_dtheta + p->p_theta0)*p->p_l + p->p_link_5__x0;
+    if (!given || !given[50])
+        p->p_link_6__y0 = cos(5.0*p->p_dtheta + p->p_theta0)*p->p_l + p->p_link_5__y0;
+    if (!given || !given[51])
+        p->p_link_7__m = p->p_m;
+    if (!given || !given[52])
+        p->p_link_7__l = p->p_l;
+    if (!given || !given[53])
+        p->p_link_7__g = p->p_g;
+    if (!given || !given[54])
+        p->p_link_7__alpha = p->p_alpha;
+    if (!given || !given[55])
+        p->p_link_7__beta = p->p_beta;
+    if (!given || !given[56])
+        p->p_link_7__x0 = sin(6.0*p->p_dtheta + p->p_theta0)*p->p_l + p->p_link_6__x0;
+    if (!given || !given[57])
+        p->p_link_7__y0 = cos(6.0*p->p_dtheta + p->p_theta0)*p->p_l + p->p_link_6__y0;
+    if (!given || !given[58])
+        p->p_link_8__m = p->p_m;
+    if (!given || !given[59])
+        p->p_link_8__l = p->p_l;
+    if (!given || !given[60])
+        p->p_link_8__g = p->p_g;
+    if (!given || !given[61])
+        p->p_link_8__alpha = p->p_alpha;
+    if (!given || !given[62])
+        p->p_link_8__beta = p->p_beta;
+    if (!given || !given[63])
+        p->p_link_8__x0 = sin(7.0*p->p_dtheta + p->p_theta0)*p->p_l + p->p_link_7__x0;
+    if (!given || !given[64])
+        p->p_link_8__y0 = cos(7.0*p->p_dtheta + p->p_theta0)*p->p_l + p->p_link_7__y0;
     bgc_params_update(p);
 }
 
 void bgc_params_update(bgc_params *p)
 {
-    p->c[0] = 1.0/p->p_m;
-    const double w838 = -p->p_l*p->p_l;
-    p->c[1] = w838;
-    p->c[2] = p->p_m*p->p_g;
-    p->c[3] = -1.0/p->p_m;
-    p->c[4] = -p->p_beta*p->p_beta;
-    p->c[5] = -2.0*p->p_alpha;
-    p->c[6] = 2.0/p->p_m;
-    p->c[7] = fabs(w838);
-    p->c[8] = -2.0/p->p_m;
+    p->c[0] = 1.0/p->p_link_1__m;
+    p->c[1] = -2.0*p->p_link_1__xp;
+    p->c[2] = -2.0*p->p_link_1__yp;
+    const double w844 = -p->p_link_1__l*p->p_link_1__l;
+    p->c[3] = w844;
+    p->c[4] = p->p_link_1__m*p->p_link_1__g;
+    p->c[5] = 1.0/p->p_link_2__m;
+    const double w845 = -p->p_link_2__l*p->p_link_2__l;
+    p->c[6] = w845;
+    p->c[7] = 1.0/p->p_link_3__m;
+    const double w846 = -p->p_link_3__l*p->p_link_3__l;
+    p->c[8] = w846;
+    p->c[9] = 1.0/p->p_link_4__m;
+    const double w847 = -p->p_link_4__l*p->p_link_4__l;
+    p->c[10] = w847;
+    p->c[11] = 1.0/p->p_link_5__m;
+    const double w848 = -p->p_link_5__l*p->p_link_5__l;
+    p->c[12] = w848;
+    p->c[13] = 1.0/p->p_link_6__m;
+    const double w849 = -p->p_link_6__l*p->p_link_6__l;
+    p->c[14] = w849;
+    p->c[15] = 1.0/p->p_link_7__m;
+    const double w850 = -p->p_link_7__l*p->p_link_7__l;
+    p->c[16] = w850;
+    p->c[17] = 1.0/p->p_link_8__m;
+    const double w851 = -p->p_link_8__l*p->p_link_8__l;
+    p->c[18] = w851;
+    p->c[19] = p->p_link_8__m*p->p_link_8__g;
+    p->c[20] = p->p_link_7__m*p->p_link_7__g;
+    p->c[21] = p->p_link_6__m*p->p_link_6__g;
+    p->c[22] = p->p_link_5__m*p->p_link_5__g;
+    p->c[23] = p->p_link_4__m*p->p_link_4__g;
+    p->c[24] = p->p_link_3__m*p->p_link_3__g;
+    p->c[25] = p->p_link_2__m*p->p_link_2__g;
+    p->c[26] = -1.0/p->p_link_8__m;
+    p->c[27] = -1.0/p->p_link_7__m;
+    p->c[28] = -1.0/p->p_link_6__m;
+    p->c[29] = -1.0/p->p_link_5__m;
+    p->c[30] = -1.0/p->p_link_4__m;
+    p->c[31] = -1.0/p->p_link_3__m;
+    p->c[32] = -1.0/p->p_link_2__m;
+    p->c[33] = -1.0/p->p_link_1__m;
+    p->c[34] = -p->p_link_1__beta*p->p_link_1__beta;
+    p->c[35] = -2.0*p->p_link_1__alpha;
+    p->c[36] = -p->p_link_2__beta*p->p_link_2__beta;
+    p->c[37] = -2.0*p->p_link_2__alpha;
+    p->c[38] = -p->p_link_3__beta*p->p_link_3__beta;
+    p->c[39] = -2.0*p->p_link_3__alpha;
+    p->c[40] = -p->p_link_4__beta*p->p_link_4__beta;
+    p->c[41] = -2.0*p->p_link_4__alpha;
+    p->c[42] = -p->p_link_5__beta*p->p_link_5__beta;
+    p->c[43] = -2.0*p->p_link_5__alpha;
+    p->c[44] = -p->p_link_6__beta*p->p_link_6__beta;
+    p->c[45] = -2.0*p->p_link_6__alpha;
+    p->c[46] = -p->p_link_7__beta*p->p_link_7__beta;
+    p->c[47] = -2.0*p->p_link_7__alpha;
+    p->c[48] = -p->p_link_8__beta*p->p_link_8__beta;
+    p->c[49] = -2.0*p->p_link_8__alpha;
+    p->c[50] = fabs(w844);
+    p->c[51] = fabs(w845);
+    p->c[52] = fabs(w846);
+    p->c[53] = fabs(w847);
+    p->c[54] = fabs(w848);
+    p->c[55] = fabs(w849);
+    p->c[56] = fabs(w850);
+    p->c[57] = fabs(w851);
+    p->c[58] = 2.0/p->p_link_1__m;
+    p->c[59] = -2.0/p->p_link_2__m;
+    p->c[60] = -2.0/p->p_link_1__m;
+    p->c[61] = 2.0/p->p_link_2__m;
+    p->c[62] = -2.0/p->p_link_3__m;
+    p->c[63] = 2.0/p->p_link_3__m;
+    p->c[64] = -2.0/p->p_link_4__m;
+    p->c[65] = 2.0/p->p_link_4__m;
+    p->c[66] = -2.0/p->p_link_5__m;
+    p->c[67] = 2.0/p->p_link_5__m;
+    p->c[68] = -2.0/p->p_link_6__m;
+    p->c[69] = 2.0/p->p_link_6__m;
+    p->c[70] = -2.0/p->p_link_7__m;
+    p->c[71] = 2.0/p->p_link_7__m;
+    p->c[72] = -2.0/p->p_link_8__m;
+    p->c[73] = 2.0/p->p_link_8__m;
 }
 
 double *bgc_param_ref(bgc_params *p, int j)
@@ -319,37 +559,121 @@ double *bgc_param_ref(bgc_params *p, int j)
     case 6:
         return &p->p_dtheta;
     case 7:
-        return &p->p_x1_0;
+        return &p->p_link_1__m;
     case 8:
-        return &p->p_y1_0;
+        return &p->p_link_1__l;
     case 9:
-        return &p->p_x2_0;
+        return &p->p_link_1__g;
     case 10:
-        return &p->p_y2_0;
+        return &p->p_link_1__alpha;
     case 11:
-        return &p->p_x3_0;
+        return &p->p_link_1__beta;
     case 12:
-        return &p->p_y3_0;
+        return &p->p_link_1__x0;
     case 13:
-        return &p->p_x4_0;
+        return &p->p_link_1__y0;
     case 14:
-        return &p->p_y4_0;
+        return &p->p_link_1__xp;
     case 15:
-        return &p->p_x5_0;
+        return &p->p_link_1__yp;
     case 16:
-        return &p->p_y5_0;
+        return &p->p_link_2__m;
     case 17:
-        return &p->p_x6_0;
+        return &p->p_link_2__l;
     case 18:
-        return &p->p_y6_0;
+        return &p->p_link_2__g;
     case 19:
-        return &p->p_x7_0;
+        return &p->p_link_2__alpha;
     case 20:
-        return &p->p_y7_0;
+        return &p->p_link_2__beta;
     case 21:
-        return &p->p_x8_0;
+        return &p->p_link_2__x0;
     case 22:
-        return &p->p_y8_0;
+        return &p->p_link_2__y0;
+    case 23:
+        return &p->p_link_3__m;
+    case 24:
+        return &p->p_link_3__l;
+    case 25:
+        return &p->p_link_3__g;
+    case 26:
+        return &p->p_link_3__alpha;
+    case 27:
+        return &p->p_link_3__beta;
+    case 28:
+        return &p->p_link_3__x0;
+    case 29:
+        return &p->p_link_3__y0;
+    case 30:
+        return &p->p_link_4__m;
+    case 31:
+        return &p->p_link_4__l;
+    case 32:
+        return &p->p_link_4__g;
+    case 33:
+        return &p->p_link_4__alpha;
+    case 34:
+        return &p->p_link_4__beta;
+    case 35:
+        return &p->p_link_4__x0;
+    case 36:
+        return &p->p_link_4__y0;
+    case 37:
+        return &p->p_link_5__m;
+    case 38:
+        return &p->p_link_5__l;
+    case 39:
+        return &p->p_link_5__g;
+    case 40:
+        return &p->p_link_5__alpha;
+    case 41:
+        return &p->p_link_5__beta;
+    case 42:
+        return &p->p_link_5__x0;
+    case 43:
+        return &p->p_link_5__y0;
+    case 44:
+        return &p->p_link_6__m;
+    case 45:
+        return &p->p_link_6__l;
+    case 46:
+        return &p->p_link_6__g;
+    case 47:
+        return &p->p_link_6__alpha;
+    case 48:
+        return &p->p_link_6__beta;
+    case 49:
+        return &p->p_link_6__x0;
+    case 50:
+        return &p->p_link_6__y0;
+    case 51:
+        return &p->p_link_7__m;
+    case 52:
+        return &p->p_link_7__l;
+    case 53:
+        return &p->p_link_7__g;
+    case 54:
+        return &p->p_link_7__alpha;
+    case 55:
+        return &p->p_link_7__beta;
+    case 56:
+        return &p->p_link_7__x0;
+    case 57:
+        return &p->p_link_7__y0;
+    case 58:
+        return &p->p_link_8__m;
+    case 59:
+        return &p->p_link_8__l;
+    case 60:
+        return &p->p_link_8__g;
+    case 61:
+        return &p->p_link_8__alpha;
+    case 62:
+        return &p->p_link_8__beta;
+    case 63:
+        return &p->p_link_8__x0;
+    case 64:
+        return &p->p_link_8__y0;
     default:
         (void)p;
         return NULL;
@@ -368,17 +692,14 @@ static const int bgc_block0_plan[] = { 0, 3, 6, 9, 12, 15, 18, 21, 0, 1, 2, 3, 4
 /* Block 0's LU in its plan's static order, unrolled: 0, or 1 if a pivot fails its test. */
 static int bgc_block0_factor(double *v)
 {
-    const double s0 = bgc_max(bgc_max(0.0, fabs(v[776])), fabs(v[777]));
-    const double s1 = bgc_max(bgc_max(bgc_max(0.0, fabs(v[778])), fabs(v[779])), fabs(v[780]));
-    const double s2 = bgc_max(bgc_max(bgc_max(0.0, fabs(v[781])), fabs(v[782])), fabs(v[783]));
-    const double s3 = bgc_max(bgc_max(bgc_max(0.0, fabs(v[784])), fabs(v[785])), fabs(v[786]));
-    const double s4 = bgc_max(bgc_max(bgc_max(0.0, fabs(v[787])), fabs(v[788])), fabs(v[789]));
-    const double s5 = bgc_max(bgc_max(bgc_max(0.0, fabs(v[790])), fabs(v[791])), fabs(v[792]));
-    const double s6 = bgc_max(bgc_max(bgc_max(0.0, fabs(v[793])), fabs(v[794])), fabs(v[795]));
-    const double s7 = bgc_max(bgc_max(0.0, fabs(v[796])), fabs(v[797]));
-    v[798] = v[776];
-    v[799] = v[777];
-    v[800] = v[778];
+    const double s0 = bgc_max(bgc_max(0.0, fabs(v[779])), fabs(v[780]));
+    const double s1 = bgc_max(bgc_max(bgc_max(0.0, fabs(v[781])), fabs(v[782])), fabs(v[783]));
+    const double s2 = bgc_max(bgc_max(bgc_max(0.0, fabs(v[784])), fabs(v[785])), fabs(v[786]));
+    const double s3 = bgc_max(bgc_max(bgc_max(0.0, fabs(v[787])), fabs(v[788])), fabs(v[789]));
+    const double s4 = bgc_max(bgc_max(bgc_max(0.0, fabs(v[790])), fabs(v[791])), fabs(v[792]));
+    const double s5 = bgc_max(bgc_max(bgc_max(0.0, fabs(v[793])), fabs(v[794])), fabs(v[795]));
+    const double s6 = bgc_max(bgc_max(bgc_max(0.0, fabs(v[796])), fabs(v[797])), fabs(v[798]));
+    const double s7 = bgc_max(bgc_max(0.0, fabs(v[799])), fabs(v[800]));
     v[801] = v[779];
     v[802] = v[780];
     v[803] = v[781];
@@ -398,36 +719,39 @@ static int bgc_block0_factor(double *v)
     v[817] = v[795];
     v[818] = v[796];
     v[819] = v[797];
-    const double sign = v[798] < 0.0 ? -1.0 : 1.0;
-    if (!(sign * v[798] > 1e-14 * s0) || !isfinite(v[798]))
-        return 1;
-    v[800] = v[800] / v[798];
-    v[801] -= v[800] * v[799];
-    if (!(sign * v[801] > 1e-14 * s1) || !isfinite(v[801]))
+    v[820] = v[798];
+    v[821] = v[799];
+    v[822] = v[800];
+    const double sign = v[801] < 0.0 ? -1.0 : 1.0;
+    if (!(sign * v[801] > 1e-14 * s0) || !isfinite(v[801]))
         return 1;
     v[803] = v[803] / v[801];
     v[804] -= v[803] * v[802];
-    if (!(sign * v[804] > 1e-14 * s2) || !isfinite(v[804]))
+    if (!(sign * v[804] > 1e-14 * s1) || !isfinite(v[804]))
         return 1;
     v[806] = v[806] / v[804];
     v[807] -= v[806] * v[805];
-    if (!(sign * v[807] > 1e-14 * s3) || !isfinite(v[807]))
+    if (!(sign * v[807] > 1e-14 * s2) || !isfinite(v[807]))
         return 1;
     v[809] = v[809] / v[807];
     v[810] -= v[809] * v[808];
-    if (!(sign * v[810] > 1e-14 * s4) || !isfinite(v[810]))
+    if (!(sign * v[810] > 1e-14 * s3) || !isfinite(v[810]))
         return 1;
     v[812] = v[812] / v[810];
     v[813] -= v[812] * v[811];
-    if (!(sign * v[813] > 1e-14 * s5) || !isfinite(v[813]))
+    if (!(sign * v[813] > 1e-14 * s4) || !isfinite(v[813]))
         return 1;
     v[815] = v[815] / v[813];
     v[816] -= v[815] * v[814];
-    if (!(sign * v[816] > 1e-14 * s6) || !isfinite(v[816]))
+    if (!(sign * v[816] > 1e-14 * s5) || !isfinite(v[816]))
         return 1;
     v[818] = v[818] / v[816];
     v[819] -= v[818] * v[817];
-    if (!(sign * v[819] > 1e-14 * s7) || !isfinite(v[819]))
+    if (!(sign * v[819] > 1e-14 * s6) || !isfinite(v[819]))
+        return 1;
+    v[821] = v[821] / v[819];
+    v[822] -= v[821] * v[820];
+    if (!(sign * v[822] > 1e-14 * s7) || !isfinite(v[822]))
         return 1;
     return 0;
 }
@@ -435,25 +759,25 @@ static int bgc_block0_factor(double *v)
 /* b := A^-1 b with the factors bgc_block0_factor left in v. */
 static void bgc_block0_lsolve(const double *v, double *b)
 {
-    b[1] -= v[800] * b[0];
-    b[2] -= v[803] * b[1];
-    b[3] -= v[806] * b[2];
-    b[4] -= v[809] * b[3];
-    b[5] -= v[812] * b[4];
-    b[6] -= v[815] * b[5];
-    b[7] -= v[818] * b[6];
-    b[7] = b[7] / v[819];
-    b[6] = (b[6] - v[817] * b[7]) / v[816];
-    b[5] = (b[5] - v[814] * b[6]) / v[813];
-    b[4] = (b[4] - v[811] * b[5]) / v[810];
-    b[3] = (b[3] - v[808] * b[4]) / v[807];
-    b[2] = (b[2] - v[805] * b[3]) / v[804];
-    b[1] = (b[1] - v[802] * b[2]) / v[801];
-    b[0] = (b[0] - v[799] * b[1]) / v[798];
+    b[1] -= v[803] * b[0];
+    b[2] -= v[806] * b[1];
+    b[3] -= v[809] * b[2];
+    b[4] -= v[812] * b[3];
+    b[5] -= v[815] * b[4];
+    b[6] -= v[818] * b[5];
+    b[7] -= v[821] * b[6];
+    b[7] = b[7] / v[822];
+    b[6] = (b[6] - v[820] * b[7]) / v[819];
+    b[5] = (b[5] - v[817] * b[6]) / v[816];
+    b[4] = (b[4] - v[814] * b[5]) / v[813];
+    b[3] = (b[3] - v[811] * b[4]) / v[810];
+    b[2] = (b[2] - v[808] * b[3]) / v[807];
+    b[1] = (b[1] - v[805] * b[2]) / v[804];
+    b[0] = (b[0] - v[802] * b[1]) / v[801];
 }
 
 static const bgc_block bgc_blocks[BGC_DIM(BGC_NUM_BLOCKS)] = {
-    { { 8, 0, 1, 22, bgc_block0_plan + 0, bgc_block0_plan + 8, bgc_block0_plan + 17, bgc_block0_plan + 24, bgc_block0_plan + 31, bgc_block0_plan + 40, bgc_block0_plan + 47, bgc_block0_plan + 54, bgc_block0_plan + 61, bgc_block0_plan + 83 }, 776, 798, 820, 884, 892, 900, 908, 916, 924, 0, 8, bgc_block0_factor, bgc_block0_lsolve },
+    { { 8, 0, 1, 22, bgc_block0_plan + 0, bgc_block0_plan + 8, bgc_block0_plan + 17, bgc_block0_plan + 24, bgc_block0_plan + 31, bgc_block0_plan + 40, bgc_block0_plan + 47, bgc_block0_plan + 54, bgc_block0_plan + 61, bgc_block0_plan + 83 }, 779, 801, 823, 887, 895, 903, 911, 919, 927, 0, 8, bgc_block0_factor, bgc_block0_lsolve },
 };
 
 /* The Jacobian's structure: the columns of each colour (evaluated by one bgc_jvp), and the
@@ -469,36 +793,36 @@ void bgc_init(const bgc_params *p, double *x0)
     (void)x0;
     x0[0] = 0.0;
     x0[1] = 0.0;
-    x0[2] = p->p_x1_0;
-    x0[3] = p->p_y1_0;
+    x0[2] = p->p_link_1__x0;
+    x0[3] = p->p_link_1__y0;
     x0[4] = 0.0;
     x0[5] = 0.0;
-    x0[6] = p->p_x2_0;
-    x0[7] = p->p_y2_0;
+    x0[6] = p->p_link_2__x0;
+    x0[7] = p->p_link_2__y0;
     x0[8] = 0.0;
     x0[9] = 0.0;
-    x0[10] = p->p_x3_0;
-    x0[11] = p->p_y3_0;
+    x0[10] = p->p_link_3__x0;
+    x0[11] = p->p_link_3__y0;
     x0[12] = 0.0;
     x0[13] = 0.0;
-    x0[14] = p->p_x4_0;
-    x0[15] = p->p_y4_0;
+    x0[14] = p->p_link_4__x0;
+    x0[15] = p->p_link_4__y0;
     x0[16] = 0.0;
     x0[17] = 0.0;
-    x0[18] = p->p_x5_0;
-    x0[19] = p->p_y5_0;
+    x0[18] = p->p_link_5__x0;
+    x0[19] = p->p_link_5__y0;
     x0[20] = 0.0;
     x0[21] = 0.0;
-    x0[22] = p->p_x6_0;
-    x0[23] = p->p_y6_0;
+    x0[22] = p->p_link_6__x0;
+    x0[23] = p->p_link_6__y0;
     x0[24] = 0.0;
     x0[25] = 0.0;
-    x0[26] = p->p_x7_0;
-    x0[27] = p->p_y7_0;
+    x0[26] = p->p_link_7__x0;
+    x0[27] = p->p_link_7__y0;
     x0[28] = 0.0;
     x0[29] = 0.0;
-    x0[30] = p->p_x8_0;
-    x0[31] = p->p_y8_0;
+    x0[30] = p->p_link_8__x0;
+    x0[31] = p->p_link_8__y0;
 }
 
 static inline int bgc_model_rhs(double t, const double *x, const bgc_params *p, bgc_work *w, double *out)
@@ -511,352 +835,352 @@ static inline int bgc_model_rhs(double t, const double *x, const bgc_params *p, 
     (void)wv;
     (void)out;
     const double w0 = p->c[0]*x[0];
-    const double w1 = 2.0*w0*x[2];
+    const double w601 = 2.0*x[2] + p->c[1];
+    const double w1 = w0*w601;
     const double w2 = p->c[0]*x[1];
-    const double w3 = 2.0*w2*x[3];
+    const double w602 = 2.0*x[3] + p->c[2];
+    const double w3 = w2*w602;
     const double w4 = w1 + w3;
-    const double w601 = x[3]*x[3];
-    const double w602 = x[2]*x[2];
-    const double w5 = w601 + w602 + p->c[1];
-    const double w7 = p->c[0]*x[4];
-    const double w603 = -2.0*x[2] + 2.0*x[6];
-    const double w8 = w603*w7;
-    const double w9 = p->c[0]*x[5];
-    const double w604 = -2.0*x[3] + 2.0*x[7];
-    const double w10 = w604*w9;
-    const double w605 = -2.0*x[6] + 2.0*x[2];
-    const double w11 = w0*w605;
-    const double w606 = -2.0*x[7] + 2.0*x[3];
-    const double w12 = w2*w606;
+    const double w603 = x[3]*x[3];
+    const double w604 = x[2]*x[2];
+    const double w5 = w603 + w604 + p->c[1]*x[2] + (p->c[2]*x[3] + p->c[3]);
+    const double w7 = p->c[5]*x[4];
+    const double w605 = -2.0*x[2] + 2.0*x[6];
+    const double w8 = w605*w7;
+    const double w9 = p->c[5]*x[5];
+    const double w606 = -2.0*x[3] + 2.0*x[7];
+    const double w10 = w606*w9;
+    const double w607 = -2.0*x[6] + 2.0*x[2];
+    const double w11 = w0*w607;
+    const double w608 = -2.0*x[7] + 2.0*x[3];
+    const double w12 = w2*w608;
     const double w13 = w10 + w11 + (w12 + w8);
-    const double w607 = x[7]*x[7];
-    const double w608 = x[6]*x[6];
-    const double w14 = w601 + w602 + (w607 + w608) + (-2.0*x[2]*x[6] - 2.0*x[3]*x[7] + p->c[1]);
-    const double w15 = p->c[0]*x[8];
-    const double w609 = -2.0*x[6] + 2.0*x[10];
-    const double w16 = w15*w609;
-    const double w17 = p->c[0]*x[9];
-    const double w610 = -2.0*x[7] + 2.0*x[11];
-    const double w18 = w17*w610;
-    const double w611 = -2.0*x[10] + 2.0*x[6];
-    const double w19 = w611*w7;
-    const double w612 = -2.0*x[11] + 2.0*x[7];
-    const double w20 = w612*w9;
+    const double w609 = x[7]*x[7];
+    const double w610 = x[6]*x[6];
+    const double w14 = w603 + w604 + (w609 + w610) + (-2.0*x[2]*x[6] - 2.0*x[3]*x[7] + p->c[6]);
+    const double w15 = p->c[7]*x[8];
+    const double w611 = -2.0*x[6] + 2.0*x[10];
+    const double w16 = w15*w611;
+    const double w17 = p->c[7]*x[9];
+    const double w612 = -2.0*x[7] + 2.0*x[11];
+    const double w18 = w17*w612;
+    const double w613 = -2.0*x[10] + 2.0*x[6];
+    const double w19 = w613*w7;
+    const double w614 = -2.0*x[11] + 2.0*x[7];
+    const double w20 = w614*w9;
     const double w21 = w16 + w18 + (w19 + w20);
-    const double w613 = x[11]*x[11];
-    const double w614 = x[10]*x[10];
-    const double w22 = w607 + w608 + (w613 + w614) + (-2.0*x[10]*x[6] - 2.0*x[11]*x[7] + p->c[1]);
-    const double w23 = p->c[0]*x[12];
-    const double w615 = -2.0*x[10] + 2.0*x[14];
-    const double w24 = w23*w615;
-    const double w25 = p->c[0]*x[13];
-    const double w616 = -2.0*x[11] + 2.0*x[15];
-    const double w26 = w25*w616;
-    const double w617 = -2.0*x[14] + 2.0*x[10];
-    const double w27 = w15*w617;
-    const double w618 = -2.0*x[15] + 2.0*x[11];
-    const double w28 = w17*w618;
+    const double w615 = x[11]*x[11];
+    const double w616 = x[10]*x[10];
+    const double w22 = w609 + w610 + (w615 + w616) + (-2.0*x[10]*x[6] - 2.0*x[11]*x[7] + p->c[8]);
+    const double w23 = p->c[9]*x[12];
+    const double w617 = -2.0*x[10] + 2.0*x[14];
+    const double w24 = w23*w617;
+    const double w25 = p->c[9]*x[13];
+    const double w618 = -2.0*x[11] + 2.0*x[15];
+    const double w26 = w25*w618;
+    const double w619 = -2.0*x[14] + 2.0*x[10];
+    const double w27 = w15*w619;
+    const double w620 = -2.0*x[15] + 2.0*x[11];
+    const double w28 = w17*w620;
     const double w29 = w24 + w26 + (w27 + w28);
-    const double w619 = x[15]*x[15];
-    const double w620 = x[14]*x[14];
-    const double w30 = w613 + w614 + (w619 + w620) + (-2.0*x[10]*x[14] - 2.0*x[11]*x[15] + p->c[1]);
-    const double w31 = p->c[0]*x[16];
-    const double w621 = -2.0*x[14] + 2.0*x[18];
-    const double w32 = w31*w621;
-    const double w33 = p->c[0]*x[17];
-    const double w622 = -2.0*x[15] + 2.0*x[19];
-    const double w34 = w33*w622;
-    const double w623 = -2.0*x[18] + 2.0*x[14];
-    const double w35 = w23*w623;
-    const double w624 = -2.0*x[19] + 2.0*x[15];
-    const double w36 = w25*w624;
+    const double w621 = x[15]*x[15];
+    const double w622 = x[14]*x[14];
+    const double w30 = w615 + w616 + (w621 + w622) + (-2.0*x[10]*x[14] - 2.0*x[11]*x[15] + p->c[10]);
+    const double w31 = p->c[11]*x[16];
+    const double w623 = -2.0*x[14] + 2.0*x[18];
+    const double w32 = w31*w623;
+    const double w33 = p->c[11]*x[17];
+    const double w624 = -2.0*x[15] + 2.0*x[19];
+    const double w34 = w33*w624;
+    const double w625 = -2.0*x[18] + 2.0*x[14];
+    const double w35 = w23*w625;
+    const double w626 = -2.0*x[19] + 2.0*x[15];
+    const double w36 = w25*w626;
     const double w37 = w32 + w34 + (w35 + w36);
-    const double w625 = x[19]*x[19];
-    const double w626 = x[18]*x[18];
-    const double w38 = w619 + w620 + (w625 + w626) + (-2.0*x[14]*x[18] - 2.0*x[15]*x[19] + p->c[1]);
-    const double w39 = p->c[0]*x[20];
-    const double w627 = -2.0*x[18] + 2.0*x[22];
-    const double w40 = w39*w627;
-    const double w41 = p->c[0]*x[21];
-    const double w628 = -2.0*x[19] + 2.0*x[23];
-    const double w42 = w41*w628;
-    const double w629 = -2.0*x[22] + 2.0*x[18];
-    const double w43 = w31*w629;
-    const double w630 = -2.0*x[23] + 2.0*x[19];
-    const double w44 = w33*w630;
+    const double w627 = x[19]*x[19];
+    const double w628 = x[18]*x[18];
+    const double w38 = w621 + w622 + (w627 + w628) + (-2.0*x[14]*x[18] - 2.0*x[15]*x[19] + p->c[12]);
+    const double w39 = p->c[13]*x[20];
+    const double w629 = -2.0*x[18] + 2.0*x[22];
+    const double w40 = w39*w629;
+    const double w41 = p->c[13]*x[21];
+    const double w630 = -2.0*x[19] + 2.0*x[23];
+    const double w42 = w41*w630;
+    const double w631 = -2.0*x[22] + 2.0*x[18];
+    const double w43 = w31*w631;
+    const double w632 = -2.0*x[23] + 2.0*x[19];
+    const double w44 = w33*w632;
     const double w45 = w40 + w42 + (w43 + w44);
-    const double w631 = x[23]*x[23];
-    const double w632 = x[22]*x[22];
-    const double w46 = w625 + w626 + (w631 + w632) + (-2.0*x[18]*x[22] - 2.0*x[19]*x[23] + p->c[1]);
-    const double w47 = p->c[0]*x[24];
-    const double w633 = -2.0*x[22] + 2.0*x[26];
-    const double w48 = w47*w633;
-    const double w49 = p->c[0]*x[25];
-    const double w634 = -2.0*x[23] + 2.0*x[27];
-    const double w50 = w49*w634;
-    const double w635 = -2.0*x[26] + 2.0*x[22];
-    const double w51 = w39*w635;
-    const double w636 = -2.0*x[27] + 2.0*x[23];
-    const double w52 = w41*w636;
+    const double w633 = x[23]*x[23];
+    const double w634 = x[22]*x[22];
+    const double w46 = w627 + w628 + (w633 + w634) + (-2.0*x[18]*x[22] - 2.0*x[19]*x[23] + p->c[14]);
+    const double w47 = p->c[15]*x[24];
+    const double w635 = -2.0*x[22] + 2.0*x[26];
+    const double w48 = w47*w635;
+    const double w49 = p->c[15]*x[25];
+    const double w636 = -2.0*x[23] + 2.0*x[27];
+    const double w50 = w49*w636;
+    const double w637 = -2.0*x[26] + 2.0*x[22];
+    const double w51 = w39*w637;
+    const double w638 = -2.0*x[27] + 2.0*x[23];
+    const double w52 = w41*w638;
     const double w53 = w48 + w50 + (w51 + w52);
-    const double w637 = x[27]*x[27];
-    const double w638 = x[26]*x[26];
-    const double w54 = w631 + w632 + (w637 + w638) + (-2.0*x[22]*x[26] - 2.0*x[23]*x[27] + p->c[1]);
-    const double w55 = p->c[0]*x[28];
-    const double w639 = -2.0*x[26] + 2.0*x[30];
-    const double w56 = w55*w639;
-    const double w57 = p->c[0]*x[29];
-    const double w640 = -2.0*x[27] + 2.0*x[31];
-    const double w58 = w57*w640;
-    const double w641 = -2.0*x[30] + 2.0*x[26];
-    const double w59 = w47*w641;
-    const double w642 = -2.0*x[31] + 2.0*x[27];
-    const double w60 = w49*w642;
+    const double w639 = x[27]*x[27];
+    const double w640 = x[26]*x[26];
+    const double w54 = w633 + w634 + (w639 + w640) + (-2.0*x[22]*x[26] - 2.0*x[23]*x[27] + p->c[16]);
+    const double w55 = p->c[17]*x[28];
+    const double w641 = -2.0*x[26] + 2.0*x[30];
+    const double w56 = w55*w641;
+    const double w57 = p->c[17]*x[29];
+    const double w642 = -2.0*x[27] + 2.0*x[31];
+    const double w58 = w57*w642;
+    const double w643 = -2.0*x[30] + 2.0*x[26];
+    const double w59 = w47*w643;
+    const double w644 = -2.0*x[31] + 2.0*x[27];
+    const double w60 = w49*w644;
     const double w61 = w56 + w58 + (w59 + w60);
-    const double w62 = w637 + w638 + (x[30]*x[30] + x[31]*x[31]) + (-2.0*x[26]*x[30] - 2.0*x[27]*x[31] + p->c[1]);
-    const double w70 = 2.0*x[2];
-    const double w72 = 2.0*x[3];
-    const double w100 = w639*p->c[3];
-    const double w101 = w100*w639;
-    const double w102 = w640*p->c[3];
-    const double w103 = w102*w640;
-    const double w104 = w633*p->c[3];
-    const double w105 = w641*p->c[3];
-    const double w106 = w104*w641;
-    const double w107 = w105*w641;
-    const double w108 = w634*p->c[3];
-    const double w109 = w642*p->c[3];
-    const double w110 = w108*w642;
-    const double w111 = w109*w642;
+    const double w62 = w639 + w640 + (x[30]*x[30] + x[31]*x[31]) + (-2.0*x[26]*x[30] - 2.0*x[27]*x[31] + p->c[18]);
+    const double w100 = w641*p->c[26];
+    const double w101 = w100*w641;
+    const double w102 = w642*p->c[26];
+    const double w103 = w102*w642;
+    const double w104 = w635*p->c[27];
+    const double w105 = w643*p->c[27];
+    const double w106 = w104*w643;
+    const double w107 = w105*w643;
+    const double w108 = w636*p->c[27];
+    const double w109 = w644*p->c[27];
+    const double w110 = w108*w644;
+    const double w111 = w109*w644;
     const double w112 = w106 + w110;
     const double w113 = w101 + w103 + (w107 + w111);
-    const double w114 = w104*w633;
-    const double w115 = w105*w633;
-    const double w116 = w108*w634;
-    const double w117 = w109*w634;
-    const double w118 = w627*p->c[3];
-    const double w119 = w635*p->c[3];
-    const double w120 = w118*w635;
-    const double w121 = w119*w635;
-    const double w122 = w628*p->c[3];
-    const double w123 = w636*p->c[3];
-    const double w124 = w122*w636;
-    const double w125 = w123*w636;
+    const double w114 = w104*w635;
+    const double w115 = w105*w635;
+    const double w116 = w108*w636;
+    const double w117 = w109*w636;
+    const double w118 = w629*p->c[28];
+    const double w119 = w637*p->c[28];
+    const double w120 = w118*w637;
+    const double w121 = w119*w637;
+    const double w122 = w630*p->c[28];
+    const double w123 = w638*p->c[28];
+    const double w124 = w122*w638;
+    const double w125 = w123*w638;
     const double w126 = w120 + w124;
     const double w127 = w114 + w116 + (w121 + w125);
     const double w128 = w115 + w117;
-    const double w129 = w118*w627;
-    const double w130 = w119*w627;
-    const double w131 = w122*w628;
-    const double w132 = w123*w628;
-    const double w133 = w621*p->c[3];
-    const double w134 = w629*p->c[3];
-    const double w135 = w133*w629;
-    const double w136 = w134*w629;
-    const double w137 = w622*p->c[3];
-    const double w138 = w630*p->c[3];
-    const double w139 = w137*w630;
-    const double w140 = w138*w630;
+    const double w129 = w118*w629;
+    const double w130 = w119*w629;
+    const double w131 = w122*w630;
+    const double w132 = w123*w630;
+    const double w133 = w623*p->c[29];
+    const double w134 = w631*p->c[29];
+    const double w135 = w133*w631;
+    const double w136 = w134*w631;
+    const double w137 = w624*p->c[29];
+    const double w138 = w632*p->c[29];
+    const double w139 = w137*w632;
+    const double w140 = w138*w632;
     const double w141 = w135 + w139;
     const double w142 = w129 + w131 + (w136 + w140);
     const double w143 = w130 + w132;
-    const double w144 = w133*w621;
-    const double w145 = w134*w621;
-    const double w146 = w137*w622;
-    const double w147 = w138*w622;
-    const double w148 = w615*p->c[3];
-    const double w149 = w623*p->c[3];
-    const double w150 = w148*w623;
-    const double w151 = w149*w623;
-    const double w152 = w616*p->c[3];
-    const double w153 = w624*p->c[3];
-    const double w154 = w152*w624;
-    const double w155 = w153*w624;
+    const double w144 = w133*w623;
+    const double w145 = w134*w623;
+    const double w146 = w137*w624;
+    const double w147 = w138*w624;
+    const double w148 = w617*p->c[30];
+    const double w149 = w625*p->c[30];
+    const double w150 = w148*w625;
+    const double w151 = w149*w625;
+    const double w152 = w618*p->c[30];
+    const double w153 = w626*p->c[30];
+    const double w154 = w152*w626;
+    const double w155 = w153*w626;
     const double w156 = w150 + w154;
     const double w157 = w144 + w146 + (w151 + w155);
     const double w158 = w145 + w147;
-    const double w159 = w148*w615;
-    const double w160 = w149*w615;
-    const double w161 = w152*w616;
-    const double w162 = w153*w616;
-    const double w163 = w609*p->c[3];
-    const double w164 = w617*p->c[3];
-    const double w165 = w163*w617;
-    const double w166 = w164*w617;
-    const double w167 = w610*p->c[3];
-    const double w168 = w618*p->c[3];
-    const double w169 = w167*w618;
-    const double w170 = w168*w618;
+    const double w159 = w148*w617;
+    const double w160 = w149*w617;
+    const double w161 = w152*w618;
+    const double w162 = w153*w618;
+    const double w163 = w611*p->c[31];
+    const double w164 = w619*p->c[31];
+    const double w165 = w163*w619;
+    const double w166 = w164*w619;
+    const double w167 = w612*p->c[31];
+    const double w168 = w620*p->c[31];
+    const double w169 = w167*w620;
+    const double w170 = w168*w620;
     const double w171 = w165 + w169;
     const double w172 = w159 + w161 + (w166 + w170);
     const double w173 = w160 + w162;
-    const double w174 = w163*w609;
-    const double w175 = w164*w609;
-    const double w176 = w167*w610;
-    const double w177 = w168*w610;
-    const double w178 = w603*p->c[3];
-    const double w179 = w611*p->c[3];
-    const double w180 = w178*w611;
-    const double w181 = w179*w611;
-    const double w182 = w604*p->c[3];
-    const double w183 = w612*p->c[3];
-    const double w184 = w182*w612;
-    const double w185 = w183*w612;
+    const double w174 = w163*w611;
+    const double w175 = w164*w611;
+    const double w176 = w167*w612;
+    const double w177 = w168*w612;
+    const double w178 = w605*p->c[32];
+    const double w179 = w613*p->c[32];
+    const double w180 = w178*w613;
+    const double w181 = w179*w613;
+    const double w182 = w606*p->c[32];
+    const double w183 = w614*p->c[32];
+    const double w184 = w182*w614;
+    const double w185 = w183*w614;
     const double w186 = w180 + w184;
     const double w187 = w174 + w176 + (w181 + w185);
     const double w188 = w175 + w177;
-    const double w189 = w178*w603;
-    const double w190 = w179*w603;
-    const double w191 = w182*w604;
-    const double w192 = w183*w604;
-    const double w193 = w70*p->c[3];
-    const double w194 = w605*p->c[3];
-    const double w195 = w193*w605;
-    const double w196 = w194*w605;
-    const double w197 = w72*p->c[3];
-    const double w198 = w606*p->c[3];
-    const double w199 = w197*w606;
-    const double w200 = w198*w606;
+    const double w189 = w178*w605;
+    const double w190 = w179*w605;
+    const double w191 = w182*w606;
+    const double w192 = w183*w606;
+    const double w193 = w601*p->c[33];
+    const double w194 = w607*p->c[33];
+    const double w195 = w193*w607;
+    const double w196 = w194*w607;
+    const double w197 = w602*p->c[33];
+    const double w198 = w608*p->c[33];
+    const double w199 = w197*w608;
+    const double w200 = w198*w608;
     const double w201 = w195 + w199;
     const double w202 = w189 + w191 + (w196 + w200);
     const double w203 = w190 + w192;
-    const double w204 = 2.0*w193*x[2];
-    const double w205 = 2.0*w194*x[2];
-    const double w206 = 2.0*w197*x[3];
-    const double w207 = 2.0*w198*x[3];
+    const double w204 = w193*w601;
+    const double w205 = w194*w601;
+    const double w206 = w197*w602;
+    const double w207 = w198*w602;
     const double w208 = w204 + w206;
     const double w209 = w205 + w207;
     const double w210 = w55*(-2.0*w47 + 2.0*w55);
-    const double w211 = p->c[0]*p->c[2];
-    const double w212 = w211*w640 + w57*(-2.0*w49 + 2.0*w57);
+    const double w211 = p->c[17]*p->c[19];
+    const double w212 = w211*w642 + w57*(-2.0*w49 + 2.0*w57);
     const double w213 = w47*(-2.0*w55 + 2.0*w47);
-    const double w214 = p->c[0]*p->c[2];
-    const double w215 = w214*w642 + w49*(-2.0*w57 + 2.0*w49);
+    const double w214 = p->c[15]*p->c[20];
+    const double w215 = w214*w644 + w49*(-2.0*w57 + 2.0*w49);
     const double w216 = w210 + w212 + (w213 + w215);
     const double w217 = w47*(-2.0*w39 + 2.0*w47);
-    const double w218 = w214*w634 + w49*(-2.0*w41 + 2.0*w49);
+    const double w218 = w214*w636 + w49*(-2.0*w41 + 2.0*w49);
     const double w219 = w39*(-2.0*w47 + 2.0*w39);
-    const double w220 = p->c[0]*p->c[2];
-    const double w221 = w220*w636 + w41*(-2.0*w49 + 2.0*w41);
+    const double w220 = p->c[13]*p->c[21];
+    const double w221 = w220*w638 + w41*(-2.0*w49 + 2.0*w41);
     const double w222 = w217 + w218 + (w219 + w221);
     const double w223 = w39*(-2.0*w31 + 2.0*w39);
-    const double w224 = w220*w628 + w41*(-2.0*w33 + 2.0*w41);
+    const double w224 = w220*w630 + w41*(-2.0*w33 + 2.0*w41);
     const double w225 = w31*(-2.0*w39 + 2.0*w31);
-    const double w226 = p->c[0]*p->c[2];
-    const double w227 = w226*w630 + w33*(-2.0*w41 + 2.0*w33);
+    const double w226 = p->c[11]*p->c[22];
+    const double w227 = w226*w632 + w33*(-2.0*w41 + 2.0*w33);
     const double w228 = w223 + w224 + (w225 + w227);
     const double w229 = w31*(-2.0*w23 + 2.0*w31);
-    const double w230 = w226*w622 + w33*(-2.0*w25 + 2.0*w33);
+    const double w230 = w226*w624 + w33*(-2.0*w25 + 2.0*w33);
     const double w231 = w23*(-2.0*w31 + 2.0*w23);
-    const double w232 = p->c[0]*p->c[2];
-    const double w233 = w232*w624 + w25*(-2.0*w33 + 2.0*w25);
+    const double w232 = p->c[23]*p->c[9];
+    const double w233 = w232*w626 + w25*(-2.0*w33 + 2.0*w25);
     const double w234 = w229 + w230 + (w231 + w233);
     const double w235 = w23*(-2.0*w15 + 2.0*w23);
-    const double w236 = w232*w616 + w25*(-2.0*w17 + 2.0*w25);
+    const double w236 = w232*w618 + w25*(-2.0*w17 + 2.0*w25);
     const double w237 = w15*(-2.0*w23 + 2.0*w15);
-    const double w238 = p->c[0]*p->c[2];
-    const double w239 = w17*(-2.0*w25 + 2.0*w17) + w238*w618;
+    const double w238 = p->c[24]*p->c[7];
+    const double w239 = w17*(-2.0*w25 + 2.0*w17) + w238*w620;
     const double w240 = w235 + w236 + (w237 + w239);
     const double w241 = w15*(-2.0*w7 + 2.0*w15);
-    const double w242 = w17*(-2.0*w9 + 2.0*w17) + w238*w610;
+    const double w242 = w17*(-2.0*w9 + 2.0*w17) + w238*w612;
     const double w243 = w7*(-2.0*w15 + 2.0*w7);
-    const double w244 = p->c[0]*p->c[2];
-    const double w245 = w244*w612 + w9*(-2.0*w17 + 2.0*w9);
+    const double w244 = p->c[25]*p->c[5];
+    const double w245 = w244*w614 + w9*(-2.0*w17 + 2.0*w9);
     const double w246 = w241 + w242 + (w243 + w245);
     const double w247 = w7*(-2.0*w0 + 2.0*w7);
-    const double w248 = w244*w604 + w9*(-2.0*w2 + 2.0*w9);
+    const double w248 = w244*w606 + w9*(-2.0*w2 + 2.0*w9);
     const double w249 = w0*(-2.0*w7 + 2.0*w0);
-    const double w250 = p->c[0]*p->c[2];
-    const double w251 = w2*(-2.0*w9 + 2.0*w2) + w250*w606;
+    const double w250 = p->c[0]*p->c[4];
+    const double w251 = w2*(-2.0*w9 + 2.0*w2) + w250*w608;
     const double w252 = w247 + w248 + (w249 + w251);
     const double w253 = 2.0*w0*w0;
-    const double w254 = 2.0*w2*w2 + 2.0*w250*x[3];
+    const double w254 = 2.0*w2*w2 + w250*w602;
     const double w255 = w253 + w254;
-    wv[776] = w208;
-    wv[777] = w209;
-    wv[778] = w201;
-    wv[779] = w202;
-    wv[780] = w203;
-    wv[781] = w186;
-    wv[782] = w187;
-    wv[783] = w188;
-    wv[784] = w171;
-    wv[785] = w172;
-    wv[786] = w173;
-    wv[787] = w156;
-    wv[788] = w157;
-    wv[789] = w158;
-    wv[790] = w141;
-    wv[791] = w142;
-    wv[792] = w143;
-    wv[793] = w126;
-    wv[794] = w127;
-    wv[795] = w128;
-    wv[796] = w112;
-    wv[797] = w113;
-    wv[884] = -w255 + w4*p->c[5] + w5*p->c[4];
-    wv[885] = -w252 + w13*p->c[5] + w14*p->c[4];
-    wv[886] = -w246 + w21*p->c[5] + w22*p->c[4];
-    wv[887] = -w240 + w29*p->c[5] + w30*p->c[4];
-    wv[888] = -w234 + w37*p->c[5] + w38*p->c[4];
-    wv[889] = -w228 + w45*p->c[5] + w46*p->c[4];
-    wv[890] = -w222 + w53*p->c[5] + w54*p->c[4];
-    wv[891] = -w216 + w61*p->c[5] + w62*p->c[4];
+    wv[779] = w208;
+    wv[780] = w209;
+    wv[781] = w201;
+    wv[782] = w202;
+    wv[783] = w203;
+    wv[784] = w186;
+    wv[785] = w187;
+    wv[786] = w188;
+    wv[787] = w171;
+    wv[788] = w172;
+    wv[789] = w173;
+    wv[790] = w156;
+    wv[791] = w157;
+    wv[792] = w158;
+    wv[793] = w141;
+    wv[794] = w142;
+    wv[795] = w143;
+    wv[796] = w126;
+    wv[797] = w127;
+    wv[798] = w128;
+    wv[799] = w112;
+    wv[800] = w113;
+    wv[887] = -w255 + w4*p->c[35] + w5*p->c[34];
+    wv[888] = -w252 + w13*p->c[37] + w14*p->c[36];
+    wv[889] = -w246 + w21*p->c[39] + w22*p->c[38];
+    wv[890] = -w240 + w29*p->c[41] + w30*p->c[40];
+    wv[891] = -w234 + w37*p->c[43] + w38*p->c[42];
+    wv[892] = -w228 + w45*p->c[45] + w46*p->c[44];
+    wv[893] = -w222 + w53*p->c[47] + w54*p->c[46];
+    wv[894] = -w216 + w61*p->c[49] + w62*p->c[48];
     if (bgc_block_solve(w, 0, t))
         return 1;
-    const double w256 = wv[884];
-    const double w257 = wv[885];
-    const double w258 = wv[886];
-    const double w259 = wv[887];
-    const double w260 = wv[888];
-    const double w261 = wv[889];
-    const double w262 = wv[890];
-    const double w263 = wv[891];
-    const double w264 = 2.0*w256*x[2];
-    const double w265 = w257*w605;
+    const double w256 = wv[887];
+    const double w257 = wv[888];
+    const double w258 = wv[889];
+    const double w259 = wv[890];
+    const double w260 = wv[891];
+    const double w261 = wv[892];
+    const double w262 = wv[893];
+    const double w263 = wv[894];
+    const double w264 = w256*w601;
+    const double w265 = w257*w607;
     const double w266 = -w264 - w265;
-    const double w267 = 2.0*w256*x[3];
-    const double w268 = w257*w606;
-    const double w269 = -w267 - w268 + p->c[2];
-    const double w270 = w257*w603;
-    const double w271 = w258*w611;
+    const double w267 = w256*w602;
+    const double w268 = w257*w608;
+    const double w269 = -w267 - w268 + p->c[4];
+    const double w270 = w257*w605;
+    const double w271 = w258*w613;
     const double w272 = -w270 - w271;
-    const double w273 = w257*w604;
-    const double w274 = w258*w612;
-    const double w275 = -w273 - w274 + p->c[2];
-    const double w276 = w258*w609;
-    const double w277 = w259*w617;
+    const double w273 = w257*w606;
+    const double w274 = w258*w614;
+    const double w275 = -w273 - w274 + p->c[25];
+    const double w276 = w258*w611;
+    const double w277 = w259*w619;
     const double w278 = -w276 - w277;
-    const double w279 = w258*w610;
-    const double w280 = w259*w618;
-    const double w281 = -w279 - w280 + p->c[2];
-    const double w282 = w259*w615;
-    const double w283 = w260*w623;
+    const double w279 = w258*w612;
+    const double w280 = w259*w620;
+    const double w281 = -w279 - w280 + p->c[24];
+    const double w282 = w259*w617;
+    const double w283 = w260*w625;
     const double w284 = -w282 - w283;
-    const double w285 = w259*w616;
-    const double w286 = w260*w624;
-    const double w287 = -w285 - w286 + p->c[2];
-    const double w288 = w260*w621;
-    const double w289 = w261*w629;
+    const double w285 = w259*w618;
+    const double w286 = w260*w626;
+    const double w287 = -w285 - w286 + p->c[23];
+    const double w288 = w260*w623;
+    const double w289 = w261*w631;
     const double w290 = -w288 - w289;
-    const double w291 = w260*w622;
-    const double w292 = w261*w630;
-    const double w293 = -w291 - w292 + p->c[2];
-    const double w294 = w261*w627;
-    const double w295 = w262*w635;
+    const double w291 = w260*w624;
+    const double w292 = w261*w632;
+    const double w293 = -w291 - w292 + p->c[22];
+    const double w294 = w261*w629;
+    const double w295 = w262*w637;
     const double w296 = -w294 - w295;
-    const double w297 = w261*w628;
-    const double w298 = w262*w636;
-    const double w299 = -w297 - w298 + p->c[2];
-    const double w300 = w262*w633;
-    const double w301 = w263*w641;
+    const double w297 = w261*w630;
+    const double w298 = w262*w638;
+    const double w299 = -w297 - w298 + p->c[21];
+    const double w300 = w262*w635;
+    const double w301 = w263*w643;
     const double w302 = -w300 - w301;
-    const double w303 = w262*w634;
-    const double w304 = w263*w642;
-    const double w305 = -w303 - w304 + p->c[2];
-    const double w306 = w263*w639;
-    const double w307 = w263*w640;
-    const double w308 = -w307 + p->c[2];
+    const double w303 = w262*w636;
+    const double w304 = w263*w644;
+    const double w305 = -w303 - w304 + p->c[20];
+    const double w306 = w263*w641;
+    const double w307 = w263*w642;
+    const double w308 = -w307 + p->c[19];
     out[0] = w266;
     out[1] = w269;
     out[2] = w0;
@@ -948,456 +1272,457 @@ static int bgc_jvp_0(double t, const double *x, const bgc_params *p, bgc_work *w
     (void)out;
     wv[608] = p->c[0]*x[0];
     wv[609] = p->c[0]*v[0];
-    const double w1 = 2.0*wv[608]*x[2];
-    const double w310 = 2.0*wv[608]*v[2] + 2.0*wv[609]*x[2];
-    wv[610] = p->c[0]*x[1];
-    wv[611] = p->c[0]*v[1];
-    const double w3 = 2.0*wv[610]*x[3];
-    const double w312 = 2.0*wv[610]*v[3] + 2.0*wv[611]*x[3];
-    wv[612] = w1 + w3;
-    wv[613] = w310 + w312;
-    const double w643 = x[3]*x[3];
-    const double w644 = x[2]*x[2];
-    wv[614] = w643 + w644 + p->c[1];
-    const double w645 = 2.0*v[3]*x[3];
-    const double w646 = 2.0*v[2]*x[2];
-    wv[615] = w645 + w646;
-    wv[616] = p->c[0]*x[4];
-    wv[617] = p->c[0]*v[4];
-    wv[618] = -2.0*x[2] + 2.0*x[6];
-    const double w8 = wv[618]*wv[616];
-    wv[619] = -2.0*v[2] + 2.0*v[6];
-    const double w316 = wv[617]*wv[618] + wv[619]*wv[616];
-    wv[620] = p->c[0]*x[5];
-    wv[621] = p->c[0]*v[5];
-    wv[622] = -2.0*x[3] + 2.0*x[7];
-    const double w10 = wv[622]*wv[620];
-    wv[623] = -2.0*v[3] + 2.0*v[7];
-    const double w318 = wv[621]*wv[622] + wv[623]*wv[620];
-    wv[624] = -2.0*x[6] + 2.0*x[2];
-    const double w11 = wv[608]*wv[624];
-    wv[625] = -2.0*v[6] + 2.0*v[2];
-    const double w319 = wv[608]*wv[625] + wv[609]*wv[624];
-    wv[626] = -2.0*x[7] + 2.0*x[3];
-    const double w12 = wv[610]*wv[626];
-    wv[627] = -2.0*v[7] + 2.0*v[3];
-    const double w320 = wv[610]*wv[627] + wv[611]*wv[626];
-    wv[628] = w10 + w11 + (w12 + w8);
-    wv[629] = w316 + w318 + (w319 + w320);
-    const double w655 = x[7]*x[7];
-    const double w656 = x[6]*x[6];
-    wv[630] = w643 + w644 + (w655 + w656) + (-2.0*x[2]*x[6] - 2.0*x[3]*x[7] + p->c[1]);
-    const double w657 = 2.0*v[7]*x[7];
-    const double w658 = 2.0*v[6]*x[6];
-    wv[631] = w645 + w646 + (w657 + w658) + (-2.0*v[2]*x[6] - 2.0*v[3]*x[7] + (-2.0*v[6]*x[2] - 2.0*v[7]*x[3]));
-    wv[632] = p->c[0]*x[8];
-    wv[633] = p->c[0]*v[8];
-    wv[634] = -2.0*x[6] + 2.0*x[10];
-    const double w16 = wv[632]*wv[634];
-    wv[635] = -2.0*v[6] + 2.0*v[10];
-    const double w324 = wv[632]*wv[635] + wv[633]*wv[634];
-    wv[636] = p->c[0]*x[9];
-    wv[637] = p->c[0]*v[9];
-    wv[638] = -2.0*x[7] + 2.0*x[11];
-    const double w18 = wv[636]*wv[638];
-    wv[639] = -2.0*v[7] + 2.0*v[11];
-    const double w326 = wv[636]*wv[639] + wv[637]*wv[638];
-    wv[640] = -2.0*x[10] + 2.0*x[6];
-    const double w19 = wv[640]*wv[616];
-    wv[641] = -2.0*v[10] + 2.0*v[6];
-    const double w327 = wv[617]*wv[640] + wv[641]*wv[616];
-    wv[642] = -2.0*x[11] + 2.0*x[7];
-    const double w20 = wv[642]*wv[620];
-    wv[643] = -2.0*v[11] + 2.0*v[7];
-    const double w328 = wv[621]*wv[642] + wv[643]*wv[620];
-    wv[644] = w16 + w18 + (w19 + w20);
-    wv[645] = w324 + w326 + (w327 + w328);
-    const double w667 = x[11]*x[11];
-    const double w668 = x[10]*x[10];
-    wv[646] = w655 + w656 + (w667 + w668) + (-2.0*x[10]*x[6] - 2.0*x[11]*x[7] + p->c[1]);
-    const double w669 = 2.0*v[11]*x[11];
-    const double w670 = 2.0*v[10]*x[10];
-    wv[647] = w657 + w658 + (w669 + w670) + (-2.0*v[6]*x[10] - 2.0*v[7]*x[11] + (-2.0*v[10]*x[6] - 2.0*v[11]*x[7]));
-    wv[648] = p->c[0]*x[12];
-    wv[649] = p->c[0]*v[12];
-    wv[650] = -2.0*x[10] + 2.0*x[14];
-    const double w24 = wv[648]*wv[650];
-    wv[651] = -2.0*v[10] + 2.0*v[14];
-    const double w332 = wv[648]*wv[651] + wv[649]*wv[650];
-    wv[652] = p->c[0]*x[13];
-    wv[653] = p->c[0]*v[13];
-    wv[654] = -2.0*x[11] + 2.0*x[15];
-    const double w26 = wv[652]*wv[654];
-    wv[655] = -2.0*v[11] + 2.0*v[15];
-    const double w334 = wv[652]*wv[655] + wv[653]*wv[654];
-    wv[656] = -2.0*x[14] + 2.0*x[10];
-    const double w27 = wv[632]*wv[656];
-    wv[657] = -2.0*v[14] + 2.0*v[10];
-    const double w335 = wv[632]*wv[657] + wv[633]*wv[656];
-    wv[658] = -2.0*x[15] + 2.0*x[11];
-    const double w28 = wv[636]*wv[658];
-    wv[659] = -2.0*v[15] + 2.0*v[11];
-    const double w336 = wv[636]*wv[659] + wv[637]*wv[658];
-    wv[660] = w24 + w26 + (w27 + w28);
-    wv[661] = w332 + w334 + (w335 + w336);
-    const double w679 = x[15]*x[15];
-    const double w680 = x[14]*x[14];
-    wv[662] = w667 + w668 + (w679 + w680) + (-2.0*x[10]*x[14] - 2.0*x[11]*x[15] + p->c[1]);
-    const double w681 = 2.0*v[15]*x[15];
-    const double w682 = 2.0*v[14]*x[14];
-    wv[663] = w669 + w670 + (w681 + w682) + (-2.0*v[10]*x[14] - 2.0*v[11]*x[15] + (-2.0*v[14]*x[10] - 2.0*v[15]*x[11]));
-    wv[664] = p->c[0]*x[16];
-    wv[665] = p->c[0]*v[16];
-    wv[666] = -2.0*x[14] + 2.0*x[18];
-    const double w32 = wv[664]*wv[666];
-    wv[667] = -2.0*v[14] + 2.0*v[18];
-    const double w340 = wv[664]*wv[667] + wv[665]*wv[666];
-    wv[668] = p->c[0]*x[17];
-    wv[669] = p->c[0]*v[17];
-    wv[670] = -2.0*x[15] + 2.0*x[19];
-    const double w34 = wv[668]*wv[670];
-    wv[671] = -2.0*v[15] + 2.0*v[19];
-    const double w342 = wv[668]*wv[671] + wv[669]*wv[670];
-    wv[672] = -2.0*x[18] + 2.0*x[14];
-    const double w35 = wv[648]*wv[672];
-    wv[673] = -2.0*v[18] + 2.0*v[14];
-    const double w343 = wv[648]*wv[673] + wv[649]*wv[672];
-    wv[674] = -2.0*x[19] + 2.0*x[15];
-    const double w36 = wv[652]*wv[674];
-    wv[675] = -2.0*v[19] + 2.0*v[15];
-    const double w344 = wv[652]*wv[675] + wv[653]*wv[674];
-    wv[676] = w32 + w34 + (w35 + w36);
-    wv[677] = w340 + w342 + (w343 + w344);
-    const double w691 = x[19]*x[19];
-    const double w692 = x[18]*x[18];
-    wv[678] = w679 + w680 + (w691 + w692) + (-2.0*x[14]*x[18] - 2.0*x[15]*x[19] + p->c[1]);
-    const double w693 = 2.0*v[19]*x[19];
-    const double w694 = 2.0*v[18]*x[18];
-    wv[679] = w681 + w682 + (w693 + w694) + (-2.0*v[14]*x[18] - 2.0*v[15]*x[19] + (-2.0*v[18]*x[14] - 2.0*v[19]*x[15]));
-    wv[680] = p->c[0]*x[20];
-    wv[681] = p->c[0]*v[20];
-    wv[682] = -2.0*x[18] + 2.0*x[22];
-    const double w40 = wv[680]*wv[682];
-    wv[683] = -2.0*v[18] + 2.0*v[22];
-    const double w348 = wv[681]*wv[682] + wv[680]*wv[683];
-    wv[684] = p->c[0]*x[21];
-    wv[685] = p->c[0]*v[21];
-    wv[686] = -2.0*x[19] + 2.0*x[23];
-    const double w42 = wv[684]*wv[686];
-    wv[687] = -2.0*v[19] + 2.0*v[23];
-    const double w350 = wv[685]*wv[686] + wv[684]*wv[687];
-    wv[688] = -2.0*x[22] + 2.0*x[18];
-    const double w43 = wv[664]*wv[688];
-    wv[689] = -2.0*v[22] + 2.0*v[18];
-    const double w351 = wv[664]*wv[689] + wv[665]*wv[688];
-    wv[690] = -2.0*x[23] + 2.0*x[19];
-    const double w44 = wv[668]*wv[690];
-    wv[691] = -2.0*v[23] + 2.0*v[19];
-    const double w352 = wv[668]*wv[691] + wv[669]*wv[690];
-    wv[692] = w40 + w42 + (w43 + w44);
-    wv[693] = w348 + w350 + (w351 + w352);
-    const double w703 = x[23]*x[23];
-    const double w704 = x[22]*x[22];
-    wv[694] = w691 + w692 + (w703 + w704) + (-2.0*x[18]*x[22] - 2.0*x[19]*x[23] + p->c[1]);
-    const double w705 = 2.0*v[23]*x[23];
-    const double w706 = 2.0*v[22]*x[22];
-    wv[695] = w693 + w694 + (w705 + w706) + (-2.0*v[18]*x[22] - 2.0*v[19]*x[23] + (-2.0*v[22]*x[18] - 2.0*v[23]*x[19]));
-    wv[696] = p->c[0]*x[24];
-    wv[697] = p->c[0]*v[24];
-    wv[698] = -2.0*x[22] + 2.0*x[26];
-    const double w48 = wv[696]*wv[698];
-    wv[699] = -2.0*v[22] + 2.0*v[26];
-    const double w356 = wv[697]*wv[698] + wv[696]*wv[699];
-    wv[700] = p->c[0]*x[25];
-    wv[701] = p->c[0]*v[25];
-    wv[702] = -2.0*x[23] + 2.0*x[27];
-    const double w50 = wv[700]*wv[702];
-    wv[703] = -2.0*v[23] + 2.0*v[27];
-    const double w358 = wv[701]*wv[702] + wv[700]*wv[703];
-    wv[704] = -2.0*x[26] + 2.0*x[22];
-    const double w51 = wv[680]*wv[704];
-    wv[705] = -2.0*v[26] + 2.0*v[22];
-    const double w359 = wv[681]*wv[704] + wv[680]*wv[705];
-    wv[706] = -2.0*x[27] + 2.0*x[23];
-    const double w52 = wv[684]*wv[706];
-    wv[707] = -2.0*v[27] + 2.0*v[23];
-    const double w360 = wv[685]*wv[706] + wv[684]*wv[707];
-    wv[708] = w48 + w50 + (w51 + w52);
-    wv[709] = w356 + w358 + (w359 + w360);
-    const double w715 = x[27]*x[27];
-    const double w716 = x[26]*x[26];
-    wv[710] = w703 + w704 + (w715 + w716) + (-2.0*x[22]*x[26] - 2.0*x[23]*x[27] + p->c[1]);
-    const double w717 = 2.0*v[27]*x[27];
-    const double w718 = 2.0*v[26]*x[26];
-    wv[711] = w705 + w706 + (w717 + w718) + (-2.0*v[22]*x[26] - 2.0*v[23]*x[27] + (-2.0*v[26]*x[22] - 2.0*v[27]*x[23]));
-    const double w55 = p->c[0]*x[28];
-    wv[712] = p->c[0]*v[28];
-    wv[713] = -2.0*x[26] + 2.0*x[30];
-    const double w56 = w55*wv[713];
-    wv[714] = -2.0*v[26] + 2.0*v[30];
-    const double w364 = wv[712]*wv[713] + w55*wv[714];
-    const double w57 = p->c[0]*x[29];
-    wv[715] = p->c[0]*v[29];
-    wv[716] = -2.0*x[27] + 2.0*x[31];
-    const double w58 = w57*wv[716];
-    wv[717] = -2.0*v[27] + 2.0*v[31];
-    const double w366 = wv[715]*wv[716] + w57*wv[717];
-    wv[718] = -2.0*x[30] + 2.0*x[26];
-    const double w59 = wv[696]*wv[718];
-    wv[719] = -2.0*v[30] + 2.0*v[26];
-    const double w367 = wv[697]*wv[718] + wv[696]*wv[719];
-    wv[720] = -2.0*x[31] + 2.0*x[27];
-    const double w60 = wv[700]*wv[720];
-    wv[721] = -2.0*v[31] + 2.0*v[27];
-    const double w368 = wv[701]*wv[720] + wv[700]*wv[721];
-    wv[722] = w56 + w58 + (w59 + w60);
-    wv[723] = w364 + w366 + (w367 + w368);
-    wv[724] = w715 + w716 + (x[30]*x[30] + x[31]*x[31]) + (-2.0*x[26]*x[30] - 2.0*x[27]*x[31] + p->c[1]);
-    wv[725] = w717 + w718 + (-2.0*v[26]*x[30] - 2.0*v[27]*x[31]) + (-2.0*v[30]*x[26] - 2.0*v[31]*x[27] + (2.0*v[30]*x[30] + 2.0*v[31]*x[31]));
-    const double w70 = 2.0*x[2];
+    wv[610] = 2.0*x[2] + p->c[1];
+    const double w1 = wv[608]*wv[610];
+    const double w310 = wv[609]*wv[610] + 2.0*wv[608]*v[2];
+    wv[611] = p->c[0]*x[1];
+    wv[612] = p->c[0]*v[1];
+    wv[613] = 2.0*x[3] + p->c[2];
+    const double w3 = wv[611]*wv[613];
+    const double w312 = wv[612]*wv[613] + 2.0*wv[611]*v[3];
+    wv[614] = w1 + w3;
+    wv[615] = w310 + w312;
+    const double w647 = x[3]*x[3];
+    const double w648 = x[2]*x[2];
+    wv[616] = w647 + w648 + p->c[1]*x[2] + (p->c[2]*x[3] + p->c[3]);
+    const double w649 = 2.0*v[3]*x[3];
+    const double w650 = 2.0*v[2]*x[2];
+    wv[617] = w649 + w650 + (p->c[1]*v[2] + p->c[2]*v[3]);
+    wv[618] = p->c[5]*x[4];
+    wv[619] = p->c[5]*v[4];
+    wv[620] = -2.0*x[2] + 2.0*x[6];
+    const double w8 = wv[620]*wv[618];
+    wv[621] = -2.0*v[2] + 2.0*v[6];
+    const double w316 = wv[619]*wv[620] + wv[621]*wv[618];
+    wv[622] = p->c[5]*x[5];
+    wv[623] = p->c[5]*v[5];
+    wv[624] = -2.0*x[3] + 2.0*x[7];
+    const double w10 = wv[624]*wv[622];
+    wv[625] = -2.0*v[3] + 2.0*v[7];
+    const double w318 = wv[623]*wv[624] + wv[625]*wv[622];
+    wv[626] = -2.0*x[6] + 2.0*x[2];
+    const double w11 = wv[608]*wv[626];
+    wv[627] = -2.0*v[6] + 2.0*v[2];
+    const double w319 = wv[608]*wv[627] + wv[609]*wv[626];
+    wv[628] = -2.0*x[7] + 2.0*x[3];
+    const double w12 = wv[611]*wv[628];
+    wv[629] = -2.0*v[7] + 2.0*v[3];
+    const double w320 = wv[611]*wv[629] + wv[612]*wv[628];
+    wv[630] = w10 + w11 + (w12 + w8);
+    wv[631] = w316 + w318 + (w319 + w320);
+    const double w659 = x[7]*x[7];
+    const double w660 = x[6]*x[6];
+    wv[632] = w647 + w648 + (w659 + w660) + (-2.0*x[2]*x[6] - 2.0*x[3]*x[7] + p->c[6]);
+    const double w661 = 2.0*v[7]*x[7];
+    const double w662 = 2.0*v[6]*x[6];
+    wv[633] = w649 + w650 + (w661 + w662) + (-2.0*v[2]*x[6] - 2.0*v[3]*x[7] + (-2.0*v[6]*x[2] - 2.0*v[7]*x[3]));
+    wv[634] = p->c[7]*x[8];
+    wv[635] = p->c[7]*v[8];
+    wv[636] = -2.0*x[6] + 2.0*x[10];
+    const double w16 = wv[634]*wv[636];
+    wv[637] = -2.0*v[6] + 2.0*v[10];
+    const double w324 = wv[634]*wv[637] + wv[635]*wv[636];
+    wv[638] = p->c[7]*x[9];
+    wv[639] = p->c[7]*v[9];
+    wv[640] = -2.0*x[7] + 2.0*x[11];
+    const double w18 = wv[638]*wv[640];
+    wv[641] = -2.0*v[7] + 2.0*v[11];
+    const double w326 = wv[638]*wv[641] + wv[639]*wv[640];
+    wv[642] = -2.0*x[10] + 2.0*x[6];
+    const double w19 = wv[642]*wv[618];
+    wv[643] = -2.0*v[10] + 2.0*v[6];
+    const double w327 = wv[619]*wv[642] + wv[643]*wv[618];
+    wv[644] = -2.0*x[11] + 2.0*x[7];
+    const double w20 = wv[644]*wv[622];
+    wv[645] = -2.0*v[11] + 2.0*v[7];
+    const double w328 = wv[623]*wv[644] + wv[645]*wv[622];
+    wv[646] = w16 + w18 + (w19 + w20);
+    wv[647] = w324 + w326 + (w327 + w328);
+    const double w671 = x[11]*x[11];
+    const double w672 = x[10]*x[10];
+    wv[648] = w659 + w660 + (w671 + w672) + (-2.0*x[10]*x[6] - 2.0*x[11]*x[7] + p->c[8]);
+    const double w673 = 2.0*v[11]*x[11];
+    const double w674 = 2.0*v[10]*x[10];
+    wv[649] = w661 + w662 + (w673 + w674) + (-2.0*v[6]*x[10] - 2.0*v[7]*x[11] + (-2.0*v[10]*x[6] - 2.0*v[11]*x[7]));
+    wv[650] = p->c[9]*x[12];
+    wv[651] = p->c[9]*v[12];
+    wv[652] = -2.0*x[10] + 2.0*x[14];
+    const double w24 = wv[650]*wv[652];
+    wv[653] = -2.0*v[10] + 2.0*v[14];
+    const double w332 = wv[650]*wv[653] + wv[651]*wv[652];
+    wv[654] = p->c[9]*x[13];
+    wv[655] = p->c[9]*v[13];
+    wv[656] = -2.0*x[11] + 2.0*x[15];
+    const double w26 = wv[654]*wv[656];
+    wv[657] = -2.0*v[11] + 2.0*v[15];
+    const double w334 = wv[654]*wv[657] + wv[655]*wv[656];
+    wv[658] = -2.0*x[14] + 2.0*x[10];
+    const double w27 = wv[634]*wv[658];
+    wv[659] = -2.0*v[14] + 2.0*v[10];
+    const double w335 = wv[634]*wv[659] + wv[635]*wv[658];
+    wv[660] = -2.0*x[15] + 2.0*x[11];
+    const double w28 = wv[638]*wv[660];
+    wv[661] = -2.0*v[15] + 2.0*v[11];
+    const double w336 = wv[638]*wv[661] + wv[639]*wv[660];
+    wv[662] = w24 + w26 + (w27 + w28);
+    wv[663] = w332 + w334 + (w335 + w336);
+    const double w683 = x[15]*x[15];
+    const double w684 = x[14]*x[14];
+    wv[664] = w671 + w672 + (w683 + w684) + (-2.0*x[10]*x[14] - 2.0*x[11]*x[15] + p->c[10]);
+    const double w685 = 2.0*v[15]*x[15];
+    const double w686 = 2.0*v[14]*x[14];
+    wv[665] = w673 + w674 + (w685 + w686) + (-2.0*v[10]*x[14] - 2.0*v[11]*x[15] + (-2.0*v[14]*x[10] - 2.0*v[15]*x[11]));
+    wv[666] = p->c[11]*x[16];
+    wv[667] = p->c[11]*v[16];
+    wv[668] = -2.0*x[14] + 2.0*x[18];
+    const double w32 = wv[666]*wv[668];
+    wv[669] = -2.0*v[14] + 2.0*v[18];
+    const double w340 = wv[666]*wv[669] + wv[667]*wv[668];
+    wv[670] = p->c[11]*x[17];
+    wv[671] = p->c[11]*v[17];
+    wv[672] = -2.0*x[15] + 2.0*x[19];
+    const double w34 = wv[670]*wv[672];
+    wv[673] = -2.0*v[15] + 2.0*v[19];
+    const double w342 = wv[670]*wv[673] + wv[671]*wv[672];
+    wv[674] = -2.0*x[18] + 2.0*x[14];
+    const double w35 = wv[650]*wv[674];
+    wv[675] = -2.0*v[18] + 2.0*v[14];
+    const double w343 = wv[650]*wv[675] + wv[651]*wv[674];
+    wv[676] = -2.0*x[19] + 2.0*x[15];
+    const double w36 = wv[654]*wv[676];
+    wv[677] = -2.0*v[19] + 2.0*v[15];
+    const double w344 = wv[654]*wv[677] + wv[655]*wv[676];
+    wv[678] = w32 + w34 + (w35 + w36);
+    wv[679] = w340 + w342 + (w343 + w344);
+    const double w695 = x[19]*x[19];
+    const double w696 = x[18]*x[18];
+    wv[680] = w683 + w684 + (w695 + w696) + (-2.0*x[14]*x[18] - 2.0*x[15]*x[19] + p->c[12]);
+    const double w697 = 2.0*v[19]*x[19];
+    const double w698 = 2.0*v[18]*x[18];
+    wv[681] = w685 + w686 + (w697 + w698) + (-2.0*v[14]*x[18] - 2.0*v[15]*x[19] + (-2.0*v[18]*x[14] - 2.0*v[19]*x[15]));
+    wv[682] = p->c[13]*x[20];
+    wv[683] = p->c[13]*v[20];
+    wv[684] = -2.0*x[18] + 2.0*x[22];
+    const double w40 = wv[682]*wv[684];
+    wv[685] = -2.0*v[18] + 2.0*v[22];
+    const double w348 = wv[683]*wv[684] + wv[682]*wv[685];
+    wv[686] = p->c[13]*x[21];
+    wv[687] = p->c[13]*v[21];
+    wv[688] = -2.0*x[19] + 2.0*x[23];
+    const double w42 = wv[686]*wv[688];
+    wv[689] = -2.0*v[19] + 2.0*v[23];
+    const double w350 = wv[687]*wv[688] + wv[686]*wv[689];
+    wv[690] = -2.0*x[22] + 2.0*x[18];
+    const double w43 = wv[666]*wv[690];
+    wv[691] = -2.0*v[22] + 2.0*v[18];
+    const double w351 = wv[666]*wv[691] + wv[667]*wv[690];
+    wv[692] = -2.0*x[23] + 2.0*x[19];
+    const double w44 = wv[670]*wv[692];
+    wv[693] = -2.0*v[23] + 2.0*v[19];
+    const double w352 = wv[670]*wv[693] + wv[671]*wv[692];
+    wv[694] = w40 + w42 + (w43 + w44);
+    wv[695] = w348 + w350 + (w351 + w352);
+    const double w707 = x[23]*x[23];
+    const double w708 = x[22]*x[22];
+    wv[696] = w695 + w696 + (w707 + w708) + (-2.0*x[18]*x[22] - 2.0*x[19]*x[23] + p->c[14]);
+    const double w709 = 2.0*v[23]*x[23];
+    const double w710 = 2.0*v[22]*x[22];
+    wv[697] = w697 + w698 + (w709 + w710) + (-2.0*v[18]*x[22] - 2.0*v[19]*x[23] + (-2.0*v[22]*x[18] - 2.0*v[23]*x[19]));
+    wv[698] = p->c[15]*x[24];
+    wv[699] = p->c[15]*v[24];
+    wv[700] = -2.0*x[22] + 2.0*x[26];
+    const double w48 = wv[698]*wv[700];
+    wv[701] = -2.0*v[22] + 2.0*v[26];
+    const double w356 = wv[699]*wv[700] + wv[698]*wv[701];
+    wv[702] = p->c[15]*x[25];
+    wv[703] = p->c[15]*v[25];
+    wv[704] = -2.0*x[23] + 2.0*x[27];
+    const double w50 = wv[702]*wv[704];
+    wv[705] = -2.0*v[23] + 2.0*v[27];
+    const double w358 = wv[703]*wv[704] + wv[702]*wv[705];
+    wv[706] = -2.0*x[26] + 2.0*x[22];
+    const double w51 = wv[682]*wv[706];
+    wv[707] = -2.0*v[26] + 2.0*v[22];
+    const double w359 = wv[683]*wv[706] + wv[682]*wv[707];
+    wv[708] = -2.0*x[27] + 2.0*x[23];
+    const double w52 = wv[686]*wv[708];
+    wv[709] = -2.0*v[27] + 2.0*v[23];
+    const double w360 = wv[687]*wv[708] + wv[686]*wv[709];
+    wv[710] = w48 + w50 + (w51 + w52);
+    wv[711] = w356 + w358 + (w359 + w360);
+    const double w719 = x[27]*x[27];
+    const double w720 = x[26]*x[26];
+    wv[712] = w707 + w708 + (w719 + w720) + (-2.0*x[22]*x[26] - 2.0*x[23]*x[27] + p->c[16]);
+    const double w721 = 2.0*v[27]*x[27];
+    const double w722 = 2.0*v[26]*x[26];
+    wv[713] = w709 + w710 + (w721 + w722) + (-2.0*v[22]*x[26] - 2.0*v[23]*x[27] + (-2.0*v[26]*x[22] - 2.0*v[27]*x[23]));
+    const double w55 = p->c[17]*x[28];
+    wv[714] = p->c[17]*v[28];
+    wv[715] = -2.0*x[26] + 2.0*x[30];
+    const double w56 = w55*wv[715];
+    wv[716] = -2.0*v[26] + 2.0*v[30];
+    const double w364 = wv[714]*wv[715] + w55*wv[716];
+    const double w57 = p->c[17]*x[29];
+    wv[717] = p->c[17]*v[29];
+    wv[718] = -2.0*x[27] + 2.0*x[31];
+    const double w58 = w57*wv[718];
+    wv[719] = -2.0*v[27] + 2.0*v[31];
+    const double w366 = wv[717]*wv[718] + w57*wv[719];
+    wv[720] = -2.0*x[30] + 2.0*x[26];
+    const double w59 = wv[698]*wv[720];
+    wv[721] = -2.0*v[30] + 2.0*v[26];
+    const double w367 = wv[699]*wv[720] + wv[698]*wv[721];
+    wv[722] = -2.0*x[31] + 2.0*x[27];
+    const double w60 = wv[702]*wv[722];
+    wv[723] = -2.0*v[31] + 2.0*v[27];
+    const double w368 = wv[703]*wv[722] + wv[702]*wv[723];
+    wv[724] = w56 + w58 + (w59 + w60);
+    wv[725] = w364 + w366 + (w367 + w368);
+    wv[726] = w719 + w720 + (x[30]*x[30] + x[31]*x[31]) + (-2.0*x[26]*x[30] - 2.0*x[27]*x[31] + p->c[18]);
+    wv[727] = w721 + w722 + (-2.0*v[26]*x[30] - 2.0*v[27]*x[31]) + (-2.0*v[30]*x[26] - 2.0*v[31]*x[27] + (2.0*v[30]*x[30] + 2.0*v[31]*x[31]));
     const double w371 = 2.0*v[2];
-    const double w72 = 2.0*x[3];
     const double w373 = 2.0*v[3];
-    const double w100 = wv[713]*p->c[3];
-    const double w401 = wv[714]*p->c[3];
-    const double w101 = w100*wv[713];
-    const double w402 = w100*wv[714] + w401*wv[713];
-    const double w102 = wv[716]*p->c[3];
-    const double w403 = wv[717]*p->c[3];
-    const double w103 = w102*wv[716];
-    const double w404 = w102*wv[717] + w403*wv[716];
-    const double w104 = wv[698]*p->c[3];
-    const double w405 = wv[699]*p->c[3];
-    const double w105 = wv[718]*p->c[3];
-    const double w406 = wv[719]*p->c[3];
-    const double w106 = w104*wv[718];
-    const double w407 = w104*wv[719] + w405*wv[718];
-    const double w107 = w105*wv[718];
-    const double w408 = w105*wv[719] + w406*wv[718];
-    const double w108 = wv[702]*p->c[3];
-    const double w409 = wv[703]*p->c[3];
-    const double w109 = wv[720]*p->c[3];
-    const double w410 = wv[721]*p->c[3];
-    const double w110 = w108*wv[720];
-    const double w411 = w108*wv[721] + w409*wv[720];
-    const double w111 = w109*wv[720];
-    const double w412 = w109*wv[721] + w410*wv[720];
-    wv[726] = w106 + w110;
-    wv[727] = w407 + w411;
-    wv[728] = w101 + w103 + (w107 + w111);
-    wv[729] = w402 + w404 + (w408 + w412);
-    const double w114 = w104*wv[698];
-    const double w415 = w104*wv[699] + w405*wv[698];
-    const double w115 = w105*wv[698];
-    const double w416 = w105*wv[699] + w406*wv[698];
-    const double w116 = w108*wv[702];
-    const double w417 = w108*wv[703] + w409*wv[702];
-    const double w117 = w109*wv[702];
-    const double w418 = w109*wv[703] + w410*wv[702];
-    const double w118 = wv[682]*p->c[3];
-    const double w419 = wv[683]*p->c[3];
-    const double w119 = wv[704]*p->c[3];
-    const double w420 = wv[705]*p->c[3];
-    const double w120 = w118*wv[704];
-    const double w421 = w118*wv[705] + w419*wv[704];
-    const double w121 = w119*wv[704];
-    const double w422 = w119*wv[705] + w420*wv[704];
-    const double w122 = wv[686]*p->c[3];
-    const double w423 = wv[687]*p->c[3];
-    const double w123 = wv[706]*p->c[3];
-    const double w424 = wv[707]*p->c[3];
-    const double w124 = w122*wv[706];
-    const double w425 = w122*wv[707] + w423*wv[706];
-    const double w125 = w123*wv[706];
-    const double w426 = w123*wv[707] + w424*wv[706];
-    wv[730] = w120 + w124;
-    wv[731] = w421 + w425;
-    wv[732] = w114 + w116 + (w121 + w125);
-    wv[733] = w415 + w417 + (w422 + w426);
-    wv[734] = w115 + w117;
-    wv[735] = w416 + w418;
-    const double w129 = w118*wv[682];
-    const double w430 = w118*wv[683] + w419*wv[682];
-    const double w130 = w119*wv[682];
-    const double w431 = w119*wv[683] + w420*wv[682];
-    const double w131 = w122*wv[686];
-    const double w432 = w122*wv[687] + w423*wv[686];
-    const double w132 = w123*wv[686];
-    const double w433 = w123*wv[687] + w424*wv[686];
-    const double w133 = wv[666]*p->c[3];
-    const double w434 = wv[667]*p->c[3];
-    const double w134 = wv[688]*p->c[3];
-    const double w435 = wv[689]*p->c[3];
-    const double w135 = w133*wv[688];
-    const double w436 = w133*wv[689] + w434*wv[688];
-    const double w136 = w134*wv[688];
-    const double w437 = w134*wv[689] + w435*wv[688];
-    const double w137 = wv[670]*p->c[3];
-    const double w438 = wv[671]*p->c[3];
-    const double w138 = wv[690]*p->c[3];
-    const double w439 = wv[691]*p->c[3];
-    const double w139 = w137*wv[690];
-    const double w440 = w137*wv[691] + w438*wv[690];
-    const double w140 = w138*wv[690];
-    const double w441 = w138*wv[691] + w439*wv[690];
-    wv[736] = w135 + w139;
-    wv[737] = w436 + w440;
-    wv[738] = w129 + w131 + (w136 + w140);
-    wv[739] = w430 + w432 + (w437 + w441);
-    wv[740] = w130 + w132;
-    wv[741] = w431 + w433;
-    const double w144 = w133*wv[666];
-    const double w445 = w133*wv[667] + w434*wv[666];
-    const double w145 = w134*wv[666];
-    const double w446 = w134*wv[667] + w435*wv[666];
-    const double w146 = w137*wv[670];
-    const double w447 = w137*wv[671] + w438*wv[670];
-    const double w147 = w138*wv[670];
-    const double w448 = w138*wv[671] + w439*wv[670];
-    const double w148 = wv[650]*p->c[3];
-    const double w449 = wv[651]*p->c[3];
-    const double w149 = wv[672]*p->c[3];
-    const double w450 = wv[673]*p->c[3];
-    const double w150 = w148*wv[672];
-    const double w451 = w148*wv[673] + w449*wv[672];
-    const double w151 = w149*wv[672];
-    const double w452 = w149*wv[673] + w450*wv[672];
-    const double w152 = wv[654]*p->c[3];
-    const double w453 = wv[655]*p->c[3];
-    const double w153 = wv[674]*p->c[3];
-    const double w454 = wv[675]*p->c[3];
-    const double w154 = w152*wv[674];
-    const double w455 = w152*wv[675] + w453*wv[674];
-    const double w155 = w153*wv[674];
-    const double w456 = w153*wv[675] + w454*wv[674];
-    wv[742] = w150 + w154;
-    wv[743] = w451 + w455;
-    wv[744] = w144 + w146 + (w151 + w155);
-    wv[745] = w445 + w447 + (w452 + w456);
-    wv[746] = w145 + w147;
-    wv[747] = w446 + w448;
-    const double w159 = w148*wv[650];
-    const double w460 = w148*wv[651] + w449*wv[650];
-    const double w160 = w149*wv[650];
-    const double w461 = w149*wv[651] + w450*wv[650];
-    const double w161 = w152*wv[654];
-    const double w462 = w152*wv[655] + w453*wv[654];
-    const double w162 = w153*wv[654];
-    const double w463 = w153*wv[655] + w454*wv[654];
-    const double w163 = wv[634]*p->c[3];
-    const double w464 = wv[635]*p->c[3];
-    const double w164 = wv[656]*p->c[3];
-    const double w465 = wv[657]*p->c[3];
-    const double w165 = w163*wv[656];
-    const double w466 = w163*wv[657] + w464*wv[656];
-    const double w166 = w164*wv[656];
-    const double w467 = w164*wv[657] + w465*wv[656];
-    const double w167 = wv[638]*p->c[3];
-    const double w468 = wv[639]*p->c[3];
-    const double w168 = wv[658]*p->c[3];
-    const double w469 = wv[659]*p->c[3];
-    const double w169 = w167*wv[658];
-    const double w470 = w167*wv[659] + w468*wv[658];
-    const double w170 = w168*wv[658];
-    const double w471 = w168*wv[659] + w469*wv[658];
-    wv[748] = w165 + w169;
-    wv[749] = w466 + w470;
-    wv[750] = w159 + w161 + (w166 + w170);
-    wv[751] = w460 + w462 + (w467 + w471);
-    wv[752] = w160 + w162;
-    wv[753] = w461 + w463;
-    const double w174 = w163*wv[634];
-    const double w475 = w163*wv[635] + w464*wv[634];
-    const double w175 = w164*wv[634];
-    const double w476 = w164*wv[635] + w465*wv[634];
-    const double w176 = w167*wv[638];
-    const double w477 = w167*wv[639] + w468*wv[638];
-    const double w177 = w168*wv[638];
-    const double w478 = w168*wv[639] + w469*wv[638];
-    const double w178 = wv[618]*p->c[3];
-    const double w479 = wv[619]*p->c[3];
-    const double w179 = wv[640]*p->c[3];
-    const double w480 = wv[641]*p->c[3];
-    const double w180 = w178*wv[640];
-    const double w481 = w178*wv[641] + w479*wv[640];
-    const double w181 = w179*wv[640];
-    const double w482 = w179*wv[641] + w480*wv[640];
-    const double w182 = wv[622]*p->c[3];
-    const double w483 = wv[623]*p->c[3];
-    const double w183 = wv[642]*p->c[3];
-    const double w484 = wv[643]*p->c[3];
-    const double w184 = w182*wv[642];
-    const double w485 = w182*wv[643] + w483*wv[642];
-    const double w185 = w183*wv[642];
-    const double w486 = w183*wv[643] + w484*wv[642];
-    wv[754] = w180 + w184;
-    wv[755] = w481 + w485;
-    wv[756] = w174 + w176 + (w181 + w185);
-    wv[757] = w475 + w477 + (w482 + w486);
-    wv[758] = w175 + w177;
-    wv[759] = w476 + w478;
-    const double w189 = w178*wv[618];
-    const double w490 = w178*wv[619] + w479*wv[618];
-    const double w190 = w179*wv[618];
-    const double w491 = w179*wv[619] + w480*wv[618];
-    const double w191 = w182*wv[622];
-    const double w492 = w182*wv[623] + w483*wv[622];
-    const double w192 = w183*wv[622];
-    const double w493 = w183*wv[623] + w484*wv[622];
-    const double w193 = w70*p->c[3];
-    const double w494 = w371*p->c[3];
-    const double w194 = wv[624]*p->c[3];
-    const double w495 = wv[625]*p->c[3];
-    const double w195 = w193*wv[624];
-    const double w496 = w193*wv[625] + w494*wv[624];
-    const double w196 = w194*wv[624];
-    const double w497 = w194*wv[625] + w495*wv[624];
-    const double w197 = w72*p->c[3];
-    const double w498 = w373*p->c[3];
-    const double w198 = wv[626]*p->c[3];
-    const double w499 = wv[627]*p->c[3];
-    const double w199 = w197*wv[626];
-    const double w500 = w197*wv[627] + w498*wv[626];
-    const double w200 = w198*wv[626];
-    const double w501 = w198*wv[627] + w499*wv[626];
-    wv[760] = w195 + w199;
-    wv[761] = w496 + w500;
-    wv[762] = w189 + w191 + (w196 + w200);
-    wv[763] = w490 + w492 + (w497 + w501);
-    wv[764] = w190 + w192;
-    wv[765] = w491 + w493;
-    const double w204 = 2.0*w193*x[2];
-    const double w505 = 2.0*w193*v[2] + 2.0*w494*x[2];
-    const double w205 = 2.0*w194*x[2];
-    const double w506 = 2.0*w194*v[2] + 2.0*w495*x[2];
-    const double w206 = 2.0*w197*x[3];
-    const double w507 = 2.0*w197*v[3] + 2.0*w498*x[3];
-    const double w207 = 2.0*w198*x[3];
-    const double w508 = 2.0*w198*v[3] + 2.0*w499*x[3];
-    wv[766] = w204 + w206;
-    wv[767] = w505 + w507;
-    wv[768] = w205 + w207;
-    wv[769] = w506 + w508;
-    const double w727 = -2.0*wv[696] + 2.0*w55;
-    const double w210 = w55*w727;
-    const double w511 = wv[712]*w727 + w55*(-2.0*wv[697] + 2.0*wv[712]);
-    const double w211 = p->c[0]*p->c[2];
-    const double w728 = -2.0*wv[700] + 2.0*w57;
-    const double w212 = w211*wv[716] + w57*w728;
-    const double w512 = w211*wv[717] + wv[715]*w728 + w57*(-2.0*wv[701] + 2.0*wv[715]);
-    const double w729 = -2.0*w55 + 2.0*wv[696];
-    const double w213 = wv[696]*w729;
-    const double w513 = wv[697]*w729 + wv[696]*(-2.0*wv[712] + 2.0*wv[697]);
-    wv[770] = p->c[0]*p->c[2];
-    const double w730 = -2.0*w57 + 2.0*wv[700];
-    const double w215 = wv[770]*wv[720] + wv[700]*w730;
-    const double w514 = wv[770]*wv[721] + wv[701]*w730 + wv[700]*(-2.0*wv[715] + 2.0*wv[701]);
-    wv[771] = w210 + w212 + (w213 + w215);
-    wv[772] = w511 + w512 + (w513 + w514);
-    const double w731 = -2.0*wv[680] + 2.0*wv[696];
-    wv[773] = wv[696]*w731;
-    wv[774] = wv[697]*w731 + wv[696]*(-2.0*wv[681] + 2.0*wv[697]);
-    wv[775] = -2.0*wv[684] + 2.0*wv[700];
+    const double w100 = wv[715]*p->c[26];
+    const double w401 = wv[716]*p->c[26];
+    const double w101 = w100*wv[715];
+    const double w402 = w100*wv[716] + w401*wv[715];
+    const double w102 = wv[718]*p->c[26];
+    const double w403 = wv[719]*p->c[26];
+    const double w103 = w102*wv[718];
+    const double w404 = w102*wv[719] + w403*wv[718];
+    const double w104 = wv[700]*p->c[27];
+    const double w405 = wv[701]*p->c[27];
+    const double w105 = wv[720]*p->c[27];
+    const double w406 = wv[721]*p->c[27];
+    const double w106 = w104*wv[720];
+    const double w407 = w104*wv[721] + w405*wv[720];
+    const double w107 = w105*wv[720];
+    const double w408 = w105*wv[721] + w406*wv[720];
+    const double w108 = wv[704]*p->c[27];
+    const double w409 = wv[705]*p->c[27];
+    const double w109 = wv[722]*p->c[27];
+    const double w410 = wv[723]*p->c[27];
+    const double w110 = w108*wv[722];
+    const double w411 = w108*wv[723] + w409*wv[722];
+    const double w111 = w109*wv[722];
+    const double w412 = w109*wv[723] + w410*wv[722];
+    wv[728] = w106 + w110;
+    wv[729] = w407 + w411;
+    wv[730] = w101 + w103 + (w107 + w111);
+    wv[731] = w402 + w404 + (w408 + w412);
+    const double w114 = w104*wv[700];
+    const double w415 = w104*wv[701] + w405*wv[700];
+    const double w115 = w105*wv[700];
+    const double w416 = w105*wv[701] + w406*wv[700];
+    const double w116 = w108*wv[704];
+    const double w417 = w108*wv[705] + w409*wv[704];
+    const double w117 = w109*wv[704];
+    const double w418 = w109*wv[705] + w410*wv[704];
+    const double w118 = wv[684]*p->c[28];
+    const double w419 = wv[685]*p->c[28];
+    const double w119 = wv[706]*p->c[28];
+    const double w420 = wv[707]*p->c[28];
+    const double w120 = w118*wv[706];
+    const double w421 = w118*wv[707] + w419*wv[706];
+    const double w121 = w119*wv[706];
+    const double w422 = w119*wv[707] + w420*wv[706];
+    const double w122 = wv[688]*p->c[28];
+    const double w423 = wv[689]*p->c[28];
+    const double w123 = wv[708]*p->c[28];
+    const double w424 = wv[709]*p->c[28];
+    const double w124 = w122*wv[708];
+    const double w425 = w122*wv[709] + w423*wv[708];
+    const double w125 = w123*wv[708];
+    const double w426 = w123*wv[709] + w424*wv[708];
+    wv[732] = w120 + w124;
+    wv[733] = w421 + w425;
+    wv[734] = w114 + w116 + (w121 + w125);
+    wv[735] = w415 + w417 + (w422 + w426);
+    wv[736] = w115 + w117;
+    wv[737] = w416 + w418;
+    const double w129 = w118*wv[684];
+    const double w430 = w118*wv[685] + w419*wv[684];
+    const double w130 = w119*wv[684];
+    const double w431 = w119*wv[685] + w420*wv[684];
+    const double w131 = w122*wv[688];
+    const double w432 = w122*wv[689] + w423*wv[688];
+    const double w132 = w123*wv[688];
+    const double w433 = w123*wv[689] + w424*wv[688];
+    const double w133 = wv[668]*p->c[29];
+    const double w434 = wv[669]*p->c[29];
+    const double w134 = wv[690]*p->c[29];
+    const double w435 = wv[691]*p->c[29];
+    const double w135 = w133*wv[690];
+    const double w436 = w133*wv[691] + w434*wv[690];
+    const double w136 = w134*wv[690];
+    const double w437 = w134*wv[691] + w435*wv[690];
+    const double w137 = wv[672]*p->c[29];
+    const double w438 = wv[673]*p->c[29];
+    const double w138 = wv[692]*p->c[29];
+    const double w439 = wv[693]*p->c[29];
+    const double w139 = w137*wv[692];
+    const double w440 = w137*wv[693] + w438*wv[692];
+    const double w140 = w138*wv[692];
+    const double w441 = w138*wv[693] + w439*wv[692];
+    wv[738] = w135 + w139;
+    wv[739] = w436 + w440;
+    wv[740] = w129 + w131 + (w136 + w140);
+    wv[741] = w430 + w432 + (w437 + w441);
+    wv[742] = w130 + w132;
+    wv[743] = w431 + w433;
+    const double w144 = w133*wv[668];
+    const double w445 = w133*wv[669] + w434*wv[668];
+    const double w145 = w134*wv[668];
+    const double w446 = w134*wv[669] + w435*wv[668];
+    const double w146 = w137*wv[672];
+    const double w447 = w137*wv[673] + w438*wv[672];
+    const double w147 = w138*wv[672];
+    const double w448 = w138*wv[673] + w439*wv[672];
+    const double w148 = wv[652]*p->c[30];
+    const double w449 = wv[653]*p->c[30];
+    const double w149 = wv[674]*p->c[30];
+    const double w450 = wv[675]*p->c[30];
+    const double w150 = w148*wv[674];
+    const double w451 = w148*wv[675] + w449*wv[674];
+    const double w151 = w149*wv[674];
+    const double w452 = w149*wv[675] + w450*wv[674];
+    const double w152 = wv[656]*p->c[30];
+    const double w453 = wv[657]*p->c[30];
+    const double w153 = wv[676]*p->c[30];
+    const double w454 = wv[677]*p->c[30];
+    const double w154 = w152*wv[676];
+    const double w455 = w152*wv[677] + w453*wv[676];
+    const double w155 = w153*wv[676];
+    const double w456 = w153*wv[677] + w454*wv[676];
+    wv[744] = w150 + w154;
+    wv[745] = w451 + w455;
+    wv[746] = w144 + w146 + (w151 + w155);
+    wv[747] = w445 + w447 + (w452 + w456);
+    wv[748] = w145 + w147;
+    wv[749] = w446 + w448;
+    const double w159 = w148*wv[652];
+    const double w460 = w148*wv[653] + w449*wv[652];
+    const double w160 = w149*wv[652];
+    const double w461 = w149*wv[653] + w450*wv[652];
+    const double w161 = w152*wv[656];
+    const double w462 = w152*wv[657] + w453*wv[656];
+    const double w162 = w153*wv[656];
+    const double w463 = w153*wv[657] + w454*wv[656];
+    const double w163 = wv[636]*p->c[31];
+    const double w464 = wv[637]*p->c[31];
+    const double w164 = wv[658]*p->c[31];
+    const double w465 = wv[659]*p->c[31];
+    const double w165 = w163*wv[658];
+    const double w466 = w163*wv[659] + w464*wv[658];
+    const double w166 = w164*wv[658];
+    const double w467 = w164*wv[659] + w465*wv[658];
+    const double w167 = wv[640]*p->c[31];
+    const double w468 = wv[641]*p->c[31];
+    const double w168 = wv[660]*p->c[31];
+    const double w469 = wv[661]*p->c[31];
+    const double w169 = w167*wv[660];
+    const double w470 = w167*wv[661] + w468*wv[660];
+    const double w170 = w168*wv[660];
+    const double w471 = w168*wv[661] + w469*wv[660];
+    wv[750] = w165 + w169;
+    wv[751] = w466 + w470;
+    wv[752] = w159 + w161 + (w166 + w170);
+    wv[753] = w460 + w462 + (w467 + w471);
+    wv[754] = w160 + w162;
+    wv[755] = w461 + w463;
+    const double w174 = w163*wv[636];
+    const double w475 = w163*wv[637] + w464*wv[636];
+    const double w175 = w164*wv[636];
+    const double w476 = w164*wv[637] + w465*wv[636];
+    const double w176 = w167*wv[640];
+    const double w477 = w167*wv[641] + w468*wv[640];
+    const double w177 = w168*wv[640];
+    const double w478 = w168*wv[641] + w469*wv[640];
+    const double w178 = wv[620]*p->c[32];
+    const double w479 = wv[621]*p->c[32];
+    const double w179 = wv[642]*p->c[32];
+    const double w480 = wv[643]*p->c[32];
+    const double w180 = w178*wv[642];
+    const double w481 = w178*wv[643] + w479*wv[642];
+    const double w181 = w179*wv[642];
+    const double w482 = w179*wv[643] + w480*wv[642];
+    const double w182 = wv[624]*p->c[32];
+    const double w483 = wv[625]*p->c[32];
+    const double w183 = wv[644]*p->c[32];
+    const double w484 = wv[645]*p->c[32];
+    const double w184 = w182*wv[644];
+    const double w485 = w182*wv[645] + w483*wv[644];
+    const double w185 = w183*wv[644];
+    const double w486 = w183*wv[645] + w484*wv[644];
+    wv[756] = w180 + w184;
+    wv[757] = w481 + w485;
+    wv[758] = w174 + w176 + (w181 + w185);
+    wv[759] = w475 + w477 + (w482 + w486);
+    wv[760] = w175 + w177;
+    wv[761] = w476 + w478;
+    const double w189 = w178*wv[620];
+    const double w490 = w178*wv[621] + w479*wv[620];
+    const double w190 = w179*wv[620];
+    const double w491 = w179*wv[621] + w480*wv[620];
+    const double w191 = w182*wv[624];
+    const double w492 = w182*wv[625] + w483*wv[624];
+    const double w192 = w183*wv[624];
+    const double w493 = w183*wv[625] + w484*wv[624];
+    const double w193 = wv[610]*p->c[33];
+    const double w494 = w371*p->c[33];
+    const double w194 = wv[626]*p->c[33];
+    const double w495 = wv[627]*p->c[33];
+    const double w195 = w193*wv[626];
+    const double w496 = w193*wv[627] + w494*wv[626];
+    const double w196 = w194*wv[626];
+    const double w497 = w194*wv[627] + w495*wv[626];
+    const double w197 = wv[613]*p->c[33];
+    const double w498 = w373*p->c[33];
+    const double w198 = wv[628]*p->c[33];
+    const double w499 = wv[629]*p->c[33];
+    const double w199 = w197*wv[628];
+    const double w500 = w197*wv[629] + w498*wv[628];
+    const double w200 = w198*wv[628];
+    const double w501 = w198*wv[629] + w499*wv[628];
+    wv[762] = w195 + w199;
+    wv[763] = w496 + w500;
+    wv[764] = w189 + w191 + (w196 + w200);
+    wv[765] = w490 + w492 + (w497 + w501);
+    wv[766] = w190 + w192;
+    wv[767] = w491 + w493;
+    const double w204 = w193*wv[610];
+    const double w505 = w494*wv[610] + 2.0*w193*v[2];
+    const double w205 = w194*wv[610];
+    const double w506 = w495*wv[610] + 2.0*w194*v[2];
+    const double w206 = w197*wv[613];
+    const double w507 = w498*wv[613] + 2.0*w197*v[3];
+    const double w207 = w198*wv[613];
+    const double w508 = w499*wv[613] + 2.0*w198*v[3];
+    wv[768] = w204 + w206;
+    wv[769] = w505 + w507;
+    wv[770] = w205 + w207;
+    wv[771] = w506 + w508;
+    const double w731 = -2.0*wv[698] + 2.0*w55;
+    const double w210 = w55*w731;
+    const double w511 = wv[714]*w731 + w55*(-2.0*wv[699] + 2.0*wv[714]);
+    const double w211 = p->c[17]*p->c[19];
+    const double w732 = -2.0*wv[702] + 2.0*w57;
+    const double w212 = w211*wv[718] + w57*w732;
+    const double w512 = w211*wv[719] + wv[717]*w732 + w57*(-2.0*wv[703] + 2.0*wv[717]);
+    const double w733 = -2.0*w55 + 2.0*wv[698];
+    const double w213 = wv[698]*w733;
+    const double w513 = wv[699]*w733 + wv[698]*(-2.0*wv[714] + 2.0*wv[699]);
+    wv[772] = p->c[15]*p->c[20];
+    const double w734 = -2.0*w57 + 2.0*wv[702];
+    const double w215 = wv[772]*wv[722] + wv[702]*w734;
+    const double w514 = wv[772]*wv[723] + wv[703]*w734 + wv[702]*(-2.0*wv[717] + 2.0*wv[703]);
+    wv[773] = w210 + w212 + (w213 + w215);
+    wv[774] = w511 + w512 + (w513 + w514);
+    const double w735 = -2.0*wv[682] + 2.0*wv[698];
+    wv[775] = wv[698]*w735;
+    wv[776] = wv[699]*w735 + wv[698]*(-2.0*wv[683] + 2.0*wv[699]);
+    wv[777] = -2.0*wv[686] + 2.0*wv[702];
+    wv[778] = wv[772]*wv[704] + wv[702]*wv[777];
     return 0;
 }
 
@@ -1411,232 +1736,231 @@ static int bgc_jvp_1(double t, const double *x, const bgc_params *p, bgc_work *w
     (void)wv;
     (void)v;
     (void)out;
-    const double w218 = wv[770]*wv[702] + wv[700]*wv[775];
-    const double w517 = wv[770]*wv[703] + wv[701]*wv[775] + wv[700]*(-2.0*wv[685] + 2.0*wv[701]);
-    const double w733 = -2.0*wv[696] + 2.0*wv[680];
-    const double w219 = wv[680]*w733;
-    const double w518 = wv[681]*w733 + wv[680]*(-2.0*wv[697] + 2.0*wv[681]);
-    const double w220 = p->c[0]*p->c[2];
-    const double w734 = -2.0*wv[700] + 2.0*wv[684];
-    const double w221 = w220*wv[706] + wv[684]*w734;
-    const double w519 = w220*wv[707] + wv[685]*w734 + wv[684]*(-2.0*wv[701] + 2.0*wv[685]);
-    const double w222 = wv[773] + w218 + (w219 + w221);
-    const double w520 = wv[774] + w517 + (w518 + w519);
-    const double w735 = -2.0*wv[664] + 2.0*wv[680];
-    const double w223 = wv[680]*w735;
-    const double w521 = wv[681]*w735 + wv[680]*(-2.0*wv[665] + 2.0*wv[681]);
-    const double w736 = -2.0*wv[668] + 2.0*wv[684];
-    const double w224 = w220*wv[686] + wv[684]*w736;
-    const double w522 = w220*wv[687] + wv[685]*w736 + wv[684]*(-2.0*wv[669] + 2.0*wv[685]);
-    const double w737 = -2.0*wv[680] + 2.0*wv[664];
-    const double w225 = wv[664]*w737;
-    const double w523 = wv[664]*(-2.0*wv[681] + 2.0*wv[665]) + wv[665]*w737;
-    const double w226 = p->c[0]*p->c[2];
-    const double w738 = -2.0*wv[684] + 2.0*wv[668];
-    const double w227 = w226*wv[690] + wv[668]*w738;
-    const double w524 = w226*wv[691] + wv[668]*(-2.0*wv[685] + 2.0*wv[669]) + wv[669]*w738;
+    const double w517 = wv[772]*wv[705] + wv[703]*wv[777] + wv[702]*(-2.0*wv[687] + 2.0*wv[703]);
+    const double w737 = -2.0*wv[698] + 2.0*wv[682];
+    const double w219 = wv[682]*w737;
+    const double w518 = wv[683]*w737 + wv[682]*(-2.0*wv[699] + 2.0*wv[683]);
+    const double w220 = p->c[13]*p->c[21];
+    const double w738 = -2.0*wv[702] + 2.0*wv[686];
+    const double w221 = w220*wv[708] + wv[686]*w738;
+    const double w519 = w220*wv[709] + wv[687]*w738 + wv[686]*(-2.0*wv[703] + 2.0*wv[687]);
+    const double w222 = wv[775] + wv[778] + (w219 + w221);
+    const double w520 = wv[776] + w517 + (w518 + w519);
+    const double w739 = -2.0*wv[666] + 2.0*wv[682];
+    const double w223 = wv[682]*w739;
+    const double w521 = wv[683]*w739 + wv[682]*(-2.0*wv[667] + 2.0*wv[683]);
+    const double w740 = -2.0*wv[670] + 2.0*wv[686];
+    const double w224 = w220*wv[688] + wv[686]*w740;
+    const double w522 = w220*wv[689] + wv[687]*w740 + wv[686]*(-2.0*wv[671] + 2.0*wv[687]);
+    const double w741 = -2.0*wv[682] + 2.0*wv[666];
+    const double w225 = wv[666]*w741;
+    const double w523 = wv[666]*(-2.0*wv[683] + 2.0*wv[667]) + wv[667]*w741;
+    const double w226 = p->c[11]*p->c[22];
+    const double w742 = -2.0*wv[686] + 2.0*wv[670];
+    const double w227 = w226*wv[692] + wv[670]*w742;
+    const double w524 = w226*wv[693] + wv[670]*(-2.0*wv[687] + 2.0*wv[671]) + wv[671]*w742;
     const double w228 = w223 + w224 + (w225 + w227);
     const double w525 = w521 + w522 + (w523 + w524);
-    const double w739 = -2.0*wv[648] + 2.0*wv[664];
-    const double w229 = wv[664]*w739;
-    const double w526 = wv[664]*(-2.0*wv[649] + 2.0*wv[665]) + wv[665]*w739;
-    const double w740 = -2.0*wv[652] + 2.0*wv[668];
-    const double w230 = w226*wv[670] + wv[668]*w740;
-    const double w527 = w226*wv[671] + wv[668]*(-2.0*wv[653] + 2.0*wv[669]) + wv[669]*w740;
-    const double w741 = -2.0*wv[664] + 2.0*wv[648];
-    const double w231 = wv[648]*w741;
-    const double w528 = wv[648]*(-2.0*wv[665] + 2.0*wv[649]) + wv[649]*w741;
-    const double w232 = p->c[0]*p->c[2];
-    const double w742 = -2.0*wv[668] + 2.0*wv[652];
-    const double w233 = w232*wv[674] + wv[652]*w742;
-    const double w529 = w232*wv[675] + wv[652]*(-2.0*wv[669] + 2.0*wv[653]) + wv[653]*w742;
+    const double w743 = -2.0*wv[650] + 2.0*wv[666];
+    const double w229 = wv[666]*w743;
+    const double w526 = wv[666]*(-2.0*wv[651] + 2.0*wv[667]) + wv[667]*w743;
+    const double w744 = -2.0*wv[654] + 2.0*wv[670];
+    const double w230 = w226*wv[672] + wv[670]*w744;
+    const double w527 = w226*wv[673] + wv[670]*(-2.0*wv[655] + 2.0*wv[671]) + wv[671]*w744;
+    const double w745 = -2.0*wv[666] + 2.0*wv[650];
+    const double w231 = wv[650]*w745;
+    const double w528 = wv[650]*(-2.0*wv[667] + 2.0*wv[651]) + wv[651]*w745;
+    const double w232 = p->c[23]*p->c[9];
+    const double w746 = -2.0*wv[670] + 2.0*wv[654];
+    const double w233 = w232*wv[676] + wv[654]*w746;
+    const double w529 = w232*wv[677] + wv[654]*(-2.0*wv[671] + 2.0*wv[655]) + wv[655]*w746;
     const double w234 = w229 + w230 + (w231 + w233);
     const double w530 = w526 + w527 + (w528 + w529);
-    const double w743 = -2.0*wv[632] + 2.0*wv[648];
-    const double w235 = wv[648]*w743;
-    const double w531 = wv[648]*(-2.0*wv[633] + 2.0*wv[649]) + wv[649]*w743;
-    const double w744 = -2.0*wv[636] + 2.0*wv[652];
-    const double w236 = w232*wv[654] + wv[652]*w744;
-    const double w532 = w232*wv[655] + wv[652]*(-2.0*wv[637] + 2.0*wv[653]) + wv[653]*w744;
-    const double w745 = -2.0*wv[648] + 2.0*wv[632];
-    const double w237 = wv[632]*w745;
-    const double w533 = wv[632]*(-2.0*wv[649] + 2.0*wv[633]) + wv[633]*w745;
-    const double w238 = p->c[0]*p->c[2];
-    const double w746 = -2.0*wv[652] + 2.0*wv[636];
-    const double w239 = wv[636]*w746 + w238*wv[658];
-    const double w534 = wv[636]*(-2.0*wv[653] + 2.0*wv[637]) + w238*wv[659] + wv[637]*w746;
+    const double w747 = -2.0*wv[634] + 2.0*wv[650];
+    const double w235 = wv[650]*w747;
+    const double w531 = wv[650]*(-2.0*wv[635] + 2.0*wv[651]) + wv[651]*w747;
+    const double w748 = -2.0*wv[638] + 2.0*wv[654];
+    const double w236 = w232*wv[656] + wv[654]*w748;
+    const double w532 = w232*wv[657] + wv[654]*(-2.0*wv[639] + 2.0*wv[655]) + wv[655]*w748;
+    const double w749 = -2.0*wv[650] + 2.0*wv[634];
+    const double w237 = wv[634]*w749;
+    const double w533 = wv[634]*(-2.0*wv[651] + 2.0*wv[635]) + wv[635]*w749;
+    const double w238 = p->c[24]*p->c[7];
+    const double w750 = -2.0*wv[654] + 2.0*wv[638];
+    const double w239 = wv[638]*w750 + w238*wv[660];
+    const double w534 = wv[638]*(-2.0*wv[655] + 2.0*wv[639]) + w238*wv[661] + wv[639]*w750;
     const double w240 = w235 + w236 + (w237 + w239);
     const double w535 = w531 + w532 + (w533 + w534);
-    const double w747 = -2.0*wv[616] + 2.0*wv[632];
-    const double w241 = wv[632]*w747;
-    const double w536 = wv[632]*(-2.0*wv[617] + 2.0*wv[633]) + wv[633]*w747;
-    const double w748 = -2.0*wv[620] + 2.0*wv[636];
-    const double w242 = wv[636]*w748 + w238*wv[638];
-    const double w537 = wv[636]*(-2.0*wv[621] + 2.0*wv[637]) + w238*wv[639] + wv[637]*w748;
-    const double w749 = -2.0*wv[632] + 2.0*wv[616];
-    const double w243 = wv[616]*w749;
-    const double w538 = wv[617]*w749 + wv[616]*(-2.0*wv[633] + 2.0*wv[617]);
-    const double w244 = p->c[0]*p->c[2];
-    const double w750 = -2.0*wv[636] + 2.0*wv[620];
-    const double w245 = w244*wv[642] + w750*wv[620];
-    const double w539 = w244*wv[643] + wv[621]*w750 + wv[620]*(-2.0*wv[637] + 2.0*wv[621]);
+    const double w751 = -2.0*wv[618] + 2.0*wv[634];
+    const double w241 = wv[634]*w751;
+    const double w536 = wv[634]*(-2.0*wv[619] + 2.0*wv[635]) + wv[635]*w751;
+    const double w752 = -2.0*wv[622] + 2.0*wv[638];
+    const double w242 = wv[638]*w752 + w238*wv[640];
+    const double w537 = wv[638]*(-2.0*wv[623] + 2.0*wv[639]) + w238*wv[641] + wv[639]*w752;
+    const double w753 = -2.0*wv[634] + 2.0*wv[618];
+    const double w243 = wv[618]*w753;
+    const double w538 = wv[619]*w753 + wv[618]*(-2.0*wv[635] + 2.0*wv[619]);
+    const double w244 = p->c[25]*p->c[5];
+    const double w754 = -2.0*wv[638] + 2.0*wv[622];
+    const double w245 = w244*wv[644] + w754*wv[622];
+    const double w539 = w244*wv[645] + wv[623]*w754 + wv[622]*(-2.0*wv[639] + 2.0*wv[623]);
     const double w246 = w241 + w242 + (w243 + w245);
     const double w540 = w536 + w537 + (w538 + w539);
-    const double w751 = -2.0*wv[608] + 2.0*wv[616];
-    const double w247 = wv[616]*w751;
-    const double w541 = wv[617]*w751 + wv[616]*(-2.0*wv[609] + 2.0*wv[617]);
-    const double w752 = -2.0*wv[610] + 2.0*wv[620];
-    const double w248 = w244*wv[622] + w752*wv[620];
-    const double w542 = w244*wv[623] + wv[621]*w752 + wv[620]*(-2.0*wv[611] + 2.0*wv[621]);
-    const double w753 = -2.0*wv[616] + 2.0*wv[608];
-    const double w249 = wv[608]*w753;
-    const double w543 = wv[608]*(-2.0*wv[617] + 2.0*wv[609]) + wv[609]*w753;
-    const double w250 = p->c[0]*p->c[2];
-    const double w754 = -2.0*wv[620] + 2.0*wv[610];
-    const double w251 = wv[610]*w754 + w250*wv[626];
-    const double w544 = wv[610]*(-2.0*wv[621] + 2.0*wv[611]) + w250*wv[627] + wv[611]*w754;
+    const double w755 = -2.0*wv[608] + 2.0*wv[618];
+    const double w247 = wv[618]*w755;
+    const double w541 = wv[619]*w755 + wv[618]*(-2.0*wv[609] + 2.0*wv[619]);
+    const double w756 = -2.0*wv[611] + 2.0*wv[622];
+    const double w248 = w244*wv[624] + w756*wv[622];
+    const double w542 = w244*wv[625] + wv[623]*w756 + wv[622]*(-2.0*wv[612] + 2.0*wv[623]);
+    const double w757 = -2.0*wv[618] + 2.0*wv[608];
+    const double w249 = wv[608]*w757;
+    const double w543 = wv[608]*(-2.0*wv[619] + 2.0*wv[609]) + wv[609]*w757;
+    const double w250 = p->c[0]*p->c[4];
+    const double w758 = -2.0*wv[622] + 2.0*wv[611];
+    const double w251 = wv[611]*w758 + w250*wv[628];
+    const double w544 = wv[611]*(-2.0*wv[623] + 2.0*wv[612]) + w250*wv[629] + wv[612]*w758;
     const double w252 = w247 + w248 + (w249 + w251);
     const double w545 = w541 + w542 + (w543 + w544);
     const double w253 = 2.0*wv[608]*wv[608];
     const double w546 = 4.0*wv[608]*wv[609];
-    const double w254 = 2.0*wv[610]*wv[610] + 2.0*w250*x[3];
-    const double w547 = 2.0*w250*v[3] + 4.0*wv[610]*wv[611];
+    const double w254 = 2.0*wv[611]*wv[611] + w250*wv[613];
+    const double w547 = 2.0*w250*v[3] + 4.0*wv[611]*wv[612];
     const double w255 = w253 + w254;
     const double w548 = w546 + w547;
-    wv[776] = wv[766];
-    wv[777] = wv[768];
-    wv[778] = wv[760];
-    wv[779] = wv[762];
-    wv[780] = wv[764];
-    wv[781] = wv[754];
-    wv[782] = wv[756];
-    wv[783] = wv[758];
-    wv[784] = wv[748];
-    wv[785] = wv[750];
-    wv[786] = wv[752];
-    wv[787] = wv[742];
-    wv[788] = wv[744];
-    wv[789] = wv[746];
-    wv[790] = wv[736];
-    wv[791] = wv[738];
-    wv[792] = wv[740];
-    wv[793] = wv[730];
-    wv[794] = wv[732];
-    wv[795] = wv[734];
-    wv[796] = wv[726];
-    wv[797] = wv[728];
-    wv[884] = -w255 + wv[612]*p->c[5] + wv[614]*p->c[4];
-    wv[885] = -w252 + wv[628]*p->c[5] + wv[630]*p->c[4];
-    wv[886] = -w246 + wv[644]*p->c[5] + wv[646]*p->c[4];
-    wv[887] = -w240 + wv[660]*p->c[5] + wv[662]*p->c[4];
-    wv[888] = -w234 + wv[676]*p->c[5] + wv[678]*p->c[4];
-    wv[889] = -w228 + wv[692]*p->c[5] + wv[694]*p->c[4];
-    wv[890] = -w222 + wv[708]*p->c[5] + wv[710]*p->c[4];
-    wv[891] = -wv[771] + wv[722]*p->c[5] + wv[724]*p->c[4];
+    wv[779] = wv[768];
+    wv[780] = wv[770];
+    wv[781] = wv[762];
+    wv[782] = wv[764];
+    wv[783] = wv[766];
+    wv[784] = wv[756];
+    wv[785] = wv[758];
+    wv[786] = wv[760];
+    wv[787] = wv[750];
+    wv[788] = wv[752];
+    wv[789] = wv[754];
+    wv[790] = wv[744];
+    wv[791] = wv[746];
+    wv[792] = wv[748];
+    wv[793] = wv[738];
+    wv[794] = wv[740];
+    wv[795] = wv[742];
+    wv[796] = wv[732];
+    wv[797] = wv[734];
+    wv[798] = wv[736];
+    wv[799] = wv[728];
+    wv[800] = wv[730];
+    wv[887] = -w255 + wv[614]*p->c[35] + wv[616]*p->c[34];
+    wv[888] = -w252 + wv[630]*p->c[37] + wv[632]*p->c[36];
+    wv[889] = -w246 + wv[646]*p->c[39] + wv[648]*p->c[38];
+    wv[890] = -w240 + wv[662]*p->c[41] + wv[664]*p->c[40];
+    wv[891] = -w234 + wv[678]*p->c[43] + wv[680]*p->c[42];
+    wv[892] = -w228 + wv[694]*p->c[45] + wv[696]*p->c[44];
+    wv[893] = -w222 + wv[710]*p->c[47] + wv[712]*p->c[46];
+    wv[894] = -wv[773] + wv[724]*p->c[49] + wv[726]*p->c[48];
     if (bgc_block_solve(w, 0, t))
         return 1;
-    const double w256 = wv[884];
-    const double w257 = wv[885];
-    const double w258 = wv[886];
-    const double w259 = wv[887];
-    const double w260 = wv[888];
-    const double w261 = wv[889];
-    const double w262 = wv[890];
-    const double w263 = wv[891];
-    wv[884] = -w548 + wv[613]*p->c[5] + wv[615]*p->c[4] + (-w256*wv[767] - w257*wv[769]);
-    wv[885] = -w545 + wv[629]*p->c[5] + wv[631]*p->c[4] + (-w256*wv[761] - w257*wv[763] - w258*wv[765]);
-    wv[886] = -w540 + wv[645]*p->c[5] + wv[647]*p->c[4] + (-w257*wv[755] - w258*wv[757] - w259*wv[759]);
-    wv[887] = -w535 + wv[661]*p->c[5] + wv[663]*p->c[4] + (-w258*wv[749] - w259*wv[751] - w260*wv[753]);
-    wv[888] = -w530 + wv[677]*p->c[5] + wv[679]*p->c[4] + (-w259*wv[743] - w260*wv[745] - w261*wv[747]);
-    wv[889] = -w525 + wv[693]*p->c[5] + wv[695]*p->c[4] + (-w260*wv[737] - w261*wv[739] - w262*wv[741]);
-    wv[890] = -w520 + wv[709]*p->c[5] + wv[711]*p->c[4] + (-w261*wv[731] - w262*wv[733] - w263*wv[735]);
-    wv[891] = -wv[772] + wv[723]*p->c[5] + wv[725]*p->c[4] + (-w262*wv[727] - w263*wv[729]);
+    const double w256 = wv[887];
+    const double w257 = wv[888];
+    const double w258 = wv[889];
+    const double w259 = wv[890];
+    const double w260 = wv[891];
+    const double w261 = wv[892];
+    const double w262 = wv[893];
+    const double w263 = wv[894];
+    wv[887] = -w548 + wv[615]*p->c[35] + wv[617]*p->c[34] + (-w256*wv[769] - w257*wv[771]);
+    wv[888] = -w545 + wv[631]*p->c[37] + wv[633]*p->c[36] + (-w256*wv[763] - w257*wv[765] - w258*wv[767]);
+    wv[889] = -w540 + wv[647]*p->c[39] + wv[649]*p->c[38] + (-w257*wv[757] - w258*wv[759] - w259*wv[761]);
+    wv[890] = -w535 + wv[663]*p->c[41] + wv[665]*p->c[40] + (-w258*wv[751] - w259*wv[753] - w260*wv[755]);
+    wv[891] = -w530 + wv[679]*p->c[43] + wv[681]*p->c[42] + (-w259*wv[745] - w260*wv[747] - w261*wv[749]);
+    wv[892] = -w525 + wv[695]*p->c[45] + wv[697]*p->c[44] + (-w260*wv[739] - w261*wv[741] - w262*wv[743]);
+    wv[893] = -w520 + wv[711]*p->c[47] + wv[713]*p->c[46] + (-w261*wv[733] - w262*wv[735] - w263*wv[737]);
+    wv[894] = -wv[774] + wv[725]*p->c[49] + wv[727]*p->c[48] + (-w262*wv[729] - w263*wv[731]);
     if (bgc_block_resolve(w, 0, t))
         return 1;
-    const double w549 = wv[884];
-    const double w550 = wv[885];
-    const double w551 = wv[886];
-    const double w552 = wv[887];
-    const double w553 = wv[888];
-    const double w554 = wv[889];
-    const double w555 = wv[890];
-    const double w556 = wv[891];
-    const double w557 = 2.0*w256*v[2] + 2.0*w549*x[2];
-    const double w558 = w257*wv[625] + w550*wv[624];
+    const double w549 = wv[887];
+    const double w550 = wv[888];
+    const double w551 = wv[889];
+    const double w552 = wv[890];
+    const double w553 = wv[891];
+    const double w554 = wv[892];
+    const double w555 = wv[893];
+    const double w556 = wv[894];
+    const double w557 = w549*wv[610] + 2.0*w256*v[2];
+    const double w558 = w257*wv[627] + w550*wv[626];
     const double w559 = -w557 - w558;
-    const double w560 = 2.0*w256*v[3] + 2.0*w549*x[3];
-    const double w561 = w257*wv[627] + w550*wv[626];
+    const double w560 = w549*wv[613] + 2.0*w256*v[3];
+    const double w561 = w257*wv[629] + w550*wv[628];
     const double w562 = -w560 - w561;
-    const double w563 = w257*wv[619] + w550*wv[618];
-    const double w564 = w258*wv[641] + w551*wv[640];
+    const double w563 = w257*wv[621] + w550*wv[620];
+    const double w564 = w258*wv[643] + w551*wv[642];
     const double w565 = -w563 - w564;
-    const double w566 = w257*wv[623] + w550*wv[622];
-    const double w567 = w258*wv[643] + w551*wv[642];
+    const double w566 = w257*wv[625] + w550*wv[624];
+    const double w567 = w258*wv[645] + w551*wv[644];
     const double w568 = -w566 - w567;
-    const double w569 = w258*wv[635] + w551*wv[634];
-    const double w570 = w259*wv[657] + w552*wv[656];
+    const double w569 = w258*wv[637] + w551*wv[636];
+    const double w570 = w259*wv[659] + w552*wv[658];
     const double w571 = -w569 - w570;
-    const double w572 = w258*wv[639] + w551*wv[638];
-    const double w573 = w259*wv[659] + w552*wv[658];
+    const double w572 = w258*wv[641] + w551*wv[640];
+    const double w573 = w259*wv[661] + w552*wv[660];
     const double w574 = -w572 - w573;
-    const double w575 = w259*wv[651] + w552*wv[650];
-    const double w576 = w260*wv[673] + w553*wv[672];
+    const double w575 = w259*wv[653] + w552*wv[652];
+    const double w576 = w260*wv[675] + w553*wv[674];
     const double w577 = -w575 - w576;
-    const double w578 = w259*wv[655] + w552*wv[654];
-    const double w579 = w260*wv[675] + w553*wv[674];
+    const double w578 = w259*wv[657] + w552*wv[656];
+    const double w579 = w260*wv[677] + w553*wv[676];
     const double w580 = -w578 - w579;
-    const double w581 = w260*wv[667] + w553*wv[666];
-    const double w582 = w261*wv[689] + w554*wv[688];
+    const double w581 = w260*wv[669] + w553*wv[668];
+    const double w582 = w261*wv[691] + w554*wv[690];
     const double w583 = -w581 - w582;
-    const double w584 = w260*wv[671] + w553*wv[670];
-    const double w585 = w261*wv[691] + w554*wv[690];
+    const double w584 = w260*wv[673] + w553*wv[672];
+    const double w585 = w261*wv[693] + w554*wv[692];
     const double w586 = -w584 - w585;
-    const double w587 = w261*wv[683] + w554*wv[682];
-    const double w588 = w262*wv[705] + w555*wv[704];
+    const double w587 = w261*wv[685] + w554*wv[684];
+    const double w588 = w262*wv[707] + w555*wv[706];
     const double w589 = -w587 - w588;
-    const double w590 = w261*wv[687] + w554*wv[686];
-    const double w591 = w262*wv[707] + w555*wv[706];
+    const double w590 = w261*wv[689] + w554*wv[688];
+    const double w591 = w262*wv[709] + w555*wv[708];
     const double w592 = -w590 - w591;
-    const double w593 = w262*wv[699] + w555*wv[698];
-    const double w594 = w263*wv[719] + w556*wv[718];
+    const double w593 = w262*wv[701] + w555*wv[700];
+    const double w594 = w263*wv[721] + w556*wv[720];
     const double w595 = -w593 - w594;
-    const double w596 = w262*wv[703] + w555*wv[702];
-    const double w597 = w263*wv[721] + w556*wv[720];
+    const double w596 = w262*wv[705] + w555*wv[704];
+    const double w597 = w263*wv[723] + w556*wv[722];
     const double w598 = -w596 - w597;
-    const double w599 = w263*wv[714] + w556*wv[713];
-    const double w600 = w263*wv[717] + w556*wv[716];
+    const double w599 = w263*wv[716] + w556*wv[715];
+    const double w600 = w263*wv[719] + w556*wv[718];
     out[0] = w559;
     out[1] = w562;
     out[2] = wv[609];
-    out[3] = wv[611];
+    out[3] = wv[612];
     out[4] = w565;
     out[5] = w568;
-    out[6] = wv[617];
-    out[7] = wv[621];
+    out[6] = wv[619];
+    out[7] = wv[623];
     out[8] = w571;
     out[9] = w574;
-    out[10] = wv[633];
-    out[11] = wv[637];
+    out[10] = wv[635];
+    out[11] = wv[639];
     out[12] = w577;
     out[13] = w580;
-    out[14] = wv[649];
-    out[15] = wv[653];
+    out[14] = wv[651];
+    out[15] = wv[655];
     out[16] = w583;
     out[17] = w586;
-    out[18] = wv[665];
-    out[19] = wv[669];
+    out[18] = wv[667];
+    out[19] = wv[671];
     out[20] = w589;
     out[21] = w592;
-    out[22] = wv[681];
-    out[23] = wv[685];
+    out[22] = wv[683];
+    out[23] = wv[687];
     out[24] = w595;
     out[25] = w598;
-    out[26] = wv[697];
-    out[27] = wv[701];
+    out[26] = wv[699];
+    out[27] = wv[703];
     out[28] = -w599;
     out[29] = -w600;
-    out[30] = wv[712];
-    out[31] = wv[715];
+    out[30] = wv[714];
+    out[31] = wv[717];
     return 0;
 }
 
@@ -1652,36 +1976,36 @@ void bgc_residual(double t, const double *x, const bgc_params *p, double *out)
     (void)x;
     (void)p;
     (void)out;
-    const double w755 = x[3]*x[3];
-    const double w756 = x[2]*x[2];
-    out[0] = w755 + w756 + p->c[1];
-    out[1] = p->c[6]*x[0]*x[2] + p->c[6]*x[1]*x[3];
-    const double w757 = x[7]*x[7];
-    const double w758 = x[6]*x[6];
-    out[2] = w755 + w756 + (w757 + w758) + (-2.0*x[2]*x[6] - 2.0*x[3]*x[7] + p->c[1]);
-    out[3] = (-2.0*x[2] + 2.0*x[6])*p->c[0]*x[4] + (-2.0*x[3] + 2.0*x[7])*p->c[0]*x[5] + ((-2.0*x[6] + 2.0*x[2])*p->c[0]*x[0] + (-2.0*x[7] + 2.0*x[3])*p->c[0]*x[1]);
-    const double w759 = x[11]*x[11];
-    const double w760 = x[10]*x[10];
-    out[4] = w757 + w758 + (w759 + w760) + (-2.0*x[10]*x[6] - 2.0*x[11]*x[7] + p->c[1]);
-    out[5] = (-2.0*x[6] + 2.0*x[10])*p->c[0]*x[8] + (-2.0*x[7] + 2.0*x[11])*p->c[0]*x[9] + ((-2.0*x[10] + 2.0*x[6])*p->c[0]*x[4] + (-2.0*x[11] + 2.0*x[7])*p->c[0]*x[5]);
-    const double w761 = x[15]*x[15];
-    const double w762 = x[14]*x[14];
-    out[6] = w759 + w760 + (w761 + w762) + (-2.0*x[10]*x[14] - 2.0*x[11]*x[15] + p->c[1]);
-    out[7] = (-2.0*x[10] + 2.0*x[14])*p->c[0]*x[12] + (-2.0*x[11] + 2.0*x[15])*p->c[0]*x[13] + ((-2.0*x[14] + 2.0*x[10])*p->c[0]*x[8] + (-2.0*x[15] + 2.0*x[11])*p->c[0]*x[9]);
-    const double w763 = x[19]*x[19];
-    const double w764 = x[18]*x[18];
-    out[8] = w761 + w762 + (w763 + w764) + (-2.0*x[14]*x[18] - 2.0*x[15]*x[19] + p->c[1]);
-    out[9] = (-2.0*x[14] + 2.0*x[18])*p->c[0]*x[16] + (-2.0*x[15] + 2.0*x[19])*p->c[0]*x[17] + ((-2.0*x[18] + 2.0*x[14])*p->c[0]*x[12] + (-2.0*x[19] + 2.0*x[15])*p->c[0]*x[13]);
-    const double w765 = x[23]*x[23];
-    const double w766 = x[22]*x[22];
-    out[10] = w763 + w764 + (w765 + w766) + (-2.0*x[18]*x[22] - 2.0*x[19]*x[23] + p->c[1]);
-    out[11] = (-2.0*x[18] + 2.0*x[22])*p->c[0]*x[20] + (-2.0*x[19] + 2.0*x[23])*p->c[0]*x[21] + ((-2.0*x[22] + 2.0*x[18])*p->c[0]*x[16] + (-2.0*x[23] + 2.0*x[19])*p->c[0]*x[17]);
-    const double w767 = x[27]*x[27];
-    const double w768 = x[26]*x[26];
-    out[12] = w765 + w766 + (w767 + w768) + (-2.0*x[22]*x[26] - 2.0*x[23]*x[27] + p->c[1]);
-    out[13] = (-2.0*x[22] + 2.0*x[26])*p->c[0]*x[24] + (-2.0*x[23] + 2.0*x[27])*p->c[0]*x[25] + ((-2.0*x[26] + 2.0*x[22])*p->c[0]*x[20] + (-2.0*x[27] + 2.0*x[23])*p->c[0]*x[21]);
-    out[14] = w767 + w768 + (x[30]*x[30] + x[31]*x[31]) + (-2.0*x[26]*x[30] - 2.0*x[27]*x[31] + p->c[1]);
-    out[15] = (-2.0*x[26] + 2.0*x[30])*p->c[0]*x[28] + (-2.0*x[27] + 2.0*x[31])*p->c[0]*x[29] + ((-2.0*x[30] + 2.0*x[26])*p->c[0]*x[24] + (-2.0*x[31] + 2.0*x[27])*p->c[0]*x[25]);
+    const double w759 = x[3]*x[3];
+    const double w760 = x[2]*x[2];
+    out[0] = w759 + w760 + p->c[1]*x[2] + (p->c[2]*x[3] + p->c[3]);
+    out[1] = (2.0*x[2] + p->c[1])*p->c[0]*x[0] + (2.0*x[3] + p->c[2])*p->c[0]*x[1];
+    const double w761 = x[7]*x[7];
+    const double w762 = x[6]*x[6];
+    out[2] = w759 + w760 + (w761 + w762) + (-2.0*x[2]*x[6] - 2.0*x[3]*x[7] + p->c[6]);
+    out[3] = (-2.0*x[2] + 2.0*x[6])*p->c[5]*x[4] + (-2.0*x[3] + 2.0*x[7])*p->c[5]*x[5] + ((-2.0*x[6] + 2.0*x[2])*p->c[0]*x[0] + (-2.0*x[7] + 2.0*x[3])*p->c[0]*x[1]);
+    const double w763 = x[11]*x[11];
+    const double w764 = x[10]*x[10];
+    out[4] = w761 + w762 + (w763 + w764) + (-2.0*x[10]*x[6] - 2.0*x[11]*x[7] + p->c[8]);
+    out[5] = (-2.0*x[6] + 2.0*x[10])*p->c[7]*x[8] + (-2.0*x[7] + 2.0*x[11])*p->c[7]*x[9] + ((-2.0*x[10] + 2.0*x[6])*p->c[5]*x[4] + (-2.0*x[11] + 2.0*x[7])*p->c[5]*x[5]);
+    const double w765 = x[15]*x[15];
+    const double w766 = x[14]*x[14];
+    out[6] = w763 + w764 + (w765 + w766) + (-2.0*x[10]*x[14] - 2.0*x[11]*x[15] + p->c[10]);
+    out[7] = (-2.0*x[10] + 2.0*x[14])*p->c[9]*x[12] + (-2.0*x[11] + 2.0*x[15])*p->c[9]*x[13] + ((-2.0*x[14] + 2.0*x[10])*p->c[7]*x[8] + (-2.0*x[15] + 2.0*x[11])*p->c[7]*x[9]);
+    const double w767 = x[19]*x[19];
+    const double w768 = x[18]*x[18];
+    out[8] = w765 + w766 + (w767 + w768) + (-2.0*x[14]*x[18] - 2.0*x[15]*x[19] + p->c[12]);
+    out[9] = (-2.0*x[14] + 2.0*x[18])*p->c[11]*x[16] + (-2.0*x[15] + 2.0*x[19])*p->c[11]*x[17] + ((-2.0*x[18] + 2.0*x[14])*p->c[9]*x[12] + (-2.0*x[19] + 2.0*x[15])*p->c[9]*x[13]);
+    const double w769 = x[23]*x[23];
+    const double w770 = x[22]*x[22];
+    out[10] = w767 + w768 + (w769 + w770) + (-2.0*x[18]*x[22] - 2.0*x[19]*x[23] + p->c[14]);
+    out[11] = (-2.0*x[18] + 2.0*x[22])*p->c[13]*x[20] + (-2.0*x[19] + 2.0*x[23])*p->c[13]*x[21] + ((-2.0*x[22] + 2.0*x[18])*p->c[11]*x[16] + (-2.0*x[23] + 2.0*x[19])*p->c[11]*x[17]);
+    const double w771 = x[27]*x[27];
+    const double w772 = x[26]*x[26];
+    out[12] = w769 + w770 + (w771 + w772) + (-2.0*x[22]*x[26] - 2.0*x[23]*x[27] + p->c[16]);
+    out[13] = (-2.0*x[22] + 2.0*x[26])*p->c[15]*x[24] + (-2.0*x[23] + 2.0*x[27])*p->c[15]*x[25] + ((-2.0*x[26] + 2.0*x[22])*p->c[13]*x[20] + (-2.0*x[27] + 2.0*x[23])*p->c[13]*x[21]);
+    out[14] = w771 + w772 + (x[30]*x[30] + x[31]*x[31]) + (-2.0*x[26]*x[30] - 2.0*x[27]*x[31] + p->c[18]);
+    out[15] = (-2.0*x[26] + 2.0*x[30])*p->c[17]*x[28] + (-2.0*x[27] + 2.0*x[31])*p->c[17]*x[29] + ((-2.0*x[30] + 2.0*x[26])*p->c[15]*x[24] + (-2.0*x[31] + 2.0*x[27])*p->c[15]*x[25]);
 }
 
 void bgc_scale(double t, const double *x, const bgc_params *p, double *out)
@@ -1690,65 +2014,67 @@ void bgc_scale(double t, const double *x, const bgc_params *p, double *out)
     (void)x;
     (void)p;
     (void)out;
-    const double w769 = fabs(x[3]*x[3]);
-    const double w770 = fabs(x[2]*x[2]);
-    out[0] = w769 + w770 + p->c[7];
-    const double w771 = fabs(p->c[0]*x[0]) + fabs(p->c[0]*x[1]) + (fabs(p->c[0]*x[4]) + fabs(p->c[0]*x[5])) + (fabs(p->c[0]*x[8]) + fabs(p->c[0]*x[9]) + (fabs(p->c[0]*x[12]) + fabs(p->c[0]*x[13]))) + (fabs(p->c[0]*x[16]) + fabs(p->c[0]*x[17]) + (fabs(p->c[0]*x[20]) + fabs(p->c[0]*x[21])) + (fabs(p->c[0]*x[24]) + fabs(p->c[0]*x[25]) + (fabs(p->c[0]*x[28]) + fabs(p->c[0]*x[29]))));
-    out[1] = w771*(fabs(2.0*x[2]) + fabs(2.0*x[3])) + fabs(p->c[6]*x[0]*x[2]) + fabs(p->c[6]*x[1]*x[3]);
-    const double w772 = fabs(x[7]*x[7]);
-    const double w773 = fabs(x[6]*x[6]);
-    out[2] = w769 + w770 + (w772 + w773) + (fabs(-2.0*x[2]*x[6]) + fabs(-2.0*x[3]*x[7]) + p->c[7]);
-    const double w774 = -2.0*x[7] + 2.0*x[3];
-    const double w775 = -2.0*x[6] + 2.0*x[2];
-    const double w776 = -2.0*x[3] + 2.0*x[7];
-    const double w777 = -2.0*x[2] + 2.0*x[6];
-    out[3] = w771*(fabs(w774) + fabs(w775) + (fabs(w776) + fabs(w777))) + fabs(w774*p->c[0]*x[1]) + fabs(w775*p->c[0]*x[0]) + (fabs(w776*p->c[0]*x[5]) + fabs(w777*p->c[0]*x[4]));
-    const double w778 = fabs(x[11]*x[11]);
-    const double w779 = fabs(x[10]*x[10]);
-    out[4] = w772 + w773 + (w778 + w779) + (fabs(-2.0*x[10]*x[6]) + fabs(-2.0*x[11]*x[7]) + p->c[7]);
-    const double w780 = -2.0*x[11] + 2.0*x[7];
-    const double w781 = -2.0*x[10] + 2.0*x[6];
-    const double w782 = -2.0*x[7] + 2.0*x[11];
-    const double w783 = -2.0*x[6] + 2.0*x[10];
-    out[5] = w771*(fabs(w780) + fabs(w781) + (fabs(w782) + fabs(w783))) + fabs(w780*p->c[0]*x[5]) + fabs(w781*p->c[0]*x[4]) + (fabs(w782*p->c[0]*x[9]) + fabs(w783*p->c[0]*x[8]));
-    const double w784 = fabs(x[15]*x[15]);
-    const double w785 = fabs(x[14]*x[14]);
-    out[6] = w778 + w779 + (w784 + w785) + (fabs(-2.0*x[10]*x[14]) + fabs(-2.0*x[11]*x[15]) + p->c[7]);
-    const double w786 = -2.0*x[15] + 2.0*x[11];
-    const double w787 = -2.0*x[14] + 2.0*x[10];
-    const double w788 = -2.0*x[11] + 2.0*x[15];
-    const double w789 = -2.0*x[10] + 2.0*x[14];
-    out[7] = w771*(fabs(w786) + fabs(w787) + (fabs(w788) + fabs(w789))) + fabs(w786*p->c[0]*x[9]) + fabs(w787*p->c[0]*x[8]) + (fabs(w788*p->c[0]*x[13]) + fabs(w789*p->c[0]*x[12]));
-    const double w790 = fabs(x[19]*x[19]);
-    const double w791 = fabs(x[18]*x[18]);
-    out[8] = w784 + w785 + (w790 + w791) + (fabs(-2.0*x[14]*x[18]) + fabs(-2.0*x[15]*x[19]) + p->c[7]);
-    const double w792 = -2.0*x[19] + 2.0*x[15];
-    const double w793 = -2.0*x[18] + 2.0*x[14];
-    const double w794 = -2.0*x[15] + 2.0*x[19];
-    const double w795 = -2.0*x[14] + 2.0*x[18];
-    out[9] = w771*(fabs(w792) + fabs(w793) + (fabs(w794) + fabs(w795))) + fabs(w792*p->c[0]*x[13]) + fabs(w793*p->c[0]*x[12]) + (fabs(w794*p->c[0]*x[17]) + fabs(w795*p->c[0]*x[16]));
-    const double w796 = fabs(x[23]*x[23]);
-    const double w797 = fabs(x[22]*x[22]);
-    out[10] = w790 + w791 + (w796 + w797) + (fabs(-2.0*x[18]*x[22]) + fabs(-2.0*x[19]*x[23]) + p->c[7]);
-    const double w798 = -2.0*x[23] + 2.0*x[19];
-    const double w799 = -2.0*x[22] + 2.0*x[18];
-    const double w800 = -2.0*x[19] + 2.0*x[23];
-    const double w801 = -2.0*x[18] + 2.0*x[22];
-    out[11] = w771*(fabs(w798) + fabs(w799) + (fabs(w800) + fabs(w801))) + fabs(w798*p->c[0]*x[17]) + fabs(w799*p->c[0]*x[16]) + (fabs(w800*p->c[0]*x[21]) + fabs(w801*p->c[0]*x[20]));
-    const double w802 = fabs(x[27]*x[27]);
-    const double w803 = fabs(x[26]*x[26]);
-    out[12] = w796 + w797 + (w802 + w803) + (fabs(-2.0*x[22]*x[26]) + fabs(-2.0*x[23]*x[27]) + p->c[7]);
-    const double w804 = -2.0*x[27] + 2.0*x[23];
-    const double w805 = -2.0*x[26] + 2.0*x[22];
-    const double w806 = -2.0*x[23] + 2.0*x[27];
-    const double w807 = -2.0*x[22] + 2.0*x[26];
-    out[13] = w771*(fabs(w804) + fabs(w805) + (fabs(w806) + fabs(w807))) + fabs(w804*p->c[0]*x[21]) + fabs(w805*p->c[0]*x[20]) + (fabs(w806*p->c[0]*x[25]) + fabs(w807*p->c[0]*x[24]));
-    out[14] = w802 + w803 + (fabs(x[30]*x[30]) + fabs(x[31]*x[31])) + (fabs(-2.0*x[26]*x[30]) + fabs(-2.0*x[27]*x[31]) + p->c[7]);
-    const double w808 = -2.0*x[31] + 2.0*x[27];
-    const double w809 = -2.0*x[30] + 2.0*x[26];
-    const double w810 = -2.0*x[27] + 2.0*x[31];
-    const double w811 = -2.0*x[26] + 2.0*x[30];
-    out[15] = w771*(fabs(w808) + fabs(w809) + (fabs(w810) + fabs(w811))) + fabs(w808*p->c[0]*x[25]) + fabs(w809*p->c[0]*x[24]) + (fabs(w810*p->c[0]*x[29]) + fabs(w811*p->c[0]*x[28]));
+    const double w773 = fabs(x[3]*x[3]);
+    const double w774 = fabs(x[2]*x[2]);
+    out[0] = w773 + w774 + fabs(p->c[1]*x[2]) + (fabs(p->c[2]*x[3]) + p->c[50]);
+    const double w775 = 2.0*x[3] + p->c[2];
+    const double w776 = 2.0*x[2] + p->c[1];
+    const double w777 = fabs(p->c[0]*x[0]) + fabs(p->c[0]*x[1]) + (fabs(p->c[5]*x[4]) + fabs(p->c[5]*x[5])) + (fabs(p->c[7]*x[8]) + fabs(p->c[7]*x[9]) + (fabs(p->c[9]*x[12]) + fabs(p->c[9]*x[13]))) + (fabs(p->c[11]*x[16]) + fabs(p->c[11]*x[17]) + (fabs(p->c[13]*x[20]) + fabs(p->c[13]*x[21])) + (fabs(p->c[15]*x[24]) + fabs(p->c[15]*x[25]) + (fabs(p->c[17]*x[28]) + fabs(p->c[17]*x[29]))));
+    out[1] = w777*(fabs(w775) + fabs(w776)) + fabs(w775*p->c[0]*x[1]) + fabs(w776*p->c[0]*x[0]);
+    const double w778 = fabs(x[7]*x[7]);
+    const double w779 = fabs(x[6]*x[6]);
+    out[2] = w773 + w774 + (w778 + w779) + (fabs(-2.0*x[2]*x[6]) + fabs(-2.0*x[3]*x[7]) + p->c[51]);
+    const double w780 = -2.0*x[7] + 2.0*x[3];
+    const double w781 = -2.0*x[6] + 2.0*x[2];
+    const double w782 = -2.0*x[3] + 2.0*x[7];
+    const double w783 = -2.0*x[2] + 2.0*x[6];
+    out[3] = w777*(fabs(w780) + fabs(w781) + (fabs(w782) + fabs(w783))) + fabs(w780*p->c[0]*x[1]) + fabs(w781*p->c[0]*x[0]) + (fabs(w782*p->c[5]*x[5]) + fabs(w783*p->c[5]*x[4]));
+    const double w784 = fabs(x[11]*x[11]);
+    const double w785 = fabs(x[10]*x[10]);
+    out[4] = w778 + w779 + (w784 + w785) + (fabs(-2.0*x[10]*x[6]) + fabs(-2.0*x[11]*x[7]) + p->c[52]);
+    const double w786 = -2.0*x[11] + 2.0*x[7];
+    const double w787 = -2.0*x[10] + 2.0*x[6];
+    const double w788 = -2.0*x[7] + 2.0*x[11];
+    const double w789 = -2.0*x[6] + 2.0*x[10];
+    out[5] = w777*(fabs(w786) + fabs(w787) + (fabs(w788) + fabs(w789))) + fabs(w786*p->c[5]*x[5]) + fabs(w787*p->c[5]*x[4]) + (fabs(w788*p->c[7]*x[9]) + fabs(w789*p->c[7]*x[8]));
+    const double w790 = fabs(x[15]*x[15]);
+    const double w791 = fabs(x[14]*x[14]);
+    out[6] = w784 + w785 + (w790 + w791) + (fabs(-2.0*x[10]*x[14]) + fabs(-2.0*x[11]*x[15]) + p->c[53]);
+    const double w792 = -2.0*x[15] + 2.0*x[11];
+    const double w793 = -2.0*x[14] + 2.0*x[10];
+    const double w794 = -2.0*x[11] + 2.0*x[15];
+    const double w795 = -2.0*x[10] + 2.0*x[14];
+    out[7] = w777*(fabs(w792) + fabs(w793) + (fabs(w794) + fabs(w795))) + fabs(w792*p->c[7]*x[9]) + fabs(w793*p->c[7]*x[8]) + (fabs(w794*p->c[9]*x[13]) + fabs(w795*p->c[9]*x[12]));
+    const double w796 = fabs(x[19]*x[19]);
+    const double w797 = fabs(x[18]*x[18]);
+    out[8] = w790 + w791 + (w796 + w797) + (fabs(-2.0*x[14]*x[18]) + fabs(-2.0*x[15]*x[19]) + p->c[54]);
+    const double w798 = -2.0*x[19] + 2.0*x[15];
+    const double w799 = -2.0*x[18] + 2.0*x[14];
+    const double w800 = -2.0*x[15] + 2.0*x[19];
+    const double w801 = -2.0*x[14] + 2.0*x[18];
+    out[9] = w777*(fabs(w798) + fabs(w799) + (fabs(w800) + fabs(w801))) + fabs(w798*p->c[9]*x[13]) + fabs(w799*p->c[9]*x[12]) + (fabs(w800*p->c[11]*x[17]) + fabs(w801*p->c[11]*x[16]));
+    const double w802 = fabs(x[23]*x[23]);
+    const double w803 = fabs(x[22]*x[22]);
+    out[10] = w796 + w797 + (w802 + w803) + (fabs(-2.0*x[18]*x[22]) + fabs(-2.0*x[19]*x[23]) + p->c[55]);
+    const double w804 = -2.0*x[23] + 2.0*x[19];
+    const double w805 = -2.0*x[22] + 2.0*x[18];
+    const double w806 = -2.0*x[19] + 2.0*x[23];
+    const double w807 = -2.0*x[18] + 2.0*x[22];
+    out[11] = w777*(fabs(w804) + fabs(w805) + (fabs(w806) + fabs(w807))) + fabs(w804*p->c[11]*x[17]) + fabs(w805*p->c[11]*x[16]) + (fabs(w806*p->c[13]*x[21]) + fabs(w807*p->c[13]*x[20]));
+    const double w808 = fabs(x[27]*x[27]);
+    const double w809 = fabs(x[26]*x[26]);
+    out[12] = w802 + w803 + (w808 + w809) + (fabs(-2.0*x[22]*x[26]) + fabs(-2.0*x[23]*x[27]) + p->c[56]);
+    const double w810 = -2.0*x[27] + 2.0*x[23];
+    const double w811 = -2.0*x[26] + 2.0*x[22];
+    const double w812 = -2.0*x[23] + 2.0*x[27];
+    const double w813 = -2.0*x[22] + 2.0*x[26];
+    out[13] = w777*(fabs(w810) + fabs(w811) + (fabs(w812) + fabs(w813))) + fabs(w810*p->c[13]*x[21]) + fabs(w811*p->c[13]*x[20]) + (fabs(w812*p->c[15]*x[25]) + fabs(w813*p->c[15]*x[24]));
+    out[14] = w808 + w809 + (fabs(x[30]*x[30]) + fabs(x[31]*x[31])) + (fabs(-2.0*x[26]*x[30]) + fabs(-2.0*x[27]*x[31]) + p->c[57]);
+    const double w814 = -2.0*x[31] + 2.0*x[27];
+    const double w815 = -2.0*x[30] + 2.0*x[26];
+    const double w816 = -2.0*x[27] + 2.0*x[31];
+    const double w817 = -2.0*x[26] + 2.0*x[30];
+    out[15] = w777*(fabs(w814) + fabs(w815) + (fabs(w816) + fabs(w817))) + fabs(w814*p->c[15]*x[25]) + fabs(w815*p->c[15]*x[24]) + (fabs(w816*p->c[17]*x[29]) + fabs(w817*p->c[17]*x[28]));
 }
 
 void bgc_position_jac(double t, const double *x, const bgc_params *p, double *out)
@@ -1758,8 +2084,8 @@ void bgc_position_jac(double t, const double *x, const bgc_params *p, double *ou
     (void)p;
     (void)out;
     memset(out, 0, 256 * sizeof *out); /* the nonzero entries follow */
-    out[2] = 2.0*x[2];
-    out[3] = 2.0*x[3];
+    out[2] = 2.0*x[2] + p->c[1];
+    out[3] = 2.0*x[3] + p->c[2];
     out[34] = -2.0*x[6] + 2.0*x[2];
     out[35] = -2.0*x[7] + 2.0*x[3];
     out[38] = -2.0*x[2] + 2.0*x[6];
@@ -1797,92 +2123,92 @@ void bgc_velocity_jac(double t, const double *x, const bgc_params *p, double *ou
     (void)p;
     (void)out;
     memset(out, 0, 256 * sizeof *out); /* the nonzero entries follow */
-    out[0] = p->c[6]*x[2];
-    out[1] = p->c[6]*x[3];
-    const double w812 = p->c[6]*x[0];
-    out[2] = w812;
-    const double w813 = p->c[6]*x[1];
-    out[3] = w813;
+    out[0] = (2.0*x[2] + p->c[1])*p->c[0];
+    out[1] = (2.0*x[3] + p->c[2])*p->c[0];
+    const double w818 = p->c[58]*x[0];
+    out[2] = w818;
+    const double w819 = p->c[58]*x[1];
+    out[3] = w819;
     out[32] = (-2.0*x[6] + 2.0*x[2])*p->c[0];
     out[33] = (-2.0*x[7] + 2.0*x[3])*p->c[0];
-    const double w814 = p->c[8]*x[4];
-    out[34] = w812 + w814;
-    const double w815 = p->c[8]*x[5];
-    out[35] = w813 + w815;
-    out[36] = (-2.0*x[2] + 2.0*x[6])*p->c[0];
-    out[37] = (-2.0*x[3] + 2.0*x[7])*p->c[0];
-    const double w816 = p->c[6]*x[4];
-    out[38] = w816 + p->c[8]*x[0];
-    const double w817 = p->c[6]*x[5];
-    out[39] = w817 + p->c[8]*x[1];
-    out[68] = (-2.0*x[10] + 2.0*x[6])*p->c[0];
-    out[69] = (-2.0*x[11] + 2.0*x[7])*p->c[0];
-    const double w818 = p->c[8]*x[8];
-    out[70] = w816 + w818;
-    const double w819 = p->c[8]*x[9];
-    out[71] = w817 + w819;
-    out[72] = (-2.0*x[6] + 2.0*x[10])*p->c[0];
-    out[73] = (-2.0*x[7] + 2.0*x[11])*p->c[0];
-    const double w820 = p->c[6]*x[8];
-    out[74] = w814 + w820;
-    const double w821 = p->c[6]*x[9];
-    out[75] = w815 + w821;
-    out[104] = (-2.0*x[14] + 2.0*x[10])*p->c[0];
-    out[105] = (-2.0*x[15] + 2.0*x[11])*p->c[0];
-    const double w822 = p->c[8]*x[12];
-    out[106] = w820 + w822;
-    const double w823 = p->c[8]*x[13];
-    out[107] = w821 + w823;
-    out[108] = (-2.0*x[10] + 2.0*x[14])*p->c[0];
-    out[109] = (-2.0*x[11] + 2.0*x[15])*p->c[0];
-    const double w824 = p->c[6]*x[12];
-    out[110] = w818 + w824;
-    const double w825 = p->c[6]*x[13];
-    out[111] = w819 + w825;
-    out[140] = (-2.0*x[18] + 2.0*x[14])*p->c[0];
-    out[141] = (-2.0*x[19] + 2.0*x[15])*p->c[0];
-    const double w826 = p->c[8]*x[16];
-    out[142] = w824 + w826;
-    const double w827 = p->c[8]*x[17];
-    out[143] = w825 + w827;
-    out[144] = (-2.0*x[14] + 2.0*x[18])*p->c[0];
-    out[145] = (-2.0*x[15] + 2.0*x[19])*p->c[0];
-    const double w828 = p->c[6]*x[16];
-    out[146] = w822 + w828;
-    const double w829 = p->c[6]*x[17];
-    out[147] = w823 + w829;
-    out[176] = (-2.0*x[22] + 2.0*x[18])*p->c[0];
-    out[177] = (-2.0*x[23] + 2.0*x[19])*p->c[0];
-    const double w830 = p->c[8]*x[20];
-    out[178] = w828 + w830;
-    const double w831 = p->c[8]*x[21];
-    out[179] = w829 + w831;
-    out[180] = (-2.0*x[18] + 2.0*x[22])*p->c[0];
-    out[181] = (-2.0*x[19] + 2.0*x[23])*p->c[0];
-    const double w832 = p->c[6]*x[20];
-    out[182] = w826 + w832;
-    const double w833 = p->c[6]*x[21];
-    out[183] = w827 + w833;
-    out[212] = (-2.0*x[26] + 2.0*x[22])*p->c[0];
-    out[213] = (-2.0*x[27] + 2.0*x[23])*p->c[0];
-    const double w834 = p->c[8]*x[24];
-    out[214] = w832 + w834;
-    const double w835 = p->c[8]*x[25];
-    out[215] = w833 + w835;
-    out[216] = (-2.0*x[22] + 2.0*x[26])*p->c[0];
-    out[217] = (-2.0*x[23] + 2.0*x[27])*p->c[0];
-    const double w836 = p->c[6]*x[24];
-    out[218] = w830 + w836;
-    const double w837 = p->c[6]*x[25];
-    out[219] = w831 + w837;
-    out[248] = (-2.0*x[30] + 2.0*x[26])*p->c[0];
-    out[249] = (-2.0*x[31] + 2.0*x[27])*p->c[0];
-    out[250] = w836 + p->c[8]*x[28];
-    out[251] = w837 + p->c[8]*x[29];
-    out[252] = (-2.0*x[26] + 2.0*x[30])*p->c[0];
-    out[253] = (-2.0*x[27] + 2.0*x[31])*p->c[0];
-    out[254] = w834 + p->c[6]*x[28];
-    out[255] = w835 + p->c[6]*x[29];
+    const double w820 = p->c[59]*x[4];
+    out[34] = w818 + w820;
+    const double w821 = p->c[59]*x[5];
+    out[35] = w819 + w821;
+    out[36] = (-2.0*x[2] + 2.0*x[6])*p->c[5];
+    out[37] = (-2.0*x[3] + 2.0*x[7])*p->c[5];
+    const double w822 = p->c[61]*x[4];
+    out[38] = w822 + p->c[60]*x[0];
+    const double w823 = p->c[61]*x[5];
+    out[39] = w823 + p->c[60]*x[1];
+    out[68] = (-2.0*x[10] + 2.0*x[6])*p->c[5];
+    out[69] = (-2.0*x[11] + 2.0*x[7])*p->c[5];
+    const double w824 = p->c[62]*x[8];
+    out[70] = w822 + w824;
+    const double w825 = p->c[62]*x[9];
+    out[71] = w823 + w825;
+    out[72] = (-2.0*x[6] + 2.0*x[10])*p->c[7];
+    out[73] = (-2.0*x[7] + 2.0*x[11])*p->c[7];
+    const double w826 = p->c[63]*x[8];
+    out[74] = w820 + w826;
+    const double w827 = p->c[63]*x[9];
+    out[75] = w821 + w827;
+    out[104] = (-2.0*x[14] + 2.0*x[10])*p->c[7];
+    out[105] = (-2.0*x[15] + 2.0*x[11])*p->c[7];
+    const double w828 = p->c[64]*x[12];
+    out[106] = w826 + w828;
+    const double w829 = p->c[64]*x[13];
+    out[107] = w827 + w829;
+    out[108] = (-2.0*x[10] + 2.0*x[14])*p->c[9];
+    out[109] = (-2.0*x[11] + 2.0*x[15])*p->c[9];
+    const double w830 = p->c[65]*x[12];
+    out[110] = w824 + w830;
+    const double w831 = p->c[65]*x[13];
+    out[111] = w825 + w831;
+    out[140] = (-2.0*x[18] + 2.0*x[14])*p->c[9];
+    out[141] = (-2.0*x[19] + 2.0*x[15])*p->c[9];
+    const double w832 = p->c[66]*x[16];
+    out[142] = w830 + w832;
+    const double w833 = p->c[66]*x[17];
+    out[143] = w831 + w833;
+    out[144] = (-2.0*x[14] + 2.0*x[18])*p->c[11];
+    out[145] = (-2.0*x[15] + 2.0*x[19])*p->c[11];
+    const double w834 = p->c[67]*x[16];
+    out[146] = w828 + w834;
+    const double w835 = p->c[67]*x[17];
+    out[147] = w829 + w835;
+    out[176] = (-2.0*x[22] + 2.0*x[18])*p->c[11];
+    out[177] = (-2.0*x[23] + 2.0*x[19])*p->c[11];
+    const double w836 = p->c[68]*x[20];
+    out[178] = w834 + w836;
+    const double w837 = p->c[68]*x[21];
+    out[179] = w835 + w837;
+    out[180] = (-2.0*x[18] + 2.0*x[22])*p->c[13];
+    out[181] = (-2.0*x[19] + 2.0*x[23])*p->c[13];
+    const double w838 = p->c[69]*x[20];
+    out[182] = w832 + w838;
+    const double w839 = p->c[69]*x[21];
+    out[183] = w833 + w839;
+    out[212] = (-2.0*x[26] + 2.0*x[22])*p->c[13];
+    out[213] = (-2.0*x[27] + 2.0*x[23])*p->c[13];
+    const double w840 = p->c[70]*x[24];
+    out[214] = w838 + w840;
+    const double w841 = p->c[70]*x[25];
+    out[215] = w839 + w841;
+    out[216] = (-2.0*x[22] + 2.0*x[26])*p->c[15];
+    out[217] = (-2.0*x[23] + 2.0*x[27])*p->c[15];
+    const double w842 = p->c[71]*x[24];
+    out[218] = w836 + w842;
+    const double w843 = p->c[71]*x[25];
+    out[219] = w837 + w843;
+    out[248] = (-2.0*x[30] + 2.0*x[26])*p->c[15];
+    out[249] = (-2.0*x[31] + 2.0*x[27])*p->c[15];
+    out[250] = w842 + p->c[72]*x[28];
+    out[251] = w843 + p->c[72]*x[29];
+    out[252] = (-2.0*x[26] + 2.0*x[30])*p->c[17];
+    out[253] = (-2.0*x[27] + 2.0*x[31])*p->c[17];
+    out[254] = w840 + p->c[73]*x[28];
+    out[255] = w841 + p->c[73]*x[29];
 }
 
 void bgc_velocity_metric(double t, const double *x, const bgc_params *p, double *out)
@@ -1892,8 +2218,8 @@ void bgc_velocity_metric(double t, const double *x, const bgc_params *p, double 
     (void)p;
     (void)out;
     memset(out, 0, 256 * sizeof *out); /* the nonzero entries follow */
-    out[0] = 2.0*x[2];
-    out[1] = 2.0*x[3];
+    out[0] = 2.0*x[2] + p->c[1];
+    out[1] = 2.0*x[3] + p->c[2];
     out[32] = -2.0*x[6] + 2.0*x[2];
     out[33] = -2.0*x[7] + 2.0*x[3];
     out[36] = -2.0*x[2] + 2.0*x[6];
