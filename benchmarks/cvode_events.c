@@ -16,9 +16,11 @@
    adams: CV_ADAMS with the fixed-point iteration (no Jacobian).
 
    Writes t and the state (a header, then l.p, or x and b.p) every DT to stdout as CSV (as
-   bgc's programs do, the solver interpolating: CV_NORMAL), DT = T_END writes two rows; the event times to
-   EVENTS_FILE (one a line, %.17g); and to stderr "stats: steps= rejected= rhs= jac= lu=
-   events= cpu=", the counters summed over the restarts, cpu the clock() of the integration. */
+   bgc's programs do, the solver interpolating: CV_NORMAL), DT = T_END writes two rows; the
+   event times to EVENTS_FILE (one a line, %.17g); and to stderr "stats: steps= rejected=
+   rhs= jac= lu= events= cpu=", the counters summed over the restarts (rejected: error test
+   and convergence failures; rhs: with the linear solver's), cpu the clock() of the
+   integration. */
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>

@@ -82,6 +82,7 @@ import machine  # noqa: E402
 from pendulum import CFLAGS, c_compiler, compile_c, cpu_seconds  # noqa: E402
 from solvers import (Job, Row, at_error, decades, fmt, measure, ms, parse_stats,  # noqa: E402
                      tol_text)
+from solvers import header as solvers_header  # noqa: E402
 
 MODELS = HERE / "models"
 ATOL_RATIO = 1e-3
@@ -188,7 +189,7 @@ def event_error(found, exact) -> tuple[float | None, str]:
 
 def problems(quick: bool) -> list[Problem]:
     wide = decades(3, 11)
-    few = [1e-4, 1e-6, 1e-8, 1e-10]
+    few = [1e-6, 1e-8, 1e-10]
     if quick:
         wide, few = [1e-5, 1e-8], [1e-6]
     pwm = {"bgc C": wide, "bgc Python": few, "SciPy RK45 events": few,
@@ -401,6 +402,8 @@ def sksundae_solve(problem: Problem, method: str, rtol: float, grid=None):
             if not res.success:
                 raise RuntimeError(res.message)
             if res.status == 2:  # an event
+                for kept in (g._i, g._t, g._y):  # sksundae's log of the events: each step
+                    kept.clear()  # would copy it whole, 20 000 events in all
                 nfev += res.nfev
                 y = np.array(res.y, dtype=float)
                 found.append(res.t)
@@ -526,12 +529,14 @@ def table(rows: list[EventRow], skipped: list) -> str:
 
 
 def levels(rows: list[EventRow]) -> list[float]:
-    """Powers of ten inside bgc C's range of error."""
+    """Powers of ten inside bgc C's range of error, else the middle of that range (to two
+    digits)."""
     errors = [r.error for r in rows if r.method == "bgc C" and r.error]
     if not errors:
         return []
     lo, hi = math.ceil(math.log10(min(errors))), math.floor(math.log10(max(errors)))
-    return [10.0 ** k for k in range(hi, lo - 1, -1)]
+    middle = float(f"{math.sqrt(min(errors) * max(errors)):.1e}")
+    return [10.0 ** k for k in range(hi, lo - 1, -1)] or [middle]
 
 
 def equal_error(rows: list[EventRow]) -> list[str]:
@@ -539,7 +544,7 @@ def equal_error(rows: list[EventRow]) -> list[str]:
     out = []
     for level in levels(rows):
         cells = sorted((t, m) for m in methods if (t := at_error(rows, m, "time", level)))
-        out.append(f"at error {level:.0e}: " + ", ".join(f"{m} {ms(t)}" for t, m in cells))
+        out.append(f"at error {level:.2g}: " + ", ".join(f"{m} {ms(t)}" for t, m in cells))
     return out
 
 
@@ -572,7 +577,8 @@ def plot(results: dict, path: Path) -> None:
     fig, axes = plt.subplots(1, len(results), figsize=(6.5 * len(results), 5), squeeze=False)
     for ax, (title, rows) in zip(axes[0], results.items()):
         methods = list(dict.fromkeys(r.method for r in rows))
-        for method, color in zip(methods, plt.cm.tab10(np.linspace(0, 1, len(methods)))):
+        for method in methods:  # each method its colour in both panels
+            color = plt.cm.tab10(list(problems(False)[0].rtols).index(method) % 10)
             pts = sorted((r.error, r.time) for r in rows
                          if r.method == method and r.error and r.time)
             if pts:
@@ -590,20 +596,12 @@ def plot(results: dict, path: Path) -> None:
 
 
 def header(repeats: int) -> list[str]:
-    versions = [f"numpy {np.__version__}"]
-    for name in ("scipy", "sksundae"):
-        try:
-            versions.append(f"{name} {__import__(name).__version__}")
-        except ImportError:
-            versions.append(f"{name} not installed")
-    return [f"date:     {datetime.datetime.now().isoformat(timespec='seconds')}",
-            f"cc:       {machine.cc_version(c_compiler())}  (flags: {' '.join(CFLAGS)} ... -lm)",
-            f"python:   {sys.version.split()[0]}  {'  '.join(versions)}",
-            f"machine:  {machine.processor()}, {os.cpu_count()} cores, {platform.system()} "
-            f"{platform.release()}, load average {machine.load_average()}",
-            f"timing:   medians of {repeats} rounds after a warm-up (a warm-up over {SLOW:g} s "
-            "is the timing); C programs: their 2-row run less a /bin/true; prog: their clock()",
-            f"tolerance: atol = rtol * {ATOL_RATIO:g}"]
+    """benchmarks/solvers.py's lines on the date, the compiler, the versions and the machine,
+    then how this one times and its tolerances."""
+    return solvers_header(repeats)[:4] + [
+        f"timing:   medians of {repeats} rounds after a warm-up (a warm-up over {SLOW:g} s is "
+        "the timing); C programs: their 2-row run less a /bin/true; prog: their clock()",
+        f"tolerance: atol = rtol * {ATOL_RATIO:g}"]
 
 
 def parse_args(argv=None):
