@@ -3,6 +3,9 @@ closed form against expm and SciPy, the right sides the baselines use against th
 modules', and models/rc_pair.bg and models/van_der_pol.bg simulated by bgc (Python backend,
 rodas4) against the closed form and SciPy's Radau.  And benchmarks/scenes.py's counts."""
 import importlib.util
+import math
+import os
+import shutil
 import sys
 from pathlib import Path
 
@@ -129,3 +132,58 @@ def test_before_after_removes_its_worktree_on_failure(monkeypatch):
         before_after.main(["--before", "HEAD", "--quick"])
     assert seen["after"] == ROOT and not seen["before"].exists()
     assert str(seen["before"]) not in before_after.git("worktree", "list")
+
+
+def test_events_closed_forms():
+    """benchmarks/events.py's references: the PWM current against solve_ivp piece by piece at
+    tight tolerance, the ball's parabolas meeting the floor at the impacts."""
+    from scipy.integrate import solve_ivp
+
+    events = _benchmark("events")
+    t_end = 0.01
+    edges = events.pwm_edges(t_end)
+    assert len(edges) == 19 and edges[0] == 0.3 * 0.001 and edges[1] == 0.001
+    grid = np.linspace(0.0, t_end, 41)
+    ref, exact = events.pwm_exact(grid, t_end)
+    y, t, ys = [0.0], 0.0, []
+    for k, stop in enumerate([*edges, t_end]):
+        f = events.pwm_rhs(1.0 if k == 0 else events.pwm_input(k - 1))
+        sol = solve_ivp(f, (t, stop), y, method="DOP853", rtol=1e-13, atol=1e-16,
+                        dense_output=True)
+        inside = grid[(grid >= t) & (grid < stop)]
+        ys += list(sol.sol(inside)[0]) if len(inside) else []
+        t, y = stop, [sol.y[0, -1]]
+    ys.append(y[0])
+    np.testing.assert_allclose(np.array(ys), ref[:, 0], rtol=1e-10, atol=1e-16)
+    impacts = events.ball_impacts(4.0)
+    assert len(impacts) == 19 and abs(impacts[0] - math.sqrt(2 / 9.81)) < 1e-15
+    around = events.ball_exact(np.concatenate([impacts - 1e-9, impacts + 1e-9]), 4.0)[0]
+    assert np.all(np.abs(around[:, 0]) < 1e-8)  # x = 0 on both sides of every impact
+    before, after = around[:19, 1], around[19:, 1]
+    np.testing.assert_allclose(after, -0.8 * before, rtol=1e-7)
+
+
+@pytest.mark.skipif(not shutil.which(os.environ.get("CC", "cc").split()[0]),
+                    reason="no C compiler")
+def test_events_quick_run(capsys):
+    """benchmarks/events.py --quick: every method has its rows or says why not (scikit-sundae
+    or SUNDIALS' C library missing), bgc's rows match the closed forms, no timing checked."""
+    events = _benchmark("events")
+    assert events.main(["--quick"]) == 0
+    out = capsys.readouterr().out
+    for problem in events.problems(quick=True):
+        section = out.split(f"== {problem.key}:")[1].split("\n==")[0]
+        rows = {}
+        for line in section.splitlines():
+            for method in problem.rtols:
+                if line.startswith(method + " "):
+                    rows.setdefault(method, []).append(line[len(method):].split())
+        for method in problem.rtols:
+            assert method in rows or f"not run: {method}: " in section, method
+        for cells in rows["bgc C"]:
+            t_error, error = float(cells[7]), float(cells[8])
+            assert error < 1e-6 and t_error < 1e-9
+            assert t_error == 0.0 or problem.key == "ball"  # time events: stepped onto
+        for method, found in rows.items():
+            assert all(float(c[8]) < 1e-2 for c in found), (method, found)
+    assert out.count("goal: pwm at equal error") == 6
