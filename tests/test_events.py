@@ -346,3 +346,16 @@ signal x = integral(if x < 1 then a elif x < 2 then 2*a else 0, init = 0)
 scene s { time 0 .. 1; outputs x }
 """, "s"))
     assert "d(x)/dt = (if x < 1 then a elif x < 2 then 2*a else 0)" in eq
+
+
+def test_the_step_budget_counts_from_the_last_event_too():
+    """Many events between two output rows are not a runaway step size: the budget of steps
+    between outputs starts again at each event."""
+    compiled = build(PWM, "run")
+    for backend in BACKENDS:
+        program = runner.prepare(compiled, backend)
+        names = [p.name for p in compiled.program.params]
+        settings = runner.settings_for(compiled.program.scene, names, dt=0.2, max_steps=200)
+        result = runner.run(program, settings, stats=True)
+        assert result.status == 0, result.stderr
+        assert int(result.stats["steps"]) > 200 and int(result.stats["events"]) == 400

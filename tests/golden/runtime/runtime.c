@@ -1113,8 +1113,9 @@ typedef struct bgc_run {
     double t, h;
     int fixed;       /* steps on a grid, no error control (s->step > 0, or euler, rk4) */
     int detect_stiffness;
-    long steps_out;  /* st->steps at the last output, at t_out */
+    long steps_out;  /* st->steps at the last output (or event), at t_out */
     double t_out;
+    int from_event;  /* t_out is an event's (the step budget counts from either) */
     /* events (a model with BGC_NUM_DISCRETE > 0): */
     double *d;       /* the discrete values, in the run's parameter copy */
     double *g;       /* the indicators at r->t */
@@ -1175,6 +1176,7 @@ static int bgc_emit(bgc_run *r, double t, const double *x)
         return bgc_fail(r->msg, r->msg_size, t, "output", bgc_output_names[j]);
     r->steps_out = r->st->steps;
     r->t_out = t;
+    r->from_event = 0;
     return r->sink ? r->sink(r->ctx, t, x, y) : 0;
 }
 
@@ -1190,8 +1192,8 @@ static int bgc_accept(bgc_run *r, double t)
     }
     if (r->s->max_steps > 0 && r->st->steps - r->steps_out > r->s->max_steps) {
         snprintf(r->msg, r->msg_size, "at t = %.17g: step budget spent: %ld steps since the "
-                 "output at t = %.17g (the step size runs away; --max-steps raises the budget)",
-                 t, r->s->max_steps, r->t_out);
+                 "%s at t = %.17g (the step size runs away; --max-steps raises the budget)",
+                 t, r->s->max_steps, r->from_event ? "event" : "output", r->t_out);
         return BGC_ERR_RUNTIME;
     }
     return 0;
@@ -1603,6 +1605,9 @@ static int bgc_handle_event(bgc_run *r, double t, double *x)
     else
         r->chain = 0;
     r->t_event = t;
+    r->steps_out = r->st->steps; /* the step budget starts again */
+    r->t_out = t;
+    r->from_event = 1;
     if (r->chain >= BGC_MAX_EVENT_ITERATIONS) {
         snprintf(r->msg, r->msg_size, "at t = %.17g: chattering: %ld events in a row, each "
                  "within 1e-12 relative of the one before (a Zeno model: the switching "
@@ -1879,6 +1884,7 @@ static int bgc_integrate(const bgc_settings *s, const bgc_params *p, bgc_work *w
     r.detect_stiffness = 0;
     r.steps_out = stats->steps;
     r.t_out = s->t0;
+    r.from_event = 0;
     r.t_next = INFINITY;
     r.t_event = -INFINITY;
     r.chain = 0;

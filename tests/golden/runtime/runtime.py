@@ -1246,9 +1246,10 @@ def _accept(run, t):
     if _STOP[0]:
         raise _Failure("at t = %.17g: interrupted by signal %d" % (t, _STOP[0]), t)
     if run.s.max_steps > 0 and run.st["steps"] - run.steps_out > run.s.max_steps:
-        raise _Failure("at t = %.17g: step budget spent: %d steps since the output at t = %.17g "
+        raise _Failure("at t = %.17g: step budget spent: %d steps since the %s at t = %.17g "
                        "(the step size runs away; --max-steps raises the budget)"
-                       % (t, run.s.max_steps, run.t_out), t)
+                       % (t, run.s.max_steps, "event" if run.from_event else "output",
+                          run.t_out), t)
 
 
 def _block_failed(failure):
@@ -1282,12 +1283,13 @@ class _Run:
     and returns; or raises _Failure, _Stiff (run.h: its last step size)."""
 
     __slots__ = ("s", "p", "w", "st", "nout", "kout", "t", "h", "y", "detect_stiffness",
-                 "steps_out", "t_out", "m", "name", "fixed", "doff", "g", "t_next", "t_event",
-                 "chain")
+                 "steps_out", "t_out", "from_event", "m", "name", "fixed", "doff", "g", "t_next",
+                 "t_event", "chain")
 
     def __init__(self, s, p, w, st, y):
         self.s, self.p, self.w, self.st = s, p, w, st
         self.steps_out, self.t_out = st["steps"], s.t0  # the steps at the last output, its t
+        self.from_event = False  # (or at the last event: the step budget counts from either)
         self.nout, self.kout = _output_count(s), 1
         self.t, self.h, self.y = s.t0, s.h0, y
         self.detect_stiffness = False
@@ -1323,7 +1325,7 @@ class _Run:
         j = _first_nonfinite(y)
         if j >= 0:
             raise _fail(t, "output", OUTPUTS[j])
-        self.steps_out, self.t_out = self.st["steps"], t
+        self.steps_out, self.t_out, self.from_event = self.st["steps"], t, False
         yield t, y
 
     def emit_step(self, c, until, inclusive=True):
@@ -1531,6 +1533,7 @@ def _handle_event(run, t, x):
     else:
         run.chain = 0
     run.t_event = t
+    run.steps_out, run.t_out, run.from_event = run.st["steps"], t, True  # a new step budget
     if run.chain >= MAX_EVENT_ITERATIONS:
         raise _Failure("at t = %.17g: chattering: %d events in a row, each within 1e-12 "
                        "relative of the one before (a Zeno model: the switching outruns the "
