@@ -175,16 +175,8 @@ def _velocity_metric(t, x, p):
     return []
 
 
-def _events(t, x, p, w, out):
-    pass
-
-
-def _next_time(t, x, p, w, out):
-    pass
-
-
-def _update(t, x, p, w, r, out):
-    pass
+_events = _next_time = _out  # a model without events: nothing to evaluate (the event
+_update = _jvp                # functions take the arguments of these; docs/hybrid.md)
 
 
 # ---------------------------------------------------------------- the runtime
