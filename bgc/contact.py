@@ -34,7 +34,7 @@ from .events import TOLERANCE, Action, Discrete, Relation, When
 from .graph import var
 from .system import der
 
-SWITCHED = ("diode", "friction")  # one-ports that are constraint junctions in one of their modes
+SWITCHED = ("diode", "friction", "switch")  # one-ports that are constraint junctions in one of their modes
 MAX_IMPACT_ROWS = 3  # rows that take part in one impact, solved symbolically
 REST = sp.Float(1e-6)  # a rebound below this fraction of the largest impact speed stays put
 
@@ -65,12 +65,10 @@ def with_contact_events(sys, infos, weigh, defs, leaf, cycle):
 
     for info in (i for i in infos if i.kind in SWITCHED):
         c = cdefs[info.junction]
-        K_d = dict(weigh(c.balance))
-        if not K_d:
-            fail(c.name_span, f"'{c.junction}': its flow is not the velocity of I elements in "
-                              "integral causality; this is not supported yet")
-        block = _impulse(c, info.balance, K_d, sp.Integer(0), bilateral, cdefs, weigh, order)[0]
-        switch = _diode if info.kind == "diode" else _friction
+        K_d = dict(weigh(c.balance))  # (none: a resistive path, whose flow stops at once)
+        block = _impulse(c, info.balance, K_d, sp.Integer(0), bilateral, cdefs, weigh,
+                         order)[0] if K_d else {}
+        switch = {"diode": _diode, "friction": _friction, "switch": _switch}[info.kind]
         relations, discretes, whens = switch(c, info, block, states, relations, discretes,
                                              whens)
     for info in (i for i in infos if i.kind == "unilateral"):
@@ -171,6 +169,30 @@ def _diode(c, info, block, states, relations, discretes, whens):
     transfer = When(reverse.symbol, reverse.text, tuple(
         Action("reinit", states[p].name, p, new, c.span) for p, new in block.items()), c.span)
     return relations + [forward, reverse], discretes + [mode], whens + [transfer]
+
+
+def _switch(c, info, stop, states, relations, discretes, whens):
+    """The ideal switch `Sw(COND)`: closed (effort zero) while COND holds, open (flow zero,
+    its effort the multiplier) otherwise; its mode `S.open` follows COND after each pass of
+    the event iteration.  Opening, the storages that carried its flow take the state that
+    stops it (an inductor's current falls to zero at once)."""
+    J = c.junction
+    cond = c.gains[0]
+    mode = Discrete(f"{J}.open", active(c),
+                    sp.Piecewise((sp.Integer(0), cond), (sp.Integer(1), True)),
+                    "1: open, 0: closed", c.name_span,
+                    sp.Piecewise((sp.Integer(0), cond), (sp.Integer(1), True)))
+    opening = []
+    if any(s != 0 for s in (new - p for p, new in stop.items())):
+        n = len(relations)
+        flows = Relation(sp.Symbol(f"event#{n}"), sp.StrictGreaterThan(
+            sp.Piecewise((sp.Integer(1), sp.Ne(active(c), 0)), (sp.Integer(-1), True)), 0),
+            f"{J}: opens", c.name_span, None)
+        relations = relations + [flows]
+        opening = [When(flows.symbol, flows.text, tuple(
+            Action("reinit", states[p].name, p, new, c.span) for p, new in stop.items()),
+            c.span)]
+    return relations, discretes + [mode], whens + opening
 
 
 def _friction(c, info, stop, states, relations, discretes, whens):

@@ -29,14 +29,14 @@ from sympy.printing.pycode import PythonCodePrinter
 
 from sympy.core.relational import Relational
 from sympy.functions.elementary.piecewise import ExprCondPair
-from sympy.logic.boolalg import And, BooleanFalse, BooleanTrue, Not, Or
+from sympy.logic.boolalg import ITE, And, BooleanFalse, BooleanTrue, Not, Or
 
 from bgc.ir import (ATOL, C, CLASSES, FUNCTIONS, D, P, R, T, V, X, SquareNext, SquareWave,
                     as_expr)
 _CLASSES = tuple(CLASSES.values())
 _ARITY = {"atan2": (2, 2), "Min": (2, None), "Max": (2, None), "Heaviside": (1, 2)}
 _TEMP = re.compile(r"w[0-9]+\Z")
-_CONDITIONALS = (sp.Piecewise, ExprCondPair, Relational, And, Or, Not, BooleanTrue,
+_CONDITIONALS = (sp.Piecewise, ExprCondPair, Relational, And, Or, Not, ITE, BooleanTrue,
                  BooleanFalse)
 _RELOPS = {"<": "<", "<=": "<=", ">": ">", ">=": ">=", "==": "==", "!=": "!="}
 MAX_EXPANDED_POWER = 4  # x**n for 2 <= n <= 4 prints as x*x*...
@@ -171,6 +171,8 @@ class _ArithmeticPrinting:
             return "(" + f" {op} ".join(self._print(a) for a in expr.args) + ")"
         if isinstance(expr, Not):
             return f"({self.LOGIC['not']}{self._print(expr.args[0])})"
+        if isinstance(expr, ITE):  # (SymPy's own form of some conditions: if a then b else c)
+            return self._conditional(*(self._print(a) for a in expr.args))
         if isinstance(expr, (BooleanTrue, BooleanFalse)):
             return self.LOGIC["true" if isinstance(expr, BooleanTrue) else "false"]
         if type(expr) in (SquareWave, SquareNext):

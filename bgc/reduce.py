@@ -434,7 +434,8 @@ def _constraint(c, sys, defs, coordinates, multipliers, memo, diags) -> Constrai
     if in_states.has(*NOT_FINITE):
         fail(c.name_span, f"the flow balance of constraint junction '{c.junction}' is not "
                           "finite (a division by zero?)")
-    if in_states.free_symbols & multipliers:
+    resistive = bool(in_states.free_symbols & multipliers)
+    if resistive and c.kind not in contact.SWITCHED:
         fail(c.span, f"the flow balance of constraint junction '{c.junction}' depends on a "
                      "multiplier directly (a resistive path?): declare it as a plain junction")
     form, reason = coordinates.form(c)
@@ -464,6 +465,8 @@ def _constraint(c, sys, defs, coordinates, multipliers, memo, diags) -> Constrai
         law = dB + gains[0] * B
     else:
         law = dB
+    if resistive:  # a switched one-port on a resistive path: its flow itself is held at zero
+        law = B
     if unilateral or switched:  # active: the constraint's law; else no force (bgc.contact)
         free = c.multiplier - (c.gains[0] * contact.direction(c) if c.kind == "friction" else 0)
         law = sp.Piecewise((law, sp.Ne(contact.active(c), 0)), (free, True))

@@ -236,7 +236,8 @@ def check_report(compiled, summary: SceneSummary | None = None) -> str:
         computed = _computed(r)
         for k in r.constraints:
             how = "detected" if k.detected else "declared"
-            gains = f"({', '.join(_s(g) for g in k.gains)})" if k.gains else ""
+            gains = f"({', '.join(_s(g) for g in k.gains)})" if k.gains and \
+                k.corrector != "none" else ""
             pruned = "" if k.multiplier in computed else \
                 "; pruned: no output needs it or its states"
             lines.append(f"  {k.junction}: {k.kind} ({how}), corrector {k.corrector}{gains}"

@@ -725,7 +725,7 @@ def _element(d: ast.ElementDecl, scope: _Scope, diags: Collector) -> Element | N
                    None, d.doc, d.span, d.name.span, dim)
 
 
-SWITCHED = {"D": 0, "Fr": 2}  # switched one-ports (docs/hybrid.md) -> their arguments
+SWITCHED = {"D": 0, "Fr": 2, "Sw": 1}  # switched one-ports (docs/hybrid.md) -> arguments
 
 
 def _switched(d: ast.ElementDecl, scope: _Scope, diags: Collector) -> Element:
@@ -738,11 +738,18 @@ def _switched(d: ast.ElementDecl, scope: _Scope, diags: Collector) -> Element:
     if len(d.args) != SWITCHED[kname]:
         if kname == "D":
             fail(d.span, f"D takes no arguments: write '{d.name.name} : D'")
+        if kname == "Sw":
+            fail(d.span, f"Sw takes one argument, its condition: Sw(COND), closed while COND "
+                         f"holds, got {len(d.args)}")
         fail(d.span, f"{kname} takes {SWITCHED[kname]} arguments, Fr(Fc, Fs): the sliding "
                      f"and the sticking friction force, got {len(d.args)}")
     if d.inits:
         fail(d.inits[0].span, f"{kname} has no state to initialise")
     gains = ()
+    if kname == "Sw":
+        if d.args[0].law is not None:
+            fail(d.args[0].span, "Sw takes its condition as a plain argument: Sw(COND)")
+        gains = (_ExprBuilder(scope, diags).build(d.args[0].expr, condition=True),)
     if kname == "Fr":
         if any(a.law is not None for a in d.args):
             fail(d.span, "Fr takes its forces as plain arguments: Fr(Fc, Fs)")
@@ -752,8 +759,8 @@ def _switched(d: ast.ElementDecl, scope: _Scope, diags: Collector) -> Element:
                 fail(g.span, "a friction force is a scalar")
             if g.value.is_Number and g.value < 0:
                 fail(g.span, "a friction force is not negative")
-    constraint = Constraint({"D": "diode", "Fr": "friction"}[kname], None, "none", gains, None,
-                            d.span)
+    constraint = Constraint({"D": "diode", "Fr": "friction", "Sw": "switch"}[kname], None, "none",
+                            gains, None, d.span)
     return Element(d.name.name, "0", None, None, None, tuple(e.name for e in d.effects),
                    constraint, d.doc, d.span, d.name.span, None, origin=None)
 

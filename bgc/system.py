@@ -401,7 +401,7 @@ class _Builder:
         balance = var(variable_name(el.name, "balance"))
         self.emit(balance, sp.Add(*[sigma[i] * through(b.label) for i, b in bonds]), el,
                   el.span)
-        if el.constraint.kind in ("diode", "friction"):  # a switched one-port: its flow
+        if el.constraint.kind in ("diode", "friction", "switch"):  # a switched one-port: its flow
             self.emit(var(variable_name(el.name, "f")), balance, el, el.span)
         c = el.constraint
         ann = None

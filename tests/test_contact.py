@@ -256,3 +256,48 @@ def test_stick_slip_on_a_moving_belt(solver, tmp_path):
     assert np.allclose(got, sticks, rtol=1e-8)
     stuck = np.abs(y[:, 2] / 1.0 - 0.5) < 1e-9  # m.p / M on the belt
     assert np.all(np.abs(y[stuck, 3]) <= 3.0 + 1e-9)  # held within Fs
+
+
+CAPACITORS = """model caps "two capacitors joined through a resistor by a switch that closes at t = 1"
+parameter C1 = 1.0
+parameter C2 = 2.0
+parameter R = 0.5
+parameter V0 = 3.0
+c1 : C(C1) init e = V0
+c2 : C(C2) init e = 0
+r : R(R)
+sw : Sw(t >= 1)
+a : 0
+b : 0
+j : 1
+a -> c1
+b -> c2
+a -> j
+j -> r
+j -> sw
+j -> b
+scene run { time 0 .. 5 every 0.01; outputs c1.q, c2.q, r.f
+            solver SOLVER(rtol = 1e-10, atol = 1e-12) }
+"""
+
+
+@pytest.mark.parametrize("solver", ["dopri5", "radau5"])
+def test_two_capacitors_joined_by_a_switch(solver, tmp_path):
+    """Open, nothing flows; closed at t = 1 (a time event), the charge flows through R with
+    time constant R C1 C2 / (C1 + C2), the total charge is kept and the energy lost is
+    C1 C2 V0^2 / (2 (C1 + C2)), whatever R."""
+    compiled = bgc.build(Source("caps.bg", CAPACITORS.replace("SOLVER", solver)), "run")
+    outs = [run(compiled, b, tmp_path / f"{b}.csv") for b in BACKENDS]
+    assert len({o[0] for o in outs}) == 1
+    _, y, events = outs[0]
+    C1, C2, R, V0 = 1.0, 2.0, 0.5, 3.0
+    tau = R * C1 * C2 / (C1 + C2)
+    q2_end = C2 * C1 * V0 / (C1 + C2)
+    t = y[:, 0]
+    q2 = np.where(t < 1, 0.0, q2_end * (1 - np.exp(-(t - 1) / tau)))
+    assert np.max(np.abs(y[:, 2] - q2)) <= 1e-6 * q2_end
+    assert np.max(np.abs(y[:, 1] + y[:, 2] - C1 * V0)) <= 1e-12  # charge kept
+    energy = y[:, 1] ** 2 / (2 * C1) + y[:, 2] ** 2 / (2 * C2)
+    lost = C1 * V0 ** 2 / 2 - energy[-1]
+    assert abs(lost - C1 * C2 * V0 ** 2 / (2 * (C1 + C2))) <= 1e-4  # (e^-12 still to go)
+    assert [r[1:] for r in events] == [["t >= 1", "0 -> 1"], ["sw.open", "1 -> 0"]]
