@@ -283,6 +283,7 @@ scene run { time 0 .. 2; outputs x }
         result = runner.run(program, None)
         assert result.status == 1
         assert "at t = 1: chattering" in result.message
+        assert "'n > 0.5' keeps changing" in result.message  # (the condition, named)
 
 
 @pytest.mark.parametrize("text, message", [

@@ -1124,6 +1124,7 @@ typedef struct bgc_run {
     double t_next;   /* the first time event after r->t (INFINITY: none) */
     double t_event;  /* the last event's time, and how many events in a row came ... */
     long chain;      /* ... closer to the one before than the solver resolves */
+    int changed;     /* the first discrete value the last event changed (-1: none) */
 } bgc_run;
 #define BGC_STIFF (-1) /* an auto run's explicit phase found the problem stiff */
 
@@ -1474,12 +1475,15 @@ static int bgc_event_iteration(bgc_run *r, double t, double *x, int start)
     double *g = r->g, *in = BGC_EV_IN(r), *out = BGC_EV_OUT(r);
     char change[96];
     int it, i, k, rc, changed = 1;
+    r->changed = -1;
     for (it = 0; changed; it++) {
         if (it == BGC_MAX_EVENT_ITERATIONS) {
             snprintf(r->msg, r->msg_size, "at t = %.17g: chattering: the event iteration "
-                     "does not settle after %d passes (a Zeno model?)", t, it);
+                     "does not settle after %d passes ('%s' keeps changing: a Zeno model?)",
+                     t, it, r->changed >= 0 ? bgc_discrete_names[r->changed] : "a state");
             return BGC_ERR_RUNTIME;
         }
+        r->changed = -1;
         rc = bgc_indicators(r, t, x, g);
         if (rc)
             return rc;
@@ -1510,6 +1514,8 @@ static int bgc_event_iteration(bgc_run *r, double t, double *x, int start)
                 return bgc_fail(r->msg, r->msg_size, t, "discrete value", bgc_discrete_names[k]);
             if (v != r->d[k]) {
                 changed = 1;
+                if (r->changed < 0)
+                    r->changed = k;
                 if (!start) {
                     snprintf(change, sizeof change, "%.17g -> %.17g", r->d[k], v);
                     rc = bgc_log(r, t, bgc_discrete_names[k], change);
@@ -1608,16 +1614,17 @@ static int bgc_handle_event(bgc_run *r, double t, double *x)
     r->steps_out = r->st->steps; /* the step budget starts again */
     r->t_out = t;
     r->from_event = 1;
-    if (r->chain >= BGC_MAX_EVENT_ITERATIONS) {
-        snprintf(r->msg, r->msg_size, "at t = %.17g: chattering: %ld events in a row, each "
-                 "within 1e-12 relative of the one before (a Zeno model: the switching "
-                 "outruns the time's resolution)", t, r->chain);
-        return BGC_ERR_RUNTIME;
-    }
     if (r->s->event_rows)
         rc = bgc_emit(r, t, x);
     if (rc == 0)
         rc = bgc_event_iteration(r, t, x, 0);
+    if (rc == 0 && r->chain >= BGC_MAX_EVENT_ITERATIONS) {
+        snprintf(r->msg, r->msg_size, "at t = %.17g: chattering: %ld events in a row, each "
+                 "within 1e-12 relative of the one before, the last changing '%s' (a Zeno "
+                 "model: the switching outruns the time's resolution)", t, r->chain,
+                 r->changed >= 0 ? bgc_discrete_names[r->changed] : "a state");
+        return BGC_ERR_RUNTIME;
+    }
     if (rc == 0 && r->s->event_rows)
         rc = bgc_emit(r, t, x);
     if (rc == 0)
@@ -1888,6 +1895,7 @@ static int bgc_integrate(const bgc_settings *s, const bgc_params *p, bgc_work *w
     r.t_next = INFINITY;
     r.t_event = -INFINITY;
     r.chain = 0;
+    r.changed = -1;
     r.d = (double *)&q + BGC_DISCRETE_OFFSET;
     r.g = r.ev = NULL;
     bgc_params_update(&q);

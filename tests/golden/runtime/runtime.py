@@ -1276,7 +1276,7 @@ class _Run:
 
     __slots__ = ("s", "p", "w", "st", "nout", "kout", "t", "h", "y", "detect_stiffness",
                  "steps_out", "t_out", "from_event", "m", "name", "fixed", "doff", "g", "t_next",
-                 "t_event", "chain")
+                 "t_event", "chain", "changed")
 
     def __init__(self, s, p, w, st, y):
         self.s, self.p, self.w, self.st = s, p, w, st
@@ -1291,6 +1291,7 @@ class _Run:
         self.doff = len(p) - len(_DISCRETE_NAMES)
         self.g = []
         self.t_next, self.t_event, self.chain = math.inf, -math.inf, 0
+        self.changed = -1  # the first discrete value the last event changed
 
     def f(self, t, y):
         """dy/dt as a numpy vector; a failed algebraic block raises _BlockFailure."""
@@ -1424,10 +1425,14 @@ def _event_iteration(run, t, x, start):
     indicators there after it."""
     G, p, off = len(_INDICATOR_STRICT), run.p, run.doff
     changed, it = True, 0
+    run.changed = -1
     while changed:
         if it == MAX_EVENT_ITERATIONS:
             raise _Failure("at t = %.17g: chattering: the event iteration does not settle "
-                           "after %d passes (a Zeno model?)" % (t, it), t)
+                           "after %d passes ('%s' keeps changing: a Zeno model?)"
+                           % (t, it, _DISCRETE_NAMES[run.changed] if run.changed >= 0
+                              else "a state"), t)
+        run.changed = -1
         g = _indicators(run, t, x)
         r = [1.0 if _holds(k, g[k]) else 0.0 for k in range(G)]
         r.append(1.0 if start and it == 0 else 0.0)
@@ -1451,6 +1456,8 @@ def _event_iteration(run, t, x, start):
                 raise _fail(t, "discrete value", _DISCRETE_NAMES[k])
             if v != p[off + k]:
                 changed = True
+                if run.changed < 0:
+                    run.changed = k
                 if not start:
                     _log(run, t, _DISCRETE_NAMES[k], "%.17g -> %.17g" % (p[off + k], v))
                 p[off + k] = v
@@ -1526,13 +1533,15 @@ def _handle_event(run, t, x):
         run.chain = 0
     run.t_event = t
     run.steps_out, run.t_out, run.from_event = run.st["steps"], t, True  # a new step budget
-    if run.chain >= MAX_EVENT_ITERATIONS:
-        raise _Failure("at t = %.17g: chattering: %d events in a row, each within 1e-12 "
-                       "relative of the one before (a Zeno model: the switching outruns the "
-                       "time's resolution)" % (t, run.chain), t)
     if run.s.event_rows:
         yield from run.emit(t, x)
     _event_iteration(run, t, x, False)
+    if run.chain >= MAX_EVENT_ITERATIONS:
+        raise _Failure("at t = %.17g: chattering: %d events in a row, each within 1e-12 "
+                       "relative of the one before, the last changing '%s' (a Zeno model: the "
+                       "switching outruns the time's resolution)"
+                       % (t, run.chain, _DISCRETE_NAMES[run.changed] if run.changed >= 0
+                          else "a state"), t)
     if run.s.event_rows:
         yield from run.emit(t, x)
     _set_next_time(run, t, x)
