@@ -356,3 +356,25 @@ def test_an_event_iteration_that_does_not_settle_fails_with_a_message(tmp_path):
             fmpy.simulate_fmu(str(path), fmi_type=kind, logger=lambda *a: log.append(a))
         (message,) = [a[4].decode() for a in log if a[2] == 3]  # fmi2Error
         assert message.startswith(f"{fn}: at t = 0.5") and "chattering" in message, message
+
+
+def test_the_rectifier_with_an_ideal_diode_as_an_fmu(tmp_path):
+    """The half-wave rectifier (an ideal diode: its modes are discrete values, its switching
+    state relations): FMPy validates its FMU, and FMPy's runs of it, Model Exchange with its
+    own event handling and Co-Simulation, follow bgc's run and the piecewise reference."""
+    from test_contact import RECTIFIER, rectifier_reference
+    text = RECTIFIER.replace("SOLVER", "dopri5")
+    compiled = build(text, "run")
+    path = tmp_path / "rectifier.fmu"
+    path.write_bytes(fmu.build_fmu(compiled))
+    assert validate_fmu(str(path)) == []
+    assert fmpy.read_model_description(str(path)).numberOfEventIndicators == 2
+    t, Y, names = bgc.simulate(Source("rectifier.bg", text), "run")
+    ours = Y[:, names.index("l.p")]
+    for kind in ("ModelExchange", "CoSimulation"):
+        extra = {"record_events": False} if kind == "ModelExchange" else {}
+        result = simulate(path, kind, 0.0005, output=["l.p"], **extra)
+        assert np.allclose(result["time"], t, rtol=0, atol=1e-12)
+        reference = 0.05 * rectifier_reference(np.asarray(t))
+        assert relative_difference(result["l.p"], ours) < 1e-6, kind
+        assert relative_difference(result["l.p"], reference) < 1e-6, kind
