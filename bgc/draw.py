@@ -149,11 +149,21 @@ def _kind_text(el: Element) -> str:
     return f"{el.kind}[{n}→{m}]" if n != m else f"{el.kind}[{n}]"
 
 
+SWITCHED = {"diode": ("D", "ideal diode"), "friction": ("Fr", "dry friction"),
+            "switch": ("Sw", "ideal switch"), "unilateral": (None, "unilateral constraint")}
+
+
 def _element_label(el: Element, lines, grey: bool) -> _Html:
     kind = _kind_text(el)
     if el.is_junction:
         sub = el.name
-        if el.constraint is not None:
+        switched = SWITCHED.get(el.constraint.kind) if el.constraint is not None else None
+        if switched:  # a switched element, or a gap: a constraint junction in one mode
+            kind = switched[0] or kind
+            if el.constraint.gains and switched[0]:  # Fr(Fc, Fs), Sw(COND)
+                kind += "(" + ", ".join(_text(g, lines) for g in el.constraint.gains) + ")"
+            sub += f" ({switched[1]})"
+        elif el.constraint is not None:
             sub += " (constraint)"
         return _label(kind, sub, grey)
     if el.law is not None:

@@ -298,3 +298,17 @@ def test_two_capacitors_joined_by_a_switch(solver, tmp_path):
     lost = C1 * V0 ** 2 / 2 - energy[-1]
     assert abs(lost - C1 * C2 * V0 ** 2 / (2 * (C1 + C2))) <= 1e-4  # (e^-12 still to go)
     assert [r[1:] for r in events] == [["t >= 1", "0 -> 1"], ["sw.open", "1 -> 0"]]
+
+
+def test_the_drawing_names_the_switched_elements():
+    """bgc draw shows a diode as D, friction as Fr(Fc, Fs), a switch as Sw(COND) and a gap as
+    a unilateral constraint junction (each a constraint junction underneath)."""
+    from bgc import draw
+    cases = [(RECTIFIER.replace("SOLVER", "dopri5"), "d", "D", "ideal diode"),
+             (STICK_SLIP.replace("SOLVER", "dopri5"), "fr", "Fr(Fc, Fs)", "dry friction"),
+             (CAPACITORS.replace("SOLVER", "dopri5"), "sw", "Sw(t &gt;= 1)", "ideal switch"),
+             (BALL, "floor", "0", "unilateral constraint")]
+    for text, name, kind, what in cases:
+        dot = draw.draw_dot(bgc.build(Source("m.bg", text), None, program=False))
+        node = next(line for line in dot.splitlines() if line.strip().startswith(f'"{name}" ['))
+        assert f"<FONT>{kind}</FONT>" in node and f"{name} ({what})" in node
