@@ -183,7 +183,7 @@ def _switch(c, info, stop, states, relations, discretes, whens):
                     "1: open, 0: closed", c.name_span,
                     sp.Piecewise((sp.Integer(0), cond), (sp.Integer(1), True)))
     opening = []
-    if any(s != 0 for s in (new - p for p, new in stop.items())):
+    if stop:  # (a resistive path has no storages to stop)
         n = len(relations)
         flows = Relation(sp.Symbol(f"event#{n}"), sp.StrictGreaterThan(
             sp.Piecewise((sp.Integer(1), sp.Ne(active(c), 0)), (sp.Integer(-1), True)), 0),

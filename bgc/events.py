@@ -29,7 +29,9 @@ from sympy.core.relational import Relational
 from sympy.logic.boolalg import BooleanAtom, BooleanFunction
 
 from .diagnostics import Span
+from .differentiate import partial
 from .graph import TIME, written
+from .ir import SquareNext, SquareWave
 
 RELATIONS = {"<": sp.StrictLessThan, "<=": sp.LessThan, ">": sp.StrictGreaterThan,
              ">=": sp.GreaterThan, "==": sp.Eq, "!=": sp.Ne}
@@ -232,7 +234,6 @@ def strict(r: Relation) -> bool:
 def _time_event(r: Relation, params: set):
     """(t*, value after t*) of a relation a t + b > 0 (a, b of parameters, a != 0), else
     None (a relation of t that is not linear: located as a state relation)."""
-    from .differentiate import partial
     rel = r.relation
     g = rel.lhs - rel.rhs
     a = partial(g, TIME)
@@ -284,7 +285,6 @@ def update_stores(sel: Selected, states) -> tuple[list, list]:
             [r.symbol for r in sel.discrete]:
         out.append(_bit(new[sym]))
     for s in sel.squares:
-        from .ir import SquareWave
         out.append(SquareWave(TIME, s.period, s.duty, s.t0))
     for d in sel.discretes:
         start = sp.Piecewise((d.init, FIRST), (d.symbol if d.next is None else
@@ -295,7 +295,6 @@ def update_stores(sel: Selected, states) -> tuple[list, list]:
 
 
 def next_times(sel: Selected) -> list:
-    from .ir import SquareNext
     return [at for _, at, _ in sel.time] + \
         [SquareNext(TIME, s.period, s.duty, s.t0) for s in sel.squares]
 

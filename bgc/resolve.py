@@ -77,7 +77,7 @@ class _ExprBuilder:
         self.refs = []
         self.noevent = 0
         value = self._evaluate(node)
-        if condition and not self._is_bool(value):
+        if condition and not is_condition(value):
             fail(node.span, "a condition is needed here (a relation such as x > 0), "
                             "not a number")
         if not condition:
@@ -99,7 +99,7 @@ class _ExprBuilder:
             action, node = todo.pop()
             if action is not None:
                 action(node, done)
-                if not done or self._is_bool(done[-1]):
+                if not done or is_condition(done[-1]):
                     continue
                 if _is_matrix(done[-1]):
                     self.scope.charge(len(done[-1]), root.span)
@@ -156,16 +156,13 @@ class _ExprBuilder:
 
     # -- conditions (docs/hybrid.md)
 
-    def _is_bool(self, v) -> bool:
-        return is_condition(v)
-
     def _number_operand(self, v, node):
-        if self._is_bool(v):
+        if is_condition(v):
             fail(node.span, "a condition is not a number: write 'if C then 1 else 0' for "
                             "its value")
 
     def _condition_operand(self, v, node):
-        if not self._is_bool(v):
+        if not is_condition(v):
             fail(node.span, "a condition is needed here (a relation such as x > 0), not a "
                             "number")
 
