@@ -17,7 +17,9 @@ so that the step driver and the event iteration handle them as any other:
             and K by the velocities (bgc.reduce's _Weights: the kinetic metric),
             (G K^T) Lambda = target - Phi', dp = K^T Lambda.  When the rebound is too small to
             leave the surface (E = 0, or below 1e-6 of the largest impact speed so far) the
-            junction becomes active instead: contact that stays closed.
+            junction becomes active instead: contact that stays closed; so it does when the
+            rebound's apex, (E Phi')^2 / (2 |Phi''|), is below 10 atol, a height that the
+            run's tolerance on the states cannot resolve.
   release   active and lambda would pull: the free motion would separate (lambda times
             d Phi''/d lambda below zero); the junction becomes inactive.
 """
@@ -31,7 +33,7 @@ from .algebra import Max
 from .diagnostics import fail
 from .differentiate import partial
 from .events import TOLERANCE, Action, Discrete, Relation, When
-from .graph import var
+from .graph import TIME, var
 from .system import der
 
 SWITCHED = ("diode", "friction", "switch")  # one-ports that are constraint junctions in one of their modes
@@ -63,12 +65,27 @@ def with_contact_events(sys, infos, weigh, defs, leaf, cycle):
     def expandable(s):
         return s in defs and not sys.is_leaf(s)
 
+    gaps = {i.junction: dict(weigh(cdefs[i.junction].balance)) for i in infos
+            if i.kind == "unilateral"}
+    held = {j: [] for j in gaps}  # the friction's stop, at each contact's release
+    moved = {j: set() for j in gaps}
     for info in (i for i in infos if i.kind in SWITCHED):
         c = cdefs[info.junction]
         K_d = dict(weigh(c.balance))  # (none: a resistive path, whose flow stops at once)
         block = _impulse(c, info.balance, K_d, sp.Integer(0), bilateral, cdefs, weigh,
                          order)[0] if K_d else {}
-        switch = {"diode": _diode, "friction": _friction, "switch": _switch}[info.kind]
+        if info.kind == "friction":
+            stops = [cdefs[j] for j in sorted(gaps) if _parallel(gaps[j], K_d)]
+            if stops:
+                _suspend(sys, c, stops)
+            for s in stops:  # released, the contact leaves the friction holding: at rest
+                held[s.junction] += [Action("reinit", states[p].name, p, new, c.span)
+                                     for p, new in block.items() if p not in moved[s.junction]]
+                moved[s.junction] |= set(block)
+            relations, discretes, whens = _friction(c, info, block, states, relations,
+                                                    discretes, whens, stops)
+            continue
+        switch = {"diode": _diode, "switch": _switch}[info.kind]
         relations, discretes, whens = switch(c, info, block, states, relations, discretes,
                                              whens)
     for info in (i for i in infos if i.kind == "unilateral"):
@@ -82,7 +99,18 @@ def with_contact_events(sys, infos, weigh, defs, leaf, cycle):
             fail(c.name_span, f"unilateral constraint '{J}': its flows are not the velocities "
                               "of I elements in integral causality (an impact moves momenta); "
                               "this is not supported yet")
-        target = sp.Piecewise((-E * v, v < 0), (v, True))
+        fastest = var(f"{J}.vmax")
+        speed = sp.Abs(v)
+        top = Max(fastest, speed)
+        # Phi'' of the free motion (the junction is open at an impact: its lambda is zero)
+        accel = sp.Add(*[partial(v, s) * der(s) for s in sorted(
+            v.free_symbols & states.keys(), key=order.get)], partial(v, TIME))
+        # a rebound whose apex, (E v)^2 / (2 |Phi''|), the run's tolerance cannot resolve
+        low = (E * speed) ** 2 <= -20 * TOLERANCE * accel
+        rests = sp.And(v < 0, sp.Or(E * speed <= REST * top, low))
+        stays = sp.Piecewise((sp.Integer(1), rests), (sp.Integer(0), True))
+        # the rebound's Phi'; resting, none (the contact then closes with Phi' = 0)
+        target = sp.Piecewise((sp.Integer(0), rests), (-E * v, v < 0), (v, True))
         new_p, moved, G = _impulse(c, v, K_u, target, bilateral, cdefs, weigh, order)
         try:  # d Phi''/d lambda: Phi' in the momenta, times each momentum's rate by lambda
             rates = {p: leaf(sys.eqs[der(p)].expr, defs, expandable, memo) for p in moved}
@@ -99,11 +127,6 @@ def with_contact_events(sys, infos, weigh, defs, leaf, cycle):
             sp.Piecewise((-pull * c.multiplier, on), (sp.Integer(-1), True)), 0),
             f"{J}: release (lambda would pull)", c.name_span, None)
         relations += [touch, leave]
-        fastest = var(f"{J}.vmax")
-        speed = sp.Abs(v)
-        top = Max(fastest, speed)
-        stays = sp.Piecewise((sp.Integer(1), sp.And(v < 0, E * speed <= REST * top)),
-                             (sp.Integer(0), True))
         discretes += [
             Discrete(f"{J}.active", active(c),
                      sp.Piecewise((sp.Integer(1), info.phi <= 0), (sp.Integer(0), True)),
@@ -115,8 +138,8 @@ def with_contact_events(sys, infos, weigh, defs, leaf, cycle):
             Action("assign", f"{J}.vmax", fastest, top, c.span))
         whens += [When(touch.symbol, touch.text, impact, c.span),
                   When(leave.symbol, leave.text,
-                       (Action("assign", f"{J}.active", active(c), sp.Integer(0), c.span),),
-                       c.span)]
+                       (Action("assign", f"{J}.active", active(c), sp.Integer(0), c.span),
+                        *held[J]), c.span)]
     return replace(sys.es, events=(tuple(relations), tuple(squares), tuple(discretes),
                                    tuple(whens)))
 
@@ -195,13 +218,38 @@ def _switch(c, info, stop, states, relations, discretes, whens):
     return relations, discretes + [mode], whens + opening
 
 
-def _friction(c, info, stop, states, relations, discretes, whens):
+def _parallel(a: dict, b: dict) -> bool:
+    """Whether two rows, {momentum: coefficient}, hold the same velocity (one a multiple of
+    the other): then, both active, their multipliers share one load."""
+    if not a or set(a) != set(b):
+        return False
+    first = min(a, key=lambda p: p.name)
+    return all(sp.expand(a[p] * b[first] - b[p] * a[first]) == 0 for p in a)
+
+
+def _suspend(sys, c, stops):
+    """Dry friction on storages that a unilateral junction also holds (a motor pressed against
+    its end stop): while a contact is closed the velocity is held by the contact, and both
+    multipliers would carry the same load, indeterminate between them.  The friction's
+    sticking row is then suspended (its force zero, the contact takes the load); when the
+    contact releases, the row holds again, and the friction sticks or breaks away as the
+    load then says."""
+    law = sys.eqs[c.multiplier]
+    closed = sp.Or(*[sp.Ne(active(s), 0) for s in stops])
+    (row, stick), (free, _) = law.expr.args
+    sys.add(replace(law, expr=sp.Piecewise((c.multiplier, sp.And(stick, closed)),
+                                           (row, stick), (free, True))))
+
+
+def _friction(c, info, stop, states, relations, discretes, whens, stops=()):
     """Dry friction `Fr(Fc, Fs)`: its mode `F.stick` (1: sticking, its flow held at zero, its
     effort the multiplier; 0: sliding, effort Fc times its direction `F.dir`, +1 or -1).
-    Sliding, it sticks where its flow would reverse (below 10 atol), the storages then taking
-    the state that stops it; sticking, it breaks away where the force that holds it exceeds
-    Fs, and slides the way that force pushes.  The multiplier's law while sliding is
-    lambda = Fc dir, from the constraint junction's (bgc.reduce)."""
+    Sliding, it sticks where its flow reverses continuously (below 10 atol), the storages
+    then taking the state that stops it; where the flow jumps across zero (an impact's
+    rebound) it slides on the other way.  Sticking, it breaks away where the force that holds
+    it exceeds Fs, and slides the way that force pushes.  While a unilateral junction on the
+    same storages (stops) is closed it sticks, suspended (_suspend).  The multiplier's law
+    while sliding is lambda = Fc dir, from the constraint junction's (bgc.reduce)."""
     J = c.junction
     Fc, Fs = c.gains
     stick = sp.Ne(active(c), 0)
@@ -213,16 +261,23 @@ def _friction(c, info, stop, states, relations, discretes, whens):
     breaks = Relation(sp.Symbol(f"event#{n + 1}"), sp.StrictGreaterThan(
         sp.Piecewise((sp.Abs(c.multiplier) - Fs, stick), (sp.Integer(-1), True)), 0),
         f"{J}: breaks away (|e| > Fs)", c.name_span, None)
+    # a located reversal leaves |f| at 10 atol to rounding; a rebound leaves it far above
+    crept = sp.Abs(info.balance) <= 100 * TOLERANCE
+    closed = [sp.Ne(active(s), 0) for s in stops]
     mode = Discrete(f"{J}.stick", active(c),
-                    sp.Piecewise((sp.Integer(1), sp.Eq(info.balance, 0)), (sp.Integer(0), True)),
+                    sp.Piecewise((sp.Integer(1), sp.Or(sp.Eq(info.balance, 0), *closed)),
+                                 (sp.Integer(0), True)),
                     "1: sticking, 0: sliding", c.name_span,
-                    sp.Piecewise((sp.Integer(0), breaks.symbol), (sp.Integer(1), slows.symbol),
+                    sp.Piecewise(*[(sp.Integer(1), on) for on in closed],
+                                 (sp.Integer(0), breaks.symbol),
+                                 (sp.Integer(1), sp.And(slows.symbol, crept)),
                                  (active(c), True)))
     direction = Discrete(f"{J}.dir", way,
                          sp.Piecewise((sp.Integer(-1), info.balance < 0), (sp.Integer(1), True)),
                          "the sliding direction", c.name_span,
-                         sp.Piecewise((sp.sign(c.multiplier), breaks.symbol), (way, True)))
+                         sp.Piecewise((sp.sign(c.multiplier), breaks.symbol),
+                                      (-way, slows.symbol), (way, True)))
     transfer = When(slows.symbol, slows.text, tuple(
-        Action("reinit", states[p].name, p, new, c.span) for p, new in stop.items()), c.span)
+        Action("reinit", states[p].name, p, sp.Piecewise((new, crept), (p, True)), c.span)
+        for p, new in stop.items()), c.span)
     return relations + [slows, breaks], discretes + [mode, direction], whens + [transfer]
-

@@ -29,16 +29,17 @@ BALL = WHEN_BALL.replace(
 assert "unilateral" in BALL and "reinit" not in BALL
 
 
-def run(compiled, backend, log, **options):
+def run(compiled, backend, log, stats=False, **options):
     program = runner.prepare(compiled, backend)
     names = [p.name for p in compiled.program.params]
     settings = runner.settings_for(compiled.program.scene, names, events=str(log), **options)
-    result = runner.run(program, settings)
+    result = runner.run(program, settings, stats=stats)
     assert result.status == 0, result.stderr
     rows = list(csv.reader(io.StringIO(result.csv)))
     with open(log, newline="") as f:
         events = list(csv.reader(f))[1:]
-    return result.csv, np.array([[float(v) for v in r] for r in rows[1:]]), events
+    y = np.array([[float(v) for v in r] for r in rows[1:]])
+    return (result.csv, y, events, result.stats) if stats else (result.csv, y, events)
 
 
 @pytest.mark.parametrize("solver", ["dopri5", "radau5"])
@@ -312,3 +313,128 @@ def test_the_drawing_names_the_switched_elements():
         dot = draw.draw_dot(bgc.build(Source("m.bg", text), None, program=False))
         node = next(line for line in dot.splitlines() if line.strip().startswith(f'"{name}" ['))
         assert f"<FONT>{kind}</FONT>" in node and f"{name} ({what})" in node
+
+
+MOTOR = (ROOT / "tests" / "models" / "motor_stop.bg").read_text()
+
+
+def motor_reference(t_out, V=12.0, R=1.0, L=0.01, k=0.1, J=0.001, b=1e-4, Fc=0.02, Fs=0.03,
+                    qmax=1.0, e=0.5, t_switch=0.5, atol=1e-12):
+    """The motor of tests/models/motor_stop.bg as a hybrid automaton integrated by SciPy at
+    tight tolerance, phase by phase: sliding (M w' = k i - b w - Fc s), stuck (w = 0 while
+    |k i| <= Fs), resting against the stop (w = 0, q = qmax, while the torque k i pushes into
+    it; the friction then carries nothing), with Newton's restitution at each impact and rest
+    once a rebound is below 1e-6 of the fastest impact or its apex below 10 atol (the rule of
+    docs/hybrid.md).  Returns q, w, i at t_out and the
+    times of the phase changes."""
+    out = np.zeros((3, len(t_out)))
+    t0, y, mode, vmax = 0.0, [0.0, 0.0, 0.0], "stick", 0.0
+    log = []
+
+    def u(t):
+        return V if t < t_switch else -V
+
+    while t0 < t_out[-1]:
+        t1 = t_switch if t0 < t_switch else t_out[-1]
+        s = {"slide+": 1.0, "slide-": -1.0}.get(mode, 0.0)
+        if s:
+            def rhs(t, z):
+                return [(u(t) - R * z[0] - k * z[1]) / L, (k * z[0] - b * z[1] - Fc * s) / J,
+                        z[1]]
+
+            def stops(t, z):
+                return z[1]
+            stops.terminal, stops.direction = True, -s
+
+            def hits(t, z):
+                return z[2] - qmax
+            hits.terminal, hits.direction = True, 1
+            events = [stops, hits]
+        else:
+            def rhs(t, z):
+                return [(u(t) - R * z[0]) / L, 0.0, 0.0]
+
+            def breaks(t, z):
+                return abs(k * z[0]) - Fs
+            breaks.terminal, breaks.direction = True, 1
+
+            def pulls(t, z):
+                return k * z[0]
+            pulls.terminal, pulls.direction = True, -1
+            events = [breaks] if mode == "stick" else [pulls]
+        sol = solve_ivp(rhs, (t0, t1), y, events=events, rtol=1e-12, atol=1e-14,
+                        dense_output=True, first_step=1e-7)
+        mask = (t_out >= t0) & (t_out <= sol.t[-1])
+        if mask.any():
+            out[:, mask] = sol.sol(t_out[mask])
+        t0, y = sol.t[-1], list(sol.y[:, -1])
+        if sol.status != 1:
+            continue  # the time event: the same phase goes on
+        fired = [j for j, te in enumerate(sol.t_events) if len(te)][0]
+        if s and fired == 0:  # w reached zero: it sticks, or the load turns it round
+            mode = "stick" if abs(k * y[0]) <= Fs else ("slide+" if y[0] > 0 else "slide-")
+            y[1] = 0.0
+            log.append((t0, "stops"))
+        elif s:  # an impact
+            vmax = max(vmax, abs(y[1]))
+            accel = (k * y[0] - b * y[1] - Fc * s) / J  # into the stop
+            if e * abs(y[1]) <= 1e-6 * vmax or (e * y[1]) ** 2 <= 20 * atol * accel:
+                mode, y[1], y[2] = "rest", 0.0, qmax
+                log.append((t0, "rest"))
+            else:
+                y[1] = -e * y[1]
+                mode = "slide-"
+                log.append((t0, "impact"))
+        elif mode == "stick":
+            mode = "slide+" if y[0] > 0 else "slide-"
+            log.append((t0, "breaks"))
+        else:
+            mode = "stick"
+            log.append((t0, "release"))
+    return out, log
+
+
+@pytest.mark.parametrize("solver", ["auto", "radau5"])
+def test_a_motor_against_its_end_stop_with_dry_friction(solver, tmp_path):
+    """The end stop (unilateral) and the friction (Fr) on the same shaft: resting against the
+    stop, the two multipliers would share one load; bgc lets the contact carry it and the
+    friction take over when the contact releases.  With the default solver the run takes a
+    few hundred steps (the penalty formulation of the same motor needs millions); against the
+    hybrid automaton above, and the phase changes against their closed forms (the default
+    solver and radau5, both backends)."""
+    compiled = bgc.build(Source("motor_stop.bg", MOTOR), "run")
+    outs = [run(compiled, b, tmp_path / f"{b}.csv", stats=True, solver=solver)
+            for b in BACKENDS]
+    assert len({o[0] for o in outs}) == 1  # the same bytes in both backends
+    _, y, events, stats = outs[0]
+    assert int(stats["steps"]) < 5000 and int(stats["events"]) < 100
+    t = y[:, 0]
+    ref, log = motor_reference(t)
+    V, R, L, k, Fs = 12.0, 1.0, 0.01, 0.1, 0.03
+    # closed forms of the phase changes: the current's rise from rest, its fall after the
+    # voltage reverses (i = 0: the stop releases), and the friction giving way backwards
+    first = -L / R * math.log(1 - Fs * R / (k * V))
+    release = 0.5 + L / R * math.log(2)
+    again = 0.5 + L / R * math.log(2 * V / R / (V / R - Fs / k))
+    kinds = [what for _, what in log]
+    assert kinds[0] == "breaks" and kinds.count("rest") == 1 and kinds.count("release") == 1
+    assert abs(log[0][0] - first) < 1e-10 and abs(dict(map(reversed, log))["release"]
+                                                    - release) < 1e-10
+    got = {what: [float(s) for s, w, c in events if w == what and c == "0 -> 1"] for what in
+           ("fr: breaks away (|e| > Fs)", "stop: release (lambda would pull)",
+            "stop: contact (phi < 0)")}
+    assert abs(got["fr: breaks away (|e| > Fs)"][0] - first) < 1e-10
+    assert abs(got["fr: breaks away (|e| > Fs)"][-1] - again) < 1e-10
+    assert len(got["stop: release (lambda would pull)"]) == 1
+    assert abs(got["stop: release (lambda would pull)"][0] - release) < 1e-10
+    impacts = [s for s, what in log if what == "impact"]
+    assert np.allclose(got["stop: contact (phi < 0)"][:10], impacts[:10], rtol=1e-7, atol=0)
+    # q and the current everywhere; the speed away from the impacts, where it jumps
+    assert np.max(np.abs(y[:, 1] - ref[2])) <= 1e-6 * np.max(np.abs(ref[2]))
+    assert np.max(np.abs(y[:, 3] / 1 - ref[0])) <= 1e-6 * np.max(np.abs(ref[0]))
+    far = np.all(np.abs(t[:, None] - np.array(impacts)[None, :]) > 1e-6, axis=1)
+    assert np.max(np.abs(y[far, 2] - ref[1][far])) <= 1e-6 * np.max(np.abs(ref[1]))
+    # resting against the stop it carries the torque k i; the friction then carries nothing
+    resting = (t > 0.2) & (t < 0.5)
+    assert np.allclose(-y[resting, 4], k * ref[0][resting], rtol=1e-6)
+    assert np.all(y[resting, 5] == 0)

@@ -35,7 +35,7 @@
 
 #define BGC_NUM_STATES 4
 #define BGC_NUM_PARAMS 8
-#define BGC_NUM_CONSTANTS 14
+#define BGC_NUM_CONSTANTS 15
 #define BGC_NUM_OUTPUTS 4
 #define BGC_NUM_CONSTRAINTS 2
 #define BGC_NUM_POSITION_ROWS 1
@@ -66,7 +66,7 @@ typedef struct bgc_params {
     double p_e;
     double p_alpha;
     double p_beta;
-    double c[14];
+    double c[15];
     double d[4]; /* set at events only (docs/hybrid.md) */
 } bgc_params;
 
@@ -160,21 +160,22 @@ void bgc_params_defaults(bgc_params *p, const int *given)
 void bgc_params_update(bgc_params *p)
 {
     p->c[0] = 1.0/p->p_m;
-    const double w60 = -p->p_l*p->p_l;
-    p->c[1] = w60;
+    const double w62 = -p->p_l*p->p_l;
+    p->c[1] = w62;
     p->c[2] = p->p_m*p->p_g;
     p->c[3] = -1.0/p->p_m;
-    const double w61 = p->p_beta*p->p_beta;
-    p->c[4] = -w61;
+    const double w63 = p->p_beta*p->p_beta;
+    p->c[4] = -w63;
     p->c[5] = -2.0*p->p_alpha;
-    p->c[6] = w61;
+    p->c[6] = w63;
     p->c[7] = 2.0*p->p_alpha;
     p->c[8] = 2.0/p->p_m;
-    p->c[9] = fabs(w60);
+    p->c[9] = fabs(w62);
     p->c[10] = -p->p_d;
-    p->c[11] = -p->p_e/p->p_m;
-    p->c[12] = -2.0/p->p_m;
-    p->c[13] = 0.5*p->p_m;
+    p->c[11] = -p->p_e*p->p_e/20.0;
+    p->c[12] = -p->p_e/p->p_m;
+    p->c[13] = -2.0/p->p_m;
+    p->c[14] = 0.5*p->p_m;
 }
 
 double *bgc_param_ref(bgc_params *p, int j)
@@ -494,20 +495,51 @@ static inline int bgc_model_update(double t, const double *x, const bgc_params *
     (void)r;
     (void)out;
     const double w53 = p->c[0]*x[0];
-    const double w54 = ((w53 < 0.0) ? p->c[11]*x[0] : w53);
-    const double w55 = p->c[3]*x[0];
-    const double w56 = -2.0*(w54 + w55)*x[2] + p->c[12]*x[0]*x[2] + p->c[12]*x[1]*x[3];
-    const double w57 = 1.0/(x[3]*x[3]);
-    out[0] = (((r[0] != 0.0) && (!(((r[2] == 0.0) && (p->d[0] != 0.0)) || ((r[0] != 0.0) && (r[2] != 0.0))))) ? (w54 + w55 - 0.5*w56*w57*x[2])*p->p_m + w56*w57*p->c[13]*x[2] + x[0] : x[0]);
-    out[1] = (((r[0] != 0.0) && (!(((r[2] == 0.0) && (p->d[0] != 0.0)) || ((r[0] != 0.0) && (r[2] != 0.0))))) ? w56*p->c[13]/x[3] + x[1] : x[1]);
+    const double w1 = 2.0*w53*x[2];
+    const double w2 = p->c[0]*x[1];
+    const double w3 = 2.0*w2*x[3];
+    const double w4 = w1 + w3;
+    const double w5 = x[2]*x[2] + x[3]*x[3] + p->c[1];
+    const double w54 = p->p_d + x[2];
+    const double w8 = 2.0*x[2];
+    const double w9 = 2.0*x[3];
+    const double w10 = w8*p->c[3];
+    const double w12 = 2.0*w10*x[2];
+    const double w13 = 2.0*p->c[3]*x[2];
+    const double w14 = w9*p->c[3];
+    const double w15 = 2.0*w14*x[3];
+    const double w16 = w12 + w15;
+    const double w17 = 2.0*w53*w53;
+    const double w18 = p->c[0]*p->c[2];
+    const double w19 = 2.0*w2*w2 + 2.0*w18*x[3];
+    const double w20 = w17 + w19;
+    const double w55 = ((p->d[2] != 0.0) ? 1.0 : 0.0);
+    wv[76] = w16;
+    wv[77] = w13;
+    wv[78] = w10*w55;
+    wv[79] = w55*p->c[3] + ((p->d[2] != 0.0) ? 0.0 : 1.0);
+    wv[88] = -w20 + w4*p->c[5] + w5*p->c[4];
+    wv[89] = -((p->d[2] != 0.0) ? w53*p->c[7] + w54*p->c[6] : 0.0);
+    if (bgc_block_solve(w, 0, t))
+        return 1;
+    const double w21 = wv[88];
+    const double w22 = wv[89];
+    const double w23 = 2.0*w21*x[2];
+    const double w24 = -w22 - w23;
+    const double w56 = fabs(w53);
+    const double w57 = bgc_max(p->d[3], w56);
+    const double w58 = (((w53 < 0.0) && ((9.9999999999999995e-07*w57 >= w56*p->p_e) || (w->atol*w24*p->c[0] <= w56*w56*p->c[11]))) ? 0.0 : ((w53 < 0.0) ? p->c[12]*x[0] : w53));
+    const double w59 = p->c[3]*x[0];
+    const double w60 = -2.0*(w58 + w59)*x[2] + p->c[13]*x[0]*x[2] + p->c[13]*x[1]*x[3];
+    const double w61 = 1.0/(x[3]*x[3]);
+    out[0] = (((r[0] != 0.0) && (!(((r[2] == 0.0) && (p->d[0] != 0.0)) || ((r[0] != 0.0) && (r[2] != 0.0))))) ? (w58 + w59 - 0.5*w60*w61*x[2])*p->p_m + w60*w61*p->c[14]*x[2] + x[0] : x[0]);
+    out[1] = (((r[0] != 0.0) && (!(((r[2] == 0.0) && (p->d[0] != 0.0)) || ((r[0] != 0.0) && (r[2] != 0.0))))) ? w60*p->c[14]/x[3] + x[1] : x[1]);
     out[2] = x[2];
     out[3] = x[3];
     out[4] = ((r[0] != 0.0) ? 1.0 : 0.0);
     out[5] = ((r[1] != 0.0) ? 1.0 : 0.0);
-    const double w58 = fabs(w53);
-    const double w59 = bgc_max(p->d[3], w58);
-    out[6] = (((r[0] != 0.0) && (!(((r[2] == 0.0) && (p->d[0] != 0.0)) || ((r[0] != 0.0) && (r[2] != 0.0))))) ? (((w53 < 0.0) && (9.9999999999999995e-07*w59 >= w58*p->p_e)) ? 1.0 : 0.0) : (((r[1] != 0.0) && (!(((r[2] == 0.0) && (p->d[1] != 0.0)) || ((r[1] != 0.0) && (r[2] != 0.0))))) ? 0.0 : ((r[2] != 0.0) ? ((p->p_d + x[2] <= 0.0) ? 1.0 : 0.0) : p->d[2])));
-    out[7] = (((r[0] != 0.0) && (!(((r[2] == 0.0) && (p->d[0] != 0.0)) || ((r[0] != 0.0) && (r[2] != 0.0))))) ? w59 : ((r[2] != 0.0) ? 0.0 : p->d[3]));
+    out[6] = (((r[0] != 0.0) && (!(((r[2] == 0.0) && (p->d[0] != 0.0)) || ((r[0] != 0.0) && (r[2] != 0.0))))) ? (((w53 < 0.0) && ((9.9999999999999995e-07*w57 >= w56*p->p_e) || (w->atol*w24*p->c[0] <= w56*w56*p->c[11]))) ? 1.0 : 0.0) : (((r[1] != 0.0) && (!(((r[2] == 0.0) && (p->d[1] != 0.0)) || ((r[1] != 0.0) && (r[2] != 0.0))))) ? 0.0 : ((r[2] != 0.0) ? ((w54 <= 0.0) ? 1.0 : 0.0) : p->d[2])));
+    out[7] = (((r[0] != 0.0) && (!(((r[2] == 0.0) && (p->d[0] != 0.0)) || ((r[0] != 0.0) && (r[2] != 0.0))))) ? w57 : ((r[2] != 0.0) ? 0.0 : p->d[3]));
     return 0;
 }
 
