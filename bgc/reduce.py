@@ -36,7 +36,7 @@ from . import blt, ir
 from .ir import Assign, BlockPlan, Newton, Solve, Store, defines
 from .algebra import (antiderivative, expand_bounded, is_singular, is_symmetric, is_zero,
                       solve_for)
-from .diagnostics import Collector, ModelError, Span, fail, warning
+from .diagnostics import Collector, ModelError, Note, Span, fail, warning
 from .differentiate import directional, partial
 from . import contact, events
 from .system import (TIME, ConstraintDef, Equation, EquationSystem, OutputDef, ParameterDef,
@@ -893,12 +893,16 @@ def reduce(es: EquationSystem, project_initial: bool = False, algebra: str = "au
                                          _Cycle)
         sys.es = es
         sys.params = sys.parameters | events.leaves(es.events)
-    targets, kept = _needed(sys)
-    selected = None
-    if any(es.events):
-        targets, kept, selected = _with_events(sys, targets, kept)
-    blocks = _Blocks(sys, algebra)
-    blocks.run(targets)
+    try:
+        targets, kept = _needed(sys)
+        selected = None
+        if any(es.events):
+            targets, kept, selected = _with_events(sys, targets, kept)
+        blocks = _Blocks(sys, algebra)
+        blocks.run(targets)
+    except ModelError as err:
+        _switched_modes_unsupported(err, infos)
+        raise
     _check_constants(blocks, sys)
     rows = _rows(sys, infos, kept)
     kept_symbols = {st.symbol for st in kept}
@@ -914,6 +918,25 @@ def reduce(es: EquationSystem, project_initial: bool = False, algebra: str = "au
     else:
         initial_values(reduced)  # every initial state a double, projected or not
     return _with_init_warnings(reduced, sys, eliminated)
+
+
+def _switched_modes_unsupported(err: ModelError, infos) -> None:
+    """A model whose switched one-ports (D, Sw, Fr) force storages into derivative causality
+    in one of their modes (a switch closing a loop of capacitors with nothing to limit the
+    flow, a diode across a capacitor): the high index or the undetermined balance met is the
+    mode's; say so at the switched elements, with what was met as a note."""
+    switched = [c for c in infos if c.kind in contact.SWITCHED]
+    d = err.diagnostics[0]
+    if not switched or not ("index is too high" in d.message
+                            or "is not determined in this scene" in d.message):
+        return
+    names = ", ".join(f"'{c.junction}'" for c in switched)
+    fail(switched[0].name_span, f"a mode of {names} forces storages into derivative causality "
+                                "(closed or conducting, it joins storages with nothing to limit "
+                                "the flow between them, or blocking, it leaves one without a "
+                                "path); bgc does not support such modes yet: put a resistance "
+                                "or an inductance in the switched path",
+         Note(d.span, d.message), *d.notes)
 
 
 def _with_events(sys: _System, targets, kept):
