@@ -32,7 +32,7 @@ Importable:
 # The model part: its names replace the runtime's neutral ones (the contract at its head).
 MODEL = "chain8"
 STATES = ["link[1].mx.p", "link[1].my.p", "link[1].x", "link[1].y", "link[2].mx.p", "link[2].my.p", "link[2].x", "link[2].y", "link[3].mx.p", "link[3].my.p", "link[3].x", "link[3].y", "link[4].mx.p", "link[4].my.p", "link[4].x", "link[4].y", "link[5].mx.p", "link[5].my.p", "link[5].x", "link[5].y", "link[6].mx.p", "link[6].my.p", "link[6].x", "link[6].y", "link[7].mx.p", "link[7].my.p", "link[7].x", "link[7].y", "link[8].mx.p", "link[8].my.p", "link[8].x", "link[8].y"]
-OUTPUTS = ["link[1].x", "link[1].y", "link[2].x", "link[2].y", "link[3].x", "link[3].y", "link[4].x", "link[4].y", "link[5].x", "link[5].y", "link[6].x", "link[6].y", "link[7].x", "link[7].y", "link[8].x", "link[8].y"]
+OUTPUTS = ["x1", "y1", "x2", "y2", "x3", "y3", "x4", "y4", "x5", "y5", "x6", "y6", "x7", "y7", "x8", "y8"]
 CONSTRAINTS = [("link[1].rod", "position"), ("link[1].rod", "velocity"), ("link[2].rod", "position"), ("link[2].rod", "velocity"), ("link[3].rod", "position"), ("link[3].rod", "velocity"), ("link[4].rod", "position"), ("link[4].rod", "velocity"), ("link[5].rod", "position"), ("link[5].rod", "velocity"), ("link[6].rod", "position"), ("link[6].rod", "velocity"), ("link[7].rod", "position"), ("link[7].rod", "velocity"), ("link[8].rod", "position"), ("link[8].rod", "velocity")]
 SCENE = {
     "t0": 0.0,
