@@ -11,9 +11,9 @@ recurse), and every lookup is an index map built once.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
-from .diagnostics import Collector, Note
+from .diagnostics import Collector, ModelError, Note
 from .graph import Element, Graph
 from .scene import Scenario, Settings
 
@@ -147,8 +147,34 @@ def _preferred_setter(a: _Assigner, el: Element, i: int) -> str:
     return el.name if sets_effort else a.g.bonds[i].other(el.name)
 
 
+DUAL_SWITCHED = ("switch", "diode")  # switched one-ports that may take either causality
+
+
 def assign_causality(scenario: Scenario) -> CausalGraph:
-    graph = scenario.graph
+    """The causal strokes.  A switch or a diode (bgc.contact) is first the constraint
+    junction that imposes its effort (the multiplier; its flow the constrained balance); where
+    that leaves storages in derivative causality (a switch that closes a loop of capacitors, a
+    diode across a capacitor), it is tried as the dual junction that imposes its flow, and kept
+    so where that leaves fewer (one element at a time, in declaration order)."""
+    causal = _assign(scenario.graph, scenario.settings)
+    if not causal.derivative:
+        return causal
+    for el in scenario.graph.elements:
+        if el.constraint is None or el.constraint.kind not in DUAL_SWITCHED or el.kind != "0":
+            continue
+        graph = causal.graph
+        dual = replace(graph, elements=tuple(replace(e, kind="1") if e.name == el.name else e
+                                             for e in graph.elements))
+        try:
+            trial = _assign(dual, scenario.settings)
+        except ModelError:
+            continue
+        if len(trial.derivative) < len(causal.derivative):
+            causal = trial
+    return causal
+
+
+def _assign(graph: Graph, settings: Settings) -> CausalGraph:
     diags = Collector()
     a = _Assigner(graph, diags)
     _seed_fixed(a)
@@ -176,7 +202,7 @@ def assign_causality(scenario: Scenario) -> CausalGraph:
     derivative = tuple(el.name for el in storage
                        if a.by[a.incident[el.name][0]] != _preferred_setter(
                            a, el, a.incident[el.name][0]))
-    return CausalGraph(graph, scenario.settings, tuple(a.by), derivative, tuple(arbitrary))
+    return CausalGraph(graph, settings, tuple(a.by), derivative, tuple(arbitrary))
 
 
 def _check_multibonds(a: _Assigner, diags: Collector):

@@ -32,7 +32,7 @@ import sympy as sp
 from .algebra import Max
 from .diagnostics import fail
 from .differentiate import partial
-from .events import TOLERANCE, Action, Discrete, Relation, When
+from .events import INITIAL, TOLERANCE, Action, Discrete, Relation, When
 from .graph import TIME, var
 from .system import der
 
@@ -49,6 +49,15 @@ def direction(c) -> sp.Symbol:
 def active(c) -> sp.Symbol:
     """The discrete value that says whether junction c is in contact."""
     return var(f"{c.junction}.active")
+
+
+def holds(c) -> sp.Basic:
+    """When junction c's constraint holds (its law determines the multiplier; else the
+    multiplier is free: zero, or a sliding friction's force).  A switched one-port that is the
+    dual junction (bgc.causality: it imposes its flow) holds its effort at zero while closed or
+    conducting, where the other form holds its flow at zero while open or blocking: the same
+    mode, `active` (open, blocking), holds the other way round."""
+    return sp.Eq(active(c), 0) if c.dual else sp.Ne(active(c), 0)
 
 
 def with_contact_events(sys, infos, weigh, defs, leaf, cycle):
@@ -71,6 +80,15 @@ def with_contact_events(sys, infos, weigh, defs, leaf, cycle):
     moved = {j: set() for j in gaps}
     for info in (i for i in infos if i.kind in SWITCHED):
         c = cdefs[info.junction]
+        if c.dual:  # (the mode at the start: its d[k] are set by the start's first pass)
+            start = info.balance > 0 if info.kind == "diode" else c.gains[0].xreplace(
+                {r.symbol: r.relation for r in relations})
+            relations, whens = _closing(sys, c, info, states, order, leaf, defs, expandable,
+                                        memo, cycle, relations, whens, start)
+            switch = {"diode": _dual_diode, "switch": _switch}[info.kind]
+            relations, discretes, whens = switch(c, info, {}, states, relations, discretes,
+                                                 whens)
+            continue
         K_d = dict(weigh(c.balance))  # (none: a resistive path, whose flow stops at once)
         block = _impulse(c, info.balance, K_d, sp.Integer(0), bilateral, cdefs, weigh,
                          order)[0] if K_d else {}
@@ -165,6 +183,67 @@ def _impulse(c, v, K_v, target, bilateral, cdefs, weigh, order):
     new_p = {p: p + sp.Add(*[K[k][i] * impulse[k] for k in range(m)])
              for i, p in enumerate(moved)}
     return new_p, moved, G[0]
+
+
+def _closing(sys, c, info, states, order, leaf, defs, expandable, memo, cycle, relations,
+             whens, start):
+    """A dual switched one-port (a switch that closes a loop of capacitors, a diode across a
+    capacitor): when its effort is held at zero (closed, conducting) the storages it joins must
+    agree, so their stored quantities jump at once, along the one direction its flow moves
+    them, to where its effort is zero: charge is conserved, and the energy that the jump loses
+    is what an arc or a tiny resistance would dissipate.  With D the states' rates by its flow
+    (the multiplier) and B its effort in the states, the jump is D * Delta with
+    Delta = -B / (dB/dx . D): exact for linear storages (one Newton step otherwise).  At the
+    start of a run in that mode (start: the mode's condition in the model's own terms), the
+    same: an inconsistent start made consistent."""
+    J = c.junction
+    B = info.balance  # its effort, in the states
+    moved = sorted(B.free_symbols & states.keys(), key=order.get)
+    try:
+        D = {s: partial(leaf(sys.eqs[der(s)].expr, defs, expandable, memo), c.multiplier)
+             for s in moved}
+    except (cycle, KeyError):
+        fail(c.name_span, f"'{J}': the rates of the storages it joins could not be written in "
+                          "the states (an algebraic loop); not supported yet")
+    slope = sp.Add(*[partial(B, s) * D[s] for s in moved])
+    if slope == 0:
+        fail(c.name_span, f"'{J}' holds an effort that its own flow cannot change: closed or "
+                          "conducting, it would fix the storages it joins, whatever they "
+                          "hold; the model is not determined in that mode")
+    jump = -B / slope
+    n = len(relations)
+    closes = Relation(sp.Symbol(f"event#{n}"), sp.StrictGreaterThan(
+        sp.Piecewise((sp.Integer(1), holds(c)), (sp.Integer(-1), True)), 0),
+        f"{J}: closes (e = 0)", c.name_span, None)
+    transfer = tuple(Action("reinit", states[s].name, s, s + D[s] * jump, c.span)
+                     for s in moved if D[s] != 0)
+    at_start = tuple(Action("reinit", a.name, a.symbol,
+                            sp.Piecewise((a.expr, start), (a.symbol, True)), c.span)
+                     for a in transfer)
+    return relations + [closes], whens + [When(closes.symbol, closes.text, transfer, c.span),
+                                          When(INITIAL, f"{J}: the start", at_start, c.span)]
+
+
+def _dual_diode(c, info, block, states, relations, discretes, whens):
+    """The ideal diode as the dual junction (it imposes its flow, the multiplier; its effort,
+    the balance, is written in the states): blocking (`D.blocking` = 1), its flow zero; it
+    starts to conduct where its effort would turn positive, and conducting, its effort held at
+    zero (_closing), it blocks where its flow would turn negative."""
+    J = c.junction
+    blocking = sp.Ne(active(c), 0)
+    n = len(relations)
+    forward = Relation(sp.Symbol(f"event#{n}"), sp.StrictGreaterThan(
+        sp.Piecewise((info.balance, blocking), (sp.Integer(-1), True)), 0),
+        f"{J}: forward (e > 0)", c.name_span, None)
+    reverse = Relation(sp.Symbol(f"event#{n + 1}"), sp.StrictGreaterThan(
+        sp.Piecewise((-c.multiplier - 10 * TOLERANCE, sp.Not(blocking)),
+                     (sp.Integer(-1), True)), 0), f"{J}: reverse (f < 0)", c.name_span, None)
+    mode = Discrete(f"{J}.blocking", active(c),
+                    sp.Piecewise((sp.Integer(0), info.balance > 0), (sp.Integer(1), True)),
+                    "1: blocking, 0: conducting", c.name_span,
+                    sp.Piecewise((sp.Integer(0), forward.symbol), (sp.Integer(1), reverse.symbol),
+                                 (active(c), True)))
+    return relations + [forward, reverse], discretes + [mode], whens
 
 
 def _diode(c, info, block, states, relations, discretes, whens):

@@ -469,7 +469,7 @@ def _constraint(c, sys, defs, coordinates, multipliers, memo, diags) -> Constrai
         law = B
     if unilateral or switched:  # active: the constraint's law; else no force (bgc.contact)
         free = c.multiplier - (c.gains[0] * contact.direction(c) if c.kind == "friction" else 0)
-        law = sp.Piecewise((law, sp.Ne(contact.active(c), 0)), (free, True))
+        law = sp.Piecewise((law, contact.holds(c)), (free, True))
     sys.add(Equation(c.multiplier, law, False, c.junction, c.span))
     return ConstraintInfo(c.junction, c.kind if unilateral or switched else kind, detected,
                           c.corrector, c.gains, phi, in_states, c.multiplier, c.span,

@@ -72,6 +72,7 @@ class ConstraintDef:
     span: Span
     name_span: Span
     restitution: sp.Expr | None = None  # unilateral: E (0 when not given)
+    dual: bool = False  # on a 1 junction: the multiplier a flow, the balance of efforts
 
 
 @dataclass(frozen=True)
@@ -402,7 +403,9 @@ class _Builder:
         self.emit(balance, sp.Add(*[sigma[i] * through(b.label) for i, b in bonds]), el,
                   el.span)
         if el.constraint.kind in ("diode", "friction", "switch"):  # a switched one-port: its flow
-            self.emit(var(variable_name(el.name, "f")), balance, el, el.span)
+            # (its effort, as the dual junction that imposes its flow: bgc.causality)
+            self.emit(var(variable_name(el.name, "f" if el.kind == "0" else "e")), balance, el,
+                      el.span)
         c = el.constraint
         ann = None
         if c.annotation is not None:
@@ -410,7 +413,7 @@ class _Builder:
         self.constraints.append(ConstraintDef(
             el.name, c.kind, c.corrector, tuple(g.value for g in c.gains), ann, lam, balance,
             var(variable_name(el.name, "residual")), el.span, el.name_span,
-            c.restitution.value if c.restitution is not None else None))
+            c.restitution.value if c.restitution is not None else None, el.kind == "1"))
 
     def signal(self, s):
         if s.is_integral:

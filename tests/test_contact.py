@@ -301,6 +301,113 @@ def test_two_capacitors_joined_by_a_switch(solver, tmp_path):
     assert [r[1:] for r in events] == [["t >= 1", "0 -> 1"], ["sw.open", "1 -> 0"]]
 
 
+SHORTED = """model caps "two capacitors joined by a switch with no resistor; a current source charges the first"
+parameter C1 = 1.0
+parameter C2 = 2.0
+parameter V0 = 3.0
+parameter I0 = 0.5
+c1 : C(C1) init e = V0
+c2 : C(C2) init e = 0
+sw : Sw(t >= 1 and t < 1.5)
+i : Sf(I0)
+a : 0
+b : 0
+j : 1
+i -> a
+a -> c1
+b -> c2
+a -> j
+j -> sw
+j -> b
+scene run { time 0 .. 2 every 0.01; outputs c1.q, c2.q, sw.f, sw.e
+            solver SOLVER(rtol = 1e-10, atol = 1e-12) }
+"""
+
+
+@pytest.mark.parametrize("solver", ["dopri5", "radau5"])
+def test_two_capacitors_joined_by_a_switch_with_no_resistor(solver, tmp_path):
+    """Closing the switch joins the capacitors with nothing to limit the flow: their charges
+    jump at once to equal voltages, the total charge kept and C1 C2 V^2 / (2 (C1 + C2)) of
+    the energy lost (V the voltage difference before); joined, the source's current divides as
+    C1 : C2 and flows through the switch; opened at t = 1.5, the second keeps its charge."""
+    compiled = bgc.build(Source("shorted.bg", SHORTED.replace("SOLVER", solver)), "run")
+    outs = [run(compiled, b, tmp_path / f"{b}.csv") for b in BACKENDS]
+    assert len({o[0] for o in outs}) == 1
+    _, y, events = outs[0]
+    C1, C2, V0, I0 = 1.0, 2.0, 3.0, 0.5
+    t = y[:, 0]
+    q = C1 * V0 + I0 * np.minimum(t, 1)  # the total charge at the closing, and before it
+    q1_at, q2_at = C1 * q[-1] / (C1 + C2), C2 * q[-1] / (C1 + C2)
+    joined = (t >= 1) & (t < 1.5)
+    q1 = np.where(t < 1, q, np.where(joined, q1_at + I0 * C1 / (C1 + C2) * (t - 1),
+                                     q1_at + I0 * C1 / (C1 + C2) * 0.5 + I0 * (t - 1.5)))
+    q2 = np.where(t < 1, 0.0, q2_at + I0 * C2 / (C1 + C2) * (np.minimum(t, 1.5) - 1))
+    assert np.max(np.abs(y[:, 1] - q1)) <= 1e-9 * np.max(q1)
+    assert np.max(np.abs(y[:, 2] - q2)) <= 1e-9 * np.max(q2)
+    assert np.max(np.abs(y[:, 1] + y[:, 2] - (C1 * V0 + I0 * t))) <= 1e-12 * 5  # charge kept
+    assert np.allclose(y[joined, 3], I0 * C2 / (C1 + C2), rtol=1e-9)  # through the switch
+    assert np.all(np.abs(y[joined, 4]) <= 1e-12) and np.all(y[t < 1, 3] == 0)
+    jumps = {what: [float(v) for v in c.split(" -> ")] for tt, what, c in events
+             if what in ("c1.q", "c2.q")}
+    assert [float(tt) for tt, what, _ in events if what == "c1.q"] == [1.0]
+    (a1, b1), (a2, b2) = jumps["c1.q"], jumps["c2.q"]
+    assert abs(a1 - q[-1]) <= 1e-12 * q[-1] and a2 == 0  # before: all on the first
+    lost = a1 ** 2 / (2 * C1) - (b1 ** 2 / (2 * C1) + b2 ** 2 / (2 * C2))
+    V = a1 / C1
+    assert abs(lost - C1 * C2 * V ** 2 / (2 * (C1 + C2))) <= 1e-12 * lost
+
+
+CLAMP = """model clamp "an ideal diode across a capacitor charged through a resistor"
+parameter C1 = 0.5
+parameter R1 = 2.0
+u : Se(sin(t))
+r : R(R1)
+c : C(C1)
+d : D
+a : 0
+j : 1
+u -> j
+j -> r
+j -> a
+a -> c
+a -> d
+scene run { time 0 .. 10 every 0.01; outputs c.q, d.f
+            solver SOLVER(rtol = 1e-10, atol = 1e-12, hmax = 0.1) }
+"""
+
+
+@pytest.mark.parametrize("solver", ["dopri5", "radau5"])
+def test_an_ideal_diode_across_a_capacitor(solver, tmp_path):
+    """The diode holds the capacitor's voltage at or below zero: conducting (e = 0, the
+    source's current R^-1 sin t through it) while the source is positive, blocking while the
+    capacitor charges negative through R; against SciPy piece by piece."""
+    compiled = bgc.build(Source("clamp.bg", CLAMP.replace("SOLVER", solver)), "run")
+    outs = [run(compiled, b, tmp_path / f"{b}.csv") for b in BACKENDS]
+    assert len({o[0] for o in outs}) == 1
+    _, y, events = outs[0]
+    C1, R1 = 0.5, 2.0
+    t = y[:, 0]
+    ref = np.zeros(len(t))
+    t0 = 0.0
+    while t0 < t[-1]:  # conducting while sin t >= 0 (q = 0), blocking until q/C1 reaches 0
+        t0 = math.pi * (math.floor(t0 / math.pi + 1e-12) + 1)  # the source turns negative
+
+        def back(tt, z):
+            return z[0]
+        back.terminal, back.direction = True, 1
+        sol = _piece(lambda tt, z: [(math.sin(tt) - z[0] / C1) / R1], t0, [0.0], back, t,
+                     ref)
+        if sol.status != 1:
+            break
+        t0 = sol.t[-1]
+    assert np.max(np.abs(y[:, 1] - ref)) <= 1e-6 * np.max(np.abs(ref))
+    assert np.all(y[:, 1] <= 1e-12)  # e = q / C <= 0
+    on = np.abs(y[:, 1]) <= 1e-12
+    assert np.allclose(y[on, 2], np.sin(t[on]) / R1, atol=1e-9)  # the source's current
+    blocking = [float(tt) for tt, what, c in events if what == "d.blocking" and c == "0 -> 1"]
+    assert np.allclose(blocking, [math.pi, 3 * math.pi], rtol=1e-10)
+
+
 def test_the_drawing_names_the_switched_elements():
     """bgc draw shows a diode as D, friction as Fr(Fc, Fs), a switch as Sw(COND) and a gap as
     a unilateral constraint junction (each a constraint junction underneath)."""
