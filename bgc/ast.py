@@ -170,6 +170,7 @@ class ElementDecl:
     doc: str | None
     span: Span
     index: object = None  # `link[i] : ...`: the index expression (instantiate resolves it)
+    switch: object = None  # `J : 1 switch(COND)`: a controlled junction's condition
 
     @property
     def is_junction(self) -> bool:

@@ -161,10 +161,13 @@ class _ToAst(Transformer_NonRecursive):
                                _span(meta), index)
 
     def junction_decl(self, meta, c):
-        (name, index), kind, dim, constraint, *rest = c
+        (name, index), kind, dim, constraint, switch, *rest = c
         effects = tuple(x for x in rest if isinstance(x, ast.Ident))
         return ast.ElementDecl(name, _ident(kind), dim, (), (), effects, constraint,
-                               _doc(rest[-1]), _span(meta), index)
+                               _doc(rest[-1]), _span(meta), index, switch)
+
+    def jswitch(self, meta, c):
+        return c[0]
 
     # components and generation
     def component_decl(self, meta, c):

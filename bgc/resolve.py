@@ -725,6 +725,25 @@ def _element(d: ast.ElementDecl, scope: _Scope, diags: Collector) -> Element | N
 SWITCHED = {"D": 0, "Fr": 2, "Sw": 1}  # switched one-ports (docs/hybrid.md) -> arguments
 
 
+def _junction_switch(d: ast.ElementDecl, scope: _Scope, diags: Collector) -> Element:
+    """A controlled junction `J : 1 switch(COND)` (`0`): on while COND holds, a plain
+    junction; off, its common flow (effort) zero on all its bonds.  It is the junction with an
+    ideal switch `J.switch` on one more bond: a 1-junction's common flow is the switch's flow,
+    so the switch is closed while on; a 0-junction's common effort is the switch's effort, so
+    it is closed while off."""
+    if d.constraint is not None:
+        fail(d.span, "a constraint junction cannot also be switched")
+    if d.dim is not None:
+        fail(d.dim.span, "a switched junction is scalar (one switch per junction)")
+    cond = _ExprBuilder(scope, diags).build(d.switch, condition=True)
+    if d.kind.name == "0":
+        cond = replace(cond, value=sp.Not(cond.value))
+    constraint = Constraint("switch", None, "none", (cond,), None, d.span)
+    return Element(f"{d.name.name}.switch", "0", None, None, None,
+                   tuple(e.name for e in d.effects), constraint,
+                   f"the switch of junction '{d.name.name}'", d.span, d.name.span)
+
+
 def _switched(d: ast.ElementDecl, scope: _Scope, diags: Collector) -> Element:
     """A switched one-port as the constraint junction it is in one of its modes: the ideal
     diode `D` blocks as a junction whose flow balance (its one bond's flow) must stay zero,
@@ -1033,6 +1052,12 @@ def resolve(model: ast.Model) -> Graph:
     sigs = [replace(s, order=order[id(d)]) for d, s in
             ((d, _guard(diags, _signal, d, scope, diags)) for d in signals.values()) if s]
     bonds = _bonds(model, elements, params, signals, diags)
+    for d in elements.values():  # controlled junctions: a switch on one more bond
+        if isinstance(d, ast.ElementDecl) and d.switch is not None:
+            sw = _guard(diags, _junction_switch, d, scope, diags)
+            if sw:
+                els.append(replace(sw, order=order[id(d)]))
+                bonds.append(Bond(d.name.name, sw.name, f"{d.name.name}->{sw.name}", d.span))
     whens = [w for w in (_guard(diags, _when, d, scope, diags) for d in model.decls
                          if isinstance(d, ast.WhenBlock)) if w]
     check_ports(els, bonds, diags)

@@ -408,6 +408,64 @@ def test_an_ideal_diode_across_a_capacitor(solver, tmp_path):
     assert np.allclose(blocking, [math.pi, 3 * math.pi], rtol=1e-10)
 
 
+JUNCTIONS = """model js "an RL circuit behind a switched 1-junction, a capacitor behind a switched 0-junction"
+parameter V = 2.0
+parameter L = 0.5
+parameter C1 = 2.0
+parameter R2 = 4.0
+u : Se(V)
+r : R(1)
+l : I(L)
+j : 1 switch(t < 1)
+u -> j
+j -> r
+j -> l
+s : Sf(1)
+c : C(C1)
+g : R(R2)
+k : 0 switch(t >= 0.5 and t < 1.5)
+s -> k
+k -> c
+k -> g
+scene run { time 0 .. 2 every 0.01; outputs l.f, c.e, g.f
+            solver SOLVER(rtol = 1e-10, atol = 1e-12) }
+"""
+
+
+@pytest.mark.parametrize("solver", ["dopri5", "radau5"])
+def test_switched_junctions(solver, tmp_path):
+    """`1 switch(COND)`: on, a plain 1-junction (the RL circuit's current rises as
+    (V/R)(1 - e^(-R t/L))); off, its flow zero on every bond (the current stops at once).
+    `0 switch(COND)`: off, its effort zero on every bond (the capacitor held empty, the source
+    shorted); on from t = 0.5, the capacitor charges through R2 (e = R2 (1 - e^(-t/(R2 C1))));
+    off again at t = 1.5, its charge gone at once."""
+    compiled = bgc.build(Source("js.bg", JUNCTIONS.replace("SOLVER", solver)), "run")
+    outs = [run(compiled, b, tmp_path / f"{b}.csv") for b in BACKENDS]
+    assert len({o[0] for o in outs}) == 1
+    _, y, events = outs[0]
+    V, R, L, C1, R2 = 2.0, 1.0, 0.5, 2.0, 4.0
+    t = y[:, 0]
+    i = np.where(t < 1, V / R * (1 - np.exp(-R * t / L)), 0.0)
+    e = np.where((t >= 0.5) & (t < 1.5), R2 * (1 - np.exp(-(t - 0.5) / (R2 * C1))), 0.0)
+    assert np.max(np.abs(y[:, 1] - i)) <= 1e-8 * V / R
+    assert np.max(np.abs(y[:, 2] - e)) <= 1e-8 * R2
+    assert np.allclose(y[:, 3], e / R2, rtol=0, atol=1e-8)
+    changes = [(float(tt), what, c) for tt, what, c in events if what.endswith(".open")]
+    assert changes == [(0.5, "k.switch.open", "0 -> 1"), (1.0, "j.switch.open", "0 -> 1"),
+                       (1.5, "k.switch.open", "1 -> 0")]
+
+
+def test_switched_elements_misuse_is_located():
+    def error(text):
+        with pytest.raises(bgc.BgcModelError) as info:
+            bgc.build(Source("m.bg", "model m\nsignal x = integral(1, init = 1)\n" + text))
+        return str(info.value)
+    assert "a constraint junction cannot also be switched" in error(
+        "j : 0 constraint holonomic(phi = x) switch(t < 1)\n")
+    assert "a switched junction is scalar" in error("j : 1[2] switch(t < 1)\n")
+    assert "m.bg:3:14: error: a condition is needed here" in error("j : 1 switch(2)\n")
+
+
 def test_the_drawing_names_the_switched_elements():
     """bgc draw shows a diode as D, friction as Fr(Fc, Fs), a switch as Sw(COND) and a gap as
     a unilateral constraint junction (each a constraint junction underneath)."""
