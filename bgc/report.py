@@ -1,6 +1,7 @@
 """Stable text dumps of the intermediate values: `bgc check` and `bgc equations`."""
 from __future__ import annotations
 
+import itertools
 from collections import Counter
 from dataclasses import dataclass
 
@@ -299,9 +300,64 @@ def _relations(compiled) -> dict:
     return {r.symbol: r.relation for r in getattr(g, "relations", ())}
 
 
+MAX_MODE_COMBINATIONS = 8  # beyond, each element's modes are shown with the others as written
+
+
+def _modes(reduced) -> list:
+    """The switched elements' and unilateral junctions' modes: [(discrete's name, its
+    symbol)], each taking the values 1 and 0 (docs/hybrid.md)."""
+    sel = reduced.events
+    if sel is None:
+        return []
+    kinds = {f"{c.junction}.active" for c in reduced.constraints
+             if c.kind == "unilateral" or c.kind in ("diode", "friction", "switch")}
+    return [(d.name, d.symbol) for d in sel.discretes if d.symbol.name in kinds]
+
+
+def _mode_lines(reduced, forms, _s) -> list[str]:
+    """The equations in each mode: every combination of the modes' values when there are
+    few, else each mode in turn with the others as written.  forms: the explicit forms of the
+    rates and multipliers, or None: then the equations of the algebraic blocks that read a
+    mode (the rest is the same in every mode)."""
+    modes = _modes(reduced)
+    if not modes:
+        return []
+    if forms is not None:
+        targets = [(f"d({st.name})/dt", forms[d]) for st, d in
+                   zip(reduced.states, reduced.rates)] + \
+            [(f"{k.junction}.lambda", forms[k.multiplier]) for k in reduced.constraints]
+    else:
+        symbols = {sym for _, sym in modes}
+        targets = [(f"0 (block {step.index})", e) for step in shown_steps(reduced)
+                   if isinstance(step, BlockInfo) for e in step.residuals
+                   if e.free_symbols & symbols]
+    if 2 ** len(modes) <= MAX_MODE_COMBINATIONS:
+        cases = [dict(zip(modes, bits)) for bits in
+                 itertools.product((1, 0), repeat=len(modes))]
+    else:
+        cases = [{m: v} for m in modes for v in (1, 0)]
+    lines = ["modes (the equations in each; the event log names the modes):"]
+    for case in cases:
+        lines.append("  " + ", ".join(f"{name} = {v}" for (name, _), v in case.items()) + ":")
+        values = {sym: sp.Integer(v) for (_, sym), v in case.items()}
+        for name, expr in targets:
+            lines.append(f"    {name} = {_s(_tidy_mode(expr.xreplace(values)))}")
+    return lines
+
+
+def _tidy_mode(expr):
+    """A mode's equation, its conditionals decided, in a simpler form where that is cheap."""
+    from .resources import fits
+    if not fits(expr) or sp.count_ops(expr) > 200:
+        return expr
+    return sp.simplify(expr)
+
+
 def equations_text(compiled) -> str:
     r = compiled.reduced
     shown = _relations(compiled)
+    if r.events is not None:  # a mode's value by its name in the event log
+        shown = {**shown, **{sym: sp.Symbol(name) for name, sym in _modes(r)}}
 
     def _s(expr) -> str:  # (the relations as written, in place of their frozen values)
         return _Printer({"order": "lex"}).doprint(expr.xreplace(shown) if shown else expr)
@@ -323,6 +379,7 @@ def equations_text(compiled) -> str:
                       for k in r.constraints]
         lines.append("outputs:")
         lines += [f"  {o.name} = {_s(forms[o.expr])}" for o in r.outputs]
+        lines += _mode_lines(r, forms, _s)
         return "\n".join(lines) + "\n"
     lines.append("program (in evaluation order; blocks solved numerically in the generated code):")
     for step in shown_steps(r):
@@ -338,6 +395,7 @@ def equations_text(compiled) -> str:
     lines += [f"  d({st.name})/dt = {d}" for st, d in zip(r.states, r.rates)]
     lines.append("outputs:")
     lines += [f"  {o.name} = {_s(o.expr)}" for o in r.outputs]
+    lines += _mode_lines(r, None, _s)
     return "\n".join(lines) + "\n"
 
 

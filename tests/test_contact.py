@@ -10,9 +10,12 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
+from click.testing import CliRunner
+
 import bgc
 from bgc import runner
 from bgc.api import Source
+from bgc.cli import main
 
 from conftest import have_cc
 from test_events import BALL as WHEN_BALL
@@ -464,6 +467,21 @@ def test_switched_elements_misuse_is_located():
         "j : 0 constraint holonomic(phi = x) switch(t < 1)\n")
     assert "a switched junction is scalar" in error("j : 1[2] switch(t < 1)\n")
     assert "m.bg:3:14: error: a condition is needed here" in error("j : 1 switch(2)\n")
+
+
+def test_the_equations_of_each_mode(tmp_path):
+    """`bgc equations` shows each mode's equations, the conditionals decided: the clamp's
+    capacitor charges through R while the diode blocks and is held while it conducts."""
+    path = tmp_path / "clamp.bg"
+    path.write_text(CLAMP.replace("SOLVER", "dopri5"))
+    result = CliRunner().invoke(main, ["equations", str(path), "--scene", "run"])
+    assert result.exit_code == 0, result.output
+    modes = result.output.split("modes (")[1]
+    blocking, conducting = modes.split("d.blocking = 1:")[1].split("d.blocking = 0:")
+    assert "d(c.q)/dt = (C1*sin(t) - c.q)/(C1*R1)" in blocking
+    assert "d.lambda = 0" in blocking
+    assert "d(c.q)/dt = 0" in conducting
+    assert "d.lambda = (C1*sin(t) - c.q)/(C1*R1)" in conducting  # (c.q held at 0)
 
 
 def test_the_drawing_names_the_switched_elements():
