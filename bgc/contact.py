@@ -177,9 +177,20 @@ def _impulse(c, v, K_v, target, bilateral, cdefs, weigh, order):
     moved = sorted(set().union(*[set(K) for _, K, _ in rows]), key=order.get)
     G = [[partial(row, p) for p in moved] for row, _, _ in rows]
     K = [[Kr.get(p, sp.Integer(0)) for p in moved] for _, Kr, _ in rows]
+    if any(all(g == 0 for g in Gr) for Gr in G):
+        # (its velocities solved from M(q) f = p in the generated code: no closed form by p)
+        fail(c.name_span, f"'{c.junction}': the velocities it constrains are those of a coupled "
+                          "inertia field I[n](M(q)); impacts and switched elements on a field "
+                          "are not supported yet (write the bodies as point masses, or hold the "
+                          "contact with a bilateral junction)")
     m = len(rows)
     A = sp.Matrix(m, m, lambda j, k: sp.Add(*[G[j][i] * K[k][i] for i in range(len(moved))]))
-    impulse = A.LUsolve(sp.Matrix([t - row for row, _, t in rows]))
+    try:
+        impulse = A.LUsolve(sp.Matrix([t - row for row, _, t in rows]))
+    except (ValueError, ZeroDivisionError):  # (sympy's NonInvertibleMatrixError included)
+        fail(c.name_span, f"'{c.junction}': the constraint rows that take part in its impulse are not "
+                          "independent (G K^T is singular): the impact's momentum change is "
+                          "not determined")
     new_p = {p: p + sp.Add(*[K[k][i] * impulse[k] for k in range(m)])
              for i, p in enumerate(moved)}
     return new_p, moved, G[0]
