@@ -677,8 +677,15 @@ class _Blocks:
         A = sp.zeros(m, m)
         for i, k, e in matrix:
             A[i, k] = _leaf(e, defs, lambda s: s in defs, memo)
-        if m <= SINGULAR_CHECK_MAX and is_singular(m, [(i, k, A[i, k]) for i, k, _ in matrix]):
-            rows = _dependent_rows(self.sys.es.constraints, z, _at_random_point(A))
+        # (with every mode open: rows that hold only in some modes, two gaps on one
+        # coordinate, may be dependent when both hold; a run that reaches that says so)
+        off = {contact.active(c): sp.Integer(1 if c.dual else 0)
+               for c in self.sys.es.constraints
+               if c.kind == "unilateral" or c.kind in contact.SWITCHED}
+        A_off = A.xreplace(off) if off else A
+        if m <= SINGULAR_CHECK_MAX and is_singular(m, [(i, k, A_off[i, k])
+                                                       for i, k, _ in matrix]):
+            rows = _dependent_rows(self.sys.es.constraints, z, _at_random_point(A_off))
             if rows:
                 fail(rows[0].name_span, f"the constraint rows {_listed(rows)} are not "
                                         "independent, whatever the state: their multipliers "

@@ -925,9 +925,6 @@ def _constraint(d: ast.ElementDecl, scope) -> Constraint:
         if annotation is None or annotation[0] != "phi":
             fail(c.span, "a unilateral constraint gives its gap, which must stay >= 0: "
                          "constraint unilateral(phi = EXPR)")
-        if d.dim is not None and (d.dim.n != 1 or (d.dim.m or 1) != 1):
-            fail(d.dim.span, "a unilateral constraint junction is scalar (one gap per "
-                             "junction; arrays of them are not supported yet)")
         scope.params_only = True
         try:
             restitution = _ExprBuilder(scope, None).build(c.restitution) \

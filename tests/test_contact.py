@@ -484,6 +484,46 @@ def test_the_equations_of_each_mode(tmp_path):
     assert "d.lambda = (C1*sin(t) - c.q)/(C1*R1)" in conducting  # (c.q held at 0)
 
 
+BOX = """model box "a ball bouncing between two walls: a unilateral junction array of two gaps"
+parameter m = 1.0
+parameter v0 = 2.0
+parameter e = 0.8
+b : I(m) init f = v0
+v : 1
+walls : 0[2] constraint unilateral(phi = [x, 1 - x]) restitution(e) corrector pid(10, 10)
+g : MTF[1->2]([[1], [-1]])
+signal x = integral(v.f, init = 0.5)
+v -> b
+v -> g -> walls
+scene run { time 0 .. 3 every 0.01; outputs x, b.p; solver SOLVER(rtol = 1e-10, atol = 1e-12) }
+"""
+
+
+@pytest.mark.parametrize("solver", ["dopri5", "radau5"])
+def test_an_array_of_gaps(solver, tmp_path):
+    """`0[2] constraint unilateral(phi = [x, 1 - x])`: one gap per row, each with its own
+    impacts (the two rows are dependent, but never both closed: bgc accepts them).  With no
+    force the ball crosses the unit box at v0, v0 e, v0 e^2 ...: impacts at closed-form times,
+    alternately on each wall."""
+    compiled = bgc.build(Source("box.bg", BOX.replace("SOLVER", solver)), "run")
+    outs = [run(compiled, b, tmp_path / f"{b}.csv") for b in BACKENDS]
+    assert len({o[0] for o in outs}) == 1
+    _, y, events = outs[0]
+    v0, e = 2.0, 0.8
+    hits = [(float(tt), what) for tt, what, c in events if what.endswith("contact (phi < 0)")
+            and c == "0 -> 1"]
+    t_ref, v, wall = 0.5 / v0, v0, 1
+    for tt, what in hits:
+        assert abs(tt - t_ref) <= 1e-10 * t_ref and what.startswith(f"walls[{wall}]")
+        v *= e
+        t_ref += 1 / v
+        wall = 1 - wall
+    assert len(hits) == 4  # (the fifth is after t = 3)
+    x = np.interp(y[:, 0], [0, 0.25], [0.5, 1.0])  # the first flight
+    first = y[:, 0] <= 0.25
+    assert np.max(np.abs(y[first, 1] - x[first])) <= 1e-9
+
+
 def test_the_drawing_names_the_switched_elements():
     """bgc draw shows a diode as D, friction as Fr(Fc, Fs), a switch as Sw(COND) and a gap as
     a unilateral constraint junction (each a constraint junction underneath)."""
