@@ -74,6 +74,7 @@ def with_contact_events(sys, infos, weigh, defs, leaf, cycle):
     def expandable(s):
         return s in defs and not sys.is_leaf(s)
 
+    metric = _metric(sys, leaf, defs, expandable, memo, cycle)
     gaps = {i.junction: dict(weigh(cdefs[i.junction].balance)) for i in infos
             if i.kind == "unilateral"}
     held = {j: [] for j in gaps}  # the friction's stop, at each contact's release
@@ -91,7 +92,7 @@ def with_contact_events(sys, infos, weigh, defs, leaf, cycle):
             continue
         K_d = dict(weigh(c.balance))  # (none: a resistive path, whose flow stops at once)
         block = _impulse(c, info.balance, K_d, sp.Integer(0), bilateral, cdefs, weigh,
-                         order)[0] if K_d else {}
+                         order, metric)[0] if K_d else {}
         if info.kind == "friction":
             stops = [cdefs[j] for j in sorted(gaps) if _parallel(gaps[j], K_d)]
             if stops:
@@ -120,16 +121,21 @@ def with_contact_events(sys, infos, weigh, defs, leaf, cycle):
         fastest = var(f"{J}.vmax")
         speed = sp.Abs(v)
         top = Max(fastest, speed)
-        # Phi'' of the free motion (the junction is open at an impact: its lambda is zero)
-        accel = sp.Add(*[partial(v, s) * der(s) for s in sorted(
-            v.free_symbols & states.keys(), key=order.get)], partial(v, TIME))
+        # Phi'' of the free motion (the junction is open at an impact: its lambda is zero):
+        # through the momenta by G = K W, and the rest of the states as Phi' reads them
+        own = sorted(K_u, key=order.get)
+        G_u = sp.Matrix([[K_u[p] for p in own]]) * metric(c, own)
+        accel = sp.Add(*[G_u[0, i] * der(p) for i, p in enumerate(own)],
+                       *[partial(v, s) * der(s) for s in sorted(
+                           (v.free_symbols & states.keys()) - set(own), key=order.get)],
+                       partial(v, TIME))
         # a rebound whose apex, (E v)^2 / (2 |Phi''|), the run's tolerance cannot resolve
         low = (E * speed) ** 2 <= -20 * TOLERANCE * accel
         rests = sp.And(v < 0, sp.Or(E * speed <= REST * top, low))
         stays = sp.Piecewise((sp.Integer(1), rests), (sp.Integer(0), True))
         # the rebound's Phi'; resting, none (the contact then closes with Phi' = 0)
         target = sp.Piecewise((sp.Integer(0), rests), (-E * v, v < 0), (v, True))
-        new_p, moved, G = _impulse(c, v, K_u, target, bilateral, cdefs, weigh, order)
+        new_p, moved, G = _impulse(c, v, K_u, target, bilateral, cdefs, weigh, order, metric)
         try:  # d Phi''/d lambda: Phi' in the momenta, times each momentum's rate by lambda
             rates = {p: leaf(sys.eqs[der(p)].expr, defs, expandable, memo) for p in moved}
         except (cycle, KeyError):
@@ -162,10 +168,12 @@ def with_contact_events(sys, infos, weigh, defs, leaf, cycle):
                                    tuple(whens)))
 
 
-def _impulse(c, v, K_v, target, bilateral, cdefs, weigh, order):
+def _impulse(c, v, K_v, target, bilateral, cdefs, weigh, order, metric):
     """The momenta after the impulse that brings row v (its derivatives by the velocities
     K_v) to target while the bilateral rows on the same storages stay at zero, by the least
-    change of kinetic energy: {p: new p}, the momenta moved, v's derivatives by them."""
+    change of kinetic energy: with W = M^-1 the velocities' derivatives by the momenta
+    (metric), (K W K^T) Lambda = target - rows and dp = K^T Lambda.  {p: new p}, the momenta
+    moved, v's derivatives by them (G = K W)."""
     rows = [(v, K_v, target)]
     for b in bilateral:
         K_b = dict(weigh(cdefs[b.junction].balance))
@@ -175,25 +183,82 @@ def _impulse(c, v, K_v, target, bilateral, cdefs, weigh, order):
         fail(c.name_span, f"'{c.junction}': {len(rows)} constraint rows take part in its "
                           f"impulse; at most {MAX_IMPACT_ROWS} are supported")
     moved = sorted(set().union(*[set(K) for _, K, _ in rows]), key=order.get)
-    G = [[partial(row, p) for p in moved] for row, _, _ in rows]
-    K = [[Kr.get(p, sp.Integer(0)) for p in moved] for _, Kr, _ in rows]
-    if any(all(g == 0 for g in Gr) for Gr in G):
-        # (its velocities solved from M(q) f = p in the generated code: no closed form by p)
-        fail(c.name_span, f"'{c.junction}': the velocities it constrains are those of a coupled "
-                          "inertia field I[n](M(q)); impacts and switched elements on a field "
-                          "are not supported yet (write the bodies as point masses, or hold the "
-                          "contact with a bilateral junction)")
+    W = metric(c, moved)
+    K = sp.Matrix([[Kr.get(p, sp.Integer(0)) for p in moved] for _, Kr, _ in rows])
+    G = K * W
     m = len(rows)
-    A = sp.Matrix(m, m, lambda j, k: sp.Add(*[G[j][i] * K[k][i] for i in range(len(moved))]))
+    A = G * K.T
     try:
         impulse = A.LUsolve(sp.Matrix([t - row for row, _, t in rows]))
     except (ValueError, ZeroDivisionError):  # (sympy's NonInvertibleMatrixError included)
-        fail(c.name_span, f"'{c.junction}': the constraint rows that take part in its impulse are not "
-                          "independent (G K^T is singular): the impact's momentum change is "
-                          "not determined")
-    new_p = {p: p + sp.Add(*[K[k][i] * impulse[k] for k in range(m)])
+        fail(c.name_span, f"'{c.junction}': the constraint rows that take part in its impulse "
+                          "are not independent (K M^-1 K^T is singular): the impact's momentum "
+                          "change is not determined")
+    new_p = {p: p + sp.Add(*[K[k, i] * impulse[k] for k in range(m)])
              for i, p in enumerate(moved)}
-    return new_p, moved, G[0]
+    return new_p, moved, [G[0, i] for i in range(len(moved))]
+
+
+MAX_FIELD_IMPULSE = 3  # a coupled field's M(q) inverted symbolically for an impulse, at most
+
+
+def _metric(sys, leaf, defs, expandable, memo, cycle):
+    """W(c, moved): the velocities' derivatives by the momenta moved (M^-1 on them).  A point
+    mass's velocity is written in the momenta; a coupled field's parts solve M(q) v = p
+    together (implicit equations, bgc.system), so its block of W is M's inverse, computed
+    symbolically for fields of up to MAX_FIELD_IMPULSE parts."""
+    flows = {p: (f, sign) for p, f, sign in sys.es.momenta}
+    by_flow = {f: p for p, (f, _) in flows.items()}
+
+    def implicit(p):
+        eq = sys.eqs.get(flows[p][0]) if p in flows else None
+        return eq if eq is not None and not eq.explicit else None
+
+    def W(c, moved):
+        index = {p: i for i, p in enumerate(moved)}
+        out = sp.zeros(len(moved), len(moved))
+        done: set = set()
+        try:
+            for i, p in enumerate(moved):
+                if p in done:
+                    continue
+                if implicit(p) is None:
+                    f, sign = flows[p]
+                    velocity = leaf(sign * f, defs, expandable, memo)
+                    for k, q in enumerate(moved):
+                        out[i, k] = partial(velocity, q)
+                    done.add(p)
+                    continue
+                field, todo = [], [p]  # the field's parts: those its equations couple
+                while todo:
+                    q = todo.pop()
+                    if q in field:
+                        continue
+                    field.append(q)
+                    todo += [by_flow[g] for g in implicit(q).expr.free_symbols
+                             if g in by_flow and implicit(by_flow[g]) is not None]
+                field.sort(key=lambda q: moved.index(q) if q in index else len(moved))
+                if len(field) > MAX_FIELD_IMPULSE:
+                    fail(c.name_span, f"'{c.junction}' acts on a coupled inertia field of "
+                                      f"{len(field)} parts; an impulse through its M(q) is "
+                                      f"computed for fields of up to {MAX_FIELD_IMPULSE} parts")
+                M = sp.Matrix(len(field), len(field), lambda a, b: leaf(
+                    partial(implicit(field[a]).expr, flows[field[b]][0]) * flows[field[b]][1],
+                    defs, expandable, memo))
+                inverse = M.inv()
+                for a, qa in enumerate(field):
+                    for b, qb in enumerate(field):
+                        if qa in index and qb in index:
+                            out[index[qa], index[qb]] = inverse[a, b]
+                done |= set(field)
+        except (cycle, KeyError):
+            fail(c.name_span, f"'{c.junction}': the velocities of the storages it acts on could "
+                              "not be written in the states (an algebraic loop); not supported")
+        except ValueError:  # (a singular M: sympy's NonInvertibleMatrixError)
+            fail(c.name_span, f"'{c.junction}': the mass matrix of the field it acts on is "
+                              "singular")
+        return out
+    return W
 
 
 def _closing(sys, c, info, states, order, leaf, defs, expandable, memo, cycle, relations,
