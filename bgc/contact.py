@@ -107,7 +107,8 @@ def with_contact_events(sys, infos, weigh, defs, leaf, cycle):
         switch = {"diode": _diode, "switch": _switch}[info.kind]
         relations, discretes, whens = switch(c, info, block, states, relations, discretes,
                                              whens)
-    for info in (i for i in infos if i.kind == "unilateral"):
+    gaps_all = [i for i in infos if i.kind == "unilateral"]
+    for info in gaps_all:
         c = cdefs[info.junction]
         J = c.junction
         on = sp.Ne(active(c), 0)
@@ -135,7 +136,19 @@ def with_contact_events(sys, infos, weigh, defs, leaf, cycle):
         stays = sp.Piecewise((sp.Integer(1), rests), (sp.Integer(0), True))
         # the rebound's Phi'; resting, none (the contact then closes with Phi' = 0)
         target = sp.Piecewise((sp.Integer(0), rests), (-E * v, v < 0), (v, True))
-        new_p, moved, G = _impulse(c, v, K_u, target, bilateral, cdefs, weigh, order, metric)
+        together = []  # the other gaps on these storages that close at the same instant
+        for o in gaps_all:
+            K_o = gaps[o.junction]
+            if o is info or not set(K_o) & set(K_u):
+                continue
+            co = cdefs[o.junction]
+            E_o = co.restitution if co.restitution is not None else sp.Integer(0)
+            touching = sp.Ne(active(co), 0)
+            takes = sp.Or(touching, sp.And(o.phi <= 10 * TOLERANCE, o.balance < 0))
+            together.append((o.balance, K_o, sp.Piecewise((sp.Integer(0), touching),
+                                                          (-E_o * o.balance, True)), takes))
+        new_p, moved, G = _impulse(c, v, K_u, target, bilateral, cdefs, weigh, order, metric,
+                                   together)
         try:  # d Phi''/d lambda: Phi' in the momenta, times each momentum's rate by lambda
             rates = {p: leaf(sys.eqs[der(p)].expr, defs, expandable, memo) for p in moved}
         except (cycle, KeyError):
@@ -168,28 +181,37 @@ def with_contact_events(sys, infos, weigh, defs, leaf, cycle):
                                    tuple(whens)))
 
 
-def _impulse(c, v, K_v, target, bilateral, cdefs, weigh, order, metric):
+def _impulse(c, v, K_v, target, bilateral, cdefs, weigh, order, metric, together=()):
     """The momenta after the impulse that brings row v (its derivatives by the velocities
     K_v) to target while the bilateral rows on the same storages stay at zero, by the least
     change of kinetic energy: with W = M^-1 the velocities' derivatives by the momenta
-    (metric), (K W K^T) Lambda = target - rows and dp = K^T Lambda.  {p: new p}, the momenta
-    moved, v's derivatives by them (G = K W)."""
-    rows = [(v, K_v, target)]
+    (metric), (K W K^T) Lambda = target - rows and dp = K^T Lambda.  together: other gaps'
+    rows (row, K, target, whether it takes part): a gap closed at the same instant, or in
+    contact, takes part with its own target; else its Lambda is zero.  {p: new p}, the
+    momenta moved, v's derivatives by them (G = K W)."""
+    rows = [(v, K_v, target, sp.true)]
     for b in bilateral:
         K_b = dict(weigh(cdefs[b.junction].balance))
         if set(K_b) & set(K_v):
-            rows.append((b.balance, K_b, sp.Integer(0)))
+            rows.append((b.balance, K_b, sp.Integer(0), sp.true))
+    rows += list(together)
     if len(rows) > MAX_IMPACT_ROWS:
         fail(c.name_span, f"'{c.junction}': {len(rows)} constraint rows take part in its "
                           f"impulse; at most {MAX_IMPACT_ROWS} are supported")
-    moved = sorted(set().union(*[set(K) for _, K, _ in rows]), key=order.get)
+    moved = sorted(set().union(*[set(K) for _, K, _, _ in rows]), key=order.get)
     W = metric(c, moved)
-    K = sp.Matrix([[Kr.get(p, sp.Integer(0)) for p in moved] for _, Kr, _ in rows])
+    K = sp.Matrix([[Kr.get(p, sp.Integer(0)) for p in moved] for _, Kr, _, _ in rows])
     G = K * W
     m = len(rows)
     A = G * K.T
+    rhs = sp.Matrix([t - row for row, _, t, _ in rows])
+    for j, (_, _, _, takes) in enumerate(rows):
+        if takes is not sp.true:  # a row that does not take part: Lambda_j = 0
+            on = sp.Piecewise((sp.Integer(1), takes), (sp.Integer(0), True))
+            A[j, :] = on * A[j, :] + (1 - on) * sp.Matrix([[int(k == j) for k in range(m)]])
+            rhs[j] = on * rhs[j]
     try:
-        impulse = A.LUsolve(sp.Matrix([t - row for row, _, t in rows]))
+        impulse = A.LUsolve(rhs)
     except (ValueError, ZeroDivisionError):  # (sympy's NonInvertibleMatrixError included)
         fail(c.name_span, f"'{c.junction}': the constraint rows that take part in its impulse "
                           "are not independent (K M^-1 K^T is singular): the impact's momentum "
