@@ -68,22 +68,23 @@ def _betacf(a: float, b: float, x: float) -> float:
     return h
 
 
-def _betainc(a: float, b: float, x: float) -> float:
-    """I_x(a, b), the regularised incomplete beta function."""
+def _betainc(a: float, b: float, x: float, y: float) -> float:
+    """I_x(a, b), the regularised incomplete beta function; y = 1 - x, given apart so that
+    neither loses digits when the other is near 1."""
     if x <= 0.0:
         return 0.0
-    if x >= 1.0:
+    if y <= 0.0:
         return 1.0
     ln = math.lgamma(a + b) - math.lgamma(a) - math.lgamma(b) + a * math.log(x) \
-        + b * math.log1p(-x)
+        + b * math.log(y)
     if x < (a + 1.0) / (a + b + 2.0):
         return math.exp(ln) * _betacf(a, b, x) / a
-    return 1.0 - math.exp(ln) * _betacf(b, a, 1.0 - x) / b
+    return 1.0 - math.exp(ln) * _betacf(b, a, y) / b
 
 
 def t_cdf(t: float, df: float) -> float:
     """P(T <= t) for Student's t with df degrees of freedom."""
-    tail = 0.5 * _betainc(0.5 * df, 0.5, df / (df + t * t))
+    tail = 0.5 * _betainc(0.5 * df, 0.5, df / (df + t * t), t * t / (df + t * t))
     return 1.0 - tail if t > 0 else tail
 
 
@@ -420,7 +421,9 @@ def _values(result) -> np.ndarray:
 
 
 def levenberg_marquardt(f, x0, lo, hi, max_iter=100, xtol=1e-10, ftol=1e-14, gtol=1e-12):
-    """Minimise cost = |r|^2 / 2 for (r, J, extra) = f(x), x kept in [lo, hi] by projection.
+    """Minimise cost = |r|^2 / 2 for (r, J, extra) = f(x), x kept in [lo, hi] by projection:
+    a parameter on its bound whose gradient pushes it out is held there for the iteration,
+    the others take the damped Gauss-Newton step, which is then clipped onto the box.
     Marquardt's scaling (diag J'J), Nielsen's update of the damping.  Returns (x, r, J, extra,
     iterations, why, converged)."""
     x = np.clip(np.asarray(x0, dtype=float), lo, hi)
@@ -440,8 +443,10 @@ def levenberg_marquardt(f, x0, lo, hi, max_iter=100, xtol=1e-10, ftol=1e-14, gto
             why, converged = "the residuals are zero", True
             break
         D = np.maximum(np.diag(A), 1e-300 + 1e-12 * np.max(np.diag(A)))
+        step = np.zeros_like(x)  # (a parameter held on its bound does not move)
+        Af = A[np.ix_(free, free)] + mu * np.diag(D[free])
         try:
-            step = np.linalg.solve(A + mu * np.diag(D), -g)
+            step[free] = np.linalg.solve(Af, -g[free])
         except np.linalg.LinAlgError:
             mu, nu = mu * nu, nu * 2
             continue
@@ -492,15 +497,18 @@ def fit(model, data, vary, scene=None, params=None, backend="c", algebra="auto",
     compiled = build(model, names, scene, tuple(fixed), False, algebra, outputs, None,
                      options.get("project_initial", False),
                      options.get("allow_inconsistent", False),
-                     option_names=(f"the data's column ({data.path})", "effects=", "--scene"))
+                     option_names=("--data columns", "effects=", "--scene"))
     program = compiled.program
     N, P = data.y.size, len(names)
     if N <= P:
         raise FitArgumentError(f"{data.path}: too few samples: {N} measured values for {P} "
                                f"parameters (more are needed for the errors)")
     dt, t_end, rows = _grid(data, program.scene.t0)
-    settings = runner.settings_for(program.scene, [p.name for p in program.params],
-                                   params=fixed, t_end=t_end, dt=dt, **options)
+    try:
+        settings = runner.settings_for(program.scene, [p.name for p in program.params],
+                                       params=fixed, t_end=t_end, dt=dt, **options)
+    except ValueError as error:
+        raise FitArgumentError(str(error)) from None
     start = np.array([_default(compiled, n, fixed) for n in names])
     lo = np.array([v.lo for v in vary])
     hi = np.array([v.hi for v in vary])
