@@ -420,7 +420,7 @@ def _values(result) -> np.ndarray:
     return flat.reshape(lines, -1)[:, 1:]
 
 
-def levenberg_marquardt(f, x0, lo, hi, max_iter=100, xtol=1e-10, ftol=1e-14, gtol=1e-12):
+def levenberg_marquardt(f, x0, lo, hi, max_iter=100, xtol=1e-10, ftol=1e-10, gtol=1e-12):
     """Minimise cost = |r|^2 / 2 for (r, J, extra) = f(x), x kept in [lo, hi] by projection:
     a parameter on its bound whose gradient pushes it out is held there for the iteration,
     the others take the damped Gauss-Newton step, which is then clipped onto the box.
@@ -430,7 +430,7 @@ def levenberg_marquardt(f, x0, lo, hi, max_iter=100, xtol=1e-10, ftol=1e-14, gto
     r, J, extra = f(x)
     cost = 0.5 * float(r @ r)
     A, g = J.T @ J, J.T @ r
-    mu, nu = 1e-3 * max(float(np.max(np.diag(A))), 1e-300), 2.0
+    mu, nu = 1e-3, 2.0  # (relative to Marquardt's scaling D = diag J'J)
     why, converged = f"stopped after {max_iter} iterations", False
     it = 0
     while it < max_iter:
