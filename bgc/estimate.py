@@ -355,12 +355,12 @@ class Fit:
 
     def table(self) -> str:
         w = max([len(n) for n in self.names] + [9])
-        lines = [f"{'parameter':<{w}}  {'estimate':>15}  {'std. error':>11}  "
-                 f"{'95% interval':^33}"]
+        lines = [f"{'parameter':<{w}}  {'estimate':>13}  {'std. error':>10}  "
+                 f"95% interval"]
         for n, e, se, lo, hi in zip(self.names, self.estimates, self.stderr, self.lower,
                                     self.upper):
             flag = "  (at its bound)" if n in self.at_bound else ""
-            lines.append(f"{n:<{w}}  {e:>15.9g}  {se:>11.4g}  [{lo:>15.9g}, {hi:>15.9g}]{flag}")
+            lines.append(f"{n:<{w}}  {e:>13.7g}  {se:>10.4g}  [{lo:.7g}, {hi:.7g}]{flag}")
         if len(self.names) > 1:
             lines.append("correlation:")
             for n, row in zip(self.names, self.correlation):
@@ -555,10 +555,12 @@ def plot_residuals(result: Fit, target, fmt: str = "png") -> None:
     fig, (top, bottom) = plt.subplots(2, 1, sharex=True, figsize=(7, 5.5),
                                       gridspec_kw={"height_ratios": [2, 1]})
     for j, name in enumerate(result.columns):
-        top.plot(result.t, result.measured[:, j], ".", ms=2, label=f"{name} measured")
-        top.plot(result.t, result.fitted[:, j], "-", lw=1, label=f"{name} fitted")
+        dots = top.plot(result.t, result.measured[:, j], ".", ms=2, alpha=0.5,
+                        label=f"{name} measured")[0]
+        top.plot(result.t, result.fitted[:, j], "-", lw=1.2, color=dots.get_color(),
+                 label=f"{name} fitted")
         bottom.plot(result.t, result.fitted[:, j] - result.measured[:, j], ".", ms=2,
-                    label=name)
+                    color=dots.get_color(), label=name)
     top.legend(fontsize=8)
     top.set_ylabel("output")
     bottom.set_ylabel("fitted - measured")
