@@ -13,13 +13,15 @@ so the augmented program is an ordinary program, and both runtimes and every sol
 it unchanged.  Its outputs are the outputs y, then dy/dp_k = (dy/dx) S_k + dy/dp_k for each
 parameter (columns `d(y)/d(p)`), and, asked for, the states and S.
 
-The stiff solvers need the augmented system's Jacobian.  Where the right side has no block
-solved in the generated code it is exact: jvp is derived from the augmented right side, the
-second derivatives included.  A tangent through a block is not differentiated again
-(bgc.tangent), so there the Jacobian is the block-diagonal diag(J, J, ..., J), J = df/dx,
-which leaves out d(J S_k + df/dp_k)/dx: a simplified Newton iteration as CVODES's simultaneous
-corrector uses, whose convergence the Radau and Rosenbrock steps test as for any model (their
-error estimate includes the sensitivities).
+The stiff solvers need the augmented system's Jacobian, whose S rows hold second derivatives:
+d(J S_k + df/dp_k)/dx.  Where every block the right side solves is linear, it is exact: jvp is
+the forward derivative of the augmented right side itself, and a tangent's Resolve through a
+linear block is differentiated once more (d(dz) = A^-1 (dr - dA dz), `_Second`).  A Newton
+block's tangent is not differentiated again, so a model with one gets the block-diagonal
+diag(J, J, ..., J), J = df/dx, which leaves those second derivatives out: a simplified Newton
+iteration as CVODES's simultaneous corrector uses.  Radau's Newton iteration converges with
+it to the same collocation solution; a Rosenbrock method, which needs the exact Jacobian for
+its order, loses accuracy in the sensitivities (docs/analysis.md gives the numbers).
 
 A model with events is refused: the sensitivities jump at an event, and the jump conditions
 are not implemented.
@@ -75,15 +77,57 @@ def seeds(params: tuple[ir.Param, ...], j: int, given) -> dict:
     return dp
 
 
+class _Second(_Forward):
+    """Forward differentiation that also goes through a Resolve of a linear block (the
+    tangent of a tangent): for dz = A^-1 r, d(dz) = A^-1 (dr - dA dz), A's entries those of
+    the block's Solve met before it in the function."""
+
+    def __init__(self, seeds, plans, fresh, solves):
+        super().__init__(seeds, plans, fresh)
+        self.solves = solves  # block -> its Solve (shared: the primal part records them)
+
+    def statement(self, s):
+        if isinstance(s, ir.Solve):
+            self.solves[s.block] = s
+        if isinstance(s, Resolve):
+            self.out.append(s)
+            solve = self.solves[s.block]
+            lu = self.plans[s.block].lu
+            row_at, col_at = ir.positions(lu.row_of), ir.positions(lu.col_of)
+            terms = [[] for _ in s.rhs]
+            for (i, k), e in zip(self.plans[s.block].pattern, solve.matrix):
+                d = self.of(e)
+                if d != 0:
+                    terms[row_at[i]].append(d * s.targets[col_at[k]])
+            self.resolve(_Unknowns(s.block, s.targets),
+                         [self.of(r) - sp.Add(*t) for r, t in zip(s.rhs, terms)])
+            return
+        super().statement(s)
+
+
+@dataclass(frozen=True)
+class _Unknowns:
+    block: int
+    unknowns: tuple
+
+
+def _exact(f: Function, plans) -> bool:
+    """Whether f's Jacobian can be derived exactly: every block it solves is linear (a
+    Newton block's tangent is not differentiated again)."""
+    return all(plans[s.block].method == "lu" for s in f.body
+               if isinstance(s, (ir.Solve, ir.Newton, Resolve)))
+
+
 def _forward(f: Function, name: str, size: int, seed_sets, offsets, plans, fresh,
-             primal_stores: bool) -> tuple[Function, int]:
+             primal_stores: bool, second: bool = False) -> tuple[Function, int]:
     """f's statements once (its stores too when primal_stores), then for each seed set its
     tangents, result k of the set's tangent stored at offsets[set] + k (a zero too: every
     function this builds stores each of its results)."""
     out = [replace(s, final_factor=True) if isinstance(s, ir.Newton) else s
            for s in f.body if primal_stores or not isinstance(s, Store)]
+    solves = {s.block: s for s in f.body if isinstance(s, ir.Solve)}
     for tan, offset in zip(seed_sets, offsets):
-        forward = _Forward(tan, plans, fresh)
+        forward = _Second(tan, plans, fresh, solves) if second else _Forward(tan, plans, fresh)
         for s in f.body:
             if isinstance(s, Store):
                 d = forward.of(s.expr)
@@ -158,11 +202,11 @@ def augment(functions: dict, params: tuple[ir.Param, ...], states: tuple[str, ..
         extra = M * (1 + m)
     out["outputs"], count = _forward(outs, "outputs", extra, ts, [(k + 1) * M for k in range(m)],
                                      plans, count, True)
-    exact = not any(isinstance(s, (ir.Solve, ir.Newton, Resolve)) for s in out["rhs"].body)
+    exact = _exact(out["rhs"], plans)
     base = None
     if exact:
         out["jvp"], count = _forward(out["rhs"], "jvp", wide, [{X[i]: V[i] for i in range(wide)}],
-                                     [0], plans, count, False)
+                                     [0], plans, count, False, second=True)
     else:
         base = pattern_of(rhs, n, plans)
         out["jvp"], count = _forward(rhs, "jvp", wide,

@@ -87,6 +87,28 @@ def test_sensitivities_match_finite_differences(model, scene, outputs, params, t
         assert error.max() < 1e-6, (solver, error)
 
 
+def test_augmented_jacobian_is_exact_through_a_linear_block():
+    """The double pendulum's multipliers are a linear block: the augmented system's Jacobian
+    (second derivatives through the block's factors) against central differences of its
+    right side at a point off the trajectory."""
+    compiled = estimate.build(MODELS / "double_pendulum.bg", ["l1", "m2"], "swing")
+    assert any(b.method == "lu" for b in compiled.program.blocks)
+    m = runner.prepare(compiled, "python", in_process=True).module
+    n = len(compiled.program.states)
+    p = m._param_values(m._overrides({}))
+    x = np.array(m._initial_state(m._settings(), m._with_constants(p), False))
+    x = x + 0.1 * np.random.default_rng(0).standard_normal(n)
+    J = np.asarray(m.jacobian(0.3, list(x), p))
+    fd = np.zeros((n, n))
+    for j in range(n):
+        e = np.zeros(n)
+        e[j] = h = 1e-6 * max(1.0, abs(x[j]))
+        fd[:, j] = (np.array(m._public(m._rhs, 0.3, list(x + e), p, n))
+                    - np.array(m._public(m._rhs, 0.3, list(x - e), p, n))) / (2 * h)
+    assert np.abs(J[n // 3:, :n // 3]).max() > 1e-3  # (the second derivatives are there)
+    assert np.abs(J - fd).max() < 1e-7 * np.abs(fd).max()
+
+
 def test_sensitivities_api_returns_states_and_outputs():
     """bgc.sensitivities: x and S of the states, y and dy of the outputs; the RLC circuit's
     initial sensitivities are those of its initial values (q(0) = q0: dq/dq0 = 1)."""
