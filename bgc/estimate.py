@@ -167,16 +167,17 @@ class Sensitivities:
 
 
 def sensitivities(model, params, scene=None, backend="c", algebra="auto", outputs=None,
-                  effects=None, **options) -> Sensitivities:
+                  effects=None, values=None, **options) -> Sensitivities:
     """A run of model's scene with the sensitivities of its states and outputs to `params`
-    (a list of parameter names, or one name, or "k,c"); options as bgc.simulate's
-    (params={name: value} overrides: a parameter computed from a chosen one follows it unless
-    it is overridden).  Raises as bgc.simulate, and FitArgumentError for unknown parameters,
-    FitError for a model with events."""
+    (a list of parameter names, or one name, or "k,c"); values: parameter overrides
+    {name: value} (simulate's params=: a parameter computed from a chosen one follows it
+    unless it is overridden); options as bgc.simulate's.  Raises as bgc.simulate, and
+    FitArgumentError for unknown parameters, FitError for a model with events."""
     if isinstance(params, str):
         params = [p.strip() for p in params.split(",") if p.strip()]
     chosen = tuple(params)
-    values = dict(options.get("params") or {})
+    values = dict(values or {})
+    options["params"] = values
     compiled = build(model, chosen, scene, tuple(values), True, algebra, outputs, effects,
                      options.get("project_initial", False),
                      options.get("allow_inconsistent", False))
@@ -517,15 +518,23 @@ def fit(model, data, vary, scene=None, params=None, backend="c", algebra="auto",
                                                                  max_iter)
     cost = 0.5 * float(r @ r)
     s2 = 2 * cost / (N - P)
+    se, corr = np.full(P, math.inf), np.full((P, P), math.nan)
+    norms = np.sqrt(np.sum(J * J, axis=0))
+    seen = norms > 1e-12 * max(float(np.max(norms)), 1e-300)  # the outputs depend on it
+    blind = [n for n, k in zip(names, seen) if not k]
     try:
-        cov = s2 * np.linalg.inv(J.T @ J)
-        se = np.sqrt(np.maximum(np.diag(cov), 0.0))
+        keep = np.flatnonzero(seen)
+        cov = s2 * np.linalg.inv(J[:, keep].T @ J[:, keep])
+        se[keep] = np.sqrt(np.maximum(np.diag(cov), 0.0))
         with np.errstate(invalid="ignore", divide="ignore"):
-            corr = cov / np.outer(se, se)
+            corr[np.ix_(keep, keep)] = cov / np.outer(se[keep], se[keep])
     except np.linalg.LinAlgError:
-        se = np.full(P, math.inf)
-        corr = np.full((P, P), math.nan)
+        se[:] = math.inf
+        corr[:] = math.nan
         why += "; J'J is singular: the parameters cannot all be told apart by these data"
+    if blind:
+        why += f"; the outputs do not depend on {', '.join(blind)} (no error for "\
+               f"{'it' if len(blind) == 1 else 'them'})"
     q = t_quantile(0.975, N - P)
     at_bound = tuple(n for n, v, a, b in zip(names, x, lo, hi) if v <= a or v >= b)
     return Fit(names, x, start, se, x - q * se, x + q * se, corr, cost, math.sqrt(s2), N,
