@@ -135,6 +135,11 @@ def build(model, params, scene=None, given=(), state_outputs=False, algebra="aut
     the reduce stage, then the lowering stage with them (bgc.sensitivity says what given and
     state_outputs mean).  Raises api's errors, FitArgumentError for parameters it refuses and
     FitError for a model it cannot do."""
+    if project_initial:
+        raise FitArgumentError(
+            "sensitivities and --project-initial exclude each other: the projection of the "
+            "initial values is not differentiated (give initial values that satisfy the "
+            "constraints, or --allow-inconsistent to start from them as they are)")
     compiled = api.build(model, scene, project_initial, algebra, program=False,
                          outputs=outputs, effects=effects, option_names=option_names,
                          allow_inconsistent=allow_inconsistent)

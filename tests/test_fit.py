@@ -128,6 +128,9 @@ def test_models_with_events_are_refused():
     assert "events" in result.stderr and "Traceback" not in result.stderr
     result = run_bgc("simulate", MODELS / "dc_motor.bg", "--sensitivities", "kt,nope")
     assert result.returncode == 2 and "unknown parameter 'nope'" in result.stderr
+    result = run_bgc("simulate", MODELS / "pendulum.bg", "--sensitivities", "l",
+                     "--project-initial")
+    assert result.returncode == 2 and "--project-initial" in result.stderr
 
 
 TRUE = {"kt": 0.9, "Ra": 2.5, "Jr": 0.04, "br": 0.12}  # the model's own: 0.8, 2, 0.05, 0.1
