@@ -430,14 +430,16 @@ def levenberg_marquardt(f, x0, lo, hi, max_iter=100, xtol=1e-10, ftol=1e-10, gto
     """Minimise cost = |r|^2 / 2 for (r, J, extra) = f(x), x kept in [lo, hi] by projection:
     a parameter on its bound whose gradient pushes it out is held there for the iteration,
     the others take the damped Gauss-Newton step, which is then clipped onto the box.
-    Marquardt's scaling (diag J'J), Nielsen's update of the damping.  Returns (x, r, J, extra,
-    iterations, why, converged)."""
+    Marquardt's scaling (diag J'J), Nielsen's update of the damping.  A trial point where f
+    raises FitError (the model's run fails there) is a rejected step; at the start it is the
+    fit's error.  Returns (x, r, J, extra, iterations, why, converged)."""
     x = np.clip(np.asarray(x0, dtype=float), lo, hi)
     r, J, extra = f(x)
     cost = 0.5 * float(r @ r)
     A, g = J.T @ J, J.T @ r
     mu, nu = 1e-3, 2.0  # (relative to Marquardt's scaling D = diag J'J)
     why, converged = f"stopped after {max_iter} iterations", False
+    failed = None  # the last trial run that failed since the last accepted step
     it = 0
     while it < max_iter:
         it += 1
@@ -459,13 +461,23 @@ def levenberg_marquardt(f, x0, lo, hi, max_iter=100, xtol=1e-10, ftol=1e-10, gto
         xn = np.clip(x + step, lo, hi)
         dx = xn - x
         if np.all(np.abs(dx) <= xtol * (np.abs(x) + xtol)):
+            if failed is not None:  # (shrunk by runs that fail, not by the cost)
+                raise failed
             why, converged = f"the step is below {xtol:g} relative", True
             break
-        rn, Jn, extra_n = f(xn)
+        try:
+            rn, Jn, extra_n = f(xn)
+        except FitError as error:  # (a trial point where the model cannot run: a shorter
+            failed = error         #  step, unless the damping runs out)
+            mu, nu = mu * nu, nu * 2
+            if not math.isfinite(mu) or mu > 1e300:
+                raise failed
+            continue
         cn = 0.5 * float(rn @ rn)
         predicted = -(g @ dx) - 0.5 * float(dx @ (A @ dx))
         rho = (cost - cn) / predicted if predicted > 0 else -1.0
         if rho > 0 and cn < cost:
+            failed = None
             reduction = (cost - cn) / cost
             x, r, J, extra, cost = xn, rn, Jn, extra_n, cn
             A, g = J.T @ J, J.T @ r

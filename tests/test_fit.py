@@ -214,3 +214,26 @@ def test_levenberg_marquardt_on_a_closed_form():
     x, *_, converged = estimate.levenberg_marquardt(f, [1.0, 0.1], np.full(2, -math.inf),
                                                     np.full(2, math.inf))
     assert converged and x == pytest.approx([3.0, 1.5], rel=1e-10)
+    calls = []
+
+    def fails_once(x):  # the model cannot run at the first trial point: a shorter step
+        calls.append(x)
+        if len(calls) == 2:
+            raise estimate.FitError("no run there")
+        return f(x)
+
+    x, *_, converged = estimate.levenberg_marquardt(fails_once, [1.0, 0.1],
+                                                    np.full(2, -math.inf), np.full(2, math.inf))
+    assert converged and x == pytest.approx([3.0, 1.5], rel=1e-10)
+    assert np.abs(calls[2] - calls[0]).max() < np.abs(calls[1] - calls[0]).max()
+    started = []
+
+    def runs_only_at_the_start(x):  # every shorter step fails too: the fit's error
+        if started:
+            raise estimate.FitError("no run there")
+        started.append(x)
+        return f(x)
+
+    with pytest.raises(estimate.FitError, match="no run there"):
+        estimate.levenberg_marquardt(runs_only_at_the_start, [1.0, 0.1], np.full(2, -math.inf),
+                                     np.full(2, math.inf))
