@@ -1,6 +1,6 @@
 """The command line: `bgc check|equations|compile|simulate|accuracy|sweep|linearize|steady|fit`.
-The only module that uses click
-and the only one that writes files.  Model errors exit 1 with a located report, usage errors 2."""
+The only module that uses click and the only one that writes files.  Model errors exit 1 with a
+located report, usage errors 2."""
 from __future__ import annotations
 
 import contextlib
