@@ -10,7 +10,8 @@ served here and never written over a submodule: no module of bgc has an API func
 """
 __version__ = "0.1.0"
 __all__ = ["BgcArgumentError", "BgcModelError", "Compiled", "SimulationFailed", "build", "check",
-           "compile", "equations", "linearize", "load", "simulate", "steady", "sweep"]
+           "compile", "equations", "fit", "linearize", "load", "sensitivities", "simulate", "steady",
+           "sweep"]
 
 
 def __getattr__(name):
@@ -20,6 +21,9 @@ def __getattr__(name):
         from .linear import linearize as value
     elif name == "steady":
         from .equilibrium import steady as value
+    elif name in ("fit", "sensitivities"):
+        from . import estimate
+        value = getattr(estimate, name)
     elif name in __all__:
         from . import api
         value = getattr(api, name)

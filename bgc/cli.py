@@ -1,5 +1,6 @@
-"""The command line: `bgc check|equations|compile|simulate|accuracy|sweep|linearize|steady`.  The only module that uses click
-and the only one that writes files.  Model errors exit 1 with a located report, usage errors 2."""
+"""The command line: `bgc check|equations|compile|simulate|accuracy|sweep|linearize|steady|fit`.
+The only module that uses click and the only one that writes files.  Model errors exit 1 with a
+located report, usage errors 2."""
 from __future__ import annotations
 
 import contextlib
@@ -32,6 +33,7 @@ class _Later:
 
 
 acc, api, stability = _Later(".accuracy"), _Later(".api"), _Later(".stability")
+estimate = _Later(".estimate")
 emit, report, diagnostics = _Later(".emit"), _Later(".report"), _Later(".diagnostics")
 
 
@@ -439,9 +441,13 @@ def compile(model, scene, outputs, effects, algebra, target, output, project_ini
 @click.option("--plot", "plot_file", default=None, metavar="FILE.png", callback=_plot_file,
               help="Also draw the run's outputs, one panel per kind, into FILE (.png, .svg "
                    "or .pdf; needs matplotlib: pip install 'bgc[plot]').")
+@click.option("--sensitivities", default=None, metavar="P1,P2,..",
+              help="Also the outputs' sensitivities to these parameters: a column "
+                   "d(Y)/d(P) after the outputs for each parameter P and output Y, integrated "
+                   "with the states (docs/analysis.md).")
 def simulate(model, scene, outputs, effects, algebra, backend, solver, rtol, atol, t_end, dt,
              step, max_steps, max_step, params, project_initial, allow_inconsistent, stats,
-             event_rows, events_file, output, plot_file, consts):
+             event_rows, events_file, output, plot_file, sensitivities, consts):
     """Simulate and write CSV.  A model compiled before with the same options runs at once
     (bgc.warm); otherwise it is compiled, and the result kept for the next run.  On a
     terminal, a run that takes more than a second shows its progress on stderr."""
@@ -451,10 +457,16 @@ def simulate(model, scene, outputs, effects, algebra, backend, solver, rtol, ato
     backend = _backend(backend)
     request = warm.Request(model, scene, outputs, effects, algebra, project_initial,
                            allow_inconsistent, backend, consts)
-    found = warm.lookup(request)
+    chosen = _names(sensitivities)
+    if sensitivities is not None and not chosen:
+        raise click.UsageError("--sensitivities: name one parameter or more (P1,P2,..)")
+    found = warm.lookup(request) if not chosen else None  # (sensitivities: built each time)
     if found is not None and warm.needs_model(found[0], solver, step):
         found = None
-    if found is None:
+    if chosen:
+        record, program, compiled = _compile_sensitivities(
+            request, chosen, [item.partition("=")[0] for item in params])
+    elif found is None:
         record, program, compiled = _compile_for_run(request)
     else:
         (record, path), compiled = found, None
@@ -554,6 +566,19 @@ def _compile_for_run(request: warm.Request):
     record = warm.record_for(compiled, program, _warnings_text(compiled))
     warm.store(request, data, record)
     return record, program, compiled
+
+
+def _compile_sensitivities(request: warm.Request, chosen, given):
+    """The program augmented with the sensitivities to `chosen` (parameters), not kept warm;
+    given: the parameters -p overrides.  (record, program, the compiled model)."""
+    r = request
+    source = replace(_or_exit(api.read_source, r.model), consts=r.consts)
+    compiled = _estimation(estimate.build, source, tuple(chosen), r.scene, tuple(given), False,
+                           r.algebra, r.outputs, r.effects, r.project_initial,
+                           r.allow_inconsistent, ("--outputs", "--effects", "--scene"))
+    _warn(compiled)
+    program = runner.prepare(compiled, r.backend)
+    return warm.record_for(compiled, program, _warnings_text(compiled)), program, compiled
 
 
 def _plot(record, csv, target: str, status: int, rows: bool) -> int:
@@ -1125,6 +1150,82 @@ def steady(model, scene, params, json_file):
     if json_file:
         _write_atomic(json_file, linear.json_lines(found.as_dict()))
     _echo(found.lines())
+
+
+# ---------------------------------------------------------------- estimation
+
+
+def _estimation(call, *args):
+    """call(*args) of bgc.estimate: the model's errors as _or_exit says them, an argument or
+    data file refused a usage error (exit 2), a fit that cannot be done one line, exit 1."""
+    try:
+        return _or_exit(call, *args)
+    except estimate.FitArgumentError as error:
+        raise click.UsageError(str(error)) from None
+    except estimate.FitError as error:
+        _fail(str(error))
+
+
+@main.command()
+@MODEL
+@SCENE
+@ALGEBRA
+@click.option("--data", required=True, type=click.Path(exists=True, dir_okay=False),
+              metavar="MEASURED.csv",
+              help="The measured samples: a column t, and columns named as the model's "
+                   "variables (they become the outputs), on a uniform time grid.")
+@click.option("--vary", "varies", multiple=True, required=True, metavar="NAME[=LO..HI]",
+              help="A parameter to estimate, from its value in the scene (or -p), kept "
+                   "within LO..HI if given (either may be left out).  Repeat for each.")
+@click.option("-p", "params", multiple=True, metavar="NAME=VALUE",
+              help="A fixed parameter override.")
+@click.option("--backend", type=click.Choice(["c", "python"]), default="c")
+@click.option("--solver", type=click.Choice(solvers.NAMES), default=None)
+@click.option("--rtol", type=POSITIVE, default=None)
+@click.option("--atol", type=POSITIVE, default=None)
+@click.option("--max-iter", type=click.IntRange(1, 10000), default=100, show_default=True,
+              help="The most Levenberg-Marquardt iterations.")
+@click.option("-o", "output", default=None, callback=_output_file, metavar="FILE.json",
+              help="Also write the result (estimates, standard errors, intervals, "
+                   "correlations, cost, iterations, why it stopped) as JSON.")
+@click.option("--plot", "plot_file", default=None, metavar="FILE.png", callback=_plot_file,
+              help="Draw the measured and fitted outputs and the residuals into FILE (needs "
+                   "matplotlib).")
+def fit(model, scene, algebra, data, varies, params, backend, solver, rtol, atol, max_iter,
+        output, plot_file):
+    """Estimate parameters from measured data by Levenberg-Marquardt on the residuals, with
+    their Jacobian from the forward sensitivities the compiler derives: estimates, standard
+    errors, 95 % confidence intervals, correlations."""
+    _not_an_input(model, output, plot_file, others=[("the data file", data)])
+    vary = [_estimation(estimate.parse_vary, v) for v in varies]
+    measured = _estimation(estimate.read_data, data)
+    fixed = {}
+    for item in params:
+        name, sep, value = item.partition("=")
+        try:
+            fixed[name] = float(value) if sep else math.nan
+        except ValueError:
+            fixed[name] = math.nan
+        if not math.isfinite(fixed[name]):
+            raise click.UsageError(f"-p expects NAME=VALUE with a finite number, got '{item}'")
+    backend = _backend(backend)
+    result = _estimation(estimate.fit, model, measured, vary, scene, fixed, backend, algebra,
+                         max_iter, **{k: v for k, v in (("solver", solver), ("rtol", rtol),
+                                                        ("atol", atol)) if v is not None})
+    if output:
+        _write_atomic(output, result.json())
+    if plot_file:
+        from . import plot
+        with outfile.Partial(plot_file) as part:
+            try:
+                estimate.plot_residuals(result, part.file, plot.check_format(plot_file))
+            except OSError as error:
+                _fail(str(part.failed(error)))
+            part.commit()
+    _echo(result.table())
+    if not result.converged:
+        click.echo(f"warning: the fit did not converge ({result.stopped})", err=True)
+        sys.exit(1)
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -394,8 +394,11 @@ def _stores(exprs) -> list[Store]:
     return [Store(k, as_expr(e)) for k, e in enumerate(exprs)]
 
 
-def lower(reduced: Reduced) -> Program:
-    """The program of a reduced system."""
+def lower(reduced: Reduced, sensitivities: tuple[str, ...] = (), given=(),
+          state_outputs: bool = False) -> Program:
+    """The program of a reduced system.  sensitivities: parameter names, for the program
+    augmented with the states' sensitivities to them (bgc.sensitivity, which says what given
+    and state_outputs mean)."""
     states = [st.symbol for st in reduced.states]
     base = {TIME: T}
     base.update((s, X[i]) for i, s in enumerate(states))
@@ -410,10 +413,20 @@ def lower(reduced: Reduced) -> Program:
     run = reduced.run
     scene = SceneSettings(run.t0, run.t_end, run.dt, run.solver, run.rtol, run.atol, run.step,
                           max_step=run.max_step)
-    return finish(reduced.name, tuple(st.name for st in reduced.states), params,
-                  tuple(o.name for o in reduced.outputs),
-                  tuple(ConstraintRow(r.junction, r.level) for r in rows), movable, scene,
-                  fns, tuple(mapper.plans), mapper.count, _events_info(reduced.events))
+    names = tuple(st.name for st in reduced.states)
+    outputs = tuple(o.name for o in reduced.outputs)
+    if sensitivities:
+        from . import sensitivity
+        sensitivity.check(sensitivities, [p.name for p in params], reduced.events is not None)
+        aug = sensitivity.augment(fns, params, names, outputs, movable, tuple(sensitivities),
+                                  given, mapper.plans, mapper.count, state_outputs,
+                                  jacobian_pattern)
+        names, outputs, fns, movable, mapper.count = aug.states, aug.outputs, aug.functions, \
+            aug.movable, aug.count
+    program = finish(reduced.name, names, params, outputs,
+                     tuple(ConstraintRow(r.junction, r.level) for r in rows), movable, scene,
+                     fns, tuple(mapper.plans), mapper.count, _events_info(reduced.events))
+    return aug.pattern(program) if sensitivities else program
 
 
 def _build(mapper: _Mapper, steps, specs: dict, n: int) -> dict:

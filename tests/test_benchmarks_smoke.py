@@ -187,3 +187,15 @@ def test_events_quick_run(capsys):
         for method, found in rows.items():
             assert all(float(c[8]) < 1e-2 for c in found), (method, found)
     assert out.count("goal: pwm at equal error") == 6
+
+
+def test_fit_baseline_is_the_model():
+    """benchmarks/fit.py's SciPy baseline integrates the DC motor's equations written by hand:
+    they are models/dc_motor.bg's (bgc's run at the data's parameters, to 1e-8), so both
+    sides of its table fit the same model."""
+    fit = _benchmark("fit")
+    t = np.linspace(0.0, 0.5, 51)
+    by_hand = fit.motor_ivp([fit.TRUE[n] for n in fit.NAMES], t)
+    _, Y, _ = bgc.simulate(ROOT / "models" / "dc_motor.bg", "run", backend="python",
+                           outputs="ind.f, rotor.f", params=fit.TRUE, t_end=0.5, dt=0.01)
+    assert np.max(np.abs(Y - by_hand)) < 1e-8 * max(1.0, np.max(np.abs(Y)))
