@@ -15,11 +15,14 @@ directory (BGC_CACHE_DIR) in three states:
   warm         a second run: bgc.warm's record names the cached program
 
 Each cell is the best wall time of --runs runs (time.perf_counter around subprocess.run, the
-process's start and exit included; the machine is shared, so the best is the least disturbed).
+process's start and exit included; the machine is shared, so the best is the least disturbed)
+and the best cpu time (user + system of bgc and of the compiler and program it runs: on a
+loaded machine the wall time measures the load, the cpu time what the command costs).
 Python's bytecode cache is on, as an installed bgc has it (PYTHONDONTWRITEBYTECODE is unset
 for the runs, and bgc's modules are imported once before them).
 
-Then the stages of a first run (once kept), timed inside one fresh process per backend:
+Then the stages of a first run (once kept), their cpu time inside one fresh process per
+backend (the process's and its children's):
 import (bgc's modules and SymPy), compile (parse to program IR, bgc.api.build), build (the
 C part, the interpreter's program or the Python module, bgc.runner.prepare), run (the program
 started and its CSV read back, bgc.runner.run).
@@ -37,6 +40,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import resource
 import shutil
 import subprocess
 import sys
@@ -52,18 +56,21 @@ BACKENDS = ("c", "vm", "python", "auto")
 KEPT = ("bgc-runtime-", "bgc-vm-", "lark-")  # built once per machine
 
 STAGES = r"""
-import json, sys, time
-t0 = time.perf_counter()
+import json, resource, sys, time
+def now():  # cpu: this process's and its children's (the compiler, the program)
+    s, c = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
+    return s.ru_utime + s.ru_stime + c.ru_utime + c.ru_stime
+c0 = now()
 import bgc.api, bgc.runner, bgc.cli, sympy
-t1 = time.perf_counter()
+c1 = now()
 compiled = bgc.api.build(sys.argv[1])
-t2 = time.perf_counter()
+c2 = now()
 program = bgc.runner.prepare(compiled, sys.argv[2])
-t3 = time.perf_counter()
+c3 = now()
 result = bgc.runner.run(program)
-t4 = time.perf_counter()
+c4 = now()
 assert result.status == 0, result.stderr
-print(json.dumps([t1 - t0, t2 - t1, t3 - t2, t4 - t3]))
+print(json.dumps([c1 - c0, c2 - c1, c3 - c2, c4 - c3]))
 """
 
 
@@ -73,16 +80,21 @@ def _bgc() -> list[str]:
 
 
 def _best(argv, env, before, runs):
-    best = float("inf")
+    """(best wall, best cpu) of runs runs; cpu: the processes' user + system time (bgc's and
+    the compiler's and the program's, which it waits for)."""
+    wall = cpu = float("inf")
     for _ in range(runs):
         before()
+        r0 = resource.getrusage(resource.RUSAGE_CHILDREN)
         t0 = time.perf_counter()
         done = subprocess.run(argv, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
                               text=True)
-        best = min(best, time.perf_counter() - t0)
+        wall = min(wall, time.perf_counter() - t0)
+        r1 = resource.getrusage(resource.RUSAGE_CHILDREN)
+        cpu = min(cpu, r1.ru_utime - r0.ru_utime + r1.ru_stime - r0.ru_stime)
         if done.returncode != 0:
             raise SystemExit(f"{' '.join(argv)} failed:\n{done.stderr}")
-    return best
+    return wall, cpu
 
 
 def _per_rhs(model: str, backend: str, env, factor: float) -> tuple[float, int]:
@@ -158,12 +170,13 @@ def main(argv=None):
           f"{machine.load_average()} (shared: the best of {args.runs} runs)")
     print(f"compiler: {machine.cc_version(['cc'])}; BGC_CFLAGS={os.environ.get('BGC_CFLAGS', '')}")
     print()
-    print("bgc simulate MODEL --backend B, wall [s]")
-    print(f"{'model':22}{'backend':>8}{'empty':>10}{'once kept':>11}{'warm':>9}")
-    for (model, backend), (e, k, w) in table.items():
-        print(f"{Path(model).stem:22}{backend:>8}{e:10.3f}{k:11.3f}{w:9.3f}")
+    print("bgc simulate MODEL --backend B: wall [s] / cpu [s]")
+    print(f"{'model':22}{'backend':>8}{'empty':>16}{'once kept':>16}{'warm':>16}")
+    for (model, backend), cells in table.items():
+        print(f"{Path(model).stem:22}{backend:>8}"
+              + "".join(f"{w:9.3f} /{c:6.3f}" for w, c in cells))
     print()
-    print("a first run's stages (once kept), wall [s]")
+    print("a first run's stages (once kept), cpu [s]")
     print(f"{'model':22}{'backend':>8}{'import':>9}{'compile':>9}{'build':>9}{'run':>9}"
           f"{'total':>9}")
     for (model, backend), times in stages.items():
@@ -183,11 +196,10 @@ def main(argv=None):
     print()
     pend = [m for m in models if Path(m).stem == "pendulum"]
     if pend:
-        cold = table[pend[0], "auto"][1]
-        warm = table[pend[0], "auto"][2]
-        print(f"bgc simulate models/pendulum.bg (auto): cold {cold:.3f} s (target < 1 s): "
-              f"{'met' if cold < 1.0 else 'NOT MET'}; warm {warm:.3f} s (target < 0.1 s): "
-              f"{'met' if warm < 0.1 else 'NOT MET'}")
+        (cold, cold_cpu), (warm, warm_cpu) = table[pend[0], "auto"][1:]
+        print(f"bgc simulate models/pendulum.bg (auto): cold {cold:.3f} s wall, {cold_cpu:.3f} s "
+              f"cpu (target < 1 s): {'met' if cold < 1.0 else 'NOT MET'}; warm {warm:.3f} s wall, "
+              f"{warm_cpu:.3f} s cpu (target < 0.1 s): {'met' if warm < 0.1 else 'NOT MET'}")
 
 
 if __name__ == "__main__":
