@@ -33,6 +33,7 @@ class _Later:
 
 acc, api, stability = _Later(".accuracy"), _Later(".api"), _Later(".stability")
 emit, report, diagnostics = _Later(".emit"), _Later(".report"), _Later(".diagnostics")
+vm = _Later(".vm")
 
 
 def _warnings_text(compiled) -> str:
@@ -574,7 +575,7 @@ def _compile_for_run(request: warm.Request, auto=None):
     source = replace(_or_exit(api.source_from_bytes, r.model, data), consts=r.consts)
     compiled = _build(source, r.scene, r.project_initial, r.algebra, outputs=r.outputs,
                       effects=r.effects, allow_inconsistent=r.allow_inconsistent)
-    if auto is not None and emit.linkable(compiled.program) and runner.short_run(
+    if auto is not None and vm.supports(compiled.program) and runner.short_run(
             compiled.program.scene.with_options(t_end=auto[0], dt=auto[1]),
             warm.rhs_ops(compiled.program), len(compiled.program.states)):
         request = replace(request, backend="vm")

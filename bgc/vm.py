@@ -495,6 +495,14 @@ def _strings(texts) -> bytes:
     return b"".join(out)
 
 
+def supports(program: Program) -> bool:
+    """Whether the interpreter runs the program (else program_bytes raises VMError): its
+    parameters and constants fit the runtime built once, and its functions are a model part's
+    (MODEL_FUNCTIONS and the constraint rows', not an FMU's outputs_jvp)."""
+    return emit.linkable(program) and all(k in MODEL_FUNCTIONS
+                                          for k in emit._model_functions(program))
+
+
 def program_bytes(program: Program) -> bytes:
     """The program file the interpreter runs (see the module's docstring)."""
     if not emit.linkable(program):
