@@ -104,7 +104,7 @@ def main(argv=None):
         cache = Path(tmp) / "cache"
         env = dict(os.environ, BGC_CACHE_DIR=str(cache))
         out = str(Path(tmp) / "out.csv")
-        simulate = [*_bgc(), "simulate", args.model, "-o", out] + \
+        simulate = [*_bgc(), "simulate", args.model, "--backend", "c", "-o", out] + \
             (["--scene", args.scene] if args.scene else [])
         subprocess.run(simulate, env=env, check=True, capture_output=True)
         (program,) = [p for p in cache.glob("bgc-*")

@@ -23,8 +23,8 @@ from .report import SceneSummary, check_report, scenes_report, equations_latex, 
 from .resolve import resolve
 from .resources import read_bounded
 from .scene import Override, Settings, apply_scene, check_parameters as check_parameters_of
-from .run import (ALGEBRA, BACKENDS, FORMATS, SIMULATE_OPTIONS, TARGETS, check_run_options,
-                  choice as _choice, exclusive)
+from .run import (ALGEBRA, BACKENDS, FORMATS, SIMULATE_OPTIONS, SWEEP_BACKENDS, TARGETS,
+                  check_run_options, choice as _choice, exclusive)
 from .run import RunSettings, run_args  # noqa: F401  (the API's, from bgc.run)
 # the one run function and its helpers (bgc.runner), as the API offers them
 from .runner import Result, choose_backend, prepare, run, settings_for
@@ -301,7 +301,8 @@ def simulate(model, scene: str | None = None, backend: str = "c", algebra: str =
     options: t_end, dt, solver, rtol, atol, step, params, project_initial, max_steps,
     allow_inconsistent (start from initial values that violate the constraints, neither
     refused nor projected: the correctors pull them back).
-    backend "c" falls back to "python" when there is no C compiler."""
+    backend "c" (and "vm", the interpreter: no C build per model, bgc/vm.py) falls back to
+    "python" when there is no C compiler."""
     _choice("backend", backend, BACKENDS)
     unknown = sorted(set(options) - set(SIMULATE_OPTIONS))
     if unknown:
@@ -363,7 +364,7 @@ def sweep(model, scene: str | None = None, grid=None, sample=None, vary=None, se
     import contextlib
 
     from . import sweeps as sw
-    _choice("backend", backend, BACKENDS)
+    _choice("backend", backend, SWEEP_BACKENDS)
     unknown = sorted(set(options) - set(SIMULATE_OPTIONS))
     if unknown:
         raise TypeError(f"sweep() got unknown options: {', '.join(unknown)}")

@@ -141,6 +141,30 @@ def compile_c_linked(model: str, runtime: str, cc: str | None = None,
     return _cached(f"bgc-{key}{_EXE_SUFFIX}", True, link)
 
 
+def compile_vm(sources: str, unit, cc: str | None = None,
+               flags: tuple[str, ...] | None = None) -> Path:
+    """The interpreter (bgc.vm), built once per machine into the cache from the text unit()
+    returns, keyed by `sources` (the digest of the files that text is made of: so a run that
+    finds it cached does not make the text) with the compiler and flags, and checked as
+    compile_c's programs are."""
+    command, flags, identity = _toolchain(cc, flags)
+    key = _key(["vm", sources, command, list(flags), list(C_LIBS), identity])
+    return _cached(f"bgc-vm-{key}{_EXE_SUFFIX}", True, lambda tmp: _build(
+        tmp, command, flags, "vm.c", unit(), [f"vm{_EXE_SUFFIX}"], C_LIBS))
+
+
+def cache_bytes(data: bytes, suffix: str) -> Path:
+    """A file of the cache named by the SHA-256 of its bytes (checked before reuse, written
+    atomically): an interpreter's program (bgc.vm)."""
+    digest = hashlib.sha256(data).hexdigest()
+
+    def write(tmp: Path) -> Path:
+        (tmp / "program").write_bytes(data)
+        return tmp / "program"
+
+    return _cached(f"bgc-{digest[:40]}{suffix}", False, write)
+
+
 def _toolchain(cc, flags) -> tuple[list[str], tuple[str, ...], str]:
     command = c_compiler(cc)
     if not command:

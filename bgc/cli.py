@@ -35,6 +35,7 @@ class _Later:
 acc, api, stability = _Later(".accuracy"), _Later(".api"), _Later(".stability")
 estimate = _Later(".estimate")
 emit, report, diagnostics = _Later(".emit"), _Later(".report"), _Later(".diagnostics")
+vm = _Later(".vm")
 
 
 def _warnings_text(compiled) -> str:
@@ -405,7 +406,12 @@ def compile(model, scene, outputs, effects, algebra, target, output, project_ini
 @SCENE
 @ADHOC
 @ALGEBRA
-@click.option("--backend", type=click.Choice(["c", "python"]), default="c")
+@click.option("--backend", type=click.Choice(["auto", "c", "vm", "python"]), default="auto",
+              envvar="BGC_BACKEND", show_envvar=True,
+              help="c: the model built in C (cached); vm: run in bgc's interpreter, no C build "
+                   "per model; python: the generated Python module.  auto: c when this model's "
+                   "build is cached or the run is long, else vm (docs/cli.md).  [default: "
+                   "auto]")
 @click.option("--solver", type=click.Choice(solvers.NAMES), default=None,
               help="The solver (default: the scene's); see docs/solvers.md.")
 @click.option("--rtol", type=POSITIVE, default=None)
@@ -454,20 +460,31 @@ def simulate(model, scene, outputs, effects, algebra, backend, solver, rtol, ato
     _not_an_input(model, output, plot_file, events_file)
     if project_initial and allow_inconsistent:
         raise click.UsageError("--project-initial and --allow-inconsistent exclude each other")
-    backend = _backend(backend)
+    auto = backend == "auto"
+    backend = _backend("c" if auto else backend)
+    auto = auto and backend == "c"  # (without a C compiler: python)
     request = warm.Request(model, scene, outputs, effects, algebra, project_initial,
                            allow_inconsistent, backend, consts)
     chosen = _names(sensitivities)
     if sensitivities is not None and not chosen:
         raise click.UsageError("--sensitivities: name one parameter or more (P1,P2,..)")
     found = warm.lookup(request) if not chosen else None  # (sensitivities: built each time)
+    if found is None and auto and not chosen:  # no build of this model: its interpreted
+        interpreted = replace(request, backend="vm")  # program, if the run is short
+        found = warm.lookup(interpreted)
+        if found is not None and _short(found[0], t_end, dt):
+            request = interpreted
+            click.echo(runner.INTERPRETED, err=True)
+        else:
+            found = None
     if found is not None and warm.needs_model(found[0], solver, step):
         found = None
     if chosen:
         record, program, compiled = _compile_sensitivities(
             request, chosen, [item.partition("=")[0] for item in params])
     elif found is None:
-        record, program, compiled = _compile_for_run(request)
+        record, program, compiled = _compile_for_run(
+            request, (t_end, dt) if auto and request.backend == "c" else None)
     else:
         (record, path), compiled = found, None
         program = warm.program(record, path)
@@ -550,9 +567,17 @@ def _scratch(needed: bool):
     return tempfile.TemporaryDirectory(prefix="bgc-")
 
 
-def _compile_for_run(request: warm.Request):
+def _short(record: warm.Record, t_end, dt) -> bool:
+    """Whether a run of the model a warm record describes is short (bgc.runner.short_run)."""
+    settings = record.settings.with_options(t_end=t_end, dt=dt)
+    return runner.short_run(settings, record.rhs_ops, record.states)
+
+
+def _compile_for_run(request: warm.Request, auto=None):
     """The cold path: build the model, compile its program into the cache, keep a warm
-    record of it; (record, program, the compiled model)."""
+    record of it; (record, program, the compiled model).  auto: (t_end, dt) of a run whose
+    backend bgc chooses: the interpreter for a short run (bgc.runner.short_run), which is
+    said on stderr, else the C backend."""
     r = request
     try:
         data = read_bounded(r.model)
@@ -562,7 +587,12 @@ def _compile_for_run(request: warm.Request):
     source = replace(_or_exit(api.source_from_bytes, r.model, data), consts=r.consts)
     compiled = _build(source, r.scene, r.project_initial, r.algebra, outputs=r.outputs,
                       effects=r.effects, allow_inconsistent=r.allow_inconsistent)
-    program = runner.prepare(compiled, r.backend)
+    if auto is not None and vm.supports(compiled.program) and runner.short_run(
+            compiled.program.scene.with_options(t_end=auto[0], dt=auto[1]),
+            warm.rhs_ops(compiled.program), len(compiled.program.states)):
+        request = replace(request, backend="vm")
+        click.echo(runner.INTERPRETED, err=True)
+    program = runner.prepare(compiled, request.backend)
     record = warm.record_for(compiled, program, _warnings_text(compiled))
     warm.store(request, data, record)
     return record, program, compiled
@@ -772,7 +802,7 @@ class _RunProgress:
 @SCENE
 @ADHOC
 @ALGEBRA
-@click.option("--backend", type=click.Choice(["c", "python"]), default="c")
+@click.option("--backend", type=click.Choice(["c", "vm", "python"]), default="c")
 @click.option("--solvers", "solver_list", default=None, metavar="A,B,...",
               help="Solvers to sweep (default: all; with --gains: the scene's and rk4).")
 @click.option("--rtols", default=None, metavar="R1,R2,...",

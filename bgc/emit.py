@@ -17,7 +17,6 @@ import json
 import re
 from dataclasses import dataclass
 
-import jinja2
 import sympy as sp
 
 from bgc import ir, solvers
@@ -72,14 +71,16 @@ class _Workspace:
     layouts: dict  # function name -> ir.Layout
 
 
-def _workspace(program: Program, chunk_ops: int) -> _Workspace:
+def _workspace(program: Program, chunk_ops: int, layouts: bool = True) -> _Workspace:
+    """layouts=False: no slots for the values that cross chunks (bgc.vm keeps them in its
+    registers)."""
     n = max(len(program.states), 1)
     y0, stages = 0, n
     y = stages + 15 * n
     jac = y + max(len(program.outputs), 1)
     slots = jac + 2 * n
     layouts = {name: ir.layout(program.function(name).body, slots, chunk_ops)
-               for name in _model_functions(program)}
+               for name in _model_functions(program)} if layouts else {}
     top = slots + max((len(lay.slot) for lay in layouts.values()), default=0)
     areas, ints = [], 0
     for bp in program.blocks:
@@ -633,7 +634,8 @@ def _check_default(j: int, default: sp.Expr) -> None:
 
 
 @functools.lru_cache(maxsize=None)
-def _environment() -> jinja2.Environment:
+def _environment():
+    import jinja2  # (here: the interpreter backend and a warm run do without)
     env = jinja2.Environment(
         loader=jinja2.FileSystemLoader(str(resource_dir("templates"))),
         undefined=jinja2.StrictUndefined,

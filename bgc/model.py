@@ -144,6 +144,10 @@ class Model(api.Source):
     def _c(self) -> runner.Program:
         return runner.prepare(self.compiled, "c")
 
+    @functools.cached_property
+    def _vm(self) -> runner.Program:
+        return runner.prepare(self.compiled, "vm")
+
     @property
     def name(self) -> str:
         return self.compiled.program.name
@@ -214,7 +218,9 @@ class Model(api.Source):
         settings = runner.settings_for(program.scene, [p.name for p in program.params],
                                        **options)
         backend, _ = runner.choose_backend(backend)
-        result = runner.run(self._python if backend == "python" else self._c, settings)
+        program = self._python if backend == "python" else self._vm if backend == "vm" \
+            else self._c
+        result = runner.run(program, settings)
         return Trajectory(*api.arrays(result), self.outputs)
 
     def equations(self, format: str = "text") -> Equations:

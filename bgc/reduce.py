@@ -1204,8 +1204,6 @@ def evaluate(reduced: Reduced, values: dict, exprs) -> list[float]:
     need: the rows of a constraint on a coupled field read its flows, which solve M(q) f = p.
     Raises _NotNumeric where a step cannot be evaluated here, ModelError where a linear block
     is singular at these values (naming its equations)."""
-    import numpy  # only models whose rows go through a block come here
-
     body = ir.prune(list(reduced.steps) + [Store(k, e) for k, e in enumerate(exprs)])
     v = {}
     for k, value in values.items():
@@ -1220,6 +1218,7 @@ def evaluate(reduced: Reduced, values: dict, exprs) -> list[float]:
         elif isinstance(s, Store):
             out[s.index] = _number(s.expr, v)
         elif isinstance(s, Solve):
+            import numpy  # (here: only models whose rows go through a block need it)
             plan = reduced.plans[s.block]
             m = len(s.unknowns)
             A = numpy.zeros((m, m))

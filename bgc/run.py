@@ -13,7 +13,8 @@ from . import solvers
 from .resources import MAX_OUTPUT_ROWS
 
 ALGEBRA = ("auto", "symbolic", "numeric")  # how algebraic blocks are solved (bgc.reduce)
-BACKENDS = ("c", "python")  # what runs a simulation
+BACKENDS = ("c", "vm", "python")  # what runs a simulation (vm: bgc/vm.py, the interpreter)
+SWEEP_BACKENDS = ("c", "python")  # what runs a sweep's batches
 TARGETS = ("c", "python", "fmu")  # what `compile` writes (fmu: bgc/fmu.py)
 FORMATS = ("text", "latex")  # what `equations` prints
 SIMULATE_OPTIONS = ("t_end", "dt", "solver", "rtol", "atol", "step", "params", "project_initial",

@@ -27,12 +27,26 @@ from . import backends, outfile
 from .run import RunSettings, parameter_overrides, run_span_problem
 
 NO_C_COMPILER = "warning: no C compiler found (cc or $CC); using the Python backend"
+INTERPRETED = ("bgc: no cached build for this model; running it in the interpreter (--backend c "
+               "to build)")
+VM_WORK = 10_000_000  # runner.short_run: the most output rows x (operations + states)
+
+
+def short_run(settings: RunSettings, rhs_ops: int, states: int) -> bool:
+    """Whether `bgc simulate` runs a model it has no build of in the interpreter (bgc.vm)
+    rather than building it: when the run's output rows ((t_end - t0) / dt + 1) times the
+    right side's operations and states (bgc.ir.count_ops, as `bgc check` counts them) is at
+    most VM_WORK, where the interpreter's extra time is below what the C build of the
+    model's part costs (benchmarks/cold.py measures both)."""
+    rows = (settings.t_end - settings.t0) / settings.dt + 1
+    return rows * (rhs_ops + states) <= VM_WORK
 
 
 def choose_backend(backend: str) -> tuple[str, str | None]:
     """The backend that runs, and the warning to print about it (None: nothing to say): "c"
-    falls back to "python" when there is no C compiler."""
-    if backend == "c" and not backends.have_c_compiler():
+    and "vm" (whose interpreter is built once per machine) fall back to "python" when there is
+    no C compiler."""
+    if backend in ("c", "vm") and not backends.have_c_compiler():
         return "python", NO_C_COMPILER
     return backend, None
 
@@ -41,15 +55,19 @@ def choose_backend(backend: str) -> tuple[str, str | None]:
 class Program:
     """A generated program ready to run."""
 
-    backend: str  # "c" or "python"
+    backend: str  # "c", "vm" or "python"
     defaults: RunSettings  # the scene's settings, compiled into it
     params: tuple[str, ...]  # its parameters, in order
     outputs: tuple[str, ...] = ()
-    path: Path | None = None  # the file started as a process (C executable or Python)
+    path: Path | None = None  # the file started as a process (C executable or Python), or
+    #                           the interpreter's program file (bgc.vm)
     module: object = None  # or: generated Python loaded in this process
+    interpreter: Path | None = None  # the interpreter that runs path (bgc.vm)
 
     def argv(self) -> list[str]:
         """The command that starts it."""
+        if self.interpreter is not None:
+            return [str(self.interpreter), str(self.path)]
         if self.path.suffix == ".py":
             return [sys.executable, str(self.path)]
         return [str(self.path)]
@@ -57,12 +75,17 @@ class Program:
 
 def prepare(compiled, backend: str, in_process: bool = False) -> Program:
     """compiled's program (bgc.api.Compiled), emitted and built for `backend` (the C program
-    into the cache; Python into the cache, or loaded in this process when in_process)."""
+    into the cache; the interpreter's program into the cache, with the interpreter built
+    once per machine; Python into the cache, or loaded in this process when in_process)."""
     from .emit import emit_python
     p = compiled.program
     facts = dict(defaults=p.scene, params=tuple(q.name for q in p.params), outputs=p.outputs)
     if backend == "c":
         return Program("c", path=c_executable(p), **facts)
+    if backend == "vm":
+        from .vm import interpreter, program_bytes
+        path = backends.cache_bytes(program_bytes(p), ".bgvm")
+        return Program("vm", path=path, interpreter=interpreter(), **facts)
     (text,) = emit_python(p).values()
     if in_process:
         return Program("python", module=backends.load_python_module(text), **facts)

@@ -42,7 +42,7 @@ from . import backends, runner, solvers
 from .resources import read_bounded
 from .run import RunSettings
 
-FORMAT = 3  # of the record; change it when its fields change
+FORMAT = 4  # of the record; change it when its fields change
 
 
 @dataclass(frozen=True)
@@ -69,6 +69,10 @@ class Record:
     correctors: bool  # a constraint has a pid or pd corrector (bgc.stability's warnings)
     plot_title: tuple[str, ...] = ()  # for --plot (bgc.plot.describe)
     plot_columns: tuple[tuple, ...] = ()  # (name, kind, doc, unit) of each output
+    interpreter: str = ""  # the interpreter backend (bgc.vm): its file in the cache ...
+    interpreter_sha256: str = ""  # ... and SHA-256; the program is then its program file
+    rhs_ops: int = 0  # the right side's operations (bgc.ir.count_ops), for runner.short_run
+    states: int = 0
 
 
 def _installation() -> list:
@@ -140,7 +144,12 @@ def lookup(request: Request) -> tuple[Record, Path] | None:
         record = Record(**data)
         program = path.parent / record.program
         if Path(record.program).name != record.program or not backends.usable(
-                program, executable=program.suffix != ".py", sha256=record.sha256):
+                program, executable=program.suffix not in (".py", ".bgvm"),
+                sha256=record.sha256):
+            return None
+        if record.interpreter and (Path(record.interpreter).name != record.interpreter
+                                   or not backends.usable(path.parent / record.interpreter,
+                                                          sha256=record.interpreter_sha256)):
             return None
     except (OSError, ValueError, TypeError, KeyError, AttributeError):
         return None
@@ -165,6 +174,9 @@ def store(request: Request, source: bytes, record: Record) -> None:
 
 def program(record: Record, path: Path) -> runner.Program:
     """The cached program a record names, to run (bgc.runner)."""
+    if record.interpreter:
+        return runner.Program("vm", record.settings, record.params, path=path,
+                              interpreter=path.parent / record.interpreter)
     return runner.Program("python" if path.suffix == ".py" else "c", record.settings,
                           record.params, path=path)
 
@@ -181,8 +193,18 @@ def record_for(compiled, program: runner.Program, warnings: str) -> Record:
     """The record of a cold run: compiled (bgc.api.Compiled) prepared as program, whose
     warnings printed as `warnings`."""
     from . import plot
+    interp = program.interpreter
     return Record(
         program=program.path.name, sha256=hashlib.sha256(program.path.read_bytes()).hexdigest(),
         warnings=warnings, params=program.params, settings=program.defaults,
         correctors=any(c.corrector in ("pid", "pd") for c in compiled.reduced.constraints),
-        **plot.describe(compiled))
+        **plot.describe(compiled), interpreter=interp.name if interp else "",
+        interpreter_sha256=hashlib.sha256(interp.read_bytes()).hexdigest() if interp else "",
+        rhs_ops=rhs_ops(compiled.program), states=len(compiled.program.states))
+
+
+def rhs_ops(program) -> int:
+    """The right side's operations, as bgc.ir.count_ops counts them (solves by their flops)."""
+    from . import ir
+    ops = ir.count_ops(program, ("rhs",))
+    return sum(v for k, v in ops.items() if k != "solve")

@@ -11,6 +11,10 @@ MODELS = ROOT / "models"
 # -std=c99 at every level).  The tests of the generated C itself name their own flags: -O2 and
 # -O3 with every warning an error (test_golden, test_emit), sanitizers (test_sanitizers).
 os.environ.setdefault("BGC_CFLAGS", "-O0 -std=c99")
+# `bgc simulate` runs the C backend in the tests unless they say otherwise: its default
+# (auto: the interpreter for a short run of a model not built before, docs/cli.md) is tested
+# in tests/test_vm.py.
+os.environ.setdefault("BGC_BACKEND", "c")
 
 
 def pytest_addoption(parser):

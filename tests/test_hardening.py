@@ -261,7 +261,7 @@ RLC = bgc.load(Path(__file__).parent.parent / "models" / "rlc.bg")
 
 @pytest.mark.parametrize("call, message", [
     (lambda: bgc.compile(RLC, target="fortran"), "target must be one of 'c', 'python'"),
-    (lambda: bgc.simulate(RLC, backend="julia"), "backend must be one of 'c', 'python'"),
+    (lambda: bgc.simulate(RLC, backend="julia"), "backend must be one of 'c', 'vm', 'python'"),
     (lambda: bgc.equations(RLC, format="html"), "format must be one of 'text', 'latex'"),
     (lambda: bgc.build(RLC, algebra="magic"), "algebra must be one of 'auto', 'symbolic'"),
     (lambda: bgc.check(RLC, algebra=None), "algebra must be one of"),

@@ -1,0 +1,132 @@
+"""The interpreter backend (bgc/vm.py, bgc/runtime/vm.c): the same CSV bytes as the C program
+and the Python module, on models with constraint rows, a linear block, a Newton block and
+events, with explicit and stiff solvers (the spans short: a few steps go through every code
+path); the choice `bgc simulate` makes by itself, and a program file the interpreter refuses."""
+from pathlib import Path
+
+import pytest
+
+import bgc
+from bgc import backends, runner, vm
+from bgc.api import Source, build
+
+from conftest import run_bgc
+
+ROOT = Path(__file__).resolve().parent.parent
+pytestmark = pytest.mark.skipif(not backends.have_c_compiler(), reason="no C compiler")
+
+BALL = """model ball "a ball dropped on a floor, bouncing by a when-block"
+parameter m = 1.0
+parameter g = 9.81
+parameter e = 0.8
+parameter h0 = 1.0
+w : Se(-m*g)
+b : I(m)
+signal x = integral(b.f, init = h0)
+w -> j
+j : 1
+j -> b
+when x < 0 {
+  reinit b.p = -e*b.p
+}
+scene drop { time 0 .. 1 every 0.01; outputs x, b.p }
+"""
+
+# model -> (the run's settings, solvers); the Python module is run on the first solver
+CASES = {
+    "pendulum.bg": ({"t_end": 0.3}, ("dopri5", "rodas5p")),  # constraint rows, projection
+    "diode.bg": ({"t_end": 0.2}, ("radau5", "dopri5")),  # a Newton block
+    "two_link_arm.bg": ({"t_end": 0.2}, ("radau5", "vern7")),  # a linear block, its tangent
+    "pendulum_wall.bg": ({"t_end": 1.0}, ("dopri5",)),  # events, a block
+    "ball": ({}, ("dopri5", "rk4")),  # a when-block
+}
+
+
+def _compiled(name):
+    return build(Source("ball.bg", BALL) if name == "ball" else ROOT / "models" / name)
+
+
+@pytest.mark.parametrize("name", list(CASES))
+def test_same_bytes_as_c_and_python(name):
+    compiled = _compiled(name)
+    options, methods = CASES[name]
+    c = runner.prepare(compiled, "c")
+    interpreted = runner.prepare(compiled, "vm")
+    assert interpreted.interpreter is not None and interpreted.path.suffix == ".bgvm"
+    for k, method in enumerate(methods):
+        settings = compiled.program.scene.with_options(solver=method, **options)
+        want = runner.run(c, settings, stats=True)
+        got = runner.run(interpreted, settings, stats=True)
+        assert want.status == 0, want.stderr
+        assert got.csv == want.csv, (name, method)
+        assert got.stats["rhs"] == want.stats["rhs"] and got.stats["steps"] == want.stats["steps"]
+        if k == 0:  # (the module in this process: its rows as its main writes them)
+            module = runner.prepare(compiled, "python", in_process=True).module
+            rows = module.rows(**settings.options(compiled.program.scene))
+            text = ",".join(["t"] + module.OUTPUTS) + "\n" + "".join(
+                module._row_text(t, y) for t, y in rows)
+            assert text == want.csv, (name, method, "python")
+
+
+def test_parameters_and_a_failed_block_as_the_c_program():
+    """-p overrides (a derived parameter's default follows), and a run that fails keeps the
+    same rows and says the same."""
+    compiled = _compiled("pendulum.bg")
+    c, interpreted = runner.prepare(compiled, "c"), runner.prepare(compiled, "vm")
+    for params in ({"l": 0.7}, {"g": float("nan")}):
+        settings = runner.settings_for(compiled.program.scene, ["g", "l", "m", "theta0"],
+                                       params, t_end=0.2)
+        want, got = runner.run(c, settings), runner.run(interpreted, settings)
+        assert (got.status, got.csv, got.stderr) == (want.status, want.csv, want.stderr)
+
+
+def test_api_backend_vm():
+    t, y, names = bgc.simulate(ROOT / "models" / "rlc.bg", backend="vm", t_end=0.01)
+    t2, y2, names2 = bgc.simulate(ROOT / "models" / "rlc.bg", backend="c", t_end=0.01)
+    assert names == names2 and (t == t2).all() and (y == y2).all()
+
+
+def test_simulate_chooses_the_interpreter_for_a_short_run(tmp_path, monkeypatch):
+    model = tmp_path / "rlc.bg"
+    model.write_bytes((ROOT / "models" / "rlc.bg").read_bytes())
+    env = {"BGC_CACHE_DIR": str(tmp_path / "cache"), "BGC_BACKEND": "auto"}
+    # (the interpreter, built once per machine, is shared from the default cache)
+    (tmp_path / "cache").mkdir()
+    interp = vm.interpreter()
+    for suffix in ("", ".sha256"):
+        (tmp_path / "cache" / (interp.name + suffix)).write_bytes(
+            Path(str(interp) + suffix).read_bytes())
+    (tmp_path / "cache" / interp.name).chmod(0o755)
+
+    first = run_bgc("simulate", str(model), "-o", str(tmp_path / "a.csv"), env=env)
+    assert first.returncode == 0, first.stderr
+    assert first.stderr.strip().splitlines() == [runner.INTERPRETED]
+    assert not [p for p in (tmp_path / "cache").glob("bgc-*") if p.suffix == "" and
+                not p.name.startswith("bgc-vm-")]  # no C program built
+    again = run_bgc("simulate", str(model), "-o", str(tmp_path / "b.csv"), env=env)
+    assert again.stderr.strip().splitlines() == [runner.INTERPRETED]  # (warm)
+    built = run_bgc("simulate", str(model), "--backend", "c", "-o", str(tmp_path / "c.csv"),
+                    env=env)
+    assert built.returncode == 0 and built.stderr == ""
+    after = run_bgc("simulate", str(model), "-o", str(tmp_path / "d.csv"), env=env)
+    assert after.stderr == ""  # the model's build is cached: C
+    texts = {(tmp_path / f"{k}.csv").read_bytes() for k in "abcd"}
+    assert len(texts) == 1
+    # a long run of a model not built before is built
+    monkeypatch.setattr(runner, "VM_WORK", 10)
+    model.write_text(model.read_text() + "\n")
+    long = run_bgc("simulate", str(model), "-o", str(tmp_path / "e.csv"), env=env)
+    assert long.returncode == 0 and long.stderr == ""
+    assert (tmp_path / "e.csv").read_bytes() in texts
+
+
+def test_a_damaged_program_is_refused(tmp_path):
+    compiled = _compiled("rlc.bg")
+    data = vm.program_bytes(compiled.program)
+    interp = vm.interpreter()
+    for k, bad in enumerate([data[:-4], data[:40], b"garbage", data[:-8] + b"\xff" * 8]):
+        path = tmp_path / f"p{k}.bgvm"
+        path.write_bytes(bad)
+        done = backends.run_captured([str(interp), str(path)])
+        assert done.returncode == 3 and "is not a program this interpreter runs" in done.stderr
+        assert done.stdout == ""
