@@ -21,7 +21,7 @@ from .parser import decode, parse, parse_option
 from .reduce import Reduced, reduce
 from .report import SceneSummary, check_report, scenes_report, equations_latex, equations_text, scene_summary
 from .resolve import resolve
-from .resources import read_bounded
+from .resources import quiet_collector, read_bounded
 from .scene import Override, Settings, apply_scene, check_parameters as check_parameters_of
 from .run import (ALGEBRA, BACKENDS, FORMATS, SIMULATE_OPTIONS, SWEEP_BACKENDS, TARGETS,
                   check_run_options, choice as _choice, exclusive)
@@ -139,6 +139,7 @@ def scene_override(outputs=None, effects=None, names=("outputs=", "effects=")) -
     return Override(outs, effs)
 
 
+@quiet_collector()
 def build(model, scene: str | None = None, project_initial: bool = False,
           algebra: str = "auto", program: bool = True,
           residual_outputs: bool = False, outputs=None, effects=None,

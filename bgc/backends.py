@@ -25,6 +25,12 @@ from pathlib import Path
 from types import ModuleType
 
 C_FLAGS = ("-O2", "-std=c99")  # the C backend's, unless $BGC_CFLAGS says otherwise
+# A linked model part of more than LARGE_PART characters is compiled at -O1 where the flags
+# are C_FLAGS: the compiler's time at -O2 grows faster than the code (two to three times
+# -O1's on the 16- and 64-link chains), and the model functions it makes run as fast
+# (benchmarks/compile_scale.py measures both, in the same run).  The runtime stays at -O2.
+LARGE_PART = 100_000
+LARGE_PART_FLAGS = ("-O1", "-std=c99")
 C_LIBS = ("-lm",)
 _EXE_SUFFIX = ".exe" if os.name == "nt" else ""
 
@@ -121,7 +127,9 @@ def compile_c_linked(model: str, runtime: str, cc: str | None = None,
     programs are; an object that does not link is built again, once."""
     command, flags, identity = _toolchain(cc, flags)
     runtime_key = _key(["runtime", runtime, command, list(flags), identity])
-    key = _key(["linked", model, runtime_key, command, list(flags), list(C_LIBS), identity])
+    part_flags = model_part_flags(flags, len(model))
+    key = _key(["linked", model, runtime_key, command, list(part_flags), list(C_LIBS),
+                identity])
     runtime_name = f"bgc-runtime-{runtime_key}.o"
 
     def runtime_object() -> Path:
@@ -131,11 +139,11 @@ def compile_c_linked(model: str, runtime: str, cc: str | None = None,
     def link(tmp: Path) -> Path:
         objects = [str(runtime_object())]
         try:
-            return _build(tmp, command, flags, "model.c", model,
+            return _build(tmp, command, part_flags, "model.c", model,
                           [f"model{_EXE_SUFFIX}", *objects], C_LIBS)
         except BackendError:
             evict(Path(objects[0]))  # (a runtime object damaged behind its checksum)
-            return _build(tmp, command, flags, "model.c", model,
+            return _build(tmp, command, part_flags, "model.c", model,
                           [f"model{_EXE_SUFFIX}", str(runtime_object())], C_LIBS)
 
     return _cached(f"bgc-{key}{_EXE_SUFFIX}", True, link)
@@ -163,6 +171,12 @@ def cache_bytes(data: bytes, suffix: str) -> Path:
         return tmp / "program"
 
     return _cached(f"bgc-{digest[:40]}{suffix}", False, write)
+
+
+def model_part_flags(flags: tuple[str, ...], size: int) -> tuple[str, ...]:
+    """The flags a linked model part of `size` characters is compiled with: LARGE_PART_FLAGS
+    for a large part when the flags are bgc's own C_FLAGS, else the flags as they are."""
+    return LARGE_PART_FLAGS if size > LARGE_PART and tuple(flags) == C_FLAGS else tuple(flags)
 
 
 def _toolchain(cc, flags) -> tuple[list[str], tuple[str, ...], str]:

@@ -22,7 +22,7 @@ import sympy as sp
 from bgc import ir, solvers
 from bgc.ir import Assign, Newton, Program, Resolve, Solve, Store, as_expr
 from bgc.printers import CPrinter, PythonPrinter, float_literal
-from bgc.resources import resource_dir
+from bgc.resources import quiet_collector, resource_dir
 
 POW10_RANGE = (-24, 56)  # powers of ten for the C number formatter: |v| in about 1e-40..1e40
 C_RUNTIME = ("runtime.c", "drive.c", "erk.c", "stiff.c", "main.c", "batch.c")  # bgc/runtime/, in this order
@@ -248,6 +248,7 @@ def _plain_lines(writer: _Writer, name: str, out_name: str) -> list[str]:
 # ---------------------------------------------------------------- C
 
 
+@quiet_collector()
 def emit_c(program: Program, chunk_ops: int = ir.CHUNK_OPS, linked: bool = False) \
         -> dict[str, str]:
     """The standalone C99 program: {"<name>.c": text}.  linked: the model part alone, to be
@@ -276,6 +277,7 @@ def emit_c(program: Program, chunk_ops: int = ir.CHUNK_OPS, linked: bool = False
     return {f"{context['ident']}.c": _render("c_program.c.j2", context)}
 
 
+@quiet_collector()
 def emit_python(program: Program, chunk_ops: int = ir.CHUNK_OPS) -> dict[str, str]:
     """The standalone Python module (numpy only): {"<name>.py": text}."""
     _validate(program)

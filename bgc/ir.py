@@ -136,6 +136,47 @@ def substitute(expr, mapping: dict, memo: dict | None = None):
     return memo[expr]
 
 
+# free symbols, remembered: the passes ask for the symbols of the same statements again and
+# again (every pruning, every rewrite), and SymPy walks the whole expression each time
+_BASIC_FREE = sp.Basic.__dict__["free_symbols"]
+_FREE_OF_ARGS: dict = {}  # type -> whether its free symbols are its arguments' (Basic's rule)
+_FREE: dict = {}  # expression -> frozenset of its free symbols
+_FREE_MAX = 1 << 18  # entries kept; beyond, the memo starts again
+
+
+def _free_of_args(cls) -> bool:
+    rule = _FREE_OF_ARGS.get(cls)
+    if rule is None:
+        owner = next((k for k in cls.__mro__ if "free_symbols" in k.__dict__), None)
+        rule = _FREE_OF_ARGS[cls] = owner is not None and \
+            owner.__dict__["free_symbols"] is _BASIC_FREE
+    return rule
+
+
+def free_symbols(expr) -> frozenset:
+    """expr.free_symbols as a frozenset, remembered for every subexpression (explicit stack);
+    nodes that define their own free symbols (symbols, Indexed, Derivative) are asked."""
+    found = _FREE.get(expr)
+    if found is not None:
+        return found
+    if len(_FREE) > _FREE_MAX:
+        _FREE.clear()
+    memo = _FREE
+    stack = [(expr, False)]
+    while stack:
+        e, ready = stack.pop()
+        if e in memo:
+            continue
+        if not e.args or not _free_of_args(type(e)):
+            memo[e] = frozenset(e.free_symbols)
+        elif not ready:
+            stack.append((e, True))
+            stack.extend((a, False) for a in e.args if a not in memo)
+        else:
+            memo[e] = frozenset().union(*[memo[a] for a in e.args])
+    return memo[expr]
+
+
 def trivial(e) -> bool:
     """A number, a symbol, or a negated symbol: substituted where it is used, never assigned."""
     if e.is_Number or e.is_Symbol or e.is_Indexed:
@@ -236,7 +277,7 @@ def state_masks(f: Function, size: int) -> list[int]:
         for a in e.atoms(sp.Indexed):
             if a.base == X:
                 bits |= 1 << int(a.indices[0])
-        for sym in e.free_symbols:
+        for sym in free_symbols(e):
             bits |= deps.get(sym, 0)
         return bits
 
@@ -261,11 +302,11 @@ def uses(s) -> set:
         inner = set(s.unknowns) | {a.target for a in s.body} | {a.target for a in s.tangents}
         out = set()
         for e in inner_expressions(s):
-            out |= e.free_symbols
+            out |= free_symbols(e)
         return out - inner
     out = set()
     for e in expressions(s):
-        out |= e.free_symbols
+        out |= free_symbols(e)
     return out
 
 

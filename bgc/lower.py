@@ -256,7 +256,7 @@ def _propagate_copies(f: Function) -> Function:
     body = []
     for s in f.body:
         if sub:
-            s = ir.map_statement(s, lambda e: ir.substitute(e, sub) if e.free_symbols & sub.keys()
+            s = ir.map_statement(s, lambda e: ir.substitute(e, sub) if ir.free_symbols(e) & sub.keys()
                                else e)
         if isinstance(s, Assign) and ir.trivial(s.expr):
             sub[s.target] = s.expr

@@ -1072,9 +1072,9 @@ class _Weights:
 
         try:
             in_flows = _leaf(defs[balance], defs, held, self.memo)
-            out = []
+            out, flows = [], in_flows.free_symbols
             for p, f, sign in self.momenta:
-                if f in in_flows.free_symbols:
+                if f in flows:
                     d = sign * partial(in_flows, f)
                     out.append((p, _leaf(d, defs, lambda s: s in defs and not sys.is_leaf(s),
                                          self.memo_all)))

@@ -9,6 +9,9 @@ solvers instead), so that no model can make bgc hang, exhaust memory or recurse 
 """
 from __future__ import annotations
 
+import gc
+import threading
+from contextlib import contextmanager
 from math import comb
 from pathlib import Path
 
@@ -36,6 +39,38 @@ MAX_EXPANDED_TERMS = 5_000  # the terms that expanding products and powers may p
 MAX_SYMBOLIC_EXPONENT = 64  # of x^n, n an integer: SymPy expands (re + i im)^n to decide
 #                             whether a power is real, minutes for n = 1000
 SYMBOLIC_MAX_BLOCK = 12  # unknowns of a block that `--algebra symbolic` solves by LU
+
+
+# the garbage collector during a compile: what exists when it starts (the imported modules,
+# SymPy's caches) is frozen out of the collector's walks, and the youngest generation is
+# collected every COMPILE_GC_THRESHOLD allocations instead of 700.  The compiler makes few
+# reference cycles, and walking every live expression again and again cost a fifth of a
+# large model's compile (benchmarks/compile_scale.py measures it).
+COMPILE_GC_THRESHOLD = 100_000
+_collector = threading.local()
+
+
+@contextmanager
+def quiet_collector():
+    """Within: the collector as a compile wants it (above); nested uses are the outer one's.
+    The collector's state is restored when the outermost use ends."""
+    depth = getattr(_collector, "depth", 0)
+    _collector.depth = depth + 1
+    if depth or threading.current_thread() is not threading.main_thread():
+        try:  # (the collector is the process's: only the main thread's outermost use sets it)
+            yield
+        finally:
+            _collector.depth = depth
+        return
+    threshold = gc.get_threshold()
+    gc.freeze()
+    gc.set_threshold(COMPILE_GC_THRESHOLD, *threshold[1:])
+    try:
+        yield
+    finally:
+        _collector.depth = depth
+        gc.set_threshold(*threshold)
+        gc.unfreeze()
 
 
 def resource_dir(name: str) -> Path:

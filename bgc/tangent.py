@@ -45,7 +45,7 @@ class _Forward:
         return ir.W(self.fresh - 1)
 
     def of(self, expr):
-        return directional(expr, self.tan) if expr.free_symbols & self.tan.keys() else ZERO
+        return directional(expr, self.tan) if ir.free_symbols(expr) & self.tan.keys() else ZERO
 
     def bind(self, target, value):
         """target's tangent is value: a new assignment unless it is zero or trivial."""

@@ -122,6 +122,35 @@ def test_a_model_too_large_for_the_runtime_is_built_standalone(cache, monkeypatc
     assert _runtime_objects(cache) == []
 
 
+def test_a_large_model_part_is_compiled_at_O1_only_under_bgcs_own_flags():
+    own = backends.C_FLAGS
+    assert backends.model_part_flags(own, backends.LARGE_PART) == own
+    assert backends.model_part_flags(own, backends.LARGE_PART + 1) == backends.LARGE_PART_FLAGS
+    assert backends.LARGE_PART_FLAGS[0] == "-O1" and own[0] == "-O2"
+    given = ("-O3", "-std=c99")  # $BGC_CFLAGS: the user's, for every part
+    assert backends.model_part_flags(given, 10 * backends.LARGE_PART) == given
+
+
+def test_a_part_at_another_level_than_the_runtime_writes_the_same_bytes(cache, monkeypatch):
+    """The rule above, with the suite's -O0 as bgc's own flags: the runtime at -O0, the part
+    at -O1, the same CSV as the standalone program at -O0 (the arithmetic is IEEE's at any
+    level: -std=c99, no -ffast-math)."""
+    program = api.build(MODELS / "pendulum.bg", "swing").program
+    monkeypatch.setattr(backends, "C_FLAGS", backends.c_flags())
+    monkeypatch.setattr(backends, "LARGE_PART", 0)
+    built = []
+    real = backends._build
+    monkeypatch.setattr(backends, "_build", lambda tmp, command, flags, name, *rest:
+                        built.append((name, flags)) or real(tmp, command, flags, name, *rest))
+    linked = runner.c_executable(program)
+    assert ("model.c", backends.LARGE_PART_FLAGS) in built
+    assert ("runtime.c", backends.c_flags()) in built
+    standalone = backends.compile_c(next(iter(emit_c(program).values())))
+    args = ["--t-end", "0.5", "--solver", "rodas5p"]
+    a, b = backends.run_c(linked, args), backends.run_c(standalone, args)
+    assert a[0] == 0 and a[:2] == b[:2], a[2]
+
+
 # ---------------------------------------------------------------- damaged entries
 
 

@@ -86,3 +86,27 @@ def test_output_tangents_go_through_a_newton_block():
     resolves = [s for s in f.body if isinstance(s, Resolve)]
     assert newtons and all(s.final_factor for s in newtons)
     assert {s.block for s in resolves} == {s.block for s in newtons}
+
+
+def test_remembered_free_symbols_are_sympys():
+    a, b, u = sp.symbols("a b u")
+    f = sp.Function("f")
+    shared = sp.sin(X[0] * a) + P[1]
+    for e in (shared, shared * W(3) + 1, sp.Derivative(f(u) * a, u), sp.Integer(2),
+              sp.Piecewise((X[2], sp.Gt(u, 0)), (b, True)), sp.Abs(a - W(0)) ** 2, X[1]):
+        assert ir.free_symbols(e) == e.free_symbols
+        assert ir.free_symbols(e) is ir.free_symbols(e)  # remembered
+
+
+def test_the_collector_is_restored_after_a_compile():
+    import gc
+
+    from bgc.resources import COMPILE_GC_THRESHOLD, quiet_collector
+
+    before = gc.get_threshold()
+    with quiet_collector():
+        assert gc.get_threshold()[0] == COMPILE_GC_THRESHOLD
+        with quiet_collector():  # nested: the outer one's
+            assert gc.get_threshold()[0] == COMPILE_GC_THRESHOLD
+        assert gc.get_threshold()[0] == COMPILE_GC_THRESHOLD
+    assert gc.get_threshold() == before and gc.get_freeze_count() == 0
