@@ -36,6 +36,23 @@ class Call:
 
 
 @dataclass(frozen=True)
+class Str:
+    """A string argument of a call: table("road.csv", t)."""
+
+    text: str
+    span: Span
+
+
+@dataclass(frozen=True)
+class KwArg:
+    """A named argument of a call: interp = step."""
+
+    name: str
+    value: object  # an expression or a Str
+    span: Span
+
+
+@dataclass(frozen=True)
 class BinOp:
     op: str  # + - * / ^
     left: object

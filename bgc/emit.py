@@ -516,6 +516,7 @@ def _common_context(program: Program, ws: _Workspace, literal, c: bool) -> dict:
         })
     return {
         "events": _events_context(program, literal),
+        "tables": _tables_context(program, c),
         "ident": identifier(program.name),
         "model_name": literal(program.name),
         "ident_literal": literal(identifier(program.name)),
@@ -557,6 +558,18 @@ def _scene_context(program: Program, literal, step_none: str) -> dict:
         "step": step_none if sc.step is None else float_literal(sc.step),
         "hmax": None if sc.max_step is None else float_literal(sc.max_step),
     }
+
+
+def _tables_context(program: Program, c: bool) -> list:
+    """The lookup tables' data as C initialisers or Python tuples (bgc/tables.py)."""
+    out = []
+    for tab in program.tables:
+        def seq(values):
+            text = ", ".join(_number(v) for v in values)
+            return "{ " + text + " }" if c else "(" + text + ("," if len(values) == 1 else "") + ")"
+        out.append({"n": tab.rows, "error": int(tab.extrapolate == "error"), "x": seq(tab.x),
+                    "origin": seq(tab.origins), "coef": seq(tab.coefficients)})
+    return out
 
 
 def _events_context(program: Program, literal) -> dict | None:

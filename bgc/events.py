@@ -12,7 +12,9 @@ solver never integrates across a switch.  What changes the frozen values:
   time relation     a relation linear in t with parameters alone (t >= t0): its time is known
                     in advance, t* = -b/a, and the solver steps onto it exactly;
   discrete relation reads discrete variables and parameters alone: it changes only at events;
-  square wave       `square(period, duty, t0)`: a value 0 or 1 whose edges are time events.
+  square wave       `square(period, duty, t0)`: a value 0 or 1 whose edges are time events;
+  time table        `table(..., t)` (bgc.tables): the piece that holds t, its breakpoints
+                    time events.
 
 At an event the program's `update` function gives the state and the discrete values after
 it: every relation's new value (a state relation's from the located crossing), the when-
@@ -31,7 +33,7 @@ from sympy.logic.boolalg import BooleanAtom, BooleanFunction
 from .diagnostics import Span
 from .differentiate import partial
 from .graph import TIME, written
-from .ir import SquareNext, SquareWave
+from .ir import SquareNext, SquareWave, TableNext, TablePiece
 
 RELATIONS = {"<": sp.StrictLessThan, "<=": sp.LessThan, ">": sp.StrictGreaterThan,
              ">=": sp.GreaterThan, "==": sp.Eq, "!=": sp.Ne}
@@ -70,6 +72,31 @@ class Square:
     t0: sp.Expr
     text: str
     span: Span
+    kind = "square"
+
+    def value(self):
+        return SquareWave(TIME, self.period, self.duty, self.t0)
+
+    def next(self):
+        return SquareNext(TIME, self.period, self.duty, self.t0)
+
+
+@dataclass(frozen=True)
+class TimeTable:
+    """A table of t: its discrete value is the piece that holds t (listed with the square
+    waves: both are time sources, their values set at their time events)."""
+
+    symbol: sp.Symbol
+    index: int  # the table's number (Table(k, ...))
+    text: str
+    span: Span
+    kind = "table"
+
+    def value(self):
+        return TablePiece(sp.Integer(self.index), TIME)
+
+    def next(self):
+        return TableNext(sp.Integer(self.index), TIME)
 
 
 @dataclass(frozen=True)
@@ -127,6 +154,11 @@ class EventTable:
             self.squares.append(Square(sym, period, duty, t0, text, node.span))
             self._index[key] = sym
         return self._index[key]
+
+    def time_table(self, k: int, text: str, span) -> sp.Symbol:
+        sym = sp.Symbol(f"table#{k}", real=True)
+        self.squares.append(TimeTable(sym, k, text, span))
+        return sym
 
 
 # ---------------------------------------------------------------- the scene's events
@@ -285,7 +317,7 @@ def update_stores(sel: Selected, states) -> tuple[list, list]:
             [r.symbol for r in sel.discrete]:
         out.append(_bit(new[sym]))
     for s in sel.squares:
-        out.append(SquareWave(TIME, s.period, s.duty, s.t0))
+        out.append(s.value())
     for d in sel.discretes:
         start = sp.Piecewise((d.init, FIRST), (d.symbol if d.next is None else
                                                d.next.xreplace(new), True))
@@ -296,7 +328,7 @@ def update_stores(sel: Selected, states) -> tuple[list, list]:
 
 def next_times(sel: Selected) -> list:
     return [at for _, at, _ in sel.time] + \
-        [SquareNext(TIME, s.period, s.duty, s.t0) for s in sel.squares]
+        [s.next() for s in sel.squares]
 
 
 def log_names(sel: Selected) -> tuple[tuple[str, ...], tuple[str, ...]]:
@@ -304,7 +336,7 @@ def log_names(sel: Selected) -> tuple[tuple[str, ...], tuple[str, ...]]:
         [r.text for r in sel.discrete] + [s.text for s in sel.squares] + \
         [d.name for d in sel.discretes]
     kinds = ["relation"] * (len(sel.state) + len(sel.time) + len(sel.discrete)) + \
-        ["square"] * len(sel.squares) + ["discrete"] * len(sel.discretes)
+        [s.kind for s in sel.squares] + ["discrete"] * len(sel.discretes)
     return tuple(names), tuple(kinds)
 
 

@@ -220,6 +220,7 @@ class Graph:
     discretes: tuple = ()
     whens: tuple = ()
     instances: tuple = ()  # Instance, one per instance of a component, in declaration order
+    tables: tuple = ()  # bgc.tables.TableData, as Table(k, ...) numbers them
 
     @cached_property
     def vector_by_name(self) -> dict:

@@ -18,7 +18,8 @@ and the functions sin cos tan asin acos atan atan2 sinh cosh tanh asinh atanh ex
 Abs sign Min Max (bgc.algebra's) Heaviside, Pow, Rational, Float, Integer, pi, E; the
 conditional Piecewise over relations (< <= > >= == !=) and And, Or, Not (booleans are never
 stored: a condition chooses a value); and SquareWave, SquareNext (a square wave's value at t
-and its next edge after t, computed by the runtimes).  Model names
+and its next edge after t, computed by the runtimes), Table, TableNext, TablePiece (a lookup
+table's value, its next breakpoint after t, the piece holding t: bgc.tables).  Model names
 never occur in expressions, so nothing a model author writes reaches generated code except
 through the name strings (states, outputs, params, block unknowns), which the emitters escape
 as literals.
@@ -71,6 +72,39 @@ class SquareNext(sp.Function):
     """SquareNext(t, period, duty, t0): the first edge of the square wave after t."""
 
     nargs = 4
+
+
+class Table(sp.Function):
+    """Table(k, X, piece, order): table k (Program.tables, bgc.tables) at X, or its
+    derivative of that order (0 to 3); piece -1: the runtime finds X's piece, else the piece
+    (a time table's discrete value, set at events)."""
+
+    nargs = 4
+
+    def fdiff(self, argindex=1):
+        k, X, piece, order = self.args
+        if argindex == 2:
+            return Table(k, X, piece, order + 1) if int(order) < 3 else sp.S.Zero
+        return sp.S.Zero
+
+    def _sympystr(self, printer):
+        k, X, _, order = self.args
+        return f"table{int(k)}{chr(39) * int(order)}({printer._print(X)})"
+
+
+class TableNext(sp.Function):
+    """TableNext(k, t): table k's first breakpoint after t (inf: none)."""
+
+    nargs = 2
+
+
+class TablePiece(sp.Function):
+    """TablePiece(k, t): the piece of table k that holds t (bgc.tables.piece)."""
+
+    nargs = 2
+
+
+RUNTIME_FUNCTIONS = (SquareWave, SquareNext, Table, TableNext, TablePiece)
 FUNCTIONS = ("sin", "cos", "tan", "asin", "acos", "atan", "atan2", "sinh", "cosh", "tanh",
              "asinh", "atanh", "exp", "log", "sqrt", "Abs", "sign", "Min", "Max", "Heaviside")
 
@@ -404,6 +438,7 @@ class Program:
     blocks: tuple[BlockPlan, ...] = ()
     jacobian: JacobianPattern = JacobianPattern((), ())
     events: Events | None = None  # None: the program has no events (and none of their code)
+    tables: tuple = ()  # bgc.tables.TableData, numbered as Table(k, ...) numbers them
 
     def function(self, name: str) -> Function:
         return self.functions[name]

@@ -413,7 +413,8 @@ def lower(reduced: Reduced) -> Program:
     return finish(reduced.name, tuple(st.name for st in reduced.states), params,
                   tuple(o.name for o in reduced.outputs),
                   tuple(ConstraintRow(r.junction, r.level) for r in rows), movable, scene,
-                  fns, tuple(mapper.plans), mapper.count, _events_info(reduced.events))
+                  fns, tuple(mapper.plans), mapper.count, _events_info(reduced.events),
+                  reduced.tables)
 
 
 def _build(mapper: _Mapper, steps, specs: dict, n: int) -> dict:
@@ -477,7 +478,7 @@ def _row_jacobian(rows, states) -> list[Store]:
 
 
 def finish(name, states, params, outputs, constraints, movable, scene, functions, plans,
-           count, events_info=None) -> Program:
+           count, events_info=None, tables=()) -> Program:
     """The passes every program goes through: pruning, constants (of every function but
     init, which runs once per parameter set anyway), temporaries, the Jacobian's pattern."""
     functions = {k: Function(f.name, f.args, f.size, ir.prune(f.body))
@@ -493,7 +494,7 @@ def finish(name, states, params, outputs, constraints, movable, scene, functions
     functions = _ordered(functions)
     pattern = jacobian_pattern(functions["rhs"], len(states), plans)
     return Program(name, states, params, outputs, constraints, movable, scene, functions,
-                   tuple(plans), pattern, events_info)
+                   tuple(plans), pattern, events_info, tuple(tables))
 
 
 def explicit_program(name, states, params, outputs, init, rhs, out, scene,

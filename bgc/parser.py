@@ -357,6 +357,12 @@ class _ToAst(Transformer_NonRecursive):
     def call(self, meta, c):
         return ast.Call(str(c[0]), tuple(x for x in c[1:] if x is not None), _span(meta))
 
+    def string_arg(self, meta, c):
+        return ast.Str(_doc(c[0]), _span(meta))
+
+    def kw_arg(self, meta, c):
+        return ast.KwArg(str(c[0]), c[1], _span(meta))
+
     def vector(self, meta, c):
         return ast.Vector(tuple(c), _span(meta))
 

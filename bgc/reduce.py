@@ -122,6 +122,7 @@ class Reduced:
     algebra: str
     warnings: tuple = ()
     events: object = None  # bgc.events.Selected, or None: no events
+    tables: tuple = ()  # bgc.tables.TableData of the model (Table(k, ...) in the steps)
 
 
 # ---------------------------------------------------------------- equations by target
@@ -908,7 +909,7 @@ def reduce(es: EquationSystem, project_initial: bool = False, algebra: str = "au
                       tuple(blocks.plans),
                       tuple(der(st.symbol) for st in kept), es.outputs, tuple(infos),
                       tuple(rows), tuple(blocks.infos), eliminated, es.run, algebra,
-                      tuple(es.warnings) + tuple(diags.warnings), selected)
+                      tuple(es.warnings) + tuple(diags.warnings), selected, es.tables)
     if not project_initial:
         check_initial(reduced)
     else:

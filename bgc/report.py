@@ -178,7 +178,8 @@ def _event_lines(sel) -> list[str]:
     out += [f"  {r.text}  (state event: located on the step's dense output)" for r in sel.state]
     out += [f"  {r.text}  (time event at t = {_s(at)})" for r, at, _ in sel.time]
     out += [f"  {r.text}  (changes at events only)" for r in sel.discrete]
-    out += [f"  {q.text}  (time events at its edges)" for q in sel.squares]
+    out += [f"  {q.text}  (time events at its "
+            f"{'edges' if q.kind == 'square' else 'breakpoints'})" for q in sel.squares]
     out += [f"  discrete {d.name} = {_s(d.init)}" for d in sel.discretes]
     for w in sel.whens:
         acts = "; ".join(f"{'reinit ' if a.kind == 'reinit' else ''}{a.name} = {_s(a.expr)}"

@@ -56,6 +56,8 @@
 #                         the indicators; the time events' next times; the state and d after
 #                         one pass of the event iteration (r: the state relations' values, then
 #                         1.0 at the run's start) (C's bgc_model_events, _next_time, _update)
+#   _TABLES               tuple per lookup table (a model with tables, bgc/tables.py) of (n,
+#                         error, x, origin, coef): what _table reads
 #   _METHODS, SOLVERS, _SOLVER_LIST  the solver tables: name -> dict of the family, its step
 #                         control and tableau; the names in order; their help text
 #
@@ -90,7 +92,7 @@ _MODEL_HELPERS = (
     "_sq", "_sign", "_heaviside", "_c_exp", "_c_log", "_c_sqrt", "_c_sin", "_c_cos", "_c_tan",
     "_c_asin", "_c_acos", "_c_atan", "_c_atan2", "_c_sinh", "_c_cosh", "_c_tanh", "_c_asinh",
     "_c_atanh", "_c_pow", "_block_solve", "_block_resolve", "_newton", "_Work", "_bind_model",
-    "_square", "_square_next",
+    "_square", "_square_next", "_table", "_table_next", "_table_piece",
 )
 # (a)'s names, for the tests that check both sides of the contract (tests/test_pyruntime.py).
 _MODEL_NAMES = (
@@ -129,6 +131,7 @@ _SOLVER_LIST = ""
 _INDICATOR_STRICT = []
 _NUM_TIMERS = 0
 _DISCRETE_NAMES = []
+_TABLES = ()
 
 
 def _fill_params(p, given):
@@ -266,6 +269,51 @@ def _square_next(t, period, duty, t0):
     k = _square_period(t, period, t0)
     down = t0 + (k + duty) * period
     return down if t < down else t0 + (k + 1.0) * period
+
+
+def _table_find(T, X):
+    """bgc_table_find: the piece holding X, the number of rows with x <= X."""
+    xs = T[2]
+    lo, hi = 0, T[0]
+    while lo < hi:
+        mid = (lo + hi) // 2
+        if xs[mid] <= X:
+            lo = mid + 1
+        else:
+            hi = mid
+    return lo
+
+
+def _table(T, X, piece, order):
+    """bgc_table: table T = (n, error, x, origin, coef) at X, or its derivative of order 1 to
+    3, in piece `piece` (or X's piece if piece < 0)."""
+    if X != X:
+        return math.nan
+    s = int(piece) if piece >= 0.0 else _table_find(T, X)
+    n = T[0]
+    if T[1] and (s == 0 or (s == n and X > T[2][n - 1])):
+        return math.nan
+    c = T[4]
+    a, b, cc, d = c[4 * s], c[4 * s + 1], c[4 * s + 2], c[4 * s + 3]
+    dx = X - T[3][s]
+    if order == 0:
+        return a + dx * (b + dx * (cc + dx * d))
+    if order == 1:
+        return b + dx * (2.0 * cc + dx * (3.0 * d))
+    if order == 2:
+        return 2.0 * cc + dx * (6.0 * d)
+    return 6.0 * d if order == 3 else 0.0
+
+
+def _table_piece(T, t):
+    return math.nan if t != t else float(_table_find(T, t))
+
+
+def _table_next(T, t):
+    if t != t:
+        return math.nan
+    s = _table_find(T, t)
+    return T[2][s] if s < T[0] else math.inf
 
 
 # The model functions' IEEE variant (run when the math variant raised) calls these: the C

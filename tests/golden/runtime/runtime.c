@@ -249,6 +249,62 @@ static inline double bgc_square_next(double t, double period, double duty, doubl
     return t < down ? down : t0 + (k + 1.0) * period;
 }
 
+/* A lookup table (bgc/tables.py): n rows x[0..n-1] (non-decreasing), n + 1 pieces, piece s
+   the cubic a + dx (b + dx (c + dx d)) in dx = X - origin[s], coef[4 s ..] = a, b, c, d;
+   error: not a number outside [x[0], x[n-1]] (extrapolate = error). */
+typedef struct bgc_table_data {
+    int n, error;
+    const double *x, *origin, *coef;
+} bgc_table_data;
+/* The piece holding X: the number of rows with x <= X (binary search). */
+static inline int bgc_table_find(const bgc_table_data *T, double X)
+{
+    int lo = 0, hi = T->n;
+    while (lo < hi) {
+        const int mid = (lo + hi) / 2;
+        if (T->x[mid] <= X)
+            lo = mid + 1;
+        else
+            hi = mid;
+    }
+    return lo;
+}
+/* The table's value at X (order 0) or its derivative of order 1 to 3, in piece `piece` (a
+   time table's, set at events), or in X's piece if piece < 0. */
+static inline double bgc_table(const bgc_table_data *T, double X, double piece, int order)
+{
+    int s;
+    const double *k;
+    double dx;
+    if (X != X)
+        return NAN;
+    s = piece >= 0.0 ? (int)piece : bgc_table_find(T, X);
+    if (T->error && (s == 0 || (s == T->n && X > T->x[T->n - 1])))
+        return NAN;
+    k = T->coef + 4 * s;
+    dx = X - T->origin[s];
+    switch (order) {
+    case 0: return k[0] + dx * (k[1] + dx * (k[2] + dx * k[3]));
+    case 1: return k[1] + dx * (2.0 * k[2] + dx * (3.0 * k[3]));
+    case 2: return 2.0 * k[2] + dx * (6.0 * k[3]);
+    case 3: return 6.0 * k[3];
+    default: return 0.0;
+    }
+}
+/* The piece that holds t, and the table's first row after t (a time table's events). */
+static inline double bgc_table_piece(const bgc_table_data *T, double t)
+{
+    return t != t ? NAN : (double)bgc_table_find(T, t);
+}
+static inline double bgc_table_next(const bgc_table_data *T, double t)
+{
+    int s;
+    if (t != t)
+        return NAN;
+    s = bgc_table_find(T, t);
+    return s < T->n ? T->x[s] : INFINITY;
+}
+
 /* A solver as bgc/solvers.py describes it (the tables are printed below this section).
    erk: an explicit Runge-Kutta tableau: c[all], a[all x all] (row-major, strictly lower),
    b and e (NULL: fixed step) and e2 (NULL: one estimate) over the first `stages`; the last of
