@@ -96,6 +96,15 @@ _RELATIONS = {"<": lambda a, b: a < b, "<=": lambda a, b: a <= b, ">": lambda a,
               ">=": lambda a, b: a >= b, "==": lambda a, b: a == b, "!=": lambda a, b: a != b}
 
 
+def _respan(node, sp):
+    """A table's file or option with its spans in this scope, its names as written."""
+    if isinstance(node, ast.KwArg):
+        return ast.KwArg(node.name, _respan(node.value, sp), sp(node.span))
+    if isinstance(node, (ast.Str, ast.Field, ast.Name)):
+        return replace(node, span=sp(node.span))
+    return node
+
+
 def _const(node, env: dict, scope: _Scope, what: str) -> int:
     """The value of a compile-time integer expression: numbers, constants, `for` variables,
     + - * / ^, min, max, abs."""
@@ -756,6 +765,11 @@ class _Rewriter:
                 if found is not None and found[1] in ("signal", "parameter", "element"):
                     return self.path(segs, node)
             return ast.Index(self.expr(node.base, own), self.expr(node.index, own), sp(node.span))
+        if isinstance(node, ast.Call) and node.func == "table":  # a file and named options
+            keep = (ast.Str, ast.Field, ast.KwArg)  # are not names in this scope
+            args = tuple(_respan(a, sp) if isinstance(a, keep) else self.expr(a, own)
+                         for a in node.args)
+            return ast.Call(node.func, args, sp(node.span))
         if isinstance(node, ast.Call):
             return ast.Call(node.func, tuple(self.expr(a, own) for a in node.args), sp(node.span))
         if isinstance(node, ast.BinOp):

@@ -427,7 +427,7 @@ class _ExprBuilder:
             shown = source.text if isinstance(source, ast.Str) else f"{source.owner}.csv"
             path = os.path.join(self.scope.directory, shown)
             column = options.get("column")
-            xs, ys, _, _ = read_csv(path, shown, column.text if column else None, source.span,
+            xs, ys, _, _ = read_csv(path, path, column.text if column else None, source.span,
                                     column.span if column else None)
             name = shown
         else:
@@ -446,7 +446,11 @@ class _ExprBuilder:
             name = "rows"
         k = len(self.scope.tables)
         time = x == TIME
-        data = build(name, xs, ys, interp, extrapolate, time)
+        try:
+            data = build(name, xs, ys, interp, extrapolate, time)
+        except OverflowError:
+            fail(source.span, "the table's slopes are too large for a double (rows too close "
+                              "for the change of y)")
         self.scope.tables.append(data)
         if time:
             piece = self.scope.events.time_table(k, f"table {k} ({name}) of t", node.span)
@@ -1122,8 +1126,8 @@ def _model_directory(path: str) -> str:
     directory for a model given as text)."""
     import os
     if not path or path.startswith("<"):
-        return "."
-    return os.path.dirname(os.path.abspath(path))
+        return ""
+    return os.path.dirname(path)
 
 
 def resolve(model: ast.Model) -> Graph:
