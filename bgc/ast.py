@@ -296,6 +296,19 @@ class ImportDecl:
     span: Span
 
 
+@dataclass(frozen=True)
+class InputDecl:
+    """`input NAME [= DEFAULT] ["doc"]`: a signal whose values come from outside."""
+
+    name: Ident
+    expr: object  # the default (parameters only), or None: 0
+    doc: str | None
+    span: Span
+    dim: object = None  # a scalar signal
+    unit: object = None
+    index: object = None
+
+
 # ---------------------------------------------------------------- events
 @dataclass(frozen=True)
 class DiscreteDecl:

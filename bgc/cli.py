@@ -433,6 +433,10 @@ def compile(model, scene, outputs, effects, algebra, target, output, project_ini
               callback=_output_file,
               help="The event log: t,event,change, a row per change at an event (docs/"
                    "hybrid.md); a failed run keeps the events before it.")
+@click.option("--input", "input_files", multiple=True, metavar="FILE.csv",
+              help="The inputs' data (`input NAME` in the model): CSV with a column t "
+                   "(increasing) and a column per input, interpolated linearly, each t a time "
+                   "event; an input without data keeps its default.  May be repeated.")
 @click.option("-o", "output", default=None, callback=_output_file,
               help="CSV file (default: stdout), written as the run goes and renamed into "
                    "place at its end; a failed run keeps the rows it computed.")
@@ -441,7 +445,7 @@ def compile(model, scene, outputs, effects, algebra, target, output, project_ini
                    "or .pdf; needs matplotlib: pip install 'bgc[plot]').")
 def simulate(model, scene, outputs, effects, algebra, backend, solver, rtol, atol, t_end, dt,
              step, max_steps, max_step, params, project_initial, allow_inconsistent, stats,
-             event_rows, events_file, output, plot_file, consts):
+             event_rows, events_file, input_files, output, plot_file, consts):
     """Simulate and write CSV.  A model compiled before with the same options runs at once
     (bgc.warm); otherwise it is compiled, and the result kept for the next run.  On a
     terminal, a run that takes more than a second shows its progress on stderr."""
@@ -476,6 +480,19 @@ def simulate(model, scene, outputs, effects, algebra, backend, solver, rtol, ato
             max_step=max_step, event_rows=event_rows or None)
     except ValueError as error:
         raise click.UsageError(str(error)) from None
+    seen: set = set()
+    for path in input_files:
+        problem = run.input_file_problem(path, record.inputs)
+        if problem:
+            _fail(problem)
+        with open(path, encoding="utf-8") as f:
+            columns = [c.strip() for c in f.readline().split(",") if c.strip() != "t"]
+        again = seen.intersection(columns)
+        if again:
+            _fail(f"{path}: input '{sorted(again)[0]}' is given twice")
+        seen.update(columns)
+    if input_files:
+        settings = replace(settings, input_files=tuple(os.path.abspath(p) for p in input_files))
     with _scratch(events_file is not None) as logs:
         if logs:
             settings = replace(settings, events=str(Path(logs) / "events.csv"))

@@ -33,7 +33,7 @@ from sympy.logic.boolalg import BooleanAtom, BooleanFunction
 from .diagnostics import Span
 from .differentiate import partial
 from .graph import TIME, written
-from .ir import SquareNext, SquareWave, TableNext, TablePiece
+from .ir import InputNext, InputPart, SquareNext, SquareWave, TableNext, TablePiece
 
 RELATIONS = {"<": sp.StrictLessThan, "<=": sp.LessThan, ">": sp.StrictGreaterThan,
              ">=": sp.GreaterThan, "==": sp.Eq, "!=": sp.Ne}
@@ -100,6 +100,27 @@ class TimeTable:
 
 
 @dataclass(frozen=True)
+class InputSlot:
+    """One of an input's three discrete values: its data's segment at t is the line through
+    (start, value) with a slope, set at the data's breakpoints (time events), so that the
+    input's value u = value + slope (t - start) is a polynomial of t between events."""
+
+    symbol: sp.Symbol
+    index: int  # the input's number
+    part: int  # 0 start, 1 value, 2 slope
+    default: sp.Expr
+    text: str
+    span: Span
+    kind = "input"
+
+    def value(self):
+        return InputPart(sp.Integer(self.index), TIME, sp.Integer(self.part), self.default)
+
+    def next(self):
+        return InputNext(sp.Integer(self.index), TIME) if self.part == 1 else None
+
+
+@dataclass(frozen=True)
 class Discrete:
     name: str
     symbol: sp.Symbol
@@ -154,6 +175,15 @@ class EventTable:
             self.squares.append(Square(sym, period, duty, t0, text, node.span))
             self._index[key] = sym
         return self._index[key]
+
+    def input(self, j: int, name: str, default, span) -> tuple:
+        """The three discrete values of input j (InputSlot): start, value, slope."""
+        out = []
+        for part, what in enumerate((f"{name} (segment start)", name, f"{name} (slope)")):
+            sym = sp.Symbol(f"input#{j}.{part}", real=True)
+            self.squares.append(InputSlot(sym, j, part, default, what, span))
+            out.append(sym)
+        return tuple(out)
 
     def time_table(self, k: int, text: str, span) -> sp.Symbol:
         sym = sp.Symbol(f"table#{k}", real=True)
@@ -328,7 +358,7 @@ def update_stores(sel: Selected, states) -> tuple[list, list]:
 
 def next_times(sel: Selected) -> list:
     return [at for _, at, _ in sel.time] + \
-        [s.next() for s in sel.squares]
+        [s.next() for s in sel.squares if s.next() is not None]
 
 
 def log_names(sel: Selected) -> tuple[tuple[str, ...], tuple[str, ...]]:

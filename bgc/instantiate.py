@@ -365,14 +365,15 @@ class _Instantiate:
 
     def declare(self, scope: _Scope, stmt, env):
         if isinstance(stmt, (ast.ParamDecl, ast.SignalDecl, ast.IntegralDecl, ast.ElementDecl,
-                             ast.PortDecl, ast.DiscreteDecl)):
+                             ast.PortDecl, ast.DiscreteDecl, ast.InputDecl)):
             name = self.local_name(scope, stmt, env)
             if isinstance(stmt, ast.ElementDecl) and self.is_instance(scope, stmt):
                 kind = "instance"
             else:
                 kind = {ast.ParamDecl: "parameter", ast.SignalDecl: "signal",
                         ast.IntegralDecl: "signal", ast.ElementDecl: "element",
-                        ast.PortDecl: "port", ast.DiscreteDecl: "signal"}[type(stmt)]
+                        ast.PortDecl: "port", ast.DiscreteDecl: "signal",
+                        ast.InputDecl: "signal"}[type(stmt)]
             old = scope.table.get(name)
             if old is not None and ("instance" in (old, kind) or "port" in (old, kind)):
                 first = scope.first.get(name)
@@ -541,7 +542,7 @@ class _Instantiate:
             return
         name = None
         if isinstance(stmt, (ast.ParamDecl, ast.SignalDecl, ast.IntegralDecl, ast.ElementDecl,
-                             ast.DiscreteDecl)):
+                             ast.DiscreteDecl, ast.InputDecl)):
             name = ast.Ident(scope.prefix + self.local_name(scope, stmt, env),
                              scope.sp(stmt.name.span))
         if isinstance(stmt, ast.ElementDecl):
@@ -562,7 +563,7 @@ class _Instantiate:
         elif isinstance(stmt, ast.SceneDecl):
             out = rw.map(stmt)
         elif isinstance(stmt, (ast.ParamDecl, ast.SignalDecl, ast.IntegralDecl,
-                               ast.DiscreteDecl)):
+                               ast.DiscreteDecl, ast.InputDecl)):
             out = replace(rw.map(stmt), name=name)
             if hasattr(out, "index"):
                 out = replace(out, index=None)

@@ -19,7 +19,8 @@ Abs sign Min Max (bgc.algebra's) Heaviside, Pow, Rational, Float, Integer, pi, E
 conditional Piecewise over relations (< <= > >= == !=) and And, Or, Not (booleans are never
 stored: a condition chooses a value); and SquareWave, SquareNext (a square wave's value at t
 and its next edge after t, computed by the runtimes), Table, TableNext, TablePiece (a lookup
-table's value, its next breakpoint after t, the piece holding t: bgc.tables).  Model names
+table's value, its next breakpoint after t, the piece holding t: bgc.tables), InputPart,
+InputNext (an input's segment and next breakpoint, from the run's data).  Model names
 never occur in expressions, so nothing a model author writes reaches generated code except
 through the name strings (states, outputs, params, block unknowns), which the emitters escape
 as literals.
@@ -104,7 +105,21 @@ class TablePiece(sp.Function):
     nargs = 2
 
 
-RUNTIME_FUNCTIONS = (SquareWave, SquareNext, Table, TableNext, TablePiece)
+class InputPart(sp.Function):
+    """InputPart(j, t, part, default): input j's segment at t, as the run's data give it
+    (bgc.events.InputSlot): its start (part 0), the value there (1), its slope (2); without
+    data 0, default, 0."""
+
+    nargs = 4
+
+
+class InputNext(sp.Function):
+    """InputNext(j, t): the first time of input j's data after t (inf: none)."""
+
+    nargs = 2
+
+
+RUNTIME_FUNCTIONS = (SquareWave, SquareNext, Table, TableNext, TablePiece, InputPart, InputNext)
 FUNCTIONS = ("sin", "cos", "tan", "asin", "acos", "atan", "atan2", "sinh", "cosh", "tanh",
              "asinh", "atanh", "exp", "log", "sqrt", "Abs", "sign", "Min", "Max", "Heaviside")
 
@@ -425,6 +440,15 @@ class Events:
 
 
 @dataclass(frozen=True)
+class InputInfo:
+    """An input of the model: its name, its default (an expression of p) and its doc."""
+
+    name: str
+    default: sp.Expr
+    doc: str | None = None
+
+
+@dataclass(frozen=True)
 class Program:
     name: str
     states: tuple[str, ...]
@@ -439,6 +463,7 @@ class Program:
     jacobian: JacobianPattern = JacobianPattern((), ())
     events: Events | None = None  # None: the program has no events (and none of their code)
     tables: tuple = ()  # bgc.tables.TableData, numbered as Table(k, ...) numbers them
+    inputs: tuple = ()  # InputInfo, numbered as InputPart(j, ...) numbers them
 
     def function(self, name: str) -> Function:
         return self.functions[name]

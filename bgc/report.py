@@ -179,7 +179,10 @@ def _event_lines(sel) -> list[str]:
     out += [f"  {r.text}  (time event at t = {_s(at)})" for r, at, _ in sel.time]
     out += [f"  {r.text}  (changes at events only)" for r in sel.discrete]
     out += [f"  {q.text}  (time events at its "
-            f"{'edges' if q.kind == 'square' else 'breakpoints'})" for q in sel.squares]
+            f"{'edges' if q.kind == 'square' else 'breakpoints'})" for q in sel.squares
+            if q.kind != "input"]
+    out += [f"  input {q.text}  (time events at its data's breakpoints)" for q in sel.squares
+            if q.kind == "input" and q.part == 1]
     out += [f"  discrete {d.name} = {_s(d.init)}" for d in sel.discretes]
     for w in sel.whens:
         acts = "; ".join(f"{'reinit ' if a.kind == 'reinit' else ''}{a.name} = {_s(a.expr)}"

@@ -18,7 +18,7 @@ import sympy as sp
 from . import ast
 from .algebra import Max, Min
 from .diagnostics import Collector, ModelError, Note, Span, fail
-from .graph import (TIME, check_effect_names, model_effects, Bond, Constraint, Element, Expr, Graph, Parameter, Scene, Signal,
+from .graph import (TIME, InputInfo, check_effect_names, model_effects, Bond, Constraint, Element, Expr, Graph, Parameter, Scene, Signal,
                     check_ports, part_name, var, variable_name, written)
 from .events import (INITIAL, RELATIONS, SOURCES, Action, Discrete, EventTable, When,
                      is_condition)
@@ -59,6 +59,7 @@ class _Scope:
         self.owner: str | None = None  # the element whose law is being built
         self.when_condition = False  # building a when-block's condition (initial() allowed)
         self.tables: list = []  # bgc.tables.TableData, in the order met
+        self.inputs: list = []  # graph.InputInfo, in declaration order
         self.directory = "."  # the model file's: table files are read relative to it
 
     def charge(self, n: int, span: Span):
@@ -739,7 +740,7 @@ def _collect_names(model: ast.Model, diags: Collector):
     params, signals, elements, first = {}, {}, {}, {}
     for d in model.decls:
         if isinstance(d, (ast.ParamDecl, ast.SignalDecl, ast.IntegralDecl, ast.ElementDecl,
-                          ast.DiscreteDecl)):
+                          ast.DiscreteDecl, ast.InputDecl)):
             name = d.name.name
             if name == "t":
                 diags.error(d.name.span, "'t' is time and cannot be declared")
@@ -752,7 +753,8 @@ def _collect_names(model: ast.Model, diags: Collector):
             if isinstance(d, ast.DiscreteDecl):
                 continue  # resolve() collects them (names taken here, so checked once)
             table = (params if isinstance(d, ast.ParamDecl) else
-                     signals if isinstance(d, (ast.SignalDecl, ast.IntegralDecl)) else elements)
+                     signals if isinstance(d, (ast.SignalDecl, ast.IntegralDecl, ast.InputDecl))
+                     else elements)
             table[name] = d
     return params, signals, elements
 
@@ -1038,6 +1040,8 @@ def _constraint(d: ast.ElementDecl, scope) -> Constraint:
 
 
 def _signal(d, scope, diags) -> Signal:
+    if isinstance(d, ast.InputDecl):
+        return _input(d, scope, diags)
     if d.dim is not None and d.dim.m is not None:
         fail(d.dim.span, f"a signal has one dimension: write '{d.name.name}[{d.dim.n}]'")
     n = _dim_of(d)
@@ -1052,6 +1056,26 @@ def _signal(d, scope, diags) -> Signal:
             scope.params_only = False
         _check_size(init, n, f"the initial value of '{d.name.name}'", broadcast=True)
     return Signal(d.name.name, expr, init, d.span, n, d.unit)
+
+
+def _input(d: ast.InputDecl, scope, diags) -> Signal:
+    """An input: a signal whose value, between two of its breakpoints, is the line through
+    its discrete values (the segment's start, value there and slope: bgc.events.InputSlot)."""
+    default = sp.Integer(0)
+    if d.expr is not None:
+        scope.params_only = True
+        try:
+            e = _ExprBuilder(scope, diags).build(d.expr)
+        finally:
+            scope.params_only = False
+        if _is_matrix(e.value):
+            fail(d.expr.span, f"input '{d.name.name}' is a scalar, but its default is "
+                              f"{_shape(e.value)}")
+        default = e.value
+    j = len(scope.inputs)
+    t0, u0, s0 = scope.events.input(j, d.name.name, default, d.span)
+    scope.inputs.append(InputInfo(d.name.name, default, d.doc, d.span))
+    return Signal(d.name.name, Expr(u0 + s0 * (TIME - t0), (), d.span), None, d.span)
 
 
 def _check_size(e: Expr, n: int | None, what: str, broadcast: bool = False) -> None:
@@ -1168,4 +1192,5 @@ def resolve(model: ast.Model) -> Graph:
                  tuple(bonds), tuple(sigs), tuple(scenes), diags.warnings,
                  ports=tuple(model.ports), instances=tuple(model.instances),
                  relations=tuple(scope.events.relations), squares=tuple(scope.events.squares),
-                 discretes=tuple(discretes), whens=tuple(whens), tables=tuple(scope.tables))
+                 discretes=tuple(discretes), whens=tuple(whens), tables=tuple(scope.tables),
+                 inputs=tuple(scope.inputs))

@@ -69,6 +69,7 @@ class Record:
     correctors: bool  # a constraint has a pid or pd corrector (bgc.stability's warnings)
     plot_title: tuple[str, ...] = ()  # for --plot (bgc.plot.describe)
     plot_columns: tuple[tuple, ...] = ()  # (name, kind, doc, unit) of each output
+    inputs: tuple[str, ...] = ()  # the program's inputs (`input NAME`), in order
 
 
 def _installation() -> list:
@@ -185,4 +186,5 @@ def record_for(compiled, program: runner.Program, warnings: str) -> Record:
         program=program.path.name, sha256=hashlib.sha256(program.path.read_bytes()).hexdigest(),
         warnings=warnings, params=program.params, settings=program.defaults,
         correctors=any(c.corrector in ("pid", "pd") for c in compiled.reduced.constraints),
+        inputs=tuple(u.name for u in compiled.program.inputs),
         **plot.describe(compiled))
