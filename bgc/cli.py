@@ -1084,8 +1084,9 @@ def _analysis_params(model, scene, params, analysed, outputs=None, effects=None)
               help="The operating point: the state of the scene's run at TIME, or an "
                    "equilibrium (bgc steady).  [default: the initial state]")
 @click.option("--inputs", default=None, metavar="U1,U2,..",
-              help="The inputs: parameters, each taken as a signal held at its value (the "
-                   "model declares no inputs yet).  [default: none; B and D have no columns]")
+              help="The inputs: the model's inputs (`input NAME`, at their defaults), or "
+                   "parameters, each taken as a signal held at its value.  [default: the "
+                   "model's inputs]")
 @click.option("-p", "params", multiple=True, metavar="NAME=VALUE", help="Parameter override.")
 @click.option("-o", "output", default=None, callback=_matrices_file, metavar="FILE",
               help="Write the matrices, eigenvalues and the point to FILE.json, .npz or .csv.")
@@ -1097,10 +1098,11 @@ def linearize(model, scene, outputs, effects, at, inputs, params, output, bode_f
     independent coordinates, the correctors' artificial modes apart.  Prints the eigenvalues
     with their natural frequencies and damping ratios."""
     _not_an_input(model, output, bode_file)
-    names = _names(inputs)
-    if bode_file and not names:
-        raise click.UsageError("--bode needs an input: name one with --inputs (a parameter)")
+    names = None if inputs is None else _names(inputs)
     analysed = _analysed(analysis.build, model, scene, outputs, effects, names)
+    if bode_file and not analysed.inputs:
+        raise click.UsageError("--bode needs an input: the model declares none; name a "
+                               "parameter with --inputs")
     _warn(analysed.compiled)
     given = _analysis_params(model, scene, params, analysed, outputs, effects)
     evaluator = _analysed(analysis.Evaluator, analysed, given)
