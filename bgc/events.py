@@ -57,6 +57,7 @@ class Relation:
     text: str  # as the event log names it
     span: Span
     owner: str | None  # the element whose law holds it (its own e, f read through the bond)
+    needs: frozenset = frozenset()  # a guard (a table's range): kept when these are used
 
     @property
     def indicator(self) -> sp.Expr:
@@ -167,6 +168,13 @@ class EventTable:
             self._index[key] = sym
         return self._index[key]
 
+    def guard(self, rel, text: str, span, needs) -> sp.Symbol:
+        """A relation that holds while the model is defined (a table's range, extrapolate =
+        error): its indicator is not a number where it is not, which stops the run."""
+        sym = sp.Symbol(f"event#{len(self.relations)}")
+        self.relations.append(Relation(sym, rel, text, span, None, frozenset(needs)))
+        return sym
+
     def square(self, period, duty, t0, node) -> sp.Symbol:
         key = ("square", period, duty, t0)
         if key not in self._index:
@@ -263,7 +271,7 @@ def select(graph_events, used: set, states: dict, params: set) -> Selected:
     discrete_symbols = {d.symbol for d in discretes}
     state, time, discrete = [], [], []
     for r in relations:
-        if r.symbol not in used:
+        if r.symbol not in used and not (r.needs and r.needs <= used | {TIME}):
             continue
         free = r.relation.free_symbols
         if free <= params | discrete_symbols:
@@ -285,7 +293,7 @@ def _oriented(r: Relation) -> Relation:
     if isinstance(rel, (sp.StrictLessThan, sp.LessThan)):
         flipped = (sp.StrictGreaterThan if isinstance(rel, sp.StrictLessThan) else
                    sp.GreaterThan)(rel.rhs, rel.lhs, evaluate=False)
-        return Relation(r.symbol, flipped, r.text, r.span, r.owner)
+        return Relation(r.symbol, flipped, r.text, r.span, r.owner, r.needs)
     return r
 
 
@@ -343,8 +351,10 @@ def update_stores(sel: Selected, states) -> tuple[list, list]:
     for st in states:
         out.append(sp.Piecewise(*values[st.symbol], (st.symbol, True))
                    if st.symbol in values else st.symbol)
-    for sym in [r.symbol for r in sel.state] + [r.symbol for r, _, _ in sel.time] + \
-            [r.symbol for r in sel.discrete]:
+    for r in sel.state:  # a guard's value is not a number once it fails: the run stops
+        out.append(sp.Piecewise((sp.Integer(1), new[r.symbol]), (sp.sqrt(r.indicator), True))
+                   if r.needs else _bit(new[r.symbol]))
+    for sym in [r.symbol for r, _, _ in sel.time] + [r.symbol for r in sel.discrete]:
         out.append(_bit(new[sym]))
     for s in sel.squares:
         out.append(s.value())

@@ -93,6 +93,16 @@ class Table(sp.Function):
         return f"table{int(k)}{chr(39) * int(order)}({printer._print(X)})"
 
 
+class TableGuard(sp.Function):
+    """TableGuard(k, X): how far X is within table k's rows (negative outside): the indicator
+    of a table with extrapolate = error, whose crossing is located and stops the run."""
+
+    nargs = 2
+
+    def fdiff(self, argindex=1):
+        return sp.S.Zero
+
+
 class TableNext(sp.Function):
     """TableNext(k, t): table k's first breakpoint after t (inf: none)."""
 
@@ -119,7 +129,8 @@ class InputNext(sp.Function):
     nargs = 2
 
 
-RUNTIME_FUNCTIONS = (SquareWave, SquareNext, Table, TableNext, TablePiece, InputPart, InputNext)
+RUNTIME_FUNCTIONS = (SquareWave, SquareNext, Table, TableNext, TablePiece, TableGuard, InputPart,
+                     InputNext)
 FUNCTIONS = ("sin", "cos", "tan", "asin", "acos", "atan", "atan2", "sinh", "cosh", "tanh",
              "asinh", "atanh", "exp", "log", "sqrt", "Abs", "sign", "Min", "Max", "Heaviside")
 

@@ -32,7 +32,7 @@ from sympy.functions.elementary.piecewise import ExprCondPair
 from sympy.logic.boolalg import ITE, And, BooleanFalse, BooleanTrue, Not, Or
 
 from bgc.ir import (ATOL, C, CLASSES, FUNCTIONS, D, P, R, T, V, X, SquareNext, SquareWave,
-                    InputNext, InputPart, Table, TableNext, TablePiece, as_expr)
+                    InputNext, InputPart, Table, TableGuard, TableNext, TablePiece, as_expr)
 _CLASSES = tuple(CLASSES.values())
 _ARITY = {"atan2": (2, 2), "Min": (2, None), "Max": (2, None), "Heaviside": (1, 2)}
 _TEMP = re.compile(r"w[0-9]+\Z")
@@ -89,7 +89,7 @@ def check_expression(expr: sp.Basic, n_states: int, n_params: int, n_consts: int
             stack.append(e.args[1])
             if type(e) is InputPart:
                 stack.append(e.args[3])
-        elif type(e) in (Table, TableNext, TablePiece):
+        elif type(e) in (Table, TableNext, TablePiece, TableGuard):
             if not (e.args[0].is_Integer and int(e.args[0]) >= 0):
                 raise UnsupportedExpressionError(f"cannot print {e}")
             if type(e) is Table and not (e.args[3].is_Integer and 0 <= int(e.args[3]) <= 3):
@@ -195,7 +195,7 @@ class _ArithmeticPrinting:
             if type(expr) is InputPart:
                 rest += [str(int(a[2])), self._print(a[3])]
             return f"{self.FUNCTION_NAMES[type(expr).__name__]}(w, {', '.join(rest)})"
-        if type(expr) in (Table, TableNext, TablePiece):
+        if type(expr) in (Table, TableNext, TablePiece, TableGuard):
             name = self.FUNCTION_NAMES[type(expr).__name__]
             rest = [self._print(a) for a in expr.args[1:3]]
             if type(expr) is Table:
@@ -351,7 +351,8 @@ class CPrinter(_ArithmeticPrinting, C99CodePrinter):
                       "Min": "bgc_min", "Max": "bgc_max", "Heaviside": "bgc_heaviside",
                       "SquareWave": "bgc_square", "SquareNext": "bgc_square_next",
                       "Table": "bgc_table", "TableNext": "bgc_table_next",
-                      "TablePiece": "bgc_table_piece", "InputPart": "bgc_input",
+                      "TablePiece": "bgc_table_piece", "TableGuard": "bgc_table_guard",
+                      "InputPart": "bgc_input",
                       "InputNext": "bgc_input_next"}
     LOGIC = {"and": "&&", "or": "||", "not": "!", "true": "1", "false": "0"}
     ATOL = "w->atol"
@@ -390,7 +391,8 @@ class CPrinter(_ArithmeticPrinting, C99CodePrinter):
 _PY_FAST = {**{f: f"math.{f}" for f in FUNCTIONS}, "Abs": "abs", "sign": "_sign",
             "Min": "min", "Max": "max", "Heaviside": "_heaviside", "SquareWave": "_square",
             "SquareNext": "_square_next", "Table": "_table", "TableNext": "_table_next",
-            "TablePiece": "_table_piece", "InputPart": "_input", "InputNext": "_input_next"}
+            "TablePiece": "_table_piece", "TableGuard": "_table_guard", "InputPart": "_input",
+            "InputNext": "_input_next"}
 _PY_IEEE = {**_PY_FAST, **{f: f"_c_{f}" for f in ("sin", "cos", "tan", "asin", "acos", "atan",
                                                      "atan2", "sinh", "cosh", "tanh", "asinh",
                                                      "atanh", "exp", "log", "sqrt")}}

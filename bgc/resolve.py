@@ -22,7 +22,7 @@ from .graph import (TIME, InputInfo, check_effect_names, model_effects, Bond, Co
                     check_ports, part_name, var, variable_name, written)
 from .events import (INITIAL, RELATIONS, SOURCES, Action, Discrete, EventTable, When,
                      is_condition)
-from .ir import Table
+from .ir import Table, TableGuard
 from .kinds import KINDS
 from .tables import EXTRAPOLATE, INTERP, MAX_TABLE_ROWS, MAX_TABLES, build, check_rows, read_csv
 from .resources import (MAX_EXTREMUM_ARGUMENTS, MAX_LITERAL_DIGITS, MAX_MATRIX_ENTRIES,
@@ -457,6 +457,12 @@ class _ExprBuilder:
             piece = self.scope.events.time_table(k, f"table {k} ({name}) of t", node.span)
         else:
             piece = sp.Integer(-1)
+        needs = {piece} if time else x.free_symbols
+        if extrapolate == "error" and needs:
+            self.scope.events.guard(
+                sp.GreaterThan(TableGuard(sp.Integer(k), x), 0),
+                f"table {k} ({name}) is read outside its rows, x from {xs[0]!r} to "
+                f"{xs[-1]!r} (extrapolate = error)", node.span, needs)
         done.append(Table(sp.Integer(k), x, piece, sp.Integer(0)))
 
     def _check_call(self, node: ast.Call):

@@ -25,7 +25,9 @@ and embedded in the generated code; both runtimes evaluate the same Horner form.
           between rows (a monotone table stays monotone), each slope from its neighbours only
   hold    extrapolation: the end row's value
   linear  extrapolation: the end's tangent (an end interval's slope; step: 0)
-  error   extrapolation: the value is not a number outside [x[0], x[n-1]], and the run stops
+  error   extrapolation: the run stops where X leaves [x[0], x[n-1]]: an event indicator
+          (bgc.ir.TableGuard, how far X is inside) located like any other, and the event
+          there fails (bgc.events.update_stores); the value itself is held
 
 A repeated x is a jump: the interval between the two rows is empty, the row before it gives
 the value on the left, the row after it on the right (and a cubic table is two independent
@@ -258,9 +260,6 @@ def evaluate(t: TableData, X: float, order: int = 0) -> float:
     if X != X:
         return math.nan
     s = piece(t, X)
-    n = len(t.x)
-    if t.extrapolate == "error" and (s == 0 or (s == n and X > t.x[n - 1])):
-        return math.nan
     a, b, c, d = t.coefficients[4 * s:4 * s + 4]
     dx = X - t.origins[s]
     if order == 0:

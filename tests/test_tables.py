@@ -200,4 +200,6 @@ def test_extrapolate_error_stops_the_run_when_x_leaves_the_range():
         program = runner.prepare(compiled, backend)
         result = runner.run(program, runner.settings_for(compiled.program.scene, []))
         assert result.status != 0
-        assert "table" in result.stderr and "outside" in result.stderr, result.stderr
+        assert "at t = 2.500000000" in result.stderr, result.stderr  # t + 1 leaves [0, 3.5]
+        assert "table 0 (rows) is read outside its rows, x from 0.0 to 3.5" in result.stderr
+        assert result.csv.splitlines()[-1].startswith("2.5,")  # the rows up to it kept

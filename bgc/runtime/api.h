@@ -301,7 +301,8 @@ static inline double bgc_input_next(const bgc_work *w, int j, double t)
 
 /* A lookup table (bgc/tables.py): n rows x[0..n-1] (non-decreasing), n + 1 pieces, piece s
    the cubic a + dx (b + dx (c + dx d)) in dx = X - origin[s], coef[4 s ..] = a, b, c, d;
-   error: not a number outside [x[0], x[n-1]] (extrapolate = error). */
+   error: extrapolate = error (held outside [x[0], x[n-1]], where bgc_table_guard, an event
+   indicator, is negative: the event there stops the run). */
 typedef struct bgc_table_data {
     int n, error;
     const double *x, *origin, *coef;
@@ -329,8 +330,6 @@ static inline double bgc_table(const bgc_table_data *T, double X, double piece, 
     if (X != X)
         return NAN;
     s = piece >= 0.0 ? (int)piece : bgc_table_find(T, X);
-    if (T->error && (s == 0 || (s == T->n && X > T->x[T->n - 1])))
-        return NAN;
     k = T->coef + 4 * s;
     dx = X - T->origin[s];
     switch (order) {
@@ -340,6 +339,12 @@ static inline double bgc_table(const bgc_table_data *T, double X, double piece, 
     case 3: return 6.0 * k[3];
     default: return 0.0;
     }
+}
+/* How far X is within the table's rows (negative outside). */
+static inline double bgc_table_guard(const bgc_table_data *T, double X)
+{
+    const double lo = X - T->x[0], hi = T->x[T->n - 1] - X;
+    return hi < lo ? hi : lo;
 }
 /* The piece that holds t, and the table's first row after t (a time table's events). */
 static inline double bgc_table_piece(const bgc_table_data *T, double t)

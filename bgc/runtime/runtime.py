@@ -94,7 +94,7 @@ _MODEL_HELPERS = (
     "_sq", "_sign", "_heaviside", "_c_exp", "_c_log", "_c_sqrt", "_c_sin", "_c_cos", "_c_tan",
     "_c_asin", "_c_acos", "_c_atan", "_c_atan2", "_c_sinh", "_c_cosh", "_c_tanh", "_c_asinh",
     "_c_atanh", "_c_pow", "_block_solve", "_block_resolve", "_newton", "_Work", "_bind_model",
-    "_square", "_square_next", "_table", "_table_next", "_table_piece", "_input",
+    "_square", "_square_next", "_table", "_table_next", "_table_piece", "_table_guard", "_input",
     "_input_next",
 )
 # (a)'s names, for the tests that check both sides of the contract (tests/test_pyruntime.py).
@@ -411,9 +411,6 @@ def _table(T, X, piece, order):
     if X != X:
         return math.nan
     s = int(piece) if piece >= 0.0 else _table_find(T, X)
-    n = T[0]
-    if T[1] and (s == 0 or (s == n and X > T[2][n - 1])):
-        return math.nan
     c = T[4]
     a, b, cc, d = c[4 * s], c[4 * s + 1], c[4 * s + 2], c[4 * s + 3]
     dx = X - T[3][s]
@@ -424,6 +421,12 @@ def _table(T, X, piece, order):
     if order == 2:
         return 2.0 * cc + dx * (6.0 * d)
     return 6.0 * d if order == 3 else 0.0
+
+
+def _table_guard(T, X):
+    """bgc_table_guard: how far X is within the table's rows (negative outside)."""
+    lo, hi = X - T[2][0], T[2][T[0] - 1] - X
+    return hi if hi < lo else lo
 
 
 def _table_piece(T, t):
