@@ -95,7 +95,7 @@ def read_csv(path: str, shown: str, column: str | None, span: Span,
         fail(span, f"cannot read the table file '{shown}': {e.strerror or e}")
     except UnicodeDecodeError:
         fail(span, f"the table file '{shown}' is not UTF-8 text")
-    origin = Origin(shown, text)
+    origin = Origin(shown, text, file=True)
 
     def at(line: int, message: str):
         fail(Span(line, 1, line, 2, origin), message, here)

@@ -203,3 +203,35 @@ def test_extrapolate_error_stops_the_run_when_x_leaves_the_range():
         assert "at t = 2.500000000" in result.stderr, result.stderr  # t + 1 leaves [0, 3.5]
         assert "table 0 (rows) is read outside its rows, x from 0.0 to 3.5" in result.stderr
         assert result.csv.splitlines()[-1].startswith("2.5,")  # the rows up to it kept
+
+
+@pytest.mark.parametrize("content, where, message", [
+    ("t,z\n0,0\n0.5,1\n0.4,2\n", "road.csv:4:1", "x decreases here (0.4 after 0.5)"),
+    ("t,z\n0,0\n0.5,inf\n", "road.csv:3:1", "'inf' is not a finite number (column 'z')"),
+    ("t,z\n0,0\n0.5\n", "road.csv:3:1", "this row has 1 fields, the header 2"),
+    ("t,z\n0,0\n0.5,1\n0.5,2\n0.5,3\n", "road.csv:5:1", "x = 0.5 a third time"),
+])
+def test_a_bad_table_file_is_an_error_at_its_row(tmp_path, content, where, message):
+    from conftest import run_bgc
+    (tmp_path / "road.csv").write_text(content, encoding="utf-8")
+    (tmp_path / "car.bg").write_text("model car\nsignal z = integral(table(road.csv, t), "
+                                     "init = 0)\n", encoding="utf-8")
+    done = run_bgc("check", "car.bg", cwd=tmp_path)
+    assert done.returncode == 1 and "Traceback" not in done.stderr
+    lines = done.stderr.splitlines()
+    assert lines[0] == f"{where}: error: {message}" or lines[0].startswith(
+        f"{where}: error: {message}"), done.stderr
+    assert "car.bg:2:27: note: the table is read here" in done.stderr
+
+
+def test_a_table_file_too_large_is_refused_before_it_is_read(tmp_path):
+    from conftest import run_bgc
+    from bgc.tables import MAX_TABLE_BYTES
+    with open(tmp_path / "big.csv", "wb") as f:
+        f.truncate(MAX_TABLE_BYTES + 1)  # sparse: nothing is written, nothing is read
+    (tmp_path / "m.bg").write_text('model m\nsignal z = integral(table("big.csv", t), '
+                                   'init = 0)\n', encoding="utf-8")
+    done = run_bgc("check", "m.bg", cwd=tmp_path)
+    assert done.returncode == 1
+    assert f"is too large ({MAX_TABLE_BYTES + 1} bytes; the limit is {MAX_TABLE_BYTES})" \
+        in done.stderr
