@@ -716,8 +716,7 @@ LINK_DOUBLES = ("SCENE_T0", "SCENE_T_END", "SCENE_DT", "SCENE_RTOL", "SCENE_ATOL
 LINK_TABLES = (("bgc_block", "blocks"), ("int", "jac_color_ptr"), ("int", "jac_color_cols"),
                ("int", "jac_col_ptr"), ("int", "jac_col_rows"), ("int", "position_rows"),
                ("int", "velocity_rows"), ("int", "velocity_movable"),
-               ("int", "indicator_strict"), ("char *const", "discrete_names"),
-               ("char *const", "input_names"))
+               ("int", "indicator_strict"), ("char *const", "discrete_names"))
 LINK_FUNCTIONS = (("rhs", ""), ("outputs", ""), ("jvp", "const double *v, "), ("events", ""),
                   ("next_time", ""), ("update", "const double *r, "))
 _MODEL_ARGS = "double t, const double *x, const bgc_params *p, bgc_work *w, "
@@ -751,6 +750,7 @@ def _link_definitions() -> str:
     for name, extra in LINK_FUNCTIONS:
         proto, call = _link_function(name, extra)
         out += [proto, "{", f"    return bgc_model_{name}({call});", "}"]
+    out += ["const char *bgc_link_input_name(int j)", "{", "    return bgc_input_name(j);", "}"]
     out += ["#ifndef BGC_NO_MAIN", "const char *const bgc_link_ident = bgc_ident;", "#endif"]
     return "\n".join(out) + "\n"
 
@@ -773,6 +773,8 @@ def _link_declarations() -> tuple[str, str]:
     for name, extra in LINK_FUNCTIONS:
         tables += [_link_function(name, extra)[0] + ";",
                    f"#define bgc_model_{name} bgc_link_{name}"]
+    tables += ["const char *bgc_link_input_name(int j);",
+               "#define bgc_input_name bgc_link_input_name"]
     tables += ["extern const char *const bgc_link_ident;", "#define bgc_ident bgc_link_ident"]
     return "\n".join(sizes) + "\n", "\n".join(tables) + "\n"
 

@@ -115,8 +115,8 @@ typedef struct bgc_settings {
     int (*on_event)(void *ctx, double t, const char *what, const char *change);
     void *event_ctx;
     /* The inputs' data: NULL (every input keeps its default), or BGC_NUM_INPUTS series
-       ordered as bgc_input_names (a series of n = 0: that input keeps its default).  The
-       arrays are read during the run, not copied. */
+       ordered as bgc_input_name numbers them (a series of n = 0: that input keeps its
+       default).  The arrays are read during the run, not copied. */
     const bgc_input_series *inputs;
 } bgc_settings;
 #define BGC_MAX_STEPS 100000L /* max_steps unless set */
@@ -199,11 +199,15 @@ static inline int bgc_model_update(double t, const double *x, const bgc_params *
 #endif
 #define BGC_MAX_EVENT_ITERATIONS 100 /* events at one instant before a run stops (Zeno) */
 
-/* Inputs (`input NAME`): BGC_NUM_INPUTS of them, named by bgc_input_names; the data of a run
-   in bgc_settings.inputs.  A model without inputs gets the neutral ones below. */
+/* Inputs (`input NAME`): BGC_NUM_INPUTS of them, input j named bgc_input_name(j); the data
+   of a run in bgc_settings.inputs.  A model without inputs gets the neutral ones below. */
 #ifndef BGC_NUM_INPUTS
 #define BGC_NUM_INPUTS 0
-static const char *const bgc_input_names[1] = { "" };
+static inline const char *bgc_input_name(int j)
+{
+    (void)j;
+    return "";
+}
 #endif
 
 /* -------------------------------------------- between the model part and the runtime --- */

@@ -621,7 +621,7 @@ BGC_FMI_EXPORT fmi2Status fmi2SetReal(fmi2Component c, const fmi2ValueReference 
         if (k >= 0) {
             if (!isfinite(value[i])) {
                 bgc_fmi_log(m, fmi2Error, "fmi2SetReal: input '%s' must be finite",
-                            bgc_input_names[k]);
+                            bgc_input_name(k));
                 return fmi2Error;
             }
             continue;

@@ -414,7 +414,7 @@ static int bgc_log_event(void *ctx, double t, const char *what, const char *chan
 
 
 /* The inputs' data (--input FILE): a CSV file with a header row, a column t (increasing) and
-   a column per input given (named as bgc_input_names), a number in every field. */
+   a column per input given (named as bgc_input_name gives), a number in every field. */
 static struct {
     const char *path;
     bgc_input_series *series; /* one per input */
@@ -490,13 +490,13 @@ static int bgc_read_inputs(void)
             tcol = ncol;
         } else {
             for (j = 0; j < BGC_NUM_INPUTS; j++)
-                if (strcmp(field, bgc_input_names[j]) == 0)
+                if (strcmp(field, bgc_input_name(j)) == 0)
                     break;
             if (j == BGC_NUM_INPUTS) {
                 fprintf(stderr, "error: %s: '%s' is not an input of the model (its inputs:", path,
                         field);
                 for (j = 0; j < BGC_NUM_INPUTS; j++)
-                    fprintf(stderr, "%s %s", j ? "," : "", bgc_input_names[j]);
+                    fprintf(stderr, "%s %s", j ? "," : "", bgc_input_name(j));
                 fprintf(stderr, "%s)\n", BGC_NUM_INPUTS ? "" : " none");
                 free(text);
                 return BGC_ERR_USAGE;
