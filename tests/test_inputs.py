@@ -12,7 +12,26 @@ import bgc
 from bgc import backends
 from bgc.api import Source
 
-from conftest import have_cc, run_bgc
+from conftest import have_cc
+
+
+class _Done:
+    def __init__(self, result):
+        self.returncode = result.exit_code
+        self.stderr = result.stderr
+
+
+def run_bgc(*args, cwd):
+    """bgc's command line in this process, in directory cwd."""
+    import os
+    from click.testing import CliRunner
+    from bgc.cli import main
+    here = os.getcwd()
+    os.chdir(cwd)
+    try:
+        return _Done(CliRunner().invoke(main, [str(a) for a in args]))
+    finally:
+        os.chdir(here)
 
 BACKENDS = ["c", "python"] if have_cc() else ["python"]
 
