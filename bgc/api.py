@@ -24,7 +24,7 @@ from .resolve import resolve
 from .resources import quiet_collector, read_bounded
 from .scene import Override, Settings, apply_scene, check_parameters as check_parameters_of
 from .run import (ALGEBRA, BACKENDS, FORMATS, SIMULATE_OPTIONS, SWEEP_BACKENDS, TARGETS,
-                  check_run_options, choice as _choice, exclusive)
+                  check_run_options, choice as _choice, exclusive, input_data)
 from .run import RunSettings, run_args  # noqa: F401  (the API's, from bgc.run)
 # the one run function and its helpers (bgc.runner), as the API offers them
 from .runner import Result, choose_backend, prepare, run, settings_for
@@ -84,7 +84,8 @@ class BgcArgumentError(BgcModelError, ValueError):
 
 def _model_error(exc: ModelError, source: Source) -> BgcModelError:
     """BgcArgumentError when every error is located in an argument, else BgcModelError."""
-    outside = all(d.span is not None and d.span.origin is not None for d in exc.diagnostics)
+    outside = all(d.span is not None and d.span.origin is not None and not d.span.origin.file
+                  for d in exc.diagnostics)
     return (BgcArgumentError if outside else BgcModelError)(exc, source)
 
 
@@ -301,18 +302,27 @@ def simulate(model, scene: str | None = None, backend: str = "c", algebra: str =
     """Simulate; returns (t, Y, names).  outputs, effects: an ad-hoc scene (see build).
     options: t_end, dt, solver, rtol, atol, step, params, project_initial, max_steps,
     allow_inconsistent (start from initial values that violate the constraints, neither
-    refused nor projected: the correctors pull them back).
+    refused nor projected: the correctors pull them back), max_step, event_rows, events;
+    inputs: {name: (t, values)}, the data of the model's inputs (`input NAME`: interpolated
+    linearly, held outside, each t a time event; an input without data keeps its default).
     backend "c" (and "vm", the interpreter: no C build per model, bgc/vm.py) falls back to
     "python" when there is no C compiler."""
     _choice("backend", backend, BACKENDS)
+    inputs = options.pop("inputs", None)
     unknown = sorted(set(options) - set(SIMULATE_OPTIONS))
     if unknown:
         raise TypeError(f"simulate() got unknown options: {', '.join(unknown)}")
     check_run_options(options)
+    if inputs is not None:
+        options["input_data"] = input_data(inputs)
     compiled = build(model, scene, options.get("project_initial", False), algebra,
                      outputs=outputs, effects=effects,
                      allow_inconsistent=options.get("allow_inconsistent", False))
     program = compiled.program
+    names = [u.name for u in program.inputs]
+    for name, _, _ in options.get("input_data", ()):
+        if name not in names:
+            raise ValueError(f"unknown input {name!r} (inputs: {', '.join(names) or 'none'})")
     settings = settings_for(program.scene, [p.name for p in program.params], **options)
     backend, _ = choose_backend(backend)
     ran = prepare(compiled, backend, in_process=True)

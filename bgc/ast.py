@@ -36,6 +36,23 @@ class Call:
 
 
 @dataclass(frozen=True)
+class Str:
+    """A string argument of a call: table("road.csv", t)."""
+
+    text: str
+    span: Span
+
+
+@dataclass(frozen=True)
+class KwArg:
+    """A named argument of a call: interp = step."""
+
+    name: str
+    value: object  # an expression or a Str
+    span: Span
+
+
+@dataclass(frozen=True)
 class BinOp:
     op: str  # + - * / ^
     left: object
@@ -278,6 +295,19 @@ class ImportDecl:
     file: str | None  # import "file.bg"
     alias: Ident | None
     span: Span
+
+
+@dataclass(frozen=True)
+class InputDecl:
+    """`input NAME [= DEFAULT] ["doc"]`: a signal whose values come from outside."""
+
+    name: Ident
+    expr: object  # the default (parameters only), or None: 0
+    doc: str | None
+    span: Span
+    dim: object = None  # a scalar signal
+    unit: object = None
+    index: object = None
 
 
 # ---------------------------------------------------------------- events

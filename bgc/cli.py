@@ -441,6 +441,10 @@ def compile(model, scene, outputs, effects, algebra, target, output, project_ini
               callback=_output_file,
               help="The event log: t,event,change, a row per change at an event (docs/"
                    "hybrid.md); a failed run keeps the events before it.")
+@click.option("--input", "input_files", multiple=True, metavar="FILE.csv",
+              help="The inputs' data (`input NAME` in the model): CSV with a column t "
+                   "(increasing) and a column per input, interpolated linearly, each t a time "
+                   "event; an input without data keeps its default.  May be repeated.")
 @click.option("-o", "output", default=None, callback=_output_file,
               help="CSV file (default: stdout), written as the run goes and renamed into "
                    "place at its end; a failed run keeps the rows it computed.")
@@ -453,7 +457,7 @@ def compile(model, scene, outputs, effects, algebra, target, output, project_ini
                    "with the states (docs/analysis.md).")
 def simulate(model, scene, outputs, effects, algebra, backend, solver, rtol, atol, t_end, dt,
              step, max_steps, max_step, params, project_initial, allow_inconsistent, stats,
-             event_rows, events_file, output, plot_file, sensitivities, consts):
+             event_rows, events_file, input_files, output, plot_file, sensitivities, consts):
     """Simulate and write CSV.  A model compiled before with the same options runs at once
     (bgc.warm); otherwise it is compiled, and the result kept for the next run.  On a
     terminal, a run that takes more than a second shows its progress on stderr."""
@@ -505,6 +509,19 @@ def simulate(model, scene, outputs, effects, algebra, backend, solver, rtol, ato
             max_step=max_step, event_rows=event_rows or None)
     except ValueError as error:
         raise click.UsageError(str(error)) from None
+    seen: set = set()
+    for path in input_files:
+        problem = run.input_file_problem(path, record.inputs)
+        if problem:
+            _fail(problem)
+        with open(path, encoding="utf-8") as f:
+            columns = [c.strip() for c in f.readline().split(",") if c.strip() != "t"]
+        again = seen.intersection(columns)
+        if again:
+            _fail(f"{path}: input '{sorted(again)[0]}' is given twice")
+        seen.update(columns)
+    if input_files:
+        settings = replace(settings, input_files=tuple(os.path.abspath(p) for p in input_files))
     with _scratch(events_file is not None) as logs:
         if logs:
             settings = replace(settings, events=str(Path(logs) / "events.csv"))
@@ -1122,8 +1139,9 @@ def _analysis_params(model, scene, params, analysed, outputs=None, effects=None)
               help="The operating point: the state of the scene's run at TIME, or an "
                    "equilibrium (bgc steady).  [default: the initial state]")
 @click.option("--inputs", default=None, metavar="U1,U2,..",
-              help="The inputs: parameters, each taken as a signal held at its value (the "
-                   "model declares no inputs yet).  [default: none; B and D have no columns]")
+              help="The inputs: the model's inputs (`input NAME`, at their defaults), or "
+                   "parameters, each taken as a signal held at its value.  [default: the "
+                   "model's inputs]")
 @click.option("-p", "params", multiple=True, metavar="NAME=VALUE", help="Parameter override.")
 @click.option("-o", "output", default=None, callback=_matrices_file, metavar="FILE",
               help="Write the matrices, eigenvalues and the point to FILE.json, .npz or .csv.")
@@ -1135,10 +1153,11 @@ def linearize(model, scene, outputs, effects, at, inputs, params, output, bode_f
     independent coordinates, the correctors' artificial modes apart.  Prints the eigenvalues
     with their natural frequencies and damping ratios."""
     _not_an_input(model, output, bode_file)
-    names = _names(inputs)
-    if bode_file and not names:
-        raise click.UsageError("--bode needs an input: name one with --inputs (a parameter)")
+    names = None if inputs is None else _names(inputs)
     analysed = _analysed(analysis.build, model, scene, outputs, effects, names)
+    if bode_file and not analysed.inputs:
+        raise click.UsageError("--bode needs an input: the model declares none; name a "
+                               "parameter with --inputs")
     _warn(analysed.compiled)
     given = _analysis_params(model, scene, params, analysed, outputs, effects)
     evaluator = _analysed(analysis.Evaluator, analysed, given)

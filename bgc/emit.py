@@ -519,6 +519,8 @@ def _common_context(program: Program, ws: _Workspace, literal, c: bool) -> dict:
         })
     return {
         "events": _events_context(program, literal),
+        "tables": _tables_context(program, c),
+        "inputs": [literal(u.name) for u in program.inputs],
         "ident": identifier(program.name),
         "model_name": literal(program.name),
         "ident_literal": literal(identifier(program.name)),
@@ -560,6 +562,18 @@ def _scene_context(program: Program, literal, step_none: str) -> dict:
         "step": step_none if sc.step is None else float_literal(sc.step),
         "hmax": None if sc.max_step is None else float_literal(sc.max_step),
     }
+
+
+def _tables_context(program: Program, c: bool) -> list:
+    """The lookup tables' data as C initialisers or Python tuples (bgc/tables.py)."""
+    out = []
+    for tab in program.tables:
+        def seq(values):
+            text = ", ".join(_number(v) for v in values)
+            return "{ " + text + " }" if c else "(" + text + ("," if len(values) == 1 else "") + ")"
+        out.append({"n": tab.rows, "error": int(tab.extrapolate == "error"), "x": seq(tab.x),
+                    "origin": seq(tab.origins), "coef": seq(tab.coefficients)})
+    return out
 
 
 def _events_context(program: Program, literal) -> dict | None:
@@ -700,7 +714,7 @@ LINK_INTS = ("NUM_STATES", "NUM_PARAMS", "NUM_CONSTANTS", "NUM_OUTPUTS", "NUM_CO
              "NUM_POSITION_ROWS", "NUM_VELOCITY_ROWS", "NUM_BLOCKS", "AUTONOMOUS",
              "WORK_DOUBLES", "WORK_INTS", "WORK_Y0", "WORK_STAGES", "WORK_Y", "WORK_JAC",
              "JAC_COLORS", "SCENE_SOLVER", "NUM_INDICATORS", "NUM_TIMERS", "NUM_DISCRETE",
-             "DISCRETE_OFFSET")
+             "DISCRETE_OFFSET", "NUM_INPUTS")
 LINK_DOUBLES = ("SCENE_T0", "SCENE_T_END", "SCENE_DT", "SCENE_RTOL", "SCENE_ATOL", "SCENE_STEP",
                 "SCENE_HMAX")
 LINK_TABLES = (("bgc_block", "blocks"), ("int", "jac_color_ptr"), ("int", "jac_color_cols"),
@@ -740,6 +754,7 @@ def _link_definitions() -> str:
     for name, extra in LINK_FUNCTIONS:
         proto, call = _link_function(name, extra)
         out += [proto, "{", f"    return bgc_model_{name}({call});", "}"]
+    out += ["const char *bgc_link_input_name(int j)", "{", "    return bgc_input_name(j);", "}"]
     out += ["#ifndef BGC_NO_MAIN", "const char *const bgc_link_ident = bgc_ident;", "#endif"]
     return "\n".join(out) + "\n"
 
@@ -762,6 +777,8 @@ def _link_declarations() -> tuple[str, str]:
     for name, extra in LINK_FUNCTIONS:
         tables += [_link_function(name, extra)[0] + ";",
                    f"#define bgc_model_{name} bgc_link_{name}"]
+    tables += ["const char *bgc_link_input_name(int j);",
+               "#define bgc_input_name bgc_link_input_name"]
     tables += ["extern const char *const bgc_link_ident;", "#define bgc_ident bgc_link_ident"]
     return "\n".join(sizes) + "\n", "\n".join(tables) + "\n"
 

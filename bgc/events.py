@@ -12,7 +12,9 @@ solver never integrates across a switch.  What changes the frozen values:
   time relation     a relation linear in t with parameters alone (t >= t0): its time is known
                     in advance, t* = -b/a, and the solver steps onto it exactly;
   discrete relation reads discrete variables and parameters alone: it changes only at events;
-  square wave       `square(period, duty, t0)`: a value 0 or 1 whose edges are time events.
+  square wave       `square(period, duty, t0)`: a value 0 or 1 whose edges are time events;
+  time table        `table(..., t)` (bgc.tables): the piece that holds t, its breakpoints
+                    time events.
 
 At an event the program's `update` function gives the state and the discrete values after
 it: every relation's new value (a state relation's from the located crossing), the when-
@@ -31,7 +33,7 @@ from sympy.logic.boolalg import BooleanAtom, BooleanFunction
 from .diagnostics import Span
 from .differentiate import partial
 from .graph import TIME, written
-from .ir import SquareNext, SquareWave
+from .ir import InputNext, InputPart, SquareNext, SquareWave, TableNext, TablePiece
 
 RELATIONS = {"<": sp.StrictLessThan, "<=": sp.LessThan, ">": sp.StrictGreaterThan,
              ">=": sp.GreaterThan, "==": sp.Eq, "!=": sp.Ne}
@@ -55,6 +57,7 @@ class Relation:
     text: str  # as the event log names it
     span: Span
     owner: str | None  # the element whose law holds it (its own e, f read through the bond)
+    needs: frozenset = frozenset()  # a guard (a table's range): kept when these are used
 
     @property
     def indicator(self) -> sp.Expr:
@@ -70,6 +73,52 @@ class Square:
     t0: sp.Expr
     text: str
     span: Span
+    kind = "square"
+
+    def value(self):
+        return SquareWave(TIME, self.period, self.duty, self.t0)
+
+    def next(self):
+        return SquareNext(TIME, self.period, self.duty, self.t0)
+
+
+@dataclass(frozen=True)
+class TimeTable:
+    """A table of t: its discrete value is the piece that holds t (listed with the square
+    waves: both are time sources, their values set at their time events)."""
+
+    symbol: sp.Symbol
+    index: int  # the table's number (Table(k, ...))
+    text: str
+    span: Span
+    kind = "table"
+
+    def value(self):
+        return TablePiece(sp.Integer(self.index), TIME)
+
+    def next(self):
+        return TableNext(sp.Integer(self.index), TIME)
+
+
+@dataclass(frozen=True)
+class InputSlot:
+    """One of an input's three discrete values: its data's segment at t is the line through
+    (start, value) with a slope, set at the data's breakpoints (time events), so that the
+    input's value u = value + slope (t - start) is a polynomial of t between events."""
+
+    symbol: sp.Symbol
+    index: int  # the input's number
+    part: int  # 0 start, 1 value, 2 slope
+    default: sp.Expr
+    text: str
+    span: Span
+    kind = "input"
+
+    def value(self):
+        return InputPart(sp.Integer(self.index), TIME, sp.Integer(self.part), self.default)
+
+    def next(self):
+        return InputNext(sp.Integer(self.index), TIME) if self.part == 1 else None
 
 
 @dataclass(frozen=True)
@@ -119,6 +168,13 @@ class EventTable:
             self._index[key] = sym
         return self._index[key]
 
+    def guard(self, rel, text: str, span, needs) -> sp.Symbol:
+        """A relation that holds while the model is defined (a table's range, extrapolate =
+        error): its indicator is not a number where it is not, which stops the run."""
+        sym = sp.Symbol(f"event#{len(self.relations)}")
+        self.relations.append(Relation(sym, rel, text, span, None, frozenset(needs)))
+        return sym
+
     def square(self, period, duty, t0, node) -> sp.Symbol:
         key = ("square", period, duty, t0)
         if key not in self._index:
@@ -127,6 +183,20 @@ class EventTable:
             self.squares.append(Square(sym, period, duty, t0, text, node.span))
             self._index[key] = sym
         return self._index[key]
+
+    def input(self, j: int, name: str, default, span) -> tuple:
+        """The three discrete values of input j (InputSlot): start, value, slope."""
+        out = []
+        for part, what in enumerate((f"{name} (segment start)", name, f"{name} (slope)")):
+            sym = sp.Symbol(f"input#{j}.{part}", real=True)
+            self.squares.append(InputSlot(sym, j, part, default, what, span))
+            out.append(sym)
+        return tuple(out)
+
+    def time_table(self, k: int, text: str, span) -> sp.Symbol:
+        sym = sp.Symbol(f"table#{k}", real=True)
+        self.squares.append(TimeTable(sym, k, text, span))
+        return sym
 
 
 # ---------------------------------------------------------------- the scene's events
@@ -201,7 +271,7 @@ def select(graph_events, used: set, states: dict, params: set) -> Selected:
     discrete_symbols = {d.symbol for d in discretes}
     state, time, discrete = [], [], []
     for r in relations:
-        if r.symbol not in used:
+        if r.symbol not in used and not (r.needs and r.needs <= used | {TIME}):
             continue
         free = r.relation.free_symbols
         if free <= params | discrete_symbols:
@@ -223,7 +293,7 @@ def _oriented(r: Relation) -> Relation:
     if isinstance(rel, (sp.StrictLessThan, sp.LessThan)):
         flipped = (sp.StrictGreaterThan if isinstance(rel, sp.StrictLessThan) else
                    sp.GreaterThan)(rel.rhs, rel.lhs, evaluate=False)
-        return Relation(r.symbol, flipped, r.text, r.span, r.owner)
+        return Relation(r.symbol, flipped, r.text, r.span, r.owner, r.needs)
     return r
 
 
@@ -281,11 +351,13 @@ def update_stores(sel: Selected, states) -> tuple[list, list]:
     for st in states:
         out.append(sp.Piecewise(*values[st.symbol], (st.symbol, True))
                    if st.symbol in values else st.symbol)
-    for sym in [r.symbol for r in sel.state] + [r.symbol for r, _, _ in sel.time] + \
-            [r.symbol for r in sel.discrete]:
+    for r in sel.state:  # a guard's value is not a number once it fails: the run stops
+        out.append(sp.Piecewise((sp.Integer(1), new[r.symbol]), (sp.sqrt(r.indicator), True))
+                   if r.needs else _bit(new[r.symbol]))
+    for sym in [r.symbol for r, _, _ in sel.time] + [r.symbol for r in sel.discrete]:
         out.append(_bit(new[sym]))
     for s in sel.squares:
-        out.append(SquareWave(TIME, s.period, s.duty, s.t0))
+        out.append(s.value())
     for d in sel.discretes:
         start = sp.Piecewise((d.init, FIRST), (d.symbol if d.next is None else
                                                d.next.xreplace(new), True))
@@ -296,7 +368,7 @@ def update_stores(sel: Selected, states) -> tuple[list, list]:
 
 def next_times(sel: Selected) -> list:
     return [at for _, at, _ in sel.time] + \
-        [SquareNext(TIME, s.period, s.duty, s.t0) for s in sel.squares]
+        [s.next() for s in sel.squares if s.next() is not None]
 
 
 def log_names(sel: Selected) -> tuple[tuple[str, ...], tuple[str, ...]]:
@@ -304,7 +376,7 @@ def log_names(sel: Selected) -> tuple[tuple[str, ...], tuple[str, ...]]:
         [r.text for r in sel.discrete] + [s.text for s in sel.squares] + \
         [d.name for d in sel.discretes]
     kinds = ["relation"] * (len(sel.state) + len(sel.time) + len(sel.discrete)) + \
-        ["square"] * len(sel.squares) + ["discrete"] * len(sel.discretes)
+        [s.kind for s in sel.squares] + ["discrete"] * len(sel.discretes)
     return tuple(names), tuple(kinds)
 
 

@@ -15,7 +15,9 @@ The variables, their value references as bgc/runtime/fmi2.c numbers them:
   derivatives  der(<state>), with the `derivative` attribute naming their state;
   outputs      the scene's other outputs, causality "output";
   discrete     the model's discrete variables (`discrete heat = 1`), "local", variability
-               "discrete": set at events.
+               "discrete": set at events;
+  inputs       the model's inputs (`input u = 0`), causality "input", variability
+               "continuous", start = the default: set with fmi2SetReal, held until set again.
 A model with events has an event indicator per state relation (numberOfEventIndicators) and
 time events (fmi2NewDiscreteStates' nextEventTime); bgc/runtime/fmi2.c says how.
 Descriptions come from the model's doc strings, a parameter's unit from a trailing
@@ -75,9 +77,9 @@ class Variable:
 
     name: str
     vr: int
-    causality: str  # parameter | local | output
+    causality: str  # parameter | local | output | input
     variability: str  # fixed | continuous | discrete
-    initial: str  # exact | calculated
+    initial: str | None  # exact | calculated (None: an input, which has none)
     description: str | None = None
     start: float | None = None
     unit: str | None = None
@@ -100,6 +102,8 @@ class Description:
     structured: bool
     indicators: int = 0  # event indicators: the state relations
     discrete: tuple[int, ...] = ()  # each discrete variable's place among the discrete values
+    input_slots: tuple[int, ...] = ()  # each input's value's place among the discrete values
+    #                                    (-1: the scene does not use it)
 
 
 def model_identifier(name: str) -> str:
@@ -161,7 +165,10 @@ def describe(compiled) -> Description:
                                   "calculated", f"time derivative of {name}",
                                   derivative=state_pos[i]))
     out_pos = {}
+    input_names = {u.name for u in program.inputs}
     for k, name in enumerate(program.outputs):
+        if name in input_names:  # the input's variable (an FMU's input is no output)
+            continue
         if name in state_index:
             out_pos[k] = state_pos[state_index[name]]
             continue
@@ -173,6 +180,16 @@ def describe(compiled) -> Description:
         variables.append(Variable(events.names[place], m + 2 * n + len(program.outputs) + k,
                                   "local", "discrete", "calculated",
                                   "a discrete variable, set at events"))
+    params = _parameter_values(program)
+    input_pos, input_slots = [], []
+    for j, u in enumerate(program.inputs):
+        input_pos.append(len(variables) + 1)
+        variables.append(Variable(u.name, m + 2 * n + len(program.outputs) + len(discrete) + j,
+                                  "input", "continuous", None, u.doc,
+                                  _value_of(u.default, params, f"the default of input '{u.name}'")))
+        slot = [k for k, (kind, name) in enumerate(zip(events.kinds, events.names))
+                if kind == "input" and name == u.name]
+        input_slots.append(slot[0] if slot else -1)
     names = [v.name for v in variables]
     if len(set(names)) != len(names):
         twice = sorted({x for x in names if names.count(x) > 1})
@@ -181,11 +198,15 @@ def describe(compiled) -> Description:
     for j, column in enumerate(program.jacobian.columns):
         for i in column:
             rows[i].append(state_pos[j])
+    for i in range(n):  # (an input may reach every derivative)
+        rows[i] += input_pos
     out_deps = _state_dependence(program.function("outputs"), len(program.outputs))
     outputs = {}
     for k, name in enumerate(program.outputs):
+        if name in input_names:
+            continue
         deps = (state_pos[state_index[name]],) if name in state_index else \
-            tuple(state_pos[j] for j in out_deps[k])
+            tuple(state_pos[j] for j in out_deps[k]) + tuple(input_pos)
         outputs.setdefault(out_pos[k], deps)
     initial = sorted(set(outputs) | set(state_pos.values()) | set(der_pos.values()))
     return Description(
@@ -196,7 +217,19 @@ def describe(compiled) -> Description:
         initial_unknowns=tuple(initial), units=tuple(units),
         experiment=program.scene,
         structured=all(_STRUCTURED.match(v) for v in names),
-        indicators=events.indicators, discrete=discrete)
+        indicators=events.indicators, discrete=discrete, input_slots=tuple(input_slots))
+
+
+def _value_of(expr, params: list, what: str) -> float:
+    """An expression of the parameters at their defaults, as a number."""
+    e = ir.as_expr(expr).xreplace({ir.P[k]: sp.Float(v, 30) for k, v in enumerate(params)})
+    try:
+        value = float(sp.N(e, 30))
+    except (TypeError, ValueError):
+        value = math.nan
+    if not math.isfinite(value):
+        raise FmuError(f"{what} is not a finite number, so it has no start value in the FMU")
+    return value
 
 
 def _parameter_values(program) -> list[float]:
@@ -335,7 +368,8 @@ def fmu_program(program) -> ir.Program:
 
 
 def fmu_source(program, guid: str, project_initial: bool = False,
-               allow_inconsistent: bool = False, discrete: tuple[int, ...] = ()) -> str:
+               allow_inconsistent: bool = False, discrete: tuple[int, ...] = (),
+               input_slots: tuple[int, ...] = ()) -> str:
     """The FMU's one C file: the generated program (fmu_program's, its main left out), the
     FMU part, bgc/runtime/fmi2.c; discrete: Description.discrete."""
     (text,) = emit_c(fmu_program(program)).values()
@@ -360,6 +394,10 @@ def fmu_source(program, guid: str, project_initial: bool = False,
         f"#define BGC_FMI_NUM_DISCRETE_VARS {len(discrete)}",
         "static const int bgc_fmi_discrete[BGC_DIM(BGC_FMI_NUM_DISCRETE_VARS)] = { "
         + ", ".join(map(str, discrete or (0,))) + " };",
+        "/* Where each input's value is among the discrete values d (-1: not used). */",
+        f"#define BGC_FMI_NUM_INPUTS {len(program.inputs)}",
+        "static const int bgc_fmi_input_slot[BGC_DIM(BGC_FMI_NUM_INPUTS)] = { "
+        + ", ".join(map(str, input_slots or (0,))) + " };",
     ]
     return "\n".join(head) + "\n" + text + "\n" + "\n".join(part) + "\n" + \
         _runtime_text("fmi2.c")
@@ -377,7 +415,7 @@ def fmu_texts(compiled, project_initial: bool = False,
     d = describe(compiled)
     xml = model_description(d, GUID_PLACEHOLDER)
     source = fmu_source(compiled.program, GUID_PLACEHOLDER, project_initial, allow_inconsistent,
-                        d.discrete)
+                        d.discrete, d.input_slots)
     guid = make_guid(xml, source)
     return d, xml.replace(GUID_PLACEHOLDER, guid), source.replace(GUID_PLACEHOLDER, guid)
 

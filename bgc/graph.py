@@ -202,6 +202,16 @@ def check_effect_names(names, spans, known, diags: Collector, where: str) -> Non
 
 
 @dataclass(frozen=True)
+class InputInfo:
+    """An input (`input NAME = DEFAULT "doc"`): a signal whose values come from outside."""
+
+    name: str
+    default: object  # a SymPy expression of parameters
+    doc: str | None
+    span: object
+
+
+@dataclass(frozen=True)
 class Graph:
     name: str
     doc: str | None
@@ -220,6 +230,8 @@ class Graph:
     discretes: tuple = ()
     whens: tuple = ()
     instances: tuple = ()  # Instance, one per instance of a component, in declaration order
+    tables: tuple = ()  # bgc.tables.TableData, as Table(k, ...) numbers them
+    inputs: tuple = ()  # InputInfo, in declaration order (their values: bgc.events.InputSlot)
 
     @cached_property
     def vector_by_name(self) -> dict:

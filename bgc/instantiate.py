@@ -96,6 +96,15 @@ _RELATIONS = {"<": lambda a, b: a < b, "<=": lambda a, b: a <= b, ">": lambda a,
               ">=": lambda a, b: a >= b, "==": lambda a, b: a == b, "!=": lambda a, b: a != b}
 
 
+def _respan(node, sp):
+    """A table's file or option with its spans in this scope, its names as written."""
+    if isinstance(node, ast.KwArg):
+        return ast.KwArg(node.name, _respan(node.value, sp), sp(node.span))
+    if isinstance(node, (ast.Str, ast.Field, ast.Name)):
+        return replace(node, span=sp(node.span))
+    return node
+
+
 def _const(node, env: dict, scope: _Scope, what: str) -> int:
     """The value of a compile-time integer expression: numbers, constants, `for` variables,
     + - * / ^, min, max, abs."""
@@ -356,14 +365,15 @@ class _Instantiate:
 
     def declare(self, scope: _Scope, stmt, env):
         if isinstance(stmt, (ast.ParamDecl, ast.SignalDecl, ast.IntegralDecl, ast.ElementDecl,
-                             ast.PortDecl, ast.DiscreteDecl)):
+                             ast.PortDecl, ast.DiscreteDecl, ast.InputDecl)):
             name = self.local_name(scope, stmt, env)
             if isinstance(stmt, ast.ElementDecl) and self.is_instance(scope, stmt):
                 kind = "instance"
             else:
                 kind = {ast.ParamDecl: "parameter", ast.SignalDecl: "signal",
                         ast.IntegralDecl: "signal", ast.ElementDecl: "element",
-                        ast.PortDecl: "port", ast.DiscreteDecl: "signal"}[type(stmt)]
+                        ast.PortDecl: "port", ast.DiscreteDecl: "signal",
+                        ast.InputDecl: "signal"}[type(stmt)]
             old = scope.table.get(name)
             if old is not None and ("instance" in (old, kind) or "port" in (old, kind)):
                 first = scope.first.get(name)
@@ -532,7 +542,7 @@ class _Instantiate:
             return
         name = None
         if isinstance(stmt, (ast.ParamDecl, ast.SignalDecl, ast.IntegralDecl, ast.ElementDecl,
-                             ast.DiscreteDecl)):
+                             ast.DiscreteDecl, ast.InputDecl)):
             name = ast.Ident(scope.prefix + self.local_name(scope, stmt, env),
                              scope.sp(stmt.name.span))
         if isinstance(stmt, ast.ElementDecl):
@@ -553,7 +563,7 @@ class _Instantiate:
         elif isinstance(stmt, ast.SceneDecl):
             out = rw.map(stmt)
         elif isinstance(stmt, (ast.ParamDecl, ast.SignalDecl, ast.IntegralDecl,
-                               ast.DiscreteDecl)):
+                               ast.DiscreteDecl, ast.InputDecl)):
             out = replace(rw.map(stmt), name=name)
             if hasattr(out, "index"):
                 out = replace(out, index=None)
@@ -756,6 +766,11 @@ class _Rewriter:
                 if found is not None and found[1] in ("signal", "parameter", "element"):
                     return self.path(segs, node)
             return ast.Index(self.expr(node.base, own), self.expr(node.index, own), sp(node.span))
+        if isinstance(node, ast.Call) and node.func == "table":  # a file and named options
+            keep = (ast.Str, ast.Field, ast.KwArg)  # are not names in this scope
+            args = tuple(_respan(a, sp) if isinstance(a, keep) else self.expr(a, own)
+                         for a in node.args)
+            return ast.Call(node.func, args, sp(node.span))
         if isinstance(node, ast.Call):
             return ast.Call(node.func, tuple(self.expr(a, own) for a in node.args), sp(node.span))
         if isinstance(node, ast.BinOp):

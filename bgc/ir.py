@@ -18,7 +18,9 @@ and the functions sin cos tan asin acos atan atan2 sinh cosh tanh asinh atanh ex
 Abs sign Min Max (bgc.algebra's) Heaviside, Pow, Rational, Float, Integer, pi, E; the
 conditional Piecewise over relations (< <= > >= == !=) and And, Or, Not (booleans are never
 stored: a condition chooses a value); and SquareWave, SquareNext (a square wave's value at t
-and its next edge after t, computed by the runtimes).  Model names
+and its next edge after t, computed by the runtimes), Table, TableNext, TablePiece (a lookup
+table's value, its next breakpoint after t, the piece holding t: bgc.tables), InputPart,
+InputNext (an input's segment and next breakpoint, from the run's data).  Model names
 never occur in expressions, so nothing a model author writes reaches generated code except
 through the name strings (states, outputs, params, block unknowns), which the emitters escape
 as literals.
@@ -71,6 +73,64 @@ class SquareNext(sp.Function):
     """SquareNext(t, period, duty, t0): the first edge of the square wave after t."""
 
     nargs = 4
+
+
+class Table(sp.Function):
+    """Table(k, X, piece, order): table k (Program.tables, bgc.tables) at X, or its
+    derivative of that order (0 to 3); piece -1: the runtime finds X's piece, else the piece
+    (a time table's discrete value, set at events)."""
+
+    nargs = 4
+
+    def fdiff(self, argindex=1):
+        k, X, piece, order = self.args
+        if argindex == 2:
+            return Table(k, X, piece, order + 1) if int(order) < 3 else sp.S.Zero
+        return sp.S.Zero
+
+    def _sympystr(self, printer):
+        k, X, _, order = self.args
+        return f"table{int(k)}{chr(39) * int(order)}({printer._print(X)})"
+
+
+class TableGuard(sp.Function):
+    """TableGuard(k, X): how far X is within table k's rows (negative outside): the indicator
+    of a table with extrapolate = error, whose crossing is located and stops the run."""
+
+    nargs = 2
+
+    def fdiff(self, argindex=1):
+        return sp.S.Zero
+
+
+class TableNext(sp.Function):
+    """TableNext(k, t): table k's first breakpoint after t (inf: none)."""
+
+    nargs = 2
+
+
+class TablePiece(sp.Function):
+    """TablePiece(k, t): the piece of table k that holds t (bgc.tables.piece)."""
+
+    nargs = 2
+
+
+class InputPart(sp.Function):
+    """InputPart(j, t, part, default): input j's segment at t, as the run's data give it
+    (bgc.events.InputSlot): its start (part 0), the value there (1), its slope (2); without
+    data 0, default, 0."""
+
+    nargs = 4
+
+
+class InputNext(sp.Function):
+    """InputNext(j, t): the first time of input j's data after t (inf: none)."""
+
+    nargs = 2
+
+
+RUNTIME_FUNCTIONS = (SquareWave, SquareNext, Table, TableNext, TablePiece, TableGuard, InputPart,
+                     InputNext)
 FUNCTIONS = ("sin", "cos", "tan", "asin", "acos", "atan", "atan2", "sinh", "cosh", "tanh",
              "asinh", "atanh", "exp", "log", "sqrt", "Abs", "sign", "Min", "Max", "Heaviside")
 
@@ -432,6 +492,15 @@ class Events:
 
 
 @dataclass(frozen=True)
+class InputInfo:
+    """An input of the model: its name, its default (an expression of p) and its doc."""
+
+    name: str
+    default: sp.Expr
+    doc: str | None = None
+
+
+@dataclass(frozen=True)
 class Program:
     name: str
     states: tuple[str, ...]
@@ -445,6 +514,8 @@ class Program:
     blocks: tuple[BlockPlan, ...] = ()
     jacobian: JacobianPattern = JacobianPattern((), ())
     events: Events | None = None  # None: the program has no events (and none of their code)
+    tables: tuple = ()  # bgc.tables.TableData, numbered as Table(k, ...) numbers them
+    inputs: tuple = ()  # InputInfo, numbered as InputPart(j, ...) numbers them
 
     def function(self, name: str) -> Function:
         return self.functions[name]

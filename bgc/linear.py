@@ -250,13 +250,15 @@ def linearization(ev: operating.Evaluator, t: float, x) -> Linearization:
                          corrector=E, coupling=coupling, **common)
 
 
-def linearize(model, scene=None, at=None, inputs=(), outputs=None, params=None,
+def linearize(model, scene=None, at=None, inputs=None, outputs=None, params=None,
               effects=None) -> Linearization:
     """The linearisation of model's scene (bgc.linearize; see the module's doc): at the
     initial state (at=None), at "t=T" (or a number T) of the scene's run, or at "steady".
-    inputs: parameter names (until the language declares inputs); outputs: as a scene's
-    (default: the scene's); params: {name: value} overrides."""
-    analysed = operating.build(model, scene, outputs, effects, tuple(inputs))
+    inputs: names of the model's inputs (`input NAME`, at their defaults) or of parameters
+    (None: the model's inputs); outputs: as a scene's (default: the scene's); params:
+    {name: value} overrides."""
+    analysed = operating.build(model, scene, outputs, effects,
+                               None if inputs is None else tuple(inputs))
     ev = operating.Evaluator(analysed, params)
     t, x = operating_point(ev, at, lambda T: run_to(ev, dict(params or {}), T))
     return linearization(ev, t, x)
@@ -388,7 +390,7 @@ def bode(lin: Linearization, target, fmt: str = "png") -> None:
     AnalysisArgumentError without inputs or outputs."""
     if not lin.inputs or not lin.outputs:
         raise AnalysisArgumentError("a Bode plot needs an input and an output: name the input "
-                                    "with --inputs (a parameter)")
+                                    "with --inputs (an input or a parameter)")
     from . import plot
     plt = plot.pyplot()
     w = frequencies(lin)

@@ -354,7 +354,7 @@ def _events_info(sel) -> ir.Events | None:
         return None
     names, kinds = events.log_names(sel)
     return ir.Events(tuple(events.strict(r) for r in sel.state),
-                     len(sel.time) + len(sel.squares), names, kinds)
+                     len(events.next_times(sel)), names, kinds)
 
 
 @dataclass(frozen=True)
@@ -425,7 +425,9 @@ def lower(reduced: Reduced, sensitivities: tuple[str, ...] = (), given=(),
             aug.movable, aug.count
     program = finish(reduced.name, names, params, outputs,
                      tuple(ConstraintRow(r.junction, r.level) for r in rows), movable, scene,
-                     fns, tuple(mapper.plans), mapper.count, _events_info(reduced.events))
+                     fns, tuple(mapper.plans), mapper.count, _events_info(reduced.events),
+                     reduced.tables, tuple(ir.InputInfo(u.name, mapper.expr(u.default), u.doc)
+                                           for u in reduced.inputs))
     return aug.pattern(program) if sensitivities else program
 
 
@@ -490,7 +492,7 @@ def _row_jacobian(rows, states) -> list[Store]:
 
 
 def finish(name, states, params, outputs, constraints, movable, scene, functions, plans,
-           count, events_info=None) -> Program:
+           count, events_info=None, tables=(), inputs=()) -> Program:
     """The passes every program goes through: pruning, constants (of every function but
     init, which runs once per parameter set anyway), temporaries, the Jacobian's pattern."""
     functions = {k: Function(f.name, f.args, f.size, ir.prune(f.body))
@@ -506,7 +508,7 @@ def finish(name, states, params, outputs, constraints, movable, scene, functions
     functions = _ordered(functions)
     pattern = jacobian_pattern(functions["rhs"], len(states), plans)
     return Program(name, states, params, outputs, constraints, movable, scene, functions,
-                   tuple(plans), pattern, events_info)
+                   tuple(plans), pattern, events_info, tuple(tables), tuple(inputs))
 
 
 def explicit_program(name, states, params, outputs, init, rhs, out, scene,

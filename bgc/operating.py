@@ -11,20 +11,23 @@ multiplier.  Its extra functions (bgc.lower.with_tangent) are the outputs' deriv
 v (`outputs_jvp`) and, for each input, the right side's and the outputs' derivative with
 respect to it.
 
-Inputs: until the language declares inputs, an input is a parameter.  Its value is held at
-the parameter's value and the derivative is taken through everything computed from it (the
-parameters defined from it, unless overridden, and the constants of the generated code).
+Inputs: the model's declared inputs (`input u = 0`), at their defaults: the derivative with
+respect to one is taken along its value (the discrete value the generated code reads it
+from, bgc.events.InputSlot), exactly.  A parameter may be an input too: its value is held
+and the derivative is taken through everything computed from it (the parameters defined
+from it, unless overridden, and the constants of the generated code).
 """
 from __future__ import annotations
 
 from dataclasses import dataclass
 
 import numpy as np
+import sympy as sp
 
 from . import api, backends
 from .differentiate import directional
 from .emit import emit_python
-from .ir import C, P, Assign, Store, substitute
+from .ir import C, D, P, Assign, Store, substitute
 from .lower import with_tangent
 
 
@@ -59,19 +62,23 @@ def _scene_outputs(model, scene, outputs, effects):
         tuple(f"{j}.residual" for j in junctions)
 
 
-def build(model, scene=None, outputs=None, effects=None, inputs=()) -> Analysed:
-    """The analysis program of model's scene (see the module's doc); raises api's errors."""
+def build(model, scene=None, outputs=None, effects=None, inputs=None) -> Analysed:
+    """The analysis program of model's scene (see the module's doc); raises api's errors.
+    inputs: names of declared inputs or parameters (None: the declared inputs)."""
     first, asked, states, lambdas, residuals = _scene_outputs(model, scene, outputs, effects)
     extra = [s for s in states + lambdas + residuals if s not in asked]
     names = ", ".join(list(asked) + extra) if asked or extra else None
     compiled = api.build(first.source, scene, outputs=names, effects=effects,
                          option_names=("--outputs", "--effects", "--scene"))
     params = [p.name for p in compiled.program.params]
+    declared = [u.name for u in compiled.program.inputs]
+    inputs = tuple(declared) if inputs is None else tuple(inputs)
     for u in inputs:
-        if u not in params:
+        if u not in params and u not in declared:
             raise AnalysisArgumentError(
-                f"unknown input '{u}': the model declares no inputs yet, and an input must be "
-                f"one of its parameters ({', '.join(params) or 'it has none'})")
+                f"unknown input '{u}': an input is one of the model's inputs "
+                f"({', '.join(declared) or 'it declares none'}) or of its parameters "
+                f"({', '.join(params) or 'it has none'})")
     if len(set(inputs)) != len(inputs):
         raise AnalysisArgumentError("an input is named twice")
     outs = compiled.program.outputs
@@ -101,6 +108,24 @@ def parameter_seeds(program, j: int, given=()) -> dict:
     return seeds
 
 
+def input_slots(program) -> dict:
+    """Each declared input's name -> the discrete value its value is read from (None: the
+    scene does not use it)."""
+    ev = program.events
+    out = {}
+    for u in program.inputs:
+        found = [k for k, (kind, name) in enumerate(zip(ev.kinds, ev.names))
+                 if kind == "input" and name == u.name] if ev is not None else []
+        out[u.name] = found[0] if found else None
+    return out
+
+
+def _default(expr, params) -> float:
+    """An input's default (an expression of p) at the parameters' values."""
+    e = substitute(expr, {P[k]: sp.Float(v, 30) for k, v in enumerate(params)})
+    return float(sp.N(e, 30))
+
+
 class Evaluator:
     """The analysis program's generated Python module, at given parameter values."""
 
@@ -109,8 +134,12 @@ class Evaluator:
         program = analysed.compiled.program
         prog = with_tangent(program, "outputs", "outputs_jvp")
         index = {p.name: k for k, p in enumerate(program.params)}
+        slots = input_slots(program)
         for k, u in enumerate(analysed.inputs):
-            seeds = parameter_seeds(program, index[u], params)
+            if u in slots:  # a declared input: along its value
+                seeds = {D[slots[u]]: 1} if slots[u] is not None else {}
+            else:
+                seeds = parameter_seeds(program, index[u], params)
             prog = with_tangent(prog, "rhs", f"rhs_du{k}", seeds)
             prog = with_tangent(prog, "outputs", f"outputs_du{k}", seeds)
         (text,) = emit_python(prog).values()
@@ -123,14 +152,20 @@ class Evaluator:
         self.p = m._param_values(m._overrides(params))
         self.pc = m._with_constants(self.p)
         self.t0 = float(m.SCENE["t0"])
+        base = len(self.p) + len(m._constants(self.p))
+        for u in program.inputs:  # the inputs at their defaults
+            slot = slots.get(u.name)
+            if slot is not None:
+                self.pc[base + slot] = _default(u.default, self.p)
 
     def _call(self, function, t, x, size, v=None):
         m = self.module
+        out = [0.0] * size
         try:
-            out = m._public(function, t, x, self.p, size,
-                            *(() if v is None else (list(v),)))
-        except m.BlockError as error:
-            raise AnalysisError(f"at t = {t:.17g}: {error}") from None
+            function(float(t), m._vector(x, m._N, "x"), self.pc, m._work(),
+                     *(() if v is None else (list(v),)), out)
+        except m._BlockFailure as failure:
+            raise AnalysisError(f"at t = {t:.17g}: {failure}") from None
         return np.asarray(out, dtype=float)
 
     def initial(self) -> np.ndarray:
@@ -146,10 +181,12 @@ class Evaluator:
 
     def jacobian(self, t, x) -> np.ndarray:
         m = self.module
+        J = np.zeros((self.n, self.n))
         try:
-            return m.jacobian(t, x, self.p)
-        except m.BlockError as error:
-            raise AnalysisError(f"at t = {t:.17g}: {error}") from None
+            m._jacobian_into(float(t), m._vector(x, m._N, "x"), self.pc, m._work(), J)
+        except m._BlockFailure as failure:
+            raise AnalysisError(f"at t = {t:.17g}: {failure}") from None
+        return J
 
     def outputs(self, t, x) -> np.ndarray:
         return self._call(self.module._out, t, x, len(self.all_outputs))

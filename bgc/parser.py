@@ -18,7 +18,7 @@ from .resources import (MAX_DIMENSION, MAX_NESTING, MAX_OPTION_CHARS, MAX_SOURCE
 KEYWORDS = frozenset("""model parameter signal integral init constraint holonomic nonholonomic
     corrector pid pd none phi scene effects outputs time every solver set
     library component port constant for in if elif else and or not import as unit
-    then when reinit discrete unilateral restitution""".split())
+    then when reinit discrete unilateral restitution input""".split())
 
 # Friendly names for terminals in "expected ..." messages.
 _TERMINAL_NAMES = {
@@ -213,6 +213,9 @@ class _ToAst(Transformer_NonRecursive):
     def elif_expr(self, meta, c):
         return (c[0], c[1])
 
+    def input_decl(self, meta, c):
+        return ast.InputDecl(_ident(c[0]), c[1], _doc(c[2]), _span(meta))
+
     def discrete_decl(self, meta, c):
         return ast.DiscreteDecl(_ident(c[0]), c[1], _doc(c[2]), _span(meta))
 
@@ -359,6 +362,12 @@ class _ToAst(Transformer_NonRecursive):
 
     def call(self, meta, c):
         return ast.Call(str(c[0]), tuple(x for x in c[1:] if x is not None), _span(meta))
+
+    def string_arg(self, meta, c):
+        return ast.Str(_doc(c[0]), _span(meta))
+
+    def kw_arg(self, meta, c):
+        return ast.KwArg(str(c[0]), c[1], _span(meta))
 
     def vector(self, meta, c):
         return ast.Vector(tuple(c), _span(meta))

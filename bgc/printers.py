@@ -32,7 +32,7 @@ from sympy.functions.elementary.piecewise import ExprCondPair
 from sympy.logic.boolalg import ITE, And, BooleanFalse, BooleanTrue, Not, Or
 
 from bgc.ir import (ATOL, C, CLASSES, FUNCTIONS, D, P, R, T, V, X, SquareNext, SquareWave,
-                    as_expr)
+                    InputNext, InputPart, Table, TableGuard, TableNext, TablePiece, as_expr)
 _CLASSES = tuple(CLASSES.values())
 _ARITY = {"atan2": (2, 2), "Min": (2, None), "Max": (2, None), "Heaviside": (1, 2)}
 _TEMP = re.compile(r"w[0-9]+\Z")
@@ -81,6 +81,20 @@ def check_expression(expr: sp.Basic, n_states: int, n_params: int, n_consts: int
         elif type(e) in _CLASSES:
             _check_arity(e)
             stack.extend(e.args)
+        elif type(e) in (InputPart, InputNext):
+            if not (e.args[0].is_Integer and int(e.args[0]) >= 0):
+                raise UnsupportedExpressionError(f"cannot print {e}")
+            if type(e) is InputPart and not (e.args[2].is_Integer and 0 <= int(e.args[2]) <= 2):
+                raise UnsupportedExpressionError(f"cannot print {e}")
+            stack.append(e.args[1])
+            if type(e) is InputPart:
+                stack.append(e.args[3])
+        elif type(e) in (Table, TableNext, TablePiece, TableGuard):
+            if not (e.args[0].is_Integer and int(e.args[0]) >= 0):
+                raise UnsupportedExpressionError(f"cannot print {e}")
+            if type(e) is Table and not (e.args[3].is_Integer and 0 <= int(e.args[3]) <= 3):
+                raise UnsupportedExpressionError(f"cannot print {e}")
+            stack.extend(e.args[1:])
         elif isinstance(e, _CONDITIONALS) or type(e) in (SquareWave, SquareNext):
             if isinstance(e, Relational) and e.rel_op not in _RELOPS:
                 raise UnsupportedExpressionError(f"cannot print {e}")
@@ -175,6 +189,18 @@ class _ArithmeticPrinting:
             return self._conditional(*(self._print(a) for a in expr.args))
         if isinstance(expr, (BooleanTrue, BooleanFalse)):
             return self.LOGIC["true" if isinstance(expr, BooleanTrue) else "false"]
+        if type(expr) in (InputPart, InputNext):
+            a = expr.args
+            rest = [str(int(a[0])), self._print(a[1])]
+            if type(expr) is InputPart:
+                rest += [str(int(a[2])), self._print(a[3])]
+            return f"{self.FUNCTION_NAMES[type(expr).__name__]}(w, {', '.join(rest)})"
+        if type(expr) in (Table, TableNext, TablePiece, TableGuard):
+            name = self.FUNCTION_NAMES[type(expr).__name__]
+            rest = [self._print(a) for a in expr.args[1:3]]
+            if type(expr) is Table:
+                rest.append(str(int(expr.args[3])))
+            return f"{name}({self._table_ref(int(expr.args[0]))}, {', '.join(rest)})"
         if type(expr) in (SquareWave, SquareNext):
             name = self.FUNCTION_NAMES["SquareWave" if type(expr) is SquareWave else "SquareNext"]
             return f"{name}({', '.join(self._print(a) for a in expr.args)})"
@@ -323,7 +349,11 @@ class CPrinter(_ArithmeticPrinting, C99CodePrinter):
 
     FUNCTION_NAMES = {**{f: f for f in FUNCTIONS}, "Abs": "fabs", "sign": "bgc_sign",
                       "Min": "bgc_min", "Max": "bgc_max", "Heaviside": "bgc_heaviside",
-                      "SquareWave": "bgc_square", "SquareNext": "bgc_square_next"}
+                      "SquareWave": "bgc_square", "SquareNext": "bgc_square_next",
+                      "Table": "bgc_table", "TableNext": "bgc_table_next",
+                      "TablePiece": "bgc_table_piece", "TableGuard": "bgc_table_guard",
+                      "InputPart": "bgc_input",
+                      "InputNext": "bgc_input_next"}
     LOGIC = {"and": "&&", "or": "||", "not": "!", "true": "1", "false": "0"}
     ATOL = "w->atol"
 
@@ -348,6 +378,9 @@ class CPrinter(_ArithmeticPrinting, C99CodePrinter):
     def _print_square(self, base):
         return f"bgc_sq({self._print(base)})"
 
+    def _table_ref(self, k):
+        return f"&bgc_tables[{k}]"
+
     def _print_pow_call(self, base, exp):
         return f"pow({base}, {exp})"
 
@@ -357,7 +390,9 @@ class CPrinter(_ArithmeticPrinting, C99CodePrinter):
 
 _PY_FAST = {**{f: f"math.{f}" for f in FUNCTIONS}, "Abs": "abs", "sign": "_sign",
             "Min": "min", "Max": "max", "Heaviside": "_heaviside", "SquareWave": "_square",
-            "SquareNext": "_square_next"}
+            "SquareNext": "_square_next", "Table": "_table", "TableNext": "_table_next",
+            "TablePiece": "_table_piece", "TableGuard": "_table_guard", "InputPart": "_input",
+            "InputNext": "_input_next"}
 _PY_IEEE = {**_PY_FAST, **{f: f"_c_{f}" for f in ("sin", "cos", "tan", "asin", "acos", "atan",
                                                      "atan2", "sinh", "cosh", "tanh", "asinh",
                                                      "atanh", "exp", "log", "sqrt")}}
@@ -394,6 +429,9 @@ class PythonPrinter(_ArithmeticPrinting, PythonCodePrinter):
 
     def _print_square(self, base):
         return f"_sq({self._print(base)})"
+
+    def _table_ref(self, k):
+        return f"_TABLES[{k}]"
 
     def _print_pow_call(self, base, exp):
         return f"{'_c_pow' if self._ieee else 'math.pow'}({base}, {exp})"

@@ -122,6 +122,8 @@ class Reduced:
     algebra: str
     warnings: tuple = ()
     events: object = None  # bgc.events.Selected, or None: no events
+    tables: tuple = ()  # bgc.tables.TableData of the model (Table(k, ...) in the steps)
+    inputs: tuple = ()  # graph.InputInfo of the model
 
 
 # ---------------------------------------------------------------- equations by target
@@ -919,7 +921,8 @@ def reduce(es: EquationSystem, project_initial: bool = False, algebra: str = "au
                       tuple(blocks.plans),
                       tuple(der(st.symbol) for st in kept), es.outputs, tuple(infos),
                       tuple(rows), tuple(blocks.infos), eliminated, es.run, algebra,
-                      tuple(es.warnings) + tuple(diags.warnings), selected)
+                      tuple(es.warnings) + tuple(diags.warnings), selected, es.tables,
+                      es.inputs)
     if not project_initial:
         check_initial(reduced)
     else:

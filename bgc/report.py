@@ -9,7 +9,7 @@ import sympy as sp
 
 from . import ir
 from .graph import model_effects
-from .ir import defines
+from .ir import Table, defines
 from .reduce import BlockInfo, explicit_forms, shown_steps
 
 TWO_PORTS = ("TF", "MTF", "GY", "MGY")
@@ -179,7 +179,11 @@ def _event_lines(sel) -> list[str]:
     out += [f"  {r.text}  (state event: located on the step's dense output)" for r in sel.state]
     out += [f"  {r.text}  (time event at t = {_s(at)})" for r, at, _ in sel.time]
     out += [f"  {r.text}  (changes at events only)" for r in sel.discrete]
-    out += [f"  {q.text}  (time events at its edges)" for q in sel.squares]
+    out += [f"  {q.text}  (time events at its "
+            f"{'edges' if q.kind == 'square' else 'breakpoints'})" for q in sel.squares
+            if q.kind != "input"]
+    out += [f"  input {q.text}  (time events at its data's breakpoints)" for q in sel.squares
+            if q.kind == "input" and q.part == 1]
     out += [f"  discrete {d.name} = {_s(d.init)}" for d in sel.discretes]
     for w in sel.whens:
         acts = "; ".join(f"{'reinit ' if a.kind == 'reinit' else ''}{a.name} = {_s(a.expr)}"
@@ -206,6 +210,17 @@ def check_report(compiled, summary: SceneSummary | None = None) -> str:
                          + (f", ports {', '.join(listed)}" if listed else ""))
     lines.append(f"states ({len(r.states)}):")
     lines += [f"  {st.name}  {KINDS[st.kind]}" for st in r.states]
+    if g.inputs:
+        lines.append(f"inputs ({len(g.inputs)}; their data from --input, else the default):")
+        lines += [f"  {u.name} = {_s(u.default)}" + (f"  \"{u.doc}\"" if u.doc else "")
+                  for u in g.inputs]
+    if g.tables:
+        lines.append(f"tables ({len(g.tables)}):")
+        for k, t in enumerate(g.tables):
+            lines.append(f"  {k}: {t.name}, {t.rows} rows, x from {t.x[0]!r} to {t.x[-1]!r}, "
+                         f"interp = {t.interp}, extrapolate = {t.extrapolate}"
+                         + ("; a table of t: its rows are time events" if t.time else
+                            "; a law of its abscissa (no events)"))
     if r.pruned:
         lines.append("not integrated (no output needs them): " + ", ".join(r.pruned))
     lines.append("causality (bond: effort set by -> flow set by):")
@@ -353,14 +368,46 @@ def _tidy_mode(expr):
     return sp.simplify(expr)
 
 
+def _inputs_as_names(graph) -> dict:
+    """An input's discrete values (bgc.events.InputSlot) -> what the equations show: its
+    name (its segment's start and slope are the data's, not the model's)."""
+    out = {}
+    for j, u in enumerate(graph.inputs):
+        out[sp.Symbol(f"input#{j}.0", real=True)] = sp.Integer(0)
+        out[sp.Symbol(f"input#{j}.1", real=True)] = sp.Symbol(u.name)
+        out[sp.Symbol(f"input#{j}.2", real=True)] = sp.Integer(0)
+    return out
+
+
+def _tables_as_written(expr, tables):
+    """Table(k, X, ...) as table(SOURCE, X, options), its derivatives with primes."""
+    found = expr.atoms(Table) if tables else ()
+    if not found:
+        return expr
+    out = {}
+    for node in found:
+        k, X, _, order = node.args
+        t = tables[int(k)]
+        options = [sp.Symbol(f"interp = {t.interp}")] if t.interp != "linear" else []
+        options += [sp.Symbol(f"extrapolate = {t.extrapolate}")] \
+            if t.extrapolate != "hold" else []
+        out[node] = sp.Function("table" + "'" * int(order))(sp.Symbol(t.name), X, *options)
+    return expr.xreplace(out)
+
+
 def equations_text(compiled) -> str:
     r = compiled.reduced
     shown = _relations(compiled)
     if r.events is not None:  # a mode's value by its name in the event log
         shown = {**shown, **{sym: sp.Symbol(name) for name, sym in _modes(r)}}
 
+    inputs = _inputs_as_names(compiled.graph)
+
     def _s(expr) -> str:  # (the relations as written, in place of their frozen values)
-        return _Printer({"order": "lex"}).doprint(expr.xreplace(shown) if shown else expr)
+        expr = expr.xreplace(shown) if shown else expr
+        expr = _tables_as_written(expr.xreplace(inputs) if inputs else expr,
+                                  compiled.graph.tables)
+        return _Printer({"order": "lex"}).doprint(expr)
 
     lines = _header(compiled)
     lines.append("parameters:")

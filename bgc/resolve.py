@@ -18,11 +18,13 @@ import sympy as sp
 from . import ast
 from .algebra import Max, Min
 from .diagnostics import Collector, ModelError, Note, Span, fail
-from .graph import (TIME, check_effect_names, model_effects, Bond, Constraint, Element, Expr, Graph, Parameter, Scene, Signal,
+from .graph import (TIME, InputInfo, check_effect_names, model_effects, Bond, Constraint, Element, Expr, Graph, Parameter, Scene, Signal,
                     check_ports, part_name, var, variable_name, written)
 from .events import (INITIAL, RELATIONS, SOURCES, Action, Discrete, EventTable, When,
                      is_condition)
+from .ir import Table, TableGuard
 from .kinds import KINDS
+from .tables import EXTRAPOLATE, INTERP, MAX_TABLE_ROWS, MAX_TABLES, build, check_rows, read_csv
 from .resources import (MAX_EXTREMUM_ARGUMENTS, MAX_LITERAL_DIGITS, MAX_MATRIX_ENTRIES,
                         MAX_SCENES, MAX_SYMBOLIC_EXPONENT)
 
@@ -56,6 +58,9 @@ class _Scope:
         self.events = EventTable()  # the relations and time sources met, numbered in order
         self.owner: str | None = None  # the element whose law is being built
         self.when_condition = False  # building a when-block's condition (initial() allowed)
+        self.tables: list = []  # bgc.tables.TableData, in the order met
+        self.inputs: list = []  # graph.InputInfo, in declaration order
+        self.directory = "."  # the model file's: table files are read relative to it
 
     def charge(self, n: int, span: Span):
         """Count n more vector or matrix entries against MAX_MATRIX_ENTRIES, before or as
@@ -122,6 +127,12 @@ class _ExprBuilder:
                 todo.append((self._end_noevent, node))
                 todo.append((None, node.args[0]))
                 todo.append((self._begin_noevent, node))
+            elif isinstance(node, ast.Call) and node.func == "table":
+                source, x = self._check_table(node)
+                todo.append((self._table, node))
+                todo.append((None, x))
+                if isinstance(source, ast.Vector):
+                    todo.append((None, source))
             elif isinstance(node, ast.Call) and node.func in SOURCES:
                 self._check_source(node)
                 todo.append((self._source, node))
@@ -360,7 +371,105 @@ class _ExprBuilder:
         else:
             done.append(sp.ImmutableMatrix(base.row(int(i)).T))
 
+    # -- tables (bgc.tables)
+
+    def _check_table(self, node: ast.Call):
+        """table(SOURCE, X, interp = ..., extrapolate = ..., column = "..."): (SOURCE, X)."""
+        if self.scope.params_only:
+            fail(node.span, "a table cannot be used here: only parameters are allowed")
+        plain = [a for a in node.args if not isinstance(a, ast.KwArg)]
+        if len(plain) != 2 or any(isinstance(a, ast.KwArg) for a in node.args[:2]):
+            fail(node.span, "table() takes a file (\"road.csv\") or rows ([[x0, y0], [x1, y1], "
+                            "...]), then the abscissa X, then any of interp = linear | step | "
+                            "cubic, extrapolate = hold | linear | error, column = \"name\"")
+        source, x = plain
+        if isinstance(x, ast.Str):
+            fail(x.span, "the abscissa of a table is an expression, not a string")
+        seen = set()
+        for a in node.args[2:]:
+            if a.name not in ("interp", "extrapolate", "column"):
+                fail(a.span, f"table() has no option '{a.name}' (it has interp, extrapolate, "
+                             "column)")
+            if a.name in seen:
+                fail(a.span, f"'{a.name}' is given twice")
+            seen.add(a.name)
+            if a.name == "column":
+                if not isinstance(a.value, ast.Str):
+                    fail(a.value.span, 'the column is a string: column = "name"')
+                if isinstance(source, ast.Vector):
+                    fail(a.span, "column = picks a column of a file; a table written as rows "
+                                 "has one")
+                continue
+            choices = INTERP if a.name == "interp" else EXTRAPOLATE
+            if not (isinstance(a.value, ast.Name) and a.value.name in choices):
+                shown = a.value.name if isinstance(a.value, ast.Name) else "this"
+                fail(a.value.span, f"{a.name} is one of {', '.join(choices)}, not {shown}")
+        if not isinstance(source, (ast.Str, ast.Vector, ast.Field)) or (
+                isinstance(source, ast.Field) and source.field != "csv"):
+            fail(source.span, "a table's data is a file (\"road.csv\", or road.csv) or rows "
+                              "[[x0, y0], [x1, y1], ...]")
+        return source, x
+
+    def _table(self, node: ast.Call, done):
+        source = node.args[0]
+        x = done.pop()
+        rows = done.pop() if isinstance(source, ast.Vector) else None
+        xarg = node.args[1]
+        self._number_operand(x, xarg)
+        if _is_matrix(x):
+            fail(xarg.span, "the abscissa of a table is a scalar")
+        options = {a.name: a.value for a in node.args[2:]}
+        interp = options["interp"].name if "interp" in options else "linear"
+        extrapolate = options["extrapolate"].name if "extrapolate" in options else "hold"
+        if len(self.scope.tables) >= MAX_TABLES:
+            fail(node.span, f"a model has at most {MAX_TABLES} tables")
+        if rows is None:
+            import os
+            shown = source.text if isinstance(source, ast.Str) else f"{source.owner}.csv"
+            path = os.path.join(self.scope.directory, shown)
+            column = options.get("column")
+            xs, ys, _, _ = read_csv(path, path, column.text if column else None, source.span,
+                                    column.span if column else None)
+            name = shown
+        else:
+            if rows.cols != 2:
+                fail(source.span, "a table written as rows has two columns: [[x0, y0], [x1, y1], "
+                                  "...]")
+            if rows.rows > MAX_TABLE_ROWS:
+                fail(source.span, f"the table has {rows.rows} rows; the limit is {MAX_TABLE_ROWS}")
+            xs, ys = [], []
+            for i in range(rows.rows):
+                for v, store in ((rows[i, 0], xs), (rows[i, 1], ys)):
+                    if not v.is_Number:
+                        fail(source.items[i].span, "a table's rows are numbers")
+                    store.append(float(v))
+            check_rows(xs, ys, [it.span for it in source.items], source.span)
+            name = "rows"
+        k = len(self.scope.tables)
+        time = x == TIME
+        try:
+            data = build(name, xs, ys, interp, extrapolate, time)
+        except OverflowError:
+            fail(source.span, "the table's slopes are too large for a double (rows too close "
+                              "for the change of y)")
+        self.scope.tables.append(data)
+        if time:
+            piece = self.scope.events.time_table(k, f"table {k} ({name}) of t", node.span)
+        else:
+            piece = sp.Integer(-1)
+        needs = {piece} if time else x.free_symbols
+        if extrapolate == "error" and needs:
+            self.scope.events.guard(
+                sp.GreaterThan(TableGuard(sp.Integer(k), x), 0),
+                f"table {k} ({name}) is read outside its rows, x from {xs[0]!r} to "
+                f"{xs[-1]!r} (extrapolate = error)", node.span, needs)
+        done.append(Table(sp.Integer(k), x, piece, sp.Integer(0)))
+
     def _check_call(self, node: ast.Call):
+        for a in node.args:
+            if isinstance(a, (ast.Str, ast.KwArg)):
+                fail(a.span, f"{node.func}() takes no {'string' if isinstance(a, ast.Str) else 'named'} "
+                             "arguments")
         if node.func == "diag":
             if not node.args:
                 fail(node.span, "diag() takes at least one argument")
@@ -637,7 +746,7 @@ def _collect_names(model: ast.Model, diags: Collector):
     params, signals, elements, first = {}, {}, {}, {}
     for d in model.decls:
         if isinstance(d, (ast.ParamDecl, ast.SignalDecl, ast.IntegralDecl, ast.ElementDecl,
-                          ast.DiscreteDecl)):
+                          ast.DiscreteDecl, ast.InputDecl)):
             name = d.name.name
             if name == "t":
                 diags.error(d.name.span, "'t' is time and cannot be declared")
@@ -650,7 +759,8 @@ def _collect_names(model: ast.Model, diags: Collector):
             if isinstance(d, ast.DiscreteDecl):
                 continue  # resolve() collects them (names taken here, so checked once)
             table = (params if isinstance(d, ast.ParamDecl) else
-                     signals if isinstance(d, (ast.SignalDecl, ast.IntegralDecl)) else elements)
+                     signals if isinstance(d, (ast.SignalDecl, ast.IntegralDecl, ast.InputDecl))
+                     else elements)
             table[name] = d
     return params, signals, elements
 
@@ -952,6 +1062,8 @@ def _constraint(d: ast.ElementDecl, scope) -> Constraint:
 
 
 def _signal(d, scope, diags) -> Signal:
+    if isinstance(d, ast.InputDecl):
+        return _input(d, scope, diags)
     if d.dim is not None and d.dim.m is not None:
         fail(d.dim.span, f"a signal has one dimension: write '{d.name.name}[{d.dim.n}]'")
     n = _dim_of(d)
@@ -966,6 +1078,26 @@ def _signal(d, scope, diags) -> Signal:
             scope.params_only = False
         _check_size(init, n, f"the initial value of '{d.name.name}'", broadcast=True)
     return Signal(d.name.name, expr, init, d.span, n, d.unit)
+
+
+def _input(d: ast.InputDecl, scope, diags) -> Signal:
+    """An input: a signal whose value, between two of its breakpoints, is the line through
+    its discrete values (the segment's start, value there and slope: bgc.events.InputSlot)."""
+    default = sp.Integer(0)
+    if d.expr is not None:
+        scope.params_only = True
+        try:
+            e = _ExprBuilder(scope, diags).build(d.expr)
+        finally:
+            scope.params_only = False
+        if _is_matrix(e.value):
+            fail(d.expr.span, f"input '{d.name.name}' is a scalar, but its default is "
+                              f"{_shape(e.value)}")
+        default = e.value
+    j = len(scope.inputs)
+    t0, u0, s0 = scope.events.input(j, d.name.name, default, d.span)
+    scope.inputs.append(InputInfo(d.name.name, default, d.doc, d.span))
+    return Signal(d.name.name, Expr(u0 + s0 * (TIME - t0), (), d.span), None, d.span)
 
 
 def _check_size(e: Expr, n: int | None, what: str, broadcast: bool = False) -> None:
@@ -1035,12 +1167,22 @@ def _scene(d: ast.SceneDecl, scope: _Scope, known_effects, diags: Collector) -> 
                  d.span, effect_spans)
 
 
+def _model_directory(path: str) -> str:
+    """Where a model's table files are read: the model file's directory (the working
+    directory for a model given as text)."""
+    import os
+    if not path or path.startswith("<"):
+        return ""
+    return os.path.dirname(path)
+
+
 def resolve(model: ast.Model) -> Graph:
     """Check names, kinds and bonds; build every expression; collect all errors, then stop."""
     diags = Collector()
     mdecl = _model_decl(model, diags)
     params, signals, elements = _collect_names(model, diags)
     scope = _Scope(params, signals, elements)
+    scope.directory = _model_directory(model.path)
     parameters = _parameters(params, scope, diags)
     discretes = _discretes(model, scope, diags)
     order = {id(d): k for k, d in enumerate(model.decls)}
@@ -1078,4 +1220,5 @@ def resolve(model: ast.Model) -> Graph:
                  tuple(bonds), tuple(sigs), tuple(scenes), diags.warnings,
                  ports=tuple(model.ports), instances=tuple(model.instances),
                  relations=tuple(scope.events.relations), squares=tuple(scope.events.squares),
-                 discretes=tuple(discretes), whens=tuple(whens))
+                 discretes=tuple(discretes), whens=tuple(whens), tables=tuple(scope.tables),
+                 inputs=tuple(scope.inputs))

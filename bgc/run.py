@@ -56,6 +56,9 @@ class RunSettings:
     max_step: float | None = None  # the adaptive solvers' largest step (a scene's hmax)
     event_rows: bool = False  # two rows at each event: its left and right limits
     events: str | None = None  # the event log's file (t,event,change)
+    input_files: tuple[str, ...] = ()  # CSV files of the inputs' data (--input)
+    input_data: tuple = ()  # ((name, (t, ...), (u, ...)), ...): the inputs' data given as
+    #                         numbers (the API's inputs=)
 
     def with_options(self, **options) -> RunSettings:
         """These settings with the options given (None: keep this one's); params a dict."""
@@ -77,6 +80,10 @@ class RunSettings:
         out = {name: getattr(self, name) for name in changed}
         if "params" in out:
             out["params"] = dict(self.params)
+        if "input_files" in out:
+            out["input"] = list(out.pop("input_files"))
+        if "input_data" in out:
+            out["inputs"] = {name: (t, u) for name, t, u in out.pop("input_data")}
         return out
 
     def args(self, defaults: RunSettings) -> list[str]:
@@ -96,7 +103,7 @@ def parameter_overrides(given, names) -> tuple[tuple[str, float], ...]:
 
 def run_args(t_end=None, dt=None, solver=None, rtol=None, atol=None, step=None, params=None,
              project_initial=False, max_steps=None, allow_inconsistent=False, max_step=None,
-             event_rows=False, events=None) -> list[str]:
+             event_rows=False, events=None, input=None, inputs=None) -> list[str]:
     """The generated program's command line for these options (None: the program's own)."""
     args = []
     for flag, value in (("--t-end", t_end), ("--dt", dt), ("--solver", solver),
@@ -113,7 +120,76 @@ def run_args(t_end=None, dt=None, solver=None, rtol=None, atol=None, step=None, 
         args.append("--allow-inconsistent")
     if event_rows:
         args.append("--event-rows")
+    if inputs:
+        raise ValueError("inputs given as numbers are written to files first (bgc.runner)")
+    for path in input or ():
+        args += ["--input", os.fspath(path)]
     return args
+
+
+def input_data(inputs) -> tuple:
+    """The API's inputs= ({name: (t, values)}) as RunSettings.input_data, checked (ValueError,
+    TypeError for people): t increasing, as many values, finite numbers."""
+    if not isinstance(inputs, dict):
+        raise TypeError("inputs must be a dict of input names to (t, values)")
+    out = []
+    for name, data in inputs.items():
+        try:
+            t, u = data
+            t = tuple(float(v) for v in t)
+            u = tuple(float(v) for v in u)
+        except (TypeError, ValueError):
+            raise TypeError(f"the data of input {name!r} is a pair (t, values) of sequences "
+                            "of numbers") from None
+        if not t or len(t) != len(u):
+            raise ValueError(f"input {name!r}: t and the values must be as many, at least one")
+        if not all(math.isfinite(v) for v in t + u):
+            raise ValueError(f"input {name!r}: the data must be finite numbers")
+        if any(not b > a for a, b in zip(t, t[1:])):
+            raise ValueError(f"input {name!r}: t must increase")
+        out.append((str(name), t, u))
+    return tuple(out)
+
+
+def input_file_problem(path: str, names) -> str | None:
+    """What is wrong with an --input file for a model whose inputs are `names` (None: it
+    is fine): a header with a column t and one per input given, rows of finite numbers, t
+    increasing."""
+    import csv
+    try:
+        with open(path, encoding="utf-8", newline="") as f:
+            rows = [r for r in csv.reader(f) if any(c.strip() for c in r)]
+    except (OSError, UnicodeDecodeError, csv.Error) as error:
+        return f"cannot read the input file '{path}': {getattr(error, 'strerror', None) or error}"
+    if not rows:
+        return f"{path}: the file is empty (a header t,NAME,... then rows of numbers)"
+    head = [h.strip() for h in rows[0]]
+    if "t" not in head:
+        return f"{path}: the header has no column 't'"
+    for name in head:
+        if name != "t" and name not in names:
+            return (f"{path}: '{name}' is not an input of the model (its inputs: "
+                    f"{', '.join(names) or 'none'})")
+    if len(set(head)) != len(head):
+        return f"{path}: a column is named twice in the header"
+    k, last = head.index("t"), None
+    for n, row in enumerate(rows[1:], 2):
+        if len(row) != len(head):
+            return f"{path}: row {n} has {len(row)} fields, the header {len(head)}"
+        for cell in row:
+            try:
+                v = float(cell)
+            except ValueError:
+                v = math.nan
+            if not math.isfinite(v):
+                return f"{path}: row {n}: '{cell.strip()}' is not a finite number"
+        t = float(row[k])
+        if last is not None and not t > last:
+            return f"{path}: row {n}: t must increase from row to row"
+        last = t
+    if len(rows) < 2:
+        return f"{path}: no rows of data"
+    return None
 
 
 def check_run_options(options: dict):

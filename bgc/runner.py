@@ -17,10 +17,12 @@ only to prepare a program from a compiled model.
 """
 from __future__ import annotations
 
+import os
 import signal
 import subprocess
 import sys
-from dataclasses import dataclass
+import tempfile
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 from . import backends, outfile
@@ -59,6 +61,7 @@ class Program:
     defaults: RunSettings  # the scene's settings, compiled into it
     params: tuple[str, ...]  # its parameters, in order
     outputs: tuple[str, ...] = ()
+    inputs: tuple[str, ...] = ()  # its inputs (`input NAME`), in order
     path: Path | None = None  # the file started as a process (C executable or Python), or
     #                           the interpreter's program file (bgc.vm)
     module: object = None  # or: generated Python loaded in this process
@@ -79,7 +82,8 @@ def prepare(compiled, backend: str, in_process: bool = False) -> Program:
     once per machine; Python into the cache, or loaded in this process when in_process)."""
     from .emit import emit_python
     p = compiled.program
-    facts = dict(defaults=p.scene, params=tuple(q.name for q in p.params), outputs=p.outputs)
+    facts = dict(defaults=p.scene, params=tuple(q.name for q in p.params), outputs=p.outputs,
+                 inputs=tuple(u.name for u in p.inputs))
     if backend == "c":
         return Program("c", path=c_executable(p), **facts)
     if backend == "vm":
@@ -209,6 +213,17 @@ def run(program, settings: RunSettings | None = None, sink=None, progress=None,
 
 def _run(program: Program, settings, sink, progress, stats, timeout) -> Result:
     settings = program.defaults if settings is None else settings
+    if settings.input_data and program.module is None:  # numbers: to files the program reads
+        with tempfile.TemporaryDirectory(prefix="bgc-inputs-") as where:
+            files = []
+            for k, (name, t, u) in enumerate(settings.input_data):
+                path = os.path.join(where, f"input{k}.csv")
+                with open(path, "w", encoding="utf-8") as f:
+                    f.write(f"t,{name}\n" + "".join(f"{a!r},{b!r}\n" for a, b in zip(t, u)))
+                files.append(path)
+            return _run(program, replace(settings, input_data=(),
+                                         input_files=settings.input_files + tuple(files)),
+                        sink, progress, stats, timeout)
     if program.module is not None:
         t, values = program.module.simulate(**settings.options(program.defaults))
         return Result(0, t=t, values=values)

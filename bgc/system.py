@@ -115,6 +115,8 @@ class EquationSystem:
     momenta: tuple = ()  # (p, f, sign) of each I state in integral causality: its velocity
     #                      is sign * f, f a bond flow (the projection's kinetic metric)
     events: tuple = ((), (), (), ())  # bgc.events: relations, squares, discretes, whens
+    tables: tuple = ()  # bgc.tables.TableData, as Table(k, ...) numbers them
+    inputs: tuple = ()  # graph.InputInfo, in declaration order
 
 
 class _Builder:
@@ -560,7 +562,8 @@ def build_equations(cg: CausalGraph) -> EquationSystem:
                           tuple(b.constraints), tuple(b.stores), _outputs(b, s.outputs, s.left_out), run,
                           tuple(g.warnings),
                           tuple((name, tuple(b.hamiltonian.get(name, ()))) for name in b.fields),
-                          tuple(b.momenta), (g.relations, g.squares, g.discretes, g.whens))
+                          tuple(b.momenta), (g.relations, g.squares, g.discretes, g.whens),
+                          tuple(g.tables), tuple(g.inputs))
 
 
 def with_residual_outputs(es: EquationSystem) -> EquationSystem:

@@ -42,7 +42,7 @@ from . import backends, runner, solvers
 from .resources import read_bounded
 from .run import RunSettings
 
-FORMAT = 4  # of the record; change it when its fields change
+FORMAT = 5  # of the record; change it when its fields change
 
 
 @dataclass(frozen=True)
@@ -73,6 +73,7 @@ class Record:
     interpreter_sha256: str = ""  # ... and SHA-256; the program is then its program file
     rhs_ops: int = 0  # the right side's operations (bgc.ir.count_ops), for runner.short_run
     states: int = 0
+    inputs: tuple[str, ...] = ()  # the program's inputs (`input NAME`), in order
 
 
 def _installation() -> list:
@@ -198,6 +199,7 @@ def record_for(compiled, program: runner.Program, warnings: str) -> Record:
         program=program.path.name, sha256=hashlib.sha256(program.path.read_bytes()).hexdigest(),
         warnings=warnings, params=program.params, settings=program.defaults,
         correctors=any(c.corrector in ("pid", "pd") for c in compiled.reduced.constraints),
+        inputs=tuple(u.name for u in compiled.program.inputs),
         **plot.describe(compiled), interpreter=interp.name if interp else "",
         interpreter_sha256=hashlib.sha256(interp.read_bytes()).hexdigest() if interp else "",
         rhs_ops=rhs_ops(compiled.program), states=len(compiled.program.states))

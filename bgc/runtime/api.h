@@ -29,6 +29,14 @@ void bgc_params_update(bgc_params *p);
 double *bgc_param_ref(bgc_params *p, int j);
 int bgc_param_index(const char *name);
 
+/* An input's data (`input NAME`, docs/cli.md "--input"): n samples (t[k], u[k]), t
+   increasing, interpolated linearly and held beyond the first and the last; each t[k] is a
+   time event.  n == 0: no data, the input keeps its default. */
+typedef struct bgc_input_series {
+    int n;
+    const double *t, *u;
+} bgc_input_series;
+
 /* The workspace of the model functions: the values they share between their parts, the
    storage of the algebraic blocks solved numerically (factors, and each Newton block's last
    solution, its next starting value), and the tolerance of the Newton iterations.  One per
@@ -43,6 +51,8 @@ typedef struct bgc_work {
     double *d;          /* a model with events: the discrete values between two calls of
                            bgc_advance (BGC_NUM_DISCRETE) ... */
     int started;        /* ... once set by the event iteration at the run's start */
+    const bgc_input_series *inputs; /* a model with inputs: one per input (NULL: none has
+                                       data), set from bgc_settings.inputs by each run */
 } bgc_work;
 bgc_work *bgc_work_new(void);
 void bgc_work_free(bgc_work *w);
@@ -104,6 +114,10 @@ typedef struct bgc_settings {
        discrete variable; change: what it became); nonzero stops the run.  NULL: none. */
     int (*on_event)(void *ctx, double t, const char *what, const char *change);
     void *event_ctx;
+    /* The inputs' data: NULL (every input keeps its default), or BGC_NUM_INPUTS series
+       ordered as bgc_input_name numbers them (a series of n = 0: that input keeps its
+       default).  The arrays are read during the run, not copied. */
+    const bgc_input_series *inputs;
 } bgc_settings;
 #define BGC_MAX_STEPS 100000L /* max_steps unless set */
 typedef struct bgc_stats {
@@ -185,6 +199,17 @@ static inline int bgc_model_update(double t, const double *x, const bgc_params *
 #endif
 #define BGC_MAX_EVENT_ITERATIONS 100 /* events at one instant before a run stops (Zeno) */
 
+/* Inputs (`input NAME`): BGC_NUM_INPUTS of them, input j named bgc_input_name(j); the data
+   of a run in bgc_settings.inputs.  A model without inputs gets the neutral ones below. */
+#ifndef BGC_NUM_INPUTS
+#define BGC_NUM_INPUTS 0
+static inline const char *bgc_input_name(int j)
+{
+    (void)j;
+    return "";
+}
+#endif
+
 /* -------------------------------------------- between the model part and the runtime --- */
 static inline double bgc_sq(double a) { return a * a; }
 static inline double bgc_min(double a, double b) { return b < a ? b : a; }
@@ -228,6 +253,115 @@ static inline double bgc_square_next(double t, double period, double duty, doubl
     k = bgc_square_period(t, period, t0);
     down = t0 + (k + duty) * period;
     return t < down ? down : t0 + (k + 1.0) * period;
+}
+
+/* Input j's data at t (bgc/events.py, InputSlot): the segment holding t, as its start
+   (part 0), the value there (1) and its slope (2); before the first sample and after the
+   last the value is held (start and slope 0); without data 0, dflt, 0. */
+static inline double bgc_input(const bgc_work *w, int j, double t, int part, double dflt)
+{
+    const bgc_input_series *u = w->inputs ? &w->inputs[j] : NULL;
+    int lo = 0, hi, k;
+    if (!u || u->n <= 0)
+        return part == 1 ? dflt : 0.0;
+    if (t != t)
+        return NAN;
+    hi = u->n;
+    while (lo < hi) { /* the samples at or before t */
+        const int mid = (lo + hi) / 2;
+        if (u->t[mid] <= t)
+            lo = mid + 1;
+        else
+            hi = mid;
+    }
+    if (lo == 0 || lo == u->n)
+        return part == 1 ? u->u[lo == 0 ? 0 : u->n - 1] : 0.0;
+    k = lo - 1;
+    if (part == 0)
+        return u->t[k];
+    if (part == 1)
+        return u->u[k];
+    return (u->u[k + 1] - u->u[k]) / (u->t[k + 1] - u->t[k]);
+}
+/* Input j's first sample after t (INFINITY: none). */
+static inline double bgc_input_next(const bgc_work *w, int j, double t)
+{
+    const bgc_input_series *u = w->inputs ? &w->inputs[j] : NULL;
+    int lo = 0, hi;
+    if (!u || u->n <= 0)
+        return INFINITY;
+    if (t != t)
+        return NAN;
+    hi = u->n;
+    while (lo < hi) {
+        const int mid = (lo + hi) / 2;
+        if (u->t[mid] <= t)
+            lo = mid + 1;
+        else
+            hi = mid;
+    }
+    return lo < u->n ? u->t[lo] : INFINITY;
+}
+
+/* A lookup table (bgc/tables.py): n rows x[0..n-1] (non-decreasing), n + 1 pieces, piece s
+   the cubic a + dx (b + dx (c + dx d)) in dx = X - origin[s], coef[4 s ..] = a, b, c, d;
+   error: extrapolate = error (held outside [x[0], x[n-1]], where bgc_table_guard, an event
+   indicator, is negative: the event there stops the run). */
+typedef struct bgc_table_data {
+    int n, error;
+    const double *x, *origin, *coef;
+} bgc_table_data;
+/* The piece holding X: the number of rows with x <= X (binary search). */
+static inline int bgc_table_find(const bgc_table_data *T, double X)
+{
+    int lo = 0, hi = T->n;
+    while (lo < hi) {
+        const int mid = (lo + hi) / 2;
+        if (T->x[mid] <= X)
+            lo = mid + 1;
+        else
+            hi = mid;
+    }
+    return lo;
+}
+/* The table's value at X (order 0) or its derivative of order 1 to 3, in piece `piece` (a
+   time table's, set at events), or in X's piece if piece < 0. */
+static inline double bgc_table(const bgc_table_data *T, double X, double piece, int order)
+{
+    int s;
+    const double *k;
+    double dx;
+    if (X != X)
+        return NAN;
+    s = piece >= 0.0 ? (int)piece : bgc_table_find(T, X);
+    k = T->coef + 4 * s;
+    dx = X - T->origin[s];
+    switch (order) {
+    case 0: return k[0] + dx * (k[1] + dx * (k[2] + dx * k[3]));
+    case 1: return k[1] + dx * (2.0 * k[2] + dx * (3.0 * k[3]));
+    case 2: return 2.0 * k[2] + dx * (6.0 * k[3]);
+    case 3: return 6.0 * k[3];
+    default: return 0.0;
+    }
+}
+/* How far X is within the table's rows (negative outside). */
+static inline double bgc_table_guard(const bgc_table_data *T, double X)
+{
+    const double lo = X - T->x[0], hi = T->x[T->n - 1] - X;
+    return hi < lo ? hi : lo;
+}
+/* The piece that holds t, and the table's first row after t (a time table's events). */
+static inline double bgc_table_piece(const bgc_table_data *T, double t)
+{
+    return t != t ? NAN : (double)bgc_table_find(T, t);
+}
+static inline double bgc_table_next(const bgc_table_data *T, double t)
+{
+    int s;
+    if (t != t)
+        return NAN;
+    s = bgc_table_find(T, t);
+    return s < T->n ? T->x[s] : INFINITY;
 }
 
 /* A solver as bgc/solvers.py describes it (the tables are printed below this section).

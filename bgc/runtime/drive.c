@@ -862,6 +862,7 @@ static int bgc_integrate(const bgc_settings *s, const bgc_params *p, bgc_work *w
         return rc;
     w->rtol = s->rtol;
     w->atol = s->atol;
+    w->inputs = s->inputs;
     r.w = w;
     r.s = s;
     r.method = &bgc_methods[s->solver];

@@ -14,6 +14,10 @@
      [P + 2N, P + 2N + M)    output k               (M = BGC_NUM_OUTPUTS; an output that is a
                                                      state is that state's variable instead)
      [P + 2N + M, ... + D)   discrete variable k    (D = BGC_FMI_NUM_DISCRETE_VARS)
+     [P + 2N + M + D, ... + U)  input j             (U = BGC_FMI_NUM_INPUTS: `input NAME`)
+   An input is "continuous", set with fmi2SetReal at any time: its value holds until it is
+   set again (Co-Simulation: between two fmi2DoStep; Model Exchange: the environment's
+   business).  Until it is set, it keeps its default.
    Parameters are "fixed": set before fmi2ExitInitializationMode; a parameter that is not set
    follows its default expression (which may use the parameters before it).  The states are
    computed from the parameters when initialisation ends (and checked against the model's
@@ -114,6 +118,7 @@ enum {
 #define BGC_FMI_VR_DERIVATIVES (BGC_FMI_VR_STATES + (fmi2ValueReference)BGC_NUM_STATES)
 #define BGC_FMI_VR_OUTPUTS (BGC_FMI_VR_DERIVATIVES + (fmi2ValueReference)BGC_NUM_STATES)
 #define BGC_FMI_VR_DISCRETE (BGC_FMI_VR_OUTPUTS + (fmi2ValueReference)BGC_NUM_OUTPUTS)
+#define BGC_FMI_VR_INPUTS (BGC_FMI_VR_DISCRETE + (fmi2ValueReference)BGC_FMI_NUM_DISCRETE_VARS)
 
 typedef struct bgc_fmi {
     fmi2Type type;
@@ -142,6 +147,9 @@ typedef struct bgc_fmi {
                                            (the first fmi2NewDiscreteStates says so) */
     double g[BGC_DIM(BGC_NUM_INDICATORS)];
     double ev[BGC_DIM(BGC_NUM_INDICATORS + BGC_EV_SIZE)]; /* the event iteration's scratch */
+    /* the inputs: each a series of one sample once set (before: none, its default) */
+    bgc_input_series in[BGC_DIM(BGC_FMI_NUM_INPUTS)];
+    double in_t[BGC_DIM(BGC_FMI_NUM_INPUTS)], in_u[BGC_DIM(BGC_FMI_NUM_INPUTS)];
 } bgc_fmi;
 
 #define BGC_FMI_ZERO 1e-300 /* an indicator's size where g is 0 (a product with another
@@ -229,6 +237,13 @@ static void bgc_fmi_start(bgc_fmi *m)
     m->x_changed = 0;
     m->w->rtol = BGC_SCENE_RTOL;
     m->w->atol = BGC_SCENE_ATOL;
+    for (j = 0; j < BGC_FMI_NUM_INPUTS; j++) {
+        m->in_t[j] = m->in_u[j] = 0.0;
+        m->in[j].n = 0;
+        m->in[j].t = &m->in_t[j];
+        m->in[j].u = &m->in_u[j];
+    }
+    m->w->inputs = BGC_FMI_NUM_INPUTS > 0 ? m->in : NULL;
     bgc_fmi_refresh(m);
 }
 
@@ -562,6 +577,9 @@ static int bgc_fmi_value(bgc_fmi *m, fmi2ValueReference vr, double *out)
         }
     } else if ((k = bgc_fmi_in(vr, BGC_FMI_VR_DISCRETE, BGC_FMI_NUM_DISCRETE_VARS)) >= 0) {
         *out = BGC_FMI_D(m)[bgc_fmi_discrete[k]];
+    } else if ((k = bgc_fmi_in(vr, BGC_FMI_VR_INPUTS, BGC_FMI_NUM_INPUTS)) >= 0) {
+        *out = m->in[k].n > 0 || bgc_fmi_input_slot[k] < 0 ? m->in_u[k]
+                                                            : BGC_FMI_D(m)[bgc_fmi_input_slot[k]];
     } else {
         return 1;
     }
@@ -599,6 +617,15 @@ BGC_FMI_EXPORT fmi2Status fmi2SetReal(fmi2Component c, const fmi2ValueReference 
     if (nvr > 0 && (!vr || !value))
         return bgc_fmi_refuse(m, "fmi2SetReal", "no array given");
     for (i = 0; i < nvr; i++) {
+        const int k = bgc_fmi_in(vr[i], BGC_FMI_VR_INPUTS, BGC_FMI_NUM_INPUTS);
+        if (k >= 0) {
+            if (!isfinite(value[i])) {
+                bgc_fmi_log(m, fmi2Error, "fmi2SetReal: input '%s' must be finite",
+                            bgc_input_name(k));
+                return fmi2Error;
+            }
+            continue;
+        }
         if (bgc_fmi_in(vr[i], 0, BGC_NUM_PARAMS) < 0) {
             bgc_fmi_log(m, fmi2Error, "fmi2SetReal: value reference %u is not a parameter (the "
                         "states start from the parameters; Model Exchange sets them with "
@@ -617,11 +644,24 @@ BGC_FMI_EXPORT fmi2Status fmi2SetReal(fmi2Component c, const fmi2ValueReference 
         }
     }
     for (i = 0; i < nvr; i++) {
+        const int k = bgc_fmi_in(vr[i], BGC_FMI_VR_INPUTS, BGC_FMI_NUM_INPUTS);
+        if (k >= 0) { /* held from now on: the segment's value, its start and slope 0 */
+            const int slot = bgc_fmi_input_slot[k];
+            m->in[k].n = 1;
+            m->in_u[k] = value[i];
+            if (slot >= 0) {
+                BGC_FMI_D(m)[slot - 1] = BGC_FMI_D(m)[slot + 1] = 0.0;
+                BGC_FMI_D(m)[slot] = value[i];
+                m->w->d[slot - 1] = m->w->d[slot + 1] = 0.0;
+                m->w->d[slot] = value[i];
+            }
+            m->dx_ok = m->y_ok = 0;
+            continue;
+        }
         *bgc_param_ref(&m->p, (int)vr[i]) = value[i];
         m->given[vr[i]] = 1;
-    }
-    if (nvr > 0)
         m->fresh = 0;
+    }
     return fmi2OK;
 }
 
@@ -1150,6 +1190,7 @@ BGC_FMI_EXPORT fmi2Status fmi2DoStep(fmi2Component c, fmi2Real currentCommunicat
     if (communicationStepSize == 0.0)
         return fmi2OK;
     bgc_settings_default(&s);
+    s.inputs = m->w->inputs;
     s.t0 = currentCommunicationPoint; /* the environment's clock: no drift from summing steps */
     s.t_end = currentCommunicationPoint + communicationStepSize;
     s.dt = communicationStepSize;

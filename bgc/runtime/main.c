@@ -413,11 +413,207 @@ static int bgc_log_event(void *ctx, double t, const char *what, const char *chan
 
 
 
+/* The inputs' data (--input FILE): a CSV file with a header row, a column t (increasing) and
+   a column per input given (named as bgc_input_name gives), a number in every field. */
+static struct {
+    const char *path;
+    bgc_input_series *series; /* one per input */
+    double *values; /* the file's numbers, column by column */
+} bgc_input_file = { NULL, NULL, NULL };
+
+/* The next comma-separated field of *line, its spaces trimmed ('\0'-terminated in place). */
+static char *bgc_next_field(char **line)
+{
+    char *start = *line, *end, *comma = strchr(start, ',');
+    if (comma) {
+        *comma = '\0';
+        *line = comma + 1;
+    } else {
+        *line = NULL;
+    }
+    while (*start == ' ' || *start == '\t')
+        start++;
+    end = start + strlen(start);
+    while (end > start && (end[-1] == ' ' || end[-1] == '\t' || end[-1] == '\r'))
+        *--end = '\0';
+    return start;
+}
+
+/* Reads --input's file into bgc_input_file.series; 0, or BGC_ERR_USAGE with a message. */
+static int bgc_read_inputs(void)
+{
+    const char *path = bgc_input_file.path;
+    FILE *f = fopen(path, "rb");
+    char *text = NULL, *line, *next, *field, *body;
+    size_t size = 0, cap = 0, got;
+    int column[256], ncol = 0, tcol = -1, rows = 0, cols, k, j;
+    long line_no = 1;
+    double *v;
+    if (!f) {
+        fprintf(stderr, "error: cannot read the input file '%s': %s\n", path, strerror(errno));
+        return BGC_ERR_USAGE;
+    }
+    if (!bgc_input_file.series)
+        bgc_input_file.series = (bgc_input_series *)calloc((size_t)BGC_DIM(BGC_NUM_INPUTS),
+                                                           sizeof *bgc_input_file.series);
+    if (!bgc_input_file.series) {
+        fclose(f);
+        fprintf(stderr, "error: out of memory reading '%s'\n", path);
+        return BGC_ERR_USAGE;
+    }
+    do {
+        if (size + 4096 + 1 > cap) {
+            char *more = (char *)realloc(text, cap = 2 * cap + 4096 + 1);
+            if (!more) {
+                free(text);
+                fclose(f);
+                fprintf(stderr, "error: out of memory reading '%s'\n", path);
+                return BGC_ERR_USAGE;
+            }
+            text = more;
+        }
+        got = fread(text + size, 1, 4096, f);
+        size += got;
+    } while (got > 0);
+    fclose(f);
+    text[size] = '\0';
+    next = strchr(text, '\n');
+    if (next)
+        *next++ = '\0';
+    line = text;
+    while (line && ncol < 256) {
+        field = bgc_next_field(&line);
+        column[ncol] = -2;
+        if (strcmp(field, "t") == 0) {
+            if (tcol >= 0)
+                goto twice;
+            tcol = ncol;
+        } else {
+            for (j = 0; j < BGC_NUM_INPUTS; j++)
+                if (strcmp(field, bgc_input_name(j)) == 0)
+                    break;
+            if (j == BGC_NUM_INPUTS) {
+                fprintf(stderr, "error: %s: '%s' is not an input of the model (its inputs:", path,
+                        field);
+                for (j = 0; j < BGC_NUM_INPUTS; j++)
+                    fprintf(stderr, "%s %s", j ? "," : "", bgc_input_name(j));
+                fprintf(stderr, "%s)\n", BGC_NUM_INPUTS ? "" : " none");
+                free(text);
+                return BGC_ERR_USAGE;
+            }
+            for (k = 0; k < ncol; k++)
+                if (column[k] == j)
+                    goto twice;
+            if (bgc_input_file.series[j].n > 0) {
+                fprintf(stderr, "error: %s: input '%s' is given twice\n", path, field);
+                free(text);
+                return BGC_ERR_USAGE;
+            }
+            column[ncol] = j;
+        }
+        ncol++;
+    }
+    if (tcol < 0) {
+        fprintf(stderr, "error: %s: the header has no column 't'\n", path);
+        free(text);
+        return BGC_ERR_USAGE;
+    }
+    if (line) {
+        fprintf(stderr, "error: %s: more than 256 columns\n", path);
+        free(text);
+        return BGC_ERR_USAGE;
+    }
+    cols = ncol;
+    body = next;
+    for (line = next; line; line = next) {
+        next = strchr(line, '\n');
+        if (next)
+            *next++ = '\0';
+        if (strspn(line, " \t\r") != strlen(line))
+            rows++;
+    }
+    v = bgc_input_file.values = (double *)malloc(sizeof(double) * (size_t)BGC_DIM(rows * cols));
+    if (!v) {
+        free(text);
+        fprintf(stderr, "error: out of memory reading '%s'\n", path);
+        return BGC_ERR_USAGE;
+    }
+    /* the values column-major: column k's rows at v + k * rows */
+    rows = 0;
+    for (line = body; line && line < text + size + 1; line = next) {
+        char *rest = line;
+        next = line + strlen(line) + 1;
+        line_no++;
+        if (strspn(line, " \t\r") == strlen(line))
+            continue;
+        for (k = 0; k < cols; k++) {
+            char *end;
+            double x;
+            if (!rest) {
+                fprintf(stderr, "error: %s:%ld: this row has %d fields, the header %d\n", path,
+                        line_no, k, cols);
+                goto fail;
+            }
+            field = bgc_next_field(&rest);
+            x = strtod(field, &end);
+            if (end == field || *end != '\0' || !isfinite(x)) {
+                fprintf(stderr, "error: %s:%ld: '%s' is not a finite number\n", path, line_no,
+                        field);
+                goto fail;
+            }
+            v[(size_t)rows * (size_t)cols + (size_t)k] = x;
+        }
+        if (rest) {
+            fprintf(stderr, "error: %s:%ld: this row has more fields than the header (%d)\n",
+                    path, line_no, cols);
+            goto fail;
+        }
+        if (rows > 0 && !(v[(size_t)rows * cols + tcol] > v[(size_t)(rows - 1) * cols + tcol])) {
+            fprintf(stderr, "error: %s:%ld: t must increase from row to row\n", path, line_no);
+            goto fail;
+        }
+        rows++;
+    }
+    free(text);
+    if (rows == 0) {
+        fprintf(stderr, "error: %s: no rows of data\n", path);
+        return BGC_ERR_USAGE;
+    }
+    { /* transpose, so that each column is an array */
+        double *cm = (double *)malloc(sizeof(double) * (size_t)rows * (size_t)cols);
+        int r;
+        if (!cm) {
+            fprintf(stderr, "error: out of memory reading '%s'\n", path);
+            return BGC_ERR_USAGE;
+        }
+        for (r = 0; r < rows; r++)
+            for (k = 0; k < cols; k++)
+                cm[(size_t)k * rows + r] = v[(size_t)r * cols + k];
+        free(v);
+        bgc_input_file.values = cm;
+    }
+    for (k = 0; k < cols; k++)
+        if (column[k] >= 0) {
+            bgc_input_series *s = &bgc_input_file.series[column[k]];
+            s->n = rows;
+            s->t = bgc_input_file.values + (size_t)tcol * rows;
+            s->u = bgc_input_file.values + (size_t)k * rows;
+        }
+    return 0;
+twice:
+    fprintf(stderr, "error: %s: a column is named twice in the header\n", path);
+    free(text);
+    return BGC_ERR_USAGE;
+fail:
+    free(text);
+    return BGC_ERR_USAGE;
+}
+
 static const char bgc_usage[] =
     " [--t-end T] [--dt DT] [--solver NAME] [--rtol R] [--atol A]\n"
     "       [--step H] [--max-steps N] [-p NAME=VALUE ...] [--stats] [--progress]\n"
     "       [--project-initial | --allow-inconsistent]\n"
-    "       [--max-step H] [--event-rows] [--events FILE]\n"
+    "       [--max-step H] [--event-rows] [--events FILE] [--input FILE]\n"
     "       [--batch FILE|- [--metric KIND:OUTPUT ...] [--trajectories DIR]]\n";
 
 static void bgc_print_usage(FILE *f)
@@ -444,6 +640,7 @@ static void bgc_help(void)
            "  --max-step H       the adaptive solvers' largest step (default: no bound)\n"
            "  --event-rows       two rows at each event: its left and right limits\n"
            "  --events FILE      the event log: t,event,change, a row per change\n"
+           "  --input FILE       the inputs' data: CSV, a column t and one per input\n"
            "  -p NAME=VALUE      set a parameter; derived parameters follow\n"
            "  --project-initial  project the initial state onto the constraints\n"
            "  --allow-inconsistent  start from an initial state that violates the constraints\n"
@@ -545,6 +742,10 @@ static int bgc_apply_option(const char *name, const char *value, bgc_settings *s
         bgc_event_log.path = value;
         return 0;
     }
+    if (strcmp(name, "--input") == 0) {
+        bgc_input_file.path = value;
+        return bgc_read_inputs() ? -1 : 0;
+    }
     if (strcmp(name, "--step") == 0) {
         if (bgc_parse_number(name, value, &s->step))
             return -1;
@@ -566,7 +767,7 @@ static int bgc_parse_args(int argc, char **argv, bgc_settings *s, bgc_params *p,
 {
     static const char *const with_value[] = { "--t-end", "--dt", "--solver", "--rtol",
                                               "--atol", "--step", "--max-steps", "-p",
-                                              "--max-step", "--events" };
+                                              "--max-step", "--events", "--input" };
     int i, k;
     for (i = 1; i < argc; i++) {
         const char *arg = argv[i], *eq = strncmp(arg, "--", 2) == 0 ? strchr(arg, '=') : NULL;
@@ -691,6 +892,7 @@ int main(int argc, char **argv)
                                                                               stderr))
         return BGC_ERR_CONSTRAINT;
 
+    s.inputs = bgc_input_file.series;
     if (bgc_event_log.path) {
         bgc_event_log.file = fopen(bgc_event_log.path, "w");
         if (!bgc_event_log.file) {

@@ -535,6 +535,7 @@ void bgc_settings_default(bgc_settings *s)
     s->event_rows = 0;
     s->on_event = NULL;
     s->event_ctx = NULL;
+    s->inputs = NULL;
 }
 
 int bgc_check_settings(const bgc_settings *s, char *msg, size_t msg_size)

@@ -56,6 +56,10 @@
 #                         the indicators; the time events' next times; the state and d after
 #                         one pass of the event iteration (r: the state relations' values, then
 #                         1.0 at the run's start) (C's bgc_model_events, _next_time, _update)
+#   _INPUT_NAMES          list of str per input (`input NAME`): simulate()'s inputs= and
+#                         --input name them
+#   _TABLES               tuple per lookup table (a model with tables, bgc/tables.py) of (n,
+#                         error, x, origin, coef): what _table reads
 #   _METHODS, SOLVERS, _SOLVER_LIST  the solver tables: name -> dict of the family, its step
 #                         control and tableau; the names in order; their help text
 #
@@ -90,7 +94,8 @@ _MODEL_HELPERS = (
     "_sq", "_sign", "_heaviside", "_c_exp", "_c_log", "_c_sqrt", "_c_sin", "_c_cos", "_c_tan",
     "_c_asin", "_c_acos", "_c_atan", "_c_atan2", "_c_sinh", "_c_cosh", "_c_tanh", "_c_asinh",
     "_c_atanh", "_c_pow", "_block_solve", "_block_resolve", "_newton", "_Work", "_bind_model",
-    "_square", "_square_next",
+    "_square", "_square_next", "_table", "_table_next", "_table_piece", "_table_guard", "_input",
+    "_input_next",
 )
 # (a)'s names, for the tests that check both sides of the contract (tests/test_pyruntime.py).
 _MODEL_NAMES = (
@@ -129,6 +134,8 @@ _SOLVER_LIST = ""
 _INDICATOR_STRICT = []
 _NUM_TIMERS = 0
 _DISCRETE_NAMES = []
+_TABLES = ()
+_INPUT_NAMES = []
 
 
 def _fill_params(p, given):
@@ -268,6 +275,171 @@ def _square_next(t, period, duty, t0):
     return down if t < down else t0 + (k + 1.0) * period
 
 
+def _input(w, j, t, part, default):
+    """bgc_input: input j's data at t: the segment's start (part 0), value (1), slope (2)."""
+    series = w.inputs[j] if w.inputs is not None else None
+    if series is None:
+        return default if part == 1 else 0.0
+    if t != t:
+        return math.nan
+    ts, us = series
+    lo, hi = 0, len(ts)
+    while lo < hi:
+        mid = (lo + hi) // 2
+        if ts[mid] <= t:
+            lo = mid + 1
+        else:
+            hi = mid
+    if lo == 0 or lo == len(ts):
+        return (us[0] if lo == 0 else us[-1]) if part == 1 else 0.0
+    k = lo - 1
+    if part == 0:
+        return ts[k]
+    if part == 1:
+        return us[k]
+    return (us[k + 1] - us[k]) / (ts[k + 1] - ts[k])
+
+
+def _input_next(w, j, t):
+    """bgc_input_next: input j's first sample after t (inf: none)."""
+    series = w.inputs[j] if w.inputs is not None else None
+    if series is None:
+        return math.inf
+    if t != t:
+        return math.nan
+    ts = series[0]
+    lo, hi = 0, len(ts)
+    while lo < hi:
+        mid = (lo + hi) // 2
+        if ts[mid] <= t:
+            lo = mid + 1
+        else:
+            hi = mid
+    return ts[lo] if lo < len(ts) else math.inf
+
+
+def _input_series(inputs=None, path=None):
+    """The inputs' data for a run, one (t, u) of floats (or None) per input, from a dict
+    {name: (t, values)} and/or a CSV file (--input); ValueError for people."""
+    out = [None] * len(_INPUT_NAMES)
+    given = []
+    for one in ([] if path is None else [path] if isinstance(path, str) else path):
+        given += _read_input_file(one)
+    for name, data in (inputs or {}).items():
+        try:
+            ts, us = data
+            ts = [float(v) for v in ts]
+            us = [float(v) for v in us]
+        except (TypeError, ValueError):
+            raise ValueError("the data of input '%s' is a pair (t, values) of numbers"
+                             % name) from None
+        given.append((name, ts, us, "input '%s'" % name))
+    for name, ts, us, where in given:
+        if name not in _INPUT_NAMES:
+            raise ValueError("%s: '%s' is not an input of the model (its inputs: %s)"
+                             % (where, name, ", ".join(_INPUT_NAMES) or "none"))
+        if out[_INPUT_NAMES.index(name)] is not None:
+            raise ValueError("%s: input '%s' is given twice" % (where, name))
+        if len(ts) != len(us) or not ts:
+            raise ValueError("%s: t and the values must be as many, at least one" % where)
+        if not all(math.isfinite(v) for v in ts + us):
+            raise ValueError("%s: the data must be finite numbers" % where)
+        if any(not ts[k] > ts[k - 1] for k in range(1, len(ts))):
+            raise ValueError("%s: t must increase from row to row" % where)
+        out[_INPUT_NAMES.index(name)] = (tuple(ts), tuple(us))
+    return out if any(s is not None for s in out) else None
+
+
+def _read_input_file(path):
+    """(name, t, u, where) per input column of an --input CSV file."""
+    try:
+        with open(path, encoding="utf-8") as f:
+            lines = f.read().splitlines()
+    except (OSError, UnicodeDecodeError) as error:
+        raise ValueError("cannot read the input file '%s': %s"
+                         % (path, getattr(error, "strerror", None) or error)) from None
+    head = [h.strip() for h in lines[0].split(",")] if lines else []
+    if "t" not in head:
+        raise ValueError("%s: the header has no column 't'" % path)
+    if len(set(head)) != len(head):
+        raise ValueError("%s: a column is named twice in the header" % path)
+    for name in head:
+        if name != "t" and name not in _INPUT_NAMES:
+            raise ValueError("%s: '%s' is not an input of the model (its inputs: %s)"
+                             % (path, name, ", ".join(_INPUT_NAMES) or "none"))
+    columns = [[] for _ in head]
+    for number, line in enumerate(lines[1:], 2):
+        if not line.strip(" \t\r"):
+            continue
+        cells = [c.strip(" \t\r") for c in line.split(",")]
+        if len(cells) != len(head):
+            raise ValueError("%s:%d: this row has %d fields, the header %d"
+                             % (path, number, len(cells), len(head)))
+        for k, cell in enumerate(cells):
+            try:
+                v = float(cell)
+            except ValueError:
+                v = math.nan
+            if not math.isfinite(v) or cell.lower().lstrip("+-") in ("inf", "nan", "infinity"):
+                raise ValueError("%s:%d: '%s' is not a finite number" % (path, number, cell))
+            columns[k].append(v)
+        t = columns[head.index("t")]
+        if len(t) > 1 and not t[-1] > t[-2]:
+            raise ValueError("%s:%d: t must increase from row to row" % (path, number))
+    if not columns[0]:
+        raise ValueError("%s: no rows of data" % path)
+    t = columns[head.index("t")]
+    return [(name, t, columns[k], path) for k, name in enumerate(head) if name != "t"]
+
+
+def _table_find(T, X):
+    """bgc_table_find: the piece holding X, the number of rows with x <= X."""
+    xs = T[2]
+    lo, hi = 0, T[0]
+    while lo < hi:
+        mid = (lo + hi) // 2
+        if xs[mid] <= X:
+            lo = mid + 1
+        else:
+            hi = mid
+    return lo
+
+
+def _table(T, X, piece, order):
+    """bgc_table: table T = (n, error, x, origin, coef) at X, or its derivative of order 1 to
+    3, in piece `piece` (or X's piece if piece < 0)."""
+    if X != X:
+        return math.nan
+    s = int(piece) if piece >= 0.0 else _table_find(T, X)
+    c = T[4]
+    a, b, cc, d = c[4 * s], c[4 * s + 1], c[4 * s + 2], c[4 * s + 3]
+    dx = X - T[3][s]
+    if order == 0:
+        return a + dx * (b + dx * (cc + dx * d))
+    if order == 1:
+        return b + dx * (2.0 * cc + dx * (3.0 * d))
+    if order == 2:
+        return 2.0 * cc + dx * (6.0 * d)
+    return 6.0 * d if order == 3 else 0.0
+
+
+def _table_guard(T, X):
+    """bgc_table_guard: how far X is within the table's rows (negative outside)."""
+    lo, hi = X - T[2][0], T[2][T[0] - 1] - X
+    return hi if hi < lo else lo
+
+
+def _table_piece(T, t):
+    return math.nan if t != t else float(_table_find(T, t))
+
+
+def _table_next(T, t):
+    if t != t:
+        return math.nan
+    s = _table_find(T, t)
+    return T[2][s] if s < T[0] else math.inf
+
+
 # The model functions' IEEE variant (run when the math variant raised) calls these: the C
 # program's functions, bit for bit.  math calls the platform's libm, as C does (numpy's exp,
 # log, power, tanh, ... are SIMD kernels of their own that round differently); where math
@@ -329,13 +501,14 @@ class _Work:
     """The model functions' workspace: values shared between their parts, the blocks' storage
     (each Newton block's last solution is its next starting value), the Newton tolerance."""
 
-    __slots__ = ("v", "iv", "rtol", "atol", "d", "started")
+    __slots__ = ("v", "iv", "rtol", "atol", "d", "started", "inputs")
 
     def __init__(self, rtol=None, atol=None):
         self.v = [0.0] * max(_WORK_DOUBLES, 1)
         self.iv = [0] * max(_WORK_INTS, 1)
         self.d = [0.0] * len(_DISCRETE_NAMES)  # the discrete values between runs (bgc_work)
         self.started = False
+        self.inputs = None  # one (t, u) or None per input (bgc_work.inputs)
         self.rtol = SCENE["rtol"] if rtol is None else rtol
         self.atol = SCENE["atol"] if atol is None else atol
 
@@ -727,7 +900,7 @@ def _project_initial(t, x, p):
 
 class _Settings:
     __slots__ = ("t0", "t_end", "dt", "solver", "rtol", "atol", "step", "max_steps", "h0",
-                 "order0", "hmax", "event_rows", "on_event")
+                 "order0", "hmax", "event_rows", "on_event", "inputs")
 
     def __init__(self, **values):
         values.setdefault("h0", 0.0)  # a run that goes on from an earlier one (bgc_settings):
@@ -735,6 +908,7 @@ class _Settings:
         values.setdefault("hmax", float(SCENE.get("hmax") or 0.0))  # events (docs/hybrid.md)
         values.setdefault("event_rows", False)
         values.setdefault("on_event", None)
+        values.setdefault("inputs", None)
         for key in self.__slots__:
             setattr(self, key, values[key])
 
@@ -743,10 +917,11 @@ MAX_STEPS = 100000  # the most steps accepted between two output times, unless s
 
 
 def _settings(t_end=None, dt=None, solver=None, rtol=None, atol=None, step=None,
-              max_steps=None, max_step=None, event_rows=False, on_event=None):
+              max_steps=None, max_step=None, event_rows=False, on_event=None, inputs=None):
     given = {"t_end": t_end, "dt": dt, "solver": solver, "rtol": rtol, "atol": atol, "step": step,
              "max_steps": max_steps, "hmax": max_step}
-    values = dict(SCENE, max_steps=MAX_STEPS, event_rows=bool(event_rows), on_event=on_event)
+    values = dict(SCENE, max_steps=MAX_STEPS, event_rows=bool(event_rows), on_event=on_event,
+                  inputs=inputs)
     values["hmax"] = float(values.get("hmax") or 0.0)
     values.update((k, v) for k, v in given.items() if v is not None)
     for key in ("t0", "t_end", "dt", "rtol", "atol"):
@@ -817,7 +992,7 @@ def _initial_state(s, p, project_initial, allow_inconsistent=False):
 
 def rows(t_end=None, dt=None, solver=None, rtol=None, atol=None, params=None, step=None,
          project_initial=False, stats=None, max_steps=None, allow_inconsistent=False,
-         max_step=None, event_rows=False, events=None):
+         max_step=None, event_rows=False, events=None, inputs=None, input=None):
     """Runs the model, yielding each output row (t, y) as it is computed (y a list ordered as
     OUTPUTS): memory does not grow with the run's length.  A failure raises SimulationError
     after the rows before it (its .times and .rows are then empty: they were yielded).
@@ -826,7 +1001,9 @@ def rows(t_end=None, dt=None, solver=None, rtol=None, atol=None, params=None, st
     correctors pull them back); it excludes project_initial.  max_step: the adaptive solvers'
     largest step; event_rows: two rows at each event (its left and right limits); events: a
     list that receives (t, event, change) for every change at an event, or a file name that
-    receives them as CSV (the program's --events)."""
+    receives them as CSV (the program's --events).  inputs: {name: (t, values)}, the data of
+    the model's inputs (interpolated linearly, held outside, each t a time event; an input
+    without data keeps its default); input: a CSV file of such data, as --input reads it."""
     if project_initial and allow_inconsistent:
         raise ValueError("project_initial and allow_inconsistent exclude each other")
     log = None
@@ -838,7 +1015,7 @@ def rows(t_end=None, dt=None, solver=None, rtol=None, atol=None, params=None, st
         log.write("t,event,change\n")
         on_event = _event_writer(log)
     s = _settings(t_end, dt, solver, rtol, atol, step, max_steps, max_step, event_rows,
-                  on_event)
+                  on_event, _input_series(inputs, input))
     p = _with_constants(_param_values(_overrides(params)))
     x0 = _initial_state(s, p, project_initial, allow_inconsistent)
     st = _new_stats() if stats is None else stats
@@ -856,14 +1033,14 @@ def rows(t_end=None, dt=None, solver=None, rtol=None, atol=None, params=None, st
 
 def simulate(t_end=None, dt=None, solver=None, rtol=None, atol=None, params=None, step=None,
              project_initial=False, out=None, max_steps=None, allow_inconsistent=False,
-             max_step=None, event_rows=False, events=None):
+             max_step=None, event_rows=False, events=None, inputs=None, input=None):
     """Runs the model; returns (t, Y) with Y[k] the outputs at t[k].  None: the scene's value.
     out: a file name or a text file: the CSV is written there row by row as the run goes
     (header first, as the program writes it) and nothing is kept: returns the number of rows.
-    max_step, event_rows, events: as rows()."""
+    max_step, event_rows, events, inputs, input: as rows()."""
     run = rows(t_end, dt, solver, rtol, atol, params, step, project_initial,
                max_steps=max_steps, allow_inconsistent=allow_inconsistent, max_step=max_step,
-               event_rows=event_rows, events=events)
+               event_rows=event_rows, events=events, inputs=inputs, input=input)
     if out is not None:
         return _stream(run, out)
     times, values = [], []
@@ -901,11 +1078,11 @@ USAGE = (
     " [--t-end T] [--dt DT] [--solver NAME] [--rtol R] [--atol A]\n"
     "       [--step H] [--max-steps N] [-p NAME=VALUE ...] [--stats] [--progress]\n"
     "       [--project-initial | --allow-inconsistent]\n"
-    "       [--max-step H] [--event-rows] [--events FILE]\n"
+    "       [--max-step H] [--event-rows] [--events FILE] [--input FILE]\n"
     "       [--batch FILE|- [--metric KIND:OUTPUT ...] [--trajectories DIR]]\n"
 )
 _WITH_VALUE = ("--t-end", "--dt", "--solver", "--rtol", "--atol", "--step", "--max-steps", "-p",
-               "--max-step", "--events")
+               "--max-step", "--events", "--input")
 _NUMBER_CHARS = frozenset("0123456789+-.eE")
 
 
@@ -932,6 +1109,7 @@ def _help():
         "  --max-step H       the adaptive solvers' largest step (default: no bound)",
         "  --event-rows       two rows at each event: its left and right limits",
         "  --events FILE      the event log: t,event,change, a row per change",
+        "  --input FILE       the inputs' data: CSV, a column t and one per input",
         "  -p NAME=VALUE      set a parameter; derived parameters follow",
         "  --project-initial  project the initial state onto the constraints",
         "  --allow-inconsistent  start from an initial state that violates the constraints",
@@ -991,6 +1169,8 @@ def _apply_option(name, value, options, given):
             raise _UsageError("error: --max-step must be positive\n")
     elif name == "--events":
         options["events"] = value
+    elif name == "--input":
+        options.setdefault("input", []).append(value)
     elif name == "--max-steps":
         n = _parse_number(name, value)
         if not (0.0 <= n <= 1e15 and n == math.floor(n)):
@@ -1113,8 +1293,10 @@ def main(argv=None):
         return 0
     options, given, flags = parsed
     log_path = options.pop("events", None)
+    input_path = options.pop("input", None)
     try:
         s = _settings(event_rows="--event-rows" in flags, **options)
+        s.inputs = _input_series(None, input_path) if input_path is not None else None
     except ValueError as error:
         sys.stderr.write("error: %s\n" % error)
         return 2
@@ -2207,6 +2389,7 @@ def _integrate_from(s, p, x0, st, w=None):
     if i >= 0:
         raise _fail(s.t0, "state", STATES[i])
     run = _Run(s, p, _Work(s.rtol, s.atol) if w is None else w, st, y)
+    run.w.inputs = s.inputs
     st["h_next"], st["order_next"] = 0.0, 0
     if _DISCRETE_NAMES:  # the event iteration at the start (bgc_integrate)
         w = run.w

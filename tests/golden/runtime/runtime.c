@@ -48,6 +48,14 @@ void bgc_params_update(bgc_params *p);
 double *bgc_param_ref(bgc_params *p, int j);
 int bgc_param_index(const char *name);
 
+/* An input's data (`input NAME`, docs/cli.md "--input"): n samples (t[k], u[k]), t
+   increasing, interpolated linearly and held beyond the first and the last; each t[k] is a
+   time event.  n == 0: no data, the input keeps its default. */
+typedef struct bgc_input_series {
+    int n;
+    const double *t, *u;
+} bgc_input_series;
+
 /* The workspace of the model functions: the values they share between their parts, the
    storage of the algebraic blocks solved numerically (factors, and each Newton block's last
    solution, its next starting value), and the tolerance of the Newton iterations.  One per
@@ -62,6 +70,8 @@ typedef struct bgc_work {
     double *d;          /* a model with events: the discrete values between two calls of
                            bgc_advance (BGC_NUM_DISCRETE) ... */
     int started;        /* ... once set by the event iteration at the run's start */
+    const bgc_input_series *inputs; /* a model with inputs: one per input (NULL: none has
+                                       data), set from bgc_settings.inputs by each run */
 } bgc_work;
 bgc_work *bgc_work_new(void);
 void bgc_work_free(bgc_work *w);
@@ -123,6 +133,10 @@ typedef struct bgc_settings {
        discrete variable; change: what it became); nonzero stops the run.  NULL: none. */
     int (*on_event)(void *ctx, double t, const char *what, const char *change);
     void *event_ctx;
+    /* The inputs' data: NULL (every input keeps its default), or BGC_NUM_INPUTS series
+       ordered as bgc_input_name numbers them (a series of n = 0: that input keeps its
+       default).  The arrays are read during the run, not copied. */
+    const bgc_input_series *inputs;
 } bgc_settings;
 #define BGC_MAX_STEPS 100000L /* max_steps unless set */
 typedef struct bgc_stats {
@@ -204,6 +218,17 @@ static inline int bgc_model_update(double t, const double *x, const bgc_params *
 #endif
 #define BGC_MAX_EVENT_ITERATIONS 100 /* events at one instant before a run stops (Zeno) */
 
+/* Inputs (`input NAME`): BGC_NUM_INPUTS of them, input j named bgc_input_name(j); the data
+   of a run in bgc_settings.inputs.  A model without inputs gets the neutral ones below. */
+#ifndef BGC_NUM_INPUTS
+#define BGC_NUM_INPUTS 0
+static inline const char *bgc_input_name(int j)
+{
+    (void)j;
+    return "";
+}
+#endif
+
 /* -------------------------------------------- between the model part and the runtime --- */
 static inline double bgc_sq(double a) { return a * a; }
 static inline double bgc_min(double a, double b) { return b < a ? b : a; }
@@ -247,6 +272,115 @@ static inline double bgc_square_next(double t, double period, double duty, doubl
     k = bgc_square_period(t, period, t0);
     down = t0 + (k + duty) * period;
     return t < down ? down : t0 + (k + 1.0) * period;
+}
+
+/* Input j's data at t (bgc/events.py, InputSlot): the segment holding t, as its start
+   (part 0), the value there (1) and its slope (2); before the first sample and after the
+   last the value is held (start and slope 0); without data 0, dflt, 0. */
+static inline double bgc_input(const bgc_work *w, int j, double t, int part, double dflt)
+{
+    const bgc_input_series *u = w->inputs ? &w->inputs[j] : NULL;
+    int lo = 0, hi, k;
+    if (!u || u->n <= 0)
+        return part == 1 ? dflt : 0.0;
+    if (t != t)
+        return NAN;
+    hi = u->n;
+    while (lo < hi) { /* the samples at or before t */
+        const int mid = (lo + hi) / 2;
+        if (u->t[mid] <= t)
+            lo = mid + 1;
+        else
+            hi = mid;
+    }
+    if (lo == 0 || lo == u->n)
+        return part == 1 ? u->u[lo == 0 ? 0 : u->n - 1] : 0.0;
+    k = lo - 1;
+    if (part == 0)
+        return u->t[k];
+    if (part == 1)
+        return u->u[k];
+    return (u->u[k + 1] - u->u[k]) / (u->t[k + 1] - u->t[k]);
+}
+/* Input j's first sample after t (INFINITY: none). */
+static inline double bgc_input_next(const bgc_work *w, int j, double t)
+{
+    const bgc_input_series *u = w->inputs ? &w->inputs[j] : NULL;
+    int lo = 0, hi;
+    if (!u || u->n <= 0)
+        return INFINITY;
+    if (t != t)
+        return NAN;
+    hi = u->n;
+    while (lo < hi) {
+        const int mid = (lo + hi) / 2;
+        if (u->t[mid] <= t)
+            lo = mid + 1;
+        else
+            hi = mid;
+    }
+    return lo < u->n ? u->t[lo] : INFINITY;
+}
+
+/* A lookup table (bgc/tables.py): n rows x[0..n-1] (non-decreasing), n + 1 pieces, piece s
+   the cubic a + dx (b + dx (c + dx d)) in dx = X - origin[s], coef[4 s ..] = a, b, c, d;
+   error: extrapolate = error (held outside [x[0], x[n-1]], where bgc_table_guard, an event
+   indicator, is negative: the event there stops the run). */
+typedef struct bgc_table_data {
+    int n, error;
+    const double *x, *origin, *coef;
+} bgc_table_data;
+/* The piece holding X: the number of rows with x <= X (binary search). */
+static inline int bgc_table_find(const bgc_table_data *T, double X)
+{
+    int lo = 0, hi = T->n;
+    while (lo < hi) {
+        const int mid = (lo + hi) / 2;
+        if (T->x[mid] <= X)
+            lo = mid + 1;
+        else
+            hi = mid;
+    }
+    return lo;
+}
+/* The table's value at X (order 0) or its derivative of order 1 to 3, in piece `piece` (a
+   time table's, set at events), or in X's piece if piece < 0. */
+static inline double bgc_table(const bgc_table_data *T, double X, double piece, int order)
+{
+    int s;
+    const double *k;
+    double dx;
+    if (X != X)
+        return NAN;
+    s = piece >= 0.0 ? (int)piece : bgc_table_find(T, X);
+    k = T->coef + 4 * s;
+    dx = X - T->origin[s];
+    switch (order) {
+    case 0: return k[0] + dx * (k[1] + dx * (k[2] + dx * k[3]));
+    case 1: return k[1] + dx * (2.0 * k[2] + dx * (3.0 * k[3]));
+    case 2: return 2.0 * k[2] + dx * (6.0 * k[3]);
+    case 3: return 6.0 * k[3];
+    default: return 0.0;
+    }
+}
+/* How far X is within the table's rows (negative outside). */
+static inline double bgc_table_guard(const bgc_table_data *T, double X)
+{
+    const double lo = X - T->x[0], hi = T->x[T->n - 1] - X;
+    return hi < lo ? hi : lo;
+}
+/* The piece that holds t, and the table's first row after t (a time table's events). */
+static inline double bgc_table_piece(const bgc_table_data *T, double t)
+{
+    return t != t ? NAN : (double)bgc_table_find(T, t);
+}
+static inline double bgc_table_next(const bgc_table_data *T, double t)
+{
+    int s;
+    if (t != t)
+        return NAN;
+    s = bgc_table_find(T, t);
+    return s < T->n ? T->x[s] : INFINITY;
 }
 
 /* A solver as bgc/solvers.py describes it (the tables are printed below this section).
@@ -976,6 +1110,7 @@ void bgc_settings_default(bgc_settings *s)
     s->event_rows = 0;
     s->on_event = NULL;
     s->event_ctx = NULL;
+    s->inputs = NULL;
 }
 
 int bgc_check_settings(const bgc_settings *s, char *msg, size_t msg_size)
@@ -1873,6 +2008,7 @@ static int bgc_integrate(const bgc_settings *s, const bgc_params *p, bgc_work *w
         return rc;
     w->rtol = s->rtol;
     w->atol = s->atol;
+    w->inputs = s->inputs;
     r.w = w;
     r.s = s;
     r.method = &bgc_methods[s->solver];
@@ -3933,11 +4069,207 @@ static int bgc_log_event(void *ctx, double t, const char *what, const char *chan
 
 
 
+/* The inputs' data (--input FILE): a CSV file with a header row, a column t (increasing) and
+   a column per input given (named as bgc_input_name gives), a number in every field. */
+static struct {
+    const char *path;
+    bgc_input_series *series; /* one per input */
+    double *values; /* the file's numbers, column by column */
+} bgc_input_file = { NULL, NULL, NULL };
+
+/* The next comma-separated field of *line, its spaces trimmed ('\0'-terminated in place). */
+static char *bgc_next_field(char **line)
+{
+    char *start = *line, *end, *comma = strchr(start, ',');
+    if (comma) {
+        *comma = '\0';
+        *line = comma + 1;
+    } else {
+        *line = NULL;
+    }
+    while (*start == ' ' || *start == '\t')
+        start++;
+    end = start + strlen(start);
+    while (end > start && (end[-1] == ' ' || end[-1] == '\t' || end[-1] == '\r'))
+        *--end = '\0';
+    return start;
+}
+
+/* Reads --input's file into bgc_input_file.series; 0, or BGC_ERR_USAGE with a message. */
+static int bgc_read_inputs(void)
+{
+    const char *path = bgc_input_file.path;
+    FILE *f = fopen(path, "rb");
+    char *text = NULL, *line, *next, *field, *body;
+    size_t size = 0, cap = 0, got;
+    int column[256], ncol = 0, tcol = -1, rows = 0, cols, k, j;
+    long line_no = 1;
+    double *v;
+    if (!f) {
+        fprintf(stderr, "error: cannot read the input file '%s': %s\n", path, strerror(errno));
+        return BGC_ERR_USAGE;
+    }
+    if (!bgc_input_file.series)
+        bgc_input_file.series = (bgc_input_series *)calloc((size_t)BGC_DIM(BGC_NUM_INPUTS),
+                                                           sizeof *bgc_input_file.series);
+    if (!bgc_input_file.series) {
+        fclose(f);
+        fprintf(stderr, "error: out of memory reading '%s'\n", path);
+        return BGC_ERR_USAGE;
+    }
+    do {
+        if (size + 4096 + 1 > cap) {
+            char *more = (char *)realloc(text, cap = 2 * cap + 4096 + 1);
+            if (!more) {
+                free(text);
+                fclose(f);
+                fprintf(stderr, "error: out of memory reading '%s'\n", path);
+                return BGC_ERR_USAGE;
+            }
+            text = more;
+        }
+        got = fread(text + size, 1, 4096, f);
+        size += got;
+    } while (got > 0);
+    fclose(f);
+    text[size] = '\0';
+    next = strchr(text, '\n');
+    if (next)
+        *next++ = '\0';
+    line = text;
+    while (line && ncol < 256) {
+        field = bgc_next_field(&line);
+        column[ncol] = -2;
+        if (strcmp(field, "t") == 0) {
+            if (tcol >= 0)
+                goto twice;
+            tcol = ncol;
+        } else {
+            for (j = 0; j < BGC_NUM_INPUTS; j++)
+                if (strcmp(field, bgc_input_name(j)) == 0)
+                    break;
+            if (j == BGC_NUM_INPUTS) {
+                fprintf(stderr, "error: %s: '%s' is not an input of the model (its inputs:", path,
+                        field);
+                for (j = 0; j < BGC_NUM_INPUTS; j++)
+                    fprintf(stderr, "%s %s", j ? "," : "", bgc_input_name(j));
+                fprintf(stderr, "%s)\n", BGC_NUM_INPUTS ? "" : " none");
+                free(text);
+                return BGC_ERR_USAGE;
+            }
+            for (k = 0; k < ncol; k++)
+                if (column[k] == j)
+                    goto twice;
+            if (bgc_input_file.series[j].n > 0) {
+                fprintf(stderr, "error: %s: input '%s' is given twice\n", path, field);
+                free(text);
+                return BGC_ERR_USAGE;
+            }
+            column[ncol] = j;
+        }
+        ncol++;
+    }
+    if (tcol < 0) {
+        fprintf(stderr, "error: %s: the header has no column 't'\n", path);
+        free(text);
+        return BGC_ERR_USAGE;
+    }
+    if (line) {
+        fprintf(stderr, "error: %s: more than 256 columns\n", path);
+        free(text);
+        return BGC_ERR_USAGE;
+    }
+    cols = ncol;
+    body = next;
+    for (line = next; line; line = next) {
+        next = strchr(line, '\n');
+        if (next)
+            *next++ = '\0';
+        if (strspn(line, " \t\r") != strlen(line))
+            rows++;
+    }
+    v = bgc_input_file.values = (double *)malloc(sizeof(double) * (size_t)BGC_DIM(rows * cols));
+    if (!v) {
+        free(text);
+        fprintf(stderr, "error: out of memory reading '%s'\n", path);
+        return BGC_ERR_USAGE;
+    }
+    /* the values column-major: column k's rows at v + k * rows */
+    rows = 0;
+    for (line = body; line && line < text + size + 1; line = next) {
+        char *rest = line;
+        next = line + strlen(line) + 1;
+        line_no++;
+        if (strspn(line, " \t\r") == strlen(line))
+            continue;
+        for (k = 0; k < cols; k++) {
+            char *end;
+            double x;
+            if (!rest) {
+                fprintf(stderr, "error: %s:%ld: this row has %d fields, the header %d\n", path,
+                        line_no, k, cols);
+                goto fail;
+            }
+            field = bgc_next_field(&rest);
+            x = strtod(field, &end);
+            if (end == field || *end != '\0' || !isfinite(x)) {
+                fprintf(stderr, "error: %s:%ld: '%s' is not a finite number\n", path, line_no,
+                        field);
+                goto fail;
+            }
+            v[(size_t)rows * (size_t)cols + (size_t)k] = x;
+        }
+        if (rest) {
+            fprintf(stderr, "error: %s:%ld: this row has more fields than the header (%d)\n",
+                    path, line_no, cols);
+            goto fail;
+        }
+        if (rows > 0 && !(v[(size_t)rows * cols + tcol] > v[(size_t)(rows - 1) * cols + tcol])) {
+            fprintf(stderr, "error: %s:%ld: t must increase from row to row\n", path, line_no);
+            goto fail;
+        }
+        rows++;
+    }
+    free(text);
+    if (rows == 0) {
+        fprintf(stderr, "error: %s: no rows of data\n", path);
+        return BGC_ERR_USAGE;
+    }
+    { /* transpose, so that each column is an array */
+        double *cm = (double *)malloc(sizeof(double) * (size_t)rows * (size_t)cols);
+        int r;
+        if (!cm) {
+            fprintf(stderr, "error: out of memory reading '%s'\n", path);
+            return BGC_ERR_USAGE;
+        }
+        for (r = 0; r < rows; r++)
+            for (k = 0; k < cols; k++)
+                cm[(size_t)k * rows + r] = v[(size_t)r * cols + k];
+        free(v);
+        bgc_input_file.values = cm;
+    }
+    for (k = 0; k < cols; k++)
+        if (column[k] >= 0) {
+            bgc_input_series *s = &bgc_input_file.series[column[k]];
+            s->n = rows;
+            s->t = bgc_input_file.values + (size_t)tcol * rows;
+            s->u = bgc_input_file.values + (size_t)k * rows;
+        }
+    return 0;
+twice:
+    fprintf(stderr, "error: %s: a column is named twice in the header\n", path);
+    free(text);
+    return BGC_ERR_USAGE;
+fail:
+    free(text);
+    return BGC_ERR_USAGE;
+}
+
 static const char bgc_usage[] =
     " [--t-end T] [--dt DT] [--solver NAME] [--rtol R] [--atol A]\n"
     "       [--step H] [--max-steps N] [-p NAME=VALUE ...] [--stats] [--progress]\n"
     "       [--project-initial | --allow-inconsistent]\n"
-    "       [--max-step H] [--event-rows] [--events FILE]\n"
+    "       [--max-step H] [--event-rows] [--events FILE] [--input FILE]\n"
     "       [--batch FILE|- [--metric KIND:OUTPUT ...] [--trajectories DIR]]\n";
 
 static void bgc_print_usage(FILE *f)
@@ -3964,6 +4296,7 @@ static void bgc_help(void)
            "  --max-step H       the adaptive solvers' largest step (default: no bound)\n"
            "  --event-rows       two rows at each event: its left and right limits\n"
            "  --events FILE      the event log: t,event,change, a row per change\n"
+           "  --input FILE       the inputs' data: CSV, a column t and one per input\n"
            "  -p NAME=VALUE      set a parameter; derived parameters follow\n"
            "  --project-initial  project the initial state onto the constraints\n"
            "  --allow-inconsistent  start from an initial state that violates the constraints\n"
@@ -4065,6 +4398,10 @@ static int bgc_apply_option(const char *name, const char *value, bgc_settings *s
         bgc_event_log.path = value;
         return 0;
     }
+    if (strcmp(name, "--input") == 0) {
+        bgc_input_file.path = value;
+        return bgc_read_inputs() ? -1 : 0;
+    }
     if (strcmp(name, "--step") == 0) {
         if (bgc_parse_number(name, value, &s->step))
             return -1;
@@ -4086,7 +4423,7 @@ static int bgc_parse_args(int argc, char **argv, bgc_settings *s, bgc_params *p,
 {
     static const char *const with_value[] = { "--t-end", "--dt", "--solver", "--rtol",
                                               "--atol", "--step", "--max-steps", "-p",
-                                              "--max-step", "--events" };
+                                              "--max-step", "--events", "--input" };
     int i, k;
     for (i = 1; i < argc; i++) {
         const char *arg = argv[i], *eq = strncmp(arg, "--", 2) == 0 ? strchr(arg, '=') : NULL;
@@ -4211,6 +4548,7 @@ int main(int argc, char **argv)
                                                                               stderr))
         return BGC_ERR_CONSTRAINT;
 
+    s.inputs = bgc_input_file.series;
     if (bgc_event_log.path) {
         bgc_event_log.file = fopen(bgc_event_log.path, "w");
         if (!bgc_event_log.file) {
