@@ -40,7 +40,7 @@ from bgc.ir import Assign, Newton, Program, Resolve, Solve, Store
 from bgc.printers import CPrinter
 from bgc.resources import resource_dir
 
-FORMAT = 1  # of the program file; vm.c refuses any other
+FORMAT = 2  # of the program file; vm.c refuses any other
 MAGIC = b"BGCVM\0\0\0"
 
 # The instruction set: name and the kinds of its three operands (r: a register; i: an index,
@@ -497,10 +497,11 @@ def _strings(texts) -> bytes:
 
 def supports(program: Program) -> bool:
     """Whether the interpreter runs the program (else program_bytes raises VMError): its
-    parameters and constants fit the runtime built once, and its functions are a model part's
-    (MODEL_FUNCTIONS and the constraint rows', not an FMU's outputs_jvp)."""
-    return emit.linkable(program) and all(k in MODEL_FUNCTIONS
-                                          for k in emit._model_functions(program))
+    parameters and constants fit the runtime built once, it has no tables nor inputs, and its
+    functions are a model part's (MODEL_FUNCTIONS and the constraint rows', not an FMU's
+    outputs_jvp)."""
+    return emit.linkable(program) and not program.tables and not program.inputs and all(
+        k in MODEL_FUNCTIONS for k in emit._model_functions(program))
 
 
 def program_bytes(program: Program) -> bytes:
@@ -508,6 +509,9 @@ def program_bytes(program: Program) -> bytes:
     if not emit.linkable(program):
         raise VMError("the model has more parameters and constants than the interpreter "
                       f"holds ({emit.LINK_PARAMS}); use --backend c")
+    if program.tables or program.inputs:
+        raise VMError("the interpreter does not run models with tables or inputs yet; use "
+                      "--backend c")
     emit._validate(program)
     unit = _Unit(program)
     ws = emit._workspace(program, ir.CHUNK_OPS, layouts=False)
@@ -570,7 +574,7 @@ def program_bytes(program: Program) -> bytes:
         "JAC_COLORS": len(jac.colors), "SCENE_SOLVER": emit.solvers.index(sc.solver),
         "NUM_INDICATORS": ev.indicators if ev else 0, "NUM_TIMERS": ev.timers if ev else 0,
         "NUM_DISCRETE": ev.discrete if ev else 0,
-        "DISCRETE_OFFSET": unit.d_base if ev else 0}
+        "DISCRETE_OFFSET": unit.d_base if ev else 0, "NUM_INPUTS": len(program.inputs)}
     doubles = {"SCENE_T0": sc.t0, "SCENE_T_END": sc.t_end, "SCENE_DT": sc.dt,
                "SCENE_RTOL": sc.rtol, "SCENE_ATOL": sc.atol,
                "SCENE_STEP": 0.0 if sc.step is None else sc.step,
@@ -588,7 +592,7 @@ def program_bytes(program: Program) -> bytes:
     for texts in (program.states, [p.name for p in program.params], program.outputs,
                   [c.junction for c in program.constraints],
                   [c.level for c in program.constraints], emit._block_names(program),
-                  list(ev.names) if ev else []):
+                  list(ev.names) if ev else [], [u.name for u in program.inputs]):
         out.append(_strings(list(texts)))
     for name in INT_TABLES:
         out.append(_ints(tables[name]))

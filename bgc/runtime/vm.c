@@ -27,6 +27,12 @@ static int bgc_vm_entry[BGC_VM_ENTRIES];
 static int *bgc_vm_defaults; /* per parameter: the segment of its default */
 static const bgc_vm_seg *bgc_vm_newton_seg; /* the Newton block bgc_vm_eval evaluates */
 static const char *const *bgc_vm_idents; /* the model's name and identifier */
+static const char *const *bgc_vm_inputs; /* the inputs' names (`input NAME`) */
+
+const char *bgc_link_input_name(int j)
+{
+    return bgc_vm_inputs[j];
+}
 
 const char *bgc_model_name;
 const char *const *bgc_state_names;
@@ -451,6 +457,7 @@ static int bgc_vm_read(const unsigned char *data, size_t size)
     bgc_constraint_levels = bgc_vm_strings(r, BGC_NUM_CONSTRAINTS);
     bgc_block_names = bgc_vm_strings(r, BGC_NUM_BLOCKS);
     bgc_link_discrete_names = bgc_vm_strings(r, BGC_NUM_DISCRETE);
+    bgc_vm_inputs = bgc_vm_strings(r, BGC_NUM_INPUTS);
     for (i = 0; i < BGC_COUNT(bgc_vm_link_tables); i++) {
         const int *t = bgc_vm_ints(r, NULL);
         *bgc_vm_link_tables[i] = t;
