@@ -18,7 +18,7 @@ from .resources import (MAX_DIMENSION, MAX_NESTING, MAX_OPTION_CHARS, MAX_SOURCE
 KEYWORDS = frozenset("""model parameter signal integral init constraint holonomic nonholonomic
     corrector pid pd none phi scene effects outputs time every solver set
     library component port constant for in if elif else and or not import as unit
-    then when reinit discrete unilateral restitution input""".split())
+    then when reinit discrete unilateral restitution input switch""".split())
 
 # Friendly names for terminals in "expected ..." messages.
 _TERMINAL_NAMES = {
