@@ -18,8 +18,9 @@ are written the way a modeller writes them, one element per line.
 - rc_ladder_components(n): the RC ladder written with a `section` component and a `for`
   loop (n instances); rc_ladder_flat_twin(n) is its flat twin, the same model written
   out by hand, for the cost of instantiating.
-- thermal_grid(n): an n x n thermal RC grid of cells written with `for` loops: n^2 states, stiff, with a sparse Jacobian
-  (benchmarks/stiff_scale.py); thermal_grid_rhs(n, T) its right side written from the formula.
+- thermal_grid(n): an n x n thermal RC grid of cells written with `for` loops: n^2 states,
+  stiff, with a sparse Jacobian (benchmarks/stiff_scale.py); thermal_grid_rhs(n, T) its right
+  side written from the formula.
 """
 from __future__ import annotations
 
@@ -256,9 +257,9 @@ def thermal_grid(n: int, t_end: float = 50.0) -> str:
     j, 1-based) is a 0-junction with a heat capacity C(c) (state cap[k].q, the cell's heat;
     cap[k].e its temperature), neighbours joined by a 1-junction with a thermal resistance
     R(r) (plain elements in `for` loops: a `link` component per joint would make the 50x50
-    grid exceed the 50 000 declarations that components and loops may generate), the cells of the last column lose heat to an ambient at
-    temperature 0 through R(rb), a heater feeds q_in into cell 1, and the cells start at the
-    temperatures 1 + sin(k) (every mode excited).  n^2 states; the fastest mode decays at
+    grid exceed the declarations that components and loops may generate), the cells of the
+    last column lose heat to an ambient at temperature 0 through R(rb), a heater feeds q_in
+    into cell 1, and the cells start at the temperatures 1 + sin(k) (every mode excited).  n^2 states; the fastest mode decays at
     about 8/(r c), the slowest at about pi^2/(4 n^2 r c): stiff for n >= 10.
 
     dT_k/dt = (q_in [k = 1] + sum over neighbours m of (T_m - T_k)/r - T_k/rb [j = n]) / c."""

@@ -159,7 +159,8 @@ def cvode_cmd(exe: Path, n: int, kind: str, rtol: float) -> list:
     return [str(exe), str(n), kind, repr(rtol), repr(rtol * ATOL_RATIO), repr(T_END)]
 
 
-def measure(method: str, cmd: list, rtol: float, ref: np.ndarray, repeats: int) -> Row:
+def first_run(method: str, cmd: list, rtol: float, ref: np.ndarray) -> Row:
+    """The row of one run: its counters, its error and its first time."""
     row = Row(method, tol_text(rtol), rtol)
     try:
         T, st = run_program(cmd)
@@ -169,11 +170,23 @@ def measure(method: str, cmd: list, rtol: float, ref: np.ndarray, repeats: int) 
     row.steps, row.rejected = int(st.get("steps", 0)), int(st.get("rejected", 0))
     row.rhs, row.jac, row.lu = int(st.get("rhs", 0)), int(st.get("jac", 0)), int(st.get("lu", 0))
     row.error = scaled_error(T, ref)
-    progs = [st["cpu"]]
-    for _ in range(repeats - 1):
-        progs.append(run_program(cmd)[1]["cpu"])
-    row.prog = statistics.median(progs)
+    row.prog = st["cpu"]
     return row
+
+
+def measure(runs: list, repeats: int) -> list[Row]:
+    """Every (method, command, rtol) run once for its row, then repeats - 1 more rounds each
+    running every one in turn (so that a change of load hits all alike); prog: the median."""
+    rows = [first_run(*run) for run in runs]
+    times = [[r.prog] for r in rows]
+    for _ in range(repeats - 1):
+        for (_, cmd, _, _), row, seen in zip(runs, rows, times):
+            if row.error is not None:
+                seen.append(run_program(cmd)[1]["cpu"])
+    for row, seen in zip(rows, times):
+        if row.error is not None:
+            row.prog = statistics.median(seen)
+    return rows
 
 
 # ---------------------------------------------------------------- output
@@ -281,7 +294,8 @@ def header(repeats: int) -> list[str]:
             f"python:   {sys.version.split()[0]}  numpy {np.__version__}  bgc {bgc.__version__}",
             f"machine:  {machine.processor()}, {os.cpu_count()} cores, {platform.system()} "
             f"{platform.release()}, load average {machine.load_average()}",
-            f"timing:   the programs' own clock() around the integration, median of {repeats}",
+            f"timing:   the programs' own clock() around the integration, median of {repeats} "
+            "rounds (each round runs every program in turn)",
             f"tolerance: atol = rtol * {ATOL_RATIO:g}; error at t = {T_END:g} against the closed "
             "form"]
 
@@ -329,8 +343,8 @@ def main(argv=None) -> int:
                 kinds = ["band", "KLU"] + (["dense"] if n <= DENSE_MAX else [])
                 programs += [(f"CVODE-C BDF {k}", lambda r, k=k: cvode_cmd(cvode, n, k.lower(), r))
                              for k in kinds]
-            rows = [measure(name, cmd(rtol), rtol, ref, args.repeats)
-                    for name, cmd in programs for rtol in tols[name.split()[0]]]
+            rows = measure([(name, cmd(rtol), rtol, ref) for name, cmd in programs
+                            for rtol in tols[name.split()[0]]], args.repeats)
             results[n] = rows
             print(table(rows))
             print("\n".join(equal_error(rows)))
