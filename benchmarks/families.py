@@ -20,9 +20,11 @@ are written the way a modeller writes them, one element per line.
   out by hand, for the cost of instantiating.
 - thermal_grid(n): an n x n thermal RC grid of cells written with `for` loops: n^2 states,
   stiff, with a sparse Jacobian (benchmarks/stiff_scale.py); thermal_grid_rhs(n, T) its right
-  side written from the formula.
+  side written from the formula; thermal_grid_cells(m) the same by its number of states.
 """
 from __future__ import annotations
+
+import math
 
 
 def pendulum_chain(n: int, theta0: float = 0.5, dtheta: float = 0.15) -> str:
@@ -312,6 +314,15 @@ def thermal_grid_rhs(n: int, T, c=1.0, r=1.0, rb=2.0, q_in=1.0):
     return (d / c).reshape(numpy.shape(T))
 
 
+def thermal_grid_cells(m: int) -> str:
+    """thermal_grid(n) by its number of states m = n^2 (a perfect square), for the growth fits
+    of benchmarks/compile_scale.py."""
+    n = math.isqrt(m)
+    if n * n != m:
+        raise ValueError(f"thermal_grid_cells: {m} is not a square")
+    return thermal_grid(n)
+
+
 FAMILIES = {
     "pendulum_chain": pendulum_chain,
     "pendulum_chain_vector": pendulum_chain_vector,
@@ -322,4 +333,5 @@ FAMILIES = {
     "rc_ladder_components": rc_ladder_components,
     "rc_ladder_flat_twin": rc_ladder_flat_twin,
     "thermal_grid": thermal_grid,
+    "thermal_grid_cells": thermal_grid_cells,
 }

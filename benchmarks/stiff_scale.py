@@ -269,13 +269,16 @@ def plot(results: dict, path: Path) -> Path | None:
     except ImportError:
         return None
     sizes = sorted(results)
+    methods = list(dict.fromkeys(r.method for n in sizes for r in results[n]))
+    colors = {m: f"C{k}" for k, m in enumerate(methods)}
     fig, axes = plt.subplots(1, len(sizes), figsize=(5.2 * len(sizes), 4.4), squeeze=False)
     for ax, n in zip(axes[0], sizes):
         rows = results[n]
         for m in dict.fromkeys(r.method for r in rows if r.error):
             pts = sorted((r.prog * 1e3, r.error) for r in rows if r.method == m and r.error)
             style = "-o" if m.startswith("bgc") else "--s"
-            ax.loglog([p[0] for p in pts], [p[1] for p in pts], style, ms=3, label=m)
+            ax.loglog([p[0] for p in pts], [p[1] for p in pts], style, ms=3, label=m,
+                      color=colors[m])
         ax.set_title(f"{n} x {n} thermal grid ({n * n} states)")
         ax.set_xlabel("integration time, ms (the program's own clock)")
         ax.set_ylabel("error at t_end (max over the cells)")
