@@ -2,7 +2,9 @@
 /* The stiff families: Rosenbrock methods in Hairer's transformed form (RODAS's design, any
    tableau of the family) and Radau IIA with 3, 5 or 7 stages, of fixed or variable order
    (RADAU5's and RADAU's design), both with the Jacobian
-   that bgc_jacobian derives symbolically and dense LU factorisations of their own (below). */
+   that bgc_jacobian derives symbolically and dense LU factorisations of their own (below); on
+   a large sparse model (bgc_jac_lu->n > 0) with J's structural values and the sparse LU the
+   compiler planned (bgc_splu_*, bgc_smat_*). */
 #include <complex.h>
 #undef I /* C99 7.3.1: the program may undefine it */
 #undef complex
