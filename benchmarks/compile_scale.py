@@ -8,7 +8,9 @@ The models are the families of benchmarks/families.py (the chains compiled with 
 constraint on a coupled field: an n-link chain in its link angles, one full n x n M(q), its end
 held on a line; rc_ladder_components is the RC ladder written with a component and a `for`
 loop, measured beside its flat twin rc_ladder_flat_twin (the ratio of the two is printed,
-the target <= 1.2 at 1000 instances).  For every model:
+the target <= 1.2 at 1000 instances); thermal_grid_cells is the n x n thermal grid of
+benchmarks/stiff_scale.py by its number of cells (states), whose stiff solvers factor by the
+sparse LU the compiler plans (its ordering and fill are part of lower).  For every model:
 
   stages   bgc.build(...).timings (parse, instantiate, resolve, flatten, scene, causality,
            equations, reduce, lower)
@@ -106,6 +108,7 @@ SIZES = {
     "link_chain_field": (2, 4, 8, 16, 32),
     "rc_ladder_components": (10, 30, 100, 300, 1000),
     "rc_ladder_flat_twin": (10, 30, 100, 300, 1000),
+    "thermal_grid_cells": (16, 64, 256, 1024),
 }
 QUICK_SIZES = {
     "pendulum_chain": (2, 8, 16),
@@ -116,6 +119,7 @@ QUICK_SIZES = {
     "link_chain_field": (2, 8),
     "rc_ladder_components": (10, 100),
     "rc_ladder_flat_twin": (10, 100),
+    "thermal_grid_cells": (16, 64),
 }
 SCENES = {"pendulum_chain": "swing", "pendulum_chain_vector": "swing", "link_chain_field": "swing"}
 STAGES = ("parse", "instantiate", "resolve", "flatten", "scene", "causality", "equations", "reduce", "lower",
@@ -951,7 +955,7 @@ def plot(rows: list[Row], path: str) -> None:
 
     fig, (ax_compile, ax_cc) = plt.subplots(1, 2, figsize=(12, 4.8), sharey=True)
     colors = dict(zip(SIZES, ("tab:blue", "tab:purple", "tab:orange", "tab:green", "tab:red",
-                              "tab:brown", "tab:olive", "tab:cyan")))
+                              "tab:brown", "tab:olive", "tab:cyan", "tab:gray")))
     for (family, tool) in dict.fromkeys((r.family, r.tool) for r in rows):
         mine = sorted((r for r in rows if (r.family, r.tool) == (family, tool)),
                       key=lambda r: r.size)

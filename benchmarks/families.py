@@ -18,8 +18,13 @@ are written the way a modeller writes them, one element per line.
 - rc_ladder_components(n): the RC ladder written with a `section` component and a `for`
   loop (n instances); rc_ladder_flat_twin(n) is its flat twin, the same model written
   out by hand, for the cost of instantiating.
+- thermal_grid(n): an n x n thermal RC grid of cells written with `for` loops: n^2 states,
+  stiff, with a sparse Jacobian (benchmarks/stiff_scale.py); thermal_grid_rhs(n, T) its right
+  side written from the formula; thermal_grid_cells(m) the same by its number of states.
 """
 from __future__ import annotations
+
+import math
 
 
 def pendulum_chain(n: int, theta0: float = 0.5, dtheta: float = 0.15) -> str:
@@ -249,6 +254,75 @@ def rc_ladder_flat_twin(n: int) -> str:
     return "\n".join(lines) + "\n"
 
 
+def thermal_grid(n: int, t_end: float = 50.0) -> str:
+    """An n x n thermal RC grid (a plate cut into cells): cell k = (i - 1) n + j (row i, column
+    j, 1-based) is a 0-junction with a heat capacity C(c) (state cap[k].q, the cell's heat;
+    cap[k].e its temperature), neighbours joined by a 1-junction with a thermal resistance
+    R(r) (plain elements in `for` loops: a `link` component per joint would make the 50x50
+    grid exceed the declarations that components and loops may generate), the cells of the
+    last column lose heat to an ambient at temperature 0 through R(rb), a heater feeds q_in
+    into cell 1, and the cells start at the temperatures 1 + sin(k) (every mode excited).  n^2 states; the fastest mode decays at
+    about 8/(r c), the slowest at about pi^2/(4 n^2 r c): stiff for n >= 10.
+
+    dT_k/dt = (q_in [k = 1] + sum over neighbours m of (T_m - T_k)/r - T_k/rb [j = n]) / c."""
+    return "\n".join([
+        f'model grid{n} "{n} x {n} thermal RC grid"',
+        f"constant N = {n}",
+        "parameter c = 1.0 \"heat capacity of a cell\"",
+        "parameter r = 1.0 \"thermal resistance between neighbouring cells\"",
+        "parameter rb = 2.0 \"thermal resistance from an edge cell to the ambient\"",
+        "parameter q_in = 1.0 \"heat flow into cell 1\"",
+        "for k in 1..N*N {",
+        "  T[k] : 0",
+        "  cap[k] : C(c) init e = 1 + sin(k)",
+        "  T[k] -> cap[k]",
+        "}",
+        "for i in 1..N { for j in 1..N-1 {",
+        "  h[(i-1)*(N-1)+j] : 1; hr[(i-1)*(N-1)+j] : R(r)",
+        "  T[(i-1)*N+j] -> h[(i-1)*(N-1)+j] -> T[(i-1)*N+j+1]",
+        "  h[(i-1)*(N-1)+j] -> hr[(i-1)*(N-1)+j]",
+        "} }",
+        "for i in 1..N-1 { for j in 1..N {",
+        "  v[(i-1)*N+j] : 1; vr[(i-1)*N+j] : R(r)",
+        "  T[(i-1)*N+j] -> v[(i-1)*N+j] -> T[i*N+j]",
+        "  v[(i-1)*N+j] -> vr[(i-1)*N+j]",
+        "} }",
+        "for i in 1..N {",
+        "  loss[i] : R(rb)",
+        "  T[i*N] -> loss[i]",
+        "}",
+        "heater : Sf(q_in)",
+        "heater -> T[1]",
+        f"scene cool {{ outputs {', '.join(f'cap[{k}].e' for k in range(1, n * n + 1))}; "
+        f"time 0 .. {t_end!r} every {t_end!r}; "
+        "solver rodas5p(rtol = 1e-6, atol = 1e-9) }",
+    ]) + "\n"
+
+
+def thermal_grid_rhs(n: int, T, c=1.0, r=1.0, rb=2.0, q_in=1.0):
+    """thermal_grid(n)'s right side in temperatures, written from the formula above (numpy,
+    T of shape (n*n,) or (n*n, m)): dT/dt."""
+    import numpy
+    G = numpy.asarray(T, dtype=float).reshape((n, n) + numpy.shape(T)[1:])
+    d = numpy.zeros_like(G)
+    d[:, :-1] += (G[:, 1:] - G[:, :-1]) / r
+    d[:, 1:] += (G[:, :-1] - G[:, 1:]) / r
+    d[:-1, :] += (G[1:, :] - G[:-1, :]) / r
+    d[1:, :] += (G[:-1, :] - G[1:, :]) / r
+    d[:, -1] -= G[:, -1] / rb
+    d[0, 0] += q_in
+    return (d / c).reshape(numpy.shape(T))
+
+
+def thermal_grid_cells(m: int) -> str:
+    """thermal_grid(n) by its number of states m = n^2 (a perfect square), for the growth fits
+    of benchmarks/compile_scale.py."""
+    n = math.isqrt(m)
+    if n * n != m:
+        raise ValueError(f"thermal_grid_cells: {m} is not a square")
+    return thermal_grid(n)
+
+
 FAMILIES = {
     "pendulum_chain": pendulum_chain,
     "pendulum_chain_vector": pendulum_chain_vector,
@@ -258,4 +332,6 @@ FAMILIES = {
     "link_chain_field": link_chain_field,
     "rc_ladder_components": rc_ladder_components,
     "rc_ladder_flat_twin": rc_ladder_flat_twin,
+    "thermal_grid": thermal_grid,
+    "thermal_grid_cells": thermal_grid_cells,
 }

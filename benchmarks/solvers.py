@@ -19,11 +19,13 @@ right sides written from the same equations (the pendulum's and its Jacobian by 
 eq. 12); a missing scipy or sksundae is reported "not installed".  Explicit methods are not
 run where stability alone costs millions of steps; the table gives the estimate: the integral
 of rho(J(y_ref(t))) dt over r, rho the Jacobian's spectral radius, r the method's real
-stability boundary (from its tableau).
+stability boundary (from its tableau).  On the stiff problems also CVODE's BDF driven from C
+(benchmarks/cvode_stiff.c, built against the system's SUNDIALS: the right sides and Jacobians
+written by hand in C, the dense solver, no Python in the loop).
 
 Columns:
   method   bgc NAME: the C program with --solver NAME;  SciPy NAME: solve_ivp(method=NAME);
-           CVODE BDF: sksundae.cvode.CVODE(method="BDF").
+           CVODE BDF: sksundae.cvode.CVODE(method="BDF");  CVODE-C BDF: cvode_stiff.c.
   rtol     the relative tolerance (two digits), or h=H: the step of a fixed-step method.
   steps    accepted steps;  rej: rejected steps ("-": the solver does not report them).
   rhs      right-side calls of the timed run (bgc: the 2-row run, without dense-output calls;
@@ -40,7 +42,8 @@ Columns:
            call in this process.  Each round runs every measurement in turn (short C runs and
            /bin/true ten times), so a change of load hits all alike.
   prog     the C program's own clock() around its integration (cpu= in its stats line), median:
-           no process start at all ("-" if the program does not print it).
+           no process start at all ("-" if the program does not print it); CVODE-C's the
+           same (its driver's clock() from CVodeInit to its last row).
 Below each table, "at equal error": each method's time and steps at one error level, linear in
 log time (log steps) against log error along its runs sorted by error; the level is the one
 inside most methods' ranges of error (the tightest of equals), a method whose range misses it
@@ -84,6 +87,8 @@ EXPLICIT = [s.name for s in solvers.SOLVER_LIST if s.family in ("fixed", "erk")]
 STIFF = [s.name for s in solvers.SOLVER_LIST if s.uses_jacobian]  # rodas4 .. radau, auto
 SCIPY_EXPLICIT = {"RK45": "dopri5", "DOP853": "dop853"}  # the same pairs as bgc's
 IMPLICIT = ("Radau", "BDF", "LSODA")
+CVODE_C_LIBS = ("-lsundials_cvode", "-lsundials_nvecserial", "-lsundials_sunlinsoldense",
+                "-lsundials_sunmatrixdense")
 RC = {"V0": 1.0, "R1": 1e-6, "C1": 1.0, "R2": 1.0, "C2": 1.0}  # as in models/rc_pair.bg
 
 
@@ -278,7 +283,8 @@ def problems(quick: bool, per: int = 1) -> list[Problem]:
     rc = Problem(
         "rc_pair", "stiff RC pair, tau 1e-6 s and 1 s, 0..5 s", "rc_pair.bg", "step", 5.0, 0.05,
         ("c1.e", "c2.e"), (0, 1), rc_system(), {**{s: sweep for s in STIFF}, "dopri5": [1e-6]},
-        {name: sweep for name in every[2:]}, lambda problem, grid: rc_exact(grid),
+        {name: sweep for name in (*every[2:], "CVODE-C BDF")},
+        lambda problem, grid: rc_exact(grid),
         "the closed form (eigenpairs of the 2x2 matrix)", stiff=True)
     out = [pendulum, rc]
     for mu, explicit in ((1e3, {"dopri5": [1e-6], "dop853": [1e-6]}), (1e5, {})):
@@ -287,7 +293,7 @@ def problems(quick: bool, per: int = 1) -> list[Problem]:
             f"vdp_1e{round(math.log10(mu))}", f"Van der Pol, mu = 1e{round(math.log10(mu))}, "
             "0..2 (scaled time)", "van_der_pol.bg", "period", 2.0, 0.02, ("cap.q", "ind.p"),
             (0, 1), vdp_system(mu), {**{s: sweep for s in STIFF}, **explicit},
-            {name: sweep for name in every[2:]},
+            {name: sweep for name in (*every[2:], "CVODE-C BDF")},
             scipy_reference("Radau", 1e-11 if quick else 1e-12, not quick),
             params={"mu": mu}, stiff=True))
     return out
@@ -365,7 +371,47 @@ def bgc_run(problem: Problem, exe: Path, ref, solver: str, setting) -> tuple[Row
     return row, job
 
 
-def baseline_run(problem: Problem, ref, grid, name: str, rtol: float) -> tuple[Row, Job | None]:
+def cvode_c(workdir: Path) -> tuple[Path | None, str]:
+    """benchmarks/cvode_stiff.c built in workdir (once), or None and why not."""
+    exe = workdir / "cvode_stiff"
+    if exe.exists():
+        return exe, ""
+    cmd = [*c_compiler(), *CFLAGS, str(HERE / "cvode_stiff.c"), "-o", str(exe),
+           *CVODE_C_LIBS, "-lm"]
+    done = subprocess.run(cmd, capture_output=True, text=True)
+    if done.returncode != 0:
+        return None, ("cannot build cvode_stiff.c against SUNDIALS ("
+                      f"{(done.stderr.strip().splitlines() or ['?'])[0]})")
+    return exe, ""
+
+
+def cvode_c_run(problem: Problem, ref, exe: Path, rtol: float) -> tuple[Row, Job | None]:
+    """CVODE driven from C: the full-grid run for the error, the 2-row run timed."""
+    row = Row("CVODE-C BDF", tol_text(rtol), rtol)
+    args = [str(exe), "vdp" if problem.key.startswith("vdp") else "rc",
+            repr(problem.params.get("mu", 1e3)), repr(rtol), repr(rtol * ATOL_RATIO),
+            repr(problem.t_end)]
+    full = subprocess.run([*args, repr(problem.dt)], capture_output=True, text=True)
+    if full.returncode != 0:
+        return failed(row, full.stderr)
+    if ref is not None:
+        data = np.loadtxt(full.stdout.splitlines()[1:], delimiter=",", ndmin=2)
+        row.error = scaled_error(data[:, 1:3][:, problem.compared], ref[:, problem.compared])
+    done, job = first_run(Job(row, lambda: subprocess.run(
+        [*args, repr(problem.t_end)], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
+        text=True), c=True))
+    if done.returncode != 0:
+        return failed(row, done.stderr)
+    stats = parse_stats(done.stderr)
+    for key in ("steps", "rejected", "rhs", "jac", "lu"):
+        setattr(row, key, int(stats[key]) if key in stats else None)
+    return row, job
+
+
+def baseline_run(problem: Problem, ref, grid, name: str, rtol: float,
+                 workdir: Path) -> tuple[Row, Job | None]:
+    if name == "CVODE-C BDF":
+        return cvode_c_run(problem, ref, cvode_c(workdir)[0], rtol)
     row = Row(name, tol_text(rtol), rtol)
     f, jac, y0 = problem.system
     tol = {"rtol": rtol, "atol": rtol * ATOL_RATIO}
@@ -425,8 +471,11 @@ def measure(jobs: list[Job], spawn: Job, repeats: int) -> None:
     spawn.walls.clear(), spawn.cpus.clear()
 
 
-def missing(name: str) -> str | None:
-    """None if the baseline's package is installed, else why not."""
+def missing(name: str, workdir: Path) -> str | None:
+    """None if the baseline's package is installed (CVODE-C: its driver builds), else why
+    not."""
+    if name == "CVODE-C BDF":
+        return cvode_c(workdir)[1] or None
     module = "sksundae" if name.startswith("CVODE") else "scipy"
     return None if importlib.util.find_spec(module) else f"{module} not installed"
 
@@ -444,10 +493,10 @@ def run_problem(problem: Problem, workdir: Path, spawn: Job, repeats: int):
         for setting in settings[1] if fixed else settings:
             runs.append(bgc_run(problem, exe, ref, solver, ("h", setting) if fixed else setting))
     for name, rtols in problem.baselines.items():
-        if why := missing(name):
+        if why := missing(name, workdir):
             skipped.append((name, why))
         else:
-            runs += [baseline_run(problem, ref, grid, name, rtol) for rtol in rtols]
+            runs += [baseline_run(problem, ref, grid, name, rtol, workdir) for rtol in rtols]
     rows, jobs = [r for r, _ in runs], [j for _, j in runs if j]
     if problem.stiff and ref is not None:
         explicit = [f"bgc {m}" for m in EXPLICIT] + [f"SciPy {m}" for m in SCIPY_EXPLICIT]
@@ -521,7 +570,7 @@ def goals(results: dict) -> list[str]:
     stiff = [f"bgc {m}" for m in STIFF]
     picked = {m: find(rc, m, 1e-6) for m in stiff}
     have = all(r and r.error is not None and r.time for r in picked.values())
-    cv = find(rc, "CVODE BDF", 1e-6)
+    cv, cvc = find(rc, "CVODE BDF", 1e-6), find(rc, "CVODE-C BDF", 1e-6)
     out = [goal("RC pair at rtol 1e-6, each stiff solver within 1e-5 of the closed form in under "
                 "150 steps", ", ".join(f"{m[4:]} {r.error:.1e} in {r.steps} steps" if r and
                                        r.error is not None else f"{m[4:]} n/a"
@@ -532,17 +581,25 @@ def goals(results: dict) -> list[str]:
                 ", ".join(f"{m[4:]} {ms(r and r.time)}" for m, r in picked.items()) +
                 f" vs CVODE {ms(cv and cv.time)}",
                 None if not (have and cv and cv.time) else
-                all(r.time < cv.time for r in picked.values()))]
+                all(r.time < cv.time for r in picked.values())),
+           goal("RC pair at rtol 1e-6, the generated C faster than CVODE driven from C",
+                ", ".join(f"{m[4:]} {ms(r and r.time)}" for m, r in picked.items()) +
+                f" vs CVODE-C {ms(cvc and cvc.time)}",
+                None if not (have and cvc and cvc.time) else
+                all(r.time < cvc.time for r in picked.values()))]
     checks = {"steps no more than SciPy Radau's": (1.0, []), "at least 20x faster than the "
-              "fastest SciPy method": (20.0, []), "at least as fast as CVODE": (1.0, [])}
+              "fastest SciPy method": (20.0, []), "at least as fast as CVODE": (1.0, []),
+              "at least as fast as CVODE driven from C": (1.0, [])}
     for r in (r for r in vdp if r.method in stiff and r.error and r.time):
         radau = at_error(vdp, "SciPy Radau", "steps", r.error)
         scipy = [t for n in ("SciPy Radau", "SciPy BDF", "SciPy LSODA")
                  if (t := at_error(vdp, n, "time", r.error))]
         cvode = at_error(vdp, "CVODE BDF", "time", r.error)
+        cvode_c = at_error(vdp, "CVODE-C BDF", "time", r.error)
         for (_, pairs), value in zip(checks.values(), (radau and radau / r.steps,
                                                        scipy and min(scipy) / r.time,
-                                                       cvode and cvode / r.time)):
+                                                       cvode and cvode / r.time,
+                                                       cvode_c and cvode_c / r.time)):
             pairs += [(r.method, value)] if value else []
     for what, (bar, pairs) in checks.items():
         ratios = {m: [v for n, v in pairs if n == m] for m in stiff}

@@ -27,6 +27,7 @@ from bgc.resources import quiet_collector, resource_dir
 POW10_RANGE = (-24, 56)  # powers of ten for the C number formatter: |v| in about 1e-40..1e40
 C_RUNTIME = ("runtime.c", "drive.c", "erk.c", "stiff.c", "main.c", "batch.c")  # bgc/runtime/, in this order
 PLAN_ARRAYS = ("diag", "lptr", "lpos", "lrow", "uptr", "upos", "ucol", "upd", "prow", "pcol")
+ITERATION_ARRAYS = ("perm", "rowptr", "cols", "diag", "jpos", "dpos")  # sparse.IterationPlan
 MODEL_FUNCTIONS = ("rhs", "outputs", "jvp")  # take the workspace, may solve blocks; so do
 #                                               a program's extra functions (bgc.lower.with_tangent)
 PLAIN_FUNCTIONS = ("residual", "scale", "position_jac", "velocity_jac", "velocity_metric")
@@ -544,6 +545,8 @@ def _common_context(program: Program, ws: _Workspace, literal, c: bool) -> dict:
         "jac": {"colors": len(jac.colors), "color_ptr": _list(color_ptr),
                 "color_cols": _list(color_cols), "col_ptr": _list(col_ptr),
                 "col_rows": _list(col_rows), "nnz": len(col_rows)},
+        "jac_lu": None if jac.lu is None else
+        {key: _list(getattr(jac.lu, key)) for key in ITERATION_ARRAYS} | {"nnz": jac.lu.nnz},
         "ws": ws,
         "list": _list,
     }
@@ -713,12 +716,13 @@ LINK_PARAMS = 16384  # the most doubles (parameters and constants) a linked mode
 LINK_INTS = ("NUM_STATES", "NUM_PARAMS", "NUM_CONSTANTS", "NUM_OUTPUTS", "NUM_CONSTRAINTS",
              "NUM_POSITION_ROWS", "NUM_VELOCITY_ROWS", "NUM_BLOCKS", "AUTONOMOUS",
              "WORK_DOUBLES", "WORK_INTS", "WORK_Y0", "WORK_STAGES", "WORK_Y", "WORK_JAC",
-             "JAC_COLORS", "SCENE_SOLVER", "NUM_INDICATORS", "NUM_TIMERS", "NUM_DISCRETE",
-             "DISCRETE_OFFSET", "NUM_INPUTS")
+             "JAC_COLORS", "JAC_SPARSE", "SCENE_SOLVER", "NUM_INDICATORS", "NUM_TIMERS",
+             "NUM_DISCRETE", "DISCRETE_OFFSET", "NUM_INPUTS")
 LINK_DOUBLES = ("SCENE_T0", "SCENE_T_END", "SCENE_DT", "SCENE_RTOL", "SCENE_ATOL", "SCENE_STEP",
                 "SCENE_HMAX")
 LINK_TABLES = (("bgc_block", "blocks"), ("int", "jac_color_ptr"), ("int", "jac_color_cols"),
-               ("int", "jac_col_ptr"), ("int", "jac_col_rows"), ("int", "position_rows"),
+               ("int", "jac_col_ptr"), ("int", "jac_col_rows"), ("bgc_splu", "jac_lu"),
+               ("int", "position_rows"),
                ("int", "velocity_rows"), ("int", "velocity_movable"),
                ("int", "indicator_strict"), ("char *const", "discrete_names"))
 LINK_FUNCTIONS = (("rhs", ""), ("outputs", ""), ("jvp", "const double *v, "), ("events", ""),

@@ -50,7 +50,7 @@ import sympy as sp
 
 from .algebra import Max, Min
 from .run import RunSettings
-from .sparse import LUPlan
+from .sparse import IterationPlan, LUPlan
 
 T = sp.Symbol("t")
 X = sp.IndexedBase("x")
@@ -463,6 +463,7 @@ class JacobianPattern:
 
     columns: tuple[tuple[int, ...], ...]  # per state j: the rows i with J[i, j] possibly nonzero
     colors: tuple[tuple[int, ...], ...]
+    lu: IterationPlan | None = None  # a large sparse model: the stiff solvers' sparse LU
 
 
 FUNCTION_NAMES = ("consts", "init", "rhs", "outputs", "jvp", "residual", "scale",

@@ -22,7 +22,7 @@ from dataclasses import dataclass, replace
 
 import sympy as sp
 
-from . import events, ir
+from . import events, ir, sparse
 from .differentiate import partial
 from .tangent import jacobian, tangent
 from .graph import TIME, var
@@ -270,8 +270,9 @@ def _propagate_copies(f: Function) -> Function:
 
 def jacobian_pattern(rhs: Function, n: int, blocks) -> JacobianPattern:
     """Structural dependence of each derivative on each state (through solves: every unknown
-    of a block depends on everything the block reads), and a greedy colouring of the columns
-    in order (no two columns of a colour share a row)."""
+    of a block depends on everything the block reads), a greedy colouring of the columns
+    in order (no two columns of a colour share a row), and for a large sparse pattern the
+    stiff solvers' sparse LU (bgc/sparse.py, iteration_plan)."""
     rows = ir.state_masks(rhs, n)
     columns = [[] for _ in range(n)]
     for i, m in enumerate(rows):
@@ -295,7 +296,9 @@ def jacobian_pattern(rhs: Function, n: int, blocks) -> JacobianPattern:
         else:
             colors.append([j])
             covered.append(rowmask)
-    return JacobianPattern(tuple(tuple(c) for c in columns), tuple(tuple(c) for c in colors))
+    columns = tuple(tuple(c) for c in columns)
+    return JacobianPattern(columns, tuple(tuple(c) for c in colors),
+                           sparse.iteration_plan(columns))
 
 
 # ---------------------------------------------------------------- the stage

@@ -27,7 +27,9 @@ MAX_SCALAR_PARTS = 50_000  # scalar elements, signals and bonds once multiports 
 MAX_MATRIX_ENTRIES = 100_000  # vector and matrix entries (and products) the expressions build
 MAX_EXTREMUM_ARGUMENTS = 32  # of one min() or max(): each one's derivative names all the others
 MAX_INSTANCE_DEPTH = 32  # components instantiating components, levels deep
-MAX_GENERATED = 50_000  # declarations and bonds that components and `for` loops make in all
+MAX_GENERATED = 100_000  # declarations and bonds that components and `for` loops make in all
+#                           (a loop charges its body once per pass before expanding it, and
+#                           each statement again as it is made: about 50 000 statements)
 MAX_SCENES = 100  # of one model (`bgc check` builds each)
 MAX_OUTPUT_ROWS = 10 ** 9  # rows of one run's CSV (the generated programs refuse more too)
 

@@ -160,3 +160,76 @@ def _symbolic(m: int, rows: list[set]) -> tuple[list[set], int]:
             for j in new:
                 cols[j].add(i)
     return filled, flops
+
+
+# ---------------------------------------------------------------- the stiff solvers' matrices
+
+SPARSE_MIN_STATES = 32  # below this, the iteration matrices are factored densely
+SPARSE_MAX_FILL = 0.25  # ... and at or above it, when L + U fills more than this of n x n
+
+
+@dataclass(frozen=True)
+class IterationPlan:
+    """A static sparse LU of the stiff solvers' iteration matrices, c I - J (c real, or complex
+    for Radau's pairs), whose pattern is the Jacobian's with the diagonal.  Row and column
+    k of the factored matrix are state perm[k] (a symmetric minimum-degree order; the diagonal
+    is always structurally there, so no matching is needed).  L + U is stored by rows: row k
+    holds the positions rowptr[k] .. rowptr[k + 1] - 1, its columns cols[...] ascending, the
+    diagonal at diag[k]; jpos[q] is the position of the Jacobian's q-th structural entry (in the
+    order of its columns, JacobianPattern.columns) and dpos[i] that of state i's diagonal."""
+
+    n: int
+    perm: tuple[int, ...]
+    rowptr: tuple[int, ...]
+    cols: tuple[int, ...]
+    diag: tuple[int, ...]
+    jpos: tuple[int, ...]
+    dpos: tuple[int, ...]
+    flops: int  # multiply-adds of one factorisation
+
+    @property
+    def nnz(self) -> int:
+        return len(self.cols)
+
+
+def iteration_plan(columns) -> IterationPlan | None:
+    """The plan for c I - J given J's structure (columns[j]: the rows of column j), or None
+    when the dense factorisation is the better one: fewer than SPARSE_MIN_STATES states, or
+    L + U filling SPARSE_MAX_FILL of the matrix or more.  Linear in the fill: the elimination's
+    updates are not listed (the runtime reads them off the rows of L + U)."""
+    n = len(columns)
+    if n < SPARSE_MIN_STATES:
+        return None
+    pattern = [set() for _ in range(n)]
+    for j, rows in enumerate(columns):
+        for i in rows:
+            pattern[i].add(j)
+    if sum(len(r) for r in pattern) + n > SPARSE_MAX_FILL * n * n:
+        return None
+    order = _minimum_degree(n, pattern)
+    rank = [0] * n
+    for k, v in enumerate(order):
+        rank[v] = k
+    rows = [set() for _ in range(n)]
+    for i in range(n):
+        rows[rank[i]] = {rank[j] for j in pattern[i]}
+        rows[rank[i]].add(rank[i])
+    filled, flops = _symbolic(n, rows)
+    if sum(len(r) for r in filled) > SPARSE_MAX_FILL * n * n:
+        return None
+    rowptr, cols, diag = [0], [], []
+    where = []  # per factored row: column -> position
+    for k in range(n):
+        row = sorted(filled[k])
+        at = {}
+        for j in row:
+            if j == k:
+                diag.append(len(cols))
+            at[j] = len(cols)
+            cols.append(j)
+        where.append(at)
+        rowptr.append(len(cols))
+    jpos = tuple(where[rank[i]][rank[j]] for j, rows_j in enumerate(columns) for i in rows_j)
+    dpos = tuple(diag[rank[i]] for i in range(n))
+    return IterationPlan(n, tuple(order), tuple(rowptr), tuple(cols), tuple(diag), jpos, dpos,
+                         flops)

@@ -497,11 +497,13 @@ def _strings(texts) -> bytes:
 
 def supports(program: Program) -> bool:
     """Whether the interpreter runs the program (else program_bytes raises VMError): its
-    parameters and constants fit the runtime built once, it has no tables nor inputs, and its
+    parameters and constants fit the runtime built once, it has no tables nor inputs nor a
+    sparse Jacobian (bgc.sparse's iteration plan), and its
     functions are a model part's (MODEL_FUNCTIONS and the constraint rows', not an FMU's
     outputs_jvp)."""
-    return emit.linkable(program) and not program.tables and not program.inputs and all(
-        k in MODEL_FUNCTIONS for k in emit._model_functions(program))
+    return emit.linkable(program) and not program.tables and not program.inputs and \
+        program.jacobian.lu is None and all(k in MODEL_FUNCTIONS
+                                            for k in emit._model_functions(program))
 
 
 def program_bytes(program: Program) -> bytes:
@@ -509,9 +511,9 @@ def program_bytes(program: Program) -> bytes:
     if not emit.linkable(program):
         raise VMError("the model has more parameters and constants than the interpreter "
                       f"holds ({emit.LINK_PARAMS}); use --backend c")
-    if program.tables or program.inputs:
-        raise VMError("the interpreter does not run models with tables or inputs yet; use "
-                      "--backend c")
+    if program.tables or program.inputs or program.jacobian.lu is not None:
+        raise VMError("the interpreter does not run models with tables, inputs or a sparse "
+                      "Jacobian yet; use --backend c")
     emit._validate(program)
     unit = _Unit(program)
     ws = emit._workspace(program, ir.CHUNK_OPS, layouts=False)
@@ -571,7 +573,7 @@ def program_bytes(program: Program) -> bytes:
         "AUTONOMOUS": int(not emit._reads_time(program.function("rhs"))),
         "WORK_DOUBLES": work_doubles, "WORK_INTS": ws.ints, "WORK_Y0": ws.y0,
         "WORK_STAGES": ws.stages, "WORK_Y": ws.y, "WORK_JAC": ws.jac,
-        "JAC_COLORS": len(jac.colors), "SCENE_SOLVER": emit.solvers.index(sc.solver),
+        "JAC_COLORS": len(jac.colors), "JAC_SPARSE": 0, "SCENE_SOLVER": emit.solvers.index(sc.solver),
         "NUM_INDICATORS": ev.indicators if ev else 0, "NUM_TIMERS": ev.timers if ev else 0,
         "NUM_DISCRETE": ev.discrete if ev else 0,
         "DISCRETE_OFFSET": unit.d_base if ev else 0, "NUM_INPUTS": len(program.inputs)}
@@ -641,7 +643,8 @@ def c_link_definitions() -> str:
     out = ["/* The model part's values, read from the program file (bgc/vm.py). */"]
     out += [f"int bgc_link_{m.lower()};" for m in emit.LINK_INTS]
     out += [f"double bgc_link_{m.lower()};" for m in emit.LINK_DOUBLES]
-    out += ["const bgc_block *bgc_link_blocks;"]
+    out += ["const bgc_block *bgc_link_blocks;", "const bgc_splu *bgc_link_jac_lu; /* none: "
+            "the interpreter's Jacobians are dense (supports) */"]
     out += [f"const int *bgc_link_{n};" for n in INT_TABLES]
     out += ["const char *const *bgc_link_discrete_names;", "const char *bgc_link_ident;"]
     out += ["static int *const bgc_vm_link_ints[] = { "

@@ -199,3 +199,31 @@ def test_fit_baseline_is_the_model():
     _, Y, _ = bgc.simulate(ROOT / "models" / "dc_motor.bg", "run", backend="python",
                            outputs="ind.f, rotor.f", params=fit.TRUE, t_end=0.5, dt=0.01)
     assert np.max(np.abs(Y - by_hand)) < 1e-8 * max(1.0, np.max(np.abs(Y)))
+
+
+def test_stiff_scale_closed_form_agrees_with_expm():
+    """benchmarks/stiff_scale.py's closed form of the thermal grid (its modes, a Kronecker sum)
+    against expm of the grid's equations written out here, and the families' numpy right side
+    against them."""
+    from scipy.linalg import expm
+
+    grid = _benchmark("stiff_scale")
+    n, N = 4, 16
+    A, b = np.zeros((N, N)), np.zeros(N)
+    for i in range(n):
+        for j in range(n):
+            k = i * n + j
+            for a, c in ((i, j - 1), (i, j + 1), (i - 1, j), (i + 1, j)):
+                if 0 <= a < n and 0 <= c < n:
+                    A[k, a * n + c] += 1.0  # r = 1, c = 1
+                    A[k, k] -= 1.0
+            if j == n - 1:
+                A[k, k] -= 0.5  # rb = 2
+    b[0] = 1.0  # q_in
+    T0 = 1.0 + np.sin(np.arange(1, N + 1))
+    steady = np.linalg.solve(A, -b)
+    for t in (0.0, 0.5, 50.0):
+        want = steady + expm(A * t) @ (T0 - steady)
+        assert np.allclose(grid.exact(n, t), want, rtol=0, atol=1e-12)
+    families = sys.modules["families"]
+    assert np.allclose(families.thermal_grid_rhs(n, T0), A @ T0 + b, rtol=0, atol=1e-12)

@@ -76,6 +76,9 @@ int bgc_outputs(double t, const double *x, const bgc_params *p, bgc_work *w, dou
 int bgc_jvp(double t, const double *x, const bgc_params *p, bgc_work *w, const double *v,
             double *jv);
 int bgc_jacobian(double t, const double *x, const bgc_params *p, bgc_work *w, double *J);
+/* J's structural entries only, column by column (bgc_jac_col_ptr, bgc_jac_col_rows). */
+int bgc_jacobian_values(double t, const double *x, const bgc_params *p, bgc_work *w,
+                        double *Jv);
 void bgc_residual(double t, const double *x, const bgc_params *p, double *r);
 void bgc_scale(double t, const double *x, const bgc_params *p, double *s);
 void bgc_position_jac(double t, const double *x, const bgc_params *p, double *J);
@@ -196,6 +199,21 @@ static inline int bgc_model_update(double t, const double *x, const bgc_params *
     (void)t, (void)x, (void)p, (void)w, (void)r, (void)out;
     return 0;
 }
+#endif
+/* The stiff solvers' iteration matrices c I - J on a large sparse model (bgc/sparse.py,
+   IterationPlan): a static LU, row k and column k of the factored matrix being state
+   perm[k]; L + U by rows (row k: positions rowptr[k] .. rowptr[k + 1] - 1, columns cols[]
+   ascending, the diagonal at diag[k]); jpos[q]: the position of the Jacobian's q-th
+   structural entry (bgc_jac_col_rows' order), dpos[i]: that of state i's diagonal.  A model
+   part with such a plan defines BGC_JAC_SPARSE 1 and bgc_jac_lu before this section; the
+   others get n = 0 (the dense factorisations). */
+typedef struct bgc_splu {
+    int n, nnz;
+    const int *perm, *rowptr, *cols, *diag, *jpos, *dpos;
+} bgc_splu;
+#ifndef BGC_JAC_SPARSE
+#define BGC_JAC_SPARSE 0
+static const bgc_splu bgc_jac_lu[1] = { { 0, 0, NULL, NULL, NULL, NULL, NULL, NULL } };
 #endif
 #define BGC_MAX_EVENT_ITERATIONS 100 /* events at one instant before a run stops (Zeno) */
 

@@ -350,6 +350,29 @@ int bgc_jacobian(double t, const double *x, const bgc_params *p, bgc_work *w, do
     return 0;
 }
 
+int bgc_jacobian_values(double t, const double *x, const bgc_params *p, bgc_work *w,
+                        double *Jv)
+{
+    enum { N = BGC_NUM_STATES };
+    double *v = w->v + BGC_WORK_JAC, *jv = w->v + BGC_WORK_JAC + BGC_DIM(N);
+    int c, k, i, q;
+    for (i = 0; i < N; i++)
+        v[i] = 0.0;
+    for (c = 0; c < BGC_JAC_COLORS; c++) {
+        for (k = bgc_jac_color_ptr[c]; k < bgc_jac_color_ptr[c + 1]; k++)
+            v[bgc_jac_color_cols[k]] = 1.0;
+        if (bgc_model_jvp(t, x, p, w, v, jv))
+            return 1;
+        for (k = bgc_jac_color_ptr[c]; k < bgc_jac_color_ptr[c + 1]; k++) {
+            const int j = bgc_jac_color_cols[k];
+            v[j] = 0.0;
+            for (q = bgc_jac_col_ptr[j]; q < bgc_jac_col_ptr[j + 1]; q++)
+                Jv[q] = jv[bgc_jac_col_rows[q]];
+        }
+    }
+    return 0;
+}
+
 int bgc_rhs(double t, const double *x, const bgc_params *p, bgc_work *w, double *dx)
 {
     return bgc_model_rhs(t, x, p, w, dx);

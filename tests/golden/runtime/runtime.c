@@ -95,6 +95,9 @@ int bgc_outputs(double t, const double *x, const bgc_params *p, bgc_work *w, dou
 int bgc_jvp(double t, const double *x, const bgc_params *p, bgc_work *w, const double *v,
             double *jv);
 int bgc_jacobian(double t, const double *x, const bgc_params *p, bgc_work *w, double *J);
+/* J's structural entries only, column by column (bgc_jac_col_ptr, bgc_jac_col_rows). */
+int bgc_jacobian_values(double t, const double *x, const bgc_params *p, bgc_work *w,
+                        double *Jv);
 void bgc_residual(double t, const double *x, const bgc_params *p, double *r);
 void bgc_scale(double t, const double *x, const bgc_params *p, double *s);
 void bgc_position_jac(double t, const double *x, const bgc_params *p, double *J);
@@ -215,6 +218,21 @@ static inline int bgc_model_update(double t, const double *x, const bgc_params *
     (void)t, (void)x, (void)p, (void)w, (void)r, (void)out;
     return 0;
 }
+#endif
+/* The stiff solvers' iteration matrices c I - J on a large sparse model (bgc/sparse.py,
+   IterationPlan): a static LU, row k and column k of the factored matrix being state
+   perm[k]; L + U by rows (row k: positions rowptr[k] .. rowptr[k + 1] - 1, columns cols[]
+   ascending, the diagonal at diag[k]); jpos[q]: the position of the Jacobian's q-th
+   structural entry (bgc_jac_col_rows' order), dpos[i]: that of state i's diagonal.  A model
+   part with such a plan defines BGC_JAC_SPARSE 1 and bgc_jac_lu before this section; the
+   others get n = 0 (the dense factorisations). */
+typedef struct bgc_splu {
+    int n, nnz;
+    const int *perm, *rowptr, *cols, *diag, *jpos, *dpos;
+} bgc_splu;
+#ifndef BGC_JAC_SPARSE
+#define BGC_JAC_SPARSE 0
+static const bgc_splu bgc_jac_lu[1] = { { 0, 0, NULL, NULL, NULL, NULL, NULL, NULL } };
 #endif
 #define BGC_MAX_EVENT_ITERATIONS 100 /* events at one instant before a run stops (Zeno) */
 
@@ -920,6 +938,29 @@ int bgc_jacobian(double t, const double *x, const bgc_params *p, bgc_work *w, do
             v[j] = 0.0;
             for (q = bgc_jac_col_ptr[j]; q < bgc_jac_col_ptr[j + 1]; q++)
                 J[bgc_jac_col_rows[q] * N + j] = jv[bgc_jac_col_rows[q]];
+        }
+    }
+    return 0;
+}
+
+int bgc_jacobian_values(double t, const double *x, const bgc_params *p, bgc_work *w,
+                        double *Jv)
+{
+    enum { N = BGC_NUM_STATES };
+    double *v = w->v + BGC_WORK_JAC, *jv = w->v + BGC_WORK_JAC + BGC_DIM(N);
+    int c, k, i, q;
+    for (i = 0; i < N; i++)
+        v[i] = 0.0;
+    for (c = 0; c < BGC_JAC_COLORS; c++) {
+        for (k = bgc_jac_color_ptr[c]; k < bgc_jac_color_ptr[c + 1]; k++)
+            v[bgc_jac_color_cols[k]] = 1.0;
+        if (bgc_model_jvp(t, x, p, w, v, jv))
+            return 1;
+        for (k = bgc_jac_color_ptr[c]; k < bgc_jac_color_ptr[c + 1]; k++) {
+            const int j = bgc_jac_color_cols[k];
+            v[j] = 0.0;
+            for (q = bgc_jac_col_ptr[j]; q < bgc_jac_col_ptr[j + 1]; q++)
+                Jv[q] = jv[bgc_jac_col_rows[q]];
         }
     }
     return 0;
@@ -2472,7 +2513,9 @@ static const bgc_family bgc_family_erk = {
 /* The stiff families: Rosenbrock methods in Hairer's transformed form (RODAS's design, any
    tableau of the family) and Radau IIA with 3, 5 or 7 stages, of fixed or variable order
    (RADAU5's and RADAU's design), both with the Jacobian
-   that bgc_jacobian derives symbolically and dense LU factorisations of their own (below). */
+   that bgc_jacobian derives symbolically and dense LU factorisations of their own (below); on
+   a large sparse model (bgc_jac_lu->n > 0) with J's structural values and the sparse LU the
+   compiler planned (bgc_splu_*, bgc_smat_*). */
 #include <complex.h>
 #undef I /* C99 7.3.1: the program may undefine it */
 #undef complex
@@ -2747,6 +2790,239 @@ static void bgc_stiff_zlu_solve(int n, const bgc_cplx *lu, const int *piv, bgc_c
     }
 }
 
+/* ----------------------------------------------------- sparse linear algebra --- */
+/* On a large sparse model (bgc_jac_lu->n > 0) the iteration matrices c I - J are kept as the
+   values of L + U in the plan's positions, and factored row by row in the plan's order with
+   no search: row i is scattered into a work vector w (by column), each of its L entries, in
+   ascending column k, becomes the multiplier l = w[k] / u_kk and subtracts l times row k of U,
+   and the row is gathered back.  No pivot is chosen, so each is tested: every multiplier at
+   most 10 in magnitude (|u_kk| >= 0.1 times the entry it eliminates, threshold partial
+   pivoting's test) and each pivot clearly nonzero for its row (above 1e-14 of the row's
+   largest entry) and finite.  If a test fails, the caller factors the same matrix densely
+   with partial pivoting (bgc_stiff_lu). */
+
+/* a = fac I - J from J's structural values. */
+static void bgc_splu_form(const bgc_splu *pl, const double *Jv, double fac, double *a)
+{
+    int q;
+    for (q = 0; q < pl->nnz; q++)
+        a[q] = 0.0;
+    for (q = 0; q < bgc_jac_col_ptr[pl->n]; q++)
+        a[pl->jpos[q]] = -Jv[q];
+    for (q = 0; q < pl->n; q++)
+        a[pl->dpos[q]] += fac;
+}
+
+static int bgc_splu_factor(const bgc_splu *pl, double *a, double *w)
+{
+    int i, q, r;
+    for (i = 0; i < pl->n; i++) {
+        const int end = pl->rowptr[i + 1], d = pl->diag[i];
+        double scale = 0.0;
+        for (q = pl->rowptr[i]; q < end; q++) {
+            w[pl->cols[q]] = a[q];
+            scale = bgc_max(scale, fabs(a[q]));
+        }
+        for (q = pl->rowptr[i]; q < d; q++) {
+            const int k = pl->cols[q];
+            const double l = w[k] / a[pl->diag[k]];
+            if (!(fabs(l) <= 10.0))
+                return 1;
+            w[k] = l;
+            for (r = pl->diag[k] + 1; r < pl->rowptr[k + 1]; r++)
+                w[pl->cols[r]] -= l * a[r];
+        }
+        for (q = pl->rowptr[i]; q < end; q++)
+            a[q] = w[pl->cols[q]];
+        if (!(fabs(a[d]) > 1e-14 * scale) || !isfinite(a[d]))
+            return 1;
+    }
+    return 0;
+}
+
+/* b (in the states' order) overwritten by the solution; w: n doubles. */
+static void bgc_splu_solve(const bgc_splu *pl, const double *a, double *b, double *w)
+{
+    int i, q;
+    for (i = 0; i < pl->n; i++) {
+        double acc = b[pl->perm[i]];
+        for (q = pl->rowptr[i]; q < pl->diag[i]; q++)
+            acc -= a[q] * w[pl->cols[q]];
+        w[i] = acc;
+    }
+    for (i = pl->n - 1; i >= 0; i--) {
+        double acc = w[i];
+        for (q = pl->diag[i] + 1; q < pl->rowptr[i + 1]; q++)
+            acc -= a[q] * w[pl->cols[q]];
+        w[i] = acc / a[pl->diag[i]];
+    }
+    for (i = 0; i < pl->n; i++)
+        b[pl->perm[i]] = w[i];
+}
+
+/* The same for (alpha + i beta) I - J. */
+static void bgc_splu_zform(const bgc_splu *pl, const double *Jv, double alpha, double beta,
+                           bgc_cplx *a)
+{
+    int q;
+    for (q = 0; q < pl->nnz; q++)
+        a[q] = 0.0;
+    for (q = 0; q < bgc_jac_col_ptr[pl->n]; q++)
+        a[pl->jpos[q]] = -Jv[q];
+    for (q = 0; q < pl->n; q++)
+        a[pl->dpos[q]] += bgc_cmake(alpha + beta * 0.0, beta);
+}
+
+static int bgc_splu_zfactor(const bgc_splu *pl, bgc_cplx *a, bgc_cplx *w)
+{
+    int i, q, r;
+    for (i = 0; i < pl->n; i++) {
+        const int end = pl->rowptr[i + 1], d = pl->diag[i];
+        double scale = 0.0;
+        for (q = pl->rowptr[i]; q < end; q++) {
+            w[pl->cols[q]] = a[q];
+            scale = bgc_max(scale, bgc_cabs1(a[q]));
+        }
+        for (q = pl->rowptr[i]; q < d; q++) {
+            const int k = pl->cols[q];
+            const bgc_cplx l = bgc_cdiv(w[k], a[pl->diag[k]]);
+            if (!(bgc_cabs1(l) <= 10.0))
+                return 1;
+            w[k] = l;
+            for (r = pl->diag[k] + 1; r < pl->rowptr[k + 1]; r++)
+                w[pl->cols[r]] -= bgc_cmul(l, a[r]);
+        }
+        for (q = pl->rowptr[i]; q < end; q++)
+            a[q] = w[pl->cols[q]];
+        if (!(bgc_cabs1(a[d]) > 1e-14 * scale) || !isfinite(bgc_cabs1(a[d])))
+            return 1;
+    }
+    return 0;
+}
+
+static void bgc_splu_zsolve(const bgc_splu *pl, const bgc_cplx *a, bgc_cplx *b, bgc_cplx *w)
+{
+    int i, q;
+    for (i = 0; i < pl->n; i++) {
+        bgc_cplx acc = b[pl->perm[i]];
+        for (q = pl->rowptr[i]; q < pl->diag[i]; q++)
+            acc -= bgc_cmul(a[q], w[pl->cols[q]]);
+        w[i] = acc;
+    }
+    for (i = pl->n - 1; i >= 0; i--) {
+        bgc_cplx acc = w[i];
+        for (q = pl->diag[i] + 1; q < pl->rowptr[i + 1]; q++)
+            acc -= bgc_cmul(a[q], w[pl->cols[q]]);
+        w[i] = bgc_cdiv(acc, a[pl->diag[i]]);
+    }
+    for (i = 0; i < pl->n; i++)
+        b[pl->perm[i]] = w[i];
+}
+
+/* An iteration matrix on the sparse path: its factors, sparse (v or z), or dense (d or dz,
+   with piv, allocated when first needed) after a pivot failed its test. */
+typedef struct bgc_smat {
+    double *v, *d;
+    bgc_cplx *z, *dz;
+    int *piv, dense;
+} bgc_smat;
+
+static void bgc_smat_free(bgc_smat *m)
+{
+    free(m->v);
+    free(m->d);
+    free(m->z);
+    free(m->dz);
+    free(m->piv);
+}
+
+/* Allocates the sparse values (complex: z); 0, or nonzero when out of memory. */
+static int bgc_smat_new(bgc_smat *m, int complex_values)
+{
+    const size_t nnz = (size_t)(bgc_jac_lu->nnz > 0 ? bgc_jac_lu->nnz : 1);
+    memset(m, 0, sizeof *m);
+    if (complex_values)
+        m->z = malloc(nnz * sizeof *m->z);
+    else
+        m->v = malloc(nnz * sizeof *m->v);
+    return complex_values ? m->z == NULL : m->v == NULL;
+}
+
+/* The dense fallback's storage; nonzero when out of memory. */
+static int bgc_smat_dense(bgc_smat *m, int complex_values)
+{
+    const size_t n = (size_t)bgc_jac_lu->n;
+    if (!m->piv)
+        m->piv = malloc(n * sizeof *m->piv);
+    if (complex_values && !m->dz)
+        m->dz = malloc(n * n * sizeof *m->dz);
+    if (!complex_values && !m->d)
+        m->d = malloc(n * n * sizeof *m->d);
+    return !m->piv || (complex_values ? !m->dz : !m->d);
+}
+
+/* fac I - J factored: 0, or nonzero if singular (or out of memory for the dense fallback). */
+static int bgc_smat_factor(bgc_smat *m, const double *Jv, double fac, double *w)
+{
+    const bgc_splu *pl = bgc_jac_lu;
+    const int n = pl->n;
+    int j, q;
+    bgc_splu_form(pl, Jv, fac, m->v);
+    m->dense = 0;
+    if (bgc_splu_factor(pl, m->v, w) == 0)
+        return 0;
+    if (bgc_smat_dense(m, 0))
+        return 1;
+    m->dense = 1;
+    for (q = 0; q < n * n; q++)
+        m->d[q] = 0.0;
+    for (j = 0; j < n; j++)
+        for (q = bgc_jac_col_ptr[j]; q < bgc_jac_col_ptr[j + 1]; q++)
+            m->d[(size_t)bgc_jac_col_rows[q] * n + j] = -Jv[q];
+    for (j = 0; j < n; j++)
+        m->d[(size_t)j * n + j] += fac;
+    return bgc_stiff_lu(n, m->d, m->piv);
+}
+
+static int bgc_smat_zfactor(bgc_smat *m, const double *Jv, double alpha, double beta,
+                            bgc_cplx *w)
+{
+    const bgc_splu *pl = bgc_jac_lu;
+    const int n = pl->n;
+    int j, q;
+    bgc_splu_zform(pl, Jv, alpha, beta, m->z);
+    m->dense = 0;
+    if (bgc_splu_zfactor(pl, m->z, w) == 0)
+        return 0;
+    if (bgc_smat_dense(m, 1))
+        return 1;
+    m->dense = 1;
+    for (q = 0; q < n * n; q++)
+        m->dz[q] = 0.0;
+    for (j = 0; j < n; j++)
+        for (q = bgc_jac_col_ptr[j]; q < bgc_jac_col_ptr[j + 1]; q++)
+            m->dz[(size_t)bgc_jac_col_rows[q] * n + j] = -Jv[q];
+    for (j = 0; j < n; j++)
+        m->dz[(size_t)j * n + j] += bgc_cmake(alpha + beta * 0.0, beta);
+    return bgc_stiff_zlu(n, m->dz, m->piv);
+}
+
+static void bgc_smat_solve(const bgc_smat *m, double *b, double *w)
+{
+    if (m->dense)
+        bgc_stiff_lu_solve(bgc_jac_lu->n, m->d, m->piv, b);
+    else
+        bgc_splu_solve(bgc_jac_lu, m->v, b, w);
+}
+
+static void bgc_smat_zsolve(const bgc_smat *m, bgc_cplx *b, bgc_cplx *w)
+{
+    if (m->dense)
+        bgc_stiff_zlu_solve(bgc_jac_lu->n, m->dz, m->piv, b);
+    else
+        bgc_splu_zsolve(bgc_jac_lu, m->z, b, w);
+}
+
 /* The error norm of the stiff families: sqrt(mean((v_i / w_i)^2)), 0 without states; *worst:
    the component with the largest share. */
 static double bgc_stiff_norm(const double *v, const double *w, int *worst)
@@ -2805,6 +3081,8 @@ typedef struct bgc_ros_state {
     double hacc, erracc;
     double *J, *E, *k, *f0, *ft, *ys, *q; /* q: R rows (the first two also the error's) */
     int *piv;
+    double *sw;  /* the sparse path: J's structural values in J, E in sm, a work vector */
+    bgc_smat sm;
     const double *y, *y1; /* the step last accepted, for the dense output */
 } bgc_ros_state;
 
@@ -2824,7 +3102,8 @@ static int bgc_ros_point(bgc_ros_state *ms, bgc_run *r, double t, const double *
             ms->ft[l] = (ms->ft[l] - ms->f0[l]) / delta;
     }
     r->st->jac++;
-    if (bgc_jacobian(t, y, r->p, r->w, ms->J))
+    if (bgc_jac_lu->n ? bgc_jacobian_values(t, y, r->p, r->w, ms->J)
+                      : bgc_jacobian(t, y, r->p, r->w, ms->J))
         return bgc_fail_block(r->msg, r->msg_size, r->w);
     return 0;
 }
@@ -2834,6 +3113,7 @@ static void bgc_ros_finish(void *state)
     bgc_ros_state *ms = state;
     free(ms->piv);
     free(ms->J);
+    bgc_smat_free(&ms->sm);
     free(ms);
 }
 
@@ -2842,10 +3122,13 @@ static void *bgc_ros_start(bgc_run *r, const double *y, double *h, int *rc)
     enum { N = BGC_NUM_STATES, D = BGC_DIM(BGC_NUM_STATES) };
     const bgc_rosenbrock *m = r->method->ros;
     const int S = m->stages, R = m->dense_rows > 2 ? m->dense_rows : 2;
+    const size_t matrices = bgc_jac_lu->n ? (size_t)bgc_jac_col_ptr[N] + D : (size_t)2 * D * D;
     bgc_ros_state *ms = calloc(1, sizeof *ms);
-    double *mem = malloc(((size_t)2 * D * D + (size_t)(S + 3 + R) * D) * sizeof *mem);
+    double *mem = malloc((matrices + (size_t)(S + 3 + R) * D) * sizeof *mem);
     int l, *piv = malloc((size_t)D * sizeof *piv);
-    if (!ms || !mem || !piv) {
+    if (!ms || !mem || !piv || (bgc_jac_lu->n && bgc_smat_new(&ms->sm, 0))) {
+        if (ms)
+            bgc_smat_free(&ms->sm);
         free(ms);
         free(mem);
         free(piv);
@@ -2859,8 +3142,9 @@ static void *bgc_ros_start(bgc_run *r, const double *y, double *h, int *rc)
     ms->erracc = 1.0;
     ms->piv = piv;
     ms->J = mem;
-    ms->E = ms->J + (size_t)D * D;
-    ms->k = ms->E + (size_t)D * D;
+    ms->E = ms->J + (bgc_jac_lu->n ? (size_t)bgc_jac_col_ptr[N] : (size_t)D * D);
+    ms->sw = ms->E; /* the sparse path: the work vector in E's place */
+    ms->k = bgc_jac_lu->n ? ms->sw + D : ms->E + (size_t)D * D;
     ms->f0 = ms->k + (size_t)S * D;
     ms->ft = ms->f0 + D;
     ms->ys = ms->ft + D;
@@ -2913,7 +3197,10 @@ static int bgc_ros_stages(bgc_ros_state *ms, bgc_run *r, double t, double h, dou
             if (!BGC_AUTONOMOUS && m->d[i] != 0.0)
                 ki[l] += h * m->d[i] * ms->ft[l];
         }
-        bgc_stiff_lu_solve(N, ms->E, ms->piv, ki);
+        if (bgc_jac_lu->n)
+            bgc_smat_solve(&ms->sm, ki, ms->sw);
+        else
+            bgc_stiff_lu_solve(N, ms->E, ms->piv, ki);
         r->st->solves++;
     }
     return 0;
@@ -2955,12 +3242,17 @@ static void bgc_ros_step(void *state, bgc_run *r, double t, double h, double tph
     int i, j, l;
 
     /* E = I/(gamma h) - J, factored */
-    for (l = 0; l < N * N; l++)
-        ms->E[l] = -ms->J[l];
-    for (l = 0; l < N; l++)
-        ms->E[(size_t)l * N + l] += 1.0 / (ms->m->gamma * h);
     r->st->lu++;
-    if (bgc_stiff_lu(N, ms->E, ms->piv)) {
+    if (bgc_jac_lu->n) {
+        l = bgc_smat_factor(&ms->sm, ms->J, 1.0 / (ms->m->gamma * h), ms->sw);
+    } else {
+        for (l = 0; l < N * N; l++)
+            ms->E[l] = -ms->J[l];
+        for (l = 0; l < N; l++)
+            ms->E[(size_t)l * N + l] += 1.0 / (ms->m->gamma * h);
+        l = bgc_stiff_lu(N, ms->E, ms->piv);
+    }
+    if (l) {
         if (ms->fixed || ++ms->nsing == 5)
             bgc_stiff_end(o, bgc_stiff_fail_singular(r, t, h));
         else
@@ -3177,6 +3469,9 @@ typedef struct bgc_radau_state {
     double *J, *E1, *Z, *W, *b, *zlast, *dw, *f0, *scal, *ys, *tmp, *cont, *f2, *ew;
     bgc_cplx *Ec, *zc;
     int *piv;
+    bgc_smat sm[(BGC_RADAU_MAX_STAGES + 1) / 2]; /* the sparse path: the real matrix, then
+                                                    the complex ones (J: J's structural values,
+                                                    E1 and Ec: work vectors) */
     bgc_radau_use u;
     const bgc_radau *dm; /* the stage set ... */
     const double *y;     /* ... and the start of the step last accepted (dense output) */
@@ -3186,6 +3481,9 @@ typedef struct bgc_radau_state {
 static void bgc_radau_finish(void *state)
 {
     bgc_radau_state *ms = state;
+    int k;
+    for (k = 0; k < (BGC_RADAU_MAX_STAGES + 1) / 2; k++)
+        bgc_smat_free(&ms->sm[k]);
     free(ms->piv);
     free(ms->Ec);
     free(ms->J);
@@ -3198,22 +3496,30 @@ static bgc_radau_state *bgc_radau_new(bgc_run *r)
     enum { D = BGC_DIM(BGC_NUM_STATES) };
     const bgc_method *method = r->method;
     bgc_radau_state *ms = calloc(1, sizeof *ms);
+    const int sparse = bgc_jac_lu->n > 0;
     int k, l, pmax, smax = 0;
     for (k = 0; k < method->radau_sets; k++)
         smax = method->radau[k].s > smax ? method->radau[k].s : smax;
     pmax = (smax - 1) / 2;
     if (!ms)
         return NULL;
-    ms->J = malloc(((size_t)2 * D * D + (size_t)(3 * smax + 11) * D) * sizeof *ms->J);
-    ms->Ec = malloc(((size_t)pmax * D * D + (size_t)pmax * D + 1) * sizeof *ms->Ec);
+    const size_t nj = sparse ? (size_t)bgc_jac_col_ptr[BGC_NUM_STATES] : (size_t)D * D;
+    const size_t ne = sparse ? (size_t)D : (size_t)D * D;
+    ms->J = malloc((nj + ne + (size_t)(3 * smax + 11) * D) * sizeof *ms->J);
+    ms->Ec = malloc(((size_t)(sparse ? 1 : pmax) * ne + (size_t)pmax * D + 1) * sizeof *ms->Ec);
     ms->piv = malloc((size_t)(1 + pmax) * D * sizeof *ms->piv + sizeof *ms->piv);
+    for (k = 0; k < 1 + pmax && sparse; k++)
+        if (bgc_smat_new(&ms->sm[k], k > 0)) {
+            bgc_radau_finish(ms);
+            return NULL;
+        }
     if (!ms->J || !ms->Ec || !ms->piv) {
         bgc_radau_finish(ms);
         return NULL;
     }
     ms->smax = smax;
-    ms->E1 = ms->J + (size_t)D * D;
-    ms->Z = ms->E1 + (size_t)D * D; /* smax x D */
+    ms->E1 = ms->J + nj;
+    ms->Z = ms->E1 + ne; /* smax x D */
     ms->W = ms->Z + (size_t)smax * D; /* smax x D */
     ms->b = ms->W + (size_t)smax * D; /* smax x D */
     ms->zlast = ms->b + (size_t)smax * D;
@@ -3225,7 +3531,7 @@ static bgc_radau_state *bgc_radau_new(bgc_run *r)
     ms->cont = ms->tmp + D;
     ms->f2 = ms->cont + D;
     ms->ew = ms->f2 + D;
-    ms->zc = ms->Ec + (size_t)pmax * D * D; /* pmax x D */
+    ms->zc = ms->Ec + (size_t)(sparse ? 1 : pmax) * ne; /* pmax x D */
     for (l = 0; l < smax * D; l++)
         ms->b[l] = 0.0;
     for (l = 0; l < D; l++)
@@ -3305,6 +3611,15 @@ static int bgc_radau_factor(bgc_radau_state *ms, bgc_run *r, const double *alphn
 {
     enum { N = BGC_NUM_STATES, D = BGC_DIM(BGC_NUM_STATES) };
     int k, l, singular;
+    if (bgc_jac_lu->n) {
+        r->st->lu++;
+        singular = bgc_smat_factor(&ms->sm[0], ms->J, fac1, ms->E1);
+        for (k = 0; k < ms->u.pairs && !singular; k++) {
+            r->st->lu++;
+            singular = bgc_smat_zfactor(&ms->sm[1 + k], ms->J, alphn[k], betan[k], ms->Ec);
+        }
+        return singular;
+    }
     for (l = 0; l < N * N; l++)
         ms->E1[l] = -ms->J[l];
     for (l = 0; l < N; l++)
@@ -3383,10 +3698,16 @@ static int bgc_radau_newton(bgc_radau_state *ms, bgc_run *r, double t, double h,
                 ms->zc[(size_t)k * D + l] = bgc_cmake(re + im * 0.0, im); /* re + im I */
             }
         }
-        bgc_stiff_lu_solve(N, ms->E1, ms->piv, ms->dw);
-        for (k = 0; k < u->pairs; k++)
-            bgc_stiff_zlu_solve(N, ms->Ec + (size_t)k * D * D, ms->piv + (size_t)(1 + k) * D,
-                                ms->zc + (size_t)k * D);
+        if (bgc_jac_lu->n) {
+            bgc_smat_solve(&ms->sm[0], ms->dw, ms->E1);
+            for (k = 0; k < u->pairs; k++)
+                bgc_smat_zsolve(&ms->sm[1 + k], ms->zc + (size_t)k * D, ms->Ec);
+        } else {
+            bgc_stiff_lu_solve(N, ms->E1, ms->piv, ms->dw);
+            for (k = 0; k < u->pairs; k++)
+                bgc_stiff_zlu_solve(N, ms->Ec + (size_t)k * D * D,
+                                    ms->piv + (size_t)(1 + k) * D, ms->zc + (size_t)k * D);
+        }
         r->st->solves += 1 + u->pairs;
         ms->newt++;
         for (l = 0; l < N; l++) {
@@ -3439,6 +3760,15 @@ static int bgc_radau_newton(bgc_radau_state *ms, bgc_run *r, double t, double h,
     }
 }
 
+/* b <- (gamma/h I - J)^-1 b with the real matrix's factors. */
+static void bgc_radau_lsolve(const bgc_radau_state *ms, double *b)
+{
+    if (bgc_jac_lu->n)
+        bgc_smat_solve(&ms->sm[0], b, ms->E1);
+    else
+        bgc_stiff_lu_solve(BGC_NUM_STATES, ms->E1, ms->piv, b);
+}
+
 /* The error estimate: (gamma/h I - J) err = f(t, y) + sum_j e_j Z_j / h, refined once with
    f(t, y + err) on the first step and after a rejection. */
 static double bgc_radau_error(bgc_radau_state *ms, bgc_run *r, double t, double h,
@@ -3458,7 +3788,7 @@ static double bgc_radau_error(bgc_radau_state *ms, bgc_run *r, double t, double 
         ms->cont[l] = ms->f2[l] + ms->f0[l];
         ms->ew[l] = u->atol + u->rtol * bgc_max(fabs(y[l]), fabs(y[l] + zs[l]));
     }
-    bgc_stiff_lu_solve(N, ms->E1, ms->piv, ms->cont);
+    bgc_radau_lsolve(ms, ms->cont);
     r->st->solves++;
     err = bgc_max(bgc_stiff_norm(ms->cont, ms->ew, &ms->worst), 1e-10);
     if (err >= 1.0 && (ms->first || ms->reject)) { /* refined: f at y + err */
@@ -3468,7 +3798,7 @@ static double bgc_radau_error(bgc_radau_state *ms, bgc_run *r, double t, double 
         if (bgc_model_rhs(t, ms->ys, r->p, r->w, ms->tmp) == 0) {
             for (l = 0; l < N; l++)
                 ms->cont[l] = ms->tmp[l] + ms->f2[l];
-            bgc_stiff_lu_solve(N, ms->E1, ms->piv, ms->cont);
+            bgc_radau_lsolve(ms, ms->cont);
             r->st->solves++;
             err = bgc_max(bgc_stiff_norm(ms->cont, ms->ew, &ms->worst), 1e-10);
         }
@@ -3557,7 +3887,8 @@ static void bgc_radau_step(void *state, bgc_run *r, double t, double h, double t
     int k, failed, bad = BGC_BAD_NONE, bad_kind = 0;
     if (ms->needjac) {
         r->st->jac++;
-        if (bgc_jacobian(t, y, r->p, r->w, ms->J)) {
+        if (bgc_jac_lu->n ? bgc_jacobian_values(t, y, r->p, r->w, ms->J)
+                          : bgc_jacobian(t, y, r->p, r->w, ms->J)) {
             bgc_stiff_end(o, bgc_fail_block(r->msg, r->msg_size, r->w));
             return;
         }

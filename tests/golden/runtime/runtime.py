@@ -33,6 +33,8 @@
 #                         factor and solve functions or None)
 #   _JAC_COLORS           list of tuples of int: the Jacobian's columns of each colour
 #   _JAC_COLUMNS          list of tuples of int: the rows each column of the Jacobian touches
+#   _JAC_LU               a large sparse model only (else None): _SparseLU, the plan of the
+#                         stiff solvers' sparse LU (bgc/sparse.py, IterationPlan)
 #   _fill_params(p, given) -> p
 #                         sets p[j] (a list of floats, ordered as _PARAM_NAMES) to parameter
 #                         j's default for every j not in the set given, in order
@@ -128,6 +130,7 @@ _BLOCK_NAMES = []
 _BLOCKS = []
 _JAC_COLORS = []
 _JAC_COLUMNS = []
+_JAC_LU = None
 _METHODS = {}
 SOLVERS = ()
 _SOLVER_LIST = ""
@@ -784,6 +787,23 @@ def _jacobian_into(t, x, p, w, J):
             v[j] = 0.0
             for i in _JAC_COLUMNS[j]:
                 J[i, j] = jv[i]
+
+
+def _jacobian_values(t, x, p, w, Jv):
+    """J's structural values, column by column (bgc_jacobian_values)."""
+    v = [0.0] * _N
+    jv = [0.0] * _N
+    starts = _JAC_LU.colstart
+    for cols in _JAC_COLORS:
+        for j in cols:
+            v[j] = 1.0
+        _jvp(t, x, p, w, v, jv)
+        for j in cols:
+            v[j] = 0.0
+            q = starts[j]
+            for i in _JAC_COLUMNS[j]:
+                Jv[q] = jv[i]
+                q += 1
 
 
 def _param_values(overrides):
@@ -2727,6 +2747,8 @@ class _SmallLU:
 
 def _lu(a):
     """bgc_stiff_lu on a (n x n, factored in place): the pivots, or None if singular."""
+    if isinstance(a, _SparseMatrix):
+        return a.piv
     n = a.shape[0]
     if n <= _SMALL_LU:
         rows = a.tolist()
@@ -2758,6 +2780,8 @@ def _lu(a):
 def _lu_solve(lu, piv, b):
     """bgc_stiff_lu_solve: A^-1 b (a new vector) from _lu's factors (under the caller's
     numpy.errstate, as _zlu_solve)."""
+    if isinstance(lu, _SparseMatrix):
+        return lu.solve(b)
     if isinstance(piv, _SmallLU):
         return numpy.array(_lu_solve_small(piv.rows, piv.piv, numpy.asarray(b, dtype=float)
                                            .tolist()))
@@ -2807,6 +2831,8 @@ def _zlu(ar, ai):
 
 def _zlu_solve(lur, lui, piv, br, bi):
     """bgc_stiff_zlu_solve: A^-1 (br + i bi) (new vectors) from _zlu's factors."""
+    if isinstance(lur, _SparseMatrix):
+        return lur.zsolve(br, bi)
     if isinstance(piv, _SmallLU):
         xr, xi = _zlu_solve_small(piv.rows, piv.imag, piv.piv,
                                   numpy.asarray(br, dtype=float).tolist(),
@@ -2833,8 +2859,192 @@ def _zlu_solve(lur, lui, piv, br, bi):
     return br, bi
 
 
+# A large sparse model's iteration matrices (_JAC_LU, bgc_splu in the C runtime): the values
+# of L + U in the plan's positions, factored row by row in the plan's order with the C
+# runtime's operations in its order (bgc_splu_factor ... bgc_smat_zsolve), each row's updates
+# element-wise; a pivot that fails its test sends the matrix to the dense LU above.
+
+
+class _SparseLU:
+    """The plan (bgc/sparse.py, IterationPlan) as arrays, with each row's parts cut out once."""
+
+    def __init__(self, perm, rowptr, cols, diag, jpos, dpos):
+        self.n = len(perm)
+        self.perm = numpy.array(perm, dtype=numpy.intp)
+        self.cols = numpy.array(cols, dtype=numpy.intp)
+        self.jpos = numpy.array(jpos, dtype=numpy.intp)
+        self.dpos = numpy.array(dpos, dtype=numpy.intp)
+        self.nnz = len(cols)
+        self.rowptr, self.diag = list(rowptr), list(diag)
+        # per row i: its positions, its L part (positions, columns), its U part after the
+        # diagonal (positions, columns)
+        self.row = [slice(rowptr[i], rowptr[i + 1]) for i in range(self.n)]
+        self.lower = [slice(rowptr[i], diag[i]) for i in range(self.n)]
+        self.lcols = [list(cols[rowptr[i]:diag[i]]) for i in range(self.n)]
+        self.upper = [slice(diag[i] + 1, rowptr[i + 1]) for i in range(self.n)]
+        self.ucols = [self.cols[diag[i] + 1:rowptr[i + 1]] for i in range(self.n)]
+        # J's structural entries (the model part binds _JAC_COLUMNS first): where each
+        # column starts, and each entry's row and column
+        self.colstart, start = [], 0
+        for rows in _JAC_COLUMNS:
+            self.colstart.append(start)
+            start += len(rows)
+        self.jrows = numpy.array([i for rows in _JAC_COLUMNS for i in rows], dtype=numpy.intp)
+        self.jcols = numpy.array([j for j, rows in enumerate(_JAC_COLUMNS) for _ in rows],
+                                 dtype=numpy.intp)
+
+
+def _splu_factor(pl, a):
+    """bgc_splu_factor: a (the values) factored in place; False if a pivot fails its test."""
+    w = numpy.zeros(pl.n)
+    cols, diag = pl.cols, pl.diag
+    for i in range(pl.n):
+        row = pl.row[i]
+        w[cols[row]] = a[row]
+        size = numpy.abs(a[row])
+        scale = max(0.0, float(numpy.max(numpy.where(size == size, size, 0.0))))
+        for k in pl.lcols[i]:
+            lower = float(w[k]) / float(a[diag[k]])
+            if not abs(lower) <= 10.0:
+                return False
+            w[k] = lower
+            u = pl.upper[k]
+            if u.stop > u.start:
+                w[pl.ucols[k]] -= lower * a[u]
+        a[row] = w[cols[row]]
+        pivot = float(a[diag[i]])
+        if not abs(pivot) > 1e-14 * scale or not math.isfinite(pivot):
+            return False
+    return True
+
+
+def _splu_solve(pl, a, b):
+    """bgc_splu_solve: a new vector (states' order)."""
+    w = numpy.empty(pl.n)
+    bp = numpy.asarray(b, dtype=float)[pl.perm]
+    cols, diag = pl.cols, pl.diag
+    for i in range(pl.n):
+        lo = pl.lower[i]
+        w[i] = _seq_minus(bp[i], a[lo] * w[cols[lo]]) if lo.stop > lo.start else bp[i]
+    for i in range(pl.n - 1, -1, -1):
+        u = pl.upper[i]
+        acc = _seq_minus(w[i], a[u] * w[pl.ucols[i]]) if u.stop > u.start else w[i]
+        w[i] = acc / a[diag[i]]
+    out = numpy.empty(pl.n)
+    out[pl.perm] = w
+    return out
+
+
+def _splu_zfactor(pl, ar, ai):
+    """bgc_splu_zfactor on ar + i ai."""
+    wr, wi = numpy.zeros(pl.n), numpy.zeros(pl.n)
+    cols, diag = pl.cols, pl.diag
+    for i in range(pl.n):
+        row = pl.row[i]
+        wr[cols[row]], wi[cols[row]] = ar[row], ai[row]
+        size = numpy.abs(ar[row]) + numpy.abs(ai[row])
+        scale = max(0.0, float(numpy.max(numpy.where(size == size, size, 0.0))))
+        for k in pl.lcols[i]:
+            dk = diag[k]
+            lr, li = _divdc3(float(wr[k]), float(wi[k]), float(ar[dk]), float(ai[dk]))
+            if not abs(lr) + abs(li) <= 10.0:
+                return False
+            wr[k], wi[k] = lr, li
+            u = pl.upper[k]
+            if u.stop > u.start:
+                pr, pi = _cmul(lr, li, ar[u], ai[u])
+                uc = pl.ucols[k]
+                wr[uc] -= pr
+                wi[uc] -= pi
+        ar[row], ai[row] = wr[cols[row]], wi[cols[row]]
+        size = abs(float(ar[diag[i]])) + abs(float(ai[diag[i]]))
+        if not size > 1e-14 * scale or not math.isfinite(size):
+            return False
+    return True
+
+
+def _splu_zsolve(pl, ar, ai, br, bi):
+    """bgc_splu_zsolve: new vectors."""
+    wr, wi = numpy.empty(pl.n), numpy.empty(pl.n)
+    pr0, pi0 = numpy.asarray(br, dtype=float)[pl.perm], numpy.asarray(bi, dtype=float)[pl.perm]
+    cols, diag = pl.cols, pl.diag
+    for i in range(pl.n):
+        lo = pl.lower[i]
+        if lo.stop > lo.start:
+            c = cols[lo]
+            pr, pi = _cmul(ar[lo], ai[lo], wr[c], wi[c])
+            wr[i], wi[i] = _seq_minus(pr0[i], pr), _seq_minus(pi0[i], pi)
+        else:
+            wr[i], wi[i] = pr0[i], pi0[i]
+    for i in range(pl.n - 1, -1, -1):
+        u = pl.upper[i]
+        xr, xi = float(wr[i]), float(wi[i])
+        if u.stop > u.start:
+            c = pl.ucols[i]
+            pr, pi = _cmul(ar[u], ai[u], wr[c], wi[c])
+            xr, xi = float(_seq_minus(xr, pr)), float(_seq_minus(xi, pi))
+        wr[i], wi[i] = _divdc3(xr, xi, float(ar[diag[i]]), float(ai[diag[i]]))
+    outr, outi = numpy.empty(pl.n), numpy.empty(pl.n)
+    outr[pl.perm], outi[pl.perm] = wr, wi
+    return outr, outi
+
+
+class _SparseMatrix:
+    """An iteration matrix on the sparse path (bgc_smat): alpha I - J (plus i beta I when
+    complex) from J's structural values, factored by factor() (False: singular), sparse or,
+    after a failed pivot test, dense."""
+
+    __slots__ = ("re", "im", "piv", "dense")
+
+    def __init__(self, Jv, alpha, beta=None):
+        pl = _JAC_LU
+        self.re = numpy.zeros(pl.nnz)
+        self.re[pl.jpos] = -Jv
+        self.re[pl.dpos] += alpha
+        self.im = None
+        if beta is not None:
+            self.im = numpy.zeros(pl.nnz)
+            self.im[pl.dpos] += beta
+        self.piv, self.dense = None, False
+        self._factor(Jv, alpha, beta)
+
+    def _factor(self, Jv, alpha, beta):
+        pl = _JAC_LU
+        with numpy.errstate(all="ignore"):
+            ok = (_splu_factor(pl, self.re) if self.im is None
+                  else _splu_zfactor(pl, self.re, self.im))
+        if ok:
+            self.piv = True
+            return
+        self.dense = True
+        self.re = numpy.zeros((_N, _N))
+        self.re[pl.jrows, pl.jcols] = -Jv
+        self.re[numpy.diag_indices(_N)] += alpha
+        if beta is None:
+            self.piv = _lu(self.re)
+        else:
+            self.im = numpy.zeros((_N, _N))
+            self.im[numpy.diag_indices(_N)] += beta
+            self.piv = _zlu(self.re, self.im)
+
+    def solve(self, b):
+        if self.dense:
+            return _lu_solve(self.re, self.piv, b)
+        with numpy.errstate(all="ignore"):
+            return _splu_solve(_JAC_LU, self.re, b)
+
+    def zsolve(self, br, bi):
+        if self.dense:
+            return _zlu_solve(self.re, self.im, self.piv, br, bi)
+        with numpy.errstate(all="ignore"):
+            return _splu_zsolve(_JAC_LU, self.re, self.im, br, bi)
+
+
 def _real_matrix(J, diagonal):
-    """-J with `diagonal` added to its diagonal, as the C runtime forms it."""
+    """-J with `diagonal` added to its diagonal, as the C runtime forms it (on the sparse path
+    factored at once: _lu returns its outcome)."""
+    if _JAC_LU is not None:
+        return _SparseMatrix(J, diagonal)
     E = -J
     E[numpy.diag_indices(_N)] += diagonal
     return E
@@ -2846,10 +3056,11 @@ def _stiff_fail_singular(name, t, h):
 
 
 def _stiff_jacobian(run, t, y):
-    J = numpy.zeros((_N, _N))
+    """J at (t, y): dense, or on the sparse path its structural values (bgc_jacobian_values)."""
+    J = numpy.zeros((_N, _N)) if _JAC_LU is None else numpy.zeros(_JAC_LU.jpos.shape[0])
     run.st["jac"] += 1
     try:
-        _jacobian_into(t, y.tolist(), run.p, run.w, J)
+        (_jacobian_into if _JAC_LU is None else _jacobian_values)(t, y.tolist(), run.p, run.w, J)
     except _BlockFailure as failure:
         raise _block_failed(failure) from None
     return J
@@ -3121,6 +3332,12 @@ class _Radau(_Family):
             return False
         for k in range(self.u.pairs):
             st["lu"] += 1
+            if _JAC_LU is not None:
+                E = _SparseMatrix(self.J, alphn[k] + betan[k] * 0.0, betan[k])
+                if E.piv is None:
+                    return False
+                self.Ec.append((E, None, E.piv))
+                continue
             Er = _real_matrix(self.J, alphn[k] + betan[k] * 0.0)
             Ei = numpy.zeros((_N, _N))
             Ei[numpy.diag_indices(_N)] += betan[k]
