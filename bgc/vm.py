@@ -643,8 +643,9 @@ def c_link_definitions() -> str:
     out = ["/* The model part's values, read from the program file (bgc/vm.py). */"]
     out += [f"int bgc_link_{m.lower()};" for m in emit.LINK_INTS]
     out += [f"double bgc_link_{m.lower()};" for m in emit.LINK_DOUBLES]
-    out += ["const bgc_block *bgc_link_blocks;", "const bgc_splu *bgc_link_jac_lu; /* none: "
-            "the interpreter's Jacobians are dense (supports) */"]
+    out += ["const bgc_block *bgc_link_blocks;",
+            "static const bgc_splu bgc_vm_no_lu; /* (the interpreter's Jacobians are dense: "
+            "supports) */", "const bgc_splu *bgc_link_jac_lu = &bgc_vm_no_lu;"]
     out += [f"const int *bgc_link_{n};" for n in INT_TABLES]
     out += ["const char *const *bgc_link_discrete_names;", "const char *bgc_link_ident;"]
     out += ["static int *const bgc_vm_link_ints[] = { "
