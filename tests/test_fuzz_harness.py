@@ -72,8 +72,12 @@ def test_the_generators_cover_the_language():
     text = "\n".join(d.decode("utf-8", "replace") for _, _, d in cases)
     for f in fuzz.FUNCTIONS:
         assert f + "(" in text, f
-    for construct in ("constraint", "MTF[", "0[", "scene ", "integral(", "@", "GY(", "\r\n"):
+    for construct in ("constraint", "MTF[", "0[", "scene ", "integral(", "@", "GY(", "\r\n",
+                      # events and contact (docs/hybrid.md), components (docs/language.md)
+                      "when ", "reinit ", "discrete ", " then ", " else ", "Fr(",
+                      "Sw(", "unilateral", "component ", "for i in ", "import "):
         assert construct in text, construct
+    assert re.search(r" : D(\n|;)", text), "an ideal diode"
     assert {how for _, how, _ in cases} >= {"generated", "generated+mutated"}
     assert len({how for _, how, _ in cases if how.startswith("mutated ")}) >= 10
 
@@ -90,6 +94,7 @@ def test_seeded_campaign_check_and_simulate(tmp_path):
             accepted.append(data)
     assert not failures, failures[0]
     assert len(accepted) >= SIMULATED
+    assert any(b"when " in d for d in accepted), "no hybrid model reached the end of check"
     backends = ["python"] + (["c"] if have_cc() else [])
     for data in accepted[:SIMULATED]:
         for backend in backends:
