@@ -117,7 +117,9 @@ def test_a_failure_is_minimised_and_written(tmp_path):
 
 
 REPLAYED = sorted(p.name for p in REGRESSIONS.glob("*.bg"))
-LOCATED = re.compile(r"^tests/fuzz_regressions/[^:]+\.bg(:\d+:\d+)?: error: ", re.M)
+# (an error in a library the model imports is located there, with a note at the instance)
+LOCATED = re.compile(r"^(tests/fuzz_regressions/[^:]+\.bg(:\d+:\d+)?"
+                     r"|\S+/bgc/library/\w+\.bg:\d+:\d+): error: ", re.M)
 
 
 @pytest.mark.parametrize("name", REPLAYED)

@@ -598,7 +598,8 @@ def case(rng: random.Random, seeds: dict[str, str], i: int) -> tuple[str, bytes]
 
 # ------------------------------------------------------------------------- check, in process
 
-LOCATED = re.compile(r"^m\.bg(:\d+:\d+)?: error: ", re.M)  # (after warnings, if any)
+# (after warnings, if any; an error in a library the model imports is located there)
+LOCATED = re.compile(r"^(m\.bg|\S+\.bg:\d+:\d+)(:\d+:\d+)?: error: ", re.M)
 
 
 def _innermost_bgc_frame(exc: BaseException) -> str:
