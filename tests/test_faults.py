@@ -350,6 +350,53 @@ def test_a_full_disk_under_the_compile_cache_is_one_line(small_disk, tmp_path):
                 if p.name.startswith(".build")] == []  # no temporary left behind
 
 
+def _cache_is_clean(cache: Path):
+    """No build directory left in the cache, and every file in it one bgc can use."""
+    assert [p.name for p in cache.iterdir() if p.name.startswith("build")] == []
+    for p in cache.iterdir():
+        if p.name.startswith("bgc-") and p.suffix in ("", ".o"):
+            assert backends.usable(p, executable=p.suffix == ""), p.name
+
+
+@pytest.mark.skipif(not backends.have_c_compiler(), reason="needs a C compiler")
+def test_the_compiler_hitting_a_file_size_limit_in_the_cache_is_one_line(tmp_path, warm):
+    """The runtime object is in the cache (the fixture built it); the compiler links a new
+    model's program into the cache under a 50 kB file size limit (SIGXFSZ kills its linker, or
+    it says File too large): one line naming the cache, exit 1, no output, the cache as it
+    was (its runtime object kept, not blamed)."""
+    (tmp_path / "m.bg").write_text(DECAY.replace("-z", "-2*z"))
+    done = subprocess.run([sys.executable, "-m", "bgc", "simulate", "m.bg", "-s", "s",
+                           "--t-end", "0.01", "-o", "out.csv"], cwd=tmp_path, env=warm[1],
+                          capture_output=True, text=True, preexec_fn=_limit_file_size)
+    cache = Path(warm[1]["BGC_CACHE_DIR"])
+    assert (done.returncode, done.stdout, done.stderr) == (
+        1, "", f"error: the C compiler cannot write into {cache}: File too large\n")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["m.bg"]
+    _cache_is_clean(cache)
+    assert any(p.name.startswith("bgc-runtime-") for p in cache.iterdir())
+
+
+@pytest.mark.skipif(not backends.have_c_compiler(), reason="needs a C compiler")
+def test_the_compiler_hitting_a_full_disk_in_its_temporary_directory_is_one_line(
+        small_disk, tmp_path, warm):
+    """$TMPDIR (where the compiler writes its temporary files) on a full disk."""
+    with open(small_disk / "fill", "wb") as fill:
+        try:
+            fill.write(b"\0" * 128 * 1024)
+        except OSError:
+            pass
+    (tmp_path / "m.bg").write_text(DECAY.replace("-z", "-3*z"))
+    done = run_bgc("simulate", "m.bg", "-s", "s", "--t-end", "0.01", "-o", "out.csv",
+                   cwd=tmp_path, env={"BGC_CACHE_DIR": warm[1]["BGC_CACHE_DIR"],
+                                      "TMPDIR": str(small_disk)})
+    assert (done.returncode, done.stdout, done.stderr) == (
+        1, "", f"error: the C compiler cannot write into {small_disk}: No space left on "
+               "device\n")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["m.bg", "small"]
+    assert [p.name for p in small_disk.iterdir()] == ["fill"]
+    _cache_is_clean(Path(warm[1]["BGC_CACHE_DIR"]))
+
+
 # ------------------------------------------------------------------ kill signals
 
 
