@@ -416,6 +416,57 @@ def test_killing_bgc_kills_the_program(tmp_path, warm, backend):
     assert not alive, "the program runs on after bgc was killed"
 
 
+def _descendants(pid: int) -> list[int]:
+    found = []
+    for child in children(pid):
+        found += [child, *_descendants(child)]
+    return found
+
+
+def _cmdline(pid: int) -> str:
+    try:
+        return Path(f"/proc/{pid}/cmdline").read_bytes().replace(b"\0", b" ").decode()
+    except OSError:
+        return ""
+
+
+def _have_dask() -> bool:
+    return importlib.util.find_spec("distributed") is not None
+
+
+@needs_proc
+def test_killing_bgc_sweep_kills_its_workers_and_their_programs(tmp_path, warm):
+    """`kill -9` of `bgc sweep`, once a batch's program runs in the worker process of a local
+    Dask cluster (--workers 1; without Dask, in bgc itself, --workers 0, the same code
+    starting the program): every process bgc started ends."""
+    workers = "1" if _have_dask() else "0"
+    (tmp_path / "m.bg").write_text(DECAY.replace("model decay", "model decay\nparameter k = 1")
+                                   .replace("-z", "-k*z"))
+    proc = subprocess.Popen([sys.executable, "-m", "bgc", "sweep", "m.bg", "-s", "s", "--grid",
+                             "k=1,2", "--metric", "final:z", "--workers", workers, "-o",
+                             "table.csv"], cwd=tmp_path, env=warm[1],
+                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    deadline = time.monotonic() + 120
+    while time.monotonic() < deadline:
+        assert proc.poll() is None
+        started = _descendants(proc.pid)
+        if any("--batch" in _cmdline(p) for p in started):
+            break
+        time.sleep(0.02)
+    else:
+        raise AssertionError("no batch started")
+    proc.kill()
+    proc.wait()
+    deadline = time.monotonic() + 20
+    while any(map(running, started)) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    left = [(p, _cmdline(p)) for p in started if running(p)]
+    for p, _ in left:
+        os.kill(p, signal.SIGKILL)
+    assert not left, f"still running after bgc sweep was killed: {left}"
+    assert not (tmp_path / "table.csv").exists()
+
+
 @needs_proc
 @pytest.mark.parametrize("backend, sig", [(b, s) for b in BACKENDS
                                           for s in (signal.SIGKILL, signal.SIGSEGV)])
