@@ -144,11 +144,16 @@ def _output_file(ctx, param, value):
     return value
 
 
-def _not_an_input(model: str, *outputs, others=()):
+def _model_path(model) -> str:
+    """The model file's path (the command's MODEL, a path or, with --const, a Source)."""
+    return model.path if isinstance(model, api.Source) else model
+
+
+def _not_an_input(model, *outputs, others=()):
     """Each output given (None: none) must not be a file the command reads: the model (under
     any name: another path, a symbolic or hard link), or `others` ((what, path) pairs); else
     one line, exit 1, before any work.  Nor may two outputs be the same file."""
-    inputs = [("the model file", model), *others]
+    inputs = [("the model file", _model_path(model)), *others]
     given = [o for o in outputs if o is not None]
     for i, output in enumerate(given):
         try:
@@ -774,7 +779,7 @@ class _RunProgress:
 def accuracy(model, scene, outputs, effects, algebra, backend, solver_list, rtols, steps,
              reference, gains, repeats, timeout, t_end, dt, params, no_plot, output):
     """Measure each solver's error and cost on the model: table, CSV and work-precision plot."""
-    stem = Path(model).stem + (f"-{scene}" if scene else "")
+    stem = Path(_model_path(model)).stem + (f"-{scene}" if scene else "")
     directory = Path(output or f"accuracy-{stem}")
     base = "gains" if gains is not None else "accuracy"
     _not_an_input(model, str(directory / f"{base}.csv"), str(directory / f"{base}.png"),
