@@ -208,3 +208,20 @@ def test_events_without_end_stop_at_the_step_budget(tmp_path):
                             r"row, the last changing '.+' \(a Zeno model\? --max-steps raises "
                             r"the budget\)", said[backend]), said[backend]
     assert len(set(said.values())) == 1, said
+
+
+@pytest.mark.parametrize("name, what", [
+    ("constraint_second_derivative_beyond_double.bg", "a number beyond a double"),
+    ("derivatives_divide_by_zero.bg", "a division by zero (zoo)")])
+def test_equations_not_finite_once_differentiated_are_the_models_error(name, what, tmp_path):
+    """Models `check` accepts whose generated equations are not finite (found through
+    `simulate`): the model's error before any code is written, exit 1, no output."""
+    from conftest import run_bgc
+    model = REGRESSIONS / name
+    with _alarm(SAFETY_SECONDS):
+        done = run_bgc("simulate", model, "--backend", "python", "--t-end", "0.05", "-o",
+                       tmp_path / "out.csv")
+    assert done.returncode == 1
+    assert done.stderr.startswith(f"{model}: error: the generated equations are not finite: "
+                                  f"the derivatives of the states hold {what}"), done.stderr
+    assert list(tmp_path.iterdir()) == []
