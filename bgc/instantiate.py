@@ -758,11 +758,24 @@ class _Rewriter:
             return ast.Index(self.expr(node.base, own), self.expr(node.index, own), sp(node.span))
         if isinstance(node, ast.Call):
             return ast.Call(node.func, tuple(self.expr(a, own) for a in node.args), sp(node.span))
-        if isinstance(node, ast.BinOp):
-            return ast.BinOp(node.op, self.expr(node.left, own), self.expr(node.right, own),
-                             sp(node.span))
+        if isinstance(node, ast.BinOp):  # (a chain `a + b + c ...` by a loop, not as deep)
+            spine = []
+            while isinstance(node, ast.BinOp):
+                spine.append(node)
+                node = node.left
+            acc = self.expr(node, own)
+            for b in reversed(spine):
+                acc = ast.BinOp(b.op, acc, self.expr(b.right, own), sp(b.span))
+            return acc
         if isinstance(node, ast.Neg):
-            return ast.Neg(self.expr(node.operand, own), sp(node.span))
+            negs = []
+            while isinstance(node, ast.Neg):
+                negs.append(node)
+                node = node.operand
+            acc = self.expr(node, own)
+            for n in reversed(negs):
+                acc = ast.Neg(acc, sp(n.span))
+            return acc
         if isinstance(node, ast.Vector):
             return ast.Vector(tuple(self.expr(a, own) for a in node.items), sp(node.span))
         return self.map(node)
