@@ -341,7 +341,9 @@ def _start(argv: list[str], **options) -> subprocess.Popen:
 def run_captured(argv: list[str], timeout: float | None = None) -> subprocess.CompletedProcess:
     """Runs argv to its end: its status, stdout and stderr as text (subprocess.run's result);
     CannotStart if it cannot be started; subprocess.TimeoutExpired after timeout seconds
-    (the program killed)."""
+    (the program killed); a timeout longer than the system's waits take (weeks) is none."""
+    if timeout is not None and timeout > 1e6:
+        timeout = None
     with _start(argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True) as proc:
         try:
             out, err = proc.communicate(timeout=timeout)

@@ -57,6 +57,8 @@ def env():
 # Command lines the fuzzer found failing (each fixed where it arose), and what each must give:
 # (argv, exit status, a piece of the message).
 LONG = "a" * 300
+ACCURACY = ["accuracy", "m.bg", "-s", "other", "--solvers", "rk4", "--steps", "0.05",
+            "--repeats", "1", "--no-plot"]
 FOUND = [
     # --const made MODEL a Source that the output checks and accuracy's file names took for a
     # path: a TypeError
@@ -70,6 +72,13 @@ FOUND = [
       "0", "-o", LONG], 2, "File name too long"),
     # a name the system allows whose hidden file beside it would not be: written all the same
     (["compile", "m.bg", "-o", "b" * 250 + ".c"], 0, ""),
+    # accuracy's -o DIR naming a file (FileExistsError after the work) or nothing (the
+    # default directory written instead); a --timeout beyond what a wait takes (OverflowError)
+    (ACCURACY + ["-o", "m.bg"], 2, "'m.bg' exists and is not a directory"),
+    (ACCURACY + ["-o", ""], 2, "an empty name is not a directory"),
+    (ACCURACY + ["-o", "acc", "--timeout", "10000001"], 0, ""),
+    (["sweep", "m.bg", "-s", "run", "--grid", "R=1,2", "--metric", "final:c.q", "--workers",
+      "0", "--backend", "python", "--trajectories", "link"], 2, "is not a directory"),
 ]
 
 
