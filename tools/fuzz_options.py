@@ -166,6 +166,8 @@ def _value(rng: random.Random, name: str, kind: str, choices: list, quick: bool)
         return rng.choice(choices + list(CHOICE_JUNK)) if rng.random() < 0.6 else \
             rng.choice(choices)
     if name in PATH_OPTIONS:
+        if name == "--reference":  # an input: a FIFO without a writer waits for one, as any
+            return rng.choice([p for p in PATHS if p != "fifo"])  # reader does
         return rng.choice(PATHS)
     if name in STRING_VALUES:
         pool = list(STRING_VALUES[name])
