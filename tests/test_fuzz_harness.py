@@ -87,7 +87,7 @@ def test_generated_hybrid_models_and_components_pass_check():
     campaign cases mix them with other pieces that bgc refuses)."""
     rng = random.Random(SEED)
     accepted = {"hybrid": 0, "component": 0}
-    for i in range(24):
+    for i in range(16):
         g = fuzz.Gen(rng)
         g.emit("model m")
         g.parameter()
