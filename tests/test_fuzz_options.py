@@ -79,7 +79,20 @@ FOUND = [
     (ACCURACY + ["-o", "acc", "--timeout", "10000001"], 0, ""),
     (["sweep", "m.bg", "-s", "run", "--grid", "R=1,2", "--metric", "final:c.q", "--workers",
       "0", "--backend", "python", "--trajectories", "link"], 2, "is not a directory"),
+    # a reference that is not a CSV (numpy's ValueError)
+    (ACCURACY + ["-o", "acc", "--reference", "m.bg"], 1, "m.bg: not a CSV of numbers"),
 ]
+
+
+def test_a_reference_that_never_ends_is_refused(env):
+    """`--reference` naming a copy of /dev/full (zeros without end) was read for ever: it is
+    read up to its limit (64 MiB), then refused."""
+    with _alarm(SAFETY_SECONDS):
+        res = fo.run_case(ACCURACY + ["-o", "acc", "--reference", "fulldev"], env)
+    assert res["failure"] is None, res
+    if res["exit"] == 2 and "does not exist" in res["stderr"]:
+        pytest.skip("no device could be made here (mknod needs root)")
+    assert res["exit"] == 1 and "fulldev: too large for a reference" in res["stderr"], res
 
 
 @pytest.mark.parametrize("argv, status, said", FOUND, ids=lambda v: None)
