@@ -509,7 +509,7 @@ def _non_finite(expr) -> sp.Basic | None:
         if e in _NON_FINITE or (isinstance(e, sp.Float) and not e.is_finite) or \
                 (isinstance(e, sp.Number) and not e.is_finite):
             return e
-        if isinstance(e, sp.Float):
+        if isinstance(e, (sp.Float, sp.Rational)):  # (an exact integer beyond a double too)
             try:
                 if float(e) in (float("inf"), float("-inf")):
                     return e
@@ -558,6 +558,7 @@ def _refuse_non_finite(functions: dict, params) -> None:
                     kind = "an undefined value"
                 else:
                     kind = "a number beyond a double"
+                    bad = sp.N(bad, 6)
                 raise ModelError([Diagnostic(
                     "error", None, f"the generated equations are not finite: "
                     f"{what.get(name, name)} hold {kind} ({bad}) once the model's laws and "
