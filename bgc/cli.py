@@ -173,8 +173,9 @@ def _output_file(ctx, param, value):
 
 
 def _model_path(model) -> str:
-    """The model file's path (the command's MODEL, a path or, with --const, a Source)."""
-    return model.path if isinstance(model, api.Source) else model
+    """The model file's path (the command's MODEL, a path or, with --const, a Source); (not
+    through api, whose import the warm path of simulate avoids)."""
+    return model if isinstance(model, (str, os.PathLike)) else model.path
 
 
 def _not_an_input(model, *outputs, others=()):

@@ -1631,10 +1631,13 @@ static int bgc_handle_event(bgc_run *r, double t, double *x)
                  r->changed >= 0 ? bgc_discrete_names[r->changed] : "a state");
         return BGC_ERR_RUNTIME;
     }
-    if (rc == 0 && r->s->max_steps > 0 && r->st->events - r->events_out > r->s->max_steps) {
+    /* the events since the last output row: as many as the step budget, and at least 1000
+       (a small step budget is for a step size that runs away, not for events) */
+    if (rc == 0 && r->s->max_steps > 0 && r->st->events - r->events_out
+                                          > (r->s->max_steps > 1000 ? r->s->max_steps : 1000)) {
         snprintf(r->msg, r->msg_size, "at t = %.17g: chattering: %ld events since the last "
                  "output row, the last changing '%s' (a Zeno model? --max-steps raises the "
-                 "budget)", t, r->s->max_steps,
+                 "budget)", t, r->st->events - r->events_out - 1,
                  r->changed >= 0 ? bgc_discrete_names[r->changed] : "a state");
         return BGC_ERR_RUNTIME;
     }

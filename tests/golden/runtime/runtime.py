@@ -1546,10 +1546,13 @@ def _handle_event(run, t, x):
                        "switching outruns the time's resolution)"
                        % (t, run.chain, _DISCRETE_NAMES[run.changed] if run.changed >= 0
                           else "a state"), t)
-    if run.s.max_steps > 0 and run.st["events"] - run.events_out > run.s.max_steps:
+    # the events since the last output row: as many as the step budget, and at least 1000 (a
+    # small step budget is for a step size that runs away, not for events)
+    if run.s.max_steps > 0 and \
+            run.st["events"] - run.events_out > max(run.s.max_steps, 1000):
         raise _Failure("at t = %.17g: chattering: %d events since the last output row, the "
                        "last changing '%s' (a Zeno model? --max-steps raises the budget)"
-                       % (t, run.s.max_steps, _DISCRETE_NAMES[run.changed]
+                       % (t, run.st["events"] - run.events_out - 1, _DISCRETE_NAMES[run.changed]
                           if run.changed >= 0 else "a state"), t)
     if run.s.event_rows:
         yield from run.emit(t, x)
