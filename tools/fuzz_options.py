@@ -297,8 +297,7 @@ def _named_outputs(argv: list[str]) -> set[str]:
         if name in PATH_OPTIONS and name != "--reference":
             value = value if eq else (argv[k + 1] if k + 1 < len(argv) else "")
             first = Path(value).parts[:1]
-            if first:
-                out.add(first[0])
+            out.add(first[0] if first else "*")  # (".": a directory option's files go here)
     return out
 
 
@@ -365,7 +364,7 @@ def _judge(argv, result, before, after, d: Path) -> str | None:
     if code == 2 and new:
         return f"{command}: a file written by a usage error ({new[0]})"
     for name in new:
-        if name not in named:
+        if name not in named and "*" not in named:
             return f"{command}: a file it was not asked to write ({name})"
     for p in [d / n for n in new] + [d / "target.csv"]:
         if p.is_file() and p.suffix == ".csv" and p.stat().st_size \
