@@ -7,7 +7,7 @@ every shipped model through `bgc check` in this process, a few of the accepted o
 other than 0 and 1 (check), a model error without a location, a traceback in the output, a
 file left behind, a cut CSV row is a failure (tools/fuzz.py says which).  The long run:
 
-    python tools/fuzz.py --seed 28 --cases 100000 --simulate-every 8
+    python tools/fuzz.py --seed 28 --cases 100000 --simulate-every 5 --out fuzz-out
 
 tests/fuzz_regressions/: the failures the harness found, minimised, once fixed.  Each must give
 exit 0, or exit 1 with a located error; NAME.err, when there is one, is the first line it

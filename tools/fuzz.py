@@ -2,7 +2,7 @@
 """Fuzzing bgc: models generated from the grammar and mutations of every shipped model, through
 `bgc check` in process and, for a sample, through `bgc simulate` in both backends.
 
-    python tools/fuzz.py --seed 1 --cases 100000 --simulate-every 50 --out fuzz-out
+    python tools/fuzz.py --seed 28 --cases 100000 --simulate-every 5 --out fuzz-out
 
 What counts as a failure:
 - check (run in a worker process, the function the command line calls, click's runner around
