@@ -10,7 +10,8 @@ What counts as a failure:
   without a located error (`m.bg:LINE:COL: error:` or `m.bg: error:`); a traceback in the
   output; a file left behind; a case that runs longer than --time-limit (a hang: the worker is
   killed and started again, the harness goes on);
-- simulate (bgc as a subprocess, C and Python backends, a short --t-end): a traceback on stderr;
+- simulate (in the worker process, or bgc as a subprocess with --simulate-subprocess; C and
+  Python backends, a short --t-end): an exception or a traceback on stderr;
   an exit status other than 0, 1 and 2 (2 only for a usage error: `Usage:` or `Error:` from
   the option parser), a death by a signal of bgc or of the generated program (bgc reports it
   as 128 + the signal), a run longer than --sim-time-limit; exit 1 without a message; a CSV
