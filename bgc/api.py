@@ -83,10 +83,9 @@ class BgcArgumentError(BgcModelError, ValueError):
 
 
 def _model_error(exc: ModelError, source: Source) -> BgcModelError:
-    """BgcArgumentError when every error is located in an argument, else BgcModelError (an
-    error in a library the model imports is the model's)."""
-    outside = all(d.span is not None and d.span.origin is not None
-                  and not d.span.origin.library for d in exc.diagnostics)
+    """BgcArgumentError when every error is located in an argument, else BgcModelError."""
+    outside = all(d.span is not None and d.span.origin is not None and not d.span.origin.file
+                  for d in exc.diagnostics)
     return (BgcArgumentError if outside else BgcModelError)(exc, source)
 
 

@@ -8,12 +8,12 @@ from dataclasses import dataclass, field
 @dataclass(frozen=True)
 class Origin:
     """Text that is not the model file but is reported like it: an option's value on the
-    command line (`--outputs`), an argument of the API, or (library True) a library the model
-    imports, whose errors are the model's."""
+    command line (`--outputs`), an argument of the API, or a file the model reads (a table's:
+    file True)."""
 
     name: str
     text: str
-    library: bool = field(default=False, compare=False)
+    file: bool = False
 
 
 @dataclass(frozen=True)

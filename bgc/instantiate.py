@@ -277,13 +277,13 @@ class _Instantiate:
         except OSError as exc:
             fail(top.sp(d.span), f"cannot read {path}: {exc.strerror}")
         except ModelError as exc:
-            origin = Origin(str(path), text if text is not None else "", library=True)
+            origin = Origin(str(path), text if text is not None else "", file=True)
             raise ModelError([replace(e, span=e.span and replace(e.span, origin=origin),
                                       notes=tuple(replace(n, span=n.span and replace(
                                           n.span, origin=origin)) for n in e.notes)
                                       + (Note(top.sp(d.span), "imported here"),))
                               for e in exc.diagnostics]) from None
-        lib = _File(str(path), Origin(str(path), text, library=True), model.decls)
+        lib = _File(str(path), Origin(str(path), text, file=True), model.decls)
         first = model.decls[0] if model.decls else None
         if not isinstance(first, ast.LibraryDecl):
             fail(top.sp(d.span), f"{path} is not a library: a library file starts with "
