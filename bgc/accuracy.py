@@ -142,11 +142,23 @@ def compare(traj: Trajectory, ref: Trajectory) -> tuple[float, float, float | No
 
 def load_reference(path: str, names: list[str], times: np.ndarray) -> Trajectory:
     """A user's CSV (t and the outputs, by name) on the scene's output grid."""
+    from .resources import MAX_REFERENCE_BYTES, read_bounded
     try:
-        text = Path(path).read_text(encoding="utf-8")
+        data = read_bounded(path, MAX_REFERENCE_BYTES)
     except OSError as exc:
         raise AccuracyError(f"{path}: cannot read: {exc.strerror}") from None
-    ref_names, data = parse_csv(text)
+    if len(data) > MAX_REFERENCE_BYTES:
+        raise AccuracyError(f"{path}: too large for a reference (more than "
+                            f"{MAX_REFERENCE_BYTES} bytes)")
+    try:
+        text = data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise AccuracyError(f"{path}: not UTF-8 text (byte {exc.start})") from None
+    try:
+        ref_names, data = parse_csv(text)
+    except ValueError as exc:  # (numpy's loadtxt: a cell that is not a number, a short row)
+        raise AccuracyError(f"{path}: not a CSV of numbers with a header: "
+                            f"{str(exc).splitlines()[0]}") from None
     if not ref_names or ref_names[0] != "t":
         raise AccuracyError(f"{path}: the first column must be 't'")
     cols = [0]

@@ -12,6 +12,7 @@ import hashlib
 import importlib.util
 import json
 import os
+import re
 import shlex
 import shutil
 import signal
@@ -141,6 +142,8 @@ def compile_c_linked(model: str, runtime: str, cc: str | None = None,
         try:
             return _build(tmp, command, part_flags, "model.c", model,
                           [f"model{_EXE_SUFFIX}", *objects], C_LIBS)
+        except CompilerOutOfSpace:
+            raise
         except BackendError:
             evict(Path(objects[0]))  # (a runtime object damaged behind its checksum)
             return _build(tmp, command, part_flags, "model.c", model,
@@ -282,13 +285,47 @@ def _sha256(path: Path) -> str:
     return hashlib.sha256(path.read_bytes()).hexdigest()
 
 
+class CompilerOutOfSpace(BackendError):
+    """The compiler could not write a file (a full disk, a quota, a file size limit): nothing
+    in the cache is to blame, nothing is evicted."""
+
+
+# What a compiler says when a file it writes cannot grow: a full disk, a quota, a file size
+# limit (as an error, or as the death of its linker or assembler by SIGXFSZ).
+_FULL = (("No space left on device", "No space left on device"),
+         ("Disk quota exceeded", "Disk quota exceeded"),
+         ("File too large", "File too large"),
+         ("File size limit exceeded", "File too large"))
+
+
+def _compiler_out_of_space(stderr: str, workdir: Path) -> str | None:
+    """The one-line reason when the compiler failed because it could not write a file (its
+    temporary files, in $TMPDIR; its output, in the build directory of the cache): the
+    directory and the system's reason; None for any other failure."""
+    for said, reason in _FULL:
+        for line in stderr.splitlines():
+            if said in line:
+                where = workdir.parent  # (the cache: relative names are the build directory's)
+                for path in re.findall(r"(/[^\s:'\"`]+)", line):
+                    path = Path(path)
+                    if path.parent.is_dir():
+                        where = workdir.parent if path.parent == workdir else path.parent
+                        break
+                return f"the C compiler cannot write into {where}: {reason}"
+    return None
+
+
 def _run_compiler(argv: list[str], workdir: Path, cwd: Path | None = None) -> None:
-    """Runs the compiler (in directory cwd, if given); BackendError if it fails: a broken or
-    missing compiler when it cannot build a trivial program either (told as such), else a bug
-    in bgc."""
+    """Runs the compiler (in directory cwd, if given); BackendError if it fails: a full disk
+    (or quota, or file size limit) where it writes, told in one line with the directory; a
+    broken or missing compiler when it cannot build a trivial program either (told as such),
+    else a bug in bgc."""
     done = _compile(argv, cwd)
     if done.returncode == 0:
         return
+    full = _compiler_out_of_space(done.stderr, workdir)
+    if full:
+        raise CompilerOutOfSpace(full)
     trivial = workdir / "trivial.c"
     trivial.write_text("int main(void) { return 0; }\n")
     check = _compile([argv[0], *C_FLAGS, str(trivial), "-o", str(workdir / "trivial")])
@@ -342,7 +379,9 @@ def _start(argv: list[str], **options) -> subprocess.Popen:
 def run_captured(argv: list[str], timeout: float | None = None) -> subprocess.CompletedProcess:
     """Runs argv to its end: its status, stdout and stderr as text (subprocess.run's result);
     CannotStart if it cannot be started; subprocess.TimeoutExpired after timeout seconds
-    (the program killed)."""
+    (the program killed); a timeout longer than the system's waits take (weeks) is none."""
+    if timeout is not None and timeout > 1e6:
+        timeout = None
     with _start(argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True) as proc:
         try:
             out, err = proc.communicate(timeout=timeout)

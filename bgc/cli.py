@@ -103,6 +103,34 @@ def _fail(message: str):
     sys.exit(1)
 
 
+def _output_directory(value: str, option: str) -> Path:
+    """A directory a command will write its files into (made later, with its parents, if it
+    does not exist): a usage error before any work if it cannot be one (an empty name, a file
+    that is not a directory, a name the system refuses)."""
+    if not value.strip():
+        raise click.UsageError(f"{option}: an empty name is not a directory")
+    path = Path(value)
+    try:
+        os.stat(path)
+    except FileNotFoundError:
+        return path
+    except OSError as error:
+        raise click.UsageError(f"{option}: cannot use '{value}' as a directory: "
+                               f"{outfile.reason(error)}") from None
+    if not path.is_dir():
+        raise click.UsageError(f"{option}: '{value}' exists and is not a directory")
+    return path
+
+
+def _make_directory(path: Path) -> None:
+    """Makes the directory of a command's files (and its parents): one line, exit 1, if the
+    system refuses (a full disk, a file in the way, no permission)."""
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+    except OSError as error:
+        _fail(f"cannot make the directory '{path}': {outfile.reason(error)}")
+
+
 def _write_atomic(path: str, text: str | bytes):
     """Write all of `text` (or bytes) or nothing (bgc.outfile); a write that fails (a full
     disk) is one line, exit 1."""
@@ -147,11 +175,17 @@ def _output_file(ctx, param, value):
     return value
 
 
-def _not_an_input(model: str, *outputs, others=()):
+def _model_path(model) -> str:
+    """The model file's path (the command's MODEL, a path or, with --const, a Source); (not
+    through api, whose import the warm path of simulate avoids)."""
+    return model if isinstance(model, (str, os.PathLike)) else model.path
+
+
+def _not_an_input(model, *outputs, others=()):
     """Each output given (None: none) must not be a file the command reads: the model (under
     any name: another path, a symbolic or hard link), or `others` ((what, path) pairs); else
     one line, exit 1, before any work.  Nor may two outputs be the same file."""
-    inputs = [("the model file", model), *others]
+    inputs = [("the model file", _model_path(model)), *others]
     given = [o for o in outputs if o is not None]
     for i, output in enumerate(given):
         try:
@@ -846,8 +880,8 @@ class _RunProgress:
 def accuracy(model, scene, outputs, effects, algebra, backend, solver_list, rtols, steps,
              reference, gains, repeats, timeout, t_end, dt, params, no_plot, output):
     """Measure each solver's error and cost on the model: table, CSV and work-precision plot."""
-    stem = Path(model).stem + (f"-{scene}" if scene else "")
-    directory = Path(output or f"accuracy-{stem}")
+    stem = Path(_model_path(model)).stem + (f"-{scene}" if scene else "")
+    directory = _output_directory(f"accuracy-{stem}" if output is None else output, "-o")
     base = "gains" if gains is not None else "accuracy"
     _not_an_input(model, str(directory / f"{base}.csv"), str(directory / f"{base}.png"),
                   others=[("the reference", reference)] if reference else ())
@@ -885,7 +919,7 @@ def accuracy(model, scene, outputs, effects, algebra, backend, solver_list, rtol
         sys.exit(1)
     text = acc.table(result, gains=gain_values is not None)
     _echo(text)
-    directory.mkdir(parents=True, exist_ok=True)
+    _make_directory(directory)
     _write_atomic(str(directory / f"{base}.csv"), acc.csv_text(result))
     written = [str(directory / f"{base}.csv")]
     if not no_plot:
@@ -978,7 +1012,7 @@ def sweep(model, scene, algebra, grids, sample, varies, seed, metrics, backend, 
             if value is not None and not value > 0:
                 raise sw.SweepError(f"{name} must be positive")
         if trajectories:
-            Path(trajectories).mkdir(parents=True, exist_ok=True)
+            _make_directory(_output_directory(trajectories, "--trajectories"))
             outfile.check_target(Path(trajectories) / "run-000000.csv")
     except (sw.SweepError, OSError, outfile.OutputError) as error:
         raise click.UsageError(str(error)) from None

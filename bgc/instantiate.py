@@ -286,13 +286,13 @@ class _Instantiate:
         except OSError as exc:
             fail(top.sp(d.span), f"cannot read {path}: {exc.strerror}")
         except ModelError as exc:
-            origin = Origin(str(path), text if text is not None else "")
+            origin = Origin(str(path), text if text is not None else "", file=True)
             raise ModelError([replace(e, span=e.span and replace(e.span, origin=origin),
                                       notes=tuple(replace(n, span=n.span and replace(
                                           n.span, origin=origin)) for n in e.notes)
                                       + (Note(top.sp(d.span), "imported here"),))
                               for e in exc.diagnostics]) from None
-        lib = _File(str(path), Origin(str(path), text), model.decls)
+        lib = _File(str(path), Origin(str(path), text, file=True), model.decls)
         first = model.decls[0] if model.decls else None
         if not isinstance(first, ast.LibraryDecl):
             fail(top.sp(d.span), f"{path} is not a library: a library file starts with "
@@ -773,11 +773,24 @@ class _Rewriter:
             return ast.Call(node.func, args, sp(node.span))
         if isinstance(node, ast.Call):
             return ast.Call(node.func, tuple(self.expr(a, own) for a in node.args), sp(node.span))
-        if isinstance(node, ast.BinOp):
-            return ast.BinOp(node.op, self.expr(node.left, own), self.expr(node.right, own),
-                             sp(node.span))
+        if isinstance(node, ast.BinOp):  # (a chain `a + b + c ...` by a loop, not as deep)
+            spine = []
+            while isinstance(node, ast.BinOp):
+                spine.append(node)
+                node = node.left
+            acc = self.expr(node, own)
+            for b in reversed(spine):
+                acc = ast.BinOp(b.op, acc, self.expr(b.right, own), sp(b.span))
+            return acc
         if isinstance(node, ast.Neg):
-            return ast.Neg(self.expr(node.operand, own), sp(node.span))
+            negs = []
+            while isinstance(node, ast.Neg):
+                negs.append(node)
+                node = node.operand
+            acc = self.expr(node, own)
+            for n in reversed(negs):
+                acc = ast.Neg(acc, sp(n.span))
+            return acc
         if isinstance(node, ast.Vector):
             return ast.Vector(tuple(self.expr(a, own) for a in node.items), sp(node.span))
         return self.map(node)

@@ -509,9 +509,78 @@ def finish(name, states, params, outputs, constraints, movable, scene, functions
         functions[k], count = common_subexpressions(functions[k], count)
         functions[k] = _propagate_copies(functions[k])
     functions = _ordered(functions)
+    _refuse_non_finite(functions, params)
     pattern = jacobian_pattern(functions["rhs"], len(states), plans)
     return Program(name, states, params, outputs, constraints, movable, scene, functions,
                    tuple(plans), pattern, events_info, tuple(tables), tuple(inputs))
+
+
+_NON_FINITE = (sp.zoo, sp.nan, sp.oo, -sp.oo)
+
+
+def _non_finite(expr) -> sp.Basic | None:
+    """The first constant of expr that is not a finite number (zoo, nan, oo, a Float beyond a
+    double), or None; an explicit stack, however deep the expression."""
+    stack = [expr]
+    while stack:
+        e = stack.pop()
+        if e in _NON_FINITE or (isinstance(e, sp.Float) and not e.is_finite) or \
+                (isinstance(e, sp.Number) and not e.is_finite):
+            return e
+        if isinstance(e, (sp.Float, sp.Rational)):  # (an exact integer beyond a double too)
+            try:
+                if float(e) in (float("inf"), float("-inf")):
+                    return e
+            except (OverflowError, ValueError):
+                return e
+        stack.extend(e.args)
+    return None
+
+
+def _exprs(statement):
+    for name in ("expr", "matrix", "rhs", "residuals", "jacobian"):
+        value = getattr(statement, name, None)
+        if isinstance(value, tuple):
+            yield from value
+        elif value is not None:
+            yield value
+    for name in ("body", "tangents"):
+        for inner in getattr(statement, name, ()) or ():
+            yield from _exprs(inner)
+
+
+def _refuse_non_finite(functions: dict, params) -> None:
+    """A model error when the generated functions hold a constant that is not a finite double:
+    the model's numbers are finite, but their derivatives or products need not be (2^1000
+    squared in a constraint's second derivative, a division by zero once a Jacobian is
+    simplified); the program would compute inf or NaN, or could not be written at all."""
+    from .diagnostics import Diagnostic, ModelError
+    what = {"rhs": "the derivatives of the states", "outputs": "the outputs",
+            "init": "the initial values", "jvp": "the Jacobian",
+            "position_jac": "the constraints' Jacobian", "velocity_jac": "the constraints' "
+            "Jacobian", "residual": "the constraints' residuals", "consts": "the constants"}
+    for prm in params:
+        bad = _non_finite(prm.default)
+        if bad is not None:
+            raise ModelError([Diagnostic("error", None, f"parameter '{prm.name}' is not finite "
+                                                          f"({bad}): a number beyond a double")])
+    for name, fn in functions.items():
+        for statement in fn.body:
+            for expr in _exprs(statement):
+                bad = _non_finite(expr)
+                if bad is None:
+                    continue
+                if bad == sp.zoo:
+                    kind = "a division by zero"
+                elif bad == sp.nan:
+                    kind = "an undefined value"
+                else:
+                    kind = "a number beyond a double"
+                    bad = sp.N(bad, 6)
+                raise ModelError([Diagnostic(
+                    "error", None, f"the generated equations are not finite: "
+                    f"{what.get(name, name)} hold {kind} ({bad}) once the model's laws and "
+                    f"constraints are differentiated and simplified")])
 
 
 def explicit_program(name, states, params, outputs, init, rhs, out, scene,

@@ -69,6 +69,15 @@ def check_target(path: str | os.PathLike, inputs=()) -> Path:
     """The path as a Path, if a file can be written there; else OutputError.  inputs: the
     files the command reads, as (what, path) pairs (("the model", "m.bg")); an output that is
     one of them, under any name, is an OutputIsInput."""
+    try:
+        return _check_target(path, inputs)
+    except OutputError:
+        raise
+    except (OSError, ValueError) as error:  # (a name too long, a loop of links ...)
+        raise OutputError(f"cannot write '{path}': {reason(error)}") from None
+
+
+def _check_target(path, inputs) -> Path:
     target = Path(path)
     info = _stat(target)
     if info is not None:
@@ -107,6 +116,14 @@ def destination(path: str | os.PathLike) -> tuple[Path, bool]:
     return target, info is not None and streamed(info.st_mode)
 
 
+def hidden_name(name: str) -> str:
+    """The hidden file's name for an output named `name`: `.NAME.bgc-PID.part`, NAME cut to
+    its first 150 characters when it is long (a file name has at most 255 bytes)."""
+    if len(name.encode("utf-8", "surrogateescape")) > 200:
+        name = name[:150]
+    return f".{name}.bgc-{os.getpid()}.part"
+
+
 class Partial:
     """A file being written for `path` (see the module's docstring): .file (binary) is a
     hidden file beside it, or the device or FIFO itself; commit() (or keep()) puts it into
@@ -121,7 +138,7 @@ class Partial:
             self.tmp = None
             flags = os.O_WRONLY
         else:
-            self.tmp = self.dest.with_name(f".{self.dest.name}.bgc-{os.getpid()}.part")
+            self.tmp = self.dest.with_name(hidden_name(self.dest.name))
             flags = os.O_RDWR | os.O_CREAT | os.O_TRUNC  # (read back: the last row)
         try:
             fd = os.open(self.tmp or self.dest, flags, 0o666)

@@ -19,6 +19,7 @@ _HERE = Path(__file__).resolve().parent
 
 # the model text
 MAX_SOURCE_BYTES = 1 << 20  # 1 MiB: larger input is refused, not read
+MAX_REFERENCE_BYTES = 64 << 20  # a reference CSV (bgc accuracy --reference): 64 MiB
 MAX_NESTING = 100  # levels of nested brackets / operators of different kinds
 MAX_OPTION_CHARS = 1 << 16  # --outputs, --effects
 MAX_LITERAL_DIGITS = 309  # an integer literal longer than this does not fit a double
@@ -83,11 +84,11 @@ def resource_dir(name: str) -> Path:
     raise FileNotFoundError(f"bgc is installed without its {name}/ directory")
 
 
-def read_bounded(path: str) -> bytes:
-    """The bytes of a file, at most MAX_SOURCE_BYTES + 1 of them (a longer file, /dev/zero or
-    a pipe that never ends is read no further); OSError as open() and read() raise it."""
+def read_bounded(path: str, limit: int = MAX_SOURCE_BYTES) -> bytes:
+    """The bytes of a file, at most limit + 1 of them (a longer file, /dev/zero or a pipe that
+    never ends is read no further); OSError as open() and read() raise it."""
     with open(path, "rb") as fh:
-        return fh.read(MAX_SOURCE_BYTES + 1)
+        return fh.read(limit + 1)
 
 
 def fits(expr, nodes: int = MAX_EXPRESSION_NODES, depth: int = MAX_EXPRESSION_DEPTH) -> bool:

@@ -226,8 +226,10 @@ def run_batch(program: SweepProgram, first: int, lines: tuple[str, ...],
             traj_dir = Path(tmp) / "runs"
             traj_dir.mkdir()
             argv += ["--trajectories", str(traj_dir)]
+        # (child_env: the program dies with the process that runs it, bgc or a Dask worker,
+        # when that is killed; a LocalCluster's workers die with bgc by Dask's own watch)
         done = subprocess.run(argv, input="".join(line + "\n" for line in lines),
-                              capture_output=True, text=True)
+                              capture_output=True, text=True, env=backends.child_env())
         if done.returncode != 0:
             raise BatchFailed(f"the batch of runs {first}..{first + len(lines) - 1} failed "
                              f"(status {done.returncode}): {done.stderr.strip()}")

@@ -350,6 +350,53 @@ def test_a_full_disk_under_the_compile_cache_is_one_line(small_disk, tmp_path):
                 if p.name.startswith(".build")] == []  # no temporary left behind
 
 
+def _cache_is_clean(cache: Path):
+    """No build directory left in the cache, and every file in it one bgc can use."""
+    assert [p.name for p in cache.iterdir() if p.name.startswith("build")] == []
+    for p in cache.iterdir():
+        if p.name.startswith("bgc-") and p.suffix in ("", ".o"):
+            assert backends.usable(p, executable=p.suffix == ""), p.name
+
+
+@pytest.mark.skipif(not backends.have_c_compiler(), reason="needs a C compiler")
+def test_the_compiler_hitting_a_file_size_limit_in_the_cache_is_one_line(tmp_path, warm):
+    """The runtime object is in the cache (the fixture built it); the compiler links a new
+    model's program into the cache under a 50 kB file size limit (SIGXFSZ kills its linker, or
+    it says File too large): one line naming the cache, exit 1, no output, the cache as it
+    was (its runtime object kept, not blamed)."""
+    (tmp_path / "m.bg").write_text(DECAY.replace("-z", "-2*z"))
+    done = subprocess.run([sys.executable, "-m", "bgc", "simulate", "m.bg", "-s", "s",
+                           "--t-end", "0.01", "-o", "out.csv"], cwd=tmp_path, env=warm[1],
+                          capture_output=True, text=True, preexec_fn=_limit_file_size)
+    cache = Path(warm[1]["BGC_CACHE_DIR"])
+    assert (done.returncode, done.stdout, done.stderr) == (
+        1, "", f"error: the C compiler cannot write into {cache}: File too large\n")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["m.bg"]
+    _cache_is_clean(cache)
+    assert any(p.name.startswith("bgc-runtime-") for p in cache.iterdir())
+
+
+@pytest.mark.skipif(not backends.have_c_compiler(), reason="needs a C compiler")
+def test_the_compiler_hitting_a_full_disk_in_its_temporary_directory_is_one_line(
+        small_disk, tmp_path, warm):
+    """$TMPDIR (where the compiler writes its temporary files) on a full disk."""
+    with open(small_disk / "fill", "wb") as fill:
+        try:
+            fill.write(b"\0" * 128 * 1024)
+        except OSError:
+            pass
+    (tmp_path / "m.bg").write_text(DECAY.replace("-z", "-3*z"))
+    done = run_bgc("simulate", "m.bg", "-s", "s", "--t-end", "0.01", "-o", "out.csv",
+                   cwd=tmp_path, env={"BGC_CACHE_DIR": warm[1]["BGC_CACHE_DIR"],
+                                      "TMPDIR": str(small_disk)})
+    assert (done.returncode, done.stdout, done.stderr) == (
+        1, "", f"error: the C compiler cannot write into {small_disk}: No space left on "
+               "device\n")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["m.bg", "small"]
+    assert [p.name for p in small_disk.iterdir()] == ["fill"]
+    _cache_is_clean(Path(warm[1]["BGC_CACHE_DIR"]))
+
+
 # ------------------------------------------------------------------ kill signals
 
 
@@ -367,6 +414,57 @@ def test_killing_bgc_kills_the_program(tmp_path, warm, backend):
     if alive:
         os.kill(program, signal.SIGKILL)
     assert not alive, "the program runs on after bgc was killed"
+
+
+def _descendants(pid: int) -> list[int]:
+    found = []
+    for child in children(pid):
+        found += [child, *_descendants(child)]
+    return found
+
+
+def _cmdline(pid: int) -> str:
+    try:
+        return Path(f"/proc/{pid}/cmdline").read_bytes().replace(b"\0", b" ").decode()
+    except OSError:
+        return ""
+
+
+def _have_dask() -> bool:
+    return importlib.util.find_spec("distributed") is not None
+
+
+@needs_proc
+def test_killing_bgc_sweep_kills_its_workers_and_their_programs(tmp_path, warm):
+    """`kill -9` of `bgc sweep`, once a batch's program runs in the worker process of a local
+    Dask cluster (--workers 1; without Dask, in bgc itself, --workers 0, the same code
+    starting the program): every process bgc started ends."""
+    workers = "1" if _have_dask() else "0"
+    (tmp_path / "m.bg").write_text(DECAY.replace("model decay", "model decay\nparameter k = 1")
+                                   .replace("-z", "-k*z"))
+    proc = subprocess.Popen([sys.executable, "-m", "bgc", "sweep", "m.bg", "-s", "s", "--grid",
+                             "k=1,2", "--metric", "final:z", "--workers", workers, "-o",
+                             "table.csv"], cwd=tmp_path, env=warm[1],
+                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    deadline = time.monotonic() + 120
+    while time.monotonic() < deadline:
+        assert proc.poll() is None
+        started = _descendants(proc.pid)
+        if any("--batch" in _cmdline(p) for p in started):
+            break
+        time.sleep(0.02)
+    else:
+        raise AssertionError("no batch started")
+    proc.kill()
+    proc.wait()
+    deadline = time.monotonic() + 20
+    while any(map(running, started)) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    left = [(p, _cmdline(p)) for p in started if running(p)]
+    for p, _ in left:
+        os.kill(p, signal.SIGKILL)
+    assert not left, f"still running after bgc sweep was killed: {left}"
+    assert not (tmp_path / "table.csv").exists()
 
 
 @needs_proc

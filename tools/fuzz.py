@@ -2,7 +2,7 @@
 """Fuzzing bgc: models generated from the grammar and mutations of every shipped model, through
 `bgc check` in process and, for a sample, through `bgc simulate` in both backends.
 
-    python tools/fuzz.py --seed 1 --cases 100000 --simulate-every 50 --out fuzz-out
+    python tools/fuzz.py --seed 28 --cases 100000 --simulate-every 5 --out fuzz-out
 
 What counts as a failure:
 - check (run in a worker process, the function the command line calls, click's runner around
@@ -10,7 +10,8 @@ What counts as a failure:
   without a located error (`m.bg:LINE:COL: error:` or `m.bg: error:`); a traceback in the
   output; a file left behind; a case that runs longer than --time-limit (a hang: the worker is
   killed and started again, the harness goes on);
-- simulate (bgc as a subprocess, C and Python backends, a short --t-end): a traceback on stderr;
+- simulate (in the worker process, or bgc as a subprocess with --simulate-subprocess; C and
+  Python backends, a short --t-end): an exception or a traceback on stderr;
   an exit status other than 0, 1 and 2 (2 only for a usage error: `Usage:` or `Error:` from
   the option parser), a death by a signal of bgc or of the generated program (bgc reports it
   as 128 + the signal), a run longer than --sim-time-limit; exit 1 without a message; a CSV
@@ -257,6 +258,146 @@ class Gen:
             self.outputs.append(f"{links}.lambda[{r.randint(0, m)}]")
         self.outputs.append(f"{q}[{r.randint(0, n)}]")
 
+    def condition(self, names=None, depth: int = 1) -> str:
+        """A relation (or several, with and/or/not) over names and numbers."""
+        r = self.rng
+        pool = (self.values + ["t"]) if names is None else names
+        a = r.choice(pool) if pool and r.random() < 0.8 else self.expr(1)
+        rel = f"{a} {r.choice(['<', '>', '<=', '>=', '<', '>'])} {self.expr(1)}"
+        if depth > 0 and r.random() < 0.25:
+            rel = f"{rel} {r.choice(['and', 'or'])} {self.condition(names, depth - 1)}"
+        if r.random() < 0.1:
+            rel = f"not ({rel})"
+        return rel
+
+    def conditional(self, names) -> str:
+        """if C then A [elif C then B] else D, or a time function, or noevent(...)."""
+        r = self.rng
+        k = r.random()
+        if k < 0.5:
+            out = f"if {self.condition(names)} then {self.expr(1, names)}"
+            if r.random() < 0.3:
+                out += f" elif {self.condition(names)} then {self.expr(1, names)}"
+            return out + f" else {self.expr(1, names)}"
+        if k < 0.6:
+            return f"noevent(if {self.condition(names)} then {self.expr(1, names)} else 0)"
+        f = r.choice([f"step({self.expr(1)})", f"ramp({self.expr(1)})",
+                      f"pulse({self.expr(1)}, {self.expr(1)})",
+                      f"square({self.expr(1)}, {r.choice(['0.5', '0.25', self.expr(1)])})"])
+        return f"{self.expr(1)} * {f}"
+
+    def hybrid(self):
+        """Events (docs/hybrid.md): a mass under gravity with an integral position, a
+        when-block with reinit and discrete assignments, if-then-else laws, and one or two
+        of: an ideal diode D, dry friction Fr, a switch Sw, a unilateral constraint junction."""
+        r = self.rng
+        v, m, x = self.name("v"), self.name("b"), self.name("x")
+        self.emit(f"{v} : 1")
+        self.emit(f"{m} : I({self.expr(1)})" + (f" init p = {self.expr(1)}"
+                                                if r.random() < 0.3 else ""))
+        self.emit(f"{v} -> {m}")
+        w = self.name("w")
+        self.emit(f"{w} : {r.choice(['Se', 'MSe'])}(-{self.expr(1)})")
+        self.emit(f"{w} -> {v}")
+        self.emit(f"signal {x} = integral({v}.f, init = {self.expr(1)})")
+        self.values.append(x)
+        self.outputs += [x, f"{m}.p"]
+        disc = []
+        for _ in range(r.choice([0, 0, 1, 2])):
+            d = self.name("d")
+            self.emit(f"discrete {d} = {r.choice(['0', '1', self.expr(1)])}{self.doc()}")
+            disc.append(d)
+        names = self.params + self.values + ["t"] + disc
+        if r.random() < 0.5:
+            s = self.name("s")
+            self.emit(f"signal {s} = {self.conditional(names)}")
+            self.values.append(s)
+        for _ in range(r.choice([0, 1, 1, 2])):
+            stmts = []
+            if r.random() < 0.8:
+                stmts.append(f"reinit {r.choice([f'{m}.p', x])} = "
+                             f"{r.choice(['-', ''])}{self.expr(1)}*{m}.p")
+            for d in disc:
+                if r.random() < 0.6:
+                    stmts.append(f"{d} = {r.choice(['1 - ' + d, '0', '1', self.expr(1, names)])}")
+            cond = self.condition([x, f"{m}.p", "t"] + disc)
+            if disc and r.random() < 0.2:
+                cond = f"{r.choice(disc)} {r.choice(['==', '!='])} {r.choice(['0', '1'])}"
+            sep = r.choice(["\n  ", "; "])
+            self.emit(f"when {cond} {{{sep}{sep.join(stmts)}\n}}")
+        for kind in r.sample(["D", "Fr", "Sw", "unilateral", "law"], r.randint(1, 2)):
+            if kind == "D":
+                d = self.name("diode")
+                self.emit(f"{d} : D")
+                self.emit(f"{v} -> {d}" if r.random() < 0.8 else f"{d} -> {v}")
+                self.outputs.append(f"{d}.e")
+            elif kind == "Fr":
+                f = self.name("fr")
+                self.emit(f"{f} : Fr({self.expr(1)}, {self.expr(1)})")
+                self.emit(f"{v} -> {f}")
+                self.outputs.append(f"{f}.e")
+            elif kind == "Sw":
+                sw, j0, c = self.name("sw"), self.name("j"), self.name("c")
+                self.emit(f"{sw} : Sw({self.condition(['t', x] + disc)})")
+                self.emit(f"{j0} : 0")
+                self.emit(f"{c} : C({self.expr(1)}) init e = {self.expr(1)}")
+                self.emit(f"{v} -> {sw}" if r.random() < 0.5 else f"{v} -> {j0}")
+                self.emit(f"{j0} -> {c}")
+                if r.random() < 0.7:
+                    self.emit(f"{j0} -> {sw}")
+                self.outputs.append(f"{c}.q")
+            elif kind == "unilateral":
+                g = self.name("gap")
+                extra = r.choice(["", f" restitution({self.expr(1)})"])
+                corr = r.choice(["", " corrector pid(10, 10)", " corrector none"])
+                self.emit(f"{g} : 0 constraint unilateral(phi = {x}"
+                          f"{r.choice(['', ' + 1', ' - ' + self.expr(1)])}){extra}{corr}")
+                self.emit(f"{v} -> {g}")
+                self.outputs.append(f"{g}.lambda")
+            else:
+                rr = self.name("r")
+                self.emit(f"{rr} : R(f = {self.conditional([*names, 'e'])})")
+                self.emit(f"{v} -> {rr}")
+
+    def component(self):
+        """A component with ports, parameters and a body, instances of it in a for loop,
+        bonds between them; or parts of the standard library."""
+        r = self.rng
+        if r.random() < 0.3:
+            self.lines.insert(1, "import electrical as el")
+            src, res, cap, gnd = (self.name(k) for k in ("src", "res", "cap", "gnd"))
+            self.emit(f"{src} : el.voltage_source(v = {self.expr(1)})")
+            self.emit(f"{res} : el.resistor(r = {self.expr(1)})")
+            self.emit(f"{cap} : el.capacitor(c = {self.expr(1)})")
+            self.emit(f"{gnd} : el.ground()")
+            self.emit(f"{src}.p -> {res}.p")
+            self.emit(f"{res}.n -> {cap}.p")
+            self.emit(f"{cap}.n -> {gnd}.p")
+            return
+        c = self.name("sec")
+        a, b = r.choice(["1", "2", "3"]), r.choice(["4", "5", "3"])
+        self.emit(f"component {c}(r = {self.expr(1, [])}, k = {self.expr(1, [])}){self.doc()} {{")
+        body = ["port a", "port b", "node : 0", "link : 1", "res : R(r)",
+                r.choice(["cap : C(k)", "cap : I(k)", "cap : C(1/k) init q = k"]),
+                "a -> link", "link -> res", "link -> node", "node -> cap", "node -> b"]
+        if r.random() < 0.3:
+            body.append(f"constant half = {r.choice(['1', '2', self.expr(1, [])])}")
+        if r.random() < 0.2:
+            r.shuffle(body)
+        self.lines.extend("  " + line for line in body)
+        self.emit("}")
+        n = self.name("n")
+        src = self.name("src")
+        self.emit(f"{src} : Se({self.expr(1)})")
+        arg = self.expr(1, ["i"] + self.params)
+        self.emit(f"for i in {a}..{b} {{\n  {n}[i] : {c}(r = {arg})\n}}")
+        self.emit(f"{src} -> {n}[{a}].a")
+        self.emit(f"for i in {int(a) + 1}..{b} {{ {n}[i-1].b -> {n}[i].a }}")
+        load = self.name("load")
+        self.emit(f"{load} : R({self.expr(1)})")
+        self.emit(f"{n}[{b}].b -> {load}")
+        self.outputs += [f"{n}[{a}].cap.q", f"{n}[{b}].res.f"]
+
     def signal(self):
         s = self.name("s")
         self.emit(f"signal {s} = {self.expr(3, self.law_names())}")
@@ -317,10 +458,14 @@ def generate(rng: random.Random) -> str:
         g.constraint()
     if rng.random() < 0.2:
         g.array()
+    if rng.random() < 0.3:
+        g.hybrid()
+    if rng.random() < 0.1:
+        g.component()
     for _ in range(rng.randint(0, 2)):
         g.scene()
     head, lines = g.lines[:1], g.lines[1:]
-    if rng.random() < 0.1:
+    if rng.random() < 0.1 and not any(l.startswith("  ") for l in lines):
         rng.shuffle(lines)
     lines = head + lines
     return rng.choice(["\n", "\n", "; "]).join(lines) + "\n"
@@ -413,12 +558,20 @@ def mutate(rng: random.Random, text: str) -> str:
     return out
 
 
+DOC_BLOCK = re.compile(r"^```bg([^\n]*)\n(.*?)^```", re.M | re.S)
+
+
 def seed_models() -> dict[str, str]:
-    """Every shipped model: models/ and tests/models/ (by file name)."""
+    """Every shipped model: models/ and tests/models/ (by file name), the standard library's
+    files, and the models shown in docs/ (the hybrid ones, components, imports: the language
+    as documented, by page and block number)."""
     out = {}
-    for d in SEED_DIRS:
+    for d in SEED_DIRS + (ROOT / "bgc" / "library",):
         for p in sorted(d.glob("*.bg")):
             out[f"{d.relative_to(ROOT)}/{p.name}"] = p.read_text(encoding="utf-8")
+    for page in sorted((ROOT / "docs").glob("*.md")):
+        for k, m in enumerate(DOC_BLOCK.finditer(page.read_text(encoding="utf-8"))):
+            out[f"docs/{page.name}#{k}"] = m.group(2)
     return out
 
 
@@ -447,7 +600,8 @@ def case(rng: random.Random, seeds: dict[str, str], i: int) -> tuple[str, bytes]
 
 # ------------------------------------------------------------------------- check, in process
 
-LOCATED = re.compile(r"^m\.bg(:\d+:\d+)?: error: ", re.M)  # (after warnings, if any)
+# (after warnings, if any; an error in a library the model imports is located there)
+LOCATED = re.compile(r"^(m\.bg|\S+\.bg:\d+:\d+)(:\d+:\d+)?: error: ", re.M)
 
 
 def _innermost_bgc_frame(exc: BaseException) -> str:
@@ -491,14 +645,53 @@ def check_case(data: bytes, args=("check", "m.bg")) -> dict:
     return {"exit": result.exit_code, "stderr": stderr[-4000:], "failure": failure}
 
 
+def _children() -> list[int]:
+    """The processes this one started that still exist (zombies apart)."""
+    out = []
+    for task in Path("/proc/self/task").iterdir():
+        try:
+            out += [int(p) for p in (task / "children").read_text().split()]
+        except OSError:
+            pass
+    alive = []
+    for pid in out:
+        try:
+            state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
+        except OSError:
+            continue
+        if state != "Z":
+            alive.append(pid)
+    return alive
+
+
 def _worker_main():
-    """The worker: reads one case a line (JSON, the bytes in base64), answers one line."""
+    """The worker: reads one case a line (JSON, the bytes in base64), answers one line.  A
+    request with "simulate": BACKEND runs `bgc simulate` in process (simulate_case), then
+    looks for a process the command left running (an orphan once bgc is gone)."""
     import bgc.cli  # noqa: F401  (imported once, before the first case)
-    out = sys.stdout
-    sys.stdout = sys.stderr  # whatever else prints must not break the protocol
+    # the protocol gets a descriptor of its own: whatever else writes on descriptor 1 (a
+    # print, a generated program) goes nowhere
+    out = os.fdopen(os.dup(1), "w")
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    os.dup2(devnull, 1)
+    sys.stdout = sys.stderr
     for line in sys.stdin:
         req = json.loads(line)
-        res = check_case(base64.b64decode(req["data"]), tuple(req.get("args", ("check", "m.bg"))))
+        data = base64.b64decode(req["data"])
+        if req.get("simulate"):
+            res = simulate_case(data, req["simulate"], 0, t_end=req.get("t_end", "0.05"),
+                                in_process=True)
+            left = _children()
+            if left and not res["failure"]:
+                res["failure"] = f"simulate {req['simulate']}: a process outlived the command"
+            for pid in left:
+                try:
+                    os.kill(pid, signal.SIGKILL)
+                    os.waitpid(pid, 0)
+                except (OSError, ChildProcessError):
+                    pass
+        else:
+            res = check_case(data, tuple(req.get("args", ("check", "m.bg"))))
         out.write(json.dumps(res) + "\n")
         out.flush()
 
@@ -533,31 +726,36 @@ class Worker:
                     pass
             self.proc = None
 
-    def run(self, data: bytes, args=("check", "m.bg")) -> dict:
+    def run(self, data: bytes, args=("check", "m.bg"), simulate: str | None = None,
+            time_limit: float | None = None) -> dict:
+        """check (args) or, with simulate=BACKEND, `bgc simulate` on data; time_limit in
+        seconds (by default the worker's)."""
         if self.proc is None or self.done >= self.recycle:
             self.stop()
             self._start()
         self.done += 1
-        req = json.dumps({"data": base64.b64encode(data).decode(), "args": list(args)}) + "\n"
+        what = f"simulate {simulate}" if simulate else "check"
+        req = json.dumps({"data": base64.b64encode(data).decode(), "args": list(args),
+                          "simulate": simulate}) + "\n"
         start = time.monotonic()
         try:
             self.proc.stdin.write(req.encode())
             self.proc.stdin.flush()
         except BrokenPipeError:
             self.stop()
-            return {"exit": None, "stderr": "", "failure": "check: the worker died"}
+            return {"exit": None, "stderr": "", "failure": f"{what}: the worker died"}
         # the first case of a worker includes its start (imports): allowed 20 s more
-        limit = self.time_limit + (20 if self.done == 1 else 0)
+        limit = (time_limit or self.time_limit) + (20 if self.done == 1 else 0)
         ready, _, _ = select.select([self.proc.stdout], [], [], limit)
         if not ready:
             self.stop()
-            return {"exit": None, "stderr": "", "failure": "check: hang",
+            return {"exit": None, "stderr": "", "failure": f"{what}: hang",
                     "seconds": time.monotonic() - start}
         line = self.proc.stdout.readline()
         if not line:
             code = self.proc.wait()
             self.stop()
-            return {"exit": code, "stderr": "", "failure": f"check: the worker died ({code})"}
+            return {"exit": code, "stderr": "", "failure": f"{what}: the worker died ({code})"}
         res = json.loads(line)
         res["seconds"] = time.monotonic() - start
         return res
@@ -735,6 +933,11 @@ def main(argv=None) -> int:
                     help="the log, the failing cases as found, summary.json")
     ap.add_argument("--regressions", type=Path, default=REGRESSIONS,
                     help="where minimised failures go")
+    ap.add_argument("--simulate-subprocess", action="store_true",
+                    help="simulate with bgc as a subprocess of its own (slower: an interpreter "
+                    "start per run) instead of in the worker process")
+    ap.add_argument("--max-seconds", type=float, default=0,
+                    help="stop (with the summary) after this many seconds (0: no limit)")
     ap.add_argument("--no-minimise", action="store_true")
     ap.add_argument("--worker", action="store_true", help=argparse.SUPPRESS)
     a = ap.parse_args(argv)
@@ -779,6 +982,9 @@ def main(argv=None) -> int:
 
     try:
         for i in range(a.cases):
+            if a.max_seconds and time.monotonic() - start > a.max_seconds:
+                say(f"stopped after {a.max_seconds:.0f} s (--max-seconds)")
+                break
             how, data = case(rng, seeds, i)
             res = worker.run(data)
             counts["check"] += 1
@@ -794,11 +1000,16 @@ def main(argv=None) -> int:
                     counts["simulate"] += 1
                     for backend in ("c", "python"):
                         counts[f"simulate_{backend}"] += 1
-                        s = simulate_case(data, backend, a.sim_time_limit)
+                        if a.simulate_subprocess:
+                            sim = lambda d, b=backend: simulate_case(  # noqa: E731
+                                d, b, a.sim_time_limit)
+                        else:
+                            sim = lambda d, b=backend: worker.run(  # noqa: E731
+                                d, simulate=b, time_limit=a.sim_time_limit)
+                        s = sim(data)
                         if s["failure"]:
                             record(s["failure"], i, how, data, s,
-                                   lambda d, b=backend: simulate_case(
-                                       d, b, a.sim_time_limit)["failure"])
+                                   lambda d, sim=sim: sim(d)["failure"])
             if (i + 1) % 500 == 0:
                 el = time.monotonic() - start
                 say(f"{i + 1} cases, {counts}, {sum(f['count'] for f in failures.values())} "

@@ -113,6 +113,8 @@ typedef struct bgc_run {
     double t_next;   /* the first time event after r->t (INFINITY: none) */
     double t_event;  /* the last event's time, and how many events in a row came ... */
     long chain;      /* ... closer to the one before than the solver resolves */
+    long kout_ev;    /* the output row the event count below starts at (r->kout then) */
+    long events_out; /* st->events at that row: the events since it are bounded as steps are */
     int changed;     /* the first discrete value the last event changed (-1: none) */
 } bgc_run;
 #define BGC_STIFF (-1) /* an auto run's explicit phase found the problem stiff */
@@ -595,6 +597,10 @@ static int bgc_handle_event(bgc_run *r, double t, double *x)
     const double scale = bgc_max(fabs(t), fabs(r->t_event));
     int rc = 0;
     r->st->events++;
+    if (r->kout != r->kout_ev) { /* the first event since an output row */
+        r->kout_ev = r->kout;
+        r->events_out = r->st->events - 1;
+    }
     if (t - r->t_event <= bgc_max(1e-12 * scale, bgc_hmin(t)))
         r->chain++;
     else
@@ -611,6 +617,16 @@ static int bgc_handle_event(bgc_run *r, double t, double *x)
         snprintf(r->msg, r->msg_size, "at t = %.17g: chattering: %ld events in a row, each "
                  "within 1e-12 relative of the one before, the last changing '%s' (a Zeno "
                  "model: the switching outruns the time's resolution)", t, r->chain,
+                 r->changed >= 0 ? bgc_discrete_names[r->changed] : "a state");
+        return BGC_ERR_RUNTIME;
+    }
+    /* the events since the last output row: as many as the step budget, and at least 1000
+       (a small step budget is for a step size that runs away, not for events) */
+    if (rc == 0 && r->s->max_steps > 0 && r->st->events - r->events_out
+                                          > (r->s->max_steps > 1000 ? r->s->max_steps : 1000)) {
+        snprintf(r->msg, r->msg_size, "at t = %.17g: chattering: %ld events since the last "
+                 "output row, the last changing '%s' (a Zeno model? --max-steps raises the "
+                 "budget)", t, r->st->events - r->events_out - 1,
                  r->changed >= 0 ? bgc_discrete_names[r->changed] : "a state");
         return BGC_ERR_RUNTIME;
     }
@@ -885,6 +901,8 @@ static int bgc_integrate(const bgc_settings *s, const bgc_params *p, bgc_work *w
     r.t_next = INFINITY;
     r.t_event = -INFINITY;
     r.chain = 0;
+    r.kout_ev = 0;
+    r.events_out = 0;
     r.changed = -1;
     r.d = (double *)&q + BGC_DISCRETE_OFFSET;
     r.g = r.ev = NULL;

@@ -1478,7 +1478,7 @@ class _Run:
 
     __slots__ = ("s", "p", "w", "st", "nout", "kout", "t", "h", "y", "detect_stiffness",
                  "steps_out", "t_out", "from_event", "m", "name", "fixed", "doff", "g", "t_next",
-                 "t_event", "chain", "changed")
+                 "t_event", "chain", "changed", "kout_ev", "events_out")
 
     def __init__(self, s, p, w, st, y):
         self.s, self.p, self.w, self.st = s, p, w, st
@@ -1493,6 +1493,8 @@ class _Run:
         self.doff = len(p) - len(_DISCRETE_NAMES)
         self.g = []
         self.t_next, self.t_event, self.chain = math.inf, -math.inf, 0
+        # the events since an output row (kout_ev: run.kout then) are bounded as steps are
+        self.kout_ev, self.events_out = 0, 0
         self.changed = -1  # the first discrete value the last event changed
 
     def f(self, t, y):
@@ -1728,6 +1730,8 @@ def _handle_event(run, t, x):
     """bgc_handle_event: the rows at the event (--event-rows), its iteration, the next time
     event; a run whose events come closer than it resolves stops."""
     run.st["events"] += 1
+    if run.kout != run.kout_ev:  # the first event since an output row
+        run.kout_ev, run.events_out = run.kout, run.st["events"] - 1
     scale = max(abs(t), abs(run.t_event))
     if t - run.t_event <= max(1e-12 * scale, _hmin(t)):
         run.chain += 1
@@ -1744,6 +1748,14 @@ def _handle_event(run, t, x):
                        "switching outruns the time's resolution)"
                        % (t, run.chain, _DISCRETE_NAMES[run.changed] if run.changed >= 0
                           else "a state"), t)
+    # the events since the last output row: as many as the step budget, and at least 1000 (a
+    # small step budget is for a step size that runs away, not for events)
+    if run.s.max_steps > 0 and \
+            run.st["events"] - run.events_out > max(run.s.max_steps, 1000):
+        raise _Failure("at t = %.17g: chattering: %d events since the last output row, the "
+                       "last changing '%s' (a Zeno model? --max-steps raises the budget)"
+                       % (t, run.st["events"] - run.events_out - 1, _DISCRETE_NAMES[run.changed]
+                          if run.changed >= 0 else "a state"), t)
     if run.s.event_rows:
         yield from run.emit(t, x)
     _set_next_time(run, t, x)
