@@ -312,7 +312,7 @@ def test_c_jacobian_matches_finite_differences(model, tmp_path):
     src = tmp_path / "model.c"
     src.write_text(text)
     cc = backends.c_compiler()
-    subprocess.run([*cc, "-O2", "-std=c99", "-shared", "-fPIC", "-DBGC_NO_MAIN", str(src), "-o",
+    subprocess.run([*cc, "-O0", "-std=c99", "-shared", "-fPIC", "-DBGC_NO_MAIN", str(src), "-o",
                     str(lib), "-lm"], check=True, capture_output=True)
     so = ctypes.CDLL(str(lib))
     n = len(program.states)
