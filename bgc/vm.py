@@ -495,15 +495,19 @@ def _strings(texts) -> bytes:
     return b"".join(out)
 
 
+def _declined(program: Program) -> bool:
+    """Parts the interpreter does not run yet: tables, inputs, a sparse Jacobian (bgc.sparse's
+    iteration plan); such a model is built in C."""
+    return bool(program.tables or program.inputs or program.jacobian.lu is not None)
+
+
 def supports(program: Program) -> bool:
     """Whether the interpreter runs the program (else program_bytes raises VMError): its
-    parameters and constants fit the runtime built once, it has no tables nor inputs nor a
-    sparse Jacobian (bgc.sparse's iteration plan), and its
+    parameters and constants fit the runtime built once, nothing of it is _declined, and its
     functions are a model part's (MODEL_FUNCTIONS and the constraint rows', not an FMU's
     outputs_jvp)."""
-    return emit.linkable(program) and not program.tables and not program.inputs and \
-        program.jacobian.lu is None and all(k in MODEL_FUNCTIONS
-                                            for k in emit._model_functions(program))
+    return emit.linkable(program) and not _declined(program) and all(
+        k in MODEL_FUNCTIONS for k in emit._model_functions(program))
 
 
 def program_bytes(program: Program) -> bytes:
@@ -511,7 +515,7 @@ def program_bytes(program: Program) -> bytes:
     if not emit.linkable(program):
         raise VMError("the model has more parameters and constants than the interpreter "
                       f"holds ({emit.LINK_PARAMS}); use --backend c")
-    if program.tables or program.inputs or program.jacobian.lu is not None:
+    if _declined(program):
         raise VMError("the interpreter does not run models with tables, inputs or a sparse "
                       "Jacobian yet; use --backend c")
     emit._validate(program)
