@@ -1,7 +1,9 @@
 """The standard library (bgc/library, docs/library.md): every component in a small model,
-against a closed form or SciPy's solve_ivp at tight tolerance computed here; a four-bar of
-library bodies and rods against models/four_bar.bg, and a slider-crank of bodies and joints
-against its one-coordinate Lagrangian equation."""
+against a closed form or SciPy's solve_ivp at tight tolerance computed here (the switched
+parts, diode, switch, friction and end stops, against their piecewise closed forms); two
+four-bars against models/four_bar.bg, one of point-mass bodies and rods, one of rigid links
+and revolute joints; and a slider-crank of bodies and joints against its one-coordinate
+Lagrangian equation."""
 import math
 from pathlib import Path
 
@@ -290,6 +292,48 @@ def test_a_four_bar_of_library_parts_matches_models_four_bar():
     assert np.abs(Y - Y0).max() < 1e-9
 
 
+FOUR_BAR_RIGID = FOUR_BAR.split("A : mb.body")[0].replace("four_bar_library", "four_bar_rigid") + """
+parameter sa = m2*b/(m1 + m2) "from the coupler's centre back to A"
+parameter sb = m1*b/(m1 + m2) "from the coupler's centre on to B"
+crank : mb.body(m = m1, j = m1*a^2/4, x0 = ax/2, y0 = ay/2, th0 = phi0, g = g)
+coupler : mb.body(m = (m1 + m2)/2, j = m1*m2*b^2/(2*(m1 + m2)), x0 = (m1*ax + m2*bx)/(m1 + m2),
+                  y0 = (m1*ay + m2*by)/(m1 + m2), th0 = atan2(by - ay, bx - ax), g = g)
+rocker : mb.body(m = m2, j = m2*c^2/4, x0 = (d + bx)/2, y0 = by/2, th0 = atan2(by, bx - d), g = g)
+o1 : mb.revolute_ground(th = crank.q[2], ax = -a/2, alpha = alpha, beta = beta)
+pa : mb.revolute(tha = crank.q[2], thb = coupler.q[2], ax = a/2, bx = -sa, alpha = alpha,
+                 beta = beta)
+pb : mb.revolute(tha = coupler.q[2], thb = rocker.q[2], ax = sb, bx = c/2, alpha = alpha,
+                 beta = beta)
+o2 : mb.revolute_ground(th = rocker.q[2], ax = -c/2, x = d, alpha = alpha, beta = beta)
+crank.a -> o1.a; crank.b -> pa.a; coupler.a -> pa.b; coupler.b -> pb.a
+rocker.a -> pb.b; rocker.b -> o2.a
+"""
+
+
+def test_a_four_bar_of_rigid_links_and_revolute_joints_matches_models_four_bar():
+    """Three rigid bodies and four revolute joints (9 coordinates, 8 constraint rows). Each
+    link carries half the mass of each moving joint it ends at: the crank is m1/2 at O1 and
+    m1/2 at A (mass m1 at its middle, inertia m1 a^2/4), the coupler m1/2 at A and m2/2 at B,
+    the rocker m2/2 at B and m2/2 at O2. Rigidly joined, these masses move as the point
+    masses m1 at A and m2 at B do, so kinetic and potential energy are those of
+    models/four_bar.bg in every position of the loop: the joints' paths agree to 1e-9."""
+    kw = dict(t_end=2.0, dt=0.05, rtol=1e-10, atol=1e-12, backend="python")
+    t, Y, _ = bgc.simulate(Source("inline.bg", FOUR_BAR_RIGID), None,
+                           outputs=["crank.q", "coupler.q", "rocker.q"], **kw)
+    t0, Y0, _ = bgc.simulate(ROOT / "models" / "four_bar.bg", None, outputs=["q"], **kw)
+    np.testing.assert_array_equal(t, t0)
+    a, b, c = 1.0, 2.0, 1.5
+
+    def point(body, s):  # the point (s, 0) of a body, in the plane
+        x, y, th = Y[:, 3 * body], Y[:, 3 * body + 1], Y[:, 3 * body + 2]
+        return np.c_[x + s * np.cos(th), y + s * np.sin(th)]
+    A, B = point(0, a / 2), point(2, c / 2)
+    assert np.abs(A - Y0[:, :2]).max() < 1e-9 and np.abs(B - Y0[:, 2:]).max() < 1e-9
+    # the coupler's ends are the same joints
+    assert np.abs(point(1, -b / 2) - A).max() < 1e-9 and np.abs(point(1, b / 2) - B).max() < 1e-9
+    assert np.ptp(Y0[:, 0]) > 1.0  # the loop swings through a large angle
+
+
 def _lagrange(positions, angles, masses, inertias, q0, t, g=9.81):
     """The motion in the coordinates q (sympy symbols, q0 their initial values, at rest) of
     bodies with centres positions(q) and angles(q), from Lagrange's equations (y down)."""
@@ -431,6 +475,149 @@ def test_a_free_body_under_gravity_and_a_force():
     np.testing.assert_allclose(Y[:, 1], -1 + 0.5 * (9.81 - 4 / 2) * t ** 2, rtol=0, atol=1e-12)
     np.testing.assert_allclose(Y[:, 2], 0.5 * (0.25 / 0.5) * t ** 2, rtol=0, atol=1e-12)
 
+
+
+# ------------------------------------------------------------------ switched parts
+RECTIFIER = """model rectifier
+import electrical as el
+parameter V = 10; parameter w = 314.159; parameter R = 10; parameter L = 0.05
+src : el.voltage_source(v = V*sin(w*t))
+d : el.diode()
+r : el.resistor(r = R)
+l : el.inductor(l = L)
+gnd : el.ground()
+n1 : 0; n2 : 0; n3 : 0
+src.p -> n1; n1 -> d.p; d.n -> n2; n2 -> r.p; r.n -> n3; n3 -> l.p; l.n -> gnd.p
+"""
+
+
+def test_a_diode_rectifies_as_the_closed_form():
+    """Half-wave rectifier with an RL load: each period starts from zero current, conducts
+    i = (V/Z)(sin(wt - phi) + sin(phi) exp(-t/tau)) until i falls to zero, then blocks."""
+    from scipy.optimize import brentq
+    t, Y = simulate(RECTIFIER, ["l.i.f", "d.d.e"], t_end=0.05, dt=0.0005)
+    V, w, R, L = 10.0, 314.159, 10.0, 0.05
+    Z, phi, tau, T = math.hypot(R, w * L), math.atan2(w * L, R), L / R, 2 * math.pi / w
+
+    def on(s):
+        return V / Z * (np.sin(w * s - phi) + math.sin(phi) * np.exp(-s / tau))
+    t_off = brentq(on, T / 2, T)
+    s = np.mod(t, T)
+    ref = np.where(s < t_off, on(s), 0.0)
+    assert np.max(np.abs(Y[:, 0] - ref)) < 1e-8 * V / R
+    blocking = s > t_off + 1e-4
+    assert np.all(Y[blocking, 0] == 0) and np.all(Y[blocking & (s < T / 2), 1] < 0)
+
+
+SWITCHED_CAPACITORS = """model capacitors
+import electrical as el
+c1 : el.capacitor(c = 1, v0 = 3)
+c2 : el.capacitor(c = 2)
+r : el.resistor(r = 0.5)
+s : el.ideal_switch(on = if t >= 1 then 1 else 0)
+g1 : el.ground(); g2 : el.ground()
+a : 0; b : 0; m : 0
+a -> c1.p; c1.n -> g1.p; b -> c2.p; c2.n -> g2.p
+a -> r.p; r.n -> m; m -> s.p; s.n -> b
+"""
+
+
+def test_a_switch_joins_two_capacitors_at_its_time():
+    t, Y = simulate(SWITCHED_CAPACITORS, ["c1.store.q", "c2.store.q"], t_end=3.0, dt=0.01)
+    tau = 0.5 * 1.0 * 2.0 / 3.0  # R C1 C2 / (C1 + C2)
+    q2 = np.where(t < 1, 0.0, 2.0 * (1 - np.exp(-(t - 1) / tau)))
+    np.testing.assert_allclose(Y[:, 1], q2, rtol=0, atol=1e-8)
+    np.testing.assert_allclose(Y[:, 0] + Y[:, 1], 3.0, rtol=0, atol=1e-12)
+
+
+STICK_SLIP = """model stick_slip
+import mechanics as mech
+parameter vb = 0.5
+m : mech.mass(m = 1)
+k : mech.spring(k = 10)
+fr : mech.friction(fc = 2, fs = 3)
+belt : mech.velocity(v = vb)
+wall : mech.fixed()
+v : 1; bj : 1
+v -> m.p; v -> k.a; k.b -> wall.p; v -> fr.a; fr.b -> bj; belt.p -> bj
+"""
+
+
+def test_friction_sticks_to_a_belt_and_breaks_away_as_the_closed_form():
+    """From rest the belt drags the mass, M x'' = -K x + Fc, until its speed reaches the
+    belt's; stuck, it rides the belt until K x = Fs; then it slides back."""
+    M, K, vb, Fc, Fs = 1.0, 10.0, 0.5, 2.0, 3.0
+    w = math.sqrt(K / M)
+    t_stick = math.asin(vb / (Fc / K * w)) / w
+    x_stick = Fc / K * (1 - math.cos(w * t_stick))
+    t_break = t_stick + (Fs / K - x_stick) / vb
+    t, Y = simulate(STICK_SLIP, ["k.store.q", "fr.fr.f"], t_end=t_break + math.pi / w,
+                    dt=0.01)
+    after = t - t_break
+    x = np.where(t < t_stick, Fc / K * (1 - np.cos(w * t)),
+                 np.where(t < t_break, x_stick + vb * (t - t_stick),
+                          Fc / K + (Fs - Fc) / K * np.cos(w * after) + vb / w * np.sin(w * after)))
+    np.testing.assert_allclose(Y[:, 0], x, rtol=0, atol=1e-8)
+    stuck = (t > t_stick) & (t < t_break)
+    assert np.all(np.abs(Y[stuck, 1]) < 1e-12) and np.all(np.abs(Y[~stuck, 1][1:]) > 1e-3)
+
+
+ROTATIONAL_SWITCHED = """model shafts
+import mechanics as mech
+# a flywheel spinning down against dry friction and a small torque, then held
+wheel : mech.inertia(j = 0.5, w0 = 1.5)
+fr : mech.rotational_friction(fc = 0.3, fs = 0.5)
+brake : mech.torque(tau = -0.2)
+wall : mech.rotational_fixed()
+w : 1
+brake.p -> w; w -> wheel.p; w -> fr.a; fr.b -> wall.p
+# a shaft driven against a stop, resting on it, then pulled away
+drive : mech.torque(tau = if t < 1.2 then 2 else -1)
+rotor : mech.inertia(j = 0.25)
+stop : mech.rotational_end_stop(gap0 = 0.5)
+u : 1
+drive.p -> u; u -> rotor.p; u -> stop.a
+"""
+
+
+def test_rotational_friction_and_a_plastic_end_stop_as_closed_forms():
+    t, Y = simulate(ROTATIONAL_SWITCHED, ["w.f", "stop.gap", "stop.stop.lambda"], t_end=2.0,
+                    dt=0.01)
+    # the flywheel decelerates at (0.2 + 0.3)/0.5 until it stops at t = 1.5, then sticks
+    np.testing.assert_allclose(Y[:, 0], np.maximum(1.5 - 1.0 * t, 0.0), rtol=0, atol=1e-9)
+    # the rotor reaches the stop at sqrt(2 J gap0 / tau) = 0.25 s, rests on it (e = 0)
+    # carrying the torque, and leaves it at t = 1.2 with the reversed torque
+    t_hit = math.sqrt(2 * 0.25 * 0.5 / 2)
+    gap = np.where(t < t_hit, 0.5 - 2 / 0.25 * t ** 2 / 2,
+                   np.where(t < 1.2, 0.0, 1 / 0.25 * (t - 1.2) ** 2 / 2))
+    np.testing.assert_allclose(Y[:, 1], gap, rtol=0, atol=1e-9)
+    resting = (t > t_hit + 0.05) & (t < 1.2)
+    np.testing.assert_allclose(np.abs(Y[resting, 2]), 2.0, rtol=1e-9)
+    assert np.all(Y[t > 1.2, 2] == 0)
+
+
+BOUNCE = """model bounce
+import mechanics as mech
+ball : mech.mass(m = 2)
+weight : mech.force(f = 2*9.81)
+floor : mech.end_stop(gap0 = 1, e = 0.8)
+v : 1
+weight.p -> v; v -> ball.p; v -> floor.a
+"""
+
+
+def test_an_end_stop_bounces_a_mass_as_the_closed_form():
+    """Falling from a gap of 1 m: the first impact at sqrt(2/g), then flights of 2 e^k v1/g."""
+    g, e = 9.81, 0.8
+    t, Y = simulate(BOUNCE, ["floor.gap"], t_end=2.5, dt=0.01)
+    t1 = math.sqrt(2 / g)
+    ref, start, speed = np.where(t < t1, 1 - g * t ** 2 / 2, np.nan), t1, e * g * t1
+    while start < t[-1]:
+        flight = 2 * speed / g
+        now = (t >= start) & (t < start + flight)
+        ref[now] = speed * (t[now] - start) - g * (t[now] - start) ** 2 / 2
+        start, speed = start + flight, e * speed
+    np.testing.assert_allclose(Y[:, 0], ref, rtol=0, atol=1e-8)
 
 # ------------------------------------------------------------------ the library's files
 def test_every_library_component_is_documented_and_exercised():

@@ -36,8 +36,12 @@ path, `-p p1.r=3`; an argument that reads a signal modulates it) and its body, t
 its law comes from. Every component is exercised by tests/test_library.py against a closed
 form or SciPy.
 
-Not yet in the library: switched elements (diodes, end stops, Coulomb friction), which need
-the language's conditions and events.
+The switched parts (`electrical.diode`, `electrical.ideal_switch`, `mechanics.friction`,
+`mechanics.end_stop` and their rotational twins) are the elements of
+[hybrid.md](hybrid.md) (`D`, `Sw`, `Fr`, a unilateral constraint junction) with ports: their
+modes and impacts appear in the event log under the instance's path (`fr.fr.stick`). A rigid
+four-bar of `planar.body` links and `planar.revolute` joints is in tests/test_library.py,
+beside the same loop of point masses and `planar.rod`s.
 """
 
 
