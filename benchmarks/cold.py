@@ -9,7 +9,9 @@ default), `bgc simulate MODEL --backend B -o out.csv` runs in a fresh process wi
 directory (BGC_CACHE_DIR) in three states:
 
   empty        nothing in the cache: the runtime object (c) or the interpreter (vm) is built
-               first, once per machine
+               first, once per machine, unless the bgc that runs was installed from a wheel
+               (`pip install .`): its package carries them, built at install (bgc.prebuild),
+               and the first run copies them into the cache (the line "prebuilt" says which)
   once kept    what is built once per machine is there (runtime object, interpreter, the
                parser's tables); the model's own files are not: a model's first run
   warm         a second run: bgc.warm's record names the cached program
@@ -169,6 +171,7 @@ def main(argv=None):
     print(f"machine:  {machine.processor()}, {os.cpu_count()} cores, load average "
           f"{machine.load_average()} (shared: the best of {args.runs} runs)")
     print(f"compiler: {machine.cc_version(['cc'])}; BGC_CFLAGS={os.environ.get('BGC_CFLAGS', '')}")
+    print(f"prebuilt: {_prebuilt()}")
     print()
     print("bgc simulate MODEL --backend B: wall [s] / cpu [s]")
     print(f"{'model':22}{'backend':>8}{'empty':>16}{'once kept':>16}{'warm':>16}")
@@ -196,10 +199,25 @@ def main(argv=None):
     print()
     pend = [m for m in models if Path(m).stem == "pendulum"]
     if pend:
-        (cold, cold_cpu), (warm, warm_cpu) = table[pend[0], "auto"][1:]
-        print(f"bgc simulate models/pendulum.bg (auto): cold {cold:.3f} s wall, {cold_cpu:.3f} s "
-              f"cpu (target < 1 s): {'met' if cold < 1.0 else 'NOT MET'}; warm {warm:.3f} s wall, "
-              f"{warm_cpu:.3f} s cpu (target < 0.1 s): {'met' if warm < 0.1 else 'NOT MET'}")
+        (empty, empty_cpu), (cold, cold_cpu), (warm, warm_cpu) = table[pend[0], "auto"]
+        print(f"bgc simulate models/pendulum.bg (auto): empty cache {empty:.3f} s wall, "
+              f"{empty_cpu:.3f} s cpu, a model's first run {cold:.3f} s wall, {cold_cpu:.3f} s "
+              f"cpu (target < 1 s): {'met' if max(empty, cold) < 1.0 else 'NOT MET'}; warm "
+              f"{warm:.3f} s wall, {warm_cpu:.3f} s cpu (target < 0.1 s): "
+              f"{'met' if warm < 0.1 else 'NOT MET'}")
+
+
+def _prebuilt() -> str:
+    """Which of bgc.prebuild's files the bgc that runs carries (none in an editable install)."""
+    done = subprocess.run([sys.executable, "-c", "import bgc.backends as b; "
+                           "print(' '.join(p.name for p in b.PREBUILT.glob('*')))"],
+                          capture_output=True, text=True, check=True)
+    kinds = {"bgc-vm-": "the interpreter", "bgc-runtime-": "the runtime object",
+             "lark-": "the parser's tables"}
+    found = [what for prefix, what in kinds.items()
+             if any(n.startswith(prefix) for n in done.stdout.split())]
+    return (f"yes ({', '.join(found)}: built when the package was installed)" if found else
+            "no (an editable install: what is built once per machine is built by the first run)")
 
 
 if __name__ == "__main__":

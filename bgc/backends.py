@@ -131,11 +131,9 @@ def compile_c_linked(model: str, runtime: str, cc: str | None = None,
     part_flags = model_part_flags(flags, len(model))
     key = _key(["linked", model, runtime_key, command, list(part_flags), list(C_LIBS),
                 identity])
-    runtime_name = f"bgc-runtime-{runtime_key}.o"
 
     def runtime_object() -> Path:
-        return _cached(runtime_name, False, lambda tmp: _build(
-            tmp, command, flags, "runtime.c", runtime, ["-c", "runtime.o"]))
+        return compile_runtime(runtime, cc, flags)
 
     def link(tmp: Path) -> Path:
         objects = [str(runtime_object())]
@@ -150,6 +148,16 @@ def compile_c_linked(model: str, runtime: str, cc: str | None = None,
                           [f"model{_EXE_SUFFIX}", str(runtime_object())], C_LIBS)
 
     return _cached(f"bgc-{key}{_EXE_SUFFIX}", True, link)
+
+
+def compile_runtime(runtime: str, cc: str | None = None,
+                    flags: tuple[str, ...] | None = None) -> Path:
+    """The runtime unit's object file (compile_c_linked), from the cache, else built into it
+    once per machine, keyed by its source, the compiler and the flags."""
+    command, flags, identity = _toolchain(cc, flags)
+    runtime_key = _key(["runtime", runtime, command, list(flags), identity])
+    return _cached(f"bgc-runtime-{runtime_key}.o", False, lambda tmp: _build(
+        tmp, command, flags, "runtime.c", runtime, ["-c", "runtime.o"]))
 
 
 def compile_vm(sources: str, unit, cc: str | None = None,
@@ -218,6 +226,11 @@ def _cached(name: str, executable: bool, build) -> Path:
     path = cache / name
     if usable(path, executable):
         return path
+    seed = PREBUILT / name
+    if usable(seed, executable):  # built when bgc was installed (bgc.prebuild): copied
+        def build(tmp: Path, seed=seed) -> Path:
+            shutil.copyfile(seed, tmp / "seed")
+            return tmp / "seed"
     try:
         with tempfile.TemporaryDirectory(dir=cache, prefix="build-") as tmp:
             built = build(Path(tmp))
@@ -247,6 +260,12 @@ def write_cached(path: Path, write) -> None:
     except BaseException:
         os.unlink(tmp)
         raise
+
+
+# What bgc.prebuild built when the package was installed, named as in the cache: the files
+# whose every input (source, compiler, flags) matches a run's are copied from here instead of
+# being built.  An editable install or a machine without a compiler has none.
+PREBUILT = Path(__file__).resolve().parent / "prebuilt"
 
 
 def _digest_path(path: Path) -> Path:

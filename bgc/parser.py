@@ -75,13 +75,18 @@ def _lark() -> Lark:
     if cache is None:
         return Lark(text, postlex=_BracketPostLex(), **_LARK_OPTIONS)
     path = cache / f"lark-{key}.pickle"
-    try:
-        with open(path, "rb") as f:
-            return Lark.__new__(Lark)._load(f, postlex=_BracketPostLex(),
-                                            propagate_positions=True)
-    except Exception:  # noqa: BLE001  (missing, damaged or of another lark: built again)
-        pass
-    parser = Lark(text, postlex=_BracketPostLex(), **_LARK_OPTIONS)
+    for where in (path, backends.PREBUILT / path.name):  # (bgc.prebuild's, at install)
+        try:
+            with open(where, "rb") as f:
+                parser = Lark.__new__(Lark)._load(f, postlex=_BracketPostLex(),
+                                                  propagate_positions=True)
+        except Exception:  # noqa: BLE001  (missing, damaged or of another lark: built again)
+            continue
+        if where == path:
+            return parser
+        break
+    else:
+        parser = Lark(text, postlex=_BracketPostLex(), **_LARK_OPTIONS)
     try:
         backends.write_cached(path, lambda f: parser.save(f, ("postlex",)))
     except (OSError, pickle.PicklingError):

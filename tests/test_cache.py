@@ -265,3 +265,42 @@ def test_concurrent_runs_share_one_cache(tmp_path):
     assert len(_runtime_objects(cache)) == 1 and len(_programs(cache)) == 3
     assert all(backends.usable(p) for p in _programs(cache))
     assert not [p.name for p in cache.iterdir() if p.name.startswith(("build-", "."))]
+
+
+def test_a_run_copies_what_the_install_prebuilt_instead_of_building_it(tmp_path, monkeypatch):
+    """setup.py runs bgc.prebuild into the package's prebuilt/ directory: the interpreter, the
+    runtime object and the parser's tables, named as the cache names them.  A run whose cache
+    lacks one copies it from there (checked, no compiler run); a damaged one is built."""
+    from bgc import parser, vm
+    seeds = tmp_path / "prebuilt"
+    monkeypatch.setenv("BGC_CACHE_DIR", str(seeds))  # what stands for the package's directory
+    vm.interpreter()
+    runtime = backends.compile_runtime(c_runtime_unit())
+    parser._lark.cache_clear()
+    parser._lark()
+    monkeypatch.setattr(backends, "PREBUILT", seeds)
+    cache = tmp_path / "cache"
+    monkeypatch.setenv("BGC_CACHE_DIR", str(cache))
+
+    def no_compiler(*args, **kwargs):
+        raise AssertionError("the compiler was run")
+    monkeypatch.setattr(backends, "_run_compiler", no_compiler)
+    try:
+        for built in (vm.interpreter(), backends.compile_runtime(c_runtime_unit())):
+            assert built.parent == cache and backends.usable(built, built.suffix != ".o")
+            assert built.read_bytes() == (seeds / built.name).read_bytes()
+        assert runtime.name in {p.name for p in cache.iterdir()}
+        parser._lark.cache_clear()
+        assert parser.parse("model m\nc : C(1)\n", "m.bg").decls
+        assert [p.name for p in cache.glob("lark-*.pickle")] == \
+            [p.name for p in seeds.glob("lark-*.pickle")]
+    finally:
+        parser._lark.cache_clear()
+    # a seed whose checksum does not match is not used
+    (seeds / "bgc-x").write_bytes(b"damaged")
+    (seeds / "bgc-x.sha256").write_text("0" * 64 + "\n")
+
+    def build(tmp):
+        (tmp / "x").write_bytes(b"new")
+        return tmp / "x"
+    assert backends._cached("bgc-x", False, build).read_bytes() == b"new"
