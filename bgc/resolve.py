@@ -1041,6 +1041,8 @@ def _constraint(d: ast.ElementDecl, scope) -> Constraint:
                 if c.restitution is not None else None
         finally:
             scope.params_only = False
+        if restitution is not None:
+            _check_size(restitution, None, "the coefficient of restitution")
         if restitution is not None and restitution.value.is_Number and not \
                 0 <= restitution.value <= 1:
             fail(restitution.span, "the coefficient of restitution is from 0 to 1")
