@@ -210,6 +210,25 @@ def test_events_without_end_stop_at_the_step_budget(tmp_path):
     assert len(set(said.values())) == 1, said
 
 
+def test_a_block_that_divides_by_its_unknown_fails_alike_in_both_backends(tmp_path):
+    """tests/fuzz_regressions/block_divides_by_its_unknown.bg: a division by a block's unknown
+    that is zero gives inf in the Python module's IEEE variant as in C (not a
+    ZeroDivisionError): the same error line and the same kept rows in both backends."""
+    from conftest import run_bgc
+    model = REGRESSIONS / "block_divides_by_its_unknown.bg"
+    said, kept = {}, {}
+    for backend in ["python"] + (["c"] if have_cc() else []):
+        out = tmp_path / f"{backend}.csv"
+        with _alarm(SAFETY_SECONDS):
+            done = run_bgc("simulate", model, "--backend", backend, "-o", out,
+                           env={"BGC_CACHE_DIR": str(tmp_path / "cache")})
+        assert done.returncode == 1 and "Traceback" not in done.stderr, done.stderr
+        said[backend], kept[backend] = done.stderr.splitlines()[0], out.read_bytes()
+        assert re.fullmatch(r"error: at t = \S+: algebraic block \d \(.+\) is singular",
+                            said[backend]), said[backend]
+    assert len(set(said.values())) == 1 and len(set(kept.values())) == 1, said
+
+
 @pytest.mark.parametrize("name, what", [
     ("constraint_second_derivative_beyond_double.bg", "a number beyond a double"),
     ("derivatives_divide_by_zero.bg", "a division by zero (zoo)")])

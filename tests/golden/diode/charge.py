@@ -192,10 +192,11 @@ def _rhs_block0(t, x, p, w, z, zo, r, ro, J, jo):
 
 
 def _rhs_block0_ieee(t, x, p, w, z, zo, r, ro, J, jo):
-    wv = w.v
+    wv = _F64(w.v)
     with numpy.errstate(all="ignore"):
         t = numpy.float64(t)
         x = numpy.asarray(x, dtype=numpy.float64)
+        z = _F64(z)
         p = numpy.asarray(p, dtype=numpy.float64)
         wv[23] = (_c_exp(z[zo + 0]*p[6]) - 1.0)*p[2]
         wv[24] = wv[23]
@@ -220,7 +221,7 @@ def _rhs_0(t, x, p, w, out):
 
 
 def _rhs_0_ieee(t, x, p, w, out):
-    wv = w.v
+    wv = _F64(w.v)
     with numpy.errstate(all="ignore"):
         t = numpy.float64(t)
         x = numpy.asarray(x, dtype=numpy.float64)
@@ -251,10 +252,11 @@ def _outputs_block0(t, x, p, w, z, zo, r, ro, J, jo):
 
 
 def _outputs_block0_ieee(t, x, p, w, z, zo, r, ro, J, jo):
-    wv = w.v
+    wv = _F64(w.v)
     with numpy.errstate(all="ignore"):
         t = numpy.float64(t)
         x = numpy.asarray(x, dtype=numpy.float64)
+        z = _F64(z)
         p = numpy.asarray(p, dtype=numpy.float64)
         wv[23] = (_c_exp(z[zo + 0]*p[6]) - 1.0)*p[2]
         wv[24] = wv[23]
@@ -281,7 +283,7 @@ def _outputs_0(t, x, p, w, out):
 
 
 def _outputs_0_ieee(t, x, p, w, out):
-    wv = w.v
+    wv = _F64(w.v)
     with numpy.errstate(all="ignore"):
         t = numpy.float64(t)
         x = numpy.asarray(x, dtype=numpy.float64)
@@ -314,10 +316,11 @@ def _jvp_block0(t, x, p, w, z, zo, r, ro, J, jo):
 
 
 def _jvp_block0_ieee(t, x, p, w, z, zo, r, ro, J, jo):
-    wv = w.v
+    wv = _F64(w.v)
     with numpy.errstate(all="ignore"):
         t = numpy.float64(t)
         x = numpy.asarray(x, dtype=numpy.float64)
+        z = _F64(z)
         p = numpy.asarray(p, dtype=numpy.float64)
         wv[23] = (_c_exp(z[zo + 0]*p[6]) - 1.0)*p[2]
         wv[24] = wv[23]
@@ -347,7 +350,7 @@ def _jvp_0(t, x, p, w, v, out):
 
 
 def _jvp_0_ieee(t, x, p, w, v, out):
-    wv = w.v
+    wv = _F64(w.v)
     with numpy.errstate(all="ignore"):
         t = numpy.float64(t)
         x = numpy.asarray(x, dtype=numpy.float64)

@@ -162,7 +162,7 @@ def _rhs_0(t, x, p, w, out):
 
 
 def _rhs_0_ieee(t, x, p, w, out):
-    wv = w.v
+    wv = _F64(w.v)
     with numpy.errstate(all="ignore"):
         t = numpy.float64(t)
         x = numpy.asarray(x, dtype=numpy.float64)
@@ -189,7 +189,7 @@ def _outputs_0(t, x, p, w, out):
 
 
 def _outputs_0_ieee(t, x, p, w, out):
-    wv = w.v
+    wv = _F64(w.v)
     with numpy.errstate(all="ignore"):
         t = numpy.float64(t)
         x = numpy.asarray(x, dtype=numpy.float64)
@@ -215,7 +215,7 @@ def _jvp_0(t, x, p, w, v, out):
 
 
 def _jvp_0_ieee(t, x, p, w, v, out):
-    wv = w.v
+    wv = _F64(w.v)
     with numpy.errstate(all="ignore"):
         t = numpy.float64(t)
         x = numpy.asarray(x, dtype=numpy.float64)

@@ -280,7 +280,7 @@ def _rhs_0(t, x, p, w, out):
 
 
 def _rhs_0_ieee(t, x, p, w, out):
-    wv = w.v
+    wv = _F64(w.v)
     with numpy.errstate(all="ignore"):
         t = numpy.float64(t)
         x = numpy.asarray(x, dtype=numpy.float64)
@@ -342,7 +342,7 @@ def _outputs_0(t, x, p, w, out):
 
 
 def _outputs_0_ieee(t, x, p, w, out):
-    wv = w.v
+    wv = _F64(w.v)
     with numpy.errstate(all="ignore"):
         t = numpy.float64(t)
         x = numpy.asarray(x, dtype=numpy.float64)
@@ -425,7 +425,7 @@ def _jvp_0(t, x, p, w, v, out):
 
 
 def _jvp_0_ieee(t, x, p, w, v, out):
-    wv = w.v
+    wv = _F64(w.v)
     with numpy.errstate(all="ignore"):
         t = numpy.float64(t)
         x = numpy.asarray(x, dtype=numpy.float64)
@@ -534,7 +534,7 @@ def _events_0(t, x, p, w, out):
 
 
 def _events_0_ieee(t, x, p, w, out):
-    wv = w.v
+    wv = _F64(w.v)
     with numpy.errstate(all="ignore"):
         t = numpy.float64(t)
         x = numpy.asarray(x, dtype=numpy.float64)
@@ -586,7 +586,7 @@ def _next_time_0(t, x, p, w, out):
 
 
 def _next_time_0_ieee(t, x, p, w, out):
-    wv = w.v
+    wv = _F64(w.v)
     with numpy.errstate(all="ignore"):
         t = numpy.float64(t)
         x = numpy.asarray(x, dtype=numpy.float64)
@@ -653,7 +653,7 @@ def _update_0(t, x, p, w, r, out):
 
 
 def _update_0_ieee(t, x, p, w, r, out):
-    wv = w.v
+    wv = _F64(w.v)
     with numpy.errstate(all="ignore"):
         t = numpy.float64(t)
         x = numpy.asarray(x, dtype=numpy.float64)

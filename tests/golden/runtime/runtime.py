@@ -97,7 +97,7 @@ _MODEL_HELPERS = (
     "_c_asin", "_c_acos", "_c_atan", "_c_atan2", "_c_sinh", "_c_cosh", "_c_tanh", "_c_asinh",
     "_c_atanh", "_c_pow", "_block_solve", "_block_resolve", "_newton", "_Work", "_bind_model",
     "_square", "_square_next", "_table", "_table_next", "_table_piece", "_table_guard", "_input",
-    "_input_next",
+    "_input_next", "_F64",
 )
 # (a)'s names, for the tests that check both sides of the contract (tests/test_pyruntime.py).
 _MODEL_NAMES = (
@@ -243,6 +243,22 @@ def _heaviside(a, at_zero):
 
 def _sq(a):
     return a * a  # as C's bgc_sq (a ** 2 on a float is libm's pow, not always a * a)
+
+
+class _F64:
+    """The workspace (or a block's unknowns in it) as a model function's IEEE variant reads
+    it: each value a numpy.float64, so that a division by a zero it holds gives C's inf or
+    nan instead of raising as a Python float does; writes go to the list itself."""
+    __slots__ = ("values",)
+
+    def __init__(self, values):
+        self.values = values
+
+    def __getitem__(self, i):
+        return numpy.float64(self.values[i])
+
+    def __setitem__(self, i, value):
+        self.values[i] = value
 
 
 def _square_period(t, period, t0):

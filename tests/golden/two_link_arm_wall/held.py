@@ -335,7 +335,7 @@ def _rhs_0(t, x, p, w, out):
 
 
 def _rhs_0_ieee(t, x, p, w, out):
-    wv = w.v
+    wv = _F64(w.v)
     with numpy.errstate(all="ignore"):
         t = numpy.float64(t)
         x = numpy.asarray(x, dtype=numpy.float64)
@@ -460,7 +460,7 @@ def _outputs_0(t, x, p, w, out):
 
 
 def _outputs_0_ieee(t, x, p, w, out):
-    wv = w.v
+    wv = _F64(w.v)
     with numpy.errstate(all="ignore"):
         t = numpy.float64(t)
         x = numpy.asarray(x, dtype=numpy.float64)
@@ -619,7 +619,7 @@ def _jvp_0(t, x, p, w, v, out):
 
 
 def _jvp_0_ieee(t, x, p, w, v, out):
-    wv = w.v
+    wv = _F64(w.v)
     with numpy.errstate(all="ignore"):
         t = numpy.float64(t)
         x = numpy.asarray(x, dtype=numpy.float64)
