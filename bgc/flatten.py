@@ -53,6 +53,15 @@ def _scalar(e: Expr | None, what: str) -> Expr | None:
     return e
 
 
+def _scalar_element(el: Element) -> None:
+    """A scalar element's value, law and initial value are scalars."""
+    _scalar(el.value, f"'{el.name}'")
+    for what, given in (("law", el.law), ("initial value", el.init)):
+        if given is not None and _is_matrix(given[1].value):
+            fail(given[1].span, f"the {what} of '{el.name}' is a scalar, but this is a vector "
+                                "or a matrix")
+
+
 def _one_row(el: Element) -> Element:
     """A scalar constraint junction (also 0[1]) whose annotation or gains are written as
     vectors of one row: their entry."""
@@ -230,7 +239,7 @@ def flatten(g: Graph) -> Graph:
         elements = []
         for el in g.elements:
             try:
-                _scalar(el.value, f"'{el.name}'")
+                _scalar_element(el)
                 elements.append(_one_row(el))
             except ModelError as exc:
                 diags.items.extend(exc.diagnostics)
@@ -243,7 +252,7 @@ def flatten(g: Graph) -> Graph:
     for el in g.elements:
         try:
             if el.dim is None:
-                _scalar(el.value, f"'{el.name}'")
+                _scalar_element(el)
                 elements.append(_one_row(el))
                 continue
             n, m = el.dim
