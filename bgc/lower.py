@@ -46,6 +46,7 @@ class _Mapper:
         self.blocks: dict = {}  # reduce's plan index -> the program's
         self.plans: list[BlockPlan] = []
         self.mapped: dict = {}  # model expression -> IR expression
+        self.memo: dict = {}  # model subexpression -> IR expression (ir.substitute's memo)
 
     def target(self, s):
         """The program variable of s (from now on, s means it)."""
@@ -57,11 +58,12 @@ class _Mapper:
         return w
 
     def expr(self, e):
-        """e in the IR's symbols.  A model symbol means the same in every function, so an
-        expression that several functions share is mapped once."""
+        """e in the IR's symbols.  A model symbol means the same in every function (and is
+        mapped before the first expression that reads it), so an expression, and any
+        subexpression, that several expressions share is mapped once."""
         done = self.mapped.get(e)
         if done is None:
-            done = self.mapped[e] = ir.integral_floats(ir.substitute(e, self.sub))
+            done = self.mapped[e] = ir.integral_floats(ir.substitute(e, self.sub, self.memo))
         return done
 
     def assign(self, a: Assign, out, propagate=True):
