@@ -23,7 +23,11 @@ _PIECEWISE_CONSTANT = (sp.sign, sp.Heaviside)  # derivative zero almost everywhe
 def is_zero(x) -> bool:
     """x == 0, without SymPy's comparison of an expression with the Python 0 (which converts
     the 0 every time): only a number can equal zero."""
-    return x is ZERO or (x.is_Number and x == 0)
+    if x is ZERO:
+        return True
+    if isinstance(x, sp.Basic):
+        return x.is_Number and x == 0
+    return x == 0  # (a Python number: seeds may be given as 1)
 
 
 def directional(expr: sp.Expr, tangents: dict) -> sp.Expr:
