@@ -20,6 +20,16 @@ ZERO = sp.S.Zero
 _PIECEWISE_CONSTANT = (sp.sign, sp.Heaviside)  # derivative zero almost everywhere
 
 
+def is_zero(x) -> bool:
+    """x == 0, without SymPy's comparison of an expression with the Python 0 (which converts
+    the 0 every time): only a number can equal zero."""
+    if x is ZERO:
+        return True
+    if isinstance(x, sp.Basic):
+        return x.is_Number and x == 0
+    return x == 0  # (a Python number: seeds may be given as 1)
+
+
 def directional(expr: sp.Expr, tangents: dict) -> sp.Expr:
     """d expr along the direction; DiracDelta terms (from sign/abs/Heaviside) are dropped."""
     if not tangents:
@@ -43,7 +53,7 @@ def directional(expr: sp.Expr, tangents: dict) -> sp.Expr:
             continue
         if isinstance(e, sp.Piecewise):  # the conditions are constant between events
             d = [done[a] for a in kids]
-            done[e] = ZERO if all(x == 0 for x in d) else sp.Piecewise(
+            done[e] = ZERO if all(is_zero(x) for x in d) else sp.Piecewise(
                 *[(x, p.cond) for x, p in zip(d, e.args)])
             continue
         done[e] = _rule(e, [done[a] for a in e.args])
@@ -56,23 +66,23 @@ def partial(expr: sp.Expr, symbol) -> sp.Expr:
 
 def _rule(e, d):
     args = e.args
-    if all(x == 0 for x in d):
+    if all(is_zero(x) for x in d):
         return ZERO
     if e.is_Add:
-        return sp.Add(*[x for x in d if x != 0])
+        return sp.Add(*[x for x in d if not is_zero(x)])
     if e.is_Mul:
         terms = []
         for k, dk in enumerate(d):
-            if dk != 0:
+            if not is_zero(dk):
                 terms.append(sp.Mul(*(args[:k] + (dk,) + args[k + 1:])))
         return sp.Add(*terms)
     if e.is_Pow:
         base, exp = args
         db, dx = d
         out = ZERO
-        if db != 0:
+        if not is_zero(db):
             out = exp * base ** (exp - 1) * db
-        if dx != 0:
+        if not is_zero(dx):
             out = out + e * sp.log(base) * dx
         return out
     if isinstance(e, _PIECEWISE_CONSTANT):
@@ -80,13 +90,13 @@ def _rule(e, d):
     if hasattr(e, "fdiff"):  # functions, Min and Max
         terms = []
         for k, dk in enumerate(d):
-            if dk != 0:
+            if not is_zero(dk):
                 f = e.fdiff(k + 1)
                 if f.has(sp.DiracDelta):
                     f = f.replace(lambda a: isinstance(a, sp.DiracDelta), lambda a: ZERO)
                 if f.has(sp.Derivative):
                     raise TypeError(f"no derivative known for {e}")  # pragma: no cover
-                if f != 0:
+                if not is_zero(f):
                     terms.append(f * dk)
         return sp.Add(*terms)
     raise TypeError(f"cannot differentiate {type(e).__name__}: {e}")  # pragma: no cover

@@ -19,9 +19,20 @@ from .kinds import KINDS
 TIME = sp.Symbol("t", real=True)
 
 
+_VARS: dict = {}  # name -> its symbol: SymPy's own constructor checks the assumptions and
+#                  consults its cache every time, and the stages ask for the same names again
+#                  and again (a bond's effort and flow in every equation that reads them)
+_VARS_MAX = 1 << 18  # names kept; beyond, the memo starts again
+
+
 def var(name: str) -> sp.Symbol:
     """The symbol of a model variable (all model quantities are real)."""
-    return sp.Symbol(name, real=True)
+    symbol = _VARS.get(name)
+    if symbol is None:
+        if len(_VARS) > _VARS_MAX:
+            _VARS.clear()
+        symbol = _VARS[name] = sp.Symbol(name, real=True)
+    return symbol
 
 
 def written(expr) -> str:

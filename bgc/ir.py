@@ -245,12 +245,39 @@ def trivial(e) -> bool:
                                                                    or e.args[1].is_Indexed)
 
 
+_FLOATS: dict = {}  # expression -> frozenset of its Floats with an integral value
+_FLOATS_MAX = 1 << 18
+
+
+def _integral(f) -> bool:
+    return float(f).is_integer() and abs(float(f)) < 2 ** 53
+
+
 def integral_floats(e):
-    """Floats with an integral value as integers (1.0*x is x), exact either way."""
-    floats = [f for f in e.atoms(sp.Float) if float(f).is_integer() and abs(float(f)) < 2 ** 53]
-    if not floats:
+    """Floats with an integral value as integers (1.0*x is x), exact either way.  Which
+    subexpressions hold such floats is remembered (explicit stack), like free_symbols."""
+    found = _FLOATS.get(e)
+    if found is None:
+        if len(_FLOATS) > _FLOATS_MAX:
+            _FLOATS.clear()
+        memo = _FLOATS
+        stack = [(e, False)]
+        while stack:
+            n, ready = stack.pop()
+            if n in memo:
+                continue
+            if not n.args:
+                memo[n] = frozenset((n,)) if isinstance(n, sp.Float) and _integral(n) \
+                    else frozenset()
+            elif not ready:
+                stack.append((n, True))
+                stack.extend((a, False) for a in n.args if a not in memo)
+            else:
+                memo[n] = frozenset().union(*[memo[a] for a in n.args])
+        found = memo[e]
+    if not found:
         return e
-    return e.xreplace({f: sp.Integer(int(f)) for f in floats})
+    return e.xreplace({f: sp.Integer(int(f)) for f in found})
 
 
 # ---------------------------------------------------------------- statements
@@ -389,6 +416,35 @@ def prune(body) -> tuple:
                 factored.discard(s.block)
     keep.reverse()
     return tuple(keep)
+
+
+def prune_each(steps, results) -> list[tuple]:
+    """prune(steps + r) for each list of Stores r in results, in one backward pass over steps
+    (each symbol remembers, as a bit mask, the results that need it), so that the functions
+    built from one program cost one walk, not one each.  Steps holding a Store or a Resolve
+    are pruned one function at a time."""
+    steps = list(steps)
+    if any(isinstance(s, (Store, Resolve)) for s in steps) or \
+            not all(isinstance(s, Store) for r in results for s in r):
+        return [prune(steps + list(r)) for r in results]
+    need: dict = {}  # symbol -> the results that need it (bit k: results[k])
+    for k, r in enumerate(results):
+        bit = 1 << k
+        for s in r:
+            for sym in uses(s):
+                need[sym] = need.get(sym, 0) | bit
+    masks = []
+    for s in reversed(steps):
+        m = 0
+        for d in defines(s):
+            m |= need.get(d, 0)
+        masks.append(m)
+        if m:
+            for sym in uses(s):
+                need[sym] = need.get(sym, 0) | m
+    masks.reverse()
+    return [tuple(s for s, m in zip(steps, masks) if m >> k & 1) + tuple(r)
+            for k, r in enumerate(results)]
 
 
 def positions(order) -> list[int]:

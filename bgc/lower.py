@@ -46,6 +46,7 @@ class _Mapper:
         self.blocks: dict = {}  # reduce's plan index -> the program's
         self.plans: list[BlockPlan] = []
         self.mapped: dict = {}  # model expression -> IR expression
+        self.memo: dict = {}  # model subexpression -> IR expression (ir.substitute's memo)
 
     def target(self, s):
         """The program variable of s (from now on, s means it)."""
@@ -57,11 +58,12 @@ class _Mapper:
         return w
 
     def expr(self, e):
-        """e in the IR's symbols.  A model symbol means the same in every function, so an
-        expression that several functions share is mapped once."""
+        """e in the IR's symbols.  A model symbol means the same in every function (and is
+        mapped before the first expression that reads it), so an expression, and any
+        subexpression, that several expressions share is mapped once."""
         done = self.mapped.get(e)
         if done is None:
-            done = self.mapped[e] = ir.integral_floats(ir.substitute(e, self.sub))
+            done = self.mapped[e] = ir.integral_floats(ir.substitute(e, self.sub, self.memo))
         return done
 
     def assign(self, a: Assign, out, propagate=True):
@@ -276,12 +278,10 @@ def jacobian_pattern(rhs: Function, n: int, blocks) -> JacobianPattern:
     rows = ir.state_masks(rhs, n)
     columns = [[] for _ in range(n)]
     for i, m in enumerate(rows):
-        j = 0
-        while m:
-            if m & 1:
-                columns[j].append(i)
-            m >>= 1
-            j += 1
+        while m:  # (the set bits only, lowest first: a row's work is its nonzeros)
+            low = m & -m
+            columns[low.bit_length() - 1].append(i)
+            m ^= low
     colors: list[list[int]] = []
     covered: list[int] = []
     for j in range(n):
@@ -439,13 +439,14 @@ def _build(mapper: _Mapper, steps, specs: dict, n: int) -> dict:
     tangents (after the primal functions, so that their variables are numbered after)."""
     steps = list(steps)
     out = {}
-    for name, (args, size, stores) in specs.items():
+    results = [_stores(stores.rows) if isinstance(stores, _Through) else list(stores)
+               for _, _, stores in specs.values()]
+    for (name, (args, size, stores)), body in zip(specs.items(), ir.prune_each(steps, results)):
         if isinstance(stores, _Through):
-            rows = mapper.function(name, args, ir.prune(steps + _stores(stores.rows)),
-                                   len(stores.rows))
+            rows = mapper.function(name, args, body, len(stores.rows))
             out[name], mapper.count = jacobian(rows, name, n, mapper.plans, mapper.count)
         else:
-            out[name] = mapper.function(name, args, ir.prune(steps + stores), size)
+            out[name] = mapper.function(name, args, body, size)
     for name, of in TANGENTS.items():
         out[name], mapper.count = tangent(out[of], name, {X[i]: V[i] for i in range(n)},
                                           mapper.plans, mapper.count)
@@ -518,12 +519,23 @@ def finish(name, states, params, outputs, constraints, movable, scene, functions
 _NON_FINITE = (sp.zoo, sp.nan, sp.oo, -sp.oo)
 
 
-def _non_finite(expr) -> sp.Basic | None:
+def _non_finite(expr, seen: set | None = None) -> sp.Basic | None:
     """The first constant of expr that is not a finite number (zoo, nan, oo, a Float beyond a
-    double), or None; an explicit stack, however deep the expression."""
+    double), or None; an explicit stack, however deep the expression.  seen (shared between
+    calls) holds the subexpressions already found finite: each is walked once."""
+    seen = set() if seen is None else seen
     stack = [expr]
     while stack:
         e = stack.pop()
+        if e in seen:
+            continue
+        seen.add(e)
+        args = e.args
+        if args:  # (only atoms are constants)
+            stack.extend(args)
+            continue
+        if e.is_Symbol:
+            continue
         if e in _NON_FINITE or (isinstance(e, sp.Float) and not e.is_finite) or \
                 (isinstance(e, sp.Number) and not e.is_finite):
             return e
@@ -533,7 +545,6 @@ def _non_finite(expr) -> sp.Basic | None:
                     return e
             except (OverflowError, ValueError):
                 return e
-        stack.extend(e.args)
     return None
 
 
@@ -559,15 +570,16 @@ def _refuse_non_finite(functions: dict, params) -> None:
             "init": "the initial values", "jvp": "the Jacobian",
             "position_jac": "the constraints' Jacobian", "velocity_jac": "the constraints' "
             "Jacobian", "residual": "the constraints' residuals", "consts": "the constants"}
+    seen: set = set()
     for prm in params:
-        bad = _non_finite(prm.default)
+        bad = _non_finite(prm.default, seen)
         if bad is not None:
             raise ModelError([Diagnostic("error", None, f"parameter '{prm.name}' is not finite "
                                                           f"({bad}): a number beyond a double")])
     for name, fn in functions.items():
         for statement in fn.body:
             for expr in _exprs(statement):
-                bad = _non_finite(expr)
+                bad = _non_finite(expr, seen)
                 if bad is None:
                     continue
                 if bad == sp.zoo:

@@ -5,9 +5,9 @@ from functools import lru_cache
 
 from dataclasses import replace
 
-from lark import Lark, Token, Transformer_NonRecursive, Tree, v_args
+from lark import Lark, Token, Tree
 from lark.exceptions import (UnexpectedCharacters, UnexpectedEOF, UnexpectedInput,
-                             UnexpectedToken, VisitError)
+                             UnexpectedToken)
 
 from . import ast
 from .diagnostics import ModelError, Note, Origin, Span, fail
@@ -125,9 +125,9 @@ def _doc(tok) -> str | None:
     return str(tok)[1:-1].replace('\\"', '"').replace("\\\\", "\\")
 
 
-@v_args(meta=True)
-class _ToAst(Transformer_NonRecursive):
-    """Builds typed nodes only; no checking beyond the shape of the syntax."""
+class _ToAst:
+    """Builds typed nodes only; no checking beyond the shape of the syntax.  A method per rule,
+    called with the rule's meta (its position) and its children already built (_transform)."""
 
     def start(self, meta, children):
         return tuple(children)
@@ -509,14 +509,37 @@ def parse(source: str, path: str = "<model>") -> ast.Model:
     return ast.Model(_transform(tree), path)
 
 
+_BUILDERS = {name: f for name, f in vars(_ToAst).items() if not name.startswith("_")}
+
+
 def _transform(tree):
-    """The AST of a parse tree; the model errors that building it finds, as they are."""
-    try:
-        return _ToAst().transform(tree)
-    except VisitError as exc:
-        if isinstance(exc.orig_exc, ModelError):
-            raise exc.orig_exc from None
-        raise
+    """The AST of a parse tree, bottom-up without recursion (a rule without a builder stays a
+    Tree); the model errors that building it finds, as they are.  (Lark's own transformer
+    does the same walk, but wraps every call of a builder that takes the meta in new objects:
+    a third of the parse of a large model.)"""
+    order = []  # the tree in reverse postfix order
+    queue = [tree]
+    while queue:
+        t = queue.pop()
+        order.append(t)
+        if type(t) is Tree:
+            queue += t.children
+    builder = _ToAst()
+    stack: list = []
+    for x in reversed(order):
+        if type(x) is Tree:
+            size = len(x.children)
+            if size:
+                args = stack[-size:]
+                del stack[-size:]
+            else:
+                args = []
+            f = _BUILDERS.get(x.data)
+            stack.append(f(builder, x.meta, args) if f is not None else Tree(x.data, args, x.meta))
+        else:
+            stack.append(x)
+    result, = stack
+    return result
 
 
 def _located_at(value, origin: Origin):

@@ -68,7 +68,9 @@ def check_expression(expr: sp.Basic, n_states: int, n_params: int, n_consts: int
     stack = [expr]
     while stack:
         e = stack.pop()
-        if isinstance(e, sp.Indexed):
+        if isinstance(e, (sp.Add, sp.Mul, sp.Pow)):  # (the most common first)
+            stack.extend(e.args)
+        elif isinstance(e, sp.Indexed):
             _check_indexed(e, n_states, n_params, n_consts)
         elif isinstance(e, sp.Symbol):
             if e.name not in (T.name, ATOL.name) and not _TEMP.match(e.name):
@@ -76,8 +78,6 @@ def check_expression(expr: sp.Basic, n_states: int, n_params: int, n_consts: int
         elif isinstance(e, (sp.Integer, sp.Rational, sp.Float)) or e in (sp.pi, sp.E):
             if isinstance(e, sp.Float):
                 float_literal(float(e))
-        elif isinstance(e, (sp.Add, sp.Mul, sp.Pow)):
-            stack.extend(e.args)
         elif type(e) in _CLASSES:
             _check_arity(e)
             stack.extend(e.args)
@@ -164,9 +164,9 @@ class _ArithmeticPrinting:
     def _print(self, expr, **kwargs):
         if isinstance(expr, sp.Indexed):
             return self._print_index(expr.base, int(expr.indices[0]))
-        if expr == ATOL:
-            return self.ATOL
         if isinstance(expr, sp.Symbol):
+            if expr == ATOL:
+                return self.ATOL
             return self.names.get(expr, expr.name)
         if isinstance(expr, sp.Add):
             return self._print_sum(expr)

@@ -33,6 +33,12 @@ def der(symbol: sp.Symbol) -> sp.Symbol:
     return var(f"der({symbol.name})")
 
 
+def _signed(sign: int, symbol: sp.Symbol) -> sp.Expr:
+    """sign * symbol (sign 1 or -1), the same expression as SymPy's product, built without
+    converting the Python number and flattening a product of two factors."""
+    return symbol if sign == 1 else -symbol
+
+
 def bond_effort(label: str) -> sp.Symbol:
     return var(f"e[{label}]")
 
@@ -392,7 +398,7 @@ class _Builder:
         for i, b in bonds:
             if i != k:
                 self.emit(common(b.label), common(kb.label), el, el.span)
-        others = sp.Add(*[sigma[i] * through(b.label) for i, b in bonds if i != k])
+        others = sp.Add(*[_signed(sigma[i], through(b.label)) for i, b in bonds if i != k])
         self.emit(through(kb.label), -sigma[k] * others, el, el.span)
         self.emit(var(variable_name(el.name, field)), common(kb.label), el, el.span)
 
@@ -402,7 +408,7 @@ class _Builder:
             self.emit(common(b.label), lam, el, el.span)
         self.emit(var(variable_name(el.name, field)), lam, el, el.span)
         balance = var(variable_name(el.name, "balance"))
-        self.emit(balance, sp.Add(*[sigma[i] * through(b.label) for i, b in bonds]), el,
+        self.emit(balance, sp.Add(*[_signed(sigma[i], through(b.label)) for i, b in bonds]), el,
                   el.span)
         if el.constraint.kind in ("diode", "friction", "switch"):  # a switched one-port: its flow
             # (its effort, as the dual junction that imposes its flow: bgc.causality)

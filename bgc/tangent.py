@@ -12,7 +12,7 @@ from dataclasses import replace
 import sympy as sp
 
 from . import ir
-from .differentiate import ZERO, directional
+from .differentiate import ZERO, directional, is_zero
 
 
 def tangent(f: ir.Function, name: str, seeds: dict, plans,
@@ -49,7 +49,7 @@ class _Forward:
 
     def bind(self, target, value):
         """target's tangent is value: a new assignment unless it is zero or trivial."""
-        if value == 0:
+        if is_zero(value):
             return
         value = ir.integral_floats(value)
         if ir.trivial(value):
@@ -81,7 +81,7 @@ class _Forward:
         terms = [[] for _ in s.rhs]
         for (i, k), e in zip(self.plans[s.block].pattern, s.matrix):
             d = self.of(e)
-            if d != 0:
+            if not is_zero(d):
                 terms[row_at[i]].append(d * s.unknowns[col_at[k]])
         self.resolve(s, [self.of(b) - sp.Add(*t) for b, t in zip(s.rhs, terms)])
 
@@ -97,7 +97,7 @@ class _Forward:
             self.bind(a.target, self.of(a.expr))
 
     def resolve(self, s, rows):
-        if all(r == 0 for r in rows):
+        if all(is_zero(r) for r in rows):
             return
         lu = self.plans[s.block].lu
         numbered = [self.new() for _ in rows]  # in the unknowns' own order, as reduce found them
@@ -125,7 +125,7 @@ def jacobian(f: ir.Function, name: str, n: int, plans, fresh: int) -> tuple[ir.F
         for s in f.body:
             if isinstance(s, ir.Store):
                 d = forward.of(s.expr)
-                if d != 0:
+                if not is_zero(d):
                     forward.out.append(ir.Store(s.index * n + j, ir.integral_floats(d)))
                 continue
             mark = len(forward.out)

@@ -110,3 +110,35 @@ def test_the_collector_is_restored_after_a_compile():
             assert gc.get_threshold()[0] == COMPILE_GC_THRESHOLD
         assert gc.get_threshold()[0] == COMPILE_GC_THRESHOLD
     assert gc.get_threshold() == before and gc.get_freeze_count() == 0
+
+
+def test_one_pruning_walk_keeps_what_each_function_needs():
+    """ir.prune_each prunes the steps for several functions in one walk: each function's
+    statements are what ir.prune keeps for its stores alone (the double pendulum's program,
+    with a block, and stores that read different parts of it, none at all included)."""
+    compiled = api.build(ROOT / "models" / "double_pendulum.bg", algebra="numeric")
+    reduced = compiled.reduced
+    steps = list(reduced.steps)
+    states = [st.symbol for st in reduced.states]
+    rates = [Store(k, e) for k, e in enumerate(reduced.rates)]
+    results = [rates, [Store(0, states[0])], [], rates[1:2] + [Store(1, states[-1] * 2)],
+               [Store(k, o.expr) for k, o in enumerate(reduced.outputs)]]
+    assert ir.prune_each(steps, results) == [ir.prune(steps + r) for r in results]
+    assert any(isinstance(s, Solve) for s in ir.prune_each(steps, results)[0])
+    # a body holding a Resolve keeps the rule that a kept Resolve keeps its block's Solve
+    a, z, dz = W(0), W(2), W(3)
+    body = [Assign(a, X[0] + 1), Solve(0, (z,), (X[0],), (X[1],)), Resolve(0, (dz,), (V[0],))]
+    stores = [[Store(0, dz)], [Store(0, a)]]
+    assert ir.prune_each(body, stores) == [ir.prune(body + r) for r in stores]
+
+
+def test_remembered_integral_floats_are_integers():
+    """ir.integral_floats: floats with an integral value become integers, others stay, in a
+    subexpression met again too."""
+    a = sp.Symbol("a")
+    inner = sp.Float(2.0) * sp.sin(a) + sp.Float(0.5)
+    assert ir.integral_floats(inner) == 2 * sp.sin(a) + sp.Float(0.5)
+    outer = inner * X[0] + sp.Float(3.0)
+    assert ir.integral_floats(outer) == (2 * sp.sin(a) + sp.Float(0.5)) * X[0] + 3
+    assert ir.integral_floats(sp.Float(2.0 ** 60) * a) == sp.Float(2.0 ** 60) * a  # beyond 2^53
+    assert ir.integral_floats(a + 1) is not None and ir.integral_floats(X[1]) == X[1]
