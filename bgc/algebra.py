@@ -350,9 +350,14 @@ def _in_doubles(e, values: dict) -> complex:
         elif all(a.imag == 0 for a in args) and isinstance(e, (sp.Abs, sp.sign, sp.atan2,
                                                                   _Extremum)):
             x = [a.real for a in args]
-            z = complex(abs(x[0]) if isinstance(e, sp.Abs) else math.atan2(*x)
-                        if isinstance(e, sp.atan2) else math.copysign(1.0, x[0]) if x[0] != 0
-                        else 0.0 if isinstance(e, sp.sign) else e.pick(x))
+            if isinstance(e, sp.Abs):
+                z = complex(abs(x[0]))
+            elif isinstance(e, sp.atan2):
+                z = complex(math.atan2(*x))
+            elif isinstance(e, sp.sign):
+                z = complex(math.copysign(1.0, x[0]) if x[0] != 0 else 0.0)
+            else:  # max, min
+                z = complex(e.pick(x))
         else:
             z = complex(math.nan)
     except OverflowError:
