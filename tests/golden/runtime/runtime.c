@@ -1845,6 +1845,74 @@ static int bgc_after_event(bgc_run *r, const bgc_family *f, double t, double *y,
     return rc;
 }
 
+/* A fixed step from t: on the grid, or onto a time event inside its step (*h, its end *tph,
+   and whether it is the run's last); nonzero (message set) when it cannot be taken. */
+static int bgc_grid_step(bgc_run *r, const bgc_family *f, bgc_grid *grid, double t, double *h,
+                         double *tph, int *last)
+{
+    const int rc = bgc_grid_next(r, f, grid, t, tph, last);
+    if (rc)
+        return rc;
+    if (r->t_next < *tph) { /* a time event inside: the step ends on it */
+        *tph = r->t_next;
+        *last = 0;
+    }
+    *h = *tph - t;
+    return 0;
+}
+
+/* An adaptive step of *h from t, cut short onto a time event or the run's end if it would
+   reach within 1 % of it (*tph its end, *last set at the run's end); returns the step the
+   controller wanted. */
+static double bgc_adaptive_step(bgc_run *r, double t, double *h, double *tph, int *last)
+{
+    const double wanted = *h, t_end = r->s->t_end;
+    if (r->t_next < t_end && t + 1.01 * *h - r->t_next > 0.0) {
+        *h = r->t_next - t; /* onto the time event */
+        *tph = r->t_next;
+    } else {
+        if (t + 1.01 * *h - t_end > 0.0) {
+            *h = t_end - t;
+            *last = 1;
+        }
+        *tph = *last ? t_end : t + *h;
+    }
+    return wanted;
+}
+
+/* The step c just accepted: its end checked and counted (and the family told), and in a
+   model with events the first event in it located.  *event 1: the step holds one, at *te
+   with the state ye there, and the output rows before it are handed over; else the step's
+   rows and the family's work after the step (which may return BGC_STIFF). */
+static int bgc_step_accepted(bgc_run *r, bgc_dense *c, int last, int *event, double *te,
+                             double *ye, double *yout)
+{
+    const int i = bgc_first_nonfinite(c->y1, BGC_NUM_STATES);
+    int rc;
+    *event = 0;
+    *te = c->tph;
+    if (i >= 0)
+        return bgc_fail(r->msg, r->msg_size, c->tph, "state", bgc_state_names[i]);
+    rc = bgc_accept(r, c->tph);
+    if (rc == 0 && c->f->accepted)
+        rc = c->f->accepted(c->ms, r, c->tph, c->y1);
+    if (rc)
+        return rc;
+    if (BGC_NUM_DISCRETE > 0) {
+        const int found = bgc_find_event(r, c, te, ye);
+        if (found < 0)
+            return -found;
+        *event = found;
+        if (found)
+            return bgc_emit_step(r, c, *te, 0, yout);
+        memcpy(r->g, BGC_EV_GB(r), sizeof(double) * BGC_NUM_INDICATORS);
+    }
+    rc = bgc_emit_step(r, c, c->tph, 1, yout);
+    if (rc == 0 && c->f->after)
+        rc = c->f->after(c->ms, r, c->tph, c->y1, last);
+    return rc;
+}
+
 /* One family's run from (r->t, y) to s->t_end (the driver proper).  Keeps r->t and y at the
    last accepted step; returns 0, an error (message set), the sink's nonzero value, or
    BGC_STIFF (r->h then holds the explicit phase's next step). */
@@ -1854,8 +1922,8 @@ static int bgc_drive(bgc_run *r, const bgc_family *f, double *y)
     const bgc_settings *s = r->s;
     const double hmax = bgc_hmax(s);
     double *mem = malloc((size_t)3 * D * sizeof *mem), *y1, *yout, *ye;
-    double t = r->t, h = 0.0, hnew, wanted = 0.0;
-    int i, rc = 0, reject = 0, last = 0, bad = BGC_BAD_NONE, bad_kind = 0, at_event = 0;
+    double t = r->t, h = 0.0, hnew, wanted = 0.0, te;
+    int rc = 0, event, reject = 0, last = 0, bad = BGC_BAD_NONE, bad_kind = 0, at_event = 0;
     bgc_grid grid = {0.0, 0.0, 0.0, 0, 0};
     bgc_outcome o;
     void *ms = NULL;
@@ -1873,7 +1941,7 @@ static int bgc_drive(bgc_run *r, const bgc_family *f, double *y)
     if (!ms)
         goto done;
     for (;;) {
-        double tph;
+        double tph = 0.0;
         bgc_dense c;
         if (r->t_next - t <= bgc_hmin(t)) { /* a time event closer than a step can be */
             t = r->t_next;
@@ -1891,32 +1959,14 @@ static int bgc_drive(bgc_run *r, const bgc_family *f, double *y)
             bad = BGC_BAD_NONE;
             continue;
         }
-        if (r->fixed) {
-            rc = bgc_grid_next(r, f, &grid, t, &tph, &last);
-            if (rc)
-                goto done;
-            if (r->t_next < tph) { /* a time event inside: the step ends on it */
-                tph = r->t_next;
-                last = 0;
-            }
-            h = tph - t;
-        } else {
-            if (!(h >= bgc_hmin(t))) {
-                rc = bgc_fail_small(r, t, h, bad, bad_kind, o.worst);
-                goto done;
-            }
-            wanted = h;
-            if (r->t_next < s->t_end && t + 1.01 * h - r->t_next > 0.0) {
-                h = r->t_next - t; /* onto the time event */
-                tph = r->t_next;
-            } else {
-                if (t + 1.01 * h - s->t_end > 0.0) {
-                    h = s->t_end - t;
-                    last = 1;
-                }
-                tph = last ? s->t_end : t + h;
-            }
-        }
+        if (r->fixed)
+            rc = bgc_grid_step(r, f, &grid, t, &h, &tph, &last);
+        else if (!(h >= bgc_hmin(t)))
+            rc = bgc_fail_small(r, t, h, bad, bad_kind, o.worst);
+        else
+            wanted = bgc_adaptive_step(r, t, &h, &tph, &last);
+        if (rc)
+            goto done;
         f->step(ms, r, t, h, tph, y, y1, &o);
         if (o.kind == BGC_STEP_END) {
             rc = o.rc;
@@ -1938,16 +1988,6 @@ static int bgc_drive(bgc_run *r, const bgc_family *f, double *y)
 
         /* accepted */
         hnew = o.hnew;
-        i = bgc_first_nonfinite(y1, N);
-        if (i >= 0) {
-            rc = bgc_fail(r->msg, r->msg_size, tph, "state", bgc_state_names[i]);
-            goto done;
-        }
-        rc = bgc_accept(r, tph);
-        if (rc == 0 && f->accepted)
-            rc = f->accepted(ms, r, tph, y1);
-        if (rc)
-            goto done;
         c.f = f;
         c.ms = ms;
         c.t = t;
@@ -1957,27 +1997,15 @@ static int bgc_drive(bgc_run *r, const bgc_family *f, double *y)
         c.y1 = y1;
         c.prepared = f->prepare == NULL;
         c.f0 = c.f1 = NULL;
-        if (BGC_NUM_DISCRETE > 0) {
-            double te = tph;
-            const int found = bgc_find_event(r, &c, &te, ye);
-            if (found < 0) {
-                rc = -found;
+        rc = bgc_step_accepted(r, &c, last, &event, &te, ye, yout);
+        if (event) { /* the step ends at the event; the method starts afresh there */
+            if (rc)
                 goto done;
-            }
-            if (found) { /* the step ends at the event; the method starts afresh there */
-                rc = bgc_emit_step(r, &c, te, 0, yout);
-                if (rc)
-                    goto done;
-                memcpy(y, ye, sizeof(double) * N);
-                t = te;
-                at_event = 1;
-                continue;
-            }
-            memcpy(r->g, BGC_EV_GB(r), sizeof(double) * BGC_NUM_INDICATORS);
+            memcpy(y, ye, sizeof(double) * N);
+            t = te;
+            at_event = 1;
+            continue;
         }
-        rc = bgc_emit_step(r, &c, tph, 1, yout);
-        if (rc == 0 && f->after)
-            rc = f->after(ms, r, tph, y1, last);
         if (rc && rc != BGC_STIFF)
             goto done;
         memcpy(y, y1, sizeof(double) * N);
@@ -4444,15 +4472,163 @@ static char *bgc_next_field(char **line)
     return start;
 }
 
+/* The whole of the open file f as one '\0'-terminated string (its length in *size); NULL
+   (message written) when out of memory.  Closes f. */
+static char *bgc_read_text(const char *path, FILE *f, size_t *size)
+{
+    char *text = NULL;
+    size_t cap = 0, got;
+    *size = 0;
+    do {
+        if (*size + 4096 + 1 > cap) {
+            char *more = (char *)realloc(text, cap = 2 * cap + 4096 + 1);
+            if (!more) {
+                free(text);
+                fclose(f);
+                fprintf(stderr, "error: out of memory reading '%s'\n", path);
+                return NULL;
+            }
+            text = more;
+        }
+        got = fread(text + *size, 1, 4096, f);
+        *size += got;
+    } while (got > 0);
+    fclose(f);
+    text[*size] = '\0';
+    return text;
+}
+
+/* The header line of --input's file: column[k] the input that column k gives (-2: none, the
+   column t), *tcol the column t.  The number of columns, or -1 (message written). */
+static int bgc_input_header(const char *path, char *line, int *column, int *tcol)
+{
+    int ncol = 0, k, j;
+    *tcol = -1;
+    while (line && ncol < 256) {
+        const char *field = bgc_next_field(&line);
+        column[ncol] = -2;
+        if (strcmp(field, "t") == 0) {
+            if (*tcol >= 0)
+                goto twice;
+            *tcol = ncol;
+        } else {
+            for (j = 0; j < BGC_NUM_INPUTS; j++)
+                if (strcmp(field, bgc_input_name(j)) == 0)
+                    break;
+            if (j == BGC_NUM_INPUTS) {
+                fprintf(stderr, "error: %s: '%s' is not an input of the model (its inputs:", path,
+                        field);
+                for (j = 0; j < BGC_NUM_INPUTS; j++)
+                    fprintf(stderr, "%s %s", j ? "," : "", bgc_input_name(j));
+                fprintf(stderr, "%s)\n", BGC_NUM_INPUTS ? "" : " none");
+                return -1;
+            }
+            for (k = 0; k < ncol; k++)
+                if (column[k] == j)
+                    goto twice;
+            if (bgc_input_file.series[j].n > 0) {
+                fprintf(stderr, "error: %s: input '%s' is given twice\n", path, field);
+                return -1;
+            }
+            column[ncol] = j;
+        }
+        ncol++;
+    }
+    if (*tcol < 0) {
+        fprintf(stderr, "error: %s: the header has no column 't'\n", path);
+        return -1;
+    }
+    if (line) {
+        fprintf(stderr, "error: %s: more than 256 columns\n", path);
+        return -1;
+    }
+    return ncol;
+twice:
+    fprintf(stderr, "error: %s: a column is named twice in the header\n", path);
+    return -1;
+}
+
+/* The rows of data after the header (body: its lines, each '\0'-terminated, up to end) into
+   v, row by row, cols numbers each, t in column tcol; the number of rows, or -1 (message
+   written). */
+static int bgc_input_rows(const char *path, char *body, const char *end, int cols, int tcol,
+                          double *v)
+{
+    char *line, *next;
+    long line_no = 1;
+    int rows = 0, k;
+    for (line = body; line && line < end; line = next) {
+        char *rest = line;
+        next = line + strlen(line) + 1;
+        line_no++;
+        if (strspn(line, " \t\r") == strlen(line))
+            continue;
+        for (k = 0; k < cols; k++) {
+            char *field, *stop;
+            double x;
+            if (!rest) {
+                fprintf(stderr, "error: %s:%ld: this row has %d fields, the header %d\n", path,
+                        line_no, k, cols);
+                return -1;
+            }
+            field = bgc_next_field(&rest);
+            x = strtod(field, &stop);
+            if (stop == field || *stop != '\0' || !isfinite(x)) {
+                fprintf(stderr, "error: %s:%ld: '%s' is not a finite number\n", path, line_no,
+                        field);
+                return -1;
+            }
+            v[(size_t)rows * (size_t)cols + (size_t)k] = x;
+        }
+        if (rest) {
+            fprintf(stderr, "error: %s:%ld: this row has more fields than the header (%d)\n",
+                    path, line_no, cols);
+            return -1;
+        }
+        if (rows > 0 && !(v[(size_t)rows * cols + tcol] > v[(size_t)(rows - 1) * cols + tcol])) {
+            fprintf(stderr, "error: %s:%ld: t must increase from row to row\n", path, line_no);
+            return -1;
+        }
+        rows++;
+    }
+    if (rows == 0)
+        fprintf(stderr, "error: %s: no rows of data\n", path);
+    return rows > 0 ? rows : -1;
+}
+
+/* The inputs' series from the rows of data v (row-major, rows x cols): the values transposed
+   into bgc_input_file.values, so that each column is an array; 0, or -1 (message written). */
+static int bgc_input_columns(const char *path, const double *v, int rows, int cols,
+                             const int *column, int tcol)
+{
+    double *cm = (double *)malloc(sizeof(double) * (size_t)rows * (size_t)cols);
+    int r, k;
+    if (!cm) {
+        fprintf(stderr, "error: out of memory reading '%s'\n", path);
+        return -1;
+    }
+    for (r = 0; r < rows; r++)
+        for (k = 0; k < cols; k++)
+            cm[(size_t)k * rows + r] = v[(size_t)r * cols + k];
+    bgc_input_file.values = cm;
+    for (k = 0; k < cols; k++)
+        if (column[k] >= 0) {
+            bgc_input_series *s = &bgc_input_file.series[column[k]];
+            s->n = rows;
+            s->t = cm + (size_t)tcol * rows;
+            s->u = cm + (size_t)k * rows;
+        }
+    return 0;
+}
+
 /* Reads --input's file into bgc_input_file.series; 0, or BGC_ERR_USAGE with a message. */
 static int bgc_read_inputs(void)
 {
     const char *path = bgc_input_file.path;
     FILE *f = fopen(path, "rb");
-    char *text = NULL, *line, *next, *field, *body;
-    size_t size = 0, cap = 0, got;
-    int column[256], ncol = 0, tcol = -1, rows = 0, cols, k, j;
-    long line_no = 1;
+    char *text, *line, *next, *body;
+    size_t size;
+    int column[256], tcol, rows = 0, cols, rc = BGC_ERR_USAGE;
     double *v;
     if (!f) {
         fprintf(stderr, "error: cannot read the input file '%s': %s\n", path, strerror(errno));
@@ -4466,152 +4642,36 @@ static int bgc_read_inputs(void)
         fprintf(stderr, "error: out of memory reading '%s'\n", path);
         return BGC_ERR_USAGE;
     }
-    do {
-        if (size + 4096 + 1 > cap) {
-            char *more = (char *)realloc(text, cap = 2 * cap + 4096 + 1);
-            if (!more) {
-                free(text);
-                fclose(f);
-                fprintf(stderr, "error: out of memory reading '%s'\n", path);
-                return BGC_ERR_USAGE;
-            }
-            text = more;
-        }
-        got = fread(text + size, 1, 4096, f);
-        size += got;
-    } while (got > 0);
-    fclose(f);
-    text[size] = '\0';
-    next = strchr(text, '\n');
-    if (next)
-        *next++ = '\0';
-    line = text;
-    while (line && ncol < 256) {
-        field = bgc_next_field(&line);
-        column[ncol] = -2;
-        if (strcmp(field, "t") == 0) {
-            if (tcol >= 0)
-                goto twice;
-            tcol = ncol;
-        } else {
-            for (j = 0; j < BGC_NUM_INPUTS; j++)
-                if (strcmp(field, bgc_input_name(j)) == 0)
-                    break;
-            if (j == BGC_NUM_INPUTS) {
-                fprintf(stderr, "error: %s: '%s' is not an input of the model (its inputs:", path,
-                        field);
-                for (j = 0; j < BGC_NUM_INPUTS; j++)
-                    fprintf(stderr, "%s %s", j ? "," : "", bgc_input_name(j));
-                fprintf(stderr, "%s)\n", BGC_NUM_INPUTS ? "" : " none");
-                free(text);
-                return BGC_ERR_USAGE;
-            }
-            for (k = 0; k < ncol; k++)
-                if (column[k] == j)
-                    goto twice;
-            if (bgc_input_file.series[j].n > 0) {
-                fprintf(stderr, "error: %s: input '%s' is given twice\n", path, field);
-                free(text);
-                return BGC_ERR_USAGE;
-            }
-            column[ncol] = j;
-        }
-        ncol++;
-    }
-    if (tcol < 0) {
-        fprintf(stderr, "error: %s: the header has no column 't'\n", path);
+    text = bgc_read_text(path, f, &size);
+    if (!text)
+        return BGC_ERR_USAGE;
+    body = strchr(text, '\n');
+    if (body)
+        *body++ = '\0';
+    cols = bgc_input_header(path, text, column, &tcol);
+    if (cols < 0) {
         free(text);
         return BGC_ERR_USAGE;
     }
-    if (line) {
-        fprintf(stderr, "error: %s: more than 256 columns\n", path);
-        free(text);
-        return BGC_ERR_USAGE;
-    }
-    cols = ncol;
-    body = next;
-    for (line = next; line; line = next) {
+    for (line = body; line; line = next) { /* the lines cut apart, the rows of data counted */
         next = strchr(line, '\n');
         if (next)
             *next++ = '\0';
         if (strspn(line, " \t\r") != strlen(line))
             rows++;
     }
-    v = bgc_input_file.values = (double *)malloc(sizeof(double) * (size_t)BGC_DIM(rows * cols));
+    v = (double *)malloc(sizeof(double) * (size_t)BGC_DIM(rows * cols));
     if (!v) {
         free(text);
         fprintf(stderr, "error: out of memory reading '%s'\n", path);
         return BGC_ERR_USAGE;
     }
-    /* the values column-major: column k's rows at v + k * rows */
-    rows = 0;
-    for (line = body; line && line < text + size + 1; line = next) {
-        char *rest = line;
-        next = line + strlen(line) + 1;
-        line_no++;
-        if (strspn(line, " \t\r") == strlen(line))
-            continue;
-        for (k = 0; k < cols; k++) {
-            char *end;
-            double x;
-            if (!rest) {
-                fprintf(stderr, "error: %s:%ld: this row has %d fields, the header %d\n", path,
-                        line_no, k, cols);
-                goto fail;
-            }
-            field = bgc_next_field(&rest);
-            x = strtod(field, &end);
-            if (end == field || *end != '\0' || !isfinite(x)) {
-                fprintf(stderr, "error: %s:%ld: '%s' is not a finite number\n", path, line_no,
-                        field);
-                goto fail;
-            }
-            v[(size_t)rows * (size_t)cols + (size_t)k] = x;
-        }
-        if (rest) {
-            fprintf(stderr, "error: %s:%ld: this row has more fields than the header (%d)\n",
-                    path, line_no, cols);
-            goto fail;
-        }
-        if (rows > 0 && !(v[(size_t)rows * cols + tcol] > v[(size_t)(rows - 1) * cols + tcol])) {
-            fprintf(stderr, "error: %s:%ld: t must increase from row to row\n", path, line_no);
-            goto fail;
-        }
-        rows++;
-    }
+    rows = bgc_input_rows(path, body, text + size + 1, cols, tcol, v);
     free(text);
-    if (rows == 0) {
-        fprintf(stderr, "error: %s: no rows of data\n", path);
-        return BGC_ERR_USAGE;
-    }
-    { /* transpose, so that each column is an array */
-        double *cm = (double *)malloc(sizeof(double) * (size_t)rows * (size_t)cols);
-        int r;
-        if (!cm) {
-            fprintf(stderr, "error: out of memory reading '%s'\n", path);
-            return BGC_ERR_USAGE;
-        }
-        for (r = 0; r < rows; r++)
-            for (k = 0; k < cols; k++)
-                cm[(size_t)k * rows + r] = v[(size_t)r * cols + k];
-        free(v);
-        bgc_input_file.values = cm;
-    }
-    for (k = 0; k < cols; k++)
-        if (column[k] >= 0) {
-            bgc_input_series *s = &bgc_input_file.series[column[k]];
-            s->n = rows;
-            s->t = bgc_input_file.values + (size_t)tcol * rows;
-            s->u = bgc_input_file.values + (size_t)k * rows;
-        }
-    return 0;
-twice:
-    fprintf(stderr, "error: %s: a column is named twice in the header\n", path);
-    free(text);
-    return BGC_ERR_USAGE;
-fail:
-    free(text);
-    return BGC_ERR_USAGE;
+    if (rows > 0 && bgc_input_columns(path, v, rows, cols, column, tcol) == 0)
+        rc = 0;
+    free(v);
+    return rc;
 }
 
 static const char bgc_usage[] =
