@@ -851,6 +851,22 @@ static int bgc_parse_args(int argc, char **argv, bgc_settings *s, bgc_params *p,
     return -1;
 }
 
+/* The run's settings from the command line (and the parameters it sets), checked: -1 to
+   run, else the exit status (as bgc_parse_args). */
+static int bgc_settings_from_args(int argc, char **argv, bgc_settings *s, bgc_params *p,
+                                  int *given, int *project, int *stats)
+{
+    char msg[1024];
+    int rc;
+    bgc_settings_default(s);
+    rc = bgc_parse_args(argc, argv, s, p, given, project, stats);
+    if (rc < 0 && bgc_check_settings(s, msg, sizeof msg)) {
+        fprintf(stderr, "error: %s\n", msg);
+        return BGC_ERR_USAGE;
+    }
+    return rc;
+}
+
 /* SIGINT, SIGTERM: the run stops at its next step, as a failure, its rows written. */
 static void bgc_on_signal(int sig)
 {
@@ -896,14 +912,9 @@ int main(int argc, char **argv)
     rc = bgc_batch_main(argc, argv);
     if (rc >= 0)
         return rc;
-    bgc_settings_default(&s);
-    rc = bgc_parse_args(argc, argv, &s, &p, given, &project, &stats);
+    rc = bgc_settings_from_args(argc, argv, &s, &p, given, &project, &stats);
     if (rc >= 0)
         return rc;
-    if (bgc_check_settings(&s, msg, sizeof msg)) {
-        fprintf(stderr, "error: %s\n", msg);
-        return BGC_ERR_USAGE;
-    }
     bgc_params_defaults(&p, given);
     for (i = 0; i < BGC_NUM_PARAMS; i++)
         if (!isfinite(*bgc_param_ref(&p, i))) {

@@ -77,6 +77,7 @@
 # explicit solvers' vector kind); the generated module calls it after its model part, and a
 # test that binds a model of its own by assigning the names above calls it too.
 
+import bisect
 import math
 import os
 import signal
@@ -278,6 +279,12 @@ def _square_next(t, period, duty, t0):
     return down if t < down else t0 + (k + 1.0) * period
 
 
+def _count_upto(x, n, X):
+    """bgc_count_upto: how many of x[:n] (non-decreasing, finite) are at or below X (not
+    NaN)."""
+    return bisect.bisect_right(x, X, 0, n)
+
+
 def _input(w, j, t, part, default):
     """bgc_input: input j's data at t: the segment's start (part 0), value (1), slope (2)."""
     series = w.inputs[j] if w.inputs is not None else None
@@ -286,13 +293,7 @@ def _input(w, j, t, part, default):
     if t != t:
         return math.nan
     ts, us = series
-    lo, hi = 0, len(ts)
-    while lo < hi:
-        mid = (lo + hi) // 2
-        if ts[mid] <= t:
-            lo = mid + 1
-        else:
-            hi = mid
+    lo = _count_upto(ts, len(ts), t)
     if lo == 0 or lo == len(ts):
         return (us[0] if lo == 0 else us[-1]) if part == 1 else 0.0
     k = lo - 1
@@ -311,13 +312,7 @@ def _input_next(w, j, t):
     if t != t:
         return math.nan
     ts = series[0]
-    lo, hi = 0, len(ts)
-    while lo < hi:
-        mid = (lo + hi) // 2
-        if ts[mid] <= t:
-            lo = mid + 1
-        else:
-            hi = mid
+    lo = _count_upto(ts, len(ts), t)
     return ts[lo] if lo < len(ts) else math.inf
 
 
@@ -397,15 +392,7 @@ def _read_input_file(path):
 
 def _table_find(T, X):
     """bgc_table_find: the piece holding X, the number of rows with x <= X."""
-    xs = T[2]
-    lo, hi = 0, T[0]
-    while lo < hi:
-        mid = (lo + hi) // 2
-        if xs[mid] <= X:
-            lo = mid + 1
-        else:
-            hi = mid
-    return lo
+    return _count_upto(T[2], T[0], X)
 
 
 def _table(T, X, piece, order):
