@@ -763,7 +763,10 @@ def jacobian(t, x, p):
     return J
 
 
-def _jacobian_into(t, x, p, w, J):
+def _jacobian_into(t, x, p, w, J, values=False):
+    """bgc_jacobian_into: J's structural entries at (t, x), one J v per colour of columns, into
+    the matrix J, or with values into J's structural values column by column
+    (bgc_jacobian_values)."""
     v = [0.0] * _N
     jv = [0.0] * _N
     for cols in _JAC_COLORS:
@@ -772,25 +775,14 @@ def _jacobian_into(t, x, p, w, J):
         _jvp(t, x, p, w, v, jv)
         for j in cols:
             v[j] = 0.0
-            for i in _JAC_COLUMNS[j]:
-                J[i, j] = jv[i]
-
-
-def _jacobian_values(t, x, p, w, Jv):
-    """J's structural values, column by column (bgc_jacobian_values)."""
-    v = [0.0] * _N
-    jv = [0.0] * _N
-    starts = _JAC_LU.colstart
-    for cols in _JAC_COLORS:
-        for j in cols:
-            v[j] = 1.0
-        _jvp(t, x, p, w, v, jv)
-        for j in cols:
-            v[j] = 0.0
-            q = starts[j]
-            for i in _JAC_COLUMNS[j]:
-                Jv[q] = jv[i]
-                q += 1
+            if values:
+                q = _JAC_LU.colstart[j]
+                for i in _JAC_COLUMNS[j]:
+                    J[q] = jv[i]
+                    q += 1
+            else:
+                for i in _JAC_COLUMNS[j]:
+                    J[i, j] = jv[i]
 
 
 def _param_values(overrides):
@@ -3059,7 +3051,7 @@ def _stiff_jacobian(run, t, y):
     J = numpy.zeros((_N, _N)) if _JAC_LU is None else numpy.zeros(_JAC_LU.jpos.shape[0])
     run.st["jac"] += 1
     try:
-        (_jacobian_into if _JAC_LU is None else _jacobian_values)(t, y.tolist(), run.p, run.w, J)
+        _jacobian_into(t, y.tolist(), run.p, run.w, J, _JAC_LU is not None)
     except _BlockFailure as failure:
         raise _block_failed(failure) from None
     return J
