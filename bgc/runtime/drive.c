@@ -379,8 +379,9 @@ typedef struct bgc_grid {
     long k, n;
 } bgc_grid;
 
-/* The fixed grid's next step from t: its end *tph and whether it is the run's last; nonzero
-   (message set) when the grid cannot be laid or the step is too small. */
+/* The fixed grid's next step from t: its end *tph (or a time event inside it) and whether it
+   is the run's last; nonzero (message set) when the grid cannot be laid or the step is too
+   small. */
 static int bgc_grid_next(bgc_run *r, const bgc_family *f, bgc_grid *g, double t, double *tph,
                          int *last)
 {
@@ -398,6 +399,10 @@ static int bgc_grid_next(bgc_run *r, const bgc_family *f, bgc_grid *g, double t,
         t = g->ta + (double)g->k * g->step;
     if (!(*tph - t >= bgc_hmin(t)))
         return bgc_fail_step(r->msg, r->msg_size, t, *tph - t, -1);
+    if (r->t_next < *tph) { /* a time event inside: the step ends on it */
+        *tph = r->t_next;
+        *last = 0;
+    }
     return 0;
 }
 
@@ -658,71 +663,18 @@ static int bgc_after_event(bgc_run *r, const bgc_family *f, double t, double *y,
     return rc;
 }
 
-/* A fixed step from t: on the grid, or onto a time event inside its step (*h, its end *tph,
-   and whether it is the run's last); nonzero (message set) when it cannot be taken. */
-static int bgc_grid_step(bgc_run *r, const bgc_family *f, bgc_grid *grid, double t, double *h,
-                         double *tph, int *last)
+/* The step just accepted, from t to tph (y1 the state there): its state checked, the step
+   counted (bgc_accept) and the family told; nonzero (message set) to end the run. */
+static int bgc_accepted(bgc_run *r, const bgc_family *f, void *ms, double tph,
+                        const double *y1)
 {
-    const int rc = bgc_grid_next(r, f, grid, t, tph, last);
-    if (rc)
-        return rc;
-    if (r->t_next < *tph) { /* a time event inside: the step ends on it */
-        *tph = r->t_next;
-        *last = 0;
-    }
-    *h = *tph - t;
-    return 0;
-}
-
-/* An adaptive step of *h from t, cut short onto a time event or the run's end if it would
-   reach within 1 % of it (*tph its end, *last set at the run's end); returns the step the
-   controller wanted. */
-static double bgc_adaptive_step(bgc_run *r, double t, double *h, double *tph, int *last)
-{
-    const double wanted = *h, t_end = r->s->t_end;
-    if (r->t_next < t_end && t + 1.01 * *h - r->t_next > 0.0) {
-        *h = r->t_next - t; /* onto the time event */
-        *tph = r->t_next;
-    } else {
-        if (t + 1.01 * *h - t_end > 0.0) {
-            *h = t_end - t;
-            *last = 1;
-        }
-        *tph = *last ? t_end : t + *h;
-    }
-    return wanted;
-}
-
-/* The step c just accepted: its end checked and counted (and the family told), and in a
-   model with events the first event in it located.  *event 1: the step holds one, at *te
-   with the state ye there, and the output rows before it are handed over; else the step's
-   rows and the family's work after the step (which may return BGC_STIFF). */
-static int bgc_step_accepted(bgc_run *r, bgc_dense *c, int last, int *event, double *te,
-                             double *ye, double *yout)
-{
-    const int i = bgc_first_nonfinite(c->y1, BGC_NUM_STATES);
+    const int i = bgc_first_nonfinite(y1, BGC_NUM_STATES);
     int rc;
-    *event = 0;
-    *te = c->tph;
     if (i >= 0)
-        return bgc_fail(r->msg, r->msg_size, c->tph, "state", bgc_state_names[i]);
-    rc = bgc_accept(r, c->tph);
-    if (rc == 0 && c->f->accepted)
-        rc = c->f->accepted(c->ms, r, c->tph, c->y1);
-    if (rc)
-        return rc;
-    if (BGC_NUM_DISCRETE > 0) {
-        const int found = bgc_find_event(r, c, te, ye);
-        if (found < 0)
-            return -found;
-        *event = found;
-        if (found)
-            return bgc_emit_step(r, c, *te, 0, yout);
-        memcpy(r->g, BGC_EV_GB(r), sizeof(double) * BGC_NUM_INDICATORS);
-    }
-    rc = bgc_emit_step(r, c, c->tph, 1, yout);
-    if (rc == 0 && c->f->after)
-        rc = c->f->after(c->ms, r, c->tph, c->y1, last);
+        return bgc_fail(r->msg, r->msg_size, tph, "state", bgc_state_names[i]);
+    rc = bgc_accept(r, tph);
+    if (rc == 0 && f->accepted)
+        rc = f->accepted(ms, r, tph, y1);
     return rc;
 }
 
@@ -735,8 +687,8 @@ static int bgc_drive(bgc_run *r, const bgc_family *f, double *y)
     const bgc_settings *s = r->s;
     const double hmax = bgc_hmax(s);
     double *mem = malloc((size_t)3 * D * sizeof *mem), *y1, *yout, *ye;
-    double t = r->t, h = 0.0, hnew, wanted = 0.0, te;
-    int rc = 0, event, reject = 0, last = 0, bad = BGC_BAD_NONE, bad_kind = 0, at_event = 0;
+    double t = r->t, h = 0.0, hnew, wanted = 0.0;
+    int rc = 0, reject = 0, last = 0, bad = BGC_BAD_NONE, bad_kind = 0, at_event = 0;
     bgc_grid grid = {0.0, 0.0, 0.0, 0, 0};
     bgc_outcome o;
     void *ms = NULL;
@@ -754,7 +706,7 @@ static int bgc_drive(bgc_run *r, const bgc_family *f, double *y)
     if (!ms)
         goto done;
     for (;;) {
-        double tph = 0.0;
+        double tph;
         bgc_dense c;
         if (r->t_next - t <= bgc_hmin(t)) { /* a time event closer than a step can be */
             t = r->t_next;
@@ -772,14 +724,28 @@ static int bgc_drive(bgc_run *r, const bgc_family *f, double *y)
             bad = BGC_BAD_NONE;
             continue;
         }
-        if (r->fixed)
-            rc = bgc_grid_step(r, f, &grid, t, &h, &tph, &last);
-        else if (!(h >= bgc_hmin(t)))
-            rc = bgc_fail_small(r, t, h, bad, bad_kind, o.worst);
-        else
-            wanted = bgc_adaptive_step(r, t, &h, &tph, &last);
-        if (rc)
-            goto done;
+        if (r->fixed) {
+            rc = bgc_grid_next(r, f, &grid, t, &tph, &last);
+            if (rc)
+                goto done;
+            h = tph - t;
+        } else {
+            if (!(h >= bgc_hmin(t))) {
+                rc = bgc_fail_small(r, t, h, bad, bad_kind, o.worst);
+                goto done;
+            }
+            wanted = h;
+            if (r->t_next < s->t_end && t + 1.01 * h - r->t_next > 0.0) {
+                h = r->t_next - t; /* onto the time event */
+                tph = r->t_next;
+            } else {
+                if (t + 1.01 * h - s->t_end > 0.0) {
+                    h = s->t_end - t;
+                    last = 1;
+                }
+                tph = last ? s->t_end : t + h;
+            }
+        }
         f->step(ms, r, t, h, tph, y, y1, &o);
         if (o.kind == BGC_STEP_END) {
             rc = o.rc;
@@ -801,24 +767,32 @@ static int bgc_drive(bgc_run *r, const bgc_family *f, double *y)
 
         /* accepted */
         hnew = o.hnew;
-        c.f = f;
-        c.ms = ms;
-        c.t = t;
-        c.h = h;
-        c.tph = tph;
-        c.y = y;
-        c.y1 = y1;
-        c.prepared = f->prepare == NULL;
-        c.f0 = c.f1 = NULL;
-        rc = bgc_step_accepted(r, &c, last, &event, &te, ye, yout);
-        if (event) { /* the step ends at the event; the method starts afresh there */
-            if (rc)
+        rc = bgc_accepted(r, f, ms, tph, y1);
+        if (rc)
+            goto done;
+        c = (bgc_dense){ .f = f, .ms = ms, .t = t, .h = h, .tph = tph, .y = y, .y1 = y1,
+                         .prepared = f->prepare == NULL, .f0 = NULL, .f1 = NULL };
+        if (BGC_NUM_DISCRETE > 0) {
+            double te = tph;
+            const int found = bgc_find_event(r, &c, &te, ye);
+            if (found < 0) {
+                rc = -found;
                 goto done;
-            memcpy(y, ye, sizeof(double) * N);
-            t = te;
-            at_event = 1;
-            continue;
+            }
+            if (found) { /* the step ends at the event; the method starts afresh there */
+                rc = bgc_emit_step(r, &c, te, 0, yout);
+                if (rc)
+                    goto done;
+                memcpy(y, ye, sizeof(double) * N);
+                t = te;
+                at_event = 1;
+                continue;
+            }
+            memcpy(r->g, BGC_EV_GB(r), sizeof(double) * BGC_NUM_INDICATORS);
         }
+        rc = bgc_emit_step(r, &c, tph, 1, yout);
+        if (rc == 0 && f->after)
+            rc = f->after(ms, r, tph, y1, last);
         if (rc && rc != BGC_STIFF)
             goto done;
         memcpy(y, y1, sizeof(double) * N);

@@ -329,8 +329,8 @@ int bgc_newton(bgc_work *w, int k, bgc_eval_fn f, double t, const double *x,
 /* J's structural entries, one J v per colour of columns: dense, into the n x n row-major J
    (the other entries left as they are), else into Jv, column by column as bgc_jac_col_ptr
    and bgc_jac_col_rows list them. */
-static int bgc_jacobian_into(double t, const double *x, const bgc_params *p, bgc_work *w,
-                             double *out, int dense)
+static inline int bgc_jacobian_into(double t, const double *x, const bgc_params *p, bgc_work *w,
+                                    double *out, int dense)
 {
     enum { N = BGC_NUM_STATES };
     double *v = w->v + BGC_WORK_JAC, *jv = w->v + BGC_WORK_JAC + BGC_DIM(N);
