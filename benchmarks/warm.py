@@ -1,7 +1,7 @@
 """What a `bgc simulate` of a model compiled before costs, against the ways it could start.
 
     python benchmarks/warm.py [--runs 20] [--cold-runs 5] [--model models/pendulum.bg]
-                              [--scene S] [--before TREE]
+                              [--scene S] [--before TREE] [--backend c|python]
 
 Each row runs a command line `--runs` times in a fresh cache directory (BGC_CACHE_DIR) and
 prints the best and the median wall time (time.perf_counter around subprocess.run, the
@@ -21,6 +21,11 @@ process's start and exit included) and the median CPU time of the child (user + 
                       runtime built too
   cold, standalone    the same, the program built as one file, runtime included (as every
                       cold run was before the runtime was built once): the baseline
+
+With --backend python the program is the generated Python module: "program alone" is
+`python model.py` (Python compiles the whole file at every start), "program, bytecode" the
+same program started from the bytecode bgc keeps beside it (what a warm run starts), and
+there is no standalone row.
 
 The targets: a warm simulate of the pendulum under 0.15 s wall, `bgc --help` under 0.2 s
 (issue 12); a cold simulate of the pendulum under 1 s wall, warm under 0.1 s (issue 27).  `bgc` is the console script on PATH if there is one, else `python -m bgc`.
@@ -96,6 +101,7 @@ def main(argv=None):
     ap.add_argument("--before", metavar="TREE",
                     help="a source tree of bgc (the code before a change): its warm and cold "
                          "rows in the same run")
+    ap.add_argument("--backend", choices=("c", "python"), default="c")
     args = ap.parse_args(argv)
 
     args.model = str(Path(args.model).resolve())
@@ -104,11 +110,15 @@ def main(argv=None):
         cache = Path(tmp) / "cache"
         env = dict(os.environ, BGC_CACHE_DIR=str(cache))
         out = str(Path(tmp) / "out.csv")
-        simulate = [*_bgc(), "simulate", args.model, "--backend", "c", "-o", out] + \
+        simulate = [*_bgc(), "simulate", args.model, "--backend", args.backend, "-o", out] + \
             (["--scene", args.scene] if args.scene else [])
         subprocess.run(simulate, env=env, check=True, capture_output=True)
-        (program,) = [p for p in cache.glob("bgc-*")
-                      if p.suffix not in (".sha256", ".py", ".o")]
+        if args.backend == "c":
+            (program,) = [[str(p)] for p in cache.glob("bgc-*")
+                          if p.suffix not in (".sha256", ".py", ".pyc", ".o")]
+        else:
+            (program,) = [[sys.executable, str(p)] for p in cache.glob("bgc-*.py")]
+            bytecode = [[sys.executable, str(p)] for p in cache.glob("bgc-*.pyc")]
         scene_args = []  # the program runs its own scene: the one it was compiled for
 
         def forget_records():
@@ -125,25 +135,33 @@ def main(argv=None):
 
         standalone = [*_standalone(), *simulate[len(_bgc()):]]
 
-        rows = [
-            ("program alone", _timed([str(program), *scene_args], env, runs=args.runs)),
+        rows = [("program alone", _timed([*program, *scene_args], env, runs=args.runs))]
+        if args.backend == "python":
+            rows += [("program, bytecode", _timed([*bytecode[0], *scene_args], env,
+                                                  runs=args.runs))] if bytecode else []
+        rows += [
             ("bgc --help", _timed([*_bgc(), "--help"], env, runs=args.runs)),
             ("warm simulate", _timed(simulate, env, runs=args.runs)),
             ("program cached", _timed(simulate, env, forget_records, runs=args.cold_runs)),
             ("cold, runtime kept", _timed(simulate, env, keep_runtime, runs=args.cold_runs)),
             ("cold", _timed(simulate, env, empty_cache, runs=args.cold_runs)),
-            ("cold, standalone", _timed(standalone, env, empty_cache, runs=args.cold_runs)),
         ]
+        if args.backend == "c":
+            rows.append(("cold, standalone", _timed(standalone, env, empty_cache,
+                                                    runs=args.cold_runs)))
         if args.before:
             rows += _before_rows(args, Path(tmp), simulate[len(_bgc()):])
     print(f"machine:  {machine.processor()}, {os.cpu_count()} cores, load average "
           f"{machine.load_average()}")
     print(f"bgc:      {' '.join(_bgc())}")
     print(f"model:    {args.model}" + (f" scene {args.scene}" if args.scene else "") +
+          f", backend {args.backend}" +
           f"; {args.runs} runs each ({args.cold_runs} for the program cached and cold rows)")
     print(f"{'':20}{'best wall [s]':>15}{'median wall [s]':>17}{'median cpu [s]':>16}")
     for name, (best, median, cpu) in rows:
         print(f"{name:20}{best:15.3f}{median:17.3f}{cpu:16.3f}")
+    if args.backend != "c":  # the issues' targets are the C backend's
+        return
     warm = dict(rows)["warm simulate"]
     helps = dict(rows)["bgc --help"]
     print(f"warm simulate: best {warm[0]:.3f} s, median {warm[1]:.3f} s (target < 0.15 s): "

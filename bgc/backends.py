@@ -12,6 +12,7 @@ import hashlib
 import importlib.util
 import json
 import os
+import py_compile
 import re
 import shlex
 import shutil
@@ -583,6 +584,27 @@ def cache_python(source: str) -> Path:
         return tmp / "model.py"
 
     return _cached(f"bgc-{digest[:40]}.py", False, write)
+
+
+def python_bytecode(source: Path) -> Path | None:
+    """The bytecode of a cached Python program (bgc-....TAG.pyc beside it, TAG this
+    interpreter's, e.g. cpython-311), compiled once, so that a run starts without compiling
+    the whole runtime again (`python model.py` does, about 40 ms); None where there is none
+    (the program then runs from its source)."""
+    tag = sys.implementation.cache_tag
+    if tag is None:
+        return None
+
+    def write(tmp: Path) -> Path:
+        py_compile.compile(str(source), cfile=str(tmp / "model.pyc"), dfile=str(source),
+                           doraise=True,
+                           invalidation_mode=py_compile.PycInvalidationMode.UNCHECKED_HASH)
+        return tmp / "model.pyc"
+
+    try:
+        return _cached(f"{source.stem}.{tag}.pyc", False, write)
+    except (BackendError, py_compile.PyCompileError):
+        return None
 
 
 def python_program(source: str, directory: str) -> list[str]:

@@ -66,13 +66,14 @@ class Program:
     #                           the interpreter's program file (bgc.vm)
     module: object = None  # or: generated Python loaded in this process
     interpreter: Path | None = None  # the interpreter that runs path (bgc.vm)
+    bytecode: Path | None = None  # Python: path compiled (backends.python_bytecode), if any
 
     def argv(self) -> list[str]:
         """The command that starts it."""
         if self.interpreter is not None:
             return [str(self.interpreter), str(self.path)]
         if self.path.suffix == ".py":
-            return [sys.executable, str(self.path)]
+            return [sys.executable, str(self.bytecode or self.path)]
         return [str(self.path)]
 
 
@@ -93,7 +94,8 @@ def prepare(compiled, backend: str, in_process: bool = False) -> Program:
     (text,) = emit_python(p).values()
     if in_process:
         return Program("python", module=backends.load_python_module(text), **facts)
-    return Program("python", path=backends.cache_python(text), **facts)
+    path = backends.cache_python(text)
+    return Program("python", path=path, bytecode=backends.python_bytecode(path), **facts)
 
 
 def c_executable(program) -> Path:

@@ -178,8 +178,10 @@ def program(record: Record, path: Path) -> runner.Program:
     if record.interpreter:
         return runner.Program("vm", record.settings, record.params, path=path,
                               interpreter=path.parent / record.interpreter)
-    return runner.Program("python" if path.suffix == ".py" else "c", record.settings,
-                          record.params, path=path)
+    if path.suffix == ".py":
+        return runner.Program("python", record.settings, record.params, path=path,
+                              bytecode=backends.python_bytecode(path))
+    return runner.Program("c", record.settings, record.params, path=path)
 
 
 def needs_model(record: Record, solver: str | None, step) -> bool:

@@ -173,7 +173,7 @@ static int harness(void)
             const double re = rd(), im = rd();
             zb[i] = bgc_cmake(re, im);
         }
-        rc = bgc_smat_zfactor(&m, Jv, alpha, beta, zw);
+        rc = bgc_smat_zfactor(&m, Jv, bgc_cmake(alpha + beta * 0.0, beta), zw);
         printf("%d %d ", rc != 0, m.dense);
         if (!rc) {
             bgc_smat_zsolve(&m, zb, zw);

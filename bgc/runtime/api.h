@@ -273,25 +273,32 @@ static inline double bgc_square_next(double t, double period, double duty, doubl
     return t < down ? down : t0 + (k + 1.0) * period;
 }
 
+/* How many of x[0..n-1] (non-decreasing) are at or below X (binary search). */
+static inline int bgc_count_upto(const double *x, int n, double X)
+{
+    int lo = 0, hi = n;
+    while (lo < hi) {
+        const int mid = (lo + hi) / 2;
+        if (x[mid] <= X)
+            lo = mid + 1;
+        else
+            hi = mid;
+    }
+    return lo;
+}
+
 /* Input j's data at t (bgc/events.py, InputSlot): the segment holding t, as its start
    (part 0), the value there (1) and its slope (2); before the first sample and after the
    last the value is held (start and slope 0); without data 0, dflt, 0. */
 static inline double bgc_input(const bgc_work *w, int j, double t, int part, double dflt)
 {
     const bgc_input_series *u = w->inputs ? &w->inputs[j] : NULL;
-    int lo = 0, hi, k;
+    int lo, k;
     if (!u || u->n <= 0)
         return part == 1 ? dflt : 0.0;
     if (t != t)
         return NAN;
-    hi = u->n;
-    while (lo < hi) { /* the samples at or before t */
-        const int mid = (lo + hi) / 2;
-        if (u->t[mid] <= t)
-            lo = mid + 1;
-        else
-            hi = mid;
-    }
+    lo = bgc_count_upto(u->t, u->n, t); /* the samples at or before t */
     if (lo == 0 || lo == u->n)
         return part == 1 ? u->u[lo == 0 ? 0 : u->n - 1] : 0.0;
     k = lo - 1;
@@ -305,19 +312,12 @@ static inline double bgc_input(const bgc_work *w, int j, double t, int part, dou
 static inline double bgc_input_next(const bgc_work *w, int j, double t)
 {
     const bgc_input_series *u = w->inputs ? &w->inputs[j] : NULL;
-    int lo = 0, hi;
+    int lo;
     if (!u || u->n <= 0)
         return INFINITY;
     if (t != t)
         return NAN;
-    hi = u->n;
-    while (lo < hi) {
-        const int mid = (lo + hi) / 2;
-        if (u->t[mid] <= t)
-            lo = mid + 1;
-        else
-            hi = mid;
-    }
+    lo = bgc_count_upto(u->t, u->n, t);
     return lo < u->n ? u->t[lo] : INFINITY;
 }
 
@@ -329,18 +329,10 @@ typedef struct bgc_table_data {
     int n, error;
     const double *x, *origin, *coef;
 } bgc_table_data;
-/* The piece holding X: the number of rows with x <= X (binary search). */
+/* The piece holding X: the number of rows with x <= X. */
 static inline int bgc_table_find(const bgc_table_data *T, double X)
 {
-    int lo = 0, hi = T->n;
-    while (lo < hi) {
-        const int mid = (lo + hi) / 2;
-        if (T->x[mid] <= X)
-            lo = mid + 1;
-        else
-            hi = mid;
-    }
-    return lo;
+    return bgc_count_upto(T->x, T->n, X);
 }
 /* The table's value at X (order 0) or its derivative of order 1 to 3, in piece `piece` (a
    time table's, set at events), or in X's piece if piece < 0. */

@@ -370,7 +370,6 @@ static int bgc_batch_main(int argc, char **argv)
     int given[BGC_DIM(BGC_NUM_PARAMS)] = { 0 };
     int i, n = 1, rc, project = 0, stats = 0;
     FILE *in;
-    char msg[1024];
     for (i = 1; i < argc; i++)
         if (strcmp(argv[i], "--batch") == 0 || strncmp(argv[i], "--batch=", 8) == 0)
             break;
@@ -412,16 +411,11 @@ static int bgc_batch_main(int argc, char **argv)
         }
     }
     memset(&p, 0, sizeof p); /* every field, a placeholder of a model without parameters too */
-    bgc_settings_default(&s);
     bgc_params_defaults(&p, NULL);
-    rc = bgc_parse_args(n, rest, &s, &p, given, &project, &stats);
+    rc = bgc_settings_from_args(n, rest, &s, &p, given, &project, &stats);
     free(rest);
     if (rc >= 0)
         return rc;
-    if (bgc_check_settings(&s, msg, sizeof msg)) {
-        fprintf(stderr, "error: %s\n", msg);
-        return BGC_ERR_USAGE;
-    }
     in = strcmp(file, "-") == 0 ? stdin : fopen(file, "r");
     if (!in) {
         fprintf(stderr, "error: cannot read '%s'\n", file);

@@ -379,8 +379,9 @@ typedef struct bgc_grid {
     long k, n;
 } bgc_grid;
 
-/* The fixed grid's next step from t: its end *tph and whether it is the run's last; nonzero
-   (message set) when the grid cannot be laid or the step is too small. */
+/* The fixed grid's next step from t: its end *tph (or a time event inside it) and whether it
+   is the run's last; nonzero (message set) when the grid cannot be laid or the step is too
+   small. */
 static int bgc_grid_next(bgc_run *r, const bgc_family *f, bgc_grid *g, double t, double *tph,
                          int *last)
 {
@@ -398,6 +399,10 @@ static int bgc_grid_next(bgc_run *r, const bgc_family *f, bgc_grid *g, double t,
         t = g->ta + (double)g->k * g->step;
     if (!(*tph - t >= bgc_hmin(t)))
         return bgc_fail_step(r->msg, r->msg_size, t, *tph - t, -1);
+    if (r->t_next < *tph) { /* a time event inside: the step ends on it */
+        *tph = r->t_next;
+        *last = 0;
+    }
     return 0;
 }
 
@@ -658,6 +663,21 @@ static int bgc_after_event(bgc_run *r, const bgc_family *f, double t, double *y,
     return rc;
 }
 
+/* The step just accepted, from t to tph (y1 the state there): its state checked, the step
+   counted (bgc_accept) and the family told; nonzero (message set) to end the run. */
+static int bgc_accepted(bgc_run *r, const bgc_family *f, void *ms, double tph,
+                        const double *y1)
+{
+    const int i = bgc_first_nonfinite(y1, BGC_NUM_STATES);
+    int rc;
+    if (i >= 0)
+        return bgc_fail(r->msg, r->msg_size, tph, "state", bgc_state_names[i]);
+    rc = bgc_accept(r, tph);
+    if (rc == 0 && f->accepted)
+        rc = f->accepted(ms, r, tph, y1);
+    return rc;
+}
+
 /* One family's run from (r->t, y) to s->t_end (the driver proper).  Keeps r->t and y at the
    last accepted step; returns 0, an error (message set), the sink's nonzero value, or
    BGC_STIFF (r->h then holds the explicit phase's next step). */
@@ -668,7 +688,7 @@ static int bgc_drive(bgc_run *r, const bgc_family *f, double *y)
     const double hmax = bgc_hmax(s);
     double *mem = malloc((size_t)3 * D * sizeof *mem), *y1, *yout, *ye;
     double t = r->t, h = 0.0, hnew, wanted = 0.0;
-    int i, rc = 0, reject = 0, last = 0, bad = BGC_BAD_NONE, bad_kind = 0, at_event = 0;
+    int rc = 0, reject = 0, last = 0, bad = BGC_BAD_NONE, bad_kind = 0, at_event = 0;
     bgc_grid grid = {0.0, 0.0, 0.0, 0, 0};
     bgc_outcome o;
     void *ms = NULL;
@@ -708,10 +728,6 @@ static int bgc_drive(bgc_run *r, const bgc_family *f, double *y)
             rc = bgc_grid_next(r, f, &grid, t, &tph, &last);
             if (rc)
                 goto done;
-            if (r->t_next < tph) { /* a time event inside: the step ends on it */
-                tph = r->t_next;
-                last = 0;
-            }
             h = tph - t;
         } else {
             if (!(h >= bgc_hmin(t))) {
@@ -751,25 +767,11 @@ static int bgc_drive(bgc_run *r, const bgc_family *f, double *y)
 
         /* accepted */
         hnew = o.hnew;
-        i = bgc_first_nonfinite(y1, N);
-        if (i >= 0) {
-            rc = bgc_fail(r->msg, r->msg_size, tph, "state", bgc_state_names[i]);
-            goto done;
-        }
-        rc = bgc_accept(r, tph);
-        if (rc == 0 && f->accepted)
-            rc = f->accepted(ms, r, tph, y1);
+        rc = bgc_accepted(r, f, ms, tph, y1);
         if (rc)
             goto done;
-        c.f = f;
-        c.ms = ms;
-        c.t = t;
-        c.h = h;
-        c.tph = tph;
-        c.y = y;
-        c.y1 = y1;
-        c.prepared = f->prepare == NULL;
-        c.f0 = c.f1 = NULL;
+        c = (bgc_dense){ .f = f, .ms = ms, .t = t, .h = h, .tph = tph, .y = y, .y1 = y1,
+                         .prepared = f->prepare == NULL, .f0 = NULL, .f1 = NULL };
         if (BGC_NUM_DISCRETE > 0) {
             double te = tph;
             const int found = bgc_find_event(r, &c, &te, ye);

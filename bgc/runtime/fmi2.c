@@ -1253,17 +1253,23 @@ BGC_FMI_EXPORT fmi2Status fmi2GetRealOutputDerivatives(fmi2Component c,
                                      "(maxOutputDerivativeOrder=\"0\")");
 }
 
+/* A status the FMU does not give: fmi2Discard, logged (why: what it gives instead). */
+static fmi2Status bgc_fmi_no_status(fmi2Component c, const char *fn, const char *why)
+{
+    bgc_fmi *m = bgc_fmi_get(c, fn, BGC_FMI_ANY, 2);
+    if (!m)
+        return fmi2Error;
+    bgc_fmi_log(m, fmi2Discard, "%s: %s", fn, why);
+    return fmi2Discard;
+}
+
 /* fmi2DoStep never returns fmi2Pending: the status is asked for only after it has. */
 BGC_FMI_EXPORT fmi2Status fmi2GetStatus(fmi2Component c, const fmi2StatusKind s,
                                         fmi2Status *value)
 {
-    bgc_fmi *m = bgc_fmi_get(c, "fmi2GetStatus", BGC_FMI_ANY, 2);
     (void)s;
     (void)value;
-    if (!m)
-        return fmi2Error;
-    bgc_fmi_log(m, fmi2Discard, "fmi2GetStatus: fmi2DoStep never returns fmi2Pending");
-    return fmi2Discard;
+    return bgc_fmi_no_status(c, "fmi2GetStatus", "fmi2DoStep never returns fmi2Pending");
 }
 
 BGC_FMI_EXPORT fmi2Status fmi2GetRealStatus(fmi2Component c, const fmi2StatusKind s,
@@ -1283,13 +1289,9 @@ BGC_FMI_EXPORT fmi2Status fmi2GetRealStatus(fmi2Component c, const fmi2StatusKin
 BGC_FMI_EXPORT fmi2Status fmi2GetIntegerStatus(fmi2Component c, const fmi2StatusKind s,
                                                fmi2Integer *value)
 {
-    bgc_fmi *m = bgc_fmi_get(c, "fmi2GetIntegerStatus", BGC_FMI_ANY, 2);
     (void)s;
     (void)value;
-    if (!m)
-        return fmi2Error;
-    bgc_fmi_log(m, fmi2Discard, "fmi2GetIntegerStatus: no integer status");
-    return fmi2Discard;
+    return bgc_fmi_no_status(c, "fmi2GetIntegerStatus", "no integer status");
 }
 
 BGC_FMI_EXPORT fmi2Status fmi2GetBooleanStatus(fmi2Component c, const fmi2StatusKind s,
@@ -1309,11 +1311,7 @@ BGC_FMI_EXPORT fmi2Status fmi2GetBooleanStatus(fmi2Component c, const fmi2Status
 BGC_FMI_EXPORT fmi2Status fmi2GetStringStatus(fmi2Component c, const fmi2StatusKind s,
                                               fmi2String *value)
 {
-    bgc_fmi *m = bgc_fmi_get(c, "fmi2GetStringStatus", BGC_FMI_ANY, 2);
     (void)s;
     (void)value;
-    if (!m)
-        return fmi2Error;
-    bgc_fmi_log(m, fmi2Discard, "fmi2GetStringStatus: no string status");
-    return fmi2Discard;
+    return bgc_fmi_no_status(c, "fmi2GetStringStatus", "no string status");
 }

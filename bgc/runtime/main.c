@@ -439,15 +439,163 @@ static char *bgc_next_field(char **line)
     return start;
 }
 
+/* The whole of the open file f as one '\0'-terminated string (its length in *size); NULL
+   (message written) when out of memory.  Closes f. */
+static char *bgc_read_text(const char *path, FILE *f, size_t *size)
+{
+    char *text = NULL;
+    size_t cap = 0, got;
+    *size = 0;
+    do {
+        if (*size + 4096 + 1 > cap) {
+            char *more = (char *)realloc(text, cap = 2 * cap + 4096 + 1);
+            if (!more) {
+                free(text);
+                fclose(f);
+                fprintf(stderr, "error: out of memory reading '%s'\n", path);
+                return NULL;
+            }
+            text = more;
+        }
+        got = fread(text + *size, 1, 4096, f);
+        *size += got;
+    } while (got > 0);
+    fclose(f);
+    text[*size] = '\0';
+    return text;
+}
+
+/* The header line of --input's file: column[k] the input that column k gives (-2: none, the
+   column t), *tcol the column t.  The number of columns, or -1 (message written). */
+static int bgc_input_header(const char *path, char *line, int *column, int *tcol)
+{
+    int ncol = 0, k, j;
+    *tcol = -1;
+    while (line && ncol < 256) {
+        const char *field = bgc_next_field(&line);
+        column[ncol] = -2;
+        if (strcmp(field, "t") == 0) {
+            if (*tcol >= 0)
+                goto twice;
+            *tcol = ncol;
+        } else {
+            for (j = 0; j < BGC_NUM_INPUTS; j++)
+                if (strcmp(field, bgc_input_name(j)) == 0)
+                    break;
+            if (j == BGC_NUM_INPUTS) {
+                fprintf(stderr, "error: %s: '%s' is not an input of the model (its inputs:", path,
+                        field);
+                for (j = 0; j < BGC_NUM_INPUTS; j++)
+                    fprintf(stderr, "%s %s", j ? "," : "", bgc_input_name(j));
+                fprintf(stderr, "%s)\n", BGC_NUM_INPUTS ? "" : " none");
+                return -1;
+            }
+            for (k = 0; k < ncol; k++)
+                if (column[k] == j)
+                    goto twice;
+            if (bgc_input_file.series[j].n > 0) {
+                fprintf(stderr, "error: %s: input '%s' is given twice\n", path, field);
+                return -1;
+            }
+            column[ncol] = j;
+        }
+        ncol++;
+    }
+    if (*tcol < 0) {
+        fprintf(stderr, "error: %s: the header has no column 't'\n", path);
+        return -1;
+    }
+    if (line) {
+        fprintf(stderr, "error: %s: more than 256 columns\n", path);
+        return -1;
+    }
+    return ncol;
+twice:
+    fprintf(stderr, "error: %s: a column is named twice in the header\n", path);
+    return -1;
+}
+
+/* The rows of data after the header (body: its lines, each '\0'-terminated, up to end) into
+   v, row by row, cols numbers each, t in column tcol; the number of rows, or -1 (message
+   written). */
+static int bgc_input_rows(const char *path, char *body, const char *end, int cols, int tcol,
+                          double *v)
+{
+    char *line, *next;
+    long line_no = 1;
+    int rows = 0, k;
+    for (line = body; line && line < end; line = next) {
+        char *rest = line;
+        next = line + strlen(line) + 1;
+        line_no++;
+        if (strspn(line, " \t\r") == strlen(line))
+            continue;
+        for (k = 0; k < cols; k++) {
+            char *field, *stop;
+            double x;
+            if (!rest) {
+                fprintf(stderr, "error: %s:%ld: this row has %d fields, the header %d\n", path,
+                        line_no, k, cols);
+                return -1;
+            }
+            field = bgc_next_field(&rest);
+            x = strtod(field, &stop);
+            if (stop == field || *stop != '\0' || !isfinite(x)) {
+                fprintf(stderr, "error: %s:%ld: '%s' is not a finite number\n", path, line_no,
+                        field);
+                return -1;
+            }
+            v[(size_t)rows * (size_t)cols + (size_t)k] = x;
+        }
+        if (rest) {
+            fprintf(stderr, "error: %s:%ld: this row has more fields than the header (%d)\n",
+                    path, line_no, cols);
+            return -1;
+        }
+        if (rows > 0 && !(v[(size_t)rows * cols + tcol] > v[(size_t)(rows - 1) * cols + tcol])) {
+            fprintf(stderr, "error: %s:%ld: t must increase from row to row\n", path, line_no);
+            return -1;
+        }
+        rows++;
+    }
+    if (rows == 0)
+        fprintf(stderr, "error: %s: no rows of data\n", path);
+    return rows > 0 ? rows : -1;
+}
+
+/* The inputs' series from the rows of data v (row-major, rows x cols): the values transposed
+   into bgc_input_file.values, so that each column is an array; 0, or -1 (message written). */
+static int bgc_input_columns(const char *path, const double *v, int rows, int cols,
+                             const int *column, int tcol)
+{
+    double *cm = (double *)malloc(sizeof(double) * (size_t)rows * (size_t)cols);
+    int r, k;
+    if (!cm) {
+        fprintf(stderr, "error: out of memory reading '%s'\n", path);
+        return -1;
+    }
+    for (r = 0; r < rows; r++)
+        for (k = 0; k < cols; k++)
+            cm[(size_t)k * rows + r] = v[(size_t)r * cols + k];
+    bgc_input_file.values = cm;
+    for (k = 0; k < cols; k++)
+        if (column[k] >= 0) {
+            bgc_input_series *s = &bgc_input_file.series[column[k]];
+            s->n = rows;
+            s->t = cm + (size_t)tcol * rows;
+            s->u = cm + (size_t)k * rows;
+        }
+    return 0;
+}
+
 /* Reads --input's file into bgc_input_file.series; 0, or BGC_ERR_USAGE with a message. */
 static int bgc_read_inputs(void)
 {
     const char *path = bgc_input_file.path;
     FILE *f = fopen(path, "rb");
-    char *text = NULL, *line, *next, *field, *body;
-    size_t size = 0, cap = 0, got;
-    int column[256], ncol = 0, tcol = -1, rows = 0, cols, k, j;
-    long line_no = 1;
+    char *text, *line, *next, *body;
+    size_t size;
+    int column[256], tcol, rows = 0, cols, rc = BGC_ERR_USAGE;
     double *v;
     if (!f) {
         fprintf(stderr, "error: cannot read the input file '%s': %s\n", path, strerror(errno));
@@ -461,152 +609,36 @@ static int bgc_read_inputs(void)
         fprintf(stderr, "error: out of memory reading '%s'\n", path);
         return BGC_ERR_USAGE;
     }
-    do {
-        if (size + 4096 + 1 > cap) {
-            char *more = (char *)realloc(text, cap = 2 * cap + 4096 + 1);
-            if (!more) {
-                free(text);
-                fclose(f);
-                fprintf(stderr, "error: out of memory reading '%s'\n", path);
-                return BGC_ERR_USAGE;
-            }
-            text = more;
-        }
-        got = fread(text + size, 1, 4096, f);
-        size += got;
-    } while (got > 0);
-    fclose(f);
-    text[size] = '\0';
-    next = strchr(text, '\n');
-    if (next)
-        *next++ = '\0';
-    line = text;
-    while (line && ncol < 256) {
-        field = bgc_next_field(&line);
-        column[ncol] = -2;
-        if (strcmp(field, "t") == 0) {
-            if (tcol >= 0)
-                goto twice;
-            tcol = ncol;
-        } else {
-            for (j = 0; j < BGC_NUM_INPUTS; j++)
-                if (strcmp(field, bgc_input_name(j)) == 0)
-                    break;
-            if (j == BGC_NUM_INPUTS) {
-                fprintf(stderr, "error: %s: '%s' is not an input of the model (its inputs:", path,
-                        field);
-                for (j = 0; j < BGC_NUM_INPUTS; j++)
-                    fprintf(stderr, "%s %s", j ? "," : "", bgc_input_name(j));
-                fprintf(stderr, "%s)\n", BGC_NUM_INPUTS ? "" : " none");
-                free(text);
-                return BGC_ERR_USAGE;
-            }
-            for (k = 0; k < ncol; k++)
-                if (column[k] == j)
-                    goto twice;
-            if (bgc_input_file.series[j].n > 0) {
-                fprintf(stderr, "error: %s: input '%s' is given twice\n", path, field);
-                free(text);
-                return BGC_ERR_USAGE;
-            }
-            column[ncol] = j;
-        }
-        ncol++;
-    }
-    if (tcol < 0) {
-        fprintf(stderr, "error: %s: the header has no column 't'\n", path);
+    text = bgc_read_text(path, f, &size);
+    if (!text)
+        return BGC_ERR_USAGE;
+    body = strchr(text, '\n');
+    if (body)
+        *body++ = '\0';
+    cols = bgc_input_header(path, text, column, &tcol);
+    if (cols < 0) {
         free(text);
         return BGC_ERR_USAGE;
     }
-    if (line) {
-        fprintf(stderr, "error: %s: more than 256 columns\n", path);
-        free(text);
-        return BGC_ERR_USAGE;
-    }
-    cols = ncol;
-    body = next;
-    for (line = next; line; line = next) {
+    for (line = body; line; line = next) { /* the lines cut apart, the rows of data counted */
         next = strchr(line, '\n');
         if (next)
             *next++ = '\0';
         if (strspn(line, " \t\r") != strlen(line))
             rows++;
     }
-    v = bgc_input_file.values = (double *)malloc(sizeof(double) * (size_t)BGC_DIM(rows * cols));
+    v = (double *)malloc(sizeof(double) * (size_t)BGC_DIM(rows * cols));
     if (!v) {
         free(text);
         fprintf(stderr, "error: out of memory reading '%s'\n", path);
         return BGC_ERR_USAGE;
     }
-    /* the values column-major: column k's rows at v + k * rows */
-    rows = 0;
-    for (line = body; line && line < text + size + 1; line = next) {
-        char *rest = line;
-        next = line + strlen(line) + 1;
-        line_no++;
-        if (strspn(line, " \t\r") == strlen(line))
-            continue;
-        for (k = 0; k < cols; k++) {
-            char *end;
-            double x;
-            if (!rest) {
-                fprintf(stderr, "error: %s:%ld: this row has %d fields, the header %d\n", path,
-                        line_no, k, cols);
-                goto fail;
-            }
-            field = bgc_next_field(&rest);
-            x = strtod(field, &end);
-            if (end == field || *end != '\0' || !isfinite(x)) {
-                fprintf(stderr, "error: %s:%ld: '%s' is not a finite number\n", path, line_no,
-                        field);
-                goto fail;
-            }
-            v[(size_t)rows * (size_t)cols + (size_t)k] = x;
-        }
-        if (rest) {
-            fprintf(stderr, "error: %s:%ld: this row has more fields than the header (%d)\n",
-                    path, line_no, cols);
-            goto fail;
-        }
-        if (rows > 0 && !(v[(size_t)rows * cols + tcol] > v[(size_t)(rows - 1) * cols + tcol])) {
-            fprintf(stderr, "error: %s:%ld: t must increase from row to row\n", path, line_no);
-            goto fail;
-        }
-        rows++;
-    }
+    rows = bgc_input_rows(path, body, text + size + 1, cols, tcol, v);
     free(text);
-    if (rows == 0) {
-        fprintf(stderr, "error: %s: no rows of data\n", path);
-        return BGC_ERR_USAGE;
-    }
-    { /* transpose, so that each column is an array */
-        double *cm = (double *)malloc(sizeof(double) * (size_t)rows * (size_t)cols);
-        int r;
-        if (!cm) {
-            fprintf(stderr, "error: out of memory reading '%s'\n", path);
-            return BGC_ERR_USAGE;
-        }
-        for (r = 0; r < rows; r++)
-            for (k = 0; k < cols; k++)
-                cm[(size_t)k * rows + r] = v[(size_t)r * cols + k];
-        free(v);
-        bgc_input_file.values = cm;
-    }
-    for (k = 0; k < cols; k++)
-        if (column[k] >= 0) {
-            bgc_input_series *s = &bgc_input_file.series[column[k]];
-            s->n = rows;
-            s->t = bgc_input_file.values + (size_t)tcol * rows;
-            s->u = bgc_input_file.values + (size_t)k * rows;
-        }
-    return 0;
-twice:
-    fprintf(stderr, "error: %s: a column is named twice in the header\n", path);
-    free(text);
-    return BGC_ERR_USAGE;
-fail:
-    free(text);
-    return BGC_ERR_USAGE;
+    if (rows > 0 && bgc_input_columns(path, v, rows, cols, column, tcol) == 0)
+        rc = 0;
+    free(v);
+    return rc;
 }
 
 static const char bgc_usage[] =
@@ -819,6 +851,22 @@ static int bgc_parse_args(int argc, char **argv, bgc_settings *s, bgc_params *p,
     return -1;
 }
 
+/* The run's settings from the command line (and the parameters it sets), checked: -1 to
+   run, else the exit status (as bgc_parse_args). */
+static int bgc_settings_from_args(int argc, char **argv, bgc_settings *s, bgc_params *p,
+                                  int *given, int *project, int *stats)
+{
+    char msg[1024];
+    int rc;
+    bgc_settings_default(s);
+    rc = bgc_parse_args(argc, argv, s, p, given, project, stats);
+    if (rc < 0 && bgc_check_settings(s, msg, sizeof msg)) {
+        fprintf(stderr, "error: %s\n", msg);
+        return BGC_ERR_USAGE;
+    }
+    return rc;
+}
+
 /* SIGINT, SIGTERM: the run stops at its next step, as a failure, its rows written. */
 static void bgc_on_signal(int sig)
 {
@@ -864,14 +912,9 @@ int main(int argc, char **argv)
     rc = bgc_batch_main(argc, argv);
     if (rc >= 0)
         return rc;
-    bgc_settings_default(&s);
-    rc = bgc_parse_args(argc, argv, &s, &p, given, &project, &stats);
+    rc = bgc_settings_from_args(argc, argv, &s, &p, given, &project, &stats);
     if (rc >= 0)
         return rc;
-    if (bgc_check_settings(&s, msg, sizeof msg)) {
-        fprintf(stderr, "error: %s\n", msg);
-        return BGC_ERR_USAGE;
-    }
     bgc_params_defaults(&p, given);
     for (i = 0; i < BGC_NUM_PARAMS; i++)
         if (!isfinite(*bgc_param_ref(&p, i))) {

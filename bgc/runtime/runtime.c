@@ -326,13 +326,15 @@ int bgc_newton(bgc_work *w, int k, bgc_eval_fn f, double t, const double *x,
 
 /* ============================================================ Jacobian === */
 
-int bgc_jacobian(double t, const double *x, const bgc_params *p, bgc_work *w, double *J)
+/* J's structural entries, one J v per colour of columns: dense, into the n x n row-major J
+   (the other entries left as they are), else into Jv, column by column as bgc_jac_col_ptr
+   and bgc_jac_col_rows list them. */
+static inline int bgc_jacobian_into(double t, const double *x, const bgc_params *p, bgc_work *w,
+                                    double *out, int dense)
 {
     enum { N = BGC_NUM_STATES };
     double *v = w->v + BGC_WORK_JAC, *jv = w->v + BGC_WORK_JAC + BGC_DIM(N);
     int c, k, i, q;
-    for (q = 0; q < N * N; q++)
-        J[q] = 0.0;
     for (i = 0; i < N; i++)
         v[i] = 0.0;
     for (c = 0; c < BGC_JAC_COLORS; c++) {
@@ -344,33 +346,24 @@ int bgc_jacobian(double t, const double *x, const bgc_params *p, bgc_work *w, do
             const int j = bgc_jac_color_cols[k];
             v[j] = 0.0;
             for (q = bgc_jac_col_ptr[j]; q < bgc_jac_col_ptr[j + 1]; q++)
-                J[bgc_jac_col_rows[q] * N + j] = jv[bgc_jac_col_rows[q]];
+                out[dense ? bgc_jac_col_rows[q] * N + j : q] = jv[bgc_jac_col_rows[q]];
         }
     }
     return 0;
 }
 
+int bgc_jacobian(double t, const double *x, const bgc_params *p, bgc_work *w, double *J)
+{
+    int q;
+    for (q = 0; q < BGC_NUM_STATES * BGC_NUM_STATES; q++)
+        J[q] = 0.0;
+    return bgc_jacobian_into(t, x, p, w, J, 1);
+}
+
 int bgc_jacobian_values(double t, const double *x, const bgc_params *p, bgc_work *w,
                         double *Jv)
 {
-    enum { N = BGC_NUM_STATES };
-    double *v = w->v + BGC_WORK_JAC, *jv = w->v + BGC_WORK_JAC + BGC_DIM(N);
-    int c, k, i, q;
-    for (i = 0; i < N; i++)
-        v[i] = 0.0;
-    for (c = 0; c < BGC_JAC_COLORS; c++) {
-        for (k = bgc_jac_color_ptr[c]; k < bgc_jac_color_ptr[c + 1]; k++)
-            v[bgc_jac_color_cols[k]] = 1.0;
-        if (bgc_model_jvp(t, x, p, w, v, jv))
-            return 1;
-        for (k = bgc_jac_color_ptr[c]; k < bgc_jac_color_ptr[c + 1]; k++) {
-            const int j = bgc_jac_color_cols[k];
-            v[j] = 0.0;
-            for (q = bgc_jac_col_ptr[j]; q < bgc_jac_col_ptr[j + 1]; q++)
-                Jv[q] = jv[bgc_jac_col_rows[q]];
-        }
-    }
-    return 0;
+    return bgc_jacobian_into(t, x, p, w, Jv, 0);
 }
 
 int bgc_rhs(double t, const double *x, const bgc_params *p, bgc_work *w, double *dx)

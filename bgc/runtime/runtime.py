@@ -77,6 +77,7 @@
 # explicit solvers' vector kind); the generated module calls it after its model part, and a
 # test that binds a model of its own by assigning the names above calls it too.
 
+import bisect
 import math
 import os
 import signal
@@ -294,6 +295,12 @@ def _square_next(t, period, duty, t0):
     return down if t < down else t0 + (k + 1.0) * period
 
 
+def _count_upto(x, n, X):
+    """bgc_count_upto: how many of x[:n] (non-decreasing, finite) are at or below X (not
+    NaN)."""
+    return bisect.bisect_right(x, X, 0, n)
+
+
 def _input(w, j, t, part, default):
     """bgc_input: input j's data at t: the segment's start (part 0), value (1), slope (2)."""
     series = w.inputs[j] if w.inputs is not None else None
@@ -302,13 +309,7 @@ def _input(w, j, t, part, default):
     if t != t:
         return math.nan
     ts, us = series
-    lo, hi = 0, len(ts)
-    while lo < hi:
-        mid = (lo + hi) // 2
-        if ts[mid] <= t:
-            lo = mid + 1
-        else:
-            hi = mid
+    lo = _count_upto(ts, len(ts), t)
     if lo == 0 or lo == len(ts):
         return (us[0] if lo == 0 else us[-1]) if part == 1 else 0.0
     k = lo - 1
@@ -327,13 +328,7 @@ def _input_next(w, j, t):
     if t != t:
         return math.nan
     ts = series[0]
-    lo, hi = 0, len(ts)
-    while lo < hi:
-        mid = (lo + hi) // 2
-        if ts[mid] <= t:
-            lo = mid + 1
-        else:
-            hi = mid
+    lo = _count_upto(ts, len(ts), t)
     return ts[lo] if lo < len(ts) else math.inf
 
 
@@ -413,15 +408,7 @@ def _read_input_file(path):
 
 def _table_find(T, X):
     """bgc_table_find: the piece holding X, the number of rows with x <= X."""
-    xs = T[2]
-    lo, hi = 0, T[0]
-    while lo < hi:
-        mid = (lo + hi) // 2
-        if xs[mid] <= X:
-            lo = mid + 1
-        else:
-            hi = mid
-    return lo
+    return _count_upto(T[2], T[0], X)
 
 
 def _table(T, X, piece, order):
@@ -792,7 +779,10 @@ def jacobian(t, x, p):
     return J
 
 
-def _jacobian_into(t, x, p, w, J):
+def _jacobian_into(t, x, p, w, J, values=False):
+    """bgc_jacobian_into: J's structural entries at (t, x), one J v per colour of columns, into
+    the matrix J, or with values into J's structural values column by column
+    (bgc_jacobian_values)."""
     v = [0.0] * _N
     jv = [0.0] * _N
     for cols in _JAC_COLORS:
@@ -801,25 +791,14 @@ def _jacobian_into(t, x, p, w, J):
         _jvp(t, x, p, w, v, jv)
         for j in cols:
             v[j] = 0.0
-            for i in _JAC_COLUMNS[j]:
-                J[i, j] = jv[i]
-
-
-def _jacobian_values(t, x, p, w, Jv):
-    """J's structural values, column by column (bgc_jacobian_values)."""
-    v = [0.0] * _N
-    jv = [0.0] * _N
-    starts = _JAC_LU.colstart
-    for cols in _JAC_COLORS:
-        for j in cols:
-            v[j] = 1.0
-        _jvp(t, x, p, w, v, jv)
-        for j in cols:
-            v[j] = 0.0
-            q = starts[j]
-            for i in _JAC_COLUMNS[j]:
-                Jv[q] = jv[i]
-                q += 1
+            if values:
+                q = _JAC_LU.colstart[j]
+                for i in _JAC_COLUMNS[j]:
+                    J[q] = jv[i]
+                    q += 1
+            else:
+                for i in _JAC_COLUMNS[j]:
+                    J[i, j] = jv[i]
 
 
 def _param_values(overrides):
@@ -3088,7 +3067,7 @@ def _stiff_jacobian(run, t, y):
     J = numpy.zeros((_N, _N)) if _JAC_LU is None else numpy.zeros(_JAC_LU.jpos.shape[0])
     run.st["jac"] += 1
     try:
-        (_jacobian_into if _JAC_LU is None else _jacobian_values)(t, y.tolist(), run.p, run.w, J)
+        _jacobian_into(t, y.tolist(), run.p, run.w, J, _JAC_LU is not None)
     except _BlockFailure as failure:
         raise _block_failed(failure) from None
     return J

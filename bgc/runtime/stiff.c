@@ -148,136 +148,85 @@ static bgc_cplx bgc_cdiv(bgc_cplx z, bgc_cplx w)
 }
 
 /* ------------------------------------------------------ dense linear algebra --- */
+/* The real and the complex linear algebra below are one text each, written for an element
+   type T by a macro: BGC_R and BGC_Z are the elements' operations, ABS1 the size a pivot is
+   chosen and tested by (|re| + |im| for a complex), MUL and DIV the product and the quotient
+   (for a complex bgc_cmul and bgc_cdiv, as the Python runtime computes them). */
+#define BGC_RMUL(a, b) ((a) * (b))
+#define BGC_RDIV(a, b) ((a) / (b))
 
-/* LU factorisation with partial pivoting of the n x n row-major matrix a, in place (L below
-   the diagonal with a unit diagonal, U on and above it); piv[k]: the row swapped with row k.
-   Returns 0, or k + 1 when column k has no nonzero pivot (a singular matrix; NaNs go through,
-   as in LAPACK, and show as non-finite stages). */
-static int bgc_stiff_lu(int n, double *a, int *piv)
-{
-    int i, j, k;
-    for (k = 0; k < n; k++) {
-        double *ak = a + (size_t)k * n, big = fabs(ak[k]);
-        int p = k;
-        for (i = k + 1; i < n; i++)
-            if (fabs(a[(size_t)i * n + k]) > big) {
-                big = fabs(a[(size_t)i * n + k]);
-                p = i;
-            }
-        piv[k] = p;
-        if (big == 0.0)
-            return k + 1;
-        if (p != k) {
-            double *ap = a + (size_t)p * n;
-            for (j = 0; j < n; j++) {
-                const double tmp = ak[j];
-                ak[j] = ap[j];
-                ap[j] = tmp;
-            }
-        }
-        for (i = k + 1; i < n; i++) {
-            double *ai = a + (size_t)i * n;
-            const double l = ai[k] / ak[k];
-            ai[k] = l;
-            if (l != 0.0)
-                for (j = k + 1; j < n; j++)
-                    ai[j] -= l * ak[j];
-        }
-    }
-    return 0;
-}
-
-/* Solves with the factors of bgc_stiff_lu: b is overwritten by the solution. */
-static void bgc_stiff_lu_solve(int n, const double *lu, const int *piv, double *b)
-{
-    int i, k;
-    /* the factorisation swapped whole rows (multipliers included): all the swaps first,
-       then L y = P b */
-    for (k = 0; k < n; k++) {
-        const double bk = b[piv[k]];
-        b[piv[k]] = b[k];
-        b[k] = bk;
-    }
-    for (k = 0; k < n; k++) {
-        const double bk = b[k];
-        if (bk != 0.0)
-            for (i = k + 1; i < n; i++)
-                b[i] -= lu[(size_t)i * n + k] * bk;
-    }
-    for (k = n - 1; k >= 0; k--) {
-        const double *row = lu + (size_t)k * n;
-        double acc = b[k];
-        for (i = k + 1; i < n; i++)
-            acc -= row[i] * b[i];
-        b[k] = acc / row[k];
-    }
-}
-
-/* The same for a complex matrix (pivots by |re| + |im|). */
 static double bgc_cabs1(bgc_cplx z)
 {
     return fabs(creal(z)) + fabs(cimag(z));
 }
 
-static int bgc_stiff_zlu(int n, bgc_cplx *a, int *piv)
-{
-    int i, j, k;
-    for (k = 0; k < n; k++) {
-        bgc_cplx *ak = a + (size_t)k * n;
-        double big = bgc_cabs1(ak[k]);
-        int p = k;
-        for (i = k + 1; i < n; i++)
-            if (bgc_cabs1(a[(size_t)i * n + k]) > big) {
-                big = bgc_cabs1(a[(size_t)i * n + k]);
-                p = i;
-            }
-        piv[k] = p;
-        if (big == 0.0)
-            return k + 1;
-        if (p != k) {
-            bgc_cplx *ap = a + (size_t)p * n;
-            for (j = 0; j < n; j++) {
-                const bgc_cplx tmp = ak[j];
-                ak[j] = ap[j];
-                ap[j] = tmp;
-            }
-        }
-        for (i = k + 1; i < n; i++) {
-            bgc_cplx *ai = a + (size_t)i * n;
-            const bgc_cplx l = bgc_cdiv(ai[k], ak[k]);
-            ai[k] = l;
-            if (l != 0.0)
-                for (j = k + 1; j < n; j++)
-                    ai[j] -= bgc_cmul(l, ak[j]);
-        }
+/* LU (LU_SOLVE) for T: LU factorisation with partial pivoting of the n x n row-major matrix
+   a, in place (L below the diagonal with a unit diagonal, U on and above it); piv[k]: the
+   row swapped with row k.  Returns 0, or k + 1 when column k has no nonzero pivot (a
+   singular matrix; NaNs go through, as in LAPACK, and show as non-finite stages).  LU_SOLVE
+   solves with its factors: b is overwritten by the solution; the factorisation swapped whole
+   rows (multipliers included): all the swaps first, then L y = P b and U x = y. */
+#define BGC_DENSE_LU(LU, LU_SOLVE, T, ABS1, MUL, DIV)                                       \
+    static int LU(int n, T *a, int *piv)                                                     \
+    {                                                                                        \
+        int i, j, k;                                                                         \
+        for (k = 0; k < n; k++) {                                                            \
+            T *ak = a + (size_t)k * n;                                                       \
+            double big = ABS1(ak[k]);                                                        \
+            int p = k;                                                                       \
+            for (i = k + 1; i < n; i++)                                                      \
+                if (ABS1(a[(size_t)i * n + k]) > big) {                                      \
+                    big = ABS1(a[(size_t)i * n + k]);                                        \
+                    p = i;                                                                   \
+                }                                                                            \
+            piv[k] = p;                                                                      \
+            if (big == 0.0)                                                                  \
+                return k + 1;                                                                \
+            if (p != k) {                                                                    \
+                T *ap = a + (size_t)p * n;                                                   \
+                for (j = 0; j < n; j++) {                                                    \
+                    const T tmp = ak[j];                                                     \
+                    ak[j] = ap[j];                                                           \
+                    ap[j] = tmp;                                                             \
+                }                                                                            \
+            }                                                                                \
+            for (i = k + 1; i < n; i++) {                                                    \
+                T *ai = a + (size_t)i * n;                                                   \
+                const T l = DIV(ai[k], ak[k]);                                               \
+                ai[k] = l;                                                                   \
+                if (l != 0.0)                                                                \
+                    for (j = k + 1; j < n; j++)                                              \
+                        ai[j] -= MUL(l, ak[j]);                                              \
+            }                                                                                \
+        }                                                                                    \
+        return 0;                                                                            \
+    }                                                                                        \
+                                                                                             \
+    static void LU_SOLVE(int n, const T *lu, const int *piv, T *b)                           \
+    {                                                                                        \
+        int i, k;                                                                            \
+        for (k = 0; k < n; k++) {                                                            \
+            const T bk = b[piv[k]];                                                          \
+            b[piv[k]] = b[k];                                                                \
+            b[k] = bk;                                                                       \
+        }                                                                                    \
+        for (k = 0; k < n; k++) {                                                            \
+            const T bk = b[k];                                                               \
+            if (bk != 0.0)                                                                   \
+                for (i = k + 1; i < n; i++)                                                  \
+                    b[i] -= MUL(lu[(size_t)i * n + k], bk);                                  \
+        }                                                                                    \
+        for (k = n - 1; k >= 0; k--) {                                                       \
+            const T *row = lu + (size_t)k * n;                                               \
+            T acc = b[k];                                                                    \
+            for (i = k + 1; i < n; i++)                                                      \
+                acc -= MUL(row[i], b[i]);                                                    \
+            b[k] = DIV(acc, row[k]);                                                         \
+        }                                                                                    \
     }
-    return 0;
-}
 
-static void bgc_stiff_zlu_solve(int n, const bgc_cplx *lu, const int *piv, bgc_cplx *b)
-{
-    int i, k;
-    /* the factorisation swapped whole rows (multipliers included): all the swaps first,
-       then L y = P b */
-    for (k = 0; k < n; k++) {
-        const bgc_cplx bk = b[piv[k]];
-        b[piv[k]] = b[k];
-        b[k] = bk;
-    }
-    for (k = 0; k < n; k++) {
-        const bgc_cplx bk = b[k];
-        if (bk != 0.0)
-            for (i = k + 1; i < n; i++)
-                b[i] -= bgc_cmul(lu[(size_t)i * n + k], bk);
-    }
-    for (k = n - 1; k >= 0; k--) {
-        const bgc_cplx *row = lu + (size_t)k * n;
-        bgc_cplx acc = b[k];
-        for (i = k + 1; i < n; i++)
-            acc -= bgc_cmul(row[i], b[i]);
-        b[k] = bgc_cdiv(acc, row[k]);
-    }
-}
+BGC_DENSE_LU(bgc_stiff_lu, bgc_stiff_lu_solve, double, fabs, BGC_RMUL, BGC_RDIV)
+BGC_DENSE_LU(bgc_stiff_zlu, bgc_stiff_zlu_solve, bgc_cplx, bgc_cabs1, bgc_cmul, bgc_cdiv)
 
 /* ----------------------------------------------------- sparse linear algebra --- */
 /* On a large sparse model (bgc_jac_lu->n > 0) the iteration matrices c I - J are kept as the
@@ -289,124 +238,6 @@ static void bgc_stiff_zlu_solve(int n, const bgc_cplx *lu, const int *piv, bgc_c
    pivoting's test) and each pivot clearly nonzero for its row (above 1e-14 of the row's
    largest entry) and finite.  If a test fails, the caller factors the same matrix densely
    with partial pivoting (bgc_stiff_lu). */
-
-/* a = fac I - J from J's structural values. */
-static void bgc_splu_form(const bgc_splu *pl, const double *Jv, double fac, double *a)
-{
-    int q;
-    for (q = 0; q < pl->nnz; q++)
-        a[q] = 0.0;
-    for (q = 0; q < bgc_jac_col_ptr[pl->n]; q++)
-        a[pl->jpos[q]] = -Jv[q];
-    for (q = 0; q < pl->n; q++)
-        a[pl->dpos[q]] += fac;
-}
-
-static int bgc_splu_factor(const bgc_splu *pl, double *a, double *w)
-{
-    int i, q, r;
-    for (i = 0; i < pl->n; i++) {
-        const int end = pl->rowptr[i + 1], d = pl->diag[i];
-        double scale = 0.0;
-        for (q = pl->rowptr[i]; q < end; q++) {
-            w[pl->cols[q]] = a[q];
-            scale = bgc_max(scale, fabs(a[q]));
-        }
-        for (q = pl->rowptr[i]; q < d; q++) {
-            const int k = pl->cols[q];
-            const double l = w[k] / a[pl->diag[k]];
-            if (!(fabs(l) <= 10.0))
-                return 1;
-            w[k] = l;
-            for (r = pl->diag[k] + 1; r < pl->rowptr[k + 1]; r++)
-                w[pl->cols[r]] -= l * a[r];
-        }
-        for (q = pl->rowptr[i]; q < end; q++)
-            a[q] = w[pl->cols[q]];
-        if (!(fabs(a[d]) > 1e-14 * scale) || !isfinite(a[d]))
-            return 1;
-    }
-    return 0;
-}
-
-/* b (in the states' order) overwritten by the solution; w: n doubles. */
-static void bgc_splu_solve(const bgc_splu *pl, const double *a, double *b, double *w)
-{
-    int i, q;
-    for (i = 0; i < pl->n; i++) {
-        double acc = b[pl->perm[i]];
-        for (q = pl->rowptr[i]; q < pl->diag[i]; q++)
-            acc -= a[q] * w[pl->cols[q]];
-        w[i] = acc;
-    }
-    for (i = pl->n - 1; i >= 0; i--) {
-        double acc = w[i];
-        for (q = pl->diag[i] + 1; q < pl->rowptr[i + 1]; q++)
-            acc -= a[q] * w[pl->cols[q]];
-        w[i] = acc / a[pl->diag[i]];
-    }
-    for (i = 0; i < pl->n; i++)
-        b[pl->perm[i]] = w[i];
-}
-
-/* The same for (alpha + i beta) I - J. */
-static void bgc_splu_zform(const bgc_splu *pl, const double *Jv, double alpha, double beta,
-                           bgc_cplx *a)
-{
-    int q;
-    for (q = 0; q < pl->nnz; q++)
-        a[q] = 0.0;
-    for (q = 0; q < bgc_jac_col_ptr[pl->n]; q++)
-        a[pl->jpos[q]] = -Jv[q];
-    for (q = 0; q < pl->n; q++)
-        a[pl->dpos[q]] += bgc_cmake(alpha + beta * 0.0, beta);
-}
-
-static int bgc_splu_zfactor(const bgc_splu *pl, bgc_cplx *a, bgc_cplx *w)
-{
-    int i, q, r;
-    for (i = 0; i < pl->n; i++) {
-        const int end = pl->rowptr[i + 1], d = pl->diag[i];
-        double scale = 0.0;
-        for (q = pl->rowptr[i]; q < end; q++) {
-            w[pl->cols[q]] = a[q];
-            scale = bgc_max(scale, bgc_cabs1(a[q]));
-        }
-        for (q = pl->rowptr[i]; q < d; q++) {
-            const int k = pl->cols[q];
-            const bgc_cplx l = bgc_cdiv(w[k], a[pl->diag[k]]);
-            if (!(bgc_cabs1(l) <= 10.0))
-                return 1;
-            w[k] = l;
-            for (r = pl->diag[k] + 1; r < pl->rowptr[k + 1]; r++)
-                w[pl->cols[r]] -= bgc_cmul(l, a[r]);
-        }
-        for (q = pl->rowptr[i]; q < end; q++)
-            a[q] = w[pl->cols[q]];
-        if (!(bgc_cabs1(a[d]) > 1e-14 * scale) || !isfinite(bgc_cabs1(a[d])))
-            return 1;
-    }
-    return 0;
-}
-
-static void bgc_splu_zsolve(const bgc_splu *pl, const bgc_cplx *a, bgc_cplx *b, bgc_cplx *w)
-{
-    int i, q;
-    for (i = 0; i < pl->n; i++) {
-        bgc_cplx acc = b[pl->perm[i]];
-        for (q = pl->rowptr[i]; q < pl->diag[i]; q++)
-            acc -= bgc_cmul(a[q], w[pl->cols[q]]);
-        w[i] = acc;
-    }
-    for (i = pl->n - 1; i >= 0; i--) {
-        bgc_cplx acc = w[i];
-        for (q = pl->diag[i] + 1; q < pl->rowptr[i + 1]; q++)
-            acc -= bgc_cmul(a[q], w[pl->cols[q]]);
-        w[i] = bgc_cdiv(acc, a[pl->diag[i]]);
-    }
-    for (i = 0; i < pl->n; i++)
-        b[pl->perm[i]] = w[i];
-}
 
 /* An iteration matrix on the sparse path: its factors, sparse (v or z), or dense (d or dz,
    with piv, allocated when first needed) after a pivot failed its test. */
@@ -450,67 +281,106 @@ static int bgc_smat_dense(bgc_smat *m, int complex_values)
     return !m->piv || (complex_values ? !m->dz : !m->d);
 }
 
-/* fac I - J factored: 0, or nonzero if singular (or out of memory for the dense fallback). */
-static int bgc_smat_factor(bgc_smat *m, const double *Jv, double fac, double *w)
-{
-    const bgc_splu *pl = bgc_jac_lu;
-    const int n = pl->n;
-    int j, q;
-    bgc_splu_form(pl, Jv, fac, m->v);
-    m->dense = 0;
-    if (bgc_splu_factor(pl, m->v, w) == 0)
-        return 0;
-    if (bgc_smat_dense(m, 0))
-        return 1;
-    m->dense = 1;
-    for (q = 0; q < n * n; q++)
-        m->d[q] = 0.0;
-    for (j = 0; j < n; j++)
-        for (q = bgc_jac_col_ptr[j]; q < bgc_jac_col_ptr[j + 1]; q++)
-            m->d[(size_t)bgc_jac_col_rows[q] * n + j] = -Jv[q];
-    for (j = 0; j < n; j++)
-        m->d[(size_t)j * n + j] += fac;
-    return bgc_stiff_lu(n, m->d, m->piv);
-}
+/* For T (COMPLEX 0 or 1; its values VALUES and DENSE in a bgc_smat; LU, LU_SOLVE dense):
+   FORM: a = c I - J from J's structural values (c: diag).
+   FACTOR: a factored in place; 0, or 1 if a pivot fails its test.  w: n elements.
+   SOLVE: b (in the states' order) overwritten by the solution; w: n elements.
+   SMAT_FACTOR: c I - J factored, sparse or else dense: 0, or nonzero if singular (or out of
+   memory for the dense fallback).  SMAT_SOLVE: the solve with its factors. */
+#define BGC_SPARSE_LU(FORM, FACTOR, SOLVE, SMAT_FACTOR, SMAT_SOLVE, T, COMPLEX, ABS1, MUL,    \
+                      DIV, VALUES, DENSE, LU, LU_SOLVE)                                      \
+    static void FORM(const bgc_splu *pl, const double *Jv, T diag, T *a)                     \
+    {                                                                                        \
+        int q;                                                                               \
+        for (q = 0; q < pl->nnz; q++)                                                        \
+            a[q] = 0.0;                                                                      \
+        for (q = 0; q < bgc_jac_col_ptr[pl->n]; q++)                                         \
+            a[pl->jpos[q]] = -Jv[q];                                                         \
+        for (q = 0; q < pl->n; q++)                                                          \
+            a[pl->dpos[q]] += diag;                                                          \
+    }                                                                                        \
+                                                                                             \
+    static int FACTOR(const bgc_splu *pl, T *a, T *w)                                        \
+    {                                                                                        \
+        int i, q, r;                                                                         \
+        for (i = 0; i < pl->n; i++) {                                                        \
+            const int end = pl->rowptr[i + 1], d = pl->diag[i];                              \
+            double scale = 0.0;                                                              \
+            for (q = pl->rowptr[i]; q < end; q++) {                                          \
+                w[pl->cols[q]] = a[q];                                                       \
+                scale = bgc_max(scale, ABS1(a[q]));                                          \
+            }                                                                                \
+            for (q = pl->rowptr[i]; q < d; q++) {                                            \
+                const int k = pl->cols[q];                                                   \
+                const T l = DIV(w[k], a[pl->diag[k]]);                                       \
+                if (!(ABS1(l) <= 10.0))                                                      \
+                    return 1;                                                                \
+                w[k] = l;                                                                    \
+                for (r = pl->diag[k] + 1; r < pl->rowptr[k + 1]; r++)                        \
+                    w[pl->cols[r]] -= MUL(l, a[r]);                                          \
+            }                                                                                \
+            for (q = pl->rowptr[i]; q < end; q++)                                            \
+                a[q] = w[pl->cols[q]];                                                       \
+            if (!(ABS1(a[d]) > 1e-14 * scale) || !isfinite(ABS1(a[d])))                      \
+                return 1;                                                                    \
+        }                                                                                    \
+        return 0;                                                                            \
+    }                                                                                        \
+                                                                                             \
+    static void SOLVE(const bgc_splu *pl, const T *a, T *b, T *w)                            \
+    {                                                                                        \
+        int i, q;                                                                            \
+        for (i = 0; i < pl->n; i++) {                                                        \
+            T acc = b[pl->perm[i]];                                                          \
+            for (q = pl->rowptr[i]; q < pl->diag[i]; q++)                                    \
+                acc -= MUL(a[q], w[pl->cols[q]]);                                            \
+            w[i] = acc;                                                                      \
+        }                                                                                    \
+        for (i = pl->n - 1; i >= 0; i--) {                                                   \
+            T acc = w[i];                                                                    \
+            for (q = pl->diag[i] + 1; q < pl->rowptr[i + 1]; q++)                            \
+                acc -= MUL(a[q], w[pl->cols[q]]);                                            \
+            w[i] = DIV(acc, a[pl->diag[i]]);                                                 \
+        }                                                                                    \
+        for (i = 0; i < pl->n; i++)                                                          \
+            b[pl->perm[i]] = w[i];                                                           \
+    }                                                                                        \
+                                                                                             \
+    static int SMAT_FACTOR(bgc_smat *m, const double *Jv, T diag, T *w)                      \
+    {                                                                                        \
+        const bgc_splu *pl = bgc_jac_lu;                                                     \
+        const int n = pl->n;                                                                 \
+        int j, q;                                                                            \
+        FORM(pl, Jv, diag, m->VALUES);                                                       \
+        m->dense = 0;                                                                        \
+        if (FACTOR(pl, m->VALUES, w) == 0)                                                   \
+            return 0;                                                                        \
+        if (bgc_smat_dense(m, COMPLEX))                                                      \
+            return 1;                                                                        \
+        m->dense = 1;                                                                        \
+        for (q = 0; q < n * n; q++)                                                          \
+            m->DENSE[q] = 0.0;                                                               \
+        for (j = 0; j < n; j++)                                                              \
+            for (q = bgc_jac_col_ptr[j]; q < bgc_jac_col_ptr[j + 1]; q++)                    \
+                m->DENSE[(size_t)bgc_jac_col_rows[q] * n + j] = -Jv[q];                      \
+        for (j = 0; j < n; j++)                                                              \
+            m->DENSE[(size_t)j * n + j] += diag;                                             \
+        return LU(n, m->DENSE, m->piv);                                                      \
+    }                                                                                        \
+                                                                                             \
+    static void SMAT_SOLVE(const bgc_smat *m, T *b, T *w)                                    \
+    {                                                                                        \
+        if (m->dense)                                                                        \
+            LU_SOLVE(bgc_jac_lu->n, m->DENSE, m->piv, b);                                    \
+        else                                                                                 \
+            SOLVE(bgc_jac_lu, m->VALUES, b, w);                                              \
+    }
 
-static int bgc_smat_zfactor(bgc_smat *m, const double *Jv, double alpha, double beta,
-                            bgc_cplx *w)
-{
-    const bgc_splu *pl = bgc_jac_lu;
-    const int n = pl->n;
-    int j, q;
-    bgc_splu_zform(pl, Jv, alpha, beta, m->z);
-    m->dense = 0;
-    if (bgc_splu_zfactor(pl, m->z, w) == 0)
-        return 0;
-    if (bgc_smat_dense(m, 1))
-        return 1;
-    m->dense = 1;
-    for (q = 0; q < n * n; q++)
-        m->dz[q] = 0.0;
-    for (j = 0; j < n; j++)
-        for (q = bgc_jac_col_ptr[j]; q < bgc_jac_col_ptr[j + 1]; q++)
-            m->dz[(size_t)bgc_jac_col_rows[q] * n + j] = -Jv[q];
-    for (j = 0; j < n; j++)
-        m->dz[(size_t)j * n + j] += bgc_cmake(alpha + beta * 0.0, beta);
-    return bgc_stiff_zlu(n, m->dz, m->piv);
-}
-
-static void bgc_smat_solve(const bgc_smat *m, double *b, double *w)
-{
-    if (m->dense)
-        bgc_stiff_lu_solve(bgc_jac_lu->n, m->d, m->piv, b);
-    else
-        bgc_splu_solve(bgc_jac_lu, m->v, b, w);
-}
-
-static void bgc_smat_zsolve(const bgc_smat *m, bgc_cplx *b, bgc_cplx *w)
-{
-    if (m->dense)
-        bgc_stiff_zlu_solve(bgc_jac_lu->n, m->dz, m->piv, b);
-    else
-        bgc_splu_zsolve(bgc_jac_lu, m->z, b, w);
-}
+BGC_SPARSE_LU(bgc_splu_form, bgc_splu_factor, bgc_splu_solve, bgc_smat_factor, bgc_smat_solve,
+              double, 0, fabs, BGC_RMUL, BGC_RDIV, v, d, bgc_stiff_lu, bgc_stiff_lu_solve)
+BGC_SPARSE_LU(bgc_splu_zform, bgc_splu_zfactor, bgc_splu_zsolve, bgc_smat_zfactor,
+              bgc_smat_zsolve, bgc_cplx, 1, bgc_cabs1, bgc_cmul, bgc_cdiv, z, dz, bgc_stiff_zlu,
+              bgc_stiff_zlu_solve)
 
 /* The error norm of the stiff families: sqrt(mean((v_i / w_i)^2)), 0 without states; *worst:
    the component with the largest share. */
@@ -1104,8 +974,9 @@ static int bgc_radau_factor(bgc_radau_state *ms, bgc_run *r, const double *alphn
         r->st->lu++;
         singular = bgc_smat_factor(&ms->sm[0], ms->J, fac1, ms->E1);
         for (k = 0; k < ms->u.pairs && !singular; k++) {
+            const bgc_cplx diag = bgc_cmake(alphn[k] + betan[k] * 0.0, betan[k]);
             r->st->lu++;
-            singular = bgc_smat_zfactor(&ms->sm[1 + k], ms->J, alphn[k], betan[k], ms->Ec);
+            singular = bgc_smat_zfactor(&ms->sm[1 + k], ms->J, diag, ms->Ec);
         }
         return singular;
     }

@@ -292,25 +292,32 @@ static inline double bgc_square_next(double t, double period, double duty, doubl
     return t < down ? down : t0 + (k + 1.0) * period;
 }
 
+/* How many of x[0..n-1] (non-decreasing) are at or below X (binary search). */
+static inline int bgc_count_upto(const double *x, int n, double X)
+{
+    int lo = 0, hi = n;
+    while (lo < hi) {
+        const int mid = (lo + hi) / 2;
+        if (x[mid] <= X)
+            lo = mid + 1;
+        else
+            hi = mid;
+    }
+    return lo;
+}
+
 /* Input j's data at t (bgc/events.py, InputSlot): the segment holding t, as its start
    (part 0), the value there (1) and its slope (2); before the first sample and after the
    last the value is held (start and slope 0); without data 0, dflt, 0. */
 static inline double bgc_input(const bgc_work *w, int j, double t, int part, double dflt)
 {
     const bgc_input_series *u = w->inputs ? &w->inputs[j] : NULL;
-    int lo = 0, hi, k;
+    int lo, k;
     if (!u || u->n <= 0)
         return part == 1 ? dflt : 0.0;
     if (t != t)
         return NAN;
-    hi = u->n;
-    while (lo < hi) { /* the samples at or before t */
-        const int mid = (lo + hi) / 2;
-        if (u->t[mid] <= t)
-            lo = mid + 1;
-        else
-            hi = mid;
-    }
+    lo = bgc_count_upto(u->t, u->n, t); /* the samples at or before t */
     if (lo == 0 || lo == u->n)
         return part == 1 ? u->u[lo == 0 ? 0 : u->n - 1] : 0.0;
     k = lo - 1;
@@ -324,19 +331,12 @@ static inline double bgc_input(const bgc_work *w, int j, double t, int part, dou
 static inline double bgc_input_next(const bgc_work *w, int j, double t)
 {
     const bgc_input_series *u = w->inputs ? &w->inputs[j] : NULL;
-    int lo = 0, hi;
+    int lo;
     if (!u || u->n <= 0)
         return INFINITY;
     if (t != t)
         return NAN;
-    hi = u->n;
-    while (lo < hi) {
-        const int mid = (lo + hi) / 2;
-        if (u->t[mid] <= t)
-            lo = mid + 1;
-        else
-            hi = mid;
-    }
+    lo = bgc_count_upto(u->t, u->n, t);
     return lo < u->n ? u->t[lo] : INFINITY;
 }
 
@@ -348,18 +348,10 @@ typedef struct bgc_table_data {
     int n, error;
     const double *x, *origin, *coef;
 } bgc_table_data;
-/* The piece holding X: the number of rows with x <= X (binary search). */
+/* The piece holding X: the number of rows with x <= X. */
 static inline int bgc_table_find(const bgc_table_data *T, double X)
 {
-    int lo = 0, hi = T->n;
-    while (lo < hi) {
-        const int mid = (lo + hi) / 2;
-        if (T->x[mid] <= X)
-            lo = mid + 1;
-        else
-            hi = mid;
-    }
-    return lo;
+    return bgc_count_upto(T->x, T->n, X);
 }
 /* The table's value at X (order 0) or its derivative of order 1 to 3, in piece `piece` (a
    time table's, set at events), or in X's piece if piece < 0. */
@@ -919,13 +911,15 @@ int bgc_newton(bgc_work *w, int k, bgc_eval_fn f, double t, const double *x,
 
 /* ============================================================ Jacobian === */
 
-int bgc_jacobian(double t, const double *x, const bgc_params *p, bgc_work *w, double *J)
+/* J's structural entries, one J v per colour of columns: dense, into the n x n row-major J
+   (the other entries left as they are), else into Jv, column by column as bgc_jac_col_ptr
+   and bgc_jac_col_rows list them. */
+static inline int bgc_jacobian_into(double t, const double *x, const bgc_params *p, bgc_work *w,
+                                    double *out, int dense)
 {
     enum { N = BGC_NUM_STATES };
     double *v = w->v + BGC_WORK_JAC, *jv = w->v + BGC_WORK_JAC + BGC_DIM(N);
     int c, k, i, q;
-    for (q = 0; q < N * N; q++)
-        J[q] = 0.0;
     for (i = 0; i < N; i++)
         v[i] = 0.0;
     for (c = 0; c < BGC_JAC_COLORS; c++) {
@@ -937,33 +931,24 @@ int bgc_jacobian(double t, const double *x, const bgc_params *p, bgc_work *w, do
             const int j = bgc_jac_color_cols[k];
             v[j] = 0.0;
             for (q = bgc_jac_col_ptr[j]; q < bgc_jac_col_ptr[j + 1]; q++)
-                J[bgc_jac_col_rows[q] * N + j] = jv[bgc_jac_col_rows[q]];
+                out[dense ? bgc_jac_col_rows[q] * N + j : q] = jv[bgc_jac_col_rows[q]];
         }
     }
     return 0;
 }
 
+int bgc_jacobian(double t, const double *x, const bgc_params *p, bgc_work *w, double *J)
+{
+    int q;
+    for (q = 0; q < BGC_NUM_STATES * BGC_NUM_STATES; q++)
+        J[q] = 0.0;
+    return bgc_jacobian_into(t, x, p, w, J, 1);
+}
+
 int bgc_jacobian_values(double t, const double *x, const bgc_params *p, bgc_work *w,
                         double *Jv)
 {
-    enum { N = BGC_NUM_STATES };
-    double *v = w->v + BGC_WORK_JAC, *jv = w->v + BGC_WORK_JAC + BGC_DIM(N);
-    int c, k, i, q;
-    for (i = 0; i < N; i++)
-        v[i] = 0.0;
-    for (c = 0; c < BGC_JAC_COLORS; c++) {
-        for (k = bgc_jac_color_ptr[c]; k < bgc_jac_color_ptr[c + 1]; k++)
-            v[bgc_jac_color_cols[k]] = 1.0;
-        if (bgc_model_jvp(t, x, p, w, v, jv))
-            return 1;
-        for (k = bgc_jac_color_ptr[c]; k < bgc_jac_color_ptr[c + 1]; k++) {
-            const int j = bgc_jac_color_cols[k];
-            v[j] = 0.0;
-            for (q = bgc_jac_col_ptr[j]; q < bgc_jac_col_ptr[j + 1]; q++)
-                Jv[q] = jv[bgc_jac_col_rows[q]];
-        }
-    }
-    return 0;
+    return bgc_jacobian_into(t, x, p, w, Jv, 0);
 }
 
 int bgc_rhs(double t, const double *x, const bgc_params *p, bgc_work *w, double *dx)
@@ -1566,8 +1551,9 @@ typedef struct bgc_grid {
     long k, n;
 } bgc_grid;
 
-/* The fixed grid's next step from t: its end *tph and whether it is the run's last; nonzero
-   (message set) when the grid cannot be laid or the step is too small. */
+/* The fixed grid's next step from t: its end *tph (or a time event inside it) and whether it
+   is the run's last; nonzero (message set) when the grid cannot be laid or the step is too
+   small. */
 static int bgc_grid_next(bgc_run *r, const bgc_family *f, bgc_grid *g, double t, double *tph,
                          int *last)
 {
@@ -1585,6 +1571,10 @@ static int bgc_grid_next(bgc_run *r, const bgc_family *f, bgc_grid *g, double t,
         t = g->ta + (double)g->k * g->step;
     if (!(*tph - t >= bgc_hmin(t)))
         return bgc_fail_step(r->msg, r->msg_size, t, *tph - t, -1);
+    if (r->t_next < *tph) { /* a time event inside: the step ends on it */
+        *tph = r->t_next;
+        *last = 0;
+    }
     return 0;
 }
 
@@ -1845,6 +1835,21 @@ static int bgc_after_event(bgc_run *r, const bgc_family *f, double t, double *y,
     return rc;
 }
 
+/* The step just accepted, from t to tph (y1 the state there): its state checked, the step
+   counted (bgc_accept) and the family told; nonzero (message set) to end the run. */
+static int bgc_accepted(bgc_run *r, const bgc_family *f, void *ms, double tph,
+                        const double *y1)
+{
+    const int i = bgc_first_nonfinite(y1, BGC_NUM_STATES);
+    int rc;
+    if (i >= 0)
+        return bgc_fail(r->msg, r->msg_size, tph, "state", bgc_state_names[i]);
+    rc = bgc_accept(r, tph);
+    if (rc == 0 && f->accepted)
+        rc = f->accepted(ms, r, tph, y1);
+    return rc;
+}
+
 /* One family's run from (r->t, y) to s->t_end (the driver proper).  Keeps r->t and y at the
    last accepted step; returns 0, an error (message set), the sink's nonzero value, or
    BGC_STIFF (r->h then holds the explicit phase's next step). */
@@ -1855,7 +1860,7 @@ static int bgc_drive(bgc_run *r, const bgc_family *f, double *y)
     const double hmax = bgc_hmax(s);
     double *mem = malloc((size_t)3 * D * sizeof *mem), *y1, *yout, *ye;
     double t = r->t, h = 0.0, hnew, wanted = 0.0;
-    int i, rc = 0, reject = 0, last = 0, bad = BGC_BAD_NONE, bad_kind = 0, at_event = 0;
+    int rc = 0, reject = 0, last = 0, bad = BGC_BAD_NONE, bad_kind = 0, at_event = 0;
     bgc_grid grid = {0.0, 0.0, 0.0, 0, 0};
     bgc_outcome o;
     void *ms = NULL;
@@ -1895,10 +1900,6 @@ static int bgc_drive(bgc_run *r, const bgc_family *f, double *y)
             rc = bgc_grid_next(r, f, &grid, t, &tph, &last);
             if (rc)
                 goto done;
-            if (r->t_next < tph) { /* a time event inside: the step ends on it */
-                tph = r->t_next;
-                last = 0;
-            }
             h = tph - t;
         } else {
             if (!(h >= bgc_hmin(t))) {
@@ -1938,25 +1939,11 @@ static int bgc_drive(bgc_run *r, const bgc_family *f, double *y)
 
         /* accepted */
         hnew = o.hnew;
-        i = bgc_first_nonfinite(y1, N);
-        if (i >= 0) {
-            rc = bgc_fail(r->msg, r->msg_size, tph, "state", bgc_state_names[i]);
-            goto done;
-        }
-        rc = bgc_accept(r, tph);
-        if (rc == 0 && f->accepted)
-            rc = f->accepted(ms, r, tph, y1);
+        rc = bgc_accepted(r, f, ms, tph, y1);
         if (rc)
             goto done;
-        c.f = f;
-        c.ms = ms;
-        c.t = t;
-        c.h = h;
-        c.tph = tph;
-        c.y = y;
-        c.y1 = y1;
-        c.prepared = f->prepare == NULL;
-        c.f0 = c.f1 = NULL;
+        c = (bgc_dense){ .f = f, .ms = ms, .t = t, .h = h, .tph = tph, .y = y, .y1 = y1,
+                         .prepared = f->prepare == NULL, .f0 = NULL, .f1 = NULL };
         if (BGC_NUM_DISCRETE > 0) {
             double te = tph;
             const int found = bgc_find_event(r, &c, &te, ye);
@@ -2677,136 +2664,85 @@ static bgc_cplx bgc_cdiv(bgc_cplx z, bgc_cplx w)
 }
 
 /* ------------------------------------------------------ dense linear algebra --- */
+/* The real and the complex linear algebra below are one text each, written for an element
+   type T by a macro: BGC_R and BGC_Z are the elements' operations, ABS1 the size a pivot is
+   chosen and tested by (|re| + |im| for a complex), MUL and DIV the product and the quotient
+   (for a complex bgc_cmul and bgc_cdiv, as the Python runtime computes them). */
+#define BGC_RMUL(a, b) ((a) * (b))
+#define BGC_RDIV(a, b) ((a) / (b))
 
-/* LU factorisation with partial pivoting of the n x n row-major matrix a, in place (L below
-   the diagonal with a unit diagonal, U on and above it); piv[k]: the row swapped with row k.
-   Returns 0, or k + 1 when column k has no nonzero pivot (a singular matrix; NaNs go through,
-   as in LAPACK, and show as non-finite stages). */
-static int bgc_stiff_lu(int n, double *a, int *piv)
-{
-    int i, j, k;
-    for (k = 0; k < n; k++) {
-        double *ak = a + (size_t)k * n, big = fabs(ak[k]);
-        int p = k;
-        for (i = k + 1; i < n; i++)
-            if (fabs(a[(size_t)i * n + k]) > big) {
-                big = fabs(a[(size_t)i * n + k]);
-                p = i;
-            }
-        piv[k] = p;
-        if (big == 0.0)
-            return k + 1;
-        if (p != k) {
-            double *ap = a + (size_t)p * n;
-            for (j = 0; j < n; j++) {
-                const double tmp = ak[j];
-                ak[j] = ap[j];
-                ap[j] = tmp;
-            }
-        }
-        for (i = k + 1; i < n; i++) {
-            double *ai = a + (size_t)i * n;
-            const double l = ai[k] / ak[k];
-            ai[k] = l;
-            if (l != 0.0)
-                for (j = k + 1; j < n; j++)
-                    ai[j] -= l * ak[j];
-        }
-    }
-    return 0;
-}
-
-/* Solves with the factors of bgc_stiff_lu: b is overwritten by the solution. */
-static void bgc_stiff_lu_solve(int n, const double *lu, const int *piv, double *b)
-{
-    int i, k;
-    /* the factorisation swapped whole rows (multipliers included): all the swaps first,
-       then L y = P b */
-    for (k = 0; k < n; k++) {
-        const double bk = b[piv[k]];
-        b[piv[k]] = b[k];
-        b[k] = bk;
-    }
-    for (k = 0; k < n; k++) {
-        const double bk = b[k];
-        if (bk != 0.0)
-            for (i = k + 1; i < n; i++)
-                b[i] -= lu[(size_t)i * n + k] * bk;
-    }
-    for (k = n - 1; k >= 0; k--) {
-        const double *row = lu + (size_t)k * n;
-        double acc = b[k];
-        for (i = k + 1; i < n; i++)
-            acc -= row[i] * b[i];
-        b[k] = acc / row[k];
-    }
-}
-
-/* The same for a complex matrix (pivots by |re| + |im|). */
 static double bgc_cabs1(bgc_cplx z)
 {
     return fabs(creal(z)) + fabs(cimag(z));
 }
 
-static int bgc_stiff_zlu(int n, bgc_cplx *a, int *piv)
-{
-    int i, j, k;
-    for (k = 0; k < n; k++) {
-        bgc_cplx *ak = a + (size_t)k * n;
-        double big = bgc_cabs1(ak[k]);
-        int p = k;
-        for (i = k + 1; i < n; i++)
-            if (bgc_cabs1(a[(size_t)i * n + k]) > big) {
-                big = bgc_cabs1(a[(size_t)i * n + k]);
-                p = i;
-            }
-        piv[k] = p;
-        if (big == 0.0)
-            return k + 1;
-        if (p != k) {
-            bgc_cplx *ap = a + (size_t)p * n;
-            for (j = 0; j < n; j++) {
-                const bgc_cplx tmp = ak[j];
-                ak[j] = ap[j];
-                ap[j] = tmp;
-            }
-        }
-        for (i = k + 1; i < n; i++) {
-            bgc_cplx *ai = a + (size_t)i * n;
-            const bgc_cplx l = bgc_cdiv(ai[k], ak[k]);
-            ai[k] = l;
-            if (l != 0.0)
-                for (j = k + 1; j < n; j++)
-                    ai[j] -= bgc_cmul(l, ak[j]);
-        }
+/* LU (LU_SOLVE) for T: LU factorisation with partial pivoting of the n x n row-major matrix
+   a, in place (L below the diagonal with a unit diagonal, U on and above it); piv[k]: the
+   row swapped with row k.  Returns 0, or k + 1 when column k has no nonzero pivot (a
+   singular matrix; NaNs go through, as in LAPACK, and show as non-finite stages).  LU_SOLVE
+   solves with its factors: b is overwritten by the solution; the factorisation swapped whole
+   rows (multipliers included): all the swaps first, then L y = P b and U x = y. */
+#define BGC_DENSE_LU(LU, LU_SOLVE, T, ABS1, MUL, DIV)                                       \
+    static int LU(int n, T *a, int *piv)                                                     \
+    {                                                                                        \
+        int i, j, k;                                                                         \
+        for (k = 0; k < n; k++) {                                                            \
+            T *ak = a + (size_t)k * n;                                                       \
+            double big = ABS1(ak[k]);                                                        \
+            int p = k;                                                                       \
+            for (i = k + 1; i < n; i++)                                                      \
+                if (ABS1(a[(size_t)i * n + k]) > big) {                                      \
+                    big = ABS1(a[(size_t)i * n + k]);                                        \
+                    p = i;                                                                   \
+                }                                                                            \
+            piv[k] = p;                                                                      \
+            if (big == 0.0)                                                                  \
+                return k + 1;                                                                \
+            if (p != k) {                                                                    \
+                T *ap = a + (size_t)p * n;                                                   \
+                for (j = 0; j < n; j++) {                                                    \
+                    const T tmp = ak[j];                                                     \
+                    ak[j] = ap[j];                                                           \
+                    ap[j] = tmp;                                                             \
+                }                                                                            \
+            }                                                                                \
+            for (i = k + 1; i < n; i++) {                                                    \
+                T *ai = a + (size_t)i * n;                                                   \
+                const T l = DIV(ai[k], ak[k]);                                               \
+                ai[k] = l;                                                                   \
+                if (l != 0.0)                                                                \
+                    for (j = k + 1; j < n; j++)                                              \
+                        ai[j] -= MUL(l, ak[j]);                                              \
+            }                                                                                \
+        }                                                                                    \
+        return 0;                                                                            \
+    }                                                                                        \
+                                                                                             \
+    static void LU_SOLVE(int n, const T *lu, const int *piv, T *b)                           \
+    {                                                                                        \
+        int i, k;                                                                            \
+        for (k = 0; k < n; k++) {                                                            \
+            const T bk = b[piv[k]];                                                          \
+            b[piv[k]] = b[k];                                                                \
+            b[k] = bk;                                                                       \
+        }                                                                                    \
+        for (k = 0; k < n; k++) {                                                            \
+            const T bk = b[k];                                                               \
+            if (bk != 0.0)                                                                   \
+                for (i = k + 1; i < n; i++)                                                  \
+                    b[i] -= MUL(lu[(size_t)i * n + k], bk);                                  \
+        }                                                                                    \
+        for (k = n - 1; k >= 0; k--) {                                                       \
+            const T *row = lu + (size_t)k * n;                                               \
+            T acc = b[k];                                                                    \
+            for (i = k + 1; i < n; i++)                                                      \
+                acc -= MUL(row[i], b[i]);                                                    \
+            b[k] = DIV(acc, row[k]);                                                         \
+        }                                                                                    \
     }
-    return 0;
-}
 
-static void bgc_stiff_zlu_solve(int n, const bgc_cplx *lu, const int *piv, bgc_cplx *b)
-{
-    int i, k;
-    /* the factorisation swapped whole rows (multipliers included): all the swaps first,
-       then L y = P b */
-    for (k = 0; k < n; k++) {
-        const bgc_cplx bk = b[piv[k]];
-        b[piv[k]] = b[k];
-        b[k] = bk;
-    }
-    for (k = 0; k < n; k++) {
-        const bgc_cplx bk = b[k];
-        if (bk != 0.0)
-            for (i = k + 1; i < n; i++)
-                b[i] -= bgc_cmul(lu[(size_t)i * n + k], bk);
-    }
-    for (k = n - 1; k >= 0; k--) {
-        const bgc_cplx *row = lu + (size_t)k * n;
-        bgc_cplx acc = b[k];
-        for (i = k + 1; i < n; i++)
-            acc -= bgc_cmul(row[i], b[i]);
-        b[k] = bgc_cdiv(acc, row[k]);
-    }
-}
+BGC_DENSE_LU(bgc_stiff_lu, bgc_stiff_lu_solve, double, fabs, BGC_RMUL, BGC_RDIV)
+BGC_DENSE_LU(bgc_stiff_zlu, bgc_stiff_zlu_solve, bgc_cplx, bgc_cabs1, bgc_cmul, bgc_cdiv)
 
 /* ----------------------------------------------------- sparse linear algebra --- */
 /* On a large sparse model (bgc_jac_lu->n > 0) the iteration matrices c I - J are kept as the
@@ -2818,124 +2754,6 @@ static void bgc_stiff_zlu_solve(int n, const bgc_cplx *lu, const int *piv, bgc_c
    pivoting's test) and each pivot clearly nonzero for its row (above 1e-14 of the row's
    largest entry) and finite.  If a test fails, the caller factors the same matrix densely
    with partial pivoting (bgc_stiff_lu). */
-
-/* a = fac I - J from J's structural values. */
-static void bgc_splu_form(const bgc_splu *pl, const double *Jv, double fac, double *a)
-{
-    int q;
-    for (q = 0; q < pl->nnz; q++)
-        a[q] = 0.0;
-    for (q = 0; q < bgc_jac_col_ptr[pl->n]; q++)
-        a[pl->jpos[q]] = -Jv[q];
-    for (q = 0; q < pl->n; q++)
-        a[pl->dpos[q]] += fac;
-}
-
-static int bgc_splu_factor(const bgc_splu *pl, double *a, double *w)
-{
-    int i, q, r;
-    for (i = 0; i < pl->n; i++) {
-        const int end = pl->rowptr[i + 1], d = pl->diag[i];
-        double scale = 0.0;
-        for (q = pl->rowptr[i]; q < end; q++) {
-            w[pl->cols[q]] = a[q];
-            scale = bgc_max(scale, fabs(a[q]));
-        }
-        for (q = pl->rowptr[i]; q < d; q++) {
-            const int k = pl->cols[q];
-            const double l = w[k] / a[pl->diag[k]];
-            if (!(fabs(l) <= 10.0))
-                return 1;
-            w[k] = l;
-            for (r = pl->diag[k] + 1; r < pl->rowptr[k + 1]; r++)
-                w[pl->cols[r]] -= l * a[r];
-        }
-        for (q = pl->rowptr[i]; q < end; q++)
-            a[q] = w[pl->cols[q]];
-        if (!(fabs(a[d]) > 1e-14 * scale) || !isfinite(a[d]))
-            return 1;
-    }
-    return 0;
-}
-
-/* b (in the states' order) overwritten by the solution; w: n doubles. */
-static void bgc_splu_solve(const bgc_splu *pl, const double *a, double *b, double *w)
-{
-    int i, q;
-    for (i = 0; i < pl->n; i++) {
-        double acc = b[pl->perm[i]];
-        for (q = pl->rowptr[i]; q < pl->diag[i]; q++)
-            acc -= a[q] * w[pl->cols[q]];
-        w[i] = acc;
-    }
-    for (i = pl->n - 1; i >= 0; i--) {
-        double acc = w[i];
-        for (q = pl->diag[i] + 1; q < pl->rowptr[i + 1]; q++)
-            acc -= a[q] * w[pl->cols[q]];
-        w[i] = acc / a[pl->diag[i]];
-    }
-    for (i = 0; i < pl->n; i++)
-        b[pl->perm[i]] = w[i];
-}
-
-/* The same for (alpha + i beta) I - J. */
-static void bgc_splu_zform(const bgc_splu *pl, const double *Jv, double alpha, double beta,
-                           bgc_cplx *a)
-{
-    int q;
-    for (q = 0; q < pl->nnz; q++)
-        a[q] = 0.0;
-    for (q = 0; q < bgc_jac_col_ptr[pl->n]; q++)
-        a[pl->jpos[q]] = -Jv[q];
-    for (q = 0; q < pl->n; q++)
-        a[pl->dpos[q]] += bgc_cmake(alpha + beta * 0.0, beta);
-}
-
-static int bgc_splu_zfactor(const bgc_splu *pl, bgc_cplx *a, bgc_cplx *w)
-{
-    int i, q, r;
-    for (i = 0; i < pl->n; i++) {
-        const int end = pl->rowptr[i + 1], d = pl->diag[i];
-        double scale = 0.0;
-        for (q = pl->rowptr[i]; q < end; q++) {
-            w[pl->cols[q]] = a[q];
-            scale = bgc_max(scale, bgc_cabs1(a[q]));
-        }
-        for (q = pl->rowptr[i]; q < d; q++) {
-            const int k = pl->cols[q];
-            const bgc_cplx l = bgc_cdiv(w[k], a[pl->diag[k]]);
-            if (!(bgc_cabs1(l) <= 10.0))
-                return 1;
-            w[k] = l;
-            for (r = pl->diag[k] + 1; r < pl->rowptr[k + 1]; r++)
-                w[pl->cols[r]] -= bgc_cmul(l, a[r]);
-        }
-        for (q = pl->rowptr[i]; q < end; q++)
-            a[q] = w[pl->cols[q]];
-        if (!(bgc_cabs1(a[d]) > 1e-14 * scale) || !isfinite(bgc_cabs1(a[d])))
-            return 1;
-    }
-    return 0;
-}
-
-static void bgc_splu_zsolve(const bgc_splu *pl, const bgc_cplx *a, bgc_cplx *b, bgc_cplx *w)
-{
-    int i, q;
-    for (i = 0; i < pl->n; i++) {
-        bgc_cplx acc = b[pl->perm[i]];
-        for (q = pl->rowptr[i]; q < pl->diag[i]; q++)
-            acc -= bgc_cmul(a[q], w[pl->cols[q]]);
-        w[i] = acc;
-    }
-    for (i = pl->n - 1; i >= 0; i--) {
-        bgc_cplx acc = w[i];
-        for (q = pl->diag[i] + 1; q < pl->rowptr[i + 1]; q++)
-            acc -= bgc_cmul(a[q], w[pl->cols[q]]);
-        w[i] = bgc_cdiv(acc, a[pl->diag[i]]);
-    }
-    for (i = 0; i < pl->n; i++)
-        b[pl->perm[i]] = w[i];
-}
 
 /* An iteration matrix on the sparse path: its factors, sparse (v or z), or dense (d or dz,
    with piv, allocated when first needed) after a pivot failed its test. */
@@ -2979,67 +2797,106 @@ static int bgc_smat_dense(bgc_smat *m, int complex_values)
     return !m->piv || (complex_values ? !m->dz : !m->d);
 }
 
-/* fac I - J factored: 0, or nonzero if singular (or out of memory for the dense fallback). */
-static int bgc_smat_factor(bgc_smat *m, const double *Jv, double fac, double *w)
-{
-    const bgc_splu *pl = bgc_jac_lu;
-    const int n = pl->n;
-    int j, q;
-    bgc_splu_form(pl, Jv, fac, m->v);
-    m->dense = 0;
-    if (bgc_splu_factor(pl, m->v, w) == 0)
-        return 0;
-    if (bgc_smat_dense(m, 0))
-        return 1;
-    m->dense = 1;
-    for (q = 0; q < n * n; q++)
-        m->d[q] = 0.0;
-    for (j = 0; j < n; j++)
-        for (q = bgc_jac_col_ptr[j]; q < bgc_jac_col_ptr[j + 1]; q++)
-            m->d[(size_t)bgc_jac_col_rows[q] * n + j] = -Jv[q];
-    for (j = 0; j < n; j++)
-        m->d[(size_t)j * n + j] += fac;
-    return bgc_stiff_lu(n, m->d, m->piv);
-}
+/* For T (COMPLEX 0 or 1; its values VALUES and DENSE in a bgc_smat; LU, LU_SOLVE dense):
+   FORM: a = c I - J from J's structural values (c: diag).
+   FACTOR: a factored in place; 0, or 1 if a pivot fails its test.  w: n elements.
+   SOLVE: b (in the states' order) overwritten by the solution; w: n elements.
+   SMAT_FACTOR: c I - J factored, sparse or else dense: 0, or nonzero if singular (or out of
+   memory for the dense fallback).  SMAT_SOLVE: the solve with its factors. */
+#define BGC_SPARSE_LU(FORM, FACTOR, SOLVE, SMAT_FACTOR, SMAT_SOLVE, T, COMPLEX, ABS1, MUL,    \
+                      DIV, VALUES, DENSE, LU, LU_SOLVE)                                      \
+    static void FORM(const bgc_splu *pl, const double *Jv, T diag, T *a)                     \
+    {                                                                                        \
+        int q;                                                                               \
+        for (q = 0; q < pl->nnz; q++)                                                        \
+            a[q] = 0.0;                                                                      \
+        for (q = 0; q < bgc_jac_col_ptr[pl->n]; q++)                                         \
+            a[pl->jpos[q]] = -Jv[q];                                                         \
+        for (q = 0; q < pl->n; q++)                                                          \
+            a[pl->dpos[q]] += diag;                                                          \
+    }                                                                                        \
+                                                                                             \
+    static int FACTOR(const bgc_splu *pl, T *a, T *w)                                        \
+    {                                                                                        \
+        int i, q, r;                                                                         \
+        for (i = 0; i < pl->n; i++) {                                                        \
+            const int end = pl->rowptr[i + 1], d = pl->diag[i];                              \
+            double scale = 0.0;                                                              \
+            for (q = pl->rowptr[i]; q < end; q++) {                                          \
+                w[pl->cols[q]] = a[q];                                                       \
+                scale = bgc_max(scale, ABS1(a[q]));                                          \
+            }                                                                                \
+            for (q = pl->rowptr[i]; q < d; q++) {                                            \
+                const int k = pl->cols[q];                                                   \
+                const T l = DIV(w[k], a[pl->diag[k]]);                                       \
+                if (!(ABS1(l) <= 10.0))                                                      \
+                    return 1;                                                                \
+                w[k] = l;                                                                    \
+                for (r = pl->diag[k] + 1; r < pl->rowptr[k + 1]; r++)                        \
+                    w[pl->cols[r]] -= MUL(l, a[r]);                                          \
+            }                                                                                \
+            for (q = pl->rowptr[i]; q < end; q++)                                            \
+                a[q] = w[pl->cols[q]];                                                       \
+            if (!(ABS1(a[d]) > 1e-14 * scale) || !isfinite(ABS1(a[d])))                      \
+                return 1;                                                                    \
+        }                                                                                    \
+        return 0;                                                                            \
+    }                                                                                        \
+                                                                                             \
+    static void SOLVE(const bgc_splu *pl, const T *a, T *b, T *w)                            \
+    {                                                                                        \
+        int i, q;                                                                            \
+        for (i = 0; i < pl->n; i++) {                                                        \
+            T acc = b[pl->perm[i]];                                                          \
+            for (q = pl->rowptr[i]; q < pl->diag[i]; q++)                                    \
+                acc -= MUL(a[q], w[pl->cols[q]]);                                            \
+            w[i] = acc;                                                                      \
+        }                                                                                    \
+        for (i = pl->n - 1; i >= 0; i--) {                                                   \
+            T acc = w[i];                                                                    \
+            for (q = pl->diag[i] + 1; q < pl->rowptr[i + 1]; q++)                            \
+                acc -= MUL(a[q], w[pl->cols[q]]);                                            \
+            w[i] = DIV(acc, a[pl->diag[i]]);                                                 \
+        }                                                                                    \
+        for (i = 0; i < pl->n; i++)                                                          \
+            b[pl->perm[i]] = w[i];                                                           \
+    }                                                                                        \
+                                                                                             \
+    static int SMAT_FACTOR(bgc_smat *m, const double *Jv, T diag, T *w)                      \
+    {                                                                                        \
+        const bgc_splu *pl = bgc_jac_lu;                                                     \
+        const int n = pl->n;                                                                 \
+        int j, q;                                                                            \
+        FORM(pl, Jv, diag, m->VALUES);                                                       \
+        m->dense = 0;                                                                        \
+        if (FACTOR(pl, m->VALUES, w) == 0)                                                   \
+            return 0;                                                                        \
+        if (bgc_smat_dense(m, COMPLEX))                                                      \
+            return 1;                                                                        \
+        m->dense = 1;                                                                        \
+        for (q = 0; q < n * n; q++)                                                          \
+            m->DENSE[q] = 0.0;                                                               \
+        for (j = 0; j < n; j++)                                                              \
+            for (q = bgc_jac_col_ptr[j]; q < bgc_jac_col_ptr[j + 1]; q++)                    \
+                m->DENSE[(size_t)bgc_jac_col_rows[q] * n + j] = -Jv[q];                      \
+        for (j = 0; j < n; j++)                                                              \
+            m->DENSE[(size_t)j * n + j] += diag;                                             \
+        return LU(n, m->DENSE, m->piv);                                                      \
+    }                                                                                        \
+                                                                                             \
+    static void SMAT_SOLVE(const bgc_smat *m, T *b, T *w)                                    \
+    {                                                                                        \
+        if (m->dense)                                                                        \
+            LU_SOLVE(bgc_jac_lu->n, m->DENSE, m->piv, b);                                    \
+        else                                                                                 \
+            SOLVE(bgc_jac_lu, m->VALUES, b, w);                                              \
+    }
 
-static int bgc_smat_zfactor(bgc_smat *m, const double *Jv, double alpha, double beta,
-                            bgc_cplx *w)
-{
-    const bgc_splu *pl = bgc_jac_lu;
-    const int n = pl->n;
-    int j, q;
-    bgc_splu_zform(pl, Jv, alpha, beta, m->z);
-    m->dense = 0;
-    if (bgc_splu_zfactor(pl, m->z, w) == 0)
-        return 0;
-    if (bgc_smat_dense(m, 1))
-        return 1;
-    m->dense = 1;
-    for (q = 0; q < n * n; q++)
-        m->dz[q] = 0.0;
-    for (j = 0; j < n; j++)
-        for (q = bgc_jac_col_ptr[j]; q < bgc_jac_col_ptr[j + 1]; q++)
-            m->dz[(size_t)bgc_jac_col_rows[q] * n + j] = -Jv[q];
-    for (j = 0; j < n; j++)
-        m->dz[(size_t)j * n + j] += bgc_cmake(alpha + beta * 0.0, beta);
-    return bgc_stiff_zlu(n, m->dz, m->piv);
-}
-
-static void bgc_smat_solve(const bgc_smat *m, double *b, double *w)
-{
-    if (m->dense)
-        bgc_stiff_lu_solve(bgc_jac_lu->n, m->d, m->piv, b);
-    else
-        bgc_splu_solve(bgc_jac_lu, m->v, b, w);
-}
-
-static void bgc_smat_zsolve(const bgc_smat *m, bgc_cplx *b, bgc_cplx *w)
-{
-    if (m->dense)
-        bgc_stiff_zlu_solve(bgc_jac_lu->n, m->dz, m->piv, b);
-    else
-        bgc_splu_zsolve(bgc_jac_lu, m->z, b, w);
-}
+BGC_SPARSE_LU(bgc_splu_form, bgc_splu_factor, bgc_splu_solve, bgc_smat_factor, bgc_smat_solve,
+              double, 0, fabs, BGC_RMUL, BGC_RDIV, v, d, bgc_stiff_lu, bgc_stiff_lu_solve)
+BGC_SPARSE_LU(bgc_splu_zform, bgc_splu_zfactor, bgc_splu_zsolve, bgc_smat_zfactor,
+              bgc_smat_zsolve, bgc_cplx, 1, bgc_cabs1, bgc_cmul, bgc_cdiv, z, dz, bgc_stiff_zlu,
+              bgc_stiff_zlu_solve)
 
 /* The error norm of the stiff families: sqrt(mean((v_i / w_i)^2)), 0 without states; *worst:
    the component with the largest share. */
@@ -3633,8 +3490,9 @@ static int bgc_radau_factor(bgc_radau_state *ms, bgc_run *r, const double *alphn
         r->st->lu++;
         singular = bgc_smat_factor(&ms->sm[0], ms->J, fac1, ms->E1);
         for (k = 0; k < ms->u.pairs && !singular; k++) {
+            const bgc_cplx diag = bgc_cmake(alphn[k] + betan[k] * 0.0, betan[k]);
             r->st->lu++;
-            singular = bgc_smat_zfactor(&ms->sm[1 + k], ms->J, alphn[k], betan[k], ms->Ec);
+            singular = bgc_smat_zfactor(&ms->sm[1 + k], ms->J, diag, ms->Ec);
         }
         return singular;
     }
@@ -4444,15 +4302,163 @@ static char *bgc_next_field(char **line)
     return start;
 }
 
+/* The whole of the open file f as one '\0'-terminated string (its length in *size); NULL
+   (message written) when out of memory.  Closes f. */
+static char *bgc_read_text(const char *path, FILE *f, size_t *size)
+{
+    char *text = NULL;
+    size_t cap = 0, got;
+    *size = 0;
+    do {
+        if (*size + 4096 + 1 > cap) {
+            char *more = (char *)realloc(text, cap = 2 * cap + 4096 + 1);
+            if (!more) {
+                free(text);
+                fclose(f);
+                fprintf(stderr, "error: out of memory reading '%s'\n", path);
+                return NULL;
+            }
+            text = more;
+        }
+        got = fread(text + *size, 1, 4096, f);
+        *size += got;
+    } while (got > 0);
+    fclose(f);
+    text[*size] = '\0';
+    return text;
+}
+
+/* The header line of --input's file: column[k] the input that column k gives (-2: none, the
+   column t), *tcol the column t.  The number of columns, or -1 (message written). */
+static int bgc_input_header(const char *path, char *line, int *column, int *tcol)
+{
+    int ncol = 0, k, j;
+    *tcol = -1;
+    while (line && ncol < 256) {
+        const char *field = bgc_next_field(&line);
+        column[ncol] = -2;
+        if (strcmp(field, "t") == 0) {
+            if (*tcol >= 0)
+                goto twice;
+            *tcol = ncol;
+        } else {
+            for (j = 0; j < BGC_NUM_INPUTS; j++)
+                if (strcmp(field, bgc_input_name(j)) == 0)
+                    break;
+            if (j == BGC_NUM_INPUTS) {
+                fprintf(stderr, "error: %s: '%s' is not an input of the model (its inputs:", path,
+                        field);
+                for (j = 0; j < BGC_NUM_INPUTS; j++)
+                    fprintf(stderr, "%s %s", j ? "," : "", bgc_input_name(j));
+                fprintf(stderr, "%s)\n", BGC_NUM_INPUTS ? "" : " none");
+                return -1;
+            }
+            for (k = 0; k < ncol; k++)
+                if (column[k] == j)
+                    goto twice;
+            if (bgc_input_file.series[j].n > 0) {
+                fprintf(stderr, "error: %s: input '%s' is given twice\n", path, field);
+                return -1;
+            }
+            column[ncol] = j;
+        }
+        ncol++;
+    }
+    if (*tcol < 0) {
+        fprintf(stderr, "error: %s: the header has no column 't'\n", path);
+        return -1;
+    }
+    if (line) {
+        fprintf(stderr, "error: %s: more than 256 columns\n", path);
+        return -1;
+    }
+    return ncol;
+twice:
+    fprintf(stderr, "error: %s: a column is named twice in the header\n", path);
+    return -1;
+}
+
+/* The rows of data after the header (body: its lines, each '\0'-terminated, up to end) into
+   v, row by row, cols numbers each, t in column tcol; the number of rows, or -1 (message
+   written). */
+static int bgc_input_rows(const char *path, char *body, const char *end, int cols, int tcol,
+                          double *v)
+{
+    char *line, *next;
+    long line_no = 1;
+    int rows = 0, k;
+    for (line = body; line && line < end; line = next) {
+        char *rest = line;
+        next = line + strlen(line) + 1;
+        line_no++;
+        if (strspn(line, " \t\r") == strlen(line))
+            continue;
+        for (k = 0; k < cols; k++) {
+            char *field, *stop;
+            double x;
+            if (!rest) {
+                fprintf(stderr, "error: %s:%ld: this row has %d fields, the header %d\n", path,
+                        line_no, k, cols);
+                return -1;
+            }
+            field = bgc_next_field(&rest);
+            x = strtod(field, &stop);
+            if (stop == field || *stop != '\0' || !isfinite(x)) {
+                fprintf(stderr, "error: %s:%ld: '%s' is not a finite number\n", path, line_no,
+                        field);
+                return -1;
+            }
+            v[(size_t)rows * (size_t)cols + (size_t)k] = x;
+        }
+        if (rest) {
+            fprintf(stderr, "error: %s:%ld: this row has more fields than the header (%d)\n",
+                    path, line_no, cols);
+            return -1;
+        }
+        if (rows > 0 && !(v[(size_t)rows * cols + tcol] > v[(size_t)(rows - 1) * cols + tcol])) {
+            fprintf(stderr, "error: %s:%ld: t must increase from row to row\n", path, line_no);
+            return -1;
+        }
+        rows++;
+    }
+    if (rows == 0)
+        fprintf(stderr, "error: %s: no rows of data\n", path);
+    return rows > 0 ? rows : -1;
+}
+
+/* The inputs' series from the rows of data v (row-major, rows x cols): the values transposed
+   into bgc_input_file.values, so that each column is an array; 0, or -1 (message written). */
+static int bgc_input_columns(const char *path, const double *v, int rows, int cols,
+                             const int *column, int tcol)
+{
+    double *cm = (double *)malloc(sizeof(double) * (size_t)rows * (size_t)cols);
+    int r, k;
+    if (!cm) {
+        fprintf(stderr, "error: out of memory reading '%s'\n", path);
+        return -1;
+    }
+    for (r = 0; r < rows; r++)
+        for (k = 0; k < cols; k++)
+            cm[(size_t)k * rows + r] = v[(size_t)r * cols + k];
+    bgc_input_file.values = cm;
+    for (k = 0; k < cols; k++)
+        if (column[k] >= 0) {
+            bgc_input_series *s = &bgc_input_file.series[column[k]];
+            s->n = rows;
+            s->t = cm + (size_t)tcol * rows;
+            s->u = cm + (size_t)k * rows;
+        }
+    return 0;
+}
+
 /* Reads --input's file into bgc_input_file.series; 0, or BGC_ERR_USAGE with a message. */
 static int bgc_read_inputs(void)
 {
     const char *path = bgc_input_file.path;
     FILE *f = fopen(path, "rb");
-    char *text = NULL, *line, *next, *field, *body;
-    size_t size = 0, cap = 0, got;
-    int column[256], ncol = 0, tcol = -1, rows = 0, cols, k, j;
-    long line_no = 1;
+    char *text, *line, *next, *body;
+    size_t size;
+    int column[256], tcol, rows = 0, cols, rc = BGC_ERR_USAGE;
     double *v;
     if (!f) {
         fprintf(stderr, "error: cannot read the input file '%s': %s\n", path, strerror(errno));
@@ -4466,152 +4472,36 @@ static int bgc_read_inputs(void)
         fprintf(stderr, "error: out of memory reading '%s'\n", path);
         return BGC_ERR_USAGE;
     }
-    do {
-        if (size + 4096 + 1 > cap) {
-            char *more = (char *)realloc(text, cap = 2 * cap + 4096 + 1);
-            if (!more) {
-                free(text);
-                fclose(f);
-                fprintf(stderr, "error: out of memory reading '%s'\n", path);
-                return BGC_ERR_USAGE;
-            }
-            text = more;
-        }
-        got = fread(text + size, 1, 4096, f);
-        size += got;
-    } while (got > 0);
-    fclose(f);
-    text[size] = '\0';
-    next = strchr(text, '\n');
-    if (next)
-        *next++ = '\0';
-    line = text;
-    while (line && ncol < 256) {
-        field = bgc_next_field(&line);
-        column[ncol] = -2;
-        if (strcmp(field, "t") == 0) {
-            if (tcol >= 0)
-                goto twice;
-            tcol = ncol;
-        } else {
-            for (j = 0; j < BGC_NUM_INPUTS; j++)
-                if (strcmp(field, bgc_input_name(j)) == 0)
-                    break;
-            if (j == BGC_NUM_INPUTS) {
-                fprintf(stderr, "error: %s: '%s' is not an input of the model (its inputs:", path,
-                        field);
-                for (j = 0; j < BGC_NUM_INPUTS; j++)
-                    fprintf(stderr, "%s %s", j ? "," : "", bgc_input_name(j));
-                fprintf(stderr, "%s)\n", BGC_NUM_INPUTS ? "" : " none");
-                free(text);
-                return BGC_ERR_USAGE;
-            }
-            for (k = 0; k < ncol; k++)
-                if (column[k] == j)
-                    goto twice;
-            if (bgc_input_file.series[j].n > 0) {
-                fprintf(stderr, "error: %s: input '%s' is given twice\n", path, field);
-                free(text);
-                return BGC_ERR_USAGE;
-            }
-            column[ncol] = j;
-        }
-        ncol++;
-    }
-    if (tcol < 0) {
-        fprintf(stderr, "error: %s: the header has no column 't'\n", path);
+    text = bgc_read_text(path, f, &size);
+    if (!text)
+        return BGC_ERR_USAGE;
+    body = strchr(text, '\n');
+    if (body)
+        *body++ = '\0';
+    cols = bgc_input_header(path, text, column, &tcol);
+    if (cols < 0) {
         free(text);
         return BGC_ERR_USAGE;
     }
-    if (line) {
-        fprintf(stderr, "error: %s: more than 256 columns\n", path);
-        free(text);
-        return BGC_ERR_USAGE;
-    }
-    cols = ncol;
-    body = next;
-    for (line = next; line; line = next) {
+    for (line = body; line; line = next) { /* the lines cut apart, the rows of data counted */
         next = strchr(line, '\n');
         if (next)
             *next++ = '\0';
         if (strspn(line, " \t\r") != strlen(line))
             rows++;
     }
-    v = bgc_input_file.values = (double *)malloc(sizeof(double) * (size_t)BGC_DIM(rows * cols));
+    v = (double *)malloc(sizeof(double) * (size_t)BGC_DIM(rows * cols));
     if (!v) {
         free(text);
         fprintf(stderr, "error: out of memory reading '%s'\n", path);
         return BGC_ERR_USAGE;
     }
-    /* the values column-major: column k's rows at v + k * rows */
-    rows = 0;
-    for (line = body; line && line < text + size + 1; line = next) {
-        char *rest = line;
-        next = line + strlen(line) + 1;
-        line_no++;
-        if (strspn(line, " \t\r") == strlen(line))
-            continue;
-        for (k = 0; k < cols; k++) {
-            char *end;
-            double x;
-            if (!rest) {
-                fprintf(stderr, "error: %s:%ld: this row has %d fields, the header %d\n", path,
-                        line_no, k, cols);
-                goto fail;
-            }
-            field = bgc_next_field(&rest);
-            x = strtod(field, &end);
-            if (end == field || *end != '\0' || !isfinite(x)) {
-                fprintf(stderr, "error: %s:%ld: '%s' is not a finite number\n", path, line_no,
-                        field);
-                goto fail;
-            }
-            v[(size_t)rows * (size_t)cols + (size_t)k] = x;
-        }
-        if (rest) {
-            fprintf(stderr, "error: %s:%ld: this row has more fields than the header (%d)\n",
-                    path, line_no, cols);
-            goto fail;
-        }
-        if (rows > 0 && !(v[(size_t)rows * cols + tcol] > v[(size_t)(rows - 1) * cols + tcol])) {
-            fprintf(stderr, "error: %s:%ld: t must increase from row to row\n", path, line_no);
-            goto fail;
-        }
-        rows++;
-    }
+    rows = bgc_input_rows(path, body, text + size + 1, cols, tcol, v);
     free(text);
-    if (rows == 0) {
-        fprintf(stderr, "error: %s: no rows of data\n", path);
-        return BGC_ERR_USAGE;
-    }
-    { /* transpose, so that each column is an array */
-        double *cm = (double *)malloc(sizeof(double) * (size_t)rows * (size_t)cols);
-        int r;
-        if (!cm) {
-            fprintf(stderr, "error: out of memory reading '%s'\n", path);
-            return BGC_ERR_USAGE;
-        }
-        for (r = 0; r < rows; r++)
-            for (k = 0; k < cols; k++)
-                cm[(size_t)k * rows + r] = v[(size_t)r * cols + k];
-        free(v);
-        bgc_input_file.values = cm;
-    }
-    for (k = 0; k < cols; k++)
-        if (column[k] >= 0) {
-            bgc_input_series *s = &bgc_input_file.series[column[k]];
-            s->n = rows;
-            s->t = bgc_input_file.values + (size_t)tcol * rows;
-            s->u = bgc_input_file.values + (size_t)k * rows;
-        }
-    return 0;
-twice:
-    fprintf(stderr, "error: %s: a column is named twice in the header\n", path);
-    free(text);
-    return BGC_ERR_USAGE;
-fail:
-    free(text);
-    return BGC_ERR_USAGE;
+    if (rows > 0 && bgc_input_columns(path, v, rows, cols, column, tcol) == 0)
+        rc = 0;
+    free(v);
+    return rc;
 }
 
 static const char bgc_usage[] =
@@ -4824,6 +4714,22 @@ static int bgc_parse_args(int argc, char **argv, bgc_settings *s, bgc_params *p,
     return -1;
 }
 
+/* The run's settings from the command line (and the parameters it sets), checked: -1 to
+   run, else the exit status (as bgc_parse_args). */
+static int bgc_settings_from_args(int argc, char **argv, bgc_settings *s, bgc_params *p,
+                                  int *given, int *project, int *stats)
+{
+    char msg[1024];
+    int rc;
+    bgc_settings_default(s);
+    rc = bgc_parse_args(argc, argv, s, p, given, project, stats);
+    if (rc < 0 && bgc_check_settings(s, msg, sizeof msg)) {
+        fprintf(stderr, "error: %s\n", msg);
+        return BGC_ERR_USAGE;
+    }
+    return rc;
+}
+
 /* SIGINT, SIGTERM: the run stops at its next step, as a failure, its rows written. */
 static void bgc_on_signal(int sig)
 {
@@ -4869,14 +4775,9 @@ int main(int argc, char **argv)
     rc = bgc_batch_main(argc, argv);
     if (rc >= 0)
         return rc;
-    bgc_settings_default(&s);
-    rc = bgc_parse_args(argc, argv, &s, &p, given, &project, &stats);
+    rc = bgc_settings_from_args(argc, argv, &s, &p, given, &project, &stats);
     if (rc >= 0)
         return rc;
-    if (bgc_check_settings(&s, msg, sizeof msg)) {
-        fprintf(stderr, "error: %s\n", msg);
-        return BGC_ERR_USAGE;
-    }
     bgc_params_defaults(&p, given);
     for (i = 0; i < BGC_NUM_PARAMS; i++)
         if (!isfinite(*bgc_param_ref(&p, i))) {
@@ -5310,7 +5211,6 @@ static int bgc_batch_main(int argc, char **argv)
     int given[BGC_DIM(BGC_NUM_PARAMS)] = { 0 };
     int i, n = 1, rc, project = 0, stats = 0;
     FILE *in;
-    char msg[1024];
     for (i = 1; i < argc; i++)
         if (strcmp(argv[i], "--batch") == 0 || strncmp(argv[i], "--batch=", 8) == 0)
             break;
@@ -5352,16 +5252,11 @@ static int bgc_batch_main(int argc, char **argv)
         }
     }
     memset(&p, 0, sizeof p); /* every field, a placeholder of a model without parameters too */
-    bgc_settings_default(&s);
     bgc_params_defaults(&p, NULL);
-    rc = bgc_parse_args(n, rest, &s, &p, given, &project, &stats);
+    rc = bgc_settings_from_args(n, rest, &s, &p, given, &project, &stats);
     free(rest);
     if (rc >= 0)
         return rc;
-    if (bgc_check_settings(&s, msg, sizeof msg)) {
-        fprintf(stderr, "error: %s\n", msg);
-        return BGC_ERR_USAGE;
-    }
     in = strcmp(file, "-") == 0 ? stdin : fopen(file, "r");
     if (!in) {
         fprintf(stderr, "error: cannot read '%s'\n", file);
