@@ -128,10 +128,9 @@ def compile_c_linked(model: str, runtime: str, cc: str | None = None,
     flags; each model then costs only its own part.  Both are cached and checked as compile_c's
     programs are; an object that does not link is built again, once."""
     command, flags, identity = _toolchain(cc, flags)
-    runtime_key = _key(["runtime", runtime, command, list(flags), identity])
     part_flags = model_part_flags(flags, len(model))
-    key = _key(["linked", model, runtime_key, command, list(part_flags), list(C_LIBS),
-                identity])
+    key = _key(["linked", model, _runtime_key(runtime, command, flags, identity), command,
+                list(part_flags), list(C_LIBS), identity])
 
     def runtime_object() -> Path:
         return compile_runtime(runtime, cc, flags)
@@ -156,9 +155,13 @@ def compile_runtime(runtime: str, cc: str | None = None,
     """The runtime unit's object file (compile_c_linked), from the cache, else built into it
     once per machine, keyed by its source, the compiler and the flags."""
     command, flags, identity = _toolchain(cc, flags)
-    runtime_key = _key(["runtime", runtime, command, list(flags), identity])
-    return _cached(f"bgc-runtime-{runtime_key}.o", False, lambda tmp: _build(
-        tmp, command, flags, "runtime.c", runtime, ["-c", "runtime.o"]))
+    return _cached(f"bgc-runtime-{_runtime_key(runtime, command, flags, identity)}.o", False,
+                   lambda tmp: _build(tmp, command, flags, "runtime.c", runtime,
+                                      ["-c", "runtime.o"]))
+
+
+def _runtime_key(runtime: str, command, flags, identity: str) -> str:
+    return _key(["runtime", runtime, command, list(flags), identity])
 
 
 def compile_vm(sources: str, unit, cc: str | None = None,

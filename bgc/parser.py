@@ -71,27 +71,34 @@ def _lark() -> Lark:
     text = (resource_dir("grammar") / "bg.lark").read_text(encoding="utf-8")
     key = hashlib.sha256(repr((text, _LARK_OPTIONS, lark.__version__, sys.version_info[:2]))
                          .encode()).hexdigest()[:40]
+    name = f"lark-{key}.pickle"
     cache = backends.own_cache_dir()
-    if cache is None:
-        return Lark(text, postlex=_BracketPostLex(), **_LARK_OPTIONS)
-    path = cache / f"lark-{key}.pickle"
-    for where in (path, backends.PREBUILT / path.name):  # (bgc.prebuild's, at install)
-        try:
-            with open(where, "rb") as f:
-                parser = Lark.__new__(Lark)._load(f, postlex=_BracketPostLex(),
-                                                  propagate_positions=True)
-        except Exception:  # noqa: BLE001  (missing, damaged or of another lark: built again)
-            continue
-        if where == path:
+    if cache is not None:
+        parser = _saved(cache / name)
+        if parser is not None:
             return parser
-        break
-    else:
+    parser = _saved(backends.PREBUILT / name)  # (bgc.prebuild's, at install)
+    if parser is None:
         parser = Lark(text, postlex=_BracketPostLex(), **_LARK_OPTIONS)
+    if cache is None:
+        return parser
+    path = cache / name
     try:
         backends.write_cached(path, lambda f: parser.save(f, ("postlex",)))
     except (OSError, pickle.PicklingError):
         pass
     return parser
+
+
+def _saved(path) -> Lark | None:
+    """The parser whose tables were saved at path, or None (missing, damaged, or of another
+    lark: built again)."""
+    try:
+        with open(path, "rb") as f:
+            return Lark.__new__(Lark)._load(f, postlex=_BracketPostLex(),
+                                            propagate_positions=True)
+    except Exception:  # noqa: BLE001
+        return None
 
 
 def _whole(tok: Token, what: str) -> int:
