@@ -1705,6 +1705,7 @@ static int bgc_find_event(bgc_run *r, bgc_dense *c, double *te, double *ye)
     enum { G = BGC_NUM_INDICATORS };
     double *ga = BGC_EV_GA(r), *gb = BGC_EV_GB(r), *gm = BGC_EV_GM(r);
     double ta = c->t, tb = c->tph, wa = 1.0, wb = 1.0;
+    const double h = c->tph - c->t; /* the time's resolution is relative to the step too */
     int rc, it, moved = 0;
     const int due = c->tph >= r->t_next;
     if (G > 0) {
@@ -1721,7 +1722,7 @@ static int bgc_find_event(bgc_run *r, bgc_dense *c, double *te, double *ye)
     }
     memcpy(ga, r->g, sizeof(double) * G);
     for (it = 0; it < 200; it++) {
-        const double scale = bgc_max(fabs(ta), fabs(tb));
+        const double scale = bgc_max(bgc_max(fabs(ta), fabs(tb)), h);
         const double tol = bgc_max(1e-12 * scale, bgc_max(4.0 * DBL_EPSILON * scale, DBL_MIN));
         double frac = 1.0, tm;
         int k, side;
@@ -1731,8 +1732,8 @@ static int bgc_find_event(bgc_run *r, bgc_dense *c, double *te, double *ye)
             if (bgc_holds(k, gb[k]) != (r->d[k] != 0.0)) {
                 const double a = wa * ga[k], b = wb * gb[k];
                 double q = a / (a - b);
-                if (!(q >= 0.0 && q <= 1.0))
-                    q = 0.5;
+                if (!(q > 0.0 && q <= 1.0))
+                    q = 0.5; /* 0: an indicator exactly 0 at ta, where the secant stalls */
                 if (q < frac)
                     frac = q;
             }
