@@ -130,17 +130,17 @@ def _const(node, env: dict, scope: _Scope, what: str) -> int:
     if isinstance(node, ast.Neg):
         return -_const(node.operand, env, scope, what)
     if isinstance(node, ast.BinOp):
-        a = _const(node.left, env, scope, what)
-        b = _const(node.right, env, scope, what)
-        if node.op in _OPS:
-            return _bounded(_OPS[node.op](a, b), node, scope)
-        if node.op == "/":
-            if b == 0 or a % b:
-                fail(scope.sp(node.span), f"{what} must be a whole number: {a}/{b} is not")
-            return a // b
-        if b < 0 or b > 64:
-            fail(scope.sp(node.span), f"{what}: the exponent must be a whole number from 0 to 64")
-        return _bounded(a ** b, node, scope)
+        # a chain of + and - (or * and /) as long as the text is, left to right without
+        # recursing down it; other nesting is bounded by the parser (MAX_NESTING)
+        group = "+-" if node.op in ("+", "-") else ("*/" if node.op in ("*", "/") else node.op)
+        spine = []
+        while isinstance(node, ast.BinOp) and node.op in group:
+            spine.append(node)
+            node = node.left
+        a = _const(node, env, scope, what)
+        for n in reversed(spine):
+            a = _const_op(n, a, _const(n.right, env, scope, what), scope, what)
+        return a
     if isinstance(node, ast.Call) and node.func in ("min", "max", "abs") and node.args:
         values = [_const(a, env, scope, what) for a in node.args]
         if node.func == "abs":
@@ -150,6 +150,19 @@ def _const(node, env: dict, scope: _Scope, what: str) -> int:
         return (min if node.func == "min" else max)(values)
     fail(scope.sp(node.span), f"{what} must be a compile-time constant (a number, a 'constant' "
                               "or a 'for' variable)")
+
+
+def _const_op(node, a: int, b: int, scope: _Scope, what: str) -> int:
+    """a OP b for _const, OP node's."""
+    if node.op in _OPS:
+        return _bounded(_OPS[node.op](a, b), node, scope)
+    if node.op == "/":
+        if b == 0 or a % b:
+            fail(scope.sp(node.span), f"{what} must be a whole number: {a}/{b} is not")
+        return a // b
+    if b < 0 or b > 64:
+        fail(scope.sp(node.span), f"{what}: the exponent must be a whole number from 0 to 64")
+    return _bounded(a ** b, node, scope)
 
 
 def _bounded(value: int, node, scope: _Scope) -> int:

@@ -210,6 +210,32 @@ def test_events_without_end_stop_at_the_step_budget(tmp_path):
     assert len(set(said.values())) == 1, said
 
 
+def test_an_indicator_held_at_zero_by_rounding_is_located_by_bisection(tmp_path):
+    """tests/fuzz_regressions/event_indicator_zero_at_start.bg: `x14 >= p1` with x14 starting
+    at p1 holds with an indicator of exactly 0, and rounding keeps it 0 for a while as x14
+    falls: the secant's next point was always the interval's start, so each event took about
+    150 evaluations (crawling by half the time's resolution, then bisecting); one probe there,
+    then bisection, takes a few.  Chattering, the run stops at the event budget in both
+    backends alike, with the evaluations counted in --stats (locate=)."""
+    from conftest import run_bgc
+    model = REGRESSIONS / "event_indicator_zero_at_start.bg"
+    said = {}
+    for backend in ["python"] + (["c"] if have_cc() else []):
+        with _alarm(SAFETY_SECONDS):
+            done = run_bgc("simulate", model, "--max-steps", "1000", "--stats", "--backend",
+                           backend, "-o", tmp_path / f"{backend}.csv",
+                           env={"BGC_CACHE_DIR": str(tmp_path / "cache")})
+        assert done.returncode == 1, done.stderr
+        stats = next(ln for ln in done.stderr.splitlines() if ln.startswith("stats:"))
+        events = int(re.search(r" events=(\d+)", stats).group(1))
+        located = int(re.search(r" locate=(\d+)", stats).group(1))
+        assert events == 1001 and located <= 10 * events, stats
+        said[backend] = (re.sub(r" cpu=\S+", "", stats),
+                         next(ln for ln in done.stderr.splitlines() if ln.startswith("error:")))
+        assert "chattering: 1000 events since the last output row" in said[backend][1]
+    assert len(set(said.values())) == 1, said
+
+
 def test_a_block_that_divides_by_its_unknown_fails_alike_in_both_backends(tmp_path):
     """tests/fuzz_regressions/block_divides_by_its_unknown.bg: a division by a block's unknown
     that is zero gives inf in the Python module's IEEE variant as in C (not a

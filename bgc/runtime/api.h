@@ -133,6 +133,8 @@ typedef struct bgc_stats {
                                   end (set, not added to; 0: none) ... */
     int order_next;            /* ... and radau the order (0: another solver) */
     long events;               /* events handled (the start's event iteration not counted) */
+    long locate_evals;         /* evaluations of the event indicators within steps, to locate
+                                  events */
 } bgc_stats;
 /* Called at every output time with the state and the outputs; nonzero stops the run. */
 typedef int (*bgc_sink)(void *ctx, double t, const double *x, const double *y);

@@ -309,7 +309,7 @@ static int bgc_batch_loop(FILE *in, const bgc_settings *s, const bgc_params *bas
     bgc_put_text(&bgc_out, ",steps,rejected,rhs,cpu,message\n");
     while (fgets(bgc_line, sizeof bgc_line, in)) {
         const size_t len = strlen(bgc_line);
-        bgc_stats st = { 0, 0, 0, 0, 0, 0, 0, 0.0, 0.0, 0.0, 0, 0 };
+        bgc_stats st = { 0, 0, 0, 0, 0, 0, 0, 0.0, 0.0, 0.0, 0, 0, 0 };
         const char *status;
         int c, too_long = len + 1 == sizeof bgc_line && bgc_line[len - 1] != '\n';
         if (too_long)

@@ -534,7 +534,7 @@ static int bgc_find_event(bgc_run *r, bgc_dense *c, double *te, double *ye)
     double *ga = BGC_EV_GA(r), *gb = BGC_EV_GB(r), *gm = BGC_EV_GM(r);
     double ta = c->t, tb = c->tph, wa = 1.0, wb = 1.0;
     const double h = c->tph - c->t; /* the time's resolution is relative to the step too */
-    int rc, it, moved = 0;
+    int rc, it, moved = 0, probed = 0;
     const int due = c->tph >= r->t_next;
     if (G > 0) {
         rc = bgc_indicators(r, tb, c->y1, gb);
@@ -560,20 +560,23 @@ static int bgc_find_event(bgc_run *r, bgc_dense *c, double *te, double *ye)
             if (bgc_holds(k, gb[k]) != (r->d[k] != 0.0)) {
                 const double a = wa * ga[k], b = wb * gb[k];
                 double q = a / (a - b);
-                if (!(q > 0.0 && q <= 1.0))
-                    q = 0.5; /* 0: an indicator exactly 0 at ta, where the secant stalls */
+                if (!(q >= 0.0 && q <= 1.0) || (q == 0.0 && probed))
+                    q = 0.5;
                 if (q < frac)
                     frac = q;
             }
         }
         if (it >= 100)
             frac = 0.5; /* bisection, should the secant stall */
+        if (frac == 0.0) /* an indicator exactly 0 at ta: probed once at the time's */
+            probed = 1;  /* resolution, then bisected (rounding may hold it at 0) */
         tm = ta + frac * (tb - ta);
         tm = bgc_max(tm, ta + 0.5 * tol);
         tm = bgc_min(tm, tb - 0.5 * tol);
         rc = bgc_dense_at(r, c, tm, ye);
         if (rc == 0)
             rc = bgc_indicators(r, tm, ye, gm);
+        r->st->locate_evals++;
         if (rc)
             return -rc;
         side = bgc_changed(r, gm) >= 0 ? 1 : -1;
@@ -844,7 +847,7 @@ void bgc_print_stats(FILE *f, const bgc_stats *st)
     if (st->switched)
         fprintf(f, " stiff_from=%.17g", st->t_switch);
     if (BGC_NUM_DISCRETE > 0)
-        fprintf(f, " events=%ld", st->events);
+        fprintf(f, " events=%ld locate=%ld", st->events, st->locate_evals);
     fprintf(f, " cpu=%.6e\n", st->cpu);
 }
 

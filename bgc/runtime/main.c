@@ -902,7 +902,7 @@ int main(int argc, char **argv)
 {
     bgc_settings s;
     bgc_params p;
-    bgc_stats st = { 0, 0, 0, 0, 0, 0, 0, 0.0, 0.0, 0.0, 0, 0 };
+    bgc_stats st = { 0, 0, 0, 0, 0, 0, 0, 0.0, 0.0, 0.0, 0, 0, 0 };
     int given[BGC_DIM(BGC_NUM_PARAMS)] = { 0 };
     double x0[BGC_DIM(BGC_NUM_STATES)] = { 0.0 };
     char msg[1024];

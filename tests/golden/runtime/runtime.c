@@ -152,6 +152,8 @@ typedef struct bgc_stats {
                                   end (set, not added to; 0: none) ... */
     int order_next;            /* ... and radau the order (0: another solver) */
     long events;               /* events handled (the start's event iteration not counted) */
+    long locate_evals;         /* evaluations of the event indicators within steps, to locate
+                                  events */
 } bgc_stats;
 /* Called at every output time with the state and the outputs; nonzero stops the run. */
 typedef int (*bgc_sink)(void *ctx, double t, const double *x, const double *y);
@@ -1706,7 +1708,7 @@ static int bgc_find_event(bgc_run *r, bgc_dense *c, double *te, double *ye)
     double *ga = BGC_EV_GA(r), *gb = BGC_EV_GB(r), *gm = BGC_EV_GM(r);
     double ta = c->t, tb = c->tph, wa = 1.0, wb = 1.0;
     const double h = c->tph - c->t; /* the time's resolution is relative to the step too */
-    int rc, it, moved = 0;
+    int rc, it, moved = 0, probed = 0;
     const int due = c->tph >= r->t_next;
     if (G > 0) {
         rc = bgc_indicators(r, tb, c->y1, gb);
@@ -1732,20 +1734,23 @@ static int bgc_find_event(bgc_run *r, bgc_dense *c, double *te, double *ye)
             if (bgc_holds(k, gb[k]) != (r->d[k] != 0.0)) {
                 const double a = wa * ga[k], b = wb * gb[k];
                 double q = a / (a - b);
-                if (!(q > 0.0 && q <= 1.0))
-                    q = 0.5; /* 0: an indicator exactly 0 at ta, where the secant stalls */
+                if (!(q >= 0.0 && q <= 1.0) || (q == 0.0 && probed))
+                    q = 0.5;
                 if (q < frac)
                     frac = q;
             }
         }
         if (it >= 100)
             frac = 0.5; /* bisection, should the secant stall */
+        if (frac == 0.0) /* an indicator exactly 0 at ta: probed once at the time's */
+            probed = 1;  /* resolution, then bisected (rounding may hold it at 0) */
         tm = ta + frac * (tb - ta);
         tm = bgc_max(tm, ta + 0.5 * tol);
         tm = bgc_min(tm, tb - 0.5 * tol);
         rc = bgc_dense_at(r, c, tm, ye);
         if (rc == 0)
             rc = bgc_indicators(r, tm, ye, gm);
+        r->st->locate_evals++;
         if (rc)
             return -rc;
         side = bgc_changed(r, gm) >= 0 ? 1 : -1;
@@ -2016,7 +2021,7 @@ void bgc_print_stats(FILE *f, const bgc_stats *st)
     if (st->switched)
         fprintf(f, " stiff_from=%.17g", st->t_switch);
     if (BGC_NUM_DISCRETE > 0)
-        fprintf(f, " events=%ld", st->events);
+        fprintf(f, " events=%ld locate=%ld", st->events, st->locate_evals);
     fprintf(f, " cpu=%.6e\n", st->cpu);
 }
 
@@ -4766,7 +4771,7 @@ int main(int argc, char **argv)
 {
     bgc_settings s;
     bgc_params p;
-    bgc_stats st = { 0, 0, 0, 0, 0, 0, 0, 0.0, 0.0, 0.0, 0, 0 };
+    bgc_stats st = { 0, 0, 0, 0, 0, 0, 0, 0.0, 0.0, 0.0, 0, 0, 0 };
     int given[BGC_DIM(BGC_NUM_PARAMS)] = { 0 };
     double x0[BGC_DIM(BGC_NUM_STATES)] = { 0.0 };
     char msg[1024];
@@ -5151,7 +5156,7 @@ static int bgc_batch_loop(FILE *in, const bgc_settings *s, const bgc_params *bas
     bgc_put_text(&bgc_out, ",steps,rejected,rhs,cpu,message\n");
     while (fgets(bgc_line, sizeof bgc_line, in)) {
         const size_t len = strlen(bgc_line);
-        bgc_stats st = { 0, 0, 0, 0, 0, 0, 0, 0.0, 0.0, 0.0, 0, 0 };
+        bgc_stats st = { 0, 0, 0, 0, 0, 0, 0, 0.0, 0.0, 0.0, 0, 0, 0 };
         const char *status;
         int c, too_long = len + 1 == sizeof bgc_line && bgc_line[len - 1] != '\n';
         if (too_long)

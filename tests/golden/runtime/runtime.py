@@ -1479,7 +1479,7 @@ def _block_failed(failure):
 def _new_stats():
     return {"steps": 0, "rejected": 0, "rhs": 0, "jac": 0, "lu": 0, "solves": 0,
             "switched": False, "t_switch": 0.0, "cpu": 0.0, "h_next": 0.0, "order_next": 0,
-            "events": 0}
+            "events": 0, "locate_evals": 0}
 
 
 def _stats_line(st):
@@ -1488,7 +1488,7 @@ def _stats_line(st):
     if st["switched"]:
         line += " stiff_from=%.17g" % st["t_switch"]
     if _DISCRETE_NAMES:
-        line += " events=%d" % st["events"]
+        line += " events=%d locate=%d" % (st["events"], st["locate_evals"])
     return line + " cpu=%.6e" % st["cpu"]
 
 
@@ -1708,6 +1708,7 @@ def _find_event(run, c):
     ga, ta, tb, wa, wb, moved = list(run.g), c.t, c.tph, 1.0, 1.0, 0
     p, off = run.p, run.doff
     h = c.tph - c.t  # the time's resolution is relative to the step too (an event near t = 0)
+    probed = False
     for it in range(200):
         scale = max(max(abs(ta), abs(tb)), h)
         tol = max(1e-12 * scale, max(4.0 * _EPS * scale, sys.float_info.min))
@@ -1719,16 +1720,19 @@ def _find_event(run, c):
                 a, b = wa * ga[k], wb * gb[k]
                 with numpy.errstate(all="ignore"):
                     q = float(numpy.float64(a) / numpy.float64(a - b))
-                if not (q > 0.0 and q <= 1.0):  # 0: an indicator exactly 0 at ta, bisect
+                if not (q >= 0.0 and q <= 1.0) or (q == 0.0 and probed):
                     q = 0.5
                 if q < frac:
                     frac = q
         if it >= 100:
             frac = 0.5
+        if frac == 0.0:  # an indicator exactly 0 at ta: probed once at the time's resolution,
+            probed = True  # then bisected (where rounding holds it at 0, the secant stalls)
         tm = ta + frac * (tb - ta)
         tm = max(tm, ta + 0.5 * tol)
         tm = min(tm, tb - 0.5 * tol)
         gm = _indicators(run, tm, c.at(tm))
+        run.st["locate_evals"] += 1
         if _changed(run, gm) >= 0:
             tb, gb, wb = tm, gm, 1.0
             wa = 0.5 * wa if moved > 0 else 1.0
