@@ -190,17 +190,29 @@ def test_parameter_given_on_the_command_line_that_makes_a_law_complex(tmp_path):
            "with a = -2" in neg.stderr
 
 
+FAST_EVENTS = """model fast_events
+signal x = integral(1, init = 0)
+discrete n = 0
+when sin(1.2566370614359172e6 * t) > 0.5 {
+  n = n + 1
+}
+signal y = n
+"""
+
+
 def test_events_without_end_stop_at_the_step_budget(tmp_path):
-    """tests/fuzz_regressions/friction_negative_mass_zeno.bg: events that come ever closer
-    (but never within 1e-12 of each other) stop the run once there are more of them since the
-    last output row than --max-steps allows, and at least 1000, in both backends alike."""
+    """A condition that changes 400 000 times a second, with steps between its changes (at
+    most 1e-6 long, five a period): the run stops once more events have come since the last
+    output row than --max-steps allows (and at least 1000), in both backends alike."""
     from conftest import run_bgc
-    model = REGRESSIONS / "friction_negative_mass_zeno.bg"
+    model = tmp_path / "fast.bg"
+    model.write_text(FAST_EVENTS, encoding="utf-8")
     said = {}
     for backend in ["python"] + (["c"] if have_cc() else []):
         with _alarm(SAFETY_SECONDS):
-            done = run_bgc("simulate", model, "--t-end", "0.05", "--max-steps", "1500",
-                           "--backend", backend, "-o", tmp_path / f"{backend}.csv",
+            done = run_bgc("simulate", model, "--t-end", "0.02", "--dt", "0.01", "--max-step",
+                           "1e-6", "--outputs", "x,y", "--max-steps", "1500", "--backend",
+                           backend, "-o", tmp_path / f"{backend}.csv",
                            env={"BGC_CACHE_DIR": str(tmp_path / "cache")})
         assert done.returncode == 1, done.stderr
         said[backend] = done.stderr.splitlines()[0]
@@ -210,29 +222,52 @@ def test_events_without_end_stop_at_the_step_budget(tmp_path):
     assert len(set(said.values())) == 1, said
 
 
+def test_steps_each_cut_short_by_an_event_stop_as_chattering(tmp_path):
+    """tests/fuzz_regressions/friction_negative_mass_zeno.bg: a negative mass against dry
+    friction sticks and breaks away at every step, each event further than 1e-12 from the
+    last (once 10^8 events in 0.05 s, minutes in C): 1000 steps in a row, each ended by an
+    event, stop it as chattering, in both backends alike."""
+    from conftest import run_bgc
+    model = REGRESSIONS / "friction_negative_mass_zeno.bg"
+    said = {}
+    for backend in ["python"] + (["c"] if have_cc() else []):
+        with _alarm(SAFETY_SECONDS):
+            done = run_bgc("simulate", model, "--t-end", "0.05", "--backend", backend, "-o",
+                           tmp_path / f"{backend}.csv",
+                           env={"BGC_CACHE_DIR": str(tmp_path / "cache")})
+        assert done.returncode == 1, done.stderr
+        said[backend] = done.stderr.splitlines()[0]
+        assert re.fullmatch(r"error: at t = \S+: chattering: 1000 steps in a row, each cut short "
+                            r"by an event, the last changing '.+' \(a sliding mode or a Zeno "
+                            r"model\? --max-steps raises the limit, a hundredth of it\)",
+                            said[backend]), said[backend]
+    assert len(set(said.values())) == 1, said
+
+
 def test_an_indicator_held_at_zero_by_rounding_is_located_by_bisection(tmp_path):
     """tests/fuzz_regressions/event_indicator_zero_at_start.bg: `x14 >= p1` with x14 starting
     at p1 holds with an indicator of exactly 0, and rounding keeps it 0 for a while as x14
     falls: the secant's next point was always the interval's start, so each event took about
     150 evaluations (crawling by half the time's resolution, then bisecting); one probe there,
     then bisection, takes a few.  Chattering, the run stops at the event budget in both
-    backends alike, with the evaluations counted in --stats (locate=)."""
+    backends alike (every step cut short by an event), with the evaluations counted in
+    --stats (locate=)."""
     from conftest import run_bgc
     model = REGRESSIONS / "event_indicator_zero_at_start.bg"
     said = {}
     for backend in ["python"] + (["c"] if have_cc() else []):
         with _alarm(SAFETY_SECONDS):
-            done = run_bgc("simulate", model, "--max-steps", "1000", "--stats", "--backend",
+            done = run_bgc("simulate", model, "--stats", "--backend",
                            backend, "-o", tmp_path / f"{backend}.csv",
                            env={"BGC_CACHE_DIR": str(tmp_path / "cache")})
         assert done.returncode == 1, done.stderr
         stats = next(ln for ln in done.stderr.splitlines() if ln.startswith("stats:"))
         events = int(re.search(r" events=(\d+)", stats).group(1))
         located = int(re.search(r" locate=(\d+)", stats).group(1))
-        assert events == 1001 and located <= 10 * events, stats
+        assert events == 1000 and located <= 10 * events, stats
         said[backend] = (re.sub(r" cpu=\S+", "", stats),
                          next(ln for ln in done.stderr.splitlines() if ln.startswith("error:")))
-        assert "chattering: 1000 events since the last output row" in said[backend][1]
+        assert "chattering: 1000 steps in a row, each cut short by an event" in said[backend][1]
     assert len(set(said.values())) == 1, said
 
 

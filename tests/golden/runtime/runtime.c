@@ -1290,6 +1290,7 @@ typedef struct bgc_run {
     long kout_ev;    /* the output row the event count below starts at (r->kout then) */
     long events_out; /* st->events at that row: the events since it are bounded as steps are */
     int changed;     /* the first discrete value the last event changed (-1: none) */
+    long sliding;    /* accepted steps in a row, each ended at a located (state) event */
 } bgc_run;
 #define BGC_STIFF (-1) /* an auto run's explicit phase found the problem stiff */
 
@@ -1769,7 +1770,7 @@ static int bgc_find_event(bgc_run *r, bgc_dense *c, double *te, double *ye)
     }
     *te = tb;
     rc = bgc_dense_at(r, c, tb, ye);
-    return rc ? -rc : 1;
+    return rc ? -rc : 2;
 }
 
 /* An event at (t, x): the left limit's row (--event-rows), the event iteration, the right
@@ -1800,6 +1801,16 @@ static int bgc_handle_event(bgc_run *r, double t, double *x)
         snprintf(r->msg, r->msg_size, "at t = %.17g: chattering: %ld events in a row, each "
                  "within 1e-12 relative of the one before, the last changing '%s' (a Zeno "
                  "model: the switching outruns the time's resolution)", t, r->chain,
+                 r->changed >= 0 ? bgc_discrete_names[r->changed] : "a state");
+        return BGC_ERR_RUNTIME;
+    }
+    /* every step cut short by a state event: at most a hundredth of the step budget in a
+       row, and at least 1000 */
+    if (rc == 0 && r->s->max_steps > 0
+        && r->sliding >= (r->s->max_steps > 100000 ? r->s->max_steps / 100 : 1000)) {
+        snprintf(r->msg, r->msg_size, "at t = %.17g: chattering: %ld steps in a row, each cut "
+                 "short by an event, the last changing '%s' (a sliding mode or a Zeno model? "
+                 "--max-steps raises the limit, a hundredth of it)", t, r->sliding,
                  r->changed >= 0 ? bgc_discrete_names[r->changed] : "a state");
         return BGC_ERR_RUNTIME;
     }
@@ -1957,6 +1968,7 @@ static int bgc_drive(bgc_run *r, const bgc_family *f, double *y)
                 rc = -found;
                 goto done;
             }
+            r->sliding = found == 2 ? r->sliding + 1 : 0;
             if (found) { /* the step ends at the event; the method starts afresh there */
                 rc = bgc_emit_step(r, &c, te, 0, yout);
                 if (rc)
@@ -2084,6 +2096,7 @@ static int bgc_integrate(const bgc_settings *s, const bgc_params *p, bgc_work *w
     r.kout_ev = 0;
     r.events_out = 0;
     r.changed = -1;
+    r.sliding = 0;
     r.d = (double *)&q + BGC_DISCRETE_OFFSET;
     r.g = r.ev = NULL;
     bgc_params_update(&q);

@@ -1504,7 +1504,7 @@ class _Run:
 
     __slots__ = ("s", "p", "w", "st", "nout", "kout", "t", "h", "y", "detect_stiffness",
                  "steps_out", "t_out", "from_event", "m", "name", "fixed", "doff", "g", "t_next",
-                 "t_event", "chain", "changed", "kout_ev", "events_out")
+                 "t_event", "chain", "changed", "kout_ev", "events_out", "sliding")
 
     def __init__(self, s, p, w, st, y):
         self.s, self.p, self.w, self.st = s, p, w, st
@@ -1522,6 +1522,7 @@ class _Run:
         # the events since an output row (kout_ev: run.kout then) are bounded as steps are
         self.kout_ev, self.events_out = 0, 0
         self.changed = -1  # the first discrete value the last event changed
+        self.sliding = 0  # accepted steps in a row, each ended at a located (state) event
 
     def f(self, t, y):
         """dy/dt as a numpy vector; a failed algebraic block raises _BlockFailure."""
@@ -1677,7 +1678,7 @@ def _event_iteration(run, t, x, start):
                 raise _fail(t, "state after the event", STATES[i])
             if out[i] != x[i]:
                 changed = True
-                if not start:
+                if not start and run.s.on_event is not None:
                     _log(run, t, STATES[i], "%.17g -> %.17g" % (x[i], out[i]))
                 x[i] = out[i]
         for k in range(len(_DISCRETE_NAMES)):
@@ -1688,7 +1689,7 @@ def _event_iteration(run, t, x, start):
                 changed = True
                 if run.changed < 0:
                     run.changed = k
-                if not start:
+                if not start and run.s.on_event is not None:
                     _log(run, t, _DISCRETE_NAMES[k], "%.17g -> %.17g" % (p[off + k], v))
                 p[off + k] = v
         it += 1
@@ -1696,11 +1697,12 @@ def _event_iteration(run, t, x, start):
 
 
 def _find_event(run, c):
-    """bgc_find_event: None, or (te, the state there: a list)."""
+    """bgc_find_event: None, or (te, the state there: a list); run.sliding counted."""
     G = len(_INDICATOR_STRICT)
     due = c.tph >= run.t_next
     gb = _indicators(run, c.tph, c.y1) if G else []
     if not G or _changed(run, gb) < 0:
+        run.sliding = 0
         if due:
             return c.tph, _as_list(c.y1)
         run.g = gb
@@ -1718,8 +1720,8 @@ def _find_event(run, c):
         for k in range(G):
             if _holds(k, gb[k]) != (p[off + k] != 0.0):
                 a, b = wa * ga[k], wb * gb[k]
-                with numpy.errstate(all="ignore"):
-                    q = float(numpy.float64(a) / numpy.float64(a - b))
+                d = a - b  # 0: C's quotient is inf or nan, refused below as q = 0.5 is
+                q = a / d if d != 0.0 else 0.5
                 if not (q >= 0.0 and q <= 1.0) or (q == 0.0 and probed):
                     q = 0.5
                 if q < frac:
@@ -1741,6 +1743,7 @@ def _find_event(run, c):
             ta, ga, wa = tm, gm, 1.0
             wb = 0.5 * wb if moved < 0 else 1.0
             moved = -1
+    run.sliding += 1
     return tb, _as_list(c.at(tb))
 
 
@@ -1778,6 +1781,15 @@ def _handle_event(run, t, x):
                        "relative of the one before, the last changing '%s' (a Zeno model: the "
                        "switching outruns the time's resolution)"
                        % (t, run.chain, _DISCRETE_NAMES[run.changed] if run.changed >= 0
+                          else "a state"), t)
+    # every step cut short by a state event: at most a hundredth of the step budget in a row,
+    # and at least 1000
+    if run.s.max_steps > 0 and \
+            run.sliding >= (run.s.max_steps // 100 if run.s.max_steps > 100000 else 1000):
+        raise _Failure("at t = %.17g: chattering: %d steps in a row, each cut short by an "
+                       "event, the last changing '%s' (a sliding mode or a Zeno model? "
+                       "--max-steps raises the limit, a hundredth of it)"
+                       % (t, run.sliding, _DISCRETE_NAMES[run.changed] if run.changed >= 0
                           else "a state"), t)
     # the events since the last output row: as many as the step budget, and at least 1000 (a
     # small step budget is for a step size that runs away, not for events)
@@ -2027,6 +2039,17 @@ def _combine(weights, K, count):
     return acc
 
 
+def _erk_plan(m):
+    """The method's _ErkPlan, made once (a run restarts its method at every event)."""
+    plan = _ERK_PLANS.get(id(m))
+    if plan is None or plan[0] is not m:
+        plan = _ERK_PLANS[id(m)] = (m, _ErkPlan(m))
+    return plan[1]
+
+
+_ERK_PLANS = {}
+
+
 class _ErkPlan:
     """A tableau's nonzero weights, ready for _V.combine."""
 
@@ -2232,7 +2255,7 @@ class _FixedSteps(_Family):
     def __init__(self, run):
         m = run.m
         self.run, self.stages, self.c = run, m["stages"], m["c"]
-        self.plan = _ErkPlan(m)
+        self.plan = _erk_plan(m)
 
     def start(self, y):
         return None
@@ -2261,7 +2284,7 @@ class _Erk(_Family):
 
     def __init__(self, run):
         m = run.m
-        self.run, self.m, self.plan = run, m, _ErkPlan(m)
+        self.run, self.m, self.plan = run, m, _erk_plan(m)
         self.stages, self.c = m["stages"], m["c"]
         self.last_stage = self.stages - 1
         self.fsal = m["fsal"]
