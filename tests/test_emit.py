@@ -478,12 +478,12 @@ print(h.hexdigest())
 """
 
 
-def _stores(n, dest="out", src="x", step=1, numbers=False):
-    return [f"{dest}[{i}] = {float_text(i) if numbers else f'{src}[{5 + step * i}]'};"
+def _store_lines(n, dest="out", src="x", step=1, numbers=False):
+    return [f"{dest}[{i}] = {_number_text(i) if numbers else f'{src}[{5 + step * i}]'};"
             for i in range(n)]
 
 
-def float_text(i):
+def _number_text(i):
     return repr(1.0 / (i + 3)) if i % 3 else ("-0.0" if i % 2 else "2.5e-300")
 
 
@@ -491,14 +491,14 @@ def test_long_runs_of_stores_become_loops():
     """Runs of COPY_RUN or more copies (or numbers) into one array become one loop over index
     tables; shorter runs, and a change of array, are left as lines."""
     from bgc.emit import COPY_RUN, _copy_loops
-    short = _stores(COPY_RUN - 1)
+    short = _store_lines(COPY_RUN - 1)
     assert _copy_loops(short) == short
-    loop = _copy_loops(_stores(COPY_RUN))
+    loop = _copy_loops(_store_lines(COPY_RUN))
     assert loop[-2:] == ["        out[k] = x[5 + k];", "}"] and len(loop) == 5
-    table = "\n".join(_copy_loops(_stores(COPY_RUN, dest="wv", src="wv", step=2)))
+    table = "\n".join(_copy_loops(_store_lines(COPY_RUN, dest="wv", src="wv", step=2)))
     assert "static const int bgc_from[" in table and "wv[k] = wv[bgc_from[k]];" in table
-    mixed = _copy_loops(["w1 = x[0];", *_stores(COPY_RUN), *_stores(3, src="v")])
-    assert mixed[0] == "w1 = x[0];" and mixed[-3:] == _stores(3, src="v")
+    mixed = _copy_loops(["w1 = x[0];", *_store_lines(COPY_RUN), *_store_lines(3, src="v")])
+    assert mixed[0] == "w1 = x[0];" and mixed[-3:] == _store_lines(3, src="v")
 
 
 @needs_cc
@@ -507,8 +507,8 @@ def test_store_loops_write_what_the_lines_write(tmp_path):
     every slot (the untouched ones included)."""
     from bgc.emit import COPY_RUN, _copy_loops
     n = COPY_RUN + 7
-    lines = [*_stores(n), "out[500] = x[1];", *_stores(n, dest="wv", src="x", step=3),
-             *_stores(n, dest="x0", numbers=True), *_stores(COPY_RUN + 1, dest="out", src="wv")]
+    lines = [*_store_lines(n), "out[500] = x[1];", *_store_lines(n, dest="wv", src="x", step=3),
+             *_store_lines(n, dest="x0", numbers=True), *_store_lines(COPY_RUN + 1, dest="out", src="wv")]
     assert len(_copy_loops(lines)) < len(lines) // 4
 
     def body(name, ls):
