@@ -258,7 +258,7 @@ def _copy_loops(lines: list[str]) -> list[str]:
 
 def _copy_loop(run: list[tuple]) -> list[str]:
     """One loop for a run of stores `dest[i] = src[j];` or `dest[i] = number;`: an index that
-    steps by one from its first value is written as first + k, any other index, and the
+    steps by one from its first value is written as first + bgc_k, any other index, and the
     numbers, as a table."""
     (dest, src), n = run[0][0], len(run)
     lines, index = ["{"], []
@@ -266,13 +266,14 @@ def _copy_loop(run: list[tuple]) -> list[str]:
         values = [r[position] for r in run]
         if name is None:
             lines.append(f"    static const double bgc_value[{n}] = {{ {', '.join(values)} }};")
-            index.append("bgc_value[k]")
+            index.append("bgc_value[bgc_k]")
         elif values == list(range(values[0], values[0] + n)):
-            index.append(f"{name}[{values[0]} + k]" if values[0] else f"{name}[k]")
+            index.append(f"{name}[{values[0]} + bgc_k]" if values[0] else f"{name}[bgc_k]")
         else:
             lines.append(f"    static const int {table}[{n}] = {{ {', '.join(map(str, values))} }};")
-            index.append(f"{name}[{table}[k]]")
-    lines += ["    int k;", f"    for (k = 0; k < {n}; ++k)", f"        {index[0]} = {index[1]};", "}"]
+            index.append(f"{name}[{table}[bgc_k]]")
+    lines += ["    int bgc_k;", f"    for (bgc_k = 0; bgc_k < {n}; ++bgc_k)",
+              f"        {index[0]} = {index[1]};", "}"]
     return lines
 
 

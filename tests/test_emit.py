@@ -494,9 +494,9 @@ def test_long_runs_of_stores_become_loops():
     short = _store_lines(COPY_RUN - 1)
     assert _copy_loops(short) == short
     loop = _copy_loops(_store_lines(COPY_RUN))
-    assert loop[-2:] == ["        out[k] = x[5 + k];", "}"] and len(loop) == 5
+    assert loop[-2:] == ["        out[bgc_k] = x[5 + bgc_k];", "}"] and len(loop) == 5
     table = "\n".join(_copy_loops(_store_lines(COPY_RUN, dest="wv", src="wv", step=2)))
-    assert "static const int bgc_from[" in table and "wv[k] = wv[bgc_from[k]];" in table
+    assert "static const int bgc_from[" in table and "wv[bgc_k] = wv[bgc_from[bgc_k]];" in table
     mixed = _copy_loops(["w1 = x[0];", *_store_lines(COPY_RUN), *_store_lines(3, src="v")])
     assert mixed[0] == "w1 = x[0];" and mixed[-3:] == _store_lines(3, src="v")
 
