@@ -478,6 +478,66 @@ print(h.hexdigest())
 """
 
 
+def _store_lines(n, dest="out", src="x", step=1, numbers=False):
+    return [f"{dest}[{i}] = {_number_text(i) if numbers else f'{src}[{5 + step * i}]'};"
+            for i in range(n)]
+
+
+def _number_text(i):
+    return repr(1.0 / (i + 3)) if i % 3 else ("-0.0" if i % 2 else "2.5e-300")
+
+
+def test_long_runs_of_stores_become_loops():
+    """Runs of COPY_RUN or more copies (or numbers) into one array become one loop over index
+    tables; shorter runs, and a change of array, are left as lines."""
+    from bgc.emit import COPY_RUN, _copy_loops
+    short = _store_lines(COPY_RUN - 1)
+    assert _copy_loops(short) == short
+    loop = _copy_loops(_store_lines(COPY_RUN))
+    assert loop[-2:] == ["        out[bgc_k] = x[5 + bgc_k];", "}"] and len(loop) == 5
+    table = "\n".join(_copy_loops(_store_lines(COPY_RUN, dest="wv", src="wv", step=2)))
+    assert "static const int bgc_from[" in table and "wv[bgc_k] = wv[bgc_from[bgc_k]];" in table
+    mixed = _copy_loops(["w1 = x[0];", *_store_lines(COPY_RUN), *_store_lines(3, src="v")])
+    assert mixed[0] == "w1 = x[0];" and mixed[-3:] == _store_lines(3, src="v")
+
+
+@needs_cc
+def test_store_loops_write_what_the_lines_write(tmp_path):
+    """The loops against the lines they replace, compiled: the same doubles, bit for bit, in
+    every slot (the untouched ones included)."""
+    from bgc.emit import COPY_RUN, _copy_loops
+    n = COPY_RUN + 7
+    lines = [*_store_lines(n), "out[500] = x[1];", *_store_lines(n, dest="wv", src="x", step=3),
+             *_store_lines(n, dest="x0", numbers=True), *_store_lines(COPY_RUN + 1, dest="out", src="wv")]
+    assert len(_copy_loops(lines)) < len(lines) // 4
+
+    def body(name, ls):
+        return (f"static void {name}(const double *x, double *out, double *wv, double *x0)\n{{\n"
+                + "\n".join(f"    {line}" for line in ls) + "\n}\n")
+
+    src = tmp_path / "loops.c"
+    src.write_text("#include <stdio.h>\n#include <string.h>\n"
+                   + body("lines", lines) + body("loops", _copy_loops(lines)) + """
+int main(void)
+{
+    static double x[1000], a[4][1000], b[4][1000];
+    int i;
+    for (i = 0; i < 1000; ++i)
+        x[i] = 1.0 / (i + 0.5);
+    memset(a, 0xab, sizeof a);
+    memset(b, 0xab, sizeof b);
+    lines(x, a[0], a[1], a[2]);
+    loops(x, b[0], b[1], b[2]);
+    puts(memcmp(a, b, sizeof a) == 0 ? "same" : "differ");
+    return 0;
+}
+""")
+    exe = tmp_path / "loops"
+    subprocess.run([*backends.c_compiler(None), "-std=c99", "-O1", str(src), "-o", str(exe)],
+                   check=True)
+    assert subprocess.run([str(exe)], capture_output=True, text=True).stdout == "same\n"
+
+
 def test_emit_is_byte_identical_under_hash_seeds():
     """The emitter's output for hand-built models in a process with a fixed hash seed and in
     this one (whose seed is random, or another fixed one)."""
