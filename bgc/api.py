@@ -21,6 +21,7 @@ from .parser import decode, parse, parse_option
 from .reduce import Reduced, reduce
 from .report import SceneSummary, check_report, scenes_report, equations_latex, equations_text, scene_summary
 from .resolve import resolve
+from . import solvers
 from .resources import quiet_collector, read_bounded
 from .scene import Override, Settings, apply_scene, check_parameters as check_parameters_of
 from .run import (ALGEBRA, BACKENDS, FORMATS, SIMULATE_OPTIONS, SWEEP_BACKENDS, TARGETS,
@@ -145,7 +146,7 @@ def build(model, scene: str | None = None, project_initial: bool = False,
           algebra: str = "auto", program: bool = True,
           residual_outputs: bool = False, outputs=None, effects=None,
           option_names=("outputs=", "effects=", "scene="),
-          allow_inconsistent: bool = False) -> Compiled:
+          allow_inconsistent: bool = False, jacobian: bool | None = True) -> Compiled:
     """Run the pipeline up to the program IR (program=False: up to the reduce stage, all that
     `check` and `equations` need; Compiled.program is then None).  residual_outputs: every
     constraint's residual `J.residual` is an output too (after the scene's), for reports on
@@ -153,7 +154,9 @@ def build(model, scene: str | None = None, project_initial: bool = False,
     scene_override); option_names: how errors name outputs, effects and scene (the CLI's
     `--outputs`).  project_initial, allow_inconsistent: initial values that violate a
     constraint are not refused here (the program projects them, or starts from them).
-    Raises BgcModelError, or BgcArgumentError for a scene, outputs or effects that the model
+    jacobian: whether the program has jvp, the Jacobian the implicit solvers need (None: as
+    the scene's solver needs; a program without it runs the explicit solvers only, in C or
+    the interpreter: what `bgc simulate` builds for such a run).  Raises BgcModelError, or BgcArgumentError for a scene, outputs or effects that the model
     refuses; ValueError or TypeError for an argument wrong in itself."""
     _choice("algebra", algebra, ALGEBRA)
     exclusive(project_initial, allow_inconsistent)
@@ -174,7 +177,10 @@ def build(model, scene: str | None = None, project_initial: bool = False,
             system = with_residual_outputs(system)
         reduced = clock("reduce", reduce, system, project_initial or allow_inconsistent,
                         algebra)
-        ir_program = clock("lower", lower, reduced) if program else None
+        if jacobian is None:
+            jacobian = solvers.get(reduced.run.solver).uses_jacobian
+        ir_program = clock("lower", lower, reduced, (), (), False, jacobian) if program \
+            else None
     except ModelError as exc:
         raise _model_error(exc, src) from None
     return Compiled(src, causal, system, reduced, ir_program, tuple(clock.times))

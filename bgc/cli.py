@@ -61,12 +61,13 @@ def _or_exit(call, *args):
 
 
 def _build(model, scene, project_initial=False, algebra="auto", program=True,
-           residual_outputs=False, outputs=None, effects=None, allow_inconsistent=False):
+           residual_outputs=False, outputs=None, effects=None, allow_inconsistent=False,
+           jacobian=True):
     if project_initial and allow_inconsistent:
         raise click.UsageError("--project-initial and --allow-inconsistent exclude each other")
     compiled = _or_exit(api.build, model, scene, project_initial, algebra, program,
                         residual_outputs, outputs, effects, ("--outputs", "--effects", "--scene"),
-                        allow_inconsistent)
+                        allow_inconsistent, jacobian)
     _warn(compiled)
     return compiled
 
@@ -522,7 +523,7 @@ def simulate(model, scene, outputs, effects, algebra, backend, solver, rtol, ato
             request, chosen, [item.partition("=")[0] for item in params])
     elif found is None:
         record, program, compiled = _compile_for_run(
-            request, (t_end, dt) if auto and request.backend == "c" else None)
+            request, (t_end, dt) if auto and request.backend == "c" else None, solver)
     else:
         (record, path), compiled = found, None
         program = warm.program(record, path)
@@ -593,7 +594,7 @@ def _simulate_run(settings, record, program, compiled, request, stats, output, p
         try:
             status, rows = _run(program, settings, stats, output, copy, progress)
         except backends.CannotStart:  # (damaged behind its checksum: evicted, built again)
-            record, program, compiled = _compile_for_run(request)
+            record, program, compiled = _compile_for_run(request, None, settings.solver)
             status, rows = _run(program, settings, stats, output, copy, progress)
         if progress is not None:
             progress.close()
@@ -624,11 +625,13 @@ def _short(record: warm.Record, t_end, dt) -> bool:
     return runner.short_run(settings, record.rhs_ops, record.states)
 
 
-def _compile_for_run(request: warm.Request, auto=None):
+def _compile_for_run(request: warm.Request, auto=None, solver: str | None = None):
     """The cold path: build the model, compile its program into the cache, keep a warm
     record of it; (record, program, the compiled model).  auto: (t_end, dt) of a run whose
     backend bgc chooses: the interpreter for a short run (bgc.runner.short_run), which is
-    said on stderr, else the C backend."""
+    said on stderr, else the C backend.  solver: the run's (None: the scene's); for an
+    explicit one, C and the interpreter get a program without the Jacobian (nothing the run
+    does not call is built: warm.needs_model sends a later implicit run here again)."""
     r = request
     try:
         data = read_bounded(r.model)
@@ -636,8 +639,11 @@ def _compile_for_run(request: warm.Request, auto=None):
         click.echo(f"error: {r.model}: cannot read: {exc.strerror}", err=True)
         sys.exit(1)
     source = replace(_or_exit(api.source_from_bytes, r.model, data), consts=r.consts)
+    jacobian = True if r.backend == "python" else (
+        None if solver is None else solvers.get(solver).uses_jacobian)
     compiled = _build(source, r.scene, r.project_initial, r.algebra, outputs=r.outputs,
-                      effects=r.effects, allow_inconsistent=r.allow_inconsistent)
+                      effects=r.effects, allow_inconsistent=r.allow_inconsistent,
+                      jacobian=jacobian)
     if auto is not None and vm.supports(compiled.program) and runner.short_run(
             compiled.program.scene.with_options(t_end=auto[0], dt=auto[1]),
             warm.rhs_ops(compiled.program), len(compiled.program.states)):

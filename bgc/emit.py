@@ -338,6 +338,8 @@ def emit_c(program: Program, chunk_ops: int = ir.CHUNK_OPS, linked: bool = False
 def emit_python(program: Program, chunk_ops: int = ir.CHUNK_OPS) -> dict[str, str]:
     """The standalone Python module (numpy only): {"<name>.py": text}."""
     _validate(program)
+    if not program.has_jacobian:  # (its jvp and jacobian are part of the module's API)
+        raise EmitError("the Python module needs a program with its Jacobian (jvp)")
     n, m, k = len(program.states), len(program.params), program.n_consts
     fast, ieee = PythonPrinter(n, m, n_consts=k), PythonPrinter(n, m, ieee=True, n_consts=k)
     ws = _workspace(program, chunk_ops)
@@ -368,7 +370,8 @@ def _model_functions(program: Program) -> tuple[str, ...]:
     """rhs, outputs, jvp, the event functions of a program with events, then the program's
     extra functions (bgc.lower.with_tangent: an FMU's outputs_jvp; bgc.operating's, in the
     Python module)."""
-    out = MODEL_FUNCTIONS + (ir.EVENT_FUNCTIONS if program.events is not None else ())
+    out = tuple(k for k in MODEL_FUNCTIONS if k in program.functions) + (
+        ir.EVENT_FUNCTIONS if program.events is not None else ())
     return out + tuple(k for k in program.functions if k not in ir.FUNCTION_NAMES
                        and k not in ir.EVENT_FUNCTIONS)
 
@@ -603,6 +606,7 @@ def _common_context(program: Program, ws: _Workspace, literal, c: bool) -> dict:
                 "col_rows": _list(col_rows), "nnz": len(col_rows)},
         "jac_lu": None if jac.lu is None else
         {key: _list(getattr(jac.lu, key)) for key in ITERATION_ARRAYS} | {"nnz": jac.lu.nnz},
+        "has_jacobian": program.has_jacobian,
         "ws": ws,
         "list": _list,
     }
@@ -650,11 +654,13 @@ def _events_context(program: Program, literal) -> dict | None:
 
 def _validate(program: Program) -> None:
     n = len(program.states)
-    sizes = {"init": n, "rhs": n, "jvp": n, "outputs": len(program.outputs),
+    sizes = {"init": n, "rhs": n, "outputs": len(program.outputs),
              "residual": len(program.constraints), "scale": len(program.constraints),
              "position_jac": len(program.position_rows) * n,
              "velocity_jac": len(program.velocity_rows) * n,
              "velocity_metric": len(program.velocity_rows) * n}
+    if program.has_jacobian:
+        sizes["jvp"] = n
     sizes.update((k, f.size) for k, f in program.functions.items() if k not in sizes)
     for name, size in sizes.items():
         f = program.function(name)
@@ -711,8 +717,41 @@ def _check_default(j: int, default: sp.Expr) -> None:
 @functools.lru_cache(maxsize=None)
 def _environment():
     import jinja2  # (here: the interpreter backend and a warm run do without)
+
+    class CompiledTemplates(jinja2.BytecodeCache):
+        """The templates as Jinja compiles them (Python code objects), kept in the compile
+        cache (bgc.backends.own_cache_dir) as the parser keeps its tables: a cold `bgc
+        simulate` reads them in a millisecond instead of compiling them (40 ms).  Jinja keys
+        them by the template's name and checks its source's checksum and its own and
+        Python's versions; anything unreadable is compiled again, and a cache that cannot
+        be written is none."""
+
+        def _path(self, bucket):
+            from . import backends
+            cache = backends.own_cache_dir()
+            return None if cache is None else cache / f"jinja-{bucket.key[:40]}.cache"
+
+        def load_bytecode(self, bucket) -> None:
+            path = self._path(bucket)
+            try:
+                if path is not None:
+                    with open(path, "rb") as f:
+                        bucket.load_bytecode(f)
+            except Exception:  # noqa: BLE001  (a damaged file: compiled again)
+                bucket.reset()
+
+        def dump_bytecode(self, bucket) -> None:
+            from . import backends
+            path = self._path(bucket)
+            try:
+                if path is not None:
+                    backends.write_cached(path, bucket.write_bytecode)
+            except OSError:
+                pass
+
     env = jinja2.Environment(
         loader=jinja2.FileSystemLoader(str(resource_dir("templates"))),
+        bytecode_cache=CompiledTemplates(),
         undefined=jinja2.StrictUndefined,
         keep_trailing_newline=True,
         autoescape=False,
@@ -773,7 +812,7 @@ LINK_INTS = ("NUM_STATES", "NUM_PARAMS", "NUM_CONSTANTS", "NUM_OUTPUTS", "NUM_CO
              "NUM_POSITION_ROWS", "NUM_VELOCITY_ROWS", "NUM_BLOCKS", "AUTONOMOUS",
              "WORK_DOUBLES", "WORK_INTS", "WORK_Y0", "WORK_STAGES", "WORK_Y", "WORK_JAC",
              "JAC_COLORS", "JAC_SPARSE", "SCENE_SOLVER", "NUM_INDICATORS", "NUM_TIMERS",
-             "NUM_DISCRETE", "DISCRETE_OFFSET", "NUM_INPUTS")
+             "NUM_DISCRETE", "DISCRETE_OFFSET", "NUM_INPUTS", "HAS_JACOBIAN")
 LINK_DOUBLES = ("SCENE_T0", "SCENE_T_END", "SCENE_DT", "SCENE_RTOL", "SCENE_ATOL", "SCENE_STEP",
                 "SCENE_HMAX")
 LINK_TABLES = (("bgc_block", "blocks"), ("int", "jac_color_ptr"), ("int", "jac_color_cols"),

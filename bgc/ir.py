@@ -566,8 +566,9 @@ class Program:
     constraints: tuple[ConstraintRow, ...]
     velocity_movable: tuple[bool, ...]
     scene: SceneSettings
-    functions: dict  # name -> Function: every name of FUNCTION_NAMES, then any others
-    #                  (an FMU's outputs_jvp; the C emitter renders them as it renders jvp)
+    functions: dict  # name -> Function: every name of FUNCTION_NAMES (but jvp in a program
+    #                  built for explicit solvers only: has_jacobian), then any others (an
+    #                  FMU's outputs_jvp; the C emitter renders them as it renders jvp)
     blocks: tuple[BlockPlan, ...] = ()
     jacobian: JacobianPattern = JacobianPattern((), ())
     events: Events | None = None  # None: the program has no events (and none of their code)
@@ -580,6 +581,12 @@ class Program:
     @property
     def n_consts(self) -> int:
         return self.functions["consts"].size
+
+    @property
+    def has_jacobian(self) -> bool:
+        """Whether the program has jvp, and so the Jacobian that the implicit solvers need
+        (bgc.lower builds it unless told the run's solver does without)."""
+        return "jvp" in self.functions
 
     @property
     def position_rows(self) -> tuple[int, ...]:

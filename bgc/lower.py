@@ -398,10 +398,11 @@ def _stores(exprs) -> list[Store]:
 
 
 def lower(reduced: Reduced, sensitivities: tuple[str, ...] = (), given=(),
-          state_outputs: bool = False) -> Program:
+          state_outputs: bool = False, jacobian: bool = True) -> Program:
     """The program of a reduced system.  sensitivities: parameter names, for the program
     augmented with the states' sensitivities to them (bgc.sensitivity, which says what given
-    and state_outputs mean)."""
+    and state_outputs mean).  jacobian=False: without jvp, the tangent the implicit solvers
+    need (a program for an explicit solver's run; without_jacobian)."""
     states = [st.symbol for st in reduced.states]
     base = {TIME: T}
     base.update((s, X[i]) for i, s in enumerate(states))
@@ -431,7 +432,18 @@ def lower(reduced: Reduced, sensitivities: tuple[str, ...] = (), given=(),
                      fns, tuple(mapper.plans), mapper.count, _events_info(reduced.events),
                      reduced.tables, tuple(ir.InputInfo(u.name, mapper.expr(u.default), u.doc)
                                            for u in reduced.inputs))
-    return aug.pattern(program) if sensitivities else program
+    program = aug.pattern(program) if sensitivities else program
+    return program if jacobian else without_jacobian(program)
+
+
+def without_jacobian(program: Program) -> Program:
+    """program without jvp (nor the stiff solvers' sparse LU plan): for a run whose solver is
+    explicit, which never calls it.  The tangent is still derived, and then dropped: the
+    variables and constants of the other functions are numbered after its own, and the
+    printers order a product's factors by their names, so that building without it would
+    change the other functions' rounding (their bytes must be the full program's)."""
+    functions = {k: f for k, f in program.functions.items() if k != "jvp"}
+    return replace(program, functions=functions, jacobian=replace(program.jacobian, lu=None))
 
 
 def _build(mapper: _Mapper, steps, specs: dict, n: int) -> dict:

@@ -40,7 +40,7 @@ from bgc.ir import Assign, Newton, Program, Resolve, Solve, Store
 from bgc.printers import CPrinter
 from bgc.resources import resource_dir
 
-FORMAT = 2  # of the program file; vm.c refuses any other
+FORMAT = 3  # of the program file; vm.c refuses any other
 MAGIC = b"BGCVM\0\0\0"
 
 # The instruction set: name and the kinds of its three operands (r: a register; i: an index,
@@ -580,7 +580,8 @@ def program_bytes(program: Program) -> bytes:
         "JAC_COLORS": len(jac.colors), "JAC_SPARSE": 0, "SCENE_SOLVER": emit.solvers.index(sc.solver),
         "NUM_INDICATORS": ev.indicators if ev else 0, "NUM_TIMERS": ev.timers if ev else 0,
         "NUM_DISCRETE": ev.discrete if ev else 0,
-        "DISCRETE_OFFSET": unit.d_base if ev else 0, "NUM_INPUTS": len(program.inputs)}
+        "DISCRETE_OFFSET": unit.d_base if ev else 0, "NUM_INPUTS": len(program.inputs),
+        "HAS_JACOBIAN": int(program.has_jacobian)}
     doubles = {"SCENE_T0": sc.t0, "SCENE_T_END": sc.t_end, "SCENE_DT": sc.dt,
                "SCENE_RTOL": sc.rtol, "SCENE_ATOL": sc.atol,
                "SCENE_STEP": 0.0 if sc.step is None else sc.step,

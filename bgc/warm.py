@@ -6,7 +6,9 @@ After a cold run the command line stores a *record* in the cache directory
 and what the command line needs from the compiled model to run it exactly as the cold path
 would — the warnings the model gave (as printed), the parameters' names, the scene's settings (the
 bgc.run.RunSettings compiled into the program), whether a constraint has a pid or pd
-corrector, and what `--plot` says of the model and its outputs (bgc.plot.describe).
+corrector, whether the program has the Jacobian (one built for an explicit solver has not:
+an implicit solver's run is then cold, and its record replaces this one), and what `--plot`
+says of the model and its outputs (bgc.plot.describe).
 
 A record's key is the SHA-256 of everything its contents depend on: this record format, bgc's
 version and the size and modification time of every file bgc is made of (so an edited or
@@ -42,7 +44,7 @@ from . import backends, runner, solvers
 from .resources import read_bounded
 from .run import RunSettings
 
-FORMAT = 5  # of the record; change it when its fields change
+FORMAT = 6  # of the record; change it when its fields change
 
 
 @dataclass(frozen=True)
@@ -74,6 +76,7 @@ class Record:
     rhs_ops: int = 0  # the right side's operations (bgc.ir.count_ops), for runner.short_run
     states: int = 0
     inputs: tuple[str, ...] = ()  # the program's inputs (`input NAME`), in order
+    jacobian: bool = True  # the program has the Jacobian the implicit solvers need
 
 
 def _installation() -> list:
@@ -187,8 +190,12 @@ def program(record: Record, path: Path) -> runner.Program:
 def needs_model(record: Record, solver: str | None, step) -> bool:
     """Whether a run with these options needs the compiled model, which a warm run does not
     have: a fixed-step run of a model with a pid or pd corrector (bgc.stability checks the
-    step against the corrector, on the model)."""
-    fixed = step is not None or solvers.get(solver or record.settings.solver).family == "fixed"
+    step against the corrector, on the model), or an implicit solver's run of a program
+    built without the Jacobian (for an explicit solver: it is built again, with it)."""
+    method = solvers.get(solver or record.settings.solver)
+    if method.uses_jacobian and not record.jacobian:
+        return True
+    fixed = step is not None or method.family == "fixed"
     return record.correctors and fixed
 
 
@@ -204,7 +211,8 @@ def record_for(compiled, program: runner.Program, warnings: str) -> Record:
         inputs=tuple(u.name for u in compiled.program.inputs),
         **plot.describe(compiled), interpreter=interp.name if interp else "",
         interpreter_sha256=hashlib.sha256(interp.read_bytes()).hexdigest() if interp else "",
-        rhs_ops=rhs_ops(compiled.program), states=len(compiled.program.states))
+        rhs_ops=rhs_ops(compiled.program), states=len(compiled.program.states),
+        jacobian=compiled.program.has_jacobian)
 
 
 def rhs_ops(program) -> int:

@@ -7,7 +7,8 @@
 
 enum { BGC_OK = 0, BGC_ERR_CONSTRAINT = 1, BGC_ERR_USAGE = 2, BGC_ERR_RUNTIME = 3 };
 /* How an algebraic block failed (bgc_work.failure). */
-enum { BGC_BLOCK_SINGULAR = 1, BGC_BLOCK_DIVERGED = 2, BGC_BLOCK_NONFINITE = 3 };
+enum { BGC_BLOCK_SINGULAR = 1, BGC_BLOCK_DIVERGED = 2, BGC_BLOCK_NONFINITE = 3,
+       BGC_NO_JACOBIAN = 4 /* jvp of a program built without it (BGC_HAS_JACOBIAN 0) */ };
 
 /* Display names, ordered as the arrays below use them. */
 extern const char *const bgc_model_name;
@@ -216,6 +217,11 @@ typedef struct bgc_splu {
 #ifndef BGC_JAC_SPARSE
 #define BGC_JAC_SPARSE 0
 static const bgc_splu bgc_jac_lu[1] = { { 0, 0, NULL, NULL, NULL, NULL, NULL, NULL } };
+#endif
+/* A model part built for an explicit solver's run (bgc simulate) has no jvp: it defines
+   BGC_HAS_JACOBIAN 0, and a run with a solver that needs the Jacobian is refused. */
+#ifndef BGC_HAS_JACOBIAN
+#define BGC_HAS_JACOBIAN 1
 #endif
 #define BGC_MAX_EVENT_ITERATIONS 100 /* events at one instant before a run stops (Zeno) */
 

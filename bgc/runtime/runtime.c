@@ -52,6 +52,10 @@ void bgc_work_message(const bgc_work *w, char *msg, size_t msg_size)
     static const char *const how[] = { "failed", "is singular", "did not converge",
                                        "has a non-finite residual" };
     const int k = w->block - 1;
+    if (w->failure == BGC_NO_JACOBIAN) {
+        snprintf(msg, msg_size, "this program was built without its Jacobian");
+        return;
+    }
     snprintf(msg, msg_size, "at t = %.17g: algebraic block %d (%s) %s", w->t, w->block,
              k >= 0 && k < BGC_NUM_BLOCKS ? bgc_block_names[k] : "?",
              how[w->failure >= 1 && w->failure <= 3 ? w->failure : 0]);
@@ -576,6 +580,10 @@ int bgc_check_settings(const bgc_settings *s, char *msg, size_t msg_size)
         bad = "--max-steps must not be negative";
     else if (s->solver < 0 || s->solver >= BGC_NUM_SOLVERS)
         bad = "unknown solver";
+    else if (!BGC_HAS_JACOBIAN && bgc_methods[s->solver].family != BGC_FAMILY_FIXED
+             && bgc_methods[s->solver].family != BGC_FAMILY_ERK)
+        bad = "this program was built without the Jacobian that an implicit solver needs "
+              "(bgc simulate builds one with it for such a solver)";
     else if (!((s->t_end - s->t0) / s->dt <= 1e9))
         bad = "too many output rows (more than 1e9): increase --dt";
     if (!bad)

@@ -168,6 +168,11 @@ int bgc_link_outputs(double t, const double *x, const bgc_params *p, bgc_work *w
 int bgc_link_jvp(double t, const double *x, const bgc_params *p, bgc_work *w, const double *v,
                  double *out)
 {
+    if (bgc_vm_entry[BGC_VM_ENTRY_JVP] < 0) { /* built without it (BGC_HAS_JACOBIAN 0) */
+        w->block = 0;
+        w->failure = BGC_NO_JACOBIAN;
+        return 1;
+    }
     return bgc_vm_model(BGC_VM_ENTRY_JVP, t, x, p, w, v, out);
 }
 

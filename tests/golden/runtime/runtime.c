@@ -26,7 +26,8 @@ enum {
 
 enum { BGC_OK = 0, BGC_ERR_CONSTRAINT = 1, BGC_ERR_USAGE = 2, BGC_ERR_RUNTIME = 3 };
 /* How an algebraic block failed (bgc_work.failure). */
-enum { BGC_BLOCK_SINGULAR = 1, BGC_BLOCK_DIVERGED = 2, BGC_BLOCK_NONFINITE = 3 };
+enum { BGC_BLOCK_SINGULAR = 1, BGC_BLOCK_DIVERGED = 2, BGC_BLOCK_NONFINITE = 3,
+       BGC_NO_JACOBIAN = 4 /* jvp of a program built without it (BGC_HAS_JACOBIAN 0) */ };
 
 /* Display names, ordered as the arrays below use them. */
 extern const char *const bgc_model_name;
@@ -235,6 +236,11 @@ typedef struct bgc_splu {
 #ifndef BGC_JAC_SPARSE
 #define BGC_JAC_SPARSE 0
 static const bgc_splu bgc_jac_lu[1] = { { 0, 0, NULL, NULL, NULL, NULL, NULL, NULL } };
+#endif
+/* A model part built for an explicit solver's run (bgc simulate) has no jvp: it defines
+   BGC_HAS_JACOBIAN 0, and a run with a solver that needs the Jacobian is refused. */
+#ifndef BGC_HAS_JACOBIAN
+#define BGC_HAS_JACOBIAN 1
 #endif
 #define BGC_MAX_EVENT_ITERATIONS 100 /* events at one instant before a run stops (Zeno) */
 
@@ -639,6 +645,10 @@ void bgc_work_message(const bgc_work *w, char *msg, size_t msg_size)
     static const char *const how[] = { "failed", "is singular", "did not converge",
                                        "has a non-finite residual" };
     const int k = w->block - 1;
+    if (w->failure == BGC_NO_JACOBIAN) {
+        snprintf(msg, msg_size, "this program was built without its Jacobian");
+        return;
+    }
     snprintf(msg, msg_size, "at t = %.17g: algebraic block %d (%s) %s", w->t, w->block,
              k >= 0 && k < BGC_NUM_BLOCKS ? bgc_block_names[k] : "?",
              how[w->failure >= 1 && w->failure <= 3 ? w->failure : 0]);
@@ -1163,6 +1173,10 @@ int bgc_check_settings(const bgc_settings *s, char *msg, size_t msg_size)
         bad = "--max-steps must not be negative";
     else if (s->solver < 0 || s->solver >= BGC_NUM_SOLVERS)
         bad = "unknown solver";
+    else if (!BGC_HAS_JACOBIAN && bgc_methods[s->solver].family != BGC_FAMILY_FIXED
+             && bgc_methods[s->solver].family != BGC_FAMILY_ERK)
+        bad = "this program was built without the Jacobian that an implicit solver needs "
+              "(bgc simulate builds one with it for such a solver)";
     else if (!((s->t_end - s->t0) / s->dt <= 1e9))
         bad = "too many output rows (more than 1e9): increase --dt";
     if (!bad)
