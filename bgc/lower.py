@@ -437,13 +437,15 @@ def lower(reduced: Reduced, sensitivities: tuple[str, ...] = (), given=(),
 
 
 def without_jacobian(program: Program) -> Program:
-    """program without jvp (nor the stiff solvers' sparse LU plan): for a run whose solver is
-    explicit, which never calls it.  The tangent is still derived, and then dropped: the
+    """program without jvp, nor the Jacobian's pattern and the stiff solvers' sparse LU plan
+    (empty: a dense chain's pattern is most of its part's text): for a run whose solver is
+    explicit, which never calls them.  The tangent is still derived, and then dropped: the
     variables and constants of the other functions are numbered after its own, and the
     printers order a product's factors by their names, so that building without it would
     change the other functions' rounding (their bytes must be the full program's)."""
     functions = {k: f for k, f in program.functions.items() if k != "jvp"}
-    return replace(program, functions=functions, jacobian=replace(program.jacobian, lu=None))
+    pattern = JacobianPattern(((),) * len(program.states), ())
+    return replace(program, functions=functions, jacobian=pattern)
 
 
 def _build(mapper: _Mapper, steps, specs: dict, n: int) -> dict:

@@ -46,6 +46,7 @@ def test_a_program_for_an_explicit_solver_has_no_jacobian_and_the_same_right_sid
     lean, full = _build(None).program, _build(True).program
     assert not lean.has_jacobian and full.has_jacobian
     assert "jvp" not in lean.functions and lean.jacobian.lu is None
+    assert not lean.jacobian.colors and not any(lean.jacobian.columns)
     for name in full.functions:  # (the tangent is derived and dropped: the same numbering)
         assert name == "jvp" or lean.function(name) == full.function(name)
     (part,) = emit.emit_c(lean, linked=True).values()
