@@ -27,6 +27,7 @@ from bgc.resources import quiet_collector, resource_dir
 POW10_RANGE = (-24, 56)  # powers of ten for the C number formatter: |v| in about 1e-40..1e40
 C_RUNTIME = ("runtime.c", "drive.c", "erk.c", "stiff.c", "main.c", "batch.c")  # bgc/runtime/, in this order
 COPY_RUN = 64  # C: at least this many copies in a row (out[i] = x[j], ...) become one loop
+PARAMETER_CHUNK = 256  # C: lines of the parameters' defaults or constants in one function
 PLAN_ARRAYS = ("diag", "lptr", "lpos", "lrow", "uptr", "upos", "ucol", "upd", "prow", "pcol")
 ITERATION_ARRAYS = ("perm", "rowptr", "cols", "diag", "jpos", "dpos")  # sparse.IterationPlan
 MODEL_FUNCTIONS = ("rhs", "outputs", "jvp")  # take the workspace, may solve blocks; so do
@@ -277,6 +278,37 @@ def _copy_loop(run: list[tuple]) -> list[str]:
     return lines
 
 
+_TEMPORARY = re.compile(r"^const double (w\d+) = ")
+_NAME = re.compile(r"\bw\d+\b")
+
+
+def _line_chunks(lines: list[str], size: int | None = None) -> list[list[str]]:
+    """C: straight-line code of one statement a line (the parameters' defaults, the
+    constants) as consecutive chunks of about `size` lines, each ending where no temporary
+    (`const double wK = ...;`) is read after it, so that each can be a function of its own
+    run in order.  A C optimiser's alias walks over a function's stores through the same
+    pointer grow as their number squared: 2 000 defaults and 1 000 constants of a model
+    with a parameter per section cost gcc -O1 half its compile in one function each.  One
+    chunk (the code as it was) when it is no longer than size (default PARAMETER_CHUNK)."""
+    size = PARAMETER_CHUNK if size is None else size
+    if len(lines) <= size:
+        return [lines]
+    last = {}
+    for k, line in enumerate(lines):
+        for name in _NAME.findall(line):
+            last[name] = k
+    chunks, start, reach = [], 0, -1
+    for k, line in enumerate(lines):
+        m = _TEMPORARY.match(line)
+        if m:
+            reach = max(reach, last.get(m.group(1), k))
+        if k + 1 - start >= size and reach <= k and k + 1 < len(lines):
+            chunks.append(lines[start:k + 1])
+            start = k + 1
+    chunks.append(lines[start:])
+    return chunks
+
+
 def _plain_lines(writer: _Writer, name: str, out_name: str) -> list[str]:
     """A function without the workspace argument.  The constraint rows of a field whose flows
     solve M(q) f = p read a linear block: such a function makes a workspace of its own for the
@@ -319,12 +351,15 @@ def emit_c(program: Program, chunk_ops: int = ir.CHUNK_OPS, linked: bool = False
     context.update(
         param_fields=fields,
         param_defaults=[printer.doprint(p.default) for p in program.params],
+        default_chunks=_line_chunks(
+            [f"if (!given || !given[{j}]) p->{fields[j]} = {printer.doprint(p.default)};"
+             for j, p in enumerate(program.params)]),
         model={name: _function_context(writer, name, "out")
                for name in _model_functions(program)},
         plain={name: _plain_lines(writer, name, "out") for name in PLAIN_FUNCTIONS},
         plain_sizes={name: program.function(name).size for name in PLAIN_FUNCTIONS},
         sparse=SPARSE_FUNCTIONS,
-        consts=_plain_lines(writer, "consts", "p->c"),
+        consts=_line_chunks(_plain_lines(writer, "consts", "p->c")),
         init=_copy_loops(_plain_lines(writer, "init", "x0")),
         scene=_scene_context(program, c_string_literal, step_none="0.0"),
         **c_runtime_parts(),

@@ -20,7 +20,7 @@ import numpy as np
 import pytest
 import sympy as sp
 
-from bgc import backends, solvers
+from bgc import api, backends, solvers
 from bgc.backends import BackendError, compile_c, have_c_compiler, load_python_module, run_c
 from bgc.emit import (POW10_RANGE, EmitError, c_param_fields, c_string_literal, emit_c,
                       emit_python, pow10_table)
@@ -1084,3 +1084,43 @@ def test_digit_words_are_exact():
     assert code == 0, err
     assert out.splitlines()[-1].endswith(" bad=0"), out
 
+
+
+def test_straight_line_code_splits_where_no_temporary_crosses():
+    """The parameters' defaults and constants, when long, as chunks of about
+    PARAMETER_CHUNK lines, each ending where every temporary it defines is read no more."""
+    from bgc.emit import _line_chunks
+    short = [f"p->c[{k}] = 1.0/p->p_r{k};" for k in range(10)]
+    assert _line_chunks(short, 4) == [short[0:4], short[4:8], short[8:10]]
+    assert _line_chunks(short, 10) == [short]
+    held = ["const double w1 = p->p_a*p->p_b;", "p->c[0] = w1;", "p->c[1] = 2.0;",
+            "p->c[2] = w1 + 1.0;", "const double w2 = p->p_c;", "p->c[3] = w2;", "p->c[4] = 3.0;"]
+    assert _line_chunks(held, 2) == [held[0:4], held[4:6], held[6:]]
+
+
+@needs_cc
+def test_parameters_and_constants_in_several_functions_give_the_python_bytes(tmp_path,
+                                                                             monkeypatch):
+    """A ladder whose every element has its own parameter, its defaults and constants split
+    into functions of 8 lines (PARAMETER_CHUNK, 256 in use, made small here): the C program
+    gives the Python module's numbers, bit for bit, with the defaults and with a late
+    parameter given."""
+    from bgc import emit
+    monkeypatch.setattr(emit, "PARAMETER_CHUNK", 8)
+    n = 12
+    lines = ['model many "a ladder with a parameter per element"', "src : Se(1.0)"]
+    for k in range(1, n + 1):
+        before = "src" if k == 1 else f"n{k - 1}"
+        lines += [f"parameter r{k} = 1.0 + 0.01*{k}", f"parameter c{k} = 0.01*(1 + {k % 7})",
+                  f"j{k} : 1", f"res{k} : R(r{k})", f"n{k} : 0", f"cap{k} : C(c{k})",
+                  f"{before} -> j{k} -> n{k}", f"j{k} -> res{k}", f"n{k} -> cap{k}"]
+    lines += ["open : Sf(0)", f"n{n} -> open",
+              f"scene run {{ outputs cap1.q, cap{n}.q; time 0 .. 0.2 every 0.05 }}"]
+    model = tmp_path / "many.bg"
+    model.write_text("\n".join(lines) + "\n")
+    (text,) = emit_c(api.build(model, "run").program, linked=True).values()
+    assert "bgc_params_defaults_2(p, given);" in text and "bgc_params_update_2(p);" in text
+    for params in (None, {f"c{n - 1}": 0.02}):
+        t, y, _ = api.simulate(model, "run", backend="c", params=params)
+        t_py, y_py, _ = api.simulate(model, "run", backend="python", params=params)
+        assert np.array_equal(t, t_py) and np.array_equal(y, y_py) and np.all(y[1:] > 0)
