@@ -28,6 +28,7 @@ POW10_RANGE = (-24, 56)  # powers of ten for the C number formatter: |v| in abou
 C_RUNTIME = ("runtime.c", "drive.c", "erk.c", "stiff.c", "main.c", "batch.c")  # bgc/runtime/, in this order
 COPY_RUN = 64  # C: at least this many copies in a row (out[i] = x[j], ...) become one loop
 PARAMETER_CHUNK = 256  # C: lines of the parameters' defaults or constants in one function
+FUNCTION_LINES = 500  # C: lines of a model function's chunk in one function (emit._line_chunks)
 PLAN_ARRAYS = ("diag", "lptr", "lpos", "lrow", "uptr", "upos", "ucol", "upd", "prow", "pcol")
 ITERATION_ARRAYS = ("perm", "rowptr", "cols", "diag", "jpos", "dpos")  # sparse.IterationPlan
 MODEL_FUNCTIONS = ("rhs", "outputs", "jvp")  # take the workspace, may solve blocks; so do
@@ -214,7 +215,10 @@ def _function_context(writer: _Writer, name: str, out_name: str) -> dict:
         lines = []
         for s in chunk:
             lines += writer.statement(s, out_name)
-        chunks.append(_copy_loops(lines) if writer.c else lines)
+        if writer.c:  # (a long run of stores as loops, a long chunk as functions)
+            chunks += _line_chunks(_copy_loops(lines), FUNCTION_LINES)
+        else:
+            chunks.append(lines)
         for s in chunk:
             if isinstance(s, Newton) and s.block not in newtons:
                 newtons[s.block] = s
@@ -283,13 +287,15 @@ _NAME = re.compile(r"\bw\d+\b")
 
 
 def _line_chunks(lines: list[str], size: int | None = None) -> list[list[str]]:
-    """C: straight-line code of one statement a line (the parameters' defaults, the
-    constants) as consecutive chunks of about `size` lines, each ending where no temporary
-    (`const double wK = ...;`) is read after it, so that each can be a function of its own
-    run in order.  A C optimiser's alias walks over a function's stores through the same
-    pointer grow as their number squared: 2 000 defaults and 1 000 constants of a model
-    with a parameter per section cost gcc -O1 half its compile in one function each.  One
-    chunk (the code as it was) when it is no longer than size (default PARAMETER_CHUNK)."""
+    """C: a function's lines (the parameters' defaults, the constants, a chunk of a model
+    function) as consecutive chunks of about `size` lines, each ending between two
+    statements outside any braces where no temporary (`const double wK = ...;`) is read
+    after it, so that each can be a function of its own, run in order.  A C optimiser's
+    alias walks over a function's stores grow as their number squared: 2 000 defaults and
+    1 000 constants of a model with a parameter per section cost gcc -O1 half its compile
+    in one function each, as do the 2 000 stores that assemble one block of the 64-section
+    ladder with symbolic resistances.  One chunk (the lines as they were) when there are at
+    most size (default PARAMETER_CHUNK)."""
     size = PARAMETER_CHUNK if size is None else size
     if len(lines) <= size:
         return [lines]
@@ -297,12 +303,14 @@ def _line_chunks(lines: list[str], size: int | None = None) -> list[list[str]]:
     for k, line in enumerate(lines):
         for name in _NAME.findall(line):
             last[name] = k
-    chunks, start, reach = [], 0, -1
+    chunks, start, reach, depth = [], 0, -1, 0
     for k, line in enumerate(lines):
         m = _TEMPORARY.match(line)
         if m:
             reach = max(reach, last.get(m.group(1), k))
-        if k + 1 - start >= size and reach <= k and k + 1 < len(lines):
+        depth += line.count("{") - line.count("}")
+        if k + 1 - start >= size and reach <= k and depth == 0 and k + 1 < len(lines) \
+                and line.endswith((";", "}")) and not lines[k + 1].startswith(" "):
             chunks.append(lines[start:k + 1])
             start = k + 1
     chunks.append(lines[start:])

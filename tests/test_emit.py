@@ -1124,3 +1124,43 @@ def test_parameters_and_constants_in_several_functions_give_the_python_bytes(tmp
         t, y, _ = api.simulate(model, "run", backend="c", params=params)
         t_py, y_py, _ = api.simulate(model, "run", backend="python", params=params)
         assert np.array_equal(t, t_py) and np.array_equal(y, y_py) and np.all(y[1:] > 0)
+
+
+def test_a_long_chunk_splits_between_statements_outside_braces():
+    """A split never falls inside braces (a loop of stores), between an `if` and the line it
+    guards, nor where a temporary is still to be read."""
+    from bgc.emit import _line_chunks
+    lines = ["wv[0] = x[0];", "{", "    int bgc_k;", "    for (bgc_k = 0; bgc_k < 9; ++bgc_k)",
+             "        out[bgc_k] = x[bgc_k];", "}", "wv[1] = x[1];",
+             "if (bgc_block_solve(w, 0, t))", "    return 1;", "const double w3 = wv[5];",
+             "out[0] = wv[2];", "out[1] = w3;", "out[2] = 1.0;"]
+    assert _line_chunks(lines, 1) == [lines[:1], lines[1:6], lines[6:7], lines[7:9],
+                                      lines[9:12], lines[12:]]
+
+
+@needs_cc
+def test_model_functions_split_into_short_functions_write_the_python_bytes(monkeypatch):
+    """A right side in chunks of few operations, each chunk's lines in functions of at most
+    8 (FUNCTION_LINES, 500 in use, made small here), block solves among them: the C program
+    writes the Python module's bytes."""
+    from bgc import emit
+    ladder = ['model rl "resistor ladder with symbolic resistances"', "parameter V0 = 10.0",
+              "parameter Cc = 0.2", "src : Se(V0)", "cap : C(Cc)"]
+    before = "src"
+    for k in range(1, 9):
+        ladder += [f"parameter Rs{k} = {1 + k / 10}", f"parameter Rp{k} = {2 + k / 20}",
+                   f"s{k} : 1", f"rs{k} : R(Rs{k})", f"n{k} : 0", f"rp{k} : R(Rp{k})",
+                   f"{before} -> s{k} -> n{k}", f"s{k} -> rs{k}", f"n{k} -> rp{k}"]
+        before = f"n{k}"
+    ladder += ["last : 1", "rl : R(Rs1)", f"{before} -> last -> cap", "last -> rl"]
+    program = api.build(api.Source("rl.bg", "\n".join(ladder) + "\n"), None).program
+    outs = []
+    for lines in (500, 8):
+        monkeypatch.setattr(emit, "FUNCTION_LINES", lines)
+        (text,) = emit_c(program, chunk_ops=30).values()
+        outs.append(run_c(compile_c(text), ["--t-end", "0.5"]))
+        assert len(re.findall(r"^static int bgc_rhs_\d+\(", text, re.M)) > (6 if lines == 8 else 0)
+    (py,) = emit_python(program, chunk_ops=30).values()
+    from bgc.backends import run_python
+    outs.append(run_python(py, ["--t-end", "0.5"]))
+    assert outs[0][0] == 0 and outs[0] == outs[1] == outs[2], outs[0][2]
