@@ -49,6 +49,7 @@ from dataclasses import dataclass, field
 import sympy as sp
 
 from .algebra import Max, Min
+from .canonical import new
 from .run import RunSettings
 from .sparse import IterationPlan, LUPlan
 
@@ -174,130 +175,6 @@ def rebuild(e, args):
     if cls is sp.Add or cls is sp.Mul:
         return new(cls, args)
     return e.func(*args)
-
-
-# Add(*args) and Mul(*args) without SymPy's general flattening where it would only sort:
-# the passes rewrite expressions whose parts become new symbols (constants, temporaries,
-# renamed variables), and SymPy's constructor spends most of its time finding that nothing
-# combines.  `new` takes the short way only for arguments it has checked that the
-# constructor would keep as they are, then sorts them with the constructor's own key, in the
-# constructor's own starting order: the result is the constructor's, node for node (the
-# same arguments in the same order), which `tests/test_ir.py` checks against SymPy on whole
-# models.  Anything else (a number that is not a finite rational or float, a nested sum or
-# product, two terms or factors that could combine, a sum times a number, exp, I, infinities)
-# goes to the constructor.
-_SORT_KEY = sp.core.basic._args_sortkey
-_ZERO, _ONE = sp.S.Zero, sp.S.One
-_CANONICAL: dict = {}  # a term c*s or a factor b**e -> whether the constructor rebuilds it as is
-_CANONICAL_MAX = 1 << 16
-VERIFY_NEW = False  # tests: compare every short-way result with the constructor's
-
-
-def _finite_number(a) -> bool:
-    return isinstance(a, (sp.Rational, sp.Float)) and a.is_finite
-
-
-def _plain(a) -> bool:
-    """A symbol, an indexed variable, or a function applied (not exp, whose base is E)."""
-    return a.is_Symbol or a.is_Indexed or (isinstance(a, sp.Function)
-                                           and not isinstance(a, sp.exp))
-
-
-def _rebuilt_as_is(a, make) -> bool:
-    """Whether make() (how Add's or Mul's flattening rebuilds the term or factor a) gives a."""
-    found = _CANONICAL.get(a)
-    if found is None:
-        if len(_CANONICAL) > _CANONICAL_MAX:
-            _CANONICAL.clear()
-        b = make()
-        found = _CANONICAL[a] = type(b) is type(a) and b == a
-    return found
-
-
-def _pow_key(a):
-    """The base of a factor a of a product, when the constructor keeps a as it is; else None.
-    (Mul.flatten: a factor b**e goes in as (b, e), e split as c*t and rebuilt; b**e rebuilt.)"""
-    if _plain(a) or a.is_Add:
-        return a
-    if a.is_Pow:
-        b, e = a.args
-        if b.is_Number or b.is_NumberSymbol or not b.is_commutative:
-            return None
-        c, t = e.as_coeff_Mul()
-
-        def make():
-            return sp.Pow(b, c * t)
-
-        return b if _rebuilt_as_is(a, make) else None
-    return None
-
-
-def _term_key(a):
-    """The rest s of a term a = c*s of a sum, when the constructor keeps a as it is; else
-    None.  (Add.flatten: a product goes in as its coefficient and rest, rebuilt as c*s.)"""
-    if _plain(a):
-        return a
-    if a.is_Pow:
-        return None if a.base.is_Number or a.base.is_NumberSymbol else a
-    if a.is_Mul:
-        c, s = a.as_coeff_Mul()
-        if c is _ONE:
-            return a if s is a else None
-        if not _finite_number(c) or c.is_zero:
-            return None
-        if len(a.args) > 2 or s.is_Add:
-            return s  # rebuilt from the same arguments, unevaluated
-        if s.is_Mul:
-            return None
-        return s if _rebuilt_as_is(a, lambda: new(sp.Mul, (c, s))) else None
-    return None
-
-
-def new(cls, args):
-    """cls(*args) for cls Add or Mul: the short way where it is the same (see above)."""
-    identity = _ZERO if cls is sp.Add else _ONE
-    number = None
-    rest = []
-    keys = set()
-    for a in args:
-        if a is identity:
-            continue
-        if a.is_Number:
-            if number is not None or not _finite_number(a):
-                return _checked(cls, args, None)
-            number = a
-            continue
-        if not isinstance(a, sp.Expr) or a.is_commutative is not True:
-            return _checked(cls, args, None)
-        key = _term_key(a) if cls is sp.Add else _pow_key(a)
-        if key is None or key in keys:
-            return _checked(cls, args, None)
-        keys.add(key)
-        rest.append(a)
-    if len(rest) + (number is not None) < 2:
-        return _checked(cls, args, None)
-    if cls is sp.Add:
-        coeff = _ZERO if number is None else _ZERO + number
-        keep = coeff is not _ZERO
-    else:
-        coeff = _ONE if number is None else _ONE * number
-        if coeff.is_zero or (len(rest) == 1 and rest[0].is_Add):
-            return _checked(cls, args, None)  # a zero product; a number times a sum distributes
-        keep = coeff is not _ONE
-    rest.sort(key=_SORT_KEY)
-    if keep:
-        rest.insert(0, coeff)
-    return _checked(cls, args, cls._from_args(rest, True))
-
-
-def _checked(cls, args, fast):
-    if fast is None:
-        return cls(*args)
-    if VERIFY_NEW:
-        slow = cls(*args)
-        if not (slow == fast and slow.args == fast.args and type(slow) is type(fast)):
-            raise AssertionError(f"bgc bug: {cls.__name__}{tuple(args)} is {slow}, not {fast}")
-    return fast
 
 
 def substitute(expr, mapping: dict, memo: dict | None = None):

@@ -163,9 +163,10 @@ def hoist_constants(functions: list[Function]) -> tuple[tuple[sp.Expr, ...], lis
                 continue
             if (e.is_Add or e.is_Mul) and sum(1 for k in kids if k[1]) > 1:
                 fixed = [a for a, k in zip(e.args, kids) if k[1]]
-                group = e.func(*fixed)
+                group = ir.new(e.func, fixed)
                 varying = [k[0] for k in kids if not k[1]]
-                new = e.func(constant(group, any(k[2] for k in kids if k[1])), *varying)
+                new = ir.new(e.func, [constant(group, any(k[2] for k in kids if k[1]))]
+                             + varying)
             else:
                 new = ir.rebuild(e, [constant(a, k[2]) if k[1] else k[0]
                                      for a, k in zip(e.args, kids)])
