@@ -16,7 +16,6 @@ import random
 import mpmath  # SymPy's own dependency: the 30-digit determinant of is_singular
 import sympy as sp
 
-from .canonical import xreplace
 from .differentiate import partial
 from .resources import MAX_EXPANDED_TERMS, expanded_terms, fits
 
@@ -251,11 +250,10 @@ def is_singular(rows: int, entries, points: int = 3, seed: int = 0) -> bool:
     with mpmath.workdps(30):
         for _ in range(points):
             values = {s: sp.Float(rng.uniform(0.3, 1.7), 30) for s in symbols}
-            a = [[mpmath.mpf(0)] * rows for _ in range(rows)]
-            memo: dict = {}
+            a = mpmath.zeros(rows, rows)
             for i, j, e in entries:
                 try:
-                    a[i][j] = mpmath.mpf(sp.Float(_at(e, values, memo).evalf(30), 30))
+                    a[i, j] = mpmath.mpf(sp.Float(e.xreplace(values).evalf(30), 30))
                 except (TypeError, ValueError):
                     return False  # not a real number there: no conclusion
             if not _loses_rank(a, rows):
@@ -264,36 +262,28 @@ def is_singular(rows: int, entries, points: int = 3, seed: int = 0) -> bool:
 
 
 def _loses_rank(a, n: int) -> bool:
-    """Elimination with partial pivoting of the n x n matrix a (rows of mpmath numbers), its
-    rows first scaled to unit length: whether a pivot falls below 1e-20 (a zero row counts)."""
+    """Elimination with partial pivoting of the n x n mpmath matrix a, its rows first scaled to
+    unit length: whether a pivot falls below 1e-20 (a zero row counts)."""
     tiny = mpmath.mpf("1e-20")
     for i in range(n):
-        row = a[i]
-        norm = mpmath.sqrt(sum(row[j] ** 2 for j in range(n)))
+        norm = mpmath.sqrt(sum(a[i, j] ** 2 for j in range(n)))
         if norm == 0:
             return True
         for j in range(n):
-            row[j] /= norm
+            a[i, j] /= norm
     for k in range(n):
-        piv = max(range(k, n), key=lambda i: abs(a[i][k]))
-        if abs(a[piv][k]) < tiny:
+        piv = max(range(k, n), key=lambda i: abs(a[i, k]))
+        if abs(a[piv, k]) < tiny:
             return True
         if piv != k:
-            a[k], a[piv] = a[piv], a[k]
-        top = a[k]
+            for j in range(n):
+                a[k, j], a[piv, j] = a[piv, j], a[k, j]
         for i in range(k + 1, n):
-            row = a[i]
-            f = row[k] / top[k]
+            f = a[i, k] / a[k, k]
             if f:
                 for j in range(k + 1, n):
-                    row[j] -= f * top[j]
+                    a[i, j] -= f * a[k, j]
     return False
-
-
-def _at(expr, point: dict, memo: dict):
-    """expr.xreplace(point), node for node as SymPy builds it, with the subexpressions that the
-    entries of one matrix share (memo, for one point) rebuilt once (bgc.canonical.xreplace)."""
-    return xreplace(expr, point, memo)
 
 
 def is_symmetric(entries, points: int = 2, seed: int = 1) -> bool:
@@ -310,11 +300,10 @@ def is_symmetric(entries, points: int = 2, seed: int = 1) -> bool:
     symbols = sorted(set().union(*[e.free_symbols for e in values.values()]), key=str)
     for _ in range(points):
         point = {s: sp.Float(rng.uniform(0.3, 1.7), 20) for s in symbols}
-        memo: dict = {}
         for i, j in pairs:
             try:
-                a = complex(_at(values[(i, j)], point, memo).evalf(20))
-                b = complex(_at(values[(j, i)], point, memo).evalf(20))
+                a = complex(values[(i, j)].xreplace(point).evalf(20))
+                b = complex(values[(j, i)].xreplace(point).evalf(20))
             except (TypeError, ValueError, ZeroDivisionError):
                 return False
             if not abs(a - b) <= 1e-12 * (abs(a) + abs(b)):

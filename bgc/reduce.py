@@ -33,7 +33,6 @@ import mpmath  # SymPy's own: a number beyond a double, shown
 import sympy as sp
 
 from . import blt, ir
-from .canonical import xreplace
 from .ir import Assign, BlockPlan, Newton, Solve, Store, defines
 from .algebra import (antiderivative, expand_bounded, is_singular, is_symmetric, is_zero,
                       solve_for)
@@ -220,14 +219,14 @@ def _leaf_forms(targets, defs, expandable, memo):
                         stack.append((u, False))
                 continue
             on_path.discard(s)
-            memo[s] = xreplace(expr, {u: memo[u] for u in inner}) if inner else expr
+            memo[s] = expr.xreplace({u: memo[u] for u in inner}) if inner else expr
 
 
 def _leaf(expr, defs, expandable, memo=None):
     memo = {} if memo is None else memo
     inner = [u for u in expr.free_symbols if expandable(u)]
     _leaf_forms(inner, defs, expandable, memo)
-    return xreplace(expr, {u: memo[u] for u in inner}) if inner else expr
+    return expr.xreplace({u: memo[u] for u in inner}) if inner else expr
 
 
 # ---------------------------------------------------------------- constraints
