@@ -150,3 +150,32 @@ def _checked(cls, args, fast):
         if not (slow == fast and slow.args == fast.args and type(slow) is type(fast)):
             raise AssertionError(f"bgc bug: {cls.__name__}{tuple(args)} is {slow}, not {fast}")
     return fast
+
+
+def xreplace(expr, rule: dict):
+    """expr.xreplace(rule), node for node as SymPy builds it (every changed node rebuilt by its
+    constructor, evaluated; sums and products by `new`), with an explicit stack."""
+    memo: dict = {}
+    stack = [(expr, False)]
+    while stack:
+        e, ready = stack.pop()
+        if e in memo:
+            continue
+        if e in rule:
+            memo[e] = rule[e]
+            continue
+        args = e.args
+        if not args:
+            memo[e] = e
+            continue
+        if not ready:
+            stack.append((e, True))
+            stack.extend((a, False) for a in args if a not in memo)
+            continue
+        new_args = [memo[a] for a in args]
+        if all(a is b for a, b in zip(new_args, args)):
+            memo[e] = e
+        else:
+            cls = type(e)
+            memo[e] = new(cls, new_args) if cls is sp.Add or cls is sp.Mul else e.func(*new_args)
+    return memo[expr]

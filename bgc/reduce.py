@@ -33,6 +33,7 @@ import mpmath  # SymPy's own: a number beyond a double, shown
 import sympy as sp
 
 from . import blt, ir
+from .canonical import new, xreplace
 from .ir import Assign, BlockPlan, Newton, Solve, Store, defines
 from .algebra import (antiderivative, expand_bounded, is_singular, is_symmetric, is_zero,
                       solve_for)
@@ -219,14 +220,14 @@ def _leaf_forms(targets, defs, expandable, memo):
                         stack.append((u, False))
                 continue
             on_path.discard(s)
-            memo[s] = expr.xreplace({u: memo[u] for u in inner}) if inner else expr
+            memo[s] = xreplace(expr, {u: memo[u] for u in inner}) if inner else expr
 
 
 def _leaf(expr, defs, expandable, memo=None):
     memo = {} if memo is None else memo
     inner = [u for u in expr.free_symbols if expandable(u)]
     _leaf_forms(inner, defs, expandable, memo)
-    return expr.xreplace({u: memo[u] for u in inner}) if inner else expr
+    return xreplace(expr, {u: memo[u] for u in inner}) if inner else expr
 
 
 # ---------------------------------------------------------------- constraints
@@ -656,7 +657,7 @@ class _Blocks:
         matrix = self._forward(z, body, partials, prelude)
         at_zero = {s: sp.Integer(0) for s in z}
         for a in body:
-            value = a.expr.xreplace(at_zero)
+            value = xreplace(a.expr, at_zero)
             at_zero[a.target] = self._named(value, prelude, "z0")
         rhs = tuple(-r.xreplace(at_zero) for r in residuals)
         return tuple(prelude), tuple(matrix), rhs
@@ -813,7 +814,8 @@ def _listed(rows) -> str:
 
 def _chain(parts, tangent, k):
     """d expr / d z_k from expr's partials and its inputs' tangents."""
-    return sp.Add(*[d * tangent[(u, k)] for u, d in parts.items() if (u, k) in tangent])
+    return new(sp.Add, [new(sp.Mul, (d, tangent[(u, k)])) for u, d in parts.items()
+                        if (u, k) in tangent])
 
 
 def _all_partials(z, body, residuals):

@@ -189,3 +189,17 @@ def test_sums_and_products_built_the_short_way_are_sympys(monkeypatch):
     api.build(api.Source("chain3.bg", families.pendulum_chain(3)), "swing")
     api.build(api.Source("ladder.bg", families.resistor_ladder(4)))
     assert sum(short) > 0.8 * len(short)  # (most go the short way)
+
+
+def test_substitution_the_short_way_is_sympys_xreplace():
+    """bgc.canonical.xreplace (reduce's leaf forms): node for node what SymPy's xreplace builds,
+    functions evaluated (an unevaluated Abs too), sums and products merged where they meet."""
+    x, y, z = sp.symbols("x y z", real=True)
+    exprs = [x + y, x * y + 2 * z, sp.Abs(x - y, evaluate=False) * z, sp.sin(x) ** 2 + x * y,
+             sp.Piecewise((x, y > 0), (z, True)) + 1, (x + y) ** -1 * z, x]
+    for rule in ({x: y}, {x: -y, z: 2 * y}, {x: sp.Integer(0)}, {y: x + z, z: sp.Float(1.5)},
+                 {x: sp.Integer(-3)}, {}):
+        for e in exprs:
+            built, expected = canonical.xreplace(e, rule), e.xreplace(rule)
+            assert type(built) is type(expected) and built == expected, (e, rule)
+            assert built.args == expected.args, (e, rule)
