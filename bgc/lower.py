@@ -256,11 +256,12 @@ def _propagate_copies(f: Function) -> Function:
     """Assignments that only rename, negate or name a constant, substituted into their uses
     (hoisting and temporaries leave some: w6 = c[2], w16 = w26)."""
     sub: dict = {}
+    memo: dict = {}  # (a variable is in sub before any statement that reads it: one memo)
     body = []
     for s in f.body:
         if sub:
-            s = ir.map_statement(s, lambda e: ir.substitute(e, sub) if ir.free_symbols(e) & sub.keys()
-                               else e)
+            s = ir.map_statement(s, lambda e: ir.substitute(e, sub, memo)
+                                 if ir.free_symbols(e) & sub.keys() else e)
         if isinstance(s, Assign) and ir.trivial(s.expr):
             sub[s.target] = s.expr
             continue
