@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import sympy as sp
 from sympy.core.sympify import _sympify  # the constructor's strict conversion of a number
+from sympy.functions.elementary.exponential import ExpBase as _ExpBase  # exp, exp_polar
 
 _SORT_KEY = sp.core.basic._args_sortkey
 _ZERO, _ONE = sp.S.Zero, sp.S.One
@@ -34,9 +35,10 @@ def _finite_number(a) -> bool:
 
 
 def _plain(a) -> bool:
-    """A symbol, an indexed variable, or a function applied (not exp, whose base is E)."""
+    """A symbol, an indexed variable, or a function applied (not exp, whose base is E, nor
+    exp_polar: Mul takes them as powers)."""
     return a.is_Symbol or a.is_Indexed or (isinstance(a, sp.Function)
-                                           and not isinstance(a, sp.exp))
+                                           and not isinstance(a, _ExpBase))
 
 
 def _rebuilt_as_is(a, make) -> bool:
@@ -104,7 +106,7 @@ def new(cls, args):
         a, b = seq
         if a.is_Rational or b.is_Rational:
             a, b = (b, a) if b.is_Rational else (a, b)
-            if not a.is_zero and b.as_coeff_Mul()[1].is_Add:
+            if not a.is_zero and isinstance(b, sp.Expr) and b.as_coeff_Mul()[1].is_Add:
                 return _checked(cls, args, None)
     coeff = _ZERO if add else _ONE
     rest = []

@@ -167,7 +167,7 @@ def test_sums_and_products_built_the_short_way_are_sympys(monkeypatch):
                  (x, y + z), (half, sp.Add(1.5, x), y), (2 * x, sp.Add(y, -2 * x)),
                  (sp.Float(0.1), sp.Float(0.2), sp.Add(sp.Float(0.3), x, evaluate=False))],
         sp.Mul: [(x, y), (2, x + y), (2.0, x + y), (-1, x + y), (x + y, z), (x, x ** 2),
-                 (sp.exp(x), sp.exp(y)), (2, 3, x), (sp.sqrt(2), sp.sqrt(3)), (x, 1 / x),
+                 (sp.exp(x), sp.exp(y)), (sp.exp_polar(x), sp.exp_polar(y)), (2, 3, x), (sp.sqrt(2), sp.sqrt(3)), (x, 1 / x),
                  (-1, x), (sp.Float(1.0), x), (0, x), (sp.I, x), (2 ** x, 3 ** x),
                  (x ** 2, y ** -1, w), (unevaluated, unevaluated ** 2), (2 * x, y),
                  (sp.Rational(1, 2), w, u ** -2, X[0] + P[1]), (half, sp.oo, x),
