@@ -16,6 +16,8 @@ from __future__ import annotations
 
 import sympy as sp
 
+from .canonical import new
+
 ZERO = sp.S.Zero
 _PIECEWISE_CONSTANT = (sp.sign, sp.Heaviside)  # derivative zero almost everywhere
 
@@ -69,13 +71,13 @@ def _rule(e, d):
     if all(is_zero(x) for x in d):
         return ZERO
     if e.is_Add:
-        return sp.Add(*[x for x in d if not is_zero(x)])
+        return new(sp.Add, [x for x in d if not is_zero(x)])
     if e.is_Mul:
         terms = []
         for k, dk in enumerate(d):
             if not is_zero(dk):
-                terms.append(sp.Mul(*(args[:k] + (dk,) + args[k + 1:])))
-        return sp.Add(*terms)
+                terms.append(new(sp.Mul, args[:k] + (dk,) + args[k + 1:]))
+        return new(sp.Add, terms)
     if e.is_Pow:
         base, exp = args
         db, dx = d

@@ -49,6 +49,7 @@ from dataclasses import dataclass, field
 import sympy as sp
 
 from .algebra import Max, Min
+from .canonical import new
 from .run import RunSettings
 from .sparse import IterationPlan, LUPlan
 
@@ -170,6 +171,9 @@ def rebuild(e, args):
         return e
     if isinstance(e, _UNEVALUATED):
         return e.func(*args, evaluate=False)
+    cls = type(e)
+    if cls is sp.Add or cls is sp.Mul:
+        return new(cls, args)
     return e.func(*args)
 
 

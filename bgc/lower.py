@@ -163,9 +163,10 @@ def hoist_constants(functions: list[Function]) -> tuple[tuple[sp.Expr, ...], lis
                 continue
             if (e.is_Add or e.is_Mul) and sum(1 for k in kids if k[1]) > 1:
                 fixed = [a for a, k in zip(e.args, kids) if k[1]]
-                group = e.func(*fixed)
+                group = ir.new(e.func, fixed)
                 varying = [k[0] for k in kids if not k[1]]
-                new = e.func(constant(group, any(k[2] for k in kids if k[1])), *varying)
+                new = ir.new(e.func, [constant(group, any(k[2] for k in kids if k[1]))]
+                             + varying)
             else:
                 new = ir.rebuild(e, [constant(a, k[2]) if k[1] else k[0]
                                      for a, k in zip(e.args, kids)])
@@ -255,11 +256,12 @@ def _propagate_copies(f: Function) -> Function:
     """Assignments that only rename, negate or name a constant, substituted into their uses
     (hoisting and temporaries leave some: w6 = c[2], w16 = w26)."""
     sub: dict = {}
+    memo: dict = {}  # (a variable is in sub before any statement that reads it: one memo)
     body = []
     for s in f.body:
         if sub:
-            s = ir.map_statement(s, lambda e: ir.substitute(e, sub) if ir.free_symbols(e) & sub.keys()
-                               else e)
+            s = ir.map_statement(s, lambda e: ir.substitute(e, sub, memo)
+                                 if ir.free_symbols(e) & sub.keys() else e)
         if isinstance(s, Assign) and ir.trivial(s.expr):
             sub[s.target] = s.expr
             continue

@@ -33,6 +33,7 @@ import mpmath  # SymPy's own: a number beyond a double, shown
 import sympy as sp
 
 from . import blt, ir
+from .canonical import new, xreplace
 from .ir import Assign, BlockPlan, Newton, Solve, Store, defines
 from .algebra import (antiderivative, expand_bounded, is_singular, is_symmetric, is_zero,
                       solve_for)
@@ -219,14 +220,14 @@ def _leaf_forms(targets, defs, expandable, memo):
                         stack.append((u, False))
                 continue
             on_path.discard(s)
-            memo[s] = expr.xreplace({u: memo[u] for u in inner}) if inner else expr
+            memo[s] = xreplace(expr, {u: memo[u] for u in inner}) if inner else expr
 
 
 def _leaf(expr, defs, expandable, memo=None):
     memo = {} if memo is None else memo
     inner = [u for u in expr.free_symbols if expandable(u)]
     _leaf_forms(inner, defs, expandable, memo)
-    return expr.xreplace({u: memo[u] for u in inner}) if inner else expr
+    return xreplace(expr, {u: memo[u] for u in inner}) if inner else expr
 
 
 # ---------------------------------------------------------------- constraints
@@ -656,7 +657,7 @@ class _Blocks:
         matrix = self._forward(z, body, partials, prelude)
         at_zero = {s: sp.Integer(0) for s in z}
         for a in body:
-            value = a.expr.xreplace(at_zero)
+            value = xreplace(a.expr, at_zero)
             at_zero[a.target] = self._named(value, prelude, "z0")
         rhs = tuple(-r.xreplace(at_zero) for r in residuals)
         return tuple(prelude), tuple(matrix), rhs
@@ -813,7 +814,8 @@ def _listed(rows) -> str:
 
 def _chain(parts, tangent, k):
     """d expr / d z_k from expr's partials and its inputs' tangents."""
-    return sp.Add(*[d * tangent[(u, k)] for u, d in parts.items() if (u, k) in tangent])
+    return new(sp.Add, [new(sp.Mul, (d, tangent[(u, k)])) for u, d in parts.items()
+                        if (u, k) in tangent])
 
 
 def _all_partials(z, body, residuals):
@@ -1143,11 +1145,13 @@ class _NotNumeric(Exception):
     """An expression that the initial values do not make a number (a Newton block's unknown)."""
 
 
-def _number(expr, values) -> float:
+def _number(expr, values, done=None) -> float:
     """expr in doubles, given the doubles of its symbols (values: symbol -> float); a walk of
     the tree without SymPy's arithmetic (the check at the start evaluates a whole model once).
-    Raises _NotNumeric for a symbol without a value; NaN where a function is undefined."""
-    done: dict = {}
+    Raises _NotNumeric for a symbol without a value; NaN where a function is undefined.
+    done (shared by the expressions of one evaluation, whose symbols each take one value):
+    the values of the subexpressions already walked."""
+    done = {} if done is None else done
     stack = [(expr, False)]
     while stack:
         e, ready = stack.pop()
@@ -1215,21 +1219,22 @@ def evaluate(reduced: Reduced, values: dict, exprs) -> list[float]:
         except TypeError:
             raise _NotNumeric(k) from None
     out = [0.0] * len(exprs)
+    done: dict = {}  # (each symbol is assigned once, before what reads it)
     for s in body:
         if isinstance(s, Assign):
-            v[s.target] = _number(s.expr, v)
+            v[s.target] = _number(s.expr, v, done)
         elif isinstance(s, Store):
-            out[s.index] = _number(s.expr, v)
+            out[s.index] = _number(s.expr, v, done)
         elif isinstance(s, Solve):
             import numpy  # (here: only models whose rows go through a block need it)
             plan = reduced.plans[s.block]
             m = len(s.unknowns)
             A = numpy.zeros((m, m))
             for (i, k), e in zip(plan.pattern, s.matrix):
-                A[i, k] = _number(e, v)
+                A[i, k] = _number(e, v, done)
             b = numpy.zeros(m)
             for r, e in zip(plan.lu.row_of, s.rhs):
-                b[r] = _number(e, v)
+                b[r] = _number(e, v, done)
             if not numpy.all(numpy.isfinite(A)):
                 raise _NotNumeric(s)
             if numpy.linalg.matrix_rank(A) < m:

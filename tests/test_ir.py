@@ -2,17 +2,21 @@
 pass, one forward-mode pass that every derived function comes from."""
 from __future__ import annotations
 
+import importlib.util
 from pathlib import Path
 
 import sympy as sp
 
-from bgc import api, ir
+from bgc import api, canonical, ir
 from bgc.differentiate import directional
 from bgc.ir import P, T, V, W, X, Assign, Newton, Param, Resolve, SceneSettings, Solve, Store
 from bgc.lower import explicit_program, with_tangent
 
 ROOT = Path(__file__).resolve().parent.parent
 SCENE = SceneSettings(0.0, 1.0, 0.1, "dopri5", 1e-6, 1e-9, None)
+_spec = importlib.util.spec_from_file_location("families", ROOT / "benchmarks" / "families.py")
+families = importlib.util.module_from_spec(_spec)
+_spec.loader.exec_module(families)
 
 
 def evaluate(f: ir.Function, values: dict) -> list:
@@ -142,3 +146,60 @@ def test_remembered_integral_floats_are_integers():
     assert ir.integral_floats(outer) == (2 * sp.sin(a) + sp.Float(0.5)) * X[0] + 3
     assert ir.integral_floats(sp.Float(2.0 ** 60) * a) == sp.Float(2.0 ** 60) * a  # beyond 2^53
     assert ir.integral_floats(a + 1) is not None and ir.integral_floats(X[1]) == X[1]
+
+
+def test_sums_and_products_built_the_short_way_are_sympys(monkeypatch):
+    """bgc.canonical.new builds Add and Mul without SymPy's flattening where it would only sort: node
+    for node (the same arguments in the same order) what SymPy's constructor builds, on cases
+    where terms or factors combine, a number multiplies a sum, or the numbers are special, and
+    on every sum and product the passes build while compiling two whole models."""
+    x, y, z = sp.symbols("x y z", real=True)
+    w, u = W(3), W(12)
+    half = sp.Float(0.5)
+    unevaluated = sp.Abs(x, evaluate=False)
+    cases = {
+        sp.Add: [(x, y), (x, 2 * x), (x,), (), (0, x), (sp.S.Zero, -2), (x, 1), (2.5, x), (3, x * y), (half, x, -y), (x, x + y), (x ** 2, x),
+                 (sp.sqrt(2), 3), (sp.Float(0.0), x), (sp.Mul(2, x + y, evaluate=False), z),
+                 (sp.Mul(1, x, evaluate=False), y), (sp.oo, x), (sp.nan, x), (sp.zoo, x),
+                 (sp.exp(x), sp.exp(y)), (X[0], -X[1], 2 * P[0] * w), (w, u, -w * u),
+                 (sp.Pow(2, 3, evaluate=False), x), (sp.Rational(1, 3) * w, 2.5 * u),
+                 (unevaluated, -unevaluated), (sp.sin(x), -sp.sin(x) * y, sp.cos(x)),
+                 (x, y + z), (half, sp.Add(1.5, x), y), (2 * x, sp.Add(y, -2 * x)),
+                 (sp.Float(0.1), sp.Float(0.2), sp.Add(sp.Float(0.3), x, evaluate=False))],
+        sp.Mul: [(x, y), (2, x + y), (2.0, x + y), (-1, x + y), (x + y, z), (x, x ** 2),
+                 (sp.exp(x), sp.exp(y)), (sp.exp_polar(x), sp.exp_polar(y)), (2, 3, x), (sp.sqrt(2), sp.sqrt(3)), (x, 1 / x),
+                 (-1, x), (sp.Float(1.0), x), (0, x), (sp.I, x), (2 ** x, 3 ** x),
+                 (x ** 2, y ** -1, w), (unevaluated, unevaluated ** 2), (2 * x, y),
+                 (sp.Rational(1, 2), w, u ** -2, X[0] + P[1]), (half, sp.oo, x),
+                 (sp.Piecewise((x, y > 0), (0, True)), w), (sp.Abs(x), X[2]),
+                 (2, sp.Mul(3, x + y, evaluate=False)), (x, sp.Mul(2, x + y, evaluate=False)),
+                 (x * y, 2 * z), (3, 2 * x * y), (x,), (), (sp.S.One, x), (2, sp.S.One), (x, y * x ** -1), (half, 3 * w, u),
+                 (sp.Float(0.1), sp.Mul(sp.Float(0.3), x, evaluate=False), sp.Float(0.7))],
+    }
+    for cls, all_args in cases.items():
+        for args in all_args:
+            built, expected = canonical.new(cls, args), cls(*args)
+            assert type(built) is type(expected) and built == expected, (cls, args)
+            assert built.args == expected.args, (cls, args)
+    monkeypatch.setattr(canonical, "VERIFY", True)  # every short way checked against SymPy's
+    short = []
+    checked = canonical._checked
+    monkeypatch.setattr(canonical, "_checked", lambda cls, args, fast: short.append(fast is not None)
+                        or checked(cls, args, fast))
+    api.build(api.Source("chain3.bg", families.pendulum_chain(3)), "swing")
+    api.build(api.Source("ladder.bg", families.resistor_ladder(4)))
+    assert sum(short) > 0.8 * len(short)  # (most go the short way)
+
+
+def test_substitution_the_short_way_is_sympys_xreplace():
+    """bgc.canonical.xreplace (reduce's leaf forms): node for node what SymPy's xreplace builds,
+    functions evaluated (an unevaluated Abs too), sums and products merged where they meet."""
+    x, y, z = sp.symbols("x y z", real=True)
+    exprs = [x + y, x * y + 2 * z, sp.Abs(x - y, evaluate=False) * z, sp.sin(x) ** 2 + x * y,
+             sp.Piecewise((x, y > 0), (z, True)) + 1, (x + y) ** -1 * z, x]
+    for rule in ({x: y}, {x: -y, z: 2 * y}, {x: sp.Integer(0)}, {y: x + z, z: sp.Float(1.5)},
+                 {x: sp.Integer(-3)}, {}):
+        for e in exprs:
+            built, expected = canonical.xreplace(e, rule), e.xreplace(rule)
+            assert type(built) is type(expected) and built == expected, (e, rule)
+            assert built.args == expected.args, (e, rule)
