@@ -29,9 +29,12 @@ from types import ModuleType
 C_FLAGS = ("-O2", "-std=c99")  # the C backend's, unless $BGC_CFLAGS says otherwise
 # A linked model part of more than LARGE_PART characters is compiled at -O1 where the flags
 # are C_FLAGS: the compiler's time at -O2 grows faster than the code (two to three times
-# -O1's on the 16- and 64-link chains), and the model functions it makes run as fast
-# (benchmarks/compile_scale.py measures both, in the same run).  The runtime stays at -O2.
-LARGE_PART = 100_000
+# -O1's on the 16- and 64-link chains and the 32-section ladder with symbolic resistances),
+# and the model functions it makes run as fast (benchmarks/compile_scale.py measures both,
+# in the same run).  80 kB: that ladder's part without the Jacobian (an explicit solver's
+# run) is 90 kB, and took 1.0 s at -O2 against 0.67 s at -O1 with it.  The runtime stays at
+# -O2.
+LARGE_PART = 80_000
 LARGE_PART_FLAGS = ("-O1", "-std=c99")
 C_LIBS = ("-lm",)
 _EXE_SUFFIX = ".exe" if os.name == "nt" else ""
