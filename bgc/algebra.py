@@ -16,6 +16,7 @@ import random
 import mpmath  # SymPy's own dependency: the 30-digit determinant of is_singular
 import sympy as sp
 
+from .canonical import xreplace
 from .differentiate import partial
 from .resources import MAX_EXPANDED_TERMS, expanded_terms, fits
 
@@ -254,7 +255,7 @@ def is_singular(rows: int, entries, points: int = 3, seed: int = 0) -> bool:
             memo: dict = {}
             for i, j, e in entries:
                 try:
-                    a[i, j] = mpmath.mpf(sp.Float(_at(e, values, memo).evalf(30), 30))
+                    a[i, j] = mpmath.mpf(sp.Float(xreplace(e, values, memo).evalf(30), 30))
                 except (TypeError, ValueError):
                     return False  # not a real number there: no conclusion
             if not _loses_rank(a, rows):
@@ -287,30 +288,6 @@ def _loses_rank(a, n: int) -> bool:
     return False
 
 
-def _at(expr, point: dict, memo: dict):
-    """expr.xreplace(point), node for node as SymPy builds it, with the subexpressions that the
-    entries of one matrix share (memo, for one point) rebuilt once (an explicit stack)."""
-    stack = [(expr, False)]
-    while stack:
-        e, ready = stack.pop()
-        if e in memo:
-            continue
-        if e in point:
-            memo[e] = point[e]
-            continue
-        args = e.args
-        if not args:
-            memo[e] = e
-            continue
-        if not ready:
-            stack.append((e, True))
-            stack.extend((a, False) for a in args if a not in memo)
-            continue
-        new = [memo[a] for a in args]
-        memo[e] = e if all(a is b for a, b in zip(new, args)) else e.func(*new)
-    return memo[expr]
-
-
 def is_symmetric(entries, points: int = 2, seed: int = 1) -> bool:
     """Whether the square matrix with these (row, column, expression) entries is symmetric
     whatever the values of its symbols: its pattern, and its values at random points to 1e-12
@@ -328,8 +305,8 @@ def is_symmetric(entries, points: int = 2, seed: int = 1) -> bool:
         memo: dict = {}
         for i, j in pairs:
             try:
-                a = complex(_at(values[(i, j)], point, memo).evalf(20))
-                b = complex(_at(values[(j, i)], point, memo).evalf(20))
+                a = complex(xreplace(values[(i, j)], point, memo).evalf(20))
+                b = complex(xreplace(values[(j, i)], point, memo).evalf(20))
             except (TypeError, ValueError, ZeroDivisionError):
                 return False
             if not abs(a - b) <= 1e-12 * (abs(a) + abs(b)):

@@ -154,10 +154,12 @@ def _checked(cls, args, fast):
     return fast
 
 
-def xreplace(expr, rule: dict):
+def xreplace(expr, rule: dict, memo: dict | None = None):
     """expr.xreplace(rule), node for node as SymPy builds it (every changed node rebuilt by its
-    constructor, evaluated; sums and products by `new`), with an explicit stack."""
-    memo: dict = {}
+    constructor, evaluated; sums and products by `new`), with an explicit stack.  memo: the
+    subexpressions already rebuilt under the same rule (expressions that share them, as the
+    entries of one matrix at one random point do: bgc.algebra), each rebuilt once."""
+    memo = {} if memo is None else memo
     stack = [(expr, False)]
     while stack:
         e, ready = stack.pop()

@@ -363,8 +363,9 @@ def test_long_sum_deep_chain_and_deep_nesting():
 
 def test_values_at_a_point_are_sympys_xreplace():
     """The random-point tests evaluate a matrix's entries with their shared subexpressions
-    rebuilt once per point (algebra._at): node for node what SymPy's xreplace builds."""
-    from bgc.algebra import _at
+    rebuilt once per point (canonical.xreplace with a memo): node for node what SymPy's
+    xreplace builds."""
+    from bgc.canonical import xreplace
     x, y = sp.symbols("x y", real=True)
     shared = sp.sin(x - y) * sp.sqrt(x ** 2 + y ** 2)
     entries = [shared + 1, 2 * shared * y, sp.Abs(x - y, evaluate=False) + shared, x,
@@ -372,5 +373,5 @@ def test_values_at_a_point_are_sympys_xreplace():
     point = {x: sp.Float(0.7, 20), y: sp.Float(1.3, 20)}
     memo: dict = {}
     for e in entries:
-        built, expected = _at(e, point, memo), e.xreplace(point)
+        built, expected = xreplace(e, point, memo), e.xreplace(point)
         assert built == expected and type(built) is type(expected)
