@@ -8,7 +8,8 @@ constraint without a corrector leaves its position undetermined, and the stacked
 Algebraic blocks are solved inside the right side as in a run.
 
 Each step is the least-squares (minimum-norm) solution of J dx = -F, damped by halving until
-|F| decreases.  Where the Jacobian is singular, the equilibria form a family (a free mass
+|F| decreases; the linear algebra is bgc.orthogonal's, whose sums run in sequence, so an
+equilibrium has the same bytes on every machine.  Where the Jacobian is singular, the equilibria form a family (a free mass
 rests anywhere): the minimum-norm steps give the one nearest the initial state, and the
 result says how many directions are free.  Where no step reduces |F| while |F| is not small
 (a mass under a constant force), there is no equilibrium near the start: NoEquilibrium,
@@ -20,7 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import operating
+from . import operating, orthogonal
 from .operating import AnalysisError
 
 TOLERANCE = 1e-10  # |F| relative to max(1, |F| at the start)
@@ -85,12 +86,12 @@ def solve(ev: operating.Evaluator, x0=None) -> Equilibrium:
             return _result(ev, t, *_polish(ev, t, x, F, J), it)
         if it == MAX_ITERATIONS:
             break
-        dx = np.linalg.lstsq(J, -F, rcond=None)[0]
-        step, norm = 1.0, np.linalg.norm(F)
+        dx = orthogonal.lstsq(J, -F)[0]
+        step, norm = 1.0, orthogonal.norm(F)
         while step >= 1e-8:
             trial = x + step * dx
             Ft = _residual(ev, t, trial)
-            if Ft is not None and np.linalg.norm(Ft) < (1 - 1e-4 * step) * norm:
+            if Ft is not None and orthogonal.norm(Ft) < (1 - 1e-4 * step) * norm:
                 x, F = trial, Ft
                 break
             step /= 2
@@ -104,9 +105,9 @@ def _polish(ev, t, x, F, J):
     """Up to three more full steps, each kept while it reduces |F| (Newton's method doubles
     the digits of a converged solution at each step): (x, J)."""
     for _ in range(3):
-        trial = x + np.linalg.lstsq(J, -F, rcond=None)[0]
+        trial = x + orthogonal.lstsq(J, -F)[0]
         Ft = _residual(ev, t, trial)
-        if Ft is None or not np.linalg.norm(Ft) < np.linalg.norm(F):
+        if Ft is None or not orthogonal.norm(Ft) < orthogonal.norm(F):
             break
         x, F, J = trial, Ft, _jacobian(ev, t, trial)
     return x, J
@@ -125,7 +126,7 @@ def _why(ev, x, F, J, it) -> str:
     k = int(np.argmax(np.abs(F)))
     what = f"d({ev.states[k]})/dt = {F[k]:.6g}" if k < ev.n else \
         f"the residual of constraint row {ev.constraint_names()[k - ev.n]} = {F[k]:.6g}"
-    rank = np.linalg.matrix_rank(J)
+    rank = orthogonal.rank(J)
     return (f"no equilibrium: after {it} Newton iterations no step reduces the right side, "
             f"which stays at {what} (the Jacobian has rank {rank} of {ev.n}: a state that "
             "integrates a nonzero constant, such as a free mass under a constant force, has "
@@ -144,7 +145,7 @@ def _result(ev, t, x, J, it) -> Equilibrium:
     f = ev.rhs(t, x)
     return Equilibrium(float(t), tuple(zip(ev.states, (float(v) for v in x))), mult, res,
                        float(np.abs(f).max(initial=0.0)), it,
-                       ev.n - int(np.linalg.matrix_rank(J)))
+                       ev.n - orthogonal.rank(J))
 
 
 def steady(model, scene=None, params=None, effects=None) -> Equilibrium:
