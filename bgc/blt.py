@@ -3,6 +3,8 @@
 - `components`: Tarjan's strongly connected components, iterative, dependencies first;
 - `tear`: choose tear vertices that break every cycle of a component, so that the rest can be
   evaluated in order once the tears are known;
+- `bound`: more tears where an evaluated vertex would read many tears through the others, so
+  that the torn system stays as sparse as the graph (a ladder's block banded, not dense);
 - `perfect_matching`: whether each residual can be paired with its own unknown (else the block is
   structurally singular).
 
@@ -89,6 +91,36 @@ def tear(vertices: list[int], succ: dict[int, list[int]], fixed: list[int],
             best = max(comp, key=lambda v: (rest[v] in preferred, indegree[v], -v))
             tears.append(rest[best])
             cut.add(rest[best])
+
+
+def bound(tears: list[int], order: list[int], succ: dict[int, list[int]],
+          limit: int) -> tuple[list[int], list[int]]:
+    """(tears, order) with more tears: taking `order` (dependencies first), a vertex whose
+    inputs reach more than `limit` tears through the vertices evaluated before it becomes a
+    tear itself.  Each row of the torn system (a tear's residual) then reads at most `limit`
+    tears through each of its inputs, where the tears of `tear` alone can leave a residual
+    reading all of them: in a ladder of resistors the series currents are sums of every later
+    branch's, and its n node voltages a dense n x n system where the 2n voltages and currents
+    are a banded one.  A block whose tears number `limit` or fewer is left as it is.  The work
+    is linear in the edges: no set grows past limit + 1 before it is cut."""
+    if len(tears) <= limit:
+        return tears, order
+    tears = list(tears)
+    reach: dict[int, frozenset] = {v: frozenset((v,)) for v in tears}
+    rest = []
+    for v in order:
+        seen: set = set()
+        for w in succ.get(v, ()):
+            seen.update(reach.get(w, ()))
+            if len(seen) > limit:
+                break
+        if len(seen) > limit:
+            tears.append(v)
+            reach[v] = frozenset((v,))
+        else:
+            reach[v] = frozenset(seen)
+            rest.append(v)
+    return tears, rest
 
 
 def perfect_matching(rows: int, cols: list[list[int]]) -> list[int] | None:

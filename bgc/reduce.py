@@ -51,6 +51,7 @@ from .sparse import plan as lu_plan
 RELATIVE_TOLERANCE = 1e-9
 SYMBOLIC_MAX_UNKNOWNS = 1  # auto: linear blocks up to this size are solved symbolically ...
 SYMBOLIC_MAX_OPS = 400  # ... when their matrix and right side are no bigger than this
+TEAR_READS_MAX = 8  # a block's residuals read at most this many tears through each input
 SUBSTITUTE_MAX_BODY = 40  # a nonlinear block of one unknown: body small enough to substitute
 SINGULAR_CHECK_MAX = 40  # linear blocks up to this size: determinant tested at compile time
 SYMMETRY_CHECK_MAX = 200  # ... and up to this size: symmetry (LDL^T-like elimination) tested
@@ -552,6 +553,7 @@ class _Blocks:
         pos = {v: k for k, v in enumerate(comp)}
         fixed = [v for v in comp if not eqs[pos[v]].explicit]
         tears, body_order = blt.tear(comp, succ, fixed, _inputs_of_nonlinearities(eqs, comp))
+        tears, body_order = blt.bound(tears, body_order, succ, TEAR_READS_MAX)
         tear_eqs = [eqs[pos[v]] for v in tears]
         z = tuple(eq.target for eq in tear_eqs)
         body = tuple(Assign(eqs[pos[v]].target, eqs[pos[v]].expr) for v in body_order)

@@ -164,3 +164,60 @@ def test_symmetric_definite_matrix_needs_no_pivoting_however_scaled():
                 x[p.col_of[k]] = z[k]
             assert np.allclose(x, np.linalg.solve(A, rhs), rtol=1e-9, atol=0)
     assert accepted == {False: False, True: True}
+
+
+def test_bound_adds_tears_where_a_vertex_reads_many_and_leaves_small_blocks_alone():
+    # a running sum: v_k reads v_{k+1} and tear t_k, as a ladder's series currents read every
+    # later branch's; tears 0..n-1, sums n..2n-1 evaluated from the far end
+    n = 30
+    succ = {n + k: [k] + ([n + k + 1] if k + 1 < n else []) for k in range(n)}
+    order = [n + k for k in reversed(range(n))]
+    tears, rest = blt.bound(list(range(n)), order, succ, 8)
+    assert tears[:n] == list(range(n)) and len(tears) > n
+    reach = {t: {t} for t in tears}
+    done = set(tears)
+    for v in rest:  # each vertex left to evaluate reads at most 8 tears, in order
+        assert all(w in done for w in succ[v])
+        reach[v] = set().union(*(reach[w] for w in succ[v]))
+        assert len(reach[v]) <= 8
+        done.add(v)
+    assert sorted(tears[n:] + rest) == sorted(order)  # every sum torn or evaluated, once
+    small = blt.bound(list(range(8)), [8, 9], {8: list(range(8)), 9: [8]}, 8)
+    assert small == (list(range(8)), [8, 9])
+
+
+def _resistor_ladder(n: int) -> str:
+    lines = ["model ladder", "parameter V0 = 10.0", "parameter Cc = 0.2"]
+    for i in range(1, n + 1):
+        lines += [f"parameter Rs{i} = {0.1 + 0.01 * i!r}", f"parameter Rp{i} = {50.0 + i!r}"]
+    lines += ["src : Se(V0)", "cap : C(Cc)"]
+    for i in range(1, n + 1):
+        left = "src" if i == 1 else f"n{i - 1}"
+        lines += [f"s{i} : 1", f"rs{i} : R(Rs{i})", f"n{i} : 0", f"rp{i} : R(Rp{i})",
+                  f"{left} -> s{i} -> n{i}", f"s{i} -> rs{i}", f"n{i} -> rp{i}"]
+    lines += ["last : 1", "rl : R(Rs1)", f"n{n} -> last -> cap", "last -> rl"]
+    return "\n".join(lines) + "\n"
+
+
+def test_a_ladder_of_symbolic_resistors_is_a_banded_block_with_its_thevenin_answer():
+    """The 64 node voltages alone are a dense system (each series current sums every later
+    branch's); with a series current torn every few sections the block's entries grow with
+    the ladder, and the capacitor still charges as the ladder's Thevenin equivalent says."""
+    import bgc
+    from bgc.api import Source
+
+    n = 64
+    source = Source("ladder.bg", _resistor_ladder(n))
+    (block,) = bgc.build(source).program.blocks
+    assert len(block.pattern) <= 8 * n  # dense Hessenberg: n(n+1)/2 + n - 1 = 2 143
+    assert block.lu.nnz <= 12 * n
+    V, R = 10.0, 0.0  # the source, then each section: Rs in series, Rp across
+    for i in range(1, n + 1):
+        R += 0.1 + 0.01 * i
+        rp = 50.0 + i
+        V, R = V * rp / (R + rp), R * rp / (R + rp)
+    tau = (R + 0.11) * 0.2  # about 1.7
+    t, Y, names = bgc.simulate(source, backend="python", t_end=5.0, dt=0.5,
+                               solver="dopri5", rtol=1e-11, atol=1e-13, outputs=["cap.q"])
+    expected = 0.2 * V * (1.0 - np.exp(-np.asarray(t) / tau))
+    assert np.abs(np.asarray(Y)[:, 0] - expected).max() <= 1e-9 * 0.2 * V
