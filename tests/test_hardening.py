@@ -124,13 +124,14 @@ def _resistor_ladder(n):
 
 
 def test_a_linear_block_too_large_for_a_closed_form():
-    """Nine unknowns whose closed form has millions of nodes: LU in auto, a located error
-    with --algebra symbolic (found before the work that would blow up)."""
+    """Ten unknowns (nine node voltages and a current torn to keep the block sparse) whose
+    closed form has millions of nodes: LU in auto, a located error with --algebra symbolic
+    (found before the work that would blow up)."""
     (block,) = build(_resistor_ladder(10), program=False).reduced.blocks
     assert block.method == "lu"
     message = error_of(_resistor_ladder(10), algebra="symbolic")
     assert message.startswith("inline.bg:")
-    assert "too large to solve symbolically (9 unknowns; its solution is too large)" in message
+    assert "too large to solve symbolically (10 unknowns; its solution is too large)" in message
 
 
 def test_limits_on_expressions():
