@@ -60,7 +60,8 @@ class _Scope:
         self.when_condition = False  # building a when-block's condition (initial() allowed)
         self.tables: list = []  # bgc.tables.TableData, in the order met
         self.inputs: list = []  # graph.InputInfo, in declaration order
-        self.directory = "."  # the model file's: table files are read relative to it
+        self.directory = "."  # the model file's: its table files are read relative to it (a
+        #                       library's, relative to the library)
 
     def charge(self, n: int, span: Span):
         """Count n more vector or matrix entries against MAX_MATRIX_ENTRIES, before or as
@@ -426,7 +427,10 @@ class _ExprBuilder:
         if rows is None:
             import os
             shown = source.text if isinstance(source, ast.Str) else f"{source.owner}.csv"
-            path = os.path.join(self.scope.directory, shown)
+            origin = source.span.origin  # a component's text: its library file
+            where = os.path.dirname(origin.name) if origin is not None and origin.file \
+                else self.scope.directory
+            path = os.path.join(where, shown)
             column = options.get("column")
             xs, ys, _, _ = read_csv(path, path, column.text if column else None, source.span,
                                     column.span if column else None)
@@ -448,7 +452,7 @@ class _ExprBuilder:
         k = len(self.scope.tables)
         time = x == TIME
         try:
-            data = build(name, xs, ys, interp, extrapolate, time)
+            data = build(name, xs, ys, interp, extrapolate, time, path if rows is None else "")
         except OverflowError:
             fail(source.span, "the table's slopes are too large for a double (rows too close "
                               "for the change of y)")

@@ -61,6 +61,8 @@ class TableData:
     origins: tuple[float, ...]  # per piece (n + 1)
     coefficients: tuple[float, ...]  # per piece a, b, c, d (4 (n + 1))
     time: bool  # a table of t: its breakpoints are time events
+    file: str = ""  # the file its rows were read from, as opened ("" for rows in the model):
+    #                 a warm run checks it is unchanged (bgc.warm)
 
     @property
     def rows(self) -> int:
@@ -198,7 +200,8 @@ def _sign(v) -> int:
     return (v > 0) - (v < 0)
 
 
-def build(name: str, xs, ys, interp: str, extrapolate: str, time: bool) -> TableData:
+def build(name: str, xs, ys, interp: str, extrapolate: str, time: bool,
+          file: str = "") -> TableData:
     """The table's pieces: origins and coefficients (module doc)."""
     n = len(xs)
     X = [Fraction(v) for v in xs]
@@ -237,7 +240,7 @@ def build(name: str, xs, ys, interp: str, extrapolate: str, time: bool) -> Table
     origins = (xs[0],) + tuple(xs[:n - 1]) + (xs[n - 1],)
     coefficients = tuple(float(c) for p in pieces for c in p)
     return TableData(name, tuple(float(v) for v in xs), tuple(float(v) for v in ys), interp,
-                     extrapolate, tuple(float(v) for v in origins), coefficients, time)
+                     extrapolate, tuple(float(v) for v in origins), coefficients, time, file)
 
 
 # ---------------------------------------------------------------- evaluation (as the runtimes)

@@ -18,8 +18,14 @@ its bytes, the scene and ad-hoc scene options, the algebra, --project-initial an
 Python backend, the interpreter).  Nothing in the key is a timestamp of the model: the same
 text under the same name hits, whatever its mtime.
 
-A record is used only if it reads as one (anything else is a miss) and the program it names is
-still the file that was built and can run (bgc.backends.usable: a regular file, executable, its
+The files a model reads besides itself are not in the key: a table's CSV file is recorded with
+its SHA-256, and a record whose table files no longer have those bytes is a miss (the data is
+compiled into the program).  A model that imports libraries is compiled cold every time (which
+file an import finds depends on files that need not exist yet): any `import` in its text, even
+in a doc string, sends it the cold way.
+
+A record is used only if it reads as one (anything else is a miss), its table files are
+unchanged, and the program it names is still the file that was built and can run (bgc.backends.usable: a regular file, executable, its
 SHA-256 the one recorded; like the program cache itself); a program that still cannot be
 started is removed from the cache and the run goes the cold way (bgc.cli).  Records are
 written to a temporary file and renamed into place, so concurrent runs are safe: each sees a
@@ -44,7 +50,7 @@ from . import backends, runner, solvers
 from .resources import read_bounded
 from .run import RunSettings
 
-FORMAT = 6  # of the record; change it when its fields change
+FORMAT = 7  # of the record; change it when its fields change
 
 
 @dataclass(frozen=True)
@@ -77,6 +83,7 @@ class Record:
     states: int = 0
     inputs: tuple[str, ...] = ()  # the program's inputs (`input NAME`), in order
     jacobian: bool = True  # the program has the Jacobian the implicit solvers need
+    files: tuple[tuple[str, str], ...] = ()  # (path, SHA-256) of each table file it read
 
 
 def _installation() -> list:
@@ -113,7 +120,7 @@ def _toolchain(backend: str) -> list:
     return facts
 
 
-IMPORT = re.compile(rb"^[ \t]*import\b", re.MULTILINE)
+IMPORT = re.compile(rb"\bimport\b")  # anywhere: a false alarm only costs a cold run
 
 
 def key(request: Request, source: bytes) -> str:
@@ -145,7 +152,10 @@ def lookup(request: Request) -> tuple[Record, Path] | None:
         data["settings"] = RunSettings(**dict(data["settings"], params=()))
         data["plot_title"] = tuple(data["plot_title"])
         data["plot_columns"] = tuple(map(tuple, data["plot_columns"]))
+        data["files"] = tuple(map(tuple, data["files"]))
         record = Record(**data)
+        if not all(_sha256(name) == digest for name, digest in record.files):
+            return None
         program = path.parent / record.program
         if Path(record.program).name != record.program or not backends.usable(
                 program, executable=program.suffix not in (".py", ".bgvm"),
@@ -158,6 +168,15 @@ def lookup(request: Request) -> tuple[Record, Path] | None:
     except (OSError, ValueError, TypeError, KeyError, AttributeError):
         return None
     return record, program
+
+
+def _sha256(path: str) -> str | None:
+    """A table file's SHA-256 (of at most one byte more than a table may have)."""
+    from .tables import MAX_TABLE_BYTES
+    try:
+        return hashlib.sha256(read_bounded(path, MAX_TABLE_BYTES)).hexdigest()
+    except OSError:
+        return None
 
 
 def store(request: Request, source: bytes, record: Record) -> None:
@@ -212,7 +231,8 @@ def record_for(compiled, program: runner.Program, warnings: str) -> Record:
         **plot.describe(compiled), interpreter=interp.name if interp else "",
         interpreter_sha256=hashlib.sha256(interp.read_bytes()).hexdigest() if interp else "",
         rhs_ops=rhs_ops(compiled.program), states=len(compiled.program.states),
-        jacobian=compiled.program.has_jacobian)
+        jacobian=compiled.program.has_jacobian,
+        files=tuple((t.file, _sha256(t.file)) for t in compiled.program.tables if t.file))
 
 
 def rhs_ops(program) -> int:

@@ -277,3 +277,21 @@ def test_a_table_file_too_large_is_refused_before_it_is_read(tmp_path):
     assert done.exit_code == 1
     assert f"is too large ({MAX_TABLE_BYTES + 1} bytes; the limit is {MAX_TABLE_BYTES})" \
         in done.stderr
+
+
+def test_a_librarys_table_file_is_read_beside_the_library(tmp_path):
+    """A component of a library reads its table relative to the library's file, so that the
+    library can carry its data; the model's own tables stay relative to the model."""
+    (tmp_path / "parts").mkdir()
+    (tmp_path / "parts" / "curves.bg").write_text(
+        "library curves\ncomponent source() {\n  port p\n"
+        "  s : Se(table(curve.csv, t))\n  s -> p\n}\n")
+    (tmp_path / "parts" / "curve.csv").write_text("x,y\n0,2\n1,4\n")
+    (tmp_path / "own.csv").write_text("x,y\n0,10\n1,30\n")
+    (tmp_path / "m.bg").write_text(
+        'model m\nimport "parts/curves.bg" as lib\nsrc : lib.source()\nj : 1\nr : R(2)\n'
+        "src.p -> j\nj -> r\nsignal own = table(own.csv, t)\n"
+        "scene run { outputs r.f, own; time 0 .. 1 every 0.5 }\n")
+    t, Y, _ = bgc.simulate(str(tmp_path / "m.bg"), "run", backend="python")
+    assert np.allclose(Y[:, 0], (2 + 2 * np.asarray(t)) / 2, rtol=0, atol=1e-14)
+    assert np.allclose(Y[:, 1], 10 + 20 * np.asarray(t), rtol=0, atol=1e-13)

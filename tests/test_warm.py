@@ -138,3 +138,31 @@ def test_warm_run_and_help_do_not_import_sympy(tmp_path, cache):
         done = subprocess.run([sys.executable, "-c", probe, *argv], capture_output=True,
                               text=True, env=env, timeout=60)
         assert done.stderr.splitlines()[-1] == "IMPORTED 0 -", done.stderr
+
+
+def test_an_edited_table_file_or_an_import_after_a_semicolon_misses(tmp_path, cache):
+    """The table's rows are compiled into the program, the library's laws too: a warm run of
+    the same model text must see the edited file (a table: recorded with its SHA-256; an
+    import, wherever it stands on its line: compiled cold every time)."""
+    model = tmp_path / "tab.bg"
+    model.write_text("model tab\nsignal a = table(data.csv, t)\n"
+                     "scene run { outputs a; time 0 .. 1 every 1 }\n")
+    args = ["simulate", model, "--scene", "run", "--backend", BACKEND]
+    for last in ("3", "9", "9", "4"):
+        (tmp_path / "data.csv").write_text(f"x,y\n0,1\n1,{last}\n")
+        run = run_bgc(*args)
+        assert run.returncode == 0, run.stderr
+        assert _rows(run.stdout) == [[0.0, 1.0], [1.0, float(last)]]
+    (record,) = cache.glob("warm-*.json")  # one record, rewritten by each cold run
+    assert [f[0] for f in json.loads(record.read_text())["files"]] == [str(tmp_path / "data.csv")]
+
+    lib = tmp_path / "slib.bg"
+    semi = tmp_path / "semi.bg"
+    semi.write_text("model semi; import slib\nsrc : Se(1)\nj : 1\nr : slib.res(r = 2)\n"
+                    "src -> j\nj -> r.p\nscene run { outputs r.x.f; time 0 .. 1 every 1 }\n")
+    for factor in ("1", "5"):
+        lib.write_text(f"library slib\ncomponent res(r = 1) {{\n  port p\n  x : R({factor}*r)\n"
+                       "  p -> x\n}\n")
+        run = run_bgc("simulate", semi, "--scene", "run", "--backend", BACKEND)
+        assert run.returncode == 0, run.stderr
+        assert _rows(run.stdout)[-1][1] == pytest.approx(1 / (2 * float(factor)), rel=1e-12)
