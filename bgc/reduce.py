@@ -412,17 +412,36 @@ def _constraints(sys: _System, diags: Collector) -> list[ConstraintInfo]:
     defs = _explicit_defs(sys)
     coordinates = _Coordinates(sys, defs)
     multipliers = set(_multipliers(sys))
+    states = {st.symbol for st in sys.es.states}
     memo: dict = {}
     infos = []
     for c in sys.es.constraints:
         try:
-            infos.append(_constraint(c, sys, defs, coordinates, multipliers, memo, diags))
+            infos.append(_constraint(c, sys, defs, coordinates, multipliers, states, memo,
+                                     diags))
         except ModelError as exc:
             diags.items.extend(exc.diagnostics)
     return infos
 
 
-def _constraint(c, sys, defs, coordinates, multipliers, memo, diags) -> ConstraintInfo:
+_HELD_MODE = {("switch", False): "open", ("switch", True): "close",
+              ("diode", False): "block", ("diode", True): "conduct"}
+
+
+def _imposed(c, in_states, multipliers, states) -> None:
+    """A switch or diode whose held quantity (its flow, or its effort as the dual junction)
+    the sources set whatever the state and the multipliers (a current source through a
+    switch): the mode that holds it at zero cannot be reached, and the model is refused."""
+    mode = _HELD_MODE.get((c.kind, c.dual))
+    if mode is None or in_states.free_symbols & (multipliers | states) or in_states == 0:
+        return
+    what = "effort" if c.dual else "flow"
+    fail(c.name_span, f"{c.kind} '{c.junction}' cannot {mode}: that mode holds its {what} at "
+                      f"zero, but the sources alone set it ({what} = {in_states}, whatever the "
+                      "state), and no storage on its path can take the change")
+
+
+def _constraint(c, sys, defs, coordinates, multipliers, states, memo, diags) -> ConstraintInfo:
     def expandable(s):
         return s in defs and not sys.is_leaf(s)
 
@@ -438,6 +457,7 @@ def _constraint(c, sys, defs, coordinates, multipliers, memo, diags) -> Constrai
     if in_states.has(*NOT_FINITE):
         fail(c.name_span, f"the flow balance of constraint junction '{c.junction}' is not "
                           "finite (a division by zero?)")
+    _imposed(c, in_states, multipliers, states)
     resistive = bool(in_states.free_symbols & multipliers)
     if resistive and c.kind not in contact.SWITCHED:
         fail(c.span, f"the flow balance of constraint junction '{c.junction}' depends on a "
