@@ -29,7 +29,7 @@ from dataclasses import replace
 
 import sympy as sp
 
-from .algebra import Max
+from .algebra import Max, Min
 from .diagnostics import fail
 from .differentiate import partial
 from .events import INITIAL, TOLERANCE, Action, Discrete, Relation, When
@@ -157,8 +157,11 @@ def with_contact_events(sys, infos, weigh, defs, leaf, cycle):
                               "supported yet")
         pull = sp.Add(*[G[i] * partial(rates[p], c.multiplier) for i, p in enumerate(moved)])
         n = len(relations)
+        # an impact: Phi < 0 while closing (Phi' < 0).  Just after one, Phi' > 0 and the
+        # relation is false at once, so the next landing is its own crossing even where a
+        # fixed step holds the whole flight (Phi < 0 alone stayed true across it)
         touch = Relation(sp.Symbol(f"event#{n}"), sp.StrictGreaterThan(
-            sp.Piecewise((-info.phi, sp.Not(on)), (sp.Integer(-1), True)), 0),
+            sp.Piecewise((Min(-info.phi, -v), sp.Not(on)), (sp.Integer(-1), True)), 0),
             f"{J}: contact (phi < 0)", c.name_span, None)
         leave = Relation(sp.Symbol(f"event#{n + 1}"), sp.StrictGreaterThan(
             sp.Piecewise((-pull * c.multiplier, on), (sp.Integer(-1), True)), 0),

@@ -72,6 +72,38 @@ def test_a_ball_bounces_then_rests_on_the_floor(solver, tmp_path):
     assert np.allclose(late[:, 3], -9.81, rtol=1e-6)  # the floor carries m g
 
 
+@pytest.mark.parametrize("solver", ["rk4", "euler"])
+def test_a_fixed_step_ball_lands_every_time(solver, tmp_path):
+    """With a fixed step of 0.01 the last flights are shorter than a step: the ball rises
+    and lands inside one.  Each landing must still be an impact (the contact's relation is
+    false as soon as the ball moves away), never a fall through the floor.  rk4 is exact on a
+    free fall: its impacts keep the closed form, and it rests where the rebounds fall below
+    its tolerance's resolution, just before the bounces' accumulation point.  Euler lands
+    each flight g h faster than it left, so its bounces settle where e (v + g h) = v."""
+    compiled = bgc.build(Source("ball.bg", BALL), "drop")
+    outs = [run(compiled, b, tmp_path / f"{b}.csv", solver=solver) for b in BACKENDS]
+    assert len({o[0] for o in outs}) == 1
+    _, y, events = outs[0]
+    assert np.all(y[:, 1] > -1e-6)  # never through the floor
+    g, e, h = 9.81, 0.8, 0.01
+    t1 = math.sqrt(2 / g)
+    impacts = [(float(t), c) for t, what, c in events if what == "b.p"]
+    if solver == "euler":
+        after = float(impacts[-1][1].split(" -> ")[1])
+        assert abs(after - e * g * h / (1 - e)) <= 0.05 * after
+        return
+    t_ref, v = t1, g * t1
+    for t, _ in impacts[:20]:
+        assert abs(t - t_ref) <= 1e-9 * t_ref
+        v *= e
+        t_ref += 2 * v / g
+    t_rest = t1 + 2 * g * t1 * e / (g * (1 - e))
+    rest = [float(t) for t, what, c in events if what == "floor.active" and c == "0 -> 1"]
+    assert len(rest) == 1 and 0 < t_rest - rest[0] < 1e-3
+    late = y[y[:, 0] > t_rest + 1.5]
+    assert np.all(np.abs(late[:, 1]) < 1e-6) and np.allclose(late[:, 3], -9.81, rtol=1e-6)
+
+
 def pendulum_reference(t_out, theta0=0.5, l=1.0, g=9.81, d=0.2, e=0.7):
     """The rigid pendulum in its angle, with the wall at l sin(theta) = -d: SciPy at tight
     tolerance, stopped at each impact and restarted with theta' reversed times e."""

@@ -467,7 +467,7 @@ static inline int bgc_model_events(double t, const double *x, const bgc_params *
     if (bgc_block_solve(w, 0, t))
         return 1;
     const double w22 = wv[89];
-    out[0] = ((p->d[2] == 0.0) ? -x[2] + p->c[10] : -1.0);
+    out[0] = ((p->d[2] == 0.0) ? bgc_min(-x[2] + p->c[10], p->c[3]*x[0]) : -1.0);
     out[1] = ((p->d[2] != 0.0) ? w22*p->c[0] : -1.0);
     return 0;
 }

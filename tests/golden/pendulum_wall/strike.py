@@ -585,7 +585,7 @@ def _events_0(t, x, p, w, out):
         wv[89] = -(w0*p[15] + w7*p[14] if (p[25] != 0.0) else 0.0)
         _block_solve(w, 0, t)
         w22 = wv[89]
-        out[0] = (-x[2] + p[18] if (p[25] == 0.0) else -1.0)
+        out[0] = (min(-x[2] + p[18], p[11]*x[0]) if (p[25] == 0.0) else -1.0)
         out[1] = (w22*p[8] if (p[25] != 0.0) else -1.0)
     except (ArithmeticError, ValueError):
         return _events_0_ieee(t, x, p, w, out)
@@ -625,7 +625,7 @@ def _events_0_ieee(t, x, p, w, out):
         wv[89] = -(w0*p[15] + w7*p[14] if (p[25] != 0.0) else 0.0)
         _block_solve(w, 0, t)
         w22 = wv[89]
-        out[0] = (-x[2] + p[18] if (p[25] == 0.0) else -1.0)
+        out[0] = (min(-x[2] + p[18], p[11]*x[0]) if (p[25] == 0.0) else -1.0)
         out[1] = (w22*p[8] if (p[25] != 0.0) else -1.0)
 
 
