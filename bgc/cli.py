@@ -461,8 +461,8 @@ def compile(model, scene, outputs, effects, algebra, target, output, project_ini
                    "with a message (a step size running away); 0: no limit.  [default: "
                    "100000]")
 @click.option("--max-step", type=POSITIVE, default=None,
-              help="The adaptive solvers' largest step (default: the scene's hmax, else no "
-                   "bound but the span).")
+              help="Every solver's largest step, fixed or adaptive (default: the scene's "
+                   "hmax, else no bound but the span).")
 @click.option("-p", "params", multiple=True, metavar="NAME=VALUE", help="Parameter override.")
 @click.option("--project-initial", is_flag=True, help="Project initial values onto the "
                                                       "constraints instead of refusing them.")

@@ -53,7 +53,7 @@ class RunSettings:
     project_initial: bool = False
     allow_inconsistent: bool = False
     scene: str | None = None  # the scene's name (reports; not a run option)
-    max_step: float | None = None  # the adaptive solvers' largest step (a scene's hmax)
+    max_step: float | None = None  # every solver's largest step (a scene's hmax)
     event_rows: bool = False  # two rows at each event: its left and right limits
     events: str | None = None  # the event log's file (t,event,change)
     input_files: tuple[str, ...] = ()  # CSV files of the inputs' data (--input)

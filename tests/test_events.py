@@ -228,6 +228,39 @@ def test_max_step_bounds_every_step():
             assert steps < 100
 
 
+DECAY = """model decay
+c : C(1) init q = 1
+r : R(1)
+n : 0
+n -> c
+n -> r
+scene run { outputs c.q; time 0 .. 2 every 1 }
+"""
+
+
+@pytest.mark.parametrize("solver", ["rk4", "euler"])
+def test_max_step_cuts_a_fixed_step(solver):
+    """--max-step bounds a fixed step too: rk4 and Euler on dq/dt = -q with dt = 1 and a
+    bound of 0.01 take 200 steps and reach e^-2 as their closed-form step errors say."""
+    compiled = build(DECAY, "run")
+    names = [p.name for p in compiled.program.params]
+    outs = []
+    for backend in BACKENDS:
+        program = runner.prepare(compiled, backend)
+        settings = runner.settings_for(compiled.program.scene, names, solver=solver,
+                                       max_step=0.01)
+        result = runner.run(program, settings, stats=True)
+        assert result.status == 0, result.stderr
+        assert int(result.stats["steps"]) == 200
+        outs.append(result.csv)
+    assert len(set(outs)) == 1  # the same bytes in both backends
+    q = float(outs[0].splitlines()[-1].split(",")[1])
+    # one step multiplies q by the method's polynomial in -h: (1 - h) or its Taylor to h^4
+    h = 0.01
+    factor = 1 - h if solver == "euler" else 1 - h + h**2 / 2 - h**3 / 6 + h**4 / 24
+    assert q == pytest.approx(factor ** 200, rel=1e-12)
+
+
 # ---------------------------------------------------------------- conditionals, discrete
 
 

@@ -715,6 +715,8 @@ static int bgc_drive(bgc_run *r, const bgc_family *f, double *y)
     ye = mem + 2 * D;
     o.worst = -1;
     grid.step = s->step > 0.0 ? s->step : s->dt;
+    if (s->hmax > 0.0 && s->hmax < grid.step) /* --max-step bounds a fixed step too */
+        grid.step = s->hmax;
     if (r->kout > r->nout)
         goto done;
     ms = f->start(r, y, &h, &rc);

@@ -669,7 +669,7 @@ static void bgc_help(void)
            "  --atol A           absolute tolerance of the adaptive solvers (%.17g)\n"
            "  --step H           step of the fixed-step solvers (default: dt)\n"
            "  --max-steps N      the most steps between two output times (%ld; 0: no limit)\n"
-           "  --max-step H       the adaptive solvers' largest step (default: no bound)\n"
+           "  --max-step H       every solver's largest step (default: no bound)\n"
            "  --event-rows       two rows at each event: its left and right limits\n"
            "  --events FILE      the event log: t,event,change, a row per change\n"
            "  --input FILE       the inputs' data: CSV, a column t and one per input\n"

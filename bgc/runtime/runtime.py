@@ -1044,8 +1044,8 @@ def rows(t_end=None, dt=None, solver=None, rtol=None, atol=None, params=None, st
     after the rows before it (its .times and .rows are then empty: they were yielded).
     stats: a dict that receives the solver's counters.  allow_inconsistent: start from
     initial values that violate the constraints, neither refused nor projected (the
-    correctors pull them back); it excludes project_initial.  max_step: the adaptive solvers'
-    largest step; event_rows: two rows at each event (its left and right limits); events: a
+    correctors pull them back); it excludes project_initial.  max_step: every solver's
+    largest step (a fixed step longer is cut to it); event_rows: two rows at each event (its left and right limits); events: a
     list that receives (t, event, change) for every change at an event, or a file name that
     receives them as CSV (the program's --events).  inputs: {name: (t, values)}, the data of
     the model's inputs (interpolated linearly, held outside, each t a time event; an input
@@ -1152,7 +1152,7 @@ def _help():
         "  --step H           step of the fixed-step solvers (default: dt)",
         "  --max-steps N      the most steps between two output times (%d; 0: no limit)"
         % s.max_steps,
-        "  --max-step H       the adaptive solvers' largest step (default: no bound)",
+        "  --max-step H       every solver's largest step (default: no bound)",
         "  --event-rows       two rows at each event: its left and right limits",
         "  --events FILE      the event log: t,event,change, a row per change",
         "  --input FILE       the inputs' data: CSV, a column t and one per input",
@@ -2104,6 +2104,8 @@ class _Grid:
         s = run.s
         self.run, self.span = run, span
         self.step = s.step if s.step > 0.0 else s.dt
+        if 0.0 < s.hmax < self.step:  # --max-step bounds a fixed step too
+            self.step = s.hmax
         self.ta = self.tb = 0.0
         self.k = self.n = 0
 

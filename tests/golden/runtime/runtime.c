@@ -1903,6 +1903,8 @@ static int bgc_drive(bgc_run *r, const bgc_family *f, double *y)
     ye = mem + 2 * D;
     o.worst = -1;
     grid.step = s->step > 0.0 ? s->step : s->dt;
+    if (s->hmax > 0.0 && s->hmax < grid.step) /* --max-step bounds a fixed step too */
+        grid.step = s->hmax;
     if (r->kout > r->nout)
         goto done;
     ms = f->start(r, y, &h, &rc);
@@ -4565,7 +4567,7 @@ static void bgc_help(void)
            "  --atol A           absolute tolerance of the adaptive solvers (%.17g)\n"
            "  --step H           step of the fixed-step solvers (default: dt)\n"
            "  --max-steps N      the most steps between two output times (%ld; 0: no limit)\n"
-           "  --max-step H       the adaptive solvers' largest step (default: no bound)\n"
+           "  --max-step H       every solver's largest step (default: no bound)\n"
            "  --event-rows       two rows at each event: its left and right limits\n"
            "  --events FILE      the event log: t,event,change, a row per change\n"
            "  --input FILE       the inputs' data: CSV, a column t and one per input\n"
