@@ -11,6 +11,11 @@ solver never integrates across a switch.  What changes the frozen values:
                     step's dense output and the step ends at the crossing;
   time relation     a relation linear in t with parameters alone (t >= t0): its time is known
                     in advance, t* = -b/a, and the solver steps onto it exactly;
+                    another relation of t and parameters alone (sin(w*t) > 0.5) is a state
+                    relation whose crossings are also times the solver steps onto, where
+                    the indicator can be inverted (time_roots: t in one place, under
+                    functions whose inverses are known); so no window of it falls inside a
+                    step, however long the solver's steps grow;
   discrete relation reads discrete variables and parameters alone: it changes only at events;
   square wave       `square(period, duty, t0)`: a value 0 or 1 whose edges are time events;
   time table        `table(..., t)` (bgc.tables): the piece that holds t, its breakpoints
@@ -33,7 +38,8 @@ from sympy.logic.boolalg import BooleanAtom, BooleanFunction
 from .diagnostics import Span
 from .differentiate import partial
 from .graph import TIME, written
-from .ir import InputNext, InputPart, SquareNext, SquareWave, TableNext, TablePiece
+from .ir import (InputNext, InputPart, PeriodicNext, SquareNext, SquareWave, TableNext,
+                 TablePiece)
 
 RELATIONS = {"<": sp.StrictLessThan, "<=": sp.LessThan, ">": sp.StrictGreaterThan,
              ">=": sp.GreaterThan, "==": sp.Eq, "!=": sp.Ne}
@@ -222,6 +228,9 @@ class Selected:
     squares: tuple[Square, ...]
     discretes: tuple[Discrete, ...]
     whens: tuple[When, ...]
+    crossings: tuple[tuple[sp.Symbol, tuple], ...] = ()  # per state relation of t and
+    #   parameters alone: its crossings' times as families (C, P), t = C + P n (time_roots),
+    #   or None where they cannot be found in advance
 
     @property
     def empty(self) -> bool:
@@ -269,7 +278,7 @@ def select(graph_events, used: set, states: dict, params: set) -> Selected:
                 used |= a.expr.free_symbols
     kept = [w for w in whens if w in kept]
     discrete_symbols = {d.symbol for d in discretes}
-    state, time, discrete = [], [], []
+    state, time, discrete, crossings = [], [], [], []
     for r in relations:
         if r.symbol not in used and not (r.needs and r.needs <= used | {TIME}):
             continue
@@ -280,11 +289,14 @@ def select(graph_events, used: set, states: dict, params: set) -> Selected:
         timed = _time_event(r, params) if free <= params | {TIME} else None
         if timed is not None:
             time.append((r, *timed))
-        else:
-            state.append(_oriented(r))
+            continue
+        state.append(_oriented(r))
+        if free <= params | {TIME} and not r.needs:
+            crossings.append((r.symbol, time_roots(r.indicator)))
     return Selected(tuple(state), tuple(time), tuple(discrete),
                     tuple(s for s in squares if s.symbol in used),
-                    tuple(d for d in discretes if d.symbol in used), tuple(kept))
+                    tuple(d for d in discretes if d.symbol in used), tuple(kept),
+                    tuple(crossings))
 
 
 def _oriented(r: Relation) -> Relation:
@@ -319,6 +331,88 @@ def _time_event(r: Relation, params: set):
     after = sp.Or(sp.And(rising, sp.GreaterThan(TIME, at)),
                   sp.And(sp.Not(rising), sp.StrictLessThan(TIME, at)))
     return at, after
+
+
+MAX_FAMILIES = 8  # of one relation's crossing times
+
+
+def _one_place(e, x) -> bool:
+    """Whether symbol x occurs exactly once in e's tree."""
+    count, stack = 0, [e]
+    while stack:
+        a = stack.pop()
+        if a == x:
+            count += 1
+            if count > 1:
+                return False
+        else:
+            stack.extend(a.args)
+    return count == 1
+
+
+def _invert(e, c):
+    """(the argument u of e, the values of u where e(u) = c as families (C, P)) for a
+    function e of one argument whose inverse is known; None for any other."""
+    two_pi = 2 * sp.pi
+    if isinstance(e, sp.sin):
+        return e.args[0], [(sp.asin(c), two_pi), (sp.pi - sp.asin(c), two_pi)]
+    if isinstance(e, sp.cos):
+        return e.args[0], [(sp.acos(c), two_pi), (-sp.acos(c), two_pi)]
+    if isinstance(e, sp.tan):
+        return e.args[0], [(sp.atan(c), sp.pi)]
+    inverse = {sp.exp: sp.log, sp.log: sp.exp, sp.sinh: sp.asinh, sp.tanh: sp.atanh,
+               sp.asinh: sp.sinh, sp.atan: sp.tan, sp.asin: sp.sin, sp.acos: sp.cos,
+               sp.atanh: sp.tanh}.get(type(e))
+    if inverse is not None:
+        return e.args[0], [(inverse(c), sp.Integer(0))]
+    if isinstance(e, sp.Abs):
+        return e.args[0], [(c, sp.Integer(0)), (-c, sp.Integer(0))]
+    if e.is_Pow:
+        b, k = e.args
+        if not k.has(TIME):
+            if k == -1:
+                return b, [(1 / c, sp.Integer(0))]
+            if k == 2:
+                return b, [(sp.sqrt(c), sp.Integer(0)), (-sp.sqrt(c), sp.Integer(0))]
+            if k == sp.Rational(1, 2):
+                return b, [(c ** 2, sp.Integer(0))]
+            return None
+        if not b.has(TIME):  # b**u = c
+            return k, [(sp.log(c) / sp.log(b), sp.Integer(0))]
+    return None
+
+
+def time_roots(g) -> tuple | None:
+    """The times where g, an expression of t and parameters, is zero: families (C, P) of
+    parameter expressions, t = C + P n for every integer n (P = 0: the one time C), with
+    values that are not real numbers where there is none (asin(2): NaN, which the runtimes
+    skip).  None where t does not occur in one place, under sums and products by parameters
+    and the functions _invert knows, with only sums and products below a periodic one.  The
+    families may hold times where g only touches zero: the solver then steps onto a time
+    where nothing changes."""
+    if not _one_place(g, TIME):
+        return None
+    forms = [(sp.Integer(0), sp.Integer(0))]
+    e = g
+    while e != TIME:
+        if e.is_Add or e.is_Mul:
+            inner = next(a for a in e.args if a.has(TIME))
+            rest = e.func(*[a for a in e.args if a is not inner])
+            forms = [(c - rest, p) for c, p in forms] if e.is_Add else \
+                [(c / rest, p / rest) for c, p in forms]
+            e = inner
+            continue
+        if any(p != 0 for _, p in forms):
+            return None  # a periodic family through a function: not a family of t
+        step = [_invert(e, c) for c, _ in forms]
+        if any(s is None for s in step):
+            return None
+        e = step[0][0]
+        forms = [f for _, fs in step for f in fs]
+        if len(forms) > MAX_FAMILIES:
+            return None
+    return tuple((C, P) for C, P in forms if not (C.is_number and (  # none there: asin(2)
+        C.has(sp.zoo, sp.nan, sp.oo, -sp.oo) or C.is_extended_real is False)))
 
 
 def _bit(cond) -> sp.Expr:
@@ -367,8 +461,12 @@ def update_stores(sel: Selected, states) -> tuple[list, list]:
 
 
 def next_times(sel: Selected) -> list:
+    """The times the solver steps onto: the time relations', the time sources' next
+    edges, and the next crossing of each state relation of t alone whose times are known."""
+    crossings = [C if P == 0 else PeriodicNext(TIME, P, C)
+                 for _, forms in sel.crossings if forms for C, P in forms]
     return [at for _, at, _ in sel.time] + \
-        [s.next() for s in sel.squares if s.next() is not None]
+        [s.next() for s in sel.squares if s.next() is not None] + crossings
 
 
 def log_names(sel: Selected) -> tuple[tuple[str, ...], tuple[str, ...]]:

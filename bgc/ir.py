@@ -18,7 +18,8 @@ and the functions sin cos tan asin acos atan atan2 sinh cosh tanh asinh atanh ex
 Abs sign Min Max (bgc.algebra's) Heaviside, Pow, Rational, Float, Integer, pi, E; the
 conditional Piecewise over relations (< <= > >= == !=) and And, Or, Not (booleans are never
 stored: a condition chooses a value); and SquareWave, SquareNext (a square wave's value at t
-and its next edge after t, computed by the runtimes), Table, TableNext, TablePiece (a lookup
+and its next edge after t, computed by the runtimes), PeriodicNext (the next of a family
+of times C + P n: a relation of t's crossings), Table, TableNext, TablePiece (a lookup
 table's value, its next breakpoint after t, the piece holding t: bgc.tables), InputPart,
 InputNext (an input's segment and next breakpoint, from the run's data).  Model names
 never occur in expressions, so nothing a model author writes reaches generated code except
@@ -130,8 +131,15 @@ class InputNext(sp.Function):
     nargs = 2
 
 
+class PeriodicNext(sp.Function):
+    """PeriodicNext(t, P, C): the first of the times C + P n (n any integer) after t; NaN
+    where P is zero or not finite (the runtimes' bgc_periodic_next)."""
+
+    nargs = 3
+
+
 RUNTIME_FUNCTIONS = (SquareWave, SquareNext, Table, TableNext, TablePiece, TableGuard, InputPart,
-                     InputNext)
+                     InputNext, PeriodicNext)
 FUNCTIONS = ("sin", "cos", "tan", "asin", "acos", "atan", "atan2", "sinh", "cosh", "tanh",
              "asinh", "atanh", "exp", "log", "sqrt", "Abs", "sign", "Min", "Max", "Heaviside")
 

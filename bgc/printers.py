@@ -31,8 +31,9 @@ from sympy.core.relational import Relational
 from sympy.functions.elementary.piecewise import ExprCondPair
 from sympy.logic.boolalg import ITE, And, BooleanFalse, BooleanTrue, Not, Or
 
-from bgc.ir import (ATOL, C, CLASSES, FUNCTIONS, D, P, R, T, V, X, SquareNext, SquareWave,
-                    InputNext, InputPart, Table, TableGuard, TableNext, TablePiece, as_expr)
+from bgc.ir import (ATOL, C, CLASSES, FUNCTIONS, D, P, R, T, V, X, InputNext, InputPart,
+                    PeriodicNext, SquareNext, SquareWave, Table, TableGuard, TableNext,
+                    TablePiece, as_expr)
 _CLASSES = tuple(CLASSES.values())
 _ARITY = {"atan2": (2, 2), "Min": (2, None), "Max": (2, None), "Heaviside": (1, 2)}
 _TEMP = re.compile(r"w[0-9]+\Z")
@@ -95,7 +96,7 @@ def check_expression(expr: sp.Basic, n_states: int, n_params: int, n_consts: int
             if type(e) is Table and not (e.args[3].is_Integer and 0 <= int(e.args[3]) <= 3):
                 raise UnsupportedExpressionError(f"cannot print {e}")
             stack.extend(e.args[1:])
-        elif isinstance(e, _CONDITIONALS) or type(e) in (SquareWave, SquareNext):
+        elif isinstance(e, _CONDITIONALS) or type(e) in (SquareWave, SquareNext, PeriodicNext):
             if isinstance(e, Relational) and e.rel_op not in _RELOPS:
                 raise UnsupportedExpressionError(f"cannot print {e}")
             stack.extend(e.args)
@@ -201,8 +202,8 @@ class _ArithmeticPrinting:
             if type(expr) is Table:
                 rest.append(str(int(expr.args[3])))
             return f"{name}({self._table_ref(int(expr.args[0]))}, {', '.join(rest)})"
-        if type(expr) in (SquareWave, SquareNext):
-            name = self.FUNCTION_NAMES["SquareWave" if type(expr) is SquareWave else "SquareNext"]
+        if type(expr) in (SquareWave, SquareNext, PeriodicNext):
+            name = self.FUNCTION_NAMES[type(expr).__name__]
             return f"{name}({', '.join(self._print(a) for a in expr.args)})"
         if isinstance(expr, sp.Rational):
             return float_literal(int(expr.p) / int(expr.q))
@@ -350,6 +351,7 @@ class CPrinter(_ArithmeticPrinting, C99CodePrinter):
     FUNCTION_NAMES = {**{f: f for f in FUNCTIONS}, "Abs": "fabs", "sign": "bgc_sign",
                       "Min": "bgc_min", "Max": "bgc_max", "Heaviside": "bgc_heaviside",
                       "SquareWave": "bgc_square", "SquareNext": "bgc_square_next",
+                      "PeriodicNext": "bgc_periodic_next",
                       "Table": "bgc_table", "TableNext": "bgc_table_next",
                       "TablePiece": "bgc_table_piece", "TableGuard": "bgc_table_guard",
                       "InputPart": "bgc_input",
@@ -390,7 +392,8 @@ class CPrinter(_ArithmeticPrinting, C99CodePrinter):
 
 _PY_FAST = {**{f: f"math.{f}" for f in FUNCTIONS}, "Abs": "abs", "sign": "_sign",
             "Min": "min", "Max": "max", "Heaviside": "_heaviside", "SquareWave": "_square",
-            "SquareNext": "_square_next", "Table": "_table", "TableNext": "_table_next",
+            "SquareNext": "_square_next", "PeriodicNext": "_periodic_next", "Table": "_table",
+            "TableNext": "_table_next",
             "TablePiece": "_table_piece", "TableGuard": "_table_guard", "InputPart": "_input",
             "InputNext": "_input_next"}
 _PY_IEEE = {**_PY_FAST, **{f: f"_c_{f}" for f in ("sin", "cos", "tan", "asin", "acos", "atan",

@@ -931,6 +931,7 @@ def reduce(es: EquationSystem, project_initial: bool = False, algebra: str = "au
         selected = None
         if any(es.events):
             targets, kept, selected = _with_events(sys, targets, kept)
+            _warn_unsolved_times(selected, diags)
         blocks = _Blocks(sys, algebra)
         blocks.run(targets)
     except ModelError as err:
@@ -952,6 +953,22 @@ def reduce(es: EquationSystem, project_initial: bool = False, algebra: str = "au
     else:
         initial_values(reduced)  # every initial state a double, projected or not
     return _with_init_warnings(reduced, sys, eliminated)
+
+
+def _warn_unsolved_times(selected, diags: Collector) -> None:
+    """A relation of t and parameters alone whose crossings bgc cannot find in advance
+    (bgc.events.time_roots) is checked at the ends of steps only: say so where it is."""
+    if selected is None:
+        return
+    where = {r.symbol: r for r in selected.state}
+    for symbol, forms in selected.crossings:
+        if forms is None:
+            r = where[symbol]
+            diags.warning(r.span, f"the condition '{r.text}' depends on t alone, but bgc cannot "
+                                  "find its times in advance (t must occur once, under sums, "
+                                  "products and functions with known inverses): it is checked "
+                                  "at the end of each step, and a window shorter than a step "
+                                  "can be missed; bound the step with --max-step (or hmax)")
 
 
 def _switched_modes_unsupported(err: ModelError, infos) -> None:

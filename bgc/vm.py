@@ -40,7 +40,7 @@ from bgc.ir import Assign, Newton, Program, Resolve, Solve, Store
 from bgc.printers import CPrinter
 from bgc.resources import resource_dir
 
-FORMAT = 3  # of the program file; vm.c refuses any other
+FORMAT = 4  # of the program file; vm.c refuses any other
 MAGIC = b"BGCVM\0\0\0"
 
 # The instruction set: name and the kinds of its three operands (r: a register; i: an index,
@@ -69,7 +69,8 @@ OPS = (
     ("ATAN2", "rrr"), ("POW", "rrr"), ("MIN", "rrr"), ("MAX", "rrr"), ("HEAVISIDE", "rrr"),
     ("SQUARE", "rrr"),    # r0 = bgc_square(r1, r2, the next instruction's r1, r2)
     ("SQUARENEXT", "rrr"),
-    ("ARGS", "-rr"),      # the last two arguments of SQUARE, SQUARENEXT
+    ("PERIODICNEXT", "rrr"),  # r0 = bgc_periodic_next(r1, r2, the next instruction's r1)
+    ("ARGS", "-rr"),      # the last arguments of SQUARE, SQUARENEXT, PERIODICNEXT
     ("SOLVE", "i--"),     # bgc_block_solve(w, i, t); return 1 if it fails
     ("RESOLVE", "i--"),
     ("NEWTON", "iii"),    # bgc_newton(w, block, the segment's residuals, ..., final)
@@ -83,7 +84,8 @@ _CALLS = {"sin": "SIN", "cos": "COS", "tan": "TAN", "asin": "ASIN", "acos": "ACO
           "acosh": "ACOSH", "atanh": "ATANH", "exp": "EXP", "log": "LOG", "sqrt": "SQRT",
           "fabs": "FABS", "bgc_sign": "SIGN", "atan2": "ATAN2", "pow": "POW",
           "bgc_min": "MIN", "bgc_max": "MAX", "bgc_heaviside": "HEAVISIDE",
-          "bgc_square": "SQUARE", "bgc_square_next": "SQUARENEXT"}
+          "bgc_square": "SQUARE", "bgc_square_next": "SQUARENEXT",
+          "bgc_periodic_next": "PERIODICNEXT"}
 
 # the model part's entry points, in the file's order (-1: the program has none)
 ENTRIES = ("consts", "init", "rhs", "outputs", "jvp", "events", "next_time", "update",
@@ -374,9 +376,9 @@ class _Compiler:
         for a in reversed(args):
             self.fn.free(a)
         dst = self.fn.alloc()
-        if op in ("SQUARE", "SQUARENEXT"):
+        if op in ("SQUARE", "SQUARENEXT", "PERIODICNEXT"):
             self.emit(op, dst, args[0], args[1])
-            self.emit("ARGS", 0, args[2], args[3])
+            self.emit("ARGS", 0, args[2], args[3] if len(args) > 3 else args[2])
         elif KINDS[op][2] == "r":
             self.emit(op, dst, args[0], args[1])
         else:

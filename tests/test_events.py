@@ -7,6 +7,7 @@ import math
 
 import numpy as np
 import pytest
+import sympy as sp
 from hypothesis import HealthCheck, given, settings, strategies as st
 
 import bgc
@@ -450,3 +451,71 @@ def test_a_quarter_car_never_misses_its_bump(t0, width, solver):
     scale = np.max(np.abs(ref), axis=0)
     assert np.all(scale > 0)
     assert np.all(np.max(np.abs(y[:, 1:] - ref), axis=0) <= 1e-6 * scale)
+
+
+# ---------------------------------------------------------------- relations of t alone
+
+
+def _measure_above(f, level, T, n=200_000):
+    """The time in [0, T] where f(t) > level, by SciPy's brentq on each sign change of a fine
+    grid (independent of bgc)."""
+    from scipy.optimize import brentq
+    ts = np.linspace(0.0, T, n + 1)
+    g = f(ts) - level
+    edges = [0.0] + [brentq(lambda t: f(t) - level, ts[i], ts[i + 1], xtol=1e-15)
+                     for i in range(n) if g[i] * g[i + 1] < 0] + [T]
+    return sum(b - a for a, b in zip(edges, edges[1:])
+               if f(np.array([(a + b) / 2]))[0] > level)
+
+
+WINDOWS = """model windows
+parameter w = 3.0
+signal a = integral(if sin(w*t) > 0.5 then 1 else 0, init = 0)
+signal b = integral(if cos(2*t + 1)^2 > 0.3 then 1 else 0, init = 0)
+signal c = integral(if exp(-t) < 0.4 then 1 else 0, init = 0)
+scene run { time 0 .. 5 every 5; outputs a, b, c }
+"""
+
+
+@pytest.mark.parametrize("solver", ["dopri5", "radau5", "rodas5p", "rk4"])
+def test_a_relation_of_t_alone_is_stepped_onto_however_long_the_steps(solver):
+    """The integrands are piecewise constant, so an adaptive solver's error estimate is zero
+    and its steps grow to the whole span: every window of the conditions must still be
+    counted.  Their times are found in advance (sin, cos, a square, exp inverted)."""
+    compiled = build(WINDOWS, "run")
+    names = [p.name for p in compiled.program.params]
+    outs = []
+    for backend in BACKENDS:
+        program = runner.prepare(compiled, backend)
+        settings = runner.settings_for(compiled.program.scene, names, solver=solver,
+                                       rtol=1e-10, atol=1e-12)
+        result = runner.run(program, settings)
+        assert result.status == 0, result.stderr
+        outs.append(result.csv)
+    assert len(set(outs)) == 1
+    got = [float(v) for v in outs[0].splitlines()[-1].split(",")[1:]]
+    want = [_measure_above(lambda t: np.sin(3 * t), 0.5, 5.0),
+            _measure_above(lambda t: np.cos(2 * t + 1) ** 2, 0.3, 5.0),
+            5.0 - math.log(1 / 0.4)]
+    assert np.allclose(got, want, rtol=0, atol=1e-9)
+
+
+def test_time_roots_of_a_relation_of_t():
+    from bgc.events import time_roots
+    from bgc.graph import TIME
+    w = sp.Symbol("w")
+    forms = time_roots(sp.sin(w * TIME) - sp.Rational(1, 2))
+    times = sorted(float((C + P * k).subs(w, 3)) for C, P in forms for k in range(-2, 3))
+    ref = sorted((math.pi / 6 + 2 * math.pi * k) / 3 for k in range(-2, 3)) + \
+        [(5 * math.pi / 6 + 2 * math.pi * k) / 3 for k in range(-2, 3)]
+    assert np.allclose(times, sorted(ref))
+    assert time_roots(TIME * sp.sin(TIME) - 1) is None  # t in two places
+    assert time_roots(sp.sin(TIME ** 2) - 1) is None  # a family through t^2
+    assert time_roots(sp.sin(TIME) - 2) == ()  # no crossing at all
+
+
+def test_a_relation_of_t_whose_times_are_unknown_is_a_warning():
+    text = WINDOWS.replace("sin(w*t) > 0.5", "t*sin(t) > 0.5")
+    compiled = build(text, "run")
+    (warning,) = [w for w in compiled.warnings if "depends on t alone" in w.message]
+    assert "t*sin(t) > 0.5" in warning.message and "--max-step" in warning.message

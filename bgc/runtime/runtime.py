@@ -97,7 +97,8 @@ _MODEL_HELPERS = (
     "_sq", "_sign", "_heaviside", "_c_exp", "_c_log", "_c_sqrt", "_c_sin", "_c_cos", "_c_tan",
     "_c_asin", "_c_acos", "_c_atan", "_c_atan2", "_c_sinh", "_c_cosh", "_c_tanh", "_c_asinh",
     "_c_atanh", "_c_pow", "_block_solve", "_block_resolve", "_newton", "_Work", "_bind_model",
-    "_square", "_square_next", "_table", "_table_next", "_table_piece", "_table_guard", "_input",
+    "_square", "_square_next", "_periodic_next", "_table", "_table_next", "_table_piece",
+    "_table_guard", "_input",
     "_input_next", "_F64",
 )
 # (a)'s names, for the tests that check both sides of the contract (tests/test_pyruntime.py).
@@ -293,6 +294,21 @@ def _square_next(t, period, duty, t0):
     k = _square_period(t, period, t0)
     down = t0 + (k + duty) * period
     return down if t < down else t0 + (k + 1.0) * period
+
+
+def _periodic_next(t, period, c):
+    """bgc_periodic_next: the first of the times c + period*n after t."""
+    if period < 0.0:
+        period = -period
+    if not period > 0.0 or not math.isfinite(period) or not math.isfinite(c) \
+            or not math.isfinite(t):
+        return math.nan
+    k = float(math.floor((t - c) / period))
+    while c + k * period > t:
+        k -= 1.0
+    while c + (k + 1.0) * period <= t:
+        k += 1.0
+    return c + (k + 1.0) * period
 
 
 def _count_upto(x, n, X):

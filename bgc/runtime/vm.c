@@ -121,6 +121,10 @@ static int bgc_vm_run(const bgc_vm_seg *s, double *f, double t, const double *x,
         f[ip[1]] = bgc_square_next(f[ip[2]], f[ip[3]], f[ip[6]], f[ip[7]]);
         ip += 4;
         BGC_VM_NEXT;
+    BGC_VM_CASE(PERIODICNEXT)
+        f[ip[1]] = bgc_periodic_next(f[ip[2]], f[ip[3]], f[ip[6]]);
+        ip += 4;
+        BGC_VM_NEXT;
     BGC_VM_CASE(ARGS) BGC_VM_NEXT; /* (read by the instruction before) */
     BGC_VM_CASE(SOLVE) if (bgc_block_solve(w, ip[1], t)) return 1; BGC_VM_NEXT;
     BGC_VM_CASE(RESOLVE) if (bgc_block_resolve(w, ip[1], t)) return 1; BGC_VM_NEXT;
@@ -419,7 +423,7 @@ static int bgc_vm_check(const bgc_vm_seg *s, int n_in)
             if (c[1] < 0 || c[1] >= BGC_NUM_BLOCKS || c[2] < 0 || c[2] >= bgc_vm_nsegs)
                 return 0;
             break;
-        case BGC_VM_SQUARE: case BGC_VM_SQUARENEXT:
+        case BGC_VM_SQUARE: case BGC_VM_SQUARENEXT: case BGC_VM_PERIODICNEXT:
             if (i + 1 >= s->n || c[4] != BGC_VM_ARGS)
                 return 0;
             break;

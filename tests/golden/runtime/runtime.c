@@ -300,6 +300,23 @@ static inline double bgc_square_next(double t, double period, double duty, doubl
     return t < down ? down : t0 + (k + 1.0) * period;
 }
 
+/* The first of the times c + period*n (n any integer) after t: a relation of t's next
+   crossing (bgc/events.py, time_roots); NaN where period is 0 or a value is not finite. */
+static inline double bgc_periodic_next(double t, double period, double c)
+{
+    double k;
+    if (period < 0.0)
+        period = -period;
+    if (!(period > 0.0) || !isfinite(period) || !isfinite(c) || !isfinite(t))
+        return NAN;
+    k = floor((t - c) / period);
+    while (c + k * period > t)
+        k -= 1.0;
+    while (c + (k + 1.0) * period <= t)
+        k += 1.0;
+    return c + (k + 1.0) * period;
+}
+
 /* How many of x[0..n-1] (non-decreasing) are at or below X (binary search). */
 static inline int bgc_count_upto(const double *x, int n, double X)
 {
