@@ -299,14 +299,15 @@ class ImportDecl:
 
 @dataclass(frozen=True)
 class InputDecl:
-    """`input NAME [= DEFAULT] ["doc"]`: a signal whose values come from outside."""
+    """`input NAME [= DEFAULT] [unit "UNIT"] ["doc"]`: a signal whose values come from
+    outside."""
 
     name: Ident
     expr: object  # the default (parameters only), or None: 0
     doc: str | None
     span: Span
     dim: object = None  # a scalar signal
-    unit: object = None
+    unit: str | None = None
     index: object = None
 
 

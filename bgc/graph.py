@@ -214,12 +214,14 @@ def check_effect_names(names, spans, known, diags: Collector, where: str) -> Non
 
 @dataclass(frozen=True)
 class InputInfo:
-    """An input (`input NAME = DEFAULT "doc"`): a signal whose values come from outside."""
+    """An input (`input NAME = DEFAULT unit "UNIT" "doc"`): a signal whose values come from
+    outside."""
 
     name: str
     default: object  # a SymPy expression of parameters
     doc: str | None
     span: object
+    unit: str | None = None
 
 
 @dataclass(frozen=True)

@@ -226,7 +226,7 @@ class _ToAst:
         return (c[0], c[1])
 
     def input_decl(self, meta, c):
-        return ast.InputDecl(_ident(c[0]), c[1], _doc(c[2]), _span(meta))
+        return ast.InputDecl(_ident(c[0]), c[1], _doc(c[3]), _span(meta), unit=c[2])
 
     def discrete_decl(self, meta, c):
         return ast.DiscreteDecl(_ident(c[0]), c[1], _doc(c[2]), _span(meta))

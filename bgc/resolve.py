@@ -1102,8 +1102,9 @@ def _input(d: ast.InputDecl, scope, diags) -> Signal:
         default = e.value
     j = len(scope.inputs)
     t0, u0, s0 = scope.events.input(j, d.name.name, default, d.span)
-    scope.inputs.append(InputInfo(d.name.name, default, d.doc, d.span))
-    return Signal(d.name.name, Expr(u0 + s0 * (TIME - t0), (), d.span), None, d.span)
+    scope.inputs.append(InputInfo(d.name.name, default, d.doc, d.span, d.unit))
+    return Signal(d.name.name, Expr(u0 + s0 * (TIME - t0), (), d.span), None, d.span,
+                  unit=d.unit)
 
 
 def _check_size(e: Expr, n: int | None, what: str, broadcast: bool = False) -> None:
