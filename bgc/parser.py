@@ -132,12 +132,17 @@ def _doc(tok) -> str | None:
     return str(tok)[1:-1].replace('\\"', '"').replace("\\\\", "\\")
 
 
+def _statements(items) -> tuple:
+    """A body's statements, each port of a `port a, b` list one of them."""
+    return tuple(s for x in items for s in (x if type(x) is list else (x,)))
+
+
 class _ToAst:
     """Builds typed nodes only; no checking beyond the shape of the syntax.  A method per rule,
     called with the rule's meta (its position) and its children already built (_transform)."""
 
     def start(self, meta, children):
-        return tuple(children)
+        return _statements(children)
 
     # declarations
     def model_decl(self, meta, c):
@@ -184,7 +189,7 @@ class _ToAst:
     # components and generation
     def component_decl(self, meta, c):
         name, params, doc, *body = c
-        return ast.ComponentDecl(_ident(name), tuple(params or ()), _doc(doc), tuple(body),
+        return ast.ComponentDecl(_ident(name), tuple(params or ()), _doc(doc), _statements(body),
                                  _span(meta))
 
     def cparams(self, meta, c):
@@ -194,6 +199,13 @@ class _ToAst:
         return ast.ComponentParam(_ident(c[0]), c[1], c[2], _span(meta), _doc(c[3]))
 
     def port_decl(self, meta, c):
+        """`port a : electrical, b[2]`: a PortDecl per port (a list, which the body holding
+        it spreads: _statements), the first one's span from the keyword."""
+        first = _span(meta)
+        first = Span(first.line, first.col, c[0].span.end_line, c[0].span.end_col)
+        return [replace(c[0], span=first), *c[1:]]
+
+    def port_item(self, meta, c):
         return ast.PortDecl(_ident(c[0]), c[1], _ident(c[2]) if c[2] is not None else None,
                             _span(meta), c[3], _doc(c[4]))
 
@@ -201,21 +213,21 @@ class _ToAst:
         return ast.ConstantDecl(_ident(c[0]), c[1], _span(meta))
 
     def for_block(self, meta, c):
-        return ast.ForBlock(_ident(c[0]), c[1], c[2], tuple(c[3:]), _span(meta))
+        return ast.ForBlock(_ident(c[0]), c[1], c[2], _statements(c[3:]), _span(meta))
 
     def if_block(self, meta, c):
         cond, *rest = c
-        body = tuple(x for x in rest if not isinstance(x, tuple) and x is not None)
+        body = _statements(x for x in rest if not isinstance(x, tuple) and x is not None)
         branches = [(cond, body)] + [(x[1], x[2]) for x in rest
                                      if isinstance(x, tuple) and x[0] == "elif"]
         orelse = next((x[1] for x in rest if isinstance(x, tuple) and x[0] == "else"), None)
         return ast.IfBlock(tuple(branches), orelse, _span(meta))
 
     def elif_part(self, meta, c):
-        return ("elif", c[0], tuple(c[1:]))
+        return ("elif", c[0], _statements(c[1:]))
 
     def else_part(self, meta, c):
-        return ("else", tuple(c))
+        return ("else", _statements(c))
 
     def if_expr(self, meta, c):
         cond, value, *rest = c

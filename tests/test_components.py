@@ -13,9 +13,11 @@ from click.testing import CliRunner
 import bgc
 from bgc import backends
 from bgc.api import Source
+from bgc.ast import ComponentDecl, PortDecl
 from bgc.cli import main
 from bgc.emit import c_param_fields, emit_c, emit_python
 from bgc.graph import var
+from bgc.parser import parse
 from bgc.reduce import explicit_forms
 from bgc.resources import MAX_INSTANCE_DEPTH
 
@@ -186,6 +188,39 @@ def test_rc_ladder_against_scipy():
     expected = np.column_stack([q[0], q[2] / c, (q[0] - q[1]) / c / r[1]])
     assert names == ["s[1].cap.q", "s[3].cap.e", "s[2].res.f"]
     np.testing.assert_allclose(Y, expected, rtol=1e-7, atol=1e-9)
+
+
+PORT_LIST = """model port_list
+component drive(m = 1) {
+  port a : electrical "the supply's side", b[2] : translational unit "N"
+  s : Se(3)
+  masses : I[2](m)
+  s -> a
+  b -> masses
+}
+x : drive(m = 2)
+r : R(1.5)
+x.a -> r
+g : Se[2]([1, 2])
+g -> x.b
+scene run { outputs x.masses.f, r.f; time 0 .. 1 every 0.25 }
+"""
+
+
+def test_a_list_of_ports_in_one_declaration():
+    """`port a : D "doc", b[2] : D2 unit "U"`: two ports, each with its size, domain, unit and
+    doc; the masses pushed by 1 and 2 from rest go at t/m and 2 t/m, the resistor takes
+    3/1.5."""
+    a = build(PORT_LIST, "run")
+    assert [(p.name, p.dim, p.domain, p.unit) for p in a.graph.ports] == [
+        ("x.a", 1, "electrical", None), ("x.b", 2, "translational", "N")]
+    comp = next(d for d in parse(PORT_LIST).decls if isinstance(d, ComponentDecl))
+    assert [d.doc for d in comp.body if isinstance(d, PortDecl)] == ["the supply's side", None]
+    t, Y, names = bgc.simulate(Source("port_list.bg", PORT_LIST), "run", backend="python",
+                               rtol=1e-10, atol=1e-12)
+    assert names == ["x.masses.f[0]", "x.masses.f[1]", "r.f"]
+    np.testing.assert_allclose(Y, np.column_stack([t / 2, t, np.full_like(t, 2.0)]),
+                               rtol=0, atol=1e-12)
 
 
 NESTED = """model nested
