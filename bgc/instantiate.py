@@ -641,6 +641,35 @@ class _Instantiate:
         _, _, sa, sb, _ = self.edges[k]
         return sa.join(sb)
 
+    def check_port(self, name: str, port: Port, sides: dict) -> bool:
+        """Whether a port has one bond inside and one outside, pointing the same way (each
+        error reported)."""
+        ok = True
+        for inner in (True, False):
+            ks = sides[inner]
+            where = "inside its component" if inner else "outside, where it is used"
+            if not ks:
+                self.diags.error(port.span, f"port '{name}' is not bonded {where} (bond a "
+                                            "free end to a zero source)")
+                ok = False
+            elif len(ks) > 1:
+                self.diags.error(self._span(ks[1]), f"port '{name}' is bonded more than "
+                                                    f"once {where}",
+                                 Note(self._span(ks[0]), "the first bond"))
+                ok = False
+        if not ok:
+            return False
+        (ki,), (ko,) = sides[True], sides[False]
+        into_inner = self.edges[ki][1] == ("port", name, True)
+        into_outer = self.edges[ko][1] == ("port", name, False)
+        if into_inner != into_outer:
+            return True
+        self.diags.error(self._span(ko), f"the bonds of port '{name}' point opposite ways: the "
+                                         "bond outside and the bond inside are one bond, and "
+                                         "point the same way", Note(self._span(ki),
+                                                                    "the bond inside"))
+        return False
+
     def fuse(self):
         """Each port joins its inner and outer bond into one; the bonds that result, in the
         order of their first part."""
@@ -653,31 +682,7 @@ class _Instantiate:
                     at.setdefault(end[1], {True: [], False: []})[end[2]].append(k)
         ok = True
         for name, port in self.ports.items():
-            sides = at.get(name, {True: [], False: []})
-            for inner in (True, False):
-                ks = sides[inner]
-                where = "inside its component" if inner else "outside, where it is used"
-                if not ks:
-                    self.diags.error(port.span, f"port '{name}' is not bonded {where} (bond a "
-                                                "free end to a zero source)")
-                    ok = False
-                elif len(ks) > 1:
-                    self.diags.error(self._span(ks[1]), f"port '{name}' is bonded more than "
-                                                        f"once {where}",
-                                     Note(self._span(ks[0]), "the first bond"))
-                    ok = False
-            if not ok or len(sides[True]) != 1 or len(sides[False]) != 1:
-                continue
-            (ki,), (ko,) = sides[True], sides[False]
-            into_inner = self.edges[ki][1] == ("port", name, True)
-            into_outer = self.edges[ko][1] == ("port", name, False)
-            if into_inner == into_outer:
-                ai, bi = self.edges[ki][2], self.edges[ki][3]
-                self.diags.error(self.edges[ko][2].join(self.edges[ko][3]),
-                                 f"the bonds of port '{name}' point opposite ways: the bond "
-                                 "outside and the bond inside are one bond, and point the same "
-                                 "way", Note(ai.join(bi), "the bond inside"))
-                ok = False
+            ok = self.check_port(name, port, at.get(name, {True: [], False: []})) and ok
         if not ok:
             return
         other = {}
