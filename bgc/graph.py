@@ -245,6 +245,7 @@ class Graph:
     instances: tuple = ()  # Instance, one per instance of a component, in declaration order
     tables: tuple = ()  # bgc.tables.TableData, as Table(k, ...) numbers them
     inputs: tuple = ()  # InputInfo, in declaration order (their values: bgc.events.InputSlot)
+    constants: tuple = ()  # (name, value) of the model file's constants (`--outputs s[N].q`)
 
     @cached_property
     def vector_by_name(self) -> dict:

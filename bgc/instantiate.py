@@ -438,7 +438,7 @@ class _Instantiate:
         self.fuse()
         self.diags.raise_if_errors()
         return ast.Model(tuple(self.out), self.model.path, tuple(self.ports.values()),
-                         tuple(self.instances))
+                         tuple(self.instances), tuple(main.constants.items()))
 
     def child(self, parent: _Scope, stmt: ast.ElementDecl, env) -> _Scope:
         name = self.local_name(parent, stmt, env)
@@ -877,6 +877,52 @@ class _Rewriter:
         return ast.Field(s.prefix + owner, rest[-1], sp)
 
 
+def output_refs(refs, constants: dict) -> tuple:
+    """Outputs (OutRefs, OutPaths) as OutRefs, each index an expression of `constants` made a
+    number (`s[N].cap.q` -> `s[8].cap.q`); ModelError with an error for each output that
+    cannot be, located where it is written."""
+    out, diags = [], Collector()
+    for r in refs:
+        try:
+            out.append(_output_ref(r, constants) if isinstance(r, ast.OutPath) else r)
+        except ModelError as exc:
+            diags.items.extend(exc.diagnostics)
+    diags.raise_if_errors()
+    return tuple(out)
+
+
+def _output_ref(path: ast.OutPath, constants: dict) -> ast.OutRef:
+    scope = _text_scope(path.span)
+    segments = [(name, index if index is None or type(index) is int else
+                 _index_value(index, constants, scope, "an index in outputs"))
+                for name, index in path.parts]
+    return ast.out_ref(segments, path.span)
+
+
+def path_name(node, constants: dict) -> ast.Ident:
+    """A scene's `set` target as an Ident: a PathRef's indices (`s[N].r`) made numbers."""
+    if not isinstance(node, ast.PathRef):
+        return node
+    scope = _text_scope(node.span)
+    segs = [n.name if i is None else
+            f"{n.name}[{_index_value(i, constants, scope, 'an index in a scene')}]"
+            for n, i in node.parts]
+    return ast.Ident(".".join(segs), node.span)
+
+
+def _text_scope(span: Span) -> _Scope:
+    """The scope of a scene's or an option's text (`--outputs`): where its spans point."""
+    origin = span.origin
+    return _Scope("", _File(origin.name if origin else "", origin, ()), None, (), ())
+
+
+def _index_value(node, constants: dict, scope: _Scope, what: str) -> int:
+    k = _const(node, constants, scope, what)
+    if not 0 <= k <= MAX_DIMENSION:
+        fail(scope.sp(node.span), f"an index is from 0 to {MAX_DIMENSION}; this one is {k}")
+    return k
+
+
 def needs_instantiation(model: ast.Model) -> bool:
     """Whether the model uses components, constants, generation or indexed names."""
     for d in model.decls:
@@ -904,4 +950,4 @@ def instantiate(model: ast.Model, consts: dict | None = None) -> ast.Model:
     return _Instantiate(model, consts, search_path()).build()
 
 
-__all__ = ["instantiate"]
+__all__ = ["instantiate", "output_refs", "path_name"]

@@ -103,10 +103,15 @@ def _saved(path) -> Lark | None:
 
 def _whole(tok: Token, what: str) -> int:
     """An INT token's value, refused above MAX_DIMENSION (before int() reads its digits)."""
-    digits = str(tok).lstrip("0")
+    return _integer(str(tok), _tspan(tok), what)
+
+
+def _integer(text: str, span: Span, what: str) -> int:
+    """The value of digits, refused above MAX_DIMENSION (before int() reads them)."""
+    digits = text.lstrip("0")
     if len(digits) > len(str(MAX_DIMENSION)) or int(digits or 0) > MAX_DIMENSION:
         shown = digits if len(digits) <= 20 else digits[:20] + "..."
-        fail(_tspan(tok), f"{what} {shown} is too large (the limit is {MAX_DIMENSION})")
+        fail(span, f"{what} {shown} is too large (the limit is {MAX_DIMENSION})")
     return int(digits or 0)
 
 
@@ -345,16 +350,18 @@ class _ToAst:
         return tuple(c)
 
     def outref(self, meta, c):
-        """a, a[1], a.f, a.f[1], p1.res.e, arm.link[2].rod.lambda: the last name a field when
-        there is more than one, the last index the output's."""
-        *head, (last, index) = c
-        text = lambda segs: ".".join(n + (f"[{i}]" if i is not None else "") for n, i in segs)
-        if not head:
-            return ast.OutRef(last, None, index, _span(meta))
-        return ast.OutRef(text(head), last, index, _span(meta))
+        """An OutRef (ast.out_ref), or an OutPath while an index is an expression."""
+        if all(index is None or type(index) is int for _, index in c):
+            return ast.out_ref(c, _span(meta))
+        return ast.OutPath(tuple(c), _span(meta))
 
     def outseg(self, meta, c):
-        return (str(c[0]), _whole(c[1], "index") if c[1] is not None else None)
+        """(name, index): a whole number written as one is read here, any other expression
+        when the constants are known."""
+        index = c[1]
+        if isinstance(index, ast.Num) and index.text.isdigit():
+            index = _integer(index.text, index.span, "index")
+        return (str(c[0]), index)
 
     def scene_time(self, meta, c):
         return ast.SceneTime(c[0], c[1], c[2], _span(meta))

@@ -22,6 +22,7 @@ from .graph import (TIME, InputInfo, check_effect_names, model_effects, Bond, Co
                     check_ports, part_name, var, variable_name, written)
 from .events import (INITIAL, RELATIONS, SOURCES, Action, Discrete, EventTable, When,
                      is_condition)
+from .instantiate import output_refs, path_name
 from .ir import Table, TableGuard
 from .kinds import KINDS
 from .tables import EXTRAPOLATE, INTERP, MAX_TABLE_ROWS, MAX_TABLES, build, check_rows, read_csv
@@ -62,6 +63,7 @@ class _Scope:
         self.inputs: list = []  # graph.InputInfo, in declaration order
         self.directory = "."  # the model file's: its table files are read relative to it (a
         #                       library's, relative to the library)
+        self.constants: dict = {}  # the model file's (indices in scenes: `outputs s[N].q`)
 
     def charge(self, n: int, span: Span):
         """Count n more vector or matrix entries against MAX_MATRIX_ENTRIES, before or as
@@ -1156,7 +1158,7 @@ def _scene(d: ast.SceneDecl, scope: _Scope, known_effects, diags: Collector) -> 
                 check_effect_names(effects, effect_spans, known_effects, diags,
                                    f"scene '{d.name.name}'")
             elif isinstance(s, ast.SceneOutputs):
-                outputs = s.refs
+                outputs = output_refs(s.refs, scope.constants)
             elif isinstance(s, ast.SceneTime):
                 b = _ExprBuilder(scope, diags)
                 time = (b.build(s.start), b.build(s.stop),
@@ -1165,9 +1167,10 @@ def _scene(d: ast.SceneDecl, scope: _Scope, known_effects, diags: Collector) -> 
                 opts = tuple((k.name, _ExprBuilder(scope, diags).build(v)) for k, v in s.options)
                 solver = (s.name.name, opts, s.span)
             elif isinstance(s, ast.SceneSet):
-                if s.name.name not in scope.params:
-                    fail(s.name.span, f"'set' names a parameter; '{s.name.name}' is not one")
-                sets.append((s.name.name, _ExprBuilder(scope, diags).build(s.expr), s.span))
+                name = path_name(s.name, scope.constants)
+                if name.name not in scope.params:
+                    fail(name.span, f"'set' names a parameter; '{name.name}' is not one")
+                sets.append((name.name, _ExprBuilder(scope, diags).build(s.expr), s.span))
     finally:
         scope.params_only = False
     return Scene(d.name.name, d.doc, effects, effects_span, outputs, time, solver, tuple(sets),
@@ -1190,6 +1193,7 @@ def resolve(model: ast.Model) -> Graph:
     params, signals, elements = _collect_names(model, diags)
     scope = _Scope(params, signals, elements)
     scope.directory = _model_directory(model.path)
+    scope.constants = dict(model.constants)
     parameters = _parameters(params, scope, diags)
     discretes = _discretes(model, scope, diags)
     order = {id(d): k for k, d in enumerate(model.decls)}
@@ -1228,4 +1232,4 @@ def resolve(model: ast.Model) -> Graph:
                  ports=tuple(model.ports), instances=tuple(model.instances),
                  relations=tuple(scope.events.relations), squares=tuple(scope.events.squares),
                  discretes=tuple(discretes), whens=tuple(whens), tables=tuple(scope.tables),
-                 inputs=tuple(scope.inputs))
+                 inputs=tuple(scope.inputs), constants=tuple(model.constants))

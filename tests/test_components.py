@@ -464,6 +464,49 @@ def test_const_on_the_command_line(tmp_path):
     assert result.exit_code == 2 and "not a whole number" in result.stderr
 
 
+TANKS = """model tanks
+constant N = 4
+component tank(k = 1) {
+  fill : Sf(k)
+  c : C(1)
+  fill -> c
+}
+for i in 1..N { s[i] : tank(k = i) }
+scene run { outputs s[N].c.q, s[N - 1].c.q, s[min(N, 2)].c.e; time 0 .. 1 every 0.25 }
+scene faster { set s[N - 1].k = 10; outputs s[N - 1].c.q, s[N].c.q; time 0 .. 1 every 0.25 }
+"""
+
+
+@pytest.mark.parametrize("const, outputs, header, rates", [
+    ([], [], ["s[4].c.q", "s[3].c.q", "s[2].c.e"], [4, 3, 2]),
+    (["--const", "N=6"], [], ["s[6].c.q", "s[5].c.q", "s[2].c.e"], [6, 5, 2]),
+    (["--const", "N=6"], ["--outputs", "s[N/2].c.q, s[N^2 - 35].c.f"],
+     ["s[3].c.q", "s[1].c.f"], [3, None])])
+def test_constants_in_the_indices_of_outputs(tmp_path, const, outputs, header, rates):
+    """Outputs indexed by constants, in the scene and in --outputs, with --const: tank i
+    is filled at the rate i, so its charge is i t (its flow i)."""
+    (tmp_path / "tanks.bg").write_text(TANKS)
+    result = CliRunner().invoke(main, ["simulate", str(tmp_path / "tanks.bg"), "--scene", "run",
+                                       "--backend", "python", *const, *outputs])
+    assert result.exit_code == 0, result.stderr
+    lines = result.stdout.splitlines()
+    assert lines[0].split(",") == ["t", *header]
+    rows = np.array([[float(x) for x in line.split(",")] for line in lines[1:]])
+    t = rows[:, 0]
+    assert np.allclose(t, [0, 0.25, 0.5, 0.75, 1])
+    expected = [r * t if r is not None else np.ones_like(t) for r in rates]
+    np.testing.assert_allclose(rows[:, 1:], np.column_stack(expected), rtol=0, atol=1e-12)
+
+
+@pytest.mark.parametrize("consts, charges", [((), (10, 4)), ((("N", 2),), (10, 2))])
+def test_a_scene_sets_a_parameter_through_constant_indices(consts, charges):
+    """`set s[N - 1].k = 10`: that tank fills at 10, the last one at N."""
+    t, Y, names = bgc.simulate(Source("tanks.bg", TANKS, consts), "faster", backend="python")
+    n = dict(consts).get("N", 4)
+    assert names == [f"s[{n - 1}].c.q", f"s[{n}].c.q"]
+    np.testing.assert_allclose(Y, np.outer(t, charges), rtol=0, atol=1e-12)
+
+
 def test_paths_in_the_csv_header_and_in_overrides(tmp_path):
     path = tmp_path / "ladder.bg"
     path.write_text(LADDER)
