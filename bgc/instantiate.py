@@ -33,7 +33,7 @@ from pathlib import Path
 from . import ast
 from .diagnostics import Collector, ModelError, Note, Origin, Span, did_you_mean, error, fail
 from .graph import Instance, Port
-from .kinds import KINDS
+from .kinds import KINDS, SWITCHED
 from .resources import MAX_DIMENSION, MAX_GENERATED, MAX_INSTANCE_DEPTH, read_bounded
 
 LIBRARY = Path(__file__).resolve().parent / "library"  # bgc's standard library
@@ -561,6 +561,7 @@ class _Instantiate:
         if isinstance(stmt, ast.ElementDecl):
             if not stmt.is_junction and stmt.kind.name not in KINDS and "." in stmt.kind.name:
                 fail(scope.sp(stmt.kind.span), f"unknown component '{stmt.kind.name}'")
+            self.check_unqualified(scope, stmt)
             own = {"e", "f"}
             spec = KINDS.get(stmt.kind.name)
             if spec is not None and spec.state:
@@ -589,6 +590,24 @@ class _Instantiate:
         else:
             out = rw.map(stmt)
         self.out.append(out)
+
+    def check_unqualified(self, scope: _Scope, stmt: ast.ElementDecl):
+        """A kind that is a component of an imported library named without the library's
+        alias (`cap2` for `F.cap2`): an error saying how to write it, with a note at each
+        import that has it."""
+        kind = stmt.kind.name
+        if stmt.is_junction or kind in KINDS or kind in SWITCHED or "." in kind:
+            return
+        qualified = [k for k in scope.file.components if k.partition(".")[2] == kind]
+        if not qualified:
+            return
+        imports = {(d.alias or d.name).name: d.span for d in scope.file.decls
+                   if isinstance(d, ast.ImportDecl)}
+        notes = [Note(replace(imports[q.partition(".")[0]], origin=scope.file.origin),
+                      f"imported here as '{q.partition('.')[0]}'") for q in qualified]
+        fail(scope.sp(stmt.kind.span), f"unknown kind '{kind}': a component of an imported "
+                                       "library is used qualified: write "
+                                       + " or ".join(f"'{q}'" for q in qualified), *notes)
 
     def end(self, scope: _Scope, node, env):
         """A bond's end: ("node", flat name) or ("port", flat port name, inner?)."""

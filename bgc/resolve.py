@@ -24,7 +24,7 @@ from .events import (INITIAL, RELATIONS, SOURCES, Action, Discrete, EventTable, 
                      is_condition)
 from .instantiate import output_refs, path_name
 from .ir import Table, TableGuard
-from .kinds import KINDS
+from .kinds import KINDS, SWITCHED, known_kinds
 from .tables import EXTRAPOLATE, INTERP, MAX_TABLE_ROWS, MAX_TABLES, build, check_rows, read_csv
 from .resources import (MAX_EXTREMUM_ARGUMENTS, MAX_LITERAL_DIGITS, MAX_MATRIX_ENTRIES,
                         MAX_SCENES, MAX_SYMBOLIC_EXPONENT)
@@ -820,7 +820,7 @@ def _element(d: ast.ElementDecl, scope: _Scope, diags: Collector) -> Element | N
     if kname not in KINDS:
         if kname.isdigit():
             fail(d.kind.span, f"unknown junction kind '{kname}': junctions are 0 or 1")
-        fail(d.kind.span, f"unknown kind '{kname}' (known: {', '.join(KINDS)}, 0, 1)")
+        fail(d.kind.span, f"unknown kind '{kname}' (known: {known_kinds()})")
     spec = KINDS[kname]
     if len(d.args) != 1:
         fail(d.span, f"{kname} takes one argument, got {len(d.args)}")
@@ -836,9 +836,6 @@ def _element(d: ast.ElementDecl, scope: _Scope, diags: Collector) -> Element | N
     init = _init(d, spec, scope, diags)
     return Element(d.name.name, kname, value, law, init, tuple(e.name for e in d.effects),
                    None, d.doc, d.span, d.name.span, dim)
-
-
-SWITCHED = {"D": 0, "Fr": 2, "Sw": 1}  # switched one-ports (docs/hybrid.md) -> arguments
 
 
 def _junction_switch(d: ast.ElementDecl, scope: _Scope, diags: Collector) -> Element:
