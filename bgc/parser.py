@@ -456,30 +456,66 @@ def _describe(tok: Token) -> str:
     return f"'{tok}'"
 
 
-def _unclosed_bracket(source: str, line: int, col: int) -> Span | None:
-    """The innermost ( or [ still open before (line, col), skipping strings and comments."""
-    stack, ln, cl, i = [], 1, 1, 0
-    in_string = in_comment = False
-    while i < len(source) and (ln, cl) < (line, col):
-        ch = source[i]
+def _code(source: str):
+    """(character, line, column) of each character outside strings and comments."""
+    ln, cl = 1, 1
+    in_string = in_comment = escaped = False
+    for ch in source:
         if in_comment:
             in_comment = ch != "\n"
         elif in_string:
-            if ch == "\\":
-                i, cl = i + 1, cl + 1
+            if escaped:
+                escaped = False
+            elif ch == "\\":
+                escaped = True
             elif ch == '"':
                 in_string = False
         elif ch == "#":
             in_comment = True
         elif ch == '"':
             in_string = True
-        elif ch in "([":
+        else:
+            yield ch, ln, cl
+        ln, cl = (ln + 1, 1) if ch == "\n" else (ln, cl + 1)
+
+
+def _unclosed_bracket(source: str, line: int, col: int) -> Span | None:
+    """The innermost ( or [ still open before (line, col), skipping strings and comments."""
+    stack = []
+    for ch, ln, cl in _code(source):
+        if (ln, cl) >= (line, col):
+            break
+        if ch in "([":
             stack.append(Span(ln, cl, ln, cl + 1))
         elif ch in ")]" and stack:
             stack.pop()
-        ln, cl = (ln + 1, 1) if ch == "\n" else (ln, cl + 1)
-        i += 1
     return stack[-1] if stack else None
+
+
+def _unclosed_block(source: str, line: int, col: int) -> Span | None:
+    """The innermost { before (line, col) that no } of the whole text closes."""
+    stack = []
+    for ch, ln, cl in _code(source):
+        if ch == "{":
+            stack.append(Span(ln, cl, ln, cl + 1))
+        elif ch == "}" and stack:
+            stack.pop()
+    before = [s for s in stack if (s.line, s.col) < (line, col)]
+    return before[-1] if before else None
+
+
+def _block_not_closed(tok: Token, source: str, line: int, col: int):
+    """A statement's keyword, or the end of the file, where a block opened before it and
+    never closed still holds the parser: the missing '}' is the error (unless a bracket is
+    open too: the newlines it holds did not end the statement, _syntax_error's note)."""
+    opened = _unclosed_block(source, line, col)
+    if opened is None or _unclosed_bracket(source, line, col) is not None:
+        return
+    width = 1 if tok.type == "$END" else len(str(tok))
+    fail(Span(line, col, line, col + width),
+         f"syntax error: unexpected {_describe(tok)}: the block opened at "
+         f"{opened.line}:{opened.col} is not closed (its '}}' is missing)",
+         Note(opened, "the block opened here"))
 
 
 def _syntax_error(exc: UnexpectedInput, source: str):
@@ -489,11 +525,13 @@ def _syntax_error(exc: UnexpectedInput, source: str):
         before = (exc.token_history or [None])[-1]
         if before is not None and str(before) in KEYWORDS and str(tok) in (":", "->"):
             _keyword_as_name(before)  # `scene : 1`, `model -> j`: a keyword declared or bonded
-        if tok.type != "NAME" and str(tok) in KEYWORDS and "NAME" in (exc.expected or ()):
-            _keyword_as_name(tok)  # `set : 0`: a keyword where only a name fits
         if tok.type == "$END":
             lines = source.splitlines() or [""]
             line, col = len(lines), len(lines[-1]) + 1
+        if tok.type == "$END" or (tok.type != "NAME" and str(tok) in KEYWORDS):
+            _block_not_closed(tok, source, line, col)  # `when c { n = 1` then `scene ...`
+        if tok.type != "NAME" and str(tok) in KEYWORDS and "NAME" in (exc.expected or ()):
+            _keyword_as_name(tok)  # `set : 0`: a keyword where only a name fits
         msg = f"syntax error: unexpected {_describe(tok)}{_expected(exc)}"
         width = max(1, len(str(tok))) if tok.type not in ("$END", "_NL") else 1
     elif isinstance(exc, UnexpectedCharacters):
