@@ -518,9 +518,13 @@ class _ExprBuilder:
             self.refs.append((node.name, node.span))
             return var(node.name)
         if node.name in s.discretes:
+            declared = Note(s.discretes[node.name].name.span, f"'{node.name}' is declared here")
+            if s.visible_params is not None:  # (a parameter's definition)
+                fail(node.span, f"a parameter cannot depend on a discrete variable: '{node.name}' "
+                                "changes at events, a parameter is fixed for the run", declared)
             if s.params_only:
                 fail(node.span, f"'{node.name}' is a discrete variable: only parameters are "
-                                "allowed here")
+                                "allowed here", declared)
             self.refs.append((node.name, node.span))
             return var(node.name)
         if node.name in s.signals:
@@ -926,13 +930,18 @@ def _with_own_vars(d, scope, diags, node) -> Expr:
 # ---------------------------------------------------------------- events
 
 
-def _discretes(model: ast.Model, scope: _Scope, diags: Collector) -> list[Discrete]:
-    out = []
+def _declare_discretes(model: ast.Model, scope: _Scope):
+    """The discrete variables' names in scope (before any expression is built: a parameter
+    that reads one is told so)."""
     for d in (d for d in model.decls if isinstance(d, ast.DiscreteDecl)):
         if d.name.name == "t" or d.name.name in scope.params or d.name.name in \
                 scope.signals or d.name.name in scope.elements:
             continue  # reported by _collect_names
         scope.discretes[d.name.name] = d
+
+
+def _discretes(scope: _Scope, diags: Collector) -> list[Discrete]:
+    out = []
     for name, d in scope.discretes.items():
         scope.params_only = True
         try:
@@ -1191,8 +1200,9 @@ def resolve(model: ast.Model) -> Graph:
     scope = _Scope(params, signals, elements)
     scope.directory = _model_directory(model.path)
     scope.constants = dict(model.constants)
+    _declare_discretes(model, scope)
     parameters = _parameters(params, scope, diags)
-    discretes = _discretes(model, scope, diags)
+    discretes = _discretes(scope, diags)
     order = {id(d): k for k, d in enumerate(model.decls)}
     els = [replace(e, order=order[id(d)]) for d, e in
            ((d, _guard(diags, _element, d, scope, diags)) for d in elements.values()) if e]
