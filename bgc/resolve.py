@@ -275,6 +275,8 @@ class _ExprBuilder:
         elif node.func == "ramp":
             done.append(sp.Piecewise((TIME - args[0], on), (sp.Integer(0), True)))
         else:  # pulse(t0, width)
+            if args[1].is_Number and args[1] < 0:
+                fail(node.args[1].span, "the width of pulse() cannot be negative")
             off = ev.relation(sp.GreaterThan(TIME, args[0] + args[1]), node, None)
             done.append(sp.Piecewise((sp.Integer(1), sp.And(on, sp.Not(off))),
                                      (sp.Integer(0), True)))
