@@ -299,14 +299,15 @@ class ImportDecl:
 
 @dataclass(frozen=True)
 class InputDecl:
-    """`input NAME [= DEFAULT] ["doc"]`: a signal whose values come from outside."""
+    """`input NAME [= DEFAULT] [unit "UNIT"] ["doc"]`: a signal whose values come from
+    outside."""
 
     name: Ident
     expr: object  # the default (parameters only), or None: 0
     doc: str | None
     span: Span
     dim: object = None  # a scalar signal
-    unit: object = None
+    unit: str | None = None
     index: object = None
 
 
@@ -360,6 +361,27 @@ class OutRef:
         return s + (f"[{self.index}]" if self.index is not None else "")
 
 
+def out_ref(segments, span: Span) -> OutRef:
+    """The output that ((name, index or None), ...) names: a, a[1], a.f, a.f[1], p1.res.e,
+    arm.link[2].rod.lambda: the last name a field when there is more than one, the last index
+    the output's."""
+    *head, (last, index) = segments
+    if not head:
+        return OutRef(last, None, index, span)
+    owner = ".".join(n + (f"[{i}]" if i is not None else "") for n, i in head)
+    return OutRef(owner, last, index, span)
+
+
+@dataclass(frozen=True)
+class OutPath:
+    """An output whose indices are not all numbers yet (`s[N].cap.q`, `q[2*k]`):
+    ((name, index: an int, a compile-time integer expression, or None), ...); made an OutRef
+    once the constants are known (bgc.instantiate.output_refs)."""
+
+    parts: tuple
+    span: Span
+
+
 @dataclass(frozen=True)
 class SceneEffects:
     names: tuple[Ident, ...] | None  # None: `effects none`
@@ -389,7 +411,7 @@ class SceneSolver:
 
 @dataclass(frozen=True)
 class SceneSet:
-    name: Ident
+    name: Ident  # or a PathRef (`set s[N].r = 2`) until the constants are known
     expr: object
     span: Span
 
@@ -408,3 +430,4 @@ class Model:
     path: str
     ports: tuple = ()  # after instantiate: graph.Port, one per port of every instance
     instances: tuple = ()  # after instantiate: graph.Instance, in declaration order
+    constants: tuple = ()  # after instantiate: (name, value) of the file's constants

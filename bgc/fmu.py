@@ -20,8 +20,9 @@ The variables, their value references as bgc/runtime/fmi2.c numbers them:
                "continuous", start = the default: set with fmi2SetReal, held until set again.
 A model with events has an event indicator per state relation (numberOfEventIndicators) and
 time events (fmi2NewDiscreteStates' nextEventTime); bgc/runtime/fmi2.c says how.
-Descriptions come from the model's doc strings, a parameter's unit from a trailing
-"[unit]" in its doc string; every text from the model is escaped.
+Descriptions come from the model's doc strings; a unit from the declaration's `unit "..."`
+(a parameter's, a signal's, an input's), else, for a parameter, from a trailing "[unit]" in
+its doc string; every text from the model is escaped.
 
 Pure up to the build: the same model gives the same XML and sources (hence the same GUID,
 derived from them) under any hash seed; the archive's entries carry fixed dates and modes.
@@ -141,23 +142,20 @@ def describe(compiled) -> Description:
                            "parameter or an output; leave it out of the outputs "
                            "(the parameter is in the FMU)")
     docs = {p.name: p.doc for p in graph.parameters}
-    declared_units = {p.name: p.unit for p in graph.parameters}
+    declared_units = _declared_units(graph)
     outputs_of_state = {state_index[o]: k for k, o in enumerate(program.outputs)
                         if o in state_index}
     variables: list[Variable] = []
-    units: dict[str, None] = {}
     for j, (p, value) in enumerate(zip(program.params, _parameter_values(program))):
         doc = docs.get(p.name)
         unit = declared_units.get(p.name) or _unit(doc)
-        if unit:
-            units[unit] = None
         variables.append(Variable(p.name, j, "parameter", "fixed", "exact", doc, value, unit))
     state_pos = {}
     for i, name in enumerate(program.states):
         state_pos[i] = len(variables) + 1
         causality = "output" if i in outputs_of_state else "local"
         variables.append(Variable(name, m + i, causality, "continuous", "calculated",
-                                  _variable_doc(graph, name)))
+                                  _variable_doc(graph, name), unit=declared_units.get(name)))
     der_pos = {}
     for i, name in enumerate(program.states):
         der_pos[i] = len(variables) + 1
@@ -174,7 +172,7 @@ def describe(compiled) -> Description:
             continue
         out_pos[k] = len(variables) + 1
         variables.append(Variable(name, m + 2 * n + k, "output", "continuous", "calculated",
-                                  _variable_doc(graph, name)))
+                                  _variable_doc(graph, name), unit=declared_units.get(name)))
     discrete = tuple(k for k, kind in enumerate(events.kinds) if kind == "discrete")
     for k, place in enumerate(discrete):
         variables.append(Variable(events.names[place], m + 2 * n + len(program.outputs) + k,
@@ -186,7 +184,8 @@ def describe(compiled) -> Description:
         input_pos.append(len(variables) + 1)
         variables.append(Variable(u.name, m + 2 * n + len(program.outputs) + len(discrete) + j,
                                   "input", "continuous", None, u.doc,
-                                  _value_of(u.default, params, f"the default of input '{u.name}'")))
+                                  _value_of(u.default, params, f"the default of input '{u.name}'"),
+                                  declared_units.get(u.name)))
         slot = [k for k, (kind, name) in enumerate(zip(events.kinds, events.names))
                 if kind == "input" and name == u.name]
         input_slots.append(slot[0] if slot else -1)
@@ -214,7 +213,8 @@ def describe(compiled) -> Description:
         variables=tuple(variables),
         outputs=tuple(sorted(outputs.items())),
         derivatives=tuple((der_pos[i], tuple(sorted(rows[i]))) for i in range(n)),
-        initial_unknowns=tuple(initial), units=tuple(units),
+        initial_unknowns=tuple(initial), units=tuple(dict.fromkeys(v.unit for v in variables
+                                                                   if v.unit)),
         experiment=program.scene,
         structured=all(_STRUCTURED.match(v) for v in names),
         indicators=events.indicators, discrete=discrete, input_slots=tuple(input_slots))
@@ -247,6 +247,13 @@ def _parameter_values(program) -> list[float]:
                            "has no start value in the FMU")
         values.append(value)
     return values
+
+
+def _declared_units(graph) -> dict:
+    """The units the model declares (`unit "kg"`) by variable name: of its parameters, its
+    signals (each scalar part of a vector one) and its inputs."""
+    declared = [*graph.parameters, *graph.signals, *graph.inputs]
+    return {d.name: d.unit for d in declared if d.unit}
 
 
 def _unit(doc: str | None) -> str | None:

@@ -214,12 +214,14 @@ def check_effect_names(names, spans, known, diags: Collector, where: str) -> Non
 
 @dataclass(frozen=True)
 class InputInfo:
-    """An input (`input NAME = DEFAULT "doc"`): a signal whose values come from outside."""
+    """An input (`input NAME = DEFAULT unit "UNIT" "doc"`): a signal whose values come from
+    outside."""
 
     name: str
     default: object  # a SymPy expression of parameters
     doc: str | None
     span: object
+    unit: str | None = None
 
 
 @dataclass(frozen=True)
@@ -243,6 +245,7 @@ class Graph:
     instances: tuple = ()  # Instance, one per instance of a component, in declaration order
     tables: tuple = ()  # bgc.tables.TableData, as Table(k, ...) numbers them
     inputs: tuple = ()  # InputInfo, in declaration order (their values: bgc.events.InputSlot)
+    constants: tuple = ()  # (name, value) of the model file's constants (`--outputs s[N].q`)
 
     @cached_property
     def vector_by_name(self) -> dict:

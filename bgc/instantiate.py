@@ -33,7 +33,7 @@ from pathlib import Path
 from . import ast
 from .diagnostics import Collector, ModelError, Note, Origin, Span, did_you_mean, error, fail
 from .graph import Instance, Port
-from .kinds import KINDS
+from .kinds import KINDS, SWITCHED
 from .resources import MAX_DIMENSION, MAX_GENERATED, MAX_INSTANCE_DEPTH, read_bounded
 
 LIBRARY = Path(__file__).resolve().parent / "library"  # bgc's standard library
@@ -438,7 +438,7 @@ class _Instantiate:
         self.fuse()
         self.diags.raise_if_errors()
         return ast.Model(tuple(self.out), self.model.path, tuple(self.ports.values()),
-                         tuple(self.instances))
+                         tuple(self.instances), tuple(main.constants.items()))
 
     def child(self, parent: _Scope, stmt: ast.ElementDecl, env) -> _Scope:
         name = self.local_name(parent, stmt, env)
@@ -561,6 +561,7 @@ class _Instantiate:
         if isinstance(stmt, ast.ElementDecl):
             if not stmt.is_junction and stmt.kind.name not in KINDS and "." in stmt.kind.name:
                 fail(scope.sp(stmt.kind.span), f"unknown component '{stmt.kind.name}'")
+            self.check_unqualified(scope, stmt)
             own = {"e", "f"}
             spec = KINDS.get(stmt.kind.name)
             if spec is not None and spec.state:
@@ -589,6 +590,24 @@ class _Instantiate:
         else:
             out = rw.map(stmt)
         self.out.append(out)
+
+    def check_unqualified(self, scope: _Scope, stmt: ast.ElementDecl):
+        """A kind that is a component of an imported library named without the library's
+        alias (`cap2` for `F.cap2`): an error saying how to write it, with a note at each
+        import that has it."""
+        kind = stmt.kind.name
+        if stmt.is_junction or kind in KINDS or kind in SWITCHED or "." in kind:
+            return
+        qualified = [k for k in scope.file.components if k.partition(".")[2] == kind]
+        if not qualified:
+            return
+        imports = {(d.alias or d.name).name: d.span for d in scope.file.decls
+                   if isinstance(d, ast.ImportDecl)}
+        notes = [Note(replace(imports[q.partition(".")[0]], origin=scope.file.origin),
+                      f"imported here as '{q.partition('.')[0]}'") for q in qualified]
+        fail(scope.sp(stmt.kind.span), f"unknown kind '{kind}': a component of an imported "
+                                       "library is used qualified: write "
+                                       + " or ".join(f"'{q}'" for q in qualified), *notes)
 
     def end(self, scope: _Scope, node, env):
         """A bond's end: ("node", flat name) or ("port", flat port name, inner?)."""
@@ -641,6 +660,35 @@ class _Instantiate:
         _, _, sa, sb, _ = self.edges[k]
         return sa.join(sb)
 
+    def check_port(self, name: str, port: Port, sides: dict) -> bool:
+        """Whether a port has one bond inside and one outside, pointing the same way (each
+        error reported)."""
+        ok = True
+        for inner in (True, False):
+            ks = sides[inner]
+            where = "inside its component" if inner else "outside, where it is used"
+            if not ks:
+                self.diags.error(port.span, f"port '{name}' is not bonded {where} (bond a "
+                                            "free end to a zero source)")
+                ok = False
+            elif len(ks) > 1:
+                self.diags.error(self._span(ks[1]), f"port '{name}' is bonded more than "
+                                                    f"once {where}",
+                                 Note(self._span(ks[0]), "the first bond"))
+                ok = False
+        if not ok:
+            return False
+        (ki,), (ko,) = sides[True], sides[False]
+        into_inner = self.edges[ki][1] == ("port", name, True)
+        into_outer = self.edges[ko][1] == ("port", name, False)
+        if into_inner != into_outer:
+            return True
+        self.diags.error(self._span(ko), f"the bonds of port '{name}' point opposite ways: the "
+                                         "bond outside and the bond inside are one bond, and "
+                                         "point the same way", Note(self._span(ki),
+                                                                    "the bond inside"))
+        return False
+
     def fuse(self):
         """Each port joins its inner and outer bond into one; the bonds that result, in the
         order of their first part."""
@@ -653,31 +701,7 @@ class _Instantiate:
                     at.setdefault(end[1], {True: [], False: []})[end[2]].append(k)
         ok = True
         for name, port in self.ports.items():
-            sides = at.get(name, {True: [], False: []})
-            for inner in (True, False):
-                ks = sides[inner]
-                where = "inside its component" if inner else "outside, where it is used"
-                if not ks:
-                    self.diags.error(port.span, f"port '{name}' is not bonded {where} (bond a "
-                                                "free end to a zero source)")
-                    ok = False
-                elif len(ks) > 1:
-                    self.diags.error(self._span(ks[1]), f"port '{name}' is bonded more than "
-                                                        f"once {where}",
-                                     Note(self._span(ks[0]), "the first bond"))
-                    ok = False
-            if not ok or len(sides[True]) != 1 or len(sides[False]) != 1:
-                continue
-            (ki,), (ko,) = sides[True], sides[False]
-            into_inner = self.edges[ki][1] == ("port", name, True)
-            into_outer = self.edges[ko][1] == ("port", name, False)
-            if into_inner == into_outer:
-                ai, bi = self.edges[ki][2], self.edges[ki][3]
-                self.diags.error(self.edges[ko][2].join(self.edges[ko][3]),
-                                 f"the bonds of port '{name}' point opposite ways: the bond "
-                                 "outside and the bond inside are one bond, and point the same "
-                                 "way", Note(ai.join(bi), "the bond inside"))
-                ok = False
+            ok = self.check_port(name, port, at.get(name, {True: [], False: []})) and ok
         if not ok:
             return
         other = {}
@@ -872,6 +896,52 @@ class _Rewriter:
         return ast.Field(s.prefix + owner, rest[-1], sp)
 
 
+def output_refs(refs, constants: dict) -> tuple:
+    """Outputs (OutRefs, OutPaths) as OutRefs, each index an expression of `constants` made a
+    number (`s[N].cap.q` -> `s[8].cap.q`); ModelError with an error for each output that
+    cannot be, located where it is written."""
+    out, diags = [], Collector()
+    for r in refs:
+        try:
+            out.append(_output_ref(r, constants) if isinstance(r, ast.OutPath) else r)
+        except ModelError as exc:
+            diags.items.extend(exc.diagnostics)
+    diags.raise_if_errors()
+    return tuple(out)
+
+
+def _output_ref(path: ast.OutPath, constants: dict) -> ast.OutRef:
+    scope = _text_scope(path.span)
+    segments = [(name, index if index is None or type(index) is int else
+                 _index_value(index, constants, scope, "an index in outputs"))
+                for name, index in path.parts]
+    return ast.out_ref(segments, path.span)
+
+
+def path_name(node, constants: dict) -> ast.Ident:
+    """A scene's `set` target as an Ident: a PathRef's indices (`s[N].r`) made numbers."""
+    if not isinstance(node, ast.PathRef):
+        return node
+    scope = _text_scope(node.span)
+    segs = [n.name if i is None else
+            f"{n.name}[{_index_value(i, constants, scope, 'an index in a scene')}]"
+            for n, i in node.parts]
+    return ast.Ident(".".join(segs), node.span)
+
+
+def _text_scope(span: Span) -> _Scope:
+    """The scope of a scene's or an option's text (`--outputs`): where its spans point."""
+    origin = span.origin
+    return _Scope("", _File(origin.name if origin else "", origin, ()), None, (), ())
+
+
+def _index_value(node, constants: dict, scope: _Scope, what: str) -> int:
+    k = _const(node, constants, scope, what)
+    if not 0 <= k <= MAX_DIMENSION:
+        fail(scope.sp(node.span), f"an index is from 0 to {MAX_DIMENSION}; this one is {k}")
+    return k
+
+
 def needs_instantiation(model: ast.Model) -> bool:
     """Whether the model uses components, constants, generation or indexed names."""
     for d in model.decls:
@@ -899,4 +969,4 @@ def instantiate(model: ast.Model, consts: dict | None = None) -> ast.Model:
     return _Instantiate(model, consts, search_path()).build()
 
 
-__all__ = ["instantiate"]
+__all__ = ["instantiate", "output_refs", "path_name"]

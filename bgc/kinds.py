@@ -33,3 +33,11 @@ KINDS = {k.name: k for k in (
     Kind("GY", 2, "gyrator"),
     Kind("MGY", 2, "gyrator", modulated=True),
 )}
+# Switched one-ports (docs/hybrid.md), each the number of its arguments: built by resolve as
+# constraint junctions in one of their modes, not by the law of a Kind.
+SWITCHED = {"D": 0, "Sw": 1, "Fr": 2}
+
+
+def known_kinds() -> str:
+    """Every element kind a declaration may name, for messages."""
+    return ", ".join([*KINDS, *SWITCHED, "0", "1"])

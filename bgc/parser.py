@@ -103,10 +103,15 @@ def _saved(path) -> Lark | None:
 
 def _whole(tok: Token, what: str) -> int:
     """An INT token's value, refused above MAX_DIMENSION (before int() reads its digits)."""
-    digits = str(tok).lstrip("0")
+    return _integer(str(tok), _tspan(tok), what)
+
+
+def _integer(text: str, span: Span, what: str) -> int:
+    """The value of digits, refused above MAX_DIMENSION (before int() reads them)."""
+    digits = text.lstrip("0")
     if len(digits) > len(str(MAX_DIMENSION)) or int(digits or 0) > MAX_DIMENSION:
         shown = digits if len(digits) <= 20 else digits[:20] + "..."
-        fail(_tspan(tok), f"{what} {shown} is too large (the limit is {MAX_DIMENSION})")
+        fail(span, f"{what} {shown} is too large (the limit is {MAX_DIMENSION})")
     return int(digits or 0)
 
 
@@ -132,12 +137,17 @@ def _doc(tok) -> str | None:
     return str(tok)[1:-1].replace('\\"', '"').replace("\\\\", "\\")
 
 
+def _statements(items) -> tuple:
+    """A body's statements, each port of a `port a, b` list one of them."""
+    return tuple(s for x in items for s in (x if type(x) is list else (x,)))
+
+
 class _ToAst:
     """Builds typed nodes only; no checking beyond the shape of the syntax.  A method per rule,
     called with the rule's meta (its position) and its children already built (_transform)."""
 
     def start(self, meta, children):
-        return tuple(children)
+        return _statements(children)
 
     # declarations
     def model_decl(self, meta, c):
@@ -184,7 +194,7 @@ class _ToAst:
     # components and generation
     def component_decl(self, meta, c):
         name, params, doc, *body = c
-        return ast.ComponentDecl(_ident(name), tuple(params or ()), _doc(doc), tuple(body),
+        return ast.ComponentDecl(_ident(name), tuple(params or ()), _doc(doc), _statements(body),
                                  _span(meta))
 
     def cparams(self, meta, c):
@@ -194,6 +204,13 @@ class _ToAst:
         return ast.ComponentParam(_ident(c[0]), c[1], c[2], _span(meta), _doc(c[3]))
 
     def port_decl(self, meta, c):
+        """`port a : electrical, b[2]`: a PortDecl per port (a list, which the body holding
+        it spreads: _statements), the first one's span from the keyword."""
+        first = _span(meta)
+        first = Span(first.line, first.col, c[0].span.end_line, c[0].span.end_col)
+        return [replace(c[0], span=first), *c[1:]]
+
+    def port_item(self, meta, c):
         return ast.PortDecl(_ident(c[0]), c[1], _ident(c[2]) if c[2] is not None else None,
                             _span(meta), c[3], _doc(c[4]))
 
@@ -201,21 +218,21 @@ class _ToAst:
         return ast.ConstantDecl(_ident(c[0]), c[1], _span(meta))
 
     def for_block(self, meta, c):
-        return ast.ForBlock(_ident(c[0]), c[1], c[2], tuple(c[3:]), _span(meta))
+        return ast.ForBlock(_ident(c[0]), c[1], c[2], _statements(c[3:]), _span(meta))
 
     def if_block(self, meta, c):
         cond, *rest = c
-        body = tuple(x for x in rest if not isinstance(x, tuple) and x is not None)
+        body = _statements(x for x in rest if not isinstance(x, tuple) and x is not None)
         branches = [(cond, body)] + [(x[1], x[2]) for x in rest
                                      if isinstance(x, tuple) and x[0] == "elif"]
         orelse = next((x[1] for x in rest if isinstance(x, tuple) and x[0] == "else"), None)
         return ast.IfBlock(tuple(branches), orelse, _span(meta))
 
     def elif_part(self, meta, c):
-        return ("elif", c[0], tuple(c[1:]))
+        return ("elif", c[0], _statements(c[1:]))
 
     def else_part(self, meta, c):
-        return ("else", tuple(c))
+        return ("else", _statements(c))
 
     def if_expr(self, meta, c):
         cond, value, *rest = c
@@ -226,7 +243,7 @@ class _ToAst:
         return (c[0], c[1])
 
     def input_decl(self, meta, c):
-        return ast.InputDecl(_ident(c[0]), c[1], _doc(c[2]), _span(meta))
+        return ast.InputDecl(_ident(c[0]), c[1], _doc(c[3]), _span(meta), unit=c[2])
 
     def discrete_decl(self, meta, c):
         return ast.DiscreteDecl(_ident(c[0]), c[1], _doc(c[2]), _span(meta))
@@ -333,16 +350,18 @@ class _ToAst:
         return tuple(c)
 
     def outref(self, meta, c):
-        """a, a[1], a.f, a.f[1], p1.res.e, arm.link[2].rod.lambda: the last name a field when
-        there is more than one, the last index the output's."""
-        *head, (last, index) = c
-        text = lambda segs: ".".join(n + (f"[{i}]" if i is not None else "") for n, i in segs)
-        if not head:
-            return ast.OutRef(last, None, index, _span(meta))
-        return ast.OutRef(text(head), last, index, _span(meta))
+        """An OutRef (ast.out_ref), or an OutPath while an index is an expression."""
+        if all(index is None or type(index) is int for _, index in c):
+            return ast.out_ref(c, _span(meta))
+        return ast.OutPath(tuple(c), _span(meta))
 
     def outseg(self, meta, c):
-        return (str(c[0]), _whole(c[1], "index") if c[1] is not None else None)
+        """(name, index): a whole number written as one is read here, any other expression
+        when the constants are known."""
+        index = c[1]
+        if isinstance(index, ast.Num) and index.text.isdigit():
+            index = _integer(index.text, index.span, "index")
+        return (str(c[0]), index)
 
     def scene_time(self, meta, c):
         return ast.SceneTime(c[0], c[1], c[2], _span(meta))
@@ -437,30 +456,66 @@ def _describe(tok: Token) -> str:
     return f"'{tok}'"
 
 
-def _unclosed_bracket(source: str, line: int, col: int) -> Span | None:
-    """The innermost ( or [ still open before (line, col), skipping strings and comments."""
-    stack, ln, cl, i = [], 1, 1, 0
-    in_string = in_comment = False
-    while i < len(source) and (ln, cl) < (line, col):
-        ch = source[i]
+def _code(source: str):
+    """(character, line, column) of each character outside strings and comments."""
+    ln, cl = 1, 1
+    in_string = in_comment = escaped = False
+    for ch in source:
         if in_comment:
             in_comment = ch != "\n"
         elif in_string:
-            if ch == "\\":
-                i, cl = i + 1, cl + 1
+            if escaped:
+                escaped = False
+            elif ch == "\\":
+                escaped = True
             elif ch == '"':
                 in_string = False
         elif ch == "#":
             in_comment = True
         elif ch == '"':
             in_string = True
-        elif ch in "([":
+        else:
+            yield ch, ln, cl
+        ln, cl = (ln + 1, 1) if ch == "\n" else (ln, cl + 1)
+
+
+def _unclosed_bracket(source: str, line: int, col: int) -> Span | None:
+    """The innermost ( or [ still open before (line, col), skipping strings and comments."""
+    stack = []
+    for ch, ln, cl in _code(source):
+        if (ln, cl) >= (line, col):
+            break
+        if ch in "([":
             stack.append(Span(ln, cl, ln, cl + 1))
         elif ch in ")]" and stack:
             stack.pop()
-        ln, cl = (ln + 1, 1) if ch == "\n" else (ln, cl + 1)
-        i += 1
     return stack[-1] if stack else None
+
+
+def _unclosed_block(source: str, line: int, col: int) -> Span | None:
+    """The innermost { before (line, col) that no } of the whole text closes."""
+    stack = []
+    for ch, ln, cl in _code(source):
+        if ch == "{":
+            stack.append(Span(ln, cl, ln, cl + 1))
+        elif ch == "}" and stack:
+            stack.pop()
+    before = [s for s in stack if (s.line, s.col) < (line, col)]
+    return before[-1] if before else None
+
+
+def _block_not_closed(tok: Token, source: str, line: int, col: int):
+    """A statement's keyword, or the end of the file, where a block opened before it and
+    never closed still holds the parser: the missing '}' is the error (unless a bracket is
+    open too: the newlines it holds did not end the statement, _syntax_error's note)."""
+    opened = _unclosed_block(source, line, col)
+    if opened is None or _unclosed_bracket(source, line, col) is not None:
+        return
+    width = 1 if tok.type == "$END" else len(str(tok))
+    fail(Span(line, col, line, col + width),
+         f"syntax error: unexpected {_describe(tok)}: the block opened at "
+         f"{opened.line}:{opened.col} is not closed (its '}}' is missing)",
+         Note(opened, "the block opened here"))
 
 
 def _syntax_error(exc: UnexpectedInput, source: str):
@@ -470,11 +525,13 @@ def _syntax_error(exc: UnexpectedInput, source: str):
         before = (exc.token_history or [None])[-1]
         if before is not None and str(before) in KEYWORDS and str(tok) in (":", "->"):
             _keyword_as_name(before)  # `scene : 1`, `model -> j`: a keyword declared or bonded
-        if tok.type != "NAME" and str(tok) in KEYWORDS and "NAME" in (exc.expected or ()):
-            _keyword_as_name(tok)  # `set : 0`: a keyword where only a name fits
         if tok.type == "$END":
             lines = source.splitlines() or [""]
             line, col = len(lines), len(lines[-1]) + 1
+        if tok.type == "$END" or (tok.type != "NAME" and str(tok) in KEYWORDS):
+            _block_not_closed(tok, source, line, col)  # `when c { n = 1` then `scene ...`
+        if tok.type != "NAME" and str(tok) in KEYWORDS and "NAME" in (exc.expected or ()):
+            _keyword_as_name(tok)  # `set : 0`: a keyword where only a name fits
         msg = f"syntax error: unexpected {_describe(tok)}{_expected(exc)}"
         width = max(1, len(str(tok))) if tok.type not in ("$END", "_NL") else 1
     elif isinstance(exc, UnexpectedCharacters):

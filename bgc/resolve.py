@@ -22,8 +22,9 @@ from .graph import (TIME, InputInfo, check_effect_names, model_effects, Bond, Co
                     check_ports, part_name, var, variable_name, written)
 from .events import (INITIAL, RELATIONS, SOURCES, Action, Discrete, EventTable, When,
                      is_condition)
+from .instantiate import output_refs, path_name
 from .ir import Table, TableGuard
-from .kinds import KINDS
+from .kinds import KINDS, SWITCHED, known_kinds
 from .tables import EXTRAPOLATE, INTERP, MAX_TABLE_ROWS, MAX_TABLES, build, check_rows, read_csv
 from .resources import (MAX_EXTREMUM_ARGUMENTS, MAX_LITERAL_DIGITS, MAX_MATRIX_ENTRIES,
                         MAX_SCENES, MAX_SYMBOLIC_EXPONENT)
@@ -62,6 +63,7 @@ class _Scope:
         self.inputs: list = []  # graph.InputInfo, in declaration order
         self.directory = "."  # the model file's: its table files are read relative to it (a
         #                       library's, relative to the library)
+        self.constants: dict = {}  # the model file's (indices in scenes: `outputs s[N].q`)
 
     def charge(self, n: int, span: Span):
         """Count n more vector or matrix entries against MAX_MATRIX_ENTRIES, before or as
@@ -273,6 +275,8 @@ class _ExprBuilder:
         elif node.func == "ramp":
             done.append(sp.Piecewise((TIME - args[0], on), (sp.Integer(0), True)))
         else:  # pulse(t0, width)
+            if args[1].is_Number and args[1] < 0:
+                fail(node.args[1].span, "the width of pulse() cannot be negative")
             off = ev.relation(sp.GreaterThan(TIME, args[0] + args[1]), node, None)
             done.append(sp.Piecewise((sp.Integer(1), sp.And(on, sp.Not(off))),
                                      (sp.Integer(0), True)))
@@ -516,9 +520,13 @@ class _ExprBuilder:
             self.refs.append((node.name, node.span))
             return var(node.name)
         if node.name in s.discretes:
+            declared = Note(s.discretes[node.name].name.span, f"'{node.name}' is declared here")
+            if s.visible_params is not None:  # (a parameter's definition)
+                fail(node.span, f"a parameter cannot depend on a discrete variable: '{node.name}' "
+                                "changes at events, a parameter is fixed for the run", declared)
             if s.params_only:
                 fail(node.span, f"'{node.name}' is a discrete variable: only parameters are "
-                                "allowed here")
+                                "allowed here", declared)
             self.refs.append((node.name, node.span))
             return var(node.name)
         if node.name in s.signals:
@@ -818,7 +826,7 @@ def _element(d: ast.ElementDecl, scope: _Scope, diags: Collector) -> Element | N
     if kname not in KINDS:
         if kname.isdigit():
             fail(d.kind.span, f"unknown junction kind '{kname}': junctions are 0 or 1")
-        fail(d.kind.span, f"unknown kind '{kname}' (known: {', '.join(KINDS)}, 0, 1)")
+        fail(d.kind.span, f"unknown kind '{kname}' (known: {known_kinds()})")
     spec = KINDS[kname]
     if len(d.args) != 1:
         fail(d.span, f"{kname} takes one argument, got {len(d.args)}")
@@ -834,9 +842,6 @@ def _element(d: ast.ElementDecl, scope: _Scope, diags: Collector) -> Element | N
     init = _init(d, spec, scope, diags)
     return Element(d.name.name, kname, value, law, init, tuple(e.name for e in d.effects),
                    None, d.doc, d.span, d.name.span, dim)
-
-
-SWITCHED = {"D": 0, "Fr": 2, "Sw": 1}  # switched one-ports (docs/hybrid.md) -> arguments
 
 
 def _junction_switch(d: ast.ElementDecl, scope: _Scope, diags: Collector) -> Element:
@@ -927,13 +932,18 @@ def _with_own_vars(d, scope, diags, node) -> Expr:
 # ---------------------------------------------------------------- events
 
 
-def _discretes(model: ast.Model, scope: _Scope, diags: Collector) -> list[Discrete]:
-    out = []
+def _declare_discretes(model: ast.Model, scope: _Scope):
+    """The discrete variables' names in scope (before any expression is built: a parameter
+    that reads one is told so)."""
     for d in (d for d in model.decls if isinstance(d, ast.DiscreteDecl)):
         if d.name.name == "t" or d.name.name in scope.params or d.name.name in \
                 scope.signals or d.name.name in scope.elements:
             continue  # reported by _collect_names
         scope.discretes[d.name.name] = d
+
+
+def _discretes(scope: _Scope, diags: Collector) -> list[Discrete]:
+    out = []
     for name, d in scope.discretes.items():
         scope.params_only = True
         try:
@@ -1102,8 +1112,9 @@ def _input(d: ast.InputDecl, scope, diags) -> Signal:
         default = e.value
     j = len(scope.inputs)
     t0, u0, s0 = scope.events.input(j, d.name.name, default, d.span)
-    scope.inputs.append(InputInfo(d.name.name, default, d.doc, d.span))
-    return Signal(d.name.name, Expr(u0 + s0 * (TIME - t0), (), d.span), None, d.span)
+    scope.inputs.append(InputInfo(d.name.name, default, d.doc, d.span, d.unit))
+    return Signal(d.name.name, Expr(u0 + s0 * (TIME - t0), (), d.span), None, d.span,
+                  unit=d.unit)
 
 
 def _check_size(e: Expr, n: int | None, what: str, broadcast: bool = False) -> None:
@@ -1155,7 +1166,7 @@ def _scene(d: ast.SceneDecl, scope: _Scope, known_effects, diags: Collector) -> 
                 check_effect_names(effects, effect_spans, known_effects, diags,
                                    f"scene '{d.name.name}'")
             elif isinstance(s, ast.SceneOutputs):
-                outputs = s.refs
+                outputs = output_refs(s.refs, scope.constants)
             elif isinstance(s, ast.SceneTime):
                 b = _ExprBuilder(scope, diags)
                 time = (b.build(s.start), b.build(s.stop),
@@ -1164,9 +1175,10 @@ def _scene(d: ast.SceneDecl, scope: _Scope, known_effects, diags: Collector) -> 
                 opts = tuple((k.name, _ExprBuilder(scope, diags).build(v)) for k, v in s.options)
                 solver = (s.name.name, opts, s.span)
             elif isinstance(s, ast.SceneSet):
-                if s.name.name not in scope.params:
-                    fail(s.name.span, f"'set' names a parameter; '{s.name.name}' is not one")
-                sets.append((s.name.name, _ExprBuilder(scope, diags).build(s.expr), s.span))
+                name = path_name(s.name, scope.constants)
+                if name.name not in scope.params:
+                    fail(name.span, f"'set' names a parameter; '{name.name}' is not one")
+                sets.append((name.name, _ExprBuilder(scope, diags).build(s.expr), s.span))
     finally:
         scope.params_only = False
     return Scene(d.name.name, d.doc, effects, effects_span, outputs, time, solver, tuple(sets),
@@ -1189,8 +1201,10 @@ def resolve(model: ast.Model) -> Graph:
     params, signals, elements = _collect_names(model, diags)
     scope = _Scope(params, signals, elements)
     scope.directory = _model_directory(model.path)
+    scope.constants = dict(model.constants)
+    _declare_discretes(model, scope)
     parameters = _parameters(params, scope, diags)
-    discretes = _discretes(model, scope, diags)
+    discretes = _discretes(scope, diags)
     order = {id(d): k for k, d in enumerate(model.decls)}
     els = [replace(e, order=order[id(d)]) for d, e in
            ((d, _guard(diags, _element, d, scope, diags)) for d in elements.values()) if e]
@@ -1227,4 +1241,4 @@ def resolve(model: ast.Model) -> Graph:
                  ports=tuple(model.ports), instances=tuple(model.instances),
                  relations=tuple(scope.events.relations), squares=tuple(scope.events.squares),
                  discretes=tuple(discretes), whens=tuple(whens), tables=tuple(scope.tables),
-                 inputs=tuple(scope.inputs))
+                 inputs=tuple(scope.inputs), constants=tuple(model.constants))

@@ -12,6 +12,7 @@ from .algebra import beyond_double
 from .diagnostics import Collector, ModelError, Note, Origin, Span, did_you_mean, fail
 from .graph import (Expr, Graph, check_effect_names, check_ports, model_effects, var,
                     written)
+from .instantiate import output_refs
 from .resources import MAX_OUTPUT_ROWS
 from .run import RunSettings
 
@@ -355,7 +356,8 @@ def apply_scene(graph: Graph, name: str | None, override: Override | None = None
     given = tuple(k for k in ("effects", "outputs")
                   if override is not None and getattr(override, k) is not None)
     effects = _effects(graph, scene, override)
-    outputs = override.outputs if "outputs" in given else (scene.outputs if scene else None)
+    outputs = output_refs(override.outputs, dict(graph.constants)) if "outputs" in given \
+        else (scene.outputs if scene else None)
     g, left_out = _apply_effects(graph, effects)
     sets = tuple((n, e) for n, e, _ in scene.sets) if scene else ()
     params = parameter_values(g, sets)

@@ -13,9 +13,11 @@ from click.testing import CliRunner
 import bgc
 from bgc import backends
 from bgc.api import Source
+from bgc.ast import ComponentDecl, PortDecl
 from bgc.cli import main
 from bgc.emit import c_param_fields, emit_c, emit_python
 from bgc.graph import var
+from bgc.parser import parse
 from bgc.reduce import explicit_forms
 from bgc.resources import MAX_INSTANCE_DEPTH
 
@@ -186,6 +188,39 @@ def test_rc_ladder_against_scipy():
     expected = np.column_stack([q[0], q[2] / c, (q[0] - q[1]) / c / r[1]])
     assert names == ["s[1].cap.q", "s[3].cap.e", "s[2].res.f"]
     np.testing.assert_allclose(Y, expected, rtol=1e-7, atol=1e-9)
+
+
+PORT_LIST = """model port_list
+component drive(m = 1) {
+  port a : electrical "the supply's side", b[2] : translational unit "N"
+  s : Se(3)
+  masses : I[2](m)
+  s -> a
+  b -> masses
+}
+x : drive(m = 2)
+r : R(1.5)
+x.a -> r
+g : Se[2]([1, 2])
+g -> x.b
+scene run { outputs x.masses.f, r.f; time 0 .. 1 every 0.25 }
+"""
+
+
+def test_a_list_of_ports_in_one_declaration():
+    """`port a : D "doc", b[2] : D2 unit "U"`: two ports, each with its size, domain, unit and
+    doc; the masses pushed by 1 and 2 from rest go at t/m and 2 t/m, the resistor takes
+    3/1.5."""
+    a = build(PORT_LIST, "run")
+    assert [(p.name, p.dim, p.domain, p.unit) for p in a.graph.ports] == [
+        ("x.a", 1, "electrical", None), ("x.b", 2, "translational", "N")]
+    comp = next(d for d in parse(PORT_LIST).decls if isinstance(d, ComponentDecl))
+    assert [d.doc for d in comp.body if isinstance(d, PortDecl)] == ["the supply's side", None]
+    t, Y, names = bgc.simulate(Source("port_list.bg", PORT_LIST), "run", backend="python",
+                               rtol=1e-10, atol=1e-12)
+    assert names == ["x.masses.f[0]", "x.masses.f[1]", "r.f"]
+    np.testing.assert_allclose(Y, np.column_stack([t / 2, t, np.full_like(t, 2.0)]),
+                               rtol=0, atol=1e-12)
 
 
 NESTED = """model nested
@@ -427,6 +462,49 @@ def test_const_on_the_command_line(tmp_path):
     assert "the model has no constant 'M'" in result.stderr
     result = CliRunner().invoke(main, ["check", str(path), "--const", "N=x"])
     assert result.exit_code == 2 and "not a whole number" in result.stderr
+
+
+TANKS = """model tanks
+constant N = 4
+component tank(k = 1) {
+  fill : Sf(k)
+  c : C(1)
+  fill -> c
+}
+for i in 1..N { s[i] : tank(k = i) }
+scene run { outputs s[N].c.q, s[N - 1].c.q, s[min(N, 2)].c.e; time 0 .. 1 every 0.25 }
+scene faster { set s[N - 1].k = 10; outputs s[N - 1].c.q, s[N].c.q; time 0 .. 1 every 0.25 }
+"""
+
+
+@pytest.mark.parametrize("const, outputs, header, rates", [
+    ([], [], ["s[4].c.q", "s[3].c.q", "s[2].c.e"], [4, 3, 2]),
+    (["--const", "N=6"], [], ["s[6].c.q", "s[5].c.q", "s[2].c.e"], [6, 5, 2]),
+    (["--const", "N=6"], ["--outputs", "s[N/2].c.q, s[N^2 - 35].c.f"],
+     ["s[3].c.q", "s[1].c.f"], [3, None])])
+def test_constants_in_the_indices_of_outputs(tmp_path, const, outputs, header, rates):
+    """Outputs indexed by constants, in the scene and in --outputs, with --const: tank i
+    is filled at the rate i, so its charge is i t (its flow i)."""
+    (tmp_path / "tanks.bg").write_text(TANKS)
+    result = CliRunner().invoke(main, ["simulate", str(tmp_path / "tanks.bg"), "--scene", "run",
+                                       "--backend", "python", *const, *outputs])
+    assert result.exit_code == 0, result.stderr
+    lines = result.stdout.splitlines()
+    assert lines[0].split(",") == ["t", *header]
+    rows = np.array([[float(x) for x in line.split(",")] for line in lines[1:]])
+    t = rows[:, 0]
+    assert np.allclose(t, [0, 0.25, 0.5, 0.75, 1])
+    expected = [r * t if r is not None else np.ones_like(t) for r in rates]
+    np.testing.assert_allclose(rows[:, 1:], np.column_stack(expected), rtol=0, atol=1e-12)
+
+
+@pytest.mark.parametrize("consts, charges", [((), (10, 4)), ((("N", 2),), (10, 2))])
+def test_a_scene_sets_a_parameter_through_constant_indices(consts, charges):
+    """`set s[N - 1].k = 10`: that tank fills at 10, the last one at N."""
+    t, Y, names = bgc.simulate(Source("tanks.bg", TANKS, consts), "faster", backend="python")
+    n = dict(consts).get("N", 4)
+    assert names == [f"s[{n - 1}].c.q", f"s[{n}].c.q"]
+    np.testing.assert_allclose(Y, np.outer(t, charges), rtol=0, atol=1e-12)
 
 
 def test_paths_in_the_csv_header_and_in_overrides(tmp_path):

@@ -178,6 +178,17 @@ def test_pulses_anywhere_property(t0, width, solver):
     assert np.max(np.abs(y[:, 1] - ref)) <= 2e-5 * peak
 
 
+def test_a_pulse_of_width_zero_is_no_pulse():
+    """pulse(t0, 0) is 1 on [t0, t0), which is empty: the lag stays at rest, in both
+    backends; whether the width is a parameter set to 0 or written 0."""
+    literal = build(LAG.replace("pulse(t0, width)", "pulse(t0, 0)"), "run")
+    texts = [run_csv(_lag(), b, params={"width": 0.0}) for b in BACKENDS]
+    texts += [run_csv(literal, b) for b in BACKENDS]
+    assert len(set(texts)) == 1
+    _, y = table(texts[0])
+    assert np.allclose(y[:, 0], np.arange(31) * 0.1) and not y[:, 1].any()
+
+
 _LAG = []
 
 

@@ -334,6 +334,41 @@ def test_model_text_is_escaped(tmp_path):
     assert validate_fmu(str(tmp_path)) == []
 
 
+UNITS = """model units "units declared with `unit`"
+parameter k = 8 unit "N/m"
+input push = 0 unit "N" "the force"
+j : 1
+mass : I(2)
+spring : C(1/k)
+f : MSe(push)
+f -> j
+j -> mass
+j -> spring
+signal x = integral(j.f, init = 0) unit "m"
+signal energy = k*x^2/2 unit "J"
+signal pair[2] = [x, 2*x] unit "m"
+scene run { outputs x, energy, pair, mass.p }
+"""
+
+
+def test_declared_units_reach_the_variables(tmp_path):
+    """`unit "..."` of a parameter, an input, a state's integral signal, a signal and a vector
+    signal's parts is the unit of its variable in modelDescription.xml, each unit defined
+    once; a variable of no declared unit has none."""
+    (tmp_path / "units.bg").write_text(UNITS, encoding="utf-8")
+    done = run_bgc("compile", "units.bg", "--scene", "run", "--target", "fmu",
+                   "-o", "units.fmu", cwd=tmp_path)
+    assert done.returncode == 0, done.stderr
+    with zipfile.ZipFile(tmp_path / "units.fmu") as z:
+        root = ET.fromstring(z.read("modelDescription.xml"))
+    units = {v.get("name"): v.find("Real").get("unit") for v in root.iter("ScalarVariable")}
+    assert units == {"k": "N/m", "push": "N", "x": "m", "energy": "J", "pair[0]": "m",
+                     "pair[1]": "m", "mass.p": None, "spring.q": None, "der(x)": None,
+                     "der(mass.p)": None, "der(spring.q)": None}
+    assert [u.get("name") for u in root.iter("Unit")] == ["N/m", "m", "J", "N"]
+    assert validate_fmu(str(tmp_path / "units.fmu")) == []
+
+
 def test_command_line_errors(tmp_path):
     done = run_bgc("compile", ROOT / "models" / "rlc.bg", "--target", "fmu")
     assert done.returncode == 2 and "-o NAME.fmu" in done.stderr

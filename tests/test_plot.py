@@ -63,6 +63,19 @@ def test_panels_group_by_unit_before_kind():
     assert groups == [("unit", ["a.v", "c.e", "half"]), ("q", ["c.q"]), ("signal", ["x"])]
 
 
+def test_an_inputs_unit_is_its_columns():
+    """`input NAME = DEFAULT unit "UNIT" "doc"`: the input's column is in that unit, on the
+    panel of the signals of that unit."""
+    text = ('model m\ninput u = 1 unit "V" "the drive"\ninput w\n'
+            'signal x = integral(u - x, init = 0) unit "V"\nsignal y = w + x\n')
+    compiled = bgc.build(bgc.api.Source("m.bg", text), program=False)
+    cols = plot.columns(compiled, ["u", "x", "w", "y"])
+    assert [(c.name, c.kind, c.unit) for c in cols] == [
+        ("u", "signal", "V"), ("x", "signal", "V"), ("w", "signal", None), ("y", "signal", None)]
+    assert [(kind, [c.name for c in group]) for kind, group in plot.panels(cols)] == [
+        ("unit", ["u", "x"]), ("signal", ["w", "y"])]
+
+
 def test_read_csv_every_kth_row_and_the_last(tmp_path):
     path = tmp_path / "run.csv"
     rows = [f"{k},{2 * k},{k * k}" for k in range(101)]
