@@ -47,11 +47,11 @@ def _warn(compiled):
     click.echo(_warnings_text(compiled), err=True, nl=False)
 
 
-def _or_exit(call, *args):
-    """call(*args), or the model's located errors (or an unreadable file) on stderr, exit 1;
+def _or_exit(call, *args, **kwargs):
+    """call(*args, **kwargs), or the model's located errors (or an unreadable file) on stderr, exit 1;
     exit 2 when they are in an option's value instead (--scene, --outputs, --effects)."""
     try:
-        return call(*args)
+        return call(*args, **kwargs)
     except api.BgcModelError as exc:
         click.echo(str(exc), err=True)
         sys.exit(2 if isinstance(exc, api.BgcArgumentError) else 1)
@@ -1244,11 +1244,12 @@ def steady(model, scene, params, json_file):
 # ---------------------------------------------------------------- estimation
 
 
-def _estimation(call, *args):
-    """call(*args) of bgc.estimate: the model's errors as _or_exit says them, an argument or
-    data file refused a usage error (exit 2), a fit that cannot be done one line, exit 1."""
+def _estimation(call, *args, **kwargs):
+    """call(*args, **kwargs) of bgc.estimate: the model's errors as _or_exit says them, an
+    argument or data file refused a usage error (exit 2), a fit that cannot be done one line,
+    exit 1."""
     try:
-        return _or_exit(call, *args)
+        return _or_exit(call, *args, **kwargs)
     except estimate.FitArgumentError as error:
         raise click.UsageError(str(error)) from None
     except estimate.FitError as error:
