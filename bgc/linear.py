@@ -251,14 +251,14 @@ def linearization(ev: operating.Evaluator, t: float, x) -> Linearization:
 
 
 def linearize(model, scene=None, at=None, inputs=None, outputs=None, params=None,
-              effects=None) -> Linearization:
+              effects=None, algebra="auto") -> Linearization:
     """The linearisation of model's scene (bgc.linearize; see the module's doc): at the
     initial state (at=None), at "t=T" (or a number T) of the scene's run, or at "steady".
     inputs: names of the model's inputs (`input NAME`, at their defaults) or of parameters
-    (None: the model's inputs); outputs: as a scene's (default: the scene's); params:
-    {name: value} overrides."""
+    (None: the model's inputs); outputs, effects: as a scene's (default: the scene's);
+    params: {name: value} overrides; algebra: as bgc.build's."""
     analysed = operating.build(model, scene, outputs, effects,
-                               None if inputs is None else tuple(inputs))
+                               None if inputs is None else tuple(inputs), algebra)
     ev = operating.Evaluator(analysed, params)
     t, x = operating_point(ev, at, lambda T: run_to(ev, dict(params or {}), T))
     return linearization(ev, t, x)

@@ -293,3 +293,28 @@ def test_fit_takes_the_solver_and_its_tolerances(tmp_path, scene_solver, option)
 
     assert fitted(*option) == pytest.approx(reference, rel=1e-7)
     assert np.max(np.abs(fitted() / reference - 1)) > 1e-6
+
+
+def test_fit_takes_the_effects(tmp_path):
+    """--effects replaces the scene's: the RC circuit's source left out, the data are its
+    decay alone, and the estimates the closed form's least squares (SciPy's)."""
+    model = tmp_path / "rc.bg"
+    model.write_text(RC_FIT.replace("SOLVER", "dopri5(rtol = 1e-11, atol = 1e-13)")
+                     .replace("r : R(R)", "r : R(R)\nsrc : Se(0.3) @drive\nk : 1")
+                     .replace("j -> r", "j -> k\nk -> r\nsrc -> k"))
+    t = np.round(np.arange(201) * 0.02, 10)
+    e = np.exp(-t / (2.0 * 0.5)) / 0.5 + 0.01 * np.random.default_rng(5).standard_normal(t.size)
+    data = tmp_path / "rc.csv"
+    data.write_text("t,c.e\n" + "".join(f"{float(a)!r},{float(b)!r}\n"
+                                         for a, b in zip(t, e)))
+    out = tmp_path / "fit.json"
+    args = ("fit", model, "--scene", "run", "--data", data, "--vary", "R", "--vary", "C",
+            "--backend", "python", "-o", out)
+    result = run_bgc(*args, "--effects", "none")
+    assert result.returncode == 0, result.stderr
+    fit = json.loads(out.read_text())["parameters"]
+    assert [fit[n]["estimate"] for n in ("R", "C")] == pytest.approx(_rc_reference(t, e),
+                                                                      rel=1e-7)
+    assert run_bgc(*args).returncode == 0  # with the source: another fit
+    fit = json.loads(out.read_text())["parameters"]
+    assert abs(fit["R"]["estimate"] / _rc_reference(t, e)[0] - 1) > 1e-3
