@@ -408,3 +408,4 @@ class Model:
     path: str
     ports: tuple = ()  # after instantiate: graph.Port, one per port of every instance
     instances: tuple = ()  # after instantiate: graph.Instance, in declaration order
+    text: str = ""  # the model file's text (a span without an origin is in it)

@@ -157,14 +157,13 @@ class EventTable:
     squares: list = field(default_factory=list)
     _index: dict = field(default_factory=dict)
 
-    def relation(self, rel, node, owner) -> sp.Symbol:
+    def relation(self, rel, node, owner, text: str | None = None) -> sp.Symbol:
+        """The symbol of relation rel (of element owner's law, or None); text: its name as
+        written (bgc.spelling), else SymPy's; the first text of a relation met names it."""
         key = (rel, owner)
         if key not in self._index:
             sym = sp.Symbol(f"event#{len(self.relations)}")
-            text = written(rel)
-            if getattr(node, "func", None):  # step(1): t >= 1
-                text = f"{node.func}: {text}"
-            self.relations.append(Relation(sym, rel, text, node.span, owner))
+            self.relations.append(Relation(sym, rel, text or written(rel), node.span, owner))
             self._index[key] = sym
         return self._index[key]
 
@@ -175,11 +174,11 @@ class EventTable:
         self.relations.append(Relation(sym, rel, text, span, None, frozenset(needs)))
         return sym
 
-    def square(self, period, duty, t0, node) -> sp.Symbol:
+    def square(self, period, duty, t0, node, text: str | None = None) -> sp.Symbol:
         key = ("square", period, duty, t0)
         if key not in self._index:
             sym = sp.Symbol(f"square#{len(self.squares)}", real=True)
-            text = f"square({written(period)}, {written(duty)}, {written(t0)})"
+            text = text or f"square({written(period)}, {written(duty)}, {written(t0)})"
             self.squares.append(Square(sym, period, duty, t0, text, node.span))
             self._index[key] = sym
         return self._index[key]

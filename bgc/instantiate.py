@@ -438,7 +438,7 @@ class _Instantiate:
         self.fuse()
         self.diags.raise_if_errors()
         return ast.Model(tuple(self.out), self.model.path, tuple(self.ports.values()),
-                         tuple(self.instances))
+                         tuple(self.instances), self.model.text)
 
     def child(self, parent: _Scope, stmt: ast.ElementDecl, env) -> _Scope:
         name = self.local_name(parent, stmt, env)

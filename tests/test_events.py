@@ -325,7 +325,7 @@ scene run { time 0 .. 3 every 0.5; outputs a.x, a.y; solver dopri5(rtol = 1e-12,
     log = tmp_path / "events.csv"
     csv_text = run_csv(build(text, "run"), BACKENDS[0], events=str(log))
     rows = events_of(log)
-    assert [r[1:] for r in rows] == [["step: t >= a.t0", "0 -> 1"], ["a.x > 0.2", "0 -> 1"],
+    assert [r[1:] for r in rows] == [["step(a.t0)", "0 -> 1"], ["a.x > 0.2", "0 -> 1"],
                                      ["a.n", "0 -> 1"]]
     t_cross = 1 - 0.5 * math.log(1 - 0.2 / 0.5)  # 0.5 (1 - exp(-(t - 1) / 0.5)) = 0.2
     assert abs(float(rows[1][0]) - t_cross) <= 1e-10 * t_cross
@@ -333,12 +333,69 @@ scene run { time 0 .. 3 every 0.5; outputs a.x, a.y; solver dopri5(rtol = 1e-12,
     assert list(y[:, 2]) == [0, 0, 0, 1, 1, 1, 1]
 
 
+NAMED = """model named "conditions written as a modeller writes them"
+component lagc(t0 = 1.0) {
+  signal x = integral(step(t0), init = 0)
+  discrete n = 0
+  when x >   0.25 { n = 1 }
+  signal on = n
+}
+discrete k = 0
+discrete hits = 0
+a : lagc(t0 = 0.4)
+r : R(e = if f>0.5 then f else 2*f)
+drive : Sf(ramp( 0.75 ))
+drive -> r
+signal y = integral(square(1, 0.5) + square(2, 0.25, 0.125) + pulse(2.25, 0.5), init = 0)
+when (y >= 0.5 and # the first half-unit
+      k == 0) { k = 1 }
+when k != 0 { hits = hits + 1 }
+signal ok = k + hits
+scene run { time 0 .. 3 every 0.5; outputs a.on, y, ok, r.e }
+"""
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_the_log_names_conditions_as_written(tmp_path, backend):
+    """Each condition is named by its text in the model (whitespace made one space, comments
+    left out), its names by their paths (a component's, an element's own e and f) and each time
+    source as written: the names and times below are read off the model and its closed forms,
+    not off bgc."""
+    log = tmp_path / "events.csv"
+    run_csv(build(NAMED, "run"), backend, events=str(log))
+    got = [(float(t), what, change) for t, what, change in events_of(log)
+           if what not in ("k", "hits", "a.n")]
+    # y' = square(1, 0.5) + square(2, 0.25, 0.125) + ...: 1, then 2 from the second square's
+    # rise at 0.125, so y = 0.5 where t + (t - 0.125) = 0.5; r.f = t - 0.75 from 0.75
+    t_half = (0.5 + 0.125) / 2
+    want = [
+        (0.125, "square(2, 0.25, 0.125)", "0 -> 1"),
+        (t_half, "y >= 0.5", "0 -> 1"),
+        (t_half, "k == 0", "1 -> 0"),
+        (t_half, "k != 0", "0 -> 1"),
+        (0.4, "step(a.t0)", "0 -> 1"),
+        (0.5, "square(1, 0.5)", "1 -> 0"),
+        (0.625, "square(2, 0.25, 0.125)", "1 -> 0"),
+        (0.65, "a.x > 0.25", "0 -> 1"),  # x = t - 0.4
+        (0.75, "ramp( 0.75 )", "0 -> 1"),
+        (1.25, "r.f>0.5", "0 -> 1")]
+    for t, what, change in want:
+        hits = [g for g in got if g[1] == what and g[2] == change]
+        assert hits, (what, change, got)
+        assert abs(hits[0][0] - t) < 1e-9, (what, hits[0][0], t)
+    names = {what for _, what, _ in got}
+    assert "pulse(2.25, 0.5)" in names and "pulse(2.25, 0.5): end" in names
+    from bgc.report import check_report
+    report = check_report(build(NAMED, "run"))
+    assert "when y >= 0.5 and k == 0 { k = 1 }" in report and "when a.x > 0.25 {" in report
+
+
 def test_reports_show_the_events():
     from bgc.report import check_report, equations_text
     compiled = build(LAG, "run")
     report = check_report(compiled)
-    assert "events:\n  pulse: t >= t0  (time event at t = t0)\n" \
-           "  pulse: t >= t0 + width  (time event at t = t0 + width)" in report
+    assert "events:\n  pulse(t0, width)  (time event at t = t0)\n" \
+           "  pulse(t0, width): end  (time event at t = t0 + width)" in report
     text = equations_text(build(BALL.replace("outputs x, b.p", "outputs x"), "drop"))
     assert "d(x)/dt = b.p/m" in text
     eq = equations_text(build("""model m
