@@ -20,7 +20,8 @@ At an event the program's `update` function gives the state and the discrete val
 it: every relation's new value (a state relation's from the located crossing), the when-
 blocks that fire (their condition became true: a rising edge), their reinits and
 assignments, all computed from the values just before (the left limit).  The driver calls it
-again until nothing changes (an event iteration, at most MAX_ITERATIONS).
+again until nothing changes (an event iteration: at most MAX_ITERATIONS passes that change
+something, the chain of events at one instant LANGUAGE.md allows; the runtimes' limit).
 """
 from __future__ import annotations
 
@@ -40,7 +41,7 @@ RELATIONS = {"<": sp.StrictLessThan, "<=": sp.LessThan, ">": sp.StrictGreaterTha
 SOURCES = {"step": (1, 1), "ramp": (1, 1), "pulse": (2, 2), "square": (2, 3),
            "initial": (0, 0)}  # name -> (fewest, most) arguments
 INITIAL = sp.Symbol("initial#")  # initial(): true in the event iteration at the start only
-MAX_ITERATIONS = 100  # events at one instant before a run stops as chattering (Zeno)
+MAX_ITERATIONS = 100  # events at one instant a run allows, then stops as chattering (Zeno)
 
 
 def is_condition(v) -> bool:

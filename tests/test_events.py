@@ -4,6 +4,7 @@ with the same bytes.  References: closed forms and SciPy computed here."""
 import csv
 import io
 import math
+import re
 
 import numpy as np
 import pytest
@@ -283,7 +284,89 @@ scene run { time 0 .. 2; outputs x }
         result = runner.run(program, None)
         assert result.status == 1
         assert "at t = 1: chattering" in result.message
-        assert "'n > 0.5' keeps changing" in result.message  # (the condition, named)
+        assert "('n > 0.5', 'n < 0.5' and 'n' keep changing" in result.message  # (named)
+
+
+ZENO = """model zeno "an event iteration that never settles"
+discrete a = 0
+discrete go = 0
+signal x = integral(1, init = 0)
+when x > 1 { go = 1 }
+when go > 0.5 and a < 0.5 { a = 1 }
+when a > 0.5 { a = 0 }
+signal oa = a
+scene run { time 0 .. 2 every 0.5; outputs x, oa }
+"""
+
+RELAY = """model relay "a relay that chatters: x' = -1 above 0, +1 below"
+signal x = integral(if x > 0 then -1 else 1, init = 1)
+scene run { time 0 .. 2 every 0.1; outputs x }
+"""
+
+CHAIN = """model chain "N + 2 events at t = 1: go set, N toggles of a, the conditions at c = N"
+parameter N = 60
+discrete a = 0
+discrete c = 0
+discrete go = 0
+signal x = integral(1, init = 0)
+when x > 1 { go = 1 }
+when go > 0.5 and a < 0.5 and c < N { a = 1; c = c + 1 }
+when a > 0.5 and c < N { a = 0; c = c + 1 }
+signal oc = c
+scene run { time 0 .. 2 every 0.5; outputs oc }
+"""
+
+
+def _failure(text, backend, **options):
+    """The run of text's scene `run` with options (runner.settings_for's): its result."""
+    compiled = build(text, "run")
+    names = [p.name for p in compiled.program.params]
+    settings = runner.settings_for(compiled.program.scene, names, **options)
+    return runner.run(runner.prepare(compiled, backend), settings)
+
+
+def test_chattering_names_every_condition_that_keeps_changing():
+    """A Zeno iteration names both of its conditions (and the value they toggle); a relay in
+    a sliding mode names its condition (it said 'a state'); both backends the same bytes."""
+    said = {}
+    for backend in BACKENDS:
+        zeno = runner.run(runner.prepare(build(ZENO, "run"), backend), None)
+        assert zeno.status == 1
+        relay = _failure(RELAY, backend, max_steps=1000)
+        assert relay.status == 1
+        said[backend] = (zeno.message, relay.message)
+    zeno, relay = said[BACKENDS[0]]
+    assert zeno.startswith("at t = 1: chattering: more than 100 events at one instant, the "
+                           "event iteration does not settle ('a < 0.5', 'a > 0.5' and 'a' "
+                           "keep changing: a Zeno model?)")
+    assert re.match(r"at t = 1\.\d+: chattering: 1000 (events since the last output row|steps "
+                    r"in a row, each cut short by an event) \('x > 0' keeps changing: ", relay)
+    assert len(set(said.values())) == 1, said
+    many = ZENO.replace("discrete go = 0", "discrete go = 0\ndiscrete b = 0\ndiscrete c = 0\n"
+                        "discrete d = 0\ndiscrete e = 0").replace(
+        "{ a = 1 }", "{ a = 1; b = 1; c = 1; d = 1; e = 1 }").replace(
+        "{ a = 0 }", "{ a = 0; b = 0; c = 0; d = 0; e = 0 }").replace(
+        "outputs x, oa", "outputs x, oa, ob").replace("signal oa = a", "signal oa = a\n"
+                                                      "signal ob = b + c + d + e")
+    said = {runner.run(runner.prepare(build(many, "run"), b), None).message for b in BACKENDS}
+    assert said == {"at t = 1: chattering: more than 100 events at one instant, the event "
+                    "iteration does not settle ('a < 0.5', 'a > 0.5', 'a', 'b', 'c', 'd' and 1 "
+                    "more keep changing: a Zeno model?)"}
+
+
+@pytest.mark.parametrize("N, settles", [(97, True), (98, True), (99, False)])
+def test_a_chain_of_100_events_at_one_instant_is_allowed(N, settles):
+    """LANGUAGE.md 10: a chain of events at one instant is allowed up to 100.  CHAIN's chain
+    at t = 1 has N + 2 events (x > 1 sets go; N toggles of a, each counting c; the conditions
+    then see c = N): 100 at N = 98, which runs; at N = 99 the run stops, in both backends."""
+    for backend in BACKENDS:
+        result = _failure(CHAIN, backend, params={"N": N})
+        assert (result.status == 0) == settles, result.message
+        if settles:
+            _, y = table(result.csv)
+            assert y[-1, 1] == N
+        else:
+            assert "more than 100 events at one instant" in result.message
 
 
 @pytest.mark.parametrize("text, message", [
