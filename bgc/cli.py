@@ -48,8 +48,9 @@ def _warn(compiled):
 
 
 def _or_exit(call, *args, **kwargs):
-    """call(*args, **kwargs), or the model's located errors (or an unreadable file) on stderr, exit 1;
-    exit 2 when they are in an option's value instead (--scene, --outputs, --effects)."""
+    """call(*args, **kwargs), or the model's located errors (or an unreadable file) on
+    stderr, exit 1; exit 2 when they are in an option's value instead (--scene, --outputs,
+    --effects)."""
     try:
         return call(*args, **kwargs)
     except api.BgcModelError as exc:
