@@ -473,6 +473,41 @@ def test_the_log_names_conditions_as_written(tmp_path, backend):
     assert "when y >= 0.5 and k == 0 { k = 1 }" in report and "when a.x > 0.25 {" in report
 
 
+COUNT = """model count "crossings counted, a time event's value, a component's discrete value"
+parameter w = 3.0
+component latch(t1 = 1.0) {
+  discrete k = 0
+  when t >= t1 { k = 1 }
+  signal unused = 0
+}
+discrete n = 0
+discrete m = 0
+signal x = integral(w*cos(w*t), init = 0)
+when x > 0.5 { n = n + 1 }
+when t >= 1 { m = 7 }
+h : latch(t1 = 2.0)
+scene run { time 0 .. 4 every 0.25; outputs x, n, m, h.k; solver dopri5(rtol = 1e-10, atol = 1e-12) }
+"""
+
+
+@pytest.mark.parametrize("backend", BACKENDS + (["vm"] if have_cc() else []))
+def test_discrete_variables_are_outputs(backend):
+    """`outputs n` for `discrete n`: its value at each row, the right limit at an event time
+    (m at t = 1, h.k at t = 2), the left and right limits at an event's two rows; against the
+    closed form: x = sin(w t) rises through 0.5 at (asin(0.5) + 2 pi k)/w."""
+    compiled = build(COUNT, "run")
+    assert compiled.program.outputs == ("x", "n", "m", "h.k")
+    header, y = table(run_csv(compiled, backend))
+    t = y[:, 0]
+    rises = (math.asin(0.5) + 2 * math.pi * np.arange(3)) / 3.0
+    assert list(y[:, 2]) == [float(np.sum(rises <= tk)) for tk in t]
+    assert list(y[:, 3]) == [7.0 if tk >= 1 else 0.0 for tk in t]
+    assert list(y[:, 4]) == [1.0 if tk >= 2 else 0.0 for tk in t]
+    _, rows = table(run_csv(compiled, backend, event_rows=True))
+    at = rows[np.abs(rows[:, 0] - rises[1]) < 1e-9]
+    assert len(at) == 2 and list(at[:, 2]) == [1.0, 2.0]  # the left limit, then the right
+
+
 def test_reports_show_the_events():
     from bgc.report import check_report, equations_text
     compiled = build(LAG, "run")
