@@ -21,7 +21,7 @@ it: every relation's new value (a state relation's from the located crossing), t
 blocks that fire (their condition became true: a rising edge), their reinits and
 assignments, all computed from the values just before (the left limit).  The driver calls it
 again until nothing changes (an event iteration: at most MAX_ITERATIONS passes that change
-something, the chain of events at one instant LANGUAGE.md allows; the runtimes' limit).
+something, the chain of events at one instant docs/hybrid.md allows; the runtimes' limit).
 """
 from __future__ import annotations
 

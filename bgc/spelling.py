@@ -1,6 +1,6 @@
 """An expression as its modeller wrote it: the names of conditions in the event log, in `bgc
-check` and in the runtimes' messages (LANGUAGE.md section 10: "the condition ... as written,
-with its path").
+check` and in the runtimes' messages (docs/hybrid.md: a condition is named as the model
+writes it, with its path).
 
 The text is the source of the expression's span, with its comments left out and each run of
 whitespace made one space, and with each name written as the model-level name it stands for:

@@ -356,7 +356,7 @@ def test_chattering_names_every_condition_that_keeps_changing():
 
 @pytest.mark.parametrize("N, settles", [(97, True), (98, True), (99, False)])
 def test_a_chain_of_100_events_at_one_instant_is_allowed(N, settles):
-    """LANGUAGE.md 10: a chain of events at one instant is allowed up to 100.  CHAIN's chain
+    """docs/hybrid.md: a chain of events at one instant is allowed up to 100.  CHAIN's chain
     at t = 1 has N + 2 events (x > 1 sets go; N toggles of a, each counting c; the conditions
     then see c = N): 100 at N = 98, which runs; at N = 99 the run stops, in both backends."""
     for backend in BACKENDS:
