@@ -243,7 +243,7 @@ def program_run(problem: Problem, row: EventRow, args: list, workdir: Path, is_b
     if is_bgc:
         with open(log, encoding="utf-8") as fh:
             logged = list(csv.reader(fh))[1:]
-        wanted = "b.p" if problem.key == "ball" else "square(period, duty, 0)"
+        wanted = "b.p" if problem.key == "ball" else "square(period, duty)"
         times = [float(t) for t, what, _ in logged if what == wanted]
     else:
         times = np.loadtxt(log, ndmin=1) if log.stat().st_size else []
@@ -284,7 +284,7 @@ def bgc_python(problem, module, rtol, c_rows):
     t, Y = module.simulate(t_end=problem.t_end, dt=problem.dt, events=log, max_steps=0, **tol)
     ref, exact = problem.exact(t, problem.t_end)
     row.error = scaled_error(Y, ref)
-    wanted = "b.p" if problem.key == "ball" else "square(period, duty, 0)"
+    wanted = "b.p" if problem.key == "ball" else "square(period, duty)"
     row.t_error, row.note = event_error([e[0] for e in log if e[1] == wanted and
                                          e[0] < problem.t_end], exact)
     twin = next((r for r in c_rows if r.rtol == rtol), None)

@@ -431,3 +431,4 @@ class Model:
     ports: tuple = ()  # after instantiate: graph.Port, one per port of every instance
     instances: tuple = ()  # after instantiate: graph.Instance, in declaration order
     constants: tuple = ()  # after instantiate: (name, value) of the file's constants
+    text: str = ""  # the model file's text (a span without an origin is in it)

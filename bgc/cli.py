@@ -47,11 +47,12 @@ def _warn(compiled):
     click.echo(_warnings_text(compiled), err=True, nl=False)
 
 
-def _or_exit(call, *args):
-    """call(*args), or the model's located errors (or an unreadable file) on stderr, exit 1;
-    exit 2 when they are in an option's value instead (--scene, --outputs, --effects)."""
+def _or_exit(call, *args, **kwargs):
+    """call(*args, **kwargs), or the model's located errors (or an unreadable file) on
+    stderr, exit 1; exit 2 when they are in an option's value instead (--scene, --outputs,
+    --effects)."""
     try:
-        return call(*args)
+        return call(*args, **kwargs)
     except api.BgcModelError as exc:
         click.echo(str(exc), err=True)
         sys.exit(2 if isinstance(exc, api.BgcArgumentError) else 1)
@@ -287,11 +288,14 @@ SCENE = click.option("--scene", "-s", default=None, help="Scene to use (default:
                                                          "every state as an output).")
 
 
+EFFECTS = click.option("--effects", default=None, metavar="E1,E2,..|none",
+                       help="The effects in (replacing the scene's): tagged items of the others "
+                            "are left out.")
+
+
 def ADHOC(f):
     """--outputs and --effects: a scene made on the command line."""
-    f = click.option("--effects", default=None, metavar="E1,E2,..|none",
-                     help="The effects in (replacing the scene's): tagged items of the others "
-                          "are left out.")(f)
+    f = EFFECTS(f)
     return click.option("--outputs", default=None, metavar="X,Y,..",
                         help="The outputs, in order (replacing the scene's): only what they "
                              "need is computed.")(f)
@@ -1175,6 +1179,7 @@ def _analysis_params(model, scene, params, analysed, outputs=None, effects=None)
 @MODEL
 @SCENE
 @ADHOC
+@ALGEBRA
 @click.option("--at", default=None, metavar="t=TIME|steady", callback=_at,
               help="The operating point: the state of the scene's run at TIME, or an "
                    "equilibrium (bgc steady).  [default: the initial state]")
@@ -1188,13 +1193,13 @@ def _analysis_params(model, scene, params, analysed, outputs=None, effects=None)
 @click.option("--bode", "bode_file", default=None, metavar="FILE.png", callback=_plot_file,
               help="Draw the Bode plot of every input-output pair into FILE (.png, .svg or "
                    ".pdf; needs matplotlib: pip install 'bgc[plot]').")
-def linearize(model, scene, outputs, effects, at, inputs, params, output, bode_file):
+def linearize(model, scene, outputs, effects, algebra, at, inputs, params, output, bode_file):
     """Linearise: A, B, C, D from the Jacobians the compiler derives; constrained models in
     independent coordinates, the correctors' artificial modes apart.  Prints the eigenvalues
     with their natural frequencies and damping ratios."""
     _not_an_input(model, output, bode_file)
     names = None if inputs is None else _names(inputs)
-    analysed = _analysed(analysis.build, model, scene, outputs, effects, names)
+    analysed = _analysed(analysis.build, model, scene, outputs, effects, names, algebra)
     if bode_file and not analysed.inputs:
         raise click.UsageError("--bode needs an input: the model declares none; name a "
                                "parameter with --inputs")
@@ -1220,17 +1225,19 @@ def linearize(model, scene, outputs, effects, at, inputs, params, output, bode_f
 @main.command()
 @MODEL
 @SCENE
+@EFFECTS
+@ALGEBRA
 @click.option("-p", "params", multiple=True, metavar="NAME=VALUE", help="Parameter override.")
 @click.option("--json", "json_file", default=None, callback=_output_file, metavar="FILE",
               help="Also write the equilibrium to FILE as JSON.")
-def steady(model, scene, params, json_file):
+def steady(model, scene, effects, algebra, params, json_file):
     """An equilibrium by Newton's method on the right side, with the exact Jacobian: one
     line per state, multiplier and constraint residual, then the residual max |dx/dt|; no
     equilibrium found: exit 1 and why."""
     _not_an_input(model, json_file)
-    analysed = _analysed(analysis.build, model, scene)
+    analysed = _analysed(analysis.build, model, scene, None, effects, None, algebra)
     _warn(analysed.compiled)
-    given = _analysis_params(model, scene, params, analysed)
+    given = _analysis_params(model, scene, params, analysed, None, effects)
     found = _analysed(equilibria.solve, _analysed(analysis.Evaluator, analysed, given))
     if found.free:
         click.echo(f"note: the Jacobian is singular ({found.free} free direction"
@@ -1244,11 +1251,12 @@ def steady(model, scene, params, json_file):
 # ---------------------------------------------------------------- estimation
 
 
-def _estimation(call, *args):
-    """call(*args) of bgc.estimate: the model's errors as _or_exit says them, an argument or
-    data file refused a usage error (exit 2), a fit that cannot be done one line, exit 1."""
+def _estimation(call, *args, **kwargs):
+    """call(*args, **kwargs) of bgc.estimate: the model's errors as _or_exit says them, an
+    argument or data file refused a usage error (exit 2), a fit that cannot be done one line,
+    exit 1."""
     try:
-        return _or_exit(call, *args)
+        return _or_exit(call, *args, **kwargs)
     except estimate.FitArgumentError as error:
         raise click.UsageError(str(error)) from None
     except estimate.FitError as error:
@@ -1258,6 +1266,7 @@ def _estimation(call, *args):
 @main.command()
 @MODEL
 @SCENE
+@EFFECTS
 @ALGEBRA
 @click.option("--data", required=True, type=click.Path(exists=True, dir_okay=False),
               metavar="MEASURED.csv",
@@ -1280,8 +1289,8 @@ def _estimation(call, *args):
 @click.option("--plot", "plot_file", default=None, metavar="FILE.png", callback=_plot_file,
               help="Draw the measured and fitted outputs and the residuals into FILE (needs "
                    "matplotlib).")
-def fit(model, scene, algebra, data, varies, params, backend, solver, rtol, atol, max_iter,
-        output, plot_file):
+def fit(model, scene, effects, algebra, data, varies, params, backend, solver, rtol, atol,
+        max_iter, output, plot_file):
     """Estimate parameters from measured data by Levenberg-Marquardt on the residuals, with
     their Jacobian from the forward sensitivities the compiler derives: estimates, standard
     errors, 95 % confidence intervals, correlations."""
@@ -1299,8 +1308,9 @@ def fit(model, scene, algebra, data, varies, params, backend, solver, rtol, atol
             raise click.UsageError(f"-p expects NAME=VALUE with a finite number, got '{item}'")
     backend = _backend(backend)
     result = _estimation(estimate.fit, model, measured, vary, scene, fixed, backend, algebra,
-                         max_iter, **{k: v for k, v in (("solver", solver), ("rtol", rtol),
-                                                        ("atol", atol)) if v is not None})
+                         max_iter, effects, **{k: v for k, v in (("solver", solver),
+                                                                 ("rtol", rtol), ("atol", atol))
+                                               if v is not None})
     if output:
         _write_atomic(output, result.json())
     if plot_file:

@@ -148,7 +148,8 @@ def _result(ev, t, x, J, it) -> Equilibrium:
                        ev.n - orthogonal.rank(J))
 
 
-def steady(model, scene=None, params=None, effects=None) -> Equilibrium:
-    """An equilibrium of model's scene (bgc.steady; see the module's doc)."""
-    analysed = operating.build(model, scene, None, effects)
+def steady(model, scene=None, params=None, effects=None, algebra="auto") -> Equilibrium:
+    """An equilibrium of model's scene (bgc.steady; see the module's doc); effects replace
+    the scene's, algebra as bgc.build's."""
+    analysed = operating.build(model, scene, None, effects, None, algebra)
     return solve(operating.Evaluator(analysed, params))

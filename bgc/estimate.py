@@ -495,13 +495,14 @@ def levenberg_marquardt(f, x0, lo, hi, max_iter=100, xtol=1e-10, ftol=1e-10, gto
 
 
 def fit(model, data, vary, scene=None, params=None, backend="c", algebra="auto",
-        max_iter=100, **options) -> Fit:
+        max_iter=100, effects=None, **options) -> Fit:
     """Estimate the parameters `vary` (names, or "k=LO..HI" texts, or Vary) of model's scene
     from the measured CSV `data` (a path, or a Data): its columns are matched to the model's
     variables by name (the scene's outputs are replaced by them), the time column is `t`,
     and the samples lie on a uniform grid from the scene's start.  params: fixed overrides;
-    options: solver, rtol, atol, max_steps, ... as bgc.simulate's (t_end and dt come from the
-    data).  Raises api's errors, FitArgumentError, FitError."""
+    effects: the effects in, replacing the scene's; options: solver, rtol, atol, max_steps,
+    ... as bgc.simulate's (t_end and dt come from the data).  Raises api's errors,
+    FitArgumentError, FitError."""
     data = data if isinstance(data, Data) else read_data(data)
     vary = [v if isinstance(v, Vary) else parse_vary(v) for v in vary]
     if not vary:
@@ -512,10 +513,10 @@ def fit(model, data, vary, scene=None, params=None, backend="c", algebra="auto",
     if both:
         raise FitArgumentError(f"'{both[0]}' is both varied and fixed (-p)")
     outputs = ", ".join(data.columns)
-    compiled = build(model, names, scene, tuple(fixed), False, algebra, outputs, None,
+    compiled = build(model, names, scene, tuple(fixed), False, algebra, outputs, effects,
                      options.get("project_initial", False),
                      options.get("allow_inconsistent", False),
-                     option_names=("--data columns", "effects=", "--scene"))
+                     option_names=("--data columns", "--effects", "--scene"))
     program = compiled.program
     N, P = data.y.size, len(names)
     if N <= P:

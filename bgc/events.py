@@ -25,7 +25,8 @@ At an event the program's `update` function gives the state and the discrete val
 it: every relation's new value (a state relation's from the located crossing), the when-
 blocks that fire (their condition became true: a rising edge), their reinits and
 assignments, all computed from the values just before (the left limit).  The driver calls it
-again until nothing changes (an event iteration, at most MAX_ITERATIONS).
+again until nothing changes (an event iteration: at most MAX_ITERATIONS passes that change
+something, the chain of events at one instant docs/hybrid.md allows; the runtimes' limit).
 """
 from __future__ import annotations
 
@@ -46,7 +47,7 @@ RELATIONS = {"<": sp.StrictLessThan, "<=": sp.LessThan, ">": sp.StrictGreaterTha
 SOURCES = {"step": (1, 1), "ramp": (1, 1), "pulse": (2, 2), "square": (2, 3),
            "initial": (0, 0)}  # name -> (fewest, most) arguments
 INITIAL = sp.Symbol("initial#")  # initial(): true in the event iteration at the start only
-MAX_ITERATIONS = 100  # events at one instant before a run stops as chattering (Zeno)
+MAX_ITERATIONS = 100  # events at one instant a run allows, then stops as chattering (Zeno)
 
 
 def is_condition(v) -> bool:
@@ -163,14 +164,13 @@ class EventTable:
     squares: list = field(default_factory=list)
     _index: dict = field(default_factory=dict)
 
-    def relation(self, rel, node, owner) -> sp.Symbol:
+    def relation(self, rel, node, owner, text: str | None = None) -> sp.Symbol:
+        """The symbol of relation rel (of element owner's law, or None); text: its name as
+        written (bgc.spelling), else SymPy's; the first text of a relation met names it."""
         key = (rel, owner)
         if key not in self._index:
             sym = sp.Symbol(f"event#{len(self.relations)}")
-            text = written(rel)
-            if getattr(node, "func", None):  # step(1): t >= 1
-                text = f"{node.func}: {text}"
-            self.relations.append(Relation(sym, rel, text, node.span, owner))
+            self.relations.append(Relation(sym, rel, text or written(rel), node.span, owner))
             self._index[key] = sym
         return self._index[key]
 
@@ -181,11 +181,11 @@ class EventTable:
         self.relations.append(Relation(sym, rel, text, span, None, frozenset(needs)))
         return sym
 
-    def square(self, period, duty, t0, node) -> sp.Symbol:
+    def square(self, period, duty, t0, node, text: str | None = None) -> sp.Symbol:
         key = ("square", period, duty, t0)
         if key not in self._index:
             sym = sp.Symbol(f"square#{len(self.squares)}", real=True)
-            text = f"square({written(period)}, {written(duty)}, {written(t0)})"
+            text = text or f"square({written(period)}, {written(duty)}, {written(t0)})"
             self.squares.append(Square(sym, period, duty, t0, text, node.span))
             self._index[key] = sym
         return self._index[key]

@@ -164,8 +164,10 @@ def describe(compiled) -> Description:
                                   derivative=state_pos[i]))
     out_pos = {}
     input_names = {u.name for u in program.inputs}
+    discrete = tuple(k for k, kind in enumerate(events.kinds) if kind == "discrete")
+    discrete_names = [events.names[place] for place in discrete]
     for k, name in enumerate(program.outputs):
-        if name in input_names:  # the input's variable (an FMU's input is no output)
+        if name in input_names or name in discrete_names:  # (that variable, set below)
             continue
         if name in state_index:
             out_pos[k] = state_pos[state_index[name]]
@@ -173,11 +175,14 @@ def describe(compiled) -> Description:
         out_pos[k] = len(variables) + 1
         variables.append(Variable(name, m + 2 * n + k, "output", "continuous", "calculated",
                                   _variable_doc(graph, name), unit=declared_units.get(name)))
-    discrete = tuple(k for k, kind in enumerate(events.kinds) if kind == "discrete")
-    for k, place in enumerate(discrete):
-        variables.append(Variable(events.names[place], m + 2 * n + len(program.outputs) + k,
-                                  "local", "discrete", "calculated",
-                                  "a discrete variable, set at events"))
+    for k, name in enumerate(discrete_names):  # an output too: the discrete variable's
+        outputs_it = [j for j, o in enumerate(program.outputs) if o == name]
+        for j in outputs_it:
+            out_pos[j] = len(variables) + 1
+        variables.append(Variable(name, m + 2 * n + len(program.outputs) + k,
+                                  "output" if outputs_it else "local", "discrete",
+                                  "calculated", "a discrete variable, set at events",
+                                  unit=declared_units.get(name)))
     params = _parameter_values(program)
     input_pos, input_slots = [], []
     for j, u in enumerate(program.inputs):
@@ -204,7 +209,8 @@ def describe(compiled) -> Description:
     for k, name in enumerate(program.outputs):
         if name in input_names:
             continue
-        deps = (state_pos[state_index[name]],) if name in state_index else \
+        deps = (state_pos[state_index[name]],) if name in state_index else () \
+            if name in discrete_names else \
             tuple(state_pos[j] for j in out_deps[k]) + tuple(input_pos)
         outputs.setdefault(out_pos[k], deps)
     initial = sorted(set(outputs) | set(state_pos.values()) | set(der_pos.values()))

@@ -438,7 +438,8 @@ class _Instantiate:
         self.fuse()
         self.diags.raise_if_errors()
         return ast.Model(tuple(self.out), self.model.path, tuple(self.ports.values()),
-                         tuple(self.instances), tuple(main.constants.items()))
+                         tuple(self.instances), tuple(main.constants.items()),
+                         self.model.text)
 
     def child(self, parent: _Scope, stmt: ast.ElementDecl, env) -> _Scope:
         name = self.local_name(parent, stmt, env)

@@ -251,14 +251,14 @@ def linearization(ev: operating.Evaluator, t: float, x) -> Linearization:
 
 
 def linearize(model, scene=None, at=None, inputs=None, outputs=None, params=None,
-              effects=None) -> Linearization:
+              effects=None, algebra="auto") -> Linearization:
     """The linearisation of model's scene (bgc.linearize; see the module's doc): at the
     initial state (at=None), at "t=T" (or a number T) of the scene's run, or at "steady".
     inputs: names of the model's inputs (`input NAME`, at their defaults) or of parameters
-    (None: the model's inputs); outputs: as a scene's (default: the scene's); params:
-    {name: value} overrides."""
+    (None: the model's inputs); outputs, effects: as a scene's (default: the scene's);
+    params: {name: value} overrides; algebra: as bgc.build's."""
     analysed = operating.build(model, scene, outputs, effects,
-                               None if inputs is None else tuple(inputs))
+                               None if inputs is None else tuple(inputs), algebra)
     ev = operating.Evaluator(analysed, params)
     t, x = operating_point(ev, at, lambda T: run_to(ev, dict(params or {}), T))
     return linearization(ev, t, x)
@@ -352,18 +352,32 @@ def _field(name: str) -> str:
     return f'"{name}"' if "," in name or '"' in name else name
 
 
+NPZ_MATRICES = ("A", "B", "C", "D", "basis")  # as_dict's keys held as the arrays themselves
+
+
+def npz_arrays(lin: Linearization) -> dict:
+    """Every key of as_dict as an array, in its order: the matrices as they are (their shapes
+    kept when empty), eigenvalues as (n, 2) of re and im, names as strings, and `at` as
+    at_t, at_states and at_values."""
+    arrays = {}
+    for key, value in lin.as_dict().items():
+        if key == "at":
+            arrays.update(at_t=np.array(lin.t),
+                          at_states=np.array([s for s, _ in lin.point], dtype=str),
+                          at_values=np.array([v for _, v in lin.point], dtype=float))
+        elif key in NPZ_MATRICES:
+            arrays[key] = np.asarray(getattr(lin, key), dtype=float)
+        elif key.endswith("eigenvalues"):
+            arrays[key] = np.array(value, dtype=float).reshape(-1, 2)
+        else:
+            arrays[key] = np.array(value, dtype=str)
+    return arrays
+
+
 def to_npz(lin: Linearization) -> bytes:
-    """The arrays of as_dict in an .npz archive, written with fixed time stamps (the same
-    linearisation gives the same bytes)."""
-    d = lin.as_dict()
-    arrays = {"states": np.array(d["states"], dtype=str), "inputs": np.array(d["inputs"], dtype=str),
-              "outputs": np.array(d["outputs"], dtype=str),
-              "A": lin.A, "B": lin.B, "C": lin.C, "D": lin.D,
-              "eigenvalues": np.array(d["eigenvalues"]).reshape(-1, 2),
-              "at_t": np.array(lin.t), "at_states": np.array([s for s, _ in lin.point], dtype=str),
-              "at_values": np.array([v for _, v in lin.point]),
-              "full_states": np.array(d["full_states"], dtype=str), "basis": lin.basis,
-              "corrector_eigenvalues": np.array(d["corrector_eigenvalues"]).reshape(-1, 2)}
+    """The arrays of as_dict (npz_arrays) in an .npz archive, written with fixed time stamps
+    (the same linearisation gives the same bytes)."""
+    arrays = npz_arrays(lin)
     buf = io.BytesIO()
     with zipfile.ZipFile(buf, "w", zipfile.ZIP_DEFLATED) as z:
         for name, value in arrays.items():

@@ -50,10 +50,10 @@ class Analysed:
     residuals: tuple[str, ...]  # the constraint residual columns
 
 
-def _scene_outputs(model, scene, outputs, effects):
+def _scene_outputs(model, scene, outputs, effects, algebra):
     """The output columns of the scene (or of --outputs), the states, and the multipliers and
     residuals of its constraints: one build to find them."""
-    first = api.build(model, scene, outputs=outputs, effects=effects,
+    first = api.build(model, scene, algebra=algebra, outputs=outputs, effects=effects,
                       option_names=("--outputs", "--effects", "--scene"))
     asked = first.program.outputs
     states = tuple(first.program.states) + tuple(first.reduced.pruned)
@@ -62,13 +62,16 @@ def _scene_outputs(model, scene, outputs, effects):
         tuple(f"{j}.residual" for j in junctions)
 
 
-def build(model, scene=None, outputs=None, effects=None, inputs=None) -> Analysed:
+def build(model, scene=None, outputs=None, effects=None, inputs=None,
+          algebra="auto") -> Analysed:
     """The analysis program of model's scene (see the module's doc); raises api's errors.
-    inputs: names of declared inputs or parameters (None: the declared inputs)."""
-    first, asked, states, lambdas, residuals = _scene_outputs(model, scene, outputs, effects)
+    inputs: names of declared inputs or parameters (None: the declared inputs); algebra: how
+    its algebraic blocks are solved, as bgc.build's."""
+    first, asked, states, lambdas, residuals = _scene_outputs(model, scene, outputs, effects,
+                                                              algebra)
     extra = [s for s in states + lambdas + residuals if s not in asked]
     names = ", ".join(list(asked) + extra) if asked or extra else None
-    compiled = api.build(first.source, scene, outputs=names, effects=effects,
+    compiled = api.build(first.source, scene, algebra=algebra, outputs=names, effects=effects,
                          option_names=("--outputs", "--effects", "--scene"))
     params = [p.name for p in compiled.program.params]
     declared = [u.name for u in compiled.program.inputs]

@@ -570,7 +570,7 @@ def parse(source: str, path: str = "<model>") -> ast.Model:
     except UnexpectedInput as exc:  # any other lark input error
         _syntax_error(exc, source)
     _check_nesting(tree)
-    return ast.Model(_transform(tree), path)
+    return ast.Model(_transform(tree), path, text=source)
 
 
 _BUILDERS = {name: f for name, f in vars(_ToAst).items() if not name.startswith("_")}

@@ -412,36 +412,17 @@ def _constraints(sys: _System, diags: Collector) -> list[ConstraintInfo]:
     defs = _explicit_defs(sys)
     coordinates = _Coordinates(sys, defs)
     multipliers = set(_multipliers(sys))
-    states = {st.symbol for st in sys.es.states}
     memo: dict = {}
     infos = []
     for c in sys.es.constraints:
         try:
-            infos.append(_constraint(c, sys, defs, coordinates, multipliers, states, memo,
-                                     diags))
+            infos.append(_constraint(c, sys, defs, coordinates, multipliers, memo, diags))
         except ModelError as exc:
             diags.items.extend(exc.diagnostics)
     return infos
 
 
-_HELD_MODE = {("switch", False): "open", ("switch", True): "close",
-              ("diode", False): "block", ("diode", True): "conduct"}
-
-
-def _imposed(c, in_states, multipliers, states) -> None:
-    """A switch or diode whose held quantity (its flow, or its effort as the dual junction)
-    the sources set whatever the state and the multipliers (a current source through a
-    switch): the mode that holds it at zero cannot be reached, and the model is refused."""
-    mode = _HELD_MODE.get((c.kind, c.dual))
-    if mode is None or in_states.free_symbols & (multipliers | states) or in_states == 0:
-        return
-    what = "effort" if c.dual else "flow"
-    fail(c.name_span, f"{c.kind} '{c.junction}' cannot {mode}: that mode holds its {what} at "
-                      f"zero, but the sources alone set it ({what} = {in_states}, whatever the "
-                      "state), and no storage on its path can take the change")
-
-
-def _constraint(c, sys, defs, coordinates, multipliers, states, memo, diags) -> ConstraintInfo:
+def _constraint(c, sys, defs, coordinates, multipliers, memo, diags) -> ConstraintInfo:
     def expandable(s):
         return s in defs and not sys.is_leaf(s)
 
@@ -457,8 +438,9 @@ def _constraint(c, sys, defs, coordinates, multipliers, states, memo, diags) -> 
     if in_states.has(*NOT_FINITE):
         fail(c.name_span, f"the flow balance of constraint junction '{c.junction}' is not "
                           "finite (a division by zero?)")
-    _imposed(c, in_states, multipliers, states)
     resistive = bool(in_states.free_symbols & multipliers)
+    if c.kind in contact.SWITCHED and not c.dual:
+        _refuse_imposed_flow(c, in_states, sys, multipliers)
     if resistive and c.kind not in contact.SWITCHED:
         fail(c.span, f"the flow balance of constraint junction '{c.junction}' depends on a "
                      "multiplier directly (a resistive path?): declare it as a plain junction")
@@ -498,6 +480,59 @@ def _constraint(c, sys, defs, coordinates, multipliers, states, memo, diags) -> 
     return ConstraintInfo(c.junction, c.kind if unilateral or switched else kind, detected,
                           c.corrector, c.gains, phi, in_states, c.multiplier, c.span,
                           c.name_span)
+
+
+SWITCHED_WORDS = {  # kind: what it is, the mode that holds its flow at zero (to, being), what
+    #                 that mode meets, what gives the flow another path
+    "diode": ("ideal diode", "block", "blocking", "a current source forcing flow through a "
+              "blocking diode", "a resistance across it"),
+    "switch": ("ideal switch", "open", "open", "a current source forcing flow through an open "
+               "switch", "a resistance across it"),
+    "friction": ("dry friction", "stick", "sticking", "a velocity source forcing motion "
+                 "through sticking friction", "a spring or a damper beside it"),
+    "junction": ("switched junction", "switch", "its switch open", "a flow source forcing "
+                 "flow through an open switch", "a resistance that carries it")}
+
+
+def _refuse_imposed_flow(c: ConstraintDef, in_states, sys: _System, multipliers) -> None:
+    """A switched one-port whose flow, written in the states, reads neither a state nor a
+    multiplier has it imposed from outside (a current source in series): the mode that holds
+    that flow at zero (blocking, open, sticking) contradicts it, and the multiplier's law
+    would divide by zero.  Refused at the element, with a note where the flow is imposed; a
+    diode's flow that is a positive number never needs to block, and a zero flow never
+    contradicts."""
+    if in_states.free_symbols & (set(sys.states) | multipliers) or in_states == 0:
+        return
+    if c.kind == "diode" and in_states.is_number and in_states > 0:
+        return
+    name = c.junction.removesuffix(".switch")  # (`J : 1 switch(C)`: its switch J.switch)
+    word, mode, being, what, path = SWITCHED_WORDS["junction" if name != c.junction
+                                                   else c.kind]
+    source = _imposed_by(sys, c.balance, c.junction)
+    by = f" by '{source.origin}'" if source is not None else ""
+    notes = [Note(source.span, f"'{source.origin}' imposes the flow here, whatever the "
+                               f"effort of '{name}'")] if source is not None else []
+    fail(c.name_span, f"{word} '{name}' cannot {mode}: its flow is imposed{by} whatever "
+                      f"its effort, and {being} (f = 0) would contradict it: {what}; give the "
+                      f"flow another path ({path}) or drive it with an effort source", *notes)
+
+
+def _imposed_by(sys: _System, start, junction: str) -> Equation | None:
+    """The equation an imposed flow comes from: the first met, walking the definitions from
+    `start` breadth first, whose right side reads parameters, t and event values only (a
+    source's law); None if there is none."""
+    seen, todo = set(), [start]
+    while todo:
+        s = todo.pop(0)
+        eq = sys.eqs.get(s)
+        if eq is None or s in seen:
+            continue
+        seen.add(s)
+        inner = [u for u in sys.symbols(eq.expr) if not sys.is_leaf(u)]
+        if not inner and eq.origin != junction:
+            return eq
+        todo += inner
+    return None
 
 
 def _residual_asked(es, c) -> bool:

@@ -25,6 +25,7 @@ from .events import (INITIAL, RELATIONS, SOURCES, Action, Discrete, EventTable, 
 from .instantiate import output_refs, path_name
 from .ir import Table, TableGuard
 from .kinds import KINDS, SWITCHED, known_kinds
+from .spelling import as_written
 from .tables import EXTRAPOLATE, INTERP, MAX_TABLE_ROWS, MAX_TABLES, build, check_rows, read_csv
 from .resources import (MAX_EXTREMUM_ARGUMENTS, MAX_LITERAL_DIGITS, MAX_MATRIX_ENTRIES,
                         MAX_SCENES, MAX_SYMBOLIC_EXPONENT)
@@ -64,6 +65,7 @@ class _Scope:
         self.directory = "."  # the model file's: its table files are read relative to it (a
         #                       library's, relative to the library)
         self.constants: dict = {}  # the model file's (indices in scenes: `outputs s[N].q`)
+        self.text = ""  # the model file's text: conditions are named as written in it
 
     def charge(self, n: int, span: Span):
         """Count n more vector or matrix entries against MAX_MATRIX_ENTRIES, before or as
@@ -205,7 +207,13 @@ class _ExprBuilder:
                 var(n) for n in self.scope.discretes):
             fail(node.span, f"'{node.op}' on a quantity that varies continuously is almost "
                             "never exactly true; write a crossing with <, <=, > or >=")
-        done.append(self.scope.events.relation(rel, node, self.scope.owner))
+        done.append(self.scope.events.relation(rel, node, self.scope.owner,
+                                               self._written(node)))
+
+    def _written(self, node, suffix: str = "") -> str | None:
+        """node as the model writes it (bgc.spelling), suffix after it; None if unknown."""
+        text = as_written(node, self.scope.text, self.scope.local)
+        return text + suffix if text else None
 
     def _constants(self) -> set:
         return {var(n) for n in self.scope.params}
@@ -267,9 +275,9 @@ class _ExprBuilder:
                 fail(node.args[0].span, "the period of square() must be positive")
             if duty.is_Number and not 0 <= duty <= 1:
                 fail(node.args[1].span, "the duty of square() is a fraction, from 0 to 1")
-            done.append(ev.square(period, duty, t0, node))
+            done.append(ev.square(period, duty, t0, node, self._written(node)))
             return
-        on = ev.relation(sp.GreaterThan(TIME, args[0]), node, None)
+        on = ev.relation(sp.GreaterThan(TIME, args[0]), node, None, self._written(node))
         if node.func == "step":
             done.append(sp.Piecewise((sp.Integer(1), on), (sp.Integer(0), True)))
         elif node.func == "ramp":
@@ -277,7 +285,8 @@ class _ExprBuilder:
         else:  # pulse(t0, width)
             if args[1].is_Number and args[1] < 0:
                 fail(node.args[1].span, "the width of pulse() cannot be negative")
-            off = ev.relation(sp.GreaterThan(TIME, args[0] + args[1]), node, None)
+            off = ev.relation(sp.GreaterThan(TIME, args[0] + args[1]), node, None,
+                              self._written(node, ": end"))
             done.append(sp.Piecewise((sp.Integer(1), sp.And(on, sp.Not(off))),
                                      (sp.Integer(0), True)))
 
@@ -988,8 +997,9 @@ def _when(d: ast.WhenBlock, scope: _Scope, diags: Collector) -> When:
             fail(st.expr.span, f"'{name}' is a scalar, but this is {_shape(expr.value)}")
         actions.append(Action(kind, name, sym, expr.value, st.span))
     shown = cond.value.xreplace({r.symbol: r.relation for r in scope.events.relations})
-    return When(cond.value, written(shown).replace("initial#", "initial()"), tuple(actions),
-                d.span)
+    text = as_written(d.condition, scope.text) or \
+        written(shown).replace("initial#", "initial()")
+    return When(cond.value, text, tuple(actions), d.span)
 
 
 def _state_symbol(name: str, span: Span, scope: _Scope):
@@ -1202,6 +1212,7 @@ def resolve(model: ast.Model) -> Graph:
     scope = _Scope(params, signals, elements)
     scope.directory = _model_directory(model.path)
     scope.constants = dict(model.constants)
+    scope.text = model.text
     _declare_discretes(model, scope)
     parameters = _parameters(params, scope, diags)
     discretes = _discretes(scope, diags)

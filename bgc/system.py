@@ -451,10 +451,12 @@ def _outputs(b: _Builder, refs, left_out=()) -> tuple[OutputDef, ...]:
     targets = {eq.target for eq in b.equations}
     constraints = {c.junction: c for c in b.constraints}
     params = {p.name for p in b.g.parameters}
+    discretes = {d.name: d.symbol for d in b.g.discretes}  # (their values between events)
     diags = Collector()
     out = []
     names = {s.name for s in b.g.signals} | params | {v.name for v in b.g.vectors
-                                                      if v.what == "signal"} | set(why)
+                                                      if v.what == "signal"} | set(why) | \
+        set(discretes)
     for ref in refs:
         ref = _signal_path(ref, b.g, names)
         if ref.owner in why:
@@ -464,7 +466,7 @@ def _outputs(b: _Builder, refs, left_out=()) -> tuple[OutputDef, ...]:
         try:
             for name, part in _expand(ref, b.g):
                 out.append(OutputDef(name, _output_expr(part, b.g, states, targets, constraints,
-                                                        params), ref.span))
+                                                        params, discretes), ref.span))
         except ModelError as exc:
             diags.items.extend(exc.diagnostics)
     diags.raise_if_errors()
@@ -502,18 +504,21 @@ def _expand(ref, g: Graph) -> list:
     return out
 
 
-def _output_expr(ref, g: Graph, states, targets, constraints, params):
+def _output_expr(ref, g: Graph, states, targets, constraints, params, discretes):
     if ref.index is not None and ref.index != 0:
         fail(ref.span, f"'{ref.owner}' is a scalar: index [{ref.index}] is out of range")
     if ref.field is None:
         sym = var(ref.owner)
         if sym in states or sym in targets or ref.owner in params:
             return sym
+        if ref.owner in discretes:
+            return discretes[ref.owner]
         if ref.owner in g.by_name or ref.owner in g.vector_by_name:
             hint = f" ('{ref.owner}' is an element: name one of its variables, e.g. " \
                    f"{ref.owner}.{'p' if _kind_of(ref.owner, g) == 'I' else 'e'})"
         else:
-            names = [s.name for s in g.signals] + list(params) + [v.name for v in g.vectors]
+            names = [s.name for s in g.signals] + list(params) + [v.name for v in g.vectors] \
+                + list(discretes)
             hint = did_you_mean(ref.owner, names)
         fail(ref.span, f"unknown output '{ref.owner}'{hint}")
     if ref.owner not in g.by_name:

@@ -501,6 +501,65 @@ def test_switched_elements_misuse_is_located():
     assert "m.bg:3:14: error: a condition is needed here" in error("j : 1 switch(2)\n")
 
 
+IMPOSED = """model imposed "a flow source in series with a switched one-port and a resistor"
+u : SOURCE
+j : 1
+d : ELEMENT
+r : R(1)
+u -> j
+j -> d
+j -> r
+scene run { time 0 .. 1 every 0.05; outputs r.f; solver dopri5(rtol = 1e-10, atol = 1e-12) }
+"""
+
+
+@pytest.mark.parametrize("source, element, message", [
+    ("MSf(sin(6*t))", "D", "ideal diode 'd' cannot block: its flow is imposed by 'u' whatever "
+     "its effort, and blocking (f = 0) would contradict it: a current source forcing flow "
+     "through a blocking diode"),
+    ("Sf(-1)", "D", "ideal diode 'd' cannot block"),
+    ("Sf(1)", "Sw(t < 0.5)", "ideal switch 'd' cannot open: its flow is imposed by 'u'"),
+    ("MSf(sin(6*t))", "Fr(1, 2)", "dry friction 'd' cannot stick: its flow is imposed by 'u'"),
+])
+def test_a_flow_source_through_a_switched_element_is_located(source, element, message):
+    """A flow source in series with a diode, a switch or dry friction: the mode that holds
+    the flow at zero contradicts it (the multiplier's law divided by zero: an error without a
+    place, 'the generated equations are not finite ... (zoo)'); located at the element, with a
+    note at the source."""
+    text = IMPOSED.replace("SOURCE", source).replace("ELEMENT", element)
+    with pytest.raises(bgc.BgcModelError) as info:
+        bgc.build(Source("m.bg", text), "run")
+    said = str(info.value)
+    assert said.startswith("m.bg:4:1: error: " + message), said
+    assert "m.bg:2:1: note: 'u' imposes the flow here, whatever the effort of 'd'" in said
+    assert "zoo" not in said and "not finite" not in said
+
+
+def test_a_flow_source_through_a_switched_junction_is_located():
+    with pytest.raises(bgc.BgcModelError) as info:
+        bgc.build(Source("m.bg", "model m\nu : Sf(1)\nj : 1 switch(t < 1)\nr : R(2)\nu -> j\n"
+                                 "j -> r\n"))
+    assert str(info.value).startswith("m.bg:3:1: error: switched junction 'j' cannot switch: "
+                                      "its flow is imposed by 'u' whatever its effort")
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_a_current_source_through_a_diode_with_a_resistance_across_it(backend, tmp_path):
+    """The remedy the message gives: a resistance Rp across the diode takes the source's
+    current while it blocks, so the diode's effort is Rp min(i, 0), its flow max(i, 0), with
+    i = sin(6 t); and a current that stays positive needs no remedy."""
+    text = IMPOSED.replace("SOURCE", "MSf(sin(6*t))").replace("j -> d", "j -> k\nk -> d\n"
+                                                              "k -> rp").replace(
+        "d : ELEMENT", "d : D\nk : 0\nrp : R(2)").replace("outputs r.f", "outputs d.e, d.f")
+    _, y, _ = run(bgc.build(Source("fixed.bg", text), "run"), backend, tmp_path / "ev.csv")
+    i = np.sin(6 * y[:, 0])
+    assert np.allclose(y[:, 1], 2 * np.minimum(i, 0), rtol=0, atol=1e-9)
+    assert np.allclose(y[:, 2], np.maximum(i, 0), rtol=0, atol=1e-9)
+    forward = IMPOSED.replace("SOURCE", "Sf(1)").replace("ELEMENT", "D")
+    _, y, _ = run(bgc.build(Source("forward.bg", forward), "run"), backend, tmp_path / "f.csv")
+    assert np.all(y[:, 1] == 1.0)
+
+
 def test_the_equations_of_each_mode(tmp_path):
     """`bgc equations` shows each mode's equations, the conditionals decided: the clamp's
     capacitor charges through R while the diode blocks and is held while it conducts."""

@@ -4,6 +4,7 @@ with the same bytes.  References: closed forms and SciPy computed here."""
 import csv
 import io
 import math
+import re
 
 import numpy as np
 import pytest
@@ -328,7 +329,89 @@ scene run { time 0 .. 2; outputs x }
         result = runner.run(program, None)
         assert result.status == 1
         assert "at t = 1: chattering" in result.message
-        assert "'n > 0.5' keeps changing" in result.message  # (the condition, named)
+        assert "('n > 0.5', 'n < 0.5' and 'n' keep changing" in result.message  # (named)
+
+
+ZENO = """model zeno "an event iteration that never settles"
+discrete a = 0
+discrete go = 0
+signal x = integral(1, init = 0)
+when x > 1 { go = 1 }
+when go > 0.5 and a < 0.5 { a = 1 }
+when a > 0.5 { a = 0 }
+signal oa = a
+scene run { time 0 .. 2 every 0.5; outputs x, oa }
+"""
+
+RELAY = """model relay "a relay that chatters: x' = -1 above 0, +1 below"
+signal x = integral(if x > 0 then -1 else 1, init = 1)
+scene run { time 0 .. 2 every 0.1; outputs x }
+"""
+
+CHAIN = """model chain "N + 2 events at t = 1: go set, N toggles of a, the conditions at c = N"
+parameter N = 60
+discrete a = 0
+discrete c = 0
+discrete go = 0
+signal x = integral(1, init = 0)
+when x > 1 { go = 1 }
+when go > 0.5 and a < 0.5 and c < N { a = 1; c = c + 1 }
+when a > 0.5 and c < N { a = 0; c = c + 1 }
+signal oc = c
+scene run { time 0 .. 2 every 0.5; outputs oc }
+"""
+
+
+def _failure(text, backend, **options):
+    """The run of text's scene `run` with options (runner.settings_for's): its result."""
+    compiled = build(text, "run")
+    names = [p.name for p in compiled.program.params]
+    settings = runner.settings_for(compiled.program.scene, names, **options)
+    return runner.run(runner.prepare(compiled, backend), settings)
+
+
+def test_chattering_names_every_condition_that_keeps_changing():
+    """A Zeno iteration names both of its conditions (and the value they toggle); a relay in
+    a sliding mode names its condition (it said 'a state'); both backends the same bytes."""
+    said = {}
+    for backend in BACKENDS:
+        zeno = runner.run(runner.prepare(build(ZENO, "run"), backend), None)
+        assert zeno.status == 1
+        relay = _failure(RELAY, backend, max_steps=1000)
+        assert relay.status == 1
+        said[backend] = (zeno.message, relay.message)
+    zeno, relay = said[BACKENDS[0]]
+    assert zeno.startswith("at t = 1: chattering: more than 100 events at one instant, the "
+                           "event iteration does not settle ('a < 0.5', 'a > 0.5' and 'a' "
+                           "keep changing: a Zeno model?)")
+    assert re.match(r"at t = 1\.\d+: chattering: 1000 (events since the last output row|steps "
+                    r"in a row, each cut short by an event) \('x > 0' keeps changing: ", relay)
+    assert len(set(said.values())) == 1, said
+    many = ZENO.replace("discrete go = 0", "discrete go = 0\ndiscrete b = 0\ndiscrete c = 0\n"
+                        "discrete d = 0\ndiscrete e = 0").replace(
+        "{ a = 1 }", "{ a = 1; b = 1; c = 1; d = 1; e = 1 }").replace(
+        "{ a = 0 }", "{ a = 0; b = 0; c = 0; d = 0; e = 0 }").replace(
+        "outputs x, oa", "outputs x, oa, ob").replace("signal oa = a", "signal oa = a\n"
+                                                      "signal ob = b + c + d + e")
+    said = {runner.run(runner.prepare(build(many, "run"), b), None).message for b in BACKENDS}
+    assert said == {"at t = 1: chattering: more than 100 events at one instant, the event "
+                    "iteration does not settle ('a < 0.5', 'a > 0.5', 'a', 'b', 'c', 'd' and 1 "
+                    "more keep changing: a Zeno model?)"}
+
+
+@pytest.mark.parametrize("N, settles", [(97, True), (98, True), (99, False)])
+def test_a_chain_of_100_events_at_one_instant_is_allowed(N, settles):
+    """docs/hybrid.md: a chain of events at one instant is allowed up to 100.  CHAIN's chain
+    at t = 1 has N + 2 events (x > 1 sets go; N toggles of a, each counting c; the conditions
+    then see c = N): 100 at N = 98, which runs; at N = 99 the run stops, in both backends."""
+    for backend in BACKENDS:
+        result = _failure(CHAIN, backend, params={"N": N})
+        assert (result.status == 0) == settles, result.message
+        if settles:
+            _, y = table(result.csv)
+            assert y[-1, 1] == N
+        else:
+            assert "more than 100 events at one instant" in result.message
 
 
 @pytest.mark.parametrize("text, message", [
@@ -370,7 +453,7 @@ scene run { time 0 .. 3 every 0.5; outputs a.x, a.y; solver dopri5(rtol = 1e-12,
     log = tmp_path / "events.csv"
     csv_text = run_csv(build(text, "run"), BACKENDS[0], events=str(log))
     rows = events_of(log)
-    assert [r[1:] for r in rows] == [["step: t >= a.t0", "0 -> 1"], ["a.x > 0.2", "0 -> 1"],
+    assert [r[1:] for r in rows] == [["step(a.t0)", "0 -> 1"], ["a.x > 0.2", "0 -> 1"],
                                      ["a.n", "0 -> 1"]]
     t_cross = 1 - 0.5 * math.log(1 - 0.2 / 0.5)  # 0.5 (1 - exp(-(t - 1) / 0.5)) = 0.2
     assert abs(float(rows[1][0]) - t_cross) <= 1e-10 * t_cross
@@ -378,12 +461,104 @@ scene run { time 0 .. 3 every 0.5; outputs a.x, a.y; solver dopri5(rtol = 1e-12,
     assert list(y[:, 2]) == [0, 0, 0, 1, 1, 1, 1]
 
 
+NAMED = """model named "conditions written as a modeller writes them"
+component lagc(t0 = 1.0) {
+  signal x = integral(step(t0), init = 0)
+  discrete n = 0
+  when x >   0.25 { n = 1 }
+  signal on = n
+}
+discrete k = 0
+discrete hits = 0
+a : lagc(t0 = 0.4)
+r : R(e = if f>0.5 then f else 2*f)
+drive : Sf(ramp( 0.75 ))
+drive -> r
+signal y = integral(square(1, 0.5) + square(2, 0.25, 0.125) + pulse(2.25, 0.5), init = 0)
+when (y >= 0.5 and # the first half-unit
+      k == 0) { k = 1 }
+when k != 0 { hits = hits + 1 }
+signal ok = k + hits
+scene run { time 0 .. 3 every 0.5; outputs a.on, y, ok, r.e }
+"""
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_the_log_names_conditions_as_written(tmp_path, backend):
+    """Each condition is named by its text in the model (whitespace made one space, comments
+    left out), its names by their paths (a component's, an element's own e and f) and each time
+    source as written: the names and times below are read off the model and its closed forms,
+    not off bgc."""
+    log = tmp_path / "events.csv"
+    run_csv(build(NAMED, "run"), backend, events=str(log))
+    got = [(float(t), what, change) for t, what, change in events_of(log)
+           if what not in ("k", "hits", "a.n")]
+    # y' = square(1, 0.5) + square(2, 0.25, 0.125) + ...: 1, then 2 from the second square's
+    # rise at 0.125, so y = 0.5 where t + (t - 0.125) = 0.5; r.f = t - 0.75 from 0.75
+    t_half = (0.5 + 0.125) / 2
+    want = [
+        (0.125, "square(2, 0.25, 0.125)", "0 -> 1"),
+        (t_half, "y >= 0.5", "0 -> 1"),
+        (t_half, "k == 0", "1 -> 0"),
+        (t_half, "k != 0", "0 -> 1"),
+        (0.4, "step(a.t0)", "0 -> 1"),
+        (0.5, "square(1, 0.5)", "1 -> 0"),
+        (0.625, "square(2, 0.25, 0.125)", "1 -> 0"),
+        (0.65, "a.x > 0.25", "0 -> 1"),  # x = t - 0.4
+        (0.75, "ramp( 0.75 )", "0 -> 1"),
+        (1.25, "r.f>0.5", "0 -> 1")]
+    for t, what, change in want:
+        hits = [g for g in got if g[1] == what and g[2] == change]
+        assert hits, (what, change, got)
+        assert abs(hits[0][0] - t) < 1e-9, (what, hits[0][0], t)
+    names = {what for _, what, _ in got}
+    assert "pulse(2.25, 0.5)" in names and "pulse(2.25, 0.5): end" in names
+    from bgc.report import check_report
+    report = check_report(build(NAMED, "run"))
+    assert "when y >= 0.5 and k == 0 { k = 1 }" in report and "when a.x > 0.25 {" in report
+
+
+COUNT = """model count "crossings counted, a time event's value, a component's discrete value"
+parameter w = 3.0
+component latch(t1 = 1.0) {
+  discrete k = 0
+  when t >= t1 { k = 1 }
+  signal unused = 0
+}
+discrete n = 0
+discrete m = 0
+signal x = integral(w*cos(w*t), init = 0)
+when x > 0.5 { n = n + 1 }
+when t >= 1 { m = 7 }
+h : latch(t1 = 2.0)
+scene run { time 0 .. 4 every 0.25; outputs x, n, m, h.k; solver dopri5(rtol = 1e-10, atol = 1e-12) }
+"""
+
+
+@pytest.mark.parametrize("backend", BACKENDS + (["vm"] if have_cc() else []))
+def test_discrete_variables_are_outputs(backend):
+    """`outputs n` for `discrete n`: its value at each row, the right limit at an event time
+    (m at t = 1, h.k at t = 2), the left and right limits at an event's two rows; against the
+    closed form: x = sin(w t) rises through 0.5 at (asin(0.5) + 2 pi k)/w."""
+    compiled = build(COUNT, "run")
+    assert compiled.program.outputs == ("x", "n", "m", "h.k")
+    header, y = table(run_csv(compiled, backend))
+    t = y[:, 0]
+    rises = (math.asin(0.5) + 2 * math.pi * np.arange(3)) / 3.0
+    assert list(y[:, 2]) == [float(np.sum(rises <= tk)) for tk in t]
+    assert list(y[:, 3]) == [7.0 if tk >= 1 else 0.0 for tk in t]
+    assert list(y[:, 4]) == [1.0 if tk >= 2 else 0.0 for tk in t]
+    _, rows = table(run_csv(compiled, backend, event_rows=True))
+    at = rows[np.abs(rows[:, 0] - rises[1]) < 1e-9]
+    assert len(at) == 2 and list(at[:, 2]) == [1.0, 2.0]  # the left limit, then the right
+
+
 def test_reports_show_the_events():
     from bgc.report import check_report, equations_text
     compiled = build(LAG, "run")
     report = check_report(compiled)
-    assert "events:\n  pulse: t >= t0  (time event at t = t0)\n" \
-           "  pulse: t >= t0 + width  (time event at t = t0 + width)" in report
+    assert "events:\n  pulse(t0, width)  (time event at t = t0)\n" \
+           "  pulse(t0, width): end  (time event at t = t0 + width)" in report
     text = equations_text(build(BALL.replace("outputs x, b.p", "outputs x"), "drop"))
     assert "d(x)/dt = b.p/m" in text
     eq = equations_text(build("""model m

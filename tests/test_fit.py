@@ -237,3 +237,84 @@ def test_levenberg_marquardt_on_a_closed_form():
     with pytest.raises(estimate.FitError, match="no run there"):
         estimate.levenberg_marquardt(runs_only_at_the_start, [1.0, 0.1], np.full(2, -math.inf),
                                      np.full(2, math.inf))
+
+
+RC_FIT = """model rc "an RC decay: c.e = q0/C exp(-t/(R C))"
+parameter R = 1.5
+parameter C = 0.8
+parameter q0 = 1.0
+c : C(C) init q = q0
+r : R(R)
+j : 0
+j -> c
+j -> r
+scene run { outputs c.e; time 0 .. 4 every 0.02; solver SOLVER }
+"""
+
+
+def _rc_reference(t, e):
+    """The least-squares R, C of the closed form q0/C exp(-t/(R C)) to the data, by SciPy."""
+    optimize = pytest.importorskip("scipy.optimize")
+
+    def residuals(x):
+        R, C = x
+        return np.exp(-t / (R * C)) / C - e
+
+    fitted = optimize.least_squares(residuals, [1.5, 0.8], xtol=1e-15, ftol=1e-15, gtol=1e-15)
+    return fitted.x
+
+
+@pytest.mark.parametrize("scene_solver, option", [
+    ("euler", ["--solver", "radau5"]),  # (euler's steps of dt: estimates off by a percent)
+    ("dopri5(rtol = 1e-2, atol = 1e-14)", ["--rtol", "1e-11"]),
+    ("dopri5(rtol = 1e-12, atol = 1e-2)", ["--atol", "1e-12"]),
+])
+def test_fit_takes_the_solver_and_its_tolerances(tmp_path, scene_solver, option):
+    """--solver, --rtol and --atol reach the fit's runs: with them the estimates are the
+    closed form's least-squares fit (SciPy's) to the digits the run resolves; with the scene's
+    own solver or tolerance alone they are not."""
+    model = tmp_path / "rc.bg"
+    model.write_text(RC_FIT.replace("SOLVER", scene_solver))
+    t = np.round(np.arange(201) * 0.02, 10)
+    e = np.exp(-t / (2.0 * 0.5)) / 0.5 + 0.01 * np.random.default_rng(3).standard_normal(t.size)
+    data = tmp_path / "rc.csv"
+    data.write_text("t,c.e\n" + "".join(f"{float(a)!r},{float(b)!r}\n"
+                                         for a, b in zip(t, e)))
+    reference = _rc_reference(t, e)
+
+    def fitted(*extra):
+        out = tmp_path / "fit.json"
+        result = run_bgc("fit", model, "--scene", "run", "--data", data, "--vary", "R",
+                         "--vary", "C", "--backend", "python", "-o", out, *extra)
+        assert result.returncode == 0, result.stderr
+        assert "Traceback" not in result.stderr
+        fit = json.loads(out.read_text())
+        return np.array([fit["parameters"][n]["estimate"] for n in ("R", "C")])
+
+    assert fitted(*option) == pytest.approx(reference, rel=1e-7)
+    assert np.max(np.abs(fitted() / reference - 1)) > 1e-6
+
+
+def test_fit_takes_the_effects(tmp_path):
+    """--effects replaces the scene's: the RC circuit's source left out, the data are its
+    decay alone, and the estimates the closed form's least squares (SciPy's)."""
+    model = tmp_path / "rc.bg"
+    model.write_text(RC_FIT.replace("SOLVER", "dopri5(rtol = 1e-11, atol = 1e-13)")
+                     .replace("r : R(R)", "r : R(R)\nsrc : Se(0.3) @drive\nk : 1")
+                     .replace("j -> r", "j -> k\nk -> r\nsrc -> k"))
+    t = np.round(np.arange(201) * 0.02, 10)
+    e = np.exp(-t / (2.0 * 0.5)) / 0.5 + 0.01 * np.random.default_rng(5).standard_normal(t.size)
+    data = tmp_path / "rc.csv"
+    data.write_text("t,c.e\n" + "".join(f"{float(a)!r},{float(b)!r}\n"
+                                         for a, b in zip(t, e)))
+    out = tmp_path / "fit.json"
+    args = ("fit", model, "--scene", "run", "--data", data, "--vary", "R", "--vary", "C",
+            "--backend", "python", "-o", out)
+    result = run_bgc(*args, "--effects", "none")
+    assert result.returncode == 0, result.stderr
+    fit = json.loads(out.read_text())["parameters"]
+    assert [fit[n]["estimate"] for n in ("R", "C")] == pytest.approx(_rc_reference(t, e),
+                                                                      rel=1e-7)
+    assert run_bgc(*args).returncode == 0  # with the source: another fit
+    fit = json.loads(out.read_text())["parameters"]
+    assert abs(fit["R"]["estimate"] / _rc_reference(t, e)[0] - 1) > 1e-3

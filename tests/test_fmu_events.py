@@ -24,7 +24,7 @@ from fmpy.fmi2 import FMU2Model, FMU2Slave  # noqa: E402
 from fmpy.validation import validate_fmu  # noqa: E402
 
 from test_docs import blocks  # noqa: E402
-from test_events import BALL, LAG, bounce_times, build, lag_reference  # noqa: E402
+from test_events import BALL, COUNT, LAG, bounce_times, build, lag_reference  # noqa: E402
 
 if not backends.have_c_compiler():
     pytest.skip("FMU export builds its binary with a C compiler", allow_module_level=True)
@@ -378,3 +378,24 @@ def test_the_rectifier_with_an_ideal_diode_as_an_fmu(tmp_path):
         reference = 0.05 * rectifier_reference(np.asarray(t))
         assert relative_difference(result["l.p"], ours) < 1e-6, kind
         assert relative_difference(result["l.p"], reference) < 1e-6, kind
+
+
+def test_a_discrete_output_is_one_variable(tmp_path):
+    """A discrete variable that is an output is one FMU variable, causality output and
+    variability discrete, with no continuous dependencies; FMPy validates the FMU, and its
+    Co-Simulation gives the values of tests/test_events.py's closed form."""
+    path = tmp_path / "count.fmu"
+    path.write_bytes(fmu.build_fmu(build(COUNT, "run")))
+    assert validate_fmu(str(path)) == []
+    md = fmpy.read_model_description(str(path))
+    names = [v.name for v in md.modelVariables]
+    for name in ("n", "m", "h.k"):
+        assert names.count(name) == 1
+        v = md.modelVariables[names.index(name)]
+        assert (v.causality, v.variability) == ("output", "discrete")
+        (out,) = [u for u in md.outputs if u.variable is v]
+        assert out.dependencies == []
+    cs = fmpy.simulate_fmu(str(path), fmi_type="CoSimulation", output_interval=0.25)
+    rises = (math.asin(0.5) + 2 * math.pi * np.arange(3)) / 3.0
+    assert list(cs["n"]) == [float(np.sum(rises <= t)) for t in cs["time"]]
+    assert list(cs["m"]) == [7.0 if t >= 1 else 0.0 for t in cs["time"]]

@@ -84,6 +84,28 @@ def test_npz_and_csv_hold_the_same(msd, tmp_path):
             assert a[si, sj] == lin.A[i, j]
 
 
+def test_npz_holds_every_array_of_the_json_the_pendulum_its_constraint_rows(tmp_path):
+    """The NPZ has every key of the JSON (`at` as at_t, at_states, at_values), the rod's two
+    rows (its length and its rate) among them; the basis N spans the null space of those rows'
+    Jacobian, computed here from Phi = x^2 + y^2 - l^2 at the initial state."""
+    npz, js = tmp_path / "p.npz", tmp_path / "p.json"
+    for f in (npz, js):
+        assert cli("linearize", PENDULUM, "--scene", "swing", "-o", str(f)).exit_code == 0
+    d, z = json.loads(js.read_text()), np.load(npz)
+    assert sorted(z.keys()) == sorted([k for k in d if k != "at"] + ["at_t", "at_states",
+                                                                      "at_values"])
+    assert list(z["constraint_rows"]) == d["constraint_rows"] == ["rod (position)",
+                                                                  "rod (velocity)"]
+    for key in ("A", "B", "C", "D", "basis", "eigenvalues", "corrector_eigenvalues"):
+        assert np.array_equal(z[key], np.array(d[key], dtype=float).reshape(z[key].shape)), key
+    m, l, theta0 = 1.0, 1.0, 0.5
+    x, y, px, py = l * math.sin(theta0), l * math.cos(theta0), 0.0, 0.0
+    rows = {"mx.p": (0, 2 * x / m), "my.p": (0, 2 * y / m), "x": (2 * x, 2 * px / m),
+            "y": (2 * y, 2 * py / m)}  # d(Phi), d(dPhi/dt) by each state
+    G = np.array([[rows[s][k] for s in z["full_states"]] for k in (0, 1)])
+    assert np.abs(G @ z["basis"]).max() < 1e-12 and z["basis"].shape == (4, 2)
+
+
 def _pendulum_checks(lin, g=9.81, l=1.0, alpha=5.0, beta=4.0):
     assert len(lin.states) == 2 and len(lin.full_states) == 4
     w = math.sqrt(g / l)

@@ -102,3 +102,65 @@ def test_errors(tmp_path):
     model = TANKS
     assert cli("steady", model, "-p", "nope=1").exit_code == 2
     assert cli("steady", model, "--scene", "nope").exit_code == 2
+
+
+HANG = """\
+model hang "a mass on a spring under its weight and a push, each an effect"
+parameter m = 2.0
+parameter k = 50.0
+parameter b = 3.0
+parameter g = 9.81
+parameter F = 5.0
+v : 1
+mass : I(m)
+spring : C(1/k)
+damper : R(b)
+weight : Se(m*g) @gravity
+push : Se(F) @push
+v -> mass
+v -> spring
+v -> damper
+weight -> v
+push -> v
+scene weighed "the weight alone" { effects gravity; outputs spring.q; time 0 .. 1 }
+"""
+
+LADDER = str(ROOT / "models" / "ladder.bg")
+
+
+@pytest.mark.parametrize("effects, load", [
+    ([], 2.0 * 9.81), (["--effects", "gravity,push"], 2.0 * 9.81 + 5.0),
+    (["--effects", "push"], 5.0), (["--effects", "none"], 0.0)])
+def test_effects_move_the_equilibrium(tmp_path, effects, load):
+    """--effects replaces the scene's as in simulate: the spring holds the load k q = m g + F
+    of the sources left in."""
+    model = write(tmp_path, "hang.bg", HANG)
+    out = tmp_path / "rest.json"
+    result = cli("steady", model, "--scene", "weighed", *effects, "--json", str(out))
+    assert result.exit_code == 0, result.output
+    states = json.loads(out.read_text())["states"]
+    assert states["spring.q"] == pytest.approx(load / 50.0, rel=1e-12, abs=1e-15)
+    assert abs(states["mass.p"]) < 1e-12
+    rest = bgc.steady(model, scene="weighed", effects=effects[1] if effects else None)
+    assert dict(rest.states)["spring.q"] == states["spring.q"]
+
+
+@pytest.mark.parametrize("algebra", ["auto", "symbolic", "numeric"])
+def test_algebra_solves_the_ladder_to_its_divider(tmp_path, algebra):
+    """The ladder's resistors are an algebraic block (LU in the generated code, or solved
+    symbolically): at rest no current reaches the capacitor, which holds the divider's
+    voltage; linearised, its one pole is -1/(R C) with R the ladder's resistance seen from it."""
+    V0, R1, R2, R3, R4, R5, Cc = 10.0, 1.0, 2.0, 1.5, 3.0, 0.5, 0.2
+    par = lambda a, b: a * b / (a + b)  # noqa: E731
+    shunt = par(R2, R3 + R4)
+    v = V0 * shunt / (R1 + shunt) * R4 / (R3 + R4)
+    out = tmp_path / "rest.json"
+    result = cli("steady", LADDER, "--scene", "charge", "--algebra", algebra, "--json", str(out))
+    assert result.exit_code == 0, result.output
+    assert json.loads(out.read_text())["states"]["cap.q"] == pytest.approx(Cc * v, rel=1e-12)
+    lin = tmp_path / "lin.json"
+    result = cli("linearize", LADDER, "--scene", "charge", "--algebra", algebra, "-o", str(lin))
+    assert result.exit_code == 0, result.output
+    R = R5 + par(R4, R3 + par(R1, R2))
+    assert json.loads(lin.read_text())["A"] == [[pytest.approx(-1 / (R * Cc), rel=1e-12)]]
+    assert bgc.steady(LADDER, scene="charge", algebra=algebra).residual < 1e-12

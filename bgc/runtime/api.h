@@ -223,7 +223,9 @@ static const bgc_splu bgc_jac_lu[1] = { { 0, 0, NULL, NULL, NULL, NULL, NULL, NU
 #ifndef BGC_HAS_JACOBIAN
 #define BGC_HAS_JACOBIAN 1
 #endif
-#define BGC_MAX_EVENT_ITERATIONS 100 /* events at one instant before a run stops (Zeno) */
+#define BGC_MAX_EVENT_ITERATIONS 100 /* events at one instant (passes of the event iteration
+                                        that change something) a run allows (Zeno) */
+#define BGC_NAMED_CHANGES 6 /* the discrete values a chattering message names, at most */
 
 /* Inputs (`input NAME`): BGC_NUM_INPUTS of them, input j named bgc_input_name(j); the data
    of a run in bgc_settings.inputs.  A model without inputs gets the neutral ones below. */

@@ -291,7 +291,7 @@ static int bgc_fmi_on_event(void *ctx, double t, const char *what, const char *c
 static fmi2Status bgc_fmi_event_iteration(bgc_fmi *m, const char *fn, int start, int *x_changed,
                                           double *t_next)
 {
-    double x0[BGC_DIM(BGC_NUM_STATES)];
+    double x0[BGC_DIM(BGC_NUM_STATES)], last[BGC_DIM(BGC_NUM_DISCRETE)];
     bgc_settings s;
     bgc_run r;
     char msg[512];
@@ -313,6 +313,9 @@ static fmi2Status bgc_fmi_event_iteration(bgc_fmi *m, const char *fn, int start,
     r.d = BGC_FMI_D(m);
     r.g = m->g;
     r.ev = m->ev;
+    r.last = last;
+    for (i = 0; i < BGC_NUM_DISCRETE; i++)
+        last[i] = -1.0;
     memcpy(x0, m->x, sizeof x0);
     if (start)
         memcpy(r.d, m->w->d, sizeof(double) * BGC_NUM_DISCRETE);

@@ -1520,7 +1520,8 @@ class _Run:
 
     __slots__ = ("s", "p", "w", "st", "nout", "kout", "t", "h", "y", "detect_stiffness",
                  "steps_out", "t_out", "from_event", "m", "name", "fixed", "doff", "g", "t_next",
-                 "t_event", "chain", "changed", "kout_ev", "events_out", "sliding")
+                 "t_event", "chain", "kout_ev", "events_out", "sliding", "passes", "last",
+                 "chain_from", "sliding_from", "out_from")
 
     def __init__(self, s, p, w, st, y):
         self.s, self.p, self.w, self.st = s, p, w, st
@@ -1537,8 +1538,14 @@ class _Run:
         self.t_next, self.t_event, self.chain = math.inf, -math.inf, 0
         # the events since an output row (kout_ev: run.kout then) are bounded as steps are
         self.kout_ev, self.events_out = 0, 0
-        self.changed = -1  # the first discrete value the last event changed
         self.sliding = 0  # accepted steps in a row, each ended at a located (state) event
+        # what keeps changing, for the chattering messages: the event iteration's passes so
+        # far, the pass that last changed each discrete value (-1: none yet), and the passes
+        # where the chains the driver bounds began (events in a row, steps cut short, events
+        # since an output row)
+        self.passes = 0
+        self.last = [-1] * len(_DISCRETE_NAMES)
+        self.chain_from = self.sliding_from = self.out_from = 0
 
     def f(self, t, y):
         """dy/dt as a numpy vector; a failed algebraic block raises _BlockFailure."""
@@ -1621,7 +1628,8 @@ def _as_list(v):
 # checked at the end of every accepted step, the first change of a state relation located on
 # the dense output (Illinois), time events stepped onto, the event iteration at an event.
 
-MAX_EVENT_ITERATIONS = 100
+MAX_EVENT_ITERATIONS = 100  # events at one instant (passes that change something) allowed
+NAMED_CHANGES = 6  # the discrete values a chattering message names, at most
 
 
 def _holds(k, g):
@@ -1667,19 +1675,29 @@ def _log(run, t, what, change):
         run.s.on_event(t, what, change)
 
 
+def _chattering(run, t, head, since, tail):
+    """bgc_chattering: the run's failure, naming every discrete value a pass since the pass
+    `since` changed (conditions first, at most NAMED_CHANGES of them, then how many more)."""
+    changing = [_DISCRETE_NAMES[k] for k, p in enumerate(run.last) if p >= since]
+    named = ["'%s'" % n for n in changing[:NAMED_CHANGES]]
+    if len(changing) > NAMED_CHANGES:
+        named.append("%d more" % (len(changing) - NAMED_CHANGES))
+    what = (", ".join(named[:-1]) + " and " + named[-1]) if len(named) > 1 else \
+        (named[0] if named else "the state")
+    verb = " keep changing: " if len(changing) > 1 else " keeps changing: "
+    return _Failure("at t = %.17g: chattering: %s (%s%s%s)" % (t, head, what, verb, tail), t)
+
+
 def _event_iteration(run, t, x, start):
     """bgc_event_iteration: update until nothing changes; x (a list) is updated; run.g the
     indicators there after it."""
     G, p, off = len(_INDICATOR_STRICT), run.p, run.doff
     changed, it = True, 0
-    run.changed = -1
     while changed:
-        if it == MAX_EVENT_ITERATIONS:
-            raise _Failure("at t = %.17g: chattering: the event iteration does not settle "
-                           "after %d passes ('%s' keeps changing: a Zeno model?)"
-                           % (t, it, _DISCRETE_NAMES[run.changed] if run.changed >= 0
-                              else "a state"), t)
-        run.changed = -1
+        if it > MAX_EVENT_ITERATIONS:  # the last pass still changed something
+            raise _chattering(run, t, "more than %d events at one instant, the event "
+                              "iteration does not settle" % MAX_EVENT_ITERATIONS,
+                              run.passes - 1, "a Zeno model?")
         g = _indicators(run, t, x)
         r = [1.0 if _holds(k, g[k]) else 0.0 for k in range(G)]
         r.append(1.0 if start and it == 0 else 0.0)
@@ -1703,12 +1721,12 @@ def _event_iteration(run, t, x, start):
                 raise _fail(t, "discrete value", _DISCRETE_NAMES[k])
             if v != p[off + k]:
                 changed = True
-                if run.changed < 0:
-                    run.changed = k
+                run.last[k] = run.passes
                 if not start and run.s.on_event is not None:
                     _log(run, t, _DISCRETE_NAMES[k], "%.17g -> %.17g" % (p[off + k], v))
                 p[off + k] = v
         it += 1
+        run.passes += 1
     run.g = g
 
 
@@ -1760,6 +1778,8 @@ def _find_event(run, c):
             wb = 0.5 * wb if moved < 0 else 1.0
             moved = -1
     run.sliding += 1
+    if run.sliding == 1:
+        run.sliding_from = run.passes
     return tb, _as_list(c.at(tb))
 
 
@@ -1782,39 +1802,35 @@ def _handle_event(run, t, x):
     run.st["events"] += 1
     if run.kout != run.kout_ev:  # the first event since an output row
         run.kout_ev, run.events_out = run.kout, run.st["events"] - 1
+        run.out_from = run.passes
     scale = max(abs(t), abs(run.t_event))
     if t - run.t_event <= max(1e-12 * scale, _hmin(t)):
         run.chain += 1
     else:
-        run.chain = 0
+        run.chain, run.chain_from = 0, run.passes
     run.t_event = t
     run.steps_out, run.t_out, run.from_event = run.st["steps"], t, True  # a new step budget
     if run.s.event_rows:
         yield from run.emit(t, x)
     _event_iteration(run, t, x, False)
     if run.chain >= MAX_EVENT_ITERATIONS:
-        raise _Failure("at t = %.17g: chattering: %d events in a row, each within 1e-12 "
-                       "relative of the one before, the last changing '%s' (a Zeno model: the "
-                       "switching outruns the time's resolution)"
-                       % (t, run.chain, _DISCRETE_NAMES[run.changed] if run.changed >= 0
-                          else "a state"), t)
+        raise _chattering(run, t, "%d events in a row, each within 1e-12 relative of the one "
+                          "before" % run.chain, run.chain_from,
+                          "a Zeno model, the switching outruns the time's resolution")
     # every step cut short by a state event: at most a hundredth of the step budget in a row,
     # and at least 1000
     if run.s.max_steps > 0 and \
             run.sliding >= (run.s.max_steps // 100 if run.s.max_steps > 100000 else 1000):
-        raise _Failure("at t = %.17g: chattering: %d steps in a row, each cut short by an "
-                       "event, the last changing '%s' (a sliding mode or a Zeno model? "
-                       "--max-steps raises the limit, a hundredth of it)"
-                       % (t, run.sliding, _DISCRETE_NAMES[run.changed] if run.changed >= 0
-                          else "a state"), t)
+        raise _chattering(run, t, "%d steps in a row, each cut short by an event" % run.sliding,
+                          run.sliding_from, "a sliding mode or a Zeno model? --max-steps "
+                          "raises the limit, a hundredth of it")
     # the events since the last output row: as many as the step budget, and at least 1000 (a
     # small step budget is for a step size that runs away, not for events)
     if run.s.max_steps > 0 and \
             run.st["events"] - run.events_out > max(run.s.max_steps, 1000):
-        raise _Failure("at t = %.17g: chattering: %d events since the last output row, the "
-                       "last changing '%s' (a Zeno model? --max-steps raises the budget)"
-                       % (t, run.st["events"] - run.events_out - 1, _DISCRETE_NAMES[run.changed]
-                          if run.changed >= 0 else "a state"), t)
+        raise _chattering(run, t, "%d events since the last output row"
+                          % (run.st["events"] - run.events_out - 1), run.out_from,
+                          "a Zeno model? --max-steps raises the budget")
     if run.s.event_rows:
         yield from run.emit(t, x)
     _set_next_time(run, t, x)

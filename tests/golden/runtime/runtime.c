@@ -242,7 +242,9 @@ static const bgc_splu bgc_jac_lu[1] = { { 0, 0, NULL, NULL, NULL, NULL, NULL, NU
 #ifndef BGC_HAS_JACOBIAN
 #define BGC_HAS_JACOBIAN 1
 #endif
-#define BGC_MAX_EVENT_ITERATIONS 100 /* events at one instant before a run stops (Zeno) */
+#define BGC_MAX_EVENT_ITERATIONS 100 /* events at one instant (passes of the event iteration
+                                        that change something) a run allows (Zeno) */
+#define BGC_NAMED_CHANGES 6 /* the discrete values a chattering message names, at most */
 
 /* Inputs (`input NAME`): BGC_NUM_INPUTS of them, input j named bgc_input_name(j); the data
    of a run in bgc_settings.inputs.  A model without inputs gets the neutral ones below. */
@@ -1320,8 +1322,12 @@ typedef struct bgc_run {
     long chain;      /* ... closer to the one before than the solver resolves */
     long kout_ev;    /* the output row the event count below starts at (r->kout then) */
     long events_out; /* st->events at that row: the events since it are bounded as steps are */
-    int changed;     /* the first discrete value the last event changed (-1: none) */
     long sliding;    /* accepted steps in a row, each ended at a located (state) event */
+    /* what keeps changing, for the chattering messages: the event iteration's passes so far,
+       the pass that last changed each discrete value (-1: none yet), and the passes where
+       the chains the driver bounds began (events in a row, steps cut short, events since an
+       output row) */
+    double passes, *last, chain_from, sliding_from, out_from;
 } bgc_run;
 #define BGC_STIFF (-1) /* an auto run's explicit phase found the problem stiff */
 
@@ -1668,6 +1674,45 @@ static int bgc_log(bgc_run *r, double t, const char *what, const char *change)
     return r->s->on_event ? r->s->on_event(r->s->event_ctx, t, what, change) : 0;
 }
 
+/* Appends a, b and c to the message (truncated to its size); returns the length it would
+   have untruncated. */
+static size_t bgc_cat(const bgc_run *r, size_t used, const char *a, const char *b, const char *c)
+{
+    const size_t at = used < r->msg_size ? used : r->msg_size - 1;
+    const int n = snprintf(r->msg + at, r->msg_size - at, "%s%s%s", a, b, c);
+    return used + (n > 0 ? (size_t)n : 0);
+}
+
+/* A chattering message: head, then what keeps changing, every discrete value a pass since
+   the pass `from` changed, conditions first (their order; at most BGC_NAMED_CHANGES named,
+   then how many more), then tail: "at t = 1: chattering: HEAD ('a < 0.5' and 'a' keep
+   changing: TAIL)". */
+static int bgc_chattering(bgc_run *r, double t, const char *head, double from, const char *tail)
+{
+    enum { ND = BGC_NUM_DISCRETE };
+    char count[64];
+    int k, total = 0, named = 0;
+    size_t used;
+    for (k = 0; k < ND; k++)
+        total += r->last[k] >= from;
+    used = (size_t)snprintf(r->msg, r->msg_size, "at t = %.17g: chattering: %s (", t, head);
+    for (k = 0; k < ND && named < BGC_NAMED_CHANGES; k++) {
+        if (r->last[k] < from)
+            continue;
+        named++;
+        used = bgc_cat(r, used, named == 1 ? "'" : named == total ? " and '" : ", '",
+                       bgc_discrete_names[k], "'");
+    }
+    if (total > named) {
+        snprintf(count, sizeof count, " and %d more", total - named);
+        used = bgc_cat(r, used, count, "", "");
+    }
+    used = bgc_cat(r, used, total == 0 ? "the state" : "", total > 1 ? " keep changing: "
+                   : " keeps changing: ", tail);
+    bgc_cat(r, used, ")", "", "");
+    return BGC_ERR_RUNTIME;
+}
+
 /* The event iteration at (t, x): bgc_model_update until the state and the discrete values
    stop changing (start: the run's first, at t0, which sets every discrete value and logs
    nothing); r->g the indicators there after it. */
@@ -1677,15 +1722,12 @@ static int bgc_event_iteration(bgc_run *r, double t, double *x, int start)
     double *g = r->g, *in = BGC_EV_IN(r), *out = BGC_EV_OUT(r);
     char change[96];
     int it, i, k, rc, changed = 1;
-    r->changed = -1;
     for (it = 0; changed; it++) {
-        if (it == BGC_MAX_EVENT_ITERATIONS) {
-            snprintf(r->msg, r->msg_size, "at t = %.17g: chattering: the event iteration "
-                     "does not settle after %d passes ('%s' keeps changing: a Zeno model?)",
-                     t, it, r->changed >= 0 ? bgc_discrete_names[r->changed] : "a state");
-            return BGC_ERR_RUNTIME;
+        if (it > BGC_MAX_EVENT_ITERATIONS) { /* the last pass still changed something */
+            snprintf(change, sizeof change, "more than %d events at one instant, the event "
+                     "iteration does not settle", BGC_MAX_EVENT_ITERATIONS);
+            return bgc_chattering(r, t, change, r->passes - 1, "a Zeno model?");
         }
-        r->changed = -1;
         rc = bgc_indicators(r, t, x, g);
         if (rc)
             return rc;
@@ -1716,8 +1758,7 @@ static int bgc_event_iteration(bgc_run *r, double t, double *x, int start)
                 return bgc_fail(r->msg, r->msg_size, t, "discrete value", bgc_discrete_names[k]);
             if (v != r->d[k]) {
                 changed = 1;
-                if (r->changed < 0)
-                    r->changed = k;
+                r->last[k] = r->passes;
                 if (!start) {
                     snprintf(change, sizeof change, "%.17g -> %.17g", r->d[k], v);
                     rc = bgc_log(r, t, bgc_discrete_names[k], change);
@@ -1727,6 +1768,7 @@ static int bgc_event_iteration(bgc_run *r, double t, double *x, int start)
                 r->d[k] = v;
             }
         }
+        r->passes++;
     }
     return 0;
 }
@@ -1810,16 +1852,20 @@ static int bgc_find_event(bgc_run *r, bgc_dense *c, double *te, double *ye)
 static int bgc_handle_event(bgc_run *r, double t, double *x)
 {
     const double scale = bgc_max(fabs(t), fabs(r->t_event));
+    char head[96];
     int rc = 0;
     r->st->events++;
     if (r->kout != r->kout_ev) { /* the first event since an output row */
         r->kout_ev = r->kout;
         r->events_out = r->st->events - 1;
+        r->out_from = r->passes;
     }
-    if (t - r->t_event <= bgc_max(1e-12 * scale, bgc_hmin(t)))
+    if (t - r->t_event <= bgc_max(1e-12 * scale, bgc_hmin(t))) {
         r->chain++;
-    else
+    } else {
         r->chain = 0;
+        r->chain_from = r->passes;
+    }
     r->t_event = t;
     r->steps_out = r->st->steps; /* the step budget starts again */
     r->t_out = t;
@@ -1829,31 +1875,28 @@ static int bgc_handle_event(bgc_run *r, double t, double *x)
     if (rc == 0)
         rc = bgc_event_iteration(r, t, x, 0);
     if (rc == 0 && r->chain >= BGC_MAX_EVENT_ITERATIONS) {
-        snprintf(r->msg, r->msg_size, "at t = %.17g: chattering: %ld events in a row, each "
-                 "within 1e-12 relative of the one before, the last changing '%s' (a Zeno "
-                 "model: the switching outruns the time's resolution)", t, r->chain,
-                 r->changed >= 0 ? bgc_discrete_names[r->changed] : "a state");
-        return BGC_ERR_RUNTIME;
+        snprintf(head, sizeof head, "%ld events in a row, each within 1e-12 relative of the "
+                 "one before", r->chain);
+        return bgc_chattering(r, t, head, r->chain_from, "a Zeno model, the switching "
+                              "outruns the time's resolution");
     }
     /* every step cut short by a state event: at most a hundredth of the step budget in a
        row, and at least 1000 */
     if (rc == 0 && r->s->max_steps > 0
         && r->sliding >= (r->s->max_steps > 100000 ? r->s->max_steps / 100 : 1000)) {
-        snprintf(r->msg, r->msg_size, "at t = %.17g: chattering: %ld steps in a row, each cut "
-                 "short by an event, the last changing '%s' (a sliding mode or a Zeno model? "
-                 "--max-steps raises the limit, a hundredth of it)", t, r->sliding,
-                 r->changed >= 0 ? bgc_discrete_names[r->changed] : "a state");
-        return BGC_ERR_RUNTIME;
+        snprintf(head, sizeof head, "%ld steps in a row, each cut short by an event",
+                 r->sliding);
+        return bgc_chattering(r, t, head, r->sliding_from, "a sliding mode or a Zeno model? "
+                              "--max-steps raises the limit, a hundredth of it");
     }
     /* the events since the last output row: as many as the step budget, and at least 1000
        (a small step budget is for a step size that runs away, not for events) */
     if (rc == 0 && r->s->max_steps > 0 && r->st->events - r->events_out
                                           > (r->s->max_steps > 1000 ? r->s->max_steps : 1000)) {
-        snprintf(r->msg, r->msg_size, "at t = %.17g: chattering: %ld events since the last "
-                 "output row, the last changing '%s' (a Zeno model? --max-steps raises the "
-                 "budget)", t, r->st->events - r->events_out - 1,
-                 r->changed >= 0 ? bgc_discrete_names[r->changed] : "a state");
-        return BGC_ERR_RUNTIME;
+        snprintf(head, sizeof head, "%ld events since the last output row",
+                 r->st->events - r->events_out - 1);
+        return bgc_chattering(r, t, head, r->out_from, "a Zeno model? --max-steps raises "
+                              "the budget");
     }
     if (rc == 0 && r->s->event_rows)
         rc = bgc_emit(r, t, x);
@@ -2002,6 +2045,8 @@ static int bgc_drive(bgc_run *r, const bgc_family *f, double *y)
                 goto done;
             }
             r->sliding = found == 2 ? r->sliding + 1 : 0;
+            if (r->sliding == 1)
+                r->sliding_from = r->passes;
             if (found) { /* the step ends at the event; the method starts afresh there */
                 rc = bgc_emit_step(r, &c, te, 0, yout);
                 if (rc)
@@ -2128,19 +2173,23 @@ static int bgc_integrate(const bgc_settings *s, const bgc_params *p, bgc_work *w
     r.chain = 0;
     r.kout_ev = 0;
     r.events_out = 0;
-    r.changed = -1;
     r.sliding = 0;
+    r.passes = r.chain_from = r.sliding_from = r.out_from = 0.0;
     r.d = (double *)&q + BGC_DISCRETE_OFFSET;
-    r.g = r.ev = NULL;
+    r.g = r.ev = r.last = NULL;
     bgc_params_update(&q);
     i = bgc_first_nonfinite(y, BGC_NUM_STATES);
     if (i >= 0)
         return bgc_fail(msg, msg_size, s->t0, "state", bgc_state_names[i]);
     if (BGC_NUM_DISCRETE > 0) {
-        r.g = malloc(sizeof(double) * (size_t)(BGC_NUM_INDICATORS + BGC_EV_SIZE));
+        r.g = malloc(sizeof(double) * (size_t)(BGC_NUM_INDICATORS + BGC_EV_SIZE
+                                               + BGC_NUM_DISCRETE));
         if (!r.g)
             return bgc_fail_memory(msg, msg_size);
         r.ev = r.g + BGC_NUM_INDICATORS;
+        r.last = r.ev + BGC_EV_SIZE;
+        for (i = 0; i < BGC_NUM_DISCRETE; i++)
+            r.last[i] = -1.0;
         memcpy(r.d, w->d, sizeof(double) * BGC_NUM_DISCRETE);
         rc = bgc_event_iteration(&r, s->t0, y, !w->started);
         w->started = 1;
