@@ -241,6 +241,18 @@ def test_max_step_bounds_every_step():
             assert steps < 100
 
 
+def _run_each(compiled, **options) -> list:
+    """The compiled scene run in each backend with these options, its counters kept."""
+    names = [p.name for p in compiled.program.params]
+    results = []
+    for backend in BACKENDS:
+        settings = runner.settings_for(compiled.program.scene, names, **options)
+        result = runner.run(runner.prepare(compiled, backend), settings, stats=True)
+        assert result.status == 0, result.stderr
+        results.append(result)
+    return results
+
+
 DECAY = """model decay
 c : C(1) init q = 1
 r : R(1)
@@ -255,17 +267,9 @@ scene run { outputs c.q; time 0 .. 2 every 1 }
 def test_max_step_cuts_a_fixed_step(solver):
     """--max-step bounds a fixed step too: rk4 and Euler on dq/dt = -q with dt = 1 and a
     bound of 0.01 take 200 steps and reach e^-2 as their closed-form step errors say."""
-    compiled = build(DECAY, "run")
-    names = [p.name for p in compiled.program.params]
-    outs = []
-    for backend in BACKENDS:
-        program = runner.prepare(compiled, backend)
-        settings = runner.settings_for(compiled.program.scene, names, solver=solver,
-                                       max_step=0.01)
-        result = runner.run(program, settings, stats=True)
-        assert result.status == 0, result.stderr
-        assert int(result.stats["steps"]) == 200
-        outs.append(result.csv)
+    results = _run_each(build(DECAY, "run"), solver=solver, max_step=0.01)
+    assert all(int(r.stats["steps"]) == 200 for r in results)
+    outs = [r.csv for r in results]
     assert len(set(outs)) == 1  # the same bytes in both backends
     q = float(outs[0].splitlines()[-1].split(",")[1])
     # one step multiplies q by the method's polynomial in -h: (1 - h) or its Taylor to h^4
@@ -668,16 +672,8 @@ def test_a_relation_of_t_alone_is_stepped_onto_however_long_the_steps(solver):
     """The integrands are piecewise constant, so an adaptive solver's error estimate is zero
     and its steps grow to the whole span: every window of the conditions must still be
     counted.  Their times are found in advance (sin, cos, a square, exp inverted)."""
-    compiled = build(WINDOWS, "run")
-    names = [p.name for p in compiled.program.params]
-    outs = []
-    for backend in BACKENDS:
-        program = runner.prepare(compiled, backend)
-        settings = runner.settings_for(compiled.program.scene, names, solver=solver,
-                                       rtol=1e-10, atol=1e-12)
-        result = runner.run(program, settings)
-        assert result.status == 0, result.stderr
-        outs.append(result.csv)
+    outs = [r.csv for r in _run_each(build(WINDOWS, "run"), solver=solver, rtol=1e-10,
+                                     atol=1e-12)]
     assert len(set(outs)) == 1
     got = [float(v) for v in outs[0].splitlines()[-1].split(",")[1:]]
     want = [_measure_above(lambda t: np.sin(3 * t), 0.5, 5.0),
