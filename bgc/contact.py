@@ -368,10 +368,21 @@ def _diode(c, info, block, states, relations, discretes, whens):
                     "1: blocking, 0: conducting", c.name_span,
                     sp.Piecewise((sp.Integer(0), forward.symbol), (sp.Integer(1), reverse.symbol),
                                  (active(c), True)))
-    # blocking, the storages that carried its flow take the state that stops it
+    # blocking, the storages that carried its flow take the state that stops it: when it
+    # blocks, and at the start where it starts blocking
     transfer = When(reverse.symbol, reverse.text, tuple(
         Action("reinit", states[p].name, p, new, c.span) for p, new in block.items()), c.span)
-    return relations + [forward, reverse], discretes + [mode], whens + [transfer]
+    return relations + [forward, reverse], discretes + [mode], \
+        whens + [transfer, _at_start(c, transfer, blocking)]
+
+
+def _at_start(c, transfer: When, mode) -> When:
+    """transfer's jumps at the start, where the element starts in the mode that needs them
+    (mode: its condition on the element's discrete value, read at t0): the initial state made
+    consistent with the initial mode (LANGUAGE.md 10a)."""
+    return When(INITIAL, f"{c.junction}: the start", tuple(
+        replace(a, expr=sp.Piecewise((a.expr, mode), (a.symbol, True)))
+        for a in transfer.actions), c.span)
 
 
 def _switch(c, info, stop, states, relations, discretes, whens):
@@ -392,9 +403,10 @@ def _switch(c, info, stop, states, relations, discretes, whens):
             sp.Piecewise((sp.Integer(1), sp.Ne(active(c), 0)), (sp.Integer(-1), True)), 0),
             f"{J}: opens", c.name_span, None)
         relations = relations + [flows]
-        opening = [When(flows.symbol, flows.text, tuple(
+        opens = When(flows.symbol, flows.text, tuple(
             Action("reinit", states[p].name, p, new, c.span) for p, new in stop.items()),
-            c.span)]
+            c.span)
+        opening = [opens, _at_start(c, opens, sp.Ne(active(c), 0))]
     return relations, discretes + [mode], whens + opening
 
 

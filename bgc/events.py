@@ -419,17 +419,53 @@ def _bit(cond) -> sp.Expr:
     return sp.Piecewise((sp.Integer(1), cond), (sp.Integer(0), True))
 
 
+def _at_start(sel: Selected, new: dict) -> dict:
+    """Every relation's and discrete value's value at t0, for the start's first pass: each
+    reads the values at t0 of what it reads (the time relations', the time sources', the other
+    relations' and the discrete values' initial values), not their values before the start, so
+    that the modes a run starts in are those the conditions at t0 give (a switch whose
+    condition holds at t0 starts closed).  Evaluated in an order where what a value reads
+    comes first (depth first, iteratively); a value that reads itself through others (a
+    cycle) reads its value before the start there."""
+    items = {r.symbol: r.relation for r in sel.state + sel.discrete}
+    items.update({d.symbol: d.init for d in sel.discretes})
+    first = {r.symbol: new[r.symbol] for r, _, _ in sel.time}
+    first.update({q.symbol: q.value() for q in sel.squares})
+    done, busy = set(first), set()
+    for root in items:
+        work = [root]
+        while work:
+            sym = work[-1]
+            if sym in done:
+                work.pop()
+                continue
+            busy.add(sym)
+            todo = sorted((u for u in items[sym].free_symbols
+                           if u in items and u not in done and u not in busy), key=str)
+            if todo:
+                work.append(todo[0])
+                continue
+            first[sym] = items[sym].xreplace(first)
+            done.add(sym)
+            busy.discard(sym)
+            work.pop()
+    return first
+
+
 def update_stores(sel: Selected, states) -> tuple[list, list]:
     """update's results over model symbols: the state after the event iteration's step (one
     per state, ordered as states), then each discrete value; and the event-time values each
-    when-block's condition reads.  Every right side reads the values before the event."""
+    when-block's condition reads.  Every right side reads the values before the event; in
+    the start's first pass, the values at t0 (_at_start)."""
     new: dict = {}
-    for k, r in enumerate(sel.state):
-        new[r.symbol] = sp.Ne(new_value(k), 0)
     for r, _, after in sel.time:
         new[r.symbol] = after
+    first = _at_start(sel, new)
+    for k, r in enumerate(sel.state):
+        new[r.symbol] = sp.Or(sp.And(FIRST, first[r.symbol]),
+                              sp.And(sp.Not(FIRST), sp.Ne(new_value(k), 0)))
     for r in sel.discrete:
-        new[r.symbol] = r.relation
+        new[r.symbol] = sp.Or(sp.And(FIRST, first[r.symbol]), sp.And(sp.Not(FIRST), r.relation))
     old = {sym: sp.Or(sp.And(FIRST, cond), sp.And(sp.Not(FIRST), sym))
            for sym, cond in new.items()}
     fires = []
@@ -439,8 +475,10 @@ def update_stores(sel: Selected, states) -> tuple[list, list]:
         fires.append(sp.And(now, sp.Not(before)))
     values: dict = {}
     for w, fire in zip(sel.whens, fires):
-        for a in w.actions:
-            values.setdefault(a.symbol, []).append((a.expr, fire))
+        for a in w.actions:  # (at the start, "just before" is the values at t0)
+            expr = sp.Piecewise((a.expr.xreplace(first), FIRST), (a.expr, True)) \
+                if a.expr.free_symbols & first.keys() else a.expr
+            values.setdefault(a.symbol, []).append((expr, fire))
     out = []
     for st in states:
         out.append(sp.Piecewise(*values[st.symbol], (st.symbol, True))
@@ -453,8 +491,8 @@ def update_stores(sel: Selected, states) -> tuple[list, list]:
     for s in sel.squares:
         out.append(s.value())
     for d in sel.discretes:
-        start = sp.Piecewise((d.init, FIRST), (d.symbol if d.next is None else
-                                               d.next.xreplace(new), True))
+        start = sp.Piecewise((first[d.symbol], FIRST), (d.symbol if d.next is None else
+                                                        d.next.xreplace(new), True))
         out.append(sp.Piecewise(*values[d.symbol], (start, True)) if d.symbol in values
                    else start)
     return out

@@ -804,3 +804,46 @@ def test_a_motor_against_its_end_stop_with_dry_friction(solver, tmp_path):
     resting = (t > 0.2) & (t < 0.5)
     assert np.allclose(-y[resting, 4], k * ref[0][resting], rtol=1e-6)
     assert np.all(y[resting, 5] == 0)
+
+
+CLOSED_AT_START = """model rl "an RL loop through a switch, the coil at 1 A"
+parameter L = 1.0
+parameter R = 2.0
+parameter on = 1
+discrete d = 0.25
+signal x = integral(1, init = 1)
+sw : Sw(COND)
+coil : I(L) init f = 1
+res : R(R)
+loop : 1
+loop -> sw
+loop -> coil
+loop -> res
+scene run { outputs coil.f; time 0 .. 1 every 0.125; solver dopri5(rtol = 1e-10, atol = 1e-12) }
+"""
+
+
+@pytest.mark.parametrize("cond", [
+    "t >= 0", "t > -1", "t < 5", "t <= 5 or t > 6", "on > 0", "1 > 0", "x > 0.5",
+    "d < 0.5", "square(4, 0.5) > 0.5", "step(0) > 0.5", "pulse(0, 2) > 0.5",
+    "not (t < 0)", "t >= 0 and x > 0"])
+def test_a_switch_whose_condition_holds_at_t0_starts_closed(cond, tmp_path):
+    """Every initial mode is taken from the conditions at t0 (LANGUAGE.md 10a): closed from
+    the start, the coil's current decays as exp(-R t / L) from 1 A, in every backend (it
+    read 0 from t = 0 where the condition depended on t, a state or a discrete value)."""
+    compiled = bgc.build(Source("rl.bg", CLOSED_AT_START.replace("COND", cond)), "run")
+    backends = BACKENDS + ["vm"]
+    outs = [run(compiled, b, tmp_path / f"{b}.csv") for b in backends]
+    assert len({o[0] for o in outs}) == 1, backends  # the same bytes
+    y = outs[0][1]
+    assert np.max(np.abs(y[:, 1] - np.exp(-2.0 * y[:, 0]))) <= 1e-8
+
+
+def test_a_switch_open_at_t0_cuts_the_coils_current_at_once(tmp_path):
+    """Open at t0 (its condition false then), the coil's initial current has no path: the
+    initial state is made consistent with the mode (the current stops), then the switch
+    closes at t = 0.5 onto a coil at rest."""
+    compiled = bgc.build(Source("rl.bg", CLOSED_AT_START.replace("COND", "t >= 0.5")), "run")
+    outs = [run(compiled, b, tmp_path / f"{b}.csv") for b in BACKENDS + ["vm"]]
+    assert len({o[0] for o in outs}) == 1
+    assert np.all(outs[0][1][:, 1] == 0.0)
