@@ -364,7 +364,7 @@ def test_declared_units_reach_the_variables(tmp_path):
     units = {v.get("name"): v.find("Real").get("unit") for v in root.iter("ScalarVariable")}
     assert units == {"k": "N/m", "push": "N", "x": "m", "energy": "J", "pair[0]": "m",
                      "pair[1]": "m", "mass.p": None, "spring.q": None, "der(x)": None,
-                     "der(mass.p)": None, "der(spring.q)": None}
+                     "der(mass.p)": None, "der(spring.q)": None, "time": None}
     assert [u.get("name") for u in root.iter("Unit")] == ["N/m", "m", "J", "N"]
     assert validate_fmu(str(tmp_path / "units.fmu")) == []
 
@@ -431,4 +431,65 @@ def test_output_derivatives_through_a_newton_block(tmp_path):
         model.terminate()
     finally:
         model.freeInstance()
+        shutil.rmtree(unzip, ignore_errors=True)
+
+
+# ---------------------------------------------------------------- degenerate models
+
+DEGENERATE = {  # every one a valid FMU: its variables at least the time
+    "empty": "model empty\n",
+    "no_states_no_parameters": "model src\nsrc : Se(2)\nj : 1\nr : R(4)\nsrc -> j\nj -> r\n",
+    "no_states_no_outputs": NO_STATES,
+    "no_parameters": "model np\nj : 1\nm : I(1) init f = 1\nk : C(1)\nj -> m\nj -> k\n",
+    "only_parameters": "model p\nparameter a = 1\nparameter b = 2*a\n",
+    "only_a_signal": "model s\nsignal y = sin(t)\n",
+    "only_an_input": "model u\ninput u = 0\n",
+    "a_constant_output": "model c\nsignal y = 3\nscene run { outputs y }\n",
+}
+
+
+@pytest.mark.parametrize("name", list(DEGENERATE))
+def test_degenerate_models_give_valid_fmus(name, tmp_path, capsys):
+    """FMPy's validator takes the description of each (the schema wants a variable in
+    ModelVariables: an empty model had none), and fmpy.dump lists it; the time is FMI 2.0's
+    independent variable, listed last, without a start."""
+    text = DEGENERATE[name]
+    compiled = api.build(bgc.load(f"{name}.bg", text), "run" if "scene" in text else None)
+    _, xml, _ = fmu.fmu_texts(compiled)
+    (tmp_path / "modelDescription.xml").write_text(xml, encoding="utf-8")
+    assert validate_fmu(str(tmp_path)) == []
+    fmpy.dump(str(tmp_path), causalities=["independent"])
+    assert "time               independent" in capsys.readouterr().out
+    md = fmpy.read_model_description(str(tmp_path))
+    last = md.modelVariables[-1]
+    assert (last.name, last.causality, last.variability, last.start) == \
+        ("time", "independent", "continuous", None)
+    assert [v.causality for v in md.modelVariables].count("independent") == 1
+
+
+def test_an_empty_model_runs_as_an_fmu(tmp_path):
+    """The empty model's FMU (the time its only variable) runs in FMPy, both types, and its
+    time is the communication point reached."""
+    path = tmp_path / "empty.fmu"
+    path.write_bytes(fmu.build_fmu(api.build(bgc.load("empty.bg", DEGENERATE["empty"]))))
+    assert validate_fmu(str(path)) == []
+    for kind in ("ModelExchange", "CoSimulation"):
+        result = fmpy.simulate_fmu(str(path), fmi_type=kind, stop_time=0.5,
+                                   output_interval=0.125, output=["time"])
+        assert list(result["time"]) == [0.0, 0.125, 0.25, 0.375, 0.5]
+    md = fmpy.read_model_description(str(path))
+    unzip = fmpy.extract(str(path))
+    slave = FMU2Slave(guid=md.guid, unzipDirectory=unzip,
+                      modelIdentifier=md.coSimulation.modelIdentifier, instanceName="cs")
+    try:
+        slave.instantiate()
+        slave.setupExperiment(startTime=0.0)
+        slave.enterInitializationMode()
+        slave.exitInitializationMode()
+        for k in range(3):
+            slave.doStep(k * 0.1, 0.1)
+        assert slave.getReal([md.modelVariables[0].valueReference]) == [0.1 + 0.1 + 0.1]
+        slave.terminate()
+    finally:
+        slave.freeInstance()
         shutil.rmtree(unzip, ignore_errors=True)

@@ -15,6 +15,8 @@
                                                      state is that state's variable instead)
      [P + 2N + M, ... + D)   discrete variable k    (D = BGC_FMI_NUM_DISCRETE_VARS)
      [P + 2N + M + D, ... + U)  input j             (U = BGC_FMI_NUM_INPUTS: `input NAME`)
+     P + 2N + M + D + U      time                   (causality "independent": the
+                                                     instance's time, never set by fmi2SetReal)
    An input is "continuous", set with fmi2SetReal at any time: its value holds until it is
    set again (Co-Simulation: between two fmi2DoStep; Model Exchange: the environment's
    business).  Until it is set, it keeps its default.
@@ -119,6 +121,7 @@ enum {
 #define BGC_FMI_VR_OUTPUTS (BGC_FMI_VR_DERIVATIVES + (fmi2ValueReference)BGC_NUM_STATES)
 #define BGC_FMI_VR_DISCRETE (BGC_FMI_VR_OUTPUTS + (fmi2ValueReference)BGC_NUM_OUTPUTS)
 #define BGC_FMI_VR_INPUTS (BGC_FMI_VR_DISCRETE + (fmi2ValueReference)BGC_FMI_NUM_DISCRETE_VARS)
+#define BGC_FMI_VR_TIME (BGC_FMI_VR_INPUTS + (fmi2ValueReference)BGC_FMI_NUM_INPUTS)
 
 typedef struct bgc_fmi {
     fmi2Type type;
@@ -583,6 +586,8 @@ static int bgc_fmi_value(bgc_fmi *m, fmi2ValueReference vr, double *out)
     } else if ((k = bgc_fmi_in(vr, BGC_FMI_VR_INPUTS, BGC_FMI_NUM_INPUTS)) >= 0) {
         *out = m->in[k].n > 0 || bgc_fmi_input_slot[k] < 0 ? m->in_u[k]
                                                             : BGC_FMI_D(m)[bgc_fmi_input_slot[k]];
+    } else if (vr == BGC_FMI_VR_TIME) {
+        *out = m->t;
     } else {
         return 1;
     }
@@ -629,6 +634,9 @@ BGC_FMI_EXPORT fmi2Status fmi2SetReal(fmi2Component c, const fmi2ValueReference 
             }
             continue;
         }
+        if (vr[i] == BGC_FMI_VR_TIME)
+            return bgc_fmi_refuse(m, "fmi2SetReal", "time is the independent variable (set by "
+                                  "fmi2SetupExperiment, fmi2SetTime and fmi2DoStep)");
         if (bgc_fmi_in(vr[i], 0, BGC_NUM_PARAMS) < 0) {
             bgc_fmi_log(m, fmi2Error, "fmi2SetReal: value reference %u is not a parameter (the "
                         "states start from the parameters; Model Exchange sets them with "
