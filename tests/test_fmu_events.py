@@ -10,6 +10,7 @@ import csv
 import math
 import shutil
 import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -25,6 +26,9 @@ from fmpy.validation import validate_fmu  # noqa: E402
 
 from test_docs import blocks  # noqa: E402
 from test_events import BALL, COUNT, LAG, bounce_times, build, lag_reference  # noqa: E402
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tools"))
+import fuzz_fmu  # noqa: E402
 
 if not backends.have_c_compiler():
     pytest.skip("FMU export builds its binary with a C compiler", allow_module_level=True)
@@ -347,7 +351,9 @@ scene run { time 0 .. 1 every 0.1; outputs x }
 
 
 def test_an_event_iteration_that_does_not_settle_fails_with_a_message(tmp_path):
-    """Both FMU types stop at the event (x = 1/2) with bgc's message in the log."""
+    """Both FMU types stop at the event (x = 1/2) with bgc's message in the log.  Random
+    sequences of FMI calls on that FMU (tools/fuzz_fmu.py) reach its error state in both
+    types, where the standard's tables allow fewer calls, and find no fault."""
     path = tmp_path / "toggle.fmu"
     path.write_bytes(fmu.build_fmu(build(TOGGLE, "run")))
     for kind, fn in (("ModelExchange", "fmi2NewDiscreteStates"), ("CoSimulation", "fmi2DoStep")):
@@ -356,6 +362,11 @@ def test_an_event_iteration_that_does_not_settle_fails_with_a_message(tmp_path):
             fmpy.simulate_fmu(str(path), fmi_type=kind, logger=lambda *a: log.append(a))
         (message,) = [a[4].decode() for a in log if a[2] == 3]  # fmi2Error
         assert message.startswith(f"{fn}: at t = 0.5") and "chattering" in message, message
+    result = fuzz_fmu.fuzz(fuzz_fmu.extract(path, tmp_path / "toggle"), 3, 60, length=30)
+    assert result["failures"] == [], result["failures"][0]["failure"]
+    for kind in ("me", "cs"):
+        assert result["seen"].get(f"{kind} error legal", 0) > 0
+        assert result["seen"].get(f"{kind} error illegal", 0) > 0
 
 
 def test_the_rectifier_with_an_ideal_diode_as_an_fmu(tmp_path):
@@ -399,3 +410,23 @@ def test_a_discrete_output_is_one_variable(tmp_path):
     rises = (math.asin(0.5) + 2 * math.pi * np.arange(3)) / 3.0
     assert list(cs["n"]) == [float(np.sum(rises <= t)) for t in cs["time"]]
     assert list(cs["m"]) == [7.0 if t >= 1 else 0.0 for t in cs["time"]]
+
+
+def test_random_sequences_of_fmi_calls_follow_the_state_machine(built, tmp_path):
+    """tools/fuzz_fmu.py's harness, seeded, on the thermostat's FMU (a model that cannot
+    fail: every legal call must succeed, --strict): random sequences of calls through ctypes,
+    legal and not (a function its state does not allow, the other type's, arguments it cannot
+    take, fmi2FreeInstance twice, calls through a freed or a NULL handle), each checked
+    against FMI 2.0's tables; every state of both types is reached, with legal and illegal
+    calls in it."""
+    F = fuzz_fmu
+    result = F.fuzz(F.extract(built["thermostat"][0], tmp_path), 2028, 80, length=30,
+                    strict=True)
+    assert result["failures"] == [], result["failures"][0]["failure"]
+    seen = result["seen"]
+    for kind, states in (("me", (F.INST, F.INIT, F.EVENT, F.CONT, F.TERM)),
+                         ("cs", (F.INST, F.INIT, F.STEP, F.TERM))):
+        for state in states:
+            for legal in ("legal", "illegal"):
+                assert seen.get(f"{kind} {state} {legal}", 0) > 0, (kind, state, legal)
+    assert seen["dead freed"] > 0 and seen["dead NULL"] > 0

@@ -43,6 +43,28 @@
    the step's end rather than never).  Co-Simulation: fmi2DoStep's run locates and handles the
    events inside the step, as bgc's own runs do; the discrete values go on from step to step.
 
+   The life cycle is FMI 2.0's state machine (its tables of the functions each state allows,
+   sections 3.2.3 and 4.2.4; the masks BGC_FMI_MASK_* below): instantiated, initialization
+   mode, then event and continuous-time mode (Model Exchange) or step complete
+   (Co-Simulation), terminated, error.  A call its state does not allow, or with arguments it
+   cannot take, returns fmi2Error, logged, and changes nothing; a failure of the model (an
+   event iteration that does not settle, chattering, a Co-Simulation run that fails) puts the
+   instance in the error state, where the values can still be read (for the diagnosis) and
+   fmi2Reset, fmi2SetFMUstate or fmi2FreeInstance go on.  The FMU never enters step in
+   progress, step failed or step canceled (fmi2DoStep is synchronous and fails with
+   fmi2Error), nor fatal (no failure reaches beyond its instance: the FMU has no global state).
+
+   The handle fmi2Instantiate returns outlives the instance: fmi2FreeInstance frees all the
+   instance holds and marks the handle freed instead of freeing it, so that a call through a
+   freed handle (fmi2FreeInstance twice, fmi2GetReal after it) reads memory that is still
+   the handle's and returns fmi2Error (a void function: nothing), without a log (the
+   environment's logger need not live beyond fmi2FreeInstance).  The price is the handle's
+   few bytes for the life of the process.  A registry of live instances would free
+   everything, but it is state shared by all instances, which FMI lets environments run in
+   threads of their own (a lock, beyond C99), and malloc may hand a freed instance's address
+   to the next one, so that a stale handle would act on another instance; a handle that is
+   never freed is never another's.
+
    The declarations below are written from the text of the FMI 2.0 standard (its sections on
    the platform types and the common functions): the types, the status and kind enumerations,
    the callbacks and the event information, with the standard's names and layouts. */
@@ -106,14 +128,17 @@ typedef struct {
 
 /* ------------------------------------------------------------- an instance --- */
 
+/* The states of FMI 2.0's state machines (the bits of the masks below); Co-Simulation's
+   "step complete" is BGC_FMI_STEP.  A freed instance, the standard's start and end, has no
+   state: its handle is marked (bgc_fmi_handle). */
 enum {
     BGC_FMI_INSTANTIATED, /* parameters may be set */
-    BGC_FMI_INIT,         /* initialisation mode: parameters may still be set */
+    BGC_FMI_INIT,         /* initialization mode: parameters may still be set */
     BGC_FMI_EVENT,        /* Model Exchange: event mode */
     BGC_FMI_CONTINUOUS,   /* Model Exchange: continuous-time mode */
-    BGC_FMI_STEP,         /* Co-Simulation: between steps */
+    BGC_FMI_STEP,         /* Co-Simulation: step complete, between two steps */
     BGC_FMI_TERMINATED,
-    BGC_FMI_FAILED        /* after an error: only fmi2Reset and fmi2FreeInstance help */
+    BGC_FMI_ERROR         /* after a failure of the model: values for the diagnosis only */
 };
 
 #define BGC_FMI_VR_STATES ((fmi2ValueReference)BGC_NUM_PARAMS)
@@ -155,6 +180,16 @@ typedef struct bgc_fmi {
     double in_t[BGC_DIM(BGC_FMI_NUM_INPUTS)], in_u[BGC_DIM(BGC_FMI_NUM_INPUTS)];
 } bgc_fmi;
 
+/* What fmi2Instantiate returns, never freed: fmi2FreeInstance frees the instance and sets m
+   to NULL.  fmu is this binary's bgc_fmi_ours, so that the handle of another FMU (or any
+   pointer to something else that starts with a pointer) is not taken for one of ours. */
+typedef struct bgc_fmi_handle {
+    const char *fmu;
+    bgc_fmi *m;
+} bgc_fmi_handle;
+
+static const char bgc_fmi_ours[] = BGC_FMI_GUID;
+
 #define BGC_FMI_ZERO 1e-300 /* an indicator's size where g is 0 (a product with another
                                   indicator's value does not underflow to 0) */
 
@@ -184,11 +219,24 @@ static fmi2Status bgc_fmi_refuse(const bgc_fmi *m, const char *fn, const char *w
     return fmi2Error;
 }
 
-/* The instance, or NULL if c is NULL or fn is not allowed in its phase (mask: 1 << phase) or
-   for its type (1: Model Exchange only, 2: Co-Simulation only, 0: both). */
+/* The live instance of handle c, or NULL: c NULL, freed, or not a handle of this FMU. */
+static bgc_fmi *bgc_fmi_live(fmi2Component c)
+{
+    const bgc_fmi_handle *h = (const bgc_fmi_handle *)c;
+    return h && h->fmu == bgc_fmi_ours ? h->m : NULL;
+}
+
+#define BGC_FMI_STATE_NAMES                                                                  \
+    { "the instantiated state", "initialization mode", "event mode", "continuous-time mode", \
+      "step complete", "the terminated state", "the error state" }
+
+/* The instance, or NULL if c is not a live instance, or fn is not allowed in its state (mask:
+   1 << state) or for its type (1: Model Exchange only, 2: Co-Simulation only, 0: both); the
+   refusal is logged (no instance: no logger to tell). */
 static bgc_fmi *bgc_fmi_get(fmi2Component c, const char *fn, int mask, int only)
 {
-    bgc_fmi *m = (bgc_fmi *)c;
+    static const char *const states[] = BGC_FMI_STATE_NAMES;
+    bgc_fmi *m = bgc_fmi_live(c);
     if (!m)
         return NULL;
     if (only && m->type != (only == 1 ? fmi2ModelExchange : fmi2CoSimulation)) {
@@ -197,21 +245,55 @@ static bgc_fmi *bgc_fmi_get(fmi2Component c, const char *fn, int mask, int only)
         return NULL;
     }
     if (!(mask & (1 << m->phase))) {
-        bgc_fmi_log(m, fmi2Error, "%s: not allowed %s", fn,
-                    m->phase == BGC_FMI_FAILED ? "after an error (fmi2Reset starts again)"
-                    : m->phase == BGC_FMI_TERMINATED ? "after fmi2Terminate"
-                    : m->phase == BGC_FMI_INSTANTIATED || m->phase == BGC_FMI_INIT
-                    ? "before initialisation has ended" : "in this mode");
+        bgc_fmi_log(m, fmi2Error, "%s: not allowed in %s%s", fn, states[m->phase],
+                    m->phase == BGC_FMI_ERROR ? " (fmi2Reset or fmi2SetFMUstate goes on)" : "");
         return NULL;
     }
     return m;
 }
 
-#define BGC_FMI_ANY (~0)
-#define BGC_FMI_SETUP ((1 << BGC_FMI_INSTANTIATED) | (1 << BGC_FMI_INIT))
-#define BGC_FMI_RUNNING ((1 << BGC_FMI_EVENT) | (1 << BGC_FMI_CONTINUOUS) | (1 << BGC_FMI_STEP))
-#define BGC_FMI_VALUES (BGC_FMI_SETUP | BGC_FMI_RUNNING | (1 << BGC_FMI_TERMINATED) \
-                        | (1 << BGC_FMI_FAILED))
+/* The states each function is allowed in: FMI 2.0's tables (3.2.3 for Model Exchange, 4.2.4
+   for Co-Simulation), the states of both types in one mask (a state belongs to one type:
+   event and continuous-time mode to Model Exchange, step complete to Co-Simulation).  What
+   the tables allow for some variables only (fmi2SetReal: parameters until initialization
+   ends, inputs throughout) is checked by the function. */
+#define BGC_FMI_S(state) (1 << BGC_FMI_##state)
+#define BGC_FMI_LIVE (BGC_FMI_S(INSTANTIATED) | BGC_FMI_S(INIT) | BGC_FMI_S(EVENT) \
+                      | BGC_FMI_S(CONTINUOUS) | BGC_FMI_S(STEP) | BGC_FMI_S(TERMINATED) \
+                      | BGC_FMI_S(ERROR))
+#define BGC_FMI_INITIALIZING (BGC_FMI_LIVE & ~BGC_FMI_S(INSTANTIATED))
+#define BGC_FMI_RUNNING (BGC_FMI_S(EVENT) | BGC_FMI_S(CONTINUOUS) | BGC_FMI_S(STEP))
+#define BGC_FMI_AFTER (BGC_FMI_S(TERMINATED) | BGC_FMI_S(ERROR))
+#define BGC_FMI_MASK_SetDebugLogging BGC_FMI_LIVE
+#define BGC_FMI_MASK_SetupExperiment BGC_FMI_S(INSTANTIATED)
+#define BGC_FMI_MASK_EnterInitializationMode BGC_FMI_S(INSTANTIATED)
+#define BGC_FMI_MASK_ExitInitializationMode BGC_FMI_S(INIT)
+#define BGC_FMI_MASK_Terminate BGC_FMI_RUNNING
+#define BGC_FMI_MASK_Reset BGC_FMI_LIVE
+#define BGC_FMI_MASK_GetValues BGC_FMI_INITIALIZING /* fmi2GetReal, ..., fmi2GetString */
+#define BGC_FMI_MASK_SetReal (BGC_FMI_S(INSTANTIATED) | BGC_FMI_S(INIT) | BGC_FMI_RUNNING)
+#define BGC_FMI_MASK_SetOther (BGC_FMI_S(INSTANTIATED) | BGC_FMI_S(INIT) | BGC_FMI_S(EVENT) \
+                               | BGC_FMI_S(STEP)) /* fmi2SetInteger, -Boolean, -String */
+#define BGC_FMI_MASK_FMUstate BGC_FMI_LIVE /* fmi2GetFMUstate, ..., fmi2DeSerializeFMUstate */
+#define BGC_FMI_MASK_GetDirectionalDerivative BGC_FMI_INITIALIZING
+#define BGC_FMI_MASK_EnterEventMode (BGC_FMI_S(EVENT) | BGC_FMI_S(CONTINUOUS))
+#define BGC_FMI_MASK_NewDiscreteStates BGC_FMI_S(EVENT)
+#define BGC_FMI_MASK_EnterContinuousTimeMode BGC_FMI_S(EVENT)
+#define BGC_FMI_MASK_CompletedIntegratorStep BGC_FMI_S(CONTINUOUS)
+#define BGC_FMI_MASK_SetTime (BGC_FMI_S(EVENT) | BGC_FMI_S(CONTINUOUS))
+#define BGC_FMI_MASK_SetContinuousStates BGC_FMI_S(CONTINUOUS)
+#define BGC_FMI_MASK_GetEventIndicators (BGC_FMI_S(INIT) | BGC_FMI_S(EVENT) \
+                                         | BGC_FMI_S(CONTINUOUS) | BGC_FMI_AFTER)
+#define BGC_FMI_MASK_GetContinuousStates BGC_FMI_MASK_GetEventIndicators
+#define BGC_FMI_MASK_GetDerivatives (BGC_FMI_S(EVENT) | BGC_FMI_S(CONTINUOUS) | BGC_FMI_AFTER)
+#define BGC_FMI_MASK_GetNominalsOfContinuousStates (BGC_FMI_S(INSTANTIATED) | BGC_FMI_S(EVENT) \
+                                                    | BGC_FMI_S(CONTINUOUS) | BGC_FMI_AFTER)
+#define BGC_FMI_MASK_SetRealInputDerivatives (BGC_FMI_S(INSTANTIATED) | BGC_FMI_S(INIT) \
+                                              | BGC_FMI_S(STEP))
+#define BGC_FMI_MASK_GetRealOutputDerivatives (BGC_FMI_S(STEP) | BGC_FMI_AFTER)
+#define BGC_FMI_MASK_DoStep BGC_FMI_S(STEP)
+/* (fmi2CancelStep: step in progress, never entered) */
+#define BGC_FMI_MASK_GetStatus (BGC_FMI_S(STEP) | BGC_FMI_S(TERMINATED)) /* and -Real-, ... */
 
 /* Parameters and states from the parameters set so far (before initialisation ends). */
 static void bgc_fmi_refresh(bgc_fmi *m)
@@ -251,13 +333,16 @@ static void bgc_fmi_start(bgc_fmi *m)
 }
 
 /* The model's failure (an algebraic block), logged: Model Exchange discards the point (the
-   integrator may try a smaller step), Co-Simulation's caller gets an error. */
+   integrator may try a smaller step), Co-Simulation's caller gets an error (and the instance
+   is in the error state). */
 static fmi2Status bgc_fmi_model_failed(bgc_fmi *m, const char *fn)
 {
     const fmi2Status status = m->type == fmi2ModelExchange ? fmi2Discard : fmi2Error;
     char msg[512];
     bgc_work_message(m->w, msg, sizeof msg);
     bgc_fmi_log(m, status, "%s: %s", fn, msg);
+    if (status == fmi2Error)
+        m->phase = BGC_FMI_ERROR;
     return status;
 }
 
@@ -290,7 +375,7 @@ static int bgc_fmi_on_event(void *ctx, double t, const char *what, const char *c
    the run's first (the discrete values then start from the workspace's); the discrete values
    kept in the workspace too, where Co-Simulation's runs take them from.  *x_changed: whether
    the states changed; *t_next: the next time event (INFINITY: none).  A failure (chattering,
-   a value that is not finite) is logged, and the instance has failed. */
+   a value that is not finite) is logged, and the instance is in the error state. */
 static fmi2Status bgc_fmi_event_iteration(bgc_fmi *m, const char *fn, int start, int *x_changed,
                                           double *t_next)
 {
@@ -329,7 +414,7 @@ static fmi2Status bgc_fmi_event_iteration(bgc_fmi *m, const char *fn, int start,
     m->w->started = 1;
     m->dx_ok = m->y_ok = 0;
     if (rc) {
-        m->phase = BGC_FMI_FAILED;
+        m->phase = BGC_FMI_ERROR;
         bgc_fmi_log(m, fmi2Error, "%s: %s", fn, msg);
         return fmi2Error;
     }
@@ -364,11 +449,13 @@ BGC_FMI_EXPORT fmi2Status fmi2SetDebugLogging(fmi2Component c, fmi2Boolean loggi
 {
     static const char *const known[] = { "logStatusWarning", "logStatusDiscard",
                                          "logStatusError", "logAll" };
-    bgc_fmi *m = bgc_fmi_get(c, "fmi2SetDebugLogging", BGC_FMI_ANY, 0);
+    bgc_fmi *m = bgc_fmi_get(c, "fmi2SetDebugLogging", BGC_FMI_MASK_SetDebugLogging, 0);
     size_t i;
     int k, found;
     if (!m)
         return fmi2Error;
+    if (nCategories > 0 && !categories)
+        return bgc_fmi_refuse(m, "fmi2SetDebugLogging", "no array of categories given");
     for (i = 0; i < nCategories; i++) {
         found = 0;
         for (k = 0; k < BGC_COUNT(known); k++)
@@ -387,6 +474,7 @@ BGC_FMI_EXPORT fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type f
                                              const fmi2CallbackFunctions *functions,
                                              fmi2Boolean visible, fmi2Boolean loggingOn)
 {
+    bgc_fmi_handle *h;
     bgc_fmi *m;
     const char *why = NULL;
     size_t len;
@@ -406,7 +494,8 @@ BGC_FMI_EXPORT fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type f
                               fmi2Error, "logStatusError", "fmi2Instantiate: %s", why);
         return NULL;
     }
-    m = (bgc_fmi *)calloc(1, sizeof *m);
+    h = (bgc_fmi_handle *)malloc(sizeof *h);
+    m = h ? (bgc_fmi *)calloc(1, sizeof *m) : NULL;
     len = strlen(instanceName);
     if (m)
         m->name = (char *)malloc(len + 1);
@@ -418,6 +507,7 @@ BGC_FMI_EXPORT fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type f
             bgc_work_free(m->w);
         }
         free(m);
+        free(h); /* (never handed out) */
         if (functions->logger)
             functions->logger(functions->componentEnvironment, instanceName, fmi2Error,
                               "logStatusError", "fmi2Instantiate: out of memory");
@@ -429,14 +519,20 @@ BGC_FMI_EXPORT fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type f
     m->env = functions->componentEnvironment;
     m->logging = loggingOn != fmi2False;
     bgc_fmi_start(m);
-    return m;
+    h->fmu = bgc_fmi_ours;
+    h->m = m;
+    return h;
 }
 
+/* Frees the instance and marks its handle freed (the handle itself stays: a second
+   fmi2FreeInstance, or any call after it, finds it freed).  NULL is ignored (FMI 2.0), and
+   so is a handle already freed or not this FMU's: nothing to free, and nobody to tell. */
 BGC_FMI_EXPORT void fmi2FreeInstance(fmi2Component c)
 {
-    bgc_fmi *m = (bgc_fmi *)c;
+    bgc_fmi *m = bgc_fmi_live(c);
     if (!m)
         return;
+    ((bgc_fmi_handle *)c)->m = NULL;
     bgc_work_free(m->w);
     free(m->name);
     free(m);
@@ -446,7 +542,7 @@ BGC_FMI_EXPORT fmi2Status fmi2SetupExperiment(fmi2Component c, fmi2Boolean toler
                                               fmi2Real tolerance, fmi2Real startTime,
                                               fmi2Boolean stopTimeDefined, fmi2Real stopTime)
 {
-    bgc_fmi *m = bgc_fmi_get(c, "fmi2SetupExperiment", 1 << BGC_FMI_INSTANTIATED, 0);
+    bgc_fmi *m = bgc_fmi_get(c, "fmi2SetupExperiment", BGC_FMI_MASK_SetupExperiment, 0);
     (void)stopTimeDefined;
     (void)stopTime;
     if (!m)
@@ -463,7 +559,8 @@ BGC_FMI_EXPORT fmi2Status fmi2SetupExperiment(fmi2Component c, fmi2Boolean toler
 
 BGC_FMI_EXPORT fmi2Status fmi2EnterInitializationMode(fmi2Component c)
 {
-    bgc_fmi *m = bgc_fmi_get(c, "fmi2EnterInitializationMode", 1 << BGC_FMI_INSTANTIATED, 0);
+    bgc_fmi *m = bgc_fmi_get(c, "fmi2EnterInitializationMode",
+                             BGC_FMI_MASK_EnterInitializationMode, 0);
     if (!m)
         return fmi2Error;
     m->phase = BGC_FMI_INIT;
@@ -494,18 +591,18 @@ static fmi2Status bgc_fmi_constraints(bgc_fmi *m)
     return fmi2Error;
 }
 
-BGC_FMI_EXPORT fmi2Status fmi2ExitInitializationMode(fmi2Component c)
+/* The initial state checked (and projected, with BGC_FMI_PROJECT_INITIAL), logged if it
+   is not right: fmi2OK or fmi2Error. */
+static fmi2Status bgc_fmi_initial(bgc_fmi *m)
 {
-    bgc_fmi *m = bgc_fmi_get(c, "fmi2ExitInitializationMode", 1 << BGC_FMI_INIT, 0);
     char msg[512];
-    double t_next;
     int i;
-    if (!m)
-        return fmi2Error;
-    bgc_fmi_refresh(m);
     for (i = 0; i < BGC_NUM_PARAMS; i++)
-        if (!isfinite(*bgc_param_ref(&m->p, i)))
-            return bgc_fmi_refuse(m, "fmi2ExitInitializationMode", "a parameter is not finite");
+        if (!isfinite(*bgc_param_ref(&m->p, i))) {
+            bgc_fmi_log(m, fmi2Error, "fmi2ExitInitializationMode: parameter '%s' is not "
+                        "finite", bgc_param_names[i]);
+            return fmi2Error;
+        }
     i = bgc_first_nonfinite(m->x, BGC_NUM_STATES);
     if (i >= 0) {
         bgc_fmi_log(m, fmi2Error, "fmi2ExitInitializationMode: state '%s' is not finite",
@@ -517,8 +614,23 @@ BGC_FMI_EXPORT fmi2Status fmi2ExitInitializationMode(fmi2Component c)
         bgc_fmi_log(m, fmi2Error, "fmi2ExitInitializationMode: %s", msg);
         return fmi2Error;
     }
-    if (bgc_fmi_constraints(m) != fmi2OK)
+    return bgc_fmi_constraints(m);
+}
+
+/* The initial state, then the start's event iteration; a failure of either (the model's)
+   puts the instance in the error state. */
+BGC_FMI_EXPORT fmi2Status fmi2ExitInitializationMode(fmi2Component c)
+{
+    bgc_fmi *m = bgc_fmi_get(c, "fmi2ExitInitializationMode",
+                             BGC_FMI_MASK_ExitInitializationMode, 0);
+    double t_next;
+    if (!m)
         return fmi2Error;
+    bgc_fmi_refresh(m);
+    if (bgc_fmi_initial(m) != fmi2OK) {
+        m->phase = BGC_FMI_ERROR;
+        return fmi2Error;
+    }
     m->dx_ok = m->y_ok = 0;
     if (bgc_fmi_event_iteration(m, "fmi2ExitInitializationMode", 1, &m->x_changed, &t_next))
         return fmi2Error;
@@ -528,7 +640,7 @@ BGC_FMI_EXPORT fmi2Status fmi2ExitInitializationMode(fmi2Component c)
 
 BGC_FMI_EXPORT fmi2Status fmi2Terminate(fmi2Component c)
 {
-    bgc_fmi *m = bgc_fmi_get(c, "fmi2Terminate", BGC_FMI_RUNNING, 0);
+    bgc_fmi *m = bgc_fmi_get(c, "fmi2Terminate", BGC_FMI_MASK_Terminate, 0);
     if (!m)
         return fmi2Error;
     m->phase = BGC_FMI_TERMINATED;
@@ -537,7 +649,7 @@ BGC_FMI_EXPORT fmi2Status fmi2Terminate(fmi2Component c)
 
 BGC_FMI_EXPORT fmi2Status fmi2Reset(fmi2Component c)
 {
-    bgc_fmi *m = bgc_fmi_get(c, "fmi2Reset", BGC_FMI_ANY, 0);
+    bgc_fmi *m = bgc_fmi_get(c, "fmi2Reset", BGC_FMI_MASK_Reset, 0);
     bgc_work *w;
     if (!m)
         return fmi2Error;
@@ -597,7 +709,7 @@ static int bgc_fmi_value(bgc_fmi *m, fmi2ValueReference vr, double *out)
 BGC_FMI_EXPORT fmi2Status fmi2GetReal(fmi2Component c, const fmi2ValueReference vr[],
                                       size_t nvr, fmi2Real value[])
 {
-    bgc_fmi *m = bgc_fmi_get(c, "fmi2GetReal", BGC_FMI_VALUES, 0);
+    bgc_fmi *m = bgc_fmi_get(c, "fmi2GetReal", BGC_FMI_MASK_GetValues, 0);
     size_t i;
     if (!m)
         return fmi2Error;
@@ -618,7 +730,7 @@ BGC_FMI_EXPORT fmi2Status fmi2GetReal(fmi2Component c, const fmi2ValueReference 
 BGC_FMI_EXPORT fmi2Status fmi2SetReal(fmi2Component c, const fmi2ValueReference vr[],
                                       size_t nvr, const fmi2Real value[])
 {
-    bgc_fmi *m = bgc_fmi_get(c, "fmi2SetReal", BGC_FMI_ANY, 0);
+    bgc_fmi *m = bgc_fmi_get(c, "fmi2SetReal", BGC_FMI_MASK_SetReal, 0);
     size_t i;
     if (!m)
         return fmi2Error;
@@ -676,10 +788,11 @@ BGC_FMI_EXPORT fmi2Status fmi2SetReal(fmi2Component c, const fmi2ValueReference 
     return fmi2OK;
 }
 
-/* The FMU has no Integer, Boolean or String variables: only empty requests succeed. */
-static fmi2Status bgc_fmi_none(fmi2Component c, const char *fn, size_t nvr)
+/* The FMU has no Integer, Boolean or String variables, and takes no input derivatives: only
+   empty requests succeed (only: bgc_fmi_get's). */
+static fmi2Status bgc_fmi_none(fmi2Component c, const char *fn, int mask, int only, size_t nvr)
 {
-    bgc_fmi *m = bgc_fmi_get(c, fn, BGC_FMI_ANY, 0);
+    bgc_fmi *m = bgc_fmi_get(c, fn, mask, only);
     if (!m)
         return fmi2Error;
     return nvr == 0 ? fmi2OK : bgc_fmi_refuse(m, fn, "the FMU has no variables of this type");
@@ -690,7 +803,7 @@ BGC_FMI_EXPORT fmi2Status fmi2GetInteger(fmi2Component c, const fmi2ValueReferen
 {
     (void)vr;
     (void)value;
-    return bgc_fmi_none(c, "fmi2GetInteger", nvr);
+    return bgc_fmi_none(c, "fmi2GetInteger", BGC_FMI_MASK_GetValues, 0, nvr);
 }
 
 BGC_FMI_EXPORT fmi2Status fmi2GetBoolean(fmi2Component c, const fmi2ValueReference vr[],
@@ -698,7 +811,7 @@ BGC_FMI_EXPORT fmi2Status fmi2GetBoolean(fmi2Component c, const fmi2ValueReferen
 {
     (void)vr;
     (void)value;
-    return bgc_fmi_none(c, "fmi2GetBoolean", nvr);
+    return bgc_fmi_none(c, "fmi2GetBoolean", BGC_FMI_MASK_GetValues, 0, nvr);
 }
 
 BGC_FMI_EXPORT fmi2Status fmi2GetString(fmi2Component c, const fmi2ValueReference vr[],
@@ -706,7 +819,7 @@ BGC_FMI_EXPORT fmi2Status fmi2GetString(fmi2Component c, const fmi2ValueReferenc
 {
     (void)vr;
     (void)value;
-    return bgc_fmi_none(c, "fmi2GetString", nvr);
+    return bgc_fmi_none(c, "fmi2GetString", BGC_FMI_MASK_GetValues, 0, nvr);
 }
 
 BGC_FMI_EXPORT fmi2Status fmi2SetInteger(fmi2Component c, const fmi2ValueReference vr[],
@@ -714,7 +827,7 @@ BGC_FMI_EXPORT fmi2Status fmi2SetInteger(fmi2Component c, const fmi2ValueReferen
 {
     (void)vr;
     (void)value;
-    return bgc_fmi_none(c, "fmi2SetInteger", nvr);
+    return bgc_fmi_none(c, "fmi2SetInteger", BGC_FMI_MASK_SetOther, 0, nvr);
 }
 
 BGC_FMI_EXPORT fmi2Status fmi2SetBoolean(fmi2Component c, const fmi2ValueReference vr[],
@@ -722,7 +835,7 @@ BGC_FMI_EXPORT fmi2Status fmi2SetBoolean(fmi2Component c, const fmi2ValueReferen
 {
     (void)vr;
     (void)value;
-    return bgc_fmi_none(c, "fmi2SetBoolean", nvr);
+    return bgc_fmi_none(c, "fmi2SetBoolean", BGC_FMI_MASK_SetOther, 0, nvr);
 }
 
 BGC_FMI_EXPORT fmi2Status fmi2SetString(fmi2Component c, const fmi2ValueReference vr[],
@@ -730,7 +843,7 @@ BGC_FMI_EXPORT fmi2Status fmi2SetString(fmi2Component c, const fmi2ValueReferenc
 {
     (void)vr;
     (void)value;
-    return bgc_fmi_none(c, "fmi2SetString", nvr);
+    return bgc_fmi_none(c, "fmi2SetString", BGC_FMI_MASK_SetOther, 0, nvr);
 }
 
 /* ------------------------------------------------------------- FMU states --- */
@@ -825,18 +938,16 @@ static int bgc_fmi_saved_ok(const bgc_fmi_saved *s, int type, const char **why)
         *why = "not a state of this FMU";
     else if (s->type != type)
         *why = "a state of the other FMU type (Model Exchange / Co-Simulation)";
-    else if (s->phase == BGC_FMI_FAILED)
-        *why = "a state after an error";
+    else if (s->phase < BGC_FMI_INSTANTIATED || s->phase > BGC_FMI_ERROR)
+        *why = "not a state of this FMU (its state machine's state)";
     else
         return 1;
     return 0;
 }
 
-#define BGC_FMI_SAVABLE (BGC_FMI_ANY & ~(1 << BGC_FMI_FAILED))
-
 BGC_FMI_EXPORT fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate *FMUstate)
 {
-    bgc_fmi *m = bgc_fmi_get(c, "fmi2GetFMUstate", BGC_FMI_SAVABLE, 0);
+    bgc_fmi *m = bgc_fmi_get(c, "fmi2GetFMUstate", BGC_FMI_MASK_FMUstate, 0);
     bgc_fmi_saved *s;
     if (!m)
         return fmi2Error;
@@ -856,7 +967,7 @@ BGC_FMI_EXPORT fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate *FMUstat
 
 BGC_FMI_EXPORT fmi2Status fmi2SetFMUstate(fmi2Component c, fmi2FMUstate FMUstate)
 {
-    bgc_fmi *m = bgc_fmi_get(c, "fmi2SetFMUstate", BGC_FMI_ANY, 0);
+    bgc_fmi *m = bgc_fmi_get(c, "fmi2SetFMUstate", BGC_FMI_MASK_FMUstate, 0);
     const char *why = NULL;
     if (!m)
         return fmi2Error;
@@ -870,7 +981,7 @@ BGC_FMI_EXPORT fmi2Status fmi2SetFMUstate(fmi2Component c, fmi2FMUstate FMUstate
 
 BGC_FMI_EXPORT fmi2Status fmi2FreeFMUstate(fmi2Component c, fmi2FMUstate *FMUstate)
 {
-    bgc_fmi *m = bgc_fmi_get(c, "fmi2FreeFMUstate", BGC_FMI_ANY, 0);
+    bgc_fmi *m = bgc_fmi_get(c, "fmi2FreeFMUstate", BGC_FMI_MASK_FMUstate, 0);
     if (!m)
         return fmi2Error;
     if (FMUstate) {
@@ -883,7 +994,7 @@ BGC_FMI_EXPORT fmi2Status fmi2FreeFMUstate(fmi2Component c, fmi2FMUstate *FMUsta
 BGC_FMI_EXPORT fmi2Status fmi2SerializedFMUstateSize(fmi2Component c, fmi2FMUstate FMUstate,
                                                      size_t *size)
 {
-    bgc_fmi *m = bgc_fmi_get(c, "fmi2SerializedFMUstateSize", BGC_FMI_ANY, 0);
+    bgc_fmi *m = bgc_fmi_get(c, "fmi2SerializedFMUstateSize", BGC_FMI_MASK_FMUstate, 0);
     if (!m)
         return fmi2Error;
     if (!FMUstate || !size)
@@ -895,7 +1006,7 @@ BGC_FMI_EXPORT fmi2Status fmi2SerializedFMUstateSize(fmi2Component c, fmi2FMUsta
 BGC_FMI_EXPORT fmi2Status fmi2SerializeFMUstate(fmi2Component c, fmi2FMUstate FMUstate,
                                                 fmi2Byte serializedState[], size_t size)
 {
-    bgc_fmi *m = bgc_fmi_get(c, "fmi2SerializeFMUstate", BGC_FMI_ANY, 0);
+    bgc_fmi *m = bgc_fmi_get(c, "fmi2SerializeFMUstate", BGC_FMI_MASK_FMUstate, 0);
     if (!m)
         return fmi2Error;
     if (!FMUstate || !serializedState)
@@ -911,7 +1022,7 @@ BGC_FMI_EXPORT fmi2Status fmi2DeSerializeFMUstate(fmi2Component c,
                                                   const fmi2Byte serializedState[], size_t size,
                                                   fmi2FMUstate *FMUstate)
 {
-    bgc_fmi *m = bgc_fmi_get(c, "fmi2DeSerializeFMUstate", BGC_FMI_ANY, 0);
+    bgc_fmi *m = bgc_fmi_get(c, "fmi2DeSerializeFMUstate", BGC_FMI_MASK_FMUstate, 0);
     bgc_fmi_saved *s;
     const char *why = NULL;
     if (!m)
@@ -944,11 +1055,12 @@ BGC_FMI_EXPORT fmi2Status fmi2GetDirectionalDerivative(fmi2Component c,
                                                        fmi2Real dvUnknown[])
 {
     static const char fn[] = "fmi2GetDirectionalDerivative";
-    bgc_fmi *m = bgc_fmi_get(c, fn, BGC_FMI_RUNNING | (1 << BGC_FMI_TERMINATED), 0);
+    bgc_fmi *m = bgc_fmi_get(c, fn, BGC_FMI_MASK_GetDirectionalDerivative, 1);
     int need_dx = 0, need_y = 0, k;
     size_t i;
     if (!m)
         return fmi2Error;
+    bgc_fmi_refresh(m);
     if ((nKnown > 0 && (!vKnown_ref || !dvKnown))
         || (nUnknown > 0 && (!vUnknown_ref || !dvUnknown)))
         return bgc_fmi_refuse(m, fn, "no array given");
@@ -996,8 +1108,7 @@ BGC_FMI_EXPORT fmi2Status fmi2GetDirectionalDerivative(fmi2Component c,
 
 BGC_FMI_EXPORT fmi2Status fmi2EnterEventMode(fmi2Component c)
 {
-    bgc_fmi *m = bgc_fmi_get(c, "fmi2EnterEventMode",
-                             (1 << BGC_FMI_EVENT) | (1 << BGC_FMI_CONTINUOUS), 1);
+    bgc_fmi *m = bgc_fmi_get(c, "fmi2EnterEventMode", BGC_FMI_MASK_EnterEventMode, 1);
     if (!m)
         return fmi2Error;
     m->phase = BGC_FMI_EVENT;
@@ -1008,7 +1119,7 @@ BGC_FMI_EXPORT fmi2Status fmi2EnterEventMode(fmi2Component c)
 BGC_FMI_EXPORT fmi2Status fmi2NewDiscreteStates(fmi2Component c, fmi2EventInfo *eventInfo)
 {
     static const char fn[] = "fmi2NewDiscreteStates";
-    bgc_fmi *m = bgc_fmi_get(c, fn, 1 << BGC_FMI_EVENT, 1);
+    bgc_fmi *m = bgc_fmi_get(c, fn, BGC_FMI_MASK_NewDiscreteStates, 1);
     double t_next;
     int changed;
     if (!m)
@@ -1030,7 +1141,8 @@ BGC_FMI_EXPORT fmi2Status fmi2NewDiscreteStates(fmi2Component c, fmi2EventInfo *
 
 BGC_FMI_EXPORT fmi2Status fmi2EnterContinuousTimeMode(fmi2Component c)
 {
-    bgc_fmi *m = bgc_fmi_get(c, "fmi2EnterContinuousTimeMode", 1 << BGC_FMI_EVENT, 1);
+    bgc_fmi *m = bgc_fmi_get(c, "fmi2EnterContinuousTimeMode",
+                             BGC_FMI_MASK_EnterContinuousTimeMode, 1);
     if (!m)
         return fmi2Error;
     m->phase = BGC_FMI_CONTINUOUS;
@@ -1042,7 +1154,8 @@ BGC_FMI_EXPORT fmi2Status fmi2CompletedIntegratorStep(fmi2Component c,
                                                       fmi2Boolean *enterEventMode,
                                                       fmi2Boolean *terminateSimulation)
 {
-    bgc_fmi *m = bgc_fmi_get(c, "fmi2CompletedIntegratorStep", 1 << BGC_FMI_CONTINUOUS, 1);
+    bgc_fmi *m = bgc_fmi_get(c, "fmi2CompletedIntegratorStep",
+                             BGC_FMI_MASK_CompletedIntegratorStep, 1);
     int k, missed = 0;
     (void)noSetFMUStatePriorToCurrentPoint;
     if (!m)
@@ -1060,8 +1173,7 @@ BGC_FMI_EXPORT fmi2Status fmi2CompletedIntegratorStep(fmi2Component c,
 
 BGC_FMI_EXPORT fmi2Status fmi2SetTime(fmi2Component c, fmi2Real time)
 {
-    bgc_fmi *m = bgc_fmi_get(c, "fmi2SetTime",
-                             (1 << BGC_FMI_EVENT) | (1 << BGC_FMI_CONTINUOUS), 1);
+    bgc_fmi *m = bgc_fmi_get(c, "fmi2SetTime", BGC_FMI_MASK_SetTime, 1);
     if (!m)
         return fmi2Error;
     if (!isfinite(time))
@@ -1092,7 +1204,7 @@ static bgc_fmi *bgc_fmi_states(fmi2Component c, const char *fn, int mask, const 
 BGC_FMI_EXPORT fmi2Status fmi2SetContinuousStates(fmi2Component c, const fmi2Real x[], size_t nx)
 {
     bgc_fmi *m = bgc_fmi_states(c, "fmi2SetContinuousStates",
-                                (1 << BGC_FMI_EVENT) | (1 << BGC_FMI_CONTINUOUS), x, nx);
+                                BGC_FMI_MASK_SetContinuousStates, x, nx);
     size_t i;
     if (!m)
         return fmi2Error;
@@ -1104,7 +1216,8 @@ BGC_FMI_EXPORT fmi2Status fmi2SetContinuousStates(fmi2Component c, const fmi2Rea
 
 BGC_FMI_EXPORT fmi2Status fmi2GetDerivatives(fmi2Component c, fmi2Real derivatives[], size_t nx)
 {
-    bgc_fmi *m = bgc_fmi_states(c, "fmi2GetDerivatives", BGC_FMI_VALUES, derivatives, nx);
+    bgc_fmi *m = bgc_fmi_states(c, "fmi2GetDerivatives", BGC_FMI_MASK_GetDerivatives,
+                                derivatives, nx);
     size_t i;
     if (!m)
         return fmi2Error;
@@ -1120,7 +1233,7 @@ BGC_FMI_EXPORT fmi2Status fmi2GetEventIndicators(fmi2Component c, fmi2Real event
                                                  size_t ni)
 {
     static const char fn[] = "fmi2GetEventIndicators";
-    bgc_fmi *m = bgc_fmi_get(c, fn, BGC_FMI_VALUES, 1);
+    bgc_fmi *m = bgc_fmi_get(c, fn, BGC_FMI_MASK_GetEventIndicators, 1);
     int k;
     if (!m)
         return fmi2Error;
@@ -1141,7 +1254,8 @@ BGC_FMI_EXPORT fmi2Status fmi2GetEventIndicators(fmi2Component c, fmi2Real event
 
 BGC_FMI_EXPORT fmi2Status fmi2GetContinuousStates(fmi2Component c, fmi2Real x[], size_t nx)
 {
-    bgc_fmi *m = bgc_fmi_states(c, "fmi2GetContinuousStates", BGC_FMI_VALUES, x, nx);
+    bgc_fmi *m = bgc_fmi_states(c, "fmi2GetContinuousStates", BGC_FMI_MASK_GetContinuousStates,
+                                x, nx);
     size_t i;
     if (!m)
         return fmi2Error;
@@ -1154,8 +1268,8 @@ BGC_FMI_EXPORT fmi2Status fmi2GetContinuousStates(fmi2Component c, fmi2Real x[],
 BGC_FMI_EXPORT fmi2Status fmi2GetNominalsOfContinuousStates(fmi2Component c, fmi2Real x_nominal[],
                                                             size_t nx)
 {
-    bgc_fmi *m = bgc_fmi_states(c, "fmi2GetNominalsOfContinuousStates", BGC_FMI_ANY, x_nominal,
-                                nx);
+    bgc_fmi *m = bgc_fmi_states(c, "fmi2GetNominalsOfContinuousStates",
+                                BGC_FMI_MASK_GetNominalsOfContinuousStates, x_nominal, nx);
     size_t i;
     if (!m)
         return fmi2Error;
@@ -1183,7 +1297,7 @@ BGC_FMI_EXPORT fmi2Status fmi2DoStep(fmi2Component c, fmi2Real currentCommunicat
                                      fmi2Boolean noSetFMUStatePriorToCurrentPoint)
 {
     static const char fn[] = "fmi2DoStep";
-    bgc_fmi *m = bgc_fmi_get(c, fn, 1 << BGC_FMI_STEP, 2);
+    bgc_fmi *m = bgc_fmi_get(c, fn, BGC_FMI_MASK_DoStep, 2);
     const bgc_method *method;
     bgc_settings s;
     char msg[512];
@@ -1221,7 +1335,7 @@ BGC_FMI_EXPORT fmi2Status fmi2DoStep(fmi2Component c, fmi2Real currentCommunicat
     m->dx_ok = 0;
     if (rc) {
         m->y_ok = 0;
-        m->phase = BGC_FMI_FAILED;
+        m->phase = BGC_FMI_ERROR;
         bgc_fmi_log(m, fmi2Error, "%s: %s", fn, msg);
         return fmi2Error;
     }
@@ -1232,8 +1346,9 @@ BGC_FMI_EXPORT fmi2Status fmi2DoStep(fmi2Component c, fmi2Real currentCommunicat
 
 BGC_FMI_EXPORT fmi2Status fmi2CancelStep(fmi2Component c)
 {
-    bgc_fmi *m = bgc_fmi_get(c, "fmi2CancelStep", BGC_FMI_ANY, 2);
-    return m ? bgc_fmi_refuse(m, "fmi2CancelStep", "fmi2DoStep never runs asynchronously")
+    bgc_fmi *m = bgc_fmi_get(c, "fmi2CancelStep", BGC_FMI_LIVE, 2);
+    return m ? bgc_fmi_refuse(m, "fmi2CancelStep", "no step in progress (fmi2DoStep never "
+                              "runs asynchronously)")
              : fmi2Error;
 }
 
@@ -1245,14 +1360,16 @@ BGC_FMI_EXPORT fmi2Status fmi2SetRealInputDerivatives(fmi2Component c,
     (void)vr;
     (void)order;
     (void)value;
-    return bgc_fmi_none(c, "fmi2SetRealInputDerivatives", nvr);
+    return bgc_fmi_none(c, "fmi2SetRealInputDerivatives",
+                        BGC_FMI_MASK_SetRealInputDerivatives, 2, nvr);
 }
 
 BGC_FMI_EXPORT fmi2Status fmi2GetRealOutputDerivatives(fmi2Component c,
                                                        const fmi2ValueReference vr[], size_t nvr,
                                                        const fmi2Integer order[], fmi2Real value[])
 {
-    bgc_fmi *m = bgc_fmi_get(c, "fmi2GetRealOutputDerivatives", BGC_FMI_ANY, 2);
+    bgc_fmi *m = bgc_fmi_get(c, "fmi2GetRealOutputDerivatives",
+                             BGC_FMI_MASK_GetRealOutputDerivatives, 2);
     (void)vr;
     (void)order;
     (void)value;
@@ -1267,7 +1384,7 @@ BGC_FMI_EXPORT fmi2Status fmi2GetRealOutputDerivatives(fmi2Component c,
 /* A status the FMU does not give: fmi2Discard, logged (why: what it gives instead). */
 static fmi2Status bgc_fmi_no_status(fmi2Component c, const char *fn, const char *why)
 {
-    bgc_fmi *m = bgc_fmi_get(c, fn, BGC_FMI_ANY, 2);
+    bgc_fmi *m = bgc_fmi_get(c, fn, BGC_FMI_MASK_GetStatus, 2);
     if (!m)
         return fmi2Error;
     bgc_fmi_log(m, fmi2Discard, "%s: %s", fn, why);
@@ -1286,7 +1403,7 @@ BGC_FMI_EXPORT fmi2Status fmi2GetStatus(fmi2Component c, const fmi2StatusKind s,
 BGC_FMI_EXPORT fmi2Status fmi2GetRealStatus(fmi2Component c, const fmi2StatusKind s,
                                             fmi2Real *value)
 {
-    bgc_fmi *m = bgc_fmi_get(c, "fmi2GetRealStatus", BGC_FMI_ANY, 2);
+    bgc_fmi *m = bgc_fmi_get(c, "fmi2GetRealStatus", BGC_FMI_MASK_GetStatus, 2);
     if (!m)
         return fmi2Error;
     if (s != fmi2LastSuccessfulTime || !value) {
@@ -1308,7 +1425,7 @@ BGC_FMI_EXPORT fmi2Status fmi2GetIntegerStatus(fmi2Component c, const fmi2Status
 BGC_FMI_EXPORT fmi2Status fmi2GetBooleanStatus(fmi2Component c, const fmi2StatusKind s,
                                                fmi2Boolean *value)
 {
-    bgc_fmi *m = bgc_fmi_get(c, "fmi2GetBooleanStatus", BGC_FMI_ANY, 2);
+    bgc_fmi *m = bgc_fmi_get(c, "fmi2GetBooleanStatus", BGC_FMI_MASK_GetStatus, 2);
     if (!m)
         return fmi2Error;
     if (s != fmi2Terminated || !value) {
