@@ -372,6 +372,36 @@ def test_declared_units_reach_the_variables(tmp_path):
     assert validate_fmu(str(tmp_path / "units.fmu")) == []
 
 
+def test_a_saved_state_holds_the_inputs(tmp_path):
+    """An input set before fmi2GetFMUstate is the input's value again after fmi2SetFMUstate
+    (and after its bytes are read back), in both FMU types: it was left as last set."""
+    path = tmp_path / "units.fmu"
+    path.write_bytes(fmu.build_fmu(api.build(bgc.load("units.bg", UNITS), "run")))
+    md = fmpy.read_model_description(str(path))
+    (push,) = [v.valueReference for v in md.modelVariables if v.name == "push"]
+    unzip = fmpy.extract(str(path))
+    for cls, ident in ((FMU2Model, md.modelExchange), (FMU2Slave, md.coSimulation)):
+        instance = cls(guid=md.guid, unzipDirectory=unzip,
+                       modelIdentifier=ident.modelIdentifier, instanceName="in")
+        try:
+            instance.instantiate()
+            instance.setupExperiment(startTime=0.0)
+            instance.enterInitializationMode()
+            instance.exitInitializationMode()
+            instance.setReal([push], [2.0])
+            state = instance.getFMUState()
+            blob = instance.serializeFMUState(state)
+            instance.setReal([push], [5.0])
+            instance.setFMUState(state)
+            assert instance.getReal([push]) == [2.0]
+            instance.setReal([push], [5.0])
+            instance.setFMUState(instance.deserializeFMUState(blob))
+            assert instance.getReal([push]) == [2.0]
+        finally:
+            instance.fmi2FreeInstance(instance.component)
+    shutil.rmtree(unzip, ignore_errors=True)
+
+
 def test_command_line_errors(tmp_path):
     done = run_bgc("compile", ROOT / "models" / "rlc.bg", "--target", "fmu")
     assert done.returncode == 2 and "-o NAME.fmu" in done.stderr

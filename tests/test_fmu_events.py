@@ -369,6 +369,149 @@ def test_an_event_iteration_that_does_not_settle_fails_with_a_message(tmp_path):
         assert result["seen"].get(f"{kind} error illegal", 0) > 0
 
 
+FRICTION = """model fr "dry friction that slides with far more force than it sticks with"
+v : 1
+b : I(1)
+w : MSe(-9)
+fr : Fr(9e15, 1)
+v -> b
+w -> v
+v -> fr
+"""
+
+
+def test_chattering_stops_model_exchange_under_fmpy(tmp_path):
+    """Fr(9e15, 1) sticks and breaks away ever faster (bgc simulate and the FMU's
+    Co-Simulation stop it as chattering).  FMPy's Model Exchange run of its FMU (CVODE
+    stopping at each event) stops at the 1000th of its integrator steps in a row each cut
+    short by an event (the driver's bound, docs/cli.md --max-steps), with
+    fmi2NewDiscreteStates' error naming the conditions that keep changing; it ran without
+    end (FMPy's timeout would end it without an error)."""
+    path = tmp_path / "fr.fmu"
+    path.write_bytes(fmu.build_fmu(build(FRICTION, None)))
+    log = []
+    with pytest.raises(Exception, match="fmi2NewDiscreteStates failed with status 3"):
+        fmpy.simulate_fmu(str(path), fmi_type="ModelExchange", stop_time=0.05, timeout=120,
+                          logger=lambda *a: log.append(a))
+    (message,) = [a[4].decode() for a in log if a[2] == 3]
+    assert message.startswith("fmi2NewDiscreteStates: at t = "), message
+    assert message.endswith(": chattering: 1000 integrator steps in a row, each cut short by an "
+                            "event ('fr: stops (f reverses)', 'fr: breaks away (|e| > Fs)', "
+                            "'fr.stick' and 'fr.dir' keep changing: a sliding mode or a Zeno "
+                            "model?)"), message
+
+
+_RAW = {}  # FMPy's logger proxy keeps one logger for the process: one for every Raw
+
+
+def _raw_callbacks():
+    """The callbacks of every Raw instance: their log lines (instance, status, message)."""
+    if not _RAW:
+        from fmpy.fmi2 import fmi2CallbackFunctions, fmi2CallbackLoggerTYPE
+        from fmpy.logging import addLoggerProxy
+        _RAW["log"] = []
+        _RAW["callbacks"] = callbacks = fmi2CallbackFunctions()
+        callbacks.logger = fmi2CallbackLoggerTYPE(
+            lambda env, name, status, cat, msg: _RAW["log"].append(
+                (name.decode(), status, msg.decode())))
+        addLoggerProxy(ctypes.byref(callbacks))
+    return _RAW["callbacks"]
+
+
+class Raw:
+    """An FMU's binary through ctypes alone (FMPy's wrappers cost more than its calls): a
+    Model Exchange instance, initialised and in continuous-time mode."""
+
+    def __init__(self, path, folder):
+        self.fmu = fuzz_fmu.extract(path, folder)
+        self.name = Path(folder).name
+        self.lib = lib = ctypes.CDLL(self.fmu.binary)
+        lib.fmi2Instantiate.restype = ctypes.c_void_p
+        lib.fmi2SetTime.argtypes = [ctypes.c_void_p, ctypes.c_double]
+        self.c = ctypes.c_void_p(lib.fmi2Instantiate(self.name.encode(), 0,
+                                                     self.fmu.guid.encode(), None,
+                                                     ctypes.byref(_raw_callbacks()), 0, 0))
+        self.info = (ctypes.c_char * 64)()
+        self.flag = ctypes.c_int()
+        for status in (lib.fmi2EnterInitializationMode(self.c),
+                       lib.fmi2ExitInitializationMode(self.c),
+                       lib.fmi2NewDiscreteStates(self.c, self.info),
+                       lib.fmi2EnterContinuousTimeMode(self.c)):
+            assert status == 0, self.errors()
+
+    def errors(self):
+        """The errors this instance logged."""
+        return [m for name, s, m in _RAW["log"] if name == self.name and s == 3]
+
+    def step(self, t):
+        """An integrator step completed at t."""
+        self.lib.fmi2SetTime(self.c, t)
+        return self.lib.fmi2CompletedIntegratorStep(self.c, 1, ctypes.byref(self.flag),
+                                                    ctypes.byref(self.flag))
+
+    def event(self, t, x=None):
+        """An event at t (the states x there, if given): fmi2NewDiscreteStates' status."""
+        self.lib.fmi2SetTime(self.c, t)
+        if x is not None:
+            self.lib.fmi2SetContinuousStates(self.c, (ctypes.c_double * len(x))(*x), len(x))
+        self.lib.fmi2EnterEventMode(self.c)
+        status = self.lib.fmi2NewDiscreteStates(self.c, self.info)
+        if status == 0:
+            self.lib.fmi2EnterContinuousTimeMode(self.c)
+        return status
+
+    def close(self):
+        self.lib.fmi2FreeInstance(self.c)
+
+
+def test_model_exchange_bounds_the_events_as_the_driver_does(built, tmp_path):
+    """The driver's bounds (docs/hybrid.md), on the events a Model Exchange environment
+    brings (the ball: states b.p, x; the relation x < 0): 100 events in a row at one instant
+    are allowed, the 101st fails; 1000 state events in a row, each ending the first
+    integrator step since the one before (every step cut short), fail, and 1500 do not when
+    a step ends before each; and the events since the scene's last output time (2, of its
+    grid of 0.01) are bounded by the step budget, 100 000 (docs/cli.md)."""
+    path = built["ball"][0]
+    same = Raw(path, tmp_path / "same")
+    try:
+        assert all(same.event(0.25) == 0 for _ in range(100))
+        assert same.event(0.25) == 3
+        (message,) = same.errors()
+        assert message.startswith("fmi2NewDiscreteStates: at t = 0.25: chattering: 100 events "
+                                  "in a row, each within 1e-12 relative of the one before ("), \
+            message
+        assert same.event(0.25) == 3 and same.step(0.3) == 3  # the error state
+    finally:
+        same.close()
+    cut = Raw(path, tmp_path / "cut")
+    free = Raw(path, tmp_path / "free")
+    try:
+        flips = [[1.0, -0.01 if k % 2 else 0.01] for k in range(1, 1501)]  # x < 0, or not
+        for k, x in enumerate(flips[:999], 1):
+            assert cut.step(k * 1e-3) == 0 and cut.event(k * 1e-3, x) == 0
+        assert cut.step(1.0) == 0 and cut.event(1.0, flips[999]) == 3
+        (message,) = cut.errors()
+        assert message == "fmi2NewDiscreteStates: at t = 1: chattering: 1000 integrator steps " \
+            "in a row, each cut short by an event ('x < 0' keeps changing: a sliding mode or " \
+            "a Zeno model?)"
+        for k, x in enumerate(flips, 1):
+            assert free.step(k * 1e-3 - 5e-4) == 0 and free.step(k * 1e-3) == 0
+            assert free.event(k * 1e-3, x) == 0
+        k = 0
+        while True:  # (then each 1e-8 after the one before, a step between)
+            k += 1
+            if free.step(2.0 + (k - 0.5) * 1e-8) != 0 or free.event(2.0 + k * 1e-8) != 0:
+                break
+        assert k == 100001
+        (message,) = free.errors()
+        assert message == f"fmi2NewDiscreteStates: at t = {2.0 + k * 1e-8:.17g}: chattering: " \
+            "100000 events since the scene's output time 2 (the state keeps changing: a Zeno " \
+            "model?)"  # (as the driver says it when no discrete value changes)
+    finally:
+        cut.close()
+        free.close()
+
+
 def test_the_rectifier_with_an_ideal_diode_as_an_fmu(tmp_path):
     """The half-wave rectifier (an ideal diode: its modes are discrete values, its switching
     state relations): FMPy validates its FMU, and FMPy's runs of it, Model Exchange with its

@@ -40,8 +40,14 @@
    changes (newDiscreteStatesNeeded is never set), says whether it changed the states, and
    gives the next time event; fmi2CompletedIntegratorStep asks for event mode when a state
    relation's value differs from its frozen one (an event the environment did not locate, at
-   the step's end rather than never).  Co-Simulation: fmi2DoStep's run locates and handles the
-   events inside the step, as bgc's own runs do; the discrete values go on from step to step.
+   the step's end rather than never).  The events the environment brings are bounded as the
+   runtime's driver bounds its own (bgc_handle_event, bgc_fmi_count_event below): events in a
+   row each within the time's resolution of the one before, state events in a row each ending
+   the environment's first integrator step since the one before (every step cut short by an
+   event), the events since the scene's last output time; past a bound fmi2NewDiscreteStates
+   fails with the runtime's "chattering" message, so that the environment stops.
+   Co-Simulation: fmi2DoStep's run locates and handles the events inside the step, as bgc's
+   own runs do; the discrete values go on from step to step.
 
    The life cycle is FMI 2.0's state machine (its tables of the functions each state allows,
    sections 3.2.3 and 4.2.4; the masks BGC_FMI_MASK_* below): instantiated, initialization
@@ -148,6 +154,21 @@ enum {
 #define BGC_FMI_VR_INPUTS (BGC_FMI_VR_DISCRETE + (fmi2ValueReference)BGC_FMI_NUM_DISCRETE_VARS)
 #define BGC_FMI_VR_TIME (BGC_FMI_VR_INPUTS + (fmi2ValueReference)BGC_FMI_NUM_INPUTS)
 
+/* Model Exchange's events, counted as the runtime's driver counts its own (bgc_run): an
+   event mode entered from continuous-time mode, not yet counted; the last event's time and
+   the events in a row within the time's resolution of the one before; the state events in a
+   row, each ending the first integrator step since the one before; the first step completed
+   since the last event (INFINITY: none); the scene's output time (its index) the count of
+   events since it began at, and that count; the event iteration's passes so far, the pass
+   that last changed each discrete value, and the passes where those chains began (for the
+   chattering message's names). */
+typedef struct bgc_fmi_events {
+    int pending;
+    long chain, sliding, since_out;
+    double t_event, t_step, kout;
+    double passes, chain_from, sliding_from, out_from, last[BGC_DIM(BGC_NUM_DISCRETE)];
+} bgc_fmi_events;
+
 typedef struct bgc_fmi {
     fmi2Type type;
     int phase;
@@ -160,6 +181,7 @@ typedef struct bgc_fmi {
     int fresh;                          /* p (and, before initialisation ends, x) are current */
     bgc_work *w;
     double t;
+    double t_start;                     /* the start time (fmi2SetupExperiment's) */
     double rtol;                        /* Co-Simulation: the solver's (the scene's, or the
                                            tolerance of fmi2SetupExperiment) */
     double x[BGC_DIM(BGC_NUM_STATES)];
@@ -175,6 +197,7 @@ typedef struct bgc_fmi {
                                            (the first fmi2NewDiscreteStates says so) */
     double g[BGC_DIM(BGC_NUM_INDICATORS)];
     double ev[BGC_DIM(BGC_NUM_INDICATORS + BGC_EV_SIZE)]; /* the event iteration's scratch */
+    bgc_fmi_events e;                   /* Model Exchange's events, counted */
     /* the inputs: each a series of one sample once set (before: none, its default) */
     bgc_input_series in[BGC_DIM(BGC_FMI_NUM_INPUTS)];
     double in_t[BGC_DIM(BGC_FMI_NUM_INPUTS)], in_u[BGC_DIM(BGC_FMI_NUM_INPUTS)];
@@ -316,10 +339,18 @@ static void bgc_fmi_start(bgc_fmi *m)
     memset(&m->st, 0, sizeof m->st);
     m->phase = BGC_FMI_INSTANTIATED;
     m->fresh = 0;
-    m->t = BGC_SCENE_T0;
+    m->t = m->t_start = BGC_SCENE_T0;
     m->rtol = BGC_SCENE_RTOL;
     m->stiff = 0;
     m->x_changed = 0;
+    m->e.pending = 0;
+    m->e.t_event = -INFINITY;
+    m->e.t_step = INFINITY;
+    m->e.chain = m->e.sliding = m->e.since_out = 0;
+    m->e.kout = -1.0;
+    m->e.passes = m->e.chain_from = m->e.sliding_from = m->e.out_from = 0.0;
+    for (j = 0; j < BGC_NUM_DISCRETE; j++)
+        m->e.last[j] = -1.0;
     m->w->rtol = BGC_SCENE_RTOL;
     m->w->atol = BGC_SCENE_ATOL;
     for (j = 0; j < BGC_FMI_NUM_INPUTS; j++) {
@@ -371,19 +402,82 @@ static int bgc_fmi_on_event(void *ctx, double t, const char *what, const char *c
     return 0;
 }
 
+/* Model Exchange: an event at the instance's time (the event mode entered from
+   continuous-time mode), counted before its event iteration as bgc_handle_event counts the
+   driver's: in a row within the time's resolution of the one before (the first has none
+   before it); a state event (a relation whose value at (t, x), in r->g, differs from its
+   frozen one), in a row with the state events before it when no integrator step was
+   completed before its instant since the last event (the environment's step was cut short
+   by it, as the driver's steps that end at a located event are); and since the start of the
+   scene's output interval it is in (the driver's output rows). */
+static void bgc_fmi_count_event(bgc_fmi *m, const bgc_run *r)
+{
+    const double t = m->t, scale = bgc_max(fabs(t), fabs(m->e.t_event));
+    const double k = floor((t - m->t_start) / BGC_SCENE_DT);
+    if (isfinite(m->e.t_event) && t - m->e.t_event <= bgc_max(1e-12 * scale, bgc_hmin(t))) {
+        m->e.chain++;
+    } else {
+        m->e.chain = 0;
+        m->e.chain_from = m->e.passes;
+    }
+    m->e.t_event = t;
+    if (BGC_NUM_INDICATORS == 0 || bgc_changed(r, r->g) < 0) {
+        m->e.sliding = 0;
+    } else {
+        if (m->e.t_step < t) /* a step that no event cut short */
+            m->e.sliding = 0;
+        if (++m->e.sliding == 1)
+            m->e.sliding_from = m->e.passes;
+    }
+    m->e.t_step = INFINITY;
+    if (k != m->e.kout) {
+        m->e.kout = k;
+        m->e.since_out = 0;
+        m->e.out_from = m->e.passes;
+    }
+    m->e.since_out++;
+}
+
+/* The driver's bounds on events (bgc_handle_event, with its default step budget) after a
+   counted event's iteration: 0, or the chattering message in r->msg. */
+static int bgc_fmi_bound_events(bgc_fmi *m, bgc_run *r)
+{
+    const long sliding = BGC_MAX_STEPS > 100000 ? BGC_MAX_STEPS / 100 : 1000;
+    const long most = BGC_MAX_STEPS > 1000 ? BGC_MAX_STEPS : 1000;
+    char head[128];
+    if (m->e.chain >= BGC_MAX_EVENT_ITERATIONS) {
+        snprintf(head, sizeof head, "%ld events in a row, each within 1e-12 relative of the "
+                 "one before", m->e.chain);
+        return bgc_chattering(r, m->t, head, m->e.chain_from, "a Zeno model, the switching "
+                              "outruns the time's resolution");
+    }
+    if (m->e.sliding >= sliding) {
+        snprintf(head, sizeof head, "%ld integrator steps in a row, each cut short by an event",
+                 m->e.sliding);
+        return bgc_chattering(r, m->t, head, m->e.sliding_from, "a sliding mode or a Zeno model?");
+    }
+    if (m->e.since_out > most) {
+        snprintf(head, sizeof head, "%ld events since the scene's output time %.17g",
+                 m->e.since_out - 1, m->t_start + m->e.kout * BGC_SCENE_DT);
+        return bgc_chattering(r, m->t, head, m->e.out_from, "a Zeno model?");
+    }
+    return 0;
+}
+
 /* The event iteration of the runtime (bgc/runtime/drive.c) at the instance's (t, x), start:
    the run's first (the discrete values then start from the workspace's); the discrete values
-   kept in the workspace too, where Co-Simulation's runs take them from.  *x_changed: whether
-   the states changed; *t_next: the next time event (INFINITY: none).  A failure (chattering,
-   a value that is not finite) is logged, and the instance is in the error state. */
-static fmi2Status bgc_fmi_event_iteration(bgc_fmi *m, const char *fn, int start, int *x_changed,
-                                          double *t_next)
+   kept in the workspace too, where Co-Simulation's runs take them from; count: an event of
+   Model Exchange, counted and bounded (bgc_fmi_count_event).  *x_changed: whether the states
+   changed; *t_next: the next time event (INFINITY: none).  A failure (chattering, a value
+   that is not finite) is logged, and the instance is in the error state. */
+static fmi2Status bgc_fmi_event_iteration(bgc_fmi *m, const char *fn, int start, int count,
+                                          int *x_changed, double *t_next)
 {
-    double x0[BGC_DIM(BGC_NUM_STATES)], last[BGC_DIM(BGC_NUM_DISCRETE)];
+    double x0[BGC_DIM(BGC_NUM_STATES)];
     bgc_settings s;
     bgc_run r;
     char msg[512];
-    int i, rc;
+    int i, rc = 0;
     *x_changed = 0;
     *t_next = INFINITY;
     if (BGC_NUM_DISCRETE == 0)
@@ -401,13 +495,20 @@ static fmi2Status bgc_fmi_event_iteration(bgc_fmi *m, const char *fn, int start,
     r.d = BGC_FMI_D(m);
     r.g = m->g;
     r.ev = m->ev;
-    r.last = last;
-    for (i = 0; i < BGC_NUM_DISCRETE; i++)
-        last[i] = -1.0;
+    r.last = m->e.last;
+    r.passes = m->e.passes;
     memcpy(x0, m->x, sizeof x0);
     if (start)
         memcpy(r.d, m->w->d, sizeof(double) * BGC_NUM_DISCRETE);
-    rc = bgc_event_iteration(&r, m->t, m->x, start);
+    if (count && BGC_NUM_INDICATORS > 0)
+        rc = bgc_indicators(&r, m->t, m->x, r.g);
+    if (rc == 0 && count)
+        bgc_fmi_count_event(m, &r);
+    if (rc == 0)
+        rc = bgc_event_iteration(&r, m->t, m->x, start);
+    m->e.passes = r.passes;
+    if (rc == 0 && count)
+        rc = bgc_fmi_bound_events(m, &r);
     if (rc == 0)
         rc = bgc_next_time(&r, m->t, m->x);
     memcpy(m->w->d, r.d, sizeof(double) * BGC_NUM_DISCRETE);
@@ -551,7 +652,7 @@ BGC_FMI_EXPORT fmi2Status fmi2SetupExperiment(fmi2Component c, fmi2Boolean toler
         return bgc_fmi_refuse(m, "fmi2SetupExperiment", "the start time is not finite");
     if (toleranceDefined && !(tolerance > 0.0 && isfinite(tolerance)))
         return bgc_fmi_refuse(m, "fmi2SetupExperiment", "the tolerance is not positive");
-    m->t = startTime;
+    m->t = m->t_start = startTime;
     m->rtol = toleranceDefined ? tolerance : BGC_SCENE_RTOL;
     m->dx_ok = m->y_ok = 0;
     return fmi2OK;
@@ -632,7 +733,8 @@ BGC_FMI_EXPORT fmi2Status fmi2ExitInitializationMode(fmi2Component c)
         return fmi2Error;
     }
     m->dx_ok = m->y_ok = 0;
-    if (bgc_fmi_event_iteration(m, "fmi2ExitInitializationMode", 1, &m->x_changed, &t_next))
+    if (bgc_fmi_event_iteration(m, "fmi2ExitInitializationMode", 1, 0, &m->x_changed,
+                                &t_next))
         return fmi2Error;
     m->phase = m->type == fmi2ModelExchange ? BGC_FMI_EVENT : BGC_FMI_STEP;
     return fmi2OK;
@@ -849,21 +951,25 @@ BGC_FMI_EXPORT fmi2Status fmi2SetString(fmi2Component c, const fmi2ValueReferenc
 /* ------------------------------------------------------------- FMU states --- */
 
 /* A saved state: everything an instance's future depends on -- its phase, time, parameters
-   (and which were set), states and cached values, the Co-Simulation solver's step size, order
-   and counters, and the workspace (the algebraic blocks' last solutions, the starting values
-   of their Newton iterations).  Serialised as its bytes after a header that names this FMU
-   (its GUID) and the layout's size: it deserialises only into the same binary. */
+   (and which were set), states and cached values, the inputs, the Co-Simulation solver's step
+   size, order and counters, Model Exchange's counts of events, and the workspace (the
+   algebraic blocks' last solutions, the starting values of their Newton iterations).
+   Serialised as its bytes after a header that names this FMU (its GUID) and the layout's
+   size: it deserialises only into the same binary. */
 typedef struct bgc_fmi_saved {
     char magic[8];                      /* "bgcFMUs" */
     char guid[64];                      /* BGC_FMI_GUID */
     unsigned long size;                 /* sizeof(bgc_fmi_saved) */
     int type, phase, fresh, stiff, dx_ok, y_ok, x_changed, wstarted;
-    double t, rtol;
+    double t, t_start, rtol;
     bgc_params p;
     int given[BGC_DIM(BGC_NUM_PARAMS)];
     double x[BGC_DIM(BGC_NUM_STATES)], dx[BGC_DIM(BGC_NUM_STATES)];
     double y[BGC_DIM(BGC_NUM_OUTPUTS)];
     bgc_stats st;
+    bgc_fmi_events e;
+    double in_u[BGC_DIM(BGC_FMI_NUM_INPUTS)];
+    int in_n[BGC_DIM(BGC_FMI_NUM_INPUTS)];
     double wrtol, watol;
     double wv[BGC_DIM(BGC_WORK_DOUBLES)];
     int wiv[BGC_DIM(BGC_WORK_INTS)];
@@ -872,6 +978,7 @@ typedef struct bgc_fmi_saved {
 
 static void bgc_fmi_save(const bgc_fmi *m, bgc_fmi_saved *s)
 {
+    int j;
     memset(s, 0, sizeof *s);
     memcpy(s->magic, "bgcFMUs", 8);
     strncpy(s->guid, BGC_FMI_GUID, sizeof s->guid - 1);
@@ -885,6 +992,7 @@ static void bgc_fmi_save(const bgc_fmi *m, bgc_fmi_saved *s)
     s->x_changed = m->x_changed;
     s->wstarted = m->w->started;
     s->t = m->t;
+    s->t_start = m->t_start;
     s->rtol = m->rtol;
     s->p = m->p;
     memcpy(s->given, m->given, sizeof s->given);
@@ -892,6 +1000,11 @@ static void bgc_fmi_save(const bgc_fmi *m, bgc_fmi_saved *s)
     memcpy(s->dx, m->dx, sizeof s->dx);
     memcpy(s->y, m->y, sizeof s->y);
     s->st = m->st;
+    s->e = m->e;
+    for (j = 0; j < BGC_FMI_NUM_INPUTS; j++) {
+        s->in_u[j] = m->in_u[j];
+        s->in_n[j] = m->in[j].n;
+    }
     s->wrtol = m->w->rtol;
     s->watol = m->w->atol;
     memcpy(s->wv, m->w->v, sizeof s->wv);
@@ -901,6 +1014,7 @@ static void bgc_fmi_save(const bgc_fmi *m, bgc_fmi_saved *s)
 
 static void bgc_fmi_restore(bgc_fmi *m, const bgc_fmi_saved *s)
 {
+    int j;
     m->phase = s->phase;
     m->fresh = s->fresh;
     m->stiff = s->stiff;
@@ -909,6 +1023,7 @@ static void bgc_fmi_restore(bgc_fmi *m, const bgc_fmi_saved *s)
     m->x_changed = s->x_changed;
     m->w->started = s->wstarted;
     m->t = s->t;
+    m->t_start = s->t_start;
     m->rtol = s->rtol;
     m->p = s->p;
     memcpy(m->given, s->given, sizeof s->given);
@@ -916,6 +1031,11 @@ static void bgc_fmi_restore(bgc_fmi *m, const bgc_fmi_saved *s)
     memcpy(m->dx, s->dx, sizeof s->dx);
     memcpy(m->y, s->y, sizeof s->y);
     m->st = s->st;
+    m->e = s->e;
+    for (j = 0; j < BGC_FMI_NUM_INPUTS; j++) {
+        m->in_u[j] = s->in_u[j];
+        m->in[j].n = s->in_n[j] ? 1 : 0;
+    }
     m->w->rtol = s->wrtol;
     m->w->atol = s->watol;
     memcpy(m->w->v, s->wv, sizeof s->wv);
@@ -1111,23 +1231,27 @@ BGC_FMI_EXPORT fmi2Status fmi2EnterEventMode(fmi2Component c)
     bgc_fmi *m = bgc_fmi_get(c, "fmi2EnterEventMode", BGC_FMI_MASK_EnterEventMode, 1);
     if (!m)
         return fmi2Error;
+    m->e.pending |= m->phase == BGC_FMI_CONTINUOUS; /* an event (counted by the next call) */
     m->phase = BGC_FMI_EVENT;
     return fmi2OK;
 }
 
-/* The event iteration until nothing changes, all in one call. */
+/* The event iteration until nothing changes, all in one call; the first call after
+   fmi2EnterEventMode counts the event and bounds the events (bgc_fmi_count_event). */
 BGC_FMI_EXPORT fmi2Status fmi2NewDiscreteStates(fmi2Component c, fmi2EventInfo *eventInfo)
 {
     static const char fn[] = "fmi2NewDiscreteStates";
     bgc_fmi *m = bgc_fmi_get(c, fn, BGC_FMI_MASK_NewDiscreteStates, 1);
     double t_next;
-    int changed;
+    int changed, count;
     if (!m)
         return fmi2Error;
     if (!eventInfo)
         return bgc_fmi_refuse(m, fn, "no event information given");
     bgc_fmi_refresh(m);
-    if (bgc_fmi_event_iteration(m, fn, 0, &changed, &t_next))
+    count = m->e.pending;
+    m->e.pending = 0;
+    if (bgc_fmi_event_iteration(m, fn, 0, count, &changed, &t_next))
         return fmi2Error;
     eventInfo->newDiscreteStatesNeeded = fmi2False;
     eventInfo->terminateSimulation = fmi2False;
@@ -1160,6 +1284,8 @@ BGC_FMI_EXPORT fmi2Status fmi2CompletedIntegratorStep(fmi2Component c,
     (void)noSetFMUStatePriorToCurrentPoint;
     if (!m)
         return fmi2Error;
+    if (m->t < m->e.t_step) /* the first step since the last event ended here */
+        m->e.t_step = m->t;
     if (bgc_fmi_indicators(m))
         return bgc_fmi_model_failed(m, "fmi2CompletedIntegratorStep");
     for (k = 0; k < BGC_NUM_INDICATORS; k++)
