@@ -17,7 +17,11 @@ The variables, their value references as bgc/runtime/fmi2.c numbers them:
   discrete     the model's discrete variables (`discrete heat = 1`), "local", variability
                "discrete": set at events;
   inputs       the model's inputs (`input u = 0`), causality "input", variability
-               "continuous", start = the default: set with fmi2SetReal, held until set again.
+               "continuous", start = the default: set with fmi2SetReal, held until set again;
+  time         the time t, causality "independent" (FMI 2.0's independent variable, which
+               an FMU without it has implicitly): listed, so that every FMU has a variable
+               (the schema requires one; a model of no parameters, states, outputs or inputs
+               has no other) and fmi2GetReal gives the instance's time.
 A model with events has an event indicator per state relation (numberOfEventIndicators) and
 time events (fmi2NewDiscreteStates' nextEventTime); bgc/runtime/fmi2.c says how.
 Descriptions come from the model's doc strings; a unit from the declaration's `unit "..."`
@@ -78,9 +82,9 @@ class Variable:
 
     name: str
     vr: int
-    causality: str  # parameter | local | output | input
+    causality: str  # parameter | local | output | input | independent
     variability: str  # fixed | continuous | discrete
-    initial: str | None  # exact | calculated (None: an input, which has none)
+    initial: str | None  # exact | calculated (None: an input or time, which have none)
     description: str | None = None
     start: float | None = None
     unit: str | None = None
@@ -194,6 +198,9 @@ def describe(compiled) -> Description:
         slot = [k for k, (kind, name) in enumerate(zip(events.kinds, events.names))
                 if kind == "input" and name == u.name]
         input_slots.append(slot[0] if slot else -1)
+    vr_time = m + 2 * n + len(program.outputs) + len(discrete) + len(program.inputs)
+    variables.append(Variable("time", vr_time, "independent", "continuous", None,
+                              "the time t"))  # (`time` is a keyword: no model's name)
     names = [v.name for v in variables]
     if len(set(names)) != len(names):
         twice = sorted({x for x in names if names.count(x) > 1})

@@ -7,6 +7,7 @@ written out by hand; model text is escaped in the XML.  FMPy is an optional test
 import ctypes
 import shutil
 import subprocess
+import sys
 import xml.etree.ElementTree as ET
 import zipfile
 from pathlib import Path
@@ -27,6 +28,8 @@ if not backends.have_c_compiler():
     pytest.skip("FMU export builds its binary with a C compiler", allow_module_level=True)
 
 ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT / "tools"))
+import fuzz_fmu  # noqa: E402
 T_END = 2.0  # the runs compared: 200 output intervals of 0.01
 RLC = dict(V0=1.0, resistance=0.5, inductance=1.0, capacitance=0.25, q0=0.1, i0=-0.2)
 PENDULUM = dict(m=1.0, l=1.0, g=9.81, theta0=0.5, alpha=5.0, beta=5.0)  # models/pendulum.bg
@@ -364,9 +367,39 @@ def test_declared_units_reach_the_variables(tmp_path):
     units = {v.get("name"): v.find("Real").get("unit") for v in root.iter("ScalarVariable")}
     assert units == {"k": "N/m", "push": "N", "x": "m", "energy": "J", "pair[0]": "m",
                      "pair[1]": "m", "mass.p": None, "spring.q": None, "der(x)": None,
-                     "der(mass.p)": None, "der(spring.q)": None}
+                     "der(mass.p)": None, "der(spring.q)": None, "time": None}
     assert [u.get("name") for u in root.iter("Unit")] == ["N/m", "m", "J", "N"]
     assert validate_fmu(str(tmp_path / "units.fmu")) == []
+
+
+def test_a_saved_state_holds_the_inputs(tmp_path):
+    """An input set before fmi2GetFMUstate is the input's value again after fmi2SetFMUstate
+    (and after its bytes are read back), in both FMU types: it was left as last set."""
+    path = tmp_path / "units.fmu"
+    path.write_bytes(fmu.build_fmu(api.build(bgc.load("units.bg", UNITS), "run")))
+    md = fmpy.read_model_description(str(path))
+    (push,) = [v.valueReference for v in md.modelVariables if v.name == "push"]
+    unzip = fmpy.extract(str(path))
+    for cls, ident in ((FMU2Model, md.modelExchange), (FMU2Slave, md.coSimulation)):
+        instance = cls(guid=md.guid, unzipDirectory=unzip,
+                       modelIdentifier=ident.modelIdentifier, instanceName="in")
+        try:
+            instance.instantiate()
+            instance.setupExperiment(startTime=0.0)
+            instance.enterInitializationMode()
+            instance.exitInitializationMode()
+            instance.setReal([push], [2.0])
+            state = instance.getFMUState()
+            blob = instance.serializeFMUState(state)
+            instance.setReal([push], [5.0])
+            instance.setFMUState(state)
+            assert instance.getReal([push]) == [2.0]
+            instance.setReal([push], [5.0])
+            instance.setFMUState(instance.deserializeFMUState(blob))
+            assert instance.getReal([push]) == [2.0]
+        finally:
+            instance.fmi2FreeInstance(instance.component)
+    shutil.rmtree(unzip, ignore_errors=True)
 
 
 def test_command_line_errors(tmp_path):
@@ -431,4 +464,213 @@ def test_output_derivatives_through_a_newton_block(tmp_path):
         model.terminate()
     finally:
         model.freeInstance()
+        shutil.rmtree(unzip, ignore_errors=True)
+
+
+# ---------------------------------------------------------------- the life cycle
+
+OK, ERROR = 0, 3
+
+
+def _run_calls(path, tmp, calls):
+    """calls [(request, status FMI 2.0 wants)] made one by one through ctypes, in a process
+    of its own (tools/fuzz_fmu.py's, so that a crash fails the test, not the suite): each
+    answer."""
+    fmu_ = fuzz_fmu.extract(path, tmp)
+    runner = fuzz_fmu.Runner(fmu_.binary, time_limit=30)
+    answers = []
+    try:
+        for request, _ in calls:
+            request = {k: fmu_.guid if v == "GUID" else v for k, v in request.items()}
+            answers.append(runner.call(request))
+    finally:
+        runner.stop()
+    return fmu_, answers
+
+
+def _call(op, **args):
+    return {"op": op, "slot": 0, **args}
+
+
+def test_the_life_cycle_through_ctypes(built, tmp_path):
+    """The RLC's binary called through ctypes as FMI 2.0's state machines say (its tables,
+    sections 3.2.3 and 4.2.4): a call of a state that does not allow it, of the other FMU
+    type, or through a handle that is NULL (before fmi2Instantiate) or freed is fmi2Error;
+    fmi2FreeInstance twice returns (no crash); the refusals of a live instance are logged,
+    those of a freed one cannot be (its logger need not exist); a refused call changes
+    nothing, so the legal calls after it go on."""
+    p = {v.name: v.valueReference
+         for v in fmpy.read_model_description(str(built["rlc"][1])).modelVariables}
+    me = [
+        (_call("fmi2GetReal", vr=[0]), ERROR),  # before fmi2Instantiate: a NULL handle
+        (_call("fmi2Instantiate", kind="me", guid="GUID", name="me", logging=False), OK),
+        (_call("fmi2GetReal", vr=[0]), ERROR),  # instantiated: no values before initialization
+        (_call("fmi2GetDerivatives", n=2), ERROR),
+        (_call("fmi2DoStep", t=0.0, h=0.1), ERROR),  # Co-Simulation's
+        (_call("fmi2SetupExperiment", tol=None, start=0.0), OK),
+        (_call("fmi2EnterInitializationMode"), OK),
+        (_call("fmi2EnterInitializationMode"), ERROR),
+        (_call("fmi2GetReal", vr=[p["resistance"], p["cap.q"]]), OK),
+        (_call("fmi2ExitInitializationMode"), OK),
+        (_call("fmi2SetContinuousStates", n=2, values=[0.1, 0.2]), ERROR),  # event mode
+        (_call("fmi2SetReal", vr=[p["resistance"]], values=[2.0]), ERROR),  # fixed by now
+        (_call("fmi2NewDiscreteStates"), OK),
+        (_call("fmi2EnterContinuousTimeMode"), OK),
+        (_call("fmi2SetContinuousStates", n=2, values=[0.1, 0.2]), OK),
+        (_call("fmi2NewDiscreteStates"), ERROR),  # continuous-time mode
+        (_call("fmi2Terminate"), OK),
+        (_call("fmi2SetTime", t=1.0), ERROR),
+        (_call("fmi2GetReal", vr=[p["ind.p"], p["time"]]), OK),  # terminated: values
+        (_call("fmi2Terminate"), ERROR),
+        (_call("fmi2FreeInstance"), None),
+        (_call("fmi2FreeInstance"), None),  # twice
+        (_call("fmi2GetReal", vr=[0]), ERROR),
+        (_call("fmi2Reset"), ERROR),
+        (_call("fmi2SetupExperiment", tol=None, start=0.0), ERROR),
+    ]
+    cs = [
+        (_call("fmi2Instantiate", kind="cs", guid="GUID", name="cs", logging=True), OK),
+        (_call("fmi2ExitInitializationMode"), ERROR),
+        (_call("fmi2EnterInitializationMode"), OK),
+        (_call("fmi2EnterEventMode"), ERROR),  # Model Exchange's
+        (_call("fmi2ExitInitializationMode"), OK),
+        (_call("fmi2DoStep", t=0.0, h=0.125), OK),
+        (_call("fmi2DoStep", t=0.0, h=0.125), ERROR),  # not the FMU's time
+        (_call("fmi2DoStep", t=0.125, h=0.125), OK),
+        (_call("fmi2GetReal", vr=[p["time"]]), OK),
+        (_call("fmi2SetReal", vr=[p["time"]], values=[1.0]), ERROR),  # independent
+        (_call("fmi2Terminate"), OK),
+        (_call("fmi2DoStep", t=0.25, h=0.125), ERROR),  # after fmi2Terminate
+        (_call("fmi2GetRealStatus", kind=2), OK),  # fmi2LastSuccessfulTime
+        (_call("fmi2Reset"), OK),
+        (_call("fmi2GetReal", vr=[p["time"]]), ERROR),  # instantiated again
+        (_call("fmi2FreeInstance"), None),
+        (_call("fmi2FreeInstance"), None),
+        (_call("fmi2DoStep", t=0.0, h=0.125), ERROR),
+    ]
+    for kind, calls in (("me", me), ("cs", cs)):
+        _, answers = _run_calls(built["rlc"][1], tmp_path / kind, calls)
+        live = False  # (a handle of an instance, not yet freed)
+        for (request, want), got in zip(calls, answers):
+            assert got["status"] == want, (request, got)
+            live = request["op"] == "fmi2Instantiate" or live \
+                and request["op"] != "fmi2FreeInstance"
+            if want == ERROR:  # logged (errors always are), where there is a logger
+                assert got["errors"] == (1 if live else 0), (request, got)
+    assert answers[8]["values"] == [0.125 + 0.125]  # time: the communication point reached
+
+
+FMPY_LIFE = """
+import ctypes
+import sys
+from fmpy import read_model_description, extract
+from fmpy.fmi2 import FMU2Model, FMU2Slave
+path = sys.argv[1]
+md = read_model_description(path)
+unzip = extract(path)
+def fails(call, *args):
+    try:
+        call(*args)
+    except Exception as e:
+        return "status 3" in str(e)
+    return False
+model = FMU2Model(guid=md.guid, unzipDirectory=unzip,
+                  modelIdentifier=md.modelExchange.modelIdentifier, instanceName="me")
+model.instantiate()
+assert fails(model.getReal, [0])  # before initialization
+model.setupExperiment(startTime=0.0)
+model.enterInitializationMode()
+model.exitInitializationMode()
+x = (ctypes.c_double * 2)(0.1, 0.2)
+assert fails(model.setContinuousStates, x, 2)  # event mode
+model.fmi2FreeInstance(model.component)
+model.fmi2FreeInstance(model.component)  # twice: returns
+assert fails(model.getReal, [0])  # after fmi2FreeInstance
+slave = FMU2Slave(guid=md.guid, unzipDirectory=unzip,
+                  modelIdentifier=md.coSimulation.modelIdentifier, instanceName="cs")
+slave.instantiate()
+slave.setupExperiment(startTime=0.0)
+slave.enterInitializationMode()
+slave.exitInitializationMode()
+slave.doStep(0.0, 0.5)
+slave.terminate()
+assert fails(slave.doStep, 0.5, 0.5)  # after fmi2Terminate
+slave.fmi2FreeInstance(slave.component)
+slave.fmi2FreeInstance(slave.component)
+assert fails(slave.getReal, [0])
+print("done")
+"""
+
+
+def test_the_life_cycle_through_fmpy(built):
+    """FMPy's calls of the same misuses, in a process of its own: each an error (FMPy raises
+    on fmi2Error) and, on a live instance, logged; fmi2FreeInstance twice returns."""
+    done = subprocess.run([sys.executable, "-c", FMPY_LIFE, str(built["rlc"][1])],
+                          capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr
+    # FMPy's logger prints what the FMU logged: each refusal of a live instance
+    assert done.stdout.splitlines() == [
+        "[ERROR] fmi2GetReal: not allowed in the instantiated state",
+        "[ERROR] fmi2SetContinuousStates: not allowed in event mode",
+        "[ERROR] fmi2DoStep: not allowed in the terminated state", "done"]
+
+
+# ---------------------------------------------------------------- degenerate models
+
+DEGENERATE = {  # every one a valid FMU: its variables at least the time
+    "empty": "model empty\n",
+    "no_states_no_parameters": "model src\nsrc : Se(2)\nj : 1\nr : R(4)\nsrc -> j\nj -> r\n",
+    "no_states_no_outputs": NO_STATES,
+    "no_parameters": "model np\nj : 1\nm : I(1) init f = 1\nk : C(1)\nj -> m\nj -> k\n",
+    "only_parameters": "model p\nparameter a = 1\nparameter b = 2*a\n",
+    "only_a_signal": "model s\nsignal y = sin(t)\n",
+    "only_an_input": "model u\ninput u = 0\n",
+    "a_constant_output": "model c\nsignal y = 3\nscene run { outputs y }\n",
+}
+
+
+@pytest.mark.parametrize("name", list(DEGENERATE))
+def test_degenerate_models_give_valid_fmus(name, tmp_path, capsys):
+    """FMPy's validator takes the description of each (the schema wants a variable in
+    ModelVariables: an empty model had none), and fmpy.dump lists it; the time is FMI 2.0's
+    independent variable, listed last, without a start."""
+    text = DEGENERATE[name]
+    compiled = api.build(bgc.load(f"{name}.bg", text), "run" if "scene" in text else None)
+    _, xml, _ = fmu.fmu_texts(compiled)
+    (tmp_path / "modelDescription.xml").write_text(xml, encoding="utf-8")
+    assert validate_fmu(str(tmp_path)) == []
+    fmpy.dump(str(tmp_path), causalities=["independent"])
+    assert "time               independent" in capsys.readouterr().out
+    md = fmpy.read_model_description(str(tmp_path))
+    last = md.modelVariables[-1]
+    assert (last.name, last.causality, last.variability, last.start) == \
+        ("time", "independent", "continuous", None)
+    assert [v.causality for v in md.modelVariables].count("independent") == 1
+
+
+def test_an_empty_model_runs_as_an_fmu(tmp_path):
+    """The empty model's FMU (the time its only variable) runs in FMPy, both types, and its
+    time is the communication point reached."""
+    path = tmp_path / "empty.fmu"
+    path.write_bytes(fmu.build_fmu(api.build(bgc.load("empty.bg", DEGENERATE["empty"]))))
+    assert validate_fmu(str(path)) == []
+    for kind in ("ModelExchange", "CoSimulation"):
+        result = fmpy.simulate_fmu(str(path), fmi_type=kind, stop_time=0.5,
+                                   output_interval=0.125, output=["time"])
+        assert list(result["time"]) == [0.0, 0.125, 0.25, 0.375, 0.5]
+    md = fmpy.read_model_description(str(path))
+    unzip = fmpy.extract(str(path))
+    slave = FMU2Slave(guid=md.guid, unzipDirectory=unzip,
+                      modelIdentifier=md.coSimulation.modelIdentifier, instanceName="cs")
+    try:
+        slave.instantiate()
+        slave.setupExperiment(startTime=0.0)
+        slave.enterInitializationMode()
+        slave.exitInitializationMode()
+        for k in range(3):
+            slave.doStep(k * 0.1, 0.1)
+        assert slave.getReal([md.modelVariables[0].valueReference]) == [0.1 + 0.1 + 0.1]
+        slave.terminate()
+    finally:
+        slave.freeInstance()
         shutil.rmtree(unzip, ignore_errors=True)

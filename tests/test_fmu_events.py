@@ -10,6 +10,7 @@ import csv
 import math
 import shutil
 import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -25,6 +26,9 @@ from fmpy.validation import validate_fmu  # noqa: E402
 
 from test_docs import blocks  # noqa: E402
 from test_events import BALL, COUNT, LAG, bounce_times, build, lag_reference  # noqa: E402
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tools"))
+import fuzz_fmu  # noqa: E402
 
 if not backends.have_c_compiler():
     pytest.skip("FMU export builds its binary with a C compiler", allow_module_level=True)
@@ -347,7 +351,9 @@ scene run { time 0 .. 1 every 0.1; outputs x }
 
 
 def test_an_event_iteration_that_does_not_settle_fails_with_a_message(tmp_path):
-    """Both FMU types stop at the event (x = 1/2) with bgc's message in the log."""
+    """Both FMU types stop at the event (x = 1/2) with bgc's message in the log.  Random
+    sequences of FMI calls on that FMU (tools/fuzz_fmu.py) reach its error state in both
+    types, where the standard's tables allow fewer calls, and find no fault."""
     path = tmp_path / "toggle.fmu"
     path.write_bytes(fmu.build_fmu(build(TOGGLE, "run")))
     for kind, fn in (("ModelExchange", "fmi2NewDiscreteStates"), ("CoSimulation", "fmi2DoStep")):
@@ -356,6 +362,154 @@ def test_an_event_iteration_that_does_not_settle_fails_with_a_message(tmp_path):
             fmpy.simulate_fmu(str(path), fmi_type=kind, logger=lambda *a: log.append(a))
         (message,) = [a[4].decode() for a in log if a[2] == 3]  # fmi2Error
         assert message.startswith(f"{fn}: at t = 0.5") and "chattering" in message, message
+    result = fuzz_fmu.fuzz(fuzz_fmu.extract(path, tmp_path / "toggle"), 3, 60, length=30)
+    assert result["failures"] == [], result["failures"][0]["failure"]
+    for kind in ("me", "cs"):
+        assert result["seen"].get(f"{kind} error legal", 0) > 0
+        assert result["seen"].get(f"{kind} error illegal", 0) > 0
+
+
+FRICTION = """model fr "dry friction that slides with far more force than it sticks with"
+v : 1
+b : I(1)
+w : MSe(-9)
+fr : Fr(9e15, 1)
+v -> b
+w -> v
+v -> fr
+"""
+
+
+def test_chattering_stops_model_exchange_under_fmpy(tmp_path):
+    """Fr(9e15, 1) sticks and breaks away ever faster (bgc simulate and the FMU's
+    Co-Simulation stop it as chattering).  FMPy's Model Exchange run of its FMU (CVODE
+    stopping at each event) stops at the 1000th of its integrator steps in a row each cut
+    short by an event (the driver's bound, docs/cli.md --max-steps), with
+    fmi2NewDiscreteStates' error naming the conditions that keep changing; it ran without
+    end (FMPy's timeout would end it without an error)."""
+    path = tmp_path / "fr.fmu"
+    path.write_bytes(fmu.build_fmu(build(FRICTION, None)))
+    log = []
+    with pytest.raises(Exception, match="fmi2NewDiscreteStates failed with status 3"):
+        fmpy.simulate_fmu(str(path), fmi_type="ModelExchange", stop_time=0.05, timeout=120,
+                          logger=lambda *a: log.append(a))
+    (message,) = [a[4].decode() for a in log if a[2] == 3]
+    assert message.startswith("fmi2NewDiscreteStates: at t = "), message
+    assert message.endswith(": chattering: 1000 integrator steps in a row, each cut short by an "
+                            "event ('fr: stops (f reverses)', 'fr: breaks away (|e| > Fs)', "
+                            "'fr.stick' and 'fr.dir' keep changing: a sliding mode or a Zeno "
+                            "model?)"), message
+
+
+_RAW = {}  # FMPy's logger proxy keeps one logger for the process: one for every Raw
+
+
+def _raw_callbacks():
+    """The callbacks of every Raw instance: their log lines (instance, status, message)."""
+    if not _RAW:
+        from fmpy.fmi2 import fmi2CallbackFunctions, fmi2CallbackLoggerTYPE
+        from fmpy.logging import addLoggerProxy
+        _RAW["log"] = []
+        _RAW["callbacks"] = callbacks = fmi2CallbackFunctions()
+        callbacks.logger = fmi2CallbackLoggerTYPE(
+            lambda env, name, status, cat, msg: _RAW["log"].append(
+                (name.decode(), status, msg.decode())))
+        addLoggerProxy(ctypes.byref(callbacks))
+    return _RAW["callbacks"]
+
+
+class Raw:
+    """An FMU's binary through ctypes alone (FMPy's wrappers cost more than its calls): a
+    Model Exchange instance, initialised and in continuous-time mode."""
+
+    def __init__(self, path, folder):
+        self.fmu = fuzz_fmu.extract(path, folder)
+        self.name = Path(folder).name
+        self.lib = lib = ctypes.CDLL(self.fmu.binary)
+        lib.fmi2Instantiate.restype = ctypes.c_void_p
+        lib.fmi2SetTime.argtypes = [ctypes.c_void_p, ctypes.c_double]
+        self.c = ctypes.c_void_p(lib.fmi2Instantiate(self.name.encode(), 0,
+                                                     self.fmu.guid.encode(), None,
+                                                     ctypes.byref(_raw_callbacks()), 0, 0))
+        self.info = (ctypes.c_char * 64)()
+        self.flag = ctypes.c_int()
+        for status in (lib.fmi2EnterInitializationMode(self.c),
+                       lib.fmi2ExitInitializationMode(self.c),
+                       lib.fmi2NewDiscreteStates(self.c, self.info),
+                       lib.fmi2EnterContinuousTimeMode(self.c)):
+            assert status == 0, self.errors()
+
+    def errors(self):
+        """The errors this instance logged."""
+        return [m for name, s, m in _RAW["log"] if name == self.name and s == 3]
+
+    def step(self, t):
+        """An integrator step completed at t."""
+        self.lib.fmi2SetTime(self.c, t)
+        return self.lib.fmi2CompletedIntegratorStep(self.c, 1, ctypes.byref(self.flag),
+                                                    ctypes.byref(self.flag))
+
+    def event(self, t, x=None):
+        """An event at t (the states x there, if given): fmi2NewDiscreteStates' status."""
+        self.lib.fmi2SetTime(self.c, t)
+        if x is not None:
+            self.lib.fmi2SetContinuousStates(self.c, (ctypes.c_double * len(x))(*x), len(x))
+        self.lib.fmi2EnterEventMode(self.c)
+        status = self.lib.fmi2NewDiscreteStates(self.c, self.info)
+        if status == 0:
+            self.lib.fmi2EnterContinuousTimeMode(self.c)
+        return status
+
+    def close(self):
+        self.lib.fmi2FreeInstance(self.c)
+
+
+def test_model_exchange_bounds_the_events_as_the_driver_does(built, tmp_path):
+    """The driver's bounds (docs/hybrid.md), on the events a Model Exchange environment
+    brings (the ball: states b.p, x; the relation x < 0): 100 events in a row at one instant
+    are allowed, the 101st fails; 1000 state events in a row, each ending the first
+    integrator step since the one before (every step cut short), fail, and 1500 do not when
+    a step ends before each; and the events since the scene's last output time (2, of its
+    grid of 0.01) are bounded by the step budget, 100 000 (docs/cli.md)."""
+    path = built["ball"][0]
+    same = Raw(path, tmp_path / "same")
+    try:
+        assert all(same.event(0.25) == 0 for _ in range(100))
+        assert same.event(0.25) == 3
+        (message,) = same.errors()
+        assert message.startswith("fmi2NewDiscreteStates: at t = 0.25: chattering: 100 events "
+                                  "in a row, each within 1e-12 relative of the one before ("), \
+            message
+        assert same.event(0.25) == 3 and same.step(0.3) == 3  # the error state
+    finally:
+        same.close()
+    cut = Raw(path, tmp_path / "cut")
+    free = Raw(path, tmp_path / "free")
+    try:
+        flips = [[1.0, -0.01 if k % 2 else 0.01] for k in range(1, 1501)]  # x < 0, or not
+        for k, x in enumerate(flips[:999], 1):
+            assert cut.step(k * 1e-3) == 0 and cut.event(k * 1e-3, x) == 0
+        assert cut.step(1.0) == 0 and cut.event(1.0, flips[999]) == 3
+        (message,) = cut.errors()
+        assert message == "fmi2NewDiscreteStates: at t = 1: chattering: 1000 integrator steps " \
+            "in a row, each cut short by an event ('x < 0' keeps changing: a sliding mode or " \
+            "a Zeno model?)"
+        for k, x in enumerate(flips, 1):
+            assert free.step(k * 1e-3 - 5e-4) == 0 and free.step(k * 1e-3) == 0
+            assert free.event(k * 1e-3, x) == 0
+        k = 0
+        while True:  # (then each 1e-8 after the one before, a step between)
+            k += 1
+            if free.step(2.0 + (k - 0.5) * 1e-8) != 0 or free.event(2.0 + k * 1e-8) != 0:
+                break
+        assert k == 100001
+        (message,) = free.errors()
+        assert message == f"fmi2NewDiscreteStates: at t = {2.0 + k * 1e-8:.17g}: chattering: " \
+            "100000 events since the scene's output time 2 (the state keeps changing: a Zeno " \
+            "model?)"  # (as the driver says it when no discrete value changes)
+    finally:
+        cut.close()
+        free.close()
 
 
 def test_the_rectifier_with_an_ideal_diode_as_an_fmu(tmp_path):
@@ -399,3 +553,23 @@ def test_a_discrete_output_is_one_variable(tmp_path):
     rises = (math.asin(0.5) + 2 * math.pi * np.arange(3)) / 3.0
     assert list(cs["n"]) == [float(np.sum(rises <= t)) for t in cs["time"]]
     assert list(cs["m"]) == [7.0 if t >= 1 else 0.0 for t in cs["time"]]
+
+
+def test_random_sequences_of_fmi_calls_follow_the_state_machine(built, tmp_path):
+    """tools/fuzz_fmu.py's harness, seeded, on the thermostat's FMU (a model that cannot
+    fail: every legal call must succeed, --strict): random sequences of calls through ctypes,
+    legal and not (a function its state does not allow, the other type's, arguments it cannot
+    take, fmi2FreeInstance twice, calls through a freed or a NULL handle), each checked
+    against FMI 2.0's tables; every state of both types is reached, with legal and illegal
+    calls in it."""
+    F = fuzz_fmu
+    result = F.fuzz(F.extract(built["thermostat"][0], tmp_path), 2028, 80, length=30,
+                    strict=True)
+    assert result["failures"] == [], result["failures"][0]["failure"]
+    seen = result["seen"]
+    for kind, states in (("me", (F.INST, F.INIT, F.EVENT, F.CONT, F.TERM)),
+                         ("cs", (F.INST, F.INIT, F.STEP, F.TERM))):
+        for state in states:
+            for legal in ("legal", "illegal"):
+                assert seen.get(f"{kind} {state} {legal}", 0) > 0, (kind, state, legal)
+    assert seen["dead freed"] > 0 and seen["dead NULL"] > 0

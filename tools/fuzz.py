@@ -16,7 +16,11 @@ What counts as a failure:
   the option parser), a death by a signal of bgc or of the generated program (bgc reports it
   as 128 + the signal), a run longer than --sim-time-limit; exit 1 without a message; a CSV
   that ends in a cut row or whose rows have fewer or more columns than its header, or that
-  holds a NaN or an infinity; a partial file left beside it; a process that outlives bgc.
+  holds a NaN or an infinity; a partial file left beside it; a process that outlives bgc;
+- the FMU (--fmu-every K: every K-th case check accepts, exported as an FMU whose life cycle
+  tools/fuzz_fmu.py fuzzes with random sequences of FMI calls through ctypes): a crash, a
+  call the FMI 2.0 state machine does not allow that does not return fmi2Error, a legal one
+  that fails for no reason of the model's (tools/fuzz_fmu.py says each).
 
 Each failure's signature (its kind, the exception's type and the innermost frame in bgc) is
 minimised once by delta debugging, on lines, tokens, then characters, keeping the signature, and
@@ -918,6 +922,38 @@ def write_regression(directory: Path, signature: str, data: bytes, how: str, see
     return path
 
 
+# ------------------------------------------------------------------------- the FMU
+
+def fmu_case(data: bytes, seed: int, sequences: int, out: Path, time_limit: float) -> dict | None:
+    """The case's FMU, its life cycle fuzzed by tools/fuzz_fmu.py in a process of its own
+    (the export and the calls limited to time_limit seconds): None if bgc exports none (a
+    model error, a model an FMU cannot hold, no C compiler); else {"calls", "failure": None
+    or the first failing sequence's signature, "stderr": what failed}."""
+    with tempfile.TemporaryDirectory(prefix="bgcfuzz-fmu-") as tmp:
+        Path(tmp, "m.bg").write_bytes(data)
+        env = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""),
+                   BGC_CACHE_DIR=str(Path(tmp, "cache")),
+                   BGC_CFLAGS=os.environ.get("BGC_CFLAGS", "-O0 -std=c99"))
+        try:
+            done = subprocess.run([sys.executable, str(ROOT / "tools" / "fuzz_fmu.py"), "--model",
+                                   str(Path(tmp, "m.bg")), "--seed", str(seed), "--sequences",
+                                   str(sequences), "--out", str(out)], capture_output=True,
+                                  text=True, env=env, timeout=time_limit)
+        except subprocess.TimeoutExpired:
+            return {"calls": 0, "stderr": "", "failure": "fmu: hang"}
+    lines = done.stdout.strip().splitlines()
+    if done.returncode != 0 or not lines:
+        return {"calls": 0, "stderr": done.stderr[-4000:],
+                "failure": f"fmu: the harness failed (exit {done.returncode})"}
+    res = json.loads(lines[-1])
+    if res is None:
+        return None
+    first = res["failures"][0] if res["failures"] else None
+    return {"calls": res["calls"], "stderr": first or "",
+            "failure": None if first is None
+            else "fmu: " + re.sub(r" \(.*", "", first.splitlines()[0]).strip()}
+
+
 # ------------------------------------------------------------------------- the campaign
 
 def main(argv=None) -> int:
@@ -939,6 +975,11 @@ def main(argv=None) -> int:
     ap.add_argument("--max-seconds", type=float, default=0,
                     help="stop (with the summary) after this many seconds (0: no limit)")
     ap.add_argument("--no-minimise", action="store_true")
+    ap.add_argument("--fmu-every", type=int, default=0, metavar="K",
+                    help="export every K-th case that check accepts as an FMU and fuzz its life "
+                    "cycle (tools/fuzz_fmu.py; 0: never)")
+    ap.add_argument("--fmu-sequences", type=int, default=20,
+                    help="random sequences of FMI calls on each FMU")
     ap.add_argument("--worker", action="store_true", help=argparse.SUPPRESS)
     a = ap.parse_args(argv)
     if a.worker:
@@ -956,7 +997,7 @@ def main(argv=None) -> int:
     seeds = seed_models()
     worker = Worker(a.time_limit)
     counts = {"check": 0, "check_ok": 0, "check_error": 0, "simulate": 0, "simulate_c": 0,
-              "simulate_python": 0}
+              "simulate_python": 0, "fmu": 0, "fmu_calls": 0}
     failures: dict[str, dict] = {}
     accepted = 0
     start = time.monotonic()
@@ -1010,6 +1051,17 @@ def main(argv=None) -> int:
                         if s["failure"]:
                             record(s["failure"], i, how, data, s,
                                    lambda d, sim=sim: sim(d)["failure"])
+                if a.fmu_every and accepted % a.fmu_every == 0:
+                    fmu = lambda d: fmu_case(d, a.seed * 1000003 + i,  # noqa: E731
+                                             a.fmu_sequences, a.out / "fmu",
+                                             a.sim_time_limit)
+                    f = fmu(data)
+                    if f is not None:
+                        counts["fmu"] += 1
+                        counts["fmu_calls"] += f["calls"]
+                        if f["failure"]:
+                            record(f["failure"], i, how, data, f,
+                                   lambda d: (fmu(d) or {}).get("failure"))
             if (i + 1) % 500 == 0:
                 el = time.monotonic() - start
                 say(f"{i + 1} cases, {counts}, {sum(f['count'] for f in failures.values())} "

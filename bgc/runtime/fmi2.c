@@ -15,6 +15,8 @@
                                                      state is that state's variable instead)
      [P + 2N + M, ... + D)   discrete variable k    (D = BGC_FMI_NUM_DISCRETE_VARS)
      [P + 2N + M + D, ... + U)  input j             (U = BGC_FMI_NUM_INPUTS: `input NAME`)
+     P + 2N + M + D + U      time                   (causality "independent": the
+                                                     instance's time, never set by fmi2SetReal)
    An input is "continuous", set with fmi2SetReal at any time: its value holds until it is
    set again (Co-Simulation: between two fmi2DoStep; Model Exchange: the environment's
    business).  Until it is set, it keeps its default.
@@ -38,8 +40,36 @@
    changes (newDiscreteStatesNeeded is never set), says whether it changed the states, and
    gives the next time event; fmi2CompletedIntegratorStep asks for event mode when a state
    relation's value differs from its frozen one (an event the environment did not locate, at
-   the step's end rather than never).  Co-Simulation: fmi2DoStep's run locates and handles the
-   events inside the step, as bgc's own runs do; the discrete values go on from step to step.
+   the step's end rather than never).  The events the environment brings are bounded as the
+   runtime's driver bounds its own (bgc_handle_event, bgc_fmi_count_event below): events in a
+   row each within the time's resolution of the one before, state events in a row each ending
+   the environment's first integrator step since the one before (every step cut short by an
+   event), the events since the scene's last output time; past a bound fmi2NewDiscreteStates
+   fails with the runtime's "chattering" message, so that the environment stops.
+   Co-Simulation: fmi2DoStep's run locates and handles the events inside the step, as bgc's
+   own runs do; the discrete values go on from step to step.
+
+   The life cycle is FMI 2.0's state machine (its tables of the functions each state allows,
+   sections 3.2.3 and 4.2.4; the masks BGC_FMI_MASK_* below): instantiated, initialization
+   mode, then event and continuous-time mode (Model Exchange) or step complete
+   (Co-Simulation), terminated, error.  A call its state does not allow, or with arguments it
+   cannot take, returns fmi2Error, logged, and changes nothing; a failure of the model (an
+   event iteration that does not settle, chattering, a Co-Simulation run that fails) puts the
+   instance in the error state, where the values can still be read (for the diagnosis) and
+   fmi2Reset, fmi2SetFMUstate or fmi2FreeInstance go on.  The FMU never enters step in
+   progress, step failed or step canceled (fmi2DoStep is synchronous and fails with
+   fmi2Error), nor fatal (no failure reaches beyond its instance: the FMU has no global state).
+
+   The handle fmi2Instantiate returns outlives the instance: fmi2FreeInstance frees all the
+   instance holds and marks the handle freed instead of freeing it, so that a call through a
+   freed handle (fmi2FreeInstance twice, fmi2GetReal after it) reads memory that is still
+   the handle's and returns fmi2Error (a void function: nothing), without a log (the
+   environment's logger need not live beyond fmi2FreeInstance).  The price is the handle's
+   few bytes for the life of the process.  A registry of live instances would free
+   everything, but it is state shared by all instances, which FMI lets environments run in
+   threads of their own (a lock, beyond C99), and malloc may hand a freed instance's address
+   to the next one, so that a stale handle would act on another instance; a handle that is
+   never freed is never another's.
 
    The declarations below are written from the text of the FMI 2.0 standard (its sections on
    the platform types and the common functions): the types, the status and kind enumerations,
@@ -104,14 +134,17 @@ typedef struct {
 
 /* ------------------------------------------------------------- an instance --- */
 
+/* The states of FMI 2.0's state machines (the bits of the masks below); Co-Simulation's
+   "step complete" is BGC_FMI_STEP.  A freed instance, the standard's start and end, has no
+   state: its handle is marked (bgc_fmi_handle). */
 enum {
     BGC_FMI_INSTANTIATED, /* parameters may be set */
-    BGC_FMI_INIT,         /* initialisation mode: parameters may still be set */
+    BGC_FMI_INIT,         /* initialization mode: parameters may still be set */
     BGC_FMI_EVENT,        /* Model Exchange: event mode */
     BGC_FMI_CONTINUOUS,   /* Model Exchange: continuous-time mode */
-    BGC_FMI_STEP,         /* Co-Simulation: between steps */
+    BGC_FMI_STEP,         /* Co-Simulation: step complete, between two steps */
     BGC_FMI_TERMINATED,
-    BGC_FMI_FAILED        /* after an error: only fmi2Reset and fmi2FreeInstance help */
+    BGC_FMI_ERROR         /* after a failure of the model: values for the diagnosis only */
 };
 
 #define BGC_FMI_VR_STATES ((fmi2ValueReference)BGC_NUM_PARAMS)
@@ -119,6 +152,22 @@ enum {
 #define BGC_FMI_VR_OUTPUTS (BGC_FMI_VR_DERIVATIVES + (fmi2ValueReference)BGC_NUM_STATES)
 #define BGC_FMI_VR_DISCRETE (BGC_FMI_VR_OUTPUTS + (fmi2ValueReference)BGC_NUM_OUTPUTS)
 #define BGC_FMI_VR_INPUTS (BGC_FMI_VR_DISCRETE + (fmi2ValueReference)BGC_FMI_NUM_DISCRETE_VARS)
+#define BGC_FMI_VR_TIME (BGC_FMI_VR_INPUTS + (fmi2ValueReference)BGC_FMI_NUM_INPUTS)
+
+/* Model Exchange's events, counted as the runtime's driver counts its own (bgc_run): an
+   event mode entered from continuous-time mode, not yet counted; the last event's time and
+   the events in a row within the time's resolution of the one before; the state events in a
+   row, each ending the first integrator step since the one before; the first step completed
+   since the last event (INFINITY: none); the scene's output time (its index) the count of
+   events since it began at, and that count; the event iteration's passes so far, the pass
+   that last changed each discrete value, and the passes where those chains began (for the
+   chattering message's names). */
+typedef struct bgc_fmi_events {
+    int pending;
+    long chain, sliding, since_out;
+    double t_event, t_step, kout;
+    double passes, chain_from, sliding_from, out_from, last[BGC_DIM(BGC_NUM_DISCRETE)];
+} bgc_fmi_events;
 
 typedef struct bgc_fmi {
     fmi2Type type;
@@ -132,6 +181,7 @@ typedef struct bgc_fmi {
     int fresh;                          /* p (and, before initialisation ends, x) are current */
     bgc_work *w;
     double t;
+    double t_start;                     /* the start time (fmi2SetupExperiment's) */
     double rtol;                        /* Co-Simulation: the solver's (the scene's, or the
                                            tolerance of fmi2SetupExperiment) */
     double x[BGC_DIM(BGC_NUM_STATES)];
@@ -147,10 +197,21 @@ typedef struct bgc_fmi {
                                            (the first fmi2NewDiscreteStates says so) */
     double g[BGC_DIM(BGC_NUM_INDICATORS)];
     double ev[BGC_DIM(BGC_NUM_INDICATORS + BGC_EV_SIZE)]; /* the event iteration's scratch */
+    bgc_fmi_events e;                   /* Model Exchange's events, counted */
     /* the inputs: each a series of one sample once set (before: none, its default) */
     bgc_input_series in[BGC_DIM(BGC_FMI_NUM_INPUTS)];
     double in_t[BGC_DIM(BGC_FMI_NUM_INPUTS)], in_u[BGC_DIM(BGC_FMI_NUM_INPUTS)];
 } bgc_fmi;
+
+/* What fmi2Instantiate returns, never freed: fmi2FreeInstance frees the instance and sets m
+   to NULL.  fmu is this binary's bgc_fmi_ours, so that the handle of another FMU (or any
+   pointer to something else that starts with a pointer) is not taken for one of ours. */
+typedef struct bgc_fmi_handle {
+    const char *fmu;
+    bgc_fmi *m;
+} bgc_fmi_handle;
+
+static const char bgc_fmi_ours[] = BGC_FMI_GUID;
 
 #define BGC_FMI_ZERO 1e-300 /* an indicator's size where g is 0 (a product with another
                                   indicator's value does not underflow to 0) */
@@ -181,11 +242,24 @@ static fmi2Status bgc_fmi_refuse(const bgc_fmi *m, const char *fn, const char *w
     return fmi2Error;
 }
 
-/* The instance, or NULL if c is NULL or fn is not allowed in its phase (mask: 1 << phase) or
-   for its type (1: Model Exchange only, 2: Co-Simulation only, 0: both). */
+/* The live instance of handle c, or NULL: c NULL, freed, or not a handle of this FMU. */
+static bgc_fmi *bgc_fmi_live(fmi2Component c)
+{
+    const bgc_fmi_handle *h = (const bgc_fmi_handle *)c;
+    return h && h->fmu == bgc_fmi_ours ? h->m : NULL;
+}
+
+#define BGC_FMI_STATE_NAMES                                                                  \
+    { "the instantiated state", "initialization mode", "event mode", "continuous-time mode", \
+      "step complete", "the terminated state", "the error state" }
+
+/* The instance, or NULL if c is not a live instance, or fn is not allowed in its state (mask:
+   1 << state) or for its type (1: Model Exchange only, 2: Co-Simulation only, 0: both); the
+   refusal is logged (no instance: no logger to tell). */
 static bgc_fmi *bgc_fmi_get(fmi2Component c, const char *fn, int mask, int only)
 {
-    bgc_fmi *m = (bgc_fmi *)c;
+    static const char *const states[] = BGC_FMI_STATE_NAMES;
+    bgc_fmi *m = bgc_fmi_live(c);
     if (!m)
         return NULL;
     if (only && m->type != (only == 1 ? fmi2ModelExchange : fmi2CoSimulation)) {
@@ -194,21 +268,55 @@ static bgc_fmi *bgc_fmi_get(fmi2Component c, const char *fn, int mask, int only)
         return NULL;
     }
     if (!(mask & (1 << m->phase))) {
-        bgc_fmi_log(m, fmi2Error, "%s: not allowed %s", fn,
-                    m->phase == BGC_FMI_FAILED ? "after an error (fmi2Reset starts again)"
-                    : m->phase == BGC_FMI_TERMINATED ? "after fmi2Terminate"
-                    : m->phase == BGC_FMI_INSTANTIATED || m->phase == BGC_FMI_INIT
-                    ? "before initialisation has ended" : "in this mode");
+        bgc_fmi_log(m, fmi2Error, "%s: not allowed in %s%s", fn, states[m->phase],
+                    m->phase == BGC_FMI_ERROR ? " (fmi2Reset or fmi2SetFMUstate goes on)" : "");
         return NULL;
     }
     return m;
 }
 
-#define BGC_FMI_ANY (~0)
-#define BGC_FMI_SETUP ((1 << BGC_FMI_INSTANTIATED) | (1 << BGC_FMI_INIT))
-#define BGC_FMI_RUNNING ((1 << BGC_FMI_EVENT) | (1 << BGC_FMI_CONTINUOUS) | (1 << BGC_FMI_STEP))
-#define BGC_FMI_VALUES (BGC_FMI_SETUP | BGC_FMI_RUNNING | (1 << BGC_FMI_TERMINATED) \
-                        | (1 << BGC_FMI_FAILED))
+/* The states each function is allowed in: FMI 2.0's tables (3.2.3 for Model Exchange, 4.2.4
+   for Co-Simulation), the states of both types in one mask (a state belongs to one type:
+   event and continuous-time mode to Model Exchange, step complete to Co-Simulation).  What
+   the tables allow for some variables only (fmi2SetReal: parameters until initialization
+   ends, inputs throughout) is checked by the function. */
+#define BGC_FMI_S(state) (1 << BGC_FMI_##state)
+#define BGC_FMI_LIVE (BGC_FMI_S(INSTANTIATED) | BGC_FMI_S(INIT) | BGC_FMI_S(EVENT) \
+                      | BGC_FMI_S(CONTINUOUS) | BGC_FMI_S(STEP) | BGC_FMI_S(TERMINATED) \
+                      | BGC_FMI_S(ERROR))
+#define BGC_FMI_INITIALIZING (BGC_FMI_LIVE & ~BGC_FMI_S(INSTANTIATED))
+#define BGC_FMI_RUNNING (BGC_FMI_S(EVENT) | BGC_FMI_S(CONTINUOUS) | BGC_FMI_S(STEP))
+#define BGC_FMI_AFTER (BGC_FMI_S(TERMINATED) | BGC_FMI_S(ERROR))
+#define BGC_FMI_MASK_SetDebugLogging BGC_FMI_LIVE
+#define BGC_FMI_MASK_SetupExperiment BGC_FMI_S(INSTANTIATED)
+#define BGC_FMI_MASK_EnterInitializationMode BGC_FMI_S(INSTANTIATED)
+#define BGC_FMI_MASK_ExitInitializationMode BGC_FMI_S(INIT)
+#define BGC_FMI_MASK_Terminate BGC_FMI_RUNNING
+#define BGC_FMI_MASK_Reset BGC_FMI_LIVE
+#define BGC_FMI_MASK_GetValues BGC_FMI_INITIALIZING /* fmi2GetReal, ..., fmi2GetString */
+#define BGC_FMI_MASK_SetReal (BGC_FMI_S(INSTANTIATED) | BGC_FMI_S(INIT) | BGC_FMI_RUNNING)
+#define BGC_FMI_MASK_SetOther (BGC_FMI_S(INSTANTIATED) | BGC_FMI_S(INIT) | BGC_FMI_S(EVENT) \
+                               | BGC_FMI_S(STEP)) /* fmi2SetInteger, -Boolean, -String */
+#define BGC_FMI_MASK_FMUstate BGC_FMI_LIVE /* fmi2GetFMUstate, ..., fmi2DeSerializeFMUstate */
+#define BGC_FMI_MASK_GetDirectionalDerivative BGC_FMI_INITIALIZING
+#define BGC_FMI_MASK_EnterEventMode (BGC_FMI_S(EVENT) | BGC_FMI_S(CONTINUOUS))
+#define BGC_FMI_MASK_NewDiscreteStates BGC_FMI_S(EVENT)
+#define BGC_FMI_MASK_EnterContinuousTimeMode BGC_FMI_S(EVENT)
+#define BGC_FMI_MASK_CompletedIntegratorStep BGC_FMI_S(CONTINUOUS)
+#define BGC_FMI_MASK_SetTime (BGC_FMI_S(EVENT) | BGC_FMI_S(CONTINUOUS))
+#define BGC_FMI_MASK_SetContinuousStates BGC_FMI_S(CONTINUOUS)
+#define BGC_FMI_MASK_GetEventIndicators (BGC_FMI_S(INIT) | BGC_FMI_S(EVENT) \
+                                         | BGC_FMI_S(CONTINUOUS) | BGC_FMI_AFTER)
+#define BGC_FMI_MASK_GetContinuousStates BGC_FMI_MASK_GetEventIndicators
+#define BGC_FMI_MASK_GetDerivatives (BGC_FMI_S(EVENT) | BGC_FMI_S(CONTINUOUS) | BGC_FMI_AFTER)
+#define BGC_FMI_MASK_GetNominalsOfContinuousStates (BGC_FMI_S(INSTANTIATED) | BGC_FMI_S(EVENT) \
+                                                    | BGC_FMI_S(CONTINUOUS) | BGC_FMI_AFTER)
+#define BGC_FMI_MASK_SetRealInputDerivatives (BGC_FMI_S(INSTANTIATED) | BGC_FMI_S(INIT) \
+                                              | BGC_FMI_S(STEP))
+#define BGC_FMI_MASK_GetRealOutputDerivatives (BGC_FMI_S(STEP) | BGC_FMI_AFTER)
+#define BGC_FMI_MASK_DoStep BGC_FMI_S(STEP)
+/* (fmi2CancelStep: step in progress, never entered) */
+#define BGC_FMI_MASK_GetStatus (BGC_FMI_S(STEP) | BGC_FMI_S(TERMINATED)) /* and -Real-, ... */
 
 /* Parameters and states from the parameters set so far (before initialisation ends). */
 static void bgc_fmi_refresh(bgc_fmi *m)
@@ -231,10 +339,18 @@ static void bgc_fmi_start(bgc_fmi *m)
     memset(&m->st, 0, sizeof m->st);
     m->phase = BGC_FMI_INSTANTIATED;
     m->fresh = 0;
-    m->t = BGC_SCENE_T0;
+    m->t = m->t_start = BGC_SCENE_T0;
     m->rtol = BGC_SCENE_RTOL;
     m->stiff = 0;
     m->x_changed = 0;
+    m->e.pending = 0;
+    m->e.t_event = -INFINITY;
+    m->e.t_step = INFINITY;
+    m->e.chain = m->e.sliding = m->e.since_out = 0;
+    m->e.kout = -1.0;
+    m->e.passes = m->e.chain_from = m->e.sliding_from = m->e.out_from = 0.0;
+    for (j = 0; j < BGC_NUM_DISCRETE; j++)
+        m->e.last[j] = -1.0;
     m->w->rtol = BGC_SCENE_RTOL;
     m->w->atol = BGC_SCENE_ATOL;
     for (j = 0; j < BGC_FMI_NUM_INPUTS; j++) {
@@ -248,13 +364,16 @@ static void bgc_fmi_start(bgc_fmi *m)
 }
 
 /* The model's failure (an algebraic block), logged: Model Exchange discards the point (the
-   integrator may try a smaller step), Co-Simulation's caller gets an error. */
+   integrator may try a smaller step), Co-Simulation's caller gets an error (and the instance
+   is in the error state). */
 static fmi2Status bgc_fmi_model_failed(bgc_fmi *m, const char *fn)
 {
     const fmi2Status status = m->type == fmi2ModelExchange ? fmi2Discard : fmi2Error;
     char msg[512];
     bgc_work_message(m->w, msg, sizeof msg);
     bgc_fmi_log(m, status, "%s: %s", fn, msg);
+    if (status == fmi2Error)
+        m->phase = BGC_FMI_ERROR;
     return status;
 }
 
@@ -283,19 +402,82 @@ static int bgc_fmi_on_event(void *ctx, double t, const char *what, const char *c
     return 0;
 }
 
+/* Model Exchange: an event at the instance's time (the event mode entered from
+   continuous-time mode), counted before its event iteration as bgc_handle_event counts the
+   driver's: in a row within the time's resolution of the one before (the first has none
+   before it); a state event (a relation whose value at (t, x), in r->g, differs from its
+   frozen one), in a row with the state events before it when no integrator step was
+   completed before its instant since the last event (the environment's step was cut short
+   by it, as the driver's steps that end at a located event are); and since the start of the
+   scene's output interval it is in (the driver's output rows). */
+static void bgc_fmi_count_event(bgc_fmi *m, const bgc_run *r)
+{
+    const double t = m->t, scale = bgc_max(fabs(t), fabs(m->e.t_event));
+    const double k = floor((t - m->t_start) / BGC_SCENE_DT);
+    if (isfinite(m->e.t_event) && t - m->e.t_event <= bgc_max(1e-12 * scale, bgc_hmin(t))) {
+        m->e.chain++;
+    } else {
+        m->e.chain = 0;
+        m->e.chain_from = m->e.passes;
+    }
+    m->e.t_event = t;
+    if (BGC_NUM_INDICATORS == 0 || bgc_changed(r, r->g) < 0) {
+        m->e.sliding = 0;
+    } else {
+        if (m->e.t_step < t) /* a step that no event cut short */
+            m->e.sliding = 0;
+        if (++m->e.sliding == 1)
+            m->e.sliding_from = m->e.passes;
+    }
+    m->e.t_step = INFINITY;
+    if (k != m->e.kout) {
+        m->e.kout = k;
+        m->e.since_out = 0;
+        m->e.out_from = m->e.passes;
+    }
+    m->e.since_out++;
+}
+
+/* The driver's bounds on events (bgc_handle_event, with its default step budget) after a
+   counted event's iteration: 0, or the chattering message in r->msg. */
+static int bgc_fmi_bound_events(bgc_fmi *m, bgc_run *r)
+{
+    const long sliding = BGC_MAX_STEPS > 100000 ? BGC_MAX_STEPS / 100 : 1000;
+    const long most = BGC_MAX_STEPS > 1000 ? BGC_MAX_STEPS : 1000;
+    char head[128];
+    if (m->e.chain >= BGC_MAX_EVENT_ITERATIONS) {
+        snprintf(head, sizeof head, "%ld events in a row, each within 1e-12 relative of the "
+                 "one before", m->e.chain);
+        return bgc_chattering(r, m->t, head, m->e.chain_from, "a Zeno model, the switching "
+                              "outruns the time's resolution");
+    }
+    if (m->e.sliding >= sliding) {
+        snprintf(head, sizeof head, "%ld integrator steps in a row, each cut short by an event",
+                 m->e.sliding);
+        return bgc_chattering(r, m->t, head, m->e.sliding_from, "a sliding mode or a Zeno model?");
+    }
+    if (m->e.since_out > most) {
+        snprintf(head, sizeof head, "%ld events since the scene's output time %.17g",
+                 m->e.since_out - 1, m->t_start + m->e.kout * BGC_SCENE_DT);
+        return bgc_chattering(r, m->t, head, m->e.out_from, "a Zeno model?");
+    }
+    return 0;
+}
+
 /* The event iteration of the runtime (bgc/runtime/drive.c) at the instance's (t, x), start:
    the run's first (the discrete values then start from the workspace's); the discrete values
-   kept in the workspace too, where Co-Simulation's runs take them from.  *x_changed: whether
-   the states changed; *t_next: the next time event (INFINITY: none).  A failure (chattering,
-   a value that is not finite) is logged, and the instance has failed. */
-static fmi2Status bgc_fmi_event_iteration(bgc_fmi *m, const char *fn, int start, int *x_changed,
-                                          double *t_next)
+   kept in the workspace too, where Co-Simulation's runs take them from; count: an event of
+   Model Exchange, counted and bounded (bgc_fmi_count_event).  *x_changed: whether the states
+   changed; *t_next: the next time event (INFINITY: none).  A failure (chattering, a value
+   that is not finite) is logged, and the instance is in the error state. */
+static fmi2Status bgc_fmi_event_iteration(bgc_fmi *m, const char *fn, int start, int count,
+                                          int *x_changed, double *t_next)
 {
-    double x0[BGC_DIM(BGC_NUM_STATES)], last[BGC_DIM(BGC_NUM_DISCRETE)];
+    double x0[BGC_DIM(BGC_NUM_STATES)];
     bgc_settings s;
     bgc_run r;
     char msg[512];
-    int i, rc;
+    int i, rc = 0;
     *x_changed = 0;
     *t_next = INFINITY;
     if (BGC_NUM_DISCRETE == 0)
@@ -313,20 +495,27 @@ static fmi2Status bgc_fmi_event_iteration(bgc_fmi *m, const char *fn, int start,
     r.d = BGC_FMI_D(m);
     r.g = m->g;
     r.ev = m->ev;
-    r.last = last;
-    for (i = 0; i < BGC_NUM_DISCRETE; i++)
-        last[i] = -1.0;
+    r.last = m->e.last;
+    r.passes = m->e.passes;
     memcpy(x0, m->x, sizeof x0);
     if (start)
         memcpy(r.d, m->w->d, sizeof(double) * BGC_NUM_DISCRETE);
-    rc = bgc_event_iteration(&r, m->t, m->x, start);
+    if (count && BGC_NUM_INDICATORS > 0)
+        rc = bgc_indicators(&r, m->t, m->x, r.g);
+    if (rc == 0 && count)
+        bgc_fmi_count_event(m, &r);
+    if (rc == 0)
+        rc = bgc_event_iteration(&r, m->t, m->x, start);
+    m->e.passes = r.passes;
+    if (rc == 0 && count)
+        rc = bgc_fmi_bound_events(m, &r);
     if (rc == 0)
         rc = bgc_next_time(&r, m->t, m->x);
     memcpy(m->w->d, r.d, sizeof(double) * BGC_NUM_DISCRETE);
     m->w->started = 1;
     m->dx_ok = m->y_ok = 0;
     if (rc) {
-        m->phase = BGC_FMI_FAILED;
+        m->phase = BGC_FMI_ERROR;
         bgc_fmi_log(m, fmi2Error, "%s: %s", fn, msg);
         return fmi2Error;
     }
@@ -361,11 +550,13 @@ BGC_FMI_EXPORT fmi2Status fmi2SetDebugLogging(fmi2Component c, fmi2Boolean loggi
 {
     static const char *const known[] = { "logStatusWarning", "logStatusDiscard",
                                          "logStatusError", "logAll" };
-    bgc_fmi *m = bgc_fmi_get(c, "fmi2SetDebugLogging", BGC_FMI_ANY, 0);
+    bgc_fmi *m = bgc_fmi_get(c, "fmi2SetDebugLogging", BGC_FMI_MASK_SetDebugLogging, 0);
     size_t i;
     int k, found;
     if (!m)
         return fmi2Error;
+    if (nCategories > 0 && !categories)
+        return bgc_fmi_refuse(m, "fmi2SetDebugLogging", "no array of categories given");
     for (i = 0; i < nCategories; i++) {
         found = 0;
         for (k = 0; k < BGC_COUNT(known); k++)
@@ -384,6 +575,7 @@ BGC_FMI_EXPORT fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type f
                                              const fmi2CallbackFunctions *functions,
                                              fmi2Boolean visible, fmi2Boolean loggingOn)
 {
+    bgc_fmi_handle *h;
     bgc_fmi *m;
     const char *why = NULL;
     size_t len;
@@ -403,7 +595,8 @@ BGC_FMI_EXPORT fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type f
                               fmi2Error, "logStatusError", "fmi2Instantiate: %s", why);
         return NULL;
     }
-    m = (bgc_fmi *)calloc(1, sizeof *m);
+    h = (bgc_fmi_handle *)malloc(sizeof *h);
+    m = h ? (bgc_fmi *)calloc(1, sizeof *m) : NULL;
     len = strlen(instanceName);
     if (m)
         m->name = (char *)malloc(len + 1);
@@ -415,6 +608,7 @@ BGC_FMI_EXPORT fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type f
             bgc_work_free(m->w);
         }
         free(m);
+        free(h); /* (never handed out) */
         if (functions->logger)
             functions->logger(functions->componentEnvironment, instanceName, fmi2Error,
                               "logStatusError", "fmi2Instantiate: out of memory");
@@ -426,14 +620,20 @@ BGC_FMI_EXPORT fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type f
     m->env = functions->componentEnvironment;
     m->logging = loggingOn != fmi2False;
     bgc_fmi_start(m);
-    return m;
+    h->fmu = bgc_fmi_ours;
+    h->m = m;
+    return h;
 }
 
+/* Frees the instance and marks its handle freed (the handle itself stays: a second
+   fmi2FreeInstance, or any call after it, finds it freed).  NULL is ignored (FMI 2.0), and
+   so is a handle already freed or not this FMU's: nothing to free, and nobody to tell. */
 BGC_FMI_EXPORT void fmi2FreeInstance(fmi2Component c)
 {
-    bgc_fmi *m = (bgc_fmi *)c;
+    bgc_fmi *m = bgc_fmi_live(c);
     if (!m)
         return;
+    ((bgc_fmi_handle *)c)->m = NULL;
     bgc_work_free(m->w);
     free(m->name);
     free(m);
@@ -443,7 +643,7 @@ BGC_FMI_EXPORT fmi2Status fmi2SetupExperiment(fmi2Component c, fmi2Boolean toler
                                               fmi2Real tolerance, fmi2Real startTime,
                                               fmi2Boolean stopTimeDefined, fmi2Real stopTime)
 {
-    bgc_fmi *m = bgc_fmi_get(c, "fmi2SetupExperiment", 1 << BGC_FMI_INSTANTIATED, 0);
+    bgc_fmi *m = bgc_fmi_get(c, "fmi2SetupExperiment", BGC_FMI_MASK_SetupExperiment, 0);
     (void)stopTimeDefined;
     (void)stopTime;
     if (!m)
@@ -452,7 +652,7 @@ BGC_FMI_EXPORT fmi2Status fmi2SetupExperiment(fmi2Component c, fmi2Boolean toler
         return bgc_fmi_refuse(m, "fmi2SetupExperiment", "the start time is not finite");
     if (toleranceDefined && !(tolerance > 0.0 && isfinite(tolerance)))
         return bgc_fmi_refuse(m, "fmi2SetupExperiment", "the tolerance is not positive");
-    m->t = startTime;
+    m->t = m->t_start = startTime;
     m->rtol = toleranceDefined ? tolerance : BGC_SCENE_RTOL;
     m->dx_ok = m->y_ok = 0;
     return fmi2OK;
@@ -460,7 +660,8 @@ BGC_FMI_EXPORT fmi2Status fmi2SetupExperiment(fmi2Component c, fmi2Boolean toler
 
 BGC_FMI_EXPORT fmi2Status fmi2EnterInitializationMode(fmi2Component c)
 {
-    bgc_fmi *m = bgc_fmi_get(c, "fmi2EnterInitializationMode", 1 << BGC_FMI_INSTANTIATED, 0);
+    bgc_fmi *m = bgc_fmi_get(c, "fmi2EnterInitializationMode",
+                             BGC_FMI_MASK_EnterInitializationMode, 0);
     if (!m)
         return fmi2Error;
     m->phase = BGC_FMI_INIT;
@@ -491,18 +692,18 @@ static fmi2Status bgc_fmi_constraints(bgc_fmi *m)
     return fmi2Error;
 }
 
-BGC_FMI_EXPORT fmi2Status fmi2ExitInitializationMode(fmi2Component c)
+/* The initial state checked (and projected, with BGC_FMI_PROJECT_INITIAL), logged if it
+   is not right: fmi2OK or fmi2Error. */
+static fmi2Status bgc_fmi_initial(bgc_fmi *m)
 {
-    bgc_fmi *m = bgc_fmi_get(c, "fmi2ExitInitializationMode", 1 << BGC_FMI_INIT, 0);
     char msg[512];
-    double t_next;
     int i;
-    if (!m)
-        return fmi2Error;
-    bgc_fmi_refresh(m);
     for (i = 0; i < BGC_NUM_PARAMS; i++)
-        if (!isfinite(*bgc_param_ref(&m->p, i)))
-            return bgc_fmi_refuse(m, "fmi2ExitInitializationMode", "a parameter is not finite");
+        if (!isfinite(*bgc_param_ref(&m->p, i))) {
+            bgc_fmi_log(m, fmi2Error, "fmi2ExitInitializationMode: parameter '%s' is not "
+                        "finite", bgc_param_names[i]);
+            return fmi2Error;
+        }
     i = bgc_first_nonfinite(m->x, BGC_NUM_STATES);
     if (i >= 0) {
         bgc_fmi_log(m, fmi2Error, "fmi2ExitInitializationMode: state '%s' is not finite",
@@ -514,10 +715,26 @@ BGC_FMI_EXPORT fmi2Status fmi2ExitInitializationMode(fmi2Component c)
         bgc_fmi_log(m, fmi2Error, "fmi2ExitInitializationMode: %s", msg);
         return fmi2Error;
     }
-    if (bgc_fmi_constraints(m) != fmi2OK)
+    return bgc_fmi_constraints(m);
+}
+
+/* The initial state, then the start's event iteration; a failure of either (the model's)
+   puts the instance in the error state. */
+BGC_FMI_EXPORT fmi2Status fmi2ExitInitializationMode(fmi2Component c)
+{
+    bgc_fmi *m = bgc_fmi_get(c, "fmi2ExitInitializationMode",
+                             BGC_FMI_MASK_ExitInitializationMode, 0);
+    double t_next;
+    if (!m)
         return fmi2Error;
+    bgc_fmi_refresh(m);
+    if (bgc_fmi_initial(m) != fmi2OK) {
+        m->phase = BGC_FMI_ERROR;
+        return fmi2Error;
+    }
     m->dx_ok = m->y_ok = 0;
-    if (bgc_fmi_event_iteration(m, "fmi2ExitInitializationMode", 1, &m->x_changed, &t_next))
+    if (bgc_fmi_event_iteration(m, "fmi2ExitInitializationMode", 1, 0, &m->x_changed,
+                                &t_next))
         return fmi2Error;
     m->phase = m->type == fmi2ModelExchange ? BGC_FMI_EVENT : BGC_FMI_STEP;
     return fmi2OK;
@@ -525,7 +742,7 @@ BGC_FMI_EXPORT fmi2Status fmi2ExitInitializationMode(fmi2Component c)
 
 BGC_FMI_EXPORT fmi2Status fmi2Terminate(fmi2Component c)
 {
-    bgc_fmi *m = bgc_fmi_get(c, "fmi2Terminate", BGC_FMI_RUNNING, 0);
+    bgc_fmi *m = bgc_fmi_get(c, "fmi2Terminate", BGC_FMI_MASK_Terminate, 0);
     if (!m)
         return fmi2Error;
     m->phase = BGC_FMI_TERMINATED;
@@ -534,7 +751,7 @@ BGC_FMI_EXPORT fmi2Status fmi2Terminate(fmi2Component c)
 
 BGC_FMI_EXPORT fmi2Status fmi2Reset(fmi2Component c)
 {
-    bgc_fmi *m = bgc_fmi_get(c, "fmi2Reset", BGC_FMI_ANY, 0);
+    bgc_fmi *m = bgc_fmi_get(c, "fmi2Reset", BGC_FMI_MASK_Reset, 0);
     bgc_work *w;
     if (!m)
         return fmi2Error;
@@ -583,6 +800,8 @@ static int bgc_fmi_value(bgc_fmi *m, fmi2ValueReference vr, double *out)
     } else if ((k = bgc_fmi_in(vr, BGC_FMI_VR_INPUTS, BGC_FMI_NUM_INPUTS)) >= 0) {
         *out = m->in[k].n > 0 || bgc_fmi_input_slot[k] < 0 ? m->in_u[k]
                                                             : BGC_FMI_D(m)[bgc_fmi_input_slot[k]];
+    } else if (vr == BGC_FMI_VR_TIME) {
+        *out = m->t;
     } else {
         return 1;
     }
@@ -592,7 +811,7 @@ static int bgc_fmi_value(bgc_fmi *m, fmi2ValueReference vr, double *out)
 BGC_FMI_EXPORT fmi2Status fmi2GetReal(fmi2Component c, const fmi2ValueReference vr[],
                                       size_t nvr, fmi2Real value[])
 {
-    bgc_fmi *m = bgc_fmi_get(c, "fmi2GetReal", BGC_FMI_VALUES, 0);
+    bgc_fmi *m = bgc_fmi_get(c, "fmi2GetReal", BGC_FMI_MASK_GetValues, 0);
     size_t i;
     if (!m)
         return fmi2Error;
@@ -613,7 +832,7 @@ BGC_FMI_EXPORT fmi2Status fmi2GetReal(fmi2Component c, const fmi2ValueReference 
 BGC_FMI_EXPORT fmi2Status fmi2SetReal(fmi2Component c, const fmi2ValueReference vr[],
                                       size_t nvr, const fmi2Real value[])
 {
-    bgc_fmi *m = bgc_fmi_get(c, "fmi2SetReal", BGC_FMI_ANY, 0);
+    bgc_fmi *m = bgc_fmi_get(c, "fmi2SetReal", BGC_FMI_MASK_SetReal, 0);
     size_t i;
     if (!m)
         return fmi2Error;
@@ -629,6 +848,9 @@ BGC_FMI_EXPORT fmi2Status fmi2SetReal(fmi2Component c, const fmi2ValueReference 
             }
             continue;
         }
+        if (vr[i] == BGC_FMI_VR_TIME)
+            return bgc_fmi_refuse(m, "fmi2SetReal", "time is the independent variable (set by "
+                                  "fmi2SetupExperiment, fmi2SetTime and fmi2DoStep)");
         if (bgc_fmi_in(vr[i], 0, BGC_NUM_PARAMS) < 0) {
             bgc_fmi_log(m, fmi2Error, "fmi2SetReal: value reference %u is not a parameter (the "
                         "states start from the parameters; Model Exchange sets them with "
@@ -668,10 +890,11 @@ BGC_FMI_EXPORT fmi2Status fmi2SetReal(fmi2Component c, const fmi2ValueReference 
     return fmi2OK;
 }
 
-/* The FMU has no Integer, Boolean or String variables: only empty requests succeed. */
-static fmi2Status bgc_fmi_none(fmi2Component c, const char *fn, size_t nvr)
+/* The FMU has no Integer, Boolean or String variables, and takes no input derivatives: only
+   empty requests succeed (only: bgc_fmi_get's). */
+static fmi2Status bgc_fmi_none(fmi2Component c, const char *fn, int mask, int only, size_t nvr)
 {
-    bgc_fmi *m = bgc_fmi_get(c, fn, BGC_FMI_ANY, 0);
+    bgc_fmi *m = bgc_fmi_get(c, fn, mask, only);
     if (!m)
         return fmi2Error;
     return nvr == 0 ? fmi2OK : bgc_fmi_refuse(m, fn, "the FMU has no variables of this type");
@@ -682,7 +905,7 @@ BGC_FMI_EXPORT fmi2Status fmi2GetInteger(fmi2Component c, const fmi2ValueReferen
 {
     (void)vr;
     (void)value;
-    return bgc_fmi_none(c, "fmi2GetInteger", nvr);
+    return bgc_fmi_none(c, "fmi2GetInteger", BGC_FMI_MASK_GetValues, 0, nvr);
 }
 
 BGC_FMI_EXPORT fmi2Status fmi2GetBoolean(fmi2Component c, const fmi2ValueReference vr[],
@@ -690,7 +913,7 @@ BGC_FMI_EXPORT fmi2Status fmi2GetBoolean(fmi2Component c, const fmi2ValueReferen
 {
     (void)vr;
     (void)value;
-    return bgc_fmi_none(c, "fmi2GetBoolean", nvr);
+    return bgc_fmi_none(c, "fmi2GetBoolean", BGC_FMI_MASK_GetValues, 0, nvr);
 }
 
 BGC_FMI_EXPORT fmi2Status fmi2GetString(fmi2Component c, const fmi2ValueReference vr[],
@@ -698,7 +921,7 @@ BGC_FMI_EXPORT fmi2Status fmi2GetString(fmi2Component c, const fmi2ValueReferenc
 {
     (void)vr;
     (void)value;
-    return bgc_fmi_none(c, "fmi2GetString", nvr);
+    return bgc_fmi_none(c, "fmi2GetString", BGC_FMI_MASK_GetValues, 0, nvr);
 }
 
 BGC_FMI_EXPORT fmi2Status fmi2SetInteger(fmi2Component c, const fmi2ValueReference vr[],
@@ -706,7 +929,7 @@ BGC_FMI_EXPORT fmi2Status fmi2SetInteger(fmi2Component c, const fmi2ValueReferen
 {
     (void)vr;
     (void)value;
-    return bgc_fmi_none(c, "fmi2SetInteger", nvr);
+    return bgc_fmi_none(c, "fmi2SetInteger", BGC_FMI_MASK_SetOther, 0, nvr);
 }
 
 BGC_FMI_EXPORT fmi2Status fmi2SetBoolean(fmi2Component c, const fmi2ValueReference vr[],
@@ -714,7 +937,7 @@ BGC_FMI_EXPORT fmi2Status fmi2SetBoolean(fmi2Component c, const fmi2ValueReferen
 {
     (void)vr;
     (void)value;
-    return bgc_fmi_none(c, "fmi2SetBoolean", nvr);
+    return bgc_fmi_none(c, "fmi2SetBoolean", BGC_FMI_MASK_SetOther, 0, nvr);
 }
 
 BGC_FMI_EXPORT fmi2Status fmi2SetString(fmi2Component c, const fmi2ValueReference vr[],
@@ -722,27 +945,31 @@ BGC_FMI_EXPORT fmi2Status fmi2SetString(fmi2Component c, const fmi2ValueReferenc
 {
     (void)vr;
     (void)value;
-    return bgc_fmi_none(c, "fmi2SetString", nvr);
+    return bgc_fmi_none(c, "fmi2SetString", BGC_FMI_MASK_SetOther, 0, nvr);
 }
 
 /* ------------------------------------------------------------- FMU states --- */
 
 /* A saved state: everything an instance's future depends on -- its phase, time, parameters
-   (and which were set), states and cached values, the Co-Simulation solver's step size, order
-   and counters, and the workspace (the algebraic blocks' last solutions, the starting values
-   of their Newton iterations).  Serialised as its bytes after a header that names this FMU
-   (its GUID) and the layout's size: it deserialises only into the same binary. */
+   (and which were set), states and cached values, the inputs, the Co-Simulation solver's step
+   size, order and counters, Model Exchange's counts of events, and the workspace (the
+   algebraic blocks' last solutions, the starting values of their Newton iterations).
+   Serialised as its bytes after a header that names this FMU (its GUID) and the layout's
+   size: it deserialises only into the same binary. */
 typedef struct bgc_fmi_saved {
     char magic[8];                      /* "bgcFMUs" */
     char guid[64];                      /* BGC_FMI_GUID */
     unsigned long size;                 /* sizeof(bgc_fmi_saved) */
     int type, phase, fresh, stiff, dx_ok, y_ok, x_changed, wstarted;
-    double t, rtol;
+    double t, t_start, rtol;
     bgc_params p;
     int given[BGC_DIM(BGC_NUM_PARAMS)];
     double x[BGC_DIM(BGC_NUM_STATES)], dx[BGC_DIM(BGC_NUM_STATES)];
     double y[BGC_DIM(BGC_NUM_OUTPUTS)];
     bgc_stats st;
+    bgc_fmi_events e;
+    double in_u[BGC_DIM(BGC_FMI_NUM_INPUTS)];
+    int in_n[BGC_DIM(BGC_FMI_NUM_INPUTS)];
     double wrtol, watol;
     double wv[BGC_DIM(BGC_WORK_DOUBLES)];
     int wiv[BGC_DIM(BGC_WORK_INTS)];
@@ -751,6 +978,7 @@ typedef struct bgc_fmi_saved {
 
 static void bgc_fmi_save(const bgc_fmi *m, bgc_fmi_saved *s)
 {
+    int j;
     memset(s, 0, sizeof *s);
     memcpy(s->magic, "bgcFMUs", 8);
     strncpy(s->guid, BGC_FMI_GUID, sizeof s->guid - 1);
@@ -764,6 +992,7 @@ static void bgc_fmi_save(const bgc_fmi *m, bgc_fmi_saved *s)
     s->x_changed = m->x_changed;
     s->wstarted = m->w->started;
     s->t = m->t;
+    s->t_start = m->t_start;
     s->rtol = m->rtol;
     s->p = m->p;
     memcpy(s->given, m->given, sizeof s->given);
@@ -771,6 +1000,11 @@ static void bgc_fmi_save(const bgc_fmi *m, bgc_fmi_saved *s)
     memcpy(s->dx, m->dx, sizeof s->dx);
     memcpy(s->y, m->y, sizeof s->y);
     s->st = m->st;
+    s->e = m->e;
+    for (j = 0; j < BGC_FMI_NUM_INPUTS; j++) {
+        s->in_u[j] = m->in_u[j];
+        s->in_n[j] = m->in[j].n;
+    }
     s->wrtol = m->w->rtol;
     s->watol = m->w->atol;
     memcpy(s->wv, m->w->v, sizeof s->wv);
@@ -780,6 +1014,7 @@ static void bgc_fmi_save(const bgc_fmi *m, bgc_fmi_saved *s)
 
 static void bgc_fmi_restore(bgc_fmi *m, const bgc_fmi_saved *s)
 {
+    int j;
     m->phase = s->phase;
     m->fresh = s->fresh;
     m->stiff = s->stiff;
@@ -788,6 +1023,7 @@ static void bgc_fmi_restore(bgc_fmi *m, const bgc_fmi_saved *s)
     m->x_changed = s->x_changed;
     m->w->started = s->wstarted;
     m->t = s->t;
+    m->t_start = s->t_start;
     m->rtol = s->rtol;
     m->p = s->p;
     memcpy(m->given, s->given, sizeof s->given);
@@ -795,6 +1031,11 @@ static void bgc_fmi_restore(bgc_fmi *m, const bgc_fmi_saved *s)
     memcpy(m->dx, s->dx, sizeof s->dx);
     memcpy(m->y, s->y, sizeof s->y);
     m->st = s->st;
+    m->e = s->e;
+    for (j = 0; j < BGC_FMI_NUM_INPUTS; j++) {
+        m->in_u[j] = s->in_u[j];
+        m->in[j].n = s->in_n[j] ? 1 : 0;
+    }
     m->w->rtol = s->wrtol;
     m->w->atol = s->watol;
     memcpy(m->w->v, s->wv, sizeof s->wv);
@@ -817,18 +1058,16 @@ static int bgc_fmi_saved_ok(const bgc_fmi_saved *s, int type, const char **why)
         *why = "not a state of this FMU";
     else if (s->type != type)
         *why = "a state of the other FMU type (Model Exchange / Co-Simulation)";
-    else if (s->phase == BGC_FMI_FAILED)
-        *why = "a state after an error";
+    else if (s->phase < BGC_FMI_INSTANTIATED || s->phase > BGC_FMI_ERROR)
+        *why = "not a state of this FMU (its state machine's state)";
     else
         return 1;
     return 0;
 }
 
-#define BGC_FMI_SAVABLE (BGC_FMI_ANY & ~(1 << BGC_FMI_FAILED))
-
 BGC_FMI_EXPORT fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate *FMUstate)
 {
-    bgc_fmi *m = bgc_fmi_get(c, "fmi2GetFMUstate", BGC_FMI_SAVABLE, 0);
+    bgc_fmi *m = bgc_fmi_get(c, "fmi2GetFMUstate", BGC_FMI_MASK_FMUstate, 0);
     bgc_fmi_saved *s;
     if (!m)
         return fmi2Error;
@@ -848,7 +1087,7 @@ BGC_FMI_EXPORT fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate *FMUstat
 
 BGC_FMI_EXPORT fmi2Status fmi2SetFMUstate(fmi2Component c, fmi2FMUstate FMUstate)
 {
-    bgc_fmi *m = bgc_fmi_get(c, "fmi2SetFMUstate", BGC_FMI_ANY, 0);
+    bgc_fmi *m = bgc_fmi_get(c, "fmi2SetFMUstate", BGC_FMI_MASK_FMUstate, 0);
     const char *why = NULL;
     if (!m)
         return fmi2Error;
@@ -862,7 +1101,7 @@ BGC_FMI_EXPORT fmi2Status fmi2SetFMUstate(fmi2Component c, fmi2FMUstate FMUstate
 
 BGC_FMI_EXPORT fmi2Status fmi2FreeFMUstate(fmi2Component c, fmi2FMUstate *FMUstate)
 {
-    bgc_fmi *m = bgc_fmi_get(c, "fmi2FreeFMUstate", BGC_FMI_ANY, 0);
+    bgc_fmi *m = bgc_fmi_get(c, "fmi2FreeFMUstate", BGC_FMI_MASK_FMUstate, 0);
     if (!m)
         return fmi2Error;
     if (FMUstate) {
@@ -875,7 +1114,7 @@ BGC_FMI_EXPORT fmi2Status fmi2FreeFMUstate(fmi2Component c, fmi2FMUstate *FMUsta
 BGC_FMI_EXPORT fmi2Status fmi2SerializedFMUstateSize(fmi2Component c, fmi2FMUstate FMUstate,
                                                      size_t *size)
 {
-    bgc_fmi *m = bgc_fmi_get(c, "fmi2SerializedFMUstateSize", BGC_FMI_ANY, 0);
+    bgc_fmi *m = bgc_fmi_get(c, "fmi2SerializedFMUstateSize", BGC_FMI_MASK_FMUstate, 0);
     if (!m)
         return fmi2Error;
     if (!FMUstate || !size)
@@ -887,7 +1126,7 @@ BGC_FMI_EXPORT fmi2Status fmi2SerializedFMUstateSize(fmi2Component c, fmi2FMUsta
 BGC_FMI_EXPORT fmi2Status fmi2SerializeFMUstate(fmi2Component c, fmi2FMUstate FMUstate,
                                                 fmi2Byte serializedState[], size_t size)
 {
-    bgc_fmi *m = bgc_fmi_get(c, "fmi2SerializeFMUstate", BGC_FMI_ANY, 0);
+    bgc_fmi *m = bgc_fmi_get(c, "fmi2SerializeFMUstate", BGC_FMI_MASK_FMUstate, 0);
     if (!m)
         return fmi2Error;
     if (!FMUstate || !serializedState)
@@ -903,7 +1142,7 @@ BGC_FMI_EXPORT fmi2Status fmi2DeSerializeFMUstate(fmi2Component c,
                                                   const fmi2Byte serializedState[], size_t size,
                                                   fmi2FMUstate *FMUstate)
 {
-    bgc_fmi *m = bgc_fmi_get(c, "fmi2DeSerializeFMUstate", BGC_FMI_ANY, 0);
+    bgc_fmi *m = bgc_fmi_get(c, "fmi2DeSerializeFMUstate", BGC_FMI_MASK_FMUstate, 0);
     bgc_fmi_saved *s;
     const char *why = NULL;
     if (!m)
@@ -936,11 +1175,12 @@ BGC_FMI_EXPORT fmi2Status fmi2GetDirectionalDerivative(fmi2Component c,
                                                        fmi2Real dvUnknown[])
 {
     static const char fn[] = "fmi2GetDirectionalDerivative";
-    bgc_fmi *m = bgc_fmi_get(c, fn, BGC_FMI_RUNNING | (1 << BGC_FMI_TERMINATED), 0);
+    bgc_fmi *m = bgc_fmi_get(c, fn, BGC_FMI_MASK_GetDirectionalDerivative, 1);
     int need_dx = 0, need_y = 0, k;
     size_t i;
     if (!m)
         return fmi2Error;
+    bgc_fmi_refresh(m);
     if ((nKnown > 0 && (!vKnown_ref || !dvKnown))
         || (nUnknown > 0 && (!vUnknown_ref || !dvUnknown)))
         return bgc_fmi_refuse(m, fn, "no array given");
@@ -988,27 +1228,30 @@ BGC_FMI_EXPORT fmi2Status fmi2GetDirectionalDerivative(fmi2Component c,
 
 BGC_FMI_EXPORT fmi2Status fmi2EnterEventMode(fmi2Component c)
 {
-    bgc_fmi *m = bgc_fmi_get(c, "fmi2EnterEventMode",
-                             (1 << BGC_FMI_EVENT) | (1 << BGC_FMI_CONTINUOUS), 1);
+    bgc_fmi *m = bgc_fmi_get(c, "fmi2EnterEventMode", BGC_FMI_MASK_EnterEventMode, 1);
     if (!m)
         return fmi2Error;
+    m->e.pending |= m->phase == BGC_FMI_CONTINUOUS; /* an event (counted by the next call) */
     m->phase = BGC_FMI_EVENT;
     return fmi2OK;
 }
 
-/* The event iteration until nothing changes, all in one call. */
+/* The event iteration until nothing changes, all in one call; the first call after
+   fmi2EnterEventMode counts the event and bounds the events (bgc_fmi_count_event). */
 BGC_FMI_EXPORT fmi2Status fmi2NewDiscreteStates(fmi2Component c, fmi2EventInfo *eventInfo)
 {
     static const char fn[] = "fmi2NewDiscreteStates";
-    bgc_fmi *m = bgc_fmi_get(c, fn, 1 << BGC_FMI_EVENT, 1);
+    bgc_fmi *m = bgc_fmi_get(c, fn, BGC_FMI_MASK_NewDiscreteStates, 1);
     double t_next;
-    int changed;
+    int changed, count;
     if (!m)
         return fmi2Error;
     if (!eventInfo)
         return bgc_fmi_refuse(m, fn, "no event information given");
     bgc_fmi_refresh(m);
-    if (bgc_fmi_event_iteration(m, fn, 0, &changed, &t_next))
+    count = m->e.pending;
+    m->e.pending = 0;
+    if (bgc_fmi_event_iteration(m, fn, 0, count, &changed, &t_next))
         return fmi2Error;
     eventInfo->newDiscreteStatesNeeded = fmi2False;
     eventInfo->terminateSimulation = fmi2False;
@@ -1022,7 +1265,8 @@ BGC_FMI_EXPORT fmi2Status fmi2NewDiscreteStates(fmi2Component c, fmi2EventInfo *
 
 BGC_FMI_EXPORT fmi2Status fmi2EnterContinuousTimeMode(fmi2Component c)
 {
-    bgc_fmi *m = bgc_fmi_get(c, "fmi2EnterContinuousTimeMode", 1 << BGC_FMI_EVENT, 1);
+    bgc_fmi *m = bgc_fmi_get(c, "fmi2EnterContinuousTimeMode",
+                             BGC_FMI_MASK_EnterContinuousTimeMode, 1);
     if (!m)
         return fmi2Error;
     m->phase = BGC_FMI_CONTINUOUS;
@@ -1034,11 +1278,14 @@ BGC_FMI_EXPORT fmi2Status fmi2CompletedIntegratorStep(fmi2Component c,
                                                       fmi2Boolean *enterEventMode,
                                                       fmi2Boolean *terminateSimulation)
 {
-    bgc_fmi *m = bgc_fmi_get(c, "fmi2CompletedIntegratorStep", 1 << BGC_FMI_CONTINUOUS, 1);
+    bgc_fmi *m = bgc_fmi_get(c, "fmi2CompletedIntegratorStep",
+                             BGC_FMI_MASK_CompletedIntegratorStep, 1);
     int k, missed = 0;
     (void)noSetFMUStatePriorToCurrentPoint;
     if (!m)
         return fmi2Error;
+    if (m->t < m->e.t_step) /* the first step since the last event ended here */
+        m->e.t_step = m->t;
     if (bgc_fmi_indicators(m))
         return bgc_fmi_model_failed(m, "fmi2CompletedIntegratorStep");
     for (k = 0; k < BGC_NUM_INDICATORS; k++)
@@ -1052,8 +1299,7 @@ BGC_FMI_EXPORT fmi2Status fmi2CompletedIntegratorStep(fmi2Component c,
 
 BGC_FMI_EXPORT fmi2Status fmi2SetTime(fmi2Component c, fmi2Real time)
 {
-    bgc_fmi *m = bgc_fmi_get(c, "fmi2SetTime",
-                             (1 << BGC_FMI_EVENT) | (1 << BGC_FMI_CONTINUOUS), 1);
+    bgc_fmi *m = bgc_fmi_get(c, "fmi2SetTime", BGC_FMI_MASK_SetTime, 1);
     if (!m)
         return fmi2Error;
     if (!isfinite(time))
@@ -1084,7 +1330,7 @@ static bgc_fmi *bgc_fmi_states(fmi2Component c, const char *fn, int mask, const 
 BGC_FMI_EXPORT fmi2Status fmi2SetContinuousStates(fmi2Component c, const fmi2Real x[], size_t nx)
 {
     bgc_fmi *m = bgc_fmi_states(c, "fmi2SetContinuousStates",
-                                (1 << BGC_FMI_EVENT) | (1 << BGC_FMI_CONTINUOUS), x, nx);
+                                BGC_FMI_MASK_SetContinuousStates, x, nx);
     size_t i;
     if (!m)
         return fmi2Error;
@@ -1096,7 +1342,8 @@ BGC_FMI_EXPORT fmi2Status fmi2SetContinuousStates(fmi2Component c, const fmi2Rea
 
 BGC_FMI_EXPORT fmi2Status fmi2GetDerivatives(fmi2Component c, fmi2Real derivatives[], size_t nx)
 {
-    bgc_fmi *m = bgc_fmi_states(c, "fmi2GetDerivatives", BGC_FMI_VALUES, derivatives, nx);
+    bgc_fmi *m = bgc_fmi_states(c, "fmi2GetDerivatives", BGC_FMI_MASK_GetDerivatives,
+                                derivatives, nx);
     size_t i;
     if (!m)
         return fmi2Error;
@@ -1112,7 +1359,7 @@ BGC_FMI_EXPORT fmi2Status fmi2GetEventIndicators(fmi2Component c, fmi2Real event
                                                  size_t ni)
 {
     static const char fn[] = "fmi2GetEventIndicators";
-    bgc_fmi *m = bgc_fmi_get(c, fn, BGC_FMI_VALUES, 1);
+    bgc_fmi *m = bgc_fmi_get(c, fn, BGC_FMI_MASK_GetEventIndicators, 1);
     int k;
     if (!m)
         return fmi2Error;
@@ -1133,7 +1380,8 @@ BGC_FMI_EXPORT fmi2Status fmi2GetEventIndicators(fmi2Component c, fmi2Real event
 
 BGC_FMI_EXPORT fmi2Status fmi2GetContinuousStates(fmi2Component c, fmi2Real x[], size_t nx)
 {
-    bgc_fmi *m = bgc_fmi_states(c, "fmi2GetContinuousStates", BGC_FMI_VALUES, x, nx);
+    bgc_fmi *m = bgc_fmi_states(c, "fmi2GetContinuousStates", BGC_FMI_MASK_GetContinuousStates,
+                                x, nx);
     size_t i;
     if (!m)
         return fmi2Error;
@@ -1146,8 +1394,8 @@ BGC_FMI_EXPORT fmi2Status fmi2GetContinuousStates(fmi2Component c, fmi2Real x[],
 BGC_FMI_EXPORT fmi2Status fmi2GetNominalsOfContinuousStates(fmi2Component c, fmi2Real x_nominal[],
                                                             size_t nx)
 {
-    bgc_fmi *m = bgc_fmi_states(c, "fmi2GetNominalsOfContinuousStates", BGC_FMI_ANY, x_nominal,
-                                nx);
+    bgc_fmi *m = bgc_fmi_states(c, "fmi2GetNominalsOfContinuousStates",
+                                BGC_FMI_MASK_GetNominalsOfContinuousStates, x_nominal, nx);
     size_t i;
     if (!m)
         return fmi2Error;
@@ -1175,7 +1423,7 @@ BGC_FMI_EXPORT fmi2Status fmi2DoStep(fmi2Component c, fmi2Real currentCommunicat
                                      fmi2Boolean noSetFMUStatePriorToCurrentPoint)
 {
     static const char fn[] = "fmi2DoStep";
-    bgc_fmi *m = bgc_fmi_get(c, fn, 1 << BGC_FMI_STEP, 2);
+    bgc_fmi *m = bgc_fmi_get(c, fn, BGC_FMI_MASK_DoStep, 2);
     const bgc_method *method;
     bgc_settings s;
     char msg[512];
@@ -1213,7 +1461,7 @@ BGC_FMI_EXPORT fmi2Status fmi2DoStep(fmi2Component c, fmi2Real currentCommunicat
     m->dx_ok = 0;
     if (rc) {
         m->y_ok = 0;
-        m->phase = BGC_FMI_FAILED;
+        m->phase = BGC_FMI_ERROR;
         bgc_fmi_log(m, fmi2Error, "%s: %s", fn, msg);
         return fmi2Error;
     }
@@ -1224,8 +1472,9 @@ BGC_FMI_EXPORT fmi2Status fmi2DoStep(fmi2Component c, fmi2Real currentCommunicat
 
 BGC_FMI_EXPORT fmi2Status fmi2CancelStep(fmi2Component c)
 {
-    bgc_fmi *m = bgc_fmi_get(c, "fmi2CancelStep", BGC_FMI_ANY, 2);
-    return m ? bgc_fmi_refuse(m, "fmi2CancelStep", "fmi2DoStep never runs asynchronously")
+    bgc_fmi *m = bgc_fmi_get(c, "fmi2CancelStep", BGC_FMI_LIVE, 2);
+    return m ? bgc_fmi_refuse(m, "fmi2CancelStep", "no step in progress (fmi2DoStep never "
+                              "runs asynchronously)")
              : fmi2Error;
 }
 
@@ -1237,14 +1486,16 @@ BGC_FMI_EXPORT fmi2Status fmi2SetRealInputDerivatives(fmi2Component c,
     (void)vr;
     (void)order;
     (void)value;
-    return bgc_fmi_none(c, "fmi2SetRealInputDerivatives", nvr);
+    return bgc_fmi_none(c, "fmi2SetRealInputDerivatives",
+                        BGC_FMI_MASK_SetRealInputDerivatives, 2, nvr);
 }
 
 BGC_FMI_EXPORT fmi2Status fmi2GetRealOutputDerivatives(fmi2Component c,
                                                        const fmi2ValueReference vr[], size_t nvr,
                                                        const fmi2Integer order[], fmi2Real value[])
 {
-    bgc_fmi *m = bgc_fmi_get(c, "fmi2GetRealOutputDerivatives", BGC_FMI_ANY, 2);
+    bgc_fmi *m = bgc_fmi_get(c, "fmi2GetRealOutputDerivatives",
+                             BGC_FMI_MASK_GetRealOutputDerivatives, 2);
     (void)vr;
     (void)order;
     (void)value;
@@ -1259,7 +1510,7 @@ BGC_FMI_EXPORT fmi2Status fmi2GetRealOutputDerivatives(fmi2Component c,
 /* A status the FMU does not give: fmi2Discard, logged (why: what it gives instead). */
 static fmi2Status bgc_fmi_no_status(fmi2Component c, const char *fn, const char *why)
 {
-    bgc_fmi *m = bgc_fmi_get(c, fn, BGC_FMI_ANY, 2);
+    bgc_fmi *m = bgc_fmi_get(c, fn, BGC_FMI_MASK_GetStatus, 2);
     if (!m)
         return fmi2Error;
     bgc_fmi_log(m, fmi2Discard, "%s: %s", fn, why);
@@ -1278,7 +1529,7 @@ BGC_FMI_EXPORT fmi2Status fmi2GetStatus(fmi2Component c, const fmi2StatusKind s,
 BGC_FMI_EXPORT fmi2Status fmi2GetRealStatus(fmi2Component c, const fmi2StatusKind s,
                                             fmi2Real *value)
 {
-    bgc_fmi *m = bgc_fmi_get(c, "fmi2GetRealStatus", BGC_FMI_ANY, 2);
+    bgc_fmi *m = bgc_fmi_get(c, "fmi2GetRealStatus", BGC_FMI_MASK_GetStatus, 2);
     if (!m)
         return fmi2Error;
     if (s != fmi2LastSuccessfulTime || !value) {
@@ -1300,7 +1551,7 @@ BGC_FMI_EXPORT fmi2Status fmi2GetIntegerStatus(fmi2Component c, const fmi2Status
 BGC_FMI_EXPORT fmi2Status fmi2GetBooleanStatus(fmi2Component c, const fmi2StatusKind s,
                                                fmi2Boolean *value)
 {
-    bgc_fmi *m = bgc_fmi_get(c, "fmi2GetBooleanStatus", BGC_FMI_ANY, 2);
+    bgc_fmi *m = bgc_fmi_get(c, "fmi2GetBooleanStatus", BGC_FMI_MASK_GetStatus, 2);
     if (!m)
         return fmi2Error;
     if (s != fmi2Terminated || !value) {
