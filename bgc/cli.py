@@ -1193,7 +1193,11 @@ def _analysis_params(model, scene, params, analysed, outputs=None, effects=None)
 @click.option("--bode", "bode_file", default=None, metavar="FILE.png", callback=_plot_file,
               help="Draw the Bode plot of every input-output pair into FILE (.png, .svg or "
                    ".pdf; needs matplotlib: pip install 'bgc[plot]').")
-def linearize(model, scene, outputs, effects, algebra, at, inputs, params, output, bode_file):
+@click.option("--max-steps", type=click.IntRange(0, 10**15), default=None, metavar="N",
+              help="The most steps of the run to --at t=TIME (0: no limit).  [default: "
+                   "10000000]")
+def linearize(model, scene, outputs, effects, algebra, at, inputs, params, output, bode_file,
+              max_steps):
     """Linearise: A, B, C, D from the Jacobians the compiler derives; constrained models in
     independent coordinates, the correctors' artificial modes apart.  Prints the eigenvalues
     with their natural frequencies and damping ratios."""
@@ -1207,7 +1211,7 @@ def linearize(model, scene, outputs, effects, algebra, at, inputs, params, outpu
     given = _analysis_params(model, scene, params, analysed, outputs, effects)
     evaluator = _analysed(analysis.Evaluator, analysed, given)
     point = _analysed(linear.operating_point, evaluator, at,
-                      lambda T: linear.run_to(evaluator, given, T))
+                      lambda T: linear.run_to(evaluator, given, T, max_steps))
     result = _analysed(linear.linearization, evaluator, *point)
     if output:
         _write_atomic(output, linear.render(result, linear.check_format(output)))
