@@ -1152,6 +1152,15 @@ def _at(ctx, param, value):
     return value
 
 
+def _steady_at(ctx, param, value):
+    """steady's --at: t=TIME, checked before any work (its start, once the model is built)."""
+    try:
+        equilibria.parse_at(value, -math.inf)
+    except ValueError as error:
+        raise click.BadParameter(str(error), ctx, param) from None
+    return value
+
+
 def _matrices_file(ctx, param, value):
     """-o of linearize: FILE.json, .npz or .csv where a file can be written."""
     if value is not None:
@@ -1234,7 +1243,11 @@ def linearize(model, scene, outputs, effects, algebra, at, inputs, params, outpu
 @click.option("-p", "params", multiple=True, metavar="NAME=VALUE", help="Parameter override.")
 @click.option("--json", "json_file", default=None, callback=_output_file, metavar="FILE",
               help="Also write the equilibrium to FILE as JSON.")
-def steady(model, scene, effects, algebra, params, json_file):
+@click.option("--at", default=None, metavar="t=TIME", callback=_steady_at,
+              help="The time the time sources (step, pulse, square, tables of t, ...) are "
+                   "evaluated at; they must be constant from there on.  [default: the "
+                   "scene's start]")
+def steady(model, scene, effects, algebra, params, json_file, at):
     """An equilibrium by Newton's method on the right side, with the exact Jacobian: one
     line per state, multiplier and constraint residual, then the residual max |dx/dt|; no
     equilibrium found: exit 1 and why."""
@@ -1242,7 +1255,12 @@ def steady(model, scene, effects, algebra, params, json_file):
     analysed = _analysed(analysis.build, model, scene, None, effects, None, algebra)
     _warn(analysed.compiled)
     given = _analysis_params(model, scene, params, analysed, None, effects)
-    found = _analysed(equilibria.solve, _analysed(analysis.Evaluator, analysed, given))
+    evaluator = _analysed(analysis.Evaluator, analysed, given)
+    found = _analysed(equilibria.solve, evaluator, None,
+                      _analysed(equilibria.parse_at, at, evaluator.t0))
+    if found.sources:
+        click.echo(f"note: time sources evaluated at t = {found.t:.17g}: "
+                   f"{', '.join(found.sources)}", err=True)
     if found.free:
         click.echo(f"note: the Jacobian is singular ({found.free} free direction"
                    f"{'s' if found.free > 1 else ''}): the equilibria form a family; this is "
