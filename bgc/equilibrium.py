@@ -16,20 +16,20 @@ result says how many directions are free.  Where no step reduces |F| while |F| i
 naming the state whose rate stays largest.
 
 Events (bgc.events).  The right side reads discrete values that a run freezes between events:
-its relations, time sources, modes and discrete variables.  The time sources are evaluated at
-a time t (the scene's start, or the one asked: `--at t=T`), as a run from t starts: its
-event iteration at (t, x0), initial() true, the discrete variables at their initial values.
-An equilibrium must stay from t on, so a model whose time sources are not constant from t on
+its relations, time sources, modes and discrete variables.  They start as the scene's run
+starts (its event iteration at (t0, x0): initial() true, the discrete variables at their
+initial values), then the time sources are evaluated at a time t (the scene's start, or the
+one asked: `--at t=T`; a when-block that makes fire is refused, as below).  An equilibrium must stay from t on, so a model whose time sources are not constant from t on
 is refused (Driven), located at each source: a time event still to come (a step, a pulse's
 start or end, a square wave's edge, a table's breakpoint, the next crossing of sin(t) > 0.5),
 a law that reads t once the discrete values are put in (sin(t), ramp), a table of t whose
 piece is not constant, a relation of t whose crossings bgc cannot find.  The relations of the
 states are held during Newton's method and then evaluated at its result: where they give
-other modes, Newton's method runs again in those (a diode that conducts at the start and
-blocks at rest), and modes that come back are refused, the conditions that switch named (a
-relay: no equilibrium, the model slides).  A when-block that the event iteration at the
-result fires (its condition rose between the start and there) would have fired on the way, so
-the discrete values are not the ones held: refused at the when-block.
+other modes, Newton's method runs again in those (`c.q < 1` holds at the start and not at
+the rest it gives), and modes that come back are refused, the conditions that switch named (a
+relay: no equilibrium, the model slides).  A when-block that the event iteration at t or at
+the result fires (its condition rose between the start and there) would have fired on the
+way, so the discrete values are not the ones held: refused at the when-block.
 """
 from __future__ import annotations
 
@@ -102,17 +102,21 @@ def _residual(ev, t, x):
 
 def solve(ev: operating.Evaluator, x0=None, t=None) -> Equilibrium:
     """The equilibrium nearest x0 (default: the scene's initial state) with the time
-    sources at t (default: the scene's start): see steady(); NoEquilibrium, Driven."""
+    sources at t (default: the scene's start), as the module's doc says; NoEquilibrium,
+    Driven."""
     t = ev.t0 if t is None else float(t)
     x = ev.initial() if x0 is None else np.asarray(x0, dtype=float).copy()
-    x = ev.settle(t, x, start=True)  # as a run from t starts: d at (t, x)
+    x = ev.settle(ev.t0, x, start=True)  # as the scene's run starts: d at (t0, x0)
+    if t != ev.t0:  # the time sources at t: a when-block they make fire is refused
+        before = ev.discrete_values()
+        _refuse(ev, _fired(ev, x, ev.settle(t, x, start=False), before, t))
     _refuse(ev, _driven(ev, t, x))
     seen = [ev.discrete_values()]
     for _ in range(MAX_MODES):
         x, J, it = _newton(ev, t, x)
         before = ev.discrete_values()
         after = ev.settle(t, x, start=False)
-        _refuse(ev, _fired(ev, x, after, before))
+        _refuse(ev, _fired(ev, x, after, before, t))
         now = ev.discrete_values()
         if now == before:
             _refuse(ev, _driven(ev, t, x))
@@ -386,11 +390,11 @@ def _slot_sources(sel) -> list:
         + [(d.name, d.span) for d in sel.discretes]
 
 
-def _fired(ev, x, after, before) -> list[Diagnostic]:
-    """The when-blocks that the event iteration at the candidate x fired (a reinit moved the
-    state, or a discrete variable changed): each condition rose between the start and x, so a
-    run would have fired it on the way, and the discrete values at the equilibrium are not
-    the ones Newton's method held.  [] if none."""
+def _fired(ev, x, after, before, t) -> list[Diagnostic]:
+    """The when-blocks that the event iteration at (t, x) fired (a reinit moved the state,
+    or a discrete variable changed): each condition rose between the scene's start and
+    there, so a run would have fired it on the way, and the discrete values at the
+    equilibrium are not the ones held.  [] if none."""
     sel = ev.events
     if sel is None:
         return []
@@ -399,8 +403,9 @@ def _fired(ev, x, after, before) -> list[Diagnostic]:
     now = ev.discrete_values()
     first = ev.discrete - len(sel.discretes)
     moved |= {sel.discretes[k - first].symbol for k in ev.held if now[k] != before[k]}
-    out = [_error(w.span, f"'when {w.text}' would fire on the way to the equilibrium: its "
-                          "condition holds there and not at the start")
+    out = [_error(w.span, f"'when {w.text}' would fire on the way from the start (t = "
+                          f"{ev.t0:.6g}) to the equilibrium at t = {t:.6g}: its condition "
+                          "holds there and not at the start")
            for w in sel.whens if any(a.symbol in moved for a in w.actions)]
     if not out:
         return []

@@ -204,6 +204,7 @@ def steady_q(result) -> float:
     ("5*ramp(1) - 5*ramp(2)", "t=2", "ramp(2)"),  # 5 (t - 1) - 5 (t - 2) = 5: t cancels
     ("table([[0, 0], [3, 5]], t)", "t=3", "table 0 (rows) of t"),  # held from its last row
     ("if exp(-t) < 0.5 then 5 else 0", "t=1", "exp(-t) < 0.5"),  # crossed at log 2
+    ("5*(1 - square(1e308, 0.5))", "t=1.6e308", "square(1e308, 0.5)"),  # next edge: 2e308
     ("5*square(2, 0.5, 10)", "t=0", None),  # refused below: this is the control
 ])
 def test_time_sources_are_evaluated_at_the_time_asked(tmp_path, source, at, named):
@@ -311,3 +312,16 @@ def test_a_when_block_at_the_start_sets_the_point(tmp_path):
     """when initial() runs as at the start of a run from the time asked: k = 2, q = C*10."""
     model = rc(tmp_path, "5*k", "discrete k = 1\nwhen initial() { k = 2 }\n")
     assert steady_q(cli("steady", model)) == pytest.approx(C_C * 2 * V_C, rel=1e-12)
+
+
+def test_a_when_block_on_time_that_fires_before_the_time_asked_is_refused(tmp_path):
+    """k = 2 from t = 1 on (a when-block on t): at --at t=2 a run from the start has fired
+    it, so the discrete value there is the run's: refused at the block; at t = 0.5 the block
+    is still to come (a time event): the model is driven."""
+    model = rc(tmp_path, "5*k", "discrete k = 1\nwhen t >= 1 { k = 2 }\n")
+    result = cli("steady", model, "--at", "t=2")
+    assert result.exit_code == 1
+    assert (":5:1: error: 'when t >= 1' would fire on the way from the start (t = 0) to the "
+            "equilibrium at t = 2") in result.stderr
+    result = cli("steady", model, "--at", "t=0.5")
+    assert result.exit_code == 1 and "'t >= 1' changes at t = 1" in result.stderr
