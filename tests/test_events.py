@@ -191,7 +191,7 @@ def test_a_pulse_of_width_zero_is_no_pulse():
 
 
 def test_a_pulse_whose_end_is_beyond_a_double_never_ends():
-    """pulse(t0, width) is 1 on [t0, t0 + width) (LANGUAGE.md section 10): where t0 + width
+    """pulse(t0, width) is 1 on [t0, t0 + width) (docs/hybrid.md, section 3): where t0 + width
     is beyond a double (2e308) the end is at infinity, a time event no run reaches, so the
     pulse never ends.  `check` says so; every backend runs it (the written form failed,
     naming an internal next_time; as parameters, t0 + width overflows in the run), the lag at
