@@ -1152,6 +1152,15 @@ def _at(ctx, param, value):
     return value
 
 
+def _steady_at(ctx, param, value):
+    """steady's --at: t=TIME, checked before any work (its start, once the model is built)."""
+    try:
+        equilibria.parse_at(value, -math.inf)
+    except ValueError as error:
+        raise click.BadParameter(str(error), ctx, param) from None
+    return value
+
+
 def _matrices_file(ctx, param, value):
     """-o of linearize: FILE.json, .npz or .csv where a file can be written."""
     if value is not None:
@@ -1193,7 +1202,11 @@ def _analysis_params(model, scene, params, analysed, outputs=None, effects=None)
 @click.option("--bode", "bode_file", default=None, metavar="FILE.png", callback=_plot_file,
               help="Draw the Bode plot of every input-output pair into FILE (.png, .svg or "
                    ".pdf; needs matplotlib: pip install 'bgc[plot]').")
-def linearize(model, scene, outputs, effects, algebra, at, inputs, params, output, bode_file):
+@click.option("--max-steps", type=click.IntRange(0, 10**15), default=None, metavar="N",
+              help="The most steps of the run to --at t=TIME (0: no limit).  [default: "
+                   "10000000]")
+def linearize(model, scene, outputs, effects, algebra, at, inputs, params, output, bode_file,
+              max_steps):
     """Linearise: A, B, C, D from the Jacobians the compiler derives; constrained models in
     independent coordinates, the correctors' artificial modes apart.  Prints the eigenvalues
     with their natural frequencies and damping ratios."""
@@ -1207,7 +1220,7 @@ def linearize(model, scene, outputs, effects, algebra, at, inputs, params, outpu
     given = _analysis_params(model, scene, params, analysed, outputs, effects)
     evaluator = _analysed(analysis.Evaluator, analysed, given)
     point = _analysed(linear.operating_point, evaluator, at,
-                      lambda T: linear.run_to(evaluator, given, T))
+                      lambda T: linear.run_to(evaluator, given, T, max_steps))
     result = _analysed(linear.linearization, evaluator, *point)
     if output:
         _write_atomic(output, linear.render(result, linear.check_format(output)))
@@ -1230,7 +1243,11 @@ def linearize(model, scene, outputs, effects, algebra, at, inputs, params, outpu
 @click.option("-p", "params", multiple=True, metavar="NAME=VALUE", help="Parameter override.")
 @click.option("--json", "json_file", default=None, callback=_output_file, metavar="FILE",
               help="Also write the equilibrium to FILE as JSON.")
-def steady(model, scene, effects, algebra, params, json_file):
+@click.option("--at", default=None, metavar="t=TIME", callback=_steady_at,
+              help="The time the time sources (step, pulse, square, tables of t, ...) are "
+                   "evaluated at; they must be constant from there on.  [default: the "
+                   "scene's start]")
+def steady(model, scene, effects, algebra, params, json_file, at):
     """An equilibrium by Newton's method on the right side, with the exact Jacobian: one
     line per state, multiplier and constraint residual, then the residual max |dx/dt|; no
     equilibrium found: exit 1 and why."""
@@ -1238,7 +1255,12 @@ def steady(model, scene, effects, algebra, params, json_file):
     analysed = _analysed(analysis.build, model, scene, None, effects, None, algebra)
     _warn(analysed.compiled)
     given = _analysis_params(model, scene, params, analysed, None, effects)
-    found = _analysed(equilibria.solve, _analysed(analysis.Evaluator, analysed, given))
+    evaluator = _analysed(analysis.Evaluator, analysed, given)
+    found = _analysed(equilibria.solve, evaluator, None,
+                      _analysed(equilibria.parse_at, at, evaluator.t0))
+    if found.sources:
+        click.echo(f"note: time sources evaluated at t = {found.t:.17g}: "
+                   f"{', '.join(found.sources)}", err=True)
     if found.free:
         click.echo(f"note: the Jacobian is singular ({found.free} free direction"
                    f"{'s' if found.free > 1 else ''}): the equilibria form a family; this is "

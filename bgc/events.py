@@ -30,6 +30,7 @@ something, the chain of events at one instant docs/hybrid.md allows; the runtime
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import sympy as sp
@@ -324,13 +325,33 @@ def _time_event(r: Relation, params: set):
     b = sp.expand(g - a * TIME)
     if TIME in b.free_symbols:
         return None
-    at = -b / a
+    at = _time(-b / a)
     rising = sp.StrictGreaterThan(a, 0)
     if isinstance(rel, (sp.StrictLessThan, sp.LessThan)):
         rising = sp.Not(rising)
     after = sp.Or(sp.And(rising, sp.GreaterThan(TIME, at)),
                   sp.And(sp.Not(rising), sp.StrictLessThan(TIME, at)))
     return at, after
+
+
+def _time(at):
+    """A time event's time; a number beyond a double (t0 + width = 2e308) as oo or -oo: no
+    run reaches it, so the event never comes (it is no event) and the relation keeps its
+    value for ever (a pulse that starts at 1e308 never ends).  Every runtime computes such a
+    time from parameters as inf too, and steps onto no time that is not finite."""
+    if at.is_number and at.is_extended_real:
+        try:
+            value = float(at)
+        except (TypeError, ValueError, OverflowError):
+            return at
+        if math.isinf(value):
+            return sp.oo if value > 0 else -sp.oo
+    return at
+
+
+def never(at) -> bool:
+    """Whether a time event's time (_time's) is one no run reaches."""
+    return at in (sp.oo, -sp.oo)
 
 
 MAX_FAMILIES = 8  # of one relation's crossing times
@@ -498,13 +519,22 @@ def update_stores(sel: Selected, states) -> tuple[list, list]:
     return out
 
 
+def timers(sel: Selected) -> list[tuple]:
+    """(time, source) of each time the solver steps onto, source the Relation, Square,
+    TimeTable or InputSlot it belongs to: the time relations' times (but those beyond a
+    double: never), the time sources' next edges, and the next crossing of each state
+    relation of t alone whose times are known."""
+    relation = {r.symbol: r for r in sel.state}
+    crossings = [(C if P == 0 else PeriodicNext(TIME, P, C), relation[sym])
+                 for sym, forms in sel.crossings if forms for C, P in forms
+                 if not (P == 0 and never(_time(C)))]
+    return [(at, r) for r, at, _ in sel.time if not never(at)] + \
+        [(s.next(), s) for s in sel.squares if s.next() is not None] + crossings
+
+
 def next_times(sel: Selected) -> list:
-    """The times the solver steps onto: the time relations', the time sources' next
-    edges, and the next crossing of each state relation of t alone whose times are known."""
-    crossings = [C if P == 0 else PeriodicNext(TIME, P, C)
-                 for _, forms in sel.crossings if forms for C, P in forms]
-    return [at for _, at, _ in sel.time] + \
-        [s.next() for s in sel.squares if s.next() is not None] + crossings
+    """The times of timers(sel): the results of the program's next_time, in order."""
+    return [at for at, _ in timers(sel)]
 
 
 def log_names(sel: Selected) -> tuple[tuple[str, ...], tuple[str, ...]]:

@@ -146,36 +146,140 @@ def parse_at(at) -> tuple[str, float | None]:
 
 
 def operating_point(ev: operating.Evaluator, at, run=None) -> tuple[float, np.ndarray]:
-    """(t, x) for `at` (parse_at's forms).  run(T) -> x: the scene's run to T (bgc.api's
-    runner), needed for a time after the start."""
+    """(t, x) for `at` (parse_at's forms), ev's discrete values set to a run's there.
+    run(T) -> (x, the discrete variables): the scene's run to T (run_to), needed for a time
+    after the start."""
     kind, T = parse_at(at)
     if kind == "steady":
         from . import equilibrium
         eq = equilibrium.solve(ev)
         return eq.t, np.array([v for _, v in eq.states])
-    x0 = ev.initial()
+    if kind == "time" and T < ev.t0:
+        raise AnalysisArgumentError(f"--at t={T:g} is before the scene's start t0 = {ev.t0:g}")
+    x0 = ev.settle(ev.t0, ev.initial(), start=True)  # the run's first row
     if kind == "initial" or T == ev.t0:
         return ev.t0, x0
-    if T < ev.t0:
-        raise AnalysisArgumentError(f"--at t={T:g} is before the scene's start t0 = {ev.t0:g}")
-    return T, run(T)
+    x, held = run(T)
+    ev.hold(T, x, held)
+    return T, x
 
 
-def run_to(ev: operating.Evaluator, params: dict, T: float) -> np.ndarray:
-    """The state at T of the scene's run (the C backend when there is a C compiler)."""
+MAX_STEPS = 10_000_000  # a run to --at t=T: its steps (an adaptive solver's budget)
+
+
+def fixed_step(scene) -> float | None:
+    """The step of a run of scene's settings if its steps are fixed (a fixed-step solver, or
+    a scene's step), bounded by its largest step; None for an adaptive run."""
+    from . import solvers
+    if scene.step is None and solvers.get(scene.solver).adaptive:
+        return None
+    h = scene.step or scene.dt
+    return min(h, scene.max_step) if scene.max_step else h
+
+
+def run_to(ev: operating.Evaluator, params: dict, T: float, max_steps: int | None = None):
+    """The state and the discrete variables at T of the scene's run (the C backend when
+    there is a C compiler).  Its only output rows are t0's and T's: the rows of the scene's
+    grid are not needed, and their number is no bound of the work.  The steps are: at most
+    max_steps (default MAX_STEPS; 0: no bound), and a run of fixed steps whose count is
+    more is refused before it starts."""
     from . import api, runner
     program = ev.analysed.compiled.program
-    settings = runner.settings_for(program.scene, [p.name for p in program.params], params,
-                                   t_end=T)
+    scene = program.scene
+    span = T - ev.t0
+    budget = MAX_STEPS if max_steps is None else int(max_steps)
+    if not math.isfinite(span):
+        raise AnalysisArgumentError(f"--at t={T:g}: the time from the scene's start "
+                                    f"t0 = {ev.t0:g} is beyond a double")
+    h = fixed_step(scene)
+    options = dict(t_end=T, dt=span, max_steps=budget)
+    if h is not None:
+        steps = math.ceil(span / h)
+        if budget and steps > budget:
+            raise AnalysisArgumentError(
+                f"--at t={T:g}: the scene's steps are fixed (h = {h:g}): reaching t = {T:g} "
+                f"takes {steps:.3g} of them, more than the {budget} a run to one time may "
+                "take (--max-steps raises the bound)")
+        options["step"] = h
+    else:
+        steps, why = explicit_steps(ev, scene.solver, span)
+        if budget and steps > budget:
+            raise AnalysisArgumentError(
+                f"--at t={T:g}: the scene's solver {scene.solver} is explicit, its steps "
+                f"bounded by its stability ({why}): reaching t = {T:g} takes at least "
+                f"{steps:.3g} of them, more than the {budget} a run to one time may take "
+                "(--max-steps raises the bound; a stiff solver's steps are not so bounded)")
+    settings = runner.settings_for(scene, [p.name for p in program.params], params,
+                                   **options)
     backend, _ = runner.choose_backend("c")
-    result = runner.run(runner.prepare(ev.analysed.compiled, backend, in_process=True),
-                        settings)
+    prepared = runner.prepare(ev.analysed.compiled, backend, in_process=True)
+    failures = (prepared.module.SimulationError, prepared.module.ConstraintError) \
+        if prepared.module is not None else ()
     try:
-        _, Y = api.arrays(result)
-    except api.SimulationFailed as error:
+        result = runner.run(prepared, settings)
+    except failures as error:
         raise AnalysisError(f"the run to t = {T:g} failed: {error}") from None
+    if result.status != 0:
+        raise AnalysisError(f"the run to t = {T:g} failed: {result.message}")
+    _, Y = api.arrays(result)
     where = {name: k for k, name in enumerate(program.outputs)}
-    return np.array([Y[-1, where[s]] for s in program.states])
+    return (np.array([Y[-1, where[s]] for s in program.states]),
+            [Y[-1, where[d]] for d in ev.held_names])
+
+
+def explicit_steps(ev: operating.Evaluator, solver: str, span: float) -> tuple[float, str]:
+    """A lower bound of the steps an explicit adaptive solver takes over span, from its
+    stability at the start: a step h keeps h lambda inside the method's stability region for
+    every eigenvalue lambda of the Jacobian with Re lambda < 0 (past its edge the error
+    estimate grows and the step is cut), so h <= reach / |lambda|; and why (the eigenvalue).
+    (0, "") for an implicit solver, for auto (which switches to one), and where the
+    Jacobian cannot be had."""
+    from . import solvers
+    method = solvers.get(solver)
+    if method.family != "erk":
+        return 0.0, ""
+    try:
+        J = ev.jacobian(ev.t0, ev.initial())
+        eig = np.linalg.eigvals(J) if J.size and np.all(np.isfinite(J)) else []
+    except (AnalysisError, np.linalg.LinAlgError):
+        return 0.0, ""
+    polynomial = _stability_polynomial(method.tableau)
+    best, why, reaches = 0.0, "", {}
+    for z in eig:
+        if not z.real < 0:
+            continue
+        angle = round(math.atan2(abs(z.imag), z.real), 2)  # (the region is symmetric)
+        if angle not in reaches:
+            reaches[angle] = _reach(polynomial, angle)
+        reach = reaches[angle]
+        if reach > 0 and span * abs(z) / reach > best:
+            best = span * abs(z) / reach
+            why = f"|lambda| = {abs(z):.3g} at the start, h |lambda| <= {reach:.3g}"
+    return best, why
+
+
+def _stability_polynomial(tableau) -> np.ndarray:
+    """The coefficients of R(z) = 1 + sum_k b^T A^(k-1) 1 z^k, lowest first."""
+    s = len(tableau.b)
+    A = [[float(tableau.a[i][j]) if j < len(tableau.a[i]) else 0.0 for j in range(s)]
+         for i in range(s)]
+    v, out = np.ones(s), [1.0]
+    for _ in range(s):
+        out.append(float(np.dot([float(b) for b in tableau.b], v)))
+        v = np.array(A) @ v
+    return np.array(out)
+
+
+def _reach(polynomial, angle: float, resolution: float = 1e-2) -> float:
+    """How far the stability region |R(z)| <= 1 reaches from 0 along e^(i angle): the last
+    r of a scan (step `resolution`, as far as 2 s^2 for a polynomial of degree s, beyond
+    which no explicit method's region reaches) before |R| exceeds 1; 0 if it does at once."""
+    r = np.arange(1, int(2 * len(polynomial) ** 2 / resolution)) * resolution
+    z = r * complex(math.cos(angle), math.sin(angle))
+    R = np.polynomial.polynomial.polyval(z, polynomial)
+    out = np.nonzero(np.abs(R) > 1 + 1e-12)[0]
+    return float(r[out[0] - 1]) if len(out) and out[0] > 0 else \
+        (0.0 if len(out) else float(r[-1]))
 
 
 # ---------------------------------------------------------------- the reduction
@@ -251,16 +355,17 @@ def linearization(ev: operating.Evaluator, t: float, x) -> Linearization:
 
 
 def linearize(model, scene=None, at=None, inputs=None, outputs=None, params=None,
-              effects=None, algebra="auto") -> Linearization:
+              effects=None, algebra="auto", max_steps=None) -> Linearization:
     """The linearisation of model's scene (bgc.linearize; see the module's doc): at the
     initial state (at=None), at "t=T" (or a number T) of the scene's run, or at "steady".
     inputs: names of the model's inputs (`input NAME`, at their defaults) or of parameters
     (None: the model's inputs); outputs, effects: as a scene's (default: the scene's);
-    params: {name: value} overrides; algebra: as bgc.build's."""
+    params: {name: value} overrides; algebra: as bgc.build's; max_steps: the run to T's
+    (run_to)."""
     analysed = operating.build(model, scene, outputs, effects,
                                None if inputs is None else tuple(inputs), algebra)
     ev = operating.Evaluator(analysed, params)
-    t, x = operating_point(ev, at, lambda T: run_to(ev, dict(params or {}), T))
+    t, x = operating_point(ev, at, lambda T: run_to(ev, dict(params or {}), T, max_steps))
     return linearization(ev, t, x)
 
 

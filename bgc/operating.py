@@ -6,8 +6,9 @@ finite differences.
 
 The analysis program is the scene's with every state kept (a state that no output needs is
 not pruned: A is the model's, whatever the outputs) and, after the outputs asked for, every
-state as an output (so that a run to a time T gives the state there) and every constraint's
-multiplier.  Its extra functions (bgc.lower.with_tangent) are the outputs' derivative along
+state and discrete variable as an output (so that a run to a time T gives them there) and
+every constraint's multiplier.  The discrete values the right side reads (relations, time
+sources, modes, discrete variables: bgc.events) are set as a run sets them (settle, hold).  Its extra functions (bgc.lower.with_tangent) are the outputs' derivative along
 v (`outputs_jvp`) and, for each input, the right side's and the outputs' derivative with
 respect to it.
 
@@ -19,6 +20,7 @@ from it, unless overridden, and the constants of the generated code).
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -57,6 +59,8 @@ def _scene_outputs(model, scene, outputs, effects, algebra):
                       option_names=("--outputs", "--effects", "--scene"))
     asked = first.program.outputs
     states = tuple(first.program.states) + tuple(first.reduced.pruned)
+    sel = first.reduced.events  # and the discrete variables: a run to T gives their values
+    states += tuple(d.name for d in sel.discretes if d.next is None) if sel else ()
     junctions = [c.junction for c in first.reduced.constraints]
     return first, asked, states, tuple(f"{j}.lambda" for j in junctions), \
         tuple(f"{j}.residual" for j in junctions)
@@ -160,6 +164,90 @@ class Evaluator:
             slot = slots.get(u.name)
             if slot is not None:
                 self.pc[base + slot] = _default(u.default, self.p)
+        self.events = analysed.compiled.reduced.events  # bgc.events.Selected, or None
+        self.discrete = program.events.discrete if program.events is not None else 0
+        self.doff = len(self.pc) - self.discrete  # the discrete values d: pc[doff:]
+        first = self.discrete - (len(self.events.discretes) if self.events else 0)
+        kept = [(first + k, d.name) for k, d in enumerate(self.events.discretes)
+                if d.next is None] if self.events else []
+        self.held = tuple(k for k, _ in kept)  # the discrete variables' places in d
+        self.held_names = tuple(name for _, name in kept)  # and their output columns
+
+    # ------------------------------------------------------------ the discrete values
+    # A run freezes its relations, time sources and discrete variables between events
+    # (bgc.events): the right side reads their values, d, from pc[doff:].  An analysis at
+    # (t, x) must read the values a run holds there, which these set.
+
+    def discrete_values(self) -> tuple[float, ...]:
+        return tuple(self.pc[self.doff:])
+
+    def _run(self, x):
+        m = self.module
+        return m._Run(m._settings(), self.pc, m._Work(), m._new_stats(), list(x))
+
+    def settle(self, t, x, start: bool) -> np.ndarray:
+        """The event iteration of a run at (t, x), as the runtimes do it at the start of a
+        run (start: initial() holds, the discrete variables take their initial values) or at
+        an event (the when-blocks whose conditions rose since the values d holds fire): d is
+        left as it ends; returns the state after it (a when-block's reinit)."""
+        xs = [float(v) for v in x]
+        if not self.discrete:
+            return np.asarray(xs, dtype=float)
+        m = self.module
+        try:
+            m._event_iteration(self._run(xs), float(t), xs, start)
+        except m._Failure as failure:
+            raise AnalysisError(str(failure)) from None
+        return np.asarray(xs, dtype=float)
+
+    def hold(self, t, x, held=()) -> None:
+        """d as a run holds it at (t, x) between events, the discrete variables given (held,
+        in the order of self.held, e.g. read from a run): every other discrete value (the
+        relations, the time sources, the modes) from the events' update until it settles,
+        no when-block firing and the state kept."""
+        if not self.discrete:
+            return
+        m, off, pc = self.module, self.doff, self.pc
+        for k, v in zip(self.held, held):
+            pc[off + k] = float(v)
+        xs = [float(v) for v in x]
+        run = self._run(xs)
+        G = len(m._INDICATOR_STRICT)
+        for _ in range(m.MAX_EVENT_ITERATIONS + 1):
+            out = [0.0] * (self.n + self.discrete)
+            try:
+                g = m._indicators(run, float(t), xs)
+                r = [1.0 if m._holds(k, g[k]) else 0.0 for k in range(G)] + [0.0]
+                m._update(float(t), xs, pc, run.w, r, out)
+            except m._Failure as failure:
+                raise AnalysisError(str(failure)) from None
+            except m._BlockFailure as failure:
+                raise AnalysisError(f"at t = {t:.17g}: {failure}") from None
+            changed = False
+            for k in range(self.discrete):
+                v = out[self.n + k]
+                if k in self.held or v == pc[off + k]:
+                    continue
+                if not math.isfinite(v):
+                    raise AnalysisError(f"at t = {t:.17g}: discrete value "
+                                        f"'{m._DISCRETE_NAMES[k]}' is not finite")
+                pc[off + k], changed = v, True
+            if not changed:
+                return
+        raise AnalysisError(f"at t = {t:.17g}: the discrete values do not settle (more than "
+                            f"{m.MAX_EVENT_ITERATIONS} passes change them)")
+
+    def next_times(self, t, x) -> list[float]:
+        """next_time's results at (t, x): per timer (bgc.events.timers) the next time event
+        after t (inf or NaN: none)."""
+        m = self.module
+        tau = [0.0] * m._NUM_TIMERS
+        if tau:
+            try:
+                m._next_time(float(t), [float(v) for v in x], self.pc, m._work(), tau)
+            except m._BlockFailure as failure:
+                raise AnalysisError(f"at t = {t:.17g}: {failure}") from None
+        return tau
 
     def _call(self, function, t, x, size, v=None):
         m = self.module

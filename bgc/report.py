@@ -7,7 +7,7 @@ from dataclasses import dataclass
 
 import sympy as sp
 
-from . import ir
+from . import events, ir
 from .graph import model_effects
 from .ir import Table, defines
 from .reduce import BlockInfo, explicit_forms, shown_steps
@@ -177,7 +177,9 @@ def _event_lines(sel) -> list[str]:
         return []
     out = ["events:"]
     out += [f"  {r.text}  (state event: located on the step's dense output)" for r in sel.state]
-    out += [f"  {r.text}  (time event at t = {_s(at)})" for r, at, _ in sel.time]
+    out += [f"  {r.text}  (time event at t = {_s(at)})" if not events.never(at) else
+            f"  {r.text}  (no event: its time is beyond a double, no run reaches it)"
+            for r, at, _ in sel.time]
     out += [f"  {r.text}  (changes at events only)" for r in sel.discrete]
     out += [f"  {q.text}  (time events at its "
             f"{'edges' if q.kind == 'square' else 'breakpoints'})" for q in sel.squares

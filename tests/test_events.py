@@ -190,6 +190,52 @@ def test_a_pulse_of_width_zero_is_no_pulse():
     assert np.allclose(y[:, 0], np.arange(31) * 0.1) and not y[:, 1].any()
 
 
+def test_a_pulse_whose_end_is_beyond_a_double_never_ends():
+    """pulse(t0, width) is 1 on [t0, t0 + width) (docs/hybrid.md, section 3): where t0 + width
+    is beyond a double (2e308) the end is at infinity, a time event no run reaches, so the
+    pulse never ends.  `check` says so; every backend runs it (the written form failed,
+    naming an internal next_time; as parameters, t0 + width overflows in the run), the lag at
+    rest before t0 = 1e308.  A pulse from 0 as wide as a double goes, and a square wave whose
+    second edge (2e308) overflows, are 1 for the whole run: the lag charges as under a
+    constant 1."""
+    from bgc.report import check_report
+    literal = build(LAG.replace("pulse(t0, width)", "pulse(1e308, 1e308)"), "run")
+    report = check_report(literal)
+    assert "  pulse(1e308, 1e308)  (time event at t = 1e+308)\n" in report
+    assert "  pulse(1e308, 1e308): end  (no event: its time is beyond a double" in report
+    backends = BACKENDS + (["vm"] if have_cc() else [])
+    texts = [run_csv(literal, b) for b in backends]
+    texts += [run_csv(_lag(), b, params={"t0": 1e308, "width": 1e308}) for b in backends]
+    assert len(set(texts)) == 1
+    _, y = table(texts[0])
+    assert np.allclose(y[:, 0], np.arange(31) * 0.1) and not y[:, 1].any()
+    squares = build(LAG.replace("pulse(t0, width)", "square(1e308, 0.5)"), "run")
+    for compiled, params in ((_lag(), {"t0": 0.0, "width": 1.7976931348623157e308}),
+                             (squares, {})):  # (the square's second edge, 2e308: never)
+        texts = [run_csv(compiled, b, params=params, rtol=1e-10, atol=1e-12)
+                 for b in backends]
+        assert len(set(texts)) == 1
+        _, y = table(texts[0])
+        ref = 0.5 * (1 - np.exp(-y[:, 0] / 0.5))  # 1 from t = 0 on
+        assert np.max(np.abs(y[:, 1] - ref)) <= 1e-8
+
+
+def test_a_square_wave_finer_than_the_time_resolution_stops_the_run():
+    """square(1e-6, 0.5) from t = 1e10: 1e16 periods in, past 2^53, its edges are not apart
+    in doubles.  Every backend stops at the start naming it as written (each looped for
+    ever, deaf to signals, in the search of the period that holds t)."""
+    compiled = build("""model fine
+signal x = integral(square(1e-6, 0.5) - x, init = 0)
+scene run { outputs x; time 1e10 .. 10000000001 every 0.5 }
+""", "run")
+    names = [p.name for p in compiled.program.params]
+    for backend in BACKENDS + (["vm"] if have_cc() else []):
+        settings = runner.settings_for(compiled.program.scene, names)
+        result = runner.run(runner.prepare(compiled, backend), settings)
+        assert result.status == 1 and result.message == (
+            "at t = 10000000000: discrete value 'square(1e-6, 0.5)' is not finite"), backend
+
+
 _LAG = []
 
 

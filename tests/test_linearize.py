@@ -12,7 +12,8 @@ import pytest
 from click.testing import CliRunner
 
 import bgc
-from bgc import backends
+from bgc import backends, runner
+from bgc.api import Source
 from bgc.cli import main
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -254,3 +255,107 @@ def test_an_input_reaches_the_parameters_computed_from_it(tmp_path):
     assert np.array_equal(lin.D, [[0.0]])
     # overridden, c no longer follows zeta
     assert not np.any(bgc.linearize(str(path), inputs=["zeta"], params={"c": 1.0}).B)
+
+
+# ---------------------------------------------------------------- far in time, time sources
+
+FORCED = """model forced "a mass under a constant force, and a capacitor charged through R"
+parameter m = 2.0
+parameter F = 3.0
+parameter V = 5.0
+v : 1
+mass : I(m) init p = 0.5
+push : Se(F)
+push -> v
+v -> mass
+signal x = integral(v.f, init = 1.0)
+src : Se(V)
+j : 1
+r : R(1)
+c : C(1)
+src -> j
+j -> r
+j -> c
+scene run { outputs x, c.q; time 0 .. 10 every 0.01 }
+"""
+
+
+def write_model(tmp_path, name, text) -> str:
+    path = tmp_path / name
+    path.write_text(text, encoding="utf-8")
+    return str(path)
+
+
+def test_far_in_time_a_linear_model_is_exact(tmp_path):
+    """At t = 1e6 (1e8 rows of the scene's grid, which a run to one time does not write):
+    p = p0 + F t, x = x0 + p0 t/m + F t^2/(2m) (a polynomial, which the solver's steps
+    follow to the rounding of their 3e5 steps, which the capacitor's stability bounds), the
+    capacitor charged to V; A is the closed form's."""
+    model = write_model(tmp_path, "forced.bg", FORCED)
+    out = tmp_path / "far.json"
+    result = cli("linearize", model, "--scene", "run", "--at", "t=1e6", "-o", str(out))
+    assert result.exit_code == 0, result.output
+    d = json.loads(out.read_text())
+    T, m, F, p0, x0 = 1e6, 2.0, 3.0, 0.5, 1.0
+    at = d["at"]
+    assert at["t"] == T
+    assert at["mass.p"] == pytest.approx(p0 + F * T, rel=1e-12)
+    assert at["x"] == pytest.approx(x0 + p0 * T / m + F * T ** 2 / (2 * m), rel=1e-12)
+    assert at["c.q"] == pytest.approx(5.0, rel=1e-5)  # the scene's tolerances
+    A = np.zeros((3, 3))
+    ip, ix, iq = (d["states"].index(s) for s in ("mass.p", "x", "c.q"))
+    A[ix, ip], A[iq, iq] = 1 / m, -1.0
+    assert np.array_equal(d["A"], A)
+
+
+@pytest.mark.parametrize("scene, at, text", [
+    ("", "t=1e10", "solver dopri5 is explicit, its steps bounded by its stability "
+                   "(|lambda| = 1 at the start, h |lambda| <= 3.3): reaching t = 1e+10 takes "
+                   "at least 3.03e+09 of them, more than the 10000000"),
+    ("solver rk4; ", "t=1e10", "the scene's steps are fixed (h = 0.01): reaching t = 1e+10 "
+                               "takes 1e+12 of them, more than the 10000000"),
+    ("", "t=1e308", "at least 3.03e+307"),
+])
+def test_a_time_too_far_is_refused_before_the_run(tmp_path, monkeypatch, scene, at, text):
+    """The steps to the time, known before the run (fixed steps; an explicit solver's
+    stability bound from the Jacobian at the start), beyond the budget: a usage error that
+    says why, and no run started (the run to 1e10 on the scene's grid was a traceback)."""
+    model = write_model(tmp_path, "rc.bg", FORCED.replace("scene run { ", "scene run { "
+                                                          + scene))
+    monkeypatch.setattr(runner, "run", lambda *a, **k: pytest.fail("the run started"))
+    result = cli("linearize", model, "--scene", "run", "--at", at)
+    assert result.exit_code == 2 and text in result.output, result.output
+
+
+def test_the_step_budget_of_a_run_to_one_time(tmp_path):
+    """--max-steps bounds the run to --at: spent, exit 1 and where."""
+    model = write_model(tmp_path, "forced.bg", FORCED)
+    # (the stability bound is 91 steps, the run takes 116)
+    result = cli("linearize", model, "--scene", "run", "--at", "t=300", "--max-steps", "100")
+    assert result.exit_code == 1
+    assert "the run to t = 300 failed: at t = " in result.output
+    assert "step budget spent: 100 steps" in result.output
+    lin = bgc.linearize(model, scene="run", at=300, max_steps=0)
+    assert dict(lin.point)["c.q"] == pytest.approx(5.0, rel=1e-5)
+
+
+SWITCHED = """model switched "a lag whose rate doubles at t = 1, and triples once x passes 0.5"
+discrete a = 1
+signal x = integral(-a*(1 + step(1))*x + 2, init = 0)
+when x > 0.5 { a = 3 }
+scene run { outputs x; time 0 .. 5 every 0.5 }
+"""
+
+
+def test_the_discrete_values_at_the_point_are_the_runs():
+    """A reads the time source and the discrete variable as the run holds them at the
+    point: -1 at the start, -3 once x passed 0.5 (at t1 = ln(4/3), x = 2 (1 - e^-t) before),
+    -6 after t = 1; x at t = 0.8 from the closed form."""
+    source = Source("switched.bg", SWITCHED)
+    assert bgc.linearize(source, scene="run").A.tolist() == [[-1.0]]
+    t1 = math.log(4 / 3)
+    lin = bgc.linearize(source, scene="run", at="t=0.8")
+    assert lin.A.tolist() == [[-3.0]]
+    x = 2 / 3 + (0.5 - 2 / 3) * math.exp(-3 * (0.8 - t1))
+    assert dict(lin.point)["x"] == pytest.approx(x, rel=1e-5)
+    assert bgc.linearize(source, scene="run", at="t=2").A.tolist() == [[-6.0]]

@@ -164,3 +164,164 @@ def test_algebra_solves_the_ladder_to_its_divider(tmp_path, algebra):
     R = R5 + par(R4, R3 + par(R1, R2))
     assert json.loads(lin.read_text())["A"] == [[pytest.approx(-1 / (R * Cc), rel=1e-12)]]
     assert bgc.steady(LADDER, scene="charge", algebra=algebra).residual < 1e-12
+
+
+# ---------------------------------------------------------------- time sources and events
+# An RC circuit driven by a source of 5 V once it is on: at rest no current flows, the
+# capacitor holds the source's voltage, q = C*5 (closed form), whatever form the source has.
+
+R_C, C_C, V_C = 2.0, 0.3, 5.0
+
+
+def rc(tmp_path, source, extra=""):
+    """The RC circuit with the effort source `source`, written to a file."""
+    return write(tmp_path, "rc.bg", f"""model rc
+parameter R = {R_C}
+parameter C = {C_C}
+{extra}src : Se({source})
+j : 1
+r : R(R)
+c : C(C)
+src -> j
+j -> r
+j -> c
+""")
+
+
+def steady_q(result) -> float:
+    assert result.exit_code == 0, result.output
+    return float(dict(line.split(" = ") for line in result.stdout.splitlines())["c.q"])
+
+
+@pytest.mark.parametrize("source, at, named", [
+    ("5*step(0)", None, "step(0)"),
+    ("5*step(1)", "t=1", "step(1)"),
+    ("5*step(1)", "t=7.5", "step(1)"),
+    ("if t >= 0 then 5 else 0", None, "t >= 0"),
+    ("if t < 2 then 0 else 5", "t=2", "t < 2"),
+    ("5*pulse(1e308, 1e308)", "t=1e308", "pulse(1e308, 1e308)"),  # it never ends
+    ("5*(1 - pulse(0, 2))", "t=2", "pulse(0, 2): end"),
+    ("5*ramp(1) - 5*ramp(2)", "t=2", "ramp(2)"),  # 5 (t - 1) - 5 (t - 2) = 5: t cancels
+    ("table([[0, 0], [3, 5]], t)", "t=3", "table 0 (rows) of t"),  # held from its last row
+    ("if exp(-t) < 0.5 then 5 else 0", "t=1", "exp(-t) < 0.5"),  # crossed at log 2
+    ("5*(1 - square(1e308, 0.5))", "t=1.6e308", "square(1e308, 0.5)"),  # next edge: 2e308
+    ("5*square(2, 0.5, 10)", "t=0", None),  # refused below: this is the control
+])
+def test_time_sources_are_evaluated_at_the_time_asked(tmp_path, source, at, named):
+    """q = C*5 for each form of source that is 5 from the time asked on, with a note that
+    names the sources as written."""
+    model = rc(tmp_path, source)
+    result = cli("steady", model, *(["--at", at] if at else []))
+    if named is None:
+        assert result.exit_code == 1
+        return
+    assert steady_q(result) == pytest.approx(C_C * V_C, rel=1e-12)
+    when = "0" if at is None else at[2:]
+    assert f"note: time sources evaluated at t = {float(when):.17g}" in result.stderr
+    assert named in result.stderr
+    eq = bgc.steady(model, at=at)
+    assert dict(eq.states)["c.q"] == pytest.approx(C_C * V_C, rel=1e-12)
+    assert eq.t == float(when)
+
+
+def test_a_constant_source_has_no_note(tmp_path):
+    result = cli("steady", rc(tmp_path, "5"))
+    assert steady_q(result) == pytest.approx(C_C * V_C, rel=1e-12)
+    assert "note" not in result.stderr
+
+
+@pytest.mark.parametrize("source, at, where, why", [
+    ("5*square(1, 0.5)", None, "square(1, 0.5)", "changes at t = 0.5"),
+    ("5*square(1e308, 0.5)", None, "square(1e308, 0.5)", "changes at t = 5e+307"),
+    ("5*square(2, 0.5, 10)", "t=3", "square(2, 0.5, 10)", "changes at t = 10"),
+    ("5*step(1)", None, "step(1)", "changes at t = 1"),
+    ("5*step(1e308)", None, "step(1e308)", "changes at t = 1e+308"),
+    ("5*pulse(1e308, 1e308)", None, "pulse(1e308, 1e308)", "changes at t = 1e+308"),
+    ("5*pulse(0, 2)", None, "pulse(0, 2)", "changes at t = 2"),
+    ("if t >= 4 then 5 else 0", "t=3", "t >= 4", "changes at t = 4"),
+    ("if sin(t) > 0.5 then 5 else 0", "t=1", "sin(t) > 0.5", "changes at t = 2.61799"),
+    ("5*sin(t)", None, "src : Se(5*sin(t))", "'src' reads t"),
+    ("5*ramp(0)", "t=5", "src : Se(5*ramp(0))", "'src' reads t"),
+    ("table([[0, 0], [3, 5]], t)", None, "table([[0, 0], [3, 5]], t)", "changes at t = 3"),
+    ("table([[0, 0], [3, 5]], t, extrapolate = linear)", "t=4",
+     "table([[0, 0], [3, 5]], t, extrapolate = linear)", "varies from t = 4 on"),
+    ("if c.q > sin(t) then 0 else 5", None, "c.q > sin(t)", "reads t"),
+])
+def test_a_driven_model_is_refused_at_its_sources(tmp_path, source, at, where, why):
+    """Sources not constant from the time asked on: exit 1, each located at the source as
+    written (its line, a caret under it), the model said to be driven, simulating
+    suggested; no file written."""
+    model = rc(tmp_path, source)
+    out = tmp_path / "eq.json"
+    result = cli("steady", model, "--json", str(out), *(["--at", at] if at else []))
+    assert result.exit_code == 1, result.output
+    lines = result.stderr.splitlines()
+    col = lines[1].index(where) - lines[1].index("|") - 1  # the excerpt: "   4 | src : ..."
+    assert lines[0].startswith(f"{model}:4:{col}: error: ") and why in lines[0], lines
+    assert lines[2].split("|")[1].startswith(" " * col + "^"), lines
+    assert "no equilibrium: the model is driven" in result.stderr
+    assert "simulate" in result.stderr and "periodic" not in result.stderr
+    assert not out.exists()
+    with pytest.raises(bgc.equilibrium.Driven) as raised:
+        bgc.steady(model, at=at)
+    assert why in str(raised.value)
+
+
+def test_every_source_is_named(tmp_path):
+    result = cli("steady", rc(tmp_path, "5*step(1) + square(1, 0.5) + sin(t)"))
+    assert result.exit_code == 1
+    errors = [ln for ln in result.stderr.splitlines() if ": error: " in ln]
+    assert len(errors) == 4 and "'src' reads t" in errors[0]  # in the order of the text
+    assert "'step(1)'" in errors[1] and "'square(1, 0.5)'" in errors[2]
+    assert "driven" in errors[3]
+
+
+@pytest.mark.parametrize("at, status, text", [
+    ("t=-1", 2, "before the scene's start"), ("soon", 2, "t=TIME"), ("t=inf", 2, "finite")])
+def test_at_usage_errors(tmp_path, at, status, text):
+    result = cli("steady", rc(tmp_path, "5"), "--at", at)
+    assert result.exit_code == status and text in result.output
+
+
+def test_modes_follow_the_equilibrium(tmp_path):
+    """5 V while q < 1, then 3 V: Newton's method in the first mode ends at q = C*5 = 1.5,
+    where the relation gives the second, whose equilibrium q = C*3 = 0.9 gives the first
+    again: no equilibrium.  With C = 0.5 the second mode's q = 1.5 keeps it: the answer."""
+    model = rc(tmp_path, "if c.q < 1 then 5 else 3")
+    result = cli("steady", model)
+    assert result.exit_code == 1
+    assert "'c.q < 1' switches at every candidate" in result.stderr
+    assert dict(bgc.steady(model, params={"C": 0.5}).states)["c.q"] == pytest.approx(1.5)
+
+
+def test_a_when_block_that_would_fire_on_the_way_is_refused(tmp_path):
+    """The source doubles when q passes 1 (a discrete variable set by a when-block): the
+    equilibrium of the first value, q = C*5 = 1.5, is past it, so the run's discrete value
+    there is not the initial one: refused at the when-block.  Past q = 2 it never fires: the
+    equilibrium holds, q = C*5."""
+    block = "discrete k = 1\nwhen c.q > LIMIT { k = 2 }\n"
+    model = rc(tmp_path, "5*k", block.replace("LIMIT", "1"))
+    result = cli("steady", model)
+    assert result.exit_code == 1
+    assert ":5:1: error: 'when c.q > 1' would fire on the way" in result.stderr
+    model = rc(tmp_path, "5*k", block.replace("LIMIT", "2"))
+    assert steady_q(cli("steady", model)) == pytest.approx(C_C * V_C, rel=1e-12)
+
+
+def test_a_when_block_at_the_start_sets_the_point(tmp_path):
+    """when initial() runs as at the start of a run from the time asked: k = 2, q = C*10."""
+    model = rc(tmp_path, "5*k", "discrete k = 1\nwhen initial() { k = 2 }\n")
+    assert steady_q(cli("steady", model)) == pytest.approx(C_C * 2 * V_C, rel=1e-12)
+
+
+def test_a_when_block_on_time_that_fires_before_the_time_asked_is_refused(tmp_path):
+    """k = 2 from t = 1 on (a when-block on t): at --at t=2 a run from the start has fired
+    it, so the discrete value there is the run's: refused at the block; at t = 0.5 the block
+    is still to come (a time event): the model is driven."""
+    model = rc(tmp_path, "5*k", "discrete k = 1\nwhen t >= 1 { k = 2 }\n")
+    result = cli("steady", model, "--at", "t=2")
+    assert result.exit_code == 1
+    assert (":5:1: error: 'when t >= 1' would fire on the way from the start (t = 0) to the "
+            "equilibrium at t = 2") in result.stderr
+    result = cli("steady", model, "--at", "t=0.5")
+    assert result.exit_code == 1 and "'t >= 1' changes at t = 1" in result.stderr

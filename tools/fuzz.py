@@ -61,6 +61,8 @@ EXTREME = ("1e308", "1.7976931348623157e308", "1e309", "1e-320", "4.9e-324", "1e
            "0.0", "-0", "-0.0", "2", "1" * 20, "9007199254740993", "9" * 309, "1" * 310,
            "1e-308", "2.2250738585072014e-308", "123456789012345678901234567890", "1000",
            "0.5", "1e8", "64", "65", "1024")
+EXTREME_TIMES = ("1e308", "1.7976931348623157e308", "8.98846567431158e307", "1e-300",
+                 "4.9e-324", "1e-6", "0", "1e10", "1e16")
 NAN_MAKERS = ("0/0", "log(0)", "sqrt(-1)", "asin(2)", "acos(-3)", "1e308*10", "exp(1000)",
               "exp(1000) - exp(1000)", "1/0", "0^0", "0^-1", "(-8)^(1/3)", "log(-1)",
               "atan2(0, 0)", "tan(asin(1))", "1e308^2", "(-1)^0.5", "sign(0)/0",
@@ -285,10 +287,18 @@ class Gen:
             return out + f" else {self.expr(1, names)}"
         if k < 0.6:
             return f"noevent(if {self.condition(names)} then {self.expr(1, names)} else 0)"
-        f = r.choice([f"step({self.expr(1)})", f"ramp({self.expr(1)})",
-                      f"pulse({self.expr(1)}, {self.expr(1)})",
-                      f"square({self.expr(1)}, {r.choice(['0.5', '0.25', self.expr(1)])})"])
+        f = r.choice([f"step({self.time()})", f"ramp({self.time()})",
+                      f"pulse({self.time()}, {self.time()})",
+                      f"square({self.time()}, {r.choice(['0.5', '0.25', self.expr(1)])})",
+                      f"square({self.time()}, 0.5, {self.time()})"])
         return f"{self.expr(1)} * {f}"
+
+    def time(self) -> str:
+        """A time source's argument: now and then one at the ends of a double, whose events
+        overflow (pulse(1e308, 1e308) ends at 2e308) or come closer than the time's
+        resolution (square(1e-300, 0.5))."""
+        r = self.rng
+        return r.choice(EXTREME_TIMES) if r.random() < 0.1 else self.expr(1)
 
     def hybrid(self):
         """Events (docs/hybrid.md): a mass under gravity with an integral position, a

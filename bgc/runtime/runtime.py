@@ -264,13 +264,19 @@ class _F64:
 
 
 def _square_period(t, period, t0):
-    """bgc_square_period: the period k >= 0 that holds t, its edges computed as written."""
-    k = float(math.floor((t - t0) / period))
+    """bgc_square_period: the period k >= 0 that holds t, its edges computed as written; NaN
+    where the edges near t are not apart (finer than the time's resolution)."""
+    q = (t - t0) / period
+    k = float(math.floor(q)) if math.isfinite(q) else math.nan
     if k < 0.0:
         k = 0.0
+    if not k + 1.0 > k:
+        return math.nan
     while k > 0.0 and t0 + k * period > t:
         k -= 1.0
     while t0 + (k + 1.0) * period <= t:
+        if not t0 + (k + 1.0) * period > t0 + k * period:
+            return math.nan
         k += 1.0
     return k
 
@@ -282,6 +288,8 @@ def _square(t, period, duty, t0):
     if t < t0:
         return 0.0
     k = _square_period(t, period, t0)
+    if k != k:
+        return math.nan
     return 1.0 if t < t0 + (k + duty) * period else 0.0
 
 
@@ -292,6 +300,8 @@ def _square_next(t, period, duty, t0):
     if t < t0:
         return t0
     k = _square_period(t, period, t0)
+    if k != k:
+        return math.nan
     down = t0 + (k + duty) * period
     return down if t < down else t0 + (k + 1.0) * period
 
@@ -303,10 +313,15 @@ def _periodic_next(t, period, c):
     if not period > 0.0 or not math.isfinite(period) or not math.isfinite(c) \
             or not math.isfinite(t):
         return math.nan
-    k = float(math.floor((t - c) / period))
+    q = (t - c) / period
+    k = float(math.floor(q)) if math.isfinite(q) else math.nan
+    if not (k + 1.0 > k and k - 1.0 < k):  # beyond 2^53 periods: the times are not apart
+        return math.nan
     while c + k * period > t:
         k -= 1.0
     while c + (k + 1.0) * period <= t:
+        if not c + (k + 1.0) * period > c + k * period:
+            return math.nan
         k += 1.0
     return c + (k + 1.0) * period
 

@@ -268,16 +268,23 @@ static inline double bgc_heaviside(double a, double at_zero)
 }
 /* square(period, duty, t0): the period k >= 0 that holds t (its edges t0 + k period and
    t0 + (k + duty) period computed as written, so that the value at an edge is the value
-   after it, and the next edge is the time the driver steps onto). */
+   after it, and the next edge is the time the driver steps onto).  NaN where the edges
+   near t are not apart (k beyond 2^53, or the next edge rounds onto this one): the wave is
+   finer there than the time's resolution, and the run stops naming it. */
 static inline double bgc_square_period(double t, double period, double t0)
 {
     double k = floor((t - t0) / period);
     if (k < 0.0)
         k = 0.0;
+    if (!(k + 1.0 > k))
+        return NAN;
     while (k > 0.0 && t0 + k * period > t)
         k -= 1.0;
-    while (t0 + (k + 1.0) * period <= t)
+    while (t0 + (k + 1.0) * period <= t) {
+        if (!(t0 + (k + 1.0) * period > t0 + k * period))
+            return NAN;
         k += 1.0;
+    }
     return k;
 }
 static inline double bgc_square(double t, double period, double duty, double t0)
@@ -288,6 +295,8 @@ static inline double bgc_square(double t, double period, double duty, double t0)
     if (t < t0)
         return 0.0;
     k = bgc_square_period(t, period, t0);
+    if (isnan(k))
+        return NAN;
     return t < t0 + (k + duty) * period ? 1.0 : 0.0;
 }
 static inline double bgc_square_next(double t, double period, double duty, double t0)
@@ -298,6 +307,8 @@ static inline double bgc_square_next(double t, double period, double duty, doubl
     if (t < t0)
         return t0;
     k = bgc_square_period(t, period, t0);
+    if (isnan(k))
+        return NAN;
     down = t0 + (k + duty) * period;
     return t < down ? down : t0 + (k + 1.0) * period;
 }
@@ -312,10 +323,15 @@ static inline double bgc_periodic_next(double t, double period, double c)
     if (!(period > 0.0) || !isfinite(period) || !isfinite(c) || !isfinite(t))
         return NAN;
     k = floor((t - c) / period);
+    if (!(k + 1.0 > k && k - 1.0 < k))  /* beyond 2^53 periods: the times are not apart */
+        return NAN;
     while (c + k * period > t)
         k -= 1.0;
-    while (c + (k + 1.0) * period <= t)
+    while (c + (k + 1.0) * period <= t) {
+        if (!(c + (k + 1.0) * period > c + k * period))
+            return NAN;
         k += 1.0;
+    }
     return c + (k + 1.0) * period;
 }
 
