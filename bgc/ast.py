@@ -324,9 +324,10 @@ class DiscreteDecl:
 
 @dataclass(frozen=True)
 class Reinit:
-    """`reinit X = EXPR` in a when-block: a state's value after the event."""
+    """`reinit X = EXPR` in a when-block: a state's value after the event.  X is written as an
+    expression naming the state (a Name, Field, or an Index of one: `link[i].mass.p[0]`)."""
 
-    target: Ident
+    target: object
     expr: object
     span: Span
 

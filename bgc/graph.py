@@ -171,12 +171,14 @@ def part_name(name: str, i: int) -> str:
     return f"{name}[{i}]"
 
 
-_PART = re.compile(r"([A-Za-z_][A-Za-z0-9_]*)\[([0-9]+)\]")
+_PART = re.compile(r"((?:.*\.)?[A-Za-z_][A-Za-z0-9_]*)\[([0-9]+)\]")
 
 
 def variable_name(element: str, field: str) -> str:
     """The name of an element's variable: `mx.p`, and for part i of a multiport `mass.p[i]`
-    (as the modeller indexes it), not `mass[i].p`."""
+    (as the modeller indexes it), not `mass[i].p`; the same under an instance's path
+    (`k.mass.p[0]`, `link[2].mass.p[0]`) and for an element declared with an index (`c[1]` in
+    a `for`: `c.q[1]`), so that every stage and report names a variable alike."""
     m = _PART.fullmatch(element)
     if m:
         return f"{m.group(1)}.{field}[{m.group(2)}]"

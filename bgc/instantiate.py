@@ -584,10 +584,8 @@ class _Instantiate:
                 out = replace(out, index=None)
         elif isinstance(stmt, ast.WhenBlock):  # its targets are names of this scope
             out = replace(rw.map(stmt), stmts=tuple(
-                replace(rw.map(st), **{"target" if isinstance(st, ast.Reinit) else "name":
-                                       rw.target(st.target if isinstance(st, ast.Reinit)
-                                                 else st.name)})
-                for st in stmt.stmts))
+                rw.map(st) if isinstance(st, ast.Reinit)  # (its target an expression)
+                else replace(rw.map(st), name=rw.target(st.name)) for st in stmt.stmts))
         else:
             out = rw.map(stmt)
         self.out.append(out)
@@ -798,11 +796,8 @@ class _Rewriter:
         if isinstance(node, ast.Member):
             return self.path(self.try_segments(node, strict=True), node)
         if isinstance(node, ast.Index):
-            segs = self.try_segments(node)
-            if segs is not None:
-                found = self.lookup(segs)
-                if found is not None and found[1] in ("signal", "parameter", "element"):
-                    return self.path(segs, node)
+            if self.names_indexed(node):
+                return self.path(self.try_segments(node), node)
             return ast.Index(self.expr(node.base, own), self.expr(node.index, own), sp(node.span))
         if isinstance(node, ast.Call) and node.func == "table":  # a file and named options
             keep = (ast.Str, ast.Field, ast.KwArg)  # are not names in this scope
@@ -834,10 +829,21 @@ class _Rewriter:
         return self.map(node)
 
     def target(self, ident: ast.Ident) -> ast.Ident:
-        """A when-block's target (a state `b.p`, `x`, or a discrete variable) by its path."""
+        """A when-block's assigned discrete variable by its path."""
         node = self.path(ident.name.split("."), ident)
         text = node.name if isinstance(node, ast.Name) else f"{node.owner}.{node.field}"
         return ast.Ident(text, node.span)
+
+    def names_indexed(self, node: ast.Index) -> bool:
+        """Whether `node` is a name declared with an index (`r[2]`, a `for`'s `x[i]`), not a
+        component of a vector: `k.mass.p[0]` indexes the variable p of element k.mass, so
+        its path is k.mass.p and the index stays an index."""
+        segs = self.try_segments(node)
+        if segs is None:
+            return False
+        found = self.lookup(segs)
+        return (found is not None and found[1] in ("signal", "parameter", "element")
+                and len(found[2]) == 1)
 
     def try_segments(self, node, strict=False):
         """The path a node names (`link[2].rod` -> ["link[2]", "rod"]), or None."""
