@@ -433,3 +433,5 @@ class Model:
     instances: tuple = ()  # after instantiate: graph.Instance, in declaration order
     constants: tuple = ()  # after instantiate: (name, value) of the file's constants
     text: str = ""  # the model file's text (a span without an origin is in it)
+    libraries: tuple = ()  # after instantiate: (path, SHA-256) of each file its imports read,
+    #                        in order, and (path, None) of each place they looked at before

@@ -248,6 +248,7 @@ class Graph:
     tables: tuple = ()  # bgc.tables.TableData, as Table(k, ...) numbers them
     inputs: tuple = ()  # InputInfo, in declaration order (their values: bgc.events.InputSlot)
     constants: tuple = ()  # (name, value) of the model file's constants (`--outputs s[N].q`)
+    libraries: tuple = ()  # (path, SHA-256 or None) of the files its imports looked at
 
     @cached_property
     def vector_by_name(self) -> dict:

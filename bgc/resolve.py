@@ -1281,4 +1281,5 @@ def resolve(model: ast.Model) -> Graph:
                  ports=tuple(model.ports), instances=tuple(model.instances),
                  relations=tuple(scope.events.relations), squares=tuple(scope.events.squares),
                  discretes=tuple(discretes), whens=tuple(whens), tables=tuple(scope.tables),
-                 inputs=tuple(scope.inputs), constants=tuple(model.constants))
+                 inputs=tuple(scope.inputs), constants=tuple(model.constants),
+                 libraries=tuple(model.libraries))
