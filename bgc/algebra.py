@@ -262,10 +262,10 @@ def gcd_bits(p, q) -> float:
     variable, then recurses on the next variable with the values as coefficients, x being
     about the square root of the smaller norm, so that a variable of degree d in both
     multiplies the bits by 1 + d/2 (a variable in one only leaves the smaller norm as it
-    was).  From 5 bits (x starts at 2 min(norm) + 29, norms of 1) plus the largest number's
-    (the sense of the bound: past MAX_GCD_BITS, not how far).  A sum of N reciprocals of
-    parameters, over one denominator, shares its N parameters with the numerator at degree
-    2: 5 * 2^N bits."""
+    was).  The start: 5 bits (x is 2 min(norm) + 29 for norms of 1) plus the bits of the
+    largest number.  A sum of N reciprocals of parameters, over one denominator, shares its
+    N parameters with the numerator at degree 2: 5 * 2^N bits.  The product stops once past
+    MAX_GCD_BITS (what matters is whether it is, whatever the order of the variables)."""
     numbers = p.atoms(sp.Number) | q.atoms(sp.Number)
     bits = 5.0 + max([0] + [53 if not n.is_Rational else
                             abs(n.p).bit_length() + n.q.bit_length() for n in numbers])
