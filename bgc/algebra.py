@@ -18,7 +18,7 @@ import sympy as sp
 
 from .canonical import xreplace
 from .differentiate import partial
-from .resources import MAX_EXPANDED_TERMS, expanded_terms, fits
+from .resources import MAX_EXPANDED_TERMS, MAX_GCD_BITS, expanded_terms, fits
 
 # f(u) = w  ->  u = inverse(w), for functions that are bijections of the reals (or of their
 # range onto the reals, where the inverse then gives NaN outside the range, as it should).
@@ -82,7 +82,9 @@ def linear_solution(equation: sp.Expr, unknown: sp.Symbol) -> sp.Expr | None:
         if rest is None or rest.has(unknown):
             return None
     if a.is_Add and a.free_symbols and sp.count_ops(a) + sp.count_ops(rest) < 40:
-        return sp.cancel(-rest / a)  # tidy a compound coefficient; a monomial divides cleanly
+        tidy = cancel_bounded(-rest / a)  # a compound coefficient; a monomial divides cleanly
+        if tidy is not None:
+            return tidy
     return -rest / a
 
 
@@ -189,6 +191,119 @@ def _slope(u, z):
     """a when u = a z + b with a, b free of z (a != 0), else None."""
     a = partial(u, z)
     return a if a != 0 and not a.has(z) else None
+
+
+def cancel_bounded(expr, nodes: int = 600):
+    """sp.cancel(expr), or None when the work it would do is beyond bgc.resources' limits.
+    cancel writes expr as one fraction p/q (no bigger than `nodes` before), expands p and q
+    (expanded_terms bounds that) and divides out their greatest common divisor, which SymPy
+    finds by its heuristic gcd: gcd_bits estimates, before any of it, how large the integers
+    of that heuristic grow."""
+    if not fits(expr, nodes):
+        return None
+    p, q = expr.as_numer_denom()
+    if not (fits(p) and fits(q)) or max(expanded_terms(p), expanded_terms(q)) > \
+            MAX_EXPANDED_TERMS or gcd_bits(p, q) > MAX_GCD_BITS:
+        return None
+    return sp.cancel(expr)
+
+
+def lu_solution_nodes(A, b, limit: int) -> int:
+    """An upper bound of the nodes (as a tree) of the solution of A x = b that SymPy's LUsolve
+    builds, known before it starts (limit + 1 when past limit): its elimination and
+    substitutions, without simplification, make each new entry of the ones it combines
+    (a - l*u: their nodes and three, the Add, the Mul and its -1; x / d likewise, d**-1),
+    structural zeros staying zero, the pivot the first nonzero entry down its column as
+    SymPy takes it.  (SymPy's own folding makes most results smaller; a number times a sum
+    distributed over it can make one a little larger: fits() checks the result.)"""
+    m = A.rows
+    size = [[_nodes(A[i, k], limit) if A[i, k] != 0 else 0 for k in range(m)]
+            for i in range(m)]
+    rhs = [_nodes(b[i], limit) if b[i] != 0 else 0 for i in range(m)]
+    cap = limit + 1
+    for k in range(m):
+        pivot = next((r for r in range(k, m) if size[r][k]), None)
+        if pivot is None:
+            return cap  # (singular: _matrix_in_outer has refused it before)
+        size[k], size[pivot] = size[pivot], size[k]
+        rhs[k], rhs[pivot] = rhs[pivot], rhs[k]
+        for i in range(k + 1, m):
+            if not size[i][k]:
+                continue
+            size[i][k] = min(size[i][k] + size[k][k] + 3, cap)  # l = a / pivot
+            for j in range(k + 1, m):
+                if size[k][j]:
+                    size[i][j] = min(size[i][j] + size[i][k] + size[k][j] + 3, cap)
+            if rhs[k]:
+                rhs[i] = min(rhs[i] + size[i][k] + rhs[k] + 3, cap)
+    total = 0
+    for i in range(m - 1, -1, -1):
+        for j in range(i + 1, m):
+            if size[i][j] and rhs[j]:
+                rhs[i] = min(rhs[i] + size[i][j] + rhs[j] + 3, cap)
+        rhs[i] = min(rhs[i] + size[i][i] + 3, cap)
+        total = min(total + rhs[i], cap)
+    return total
+
+
+def _nodes(expr, limit: int) -> int:
+    """expr's nodes as a tree, counted to limit + 1 at most."""
+    count, stack = 0, [expr]
+    while stack and count <= limit:
+        e = stack.pop()
+        count += 1
+        stack.extend(e.args)
+    return count
+
+
+def gcd_bits(p, q) -> float:
+    """An estimate of the bits of the integers that SymPy's heuristic gcd of the polynomials p
+    and q builds (sympy.polys.heuristicgcd): it evaluates both at an integer x for one
+    variable, then recurses on the next variable with the values as coefficients, x being
+    about the square root of the smaller norm, so that a variable of degree d in both
+    multiplies the bits by 1 + d/2 (a variable in one only leaves the smaller norm as it
+    was).  The start: 5 bits (x is 2 min(norm) + 29 for norms of 1) plus the bits of the
+    largest number.  A sum of N reciprocals of parameters, over one denominator, shares its
+    N parameters with the numerator at degree 2: 5 * 2^N bits.  The product stops once past
+    MAX_GCD_BITS (what matters is whether it is, whatever the order of the variables)."""
+    numbers = p.atoms(sp.Number) | q.atoms(sp.Number)
+    bits = 5.0 + max([0] + [53 if not n.is_Rational else
+                            abs(n.p).bit_length() + n.q.bit_length() for n in numbers])
+    dp, dq = _degrees(p), _degrees(q)
+    for g in dp.keys() & dq.keys():
+        bits *= 1 + min(dp[g], dq[g]) / 2
+        if bits > MAX_GCD_BITS:
+            break
+    return bits
+
+
+def _degrees(expr) -> dict:
+    """An upper bound of expr's degree in each variable of its polynomial form (symbols, and
+    functions or non-integer powers, which SymPy's polynomials take as variables of their
+    own): sums take the largest, products add, an integer power multiplies."""
+    degree: dict = {}
+    stack = [(expr, False)]
+    while stack:
+        e, ready = stack.pop()
+        if e in degree:
+            continue
+        polynomial = e.is_Add or e.is_Mul or (e.is_Pow and e.exp.is_Integer and e.exp > 0)
+        if e.is_Number:
+            degree[e] = {}
+        elif not polynomial:
+            degree[e] = {e: 1}
+        elif not ready:
+            stack.append((e, True))
+            stack.extend((a, False) for a in e.args if a not in degree)
+        elif e.is_Pow:
+            degree[e] = {g: k * int(e.exp) for g, k in degree[e.base].items()}
+        else:
+            out: dict = {}
+            for a in e.args:
+                for g, k in degree[a].items():
+                    out[g] = max(out.get(g, 0), k) if e.is_Add else out.get(g, 0) + k
+            degree[e] = out
+    return degree[expr]
 
 
 def expand_bounded(expr):

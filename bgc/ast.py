@@ -324,9 +324,10 @@ class DiscreteDecl:
 
 @dataclass(frozen=True)
 class Reinit:
-    """`reinit X = EXPR` in a when-block: a state's value after the event."""
+    """`reinit X = EXPR` in a when-block: a state's value after the event.  X is written as an
+    expression naming the state (a Name, Field, or an Index of one: `link[i].mass.p[0]`)."""
 
-    target: Ident
+    target: object
     expr: object
     span: Span
 
@@ -432,3 +433,5 @@ class Model:
     instances: tuple = ()  # after instantiate: graph.Instance, in declaration order
     constants: tuple = ()  # after instantiate: (name, value) of the file's constants
     text: str = ""  # the model file's text (a span without an origin is in it)
+    libraries: tuple = ()  # after instantiate: (path, SHA-256) of each file its imports read,
+    #                        in order, and (path, None) of each place they looked at before

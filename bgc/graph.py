@@ -171,12 +171,14 @@ def part_name(name: str, i: int) -> str:
     return f"{name}[{i}]"
 
 
-_PART = re.compile(r"([A-Za-z_][A-Za-z0-9_]*)\[([0-9]+)\]")
+_PART = re.compile(r"((?:.*\.)?[A-Za-z_][A-Za-z0-9_]*)\[([0-9]+)\]")
 
 
 def variable_name(element: str, field: str) -> str:
     """The name of an element's variable: `mx.p`, and for part i of a multiport `mass.p[i]`
-    (as the modeller indexes it), not `mass[i].p`."""
+    (as the modeller indexes it), not `mass[i].p`; the same under an instance's path
+    (`k.mass.p[0]`, `link[2].mass.p[0]`) and for an element declared with an index (`c[1]` in
+    a `for`: `c.q[1]`), so that every stage and report names a variable alike."""
     m = _PART.fullmatch(element)
     if m:
         return f"{m.group(1)}.{field}[{m.group(2)}]"
@@ -246,6 +248,7 @@ class Graph:
     tables: tuple = ()  # bgc.tables.TableData, as Table(k, ...) numbers them
     inputs: tuple = ()  # InputInfo, in declaration order (their values: bgc.events.InputSlot)
     constants: tuple = ()  # (name, value) of the model file's constants (`--outputs s[N].q`)
+    libraries: tuple = ()  # (path, SHA-256 or None) of the files its imports looked at
 
     @cached_property
     def vector_by_name(self) -> dict:

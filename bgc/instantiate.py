@@ -26,6 +26,7 @@ work they would cause.  Expressions are walked recursively; their depth is the p
 """
 from __future__ import annotations
 
+import hashlib
 import os
 from dataclasses import dataclass, field, fields, is_dataclass, replace
 from pathlib import Path
@@ -59,6 +60,7 @@ class _File:
     components: dict = field(default_factory=dict)  # name (or alias.name) -> ComponentDecl
     owner: dict = field(default_factory=dict)  # component name -> the _File declaring it
     constants: dict = field(default_factory=dict)  # name -> int (the file's top level)
+    sha256: str = ""  # of a library's bytes, as read (bgc.warm checks them again)
 
 
 @dataclass
@@ -197,6 +199,7 @@ class _Instantiate:
         self.ports: dict = {}  # flat port name -> graph.Port
         self.instances: list = []  # graph.Instance, in pre-order
         self.files: dict = {}  # resolved library path -> _File
+        self.looked: dict = {}  # each path an import looked at -> its SHA-256, None: no file
         self.top = {id(d) for d in model.decls}  # the model file's top-level statements
         self.dims: dict = {}  # flat element name -> (dimension of its in side, of its out side)
 
@@ -266,6 +269,8 @@ class _Instantiate:
             candidates = [Path(p) / name for p in dirs]
             shown = name
         path = next((c for c in candidates if c.is_file()), None)
+        for c in candidates[:candidates.index(path) if path is not None else len(candidates)]:
+            self.looked.setdefault(str(c), None)  # (a file made there later would be found)
         if path is None and d.file is not None:
             fail(top.sp(d.span), f"cannot find the library file '{d.file}' (a path relative to "
                                  "the file that imports it)")
@@ -281,6 +286,8 @@ class _Instantiate:
             self.files[key] = None  # being read: an import cycle ends here
             self.files[key] = self.parse_library(path, d, top)
         lib = self.files[key]
+        if lib is not None:
+            self.looked.setdefault(str(path), lib.sha256)
         if lib is None:
             fail(top.sp(d.span), f"library {shown} imports itself (through its imports)")
         if any(k.startswith(alias + ".") for k in f.components):
@@ -294,7 +301,8 @@ class _Instantiate:
         from .parser import decode, parse
         text = None
         try:
-            text = decode(read_bounded(str(path)))
+            data = read_bounded(str(path))
+            text = decode(data)
             model = parse(text, str(path))
         except OSError as exc:
             fail(top.sp(d.span), f"cannot read {path}: {exc.strerror}")
@@ -305,7 +313,8 @@ class _Instantiate:
                                           n.span, origin=origin)) for n in e.notes)
                                       + (Note(top.sp(d.span), "imported here"),))
                               for e in exc.diagnostics]) from None
-        lib = _File(str(path), Origin(str(path), text, file=True), model.decls)
+        lib = _File(str(path), Origin(str(path), text, file=True), model.decls,
+                    sha256=hashlib.sha256(data).hexdigest())
         first = model.decls[0] if model.decls else None
         if not isinstance(first, ast.LibraryDecl):
             fail(top.sp(d.span), f"{path} is not a library: a library file starts with "
@@ -439,7 +448,7 @@ class _Instantiate:
         self.diags.raise_if_errors()
         return ast.Model(tuple(self.out), self.model.path, tuple(self.ports.values()),
                          tuple(self.instances), tuple(main.constants.items()),
-                         self.model.text)
+                         self.model.text, tuple(self.looked.items()))
 
     def child(self, parent: _Scope, stmt: ast.ElementDecl, env) -> _Scope:
         name = self.local_name(parent, stmt, env)
@@ -584,10 +593,8 @@ class _Instantiate:
                 out = replace(out, index=None)
         elif isinstance(stmt, ast.WhenBlock):  # its targets are names of this scope
             out = replace(rw.map(stmt), stmts=tuple(
-                replace(rw.map(st), **{"target" if isinstance(st, ast.Reinit) else "name":
-                                       rw.target(st.target if isinstance(st, ast.Reinit)
-                                                 else st.name)})
-                for st in stmt.stmts))
+                rw.map(st) if isinstance(st, ast.Reinit)  # (its target an expression)
+                else replace(rw.map(st), name=rw.target(st.name)) for st in stmt.stmts))
         else:
             out = rw.map(stmt)
         self.out.append(out)
@@ -798,11 +805,8 @@ class _Rewriter:
         if isinstance(node, ast.Member):
             return self.path(self.try_segments(node, strict=True), node)
         if isinstance(node, ast.Index):
-            segs = self.try_segments(node)
-            if segs is not None:
-                found = self.lookup(segs)
-                if found is not None and found[1] in ("signal", "parameter", "element"):
-                    return self.path(segs, node)
+            if self.names_indexed(node):
+                return self.path(self.try_segments(node), node)
             return ast.Index(self.expr(node.base, own), self.expr(node.index, own), sp(node.span))
         if isinstance(node, ast.Call) and node.func == "table":  # a file and named options
             keep = (ast.Str, ast.Field, ast.KwArg)  # are not names in this scope
@@ -834,10 +838,21 @@ class _Rewriter:
         return self.map(node)
 
     def target(self, ident: ast.Ident) -> ast.Ident:
-        """A when-block's target (a state `b.p`, `x`, or a discrete variable) by its path."""
+        """A when-block's assigned discrete variable by its path."""
         node = self.path(ident.name.split("."), ident)
         text = node.name if isinstance(node, ast.Name) else f"{node.owner}.{node.field}"
         return ast.Ident(text, node.span)
+
+    def names_indexed(self, node: ast.Index) -> bool:
+        """Whether `node` is a name declared with an index (`r[2]`, a `for`'s `x[i]`), not a
+        component of a vector: `k.mass.p[0]` indexes the variable p of element k.mass, so
+        its path is k.mass.p and the index stays an index."""
+        segs = self.try_segments(node)
+        if segs is None:
+            return False
+        found = self.lookup(segs)
+        return (found is not None and found[1] in ("signal", "parameter", "element")
+                and len(found[2]) == 1)
 
     def try_segments(self, node, strict=False):
         """The path a node names (`link[2].rod` -> ["link[2]", "rod"]), or None."""

@@ -252,6 +252,7 @@ class _ToAst:
         return ast.WhenBlock(c[0], tuple(x for x in c[1:] if x is not None), _span(meta))
 
     def reinit_stmt(self, meta, c):
+        """Its target an expression: a state's name, indexed or not (bgc.resolve checks it)."""
         return ast.Reinit(c[0], c[1], _span(meta))
 
     def assign_stmt(self, meta, c):

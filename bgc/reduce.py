@@ -35,8 +35,8 @@ import sympy as sp
 from . import blt, ir
 from .canonical import new, xreplace
 from .ir import Assign, BlockPlan, Newton, Solve, Store, defines
-from .algebra import (antiderivative, expand_bounded, is_singular, is_symmetric, is_zero,
-                      solve_for)
+from .algebra import (antiderivative, cancel_bounded, expand_bounded, is_singular,
+                      is_symmetric, is_zero, lu_solution_nodes, solve_for)
 from .diagnostics import Collector, ModelError, Note, Span, fail, warning
 from .differentiate import directional, partial
 from . import contact, events
@@ -77,6 +77,7 @@ class BlockInfo:
     residuals: tuple[sp.Expr, ...] = ()  # a numeric block's equations, as reports show them:
     body: tuple[Assign, ...] = ()  # 0 = residuals(z), where body (explicit given z)
     internal: frozenset = frozenset()  # the variables its statements define besides z
+    note: str = ""  # why a block that auto would solve symbolically is solved numerically
 
 
 @dataclass(frozen=True)
@@ -586,6 +587,7 @@ class _Blocks:
         self.plan_eq: list = []  # per plan, and per variable a block introduces (its
         self.owner: dict = {}  # coefficients, its Jacobian's tangents): the block's equation
         self.fresh = 0
+        self.note = ""  # the block's BlockInfo.note, while it is being solved
 
     def symbol(self, hint: str) -> sp.Symbol:
         self.fresh += 1
@@ -621,6 +623,7 @@ class _Blocks:
         partials = _partials(z, body, residuals)
         linear = partials is not None
         prelude = ()
+        self.note = ""
         method = self._choose(z, linear)
         if linear:
             prelude, matrix, rhs = self._linear_system(z, body, residuals, partials)
@@ -637,7 +640,7 @@ class _Blocks:
         internal = frozenset(a.target for a in body + prelude) if method == "lu" else frozenset()
         self.infos.append(BlockInfo(index, tuple(s.name for s in z), origins, linear, method,
                                     span, residuals if numeric else (), body if numeric else (),
-                                    internal))
+                                    internal, self.note))
 
     def _lu(self, index, z, body, prelude, matrix, rhs, origins, span, eq):
         """A z = b as statements: the coefficients (prelude), the Solve, the body."""
@@ -768,8 +771,11 @@ class _Blocks:
         if not all(map(fits, entries)) or (self.algebra == "auto" and sum(
                 sp.count_ops(e) for e in entries) > SYMBOLIC_MAX_OPS):
             return self._too_large(z, origins, span, "its coefficients are too large")
+        if lu_solution_nodes(A, b, MAX_EXPRESSION_NODES) > MAX_EXPRESSION_NODES:
+            return self._too_large(z, origins, span, "its solution would have more than "
+                                                     f"{MAX_EXPRESSION_NODES} nodes")
         sol = [b[0] / A[0, 0]] if m == 1 else list(A.LUsolve(b))
-        if not all(map(fits, sol)):
+        if not all(map(fits, sol)):  # (a safety net: the estimate above bounds it)
             return self._too_large(z, origins, span, "its solution is too large")
         for s, value in zip(z, sol):
             self.steps.append(Assign(s, _tidy(value)))
@@ -777,12 +783,14 @@ class _Blocks:
         return "symbolic"
 
     def _too_large(self, z, origins, span, why) -> str:
-        """"lu" in auto; with --algebra symbolic, a located error."""
+        """"lu" in auto, the reason kept for `bgc check`; with --algebra symbolic, a located
+        error."""
         if self.algebra == "symbolic":
             names = ", ".join(f"'{o}'" for o in origins)
             fail(span, f"the linear equations through {names} are too large to solve "
                        f"symbolically ({len(z)} unknowns; {why}); let bgc solve them "
                        "numerically (--algebra auto or numeric)")
+        self.note = f"not symbolically: {why}"
         return "lu"
 
     # -- nonlinear blocks
@@ -942,8 +950,13 @@ def _linear_parts(expr, zdep):
 
 
 def _tidy(expr):
-    return sp.factor_terms(sp.cancel(expr)) if fits(expr, 600) and sp.count_ops(expr) < 300 \
-        else expr
+    """A symbolic solution's fraction cancelled and its common factors taken out, when that
+    is small work (bgc.algebra.cancel_bounded: estimated before it starts); else as it is.
+    (The cancelled form of a sum of N reciprocals is also N times larger than the sum.)"""
+    if not fits(expr, 600) or sp.count_ops(expr) >= 300:
+        return expr
+    cancelled = cancel_bounded(expr)
+    return expr if cancelled is None else sp.factor_terms(cancelled)
 
 
 # ---------------------------------------------------------------- main

@@ -248,7 +248,7 @@ def check_report(compiled, summary: SceneSummary | None = None) -> str:
                 (g.by_name[o].origin or o) if o in g.by_name else o for o in b.origins))
             lines.append(f"  {b.index}: {', '.join(b.unknowns)} ({len(b.unknowns)} unknown"
                          f"{'s' * (len(b.unknowns) > 1)}) through {', '.join(origins)}: "
-                         f"{kind}, {METHODS[b.method]}")
+                         f"{kind}, {METHODS[b.method]}" + (f"; {b.note}" if b.note else ""))
     if r.constraints:
         lines.append("constraints:")
         computed = _computed(r)

@@ -575,7 +575,7 @@ class _ExprBuilder:
         if n is not None:
             return sp.ImmutableMatrix([var(variable_name(part_name(node.owner, i), node.field))
                                        for i in range(n)])
-        return var(f"{node.owner}.{node.field}")
+        return var(variable_name(node.owner, node.field))
 
 
 def _is_matrix(v) -> bool:
@@ -925,10 +925,10 @@ def _element_dim(d: ast.ElementDecl) -> tuple[int, int] | None:
 
 
 def _with_own_vars(d, scope, diags, node) -> Expr:
-    own = {v: var(f"{d.name.name}.{v}") for v in ("e", "f")}
+    own = {v: var(variable_name(d.name.name, v)) for v in ("e", "f")}
     spec = KINDS[d.kind.name]
     if spec.state:
-        own[spec.state] = var(f"{d.name.name}.{spec.state}")
+        own[spec.state] = var(variable_name(d.name.name, spec.state))
     scope.local = own
     scope.owner = d.name.name
     try:
@@ -976,9 +976,8 @@ def _when(d: ast.WhenBlock, scope: _Scope, diags: Collector) -> When:
     actions, seen = [], {}
     for st in d.stmts:
         if isinstance(st, ast.Reinit):
-            name = st.target.name
-            sym = _state_symbol(name, st.target.span, scope)
-            kind = "reinit"
+            sym = _state_symbol(st.target, scope, diags)
+            name, kind = sym.name, "reinit"
         else:
             name = st.name.name
             if name not in scope.discretes:
@@ -1002,23 +1001,53 @@ def _when(d: ast.WhenBlock, scope: _Scope, diags: Collector) -> When:
     return When(cond.value, text, tuple(actions), d.span)
 
 
-def _state_symbol(name: str, span: Span, scope: _Scope):
-    """The symbol of a state named in a reinit: X.p of an I, X.q of a C, or an integral signal."""
-    owner, _, fld = name.rpartition(".")
-    if not owner:
+def _state_symbol(target, scope: _Scope, diags: Collector):
+    """The symbol of a state named in a reinit: X.p of an I, X.q of a C, or an integral
+    signal; a component `X.p[k]`, `x[k]` of a multiport's or a vector integral's (k a whole
+    number, or an expression of constants)."""
+    node, k = target, None
+    if isinstance(target, ast.Index):
+        node = target.base
+        k = _ExprBuilder(scope, diags).build(target.index).value
+        if _is_matrix(k) or not k.is_Integer:
+            fail(target.index.span, "an index is a whole number (0-based)")
+        k = int(k)
+    if isinstance(node, ast.Name):
+        name, owner, fld = node.name, None, None
+    elif isinstance(node, ast.Field):
+        name, owner, fld = f"{node.owner}.{node.field}", node.owner, node.field
+    else:
+        fail(target.span, "reinit takes a state: X.p of an I, X.q of a C, or an integral signal")
+    shown = name if k is None else f"{name}[{k}]"
+    if owner is None:
         d = scope.signals.get(name)
-        if isinstance(d, ast.IntegralDecl) and d.dim is None:
-            return var(name)
+        if isinstance(d, ast.IntegralDecl):
+            _check_part(name, _dim_of(d), k, target)
+            return var(name if k is None else part_name(name, k))
         if name in scope.discretes:
-            fail(span, f"'{name}' is a discrete variable: assign it without 'reinit'")
-        fail(span, f"'{name}' is not a state: reinit takes X.p of an I, X.q of a C, or an "
-                   "integral signal")
-    d = scope.elements.get(owner)
-    spec = KINDS.get(d.kind.name) if d is not None else None
-    if spec is None or not spec.state or spec.state != fld or d.dim is not None:
-        fail(span, f"'{name}' is not a state: reinit takes X.p of an I, X.q of a C, or an "
-                   "integral signal")
-    return var(name)
+            fail(target.span, f"'{name}' is a discrete variable: assign it without 'reinit'")
+    else:
+        d = scope.elements.get(owner)
+        spec = KINDS.get(d.kind.name) if d is not None else None
+        if spec is not None and spec.state and spec.state == fld:
+            _check_part(name, _dim_of(d), k, target)
+            return var(variable_name(owner if k is None else part_name(owner, k), fld))
+    fail(target.span, f"'{shown}' is not a state: reinit takes X.p of an I, X.q of a C, or an "
+                      "integral signal")
+
+
+def _check_part(name: str, n: int | None, k: int | None, target):
+    """A reinit names one scalar state: a scalar unindexed, or component k of a vector of n
+    (refused out of range, or a vector reinit whole)."""
+    if n is None and k is None:
+        return
+    if n is None:
+        fail(target.index.span, f"'{name}' is a scalar: it has no index")
+    if k is None:
+        fail(target.span, f"'{name}' has {n} components: reinit them one by one "
+                          f"({name}[0] = ...)")
+    if not 0 <= k < n:
+        fail(target.index.span, f"index {k} is out of range (0 .. {n - 1})")
 
 
 def _init(d, spec, scope, diags):
@@ -1252,4 +1281,5 @@ def resolve(model: ast.Model) -> Graph:
                  ports=tuple(model.ports), instances=tuple(model.instances),
                  relations=tuple(scope.events.relations), squares=tuple(scope.events.squares),
                  discretes=tuple(discretes), whens=tuple(whens), tables=tuple(scope.tables),
-                 inputs=tuple(scope.inputs), constants=tuple(model.constants))
+                 inputs=tuple(scope.inputs), constants=tuple(model.constants),
+                 libraries=tuple(model.libraries))

@@ -42,6 +42,10 @@ MAX_EXPANDED_TERMS = 5_000  # the terms that expanding products and powers may p
 MAX_SYMBOLIC_EXPONENT = 64  # of x^n, n an integer: SymPy expands (re + i im)^n to decide
 #                             whether a power is real, minutes for n = 1000
 SYMBOLIC_MAX_BLOCK = 12  # unknowns of a block that `--algebra symbolic` solves by LU
+MAX_GCD_BITS = 4096  # the integers SymPy's heuristic gcd would build to cancel a fraction
+#                      (bgc.algebra.gcd_bits): past this, the fraction is not cancelled.  They
+#                      grow by a factor per variable, 2^N for a sum of N reciprocals: minutes
+#                      at N = 30, where the models' own fractions need under 20 bits
 
 
 # the garbage collector during a compile: what exists when it starts (the imported modules,

@@ -12,20 +12,23 @@ says of the model and its outputs (bgc.plot.describe).
 
 A record's key is the SHA-256 of everything its contents depend on: this record format, bgc's
 version and the size and modification time of every file bgc is made of (so an edited or
-upgraded bgc misses), the model's path as given (it appears in the warnings) and the SHA-256 of
-its bytes, the scene and ad-hoc scene options, the algebra, --project-initial and
---allow-inconsistent, the backend, and the C compiler's resolved path, size and modification time with $CC and the flags (or, for the
+upgraded bgc misses), the model's path as given (it appears in the warnings, and imports look
+beside it) and the SHA-256 of its bytes, the scene and ad-hoc scene options, the algebra,
+--project-initial and --allow-inconsistent, the backend, $BGC_PATH (where imports look), and
+the C compiler's resolved path, size and modification time with $CC and the flags (or, for the
 Python backend, the interpreter).  Nothing in the key is a timestamp of the model: the same
 text under the same name hits, whatever its mtime.
 
-The files a model reads besides itself are not in the key: a table's CSV file is recorded with
-its SHA-256, and a record whose table files no longer have those bytes is a miss (the data is
-compiled into the program).  A model that imports libraries is compiled cold every time (which
-file an import finds depends on files that need not exist yet): any `import` in its text, even
-in a doc string, sends it the cold way.
+The files a model reads besides itself are not in the key; the record names them with their
+SHA-256, and a record whose files no longer have those bytes is a miss (their contents are
+compiled into the program): a table's CSV file, each library an `import` read (the model's and
+the libraries' own, the standard library's too), and each place an import looked at before the
+file it found, recorded as no file (a library made there later would be found first: a miss).
+Paths are recorded as the compile used them (relative ones to the working directory, as the
+compile of the same command there would read them).
 
-A record is used only if it reads as one (anything else is a miss), its table files are
-unchanged, and the program it names is still the file that was built and can run (bgc.backends.usable: a regular file, executable, its
+A record is used only if it reads as one (anything else is a miss), its files are unchanged,
+and the program it names is still the file that was built and can run (bgc.backends.usable: a regular file, executable, its
 SHA-256 the one recorded; like the program cache itself); a program that still cannot be
 started is removed from the cache and the run goes the cold way (bgc.cli).  Records are
 written to a temporary file and renamed into place, so concurrent runs are safe: each sees a
@@ -37,7 +40,6 @@ bgc.runner and bgc.solvers, which do too; bgc.plot when a cold run makes a recor
 from __future__ import annotations
 
 import hashlib
-import re
 import json
 import os
 import shutil
@@ -50,7 +52,7 @@ from . import backends, runner, solvers
 from .resources import read_bounded
 from .run import RunSettings
 
-FORMAT = 7  # of the record; change it when its fields change
+FORMAT = 8  # of the record; change it when its fields change
 
 
 @dataclass(frozen=True)
@@ -83,7 +85,8 @@ class Record:
     states: int = 0
     inputs: tuple[str, ...] = ()  # the program's inputs (`input NAME`), in order
     jacobian: bool = True  # the program has the Jacobian the implicit solvers need
-    files: tuple[tuple[str, str], ...] = ()  # (path, SHA-256) of each table file it read
+    files: tuple[tuple[str, str | None], ...] = ()  # (path, SHA-256) of each file it read,
+    #                                               None: a place an import found no file
 
 
 def _installation() -> list:
@@ -120,13 +123,10 @@ def _toolchain(backend: str) -> list:
     return facts
 
 
-IMPORT = re.compile(rb"\bimport\b")  # anywhere: a false alarm only costs a cold run
-
-
 def key(request: Request, source: bytes) -> str:
     from . import __version__
     parts = [FORMAT, __version__, _installation(), hashlib.sha256(source).hexdigest(),
-             asdict(request), _toolchain(request.backend)]
+             asdict(request), _toolchain(request.backend), os.environ.get("BGC_PATH", "")]
     return hashlib.sha256(json.dumps(parts, sort_keys=True).encode()).hexdigest()
 
 
@@ -140,8 +140,6 @@ def lookup(request: Request) -> tuple[Record, Path] | None:
     try:
         source = read_bounded(request.model)
     except OSError:
-        return None
-    if IMPORT.search(source):  # its libraries are other files: compiled cold, every time
         return None
     path = _record_path(key(request, source))
     try:
@@ -171,9 +169,13 @@ def lookup(request: Request) -> tuple[Record, Path] | None:
 
 
 def _sha256(path: str) -> str | None:
-    """A table file's SHA-256 (of at most one byte more than a table may have)."""
+    """A table's or a library's SHA-256 (of at most one byte more than a table may have, more
+    than a library may have), None when it is not a regular file (a library's place that
+    must stay empty; nothing else is opened, a FIFO included)."""
     from .tables import MAX_TABLE_BYTES
     try:
+        if not os.path.isfile(path):
+            return None
         return hashlib.sha256(read_bounded(path, MAX_TABLE_BYTES)).hexdigest()
     except OSError:
         return None
@@ -232,7 +234,8 @@ def record_for(compiled, program: runner.Program, warnings: str) -> Record:
         interpreter_sha256=hashlib.sha256(interp.read_bytes()).hexdigest() if interp else "",
         rhs_ops=rhs_ops(compiled.program), states=len(compiled.program.states),
         jacobian=compiled.program.has_jacobian,
-        files=tuple((t.file, _sha256(t.file)) for t in compiled.program.tables if t.file))
+        files=tuple((t.file, _sha256(t.file)) for t in compiled.program.tables if t.file)
+        + tuple(compiled.graph.libraries))
 
 
 def rhs_ops(program) -> int:

@@ -375,3 +375,113 @@ def test_values_at_a_point_are_sympys_xreplace():
     for e in entries:
         built, expected = xreplace(e, point, memo), e.xreplace(point)
         assert built == expected and type(built) is type(expected)
+
+
+# ------------------------------------------------------------------ parallel branches
+RC_BRANCHES = """model rc_branches "N series RC branches on one 0-junction, fed by a current"
+constant N = 40
+parameter F = 2
+component branch(r = 1, c = 1) {
+  port a
+  s : 1
+  res : R(r)
+  cap : C(c)
+  a -> s
+  s -> res
+  s -> cap
+}
+src : Sf(F)
+j : 0
+src -> j
+for i in 1..N {
+  b[i] : branch(r = i, c = 2/(i + 1))
+  j -> b[i].a
+}
+scene run { outputs j.e, b[1].cap.q, b[N].cap.q; time 0 .. 2 every 0.5 }
+"""
+
+
+def test_parallel_rc_branches_against_scipy(monkeypatch):
+    """The block of the junction's effort is one linear unknown whose solution is a sum of N
+    terms over a sum of N reciprocals: solved symbolically without cancelling that fraction
+    (SymPy's heuristic gcd of it grows as 2^N: minutes at N = 30), in time linear in N; the
+    run against SciPy on the same linear ODE, u = (F + sum q_k/(c_k r_k)) / sum 1/r_k,
+    dq_i/dt = (u - q_i/c_i) / r_i."""
+    cancelled = []
+    real_cancel = sp.cancel
+    monkeypatch.setattr(sp, "cancel", lambda e, *a, **k: cancelled.append(
+        len(e.free_symbols)) or real_cancel(e, *a, **k))
+    compiled = bgc.build(Source("rc.bg", RC_BRANCHES), "run")
+    monkeypatch.undo()
+    assert max(cancelled, default=0) < 20
+    (block,) = compiled.reduced.blocks
+    assert block.method == "symbolic" and block.note == ""
+    t, Y, names = bgc.simulate(Source("rc.bg", RC_BRANCHES), "run", backend="vm", rtol=1e-11,
+                               atol=1e-13)
+    n, F = 40, 2.0
+    r = np.arange(1, n + 1, dtype=float)
+    c = 2 / (r + 1)
+
+    def rates(_, q):
+        u = (F + np.sum(q / (c * r))) / np.sum(1 / r)
+        return (u - q / c) / r
+    ref = solve_ivp(rates, (0, 2), np.zeros(n), t_eval=t, rtol=1e-12, atol=1e-14,
+                    method="LSODA")
+    u = (F + (ref.y / (c * r)[:, None]).sum(axis=0)) / np.sum(1 / r)
+    assert names == ["j.e", "b[1].cap.q", "b[40].cap.q"]
+    close(Y, np.column_stack([u, ref.y[0], ref.y[-1]]), 1e-7)
+
+
+def test_a_block_too_large_to_solve_symbolically_says_why_in_check(monkeypatch):
+    from bgc import reduce
+    from bgc.report import check_report
+    monkeypatch.setattr(reduce, "SYMBOLIC_MAX_OPS", 10)
+    compiled = bgc.build(Source("rc.bg", RC_BRANCHES.replace("N = 40", "N = 4")), "run")
+    (block,) = compiled.reduced.blocks
+    assert block.method == "lu"
+    assert "linear, solved numerically (LU); not symbolically: its coefficients are too " \
+           "large" in check_report(compiled)
+
+
+def _heugcd_bits(monkeypatch, expr) -> int:
+    """The largest integer SymPy's heuristic gcd builds while cancelling expr, in bits."""
+    from sympy.polys import heuristicgcd, rings
+    seen = [0]
+    real = heuristicgcd.heugcd
+
+    def spy(f, g):
+        seen[0] = max(seen[0], f.max_norm().bit_length(), g.max_norm().bit_length())
+        return real(f, g)
+    monkeypatch.setattr(rings, "heugcd", spy)
+    monkeypatch.setattr(heuristicgcd, "heugcd", spy)
+    sp.cancel(expr)
+    monkeypatch.undo()
+    return seen[0]
+
+
+@pytest.mark.parametrize("n", [2, 4, 6, 8])
+def test_the_gcd_estimate_bounds_sympys_heuristic(monkeypatch, n):
+    """gcd_bits against the integers SymPy's heugcd really builds: above them, and growing
+    as they do (each further parameter shared by numerator and denominator multiplies)."""
+    from bgc.algebra import gcd_bits
+    r, q = sp.symbols(f"r0:{n}", positive=True), sp.symbols(f"q0:{n}")
+    expr = (1 + sum(q[i] / r[i] for i in range(n))) / sum(1 / r[i] for i in range(n))
+    real = _heugcd_bits(monkeypatch, expr)
+    estimate = gcd_bits(*expr.as_numer_denom())
+    assert real <= estimate <= 64 * real
+
+
+def test_the_lu_estimate_bounds_the_solution_sympy_builds():
+    from bgc.algebra import lu_solution_nodes
+    rng = np.random.default_rng(3)
+    x = sp.symbols("x0:9", real=True)
+    for m in (1, 2, 3, 5):
+        A = sp.Matrix(m, m, lambda i, k: 0 if rng.random() < 0.3 and i != k else
+                      x[int(rng.integers(9))] + int(rng.integers(1, 4)) * x[(i + k) % 9])
+        b = sp.Matrix(m, 1, lambda i, _: x[i % 9] ** 2)
+        nodes = sum(_tree_nodes(s) for s in A.LUsolve(b))
+        assert nodes <= lu_solution_nodes(A, b, 10 ** 9) <= 50 * nodes
+
+
+def _tree_nodes(e) -> int:
+    return 1 + sum(_tree_nodes(a) for a in e.args)

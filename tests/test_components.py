@@ -325,7 +325,174 @@ j -> b_mass
 
 def test_a_vector_port_against_the_flat_twin():
     a, _ = assert_twins(VECTOR, VECTOR_FLAT)
-    assert [s.name for s in a.reduced.states] == ["b.mass[0].p", "b.mass[1].p"]
+    # a multiport's parts are named alike inside an instance and at the top: b.mass.p[0]
+    assert [s.name for s in a.reduced.states] == ["b.mass.p[0]", "b.mass.p[1]"]
+
+
+# A vector element variable of an element inside an instance, indexed by its path wherever an
+# expression names a variable: in the component (mass.p[0]), in a law, a signal, a component's
+# argument, a condition and a reinit target, through `for` (link[i].mass.p[0]) and constant
+# index expressions (p[N-2]); the same of a top-level multiport (m2.p[0]) and of a `for`'s
+# indexed element (c[1].q).
+CHAIN = """model chain
+constant N = 3
+component rod_and_mass(m = 1, k = 2) {
+  port a[2]
+  mass : I[2](m)
+  spring : C[2](1/k)
+  node : 1[2]
+  a -> node
+  node -> mass
+  node -> spring
+  signal ke = mass.p[0]^2/(2*m) + mass.p[1]^2/(2*m)
+  when mass.p[1] > 0.5 { reinit mass.p[1] = 0 }
+}
+component push(v = 0) {
+  port a
+  s : Se(v)
+  s -> a
+}
+g : Se[2]([1, 2])
+j : 0[2]
+g -> j
+for i in 1..N {
+  link[i] : rod_and_mass(m = i)
+  j -> link[i].a
+  c[i] : C(i)
+  h[i] : 0
+  when link[i].mass.p[0] > 0.3*i { reinit link[i].mass.p[0] = -link[i].mass.p[0] }
+}
+m2 : I[2](2)
+j -> m2
+pr : push(v = link[1].mass.p[0] + m2.p[N-2])
+pr.a -> h[1]
+h[1] -> c[1]
+d : R(e = 3*f + link[2].mass.p[1])
+src : Sf(link[N].spring.q[N-2])
+src -> h[2]
+h[2] -> c[2]
+h[2] -> d
+f3 : Sf(c[1].q)
+f3 -> h[3]
+h[3] -> c[3]
+signal en = link[1].ke + link[2].mass.p[0]^2/4 + link[N].mass.p[N-2]^2/6
+when en > 1 and m2.p[0] > 0 { reinit m2.p[1] = 0; reinit c[2].q = c[1].q }
+scene s { outputs en, link[2].mass.p[1], link[N].spring.q[N-3], m2.p[0], c[3].q
+          time 0 .. 1 every 0.25 }
+"""
+
+CHAIN_FLAT = """model chain
+g : Se[2]([1, 2])
+j : 0[2]
+g -> j
+parameter link1_m = 1
+parameter link1_k = 2
+link1_mass : I[2](link1_m)
+link1_spring : C[2](1/link1_k)
+link1_node : 1[2]
+signal link1_ke = link1_mass.p[0]^2/(2*link1_m) + link1_mass.p[1]^2/(2*link1_m)
+when link1_mass.p[1] > 0.5 { reinit link1_mass.p[1] = 0 }
+j -> link1_node
+link1_node -> link1_mass
+link1_node -> link1_spring
+c1 : C(1)
+h1 : 0
+when link1_mass.p[0] > 0.3*1 { reinit link1_mass.p[0] = -link1_mass.p[0] }
+parameter link2_m = 2
+parameter link2_k = 2
+link2_mass : I[2](link2_m)
+link2_spring : C[2](1/link2_k)
+link2_node : 1[2]
+signal link2_ke = link2_mass.p[0]^2/(2*link2_m) + link2_mass.p[1]^2/(2*link2_m)
+when link2_mass.p[1] > 0.5 { reinit link2_mass.p[1] = 0 }
+j -> link2_node
+link2_node -> link2_mass
+link2_node -> link2_spring
+c2 : C(2)
+h2 : 0
+when link2_mass.p[0] > 0.3*2 { reinit link2_mass.p[0] = -link2_mass.p[0] }
+parameter link3_m = 3
+parameter link3_k = 2
+link3_mass : I[2](link3_m)
+link3_spring : C[2](1/link3_k)
+link3_node : 1[2]
+signal link3_ke = link3_mass.p[0]^2/(2*link3_m) + link3_mass.p[1]^2/(2*link3_m)
+when link3_mass.p[1] > 0.5 { reinit link3_mass.p[1] = 0 }
+j -> link3_node
+link3_node -> link3_mass
+link3_node -> link3_spring
+c3 : C(3)
+h3 : 0
+when link3_mass.p[0] > 0.3*3 { reinit link3_mass.p[0] = -link3_mass.p[0] }
+m2 : I[2](2)
+j -> m2
+signal pr_v = link1_mass.p[0] + m2.p[1]
+pr_s : MSe(pr_v)
+pr_s -> h1
+h1 -> c1
+d : R(e = 3*f + link2_mass.p[1])
+src : Sf(link3_spring.q[1])
+src -> h2
+h2 -> c2
+h2 -> d
+f3 : Sf(c1.q)
+f3 -> h3
+h3 -> c3
+signal en = link1_ke + link2_mass.p[0]^2/4 + link3_mass.p[1]^2/6
+when en > 1 and m2.p[0] > 0 { reinit m2.p[1] = 0; reinit c2.q = c1.q }
+scene s { outputs en, link2_mass.p[1], link3_spring.q[0], m2.p[0], c3.q
+          time 0 .. 1 every 0.25 }
+"""
+
+
+def test_indexed_vector_variables_by_path_against_the_flat_twin(tmp_path):
+    a, b = assert_twins(CHAIN, CHAIN_FLAT, "s")
+    assert list(a.program.outputs) == ["en", "link[2].mass.p[1]", "link[3].spring.q[0]",
+                                       "m2.p[0]", "c[3].q"]
+    ya = bgc.simulate(Source("a.bg", CHAIN), "s", backend="vm")
+    yb = bgc.simulate(Source("b.bg", CHAIN_FLAT), "s", backend="vm")
+    np.testing.assert_array_equal(ya[1], yb[1])  # the same numbers, bit for bit
+    path = tmp_path / "chain.bg"
+    path.write_text(CHAIN)
+    result = CliRunner().invoke(main, ["simulate", str(path), "-s", "s", "--backend", "vm",
+                                       "--outputs", "link[N].mass.p[N-2],c[1].q"])
+    assert result.exit_code == 0, result.output
+    assert result.output.splitlines()[0] == "t,link[3].mass.p[1],c[1].q"
+
+
+OSCILLATORS = """model oscillators
+constant N = 2
+component oscillator(m = 1, k = 4, a = 1) {
+  port base[2]
+  mass : I[2](m)
+  spring : C[2](1/k) init q = [a, 2*a]
+  node : 1[2]
+  base -> node
+  node -> mass
+  node -> spring
+}
+ground : Se[2]([0, 0])
+g : 0[2]
+ground -> g
+for i in 1..N {
+  link[i] : oscillator(m = i, a = 0.5*i)
+  g -> link[i].base
+}
+signal en = link[N].mass.p[1]^2/(2*N) + link[N].spring.q[1]^2*4/2
+scene run { outputs link[1].mass.p[0], link[N].spring.q[N-1], en; time 0 .. 2 every 0.5 }
+"""
+
+
+def test_indexed_vector_variables_of_instances_against_the_closed_form():
+    """Undamped oscillators m_i, k = 4 from q(0) = (a_i, 2 a_i): q = q(0) cos(w t),
+    p = -m w q(0) sin(w t), w = sqrt(k / m); the energy k q(0)^2 / 2 stays."""
+    t, Y, names = bgc.simulate(Source("osc.bg", OSCILLATORS), "run", backend="vm",
+                               rtol=1e-11, atol=1e-13)
+    assert names == ["link[1].mass.p[0]", "link[2].spring.q[1]", "en"]
+    w1, w2 = 2.0, np.sqrt(2.0)
+    expected = np.column_stack([-1 * w1 * 0.5 * np.sin(w1 * t), 2.0 * np.cos(w2 * t),
+                                np.full_like(t, 4 * 2.0**2 / 2)])
+    np.testing.assert_allclose(Y, expected, rtol=1e-8, atol=1e-9)
 
 
 PENDULUM = """model pendulum

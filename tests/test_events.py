@@ -471,6 +471,15 @@ def test_a_chain_of_100_events_at_one_instant_is_allowed(N, settles):
      "a condition is not a number: write 'if C then 1 else 0' for its value"),
     ("parameter a = 1\nsignal y = integral(1, init = 0)\nwhen y > 1 { reinit a = 0 }",
      "'a' is not a state: reinit takes X.p of an I, X.q of a C, or an integral signal"),
+    ("b : I[2](1)\nwhen t > 1 { reinit b.p = 0 }",
+     "'b.p' has 2 components: reinit them one by one (b.p[0] = ...)"),
+    ("b : I[2](1)\nwhen t > 1 { reinit b.p[2] = 0 }", "index 2 is out of range (0 .. 1)"),
+    ("b : I(1)\nwhen t > 1 { reinit b.p[0] = 0 }", "'b.p' is a scalar: it has no index"),
+    ("b : I[2](1)\nwhen t > 1 { reinit b.f[0] = 0 }", "'b.f[0]' is not a state"),
+    ("b : I[2](1)\nparameter k = 1\nwhen t > 1 { reinit b.p[k] = 0 }",
+     "an index is a whole number (0-based)"),
+    ("signal y = integral(1, init = 0)\nwhen t > 1 { reinit sin(y) = 0 }",
+     "reinit takes a state: X.p of an I, X.q of a C, or an integral signal"),
     ("signal y = integral(1, init = 0)\nwhen y > 1 { y = 0 }",
      "'y' is not a discrete variable: a when-block assigns discrete variables and reinits "
      "states ('y' is a signal; a state takes 'reinit')"),
@@ -509,6 +518,40 @@ scene run { time 0 .. 3 every 0.5; outputs a.x, a.y; solver dopri5(rtol = 1e-12,
     assert abs(float(rows[1][0]) - t_cross) <= 1e-10 * t_cross
     _, y = table(csv_text)
     assert list(y[:, 2]) == [0, 0, 0, 1, 1, 1, 1]
+
+
+def test_reinit_of_vector_components_by_path(tmp_path):
+    """Each component of a vector state reinit by its index, inside a `for` over instances:
+    x[1] = 2t - 0.9 floor(2t / 0.9), instance i's p[0] = t - 0.33 i floor(t / (0.33 i))."""
+    text = """model v
+component body(m = 1) {
+  port a[2]
+  mass : I[2](m)
+  a -> mass
+}
+g : Se[2]([1, 0])
+j : 0[2]
+g -> j
+for i in 1..2 {
+  b[i] : body()
+  j -> b[i].a
+  when b[i].mass.p[0] > 0.33*i { reinit b[i].mass.p[0] = 0 }
+}
+signal x[2] = integral([1, 2], init = [0, 0])
+when x[1] > 0.9 { reinit x[1] = 0 }
+scene run { time 0 .. 1.4 every 0.2; outputs x, b[1].mass.p[0], b[2].mass.p[0]
+            solver dopri5(rtol = 1e-12, atol = 1e-14) }
+"""
+    log = tmp_path / "events.csv"
+    head, y = table(run_csv(build(text, "run"), "vm", events=str(log)))
+    assert head == ["t", "x[0]", "x[1]", "b[1].mass.p[0]", "b[2].mass.p[0]"]
+    t = y[:, 0]
+    np.testing.assert_allclose(y[:, 1:], np.column_stack([
+        t, 2 * t - 0.9 * np.floor(2 * t / 0.9), t - 0.33 * np.floor(t / 0.33),
+        t - 0.66 * np.floor(t / 0.66)]), atol=1e-9)
+    reset = {r[1]: float(r[0]) for r in events_of(log) if " " not in r[1]}
+    assert reset.keys() == {"x[1]", "b[1].mass.p[0]", "b[2].mass.p[0]"}
+    np.testing.assert_allclose(reset["b[2].mass.p[0]"], 1.32, rtol=1e-10)
 
 
 NAMED = """model named "conditions written as a modeller writes them"

@@ -78,7 +78,8 @@ def test_the_generators_cover_the_language():
                       "Sw(", "unilateral", "component ", "for i in ", "import "):
         assert construct in text, construct
     assert re.search(r" : D(\n|;)", text), "an ideal diode"
-    assert {how for _, how, _ in cases} >= {"generated", "generated+mutated"}
+    assert {how for _, how, _ in cases} >= {"generated", "generated+mutated",
+                                            "parallel branches"}
     assert len({how for _, how, _ in cases if how.startswith("mutated ")}) >= 10
 
 

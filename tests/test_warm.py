@@ -142,8 +142,7 @@ def test_warm_run_and_help_do_not_import_sympy(tmp_path, cache):
 
 def test_an_edited_table_file_or_an_import_after_a_semicolon_misses(tmp_path, cache):
     """The table's rows are compiled into the program, the library's laws too: a warm run of
-    the same model text must see the edited file (a table: recorded with its SHA-256; an
-    import, wherever it stands on its line: compiled cold every time)."""
+    the same model text must see the edited file (each recorded with its SHA-256)."""
     model = tmp_path / "tab.bg"
     model.write_text("model tab\nsignal a = table(data.csv, t)\n"
                      "scene run { outputs a; time 0 .. 1 every 1 }\n")
@@ -166,3 +165,66 @@ def test_an_edited_table_file_or_an_import_after_a_semicolon_misses(tmp_path, ca
         run = run_bgc("simulate", semi, "--scene", "run", "--backend", BACKEND)
         assert run.returncode == 0, run.stderr
         assert _rows(run.stdout)[-1][1] == pytest.approx(1 / (2 * float(factor)), rel=1e-12)
+
+
+IMPORTING = textwrap.dedent("""\
+    model importing
+    import electrical as e
+    import mylib
+    parameter V = 3
+    src : Se(V)
+    a : 0
+    b : 0
+    res : e.resistor(r = 1)
+    load : mylib.load(r = 2)
+    src -> a
+    a -> res.p
+    res.n -> b
+    b -> load.p
+    scene run { outputs load.x.f; time 0 .. 1 every 1 }
+    """)
+
+
+def _load_library(factor) -> str:
+    return f"library mylib\ncomponent load(r = 1) {{\n  port p\n  x : R({factor}*r)\n  p -> x\n}}\n"
+
+
+def test_a_model_importing_libraries_runs_warm_and_sees_an_edited_library(tmp_path, cache,
+                                                                          monkeypatch):
+    """The standard library's electrical and a library beside the model: the second run uses
+    the record (no compile); an edit of the library, or a library of the standard one's name
+    made beside the model (which an import finds first), is compiled and seen.  The current
+    through the series resistors: V / (1 + factor * 2)."""
+    from bgc import cli, warm
+    compiles, found = [], []
+    real_compile, real_lookup = cli._compile_for_run, warm.lookup
+    monkeypatch.setattr(cli, "_compile_for_run",
+                        lambda *a, **k: compiles.append(1) or real_compile(*a, **k))
+    monkeypatch.setattr(warm, "lookup",
+                        lambda *a, **k: found.append(real_lookup(*a, **k)) or found[-1])
+    model = tmp_path / "importing.bg"
+    model.write_text(IMPORTING)
+    lib = tmp_path / "mylib.bg"
+
+    def current():
+        done = run_bgc("simulate", model, "--scene", "run", "--backend", "python")
+        assert done.returncode == 0, done.stderr
+        return _rows(done.stdout)[-1][1]
+    for factor, runs in (("1", 2), ("4", 1)):
+        lib.write_text(_load_library(factor))
+        for k in range(runs):
+            del compiles[:], found[:]
+            assert current() == pytest.approx(3 / (1 + 2 * float(factor)), rel=1e-12)
+            assert (len(compiles), found[0] is not None) == ((1, False) if k == 0 else
+                                                              (0, True))
+    (record,) = cache.glob("warm-*.json")
+    files = dict(map(tuple, json.loads(record.read_text())["files"]))
+    assert files[str(tmp_path / "electrical.bg")] is None  # looked at first, no file
+    assert files[str(lib)] is not None and len(files) == 3
+    # a library made where an import looks first: found now, so the record is not used
+    (tmp_path / "electrical.bg").write_text(
+        "library electrical\ncomponent resistor(r = 1) {\n  port p, n\n  s : 1\n"
+        "  x : R(10*r)\n  p -> s\n  s -> x\n  s -> n\n}\n")
+    del compiles[:]
+    assert current() == pytest.approx(3 / (10 + 2 * 4), rel=1e-12)
+    assert len(compiles) == 1

@@ -485,6 +485,35 @@ def generate(rng: random.Random) -> str:
     return rng.choice(["\n", "\n", "; "]).join(lines) + "\n"
 
 
+def parallel_branches(rng: random.Random) -> str:
+    """The parallel-branch family: N instances of one component in a `for` loop, each a
+    branch of its own parameters on one junction, driven by a source, N up to 60.  A block
+    through every branch (the junction's effort, or its flow) is as wide as N, with as many
+    parameters: symbolic work that grows faster than its size shows as a hang (SymPy's gcd
+    of a fraction over N parameters, issue 37: minutes at N = 30)."""
+    n = rng.choice([1, 2, 5, 10, 20, 30, 40, 60])
+    on = rng.choice(["0", "1"])
+    inner, source = ("1", "Sf") if on == "0" else ("0", "Se")
+    storage = rng.choice(["C(c)", "I(c)", "C(c) init q = c/2", "I(1/c)"])
+    law = rng.choice(["R(r)", "R(r)", "R(e = r*f + f^3)", "R(r*(1 + 0.1*i0))"])
+    body = ["port a", f"s : {inner}", f"res : {law}", f"st : {storage}", "a -> s",
+            "s -> res", "s -> st"]
+    if rng.random() < 0.3:
+        body += ["extra : R(2*r)", "s -> extra"]
+    params = rng.choice([("r = i", "c = 1/(i + 1)"), ("r = r0*i", "c = c0/i"),
+                         ("r = r0 + i", "c = c0"), ("r = i^2", "c = 1/i")])
+    lines = [f"model branches{n}", "constant N = " + str(n), "parameter r0 = 1.5",
+             "parameter c0 = 0.5", "component branch(r = 1, c = 1, i0 = 0) {"]
+    lines += ["  " + b for b in body] + ["}", f"src : {source}({rng.choice(['1', 'r0', 'sin(t)'])})",
+                                         f"j : {on}", "src -> j", "for i in 1..N {",
+                                         f"  b[i] : branch({', '.join(params)}, i0 = i)",
+                                         "  j -> b[i].a", "}"]
+    outputs = ("j.e" if on == "0" else "j.f") + (", b[1].st.q" if storage[0] == "C" else
+                                                 ", b[1].st.p") + ", b[N].res.f"
+    lines.append(f"scene run {{ outputs {outputs}; time 0 .. 0.1 every 0.05 }}")
+    return "\n".join(lines) + "\n"
+
+
 # ------------------------------------------------------------------------- mutation
 
 TOKEN = re.compile(r'"(?:\\.|[^"\\\n])*"|#[^\n]*|[A-Za-z_][A-Za-z0-9_]*'
@@ -600,6 +629,8 @@ def to_bytes(text: str, rng: random.Random | None = None) -> bytes:
 def case(rng: random.Random, seeds: dict[str, str], i: int) -> tuple[str, bytes]:
     """Case number i: (how it was made, its bytes).  Even cases are generated, odd ones are
     mutations of a shipped model (or, one time in four, of a generated one)."""
+    if i % 50 == 49:  # (a family of models that grow with N: costs that grow too fast)
+        return "parallel branches", to_bytes(parallel_branches(rng))
     if i % 2 == 0:
         text = generate(rng)
         if rng.random() < 0.25:
