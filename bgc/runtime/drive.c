@@ -591,8 +591,11 @@ static int bgc_find_event(bgc_run *r, bgc_dense *c, double *te, double *ye)
     }
     memcpy(ga, r->g, sizeof(double) * G);
     for (it = 0; it < 200; it++) {
-        const double scale = bgc_max(bgc_max(fabs(ta), fabs(tb)), h);
-        const double tol = bgc_max(1e-12 * scale, bgc_max(4.0 * DBL_EPSILON * scale, DBL_MIN));
+        /* 1e-12 relative in t, the floating point's resolution relative to the step too (an
+           event near t = 0): a switched element's flow is resolved to its rate times that
+           (bgc/contact.py, LOCATED) */
+        const double at = bgc_max(fabs(ta), fabs(tb)), scale = bgc_max(at, h);
+        const double tol = bgc_max(1e-12 * at, bgc_max(4.0 * DBL_EPSILON * scale, DBL_MIN));
         double frac = 1.0, tm;
         int k, side;
         if (tb - ta <= tol)

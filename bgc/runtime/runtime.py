@@ -1746,8 +1746,9 @@ def _find_event(run, c):
     h = c.tph - c.t  # the time's resolution is relative to the step too (an event near t = 0)
     probed = False
     for it in range(200):
-        scale = max(max(abs(ta), abs(tb)), h)
-        tol = max(1e-12 * scale, max(4.0 * _EPS * scale, sys.float_info.min))
+        at = max(abs(ta), abs(tb))  # (1e-12 relative in t, the resolution relative to h too)
+        scale = max(at, h)
+        tol = max(1e-12 * at, max(4.0 * _EPS * scale, sys.float_info.min))
         if tb - ta <= tol:
             break
         frac = 1.0
