@@ -406,6 +406,12 @@ static inline double bgc_table_guard(const bgc_table_data *T, double X)
     const double lo = X - T->x[0], hi = T->x[T->n - 1] - X;
     return hi < lo ? hi : lo;
 }
+/* The model's tables: BGC_NUM_TABLES of them in bgc_tables (a model part with tables defines
+   both); a model without tables gets the neutral ones. */
+#ifndef BGC_NUM_TABLES
+#define BGC_NUM_TABLES 0
+static const bgc_table_data bgc_tables[1] = { { 0, 0, NULL, NULL, NULL } };
+#endif
 /* The piece that holds t, and the table's first row after t (a time table's events). */
 static inline double bgc_table_piece(const bgc_table_data *T, double t)
 {
