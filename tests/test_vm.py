@@ -86,11 +86,11 @@ scene run { time 0 .. 1 every 0.05; outputs x, a, b, c, d, e, u }
 def test_tables_and_inputs_as_the_c_program_and_python(tmp_path):
     """Tables of t (time events) and of a state (searched at each call, differentiated for the
     stiff solver's Jacobian), linear, step and cubic, held, extended and guarded, a table file
-    and an input's data: the interpreter writes the C program's and the Python
+    and an input's data with a jump: the interpreter writes the C program's and the Python
     module's bytes, its event log too; a run that reads a table outside its rows (extrapolate
     = error) stops there as they do."""
     (tmp_path / "ramp.csv").write_text("x,y\n-1,0\n0.2,0.3\n0.5,0.1\n0.9,0.7\n")
-    (tmp_path / "u.csv").write_text("t,u\n0,0\n0.35,1\n0.7,0.5\n")
+    (tmp_path / "u.csv").write_text("t,u\n0,0\n0.35,1\n0.35,-0.5\n0.7,0.5\n")
     for text, fails in ((TABLES, False), (TABLES.replace("[3, 2]]", "[1.25, 2]]"), True)):
         compiled = build(Source(str(tmp_path / "tabs.bg"), text), "run")
         programs = {b: runner.prepare(compiled, b) for b in ("c", "vm", "python")}

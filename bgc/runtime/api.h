@@ -31,8 +31,10 @@ double *bgc_param_ref(bgc_params *p, int j);
 int bgc_param_index(const char *name);
 
 /* An input's data (`input NAME`, docs/cli.md "--input"): n samples (t[k], u[k]), t
-   increasing, interpolated linearly and held beyond the first and the last; each t[k] is a
-   time event.  n == 0: no data, the input keeps its default. */
+   non-decreasing, interpolated linearly and held beyond the first and the last; each t[k] is
+   a time event.  A repeated t is a jump, as a table's repeated x: the sample before it is the
+   value on the left, the one after it on the right (bgc_input reads the segment after the
+   last sample at or before t).  n == 0: no data, the input keeps its default. */
 typedef struct bgc_input_series {
     int n;
     const double *t, *u;

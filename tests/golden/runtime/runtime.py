@@ -374,10 +374,28 @@ def _input_series(inputs=None, path=None):
             raise ValueError("%s: t and the values must be as many, at least one" % where)
         if not all(math.isfinite(v) for v in ts + us):
             raise ValueError("%s: the data must be finite numbers" % where)
-        if any(not ts[k] > ts[k - 1] for k in range(1, len(ts))):
-            raise ValueError("%s: t must increase from row to row" % where)
+        k = _input_order(ts)
+        if k is not None:
+            raise ValueError("%s: %s" % (where, _input_order_problem(ts, k, "at t[%d]" % k)))
         out[_INPUT_NAMES.index(name)] = (tuple(ts), tuple(us))
     return out if any(s is not None for s in out) else None
+
+
+def _input_order(ts, k=None):
+    """The first index from k on (else from 1) where an input's times break their order (None:
+    none): t does not decrease, and a repeated t, a jump, is two samples, never three."""
+    for k in range(1, len(ts)) if k is None else (k,) if k >= 1 else ():
+        if ts[k] < ts[k - 1] or (k >= 2 and ts[k] == ts[k - 1] == ts[k - 2]):
+            return k
+    return None
+
+
+def _input_order_problem(ts, k, at):
+    """What is wrong at index k (_input_order), there being `at` ("here": as main.c says it)."""
+    if ts[k] < ts[k - 1]:
+        return "t decreases %s (t does not decrease from row to row; a repeated t is a " \
+               "jump)" % at
+    return "the same t a third time %s (a jump is two rows of the same t)" % at
 
 
 def _read_input_file(path):
@@ -414,8 +432,9 @@ def _read_input_file(path):
                 raise ValueError("%s:%d: '%s' is not a finite number" % (path, number, cell))
             columns[k].append(v)
         t = columns[head.index("t")]
-        if len(t) > 1 and not t[-1] > t[-2]:
-            raise ValueError("%s:%d: t must increase from row to row" % (path, number))
+        if _input_order(t, len(t) - 1) is not None:
+            raise ValueError("%s:%d: %s" % (path, number,
+                                            _input_order_problem(t, len(t) - 1, "here")))
     if not columns[0]:
         raise ValueError("%s: no rows of data" % path)
     t = columns[head.index("t")]
