@@ -40,7 +40,7 @@ from bgc.ir import Assign, Newton, Program, Resolve, Solve, Store
 from bgc.printers import CPrinter
 from bgc.resources import resource_dir
 
-FORMAT = 5  # of the program file; vm.c refuses any other
+FORMAT = 6  # of the program file; vm.c refuses any other
 MAGIC = b"BGCVM\0\0\0"
 
 # The instruction set: name and the kinds of its three operands (r: a register; i: an index,
@@ -103,7 +103,8 @@ ENTRIES = ("consts", "init", "rhs", "outputs", "jvp", "events", "next_time", "up
            "residual", "scale", "position_jac", "velocity_jac", "velocity_metric")
 MODEL_FUNCTIONS = ("rhs", "outputs", "jvp", "events", "next_time", "update")
 INT_TABLES = ("jac_color_ptr", "jac_color_cols", "jac_col_ptr", "jac_col_rows",
-              "position_rows", "velocity_rows", "velocity_movable", "indicator_strict")
+              "position_rows", "velocity_rows", "velocity_movable", "indicator_strict",
+              "discrete_log")
 
 
 class VMError(backends.BackendError):
@@ -655,7 +656,8 @@ def program_bytes(program: Program) -> bytes:
               "jac_col_rows": col_rows, "position_rows": list(program.position_rows),
               "velocity_rows": list(program.velocity_rows),
               "velocity_movable": [int(v) for v in program.velocity_movable],
-              "indicator_strict": [int(v) for v in ev.strict] if ev else []}
+              "indicator_strict": [int(v) for v in ev.strict] if ev else [],
+              "discrete_log": emit.discrete_log(ev) if ev else []}
     out = [MAGIC, struct.pack("<i", FORMAT)]
     out.append(struct.pack(f"<{len(emit.LINK_INTS)}i", *(ints[m] for m in emit.LINK_INTS)))
     out.append(struct.pack(f"<{len(emit.LINK_DOUBLES)}d",

@@ -505,11 +505,27 @@ static int bgc_vm_check(const bgc_vm_seg *s, int n_in, int alone)
     return s->n > 0 && s->code[4 * (s->n - 1)] == BGC_VM_END;
 }
 
+/* Whether bgc_discrete_log (the last of the int tables, count ints) is two ints for each
+   discrete value, each naming a kind and a table or an input there is: 0, or 1. */
+static int bgc_vm_discrete_log(int count)
+{
+    int k;
+    if (count != 2 * BGC_NUM_DISCRETE)
+        return 1;
+    for (k = 0; k < BGC_NUM_DISCRETE; k++) {
+        const int kind = bgc_discrete_log[2 * k], j = bgc_discrete_log[2 * k + 1];
+        if (!(kind == BGC_LOG_PLAIN || (kind == BGC_LOG_INPUT && j >= 0 && j < BGC_NUM_INPUTS)
+              || (kind == BGC_LOG_TABLE && j >= 0 && j < BGC_NUM_TABLES)))
+            return 1;
+    }
+    return 0;
+}
+
 static int bgc_vm_read(const unsigned char *data, size_t size)
 {
     bgc_vm_reader rd = { data, data + size, 0 }, *r = &rd;
     bgc_block *blocks;
-    int i, j, nb, n_in;
+    int i, j, nb, n_in, counts[BGC_COUNT(bgc_vm_link_tables)];
     if (size < 12 || memcmp(data, "BGCVM\0\0\0", 8) != 0)
         return 1;
     r->at += 8;
@@ -539,10 +555,10 @@ static int bgc_vm_read(const unsigned char *data, size_t size)
     bgc_link_discrete_names = bgc_vm_strings(r, BGC_NUM_DISCRETE);
     bgc_vm_inputs = bgc_vm_strings(r, BGC_NUM_INPUTS);
     for (i = 0; i < BGC_COUNT(bgc_vm_link_tables); i++) {
-        const int *t = bgc_vm_ints(r, NULL);
+        const int *t = bgc_vm_ints(r, &counts[i]);
         *bgc_vm_link_tables[i] = t;
     }
-    if (r->bad)
+    if (r->bad || bgc_vm_discrete_log(counts[BGC_COUNT(bgc_vm_link_tables) - 1]))
         return 1;
     nb = bgc_vm_int(r);
     if (nb != BGC_NUM_BLOCKS)

@@ -193,11 +193,15 @@ void bgc_request_stop(int sig);
    g > 0, or g >= 0 where bgc_indicator_strict is 0), BGC_NUM_TIMERS (the results of
    bgc_model_next_time: time events, of which the runtime steps onto the first after t) and
    BGC_NUM_DISCRETE (the discrete values d: the relations' frozen values, the state relations'
-   first, then square waves and discrete variables, named by bgc_discrete_names), and
+   first, then square waves and discrete variables, named by bgc_discrete_names, their
+   changes shown in the event log as bgc_discrete_log says: two ints each, BGC_LOG_PLAIN
+   (the values themselves), BGC_LOG_TABLE k (a table of t's piece: the table's values),
+   BGC_LOG_INPUT j (a value of input j's segment: the input's values, one row)), and
    BGC_DISCRETE_OFFSET, where d is in its parameter struct (in doubles).  bgc_model_update
    gives the state and d after one pass of an event iteration from r (the state relations'
    values at the event, then 1 at the start of a run, else 0).  A model without events gets
    the neutral ones below. */
+enum { BGC_LOG_PLAIN, BGC_LOG_INPUT, BGC_LOG_TABLE }; /* bgc_discrete_log (bgc/ir.py LOG_*) */
 #ifndef BGC_NUM_DISCRETE
 #define BGC_NUM_INDICATORS 0
 #define BGC_NUM_TIMERS 0
@@ -205,6 +209,7 @@ void bgc_request_stop(int sig);
 #define BGC_DISCRETE_OFFSET 0
 static const int bgc_indicator_strict[1] = { 0 };
 static const char *const bgc_discrete_names[1] = { "" };
+static const int bgc_discrete_log[2] = { 0, 0 };
 static inline int bgc_model_events(double t, const double *x, const bgc_params *p,
                                    bgc_work *w, double *out)
 {
@@ -321,13 +326,25 @@ static inline double bgc_periodic_next(double t, double period, double c)
     return c + (k + 1.0) * period;
 }
 
-/* How many of x[0..n-1] (non-decreasing) are at or below X (binary search). */
+/* How many of x[0..n-1] (non-decreasing) are at or below X (binary search); below X. */
 static inline int bgc_count_upto(const double *x, int n, double X)
 {
     int lo = 0, hi = n;
     while (lo < hi) {
         const int mid = (lo + hi) / 2;
         if (x[mid] <= X)
+            lo = mid + 1;
+        else
+            hi = mid;
+    }
+    return lo;
+}
+static inline int bgc_count_below(const double *x, int n, double X)
+{
+    int lo = 0, hi = n;
+    while (lo < hi) {
+        const int mid = (lo + hi) / 2;
+        if (x[mid] < X)
             lo = mid + 1;
         else
             hi = mid;
@@ -355,6 +372,26 @@ static inline double bgc_input(const bgc_work *w, int j, double t, int part, dou
     if (part == 1)
         return u->u[k];
     return (u->u[k + 1] - u->u[k]) / (u->t[k + 1] - u->t[k]);
+}
+/* Input j's value at t from its data, as the event log shows it: the limit from the left
+   (side 0) or from the right (1).  At a sample's time the sample itself (at a jump, the row
+   before it from the left, the row after it from the right), between samples the line
+   between them, held outside them; NaN without data. */
+static inline double bgc_input_value(const bgc_work *w, int j, double t, int side)
+{
+    const bgc_input_series *u = w->inputs ? &w->inputs[j] : NULL;
+    int lo, k;
+    if (!u || u->n <= 0 || t != t)
+        return NAN;
+    lo = side ? bgc_count_upto(u->t, u->n, t) : bgc_count_below(u->t, u->n, t);
+    if (side == 0 && lo < u->n && u->t[lo] == t)
+        return u->u[lo];
+    if (side != 0 && lo > 0 && u->t[lo - 1] == t)
+        return u->u[lo - 1];
+    if (lo == 0 || lo == u->n)
+        return u->u[lo == 0 ? 0 : u->n - 1];
+    k = lo - 1;
+    return u->u[k] + (u->u[k + 1] - u->u[k]) / (u->t[k + 1] - u->t[k]) * (t - u->t[k]);
 }
 /* Input j's first sample after t (INFINITY: none). */
 static inline double bgc_input_next(const bgc_work *w, int j, double t)
@@ -407,6 +444,17 @@ static inline double bgc_table_guard(const bgc_table_data *T, double X)
 {
     const double lo = X - T->x[0], hi = T->x[T->n - 1] - X;
     return hi < lo ? hi : lo;
+}
+/* The table's value at t in piece `piece` as the event log shows it: at the right end of a
+   piece that is not constant (linear, cubic), the row there, its limit from the left (at a
+   jump, the row before it; piece s + 1 starts at row s: its a is y[s]). */
+static inline double bgc_table_limit(const bgc_table_data *T, double t, double piece)
+{
+    const int s = (int)piece;
+    if (s >= 0 && s < T->n && T->x[s] == t
+        && (T->coef[4 * s + 1] != 0.0 || T->coef[4 * s + 2] != 0.0 || T->coef[4 * s + 3] != 0.0))
+        return T->coef[4 * (s + 1)];
+    return bgc_table(T, t, piece, 0);
 }
 /* The model's tables: BGC_NUM_TABLES of them in bgc_tables (a model part with tables defines
    both); a model without tables gets the neutral ones. */
@@ -1682,6 +1730,31 @@ static int bgc_log(bgc_run *r, double t, const char *what, const char *change)
     return r->s->on_event ? r->s->on_event(r->s->event_ctx, t, what, change) : 0;
 }
 
+/* The event log's row of discrete value k changing from old to v: a table of t's piece as the
+   table's values, an input's segment (three discrete values, consecutive) as one row of the
+   input's values by its name, from its data; *shown: the input whose row this pass wrote
+   last (-1: none). */
+static int bgc_log_discrete(bgc_run *r, double t, int k, double old, double v, int *shown)
+{
+    const int kind = bgc_discrete_log[2 * k], j = bgc_discrete_log[2 * k + 1];
+    char change[96];
+    if (kind == BGC_LOG_INPUT) {
+        if (j == *shown)
+            return 0;
+        *shown = j;
+        snprintf(change, sizeof change, "%.17g -> %.17g", bgc_input_value(r->w, j, t, 0),
+                 bgc_input_value(r->w, j, t, 1));
+        return bgc_log(r, t, bgc_input_name(j), change);
+    }
+    *shown = -1;
+    if (kind == BGC_LOG_TABLE)
+        snprintf(change, sizeof change, "%.17g -> %.17g", bgc_table_limit(&bgc_tables[j], t, old),
+                 bgc_table(&bgc_tables[j], t, v, 0));
+    else
+        snprintf(change, sizeof change, "%.17g -> %.17g", old, v);
+    return bgc_log(r, t, bgc_discrete_names[k], change);
+}
+
 /* Appends a, b and c to the message (truncated to its size); returns the length it would
    have untruncated. */
 static size_t bgc_cat(const bgc_run *r, size_t used, const char *a, const char *b, const char *c)
@@ -1729,7 +1802,7 @@ static int bgc_event_iteration(bgc_run *r, double t, double *x, int start)
     enum { N = BGC_NUM_STATES, G = BGC_NUM_INDICATORS, ND = BGC_NUM_DISCRETE };
     double *g = r->g, *in = BGC_EV_IN(r), *out = BGC_EV_OUT(r);
     char change[96];
-    int it, i, k, rc, changed = 1;
+    int it, i, k, rc, shown, changed = 1;
     for (it = 0; changed; it++) {
         if (it > BGC_MAX_EVENT_ITERATIONS) { /* the last pass still changed something */
             snprintf(change, sizeof change, "more than %d events at one instant, the event "
@@ -1760,6 +1833,7 @@ static int bgc_event_iteration(bgc_run *r, double t, double *x, int start)
                 x[i] = out[i];
             }
         }
+        shown = -1;
         for (k = 0; k < ND; k++) {
             const double v = out[N + k];
             if (!isfinite(v))
@@ -1767,9 +1841,8 @@ static int bgc_event_iteration(bgc_run *r, double t, double *x, int start)
             if (v != r->d[k]) {
                 changed = 1;
                 r->last[k] = r->passes;
-                if (!start) {
-                    snprintf(change, sizeof change, "%.17g -> %.17g", r->d[k], v);
-                    rc = bgc_log(r, t, bgc_discrete_names[k], change);
+                if (!start && r->s->on_event) {
+                    rc = bgc_log_discrete(r, t, k, r->d[k], v, &shown);
                     if (rc)
                         return rc;
                 }
