@@ -1748,8 +1748,8 @@ static int bgc_log_discrete(bgc_run *r, double t, int k, double old, double v, i
     }
     *shown = -1;
     if (kind == BGC_LOG_TABLE)
-        snprintf(change, sizeof change, "%.17g -> %.17g", bgc_table_limit(&bgc_tables[j], t, old),
-                 bgc_table(&bgc_tables[j], t, v, 0));
+        snprintf(change, sizeof change, "%.17g -> %.17g",
+                 bgc_table_limit(&bgc_tables[j], t, old), bgc_table(&bgc_tables[j], t, v, 0));
     else
         snprintf(change, sizeof change, "%.17g -> %.17g", old, v);
     return bgc_log(r, t, bgc_discrete_names[k], change);
