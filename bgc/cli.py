@@ -482,8 +482,9 @@ def compile(model, scene, outputs, effects, algebra, target, output, project_ini
                    "hybrid.md); a failed run keeps the events before it.")
 @click.option("--input", "input_files", multiple=True, metavar="FILE.csv",
               help="The inputs' data (`input NAME` in the model): CSV with a column t "
-                   "(increasing) and a column per input, interpolated linearly, each t a time "
-                   "event; an input without data keeps its default.  May be repeated.")
+                   "(not decreasing; a repeated t is a jump) and a column per input, "
+                   "interpolated linearly, each t a time event; an input without data keeps "
+                   "its default.  May be repeated.")
 @click.option("-o", "output", default=None, callback=_output_file,
               help="CSV file (default: stdout), written as the run goes and renamed into "
                    "place at its end; a failed run keeps the rows it computed.")

@@ -39,6 +39,33 @@ from .system import der
 SWITCHED = ("diode", "friction", "switch")  # one-ports that are constraint junctions in one of their modes
 MAX_IMPACT_ROWS = 3  # rows that take part in one impact, solved symbolically
 REST = sp.Float(1e-6)  # a rebound below this fraction of the largest impact speed stays put
+EPS = sp.Float(2.0 ** -52)  # a double's epsilon
+LOCATED = sp.Float(1e-12)  # a located state event's resolution in t, relative to t (the step
+#                            drivers' bgc_find_event, runtime.py's _find_event)
+
+
+def _magnitude(e) -> sp.Expr:
+    """The size of what e is computed from: the sum of its terms' sizes (|e| itself where it
+    is one term), so that the floating point resolves e to about eps times this, however
+    much the terms cancel (a mass's velocity against a belt's: both 0.5, f = 0)."""
+    terms = e.args if isinstance(e, sp.Add) else (e,)
+    return sp.Add(*[sp.Abs(a) for a in terms])
+
+
+def _width(flow) -> sp.Expr:
+    """A switched element's switching width on its flow (docs/hybrid.md): 10 atol, and never
+    below what the floating point resolves at the flow's current values (16 eps times its
+    terms' size, ten times over): where atol is finer than that, a flow that is zero to
+    rounding must not read as a reversal, and a width the arithmetic cannot hold would flip
+    the mode to and fro (false chattering)."""
+    return 10 * Max(TOLERANCE, 16 * EPS * _magnitude(flow))
+
+
+def _rate(e, states) -> sp.Expr:
+    """e's time derivative along the model (e written in the states and t)."""
+    return sp.Add(*[partial(e, s) * der(s) for s in sorted(e.free_symbols & states.keys(),
+                                                           key=lambda s: s.name)],
+                  partial(e, TIME))
 
 
 def direction(c) -> sp.Symbol:
@@ -337,7 +364,7 @@ def _dual_diode(c, info, block, states, relations, discretes, whens):
         sp.Piecewise((info.balance, blocking), (sp.Integer(-1), True)), 0),
         f"{J}: forward (e > 0)", c.name_span, None)
     reverse = Relation(sp.Symbol(f"event#{n + 1}"), sp.StrictGreaterThan(
-        sp.Piecewise((-c.multiplier - 10 * TOLERANCE, sp.Not(blocking)),
+        sp.Piecewise((-c.multiplier - _width(c.multiplier), sp.Not(blocking)),
                      (sp.Integer(-1), True)), 0), f"{J}: reverse (f < 0)", c.name_span, None)
     mode = Discrete(f"{J}.blocking", active(c),
                     sp.Piecewise((sp.Integer(0), info.balance > 0), (sp.Integer(1), True)),
@@ -359,10 +386,10 @@ def _diode(c, info, block, states, relations, discretes, whens):
     forward = Relation(sp.Symbol(f"event#{n}"), sp.StrictGreaterThan(
         sp.Piecewise((c.multiplier, blocking), (sp.Integer(-1), True)), 0),
         f"{J}: forward (e > 0)", c.name_span, None)
-    # (reverse below 10 atol: at the start of conduction the flow is zero to rounding)
+    # (reverse below its width: at the start of conduction the flow is zero to rounding)
     reverse = Relation(sp.Symbol(f"event#{n + 1}"), sp.StrictGreaterThan(
-        sp.Piecewise((-info.balance - 10 * TOLERANCE, sp.Not(blocking)), (sp.Integer(-1), True)),
-        0), f"{J}: reverse (f < 0)", c.name_span, None)
+        sp.Piecewise((-info.balance - _width(info.balance), sp.Not(blocking)),
+                     (sp.Integer(-1), True)), 0), f"{J}: reverse (f < 0)", c.name_span, None)
     mode = Discrete(f"{J}.blocking", active(c),
                     sp.Piecewise((sp.Integer(0), info.balance > 0), (sp.Integer(1), True)),
                     "1: blocking, 0: conducting", c.name_span,
@@ -436,25 +463,30 @@ def _suspend(sys, c, stops):
 def _friction(c, info, stop, states, relations, discretes, whens, stops=()):
     """Dry friction `Fr(Fc, Fs)`: its mode `F.stick` (1: sticking, its flow held at zero, its
     effort the multiplier; 0: sliding, effort Fc times its direction `F.dir`, +1 or -1).
-    Sliding, it sticks where its flow reverses continuously (below 10 atol), the storages
-    then taking the state that stops it; where the flow jumps across zero (an impact's
-    rebound) it slides on the other way.  Sticking, it breaks away where the force that holds
-    it exceeds Fs, and slides the way that force pushes.  While a unilateral junction on the
-    same storages (stops) is closed it sticks, suspended (_suspend).  The multiplier's law
-    while sliding is lambda = Fc dir, from the constraint junction's (bgc.reduce)."""
+    Sliding, it sticks where its flow reverses continuously (below its width, _width), the
+    storages then taking the state that stops it; where the flow jumps across zero (an
+    impact's rebound) it slides on the other way.  Sticking, it breaks away where the force
+    that holds it exceeds Fs, and slides the way that force pushes.  While a unilateral
+    junction on the same storages (stops) is closed it sticks, suspended (_suspend).  The
+    multiplier's law while sliding is lambda = Fc dir, from the constraint junction's
+    (bgc.reduce)."""
     J = c.junction
     Fc, Fs = c.gains
     stick = sp.Ne(active(c), 0)
     way = var(f"{J}.dir")
     n = len(relations)
+    width = _width(info.balance)
     slows = Relation(sp.Symbol(f"event#{n}"), sp.StrictGreaterThan(
-        sp.Piecewise((-way * info.balance - 10 * TOLERANCE, sp.Not(stick)),
+        sp.Piecewise((-way * info.balance - width, sp.Not(stick)),
                      (sp.Integer(-1), True)), 0), f"{J}: stops (f reverses)", c.name_span, None)
     breaks = Relation(sp.Symbol(f"event#{n + 1}"), sp.StrictGreaterThan(
         sp.Piecewise((sp.Abs(c.multiplier) - Fs, stick), (sp.Integer(-1), True)), 0),
         f"{J}: breaks away (|e| > Fs)", c.name_span, None)
-    # a located reversal leaves |f| at 10 atol to rounding; a rebound leaves it far above
-    crept = sp.Abs(info.balance) <= 100 * TOLERANCE
+    # a located reversal leaves |f| at the width, plus what the crossing's location in t
+    # leaves of it (its resolution, relative to t, times |f'|): ten times the width and
+    # twice that cover it; a rebound leaves |f| far above
+    crept = sp.Abs(info.balance) <= 10 * width + 2 * LOCATED * sp.Abs(TIME) * sp.Abs(
+        _rate(info.balance, states))
     closed = [sp.Ne(active(s), 0) for s in stops]
     mode = Discrete(f"{J}.stick", active(c),
                     sp.Piecewise((sp.Integer(1), sp.Or(sp.Eq(info.balance, 0), *closed)),

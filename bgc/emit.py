@@ -682,6 +682,11 @@ def _tables_context(program: Program, c: bool) -> list:
     return out
 
 
+def discrete_log(ev) -> list[int]:
+    """ir.Events.log, two ints per discrete value (LOG_PLAIN, 0 for each where it is empty)."""
+    return list(ev.log) if ev.log else [0] * (2 * ev.discrete)
+
+
 def _events_context(program: Program, literal) -> dict | None:
     """The sizes and tables of a program's events (None: it has none, nor their code)."""
     ev = program.events
@@ -689,6 +694,7 @@ def _events_context(program: Program, literal) -> dict | None:
         return None
     return {"indicators": ev.indicators, "timers": ev.timers, "discrete": ev.discrete,
             "strict": [int(x) for x in ev.strict], "names": [literal(n) for n in ev.names],
+            "log": [str(v) for v in discrete_log(ev)],
             "kinds": "".join(k[0] for k in ev.kinds)}
 
 
@@ -855,14 +861,15 @@ LINK_INTS = ("NUM_STATES", "NUM_PARAMS", "NUM_CONSTANTS", "NUM_OUTPUTS", "NUM_CO
              "NUM_POSITION_ROWS", "NUM_VELOCITY_ROWS", "NUM_BLOCKS", "AUTONOMOUS",
              "WORK_DOUBLES", "WORK_INTS", "WORK_Y0", "WORK_STAGES", "WORK_Y", "WORK_JAC",
              "JAC_COLORS", "JAC_SPARSE", "SCENE_SOLVER", "NUM_INDICATORS", "NUM_TIMERS",
-             "NUM_DISCRETE", "DISCRETE_OFFSET", "NUM_INPUTS", "HAS_JACOBIAN")
+             "NUM_DISCRETE", "DISCRETE_OFFSET", "NUM_INPUTS", "HAS_JACOBIAN", "NUM_TABLES")
 LINK_DOUBLES = ("SCENE_T0", "SCENE_T_END", "SCENE_DT", "SCENE_RTOL", "SCENE_ATOL", "SCENE_STEP",
                 "SCENE_HMAX")
 LINK_TABLES = (("bgc_block", "blocks"), ("int", "jac_color_ptr"), ("int", "jac_color_cols"),
                ("int", "jac_col_ptr"), ("int", "jac_col_rows"), ("bgc_splu", "jac_lu"),
                ("int", "position_rows"),
                ("int", "velocity_rows"), ("int", "velocity_movable"),
-               ("int", "indicator_strict"), ("char *const", "discrete_names"))
+               ("int", "indicator_strict"), ("char *const", "discrete_names"),
+               ("int", "discrete_log"), ("bgc_table_data", "tables"))
 LINK_FUNCTIONS = (("rhs", ""), ("outputs", ""), ("jvp", "const double *v, "), ("events", ""),
                   ("next_time", ""), ("update", "const double *r, "))
 _MODEL_ARGS = "double t, const double *x, const bgc_params *p, bgc_work *w, "

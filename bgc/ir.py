@@ -534,6 +534,7 @@ class JacobianPattern:
     lu: IterationPlan | None = None  # a large sparse model: the stiff solvers' sparse LU
 
 
+LOG_PLAIN, LOG_INPUT, LOG_TABLE = 0, 1, 2  # Events.log: what a discrete value's change shows
 FUNCTION_NAMES = ("consts", "init", "rhs", "outputs", "jvp", "residual", "scale",
                   "position_jac", "velocity_jac", "velocity_metric")
 EVENT_FUNCTIONS = ("events", "next_time", "update")  # a program with events has them too
@@ -549,7 +550,12 @@ class Events:
     strict: tuple[bool, ...]  # per state relation (indicator)
     timers: int  # results of next_time: the time relations' times, the square waves' edges
     names: tuple[str, ...]  # per discrete value: what the event log calls it
-    kinds: tuple[str, ...]  # per discrete value: "relation" | "square" | "discrete"
+    kinds: tuple[str, ...]  # per discrete value: "relation" | "square" | "table" | "input" |
+    #                         "discrete"
+    log: tuple[int, ...] = ()  # per discrete value two ints, how the event log writes its
+    #   change (LOG_*): (LOG_PLAIN, 0) its own values; (LOG_TABLE, k) table k's values (a
+    #   table of t: the value is its piece); (LOG_INPUT, j) input j's values, one row by the
+    #   input's name for its three (segment start, value, slope).  () : every one plain
 
     @property
     def indicators(self) -> int:

@@ -359,7 +359,19 @@ def _events_info(sel) -> ir.Events | None:
         return None
     names, kinds = events.log_names(sel)
     return ir.Events(tuple(events.strict(r) for r in sel.state),
-                     len(events.next_times(sel)), names, kinds)
+                     len(events.next_times(sel)), names, kinds, _log(sel, kinds))
+
+
+def _log(sel, kinds) -> tuple[int, ...]:
+    """ir.Events.log: a table of t's and an input's changes shown as their values, from the
+    data (the discrete values of the squares: TimeTable and InputSlot carry their number)."""
+    first = len(kinds) - len(sel.squares) - len(sel.discretes)
+    out = [ir.LOG_PLAIN, 0] * len(kinds)
+    for k, s in enumerate(sel.squares, first):
+        if kinds[k] in ("table", "input"):
+            out[2 * k: 2 * k + 2] = [ir.LOG_TABLE if kinds[k] == "table" else ir.LOG_INPUT,
+                                     s.index]
+    return tuple(out)
 
 
 @dataclass(frozen=True)

@@ -471,15 +471,16 @@ class _ExprBuilder:
                               "for the change of y)")
         self.scope.tables.append(data)
         if time:
-            piece = self.scope.events.time_table(k, f"table {k} ({name}) of t", node.span)
+            piece = self.scope.events.time_table(  # (named as written: the event log, check)
+                k, self._written(node) or f"table({name}, t)", node.span)
         else:
             piece = sp.Integer(-1)
         needs = {piece} if time else x.free_symbols
         if extrapolate == "error" and needs:
             self.scope.events.guard(
                 sp.GreaterThan(TableGuard(sp.Integer(k), x), 0),
-                f"table {k} ({name}) is read outside its rows, x from {xs[0]!r} to "
-                f"{xs[-1]!r} (extrapolate = error)", node.span, needs)
+                f"{self._written(node) or f'table {k} ({name})'} is read outside its rows, x "
+                f"from {xs[0]!r} to {xs[-1]!r} (extrapolate = error)", node.span, needs)
         done.append(Table(sp.Integer(k), x, piece, sp.Integer(0)))
 
     def _check_call(self, node: ast.Call):

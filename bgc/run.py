@@ -129,7 +129,8 @@ def run_args(t_end=None, dt=None, solver=None, rtol=None, atol=None, step=None, 
 
 def input_data(inputs) -> tuple:
     """The API's inputs= ({name: (t, values)}) as RunSettings.input_data, checked (ValueError,
-    TypeError for people): t increasing, as many values, finite numbers."""
+    TypeError for people): t non-decreasing (a repeated t is a jump: input_order), as many
+    values, finite numbers."""
     if not isinstance(inputs, dict):
         raise TypeError("inputs must be a dict of input names to (t, values)")
     out = []
@@ -145,16 +146,34 @@ def input_data(inputs) -> tuple:
             raise ValueError(f"input {name!r}: t and the values must be as many, at least one")
         if not all(math.isfinite(v) for v in t + u):
             raise ValueError(f"input {name!r}: the data must be finite numbers")
-        if any(not b > a for a, b in zip(t, t[1:])):
-            raise ValueError(f"input {name!r}: t must increase")
+        k = input_order(t)
+        if k is not None:
+            raise ValueError(f"input {name!r}: {input_order_problem(t, k, f'at t[{k}]')}")
         out.append((str(name), t, u))
     return tuple(out)
+
+
+def input_order(ts, k: int | None = None) -> int | None:
+    """The first index from k on (else from 1) where an input's times break their order (None:
+    none): t does not decrease, and a repeated t is a jump, two samples, never three (as
+    the runtimes check it: runtime.py's _input_order, main.c's bgc_input_rows)."""
+    for k in range(1, len(ts)) if k is None else (k,) if k >= 1 else ():
+        if ts[k] < ts[k - 1] or (k >= 2 and ts[k] == ts[k - 1] == ts[k - 2]):
+            return k
+    return None
+
+
+def input_order_problem(ts, k: int, at: str) -> str:
+    """What is wrong at index k (input_order), there being `at` ("here": in a file's row)."""
+    if ts[k] < ts[k - 1]:
+        return f"t decreases {at} (t does not decrease from row to row; a repeated t is a jump)"
+    return f"the same t a third time {at} (a jump is two rows of the same t)"
 
 
 def input_file_problem(path: str, names) -> str | None:
     """What is wrong with an --input file for a model whose inputs are `names` (None: it
     is fine): a header with a column t and one per input given, rows of finite numbers, t
-    increasing."""
+    non-decreasing (input_order)."""
     import csv
     try:
         with open(path, encoding="utf-8", newline="") as f:
@@ -172,7 +191,7 @@ def input_file_problem(path: str, names) -> str | None:
                     f"{', '.join(names) or 'none'})")
     if len(set(head)) != len(head):
         return f"{path}: a column is named twice in the header"
-    k, last = head.index("t"), None
+    k, times = head.index("t"), []
     for n, row in enumerate(rows[1:], 2):
         if len(row) != len(head):
             return f"{path}: row {n} has {len(row)} fields, the header {len(head)}"
@@ -183,10 +202,9 @@ def input_file_problem(path: str, names) -> str | None:
                 v = math.nan
             if not math.isfinite(v):
                 return f"{path}: row {n}: '{cell.strip()}' is not a finite number"
-        t = float(row[k])
-        if last is not None and not t > last:
-            return f"{path}: row {n}: t must increase from row to row"
-        last = t
+        times.append(float(row[k]))
+        if input_order(times, len(times) - 1) is not None:
+            return f"{path}: row {n}: {input_order_problem(times, len(times) - 1, 'here')}"
     if len(rows) < 2:
         return f"{path}: no rows of data"
     return None

@@ -40,7 +40,7 @@ from bgc.ir import Assign, Newton, Program, Resolve, Solve, Store
 from bgc.printers import CPrinter
 from bgc.resources import resource_dir
 
-FORMAT = 4  # of the program file; vm.c refuses any other
+FORMAT = 6  # of the program file; vm.c refuses any other
 MAGIC = b"BGCVM\0\0\0"
 
 # The instruction set: name and the kinds of its three operands (r: a register; i: an index,
@@ -74,6 +74,13 @@ OPS = (
     ("SOLVE", "i--"),     # bgc_block_solve(w, i, t); return 1 if it fails
     ("RESOLVE", "i--"),
     ("NEWTON", "iii"),    # bgc_newton(w, block, the segment's residuals, ..., final)
+    ("TABLE", "rrr"),     # r0 = bgc_table(&bgc_tables[k], r1, r2, order): k, order the IARGS'
+    ("TABLEGUARD", "rri"),  # r0 = bgc_table_guard(&bgc_tables[i], r1)
+    ("TABLEPIECE", "rri"),  # r0 = bgc_table_piece(&bgc_tables[i], r1)
+    ("TABLENEXT", "rri"),   # r0 = bgc_table_next(&bgc_tables[i], r1)
+    ("INPUT", "rrr"),     # r0 = bgc_input(w, j, r1, part, r2): j, part the IARGS'
+    ("INPUTNEXT", "rri"),   # r0 = bgc_input_next(w, i, r1)
+    ("IARGS", "-ii"),     # the indices of TABLE and INPUT
 )
 OPCODE = {name: k for k, (name, _) in enumerate(OPS)}
 KINDS = {name: kinds for name, kinds in OPS}
@@ -86,13 +93,18 @@ _CALLS = {"sin": "SIN", "cos": "COS", "tan": "TAN", "asin": "ASIN", "acos": "ACO
           "bgc_min": "MIN", "bgc_max": "MAX", "bgc_heaviside": "HEAVISIDE",
           "bgc_square": "SQUARE", "bgc_square_next": "SQUARENEXT",
           "bgc_periodic_next": "PERIODICNEXT"}
+# the runtime's calls that name a table or an input (their first arguments are indices)
+_INDEXED = {"bgc_table": "TABLE", "bgc_table_guard": "TABLEGUARD",
+            "bgc_table_piece": "TABLEPIECE", "bgc_table_next": "TABLENEXT",
+            "bgc_input": "INPUT", "bgc_input_next": "INPUTNEXT"}
 
 # the model part's entry points, in the file's order (-1: the program has none)
 ENTRIES = ("consts", "init", "rhs", "outputs", "jvp", "events", "next_time", "update",
            "residual", "scale", "position_jac", "velocity_jac", "velocity_metric")
 MODEL_FUNCTIONS = ("rhs", "outputs", "jvp", "events", "next_time", "update")
 INT_TABLES = ("jac_color_ptr", "jac_color_cols", "jac_col_ptr", "jac_col_rows",
-              "position_rows", "velocity_rows", "velocity_movable", "indicator_strict")
+              "position_rows", "velocity_rows", "velocity_movable", "indicator_strict",
+              "discrete_log")
 
 
 class VMError(backends.BackendError):
@@ -106,12 +118,15 @@ class VMError(backends.BackendError):
 
 class _Printer(CPrinter):
     """The C printer, its operands named plainly: x[i], v[i], r[i], p[j], c[k], d[k], t,
-    atol and program variables by name (or as `names` says)."""
+    atol and program variables by name (or as `names` says), table k as tab[k]."""
 
     ATOL = "atol"
 
     def _print_index(self, base, index):
         return f"{base.name}[{index}]"
+
+    def _table_ref(self, k):
+        return f"tab[{k}]"
 
 
 _TOKEN = re.compile(r"\s*(?:(\d+\.\d*(?:e[-+]?\d+)?|\d+e[-+]?\d+|\d+)"
@@ -358,8 +373,57 @@ class _Compiler:
         self.emit(name, dst, r)
         return dst
 
+    def index(self, expect: str) -> int:
+        """A table's number (tab[k]) or an integer literal (an input's number, a part, an
+        order) of a call in _INDEXED."""
+        tok = self.take()
+        if expect == "tab" and tok[0] == "name" and tok[1] == "tab" and tok[2] is not None:
+            return tok[2]
+        if expect == "int" and tok[0] == "num" and tok[1] == int(tok[1]) and tok[1] >= 0:
+            return int(tok[1])
+        raise VMError(f"expected {'a table' if expect == 'tab' else 'an index'} in a printed "
+                      f"call, got {tok!r}")
+
+    def indexed(self, name: str) -> int:
+        """A call of _INDEXED: bgc_table(tab[k], X, piece, order), bgc_table_guard(tab[k], X),
+        ..., bgc_input(w, j, t, part, default), bgc_input_next(w, j, t); its registers'
+        arguments evaluated in their order, as C evaluates them (they have no effects)."""
+        op = _INDEXED[name]
+        if op.startswith("INPUT"):
+            if self.take() != ("name", "w", None):
+                raise VMError(f"expected the workspace as {name}'s first argument")
+            self.expect(",")
+            first = self.index("int")
+        else:
+            first = self.index("tab")
+        self.expect(",")
+        a = self.parse(0)[0]
+        regs, ints = [a], [first]
+        if op == "TABLE":
+            self.expect(",")
+            regs.append(self.parse(0)[0])
+            self.expect(",")
+            ints.append(self.index("int"))
+        elif op == "INPUT":
+            self.expect(",")
+            ints.append(self.index("int"))
+            self.expect(",")
+            regs.append(self.parse(0)[0])
+        self.expect(")")
+        for r in reversed(regs):
+            self.fn.free(r)
+        dst = self.fn.alloc()
+        if op in ("TABLE", "INPUT"):
+            self.emit(op, dst, regs[0], regs[1])
+            self.emit("IARGS", 0, ints[0], ints[1])
+        else:
+            self.emit(op, dst, regs[0], ints[0])
+        return dst
+
     def call(self, name: str) -> int:
         self.expect("(")
+        if name in _INDEXED:
+            return self.indexed(name)
         args = [self.parse(0)[0]]
         while self.peek() == ("op", ","):
             self.take()
@@ -498,9 +562,9 @@ def _strings(texts) -> bytes:
 
 
 def _declined(program: Program) -> bool:
-    """Parts the interpreter does not run yet: tables, inputs, a sparse Jacobian (bgc.sparse's
-    iteration plan); such a model is built in C."""
-    return bool(program.tables or program.inputs or program.jacobian.lu is not None)
+    """Parts the interpreter does not run yet: a sparse Jacobian (bgc.sparse's iteration
+    plan); such a model is built in C."""
+    return program.jacobian.lu is not None
 
 
 def supports(program: Program) -> bool:
@@ -518,8 +582,8 @@ def program_bytes(program: Program) -> bytes:
         raise VMError("the model has more parameters and constants than the interpreter "
                       f"holds ({emit.LINK_PARAMS}); use --backend c")
     if _declined(program):
-        raise VMError("the interpreter does not run models with tables, inputs or a sparse "
-                      "Jacobian yet; use --backend c")
+        raise VMError("the interpreter does not run models with a sparse Jacobian yet; use "
+                      "--backend c")
     emit._validate(program)
     unit = _Unit(program)
     ws = emit._workspace(program, ir.CHUNK_OPS, layouts=False)
@@ -583,7 +647,7 @@ def program_bytes(program: Program) -> bytes:
         "NUM_INDICATORS": ev.indicators if ev else 0, "NUM_TIMERS": ev.timers if ev else 0,
         "NUM_DISCRETE": ev.discrete if ev else 0,
         "DISCRETE_OFFSET": unit.d_base if ev else 0, "NUM_INPUTS": len(program.inputs),
-        "HAS_JACOBIAN": int(program.has_jacobian)}
+        "HAS_JACOBIAN": int(program.has_jacobian), "NUM_TABLES": len(program.tables)}
     doubles = {"SCENE_T0": sc.t0, "SCENE_T_END": sc.t_end, "SCENE_DT": sc.dt,
                "SCENE_RTOL": sc.rtol, "SCENE_ATOL": sc.atol,
                "SCENE_STEP": 0.0 if sc.step is None else sc.step,
@@ -592,7 +656,8 @@ def program_bytes(program: Program) -> bytes:
               "jac_col_rows": col_rows, "position_rows": list(program.position_rows),
               "velocity_rows": list(program.velocity_rows),
               "velocity_movable": [int(v) for v in program.velocity_movable],
-              "indicator_strict": [int(v) for v in ev.strict] if ev else []}
+              "indicator_strict": [int(v) for v in ev.strict] if ev else [],
+              "discrete_log": emit.discrete_log(ev) if ev else []}
     out = [MAGIC, struct.pack("<i", FORMAT)]
     out.append(struct.pack(f"<{len(emit.LINK_INTS)}i", *(ints[m] for m in emit.LINK_INTS)))
     out.append(struct.pack(f"<{len(emit.LINK_DOUBLES)}d",
@@ -613,6 +678,11 @@ def program_bytes(program: Program) -> bytes:
             out.append(_ints(getattr(lu, key)))
         out.append(struct.pack("<11i", area.save, area.lu, area.dense, area.b, area.scale,
                                area.z, area.r, area.zt, area.rt, area.piv, area.how))
+    out.append(struct.pack("<i", len(program.tables)))
+    for tab in program.tables:  # (bgc.tables: rows, then each piece's origin and a, b, c, d)
+        out.append(struct.pack("<2i", tab.rows, int(tab.extrapolate == "error")))
+        for values in (tab.x, tab.origins, tab.coefficients):
+            out.append(struct.pack(f"<{len(values)}d", *values))
     consts = list(unit.constants)
     out.append(struct.pack("<i", len(consts)) + b"".join(consts))
     out.append(struct.pack("<i", len(unit.segments)))
@@ -654,7 +724,8 @@ def c_link_definitions() -> str:
             "static const bgc_splu bgc_vm_no_lu; /* (the interpreter's Jacobians are dense: "
             "supports) */", "const bgc_splu *bgc_link_jac_lu = &bgc_vm_no_lu;"]
     out += [f"const int *bgc_link_{n};" for n in INT_TABLES]
-    out += ["const char *const *bgc_link_discrete_names;", "const char *bgc_link_ident;"]
+    out += ["const char *const *bgc_link_discrete_names;", "const char *bgc_link_ident;",
+            "const bgc_table_data *bgc_link_tables;"]
     out += ["static int *const bgc_vm_link_ints[] = { "
             + ", ".join(f"&bgc_link_{m.lower()}" for m in emit.LINK_INTS) + " };",
             "static double *const bgc_vm_link_doubles[] = { "

@@ -150,6 +150,27 @@ def test_errors_against_a_scipy_reference(tmp_path):
 
 
 @needs_cc
+def test_accuracy_on_a_stick_slip_model(tmp_path):
+    """The references (DOP853 and Dopri5 at rtol 1e-13, atol 1e-15) of a mass that sticks to
+    a belt and breaks away: they run (no false chattering at a stick), agree with each other,
+    and the swept errors fall as the tolerance tightens."""
+    from test_contact import STICK_SLIP
+    (tmp_path / "stick.bg").write_text(STICK_SLIP.replace("SOLVER", "dopri5").replace(
+        ", hmax = 0.05", ""), encoding="utf-8")
+    done = bgc("accuracy", "stick.bg", "-s", "run", "--solvers", "dopri5,dop853", "--rtols",
+               "1e-4,1e-7,1e-10", "--repeats", "1", "--no-plot", "-o", "acc", cwd=tmp_path)
+    assert done.returncode == 0, done.stderr
+    assert "reference: dop853 rtol=1e-13" in done.stdout
+    floor = float(done.stdout.split("references differ by ")[1].split()[0])
+    assert floor < 1e-10
+    rows = read_rows(tmp_path / "acc" / "accuracy.csv")
+    for name in ("dopri5", "dop853"):
+        errors = [float(r["error_max"]) for r in rows if r["solver"] == name]
+        assert all(r["status"] == "ok" for r in rows if r["solver"] == name)
+        assert errors[0] > errors[1] > errors[2] or errors[2] < 10 * floor, (name, errors)
+
+
+@needs_cc
 def test_gain_sweep_reports_the_unstable_gain(tmp_path):
     done = bgc("accuracy", PENDULUM, "-s", "swing", "--t-end", "2", "--gains", "5,300",
                "--solvers", "rk4", "--steps", "0.01", "--repeats", "1", "--no-plot",

@@ -291,6 +291,30 @@ def test_stick_slip_on_a_moving_belt(solver, tmp_path):
     assert np.all(np.abs(y[stuck, 3]) <= 3.0 + 1e-9)  # held within Fs
 
 
+def test_stick_slip_converges_as_the_tolerance_tightens(tmp_path):
+    """Down to rtol 1e-13 and atol 1e-16, where 10 atol is below what the located stick can
+    resolve of the flow (its time to 1e-12 relative: |f'| 1e-12 t): each run sticks and
+    breaks away as the SciPy reference does (no false chattering), its error falling to the
+    reference's own; the first stick at its closed-form time."""
+    compiled = bgc.build(Source("stick.bg", STICK_SLIP.replace("SOLVER", "dop853").replace(
+        ", hmax = 0.05", "")), "run")
+    errors, ref = [], None
+    for rtol, atol in ((1e-5, 1e-8), (1e-8, 1e-11), (1e-11, 1e-14), (1e-13, 1e-16)):
+        csv_text, y, events = run(compiled, BACKENDS[0], tmp_path / "log.csv", rtol=rtol,
+                                  atol=atol)
+        if ref is None:
+            ref, sticks = stick_slip_reference(y[:, 0])
+        got = [float(t) for t, what, c in events if what == "fr.stick" and c == "0 -> 1"]
+        assert len(got) == len(sticks)
+        errors.append(np.max(np.abs(y[:, 1] - ref)) / np.max(np.abs(ref)))
+    assert errors[0] > errors[1] > errors[2] and errors[3] < 1e-10, errors
+    w = math.sqrt(10.0)  # from rest, x = (Fc/K)(1 - cos(w t)) until m.p / M reaches vb
+    assert abs(got[0] - math.asin(0.5 / (0.2 * w)) / w) < 1e-12
+    if len(BACKENDS) > 1:  # the other backend: the same bytes
+        assert run(compiled, BACKENDS[1], tmp_path / "log.csv", rtol=1e-13,
+                   atol=1e-16)[0] == csv_text
+
+
 CAPACITORS = """model caps "two capacitors joined through a resistor by a switch that closes at t = 1"
 parameter C1 = 1.0
 parameter C2 = 2.0

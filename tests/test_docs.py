@@ -25,7 +25,8 @@ an info string, a language followed by words `key` or `key=value` (a value may b
   text, c             other output and listings: not run
 
 A page's blocks run in order in a fresh directory, where `models` is the repository's models/
-directory.  A `bgc` command without shell syntax runs in this process (click's CliRunner);
+directory.  A `bgc` command without shell syntax runs in this process (click's CliRunner),
+with the default backend (auto, as a user's: what it writes is what the page shows);
 any other line runs in bash, with `bgc` and `python` on the PATH.  For speed, C is compiled
 without optimisation: bgc's C backend with -O0 ($BGC_CFLAGS, set in conftest.py), and `-O2`
 in a command line reads `-O0`; the generated code's results do not depend on it (test_emit and the
@@ -231,7 +232,9 @@ def commands(text: str) -> list[str]:
 
 
 def run_bgc(page: Page, args: list[str]) -> tuple[int, str]:
-    result = page.runner.invoke(main, args, catch_exceptions=True)
+    """A bgc command in this process, with the backend a user's has by default (auto, not the
+    suite's $BGC_BACKEND): the messages it writes are the ones a page shows."""
+    result = page.runner.invoke(main, args, catch_exceptions=True, env={"BGC_BACKEND": "auto"})
     if result.exception is not None and not isinstance(result.exception, SystemExit):
         raise result.exception
     page.last = {"stdout": result.stdout, "stderr": result.stderr}

@@ -611,6 +611,44 @@ def test_the_log_names_conditions_as_written(tmp_path, backend):
     assert "when y >= 0.5 and k == 0 { k = 1 }" in report and "when a.x > 0.25 {" in report
 
 
+DATA = """model data "an RC whose resistance and source are data: tables of t and an input"
+input v = 0.5
+signal level = table([[0, 0], [0.5, 1], [0.5, 2], [1.2, 0.5]],   t)  # a jump, a kink
+src : Se(v + level)
+r : R(table(resistance.csv, t, interp = step))
+c : C(0.25)
+j : 1
+src -> j
+j -> r
+j -> c
+scene run { time 0 .. 2 every 0.25; outputs c.e, v, level }
+"""
+RESISTANCE = [(0.0, 2.0), (1.0, 1.0), (1.5, 3.0)]  # a step table
+VOLTAGE = [(0.0, 0.0), (0.25, 1.0), (0.25, 3.0), (0.7, 3.0), (1.4, -1.0)]  # a jump, kinks
+
+
+@pytest.mark.parametrize("backend", BACKENDS + (["vm"] if have_cc() else []))
+def test_the_log_shows_tables_and_inputs_as_their_data(tmp_path, backend):
+    """A table of t is logged by its call as written, an input by its name, each at each time
+    of its data (none at the start) with its value before and after from the data's rows: a
+    step's left row and the next, a jump's two rows, a kink's one value twice.  The rows here
+    are read off the data, and there are no others (no segment starts, no slopes)."""
+    (tmp_path / "resistance.csv").write_text(
+        "t,R\n" + "".join(f"{x!r},{y!r}\n" for x, y in RESISTANCE), encoding="utf-8")
+    (tmp_path / "v.csv").write_text(
+        "t,v\n" + "".join(f"{x!r},{y!r}\n" for x, y in VOLTAGE), encoding="utf-8")
+    compiled = bgc.build(Source(str(tmp_path / "data.bg"), DATA), "run")
+    log = tmp_path / "events.csv"
+    run_csv(compiled, backend, events=str(log), input_files=(str(tmp_path / "v.csv"),))
+    level = "table([[0, 0], [0.5, 1], [0.5, 2], [1.2, 0.5]], t)"
+    step = "table(resistance.csv, t, interp = step)"
+    want = [(0.25, "v", "1 -> 3"), (0.5, level, "1 -> 2"), (0.7, "v", "3 -> 3"),
+            (1.0, step, "2 -> 1"), (1.2, level, "0.5 -> 0.5"), (1.4, "v", "-1 -> -1"),
+            (1.5, step, "1 -> 3")]
+    got = sorted((float(t), what, change) for t, what, change in events_of(log))
+    assert got == want
+
+
 COUNT = """model count "crossings counted, a time event's value, a component's discrete value"
 parameter w = 3.0
 component latch(t1 = 1.0) {

@@ -56,7 +56,8 @@ VOLTAGE = [(0.0, 0.0), (0.37, 1.2), (0.41, 1.2), (1.13, -0.4), (1.9, 0.3)]
 def rc_exact(t, data=VOLTAGE, tau=TAU):
     """The capacitor's voltage: on each piece v = a + b s (s = t - t_k) the solution of
     tau e' = v - e is a + b (s - tau) + (e_k - a + b tau) exp(-s / tau); v held outside."""
-    pieces = [(ta, tb, ua, (ub - ua) / (tb - ta)) for (ta, ua), (tb, ub) in zip(data, data[1:])]
+    pieces = [(ta, tb, ua, (ub - ua) / (tb - ta)) for (ta, ua), (tb, ub) in zip(data, data[1:])
+              if tb > ta]  # (a repeated t, a jump, is no piece)
     pieces.insert(0, (-math.inf, data[0][0], data[0][1], 0.0))
     pieces.append((data[-1][0], math.inf, data[-1][1], 0.0))
     out, e, start = [], 0.0, 0.0
@@ -128,7 +129,10 @@ def test_an_rc_circuit_driven_through_input_matches_its_closed_form(tmp_path):
 @pytest.mark.parametrize("content, message", [
     ("t,w\n0,1\n", "'w' is not an input of the model (its inputs: v)"),
     ("time,v\n0,1\n", "the header has no column 't'"),
-    ("t,v\n0,1\n0.5,2\n0.5,3\n", "row 4: t must increase from row to row"),
+    ("t,v\n0,1\n0.5,2\n0.4,3\n", "row 4: t decreases here (t does not decrease from row to row; "
+                                  "a repeated t is a jump)"),
+    ("t,v\n0,1\n0.5,2\n0.5,3\n0.5,4\n", "row 5: the same t a third time here (a jump is two "
+                                         "rows of the same t)"),
     ("t,v\n0,1\n1,nan\n", "row 3: 'nan' is not a finite number"),
 ])
 def test_a_bad_input_file_is_one_line_and_exit_1(tmp_path, content, message):
@@ -137,6 +141,70 @@ def test_a_bad_input_file_is_one_line_and_exit_1(tmp_path, content, message):
     done = run_bgc("simulate", "rc.bg", "--scene", "run", "--input", "bad.csv", cwd=tmp_path)
     assert done.returncode == 1
     assert done.stderr.strip().splitlines() == [f"bgc: error: bad.csv: {message}"], done.stderr
+
+
+STEPS = [(0.0, 0.0), (0.6, 0.0), (0.6, 1.0), (1.3, 1.0), (1.3, 0.25), (1.7, 0.25)]  # two jumps
+
+
+def test_a_repeated_t_is_a_jump_of_the_input(tmp_path):
+    """An RC driven by a stepped input (a repeated t: the row before it on the left, the row
+    after it on the right): the capacitor's voltage is the closed form's, each piece an
+    exponential, the input's column the steps; the same bytes from C, the Python module and
+    the interpreter, and from the data given as numbers."""
+    (tmp_path / "rc.bg").write_text(RC, encoding="utf-8")
+    write_voltage(tmp_path / "v.csv", STEPS)
+    texts = {}
+    for backend in BACKENDS + (["vm"] if "c" in BACKENDS else []):
+        out = tmp_path / f"{backend}.csv"
+        done = run_bgc("simulate", "rc.bg", "--scene", "run", "--input", "v.csv", "--backend",
+                       backend, "-o", out, "--stats", cwd=tmp_path)
+        assert done.returncode == 0, done.stderr
+        assert "events=3" in done.stderr  # at 0.6, 1.3 and 1.7
+        texts[backend] = out.read_bytes()
+    assert len(set(texts.values())) == 1
+    _, y = read_csv(tmp_path / f"{BACKENDS[0]}.csv")
+    t = y[:, 0]
+    ref = rc_exact(t, STEPS)
+    assert np.max(np.abs(y[:, 1] - ref)) < 1e-9
+    assert np.array_equal(y[:, 2], np.where(t < 0.6, 0.0, np.where(t < 1.3, 1.0, 0.25)))
+    data = {"v": ([t for t, _ in STEPS], [u for _, u in STEPS])}
+    for backend in BACKENDS:
+        _, Y, _ = bgc.simulate(Source(str(tmp_path / "rc.bg"), RC), "run", backend=backend,
+                               inputs=data)
+        assert np.array_equal(Y, y[:, 1:])
+    three = {"v": ([0.0, 1.0, 1.0, 1.0], [0.0, 1.0, 2.0, 3.0])}
+    with pytest.raises(ValueError, match="the same t a third time at t.3."):
+        bgc.simulate(Source(str(tmp_path / "rc.bg"), RC), "run", inputs=three)
+    from bgc import runner  # the generated module's own simulate(inputs=...)
+    module = runner.prepare(bgc.build(Source(str(tmp_path / "rc.bg"), RC), "run"), "python",
+                            in_process=True).module
+    assert np.array_equal(module.simulate(inputs=data)[1], y[:, 1:])
+    with pytest.raises(ValueError, match="the same t a third time at t.3."):
+        module.simulate(inputs=three)
+
+
+def test_the_programs_own_input_refuses_the_same_rows(tmp_path):
+    """The generated programs read --input themselves: a repeated t is a jump there too, a t
+    that decreases or comes a third time the same line from each (exit 2)."""
+    import subprocess
+    from bgc import runner
+    compiled = bgc.build(Source(str(tmp_path / "rc.bg"), RC), "run")
+    (tmp_path / "jump.csv").write_text("t,v\n0,0\n1,0\n1,2\n", encoding="utf-8")
+    (tmp_path / "bad.csv").write_text("t,v\n0,1\n1,2\n1,3\n1,4\n", encoding="utf-8")
+    said = set()
+    for backend in BACKENDS + (["vm"] if "c" in BACKENDS else []):
+        argv = runner.prepare(compiled, backend).argv()
+        ok = subprocess.run(argv + ["--input", "jump.csv", "--t-end", "2"], cwd=tmp_path,
+                            capture_output=True, text=True)
+        assert ok.returncode == 0, ok.stderr
+        last = [float(v) for v in ok.stdout.splitlines()[-1].split(",")]
+        assert last[0] == 2.0 and last[2] == 2.0  # v after the jump
+        bad = subprocess.run(argv + ["--input", "bad.csv"], cwd=tmp_path, capture_output=True,
+                             text=True)
+        assert bad.returncode == 2 and bad.stdout == ""
+        said.add(bad.stderr)
+    assert said == {"error: bad.csv:5: the same t a third time here (a jump is two rows of the "
+                    "same t)\n"}
 
 
 def test_inputs_inside_components_take_their_paths(tmp_path):

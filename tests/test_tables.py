@@ -234,7 +234,9 @@ def test_extrapolate_error_stops_the_run_when_x_leaves_the_range():
         result = runner.run(program, runner.settings_for(compiled.program.scene, []))
         assert result.status != 0
         assert "at t = 2.500000000" in result.stderr, result.stderr  # t + 1 leaves [0, 3.5]
-        assert "table 0 (rows) is read outside its rows, x from 0.0 to 3.5" in result.stderr
+        assert ("'table([[0.0, 1.0], [0.5, 2.0], [1.25, 1.5], [2.0, 4.0], [2.0, 3.0], [3.5, 3.5]], "
+                "t + 1, interp = linear, extrapolate = error) is read outside its rows, x from "
+                "0.0 to 3.5") in result.stderr, result.stderr  # (named as written)
         assert result.csv.splitlines()[-1].startswith("2.5,")  # the rows up to it kept
 
 

@@ -1,7 +1,8 @@
 """The interpreter backend (bgc/vm.py, bgc/runtime/vm.c): the same CSV bytes as the C program
-and the Python module, on models with constraint rows, a linear block, a Newton block and
-events, with explicit and stiff solvers (the spans short: a few steps go through every code
-path); the choice `bgc simulate` makes by itself, and a program file the interpreter refuses."""
+and the Python module, on models with constraint rows, a linear block, a Newton block,
+events, tables and inputs, with explicit and stiff solvers (the spans short: a few steps go
+through every code path); the choice `bgc simulate` makes by itself, and a program file the
+interpreter refuses."""
 from pathlib import Path
 
 import pytest
@@ -66,6 +67,45 @@ def test_same_bytes_as_c_and_python(name):
             text = ",".join(["t"] + module.OUTPUTS) + "\n" + "".join(
                 module._row_text(t, y) for t, y in rows)
             assert text == want.csv, (name, method, "python")
+
+
+TABLES = """model tabs "every kind of table: of t and of a state, each interp and extrapolate"
+input u = 0.25
+signal a = table([[0, 1], [0.3, 2], [0.3, 0.5], [0.8, 1.5]], t)
+signal b = table([[0, 1], [0.25, 2], [0.6, -1]], t, interp = step, extrapolate = linear)
+signal c = table([[-1, 0], [0, 0.1], [0.5, 1.4], [1, 1.5], [2, 0.2]], x, interp = cubic,
+                 extrapolate = linear)
+signal d = table([[0, 0], [0.4, 1], [3, 2]], x + 1, extrapolate = error)
+signal e = table(ramp.csv, t, interp = cubic)
+signal f = table([[0, 2], [1, 0.5]], 3*x, interp = step)
+signal x = integral(a + b - 2*c + d - e + f*u, init = 0.2)
+scene run { time 0 .. 1 every 0.05; outputs x, a, b, c, d, e, u }
+"""
+
+
+def test_tables_and_inputs_as_the_c_program_and_python(tmp_path):
+    """Tables of t (time events) and of a state (searched at each call, differentiated for the
+    stiff solver's Jacobian), linear, step and cubic, held, extended and guarded, a table file
+    and an input's data with a jump: the interpreter writes the C program's and the Python
+    module's bytes, its event log too; a run that reads a table outside its rows (extrapolate
+    = error) stops there as they do."""
+    (tmp_path / "ramp.csv").write_text("x,y\n-1,0\n0.2,0.3\n0.5,0.1\n0.9,0.7\n")
+    (tmp_path / "u.csv").write_text("t,u\n0,0\n0.35,1\n0.35,-0.5\n0.7,0.5\n")
+    for text, fails in ((TABLES, False), (TABLES.replace("[3, 2]]", "[1.25, 2]]"), True)):
+        compiled = build(Source(str(tmp_path / "tabs.bg"), text), "run")
+        programs = {b: runner.prepare(compiled, b) for b in ("c", "vm", "python")}
+        for method in ("dopri5", "radau5"):
+            got = {}
+            for backend, program in programs.items():
+                log = tmp_path / f"{backend}.events.csv"
+                settings = compiled.program.scene.with_options(
+                    solver=method, events=str(log), input_files=(str(tmp_path / "u.csv"),))
+                result = runner.run(program, settings)
+                got[backend] = (result.status, result.csv, result.stderr, log.read_bytes())
+            assert got["vm"] == got["c"] == got["python"], method
+            assert (got["c"][0] != 0) == fails and got["c"][1].count("\n") > 1
+            if fails:
+                assert "is read outside its rows" in got["c"][2]
 
 
 def test_parameters_and_a_failed_block_as_the_c_program():

@@ -31,8 +31,10 @@ double *bgc_param_ref(bgc_params *p, int j);
 int bgc_param_index(const char *name);
 
 /* An input's data (`input NAME`, docs/cli.md "--input"): n samples (t[k], u[k]), t
-   increasing, interpolated linearly and held beyond the first and the last; each t[k] is a
-   time event.  n == 0: no data, the input keeps its default. */
+   non-decreasing, interpolated linearly and held beyond the first and the last; each t[k] is
+   a time event.  A repeated t is a jump, as a table's repeated x: the sample before it is the
+   value on the left, the one after it on the right (bgc_input reads the segment after the
+   last sample at or before t).  n == 0: no data, the input keeps its default. */
 typedef struct bgc_input_series {
     int n;
     const double *t, *u;
@@ -172,11 +174,15 @@ void bgc_request_stop(int sig);
    g > 0, or g >= 0 where bgc_indicator_strict is 0), BGC_NUM_TIMERS (the results of
    bgc_model_next_time: time events, of which the runtime steps onto the first after t) and
    BGC_NUM_DISCRETE (the discrete values d: the relations' frozen values, the state relations'
-   first, then square waves and discrete variables, named by bgc_discrete_names), and
+   first, then square waves and discrete variables, named by bgc_discrete_names, their
+   changes shown in the event log as bgc_discrete_log says: two ints each, BGC_LOG_PLAIN
+   (the values themselves), BGC_LOG_TABLE k (a table of t's piece: the table's values),
+   BGC_LOG_INPUT j (a value of input j's segment: the input's values, one row)), and
    BGC_DISCRETE_OFFSET, where d is in its parameter struct (in doubles).  bgc_model_update
    gives the state and d after one pass of an event iteration from r (the state relations'
    values at the event, then 1 at the start of a run, else 0).  A model without events gets
    the neutral ones below. */
+enum { BGC_LOG_PLAIN, BGC_LOG_INPUT, BGC_LOG_TABLE }; /* bgc_discrete_log (bgc/ir.py LOG_*) */
 #ifndef BGC_NUM_DISCRETE
 #define BGC_NUM_INDICATORS 0
 #define BGC_NUM_TIMERS 0
@@ -184,6 +190,7 @@ void bgc_request_stop(int sig);
 #define BGC_DISCRETE_OFFSET 0
 static const int bgc_indicator_strict[1] = { 0 };
 static const char *const bgc_discrete_names[1] = { "" };
+static const int bgc_discrete_log[2] = { 0, 0 };
 static inline int bgc_model_events(double t, const double *x, const bgc_params *p,
                                    bgc_work *w, double *out)
 {
@@ -316,13 +323,25 @@ static inline double bgc_periodic_next(double t, double period, double c)
     return c + (k + 1.0) * period;
 }
 
-/* How many of x[0..n-1] (non-decreasing) are at or below X (binary search). */
+/* How many of x[0..n-1] (non-decreasing) are at or below X (binary search); below X. */
 static inline int bgc_count_upto(const double *x, int n, double X)
 {
     int lo = 0, hi = n;
     while (lo < hi) {
         const int mid = (lo + hi) / 2;
         if (x[mid] <= X)
+            lo = mid + 1;
+        else
+            hi = mid;
+    }
+    return lo;
+}
+static inline int bgc_count_below(const double *x, int n, double X)
+{
+    int lo = 0, hi = n;
+    while (lo < hi) {
+        const int mid = (lo + hi) / 2;
+        if (x[mid] < X)
             lo = mid + 1;
         else
             hi = mid;
@@ -350,6 +369,26 @@ static inline double bgc_input(const bgc_work *w, int j, double t, int part, dou
     if (part == 1)
         return u->u[k];
     return (u->u[k + 1] - u->u[k]) / (u->t[k + 1] - u->t[k]);
+}
+/* Input j's value at t from its data, as the event log shows it: the limit from the left
+   (side 0) or from the right (1).  At a sample's time the sample itself (at a jump, the row
+   before it from the left, the row after it from the right), between samples the line
+   between them, held outside them; NaN without data. */
+static inline double bgc_input_value(const bgc_work *w, int j, double t, int side)
+{
+    const bgc_input_series *u = w->inputs ? &w->inputs[j] : NULL;
+    int lo, k;
+    if (!u || u->n <= 0 || t != t)
+        return NAN;
+    lo = side ? bgc_count_upto(u->t, u->n, t) : bgc_count_below(u->t, u->n, t);
+    if (side == 0 && lo < u->n && u->t[lo] == t)
+        return u->u[lo];
+    if (side != 0 && lo > 0 && u->t[lo - 1] == t)
+        return u->u[lo - 1];
+    if (lo == 0 || lo == u->n)
+        return u->u[lo == 0 ? 0 : u->n - 1];
+    k = lo - 1;
+    return u->u[k] + (u->u[k + 1] - u->u[k]) / (u->t[k + 1] - u->t[k]) * (t - u->t[k]);
 }
 /* Input j's first sample after t (INFINITY: none). */
 static inline double bgc_input_next(const bgc_work *w, int j, double t)
@@ -403,6 +442,23 @@ static inline double bgc_table_guard(const bgc_table_data *T, double X)
     const double lo = X - T->x[0], hi = T->x[T->n - 1] - X;
     return hi < lo ? hi : lo;
 }
+/* The table's value at t in piece `piece` as the event log shows it: at the right end of a
+   piece that is not constant (linear, cubic), the row there, its limit from the left (at a
+   jump, the row before it; piece s + 1 starts at row s: its a is y[s]). */
+static inline double bgc_table_limit(const bgc_table_data *T, double t, double piece)
+{
+    const int s = (int)piece;
+    if (s >= 0 && s < T->n && T->x[s] == t
+        && (T->coef[4 * s + 1] != 0.0 || T->coef[4 * s + 2] != 0.0 || T->coef[4 * s + 3] != 0.0))
+        return T->coef[4 * (s + 1)];
+    return bgc_table(T, t, piece, 0);
+}
+/* The model's tables: BGC_NUM_TABLES of them in bgc_tables (a model part with tables defines
+   both); a model without tables gets the neutral ones. */
+#ifndef BGC_NUM_TABLES
+#define BGC_NUM_TABLES 0
+static const bgc_table_data bgc_tables[1] = { { 0, 0, NULL, NULL, NULL } };
+#endif
 /* The piece that holds t, and the table's first row after t (a time table's events). */
 static inline double bgc_table_piece(const bgc_table_data *T, double t)
 {

@@ -467,6 +467,31 @@ static int bgc_log(bgc_run *r, double t, const char *what, const char *change)
     return r->s->on_event ? r->s->on_event(r->s->event_ctx, t, what, change) : 0;
 }
 
+/* The event log's row of discrete value k changing from old to v: a table of t's piece as the
+   table's values, an input's segment (three discrete values, consecutive) as one row of the
+   input's values by its name, from its data; *shown: the input whose row this pass wrote
+   last (-1: none). */
+static int bgc_log_discrete(bgc_run *r, double t, int k, double old, double v, int *shown)
+{
+    const int kind = bgc_discrete_log[2 * k], j = bgc_discrete_log[2 * k + 1];
+    char change[96];
+    if (kind == BGC_LOG_INPUT) {
+        if (j == *shown)
+            return 0;
+        *shown = j;
+        snprintf(change, sizeof change, "%.17g -> %.17g", bgc_input_value(r->w, j, t, 0),
+                 bgc_input_value(r->w, j, t, 1));
+        return bgc_log(r, t, bgc_input_name(j), change);
+    }
+    *shown = -1;
+    if (kind == BGC_LOG_TABLE)
+        snprintf(change, sizeof change, "%.17g -> %.17g",
+                 bgc_table_limit(&bgc_tables[j], t, old), bgc_table(&bgc_tables[j], t, v, 0));
+    else
+        snprintf(change, sizeof change, "%.17g -> %.17g", old, v);
+    return bgc_log(r, t, bgc_discrete_names[k], change);
+}
+
 /* Appends a, b and c to the message (truncated to its size); returns the length it would
    have untruncated. */
 static size_t bgc_cat(const bgc_run *r, size_t used, const char *a, const char *b, const char *c)
@@ -514,7 +539,7 @@ static int bgc_event_iteration(bgc_run *r, double t, double *x, int start)
     enum { N = BGC_NUM_STATES, G = BGC_NUM_INDICATORS, ND = BGC_NUM_DISCRETE };
     double *g = r->g, *in = BGC_EV_IN(r), *out = BGC_EV_OUT(r);
     char change[96];
-    int it, i, k, rc, changed = 1;
+    int it, i, k, rc, shown, changed = 1;
     for (it = 0; changed; it++) {
         if (it > BGC_MAX_EVENT_ITERATIONS) { /* the last pass still changed something */
             snprintf(change, sizeof change, "more than %d events at one instant, the event "
@@ -545,6 +570,7 @@ static int bgc_event_iteration(bgc_run *r, double t, double *x, int start)
                 x[i] = out[i];
             }
         }
+        shown = -1;
         for (k = 0; k < ND; k++) {
             const double v = out[N + k];
             if (!isfinite(v))
@@ -552,9 +578,8 @@ static int bgc_event_iteration(bgc_run *r, double t, double *x, int start)
             if (v != r->d[k]) {
                 changed = 1;
                 r->last[k] = r->passes;
-                if (!start) {
-                    snprintf(change, sizeof change, "%.17g -> %.17g", r->d[k], v);
-                    rc = bgc_log(r, t, bgc_discrete_names[k], change);
+                if (!start && r->s->on_event) {
+                    rc = bgc_log_discrete(r, t, k, r->d[k], v, &shown);
                     if (rc)
                         return rc;
                 }
@@ -591,8 +616,11 @@ static int bgc_find_event(bgc_run *r, bgc_dense *c, double *te, double *ye)
     }
     memcpy(ga, r->g, sizeof(double) * G);
     for (it = 0; it < 200; it++) {
-        const double scale = bgc_max(bgc_max(fabs(ta), fabs(tb)), h);
-        const double tol = bgc_max(1e-12 * scale, bgc_max(4.0 * DBL_EPSILON * scale, DBL_MIN));
+        /* 1e-12 relative in t, the floating point's resolution relative to the step too (an
+           event near t = 0): a switched element's flow is resolved to its rate times that
+           (bgc/contact.py, LOCATED) */
+        const double at = bgc_max(fabs(ta), fabs(tb)), scale = bgc_max(at, h);
+        const double tol = bgc_max(1e-12 * at, bgc_max(4.0 * DBL_EPSILON * scale, DBL_MIN));
         double frac = 1.0, tm;
         int k, side;
         if (tb - ta <= tol)

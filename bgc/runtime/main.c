@@ -413,8 +413,9 @@ static int bgc_log_event(void *ctx, double t, const char *what, const char *chan
 
 
 
-/* The inputs' data (--input FILE): a CSV file with a header row, a column t (increasing) and
-   a column per input given (named as bgc_input_name gives), a number in every field. */
+/* The inputs' data (--input FILE): a CSV file with a header row, a column t (non-decreasing:
+   a repeated t is a jump, never three in a row) and a column per input given (named as
+   bgc_input_name gives), a number in every field. */
 static struct {
     const char *path;
     bgc_input_series *series; /* one per input */
@@ -552,8 +553,15 @@ static int bgc_input_rows(const char *path, char *body, const char *end, int col
                     path, line_no, cols);
             return -1;
         }
-        if (rows > 0 && !(v[(size_t)rows * cols + tcol] > v[(size_t)(rows - 1) * cols + tcol])) {
-            fprintf(stderr, "error: %s:%ld: t must increase from row to row\n", path, line_no);
+        if (rows > 0 && v[(size_t)rows * cols + tcol] < v[(size_t)(rows - 1) * cols + tcol]) {
+            fprintf(stderr, "error: %s:%ld: t decreases here (t does not decrease from row to "
+                    "row; a repeated t is a jump)\n", path, line_no);
+            return -1;
+        }
+        if (rows > 1 && v[(size_t)rows * cols + tcol] == v[(size_t)(rows - 1) * cols + tcol]
+            && v[(size_t)rows * cols + tcol] == v[(size_t)(rows - 2) * cols + tcol]) {
+            fprintf(stderr, "error: %s:%ld: the same t a third time here (a jump is two rows of "
+                    "the same t)\n", path, line_no);
             return -1;
         }
         rows++;

@@ -54,6 +54,9 @@
 #   _NUM_TIMERS           int: the results of _next_time
 #   _DISCRETE_NAMES       list of str per discrete value d (the event log's names); d follows
 #                         the constants in p
+#   _DISCRETE_LOG         list of int, two per discrete value: how the event log shows its
+#                         change (_LOG_PLAIN, 0; _LOG_TABLE k: table k's values; _LOG_INPUT j:
+#                         input j's values, one row for its segment's three)
 #   _events(t, x, p, w, out), _next_time(t, x, p, w, out), _update(t, x, p, w, r, out)
 #                         the indicators; the time events' next times; the state and d after
 #                         one pass of the event iteration (r: the state relations' values, then
@@ -139,8 +142,10 @@ _SOLVER_LIST = ""
 _INDICATOR_STRICT = []
 _NUM_TIMERS = 0
 _DISCRETE_NAMES = []
+_DISCRETE_LOG = []
 _TABLES = ()
 _INPUT_NAMES = []
+_LOG_PLAIN, _LOG_INPUT, _LOG_TABLE = 0, 1, 2  # _DISCRETE_LOG (bgc/ir.py LOG_*, api.h)
 
 
 def _fill_params(p, given):
@@ -351,6 +356,25 @@ def _input(w, j, t, part, default):
     return (us[k + 1] - us[k]) / (ts[k + 1] - ts[k])
 
 
+def _input_value(w, j, t, side):
+    """bgc_input_value: input j's value at t from its data, the limit from the left (side 0)
+    or the right (1), a sample's own value at its time (the event log's values)."""
+    series = w.inputs[j] if w.inputs is not None else None
+    if series is None or t != t:
+        return math.nan
+    ts, us = series
+    n = len(ts)
+    lo = bisect.bisect_right(ts, t) if side else bisect.bisect_left(ts, t)
+    if side == 0 and lo < n and ts[lo] == t:
+        return us[lo]
+    if side != 0 and lo > 0 and ts[lo - 1] == t:
+        return us[lo - 1]
+    if lo == 0 or lo == n:
+        return us[0 if lo == 0 else n - 1]
+    k = lo - 1
+    return us[k] + (us[k + 1] - us[k]) / (ts[k + 1] - ts[k]) * (t - ts[k])
+
+
 def _input_next(w, j, t):
     """bgc_input_next: input j's first sample after t (inf: none)."""
     series = w.inputs[j] if w.inputs is not None else None
@@ -389,10 +413,28 @@ def _input_series(inputs=None, path=None):
             raise ValueError("%s: t and the values must be as many, at least one" % where)
         if not all(math.isfinite(v) for v in ts + us):
             raise ValueError("%s: the data must be finite numbers" % where)
-        if any(not ts[k] > ts[k - 1] for k in range(1, len(ts))):
-            raise ValueError("%s: t must increase from row to row" % where)
+        k = _input_order(ts)
+        if k is not None:
+            raise ValueError("%s: %s" % (where, _input_order_problem(ts, k, "at t[%d]" % k)))
         out[_INPUT_NAMES.index(name)] = (tuple(ts), tuple(us))
     return out if any(s is not None for s in out) else None
+
+
+def _input_order(ts, k=None):
+    """The first index from k on (else from 1) where an input's times break their order (None:
+    none): t does not decrease, and a repeated t, a jump, is two samples, never three."""
+    for k in range(1, len(ts)) if k is None else (k,) if k >= 1 else ():
+        if ts[k] < ts[k - 1] or (k >= 2 and ts[k] == ts[k - 1] == ts[k - 2]):
+            return k
+    return None
+
+
+def _input_order_problem(ts, k, at):
+    """What is wrong at index k (_input_order), there being `at` ("here": as main.c says it)."""
+    if ts[k] < ts[k - 1]:
+        return "t decreases %s (t does not decrease from row to row; a repeated t is a " \
+               "jump)" % at
+    return "the same t a third time %s (a jump is two rows of the same t)" % at
 
 
 def _read_input_file(path):
@@ -429,8 +471,9 @@ def _read_input_file(path):
                 raise ValueError("%s:%d: '%s' is not a finite number" % (path, number, cell))
             columns[k].append(v)
         t = columns[head.index("t")]
-        if len(t) > 1 and not t[-1] > t[-2]:
-            raise ValueError("%s:%d: t must increase from row to row" % (path, number))
+        if _input_order(t, len(t) - 1) is not None:
+            raise ValueError("%s:%d: %s" % (path, number,
+                                            _input_order_problem(t, len(t) - 1, "here")))
     if not columns[0]:
         raise ValueError("%s: no rows of data" % path)
     t = columns[head.index("t")]
@@ -464,6 +507,16 @@ def _table_guard(T, X):
     """bgc_table_guard: how far X is within the table's rows (negative outside)."""
     lo, hi = X - T[2][0], T[2][T[0] - 1] - X
     return hi if hi < lo else lo
+
+
+def _table_limit(T, t, piece):
+    """bgc_table_limit: the table's value at t in piece `piece`, the row there at the right
+    end of a piece that is not constant (the event log's value before a breakpoint)."""
+    s, c = int(piece), T[4]
+    if 0 <= s < T[0] and T[2][s] == t and (c[4 * s + 1] != 0.0 or c[4 * s + 2] != 0.0
+                                            or c[4 * s + 3] != 0.0):
+        return c[4 * (s + 1)]
+    return _table(T, t, piece, 0)
 
 
 def _table_piece(T, t):
@@ -1690,6 +1743,24 @@ def _log(run, t, what, change):
         run.s.on_event(t, what, change)
 
 
+def _log_discrete(run, t, k, old, new, shown):
+    """bgc_log_discrete: the event log's row of discrete value k changing from old to new;
+    the input whose row this pass wrote last (its three values are consecutive: one row)."""
+    kind, j = _DISCRETE_LOG[2 * k], _DISCRETE_LOG[2 * k + 1]
+    if kind == _LOG_INPUT:
+        if j != shown:
+            _log(run, t, _INPUT_NAMES[j], "%.17g -> %.17g" % (_input_value(run.w, j, t, 0),
+                                                             _input_value(run.w, j, t, 1)))
+        return j
+    if kind == _LOG_TABLE:
+        T = _TABLES[j]
+        _log(run, t, _DISCRETE_NAMES[k], "%.17g -> %.17g" % (_table_limit(T, t, old),
+                                                            _table(T, t, new, 0)))
+    else:
+        _log(run, t, _DISCRETE_NAMES[k], "%.17g -> %.17g" % (old, new))
+    return -1
+
+
 def _chattering(run, t, head, since, tail):
     """bgc_chattering: the run's failure, naming every discrete value a pass since the pass
     `since` changed (conditions first, at most NAMED_CHANGES of them, then how many more)."""
@@ -1730,6 +1801,7 @@ def _event_iteration(run, t, x, start):
                 if not start and run.s.on_event is not None:
                     _log(run, t, STATES[i], "%.17g -> %.17g" % (x[i], out[i]))
                 x[i] = out[i]
+        shown = -1
         for k in range(len(_DISCRETE_NAMES)):
             v = out[_N + k]
             if not math.isfinite(v):
@@ -1738,7 +1810,7 @@ def _event_iteration(run, t, x, start):
                 changed = True
                 run.last[k] = run.passes
                 if not start and run.s.on_event is not None:
-                    _log(run, t, _DISCRETE_NAMES[k], "%.17g -> %.17g" % (p[off + k], v))
+                    shown = _log_discrete(run, t, k, p[off + k], v, shown)
                 p[off + k] = v
         it += 1
         run.passes += 1
@@ -1761,8 +1833,9 @@ def _find_event(run, c):
     h = c.tph - c.t  # the time's resolution is relative to the step too (an event near t = 0)
     probed = False
     for it in range(200):
-        scale = max(max(abs(ta), abs(tb)), h)
-        tol = max(1e-12 * scale, max(4.0 * _EPS * scale, sys.float_info.min))
+        at = max(abs(ta), abs(tb))  # (1e-12 relative in t, the resolution relative to h too)
+        scale = max(at, h)
+        tol = max(1e-12 * at, max(4.0 * _EPS * scale, sys.float_info.min))
         if tb - ta <= tol:
             break
         frac = 1.0

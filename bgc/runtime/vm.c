@@ -5,9 +5,10 @@
    compiled runtime's, and call the model part's functions below as they call a compiled one.
 
    A program file holds the model part's sizes, scene, names and tables, the blocks' plans,
-   constants, and segments of instructions (four ints each: opcode and three operands) over
-   registers.  Each instruction is one operation of the generated C's text, in its order, with
-   the same C operation or libm call, so the results are the same bits.  The registers of the
+   the lookup tables' rows and pieces, constants, and segments of instructions (four ints
+   each: opcode and three operands) over registers.  Each instruction is one operation of the
+   generated C's text, in its order, with the same C operation or libm call, so the results
+   are the same bits.  The registers of the
    model functions are in the workspace (w->v, above the program's own storage): nothing is
    allocated per call.  The program file is checked whole when it is read (every register
    inside its segment's frame, every index inside its array), so that no instruction reads or
@@ -126,6 +127,19 @@ static int bgc_vm_run(const bgc_vm_seg *s, double *f, double t, const double *x,
         ip += 4;
         BGC_VM_NEXT;
     BGC_VM_CASE(ARGS) BGC_VM_NEXT; /* (read by the instruction before) */
+    BGC_VM_CASE(TABLE)
+        f[ip[1]] = bgc_table(&bgc_tables[ip[6]], f[ip[2]], f[ip[3]], ip[7]);
+        ip += 4;
+        BGC_VM_NEXT;
+    BGC_VM_CASE(TABLEGUARD) f[ip[1]] = bgc_table_guard(&bgc_tables[ip[3]], f[ip[2]]); BGC_VM_NEXT;
+    BGC_VM_CASE(TABLEPIECE) f[ip[1]] = bgc_table_piece(&bgc_tables[ip[3]], f[ip[2]]); BGC_VM_NEXT;
+    BGC_VM_CASE(TABLENEXT) f[ip[1]] = bgc_table_next(&bgc_tables[ip[3]], f[ip[2]]); BGC_VM_NEXT;
+    BGC_VM_CASE(INPUT)
+        f[ip[1]] = bgc_input(w, ip[6], f[ip[2]], ip[7], f[ip[3]]);
+        ip += 4;
+        BGC_VM_NEXT;
+    BGC_VM_CASE(INPUTNEXT) f[ip[1]] = bgc_input_next(w, ip[3], f[ip[2]]); BGC_VM_NEXT;
+    BGC_VM_CASE(IARGS) BGC_VM_NEXT; /* (read by the instruction before) */
     BGC_VM_CASE(SOLVE) if (bgc_block_solve(w, ip[1], t)) return 1; BGC_VM_NEXT;
     BGC_VM_CASE(RESOLVE) if (bgc_block_resolve(w, ip[1], t)) return 1; BGC_VM_NEXT;
     BGC_VM_CASE(NEWTON)
@@ -354,6 +368,44 @@ static int *bgc_vm_ints(bgc_vm_reader *r, int *count)
     return out;
 }
 
+/* n doubles (the rest of the file holding them), or NULL with r->bad set. */
+static double *bgc_vm_doubles(bgc_vm_reader *r, long n)
+{
+    double *out;
+    long i;
+    if (r->bad || n < 0 || (long)(r->end - r->at) / 8 < n) {
+        r->bad = 1;
+        return NULL;
+    }
+    out = (double *)bgc_vm_alloc(r, (size_t)n, sizeof *out);
+    for (i = 0; out && i < n; i++)
+        out[i] = bgc_vm_double(r);
+    return out;
+}
+
+/* The lookup tables (bgc/tables.py): per table its rows n (at least one), extrapolate =
+   error, then x[n], each piece's origin[n + 1] and a, b, c, d[4 (n + 1)]; 0, or 1. */
+static int bgc_vm_tables(bgc_vm_reader *r)
+{
+    bgc_table_data *tables;
+    int i;
+    if (bgc_vm_int(r) != BGC_NUM_TABLES)
+        return 1;
+    tables = (bgc_table_data *)bgc_vm_alloc(r, (size_t)BGC_DIM(BGC_NUM_TABLES), sizeof *tables);
+    for (i = 0; tables && i < BGC_NUM_TABLES && !r->bad; i++) {
+        const int n = bgc_vm_int(r);
+        if (n < 1 || n > (int)((r->end - r->at) / 8))
+            return 1;
+        tables[i].n = n;
+        tables[i].error = bgc_vm_int(r);
+        tables[i].x = bgc_vm_doubles(r, n);
+        tables[i].origin = bgc_vm_doubles(r, (long)n + 1);
+        tables[i].coef = bgc_vm_doubles(r, 4 * ((long)n + 1));
+    }
+    bgc_link_tables = tables;
+    return r->bad;
+}
+
 static const char *const *bgc_vm_strings(bgc_vm_reader *r, int expect)
 {
     const int n = bgc_vm_count(r, 4);
@@ -381,8 +433,9 @@ static const char *const *bgc_vm_strings(bgc_vm_reader *r, int expect)
     return out;
 }
 
-/* Whether every operand of segment s is inside what it indexes. */
-static int bgc_vm_check(const bgc_vm_seg *s, int n_in)
+/* Whether every operand of segment s is inside what it indexes; alone: the segment runs
+   without a workspace (bgc_vm_alone), so it reads no input. */
+static int bgc_vm_check(const bgc_vm_seg *s, int n_in, int alone)
 {
     int i, j;
     for (i = 0; i < s->n; i++) {
@@ -427,6 +480,24 @@ static int bgc_vm_check(const bgc_vm_seg *s, int n_in)
             if (i + 1 >= s->n || c[4] != BGC_VM_ARGS)
                 return 0;
             break;
+        case BGC_VM_TABLE:
+            if (i + 1 >= s->n || c[4] != BGC_VM_IARGS || c[6] < 0 || c[6] >= BGC_NUM_TABLES
+                || c[7] < 0 || c[7] > 3)
+                return 0;
+            break;
+        case BGC_VM_TABLEGUARD: case BGC_VM_TABLEPIECE: case BGC_VM_TABLENEXT:
+            if (c[3] < 0 || c[3] >= BGC_NUM_TABLES)
+                return 0;
+            break;
+        case BGC_VM_INPUT:
+            if (alone || i + 1 >= s->n || c[4] != BGC_VM_IARGS || c[6] < 0
+                || c[6] >= BGC_NUM_INPUTS || c[7] < 0 || c[7] > 2)
+                return 0;
+            break;
+        case BGC_VM_INPUTNEXT:
+            if (alone || c[3] < 0 || c[3] >= BGC_NUM_INPUTS)
+                return 0;
+            break;
         default:
             break;
         }
@@ -434,11 +505,27 @@ static int bgc_vm_check(const bgc_vm_seg *s, int n_in)
     return s->n > 0 && s->code[4 * (s->n - 1)] == BGC_VM_END;
 }
 
+/* Whether bgc_discrete_log (the last of the int tables, count ints) is two ints for each
+   discrete value, each naming a kind and a table or an input there is: 0, or 1. */
+static int bgc_vm_discrete_log(int count)
+{
+    int k;
+    if (count != 2 * BGC_NUM_DISCRETE)
+        return 1;
+    for (k = 0; k < BGC_NUM_DISCRETE; k++) {
+        const int kind = bgc_discrete_log[2 * k], j = bgc_discrete_log[2 * k + 1];
+        if (!(kind == BGC_LOG_PLAIN || (kind == BGC_LOG_INPUT && j >= 0 && j < BGC_NUM_INPUTS)
+              || (kind == BGC_LOG_TABLE && j >= 0 && j < BGC_NUM_TABLES)))
+            return 1;
+    }
+    return 0;
+}
+
 static int bgc_vm_read(const unsigned char *data, size_t size)
 {
     bgc_vm_reader rd = { data, data + size, 0 }, *r = &rd;
     bgc_block *blocks;
-    int i, j, nb, n_in;
+    int i, j, nb, n_in, counts[BGC_COUNT(bgc_vm_link_tables)];
     if (size < 12 || memcmp(data, "BGCVM\0\0\0", 8) != 0)
         return 1;
     r->at += 8;
@@ -468,10 +555,10 @@ static int bgc_vm_read(const unsigned char *data, size_t size)
     bgc_link_discrete_names = bgc_vm_strings(r, BGC_NUM_DISCRETE);
     bgc_vm_inputs = bgc_vm_strings(r, BGC_NUM_INPUTS);
     for (i = 0; i < BGC_COUNT(bgc_vm_link_tables); i++) {
-        const int *t = bgc_vm_ints(r, NULL);
+        const int *t = bgc_vm_ints(r, &counts[i]);
         *bgc_vm_link_tables[i] = t;
     }
-    if (r->bad)
+    if (r->bad || bgc_vm_discrete_log(counts[BGC_COUNT(bgc_vm_link_tables) - 1]))
         return 1;
     nb = bgc_vm_int(r);
     if (nb != BGC_NUM_BLOCKS)
@@ -508,6 +595,8 @@ static int bgc_vm_read(const unsigned char *data, size_t size)
         blocks[i].lsolve = NULL;
     }
     bgc_link_blocks = blocks;
+    if (bgc_vm_tables(r))
+        return 1;
     bgc_vm_nconsts = bgc_vm_count(r, 8);
     if (bgc_vm_nconsts < 0)
         return 1;
@@ -540,20 +629,24 @@ static int bgc_vm_read(const unsigned char *data, size_t size)
     for (i = 0; i < nb; i++)
         if (blocks[i].lu.m > n_in)
             n_in = blocks[i].lu.m;
-    for (i = 0; i < bgc_vm_nsegs; i++)
-        if (!bgc_vm_check(&bgc_vm_segs[i], n_in) || bgc_vm_segs[i].frame > bgc_link_work_doubles
-            + LINK_PARAMS_MAX)
-            return 1;
     for (i = 0; i < BGC_VM_ENTRIES; i++)
         if (bgc_vm_entry[i] >= bgc_vm_nsegs
             || (bgc_vm_entry[i] < 0 && (i == BGC_VM_ENTRY_CONSTS || i == BGC_VM_ENTRY_INIT)))
             return 1;
+    for (j = 0; j < BGC_NUM_PARAMS; j++)
+        if (bgc_vm_defaults[j] < 0 || bgc_vm_defaults[j] >= bgc_vm_nsegs)
+            return 1;
+    for (i = 0; i < bgc_vm_nsegs; i++) {
+        int alone = i == bgc_vm_entry[BGC_VM_ENTRY_CONSTS] || i == bgc_vm_entry[BGC_VM_ENTRY_INIT];
+        for (j = 0; j < BGC_NUM_PARAMS && !alone; j++)
+            alone = i == bgc_vm_defaults[j];
+        if (!bgc_vm_check(&bgc_vm_segs[i], n_in, alone)
+            || bgc_vm_segs[i].frame > bgc_link_work_doubles + LINK_PARAMS_MAX)
+            return 1;
+    }
     for (i = BGC_VM_ENTRY_RHS; i < BGC_VM_ENTRIES; i++)
         if (bgc_vm_entry[i] >= 0 && i != BGC_VM_ENTRY_CONSTS && i != BGC_VM_ENTRY_INIT
             && bgc_vm_segs[bgc_vm_entry[i]].frame > bgc_link_work_doubles)
-            return 1;
-    for (j = 0; j < BGC_NUM_PARAMS; j++)
-        if (bgc_vm_defaults[j] < 0 || bgc_vm_defaults[j] >= bgc_vm_nsegs)
             return 1;
     return 0;
 }

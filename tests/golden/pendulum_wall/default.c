@@ -111,7 +111,8 @@ const char *const bgc_constraint_levels[BGC_DIM(BGC_NUM_CONSTRAINTS)] = {
     "velocity",
 };
 /* Events: whether each state relation holds when its indicator is > 0 (1) or >= 0 (0); what
-   the event log calls each discrete value. */
+   the event log calls each discrete value, and how it shows its change (two ints each:
+   BGC_LOG_PLAIN, BGC_LOG_TABLE k, BGC_LOG_INPUT j). */
 static const int bgc_indicator_strict[BGC_DIM(BGC_NUM_INDICATORS)] = { 1, 1 };
 static const char *const bgc_discrete_names[BGC_DIM(BGC_NUM_DISCRETE)] = {
     "wall: contact (phi < 0)",
@@ -119,6 +120,7 @@ static const char *const bgc_discrete_names[BGC_DIM(BGC_NUM_DISCRETE)] = {
     "wall.active",
     "wall.vmax",
 };
+static const int bgc_discrete_log[2 * BGC_DIM(BGC_NUM_DISCRETE)] = { 0, 0, 0, 0, 0, 0, 0, 0 };
 const char *const bgc_block_names[BGC_DIM(BGC_NUM_BLOCKS)] = {
     "rod.lambda, wall.lambda",
 };

@@ -228,10 +228,12 @@ def _init(p):
     return [float(v) for v in out]
 
 # events (docs/hybrid.md): per state relation, whether it holds when its indicator is > 0
-# (else >= 0); the time events' count; what the event log calls each discrete value
+# (else >= 0); the time events' count; what the event log calls each discrete value, and
+# how it shows its change (two ints each: _LOG_PLAIN, _LOG_TABLE k, _LOG_INPUT j)
 _INDICATOR_STRICT = [True, True]
 _NUM_TIMERS = 0
 _DISCRETE_NAMES = ["wall: contact (phi < 0)", "wall: release (lambda would pull)", "wall.active", "wall.vmax"]
+_DISCRETE_LOG = [0, 0, 0, 0, 0, 0, 0, 0]
 
 
 
