@@ -164,3 +164,20 @@ def test_algebra_solves_the_ladder_to_its_divider(tmp_path, algebra):
     R = R5 + par(R4, R3 + par(R1, R2))
     assert json.loads(lin.read_text())["A"] == [[pytest.approx(-1 / (R * Cc), rel=1e-12)]]
     assert bgc.steady(LADDER, scene="charge", algebra=algebra).residual < 1e-12
+
+
+OVERFLOW = """\
+model fast "a first-order lag whose rate is a parameter: its rest is z = 1 whatever the rate"
+parameter a = 1
+signal z = integral(a*(1 - z), init = 0)
+"""
+
+
+@pytest.mark.parametrize("a", ["1e200", "1e308", "-1e308", "1e-300"])
+def test_a_huge_rate_still_rests_at_its_equilibrium(tmp_path, a):
+    """-p a=1e308: the Jacobian's squares overflowed in the least squares: numpy's
+    RuntimeWarnings on stderr, then "no equilibrium ... rank 0".  dz/dt = a (1 - z) rests at
+    z = 1 for every a != 0."""
+    model = write(tmp_path, "fast.bg", OVERFLOW)
+    result = CliRunner().invoke(main, ["steady", model, "-p", f"a={a}"])
+    assert (result.exit_code, result.stdout, result.stderr) == (0, "z = 1\nresidual = 0\n", "")
