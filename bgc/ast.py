@@ -432,3 +432,4 @@ class Model:
     instances: tuple = ()  # after instantiate: graph.Instance, in declaration order
     constants: tuple = ()  # after instantiate: (name, value) of the file's constants
     text: str = ""  # the model file's text (a span without an origin is in it)
+    libraries: tuple = ()  # after instantiate: the path of each library file read, as opened

@@ -439,7 +439,8 @@ class _Instantiate:
         self.diags.raise_if_errors()
         return ast.Model(tuple(self.out), self.model.path, tuple(self.ports.values()),
                          tuple(self.instances), tuple(main.constants.items()),
-                         self.model.text)
+                         self.model.text,
+                         tuple(f.path for f in self.files.values() if f is not None))
 
     def child(self, parent: _Scope, stmt: ast.ElementDecl, env) -> _Scope:
         name = self.local_name(parent, stmt, env)

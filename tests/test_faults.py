@@ -155,6 +155,233 @@ def test_an_output_that_is_the_model_is_refused_under_any_name(tmp_path):
                                                           "m.bg", "sub"]
 
 
+READS = """model reads "a lag driven by a table and an input, beside a library it imports"
+import parts
+input u = 0
+parameter k = 1
+signal v = table(curve.csv, t)
+signal z = integral(-k*z + v + u, init = 1)
+scene s { outputs z; time 0 .. 1 every 0.5 }
+"""
+PARTS = """library parts "one component, unused: the import alone reads the file"
+component spring(k = 1) "a spring at port p" {
+  port p
+  x : C(1/k)
+  p -> x
+}
+"""
+
+
+@pytest.fixture
+def reads(tmp_path):
+    """A model and every kind of file a command reads: a library it imports, a table, an
+    --input CSV, a --data CSV, a --reference CSV; links to them, symbolic and hard, some of
+    them inside directories an output directory names (accuracy's -o, --trajectories)."""
+    files = {"reads.bg": READS, "parts.bg": PARTS, "curve.csv": "t,v\n0,1\n0.5,2\n1,0\n",
+             "inp.csv": "t,u\n0,0\n1,1\n", "data.csv": "t,z\n0,1\n0.5,1.1\n1,1.4\n",
+             "ref.csv": "t,z\n0,1\n0.5,1.1\n1,1.4\n"}
+    for name, text in files.items():
+        (tmp_path / name).write_text(text)
+    for sub in ("acc", "acc2", "traj"):
+        (tmp_path / sub).mkdir()
+    for link, target in (("parts-link.bg", "parts.bg"), ("curve-link.csv", "curve.csv"),
+                         ("inp-link.csv", "inp.csv"), ("lib.dot", "parts.bg")):
+        (tmp_path / link).symlink_to(target)
+    for link, target in (("parts-hard.bg", "parts.bg"), ("curve-hard.csv", "curve.csv"),
+                         ("data-hard.json", "data.csv"), ("acc/accuracy.csv", "ref.csv"),
+                         ("acc2/accuracy.csv", "curve.csv"),
+                         ("traj/run-000001.csv", "curve.csv")):
+        os.link(tmp_path / target, tmp_path / link)
+    return tmp_path
+
+
+def tree(directory: Path) -> dict:
+    """Every path under directory: its kind, device and inode, and its bytes or link."""
+    out = {}
+    for p in sorted(directory.rglob("*")):
+        info = os.lstat(p)
+        body = os.readlink(p) if p.is_symlink() else p.read_bytes() if p.is_file() else None
+        out[str(p.relative_to(directory))] = (stat.S_IFMT(info.st_mode), info.st_dev,
+                                              info.st_ino, body)
+    return out
+
+
+LAG = ["reads.bg", "-s", "s"]
+INPUT = [*LAG, "--input", "inp.csv"]
+SWEEP = ["sweep", *LAG, "--grid", "k=1,2", "--metric", "final:z", "--workers", "0",
+         "--backend", "python", "--no-timing"]
+ACCURACY = ["accuracy", *LAG, "--solvers", "rk4", "--steps", "0.05", "--repeats", "1",
+            "--no-plot"]
+LIBRARY, TABLE = "the imported library", "the table file"
+# (command line, the output, what it is, the name the command reads it by if another)
+AIMED = [
+    (["compile", "reads.bg", "-o", "parts.bg"], "parts.bg", LIBRARY, None),
+    (["compile", "reads.bg", "-o", "parts-link.bg"], "parts-link.bg", LIBRARY, "parts.bg"),
+    (["compile", "reads.bg", "-o", "parts-hard.bg"], "parts-hard.bg", LIBRARY, "parts.bg"),
+    (["compile", "reads.bg", "-o", "curve.csv"], "curve.csv", TABLE, None),
+    (["simulate", *INPUT, "-o", "inp.csv"], "inp.csv", "the --input file", None),
+    (["simulate", *INPUT, "-o", "out.csv", "--events", "inp-link.csv"], "inp-link.csv",
+     "the --input file", "inp.csv"),
+    (["simulate", *LAG, "-o", "curve-hard.csv"], "curve-hard.csv", TABLE, "curve.csv"),
+    (["sweep", *SWEEP[1:], "-o", "curve-link.csv"], "curve-link.csv", TABLE, "curve.csv"),
+    (["sweep", *SWEEP[1:], "--trajectories", "traj"], "traj/run-000001.csv", TABLE,
+     "curve.csv"),
+    (["linearize", *LAG, "-o", "curve-hard.csv"], "curve-hard.csv", TABLE, "curve.csv"),
+    (["steady", *LAG, "--json", "parts-link.bg"], "parts-link.bg", LIBRARY, "parts.bg"),
+    (["draw", "reads.bg", "-o", "lib.dot"], "lib.dot", LIBRARY, "parts.bg"),
+    (["fit", *LAG, "--data", "data.csv", "--vary", "k", "--backend", "python", "-o",
+      "data-hard.json"], "data-hard.json", "the data file", "data.csv"),
+    ([*ACCURACY, "--reference", "ref.csv", "-o", "acc"], "acc/accuracy.csv", "the reference",
+     "ref.csv"),
+    ([*ACCURACY, "-o", "acc2"], "acc2/accuracy.csv", TABLE, "curve.csv"),
+]
+
+
+@pytest.mark.parametrize("argv, target, what, name", AIMED,
+                         ids=[f"{a[0]}-{t}" for a, t, _, _ in AIMED])
+def test_an_output_that_is_a_file_the_command_reads_is_refused(reads, argv, target, what,
+                                                                name):
+    """Not only the model: a library it imports, a table it reads, --input, --data and
+    --reference, under their names and through symbolic and hard links (the libraries and
+    tables are known once the model is parsed: refused all the same before any output is
+    opened).  The directory keeps every byte, link and inode it had."""
+    before = tree(reads)
+    done = run_bgc(*argv, cwd=reads)
+    assert (done.returncode, done.stdout) == (1, ""), done.stderr
+    again = f" '{name}'" if name else ""
+    assert done.stderr.splitlines()[-1] == (
+        f"bgc: error: cannot write '{target}': it is {what}{again}, which this command reads; "
+        "name another output file")
+    assert tree(reads) == before
+
+
+def test_standard_output_that_is_a_file_the_command_reads_is_refused(reads):
+    """`bgc compile reads.bg >> parts.bg`: the library it imports is its standard output."""
+    before = tree(reads)
+    with open(reads / "parts.bg", "ab") as out:
+        done = subprocess.run([sys.executable, "-m", "bgc", "compile", "reads.bg"], cwd=reads,
+                              stdout=out, stderr=subprocess.PIPE, text=True)
+    assert (done.returncode, done.stderr) == (
+        1, "bgc: error: cannot write standard output: it is the imported library 'parts.bg', "
+           "which this command reads; name another output file\n")
+    assert tree(reads) == before
+
+
+have_matplotlib = importlib.util.find_spec("matplotlib") is not None
+# (command line, its output option, the file it writes otherwise, what goes to stderr
+# instead of stdout when the output takes it: the command's report)
+DASHED = [
+    (["compile", "reads.bg"], "-o", "out.c", False),
+    (["simulate", *INPUT], "-o", "out.csv", False),
+    (["simulate", *INPUT, "-o", "run.csv"], "--events", "events.csv", False),
+    (SWEEP, "-o", "table.csv", False),
+    (["draw", "reads.bg"], "-o", "graph.dot", False),
+    (["steady", *LAG], "--json", "rest.json", True),
+    (["linearize", *LAG], "-o", "modes.json", True),
+    pytest.param(["simulate", *INPUT, "-o", "run.csv"], "--plot", "run.png", False,
+                 marks=pytest.mark.skipif(not have_matplotlib, reason="needs matplotlib")),
+]
+
+
+@pytest.mark.parametrize("argv, option, name, report", DASHED,
+                         ids=["compile", "simulate", "events", "sweep", "draw", "steady",
+                              "linearize", "plot"])
+def test_a_dash_is_standard_output_for_every_output_option(reads, argv, option, name,
+                                                           report):
+    """`-o -`, `--events -`, `--json -`, `--plot -`: the bytes the same command writes into
+    a file, on stdout (a PNG too: stdout is not a terminal), and no file named `-`; the report
+    a command prints on stdout otherwise goes to stderr."""
+    named = run_bgc(*argv, option, name, cwd=reads)
+    assert named.returncode == 0, named.stderr
+    (reads / name).rename(reads / f"kept-{name}")
+    dashed = run_bgc(*argv, option, "-", cwd=reads)
+    assert dashed.returncode == 0, dashed.stderr
+    assert dashed.stdout_bytes == (reads / f"kept-{name}").read_bytes() != b""
+    assert not (reads / "-").exists() and not (reads / name).exists()
+    if report:
+        assert named.stdout and named.stdout in dashed.stderr
+
+
+@pytest.mark.parametrize("argv", [
+    ["simulate", *INPUT, "-o", "-", "--events", "-"],
+    ["simulate", *INPUT, "--events", "-"],  # (the CSV is on stdout without -o)
+    ["simulate", *INPUT, "--plot", "-"],
+    ["linearize", *LAG, "--inputs", "k", "-o", "-", "--bode", "-"],
+    ["fit", *LAG, "--data", "data.csv", "--vary", "k", "-o", "-", "--plot", "-"],
+    [*ACCURACY, "-o", "-"],
+    [*SWEEP, "--trajectories", "-"],
+], ids=["csv-events", "stdout-events", "stdout-plot", "matrices-bode", "fit-plot",
+        "accuracy-dir", "trajectories-dir"])
+def test_standard_output_taken_twice_or_for_a_directory_is_a_usage_error(reads, argv):
+    before = tree(reads)
+    done = run_bgc(*argv, cwd=reads)
+    assert (done.returncode, done.stdout) == (2, ""), done.stderr
+    assert "standard output" in done.stderr.splitlines()[-1]
+    assert tree(reads) == before
+
+
+@pytest.mark.skipif(not hasattr(os, "openpty"), reason="needs a pseudo-terminal")
+def test_binary_data_is_not_written_to_a_terminal(reads):
+    """`--plot -` and `--target fmu -o -` with a terminal on stdout (as gzip and tar refuse
+    it): a usage error before any work, nothing written."""
+    before = tree(reads)
+    for argv in (["simulate", *INPUT, "-o", "run.csv", "--plot", "-"],
+                 ["compile", "reads.bg", "--target", "fmu", "-o", "-"]):
+        master, slave = os.openpty()
+        done = subprocess.run([sys.executable, "-m", "bgc", *argv], cwd=reads, stdout=slave,
+                              stderr=subprocess.PIPE, text=True)
+        os.close(slave)
+        os.close(master)
+        assert done.returncode == 2, done.stderr
+        assert done.stderr.splitlines()[-1].endswith(
+            "-: binary data is not written to a terminal; redirect standard output (> FILE, "
+            "| ...) or name a file")
+    assert tree(reads) == before
+
+
+@pytest.fixture
+def read_only(tmp_path):
+    """A directory that cannot be written: chmod 555, or for root (whom that does not stop)
+    a read-only tmpfs, unmounted afterwards."""
+    where = tmp_path / "ro"
+    where.mkdir()
+    if os.geteuid() != 0:
+        where.chmod(0o555)
+        yield where
+        where.chmod(0o755)
+        return
+    done = subprocess.run(["mount", "-t", "tmpfs", "-o", "ro,size=64k", "tmpfs", str(where)],
+                          capture_output=True, text=True) if shutil.which("mount") else None
+    if done is None or done.returncode != 0:
+        pytest.skip("a read-only directory for root needs a tmpfs mount")
+    try:
+        yield where
+    finally:
+        subprocess.run(["umount", "-l", str(where)], capture_output=True)
+
+
+def test_accuracy_into_a_read_only_directory_fails_before_the_work(reads, read_only):
+    """Its files' hidden temporaries are made before any run: with a reference the work
+    would refuse (its first column is not t), the directory's refusal comes first, and no
+    table is printed."""
+    (reads / "ro-ref.csv").write_text("not numbers\n")
+    for target, status, said in ((read_only, 2, "is not writable"),
+                                 (read_only / "acc", 1, "cannot make the directory")):
+        done = run_bgc(*ACCURACY, "--reference", "ro-ref.csv", "-o", target, cwd=reads)
+        assert (done.returncode, done.stdout) == (status, ""), done.stderr
+        assert said in done.stderr and "ro-ref.csv" not in done.stderr
+    assert list(read_only.iterdir()) == []
+
+
+def test_accuracy_that_fails_leaves_no_directory_it_made(reads):
+    before = tree(reads)
+    (reads / "ref-bad.csv").write_text("not numbers\n")
+    done = run_bgc(*ACCURACY, "--reference", "ref-bad.csv", "-o", "new/acc", cwd=reads)
+    assert done.returncode == 1 and "error: ref-bad.csv: " in done.stderr
+    (reads / "ref-bad.csv").unlink()
+    assert tree(reads) == before
+
+
 def test_a_device_is_written_into_and_never_replaced(tmp_path, warm):
     """/dev/null itself is only looked at; the writes go to a private copy of it (mknod, as
     root), which must stay a character device."""
