@@ -445,10 +445,45 @@ ALLOW_HELP = ("Start from initial values that violate the constraints, neither r
 WRITE_ERRNOS = (errno.ENOSPC, errno.EDQUOT, errno.EFBIG, errno.EIO, errno.EPIPE, errno.EROFS)
 
 
+class Interrupted(KeyboardInterrupt):
+    """SIGINT or SIGTERM received by bgc: the command stops where it is, as at Ctrl-C (its
+    outputs in place whole or not at all, the processes it started ended), and exits with
+    128 + the signal."""
+
+    def __init__(self, number: int):
+        super().__init__(number)
+        self.signal = number
+
+
+def _interrupt(number, frame):
+    raise Interrupted(number)
+
+
+@contextlib.contextmanager
+def _interruptible():
+    """SIGINT and SIGTERM raise Interrupted while a command runs, where they have their
+    default dispositions (a SIGINT that is ignored, as in a background job, stays so)."""
+    import signal
+    import threading
+    saved = []
+    if threading.current_thread() is threading.main_thread():
+        for sig, default in ((signal.SIGINT, signal.default_int_handler),
+                             (signal.SIGTERM, signal.SIG_DFL)):
+            if signal.getsignal(sig) is default:
+                saved.append((sig, signal.signal(sig, _interrupt)))
+    try:
+        yield
+    finally:
+        for sig, handler in saved:
+            signal.signal(sig, handler)
+
+
 class _Group(click.Group):
     """The commands; a C toolchain that fails (bgc.backends.BackendError) is reported as such,
     exit 1, without a traceback; so is a write that fails where no command caught it (a full
-    disk under the cache, a closed stdout while click writes help): one line, exit 1."""
+    disk under the cache, a closed stdout while click writes help): one line, exit 1.  A
+    command interrupted (SIGINT, SIGTERM: Interrupted) says so in one line and exits with
+    128 + the signal (130, 143), not click's `Aborted!` and 1."""
 
     def invoke(self, ctx):
         try:
@@ -456,10 +491,16 @@ class _Group(click.Group):
         except backends.BackendError as error:
             click.echo(f"error: {error}", err=True)
             ctx.exit(1)
+        except KeyboardInterrupt as error:
+            number = getattr(error, "signal", 2)  # (a KeyboardInterrupt of its own: SIGINT)
+            clear = "\r\033[K" if _isatty(sys.stderr) else ""  # (a progress bar's line)
+            click.echo(f"{clear}bgc: interrupted by {runner.signal_name(number)}", err=True)
+            ctx.exit(128 + number)
 
     def main(self, *args, **kwargs):
         try:
-            return super().main(*args, **kwargs)
+            with _interruptible():
+                return super().main(*args, **kwargs)
         except OSError as error:
             if error.errno not in WRITE_ERRNOS:
                 raise

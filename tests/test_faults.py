@@ -729,6 +729,106 @@ def test_a_killed_program_writing_to_stdout_leaves_whole_rows_in_a_file_there(tm
     assert err[-1] == f"bgc: error: the generated program was killed by SIGKILL at t = {t}"
 
 
+SWEPT = DECAY.replace("model decay", "model decay\nparameter k = 1").replace("-z", "-k*z")
+
+
+def _interrupt_when(proc, ready, sig, group=False) -> list[int]:
+    """Sends sig to bgc (to its process group, as a terminal's Ctrl-C does, if group) once
+    ready(descendants) holds; every process it started by then, and until it ends."""
+    seen: set[int] = set()
+    deadline = time.monotonic() + 120
+    while time.monotonic() < deadline:
+        assert proc.poll() is None, proc.communicate()
+        found = _descendants(proc.pid)
+        seen.update(found)
+        if ready(found):
+            break
+        time.sleep(0.02)
+    else:
+        raise AssertionError("never ready to be interrupted")
+    (os.killpg if group else os.kill)(proc.pid, sig)
+    while proc.poll() is None:
+        seen.update(_descendants(proc.pid))
+        time.sleep(0.02)
+    return sorted(seen)
+
+
+def _gone(started: list[int]) -> list:
+    deadline = time.monotonic() + 20
+    while any(map(running, started)) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    left = [(p, _cmdline(p)) for p in started if running(p)]
+    for p, _ in left:
+        os.kill(p, signal.SIGKILL)
+    return left
+
+
+def _batch_runs(found) -> bool:
+    return any("--batch" in _cmdline(p) for p in found)
+
+
+@needs_proc
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM], ids=["INT", "TERM"])
+def test_an_interrupted_sweep_exits_128_plus_the_signal_and_writes_nothing(tmp_path, warm,
+                                                                          sig):
+    """A serial sweep (--workers 0) stopped while a batch's program runs: one line, exit 130
+    or 143 (not click's `Aborted!` and 1, nor a death by the signal), no table, no
+    trajectory, the program gone."""
+    (tmp_path / "m.bg").write_text(SWEPT)
+    (tmp_path / "traj").mkdir()
+    proc = subprocess.Popen([sys.executable, "-m", "bgc", "sweep", "m.bg", "-s", "s", "--grid",
+                             "k=1,2", "--metric", "final:z", "--workers", "0", "--backend",
+                             "python", "--trajectories", "traj", "-o", "table.csv"],
+                            cwd=tmp_path, env=warm[1], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
+    started = _interrupt_when(proc, _batch_runs, sig)
+    code, err = finish(proc)
+    assert (code, err) == (128 + sig, [f"bgc: interrupted by {sig.name}"])
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["m.bg", "traj"]
+    assert list((tmp_path / "traj").iterdir()) == []
+    assert _gone(started) == []
+
+
+@needs_proc
+@pytest.mark.skipif(not _have_dask(), reason="needs dask.distributed")
+@pytest.mark.parametrize("when", ["start", "batch"])
+def test_ctrl_c_of_a_sweep_on_dask_is_one_line_and_exit_130(tmp_path, warm, when):
+    """SIGINT to the whole process group, as a terminal's Ctrl-C sends it: while the local
+    cluster starts (its first process just made: Dask's clean-up of a half-made cluster was
+    `AssertionError: Status.init`), and while a batch runs.  Not a worker's traceback either:
+    they ignore SIGINT, bgc closes them."""
+    (tmp_path / "m.bg").write_text(SWEPT)
+    proc = subprocess.Popen([sys.executable, "-m", "bgc", "sweep", "m.bg", "-s", "s", "--grid",
+                             "k=1,2", "--metric", "final:z", "--workers", "1", "--backend",
+                             "python", "-o", "table.csv"], cwd=tmp_path, env=warm[1],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            start_new_session=True)
+    started = _interrupt_when(proc, bool if when == "start" else _batch_runs, signal.SIGINT,
+                              group=True)
+    code, err = finish(proc)
+    assert (code, err) == (130, ["bgc: interrupted by SIGINT"])
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["m.bg"]
+    assert _gone(started) == []
+
+
+@needs_proc
+def test_an_interrupted_accuracy_leaves_no_directory_and_no_program(tmp_path, warm):
+    """Its output files are opened (their hidden temporaries made, in a directory it makes)
+    before the work; SIGTERM during the work: exit 143, the directory gone again."""
+    proc = subprocess.Popen([sys.executable, "-m", "bgc", "accuracy", str(warm[0]), "-s", "s",
+                             "--solvers", "rk4", "--steps", "0.001", "--repeats", "1",
+                             "--backend", "python", "--no-plot", "-o", "new/acc"],
+                            cwd=tmp_path, env=warm[1], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
+    acc = tmp_path / "new" / "acc"
+    started = _interrupt_when(proc, lambda found: found and acc.is_dir() and hidden(acc),
+                              signal.SIGTERM)
+    code, err = finish(proc)
+    assert (code, err[-1:]) == (143, ["bgc: interrupted by SIGTERM"])
+    assert list(tmp_path.iterdir()) == []
+    assert _gone(started) == []
+
+
 # ------------------------------------------------------------------ the output grid
 
 
