@@ -54,6 +54,8 @@ class Compiled:
     reduced: Reduced
     program: Program | None  # None when built for a report only
     timings: tuple[tuple[str, float], ...] = ()  # (stage, seconds), for benchmarks
+    files: tuple[tuple[str, str], ...] = ()  # what the model read besides itself: ("library",
+    #   path) of each library file, ("table", path) of each table's CSV file, as opened
 
     @property
     def graph(self) -> Graph:  # with the scene's effects applied
@@ -169,6 +171,8 @@ def build(model, scene: str | None = None, project_initial: bool = False,
         ast_ = clock("parse", parse, src.text, src.path)
         ast_ = clock("instantiate", instantiate, ast_, dict(src.consts))
         graph = clock("resolve", resolve, ast_)
+        files = tuple(("library", p) for p, sha in ast_.libraries if sha is not None) + tuple(
+            ("table", t.file) for t in graph.tables if t.file)
         graph = clock("flatten", flatten, graph)
         scenario = clock("scene", apply_scene, graph, scene, override, option_names[2])
         causal = clock("causality", assign_causality, scenario)
@@ -183,7 +187,7 @@ def build(model, scene: str | None = None, project_initial: bool = False,
             else None
     except ModelError as exc:
         raise _model_error(exc, src) from None
-    return Compiled(src, causal, system, reduced, ir_program, tuple(clock.times))
+    return Compiled(src, causal, system, reduced, ir_program, tuple(clock.times), files)
 
 
 def check_parameters(model, scene: str | None, params: dict, outputs=None, effects=None,

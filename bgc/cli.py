@@ -111,6 +111,9 @@ def _output_directory(value: str, option: str) -> Path:
     that is not a directory, a name the system refuses)."""
     if not value.strip():
         raise click.UsageError(f"{option}: an empty name is not a directory")
+    if outfile.is_stdout(value):
+        raise click.UsageError(f"{option} -: a directory's files cannot go to standard "
+                               "output; name a directory")
     path = Path(value)
     try:
         os.stat(path)
@@ -124,6 +127,46 @@ def _output_directory(value: str, option: str) -> Path:
     return path
 
 
+@contextlib.contextmanager
+def _made_directory(path: Path):
+    """The directory of a command's files, made with its parents if missing (one line, exit
+    1, if the system refuses); the directories made are removed again if the command fails
+    before its files are in them."""
+    made = [d for d in (path, *path.parents) if not os.path.lexists(d)][::-1]
+    _make_directory(path)
+    try:
+        yield path
+    except BaseException:
+        for d in reversed(made):
+            try:
+                d.rmdir()
+            except OSError:
+                pass  # (not empty, or not ours any more)
+        raise
+
+
+def _opened(path: Path, option: str) -> outfile.Partial:
+    """The output file for path, its hidden file made now, before the work, so that a folder
+    that cannot take it is said at once: a usage error, as for an output option's path."""
+    try:
+        return outfile.Partial(path)
+    except outfile.OutputError as error:
+        raise click.UsageError(f"{option}: {error}") from None
+
+
+def _commit(part: outfile.Partial, render) -> None:
+    """render(file) into an output opened by _opened, then into place; one line, exit 1, if
+    the write fails."""
+    try:
+        try:
+            render(part.file)
+        except OSError as error:
+            raise part.failed(error) from None
+        part.commit()
+    except outfile.OutputError as error:
+        _fail(str(error))
+
+
 def _make_directory(path: Path) -> None:
     """Makes the directory of a command's files (and its parents): one line, exit 1, if the
     system refuses (a full disk, a file in the way, no permission)."""
@@ -134,12 +177,32 @@ def _make_directory(path: Path) -> None:
 
 
 def _write_atomic(path: str, text: str | bytes):
-    """Write all of `text` (or bytes) or nothing (bgc.outfile); a write that fails (a full
-    disk) is one line, exit 1."""
+    """Write all of `text` (or bytes) or nothing (bgc.outfile), or onto standard output for
+    `-`; a write that fails (a full disk) is one line, exit 1."""
+    if outfile.is_stdout(path):
+        _echo(text)
+        return
     try:
         outfile.write_atomic(path, text)
     except outfile.OutputError as error:
         _fail(str(error))
+
+
+def _write_with(path: str, render) -> None:
+    """render(file) writes binary data into a file for `path` (a figure by matplotlib),
+    put into place whole (bgc.outfile.Partial), or onto standard output for `-`; OutputError
+    if it cannot be written."""
+    if outfile.is_stdout(path):
+        data = io.BytesIO()
+        render(data)
+        _echo(data.getvalue())
+        return
+    with outfile.Partial(path) as part:
+        try:
+            render(part.file)
+        except OSError as error:
+            raise part.failed(error) from None
+        part.commit()
 
 
 def _stdout_lost(error: OSError):
@@ -158,17 +221,19 @@ def _stdout_lost(error: OSError):
     _fail(f"cannot write stdout: {outfile.reason(error)}")
 
 
-def _echo(text: str):
-    """text on stdout, flushed; a write that fails is _stdout_lost."""
+def _echo(text: str | bytes, err: bool = False):
+    """text (or bytes, as they are) on stdout (stderr if err), flushed; a write to stdout
+    that fails is _stdout_lost."""
     try:
-        click.echo(text, nl=False)
+        click.echo(text, nl=False, err=err)
         sys.stdout.flush()
     except OSError as error:
         _stdout_lost(error)
 
 
 def _output_file(ctx, param, value):
-    """-o: a file that can be written, checked before any work (a usage error if not)."""
+    """-o: a file that can be written, checked before any work (a usage error if not), or
+    `-`, standard output."""
     if value is not None:
         try:
             outfile.check_target(value)
@@ -183,22 +248,81 @@ def _model_path(model) -> str:
     return model if isinstance(model, (str, os.PathLike)) else model.path
 
 
-def _not_an_input(model, *outputs, others=()):
-    """Each output given (None: none) must not be a file the command reads: the model (under
-    any name: another path, a symbolic or hard link), or `others` ((what, path) pairs); else
-    one line, exit 1, before any work.  Nor may two outputs be the same file."""
-    inputs = [("the model file", _model_path(model)), *others]
-    given = [o for o in outputs if o is not None]
-    for i, output in enumerate(given):
-        try:
-            outfile.check_target(output, inputs)
-        except outfile.OutputIsInput as error:
-            _fail(str(error))
-        except outfile.OutputError:
-            pass  # (said by the option's own check)
-        inputs.append(("another output of this command", output))
-        if any(os.path.abspath(output) == os.path.abspath(o) for o in given[:i]):
-            _fail(f"cannot write '{output}' twice: name different output files")
+READS = {"library": "the imported library", "table": "the table file"}  # Compiled.files
+
+
+class _Files:
+    """What a command reads and writes, in one place.  The outputs are its output options'
+    paths (`-`: standard output, bgc.outfile.STDOUT); the files it reads are the model, the
+    files its options name (--input, --data, --reference), and, once the model is parsed,
+    the libraries it imports and the tables it reads (read()).  Each check runs before any
+    output is opened: an output that is a file the command reads (under any name: device and
+    inode, through a symbolic or a hard link), or the same file as another output, is one
+    line, exit 1; standard output taken by two outputs, or binary data (an FMU, a PNG) sent
+    to a terminal, is a usage error (exit 2)."""
+
+    def __init__(self, model, outputs, reads=(), stdout=None, binary=()):
+        """outputs: (option, path or None) pairs; reads: (what, path) pairs besides the model;
+        stdout: (option, what it writes) of the output that goes to standard output when its
+        option is not given (compile's code, simulate's CSV), if any; binary: the options
+        whose data is binary."""
+        self.outputs = [(o, p) for o, p in outputs if p is not None]
+        self.reads = [("the model file", _model_path(model)), *reads]
+        self.to_stdout = [o for o, p in self.outputs if outfile.is_stdout(p)]
+        if stdout is not None and dict(outputs).get(stdout[0]) is None:
+            if self.to_stdout:
+                raise click.UsageError(
+                    f"{self.to_stdout[0]} -: standard output already has {stdout[1]} (no "
+                    f"{stdout[0]} FILE given); name a file for one of them")
+            self.to_stdout = [stdout[0]]
+        if len(self.to_stdout) > 1:
+            first, second = self.to_stdout[:2]
+            raise click.UsageError(f"{first} - and {second} -: standard output can take one "
+                                   "of them only; name a file for the other")
+        for option in set(self.to_stdout) & set(binary):
+            if _isatty(sys.stdout):
+                raise click.UsageError(
+                    f"{option} -: binary data is not written to a terminal; redirect standard "
+                    "output (> FILE, | ...) or name a file")
+        self._check()
+
+    def read(self, files) -> None:
+        """The files the model read besides itself ((kind, path) pairs, api.Compiled.files),
+        each refused as an output, before any output is opened."""
+        self.reads += [(READS[kind], path) for kind, path in files]
+        self._check()
+
+    def write(self, outputs) -> None:
+        """More outputs ((option, path) pairs), known once the model is parsed, checked."""
+        self.outputs += list(outputs)
+        self._check()
+
+    def _check(self) -> None:
+        seen = []
+        for option, path in self.outputs:
+            if outfile.is_stdout(path):
+                continue
+            try:
+                outfile.check_target(path, self.reads)
+            except outfile.OutputIsInput as error:
+                _fail(str(error))
+            except outfile.OutputError:
+                pass  # (said by the option's own check)
+            if any(outfile.same_target(path, other) for other in seen):
+                _fail(f"cannot write '{path}' twice: name different output files")
+            seen.append(path)
+        where = outfile.stdout_identity() if self.to_stdout else None
+        for what, name in self.reads if where is not None else ():
+            if outfile.identity(name) == where:
+                _fail(f"cannot write standard output: it is {what} '{name}', which this "
+                      "command reads; name another output file")
+
+
+def _isatty(stream) -> bool:
+    try:
+        return stream.isatty()
+    except (AttributeError, ValueError):
+        return False
 
 
 def _plot_file(ctx, param, value):
@@ -207,7 +331,7 @@ def _plot_file(ctx, param, value):
     if value is not None:
         from . import plot
         try:
-            plot.check_format(value)
+            _plot_format(value)
             outfile.check_target(value)
         except (plot.PlotError, outfile.OutputError) as error:
             raise click.BadParameter(str(error), ctx, param) from None
@@ -215,6 +339,12 @@ def _plot_file(ctx, param, value):
         if missing:
             raise click.BadParameter(missing, ctx, param)
     return value
+
+
+def _plot_format(path: str) -> str:
+    """A figure's format: its file's extension (bgc.plot.check_format), PNG on stdout."""
+    from . import plot
+    return "png" if outfile.is_stdout(path) else plot.check_format(path)
 
 
 def _parse_params(values, names) -> dict:
@@ -315,10 +445,45 @@ ALLOW_HELP = ("Start from initial values that violate the constraints, neither r
 WRITE_ERRNOS = (errno.ENOSPC, errno.EDQUOT, errno.EFBIG, errno.EIO, errno.EPIPE, errno.EROFS)
 
 
+class Interrupted(KeyboardInterrupt):
+    """SIGINT or SIGTERM received by bgc: the command stops where it is, as at Ctrl-C (its
+    outputs in place whole or not at all, the processes it started ended), and exits with
+    128 + the signal."""
+
+    def __init__(self, number: int):
+        super().__init__(number)
+        self.signal = number
+
+
+def _interrupt(number, frame):
+    raise Interrupted(number)
+
+
+@contextlib.contextmanager
+def _interruptible():
+    """SIGINT and SIGTERM raise Interrupted while a command runs, where they have their
+    default dispositions (a SIGINT that is ignored, as in a background job, stays so)."""
+    import signal
+    import threading
+    saved = []
+    if threading.current_thread() is threading.main_thread():
+        for sig, default in ((signal.SIGINT, signal.default_int_handler),
+                             (signal.SIGTERM, signal.SIG_DFL)):
+            if signal.getsignal(sig) is default:
+                saved.append((sig, signal.signal(sig, _interrupt)))
+    try:
+        yield
+    finally:
+        for sig, handler in saved:
+            signal.signal(sig, handler)
+
+
 class _Group(click.Group):
     """The commands; a C toolchain that fails (bgc.backends.BackendError) is reported as such,
     exit 1, without a traceback; so is a write that fails where no command caught it (a full
-    disk under the cache, a closed stdout while click writes help): one line, exit 1."""
+    disk under the cache, a closed stdout while click writes help): one line, exit 1.  A
+    command interrupted (SIGINT, SIGTERM: Interrupted) says so in one line and exits with
+    128 + the signal (130, 143), not click's `Aborted!` and 1."""
 
     def invoke(self, ctx):
         try:
@@ -326,10 +491,16 @@ class _Group(click.Group):
         except backends.BackendError as error:
             click.echo(f"error: {error}", err=True)
             ctx.exit(1)
+        except KeyboardInterrupt as error:
+            number = getattr(error, "signal", 2)  # (a KeyboardInterrupt of its own: SIGINT)
+            clear = "\r\033[K" if _isatty(sys.stderr) else ""  # (a progress bar's line)
+            click.echo(f"{clear}bgc: interrupted by {runner.signal_name(number)}", err=True)
+            ctx.exit(128 + number)
 
     def main(self, *args, **kwargs):
         try:
-            return super().main(*args, **kwargs)
+            with _interruptible():
+                return super().main(*args, **kwargs)
         except OSError as error:
             if error.errno not in WRITE_ERRNOS:
                 raise
@@ -417,11 +588,14 @@ def equations(model, scene, outputs, effects, algebra, fmt):
 def compile(model, scene, outputs, effects, algebra, target, output, project_initial,
             allow_inconsistent):
     """Emit standalone C or Python source code, or an FMU."""
-    _not_an_input(model, output)
     if target == "fmu" and not output:
-        raise click.UsageError("--target fmu writes a zip archive: name it with -o NAME.fmu")
+        raise click.UsageError("--target fmu writes a zip archive: name it with -o NAME.fmu "
+                               "(or -o - for standard output)")
+    files = _Files(model, [("-o", output)], stdout=("-o", "the code"),
+                   binary=("-o",) if target == "fmu" else ())
     compiled = _build(model, scene, project_initial, algebra, outputs=outputs, effects=effects,
                       allow_inconsistent=allow_inconsistent)
+    files.read(compiled.files)
     if target == "fmu":
         from . import fmu
         try:
@@ -432,12 +606,9 @@ def compile(model, scene, outputs, effects, algebra, target, output, project_ini
             sys.exit(1)
         _write_atomic(output, data)
         return
-    files = (emit.emit_c if target == "c" else emit.emit_python)(compiled.program)
-    (text,) = files.values()
-    if output:
-        _write_atomic(output, text)
-    else:
-        _echo(text)
+    emitted = (emit.emit_c if target == "c" else emit.emit_python)(compiled.program)
+    (text,) = emitted.values()
+    _write_atomic(output or outfile.STDOUT, text)
 
 
 @main.command()
@@ -501,7 +672,10 @@ def simulate(model, scene, outputs, effects, algebra, backend, solver, rtol, ato
     """Simulate and write CSV.  A model compiled before with the same options runs at once
     (bgc.warm); otherwise it is compiled, and the result kept for the next run.  On a
     terminal, a run that takes more than a second shows its progress on stderr."""
-    _not_an_input(model, output, plot_file, events_file)
+    files = _Files(model, [("-o", output), ("--events", events_file), ("--plot", plot_file)],
+                   [("the --input file", path) for path in input_files],
+                   stdout=("-o", "the CSV"), binary=("--plot",))
+    output = None if outfile.is_stdout(output) else output
     if project_initial and allow_inconsistent:
         raise click.UsageError("--project-initial and --allow-inconsistent exclude each other")
     auto = backend == "auto"
@@ -533,6 +707,8 @@ def simulate(model, scene, outputs, effects, algebra, backend, solver, rtol, ato
         (record, path), compiled = found, None
         program = warm.program(record, path)
         click.echo(record.warnings, err=True, nl=False)
+    files.read(compiled.files if compiled is not None else
+               [("table", name) for name, _ in record.files])
     problem = run.run_span_problem(record.settings, t_end, dt)  # (before -p, as always)
     if problem:
         raise click.UsageError(problem)
@@ -575,6 +751,9 @@ def simulate(model, scene, outputs, effects, algebra, backend, solver, rtol, ato
 def _keep_events(log: Path, target: str, status: int) -> int:
     """The run's event log, moved to its place (a failed run's too: the events before it)."""
     if not log.exists():
+        return status
+    if outfile.is_stdout(target):
+        _echo(log.read_bytes())
         return status
     try:
         outfile.write_atomic(target, log.read_bytes())
@@ -686,13 +865,9 @@ def _plot(record, csv, target: str, status: int, rows: bool) -> int:
     try:
         table = plot.read_csv(csv)
         cols = [plot.Column(*c) for c in record.plot_columns]
-        with outfile.Partial(target) as part:
-            try:
-                plot.plot_run(table, cols, part.file, plot.check_format(target),
-                              list(record.plot_title), stopped=status != 0)
-            except OSError as error:
-                raise part.failed(error) from None
-            part.commit()
+        _write_with(target, lambda file: plot.plot_run(
+            table, cols, file, _plot_format(target), list(record.plot_title),
+            stopped=status != 0))
     except (plot.PlotError, outfile.OutputError, OSError) as error:
         click.echo(f"error: no plot written: {error}", err=True)
         return status or 1
@@ -894,8 +1069,17 @@ def accuracy(model, scene, outputs, effects, algebra, backend, solver_list, rtol
     stem = Path(_model_path(model)).stem + (f"-{scene}" if scene else "")
     directory = _output_directory(f"accuracy-{stem}" if output is None else output, "-o")
     base = "gains" if gains is not None else "accuracy"
-    _not_an_input(model, str(directory / f"{base}.csv"), str(directory / f"{base}.png"),
-                  others=[("the reference", reference)] if reference else ())
+    written = [directory / f"{base}.csv"]
+    if not no_plot:
+        try:
+            import matplotlib  # noqa: F401
+        except ImportError:
+            click.echo("warning: matplotlib is not installed (pip install 'bgc[plot]'): no plot "
+                       "written", err=True)
+        else:
+            written.append(directory / f"{base}.png")
+    files = _Files(model, [("-o", str(path)) for path in written],
+                   [("the reference", reference)] if reference else ())
     names = [n.strip() for n in solver_list.split(",")] if solver_list else None
     for n in names or []:
         if n not in solvers.SOLVERS:
@@ -908,50 +1092,32 @@ def accuracy(model, scene, outputs, effects, algebra, backend, solver_list, rtol
             raise click.UsageError(f"{option} must be positive")
     compiled = _build(model, scene, algebra=algebra, program=True, residual_outputs=True,
                       outputs=outputs, effects=effects)
+    files.read(compiled.files)
     _check_span(compiled, t_end, dt)
     overrides = _overrides(params, compiled)
     backend = _backend(backend)
     progress = _Progress()
-    try:
-        if gain_values is not None:
-            result = acc.run_gains(compiled, gain_values,
-                                   acc.plan_gains(compiled, names, rtol_values, step_values, dt),
-                                   backend, repeats, t_end, dt, overrides, timeout, progress)
-            base = "gains"
-        else:
-            result = acc.run_sweep(compiled, acc.plan(compiled, names, rtol_values, step_values,
-                                                      dt),
-                                   backend, repeats, reference, overrides, t_end, dt, timeout,
-                                   progress)
-            base = "accuracy"
-    except acc.AccuracyError as exc:
-        progress(None)
-        click.echo(f"error: {exc}", err=True)
-        sys.exit(1)
-    text = acc.table(result, gains=gain_values is not None)
-    _echo(text)
-    _make_directory(directory)
-    _write_atomic(str(directory / f"{base}.csv"), acc.csv_text(result))
-    written = [str(directory / f"{base}.csv")]
-    if not no_plot:
+    with _made_directory(directory), contextlib.ExitStack() as stack:
+        parts = [stack.enter_context(_opened(path, "-o")) for path in written]
         try:
-            import matplotlib  # noqa: F401
-        except ImportError:
-            click.echo("warning: matplotlib is not installed (pip install 'bgc[plot]'): no plot "
-                       "written", err=True)
-        else:
-            png = directory / f"{base}.png"
-            try:
-                with outfile.Partial(png) as part:
-                    try:
-                        acc.plot(result, part.file, gains=gain_values is not None)
-                    except OSError as error:
-                        raise part.failed(error) from None
-                    part.commit()
-            except outfile.OutputError as error:
-                _fail(str(error))
-            written.append(str(png))
-    click.echo(f"wrote {', '.join(written)}", err=True)
+            if gain_values is not None:
+                result = acc.run_gains(
+                    compiled, gain_values,
+                    acc.plan_gains(compiled, names, rtol_values, step_values, dt),
+                    backend, repeats, t_end, dt, overrides, timeout, progress)
+            else:
+                result = acc.run_sweep(
+                    compiled, acc.plan(compiled, names, rtol_values, step_values, dt),
+                    backend, repeats, reference, overrides, t_end, dt, timeout, progress)
+        except acc.AccuracyError as exc:
+            progress(None)
+            click.echo(f"error: {exc}", err=True)
+            sys.exit(1)
+        _echo(acc.table(result, gains=gain_values is not None))
+        _commit(parts[0], lambda file: file.write(acc.csv_text(result).encode("utf-8")))
+        if len(parts) > 1:
+            _commit(parts[1], lambda file: acc.plot(result, file, gains=gain_values is not None))
+    click.echo(f"wrote {', '.join(map(str, written))}", err=True)
 
 
 @main.command()
@@ -1003,7 +1169,8 @@ def sweep(model, scene, algebra, grids, sample, varies, seed, metrics, backend, 
     batches on Dask or serially; write one table: run, parameters, metrics, counters, status,
     message.  A run that fails is a row with its status and message; see docs/sweeps.md."""
     from . import sweeps as sw
-    _not_an_input(model, output)
+    files = _Files(model, [("-o", output)], stdout=("-o", "the table"))
+    output = None if outfile.is_stdout(output) else output
     parquet = bool(output) and output.lower().endswith(".parquet")
     if parquet and not sw.have_pyarrow():
         raise click.UsageError("writing Parquet needs pyarrow: pip install 'bgc[parquet]' "
@@ -1029,8 +1196,12 @@ def sweep(model, scene, algebra, grids, sample, varies, seed, metrics, backend, 
         raise click.UsageError(str(error)) from None
     compiled = _build(model, scene, project_initial, algebra,
                       allow_inconsistent=allow_inconsistent)
+    files.read(compiled.files)
+    if trajectories:
+        files.write(("--trajectories", str(path)) for path in _trajectory_files(trajectories))
     overrides = _overrides(params, compiled)
     backend = _backend(backend)
+
     def keep(result):
         for number, text in (result.trajectories or {}).items():
             _write_atomic(str(Path(trajectories) / f"run-{number:06d}.csv"), text)
@@ -1072,6 +1243,17 @@ def sweep(model, scene, algebra, grids, sample, varies, seed, metrics, backend, 
                f"({len(table) / wall:.0f} runs/s)", err=True)
 
 
+def _trajectory_files(directory: str) -> list[Path]:
+    """The files in `directory` that a sweep's --trajectories may replace: run-NNNNNN.csv."""
+    import re
+    try:
+        entries = sorted(os.listdir(directory))
+    except OSError:
+        return []
+    return [Path(directory) / name for name in entries
+            if re.fullmatch(r"run-\d{6}\.csv", name)]
+
+
 # ---------------------------------------------------------------- bgc draw
 
 
@@ -1106,18 +1288,17 @@ def draw(model, scene, outputs, effects, output, depth):
     constraint correctors as block diagrams, what the scene leaves out in grey; each instance
     of a component is a cluster."""
     from . import draw as drawing
-    _not_an_input(model, None if output == "-" else output)
-    fmt = "dot" if output in (None, "-") else drawing.format_of(output)
+    files = _Files(model, [("-o", output)], stdout=("-o", "the drawing"))
+    output = output or outfile.STDOUT
+    fmt = "dot" if outfile.is_stdout(output) else drawing.format_of(output)
     if fmt != "dot" and not drawing.have_graphviz():
         click.echo(f"error: {drawing.GRAPHVIZ_HELP}", err=True)
         sys.exit(1)
     compiled = _build(model, scene, program=False, outputs=outputs, effects=effects)
+    files.read(compiled.files)
     text = drawing.draw_dot(compiled, depth)
     if fmt == "dot":
-        if output in (None, "-"):
-            _echo(text)
-        else:
-            _write_atomic(output, text)
+        _write_atomic(output, text)
         return
     try:
         data = drawing.render(text, fmt)
@@ -1164,7 +1345,7 @@ def _steady_at(ctx, param, value):
 
 def _matrices_file(ctx, param, value):
     """-o of linearize: FILE.json, .npz or .csv where a file can be written."""
-    if value is not None:
+    if value is not None and not outfile.is_stdout(value):
         try:
             linear.check_format(value)
         except ValueError as error:
@@ -1211,9 +1392,13 @@ def linearize(model, scene, outputs, effects, algebra, at, inputs, params, outpu
     """Linearise: A, B, C, D from the Jacobians the compiler derives; constrained models in
     independent coordinates, the correctors' artificial modes apart.  Prints the eigenvalues
     with their natural frequencies and damping ratios."""
-    _not_an_input(model, output, bode_file)
+    binary = output is not None and not outfile.is_stdout(output) and \
+        linear.check_format(output) == "npz"
+    files = _Files(model, [("-o", output), ("--bode", bode_file)],
+                   binary=("--bode",) + (("-o",) if binary else ()))
     names = None if inputs is None else _names(inputs)
     analysed = _analysed(analysis.build, model, scene, outputs, effects, names, algebra)
+    files.read(analysed.compiled.files)
     if bode_file and not analysed.inputs:
         raise click.UsageError("--bode needs an input: the model declares none; name a "
                                "parameter with --inputs")
@@ -1224,16 +1409,15 @@ def linearize(model, scene, outputs, effects, algebra, at, inputs, params, outpu
                       lambda T: linear.run_to(evaluator, given, T, max_steps))
     result = _analysed(linear.linearization, evaluator, *point)
     if output:
-        _write_atomic(output, linear.render(result, linear.check_format(output)))
+        fmt = "json" if outfile.is_stdout(output) else linear.check_format(output)
+        _write_atomic(output, linear.render(result, fmt))
     if bode_file:
-        from . import plot
-        with outfile.Partial(bode_file) as part:
-            try:
-                linear.bode(result, part.file, plot.check_format(bode_file))
-            except OSError as error:
-                _fail(str(part.failed(error)))
-            part.commit()
-    _echo(linear.modes_table(result))
+        try:
+            _write_with(bode_file, lambda file: linear.bode(result, file,
+                                                            _plot_format(bode_file)))
+        except outfile.OutputError as error:
+            _fail(str(error))
+    _echo(linear.modes_table(result), err=bool(files.to_stdout))
 
 
 @main.command()
@@ -1252,8 +1436,9 @@ def steady(model, scene, effects, algebra, params, json_file, at):
     """An equilibrium by Newton's method on the right side, with the exact Jacobian: one
     line per state, multiplier and constraint residual, then the residual max |dx/dt|; no
     equilibrium found: exit 1 and why."""
-    _not_an_input(model, json_file)
+    files = _Files(model, [("--json", json_file)])
     analysed = _analysed(analysis.build, model, scene, None, effects, None, algebra)
+    files.read(analysed.compiled.files)
     _warn(analysed.compiled)
     given = _analysis_params(model, scene, params, analysed, None, effects)
     evaluator = _analysed(analysis.Evaluator, analysed, given)
@@ -1268,7 +1453,7 @@ def steady(model, scene, effects, algebra, params, json_file, at):
                    "the one nearest the initial state", err=True)
     if json_file:
         _write_atomic(json_file, linear.json_lines(found.as_dict()))
-    _echo(found.lines())
+    _echo(found.lines(), err=bool(files.to_stdout))
 
 
 # ---------------------------------------------------------------- estimation
@@ -1317,7 +1502,8 @@ def fit(model, scene, effects, algebra, data, varies, params, backend, solver, r
     """Estimate parameters from measured data by Levenberg-Marquardt on the residuals, with
     their Jacobian from the forward sensitivities the compiler derives: estimates, standard
     errors, 95 % confidence intervals, correlations."""
-    _not_an_input(model, output, plot_file, others=[("the data file", data)])
+    files = _Files(model, [("-o", output), ("--plot", plot_file)], [("the data file", data)],
+                   binary=("--plot",))
     vary = [_estimation(estimate.parse_vary, v) for v in varies]
     measured = _estimation(estimate.read_data, data)
     fixed = {}
@@ -1331,20 +1517,18 @@ def fit(model, scene, effects, algebra, data, varies, params, backend, solver, r
             raise click.UsageError(f"-p expects NAME=VALUE with a finite number, got '{item}'")
     backend = _backend(backend)
     result = _estimation(estimate.fit, model, measured, vary, scene, fixed, backend, algebra,
-                         max_iter, effects, **{k: v for k, v in (("solver", solver),
-                                                                 ("rtol", rtol), ("atol", atol))
-                                               if v is not None})
+                         max_iter, effects, on_build=lambda c: files.read(c.files),
+                         **{k: v for k, v in (("solver", solver), ("rtol", rtol),
+                                              ("atol", atol)) if v is not None})
     if output:
         _write_atomic(output, result.json())
     if plot_file:
-        from . import plot
-        with outfile.Partial(plot_file) as part:
-            try:
-                estimate.plot_residuals(result, part.file, plot.check_format(plot_file))
-            except OSError as error:
-                _fail(str(part.failed(error)))
-            part.commit()
-    _echo(result.table())
+        try:
+            _write_with(plot_file, lambda file: estimate.plot_residuals(
+                result, file, _plot_format(plot_file)))
+        except outfile.OutputError as error:
+            _fail(str(error))
+    _echo(result.table(), err=bool(files.to_stdout))
     if not result.converged:
         click.echo(f"warning: the fit did not converge ({result.stopped})", err=True)
         sys.exit(1)

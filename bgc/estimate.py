@@ -495,14 +495,16 @@ def levenberg_marquardt(f, x0, lo, hi, max_iter=100, xtol=1e-10, ftol=1e-10, gto
 
 
 def fit(model, data, vary, scene=None, params=None, backend="c", algebra="auto",
-        max_iter=100, effects=None, **options) -> Fit:
+        max_iter=100, effects=None, on_build=None, **options) -> Fit:
     """Estimate the parameters `vary` (names, or "k=LO..HI" texts, or Vary) of model's scene
     from the measured CSV `data` (a path, or a Data): its columns are matched to the model's
     variables by name (the scene's outputs are replaced by them), the time column is `t`,
     and the samples lie on a uniform grid from the scene's start.  params: fixed overrides;
     effects: the effects in, replacing the scene's; options: solver, rtol, atol, max_steps,
-    ... as bgc.simulate's (t_end and dt come from the data).  Raises api's errors,
-    FitArgumentError, FitError."""
+    ... as bgc.simulate's (t_end and dt come from the data); on_build(compiled), if given,
+    is called once the model is compiled, before any run (the command line checks its
+    outputs against the files the model read).  Raises api's errors, FitArgumentError,
+    FitError."""
     data = data if isinstance(data, Data) else read_data(data)
     vary = [v if isinstance(v, Vary) else parse_vary(v) for v in vary]
     if not vary:
@@ -517,6 +519,8 @@ def fit(model, data, vary, scene=None, params=None, backend="c", algebra="auto",
                      options.get("project_initial", False),
                      options.get("allow_inconsistent", False),
                      option_names=("--data columns", "--effects", "--scene"))
+    if on_build is not None:
+        on_build(compiled)
     program = compiled.program
     N, P = data.y.size, len(names)
     if N <= P:

@@ -10,6 +10,8 @@ the same inputs give the same bytes everywhere.  Meant for the analysis commands
 """
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 EPS = np.finfo(float).eps
@@ -23,10 +25,26 @@ def total(x, axis=0):
     return np.take(np.cumsum(x, axis=axis), -1, axis=axis)
 
 
+BIG, SMALL = 2.0 ** 500, 2.0 ** -500  # beyond these, squares over- or underflow
+
+
+def _exponent(x) -> int:
+    """k such that x * 2^-k has its largest magnitude in [0.5, 1), for an x whose squares
+    would over- or underflow (entries beyond 2^±500); else 0.  A power of two scales
+    exactly, so an x of ordinary size is computed as it is, to the bit."""
+    m = float(np.max(np.abs(x), initial=0.0))
+    if not math.isfinite(m) or m == 0.0 or SMALL <= m <= BIG:
+        return 0
+    return math.frexp(m)[1]
+
+
 def norm(x) -> float:
-    """The Euclidean norm of a vector, its squares added in sequence."""
+    """The Euclidean norm of a vector, its squares added in sequence (scaled by a power of
+    two where they would overflow: the norm of [1e200] is 1e200)."""
     x = np.asarray(x, dtype=float).ravel()
-    return float(np.sqrt(total(x * x)))
+    k = _exponent(x)
+    x = np.ldexp(x, -k)
+    return math.ldexp(float(np.sqrt(total(x * x))), k)
 
 
 def _reflect(a, k, pivot, perm):
@@ -99,9 +117,15 @@ def lstsq(a, b):
 
     a P = Q [R11 R12; 0 0] by pivoted QR; where the rank r is below the columns, the r rows
     [R11 R12] are factored again, [R11 R12]^T = Q2 R2, and x = P Q2 R2^-T (Q^T b)[:r] is the
-    smallest of the solutions (LAPACK's complete orthogonal factorisation, in another order)."""
+    smallest of the solutions (LAPACK's complete orthogonal factorisation, in another order).
+    a and b are scaled by powers of two where their squares would overflow (a Jacobian of
+    1e200), which leaves x as it is."""
     a = np.array(a, dtype=float)
     c = np.array(b, dtype=float).ravel()
+    ka, kb = _exponent(a), _exponent(c)
+    if ka or kb:
+        x, rank_ = lstsq(np.ldexp(a, -ka), np.ldexp(c, -kb))
+        return np.ldexp(x, kb - ka), rank_
     m, n = a.shape
     rank, _, perm = _qr(a, c, pivot=True)
     x = np.zeros(n)
@@ -125,4 +149,5 @@ def rank(a) -> int:
     a = np.array(a, dtype=float)
     if a.size == 0:
         return 0
+    a = np.ldexp(a, -_exponent(a))
     return _qr(a, np.zeros(a.shape[0]), pivot=True)[0]

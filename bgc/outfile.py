@@ -1,9 +1,12 @@
 """Files the command line writes, and the one place that decides how each is written.
 
-A target (`-o`, `--plot`, a table, a trajectory) is checked before any work (check_target):
-not a directory, in a directory that exists and can be written, not read-only, and not a file
-the same command reads (the model, a reference: the same file under any name, through a
-symbolic or a hard link).  Then, by what the path names (destination):
+An output named `-` (STDOUT) is standard output, for every output option; the command line
+writes it (bgc.cli), nothing here checks or replaces it.  Any other target (`-o`, `--plot`, a
+table, a trajectory) is checked before any work (check_target): not a directory, in a
+directory that exists and can be written, not read-only, and not a file the same command
+reads (the model, a library or a table it reads, a reference: the same file under any name,
+through a symbolic or a hard link: compared by device and inode).  Then, by what the path
+names (destination):
 
 - nothing yet, or a regular file: the data goes to a hidden file beside it (created with the
   user's umask, like any new file) renamed into place at the end, so that a reader never sees
@@ -39,6 +42,41 @@ class OutputIsInput(OutputError):
     command line's form: bgc exits 1)."""
 
 
+STDOUT = "-"  # an output of this name is standard output (`./-` names a file)
+
+
+def is_stdout(path) -> bool:
+    """Whether an output option's value names standard output."""
+    return path is not None and os.fspath(path) == STDOUT
+
+
+def identity(path) -> tuple[int, int] | None:
+    """(device, inode) of the file path leads to (through symbolic links), None if none."""
+    info = _stat(path)
+    return None if info is None else (info.st_dev, info.st_ino)
+
+
+def stdout_identity() -> tuple[int, int] | None:
+    """(device, inode) of the regular file standard output is (`> out.csv`), else None."""
+    try:
+        info = os.fstat(1)
+    except OSError:
+        return None
+    return (info.st_dev, info.st_ino) if stat.S_ISREG(info.st_mode) else None
+
+
+def same_target(a, b) -> bool:
+    """Whether two output paths name one file: the same device and inode, or, where one is
+    not there yet, the same path once symbolic links are followed."""
+    first, second = identity(a), identity(b)
+    if first is not None and second is not None:
+        return first == second
+    try:
+        return os.path.realpath(a) == os.path.realpath(b)
+    except (OSError, ValueError):
+        return os.path.abspath(a) == os.path.abspath(b)
+
+
 def reason(error: OSError) -> str:
     """An OSError as people read it: `No space left on device`."""
     return error.strerror or str(error)
@@ -66,9 +104,12 @@ def streamed(mode: int) -> bool:
 
 
 def check_target(path: str | os.PathLike, inputs=()) -> Path:
-    """The path as a Path, if a file can be written there; else OutputError.  inputs: the
-    files the command reads, as (what, path) pairs (("the model", "m.bg")); an output that is
-    one of them, under any name, is an OutputIsInput."""
+    """The path as a Path, if a file can be written there (`-`, standard output, is not
+    looked at); else OutputError.  inputs: the files the command reads, as (what, path) pairs
+    (("the model file", "m.bg")); an output that is one of them, under any name, is an
+    OutputIsInput."""
+    if is_stdout(path):
+        return Path(path)
     try:
         return _check_target(path, inputs)
     except OutputError:
@@ -82,8 +123,7 @@ def _check_target(path, inputs) -> Path:
     info = _stat(target)
     if info is not None:
         for what, name in inputs:
-            other = _stat(name)
-            if other is not None and (other.st_dev, other.st_ino) == (info.st_dev, info.st_ino):
+            if identity(name) == (info.st_dev, info.st_ino):
                 same = "" if os.path.abspath(name) == os.path.abspath(path) else f" '{name}'"
                 raise OutputIsInput(f"cannot write '{path}': it is {what}{same}, which this "
                                     "command reads; name another output file")

@@ -26,9 +26,11 @@ import itertools
 import math
 import os
 import re
+import signal
 import subprocess
 import sys
 import tempfile
+import threading
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -395,18 +397,83 @@ def _batch_key(lines, trajectories) -> str:
 
 def local_client(workers: int | None):
     """A Client of a new LocalCluster of `workers` processes (default: the cores), one
-    thread each, without a dashboard.  Close both (client.close(); client.cluster.close())."""
+    thread each, without a dashboard.  Close both (client.close(); client.cluster.close()).
+    The workers ignore SIGINT (_workers_ignore_sigint): a Ctrl-C is bgc's to handle."""
     import logging
 
     from distributed import Client, LocalCluster
+    _workers_ignore_sigint()
     cluster = LocalCluster(n_workers=workers or os.cpu_count() or 1, threads_per_worker=1,
                            processes=True, dashboard_address=None,
                            silence_logs=logging.ERROR)
     return Client(cluster)
 
 
+def _workers_ignore_sigint() -> None:
+    """The local cluster's worker processes started with SIGINT ignored, so that a Ctrl-C,
+    which the terminal sends to every process of the job, stops bgc alone (which then closes
+    the cluster) rather than each worker in the middle of its start or of a task, each with
+    a traceback.  The workers are forked by multiprocessing's fork server, which ignores
+    SIGINT from its start (bgc.forkserver_init, its first preload) and passes that on to each
+    process it forks, its stderr on the null device (a worker's errors reach bgc through
+    Dask; what one stopped halfway through its start prints does not).  bgc's own SIGINT is
+    never ignored, so no Ctrl-C is lost; without a fork server the workers start as Dask
+    starts them."""
+    import multiprocessing
+    if "forkserver" not in multiprocessing.get_all_start_methods():
+        return
+    import dask
+    from distributed.utils import get_mp_context
+
+    from .forkserver_init import IGNORE_SIGINT
+    dask.config.set({"distributed.worker.multiprocessing-method": "forkserver"})
+    get_mp_context().set_forkserver_preload(["bgc.forkserver_init", "distributed"])
+    from multiprocessing import forkserver
+    null, stderr = os.open(os.devnull, os.O_WRONLY), os.dup(2)
+    os.environ[IGNORE_SIGINT] = "1"
+    try:
+        os.dup2(null, 2)
+        forkserver.ensure_running()
+    finally:
+        os.dup2(stderr, 2)
+        os.close(stderr)
+        os.close(null)
+        os.environ.pop(IGNORE_SIGINT, None)
+
+
 NO_DASK = ("note: dask.distributed is not installed (pip install 'bgc[sweep]'); running the "
            "batches serially in this process")
+
+
+@contextlib.contextmanager
+def signals_held():
+    """SIGINT and SIGTERM held back while Dask starts or stops a client or cluster, then
+    raised again, to whatever handles them, once it is done: one that interrupts Dask's start
+    leaves the cluster half made, and its clean-up fails (`AssertionError: Status.init`).  A
+    second one meanwhile is not held (a start that hangs can still be stopped)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    got: list[int] = []
+    saved = {}
+
+    def hold(sig, frame):
+        if got:
+            for number, handler in saved.items():
+                signal.signal(number, handler)
+            signal.raise_signal(sig)
+        got.append(sig)
+
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        if signal.getsignal(sig) not in (signal.SIG_IGN, None):
+            saved[sig] = signal.signal(sig, hold)
+    try:
+        yield
+    finally:
+        for sig, handler in saved.items():
+            signal.signal(sig, handler)
+        if got:
+            signal.raise_signal(got[0])
 
 
 @contextlib.contextmanager
@@ -423,25 +490,63 @@ def dask_client(scheduler: str | None = None, workers: int | None = None, note=N
         note(NO_DASK)
         yield None
         return
-    if scheduler:
-        from distributed import Client
-        try:
-            client = Client(scheduler, timeout=30)
-        except OSError as error:
-            raise SchedulerUnreachable(f"cannot reach the scheduler {scheduler}: {error}") \
-                from None
-        try:
-            yield client
-        finally:
-            client.close()
-        return
-    client = local_client(workers)
+    client = None
     try:
+        if scheduler:
+            from distributed import Client
+            try:
+                with signals_held():
+                    client = Client(scheduler, timeout=30)
+            except OSError as error:
+                raise SchedulerUnreachable(f"cannot reach the scheduler {scheduler}: "
+                                           f"{error}") from None
+        else:
+            with signals_held():  # (an interrupt meanwhile comes once client is set)
+                client = local_client(workers)
         yield client
-    finally:
-        cluster = client.cluster
-        client.close()
-        cluster.close()
+    except BaseException:
+        if client is not None:
+            _close(client, scheduler is None, stopped=True)
+        raise
+    _close(client, scheduler is None, stopped=False)
+
+
+def _close(client, cluster: bool, stopped: bool) -> None:
+    """Closes the client (and its cluster, if bgc made it), signals held meanwhile.  stopped:
+    the sweep stopped halfway (interrupted, a batch failed): Dask's complaints about work
+    cut short (a task's data lost, a worker closed in its start) are not shown, nor is a
+    close that fails (bgc is leaving: the workers end with it)."""
+    import logging
+    loggers = [logging.getLogger(name) for name in ("distributed", "asyncio", "tornado")]
+    levels = [log.level for log in loggers]
+    with signals_held():
+        if stopped:
+            for log in loggers:
+                log.setLevel(logging.CRITICAL + 1)
+        try:
+            made = client.cluster if cluster else None
+            client.close()
+            if made is not None:
+                made.close()
+        except Exception:
+            if not stopped:
+                raise
+            _leave_unclosed()
+        finally:
+            for log, level in zip(loggers, levels):
+                log.setLevel(level)
+
+
+def _leave_unclosed() -> None:
+    """Dask's own attempt, when bgc exits, to close a cluster whose close failed (a worker
+    still in its start: `AssertionError: Status.init`) is not made: it would fail again, with
+    a traceback; the workers end with bgc (they watch it)."""
+    import atexit
+    try:
+        from distributed.deploy import spec
+        atexit.unregister(spec.close_clusters)
+    except (ImportError, AttributeError):
+        pass
 
 
 def have_dask() -> bool:

@@ -47,10 +47,12 @@ def have_cc() -> bool:
 
 
 class CliResult:
-    """What a command line gave: returncode, stdout, stderr (as subprocess.run's result)."""
+    """What a command line gave: returncode, stdout, stderr (as subprocess.run's result), and
+    stdout's bytes (a PNG or an FMU written to standard output)."""
 
-    def __init__(self, returncode, stdout, stderr):
+    def __init__(self, returncode, stdout, stderr, stdout_bytes=b""):
         self.returncode, self.stdout, self.stderr = returncode, stdout, stderr
+        self.stdout_bytes = stdout_bytes
 
 
 def run_bgc(*args, cwd=None, env=None, umask=None) -> CliResult:
@@ -70,4 +72,4 @@ def run_bgc(*args, cwd=None, env=None, umask=None) -> CliResult:
         os.umask(old_mask)
     if result.exception and not isinstance(result.exception, SystemExit):
         raise result.exception
-    return CliResult(result.exit_code, result.stdout, result.stderr)
+    return CliResult(result.exit_code, result.stdout, result.stderr, result.stdout_bytes)

@@ -155,6 +155,233 @@ def test_an_output_that_is_the_model_is_refused_under_any_name(tmp_path):
                                                           "m.bg", "sub"]
 
 
+READS = """model reads "a lag driven by a table and an input, beside a library it imports"
+import parts
+input u = 0
+parameter k = 1
+signal v = table(curve.csv, t)
+signal z = integral(-k*z + v + u, init = 1)
+scene s { outputs z; time 0 .. 1 every 0.5 }
+"""
+PARTS = """library parts "one component, unused: the import alone reads the file"
+component spring(k = 1) "a spring at port p" {
+  port p
+  x : C(1/k)
+  p -> x
+}
+"""
+
+
+@pytest.fixture
+def reads(tmp_path):
+    """A model and every kind of file a command reads: a library it imports, a table, an
+    --input CSV, a --data CSV, a --reference CSV; links to them, symbolic and hard, some of
+    them inside directories an output directory names (accuracy's -o, --trajectories)."""
+    files = {"reads.bg": READS, "parts.bg": PARTS, "curve.csv": "t,v\n0,1\n0.5,2\n1,0\n",
+             "inp.csv": "t,u\n0,0\n1,1\n", "data.csv": "t,z\n0,1\n0.5,1.1\n1,1.4\n",
+             "ref.csv": "t,z\n0,1\n0.5,1.1\n1,1.4\n"}
+    for name, text in files.items():
+        (tmp_path / name).write_text(text)
+    for sub in ("acc", "acc2", "traj"):
+        (tmp_path / sub).mkdir()
+    for link, target in (("parts-link.bg", "parts.bg"), ("curve-link.csv", "curve.csv"),
+                         ("inp-link.csv", "inp.csv"), ("lib.dot", "parts.bg")):
+        (tmp_path / link).symlink_to(target)
+    for link, target in (("parts-hard.bg", "parts.bg"), ("curve-hard.csv", "curve.csv"),
+                         ("data-hard.json", "data.csv"), ("acc/accuracy.csv", "ref.csv"),
+                         ("acc2/accuracy.csv", "curve.csv"),
+                         ("traj/run-000001.csv", "curve.csv")):
+        os.link(tmp_path / target, tmp_path / link)
+    return tmp_path
+
+
+def tree(directory: Path) -> dict:
+    """Every path under directory: its kind, device and inode, and its bytes or link."""
+    out = {}
+    for p in sorted(directory.rglob("*")):
+        info = os.lstat(p)
+        body = os.readlink(p) if p.is_symlink() else p.read_bytes() if p.is_file() else None
+        out[str(p.relative_to(directory))] = (stat.S_IFMT(info.st_mode), info.st_dev,
+                                              info.st_ino, body)
+    return out
+
+
+LAG = ["reads.bg", "-s", "s"]
+INPUT = [*LAG, "--input", "inp.csv"]
+SWEEP = ["sweep", *LAG, "--grid", "k=1,2", "--metric", "final:z", "--workers", "0",
+         "--backend", "python", "--no-timing"]
+ACCURACY = ["accuracy", *LAG, "--solvers", "rk4", "--steps", "0.05", "--repeats", "1",
+            "--no-plot"]
+LIBRARY, TABLE = "the imported library", "the table file"
+# (command line, the output, what it is, the name the command reads it by if another)
+AIMED = [
+    (["compile", "reads.bg", "-o", "parts.bg"], "parts.bg", LIBRARY, None),
+    (["compile", "reads.bg", "-o", "parts-link.bg"], "parts-link.bg", LIBRARY, "parts.bg"),
+    (["compile", "reads.bg", "-o", "parts-hard.bg"], "parts-hard.bg", LIBRARY, "parts.bg"),
+    (["compile", "reads.bg", "-o", "curve.csv"], "curve.csv", TABLE, None),
+    (["simulate", *INPUT, "-o", "inp.csv"], "inp.csv", "the --input file", None),
+    (["simulate", *INPUT, "-o", "out.csv", "--events", "inp-link.csv"], "inp-link.csv",
+     "the --input file", "inp.csv"),
+    (["simulate", *LAG, "-o", "curve-hard.csv"], "curve-hard.csv", TABLE, "curve.csv"),
+    (["sweep", *SWEEP[1:], "-o", "curve-link.csv"], "curve-link.csv", TABLE, "curve.csv"),
+    (["sweep", *SWEEP[1:], "--trajectories", "traj"], "traj/run-000001.csv", TABLE,
+     "curve.csv"),
+    (["linearize", *LAG, "-o", "curve-hard.csv"], "curve-hard.csv", TABLE, "curve.csv"),
+    (["steady", *LAG, "--json", "parts-link.bg"], "parts-link.bg", LIBRARY, "parts.bg"),
+    (["draw", "reads.bg", "-o", "lib.dot"], "lib.dot", LIBRARY, "parts.bg"),
+    (["fit", *LAG, "--data", "data.csv", "--vary", "k", "--backend", "python", "-o",
+      "data-hard.json"], "data-hard.json", "the data file", "data.csv"),
+    ([*ACCURACY, "--reference", "ref.csv", "-o", "acc"], "acc/accuracy.csv", "the reference",
+     "ref.csv"),
+    ([*ACCURACY, "-o", "acc2"], "acc2/accuracy.csv", TABLE, "curve.csv"),
+]
+
+
+@pytest.mark.parametrize("argv, target, what, name", AIMED,
+                         ids=[f"{a[0]}-{t}" for a, t, _, _ in AIMED])
+def test_an_output_that_is_a_file_the_command_reads_is_refused(reads, argv, target, what,
+                                                                name):
+    """Not only the model: a library it imports, a table it reads, --input, --data and
+    --reference, under their names and through symbolic and hard links (the libraries and
+    tables are known once the model is parsed: refused all the same before any output is
+    opened).  The directory keeps every byte, link and inode it had."""
+    before = tree(reads)
+    done = run_bgc(*argv, cwd=reads)
+    assert (done.returncode, done.stdout) == (1, ""), done.stderr
+    again = f" '{name}'" if name else ""
+    assert done.stderr.splitlines()[-1] == (
+        f"bgc: error: cannot write '{target}': it is {what}{again}, which this command reads; "
+        "name another output file")
+    assert tree(reads) == before
+
+
+def test_standard_output_that_is_a_file_the_command_reads_is_refused(reads):
+    """`bgc compile reads.bg >> parts.bg`: the library it imports is its standard output."""
+    before = tree(reads)
+    with open(reads / "parts.bg", "ab") as out:
+        done = subprocess.run([sys.executable, "-m", "bgc", "compile", "reads.bg"], cwd=reads,
+                              stdout=out, stderr=subprocess.PIPE, text=True)
+    assert (done.returncode, done.stderr) == (
+        1, "bgc: error: cannot write standard output: it is the imported library 'parts.bg', "
+           "which this command reads; name another output file\n")
+    assert tree(reads) == before
+
+
+have_matplotlib = importlib.util.find_spec("matplotlib") is not None
+# (command line, its output option, the file it writes otherwise, what goes to stderr
+# instead of stdout when the output takes it: the command's report)
+DASHED = [
+    (["compile", "reads.bg"], "-o", "out.c", False),
+    (["simulate", *INPUT], "-o", "out.csv", False),
+    (["simulate", *INPUT, "-o", "run.csv"], "--events", "events.csv", False),
+    (SWEEP, "-o", "table.csv", False),
+    (["draw", "reads.bg"], "-o", "graph.dot", False),
+    (["steady", *LAG, "--at", "t=1"], "--json", "rest.json", True),  # (the table's last row)
+    (["linearize", *LAG], "-o", "modes.json", True),
+    pytest.param(["simulate", *INPUT, "-o", "run.csv"], "--plot", "run.png", False,
+                 marks=pytest.mark.skipif(not have_matplotlib, reason="needs matplotlib")),
+]
+
+
+@pytest.mark.parametrize("argv, option, name, report", DASHED,
+                         ids=["compile", "simulate", "events", "sweep", "draw", "steady",
+                              "linearize", "plot"])
+def test_a_dash_is_standard_output_for_every_output_option(reads, argv, option, name,
+                                                           report):
+    """`-o -`, `--events -`, `--json -`, `--plot -`: the bytes the same command writes into
+    a file, on stdout (a PNG too: stdout is not a terminal), and no file named `-`; the report
+    a command prints on stdout otherwise goes to stderr."""
+    named = run_bgc(*argv, option, name, cwd=reads)
+    assert named.returncode == 0, named.stderr
+    (reads / name).rename(reads / f"kept-{name}")
+    dashed = run_bgc(*argv, option, "-", cwd=reads)
+    assert dashed.returncode == 0, dashed.stderr
+    assert dashed.stdout_bytes == (reads / f"kept-{name}").read_bytes() != b""
+    assert not (reads / "-").exists() and not (reads / name).exists()
+    if report:
+        assert named.stdout and named.stdout in dashed.stderr
+
+
+@pytest.mark.parametrize("argv", [
+    ["simulate", *INPUT, "-o", "-", "--events", "-"],
+    ["simulate", *INPUT, "--events", "-"],  # (the CSV is on stdout without -o)
+    ["simulate", *INPUT, "--plot", "-"],
+    ["linearize", *LAG, "--inputs", "k", "-o", "-", "--bode", "-"],
+    ["fit", *LAG, "--data", "data.csv", "--vary", "k", "-o", "-", "--plot", "-"],
+    [*ACCURACY, "-o", "-"],
+    [*SWEEP, "--trajectories", "-"],
+], ids=["csv-events", "stdout-events", "stdout-plot", "matrices-bode", "fit-plot",
+        "accuracy-dir", "trajectories-dir"])
+def test_standard_output_taken_twice_or_for_a_directory_is_a_usage_error(reads, argv):
+    before = tree(reads)
+    done = run_bgc(*argv, cwd=reads)
+    assert (done.returncode, done.stdout) == (2, ""), done.stderr
+    assert "standard output" in done.stderr.splitlines()[-1]
+    assert tree(reads) == before
+
+
+@pytest.mark.skipif(not hasattr(os, "openpty"), reason="needs a pseudo-terminal")
+def test_binary_data_is_not_written_to_a_terminal(reads):
+    """`--plot -` and `--target fmu -o -` with a terminal on stdout (as gzip and tar refuse
+    it): a usage error before any work, nothing written."""
+    before = tree(reads)
+    for argv in (["simulate", *INPUT, "-o", "run.csv", "--plot", "-"],
+                 ["compile", "reads.bg", "--target", "fmu", "-o", "-"]):
+        master, slave = os.openpty()
+        done = subprocess.run([sys.executable, "-m", "bgc", *argv], cwd=reads, stdout=slave,
+                              stderr=subprocess.PIPE, text=True)
+        os.close(slave)
+        os.close(master)
+        assert done.returncode == 2, done.stderr
+        assert done.stderr.splitlines()[-1].endswith(
+            "-: binary data is not written to a terminal; redirect standard output (> FILE, "
+            "| ...) or name a file")
+    assert tree(reads) == before
+
+
+@pytest.fixture
+def read_only(tmp_path):
+    """A directory that cannot be written: chmod 555, or for root (whom that does not stop)
+    a read-only tmpfs, unmounted afterwards."""
+    where = tmp_path / "ro"
+    where.mkdir()
+    if os.geteuid() != 0:
+        where.chmod(0o555)
+        yield where
+        where.chmod(0o755)
+        return
+    done = subprocess.run(["mount", "-t", "tmpfs", "-o", "ro,size=64k", "tmpfs", str(where)],
+                          capture_output=True, text=True) if shutil.which("mount") else None
+    if done is None or done.returncode != 0:
+        pytest.skip("a read-only directory for root needs a tmpfs mount")
+    try:
+        yield where
+    finally:
+        subprocess.run(["umount", "-l", str(where)], capture_output=True)
+
+
+def test_accuracy_into_a_read_only_directory_fails_before_the_work(reads, read_only):
+    """Its files' hidden temporaries are made before any run: with a reference the work
+    would refuse (its first column is not t), the directory's refusal comes first, and no
+    table is printed."""
+    (reads / "ro-ref.csv").write_text("not numbers\n")
+    for target, status, said in ((read_only, 2, "is not writable"),
+                                 (read_only / "acc", 1, "cannot make the directory")):
+        done = run_bgc(*ACCURACY, "--reference", "ro-ref.csv", "-o", target, cwd=reads)
+        assert (done.returncode, done.stdout) == (status, ""), done.stderr
+        assert said in done.stderr and "ro-ref.csv" not in done.stderr
+    assert list(read_only.iterdir()) == []
+
+
+def test_accuracy_that_fails_leaves_no_directory_it_made(reads):
+    before = tree(reads)
+    (reads / "ref-bad.csv").write_text("not numbers\n")
+    done = run_bgc(*ACCURACY, "--reference", "ref-bad.csv", "-o", "new/acc", cwd=reads)
+    assert done.returncode == 1 and "error: ref-bad.csv: " in done.stderr
+    (reads / "ref-bad.csv").unlink()
+    assert tree(reads) == before
+
+
 def test_a_device_is_written_into_and_never_replaced(tmp_path, warm):
     """/dev/null itself is only looked at; the writes go to a private copy of it (mknod, as
     root), which must stay a character device."""
@@ -500,6 +727,121 @@ def test_a_killed_program_writing_to_stdout_leaves_whole_rows_in_a_file_there(tm
     t = err[-1].split("t = ")[1]
     assert code == 1 and float(t) == data[-1][0]
     assert err[-1] == f"bgc: error: the generated program was killed by SIGKILL at t = {t}"
+
+
+SWEPT = DECAY.replace("model decay", "model decay\nparameter k = 1").replace("-z", "-k*z")
+
+
+def _interrupt_when(proc, ready, sig, group=False) -> list[int]:
+    """Sends sig to bgc (to its process group, as a terminal's Ctrl-C does, if group) once
+    ready(descendants) holds; every process it started by then, and until it ends."""
+    seen: set[int] = set()
+    deadline = time.monotonic() + 120
+    while time.monotonic() < deadline:
+        assert proc.poll() is None, proc.communicate()
+        found = _descendants(proc.pid)
+        seen.update(found)
+        if ready(found):
+            break
+        time.sleep(0.02)
+    else:
+        raise AssertionError("never ready to be interrupted")
+    (os.killpg if group else os.kill)(proc.pid, sig)
+    while proc.poll() is None:
+        seen.update(_descendants(proc.pid))
+        time.sleep(0.02)
+    return sorted(seen)
+
+
+def _gone(started: list[int]) -> list:
+    deadline = time.monotonic() + 20
+    while any(map(running, started)) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    left = [(p, _cmdline(p)) for p in started if running(p)]
+    for p, _ in left:
+        os.kill(p, signal.SIGKILL)
+    return left
+
+
+def _batch_runs(found) -> bool:
+    return any("--batch" in _cmdline(p) for p in found)
+
+
+def _catches_sigint(pid: int) -> bool:
+    try:
+        caught = [line for line in Path(f"/proc/{pid}/status").read_text().splitlines()
+                  if line.startswith("SigCgt:")]
+    except OSError:
+        return False
+    return bool(caught) and bool(int(caught[0].split()[1], 16) & (1 << (signal.SIGINT - 1)))
+
+
+def _batch_stops_on_sigint(found) -> bool:
+    """A batch's program runs and has its SIGINT handler (before, it ignores SIGINT as the
+    worker that started it does, and ends only with the worker)."""
+    return any("--batch" in _cmdline(p) and _catches_sigint(p) for p in found)
+
+
+@needs_proc
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM], ids=["INT", "TERM"])
+def test_an_interrupted_sweep_exits_128_plus_the_signal_and_writes_nothing(tmp_path, warm,
+                                                                          sig):
+    """A serial sweep (--workers 0) stopped while a batch's program runs: one line, exit 130
+    or 143 (not click's `Aborted!` and 1, nor a death by the signal), no table, no
+    trajectory, the program gone."""
+    (tmp_path / "m.bg").write_text(SWEPT)
+    (tmp_path / "traj").mkdir()
+    proc = subprocess.Popen([sys.executable, "-m", "bgc", "sweep", "m.bg", "-s", "s", "--grid",
+                             "k=1,2", "--metric", "final:z", "--workers", "0", "--backend",
+                             "python", "--trajectories", "traj", "-o", "table.csv"],
+                            cwd=tmp_path, env=warm[1], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
+    started = _interrupt_when(proc, _batch_runs, sig)
+    code, err = finish(proc)
+    assert (code, err) == (128 + sig, [f"bgc: interrupted by {sig.name}"])
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["m.bg", "traj"]
+    assert list((tmp_path / "traj").iterdir()) == []
+    assert _gone(started) == []
+
+
+@needs_proc
+@pytest.mark.skipif(not _have_dask(), reason="needs dask.distributed")
+@pytest.mark.parametrize("when", ["start", "batch"])
+def test_ctrl_c_of_a_sweep_on_dask_is_one_line_and_exit_130(tmp_path, warm, when):
+    """SIGINT to the whole process group, as a terminal's Ctrl-C sends it: while the local
+    cluster starts (its first process just made: Dask's clean-up of a half-made cluster was
+    `AssertionError: Status.init`), and while a batch runs.  Not a worker's traceback either:
+    they ignore SIGINT, bgc closes them."""
+    (tmp_path / "m.bg").write_text(SWEPT)
+    proc = subprocess.Popen([sys.executable, "-m", "bgc", "sweep", "m.bg", "-s", "s", "--grid",
+                             "k=1,2", "--metric", "final:z", "--workers", "1", "--backend",
+                             "python", "-o", "table.csv"], cwd=tmp_path, env=warm[1],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            start_new_session=True)
+    started = _interrupt_when(proc, bool if when == "start" else _batch_stops_on_sigint,
+                              signal.SIGINT, group=True)
+    code, err = finish(proc)
+    assert (code, err) == (130, ["bgc: interrupted by SIGINT"])
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["m.bg"]
+    assert _gone(started) == []
+
+
+@needs_proc
+def test_an_interrupted_accuracy_leaves_no_directory_and_no_program(tmp_path, warm):
+    """Its output files are opened (their hidden temporaries made, in a directory it makes)
+    before the work; SIGTERM during the work: exit 143, the directory gone again."""
+    proc = subprocess.Popen([sys.executable, "-m", "bgc", "accuracy", str(warm[0]), "-s", "s",
+                             "--solvers", "rk4", "--steps", "0.001", "--repeats", "1",
+                             "--backend", "python", "--no-plot", "-o", "new/acc"],
+                            cwd=tmp_path, env=warm[1], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
+    acc = tmp_path / "new" / "acc"
+    started = _interrupt_when(proc, lambda found: found and acc.is_dir() and hidden(acc),
+                              signal.SIGTERM)
+    code, err = finish(proc)
+    assert (code, err[-1:]) == (143, ["bgc: interrupted by SIGTERM"])
+    assert list(tmp_path.iterdir()) == []
+    assert _gone(started) == []
 
 
 # ------------------------------------------------------------------ the output grid

@@ -3,11 +3,13 @@ every command's options, and the command lines it found failing, replayed.
 
 Each case is a valid command line on a small model changed one to four times (values of each
 option's kind taken to extremes, unknown names, paths that are directories, devices, FIFOs,
-links to the model or missing, repeated and unknown options), run in a directory of its own
-through the function the command line calls.  Nothing may raise, print a traceback, exit
-with a status outside 0, 1, 2 or without a message, leave a hidden or unasked-for file, write
-after a usage error, cut a CSV row, or replace the model, a device, a FIFO, a link or a
-directory (tools/fuzz_options.py says which).  The long run:
+links to the model or missing, repeated and unknown options, an output aimed at a file the
+command reads, `-` for output options), run in a directory of its own through the function
+the command line calls.  Nothing may raise, print a traceback, exit with a status outside 0,
+1, 2 or without a message, leave a hidden or unasked-for file or one named `-`, write after a
+usage error, cut a CSV row, change or replace a file the command reads (its model, library,
+table, --input, --data, --reference, under any name), or replace a device, a FIFO, a link or
+a directory (tools/fuzz_options.py says which).  The long run:
 
     python tools/fuzz_options.py --seed 1 --cases 20000 --out fuzz-options-out
 """
@@ -81,6 +83,18 @@ FOUND = [
       "0", "--backend", "python", "--trajectories", "link"], 2, "is not a directory"),
     # a reference that is not a CSV (numpy's ValueError)
     (ACCURACY + ["-o", "acc", "--reference", "m.bg"], 1, "m.bg: not a CSV of numbers"),
+    # an output that is a library or a table the model reads, or an --input, through links:
+    # replaced, exit 0; `-` written as a file named `-`
+    (["compile", "lm.bg", "-o", "parts-hard.bg"], 1,
+     "it is the imported library 'parts.bg', which this command reads"),
+    (["simulate", "lm.bg", "-s", "run", "--input", "inp.csv", "-o", "out.csv", "--events",
+      "inp-link.csv"], 1, "it is the --input file 'inp.csv'"),
+    (["sweep", "lm.bg", "-s", "run", "--grid", "R=1,2", "--metric", "final:c.q", "--workers",
+      "0", "--backend", "python", "--trajectories", "trajdir"], 1,
+     "cannot write 'trajdir/run-000000.csv': it is the table file 'curve.csv'"),
+    (["steady", "m.bg", "-s", "run", "--json", "-"], 0, "c.q = "),
+    (["simulate", "m.bg", "-s", "run", "--events", "-"], 2,
+     "--events -: standard output already has the CSV"),
 ]
 
 
@@ -117,3 +131,25 @@ def test_seeded_campaign(env):
     assert not failures, failures[0]
     assert len(seen) >= 7, seen
     assert {0, 2} <= set().union(*seen.values()), seen
+
+
+def test_seeded_outputs_aimed_at_inputs_and_at_standard_output(env):
+    """The two classes of issue 37, one case each for every command of the quick campaign:
+    an output aimed at a file the command reads (lm.bg, its library and table, an --input),
+    and every output option given `-`."""
+    rng = random.Random(SEED)
+    failures = []
+    for command in sorted(c for c in fo.BASE if c not in fo.SLOW):
+        opts = fo._options(command)
+        aimed = list(fo.BASE[command]) + (["--backend", "python"] if command == "sweep" else [])
+        dashed = list(aimed)
+        fo._aim_at_input(rng, command, aimed, opts)
+        for names, _, _ in opts:
+            if names[0] in fo.OUTPUT_OPTIONS:
+                dashed += [names[0], "-"]
+        for argv in (aimed, dashed):
+            with _alarm(SAFETY_SECONDS):
+                res = fo.run_case(argv, env)
+            if res["failure"]:
+                failures.append((argv, res))
+    assert not failures, failures[0]

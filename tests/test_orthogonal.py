@@ -45,3 +45,22 @@ def test_a_free_direction_gets_the_least_norm_step():
     x, rank = orthogonal.lstsq([[1.0, 1.0]], [2.0])
     assert rank == 1 and np.allclose(x, [1.0, 1.0], atol=1e-15)
     assert math.isclose(orthogonal.norm(x), math.sqrt(2.0), rel_tol=1e-15)
+
+
+@pytest.mark.parametrize("k", [600, -600, 1000])
+def test_entries_whose_squares_overflow_scale_exactly(k):
+    """A Jacobian of 1e200 (`bgc steady -p a=1e200`): the squares of the reflections
+    overflowed to inf, the rank came out 0 and the step NaN.  Scaled by 2^k, a least-squares
+    problem has the same solution to the bit (a power of two scales exactly), and the norm
+    of [3, 4] 2^k is 5 2^k."""
+    rng = np.random.default_rng(7)
+    A, b = rng.standard_normal((6, 4)), rng.standard_normal(6)
+    x, rank = orthogonal.lstsq(A, b)
+    big = np.ldexp(A, k)
+    scaled, rank_scaled = orthogonal.lstsq(big, np.ldexp(b, k))
+    assert np.array_equal(scaled, x) and rank_scaled == rank == 4
+    assert np.array_equal(orthogonal.lstsq(big, b)[0], np.ldexp(x, -k))
+    assert orthogonal.rank(big) == 4
+    assert orthogonal.norm(np.ldexp([3.0, 4.0], k)) == math.ldexp(5.0, k)
+    x, rank = orthogonal.lstsq([[-1e308]], [1e308])
+    assert x.tolist() == [-1.0] and rank == 1

@@ -4,15 +4,18 @@
     python tools/fuzz_options.py --seed 1 --cases 5000 --out fuzz-options-out
 
 Each case is a valid command line of one command (check, scenes, equations, compile, draw,
-simulate, sweep, accuracy, linearize, steady: every command click knows, with every option it
-takes) on a small model, changed one to four times: an option set to a value of its kind
-taken to extremes (numbers: 0, -1, 1e308, 1e309, 1e-400, nan, inf, 1_0, Arabic-Indic and
+simulate, sweep, accuracy, linearize, steady, fit: every command click knows, with every
+option it takes) on a small model, changed one to four times: an option set to a value of its
+kind taken to extremes (numbers: 0, -1, 1e308, 1e309, 1e-400, nan, inf, 1_0, Arabic-Indic and
 full-width digits, 400 digits, empty; names: unknown, unicode, empty, with spaces or commas;
 paths: a directory, a missing directory, a character device, a FIFO, a symbolic link to the
 model, the model itself, a name too long, `-`), an option repeated, an unknown option, a token
-removed, `--opt=VALUE` for `--opt VALUE`.  It runs in a directory of its own that holds the
-model and those paths (the devices are private copies of /dev/null and /dev/full, made with
-mknod when the harness may; never the system's).
+removed, `--opt=VALUE` for `--opt VALUE`; an output aimed at a file the command reads (the
+model lm.bg, which imports a library and reads a table, with an --input, a --data or a
+--reference CSV: the file itself, a symbolic or a hard link to it, a directory output whose
+file is a hard link to it); one output option or two given `-`.  It runs in a directory of
+its own that holds the models, those files and paths (the devices are private copies of
+/dev/null and /dev/full, made with mknod when the harness may; never the system's).
 
 What counts as a failure:
 - an exception other than the command's exit (a traceback), or "Traceback" in the output;
@@ -21,8 +24,11 @@ What counts as a failure:
 - a half-written output: a hidden file left in the directory (a temporary, a `.part`), a file
   that the command was not asked to write, any new file after a usage error (exit 2), a CSV
   whose last row is cut;
-- a path of the directory changed in kind: the model file changed, the FIFO, the devices, the
-  symbolic link or the directory replaced by something else;
+- a file the command reads (its model, a library and a table it reads, its --input, --data,
+  --reference) changed, or a name of it (a symbolic or a hard link) replaced; a file named
+  `-` (standard output was meant); exit 0 with nothing on stdout for an output given `-`;
+- a path of the directory changed in kind: the FIFO, the devices, a symbolic link or a
+  directory replaced by something else;
 - a case that runs longer than --time-limit (a hang: its worker is killed and the run goes on).
 
 Cases run in process (the function the command line calls, through click's runner) in a
@@ -67,6 +73,48 @@ scene run "one second" { outputs c.q, r.f; time 0 .. 1 every 0.1 }
 scene other { effects none; outputs c.q; time 0 .. 0.5 every 0.25; solver rk4(step = 0.01) }
 """
 
+# m's circuit reading files: a library it imports, a table, an input (its outputs as m's)
+READING = """model lm "m's circuit: its supply a table and an input, its resistor a library's"
+import parts
+input u = 0 "a voltage added to the supply"
+parameter R = 2.0 "resistance"
+parameter C = 0.5 "capacitance"
+parameter V = 1.0 "supply"
+signal v = V * table(curve.csv, t)
+src : MSe(v + u)
+j : 1
+n : 0
+r : parts.resistor(r = R) @loss
+c : C(C) init q = 0
+src -> j
+j -> r.p
+j -> n
+n -> c
+scene run "one second" { outputs c.q, r.x.f; time 0 .. 1 every 0.1 }
+scene other { effects none; outputs c.q; time 0 .. 0.5 every 0.25; solver rk4(step = 0.01) }
+"""
+PARTS = """library parts "the fuzzer's library"
+component resistor(r = 1) "a resistor at port p" {
+  port p
+  x : R(r)
+  p -> x
+}
+"""
+MEASURED = "t,c.q\n" + "".join(f"{k / 10:g},{0.4 * (1 - 0.9 ** k):.6f}\n" for k in range(11))
+FILES = {"parts.bg": PARTS, "curve.csv": "t,v\n0,1\n0.5,1\n1,0.5\n",
+         "inp.csv": "t,u\n0,0\n1,0.5\n", "data.csv": MEASURED, "ref.csv": MEASURED}
+# names of those files: symbolic and hard links, and links inside the directories that
+# accuracy's -o and sweep's --trajectories name (accdir/accuracy.csv, trajdir/run-000000.csv)
+SYMLINKS = {"parts-link.bg": "parts.bg", "curve-link.csv": "curve.csv",
+            "inp-link.csv": "inp.csv", "lib.dot": "parts.bg", "ref-link.json": "ref.csv"}
+HARDLINKS = {"parts-hard.bg": "parts.bg", "curve-hard.csv": "curve.csv",
+             "data-hard.json": "data.csv", "inp-hard.csv": "inp.csv",
+             "accdir/accuracy.csv": "ref.csv", "trajdir/run-000000.csv": "curve.csv"}
+AT_INPUTS = ("lm.bg", "parts.bg", "curve.csv", "inp.csv", "data.csv", "ref.csv",
+             *SYMLINKS, *(h for h in HARDLINKS if "/" not in h))
+INPUT_PATHS = ("inp.csv", "inp-link.csv", "inp-hard.csv", "data.csv", "data-hard.json",
+               "ref.csv", "curve.csv", "m.bg", "missing.csv", "adir", "nulldev", "")
+
 # valid command lines, one per command (the model is m.bg in the working directory)
 BASE = {
     "check": ["check", "m.bg"],
@@ -81,8 +129,10 @@ BASE = {
                  "1e-3", "--steps", "0.05", "--repeats", "1", "--no-plot", "-o", "acc"],
     "linearize": ["linearize", "m.bg", "-s", "run", "--at", "t=0.5", "-o", "lin.json"],
     "steady": ["steady", "m.bg", "-s", "run", "--json", "rest.json"],
+    "fit": ["fit", "m.bg", "-s", "run", "--data", "data.csv", "--vary", "R", "--backend",
+            "python", "-o", "fit.json"],
 }
-SLOW = {"accuracy"}  # left out of the quick (suite) campaign
+SLOW = {"accuracy", "fit"}  # left out of the quick (suite) campaign
 
 NUMBERS = ("0", "-0", "1", "-1", "2", "0.5", "1e-3", "1e-300", "1e300", "1e308", "1e309",
            "1e-400", "4.9e-324", "nan", "NaN", "-nan", "inf", "-inf", "Infinity", "1_0",
@@ -97,7 +147,7 @@ PATHS = ("out.csv", "out.c", "out.py", "out.fmu", "out.svg", "out.png", "out.dot
          "out.json", "out.tex", "out.parquet", "adir", "adir/", ".", "", "missing/out.csv",
          "m.bg", "./m.bg", "adir/../m.bg", "link", "fifo", "nulldev", "fulldev",
          "out.csv/x", "-", "\U0001f4a5.csv", "a" * 300 + ".csv", "target-link.csv",
-         "a b.csv", "--help")
+         "a b.csv", "--help", "./-", "parts.bg", "curve-hard.csv", "inp-link.csv")
 CHOICE_JUNK = ("", "nope", "C", "ｃ", "c ", "python3", "-", "auto")
 STRING_VALUES = {  # options whose value is a small language of its own
     "-p": ["R=3", "C=1e-3", "V=0", "nope=1", "R", "=1", "R==1", "R=", "R= 1",
@@ -131,8 +181,10 @@ STRING_VALUES = {  # options whose value is a small language of its own
     "--depth": ["0", "1", "-1", "x", "1000000"],
     "--max-steps": ["0", "1", "10", "-1", "1" + "0" * 16, "x"],
 }
-PATH_OPTIONS = {"-o", "--events", "--plot", "--json", "--bode", "--trajectories",
-                "--reference"}
+OUTPUT_OPTIONS = {"-o", "--events", "--plot", "--json", "--bode", "--trajectories"}
+INPUT_OPTIONS = {"--reference", "--input", "--data"}
+PATH_OPTIONS = OUTPUT_OPTIONS | INPUT_OPTIONS
+DIRECTORIES = {"accuracy": {"-o": "accdir"}, "sweep": {"--trajectories": "trajdir"}}
 # settings that would make a legitimate run long (many rows, many steps): left at their
 # values in the base line when another option could combine with them
 HEAVY = {"--dt", "--step", "--t-end", "--max-step"}
@@ -165,9 +217,9 @@ def _value(rng: random.Random, name: str, kind: str, choices: list, quick: bool)
     if kind == "choice":
         return rng.choice(choices + list(CHOICE_JUNK)) if rng.random() < 0.6 else \
             rng.choice(choices)
+    if name in INPUT_OPTIONS:  # (not the FIFO: without a writer it waits for one, as any
+        return rng.choice(INPUT_PATHS)  # reader does)
     if name in PATH_OPTIONS:
-        if name == "--reference":  # an input: a FIFO without a writer waits for one, as any
-            return rng.choice([p for p in PATHS if p != "fifo"])  # reader does
         return rng.choice(PATHS)
     if name in STRING_VALUES:
         pool = list(STRING_VALUES[name])
@@ -218,6 +270,12 @@ def options(rng: random.Random, quick: bool = False) -> list[str]:
             k = argv.index("m.bg") if "m.bg" in argv else 1
             argv[k:k + 1] = [rng.choice(["missing.bg", "adir", "nulldev", "link", "", "-",
                                          "empty.bg", "m.bg", "--", "m.bg m.bg"])]
+        elif how < 0.88:  # an output aimed at a file the command reads
+            _aim_at_input(rng, command, argv, opts)
+        elif how < 0.91:  # one output option or two given `-`
+            outs = [n for names, _, _ in opts for n in names[:1] if n in OUTPUT_OPTIONS]
+            for name in rng.sample(outs, min(len(outs), rng.choice([1, 1, 2]))):
+                argv += [name, "-"]
         elif how < 0.95:  # an unknown option, or an option of another command
             argv.append(rng.choice(["--nope", "-x", "--t-end=", "--", "-pR=3", "--help",
                                     "--grid", "--solver", "-o", "--version", "-h"]))
@@ -226,18 +284,46 @@ def options(rng: random.Random, quick: bool = False) -> list[str]:
     return argv
 
 
+def _aim_at_input(rng: random.Random, command: str, argv: list[str], opts) -> None:
+    """One output of the command line aimed at a file it reads: the model becomes lm.bg
+    (a library, a table; simulate also gets --input), and an output option's value one of
+    those files, a link to one, or a directory whose file for that option is a hard link."""
+    if "m.bg" in argv:
+        argv[argv.index("m.bg")] = "lm.bg"
+    if command == "simulate":
+        argv += ["--input", rng.choice(["inp.csv", "inp-link.csv"])]
+    if command == "accuracy" and rng.random() < 0.5:
+        argv += ["--reference", rng.choice(["ref.csv", "ref-link.json"])]
+    outs = [n for names, _, _ in opts for n in names[:1] if n in OUTPUT_OPTIONS]
+    if not outs:
+        return
+    name = rng.choice(outs)
+    folder = DIRECTORIES.get(command, {}).get(name)
+    argv += [name, folder if folder and rng.random() < 0.7 else rng.choice(AT_INPUTS)]
+
+
 # ------------------------------------------------------------------------- one case
 
 def _setup(directory: Path) -> dict:
-    """The case's directory: the model, an empty model, a directory, a symbolic link to the
-    model, one to a regular file, a FIFO, private null and full devices (when mknod is
-    allowed).  Returns {name: (kind, detail)} to check afterwards."""
+    """The case's directory: the models, an empty model, a directory, a symbolic link to the
+    model, one to a regular file, the files lm.bg reads and the CSVs of the options that
+    read (FILES) with links to them (SYMLINKS, HARDLINKS), a FIFO, private null and full
+    devices (when mknod is allowed).  Returns {path: (kind, detail, inode)} to check
+    afterwards."""
     (directory / "m.bg").write_text(MODEL, encoding="utf-8")
+    (directory / "lm.bg").write_text(READING, encoding="utf-8")
     (directory / "empty.bg").write_text("")
-    (directory / "adir").mkdir()
+    for name in ("adir", "accdir", "trajdir"):
+        (directory / name).mkdir()
     (directory / "target.csv").write_text("t,x\n0,1\n")
+    for name, text in FILES.items():
+        (directory / name).write_text(text, encoding="utf-8")
     os.symlink("m.bg", directory / "link")
     os.symlink("target.csv", directory / "target-link.csv")
+    for link, target in SYMLINKS.items():
+        os.symlink(target, directory / link)
+    for link, target in HARDLINKS.items():
+        os.link(directory / target, directory / link)
     os.mkfifo(directory / "fifo")
     for name, minor in (("nulldev", 3), ("fulldev", 7)):
         try:
@@ -248,20 +334,48 @@ def _setup(directory: Path) -> dict:
 
 
 def _snapshot(directory: Path) -> dict:
+    """{path relative to directory: (kind, detail, inode)} for every path in it and in its
+    subdirectories; a regular file's detail is its bytes (the case's files are small)."""
     out = {}
-    for p in directory.iterdir():
-        st = os.lstat(p)
-        if stat.S_ISLNK(st.st_mode):
-            out[p.name] = ("link", os.readlink(p))
-        elif stat.S_ISDIR(st.st_mode):
-            out[p.name] = ("dir", sorted(os.listdir(p)))
-        elif stat.S_ISFIFO(st.st_mode):
-            out[p.name] = ("fifo", None)
-        elif stat.S_ISCHR(st.st_mode):
-            out[p.name] = ("chr", st.st_rdev)
-        else:
-            out[p.name] = ("file", p.read_bytes() if p.name.endswith(".bg") else None)
+    for root, dirs, files in os.walk(directory):
+        for name in dirs + files:
+            p = Path(root) / name
+            st = os.lstat(p)
+            key = str(p.relative_to(directory))
+            if stat.S_ISLNK(st.st_mode):
+                out[key] = ("link", os.readlink(p), st.st_ino)
+            elif stat.S_ISDIR(st.st_mode):
+                out[key] = ("dir", None, st.st_ino)
+            elif stat.S_ISFIFO(st.st_mode):
+                out[key] = ("fifo", None, st.st_ino)
+            elif stat.S_ISCHR(st.st_mode):
+                out[key] = ("chr", st.st_rdev, st.st_ino)
+            elif stat.S_ISREG(st.st_mode) and st.st_size < 1 << 20:
+                out[key] = ("file", p.read_bytes(), st.st_ino)
+            else:
+                out[key] = ("other", None, st.st_ino)
     return out
+
+
+def _reads(argv: list[str], directory: Path) -> set[int]:
+    """The inodes of the regular files the command line reads: its model (lm.bg's library
+    and table with it), and the values of --input, --data and --reference."""
+    names = {_model_argument(argv)}
+    for k, a in enumerate(argv):
+        name, eq, value = a.partition("=")
+        if name in INPUT_OPTIONS:
+            names.add(value if eq else (argv[k + 1] if k + 1 < len(argv) else ""))
+    inodes = set()
+    for name in names:
+        try:
+            info = os.stat(directory / name) if name else None
+        except (OSError, ValueError):
+            continue
+        if info is not None and stat.S_ISREG(info.st_mode):
+            inodes.add(info.st_ino)
+            if name in ("lm.bg", "./lm.bg"):
+                inodes |= {os.stat(directory / f).st_ino for f in ("parts.bg", "curve.csv")}
+    return inodes
 
 
 class _Drain:
@@ -289,15 +403,44 @@ class _Drain:
         os.close(self.fd)
 
 
-def _named_outputs(argv: list[str]) -> set[str]:
-    """The first path component of each value given to an output option."""
-    out = set()
+def _model_argument(argv: list[str]) -> str:
+    """The command line's MODEL as click would take it: its first token after the command
+    that is neither an option nor an option's value ("" if none)."""
+    if not argv or argv[0] not in BASE:
+        return ""
+    takes = {n for names, kind, _ in _options(argv[0]) if kind != "flag" for n in names}
+    k = 1
+    while k < len(argv):
+        a = argv[k]
+        if a == "--":
+            return argv[k + 1] if k + 1 < len(argv) else ""
+        if a.startswith("-") and a != "-":
+            k += 2 if a in takes else 1
+            continue
+        return a
+    return ""
+
+
+def _output_values(argv: list[str], last: bool = True) -> list[str]:
+    """The values given to output options: the last of each (the one click keeps), or all."""
+    out = {}
     for k, a in enumerate(argv):
         name, eq, value = a.partition("=")
-        if name in PATH_OPTIONS and name != "--reference":
+        if name in OUTPUT_OPTIONS:
             value = value if eq else (argv[k + 1] if k + 1 < len(argv) else "")
-            first = Path(value).parts[:1]
-            out.add(first[0] if first else "*")  # (".": a directory option's files go here)
+            out[name if last else k] = value
+    return list(out.values())
+
+
+def _named_outputs(argv: list[str]) -> set[str]:
+    """The first path component of each value given to an output option (`-` names none:
+    it is standard output)."""
+    out = set()
+    for value in _output_values(argv, last=False):
+        if value == "-":
+            continue
+        first = Path(value).parts[:1]
+        out.add(first[0] if first else "*")  # (".": a directory option's files go here)
     return out
 
 
@@ -312,6 +455,7 @@ def run_case(argv: list[str], env: dict | None = None) -> dict:
     with tempfile.TemporaryDirectory(prefix="bgcopt-") as tmp:
         d = Path(tmp)
         before = _setup(d)
+        reads = _reads(argv, d)
         drain = _Drain(d / "fifo")
         os.chdir(d)
         try:
@@ -320,14 +464,14 @@ def run_case(argv: list[str], env: dict | None = None) -> dict:
             os.chdir(cwd)
             drain.close()
         after = _snapshot(d)
-        failure = _judge(argv, result, before, after, d)
+        failure = _judge(argv, result, before, after, d, reads)
     out = result.stdout + result.stderr
     if result.exception is not None and not isinstance(result.exception, SystemExit):
         out += "".join(traceback.format_exception(result.exception))
     return {"exit": result.exit_code, "stderr": out[-3000:], "failure": failure}
 
 
-def _judge(argv, result, before, after, d: Path) -> str | None:
+def _judge(argv, result, before, after, d: Path, reads=frozenset()) -> str | None:
     command = argv[0] if argv else ""
     exc = result.exception
     if exc is not None and not isinstance(exc, SystemExit):
@@ -343,7 +487,7 @@ def _judge(argv, result, before, after, d: Path) -> str | None:
         return f"{command}: exit {code}"
     if code != 0 and not result.stderr.strip():
         return f"{command}: exit {code} without a message"
-    for name, (kind, detail) in before.items():
+    for name, (kind, detail, inode) in before.items():
         now = after.get(name)
         if now is None:
             return f"{command}: {name} ({kind}) removed"
@@ -351,21 +495,24 @@ def _judge(argv, result, before, after, d: Path) -> str | None:
             return f"{command}: {name} ({kind}) replaced by a {now[0]}"
         if kind in ("link", "chr") and now[1] != detail:
             return f"{command}: {name} changed"
-        if name.endswith(".bg") and now[1] != detail:
-            return f"{command}: the model file {name} changed"
-    named = _named_outputs(argv)
+        if kind == "file" and inode in reads and now[1:] != (detail, inode):
+            return f"{command}: {name}, a file it reads, " + (
+                "replaced" if now[2] != inode else "changed")
     new = [n for n in after if n not in before]
-    for name in new + ["adir"]:
-        if name.startswith(".") and name not in (".", ".."):
+    for name in new:
+        if any(part.startswith(".") for part in Path(name).parts):
             return f"{command}: a hidden file left behind ({name})"
-    if (d / "adir").is_dir():
-        for p in (d / "adir").rglob(".*"):
-            return f"{command}: a hidden file left behind (adir/{p.name})"
+        if Path(name).name == "-" and not any(
+                v != "-" and Path(v).name == "-" for v in _output_values(argv)):
+            return f"{command}: a file named '-' ({name}; standard output was meant)"
     if code == 2 and new:
         return f"{command}: a file written by a usage error ({new[0]})"
+    named = _named_outputs(argv)
     for name in new:
-        if name not in named and "*" not in named:
+        if Path(name).parts[0] not in named and "*" not in named:
             return f"{command}: a file it was not asked to write ({name})"
+    if code == 0 and "-" in _output_values(argv) and not result.stdout_bytes:
+        return f"{command}: an output given '-' and nothing on stdout"
     for p in [d / n for n in new] + [d / "target.csv"]:
         if p.is_file() and p.suffix == ".csv" and p.stat().st_size \
                 and not p.read_bytes().endswith(b"\n"):
