@@ -406,7 +406,7 @@ def _diode(c, info, block, states, relations, discretes, whens):
 def _at_start(c, transfer: When, mode) -> When:
     """transfer's jumps at the start, where the element starts in the mode that needs them
     (mode: its condition on the element's discrete value, read at t0): the initial state made
-    consistent with the initial mode (LANGUAGE.md 10a)."""
+    consistent with the initial mode (docs/hybrid.md, section 4)."""
     return When(INITIAL, f"{c.junction}: the start", tuple(
         replace(a, expr=sp.Piecewise((a.expr, mode), (a.symbol, True)))
         for a in transfer.actions), c.span)

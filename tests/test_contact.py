@@ -852,7 +852,7 @@ scene run { outputs coil.f; time 0 .. 1 every 0.125; solver dopri5(rtol = 1e-10,
     "d < 0.5", "square(4, 0.5) > 0.5", "step(0) > 0.5", "pulse(0, 2) > 0.5",
     "not (t < 0)", "t >= 0 and x > 0"])
 def test_a_switch_whose_condition_holds_at_t0_starts_closed(cond, tmp_path):
-    """Every initial mode is taken from the conditions at t0 (LANGUAGE.md 10a): closed from
+    """Every initial mode is taken from the conditions at t0 (docs/hybrid.md): closed from
     the start, the coil's current decays as exp(-R t / L) from 1 A, in every backend (it
     read 0 from t = 0 where the condition depended on t, a state or a discrete value)."""
     compiled = bgc.build(Source("rl.bg", CLOSED_AT_START.replace("COND", cond)), "run")
