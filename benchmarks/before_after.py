@@ -47,7 +47,7 @@ import json, sys
 from pathlib import Path
 import bgc
 from bgc import backends
-from bgc.emit import emit_c, emit_python
+from bgc.codegen.emit import emit_c, emit_python
 out, specs = Path(sys.argv[1]), json.loads(sys.argv[2])
 for name, model, scene in specs:
     program = bgc.build(Path(model), scene).program

@@ -10,11 +10,11 @@ directory (BGC_CACHE_DIR) in three states:
 
   empty        nothing in the cache: the runtime object (c) or the interpreter (vm) is built
                first, once per machine, unless the bgc that runs was installed from a wheel
-               (`pip install .`): its package carries them, built at install (bgc.prebuild),
+               (`pip install .`): its package carries them, built at install (bgc.execute.prebuild),
                and the first run copies them into the cache (the line "prebuilt" says which)
   once kept    what is built once per machine is there (runtime object, interpreter, the
                parser's tables); the model's own files are not: a model's first run
-  warm         a second run: bgc.warm's record names the cached program
+  warm         a second run: bgc.execute.warm's record names the cached program
 
 Each cell is the best wall time of --runs runs (time.perf_counter around subprocess.run, the
 process's start and exit included; the machine is shared, so the best is the least disturbed)
@@ -26,8 +26,8 @@ for the runs, and bgc's modules are imported once before them).
 Then the stages of a first run (once kept), their cpu time inside one fresh process per
 backend (the process's and its children's):
 import (bgc's modules and SymPy), compile (parse to program IR, bgc.api.build), build (the
-C part, the interpreter's program or the Python module, bgc.runner.prepare), run (the program
-started and its CSV read back, bgc.runner.run).
+C part, the interpreter's program or the Python module, bgc.execute.runner.prepare), run (the
+program started and its CSV read back, bgc.execute.runner.run).
 
 And what a run costs once started: the model run over a longer span (--long times its
 scene's) with each backend, the cpu time the program reports (--stats) divided by its
@@ -63,13 +63,13 @@ def now():  # cpu: this process's and its children's (the compiler, the program)
     s, c = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
     return s.ru_utime + s.ru_stime + c.ru_utime + c.ru_stime
 c0 = now()
-import bgc.api, bgc.runner, bgc.cli, sympy
+import bgc.api, bgc.execute.runner, bgc.cli, sympy
 c1 = now()
 compiled = bgc.api.build(sys.argv[1])
 c2 = now()
-program = bgc.runner.prepare(compiled, sys.argv[2])
+program = bgc.execute.runner.prepare(compiled, sys.argv[2])
 c3 = now()
-result = bgc.runner.run(program)
+result = bgc.execute.runner.run(program)
 c4 = now()
 assert result.status == 0, result.stderr
 print(json.dumps([c1 - c0, c2 - c1, c3 - c2, c4 - c3]))
@@ -101,11 +101,12 @@ def _best(argv, env, before, runs):
 
 def _per_rhs(model: str, backend: str, env, factor: float) -> tuple[float, int]:
     """(seconds of the program's cpu per right-side call, calls) over factor x the span."""
-    script = ("import sys, bgc.api, bgc.runner\n"
+    script = ("import sys, bgc.api, bgc.execute.runner\n"
               "c = bgc.api.build(sys.argv[1])\n"
               "s = c.program.scene\n"
               "st = s.with_options(t_end=s.t0 + float(sys.argv[3]) * (s.t_end - s.t0))\n"
-              "r = bgc.runner.run(bgc.runner.prepare(c, sys.argv[2]), st, stats=True)\n"
+              "from bgc.execute import runner\n"
+              "r = runner.run(runner.prepare(c, sys.argv[2]), st, stats=True)\n"
               "assert r.status == 0, r.stderr\n"
               "print(r.stats['cpu'], r.stats['rhs'])\n")
     done = subprocess.run([sys.executable, "-c", script, model, backend, str(factor)], env=env,
@@ -129,8 +130,9 @@ def main(argv=None):
         env = dict(os.environ, BGC_CACHE_DIR=str(cache))
         # (Python's bytecode cache as an installed bgc has it, written before the first row)
         env.pop("PYTHONDONTWRITEBYTECODE", None)
-        subprocess.run([sys.executable, "-c", "import bgc.api, bgc.cli, bgc.vm, bgc.emit, "
-                        "bgc.plot, bgc.report"], env=env, check=True)
+        subprocess.run([sys.executable, "-c", "import bgc.api, bgc.cli, bgc.codegen.vm, "
+                        "bgc.codegen.emit, bgc.reports.plot, bgc.reports.report"], env=env,
+                       check=True)
         out = str(Path(tmp) / "out.csv")
 
         def empty():
@@ -208,8 +210,9 @@ def main(argv=None):
 
 
 def _prebuilt() -> str:
-    """Which of bgc.prebuild's files the bgc that runs carries (none in an editable install)."""
-    done = subprocess.run([sys.executable, "-c", "import bgc.backends as b; "
+    """Which of bgc.execute.prebuild's files the bgc that runs carries (none in an editable
+    install)."""
+    done = subprocess.run([sys.executable, "-c", "import bgc.base.backends as b; "
                            "print(' '.join(p.name for p in b.PREBUILT.glob('*')))"],
                           capture_output=True, text=True, check=True)
     kinds = {"bgc-vm-": "the interpreter", "bgc-runtime-": "the runtime object",

@@ -23,8 +23,8 @@ sparse LU the compiler plans (its ordering and fill are part of lower).  For eve
   cc       wall clock of `cc -O2 -std=c99 model.c -o model -lm` (the program, runtime
            included).  Median over the repeats.
   part     wall clock of `cc FLAGS -std=c99 -c` of the model part alone, as `bgc simulate` builds
-           it to link with the runtime built once: FLAGS are bgc.backends.model_part_flags's
-           (-O1 for a part larger than bgc.backends.LARGE_PART, else -O2); "to .o" is the
+           it to link with the runtime built once: FLAGS are bgc.base.backends.model_part_flags's
+           (-O1 for a part larger than bgc.base.backends.LARGE_PART, else -O2); "to .o" is the
            in-process total plus this, the model's build to an object file, as CasADi's is
            measured (build + codegen + cc -O2 -c).  Median over the repeats.
   scene    the same build (in process, then cc -c of the model part) of the program as `bgc
@@ -427,7 +427,7 @@ def one(family: str, n: int, outdir: Path, with_python: bool, scene: bool = Fals
     import bgc
     from bgc import ir
     from bgc.api import Source
-    from bgc.emit import emit_c, emit_python
+    from bgc.codegen.emit import emit_c, emit_python
 
     name = model_name(family, n)
     source = Source(f"{name}.bg", families.FAMILIES[family](n))
@@ -469,8 +469,8 @@ def bgc_command(*args: str, workdir: Path) -> float:
 
 
 def part_flags(part: Path) -> tuple[str, ...]:
-    """The flags bgc simulate compiles this model part with (bgc.backends.model_part_flags)."""
-    from bgc import backends
+    """The flags bgc simulate compiles this model part with (bgc.base.backends.model_part_flags)."""
+    from bgc.base import backends
 
     rule = getattr(backends, "model_part_flags", None)  # (a bgc from before the rule: -O2)
     size = len(part.read_text(encoding="utf-8"))
@@ -520,10 +520,11 @@ _RUNTIME_DRIVER_OBJECT: list[Path] = []
 
 
 def runtime_driver_object(workdir: Path) -> Path:
-    """The runtime unit (bgc.emit.c_runtime_unit) at -O2 without its main, for the drivers of
+    """The runtime unit (bgc.codegen.emit.c_runtime_unit) at -O2 without its main, for the drivers
+    of
     linked model parts; built once per run."""
     if not _RUNTIME_DRIVER_OBJECT:
-        from bgc.emit import c_runtime_unit
+        from bgc.codegen.emit import c_runtime_unit
 
         source = workdir / "runtime_driver.c"
         source.write_text(c_runtime_unit(), encoding="utf-8")
@@ -589,7 +590,7 @@ def measure_bgc(family: str, n: int, workdir: Path, args) -> Row:
 
 def bgc_module(family: str, n: int, workdir: Path):
     """bgc's generated Python module of a model measured before (written by --one)."""
-    from bgc import backends
+    from bgc.base import backends
 
     return backends.load_python_module(
         (workdir / f"{model_name(family, n)}.py").read_text(encoding="utf-8"))

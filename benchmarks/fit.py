@@ -73,7 +73,7 @@ def error(x) -> float:
 
 
 def bgc_fit(data: Path, backend: str):
-    from bgc import estimate
+    from bgc.analysis import estimate
     start = time.perf_counter()
     fit = estimate.fit(MODEL, data, ["kt", "Ra=0.1..10", "Jr", "br"], scene="run",
                        backend=backend)
@@ -105,13 +105,13 @@ def bgc_check():
 
 def bgc_loop(data: Path):
     """The iterations alone: the fit's model built once, then the same LM from the start."""
-    from bgc import estimate
+    from bgc.analysis import estimate
     measured = estimate.read_data(data)
     compiled = estimate.build(MODEL, tuple(NAMES), "run", (), False,
                               outputs="ind.f, rotor.f", option_names=("--data columns",
                                                                       "effects=", "--scene"))
     dt, t_end, rows = estimate._grid(measured, compiled.program.scene.t0)
-    from bgc import runner
+    from bgc.execute import runner
     settings = runner.settings_for(compiled.program.scene,
                                    [p.name for p in compiled.program.params], t_end=t_end,
                                    dt=dt)
@@ -128,7 +128,8 @@ def scipy_bgc(data_y):
     """least_squares on residuals from runs of the plain model's C program (compiled once)."""
     from scipy.optimize import least_squares
 
-    from bgc import api, runner
+    from bgc import api
+    from bgc.execute import runner
     start = time.perf_counter()
     compiled = api.build(MODEL, "run", outputs="ind.f, rotor.f")
     program = runner.prepare(compiled, "c")

@@ -4,7 +4,7 @@ ways, its solver time side by side.
     python benchmarks/linked.py [--rounds 7]
 
 `bgc simulate` builds a model's part and links it with the runtime compiled once per machine
-(bgc.emit.c_runtime_unit); `bgc compile` and `bgc sweep` build the standalone program, where
+(bgc.codegen.emit.c_runtime_unit); `bgc compile` and `bgc sweep` build the standalone program, where
 the runtime sees the model's sizes as constants and may inline the model functions.  Each row
 builds both (-O2 -std=c99, the C backend's flags), checks that they write the same bytes, and
 runs them alternately `--rounds` times; cpu is the program's own clock() (--stats cpu=), the
@@ -51,8 +51,9 @@ def main(argv=None):
         os.environ["BGC_CACHE_DIR"] = tmp
         os.environ.pop("BGC_CFLAGS", None)
         import bgc
-        from bgc import backends, runner
-        from bgc.emit import emit_c
+        from bgc.base import backends
+        from bgc.execute import runner
+        from bgc.codegen.emit import emit_c
         print(f"machine:  {machine.processor()}, {os.cpu_count()} cores, load average "
               f"{machine.load_average()}")
         print(f"cc:       {machine.cc_version(backends.c_compiler())}  (flags: "

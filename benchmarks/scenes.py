@@ -18,13 +18,14 @@ state an output), then each scene the model declares, in its order.  Columns of 
            them).
   rhs ops, out ops  operations of the generated right side and outputs, counted on the IR by
            bgc.ir.count_ops(program, ("rhs",)) and (("outputs",)), totalled over
-           bgc.report.OP_KINDS (add, neg, mul, div, call, solve: one solve of a linear block
+           bgc.reports.report.OP_KINDS (add, neg, mul, div, call, solve: one solve of a linear block
            counts 1, as in `bgc check`).  The full model's outputs are its states: 0 ops.
-  C bytes  the generated C file less its model-independent parts (bgc.emit.c_runtime_parts(),
+  C bytes  the generated C file less its model-independent parts
+  (bgc.codegen.emit.c_runtime_parts(),
            the same bytes in every program; the idea of tests/test_golden.py's model_part).
-  bgc s    bgc's front end, model file to C text: bgc.build + bgc.emit.emit_c, in this
+  bgc s    bgc's front end, model file to C text: bgc.build + bgc.codegen.emit.emit_c, in this
            process, SymPy's cache cleared before each (wall, median over the repeats).
-  cc s     bgc.backends.compile_c of that text (cc -O2 -std=c99 ... -lm, the whole program),
+  cc s     bgc.base.backends.compile_c of that text (cc -O2 -std=c99 ... -lm, the whole program),
            into a private cache emptied before each (wall, median).
   rhs      right-side evaluations of the timed run: the generated C program with the SAME
            solver and settings for every row (default --solver rk4 --step 1e-3 --t-end 60,
@@ -78,11 +79,12 @@ sys.path[:0] = [str(HERE), str(ROOT)]  # machine.py beside this file, bgc above
 import machine  # noqa: E402
 
 import bgc  # noqa: E402
-from bgc import backends, ir  # noqa: E402
-from bgc.emit import c_runtime_parts, emit_c  # noqa: E402
-from bgc.graph import model_effects  # noqa: E402
+from bgc.base import backends
+from bgc import ir  # noqa: E402
+from bgc.codegen.emit import c_runtime_parts, emit_c  # noqa: E402
+from bgc.front.graph import model_effects  # noqa: E402
 from bgc.ir import defines  # noqa: E402
-from bgc.report import OP_KINDS  # noqa: E402
+from bgc.reports.report import OP_KINDS  # noqa: E402
 
 MODEL = ROOT / "models" / "gantry_crane.bg"
 FULL = "(full model)"

@@ -80,7 +80,7 @@ sys.path[:0] = [str(HERE), str(ROOT)]  # machine.py and pendulum.py beside this 
 import machine  # noqa: E402
 from pendulum import CFLAGS, PARAMS, c_compiler, compile_c, cpu_seconds  # noqa: E402
 
-from bgc import solvers  # noqa: E402
+from bgc.base import solvers  # noqa: E402
 
 ATOL_RATIO = 1e-3
 EXPLICIT = [s.name for s in solvers.SOLVER_LIST if s.family in ("fixed", "erk")]

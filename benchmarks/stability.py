@@ -28,9 +28,9 @@ ROOT = HERE.parent
 sys.path[:0] = [str(HERE), str(ROOT)]
 import machine  # noqa: E402
 
-from bgc import backends  # noqa: E402
+from bgc.base import backends  # noqa: E402
 from bgc.api import build  # noqa: E402
-from bgc.emit import emit_c, emit_python  # noqa: E402
+from bgc.codegen.emit import emit_c, emit_python  # noqa: E402
 
 MODELS, TEST_MODELS = ROOT / "models", ROOT / "tests" / "models"
 FLAGS = ("-O2", "-std=c99")

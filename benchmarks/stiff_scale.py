@@ -107,7 +107,7 @@ def build_bgc(n: int, workdir: Path, dense: bool = False) -> tuple[Path, float, 
     """The grid's C program (dense: the sparse path switched off), the seconds of bgc's compile
     and of cc's."""
     import bgc
-    from bgc import sparse
+    from bgc.symbolic import sparse
 
     source = workdir / f"grid{n}.bg"
     source.write_text(thermal_grid(n, T_END), encoding="utf-8")

@@ -53,7 +53,9 @@ sys.path.insert(0, str(HERE))  # machine.py
 import machine  # noqa: E402
 
 import bgc  # noqa: E402
-from bgc import api, backends, sweeps  # noqa: E402
+from bgc import api
+from bgc.base import backends
+from bgc.execute import sweeps  # noqa: E402
 
 MODEL = ROOT / "models" / "pendulum.bg"
 SCENE = "swing"

@@ -9,7 +9,7 @@ process's start and exit included) and the median CPU time of the child (user + 
 
   program alone       the cached generated program itself, writing the same CSV: the floor
   bgc --help          the command line's start: Python, click, bgc's light modules
-  warm simulate       `bgc simulate MODEL -o out.csv` after a first run: bgc.warm's record
+  warm simulate       `bgc simulate MODEL -o out.csv` after a first run: bgc.execute.warm's record
                       names the cached program, no SymPy, no pipeline
   program cached      the same, with the warm records deleted before each run: the pipeline
                       runs (SymPy imported, the equations derived), the C program comes from
@@ -55,7 +55,8 @@ def _bgc() -> list[str]:
 
 def _standalone() -> list[str]:
     """bgc with the runtime never linked: every program built as the standalone file."""
-    return [sys.executable, "-c", "import sys, bgc.emit; bgc.emit.linkable = lambda p: False; "
+    return [sys.executable, "-c", "import sys, bgc.codegen.emit; "
+            "bgc.codegen.emit.linkable = lambda p: False; "
             "from bgc.cli import main; sys.argv[0] = 'bgc'; main()"]
 
 

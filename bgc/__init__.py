@@ -4,9 +4,9 @@
     t, Y, names = bgc.simulate("models/pendulum.bg", scene="swing")
 
 The API (bgc.api; bgc.model for `load`) is imported on first use of one of its names, so that
-`bgc --help` and a warm `bgc simulate` (bgc.warm) start without importing SymPy.  The names are
-served here and never written over a submodule: no module of bgc has an API function's name
-(the equations stage is bgc.system, so `bgc.equations` is always the function).
+`bgc --help` and a warm `bgc simulate` (bgc.execute.warm) start without importing SymPy.  The names
+are served here and never written over a submodule: no module of bgc has an API function's name
+(the equations stage is bgc.middle.system, so `bgc.equations` is always the function).
 """
 __version__ = "0.1.0"
 __all__ = ["BgcArgumentError", "BgcModelError", "Compiled", "SimulationFailed", "build", "check",
@@ -18,11 +18,11 @@ def __getattr__(name):
     if name == "load":
         from .model import load as value
     elif name == "linearize":
-        from .linear import linearize as value
+        from .analysis.linear import linearize as value
     elif name == "steady":
-        from .equilibrium import steady as value
+        from .analysis.equilibrium import steady as value
     elif name in ("fit", "sensitivities"):
-        from . import estimate
+        from .analysis import estimate
         value = getattr(estimate, name)
     elif name in __all__:
         from . import api

@@ -1,34 +1,35 @@
 """The pipeline as functions: parse -> resolve -> flatten -> scene -> causality -> equations
-(bgc.system) -> reduce -> lower -> emit, and runs of the result (bgc.runner's run, the one way
-bgc runs a program).  `bgc.cli`, bgc.model and the tests use exactly these.  bgc.load, the
-notebook's entry, is bgc.model's (it returns a Model, which is built with this module)."""
+(bgc.middle.system) -> reduce -> lower -> emit, and runs of the result (bgc.execute.runner's run,
+the one way bgc runs a program).  `bgc.cli`, bgc.model and the tests use exactly these.  bgc.load,
+the notebook's entry, is bgc.model's (it returns a Model, which is built with this module)."""
 from __future__ import annotations
 
 import io
 import time
 from dataclasses import dataclass, replace
 
-from .causality import CausalGraph, assign_causality
-from .diagnostics import ModelError, Note, format_diagnostic
-from .emit import emit_c, emit_python
-from .flatten import flatten
-from .system import EquationSystem, build_equations, with_residual_outputs
-from .graph import Graph
+from .middle.causality import CausalGraph, assign_causality
+from .base.diagnostics import ModelError, Note, format_diagnostic
+from .codegen.emit import emit_c, emit_python
+from .front.flatten import flatten
+from .middle.system import EquationSystem, build_equations, with_residual_outputs
+from .front.graph import Graph
 from .ir import Program
-from .instantiate import instantiate
-from .lower import lower
-from .parser import decode, parse, parse_option
-from .reduce import Reduced, reduce
-from .report import SceneSummary, check_report, scenes_report, equations_latex, equations_text, scene_summary
-from .resolve import resolve
-from . import solvers
-from .resources import quiet_collector, read_bounded
-from .scene import Override, Settings, apply_scene, check_parameters as check_parameters_of
-from .run import (ALGEBRA, BACKENDS, FORMATS, SIMULATE_OPTIONS, SWEEP_BACKENDS, TARGETS,
-                  check_run_options, choice as _choice, exclusive, input_data)
-from .run import RunSettings, run_args  # noqa: F401  (the API's, from bgc.run)
-# the one run function and its helpers (bgc.runner), as the API offers them
-from .runner import Result, choose_backend, prepare, run, settings_for
+from .front.instantiate import front, instantiate  # noqa: F401 (front: the API's too)
+from .codegen.lower import lower
+from .front.parser import decode, parse, parse_option
+from .middle.reduce import Reduced, reduce
+from .reports.report import (SceneSummary, check_report, scenes_report, equations_latex,
+                             equations_text, scene_summary)
+from .front.resolve import resolve
+from .base import solvers
+from .base.resources import quiet_collector, read_bounded
+from .middle.scene import Override, Settings, apply_scene, check_parameters as check_parameters_of
+from .base.run import (ALGEBRA, BACKENDS, FORMATS, SIMULATE_OPTIONS, SWEEP_BACKENDS, TARGETS,
+                       check_run_options, choice as _choice, exclusive, input_data)
+from .base.run import RunSettings, run_args  # noqa: F401  (the API's, from bgc.base.run)
+# the one run function and its helpers (bgc.execute.runner), as the API offers them
+from .execute.runner import Result, choose_backend, prepare, run, settings_for
 
 
 @dataclass(frozen=True)
@@ -36,12 +37,6 @@ class Source:
     path: str
     text: str
     consts: tuple = ()  # ((name, value), ...): values for the model's constants (--const)
-
-
-def front(src: Source):
-    """The parse and instantiate stages: the model's text as a flat AST (components
-    instantiated, `for` and `if` expanded, constants replaced by their values)."""
-    return instantiate(parse(src.text, src.path), dict(src.consts))
 
 
 @dataclass(frozen=True)
@@ -295,13 +290,14 @@ def compile(model, target: str = "c", scene: str | None = None,
             project_initial: bool = False, algebra: str = "auto", outputs=None,
             effects=None, allow_inconsistent: bool = False) -> dict[str, str | bytes]:
     """Standalone source code: {filename: text}; target "fmu": {"<id>.fmu": the bytes of an
-    FMI 2.0 FMU for Model Exchange and Co-Simulation} (bgc.fmu; needs a C compiler:
-    bgc.backends.BackendError without one; bgc.fmu.FmuError for a model an FMU cannot hold)."""
+    FMI 2.0 FMU for Model Exchange and Co-Simulation} (bgc.codegen.fmu; needs a C compiler:
+    bgc.base.backends.BackendError without one; bgc.codegen.fmu.FmuError for a model an FMU cannot
+    hold)."""
     _choice("target", target, TARGETS)
     compiled = build(model, scene, project_initial, algebra, outputs=outputs, effects=effects,
                      allow_inconsistent=allow_inconsistent)
     if target == "fmu":
-        from . import fmu
+        from .codegen import fmu
         return {fmu.file_name(compiled): fmu.build_fmu(compiled, project_initial,
                                                        allow_inconsistent=allow_inconsistent)}
     return emit_c(compiled.program) if target == "c" else emit_python(compiled.program)
@@ -315,7 +311,7 @@ def simulate(model, scene: str | None = None, backend: str = "c", algebra: str =
     refused nor projected: the correctors pull them back), max_step, event_rows, events;
     inputs: {name: (t, values)}, the data of the model's inputs (`input NAME`: interpolated
     linearly, held outside, each t a time event; an input without data keeps its default).
-    backend "c" (and "vm", the interpreter: no C build per model, bgc/vm.py) falls back to
+    backend "c" (and "vm", the interpreter: no C build per model, bgc/codegen/vm.py) falls back to
     "python" when there is no C compiler."""
     _choice("backend", backend, BACKENDS)
     inputs = options.pop("inputs", None)
@@ -384,7 +380,7 @@ def sweep(model, scene: str | None = None, grid=None, sample=None, vary=None, se
     (params are the fixed ones)."""
     import contextlib
 
-    from . import sweeps as sw
+    from .execute import sweeps as sw
     _choice("backend", backend, SWEEP_BACKENDS)
     unknown = sorted(set(options) - set(SIMULATE_OPTIONS))
     if unknown:

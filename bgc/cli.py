@@ -16,13 +16,14 @@ from pathlib import Path
 
 import click
 
-from . import backends, outfile, run, runner, solvers, warm
-from .resources import read_bounded
+from .base import backends, run, solvers
+from .execute import outfile, runner, warm
+from .base.resources import read_bounded
 
 
 class _Later:
     """A module imported on first use: the compiler's modules import SymPy (about a second),
-    which `bgc --help` and a warm `bgc simulate` (bgc.warm) never need."""
+    which `bgc --help` and a warm `bgc simulate` (bgc.execute.warm) never need."""
 
     def __init__(self, name: str):
         self._name = name
@@ -32,10 +33,11 @@ class _Later:
         return getattr(importlib.import_module(self._name, __package__), attr)
 
 
-acc, api, stability = _Later(".accuracy"), _Later(".api"), _Later(".stability")
-estimate = _Later(".estimate")
-emit, report, diagnostics = _Later(".emit"), _Later(".report"), _Later(".diagnostics")
-vm = _Later(".vm")
+acc, api, stability = _Later(".analysis.accuracy"), _Later(".api"), _Later(".analysis.stability")
+estimate = _Later(".analysis.estimate")
+emit, report = _Later(".codegen.emit"), _Later(".reports.report")
+diagnostics = _Later(".base.diagnostics")
+vm = _Later(".codegen.vm")
 
 
 def _warnings_text(compiled) -> str:
@@ -177,7 +179,7 @@ def _make_directory(path: Path) -> None:
 
 
 def _write_atomic(path: str, text: str | bytes):
-    """Write all of `text` (or bytes) or nothing (bgc.outfile), or onto standard output for
+    """Write all of `text` (or bytes) or nothing (bgc.execute.outfile), or onto standard output for
     `-`; a write that fails (a full disk) is one line, exit 1."""
     if outfile.is_stdout(path):
         _echo(text)
@@ -190,7 +192,7 @@ def _write_atomic(path: str, text: str | bytes):
 
 def _write_with(path: str, render) -> None:
     """render(file) writes binary data into a file for `path` (a figure by matplotlib),
-    put into place whole (bgc.outfile.Partial), or onto standard output for `-`; OutputError
+    put into place whole (bgc.execute.outfile.Partial), or onto standard output for `-`; OutputError
     if it cannot be written."""
     if outfile.is_stdout(path):
         data = io.BytesIO()
@@ -253,7 +255,7 @@ READS = {"library": "the imported library", "table": "the table file"}  # Compil
 
 class _Files:
     """What a command reads and writes, in one place.  The outputs are its output options'
-    paths (`-`: standard output, bgc.outfile.STDOUT); the files it reads are the model, the
+    paths (`-`: standard output, bgc.execute.outfile.STDOUT); the files it reads are the model, the
     files its options name (--input, --data, --reference), and, once the model is parsed,
     the libraries it imports and the tables it reads (read()).  Each check runs before any
     output is opened: an output that is a file the command reads (under any name: device and
@@ -329,7 +331,7 @@ def _plot_file(ctx, param, value):
     """--plot: a file name bgc writes figures to, where a file can be written, and matplotlib
     there; checked before any work (a usage error if not)."""
     if value is not None:
-        from . import plot
+        from .reports import plot
         try:
             _plot_format(value)
             outfile.check_target(value)
@@ -342,14 +344,14 @@ def _plot_file(ctx, param, value):
 
 
 def _plot_format(path: str) -> str:
-    """A figure's format: its file's extension (bgc.plot.check_format), PNG on stdout."""
-    from . import plot
+    """A figure's format: its file's extension (bgc.reports.plot.check_format), PNG on stdout."""
+    from .reports import plot
     return "png" if outfile.is_stdout(path) else plot.check_format(path)
 
 
 def _parse_params(values, names) -> dict:
     """-p NAME=VALUE items as {name: value}, each checked in turn (its form, its name against
-    the model's parameters `names` with bgc.run.parameter_overrides, its value)."""
+    the model's parameters `names` with bgc.base.run.parameter_overrides, its value)."""
     out = {}
     for item in values:
         name, sep, value = item.partition("=")
@@ -479,7 +481,7 @@ def _interruptible():
 
 
 class _Group(click.Group):
-    """The commands; a C toolchain that fails (bgc.backends.BackendError) is reported as such,
+    """The commands; a C toolchain that fails (bgc.base.backends.BackendError) is reported as such,
     exit 1, without a traceback; so is a write that fails where no command caught it (a full
     disk under the cache, a closed stdout while click writes help): one line, exit 1.  A
     command interrupted (SIGINT, SIGTERM: Interrupted) says so in one line and exits with
@@ -597,7 +599,7 @@ def compile(model, scene, outputs, effects, algebra, target, output, project_ini
                       allow_inconsistent=allow_inconsistent)
     files.read(compiled.files)
     if target == "fmu":
-        from . import fmu
+        from .codegen import fmu
         try:
             data = fmu.build_fmu(compiled, project_initial,
                                  allow_inconsistent=allow_inconsistent)
@@ -670,7 +672,7 @@ def simulate(model, scene, outputs, effects, algebra, backend, solver, rtol, ato
              step, max_steps, max_step, params, project_initial, allow_inconsistent, stats,
              event_rows, events_file, input_files, output, plot_file, sensitivities, consts):
     """Simulate and write CSV.  A model compiled before with the same options runs at once
-    (bgc.warm); otherwise it is compiled, and the result kept for the next run.  On a
+    (bgc.execute.warm); otherwise it is compiled, and the result kept for the next run.  On a
     terminal, a run that takes more than a second shows its progress on stderr."""
     files = _Files(model, [("-o", output), ("--events", events_file), ("--plot", plot_file)],
                    [("the --input file", path) for path in input_files],
@@ -788,7 +790,7 @@ def _simulate_run(settings, record, program, compiled, request, stats, output, p
 
 
 def _backend(backend: str) -> str:
-    """The backend that runs (bgc.runner.choose_backend), its fallback said on stderr."""
+    """The backend that runs (bgc.execute.runner.choose_backend), its fallback said on stderr."""
     backend, warning = runner.choose_backend(backend)
     if warning:
         click.echo(warning, err=True)
@@ -804,7 +806,8 @@ def _scratch(needed: bool):
 
 
 def _short(record: warm.Record, t_end, dt) -> bool:
-    """Whether a run of the model a warm record describes is short (bgc.runner.short_run)."""
+    """Whether a run of the model a warm record describes is short
+    (bgc.execute.runner.short_run)."""
     settings = record.settings.with_options(t_end=t_end, dt=dt)
     return runner.short_run(settings, record.rhs_ops, record.states)
 
@@ -812,7 +815,7 @@ def _short(record: warm.Record, t_end, dt) -> bool:
 def _compile_for_run(request: warm.Request, auto=None, solver: str | None = None):
     """The cold path: build the model, compile its program into the cache, keep a warm
     record of it; (record, program, the compiled model).  auto: (t_end, dt) of a run whose
-    backend bgc chooses: the interpreter for a short run (bgc.runner.short_run), which is
+    backend bgc chooses: the interpreter for a short run (bgc.execute.runner.short_run), which is
     said on stderr, else the C backend.  solver: the run's (None: the scene's); for an
     explicit one, C and the interpreter get a program without the Jacobian (nothing the run
     does not call is built: warm.needs_model sends a later implicit run here again)."""
@@ -853,11 +856,11 @@ def _compile_sensitivities(request: warm.Request, chosen, given):
 
 
 def _plot(record, csv, target: str, status: int, rows: bool) -> int:
-    """The run's plot (bgc.plot) from its CSV, written atomically, with what the warm record
+    """The run's plot (bgc.reports.plot) from its CSV, written atomically, with what the warm record
     says of the model's outputs; a failed run's rows are plotted too (the title says where it
     stopped), a run without rows has no plot.  The exit status: the run's, or 1 if the plot
     could not be written."""
-    from . import plot
+    from .reports import plot
     if not rows:
         if status != 2:  # (refused settings: a usage error, said as such)
             click.echo(f"bgc: no rows computed; no plot written to {target}", err=True)
@@ -891,7 +894,7 @@ class _Tee:
 
 def _run(program, settings, stats: bool, output: str | None, copy: Path | None = None,
          progress=None) -> tuple[int, bool]:
-    """Runs the program (bgc.runner.run), its CSV streamed to `output` (else stdout, and a
+    """Runs the program (bgc.execute.runner.run), its CSV streamed to `output` (else stdout, and a
     copy into `copy` if given); the exit status, and whether rows were written.  A failed
     run's rows are kept, cut back to the last whole row, and the last line on stderr says so.
     progress: a _RunProgress for the program's progress lines."""
@@ -1168,7 +1171,7 @@ def sweep(model, scene, algebra, grids, sample, varies, seed, metrics, backend, 
     """Run the model for many parameter sets (a grid or a seeded sample), compiled once, in
     batches on Dask or serially; write one table: run, parameters, metrics, counters, status,
     message.  A run that fails is a row with its status and message; see docs/sweeps.md."""
-    from . import sweeps as sw
+    from .execute import sweeps as sw
     files = _Files(model, [("-o", output)], stdout=("-o", "the table"))
     output = None if outfile.is_stdout(output) else output
     parquet = bool(output) and output.lower().endswith(".parquet")
@@ -1260,7 +1263,7 @@ def _trajectory_files(directory: str) -> list[Path]:
 def _drawing_target(ctx, param, value):
     """-o for `bgc draw`: FILE.dot, FILE.svg or FILE.png (the extension says which; `-` is
     DOT on stdout), checked before any work; anything else is a usage error."""
-    from . import draw as drawing
+    from .reports import draw as drawing
     if value is None or value == "-":
         return value
     if drawing.format_of(value) is None:
@@ -1287,7 +1290,7 @@ def draw(model, scene, outputs, effects, output, depth):
     for power, the stroke where the effort is received, multibonds as double lines, the
     constraint correctors as block diagrams, what the scene leaves out in grey; each instance
     of a component is a cluster."""
-    from . import draw as drawing
+    from .reports import draw as drawing
     files = _Files(model, [("-o", output)], stdout=("-o", "the drawing"))
     output = output or outfile.STDOUT
     fmt = "dot" if outfile.is_stdout(output) else drawing.format_of(output)
@@ -1311,7 +1314,8 @@ def draw(model, scene, outputs, effects, output, depth):
 # ---------------------------------------------------------------- analyses
 
 
-analysis, linear, equilibria = _Later(".operating"), _Later(".linear"), _Later(".equilibrium")
+analysis, linear = _Later(".analysis.operating"), _Later(".analysis.linear")
+equilibria = _Later(".analysis.equilibrium")
 
 
 def _analysed(call, *args):
@@ -1460,7 +1464,7 @@ def steady(model, scene, effects, algebra, params, json_file, at):
 
 
 def _estimation(call, *args, **kwargs):
-    """call(*args, **kwargs) of bgc.estimate: the model's errors as _or_exit says them, an
+    """call(*args, **kwargs) of bgc.analysis.estimate: the model's errors as _or_exit says them, an
     argument or data file refused a usage error (exit 2), a fit that cannot be done one line,
     exit 1."""
     try:

@@ -15,7 +15,9 @@ import functools
 
 import numpy as np
 
-from . import api, run, runner
+from . import api
+from .base import run
+from .execute import runner
 
 
 def load(path, text: str | None = None, scene: str | None = None, backend: str = "c",
@@ -70,7 +72,7 @@ class Trajectory:
 
     def to_csv(self, path) -> None:
         """The rows as bgc's CSV (17 significant digits), written atomically."""
-        from .outfile import write_atomic
+        from .execute.outfile import write_atomic
         lines = [",".join(self.keys())]
         lines += [",".join(repr(float(v)) for v in (t, *row))
                   for t, row in zip(self.t, self.values)]
@@ -226,20 +228,20 @@ class Model(api.Source):
     def equations(self, format: str = "text") -> Equations:
         """The reduced equations, as `bgc equations` prints them; format "text" or "latex"."""
         run.choice("format", format, run.FORMATS)
-        from .report import equations_latex, equations_text
+        from .reports.report import equations_latex, equations_text
         return Equations((equations_latex if format == "latex" else equations_text)(
             self.compiled))
 
     def check(self) -> str:
         """The report of `bgc check`."""
-        from .report import check_report
+        from .reports.report import check_report
         return check_report(self.compiled, api.summary(self.compiled) if self.scene else None)
 
     def draw(self, format: str = "svg"):
         """The bond graph with its causal strokes (`bgc draw`): format "svg" (an SVG that
         Jupyter displays; needs Graphviz's `dot`) or "dot" (the Graphviz text)."""
         run.choice("format", format, ("svg", "dot"))
-        from . import draw
+        from .reports import draw
         dot = draw.draw_dot(self.compiled)
         if format == "dot":
             return dot

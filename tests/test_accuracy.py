@@ -9,7 +9,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from bgc import api, backends, solvers, stability
+from bgc import api
+from bgc.base import backends, solvers
+from bgc.analysis import stability
 from conftest import run_bgc
 from test_simulate import pendulum_reference
 

@@ -23,9 +23,9 @@ from scipy.integrate import solve_ivp
 from scipy.optimize import brentq
 
 import bgc
-from bgc import backends
+from bgc.base import backends
 from bgc.api import Source
-from bgc.emit import emit_c, emit_python
+from bgc.codegen.emit import emit_c, emit_python
 
 ROOT = Path(__file__).resolve().parent.parent
 MODELS = sorted((ROOT / "models").glob("*.bg"))
@@ -365,7 +365,7 @@ def test_values_at_a_point_are_sympys_xreplace():
     """The random-point tests evaluate a matrix's entries with their shared subexpressions
     rebuilt once per point (canonical.xreplace with a memo): node for node what SymPy's
     xreplace builds."""
-    from bgc.canonical import xreplace
+    from bgc.symbolic.canonical import xreplace
     x, y = sp.symbols("x y", real=True)
     shared = sp.sin(x - y) * sp.sqrt(x ** 2 + y ** 2)
     entries = [shared + 1, 2 * shared * y, sp.Abs(x - y, evaluate=False) + shared, x,
@@ -433,8 +433,8 @@ def test_parallel_rc_branches_against_scipy(monkeypatch):
 
 
 def test_a_block_too_large_to_solve_symbolically_says_why_in_check(monkeypatch):
-    from bgc import reduce
-    from bgc.report import check_report
+    from bgc.middle import reduce
+    from bgc.reports.report import check_report
     monkeypatch.setattr(reduce, "SYMBOLIC_MAX_OPS", 10)
     compiled = bgc.build(Source("rc.bg", RC_BRANCHES.replace("N = 40", "N = 4")), "run")
     (block,) = compiled.reduced.blocks
@@ -463,7 +463,7 @@ def _heugcd_bits(monkeypatch, expr) -> int:
 def test_the_gcd_estimate_bounds_sympys_heuristic(monkeypatch, n):
     """gcd_bits against the integers SymPy's heugcd really builds: above them, and growing
     as they do (each further parameter shared by numerator and denominator multiplies)."""
-    from bgc.algebra import gcd_bits
+    from bgc.symbolic.algebra import gcd_bits
     r, q = sp.symbols(f"r0:{n}", positive=True), sp.symbols(f"q0:{n}")
     expr = (1 + sum(q[i] / r[i] for i in range(n))) / sum(1 / r[i] for i in range(n))
     real = _heugcd_bits(monkeypatch, expr)
@@ -472,7 +472,7 @@ def test_the_gcd_estimate_bounds_sympys_heuristic(monkeypatch, n):
 
 
 def test_the_lu_estimate_bounds_the_solution_sympy_builds():
-    from bgc.algebra import lu_solution_nodes
+    from bgc.symbolic.algebra import lu_solution_nodes
     rng = np.random.default_rng(3)
     x = sp.symbols("x0:9", real=True)
     for m in (1, 2, 3, 5):

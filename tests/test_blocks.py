@@ -1,12 +1,13 @@
-"""The graph algorithms of the block sort (bgc/blt.py) and the LU plans (bgc/sparse.py), on
-small graphs and random matrices whose answers are known or computed by numpy."""
+"""The graph algorithms of the block sort (bgc/symbolic/blt.py) and the LU plans
+(bgc/symbolic/sparse.py), on small graphs and random matrices whose answers are known or computed
+by numpy."""
 import random
 
 import numpy as np
 import pytest
 
-from bgc import blt
-from bgc.sparse import plan
+from bgc.symbolic import blt
+from bgc.symbolic.sparse import plan
 
 
 def test_components_in_dependency_order():
@@ -132,8 +133,8 @@ def test_symmetric_definite_matrix_needs_no_pivoting_however_scaled():
     would refactor it densely), the one-sign test of a symmetric one accepts it, and the
     solution is right."""
     import bgc
-    from bgc import backends
-    from bgc.emit import emit_python
+    from bgc.base import backends
+    from bgc.codegen.emit import emit_python
 
     (text,) = emit_python(bgc.build(bgc.api.Source("c.bg", "model c\n")).program).values()
     runtime = backends.load_python_module(text)  # the runtime's routines, as generated

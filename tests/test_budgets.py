@@ -6,9 +6,9 @@ import functools
 
 import pytest
 
-from bgc import backends
+from bgc.base import backends
 from bgc.api import Source, build
-from bgc.emit import emit_c, emit_python
+from bgc.codegen.emit import emit_c, emit_python
 from conftest import MODELS
 
 BACKENDS = ["python"] + (["c"] if backends.have_c_compiler() else [])

@@ -1,4 +1,4 @@
-"""The compile cache (bgc.backends): the runtime built once and linked with each model's part,
+"""The compile cache (bgc.base.backends): the runtime built once and linked with each model's part,
 giving the bytes the standalone program gives; and a cache that verifies what it holds and
 builds again whatever it cannot run (a program without its mode, a directory in its place, a
 truncated or garbage file, a missing or damaged runtime object), without a traceback, also
@@ -10,8 +10,10 @@ from pathlib import Path
 
 import pytest
 
-from bgc import api, backends, runner
-from bgc.emit import c_runtime_unit, emit_c, linkable
+from bgc import api
+from bgc.base import backends
+from bgc.execute import runner
+from bgc.codegen.emit import c_runtime_unit, emit_c, linkable
 from conftest import MODELS, ROOT, run_bgc
 
 pytestmark = pytest.mark.skipif(not backends.have_c_compiler(), reason="no C compiler")
@@ -116,7 +118,7 @@ def test_the_runtime_unit_and_a_linked_part_are_strict_c99(tmp_path):
 
 def test_a_model_too_large_for_the_runtime_is_built_standalone(cache, monkeypatch):
     program = api.build(MODELS / "rlc.bg").program
-    monkeypatch.setattr("bgc.emit.LINK_PARAMS", 1)
+    monkeypatch.setattr("bgc.codegen.emit.LINK_PARAMS", 1)
     assert not linkable(program)
     runner.c_executable(program)
     assert _runtime_objects(cache) == []
@@ -268,10 +270,12 @@ def test_concurrent_runs_share_one_cache(tmp_path):
 
 
 def test_a_run_copies_what_the_install_prebuilt_instead_of_building_it(tmp_path, monkeypatch):
-    """setup.py runs bgc.prebuild into the package's prebuilt/ directory: the interpreter, the
+    """setup.py runs bgc.execute.prebuild into the package's prebuilt/ directory: the interpreter,
+    the
     runtime object and the parser's tables, named as the cache names them.  A run whose cache
     lacks one copies it from there (checked, no compiler run); a damaged one is built."""
-    from bgc import parser, vm
+    from bgc.front import parser
+    from bgc.codegen import vm
     seeds = tmp_path / "prebuilt"
     monkeypatch.setenv("BGC_CACHE_DIR", str(seeds))  # what stands for the package's directory
     vm.interpreter()

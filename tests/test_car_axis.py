@@ -11,8 +11,9 @@ import numpy as np
 import pytest
 import sympy as sp
 
-from bgc import api, backends
-from bgc.graph import TIME, var
+from bgc import api
+from bgc.base import backends
+from bgc.front.graph import TIME, var
 
 ROOT = Path(__file__).resolve().parent.parent
 MODELS = ROOT / "models"

@@ -11,15 +11,15 @@ import sympy as sp
 from click.testing import CliRunner
 
 import bgc
-from bgc import backends
+from bgc.base import backends
 from bgc.api import Source
-from bgc.ast import ComponentDecl, PortDecl
+from bgc.front.ast import ComponentDecl, PortDecl
 from bgc.cli import main
-from bgc.emit import c_param_fields, emit_c, emit_python
-from bgc.graph import var
-from bgc.parser import parse
-from bgc.reduce import explicit_forms
-from bgc.resources import MAX_INSTANCE_DEPTH
+from bgc.codegen.emit import c_param_fields, emit_c, emit_python
+from bgc.front.graph import var
+from bgc.front.parser import parse
+from bgc.middle.reduce import explicit_forms
+from bgc.base.resources import MAX_INSTANCE_DEPTH
 
 
 ROOT = Path(__file__).resolve().parent.parent

@@ -13,7 +13,7 @@ from scipy.integrate import solve_ivp
 from click.testing import CliRunner
 
 import bgc
-from bgc import runner
+from bgc.execute import runner
 from bgc.api import Source
 from bgc.cli import main
 
@@ -694,7 +694,7 @@ def test_a_bar_lands_flat_on_two_supports(solver, tmp_path):
 def test_the_drawing_names_the_switched_elements():
     """bgc draw shows a diode as D, friction as Fr(Fc, Fs), a switch as Sw(COND) and a gap as
     a unilateral constraint junction (each a constraint junction underneath)."""
-    from bgc import draw
+    from bgc.reports import draw
     cases = [(RECTIFIER.replace("SOLVER", "dopri5"), "d", "D", "ideal diode"),
              (STICK_SLIP.replace("SOLVER", "dopri5"), "fr", "Fr(Fc, Fs)", "dry friction"),
              (CAPACITORS.replace("SOLVER", "dopri5"), "sw", "Sw(t &gt;= 1)", "ideal switch"),

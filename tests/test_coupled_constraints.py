@@ -16,7 +16,8 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from bgc import api, backends
+from bgc import api
+from bgc.base import backends
 from conftest import run_bgc
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -448,8 +449,8 @@ def test_the_jacobian_goes_through_the_field_and_the_augmented_solve():
     """J v of Andrews' right side, derived symbolically through M(q) f = p and the augmented
     system [M G^T; G 0], against central differences of the right side itself (the generated
     Python module, at the start and at a state off it)."""
-    from bgc.backends import load_python_module
-    from bgc.emit import emit_python
+    from bgc.base.backends import load_python_module
+    from bgc.codegen.emit import emit_python
 
     compiled = api.build(MODELS / "andrews.bg", "squeeze")
     (source,) = emit_python(compiled.program).values()

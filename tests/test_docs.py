@@ -52,7 +52,7 @@ from click.testing import CliRunner
 
 from bgc import api
 from bgc.cli import main
-from bgc.parser import parse
+from bgc.front.parser import parse
 
 ROOT = Path(__file__).resolve().parent.parent
 PAGES = [ROOT / "README.md"] + sorted((ROOT / "docs").glob("*.md"))

@@ -1,4 +1,4 @@
-"""`bgc draw` (bgc/draw.py): the DOT it writes, read back by a small DOT reader written here
+"""`bgc draw` (bgc/reports/draw.py): the DOT it writes, read back by a small DOT reader written here
 (not draw.py's own code), checked against the causality the compiler assigned, the paper's
 figure-8 structure, the scene's left-out elements, multibonds, hostile doc strings, and
 determinism; SVG/PNG through Graphviz when `dot` is installed."""
@@ -15,8 +15,9 @@ from pathlib import Path
 
 import pytest
 
-from bgc import api, draw
-from bgc.report import check_report
+from bgc import api
+from bgc.reports import draw
+from bgc.reports.report import check_report
 from conftest import MODELS, ROOT, run_bgc
 from test_components import CIRCUIT, HYD
 

@@ -20,15 +20,16 @@ import numpy as np
 import pytest
 import sympy as sp
 
-from bgc import api, backends, solvers
-from bgc.backends import BackendError, compile_c, have_c_compiler, load_python_module, run_c
-from bgc.emit import (POW10_RANGE, EmitError, c_param_fields, c_string_literal, emit_c,
+from bgc import api
+from bgc.base import backends, solvers
+from bgc.base.backends import BackendError, compile_c, have_c_compiler, load_python_module, run_c
+from bgc.codegen.emit import (POW10_RANGE, EmitError, c_param_fields, c_string_literal, emit_c,
                       emit_python, pow10_table)
-from bgc.algebra import Max, Min
+from bgc.symbolic.algebra import Max, Min
 from bgc.ir import C, ConstraintRow, Function, P, Param, SceneSettings, Store, T, X
 from bgc.ir import expressions as ir_expressions
-from bgc.lower import explicit_program, hoist_constants
-from bgc.printers import CPrinter, PythonPrinter, UnsupportedExpressionError
+from bgc.codegen.lower import explicit_program, hoist_constants
+from bgc.ir.printers import CPrinter, PythonPrinter, UnsupportedExpressionError
 
 STRICT = ("-O2", "-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic")
 HERE = Path(__file__).resolve().parent
@@ -236,7 +237,7 @@ def test_printer_refuses_unsupported():
 
 
 def test_printers_write_conditionals_alike():
-    """A conditional (the language's if/elif/else over relations, bgc.events) prints as nested
+    """A conditional (the language's if/elif/else over relations, bgc.front.events) prints as nested
     conditional expressions in both languages, and a condition is never a number."""
     e = sp.Piecewise((X[0], sp.And(X[0] > 1, sp.Not(sp.Eq(P[0], 2)))), (2 * X[0], X[0] <= -1),
                      (0, True))
@@ -467,7 +468,7 @@ int main(void)
 
 _DIGEST_SCRIPT = """
 import hashlib, test_emit as m
-from bgc.emit import emit_c, emit_python
+from bgc.codegen.emit import emit_c, emit_python
 h = hashlib.sha256()
 for cm in (m.oscillator(), m.damped(), m.circle(), m.evil(), m.functions_model()[0],
            m.hoisted_oscillator()):
@@ -490,7 +491,7 @@ def _number_text(i):
 def test_long_runs_of_stores_become_loops():
     """Runs of COPY_RUN or more copies (or numbers) into one array become one loop over index
     tables; shorter runs, and a change of array, are left as lines."""
-    from bgc.emit import COPY_RUN, _copy_loops
+    from bgc.codegen.emit import COPY_RUN, _copy_loops
     short = _store_lines(COPY_RUN - 1)
     assert _copy_loops(short) == short
     loop = _copy_loops(_store_lines(COPY_RUN))
@@ -505,7 +506,7 @@ def test_long_runs_of_stores_become_loops():
 def test_store_loops_write_what_the_lines_write(tmp_path):
     """The loops against the lines they replace, compiled: the same doubles, bit for bit, in
     every slot (the untouched ones included)."""
-    from bgc.emit import COPY_RUN, _copy_loops
+    from bgc.codegen.emit import COPY_RUN, _copy_loops
     n = COPY_RUN + 7
     lines = [*_store_lines(n), "out[500] = x[1];", *_store_lines(n, dest="wv", src="x", step=3),
              *_store_lines(n, dest="x0", numbers=True), *_store_lines(COPY_RUN + 1, dest="out", src="wv")]
@@ -635,7 +636,8 @@ def test_compiler_failure_is_a_backend_error():
 
 
 def test_no_eval_or_exec_in_backends():
-    for name in ("printers.py", "emit.py", "backends.py", "lower.py", "ir.py"):
+    for name in ("ir/printers.py", "codegen/emit.py", "base/backends.py", "codegen/lower.py",
+                 "ir/program.py"):
         text = (HERE.parent / "bgc" / name).read_text()
         assert "eval(" not in text and "exec(" not in text, name
 
@@ -1089,7 +1091,7 @@ def test_digit_words_are_exact():
 def test_straight_line_code_splits_where_no_temporary_crosses():
     """The parameters' defaults and constants, when long, as chunks of about
     PARAMETER_CHUNK lines, each ending where every temporary it defines is read no more."""
-    from bgc.emit import _line_chunks
+    from bgc.codegen.emit import _line_chunks
     short = [f"p->c[{k}] = 1.0/p->p_r{k};" for k in range(10)]
     assert _line_chunks(short, 4) == [short[0:4], short[4:8], short[8:10]]
     assert _line_chunks(short, 10) == [short]
@@ -1105,7 +1107,7 @@ def test_parameters_and_constants_in_several_functions_give_the_python_bytes(tmp
     into functions of 8 lines (PARAMETER_CHUNK, 256 in use, made small here): the C program
     gives the Python module's numbers, bit for bit, with the defaults and with a late
     parameter given."""
-    from bgc import emit
+    from bgc.codegen import emit
     monkeypatch.setattr(emit, "PARAMETER_CHUNK", 8)
     n = 12
     lines = ['model many "a ladder with a parameter per element"', "src : Se(1.0)"]
@@ -1129,7 +1131,7 @@ def test_parameters_and_constants_in_several_functions_give_the_python_bytes(tmp
 def test_a_long_chunk_splits_between_statements_outside_braces():
     """A split never falls inside braces (a loop of stores), between an `if` and the line it
     guards, nor where a temporary is still to be read."""
-    from bgc.emit import _line_chunks
+    from bgc.codegen.emit import _line_chunks
     lines = ["wv[0] = x[0];", "{", "    int bgc_k;", "    for (bgc_k = 0; bgc_k < 9; ++bgc_k)",
              "        out[bgc_k] = x[bgc_k];", "}", "wv[1] = x[1];",
              "if (bgc_block_solve(w, 0, t))", "    return 1;", "const double w3 = wv[5];",
@@ -1143,7 +1145,7 @@ def test_model_functions_split_into_short_functions_write_the_python_bytes(monke
     """A right side in chunks of few operations, each chunk's lines in functions of at most
     8 (FUNCTION_LINES, 500 in use, made small here), block solves among them: the C program
     writes the Python module's bytes."""
-    from bgc import emit
+    from bgc.codegen import emit
     ladder = ['model rl "resistor ladder with symbolic resistances"', "parameter V0 = 10.0",
               "parameter Cc = 0.2", "src : Se(V0)", "cap : C(Cc)"]
     before = "src"
@@ -1161,6 +1163,6 @@ def test_model_functions_split_into_short_functions_write_the_python_bytes(monke
         outs.append(run_c(compile_c(text), ["--t-end", "0.5"]))
         assert len(re.findall(r"^static int bgc_rhs_\d+\(", text, re.M)) > (6 if lines == 8 else 0)
     (py,) = emit_python(program, chunk_ops=30).values()
-    from bgc.backends import run_python
+    from bgc.base.backends import run_python
     outs.append(run_python(py, ["--t-end", "0.5"]))
     assert outs[0][0] == 0 and outs[0] == outs[1] == outs[2], outs[0][2]

@@ -12,7 +12,7 @@ import sympy as sp
 from hypothesis import HealthCheck, given, settings, strategies as st
 
 import bgc
-from bgc import runner
+from bgc.execute import runner
 from bgc.api import Source
 
 from conftest import have_cc
@@ -198,7 +198,7 @@ def test_a_pulse_whose_end_is_beyond_a_double_never_ends():
     rest before t0 = 1e308.  A pulse from 0 as wide as a double goes, and a square wave whose
     second edge (2e308) overflows, are 1 for the whole run: the lag charges as under a
     constant 1."""
-    from bgc.report import check_report
+    from bgc.reports.report import check_report
     literal = build(LAG.replace("pulse(t0, width)", "pulse(1e308, 1e308)"), "run")
     report = check_report(literal)
     assert "  pulse(1e308, 1e308)  (time event at t = 1e+308)\n" in report
@@ -606,7 +606,7 @@ def test_the_log_names_conditions_as_written(tmp_path, backend):
         assert abs(hits[0][0] - t) < 1e-9, (what, hits[0][0], t)
     names = {what for _, what, _ in got}
     assert "pulse(2.25, 0.5)" in names and "pulse(2.25, 0.5): end" in names
-    from bgc.report import check_report
+    from bgc.reports.report import check_report
     report = check_report(build(NAMED, "run"))
     assert "when y >= 0.5 and k == 0 { k = 1 }" in report and "when a.x > 0.25 {" in report
 
@@ -685,7 +685,7 @@ def test_discrete_variables_are_outputs(backend):
 
 
 def test_reports_show_the_events():
-    from bgc.report import check_report, equations_text
+    from bgc.reports.report import check_report, equations_text
     compiled = build(LAG, "run")
     report = check_report(compiled)
     assert "events:\n  pulse(t0, width)  (time event at t = t0)\n" \
@@ -810,8 +810,8 @@ def test_a_relation_of_t_alone_is_stepped_onto_however_long_the_steps(solver):
 
 
 def test_time_roots_of_a_relation_of_t():
-    from bgc.events import time_roots
-    from bgc.graph import TIME
+    from bgc.front.events import time_roots
+    from bgc.front.graph import TIME
     w = sp.Symbol("w")
     forms = time_roots(sp.sin(w * TIME) - sp.Rational(1, 2))
     times = sorted(float((C + P * k).subs(w, 3)) for C, P in forms for k in range(-2, 3))

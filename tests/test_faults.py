@@ -28,7 +28,8 @@ from pathlib import Path
 
 import pytest
 
-from bgc import backends, outfile
+from bgc.base import backends
+from bgc.execute import outfile
 from conftest import run_bgc
 
 BACKENDS = ["python"] + (["c"] if backends.have_c_compiler() else [])

@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from bgc import backends
+from bgc.base import backends
 from conftest import MODELS, run_bgc
 
 needs_cc = pytest.mark.skipif(not backends.have_c_compiler(), reason="no C compiler")
@@ -183,7 +183,7 @@ def test_the_python_module_streams_rows_to_a_file_or_yields_them(tmp_path):
     """rows() and simulate(out=...) give what simulate() returns, and the CSV the program
     writes; z = exp(-t) at rk4's accuracy."""
     from bgc.api import Source, build
-    from bgc.emit import emit_python
+    from bgc.codegen.emit import emit_python
 
     (text,) = emit_python(build(Source("decay.bg", DECAY), "s").program).values()
     module = backends.load_python_module(text)

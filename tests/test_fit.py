@@ -1,4 +1,5 @@
-"""Forward sensitivities (bgc.sensitivity, bgc.estimate.sensitivities) and `bgc fit`.
+"""Forward sensitivities (bgc.codegen.sensitivity, bgc.analysis.estimate.sensitivities) and `bgc
+fit`.
 
 The sensitivities are checked against central finite differences of the model's own solution
 with the parameter perturbed (`-p`), computed here with the classical Runge-Kutta method on a
@@ -15,7 +16,9 @@ import math
 import numpy as np
 import pytest
 
-from bgc import api, estimate, runner
+from bgc import api
+from bgc.analysis import estimate
+from bgc.execute import runner
 from conftest import MODELS, have_cc, run_bgc
 
 needs_cc = pytest.mark.skipif(not have_cc(), reason="no C compiler")

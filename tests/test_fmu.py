@@ -16,8 +16,10 @@ import numpy as np
 import pytest
 
 import bgc
-from bgc import api, backends, fmu
-from bgc.emit import emit_c
+from bgc import api
+from bgc.base import backends
+from bgc.codegen import fmu
+from bgc.codegen.emit import emit_c
 from conftest import run_bgc
 
 fmpy = pytest.importorskip("fmpy")

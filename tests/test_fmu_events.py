@@ -17,7 +17,8 @@ import numpy as np
 import pytest
 
 import bgc
-from bgc import backends, fmu
+from bgc.base import backends
+from bgc.codegen import fmu
 from bgc.api import Source
 
 fmpy = pytest.importorskip("fmpy")

@@ -11,7 +11,7 @@ mode draws fresh examples, as many as BGC_FUZZ_EXAMPLES says for each of the two
 
     BGC_FUZZ_EXAMPLES=100000 python -m pytest -q -n 0 -s tests/test_fuzz.py
 
-Time is bounded by bgc's own limits (bgc/resources.py); the alarm below only turns a hang into
+Time is bounded by bgc's own limits (bgc/base/resources.py); the alarm below only turns a hang into
 a failure instead of a stuck test run.  The fuzzing harness of the long runs, with simulation
 and minimisation, is tools/fuzz.py (tests/test_fuzz_harness.py, docs/fuzzing.md).
 """
@@ -28,7 +28,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from bgc.cli import main
-from bgc.parser import KEYWORDS
+from bgc.front.parser import KEYWORDS
 
 MODELS = Path(__file__).resolve().parent.parent / "models"
 LONG = int(os.environ.get("BGC_FUZZ_EXAMPLES", "0"))

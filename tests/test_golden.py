@@ -11,11 +11,11 @@ import pytest
 import sympy as sp
 
 import bgc
-from bgc import backends
-from bgc.emit import c_runtime_parts, emit_c, emit_python, python_runtime
-from bgc.graph import TIME, var
-from bgc.reduce import explicit_forms
-from bgc.report import check_report, equations_text
+from bgc.base import backends
+from bgc.codegen.emit import c_runtime_parts, emit_c, emit_python, python_runtime
+from bgc.front.graph import TIME, var
+from bgc.middle.reduce import explicit_forms
+from bgc.reports.report import check_report, equations_text
 
 ROOT = Path(__file__).resolve().parent.parent
 GOLDEN = Path(__file__).parent / "golden"
@@ -126,8 +126,8 @@ def test_python_rhs_matches_sympy_at_random_points(path):
 HASHES = (
     "import hashlib, sys, bgc\n"
     "from pathlib import Path\n"
-    "from bgc.emit import c_runtime_parts, emit_c, emit_python, python_runtime\n"
-    "from bgc.report import equations_text\n"
+    "from bgc.codegen.emit import c_runtime_parts, emit_c, emit_python, python_runtime\n"
+    "from bgc.reports.report import equations_text\n"
     "parts = dict(c_runtime_parts(), python=python_runtime())\n"
     "def model_part(text):  # as test_golden.model_part\n"
     "    for name, part in parts.items():\n"

@@ -13,15 +13,15 @@ from click.testing import CliRunner
 from lark.lexer import PatternStr
 
 import bgc
-from bgc import backends
-from bgc.algebra import antiderivative, is_zero, solve_for
+from bgc.base import backends
+from bgc.symbolic.algebra import antiderivative, is_zero, solve_for
 from bgc.api import Source
 from bgc.cli import main
-from bgc.emit import emit_python
-from bgc.graph import var
-from bgc.parser import KEYWORDS, _lark
-from bgc.reduce import explicit_forms
-from bgc.resources import MAX_EXPANDED_TERMS, MAX_SOURCE_BYTES, expanded_terms, fits
+from bgc.codegen.emit import emit_python
+from bgc.front.graph import var
+from bgc.front.parser import KEYWORDS, _lark
+from bgc.middle.reduce import explicit_forms
+from bgc.base.resources import MAX_EXPANDED_TERMS, MAX_SOURCE_BYTES, expanded_terms, fits
 
 
 def build(text, scene=None, **kw):

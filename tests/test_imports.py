@@ -1,5 +1,6 @@
-"""bgc's modules import each other without a cycle, and the package's API names are served
-without rewriting its attributes: the graph of imports is read from the source with `ast`.
+"""bgc's modules import each other without a cycle, each package imports only the packages
+below it in the pipeline's order, and the package's API names are served without rewriting its
+attributes: the graph of imports is read from the source with `ast`.
 
 Every import of a bgc module is an edge, at the top of a module or inside a function alike: a
 lazy import only moves a cycle from import time to call time, where it still ties the two
@@ -15,37 +16,75 @@ from pathlib import Path
 
 PACKAGE = Path(__file__).resolve().parent.parent / "bgc"
 
+# The packages from the bottom up (docs/architecture.md): a module may import its own package
+# and those before it.  The modules at the top (api, model, cli) may import any package; api
+# stands between execute and analysis, which builds on it.
+LAYERS = ("base", "symbolic", "ir", "front", "middle", "codegen", "reports", "execute", "api",
+          "analysis", "model", "__init__", "cli", "__main__")
 
-def _imported(node: ast.AST, modules: set[str]) -> set[str]:
+
+def _layer(module: str) -> str:
+    """The layer of a module named below bgc ("middle.reduce" -> "middle", "api" -> "api")."""
+    return module.split(".")[0]
+
+
+def modules() -> dict[str, Path]:
+    """Every module of bgc by its name below the package ("middle.reduce", "cli")."""
+    out = {}
+    for path in sorted(PACKAGE.rglob("*.py")):
+        rel = path.relative_to(PACKAGE).with_suffix("")
+        if rel.parts[0] == "runtime":
+            continue
+        parts = list(rel.parts)
+        if parts[-1] == "__init__" and len(parts) > 1:
+            parts = parts[:-1]
+        out[".".join(parts)] = path
+    return out
+
+
+def _package_of(name: str, path: Path) -> list[str]:
+    """The package a module's relative imports start from, as parts below bgc."""
+    parts = name.split(".") if name != "__init__" else []
+    return parts if path.name == "__init__.py" else parts[:-1]
+
+
+def _imported(node: ast.AST, here: list[str], known: set[str]) -> set[str]:
     """The bgc modules an import statement (or the command line's _Later(".name")) names."""
-    names: list[str] = []
+    targets: list[list[str]] = []
     if isinstance(node, ast.ImportFrom):
-        base = node.module or ""
         if node.level == 0:
-            if base != "bgc" and not base.startswith("bgc."):
+            if node.module != "bgc" and not (node.module or "").startswith("bgc."):
                 return set()
-            base = base[len("bgc"):].lstrip(".")
-        elif node.level > 1:
-            return set()
-        names = [base.split(".")[0]] if base else [a.name for a in node.names]
+            base = (node.module or "").split(".")[1:]
+        else:
+            base = here[:len(here) - (node.level - 1)] if node.level > 1 else list(here)
+            base = base + (node.module.split(".") if node.module else [])
+        targets = [base + [a.name] for a in node.names] + [base]
     elif isinstance(node, ast.Import):
-        names = [a.name.split(".")[1] for a in node.names
-                 if a.name.startswith("bgc.") and a.name.count(".") >= 1]
+        targets = [a.name.split(".")[1:] for a in node.names if a.name.startswith("bgc.")]
     elif isinstance(node, ast.Call) and (getattr(node.func, "id", None) == "_Later"
                                          or getattr(node.func, "attr", None) == "import_module"):
-        names = [a.value.lstrip(".") for a in node.args[:1]
-                 if isinstance(a, ast.Constant) and isinstance(a.value, str)]
-    return {n for n in names if n in modules}
+        targets = [a.value.lstrip(".").split(".") for a in node.args[:1]
+                   if isinstance(a, ast.Constant) and isinstance(a.value, str)]
+    out = set()
+    for t in targets:
+        for k in range(len(t), 0, -1):  # the longest prefix that is a module
+            if ".".join(t[:k]) in known:
+                out.add(".".join(t[:k]))
+                break
+    return out
 
 
 def import_graph() -> dict[str, set[str]]:
-    modules = {p.stem for p in PACKAGE.glob("*.py")}
+    found = modules()
+    known = set(found)
     graph = {}
-    for name in sorted(modules):
-        tree = ast.parse((PACKAGE / f"{name}.py").read_text(encoding="utf-8"))
+    for name, path in found.items():
+        tree = ast.parse(path.read_text(encoding="utf-8"))
+        here = _package_of(name, path)
         edges = set()
         for node in ast.walk(tree):
-            edges |= _imported(node, modules)
+            edges |= _imported(node, here, known)
         graph[name] = edges - {name}
     return graph
 
@@ -95,17 +134,75 @@ def test_the_cycle_finder_finds_a_cycle():
 
 def test_the_graph_sees_lazy_imports():
     graph = import_graph()
-    assert "emit" in graph["runner"]  # inside runner.prepare
+    assert "codegen.emit" in graph["execute.runner"]  # inside runner.prepare
     assert "api" in graph["cli"]  # _Later(".api")
+    assert "analysis.accuracy" in graph["cli"]  # _Later(".analysis.accuracy")
     assert "api" in graph["model"] and "model" in graph["__init__"]
+    assert "ir" in graph["middle.reduce"]  # from .. import ir: the package
 
 
 def test_bgc_modules_import_each_other_without_a_cycle():
     assert cycles(import_graph()) == []
 
 
+def test_every_module_is_in_a_layer():
+    assert {_layer(m) for m in modules()} <= set(LAYERS)
+
+
+def test_no_package_imports_one_above_it():
+    """The stages as packages in pipeline order: an import runs down, or within a package."""
+    rank = {name: k for k, name in enumerate(LAYERS)}
+    upward = sorted(f"{m} -> {d}" for m, deps in import_graph().items() for d in deps
+                    if rank[_layer(d)] > rank[_layer(m)])
+    assert upward == []
+
+
+def private_crossings() -> list[str]:
+    """`from ..codegen.emit import _x` or `emit._x` in a module of another package."""
+    crossing = []
+    for name, path in modules().items():
+        tree = ast.parse(path.read_text(encoding="utf-8"))
+        here = _package_of(name, path)
+        aliases = {}  # local name -> the bgc module it is
+        for node in ast.walk(tree):
+            if isinstance(node, ast.ImportFrom):
+                targets = _imported(node, here, set(modules()))
+                for a in node.names:
+                    hit = [t for t in targets if t.endswith("." + a.name) or t == a.name]
+                    if hit:
+                        aliases[a.asname or a.name] = hit[0]
+                    elif a.name.startswith("_") and a.name != "__version__" and targets:
+                        target = max(targets, key=len)
+                        if _layer(target) != _layer(name):
+                            crossing.append(f"{name}: {a.name} from {target}")
+        for node in ast.walk(tree):
+            if isinstance(node, ast.Attribute) and isinstance(node.value, ast.Name) \
+                    and node.value.id in aliases and node.attr.startswith("_") \
+                    and not node.attr.startswith("__"):
+                target = aliases[node.value.id]
+                if _layer(target) != _layer(name):
+                    crossing.append(f"{name}: {node.value.id}.{node.attr}")
+    return sorted(set(crossing))
+
+
+def test_no_private_name_crosses_a_package():
+    """A private name is its package's own."""
+    assert private_crossings() == KNOWN_PRIVATE_CROSSINGS
+
+
+# The private names that cross a package today, each to become public or move with its user
+# (the house issue's splits); the list only shrinks.
+KNOWN_PRIVATE_CROSSINGS = [
+    "analysis.linear: plot._text",
+    "codegen.fmu: backends._run_compiler",
+    "codegen.sensitivity: _Forward from ir.tangent",
+    "execute.prebuild: parser._lark",
+    "execute.warm: _HERE from base.resources",
+]
+
+
 def test_only_the_command_line_imports_click():
-    for path in PACKAGE.glob("*.py"):
+    for path in PACKAGE.rglob("*.py"):
         tree = ast.parse(path.read_text(encoding="utf-8"))
         for node in ast.walk(tree):
             if isinstance(node, (ast.Import, ast.ImportFrom)):
@@ -121,10 +218,11 @@ def test_the_api_names_leave_the_submodules_alone():
     import bgc
     import bgc.api
     import bgc.model
-    import bgc.run
-    import bgc.system
-    assert isinstance(bgc.system, types.ModuleType) and isinstance(bgc.run, types.ModuleType)
-    assert importlib.import_module("bgc.run") is bgc.run
+    import bgc.base.run
+    import bgc.middle.system
+    assert isinstance(bgc.middle.system, types.ModuleType)
+    assert isinstance(bgc.base.run, types.ModuleType)
+    assert importlib.import_module("bgc.base.run") is bgc.base.run
     assert bgc.equations is bgc.api.equations and bgc.load is bgc.model.load
     assert bgc.simulate is bgc.api.simulate and bgc.compile is bgc.api.compile
     assert not set(bgc.__all__) & set(vars(bgc))  # served by __getattr__, never stored

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 import bgc
-from bgc import backends
+from bgc.base import backends
 from bgc.api import Source
 
 from conftest import have_cc
@@ -175,7 +175,7 @@ def test_a_repeated_t_is_a_jump_of_the_input(tmp_path):
     three = {"v": ([0.0, 1.0, 1.0, 1.0], [0.0, 1.0, 2.0, 3.0])}
     with pytest.raises(ValueError, match="the same t a third time at t.3."):
         bgc.simulate(Source(str(tmp_path / "rc.bg"), RC), "run", inputs=three)
-    from bgc import runner  # the generated module's own simulate(inputs=...)
+    from bgc.execute import runner  # the generated module's own simulate(inputs=...)
     module = runner.prepare(bgc.build(Source(str(tmp_path / "rc.bg"), RC), "run"), "python",
                             in_process=True).module
     assert np.array_equal(module.simulate(inputs=data)[1], y[:, 1:])
@@ -187,7 +187,7 @@ def test_the_programs_own_input_refuses_the_same_rows(tmp_path):
     """The generated programs read --input themselves: a repeated t is a jump there too, a t
     that decreases or comes a third time the same line from each (exit 2)."""
     import subprocess
-    from bgc import runner
+    from bgc.execute import runner
     compiled = bgc.build(Source(str(tmp_path / "rc.bg"), RC), "run")
     (tmp_path / "jump.csv").write_text("t,v\n0,0\n1,0\n1,2\n", encoding="utf-8")
     (tmp_path / "bad.csv").write_text("t,v\n0,1\n1,2\n1,3\n1,4\n", encoding="utf-8")

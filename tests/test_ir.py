@@ -7,10 +7,11 @@ from pathlib import Path
 
 import sympy as sp
 
-from bgc import api, canonical, ir
-from bgc.differentiate import directional
+from bgc import api, ir
+from bgc.symbolic import canonical
+from bgc.symbolic.differentiate import directional
 from bgc.ir import P, T, V, W, X, Assign, Newton, Param, Resolve, SceneSettings, Solve, Store
-from bgc.lower import explicit_program, with_tangent
+from bgc.codegen.lower import explicit_program, with_tangent
 
 ROOT = Path(__file__).resolve().parent.parent
 SCENE = SceneSettings(0.0, 1.0, 0.1, "dopri5", 1e-6, 1e-9, None)
@@ -105,7 +106,7 @@ def test_remembered_free_symbols_are_sympys():
 def test_the_collector_is_restored_after_a_compile():
     import gc
 
-    from bgc.resources import COMPILE_GC_THRESHOLD, quiet_collector
+    from bgc.base.resources import COMPILE_GC_THRESHOLD, quiet_collector
 
     before = gc.get_threshold()
     with quiet_collector():
@@ -149,7 +150,8 @@ def test_remembered_integral_floats_are_integers():
 
 
 def test_sums_and_products_built_the_short_way_are_sympys(monkeypatch):
-    """bgc.canonical.new builds Add and Mul without SymPy's flattening where it would only sort: node
+    """bgc.symbolic.canonical.new builds Add and Mul without SymPy's flattening where it would only
+    sort: node
     for node (the same arguments in the same order) what SymPy's constructor builds, on cases
     where terms or factors combine, a number multiplies a sum, or the numbers are special, and
     on every sum and product the passes build while compiling two whole models."""
@@ -192,7 +194,8 @@ def test_sums_and_products_built_the_short_way_are_sympys(monkeypatch):
 
 
 def test_substitution_the_short_way_is_sympys_xreplace():
-    """bgc.canonical.xreplace (reduce's leaf forms): node for node what SymPy's xreplace builds,
+    """bgc.symbolic.canonical.xreplace (reduce's leaf forms): node for node what SymPy's xreplace
+    builds,
     functions evaluated (an unevaluated Abs too), sums and products merged where they meet."""
     x, y, z = sp.symbols("x y z", real=True)
     exprs = [x + y, x * y + 2 * z, sp.Abs(x - y, evaluate=False) * z, sp.sin(x) ** 2 + x * y,

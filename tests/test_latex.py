@@ -7,8 +7,8 @@ import pytest
 import sympy as sp
 
 import bgc
-from bgc.latex import escape, latex_system, tex_names, tidy
-from bgc.report import equations_latex
+from bgc.reports.latex import escape, latex_system, tex_names, tidy
+from bgc.reports.report import equations_latex
 from conftest import MODELS
 
 PENDULUM = MODELS / "pendulum.bg"

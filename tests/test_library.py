@@ -624,9 +624,9 @@ def test_every_library_component_is_documented_and_exercised():
     """Each component has a doc string, its ports a domain and a doc string, its parameters
     a unit (but a signal block's) and a doc string; each one is instantiated by a model of
     this file."""
-    from bgc import ast
-    from bgc.instantiate import LIBRARY
-    from bgc.parser import parse
+    from bgc.front import ast
+    from bgc.front.instantiate import LIBRARY
+    from bgc.front.parser import parse
     here = Path(__file__).read_text()
     found = 0
     for path in sorted(LIBRARY.glob("*.bg")):

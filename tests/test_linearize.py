@@ -12,7 +12,8 @@ import pytest
 from click.testing import CliRunner
 
 import bgc
-from bgc import backends, runner
+from bgc.base import backends
+from bgc.execute import runner
 from bgc.api import Source
 from bgc.cli import main
 

@@ -11,9 +11,9 @@ import pytest
 from scipy.linalg import expm
 
 import bgc
-from bgc import backends
+from bgc.base import backends
 from bgc.api import Source
-from bgc.emit import emit_c, emit_python
+from bgc.codegen.emit import emit_c, emit_python
 
 from cbits import C_IO
 

@@ -387,10 +387,10 @@ def assert_columns_match(got: Columns, ref: Columns, t: np.ndarray, what: str,
 @pytest.mark.parametrize("case", CASES, ids=[c.id for c in CASES])
 def test_model_matches_reference(case: Case, backend: str) -> None:
     import bgc
-    import bgc.backends
+    import bgc.base.backends
 
     if backend == "c":
-        if not bgc.backends.have_c_compiler():
+        if not bgc.base.backends.have_c_compiler():
             pytest.skip("no C compiler")
     kwargs = {"scene": case.scene, "backend": backend}
     if case.params:

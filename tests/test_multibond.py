@@ -10,7 +10,8 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from bgc import api, backends
+from bgc import api
+from bgc.base import backends
 from bgc.api import BgcModelError, Source
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -72,7 +73,7 @@ def test_vector_model_has_the_paper_equations():
     import sympy as sp
     vec = api.build(MODELS / "pendulum_vector.bg", "swing", program=False).reduced
     sca = api.build(MODELS / "pendulum.bg", "swing", program=False).reduced
-    from bgc.reduce import explicit_forms
+    from bgc.middle.reduce import explicit_forms
     fv = explicit_forms(vec, list(vec.rates))
     fs = explicit_forms(sca, list(sca.rates))
     rename = {sp.Symbol("mass.p[0]", real=True): sp.Symbol("mx.p", real=True),

@@ -103,7 +103,7 @@ def test_a_model_is_a_source_and_its_errors_come_at_first_use():
 def test_draw_gives_the_dot_text_and_an_svg_jupyter_shows(pendulum):
     import shutil
 
-    from bgc import draw
+    from bgc.reports import draw
     dot = pendulum.draw("dot")
     assert dot == draw.draw_dot(pendulum.compiled)
     if shutil.which("dot"):

@@ -1,11 +1,11 @@
-"""bgc.orthogonal: the analysis commands' least squares, every sum in sequence."""
+"""bgc.symbolic.orthogonal: the analysis commands' least squares, every sum in sequence."""
 import math
 import random
 
 import numpy as np
 import pytest
 
-from bgc import orthogonal
+from bgc.symbolic import orthogonal
 
 
 def test_total_adds_in_sequence_as_python_does():

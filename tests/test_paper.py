@@ -5,8 +5,8 @@ from pathlib import Path
 import sympy as sp
 
 import bgc
-from bgc.graph import var
-from bgc.reduce import explicit_forms
+from bgc.front.graph import var
+from bgc.middle.reduce import explicit_forms
 
 PENDULUM = Path(__file__).parent.parent / "models" / "pendulum.bg"
 

@@ -15,9 +15,9 @@ from pathlib import Path
 import pytest
 
 import bgc
-from bgc import backends, solvers
+from bgc.base import backends, solvers
 from bgc.api import Source
-from bgc.emit import emit_c, emit_python
+from bgc.codegen.emit import emit_c, emit_python
 
 from cbits import C_IO
 

@@ -5,7 +5,7 @@ import sys
 import pytest
 
 import bgc
-from bgc import plot
+from bgc.reports import plot
 from conftest import MODELS, have_cc, run_bgc
 
 PNG = b"\x89PNG\r\n\x1a\n"

@@ -11,8 +11,9 @@ import sys
 import pytest
 
 import bgc
-from bgc import backends, cli
-from bgc.emit import emit_c, emit_python
+from bgc.base import backends
+from bgc import cli
+from bgc.codegen.emit import emit_c, emit_python
 from conftest import MODELS, have_cc, run_bgc
 
 PENDULUM = MODELS / "pendulum.bg"

@@ -13,7 +13,7 @@ import pytest
 from pyflakes import api as pyflakes_api
 from pyflakes import reporter as pyflakes_reporter
 
-from bgc.emit import solver_tables_python
+from bgc.codegen.emit import solver_tables_python
 
 ROOT = Path(__file__).resolve().parent.parent
 RUNTIME = ROOT / "bgc" / "runtime" / "runtime.py"

@@ -10,7 +10,7 @@ from math import comb
 import mpmath
 import pytest
 
-from bgc import solvers
+from bgc.base import solvers
 
 DIGITS = 50
 

@@ -1,5 +1,5 @@
-"""The one settings type (bgc.run.RunSettings) and the one run function (bgc.runner): options
-laid over a scene's settings, a program started with only what differs from its own, the
+"""The one settings type (bgc.base.run.RunSettings) and the one run function (bgc.execute.runner):
+options laid over a scene's settings, a program started with only what differs from its own, the
 parameters checked once, the C compiler's fallback said once, a run's result."""
 from __future__ import annotations
 
@@ -10,8 +10,8 @@ from pathlib import Path
 import pytest
 
 import bgc
-from bgc import runner
-from bgc.run import RunSettings, parameter_overrides
+from bgc.execute import runner
+from bgc.base.run import RunSettings, parameter_overrides
 
 RLC = Path(__file__).parent.parent / "models" / "rlc.bg"
 SCENE = RunSettings(0.0, 10.0, 0.01, "dopri5", 1e-6, 1e-9)

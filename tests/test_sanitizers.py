@@ -13,9 +13,9 @@ from pathlib import Path
 import pytest
 
 import bgc
-from bgc import backends
+from bgc.base import backends
 from bgc.api import Source
-from bgc.emit import emit_c
+from bgc.codegen.emit import emit_c
 from conftest import MODELS
 
 FLAGS = ["-O0", "-std=c99", "-fsanitize=address,undefined", "-fno-sanitize-recover=all"]

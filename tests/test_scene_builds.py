@@ -11,8 +11,10 @@ import subprocess
 
 from conftest import have_cc, run_bgc
 
-from bgc import api, backends, emit, vm
-from bgc.emit import EmitError
+from bgc import api
+from bgc.base import backends
+from bgc.codegen import emit, vm
+from bgc.codegen.emit import EmitError
 
 needs_cc = pytest.mark.skipif(not have_cc(), reason="no C compiler")
 

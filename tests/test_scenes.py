@@ -12,9 +12,9 @@ from click.testing import CliRunner
 import bgc
 from bgc import ir
 from bgc.api import Source
-from bgc.backends import load_python_module
+from bgc.base.backends import load_python_module
 from bgc.cli import main
-from bgc.emit import emit_python
+from bgc.codegen.emit import emit_python
 
 ROOT = Path(__file__).resolve().parent.parent
 PENDULUM = ROOT / "models" / "pendulum.bg"

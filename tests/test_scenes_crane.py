@@ -26,8 +26,9 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from bgc import api, backends
-from bgc.emit import emit_python
+from bgc import api
+from bgc.base import backends
+from bgc.codegen.emit import emit_python
 
 MODEL = Path(__file__).resolve().parent.parent / "models" / "gantry_crane.bg"
 

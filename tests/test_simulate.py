@@ -7,7 +7,7 @@ import pytest
 from scipy.integrate import solve_ivp
 
 import bgc
-from bgc import backends
+from bgc.base import backends
 from bgc.api import Source
 from conftest import run_bgc
 

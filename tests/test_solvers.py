@@ -1,4 +1,4 @@
-"""The solver registry (bgc/solvers.py) against the order conditions of its methods, and the
+"""The solver registry (bgc/base/solvers.py) against the order conditions of its methods, and the
 explicit family in both runtimes: orders by step halving against closed forms, dense output,
 and the work a high-order pair saves on the paper's pendulum (counted, not timed)."""
 from fractions import Fraction
@@ -10,11 +10,11 @@ import pytest
 import sympy as sp
 
 import bgc
-from bgc import solvers
-from bgc.backends import compile_c, have_c_compiler, load_python_module, run_c
-from bgc.emit import emit_c, emit_python
+from bgc.base import solvers
+from bgc.base.backends import compile_c, have_c_compiler, load_python_module, run_c
+from bgc.codegen.emit import emit_c, emit_python
 from bgc.ir import P, Param, SceneSettings, T, X
-from bgc.lower import explicit_program
+from bgc.codegen.lower import explicit_program
 
 ROOT = Path(__file__).resolve().parent.parent
 BACKENDS = ["python"] + (["c"] if have_c_compiler() else [])

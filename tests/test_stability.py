@@ -27,9 +27,9 @@ from scipy.optimize import brentq
 from scipy.special import ellipj, ellipk
 
 import bgc
-from bgc import backends
+from bgc.base import backends
 from bgc.api import Source, build
-from bgc.emit import emit_c, emit_python
+from bgc.codegen.emit import emit_c, emit_python
 from conftest import MODELS, ROOT, run_bgc
 
 TEST_MODELS = ROOT / "tests" / "models"

@@ -4,11 +4,11 @@ import pytest
 import sympy as sp
 
 import bgc
-from bgc import ast
+from bgc.front import ast
 from bgc.api import Source
-from bgc.graph import TIME, var
-from bgc.parser import parse
-from bgc.reduce import explicit_forms
+from bgc.front.graph import TIME, var
+from bgc.front.parser import parse
+from bgc.middle.reduce import explicit_forms
 
 
 def build(text, scene=None, **kw):

@@ -262,7 +262,7 @@ def test_a_driven_model_is_refused_at_its_sources(tmp_path, source, at, where, w
     assert "no equilibrium: the model is driven" in result.stderr
     assert "simulate" in result.stderr and "periodic" not in result.stderr
     assert not out.exists()
-    with pytest.raises(bgc.equilibrium.Driven) as raised:
+    with pytest.raises(bgc.analysis.equilibrium.Driven) as raised:
         bgc.steady(model, at=at)
     assert why in str(raised.value)
 

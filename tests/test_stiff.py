@@ -12,11 +12,11 @@ import numpy as np
 import pytest
 import sympy as sp
 
-from bgc import solvers
-from bgc.backends import compile_c, have_c_compiler, load_python_module, run_c
-from bgc.emit import emit_c, emit_python
+from bgc.base import solvers
+from bgc.base.backends import compile_c, have_c_compiler, load_python_module, run_c
+from bgc.codegen.emit import emit_c, emit_python
 from bgc.ir import P, Param, SceneSettings, T, X
-from bgc.lower import explicit_program
+from bgc.codegen.lower import explicit_program
 
 STRICT = ("-O2", "-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic")
 BACKENDS = ["python"] + (["c"] if have_c_compiler() else [])

@@ -1,5 +1,5 @@
-"""Sweeps (bgc/sweeps.py, the programs' --batch mode): a batch's runs equal separate runs of the
-program bit for bit; a failed run is a row and leaves the others alone; Dask gives the same
+"""Sweeps (bgc/execute/sweeps.py, the programs' --batch mode): a batch's runs equal separate runs
+of the program bit for bit; a failed run is a row and leaves the others alone; Dask gives the same
 table as a serial sweep, also when a worker dies in the middle."""
 import math
 import os
@@ -11,9 +11,11 @@ import pytest
 from click.testing import CliRunner
 
 import bgc
-from bgc import api, backends, sweeps
+from bgc import api
+from bgc.base import backends
+from bgc.execute import sweeps
 from bgc.cli import main
-from bgc.emit import emit_c, emit_python
+from bgc.codegen.emit import emit_c, emit_python
 
 ROOT = Path(__file__).resolve().parent.parent
 PENDULUM = str(ROOT / "models" / "pendulum.bg")

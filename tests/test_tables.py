@@ -10,7 +10,8 @@ import numpy as np
 import pytest
 
 import bgc
-from bgc import runner, solvers
+from bgc.execute import runner
+from bgc.base import solvers
 from bgc.api import Source
 
 from conftest import have_cc
@@ -270,7 +271,7 @@ def test_a_bad_table_file_is_an_error_at_its_row(tmp_path, content, where, messa
 
 
 def test_a_table_file_too_large_is_refused_before_it_is_read(tmp_path):
-    from bgc.tables import MAX_TABLE_BYTES
+    from bgc.front.tables import MAX_TABLE_BYTES
     with open(tmp_path / "big.csv", "wb") as f:
         f.truncate(MAX_TABLE_BYTES + 1)  # sparse: nothing is written, nothing is read
     (tmp_path / "m.bg").write_text('model m\nsignal z = integral(table("big.csv", t), '

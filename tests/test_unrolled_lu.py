@@ -1,5 +1,5 @@
-"""Small algebraic blocks factor with straight-line code (bgc.emit._unrolled_lu) instead of the
-runtime's loops over their plan.  The unrolled code must do the same floating-point
+"""Small algebraic blocks factor with straight-line code (bgc.codegen.emit._unrolled_lu) instead of
+the runtime's loops over their plan.  The unrolled code must do the same floating-point
 operations in the same order: for random sparse plans (general and symmetric, some planned
 dense), on matrices whose pivots pass the static tests and on ones whose pivots fail them (the
 runtime then factors densely), it must give the runtime's verdict and the runtime's factors
@@ -10,8 +10,9 @@ import numpy as np
 import pytest
 
 import bgc
-from bgc import backends, sparse
-from bgc.emit import _BlockArea, _unrolled_lu, emit_c, emit_python
+from bgc.base import backends
+from bgc.symbolic import sparse
+from bgc.codegen.emit import _BlockArea, _unrolled_lu, emit_c, emit_python
 from conftest import MODELS
 
 PLAN_KEYS = ("diag", "lptr", "lpos", "lrow", "uptr", "upos", "ucol", "upd", "prow", "pcol")

@@ -1,5 +1,5 @@
-"""The interpreter backend (bgc/vm.py, bgc/runtime/vm.c): the same CSV bytes as the C program
-and the Python module, on models with constraint rows, a linear block, a Newton block,
+"""The interpreter backend (bgc/codegen/vm.py, bgc/runtime/vm.c): the same CSV bytes as the C
+program and the Python module, on models with constraint rows, a linear block, a Newton block,
 events, tables and inputs, with explicit and stiff solvers (the spans short: a few steps go
 through every code path); the choice `bgc simulate` makes by itself, and a program file the
 interpreter refuses."""
@@ -8,7 +8,9 @@ from pathlib import Path
 import pytest
 
 import bgc
-from bgc import backends, runner, vm
+from bgc.base import backends
+from bgc.execute import runner
+from bgc.codegen import vm
 from bgc.api import Source, build
 
 from conftest import run_bgc

@@ -1,5 +1,5 @@
-"""Warm runs (bgc.warm): a model `bgc simulate` has compiled before runs from its cached program
-without SymPy, exactly as a cold run would; anything that changes the program misses."""
+"""Warm runs (bgc.execute.warm): a model `bgc simulate` has compiled before runs from its cached
+program without SymPy, exactly as a cold run would; anything that changes the program misses."""
 import json
 import os
 import subprocess
@@ -195,7 +195,8 @@ def test_a_model_importing_libraries_runs_warm_and_sees_an_edited_library(tmp_pa
     the record (no compile); an edit of the library, or a library of the standard one's name
     made beside the model (which an import finds first), is compiled and seen.  The current
     through the series resistors: V / (1 + factor * 2)."""
-    from bgc import cli, warm
+    from bgc import cli
+    from bgc.execute import warm
     compiles, found = [], []
     real_compile, real_lookup = cli._compile_for_run, warm.lookup
     monkeypatch.setattr(cli, "_compile_for_run",

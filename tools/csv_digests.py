@@ -31,8 +31,9 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
 import bgc  # noqa: E402
-from bgc import backends, runner, solvers  # noqa: E402
-from bgc.emit import emit_c, emit_python  # noqa: E402
+from bgc.base import backends, solvers
+from bgc.execute import runner  # noqa: E402
+from bgc.codegen.emit import emit_c, emit_python  # noqa: E402
 
 SHORT = ("--t-end", "0.5")  # every solver, adaptive: half a second of each model
 FIXED = ("--t-end", "0.05", "--step", "0.001")  # every solver with a fixed step

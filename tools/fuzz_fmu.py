@@ -735,8 +735,10 @@ def build(text: str, folder, sanitize: bool = False) -> Fmu | None:
     the model or its FMU with a message (a model error, a model an FMU cannot hold).  Any
     other exception is bgc's failure, and propagates."""
     sys.path.insert(0, str(ROOT))
-    from bgc import api, backends, fmu as fmu_export
-    from bgc.diagnostics import ModelError
+    from bgc import api
+    from bgc.base import backends
+    from bgc.codegen import fmu as fmu_export
+    from bgc.base.diagnostics import ModelError
     try:
         compiled = api.build(api.Source("m.bg", text))
         flags = ("-O1", "-g", "-std=c99", "-fsanitize=address,undefined",

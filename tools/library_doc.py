@@ -16,9 +16,9 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-from bgc import ast  # noqa: E402
-from bgc.instantiate import LIBRARY  # noqa: E402
-from bgc.parser import parse  # noqa: E402
+from bgc.front import ast  # noqa: E402
+from bgc.front.instantiate import LIBRARY  # noqa: E402
+from bgc.front.parser import parse  # noqa: E402
 
 PAGE = ROOT / "docs" / "library.md"
 ORDER = ("electrical", "mechanics", "hydraulic", "thermal", "planar", "blocks")

@@ -1,0 +1,2 @@
+"""Foundations every stage uses: diagnostics, resource limits and paths, a run's settings, the
+solver catalogue and tableaux, the compile cache and toolchain."""

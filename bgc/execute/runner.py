@@ -1,0 +1,248 @@
+"""Running a generated program: the one place bgc runs a simulation.  The command line (cold and
+warm), bgc.simulate, Model.simulate, `bgc accuracy` and `bgc sweep` all come here for the
+backend (and the fallback when there is no C compiler), the run's settings (a
+bgc.base.run.RunSettings over the program's own, parameter overrides checked once) and the run.
+
+A Program is a generated program ready to run: a file in the cache started as a process (C, or
+Python), or generated Python loaded in this process (the API's Python backend, whose errors
+are the module's own exceptions).  run() starts it with the settings that differ from the ones
+it was compiled with, so that a run with the scene's settings starts it exactly as bgc always
+has.  The rows go to a sink (the command line's file or stdout, which it owns) or come back
+as text; the caller decides what a failure means (bgc.api raises, the command line keeps the
+rows and says so, bgc.analysis.accuracy records it).
+
+Light on purpose, like bgc.base.run: the standard library and bgc.base.backends only at import (a
+warm `bgc simulate` runs through here without importing SymPy or numpy); the emitter is imported
+only to prepare a program from a compiled model.
+"""
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import tempfile
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+from ..base import backends
+from . import outfile
+from ..base.run import RunSettings, parameter_overrides, run_span_problem
+
+NO_C_COMPILER = "warning: no C compiler found (cc or $CC); using the Python backend"
+INTERPRETED = ("bgc: no cached build for this model; running it in the interpreter (--backend c "
+               "to build)")
+VM_WORK = 10_000_000  # runner.short_run: the most output rows x (operations + states)
+
+
+def short_run(settings: RunSettings, rhs_ops: int, states: int) -> bool:
+    """Whether `bgc simulate` runs a model it has no build of in the interpreter (bgc.codegen.vm)
+    rather than building it: when the run's output rows ((t_end - t0) / dt + 1) times the
+    right side's operations and states (bgc.ir.count_ops, as `bgc check` counts them) is at
+    most VM_WORK, where the interpreter's extra time is below what the C build of the
+    model's part costs (benchmarks/cold.py measures both)."""
+    rows = (settings.t_end - settings.t0) / settings.dt + 1
+    return rows * (rhs_ops + states) <= VM_WORK
+
+
+def choose_backend(backend: str) -> tuple[str, str | None]:
+    """The backend that runs, and the warning to print about it (None: nothing to say): "c"
+    and "vm" (whose interpreter is built once per machine) fall back to "python" when there is
+    no C compiler."""
+    if backend in ("c", "vm") and not backends.have_c_compiler():
+        return "python", NO_C_COMPILER
+    return backend, None
+
+
+@dataclass(frozen=True)
+class Program:
+    """A generated program ready to run."""
+
+    backend: str  # "c", "vm" or "python"
+    defaults: RunSettings  # the scene's settings, compiled into it
+    params: tuple[str, ...]  # its parameters, in order
+    outputs: tuple[str, ...] = ()
+    inputs: tuple[str, ...] = ()  # its inputs (`input NAME`), in order
+    path: Path | None = None  # the file started as a process (C executable or Python), or
+    #                           the interpreter's program file (bgc.codegen.vm)
+    module: object = None  # or: generated Python loaded in this process
+    interpreter: Path | None = None  # the interpreter that runs path (bgc.codegen.vm)
+    bytecode: Path | None = None  # Python: path compiled (backends.python_bytecode), if any
+
+    def argv(self) -> list[str]:
+        """The command that starts it."""
+        if self.interpreter is not None:
+            return [str(self.interpreter), str(self.path)]
+        if self.path.suffix == ".py":
+            return [sys.executable, str(self.bytecode or self.path)]
+        return [str(self.path)]
+
+
+def prepare(compiled, backend: str, in_process: bool = False) -> Program:
+    """compiled's program (bgc.api.Compiled), emitted and built for `backend` (the C program
+    into the cache; the interpreter's program into the cache, with the interpreter built
+    once per machine; Python into the cache, or loaded in this process when in_process)."""
+    from ..codegen.emit import emit_python
+    p = compiled.program
+    facts = dict(defaults=p.scene, params=tuple(q.name for q in p.params), outputs=p.outputs,
+                 inputs=tuple(u.name for u in p.inputs))
+    if backend == "c":
+        return Program("c", path=c_executable(p), **facts)
+    if backend == "vm":
+        from ..codegen.vm import interpreter, program_bytes
+        path = backends.cache_bytes(program_bytes(p), ".bgvm")
+        return Program("vm", path=path, interpreter=interpreter(), **facts)
+    (text,) = emit_python(p).values()
+    if in_process:
+        return Program("python", module=backends.load_python_module(text), **facts)
+    path = backends.cache_python(text)
+    return Program("python", path=path, bytecode=backends.python_bytecode(path), **facts)
+
+
+def c_executable(program) -> Path:
+    """The C executable of a program (bgc.ir.Program), built into the cache: its model part
+    linked with the runtime built once (bgc.codegen.emit.c_runtime_unit), or, for a model whose
+    parameters do not fit that runtime (bgc.codegen.emit.linkable), the standalone program."""
+    from ..codegen.emit import c_runtime_unit, emit_c, linkable
+    if linkable(program):
+        (text,) = emit_c(program, linked=True).values()
+        return backends.compile_c_linked(text, c_runtime_unit())
+    (text,) = emit_c(program).values()
+    return backends.compile_c(text)
+
+
+def settings_for(defaults: RunSettings, names, params: dict | None = None,
+                 **options) -> RunSettings:
+    """A run's settings: a program's own (`defaults`, its scene's) with the options given
+    (None: its own) and the parameter overrides, checked against its parameters (`names`, in
+    the order an error lists them) and its scene's start (ValueError, for people)."""
+    overrides = parameter_overrides(params, names)
+    settings = defaults.with_options(params=dict(overrides), **options)
+    problem = run_span_problem(settings)
+    if problem:
+        raise ValueError(problem)
+    return settings
+
+
+WRITE_FAILED = "error: cannot write the output: "  # how a generated program says so (then why)
+
+
+@dataclass(frozen=True)
+class Result:
+    """How a run ended.  status is bgc's exit status for it: 0; 2 for settings the program
+    refused (a usage error); 128 + the signal that interrupted it; -1 over the time budget;
+    else 1 (a failed run, a violated constraint, a program killed by a signal, a CSV that
+    could not be written)."""
+
+    status: int
+    stderr: str = ""  # the program's messages (progress lines apart)
+    csv: str | None = None  # the rows as the program wrote them, when no sink took them
+    t: object = None  # in this process: the times and the rows (the module's arrays)
+    values: object = None
+    killed: int = 0  # the signal that killed the program (not one bgc passed on), else 0
+    write_error: str | None = None  # why the CSV could not be written ("No space left ...")
+    last_line: str = ""  # the last whole line a sink without a descriptor was given
+
+    @property
+    def stats(self) -> dict:
+        """The counters of a run with stats=True: {name: text}."""
+        for line in self.stderr.splitlines():
+            if line.startswith("stats:"):
+                return {k: v for k, _, v in (part.partition("=") for part in line.split()[1:])}
+        return {}
+
+    @property
+    def message(self) -> str:
+        """A failed run's last error, without its `error:`."""
+        if self.killed:
+            return f"the generated program was killed by {signal_name(self.killed)}"
+        lines = self.stderr.strip().splitlines()
+        errors = [ln for ln in lines if ln.startswith("error:")]
+        if errors:
+            return errors[-1][len("error:"):].strip()
+        return lines[-1] if lines else "failed"
+
+    @property
+    def messages(self) -> str:
+        """The program's stderr as the command line shows it: the report of a write that
+        failed taken out (the command line says it with the file's name)."""
+        if self.write_error is None:
+            return self.stderr
+        return "".join(line for line in self.stderr.splitlines(keepends=True)
+                       if not line.startswith(WRITE_FAILED))
+
+
+def signal_name(number: int) -> str:
+    """SIGKILL for 9 (the number itself for a signal Python does not name)."""
+    try:
+        return signal.Signals(number).name
+    except ValueError:
+        return f"signal {number}"
+
+
+def _write_error(stderr: str) -> str | None:
+    for line in stderr.splitlines():
+        if line.startswith(WRITE_FAILED):
+            return line[len(WRITE_FAILED):].strip()
+    return None
+
+
+def _status(code: int, signal: int = 0) -> int:
+    if signal:
+        return 128 + signal
+    return code if code in (0, 2) else 1
+
+
+def run(program, settings: RunSettings | None = None, sink=None, progress=None,
+        stats: bool = False, timeout: float | None = None, backend: str = "c") -> Result:
+    """Runs program (a Program, or a bgc.api.Compiled, prepared here for `backend` after
+    choose_backend) with settings (None: its own).  sink: a file (or anything with write())
+    that the CSV streams into as the run goes, SIGINT and SIGTERM passed on to the program
+    (the command line); None: the CSV comes back in Result.csv.  progress: called with
+    (t, t0, t_end) as the run goes.  stats: the program prints its counters (Result.stats).
+    timeout: seconds, then the run is stopped (status -1).  A program loaded in this process
+    returns its arrays, and its errors are raised (the generated module's SimulationError,
+    ValueError)."""
+    if isinstance(program, Program):
+        return _run(program, settings, sink, progress, stats, timeout)
+    compiled = program
+    program = prepare(compiled, choose_backend(backend)[0])
+    try:
+        return _run(program, settings, sink, progress, stats, timeout)
+    except backends.CannotStart:  # (a cached program damaged behind its checksum: evicted)
+        return _run(prepare(compiled, program.backend), settings, sink, progress, stats,
+                    timeout)
+
+
+def _run(program: Program, settings, sink, progress, stats, timeout) -> Result:
+    settings = program.defaults if settings is None else settings
+    if settings.input_data and program.module is None:  # numbers: to files the program reads
+        with tempfile.TemporaryDirectory(prefix="bgc-inputs-") as where:
+            files = []
+            for k, (name, t, u) in enumerate(settings.input_data):
+                path = os.path.join(where, f"input{k}.csv")
+                with open(path, "w", encoding="utf-8") as f:
+                    f.write(f"t,{name}\n" + "".join(f"{a!r},{b!r}\n" for a, b in zip(t, u)))
+                files.append(path)
+            return _run(program, replace(settings, input_data=(),
+                                         input_files=settings.input_files + tuple(files)),
+                        sink, progress, stats, timeout)
+    if program.module is not None:
+        t, values = program.module.simulate(**settings.options(program.defaults))
+        return Result(0, t=t, values=values)
+    argv = program.argv() + settings.args(program.defaults) + ["--stats"] * stats \
+        + ["--progress"] * (progress is not None)
+    if sink is not None:
+        done = backends.run_streaming(argv, sink, progress)
+        failed = done.sink_error
+        write_error = outfile.reason(failed) if failed is not None else _write_error(done.stderr)
+        killed = -done.code if done.code < 0 and not done.signal and failed is None else 0
+        return Result(_status(done.code, done.signal), done.stderr, killed=killed,
+                      write_error=write_error, last_line=done.last_line)
+    try:
+        done = backends.run_captured(argv, timeout)
+    except subprocess.TimeoutExpired:
+        return Result(-1, f"stopped after {timeout:g} s (the time budget per run)", "")
+    return Result(_status(done.returncode), done.stderr, done.stdout,
+                  killed=max(0, -done.returncode), write_error=_write_error(done.stderr))
+

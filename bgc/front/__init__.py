@@ -1,0 +1,3 @@
+"""The front end: parse (grammar/bg.lark), instantiate components, resolve names into the bond
+graph, flatten multibonds; tables, events, spelling.  Entry: `bgc.api.front` chains
+parser.parse, instantiate, resolve.resolve, flatten."""

@@ -1,0 +1,4 @@
+"""The program IR: the statement vocabulary and `Program` (bgc.ir.program, re-exported here),
+forward differentiation of statements (tangent), one expression to one line of C or Python
+(printers)."""
+from .program import *  # noqa: F401,F403 (the IR's vocabulary)

@@ -1,0 +1,2 @@
+"""The middle: scene, causality (SCAP), the equation system (system), reduce (the sorted, pruned
+program), contact (switched elements' events).  Entry: reduce.reduce."""
