@@ -1,5 +1,5 @@
 """The command line: `bgc check|equations|compile|simulate|accuracy|sweep|linearize|steady|fit`,
-and for editors `bgc fmt` (bgc.editor).
+and for editors `bgc fmt|lsp` (bgc.editor).
 The only module that uses click and the only one that writes files.  Model errors exit 1 with a
 located report, usage errors 2."""
 from __future__ import annotations
@@ -1430,6 +1430,18 @@ def _write_formatted(path: str, text: str):
             part.commit()
     except outfile.OutputError as error:
         _fail(str(error))
+
+
+@main.command()
+def lsp():
+    """A Language Server Protocol server on the standard input and output, for editors
+    (docs/editors.md): diagnostics, hover, definitions, completion, outline, formatting.
+    Needs pygls: pip install 'bgc[lsp]'."""
+    try:
+        from .editor import lsp as server
+    except ImportError as error:
+        _fail(f"bgc lsp needs pygls ({error}): pip install 'bgc[lsp]'")
+    server.main()
 
 
 if __name__ == "__main__":  # pragma: no cover
