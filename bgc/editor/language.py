@@ -595,7 +595,9 @@ def port_text(p) -> str:
 
 
 def component_text(name: str, lib: File, comp: ast.ComponentDecl, scope: Scope) -> str:
-    where = f"component of `{lib.path}`"
+    first = lib.model.decls[0] if lib.model.decls else None
+    owner = f"library `{first.name.name}`" if isinstance(first, ast.LibraryDecl) else "the file"
+    where = f"component of {owner} ({lib.path})"
     out = [f"**{name}**({', '.join(p.name.name for p in comp.params)}): {where}"]
     if comp.doc:
         out.append(comp.doc)
