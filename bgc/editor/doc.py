@@ -80,12 +80,16 @@ BREAK_PARENT = BreakParent()
 def propagate_breaks(doc) -> bool:
     """Marks broken every group that holds a hard line, a Comment or a BreakParent (not
     through a group that stops breaks); whether `doc` itself holds one."""
-    # post-order without recursion: (node, children visited?)
-    stack, result = [(doc, False)], {}
+    # post-order without recursion: (node, children visited?); a node the document holds in
+    # several places (a group's layouts share their parts) is visited once
+    stack, result, expanded = [(doc, False)], {}, set()
     while stack:
         node, done = stack.pop()
         kids = _children(node)
         if not done:
+            if id(node) in expanded:
+                continue
+            expanded.add(id(node))
             stack.append((node, True))
             stack.extend((k, False) for k in kids)
             continue
