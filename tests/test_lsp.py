@@ -240,16 +240,17 @@ DRIVE = ROOT / "tests" / "models" / "dc_drive.bg"
 
 def test_diagnostics_of_a_100_line_model_take_under_100_ms_warm():
     """The work of one check, every stage of `bgc check` (libraries parsed once before:
-    warm), timed in this process; the least of five runs (the machine's other load aside)."""
+    warm), as the processor time of this thread (what the server's worker spends, whatever
+    else the machine runs), the least of five runs."""
     text = DRIVE.read_text("utf-8")
     assert len(text.splitlines()) >= 100
     times = []
     for _ in range(6):
-        start = time.perf_counter()
+        start = time.thread_time()
         checked = language.check(text, str(DRIVE))
         assert language.reducible(checked)
         assert language.check_reduced(checked) == ()
-        times.append(time.perf_counter() - start)
+        times.append(time.thread_time() - start)
     assert min(times[1:]) < 0.1, times
 
 

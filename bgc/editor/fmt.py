@@ -641,8 +641,8 @@ def format_text(text: str, path: str = "<model>", width: int = WIDTH) -> str:
     """text in the canonical layout; ModelError (located) if it is not a model's text (a
     syntax error), FormatBug if the layout lost or changed a token or a comment."""
     parse(text, path)  # (bgc's own located syntax errors, its limits)
-    out = _layout(text, width)
-    if _signature(out) != _signature(text):
+    out, kept = _layout(text, width)
+    if _signature(out) != kept:
         raise FormatBug(f"{path}: formatting would change its tokens or comments")
     return out
 
@@ -652,18 +652,20 @@ def _tree(text: str) -> tuple[str, Tree]:
     return text, _concrete().parse(text, start="start")
 
 
-def _layout(text: str, width: int) -> str:
+def _layout(text: str, width: int) -> tuple[str, tuple]:
+    """The text laid out, and the input's _signature (of the same parse)."""
     text, tree = _tree(text)
     printer = _Printer(text, tree)
     doc = printer.document(tree)
     out = render(doc, width).rstrip("\n")
-    return out + "\n" if out else ""
+    return (out + "\n" if out else ""), _signature(text, tree)
 
 
-def _signature(text: str) -> tuple:
+def _signature(text: str, tree: Tree | None = None) -> tuple:
     """What formatting keeps: the tokens but statement ends, each statement end where one
     is (a `;` is a newline, several newlines one), and the comments' texts, in order."""
-    text, tree = _tree(text)
+    if tree is None:
+        text, tree = _tree(text)
     tokens = _leaves(tree)
     out, end = [], False
     for t in tokens:
