@@ -1,4 +1,5 @@
-"""The command line: `bgc check|equations|compile|simulate|accuracy|sweep|linearize|steady|fit`.
+"""The command line: `bgc check|equations|compile|simulate|accuracy|sweep|linearize|steady|fit`,
+and for editors `bgc fmt|lsp` (bgc.editor).
 The only module that uses click and the only one that writes files.  Model errors exit 1 with a
 located report, usage errors 2."""
 from __future__ import annotations
@@ -1536,6 +1537,100 @@ def fit(model, scene, effects, algebra, data, varies, params, backend, solver, r
     if not result.converged:
         click.echo(f"warning: the fit did not converge ({result.stopped})", err=True)
         sys.exit(1)
+
+
+# ---------------------------------------------------------------- editors
+
+
+@main.command("fmt")
+@click.argument("models", nargs=-1, required=True,
+                type=click.Path(exists=True, dir_okay=False, allow_dash=True))
+@click.option("--check", is_flag=True, help="Change nothing: name each file that is not in "
+                                            "the canonical layout, and exit 1 if one is not.")
+@click.option("--diff", is_flag=True, help="Change nothing: print what formatting changes, "
+                                           "as a unified diff.")
+def fmt(models, check, diff):
+    """Lay models out in the canonical layout (docs/editors.md): indentation, spacing, one
+    statement a line, declarations aligned, lines wrapped at 100 columns; every comment and
+    doc string kept, the meaning unchanged.  `-` reads the standard input and writes the
+    standard output.  A file with a syntax error is reported and left as it is (exit 1)."""
+    from .editor import fmt as layout
+    status = 0
+    for path in models:
+        status = max(status, _fmt_file(layout, path, check, diff))
+    sys.exit(status)
+
+
+def _fmt_file(layout, path: str, check: bool, diff: bool) -> int:
+    """bgc fmt of one file (`-`: the standard input): its exit status."""
+    import difflib
+
+    from .base.resources import MAX_SOURCE_BYTES
+    name = "<stdin>" if path == "-" else path
+    try:
+        data = sys.stdin.buffer.read(MAX_SOURCE_BYTES + 1) if path == "-" else read_bounded(path)
+    except OSError as error:
+        click.echo(f"error: {name}: cannot read: {outfile.reason(error)}", err=True)
+        return 1
+    try:
+        source = api.source_from_bytes(name, data)
+        text = layout.format_text(source.text, name)
+    except api.BgcModelError as error:
+        click.echo(str(error), err=True)
+        return 1
+    except diagnostics.ModelError as error:
+        click.echo(str(api.BgcModelError(error, source)), err=True)
+        return 1
+    except layout.FormatBug as error:
+        click.echo(f"bgc: error: {error}: a bug of bgc fmt, the file is left as it is",
+                   err=True)
+        return 1
+    changed = text != source.text
+    if diff and changed:
+        lines = difflib.unified_diff(source.text.splitlines(True), text.splitlines(True),
+                                     name, f"{name} (formatted)")
+        _echo("".join(x if x.endswith("\n") else x + "\n\\ No newline at end of file\n"
+                      for x in lines))
+    if check:
+        if changed and not diff:
+            _echo(f"{name}\n")
+        return 1 if changed else 0
+    if diff:
+        return 0
+    if path == "-":
+        _echo(text)
+    elif changed:
+        _write_formatted(path, text)
+    return 0
+
+
+def _write_formatted(path: str, text: str):
+    """The model's file replaced by its formatted text, whole or not at all, its permissions
+    kept (bgc.execute.outfile)."""
+    import stat
+    try:
+        with outfile.Partial(path) as part:
+            try:
+                if part.tmp is not None:
+                    os.fchmod(part.file.fileno(), stat.S_IMODE(os.stat(path).st_mode))
+            except OSError:
+                pass  # (the user's umask, as for any new file)
+            part.write(text.encode("utf-8"))
+            part.commit()
+    except outfile.OutputError as error:
+        _fail(str(error))
+
+
+@main.command()
+def lsp():
+    """A Language Server Protocol server on the standard input and output, for editors
+    (docs/editors.md): diagnostics, hover, definitions, completion, outline, formatting.
+    Needs pygls: pip install 'bgc[lsp]'."""
+    try:
+        from .editor import lsp as server
+    except ImportError as error:
+        _fail(f"bgc lsp needs pygls ({error}): pip install 'bgc[lsp]'")
+    server.main()
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -10,6 +10,7 @@ References, each independent of bgc:
   multiplier, typed here and integrated by SciPy at tight tolerance;
 - a start off the constraint against the corrector's own law in closed form.
 """
+import re
 from pathlib import Path
 
 import numpy as np
@@ -19,6 +20,21 @@ from scipy.integrate import solve_ivp
 from bgc import api
 from bgc.base import backends
 from conftest import run_bgc
+
+
+def _replaced(text: str, pattern: str, new: str) -> str:
+    """text with the one match of pattern (a line's start: re.M) replaced, whatever the
+    blanks bgc fmt's alignment put in it."""
+    text, n = re.subn(pattern, new, text, flags=re.M)
+    assert n == 1, pattern
+    return text
+
+
+def _arm_moving(p: str) -> str:
+    """models/two_link_arm_wall.bg with its inertia's initial momenta `init p = P` (where its
+    doc string was)."""
+    return _replaced((MODELS / "two_link_arm_wall.bg").read_text(), r'"the links\' inertia"',
+                     f"init p = {p}")
 
 ROOT = Path(__file__).resolve().parent.parent
 MODELS = ROOT / "models"
@@ -150,8 +166,7 @@ def test_arm_projected_onto_the_constraint_in_both_backends(tmp_path):
     kinetic metric, the least change of kinetic energy: p = p0 - G^T mu, where
     mu = G M^-1 p0 / (G M^-1 G^T) (an impulse of the guide), so that the flows f = M^-1 p give
     G f = 0; and the backends agree byte for byte."""
-    text = (MODELS / "two_link_arm_wall.bg").read_text().replace(
-        "m2*l2^2]]) \"the links' inertia\"", "m2*l2^2]]) init p = [1, 0.2]")
+    text = _arm_moving("[1, 0.2]")
     model = tmp_path / "arm_moving.bg"
     model.write_text(text)
     r = run_bgc("check", str(model))
@@ -178,8 +193,7 @@ def test_arm_started_off_the_constraint_follows_the_correctors_law(tmp_path, bac
     """--allow-inconsistent with a velocity that violates the constraint: with the PID
     corrector (alpha = beta = 10, critically damped) Phi'' + 2 alpha Phi' + beta^2 Phi = 0 from
     Phi = 0, Phi' = v0 gives Phi = v0 t exp(-10 t)."""
-    text = (MODELS / "two_link_arm_wall.bg").read_text().replace(
-        "m2*l2^2]]) \"the links' inertia\"", "m2*l2^2]]) init p = [1, 0.2]")
+    text = _arm_moving("[1, 0.2]")
     model = tmp_path / "arm_moving.bg"
     model.write_text(text)
     names, data = _columns(_simulate(tmp_path, model, "--scene", "held", "--allow-inconsistent",
@@ -225,8 +239,7 @@ scene run { outputs x, c.lambda
 def test_rows_through_the_field_are_checked_at_compile_time(tmp_path):
     """The initial-value check evaluates dPhi/dt through M(q) f = p at compile time and names
     the constraint."""
-    text = (MODELS / "two_link_arm_wall.bg").read_text().replace(
-        "m2*l2^2]]) \"the links' inertia\"", "m2*l2^2]]) init p = [1, 0.2]")
+    text = _arm_moving("[1, 0.2]")
     model = tmp_path / "arm_moving.bg"
     model.write_text(text)
     with pytest.raises(api.BgcModelError) as err:
@@ -414,16 +427,16 @@ def test_point_masses_and_a_coupled_field_project_alike(tmp_path):
                   [M2 * L1 * L2 * np.cos(a - b), M2 * L2**2]])
     p0 = M @ w0
     joint = tmp_path / "joint.bg"
-    joint.write_text((MODELS / "two_link_arm_wall.bg").read_text().replace(
-        "m2*l2^2]]) \"the links' inertia\"", f"m2*l2^2]]) init p = [{float(p0[0])!r}, {float(p0[1])!r}]"))
+    joint.write_text(_arm_moving(f"[{float(p0[0])!r}, {float(p0[1])!r}]"))
     v1 = np.array([L1 * np.cos(a) * w0[0], -L1 * np.sin(a) * w0[0]])
     v2 = v1 + [L2 * np.cos(b) * w0[1], -L2 * np.sin(b) * w0[1]]
     text = (MODELS / "double_pendulum.bg").read_text()
-    text = text.replace("theta1 = 0.5", f"theta1 = {TH1!r}").replace(
-        "theta2 = 1.0", f"theta2 = {TH2!r}")
+    text = _replaced(text, r"theta1( *)= 0\.5", rf"theta1\1= {TH1!r}")
+    text = _replaced(text, r"theta2( *)= 1\.0", rf"theta2\1= {TH2!r}")
     for name, mass, v in (("mx1", "m1", v1[0]), ("my1", "m1", v1[1]), ("mx2", "m2", v2[0]),
                           ("my2", "m2", v2[1])):
-        text = text.replace(f"{name} : I({mass})", f"{name} : I({mass}) init f = {float(v)!r}")
+        text = _replaced(text, rf"^{name}( *): I\({mass}\)",
+                         rf"{name}\1: I({mass}) init f = {float(v)!r}")
     text = text.replace("scene swing", """tip : 0 constraint holonomic(init = -l1*sin(theta1) - l2*sin(theta2)) corrector pid(alpha, beta)
 t2 : TF(1)
 vx2 -> t2 -> tip

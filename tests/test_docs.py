@@ -8,6 +8,9 @@ an info string, a language followed by words `key` or `key=value` (a value may b
   bg file=NAME        the same, and the model is saved as NAME for the page's later blocks
   bg fragment         part of a model: it must parse (after a `model` line if it has none);
                       it is not checked further
+  bg keep-layout      (with any of the others) its layout is what the block shows: bgc fmt
+                      leaves it as it is (tools/fmt_docs.py); every other bg block but an
+                      error's is in bgc fmt's layout (tests/test_fmt.py)
   bg error            a model that bgc refuses: `bgc check` (with scene=NAME, `--scene NAME`)
                       exits 1 with a located error; error="TEXT": the report contains TEXT
   sh                  commands, one a line (`\\` continues a line, `#` starts a comment); each
@@ -57,7 +60,7 @@ from bgc.front.parser import parse
 ROOT = Path(__file__).resolve().parent.parent
 PAGES = [ROOT / "README.md"] + sorted((ROOT / "docs").glob("*.md"))
 LANGUAGES = {"bg", "sh", "python", "text", "c"}
-KEYS = {"bg": {"file", "fragment", "error", "scene"},
+KEYS = {"bg": {"file", "fragment", "error", "scene", "keep-layout"},
         "sh": {"status", "dry-run", "skip", "needs"},
         "python": set(), "text": {"output"}, "c": {"file"}}
 # Blocks left unrun or partly run, at most (keep them few: every other example runs).

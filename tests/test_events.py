@@ -578,10 +578,10 @@ scene run { time 0 .. 3 every 0.5; outputs a.on, y, ok, r.e }
 
 @pytest.mark.parametrize("backend", BACKENDS)
 def test_the_log_names_conditions_as_written(tmp_path, backend):
-    """Each condition is named by its text in the model (whitespace made one space, comments
-    left out), its names by their paths (a component's, an element's own e and f) and each time
-    source as written: the names and times below are read off the model and its closed forms,
-    not off bgc."""
+    """Each condition is named by its text in the model (spaced as bgc fmt spaces it: one
+    space around a relation, none inside a call's brackets; comments left out), its names by
+    their paths (a component's, an element's own e and f) and each time source as written: the
+    names and times below are read off the model and its closed forms, not off bgc."""
     log = tmp_path / "events.csv"
     run_csv(build(NAMED, "run"), backend, events=str(log))
     got = [(float(t), what, change) for t, what, change in events_of(log)
@@ -598,8 +598,8 @@ def test_the_log_names_conditions_as_written(tmp_path, backend):
         (0.5, "square(1, 0.5)", "1 -> 0"),
         (0.625, "square(2, 0.25, 0.125)", "1 -> 0"),
         (0.65, "a.x > 0.25", "0 -> 1"),  # x = t - 0.4
-        (0.75, "ramp( 0.75 )", "0 -> 1"),
-        (1.25, "r.f>0.5", "0 -> 1")]
+        (0.75, "ramp(0.75)", "0 -> 1"),
+        (1.25, "r.f > 0.5", "0 -> 1")]
     for t, what, change in want:
         hits = [g for g in got if g[1] == what and g[2] == change]
         assert hits, (what, change, got)

@@ -18,9 +18,10 @@ PACKAGE = Path(__file__).resolve().parent.parent / "bgc"
 
 # The packages from the bottom up (docs/architecture.md): a module may import its own package
 # and those before it.  The modules at the top (api, model, cli) may import any package; api
-# stands between execute and analysis, which builds on it.
+# stands between execute and analysis, which builds on it; editor (bgc fmt, bgc lsp) reads
+# the front end and the middle.
 LAYERS = ("base", "symbolic", "ir", "front", "middle", "codegen", "reports", "execute", "api",
-          "analysis", "model", "__init__", "cli", "__main__")
+          "analysis", "editor", "model", "__init__", "cli", "__main__")
 
 
 def _layer(module: str) -> str:
@@ -139,6 +140,37 @@ def test_the_graph_sees_lazy_imports():
     assert "analysis.accuracy" in graph["cli"]  # _Later(".analysis.accuracy")
     assert "api" in graph["model"] and "model" in graph["__init__"]
     assert "ir" in graph["middle.reduce"]  # from .. import ir: the package
+
+
+def test_every_import_of_bgc_names_a_module_or_the_api():
+    """`from bgc import solvers` where solvers moved to bgc.base is an ImportError in an
+    installed bgc (an editable install's finder may hide it in a development tree)."""
+    import bgc
+    found = modules()
+    known = set(found)
+    allowed = set(bgc.__all__) | {"__version__"}
+    missing = []
+    for name, path in found.items():
+        tree = ast.parse(path.read_text(encoding="utf-8"))
+        here = _package_of(name, path)
+        for node in ast.walk(tree):
+            if not isinstance(node, ast.ImportFrom):
+                continue
+            if node.level == 0 and node.module != "bgc" \
+                    and not (node.module or "").startswith("bgc."):
+                continue
+            base = (node.module or "").split(".")[1:] if node.level == 0 else \
+                (here[:len(here) - (node.level - 1)] if node.level > 1 else list(here)) + \
+                (node.module.split(".") if node.module else [])
+            if base and ".".join(base) not in known and base[0] != "runtime":
+                missing.append(f"{name}: {'.'.join(base)}")
+            elif not base or ".".join(base) in known and found[".".join(base)].name == "__init__.py":
+                package = ".".join(base)
+                for a in node.names:
+                    sub = f"{package}.{a.name}" if package else a.name
+                    if sub not in known and a.name not in allowed and not package:
+                        missing.append(f"{name}: bgc.{a.name}")
+    assert missing == []
 
 
 def test_bgc_modules_import_each_other_without_a_cycle():

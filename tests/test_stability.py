@@ -245,7 +245,9 @@ def test_allow_inconsistent_in_batch_mode(tmp_path):
 def test_allow_inconsistent_through_the_api_and_the_command_line(tmp_path):
     """A model whose own initial values violate its constraint: compiling refuses it (a located
     error) unless the flag says the start is meant."""
-    text = OFFSET.read_text(encoding="utf-8").replace("parameter r0 = l ", "parameter r0 = 1.001 ")
+    text, n = re.subn(r"^parameter r0( *)= l ", r"parameter r0\1= 1.001 ",
+                      OFFSET.read_text(encoding="utf-8"), flags=re.M)
+    assert n == 1
     path = tmp_path / "off.bg"
     path.write_text(text, encoding="utf-8")
     refused = run_bgc("simulate", path, "-s", "settle", "--backend", "python",

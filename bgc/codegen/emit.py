@@ -19,10 +19,11 @@ from dataclasses import dataclass
 
 import sympy as sp
 
-from bgc import ir, solvers
-from bgc.ir import Assign, Newton, Program, Resolve, Solve, Store, as_expr
-from bgc.ir.printers import CPrinter, PythonPrinter, float_literal
-from bgc.base.resources import quiet_collector, resource_dir
+from .. import ir
+from ..base import solvers
+from ..base.resources import quiet_collector, resource_dir
+from ..ir import Assign, Newton, Program, Resolve, Solve, Store, as_expr
+from ..ir.printers import CPrinter, PythonPrinter, float_literal
 
 POW10_RANGE = (-24, 56)  # powers of ten for the C number formatter: |v| in about 1e-40..1e40
 C_RUNTIME = ("runtime.c", "drive.c", "erk.c", "stiff.c", "main.c", "batch.c")  # bgc/runtime/, in this order

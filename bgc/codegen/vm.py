@@ -35,10 +35,12 @@ import struct
 from pathlib import Path
 
 
-from bgc import backends, emit, ir
-from bgc.ir import Assign, Newton, Program, Resolve, Solve, Store
-from bgc.ir.printers import CPrinter
-from bgc.base.resources import resource_dir
+from . import emit
+from .. import ir
+from ..base import backends
+from ..base.resources import resource_dir
+from ..ir import Assign, Newton, Program, Resolve, Solve, Store
+from ..ir.printers import CPrinter
 
 FORMAT = 6  # of the program file; vm.c refuses any other
 MAGIC = b"BGCVM\0\0\0"

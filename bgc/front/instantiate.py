@@ -298,12 +298,12 @@ class _Instantiate:
                 f.owner[f"{alias}.{name}"] = lib.owner[name]
 
     def parse_library(self, path: Path, d: ast.ImportDecl, top: _Scope) -> _File:
-        from .parser import decode, parse
+        from .parser import decode, parse_library
         text = None
         try:
             data = read_bounded(str(path))
             text = decode(data)
-            model = parse(text, str(path))
+            model = parse_library(text, str(path))
         except OSError as exc:
             fail(top.sp(d.span), f"cannot read {path}: {exc.strerror}")
         except ModelError as exc:

@@ -575,6 +575,13 @@ def parse(source: str, path: str = "<model>") -> ast.Model:
     return ast.Model(_transform(tree), path, text=source)
 
 
+@lru_cache(maxsize=64)
+def parse_library(source: str, path: str) -> ast.Model:
+    """parse() of a library's text, remembered (the AST is immutable): a long-lived process
+    (bgc lsp, a notebook) parses each library once, not at every build that imports it."""
+    return parse(source, path)
+
+
 _BUILDERS = {name: f for name, f in vars(_ToAst).items() if not name.startswith("_")}
 
 

@@ -2,8 +2,10 @@
 check` and in the runtimes' messages (docs/hybrid.md: a condition is named as the model
 writes it, with its path).
 
-The text is the source of the expression's span, with its comments left out and each run of
-whitespace made one space, and with each name written as the model-level name it stands for:
+The text is the source of the expression's span, with its comments left out and spaced as bgc
+fmt spaces it (whatever the blanks and line breaks written: a model and its formatted text give
+the same names, and so the same generated code), and with each name written as the model-level
+name it stands for:
 inside a component the instance's path (`x` of instance `a` is `a.x`), an element's own `e`
 in its law the element's (`valve.e`), an indexed name its index's value (`link[i]` is
 `link[2]`), a compile-time constant its value.  The leaves of a flat AST (bgc.front.instantiate)
@@ -21,7 +23,10 @@ from . import ast
 from ..base.diagnostics import Span
 
 COMMENT = re.compile(r"#[^\n]*")
-SPACE = re.compile(r"\s+")
+# what lies between two leaves: operators, brackets, commas, keywords, function and option names
+TOKEN = re.compile(r"\.\.|->|<=|>=|==|!=|\*\*|[A-Za-z_]\w*|[^\s\\]")
+KEYWORDS = frozenset("and or not if then elif else".split())
+TIGHT = frozenset(("*", "/", "^", "**"))
 LEAVES = (ast.Num, ast.Name, ast.Field, ast.Str, ast.Ident)
 
 
@@ -40,10 +45,11 @@ def as_written(node, model_text: str, names=None) -> str | None:
         a, b = _bounds(leaf.span, span, text)
         if a is None or a < at or b > end:
             return None
-        pieces += [_gap(text[at:a]), _spelled(leaf, text[a:b], names or {})]
+        pieces += [(t, False) for t in _gap(text[at:a])]
+        pieces.append((_spelled(leaf, text[a:b], names or {}), True))
         at = b
-    pieces.append(_gap(text[at:end]))
-    return "".join(pieces).strip() or None
+    pieces += [(t, False) for t in _gap(text[at:end])]
+    return _joined(pieces) or None
 
 
 def _source(span: Span | None, model_text: str) -> str:
@@ -85,9 +91,61 @@ def _spelled(leaf, source: str, names: dict) -> str:
     return source  # a string or a keyword, as written
 
 
-def _gap(text: str) -> str:
-    """What lies between two leaves: operators, parentheses, spaces; comments dropped."""
-    return SPACE.sub(" ", COMMENT.sub("", text))
+def _gap(text: str) -> list[str]:
+    """The tokens between two leaves (operators, brackets, keywords); blanks, line
+    continuations and comments dropped."""
+    return TOKEN.findall(COMMENT.sub("", text))
+
+
+def _joined(pieces) -> str:
+    """The tokens, (text, is a leaf), spaced as bgc fmt spaces an expression: nothing inside
+    brackets, before a comma or around `*`, `/`, `^`, `.`; a sign against what it signs; a call's
+    or an index's bracket against what it follows; `+` and `-` tight inside an index; one space
+    around every other operator and keyword, and after a comma."""
+    out, prev, brackets = [], None, []
+    for text, leaf in pieces:
+        kind = _kind(text, leaf, prev)
+        if prev is not None:
+            out.append(_between(prev, kind, text, brackets))
+        if kind == "open":
+            brackets.append("index" if text == "[" and prev in ("operand", "close") else text)
+        elif kind == "close" and brackets:
+            brackets.pop()
+        out.append(text)
+        prev = kind
+    return "".join(out).strip()
+
+
+def _kind(text: str, leaf: bool, prev: str | None) -> str:
+    if leaf:
+        return "operand"
+    if text in ("(", "["):
+        return "open"
+    if text in (")", "]"):
+        return "close"
+    if text in (",", "."):
+        return text
+    if text in ("+", "-"):
+        return "binary" if prev in ("operand", "close") else "sign"
+    if text in TIGHT:
+        return "tight"
+    if text[0].isalpha() or text[0] == "_":
+        return "keyword" if text in KEYWORDS else "name"
+    return "operator"
+
+
+def _between(prev: str, kind: str, text: str, brackets: list) -> str:
+    if prev == "open" or kind in ("close", ","):
+        return ""
+    if prev == ",":
+        return " "
+    if "." in (prev, kind) or "tight" in (prev, kind) or prev == "sign":
+        return ""
+    if kind == "open":
+        return "" if prev in ("operand", "close", "name") else " "
+    if "binary" in (prev, kind) and brackets and brackets[-1] == "index":
+        return ""
+    return " "
 
 
 def _offset(text: str, line: int, col: int) -> int:

@@ -32,9 +32,9 @@ from sympy.core.relational import Relational
 from sympy.functions.elementary.piecewise import ExprCondPair
 from sympy.logic.boolalg import ITE, And, BooleanFalse, BooleanTrue, Not, Or
 
-from bgc.ir import (ATOL, C, CLASSES, FUNCTIONS, D, P, R, T, V, X, InputNext, InputPart,
-                    PeriodicNext, SquareNext, SquareWave, Table, TableGuard, TableNext,
-                    TablePiece, as_expr)
+from .program import (ATOL, C, CLASSES, FUNCTIONS, D, P, R, T, V, X, InputNext, InputPart,
+                      PeriodicNext, SquareNext, SquareWave, Table, TableGuard, TableNext,
+                      TablePiece, as_expr)
 _CLASSES = tuple(CLASSES.values())
 _ARITY = {"atan2": (2, 2), "Min": (2, None), "Max": (2, None), "Heaviside": (1, 2)}
 _TEMP = re.compile(r"w[0-9]+\Z")
