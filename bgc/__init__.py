@@ -10,8 +10,8 @@ are served here and never written over a submodule: no module of bgc has an API 
 """
 __version__ = "0.1.0"
 __all__ = ["BgcArgumentError", "BgcModelError", "Compiled", "SimulationFailed", "build", "check",
-           "compile", "equations", "fit", "linearize", "load", "sensitivities", "simulate", "steady",
-           "sweep"]
+           "compile", "equations", "fit", "linearize", "load", "periodic", "sensitivities", "simulate",
+           "steady", "sweep"]
 
 
 def __getattr__(name):
@@ -19,6 +19,8 @@ def __getattr__(name):
         from .model import load as value
     elif name == "linearize":
         from .analysis.linear import linearize as value
+    elif name == "periodic":
+        from .analysis.periodic import periodic as value
     elif name == "steady":
         from .analysis.equilibrium import steady as value
     elif name in ("fit", "sensitivities"):

@@ -1461,6 +1461,74 @@ def steady(model, scene, effects, algebra, params, json_file, at):
     _echo(found.lines(), err=bool(files.to_stdout))
 
 
+@main.command()
+@MODEL
+@SCENE
+@ADHOC
+@ALGEBRA
+@click.option("--period", default=None, metavar="T|auto",
+              help="The period.  [default: auto, the model's time sources' (square waves, "
+                   "sin and cos of t): their least common multiple]")
+@click.option("-p", "params", multiple=True, metavar="NAME=VALUE", help="Parameter override.")
+@click.option("--dt", type=POSITIVE, default=None,
+              help="The orbit's output interval.  [default: the scene's, or a 200th of the "
+                   "period where that is longer]")
+@click.option("--backend", type=click.Choice(["c", "vm", "python"]), default="c",
+              show_default=True, help="What runs the period map.")
+@click.option("-o", "output", default=None, callback=_output_file, metavar="FILE.csv",
+              help="Write one period of the outputs to FILE (CSV, as simulate writes).")
+@click.option("--json", "json_file", default=None, callback=_output_file, metavar="FILE",
+              help="Also write the orbit's figures (x0, mean/min/max/ripple, multipliers, "
+                   "the monodromy matrix) to FILE as JSON.")
+@click.option("--plot", "plot_file", default=None, metavar="FILE.png", callback=_plot_file,
+              help="Draw one period of the outputs into FILE (.png, .svg or .pdf; needs "
+                   "matplotlib: pip install 'bgc[plot]').")
+def periodic(model, scene, outputs, effects, algebra, period, params, dt, backend, output,
+             json_file, plot_file):
+    """The periodic steady state of a periodically driven model, by shooting: Newton on the
+    period map with its exact monodromy matrix.  Prints the orbit's initial state, each
+    output's mean, min, max and ripple over one period, and the Floquet multipliers; no
+    orbit: exit 1 and why."""
+    from .analysis import periodic as periodic_
+    files = _Files(model, [("-o", output), ("--json", json_file), ("--plot", plot_file)])
+    T = None
+    if period is not None and period != "auto":
+        try:
+            T = float(period)
+        except ValueError:
+            raise click.BadParameter(f"{period!r} is not a number nor 'auto'",
+                                     param_hint="--period") from None
+        if not (math.isfinite(T) and T > 0):
+            raise click.BadParameter(f"{period!r}: a period is a positive number",
+                                     param_hint="--period")
+    first = _or_exit(api.build, model, scene, False, algebra, True, False, outputs, effects,
+                     ("--outputs", "--effects", "--scene"))
+    files.read(first.files)
+    _warn(first)
+    given = _parse_params(params, sorted(p.name for p in first.program.params))
+    if given:
+        _or_exit(api.check_parameters, model, scene, given, outputs, effects,
+                 ("--outputs", "--effects"))
+    try:
+        orbit = _or_exit(periodic_.periodic, first.source, scene, T, given, outputs, effects,
+                         backend, algebra, dt)
+    except analysis.AnalysisArgumentError as error:
+        raise click.UsageError(str(error)) from None
+    except analysis.AnalysisError as error:
+        _fail(str(error))
+    if output:
+        _write_atomic(output, orbit.csv())
+    if json_file:
+        _write_atomic(json_file, linear.json_lines(orbit.as_dict()))
+    if plot_file:
+        try:
+            _write_with(plot_file, lambda file: periodic_.plot(orbit, file,
+                                                               _plot_format(plot_file)))
+        except outfile.OutputError as error:
+            _fail(str(error))
+    _echo("\n".join(orbit.lines()) + "\n", err=bool(files.to_stdout))
+
+
 # ---------------------------------------------------------------- estimation
 
 

@@ -260,7 +260,7 @@ def test_a_driven_model_is_refused_at_its_sources(tmp_path, source, at, where, w
     assert lines[0].startswith(f"{model}:4:{col}: error: ") and why in lines[0], lines
     assert lines[2].split("|")[1].startswith(" " * col + "^"), lines
     assert "no equilibrium: the model is driven" in result.stderr
-    assert "simulate" in result.stderr and "periodic" not in result.stderr
+    assert "simulate" in result.stderr and "bgc periodic" in result.stderr
     assert not out.exists()
     with pytest.raises(bgc.analysis.equilibrium.Driven) as raised:
         bgc.steady(model, at=at)

@@ -289,7 +289,8 @@ def _driven(ev, t: float, x) -> list[Diagnostic]:
     return out + [_error(None, f"no equilibrium: the model is driven by time sources that are "
                                f"not constant from t = {t:.6g} on (bgc steady evaluates them "
                                "there, --at t=T at another time); simulate it to see where "
-                               "it goes")]
+                               "it goes, or find its periodic orbit with bgc periodic where "
+                               "the sources are periodic")]
 
 
 def _position(span) -> tuple:

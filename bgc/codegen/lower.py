@@ -437,7 +437,8 @@ def lower(reduced: Reduced, sensitivities: tuple[str, ...] = (), given=(),
     outputs = tuple(o.name for o in reduced.outputs)
     if sensitivities:
         from . import sensitivity
-        sensitivity.check(sensitivities, [p.name for p in params], reduced.events is not None)
+        sensitivity.check(sensitivities, [p.name for p in params], reduced.events, states,
+                          {p.name: p.expr for p in reduced.parameters}, reduced.steps)
         aug = sensitivity.augment(fns, params, names, outputs, movable, tuple(sensitivities),
                                   given, mapper.plans, mapper.count, state_outputs,
                                   jacobian_pattern)

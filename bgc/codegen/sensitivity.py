@@ -23,8 +23,13 @@ iteration as CVODES's simultaneous corrector uses.  Radau's Newton iteration con
 it to the same collocation solution; a Rosenbrock method, which needs the exact Jacobian for
 its order, loses accuracy in the sensitivities (docs/analysis.md gives the numbers).
 
-A model with events is refused: the sensitivities jump at an event, and the jump conditions
-are not implemented.
+Through events: at a time event whose time depends on none of the chosen parameters (a square
+wave's edge, a relation of t, a table's or an input's breakpoint), where nothing that changes
+reads the states or the chosen parameters, x is continuous for every value of the parameters,
+and so is S: S(t+) = S(t-), and the augmented program runs through it unchanged (its update
+passes S through).  Every other event is refused, named: a state event's time depends on the
+states (S jumps by (f- - f+) dtau/dp), and a reinit or a mode read from the states sets x from
+them; those jump conditions are not implemented yet.
 """
 from __future__ import annotations
 
@@ -34,6 +39,7 @@ import sympy as sp
 
 from .. import ir
 from ..symbolic.differentiate import directional
+from ..front.graph import var
 from ..ir import P, V, X, Function, JacobianPattern, Resolve, Store
 from ..ir.tangent import _Forward
 
@@ -47,8 +53,13 @@ def column(of: str, param: str) -> str:
     return f"d({of})/d({param})"
 
 
-def check(params, names, has_events: bool) -> tuple[str, ...]:
-    """The parameters asked for, checked against the program's parameters (`names`)."""
+def check(params, names, events=None, states=(), defaults=None, steps=()) -> tuple[str, ...]:
+    """The parameters asked for, checked against the program's parameters (`names`); events:
+    the model's (bgc.front.events.Selected, or None), refused unless S is continuous through
+    all of them (see the module's doc); states: the states' symbols; defaults: each
+    parameter's name -> its default expression (a parameter defined from a chosen one
+    follows it); steps: the statements that compute what the events read (bgc.ir's, over
+    model symbols).  A true `events` that is not a Selected (an older caller) is refused."""
     params = tuple(params)
     if not params:
         raise SensitivityError("no parameter given for the sensitivities")
@@ -58,11 +69,67 @@ def check(params, names, has_events: bool) -> tuple[str, ...]:
                                    f"{', '.join(names) or 'none'})")
     if len(set(params)) != len(params):
         raise SensitivityError("a parameter is named twice for the sensitivities")
-    if has_events:
-        raise SensitivityError(
-            "the model has events (a when-block, a switch, a relation of the states or time): "
-            "its sensitivities jump at an event, and bgc does not compute those jumps")
+    if events is not None and events is not False:
+        why = jumps(events, params, states, defaults or {}, steps)
+        if why is not None:
+            raise SensitivityError(why)
     return params
+
+
+def _moved(params, defaults: dict) -> set:
+    """The symbols of the chosen parameters and of every parameter defined from them."""
+    moved = {var(p) for p in params}
+    for name, expr in defaults.items():  # (in order: a default reads earlier ones only)
+        if expr is not None and expr.free_symbols & moved:
+            moved.add(var(name))
+    return moved
+
+
+def jumps(sel, params, states, defaults: dict, steps=()) -> str | None:
+    """Why the sensitivities to params would jump at one of sel's events (a sentence naming
+    the event, for people), or None: every event is a time event that S passes unchanged."""
+    if not hasattr(sel, "slots"):
+        return ("the model has events (a when-block, a switch, a relation of the states or "
+                "time): its sensitivities jump at an event, and bgc does not compute those "
+                "jumps")
+    reads = set(states) | _moved(params, defaults)  # what follows the states or the params
+    grown = True
+    while grown:  # (through the steps, and the discrete values' laws: to the fixed point)
+        size = len(reads)
+        for st in steps:
+            if ir.uses(st) & reads:
+                reads |= set(ir.defines(st))
+        for d in sel.discretes:
+            laws = [d.init] + ([d.next] if d.next is not None else [])
+            laws += [a.expr for w in sel.whens for a in w.actions if a.symbol == d.symbol]
+            if d.symbol not in reads and any(e.free_symbols & reads for e in laws):
+                reads.add(d.symbol)
+        grown = len(reads) > size
+    changing = {d.symbol for d in sel.discretes} & reads
+
+    def refuse(text, what):
+        return (f"{what} '{text}': the sensitivities jump there, and bgc computes them "
+                "through time events only (an event whose time and effect depend on neither "
+                "the states nor the parameters asked for); not supported yet")
+    for r in sel.state + sel.discrete:
+        if r.indicator.free_symbols & reads:
+            return refuse(r.text, "the model has the event" if r.indicator.free_symbols
+                          & changing else "the model has the state event")
+    for r, at, _ in sel.time:
+        if sp.sympify(at).free_symbols & reads:
+            return refuse(r.text, "the time of the event")
+    for s in sel.squares:
+        if any(sp.sympify(getattr(s, f, 0)).free_symbols & reads
+               for f in ("period", "duty", "t0")):
+            return refuse(s.text, "the time of the event")
+    for w in sel.whens:
+        for a in w.actions:
+            if a.kind == "reinit":
+                return refuse(w.text, "the when-block (a reinit)")
+    for d in sel.discretes:
+        if d.symbol in changing:
+            return refuse(d.name, "the discrete value")
+    return None
 
 
 def seeds(params: tuple[ir.Param, ...], j: int, given) -> dict:
@@ -150,6 +217,15 @@ def _restride(f: Function, n: int, wide: int) -> Function:
     return Function(f.name, f.args, rows * wide, body)
 
 
+def _passing(f: Function, n: int, wide: int) -> Function:
+    """The event iteration's update of the augmented program: the model's new states, then S
+    as it is (its stores n..wide), then the discrete values (the model's stores from n on)."""
+    body = tuple(Store(s.index + wide - n, s.expr) if isinstance(s, Store) and s.index >= n
+                 else s for s in f.body)
+    return Function(f.name, f.args, f.size + wide - n,
+                    body + tuple(Store(i, X[i]) for i in range(n, wide)))
+
+
 @dataclass(frozen=True)
 class Augmented:
     states: tuple[str, ...]
@@ -215,6 +291,8 @@ def augment(functions: dict, params: tuple[ir.Param, ...], states: tuple[str, ..
                                      [b * n for b in range(1 + m)], plans, count, False)
     for name in ("position_jac", "velocity_jac", "velocity_metric"):
         out[name] = _restride(functions[name], n, wide)
+    if "update" in functions:  # (time events only, check's: S passes through unchanged)
+        out["update"] = _passing(functions["update"], n, wide)
     names = list(states) + [column(s, p) for p in chosen for s in states]
     shown = list(outputs) + (list(states) if state_outputs else [])
     columns = shown + [column(y, p) for p in chosen for y in shown]

@@ -1,0 +1,227 @@
+"""bgc periodic (shooting on the period map with the exact monodromy matrix) and the
+sensitivities through time events, against closed forms, matrix exponentials and finite
+differences computed here."""
+import json
+import math
+
+import numpy as np
+import pytest
+from scipy.linalg import expm
+
+import bgc
+from bgc.analysis.periodic import NoOrbit, common_period
+from conftest import ROOT, have_cc, run_bgc
+
+MOTOR = ROOT / "tests" / "models" / "pwm_motor.bg"
+pytestmark = pytest.mark.skipif(not have_cc(), reason="no C compiler")
+
+RL = """model rl_pwm "An RL load driven by a PWM voltage"
+parameter V = 10
+parameter Rl = 2
+parameter Ll = 0.01
+parameter T = 0.001
+parameter d = 0.3
+src : Se(V*square(T, d))
+loop : 1
+r : R(Rl)
+l : I(Ll)
+src -> loop
+loop -> r
+loop -> l
+scene run {
+  outputs l.f
+  time 0 .. 0.01 every 0.0001
+  solver dopri5(rtol = 1e-12, atol = 1e-14)
+}
+"""
+
+
+@pytest.fixture(scope="module")
+def rl(tmp_path_factory):
+    path = tmp_path_factory.mktemp("periodic") / "rl.bg"
+    path.write_text(RL)
+    return path
+
+
+def rl_orbit(V=10.0, R=2.0, L=0.01, T=1e-3, d=0.3):
+    """The closed form: i rises towards V/R for d T, decays for (1 - d) T; the periodic
+    current at the period's start, and the one multiplier exp(-T R / L)."""
+    tau = L / R
+    a, b = math.exp(-d * T / tau), math.exp(-(1 - d) * T / tau)
+    i0 = V / R * (1 - a) * b / (1 - a * b)
+    return i0, math.exp(-T / tau)
+
+
+def test_a_pwm_driven_rl_circuit_matches_its_closed_form_periodic_solution(rl):
+    orbit = bgc.periodic(rl, "run")
+    i0, mu = rl_orbit()
+    assert orbit.period == pytest.approx(1e-3, rel=1e-15)
+    assert orbit.states == ("l.p",)
+    assert orbit.x0[0] / 0.01 == pytest.approx(i0, rel=1e-10)
+    assert orbit.multipliers[0].real == pytest.approx(mu, rel=1e-10)
+    assert orbit.multipliers[0].imag == 0 and orbit.stable
+    (name, mean, lo, hi, ripple), = orbit.figures
+    # the mean of a linear circuit's periodic current is its averaged circuit's, V d / R
+    # (the trapezoidal rule over 200 rows: exponential arcs, error (T/200)^2 / 12 i'')
+    assert name == "l.f" and mean == pytest.approx(10 * 0.3 / 2, rel=1e-6)
+    assert lo == pytest.approx(i0, rel=1e-10)
+    tau = 0.005
+    peak = 5 + (i0 - 5) * math.exp(-0.3e-3 / tau)  # the current at the end of the on-time
+    assert hi == pytest.approx(peak, rel=1e-10) and ripple == pytest.approx(peak - i0, rel=1e-8)
+    # one period of rows, the closed form at each
+    t = orbit.t
+    assert t[0] == 0 and t[-1] == pytest.approx(1e-3, rel=1e-14) and len(t) == 201
+    on = t <= 0.3e-3
+    exact = np.where(on, 5 + (i0 - 5) * np.exp(-t / tau),
+                     peak * np.exp(-(t - 0.3e-3) / tau))
+    assert np.max(np.abs(orbit.y[:, 0] - exact)) < 1e-10 * 5
+
+
+def _motor_matrices(kt=0.8, Ra=2.0, La=0.5, Jr=0.05, br=0.1):
+    """x = (ind.p, rotor.p): x' = A x + b_u u + c, u the supply voltage."""
+    A = np.array([[-Ra / La, -kt / Jr], [kt / La, -br / Jr]])
+    return A, np.array([1.0, 0.0]), np.array([0.0, -0.5])
+
+
+def _affine_flow(A, g, h):
+    """The map x -> exp(A h) x + int_0^h exp(A s) ds g, as the 3x3 exponential's blocks."""
+    E = np.zeros((3, 3))
+    E[:2, :2], E[:2, 2] = A, g
+    F = expm(E * h)
+    return F[:2, :2], F[:2, 2]
+
+
+def test_a_pwm_motor_orbit_matches_matrix_exponentials_and_its_mean_the_averaged_model():
+    orbit = bgc.periodic(MOTOR, "run")
+    A, bu, c = _motor_matrices()
+    T, d, V = 1e-3, 0.7, 12.0
+    P_on, q_on = _affine_flow(A, bu * V + c, d * T)
+    P_off, q_off = _affine_flow(A, c, (1 - d) * T)
+    M = P_off @ P_on
+    x0 = np.linalg.solve(np.eye(2) - M, P_off @ q_on + q_off)
+    assert orbit.states == ("ind.p", "rotor.p", "angle")
+    np.testing.assert_allclose(orbit.x0[:2], x0, rtol=1e-10)
+    np.testing.assert_allclose(orbit.monodromy[:2, :2], M, rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(np.sort_complex(orbit.multipliers),
+                               np.sort_complex(np.linalg.eigvals(M)), rtol=1e-9)
+    # the angle drifts: nothing reads it; it advances by the mean speed times the period
+    kt, Ra, br, tau = 0.8, 2.0, 0.1, 0.5
+    w_mean = (kt * V * d - Ra * tau) / (kt ** 2 + Ra * br)  # the averaged motor's equilibrium
+    i_mean = (br * w_mean + tau) / kt
+    (name, advance), = orbit.drift
+    assert name == "angle" and advance == pytest.approx(w_mean * T, rel=1e-9)
+    figures = {f[0]: f[1:] for f in orbit.figures}
+    assert figures["rotor.f"][0] == pytest.approx(w_mean, rel=1e-9)
+    assert figures["ind.f"][0] == pytest.approx(i_mean, rel=1e-9)
+
+
+def test_the_command_writes_one_period_its_figures_and_the_same_bytes_in_every_backend(
+        rl, tmp_path):
+    texts = {}
+    for backend in ("c", "python", "vm"):
+        out, js = tmp_path / f"{backend}.csv", tmp_path / f"{backend}.json"
+        r = run_bgc("periodic", str(rl), "--scene", "run", "--backend", backend, "-o", str(out),
+                    "--json", str(js))
+        assert r.returncode == 0, r.stderr
+        texts[backend] = out.read_bytes()
+        assert "Floquet multipliers: 0.818731" in r.stdout
+        assert "l.f" in r.stdout and "stable" in r.stdout
+    assert texts["c"] == texts["python"] == texts["vm"]
+    rows = texts["c"].decode().splitlines()
+    assert rows[0] == "t,l.f" and len(rows) == 202
+    doc = json.loads(js.read_text())
+    i0, mu = rl_orbit()
+    assert doc["x0"]["l.p"] / 0.01 == pytest.approx(i0, rel=1e-10)
+    assert doc["multipliers"][0][0] == pytest.approx(mu, rel=1e-10)
+    assert doc["outputs"]["l.f"]["mean"] == pytest.approx(1.5, rel=1e-6) and doc["stable"]
+
+
+@pytest.mark.parametrize("change, message", [
+    ("src : Se(V*square(T, d)*step(0.002))", "not periodic: 'step(0.002)"),
+    ("src : Se(V*square(T, d) + sin(2000*t))", "incommensurate"),
+    ("src : Se(V*exp(-t))", "a law reads t other than through a periodic source"),
+    ("src : Se(V)", "no period: the model has no periodic time source"),
+])
+def test_a_model_that_is_not_periodic_is_refused_saying_why(tmp_path, change, message):
+    path = tmp_path / "m.bg"
+    path.write_text(RL.replace("src : Se(V*square(T, d))", change))
+    r = run_bgc("periodic", str(path), "--scene", "run")
+    assert r.returncode == 1 and message in r.stderr, r.stderr
+    assert "Traceback" not in r.stderr
+
+
+def test_an_unstable_orbit_is_refused_with_its_multipliers(tmp_path):
+    path = tmp_path / "m.bg"
+    path.write_text(RL.replace("parameter Rl = 2", "parameter Rl = -2"))
+    r = run_bgc("periodic", str(path), "--scene", "run")
+    mu = math.exp(1e-3 * 2 / 0.01)
+    assert r.returncode == 1 and "unstable" in r.stderr and f"{mu:.6g}" in r.stderr, r.stderr
+
+
+def test_a_period_that_is_not_a_multiple_of_the_sources_is_refused_and_a_multiple_taken(rl):
+    r = run_bgc("periodic", str(rl), "--scene", "run", "--period", "0.0015")
+    assert r.returncode == 1 and "not a multiple" in r.stderr
+    orbit = bgc.periodic(rl, "run", period=2e-3)
+    i0, mu = rl_orbit()
+    assert orbit.x0[0] / 0.01 == pytest.approx(i0, rel=1e-10)
+    assert orbit.multipliers[0].real == pytest.approx(mu ** 2, rel=1e-10)
+
+
+def test_a_model_with_state_events_is_refused_naming_the_event(tmp_path):
+    path = tmp_path / "m.bg"
+    path.write_text(RL.replace("loop -> l", "loop -> l\nw : Se(if l.f > 1 then 1 else 0)\n"
+                                            "w -> loop"))
+    r = run_bgc("periodic", str(path), "--scene", "run")
+    assert r.returncode == 1 and "state event 'l.f > 1'" in r.stderr, r.stderr
+
+
+def test_common_period_is_the_least_common_multiple():
+    assert common_period([(2e-3, "a"), (3e-3, "b")]) == pytest.approx(6e-3, rel=1e-15)
+    assert common_period([(0.02, "a"), (0.02 / 3, "b")]) == pytest.approx(0.02, rel=1e-12)
+    with pytest.raises(NoOrbit, match="incommensurate"):
+        common_period([(1.0, "a"), (math.sqrt(2), "b")])
+
+
+def test_sensitivities_pass_the_time_events_of_a_pwm_drive_as_finite_differences_say():
+    """d(speed)/d(kt) and d(speed)/d(Ra) through 10 PWM periods (20 time events), against
+    central differences of runs at kt +- h (the event times do not depend on kt)."""
+    s = bgc.sensitivities(MOTOR, ["kt", "Ra"], "run")
+    k = s.outputs.index("rotor.f")
+    for j, (name, value) in enumerate((("kt", 0.8), ("Ra", 2.0))):
+        h = 1e-5 * value
+        _, up, names = bgc.simulate(MOTOR, "run", params={name: value + h})
+        _, down, _ = bgc.simulate(MOTOR, "run", params={name: value - h})
+        fd = (up[:, names.index("rotor.f")] - down[:, names.index("rotor.f")]) / (2 * h)
+        np.testing.assert_allclose(s.dy[:, k, j], fd, rtol=1e-6, atol=1e-9)
+
+
+def test_a_sensitivity_of_a_time_event_s_time_is_refused():
+    from bgc.analysis.estimate import FitError
+    with pytest.raises(FitError, match="the time of the event 'square"):
+        bgc.sensitivities(MOTOR, ["Tp"], "run")
+
+
+def test_fit_recovers_a_pwm_motor_s_torque_constant_through_its_time_events(tmp_path):
+    """Data made here from the exact piecewise-affine flow (matrix exponentials of the on and
+    off phases, sampled every 10 periods) at kt = 0.85, with noise; bgc fits kt from 0.8
+    through the 1 000 PWM edges of the run, and its 95 % interval covers the truth."""
+    from bgc.analysis.estimate import fit
+    kt, T, d, V, La, Jr = 0.85, 1e-3, 0.7, 12.0, 0.5, 0.05
+    A, bu, c = _motor_matrices(kt=kt)
+    P_on, q_on = _affine_flow(A, bu * V + c, d * T)
+    P_off, q_off = _affine_flow(A, c, (1 - d) * T)
+    M, q = P_off @ P_on, P_off @ q_on + q_off
+    x, rows = np.zeros(2), []
+    noise = np.random.default_rng(3).standard_normal((51, 2)) * 0.005
+    for k in range(51):
+        rows.append(f"{k * 0.01!r},{float(x[0] / La + noise[k, 0])!r},"
+                    f"{float(x[1] / Jr + noise[k, 1])!r}")
+        for _ in range(10):
+            x = M @ x + q
+    data = tmp_path / "pwm.csv"
+    data.write_text("t,ind.f,rotor.f\n" + "\n".join(rows) + "\n")
+    result = fit(MOTOR, data, ["kt"], scene="run")
+    assert result.converged
+    (estimate,), (lo,), (hi,) = result.estimates, result.lower, result.upper
+    assert lo < kt < hi and hi - lo < 0.01
+    assert result.residual_sd == pytest.approx(0.005, rel=0.3)
