@@ -34,6 +34,7 @@ from __future__ import annotations
 
 import argparse
 import base64
+import hashlib
 import json
 import os
 import random
@@ -735,6 +736,14 @@ def _worker_main():
                     os.waitpid(pid, 0)
                 except (OSError, ChildProcessError):
                     pass
+        elif req.get("command"):
+            res = command_case(data, req["command"])
+            for pid in _children():
+                try:
+                    os.kill(pid, signal.SIGKILL)
+                    os.waitpid(pid, 0)
+                except (OSError, ChildProcessError):
+                    pass
         else:
             res = check_case(data, tuple(req.get("args", ("check", "m.bg"))))
         out.write(json.dumps(res) + "\n")
@@ -772,16 +781,16 @@ class Worker:
             self.proc = None
 
     def run(self, data: bytes, args=("check", "m.bg"), simulate: str | None = None,
-            time_limit: float | None = None) -> dict:
-        """check (args) or, with simulate=BACKEND, `bgc simulate` on data; time_limit in
-        seconds (by default the worker's)."""
+            time_limit: float | None = None, command: str | None = None) -> dict:
+        """check (args) or, with simulate=BACKEND, `bgc simulate` on data, or one of COMMANDS
+        (command=NAME); time_limit in seconds (by default the worker's)."""
         if self.proc is None or self.done >= self.recycle:
             self.stop()
             self._start()
         self.done += 1
-        what = f"simulate {simulate}" if simulate else "check"
+        what = f"simulate {simulate}" if simulate else command or "check"
         req = json.dumps({"data": base64.b64encode(data).decode(), "args": list(args),
-                          "simulate": simulate}) + "\n"
+                          "simulate": simulate, "command": command}) + "\n"
         start = time.monotonic()
         try:
             self.proc.stdin.write(req.encode())
@@ -902,7 +911,11 @@ def simulate_case(data: bytes, backend: str, time_limit: float, t_end: str = "0.
             failure = f"simulate {backend}: files left behind"
         elif orphan:
             failure = f"simulate {backend}: a process outlived bgc"
-        return {"exit": code, "stderr": stderr[-4000:], "failure": failure}
+        elif Path(tmp, "m.bg").read_bytes() != data:
+            failure = f"simulate {backend}: the model file changed"
+        digest = hashlib.sha256(out.read_bytes()).hexdigest() \
+            if code == 0 and out.exists() else None
+        return {"exit": code, "stderr": stderr[-4000:], "failure": failure, "digest": digest}
 
 
 # ------------------------------------------------------------------------- minimisation
@@ -965,6 +978,62 @@ def write_regression(directory: Path, signature: str, data: bytes, how: str, see
 
 # ------------------------------------------------------------------------- the FMU
 
+COMMANDS = {  # --full-every: the other commands, each with the outputs it must write on exit 0
+    "compile c": (["compile", "m.bg", "--target", "c", "-o", "m.c"], ["m.c"]),
+    "compile python": (["compile", "m.bg", "--target", "python", "-o", "m.py"], ["m.py"]),
+    "compile fmu": (["compile", "m.bg", "--target", "fmu", "-o", "m.fmu"], ["m.fmu"]),
+    "linearize": (["linearize", "m.bg", "-o", "lin.json"], ["lin.json"]),
+    "steady": (["steady", "m.bg", "--json", "eq.json"], ["eq.json"]),
+}
+
+
+def command_case(data: bytes, what: str) -> dict:
+    """One of COMMANDS on data, in process (click's runner) in a directory of its own with a
+    cache of its own.  A failure: an exception or a traceback, an exit status other than 0, 1
+    and 2 (2 only with a usage message), exit 1 without a message, exit 0 without its output,
+    a file left behind that is not its output, the model file changed."""
+    from click.testing import CliRunner
+
+    from bgc.cli import main
+
+    args, outputs = COMMANDS[what]
+    cwd = os.getcwd()
+    with tempfile.TemporaryDirectory(prefix="bgcfuzz-cmd-") as tmp:
+        Path(tmp, "m.bg").write_bytes(data)
+        env = {"BGC_CACHE_DIR": str(Path(tmp, "cache")),
+               "BGC_CFLAGS": os.environ.get("BGC_CFLAGS", "-O0 -std=c99")}
+        os.chdir(tmp)
+        try:
+            result = CliRunner().invoke(main, args, env=env)
+            left = sorted(p for p in os.listdir(tmp) if p not in ("m.bg", "cache", *outputs))
+            written = [o for o in outputs if Path(tmp, o).exists()]
+            same = Path(tmp, "m.bg").read_bytes() == data
+        finally:
+            os.chdir(cwd)
+    exc, stderr, code = result.exception, result.stderr, result.exit_code
+    failure = None
+    if exc is not None and not isinstance(exc, SystemExit):
+        failure = f"{what}: {type(exc).__name__} at {_innermost_bgc_frame(exc)}"
+        stderr += "".join(traceback.format_exception(exc))
+    elif "Traceback" in stderr or "Traceback" in result.stdout:
+        failure = f"{what}: traceback in the output"
+    elif code not in (0, 1, 2):
+        failure = f"{what}: exit {code}"
+    elif code == 2 and not re.search(r"^(Usage:|Error:)", stderr, re.M):
+        failure = f"{what}: exit 2 without a usage error"
+    elif code == 1 and not stderr.strip():
+        failure = f"{what}: exit 1 without a message"
+    elif code == 0 and len(written) != len(outputs):
+        failure = f"{what}: exit 0 without its output"
+    elif code != 0 and written:
+        failure = f"{what}: an output written by a command that failed"
+    elif left:
+        failure = f"{what}: files left behind ({', '.join(left)})"
+    elif not same:
+        failure = f"{what}: the model file changed"
+    return {"exit": code, "stderr": stderr[-4000:], "failure": failure}
+
+
 def fmu_case(data: bytes, seed: int, sequences: int, out: Path, time_limit: float) -> dict | None:
     """The case's FMU, its life cycle fuzzed by tools/fuzz_fmu.py in a process of its own
     (the export and the calls limited to time_limit seconds): None if bgc exports none (a
@@ -1021,6 +1090,11 @@ def main(argv=None) -> int:
                     "cycle (tools/fuzz_fmu.py; 0: never)")
     ap.add_argument("--fmu-sequences", type=int, default=20,
                     help="random sequences of FMI calls on each FMU")
+    ap.add_argument("--full-every", type=int, default=0, metavar="K",
+                    help="every K-th case that check accepts through everything: simulate in "
+                    "the three backends (C, Python, the interpreter) with their CSVs compared "
+                    "byte for byte, compile to C, Python and an FMU, linearize and steady "
+                    "(0: never)")
     ap.add_argument("--worker", action="store_true", help=argparse.SUPPRESS)
     a = ap.parse_args(argv)
     if a.worker:
@@ -1038,7 +1112,8 @@ def main(argv=None) -> int:
     seeds = seed_models()
     worker = Worker(a.time_limit)
     counts = {"check": 0, "check_ok": 0, "check_error": 0, "simulate": 0, "simulate_c": 0,
-              "simulate_python": 0, "fmu": 0, "fmu_calls": 0}
+              "simulate_python": 0, "simulate_vm": 0, "backends_compared": 0, "fmu": 0,
+              "fmu_calls": 0, **{k.replace(" ", "_"): 0 for k in COMMANDS}}
     failures: dict[str, dict] = {}
     accepted = 0
     start = time.monotonic()
@@ -1092,6 +1167,40 @@ def main(argv=None) -> int:
                         if s["failure"]:
                             record(s["failure"], i, how, data, s,
                                    lambda d, sim=sim: sim(d)["failure"])
+                if a.full_every and accepted % a.full_every == 0:
+                    digests = {}
+                    for backend in ("c", "python", "vm"):
+                        counts[f"simulate_{backend}"] += 1
+                        sim = lambda d, b=backend: worker.run(  # noqa: E731
+                            d, simulate=b, time_limit=a.sim_time_limit)
+                        s = sim(data)
+                        if s["failure"]:
+                            record(s["failure"], i, how, data, s,
+                                   lambda d, sim=sim: sim(d)["failure"])
+                        else:
+                            digests[backend] = (s["exit"], s.get("digest"))
+                    if len(digests) == 3:
+                        counts["backends_compared"] += 1
+                        if len(set(digests.values())) > 1:
+                            def differ(d):
+                                out = {b: worker.run(d, simulate=b,
+                                                     time_limit=a.sim_time_limit)
+                                       for b in ("c", "python", "vm")}
+                                if any(r["failure"] for r in out.values()):
+                                    return None
+                                seen = {(r["exit"], r.get("digest")) for r in out.values()}
+                                return "simulate: the backends differ" if len(seen) > 1 \
+                                    else None
+                            record("simulate: the backends differ", i, how, data,
+                                   {"stderr": json.dumps(digests)}, differ)
+                    for what in COMMANDS:
+                        counts[what.replace(" ", "_")] += 1
+                        run = lambda d, w=what: worker.run(  # noqa: E731
+                            d, command=w, time_limit=a.sim_time_limit)
+                        r = run(data)
+                        if r["failure"]:
+                            record(r["failure"], i, how, data, r,
+                                   lambda d, run=run: run(d)["failure"])
                 if a.fmu_every and accepted % a.fmu_every == 0:
                     fmu = lambda d: fmu_case(d, a.seed * 1000003 + i,  # noqa: E731
                                              a.fmu_sequences, a.out / "fmu",

@@ -335,6 +335,19 @@ def linearization(ev: operating.Evaluator, t: float, x) -> Linearization:
     k = len(ev.analysed.outputs)
     C, D = Cfull[:k], Dfull[:k]
     n = ev.n
+    for what, M, rows, cols in (("A", A, ev.states, ev.states),
+                                ("B", Bfull, ev.states, ev.analysed.inputs),
+                                ("C", Cfull, ev.analysed.compiled.program.outputs, ev.states),
+                                ("D", Dfull, ev.analysed.compiled.program.outputs,
+                                 ev.analysed.inputs)):
+        bad = np.argwhere(~np.isfinite(M))
+        if bad.size:
+            i, j = bad[0]
+            raise AnalysisError(
+                f"at t = {t:.17g} the linearisation is not finite: {what}[{i}, {j}] = "
+                f"d({rows[i] if i < len(rows) else i})/d({cols[j] if j < len(cols) else j})"
+                f" is {M[i, j]} (a law without a finite derivative there: give another "
+                "point with --at)")
     point = tuple(zip(ev.states, (float(v) for v in x)))
     common = dict(inputs=ev.analysed.inputs, outputs=ev.analysed.outputs, t=float(t),
                   point=point, full_states=ev.states)

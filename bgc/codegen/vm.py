@@ -432,6 +432,9 @@ class _Compiler:
             self.take()
             args.append(self.parse(0)[0])
         self.expect(")")
+        if name == "bgc_opaque":  # (the interpreter folds nothing: the number as it is)
+            (a,) = args
+            return a
         if name == "bgc_sq":
             (a,) = args
             dst = a if a < 0 else self.fn.alloc()

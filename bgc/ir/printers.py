@@ -344,6 +344,10 @@ class _ArithmeticPrinting:
 
 # ---------------------------------------------------------------- C
 
+# libm's functions that a C compiler may fold at compile time with a rounding of its own
+LIBM = ("sin", "cos", "tan", "asin", "acos", "atan", "atan2", "sinh", "cosh", "tanh", "asinh",
+        "atanh", "exp", "log")
+
 
 class CPrinter(_ArithmeticPrinting, C99CodePrinter):
     """C99: x[i], parameters as struct fields p-><field>, constants as p->c[k] (the struct
@@ -380,6 +384,18 @@ class CPrinter(_ArithmeticPrinting, C99CodePrinter):
 
     def _print_square(self, base):
         return f"bgc_sq({self._print(base)})"
+
+    def _print_call(self, expr):
+        # a libm function of numbers alone: computed at run time, as in Python (bgc_opaque)
+        if type(expr).__name__ in LIBM and not expr.free_symbols:
+            args = [f"bgc_opaque({self._print(a)})" for a in expr.args]
+            return f"{self.FUNCTION_NAMES[type(expr).__name__]}({', '.join(args)})"
+        return super()._print_call(expr)
+
+    def _print_power(self, expr):
+        if not expr.free_symbols and not (expr.exp.is_Integer or expr.exp == sp.S.Half):
+            return f"pow(bgc_opaque({self._print(expr.base)}), {self._print(expr.exp)})"
+        return super()._print_power(expr)
 
     def _table_ref(self, k):
         return f"&bgc_tables[{k}]"

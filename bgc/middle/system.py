@@ -504,6 +504,14 @@ def _expand(ref, g: Graph) -> list:
     return out
 
 
+# The modes an output may name, per kind of constraint junction: the field -> the suffix of
+# its discrete value (bgc.middle.contact: a diode's `blocking` and a switch's `open` are its
+# `J.active`)
+MODE_FIELDS = {"unilateral": {"active": "active", "vmax": "vmax"},
+               "diode": {"blocking": "active"}, "switch": {"open": "active"},
+               "friction": {"stick": "active", "dir": "dir"}}
+
+
 def _output_expr(ref, g: Graph, states, targets, constraints, params, discretes):
     if ref.index is not None and ref.index != 0:
         fail(ref.span, f"'{ref.owner}' is a scalar: index [{ref.index}] is out of range")
@@ -524,8 +532,11 @@ def _output_expr(ref, g: Graph, states, targets, constraints, params, discretes)
     if ref.owner not in g.by_name:
         names = [el.origin or el.name for el in g.elements]
         fail(ref.span, f"unknown element '{ref.owner}' in outputs{did_you_mean(ref.owner, names)}")
+    c = constraints.get(ref.owner)
+    if c is not None and ref.field in MODE_FIELDS.get(c.kind, {}):
+        # a switched element's or a contact's mode (bgc.middle.contact's discrete values)
+        return var(f"{c.junction}.{MODE_FIELDS[c.kind][ref.field]}")
     if ref.field in ("lambda", "residual"):
-        c = constraints.get(ref.owner)
         if c is None:
             fail(ref.span, f"'{ref.owner}' is not a constraint junction")
         return c.multiplier if ref.field == "lambda" else c.residual
@@ -534,7 +545,8 @@ def _output_expr(ref, g: Graph, states, targets, constraints, params, discretes)
         return sym
     defined = states.keys() | targets
     have = [f for f in ("e", "f", "p", "q") if var(variable_name(ref.owner, f)) in defined] + \
-        (["lambda", "residual"] if ref.owner in constraints else [])
+        (["lambda", "residual"] if ref.owner in constraints else []) + \
+        (list(MODE_FIELDS.get(c.kind, ())) if c is not None else [])
     fail(ref.span, f"'{g.by_name[ref.owner].origin or ref.owner}' has no variable '{ref.field}'"
                    + (f" (it has: {', '.join(have)})" if have else ""))
 

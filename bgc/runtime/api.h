@@ -247,6 +247,14 @@ static inline const char *bgc_input_name(int j)
 
 /* -------------------------------------------- between the model part and the runtime --- */
 static inline double bgc_sq(double a) { return a * a; }
+/* A number the compiler cannot see through: libm's functions of literal arguments are
+   computed at run time, as the Python backend and the interpreter compute them (a compiler
+   folds tanh(cos(9.0)) with exact rounding, libm may round otherwise: bgc/ir/printers.py). */
+static inline double bgc_opaque(double a)
+{
+    volatile double v = a;
+    return v;
+}
 static inline double bgc_min(double a, double b) { return b < a ? b : a; }
 static inline double bgc_max(double a, double b) { return b > a ? b : a; }
 static inline double bgc_sign(double a) { return a > 0.0 ? 1.0 : (a < 0.0 ? -1.0 : a); }
