@@ -236,8 +236,9 @@ def _echo(text: str | bytes, err: bool = False):
 
 def _output_file(ctx, param, value):
     """-o: a file that can be written, checked before any work (a usage error if not), or
-    `-`, standard output."""
-    if value is not None:
+    `-`, standard output.  An existing directory passes (compile --target embedded writes
+    into one; compile checks it for the other targets)."""
+    if value is not None and not os.path.isdir(value):
         try:
             outfile.check_target(value)
         except outfile.OutputError as error:
@@ -582,15 +583,38 @@ def equations(model, scene, outputs, effects, algebra, fmt):
 @ALGEBRA
 @click.option("--target", type=click.Choice(list(run.TARGETS)), default="c",
               help="fmu: an FMI 2.0 FMU for Model Exchange and Co-Simulation, built with the "
-                   "C compiler (needs -o NAME.fmu).")
+                   "C compiler (needs -o NAME.fmu).  embedded: NAME.h and NAME.c, one fixed "
+                   "step per call, no heap, no stdio (docs/embedded.md).")
 @click.option("-o", "output", default=None, callback=_output_file,
-              help="Output file (default: stdout).")
+              help="Output file (default: stdout); --target embedded: the directory "
+                   "(default: the current one).")
 @click.option("--project-initial", is_flag=True, help="Project initial values onto the "
                                                       "constraints instead of refusing them.")
 @click.option("--allow-inconsistent", is_flag=True, help=ALLOW_HELP)
+@click.option("--real", type=click.Choice(["double", "float"]), default=None,
+              help="--target embedded: the real type.  [default: double]")
+@click.option("--solver", type=click.Choice(solvers.NAMES), default=None,
+              help="--target embedded: the fixed-step method, euler or rk4 (default: the "
+                   "scene's, if it is one of them).")
+@click.option("--step", type=POSITIVE, default=None,
+              help="--target embedded: the fixed step H (default: the scene's step, else its "
+                   "output interval).")
+@click.option("--report", is_flag=True,
+              help="--target embedded: print the memory the model needs, in bytes, on stderr.")
 def compile(model, scene, outputs, effects, algebra, target, output, project_initial,
-            allow_inconsistent):
+            allow_inconsistent, real, solver, step, report):
     """Emit standalone C or Python source code, or an FMU."""
+    if target == "embedded":
+        _compile_embedded(model, scene, outputs, effects, algebra, output, project_initial,
+                          allow_inconsistent, real, solver, step, report)
+        return
+    given = [name for name, value in (("--real", real), ("--solver", solver),
+                                      ("--step", step), ("--report", report)) if value]
+    if given:
+        raise click.UsageError(f"{given[0]} is an option of --target embedded")
+    if output is not None and os.path.isdir(output):
+        raise click.BadParameter(f"cannot write '{output}': it is a directory",
+                                 param_hint="'-o'")
     if target == "fmu" and not output:
         raise click.UsageError("--target fmu writes a zip archive: name it with -o NAME.fmu "
                                "(or -o - for standard output)")
@@ -612,6 +636,34 @@ def compile(model, scene, outputs, effects, algebra, target, output, project_ini
     emitted = (emit.emit_c if target == "c" else emit.emit_python)(compiled.program)
     (text,) = emitted.values()
     _write_atomic(output or outfile.STDOUT, text)
+
+
+def _compile_embedded(model, scene, outputs, effects, algebra, output, project_initial,
+                      allow_inconsistent, real, solver, step, report):
+    """compile --target embedded: DIR/NAME.h and DIR/NAME.c, both or neither."""
+    if project_initial or allow_inconsistent:
+        raise click.UsageError("--target embedded starts from the model's initial values as "
+                               "they are: leave out --project-initial and --allow-inconsistent")
+    if solver is not None and solver not in ("euler", "rk4"):
+        raise click.BadParameter(f"'{solver}' is not a fixed-step method: the embedded target "
+                                 "takes one fixed step per call (euler or rk4)",
+                                 param_hint="'--solver'")
+    directory = Path(output or ".")
+    if outfile.is_stdout(str(directory)) or not directory.is_dir():
+        raise click.BadParameter(f"'{directory}' is not a directory: --target embedded writes "
+                                 "NAME.h and NAME.c into one", param_hint="'-o'")
+    compiled = _build(model, scene, False, algebra, outputs=outputs, effects=effects)
+    files = _or_exit(api.compile_embedded, compiled, real or "double", solver, step)
+    targets = [(directory / name, text) for name, text in files.items()]
+    checker = _Files(model, [("-o", str(path)) for path, _ in targets])
+    checker.read(compiled.files)
+    for path, text in targets:
+        _write_atomic(str(path), text)
+    if report:
+        from .codegen import embedded
+        sizes = embedded.memory(compiled.program, real or "double")
+        click.echo("memory (bytes): " + ", ".join(f"{k}={v}" for k, v in sizes.items()),
+                   err=True)
 
 
 @main.command()

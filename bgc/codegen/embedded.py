@@ -1,0 +1,204 @@
+"""The embedded C target: Program -> {"NAME.h": ..., "NAME.c": ...} (docs/embedded.md).
+
+One fixed step per call of NAME_step, no heap, no stdio, no mutable global: the caller owns the
+state, parameter, input and output structs, every array is sized at compile time, and the only
+work area of a step is a local array of a size fixed here.  The model part is the C emitter's
+(bgc.codegen.emit: the same statements, printed by the same printer, in the same order), the
+step is the fixed-step driver's (bgc/runtime/erk.c, bgc_fixed_step, on the grid t0 + k H of
+drive.c with one step per output interval), so that in double the states and outputs after k
+steps are the bytes `bgc simulate --solver S --step H --dt H` writes at t0 + k H.  With
+--real float every value, coefficient and function is the float one (sinf, 2.0f, ...): the
+same operations in the same order, rounded to float.
+
+What the target cannot run yet is refused before anything is written, with the place in the
+model and what to change (check_supported)."""
+from __future__ import annotations
+
+import re
+
+import sympy as sp
+
+from .. import ir
+from ..base import solvers
+from ..base.diagnostics import ModelError, error
+from ..ir import FUNCTIONS, Program
+from ..ir.printers import CPrinter, float_literal
+from . import emit
+
+REALS = ("double", "float")
+SOLVERS = ("euler", "rk4")  # the fixed-step methods the target steps with
+MAX_TABLE_ROWS = 1024  # the most rows of a lookup table the target would carry (flash)
+FAULTS = (("OK", 0, "the step was taken"),
+          ("FAULT_NONFINITE", 1, "a derivative, state or output is not finite: the state is "
+                                 "left as it was before the step"),
+          ("FAULT_NEWTON", 2, "an algebraic block did not converge within its iteration bound "
+                              "(reserved: such models are refused for now)"))
+
+
+class _FloatPrinter(CPrinter):
+    """CPrinter in single precision: float literals (2.0f) and libm's float functions (sinf);
+    the layout, and so the operations and their order, are CPrinter's."""
+
+    FUNCTION_NAMES = {**CPrinter.FUNCTION_NAMES, **{f: f + "f" for f in FUNCTIONS},
+                      "Abs": "fabsf"}
+
+    def _print(self, expr, **kwargs):
+        if isinstance(expr, (sp.Rational, sp.Float)) or expr in (sp.pi, sp.E):
+            return super()._print(expr, **kwargs) + "f"
+        return super()._print(expr, **kwargs)
+
+    def _print_power(self, expr):
+        text = super()._print_power(expr)
+        if expr.exp.is_Rational and expr.exp.is_negative and text.startswith("1.0/"):
+            return "1.0f/" + text[4:]
+        return text
+
+    def _quotient(self, numer, denom):
+        text = super()._quotient(numer, denom)
+        return text if numer else "1.0f" + text[3:]
+
+    def _print_call(self, expr):
+        if type(expr).__name__ == "Heaviside" and len(expr.args) == 1:
+            return f"bgc_heaviside({self._print(expr.args[0])}, 0.5f)"
+        return super()._print_call(expr)
+
+    def _print_pow_call(self, base, exp):
+        return f"powf({base}, {exp})"
+
+
+_DOUBLE_DECL = re.compile(r"^const double ")
+
+
+def _typed(lines: list[str]) -> list[str]:
+    """The C emitter's temporaries (`const double wK = ...`) in the target's real type."""
+    return [_DOUBLE_DECL.sub("const bgc_real ", line) for line in lines]
+
+
+def _workspace(program: Program, chunk_ops: int):
+    """The work area of one step: only the values that cross the chunks of a long model
+    function (each chunk a function of its own), from offset 0."""
+    layouts = {name: ir.layout(program.function(name).body, 0, chunk_ops)
+               for name in ("rhs", "outputs")}
+    top = max((len(lay.slot) for lay in layouts.values()), default=0)
+    return emit._Workspace(0, 0, 0, 0, 0, (), top, 0, layouts)
+
+
+# ---------------------------------------------------------------- refusals
+
+
+def _refuse(span, message: str):
+    raise ModelError([error(span, f"embedded target: {message}")])
+
+
+def check_supported(program: Program, graph, scene, solver: str) -> None:
+    """ModelError, located, for what the embedded target does not run (yet): an adaptive
+    solver, events (when-blocks, relations of states or time, square waves, discrete
+    variables, switches), algebraic blocks solved at run time, inputs, lookup tables."""
+    if solver not in SOLVERS:
+        span = scene.solver[2] if scene is not None and scene.solver else None
+        family = "adaptive" if solvers.get(solver).adaptive else "not a fixed-step method"
+        _refuse(span, f"the solver '{solver}' is {family}; the target takes one fixed step "
+                      f"per call: give --solver rk4 or --solver euler, and --step H")
+    for when in graph.whens:
+        _refuse(when.span, "when-blocks are not supported yet (events at a fixed step are "
+                           "planned; simulate the model with `bgc simulate`)")
+    for kind, items in (("relations of states or time (conditions that switch the model: "
+                         "events)", graph.relations),
+                        ("square waves (time events)", graph.squares),
+                        ("discrete variables", graph.discretes)):
+        for item in items:
+            _refuse(item.span, f"{kind} are not supported yet")
+    if program.events is not None:
+        _refuse(None, "the model has events, which the target does not support yet")
+    for tab in program.tables:
+        if tab.rows > MAX_TABLE_ROWS:
+            _refuse(None, f"the table '{tab.name}' has {tab.rows} rows, more than the "
+                          f"{MAX_TABLE_ROWS} the target carries: resample it coarser")
+        _refuse(None, f"lookup tables ('{tab.name}') are not supported yet")
+    for info in program.inputs:
+        _refuse(getattr(info, "span", None),
+                f"inputs ('{info.name}') are not supported yet")
+    if program.blocks:
+        bp = program.blocks[0]
+        _refuse(_block_span(graph, bp),
+                f"algebraic block {bp.index} ({', '.join(bp.unknowns[:4])}) is solved at run "
+                f"time ({'Newton' if bp.method == 'newton' else 'an LU factorisation'}), which "
+                f"the target does not support yet; --algebra symbolic solves a linear one "
+                f"in closed form")
+
+
+def _block_span(graph, bp):
+    """The declaration of the element the block's first unknown belongs to, if it names one."""
+    for name in bp.unknowns:
+        el = graph.by_name.get(name.split(".")[0])
+        if el is not None:
+            return getattr(el, "span", None)
+    return None
+
+
+# ---------------------------------------------------------------- emission
+
+
+def emit_embedded(program: Program, real: str = "double", solver: str = "rk4",
+                  step: float | None = None, chunk_ops: int = ir.CHUNK_OPS) -> dict[str, str]:
+    """{"NAME.h": the API, "NAME.c": the model and its step} for a program check_supported
+    accepted; step: H (default: the scene's step, else its output interval)."""
+    if real not in REALS:
+        raise ValueError(f"real must be one of {', '.join(REALS)}")
+    if solver not in SOLVERS:
+        raise ValueError(f"solver must be one of {', '.join(SOLVERS)}")
+    sc = program.scene
+    h = step if step is not None else (sc.step if sc.step is not None else sc.dt)
+    if not (h > 0.0 and h != float("inf")):
+        raise ValueError("the step must be positive and finite")
+    fields = emit.c_param_fields(tuple(p.name for p in program.params))
+    printer = (_FloatPrinter if real == "float" else CPrinter)(
+        len(program.states), fields, program.n_consts)
+    ws = _workspace(program, chunk_ops)
+    writer = emit._Writer(program, ws, printer, "c")
+    model = {}
+    for name in ("rhs", "outputs"):
+        f = emit._function_context(writer, name, "out")
+        f["chunks"] = [_typed(lines) for lines in f["chunks"]]
+        model[name] = f
+    tab = solvers.get(solver).tableau
+    lit = (lambda v: float_literal(v) + "f") if real == "float" else float_literal
+    ident = emit.identifier(program.name)
+    context = {
+        "ident": ident, "NAME": ident, "guard": f"BGC_EMBEDDED_{ident.upper()}_H",
+        "model_name": emit.c_string_literal(program.name),
+        "real": real, "solver": solver, "step": float_literal(h),
+        "t0": float_literal(sc.t0),
+        "n_states": len(program.states), "n_outputs": len(program.outputs),
+        "n_params": len(program.params), "n_consts": program.n_consts,
+        "n_inputs": len(program.inputs), "work": max(ws.doubles, 1),
+        "states": [emit.c_string_literal(s) for s in program.states],
+        "outputs": [emit.c_string_literal(o) for o in program.outputs],
+        "params": [emit.c_string_literal(p.name) for p in program.params],
+        "param_fields": fields,
+        "param_defaults": [printer.doprint(p.default) for p in program.params],
+        "consts": _typed(emit._plain_lines(writer, "consts", "p->c")),
+        "init": _typed(emit._plain_lines(writer, "init", "x0")),
+        "model": model,
+        "autonomous": not emit._reads_time(program.function("rhs")),
+        "stages": tab.stages,
+        "tab_c": ", ".join(lit(v) for v in tab.c),
+        "tab_a": ", ".join(lit(v) for v in emit._square(tab.a, tab.stages)) or lit(0.0),
+        "tab_b": ", ".join(lit(v) for v in tab.b),
+        "faults": FAULTS,
+        "flit": lit,
+    }
+    return {f"{ident}.h": emit._render("embedded/model.h.j2", context),
+            f"{ident}.c": emit._render("embedded/model.c.j2", context)}
+
+
+def memory(program: Program, real: str = "double", chunk_ops: int = ir.CHUNK_OPS) -> dict:
+    """The bytes of the caller's structs and of one step's work (its local arrays: the stages,
+    their argument, the new state, the work area), for --report."""
+    size = 8 if real == "double" else 4
+    n, m = max(len(program.states), 1), max(len(program.outputs), 1)
+    work = max(_workspace(program, chunk_ops).doubles, 1)
+    return {"state": 8 * ((8 + n * size + 7) // 8),
+            "params": (max(len(program.params), 1) + max(program.n_consts, 1)) * size,
+            "outputs": m * size, "inputs": max(len(program.inputs), 1) * size,
+            "step_locals": (4 * n + 2 * n + work) * size}
