@@ -10,6 +10,9 @@
 #include <string.h>
 #include BGC_HEADER
 
+#ifndef BGC_STEPS
+#define BGC_STEPS 10 /* the steps without an argument (a target without a command line) */
+#endif
 #define BGC_CAT2(a, b) a##b
 #define BGC_CAT(a, b) BGC_CAT2(a, b)
 #define API(x) BGC_CAT(BGC_MODEL, x)
@@ -45,7 +48,7 @@ int main(int argc, char **argv)
     API(_params) p;
     API(_inputs) u;
     API(_outputs) y;
-    long k, steps = argc > 1 ? strtol(argv[1], NULL, 10) : 10;
+    long k, steps = argc > 1 ? strtol(argv[1], NULL, 10) : BGC_STEPS;
     int j, rc;
     memset(&u, 0, sizeof u);
     API(_params_default)(&p);

@@ -26,6 +26,7 @@ from ..ir.printers import CPrinter, float_literal
 from . import emit
 
 REALS = ("double", "float")
+HELPERS = ("bgc_sq", "bgc_min", "bgc_max", "bgc_sign", "bgc_heaviside")  # emitted where used
 SOLVERS = ("euler", "rk4")  # the fixed-step methods the target steps with
 MAX_TABLE_ROWS = 1024  # the most rows of a lookup table the target would carry (flash)
 FAULTS = (("OK", 0, "the step was taken"),
@@ -161,6 +162,11 @@ def emit_embedded(program: Program, real: str = "double", solver: str = "rk4",
         f = emit._function_context(writer, name, "out")
         f["chunks"] = [_typed(lines) for lines in f["chunks"]]
         model[name] = f
+    defaults = [printer.doprint(p.default) for p in program.params]
+    consts = _typed(emit._plain_lines(writer, "consts", "p->c"))
+    init = _typed(emit._plain_lines(writer, "init", "x0"))
+    code = "\n".join([*defaults, *consts, *init] + [line for f in model.values()
+                                                   for lines in f["chunks"] for line in lines])
     tab = solvers.get(solver).tableau
     lit = (lambda v: float_literal(v) + "f") if real == "float" else float_literal
     ident = emit.identifier(program.name)
@@ -176,9 +182,7 @@ def emit_embedded(program: Program, real: str = "double", solver: str = "rk4",
         "outputs": [emit.c_string_literal(o) for o in program.outputs],
         "params": [emit.c_string_literal(p.name) for p in program.params],
         "param_fields": fields,
-        "param_defaults": [printer.doprint(p.default) for p in program.params],
-        "consts": _typed(emit._plain_lines(writer, "consts", "p->c")),
-        "init": _typed(emit._plain_lines(writer, "init", "x0")),
+        "param_defaults": defaults, "consts": consts, "init": init,
         "model": model,
         "autonomous": not emit._reads_time(program.function("rhs")),
         "stages": tab.stages,
@@ -186,6 +190,7 @@ def emit_embedded(program: Program, real: str = "double", solver: str = "rk4",
         "tab_a": ", ".join(lit(v) for v in emit._square(tab.a, tab.stages)) or lit(0.0),
         "tab_b": ", ".join(lit(v) for v in tab.b),
         "faults": FAULTS,
+        "helpers": [name for name in HELPERS if f"{name}(" in code],
         "flit": lit,
     }
     return {f"{ident}.h": emit._render("embedded/model.h.j2", context),
