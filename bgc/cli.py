@@ -661,7 +661,8 @@ def _compile_embedded(model, scene, outputs, effects, algebra, output, project_i
         _write_atomic(str(path), text)
     if report:
         from .codegen import embedded
-        sizes = embedded.memory(compiled.program, real or "double")
+        sizes = embedded.memory(compiled.program, real or "double",
+                                solver or compiled.settings.solver)
         click.echo("memory (bytes): " + ", ".join(f"{k}={v}" for k, v in sizes.items()),
                    err=True)
 

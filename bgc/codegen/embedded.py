@@ -197,13 +197,15 @@ def emit_embedded(program: Program, real: str = "double", solver: str = "rk4",
             f"{ident}.c": emit._render("embedded/model.c.j2", context)}
 
 
-def memory(program: Program, real: str = "double", chunk_ops: int = ir.CHUNK_OPS) -> dict:
-    """The bytes of the caller's structs and of one step's work (its local arrays: the stages,
-    their argument, the new state, the work area), for --report."""
+def memory(program: Program, real: str = "double", solver: str = "rk4",
+           chunk_ops: int = ir.CHUNK_OPS) -> dict:
+    """The bytes of the caller's structs (natural alignment) and of one step's local arrays
+    (the stages, their argument, the new state, the outputs, the work area), for --report."""
     size = 8 if real == "double" else 4
     n, m = max(len(program.states), 1), max(len(program.outputs), 1)
     work = max(_workspace(program, chunk_ops).doubles, 1)
+    stages = solvers.get(solver).tableau.stages
     return {"state": 8 * ((8 + n * size + 7) // 8),
             "params": (max(len(program.params), 1) + max(program.n_consts, 1)) * size,
             "outputs": m * size, "inputs": max(len(program.inputs), 1) * size,
-            "step_locals": (4 * n + 2 * n + work) * size}
+            "step_locals": (stages * n + 2 * n + m + work) * size}
