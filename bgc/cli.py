@@ -236,14 +236,20 @@ def _echo(text: str | bytes, err: bool = False):
 
 def _output_file(ctx, param, value):
     """-o: a file that can be written, checked before any work (a usage error if not), or
-    `-`, standard output.  An existing directory passes (compile --target embedded writes
-    into one; compile checks it for the other targets)."""
-    if value is not None and not os.path.isdir(value):
+    `-`, standard output."""
+    if value is not None:
         try:
             outfile.check_target(value)
         except outfile.OutputError as error:
             raise click.BadParameter(str(error), ctx, param) from None
     return value
+
+
+def _output_file_or_directory(ctx, param, value):
+    """compile's -o: as _output_file, or an existing directory (--target embedded writes into
+    one; compile refuses it for the other targets)."""
+    return value if value is not None and os.path.isdir(value) else \
+        _output_file(ctx, param, value)
 
 
 def _model_path(model) -> str:
@@ -585,7 +591,7 @@ def equations(model, scene, outputs, effects, algebra, fmt):
               help="fmu: an FMI 2.0 FMU for Model Exchange and Co-Simulation, built with the "
                    "C compiler (needs -o NAME.fmu).  embedded: NAME.h and NAME.c, one fixed "
                    "step per call, no heap, no stdio (docs/embedded.md).")
-@click.option("-o", "output", default=None, callback=_output_file,
+@click.option("-o", "output", default=None, callback=_output_file_or_directory,
               help="Output file (default: stdout); --target embedded: the directory "
                    "(default: the current one).")
 @click.option("--project-initial", is_flag=True, help="Project initial values onto the "
