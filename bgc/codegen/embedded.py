@@ -28,12 +28,13 @@ from . import emit
 REALS = ("double", "float")
 HELPERS = ("bgc_sq", "bgc_min", "bgc_max", "bgc_sign", "bgc_heaviside")  # emitted where used
 SOLVERS = ("euler", "rk4")  # the fixed-step methods the target steps with
+FLOAT_NEWTON_RTOL, FLOAT_NEWTON_ATOL = 1e-5, 1e-6  # float: Newton's tolerance at least these
 MAX_TABLE_ROWS = 1024  # the most rows of a lookup table the target would carry (flash)
 FAULTS = (("OK", 0, "the step was taken"),
           ("FAULT_NONFINITE", 1, "a derivative, state or output is not finite: the state is "
                                  "left as it was before the step"),
-          ("FAULT_NEWTON", 2, "an algebraic block did not converge within its iteration bound "
-                              "(reserved: such models are refused for now)"))
+          ("FAULT_NEWTON", 2, "an algebraic block is singular, or its Newton iteration does "
+                              "not converge within 50 iterations: the state is left as it was"))
 
 
 class _FloatPrinter(CPrinter):
@@ -76,12 +77,32 @@ def _typed(lines: list[str]) -> list[str]:
 
 
 def _workspace(program: Program, chunk_ops: int):
-    """The work area of one step: only the values that cross the chunks of a long model
-    function (each chunk a function of its own), from offset 0."""
+    """The work area (in the state: a Newton block's last solution is its next start): the
+    values that cross the chunks of a long model function (each chunk a function of its own),
+    then each algebraic block's storage, as the C emitter lays them out, from offset 0."""
     layouts = {name: ir.layout(program.function(name).body, 0, chunk_ops)
                for name in ("rhs", "outputs")}
     top = max((len(lay.slot) for lay in layouts.values()), default=0)
-    return emit._Workspace(0, 0, 0, 0, 0, (), top, 0, layouts)
+    areas, ints = [], 0
+    for bp in program.blocks:
+        m, nnz = bp.lu.m, bp.lu.nnz
+        save = top
+        lu = save + nnz
+        dense = lu + (0 if bp.lu.dense else nnz)
+        b = dense + m * m
+        areas.append(emit._BlockArea(save, lu, dense, b, b + m, b + 2 * m, b + 3 * m,
+                                     b + 4 * m, b + 5 * m, ints, ints + m))
+        top = b + 6 * m
+        ints += m + 1
+    return emit._Workspace(0, 0, 0, 0, 0, tuple(areas), top, ints, layouts)
+
+
+_FLOAT_LITERAL = re.compile(r"(?<![\w.\[])(\d+\.\d*(?:e[-+]?\d+)?|\d+e[-+]?\d+)(?![\w.])")
+
+
+def _single(lines: list[str]) -> list[str]:
+    """The C emitter's unrolled LU lines in float: float literals and fabsf."""
+    return [_FLOAT_LITERAL.sub(r"\1f", line).replace("fabs(", "fabsf(") for line in lines]
 
 
 # ---------------------------------------------------------------- refusals
@@ -91,10 +112,10 @@ def _refuse(span, message: str):
     raise ModelError([error(span, f"embedded target: {message}")])
 
 
-def check_supported(program: Program, graph, scene, solver: str) -> None:
+def check_supported(program: Program, graph, scene, solver: str, real: str = "double") -> None:
     """ModelError, located, for what the embedded target does not run (yet): an adaptive
     solver, events (when-blocks, relations of states or time, square waves, discrete
-    variables, switches), algebraic blocks solved at run time, inputs, lookup tables."""
+    variables, switches), Newton blocks in float, inputs, lookup tables."""
     if solver not in SOLVERS:
         span = scene.solver[2] if scene is not None and scene.solver else None
         family = "adaptive" if solvers.get(solver).adaptive else "not a fixed-step method"
@@ -109,6 +130,11 @@ def check_supported(program: Program, graph, scene, solver: str) -> None:
                         ("discrete variables", graph.discretes)):
         for item in items:
             _refuse(item.span, f"{kind} are not supported yet")
+    newton = [bp for bp in program.blocks if bp.method == "newton"]
+    if newton and real == "float":
+        _refuse(None, f"algebraic block {newton[0].index} ({', '.join(newton[0].unknowns[:4])}) "
+                      f"is solved by Newton's method, which the target does not run in float "
+                      f"yet: use --real double")
     if program.events is not None:
         _refuse(None, "the model has events, which the target does not support yet")
     for tab in program.tables:
@@ -119,22 +145,6 @@ def check_supported(program: Program, graph, scene, solver: str) -> None:
     for info in program.inputs:
         _refuse(getattr(info, "span", None),
                 f"inputs ('{info.name}') are not supported yet")
-    if program.blocks:
-        bp = program.blocks[0]
-        _refuse(_block_span(graph, bp),
-                f"algebraic block {bp.index} ({', '.join(bp.unknowns[:4])}) is solved at run "
-                f"time ({'Newton' if bp.method == 'newton' else 'an LU factorisation'}), which "
-                f"the target does not support yet; --algebra symbolic solves a linear one "
-                f"in closed form")
-
-
-def _block_span(graph, bp):
-    """The declaration of the element the block's first unknown belongs to, if it names one."""
-    for name in bp.unknowns:
-        el = graph.by_name.get(name.split(".")[0])
-        if el is not None:
-            return getattr(el, "span", None)
-    return None
 
 
 # ---------------------------------------------------------------- emission
@@ -161,12 +171,25 @@ def emit_embedded(program: Program, real: str = "double", solver: str = "rk4",
     for name in ("rhs", "outputs"):
         f = emit._function_context(writer, name, "out")
         f["chunks"] = [_typed(lines) for lines in f["chunks"]]
+        for e in f["evals"]:
+            for key in ("body", "residuals", "tangents", "jacobian"):
+                e[key] = _typed(e[key])
         model[name] = f
+    blocks = emit._common_context(program, ws, emit.c_string_literal, True)["blocks"]
+    for b in blocks:
+        if b["unrolled"]:
+            for key in ("factor_lines", "lsolve_lines"):
+                lines = _typed(b["unrolled"][key])
+                b["unrolled"][key] = _single(lines) if real == "float" else lines
     defaults = [printer.doprint(p.default) for p in program.params]
     consts = _typed(emit._plain_lines(writer, "consts", "p->c"))
     init = _typed(emit._plain_lines(writer, "init", "x0"))
     code = "\n".join([*defaults, *consts, *init] + [line for f in model.values()
-                                                   for lines in f["chunks"] for line in lines])
+                                                   for lines in f["chunks"] for line in lines]
+                     + [line for f in model.values() for e in f["evals"] for key in
+                        ("body", "residuals", "tangents", "jacobian") for line in e[key]])
+    if blocks:
+        code += "\nbgc_max("
     tab = solvers.get(solver).tableau
     lit = (lambda v: float_literal(v) + "f") if real == "float" else float_literal
     ident = emit.identifier(program.name)
@@ -177,7 +200,14 @@ def emit_embedded(program: Program, real: str = "double", solver: str = "rk4",
         "t0": float_literal(sc.t0),
         "n_states": len(program.states), "n_outputs": len(program.outputs),
         "n_params": len(program.params), "n_consts": program.n_consts,
-        "n_inputs": len(program.inputs), "work": max(ws.doubles, 1),
+        "n_inputs": len(program.inputs), "work": max(ws.doubles, 1), "ints": max(ws.ints, 1),
+        "blocks": blocks,
+        # Newton's tolerance: the scene's, at least float's resolution in float
+        "rtol": lit(max(sc.rtol, FLOAT_NEWTON_RTOL) if real == "float" else sc.rtol),
+        "atol": lit(max(sc.atol, FLOAT_NEWTON_ATOL) if real == "float" else sc.atol),
+        "eps": "FLT_EPSILON" if real == "float" else "DBL_EPSILON",
+        "fabs": "fabsf" if real == "float" else "fabs",
+        "sqrt": "sqrtf" if real == "float" else "sqrt",
         "states": [emit.c_string_literal(s) for s in program.states],
         "outputs": [emit.c_string_literal(o) for o in program.outputs],
         "params": [emit.c_string_literal(p.name) for p in program.params],
@@ -189,7 +219,7 @@ def emit_embedded(program: Program, real: str = "double", solver: str = "rk4",
         "tab_c": ", ".join(lit(v) for v in tab.c),
         "tab_a": ", ".join(lit(v) for v in emit._square(tab.a, tab.stages)) or lit(0.0),
         "tab_b": ", ".join(lit(v) for v in tab.b),
-        "faults": FAULTS,
+        "faults": FAULTS, "code": code,
         "helpers": [name for name in HELPERS if f"{name}(" in code],
         "flit": lit,
     }
@@ -200,12 +230,14 @@ def emit_embedded(program: Program, real: str = "double", solver: str = "rk4",
 def memory(program: Program, real: str = "double", solver: str = "rk4",
            chunk_ops: int = ir.CHUNK_OPS) -> dict:
     """The bytes of the caller's structs (natural alignment) and of one step's local arrays
-    (the stages, their argument, the new state, the outputs, the work area), for --report."""
+    (the stages, their argument, the new state, the outputs, and the state's copy that the
+    step works on), for --report."""
     size = 8 if real == "double" else 4
     n, m = max(len(program.states), 1), max(len(program.outputs), 1)
-    work = max(_workspace(program, chunk_ops).doubles, 1)
+    ws = _workspace(program, chunk_ops)
+    state = 8 * ((8 + (n + max(ws.doubles, 1)) * size + 4 * max(ws.ints, 1) + 7) // 8)
     stages = solvers.get(solver).tableau.stages
-    return {"state": 8 * ((8 + n * size + 7) // 8),
+    return {"state": state,
             "params": (max(len(program.params), 1) + max(program.n_consts, 1)) * size,
             "outputs": m * size, "inputs": max(len(program.inputs), 1) * size,
-            "step_locals": (stages * n + 2 * n + m + work) * size}
+            "step_locals": (stages * n + 2 * n + m) * size + state}
