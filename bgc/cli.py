@@ -671,6 +671,15 @@ def _compile_embedded(model, scene, outputs, effects, algebra, output, project_i
                                 solver or compiled.settings.solver)
         click.echo("memory (bytes): " + ", ".join(f"{k}={v}" for k, v in sizes.items()),
                    err=True)
+        ident = next(iter(files))[:-2]
+        frames = backends.stack_usage(directory / f"{ident}.c", directory)
+        if frames is None:
+            click.echo("stack: not measured (no C compiler with -fstack-usage)", err=True)
+        else:
+            click.echo(f"stack (bytes, this machine's cc -O2 -fstack-usage): "
+                       f"{ident}_step={frames.get(ident + '_step', 0)}, every function's "
+                       f"frame together={sum(frames.values())} (a bound on any call chain: "
+                       f"no recursion)", err=True)
 
 
 @main.command()

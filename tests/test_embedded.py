@@ -237,6 +237,24 @@ def test_command_writes_both_files(tmp_path, capsys):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["pendulum.c", "pendulum.h"]
     assert "#define pendulum_STEP 0.001" in (tmp_path / "pendulum.h").read_text()
     assert out.err.startswith("memory (bytes): state=")
+    assert "stack (bytes" in out.err and "pendulum_step=" in out.err
+
+
+def test_long_functions_in_parts(tmp_path):
+    """A model function split into parts (each a C function, the values between them in the
+    work area) steps to the same bytes."""
+    if shutil.which("gcc") is None:
+        pytest.skip("no gcc on this machine")
+    from bgc.codegen import embedded
+    program = api.build(str(ROOT / "models" / "double_pendulum.bg")).program
+    files = embedded.emit_embedded(program, "double", "rk4", H, chunk_ops=40)
+    for name, text in files.items():
+        (tmp_path / name).write_text(text)
+    assert files["double_pendulum.c"].count("static int bgc_rhs_") > 2
+    subprocess.run(["gcc", *FLAGS, "-I.", "-DBGC_MODEL=double_pendulum",
+                    '-DBGC_HEADER="double_pendulum.h"', str(HARNESS), "double_pendulum.c",
+                    "-lm", "-o", "run"], cwd=tmp_path, check=True)
+    assert _rows(tmp_path, 300) == _simulated("double_pendulum", 300)
 
 
 @pytest.mark.parametrize("model", ["pendulum", "double_pendulum"])
