@@ -57,7 +57,7 @@ def built(tmp_path_factory):
         _emit(model, real, tmp)
         subprocess.run(["gcc", *FLAGS, "-c", f"{model}.c", "-o", f"{model}.o"], cwd=tmp,
                        check=True)
-        subprocess.run(["gcc", *FLAGS, "-I.", f"-DBGC_MODEL={model}",
+        subprocess.run(["gcc", *FLAGS[:-1], "-O0", "-I.", f"-DBGC_MODEL={model}",
                         f'-DBGC_HEADER="{model}.h"', str(HARNESS), f"{model}.o", "-lm",
                         "-o", "run"], cwd=tmp, check=True)
         out[model, real] = tmp
@@ -127,6 +127,7 @@ def test_dc_motor_follows_its_linear_equations(built):
     V, Ra, La, kt, Jr, br, tau = 12.0, 2.0, 0.5, 0.8, 0.05, 0.1, 0.5
     A = np.array([[-Ra / La, -kt / La, 0, V / La], [kt / Jr, -br / Jr, 0, -tau / Jr],
                   [0, 1, 0, 0], [0, 0, 0, 0]])
+    rows = rows[::50]
     z = np.array([expm(A * t) @ [0, 0, 0, 1] for t in rows[:, 0]])
     got = {n: rows[:, j] for j, n in enumerate(names)}
     assert np.max(np.abs(got["ind.f"] - z[:, 0])) < 1e-9
