@@ -288,19 +288,45 @@ def equations(model, scene: str | None = None, format: str = "text",
 
 def compile(model, target: str = "c", scene: str | None = None,
             project_initial: bool = False, algebra: str = "auto", outputs=None,
-            effects=None, allow_inconsistent: bool = False) -> dict[str, str | bytes]:
+            effects=None, allow_inconsistent: bool = False,
+            embedded: dict | None = None) -> dict[str, str | bytes]:
     """Standalone source code: {filename: text}; target "fmu": {"<id>.fmu": the bytes of an
     FMI 2.0 FMU for Model Exchange and Co-Simulation} (bgc.codegen.fmu; needs a C compiler:
     bgc.base.backends.BackendError without one; bgc.codegen.fmu.FmuError for a model an FMU cannot
-    hold)."""
+    hold); target "embedded": {"<id>.h", "<id>.c"} (bgc.codegen.embedded; embedded: its
+    options real, solver, step as compile_embedded takes them)."""
     _choice("target", target, TARGETS)
     compiled = build(model, scene, project_initial, algebra, outputs=outputs, effects=effects,
                      allow_inconsistent=allow_inconsistent)
+    if target == "embedded":
+        return compile_embedded(compiled, **(embedded or {}))
     if target == "fmu":
         from .codegen import fmu
         return {fmu.file_name(compiled): fmu.build_fmu(compiled, project_initial,
                                                        allow_inconsistent=allow_inconsistent)}
     return emit_c(compiled.program) if target == "c" else emit_python(compiled.program)
+
+
+def compile_embedded(compiled: Compiled, real: str = "double", solver: str | None = None,
+                     step: float | None = None) -> dict[str, str]:
+    """The embedded C target of a built model: {"<id>.h", "<id>.c"} (docs/embedded.md).  solver:
+    euler or rk4 (default: the scene's, which must then be one of them); step: the fixed step
+    (default: the scene's step, else its output interval).  What the target cannot run is
+    refused with a located BgcModelError."""
+    from .codegen import embedded
+    _choice("real", real, embedded.REALS)
+    if step is not None and not (isinstance(step, (int, float)) and 0 < step < float("inf")):
+        raise ValueError(f"step must be a positive finite number, not {step!r}")
+    chosen = solver or compiled.settings.solver
+    scene = next((s for s in compiled.graph.scenes if s.name == compiled.settings.scene), None)
+    if solver is not None:
+        _choice("solver", solver, solvers.NAMES)
+    try:
+        embedded.check_supported(compiled.program, compiled.graph,
+                                 None if solver else scene, chosen, real)
+    except ModelError as exc:
+        raise BgcModelError(exc, compiled.source) from None
+    return embedded.emit_embedded(compiled.program, real, chosen, step)
 
 
 def simulate(model, scene: str | None = None, backend: str = "c", algebra: str = "auto",

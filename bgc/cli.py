@@ -245,6 +245,13 @@ def _output_file(ctx, param, value):
     return value
 
 
+def _output_file_or_directory(ctx, param, value):
+    """compile's -o: as _output_file, or an existing directory (--target embedded writes into
+    one; compile refuses it for the other targets)."""
+    return value if value is not None and os.path.isdir(value) else \
+        _output_file(ctx, param, value)
+
+
 def _model_path(model) -> str:
     """The model file's path (the command's MODEL, a path or, with --const, a Source); (not
     through api, whose import the warm path of simulate avoids)."""
@@ -582,15 +589,38 @@ def equations(model, scene, outputs, effects, algebra, fmt):
 @ALGEBRA
 @click.option("--target", type=click.Choice(list(run.TARGETS)), default="c",
               help="fmu: an FMI 2.0 FMU for Model Exchange and Co-Simulation, built with the "
-                   "C compiler (needs -o NAME.fmu).")
-@click.option("-o", "output", default=None, callback=_output_file,
-              help="Output file (default: stdout).")
+                   "C compiler (needs -o NAME.fmu).  embedded: NAME.h and NAME.c, one fixed "
+                   "step per call, no heap, no stdio (docs/embedded.md).")
+@click.option("-o", "output", default=None, callback=_output_file_or_directory,
+              help="Output file (default: stdout); --target embedded: the directory "
+                   "(default: the current one).")
 @click.option("--project-initial", is_flag=True, help="Project initial values onto the "
                                                       "constraints instead of refusing them.")
 @click.option("--allow-inconsistent", is_flag=True, help=ALLOW_HELP)
+@click.option("--real", type=click.Choice(["double", "float"]), default=None,
+              help="--target embedded: the real type.  [default: double]")
+@click.option("--solver", type=click.Choice(solvers.NAMES), default=None,
+              help="--target embedded: the fixed-step method, euler or rk4 (default: the "
+                   "scene's, if it is one of them).")
+@click.option("--step", type=POSITIVE, default=None,
+              help="--target embedded: the fixed step H (default: the scene's step, else its "
+                   "output interval).")
+@click.option("--report", is_flag=True,
+              help="--target embedded: print the memory the model needs, in bytes, on stderr.")
 def compile(model, scene, outputs, effects, algebra, target, output, project_initial,
-            allow_inconsistent):
+            allow_inconsistent, real, solver, step, report):
     """Emit standalone C or Python source code, or an FMU."""
+    if target == "embedded":
+        _compile_embedded(model, scene, outputs, effects, algebra, output, project_initial,
+                          allow_inconsistent, real, solver, step, report)
+        return
+    given = [name for name, value in (("--real", real), ("--solver", solver),
+                                      ("--step", step), ("--report", report)) if value]
+    if given:
+        raise click.UsageError(f"{given[0]} is an option of --target embedded")
+    if output is not None and os.path.isdir(output):
+        raise click.BadParameter(f"cannot write '{output}': it is a directory",
+                                 param_hint="'-o'")
     if target == "fmu" and not output:
         raise click.UsageError("--target fmu writes a zip archive: name it with -o NAME.fmu "
                                "(or -o - for standard output)")
@@ -612,6 +642,44 @@ def compile(model, scene, outputs, effects, algebra, target, output, project_ini
     emitted = (emit.emit_c if target == "c" else emit.emit_python)(compiled.program)
     (text,) = emitted.values()
     _write_atomic(output or outfile.STDOUT, text)
+
+
+def _compile_embedded(model, scene, outputs, effects, algebra, output, project_initial,
+                      allow_inconsistent, real, solver, step, report):
+    """compile --target embedded: DIR/NAME.h and DIR/NAME.c, both or neither."""
+    if project_initial or allow_inconsistent:
+        raise click.UsageError("--target embedded starts from the model's initial values as "
+                               "they are: leave out --project-initial and --allow-inconsistent")
+    if solver is not None and solver not in ("euler", "rk4"):
+        raise click.BadParameter(f"'{solver}' is not a fixed-step method: the embedded target "
+                                 "takes one fixed step per call (euler or rk4)",
+                                 param_hint="'--solver'")
+    directory = Path(output or ".")
+    if outfile.is_stdout(str(directory)) or not directory.is_dir():
+        raise click.BadParameter(f"'{directory}' is not a directory: --target embedded writes "
+                                 "NAME.h and NAME.c into one", param_hint="'-o'")
+    compiled = _build(model, scene, False, algebra, outputs=outputs, effects=effects)
+    files = _or_exit(api.compile_embedded, compiled, real or "double", solver, step)
+    targets = [(directory / name, text) for name, text in files.items()]
+    checker = _Files(model, [("-o", str(path)) for path, _ in targets])
+    checker.read(compiled.files)
+    for path, text in targets:
+        _write_atomic(str(path), text)
+    if report:
+        from .codegen import embedded
+        sizes = embedded.memory(compiled.program, real or "double",
+                                solver or compiled.settings.solver)
+        click.echo("memory (bytes): " + ", ".join(f"{k}={v}" for k, v in sizes.items()),
+                   err=True)
+        ident = next(iter(files))[:-2]
+        frames = backends.stack_usage(directory / f"{ident}.c", directory)
+        if frames is None:
+            click.echo("stack: not measured (no C compiler with -fstack-usage)", err=True)
+        else:
+            click.echo(f"stack (bytes, this machine's cc -O2 -fstack-usage): "
+                       f"{ident}_step={frames.get(ident + '_step', 0)}, every function's "
+                       f"frame together={sum(frames.values())} (a bound on any call chain: "
+                       f"no recursion)", err=True)
 
 
 @main.command()

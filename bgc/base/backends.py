@@ -628,3 +628,24 @@ def run_python(source: str, args=(), timeout: float | None = None) -> tuple[int,
         proc = subprocess.run([sys.executable, str(path), *map(str, args)], capture_output=True,
                               text=True, timeout=timeout)
     return proc.returncode, proc.stdout, proc.stderr
+
+
+def stack_usage(source: Path, include: Path, cc: str | None = None) -> dict[str, int] | None:
+    """Each function's stack frame in bytes, as the C compiler reports it compiling `source`
+    with -O2 -fstack-usage (gcc, clang); None without a compiler or when it cannot tell."""
+    if not have_c_compiler(cc):
+        return None
+    with tempfile.TemporaryDirectory(prefix="bgc-stack-") as tmp:
+        out = Path(tmp) / "unit.o"
+        done = subprocess.run([*c_compiler(cc), "-std=c99", "-O2", "-fstack-usage",
+                               f"-I{include}", "-c", str(source), "-o", str(out)],
+                              capture_output=True, text=True, cwd=tmp)
+        usage = Path(tmp) / "unit.su"
+        if done.returncode != 0 or not usage.exists():
+            return None
+        frames = {}
+        for line in usage.read_text().splitlines():
+            parts = line.split("\t")
+            if len(parts) >= 2 and parts[1].strip().isdigit():
+                frames[parts[0].rsplit(":", 1)[-1]] = int(parts[1])
+        return frames

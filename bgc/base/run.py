@@ -15,7 +15,8 @@ from .resources import MAX_OUTPUT_ROWS
 ALGEBRA = ("auto", "symbolic", "numeric")  # how algebraic blocks are solved (bgc.middle.reduce)
 BACKENDS = ("c", "vm", "python")  # what runs a simulation (vm: bgc/codegen/vm.py, the interpreter)
 SWEEP_BACKENDS = ("c", "python")  # what runs a sweep's batches
-TARGETS = ("c", "python", "fmu")  # what `compile` writes (fmu: bgc/codegen/fmu.py)
+TARGETS = ("c", "python", "fmu", "embedded")  # what `compile` writes (fmu: bgc/codegen/fmu.py;
+#                                               embedded: bgc/codegen/embedded.py)
 FORMATS = ("text", "latex")  # what `equations` prints
 SIMULATE_OPTIONS = ("t_end", "dt", "solver", "rtol", "atol", "step", "params", "project_initial",
                     "max_steps", "allow_inconsistent", "max_step", "event_rows", "events")

@@ -1,0 +1,243 @@
+"""The embedded C target: Program -> {"NAME.h": ..., "NAME.c": ...} (docs/embedded.md).
+
+One fixed step per call of NAME_step, no heap, no stdio, no mutable global: the caller owns the
+state, parameter, input and output structs, every array is sized at compile time, and the only
+work area of a step is a local array of a size fixed here.  The model part is the C emitter's
+(bgc.codegen.emit: the same statements, printed by the same printer, in the same order), the
+step is the fixed-step driver's (bgc/runtime/erk.c, bgc_fixed_step, on the grid t0 + k H of
+drive.c with one step per output interval), so that in double the states and outputs after k
+steps are the bytes `bgc simulate --solver S --step H --dt H` writes at t0 + k H.  With
+--real float every value, coefficient and function is the float one (sinf, 2.0f, ...): the
+same operations in the same order, rounded to float.
+
+What the target cannot run yet is refused before anything is written, with the place in the
+model and what to change (check_supported)."""
+from __future__ import annotations
+
+import re
+
+import sympy as sp
+
+from .. import ir
+from ..base import solvers
+from ..base.diagnostics import ModelError, error
+from ..ir import FUNCTIONS, Program
+from ..ir.printers import CPrinter, float_literal
+from . import emit
+
+REALS = ("double", "float")
+HELPERS = ("bgc_sq", "bgc_min", "bgc_max", "bgc_sign", "bgc_heaviside")  # emitted where used
+SOLVERS = ("euler", "rk4")  # the fixed-step methods the target steps with
+FLOAT_NEWTON_RTOL, FLOAT_NEWTON_ATOL = 1e-5, 1e-6  # float: Newton's tolerance at least these
+MAX_TABLE_ROWS = 1024  # the most rows of a lookup table the target would carry (flash)
+FAULTS = (("OK", 0, "the step was taken"),
+          ("FAULT_NONFINITE", 1, "a derivative, state or output is not finite: the state is "
+                                 "left as it was before the step"),
+          ("FAULT_NEWTON", 2, "an algebraic block is singular, or its Newton iteration does "
+                              "not converge within 50 iterations: the state is left as it was"))
+
+
+class _FloatPrinter(CPrinter):
+    """CPrinter in single precision: float literals (2.0f) and libm's float functions (sinf);
+    the layout, and so the operations and their order, are CPrinter's."""
+
+    FUNCTION_NAMES = {**CPrinter.FUNCTION_NAMES, **{f: f + "f" for f in FUNCTIONS},
+                      "Abs": "fabsf"}
+
+    def _print(self, expr, **kwargs):
+        if isinstance(expr, (sp.Rational, sp.Float)) or expr in (sp.pi, sp.E):
+            return super()._print(expr, **kwargs) + "f"
+        return super()._print(expr, **kwargs)
+
+    def _print_power(self, expr):
+        text = super()._print_power(expr)
+        if expr.exp.is_Rational and expr.exp.is_negative and text.startswith("1.0/"):
+            return "1.0f/" + text[4:]
+        return text
+
+    def _quotient(self, numer, denom):
+        text = super()._quotient(numer, denom)
+        return text if numer else "1.0f" + text[3:]
+
+    def _print_call(self, expr):
+        if type(expr).__name__ == "Heaviside" and len(expr.args) == 1:
+            return f"bgc_heaviside({self._print(expr.args[0])}, 0.5f)"
+        return super()._print_call(expr)
+
+    def _print_pow_call(self, base, exp):
+        return f"powf({base}, {exp})"
+
+
+_DOUBLE_DECL = re.compile(r"^const double ")
+
+
+def _typed(lines: list[str]) -> list[str]:
+    """The C emitter's temporaries (`const double wK = ...`) in the target's real type."""
+    return [_DOUBLE_DECL.sub("const bgc_real ", line) for line in lines]
+
+
+def _workspace(program: Program, chunk_ops: int):
+    """The work area (in the state: a Newton block's last solution is its next start): the
+    values that cross the chunks of a long model function (each chunk a function of its own),
+    then each algebraic block's storage, as the C emitter lays them out, from offset 0."""
+    layouts = {name: ir.layout(program.function(name).body, 0, chunk_ops)
+               for name in ("rhs", "outputs")}
+    top = max((len(lay.slot) for lay in layouts.values()), default=0)
+    areas, ints = [], 0
+    for bp in program.blocks:
+        m, nnz = bp.lu.m, bp.lu.nnz
+        save = top
+        lu = save + nnz
+        dense = lu + (0 if bp.lu.dense else nnz)
+        b = dense + m * m
+        areas.append(emit._BlockArea(save, lu, dense, b, b + m, b + 2 * m, b + 3 * m,
+                                     b + 4 * m, b + 5 * m, ints, ints + m))
+        top = b + 6 * m
+        ints += m + 1
+    return emit._Workspace(0, 0, 0, 0, 0, tuple(areas), top, ints, layouts)
+
+
+_FLOAT_LITERAL = re.compile(r"(?<![\w.\[])(\d+\.\d*(?:e[-+]?\d+)?|\d+e[-+]?\d+)(?![\w.])")
+
+
+def _single(lines: list[str]) -> list[str]:
+    """The C emitter's unrolled LU lines in float: float literals and fabsf."""
+    return [_FLOAT_LITERAL.sub(r"\1f", line).replace("fabs(", "fabsf(") for line in lines]
+
+
+# ---------------------------------------------------------------- refusals
+
+
+def _refuse(span, message: str):
+    raise ModelError([error(span, f"embedded target: {message}")])
+
+
+def check_supported(program: Program, graph, scene, solver: str, real: str = "double") -> None:
+    """ModelError, located, for what the embedded target does not run (yet): an adaptive
+    solver, events (when-blocks, relations of states or time, square waves, discrete
+    variables, switches), Newton blocks in float, inputs, lookup tables."""
+    if solver not in SOLVERS:
+        span = scene.solver[2] if scene is not None and scene.solver else None
+        family = "adaptive" if solvers.get(solver).adaptive else "not a fixed-step method"
+        _refuse(span, f"the solver '{solver}' is {family}; the target takes one fixed step "
+                      f"per call: give --solver rk4 or --solver euler, and --step H")
+    for when in graph.whens:
+        _refuse(when.span, "when-blocks are not supported yet (events at a fixed step are "
+                           "planned; simulate the model with `bgc simulate`)")
+    for kind, items in (("relations of states or time (conditions that switch the model: "
+                         "events)", graph.relations),
+                        ("square waves (time events)", graph.squares),
+                        ("discrete variables", graph.discretes)):
+        for item in items:
+            _refuse(item.span, f"{kind} are not supported yet")
+    newton = [bp for bp in program.blocks if bp.method == "newton"]
+    if newton and real == "float":
+        _refuse(None, f"algebraic block {newton[0].index} ({', '.join(newton[0].unknowns[:4])}) "
+                      f"is solved by Newton's method, which the target does not run in float "
+                      f"yet: use --real double")
+    if program.events is not None:
+        _refuse(None, "the model has events, which the target does not support yet")
+    for tab in program.tables:
+        if tab.rows > MAX_TABLE_ROWS:
+            _refuse(None, f"the table '{tab.name}' has {tab.rows} rows, more than the "
+                          f"{MAX_TABLE_ROWS} the target carries: resample it coarser")
+        _refuse(None, f"lookup tables ('{tab.name}') are not supported yet")
+    for info in program.inputs:
+        _refuse(getattr(info, "span", None),
+                f"inputs ('{info.name}') are not supported yet")
+
+
+# ---------------------------------------------------------------- emission
+
+
+def emit_embedded(program: Program, real: str = "double", solver: str = "rk4",
+                  step: float | None = None, chunk_ops: int = ir.CHUNK_OPS) -> dict[str, str]:
+    """{"NAME.h": the API, "NAME.c": the model and its step} for a program check_supported
+    accepted; step: H (default: the scene's step, else its output interval)."""
+    if real not in REALS:
+        raise ValueError(f"real must be one of {', '.join(REALS)}")
+    if solver not in SOLVERS:
+        raise ValueError(f"solver must be one of {', '.join(SOLVERS)}")
+    sc = program.scene
+    h = step if step is not None else (sc.step if sc.step is not None else sc.dt)
+    if not (h > 0.0 and h != float("inf")):
+        raise ValueError("the step must be positive and finite")
+    fields = emit.c_param_fields(tuple(p.name for p in program.params))
+    printer = (_FloatPrinter if real == "float" else CPrinter)(
+        len(program.states), fields, program.n_consts)
+    ws = _workspace(program, chunk_ops)
+    writer = emit._Writer(program, ws, printer, "c")
+    model = {}
+    for name in ("rhs", "outputs"):
+        f = emit._function_context(writer, name, "out")
+        f["chunks"] = [_typed(lines) for lines in f["chunks"]]
+        for e in f["evals"]:
+            for key in ("body", "residuals", "tangents", "jacobian"):
+                e[key] = _typed(e[key])
+        model[name] = f
+    blocks = emit._common_context(program, ws, emit.c_string_literal, True)["blocks"]
+    for b in blocks:
+        if b["unrolled"]:
+            for key in ("factor_lines", "lsolve_lines"):
+                lines = _typed(b["unrolled"][key])
+                b["unrolled"][key] = _single(lines) if real == "float" else lines
+    defaults = [printer.doprint(p.default) for p in program.params]
+    consts = _typed(emit._plain_lines(writer, "consts", "p->c"))
+    init = _typed(emit._plain_lines(writer, "init", "x0"))
+    code = "\n".join([*defaults, *consts, *init] + [line for f in model.values()
+                                                   for lines in f["chunks"] for line in lines]
+                     + [line for f in model.values() for e in f["evals"] for key in
+                        ("body", "residuals", "tangents", "jacobian") for line in e[key]])
+    if blocks:
+        code += "\nbgc_max("
+    tab = solvers.get(solver).tableau
+    lit = (lambda v: float_literal(v) + "f") if real == "float" else float_literal
+    ident = emit.identifier(program.name)
+    context = {
+        "ident": ident, "NAME": ident, "guard": f"BGC_EMBEDDED_{ident.upper()}_H",
+        "model_name": emit.c_string_literal(program.name),
+        "real": real, "solver": solver, "step": float_literal(h),
+        "t0": float_literal(sc.t0),
+        "n_states": len(program.states), "n_outputs": len(program.outputs),
+        "n_params": len(program.params), "n_consts": program.n_consts,
+        "n_inputs": len(program.inputs), "work": max(ws.doubles, 1), "ints": max(ws.ints, 1),
+        "blocks": blocks,
+        # Newton's tolerance: the scene's, at least float's resolution in float
+        "rtol": lit(max(sc.rtol, FLOAT_NEWTON_RTOL) if real == "float" else sc.rtol),
+        "atol": lit(max(sc.atol, FLOAT_NEWTON_ATOL) if real == "float" else sc.atol),
+        "eps": "FLT_EPSILON" if real == "float" else "DBL_EPSILON",
+        "fabs": "fabsf" if real == "float" else "fabs",
+        "sqrt": "sqrtf" if real == "float" else "sqrt",
+        "states": [emit.c_string_literal(s) for s in program.states],
+        "outputs": [emit.c_string_literal(o) for o in program.outputs],
+        "params": [emit.c_string_literal(p.name) for p in program.params],
+        "param_fields": fields,
+        "param_defaults": defaults, "consts": consts, "init": init,
+        "model": model,
+        "autonomous": not emit._reads_time(program.function("rhs")),
+        "stages": tab.stages,
+        "tab_c": ", ".join(lit(v) for v in tab.c),
+        "tab_a": ", ".join(lit(v) for v in emit._square(tab.a, tab.stages)) or lit(0.0),
+        "tab_b": ", ".join(lit(v) for v in tab.b),
+        "faults": FAULTS, "code": code,
+        "helpers": [name for name in HELPERS if f"{name}(" in code],
+        "flit": lit,
+    }
+    return {f"{ident}.h": emit._render("embedded/model.h.j2", context),
+            f"{ident}.c": emit._render("embedded/model.c.j2", context)}
+
+
+def memory(program: Program, real: str = "double", solver: str = "rk4",
+           chunk_ops: int = ir.CHUNK_OPS) -> dict:
+    """The bytes of the caller's structs (natural alignment) and of one step's local arrays
+    (the stages, their argument, the new state, the outputs, and the state's copy that the
+    step works on), for --report."""
+    size = 8 if real == "double" else 4
+    n, m = max(len(program.states), 1), max(len(program.outputs), 1)
+    ws = _workspace(program, chunk_ops)
+    state = 8 * ((8 + (n + max(ws.doubles, 1)) * size + 4 * max(ws.ints, 1) + 7) // 8)
+    stages = solvers.get(solver).tableau.stages
+    return {"state": state,
+            "params": (max(len(program.params), 1) + max(program.n_consts, 1)) * size,
+            "outputs": m * size, "inputs": max(len(program.inputs), 1) * size,
+            "step_locals": (stages * n + 2 * n + m) * size + state}

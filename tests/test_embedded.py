@@ -1,0 +1,327 @@
+"""The embedded C target (bgc compile --target embedded, docs/embedded.md): the generated code
+compiles warning-free, holds no heap, stdio or mutable global, and steps to the bytes of
+`bgc simulate` at the same fixed-step solver and step (double), within float's resolution
+(float), on the host and on a Cortex-M4 under QEMU; the motions themselves checked against
+the closed forms and SciPy computed here; refusals located."""
+from __future__ import annotations
+
+import math
+import shutil
+import subprocess
+from pathlib import Path
+
+import numpy as np
+import pytest
+from scipy.integrate import solve_ivp
+from scipy.linalg import expm
+
+from bgc import api
+from bgc.cli import main
+
+ROOT = Path(__file__).resolve().parent.parent
+HARNESS = ROOT / "tests" / "embedded_harness.c"
+M4 = ROOT / "tests" / "embedded_m4"
+FLAGS = ["-std=c99", "-Wall", "-Wextra", "-Wconversion", "-Werror", "-pedantic", "-O2"]
+H = 0.001
+STEPS = 1000
+MODELS = {"pendulum": ("pendulum.bg", "swing"), "dc_motor": ("dc_motor.bg", "run"),
+          "double_pendulum": ("double_pendulum.bg", None),  # a linear block (LU) per step
+          "diode": ("diode.bg", None)}  # a Newton block
+BUILDS = [("pendulum", "double"), ("pendulum", "float"), ("dc_motor", "double"),
+          ("dc_motor", "float"), ("double_pendulum", "double"), ("double_pendulum", "float"),
+          ("diode", "double")]
+FORBIDDEN = ("malloc", "calloc", "realloc", "free", "printf", "fprintf", "sprintf",
+             "snprintf", "puts", "fputs", "fwrite", "putchar", "fopen", "exit", "abort")
+
+needs_gcc = pytest.mark.skipif(shutil.which("gcc") is None, reason="no gcc on this machine")
+
+
+def _emit(model, real, tmp):
+    path, scene = MODELS[model]
+    files = api.compile(str(ROOT / "models" / path), "embedded", scene=scene,
+                        embedded={"real": real, "solver": "rk4", "step": H})
+    for name, text in files.items():
+        (tmp / name).write_text(text)
+    return files
+
+
+@pytest.fixture(scope="module")
+def built(tmp_path_factory):
+    """(model, real) -> the directory with NAME.h, NAME.c, NAME.o and the harness `run`
+    (one gcc compile of the model, one of the harness)."""
+    if shutil.which("gcc") is None:
+        pytest.skip("no gcc on this machine")
+    out = {}
+    for model, real in BUILDS:
+        tmp = tmp_path_factory.mktemp(f"{model}-{real}")
+        _emit(model, real, tmp)
+        subprocess.run(["gcc", *FLAGS, "-c", f"{model}.c", "-o", f"{model}.o"], cwd=tmp,
+                       check=True)
+        subprocess.run(["gcc", *FLAGS[:-1], "-O0", "-I.", f"-DBGC_MODEL={model}",
+                        f'-DBGC_HEADER="{model}.h"', str(HARNESS), f"{model}.o", "-lm",
+                        "-o", "run"], cwd=tmp, check=True)
+        out[model, real] = tmp
+    return out
+
+
+def _rows(directory, steps=STEPS):
+    text = subprocess.run([str(directory / "run"), str(steps)], capture_output=True,
+                          text=True, check=True).stdout
+    return text
+
+
+def _simulated(model, steps=STEPS):
+    """`bgc simulate --solver rk4 --step H --dt H` as CSV text (the numbers as the CSV
+    writes them, %.17g)."""
+    path, scene = MODELS[model]
+    t, Y, names = api.simulate(str(ROOT / "models" / path), scene, backend="vm", solver="rk4",
+                               step=H, dt=H, t_end=steps * H)
+    assert steps * H == t[-1]  # the last row is on the grid too
+    lines = [",".join(["t", *names])]
+    lines += [",".join("%.17g" % v for v in (tk, *row)) for tk, row in zip(t, Y)]
+    return "\n".join(lines) + "\n"
+
+
+def _table(text):
+    lines = text.strip().split("\n")
+    return lines[0].split(","), np.array([[float(v) for v in ln.split(",")] for ln in lines[1:]])
+
+
+@pytest.mark.parametrize("model", list(MODELS))
+def test_double_is_the_bytes_of_simulate(built, model):
+    """Also through algebraic blocks: the double pendulum's linear one, the diode's Newton
+    iterations (each starting from the last step's solution, as in simulate)."""
+    assert _rows(built[model, "double"]) == _simulated(model)
+
+
+@pytest.mark.parametrize("model", ["pendulum", "dc_motor", "double_pendulum"])
+def test_float_within_its_resolution(built, model):
+    names, single = _table(_rows(built[model, "float"]))
+    _, double = _table(_simulated(model))
+    assert single.shape == double.shape
+    assert np.array_equal(single[:, 0], double[:, 0])
+    for j, name in enumerate(names[1:], 1):
+        scale = np.max(np.abs(double[:, j]))
+        if name == "rod.residual":  # x^2 + y^2 - l^2: zero up to the rounding of l^2 = 1
+            assert np.max(np.abs(single[:, j])) < 1e-5
+            continue
+        assert np.max(np.abs(single[:, j] - double[:, j])) <= 1e-5 * scale, name
+
+
+def test_pendulum_swings_as_the_pendulum_equation(built):
+    """x = l sin(theta), y = l cos(theta) with theta'' = -(g/l) sin(theta), theta(0) = 0.5:
+    SciPy at tight tolerance; the Baumgarte-stabilised constraint holds at the fixed step."""
+    names, rows = _table(_rows(built["pendulum", "double"]))
+    g, l, th0 = 9.81, 1.0, 0.5
+    sol = solve_ivp(lambda t, z: [z[1], -g / l * math.sin(z[0])], (0, STEPS * H), [th0, 0.0],
+                    t_eval=rows[:, 0], rtol=1e-12, atol=1e-12)
+    assert np.max(np.abs(rows[:, 1] - l * np.sin(sol.y[0]))) < 1e-8
+    assert np.max(np.abs(rows[:, 2] - l * np.cos(sol.y[0]))) < 1e-8
+    assert np.max(np.abs(rows[:, 4])) < 1e-10
+
+
+def test_dc_motor_follows_its_linear_equations(built):
+    """La di/dt = V - Ra i - kt w, Jr dw/dt = kt i - br w - tau, angle' = w from rest: the
+    matrix exponential of the affine system."""
+    names, rows = _table(_rows(built["dc_motor", "double"]))
+    V, Ra, La, kt, Jr, br, tau = 12.0, 2.0, 0.5, 0.8, 0.05, 0.1, 0.5
+    A = np.array([[-Ra / La, -kt / La, 0, V / La], [kt / Jr, -br / Jr, 0, -tau / Jr],
+                  [0, 1, 0, 0], [0, 0, 0, 0]])
+    rows = rows[::50]
+    z = np.array([expm(A * t) @ [0, 0, 0, 1] for t in rows[:, 0]])
+    got = {n: rows[:, j] for j, n in enumerate(names)}
+    assert np.max(np.abs(got["ind.f"] - z[:, 0])) < 1e-9
+    assert np.max(np.abs(got["rotor.f"] - z[:, 1])) < 1e-9
+    assert np.max(np.abs(got["angle"] - z[:, 2])) < 1e-9
+
+
+def test_no_heap_no_stdio_no_mutable_global(built):
+    for (model, real), directory in built.items():
+        obj = str(directory / f"{model}.o")
+        undefined = subprocess.run(["nm", "-u", obj], capture_output=True, text=True,
+                                   check=True).stdout.split()
+        names = {u for u in undefined if u != "U"}
+        assert not names & set(FORBIDDEN), (model, real, names)
+        libm = {"sin", "cos", "sinf", "cosf", "sqrt", "sqrtf", "exp", "expf", "log", "logf"}
+        assert names <= libm, (model, real, names - libm)
+        sizes = subprocess.run(["size", "-A", obj], capture_output=True, text=True,
+                               check=True).stdout
+        for line in sizes.splitlines():
+            parts = line.split()
+            if parts and parts[0] in (".data", ".bss"):
+                assert parts[1] == "0", (model, real, line)
+
+
+def test_fault_leaves_the_state_unchanged(tmp_path):
+    """A step whose derivative is not finite returns NAME_FAULT_NONFINITE with the state and
+    the outputs as they were."""
+    if shutil.which("gcc") is None:
+        pytest.skip("no gcc on this machine")
+    _emit("dc_motor", "double", tmp_path)
+    (tmp_path / "main.c").write_text("""
+#include <math.h>
+#include <string.h>
+#include "dc_motor.h"
+int main(void)
+{
+    dc_motor_state s, before;
+    dc_motor_params p;
+    dc_motor_inputs u;
+    dc_motor_outputs y, ybefore;
+    memset(&u, 0, sizeof u);
+    memset(&y, 0, sizeof y);
+    dc_motor_params_default(&p);
+    dc_motor_init(&s, &p);
+    if (dc_motor_step(&s, &p, &u, &y) != dc_motor_OK)
+        return 1;
+    before = s;
+    ybefore = y;
+    p.p_V = NAN;
+    dc_motor_params_update(&p);
+    if (dc_motor_step(&s, &p, &u, &y) != dc_motor_FAULT_NONFINITE)
+        return 2;
+    if (memcmp(&s, &before, sizeof s) != 0 || memcmp(&y, &ybefore, sizeof y) != 0)
+        return 3;
+    return dc_motor_time(&s) == 0.001 ? 0 : 4;
+}
+""")
+    subprocess.run(["gcc", *FLAGS, "main.c", "dc_motor.c", "-lm", "-o", "fault"],
+                   cwd=tmp_path, check=True)
+    assert subprocess.run([str(tmp_path / "fault")]).returncode == 0
+
+
+@pytest.mark.skipif(shutil.which("clang") is None, reason="no clang on this machine")
+def test_clang_warning_free(built):
+    for (model, real), directory in built.items():
+        subprocess.run(["clang", *FLAGS, "-fsyntax-only", f"{model}.c"], cwd=directory,
+                       check=True)
+
+
+@pytest.mark.skipif(shutil.which("arm-none-eabi-gcc") is None
+                    or shutil.which("qemu-system-arm") is None,
+                    reason="no arm-none-eabi-gcc or qemu-system-arm (apt-get install "
+                           "gcc-arm-none-eabi libnewlib-arm-none-eabi qemu-system-arm)")
+@pytest.mark.parametrize("real", ["double", "float"])
+def test_cortex_m4_under_qemu_is_the_host(built, real):
+    """The pendulum cross-compiled for a Cortex-M4F (MPS2-AN386), run under QEMU with its
+    output by semihosting: the host's rows, byte for byte."""
+    directory = built["pendulum", real]
+    cpu = ["-mcpu=cortex-m4", "-mthumb", "-mfloat-abi=hard", "-mfpu=fpv4-sp-d16"]
+    subprocess.run(["arm-none-eabi-gcc", *cpu, *FLAGS, "-c", "pendulum.c", "-o", "m4.o"],
+                   cwd=directory, check=True)
+    subprocess.run(["arm-none-eabi-gcc", *cpu, "-O2", "-I.", "-DBGC_MODEL=pendulum",
+                    '-DBGC_HEADER="pendulum.h"', "-DBGC_STEPS=200", "--specs=rdimon.specs",
+                    "-nostartfiles", "-T", str(M4 / "mps2_an386.ld"), str(M4 / "startup.c"),
+                    str(HARNESS), "m4.o", "-lm", "-o", "m4.elf"], cwd=directory, check=True)
+    run = subprocess.run(["qemu-system-arm", "-M", "mps2-an386", "-nographic", "-monitor",
+                          "none", "-serial", "none", "-semihosting-config",
+                          "enable=on,target=native", "-kernel", "m4.elf"], cwd=directory,
+                         capture_output=True, text=True, timeout=120)
+    assert run.returncode == 0, run.stderr
+    assert run.stdout == _rows(directory, 200)
+
+
+# ---------------------------------------------------------------- the command and refusals
+
+
+def _compile(capsys, *args):
+    with pytest.raises(SystemExit) as exc:
+        main(["compile", *args], standalone_mode=True)
+    return exc.value.code, capsys.readouterr()
+
+
+def test_command_writes_both_files(tmp_path, capsys):
+    code, out = _compile(capsys, str(ROOT / "models" / "pendulum.bg"), "-s", "swing",
+                         "--target", "embedded", "--solver", "rk4", "--step", "0.001",
+                         "-o", str(tmp_path), "--report")
+    assert code == 0
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["pendulum.c", "pendulum.h"]
+    assert "#define pendulum_STEP 0.001" in (tmp_path / "pendulum.h").read_text()
+    assert out.err.startswith("memory (bytes): state=")
+    assert "stack (bytes" in out.err and "pendulum_step=" in out.err
+
+
+def test_long_functions_in_parts(tmp_path):
+    """A model function split into parts (each a C function, the values between them in the
+    work area) steps to the same bytes."""
+    if shutil.which("gcc") is None:
+        pytest.skip("no gcc on this machine")
+    from bgc.codegen import embedded
+    program = api.build(str(ROOT / "models" / "double_pendulum.bg")).program
+    files = embedded.emit_embedded(program, "double", "rk4", H, chunk_ops=40)
+    for name, text in files.items():
+        (tmp_path / name).write_text(text)
+    assert files["double_pendulum.c"].count("static int bgc_rhs_") > 2
+    subprocess.run(["gcc", *FLAGS, "-I.", "-DBGC_MODEL=double_pendulum",
+                    '-DBGC_HEADER="double_pendulum.h"', str(HARNESS), "double_pendulum.c",
+                    "-lm", "-o", "run"], cwd=tmp_path, check=True)
+    assert _rows(tmp_path, 300) == _simulated("double_pendulum", 300)
+
+
+@pytest.mark.parametrize("model", ["pendulum", "double_pendulum"])
+def test_report_is_what_the_compiler_lays_out(built, model):
+    """--report's struct sizes are sizeof of the structs (x86-64, natural alignment)."""
+    from bgc.codegen import embedded
+    directory = built[model, "double"]
+    path, scene = MODELS[model]
+    program = api.build(str(ROOT / "models" / path), scene).program
+    want = embedded.memory(program, "double", "rk4")
+    (directory / "sizes.c").write_text(f"""#include <stdio.h>
+#include "{model}.h"
+int main(void)
+{{
+    printf("%d %d %d %d\\n", (int)sizeof({model}_state), (int)sizeof({model}_params),
+           (int)sizeof({model}_outputs), (int)sizeof({model}_inputs));
+    return 0;
+}}
+""")
+    subprocess.run(["gcc", "-std=c99", "sizes.c", "-o", "sizes"], cwd=directory, check=True)
+    got = subprocess.run([str(directory / "sizes")], capture_output=True, text=True,
+                         check=True).stdout.split()
+    assert [int(v) for v in got] == [want[k] for k in ("state", "params", "outputs", "inputs")]
+
+
+def test_adaptive_solver_refused_at_the_scene(tmp_path, capsys):
+    code, out = _compile(capsys, str(ROOT / "models" / "pendulum.bg"), "-s", "swing",
+                         "--target", "embedded", "-o", str(tmp_path))
+    assert code == 1
+    assert "pendulum.bg:36:3: error: embedded target: the solver 'dopri5' is adaptive" in out.err
+    assert "--solver rk4" in out.err and "^~~" in out.err
+    assert list(tmp_path.iterdir()) == []
+    code, out = _compile(capsys, str(ROOT / "models" / "pendulum.bg"), "--target",
+                         "embedded", "--solver", "dopri5", "-o", str(tmp_path))
+    assert code == 2 and "not a fixed-step method" in out.err
+
+
+def test_when_block_refused_with_the_caret_on_it(tmp_path, capsys):
+    model = tmp_path / "ball.bg"
+    model.write_text("""model ball "a bouncing ball"
+parameter m = 1.0
+parameter g = 9.81
+mass : I(m)
+grav : Se(-m*g)
+j : 1
+grav -> j
+j -> mass
+signal h = integral(mass.f, init = 1.0)
+when h < 0 {
+  reinit mass.p = -0.8*mass.p
+}
+""")
+    code, out = _compile(capsys, str(model), "--target", "embedded", "--solver", "rk4",
+                         "-o", str(tmp_path))
+    assert code == 1, out.err
+    assert "ball.bg:10:1: error: embedded target: when-blocks are not supported yet" in out.err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["ball.bg"]
+
+
+def test_newton_in_float_refused(tmp_path, capsys):
+    code, out = _compile(capsys, str(ROOT / "models" / "diode.bg"), "--target", "embedded",
+                         "--solver", "rk4", "--real", "float", "-o", str(tmp_path))
+    assert code == 1 and "Newton's method" in out.err and "--real double" in out.err
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_options_of_the_embedded_target_only(capsys):
+    code, out = _compile(capsys, str(ROOT / "models" / "pendulum.bg"), "--real", "float")
+    assert code == 2 and "--real is an option of --target embedded" in out.err
