@@ -26,7 +26,7 @@ from ..ir.printers import CPrinter, float_literal
 from . import emit
 
 REALS = ("double", "float")
-HELPERS = ("bgc_sq", "bgc_min", "bgc_max", "bgc_sign", "bgc_heaviside")  # emitted where used
+HELPERS = ("bgc_opaque", "bgc_sq", "bgc_min", "bgc_max", "bgc_sign", "bgc_heaviside")  # emitted where used
 SOLVERS = ("euler", "rk4")  # the fixed-step methods the target steps with
 FLOAT_NEWTON_RTOL, FLOAT_NEWTON_ATOL = 1e-5, 1e-6  # float: Newton's tolerance at least these
 MAX_TABLE_ROWS = 1024  # the most rows of a lookup table the target would carry (flash)
