@@ -69,3 +69,15 @@ def test_every_shipped_unit_parses():
             si.parse(u)
             seen += 1
     assert seen > 0
+
+
+def test_unknown_unit_in_a_model_is_located():
+    from bgc.base.diagnostics import ModelError
+    from bgc.front.parser import parse
+    src = 'model ball\nparameter m  = 1.0 unit "kg*Kelvn"\nw : Se(-m)\nb : I(m)\nw -> b\n'
+    with pytest.raises(ModelError) as e:
+        parse(src)
+    d = e.value.diagnostics[0]
+    assert "unknown unit 'Kelvn'" in d.message
+    assert (d.span.line, d.span.col) == (2, src.splitlines()[1].index("Kelvn") + 1)
+    parse(src.replace("Kelvn", "K"))
