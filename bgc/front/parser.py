@@ -10,6 +10,7 @@ from lark.exceptions import (UnexpectedCharacters, UnexpectedEOF, UnexpectedInpu
                              UnexpectedToken)
 
 from . import ast
+from ..base import si
 from ..base.diagnostics import ModelError, Note, Origin, Span, fail
 from ..base.resources import (MAX_DIMENSION, MAX_NESTING, MAX_OPTION_CHARS, MAX_SOURCE_BYTES,
                               resource_dir)
@@ -160,7 +161,15 @@ class _ToAst:
         return ast.ParamDecl(_ident(c[0]), c[1], _doc(c[3]), _span(meta), c[2])
 
     def unit(self, meta, c):
-        return _doc(c[0])
+        text = _doc(c[0])
+        try:
+            si.parse(text)
+        except si.UnitError as e:
+            tok = c[0]
+            col = tok.column + 1 + e.offset if tok.line == tok.end_line else tok.column
+            width = e.length if tok.line == tok.end_line else len(str(tok))
+            fail(Span(tok.line, col, tok.line, col + width), str(e))
+        return text
 
     def decl_name(self, meta, c):
         return (_ident(c[0]), c[1])
