@@ -64,8 +64,8 @@ def test_every_shipped_unit_parses():
     seen = 0
     for path in texts:
         for u in re.findall(r'\bunit\s+"([^"]*)"', open(path, encoding="utf-8").read()):
-            if u in ("UNIT", "STRING", "...") and path.startswith("docs"):
-                continue   # the grammar's placeholders in the manual
+            if u in ("UNIT", "STRING", "...", "kg*Kelvn") and path.startswith("docs"):
+                continue   # the grammar's placeholders in the manual, and its error example
             si.parse(u)
             seen += 1
     assert seen > 0

@@ -67,6 +67,7 @@ SYMBOLS: dict[str, Unit] = {
     "deg": Unit(rad.dims, 3.141592653589793 / 180.0),
 }
 SYMBOLS["\u03a9"] = SYMBOLS["Ohm"]
+SYMBOLS["ohm"] = SYMBOLS["Ohm"]  # (as 20-sim and many a model spell it)
 
 PREFIXES: dict[str, float] = {
     "p": 1e-12, "n": 1e-9, "u": 1e-6, "\u00b5": 1e-6, "m": 1e-3, "c": 1e-2, "d": 1e-1,
