@@ -90,18 +90,10 @@ def test_generated_c_compiles_strictly(path, tmp_path):
         assert proc.returncode == 0, proc.stderr
 
 
-# The buck converter's coupled switch group: its symbolic path (--algebra symbolic) is
-# refused ("the generated equations are not finite": a mode's row divides by zero once
-# solved in closed form), not wrong; its equations are checked against matrix exponentials
-# in tests/test_switching.py.  To do with the rest of the switching work.
-SYMBOLIC_REFUSED = ("buck",)
-
-
 def _symbolic_path(path) -> bool:
     """Models whose blocks are small and linear: their equations have an explicit form
     (the others are checked against references in test_algebra.py)."""
-    return path.stem not in SYMBOLIC_REFUSED and \
-        all(b.linear and len(b.unknowns) <= 2 for b in bgc.build(path).reduced.blocks)
+    return all(b.linear and len(b.unknowns) <= 2 for b in bgc.build(path).reduced.blocks)
 
 
 @pytest.mark.parametrize("path", [p for p in MODEL_FILES if _symbolic_path(p)],
