@@ -47,9 +47,6 @@ RELATIONS = {"<": sp.StrictLessThan, "<=": sp.LessThan, ">": sp.StrictGreaterTha
 SOURCES = {"step": (1, 1), "ramp": (1, 1), "pulse": (2, 2), "square": (2, 3),
            "initial": (0, 0)}  # name -> (fewest, most) arguments
 INITIAL = sp.Symbol("initial#")  # initial(): true in the event iteration at the start only
-ALWAYS = sp.Symbol("always#")  # a when-block's condition: its actions apply at every pass of
-#                                the event iteration, their right sides reading the relations'
-#                                values after it (a group's jump, bgc.middle.groups)
 MAX_ITERATIONS = 100  # events at one instant a run allows, then stops as chattering (Zeno)
 
 
@@ -140,8 +137,6 @@ class Discrete:
     span: Span
     next: sp.Expr | None = None  # a mode (bgc.middle.contact): its value after each pass of the
     #                              event iteration, from the relations' values then
-    watches: tuple = ()  # relation symbols whose events a mode needs located (a coupled
-    #                      diode's, bgc.middle.groups), kept with it
 
 
 @dataclass(frozen=True)
@@ -271,7 +266,7 @@ def select(graph_events, used: set, states: dict, params: set) -> Selected:
                 used |= r.relation.free_symbols
         for d in discretes:  # and what a mode's next value reads
             if d.symbol in used and d.next is not None:
-                used |= d.next.free_symbols | d.init.free_symbols | set(d.watches)
+                used |= d.next.free_symbols | d.init.free_symbols
         more = [w for w in whens if w not in kept and any(
             a.symbol in states if a.kind == "reinit" else a.symbol in used for a in w.actions)]
         if not more:
@@ -495,21 +490,12 @@ def update_stores(sel: Selected, states) -> tuple[list, list]:
            for sym, cond in new.items()}
     fires = []
     for w in sel.whens:
-        if w.condition is ALWAYS:
-            fires.append(sp.true)
-            continue
         now = w.condition.xreplace({**new, INITIAL: FIRST})
         before = w.condition.xreplace({**old, INITIAL: sp.false})
         fires.append(sp.And(now, sp.Not(before)))
     values: dict = {}
     for w, fire in zip(sel.whens, fires):
         for a in w.actions:  # (at the start, "just before" is the values at t0)
-            if w.condition is ALWAYS:
-                expr = a.expr.xreplace(new)
-                if expr.free_symbols & first.keys():
-                    expr = sp.Piecewise((a.expr.xreplace(first), FIRST), (expr, True))
-                values.setdefault(a.symbol, []).append((expr, fire))
-                continue
             expr = sp.Piecewise((a.expr.xreplace(first), FIRST), (a.expr, True)) \
                 if a.expr.free_symbols & first.keys() else a.expr
             values.setdefault(a.symbol, []).append((expr, fire))

@@ -129,10 +129,8 @@ class _Assigner:
         self.assign(f, el.name if sets_f else self.g.bonds[f].other(el.name), origin, el.name)
 
 
-def _seed_fixed(a: _Assigner, late=frozenset()):
+def _seed_fixed(a: _Assigner):
     for el in a.g.elements:
-        if el.name in late:
-            continue
         if el.constraint is not None:
             # The multiplier is an unknown effort (0) / flow (1) imposed on every bond.
             for i in a.incident[el.name]:
@@ -158,13 +156,7 @@ def assign_causality(scenario: Scenario) -> CausalGraph:
     that leaves storages in derivative causality (a switch that closes a loop of capacitors, a
     diode across a capacitor), it is tried as the dual junction that imposes its flow, and kept
     so where that leaves fewer (one element at a time, in declaration order)."""
-    try:
-        causal = _assign(scenario.graph, scenario.settings)
-    except ModelError as err:
-        late = _late(scenario.graph, scenario.settings)
-        if late is None:
-            raise err from None
-        return late
+    causal = _assign(scenario.graph, scenario.settings)
     if not causal.derivative:
         return causal
     for el in scenario.graph.elements:
@@ -182,54 +174,15 @@ def assign_causality(scenario: Scenario) -> CausalGraph:
     return causal
 
 
-def _switched(graph: Graph) -> list[Element]:
-    return [el for el in graph.elements
-            if el.constraint is not None and el.constraint.kind in DUAL_SWITCHED]
-
-
-def _late(graph: Graph, settings: Settings) -> CausalGraph | None:
-    """Where giving every switch and diode its preferred causality first conflicts (a switch
-    and its freewheeling diode on one node: both would impose its effort), the switched
-    one-ports take the causality that the sources and the storages in integral causality
-    leave them, each in turn (in declaration order; one still free imposes its effort), as a
-    coupled group whose modes are chosen together (bgc.middle.groups).  None: no better."""
-    switched = _switched(graph)
-    if len(switched) < 2:
-        return None
-    a = _Assigner(graph, Collector())
-    names = frozenset(el.name for el in switched)
-    _seed_fixed(a, names)
-    _seed_storage(a, graph)
-    kinds = {}
-    for el in switched:
-        (i,) = a.incident[el.name]
-        if a.by[i] is None:
-            a.choose(i, el.name, el.name)
-        kinds[el.name] = "0" if a.by[i] == el.name else "1"
-    if a.failed:
-        return None
-    dual = replace(graph, elements=tuple(replace(e, kind=kinds[e.name]) if e.name in kinds
-                                         else e for e in graph.elements))
-    try:
-        return _assign(dual, settings)
-    except ModelError:
-        return None
-
-
-def _seed_storage(a: _Assigner, graph: Graph) -> list[Element]:
+def _assign(graph: Graph, settings: Settings) -> CausalGraph:
+    diags = Collector()
+    a = _Assigner(graph, diags)
+    _seed_fixed(a)
     storage = [el for el in graph.elements if not el.is_junction and el.spec.role == "storage"]
     for el in storage:
         (i,) = a.incident[el.name]
         if a.by[i] is None:
             a.choose(i, _preferred_setter(a, el, i), el.name)
-    return storage
-
-
-def _assign(graph: Graph, settings: Settings) -> CausalGraph:
-    diags = Collector()
-    a = _Assigner(graph, diags)
-    _seed_fixed(a)
-    storage = _seed_storage(a, graph)
     arbitrary = []
     for el in graph.elements:
         if not el.is_junction and el.spec.role == "resistor":

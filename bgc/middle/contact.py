@@ -88,11 +88,10 @@ def holds(c) -> sp.Basic:
     return sp.Eq(active(c), 0) if c.dual else sp.Ne(active(c), 0)
 
 
-def with_contact_events(sys, infos, weigh, defs, leaf, cycle, coupled=(), group_events=None):
+def with_contact_events(sys, infos, weigh, defs, leaf, cycle):
     """The equation system with the events of its unilateral junctions and switched one-ports
     added; leaf, cycle: bgc.middle.reduce's leaf forms (an expression written in the states) and
-    the exception they raise on an algebraic loop; coupled: the groups of switched one-ports
-    whose modes are chosen together, their events made by group_events (bgc.middle.groups)."""
+    the exception they raise on an algebraic loop."""
     relations, squares, discretes, whens = (list(x) for x in sys.es.events)
     cdefs = {c.junction: c for c in sys.es.constraints}
     states = {st.symbol: st for st in sys.es.states}
@@ -108,14 +107,7 @@ def with_contact_events(sys, infos, weigh, defs, leaf, cycle, coupled=(), group_
             if i.kind == "unilateral"}
     held = {j: [] for j in gaps}  # the friction's stop, at each contact's release
     moved = {j: set() for j in gaps}
-    grouped = {i.junction for g in coupled for i in g}
-    if coupled:
-        rates = _rates(sys, leaf, defs, expandable, memo, cycle, coupled[0][0])
-        names = {s: st.name for s, st in states.items()}
-        for group in coupled:
-            relations, discretes, whens = group_events(
-                group, cdefs, rates, set(rates), names, relations, discretes, whens)
-    for info in (i for i in infos if i.kind in SWITCHED and i.junction not in grouped):
+    for info in (i for i in infos if i.kind in SWITCHED):
         c = cdefs[info.junction]
         if c.dual:  # (the mode at the start: its d[k] are set by the start's first pass)
             start = info.balance > 0 if info.kind == "diode" else c.gains[0].xreplace(
@@ -218,16 +210,6 @@ def with_contact_events(sys, infos, weigh, defs, leaf, cycle, coupled=(), group_
                         *held[J]), c.span)]
     return replace(sys.es, events=(tuple(relations), tuple(squares), tuple(discretes),
                                    tuple(whens)))
-
-
-def _rates(sys, leaf, defs, expandable, memo, cycle, info) -> dict:
-    """Every state's rate written in the states and the multipliers."""
-    try:
-        return {st.symbol: leaf(sys.eqs[der(st.symbol)].expr, defs, expandable, memo)
-                for st in sys.es.states}
-    except (cycle, KeyError):
-        fail(info.name_span, f"'{info.junction}': the rates of the storages it acts on could "
-                             "not be written in the states (an algebraic loop); not supported")
 
 
 def _impulse(c, v, K_v, target, bilateral, cdefs, weigh, order, metric, together=()):

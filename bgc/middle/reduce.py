@@ -40,7 +40,7 @@ from ..symbolic.algebra import (antiderivative, cancel_bounded, expand_bounded, 
                                 is_symmetric, is_zero, lu_solution_nodes, solve_for)
 from ..base.diagnostics import Collector, ModelError, Note, Span, fail, warning
 from ..symbolic.differentiate import directional, partial
-from . import contact, groups
+from . import contact
 from ..front import events
 from .system import (TIME, ConstraintDef, Equation, EquationSystem, OutputDef, ParameterDef,
                      StateVar, der)
@@ -971,13 +971,9 @@ def reduce(es: EquationSystem, project_initial: bool = False, algebra: str = "au
     diags = Collector()
     infos = _constraints(sys, diags)
     diags.raise_if_errors()
-    cdefs = {c.junction: c for c in sys.es.constraints}
-    coupled = groups.find(infos, cdefs)
-    for group in coupled:
-        groups.rewrite_laws(sys, group, cdefs, {st.symbol: st for st in sys.es.states})
     if any(c.kind == "unilateral" or c.kind in contact.SWITCHED for c in infos):
         es = contact.with_contact_events(sys, infos, _Weights(sys), _explicit_defs(sys), _leaf,
-                                         _Cycle, coupled, groups.events)
+                                         _Cycle)
         sys.es = es
         sys.params = sys.parameters | events.leaves(es.events)
     try:
