@@ -710,6 +710,16 @@ def _children() -> list[int]:
     return alive
 
 
+def _kill(pids) -> None:
+    """Kill and reap the processes a command left running."""
+    for pid in pids:
+        try:
+            os.kill(pid, signal.SIGKILL)
+            os.waitpid(pid, 0)
+        except (OSError, ChildProcessError):
+            pass
+
+
 def _worker_main():
     """The worker: reads one case a line (JSON, the bytes in base64), answers one line.  A
     request with "simulate": BACKEND runs `bgc simulate` in process (simulate_case), then
@@ -730,20 +740,10 @@ def _worker_main():
             left = _children()
             if left and not res["failure"]:
                 res["failure"] = f"simulate {req['simulate']}: a process outlived the command"
-            for pid in left:
-                try:
-                    os.kill(pid, signal.SIGKILL)
-                    os.waitpid(pid, 0)
-                except (OSError, ChildProcessError):
-                    pass
+            _kill(left)
         elif req.get("command"):
             res = command_case(data, req["command"])
-            for pid in _children():
-                try:
-                    os.kill(pid, signal.SIGKILL)
-                    os.waitpid(pid, 0)
-                except (OSError, ChildProcessError):
-                    pass
+            _kill(_children())
         else:
             res = check_case(data, tuple(req.get("args", ("check", "m.bg"))))
         out.write(json.dumps(res) + "\n")

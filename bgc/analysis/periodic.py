@@ -211,7 +211,7 @@ def _values(reduced, given: dict) -> dict:
 
 def _number_of(e, env) -> float:
     try:
-        return float(sp.sympify(e).xreplace(env))
+        return float(e.xreplace(env) if isinstance(e, sp.Basic) else e)
     except (TypeError, ValueError):
         return math.nan
 

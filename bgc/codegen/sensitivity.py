@@ -76,6 +76,11 @@ def check(params, names, events=None, states=(), defaults=None, steps=()) -> tup
     return params
 
 
+def _free(e) -> set:
+    """e's free symbols (a plain number has none)."""
+    return e.free_symbols if isinstance(e, sp.Basic) else set()
+
+
 def _moved(params, defaults: dict) -> set:
     """The symbols of the chosen parameters and of every parameter defined from them."""
     moved = {var(p) for p in params}
@@ -116,10 +121,10 @@ def jumps(sel, params, states, defaults: dict, steps=()) -> str | None:
             return refuse(r.text, "the model has the event" if r.indicator.free_symbols
                           & changing else "the model has the state event")
     for r, at, _ in sel.time:
-        if sp.sympify(at).free_symbols & reads:
+        if _free(at) & reads:
             return refuse(r.text, "the time of the event")
     for s in sel.squares:
-        if any(sp.sympify(getattr(s, f, 0)).free_symbols & reads
+        if any(_free(getattr(s, f, 0)) & reads
                for f in ("period", "duty", "t0")):
             return refuse(s.text, "the time of the event")
     for w in sel.whens:
