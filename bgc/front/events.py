@@ -40,12 +40,14 @@ from sympy.logic.boolalg import BooleanAtom, BooleanFunction
 from ..base.diagnostics import Span
 from ..symbolic.differentiate import partial
 from .graph import TIME, written
+from .kinds import TIME_SOURCES
 from ..ir import InputNext, InputPart, PeriodicNext, SquareNext, SquareWave, TableNext, TablePiece
 
 RELATIONS = {"<": sp.StrictLessThan, "<=": sp.LessThan, ">": sp.StrictGreaterThan,
              ">=": sp.GreaterThan, "==": sp.Eq, "!=": sp.Ne}
 SOURCES = {"step": (1, 1), "ramp": (1, 1), "pulse": (2, 2), "square": (2, 3),
            "initial": (0, 0)}  # name -> (fewest, most) arguments
+assert tuple(SOURCES) == TIME_SOURCES
 INITIAL = sp.Symbol("initial#")  # initial(): true in the event iteration at the start only
 MAX_ITERATIONS = 100  # events at one instant a run allows, then stops as chattering (Zeno)
 

@@ -12,8 +12,8 @@ number, every `if` decided.
   then its file's constants); `p1.res.e` walks down the instances.
 - Parameters.  A component's parameter becomes a parameter of the model under the instance's
   path (`p1.r`), its value the argument (an expression of the instantiating scope) or the
-  default; an argument that reads a signal, an element variable or t makes it a signal
-  instead (it then modulates what uses it).
+  default; an argument that reads a signal, an element variable, t or a time source makes it
+  a signal instead (it then modulates what uses it).
 - Ports.  Inside, one bond joins a port to an inner node; outside, one bond joins the
   instance's port to an outer node; the two make one bond (checked: both present, the same
   way, declared domains equal).
@@ -34,7 +34,7 @@ from pathlib import Path
 from . import ast
 from ..base.diagnostics import Collector, ModelError, Note, Origin, Span, did_you_mean, error, fail
 from .graph import Instance, Port
-from .kinds import KINDS, SWITCHED
+from .kinds import KINDS, SWITCHED, TIME_SOURCES
 from ..base.resources import MAX_DIMENSION, MAX_GENERATED, MAX_INSTANCE_DEPTH, read_bounded
 
 LIBRARY = Path(__file__).resolve().parent.parent / "library"  # bgc's standard library
@@ -814,6 +814,8 @@ class _Rewriter:
                          for a in node.args)
             return ast.Call(node.func, args, sp(node.span))
         if isinstance(node, ast.Call):
+            if node.func in TIME_SOURCES:  # (square(1/f, d): it varies in time, as t does)
+                self.dynamic = True
             return ast.Call(node.func, tuple(self.expr(a, own) for a in node.args), sp(node.span))
         if isinstance(node, ast.BinOp):  # (a chain `a + b + c ...` by a loop, not as deep)
             spine = []

@@ -36,6 +36,9 @@ KINDS = {k.name: k for k in (
 # Switched one-ports (docs/hybrid.md), each the number of its arguments: built by resolve as
 # constraint junctions in one of their modes, not by the law of a Kind.
 SWITCHED = {"D": 0, "Sw": 1, "Fr": 2}
+# The time sources (bgc.front.events.SOURCES: their arguments): an expression that calls one
+# varies in time, as one that reads t does.
+TIME_SOURCES = ("step", "ramp", "pulse", "square", "initial")
 
 
 def known_kinds() -> str:

@@ -129,8 +129,10 @@ class _Assigner:
         self.assign(f, el.name if sets_f else self.g.bonds[f].other(el.name), origin, el.name)
 
 
-def _seed_fixed(a: _Assigner):
+def _seed_fixed(a: _Assigner, defer=frozenset()):
     for el in a.g.elements:
+        if el.name in defer:
+            continue
         if el.constraint is not None:
             # The multiplier is an unknown effort (0) / flow (1) imposed on every bond.
             for i in a.incident[el.name]:
@@ -150,17 +152,26 @@ def _preferred_setter(a: _Assigner, el: Element, i: int) -> str:
 DUAL_SWITCHED = ("switch", "diode")  # switched one-ports that may take either causality
 
 
+def _dual_switched(el: Element) -> bool:
+    return el.constraint is not None and el.constraint.kind in DUAL_SWITCHED and el.kind == "0"
+
+
 def assign_causality(scenario: Scenario) -> CausalGraph:
     """The causal strokes.  A switch or a diode (bgc.middle.contact) is first the constraint
-    junction that imposes its effort (the multiplier; its flow the constrained balance); where
-    that leaves storages in derivative causality (a switch that closes a loop of capacitors, a
-    diode across a capacitor), it is tried as the dual junction that imposes its flow, and kept
-    so where that leaves fewer (one element at a time, in declaration order)."""
-    causal = _assign(scenario.graph, scenario.settings)
+    junction that imposes its effort (the multiplier; its flow the constrained balance).  Where
+    two of them, or one and a source, would impose one junction's effort (a switch and its
+    freewheeling diode), their strokes are chosen after the storages' instead (_switched_strokes).
+    Where the first form leaves storages in derivative causality (a switch that closes a loop of
+    capacitors, a diode across a capacitor), each is tried as the dual junction that imposes its
+    flow, and kept so where that leaves fewer (one element at a time, in declaration order)."""
+    try:
+        causal = _assign(scenario.graph, scenario.settings)
+    except ModelError as err:
+        causal = _switched_strokes(scenario, err)
     if not causal.derivative:
         return causal
     for el in scenario.graph.elements:
-        if el.constraint is None or el.constraint.kind not in DUAL_SWITCHED or el.kind != "0":
+        if not _dual_switched(el):
             continue
         graph = causal.graph
         dual = replace(graph, elements=tuple(replace(e, kind="1") if e.name == el.name else e
@@ -174,35 +185,73 @@ def assign_causality(scenario: Scenario) -> CausalGraph:
     return causal
 
 
-def _assign(graph: Graph, settings: Settings) -> CausalGraph:
-    diags = Collector()
+def _switched_strokes(scenario: Scenario, err: ModelError) -> CausalGraph:
+    """A causal conflict where switched one-ports meet (coupled switched elements, docs/hybrid.md
+    section 13): the procedure again with their strokes left free until the storages' preferred
+    ones are propagated, each then imposing its effort where the bond is still free and its
+    flow (the dual junction) where the rest of the model already imposes its effort.  So a
+    switch in series with a voltage source and a freewheeling diode on the node after it
+    become one switch that imposes its current and one diode that imposes the node's voltage.
+    The conflict stands (err) where that does not resolve it."""
+    graph = scenario.graph
+    switched = [el for el in graph.elements if _dual_switched(el)]
+    if not switched:
+        raise err
+    a = _strokes(graph, Collector(), frozenset(el.name for el in switched))
+    if a.failed or any(len(a.incident[el.name]) != 1 for el in switched):
+        raise err
+    dual = {el.name for el in switched if a.by[a.incident[el.name][0]] != el.name}
+    graph = replace(graph, elements=tuple(replace(e, kind="1") if e.name in dual else e
+                                          for e in graph.elements))
+    try:
+        return _assign(graph, scenario.settings)
+    except ModelError:
+        raise err from None
+
+
+def _strokes(graph: Graph, diags: Collector, defer=frozenset()) -> _Assigner:
+    """The procedure's choices, in its order: sources and constraint junctions (but those in
+    defer), storages in preferred causality, the deferred one-ports in their preferred form
+    (imposing their effort) where still free, resistors, then any bond still free."""
     a = _Assigner(graph, diags)
-    _seed_fixed(a)
+    _seed_fixed(a, defer)
     storage = [el for el in graph.elements if not el.is_junction and el.spec.role == "storage"]
     for el in storage:
         (i,) = a.incident[el.name]
         if a.by[i] is None:
             a.choose(i, _preferred_setter(a, el, i), el.name)
-    arbitrary = []
+    for el in graph.elements:
+        if el.name in defer:
+            (i,) = a.incident[el.name]
+            if a.by[i] is None:
+                a.choose(i, el.name, el.name)
+    a.arbitrary = []
     for el in graph.elements:
         if not el.is_junction and el.spec.role == "resistor":
             (i,) = a.incident[el.name]
             if a.by[i] is None:
-                arbitrary.append(el.name)
+                a.arbitrary.append(el.name)
                 # resistance form e = r f unless the law is written f = EXPR(e)
                 sets_effort = not (el.law is not None and el.law[0] == "f")
                 a.choose(i, el.name if sets_effort else graph.bonds[i].other(el.name), el.name)
     for i, b in enumerate(graph.bonds):
         if a.by[i] is None:
-            arbitrary.append(b.label)
+            a.arbitrary.append(b.label)
             a.choose(i, b.src, b.src)
+    return a
+
+
+def _assign(graph: Graph, settings: Settings) -> CausalGraph:
+    diags = Collector()
+    a = _strokes(graph, diags)
     _check_junctions(a, diags)
     _check_multibonds(a, diags)
     diags.raise_if_errors()
+    storage = [el for el in graph.elements if not el.is_junction and el.spec.role == "storage"]
     derivative = tuple(el.name for el in storage
                        if a.by[a.incident[el.name][0]] != _preferred_setter(
                            a, el, a.incident[el.name][0]))
-    return CausalGraph(graph, settings, tuple(a.by), derivative, tuple(arbitrary))
+    return CausalGraph(graph, settings, tuple(a.by), derivative, tuple(a.arbitrary))
 
 
 def _check_multibonds(a: _Assigner, diags: Collector):

@@ -34,7 +34,8 @@ from ..base.diagnostics import fail
 from ..symbolic.differentiate import partial
 from ..front.events import INITIAL, TOLERANCE, Action, Discrete, Relation, When
 from ..front.graph import TIME, var
-from .system import der
+from . import groups
+from .system import Equation, der
 
 SWITCHED = ("diode", "friction", "switch")  # one-ports that are constraint junctions in one of their modes
 MAX_IMPACT_ROWS = 3  # rows that take part in one impact, solved symbolically
@@ -94,6 +95,7 @@ def with_contact_events(sys, infos, weigh, defs, leaf, cycle):
     the exception they raise on an algebraic loop."""
     relations, squares, discretes, whens = (list(x) for x in sys.es.events)
     cdefs = {c.junction: c for c in sys.es.constraints}
+    multipliers = {c.multiplier for c in sys.es.constraints}
     states = {st.symbol: st for st in sys.es.states}
     order = {st.symbol: k for k, st in enumerate(sys.es.states)}
     bilateral = [i for i in infos if i.kind in ("holonomic", "nonholonomic")]
@@ -107,13 +109,21 @@ def with_contact_events(sys, infos, weigh, defs, leaf, cycle):
             if i.kind == "unilateral"}
     held = {j: [] for j in gaps}  # the friction's stop, at each contact's release
     moved = {j: set() for j in gaps}
-    for info in (i for i in infos if i.kind in SWITCHED):
+    grouped = set()
+    for group in groups.find(infos, cdefs):
+        relations, discretes, whens = _coupled(sys, group, cdefs, states, leaf, defs,
+                                               expandable, memo, cycle, weigh, bilateral,
+                                               order, metric, relations, discretes, whens)
+        grouped |= {i.junction for i in group}
+    for info in (i for i in infos if i.kind in SWITCHED and i.junction not in grouped):
         c = cdefs[info.junction]
         if c.dual:  # (the mode at the start: its d[k] are set by the start's first pass)
             start = info.balance > 0 if info.kind == "diode" else c.gains[0].xreplace(
                 {r.symbol: r.relation for r in relations})
-            relations, whens = _closing(sys, c, info, states, order, leaf, defs, expandable,
-                                        memo, cycle, relations, whens, start)
+            if not info.balance.free_symbols & multipliers:  # (else coupled: no jump, the
+                #                  block of the multipliers holds its effort at zero)
+                relations, whens = _closing(sys, c, info, states, order, leaf, defs,
+                                            expandable, memo, cycle, relations, whens, start)
             switch = {"diode": _dual_diode, "switch": _switch}[info.kind]
             relations, discretes, whens = switch(c, info, {}, states, relations, discretes,
                                                  whens)
@@ -210,6 +220,39 @@ def with_contact_events(sys, infos, weigh, defs, leaf, cycle):
                         *held[J]), c.span)]
     return replace(sys.es, events=(tuple(relations), tuple(squares), tuple(discretes),
                                    tuple(whens)))
+
+
+def _coupled(sys, group, cdefs, states, leaf, defs, expandable, memo, cycle, weigh, bilateral,
+             order, metric, relations, discretes, whens):
+    """A group of coupled switches and diodes (bgc.middle.groups): their laws made the group's,
+    the switches' modes from their conditions, the diodes' chosen together."""
+    def law(m, expr):
+        return Equation(m.lam, expr, False, m.c.junction, m.c.span)
+
+    def leaf_rate(s):
+        try:
+            return leaf(sys.eqs[der(s)].expr, defs, expandable, memo)
+        except (cycle, KeyError):
+            fail(cdefs[group[0].junction].name_span,
+                 "the rates of the storages the coupled switched elements act on could not be "
+                 "written in the states (an algebraic loop); not supported yet")
+
+    rates = groups.rate_of(states.keys(), leaf_rate)
+    members, every = groups.rewrite(sys, group, cdefs, active, holds, _width,
+                                    lambda e: _rate(e, states), law, rates)
+    lams = [m.lam for m in members]
+    stops = {}
+    for m in members:
+        K = dict(weigh(m.c.balance))
+        if K and not m.dual:
+            free = m.B.xreplace({x: sp.Integer(0) for x in lams})
+            stops[m.c.junction] = _impulse(m.c, free, K, sp.Integer(0), bilateral, cdefs,
+                                           weigh, order, metric)[0]
+    for m in members:
+        if not m.diode:
+            relations, discretes, whens = _switch(m.c, m.info, {}, states, relations,
+                                                  discretes, whens)
+    return groups.events(sys, members, every, stops, relations, discretes, whens)
 
 
 def _impulse(c, v, K_v, target, bilateral, cdefs, weigh, order, metric, together=()):

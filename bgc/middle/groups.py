@@ -1,0 +1,315 @@
+"""Coupled switched one-ports (docs/hybrid.md, section 13): modes chosen together.
+
+Ideal switches and diodes whose flow balances read one another's multipliers (a switch and
+its freewheeling diode: the node between them has its voltage from the one and its current
+through the other) are one system.  Each keeps its multiplier and its mode (`S.open`,
+`D.blocking`), and the block of the multipliers is solved as one, but:
+
+  the rows  an element whose mode holds its constraint (open: f = 0; blocking: f = 0, or as
+            the dual junction, conducting: e = 0) contributes its balance B = 0 where B reads
+            a multiplier of the group that is held too (an algebraic row), and dB/dt = 0 where
+            it reads none (a state row: the storages' flow is held, as an inductor's current
+            by a blocking diode with the switch open); an element whose mode frees it has its
+            multiplier zero.  So every combination of modes is one linear block, and the
+            combinations no run can reach (a closed switch shorting the source through a
+            conducting diode) are singular ones: never chosen, never an error.
+  the modes at t0 and after each pass of the event iteration, the switches take theirs from
+            their conditions, and the diodes' follow from the complementarity conditions of
+            all of them together, with the storages' states held: the combinations are
+            enumerated (at most 2^MAX_COUPLED, each block solved in closed form here), and
+            the first is taken in which every conducting diode's flow is at least -width/2
+            and every blocking diode's effort at most 0, and whose state rows hold; where none
+            does without a jump of the states (a diode's current that has reversed), the first
+            whose signs hold with its state rows then made to hold.  The current modes come
+            first while no diode's relation has crossed (a relation just crossed is taken as
+            crossed: the mode it leaves is not taken again at that instant).
+  the jumps entering a combination with a state row (the switch open and the diode blocking),
+            the storages take the state that stops its flow (the impulse of section 7 with a
+            zero target), at the pass after the modes changed, where the selection keeps them.
+"""
+from __future__ import annotations
+
+from itertools import product
+
+import sympy as sp
+from sympy.solvers.solveset import NonlinearError
+
+from ..base.diagnostics import fail
+from ..front.events import INITIAL, Action, Discrete, Relation, When
+from ..front.graph import TIME
+from ..symbolic.differentiate import partial
+
+MAX_COUPLED = 6  # switched one-ports in one group: 2^6 = 64 combinations of their modes
+KINDS = ("diode", "switch")
+
+
+def find(infos, cdefs) -> list[list]:
+    """The groups of coupled switched one-ports (two or more each), in declaration order: D and
+    Sw elements joined where one's balance reads another's multiplier."""
+    members = [i for i in infos if i.kind in KINDS]
+    by_multiplier = {cdefs[i.junction].multiplier: i.junction for i in members}
+    parent = {i.junction: i.junction for i in members}
+
+    def root(j):
+        while parent[j] != j:
+            parent[j] = parent[parent[j]]
+            j = parent[j]
+        return j
+
+    for i in members:
+        for m in sorted(i.balance.free_symbols & by_multiplier.keys(), key=lambda s: s.name):
+            a, b = root(i.junction), root(by_multiplier[m])
+            if a != b:
+                parent[max(a, b, key=order(members).get)] = min(a, b, key=order(members).get)
+    groups: dict = {}
+    for i in members:
+        groups.setdefault(root(i.junction), []).append(i)
+    return [g for g in groups.values() if len(g) > 1]
+
+
+def order(members) -> dict:
+    return {i.junction: k for k, i in enumerate(members)}
+
+
+class _Member:
+    """One element of a group: its multiplier, its mode, its balance in the states."""
+
+    def __init__(self, info, c, active, holds, width):
+        self.info, self.c = info, c
+        self.diode = info.kind == "diode"
+        self.dual = c.dual
+        self.lam = c.multiplier
+        self.mode = active(c)
+        self.holds = holds(c)
+        self.B = info.balance
+        self.width = width
+
+    def held(self, bit: int) -> bool:
+        """Whether mode value `bit` (1: open or blocking) holds the constraint."""
+        return bit == 0 if self.dual else bit == 1
+
+    def effort(self, lam: dict, B):
+        return B if self.dual else lam[self.lam]
+
+    def flow(self, lam: dict, B):
+        return lam[self.lam] if self.dual else B
+
+
+def rewrite(sys, group, cdefs, active, holds, width, rate, law_equation, rates):
+    """The group's members and the combinations of their modes (bgc.middle.groups._Combination),
+    with each multiplier's law made the group's (the module's rows).  rate(e): e's time
+    derivative through der() of its states; rates(e): the same written in the states and the
+    multipliers.  In a combination whose block is singular (never chosen) every multiplier is
+    zero, so that the modes the event iteration starts from are no error; where no combination
+    is consistent the diodes' modes are 2, whose rows are singular: the run stops there with
+    the block's elements named."""
+    """The group's members, with each multiplier's law made the group's (the module's rows)."""
+    members = [_Member(i, cdefs[i.junction], active, holds, width) for i in group]
+    if len(members) > MAX_COUPLED:
+        fail(members[0].c.name_span, f"{len(members)} switched elements are coupled here "
+                                     f"({', '.join(repr(m.c.junction) for m in members)}); "
+                                     f"their modes are chosen together for up to {MAX_COUPLED}")
+    lams = {m.lam: m for m in members}
+    every = {c.multiplier for c in cdefs.values()}
+    for m in members:
+        other = sorted((m.B.free_symbols & every) - lams.keys(), key=lambda s: s.name)
+        if other:
+            fail(m.c.name_span, f"'{m.c.junction}' is coupled with the constraint of "
+                                f"'{other[0].name.removesuffix('.lambda')}', which is not a "
+                                "switch or a diode: not supported yet")
+    every = [_Combination(bits, members, rates)
+             for bits in product((0, 1), repeat=len(members))]
+    singular = sp.Add(*[_in(k, members) for k in every if not k.ok])
+    lost = sp.Or(*[sp.Eq(m.mode, 2) for m in members if m.diode])
+    for m in members:
+        read = [lams[s] for s in sorted(m.B.free_symbols & lams.keys(), key=lambda s: s.name)]
+        free = m.B.xreplace({s: sp.Integer(0) for s in lams})
+        law = sp.Piecewise((sp.Integer(0), lost), (m.lam, singular > sp.Rational(1, 2)),
+                           (m.lam, sp.Not(m.holds)),
+                           (m.B, sp.Or(*[r.holds for r in read])),
+                           (rate(free), True))
+        sys.eqs[m.lam] = law_equation(m, law)  # (in its place in the equations' order)
+    return members, every
+
+
+def _in(k, members) -> sp.Expr:
+    """1 where the members' modes are k's, else 0 (modes 0 and 1: a product of them)."""
+    out = sp.Integer(1)
+    for m, b in zip(members, k.bits):
+        out *= m.mode if b == 1 else 1 - m.mode
+    return out
+
+
+class _Combination:
+    """One combination of the members' modes: its block in closed form, or None (singular)."""
+
+    def __init__(self, bits, members, rates):
+        self.bits = bits
+        self.held = [m.held(b) for m, b in zip(members, bits)]
+        unknowns = [m.lam for m, h in zip(members, self.held) if h]
+        free = {m.lam: sp.Integer(0) for m, h in zip(members, self.held) if not h}
+        rows, self.state_rows = [], []
+        for m, h in zip(members, self.held):
+            if not h:
+                continue
+            if any(s in unknowns for s in m.B.free_symbols):
+                rows.append(m.B.xreplace(free))
+            else:
+                self.state_rows.append(m)
+                rows.append(rates(m.B.xreplace(free)).xreplace(free))
+        self.lam = dict(free)
+        self.ok = True
+        if unknowns:
+            try:
+                A, b = sp.linear_eq_to_matrix([sp.expand(r) for r in rows], unknowns)
+            except NonlinearError:
+                fail(members[0].c.name_span, "the block of the coupled switched elements "
+                                             f"{', '.join(repr(m.c.junction) for m in members)}"
+                                             " is not linear in their multipliers: not "
+                                             "supported yet")
+            if sp.simplify(A.det()) == 0:
+                self.ok = False
+                return
+            solution = A.LUsolve(b)
+            self.lam.update({u: sp.simplify(solution[k]) if sp.count_ops(solution[k]) < 60
+                             else solution[k] for k, u in enumerate(unknowns)})
+
+
+def _is(test) -> sp.Expr:
+    """1 where test holds, else 0: the selection is arithmetic on 0 and 1 (exact in every
+    backend), so that SymPy never rewrites its conditions as one boolean formula."""
+    return sp.Piecewise((sp.Integer(1), test), (sp.Integer(0), True))
+
+
+def _first(pieces, default) -> sp.Expr:
+    """The value of the first (value, c) whose c (0 or 1) is 1, else default: c*v + (1-c)*rest,
+    folded from the end (a loop, not a recursion)."""
+    out = default
+    for value, c in reversed(pieces):
+        out = c * value + (1 - c) * out
+    return out
+
+
+def events(sys, members, every, stops, relations, discretes, whens):
+    """The group's relations, modes and jumps (the module's selection).  rates(e): e's time
+    derivative written in the states and the multipliers; every: the combinations;
+    stops[junction]: the momenta's
+    values that stop that member's flow (its balance's free form), or {}."""
+    diodes = [m for m in members if m.diode]
+    switches = [m for m in members if not m.diode]
+    combos = [c for c in every if c.ok]
+    fired = []  # the diodes' relations (the events that locate their changes), as for one
+    for m in diodes:
+        n = len(relations)
+        blocking = sp.Ne(m.mode, 0)
+        e, f = (m.B, m.lam) if m.dual else (m.lam, m.B)
+        forward = Relation(sp.Symbol(f"event#{n}"), sp.StrictGreaterThan(
+            sp.Piecewise((e, blocking), (sp.Integer(-1), True)), 0),
+            f"{m.c.junction}: forward (e > 0)", m.c.name_span, None)
+        reverse = Relation(sp.Symbol(f"event#{n + 1}"), sp.StrictGreaterThan(
+            sp.Piecewise((-f - m.width(f), sp.Not(blocking)), (sp.Integer(-1), True)), 0),
+            f"{m.c.junction}: reverse (f < 0)", m.c.name_span, None)
+        relations = relations + [forward, reverse]
+        fired.append(_is(sp.Or(forward.symbol, reverse.symbol)))
+    closed = {m.lam: _is(m.c.gains[0]) for m in switches}  # 1: closed, from its condition
+
+    def admissible(k, rows_hold):
+        lam, out = k.lam, sp.Integer(1)
+        for m, b in zip(members, k.bits):
+            if m.diode:
+                B = m.B.xreplace(lam)
+                if b == 1:
+                    out *= _is(m.effort(lam, B) <= 0)
+                else:
+                    f = m.flow(lam, B)
+                    out *= _is(f >= -m.width(f) / 2)
+        if rows_hold:
+            for m in k.state_rows:
+                free = m.B.xreplace(lam)
+                out *= _is(sp.Abs(free) <= m.width(free))
+        elif any(m.dual for m in k.state_rows):  # (an effort held at zero on storages: a
+            return sp.Integer(0)  # jump of their charges, chosen only where it holds already)
+        return out
+
+    def matches(k):  # 1 where the switches' conditions give k's bits
+        out = sp.Integer(1)
+        for m, b in zip(members, k.bits):
+            if not m.diode:
+                out *= closed[m.lam] if b == 0 else 1 - closed[m.lam]
+        return out
+
+    def current(k):  # 1 where the diodes are in k's modes now
+        out = sp.Integer(1)
+        for m, b in zip(members, k.bits):
+            if m.diode:
+                out *= m.mode if b == 1 else 1 - m.mode
+        return out
+
+    unchanged = sp.Integer(1)
+    for m in switches:
+        unchanged *= closed[m.lam] * (1 - m.mode) + (1 - closed[m.lam]) * m.mode
+    quiet = sp.Integer(1)
+    for x in fired:
+        quiet *= 1 - x
+    tests = {(id(k), rows): admissible(k, rows) for k in combos for rows in (True, False)}
+    stay = unchanged * quiet + (1 - unchanged) * sp.Add(
+        *[current(k) * matches(k) * tests[id(k), True] for k in combos])
+
+    def chosen(m):
+        i = members.index(m)
+        pieces = [(m.mode, stay)]
+        for rows in (True, False):
+            for k in combos:
+                pieces.append((sp.Integer(k.bits[i]),
+                               (1 - current(k)) * matches(k) * tests[id(k), rows]))
+        return _first(pieces, sp.Integer(2))  # (no consistent combination: 2)
+
+    def initial(m):
+        """The value before the start's event iteration: the first combination, blocking
+        diodes first, that the switches' conditions allow and whose block is regular; the
+        iteration's next pass chooses as after any event (the value is kept where its
+        relations have not crossed)."""
+        i = members.index(m)
+        order = sorted(combos, key=lambda k: [-b for o, b in zip(members, k.bits) if o.diode])
+        return _first([(sp.Integer(k.bits[i]), matches(k)) for k in order], sp.Integer(1))
+
+    nexts = {}
+    for m in diodes:
+        nexts[m.lam] = chosen(m)
+        discretes = discretes + [Discrete(
+            f"{m.c.junction}.blocking", m.mode, initial(m),
+            "1: blocking, 0: conducting", m.c.name_span, nexts[m.lam])]
+    kept = sp.Integer(1)
+    for m in diodes:
+        kept *= 1 - (nexts[m.lam] - m.mode) ** 2
+    states = {st.symbol: st for st in sys.es.states}
+    for m in members:
+        stop = stops.get(m.c.junction) or {}
+        if not stop or m.dual:
+            continue
+        read = [o for o in members if o.lam in m.B.free_symbols]
+        row = sp.And(m.holds, *[sp.Not(o.holds) for o in read])
+        n = len(relations)
+        enters = Relation(sp.Symbol(f"event#{n}"), sp.StrictGreaterThan(
+            sp.Piecewise((sp.Integer(1), row), (sp.Integer(-1), True)), 0),
+            f"{m.c.junction}: its flow held", m.c.name_span, None)
+        relations = relations + [enters]
+        whens = whens + [
+            When(enters.symbol, enters.text, tuple(
+                Action("reinit", states[p].name, p, kept * new + (1 - kept) * p, m.c.span)
+                for p, new in stop.items()), m.c.span),
+            When(INITIAL, f"{m.c.junction}: the start", tuple(
+                Action("reinit", states[p].name, p,
+                       _is(row) * kept * new + (1 - _is(row) * kept) * p, m.c.span)
+                for p, new in stop.items()), m.c.span)]
+    return relations, discretes, whens
+
+
+def rate_of(states_of, leaf_rate):
+    """e's time derivative: its states' rates (leaf_rate(s): der(s) written in the states and
+    the multipliers) and its own dependence on t."""
+    def rate(e):
+        return sp.Add(*[partial(e, s) * leaf_rate(s)
+                        for s in sorted(e.free_symbols & states_of, key=lambda s: s.name)],
+                      partial(e, TIME))
+    return rate

@@ -1,0 +1,151 @@
+"""Coupled switched elements (docs/hybrid.md, section 13): a switch and its freewheeling diode
+chosen together, against exact piecewise-linear references.
+
+The references are the converters' linear circuits solved exactly between events (matrix
+exponentials of the augmented system), the switching instants the square wave's edges and the
+instants where the coil's current reaches zero (found by brentq on the exact solution to
+1e-15 relative): nothing of bgc's."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.linalg import expm
+from scipy.optimize import brentq
+
+from conftest import ROOT, have_cc, run_bgc
+
+BUCK = ROOT / "models" / "buck.bg"
+BUCK_LIBRARY = ROOT / "tests" / "models" / "buck_library.bg"
+BOOST = ROOT / "tests" / "models" / "boost.bg"
+F, DUTY, L, C = 1e5, 0.5, 1e-4, 1e-5
+
+
+def _modes(kind, V, R):
+    """{mode: (A, b)} of x' = A x + b, x = (coil current, capacitor voltage): the switch
+    closed ("on"), open with the diode conducting ("free"), open with both blocking ("dcm")."""
+    load = -1 / (R * C)
+    if kind == "buck":
+        on = ([[0, -1 / L], [1 / C, load]], [V / L, 0])
+        free = ([[0, -1 / L], [1 / C, load]], [0, 0])
+    else:  # boost: closed, the switch shorts the coil to ground; open, it feeds the output
+        on = ([[0, 0], [0, load]], [V / L, 0])
+        free = ([[0, -1 / L], [1 / C, load]], [V / L, 0])
+    dcm = ([[0, 0], [0, load]], [0, 0])
+    return {k: (np.array(a, float), np.array(b, float)) for k, (a, b) in
+            (("on", on), ("free", free), ("dcm", dcm))}
+
+
+def _flow(mode, x, h):
+    A, b = mode
+    M = np.zeros((3, 3))
+    M[:2, :2], M[:2, 2] = A, b
+    E = expm(M * h)
+    return E[:2, :2] @ x + E[:2, 2]
+
+
+def reference(kind, V, R, t_out):
+    """The exact trajectory at t_out from rest, and how many periods end in discontinuous
+    conduction."""
+    modes, T = _modes(kind, V, R), 1 / F
+    x, t, k, segments = np.zeros(2), 0.0, 0, []
+    while t < t_out[-1]:
+        off, end = (k + DUTY) * T, (k + 1) * T
+        segments.append((t, "on", x.copy()))
+        x, t = _flow(modes["on"], x, off - t), off
+        if _flow(modes["free"], x, end - t)[0] < 0:
+            zero = brentq(lambda s: _flow(modes["free"], x, s)[0], 0, end - t, xtol=1e-18,
+                          rtol=1e-15)
+            segments.append((t, "free", x.copy()))
+            x, t = _flow(modes["free"], x, zero), t + zero
+            x[0] = 0.0
+            segments.append((t, "dcm", x.copy()))
+            x, t = _flow(modes["dcm"], x, end - t), end
+        else:
+            segments.append((t, "free", x.copy()))
+            x, t = _flow(modes["free"], x, end - t), end
+        k += 1
+    starts = np.array([s[0] for s in segments])
+    out = []
+    for tt in t_out:
+        t0, mode, x0 = segments[np.searchsorted(starts, tt, side="right") - 1]
+        out.append(_flow(modes[mode], x0, tt - t0))
+    return np.array(out), sum(1 for s in segments if s[1] == "dcm")
+
+
+def simulate(tmp_path, model, backend="c", params=(), t_end="0.5e-3"):
+    out = tmp_path / f"{model.stem}-{backend}-{'-'.join(params)}.csv"
+    args = ["simulate", model, "--scene", "run", "-o", out, "--backend", backend,
+            "--t-end", t_end]
+    for p in params:
+        args += ["-p", p]
+    result = run_bgc(*args)
+    assert result.returncode == 0, result.stderr
+    return out
+
+
+needs_cc = pytest.mark.skipif(not have_cc(), reason="no C compiler")
+
+
+@needs_cc
+@pytest.mark.parametrize("model, kind, V, R, dcm", [
+    (BUCK, "buck", 12.0, 5.0, False),        # continuous conduction once started
+    (BUCK, "buck", 12.0, 50.0, True),        # a light load: the coil's current stops each period
+    (BUCK_LIBRARY, "buck", 12.0, 50.0, True),  # the same of the standard library's parts
+    (BOOST, "boost", 5.0, 20.0, False),
+    (BOOST, "boost", 5.0, 500.0, True),
+])
+def test_converters_as_drawn_match_their_exact_piecewise_linear_solution(
+        tmp_path, model, kind, V, R, dcm):
+    out = simulate(tmp_path, model, params=(f"R={R}",))
+    data = np.loadtxt(out, delimiter=",", skiprows=1)
+    exact, periods_in_dcm = reference(kind, V, R, data[:, 0])
+    assert (periods_in_dcm > 10) == dcm
+    for j in (0, 1):  # coil current, capacitor voltage: 1e-8 of their largest values
+        scale = np.max(np.abs(exact[:, j]))
+        assert np.max(np.abs(data[:, 1 + j] - exact[:, j])) < 1e-8 * scale
+
+
+@needs_cc
+def test_a_coupled_switch_and_diode_give_the_same_bytes_in_every_backend(tmp_path):
+    runs = [simulate(tmp_path, BUCK, backend, ("R=50",), "0.1e-3").read_bytes()
+            for backend in ("c", "python", "vm")]
+    assert runs[0] == runs[1] == runs[2]
+
+
+def test_the_switch_and_the_diode_are_one_block_whose_modes_are_chosen_together():
+    report = run_bgc("check", BUCK)
+    assert report.returncode == 0, report.stderr
+    assert "sw.lambda, fw.lambda (2 unknowns)" in report.stdout
+    # the switch imposes its current and the diode the node's voltage: no causal conflict
+    assert "a->sw: sw -> a" in report.stdout and "k->fw: k -> fw" in report.stdout
+
+
+NO_MODE = """model short "a closed switch shorts the source through a forward diode"
+parameter V = 1.0
+src : Se(V)
+d : D
+sw : Sw(t >= 0.5)
+src -> a
+a : 1
+a -> d
+a -> sw
+scene run {
+  time 0 .. 1 every 0.1
+  outputs d.f
+}
+"""
+
+
+@needs_cc
+def test_a_model_with_no_consistent_mode_stops_at_the_instant_naming_the_elements(tmp_path):
+    """Open, the switch leaves the diode blocking (its flow zero, its effort -V: no current
+    can flow); closed at t = 0.5, conducting would short the source (V = 0) and blocking would
+    hold a forward voltage V > 0: no combination of modes is consistent."""
+    model = tmp_path / "short.bg"
+    model.write_text(NO_MODE)
+    out = tmp_path / "short.csv"
+    result = run_bgc("simulate", model, "--scene", "run", "-o", out, "--backend", "c")
+    assert result.returncode == 1
+    assert "at t = 0.5: algebraic block 1 (d.lambda, sw.lambda) is singular" in result.stderr
+    rows = np.loadtxt(out, delimiter=",", skiprows=1)
+    assert rows[-1, 0] < 0.5 and np.all(rows[:, 1] == 0)
