@@ -32,7 +32,7 @@ MODEL_FILES = sorted((ROOT / "models").glob("*.bg"))
 # path of the code generator that no default scene takes (a default scene outputs the states
 # and keeps every constraint's corrector).  Every other scene's C and Python differ from its
 # model's default scene's only in what the dumps of that scene (golden too) already show: its
-# outputs, effects and settings; test_generated_c_compiles_strictly still compiles each one.
+# outputs, effects and settings; test_golden still compiles each one strictly.
 CODE_SCENES = {
     ("pendulum", "swing"): "a multiplier and a residual as outputs",
     ("pendulum", "unstabilised"): "a holonomic constraint without a corrector",
@@ -92,48 +92,47 @@ def test_runtime_golden(golden):
     golden(GOLDEN / "runtime" / "runtime.py", python_runtime())
 
 
-@pytest.mark.parametrize("path, scene", CASES)
-def test_golden(path, scene, golden):
-    code = has_code_golden(path, scene)
-    compiled = built(path, scene, program=code)
-    base = GOLDEN / path.stem / (scene or "default")
-    golden(base.with_suffix(".check.txt"), check_report(compiled))
-    golden(base.with_suffix(".equations.txt"), equations_text(compiled))
-    if not code:
-        for suffix in (".c", ".py"):
-            assert not base.with_suffix(suffix).exists(), \
-                f"{base.with_suffix(suffix).relative_to(ROOT)} is no golden file (CODE_SCENES)"
-        return
-    (c_text,) = emit_c(compiled.program).values()
-    (py_text,) = emit_python(compiled.program).values()
-    assert "[runtime: runtime]" in model_part(c_text)
-    assert "[runtime: python]" in model_part(py_text)
-    golden(base.with_suffix(".c"), model_part(c_text))
-    golden(base.with_suffix(".py"), model_part(py_text))
-
-
 OPTIMISED = ("gantry_crane", "diode", "pendulum_chain", "knife_edge", "two_link_arm")
 
 
-@pytest.mark.skipif(not backends.have_c_compiler(), reason="no C compiler")
-@pytest.mark.parametrize("path", MODEL_FILES, ids=lambda p: p.stem)
-def test_generated_c_compiles_strictly(path, tmp_path):
+@pytest.mark.parametrize("path, scene", CASES)
+def test_golden(path, scene, golden, tmp_path):
+    """The scene's dumps, and its code where it has golden files (CODE_SCENES); and its C
+    program compiles without a warning (compile_strictly)."""
+    code = has_code_golden(path, scene)
+    compiled = built(path, scene)
+    base = GOLDEN / path.stem / (scene or "default")
+    golden(base.with_suffix(".check.txt"), check_report(compiled))
+    golden(base.with_suffix(".equations.txt"), equations_text(compiled))
+    (c_text,) = emit_c(compiled.program).values()
+    if code:
+        (py_text,) = emit_python(compiled.program).values()
+        assert "[runtime: runtime]" in model_part(c_text)
+        assert "[runtime: python]" in model_part(py_text)
+        golden(base.with_suffix(".c"), model_part(c_text))
+        golden(base.with_suffix(".py"), model_part(py_text))
+    else:
+        for suffix in (".c", ".py"):
+            assert not base.with_suffix(suffix).exists(), \
+                f"{base.with_suffix(suffix).relative_to(ROOT)} is no golden file (CODE_SCENES)"
+    if backends.have_c_compiler():
+        compile_strictly(c_text, tmp_path, link=scene is None and path.stem in OPTIMISED)
+
+
+def compile_strictly(text: str, tmp_path, link: bool):
     """Every scene's program compiles without a warning, checked by the front end; the default
     scene of the models in OPTIMISED (one of each kind of generated code: LU blocks unrolled
     and not, Newton blocks, velocity constraints, a large model) is also built and linked at
     -O2, where some warnings need the optimiser's analysis.  (The runtime, the same bytes in
     every program, is built at -O1, -O2 and -O3 by test_emit.)"""
-    for k, scene in enumerate([None] + scene_names(path)):
-        k = k if path.stem in OPTIMISED else 1
-        (text,) = emit_c(built(path, scene).program).values()
-        src = tmp_path / "model.c"
-        src.write_text(text)
-        cc = os.environ.get("CC", "cc")
-        how = ["-O2", str(src), "-o", str(tmp_path / "model"), "-lm"] if k == 0 else \
-            ["-fsyntax-only", str(src)]
-        proc = subprocess.run([cc, "-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic", *how],
-                              capture_output=True, text=True)
-        assert proc.returncode == 0, proc.stderr
+    src = tmp_path / "model.c"
+    src.write_text(text)
+    cc = os.environ.get("CC", "cc")
+    how = ["-O2", str(src), "-o", str(tmp_path / "model"), "-lm"] if link else \
+        ["-fsyntax-only", str(src)]
+    proc = subprocess.run([cc, "-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic", *how],
+                          capture_output=True, text=True)
+    assert proc.returncode == 0, proc.stderr
 
 
 def _symbolic_path(path) -> bool:
