@@ -1,5 +1,6 @@
 import os
 import shutil
+import tempfile
 from pathlib import Path
 
 import pytest
@@ -15,6 +16,23 @@ os.environ.setdefault("BGC_CFLAGS", "-O0 -std=c99")
 # (auto: the interpreter for a short run of a model not built before, docs/cli.md) is tested
 # in tests/test_vm.py.
 os.environ.setdefault("BGC_BACKEND", "c")
+
+
+def pytest_configure(config):
+    """One compile cache for the whole run, shared by the xdist workers (started after this,
+    with this environment), unless BGC_CACHE_DIR is set: a program that several tests build is
+    compiled once, and the run neither reads nor fills the user's ~/.cache/bgc.  The tests of
+    the cache itself name their own directories."""
+    if "BGC_CACHE_DIR" not in os.environ and not os.environ.get("PYTEST_XDIST_WORKER"):
+        os.environ["BGC_CACHE_DIR"] = tempfile.mkdtemp(prefix="bgc-test-cache-")
+        config._bgc_cache_dir = os.environ["BGC_CACHE_DIR"]
+
+
+def pytest_unconfigure(config):
+    made = getattr(config, "_bgc_cache_dir", None)
+    if made:
+        shutil.rmtree(made, ignore_errors=True)
+        del os.environ["BGC_CACHE_DIR"]
 
 
 def pytest_addoption(parser):
