@@ -240,7 +240,7 @@ SAME_BLOCKS = ("double_pendulum_vector", "pendulum_vector", "car_axis_vector", "
 
 # The models of _blocks_both_ways less SAME_BLOCKS, named so that collecting the tests builds no
 # model (test_models_with_linear_blocks_are_listed keeps the list true).
-BOTH_WAYS = ("car_axis", "double_pendulum", "gantry_crane", "knife_edge", "ladder",
+BOTH_WAYS = ("buck", "car_axis", "double_pendulum", "gantry_crane", "knife_edge", "ladder",
              "parallel_caps", "parallel_caps_dual", "pendulum", "pendulum_wall", "two_link_arm")
 
 

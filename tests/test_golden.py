@@ -143,8 +143,8 @@ def _symbolic_path(path) -> bool:
 
 # The models of _symbolic_path, named so that collecting the tests builds no model
 # (test_symbolic_models_are_listed keeps the list true).
-SYMBOLIC = ("car_axis", "car_axis_vector", "dc_motor", "double_pendulum", "double_pendulum_vector",
-            "gantry_crane", "knife_edge", "ladder", "parallel_caps", "parallel_caps_dual",
+SYMBOLIC = ("buck", "car_axis", "car_axis_vector", "dc_motor", "double_pendulum",
+            "double_pendulum_vector", "gantry_crane", "knife_edge", "ladder", "parallel_caps", "parallel_caps_dual",
             "pendulum", "pendulum_vector", "pendulum_wall", "rc_pair", "rlc", "twin_motors",
             "two_link_arm", "van_der_pol")
 
