@@ -75,6 +75,7 @@
    the platform types and the common functions): the types, the status and kind enumerations,
    the callbacks and the event information, with the standard's names and layouts. */
 
+#include <float.h>
 #include <stdarg.h>
 
 #if defined(_WIN32)
@@ -500,6 +501,12 @@ static fmi2Status bgc_fmi_event_iteration(bgc_fmi *m, const char *fn, int start,
     memcpy(x0, m->x, sizeof x0);
     if (start)
         memcpy(r.d, m->w->d, sizeof(double) * BGC_NUM_DISCRETE);
+    /* A time event that the importer's clock stopped short of by its rounding (FMPy reaches
+       5e-6 as 4.9999999999999996e-06, the double below): taken there, at its own time, not
+       left a step of one ulp ahead, which no integrator can take. */
+    if (!start && bgc_next_time(&r, m->t, m->x) == 0 && isfinite(r.t_next)
+        && r.t_next - m->t <= 16.0 * DBL_EPSILON * fabs(r.t_next))
+        m->t = r.t = r.t_next;
     if (count && BGC_NUM_INDICATORS > 0)
         rc = bgc_indicators(&r, m->t, m->x, r.g);
     if (rc == 0 && count)
