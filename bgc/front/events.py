@@ -233,6 +233,8 @@ class Selected:
     crossings: tuple[tuple[sp.Symbol, tuple], ...] = ()  # per state relation of t and
     #   parameters alone: its crossings' times as families (C, P), t = C + P n (time_roots),
     #   or None where they cannot be found in advance
+    starts: tuple[tuple[sp.Symbol, sp.Basic], ...] = ()  # (symbol, the state relation with
+    #   the signals it reads written out): what the start's first pass evaluates (_at_start)
 
     @property
     def empty(self) -> bool:
@@ -448,8 +450,11 @@ def _at_start(sel: Selected, new: dict) -> dict:
     that the modes a run starts in are those the conditions at t0 give (a switch whose
     condition holds at t0 starts closed).  Evaluated in an order where what a value reads
     comes first (depth first, iteratively); a value that reads itself through others (a
-    cycle) reads its value before the start there."""
-    items = {r.symbol: r.relation for r in sel.state + sel.discrete}
+    cycle) reads its value before the start there.  A relation that reads a signal of a time
+    source (`Sw(on > 0)`, on an instance's argument `square(...)`) reads it written out
+    (sel.starts), so that it too reads the source's value at t0."""
+    written = dict(sel.starts)
+    items = {r.symbol: written.get(r.symbol, r.relation) for r in sel.state + sel.discrete}
     items.update({d.symbol: d.init for d in sel.discretes})
     first = {r.symbol: new[r.symbol] for r, _, _ in sel.time}
     first.update({q.symbol: q.value() for q in sel.squares})

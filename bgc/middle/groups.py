@@ -39,7 +39,7 @@ from ..front.events import INITIAL, Action, Discrete, Relation, When
 from ..front.graph import TIME
 from ..symbolic.differentiate import partial
 
-MAX_COUPLED = 6  # switched one-ports in one group: 2^6 = 64 combinations of their modes
+MAX_COUPLED = 8  # switched one-ports in one group: 2^6 = 64 combinations of their modes
 KINDS = ("diode", "switch")
 
 
@@ -252,7 +252,8 @@ def events(sys, members, every, stops, relations, discretes, whens):
     for x in fired:
         quiet *= 1 - x
     tests = {(id(k), rows): admissible(k, rows) for k in combos for rows in (True, False)}
-    stay = unchanged * quiet + (1 - unchanged) * sp.Add(
+    regular = 1 - sp.Add(*[_in(k, members) for k in every if not k.ok])  # (the modes now)
+    stay = regular * unchanged * quiet + (1 - unchanged) * sp.Add(
         *[current(k) * matches(k) * tests[id(k), True] for k in combos])
 
     def chosen(m):
@@ -264,20 +265,12 @@ def events(sys, members, every, stops, relations, discretes, whens):
                                (1 - current(k)) * matches(k) * tests[id(k), rows]))
         return _first(pieces, sp.Integer(2))  # (no consistent combination: 2)
 
-    def initial(m):
-        """The value before the start's event iteration: the first combination, blocking
-        diodes first, that the switches' conditions allow and whose block is regular; the
-        iteration's next pass chooses as after any event (the value is kept where its
-        relations have not crossed)."""
-        i = members.index(m)
-        order = sorted(combos, key=lambda k: [-b for o, b in zip(members, k.bits) if o.diode])
-        return _first([(sp.Integer(k.bits[i]), matches(k)) for k in order], sp.Integer(1))
 
     nexts = {}
     for m in diodes:
         nexts[m.lam] = chosen(m)
         discretes = discretes + [Discrete(
-            f"{m.c.junction}.blocking", m.mode, initial(m),
+            f"{m.c.junction}.blocking", m.mode, sp.Integer(1),  # (the start's next pass chooses)
             "1: blocking, 0: conducting", m.c.name_span, nexts[m.lam])]
     kept = sp.Integer(1)
     for m in diodes:

@@ -982,6 +982,7 @@ def reduce(es: EquationSystem, project_initial: bool = False, algebra: str = "au
         if any(es.events):
             targets, kept, selected = _with_events(sys, targets, kept)
             _warn_unsolved_times(selected, diags)
+            selected = _with_start_forms(sys, selected)
         blocks = _Blocks(sys, algebra)
         blocks.run(targets)
     except ModelError as err:
@@ -1038,6 +1039,40 @@ def _switched_modes_unsupported(err: ModelError, infos) -> None:
                                 "path); bgc does not support such modes yet: put a resistance "
                                 "or an inductance in the switched path",
          Note(d.span, d.message), *d.notes)
+
+
+def _with_start_forms(sys: _System, selected):
+    """The state relations that read signals, written in what the signals are computed from,
+    for the start's first pass (bgc.front.events._at_start): a relation of a signal of a time
+    source must read the source's value at t0 there, not its value before the start.  Only
+    the signals that read a time source are written out, and a form beyond MAX_START_FORM
+    operations is left as it is."""
+    if selected is None:
+        return None
+    defs, memo = _explicit_defs(sys), {}
+    sources = {q.symbol for q in selected.squares} | {r.symbol for r, _, _ in selected.time}
+
+    def expandable(s):
+        return s in defs and not sys.is_leaf(s)
+
+    starts = []
+    for r in selected.state:
+        timed = {}
+        for s in sorted(r.relation.free_symbols, key=lambda s: s.name):
+            if not expandable(s):
+                continue
+            try:
+                form = _leaf(s, defs, expandable, memo)
+            except _Cycle:
+                continue
+            if form.free_symbols & sources and fits(form, MAX_START_FORM):
+                timed[s] = form  # (a signal of a time source: written out)
+        if timed:
+            starts.append((r.symbol, r.relation.xreplace(timed)))
+    return replace(selected, starts=tuple(starts))
+
+
+MAX_START_FORM = 2000
 
 
 def _with_events(sys: _System, targets, kept):
