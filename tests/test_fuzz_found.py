@@ -31,3 +31,24 @@ def test_linearize_of_a_law_without_a_finite_derivative_says_so(tmp_path):
     assert r.returncode == 1 and "Traceback" not in r.stderr
     assert "at t = 0 the linearisation is not finite: A[0, 0]" in r.stderr, r.stderr
     assert not out.exists()
+
+
+def test_a_constant_that_divides_by_zero_is_inf_in_every_backend(tmp_path):
+    """1/R with R = min(p1, 0) = 0: IEEE division gives inf (C's 1.0/0.0), so every backend
+    stops at t = 0 with the same located message and the same rows, none with a traceback."""
+    model = FOUND / "python_constant_divides_by_zero.bg"
+    backends = ("c", "python", "vm") if have_cc() else ("python", "vm")
+    texts, errors = [], []
+    for backend in backends:
+        out = tmp_path / f"{backend}.csv"
+        r = run_bgc("simulate", model, "--backend", backend, "--t-end", "0.1", "-o", out)
+        assert r.returncode == 1 and "Traceback" not in r.stderr, r.stderr
+        errors.append(r.stderr.splitlines()[0])
+        texts.append(out.read_bytes())
+    assert errors[0] == "error: at t = 0: derivative of state 'c.q' is not finite"
+    assert all(e == errors[0] for e in errors) and all(t == texts[0] for t in texts)
+    for command in ("linearize", "steady"):
+        r = run_bgc(command, model)
+        assert r.returncode == 1 and "Traceback" not in r.stderr, r.stderr
+        assert "not finite" in r.stderr, r.stderr
+

@@ -187,20 +187,20 @@ def _constants_into_ieee(p, out):
         w234 = p[2]*p[2]
         out[0] = w234
         out[1] = p[4]*p[5]
-        out[2] = 1.0/p[9]
+        out[2] = numpy.float64(1.0)/p[9]
         w235 = p[4]*p[4]
         out[3] = -w235
         out[4] = -p[6]*p[9]
         out[5] = -w234
         out[6] = -p[4]*p[5]*p[5]
-        out[7] = -1.0/p[9]
+        out[7] = -numpy.float64(1.0)/p[9]
         out[8] = -p[8]*p[8]
         out[9] = -2.0*p[7]
-        out[10] = p[4]/p[9]
+        out[10] = numpy.float64(p[4])/p[9]
         out[11] = -w235*p[5]
         out[12] = abs(-w234)
-        out[13] = -2.0/p[9]
-        out[14] = 2.0/p[9]
+        out[13] = -numpy.float64(2.0)/p[9]
+        out[14] = numpy.float64(2.0)/p[9]
 
 
 
@@ -228,7 +228,7 @@ def _init_into(p, out):
 def _init_into_ieee(p, out):
     with numpy.errstate(all="ignore"):
         p = numpy.asarray(p, dtype=numpy.float64)
-        w155 = -p[3]*p[9]/p[2]
+        w155 = -numpy.float64(p[3]*p[9])/p[2]
         out[0] = w155
         out[1] = 0.0
         out[2] = w155
@@ -373,7 +373,7 @@ def _rhs_0_ieee(t, x, p, w, out):
         w158 = -w0*w0 + p[10]
         w1 = _c_sqrt(w158)
         w159 = _c_cos(w156)*p[11]
-        w3 = -w0*w159/w1
+        w3 = -numpy.float64(w0*w159)/w1
         w160 = x[5]*x[5]
         w161 = x[4]*x[4]
         w4 = _c_sqrt(w160 + w161)
@@ -382,7 +382,7 @@ def _rhs_0_ieee(t, x, p, w, out):
         w5 = _c_sqrt(w162*w162 + w163*w163)
         w6 = p[12]*x[0]
         w164 = -w4 + p[3]
-        w7 = w164*x[4]/w4
+        w7 = numpy.float64(w164*x[4])/w4
         w8 = w1*w6
         w9 = p[12]*x[1]
         w10 = w0*w9
@@ -390,8 +390,8 @@ def _rhs_0_ieee(t, x, p, w, out):
         w12 = w159*x[5] + w3*x[4]
         w13 = w11 + w12
         w14 = _c_sqrt(w157*w157*p[13] + p[10])*x[4] + w157*p[4]*x[5]
-        w16 = -w0*w159/_c_sqrt(w158)
-        w18 = w164*x[5]/w4
+        w16 = -numpy.float64(w0*w159)/_c_sqrt(w158)
+        w18 = numpy.float64(w164*x[5])/w4
         w165 = -2.0*x[6] + 2.0*x[4]
         w19 = w165*w6
         w166 = -2.0*x[7] + 2.0*x[5]
@@ -405,10 +405,10 @@ def _rhs_0_ieee(t, x, p, w, out):
         w25 = w19 + w20 + (w22 + w24)
         w26 = w160 + w161 + (x[6]*x[6] + x[7]*x[7]) + (-2.0*x[4]*x[6] - 2.0*x[5]*x[7] + p[15])
         w169 = -w5 + p[3]
-        w27 = w162*w169/w5
-        w29 = w163*w169/w5
+        w27 = numpy.float64(w162*w169)/w5
+        w29 = numpy.float64(w163*w169)/w5
         w30 = w157*p[16]
-        w31 = -w159*w159/w1 - w0*w30/w1 + w0*w159*w16/(w1*w1)
+        w31 = -numpy.float64(w159*w159)/w1 - numpy.float64(w0*w30)/w1 + numpy.float64(w0*w159*w16)/(w1*w1)
         w32 = w159*w9 + w3*w6 + (w30*x[5] + w31*x[4])
         w37 = w1*p[17]
         w38 = w165*p[17]
@@ -600,7 +600,7 @@ def _outputs_0_ieee(t, x, p, w, out):
         w172 = -w0*w0 + p[10]
         w1 = _c_sqrt(w172)
         w173 = _c_cos(w170)*p[11]
-        w3 = -w0*w173/w1
+        w3 = -numpy.float64(w0*w173)/w1
         w174 = x[5]*x[5]
         w175 = x[4]*x[4]
         w4 = _c_sqrt(w174 + w175)
@@ -609,7 +609,7 @@ def _outputs_0_ieee(t, x, p, w, out):
         w5 = _c_sqrt(w176*w176 + w177*w177)
         w6 = p[12]*x[0]
         w178 = -w4 + p[3]
-        w7 = w178*x[4]/w4
+        w7 = numpy.float64(w178*x[4])/w4
         w8 = w1*w6
         w9 = p[12]*x[1]
         w10 = w0*w9
@@ -617,8 +617,8 @@ def _outputs_0_ieee(t, x, p, w, out):
         w12 = w173*x[5] + w3*x[4]
         w13 = w11 + w12
         w14 = _c_sqrt(w171*w171*p[13] + p[10])*x[4] + w171*p[4]*x[5]
-        w16 = -w0*w173/_c_sqrt(w172)
-        w18 = w178*x[5]/w4
+        w16 = -numpy.float64(w0*w173)/_c_sqrt(w172)
+        w18 = numpy.float64(w178*x[5])/w4
         w179 = -2.0*x[6] + 2.0*x[4]
         w19 = w179*w6
         w180 = -2.0*x[7] + 2.0*x[5]
@@ -632,10 +632,10 @@ def _outputs_0_ieee(t, x, p, w, out):
         w25 = w19 + w20 + (w22 + w24)
         w26 = w174 + w175 + (x[6]*x[6] + x[7]*x[7]) + (-2.0*x[4]*x[6] - 2.0*x[5]*x[7] + p[15])
         w183 = -w5 + p[3]
-        w27 = w176*w183/w5
-        w29 = w177*w183/w5
+        w27 = numpy.float64(w176*w183)/w5
+        w29 = numpy.float64(w177*w183)/w5
         w30 = w171*p[16]
-        w31 = -w173*w173/w1 - w0*w30/w1 + w0*w16*w173/(w1*w1)
+        w31 = -numpy.float64(w173*w173)/w1 - numpy.float64(w0*w30)/w1 + numpy.float64(w0*w16*w173)/(w1*w1)
         w32 = w173*w9 + w3*w6 + (w30*x[5] + w31*x[4])
         w37 = w1*p[17]
         w38 = w179*p[17]
@@ -898,25 +898,25 @@ def _jvp_0_ieee(t, x, p, w, v, out):
         w186 = -w0*w0 + p[10]
         w1 = _c_sqrt(w186)
         w187 = _c_cos(w184)*p[11]
-        w3 = -w0*w187/w1
+        w3 = -numpy.float64(w0*w187)/w1
         w188 = x[5]*x[5]
         w189 = x[4]*x[4]
         w190 = w188 + w189
         w4 = _c_sqrt(w190)
         w191 = 2.0*v[5]*x[5]
         w192 = 2.0*v[4]*x[4]
-        w86 = (w191 + w192)*(0.5/_c_sqrt(w190))
+        w86 = (w191 + w192)*(numpy.float64(0.5)/_c_sqrt(w190))
         w193 = -w1 + x[6]
         w194 = -w0 + x[7]
         w195 = w193*w193 + w194*w194
         w5 = _c_sqrt(w195)
-        w87 = ((-2.0*w0 + 2.0*x[7])*v[7] + (-2.0*w1 + 2.0*x[6])*v[6])*(0.5/_c_sqrt(w195))
+        w87 = ((-2.0*w0 + 2.0*x[7])*v[7] + (-2.0*w1 + 2.0*x[6])*v[6])*(numpy.float64(0.5)/_c_sqrt(w195))
         w6 = p[12]*x[0]
         w88 = p[12]*v[0]
         w196 = -w4 + p[3]
-        w7 = w196*x[4]/w4
-        w197 = 1.0/(w4*w4)
-        w89 = w196*v[4]/w4 - w86*x[4]/w4 - w196*w197*w86*x[4]
+        w7 = numpy.float64(w196*x[4])/w4
+        w197 = numpy.float64(1.0)/(w4*w4)
+        w89 = numpy.float64(w196*v[4])/w4 - numpy.float64(w86*x[4])/w4 - w196*w197*w86*x[4]
         w8 = w1*w6
         w90 = w1*w88
         w9 = p[12]*x[1]
@@ -932,9 +932,9 @@ def _jvp_0_ieee(t, x, p, w, v, out):
         w198 = _c_sqrt(w185*w185*p[13] + p[10])
         w14 = w198*x[4] + w185*p[4]*x[5]
         w96 = w198*v[4] + w185*p[4]*v[5]
-        w16 = -w0*w187/_c_sqrt(w186)
-        w18 = w196*x[5]/w4
-        w97 = w196*v[5]/w4 - w86*x[5]/w4 - w196*w197*w86*x[5]
+        w16 = -numpy.float64(w0*w187)/_c_sqrt(w186)
+        w18 = numpy.float64(w196*x[5])/w4
+        w97 = numpy.float64(w196*v[5])/w4 - numpy.float64(w86*x[5])/w4 - w196*w197*w86*x[5]
         w199 = -2.0*x[6] + 2.0*x[4]
         w19 = w199*w6
         w200 = -2.0*v[6] + 2.0*v[4]
@@ -960,13 +960,13 @@ def _jvp_0_ieee(t, x, p, w, v, out):
         w26 = w188 + w189 + (x[6]*x[6] + x[7]*x[7]) + (-2.0*x[4]*x[6] - 2.0*x[5]*x[7] + p[15])
         w105 = w191 + w192 + (-2.0*v[4]*x[6] - 2.0*v[5]*x[7]) + (-2.0*v[6]*x[4] - 2.0*v[7]*x[5] + (2.0*v[6]*x[6] + 2.0*v[7]*x[7]))
         w207 = -w5 + p[3]
-        w27 = w193*w207/w5
-        w208 = 1.0/(w5*w5)
-        w106 = w207*v[6]/w5 - w193*w87/w5 - w193*w207*w208*w87
-        w29 = w194*w207/w5
-        w107 = w207*v[7]/w5 - w194*w87/w5 - w194*w207*w208*w87
+        w27 = numpy.float64(w193*w207)/w5
+        w208 = numpy.float64(1.0)/(w5*w5)
+        w106 = numpy.float64(w207*v[6])/w5 - numpy.float64(w193*w87)/w5 - w193*w207*w208*w87
+        w29 = numpy.float64(w194*w207)/w5
+        w107 = numpy.float64(w207*v[7])/w5 - numpy.float64(w194*w87)/w5 - w194*w207*w208*w87
         w30 = w185*p[16]
-        w31 = -w187*w187/w1 - w0*w30/w1 + w0*w16*w187/(w1*w1)
+        w31 = -numpy.float64(w187*w187)/w1 - numpy.float64(w0*w30)/w1 + numpy.float64(w0*w16*w187)/(w1*w1)
         w32 = w187*w9 + w3*w6 + (w30*x[5] + w31*x[4])
         w108 = w187*w91 + w3*w88 + (w30*v[5] + w31*v[4])
         w37 = w1*p[17]
@@ -1103,7 +1103,7 @@ def _residual_into_ieee(t, x, p, out):
         w216 = _c_sqrt(w215)
         out[0] = w216*x[4] + w214*p[4]*x[5]
         w217 = _c_cos(w213)
-        out[1] = w214*p[20]*x[1] + w216*p[12]*x[0] + (w217*p[11]*x[5] + w214*w217*p[21]*x[4]/_c_sqrt(w215))
+        out[1] = w214*p[20]*x[1] + w216*p[12]*x[0] + (w217*p[11]*x[5] + numpy.float64(w214*w217*p[21]*x[4])/_c_sqrt(w215))
         out[2] = x[4]*x[4] + x[5]*x[5] + (x[6]*x[6] + x[7]*x[7]) + (-2.0*x[4]*x[6] - 2.0*x[5]*x[7] + p[15])
         out[3] = (-2.0*x[4] + 2.0*x[6])*p[12]*x[2] + (-2.0*x[5] + 2.0*x[7])*p[12]*x[3] + ((-2.0*x[6] + 2.0*x[4])*p[12]*x[0] + (-2.0*x[7] + 2.0*x[5])*p[12]*x[1])
 
@@ -1147,7 +1147,7 @@ def _scale_into_ieee(t, x, p, out):
         out[0] = abs(w221*x[4]) + abs(w219*p[4]*x[5])
         w222 = _c_cos(w218)
         w223 = abs(p[12]*x[0]) + abs(p[12]*x[1]) + (abs(p[12]*x[2]) + abs(p[12]*x[3]))
-        out[1] = w223*(abs(w221) + abs(w219*p[4])) + abs(w219*p[20]*x[1]) + abs(w221*p[12]*x[0]) + (abs(w222*p[11]*x[5]) + abs(w219*w222*p[21]*x[4]/_c_sqrt(w220)))
+        out[1] = w223*(abs(w221) + abs(w219*p[4])) + abs(w219*p[20]*x[1]) + abs(w221*p[12]*x[0]) + (abs(w222*p[11]*x[5]) + abs(numpy.float64(w219*w222*p[21]*x[4])/_c_sqrt(w220)))
         out[2] = abs(x[4]*x[4]) + abs(x[5]*x[5]) + (abs(x[6]*x[6]) + abs(x[7]*x[7])) + (abs(-2.0*x[4]*x[6]) + abs(-2.0*x[5]*x[7]) + p[22])
         w224 = -2.0*x[7] + 2.0*x[5]
         w225 = -2.0*x[6] + 2.0*x[4]
@@ -1230,7 +1230,7 @@ def _velocity_jac_into_ieee(t, x, p, out):
         out[0] = _c_sqrt(w231)*p[12]
         out[1] = w230*p[20]
         w232 = _c_cos(w229)
-        out[4] = w230*w232*p[21]/_c_sqrt(w231)
+        out[4] = numpy.float64(w230*w232*p[21])/_c_sqrt(w231)
         out[5] = w232*p[11]
         out[8] = (-2.0*x[6] + 2.0*x[4])*p[12]
         out[9] = (-2.0*x[7] + 2.0*x[5])*p[12]

@@ -187,11 +187,11 @@ def _fill_params_ieee(p, given):
         if 12 not in given:
             p[12] = _c_sqrt(_sq(-p[10] + p[5]) + p[11]*p[11])
         if 13 not in given:
-            p[13] = (-p[10] + p[5])/p[12]
+            p[13] = numpy.float64((-p[10] + p[5]))/p[12]
         if 14 not in given:
-            p[14] = -p[11]/p[12]
+            p[14] = -numpy.float64(p[11])/p[12]
         if 15 not in given:
-            p[15] = (p[3]*p[3] + p[12]*p[12] - p[4]*p[4])*(0.5/p[12])
+            p[15] = (p[3]*p[3] + p[12]*p[12] - p[4]*p[4])*(numpy.float64(0.5)/p[12])
         if 16 not in given:
             p[16] = _c_sqrt(p[3]*p[3] - p[15]*p[15])
         if 17 not in given:
@@ -231,13 +231,13 @@ def _constants_into(p, out):
 def _constants_into_ieee(p, out):
     with numpy.errstate(all="ignore"):
         p = numpy.asarray(p, dtype=numpy.float64)
-        out[0] = 1.0/p[0]
+        out[0] = numpy.float64(1.0)/p[0]
         out[1] = p[0]*p[6]
-        out[2] = 1.0/p[1]
+        out[2] = numpy.float64(1.0)/p[1]
         out[3] = p[1]*p[6]
         out[4] = -2.0*p[5]
-        out[5] = -1.0/p[0]
-        out[6] = -1.0/p[1]
+        out[5] = -numpy.float64(1.0)/p[0]
+        out[6] = -numpy.float64(1.0)/p[1]
         w187 = -p[2]*p[2]
         out[7] = w187
         w188 = -p[3]*p[3]
@@ -245,13 +245,13 @@ def _constants_into_ieee(p, out):
         w189 = -p[4]*p[4]
         w190 = p[5]*p[5]
         out[9] = w189 + w190
-        out[10] = 2.0/p[0]
-        out[11] = 2.0/p[1]
+        out[10] = numpy.float64(2.0)/p[0]
+        out[11] = numpy.float64(2.0)/p[1]
         out[12] = abs(w187)
         out[13] = abs(w188)
         out[14] = abs(w189) + abs(w190)
-        out[15] = -2.0/p[1]
-        out[16] = -2.0/p[0]
+        out[15] = -numpy.float64(2.0)/p[1]
+        out[16] = -numpy.float64(2.0)/p[0]
 
 
 

@@ -236,20 +236,20 @@ def _constants_into(p, out):
 def _constants_into_ieee(p, out):
     with numpy.errstate(all="ignore"):
         p = numpy.asarray(p, dtype=numpy.float64)
-        out[0] = 1.0/p[4]
-        out[1] = 1.0/p[10]
+        out[0] = numpy.float64(1.0)/p[4]
+        out[1] = numpy.float64(1.0)/p[10]
         w79 = -p[11]*p[11]
         out[2] = w79
         out[3] = p[10]*p[12]
-        out[4] = -1.0/p[10]
+        out[4] = -numpy.float64(1.0)/p[10]
         out[5] = -p[15]*p[15]
         out[6] = -2.0*p[14]
-        out[7] = 2.0/p[10]
-        out[8] = p[7]/p[4]
+        out[7] = numpy.float64(2.0)/p[10]
+        out[8] = numpy.float64(p[7])/p[4]
         out[9] = abs(w79)
-        out[10] = -2.0/p[10]
-        out[11] = 2.0*p[7]/p[4]
-        out[12] = -2.0*p[7]/p[4]
+        out[10] = -numpy.float64(2.0)/p[10]
+        out[11] = numpy.float64(2.0*p[7])/p[4]
+        out[12] = -numpy.float64(2.0*p[7])/p[4]
 
 
 

@@ -138,9 +138,9 @@ def _constants_into(p, out):
 def _constants_into_ieee(p, out):
     with numpy.errstate(all="ignore"):
         p = numpy.asarray(p, dtype=numpy.float64)
-        out[0] = 1.0/p[0]
-        out[1] = 1.0/p[1]
-        out[2] = -1.0/p[0]
+        out[0] = numpy.float64(1.0)/p[0]
+        out[1] = numpy.float64(1.0)/p[1]
+        out[2] = -numpy.float64(1.0)/p[0]
 
 
 
@@ -219,7 +219,7 @@ def _rhs_0_ieee(t, x, p, w, out):
         w3 = w19*w2
         w4 = w1 + w3
         w5 = p[12]*x[2]
-        w6 = (w4*p[10] - w0*w19*w5 - w18*w2*w5)*(p[0]/(w18*w18 + w19*w19))
+        w6 = (w4*p[10] - w0*w19*w5 - w18*w2*w5)*(numpy.float64(p[0])/(w18*w18 + w19*w19))
         w7 = -w18*w6
         w8 = w19*w6
         out[0] = -w7
@@ -273,7 +273,7 @@ def _outputs_0_ieee(t, x, p, w, out):
         w3 = w2*w21
         w4 = w1 + w3
         w5 = p[12]*x[2]
-        w6 = (w4*p[10] - w0*w21*w5 - w2*w20*w5)*(p[0]/(w20*w20 + w21*w21))
+        w6 = (w4*p[10] - w0*w21*w5 - w2*w20*w5)*(numpy.float64(p[0])/(w20*w20 + w21*w21))
         out[0] = x[3]
         out[1] = x[4]
         out[2] = x[5]
@@ -340,8 +340,8 @@ def _jvp_0_ieee(t, x, p, w, v, out):
         w13 = w10 + w12
         w5 = p[12]*x[2]
         w14 = p[12]*v[2]
-        w6 = (w4*p[10] - w0*w23*w5 - w2*w22*w5)*(p[0]/(w22*w22 + w23*w23))
-        w15 = (w13*p[10] - w0*w14*w23 + (-w11*w22*w5 - w14*w2*w22) + (-w23*w5*w9 + w0*w22*w5*v[5] - w2*w23*w5*v[5]))*(p[0]/(w22*w22 + w23*w23))
+        w6 = (w4*p[10] - w0*w23*w5 - w2*w22*w5)*(numpy.float64(p[0])/(w22*w22 + w23*w23))
+        w15 = (w13*p[10] - w0*w14*w23 + (-w11*w22*w5 - w14*w2*w22) + (-w23*w5*w9 + w0*w22*w5*v[5] - w2*w23*w5*v[5]))*(numpy.float64(p[0])/(w22*w22 + w23*w23))
         w16 = -w15*w22 - w23*w6*v[5]
         w17 = w15*w23 - w22*w6*v[5]
         out[0] = -w16
