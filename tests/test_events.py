@@ -828,3 +828,39 @@ def test_a_relation_of_t_whose_times_are_unknown_is_a_warning():
     compiled = build(text, "run")
     (warning,) = [w for w in compiled.warnings if "depends on t alone" in w.message]
     assert "t*sin(t) > 0.5" in warning.message and "--max-step" in warning.message
+
+
+def _steps(n):
+    """n steps of s, at 1 + k 1e-14 (k < n): n time events, each after the first within
+    1e-12 relative of the one before."""
+    terms = " + ".join(f"step({1 + k * 1e-14!r})" for k in range(n))
+    return (f'model steps "{n} time events 1e-14 apart"\nsignal s = {terms}\n'
+            "signal x = integral(s, init = 0)\nscene run { time 0 .. 2 every 0.5; outputs x }\n")
+
+
+@pytest.mark.parametrize("n", [100, 101])
+def test_a_hundred_events_in_a_row_each_close_to_the_one_before_are_allowed(tmp_path, n):
+    """docs/hybrid.md: 100 events in a row, each after the first within 1e-12 relative of
+    the one before, are allowed; the 101st stops the run (as the FMU counts them).  The
+    run's first event had counted as close to one before it (at -inf), so that 100 stopped;
+    the same in the C, Python and interpreter backends.  Where it runs, x(2) = the sum of
+    2 - t_k (closed form)."""
+    from conftest import run_bgc
+    model = tmp_path / "steps.bg"
+    model.write_text(_steps(n))
+    backends = (["c"] if have_cc() else []) + ["python", "vm"]
+    texts = set()
+    for backend in backends:
+        out = tmp_path / f"{backend}.csv"
+        r = run_bgc("simulate", model, "--scene", "run", "--backend", backend, "-o", out)
+        if n == 100:
+            assert r.returncode == 0, r.stderr
+            x2 = float(out.read_text().splitlines()[-1].split(",")[1])
+            assert x2 == pytest.approx(math.fsum(2 - (1 + k * 1e-14) for k in range(n)),
+                                       rel=1e-13)
+        else:
+            assert r.returncode == 1
+            assert "chattering: 100 events in a row, each within 1e-12 relative of the one " \
+                "before ('step(1.0)'" in r.stderr, r.stderr
+        texts.add(out.read_bytes())
+    assert len(texts) == 1

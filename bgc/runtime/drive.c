@@ -694,7 +694,8 @@ static int bgc_handle_event(bgc_run *r, double t, double *x)
         r->events_out = r->st->events - 1;
         r->out_from = r->passes;
     }
-    if (t - r->t_event <= bgc_max(1e-12 * scale, bgc_hmin(t))) {
+    /* (the run's first event has none before it: t_event is -inf, and so is the scale) */
+    if (isfinite(r->t_event) && t - r->t_event <= bgc_max(1e-12 * scale, bgc_hmin(t))) {
         r->chain++;
     } else {
         r->chain = 0;
