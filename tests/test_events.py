@@ -221,19 +221,41 @@ def test_a_pulse_whose_end_is_beyond_a_double_never_ends():
 
 
 def test_a_square_wave_finer_than_the_time_resolution_stops_the_run():
-    """square(1e-6, 0.5) from t = 1e10: 1e16 periods in, past 2^53, its edges are not apart
-    in doubles.  Every backend stops at the start naming it as written (each looped for
-    ever, deaf to signals, in the search of the period that holds t)."""
+    """square(P, 0.5) with P = 1e-6 from t = 1e10: 1e16 periods in, past 2^53, its edges are
+    not apart in doubles.  Given by -p, every backend stops at the start naming it as
+    written (each looped for ever, deaf to signals, in the search of the period that holds
+    t)."""
     compiled = build("""model fine
-signal x = integral(square(1e-6, 0.5) - x, init = 0)
+parameter P = 1
+signal x = integral(square(P, 0.5) - x, init = 0)
 scene run { outputs x; time 1e10 .. 10000000001 every 0.5 }
 """, "run")
     names = [p.name for p in compiled.program.params]
     for backend in BACKENDS + (["vm"] if have_cc() else []):
-        settings = runner.settings_for(compiled.program.scene, names)
+        settings = runner.settings_for(compiled.program.scene, names, params={"P": 1e-6})
         result = runner.run(runner.prepare(compiled, backend), settings)
         assert result.status == 1 and result.message == (
-            "at t = 10000000000: discrete value 'square(1e-6, 0.5)' is not finite"), backend
+            "at t = 10000000000: discrete value 'square(P, 0.5)' is not finite"), backend
+
+
+@pytest.mark.parametrize("wave, time, at", [
+    ("square(1e-300, 0.5)", "0 .. 10", "10"),  # 1e301 periods: edges 5e-301 apart at 10
+    ("square(1e-6, 0.5)", "1e10 .. 10000000001", "1e+10"),  # 1e16 periods in: past 2^53
+    ("square(1e-16, 0.5, 2)", "0 .. 10", "2"),  # from its start on
+])
+def test_a_square_wave_no_run_can_follow_is_refused_at_the_call(wave, time, at):
+    """Where the scene's time span is known, a square wave whose edges are not apart in
+    doubles there (the runtimes' own test of its periods: k + 1 > k and t0 + k P < t0 +
+    (k + 1) P) is a located error at the call, before any run (the run chattered through
+    100 000 events, or stopped with the value not finite)."""
+    text = f"model fine\nsignal x = integral({wave} - x, init = 0)\n" \
+        f"scene run {{ outputs x; time {time} every 0.5 }}\n"
+    with pytest.raises(bgc.BgcModelError) as info:
+        build(text, "run")
+    message = str(info.value)
+    assert f"inline.bg:2:21: error: the edges of '{wave}' are not apart in doubles at " \
+        f"t = {at} " in message, message
+    assert "^" in message  # the call underlined
 
 
 _LAG = []
@@ -828,3 +850,39 @@ def test_a_relation_of_t_whose_times_are_unknown_is_a_warning():
     compiled = build(text, "run")
     (warning,) = [w for w in compiled.warnings if "depends on t alone" in w.message]
     assert "t*sin(t) > 0.5" in warning.message and "--max-step" in warning.message
+
+
+def _steps(n):
+    """n steps of s, at 1 + k 1e-14 (k < n): n time events, each after the first within
+    1e-12 relative of the one before."""
+    terms = " + ".join(f"step({1 + k * 1e-14!r})" for k in range(n))
+    return (f'model steps "{n} time events 1e-14 apart"\nsignal s = {terms}\n'
+            "signal x = integral(s, init = 0)\nscene run { time 0 .. 2 every 0.5; outputs x }\n")
+
+
+@pytest.mark.parametrize("n", [100, 101])
+def test_a_hundred_events_in_a_row_each_close_to_the_one_before_are_allowed(tmp_path, n):
+    """docs/hybrid.md: 100 events in a row, each after the first within 1e-12 relative of
+    the one before, are allowed; the 101st stops the run (as the FMU counts them).  The
+    run's first event had counted as close to one before it (at -inf), so that 100 stopped;
+    the same in the C, Python and interpreter backends.  Where it runs, x(2) = the sum of
+    2 - t_k (closed form)."""
+    from conftest import run_bgc
+    model = tmp_path / "steps.bg"
+    model.write_text(_steps(n))
+    backends = (["c"] if have_cc() else []) + ["python", "vm"]
+    texts = set()
+    for backend in backends:
+        out = tmp_path / f"{backend}.csv"
+        r = run_bgc("simulate", model, "--scene", "run", "--backend", backend, "-o", out)
+        if n == 100:
+            assert r.returncode == 0, r.stderr
+            x2 = float(out.read_text().splitlines()[-1].split(",")[1])
+            assert x2 == pytest.approx(math.fsum(2 - (1 + k * 1e-14) for k in range(n)),
+                                       rel=1e-13)
+        else:
+            assert r.returncode == 1
+            assert "chattering: 100 events in a row, each within 1e-12 relative of the one " \
+                "before ('step(1.0)'" in r.stderr, r.stderr
+        texts.add(out.read_bytes())
+    assert len(texts) == 1

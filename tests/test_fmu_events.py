@@ -402,6 +402,28 @@ def test_chattering_stops_model_exchange_under_fmpy(tmp_path):
                             "model?)"), message
 
 
+def test_the_co_simulation_fmu_names_its_own_budget_not_a_command_line_option(tmp_path):
+    """Fr(9e15, 1) in Co-Simulation: 100 000 events within the first communication step
+    stop it (BGC_MAX_STEPS, the FMU's fixed budget); an FMU has no command line, so its
+    message says the budget is fixed where bgc simulate's names --max-steps."""
+    from conftest import run_bgc
+    path = tmp_path / "fr.fmu"
+    path.write_bytes(fmu.build_fmu(build(FRICTION, None)))
+    log = []
+    with pytest.raises(Exception, match="fmi2DoStep failed with status 3"):
+        fmpy.simulate_fmu(str(path), fmi_type="CoSimulation", stop_time=0.05,
+                          logger=lambda *a: log.append(a))
+    (message,) = [a[4].decode() for a in log if a[2] == 3]
+    assert "--max-steps" not in message, message
+    assert message.endswith("keep changing: a Zeno model? The FMU's budget, 100000 events per "
+                            "communication step, is fixed)"), message
+    model = tmp_path / "fr.bg"
+    model.write_text(FRICTION)
+    r = run_bgc("simulate", model, "--t-end", "0.05", "-o", tmp_path / "fr.csv")
+    assert r.returncode == 1
+    assert "keep changing: a Zeno model? --max-steps raises the budget)" in r.stderr, r.stderr
+
+
 _RAW = {}  # FMPy's logger proxy keeps one logger for the process: one for every Raw
 
 

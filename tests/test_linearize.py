@@ -315,17 +315,23 @@ def test_far_in_time_a_linear_model_is_exact(tmp_path):
                    "at least 3.03e+09 of them, more than the 10000000"),
     ("solver rk4; ", "t=1e10", "the scene's steps are fixed (h = 0.01): reaching t = 1e+10 "
                                "takes 1e+12 of them, more than the 10000000"),
+    ("", "t=1e200", "at least 3.03e+199"),
     ("", "t=1e308", "at least 3.03e+307"),
+    ("solver rk4; ", "t=1.7e308", "the scene's steps are fixed (h = 0.01): reaching t = "
+                                  "1.7e+308 takes more of them than a double counts"),
 ])
 def test_a_time_too_far_is_refused_before_the_run(tmp_path, monkeypatch, scene, at, text):
     """The steps to the time, known before the run (fixed steps; an explicit solver's
-    stability bound from the Jacobian at the start), beyond the budget: a usage error that
-    says why, and no run started (the run to 1e10 on the scene's grid was a traceback)."""
+    stability bound from the Jacobian at the start), beyond the budget: a run that cannot be
+    done, exit 1 with a plain error that says why (as simulate's spent step budget; it was a
+    usage error, exit 2, and 1.7e308 fixed steps an OverflowError), and no run started (the
+    run to 1e10 on the scene's grid was a traceback)."""
     model = write_model(tmp_path, "rc.bg", FORCED.replace("scene run { ", "scene run { "
                                                           + scene))
     monkeypatch.setattr(runner, "run", lambda *a, **k: pytest.fail("the run started"))
     result = cli("linearize", model, "--scene", "run", "--at", at)
-    assert result.exit_code == 2 and text in result.output, result.output
+    assert result.exit_code == 1 and text in result.stderr, result.output
+    assert result.stderr.startswith("bgc: error: --at t=") and "Usage:" not in result.stderr
 
 
 def test_the_step_budget_of_a_run_to_one_time(tmp_path):

@@ -342,3 +342,61 @@ def test_a_huge_rate_still_rests_at_its_equilibrium(tmp_path, a):
     model = write(tmp_path, "fast.bg", OVERFLOW)
     result = CliRunner().invoke(main, ["steady", model, "-p", f"a={a}"])
     assert (result.exit_code, result.stdout, result.stderr) == (0, "z = 1\nresidual = 0\n", "")
+
+
+SERIES = """\
+model series "a source charging a capacitor through a resistor and an inductor"
+parameter capacitance = 1
+parameter resistance = 1
+parameter inductance = 1
+src : Se(5)
+j : 1
+r : R({law})
+l : I(inductance)
+c : C(capacitance)
+src -> j
+j -> r
+j -> l
+j -> c
+"""
+
+
+def series_rest(tmp_path, law, **params):
+    text = SERIES.format(law=law)
+    if law != "resistance":  # without the inductor
+        text = text.replace("l : I(inductance)\n", "").replace("j -> l\n", "")
+    model = write(tmp_path, "series.bg", text)
+    args = [a for k, v in params.items() for a in ("-p", f"{k}={v}")]
+    return cli("steady", model, *args)
+
+
+@pytest.mark.parametrize("law, params", [
+    ("resistance", {"capacitance": 1e300}),  # was refused: rank 1 of 2
+    ("resistance", {"capacitance": 1e300, "inductance": 1e-300}),
+    ("resistance", {"capacitance": 1e-300, "inductance": 1e300}),
+    ("resistance", {"resistance": 1e300}),
+    ("resistance", {"capacitance": 1e-308}),
+    ("f = (e + e*e*e)/resistance", {"resistance": 1e300}),  # was c.q = 3.679
+    ("f = (e + e*e*e)/resistance", {"capacitance": 1e-300, "resistance": 1e300}),
+    ("f = (e + e*e*e)/resistance", {"capacitance": 1e300, "resistance": 1e-300}),
+])
+def test_the_rest_of_a_series_circuit_at_extreme_magnitudes(tmp_path, law, params):
+    """At rest no current flows and the capacitor holds the source's 5 V: q = C V, p = 0,
+    whatever the units' magnitudes (the residual and the rank are judged relative to the
+    terms and to the equilibrated Jacobian, not against 1)."""
+    result = series_rest(tmp_path, law, **params)
+    assert result.exit_code == 0, result.output
+    values = {k: float(v) for k, v in (line.split(" = ") for line in result.stdout.splitlines())}
+    C = params.get("capacitance", 1.0)
+    assert values["c.q"] == pytest.approx(5 * C, rel=1e-12)
+    if "l.p" in values:  # the current p / L, against the circuit's 5 V / R
+        R, L = params.get("resistance", 1.0), params.get("inductance", 1.0)
+        assert abs(values["l.p"] / L) <= 1e-12 * 5 / R
+    assert result.stderr == ""
+
+
+def test_an_equilibrium_beyond_double_is_refused_not_printed(tmp_path):
+    """C = 1e308: q = C V = 5e308 is not a double; steady says so (exit 1, no number)."""
+    result = series_rest(tmp_path, "resistance", capacitance=1e308)
+    assert result.exit_code == 1 and result.stdout == ""
+    assert "leaves the range of double" in result.stderr, result.stderr

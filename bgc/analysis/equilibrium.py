@@ -48,7 +48,7 @@ from ..base.diagnostics import Diagnostic, ModelError
 from ..front.graph import TIME
 from .operating import AnalysisArgumentError, AnalysisError
 
-TOLERANCE = 1e-10  # |F| relative to max(1, |F| at the start)
+TOLERANCE = 1e-10  # each row's |F| relative to its terms' magnitudes (_scale)
 MAX_ITERATIONS = 100
 MAX_MODES = 20  # rounds of Newton's method, each in the modes the last one's point gives
 
@@ -133,23 +133,32 @@ def solve(ev: operating.Evaluator, x0=None, t=None) -> Equilibrium:
 
 
 def _newton(ev, t, x):
-    """Newton's method from x, the discrete values held: (x, J, iterations)."""
+    """Newton's method from x, the discrete values held: (x, J, iterations).  Every decision
+    is relative, so that a model's units do not move it: a row of F is small against the
+    magnitudes of its terms (_scale), steps and ranks are those of the equilibrated Jacobian
+    (_equilibrated), and the line search measures F in the rows' own units."""
     F = _residual(ev, t, x)
     if F is None:
         raise NoEquilibrium(f"the right side is not finite at the initial state (t = {t:g})")
-    goal = TOLERANCE * max(1.0, np.abs(F).max(initial=0.0))
+    goal = np.zeros(len(F))
     for it in range(MAX_ITERATIONS + 1):
         J = _jacobian(ev, t, x)
-        if np.abs(F).max(initial=0.0) <= goal:
+        goal = np.maximum(goal, TOLERANCE * _scale(F, J, x))
+        if np.all(np.abs(F) <= goal):
             return (*_polish(ev, t, x, F, J), it)
         if it == MAX_ITERATIONS:
             break
-        dx = orthogonal.lstsq(J, -F)[0]
-        step, norm = 1.0, orthogonal.norm(F)
+        dx, rows, cols = _step(ev, J, F, x)
+        if _converged(J, F, x, dx, cols):
+            Ft = _residual(ev, t, x + dx)
+            if Ft is not None:
+                x, F = x + dx, Ft
+            return (*_polish(ev, t, x, F, _jacobian(ev, t, x)), it + 1)
+        step, norm = 1.0, orthogonal.norm(rows * F)
         while step >= 1e-8:
             trial = x + step * dx
             Ft = _residual(ev, t, trial)
-            if Ft is not None and orthogonal.norm(Ft) < (1 - 1e-4 * step) * norm:
+            if Ft is not None and orthogonal.norm(rows * Ft) < (1 - 1e-4 * step) * norm:
                 x, F = trial, Ft
                 break
             step /= 2
@@ -159,13 +168,87 @@ def _newton(ev, t, x):
                         f"(max |dx/dt| = {np.abs(F[:ev.n]).max():.3g})")
 
 
+def _scale(F, J, x):
+    """Each row's magnitude of terms at x: |F - J x| + |J| |x| (for an affine F = A x + b,
+    |b| plus the magnitudes of A's terms, which cancel at an equilibrium)."""
+    with np.errstate(all="ignore"):  # (inf where the terms' magnitudes exceed double's)
+        Jx = J * x[None, :]
+        return np.abs(F - orthogonal.total(Jx, axis=1)) + orthogonal.total(np.abs(Jx), axis=1)
+
+
+def _equilibrated(J):
+    """(rows, cols): integer exponents such that J * 2^(rows_i + cols_j) has each row's and
+    each column's largest magnitude near 1 (Ruiz's scaling, in powers of two, found on the
+    entries' exponents so that nothing under- or overflows on the way), so that a row or a
+    state in small or large units weighs as the others in a step and a rank."""
+    e = np.where(J != 0.0, np.frexp(J)[1], -(1 << 20)).astype(np.int64)
+    rows = np.zeros(J.shape[0], dtype=np.int64)
+    cols = np.zeros(J.shape[1], dtype=np.int64)
+    for _ in range(64):
+        r = (e + rows[:, None] + cols[None, :]).max(axis=1, initial=-(1 << 20))
+        c = (e + rows[:, None] + cols[None, :]).max(axis=0, initial=-(1 << 20))
+        r = np.where(r > -(1 << 19), r, 0)
+        c = np.where(c > -(1 << 19), c, 0)
+        if not (np.any(np.abs(r) > 1) or np.any(np.abs(c) > 1)):
+            break
+        rows -= r // 2
+        cols -= c // 2
+    both = np.concatenate([rows, -cols])  # rows + k, cols - k scale as well: centred
+    k = -(int(both.max(initial=0)) + int(both.min(initial=0))) // 2
+    return np.clip(rows + k, -1000, 1000), np.clip(cols - k, -1000, 1000)
+
+
+def _scaled(J, rows, cols):
+    with np.errstate(all="ignore"):
+        return np.ldexp(J, rows[:, None] + cols[None, :])
+
+
+def _rank(J) -> int:
+    return orthogonal.rank(_scaled(J, *_equilibrated(J)))
+
+
+def _solve(J, F):
+    """The Newton step of least norm in the equilibrated units, and the exponents."""
+    rows, cols = _equilibrated(J)
+    with np.errstate(all="ignore"):
+        y = orthogonal.lstsq(_scaled(J, rows, cols), -np.ldexp(F, rows))[0]
+        return np.ldexp(y, cols), rows, cols
+
+
+def _step(ev, J, F, x):
+    """The Newton step, the rows' weights and the columns' scales; NoEquilibrium where the
+    step overflows: the equilibrium is beyond double's range."""
+    dx, rows, cols = _solve(J, F)
+    with np.errstate(all="ignore"):
+        finite = np.all(np.isfinite(x + dx))
+    if not finite:
+        raise NoEquilibrium(f"no equilibrium bgc steady can compute: Newton's step from "
+                            f"{_where(ev, x)} leaves the range of double (about 1.8e308)")
+    return dx, np.ldexp(1.0, rows), np.ldexp(1.0, cols)
+
+
+def _converged(J, F, x, dx, cols) -> bool:
+    """Whether x is an equilibrium to the last digits its rows can resolve, though a row's
+    |F| is not small against its terms (a row of one term, p/L, at the rounding left by the
+    others): the step solves the linearisation (J dx = -F to rounding in every row) and is
+    small in the equilibrated units (|dx / cols| against the largest |x / cols|)."""
+    with np.errstate(all="ignore"):
+        Jdx = J * dx[None, :]
+        linear = np.abs(F + orthogonal.total(Jdx, axis=1))
+        solves = np.all(linear <= 1e-8 * (np.abs(F) + orthogonal.total(np.abs(Jdx), axis=1)))
+        size = np.abs(x / cols).max(initial=0.0)
+        return bool(solves and np.abs(dx / cols).max(initial=0.0) <= TOLERANCE * size)
+
+
 def _polish(ev, t, x, F, J):
     """Up to three more full steps, each kept while it reduces |F| (Newton's method doubles
     the digits of a converged solution at each step): (x, J)."""
     for _ in range(3):
-        trial = x + orthogonal.lstsq(J, -F)[0]
+        dx, rows, _ = _solve(J, F)
+        trial = x + dx
         Ft = _residual(ev, t, trial)
-        if Ft is None or not orthogonal.norm(Ft) < orthogonal.norm(F):
+        if Ft is None or not orthogonal.norm(np.ldexp(Ft, rows)) < \
+                orthogonal.norm(np.ldexp(F, rows)):
             break
         x, F, J = trial, Ft, _jacobian(ev, t, trial)
     return x, J
@@ -184,7 +267,7 @@ def _why(ev, x, F, J, it) -> str:
     k = int(np.argmax(np.abs(F)))
     what = f"d({ev.states[k]})/dt = {F[k]:.6g}" if k < ev.n else \
         f"the residual of constraint row {ev.constraint_names()[k - ev.n]} = {F[k]:.6g}"
-    rank = orthogonal.rank(J)
+    rank = _rank(J)
     return (f"no equilibrium: after {it} Newton iterations no step reduces the right side, "
             f"which stays at {what} (the Jacobian has rank {rank} of {ev.n}: a state that "
             "integrates a nonzero constant, such as a free mass under a constant force, has "
@@ -203,7 +286,7 @@ def _result(ev, t, x, J, it) -> Equilibrium:
     f = ev.rhs(t, x)
     return Equilibrium(float(t), tuple(zip(ev.states, (float(v) for v in x))), mult, res,
                        float(np.abs(f).max(initial=0.0)), it,
-                       ev.n - orthogonal.rank(J), time_sources(ev))
+                       ev.n - _rank(J), time_sources(ev))
 
 
 def parse_at(at, t0: float) -> float:

@@ -195,21 +195,23 @@ def run_to(ev: operating.Evaluator, params: dict, T: float, max_steps: int | Non
     h = fixed_step(scene)
     options = dict(t_end=T, dt=span, max_steps=budget)
     if h is not None:
-        steps = math.ceil(span / h)
-        if budget and steps > budget:
-            raise AnalysisArgumentError(
+        steps = span / h
+        if budget and not steps <= budget:
+            raise AnalysisError(
                 f"--at t={T:g}: the scene's steps are fixed (h = {h:g}): reaching t = {T:g} "
-                f"takes {steps:.3g} of them, more than the {budget} a run to one time may "
-                "take (--max-steps raises the bound)")
+                f"takes {_steps_text(math.ceil(steps) if math.isfinite(steps) else steps)}, "
+                f"more than the {budget} a run to one time may take (--max-steps raises the "
+                "bound)")
         options["step"] = h
     else:
         steps, why = explicit_steps(ev, scene.solver, span)
         if budget and steps > budget:
-            raise AnalysisArgumentError(
+            raise AnalysisError(
                 f"--at t={T:g}: the scene's solver {scene.solver} is explicit, its steps "
-                f"bounded by its stability ({why}): reaching t = {T:g} takes at least "
-                f"{steps:.3g} of them, more than the {budget} a run to one time may take "
-                "(--max-steps raises the bound; a stiff solver's steps are not so bounded)")
+                f"bounded by its stability ({why}): reaching t = {T:g} takes "
+                f"{_steps_text(steps, 'at least ')}, more than the {budget} a run to one time "
+                "may take (--max-steps raises the bound; a stiff solver's steps are not so "
+                "bounded)")
     settings = runner.settings_for(scene, [p.name for p in program.params], params,
                                    **options)
     backend, _ = runner.choose_backend("c")
@@ -226,6 +228,14 @@ def run_to(ev: operating.Evaluator, params: dict, T: float, max_steps: int | Non
     where = {name: k for k, name in enumerate(program.outputs)}
     return (np.array([Y[-1, where[s]] for s in program.states]),
             [Y[-1, where[d]] for d in ev.held_names])
+
+
+def _steps_text(steps: float, least: str = "") -> str:
+    """A count of steps for a message: "[at least ]3.03e+09 of them", or where it is beyond
+    a double's range, "more of them than a double counts"."""
+    if not math.isfinite(steps):
+        return "more of them than a double counts"
+    return f"{least}{steps:.3g} of them"
 
 
 def explicit_steps(ev: operating.Evaluator, solver: str, span: float) -> tuple[float, str]:
@@ -252,10 +262,10 @@ def explicit_steps(ev: operating.Evaluator, solver: str, span: float) -> tuple[f
         angle = round(math.atan2(abs(z.imag), z.real), 2)  # (the region is symmetric)
         if angle not in reaches:
             reaches[angle] = _reach(polynomial, angle)
-        reach = reaches[angle]
-        if reach > 0 and span * abs(z) / reach > best:
-            best = span * abs(z) / reach
-            why = f"|lambda| = {abs(z):.3g} at the start, h |lambda| <= {reach:.3g}"
+        reach, size = reaches[angle], float(abs(z))  # (Python floats: inf past a double)
+        if reach > 0 and span * size / reach > best:
+            best = span * size / reach
+            why = f"|lambda| = {size:.3g} at the start, h |lambda| <= {reach:.3g}"
     return best, why
 
 

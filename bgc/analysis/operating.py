@@ -224,7 +224,7 @@ class Evaluator:
             except m._Failure as failure:
                 raise AnalysisError(str(failure)) from None
             except m._BlockFailure as failure:
-                raise AnalysisError(f"at t = {t:.17g}: {failure}") from None
+                raise AnalysisError(str(failure)) from None  # (it says "at t = ...")
             changed = False
             for k in range(self.discrete):
                 v = out[self.n + k]
@@ -248,7 +248,7 @@ class Evaluator:
             try:
                 m._next_time(float(t), [float(v) for v in x], self.pc, m._work(), tau)
             except m._BlockFailure as failure:
-                raise AnalysisError(f"at t = {t:.17g}: {failure}") from None
+                raise AnalysisError(str(failure)) from None  # (it says "at t = ...")
         return tau
 
     def _call(self, function, t, x, size, v=None):
@@ -258,7 +258,7 @@ class Evaluator:
             function(float(t), m._vector(x, m._N, "x"), self.pc, m._work(),
                      *(() if v is None else (list(v),)), out)
         except m._BlockFailure as failure:
-            raise AnalysisError(f"at t = {t:.17g}: {failure}") from None
+            raise AnalysisError(str(failure)) from None  # (it says "at t = ...")
         return np.asarray(out, dtype=float)
 
     def initial(self) -> np.ndarray:
@@ -278,7 +278,7 @@ class Evaluator:
         try:
             m._jacobian_into(float(t), m._vector(x, m._N, "x"), self.pc, m._work(), J)
         except m._BlockFailure as failure:
-            raise AnalysisError(f"at t = {t:.17g}: {failure}") from None
+            raise AnalysisError(str(failure)) from None  # (it says "at t = ...")
         return J
 
     def outputs(self, t, x) -> np.ndarray:

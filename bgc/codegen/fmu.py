@@ -402,6 +402,7 @@ def fmu_source(program, guid: str, project_initial: bool = False,
         f" *   cc -shared -fPIC -fvisibility=hidden -O2 -std=c99 {ident}.c -o {ident}.so -lm",
         " * (.dylib on macOS).  The generated program follows, its command line left out. */",
         "#define BGC_NO_MAIN 1",
+        "#define BGC_FMU 1 /* the runtime's messages say what applies in an FMU */",
     ]
     part = [
         "/* ============================================================= FMU part === */",

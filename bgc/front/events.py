@@ -265,12 +265,15 @@ def select(graph_events, used: set, states: dict, params: set) -> Selected:
     used = set(used)
     kept: list = []
     while True:
-        for r in relations:  # what a relation reads is read too (a discrete variable)
-            if r.symbol in used:
-                used |= r.relation.free_symbols
-        for d in discretes:  # and what a mode's next value reads
-            if d.symbol in used and d.next is not None:
-                used |= d.next.free_symbols | d.init.free_symbols
+        size = len(used) + 1
+        while len(used) != size:  # until nothing more is read (a mode reads a relation that
+            size = len(used)      # reads a discrete variable: a switch's Sw(d < 16))
+            for r in relations:  # what a relation reads is read too (a discrete variable)
+                if r.symbol in used:
+                    used |= r.relation.free_symbols
+            for d in discretes:  # and what a mode's next value reads
+                if d.symbol in used and d.next is not None:
+                    used |= d.next.free_symbols | d.init.free_symbols
         more = [w for w in whens if w not in kept and any(
             a.symbol in states if a.kind == "reinit" else a.symbol in used for a in w.actions)]
         if not more:

@@ -277,6 +277,8 @@ class _ArithmeticPrinting:
 
     def _quotient(self, numer: list, denom: list) -> str:
         text = "*".join(self._operand(f, PREC_MUL) for f in numer) if numer else "1.0"
+        if denom:
+            text = self._dividend(text)
         if len(denom) == 1:
             text += "/" + self._operand(denom[0], PREC_ATOM)
         elif denom:
@@ -290,7 +292,8 @@ class _ArithmeticPrinting:
         if exp == sp.S.Half:
             return f"{self.FUNCTION_NAMES['sqrt']}({self._print(base)})"
         if exp.is_Rational and exp.is_negative:
-            return "1.0/" + self._operand(sp.Pow(base, -exp, evaluate=False), PREC_ATOM)
+            return self._dividend("1.0") + "/" + \
+                self._operand(sp.Pow(base, -exp, evaluate=False), PREC_ATOM)
         if exp.is_Integer and _is_simple(base) and int(exp) <= MAX_EXPANDED_POWER:
             return "*".join([self._print(base)] * int(exp))
         if exp == 2:
@@ -326,6 +329,10 @@ class _ArithmeticPrinting:
         return text
 
     # -- language hooks
+
+    def _dividend(self, text: str) -> str:
+        """The left operand of a division as printed (the Python fallback's is a float64)."""
+        return text
 
     LOGIC: dict = {}
 
@@ -446,6 +453,14 @@ class PythonPrinter(_ArithmeticPrinting, PythonCodePrinter):
 
     def _print_extremum(self, func, args):
         return f"{func}({', '.join(args)})"  # min(a, b, c) == min(min(a, b), c) exactly
+
+    def _dividend(self, text):
+        # a division of Python floats by zero raises, whatever the operands came from (a
+        # literal min() or a conditional picked, a table's value): the fallback divides a
+        # numpy.float64, which gives C's inf or nan, the same bits where both are finite
+        if self._ieee:
+            return f"numpy.float64({text})"
+        return text
 
     def _print_square(self, base):
         return f"_sq({self._print(base)})"

@@ -339,6 +339,35 @@ def _effects(graph: Graph, scene, override) -> tuple[str, ...] | None:
     return effects
 
 
+def _square_apart(t, period, t0) -> bool:
+    """Whether the periods of square(period, duty, t0) around t are apart in doubles, as the
+    runtimes compute them (bgc_square_period: k + 1 > k, t0 + k period < t0 + (k + 1) period)."""
+    q = (t - t0) / period
+    k = float(math.floor(q)) if math.isfinite(q) else math.nan
+    return k + 1.0 > k and t0 + (k + 1.0) * period > t0 + k * period
+
+
+def _check_squares(graph: Graph, t0: float, t1: float) -> None:
+    """A square wave of numbers whose edges are not apart in doubles within the scene's time
+    span (a period of 1e-300, or of 1e-6 at t = 1e10) can be followed by no run: a located
+    error at the square() call (one of parameters, whose -p may give another period, stops
+    the run that reaches such a time with the value not finite)."""
+    for q in graph.squares:
+        if getattr(q, "kind", None) != "square" or (q.period.free_symbols | q.t0.free_symbols):
+            continue  # (of parameters: -p may give others; the run stops where it must)
+        try:
+            period, start = float(q.period), float(q.t0)
+        except (TypeError, ValueError):
+            continue
+        if not (period > 0 and math.isfinite(period) and math.isfinite(start)) or start > t1:
+            continue
+        for t in (max(t0, start), t1):
+            if not _square_apart(t, period, start):
+                fail(q.span, f"the edges of '{q.text}' are not apart in doubles at t = {t:.6g} "
+                             f"(its period {period:.6g} is finer than the time's resolution "
+                             "there): no run can follow it")
+
+
 def apply_scene(graph: Graph, name: str | None, override: Override | None = None,
                 option: str = "scene") -> Scenario:
     """The graph as scene `name` sees it (None: the default scene, all effects, every state),
@@ -375,6 +404,7 @@ def apply_scene(graph: Graph, name: str | None, override: Override | None = None
         elif not (t1 - t0) / dt <= MAX_OUTPUT_ROWS:
             fail(scene.time[2].span, f"more than {MAX_OUTPUT_ROWS:.0e} output rows: the output "
                                      "interval is too small for the time span")
+    _check_squares(g, t0, t1)
     solver, rtol, atol, step, hmax = _solver(scene.solver if scene else None, params)
     run = RunSettings(t0, t1, dt, solver, rtol, atol, step, scene=name, max_step=hmax)
     return Scenario(g, Settings(name, outputs, run, sets, given, effects,

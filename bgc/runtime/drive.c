@@ -122,6 +122,19 @@ typedef struct bgc_run {
        output row) */
     double passes, *last, chain_from, sliding_from, out_from;
 } bgc_run;
+/* What raises a budget, as the messages say it: the program's --max-steps, or in an FMU,
+   whose settings are the defaults (BGC_MAX_STEPS), what the fixed budget is. */
+#ifdef BGC_FMU
+#define BGC_HINT_STEPS "the FMU's budget, 100000 steps per communication step, is fixed"
+#define BGC_HINT_SLIDING "a sliding mode or a Zeno model? The FMU's limit, 1000, is fixed"
+#define BGC_HINT_EVENTS "a Zeno model? The FMU's budget, 100000 events per communication " \
+    "step, is fixed"
+#else
+#define BGC_HINT_STEPS "--max-steps raises the budget"
+#define BGC_HINT_SLIDING "a sliding mode or a Zeno model? --max-steps raises the limit, a " \
+    "hundredth of it"
+#define BGC_HINT_EVENTS "a Zeno model? --max-steps raises the budget"
+#endif
 #define BGC_STIFF (-1) /* an auto run's explicit phase found the problem stiff */
 
 /* An attempted step's outcome. */
@@ -189,7 +202,7 @@ static int bgc_accept(bgc_run *r, double t)
     }
     if (r->s->max_steps > 0 && r->st->steps - r->steps_out > r->s->max_steps) {
         snprintf(r->msg, r->msg_size, "at t = %.17g: step budget spent: %ld steps since the "
-                 "%s at t = %.17g (the step size runs away; --max-steps raises the budget)",
+                 "%s at t = %.17g (the step size runs away; " BGC_HINT_STEPS ")",
                  t, r->s->max_steps, r->from_event ? "event" : "output", r->t_out);
         return BGC_ERR_RUNTIME;
     }
@@ -681,7 +694,8 @@ static int bgc_handle_event(bgc_run *r, double t, double *x)
         r->events_out = r->st->events - 1;
         r->out_from = r->passes;
     }
-    if (t - r->t_event <= bgc_max(1e-12 * scale, bgc_hmin(t))) {
+    /* (the run's first event has none before it: t_event is -inf, and so is the scale) */
+    if (isfinite(r->t_event) && t - r->t_event <= bgc_max(1e-12 * scale, bgc_hmin(t))) {
         r->chain++;
     } else {
         r->chain = 0;
@@ -707,8 +721,7 @@ static int bgc_handle_event(bgc_run *r, double t, double *x)
         && r->sliding >= (r->s->max_steps > 100000 ? r->s->max_steps / 100 : 1000)) {
         snprintf(head, sizeof head, "%ld steps in a row, each cut short by an event",
                  r->sliding);
-        return bgc_chattering(r, t, head, r->sliding_from, "a sliding mode or a Zeno model? "
-                              "--max-steps raises the limit, a hundredth of it");
+        return bgc_chattering(r, t, head, r->sliding_from, BGC_HINT_SLIDING);
     }
     /* the events since the last output row: as many as the step budget, and at least 1000
        (a small step budget is for a step size that runs away, not for events) */
@@ -716,8 +729,7 @@ static int bgc_handle_event(bgc_run *r, double t, double *x)
                                           > (r->s->max_steps > 1000 ? r->s->max_steps : 1000)) {
         snprintf(head, sizeof head, "%ld events since the last output row",
                  r->st->events - r->events_out - 1);
-        return bgc_chattering(r, t, head, r->out_from, "a Zeno model? --max-steps raises "
-                              "the budget");
+        return bgc_chattering(r, t, head, r->out_from, BGC_HINT_EVENTS);
     }
     if (rc == 0 && r->s->event_rows)
         rc = bgc_emit(r, t, x);

@@ -187,20 +187,20 @@ def _constants_into_ieee(p, out):
         w212 = p[2]*p[2]
         out[0] = w212
         out[1] = p[4]*p[5]
-        out[2] = 1.0/p[9]
+        out[2] = numpy.float64(1.0)/p[9]
         w213 = p[4]*p[4]
         out[3] = -w213
         out[4] = -p[6]*p[9]
         out[5] = -w212
         out[6] = -p[4]*p[5]*p[5]
-        out[7] = -1.0/p[9]
+        out[7] = -numpy.float64(1.0)/p[9]
         out[8] = -p[8]*p[8]
         out[9] = -2.0*p[7]
-        out[10] = p[4]/p[9]
+        out[10] = numpy.float64(p[4])/p[9]
         out[11] = -w213*p[5]
         out[12] = abs(-w212)
-        out[13] = -2.0/p[9]
-        out[14] = 2.0/p[9]
+        out[13] = -numpy.float64(2.0)/p[9]
+        out[14] = numpy.float64(2.0)/p[9]
 
 
 
@@ -228,7 +228,7 @@ def _init_into(p, out):
 def _init_into_ieee(p, out):
     with numpy.errstate(all="ignore"):
         p = numpy.asarray(p, dtype=numpy.float64)
-        w147 = -p[3]*p[9]/p[2]
+        w147 = -numpy.float64(p[3]*p[9])/p[2]
         out[0] = w147
         out[1] = 0.0
         out[2] = w147
@@ -369,7 +369,7 @@ def _rhs_0_ieee(t, x, p, w, out):
         w150 = -w0*w0 + p[10]
         w1 = _c_sqrt(w150)
         w151 = _c_cos(w148)*p[11]
-        w3 = -w0*w151/w1
+        w3 = -numpy.float64(w0*w151)/w1
         w152 = x[5]*x[5]
         w153 = x[4]*x[4]
         w4 = _c_sqrt(w152 + w153)
@@ -378,15 +378,15 @@ def _rhs_0_ieee(t, x, p, w, out):
         w5 = _c_sqrt(w154*w154 + w155*w155)
         w6 = p[12]*x[0]
         w156 = -w4 + p[3]
-        w7 = w156*x[4]/w4
+        w7 = numpy.float64(w156*x[4])/w4
         w8 = w1*w6
         w9 = p[12]*x[1]
         w10 = w0*w9
         w11 = w151*x[5] + w3*x[4]
         w12 = w10 + w11 + w8
         w13 = _c_sqrt(w149*w149*p[13] + p[10])*x[4] + w149*p[4]*x[5]
-        w15 = -w0*w151/_c_sqrt(w150)
-        w17 = w156*x[5]/w4
+        w15 = -numpy.float64(w0*w151)/_c_sqrt(w150)
+        w17 = numpy.float64(w156*x[5])/w4
         w157 = -2.0*x[6] + 2.0*x[4]
         w18 = w157*w6
         w158 = -2.0*x[7] + 2.0*x[5]
@@ -400,10 +400,10 @@ def _rhs_0_ieee(t, x, p, w, out):
         w24 = w18 + w19 + (w21 + w23)
         w25 = w152 + w153 + (x[6]*x[6] + x[7]*x[7]) + (-2.0*x[4]*x[6] - 2.0*x[5]*x[7] + p[15])
         w161 = -w5 + p[3]
-        w26 = w154*w161/w5
-        w28 = w155*w161/w5
+        w26 = numpy.float64(w154*w161)/w5
+        w28 = numpy.float64(w155*w161)/w5
         w29 = w149*p[16]
-        w30 = -w151*w151/w1 - w0*w29/w1 + w0*w15*w151/(w1*w1)
+        w30 = -numpy.float64(w151*w151)/w1 - numpy.float64(w0*w29)/w1 + numpy.float64(w0*w15*w151)/(w1*w1)
         w31 = w151*w9 + w29*x[5] + (w3*w6 + w30*x[4])
         w36 = w1*p[17]
         w37 = w157*p[17]
@@ -702,25 +702,25 @@ def _jvp_0_ieee(t, x, p, w, v, out):
         w164 = -w0*w0 + p[10]
         w1 = _c_sqrt(w164)
         w165 = _c_cos(w162)*p[11]
-        w3 = -w0*w165/w1
+        w3 = -numpy.float64(w0*w165)/w1
         w166 = x[5]*x[5]
         w167 = x[4]*x[4]
         w168 = w166 + w167
         w4 = _c_sqrt(w168)
         w169 = 2.0*v[5]*x[5]
         w170 = 2.0*v[4]*x[4]
-        w82 = (w169 + w170)*(0.5/_c_sqrt(w168))
+        w82 = (w169 + w170)*(numpy.float64(0.5)/_c_sqrt(w168))
         w171 = -w1 + x[6]
         w172 = -w0 + x[7]
         w173 = w171*w171 + w172*w172
         w5 = _c_sqrt(w173)
-        w83 = ((-2.0*w0 + 2.0*x[7])*v[7] + (-2.0*w1 + 2.0*x[6])*v[6])*(0.5/_c_sqrt(w173))
+        w83 = ((-2.0*w0 + 2.0*x[7])*v[7] + (-2.0*w1 + 2.0*x[6])*v[6])*(numpy.float64(0.5)/_c_sqrt(w173))
         w6 = p[12]*x[0]
         w84 = p[12]*v[0]
         w174 = -w4 + p[3]
-        w7 = w174*x[4]/w4
-        w175 = 1.0/(w4*w4)
-        w85 = w174*v[4]/w4 - w82*x[4]/w4 - w174*w175*w82*x[4]
+        w7 = numpy.float64(w174*x[4])/w4
+        w175 = numpy.float64(1.0)/(w4*w4)
+        w85 = numpy.float64(w174*v[4])/w4 - numpy.float64(w82*x[4])/w4 - w174*w175*w82*x[4]
         w8 = w1*w6
         w86 = w1*w84
         w9 = p[12]*x[1]
@@ -734,9 +734,9 @@ def _jvp_0_ieee(t, x, p, w, v, out):
         w176 = _c_sqrt(w163*w163*p[13] + p[10])
         w13 = w176*x[4] + w163*p[4]*x[5]
         w91 = w176*v[4] + w163*p[4]*v[5]
-        w15 = -w0*w165/_c_sqrt(w164)
-        w17 = w174*x[5]/w4
-        w92 = w174*v[5]/w4 - w82*x[5]/w4 - w174*w175*w82*x[5]
+        w15 = -numpy.float64(w0*w165)/_c_sqrt(w164)
+        w17 = numpy.float64(w174*x[5])/w4
+        w92 = numpy.float64(w174*v[5])/w4 - numpy.float64(w82*x[5])/w4 - w174*w175*w82*x[5]
         w177 = -2.0*x[6] + 2.0*x[4]
         w18 = w177*w6
         w178 = -2.0*v[6] + 2.0*v[4]
@@ -762,13 +762,13 @@ def _jvp_0_ieee(t, x, p, w, v, out):
         w25 = w166 + w167 + (x[6]*x[6] + x[7]*x[7]) + (-2.0*x[4]*x[6] - 2.0*x[5]*x[7] + p[15])
         w100 = w169 + w170 + (-2.0*v[4]*x[6] - 2.0*v[5]*x[7]) + (-2.0*v[6]*x[4] - 2.0*v[7]*x[5] + (2.0*v[6]*x[6] + 2.0*v[7]*x[7]))
         w185 = -w5 + p[3]
-        w26 = w171*w185/w5
-        w186 = 1.0/(w5*w5)
-        w101 = w185*v[6]/w5 - w171*w83/w5 - w171*w185*w186*w83
-        w28 = w172*w185/w5
-        w102 = w185*v[7]/w5 - w172*w83/w5 - w172*w185*w186*w83
+        w26 = numpy.float64(w171*w185)/w5
+        w186 = numpy.float64(1.0)/(w5*w5)
+        w101 = numpy.float64(w185*v[6])/w5 - numpy.float64(w171*w83)/w5 - w171*w185*w186*w83
+        w28 = numpy.float64(w172*w185)/w5
+        w102 = numpy.float64(w185*v[7])/w5 - numpy.float64(w172*w83)/w5 - w172*w185*w186*w83
         w29 = w163*p[16]
-        w30 = -w165*w165/w1 - w0*w29/w1 + w0*w15*w165/(w1*w1)
+        w30 = -numpy.float64(w165*w165)/w1 - numpy.float64(w0*w29)/w1 + numpy.float64(w0*w15*w165)/(w1*w1)
         w31 = w165*w9 + w29*x[5] + (w3*w6 + w30*x[4])
         w103 = w165*w87 + w29*v[5] + (w3*w84 + w30*v[4])
         w36 = w1*p[17]
@@ -901,7 +901,7 @@ def _residual_into_ieee(t, x, p, out):
         w194 = _c_sqrt(w193)
         out[0] = w194*x[4] + w192*p[4]*x[5]
         w195 = _c_cos(w191)
-        out[1] = w192*p[20]*x[1] + w194*p[12]*x[0] + (w195*p[11]*x[5] + w192*w195*p[21]*x[4]/_c_sqrt(w193))
+        out[1] = w192*p[20]*x[1] + w194*p[12]*x[0] + (w195*p[11]*x[5] + numpy.float64(w192*w195*p[21]*x[4])/_c_sqrt(w193))
         out[2] = x[4]*x[4] + x[5]*x[5] + (x[6]*x[6] + x[7]*x[7]) + (-2.0*x[4]*x[6] - 2.0*x[5]*x[7] + p[15])
         out[3] = (-2.0*x[4] + 2.0*x[6])*p[12]*x[2] + (-2.0*x[5] + 2.0*x[7])*p[12]*x[3] + ((-2.0*x[6] + 2.0*x[4])*p[12]*x[0] + (-2.0*x[7] + 2.0*x[5])*p[12]*x[1])
 
@@ -945,7 +945,7 @@ def _scale_into_ieee(t, x, p, out):
         out[0] = abs(w199*x[4]) + abs(w197*p[4]*x[5])
         w200 = _c_cos(w196)
         w201 = abs(p[12]*x[0]) + abs(p[12]*x[1]) + (abs(p[12]*x[2]) + abs(p[12]*x[3]))
-        out[1] = w201*(abs(w199) + abs(w197*p[4])) + abs(w197*p[20]*x[1]) + abs(w199*p[12]*x[0]) + (abs(w200*p[11]*x[5]) + abs(w197*w200*p[21]*x[4]/_c_sqrt(w198)))
+        out[1] = w201*(abs(w199) + abs(w197*p[4])) + abs(w197*p[20]*x[1]) + abs(w199*p[12]*x[0]) + (abs(w200*p[11]*x[5]) + abs(numpy.float64(w197*w200*p[21]*x[4])/_c_sqrt(w198)))
         out[2] = abs(x[4]*x[4]) + abs(x[5]*x[5]) + (abs(x[6]*x[6]) + abs(x[7]*x[7])) + (abs(-2.0*x[4]*x[6]) + abs(-2.0*x[5]*x[7]) + p[22])
         w202 = -2.0*x[7] + 2.0*x[5]
         w203 = -2.0*x[6] + 2.0*x[4]
@@ -1028,7 +1028,7 @@ def _velocity_jac_into_ieee(t, x, p, out):
         out[0] = _c_sqrt(w209)*p[12]
         out[1] = w208*p[20]
         w210 = _c_cos(w207)
-        out[4] = w208*w210*p[21]/_c_sqrt(w209)
+        out[4] = numpy.float64(w208*w210*p[21])/_c_sqrt(w209)
         out[5] = w210*p[11]
         out[8] = (-2.0*x[6] + 2.0*x[4])*p[12]
         out[9] = (-2.0*x[7] + 2.0*x[5])*p[12]

@@ -187,20 +187,20 @@ def _constants_into_ieee(p, out):
         w220 = p[2]*p[2]
         out[0] = w220
         out[1] = p[4]*p[5]
-        out[2] = 1.0/p[9]
+        out[2] = numpy.float64(1.0)/p[9]
         w221 = p[4]*p[4]
         out[3] = -w221
         out[4] = -p[6]*p[9]
         out[5] = -w220
         out[6] = -p[4]*p[5]*p[5]
-        out[7] = -1.0/p[9]
+        out[7] = -numpy.float64(1.0)/p[9]
         out[8] = -p[8]*p[8]
         out[9] = -2.0*p[7]
-        out[10] = p[4]/p[9]
+        out[10] = numpy.float64(p[4])/p[9]
         out[11] = -w221*p[5]
         out[12] = abs(-w220)
-        out[13] = -2.0/p[9]
-        out[14] = 2.0/p[9]
+        out[13] = -numpy.float64(2.0)/p[9]
+        out[14] = numpy.float64(2.0)/p[9]
 
 
 
@@ -228,7 +228,7 @@ def _init_into(p, out):
 def _init_into_ieee(p, out):
     with numpy.errstate(all="ignore"):
         p = numpy.asarray(p, dtype=numpy.float64)
-        w155 = -p[3]*p[9]/p[2]
+        w155 = -numpy.float64(p[3]*p[9])/p[2]
         out[0] = w155
         out[1] = 0.0
         out[2] = w155
@@ -373,7 +373,7 @@ def _rhs_0_ieee(t, x, p, w, out):
         w158 = -w0*w0 + p[10]
         w1 = _c_sqrt(w158)
         w159 = _c_cos(w156)*p[11]
-        w3 = -w0*w159/w1
+        w3 = -numpy.float64(w0*w159)/w1
         w160 = x[5]*x[5]
         w161 = x[4]*x[4]
         w4 = _c_sqrt(w160 + w161)
@@ -382,7 +382,7 @@ def _rhs_0_ieee(t, x, p, w, out):
         w5 = _c_sqrt(w162*w162 + w163*w163)
         w6 = p[12]*x[0]
         w164 = -w4 + p[3]
-        w7 = w164*x[4]/w4
+        w7 = numpy.float64(w164*x[4])/w4
         w8 = w1*w6
         w9 = p[12]*x[1]
         w10 = w0*w9
@@ -390,8 +390,8 @@ def _rhs_0_ieee(t, x, p, w, out):
         w12 = w159*x[5] + w3*x[4]
         w13 = w11 + w12
         w14 = _c_sqrt(w157*w157*p[13] + p[10])*x[4] + w157*p[4]*x[5]
-        w16 = -w0*w159/_c_sqrt(w158)
-        w18 = w164*x[5]/w4
+        w16 = -numpy.float64(w0*w159)/_c_sqrt(w158)
+        w18 = numpy.float64(w164*x[5])/w4
         w165 = -2.0*x[6] + 2.0*x[4]
         w19 = w165*w6
         w166 = -2.0*x[7] + 2.0*x[5]
@@ -405,10 +405,10 @@ def _rhs_0_ieee(t, x, p, w, out):
         w25 = w19 + w20 + (w22 + w24)
         w26 = w160 + w161 + (x[6]*x[6] + x[7]*x[7]) + (-2.0*x[4]*x[6] - 2.0*x[5]*x[7] + p[15])
         w169 = -w5 + p[3]
-        w27 = w162*w169/w5
-        w29 = w163*w169/w5
+        w27 = numpy.float64(w162*w169)/w5
+        w29 = numpy.float64(w163*w169)/w5
         w30 = w157*p[16]
-        w31 = -w159*w159/w1 - w0*w30/w1 + w0*w159*w16/(w1*w1)
+        w31 = -numpy.float64(w159*w159)/w1 - numpy.float64(w0*w30)/w1 + numpy.float64(w0*w159*w16)/(w1*w1)
         w32 = w159*w9 + w3*w6 + (w30*x[5] + w31*x[4])
         w37 = w1*p[17]
         w38 = w165*p[17]
@@ -716,25 +716,25 @@ def _jvp_0_ieee(t, x, p, w, v, out):
         w172 = -w0*w0 + p[10]
         w1 = _c_sqrt(w172)
         w173 = _c_cos(w170)*p[11]
-        w3 = -w0*w173/w1
+        w3 = -numpy.float64(w0*w173)/w1
         w174 = x[5]*x[5]
         w175 = x[4]*x[4]
         w176 = w174 + w175
         w4 = _c_sqrt(w176)
         w177 = 2.0*v[5]*x[5]
         w178 = 2.0*v[4]*x[4]
-        w86 = (w177 + w178)*(0.5/_c_sqrt(w176))
+        w86 = (w177 + w178)*(numpy.float64(0.5)/_c_sqrt(w176))
         w179 = -w1 + x[6]
         w180 = -w0 + x[7]
         w181 = w179*w179 + w180*w180
         w5 = _c_sqrt(w181)
-        w87 = ((-2.0*w0 + 2.0*x[7])*v[7] + (-2.0*w1 + 2.0*x[6])*v[6])*(0.5/_c_sqrt(w181))
+        w87 = ((-2.0*w0 + 2.0*x[7])*v[7] + (-2.0*w1 + 2.0*x[6])*v[6])*(numpy.float64(0.5)/_c_sqrt(w181))
         w6 = p[12]*x[0]
         w88 = p[12]*v[0]
         w182 = -w4 + p[3]
-        w7 = w182*x[4]/w4
-        w183 = 1.0/(w4*w4)
-        w89 = w182*v[4]/w4 - w86*x[4]/w4 - w182*w183*w86*x[4]
+        w7 = numpy.float64(w182*x[4])/w4
+        w183 = numpy.float64(1.0)/(w4*w4)
+        w89 = numpy.float64(w182*v[4])/w4 - numpy.float64(w86*x[4])/w4 - w182*w183*w86*x[4]
         w8 = w1*w6
         w90 = w1*w88
         w9 = p[12]*x[1]
@@ -750,9 +750,9 @@ def _jvp_0_ieee(t, x, p, w, v, out):
         w184 = _c_sqrt(w171*w171*p[13] + p[10])
         w14 = w184*x[4] + w171*p[4]*x[5]
         w96 = w184*v[4] + w171*p[4]*v[5]
-        w16 = -w0*w173/_c_sqrt(w172)
-        w18 = w182*x[5]/w4
-        w97 = w182*v[5]/w4 - w86*x[5]/w4 - w182*w183*w86*x[5]
+        w16 = -numpy.float64(w0*w173)/_c_sqrt(w172)
+        w18 = numpy.float64(w182*x[5])/w4
+        w97 = numpy.float64(w182*v[5])/w4 - numpy.float64(w86*x[5])/w4 - w182*w183*w86*x[5]
         w185 = -2.0*x[6] + 2.0*x[4]
         w19 = w185*w6
         w186 = -2.0*v[6] + 2.0*v[4]
@@ -778,13 +778,13 @@ def _jvp_0_ieee(t, x, p, w, v, out):
         w26 = w174 + w175 + (x[6]*x[6] + x[7]*x[7]) + (-2.0*x[4]*x[6] - 2.0*x[5]*x[7] + p[15])
         w105 = w177 + w178 + (-2.0*v[4]*x[6] - 2.0*v[5]*x[7]) + (-2.0*v[6]*x[4] - 2.0*v[7]*x[5] + (2.0*v[6]*x[6] + 2.0*v[7]*x[7]))
         w193 = -w5 + p[3]
-        w27 = w179*w193/w5
-        w194 = 1.0/(w5*w5)
-        w106 = w193*v[6]/w5 - w179*w87/w5 - w179*w193*w194*w87
-        w29 = w180*w193/w5
-        w107 = w193*v[7]/w5 - w180*w87/w5 - w180*w193*w194*w87
+        w27 = numpy.float64(w179*w193)/w5
+        w194 = numpy.float64(1.0)/(w5*w5)
+        w106 = numpy.float64(w193*v[6])/w5 - numpy.float64(w179*w87)/w5 - w179*w193*w194*w87
+        w29 = numpy.float64(w180*w193)/w5
+        w107 = numpy.float64(w193*v[7])/w5 - numpy.float64(w180*w87)/w5 - w180*w193*w194*w87
         w30 = w171*p[16]
-        w31 = -w173*w173/w1 - w0*w30/w1 + w0*w16*w173/(w1*w1)
+        w31 = -numpy.float64(w173*w173)/w1 - numpy.float64(w0*w30)/w1 + numpy.float64(w0*w16*w173)/(w1*w1)
         w32 = w173*w9 + w3*w6 + (w30*x[5] + w31*x[4])
         w108 = w173*w91 + w3*w88 + (w30*v[5] + w31*v[4])
         w37 = w1*p[17]
@@ -921,7 +921,7 @@ def _residual_into_ieee(t, x, p, out):
         w202 = _c_sqrt(w201)
         out[0] = w202*x[4] + w200*p[4]*x[5]
         w203 = _c_cos(w199)
-        out[1] = w200*p[20]*x[1] + w202*p[12]*x[0] + (w203*p[11]*x[5] + w200*w203*p[21]*x[4]/_c_sqrt(w201))
+        out[1] = w200*p[20]*x[1] + w202*p[12]*x[0] + (w203*p[11]*x[5] + numpy.float64(w200*w203*p[21]*x[4])/_c_sqrt(w201))
         out[2] = x[4]*x[4] + x[5]*x[5] + (x[6]*x[6] + x[7]*x[7]) + (-2.0*x[4]*x[6] - 2.0*x[5]*x[7] + p[15])
         out[3] = (-2.0*x[4] + 2.0*x[6])*p[12]*x[2] + (-2.0*x[5] + 2.0*x[7])*p[12]*x[3] + ((-2.0*x[6] + 2.0*x[4])*p[12]*x[0] + (-2.0*x[7] + 2.0*x[5])*p[12]*x[1])
 
@@ -965,7 +965,7 @@ def _scale_into_ieee(t, x, p, out):
         out[0] = abs(w207*x[4]) + abs(w205*p[4]*x[5])
         w208 = _c_cos(w204)
         w209 = abs(p[12]*x[0]) + abs(p[12]*x[1]) + (abs(p[12]*x[2]) + abs(p[12]*x[3]))
-        out[1] = w209*(abs(w207) + abs(w205*p[4])) + abs(w205*p[20]*x[1]) + abs(w207*p[12]*x[0]) + (abs(w208*p[11]*x[5]) + abs(w205*w208*p[21]*x[4]/_c_sqrt(w206)))
+        out[1] = w209*(abs(w207) + abs(w205*p[4])) + abs(w205*p[20]*x[1]) + abs(w207*p[12]*x[0]) + (abs(w208*p[11]*x[5]) + abs(numpy.float64(w205*w208*p[21]*x[4])/_c_sqrt(w206)))
         out[2] = abs(x[4]*x[4]) + abs(x[5]*x[5]) + (abs(x[6]*x[6]) + abs(x[7]*x[7])) + (abs(-2.0*x[4]*x[6]) + abs(-2.0*x[5]*x[7]) + p[22])
         w210 = -2.0*x[7] + 2.0*x[5]
         w211 = -2.0*x[6] + 2.0*x[4]
@@ -1048,7 +1048,7 @@ def _velocity_jac_into_ieee(t, x, p, out):
         out[0] = _c_sqrt(w217)*p[12]
         out[1] = w216*p[20]
         w218 = _c_cos(w215)
-        out[4] = w216*w218*p[21]/_c_sqrt(w217)
+        out[4] = numpy.float64(w216*w218*p[21])/_c_sqrt(w217)
         out[5] = w218*p[11]
         out[8] = (-2.0*x[6] + 2.0*x[4])*p[12]
         out[9] = (-2.0*x[7] + 2.0*x[5])*p[12]

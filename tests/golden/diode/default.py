@@ -143,10 +143,10 @@ def _constants_into(p, out):
 def _constants_into_ieee(p, out):
     with numpy.errstate(all="ignore"):
         p = numpy.asarray(p, dtype=numpy.float64)
-        out[0] = 1.0/p[4]
-        out[1] = 1.0/p[3]
+        out[0] = numpy.float64(1.0)/p[4]
+        out[1] = numpy.float64(1.0)/p[3]
         out[2] = -p[0]
-        out[3] = p[2]/p[3]
+        out[3] = numpy.float64(p[2])/p[3]
 
 
 

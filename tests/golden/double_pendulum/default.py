@@ -181,24 +181,24 @@ def _constants_into(p, out):
 def _constants_into_ieee(p, out):
     with numpy.errstate(all="ignore"):
         p = numpy.asarray(p, dtype=numpy.float64)
-        out[0] = 1.0/p[0]
+        out[0] = numpy.float64(1.0)/p[0]
         w156 = -p[2]*p[2]
         out[1] = w156
         out[2] = p[0]*p[4]
-        out[3] = 1.0/p[1]
+        out[3] = numpy.float64(1.0)/p[1]
         w157 = -p[3]*p[3]
         out[4] = w157
         out[5] = p[1]*p[4]
-        out[6] = -1.0/p[1]
-        out[7] = -1.0/p[0]
+        out[6] = -numpy.float64(1.0)/p[1]
+        out[7] = -numpy.float64(1.0)/p[0]
         out[8] = -p[8]*p[8]
         out[9] = -2.0*p[7]
-        out[10] = 2.0/p[0]
+        out[10] = numpy.float64(2.0)/p[0]
         out[11] = abs(w156)
         out[12] = abs(w157)
-        out[13] = -2.0/p[1]
-        out[14] = -2.0/p[0]
-        out[15] = 2.0/p[1]
+        out[13] = -numpy.float64(2.0)/p[1]
+        out[14] = -numpy.float64(2.0)/p[0]
+        out[15] = numpy.float64(2.0)/p[1]
 
 
 

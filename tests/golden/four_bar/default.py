@@ -187,11 +187,11 @@ def _fill_params_ieee(p, given):
         if 12 not in given:
             p[12] = _c_sqrt(_sq(-p[10] + p[5]) + p[11]*p[11])
         if 13 not in given:
-            p[13] = (-p[10] + p[5])/p[12]
+            p[13] = numpy.float64((-p[10] + p[5]))/p[12]
         if 14 not in given:
-            p[14] = -p[11]/p[12]
+            p[14] = -numpy.float64(p[11])/p[12]
         if 15 not in given:
-            p[15] = (p[3]*p[3] + p[12]*p[12] - p[4]*p[4])*(0.5/p[12])
+            p[15] = (p[3]*p[3] + p[12]*p[12] - p[4]*p[4])*(numpy.float64(0.5)/p[12])
         if 16 not in given:
             p[16] = _c_sqrt(p[3]*p[3] - p[15]*p[15])
         if 17 not in given:
@@ -233,11 +233,11 @@ def _constants_into(p, out):
 def _constants_into_ieee(p, out):
     with numpy.errstate(all="ignore"):
         p = numpy.asarray(p, dtype=numpy.float64)
-        out[0] = 1.0/p[0]
+        out[0] = numpy.float64(1.0)/p[0]
         w220 = -p[2]*p[2]
         out[1] = w220
         out[2] = p[0]*p[6]
-        out[3] = 1.0/p[1]
+        out[3] = numpy.float64(1.0)/p[1]
         w221 = -p[3]*p[3]
         out[4] = w221
         out[5] = -2.0*p[5]
@@ -245,17 +245,17 @@ def _constants_into_ieee(p, out):
         w223 = p[5]*p[5]
         out[6] = w222 + w223
         out[7] = p[1]*p[6]
-        out[8] = -1.0/p[0]
-        out[9] = -1.0/p[1]
+        out[8] = -numpy.float64(1.0)/p[0]
+        out[9] = -numpy.float64(1.0)/p[1]
         out[10] = -p[9]*p[9]
         out[11] = -2.0*p[8]
-        out[12] = 2.0/p[0]
-        out[13] = 2.0/p[1]
+        out[12] = numpy.float64(2.0)/p[0]
+        out[13] = numpy.float64(2.0)/p[1]
         out[14] = abs(w220)
         out[15] = abs(w221)
         out[16] = abs(w222) + abs(w223)
-        out[17] = -2.0/p[1]
-        out[18] = -2.0/p[0]
+        out[17] = -numpy.float64(2.0)/p[1]
+        out[18] = -numpy.float64(2.0)/p[0]
 
 
 

@@ -245,29 +245,29 @@ def _constants_into(p, out):
 def _constants_into_ieee(p, out):
     with numpy.errstate(all="ignore"):
         p = numpy.asarray(p, dtype=numpy.float64)
-        out[0] = 1.0/p[2]
-        out[1] = 1.0/p[4]
-        out[2] = 1.0/p[10]
+        out[0] = numpy.float64(1.0)/p[2]
+        out[1] = numpy.float64(1.0)/p[4]
+        out[2] = numpy.float64(1.0)/p[10]
         w114 = -p[11]*p[11]
         out[3] = w114
         out[4] = p[10]*p[12]
-        out[5] = -1.0/p[10]
+        out[5] = -numpy.float64(1.0)/p[10]
         out[6] = -p[15]*p[15]
         out[7] = -2.0*p[14]
-        out[8] = 1.0/p[17]
-        out[9] = 1.0/p[19]
-        out[10] = 1.0/p[18]
+        out[8] = numpy.float64(1.0)/p[17]
+        out[9] = numpy.float64(1.0)/p[19]
+        out[10] = numpy.float64(1.0)/p[18]
         out[11] = -p[16]
-        out[12] = 1.0/p[20]
-        out[13] = 1.0/p[21]
-        out[14] = 1.0/p[23]
+        out[12] = numpy.float64(1.0)/p[20]
+        out[13] = numpy.float64(1.0)/p[21]
+        out[14] = numpy.float64(1.0)/p[23]
         out[15] = 2.0*p[1]
-        out[16] = 2.0/p[10]
-        out[17] = p[7]/p[4]
+        out[16] = numpy.float64(2.0)/p[10]
+        out[17] = numpy.float64(p[7])/p[4]
         out[18] = abs(w114)
-        out[19] = -2.0/p[10]
-        out[20] = 2.0*p[7]/p[4]
-        out[21] = -2.0*p[7]/p[4]
+        out[19] = -numpy.float64(2.0)/p[10]
+        out[20] = numpy.float64(2.0*p[7])/p[4]
+        out[21] = -numpy.float64(2.0*p[7])/p[4]
 
 
 

@@ -237,21 +237,21 @@ def _constants_into(p, out):
 def _constants_into_ieee(p, out):
     with numpy.errstate(all="ignore"):
         p = numpy.asarray(p, dtype=numpy.float64)
-        out[0] = 1.0/p[2]
-        out[1] = 1.0/p[4]
-        out[2] = 1.0/p[10]
+        out[0] = numpy.float64(1.0)/p[2]
+        out[1] = numpy.float64(1.0)/p[4]
+        out[2] = numpy.float64(1.0)/p[10]
         w87 = -p[11]*p[11]
         out[3] = w87
         out[4] = p[10]*p[12]
-        out[5] = -1.0/p[10]
+        out[5] = -numpy.float64(1.0)/p[10]
         out[6] = -p[15]*p[15]
         out[7] = -2.0*p[14]
-        out[8] = 2.0/p[10]
-        out[9] = p[7]/p[4]
+        out[8] = numpy.float64(2.0)/p[10]
+        out[9] = numpy.float64(p[7])/p[4]
         out[10] = abs(w87)
-        out[11] = -2.0/p[10]
-        out[12] = 2.0*p[7]/p[4]
-        out[13] = -2.0*p[7]/p[4]
+        out[11] = -numpy.float64(2.0)/p[10]
+        out[12] = numpy.float64(2.0*p[7])/p[4]
+        out[13] = -numpy.float64(2.0*p[7])/p[4]
 
 
 

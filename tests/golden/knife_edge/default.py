@@ -141,12 +141,12 @@ def _constants_into(p, out):
 def _constants_into_ieee(p, out):
     with numpy.errstate(all="ignore"):
         p = numpy.asarray(p, dtype=numpy.float64)
-        out[0] = 1.0/p[0]
-        out[1] = 1.0/p[1]
+        out[0] = numpy.float64(1.0)/p[0]
+        out[1] = numpy.float64(1.0)/p[1]
         out[2] = p[0]*p[4]
         out[3] = p[0]*p[10]
         out[4] = -p[0]
-        out[5] = -1.0/p[0]
+        out[5] = -numpy.float64(1.0)/p[0]
 
 
 
@@ -226,7 +226,7 @@ def _rhs_0_ieee(t, x, p, w, out):
         w3 = w2*w21
         w4 = w1 + w3
         w5 = p[12]*x[2]
-        w7 = (w21*p[13] + w4*p[14] + (w0*w21*w5*p[15] + w2*w20*w5*p[15]))/(w20*w20 + w21*w21)
+        w7 = numpy.float64((w21*p[13] + w4*p[14] + (w0*w21*w5*p[15] + w2*w20*w5*p[15])))/(w20*w20 + w21*w21)
         w8 = -w20*w7
         w9 = w21*w7
         w10 = -w9 + p[13]
@@ -328,8 +328,8 @@ def _jvp_0_ieee(t, x, p, w, v, out):
         w15 = w12 + w14
         w5 = p[12]*x[2]
         w16 = p[12]*v[2]
-        w7 = (w23*p[13] + w4*p[14] + (w0*w23*w5*p[15] + w2*w22*w5*p[15]))/(w22*w22 + w23*w23)
-        w17 = (w15*p[14] - w22*p[13]*v[5] + (w0*w16*w23*p[15] + w11*w23*w5*p[15]) + (w13*w22*w5*p[15] + w16*w2*w22*p[15] + (w0*w22*w5*p[0]*v[5] + w2*w23*w5*p[15]*v[5])))/(w22*w22 + w23*w23)
+        w7 = numpy.float64((w23*p[13] + w4*p[14] + (w0*w23*w5*p[15] + w2*w22*w5*p[15])))/(w22*w22 + w23*w23)
+        w17 = numpy.float64((w15*p[14] - w22*p[13]*v[5] + (w0*w16*w23*p[15] + w11*w23*w5*p[15]) + (w13*w22*w5*p[15] + w16*w2*w22*p[15] + (w0*w22*w5*p[0]*v[5] + w2*w23*w5*p[15]*v[5]))))/(w22*w22 + w23*w23)
         w18 = -w17*w22 - w23*w7*v[5]
         w19 = w17*w23 - w22*w7*v[5]
         out[0] = -w18

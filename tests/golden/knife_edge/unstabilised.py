@@ -140,11 +140,11 @@ def _constants_into(p, out):
 def _constants_into_ieee(p, out):
     with numpy.errstate(all="ignore"):
         p = numpy.asarray(p, dtype=numpy.float64)
-        out[0] = 1.0/p[0]
-        out[1] = 1.0/p[1]
+        out[0] = numpy.float64(1.0)/p[0]
+        out[1] = numpy.float64(1.0)/p[1]
         out[2] = p[0]*p[4]
         out[3] = -p[0]
-        out[4] = -1.0/p[0]
+        out[4] = -numpy.float64(1.0)/p[0]
 
 
 
@@ -218,7 +218,7 @@ def _rhs_0_ieee(t, x, p, w, out):
         w2 = p[11]*x[1]
         w17 = _c_sin(x[5])
         w18 = _c_cos(x[5])
-        w4 = (w18*p[13] + w0*w1*w18*p[14] + w1*w17*w2*p[14])/(w17*w17 + w18*w18)
+        w4 = numpy.float64((w18*p[13] + w0*w1*w18*p[14] + w1*w17*w2*p[14]))/(w17*w17 + w18*w18)
         w5 = -w17*w4
         w6 = w18*w4
         w7 = -w6 + p[13]
@@ -270,7 +270,7 @@ def _outputs_0_ieee(t, x, p, w, out):
         w2 = p[11]*x[1]
         w19 = _c_sin(x[5])
         w20 = _c_cos(x[5])
-        w4 = (w20*p[13] + w0*w1*w20*p[14] + w1*w19*w2*p[14])/(w19*w19 + w20*w20)
+        w4 = numpy.float64((w20*p[13] + w0*w1*w20*p[14] + w1*w19*w2*p[14]))/(w19*w19 + w20*w20)
         w8 = -w0*w19
         w9 = w2*w20
         w10 = w8 + w9
@@ -328,8 +328,8 @@ def _jvp_0_ieee(t, x, p, w, v, out):
         w13 = p[11]*v[1]
         w21 = _c_sin(x[5])
         w22 = _c_cos(x[5])
-        w4 = (w22*p[13] + w0*w1*w22*p[14] + w1*w2*w21*p[14])/(w21*w21 + w22*w22)
-        w14 = (-w21*p[13]*v[5] + w0*w12*w22*p[14] + (w1*w11*w22*p[14] + w1*w13*w21*p[14]) + (w12*w2*w21*p[14] + w0*w1*w21*p[0]*v[5] + w1*w2*w22*p[14]*v[5]))/(w21*w21 + w22*w22)
+        w4 = numpy.float64((w22*p[13] + w0*w1*w22*p[14] + w1*w2*w21*p[14]))/(w21*w21 + w22*w22)
+        w14 = numpy.float64((-w21*p[13]*v[5] + w0*w12*w22*p[14] + (w1*w11*w22*p[14] + w1*w13*w21*p[14]) + (w12*w2*w21*p[14] + w0*w1*w21*p[0]*v[5] + w1*w2*w22*p[14]*v[5])))/(w21*w21 + w22*w22)
         w15 = -w14*w21 - w22*w4*v[5]
         w16 = w14*w22 - w21*w4*v[5]
         out[0] = -w15

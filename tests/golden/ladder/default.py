@@ -163,11 +163,11 @@ def _constants_into(p, out):
 def _constants_into_ieee(p, out):
     with numpy.errstate(all="ignore"):
         p = numpy.asarray(p, dtype=numpy.float64)
-        out[0] = 1.0/p[6]
-        out[1] = 1.0/p[5]
-        out[2] = 1.0/p[4]
-        out[3] = 1.0/p[2]
-        out[4] = -1.0/p[5]
+        out[0] = numpy.float64(1.0)/p[6]
+        out[1] = numpy.float64(1.0)/p[5]
+        out[2] = numpy.float64(1.0)/p[4]
+        out[3] = numpy.float64(1.0)/p[2]
+        out[4] = -numpy.float64(1.0)/p[5]
 
 
 

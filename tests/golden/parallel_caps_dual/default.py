@@ -122,13 +122,13 @@ def _constants_into(p, out):
 def _constants_into_ieee(p, out):
     with numpy.errstate(all="ignore"):
         p = numpy.asarray(p, dtype=numpy.float64)
-        out[0] = 1.0/p[2]
-        out[1] = 1.0/p[1]
-        out[2] = 1.0/p[3]
+        out[0] = numpy.float64(1.0)/p[2]
+        out[1] = numpy.float64(1.0)/p[1]
+        out[2] = numpy.float64(1.0)/p[3]
         out[3] = p[2]*p[5]
-        out[4] = p[3]/(p[2] + p[3])
-        out[5] = -1.0/p[1]
-        out[6] = -1.0/p[3]
+        out[4] = numpy.float64(p[3])/(p[2] + p[3])
+        out[5] = -numpy.float64(1.0)/p[1]
+        out[6] = -numpy.float64(1.0)/p[3]
 
 
 

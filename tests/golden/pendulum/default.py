@@ -125,7 +125,7 @@ def _constants_into(p, out):
 def _constants_into_ieee(p, out):
     with numpy.errstate(all="ignore"):
         p = numpy.asarray(p, dtype=numpy.float64)
-        out[0] = 1.0/p[0]
+        out[0] = numpy.float64(1.0)/p[0]
         w27 = -p[1]*p[1]
         out[1] = w27
         out[2] = p[0]*p[2]
@@ -133,7 +133,7 @@ def _constants_into_ieee(p, out):
         out[4] = p[0]*p[5]*p[5]
         out[5] = 2.0*p[0]*p[4]
         out[6] = 4.0*p[0]
-        out[7] = 2.0/p[0]
+        out[7] = numpy.float64(2.0)/p[0]
         out[8] = abs(w27)
 
 
@@ -208,7 +208,7 @@ def _rhs_0_ieee(t, x, p, w, out):
         w20 = x[3]*x[3]
         w21 = x[2]*x[2]
         w5 = w20 + w21 + p[7]
-        w7 = (w4*p[11] + w5*p[10] + w0*w0*p[9] + (w2*w2*p[9] + 2.0*p[8]*x[3]))*(0.25/(w20 + w21))
+        w7 = (w4*p[11] + w5*p[10] + w0*w0*p[9] + (w2*w2*p[9] + 2.0*p[8]*x[3]))*(numpy.float64(0.25)/(w20 + w21))
         w8 = 2.0*w7*x[2]
         w9 = 2.0*w7*x[3]
         w10 = -w9 + p[8]
@@ -306,8 +306,8 @@ def _jvp_0_ieee(t, x, p, w, v, out):
         w24 = 2.0*v[2]*x[2] + 2.0*v[3]*x[3]
         w25 = w4*p[11] + w5*p[10] + w0*w0*p[9] + (w2*w2*p[9] + 2.0*p[8]*x[3])
         w26 = w22 + w23
-        w7 = 0.25*w25/w26
-        w17 = (w15*p[11] + w24*p[10] + 2.0*p[8]*v[3] + (w0*w11*p[12] + w13*w2*p[12]))*(0.25/w26) - 0.25*w24*w25/(w26*w26)
+        w7 = numpy.float64(0.25*w25)/w26
+        w17 = (w15*p[11] + w24*p[10] + 2.0*p[8]*v[3] + (w0*w11*p[12] + w13*w2*p[12]))*(numpy.float64(0.25)/w26) - numpy.float64(0.25*w24*w25)/(w26*w26)
         w18 = 2.0*w17*x[2] + 2.0*w7*v[2]
         w19 = 2.0*w17*x[3] + 2.0*w7*v[3]
         out[0] = -w18

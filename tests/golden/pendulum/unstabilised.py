@@ -122,12 +122,12 @@ def _constants_into(p, out):
 def _constants_into_ieee(p, out):
     with numpy.errstate(all="ignore"):
         p = numpy.asarray(p, dtype=numpy.float64)
-        out[0] = 1.0/p[0]
+        out[0] = numpy.float64(1.0)/p[0]
         out[1] = p[0]*p[2]
         w17 = -p[1]*p[1]
         out[2] = w17
         out[3] = 2.0*p[0]
-        out[4] = 2.0/p[0]
+        out[4] = numpy.float64(2.0)/p[0]
         out[5] = abs(w17)
 
 
@@ -190,7 +190,7 @@ def _rhs_0_ieee(t, x, p, w, out):
         p = numpy.asarray(p, dtype=numpy.float64)
         w0 = p[6]*x[0]
         w1 = p[6]*x[1]
-        w3 = (w0*w0*p[0] + w1*w1*p[0] + p[7]*x[3])*(0.5/(x[2]*x[2] + x[3]*x[3]))
+        w3 = (w0*w0*p[0] + w1*w1*p[0] + p[7]*x[3])*(numpy.float64(0.5)/(x[2]*x[2] + x[3]*x[3]))
         w4 = 2.0*w3*x[2]
         w5 = 2.0*w3*x[3]
         w6 = -w5 + p[7]
@@ -233,7 +233,7 @@ def _outputs_0_ieee(t, x, p, w, out):
         w1 = p[6]*x[1]
         w13 = x[3]*x[3]
         w14 = x[2]*x[2]
-        w3 = (w0*w0*p[0] + w1*w1*p[0] + p[7]*x[3])*(0.5/(w13 + w14))
+        w3 = (w0*w0*p[0] + w1*w1*p[0] + p[7]*x[3])*(numpy.float64(0.5)/(w13 + w14))
         w7 = w13 + w14 + p[8]
         out[0] = x[2]
         out[1] = x[3]
@@ -280,8 +280,8 @@ def _jvp_0_ieee(t, x, p, w, v, out):
         w9 = p[6]*v[1]
         w15 = w0*w0*p[0] + w1*w1*p[0] + p[7]*x[3]
         w16 = x[2]*x[2] + x[3]*x[3]
-        w3 = 0.5*w15/w16
-        w10 = (p[7]*v[3] + w0*w8*p[9] + w1*w9*p[9])*(0.5/w16) - (2.0*v[2]*x[2] + 2.0*v[3]*x[3])*(0.5*w15/(w16*w16))
+        w3 = numpy.float64(0.5*w15)/w16
+        w10 = (p[7]*v[3] + w0*w8*p[9] + w1*w9*p[9])*(numpy.float64(0.5)/w16) - (2.0*v[2]*x[2] + 2.0*v[3]*x[3])*(numpy.float64(0.5*w15)/(w16*w16))
         w11 = 2.0*w10*x[2] + 2.0*w3*v[2]
         w12 = 2.0*w10*x[3] + 2.0*w3*v[3]
         out[0] = -w11

@@ -176,22 +176,22 @@ def _constants_into(p, out):
 def _constants_into_ieee(p, out):
     with numpy.errstate(all="ignore"):
         p = numpy.asarray(p, dtype=numpy.float64)
-        out[0] = 1.0/p[0]
+        out[0] = numpy.float64(1.0)/p[0]
         w67 = -p[1]*p[1]
         out[1] = w67
         out[2] = p[0]*p[2]
-        out[3] = -1.0/p[0]
+        out[3] = -numpy.float64(1.0)/p[0]
         w68 = p[7]*p[7]
         out[4] = -w68
         out[5] = -2.0*p[6]
         out[6] = w68
         out[7] = 2.0*p[6]
-        out[8] = 2.0/p[0]
+        out[8] = numpy.float64(2.0)/p[0]
         out[9] = abs(w67)
         out[10] = -p[4]
-        out[11] = -p[5]*p[5]/20.0
-        out[12] = -p[5]/p[0]
-        out[13] = -2.0/p[0]
+        out[11] = -numpy.float64(p[5]*p[5])/20.0
+        out[12] = -numpy.float64(p[5])/p[0]
+        out[13] = -numpy.float64(2.0)/p[0]
         out[14] = 0.5*p[0]
 
 
@@ -705,12 +705,12 @@ def _update_0_ieee(t, x, p, w, r, out):
         w60 = w58*p[5]
         w61 = (0.0 if ((w52 < 0.0) and ((w60 <= 9.9999999999999995e-07*w59) or (w.atol*w24*p[8] <= w58*w58*p[19]))) else (p[20]*x[0] if (w52 < 0.0) else w52))
         w62 = w56 + w57 - 2.0*(w55 + w61)*x[2]
-        w63 = 1.0/(x[3]*x[3])
+        w63 = numpy.float64(1.0)/(x[3]*x[3])
         w64 = max(0.0, w58)
         w65 = (0.0 if ((w52 < 0.0) and ((w60 <= 9.9999999999999995e-07*w64) or (w.atol*w24*p[8] <= w58*w58*p[19]))) else (p[20]*x[0] if (w52 < 0.0) else w52))
         w66 = w56 + w57 - 2.0*(w55 + w65)*x[2]
         out[0] = (((w55 + w65 - 0.5*w63*w66*x[2])*p[0] + w63*w66*p[22]*x[2] + x[0] if (r[2] != 0.0) else (w55 + w61 - 0.5*w62*w63*x[2])*p[0] + w62*w63*p[22]*x[2] + x[0]) if (((((r[2] == 0.0) and (r[0] != 0.0)) or ((r[2] != 0.0) and (min(-x[2] + p[18], w55) > 0.0))) and (not (((r[2] == 0.0) and (p[23] != 0.0)) or ((r[2] != 0.0) and (((r[2] == 0.0) and (r[0] != 0.0)) or ((r[2] != 0.0) and (min(-x[2] + p[18], w55) > 0.0))))))) if (w53 > 0.0) else ((r[2] == 0.0) and (r[0] != 0.0) and (not ((r[2] == 0.0) and (p[23] != 0.0))))) else x[0])
-        out[1] = ((w66*p[22]/x[3] + x[1] if (r[2] != 0.0) else w62*p[22]/x[3] + x[1]) if (((((r[2] == 0.0) and (r[0] != 0.0)) or ((r[2] != 0.0) and (min(-x[2] + p[18], w55) > 0.0))) and (not (((r[2] == 0.0) and (p[23] != 0.0)) or ((r[2] != 0.0) and (((r[2] == 0.0) and (r[0] != 0.0)) or ((r[2] != 0.0) and (min(-x[2] + p[18], w55) > 0.0))))))) if (w53 > 0.0) else ((r[2] == 0.0) and (r[0] != 0.0) and (not ((r[2] == 0.0) and (p[23] != 0.0))))) else x[1])
+        out[1] = ((numpy.float64(w66*p[22])/x[3] + x[1] if (r[2] != 0.0) else numpy.float64(w62*p[22])/x[3] + x[1]) if (((((r[2] == 0.0) and (r[0] != 0.0)) or ((r[2] != 0.0) and (min(-x[2] + p[18], w55) > 0.0))) and (not (((r[2] == 0.0) and (p[23] != 0.0)) or ((r[2] != 0.0) and (((r[2] == 0.0) and (r[0] != 0.0)) or ((r[2] != 0.0) and (min(-x[2] + p[18], w55) > 0.0))))))) if (w53 > 0.0) else ((r[2] == 0.0) and (r[0] != 0.0) and (not ((r[2] == 0.0) and (p[23] != 0.0))))) else x[1])
         out[2] = x[2]
         out[3] = x[3]
         out[4] = (1.0 if ((((r[2] == 0.0) and (r[0] != 0.0)) or ((r[2] != 0.0) and (min(-x[2] + p[18], w55) > 0.0))) if (w53 > 0.0) else ((r[2] == 0.0) and (r[0] != 0.0))) else 0.0)

@@ -1892,7 +1892,8 @@ def _handle_event(run, t, x):
         run.kout_ev, run.events_out = run.kout, run.st["events"] - 1
         run.out_from = run.passes
     scale = max(abs(t), abs(run.t_event))
-    if t - run.t_event <= max(1e-12 * scale, _hmin(t)):
+    # (the run's first event has none before it: t_event is -inf, and so is the scale)
+    if math.isfinite(run.t_event) and t - run.t_event <= max(1e-12 * scale, _hmin(t)):
         run.chain += 1
     else:
         run.chain, run.chain_from = 0, run.passes

@@ -210,7 +210,7 @@ def _fill_params_ieee(p, given):
         if 3 not in given:
             p[3] = 0.5
         if 4 not in given:
-            p[4] = p[1]*p[1]*p[3]/12.0
+            p[4] = numpy.float64(p[1]*p[1]*p[3])/12.0
         if 5 not in given:
             p[5] = 1.0
         if 6 not in given:
@@ -220,7 +220,7 @@ def _fill_params_ieee(p, given):
         if 8 not in given:
             p[8] = 0.29999999999999999
         if 9 not in given:
-            p[9] = _c_asin(_c_sin(p[8])*(p[0]/p[1]))
+            p[9] = _c_asin(_c_sin(p[8])*(numpy.float64(p[0])/p[1]))
         if 10 not in given:
             p[10] = 100.0
         if 11 not in given:
@@ -254,7 +254,7 @@ def _constants_into_ieee(p, out):
         out[2] = 0.25*p[1]*p[1]*p[3] + p[4]
         out[3] = -p[0]
         out[4] = -p[1]
-        out[5] = 1.0/p[5]
+        out[5] = numpy.float64(1.0)/p[5]
         out[6] = 0.5*p[0]*p[1]*p[3]
         out[7] = -p[11]*p[11]
         out[8] = -2.0*p[10]

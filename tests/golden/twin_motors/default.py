@@ -153,10 +153,10 @@ def _constants_into(p, out):
 def _constants_into_ieee(p, out):
     with numpy.errstate(all="ignore"):
         p = numpy.asarray(p, dtype=numpy.float64)
-        out[0] = 1.0/p[4]
-        out[1] = 1.0/p[8]
-        out[2] = 1.0/p[5]
-        out[3] = 1.0/p[9]
+        out[0] = numpy.float64(1.0)/p[4]
+        out[1] = numpy.float64(1.0)/p[8]
+        out[2] = numpy.float64(1.0)/p[5]
+        out[3] = numpy.float64(1.0)/p[9]
         out[4] = -p[12]
         out[5] = -p[13]
 

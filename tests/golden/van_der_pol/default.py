@@ -86,7 +86,7 @@ def _fill_params_ieee(p, given):
         if 0 not in given:
             p[0] = 1000.0
         if 1 not in given:
-            p[1] = 1.0/(p[0]*p[0])
+            p[1] = numpy.float64(1.0)/(p[0]*p[0])
         return [float(v) for v in p]
 
 
@@ -103,7 +103,7 @@ def _constants_into(p, out):
 def _constants_into_ieee(p, out):
     with numpy.errstate(all="ignore"):
         p = numpy.asarray(p, dtype=numpy.float64)
-        out[0] = 1.0/p[1]
+        out[0] = numpy.float64(1.0)/p[1]
         w6 = p[0]*p[0]
         out[1] = w6
         out[2] = 2.0*w6
@@ -128,7 +128,7 @@ def _init_into_ieee(p, out):
     with numpy.errstate(all="ignore"):
         p = numpy.asarray(p, dtype=numpy.float64)
         out[0] = 2.0
-        out[1] = 10.0*p[1]/81.0 - 0.66666666666666663
+        out[1] = numpy.float64(10.0*p[1])/81.0 - 0.66666666666666663
 
 
 
