@@ -171,3 +171,97 @@ def test_the_buck_converter_runs_as_an_fmu(tmp_path, kind):
     tolerance = 1e-8 if kind == "CoSimulation" else 1e-4
     for j in (0, 1):  # (the states are continuous at the edges: rows at events compare too)
         assert np.max(np.abs(got[:, j] - exact[:, j])) < tolerance * np.max(np.abs(exact[:, j]))
+
+
+HBRIDGE = ROOT / "tests" / "models" / "hbridge.bg"
+
+
+@needs_cc
+def test_an_h_bridge_with_dead_time_drives_a_dc_motor_as_its_exact_solution(tmp_path):
+    """Four switches with their anti-parallel diodes (eight coupled elements): s1 and s4 closed
+    for 70 % of each 50 us period, s2 and s3 for 20 %, all four open for 5 % after each; in the
+    dead time the diodes carry the motor's current (the bridge applies -V while it is positive,
+    +V while negative, and holds it at zero where it would reverse). The motor: L di/dt =
+    v - R i - k w, J dw/dt = k i - b w, exact by matrix exponentials between the instants."""
+    V, f, D, dead, R, L, k, J, b = 24.0, 2e4, 0.7, 0.05, 1.0, 1e-3, 0.05, 1e-4, 1e-5
+    out = simulate(tmp_path, HBRIDGE, t_end="1e-3")
+    data = np.loadtxt(out, delimiter=",", skiprows=1)
+    A = np.array([[-R / L, -k / L], [k / J, -b / J]])
+    A_held = np.array([[0, 0], [0, -b / J]])  # (the current held at zero)
+
+    def flow(x, v, h, held=False):
+        M = np.zeros((3, 3))
+        M[:2, :2], M[0, 2] = (A_held, 0.0) if held else (A, v / L)
+        E = expm(M * h)
+        return E[:2, :2] @ x + E[:2, 2]
+
+    T, x, t, n, segments = 1 / f, np.zeros(2), 0.0, 0, []
+
+    def dead_time(t, end, x):
+        while t < end:
+            if x[0] == 0:
+                segments.append((t, 0.0, x, True))
+                return flow(x, 0.0, end - t, True)
+            v = -V if x[0] > 0 else V
+            after = flow(x, v, end - t)
+            if np.sign(after[0]) == np.sign(x[0]):
+                segments.append((t, v, x, False))
+                return after
+            zero = brentq(lambda s: flow(x, v, s)[0], 0, end - t, xtol=1e-18, rtol=1e-15)
+            segments.append((t, v, x, False))
+            x = flow(x, v, zero)
+            x[0], t = 0.0, t + zero
+        return x
+
+    while t < data[-1, 0]:
+        for v, end in ((V, (n + D) * T), (None, (n + D + dead) * T), (-V, (n + 1 - dead) * T),
+                       (None, (n + 1) * T)):
+            if v is None:
+                x = dead_time(t, end, x)
+            else:
+                segments.append((t, v, x, False))
+                x = flow(x, v, end - t)
+            t = end
+        n += 1
+    starts = np.array([s[0] for s in segments])
+    exact = np.array([flow(segments[j][2], segments[j][1], tt - segments[j][0], segments[j][3])
+                      for tt, j in zip(data[:, 0],
+                                       np.searchsorted(starts, data[:, 0], side="right") - 1)])
+    for j in (0, 1):
+        assert np.max(np.abs(data[:, 1 + j] - exact[:, j])) < 1e-8 * np.max(np.abs(exact[:, j]))
+
+
+RL_SWITCHED = """model rl "a coil at 1 A in a loop closed by a switch whose argument is a time source"
+import electrical as el
+coil : el.inductor(l = 1, i0 = 1)
+res : el.resistor(r = 1)
+sw : el.ideal_switch(on = ON)
+g : el.ground()
+a : 0
+b : 0
+a -> coil.p
+coil.n -> b
+b -> res.p
+res.n -> sw.p
+sw.n -> g.p
+g2 : el.ground()
+a -> g2.p
+scene run {
+  time 0 .. 2 every 0.01
+  outputs coil.store.f
+  solver dopri5(rtol = 1e-10, atol = 1e-12)
+}
+"""
+
+
+@pytest.mark.parametrize("on", ["square(10, 0.5)", "1 - step(5)", "pulse(0, 5)"])
+def test_a_switch_closed_at_t0_through_an_instance_argument_starts_closed(tmp_path, on):
+    """The switch's condition reads a signal (the instance's argument) of a time source: at t0
+    it reads the source's value there, so the coil's current decays as exp(-t) from the start."""
+    model = tmp_path / "rl.bg"
+    model.write_text(RL_SWITCHED.replace("ON", on))
+    out = tmp_path / "rl.csv"
+    result = run_bgc("simulate", model, "--scene", "run", "-o", out, "--backend", "python")
+    assert result.returncode == 0, result.stderr
+    data = np.loadtxt(out, delimiter=",", skiprows=1)
+    assert np.max(np.abs(data[:, 1] - np.exp(-data[:, 0]))) < 1e-8

@@ -39,7 +39,7 @@ from ..front.events import INITIAL, Action, Discrete, Relation, When
 from ..front.graph import TIME
 from ..symbolic.differentiate import partial
 
-MAX_COUPLED = 8  # switched one-ports in one group: 2^6 = 64 combinations of their modes
+MAX_COUPLED = 8  # switched one-ports in a group: 2^8 = 256 combinations (an H-bridge's eight)
 KINDS = ("diode", "switch")
 
 
