@@ -231,7 +231,7 @@ def test_an_h_bridge_with_dead_time_drives_a_dc_motor_as_its_exact_solution(tmp_
         assert np.max(np.abs(data[:, 1 + j] - exact[:, j])) < 1e-8 * np.max(np.abs(exact[:, j]))
 
 
-RL_SWITCHED = """model rl "a coil at 1 A in a loop closed by a switch whose argument is a time source"
+RL_SWITCHED = """model rl "a coil at 1 A in a loop closed by a switch of a time source"
 import electrical as el
 coil : el.inductor(l = 1, i0 = 1)
 res : el.resistor(r = 1)
