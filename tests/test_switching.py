@@ -265,3 +265,78 @@ def test_a_switch_closed_at_t0_through_an_instance_argument_starts_closed(tmp_pa
     assert result.returncode == 0, result.stderr
     data = np.loadtxt(out, delimiter=",", skiprows=1)
     assert np.max(np.abs(data[:, 1] - np.exp(-data[:, 0]))) < 1e-8
+
+
+BRIDGE = """model bridge "a single-phase bridge of four ideal diodes with a smoothing capacitor"
+parameter V = 10.0
+parameter w = 314.159
+parameter C = 1e-3
+parameter R = 100.0
+src : MSe(V*sin(w*t))
+d1 : D
+d2 : D
+d3 : D
+d4 : D
+c : C(C)
+r : R(R)
+src -> s
+s : 1
+b -> s
+s -> a
+a : 0
+b : 0
+p : 0
+j1 : 1
+a -> j1
+j1 -> p
+j1 -> d1
+j2 : 1
+b -> j2
+j2 -> p
+j2 -> d2
+j3 : 1
+j3 -> a
+j3 -> d3
+j4 : 1
+j4 -> b
+j4 -> d4
+p -> c
+p -> r
+scene run {
+  time 0 .. 0.1 every 1e-4
+  outputs c.e
+  solver dopri5(rtol = 1e-10, atol = 1e-12)
+}
+"""
+
+
+@needs_cc
+def test_a_diode_bridge_with_a_smoothing_capacitor_is_the_peak_rectifier(tmp_path):
+    """The source floats: while all four diodes block, its potential is undetermined (any
+    value between the diodes' limits is taken), and while two conduct the capacitor follows
+    |u| as long as their current C d|u|/dt + |u|/R is positive, i.e. until tan(w t) = -w R C
+    within the half period; then it discharges, v = v_off exp(-(t - t_off)/RC), until it
+    meets |u| again (brentq on the closed forms)."""
+    V, w, C, R = 10.0, 314.159, 1e-3, 100.0
+    model = tmp_path / "bridge.bg"
+    model.write_text(BRIDGE)
+    out = tmp_path / "bridge.csv"
+    result = run_bgc("simulate", model, "--scene", "run", "-o", out, "--backend", "c")
+    assert result.returncode == 0, result.stderr
+    data = np.loadtxt(out, delimiter=",", skiprows=1)
+    half, tau = np.pi / w, R * C
+    off = (np.pi - np.arctan(w * R * C)) / w
+    segments, start, k = [], 0.0, 0
+    while start < data[-1, 0]:
+        t_off = k * half + off
+        v_off = V * abs(np.sin(w * t_off))
+        meets = brentq(lambda s: v_off * np.exp(-(s - t_off) / tau) - V * abs(np.sin(w * s)),
+                       (k + 1) * half + 1e-12, (k + 1.5) * half, xtol=1e-16, rtol=1e-15)
+        segments += [(start, None), (t_off, v_off)]
+        start, k = meets, k + 1
+    at = np.array([s[0] for s in segments])
+    exact = []
+    for t in data[:, 0]:
+        t0, v0 = segments[np.searchsorted(at, t, side="right") - 1]
+        exact.append(V * abs(np.sin(w * t)) if v0 is None else v0 * np.exp(-(t - t0) / tau))
+    assert np.max(np.abs(data[:, 1] - np.array(exact))) < 1e-8 * V

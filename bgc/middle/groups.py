@@ -37,8 +37,10 @@ from sympy.solvers.solveset import NonlinearError
 from ..base.diagnostics import fail
 from ..front.events import INITIAL, Action, Discrete, Relation, When
 from ..front.graph import TIME
+from ..symbolic.algebra import Max, Min
 from ..symbolic.differentiate import partial
 
+LOCATED = sp.Float(1e-12)  # a located event's resolution in t, relative (bgc.middle.contact)
 MAX_COUPLED = 8  # switched one-ports in a group: 2^8 = 256 combinations (an H-bridge's eight)
 KINDS = ("diode", "switch")
 
@@ -124,8 +126,12 @@ def rewrite(sys, group, cdefs, active, holds, width, rate, law_equation, rates):
     for m in members:
         read = [lams[s] for s in sorted(m.B.free_symbols & lams.keys(), key=lambda s: s.name)]
         free = m.B.xreplace({s: sp.Integer(0) for s in lams})
+        pinned = [(k.pin[1] - k.pin[2], _in(k, members) > sp.Rational(1, 2))
+                  for k in every if k.pin is not None and k.pin[0] is m]
+        pinned += [(rate(k.derived[1]), _in(k, members) > sp.Rational(1, 2))
+                   for k in every if k.derived is not None and k.derived[0] is m]
         law = sp.Piecewise((sp.Integer(0), lost), (m.lam, singular > sp.Rational(1, 2)),
-                           (m.lam, sp.Not(m.holds)),
+                           *pinned, (m.lam, sp.Not(m.holds)),
                            (m.B, sp.Or(*[r.holds for r in read])),
                            (rate(free), True))
         sys.eqs[m.lam] = law_equation(m, law)  # (in its place in the equations' order)
@@ -169,10 +175,109 @@ class _Combination:
                                              "supported yet")
             if sp.simplify(A.det()) == 0:
                 self.ok = False
+                A, b = self._constrained(A, b, unknowns, members, rates)
+                if self.ok:
+                    solution = A.LUsolve(b)
+                    self.lam.update({u: solution[k] for k, u in enumerate(unknowns)})
+                    return
+                self._undetermined(A, b, unknowns, members)
                 return
             solution = A.LUsolve(b)
             self.lam.update({u: sp.simplify(solution[k]) if sp.count_ops(solution[k]) < 60
                              else solution[k] for k, u in enumerate(unknowns)})
+
+
+    pin = None  # (the member whose row gives way, the multiplier pinned, its value)
+    derived = None  # (the member whose row gives way, the constraint on the states it derives)
+
+    def _constrained(self, A, b, unknowns, members, rates):
+        """A block singular whatever the state whose rows together hold the states (a
+        capacitor tied to the source through two conducting diodes of a bridge: y^T A = 0,
+        and g = y^T b, a relation of the states and t, must be zero): the row of one member
+        gives way to g's rate, as a member's own state row does (its storages then follow
+        the source; the combination is taken only where g holds already)."""
+        n = len(unknowns)
+        if A.rank(simplify=True) != n - 1 or A.row_join(b).rank(simplify=True) != n:
+            return A, b
+        (y,) = A.T.nullspace(simplify=True)
+        g = sp.simplify((y.T * b)[0])
+        if g.has(*unknowns):
+            return A, b
+        held = [m for m, h in zip(members, self.held) if h]
+        for r in range(n):
+            if y[r] == 0:
+                continue
+            row = sp.expand(rates(g))
+            try:
+                a, c = sp.linear_eq_to_matrix([row], unknowns)
+            except NonlinearError:
+                return A, b
+            A2, b2 = A.copy(), b.copy()
+            A2[r, :], b2[r, 0] = a, c[0]
+            if sp.simplify(A2.det()) != 0:
+                self.derived = (held[r], g)
+                self.ok = True
+                return A2, b2
+        return A, b
+    feasible = sp.Integer(1)  # (pinned: 1 where some value of the free direction is admissible)
+
+    def _undetermined(self, A, b, unknowns, members):
+        """A block singular whatever the state but consistent, with one free direction (a
+        floating source while every diode of a bridge blocks: its potential is undetermined):
+        the multipliers are lam_p + s v, and s is pinned at the middle of the interval where
+        every diode's sign test holds (LANGUAGE's "any split that satisfies them"): the row
+        of one member gives way to lam_j = s.  Where that interval is empty the combination
+        is not admissible; where the direction's coefficients are not numbers, or there is
+        more than one free direction, it stays singular."""
+        n = len(unknowns)
+        if A.rank(simplify=True) != n - 1 or A.row_join(b).rank(simplify=True) != n - 1:
+            return
+        (v,) = A.nullspace(simplify=True)
+        j = next((i for i in range(n) if v[i].is_number and v[i] != 0), None)
+        if j is None or not all(x.is_number for x in v):
+            return
+        cols = [c for c in range(n) if c != j]
+        for r in range(n):
+            rows = [k for k in range(n) if k != r]
+            sub = A.extract(rows, cols)
+            if sp.simplify(sub.det()) != 0:
+                break
+        else:
+            return
+        solution = sub.LUsolve(b.extract(rows, [0]))
+        S = sp.Symbol("s#")
+        lam = dict(self.lam)
+        for i, c in enumerate(cols):
+            lam[unknowns[c]] = solution[i] + S * v[c] / v[j]
+        lam[unknowns[j]] = S
+        lows, highs, fixed = [], [], []
+        for m, bit in zip(members, self.bits):
+            if not m.diode:
+                continue
+            B = m.B.xreplace(lam)
+            if bit == 1:
+                g = m.effort(lam, B)
+            else:
+                f = m.flow(lam, B)
+                g = -f - m.width(f.xreplace({S: 0})) / 2
+            a, c = sp.diff(g, S), g.xreplace({S: 0})
+            if not a.is_number:
+                return
+            if a == 0:
+                fixed.append(c <= 0)
+            else:
+                (lows if a < 0 else highs).append(-c / a)
+        lo = (lows[0] if len(lows) == 1 else Max(*lows)) if lows else None
+        hi = (highs[0] if len(highs) == 1 else Min(*highs)) if highs else None
+        value = (lo + hi) / 2 if lo is not None and hi is not None else \
+            lo if lo is not None else hi if hi is not None else sp.Integer(0)
+        tests = [_is(t) for t in fixed] + ([_is(lo <= hi)] if lo is not None and hi is not None
+                                           else [])
+        self.feasible = sp.Mul(*tests) if tests else sp.Integer(1)
+        held = [m for m, h in zip(members, self.held) if h]
+        self.pin = (held[r], unknowns[j], value)
+        self.lam = {u: e.xreplace({S: value}) for u, e in lam.items()}
+        self.ok = True
 
 
 def _is(test) -> sp.Expr:
@@ -214,21 +319,27 @@ def events(sys, members, every, stops, relations, discretes, whens):
     closed = {m.lam: _is(m.c.gains[0]) for m in switches}  # 1: closed, from its condition
 
     def admissible(k, rows_hold):
-        lam, out = k.lam, sp.Integer(1)
+        lam, out = k.lam, k.feasible
         for m, b in zip(members, k.bits):
-            if m.diode:
+            if m.diode and k.pin is None:  # (pinned: feasible holds the sign tests)
                 B = m.B.xreplace(lam)
                 if b == 1:
                     out *= _is(m.effort(lam, B) <= 0)
                 else:
                     f = m.flow(lam, B)
                     out *= _is(f >= -m.width(f) / 2)
-        if rows_hold:
-            for m in k.state_rows:
-                free = m.B.xreplace(lam)
-                out *= _is(sp.Abs(free) <= m.width(free))
-        elif any(m.dual for m in k.state_rows):  # (an effort held at zero on storages: a
-            return sp.Integer(0)  # jump of their charges, chosen only where it holds already)
+        if rows_hold:  # (each within its width and what the located crossing resolves of
+            #             it: 1e-12 relative in t, times its rate through t, four times over)
+            held = [(m, m.B.xreplace(lam)) for m in k.state_rows]
+            if k.derived is not None:
+                held.append(k.derived)
+            for m, g in held:
+                slack = 4 * LOCATED * sp.Abs(TIME) * sp.Abs(partial(g, TIME))
+                out *= _is(sp.Abs(g) <= m.width(g) + slack)
+        elif k.derived is not None or any(m.dual or not stops.get(m.c.junction)
+                                          for m in k.state_rows):
+            return sp.Integer(0)  # (no jump of momenta makes these rows hold: an effort held
+            #                        at zero on capacitors, a row of no storage's state)
         return out
 
     def matches(k):  # 1 where the switches' conditions give k's bits
