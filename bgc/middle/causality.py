@@ -195,10 +195,10 @@ def _switched_strokes(scenario: Scenario, err: ModelError) -> CausalGraph:
     The conflict stands (err) where that does not resolve it."""
     graph = scenario.graph
     switched = [el for el in graph.elements if _dual_switched(el)]
-    if not switched:
-        raise err
+    if not switched or any(len(graph.incident[el.name]) != 1 for el in switched):
+        raise err  # (a one-port without its one bond is refused where the conflict is)
     a = _strokes(graph, Collector(), frozenset(el.name for el in switched))
-    if a.failed or any(len(a.incident[el.name]) != 1 for el in switched):
+    if a.failed:
         raise err
     dual = {el.name for el in switched if a.by[a.incident[el.name][0]] != el.name}
     graph = replace(graph, elements=tuple(replace(e, kind="1") if e.name in dual else e
