@@ -399,6 +399,9 @@ def _batch_key(lines, trajectories) -> str:
 def local_client(workers: int | None):
     """A Client of a new LocalCluster of `workers` processes (default: the cores), one
     thread each, without a dashboard.  Close both (client.close(); client.cluster.close()).
+    The scheduler's HTTP server (Dask starts one even without the dashboard) takes a port
+    the system chooses: its default, 8787, may be another cluster's, and Dask then warns on
+    the user's terminal.
     The workers ignore SIGINT (_workers_ignore_sigint): a Ctrl-C is bgc's to handle."""
     import logging
 
@@ -406,6 +409,7 @@ def local_client(workers: int | None):
     _workers_ignore_sigint()
     cluster = LocalCluster(n_workers=workers or os.cpu_count() or 1, threads_per_worker=1,
                            processes=True, dashboard_address=None,
+                           scheduler_kwargs={"dashboard_address": ":0"},
                            silence_logs=logging.ERROR)
     return Client(cluster)
 
