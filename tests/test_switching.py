@@ -340,3 +340,75 @@ def test_a_diode_bridge_with_a_smoothing_capacitor_is_the_peak_rectifier(tmp_pat
         t0, v0 = segments[np.searchsorted(at, t, side="right") - 1]
         exact.append(V * abs(np.sin(w * t)) if v0 is None else v0 * np.exp(-(t - t0) / tau))
     assert np.max(np.abs(data[:, 1] - np.array(exact))) < 1e-8 * V
+
+
+CLUTCH = ROOT / "tests" / "models" / "one_way_clutch.bg"
+
+
+def _one_way_clutch(grid, J1=0.1, J2=0.3, b2=0.05, Fc=0.3, Fs=0.5, t_on=3.0):
+    """The one-way clutch as an automaton of two modes, integrated by SciPy (DOP853 at
+    rtol 1e-13) with a restart at each switch: locked (one speed, (J1 + J2) w' = tau - b2 w,
+    the coupling carrying T = (J2 tau + J1 b2 w)/(J1 + J2), which the freewheel holds
+    whatever it is below zero and the clutch up to Fs) until T exceeds the clutch's limit;
+    slipping (w1 > w2: the freewheel runs free, the clutch carries Fc) until the speeds
+    meet again.  Nothing of bgc's."""
+    from scipy.integrate import solve_ivp
+
+    def tau(t):
+        return np.sin(2 * t) - 0.2
+
+    t, y, locked, ts, ys = 0.0, np.zeros(2), True, [], []
+    while t < grid[-1]:
+        stop, on = (t_on, 0.0) if t < t_on else (grid[-1], 1.0)
+        if locked:
+            def event(t, w):
+                return (J2 * tau(t) + J1 * b2 * w[0]) / (J1 + J2) - Fs * on
+
+            def rhs(t, w):
+                return [(tau(t) - b2 * w[0]) / (J1 + J2)]
+            y0 = [y[0]]
+        else:
+            def event(t, w):
+                return w[0] - w[1]
+
+            def rhs(t, w):
+                return [(tau(t) - Fc * on) / J1, (Fc * on - b2 * w[1]) / J2]
+            y0 = list(y)
+        event.terminal, event.direction = True, 1 if locked else -1
+        s = solve_ivp(rhs, (t, stop), y0, method="DOP853", rtol=1e-13, atol=1e-16,
+                      events=event, dense_output=True)
+        for tt in grid[((grid > t) if ts else (grid >= t)) & (grid <= s.t[-1])]:
+            v = s.sol(tt)
+            ts.append(tt)
+            ys.append([v[0], v[-1]])
+        t, v = s.t[-1], s.y[:, -1]
+        y = np.array([v[0], v[-1]])
+        if s.status == 1:
+            locked = not locked
+        elif locked and (J2 * tau(t) + J1 * b2 * y[0]) / (J1 + J2) > Fs * (t >= t_on):
+            locked = False  # (the clutch engages while the freewheel's lock carries more)
+    return np.array(ys)
+
+
+@needs_cc
+def test_a_one_way_clutch_of_a_freewheel_beside_a_clutch_is_its_automaton(tmp_path):
+    """A freewheel D and a clutch Fr on one relative speed: both hold it while locked (how
+    the torque splits between them is not determined: any split inside both cones is taken),
+    the clutch slips above its limit once engaged, and the freewheel alone locks before."""
+    out = tmp_path / "clutch.csv"
+    events = tmp_path / "events.csv"
+    result = run_bgc("simulate", CLUTCH, "--scene", "run", "-o", out, "--events", events,
+                     "--backend", "c")
+    assert result.returncode == 0, result.stderr
+    data = np.loadtxt(out, delimiter=",", skiprows=1)
+    exact = _one_way_clutch(data[:, 0])
+    assert np.max(np.abs(data[:, 1:3] - exact)) < 1e-9 * np.max(np.abs(exact))
+    log = events.read_text()
+    assert "cl.stick,0 -> 1" in log and "fw.blocking,1 -> 0" in log  # (it slips and locks)
+    runs = []
+    for backend in ("c", "python", "vm"):
+        other = tmp_path / f"clutch-{backend}.csv"
+        assert run_bgc("simulate", CLUTCH, "--scene", "run", "-o", other, "--backend",
+                       backend, "--t-end", "5").returncode == 0
+        runs.append(other.read_bytes())
+    assert runs[0] == runs[1] == runs[2]

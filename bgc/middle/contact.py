@@ -110,7 +110,16 @@ def with_contact_events(sys, infos, weigh, defs, leaf, cycle):
     held = {j: [] for j in gaps}  # the friction's stop, at each contact's release
     moved = {j: set() for j in gaps}
     grouped = set()
-    for group in groups.find(infos, cdefs):
+    def reads(info):  # the multipliers the rate of a balance in the states reads
+        out = set()
+        for s in sorted(info.balance.free_symbols & states.keys(), key=order.get):
+            try:
+                out |= leaf(sys.eqs[der(s)].expr, defs, expandable, memo).free_symbols
+            except (cycle, KeyError):
+                continue
+        return out & multipliers
+
+    for group in groups.find(infos, cdefs, reads):
         relations, discretes, whens = _coupled(sys, group, cdefs, states, leaf, defs,
                                                expandable, memo, cycle, weigh, bilateral,
                                                order, metric, relations, discretes, whens)
@@ -239,7 +248,7 @@ def _coupled(sys, group, cdefs, states, leaf, defs, expandable, memo, cycle, wei
 
     rates = groups.rate_of(states.keys(), leaf_rate)
     members, every = groups.rewrite(sys, group, cdefs, active, holds, _width,
-                                    lambda e: _rate(e, states), law, rates)
+                                    lambda e: _rate(e, states), law, rates, direction)
     lams = [m.lam for m in members]
     stops = {}
     for m in members:
@@ -249,10 +258,10 @@ def _coupled(sys, group, cdefs, states, leaf, defs, expandable, memo, cycle, wei
             stops[m.c.junction] = _impulse(m.c, free, K, sp.Integer(0), bilateral, cdefs,
                                            weigh, order, metric)[0]
     for m in members:
-        if not m.diode:
+        if m.kind == "switch":
             relations, discretes, whens = _switch(m.c, m.info, {}, states, relations,
                                                   discretes, whens)
-    return groups.events(sys, members, every, stops, relations, discretes, whens)
+    return groups.events(sys, members, every, stops, rates, relations, discretes, whens)
 
 
 def _impulse(c, v, K_v, target, bilateral, cdefs, weigh, order, metric, together=()):

@@ -37,20 +37,26 @@ from sympy.solvers.solveset import NonlinearError
 from ..base.diagnostics import fail
 from ..front.events import INITIAL, Action, Discrete, Relation, When
 from ..front.graph import TIME
-from ..symbolic.algebra import Max, Min
+from ..symbolic.algebra import Max, Min, indicator
 from ..symbolic.differentiate import partial
 
+EPS = sp.Float(2.0 ** -52)  # a double's epsilon
 LOCATED = sp.Float(1e-12)  # a located event's resolution in t, relative (bgc.middle.contact)
 MAX_COUPLED = 8  # switched one-ports in a group: 2^8 = 256 combinations (an H-bridge's eight)
-KINDS = ("diode", "switch")
+KINDS = ("diode", "friction", "switch")
 
 
-def find(infos, cdefs) -> list[list]:
-    """The groups of coupled switched one-ports (two or more each), in declaration order: D and
-    Sw elements joined where one's balance reads another's multiplier."""
+def find(infos, cdefs, reads=None) -> list[list]:
+    """The groups of coupled switched one-ports (two or more each, one of them a diode or a
+    switch), in declaration order: D, Sw and Fr elements joined where one's balance reads
+    another's multiplier, or where the rate of a balance written in the states alone reads
+    another's (reads(info): those multipliers; a freewheel and a clutch on one shaft, two
+    diodes in series with a coil).  Friction elements coupled only with one another keep
+    their own events (bgc.middle.contact._friction)."""
     members = [i for i in infos if i.kind in KINDS]
-    by_multiplier = {cdefs[i.junction].multiplier: i.junction for i in members}
+    by_multiplier = {cdefs[i.junction].multiplier: i for i in members}
     parent = {i.junction: i.junction for i in members}
+    rank = order(members)
 
     def root(j):
         while parent[j] != j:
@@ -59,36 +65,74 @@ def find(infos, cdefs) -> list[list]:
         return j
 
     for i in members:
-        for m in sorted(i.balance.free_symbols & by_multiplier.keys(), key=lambda s: s.name):
-            a, b = root(i.junction), root(by_multiplier[m])
+        read = i.balance.free_symbols & by_multiplier.keys()
+        if not read and reads is not None:
+            read = reads(i) & by_multiplier.keys()
+        for m in sorted(read, key=lambda s: s.name):
+            o = by_multiplier[m]
+            if i.kind == "friction" and o.kind == "friction":
+                continue
+            a, b = root(i.junction), root(o.junction)
             if a != b:
-                parent[max(a, b, key=order(members).get)] = min(a, b, key=order(members).get)
+                parent[max(a, b, key=rank.get)] = min(a, b, key=rank.get)
     groups: dict = {}
     for i in members:
         groups.setdefault(root(i.junction), []).append(i)
-    return [g for g in groups.values() if len(g) > 1]
+    return [g for g in groups.values()
+            if len(g) > 1 and any(i.kind != "friction" for i in g)]
 
 
 def order(members) -> dict:
     return {i.junction: k for k, i in enumerate(members)}
 
 
-class _Member:
-    """One element of a group: its multiplier, its mode, its balance in the states."""
+STICK, PLUS, MINUS = 1, 2, 3  # a friction element's modes in a combination: sticking, sliding
+#                               the positive way, the negative way
 
-    def __init__(self, info, c, active, holds, width):
+
+class _Member:
+    """One element of a group: its multiplier, its mode, its balance in the states.  A
+    diode's or a switch's mode is 0 or 1 (1: open or blocking); a friction element's is STICK,
+    PLUS or MINUS, held as two discrete values, `F.stick` (1: sticking) and `F.dir`."""
+
+    def __init__(self, info, c, active, holds, width, direction):
         self.info, self.c = info, c
+        self.kind = info.kind
         self.diode = info.kind == "diode"
+        self.friction = info.kind == "friction"
         self.dual = c.dual
         self.lam = c.multiplier
         self.mode = active(c)
+        self.dir = direction(c) if self.friction else None
         self.holds = holds(c)
         self.B = info.balance
         self.width = width
+        self.values = (STICK, PLUS, MINUS) if self.friction else (0, 1)
+        if self.friction and self.dual:
+            fail(c.name_span, f"dry friction '{c.junction}' imposes its flow here (the dual "
+                              "form) and is coupled with a switch or a diode: not supported "
+                              "yet")
 
     def held(self, bit: int) -> bool:
-        """Whether mode value `bit` (1: open or blocking) holds the constraint."""
+        """Whether mode value `bit` (1: open, blocking or sticking) holds the constraint."""
         return bit == 0 if self.dual else bit == 1
+
+    def sliding(self, bit: int) -> sp.Expr:
+        """The multiplier of a friction element sliding in mode `bit`: Fc the way it slides."""
+        return self.c.gains[0] * (1 if bit == PLUS else -1)
+
+    def free(self) -> sp.Expr:
+        """The multiplier's law while its mode frees it (lambda = 0; sliding, Fc dir)."""
+        return self.lam - self.c.gains[0] * self.dir if self.friction else self.lam
+
+    def now(self, bit: int) -> sp.Expr:
+        """1 where the member is in mode `bit` now, else 0."""
+        if not self.friction:
+            return self.mode if bit == 1 else 1 - self.mode
+        if bit == STICK:
+            return self.mode
+        return (1 - self.mode) * (1 + self.dir) / 2 if bit == PLUS else \
+            (1 - self.mode) * (1 - self.dir) / 2
 
     def effort(self, lam: dict, B):
         return B if self.dual else lam[self.lam]
@@ -97,7 +141,7 @@ class _Member:
         return lam[self.lam] if self.dual else B
 
 
-def rewrite(sys, group, cdefs, active, holds, width, rate, law_equation, rates):
+def rewrite(sys, group, cdefs, active, holds, width, rate, law_equation, rates, direction):
     """The group's members and the combinations of their modes (bgc.middle.groups._Combination),
     with each multiplier's law made the group's (the module's rows).  rate(e): e's time
     derivative through der() of its states; rates(e): the same written in the states and the
@@ -106,8 +150,8 @@ def rewrite(sys, group, cdefs, active, holds, width, rate, law_equation, rates):
     is consistent the diodes' modes are 2, whose rows are singular: the run stops there with
     the block's elements named."""
     """The group's members, with each multiplier's law made the group's (the module's rows)."""
-    members = [_Member(i, cdefs[i.junction], active, holds, width) for i in group]
-    if len(members) > MAX_COUPLED:
+    members = [_Member(i, cdefs[i.junction], active, holds, width, direction) for i in group]
+    if sum(len(m.values) > 2 for m in members) + len(members) > MAX_COUPLED:
         fail(members[0].c.name_span, f"{len(members)} switched elements are coupled here "
                                      f"({', '.join(repr(m.c.junction) for m in members)}); "
                                      f"their modes are chosen together for up to {MAX_COUPLED}")
@@ -120,9 +164,9 @@ def rewrite(sys, group, cdefs, active, holds, width, rate, law_equation, rates):
                                 f"'{other[0].name.removesuffix('.lambda')}', which is not a "
                                 "switch or a diode: not supported yet")
     every = [_Combination(bits, members, rates)
-             for bits in product((0, 1), repeat=len(members))]
+             for bits in product(*[m.values for m in members])]
     singular = sp.Add(*[_in(k, members) for k in every if not k.ok])
-    lost = sp.Or(*[sp.Eq(m.mode, 2) for m in members if m.diode])
+    lost = sp.Or(*[sp.Eq(m.mode, 2) for m in members if m.diode or m.friction])
     for m in members:
         read = [lams[s] for s in sorted(m.B.free_symbols & lams.keys(), key=lambda s: s.name)]
         free = m.B.xreplace({s: sp.Integer(0) for s in lams})
@@ -131,7 +175,7 @@ def rewrite(sys, group, cdefs, active, holds, width, rate, law_equation, rates):
         pinned += [(rate(k.derived[1]), _in(k, members) > sp.Rational(1, 2))
                    for k in every if k.derived is not None and k.derived[0] is m]
         law = sp.Piecewise((sp.Integer(0), lost), (m.lam, singular > sp.Rational(1, 2)),
-                           *pinned, (m.lam, sp.Not(m.holds)),
+                           *pinned, (m.free(), sp.Not(m.holds)),
                            (m.B, sp.Or(*[r.holds for r in read])),
                            (rate(free), True))
         sys.eqs[m.lam] = law_equation(m, law)  # (in its place in the equations' order)
@@ -142,7 +186,7 @@ def _in(k, members) -> sp.Expr:
     """1 where the members' modes are k's, else 0 (modes 0 and 1: a product of them)."""
     out = sp.Integer(1)
     for m, b in zip(members, k.bits):
-        out *= m.mode if b == 1 else 1 - m.mode
+        out *= m.now(b)
     return out
 
 
@@ -153,7 +197,8 @@ class _Combination:
         self.bits = bits
         self.held = [m.held(b) for m, b in zip(members, bits)]
         unknowns = [m.lam for m, h in zip(members, self.held) if h]
-        free = {m.lam: sp.Integer(0) for m, h in zip(members, self.held) if not h}
+        free = {m.lam: m.sliding(b) if m.friction else sp.Integer(0)
+                for m, h, b in zip(members, self.held, bits) if not h}
         rows, self.state_rows = [], []
         for m, h in zip(members, self.held):
             if not h:
@@ -233,7 +278,11 @@ class _Combination:
         if A.rank(simplify=True) != n - 1 or A.row_join(b).rank(simplify=True) != n - 1:
             return
         (v,) = A.nullspace(simplify=True)
-        j = next((i for i in range(n) if v[i].is_number and v[i] != 0), None)
+        held = [m for m, h in zip(members, self.held) if h]
+        # (a friction element's force is the one pinned where there is one: the middle of its
+        # cone is then exact, zero where Fs = 0 shrinks the cone to a point)
+        j = next((i for i in sorted(range(n), key=lambda i: not held[i].friction)
+                  if v[i].is_number and v[i] != 0), None)
         if j is None or not all(x.is_number for x in v):
             return
         cols = [c for c in range(n) if c != j]
@@ -252,21 +301,29 @@ class _Combination:
         lam[unknowns[j]] = S
         lows, highs, fixed = [], [], []
         for m, bit in zip(members, self.bits):
-            if not m.diode:
+            if not (m.diode or m.friction):
                 continue
             B = m.B.xreplace(lam)
-            if bit == 1:
-                g = m.effort(lam, B)
+            if m.friction and bit == STICK:  # (inside its cone: -Fs <= lambda <= Fs)
+                Fs = m.c.gains[1]
+                tests = [lam[m.lam] - Fs, -lam[m.lam] - Fs]
+            elif m.friction:  # (sliding: not against the way it slides)
+                f = m.flow(lam, B)
+                way = 1 if bit == PLUS else -1
+                tests = [-way * f - m.width(f.xreplace({S: 0})) / 2]
+            elif bit == 1:
+                tests = [m.effort(lam, B)]
             else:
                 f = m.flow(lam, B)
-                g = -f - m.width(f.xreplace({S: 0})) / 2
-            a, c = sp.diff(g, S), g.xreplace({S: 0})
-            if not a.is_number:
-                return
-            if a == 0:
-                fixed.append(c <= 0)
-            else:
-                (lows if a < 0 else highs).append(-c / a)
+                tests = [-f - m.width(f.xreplace({S: 0})) / 2]
+            for g in tests:  # (each g <= 0)
+                a, c = sp.diff(g, S), g.xreplace({S: 0})
+                if not a.is_number:
+                    return
+                if a == 0:
+                    fixed.append(c <= 0)
+                else:
+                    (lows if a < 0 else highs).append(-c / a)
         lo = (lows[0] if len(lows) == 1 else Max(*lows)) if lows else None
         hi = (highs[0] if len(highs) == 1 else Min(*highs)) if highs else None
         value = (lo + hi) / 2 if lo is not None and hi is not None else \
@@ -280,10 +337,34 @@ class _Combination:
         self.ok = True
 
 
+def _friction_test(m, bit, lam, signs, rates) -> sp.Expr:
+    """1 where friction element m can be in mode `bit` with the multipliers `lam`, else 0:
+    sticking, its force inside the cone (signs: not pinned, where the combination's
+    feasibility holds it); sliding, its flow not against the way it slides and, at rest
+    (within its width), its acceleration that way."""
+    if bit == STICK:
+        return _is(sp.Abs(lam[m.lam]) <= m.c.gains[1] + _band(m, lam)) if signs else \
+            sp.Integer(1)
+    way = 1 if bit == PLUS else -1
+    f = way * m.B.xreplace(lam)
+    w = m.width(m.B)
+    moving = _is(f > w)
+    accel = way * rates(m.B).xreplace(lam)
+    return moving + (1 - moving) * _is(f >= -w / 2) * _is(accel >= 0)
+
+
+def _band(m, lam) -> sp.Expr:
+    """What rounding leaves of a friction element's force against its cone Fs: 16 eps of the
+    group's multipliers and Fs (a force pinned inside a cone that Fs = 0 shrinks to a point
+    is zero only to rounding of the others' sizes)."""
+    return 16 * EPS * (sp.Add(*[sp.Abs(v) for v in lam.values()]) + sp.Abs(m.c.gains[1]))
+
+
 def _is(test) -> sp.Expr:
     """1 where test holds, else 0: the selection is arithmetic on 0 and 1 (exact in every
-    backend), so that SymPy never rewrites its conditions as one boolean formula."""
-    return sp.Piecewise((sp.Integer(1), test), (sp.Integer(0), True))
+    backend), so that SymPy never rewrites its conditions as one boolean formula (nor drops
+    a time source's step inside one: bgc.symbolic.algebra.indicator)."""
+    return indicator(test)
 
 
 def _first(pieces, default) -> sp.Expr:
@@ -295,13 +376,14 @@ def _first(pieces, default) -> sp.Expr:
     return out
 
 
-def events(sys, members, every, stops, relations, discretes, whens):
+def events(sys, members, every, stops, rates, relations, discretes, whens):
     """The group's relations, modes and jumps (the module's selection).  rates(e): e's time
     derivative written in the states and the multipliers; every: the combinations;
-    stops[junction]: the momenta's
-    values that stop that member's flow (its balance's free form), or {}."""
+    stops[junction]: the momenta's values that stop that member's flow (its balance's free
+    form), or {}."""
     diodes = [m for m in members if m.diode]
-    switches = [m for m in members if not m.diode]
+    frictions = [m for m in members if m.friction]
+    switches = [m for m in members if m.kind == "switch"]
     combos = [c for c in every if c.ok]
     fired = []  # the diodes' relations (the events that locate their changes), as for one
     for m in diodes:
@@ -316,11 +398,25 @@ def events(sys, members, every, stops, relations, discretes, whens):
             f"{m.c.junction}: reverse (f < 0)", m.c.name_span, None)
         relations = relations + [forward, reverse]
         fired.append(_is(sp.Or(forward.symbol, reverse.symbol)))
+    for m in frictions:  # (as one friction element's: bgc.middle.contact._friction)
+        n = len(relations)
+        stick = sp.Ne(m.mode, 0)
+        slows = Relation(sp.Symbol(f"event#{n}"), sp.StrictGreaterThan(
+            sp.Piecewise((-m.dir * m.B - m.width(m.B), sp.Not(stick)), (sp.Integer(-1), True)),
+            0), f"{m.c.junction}: stops (f reverses)", m.c.name_span, None)
+        breaks = Relation(sp.Symbol(f"event#{n + 1}"), sp.StrictGreaterThan(
+            sp.Piecewise((sp.Abs(m.lam) - m.c.gains[1] - _band(m, {o.lam: o.lam for o in members}),
+                          stick), (sp.Integer(-1), True)), 0),
+            f"{m.c.junction}: breaks away (|e| > Fs)", m.c.name_span, None)
+        relations = relations + [slows, breaks]
+        fired.append(_is(sp.Or(slows.symbol, breaks.symbol)))
     closed = {m.lam: _is(m.c.gains[0]) for m in switches}  # 1: closed, from its condition
 
     def admissible(k, rows_hold):
         lam, out = k.lam, k.feasible
         for m, b in zip(members, k.bits):
+            if m.friction:
+                out *= _friction_test(m, b, lam, k.pin is None, rates)
             if m.diode and k.pin is None:  # (pinned: feasible holds the sign tests)
                 B = m.B.xreplace(lam)
                 if b == 1:
@@ -345,15 +441,15 @@ def events(sys, members, every, stops, relations, discretes, whens):
     def matches(k):  # 1 where the switches' conditions give k's bits
         out = sp.Integer(1)
         for m, b in zip(members, k.bits):
-            if not m.diode:
+            if m.kind == "switch":
                 out *= closed[m.lam] if b == 0 else 1 - closed[m.lam]
         return out
 
-    def current(k):  # 1 where the diodes are in k's modes now
+    def current(k):  # 1 where the diodes and the friction elements are in k's modes now
         out = sp.Integer(1)
         for m, b in zip(members, k.bits):
-            if m.diode:
-                out *= m.mode if b == 1 else 1 - m.mode
+            if m.kind != "switch":
+                out *= m.now(b)
         return out
 
     unchanged = sp.Integer(1)
@@ -367,25 +463,40 @@ def events(sys, members, every, stops, relations, discretes, whens):
     stay = regular * unchanged * quiet + (1 - unchanged) * sp.Add(
         *[current(k) * matches(k) * tests[id(k), True] for k in combos])
 
-    def chosen(m):
+    def chosen(m, now, value, lost):
+        """m's next value: `now` while the modes stay, value(bit) of the first admissible
+        combination, else `lost`."""
         i = members.index(m)
-        pieces = [(m.mode, stay)]
+        pieces = [(now, stay)]
         for rows in (True, False):
             for k in combos:
-                pieces.append((sp.Integer(k.bits[i]),
+                pieces.append((value(k.bits[i]),
                                (1 - current(k)) * matches(k) * tests[id(k), rows]))
-        return _first(pieces, sp.Integer(2))  # (no consistent combination: 2)
+        return _first(pieces, lost)
 
-
-    nexts = {}
-    for m in diodes:
-        nexts[m.lam] = chosen(m)
+    nexts, kept = {}, sp.Integer(1)
+    for m in diodes:  # (no consistent combination: 2)
+        nexts[m.lam] = chosen(m, m.mode, sp.Integer, sp.Integer(2))
         discretes = discretes + [Discrete(
             f"{m.c.junction}.blocking", m.mode, sp.Integer(1),  # (the start's next pass chooses)
             "1: blocking, 0: conducting", m.c.name_span, nexts[m.lam])]
-    kept = sp.Integer(1)
-    for m in diodes:
         kept *= 1 - (nexts[m.lam] - m.mode) ** 2
+    for m in frictions:  # (it starts sticking where its flow is zero, else sliding its way)
+        stick = chosen(m, m.mode, lambda b: sp.Integer(int(b == STICK)), sp.Integer(2))
+        way = chosen(m, m.dir, lambda b: m.dir if b == STICK else sp.Integer(
+            1 if b == PLUS else -1), m.dir)
+        discretes = discretes + [
+            Discrete(f"{m.c.junction}.stick", m.mode, sp.Piecewise(
+                (sp.Integer(1), sp.Eq(m.B, 0)), (sp.Integer(0), True)),
+                "1: sticking, 0: sliding", m.c.name_span, stick),
+            Discrete(f"{m.c.junction}.dir", m.dir, sp.Piecewise(
+                (sp.Integer(-1), m.B < 0), (sp.Integer(1), True)),
+                "the sliding direction", m.c.name_span, way)]
+        kept *= (1 - (stick - m.mode) ** 2) * (1 - (way - m.dir) ** 2 / 4)
+    # entering a mode that holds a flow, the jump is taken where the modes now are admissible
+    # with it (a when-block reads the relations' values before its pass, which still say
+    # what made the modes change: `kept` would read them as changing again)
+    taken = sp.Add(*[current(k) * matches(k) * tests[id(k), False] for k in combos])
     states = {st.symbol: st for st in sys.es.states}
     for m in members:
         stop = stops.get(m.c.junction) or {}
@@ -400,7 +511,7 @@ def events(sys, members, every, stops, relations, discretes, whens):
         relations = relations + [enters]
         whens = whens + [
             When(enters.symbol, enters.text, tuple(
-                Action("reinit", states[p].name, p, kept * new + (1 - kept) * p, m.c.span)
+                Action("reinit", states[p].name, p, taken * new + (1 - taken) * p, m.c.span)
                 for p, new in stop.items()), m.c.span),
             When(INITIAL, f"{m.c.junction}: the start", tuple(
                 Action("reinit", states[p].name, p,
