@@ -412,3 +412,17 @@ def test_a_one_way_clutch_of_a_freewheel_beside_a_clutch_is_its_automaton(tmp_pa
                        backend, "--t-end", "5").returncode == 0
         runs.append(other.read_bytes())
     assert runs[0] == runs[1] == runs[2]
+
+
+def test_a_condition_holding_a_time_source_keeps_it():
+    """SymPy's Piecewise, given (1, x > 2*step(3)), folds the condition and rewrites it as an
+    ITE that takes the step's event value (a symbol) for always true: x > 2, silently.  bgc's
+    conditions are unnested first (bgc.symbolic.conditions): both sides of the step stay."""
+    import sympy as sp
+
+    import bgc.symbolic  # noqa: F401 (installs the guard)
+    event, x = sp.Symbol("event#0"), sp.Symbol("x")
+    cond = sp.Piecewise((1, x > 2 * sp.Piecewise((1, event), (0, True))), (0, True))
+    for e_value, x_value, expected in ((False, 1, 1), (True, 1, 0), (True, 3, 1),
+                                       (False, -1, 0)):
+        assert cond.xreplace({event: sp.true if e_value else sp.false, x: x_value}) == expected

@@ -37,7 +37,8 @@ from sympy.solvers.solveset import NonlinearError
 from ..base.diagnostics import fail
 from ..front.events import INITIAL, Action, Discrete, Relation, When
 from ..front.graph import TIME
-from ..symbolic.algebra import Max, Min, indicator
+from ..symbolic.algebra import Max, Min
+from ..symbolic.conditions import indicator
 from ..symbolic.differentiate import partial
 
 EPS = sp.Float(2.0 ** -52)  # a double's epsilon
@@ -363,7 +364,7 @@ def _band(m, lam) -> sp.Expr:
 def _is(test) -> sp.Expr:
     """1 where test holds, else 0: the selection is arithmetic on 0 and 1 (exact in every
     backend), so that SymPy never rewrites its conditions as one boolean formula (nor drops
-    a time source's step inside one: bgc.symbolic.algebra.indicator)."""
+    a time source's step inside one: bgc.symbolic.conditions)."""
     return indicator(test)
 
 

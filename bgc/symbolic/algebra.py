@@ -70,33 +70,6 @@ class Min(_Extremum):
     pick = staticmethod(min)
 
 
-def indicator(test) -> sp.Expr:
-    """1 where `test` holds, else 0.  SymPy's Piecewise rewrites a condition that holds a
-    Piecewise (piecewise_fold, then ITE), and where that inner Piecewise's own condition is
-    a symbol (an event's value, as step(t0) is written) the rewrite drops it: a pair
-    (1, x > 2*Piecewise((1, e), (0, True))) becomes (1, x > 2), silently.  Here such a test
-    is taken apart instead: and, or and not as products of indicators, a relation holding a
-    Piecewise folded into its pieces, each piece's indicator times the indicator that its
-    condition is the first to hold; no condition handed to SymPy holds a Piecewise."""
-    if not (isinstance(test, sp.Basic) and test.has(sp.Piecewise)):
-        return sp.Piecewise((sp.Integer(1), test), (sp.Integer(0), True))
-    if isinstance(test, sp.And):
-        return sp.Mul(*[indicator(a) for a in test.args])
-    if isinstance(test, sp.Or):
-        return 1 - sp.Mul(*[1 - indicator(a) for a in test.args])
-    if isinstance(test, sp.Not):
-        return 1 - indicator(test.args[0])
-    folded = sp.piecewise_fold(test)
-    if not isinstance(folded, sp.Piecewise):
-        raise ValueError(f"a condition that SymPy cannot take apart: {test}")
-    out, rest = sp.Integer(0), sp.Integer(1)
-    for piece, cond in folded.args:
-        hit = sp.Integer(1) if cond == True else indicator(cond)  # noqa: E712 (SymPy's true)
-        out += rest * hit * indicator(piece)
-        rest *= 1 - hit
-    return out
-
-
 def linear_solution(equation: sp.Expr, unknown: sp.Symbol) -> sp.Expr | None:
     """The solution of equation == 0 when it has degree one in unknown with a coefficient
     free of it: -(equation - a*unknown)/a.  None otherwise."""
