@@ -546,13 +546,29 @@ n -> coil.p; coil.n -> out; out -> cap.p; cap.n -> g2.p; out -> load.p; load.n -
 """
 
 
-def test_two_switches_with_their_diodes_make_a_synchronous_buck_converter():
+SYNCHRONOUS_BUCK_LEG = """model sync_buck_leg
+import electrical as el
+parameter f = 1e5
+supply : el.voltage_source(v = 12)
+leg : el.half_bridge(high = square(1/f, 0.5), low = 1 - square(1/f, 0.5))
+coil : el.inductor(l = 1e-4)
+cap : el.capacitor(c = 1e-5)
+load : el.resistor(r = 50)
+g1 : el.ground(); g2 : el.ground(); g3 : el.ground()
+vin : 0; out : 0; gn : 0
+supply.p -> vin; vin -> leg.plus; leg.minus -> gn; gn -> g1.p
+leg.out -> coil.p; coil.n -> out; out -> cap.p; cap.n -> g2.p; out -> load.p; load.n -> g3.p
+"""
+
+
+@pytest.mark.parametrize("text", [SYNCHRONOUS_BUCK, SYNCHRONOUS_BUCK_LEG], ids=["parts", "leg"])
+def test_two_switches_with_their_diodes_make_a_synchronous_buck_converter(text):
     """A half-bridge of two switch_diodes driven in turn: the coil sees 12 V, then 0 V, and its
     current reverses through the low switch at light load (no discontinuous conduction): the
     exact solution is the matrix exponential of one linear circuit per half period."""
     from scipy.linalg import expm
     T, L, C, R = 1e-5, 1e-4, 1e-5, 50.0
-    t, Y = simulate(SYNCHRONOUS_BUCK, ["coil.store.f", "cap.store.e"], t_end=20 * T, dt=T / 50)
+    t, Y = simulate(text, ["coil.store.f", "cap.store.e"], t_end=20 * T, dt=T / 50)
     M = np.zeros((3, 3))
     M[:2, :2] = [[0, -1 / L], [1 / C, -1 / (R * C)]]
 
@@ -573,6 +589,69 @@ def test_two_switches_with_their_diodes_make_a_synchronous_buck_converter():
     assert exact[:, 0].min() < -1  # the current does reverse
     for j in (0, 1):
         assert np.max(np.abs(Y[:, j] - exact[:, j])) < 1e-8 * np.max(np.abs(exact[:, j]))
+
+
+FREEWHEEL = """model freewheel
+import mechanics as mech
+wheel : mech.inertia(j = 0.5)
+pedals : mech.inertia(j = 0.2)
+drag : mech.rotational_damper(d = 0.1)
+push : mech.torque(tau = 1 - 2*step(1))
+fw : mech.freewheel()
+ground : mech.rotational_fixed()
+w : 1; p : 1
+w -> wheel.p; w -> drag.a; drag.b -> ground.p; w -> fw.a
+push.p -> p; p -> pedals.p; fw.b -> p
+"""
+
+
+def test_a_freewheel_is_driven_then_overruns_as_the_closed_form():
+    """The pedals push the wheel through the freewheel, locked: (Ja + Jb) w' = 1 - d w from
+    rest; at t = 1 the push reverses, the freewheel cannot pull, and the two part: the wheel
+    coasts against its drag, w = w1 exp(-d (t - 1)/Ja), the pedals decelerate at 1/Jb."""
+    Ja, Jb, d = 0.5, 0.2, 0.1
+    t, Y = simulate(FREEWHEEL, ["wheel.body.f", "pedals.body.f"], t_end=2.0, dt=0.01)
+    w1 = (1 - math.exp(-d / (Ja + Jb))) / d
+    together = (1 - np.exp(-d * t / (Ja + Jb))) / d
+    wheel = np.where(t <= 1, together, w1 * np.exp(-d * (t - 1) / Ja))
+    pedals = np.where(t <= 1, together, w1 - (t - 1) / Jb)
+    np.testing.assert_allclose(Y[:, 0], wheel, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(Y[:, 1], pedals, rtol=0, atol=1e-9)
+
+
+AS_FLAT = [  # (the model of library parts, its plain counterpart in tests/models, t_end)
+    ("hbridge_library.bg", "hbridge.bg", ".h_bridge(", 2e-4),
+    ("one_way_clutch_library.bg", "one_way_clutch.bg", ".one_way_clutch(", 4.0),
+]
+
+
+@pytest.mark.parametrize("library, plain, used, t_end", AS_FLAT)
+def test_bridges_and_clutches_of_library_parts_run_as_their_plain_models(library, plain, used,
+                                                                         t_end):
+    """Flattening is exact: the H-bridge drive of `el.h_bridge(` and the one-way clutch of
+    `mech.one_way_clutch(` give the numbers of the same models written out flat (whose
+    exact references tests/test_switching.py checks)."""
+    models = ROOT / "tests" / "models"
+    assert used in (models / library).read_text()
+    runs = [bgc.simulate(str(models / name), "run", backend="python", t_end=t_end)[1]
+            for name in (library, plain)]
+    np.testing.assert_array_equal(runs[0], runs[1])
+
+
+BRIDGE_PARTS = """model bridge_parts
+import electrical as el
+src : MSe(10*sin(314.159*t))
+bridge : el.diode_bridge()
+c : C(1e-3); r : R(100); p : 0
+src -> bridge.ac; bridge.dc -> p; p -> c; p -> r
+"""
+
+
+def test_a_diode_bridge_rectifies_to_the_peak_while_it_charges():
+    """From rest the capacitor follows |u| (two diodes conducting) while its current
+    C d|u|/dt + |u|/R is positive: v = 10 |sin(w t)| up to the first peak."""
+    t, Y = simulate(BRIDGE_PARTS, ["c.e"], t_end=4e-3, dt=1e-4)
+    np.testing.assert_allclose(Y[:, 0], 10 * np.abs(np.sin(314.159 * t)), rtol=0, atol=1e-8)
 
 
 STICK_SLIP = """model stick_slip

@@ -174,17 +174,19 @@ def test_the_buck_converter_runs_as_an_fmu(tmp_path, kind):
 
 
 HBRIDGE = ROOT / "tests" / "models" / "hbridge.bg"
+HBRIDGE_LIBRARY = ROOT / "tests" / "models" / "hbridge_library.bg"
 
 
 @needs_cc
-def test_an_h_bridge_with_dead_time_drives_a_dc_motor_as_its_exact_solution(tmp_path):
+@pytest.mark.parametrize("model", [HBRIDGE, HBRIDGE_LIBRARY], ids=["plain", "library"])
+def test_an_h_bridge_with_dead_time_drives_a_dc_motor_as_its_exact_solution(tmp_path, model):
     """Four switches with their anti-parallel diodes (eight coupled elements): s1 and s4 closed
     for 70 % of each 50 us period, s2 and s3 for 20 %, all four open for 5 % after each; in the
     dead time the diodes carry the motor's current (the bridge applies -V while it is positive,
     +V while negative, and holds it at zero where it would reverse). The motor: L di/dt =
     v - R i - k w, J dw/dt = k i - b w, exact by matrix exponentials between the instants."""
     V, f, D, dead, R, L, k, J, b = 24.0, 2e4, 0.7, 0.05, 1.0, 1e-3, 0.05, 1e-4, 1e-5
-    out = simulate(tmp_path, HBRIDGE, t_end="1e-3")
+    out = simulate(tmp_path, model, t_end="1e-3")
     data = np.loadtxt(out, delimiter=",", skiprows=1)
     A = np.array([[-R / L, -k / L], [k / J, -b / J]])
     A_held = np.array([[0, 0], [0, -b / J]])  # (the current held at zero)
@@ -310,8 +312,32 @@ scene run {
 """
 
 
+BRIDGE_LIBRARY = """model bridge_lib "the same with the standard library's diode_bridge"
+import electrical as el
+parameter V = 10.0
+parameter w = 314.159
+parameter C = 1e-3
+parameter R = 100.0
+src : MSe(V*sin(w*t))
+bridge : el.diode_bridge()
+c : C(C)
+r : R(R)
+p : 0
+src -> bridge.ac
+bridge.dc -> p
+p -> c
+p -> r
+scene run {
+  time 0 .. 0.1 every 1e-4
+  outputs c.e
+  solver dopri5(rtol = 1e-10, atol = 1e-12)
+}
+"""
+
+
 @needs_cc
-def test_a_diode_bridge_with_a_smoothing_capacitor_is_the_peak_rectifier(tmp_path):
+@pytest.mark.parametrize("text", [BRIDGE, BRIDGE_LIBRARY], ids=["plain", "library"])
+def test_a_diode_bridge_with_a_smoothing_capacitor_is_the_peak_rectifier(tmp_path, text):
     """The source floats: while all four diodes block, its potential is undetermined (any
     value between the diodes' limits is taken), and while two conduct the capacitor follows
     |u| as long as their current C d|u|/dt + |u|/R is positive, i.e. until tan(w t) = -w R C
@@ -319,7 +345,7 @@ def test_a_diode_bridge_with_a_smoothing_capacitor_is_the_peak_rectifier(tmp_pat
     meets |u| again (brentq on the closed forms)."""
     V, w, C, R = 10.0, 314.159, 1e-3, 100.0
     model = tmp_path / "bridge.bg"
-    model.write_text(BRIDGE)
+    model.write_text(text)
     out = tmp_path / "bridge.csv"
     result = run_bgc("simulate", model, "--scene", "run", "-o", out, "--backend", "c")
     assert result.returncode == 0, result.stderr
@@ -343,6 +369,7 @@ def test_a_diode_bridge_with_a_smoothing_capacitor_is_the_peak_rectifier(tmp_pat
 
 
 CLUTCH = ROOT / "tests" / "models" / "one_way_clutch.bg"
+CLUTCH_LIBRARY = ROOT / "tests" / "models" / "one_way_clutch_library.bg"
 
 
 def _one_way_clutch(grid, J1=0.1, J2=0.3, b2=0.05, Fc=0.3, Fs=0.5, t_on=3.0):
@@ -391,13 +418,14 @@ def _one_way_clutch(grid, J1=0.1, J2=0.3, b2=0.05, Fc=0.3, Fs=0.5, t_on=3.0):
 
 
 @needs_cc
-def test_a_one_way_clutch_of_a_freewheel_beside_a_clutch_is_its_automaton(tmp_path):
+@pytest.mark.parametrize("model", [CLUTCH, CLUTCH_LIBRARY], ids=["plain", "library"])
+def test_a_one_way_clutch_of_a_freewheel_beside_a_clutch_is_its_automaton(tmp_path, model):
     """A freewheel D and a clutch Fr on one relative speed: both hold it while locked (how
     the torque splits between them is not determined: any split inside both cones is taken),
     the clutch slips above its limit once engaged, and the freewheel alone locks before."""
     out = tmp_path / "clutch.csv"
     events = tmp_path / "events.csv"
-    result = run_bgc("simulate", CLUTCH, "--scene", "run", "-o", out, "--events", events,
+    result = run_bgc("simulate", model, "--scene", "run", "-o", out, "--events", events,
                      "--backend", "c")
     assert result.returncode == 0, result.stderr
     data = np.loadtxt(out, delimiter=",", skiprows=1)
@@ -405,6 +433,8 @@ def test_a_one_way_clutch_of_a_freewheel_beside_a_clutch_is_its_automaton(tmp_pa
     assert np.max(np.abs(data[:, 1:3] - exact)) < 1e-9 * np.max(np.abs(exact))
     log = events.read_text()
     assert "cl.stick,0 -> 1" in log and "fw.blocking,1 -> 0" in log  # (it slips and locks)
+    if model == CLUTCH_LIBRARY:
+        return
     runs = []
     for backend in ("c", "python", "vm"):
         other = tmp_path / f"clutch-{backend}.csv"
