@@ -27,7 +27,7 @@ bgc_work *bgc_work_new(void)
         return NULL;
     w->v = (double *)calloc(BGC_DIM(BGC_WORK_DOUBLES), sizeof *w->v);
     w->iv = (int *)calloc(BGC_DIM(BGC_WORK_INTS), sizeof *w->iv);
-    w->d = (double *)calloc(BGC_DIM(BGC_NUM_DISCRETE), sizeof *w->d);
+    w->d = (double *)calloc(BGC_DIM(BGC_NUM_DISCRETE + 2 * BGC_NUM_INDICATORS), sizeof *w->d);
     if (!w->v || !w->iv || !w->d) {
         bgc_work_free(w);
         return NULL;
