@@ -797,11 +797,13 @@ def _newton(w, k, f, t, x, p, final_factor):
         else:
             _block_lsolve(w, b, bb)
         small = True  # a full step this small ends the iteration (quadratic convergence)
+        near = True  # one within the tolerance ends it where the residual cannot decrease
         for i in rows:
             dz, z = v[bb + i], v[bz + i]
             if abs(dz) > 0.01 * (atol + rtol * abs(z)) and abs(dz) > eps4 * abs(z):
                 small = False
-                break
+            if abs(dz) > atol + rtol * abs(z):
+                near = False
         lam = 1.0
         if m == 1:  # the scalar block, most common: the same operations without the loops
             z0, d0 = v[bz], v[bb]
@@ -827,10 +829,12 @@ def _newton(w, k, f, t, x, p, final_factor):
                 lam *= 0.5
         v[bz:bz + m] = zt
         v[br:br + m] = rt
+        # no decrease even at the shortest step: the residual at its rounding's floor (bgc_newton)
+        near = near and not small and not (trial <= (1.0 - 1e-4 * lam) * norm)
         norm = trial
         if not isfinite(norm):
             raise _BlockFailure(k, 3, t)
-        if small:
+        if small or near:
             break
         f(t, x, p, w, v, bz, v, br, v, save)
     if final_factor:
