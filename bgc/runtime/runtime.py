@@ -3555,7 +3555,7 @@ class _Radau(_Family):
         self.erracc = 1.0
         self.faccon, self.theta, self.thetat = 1.0, _THET, 0.0
         self.thqold, self.dynold, self.hhfac = 1.0, 1.0, 0.5
-        self.reject = self.caljac = self.refactored = False
+        self.reject = self.caljac = False
         self.first = self.needjac = True
         self.accepted_steps, self.nsing, self.newt = 0, 0, 0
         self.J = self.E1 = self.piv1 = self.f0 = self.scal = None
@@ -3687,8 +3687,8 @@ class _Radau(_Family):
                 W = W + dW
                 Z = _radau_mul(u.T, W)
             self.Z = Z
-            # converged; after one iteration only on the previous step's matrices
-            if (newt > 1 or not self.refactored) and self.faccon * dyno <= u.fnewt:
+            # converged, the contraction measured in this step (never after one iteration)
+            if newt > 1 and self.faccon * dyno <= u.fnewt:
                 return 0, None
 
     def _error(self, t, h, y):
@@ -3778,7 +3778,6 @@ class _Radau(_Family):
         fac1 = u.gamma / h
         alphn = [a / h for a in u.alpha]
         betan = [bb / h for bb in u.beta]
-        self.refactored = h != self.hfact
         if h != self.hfact:
             if not self._factor(fac1, alphn, betan):
                 self.hfact = 0.0
