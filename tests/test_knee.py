@@ -258,7 +258,8 @@ def _noevent_model(tmp_path):
 
 def test_the_bridge_under_noevent_converges_as_the_tolerance_tightens(tmp_path):
     """Kinks under noevent (docs/hybrid.md): radau5's error against the reference falls with
-    its tolerance (about 6e-8, 4e-9 and 1e-10 at rtol 1e-8, 1e-10 and 1e-12).  At 1e-12 the
+    its tolerance (about 6e-8, 4e-9 and 1e-10 at rtol 1e-8, 1e-10 and 1e-12; at atol 1e-12,
+    6e-8 and 4e-9 at rtol 1e-8 and 1e-10).  At 1e-12 the
     Newton iteration of a blocking diode's node stalled: its voltage is its current's rounding
     through 1/Goff, 3e-14 V, above Newton's 0.01 rtol |z|, and the run stopped as a block that
     did not converge; a step within the tolerance where the residual cannot decrease now ends
@@ -276,6 +277,18 @@ def test_the_bridge_under_noevent_converges_as_the_tolerance_tightens(tmp_path):
         assert np.all(err < bound), (rtol, err)
         errors.append(np.max(err))
     assert errors == sorted(errors, reverse=True)
+    # at a looser atol radau5 had stopped its Newton iteration after one iteration across a
+    # kink, on the other branch's Jacobian: 1.3e-2 off at rtol 1e-8, 3.7e-3 at 1e-10
+    errors = []
+    for rtol, bound in (("1e-8", 1e-6), ("1e-10", 1e-7)):
+        out = tmp_path / f"noevent-atol-{rtol}.csv"
+        result = run_bgc("simulate", model, "--scene", "run", "--backend", backend, "-o", out,
+                         "--t-end", "0.02", "--rtol", rtol, "--atol", "1e-12")
+        assert result.returncode == 0, result.stderr
+        err, _ = _errors(out)
+        assert np.all(err < bound), (rtol, err)
+        errors.append(np.max(err))
+    assert errors[1] < errors[0]
     out = tmp_path / "noevent-dopri5.csv"
     result = run_bgc("simulate", model, "--scene", "run", "--backend", backend, "-o", out,
                      "--t-end", "0.02", "--rtol", "1e-12", "--solver", "dopri5")
