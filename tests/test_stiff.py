@@ -206,8 +206,10 @@ def test_stiff_rc_pair_matches_the_closed_form(backend, solver):
         assert st["jac"] == st["steps"]
         assert st["lu"] == attempts and st["solves"] == S * attempts
         assert st["rhs"] >= (S - 1) * attempts + st["steps"]
-    else:  # pairs of factorisations; per step a Newton iteration (2 solves) and an estimate
-        assert st["lu"] % 2 == 0 and st["jac"] <= st["lu"] // 2
+    else:  # per step a Newton iteration (2 solves) and an estimate; radau5 factors pairs
+        # (a real and a complex matrix), radau's five and seven stages three and four
+        assert st["lu"] % 2 == 0 or solver == "radau"
+        assert st["jac"] <= st["lu"] // 2
         assert st["solves"] >= 3 * st["steps"] and st["rhs"] >= 3 * attempts
 
 

@@ -52,7 +52,8 @@ typedef struct bgc_work {
     int failure;        /* ... and how: BGC_BLOCK_SINGULAR, _DIVERGED or _NONFINITE */
     double t;           /* ... and when */
     double *d;          /* a model with events: the discrete values between two calls of
-                           bgc_advance (BGC_NUM_DISCRETE) ... */
+                           bgc_advance (BGC_NUM_DISCRETE), then per state relation its
+                           hysteresis band and its indicator's largest magnitude ... */
     int started;        /* ... once set by the event iteration at the run's start */
     const bgc_input_series *inputs; /* a model with inputs: one per input (NULL: none has
                                        data), set from bgc_settings.inputs by each run */

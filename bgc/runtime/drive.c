@@ -107,6 +107,8 @@ typedef struct bgc_run {
     int from_event;  /* t_out is an event's (the step budget counts from either) */
     /* events (a model with BGC_NUM_DISCRETE > 0): */
     double *d;       /* the discrete values, in the run's parameter copy */
+    double *band;    /* per state relation: its hysteresis band (0: none), and ... */
+    double *gmax;    /* ... its indicator's largest magnitude so far (in the workspace) */
     double *g;       /* the indicators at r->t */
     double *ev;      /* scratch: indicators (2 x BGC_NUM_INDICATORS), update's input and
                         output, a state and two derivatives */
@@ -437,12 +439,55 @@ static int bgc_holds(int k, double g)
     return bgc_indicator_strict[k] ? g > 0.0 : g >= 0.0;
 }
 
+/* Hysteresis (docs/hybrid.md, "Knees"): a state relation that changed its value at an event
+   keeps it until its indicator goes back beyond zero by more than its band, the solver's
+   resolution of the indicator after the event: the larger of
+   - what the indicator changes by in the time's resolution (1e-12 relative, as events are
+     located) along the state's derivative after the event (bgc_bands), and
+   - BGC_BAND_REL times the largest magnitude the indicator has had in the run: its
+     floating-point resolution (its rounding is a few ulps of the numbers it is computed
+     from, with a margin of 10^4 for an algebraic solve's condition).
+   At a knee where the law is continuous, the indicator after the event sits within rounding
+   of zero, or of a crossing within the time's resolution (a steep branch hands over to a
+   flat one: the rounding of a current through 1/Ron is seen through 1/Goff), and may come out
+   on the old side; a Zeno model's conditions go back by a finite amount, far beyond it. */
+#define BGC_BAND_REL 1e-12
+
+/* Relation k's indicator g moved by its band: > 0 where the relation holds (>= 0 while it
+   is held true; g itself without a band). */
+static double bgc_level(const bgc_run *r, int k, double g)
+{
+    const double b = r->band[k];
+    return b > 0.0 ? (r->d[k] != 0.0 ? g + b : g - b) : g;
+}
+
+/* The value state relation k takes at indicator value g: its condition, or within its band
+   the value it has. */
+static int bgc_relation(const bgc_run *r, int k, double g)
+{
+    if (r->band[k] > 0.0)
+        return r->d[k] != 0.0 ? bgc_level(r, k, g) >= 0.0 : bgc_level(r, k, g) > 0.0;
+    return bgc_holds(k, g);
+}
+
+/* The indicators g seen at an accepted point: each one's largest magnitude, and the end of
+   the band of a relation whose indicator is beyond it on the relation's own side. */
+static void bgc_seen(bgc_run *r, const double *g)
+{
+    int k;
+    for (k = 0; k < BGC_NUM_INDICATORS; k++) {
+        r->gmax[k] = bgc_max(r->gmax[k], fabs(g[k]));
+        if (r->band[k] > 0.0 && (r->d[k] != 0.0 ? g[k] > r->band[k] : g[k] < -r->band[k]))
+            r->band[k] = 0.0;
+    }
+}
+
 /* The first state relation whose value at g differs from its frozen value d, or -1. */
 static int bgc_changed(const bgc_run *r, const double *g)
 {
     int k;
     for (k = 0; k < BGC_NUM_INDICATORS; k++)
-        if (bgc_holds(k, g[k]) != (r->d[k] != 0.0))
+        if (bgc_relation(r, k, g[k]) != (r->d[k] != 0.0))
             return k;
     return -1;
 }
@@ -544,6 +589,30 @@ static int bgc_chattering(bgc_run *r, double t, const char *head, double from, c
     return BGC_ERR_RUNTIME;
 }
 
+/* The bands of the state relations that changed in the event iteration's last pass, at
+   (t, x) after it: each at least what its indicator changes by over the time's resolution
+   tau along the derivative there (one Euler step of tau: x + tau f). */
+static int bgc_bands(bgc_run *r, double t, const double *x)
+{
+    enum { N = BGC_NUM_STATES, G = BGC_NUM_INDICATORS };
+    double *g0 = BGC_EV_GA(r), *g1 = BGC_EV_GB(r), *f = BGC_EV_F0(r), *xt = f + N;
+    const double tau = bgc_max(1e-12 * fabs(t), bgc_hmin(t));
+    int i, k, rc;
+    if (bgc_model_rhs(t, x, r->p, r->w, f))
+        return bgc_fail_block(r->msg, r->msg_size, r->w);
+    for (i = 0; i < N; i++)
+        xt[i] = x[i] + tau * f[i];
+    rc = bgc_indicators(r, t, x, g0);
+    if (rc == 0)
+        rc = bgc_indicators(r, t + tau, xt, g1);
+    if (rc)
+        return rc;
+    for (k = 0; k < G; k++)
+        if (r->last[k] == r->passes)
+            r->band[k] = bgc_max(r->band[k], fabs(g1[k] - g0[k]));
+    return 0;
+}
+
 /* The event iteration at (t, x): bgc_model_update until the state and the discrete values
    stop changing (start: the run's first, at t0, which sets every discrete value and logs
    nothing); r->g the indicators there after it. */
@@ -552,7 +621,7 @@ static int bgc_event_iteration(bgc_run *r, double t, double *x, int start)
     enum { N = BGC_NUM_STATES, G = BGC_NUM_INDICATORS, ND = BGC_NUM_DISCRETE };
     double *g = r->g, *in = BGC_EV_IN(r), *out = BGC_EV_OUT(r);
     char change[96];
-    int it, i, k, rc, shown, changed = 1;
+    int it, i, k, rc, shown, crossed, changed = 1;
     for (it = 0; changed; it++) {
         if (it > BGC_MAX_EVENT_ITERATIONS) { /* the last pass still changed something */
             snprintf(change, sizeof change, "more than %d events at one instant, the event "
@@ -562,8 +631,10 @@ static int bgc_event_iteration(bgc_run *r, double t, double *x, int start)
         rc = bgc_indicators(r, t, x, g);
         if (rc)
             return rc;
-        for (k = 0; k < G; k++)
-            in[k] = bgc_holds(k, g[k]) ? 1.0 : 0.0;
+        for (k = 0; k < G; k++) {
+            r->gmax[k] = bgc_max(r->gmax[k], fabs(g[k]));
+            in[k] = bgc_relation(r, k, g[k]) ? 1.0 : 0.0;
+        }
         in[G] = start && it == 0 ? 1.0 : 0.0;
         if (bgc_model_update(t, x, r->p, r->w, in, out))
             return bgc_fail_block(r->msg, r->msg_size, r->w);
@@ -584,6 +655,7 @@ static int bgc_event_iteration(bgc_run *r, double t, double *x, int start)
             }
         }
         shown = -1;
+        crossed = 0;
         for (k = 0; k < ND; k++) {
             const double v = out[N + k];
             if (!isfinite(v))
@@ -591,6 +663,10 @@ static int bgc_event_iteration(bgc_run *r, double t, double *x, int start)
             if (v != r->d[k]) {
                 changed = 1;
                 r->last[k] = r->passes;
+                if (k < G) { /* a relation that changed: its band (none at the start) */
+                    r->band[k] = start && it == 0 ? 0.0 : BGC_BAND_REL * r->gmax[k];
+                    crossed |= !(start && it == 0);
+                }
                 if (!start && r->s->on_event) {
                     rc = bgc_log_discrete(r, t, k, r->d[k], v, &shown);
                     if (rc)
@@ -599,8 +675,14 @@ static int bgc_event_iteration(bgc_run *r, double t, double *x, int start)
                 r->d[k] = v;
             }
         }
+        if (crossed) {
+            rc = bgc_bands(r, t, x);
+            if (rc)
+                return rc;
+        }
         r->passes++;
     }
+    bgc_seen(r, g);
     return 0;
 }
 
@@ -639,8 +721,8 @@ static int bgc_find_event(bgc_run *r, bgc_dense *c, double *te, double *ye)
         if (tb - ta <= tol)
             break;
         for (k = 0; k < G; k++) {
-            if (bgc_holds(k, gb[k]) != (r->d[k] != 0.0)) {
-                const double a = wa * ga[k], b = wb * gb[k];
+            if (bgc_relation(r, k, gb[k]) != (r->d[k] != 0.0)) {
+                const double a = wa * bgc_level(r, k, ga[k]), b = wb * bgc_level(r, k, gb[k]);
                 double q = a / (a - b);
                 if (!(q >= 0.0 && q <= 1.0) || (q == 0.0 && probed))
                     q = 0.5;
@@ -890,6 +972,7 @@ static int bgc_drive(bgc_run *r, const bgc_family *f, double *y)
                 continue;
             }
             memcpy(r->g, BGC_EV_GB(r), sizeof(double) * BGC_NUM_INDICATORS);
+            bgc_seen(r, r->g);
         }
         rc = bgc_emit_step(r, &c, tph, 1, yout);
         if (rc == 0 && f->after)
@@ -1009,6 +1092,8 @@ static int bgc_integrate(const bgc_settings *s, const bgc_params *p, bgc_work *w
     r.sliding = 0;
     r.passes = r.chain_from = r.sliding_from = r.out_from = 0.0;
     r.d = (double *)&q + BGC_DISCRETE_OFFSET;
+    r.band = w->d + BGC_NUM_DISCRETE;
+    r.gmax = r.band + BGC_NUM_INDICATORS;
     r.g = r.ev = r.last = NULL;
     bgc_params_update(&q);
     i = bgc_first_nonfinite(y, BGC_NUM_STATES);

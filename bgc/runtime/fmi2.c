@@ -30,9 +30,11 @@
    Events (a model with BGC_NUM_DISCRETE > 0, docs/hybrid.md).  fmi2ExitInitializationMode
    runs the start's event iteration (both types).  Model Exchange: event indicator k is the
    state relation k's indicator g (the relation holds when g > 0 if it is strict, g >= 0 if
-   not), except where g is exactly 0: there it is BGC_FMI_ZERO on the side of the relation's
-   value (-BGC_FMI_ZERO for a strict relation, which does not hold, +BGC_FMI_ZERO for another,
-   which does).  So an indicator is > 0 exactly when its relation holds, and never 0: the
+   not; a relation that changed at an event, within its hysteresis band, bgc_level: g moved
+   by the band, the relation keeping its value where that is 0), except where it is exactly
+   0: there it is BGC_FMI_ZERO on the side of the relation's value (-BGC_FMI_ZERO for a
+   strict relation, which does not hold, +BGC_FMI_ZERO for another, which does).  So an
+   indicator is > 0 exactly when its relation holds, and never 0: the
    relation changes its value exactly when the indicator changes sign, which is FMI's state
    event, and a root finder that stops where an indicator is 0 (CVODE does) never stops at
    a point where the relation has not changed yet.
@@ -494,6 +496,8 @@ static fmi2Status bgc_fmi_event_iteration(bgc_fmi *m, const char *fn, int start,
     r.msg_size = sizeof msg;
     r.t = m->t;
     r.d = BGC_FMI_D(m);
+    r.band = m->w->d + BGC_NUM_DISCRETE;
+    r.gmax = r.band + BGC_NUM_INDICATORS;
     r.g = m->g;
     r.ev = m->ev;
     r.last = m->e.last;
@@ -530,6 +534,16 @@ static fmi2Status bgc_fmi_event_iteration(bgc_fmi *m, const char *fn, int start,
         *x_changed |= x0[i] != m->x[i];
     *t_next = r.t_next;
     return fmi2OK;
+}
+
+/* The run r as far as the state relations' values need it (bgc_relation, bgc_level,
+   bgc_seen): the discrete values and the bands in the instance's workspace. */
+static void bgc_fmi_bands(bgc_fmi *m, bgc_run *r)
+{
+    memset(r, 0, sizeof *r);
+    r->d = BGC_FMI_D(m);
+    r->band = m->w->d + BGC_NUM_DISCRETE;
+    r->gmax = r->band + BGC_NUM_INDICATORS;
 }
 
 /* The state relations' indicators at the instance's (t, x) in m->g; nonzero if the model
@@ -980,7 +994,7 @@ typedef struct bgc_fmi_saved {
     double wrtol, watol;
     double wv[BGC_DIM(BGC_WORK_DOUBLES)];
     int wiv[BGC_DIM(BGC_WORK_INTS)];
-    double wd[BGC_DIM(BGC_NUM_DISCRETE)];
+    double wd[BGC_DIM(BGC_NUM_DISCRETE + 2 * BGC_NUM_INDICATORS)]; /* and the bands */
 } bgc_fmi_saved;
 
 static void bgc_fmi_save(const bgc_fmi *m, bgc_fmi_saved *s)
@@ -1016,7 +1030,7 @@ static void bgc_fmi_save(const bgc_fmi *m, bgc_fmi_saved *s)
     s->watol = m->w->atol;
     memcpy(s->wv, m->w->v, sizeof s->wv);
     memcpy(s->wiv, m->w->iv, sizeof s->wiv);
-    memcpy(s->wd, m->w->d, sizeof(double) * BGC_NUM_DISCRETE);
+    memcpy(s->wd, m->w->d, sizeof s->wd);
 }
 
 static void bgc_fmi_restore(bgc_fmi *m, const bgc_fmi_saved *s)
@@ -1047,7 +1061,7 @@ static void bgc_fmi_restore(bgc_fmi *m, const bgc_fmi_saved *s)
     m->w->atol = s->watol;
     memcpy(m->w->v, s->wv, sizeof s->wv);
     memcpy(m->w->iv, s->wiv, sizeof s->wiv);
-    memcpy(m->w->d, s->wd, sizeof(double) * BGC_NUM_DISCRETE);
+    memcpy(m->w->d, s->wd, sizeof s->wd);
     m->w->block = 0;
     m->w->failure = 0;
 }
@@ -1287,6 +1301,7 @@ BGC_FMI_EXPORT fmi2Status fmi2CompletedIntegratorStep(fmi2Component c,
 {
     bgc_fmi *m = bgc_fmi_get(c, "fmi2CompletedIntegratorStep",
                              BGC_FMI_MASK_CompletedIntegratorStep, 1);
+    bgc_run r;
     int k, missed = 0;
     (void)noSetFMUStatePriorToCurrentPoint;
     if (!m)
@@ -1295,8 +1310,11 @@ BGC_FMI_EXPORT fmi2Status fmi2CompletedIntegratorStep(fmi2Component c,
         m->e.t_step = m->t;
     if (bgc_fmi_indicators(m))
         return bgc_fmi_model_failed(m, "fmi2CompletedIntegratorStep");
+    bgc_fmi_bands(m, &r);
     for (k = 0; k < BGC_NUM_INDICATORS; k++)
-        missed |= bgc_holds(k, m->g[k]) != (BGC_FMI_D(m)[k] != 0.0);
+        missed |= bgc_relation(&r, k, m->g[k]) != (r.d[k] != 0.0);
+    if (!missed) /* an accepted point, as the driver's step ends */
+        bgc_seen(&r, m->g);
     if (enterEventMode)
         *enterEventMode = missed ? fmi2True : fmi2False;
     if (terminateSimulation)
@@ -1367,6 +1385,7 @@ BGC_FMI_EXPORT fmi2Status fmi2GetEventIndicators(fmi2Component c, fmi2Real event
 {
     static const char fn[] = "fmi2GetEventIndicators";
     bgc_fmi *m = bgc_fmi_get(c, fn, BGC_FMI_MASK_GetEventIndicators, 1);
+    bgc_run r;
     int k;
     if (!m)
         return fmi2Error;
@@ -1379,9 +1398,12 @@ BGC_FMI_EXPORT fmi2Status fmi2GetEventIndicators(fmi2Component c, fmi2Real event
         return bgc_fmi_refuse(m, fn, "no array given");
     if (bgc_fmi_indicators(m))
         return bgc_fmi_model_failed(m, fn);
-    for (k = 0; k < BGC_NUM_INDICATORS; k++) /* > 0 exactly when the relation holds */
-        eventIndicators[k] = m->g[k] != 0.0 ? m->g[k]
-                             : bgc_indicator_strict[k] ? -BGC_FMI_ZERO : BGC_FMI_ZERO;
+    bgc_fmi_bands(m, &r);
+    for (k = 0; k < BGC_NUM_INDICATORS; k++) { /* > 0 exactly when the relation holds */
+        const double level = bgc_level(&r, k, m->g[k]);
+        eventIndicators[k] = level != 0.0 ? level
+                             : bgc_relation(&r, k, m->g[k]) ? BGC_FMI_ZERO : -BGC_FMI_ZERO;
+    }
     return fmi2OK;
 }
 

@@ -27,7 +27,7 @@ bgc_work *bgc_work_new(void)
         return NULL;
     w->v = (double *)calloc(BGC_DIM(BGC_WORK_DOUBLES), sizeof *w->v);
     w->iv = (int *)calloc(BGC_DIM(BGC_WORK_INTS), sizeof *w->iv);
-    w->d = (double *)calloc(BGC_DIM(BGC_NUM_DISCRETE), sizeof *w->d);
+    w->d = (double *)calloc(BGC_DIM(BGC_NUM_DISCRETE + 2 * BGC_NUM_INDICATORS), sizeof *w->d);
     if (!w->v || !w->iv || !w->d) {
         bgc_work_free(w);
         return NULL;
@@ -271,7 +271,7 @@ int bgc_newton(bgc_work *w, int k, bgc_eval_fn f, double t, const double *x,
     const int m = b->lu.m;
     double *z = w->v + b->z, *r = w->v + b->r, *dz = w->v + b->b, *zt = w->v + b->zt;
     double *rt = w->v + b->rt, *J = w->v + b->save, norm, trial, lambda;
-    int it, i, small;
+    int it, i, small, near;
     if (f(t, x, p, w, z, r, J))
         return 1;
     norm = bgc_norm2(r, m);
@@ -293,10 +293,14 @@ int bgc_newton(bgc_work *w, int k, bgc_eval_fn f, double t, const double *x,
             dz[i] = -r[i];
         bgc_block_lsolve(w, b, dz);
         small = 1; /* a full step this small ends the iteration (quadratic convergence) */
-        for (i = 0; i < m; i++)
+        near = 1;  /* one within the tolerance ends it where the residual cannot decrease */
+        for (i = 0; i < m; i++) {
             if (fabs(dz[i]) > 0.01 * (w->atol + w->rtol * fabs(z[i])) &&
                 fabs(dz[i]) > 4.0 * DBL_EPSILON * fabs(z[i]))
                 small = 0;
+            if (fabs(dz[i]) > w->atol + w->rtol * fabs(z[i]))
+                near = 0;
+        }
         for (lambda = 1.0;; lambda *= 0.5) {
             for (i = 0; i < m; i++)
                 zt[i] = z[i] + lambda * dz[i];
@@ -310,10 +314,14 @@ int bgc_newton(bgc_work *w, int k, bgc_eval_fn f, double t, const double *x,
             z[i] = zt[i];
             r[i] = rt[i];
         }
+        /* no decrease even at the shortest step: the residual is at its rounding's floor (a
+           flat branch of a kinked law sees it magnified: a current's rounding through
+           1/Goff), and z is as good as it gets when the step left is within the tolerance */
+        near = near && !small && !(trial <= (1.0 - 1e-4 * lambda) * norm);
         norm = trial;
         if (!isfinite(norm))
             return bgc_block_fail(w, k, BGC_BLOCK_NONFINITE, t);
-        if (small)
+        if (small || near)
             break;
         if (f(t, x, p, w, z, r, J))
             return 1;

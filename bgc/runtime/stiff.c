@@ -798,10 +798,13 @@ static void bgc_radau_configure(bgc_radau_use *u, const bgc_method *method,
    iterations (s = 3, 5, 7) from the previous step's collocation polynomial (zero on the first
    step and after an order change), convergence rate theta, stop when
    theta/(1 - theta) |dW| <= fnewt = max(10 eps/rtol', min(0.03, rtol'^(1/e - 1))),
-   e = (s+1)/(2s); after one iteration (the previous step's theta) only if h and J are the
-   previous step's (RADAU5 allows it on any step: after a change of h the old rate does not
-   hold, and the stages' Newton error of up to fnewt times the tolerance can exceed the
-   method's far smaller local error); theta >= 0.99 or no convergence: h / 2; a predicted miss
+   e = (s+1)/(2s); never after one iteration (RADAU5 allows it with the previous step's theta:
+   after a change of h the old rate does not hold, and the stages' Newton error of up to fnewt
+   times the tolerance can exceed the method's far smaller local error; across a kink of a law
+   under noevent, J is the other branch's, and a first increment damped by a matrix far
+   stiffer than the branch's looked converged while the stages were not, the error estimate
+   as blind: the run did not converge as the tolerance tightened); theta >= 0.99 or no
+   convergence: h / 2; a predicted miss
    of fnewt within the budget: h shrunk accordingly.  Error estimate:
    (gamma/h I - J) err = f(t, y) + sum_j e_j Z_j / h, refined once with f(t, y + err) on the
    first step and after a rejection, in Hairer's norm with the weights
@@ -823,7 +826,7 @@ typedef struct bgc_radau_state {
     bgc_run *r;
     const bgc_method *method;
     int fixed, variable, smax, set, since, change, unexp, unexn, recheck;
-    int reject, first, needjac, caljac, accepted, nsing, worst, newt, refactored;
+    int reject, first, needjac, caljac, accepted, nsing, worst, newt;
     double hfact, hold, hacc, erracc, faccon, theta, thetat, thqold, dynold, hhfac;
     double *J, *E1, *Z, *W, *b, *zlast, *dw, *f0, *scal, *ys, *tmp, *cont, *f2, *ew;
     bgc_cplx *Ec, *zc;
@@ -1113,9 +1116,8 @@ static int bgc_radau_newton(bgc_radau_state *ms, bgc_run *r, double t, double h,
                 W[(size_t)i * D + l] = a[i];
             bgc_radau_mul(m->T, u->ns, a, 1, Z + l, D);
         }
-        /* converged; after one iteration only on the previous step's matrices, whose
-           contraction faccon measured */
-        if ((ms->newt > 1 || !ms->refactored) && ms->faccon * dyno <= u->fnewt)
+        /* converged, the contraction measured in this step (never after one iteration) */
+        if (ms->newt > 1 && ms->faccon * dyno <= u->fnewt)
             return 0;
     }
 }
@@ -1263,7 +1265,6 @@ static void bgc_radau_step(void *state, bgc_run *r, double t, double h, double t
         alphn[k] = ms->u.m->alpha[k] / h;
         betan[k] = ms->u.m->beta[k] / h;
     }
-    ms->refactored = h != ms->hfact;
     if (h != ms->hfact) {
         if (bgc_radau_factor(ms, r, alphn, betan, fac1)) {
             ms->hfact = 0.0;

@@ -71,7 +71,8 @@ typedef struct bgc_work {
     int failure;        /* ... and how: BGC_BLOCK_SINGULAR, _DIVERGED or _NONFINITE */
     double t;           /* ... and when */
     double *d;          /* a model with events: the discrete values between two calls of
-                           bgc_advance (BGC_NUM_DISCRETE) ... */
+                           bgc_advance (BGC_NUM_DISCRETE), then per state relation its
+                           hysteresis band and its indicator's largest magnitude ... */
     int started;        /* ... once set by the event iteration at the run's start */
     const bgc_input_series *inputs; /* a model with inputs: one per input (NULL: none has
                                        data), set from bgc_settings.inputs by each run */
@@ -719,7 +720,7 @@ bgc_work *bgc_work_new(void)
         return NULL;
     w->v = (double *)calloc(BGC_DIM(BGC_WORK_DOUBLES), sizeof *w->v);
     w->iv = (int *)calloc(BGC_DIM(BGC_WORK_INTS), sizeof *w->iv);
-    w->d = (double *)calloc(BGC_DIM(BGC_NUM_DISCRETE), sizeof *w->d);
+    w->d = (double *)calloc(BGC_DIM(BGC_NUM_DISCRETE + 2 * BGC_NUM_INDICATORS), sizeof *w->d);
     if (!w->v || !w->iv || !w->d) {
         bgc_work_free(w);
         return NULL;
@@ -963,7 +964,7 @@ int bgc_newton(bgc_work *w, int k, bgc_eval_fn f, double t, const double *x,
     const int m = b->lu.m;
     double *z = w->v + b->z, *r = w->v + b->r, *dz = w->v + b->b, *zt = w->v + b->zt;
     double *rt = w->v + b->rt, *J = w->v + b->save, norm, trial, lambda;
-    int it, i, small;
+    int it, i, small, near;
     if (f(t, x, p, w, z, r, J))
         return 1;
     norm = bgc_norm2(r, m);
@@ -985,10 +986,14 @@ int bgc_newton(bgc_work *w, int k, bgc_eval_fn f, double t, const double *x,
             dz[i] = -r[i];
         bgc_block_lsolve(w, b, dz);
         small = 1; /* a full step this small ends the iteration (quadratic convergence) */
-        for (i = 0; i < m; i++)
+        near = 1;  /* one within the tolerance ends it where the residual cannot decrease */
+        for (i = 0; i < m; i++) {
             if (fabs(dz[i]) > 0.01 * (w->atol + w->rtol * fabs(z[i])) &&
                 fabs(dz[i]) > 4.0 * DBL_EPSILON * fabs(z[i]))
                 small = 0;
+            if (fabs(dz[i]) > w->atol + w->rtol * fabs(z[i]))
+                near = 0;
+        }
         for (lambda = 1.0;; lambda *= 0.5) {
             for (i = 0; i < m; i++)
                 zt[i] = z[i] + lambda * dz[i];
@@ -1002,10 +1007,14 @@ int bgc_newton(bgc_work *w, int k, bgc_eval_fn f, double t, const double *x,
             z[i] = zt[i];
             r[i] = rt[i];
         }
+        /* no decrease even at the shortest step: the residual is at its rounding's floor (a
+           flat branch of a kinked law sees it magnified: a current's rounding through
+           1/Goff), and z is as good as it gets when the step left is within the tolerance */
+        near = near && !small && !(trial <= (1.0 - 1e-4 * lambda) * norm);
         norm = trial;
         if (!isfinite(norm))
             return bgc_block_fail(w, k, BGC_BLOCK_NONFINITE, t);
-        if (small)
+        if (small || near)
             break;
         if (f(t, x, p, w, z, r, J))
             return 1;
@@ -1394,6 +1403,8 @@ typedef struct bgc_run {
     int from_event;  /* t_out is an event's (the step budget counts from either) */
     /* events (a model with BGC_NUM_DISCRETE > 0): */
     double *d;       /* the discrete values, in the run's parameter copy */
+    double *band;    /* per state relation: its hysteresis band (0: none), and ... */
+    double *gmax;    /* ... its indicator's largest magnitude so far (in the workspace) */
     double *g;       /* the indicators at r->t */
     double *ev;      /* scratch: indicators (2 x BGC_NUM_INDICATORS), update's input and
                         output, a state and two derivatives */
@@ -1724,12 +1735,55 @@ static int bgc_holds(int k, double g)
     return bgc_indicator_strict[k] ? g > 0.0 : g >= 0.0;
 }
 
+/* Hysteresis (docs/hybrid.md, "Knees"): a state relation that changed its value at an event
+   keeps it until its indicator goes back beyond zero by more than its band, the solver's
+   resolution of the indicator after the event: the larger of
+   - what the indicator changes by in the time's resolution (1e-12 relative, as events are
+     located) along the state's derivative after the event (bgc_bands), and
+   - BGC_BAND_REL times the largest magnitude the indicator has had in the run: its
+     floating-point resolution (its rounding is a few ulps of the numbers it is computed
+     from, with a margin of 10^4 for an algebraic solve's condition).
+   At a knee where the law is continuous, the indicator after the event sits within rounding
+   of zero, or of a crossing within the time's resolution (a steep branch hands over to a
+   flat one: the rounding of a current through 1/Ron is seen through 1/Goff), and may come out
+   on the old side; a Zeno model's conditions go back by a finite amount, far beyond it. */
+#define BGC_BAND_REL 1e-12
+
+/* Relation k's indicator g moved by its band: > 0 where the relation holds (>= 0 while it
+   is held true; g itself without a band). */
+static double bgc_level(const bgc_run *r, int k, double g)
+{
+    const double b = r->band[k];
+    return b > 0.0 ? (r->d[k] != 0.0 ? g + b : g - b) : g;
+}
+
+/* The value state relation k takes at indicator value g: its condition, or within its band
+   the value it has. */
+static int bgc_relation(const bgc_run *r, int k, double g)
+{
+    if (r->band[k] > 0.0)
+        return r->d[k] != 0.0 ? bgc_level(r, k, g) >= 0.0 : bgc_level(r, k, g) > 0.0;
+    return bgc_holds(k, g);
+}
+
+/* The indicators g seen at an accepted point: each one's largest magnitude, and the end of
+   the band of a relation whose indicator is beyond it on the relation's own side. */
+static void bgc_seen(bgc_run *r, const double *g)
+{
+    int k;
+    for (k = 0; k < BGC_NUM_INDICATORS; k++) {
+        r->gmax[k] = bgc_max(r->gmax[k], fabs(g[k]));
+        if (r->band[k] > 0.0 && (r->d[k] != 0.0 ? g[k] > r->band[k] : g[k] < -r->band[k]))
+            r->band[k] = 0.0;
+    }
+}
+
 /* The first state relation whose value at g differs from its frozen value d, or -1. */
 static int bgc_changed(const bgc_run *r, const double *g)
 {
     int k;
     for (k = 0; k < BGC_NUM_INDICATORS; k++)
-        if (bgc_holds(k, g[k]) != (r->d[k] != 0.0))
+        if (bgc_relation(r, k, g[k]) != (r->d[k] != 0.0))
             return k;
     return -1;
 }
@@ -1831,6 +1885,30 @@ static int bgc_chattering(bgc_run *r, double t, const char *head, double from, c
     return BGC_ERR_RUNTIME;
 }
 
+/* The bands of the state relations that changed in the event iteration's last pass, at
+   (t, x) after it: each at least what its indicator changes by over the time's resolution
+   tau along the derivative there (one Euler step of tau: x + tau f). */
+static int bgc_bands(bgc_run *r, double t, const double *x)
+{
+    enum { N = BGC_NUM_STATES, G = BGC_NUM_INDICATORS };
+    double *g0 = BGC_EV_GA(r), *g1 = BGC_EV_GB(r), *f = BGC_EV_F0(r), *xt = f + N;
+    const double tau = bgc_max(1e-12 * fabs(t), bgc_hmin(t));
+    int i, k, rc;
+    if (bgc_model_rhs(t, x, r->p, r->w, f))
+        return bgc_fail_block(r->msg, r->msg_size, r->w);
+    for (i = 0; i < N; i++)
+        xt[i] = x[i] + tau * f[i];
+    rc = bgc_indicators(r, t, x, g0);
+    if (rc == 0)
+        rc = bgc_indicators(r, t + tau, xt, g1);
+    if (rc)
+        return rc;
+    for (k = 0; k < G; k++)
+        if (r->last[k] == r->passes)
+            r->band[k] = bgc_max(r->band[k], fabs(g1[k] - g0[k]));
+    return 0;
+}
+
 /* The event iteration at (t, x): bgc_model_update until the state and the discrete values
    stop changing (start: the run's first, at t0, which sets every discrete value and logs
    nothing); r->g the indicators there after it. */
@@ -1839,7 +1917,7 @@ static int bgc_event_iteration(bgc_run *r, double t, double *x, int start)
     enum { N = BGC_NUM_STATES, G = BGC_NUM_INDICATORS, ND = BGC_NUM_DISCRETE };
     double *g = r->g, *in = BGC_EV_IN(r), *out = BGC_EV_OUT(r);
     char change[96];
-    int it, i, k, rc, shown, changed = 1;
+    int it, i, k, rc, shown, crossed, changed = 1;
     for (it = 0; changed; it++) {
         if (it > BGC_MAX_EVENT_ITERATIONS) { /* the last pass still changed something */
             snprintf(change, sizeof change, "more than %d events at one instant, the event "
@@ -1849,8 +1927,10 @@ static int bgc_event_iteration(bgc_run *r, double t, double *x, int start)
         rc = bgc_indicators(r, t, x, g);
         if (rc)
             return rc;
-        for (k = 0; k < G; k++)
-            in[k] = bgc_holds(k, g[k]) ? 1.0 : 0.0;
+        for (k = 0; k < G; k++) {
+            r->gmax[k] = bgc_max(r->gmax[k], fabs(g[k]));
+            in[k] = bgc_relation(r, k, g[k]) ? 1.0 : 0.0;
+        }
         in[G] = start && it == 0 ? 1.0 : 0.0;
         if (bgc_model_update(t, x, r->p, r->w, in, out))
             return bgc_fail_block(r->msg, r->msg_size, r->w);
@@ -1871,6 +1951,7 @@ static int bgc_event_iteration(bgc_run *r, double t, double *x, int start)
             }
         }
         shown = -1;
+        crossed = 0;
         for (k = 0; k < ND; k++) {
             const double v = out[N + k];
             if (!isfinite(v))
@@ -1878,6 +1959,10 @@ static int bgc_event_iteration(bgc_run *r, double t, double *x, int start)
             if (v != r->d[k]) {
                 changed = 1;
                 r->last[k] = r->passes;
+                if (k < G) { /* a relation that changed: its band (none at the start) */
+                    r->band[k] = start && it == 0 ? 0.0 : BGC_BAND_REL * r->gmax[k];
+                    crossed |= !(start && it == 0);
+                }
                 if (!start && r->s->on_event) {
                     rc = bgc_log_discrete(r, t, k, r->d[k], v, &shown);
                     if (rc)
@@ -1886,8 +1971,14 @@ static int bgc_event_iteration(bgc_run *r, double t, double *x, int start)
                 r->d[k] = v;
             }
         }
+        if (crossed) {
+            rc = bgc_bands(r, t, x);
+            if (rc)
+                return rc;
+        }
         r->passes++;
     }
+    bgc_seen(r, g);
     return 0;
 }
 
@@ -1926,8 +2017,8 @@ static int bgc_find_event(bgc_run *r, bgc_dense *c, double *te, double *ye)
         if (tb - ta <= tol)
             break;
         for (k = 0; k < G; k++) {
-            if (bgc_holds(k, gb[k]) != (r->d[k] != 0.0)) {
-                const double a = wa * ga[k], b = wb * gb[k];
+            if (bgc_relation(r, k, gb[k]) != (r->d[k] != 0.0)) {
+                const double a = wa * bgc_level(r, k, ga[k]), b = wb * bgc_level(r, k, gb[k]);
                 double q = a / (a - b);
                 if (!(q >= 0.0 && q <= 1.0) || (q == 0.0 && probed))
                     q = 0.5;
@@ -2177,6 +2268,7 @@ static int bgc_drive(bgc_run *r, const bgc_family *f, double *y)
                 continue;
             }
             memcpy(r->g, BGC_EV_GB(r), sizeof(double) * BGC_NUM_INDICATORS);
+            bgc_seen(r, r->g);
         }
         rc = bgc_emit_step(r, &c, tph, 1, yout);
         if (rc == 0 && f->after)
@@ -2296,6 +2388,8 @@ static int bgc_integrate(const bgc_settings *s, const bgc_params *p, bgc_work *w
     r.sliding = 0;
     r.passes = r.chain_from = r.sliding_from = r.out_from = 0.0;
     r.d = (double *)&q + BGC_DISCRETE_OFFSET;
+    r.band = w->d + BGC_NUM_DISCRETE;
+    r.gmax = r.band + BGC_NUM_INDICATORS;
     r.g = r.ev = r.last = NULL;
     bgc_params_update(&q);
     i = bgc_first_nonfinite(y, BGC_NUM_STATES);
@@ -3535,10 +3629,13 @@ static void bgc_radau_configure(bgc_radau_use *u, const bgc_method *method,
    iterations (s = 3, 5, 7) from the previous step's collocation polynomial (zero on the first
    step and after an order change), convergence rate theta, stop when
    theta/(1 - theta) |dW| <= fnewt = max(10 eps/rtol', min(0.03, rtol'^(1/e - 1))),
-   e = (s+1)/(2s); after one iteration (the previous step's theta) only if h and J are the
-   previous step's (RADAU5 allows it on any step: after a change of h the old rate does not
-   hold, and the stages' Newton error of up to fnewt times the tolerance can exceed the
-   method's far smaller local error); theta >= 0.99 or no convergence: h / 2; a predicted miss
+   e = (s+1)/(2s); never after one iteration (RADAU5 allows it with the previous step's theta:
+   after a change of h the old rate does not hold, and the stages' Newton error of up to fnewt
+   times the tolerance can exceed the method's far smaller local error; across a kink of a law
+   under noevent, J is the other branch's, and a first increment damped by a matrix far
+   stiffer than the branch's looked converged while the stages were not, the error estimate
+   as blind: the run did not converge as the tolerance tightened); theta >= 0.99 or no
+   convergence: h / 2; a predicted miss
    of fnewt within the budget: h shrunk accordingly.  Error estimate:
    (gamma/h I - J) err = f(t, y) + sum_j e_j Z_j / h, refined once with f(t, y + err) on the
    first step and after a rejection, in Hairer's norm with the weights
@@ -3560,7 +3657,7 @@ typedef struct bgc_radau_state {
     bgc_run *r;
     const bgc_method *method;
     int fixed, variable, smax, set, since, change, unexp, unexn, recheck;
-    int reject, first, needjac, caljac, accepted, nsing, worst, newt, refactored;
+    int reject, first, needjac, caljac, accepted, nsing, worst, newt;
     double hfact, hold, hacc, erracc, faccon, theta, thetat, thqold, dynold, hhfac;
     double *J, *E1, *Z, *W, *b, *zlast, *dw, *f0, *scal, *ys, *tmp, *cont, *f2, *ew;
     bgc_cplx *Ec, *zc;
@@ -3850,9 +3947,8 @@ static int bgc_radau_newton(bgc_radau_state *ms, bgc_run *r, double t, double h,
                 W[(size_t)i * D + l] = a[i];
             bgc_radau_mul(m->T, u->ns, a, 1, Z + l, D);
         }
-        /* converged; after one iteration only on the previous step's matrices, whose
-           contraction faccon measured */
-        if ((ms->newt > 1 || !ms->refactored) && ms->faccon * dyno <= u->fnewt)
+        /* converged, the contraction measured in this step (never after one iteration) */
+        if (ms->newt > 1 && ms->faccon * dyno <= u->fnewt)
             return 0;
     }
 }
@@ -4000,7 +4096,6 @@ static void bgc_radau_step(void *state, bgc_run *r, double t, double h, double t
         alphn[k] = ms->u.m->alpha[k] / h;
         betan[k] = ms->u.m->beta[k] / h;
     }
-    ms->refactored = h != ms->hfact;
     if (h != ms->hfact) {
         if (bgc_radau_factor(ms, r, alphn, betan, fac1)) {
             ms->hfact = 0.0;

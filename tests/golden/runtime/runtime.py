@@ -591,12 +591,14 @@ class _Work:
     """The model functions' workspace: values shared between their parts, the blocks' storage
     (each Newton block's last solution is its next starting value), the Newton tolerance."""
 
-    __slots__ = ("v", "iv", "rtol", "atol", "d", "started", "inputs")
+    __slots__ = ("v", "iv", "rtol", "atol", "d", "band", "gmax", "started", "inputs")
 
     def __init__(self, rtol=None, atol=None):
         self.v = [0.0] * max(_WORK_DOUBLES, 1)
         self.iv = [0] * max(_WORK_INTS, 1)
         self.d = [0.0] * len(_DISCRETE_NAMES)  # the discrete values between runs (bgc_work)
+        self.band = [0.0] * len(_INDICATOR_STRICT)  # and per state relation its hysteresis
+        self.gmax = [0.0] * len(_INDICATOR_STRICT)  # band, its indicator's largest magnitude
         self.started = False
         self.inputs = None  # one (t, u) or None per input (bgc_work.inputs)
         self.rtol = SCENE["rtol"] if rtol is None else rtol
@@ -795,11 +797,13 @@ def _newton(w, k, f, t, x, p, final_factor):
         else:
             _block_lsolve(w, b, bb)
         small = True  # a full step this small ends the iteration (quadratic convergence)
+        near = True  # one within the tolerance ends it where the residual cannot decrease
         for i in rows:
             dz, z = v[bb + i], v[bz + i]
             if abs(dz) > 0.01 * (atol + rtol * abs(z)) and abs(dz) > eps4 * abs(z):
                 small = False
-                break
+            if abs(dz) > atol + rtol * abs(z):
+                near = False
         lam = 1.0
         if m == 1:  # the scalar block, most common: the same operations without the loops
             z0, d0 = v[bz], v[bb]
@@ -825,10 +829,12 @@ def _newton(w, k, f, t, x, p, final_factor):
                 lam *= 0.5
         v[bz:bz + m] = zt
         v[br:br + m] = rt
+        # no decrease even at the shortest step: the residual at its rounding's floor (bgc_newton)
+        near = near and not small and not (trial <= (1.0 - 1e-4 * lam) * norm)
         norm = trial
         if not isfinite(norm):
             raise _BlockFailure(k, 3, t)
-        if small:
+        if small or near:
             break
         f(t, x, p, w, v, bz, v, br, v, save)
     if final_factor:
@@ -1589,7 +1595,7 @@ class _Run:
     __slots__ = ("s", "p", "w", "st", "nout", "kout", "t", "h", "y", "detect_stiffness",
                  "steps_out", "t_out", "from_event", "m", "name", "fixed", "doff", "g", "t_next",
                  "t_event", "chain", "kout_ev", "events_out", "sliding", "passes", "last",
-                 "chain_from", "sliding_from", "out_from")
+                 "chain_from", "sliding_from", "out_from", "band", "gmax")
 
     def __init__(self, s, p, w, st, y):
         self.s, self.p, self.w, self.st = s, p, w, st
@@ -1602,6 +1608,9 @@ class _Run:
         # events (bgc_run's): d at p[doff:], the indicators at run.t, the next time event,
         # the last event's time and the events in a row closer than the resolution
         self.doff = len(p) - len(_DISCRETE_NAMES)
+        # per state relation: its hysteresis band (0: none) and its indicator's largest
+        # magnitude so far (bgc_run's band, gmax; _relation), kept in the workspace
+        self.band, self.gmax = w.band, w.gmax
         self.g = []
         self.t_next, self.t_event, self.chain = math.inf, -math.inf, 0
         # the events since an output row (kout_ev: run.kout then) are bounded as steps are
@@ -1704,10 +1713,48 @@ def _holds(k, g):
     return g > 0.0 if _INDICATOR_STRICT[k] else g >= 0.0
 
 
+# Hysteresis (docs/hybrid.md, "Knees"; drive.c's BGC_BAND_REL): a state relation that changed
+# its value at an event keeps it until its indicator goes back beyond zero by more than its
+# band: the larger of what the indicator changes by in the time's resolution along the
+# derivative after the event (_bands) and BAND_REL times the largest magnitude the indicator
+# has had in the run.
+BAND_REL = 1e-12
+
+
+def _level(run, k, g):
+    """bgc_level: relation k's indicator g moved by its band (g itself without one)."""
+    b = run.band[k]
+    if b > 0.0:
+        return g + b if run.p[run.doff + k] != 0.0 else g - b
+    return g
+
+
+def _relation(run, k, g):
+    """bgc_relation: the value relation k takes at g (within its band, the one it has)."""
+    if run.band[k] > 0.0:
+        if run.p[run.doff + k] != 0.0:
+            return _level(run, k, g) >= 0.0
+        return _level(run, k, g) > 0.0
+    return _holds(k, g)
+
+
+def _seen(run, g):
+    """bgc_seen: the indicators at an accepted point: their largest magnitudes, and the end
+    of the band of a relation whose indicator is beyond it on the relation's own side."""
+    p, off, band, gmax = run.p, run.doff, run.band, run.gmax
+    for k in range(len(_INDICATOR_STRICT)):
+        a = abs(g[k])
+        if a > gmax[k]:
+            gmax[k] = a
+        b = band[k]
+        if b > 0.0 and (g[k] > b if p[off + k] != 0.0 else g[k] < -b):
+            band[k] = 0.0
+
+
 def _changed(run, g):
     p, off = run.p, run.doff
     for k in range(len(_INDICATOR_STRICT)):
-        if _holds(k, g[k]) != (p[off + k] != 0.0):
+        if _relation(run, k, g[k]) != (p[off + k] != 0.0):
             return k
     return -1
 
@@ -1774,6 +1821,27 @@ def _chattering(run, t, head, since, tail):
     return _Failure("at t = %.17g: chattering: %s (%s%s%s)" % (t, head, what, verb, tail), t)
 
 
+def _bands(run, t, x):
+    """bgc_bands: the bands of the relations that changed in the last pass, at (t, x) after
+    it: each at least what its indicator changes by over the time's resolution tau along the
+    derivative there (x + tau f)."""
+    f = [0.0] * _N
+    try:
+        _rhs(t, x, run.p, run.w, f)
+    except _BlockFailure as failure:
+        raise _block_failed(failure) from None
+    tau = max(1e-12 * abs(t), _hmin(t))
+    xt = [x[i] + tau * f[i] for i in range(_N)]
+    g0 = _indicators(run, t, x)
+    g1 = _indicators(run, t + tau, xt)
+    band, last = run.band, run.last
+    for k in range(len(_INDICATOR_STRICT)):
+        if last[k] == run.passes:
+            d = abs(g1[k] - g0[k])
+            if d > band[k]:
+                band[k] = d
+
+
 def _event_iteration(run, t, x, start):
     """bgc_event_iteration: update until nothing changes; x (a list) is updated; run.g the
     indicators there after it."""
@@ -1785,7 +1853,11 @@ def _event_iteration(run, t, x, start):
                               "iteration does not settle" % MAX_EVENT_ITERATIONS,
                               run.passes - 1, "a Zeno model?")
         g = _indicators(run, t, x)
-        r = [1.0 if _holds(k, g[k]) else 0.0 for k in range(G)]
+        gmax = run.gmax
+        for k in range(G):
+            if abs(g[k]) > gmax[k]:
+                gmax[k] = abs(g[k])
+        r = [1.0 if _relation(run, k, g[k]) else 0.0 for k in range(G)]
         r.append(1.0 if start and it == 0 else 0.0)
         out = [0.0] * (_N + len(_DISCRETE_NAMES))
         try:
@@ -1802,6 +1874,7 @@ def _event_iteration(run, t, x, start):
                     _log(run, t, STATES[i], "%.17g -> %.17g" % (x[i], out[i]))
                 x[i] = out[i]
         shown = -1
+        crossed = False
         for k in range(len(_DISCRETE_NAMES)):
             v = out[_N + k]
             if not math.isfinite(v):
@@ -1809,11 +1882,17 @@ def _event_iteration(run, t, x, start):
             if v != p[off + k]:
                 changed = True
                 run.last[k] = run.passes
+                if k < G:  # a relation that changed: its band (none at the start)
+                    run.band[k] = 0.0 if start and it == 0 else BAND_REL * run.gmax[k]
+                    crossed = crossed or not (start and it == 0)
                 if not start and run.s.on_event is not None:
                     shown = _log_discrete(run, t, k, p[off + k], v, shown)
                 p[off + k] = v
+        if crossed:
+            _bands(run, t, x)
         it += 1
         run.passes += 1
+    _seen(run, g)
     run.g = g
 
 
@@ -1827,6 +1906,7 @@ def _find_event(run, c):
         if due:
             return c.tph, _as_list(c.y1)
         run.g = gb
+        _seen(run, gb)
         return None
     ga, ta, tb, wa, wb, moved = list(run.g), c.t, c.tph, 1.0, 1.0, 0
     p, off = run.p, run.doff
@@ -1840,8 +1920,8 @@ def _find_event(run, c):
             break
         frac = 1.0
         for k in range(G):
-            if _holds(k, gb[k]) != (p[off + k] != 0.0):
-                a, b = wa * ga[k], wb * gb[k]
+            if _relation(run, k, gb[k]) != (p[off + k] != 0.0):
+                a, b = wa * _level(run, k, ga[k]), wb * _level(run, k, gb[k])
                 d = a - b  # 0: C's quotient is inf or nan, refused below as q = 0.5 is
                 q = a / d if d != 0.0 else 0.5
                 if not (q >= 0.0 and q <= 1.0) or (q == 0.0 and probed):
@@ -3475,7 +3555,7 @@ class _Radau(_Family):
         self.erracc = 1.0
         self.faccon, self.theta, self.thetat = 1.0, _THET, 0.0
         self.thqold, self.dynold, self.hhfac = 1.0, 1.0, 0.5
-        self.reject = self.caljac = self.refactored = False
+        self.reject = self.caljac = False
         self.first = self.needjac = True
         self.accepted_steps, self.nsing, self.newt = 0, 0, 0
         self.J = self.E1 = self.piv1 = self.f0 = self.scal = None
@@ -3607,8 +3687,8 @@ class _Radau(_Family):
                 W = W + dW
                 Z = _radau_mul(u.T, W)
             self.Z = Z
-            # converged; after one iteration only on the previous step's matrices
-            if (newt > 1 or not self.refactored) and self.faccon * dyno <= u.fnewt:
+            # converged, the contraction measured in this step (never after one iteration)
+            if newt > 1 and self.faccon * dyno <= u.fnewt:
                 return 0, None
 
     def _error(self, t, h, y):
@@ -3698,7 +3778,6 @@ class _Radau(_Family):
         fac1 = u.gamma / h
         alphn = [a / h for a in u.alpha]
         betan = [bb / h for bb in u.beta]
-        self.refactored = h != self.hfact
         if h != self.hfact:
             if not self._factor(fac1, alphn, betan):
                 self.hfact = 0.0
