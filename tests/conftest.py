@@ -1,4 +1,6 @@
+import fcntl
 import os
+import pickle
 import shutil
 import tempfile
 from pathlib import Path
@@ -26,6 +28,9 @@ def pytest_configure(config):
     if "BGC_CACHE_DIR" not in os.environ and not os.environ.get("PYTEST_XDIST_WORKER"):
         os.environ["BGC_CACHE_DIR"] = tempfile.mkdtemp(prefix="bgc-test-cache-")
         config._bgc_cache_dir = os.environ["BGC_CACHE_DIR"]
+    if not os.environ.get("PYTEST_XDIST_WORKER"):
+        os.environ[_SHARED] = tempfile.mkdtemp(prefix="bgc-test-references-")
+        config._bgc_shared_dir = os.environ[_SHARED]
 
 
 def pytest_unconfigure(config):
@@ -33,6 +38,35 @@ def pytest_unconfigure(config):
     if made:
         shutil.rmtree(made, ignore_errors=True)
         del os.environ["BGC_CACHE_DIR"]
+    shared = getattr(config, "_bgc_shared_dir", None)
+    if shared:
+        shutil.rmtree(shared, ignore_errors=True)
+        del os.environ[_SHARED]
+
+
+_SHARED = "BGC_TEST_REFERENCES"
+
+
+def shared_reference(name: str, compute):
+    """compute() once per test run, whichever xdist worker asks first (the others wait for it
+    and read its result): a reference that costs seconds (a stiff SciPy solve at a tight
+    tolerance) is not computed again in every worker.  Computed here if the run made no
+    shared directory (a test module run by hand)."""
+    folder = os.environ.get(_SHARED)
+    if not folder or not os.path.isdir(folder):
+        return compute()
+    path = os.path.join(folder, name + ".pickle")
+    with open(path + ".lock", "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        try:
+            with open(path, "rb") as f:
+                return pickle.load(f)
+        except FileNotFoundError:
+            value = compute()
+            with open(path + ".part", "wb") as f:
+                pickle.dump(value, f)
+            os.replace(path + ".part", path)
+            return value
 
 
 def pytest_addoption(parser):

@@ -11,6 +11,7 @@ Every reference here is computed independently of bgc, inside the test:
 from __future__ import annotations
 
 import ctypes
+import functools
 import importlib.util
 import math
 import subprocess
@@ -223,8 +224,15 @@ scene run { outputs cap.q; time 0 .. 2 every 0.1; solver rk4 }
 # ---------------------------------------------------------------- symbolic against numeric
 
 
+@functools.lru_cache(maxsize=None)
+def built(model):
+    """bgc.build(model), once for the tests of this file that read the same default build (a
+    build is a value: frozen stages)."""
+    return bgc.build(model)
+
+
 def _blocks_both_ways(path):
-    auto = bgc.build(path, program=False)
+    auto = built(path)
     return any(b.linear for b in auto.reduced.blocks)
 
 
@@ -303,7 +311,7 @@ JACOBIAN_MODELS = MODELS + [Source("nl.bg", NONINVERTIBLE), Source("loop2.bg", T
 @pytest.mark.parametrize("model", JACOBIAN_MODELS,
                          ids=lambda m: m.stem if isinstance(m, Path) else m.path)
 def test_python_jacobian_matches_finite_differences(model):
-    (text,) = emit_python(bgc.build(model).program).values()
+    (text,) = emit_python(built(model).program).values()
     module = backends.load_python_module(text)
     rng = np.random.default_rng(11)
     for _ in range(2):
@@ -319,7 +327,7 @@ def test_python_jacobian_matches_finite_differences(model):
 @pytest.mark.parametrize("model", JACOBIAN_MODELS,
                          ids=lambda m: m.stem if isinstance(m, Path) else m.path)
 def test_c_jacobian_matches_finite_differences(model, tmp_path):
-    program = bgc.build(model).program
+    program = built(model).program
     (text,) = emit_c(program).values()
     lib = tmp_path / "model.so"
     src = tmp_path / "model.c"

@@ -10,6 +10,7 @@ in the graph: its files are text the emitter inlines into generated programs.
 from __future__ import annotations
 
 import ast
+import functools
 import importlib
 import types
 from pathlib import Path
@@ -31,6 +32,11 @@ def _layer(module: str) -> str:
 
 def modules() -> dict[str, Path]:
     """Every module of bgc by its name below the package ("middle.reduce", "cli")."""
+    return dict(_modules())
+
+
+@functools.lru_cache(maxsize=None)
+def _modules() -> dict[str, Path]:
     out = {}
     for path in sorted(PACKAGE.rglob("*.py")):
         rel = path.relative_to(PACKAGE).with_suffix("")
@@ -76,12 +82,23 @@ def _imported(node: ast.AST, here: list[str], known: set[str]) -> set[str]:
     return out
 
 
+@functools.lru_cache(maxsize=None)
+def _syntax(path: Path) -> ast.Module:
+    """A file's syntax tree, read once for the tests of this file (which only walk it)."""
+    return ast.parse(path.read_text(encoding="utf-8"))
+
+
 def import_graph() -> dict[str, set[str]]:
+    return {name: set(edges) for name, edges in _import_graph().items()}
+
+
+@functools.lru_cache(maxsize=None)
+def _import_graph() -> dict[str, set[str]]:
     found = modules()
     known = set(found)
     graph = {}
     for name, path in found.items():
-        tree = ast.parse(path.read_text(encoding="utf-8"))
+        tree = _syntax(path)
         here = _package_of(name, path)
         edges = set()
         for node in ast.walk(tree):
@@ -151,7 +168,7 @@ def test_every_import_of_bgc_names_a_module_or_the_api():
     allowed = set(bgc.__all__) | {"__version__"}
     missing = []
     for name, path in found.items():
-        tree = ast.parse(path.read_text(encoding="utf-8"))
+        tree = _syntax(path)
         here = _package_of(name, path)
         for node in ast.walk(tree):
             if not isinstance(node, ast.ImportFrom):
@@ -191,14 +208,14 @@ def test_no_package_imports_one_above_it():
 
 def private_crossings() -> list[str]:
     """`from ..codegen.emit import _x` or `emit._x` in a module of another package."""
-    crossing = []
+    crossing, known = [], set(modules())
     for name, path in modules().items():
-        tree = ast.parse(path.read_text(encoding="utf-8"))
+        tree = _syntax(path)
         here = _package_of(name, path)
         aliases = {}  # local name -> the bgc module it is
         for node in ast.walk(tree):
             if isinstance(node, ast.ImportFrom):
-                targets = _imported(node, here, set(modules()))
+                targets = _imported(node, here, known)
                 for a in node.names:
                     hit = [t for t in targets if t.endswith("." + a.name) or t == a.name]
                     if hit:
@@ -235,7 +252,7 @@ KNOWN_PRIVATE_CROSSINGS = [
 
 def test_only_the_command_line_imports_click():
     for path in PACKAGE.rglob("*.py"):
-        tree = ast.parse(path.read_text(encoding="utf-8"))
+        tree = _syntax(path)
         for node in ast.walk(tree):
             if isinstance(node, (ast.Import, ast.ImportFrom)):
                 names = [a.name for a in node.names] if isinstance(node, ast.Import) \

@@ -17,6 +17,7 @@ from bgc.base.backends import compile_c, have_c_compiler, load_python_module, ru
 from bgc.codegen.emit import emit_c, emit_python
 from bgc.ir import P, Param, SceneSettings, T, X
 from bgc.codegen.lower import explicit_program
+from conftest import shared_reference
 
 # Every warning an error, at -O0 (a quarter of -O2's compile time; the same IEEE arithmetic
 # under -std=c99 at every level: tests/conftest.py; test_emit builds programs at -O1 to -O3).
@@ -106,6 +107,11 @@ def van_der_pol():
 
 @functools.lru_cache(maxsize=None)
 def van_der_pol_reference():
+    """SciPy's Radau at rtol 1e-10 on 101 points (some seconds: once per test run)."""
+    return shared_reference("van_der_pol_radau", _van_der_pol_reference)
+
+
+def _van_der_pol_reference():
     from scipy.integrate import solve_ivp
 
     def f(t, y):
