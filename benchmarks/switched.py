@@ -127,14 +127,14 @@ def exact(p, t_end, times):
 
 # ---------------------------------------------------------------- the methods
 
-def _stats(stderr: str) -> dict:
+def parse_stats(stderr: str) -> dict:
     for line in stderr.splitlines():
         if line.startswith("stats:"):
             return {k: v for k, _, v in (w.partition("=") for w in line.split()[1:])}
     return {}
 
 
-def _read(text: str):
+def read_csv(text: str):
     rows = [list(map(float, ln.split(","))) for ln in text.strip().splitlines()[1:]]
     a = np.array(rows)
     return a[:, 0], a[:, 1:]
@@ -149,14 +149,14 @@ def _start_time(repeats) -> float:
     return statistics.median(ts)
 
 
-def _timed(cmd, repeats, spawn) -> float:
+def timed(cmd, repeats, spawn) -> float:
     """The median over the repeats of the program's own processor time of its integration
     (the cpu= of its stats line: the clock() around the run, which other jobs on the machine
     do not inflate as they do the wall time), in ms."""
     ts = []
     for _ in range(repeats):
         done = subprocess.run(cmd, capture_output=True, text=True, check=True)
-        ts.append(float(_stats(done.stderr)["cpu"]))
+        ts.append(float(parse_stats(done.stderr)["cpu"]))
     return statistics.median(ts) * 1e3
 
 
@@ -171,15 +171,15 @@ def run_bgc(exe, rtol, t_end, dt):
     args = [str(exe), "--rtol", repr(rtol), "--atol", repr(rtol * ATOL_RATIO), "--stats",
             "--max-steps", "0", "--t-end", repr(t_end)]
     full = subprocess.run(args + ["--dt", repr(dt)], capture_output=True, text=True, check=True)
-    return _read(full.stdout), _stats(full.stderr), args + ["--dt", repr(t_end)]
+    return read_csv(full.stdout), parse_stats(full.stderr), args + ["--dt", repr(t_end)]
 
 
 def run_cvode(exe, method, rtol, t_end, dt, p):
     tail = [repr(p[k]) for k in ("V", "L", "C", "R", "T", "duty")]
     args = [str(exe), method, repr(rtol), repr(rtol * ATOL_RATIO), repr(t_end)]
     full = subprocess.run(args + [repr(dt)] + tail, capture_output=True, text=True, check=True)
-    t, Y = _read(full.stdout)  # (l.p, c.q): the current and the voltage
-    return (t, Y / np.array([p["L"], p["C"]])), _stats(full.stderr), \
+    t, Y = read_csv(full.stdout)  # (l.p, c.q): the current and the voltage
+    return (t, Y / np.array([p["L"], p["C"]])), parse_stats(full.stderr), \
         args + [repr(t_end)] + tail
 
 
@@ -224,7 +224,7 @@ def run_scipy(rtol, t_end, dt, p):
 
 # ---------------------------------------------------------------- the table
 
-def _interp(runs, err):
+def at_error(runs, err):
     """A method's time at an achieved error, log-log along its runs sorted by error."""
     pts = sorted((e, c) for e, c in runs if e > 0 and c > 0)
     if len(pts) < 2 or not pts[0][0] <= err <= pts[-1][0]:
@@ -274,7 +274,7 @@ def main(argv=None) -> int:
     for rtol in rtols:
         (t, Y), st, quiet = run_bgc(exe, rtol, t_end, dt)
         err = error_of(t, Y, p, t_end, scale)
-        cpu = _timed(quiet, args.repeats, spawn)
+        cpu = timed(quiet, args.repeats, spawn)
         rows.append(("bgc C dopri5", rtol, st.get("steps"), st.get("rhs"), st.get("events"),
                      err, cpu))
         by_method.setdefault("bgc C dopri5", []).append((err, cpu))
@@ -282,7 +282,7 @@ def main(argv=None) -> int:
             for method in ("bdf", "adams"):
                 (t, Y), st, quiet = run_cvode(cv, method, rtol, t_end, dt, p)
                 err = error_of(t, Y, p, t_end, scale)
-                cpu = _timed(quiet, args.repeats, spawn)
+                cpu = timed(quiet, args.repeats, spawn)
                 label = f"CVODE-C {method.upper() if method == 'bdf' else 'Adams'} root"
                 rows.append((label, rtol, st.get("steps"), st.get("rhs"), st.get("events"),
                              err, cpu))
@@ -302,8 +302,8 @@ def main(argv=None) -> int:
     for m, runs in by_method.items():
         if m.startswith("bgc"):
             continue
-        ratios = [(e, _interp(runs, e) / c) for e, c in by_method["bgc C dopri5"]
-                  if _interp(runs, e) is not None and c > 0]
+        ratios = [(e, at_error(runs, e) / c) for e, c in by_method["bgc C dopri5"]
+                  if at_error(runs, e) is not None and c > 0]
         text = ", ".join(f"{r:.1f}x at {e:.0e}" for e, r in ratios) or "no common error"
         print(f"{m:<20} {text}")
     shutil.rmtree(work, ignore_errors=True)

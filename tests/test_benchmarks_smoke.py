@@ -227,3 +227,36 @@ def test_stiff_scale_closed_form_agrees_with_expm():
         assert np.allclose(grid.exact(n, t), want, rtol=0, atol=1e-12)
     families = sys.modules["families"]
     assert np.allclose(families.thermal_grid_rhs(n, T0), A @ T0 + b, rtol=0, atol=1e-12)
+
+
+def test_hbridge_reference_is_bgcs_edges_and_the_motors_exact_solution():
+    """benchmarks/hbridge.py's reference, no timing: its switching instants are those of the
+    runtime's square_next, chained from t = 0, and its exact march agrees with SciPy's DOP853
+    at tight tolerance, restarted at each of those instants (the current stays positive after
+    the start, so the diodes in the dead time apply -V)."""
+    from scipy.integrate import solve_ivp
+    from bgc.runtime import runtime as rt
+
+    hb = _benchmark("hbridge")
+    p, t_end = hb.HBRIDGE, 2e-4
+    chained = []
+    for period, duty, t0 in hb.waves(p):
+        t = 0.0
+        while (t := rt._square_next(t, period, duty, t0)) < t_end:
+            chained.append(t)
+    assert sorted(chained) == [e for e, _, _ in hb.edges(p, t_end)]
+    times = np.linspace(0.0, t_end, 201)
+    ref, events = hb.exact(p, t_end, times)
+    R, L, k, J, b, V = (p[n] for n in ("R", "L", "k", "J", "b", "V"))
+    x, t, Y = np.zeros(2), 0.0, np.empty_like(ref)
+    bounds = sorted(set(chained)) + [t_end]
+    for n, end in enumerate(bounds):
+        phase = (t * p["f"]) % 1.0  # +V for s1 and s4, -V in the dead times and for s2 and s3
+        v = V if phase < p["duty"] - 1e-9 or phase > 1 - 1e-9 else -V
+        sol = solve_ivp(lambda s, y: [(v - R * y[0] - k * y[1]) / L, (k * y[0] - b * y[1]) / J],
+                        (t, end), x, method="DOP853", rtol=1e-13, atol=1e-15, dense_output=True)
+        inside = (times >= t) & (times <= end)
+        Y[inside] = sol.sol(times[inside]).T
+        x, t = sol.y[:, -1], end
+    assert len(events) == len(chained) and ref[1:, 0].min() > 0.0
+    assert np.all(np.abs(Y - ref).max(axis=0) < 1e-10 * np.abs(ref).max(axis=0))
