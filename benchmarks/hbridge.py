@@ -50,7 +50,7 @@ ROOT = HERE.parent
 sys.path[:0] = [str(HERE), str(ROOT)]
 import machine  # noqa: E402
 from pendulum import CFLAGS, c_compiler  # noqa: E402
-from switched import SUNDIALS_LIBS, at_error, parse_stats, read_csv, timed  # noqa: E402
+from switched import SUNDIALS_LIBS, parse_stats, print_table, read_csv, timed  # noqa: E402
 
 MODEL = ROOT / "tests" / "models" / "hbridge.bg"
 HBRIDGE = {"V": 24.0, "f": 2e4, "duty": 0.7, "dead": 0.05, "R": 1.0, "L": 1e-3, "k": 0.05,
@@ -274,22 +274,7 @@ def main(argv=None) -> int:
         rows, by_method = table(args, p, t_end, dt, exe, cv, (t_ref, ref), scale)
     finally:
         shutil.rmtree(work, ignore_errors=True)
-    print(f"{'method':<20} {'rtol':>7} {'steps':>8} {'rhs':>9} {'events':>7} {'error':>9} "
-          f"{'cpu ms':>9}")
-    for m, rtol, steps, rhs, ev, err, cpu in rows:
-        print(f"{m:<20} {rtol:>7.0e} {steps or '-':>8} {rhs or '-':>9} {ev or '-':>7} "
-              f"{err:>9.1e} {cpu:>9.3g}")
-    print("\n# each baseline's time at bgc's achieved error, over bgc's")
-    for m, runs in by_method.items():
-        if m.startswith("bgc"):
-            continue
-        ratios = [(e, at_error(runs, e) / c) for e, c in by_method["bgc C dopri5"]
-                  if at_error(runs, e) is not None and c > 0]
-        e_best, c_best = min(runs)
-        text = ", ".join(f"{r:.1f}x at {e:.0e}" for e, r in ratios) or \
-            f"no common error (its least {e_best:.1e} in {c_best:.3g} ms; bgc's largest " \
-            f"{max(by_method['bgc C dopri5'])[0]:.1e})"
-        print(f"{m:<20} {text}")
+    print_table(rows, by_method)
     return 0
 
 
