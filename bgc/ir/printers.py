@@ -32,10 +32,11 @@ from sympy.core.relational import Relational
 from sympy.functions.elementary.piecewise import ExprCondPair
 from sympy.logic.boolalg import ITE, And, BooleanFalse, BooleanTrue, Not, Or
 
+from ..symbolic.algebra import Heaviside
 from .program import (ATOL, C, CLASSES, FUNCTIONS, D, P, R, T, V, X, InputNext, InputPart,
                       PeriodicNext, SquareNext, SquareWave, Table, TableGuard, TableNext,
                       TablePiece, as_expr)
-_CLASSES = tuple(CLASSES.values())
+_CLASSES = tuple(CLASSES.values()) + (Heaviside,)  # (bgc.symbolic.algebra's, printed as SymPy's)
 _ARITY = {"atan2": (2, 2), "Min": (2, None), "Max": (2, None), "Heaviside": (1, 2)}
 _TEMP = re.compile(r"w[0-9]+\Z")
 _CONDITIONALS = (sp.Piecewise, ExprCondPair, Relational, And, Or, Not, ITE, BooleanTrue,

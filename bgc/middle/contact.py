@@ -25,11 +25,13 @@ so that the step driver and the event iteration handle them as any other:
 """
 from __future__ import annotations
 
-from dataclasses import replace
+from dataclasses import dataclass, replace
+from itertools import product
 
 import sympy as sp
 
-from ..symbolic.algebra import Max, Min
+from ..ir.program import substitute
+from ..symbolic.algebra import Heaviside, Max, Min
 from ..base.diagnostics import fail
 from ..symbolic.differentiate import partial
 from ..front.events import INITIAL, TOLERANCE, Action, Discrete, Relation, When
@@ -183,7 +185,8 @@ def with_contact_events(sys, infos, weigh, defs, leaf, cycle):
         stays = sp.Piecewise((sp.Integer(1), rests), (sp.Integer(0), True))
         # the rebound's Phi'; resting, none (the contact then closes with Phi' = 0)
         target = sp.Piecewise((sp.Integer(0), rests), (-E * v, v < 0), (v, True))
-        together = []  # the other gaps on these storages that close at the same instant
+        together, at = [], [c.multiplier]  # the other gaps on these storages that close
+        #                                      at the same instant, and their multipliers
         for o in gaps_all:
             K_o = gaps[o.junction]
             if o is info or not set(K_o) & set(K_u):
@@ -194,8 +197,10 @@ def with_contact_events(sys, infos, weigh, defs, leaf, cycle):
             takes = sp.Or(touching, sp.And(o.phi <= 10 * TOLERANCE, o.balance < 0))
             together.append((o.balance, K_o, sp.Piecewise((sp.Integer(0), touching),
                                                           (-E_o * o.balance, True)), takes))
-        new_p, moved, G = _impulse(c, v, K_u, target, bilateral, cdefs, weigh, order, metric,
-                                   together)
+            at.append(co.multiplier)
+        frictions = _tangential(c, at, infos, cdefs, weigh, grouped)
+        new_p, moved, G, modes = _impulse(c, v, K_u, target, bilateral, cdefs, weigh, order,
+                                          metric, together, frictions, at[1:])
         try:  # d Phi''/d lambda: Phi' in the momenta, times each momentum's rate by lambda
             rates = {p: leaf(sys.eqs[der(p)].expr, defs, expandable, memo) for p in moved}
         except (cycle, KeyError):
@@ -220,8 +225,11 @@ def with_contact_events(sys, infos, weigh, defs, leaf, cycle):
                      "1: in contact", c.name_span),
             Discrete(f"{J}.vmax", fastest, sp.Integer(0), "the largest impact speed so far",
                      c.name_span)]
+        slips = tuple(a for f, stick, way in modes for a in (
+            Action("assign", f"{f.c.junction}.stick", active(f.c), stick, c.span),
+            Action("assign", f"{f.c.junction}.dir", direction(f.c), way, c.span)))
         impact = tuple(Action("reinit", states[p].name, p, new_p[p], c.span) for p in moved) + (
-            Action("assign", f"{J}.active", active(c), stays, c.span),
+            *slips, Action("assign", f"{J}.active", active(c), stays, c.span),
             Action("assign", f"{J}.vmax", fastest, top, c.span))
         whens += [When(touch.symbol, touch.text, impact, c.span),
                   When(leave.symbol, leave.text,
@@ -264,14 +272,17 @@ def _coupled(sys, group, cdefs, states, leaf, defs, expandable, memo, cycle, wei
     return groups.events(sys, members, every, stops, rates, relations, discretes, whens)
 
 
-def _impulse(c, v, K_v, target, bilateral, cdefs, weigh, order, metric, together=()):
+def _impulse(c, v, K_v, target, bilateral, cdefs, weigh, order, metric, together=(),
+             frictions=(), gaps=()):
     """The momenta after the impulse that brings row v (its derivatives by the velocities
     K_v) to target while the bilateral rows on the same storages stay at zero, by the least
     change of kinetic energy: with W = M^-1 the velocities' derivatives by the momenta
     (metric), (K W K^T) Lambda = target - rows and dp = K^T Lambda.  together: other gaps'
     rows (row, K, target, whether it takes part): a gap closed at the same instant, or in
-    contact, takes part with its own target; else its Lambda is zero.  {p: new p}, the
-    momenta moved, v's derivatives by them (G = K W)."""
+    contact, takes part with its own target; else its Lambda is zero.  frictions: the
+    friction elements at these contacts (_Tangential), whose tangential impulses take part
+    (_frictional); gaps: the together rows' multipliers.  {p: new p}, the momenta moved, v's derivatives by them (G = K W), and
+    the frictions' modes after the impulse ([(stick, dir)], 0/1 and +-1 expressions)."""
     rows = [(v, K_v, target, sp.true)]
     for b in bilateral:
         K_b = dict(weigh(cdefs[b.junction].balance))
@@ -281,6 +292,10 @@ def _impulse(c, v, K_v, target, bilateral, cdefs, weigh, order, metric, together
     if len(rows) > MAX_IMPACT_ROWS:
         fail(c.name_span, f"'{c.junction}': {len(rows)} constraint rows take part in its "
                           f"impulse; at most {MAX_IMPACT_ROWS} are supported")
+    normal = len(rows)
+    index = {c.multiplier: 0}  # each contact's row among the rows
+    index.update({lam: normal - len(gaps) + k for k, lam in enumerate(gaps)})
+    rows += [(f.row, f.K, sp.Integer(0), rows[index[f.of]][3]) for f in frictions]
     moved = sorted(set().union(*[set(K) for _, K, _, _ in rows]), key=order.get)
     W = metric(c, moved)
     K = sp.Matrix([[Kr.get(p, sp.Integer(0)) for p in moved] for _, Kr, _, _ in rows])
@@ -293,15 +308,199 @@ def _impulse(c, v, K_v, target, bilateral, cdefs, weigh, order, metric, together
             on = sp.Piecewise((sp.Integer(1), takes), (sp.Integer(0), True))
             A[j, :] = on * A[j, :] + (1 - on) * sp.Matrix([[int(k == j) for k in range(m)]])
             rhs[j] = on * rhs[j]
+    if frictions:
+        impulse, modes = _frictional(c, A, rhs, K, moved, normal, frictions,
+                                     [r[3] for r in rows], G * K.T, index)
+    else:
+        impulse, modes = _solve_impulse(c, A, rhs), []
+    new_p = {p: p + sp.Add(*[K[k, i] * impulse[k] for k in range(m)])
+             for i, p in enumerate(moved)}
+    return new_p, moved, [G[0, i] for i in range(len(moved))], modes
+
+
+@dataclass(frozen=True)
+class _Tangential:
+    """A friction element at a contact, in that contact's impacts (LANGUAGE 10b): its flow
+    (the slip, in the states) and its derivatives by the velocities, its coefficients (its
+    forces mu |lambda| sliding, mu0 |lambda| at most sticking, lambda the contact's
+    multiplier), and that multiplier."""
+    c: object
+    row: sp.Expr
+    K: dict
+    mu: sp.Expr
+    mu0: sp.Expr
+    of: sp.Symbol
+
+
+MAX_FRICTIONAL_ROWS = 3  # rows of a frictional impact, solved in closed form for each of the
+#                         3^k combinations of its k friction rows' modes (their expressions
+#                         grow fourfold with each row)
+
+
+def _frictional(c, A, rhs, K, moved, normal, frictions, takes, A0, index):
+    """The impulse of a frictional impact (Glocker and Pfeiffer's, at the impulse level):
+    each friction row either sticks, its slip zero after the impact and its impulse inside
+    the cone |Lambda_t| <= mu0 Lambda_n, or slides the way s it slips after the impact,
+    Lambda_t = -s mu Lambda_n (the normal impulse Lambda_n pushes: it raises Phi').  The
+    combinations of the rows' modes are enumerated (3^k, each block solved in closed form),
+    sticking before sliding, and the first admissible is taken: for one contact some
+    combination always is (mu <= mu0), and at a boundary, within rounding, sticking is
+    taken.  The impulse, and the modes [(stick, dir)] the frictions leave it in, as 0/1
+    arithmetic (bgc.middle.groups: exact in every backend).  The blocks are solved on
+    placeholders of A's and the rows' entries, substituted once at the end: the closed forms
+    share their subexpressions instead of repeating them."""
+    m = A.rows
+    if m > MAX_FRICTIONAL_ROWS:
+        fail(c.name_span, f"'{c.junction}': its frictional impact has {m} rows (the normal "
+                          f"rows of the contacts that take part, the bilateral rows on the "
+                          f"same storages, and {len(frictions)} for friction); the impulse is "
+                          f"solved in closed form for at most {MAX_FRICTIONAL_ROWS} rows, whose "
+                          "size grows fourfold with each row more: not supported yet")
+    names: dict = {}
+
+    def held(e):  # a placeholder for each entry that is not a number
+        if e.is_Number:
+            return e
+        if e not in names:
+            names[e] = sp.Dummy(f"a{len(names)}")
+        return names[e]
+    Ah = A.applyfunc(held)
+    A0h = A0.applyfunc(held)
+    bh = rhs.applyfunc(held)
+    rows = [held(f.row) for f in frictions]
+    widths = [held(_width(f.row)) for f in frictions]
+    pieces = []
+    for bits in product((groups.STICK, groups.PLUS, groups.MINUS), repeat=len(frictions)):
+        A2, b2 = Ah.copy(), bh.copy()
+        for k, (f, bit) in enumerate(zip(frictions, bits)):
+            j = normal + k
+            if bit != groups.STICK:  # (sliding: its impulse set by the normal one)
+                way = 1 if bit == groups.PLUS else -1
+                A2[j, :] = sp.Matrix([[int(i == j) for i in range(m)]])
+                A2[j, index[f.of]] += way * f.mu
+                b2[j] = sp.Integer(0)
+        lam = _eliminate(c, A2, b2)
+        ok = sp.Integer(1)
+        for k, (f, bit) in enumerate(zip(frictions, bits)):
+            j, n = normal + k, index[f.of]
+            if bit == groups.STICK:  # (|Lambda_t| <= mu0 Lambda_n, to rounding)
+                cone = f.mu0 * lam[n] + 16 * EPS * (Max(lam[j], -lam[j])
+                                                    + Max(lam[n], -lam[n]) * f.mu0)
+                ok *= Heaviside(cone - lam[j], 1) * Heaviside(cone + lam[j], 1)
+            else:
+                way = 1 if bit == groups.PLUS else -1
+                after = rows[k] + sp.Add(*[A0h[j, i] * lam[i] for i in range(m)])
+                ok *= Heaviside(way * after + widths[k] / 2, 1)
+        pieces.append((bits, lam, ok))
+    weights, rest = [], sp.Integer(1)  # (the first admissible: ok times none before it)
+    for _, _, ok in pieces:
+        weights.append(rest * ok)
+        rest = rest * (1 - ok)
+    stuck = pieces[0][1]  # (none admissible, to rounding: sticking, the boundary's side)
+    impulse = [sp.Add(*[w * lam[i] for w, (_, lam, _) in zip(weights, pieces)],
+                      rest * stuck[i]) for i in range(m)]
+    modes = []
+    for k, f in enumerate(frictions):
+        mode, way = active(f.c), direction(f.c)
+        stick = sp.Add(*[w for w, (bits, _, _) in zip(weights, pieces)
+                         if bits[k] == groups.STICK], rest)
+        slide = sp.Add(*[w * (1 if bits[k] == groups.PLUS else -1)
+                         for w, (bits, _, _) in zip(weights, pieces)
+                         if bits[k] != groups.STICK])
+        taking = takes[normal + k]
+        on = sp.Integer(1) if taking is sp.true else sp.Piecewise((sp.Integer(1), taking),
+                                                                   (sp.Integer(0), True))
+        modes.append((f, on * stick + (1 - on) * mode, on * (slide + stick * way)
+                      + (1 - on) * way))
+    back = {d: e for e, d in names.items()}
+    memo: dict = {}
+    impulse = sp.Matrix([substitute(e, back, memo) for e in impulse])
+    modes = [(f, substitute(s, back, memo), substitute(w, back, memo)) for f, s, w in modes]
+    return impulse, modes
+
+
+def _eliminate(c, A, b) -> list:
+    """The solution of A x = b by Gaussian elimination in the order of the rows, without
+    pivoting (the blocks here are K M^-1 K^T's rows, positive definite, and rows of the
+    identity), the expressions left unexpanded; a pivot that is zero whatever the values
+    is refused."""
+    n = A.rows
+    M = [[A[i, k] for k in range(n)] + [b[i]] for i in range(n)]
+    for k in range(n):
+        if M[k][k] == 0:
+            fail(c.name_span, f"'{c.junction}': the rows of its frictional impact are not "
+                              "independent: the impulse is not determined")
+        for i in range(k + 1, n):
+            if M[i][k] == 0:
+                continue
+            r = M[i][k] / M[k][k]
+            M[i] = [M[i][q] - r * M[k][q] if q >= k else M[i][q] for q in range(n + 1)]
+    x = [sp.Integer(0)] * n
+    for k in reversed(range(n)):
+        x[k] = (M[k][n] - sp.Add(*[M[k][q] * x[q] for q in range(k + 1, n)])) / M[k][k]
+    return x
+
+
+def _tangential(c, multipliers, infos, cdefs, weigh, grouped) -> list:
+    """The friction elements whose forces are proportional to the normal force of the
+    contact c or of a gap that impacts with it (multipliers: theirs): Fr(mu*abs(c.lambda),
+    mu0*abs(c.lambda)), Coulomb friction at the contact (LANGUAGE 10b).  Their tangential
+    impulses take part in the impact."""
+    out = []
+    for info in infos:
+        if info.kind != "friction":
+            continue
+        f = cdefs[info.junction]
+        read = [lam for lam in multipliers if any(lam in g.free_symbols for g in f.gains)]
+        if not read:
+            continue
+        if len(read) > 1:
+            fail(f.span, f"friction '{f.junction}' reads the normal forces of two contacts; "
+                         "a frictional contact's forces are proportional to one")
+        lam = read[0]
+        if info.junction in grouped:
+            fail(f.span, f"friction '{f.junction}' at the contact whose multiplier it reads is "
+                         "coupled with switches or diodes: its frictional impacts are not "
+                         "supported yet")
+        mu, mu0 = (_proportional(g, lam) for g in f.gains)
+        if mu is None or mu0 is None:
+            fail(f.span, f"friction '{f.junction}': at a contact, its forces must be "
+                         f"proportional to abs({lam.name}) (Fr(mu*abs({lam.name}), "
+                         f"mu0*abs({lam.name}))), for its impulse in an impact")
+        K = dict(weigh(f.balance))
+        if not K:
+            fail(f.span, f"friction '{f.junction}': its flow is not a velocity of I elements "
+                         "in integral causality, so an impact of its contact cannot move it")
+        out.append(_Tangential(f, info.balance, K, mu, mu0, lam))
+    return out
+
+
+def _proportional(g, lam):
+    """k where g = k*abs(lam), k free of lam; else None."""
+    size = sp.Dummy("n", nonnegative=True)
+    h = sp.expand(g.xreplace({sp.Abs(lam): size}))
+    if lam in h.free_symbols:
+        return None
+    k = sp.diff(h, size)
+    if size in k.free_symbols or sp.expand(h - k * size) != 0:
+        return None
+    return k
+
+
+def _nonnegative(x) -> sp.Expr:
+    """1 where x >= 0, else 0, as arithmetic on sign(x) (-1, 0 or 1): exact, and no
+    condition holds x, whose Piecewise pieces (the rows that take part) SymPy would fold."""
+    s = sp.sign(x)
+    return (s + 1) * (2 - s) / 2
+
+
+def _solve_impulse(c, A, rhs):
     try:
-        impulse = A.LUsolve(rhs)
+        return A.LUsolve(rhs)
     except (ValueError, ZeroDivisionError):  # (sympy's NonInvertibleMatrixError included)
         fail(c.name_span, f"'{c.junction}': the constraint rows that take part in its impulse "
                           "are not independent (K M^-1 K^T is singular): the impact's momentum "
                           "change is not determined")
-    new_p = {p: p + sp.Add(*[K[k, i] * impulse[k] for k in range(m)])
-             for i, p in enumerate(moved)}
-    return new_p, moved, [G[0, i] for i in range(len(moved))]
 
 
 MAX_FIELD_IMPULSE = 3  # a coupled field's M(q) inverted symbolically for an impulse, at most

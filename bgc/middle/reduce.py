@@ -506,6 +506,8 @@ def _refuse_imposed_flow(c: ConstraintDef, in_states, sys: _System, multipliers)
     contradicts."""
     if in_states.free_symbols & (set(sys.states) | multipliers) or in_states == 0:
         return
+    if any(s in sys.eqs and not sys.eqs[s].explicit for s in in_states.free_symbols):
+        return  # (a coupled field's velocities: they solve M(q) v = p, so follow the states)
     if c.kind == "diode" and in_states.is_number and in_states > 0:
         return
     name = c.junction.removesuffix(".switch")  # (`J : 1 switch(C)`: its switch J.switch)

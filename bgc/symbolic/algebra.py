@@ -70,6 +70,27 @@ class Min(_Extremum):
     pick = staticmethod(min)
 
 
+class Heaviside(sp.Function):
+    """Heaviside(x, H0): 0 where x < 0, 1 where x > 0, H0 at 0; evaluated for a number x
+    only (SymPy's asks the assumptions system whether x is negative, positive or real,
+    which for a large x, an impulse solved in closed form, costs minutes).  Printed as
+    SymPy's (by name); its derivative is zero (piecewise constant)."""
+    nargs = 2
+
+    @classmethod
+    def eval(cls, arg, H0):
+        if arg.is_Number and H0.is_Number:
+            return sp.Heaviside(arg, H0)
+        return None
+
+    def fdiff(self, argindex=1):
+        return sp.Integer(0)
+
+    @property
+    def pargs(self):  # (SymPy's printers of its own Heaviside read these)
+        return self.args
+
+
 def linear_solution(equation: sp.Expr, unknown: sp.Symbol) -> sp.Expr | None:
     """The solution of equation == 0 when it has degree one in unknown with a coefficient
     free of it: -(equation - a*unknown)/a.  None otherwise."""
