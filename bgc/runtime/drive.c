@@ -689,6 +689,53 @@ static int bgc_event_iteration(bgc_run *r, double t, double *x, int start)
 /* Whether the step just accepted, from c->t to c->tph, holds an event: 0 none; 1 at *te
    (<= tph), the state there in ye; else an error.  A time event is due when the step ends
    on it; a state relation whose value at tph differs from its frozen one is located. */
+/* How far relation k's indicator g is from changing its value (negative: changed). */
+static double bgc_margin(const bgc_run *r, int k, double g)
+{
+    const double level = bgc_level(r, k, g);
+    return r->d[k] != 0.0 ? level : -level;
+}
+
+/* A relation that changes and changes back inside a step, unseen at its ends: the
+   indicators at the step's middle, then, where the parabola through a relation's margins at
+   the start, the middle and the end turns below zero inside the step, at the turn (the
+   earliest).  1 with *tm and g there if one has changed, 0 if none, or -rc. */
+static int bgc_hidden(bgc_run *r, bgc_dense *c, const double *gb, double *tm, double *ye,
+                      double *g)
+{
+    enum { G = BGC_NUM_INDICATORS };
+    const double ta = c->t, h = c->tph - c->t;
+    double best = 2.0;
+    int k, rc, probe;
+    *tm = ta + 0.5 * h;
+    for (probe = 0; probe < 2; probe++) {
+        rc = bgc_dense_at(r, c, *tm, ye);
+        if (rc == 0)
+            rc = bgc_indicators(r, *tm, ye, g);
+        r->st->locate_evals++;
+        if (rc)
+            return -rc;
+        if (bgc_changed(r, g) >= 0)
+            return 1;
+        if (probe == 1)
+            break;
+        for (k = 0; k < G; k++) {
+            const double s0 = bgc_margin(r, k, r->g[k]), sm = bgc_margin(r, k, g[k]);
+            const double s1 = bgc_margin(r, k, gb[k]);
+            const double a2 = 2.0 * (s0 - 2.0 * sm + s1), a1 = 4.0 * sm - 3.0 * s0 - s1;
+            if (a2 > 0.0) {
+                const double s = -a1 / (2.0 * a2);
+                if (s > 0.0 && s < 1.0 && s0 + s * (a1 + s * a2) < 0.0 && s < best)
+                    best = s;
+            }
+        }
+        if (best >= 2.0)
+            break;
+        *tm = ta + best * h;
+    }
+    return 0;
+}
+
 static int bgc_find_event(bgc_run *r, bgc_dense *c, double *te, double *ye)
 {
     enum { G = BGC_NUM_INDICATORS };
@@ -703,11 +750,20 @@ static int bgc_find_event(bgc_run *r, bgc_dense *c, double *te, double *ye)
             return -rc;
     }
     if (G == 0 || bgc_changed(r, gb) < 0) {
-        if (!due)
-            return 0;
-        *te = c->tph;
-        memcpy(ye, c->y1, sizeof(double) * BGC_NUM_STATES);
-        return 1;
+        int hidden = 0;
+        if (G > 0) {
+            hidden = bgc_hidden(r, c, gb, &tb, ye, gm);
+            if (hidden < 0)
+                return hidden;
+        }
+        if (!hidden) {
+            if (!due)
+                return 0;
+            *te = c->tph;
+            memcpy(ye, c->y1, sizeof(double) * BGC_NUM_STATES);
+            return 1;
+        }
+        memcpy(gb, gm, sizeof(double) * G);
     }
     memcpy(ga, r->g, sizeof(double) * G);
     for (it = 0; it < 200; it++) {

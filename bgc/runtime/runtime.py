@@ -1896,19 +1896,59 @@ def _event_iteration(run, t, x, start):
     run.g = g
 
 
+def _margin(run, k, g):
+    """bgc_margin: how far relation k's indicator g is from changing (negative: changed)."""
+    level = _level(run, k, g)
+    return level if run.p[run.doff + k] != 0.0 else -level
+
+
+def _hidden(run, c, gb):
+    """bgc_hidden: (tm, g there) where a relation that changes and changes back inside the
+    step has changed (at the middle, then at the turn of the parabola through its margins at
+    the start, the middle and the end), or None."""
+    ta, h = c.t, c.tph - c.t
+    best = 2.0
+    tm = ta + 0.5 * h
+    ga = run.g
+    for probe in range(2):
+        g = _indicators(run, tm, c.at(tm))
+        run.st["locate_evals"] += 1
+        if _changed(run, g) >= 0:
+            return tm, g
+        if probe == 1:
+            break
+        for k in range(len(g)):
+            s0, sm = _margin(run, k, ga[k]), _margin(run, k, g[k])
+            s1 = _margin(run, k, gb[k])
+            a2 = 2.0 * (s0 - 2.0 * sm + s1)
+            a1 = 4.0 * sm - 3.0 * s0 - s1
+            if a2 > 0.0:
+                s = -a1 / (2.0 * a2)
+                if s > 0.0 and s < 1.0 and s0 + s * (a1 + s * a2) < 0.0 and s < best:
+                    best = s
+        if best >= 2.0:
+            break
+        tm = ta + best * h
+    return None
+
+
 def _find_event(run, c):
     """bgc_find_event: None, or (te, the state there: a list); run.sliding counted."""
     G = len(_INDICATOR_STRICT)
     due = c.tph >= run.t_next
     gb = _indicators(run, c.tph, c.y1) if G else []
+    tb = c.tph
     if not G or _changed(run, gb) < 0:
-        run.sliding = 0
-        if due:
-            return c.tph, _as_list(c.y1)
-        run.g = gb
-        _seen(run, gb)
-        return None
-    ga, ta, tb, wa, wb, moved = list(run.g), c.t, c.tph, 1.0, 1.0, 0
+        hidden = _hidden(run, c, gb) if G else None
+        if hidden is None:
+            run.sliding = 0
+            if due:
+                return c.tph, _as_list(c.y1)
+            run.g = gb
+            _seen(run, gb)
+            return None
+        tb, gb = hidden
+    ga, ta, wa, wb, moved = list(run.g), c.t, 1.0, 1.0, 0
     p, off = run.p, run.doff
     h = c.tph - c.t  # the time's resolution is relative to the step too (an event near t = 0)
     probed = False
