@@ -30,7 +30,6 @@ from itertools import product
 
 import sympy as sp
 
-from ..ir.program import substitute
 from ..symbolic.algebra import Heaviside, Max, Min
 from ..base.diagnostics import fail
 from ..symbolic.differentiate import partial
@@ -109,6 +108,19 @@ def with_contact_events(sys, infos, weigh, defs, leaf, cycle):
     metric = _metric(sys, leaf, defs, expandable, memo, cycle)
     gaps = {i.junction: dict(weigh(cdefs[i.junction].balance)) for i in infos
             if i.kind == "unilateral"}
+    temporaries: list = []
+
+    def define(c, expr):  # a frictional impact's intermediate value, as a step of the run
+        if expr.is_Number or expr.is_Symbol:
+            return expr
+        s = sp.Symbol(f"{c.junction}.impulse#{len(temporaries)}", real=True)
+        temporaries.append(s)
+        sys.add(Equation(s, expr, True, c.junction, c.span))
+        return s
+
+    # what moves with the states: the states and a coupled field's flows (M f = p), whose
+    # rates the steps compute
+    moving = dict.fromkeys([*states, *[f for _, f, _ in sys.es.momenta if f not in states]])
     held = {j: [] for j in gaps}  # the friction's stop, at each contact's release
     moved = {j: set() for j in gaps}
     grouped = set()
@@ -150,8 +162,13 @@ def with_contact_events(sys, infos, weigh, defs, leaf, cycle):
                 held[s.junction] += [Action("reinit", states[p].name, p, new, c.span)
                                      for p, new in block.items() if p not in moved[s.junction]]
                 moved[s.junction] |= set(block)
+            loads = [i for i in infos if i.kind == "unilateral" and cdefs[i.junction]
+                     .multiplier in set().union(*[g.free_symbols for g in c.gains])]
             relations, discretes, whens = _friction(c, info, block, states, relations,
-                                                    discretes, whens, stops)
+                                                    discretes, whens, stops, loads, moving)
+            for i in loads:  # released, its contact's friction holds nothing
+                held[i.junction].append(Action("assign", f"{c.junction}.stick", active(c),
+                                               sp.Integer(0), c.span))
             continue
         switch = {"diode": _diode, "switch": _switch}[info.kind]
         relations, discretes, whens = switch(c, info, block, states, relations, discretes,
@@ -200,7 +217,7 @@ def with_contact_events(sys, infos, weigh, defs, leaf, cycle):
             at.append(co.multiplier)
         frictions = _tangential(c, at, infos, cdefs, weigh, grouped)
         new_p, moved, G, modes = _impulse(c, v, K_u, target, bilateral, cdefs, weigh, order,
-                                          metric, together, frictions, at[1:])
+                                          metric, together, frictions, at[1:], define)
         try:  # d Phi''/d lambda: Phi' in the momenta, times each momentum's rate by lambda
             rates = {p: leaf(sys.eqs[der(p)].expr, defs, expandable, memo) for p in moved}
         except (cycle, KeyError):
@@ -208,6 +225,15 @@ def with_contact_events(sys, infos, weigh, defs, leaf, cycle):
                               "not be written in the states (an algebraic loop); not "
                               "supported yet")
         pull = sp.Add(*[G[i] * partial(rates[p], c.multiplier) for i, p in enumerate(moved)])
+        for f in frictions:  # (its force mu |lambda|: mu lambda sign(pull), the same wherever
+            #                  the contact holds, lambda pushing, and zero where it is open;
+            #                  linear, so its block is solved by LU, not by Newton iterations
+            #                  across abs's corner)
+            if f.of == c.multiplier:
+                law = sys.eqs[f.c.multiplier]
+                way = sp.sign(pull) if not pull.is_number else sp.Integer(sp.sign(pull))
+                sys.add(replace(law, expr=law.expr.xreplace(
+                    {sp.Abs(c.multiplier): way * c.multiplier})))
         n = len(relations)
         # an impact: Phi < 0 while closing (Phi' < 0).  Just after one, Phi' > 0 and the
         # relation is false at once, so the next landing is its own crossing even where a
@@ -215,8 +241,13 @@ def with_contact_events(sys, infos, weigh, defs, leaf, cycle):
         touch = Relation(sp.Symbol(f"event#{n}"), sp.StrictGreaterThan(
             sp.Piecewise((Min(-info.phi, -v), sp.Not(on)), (sp.Integer(-1), True)), 0),
             f"{J}: contact (phi < 0)", c.name_span, None)
+        # a friction of this contact that sticks beyond its cone breaks away first: sliding,
+        # the contact may hold (a sleeve jammed on its pole by the friction's moment)
+        breaking = sp.Or(*[sp.And(sp.Ne(active(f.c), 0), sp.Abs(f.c.multiplier) > f.c.gains[1])
+                           for f in frictions if f.of == c.multiplier])
         leave = Relation(sp.Symbol(f"event#{n + 1}"), sp.StrictGreaterThan(
-            sp.Piecewise((-pull * c.multiplier, on), (sp.Integer(-1), True)), 0),
+            sp.Piecewise((-pull * c.multiplier, sp.And(on, sp.Not(breaking))),
+                         (sp.Integer(-1), True)), 0),
             f"{J}: release (lambda would pull)", c.name_span, None)
         relations += [touch, leave]
         discretes += [
@@ -273,7 +304,7 @@ def _coupled(sys, group, cdefs, states, leaf, defs, expandable, memo, cycle, wei
 
 
 def _impulse(c, v, K_v, target, bilateral, cdefs, weigh, order, metric, together=(),
-             frictions=(), gaps=()):
+             frictions=(), gaps=(), define=None):
     """The momenta after the impulse that brings row v (its derivatives by the velocities
     K_v) to target while the bilateral rows on the same storages stay at zero, by the least
     change of kinetic energy: with W = M^-1 the velocities' derivatives by the momenta
@@ -281,7 +312,10 @@ def _impulse(c, v, K_v, target, bilateral, cdefs, weigh, order, metric, together
     rows (row, K, target, whether it takes part): a gap closed at the same instant, or in
     contact, takes part with its own target; else its Lambda is zero.  frictions: the
     friction elements at these contacts (_Tangential), whose tangential impulses take part
-    (_frictional); gaps: the together rows' multipliers.  {p: new p}, the momenta moved, v's derivatives by them (G = K W), and
+    (_frictional); gaps: the together rows' multipliers; define: (c, expr) -> the symbol of
+    a new equation of the system computing expr (the frictional impulse's intermediate values,
+    computed as steps of the event's update).  {p: new p}, the momenta moved, v's derivatives
+    by them (G = K W), and
     the frictions' modes after the impulse ([(stick, dir)], 0/1 and +-1 expressions)."""
     rows = [(v, K_v, target, sp.true)]
     for b in bilateral:
@@ -310,7 +344,7 @@ def _impulse(c, v, K_v, target, bilateral, cdefs, weigh, order, metric, together
             rhs[j] = on * rhs[j]
     if frictions:
         impulse, modes = _frictional(c, A, rhs, K, moved, normal, frictions,
-                                     [r[3] for r in rows], G * K.T, index)
+                                     [r[3] for r in rows], G * K.T, index, define)
     else:
         impulse, modes = _solve_impulse(c, A, rhs), []
     new_p = {p: p + sp.Add(*[K[k, i] * impulse[k] for k in range(m)])
@@ -332,37 +366,27 @@ class _Tangential:
     of: sp.Symbol
 
 
-MAX_FRICTIONAL_ROWS = 3  # rows of a frictional impact, solved in closed form for each of the
-#                         3^k combinations of its k friction rows' modes (their expressions
-#                         grow fourfold with each row)
-
-
-def _frictional(c, A, rhs, K, moved, normal, frictions, takes, A0, index):
+def _frictional(c, A, rhs, K, moved, normal, frictions, takes, A0, index, define):
     """The impulse of a frictional impact (Glocker and Pfeiffer's, at the impulse level):
     each friction row either sticks, its slip zero after the impact and its impulse inside
     the cone |Lambda_t| <= mu0 Lambda_n, or slides the way s it slips after the impact,
     Lambda_t = -s mu Lambda_n (the normal impulse Lambda_n pushes: it raises Phi').  The
-    combinations of the rows' modes are enumerated (3^k, each block solved in closed form),
-    sticking before sliding, and the first admissible is taken: for one contact some
-    combination always is (mu <= mu0), and at a boundary, within rounding, sticking is
-    taken.  The impulse, and the modes [(stick, dir)] the frictions leave it in, as 0/1
-    arithmetic (bgc.middle.groups: exact in every backend).  The blocks are solved on
-    placeholders of A's and the rows' entries, substituted once at the end: the closed forms
-    share their subexpressions instead of repeating them."""
-    m = A.rows
-    if m > MAX_FRICTIONAL_ROWS:
-        fail(c.name_span, f"'{c.junction}': its frictional impact has {m} rows (the normal "
-                          f"rows of the contacts that take part, the bilateral rows on the "
-                          f"same storages, and {len(frictions)} for friction); the impulse is "
-                          f"solved in closed form for at most {MAX_FRICTIONAL_ROWS} rows, whose "
-                          "size grows fourfold with each row more: not supported yet")
+    combinations of the rows' modes are enumerated (3^k), sticking before sliding, and the
+    first admissible is taken: for one contact some combination always is (mu <= mu0), and at
+    a boundary, within rounding, sticking is taken.  The impulse, and the modes [(stick, dir)]
+    the frictions leave it in, as 0/1 arithmetic (bgc.middle.groups: exact in every backend).
+    Every entry, every elimination's intermediate value and every solution is a step of the
+    event's update (define): the work and the code grow as 3^k m^3, not as closed forms'
+    nested expressions; with at most MAX_IMPACT_ROWS normal rows, each with its friction,
+    that is at most 27 blocks of 6 rows."""
+    m, k = A.rows, len(frictions)
     names: dict = {}
 
-    def held(e):  # a placeholder for each entry that is not a number
+    def held(e):  # a step for each entry that is not a number (each computed once)
         if e.is_Number:
             return e
         if e not in names:
-            names[e] = sp.Dummy(f"a{len(names)}")
+            names[e] = define(c, e)
         return names[e]
     Ah = A.applyfunc(held)
     A0h = A0.applyfunc(held)
@@ -370,62 +394,59 @@ def _frictional(c, A, rhs, K, moved, normal, frictions, takes, A0, index):
     rows = [held(f.row) for f in frictions]
     widths = [held(_width(f.row)) for f in frictions]
     pieces = []
-    for bits in product((groups.STICK, groups.PLUS, groups.MINUS), repeat=len(frictions)):
+    for bits in product((groups.STICK, groups.PLUS, groups.MINUS), repeat=k):
         A2, b2 = Ah.copy(), bh.copy()
-        for k, (f, bit) in enumerate(zip(frictions, bits)):
-            j = normal + k
+        for q, (f, bit) in enumerate(zip(frictions, bits)):
+            j = normal + q
             if bit != groups.STICK:  # (sliding: its impulse set by the normal one)
                 way = 1 if bit == groups.PLUS else -1
                 A2[j, :] = sp.Matrix([[int(i == j) for i in range(m)]])
-                A2[j, index[f.of]] += way * f.mu
+                A2[j, index[f.of]] += way * held(f.mu)
                 b2[j] = sp.Integer(0)
-        lam = _eliminate(c, A2, b2)
+        lam = _eliminate(c, A2, b2, define)
         ok = sp.Integer(1)
-        for k, (f, bit) in enumerate(zip(frictions, bits)):
-            j, n = normal + k, index[f.of]
+        for q, (f, bit) in enumerate(zip(frictions, bits)):
+            j, n = normal + q, index[f.of]
             if bit == groups.STICK:  # (|Lambda_t| <= mu0 Lambda_n, to rounding)
-                cone = f.mu0 * lam[n] + 16 * EPS * (Max(lam[j], -lam[j])
-                                                    + Max(lam[n], -lam[n]) * f.mu0)
+                mu0 = held(f.mu0)
+                cone = define(c, mu0 * lam[n] + 16 * EPS * (Max(lam[j], -lam[j])
+                                                          + Max(lam[n], -lam[n]) * mu0))
                 ok *= Heaviside(cone - lam[j], 1) * Heaviside(cone + lam[j], 1)
             else:
                 way = 1 if bit == groups.PLUS else -1
-                after = rows[k] + sp.Add(*[A0h[j, i] * lam[i] for i in range(m)])
-                ok *= Heaviside(way * after + widths[k] / 2, 1)
-        pieces.append((bits, lam, ok))
+                after = define(c, rows[q] + sp.Add(*[A0h[j, i] * lam[i] for i in range(m)]))
+                ok *= Heaviside(way * after + widths[q] / 2, 1)
+        pieces.append((bits, lam, define(c, ok)))
     weights, rest = [], sp.Integer(1)  # (the first admissible: ok times none before it)
     for _, _, ok in pieces:
-        weights.append(rest * ok)
-        rest = rest * (1 - ok)
+        weights.append(define(c, rest * ok))
+        rest = define(c, rest * (1 - ok))
     stuck = pieces[0][1]  # (none admissible, to rounding: sticking, the boundary's side)
-    impulse = [sp.Add(*[w * lam[i] for w, (_, lam, _) in zip(weights, pieces)],
-                      rest * stuck[i]) for i in range(m)]
+    impulse = [define(c, sp.Add(*[w * lam[i] for w, (_, lam, _) in zip(weights, pieces)],
+                                rest * stuck[i])) for i in range(m)]
     modes = []
-    for k, f in enumerate(frictions):
+    for q, f in enumerate(frictions):
         mode, way = active(f.c), direction(f.c)
         stick = sp.Add(*[w for w, (bits, _, _) in zip(weights, pieces)
-                         if bits[k] == groups.STICK], rest)
-        slide = sp.Add(*[w * (1 if bits[k] == groups.PLUS else -1)
+                         if bits[q] == groups.STICK], rest)
+        slide = sp.Add(*[w * (1 if bits[q] == groups.PLUS else -1)
                          for w, (bits, _, _) in zip(weights, pieces)
-                         if bits[k] != groups.STICK])
-        taking = takes[normal + k]
+                         if bits[q] != groups.STICK])
+        taking = takes[normal + q]
         on = sp.Integer(1) if taking is sp.true else sp.Piecewise((sp.Integer(1), taking),
                                                                    (sp.Integer(0), True))
         modes.append((f, on * stick + (1 - on) * mode, on * (slide + stick * way)
                       + (1 - on) * way))
-    back = {d: e for e, d in names.items()}
-    memo: dict = {}
-    impulse = sp.Matrix([substitute(e, back, memo) for e in impulse])
-    modes = [(f, substitute(s, back, memo), substitute(w, back, memo)) for f, s, w in modes]
-    return impulse, modes
+    return sp.Matrix(impulse), modes
 
 
-def _eliminate(c, A, b) -> list:
+def _eliminate(c, A, b, define) -> list:
     """The solution of A x = b by Gaussian elimination in the order of the rows, without
     pivoting (the blocks here are K M^-1 K^T's rows, positive definite, and rows of the
-    identity), the expressions left unexpanded; a pivot that is zero whatever the values
-    is refused."""
+    identity), each intermediate value a step (define); a pivot that is zero whatever the
+    values is refused."""
     n = A.rows
-    M = [[A[i, k] for k in range(n)] + [b[i]] for i in range(n)]
+    M = [[A[i, q] for q in range(n)] + [b[i]] for i in range(n)]
     for k in range(n):
         if M[k][k] == 0:
             fail(c.name_span, f"'{c.junction}': the rows of its frictional impact are not "
@@ -433,11 +454,13 @@ def _eliminate(c, A, b) -> list:
         for i in range(k + 1, n):
             if M[i][k] == 0:
                 continue
-            r = M[i][k] / M[k][k]
-            M[i] = [M[i][q] - r * M[k][q] if q >= k else M[i][q] for q in range(n + 1)]
+            r = define(c, M[i][k] / M[k][k])
+            M[i] = [define(c, M[i][q] - r * M[k][q]) if q > k else
+                    (sp.Integer(0) if q == k else M[i][q]) for q in range(n + 1)]
     x = [sp.Integer(0)] * n
     for k in reversed(range(n)):
-        x[k] = (M[k][n] - sp.Add(*[M[k][q] * x[q] for q in range(k + 1, n)])) / M[k][k]
+        x[k] = define(c, (M[k][n] - sp.Add(*[M[k][q] * x[q] for q in range(k + 1, n)]))
+                      / M[k][k])
     return x
 
 
@@ -513,12 +536,39 @@ def _metric(sys, leaf, defs, expandable, memo, cycle):
     symbolically for fields of up to MAX_FIELD_IMPULSE parts."""
     flows = {p: (f, sign) for p, f, sign in sys.es.momenta}
     by_flow = {f: p for p, (f, _) in flows.items()}
+    dependent: list = []  # (store, the momenta its state follows), on first use
+
+    def coupled_through_dependent(c, moved):
+        """Refuse an impulse on momenta that a storage in derivative causality follows: its
+        momentum is not a state, so the impulse's metric (the states' M^-1) would leave out
+        its inertia.  One momentum moved, followed by that storage alone, is exact (the
+        target fixes the one velocity)."""
+        if not dependent:
+            dependent.append(None)
+            for st in sys.es.stores:
+                try:
+                    e = leaf(st.state, defs, expandable, memo)
+                except (cycle, KeyError):
+                    continue
+                dependent.append((st, e.free_symbols & flows.keys()))
+        for entry in dependent[1:]:
+            st, follows = entry
+            hit = follows & set(moved)
+            if hit and (len(follows) > 1 or len(moved) > 1):
+                fail(c.name_span, f"'{c.junction}': its impulse moves "
+                                  f"{', '.join(sorted(p.name for p in moved))}, whose "
+                                  f"velocities the inertia '{st.element}' in derivative "
+                                  f"causality follows (its {st.state.name} is not a state): "
+                                  "an impulse through a dependent inertia is not supported; "
+                                  "write the bodies' inertia as one coupled field I[n](M) in "
+                                  "independent coordinates")
 
     def implicit(p):
         eq = sys.eqs.get(flows[p][0]) if p in flows else None
         return eq if eq is not None and not eq.explicit else None
 
     def W(c, moved):
+        coupled_through_dependent(c, moved)
         index = {p: i for i, p in enumerate(moved)}
         out = sp.zeros(len(moved), len(moved))
         done: set = set()
@@ -712,7 +762,8 @@ def _suspend(sys, c, stops):
                                            (row, stick), (free, True))))
 
 
-def _friction(c, info, stop, states, relations, discretes, whens, stops=()):
+def _friction(c, info, stop, states, relations, discretes, whens, stops=(), loads=(),
+              moving=None):
     """Dry friction `Fr(Fc, Fs)`: its mode `F.stick` (1: sticking, its flow held at zero, its
     effort the multiplier; 0: sliding, effort Fc times its direction `F.dir`, +1 or -1).
     Sliding, it sticks where its flow reverses continuously (below its width, _width), the
@@ -721,15 +772,22 @@ def _friction(c, info, stop, states, relations, discretes, whens, stops=()):
     that holds it exceeds Fs, and slides the way that force pushes.  While a unilateral
     junction on the same storages (stops) is closed it sticks, suspended (_suspend).  The
     multiplier's law while sliding is lambda = Fc dir, from the constraint junction's
-    (bgc.middle.reduce)."""
+    (bgc.middle.reduce).  loads: the contacts (unilateral junctions' infos) whose normal
+    forces its forces are proportional to (LANGUAGE 10b): while one is open the friction
+    carries no force and does not stick where its flow reverses (two frictions of one body
+    would otherwise both hold it, their rows dependent); its contact's impacts set its mode,
+    its contact's release frees it.  moving: the symbols whose rates the run computes (the
+    states and a coupled field's flows), for the reversal's resolution."""
     J = c.junction
     Fc, Fs = c.gains
     stick = sp.Ne(active(c), 0)
+    loaded = sp.And(*[sp.Ne(active(i), 0) for i in loads]) if loads \
+        else sp.true
     way = var(f"{J}.dir")
     n = len(relations)
     width = _width(info.balance)
     slows = Relation(sp.Symbol(f"event#{n}"), sp.StrictGreaterThan(
-        sp.Piecewise((-way * info.balance - width, sp.Not(stick)),
+        sp.Piecewise((-way * info.balance - width, sp.And(sp.Not(stick), loaded)),
                      (sp.Integer(-1), True)), 0), f"{J}: stops (f reverses)", c.name_span, None)
     breaks = Relation(sp.Symbol(f"event#{n + 1}"), sp.StrictGreaterThan(
         sp.Piecewise((sp.Abs(c.multiplier) - Fs, stick), (sp.Integer(-1), True)), 0),
@@ -738,10 +796,12 @@ def _friction(c, info, stop, states, relations, discretes, whens, stops=()):
     # leaves of it (its resolution, relative to t, times |f'|): ten times the width and
     # twice that cover it; a rebound leaves |f| far above
     crept = sp.Abs(info.balance) <= 10 * width + 2 * LOCATED * sp.Abs(TIME) * sp.Abs(
-        _rate(info.balance, states))
+        _rate(info.balance, states if moving is None else moving))
     closed = [sp.Ne(active(s), 0) for s in stops]
     mode = Discrete(f"{J}.stick", active(c),
-                    sp.Piecewise((sp.Integer(1), sp.Or(sp.Eq(info.balance, 0), *closed)),
+                    sp.Piecewise((sp.Integer(1), sp.Or(sp.And(sp.Eq(info.balance, 0),
+                                                              *[i.phi <= 0 for i in loads]),
+                                                       *closed)),
                                  (sp.Integer(0), True)),
                     "1: sticking, 0: sliding", c.name_span,
                     sp.Piecewise(*[(sp.Integer(1), on) for on in closed],
