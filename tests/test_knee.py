@@ -108,9 +108,9 @@ def reference(t_out):
         z, t = sol.y[:, -1], sol.t[-1]
 
 
-def _simulate(tmp_path, backend, *options):
+def _simulate(tmp_path, backend, *options, model=B6):
     out, log = tmp_path / f"b6-{backend}.csv", tmp_path / f"b6-{backend}-events.csv"
-    result = run_bgc("simulate", B6, "--scene", "run", "--backend", backend, "-o", out,
+    result = run_bgc("simulate", model, "--scene", "run", "--backend", backend, "-o", out,
                      "--events", log, *options)
     assert result.returncode == 0, result.stderr
     return out, log
@@ -164,6 +164,25 @@ def test_a_b6_bridge_of_knee_diodes_matches_its_piecewise_linear_reference(
         on[name] = change[-1]
     for (t, _, _), (t_ref, _) in zip(got, switched):
         assert abs(t - t_ref) <= t_bound * 0.02
+
+
+def test_the_library_b6_bridge_matches_the_same_reference(tmp_path):
+    """tests/models/b6_library.bg, the bridge as electrical.b6_bridge of knee_diodes: the
+    reference's currents and DC voltage within 1e-10 of their largest values, its twelve
+    switchings in order (the paths now bridge.d1.d ...)."""
+    backend = "c" if have_cc() else "vm"
+    out, log = _simulate(tmp_path, backend, "--solver", "rodas5p", "--t-end", "0.02",
+                         model=ROOT / "tests" / "models" / "b6_library.bg")
+    err, switched = _errors(out)
+    assert np.all(err < 1e-10), err
+    names = {f"bridge.d{k}": f"D{k}" for k in range(1, 7)}
+    got = [names[".".join(what.split(".")[:2])] for _, what, _ in _switchings_paths(log)]
+    assert got == [name for _, name in switched]
+
+
+def _switchings_paths(log):
+    rows = list(csv.reader(io.StringIO(log.read_text())))[1:]
+    return [(float(t), what, change) for t, what, change in rows]
 
 
 def test_the_knees_give_the_same_bytes_in_every_backend(tmp_path):

@@ -4,6 +4,7 @@ parts, diode, switch, friction and end stops, against their piecewise closed for
 four-bars against models/four_bar.bg, one of point-mass bodies and rods, one of rigid links
 and revolute joints; and a slider-crank of bodies and joints against its one-coordinate
 Lagrangian equation."""
+import itertools
 import math
 from pathlib import Path
 
@@ -652,6 +653,83 @@ def test_a_diode_bridge_rectifies_to_the_peak_while_it_charges():
     C d|u|/dt + |u|/R is positive: v = 10 |sin(w t)| up to the first peak."""
     t, Y = simulate(BRIDGE_PARTS, ["c.e"], t_end=4e-3, dt=1e-4)
     np.testing.assert_allclose(Y[:, 0], 10 * np.abs(np.sin(314.159 * t)), rtol=0, atol=1e-8)
+
+
+KNEE = """model knee
+import electrical as el
+src : el.voltage_source(v = 5)
+d : el.knee_diode(Ron = 1, Goff = 1e-3, Vknee = 0.7)
+cap : el.capacitor(c = 1e-3)
+gnd : el.ground()
+top : 0; mid : 0; bot : 0
+src.p -> top; top -> d.p; d.n -> mid; mid -> cap.p; cap.n -> bot; bot -> gnd.p
+"""
+
+
+def test_a_knee_diode_charges_a_capacitor_through_both_its_segments():
+    """5 V through the diode into 1 mF from rest: above the knee, u = 5 - v - Vknee decays as
+    u' = -(u/Ron + Goff Vknee)/C until it reaches 0 at t1 = Ron C ln((u0 + G V R)/(G V R));
+    below, the leak charges on, 5 - v = Vknee exp(-Goff (t - t1)/C)."""
+    Ron, Goff, Vk, C, V = 1.0, 1e-3, 0.7, 1e-3, 5.0
+    t, Y = simulate(KNEE, ["cap.store.e"], t_end=0.5, dt=1e-3)
+    gvr = Goff * Vk * Ron
+    t1 = Ron * C * math.log((V - Vk + gvr) / gvr)
+    above = (V - Vk + gvr) * np.exp(-t / (Ron * C)) - gvr
+    v = np.where(t <= t1, V - Vk - above, V - Vk * np.exp(-Goff * (t - t1) / C))
+    np.testing.assert_allclose(Y[:, 0], v, rtol=0, atol=1e-8)
+
+
+B6 = """model b6
+import electrical as el
+parameter w = 314.1592653589793
+star : 0
+ua : Se(100*sin(w*t)); ub : Se(100*sin(w*t - 2.0943951023931953))
+uc : Se(100*sin(w*t + 2.0943951023931953))
+pa : 1; pb : 1; pc : 1
+star -> pa; star -> pb; star -> pc; ua -> pa; ub -> pb; uc -> pc
+pa -> bridge.a; pb -> bridge.b; pc -> bridge.c
+bridge : el.b6_bridge(Ron = 0.01, Goff = 1e-5, Vknee = 0.7)
+plus : 0
+bridge.dc -> plus
+load : R(20)
+plus -> load
+signal clock = integral(1, init = 0)
+"""
+
+
+def _b6_exact(t, Ron=0.01, Goff=1e-5, Vk=0.7, Rl=20.0):
+    """The B6 bridge on a resistor, no storage: at each instant the star point's potential
+    s and the plus rail's v from the two node laws (the phase currents add to zero; the
+    upper diodes' currents feed the load), each diode on the segment of its law its voltage
+    calls for, the 2^6 assignments tried in turn (the one consistent is the solution)."""
+    def law(on):
+        return (1 / Ron, (Goff - 1 / Ron) * Vk) if on else (Goff, 0.0)
+    out = []
+    for tk in t:
+        V = 100 * np.sin(314.1592653589793 * tk + np.array([0, -1, 1]) * 2.0943951023931953)
+        for bits in itertools.product((False, True), repeat=6):
+            A, b = np.zeros((2, 2)), np.zeros(2)
+            for n in range(3):  # upper: (V_n + s) - v; lower: 0 - (V_n + s)
+                (Gu, cu), (Gl, cl) = law(bits[n]), law(bits[3 + n])
+                A[0] += [Gu + Gl, -Gu]
+                b[0] -= (Gu + Gl) * V[n] + cu - cl
+                A[1] += [Gu, -Gu]
+                b[1] -= Gu * V[n] + cu
+            A[1, 1] -= 1 / Rl
+            s, v = np.linalg.solve(A, b)
+            volts = [V[n] + s - v for n in range(3)] + [-(V[n] + s) for n in range(3)]
+            if all((u > Vk) == on for u, on in zip(volts, bits)):
+                out.append(v)
+                break
+    return np.array(out)
+
+
+def test_a_b6_bridge_on_a_resistor_follows_the_largest_line_voltage():
+    """The rectified voltage over one mains period: the largest line-to-line voltage less
+    two knees and the drops across Ron, against the network's solution at each instant."""
+    t, Y = simulate(B6, ["load.e"], t_end=0.02, dt=2e-4)
+    np.testing.assert_allclose(Y[:, 0], _b6_exact(t), rtol=0, atol=1e-8)
+    assert np.ptp(Y[:, 0]) > 20  # (six pulses a period: the ripple of a B6)
 
 
 STICK_SLIP = """model stick_slip

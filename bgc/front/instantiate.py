@@ -770,20 +770,21 @@ class _Rewriter:
         self.stage, self.scope, self.env = stage, scope, env
         self.dynamic = False  # reads a signal, an element variable or t
 
-    def map(self, node):
-        """Any node with its spans in this scope, its expressions rewritten."""
+    def map(self, node, own=()):
+        """Any node with its spans in this scope, its expressions rewritten (own: the names an
+        element's law reads as its own variables, e and f, inside conditionals too)."""
         if isinstance(node, Span):
             return self.scope.sp(node)
         if isinstance(node, tuple):
-            return tuple(self.map(x) for x in node)
+            return tuple(self.map(x, own) for x in node)
         if isinstance(node, (ast.Num, ast.Name, ast.Field, ast.Member, ast.Index, ast.Call,
                              ast.BinOp, ast.Neg, ast.Vector)):
-            return self.expr(node)
+            return self.expr(node, own)
         if is_dataclass(node) and not isinstance(node, type):
             names = _FIELDS.get(type(node))
             if names is None:
                 names = _FIELDS[type(node)] = tuple(f.name for f in fields(node))
-            return type(node)(*[self.map(getattr(node, n)) for n in names])
+            return type(node)(*[self.map(getattr(node, n), own) for n in names])
         return node
 
     def expr(self, node, own=()):
@@ -837,7 +838,7 @@ class _Rewriter:
             return acc
         if isinstance(node, ast.Vector):
             return ast.Vector(tuple(self.expr(a, own) for a in node.items), sp(node.span))
-        return self.map(node)
+        return self.map(node, own)
 
     def target(self, ident: ast.Ident) -> ast.Ident:
         """A when-block's assigned discrete variable by its path."""
