@@ -28,6 +28,7 @@ import numpy as np
 from .. import api
 from ..execute import runner
 from ..codegen.lower import lower
+from ..base.diagnostics import ModelError
 from ..codegen.sensitivity import SensitivityError, column
 
 
@@ -154,6 +155,8 @@ def build(model, params, scene=None, given=(), state_outputs=False, algebra="aut
         program = lower(compiled.reduced, tuple(params), tuple(given), state_outputs)
     except SensitivityError as error:
         raise FitError(str(error)) from None
+    except ModelError as error:  # (located: an event the sensitivities cannot pass)
+        raise api.BgcModelError(error, compiled.source) from None
     return replace(compiled, program=program)
 
 
