@@ -53,7 +53,9 @@ u -> j
 j : 1
 j -> r
 j -> l
-scene run { time 0 .. 0.0195 every 0.000137; outputs l.p; solver dopri5(rtol = 1e-12, atol = 1e-14) }
+scene run {
+  time 0 .. 0.0195 every 0.000137; outputs l.p; solver dopri5(rtol = 1e-12, atol = 1e-14)
+}
 """
 
 
@@ -223,6 +225,95 @@ def test_pwm_sensitivities_to_duty_and_period_match_the_closed_form(tmp_path):
         got = _column(head, Y, f"d(l.p)/d({name})")
         error = np.max(np.abs(got - fd[name][:, 0])) / np.max(np.abs(fd[name]))
         assert error < 1e-6, (name, error)
+
+
+# ---------------------------------------------------------------- stick-slip: mode changes
+
+STICK = """model stickslip "a block pushed by a sinusoidal force, with Coulomb friction"
+parameter m = 1.0
+parameter F0 = 0.6
+parameter w = 2.0
+parameter Fc = 0.3
+parameter Fs = 0.5
+f : MSe(F0*sin(w*t))
+mass : I(m)
+fr : Fr(Fc, Fs)
+j : 1
+f -> j
+j -> mass
+j -> fr
+signal x = integral(mass.f, init = 0)
+scene run {
+  time 0 .. 10 every 0.01; outputs mass.f, x; solver dopri5(rtol = 1e-12, atol = 1e-12)
+}
+"""
+STICK_VALUES = {"Fc": 0.3, "Fs": 0.5, "F0": 0.6, "m": 1.0}
+
+
+def test_stick_slip_sensitivities_match_finite_differences(tmp_path):
+    """Six breakaways and stops in 10 s (the friction's mode changes, a stop setting the
+    momentum to 0): the sensitivities to the friction levels, the force and the mass against
+    central differences (h = 1e-4: below it the differences' noise, the events' location to
+    1e-12 in t divided by h, grows past the truncation)."""
+    path = _write(tmp_path, "stick.bg", STICK)
+    params = list(STICK_VALUES)
+    compiled = estimate.build(path, params, "run")
+    head, Y = _runs(compiled, {})
+    t, fd = _finite_differences(path, "run", "mass.f, x", params, STICK_VALUES, h=1e-4)
+    sticking = np.abs(_column(head, Y, "mass.f")) == 0.0
+    assert 100 < np.sum(sticking) < len(t) - 100  # (it sticks and slips)
+    for p in params:
+        for k, q in enumerate(("mass.f", "x")):
+            got, want = _column(head, Y, f"d({q})/d({p})"), fd[p][:, k]
+            error = np.max(np.abs(got - want)) / np.max(np.abs(want))
+            assert error < 1e-6, (q, p, error)
+
+
+# ---------------------------------------------------------------- bgc fit through events
+
+
+def _noisy_csv(path, t, columns, noise, seed):
+    rng = np.random.default_rng(seed)
+    with open(path, "w") as fh:
+        fh.write("t," + ",".join(columns) + "\n")
+        values = {c: v + noise * rng.standard_normal(len(t)) for c, v in columns.items()}
+        for k, tk in enumerate(t):
+            fh.write(",".join([repr(float(tk))] + [repr(float(values[c][k])) for c in columns])
+                     + "\n")
+    return path
+
+
+def test_fit_recovers_the_ball_s_restitution_from_its_closed_form(tmp_path):
+    """Heights every 0.01 s for 3 s from the closed form at e = 0.75 (the model's 0.8), with
+    noise of 1 mm: bgc fit through the impacts, its 95 % interval covering the truth."""
+    (e, g, h0, t), flights = _ball_closed_form()
+    at = {e: 0.75, g: 9.81, h0: 1.0}
+    times = np.arange(300) * 0.01
+    x = np.zeros(len(times))
+    for a, b, height, _ in flights:
+        a, b = float(a.subs(at)), float(b.subs(at))
+        inside = (times >= a) & (times < b)
+        x[inside] = sp.lambdify(t, height.subs(at), "numpy")(times[inside])
+    data = _noisy_csv(tmp_path / "ball.csv", times, {"x": x}, 1e-3, 5)
+    result = estimate.fit(_write(tmp_path, "ball.bg", BALL), data, ["e=0.5..0.95"],
+                          scene="drop", backend=BACKENDS[0])
+    assert result.converged, result.stopped
+    assert result.lower[0] < 0.75 < result.upper[0]
+    assert result.upper[0] - result.lower[0] < 1e-3
+    assert result.residual_sd == pytest.approx(1e-3, rel=0.1)
+
+
+def test_fit_recovers_a_coulomb_friction_level_through_stick_slip(tmp_path):
+    """The block's speed and position at Fc = 0.25, Fs = 0.5 (the model's Fc 0.3), with
+    noise: bgc fit of Fc through every breakaway and stop, the interval covering it."""
+    path = _write(tmp_path, "stick.bg", STICK)
+    t, Y, names = api.simulate(path, "run", backend=BACKENDS[0], outputs="mass.f, x",
+                               params={"Fc": 0.25})
+    data = _noisy_csv(tmp_path / "stick.csv", t, {"mass.f": Y[:, 0], "x": Y[:, 1]}, 2e-3, 11)
+    result = estimate.fit(path, data, ["Fc=0.05..0.45"], scene="run", backend=BACKENDS[0])
+    assert result.converged, result.stopped
+    assert result.lower[0] < 0.25 < result.upper[0]
+    assert result.upper[0] - result.lower[0] < 0.01
 
 
 # ---------------------------------------------------------------- what stays refused

@@ -141,10 +141,10 @@ def _following(sel, params, states, defaults: dict, steps) -> tuple[set, dict]:
 
 def refusal(sel, params, states, defaults: dict, steps=()):
     """Why the sensitivities to params cannot be carried through sel's events: (its span, a
-    sentence for people), a sentence where there is no place to point at, or None.  What is refused: a discrete value set from the
-    states or the chosen parameters by a law that is not piecewise constant (a sampled
-    value, `when ... { d = x }`): its sensitivity would be a state's that the augmented
-    program does not have."""
+    sentence for people), a sentence where there is no place to point at, or None.  What is
+    refused: a discrete value set from the states or the chosen parameters by a law that is
+    not piecewise constant (a sampled value, `when ... { d = x }`): its sensitivity would be
+    a state's that the augmented program does not have."""
     if not hasattr(sel, "slots"):
         return ("the model has events (a when-block, a switch, a relation of the states or "
                 "time): its sensitivities jump at an event, and bgc does not compute those "
@@ -325,6 +325,8 @@ def _jumping(f: Function, n: int, m: int, sel, dps, plans, fresh) -> tuple[Funct
 
     rate = [assign(e) for e in rates]
     along = run({**{X[i]: rate[i] for i in range(n)}, ir.T: sp.Integer(1)}, indicators)
+    along = [a if a.is_number else assign(a) for a in along]  # (a piecewise rate's zero
+    #        branches stay in it: a quotient by the Piecewise itself would divide them by 0)
     changed = _changed(sel, n, stores)
     base = n + ND - len(sel.squares) - len(sel.discretes)  # the square waves' stores
     waves = [stores[base + q] for q, s in enumerate(sel.squares) if s.kind == "square"]
