@@ -19,7 +19,7 @@ from bgc import api
 from bgc.analysis import estimate
 from bgc.execute import runner
 
-from conftest import have_cc, run_bgc
+from conftest import ROOT, have_cc, run_bgc
 
 BACKENDS = ["c", "vm", "python"] if have_cc() else ["python"]
 
@@ -225,6 +225,44 @@ def test_pwm_sensitivities_to_duty_and_period_match_the_closed_form(tmp_path):
         got = _column(head, Y, f"d(l.p)/d({name})")
         error = np.max(np.abs(got - fd[name][:, 0])) / np.max(np.abs(fd[name]))
         assert error < 1e-6, (name, error)
+
+
+# ---------------------------------------------------------------- impacts and switches
+
+
+def test_a_pendulum_striking_a_wall_matches_finite_differences():
+    """models/pendulum_wall.bg: a constrained pendulum against a unilateral junction with
+    restitution, whose impacts move the momenta through the kinetic metric (the mode
+    change's map h): d(x, y)/d(e, l, d) through its impacts against central differences."""
+    path = ROOT / "models" / "pendulum_wall.bg"
+    values = {"e": 0.7, "l": 1.0, "d": 0.2}
+    compiled = estimate.build(path, list(values), "strike", outputs="x, y")
+    head, Y = _runs(compiled, {})
+    t, fd = _finite_differences(path, "strike", "x, y", list(values), values)
+    for p in values:
+        for k, q in enumerate(("x", "y")):
+            got, want = _column(head, Y, f"d({q})/d({p})"), fd[p][:, k]
+            error = np.max(np.abs(got - want)) / np.max(np.abs(want))
+            assert error < 1e-6, (q, p, error)
+
+
+def test_a_buck_converter_s_switch_and_diode_match_finite_differences():
+    """models/buck.bg: an ideal switch on a square wave and a freewheeling diode, its mode
+    changes state events; d(l.f, c.e)/d(duty, L, R) against central differences, away from
+    the rows on an edge (where a row is the edge's right limit, the differences its mean)."""
+    path = ROOT / "models" / "buck.bg"
+    values = {"duty": 0.5, "L": 1e-4, "R": 5.0}
+    compiled = estimate.build(path, list(values), "run", outputs="l.f, c.e")
+    head, Y = _runs(compiled, {})
+    t, fd = _finite_differences(path, "run", "l.f, c.e", list(values), values)
+    phase = (t * 1e5) % 0.5  # edges at k/f and (k + 1/2)/f
+    keep = np.minimum(phase, 0.5 - phase) > 1e-3
+    assert np.sum(keep) > 700
+    for p in values:
+        for k, q in enumerate(("l.f", "c.e")):
+            got, want = _column(head, Y, f"d({q})/d({p})")[keep], fd[p][keep, k]
+            error = np.max(np.abs(got - want)) / np.max(np.abs(want))
+            assert error < 1e-6, (q, p, error)
 
 
 # ---------------------------------------------------------------- stick-slip: mode changes

@@ -438,7 +438,8 @@ def lower(reduced: Reduced, sensitivities: tuple[str, ...] = (), given=(),
         from . import sensitivity
         defaults = {p.name: p.expr for p in reduced.parameters}
         sensitivity.check(sensitivities, [p.name for p in reduced.parameters],
-                          reduced.events, states, defaults, reduced.steps)
+                          reduced.events, states, defaults, reduced.steps,
+                          list(reduced.rates) + [o.expr for o in reduced.outputs])
         jumps = sensitivity.needs_jumps(reduced.events, sensitivities, states, defaults,
                                         reduced.steps)
     fns = _build(mapper, reduced.steps, functions(reduced, jumps), len(states))

@@ -65,14 +65,15 @@ def column(of: str, param: str) -> str:
     return f"d({of})/d({param})"
 
 
-def check(params, names, events=None, states=(), defaults=None, steps=()) -> tuple[str, ...]:
+def check(params, names, events=None, states=(), defaults=None, steps=(),
+          results=None) -> tuple[str, ...]:
     """The parameters asked for, checked against the program's parameters (`names`); events:
     the model's (bgc.front.events.Selected, or None), refused where the sensitivities'
     jumps at its events cannot be computed (refusal's); states: the states' symbols;
     defaults: each parameter's name -> its default expression (a parameter defined from a
     chosen one follows it); steps: the statements that compute what the events read
-    (bgc.ir's, over model symbols).  A true `events` that is not a Selected (an older
-    caller) is refused."""
+    (bgc.ir's, over model symbols); results: what the run reads of them (refusal's).  A
+    true `events` that is not a Selected (an older caller) is refused."""
     params = tuple(params)
     if not params:
         raise SensitivityError("no parameter given for the sensitivities")
@@ -83,7 +84,7 @@ def check(params, names, events=None, states=(), defaults=None, steps=()) -> tup
     if len(set(params)) != len(params):
         raise SensitivityError("a parameter is named twice for the sensitivities")
     if events is not None and events is not False:
-        why = refusal(events, params, states, defaults or {}, steps)
+        why = refusal(events, params, states, defaults or {}, steps, results)
         if isinstance(why, tuple):  # (where, what): a model error, located
             fail(*why)
         if why is not None:
@@ -139,19 +140,44 @@ def _following(sel, params, states, defaults: dict, steps) -> tuple[set, dict]:
     return reads, continuous
 
 
-def refusal(sel, params, states, defaults: dict, steps=()):
+def _weighs(d, sel, steps, results) -> bool:
+    """Whether discrete value d's own value moves anything the sensitivities carry: what the
+    steps compute from it with a nonzero derivative (followed in order), read so by the
+    results (the rates, the outputs), the state relations' indicators, the time events'
+    times or the reinits.  A value read only in conditions (a contact's largest impact
+    speed, which decides whether it rests) does not: their derivative is zero."""
+    carried = {d}
+
+    def moves(e) -> bool:
+        free = _free(e) & carried
+        return bool(free) and directional(e, {c: sp.Integer(1) for c in free}) != 0
+    for st in steps:
+        if any(moves(e) for e in ir.expressions(st)):
+            carried |= set(ir.defines(st))
+    exprs = list(results) + [r.indicator for r in sel.state] + [at for _, at, _ in sel.time]
+    exprs += [getattr(q, f) for q in sel.squares if q.kind == "square"
+              for f in ("period", "duty", "t0")]
+    exprs += [a.expr for w in sel.whens for a in w.actions if a.kind == "reinit"]
+    return any(moves(e) for e in exprs)
+
+
+def refusal(sel, params, states, defaults: dict, steps=(), results=None):
     """Why the sensitivities to params cannot be carried through sel's events: (its span, a
     sentence for people), a sentence where there is no place to point at, or None.  What is
     refused: a discrete value set from the states or the chosen parameters by a law that is
     not piecewise constant (a sampled value, `when ... { d = x }`): its sensitivity would be
-    a state's that the augmented program does not have."""
+    a state's that the augmented program does not have.  A value read only in conditions
+    passes (_weighs).  results: what the run computes from the steps (the rates, the
+    outputs); None: everything the steps define."""
+    if results is None:
+        results = [t for st in steps for t in ir.defines(st)]
     if not hasattr(sel, "slots"):
         return ("the model has events (a when-block, a switch, a relation of the states or "
                 "time): its sensitivities jump at an event, and bgc does not compute those "
                 "jumps")
     _, continuous = _following(sel, params, states, defaults, steps)
     for d in sel.discretes:
-        if d.symbol in continuous:
+        if d.symbol in continuous and _weighs(d.symbol, sel, steps, results):
             what = ", ".join(sorted(str(s) for s in continuous[d.symbol]))
             return d.span, (
                 f"the sensitivities cannot pass the events of '{d.name}': it is set from "
