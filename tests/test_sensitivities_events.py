@@ -227,6 +227,37 @@ def test_pwm_sensitivities_to_duty_and_period_match_the_closed_form(tmp_path):
         assert error < 1e-6, (name, error)
 
 
+LAG = """model lag "a first-order lag driven by a short pulse"
+parameter tau = 0.5
+parameter t0 = 1.7
+parameter width = 0.05
+signal x = integral(-x/tau + pulse(t0, width), init = 0)
+scene run { time 0 .. 3 every 0.01; outputs x; solver dopri5(rtol = 1e-12, atol = 1e-14) }
+"""
+
+
+def test_a_pulse_s_start_and_width_move_its_time_events():
+    """x' = -x/tau + pulse(t0, w): its closed form differentiated by SymPy (x = tau (1 -
+    e^-(t - t0)/tau) during the pulse, then that at t0 + w decaying), the sensitivities to
+    t0, w and tau through the two time events (t >= t0, t < t0 + w) whose times move."""
+    tau, t0, w, t = sp.symbols("tau t0 w t", positive=True)
+    during = tau * (1 - sp.exp(-(t - t0) / tau))
+    after = during.subs(t, t0 + w) * sp.exp(-(t - t0 - w) / tau)
+    values = {tau: 0.5, t0: 1.7, w: 0.05}
+    compiled = estimate.build(api.Source("lag.bg", LAG), ["t0", "width", "tau"], "run")
+    head, Y = _runs(compiled, {})
+    times = Y[:, 0]
+    for name, p in (("t0", t0), ("width", w), ("tau", tau)):
+        want = np.zeros(len(times))
+        for lo, hi, expr in ((1.7, 1.75, during), (1.75, 9.0, after)):
+            inside = (times > lo) & (times < hi)
+            want[inside] = sp.lambdify(t, sp.diff(expr, p).subs(values), "numpy")(times[inside])
+        got = _column(head, Y, f"d(x)/d({name})")
+        off = np.min(np.abs(times[:, None] - np.array([1.7, 1.75])), axis=1) > 1e-9
+        assert np.sum(~off) == 2  # (the rows on the edges are their right limits)
+        assert np.max(np.abs(got - want)[off]) < 1e-9 * np.max(np.abs(want)), name
+
+
 # ---------------------------------------------------------------- impacts and switches
 
 
