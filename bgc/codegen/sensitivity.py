@@ -307,8 +307,8 @@ def _changed(sel, n: int, stores: dict):
     out = [("state", k, sp.Ne(R[k], D[k])) for k in range(G)]
     out += [("time", k, sp.Ne(stores[n + G + k], D[G + k])) for k in range(len(sel.time))]
     first = G + len(sel.time) + len(sel.discrete)
-    out += [("square", q, sp.Ne(stores[n + first + q], D[first + q]))
-            for q, s in enumerate(sel.squares) if s.kind == "square"]
+    at = [first + q for q, s in enumerate(sel.squares) if s.kind == "square"]
+    out += [("square", k, sp.Ne(stores[n + i], D[i])) for k, i in enumerate(at)]
     return out
 
 
@@ -363,8 +363,8 @@ def _jumping(f: Function, n: int, m: int, sel, dps, plans, fresh) -> tuple[Funct
         moved = run({**dp, **{X[i]: S[i] for i in range(n)}}, indicators + times + edges)
         pieces = []
         for kind, k, cond in changed:
-            if kind == "state":
-                d = -moved[k] / along[k] if moved[k] != 0 else 0
+            if kind == "state":  # (a rate that is 0 throughout: it never crosses in time)
+                d = -moved[k] / along[k] if moved[k] != 0 and along[k] != 0 else 0
             elif kind == "time":
                 d = moved[G + k]
             else:  # an edge at t0 + k*period (rising) or t0 + (k + duty)*period (falling)
