@@ -385,6 +385,20 @@ def test_fit_recovers_a_coulomb_friction_level_through_stick_slip(tmp_path):
     assert result.upper[0] - result.lower[0] < 0.01
 
 
+def test_a_time_table_before_the_square_wave_leaves_its_edges_alone(tmp_path):
+    """A table of t met before the square wave (its breakpoints time events of their own,
+    its value 0 throughout): the edges' jumps are the square wave's still."""
+    (tmp_path / "zero.csv").write_text("t,v\n0,0\n0.0051,0\n0.013,0\n0.03,0\n")
+    text = PWM.replace("u : MSe(", 'z : Se(table("zero.csv", t))\nu : MSe(').replace(
+        "u -> j\n", "u -> j\nz -> j\n")
+    compiled = estimate.build(_write(tmp_path, "pwm_table.bg", text), ["duty", "period"], "run")
+    head, Y = _runs(compiled, {})
+    assert sum(k == "table" for k in compiled.program.events.kinds) == 1
+    for name, want in zip(("duty", "period"), _pwm_reference(Y[:, 0])):
+        got = _column(head, Y, f"d(l.p)/d({name})")
+        assert np.max(np.abs(got - want)) < 1e-8 * np.max(np.abs(want)), name
+
+
 # ---------------------------------------------------------------- what stays refused
 
 
