@@ -296,6 +296,20 @@ def test_a_buck_converter_s_switch_and_diode_match_finite_differences():
             assert error < 1e-6, (q, p, error)
 
 
+def test_the_buck_converter_s_periodic_orbit_through_its_switch_and_diode():
+    """bgc periodic shoots through the switch's edges and the diode's state events with the
+    monodromy matrix from the sensitivities' jumps: in continuous conduction the ideal buck's
+    mean output is duty*V exactly (the coil's mean voltage is 0), its mean current that over
+    R (the capacitor's mean current is 0), and its multipliers have |mu| = exp(-T/(2RC))."""
+    import bgc
+    orbit = bgc.periodic(ROOT / "models" / "buck.bg", "run")
+    mean = {name: m for name, m, *_ in orbit.figures}
+    assert mean["c.e"] == pytest.approx(0.5 * 12.0, rel=1e-9)
+    assert mean["l.f"] == pytest.approx(0.5 * 12.0 / 5.0, rel=1e-9)
+    assert np.abs(orbit.multipliers) == pytest.approx(math.exp(-1e-5 / (2 * 5.0 * 1e-5)),
+                                                      rel=1e-9)
+
+
 # ---------------------------------------------------------------- stick-slip: mode changes
 
 STICK = """model stickslip "a block pushed by a sinusoidal force, with Coulomb friction"
