@@ -125,10 +125,8 @@ def test_sensitivities_api_returns_states_and_outputs():
     assert r.S[0, q, 0] == 1.0 and r.S[0, q, 1] == 0.0
 
 
-def test_models_with_events_are_refused():
-    result = run_bgc("simulate", MODELS / "pendulum_wall.bg", "--sensitivities", "l")
-    assert result.returncode == 1
-    assert "events" in result.stderr and "Traceback" not in result.stderr
+def test_sensitivities_refuse_unknown_parameters_and_the_projection():
+    """(Models with events: tests/test_sensitivities_events.py.)"""
     result = run_bgc("simulate", MODELS / "dc_motor.bg", "--sensitivities", "kt,nope")
     assert result.returncode == 2 and "unknown parameter 'nope'" in result.stderr
     result = run_bgc("simulate", MODELS / "pendulum.bg", "--sensitivities", "l",

@@ -167,12 +167,15 @@ def test_a_period_that_is_not_a_multiple_of_the_sources_is_refused_and_a_multipl
     assert orbit.multipliers[0].real == pytest.approx(mu ** 2, rel=1e-10)
 
 
-def test_a_model_with_state_events_is_refused_naming_the_event(tmp_path):
+def test_a_model_whose_events_the_sensitivities_cannot_pass_is_refused_located(tmp_path):
+    """A discrete value sampled from the state (its own sensitivity is not carried)."""
     path = tmp_path / "m.bg"
-    path.write_text(RL.replace("loop -> l", "loop -> l\nw : Se(if l.f > 1 then 1 else 0)\n"
-                                            "w -> loop"))
+    path.write_text(RL.replace("loop -> l", "loop -> l\ndiscrete held = 0\n"
+                                            "when l.f > 1 { held = l.f }\n"
+                                            "w : Se(held)\nw -> loop"))
     r = run_bgc("periodic", str(path), "--scene", "run")
-    assert r.returncode == 1 and "state event 'l.f > 1'" in r.stderr, r.stderr
+    assert r.returncode == 1 and "m.bg:" in r.stderr and "'held'" in r.stderr, r.stderr
+    assert "Traceback" not in r.stderr
 
 
 def test_common_period_is_the_least_common_multiple():
@@ -195,10 +198,25 @@ def test_sensitivities_pass_the_time_events_of_a_pwm_drive_as_finite_differences
         np.testing.assert_allclose(s.dy[:, k, j], fd, rtol=1e-6, atol=1e-9)
 
 
-def test_a_sensitivity_of_a_time_event_s_time_is_refused():
-    from bgc.analysis.estimate import FitError
-    with pytest.raises(FitError, match="the time of the event 'square"):
-        bgc.sensitivities(MOTOR, ["Tp"], "run")
+def test_sensitivities_to_the_pwm_period_and_duty_as_finite_differences_say():
+    """d(speed)/d(Tp) and d(speed)/d(d): the edges move with them (S jumps by
+    (f- - f+) dtau/dp at each), against central differences of runs at p +- h (at a
+    tolerance tighter than the scene's, the differences' noise its error over 2h), away
+    from the rows that fall on an edge: there the speed is one-sided in p (an edge moved
+    past the row or not), and the differences' error is O(h)."""
+    tight = {"rtol": 1e-12, "atol": 1e-14}
+    s = bgc.sensitivities(MOTOR, ["Tp", "d"], "run", **tight)
+    k = s.outputs.index("rotor.f")
+    phase = (s.t / 1e-3) % 1.0
+    keep = np.minimum(np.abs(phase - 0.7), np.minimum(phase, 1.0 - phase)) > 1e-6
+    assert 70 < np.sum(keep) < len(s.t)
+    for j, (name, value) in enumerate((("Tp", 1e-3), ("d", 0.7))):
+        h = 1e-4 * value
+        _, up, names = bgc.simulate(MOTOR, "run", params={name: value + h}, **tight)
+        _, down, _ = bgc.simulate(MOTOR, "run", params={name: value - h}, **tight)
+        fd = (up[:, names.index("rotor.f")] - down[:, names.index("rotor.f")]) / (2 * h)
+        error = np.abs(s.dy[:, k, j] - fd)[keep]
+        assert np.max(error) <= 1e-6 * np.max(np.abs(fd)), name
 
 
 def test_fit_recovers_a_pwm_motor_s_torque_constant_through_its_time_events(tmp_path):

@@ -28,6 +28,7 @@ import numpy as np
 from .. import api
 from ..execute import runner
 from ..codegen.lower import lower
+from ..base.diagnostics import ModelError
 from ..codegen.sensitivity import SensitivityError, column
 
 
@@ -135,7 +136,8 @@ def build(model, params, scene=None, given=(), state_outputs=False, algebra="aut
     """model's scene compiled with the sensitivities to `params` (names): bgc.api.build up to
     the reduce stage, then the lowering stage with them (bgc.codegen.sensitivity says what given and
     state_outputs mean).  Raises api's errors, FitArgumentError for parameters it refuses and
-    FitError for a model it cannot do."""
+    FitError for a model it cannot do, BgcModelError for one whose events the sensitivities
+    cannot pass (located)."""
     if project_initial:
         raise FitArgumentError(
             "sensitivities and --project-initial exclude each other: the projection of the "
@@ -154,6 +156,8 @@ def build(model, params, scene=None, given=(), state_outputs=False, algebra="aut
         program = lower(compiled.reduced, tuple(params), tuple(given), state_outputs)
     except SensitivityError as error:
         raise FitError(str(error)) from None
+    except ModelError as error:  # (located: an event the sensitivities cannot pass)
+        raise api.BgcModelError(error, compiled.source) from None
     return replace(compiled, program=program)
 
 
@@ -178,7 +182,8 @@ def sensitivities(model, params, scene=None, backend="c", algebra="auto", output
     (a list of parameter names, or one name, or "k,c"); values: parameter overrides
     {name: value} (simulate's params=: a parameter computed from a chosen one follows it
     unless it is overridden); options as bgc.simulate's.  Raises as bgc.simulate, and
-    FitArgumentError for unknown parameters, FitError for a model with events."""
+    FitArgumentError for unknown parameters, BgcModelError (located) for a model whose events
+    the sensitivities cannot pass (a discrete value sampled from the states)."""
     if isinstance(params, str):
         params = [p.strip() for p in params.split(",") if p.strip()]
     chosen = tuple(params)

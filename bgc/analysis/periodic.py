@@ -11,9 +11,10 @@ run's own error keeps it above that, at the floating-point noise of the map itse
 so).
 
 The sensitivities pass the time events unchanged (the square waves' edges, relations of t:
-their times depend on neither the states nor x0), so M is exact through them; a model whose
-events read the states (a diode, a switch's mode from a state, an impact) is refused with the
-event named, as the sensitivities are (their jump conditions are not implemented yet).
+their times depend on neither the states nor x0), and jump at the events whose times or maps
+read the states (a diode, a switch's mode from a state, an impact: bgc.codegen.sensitivity,
+"Through events"), so M is exact through every event of the period; a model whose events
+they cannot pass (a discrete value sampled from the states) is refused, located.
 
 A state whose column of M is the unit column (nothing in the model reads it: a shaft's angle)
 drifts: it advances by the same amount every period and takes no part in the fixed point; it is
@@ -37,6 +38,7 @@ import sympy as sp
 
 from .. import api, ir
 from ..codegen.lower import lower
+from ..base.diagnostics import ModelError
 from ..codegen.sensitivity import SensitivityError
 from ..execute import runner
 from ..front.graph import TIME, var
@@ -177,6 +179,8 @@ def build(model, scene=None, outputs=None, effects=None, algebra="auto") -> Shoo
     except SensitivityError as error:
         raise NoOrbit(f"bgc periodic cannot shoot through this model's events: {error}") \
             from None
+    except ModelError as error:  # (located: an event the sensitivities cannot pass)
+        raise api.BgcModelError(error, compiled.source) from None
     from dataclasses import replace
     return Shooting(replace(compiled, reduced=reduced, program=program),
                     tuple(st.name for st in reduced.states), asked, reduced)

@@ -697,6 +697,7 @@ def _events_context(program: Program, literal) -> dict | None:
         return None
     return {"indicators": ev.indicators, "timers": ev.timers, "discrete": ev.discrete,
             "strict": [int(x) for x in ev.strict], "names": [literal(n) for n in ev.names],
+            "jumps": ev.jumps,
             "log": [str(v) for v in discrete_log(ev)],
             "kinds": "".join(k[0] for k in ev.kinds)}
 
@@ -864,7 +865,8 @@ LINK_INTS = ("NUM_STATES", "NUM_PARAMS", "NUM_CONSTANTS", "NUM_OUTPUTS", "NUM_CO
              "NUM_POSITION_ROWS", "NUM_VELOCITY_ROWS", "NUM_BLOCKS", "AUTONOMOUS",
              "WORK_DOUBLES", "WORK_INTS", "WORK_Y0", "WORK_STAGES", "WORK_Y", "WORK_JAC",
              "JAC_COLORS", "JAC_SPARSE", "SCENE_SOLVER", "NUM_INDICATORS", "NUM_TIMERS",
-             "NUM_DISCRETE", "DISCRETE_OFFSET", "NUM_INPUTS", "HAS_JACOBIAN", "NUM_TABLES")
+             "NUM_DISCRETE", "DISCRETE_OFFSET", "NUM_INPUTS", "HAS_JACOBIAN", "NUM_TABLES",
+             "NUM_JUMPS")
 LINK_DOUBLES = ("SCENE_T0", "SCENE_T_END", "SCENE_DT", "SCENE_RTOL", "SCENE_ATOL", "SCENE_STEP",
                 "SCENE_HMAX")
 LINK_TABLES = (("bgc_block", "blocks"), ("int", "jac_color_ptr"), ("int", "jac_color_cols"),

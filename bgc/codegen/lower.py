@@ -308,10 +308,13 @@ def jacobian_pattern(rhs: Function, n: int, blocks) -> JacobianPattern:
 # ---------------------------------------------------------------- the stage
 
 
-def functions(reduced: Reduced) -> dict:
+def functions(reduced: Reduced, jumps: bool = False) -> dict:
     """The program's functions as their results: name -> (arguments, size, stores over model
     symbols).  Each is built from the sorted steps by the same passes (pruning from its
-    results, mapping, constants, temporaries), so a new function is a new entry here."""
+    results, mapping, constants, temporaries), so a new function is a new entry here.
+    jumps: update's results are followed by what the sensitivities' jumps read (the right
+    side, the state relations' indicators, the time relations' times:
+    bgc.codegen.sensitivity's _jumping)."""
     states = [st.symbol for st in reduced.states]
     rows, t0 = reduced.rows, sp.Float(reduced.run.t0)
     position = [r.expr for r in rows if r.level == "position"]
@@ -339,6 +342,9 @@ def functions(reduced: Reduced) -> dict:
         times = events.next_times(sel)
         specs["next_time"] = (txp, len(times), _stores(times))
         update = events.update_stores(sel, reduced.states)
+        if jumps:
+            update += list(reduced.rates) + [r.indicator for r in sel.state]
+            update += [sp.Integer(0) if events.never(at) else at for _, at, _ in sel.time]
         specs["update"] = (("t", "x", "p", "r"), len(update), _stores(update))
     return specs
 
@@ -427,7 +433,16 @@ def lower(reduced: Reduced, sensitivities: tuple[str, ...] = (), given=(),
         base.update(_event_symbols(reduced.events))
     mapper = _Mapper(base, reduced.plans)
     rows = reduced.rows
-    fns = _build(mapper, reduced.steps, functions(reduced), len(states))
+    jumps = False
+    if sensitivities:
+        from . import sensitivity
+        defaults = {p.name: p.expr for p in reduced.parameters}
+        sensitivity.check(sensitivities, [p.name for p in reduced.parameters],
+                          reduced.events, states, defaults, reduced.steps,
+                          list(reduced.rates) + [o.expr for o in reduced.outputs])
+        jumps = sensitivity.needs_jumps(reduced.events, sensitivities, states, defaults,
+                                        reduced.steps)
+    fns = _build(mapper, reduced.steps, functions(reduced, jumps), len(states))
     params = tuple(Param(p.name, mapper.expr(p.expr)) for p in reduced.parameters)
     movable = velocity_movable(rows, states)
     run = reduced.run
@@ -436,17 +451,15 @@ def lower(reduced: Reduced, sensitivities: tuple[str, ...] = (), given=(),
     names = tuple(st.name for st in reduced.states)
     outputs = tuple(o.name for o in reduced.outputs)
     if sensitivities:
-        from . import sensitivity
-        sensitivity.check(sensitivities, [p.name for p in params], reduced.events, states,
-                          {p.name: p.expr for p in reduced.parameters}, reduced.steps)
         aug = sensitivity.augment(fns, params, names, outputs, movable, tuple(sensitivities),
                                   given, mapper.plans, mapper.count, state_outputs,
-                                  jacobian_pattern)
+                                  jacobian_pattern, reduced.events if jumps else None)
         names, outputs, fns, movable, mapper.count = aug.states, aug.outputs, aug.functions, \
             aug.movable, aug.count
     program = finish(reduced.name, names, params, outputs,
                      tuple(ConstraintRow(r.junction, r.level) for r in rows), movable, scene,
-                     fns, tuple(mapper.plans), mapper.count, _events_info(reduced.events),
+                     fns, tuple(mapper.plans), mapper.count,
+                     _with_jumps(_events_info(reduced.events), len(sensitivities) if jumps else 0),
                      reduced.tables, tuple(ir.InputInfo(u.name, mapper.expr(u.default), u.doc)
                                            for u in reduced.inputs))
     program = aug.pattern(program) if sensitivities else program
@@ -545,6 +558,11 @@ def finish(name, states, params, outputs, constraints, movable, scene, functions
     pattern = jacobian_pattern(functions["rhs"], len(states), plans)
     return Program(name, states, params, outputs, constraints, movable, scene, functions,
                    tuple(plans), pattern, events_info, tuple(tables), tuple(inputs))
+
+
+def _with_jumps(info, m: int):
+    """The program's ir.Events with the number of parameters its update's jumps carry."""
+    return replace(info, jumps=m) if info is not None and m else info
 
 
 _NON_FINITE = (sp.zoo, sp.nan, sp.oo, -sp.oo)

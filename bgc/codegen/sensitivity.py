@@ -23,13 +23,24 @@ iteration as CVODES's simultaneous corrector uses.  Radau's Newton iteration con
 it to the same collocation solution; a Rosenbrock method, which needs the exact Jacobian for
 its order, loses accuracy in the sensitivities (docs/analysis.md gives the numbers).
 
-Through events: at a time event whose time depends on none of the chosen parameters (a square
-wave's edge, a relation of t, a table's or an input's breakpoint), where nothing that changes
-reads the states or the chosen parameters, x is continuous for every value of the parameters,
-and so is S: S(t+) = S(t-), and the augmented program runs through it unchanged (its update
-passes S through).  Every other event is refused, named: a state event's time depends on the
-states (S jumps by (f- - f+) dtau/dp), and a reinit or a mode read from the states sets x from
-them; those jump conditions are not implemented yet.
+Through events (needs_jumps): where every event is a time event whose time depends on none of
+the chosen parameters (a square wave's edge, a relation of t, a table's or an input's
+breakpoint) and nothing that changes reads the states or the chosen parameters, x is
+continuous for every value of the parameters, and so is S: the augmented program's update
+passes S through (_passing).  Otherwise, at an event at tau with map h (a reinit; the
+identity where a mode change only switches the right side from f- to f+), S jumps:
+
+    dtau/dp = -(g_x S- + g_p) / (g_x f- + g_t)        a state event, g(x, p, t) crossing zero
+    dtau/dp = d(time)/dp                              a time event (step, pulse, square's edge)
+    S+ = h_x S- + h_p + (h_x f- + h_t - f+) dtau/dp
+
+The augmented update (_jumping) computes, in the event iteration's first pass, dtau/dp of the
+first event that changed (the order in which the runtimes locate them) and the total
+derivative T = S- + f- dtau/dp, and in every pass T+ = h_x T + h_p + h_t dtau/dp (the
+tangent of the update's states), dtau/dp among its results; the runtimes hand it back in the
+later passes and after the iteration subtract f+ dtau/dp (bgc_jumps_after in drive.c): the
+passes compose, whatever the modes an event changes in turn.  What stays refused (refusal):
+a discrete value the run reads that follows the states or the parameters continuously.
 """
 from __future__ import annotations
 
@@ -39,8 +50,9 @@ import sympy as sp
 
 from .. import ir
 from ..symbolic.differentiate import directional
+from ..base.diagnostics import fail
 from ..front.graph import var
-from ..ir import P, V, X, Function, JacobianPattern, Resolve, Store
+from ..ir import D, P, R, V, X, Function, JacobianPattern, Resolve, Store
 from ..ir.tangent import _Forward
 
 
@@ -53,13 +65,15 @@ def column(of: str, param: str) -> str:
     return f"d({of})/d({param})"
 
 
-def check(params, names, events=None, states=(), defaults=None, steps=()) -> tuple[str, ...]:
+def check(params, names, events=None, states=(), defaults=None, steps=(),
+          results=None) -> tuple[str, ...]:
     """The parameters asked for, checked against the program's parameters (`names`); events:
-    the model's (bgc.front.events.Selected, or None), refused unless S is continuous through
-    all of them (see the module's doc); states: the states' symbols; defaults: each
-    parameter's name -> its default expression (a parameter defined from a chosen one
-    follows it); steps: the statements that compute what the events read (bgc.ir's, over
-    model symbols).  A true `events` that is not a Selected (an older caller) is refused."""
+    the model's (bgc.front.events.Selected, or None), refused where the sensitivities'
+    jumps at its events cannot be computed (refusal's); states: the states' symbols;
+    defaults: each parameter's name -> its default expression (a parameter defined from a
+    chosen one follows it); steps: the statements that compute what the events read
+    (bgc.ir's, over model symbols); results: what the run reads of them (refusal's).  A
+    true `events` that is not a Selected (an older caller) is refused."""
     params = tuple(params)
     if not params:
         raise SensitivityError("no parameter given for the sensitivities")
@@ -70,7 +84,9 @@ def check(params, names, events=None, states=(), defaults=None, steps=()) -> tup
     if len(set(params)) != len(params):
         raise SensitivityError("a parameter is named twice for the sensitivities")
     if events is not None and events is not False:
-        why = jumps(events, params, states, defaults or {}, steps)
+        why = refusal(events, params, states, defaults or {}, steps, results)
+        if isinstance(why, tuple):  # (where, what): a model error, located
+            fail(*why)
         if why is not None:
             raise SensitivityError(why)
     return params
@@ -90,14 +106,21 @@ def _moved(params, defaults: dict) -> set:
     return moved
 
 
-def jumps(sel, params, states, defaults: dict, steps=()) -> str | None:
-    """Why the sensitivities to params would jump at one of sel's events (a sentence naming
-    the event, for people), or None: every event is a time event that S passes unchanged."""
-    if not hasattr(sel, "slots"):
-        return ("the model has events (a when-block, a switch, a relation of the states or "
-                "time): its sensitivities jump at an event, and bgc does not compute those "
-                "jumps")
-    reads = set(states) | _moved(params, defaults)  # what follows the states or the params
+def _laws(sel, d) -> list:
+    """What sets discrete value d: its initial value, its next value (a mode's), the when-
+    blocks' assignments to it."""
+    laws = [d.init] + ([d.next] if d.next is not None else [])
+    return laws + [a.expr for w in sel.whens for a in w.actions if a.symbol == d.symbol]
+
+
+def _following(sel, params, states, defaults: dict, steps) -> tuple[set, dict]:
+    """(what follows the states or the chosen parameters: the steps' symbols computed from
+    them, to the fixed point through the discrete values; the discrete values among them
+    that follow them continuously, each -> the symbols its law reads that move it).  A
+    discrete value whose laws are piecewise constant in what they read (a mode, a counter,
+    a relation's value: derivative zero wherever it is defined) does not follow them."""
+    reads = set(states) | _moved(params, defaults)
+    continuous: dict = {}
     grown = True
     while grown:  # (through the steps, and the discrete values' laws: to the fixed point)
         size = len(reads)
@@ -105,36 +128,81 @@ def jumps(sel, params, states, defaults: dict, steps=()) -> str | None:
             if ir.uses(st) & reads:
                 reads |= set(ir.defines(st))
         for d in sel.discretes:
-            laws = [d.init] + ([d.next] if d.next is not None else [])
-            laws += [a.expr for w in sel.whens for a in w.actions if a.symbol == d.symbol]
-            if d.symbol not in reads and any(e.free_symbols & reads for e in laws):
-                reads.add(d.symbol)
+            if d.symbol in continuous:
+                continue
+            for law in _laws(sel, d):
+                moving = _free(law) & reads
+                if moving and directional(law, {s: sp.Integer(1) for s in moving}) != 0:
+                    continuous[d.symbol] = moving
+                    reads.add(d.symbol)
+                    break
         grown = len(reads) > size
-    changing = {d.symbol for d in sel.discretes} & reads
+    return reads, continuous
 
-    def refuse(text, what):
-        return (f"{what} '{text}': the sensitivities jump there, and bgc computes them "
-                "through time events only (an event whose time and effect depend on neither "
-                "the states nor the parameters asked for); not supported yet")
-    for r in sel.state + sel.discrete:
-        if r.indicator.free_symbols & reads:
-            return refuse(r.text, "the model has the event" if r.indicator.free_symbols
-                          & changing else "the model has the state event")
-    for r, at, _ in sel.time:
-        if _free(at) & reads:
-            return refuse(r.text, "the time of the event")
-    for s in sel.squares:
-        if any(_free(getattr(s, f, 0)) & reads
-               for f in ("period", "duty", "t0")):
-            return refuse(s.text, "the time of the event")
-    for w in sel.whens:
-        for a in w.actions:
-            if a.kind == "reinit":
-                return refuse(w.text, "the when-block (a reinit)")
+
+def _weighs(d, sel, steps, results) -> bool:
+    """Whether discrete value d's own value moves anything the sensitivities carry: what the
+    steps compute from it with a nonzero derivative (followed in order), read so by the
+    results (the rates, the outputs), the state relations' indicators, the time events'
+    times or the reinits.  A value read only in conditions (a contact's largest impact
+    speed, which decides whether it rests) does not: their derivative is zero."""
+    carried = {d}
+
+    def moves(e) -> bool:
+        free = _free(e) & carried
+        return bool(free) and directional(e, {c: sp.Integer(1) for c in free}) != 0
+    for st in steps:
+        if any(moves(e) for e in ir.expressions(st)):
+            carried |= set(ir.defines(st))
+    exprs = list(results) + [r.indicator for r in sel.state] + [at for _, at, _ in sel.time]
+    exprs += [getattr(q, f) for q in sel.squares if q.kind == "square"
+              for f in ("period", "duty", "t0")]
+    exprs += [a.expr for w in sel.whens for a in w.actions if a.kind == "reinit"]
+    return any(moves(e) for e in exprs)
+
+
+def refusal(sel, params, states, defaults: dict, steps=(), results=None):
+    """Why the sensitivities to params cannot be carried through sel's events: (its span, a
+    sentence for people), a sentence where there is no place to point at, or None.  What is
+    refused: a discrete value set from the states or the chosen parameters by a law that is
+    not piecewise constant (a sampled value, `when ... { d = x }`): its sensitivity would be
+    a state's that the augmented program does not have.  A value read only in conditions
+    passes (_weighs).  results: what the run computes from the steps (the rates, the
+    outputs); None: everything the steps define."""
+    if results is None:
+        results = [t for st in steps for t in ir.defines(st)]
+    if not hasattr(sel, "slots"):
+        return ("the model has events (a when-block, a switch, a relation of the states or "
+                "time): its sensitivities jump at an event, and bgc does not compute those "
+                "jumps")
+    _, continuous = _following(sel, params, states, defaults, steps)
     for d in sel.discretes:
-        if d.symbol in changing:
-            return refuse(d.name, "the discrete value")
+        if d.symbol in continuous and _weighs(d.symbol, sel, steps, results):
+            what = ", ".join(sorted(str(s) for s in continuous[d.symbol]))
+            return d.span, (
+                f"the sensitivities cannot pass the events of '{d.name}': it is set from "
+                f"what the states or the parameters asked for move ({what}), by a law that "
+                "is not piecewise constant, so its own sensitivity would have to be carried "
+                "as a state's; bgc carries the states' only (not supported yet)")
     return None
+
+
+def needs_jumps(sel, params, states, defaults: dict, steps=()) -> bool:
+    """Whether the sensitivities to params jump at one of sel's events: a state event whose
+    indicator reads what the states or the parameters move, a time event whose time reads
+    the parameters, a reinit.  Else every event is a time event that S passes unchanged,
+    and the augmented program's update passes S through (_passing)."""
+    if sel is None or not hasattr(sel, "slots"):
+        return False
+    reads, _ = _following(sel, params, states, defaults, steps)
+    if any(r.indicator.free_symbols & reads for r in sel.state + sel.discrete):
+        return True
+    if any(_free(at) & reads for _, at, _ in sel.time):
+        return True
+    if any(_free(getattr(s, f, 0)) & reads for s in sel.squares
+           for f in ("period", "duty", "t0")):
+        return True
+    return any(a.kind == "reinit" for w in sel.whens for a in w.actions)
 
 
 def seeds(params: tuple[ir.Param, ...], j: int, given) -> dict:
@@ -231,6 +299,94 @@ def _passing(f: Function, n: int, wide: int) -> Function:
                     body + tuple(Store(i, X[i]) for i in range(n, wide)))
 
 
+def _changed(sel, n: int, stores: dict):
+    """Per event that can set the time of an event iteration, in the order the runtimes
+    locate them (the state relations, the time relations, the square waves): (its kind,
+    its number among its kind, the condition that it changed in this pass, in IR symbols)."""
+    G = len(sel.state)
+    out = [("state", k, sp.Ne(R[k], D[k])) for k in range(G)]
+    out += [("time", k, sp.Ne(stores[n + G + k], D[G + k])) for k in range(len(sel.time))]
+    first = G + len(sel.time) + len(sel.discrete)
+    at = [first + q for q, s in enumerate(sel.squares) if s.kind == "square"]
+    out += [("square", k, sp.Ne(stores[n + i], D[i])) for k, i in enumerate(at)]
+    return out
+
+
+def _jumping(f: Function, n: int, m: int, sel, dps, plans, fresh) -> tuple[Function, int]:
+    """The event iteration's update of the augmented program through the jumps of S (the
+    module's doc, "Through events").  f is the model's update with, after its results (the
+    n states, then the discrete values), the right side f- (n), the state relations'
+    indicators and the time relations' times; the result: the new states, the new T_k
+    (n each), the discrete values, then dtau/dp_k (one per parameter), which the runtimes
+    hand back as r[G + 2 + k] in the iteration's later passes (r[G + 1] = 1 in its first)."""
+    ND = len(sel.slots())
+    G, wide = len(sel.state), n * (1 + m)
+    stores = {s.index: s.expr for s in f.body if isinstance(s, Store)}
+    body = [replace(s, final_factor=True) if isinstance(s, ir.Newton) else s
+            for s in f.body if not isinstance(s, Store)]
+    rates = [stores[n + ND + i] for i in range(n)]
+    indicators = [stores[n + ND + n + k] for k in range(G)]
+    times = [stores[n + ND + n + G + k] for k in range(len(sel.time))]
+    first = sp.Ne(R[G + 1], 0)
+
+    def run(seeds, exprs):
+        """The tangents of exprs along seeds, their statements appended to the body."""
+        nonlocal fresh
+        forward = _Forward(seeds, plans, fresh)
+        for s in [s for s in f.body if not isinstance(s, Store)]:
+            mark = len(forward.out)
+            forward.statement(s)
+            del forward.out[mark]
+        out = [ir.integral_floats(forward.of(e)) for e in exprs]
+        body.extend(forward.out)
+        fresh = forward.fresh
+        return out
+
+    def assign(expr):
+        nonlocal fresh
+        w = ir.W(fresh)
+        fresh += 1
+        body.append(ir.Assign(w, expr))
+        return w
+
+    rate = [assign(e) for e in rates]
+    along = run({**{X[i]: rate[i] for i in range(n)}, ir.T: sp.Integer(1)}, indicators)
+    along = [a if a.is_number else assign(a) for a in along]  # (a piecewise rate's zero
+    #        branches stay in it: a quotient by the Piecewise itself would divide them by 0)
+    changed = _changed(sel, n, stores)
+    base = n + ND - len(sel.squares) - len(sel.discretes)  # the square waves' stores
+    waves = [stores[base + q] for q, s in enumerate(sel.squares) if s.kind == "square"]
+    edges = [a for w in waves for a in w.args[1:]]  # period, duty, t0 of each
+    jumps, taus = [], []
+    for j, dp in enumerate(dps):
+        S = [X[(j + 1) * n + i] for i in range(n)]
+        moved = run({**dp, **{X[i]: S[i] for i in range(n)}}, indicators + times + edges)
+        pieces = []
+        for kind, k, cond in changed:
+            if kind == "state":  # (a rate that is 0 throughout: it never crosses in time)
+                d = -moved[k] / along[k] if moved[k] != 0 and along[k] != 0 else 0
+            elif kind == "time":
+                d = moved[G + k]
+            else:  # an edge at t0 + k*period (rising) or t0 + (k + duty)*period (falling)
+                dP, dduty, dt0 = moved[G + len(times) + 3 * k:][:3]
+                period, _, t0 = waves[k].args[1:]
+                fall = sp.Piecewise((period * dduty, sp.Eq(waves[k], 0)), (0, True))
+                d = dt0 + (ir.T - t0) / period * dP + fall
+            if d != 0:
+                pieces.append((d, cond))
+        located = sp.Piecewise(*pieces, (0, True)) if pieces else sp.Integer(0)
+        tau = assign(sp.Piecewise((located, first), (R[G + 2 + j], True)))
+        total = [assign(sp.Piecewise((S[i] + rate[i] * tau, first), (S[i], True)))
+                 for i in range(n)]
+        h = run({**dp, **{X[i]: total[i] for i in range(n)}, ir.T: tau},
+                [stores[i] for i in range(n)])
+        jumps += [Store(n + j * n + i, h[i]) for i in range(n)]
+        taus.append(Store(wide + ND + j, tau))
+    out = [Store(i, stores[i]) for i in range(n)] + jumps + \
+        [Store(wide + k, stores[n + k]) for k in range(ND)] + taus
+    return Function(f.name, f.args, wide + ND + m, tuple(body + out)), fresh
+
+
 @dataclass(frozen=True)
 class Augmented:
     states: tuple[str, ...]
@@ -257,11 +413,13 @@ class Augmented:
 def augment(functions: dict, params: tuple[ir.Param, ...], states: tuple[str, ...],
             outputs: tuple[str, ...], movable: tuple[bool, ...], chosen: tuple[str, ...],
             given, plans, count: int, state_outputs: bool = False,
-            pattern_of=None) -> Augmented:
+            pattern_of=None, events=None) -> Augmented:
     """The functions of the augmented program (see the module's doc), from the model's own in
     the IR's symbols, before constants are hoisted.  chosen: the parameters (names); given:
     those the run overrides (a parameter computed from a chosen one by its default follows
-    it unless given).  state_outputs: the states and S are outputs too, after the others."""
+    it unless given).  state_outputs: the states and S are outputs too, after the others.
+    events: the model's (a Selected) when S jumps at them (needs_jumps): the functions' update
+    has the results _jumping reads after its own."""
     n, m, M = len(states), len(chosen), len(outputs)
     index = {p.name: k for k, p in enumerate(params)}
     given = set(given) | set(chosen)
@@ -296,7 +454,16 @@ def augment(functions: dict, params: tuple[ir.Param, ...], states: tuple[str, ..
                                      [b * n for b in range(1 + m)], plans, count, False)
     for name in ("position_jac", "velocity_jac", "velocity_metric"):
         out[name] = _restride(functions[name], n, wide)
-    if "update" in functions:  # (time events only, check's: S passes through unchanged)
+    if "update" in functions and events is not None:  # S jumps at the events
+        try:
+            out["update"], count = _jumping(functions["update"], n, m, events, dps, plans,
+                                            count)
+        except TypeError as error:  # (directional's: a function it has no derivative of)
+            raise SensitivityError(
+                f"the sensitivities cannot jump through the model's events: a map of an "
+                f"event (a reinit, a mode change) or a relation is not differentiable "
+                f"({error})") from None
+    elif "update" in functions:  # (time events only, needs_jumps's: S passes unchanged)
         out["update"] = _passing(functions["update"], n, wide)
     names = list(states) + [column(s, p) for p in chosen for s in states]
     shown = list(outputs) + (list(states) if state_outputs else [])

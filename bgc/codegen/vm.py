@@ -42,7 +42,7 @@ from ..base.resources import resource_dir
 from ..ir import Assign, Newton, Program, Resolve, Solve, Store
 from ..ir.printers import CPrinter
 
-FORMAT = 6  # of the program file; vm.c refuses any other
+FORMAT = 7  # of the program file; vm.c refuses any other
 MAGIC = b"BGCVM\0\0\0"
 
 # The instruction set: name and the kinds of its three operands (r: a register; i: an index,
@@ -653,7 +653,8 @@ def program_bytes(program: Program) -> bytes:
         "NUM_INDICATORS": ev.indicators if ev else 0, "NUM_TIMERS": ev.timers if ev else 0,
         "NUM_DISCRETE": ev.discrete if ev else 0,
         "DISCRETE_OFFSET": unit.d_base if ev else 0, "NUM_INPUTS": len(program.inputs),
-        "HAS_JACOBIAN": int(program.has_jacobian), "NUM_TABLES": len(program.tables)}
+        "HAS_JACOBIAN": int(program.has_jacobian), "NUM_TABLES": len(program.tables),
+        "NUM_JUMPS": ev.jumps if ev else 0}
     doubles = {"SCENE_T0": sc.t0, "SCENE_T_END": sc.t_end, "SCENE_DT": sc.dt,
                "SCENE_RTOL": sc.rtol, "SCENE_ATOL": sc.atol,
                "SCENE_STEP": 0.0 if sc.step is None else sc.step,

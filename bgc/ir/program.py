@@ -557,6 +557,8 @@ class Events:
     #   change (LOG_*): (LOG_PLAIN, 0) its own values; (LOG_TABLE, k) table k's values (a
     #   table of t: the value is its piece); (LOG_INPUT, j) input j's values, one row by the
     #   input's name for its three (segment start, value, slope).  () : every one plain
+    jumps: int = 0  # the parameters of the sensitivities the update carries through its
+    #   jumps (bgc.codegen.sensitivity's _jumping): r and its results have `jumps` more
 
     @property
     def indicators(self) -> int:

@@ -231,6 +231,15 @@ static const bgc_splu bgc_jac_lu[1] = { { 0, 0, NULL, NULL, NULL, NULL, NULL, NU
 #ifndef BGC_HAS_JACOBIAN
 #define BGC_HAS_JACOBIAN 1
 #endif
+/* A program augmented with the sensitivities to BGC_NUM_JUMPS parameters whose update
+   carries their jumps at events (bgc/codegen/sensitivity.py, "Through events"): its r holds,
+   after the start's flag, 1 in the first pass of an event's iteration (else 0) and the
+   event time's sensitivities dtau/dp that the first pass gave (0 in it), and its results
+   end with them; after the iteration the driver subtracts f+ dtau/dp from each S (f+ the
+   right side there).  The states are x, then S for each parameter.  Others: 0. */
+#ifndef BGC_NUM_JUMPS
+#define BGC_NUM_JUMPS 0
+#endif
 #define BGC_MAX_EVENT_ITERATIONS 100 /* events at one instant (passes of the event iteration
                                         that change something) a run allows (Zeno) */
 #define BGC_NAMED_CHANGES 6 /* the discrete values a chattering message names, at most */

@@ -624,8 +624,9 @@ static int bgc_vm_read(const unsigned char *data, size_t size)
         return 1;
     /* every segment checked: model functions in the workspace, the others in their own frame
        (bgc_vm_alone); a Newton block's segment reads its unknowns */
-    n_in = BGC_DIM(BGC_NUM_STATES) > BGC_NUM_INDICATORS + 1 ? BGC_DIM(BGC_NUM_STATES)
-                                                             : BGC_NUM_INDICATORS + 1;
+    n_in = BGC_NUM_INDICATORS + 2 + BGC_NUM_JUMPS; /* update's r (api.h) */
+    if (BGC_DIM(BGC_NUM_STATES) > n_in)
+        n_in = BGC_DIM(BGC_NUM_STATES);
     for (i = 0; i < nb; i++)
         if (blocks[i].lu.m > n_in)
             n_in = blocks[i].lu.m;

@@ -250,6 +250,15 @@ static const bgc_splu bgc_jac_lu[1] = { { 0, 0, NULL, NULL, NULL, NULL, NULL, NU
 #ifndef BGC_HAS_JACOBIAN
 #define BGC_HAS_JACOBIAN 1
 #endif
+/* A program augmented with the sensitivities to BGC_NUM_JUMPS parameters whose update
+   carries their jumps at events (bgc/codegen/sensitivity.py, "Through events"): its r holds,
+   after the start's flag, 1 in the first pass of an event's iteration (else 0) and the
+   event time's sensitivities dtau/dp that the first pass gave (0 in it), and its results
+   end with them; after the iteration the driver subtracts f+ dtau/dp from each S (f+ the
+   right side there).  The states are x, then S for each parameter.  Others: 0. */
+#ifndef BGC_NUM_JUMPS
+#define BGC_NUM_JUMPS 0
+#endif
 #define BGC_MAX_EVENT_ITERATIONS 100 /* events at one instant (passes of the event iteration
                                         that change something) a run allows (Zeno) */
 #define BGC_NAMED_CHANGES 6 /* the discrete values a chattering message names, at most */
@@ -1512,10 +1521,11 @@ static int bgc_accept(bgc_run *r, double t)
 #define BGC_EV_GA(r) ((r)->ev)
 #define BGC_EV_GB(r) ((r)->ev + BGC_NUM_INDICATORS)
 #define BGC_EV_IN(r) ((r)->ev + 2 * BGC_NUM_INDICATORS)
-#define BGC_EV_OUT(r) (BGC_EV_IN(r) + BGC_NUM_INDICATORS + 1)
-#define BGC_EV_GM(r) (BGC_EV_OUT(r) + BGC_NUM_STATES + BGC_NUM_DISCRETE)
+#define BGC_EV_OUT(r) (BGC_EV_IN(r) + BGC_NUM_INDICATORS + 2 + BGC_NUM_JUMPS)
+#define BGC_EV_GM(r) (BGC_EV_OUT(r) + BGC_NUM_STATES + BGC_NUM_DISCRETE + BGC_NUM_JUMPS)
 #define BGC_EV_F0(r) (BGC_EV_GM(r) + BGC_NUM_INDICATORS)
-#define BGC_EV_SIZE (4 * BGC_NUM_INDICATORS + 1 + 3 * BGC_NUM_STATES + BGC_NUM_DISCRETE)
+#define BGC_EV_SIZE (4 * BGC_NUM_INDICATORS + 2 + 3 * BGC_NUM_STATES + BGC_NUM_DISCRETE \
+                     + 2 * BGC_NUM_JUMPS)
 
 /* The state inside the step just accepted, from t over h to tph (y at t, y1 at tph): the
    family's dense output (prepared once), or for a family without one (the fixed-step
@@ -1909,12 +1919,36 @@ static int bgc_bands(bgc_run *r, double t, const double *x)
     return 0;
 }
 
+/* The sensitivities' jumps after an event iteration (a program with BGC_NUM_JUMPS > 0, see
+   api.h): S -= f+ dtau/dp for each parameter, f+ the right side at (t, x) after it; dtau the
+   update's last results (out).  Nothing where the event's time moves with no parameter. */
+static int bgc_jumps_after(bgc_run *r, double t, double *x, const double *dtau)
+{
+    enum { N = BGC_NUM_STATES, J = BGC_NUM_JUMPS };
+    const int n = N / (1 + J);
+    double *f = BGC_EV_F0(r);
+    int i, j, moved = 0;
+    for (j = 0; j < J; j++)
+        moved |= dtau[j] != 0.0;
+    if (!moved)
+        return 0;
+    if (bgc_model_rhs(t, x, r->p, r->w, f))
+        return bgc_fail_block(r->msg, r->msg_size, r->w);
+    for (j = 0; j < J; j++)
+        for (i = 0; i < n; i++)
+            x[n + j * n + i] = x[n + j * n + i] - f[i] * dtau[j];
+    return 0;
+}
+
 /* The event iteration at (t, x): bgc_model_update until the state and the discrete values
    stop changing (start: the run's first, at t0, which sets every discrete value and logs
-   nothing); r->g the indicators there after it. */
+   nothing); r->g the indicators there after it.  A program with the sensitivities' jumps
+   (BGC_NUM_JUMPS > 0): its S are states that change nothing else, not logged; the first
+   pass's dtau/dp goes back into each later pass, then bgc_jumps_after. */
 static int bgc_event_iteration(bgc_run *r, double t, double *x, int start)
 {
-    enum { N = BGC_NUM_STATES, G = BGC_NUM_INDICATORS, ND = BGC_NUM_DISCRETE };
+    enum { N = BGC_NUM_STATES, G = BGC_NUM_INDICATORS, ND = BGC_NUM_DISCRETE, J = BGC_NUM_JUMPS };
+    const int n = N / (1 + J); /* the model's own states, before S */
     double *g = r->g, *in = BGC_EV_IN(r), *out = BGC_EV_OUT(r);
     char change[96];
     int it, i, k, rc, shown, crossed, changed = 1;
@@ -1932,14 +1966,28 @@ static int bgc_event_iteration(bgc_run *r, double t, double *x, int start)
             in[k] = bgc_relation(r, k, g[k]) ? 1.0 : 0.0;
         }
         in[G] = start && it == 0 ? 1.0 : 0.0;
+        if (J > 0) {
+            in[G + 1] = !start && it == 0 ? 1.0 : 0.0;
+            for (k = 0; k < J; k++)
+                in[G + 2 + k] = it == 0 ? 0.0 : out[N + ND + k];
+        }
         if (bgc_model_update(t, x, r->p, r->w, in, out))
             return bgc_fail_block(r->msg, r->msg_size, r->w);
+        for (k = 0; k < J; k++)
+            if (!isfinite(out[N + ND + k])) {
+                snprintf(r->msg, r->msg_size, "at t = %.17g: the event's time has no "
+                         "derivative (an event that grazes: its indicator's rate along the "
+                         "motion is zero), so the sensitivities cannot pass it", t);
+                return BGC_ERR_RUNTIME;
+            }
         changed = 0;
         for (i = 0; i < N; i++) {
             if (!isfinite(out[i]))
                 return bgc_fail(r->msg, r->msg_size, t, "state after the event",
                                 bgc_state_names[i]);
-            if (out[i] != x[i]) {
+            if (out[i] != x[i] && i >= n) {
+                x[i] = out[i];
+            } else if (out[i] != x[i]) {
                 changed = 1;
                 if (!start) {
                     snprintf(change, sizeof change, "%.17g -> %.17g", x[i], out[i]);
@@ -1977,6 +2025,11 @@ static int bgc_event_iteration(bgc_run *r, double t, double *x, int start)
                 return rc;
         }
         r->passes++;
+    }
+    if (J > 0 && !start) {
+        rc = bgc_jumps_after(r, t, x, out + N + ND);
+        if (rc)
+            return rc;
     }
     bgc_seen(r, g);
     return 0;

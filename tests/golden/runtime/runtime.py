@@ -146,6 +146,8 @@ _DISCRETE_LOG = []
 _TABLES = ()
 _INPUT_NAMES = []
 _LOG_PLAIN, _LOG_INPUT, _LOG_TABLE = 0, 1, 2  # _DISCRETE_LOG (bgc/ir.py LOG_*, api.h)
+_NUM_JUMPS = 0  # the sensitivities' parameters whose jumps _update carries (api.h's
+#                 BGC_NUM_JUMPS: r and its results have as many more, see _event_iteration)
 
 
 def _fill_params(p, given):
@@ -1842,10 +1844,30 @@ def _bands(run, t, x):
                 band[k] = d
 
 
+def _jumps_after(run, t, x, dtau):
+    """bgc_jumps_after: S -= f+ dtau/dp for each parameter, f+ the right side at (t, x)."""
+    if not any(d != 0.0 for d in dtau):
+        return
+    f = [0.0] * _N
+    try:
+        _rhs(t, x, run.p, run.w, f)
+    except _BlockFailure as failure:
+        raise _block_failed(failure) from None
+    n = _N // (1 + _NUM_JUMPS)
+    for j in range(_NUM_JUMPS):
+        for i in range(n):
+            x[n + j * n + i] = x[n + j * n + i] - f[i] * dtau[j]
+
+
 def _event_iteration(run, t, x, start):
     """bgc_event_iteration: update until nothing changes; x (a list) is updated; run.g the
-    indicators there after it."""
+    indicators there after it.  With the sensitivities' jumps (_NUM_JUMPS): S changes
+    nothing else and is not logged; the first pass's dtau/dp goes back into the later ones,
+    then _jumps_after."""
     G, p, off = len(_INDICATOR_STRICT), run.p, run.doff
+    J, ND = _NUM_JUMPS, len(_DISCRETE_NAMES)
+    n = _N // (1 + J)
+    dtau = [0.0] * J
     changed, it = True, 0
     while changed:
         if it > MAX_EVENT_ITERATIONS:  # the last pass still changed something
@@ -1859,16 +1881,26 @@ def _event_iteration(run, t, x, start):
                 gmax[k] = abs(g[k])
         r = [1.0 if _relation(run, k, g[k]) else 0.0 for k in range(G)]
         r.append(1.0 if start and it == 0 else 0.0)
-        out = [0.0] * (_N + len(_DISCRETE_NAMES))
+        if J:
+            r.append(1.0 if not start and it == 0 else 0.0)
+            r += dtau
+        out = [0.0] * (_N + ND + J)
         try:
             _update(t, x, p, run.w, r, out)
         except _BlockFailure as failure:
             raise _block_failed(failure) from None
+        dtau = out[_N + ND:]
+        if not all(math.isfinite(d) for d in dtau):
+            raise _Failure("at t = %.17g: the event's time has no derivative (an event that "
+                           "grazes: its indicator's rate along the motion is zero), so the "
+                           "sensitivities cannot pass it" % t, t)
         changed = False
         for i in range(_N):
             if not math.isfinite(out[i]):
                 raise _fail(t, "state after the event", STATES[i])
-            if out[i] != x[i]:
+            if out[i] != x[i] and i >= n:
+                x[i] = out[i]
+            elif out[i] != x[i]:
                 changed = True
                 if not start and run.s.on_event is not None:
                     _log(run, t, STATES[i], "%.17g -> %.17g" % (x[i], out[i]))
@@ -1892,6 +1924,8 @@ def _event_iteration(run, t, x, start):
             _bands(run, t, x)
         it += 1
         run.passes += 1
+    if J and not start:
+        _jumps_after(run, t, x, dtau)
     _seen(run, g)
     run.g = g
 
