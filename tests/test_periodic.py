@@ -243,3 +243,63 @@ def test_fit_recovers_a_pwm_motor_s_torque_constant_through_its_time_events(tmp_
     (estimate,), (lo,), (hi,) = result.estimates, result.lower, result.upper
     assert lo < kt < hi and hi - lo < 0.01
     assert result.residual_sd == pytest.approx(0.005, rel=0.3)
+
+
+BUCK = ROOT / "models" / "buck.bg"
+
+
+def _buck_period_map(R, V=12.0, L=1e-4, C=1e-5, f=1e5, duty=0.5):
+    """The buck converter's exact period map on (coil current, capacitor voltage): matrix
+    exponentials of the closed switch's and the freewheeling diode's linear circuits, the
+    diode blocking where the current reaches zero (brentq on the exact solution), as in
+    tests/test_switching.py."""
+    from scipy.optimize import brentq
+    T, load = 1 / f, -1 / (R * C)
+    A = np.array([[0, -1 / L], [1 / C, load]])
+    modes = {"on": (A, [V / L, 0]), "free": (A, [0, 0]),
+             "dcm": (np.array([[0, 0], [0, load]]), [0, 0])}
+
+    def flow(mode, x, h):
+        M = np.zeros((3, 3))
+        M[:2, :2], M[:2, 2] = modes[mode]
+        E = expm(M * h)
+        return E[:2, :2] @ x + E[:2, 2]
+
+    def period(x):
+        x, rest = flow("on", x, duty * T), (1 - duty) * T
+        if flow("free", x, rest)[0] >= 0:
+            return flow("free", x, rest)
+        zero = brentq(lambda s: flow("free", x, s)[0], 0, rest, xtol=1e-18, rtol=1e-15)
+        x = flow("free", x, zero)
+        return flow("dcm", np.array([0.0, x[1]]), rest - zero)
+    return period, expm(A * T)
+
+
+@pytest.mark.parametrize("R, dcm", [(5.0, False), (50.0, True)])
+def test_the_buck_converter_s_orbit_is_the_fixed_point_of_its_exact_period_map(R, dcm):
+    """bgc periodic of models/buck.bg as drawn (an ideal switch, a freewheeling diode), in
+    continuous and in discontinuous conduction: its orbit is the fixed point of the exact
+    period map (iterated here to 1e-15) within 1e-10; continuous, the multipliers are the
+    eigenvalues of exp(A T) (one linear circuit on both sides of the switch); discontinuous,
+    the current starts each period at zero (a multiplier 0) and the other is the map's
+    derivative along the voltage (central differences of the exact map).  The monodromy
+    matrix goes through the diode's blocking, a state event (issue 40)."""
+    period, flow = _buck_period_map(R)
+    x = np.zeros(2)
+    for _ in range(5000):
+        x, before = period(x), x
+        if np.max(np.abs(x - before)) <= 1e-15 * np.max(np.abs(x)):
+            break
+    orbit = bgc.periodic(BUCK, "run", params={"R": R})
+    assert orbit.states == ("l.p", "c.q")
+    got = np.array(orbit.x0) / np.array([1e-4, 1e-5])
+    assert np.max(np.abs(got - x)) <= 1e-10 * np.max(np.abs(x)), (got, x)
+    mu = sorted(orbit.multipliers, key=lambda m: (abs(m), m.imag))
+    if not dcm:
+        want = sorted(np.linalg.eigvals(flow), key=lambda m: (abs(m), m.imag))
+        assert np.max(np.abs(np.array(mu) - np.array(want))) < 1e-9, (mu, want)
+    else:
+        assert x[0] == 0.0 and abs(mu[0]) < 1e-9
+        h = 1e-6 * x[1]
+        slope = (period(x + [0, h])[1] - period(x - [0, h])[1]) / (2 * h)
+        assert abs(mu[1] - slope) < 1e-6, (mu, slope)

@@ -30,7 +30,7 @@ square wave that starts after t0) makes the model aperiodic: refused, with the s
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from fractions import Fraction
 
 import numpy as np
@@ -159,6 +159,14 @@ class Shooting:
     states: tuple[str, ...]
     outputs: tuple[str, ...]  # the scene's (or --outputs') output columns
     reduced: object  # the reduced system (the time sources' periods)
+    prepared: dict = field(default_factory=dict, compare=False)  # backend -> its program,
+    #                                 prepared once (preparing emits the code to find it)
+
+    def program_for(self, backend: str):
+        if backend not in self.prepared:
+            self.prepared[backend] = runner.prepare(self.compiled, backend,
+                                                    in_process=backend == "python")
+        return self.prepared[backend]
 
 
 def build(model, scene=None, outputs=None, effects=None, algebra="auto") -> Shooting:
@@ -361,12 +369,15 @@ def _one_period(prepared, program, n, T, t0, given, x0, dt=None, event_rows=Fals
 
 
 def periodic(model, scene=None, period=None, params=None, outputs=None, effects=None,
-             backend="c", algebra="auto", dt=None) -> Orbit:
+             backend="c", algebra="auto", dt=None, shooting=None) -> Orbit:
     """The periodic orbit of model's scene (see the module's doc); params: overrides
     {name: value}; period: a number, or None for the time sources' period; dt: the orbit's
-    output interval (default: the scene's, or a 200th of the period where that is longer).
+    output interval (default: the scene's, or a 200th of the period where that is longer);
+    shooting: build's result for these model, scene, outputs, effects and algebra, to shoot
+    again without the pipeline (other parameters, a benchmark's repeats).
     Raises api's errors, AnalysisArgumentError for arguments it refuses and NoOrbit."""
-    shooting = build(model, scene, outputs, effects, algebra)
+    if shooting is None:
+        shooting = build(model, scene, outputs, effects, algebra)
     program = shooting.compiled.program
     given = dict(params or {})
     names = [p.name for p in program.params]
@@ -377,7 +388,7 @@ def periodic(model, scene=None, period=None, params=None, outputs=None, effects=
     n = len(shooting.states)
     t0 = float(program.scene.t0)
     backend, _ = runner.choose_backend(backend)
-    prepared = runner.prepare(shooting.compiled, backend, in_process=backend == "python")
+    prepared = shooting.program_for(backend)
 
     def shoot(x):
         try:
