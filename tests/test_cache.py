@@ -228,7 +228,7 @@ def test_a_full_disk_while_building_is_told_in_one_line(cache, tmp_path, monkeyp
 
     def full(*args, **kwargs):
         raise OSError(errno.ENOSPC, "No space left on device")
-    monkeypatch.setattr(backends, "_run_compiler", full)
+    monkeypatch.setattr(backends, "run_compiler", full)
     done = _simulate(tmp_path, None, "-o", "out.csv")
     assert done.returncode == 1 and not (tmp_path / "out.csv").exists()
     assert done.stderr == f"error: cannot write into the compile cache {cache}: No space left " \
@@ -281,26 +281,26 @@ def test_a_run_copies_what_the_install_prebuilt_instead_of_building_it(tmp_path,
     monkeypatch.setenv("BGC_CACHE_DIR", str(seeds))  # what stands for the package's directory
     vm.interpreter()
     runtime = backends.compile_runtime(c_runtime_unit())
-    parser._lark.cache_clear()
-    parser._lark()
+    parser.lark_parser.cache_clear()
+    parser.lark_parser()
     monkeypatch.setattr(backends, "PREBUILT", seeds)
     cache = tmp_path / "cache"
     monkeypatch.setenv("BGC_CACHE_DIR", str(cache))
 
     def no_compiler(*args, **kwargs):
         raise AssertionError("the compiler was run")
-    monkeypatch.setattr(backends, "_run_compiler", no_compiler)
+    monkeypatch.setattr(backends, "run_compiler", no_compiler)
     try:
         for built in (vm.interpreter(), backends.compile_runtime(c_runtime_unit())):
             assert built.parent == cache and backends.usable(built, built.suffix != ".o")
             assert built.read_bytes() == (seeds / built.name).read_bytes()
         assert runtime.name in {p.name for p in cache.iterdir()}
-        parser._lark.cache_clear()
+        parser.lark_parser.cache_clear()
         assert parser.parse("model m\nc : C(1)\n", "m.bg").decls
         assert [p.name for p in cache.glob("lark-*.pickle")] == \
             [p.name for p in seeds.glob("lark-*.pickle")]
     finally:
-        parser._lark.cache_clear()
+        parser.lark_parser.cache_clear()
     # a seed whose checksum does not match is not used
     (seeds / "bgc-x").write_bytes(b"damaged")
     (seeds / "bgc-x.sha256").write_text("0" * 64 + "\n")

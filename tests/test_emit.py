@@ -630,7 +630,7 @@ def test_compile_cache_hit_does_not_compile(monkeypatch):
     def no_compiler(*args, **kwargs):
         raise AssertionError("compiled again")
 
-    monkeypatch.setattr(backends, "_run_compiler", no_compiler)
+    monkeypatch.setattr(backends, "run_compiler", no_compiler)
     assert compile_c(source) == first
 
 

@@ -19,7 +19,7 @@ from bgc.api import Source
 from bgc.cli import main
 from bgc.codegen.emit import emit_python
 from bgc.front.graph import var
-from bgc.front.parser import KEYWORDS, _lark
+from bgc.front.parser import KEYWORDS, lark_parser
 from bgc.middle.reduce import explicit_forms
 from bgc.base.resources import MAX_EXPANDED_TERMS, MAX_SOURCE_BYTES, expanded_terms, fits
 
@@ -190,7 +190,7 @@ def test_at_most_100_scenes():
 
 
 def test_the_keywords_are_the_grammars():
-    words = {t.pattern.value for t in _lark().terminals
+    words = {t.pattern.value for t in lark_parser().terminals
              if isinstance(t.pattern, PatternStr) and t.pattern.value.isidentifier()}
     assert words | {"holonomic", "nonholonomic", "unilateral", "init", "phi"} == KEYWORDS
 

@@ -543,7 +543,7 @@ def bode(lin: Linearization, target, fmt: str = "png") -> None:
         for i, y in enumerate(lin.outputs):
             for j, u in enumerate(lin.inputs):
                 h = H[i, j]
-                label = plot._text(f"{u} → {y}")
+                label = plot.shorten(f"{u} → {y}")
                 mag.semilogx(w, 20 * np.log10(np.abs(h)), label=label)
                 phase.semilogx(w, np.degrees(np.unwrap(np.angle(h))), label=label)
     mag.set_ylabel("magnitude (dB)")

@@ -219,7 +219,7 @@ def _build(tmp: Path, command, flags, name: str, source: str, out_args: list[str
         argv, out = [*command, *flags, "-c", name, "-o", out_args[1]], out_args[1]
     else:
         argv, out = [*command, *flags, name, "-o", *out_args, *libs], out_args[0]
-    _run_compiler(argv, tmp, cwd=tmp)
+    run_compiler(argv, tmp, cwd=tmp)
     return tmp / out
 
 
@@ -341,7 +341,7 @@ def _compiler_out_of_space(stderr: str, workdir: Path) -> str | None:
     return None
 
 
-def _run_compiler(argv: list[str], workdir: Path, cwd: Path | None = None) -> None:
+def run_compiler(argv: list[str], workdir: Path, cwd: Path | None = None) -> None:
     """Runs the compiler (in directory cwd, if given); BackendError if it fails: a full disk
     (or quota, or file size limit) where it writes, told in one line with the directory; a
     broken or missing compiler when it cannot build a trivial program either (told as such),

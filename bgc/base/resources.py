@@ -15,7 +15,7 @@ from contextlib import contextmanager
 from math import comb
 from pathlib import Path
 
-_HERE = Path(__file__).resolve().parent.parent  # the package bgc
+PACKAGE_DIR = Path(__file__).resolve().parent.parent  # the package bgc
 
 # the model text
 MAX_SOURCE_BYTES = 1 << 20  # 1 MiB: larger input is refused, not read
@@ -82,7 +82,7 @@ def quiet_collector():
 
 def resource_dir(name: str) -> Path:
     """The directory `name` ("grammar" or "templates")."""
-    for candidate in (_HERE / name, _HERE.parent / name):
+    for candidate in (PACKAGE_DIR / name, PACKAGE_DIR.parent / name):
         if candidate.is_dir():
             return candidate
     raise FileNotFoundError(f"bgc is installed without its {name}/ directory")

@@ -459,7 +459,7 @@ def build_binary(source: str, ident: str, suffix: str, cc: str | None = None,
         work = Path(tmp)
         (work / f"{ident}.c").write_text(source, encoding="utf-8")
         out = f"{ident}{suffix}"
-        backends._run_compiler([*command, *flags, *SHARED_FLAGS, f"{ident}.c", "-o", out,
+        backends.run_compiler([*command, *flags, *SHARED_FLAGS, f"{ident}.c", "-o", out,
                                 *backends.C_LIBS], work, cwd=work)
         return (work / out).read_bytes()
 

@@ -53,7 +53,7 @@ from ..symbolic.differentiate import directional
 from ..base.diagnostics import fail
 from ..front.graph import var
 from ..ir import D, P, R, V, X, Function, JacobianPattern, Resolve, Store
-from ..ir.tangent import _Forward
+from ..ir.tangent import Forward
 
 
 class SensitivityError(ValueError):
@@ -217,7 +217,7 @@ def seeds(params: tuple[ir.Param, ...], j: int, given) -> dict:
     return dp
 
 
-class _Second(_Forward):
+class _Second(Forward):
     """Forward differentiation that also goes through a Resolve of a linear block (the
     tangent of a tangent): for dz = A^-1 r, d(dz) = A^-1 (dr - dA dz), A's entries those of
     the block's Solve met before it in the function."""
@@ -267,7 +267,7 @@ def _forward(f: Function, name: str, size: int, seed_sets, offsets, plans, fresh
            for s in f.body if primal_stores or not isinstance(s, Store)]
     solves = {s.block: s for s in f.body if isinstance(s, ir.Solve)}
     for tan, offset in zip(seed_sets, offsets):
-        forward = _Second(tan, plans, fresh, solves) if second else _Forward(tan, plans, fresh)
+        forward = _Second(tan, plans, fresh, solves) if second else Forward(tan, plans, fresh)
         for s in f.body:
             if isinstance(s, Store):
                 d = forward.of(s.expr)
@@ -332,7 +332,7 @@ def _jumping(f: Function, n: int, m: int, sel, dps, plans, fresh) -> tuple[Funct
     def run(seeds, exprs):
         """The tangents of exprs along seeds, their statements appended to the body."""
         nonlocal fresh
-        forward = _Forward(seeds, plans, fresh)
+        forward = Forward(seeds, plans, fresh)
         for s in [s for s in f.body if not isinstance(s, Store)]:
             mark = len(forward.out)
             forward.statement(s)

@@ -27,7 +27,7 @@ def main(argv: list[str]) -> int:
     from ..base import backends
     from ..codegen import emit, vm
     from ..front import parser
-    parser._lark()
+    parser.lark_parser()
     if not backends.have_c_compiler():
         print("bgc.execute.prebuild: no C compiler: the interpreter and the runtime are built on "
               "first use", file=sys.stderr)

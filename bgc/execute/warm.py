@@ -93,8 +93,8 @@ class Record:
 
 def _installation() -> list:
     """bgc's files (package, runtime, grammar, templates): name, size, modification time."""
-    from ..base.resources import _HERE, resource_dir
-    dirs = [_HERE, *sorted(p.parent for p in _HERE.glob("*/__init__.py"))]
+    from ..base.resources import PACKAGE_DIR, resource_dir
+    dirs = [PACKAGE_DIR, *sorted(p.parent for p in PACKAGE_DIR.glob("*/__init__.py"))]
     for name in ("grammar", "templates"):
         try:
             dirs.append(resource_dir(name))

@@ -57,7 +57,7 @@ _LARK_OPTIONS = dict(parser="lalr", lexer="contextual", propagate_positions=True
 
 
 @lru_cache(maxsize=1)
-def _lark() -> Lark:
+def lark_parser() -> Lark:
     """The parser.  Building its LALR tables takes a tenth of a second or more, every cold
     `bgc simulate`; they are kept in the compile cache (bgc.base.backends.own_cache_dir) under the
     SHA-256 of the grammar, the options and the versions of lark and Python, and read back
@@ -575,7 +575,7 @@ def parse(source: str, path: str = "<model>") -> ast.Model:
         fail(None, f"model file too large (more than {MAX_SOURCE_BYTES} bytes)")
     text = source if source.endswith("\n") else source + "\n"
     try:
-        tree = _lark().parse(text, start="start")
+        tree = lark_parser().parse(text, start="start")
     except (UnexpectedEOF, UnexpectedToken, UnexpectedCharacters) as exc:
         _syntax_error(exc, source)
     except UnexpectedInput as exc:  # any other lark input error
@@ -647,7 +647,7 @@ def parse_option(kind: str, text: str, name: str):
     start = {"outputs": "option_outputs", "effects": "option_effects"}[kind]
     try:
         try:
-            tree = _lark().parse(text, start=start)
+            tree = lark_parser().parse(text, start=start)
         except UnexpectedInput as exc:
             _syntax_error(exc, text)
     except ModelError as exc:

@@ -25,13 +25,13 @@ def tangent(f: ir.Function, name: str, seeds: dict, plans,
     final factors).  New program variables are w<fresh>, ...; a trivial tangent (a number, a
     symbol, a negated one) is substituted instead of assigned.  Returns the function
     (unpruned) and the next free variable number."""
-    forward = _Forward(seeds, plans, fresh)
+    forward = Forward(seeds, plans, fresh)
     for s in f.body:
         forward.statement(s)
     return ir.Function(name, f.args + ("v",), f.size, tuple(forward.out)), forward.fresh
 
 
-class _Forward:
+class Forward:
     """The statements of a tangent function as they are derived (out), and each variable's
     tangent so far."""
 
@@ -87,7 +87,7 @@ class _Forward:
 
     def newton(self, s: ir.Newton):
         """The body's tangents with z held, dz = -J^-1 dr, then the body's full tangents."""
-        held = _Forward(self.tan, self.plans, self.fresh)
+        held = Forward(self.tan, self.plans, self.fresh)
         held.out = self.out
         for a in s.body:
             held.bind(a.target, held.of(a.expr))
@@ -121,7 +121,7 @@ def jacobian(f: ir.Function, name: str, n: int, plans, fresh: int) -> tuple[ir.F
     for j in range(n):
         if ir.X[j] not in reads:
             continue
-        forward = _Forward({ir.X[j]: sp.Integer(1)}, plans, fresh)
+        forward = Forward({ir.X[j]: sp.Integer(1)}, plans, fresh)
         for s in f.body:
             if isinstance(s, ir.Store):
                 d = forward.of(s.expr)

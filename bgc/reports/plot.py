@@ -85,7 +85,7 @@ def save(fig, target, fmt: str = "png") -> None:
     pyplot().close(fig)
 
 
-def _text(s: str, limit: int = 60) -> str:
+def shorten(s: str, limit: int = 60) -> str:
     """Model text for a matplotlib label: no mathtext ($ escaped), one line, bounded."""
     s = " ".join(s.split())
     if len(s) > limit:
@@ -231,9 +231,9 @@ def describe(compiled) -> dict:
 def title_lines(compiled) -> list[str]:
     g, s = compiled.graph, compiled.settings
     scene = next((sc for sc in g.scenes if sc.name == s.scene), None)
-    lines = [g.name + (f": {_text(g.doc, 80)}" if g.doc else "")]
+    lines = [g.name + (f": {shorten(g.doc, 80)}" if g.doc else "")]
     if scene is not None:
-        lines.append(f"scene {scene.name}" + (f": {_text(scene.doc, 80)}" if scene.doc else ""))
+        lines.append(f"scene {scene.name}" + (f": {shorten(scene.doc, 80)}" if scene.doc else ""))
     else:
         lines.append("default scene (every effect)")
     if s.given:
@@ -267,15 +267,15 @@ def figure(table: Table, cols: list[Column], heading: list[str], stopped: bool =
         title, quantity = KINDS[kind]
         unit = group[0].unit  # (one per panel)
         if kind == "unit":
-            title = f"in {_text(unit, 20)}"
+            title = f"in {shorten(unit, 20)}"
         for c in group:
-            label = _text(c.name) + (f" ({_text(c.doc, 40)})" if c.doc else "")
+            label = shorten(c.name) + (f" ({shorten(c.doc, 40)})" if c.doc else "")
             ax.plot(table.t, table.values[index[c.name]], lw=1.2, label=label)
         names = ", ".join(c.name for c in group)
-        ylabel = _text(names) if len(names) <= 24 else quantity
-        ax.set_ylabel(ylabel + (f" [{_text(unit, 20)}]" if unit else ""))
+        ylabel = shorten(names) if len(names) <= 24 else quantity
+        ax.set_ylabel(ylabel + (f" [{shorten(unit, 20)}]" if unit else ""))
         if len(group) == 1 and group[0].doc:
-            title += f": {_text(group[0].doc, 60)}"
+            title += f": {shorten(group[0].doc, 60)}"
         elif len(group) > MAX_LEGEND:
             title += f" ({len(group)} columns)"
         ax.set_title(title, fontsize=9, loc="right")
