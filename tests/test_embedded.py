@@ -395,7 +395,7 @@ def test_long_functions_in_parts(tmp_path):
     assert _rows(tmp_path, 300) == _simulated("double_pendulum", 300)
 
 
-@pytest.mark.parametrize("model", ["pendulum", "double_pendulum", "stick_slip"])
+@pytest.mark.parametrize("model", ["pendulum", "double_pendulum", "stick_slip", "pwm_motor_stop"])
 def test_report_is_what_the_compiler_lays_out(built, model):
     """--report's struct sizes are sizeof of the structs (x86-64, natural alignment)."""
     from bgc.codegen import embedded
