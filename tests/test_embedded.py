@@ -221,6 +221,15 @@ def test_clang_warning_free(built):
                        check=True)
 
 
+@pytest.mark.skipif(shutil.which("arm-none-eabi-gcc") is None,
+                    reason="no arm-none-eabi-gcc (apt-get install gcc-arm-none-eabi)")
+def test_arm_none_eabi_warning_free(built):
+    cpu = ["-mcpu=cortex-m4", "-mthumb", "-mfloat-abi=hard", "-mfpu=fpv4-sp-d16"]
+    for (model, real), directory in built.items():
+        subprocess.run(["arm-none-eabi-gcc", *cpu, *FLAGS, "-c", f"{model}.c", "-o", "arm.o"],
+                       cwd=directory, check=True)
+
+
 @pytest.mark.skipif(shutil.which("arm-none-eabi-gcc") is None
                     or shutil.which("qemu-system-arm") is None,
                     reason="no arm-none-eabi-gcc or qemu-system-arm (apt-get install "
