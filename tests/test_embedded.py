@@ -308,6 +308,24 @@ def test_time_sources_and_a_discrete_counter(tmp_path):
     assert seg[0, 0] > 0.75 and np.max(np.abs(seg[:, 1] - want)) < 1e-9
 
 
+@pytest.mark.parametrize("model", ["stick_slip", "ball_when"])
+def test_events_with_euler_are_the_bytes_of_simulate(model, tmp_path):
+    """The other fixed-step method: one stage, the same location on its step's interpolant."""
+    if shutil.which("gcc") is None:
+        pytest.skip("no gcc on this machine")
+    path, scene = MODELS[model]
+    files = api.compile(str(ROOT / path), "embedded", scene=scene,
+                        embedded={"real": "double", "solver": "euler", "step": H})
+    for name, text in files.items():
+        (tmp_path / name).write_text(text)
+    subprocess.run(["gcc", *FLAGS, "-I.", f"-DBGC_MODEL={model}", f'-DBGC_HEADER="{model}.h"',
+                    str(HARNESS), f"{model}.c", "-lm", "-o", "run"], cwd=tmp_path, check=True)
+    t, Y, names = api.simulate(str(ROOT / path), scene, backend="vm", solver="euler", step=H,
+                               dt=H, t_end=2000 * H)
+    assert _rows(tmp_path, 2000) == "\n".join([",".join(["t", *names])] + [
+        ",".join("%.17g" % v for v in (tk, *row)) for tk, row in zip(t, Y)]) + "\n"
+
+
 def test_ball_bounces_as_the_parabolas(built):
     """Free fall from 1 m, each crossing of the floor reversing the speed scaled by e: the
     flights' closed forms, x = v0 (t - tk) - g (t - tk)^2 / 2 after the k-th bounce at tk."""
