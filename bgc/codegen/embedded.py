@@ -8,7 +8,10 @@ step is the fixed-step driver's (bgc/runtime/erk.c, bgc_fixed_step, on the grid 
 drive.c with one step per output interval), so that in double the states and outputs after k
 steps are the bytes `bgc simulate --solver S --step H --dt H` writes at t0 + k H.  With
 --real float every value, coefficient and function is the float one (sinf, 2.0f, ...): the
-same operations in the same order, rounded to float.
+same operations in the same order, rounded to float.  A model with events adds its event
+functions and the fixed-step driver's event handling (drive.c's bgc_find_event, bgc_hidden,
+the Hermite interpolant, the event iteration), the rest of an output interval stepped from an
+event inside the same call, so that its rows are again simulate's bytes.
 
 What the target cannot run yet is refused before anything is written, with the place in the
 model and what to change (check_supported)."""
@@ -21,8 +24,7 @@ import sympy as sp
 from .. import ir
 from ..base import solvers
 from ..base.diagnostics import ModelError, error
-from ..ir import FUNCTIONS, Program
-from ..ir.program import D
+from ..ir import FUNCTIONS, D, Program
 from ..ir.printers import CPrinter, float_literal
 from . import emit
 
@@ -145,7 +147,8 @@ def _refuse(span, message: str):
 def check_supported(program: Program, graph, scene, solver: str, real: str = "double",
                     step: float | None = None) -> None:
     """ModelError, located, for what the embedded target does not run (yet): an adaptive
-    solver, Newton blocks in float, inputs, lookup tables."""
+    solver, events or Newton blocks in float, a scene's max_step below the step, inputs,
+    lookup tables."""
     if solver not in SOLVERS:
         span = scene.solver[2] if scene is not None and scene.solver else None
         family = "adaptive" if solvers.get(solver).adaptive else "not a fixed-step method"
@@ -225,7 +228,6 @@ def emit_embedded(program: Program, real: str = "double", solver: str = "rk4",
                         ("body", "residuals", "tangents", "jacobian") for line in e[key]])
     if blocks:
         code += "\nbgc_max("
-
     tab = solvers.get(solver).tableau
     lit = (lambda v: float_literal(v) + "f") if real == "float" else float_literal
     ident = emit.identifier(program.name)
