@@ -323,7 +323,7 @@ def compile_embedded(compiled: Compiled, real: str = "double", solver: str | Non
         _choice("solver", solver, solvers.NAMES)
     try:
         embedded.check_supported(compiled.program, compiled.graph,
-                                 None if solver else scene, chosen, real)
+                                 None if solver else scene, chosen, real, step)
     except ModelError as exc:
         raise BgcModelError(exc, compiled.source) from None
     return embedded.emit_embedded(compiled.program, real, chosen, step)

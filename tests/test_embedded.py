@@ -24,12 +24,21 @@ M4 = ROOT / "tests" / "embedded_m4"
 FLAGS = ["-std=c99", "-Wall", "-Wextra", "-Wconversion", "-Werror", "-pedantic", "-O2"]
 H = 0.001
 STEPS = 1000
-MODELS = {"pendulum": ("pendulum.bg", "swing"), "dc_motor": ("dc_motor.bg", "run"),
-          "double_pendulum": ("double_pendulum.bg", None),  # a linear block (LU) per step
-          "diode": ("diode.bg", None)}  # a Newton block
+MODELS = {"pendulum": ("models/pendulum.bg", "swing"), "dc_motor": ("models/dc_motor.bg", "run"),
+          "double_pendulum": ("models/double_pendulum.bg", None),  # a linear block (LU) per step
+          "diode": ("models/diode.bg", None),  # a Newton block
+          # events: a when-block's reinit, a switched element (dry friction), PWM edges and an
+          # end stop's impacts; (their step, and the steps a run takes)
+          "ball_when": ("tests/models/ball_when.bg", "drop"),
+          "stick_slip": ("tests/models/stick_slip.bg", "run"),
+          "pwm_motor_stop": ("tests/models/pwm_motor_stop.bg", "run"),
+          # impacts of a two-link arm on a stop, its multipliers an LU block per step
+          "two_link_arm_stop": ("tests/models/two_link_arm_stop.bg", "strike")}
+STEP = {"pwm_motor_stop": (1e-4, 10000), "stick_slip": (H, 10000), "ball_when": (H, 3000)}
 BUILDS = [("pendulum", "double"), ("pendulum", "float"), ("dc_motor", "double"),
           ("dc_motor", "float"), ("double_pendulum", "double"), ("double_pendulum", "float"),
-          ("diode", "double")]
+          ("diode", "double"), ("ball_when", "double"), ("stick_slip", "double"),
+          ("pwm_motor_stop", "double"), ("two_link_arm_stop", "double")]
 FORBIDDEN = ("malloc", "calloc", "realloc", "free", "printf", "fprintf", "sprintf",
              "snprintf", "puts", "fputs", "fwrite", "putchar", "fopen", "exit", "abort")
 
@@ -38,8 +47,8 @@ needs_gcc = pytest.mark.skipif(shutil.which("gcc") is None, reason="no gcc on th
 
 def _emit(model, real, tmp):
     path, scene = MODELS[model]
-    files = api.compile(str(ROOT / "models" / path), "embedded", scene=scene,
-                        embedded={"real": real, "solver": "rk4", "step": H})
+    files = api.compile(str(ROOT / path), "embedded", scene=scene,
+                        embedded={"real": real, "solver": "rk4", "step": STEP.get(model, (H,))[0]})
     for name, text in files.items():
         (tmp / name).write_text(text)
     return files
@@ -70,13 +79,14 @@ def _rows(directory, steps=STEPS):
     return text
 
 
-def _simulated(model, steps=STEPS):
+def _simulated(model, steps=STEPS, backend="vm"):
     """`bgc simulate --solver rk4 --step H --dt H` as CSV text (the numbers as the CSV
     writes them, %.17g)."""
     path, scene = MODELS[model]
-    t, Y, names = api.simulate(str(ROOT / "models" / path), scene, backend="vm", solver="rk4",
-                               step=H, dt=H, t_end=steps * H)
-    assert steps * H == t[-1]  # the last row is on the grid too
+    h = STEP.get(model, (H,))[0]
+    t, Y, names = api.simulate(str(ROOT / path), scene, backend=backend, solver="rk4",
+                               step=h, dt=h, t_end=steps * h)
+    assert steps * h == t[-1]  # the last row is on the grid too
     lines = [",".join(["t", *names])]
     lines += [",".join("%.17g" % v for v in (tk, *row)) for tk, row in zip(t, Y)]
     return "\n".join(lines) + "\n"
@@ -90,8 +100,18 @@ def _table(text):
 @pytest.mark.parametrize("model", list(MODELS))
 def test_double_is_the_bytes_of_simulate(built, model):
     """Also through algebraic blocks: the double pendulum's linear one, the diode's Newton
-    iterations (each starting from the last step's solution, as in simulate)."""
-    assert _rows(built[model, "double"]) == _simulated(model)
+    iterations (each starting from the last step's solution, as in simulate); and through
+    events: crossings located inside the step and the step split there, time events stepped
+    onto, reinits, a switched element's modes, impacts."""
+    steps = STEP.get(model, (H, STEPS))[1]
+    assert _rows(built[model, "double"], steps) == _simulated(model, steps)
+
+
+@pytest.mark.skipif(shutil.which("gcc") is None, reason="no gcc on this machine")
+def test_events_are_the_bytes_of_the_c_backend(built):
+    """simulate built in C (its runtime's bgc_find_event) as well as in the interpreter."""
+    assert _rows(built["pwm_motor_stop", "double"], 3000) == _simulated(
+        "pwm_motor_stop", 3000, backend="c")
 
 
 @pytest.mark.parametrize("model", ["pendulum", "dc_motor", "double_pendulum"])
@@ -142,8 +162,12 @@ def test_no_heap_no_stdio_no_mutable_global(built):
                                    check=True).stdout.split()
         names = {u for u in undefined if u != "U"}
         assert not names & set(FORBIDDEN), (model, real, names)
-        libm = {"sin", "cos", "sinf", "cosf", "sqrt", "sqrtf", "exp", "expf", "log", "logf"}
-        assert names <= libm, (model, real, names - libm)
+        libm = {"sin", "cos", "sinf", "cosf", "sqrt", "sqrtf", "exp", "expf", "log", "logf",
+                "floor", "floorf",
+                "sincos", "sincosf"}  # (gcc's fusion of a sin and a cos of one argument)
+        # what gcc may call for a loop that zeroes or copies an array, even freestanding
+        compiler = {"memset", "memcpy", "memmove"}
+        assert names <= libm | compiler, (model, real, names - libm - compiler)
         sizes = subprocess.run(["size", "-A", obj], capture_output=True, text=True,
                                check=True).stdout
         for line in sizes.splitlines():
@@ -197,28 +221,168 @@ def test_clang_warning_free(built):
                        check=True)
 
 
+@pytest.mark.skipif(shutil.which("arm-none-eabi-gcc") is None,
+                    reason="no arm-none-eabi-gcc (apt-get install gcc-arm-none-eabi)")
+def test_arm_none_eabi_warning_free(built):
+    cpu = ["-mcpu=cortex-m4", "-mthumb", "-mfloat-abi=hard", "-mfpu=fpv4-sp-d16"]
+    for (model, real), directory in built.items():
+        subprocess.run(["arm-none-eabi-gcc", *cpu, *FLAGS, "-c", f"{model}.c", "-o", "arm.o"],
+                       cwd=directory, check=True)
+
+
 @pytest.mark.skipif(shutil.which("arm-none-eabi-gcc") is None
                     or shutil.which("qemu-system-arm") is None,
                     reason="no arm-none-eabi-gcc or qemu-system-arm (apt-get install "
                            "gcc-arm-none-eabi libnewlib-arm-none-eabi qemu-system-arm)")
-@pytest.mark.parametrize("real", ["double", "float"])
-def test_cortex_m4_under_qemu_is_the_host(built, real):
-    """The pendulum cross-compiled for a Cortex-M4F (MPS2-AN386), run under QEMU with its
-    output by semihosting: the host's rows, byte for byte."""
-    directory = built["pendulum", real]
+@pytest.mark.parametrize("model, real, steps", [
+    ("pendulum", "double", 200), ("pendulum", "float", 200),
+    ("stick_slip", "double", 1000),  # through its first stick and breakaway
+    ("pwm_motor_stop", "double", 4000)])  # 400 PWM periods, its impacts on the stop
+def test_cortex_m4_under_qemu_is_the_host(built, model, real, steps):
+    """Cross-compiled for a Cortex-M4F (MPS2-AN386), run under QEMU with its output by
+    semihosting: the host's rows, byte for byte."""
+    directory = built[model, real]
     cpu = ["-mcpu=cortex-m4", "-mthumb", "-mfloat-abi=hard", "-mfpu=fpv4-sp-d16"]
-    subprocess.run(["arm-none-eabi-gcc", *cpu, *FLAGS, "-c", "pendulum.c", "-o", "m4.o"],
+    subprocess.run(["arm-none-eabi-gcc", *cpu, *FLAGS, "-c", f"{model}.c", "-o", "m4.o"],
                    cwd=directory, check=True)
-    subprocess.run(["arm-none-eabi-gcc", *cpu, "-O2", "-I.", "-DBGC_MODEL=pendulum",
-                    '-DBGC_HEADER="pendulum.h"', "-DBGC_STEPS=200", "--specs=rdimon.specs",
+    subprocess.run(["arm-none-eabi-gcc", *cpu, "-O2", "-I.", f"-DBGC_MODEL={model}",
+                    f'-DBGC_HEADER="{model}.h"', f"-DBGC_STEPS={steps}", "--specs=rdimon.specs",
                     "-nostartfiles", "-T", str(M4 / "mps2_an386.ld"), str(M4 / "startup.c"),
                     str(HARNESS), "m4.o", "-lm", "-o", "m4.elf"], cwd=directory, check=True)
     run = subprocess.run(["qemu-system-arm", "-M", "mps2-an386", "-nographic", "-monitor",
                           "none", "-serial", "none", "-semihosting-config",
                           "enable=on,target=native", "-kernel", "m4.elf"], cwd=directory,
-                         capture_output=True, text=True, timeout=120)
+                         capture_output=True, text=True, timeout=300)
     assert run.returncode == 0, run.stderr
-    assert run.stdout == _rows(directory, 200)
+    assert run.stdout == _rows(directory, steps)
+
+
+TIME_EVENTS = """model rc_events "an RC circuit driven by a step and a pulse, a counter of resets"
+parameter R = 1.0
+parameter C = 0.5
+u : Se(2*step(0.3) + pulse(0.55, 0.2))
+r : R(R)
+c : C(C)
+u -> j
+j : 1
+j -> r
+j -> c
+discrete n = 0
+when c.q > 0.4 {
+  n = n + 1
+  reinit c.q = 0.1
+}
+signal count = n
+scene run { time 0 .. 2 every 0.01; outputs c.q, count
+  solver rk4(step = 0.001) }
+"""
+
+
+def test_time_sources_and_a_discrete_counter(tmp_path):
+    """step and pulse stepped onto, a when-block's reinit and discrete variable: the bytes of
+    simulate; between the events the charge is the RC's exponential toward C u."""
+    if shutil.which("gcc") is None:
+        pytest.skip("no gcc on this machine")
+    model = tmp_path / "rc_events.bg"
+    model.write_text(TIME_EVENTS)
+    files = api.compile(str(model), "embedded", scene="run",
+                        embedded={"real": "double", "solver": "rk4", "step": H})
+    for name, text in files.items():
+        (tmp_path / name).write_text(text)
+    subprocess.run(["gcc", *FLAGS, "-I.", "-DBGC_MODEL=rc_events",
+                    '-DBGC_HEADER="rc_events.h"', str(HARNESS), "rc_events.c", "-lm", "-o",
+                    "run"], cwd=tmp_path, check=True)
+    rows = _rows(tmp_path, 2000)
+    t, Y, names = api.simulate(str(model), "run", backend="vm", solver="rk4", step=H, dt=H,
+                               t_end=2.0)
+    assert rows == "\n".join([",".join(["t", *names])] + [
+        ",".join("%.17g" % v for v in (tk, *row)) for tk, row in zip(t, Y)]) + "\n"
+    _, table = _table(rows)
+    q, count = table[:, 1], table[:, 2]
+    assert np.all(q[table[:, 0] < 0.3] == 0.0)  # nothing before the step
+    assert count[-1] >= 3 and np.all(np.diff(count) >= 0) and np.all(q <= 0.4 + 1e-12)
+    # from the last reset on: q = C u + (q0 - C u) exp(-(t - t0) / (R C)), u = 2 (pulse over)
+    last = np.flatnonzero(np.diff(count))[-1] + 1
+    seg = table[last:]
+    want = 1.0 + (seg[0, 1] - 1.0) * np.exp(-(seg[:, 0] - seg[0, 0]) / 0.5)
+    assert seg[0, 0] > 0.75 and np.max(np.abs(seg[:, 1] - want)) < 1e-9
+
+
+@pytest.mark.parametrize("model", ["stick_slip", "ball_when"])
+def test_events_with_euler_are_the_bytes_of_simulate(model, tmp_path):
+    """The other fixed-step method: one stage, the same location on its step's interpolant."""
+    if shutil.which("gcc") is None:
+        pytest.skip("no gcc on this machine")
+    path, scene = MODELS[model]
+    files = api.compile(str(ROOT / path), "embedded", scene=scene,
+                        embedded={"real": "double", "solver": "euler", "step": H})
+    for name, text in files.items():
+        (tmp_path / name).write_text(text)
+    subprocess.run(["gcc", *FLAGS, "-I.", f"-DBGC_MODEL={model}", f'-DBGC_HEADER="{model}.h"',
+                    str(HARNESS), f"{model}.c", "-lm", "-o", "run"], cwd=tmp_path, check=True)
+    t, Y, names = api.simulate(str(ROOT / path), scene, backend="vm", solver="euler", step=H,
+                               dt=H, t_end=2000 * H)
+    assert _rows(tmp_path, 2000) == "\n".join([",".join(["t", *names])] + [
+        ",".join("%.17g" % v for v in (tk, *row)) for tk, row in zip(t, Y)]) + "\n"
+
+
+def test_ball_bounces_as_the_parabolas(built):
+    """Free fall from 1 m, each crossing of the floor reversing the speed scaled by e: the
+    flights' closed forms, x = v0 (t - tk) - g (t - tk)^2 / 2 after the k-th bounce at tk."""
+    names, rows = _table(_rows(built["ball_when", "double"], 3000))
+    g, e = 9.81, 0.8
+    t = rows[:, 0]
+    want = np.empty_like(t)
+    tk, v0, x0 = 0.0, 0.0, 1.0
+    bounces = 0
+    while tk < t[-1]:
+        flight = (v0 + math.sqrt(v0 * v0 + 2 * g * x0)) / g  # to the floor
+        mask = (t >= tk) & (t < tk + flight)
+        want[mask] = x0 + v0 * (t[mask] - tk) - 0.5 * g * (t[mask] - tk) ** 2
+        tk, v0, x0 = tk + flight, e * (g * flight - v0), 0.0
+        bounces += 1
+    assert bounces >= 4
+    assert np.max(np.abs(rows[:, 1] - want)) < 1e-9
+
+
+def test_stick_slip_as_the_scipy_reference(built):
+    """The mass sticks to the belt and breaks away as SciPy's piecewise reference has it
+    (tests/test_contact.py: sliding M v' = -K x -+ Fc, stuck x' = vb while K |x| <= Fs)."""
+    from test_contact import stick_slip_reference
+    names, rows = _table(_rows(built["stick_slip", "double"], 10000))
+    ref, sticks = stick_slip_reference(rows[::10, 0])
+    assert len(sticks) >= 4
+    assert np.max(np.abs(rows[::10, 1] - ref)) <= 1e-7 * np.max(np.abs(ref))
+    stuck = np.abs(rows[:, 2] - 0.5) < 1e-9  # m.p / M on the belt
+    assert stuck.sum() > 1000 and np.all(np.abs(rows[stuck, 3]) <= 3.0 + 1e-9)
+
+
+def test_pwm_motor_rests_on_its_stop_as_a_locked_rotor(built):
+    """Driven into the stop, the rotor strikes it and comes to rest there (angle qmax, speed
+    0); from then on the armature is the locked rotor's RL circuit under the PWM voltage,
+    La i' = V square(Tp, d) - Ra i (exponentials between the edges, its closed form from the
+    current at t = 0.5), and the stop holds the torque kt i."""
+    names, rows = _table(_rows(built["pwm_motor_stop", "double"], 10000))
+    col = {n: j for j, n in enumerate(names)}
+    V, Tp, d, Ra, La, kt, qmax = 12.0, 0.001, 0.7, 2.0, 0.05, 0.8, 0.5
+    assert np.max(rows[:, col["angle"]]) <= qmax + 1e-9
+    late = rows[rows[:, 0] >= 0.5]
+    assert np.max(np.abs(late[:, col["angle"]] - qmax)) < 1e-9
+    assert np.max(np.abs(late[:, col["rotor.f"]])) < 1e-9
+    i, t = late[0, col["ind.f"]], late[0, 0]
+    want = [i]
+    for t_next in late[1:, 0]:
+        while t < t_next:  # piece by piece between the PWM edges
+            k = math.floor(t / Tp + 1e-9)
+            up, down = k * Tp, (k + d) * Tp
+            on = up - 1e-12 <= t < down - 1e-12
+            end = min(t_next, down if on else (k + 1) * Tp)
+            target = V / Ra if on else 0.0
+            i = target + (i - target) * math.exp(-Ra / La * (end - t))
+            t = end
+        want.append(i)
+    assert np.max(np.abs(late[:, col["ind.f"]] - want)) < 1e-8
+    assert np.max(np.abs(late[:, col["stop.lambda"]] + kt * late[:, col["ind.f"]])) < 1e-8
 
 
 # ---------------------------------------------------------------- the command and refusals
@@ -258,13 +422,13 @@ def test_long_functions_in_parts(tmp_path):
     assert _rows(tmp_path, 300) == _simulated("double_pendulum", 300)
 
 
-@pytest.mark.parametrize("model", ["pendulum", "double_pendulum"])
+@pytest.mark.parametrize("model", ["pendulum", "double_pendulum", "stick_slip", "pwm_motor_stop"])
 def test_report_is_what_the_compiler_lays_out(built, model):
     """--report's struct sizes are sizeof of the structs (x86-64, natural alignment)."""
     from bgc.codegen import embedded
     directory = built[model, "double"]
     path, scene = MODELS[model]
-    program = api.build(str(ROOT / "models" / path), scene).program
+    program = api.build(str(ROOT / path), scene).program
     want = embedded.memory(program, "double", "rk4")
     (directory / "sizes.c").write_text(f"""#include <stdio.h>
 #include "{model}.h"
@@ -293,26 +457,31 @@ def test_adaptive_solver_refused_at_the_scene(tmp_path, capsys):
     assert code == 2 and "not a fixed-step method" in out.err
 
 
-def test_when_block_refused_with_the_caret_on_it(tmp_path, capsys):
-    model = tmp_path / "ball.bg"
-    model.write_text("""model ball "a bouncing ball"
-parameter m = 1.0
-parameter g = 9.81
-mass : I(m)
-grav : Se(-m*g)
+def test_events_in_float_refused_at_the_element(tmp_path, capsys):
+    code, out = _compile(capsys, str(ROOT / "tests" / "models" / "stick_slip.bg"), "--target",
+                         "embedded", "--solver", "rk4", "--real", "float", "-o", str(tmp_path))
+    assert code == 1, out.err
+    assert "stick_slip.bg:14:1: error: embedded target: events (" in out.err
+    assert "use --real double" in out.err and "^~~" in out.err
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_a_max_step_below_the_step_refused(tmp_path, capsys):
+    model = tmp_path / "rc.bg"
+    model.write_text("""model rc
+c : C(1) init q = 1
+r : R(1)
+c -> j
 j : 1
-grav -> j
-j -> mass
-signal h = integral(mass.f, init = 1.0)
-when h < 0 {
-  reinit mass.p = -0.8*mass.p
-}
+j -> r
+scene run { time 0 .. 1 every 0.1; outputs c.q
+            solver rk4(step = 0.01, hmax = 0.001) }
 """)
-    code, out = _compile(capsys, str(model), "--target", "embedded", "--solver", "rk4",
+    code, out = _compile(capsys, str(model), "-s", "run", "--target", "embedded",
                          "-o", str(tmp_path))
     assert code == 1, out.err
-    assert "ball.bg:10:1: error: embedded target: when-blocks are not supported yet" in out.err
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["ball.bg"]
+    assert "rc.bg:8:13: error: embedded target: the scene's max_step 0.001 is below the step " \
+           "0.01" in out.err and "--step 0.001 or less" in out.err
 
 
 def test_newton_in_float_refused(tmp_path, capsys):

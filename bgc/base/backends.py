@@ -638,7 +638,8 @@ def stack_usage(source: Path, include: Path, cc: str | None = None) -> dict[str,
     with tempfile.TemporaryDirectory(prefix="bgc-stack-") as tmp:
         out = Path(tmp) / "unit.o"
         done = subprocess.run([*c_compiler(cc), "-std=c99", "-O2", "-fstack-usage",
-                               f"-I{include}", "-c", str(source), "-o", str(out)],
+                               f"-I{Path(include).resolve()}", "-c",
+                               str(Path(source).resolve()), "-o", str(out)],
                               capture_output=True, text=True, cwd=tmp)
         usage = Path(tmp) / "unit.su"
         if done.returncode != 0 or not usage.exists():

@@ -8,7 +8,10 @@ step is the fixed-step driver's (bgc/runtime/erk.c, bgc_fixed_step, on the grid 
 drive.c with one step per output interval), so that in double the states and outputs after k
 steps are the bytes `bgc simulate --solver S --step H --dt H` writes at t0 + k H.  With
 --real float every value, coefficient and function is the float one (sinf, 2.0f, ...): the
-same operations in the same order, rounded to float.
+same operations in the same order, rounded to float.  A model with events adds its event
+functions and the fixed-step driver's event handling (drive.c's bgc_find_event, bgc_hidden,
+the Hermite interpolant, the event iteration), the rest of an output interval stepped from an
+event inside the same call, so that its rows are again simulate's bytes.
 
 What the target cannot run yet is refused before anything is written, with the place in the
 model and what to change (check_supported)."""
@@ -21,12 +24,13 @@ import sympy as sp
 from .. import ir
 from ..base import solvers
 from ..base.diagnostics import ModelError, error
-from ..ir import FUNCTIONS, Program
+from ..ir import FUNCTIONS, D, Program
 from ..ir.printers import CPrinter, float_literal
 from . import emit
 
 REALS = ("double", "float")
-HELPERS = ("bgc_opaque", "bgc_sq", "bgc_min", "bgc_max", "bgc_sign", "bgc_heaviside")  # emitted where used
+HELPERS = ("bgc_opaque", "bgc_sq", "bgc_min", "bgc_max", "bgc_sign", "bgc_heaviside",
+           "bgc_square", "bgc_square_next", "bgc_periodic_next")  # emitted where used
 SOLVERS = ("euler", "rk4")  # the fixed-step methods the target steps with
 FLOAT_NEWTON_RTOL, FLOAT_NEWTON_ATOL = 1e-5, 1e-6  # float: Newton's tolerance at least these
 MAX_TABLE_ROWS = 1024  # the most rows of a lookup table the target would carry (flash)
@@ -37,11 +41,32 @@ FAULTS = (("OK", 0, "the step was taken"),
                               "not converge within 50 iterations: the state is left as it was"))
 
 
-class _FloatPrinter(CPrinter):
+EVENT_FAULTS = (("FAULT_EVENTS", 3, "the events do not settle: an event iteration of more than "
+                                   "100 passes, 100 events in a row each within the time's "
+                                   "resolution of the one before (Zeno), 1000 steps in a row "
+                                   "cut short by an event (a sliding mode), or more than 1000 "
+                                   "events in one step: the state is left as it was"),
+                ("FAULT_TIME", 4, "the time no longer resolves the step (t / H beyond about "
+                                  "1e14): the state is left as it was"))
+
+
+class _EmbeddedPrinter(CPrinter):
+    """CPrinter with the discrete values d in the step's work area (w->d: the state's copy
+    that the step works on) rather than in the parameter struct, which the caller owns."""
+
+    def _print_index(self, base, index):
+        if base.name == D.name:
+            return f"w->d[{index}]"
+        return super()._print_index(base, index)
+
+
+class _FloatPrinter(_EmbeddedPrinter):
     """CPrinter in single precision: float literals (2.0f) and libm's float functions (sinf);
     the layout, and so the operations and their order, are CPrinter's."""
 
-    FUNCTION_NAMES = {**CPrinter.FUNCTION_NAMES, **{f: f + "f" for f in FUNCTIONS},
+    FUNCTION_NAMES = {**CPrinter.FUNCTION_NAMES,
+                      **{f: f + "f" for f in FUNCTIONS
+                         if CPrinter.FUNCTION_NAMES.get(f, f) == f},  # libm's, not bgc_max
                       "Abs": "fabsf"}
 
     def _print(self, expr, **kwargs):
@@ -76,12 +101,19 @@ def _typed(lines: list[str]) -> list[str]:
     return [_DOUBLE_DECL.sub("const bgc_real ", line) for line in lines]
 
 
+def _functions(program: Program) -> tuple[str, ...]:
+    """The model functions the target emits: rhs and outputs, and a model with events its
+    indicators (events), its next time events (next_time) and one pass of its event iteration
+    (update)."""
+    return ("rhs", "outputs") + (ir.EVENT_FUNCTIONS if program.events is not None else ())
+
+
 def _workspace(program: Program, chunk_ops: int):
     """The work area (in the state: a Newton block's last solution is its next start): the
     values that cross the chunks of a long model function (each chunk a function of its own),
     then each algebraic block's storage, as the C emitter lays them out, from offset 0."""
     layouts = {name: ir.layout(program.function(name).body, 0, chunk_ops)
-               for name in ("rhs", "outputs")}
+               for name in _functions(program)}
     top = max((len(lay.slot) for lay in layouts.values()), default=0)
     areas, ints = [], 0
     for bp in program.blocks:
@@ -112,31 +144,37 @@ def _refuse(span, message: str):
     raise ModelError([error(span, f"embedded target: {message}")])
 
 
-def check_supported(program: Program, graph, scene, solver: str, real: str = "double") -> None:
+def check_supported(program: Program, graph, scene, solver: str, real: str = "double",
+                    step: float | None = None) -> None:
     """ModelError, located, for what the embedded target does not run (yet): an adaptive
-    solver, events (when-blocks, relations of states or time, square waves, discrete
-    variables, switches), Newton blocks in float, inputs, lookup tables."""
+    solver, events or Newton blocks in float, a scene's max_step below the step, inputs,
+    lookup tables."""
     if solver not in SOLVERS:
         span = scene.solver[2] if scene is not None and scene.solver else None
         family = "adaptive" if solvers.get(solver).adaptive else "not a fixed-step method"
         _refuse(span, f"the solver '{solver}' is {family}; the target takes one fixed step "
                       f"per call: give --solver rk4 or --solver euler, and --step H")
-    for when in graph.whens:
-        _refuse(when.span, "when-blocks are not supported yet (events at a fixed step are "
-                           "planned; simulate the model with `bgc simulate`)")
-    for kind, items in (("relations of states or time (conditions that switch the model: "
-                         "events)", graph.relations),
-                        ("square waves (time events)", graph.squares),
-                        ("discrete variables", graph.discretes)):
-        for item in items:
-            _refuse(item.span, f"{kind} are not supported yet")
+    if program.events is not None and real == "float":
+        spans = [item.span for items in (graph.whens, graph.relations, graph.squares,
+                                         graph.discretes) for item in items]
+        owners = {name.split(":")[0].split(".")[0] for name in program.events.names}
+        spans += [e.span for e in graph.elements if e.name in owners]  # switched elements
+        _refuse(spans[0] if spans else None,
+                "events (when-blocks, relations of states or time, switched elements) run "
+                "in double only (in float a located event's time rounds to float's "
+                "resolution, and the run departs from simulate's by more than it): use "
+                "--real double")
+    sc = program.scene
+    h = step if step is not None else (sc.step if sc.step is not None else sc.dt)
+    if sc.max_step is not None and h > sc.max_step:
+        span = scene.solver[2] if scene is not None and scene.solver else None
+        _refuse(span, f"the scene's max_step {sc.max_step:g} is below the step {h:g}, "
+                      f"which bgc simulate would split: give --step {sc.max_step:g} or less")
     newton = [bp for bp in program.blocks if bp.method == "newton"]
     if newton and real == "float":
         _refuse(None, f"algebraic block {newton[0].index} ({', '.join(newton[0].unknowns[:4])}) "
                       f"is solved by Newton's method, which the target does not run in float "
                       f"yet: use --real double")
-    if program.events is not None:
-        _refuse(None, "the model has events, which the target does not support yet")
     for tab in program.tables:
         if tab.rows > MAX_TABLE_ROWS:
             _refuse(None, f"the table '{tab.name}' has {tab.rows} rows, more than the "
@@ -163,12 +201,12 @@ def emit_embedded(program: Program, real: str = "double", solver: str = "rk4",
     if not (h > 0.0 and h != float("inf")):
         raise ValueError("the step must be positive and finite")
     fields = emit.c_param_fields(tuple(p.name for p in program.params))
-    printer = (_FloatPrinter if real == "float" else CPrinter)(
+    printer = (_FloatPrinter if real == "float" else _EmbeddedPrinter)(
         len(program.states), fields, program.n_consts)
     ws = _workspace(program, chunk_ops)
     writer = emit._Writer(program, ws, printer, "c")
     model = {}
-    for name in ("rhs", "outputs"):
+    for name in _functions(program):
         f = emit._function_context(writer, name, "out")
         f["chunks"] = [_typed(lines) for lines in f["chunks"]]
         for e in f["evals"]:
@@ -208,6 +246,7 @@ def emit_embedded(program: Program, real: str = "double", solver: str = "rk4",
         "eps": "FLT_EPSILON" if real == "float" else "DBL_EPSILON",
         "fabs": "fabsf" if real == "float" else "fabs",
         "sqrt": "sqrtf" if real == "float" else "sqrt",
+        "floor": "floorf" if real == "float" else "floor",
         "states": [emit.c_string_literal(s) for s in program.states],
         "outputs": [emit.c_string_literal(o) for o in program.outputs],
         "params": [emit.c_string_literal(p.name) for p in program.params],
@@ -219,7 +258,8 @@ def emit_embedded(program: Program, real: str = "double", solver: str = "rk4",
         "tab_c": ", ".join(lit(v) for v in tab.c),
         "tab_a": ", ".join(lit(v) for v in emit._square(tab.a, tab.stages)) or lit(0.0),
         "tab_b": ", ".join(lit(v) for v in tab.b),
-        "faults": FAULTS, "code": code,
+        "faults": FAULTS + (EVENT_FAULTS if program.events is not None else ()),
+        "code": code, "events": emit._events_context(program, emit.c_string_literal),
         "helpers": [name for name in HELPERS if f"{name}(" in code],
         "flit": lit,
     }
@@ -227,17 +267,34 @@ def emit_embedded(program: Program, real: str = "double", solver: str = "rk4",
             f"{ident}.c": emit._render("embedded/model.c.j2", context)}
 
 
+def _struct_bytes(fields) -> int:
+    """The bytes of a struct of (size, count) fields in order, each aligned to its size (the
+    host's natural alignment), padded to its largest."""
+    offset, align = 0, 1
+    for size, count in fields:
+        offset = -(-offset // size) * size + size * count
+        align = max(align, size)
+    return -(-offset // align) * align
+
+
 def memory(program: Program, real: str = "double", solver: str = "rk4",
            chunk_ops: int = ir.CHUNK_OPS) -> dict:
-    """The bytes of the caller's structs (natural alignment) and of one step's local arrays
-    (the stages, their argument, the new state, the outputs, and the state's copy that the
-    step works on), for --report."""
+    """The bytes of the caller's structs (natural alignment, 8-byte long) and of one step's
+    local arrays (the stages, their argument, the outputs, and the state's copy that the step
+    works on; with events also the step's end, the located state, the interpolant's two
+    derivatives and the indicators), for --report."""
     size = 8 if real == "double" else 4
     n, m = max(len(program.states), 1), max(len(program.outputs), 1)
     ws = _workspace(program, chunk_ops)
-    state = 8 * ((8 + (n + max(ws.doubles, 1)) * size + 4 * max(ws.ints, 1) + 7) // 8)
+    fields = [(8, 1), (size, n), (size, max(ws.doubles, 1)), (4, max(ws.ints, 1))]
+    ev = program.events
+    if ev is not None:
+        g = max(ev.indicators, 1)
+        fields += [(8, 3), (8, 2), (4, 1), (size, max(ev.discrete, 1)), (size, 3 * g)]
+    state = _struct_bytes(fields)
     stages = solvers.get(solver).tableau.stages
+    locals_ = stages * n + 2 * n + m + (4 * n + max(ev.indicators, 1) if ev is not None else 0)
     return {"state": state,
             "params": (max(len(program.params), 1) + max(program.n_consts, 1)) * size,
             "outputs": m * size, "inputs": max(len(program.inputs), 1) * size,
-            "step_locals": (stages * n + 2 * n + m) * size + state}
+            "step_locals": locals_ * size + state}
