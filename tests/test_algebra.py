@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import ctypes
 import functools
-import importlib.util
 import math
 import subprocess
 from pathlib import Path
@@ -27,14 +26,12 @@ import bgc
 from bgc.base import backends
 from bgc.api import Source
 from bgc.codegen.emit import emit_c, emit_python
+from helpers import families
 
 ROOT = Path(__file__).resolve().parent.parent
 MODELS = sorted((ROOT / "models").glob("*.bg"))
 BACKENDS = ["python"] + (["c"] if backends.have_c_compiler() else [])
 
-_spec = importlib.util.spec_from_file_location("families", ROOT / "benchmarks" / "families.py")
-families = importlib.util.module_from_spec(_spec)
-_spec.loader.exec_module(families)
 
 
 def close(got, ref, rel=1e-6):

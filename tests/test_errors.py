@@ -1,13 +1,14 @@
 """Bad models as files; each must produce exactly the diagnostic in its .err file, exit 1,
-no traceback and no output file."""
-import subprocess
-import sys
+no traceback and no output file.  The commands run in this process (conftest.run_bgc: an
+exception other than the command's exit fails the test); bgc as a process of its own, its
+exit statuses and signals, is tests/test_faults.py's."""
 from pathlib import Path
 
 import pytest
 from click.testing import CliRunner
 
 from bgc.cli import main
+from conftest import run_bgc
 
 ERRORS = Path(__file__).parent / "errors"
 CASES = sorted(p.name for p in ERRORS.glob("*.bg"))
@@ -28,7 +29,7 @@ def test_no_output_file_on_model_error(tmp_path):
     out = tmp_path / "out.csv"
     bad = ERRORS / "causal_conflict.bg"
     for cmd in (["simulate", str(bad), "-o", str(out)], ["compile", str(bad), "-o", str(out)]):
-        proc = subprocess.run([sys.executable, "-m", "bgc", *cmd], capture_output=True, text=True)
+        proc = run_bgc(*cmd)
         assert proc.returncode == 1
         assert "Traceback" not in proc.stderr
         assert "error: causal conflict" in proc.stderr
@@ -37,11 +38,10 @@ def test_no_output_file_on_model_error(tmp_path):
 
 
 def test_usage_error_exit_2(tmp_path):
-    proc = subprocess.run([sys.executable, "-m", "bgc", "simulate"], capture_output=True, text=True)
+    proc = run_bgc("simulate")
     assert proc.returncode == 2
 
 
 def test_missing_file_is_not_a_traceback(tmp_path):
-    proc = subprocess.run([sys.executable, "-m", "bgc", "check", str(tmp_path / "nope.bg")],
-                          capture_output=True, text=True)
+    proc = run_bgc("check", tmp_path / "nope.bg")
     assert proc.returncode in (1, 2) and "Traceback" not in proc.stderr

@@ -2,7 +2,6 @@
 pass, one forward-mode pass that every derived function comes from."""
 from __future__ import annotations
 
-import importlib.util
 from pathlib import Path
 
 import sympy as sp
@@ -12,12 +11,10 @@ from bgc.symbolic import canonical
 from bgc.symbolic.differentiate import directional
 from bgc.ir import P, T, V, W, X, Assign, Newton, Param, Resolve, SceneSettings, Solve, Store
 from bgc.codegen.lower import explicit_program, with_tangent
+from helpers import families
 
 ROOT = Path(__file__).resolve().parent.parent
 SCENE = SceneSettings(0.0, 1.0, 0.1, "dopri5", 1e-6, 1e-9, None)
-_spec = importlib.util.spec_from_file_location("families", ROOT / "benchmarks" / "families.py")
-families = importlib.util.module_from_spec(_spec)
-_spec.loader.exec_module(families)
 
 
 def evaluate(f: ir.Function, values: dict) -> list:

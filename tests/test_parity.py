@@ -7,7 +7,6 @@ tolerance is needed, whatever BLAS or SIMD kernels numpy picks on the machine (s
 docs/solvers.md).  Spans are short: a few steps of the large models are enough to go through
 every code path, the whole file takes some twenty seconds."""
 import contextlib
-import importlib.util
 import io
 import subprocess
 from pathlib import Path
@@ -20,24 +19,17 @@ from bgc.api import Source
 from bgc.codegen.emit import emit_c, emit_python
 
 from cbits import C_IO
+from helpers import families
 
 ROOT = Path(__file__).resolve().parent.parent
 pytestmark = pytest.mark.skipif(not backends.have_c_compiler(), reason="no C compiler")
-
-
-def _families():
-    spec = importlib.util.spec_from_file_location("bench_families",
-                                                  ROOT / "benchmarks" / "families.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
 
 
 def _source(name):
     if name.endswith(".bg"):
         return ROOT / "models" / name
     family, n = name.rsplit("_", 1)
-    return Source(f"{name}.bg", getattr(_families(), family)(int(n)))
+    return Source(f"{name}.bg", getattr(families, family)(int(n)))
 
 
 # model -> (states, adaptive run's options, fixed-step run's options)

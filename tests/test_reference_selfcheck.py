@@ -8,19 +8,12 @@ Needs numpy and scipy only, not bgc.
 """
 from __future__ import annotations
 
-import importlib.util
 import math
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
 
-_spec = importlib.util.spec_from_file_location(
-    "_bgc_model_references", Path(__file__).resolve().parent / "test_models.py")
-refs = importlib.util.module_from_spec(_spec)
-sys.modules[_spec.name] = refs  # dataclasses look their module up there
-_spec.loader.exec_module(refs)
+import test_models as refs  # (the module pytest collects, not a second copy)
 
 SELF_TOLERANCE = 1e-9
 

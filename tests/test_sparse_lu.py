@@ -5,7 +5,6 @@ factorisations and solves bit for bit on a model's plan; and the thermal grid, a
 sparse path, against its closed form (SciPy's expm), its C program's CSV byte for byte in
 Python."""
 import contextlib
-import importlib.util
 import io
 import subprocess
 from pathlib import Path
@@ -22,18 +21,11 @@ from bgc.codegen.emit import emit_c, emit_python
 from bgc.runtime import runtime as rt
 
 from cbits import C_IO
+from helpers import families
 
 ROOT = Path(__file__).resolve().parent.parent
 needs_cc = pytest.mark.skipif(not backends.have_c_compiler(), reason="no C compiler")
 GRID = 6  # 36 states: above sparse.SPARSE_MIN_STATES
-
-
-def _families():
-    spec = importlib.util.spec_from_file_location("bench_families",
-                                                  ROOT / "benchmarks" / "families.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
 
 
 @pytest.fixture(scope="module")
@@ -41,7 +33,7 @@ def grid(tmp_path_factory):
     """The 6 x 6 grid's program (scene cool: every temperature an output), its C program with
     the harness below (one build: `--harness` runs the harness, anything else the program's
     main), and its Python module."""
-    compiled = bgc.build(Source("grid.bg", _families().thermal_grid(GRID)), scene="cool")
+    compiled = bgc.build(Source("grid.bg", families.thermal_grid(GRID)), scene="cool")
     program = compiled.program
     assert program.jacobian.lu is not None  # on the sparse path
     (c_text,) = emit_c(program).values()

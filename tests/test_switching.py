@@ -7,12 +7,16 @@ instants where the coil's current reaches zero (found by brentq on the exact sol
 1e-15 relative): nothing of bgc's."""
 from __future__ import annotations
 
+import io
+
 import numpy as np
 import pytest
 from scipy.linalg import expm
 from scipy.optimize import brentq
 
+from bgc.execute import runner
 from conftest import ROOT, have_cc, run_bgc
+from helpers import built
 
 BUCK = ROOT / "models" / "buck.bg"
 BUCK_LIBRARY = ROOT / "tests" / "models" / "buck_library.bg"
@@ -417,31 +421,43 @@ def _one_way_clutch(grid, J1=0.1, J2=0.3, b2=0.05, Fc=0.3, Fs=0.5, t_on=3.0):
     return np.array(ys)
 
 
-@needs_cc
-@pytest.mark.parametrize("model", [CLUTCH, CLUTCH_LIBRARY], ids=["plain", "library"])
-def test_a_one_way_clutch_of_a_freewheel_beside_a_clutch_is_its_automaton(tmp_path, model):
-    """A freewheel D and a clutch Fr on one relative speed: both hold it while locked (how
-    the torque splits between them is not determined: any split inside both cones is taken),
-    the clutch slips above its limit once engaged, and the freewheel alone locks before."""
-    out = tmp_path / "clutch.csv"
-    events = tmp_path / "events.csv"
-    result = run_bgc("simulate", model, "--scene", "run", "-o", out, "--events", events,
-                     "--backend", "c")
-    assert result.returncode == 0, result.stderr
-    data = np.loadtxt(out, delimiter=",", skiprows=1)
+def _clutch_run(backend, **options):
+    """The plain clutch's run scene (built once for the process), run by backend: its CSV."""
+    compiled = built(CLUTCH, "run")
+    names = [p.name for p in compiled.program.params]
+    result = runner.run(runner.prepare(compiled, backend),
+                        runner.settings_for(compiled.program.scene, names, **options))
+    assert result.status == 0, result.stderr
+    return result.csv
+
+
+def _check_clutch(csv_text: str, log: str):
+    data = np.loadtxt(io.StringIO(csv_text), delimiter=",", skiprows=1)
     exact = _one_way_clutch(data[:, 0])
     assert np.max(np.abs(data[:, 1:3] - exact)) < 1e-9 * np.max(np.abs(exact))
-    log = events.read_text()
     assert "cl.stick,0 -> 1" in log and "fw.blocking,1 -> 0" in log  # (it slips and locks)
-    if model == CLUTCH_LIBRARY:
-        return
-    runs = []
-    for backend in ("c", "python", "vm"):
-        other = tmp_path / f"clutch-{backend}.csv"
-        assert run_bgc("simulate", CLUTCH, "--scene", "run", "-o", other, "--backend",
-                       backend, "--t-end", "5").returncode == 0
-        runs.append(other.read_bytes())
+
+
+@needs_cc
+def test_a_one_way_clutch_of_a_freewheel_beside_a_clutch_is_its_automaton(tmp_path):
+    """A freewheel D and a clutch Fr on one relative speed: both hold it while locked (how
+    the torque splits between them is not determined: any split inside both cones is taken),
+    the clutch slips above its limit once engaged, and the freewheel alone locks before.  The
+    model built once, its C, Python and interpreter runs the same bytes."""
+    events = tmp_path / "events.csv"
+    _check_clutch(_clutch_run("c", events=str(events)), events.read_text())
+    runs = [_clutch_run(backend, t_end=5.0) for backend in ("c", "python", "vm")]
     assert runs[0] == runs[1] == runs[2]
+
+
+@needs_cc
+def test_the_one_way_clutch_of_library_parts_is_its_automaton_from_the_command_line(tmp_path):
+    """The same clutch of mechanics.one_way_clutch, by `bgc simulate --events`."""
+    out, events = tmp_path / "clutch.csv", tmp_path / "events.csv"
+    result = run_bgc("simulate", CLUTCH_LIBRARY, "--scene", "run", "-o", out, "--events",
+                     events, "--backend", "c")
+    assert result.returncode == 0, result.stderr
+    _check_clutch(out.read_text(), events.read_text())
 
 
 def test_a_condition_holding_a_time_source_keeps_it():
