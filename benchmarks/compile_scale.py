@@ -12,8 +12,8 @@ the target <= 1.2 at 1000 instances); thermal_grid_cells is the n x n thermal gr
 benchmarks/stiff_scale.py by its number of cells (states), whose stiff solvers factor by the
 sparse LU the compiler plans (its ordering and fill are part of lower).  For every model:
 
-  stages   bgc.build(...).timings (parse, instantiate, resolve, flatten, scene, causality,
-           equations, reduce, lower)
+  stages   bgc.build(...).timings (parse, instantiate, resolve, flatten, units, scene,
+           causality, equations, reduce, lower)
            and emit_c, timed inside a fresh Python process (this script run with the hidden
            option --one FAMILY N DIR, which prints JSON): SymPy caches what it has seen, so sizes
            built in one process would warm each other.  Median over the repeats.
@@ -127,8 +127,8 @@ QUICK_SIZES = {
     "thermal_grid_cells": (16, 64),
 }
 SCENES = {"pendulum_chain": "swing", "pendulum_chain_vector": "swing", "link_chain_field": "swing"}
-STAGES = ("parse", "instantiate", "resolve", "flatten", "scene", "causality", "equations", "reduce", "lower",
-          "emit")
+STAGES = ("parse", "instantiate", "resolve", "flatten", "units", "scene", "causality",
+          "equations", "reduce", "lower", "emit")
 ARITHMETIC = ("add", "mul", "div", "call", "neg")
 CFLAGS = ("-O2", "-std=c99")
 DRIVER_FLAGS = ("-D_POSIX_C_SOURCE=199309L",)

@@ -11,7 +11,7 @@ are served here and never written over a submodule: no module of bgc has an API 
 __version__ = "0.1.0"
 __all__ = ["BgcArgumentError", "BgcModelError", "Compiled", "SimulationFailed", "build", "check",
            "compile", "equations", "fit", "linearize", "load", "periodic", "sensitivities", "simulate",
-           "steady", "sweep"]
+           "steady", "sweep", "units"]
 
 
 def __getattr__(name):

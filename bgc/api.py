@@ -22,6 +22,7 @@ from .middle.reduce import Reduced, reduce
 from .reports.report import (SceneSummary, check_report, scenes_report, equations_latex,
                              equations_text, scene_summary)
 from .front.resolve import resolve
+from .front.units import check_units
 from .base import solvers
 from .base.resources import quiet_collector, read_bounded
 from .middle.scene import Override, Settings, apply_scene, check_parameters as check_parameters_of
@@ -169,6 +170,7 @@ def build(model, scene: str | None = None, project_initial: bool = False,
         files = tuple(("library", p) for p, sha in ast_.libraries if sha is not None) + tuple(
             ("table", t.file) for t in graph.tables if t.file)
         graph = clock("flatten", flatten, graph)
+        graph = clock("units", check_units, graph)
         scenario = clock("scene", apply_scene, graph, scene, override, option_names[2])
         causal = clock("causality", assign_causality, scenario)
         system = clock("equations", build_equations, causal)
@@ -263,6 +265,17 @@ def check(model, scene: str | None = None, algebra: str = "auto", outputs=None,
     if not adhoc:
         check_scenes(compiled)
     return check_report(compiled, summary(compiled) if adhoc else None)
+
+
+def units(model) -> dict:
+    """The unit of every quantity of the model whose unit is known (name -> unit string:
+    declared, from the ports' domains, or inferred; docs/units.md), after the units check;
+    BgcModelError for a mismatch."""
+    src = _source(model)
+    try:
+        return dict(check_units(flatten(resolve(front(src)))).units)
+    except ModelError as exc:
+        raise BgcModelError(exc, src) from None
 
 
 def scenes(model) -> str:

@@ -737,9 +737,13 @@ def _compile_embedded(model, scene, outputs, effects, algebra, output, project_i
               help="Also the outputs' sensitivities to these parameters: a column "
                    "d(Y)/d(P) after the outputs for each parameter P and output Y, integrated "
                    "with the states (docs/analysis.md).")
+@click.option("--units", "units_row", is_flag=True,
+              help="A second header row: the unit of each column (s for t; declared or "
+                   "inferred, docs/units.md; empty where it is not known).")
 def simulate(model, scene, outputs, effects, algebra, backend, solver, rtol, atol, t_end, dt,
              step, max_steps, max_step, params, project_initial, allow_inconsistent, stats,
-             event_rows, events_file, input_files, output, plot_file, sensitivities, consts):
+             event_rows, events_file, input_files, output, plot_file, sensitivities, units_row,
+             consts):
     """Simulate and write CSV.  A model compiled before with the same options runs at once
     (bgc.execute.warm); otherwise it is compiled, and the result kept for the next run.  On a
     terminal, a run that takes more than a second shows its progress on stderr."""
@@ -813,7 +817,7 @@ def simulate(model, scene, outputs, effects, algebra, backend, solver, rtol, ato
         if logs:
             settings = replace(settings, events=str(Path(logs) / "events.csv"))
         status = _simulate_run(settings, record, program, compiled, request, stats, output,
-                               plot_file)
+                               plot_file, units_row)
         if logs:
             status = _keep_events(Path(logs) / "events.csv", events_file, status)
     sys.exit(status)
@@ -834,8 +838,10 @@ def _keep_events(log: Path, target: str, status: int) -> int:
     return status
 
 
-def _simulate_run(settings, record, program, compiled, request, stats, output, plot_file):
-    """simulate's run proper (the CSV, the plot); its exit status."""
+def _simulate_run(settings, record, program, compiled, request, stats, output, plot_file,
+                  units_row=False):
+    """simulate's run proper (the CSV, the plot); its exit status.  units_row: the CSV's
+    second row the columns' units (the warm record's, bgc.reports.plot.columns)."""
     if compiled is not None and record.correctors:
         for message in stability.warnings_for_run(compiled, settings.solver, settings.step,
                                                   settings.dt, dict(settings.params)):
@@ -846,11 +852,12 @@ def _simulate_run(settings, record, program, compiled, request, stats, output, p
         # (not while the CSV itself goes to the terminal: the bar would cut its lines)
         progress = _RunProgress() if sys.stderr.isatty() and (
             output or not sys.stdout.isatty()) else None
+        units = {c[0]: c[3] or "" for c in record.plot_columns} if units_row else None
         try:
-            status, rows = _run(program, settings, stats, output, copy, progress)
+            status, rows = _run(program, settings, stats, output, copy, progress, units)
         except backends.CannotStart:  # (damaged behind its checksum: evicted, built again)
             record, program, compiled = _compile_for_run(request, None, settings.solver)
-            status, rows = _run(program, settings, stats, output, copy, progress)
+            status, rows = _run(program, settings, stats, output, copy, progress, units)
         if progress is not None:
             progress.close()
         if plot_file:
@@ -961,14 +968,37 @@ class _Tee:
         self.copy.flush()
 
 
+class _UnitsRow:
+    """A CSV sink that writes, after the header line, the row of the columns' units (`s` for
+    t, '' where unknown): what `simulate --units` adds.  It has no descriptor, so that the
+    program's output comes through it in whole lines."""
+
+    def __init__(self, stream, units: dict):
+        self.stream, self.units, self.done = stream, units, False
+
+    def write(self, text: str) -> None:
+        if not self.done:
+            cut = text.find("\n")
+            if cut >= 0:
+                names = text[:cut].rstrip("\r").split(",")
+                row = ",".join("s" if n == "t" else self.units.get(n, "") for n in names)
+                text = text[:cut + 1] + row + "\n" + text[cut + 1:]
+                self.done = True
+        self.stream.write(text)
+
+    def flush(self) -> None:
+        self.stream.flush()
+
+
 def _run(program, settings, stats: bool, output: str | None, copy: Path | None = None,
-         progress=None) -> tuple[int, bool]:
+         progress=None, units: dict | None = None) -> tuple[int, bool]:
     """Runs the program (bgc.execute.runner.run), its CSV streamed to `output` (else stdout, and a
     copy into `copy` if given); the exit status, and whether rows were written.  A failed
     run's rows are kept, cut back to the last whole row, and the last line on stderr says so.
-    progress: a _RunProgress for the program's progress lines."""
+    progress: a _RunProgress for the program's progress lines.  units: the row of units
+    after the header (--units), by column."""
     if not output:
-        return _run_to_stdout(program, settings, stats, copy, progress)
+        return _run_to_stdout(program, settings, stats, copy, progress, units)
     try:
         part = outfile.Partial(output)
     except outfile.OutputError as error:
@@ -979,8 +1009,13 @@ def _run(program, settings, stats: bool, output: str | None, copy: Path | None =
         if part.direct and copy is not None:  # (a device or a FIFO, and a copy for --plot)
             sink = _Tee(io.TextIOWrapper(part.file, encoding="utf-8", newline="",
                                          write_through=True), copy)
-        with sink.copy if sink is not part.file else contextlib.nullcontext():
+        if units is not None:
+            sink = _UnitsRow(sink if sink is not part.file else io.TextIOWrapper(
+                part.file, encoding="utf-8", newline="", write_through=True), units)
+        tee = sink.stream if isinstance(sink, _UnitsRow) else sink
+        with tee.copy if isinstance(tee, _Tee) else contextlib.nullcontext():
             done = runner.run(program, settings, sink, progress, stats)
+            sink.flush()
         last = part.rows_end() if copy is None else outfile.last_row_time(copy)
         _say(done, f"'{output}'", last)
         try:
@@ -1002,18 +1037,20 @@ def _run(program, settings, stats: bool, output: str | None, copy: Path | None =
     return done.status, True
 
 
-def _run_to_stdout(program, settings, stats, copy, progress) -> tuple[int, bool]:
+def _run_to_stdout(program, settings, stats, copy, progress, units=None) -> tuple[int, bool]:
     """_run with the CSV on stdout: a regular file there (`> out.csv`) is cut back to its last
     whole row if the run fails, as a named file is."""
-    sink = sys.stdout if copy is None else _Tee(sys.stdout, copy)
+    tee = sys.stdout if copy is None else _Tee(sys.stdout, copy)
+    sink = tee if units is None else _UnitsRow(tee, units)
     try:
         fd = sys.stdout.fileno()
         sys.stdout.flush()
         start = outfile.offset(fd)
     except (OSError, ValueError, AttributeError, io.UnsupportedOperation):
         fd = start = None  # (a pipe, a test's captured output)
-    with sink.copy if copy is not None else contextlib.nullcontext():
+    with tee.copy if copy is not None else contextlib.nullcontext():
         done = runner.run(program, settings, sink, progress, stats)
+        sink.flush()
     if fd is not None:
         if done.status != 0:
             outfile.cut_to_whole_rows(fd, start)
@@ -1486,8 +1523,9 @@ def linearize(model, scene, outputs, effects, algebra, at, inputs, params, outpu
         _write_atomic(output, linear.render(result, fmt))
     if bode_file:
         try:
+            known = dict(analysed.compiled.graph.units)
             _write_with(bode_file, lambda file: linear.bode(result, file,
-                                                            _plot_format(bode_file)))
+                                                            _plot_format(bode_file), known))
         except outfile.OutputError as error:
             _fail(str(error))
     _echo(linear.modes_table(result), err=bool(files.to_stdout))
@@ -1663,13 +1701,14 @@ def fit(model, scene, effects, algebra, data, varies, params, backend, solver, r
                                               ("atol", atol)) if v is not None})
     if output:
         _write_atomic(output, result.json())
+    known = _or_exit(api.units, model)
     if plot_file:
         try:
             _write_with(plot_file, lambda file: estimate.plot_residuals(
-                result, file, _plot_format(plot_file)))
+                result, file, _plot_format(plot_file), known))
         except outfile.OutputError as error:
             _fail(str(error))
-    _echo(result.table(), err=bool(files.to_stdout))
+    _echo(result.table(known), err=bool(files.to_stdout))
     if not result.converged:
         click.echo(f"warning: the fit did not converge ({result.stopped})", err=True)
         sys.exit(1)

@@ -51,8 +51,10 @@ def test_columns_kinds_docs_and_units():
 
 
 def test_panels_group_by_unit_before_kind():
-    """Outputs of one declared unit share a panel whatever they are (a flow, a signal, a
-    component's parameter); the others are grouped by kind."""
+    """Outputs of one unit share a panel whatever they are (a flow, a signal, a component's
+    parameter); the others are grouped by kind.  x, the integral of a voltage, is in V*s
+    (Wb, from the units check: bgc.front.units), a panel of its own; the capacitor's charge
+    has no known unit (C(1): a number of any unit)."""
     text = ('model m\ncomponent src(v = 1 unit "V") { port p; s : Se(v); s -> p }\n'
             'a : src(v = 2)\nn : 0 "node [V]"\nc : C(1)\na.p -> n\nn -> c\n'
             'signal half = c.e/2 unit "V"\nsignal x = integral(c.e, init = 0)\n')
@@ -60,20 +62,25 @@ def test_panels_group_by_unit_before_kind():
     names = ["a.v", "c.q", "c.e", "half", "x"]
     groups = [(kind, [c.name for c in group])
               for kind, group in plot.panels(plot.columns(compiled, names))]
-    assert groups == [("unit", ["a.v", "c.e", "half"]), ("q", ["c.q"]), ("signal", ["x"])]
+    assert groups == [("unit", ["a.v", "c.e", "half"]), ("q", ["c.q"]), ("unit", ["x"])]
+    assert plot.columns(compiled, ["x"])[0].unit == "Wb"
 
 
 def test_an_inputs_unit_is_its_columns():
     """`input NAME = DEFAULT unit "UNIT" "doc"`: the input's column is in that unit, on the
-    panel of the signals of that unit."""
-    text = ('model m\ninput u = 1 unit "V" "the drive"\ninput w\n'
-            'signal x = integral(u - x, init = 0) unit "V"\nsignal y = w + x\n')
+    panel of the signals of that unit; w and y, of no declared unit, take x's through the
+    sum y = w + x (the units check), z none."""
+    text = ('model m\ninput u = 1 unit "V" "the drive"\ninput w\ninput z\n'
+            'parameter tau = 1 unit "s"\n'
+            'signal x = integral((u - x)/tau, init = 0) unit "V"\nsignal y = w + x\n'
+            'signal v = 2*z\n')
     compiled = bgc.build(bgc.api.Source("m.bg", text), program=False)
-    cols = plot.columns(compiled, ["u", "x", "w", "y"])
+    cols = plot.columns(compiled, ["u", "x", "w", "y", "z"])
     assert [(c.name, c.kind, c.unit) for c in cols] == [
-        ("u", "signal", "V"), ("x", "signal", "V"), ("w", "signal", None), ("y", "signal", None)]
+        ("u", "signal", "V"), ("x", "signal", "V"), ("w", "signal", "V"), ("y", "signal", "V"),
+        ("z", "signal", None)]
     assert [(kind, [c.name for c in group]) for kind, group in plot.panels(cols)] == [
-        ("unit", ["u", "x"]), ("signal", ["w", "y"])]
+        ("unit", ["u", "x", "w", "y"]), ("signal", ["z"])]
 
 
 def test_read_csv_every_kth_row_and_the_last(tmp_path):

@@ -365,14 +365,18 @@ class Fit:
     def json(self) -> str:
         return json.dumps(self.as_dict(), indent=2) + "\n"
 
-    def table(self) -> str:
+    def table(self, units: dict | None = None) -> str:
+        """The report: each parameter's estimate, standard error and interval (in its unit,
+        from units, bgc.api.units, where known), the correlations, the cost and the run."""
+        units = units or {}
         w = max([len(n) for n in self.names] + [9])
         lines = [f"{'parameter':<{w}}  {'estimate':>13}  {'std. error':>10}  "
                  f"95% interval"]
         for n, e, se, lo, hi in zip(self.names, self.estimates, self.stderr, self.lower,
                                     self.upper):
             flag = "  (at its bound)" if n in self.at_bound else ""
-            lines.append(f"{n:<{w}}  {e:>13.7g}  {se:>10.4g}  [{lo:.7g}, {hi:.7g}]{flag}")
+            unit = f" {units[n]}" if units.get(n) else ""
+            lines.append(f"{n:<{w}}  {e:>13.7g}  {se:>10.4g}  [{lo:.7g}, {hi:.7g}]{unit}{flag}")
         if len(self.names) > 1:
             lines.append("correlation:")
             for n, row in zip(self.names, self.correlation):
@@ -584,8 +588,9 @@ def _default(compiled, name, fixed) -> float:
     return v
 
 
-def plot_residuals(result: Fit, target, fmt: str = "png") -> None:
-    """The measured and fitted outputs against time, and the residuals below (matplotlib)."""
+def plot_residuals(result: Fit, target, fmt: str = "png", units: dict | None = None) -> None:
+    """The measured and fitted outputs against time, and the residuals below (matplotlib);
+    units: of the outputs by name (bgc.api.units), on the axes where the outputs share one."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -599,9 +604,11 @@ def plot_residuals(result: Fit, target, fmt: str = "png") -> None:
         bottom.plot(result.t, result.fitted[:, j] - result.measured[:, j], ".", ms=2,
                     color=dots.get_color(), label=name)
     top.legend(fontsize=8)
-    top.set_ylabel("output")
-    bottom.set_ylabel("fitted - measured")
-    bottom.set_xlabel("t")
+    shared = {(units or {}).get(name) for name in result.columns}
+    unit = f" [{shared.pop()}]" if len(shared) == 1 and None not in shared else ""
+    top.set_ylabel((result.columns[0] if len(result.columns) == 1 else "outputs") + unit)
+    bottom.set_ylabel("fitted - measured" + unit)
+    bottom.set_xlabel("time t [s]")
     fig.tight_layout()
     fig.savefig(target, format=fmt)
     plt.close(fig)

@@ -528,9 +528,12 @@ def frequencies(lin: Linearization, points: int = 400) -> np.ndarray:
     return np.logspace(lo, hi, points)
 
 
-def bode(lin: Linearization, target, fmt: str = "png") -> None:
+def bode(lin: Linearization, target, fmt: str = "png", units: dict | None = None) -> None:
     """The Bode plot of every input-output pair into target (a file name or a binary file);
-    AnalysisArgumentError without inputs or outputs."""
+    AnalysisArgumentError without inputs or outputs.  units: of the inputs and outputs by
+    name (bgc.api.units): each pair's gain unit in its label (dB of |H| in it)."""
+    from ..front.units import ratio
+    units = units or {}
     if not lin.inputs or not lin.outputs:
         raise AnalysisArgumentError("a Bode plot needs an input and an output: name the input "
                                     "with --inputs (an input or a parameter)")
@@ -543,10 +546,11 @@ def bode(lin: Linearization, target, fmt: str = "png") -> None:
         for i, y in enumerate(lin.outputs):
             for j, u in enumerate(lin.inputs):
                 h = H[i, j]
-                label = plot.shorten(f"{u} → {y}")
+                gain = ratio(units.get(y), units.get(u))
+                label = plot.shorten(f"{u} → {y}") + (f" [{gain}]" if gain else "")
                 mag.semilogx(w, 20 * np.log10(np.abs(h)), label=label)
                 phase.semilogx(w, np.degrees(np.unwrap(np.angle(h))), label=label)
-    mag.set_ylabel("magnitude (dB)")
+    mag.set_ylabel("magnitude (dB of |H| in the gain's unit)")
     phase.set_ylabel("phase (deg)")
     phase.set_xlabel("frequency ω (rad/s)")
     mag.set_title(f"Bode plot, linearised at t = {lin.t:.6g}")

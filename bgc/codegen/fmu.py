@@ -264,10 +264,28 @@ def _parameter_values(program) -> list[float]:
 
 
 def _declared_units(graph) -> dict:
-    """The units the model declares (`unit "kg"`) by variable name: of its parameters, its
-    signals (each scalar part of a vector one) and its inputs."""
+    """The units of the model's variables by name: declared (`unit "kg"`: of its parameters,
+    its signals, each scalar part of a vector one, and its inputs) or found by the units stage
+    (bgc.front.units: a bond's effort from its port's domain, a state from its law)."""
     declared = [*graph.parameters, *graph.signals, *graph.inputs]
-    return {d.name: d.unit for d in declared if d.unit}
+    return {**dict(graph.units), **{d.name: d.unit for d in declared if d.unit}}
+
+
+def _unit_element(name: str) -> str:
+    """A UnitDefinitions entry: the unit and its exponents of the SI base units (FMI 2.0's
+    BaseUnit, integers only: a unit with a fractional exponent, Pa^0.5, is named only)."""
+    try:
+        from ..base import si
+        u = si.parse(name)
+    except ValueError:
+        return f"    <Unit{_attrs(name=name)}/>"
+    if any(e.denominator != 1 for e in u.dims):
+        return f"    <Unit{_attrs(name=name)}/>"
+    base = {b: str(int(e)) for b, e in zip(si.BASE, u.dims) if e}
+    if u.scale != 1.0:
+        base["factor"] = repr(u.scale)
+    return (f"    <Unit{_attrs(name=name)}><BaseUnit{_attrs(**base)}/></Unit>" if base
+            else f"    <Unit{_attrs(name=name)}/>")
 
 
 def _unit(doc: str | None) -> str | None:
@@ -345,7 +363,7 @@ def model_description(d: Description, guid: str) -> str:
     lines += sources + ["  </CoSimulation>"]
     if d.units:
         lines.append("  <UnitDefinitions>")
-        lines += [f"    <Unit{_attrs(name=u)}/>" for u in d.units]
+        lines += [_unit_element(u) for u in d.units]
         lines.append("  </UnitDefinitions>")
     lines.append("  <LogCategories>")
     lines += [f"    <Category{_attrs(name=n, description=t)}/>" for n, t in LOG_CATEGORIES]

@@ -334,8 +334,8 @@ def cut_to_whole_rows(fd: int, start: int) -> None:
 
 
 def _row_time(line: bytes) -> str | None:
-    if not line or line.startswith(b"t,"):
-        return None
+    if not line or line.startswith(b"t,") or line.startswith(b"s,") or line == b"s":
+        return None  # (the header, and the units' row of --units)
     return line.split(b",", 1)[0].decode("ascii", "replace")
 
 

@@ -228,6 +228,7 @@ class PathRef:
 class BondChain:
     nodes: tuple  # Ident (a plain path `a` or `p1.a`) or PathRef
     span: Span
+    ports: tuple = ()  # after instantiate: the ports it crosses, (domain, unit, span, path)
 
 
 # ---------------------------------------------------------------- components and generation

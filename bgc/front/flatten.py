@@ -283,7 +283,7 @@ def flatten(g: Graph) -> Graph:
         parts = []
         for i in range(na):
             label = b.label if na == 1 else f"{b.label}[{i}]"
-            bonds.append(Bond(_end(a, True, i), _end(c, False, i), label, b.span))
+            bonds.append(Bond(_end(a, True, i), _end(c, False, i), label, b.span, b.ports, i))
             parts.append(label)
         multibonds.append(Multibond(b.label, b.src, b.dst, na, tuple(parts), b.span))
     signals = []

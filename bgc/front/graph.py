@@ -8,7 +8,7 @@ as public functions.
 from __future__ import annotations
 
 import re
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from functools import cached_property
 
 import sympy as sp
@@ -100,6 +100,10 @@ class Bond:
     dst: str
     label: str  # unique, e.g. "vx->mx"
     span: Span
+    # the ports of instances the bond crosses, (domain, unit, span, path) each (its units:
+    # bgc.front.units); part: which component of a vector bond it is
+    ports: tuple = field(default=(), compare=False)
+    part: int | None = field(default=None, compare=False)
 
     def other(self, node: str) -> str:
         return self.dst if self.src == node else self.src
@@ -249,6 +253,7 @@ class Graph:
     inputs: tuple = ()  # InputInfo, in declaration order (their values: bgc.front.events.InputSlot)
     constants: tuple = ()  # (name, value) of the model file's constants (`--outputs s[N].q`)
     libraries: tuple = ()  # (path, SHA-256 or None) of the files its imports looked at
+    units: tuple = ()  # after the units stage: (name, unit) of each quantity whose unit is known
 
     @cached_property
     def vector_by_name(self) -> dict:

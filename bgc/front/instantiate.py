@@ -752,7 +752,8 @@ class _Instantiate:
             else:
                 span = best[1].join(best[2])
                 self.out.append(ast.BondChain((ast.Ident(a[1], span), ast.Ident(end[1], span)),
-                                              span))
+                                              span, tuple((p.domain, p.unit, p.span, p.name)
+                                                          for p in through)))
         for k, (a, b, sa, sb, _) in enumerate(self.edges):
             if k not in seen:
                 self.diags.error(sa.join(sb), "this bond joins ports only: no element at either "

@@ -1188,7 +1188,7 @@ def _bonds(model, elements, params, signals, diags: Collector):
             key = f"{a.name}->{b.name}"
             seen[key] = seen.get(key, 0) + 1
             label = key if seen[key] == 1 else f"{key}#{seen[key]}"
-            bonds.append(Bond(a.name, b.name, label, a.span.join(b.span)))
+            bonds.append(Bond(a.name, b.name, label, a.span.join(b.span), chain.ports))
     return bonds
 
 

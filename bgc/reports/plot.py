@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import math
 import re
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 PLOT_INSTALL = "pip install 'bgc[plot]'"
@@ -136,6 +136,12 @@ def columns(compiled, names) -> list[Column]:
     graph = compiled.graph
     params = {p.name: p for p in graph.parameters}
     signals = {s.name: s for s in graph.signals}
+    known = dict(graph.units)  # what bgc.front.units found (declared or inferred)
+    return [replace(c, unit=known.get(c.name) or c.unit)
+            for c in _columns(graph, params, signals, names)]
+
+
+def _columns(graph, params, signals, names) -> list[Column]:
     out = []
     for name in names:
         m = _VARIABLE.fullmatch(name)
@@ -188,12 +194,18 @@ def read_csv(path, max_points: int = MAX_POINTS) -> Table:
         rows = sum(chunk.count(b"\n") for chunk in iter(lambda: f.read(1 << 20), b""))
     if not header or header[0] != "t":
         raise PlotError(f"'{path}' is not a bgc CSV (its header does not start with t)")
+    with open(path, "rb") as f:
+        f.readline()
+        units = f.readline().startswith(b"s,")  # (the units' row of simulate --units)
+    rows -= units
     every = max(1, math.ceil(rows / max_points))
     t: list = []
     values: list = [[] for _ in header[1:]]
     last = None
     with open(path, "rb") as f:
         f.readline()
+        if units:
+            f.readline()
         for k, line in enumerate(f):
             if not line.endswith(b"\n"):
                 break  # a row cut short
@@ -284,7 +296,7 @@ def figure(table: Table, cols: list[Column], heading: list[str], stopped: bool =
             ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0),
                       borderaxespad=0.0)
         style(ax)
-    axes[-1, 0].set_xlabel("time t")
+    axes[-1, 0].set_xlabel("time t [s]")
     notes = []
     if stopped:
         notes.append(f"the run stopped at t = {table.t[-1]:.6g}: its rows up to there")
