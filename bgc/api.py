@@ -1,4 +1,4 @@
-"""The pipeline as functions: parse -> resolve -> flatten -> scene -> causality -> equations
+"""The pipeline as functions: parse -> resolve -> flatten -> units -> scene -> causality -> equations
 (bgc.middle.system) -> reduce -> lower -> emit, and runs of the result (bgc.execute.runner's run,
 the one way bgc runs a program).  `bgc.cli`, bgc.model and the tests use exactly these.  bgc.load,
 the notebook's entry, is bgc.model's (it returns a Model, which is built with this module)."""
