@@ -223,3 +223,14 @@ def test_fmu_units_name_their_base_units():
     scaled = ET.fromstring(fmu._unit_element("kN")).find("BaseUnit")
     assert float(scaled.get("factor")) == 1000.0
     assert ET.fromstring(fmu._unit_element("m^3/(s*Pa^0.5)")).find("BaseUnit") is None
+
+
+def test_a_parameter_defined_in_the_wrong_unit_is_refused_at_its_definition(tmp_path):
+    """`parameter Q0 = C*V unit "V"`: C V is a charge (A*s), not a voltage."""
+    text = RC.format(R="Ohm", source="V").replace(
+        'parameter V = 5 unit "V"\n', 'parameter V = 5 unit "V"\nparameter Q0 = C*V unit "V"\n')
+    result = _check(tmp_path, text)
+    assert result.exit_code == 1
+    first = result.stderr.splitlines()[0]
+    assert ":5:" in first and "unit mismatch in the definition of 'Q0'" in first, first
+    assert "is V but 'C*V' is s*A" in first, first
