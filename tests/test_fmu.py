@@ -361,7 +361,7 @@ def test_declared_units_reach_the_variables(tmp_path):
     signal's parts is the unit of its variable in modelDescription.xml, each unit defined
     once; the units the laws give are there too (bgc.front.units: the force's N on the
     junction, x's m/s as its flow, so the mass's momentum is N*s and the spring's
-    displacement m); a time derivative has none."""
+    displacement m), their time derivatives in m/s and N, time in s."""
     (tmp_path / "units.bg").write_text(UNITS, encoding="utf-8")
     done = run_bgc("compile", "units.bg", "--scene", "run", "--target", "fmu",
                    "-o", "units.fmu", cwd=tmp_path)
@@ -370,9 +370,9 @@ def test_declared_units_reach_the_variables(tmp_path):
         root = ET.fromstring(z.read("modelDescription.xml"))
     units = {v.get("name"): v.find("Real").get("unit") for v in root.iter("ScalarVariable")}
     assert units == {"k": "N/m", "push": "N", "x": "m", "energy": "J", "pair[0]": "m",
-                     "pair[1]": "m", "mass.p": "N*s", "spring.q": "m", "der(x)": None,
-                     "der(mass.p)": None, "der(spring.q)": None, "time": None}
-    assert [u.get("name") for u in root.iter("Unit")] == ["N/m", "N*s", "m", "J", "N"]
+                     "pair[1]": "m", "mass.p": "N*s", "spring.q": "m", "der(x)": "m/s",
+                     "der(mass.p)": "N", "der(spring.q)": "m/s", "time": "s"}
+    assert [u.get("name") for u in root.iter("Unit")] == ["N/m", "N*s", "m", "N", "m/s", "J", "s"]
     assert validate_fmu(str(tmp_path / "units.fmu")) == []
 
 

@@ -166,6 +166,7 @@ def describe(compiled) -> Description:
         der_pos[i] = len(variables) + 1
         variables.append(Variable(f"der({name})", m + n + i, "local", "continuous",
                                   "calculated", f"time derivative of {name}",
+                                  unit=ratio(declared_units.get(name), "s"),
                                   derivative=state_pos[i]))
     out_pos = {}
     input_names = {u.name for u in program.inputs}
@@ -201,7 +202,7 @@ def describe(compiled) -> Description:
         input_slots.append(slot[0] if slot else -1)
     vr_time = m + 2 * n + len(program.outputs) + len(discrete) + len(program.inputs)
     variables.append(Variable("time", vr_time, "independent", "continuous", None,
-                              "the time t"))  # (`time` is a keyword: no model's name)
+                              "the time t", unit="s"))  # (`time` is a keyword: no model's name)
     names = [v.name for v in variables]
     if len(set(names)) != len(names):
         twice = sorted({x for x in names if names.count(x) > 1})
@@ -269,6 +270,12 @@ def _declared_units(graph) -> dict:
     (bgc.front.units: a bond's effort from its port's domain, a state from its law)."""
     declared = [*graph.parameters, *graph.signals, *graph.inputs]
     return {**dict(graph.units), **{d.name: d.unit for d in declared if d.unit}}
+
+
+def ratio(num, den):
+    """The unit of num/den (bgc.front.units.ratio)."""
+    from ..front.units import ratio as quotient
+    return quotient(num, den)
 
 
 def _unit_element(name: str) -> str:
