@@ -399,6 +399,79 @@ def test_fit_recovers_a_coulomb_friction_level_through_stick_slip(tmp_path):
     assert result.upper[0] - result.lower[0] < 0.01
 
 
+PWM_MOTOR = """model pwm_motor "a DC motor driven by a PWM voltage"
+parameter V = 12
+parameter R = 1
+parameter L = 0.005
+parameter K = 0.08 "the torque constant (the back-emf's too)"
+parameter J = 1e-4
+parameter b = 1e-4
+parameter period = 0.001
+parameter duty = 0.6
+u : MSe(V*square(period, duty))
+ra : R(R)
+la : I(L)
+em : GY(K)
+rotor : I(J)
+fr : R(b)
+ea : 1
+wm : 1
+u -> ea
+ea -> ra
+ea -> la
+ea -> em -> wm
+wm -> rotor
+wm -> fr
+scene run { time 0 .. 0.02 every 0.0001; outputs la.f, rotor.f
+  solver dopri5(rtol = 1e-10, atol = 1e-12) }
+"""
+
+
+def _pwm_motor_exact(times, K):
+    """Current and speed of the PWM motor at torque constant K, exactly: between the edges
+    (k T on, (k + D) T off) the motor is linear, L i' = V u - R i - K w, J w' = K i - b w,
+    so each piece is the matrix exponential of the system augmented with its input."""
+    from scipy.linalg import expm
+    V, R, L, J, b, T, D = 12.0, 1.0, 0.005, 1e-4, 1e-4, 0.001, 0.6
+    A = np.array([[-R / L, -K / L], [K / J, -b / J]])
+    pieces = {}
+    for on in (1.0, 0.0):
+        M = np.zeros((3, 3))
+        M[:2, :2], M[0, 2] = A, V * on / L
+        pieces[on] = M
+    edges = sorted({k * T for k in range(25)} | {(k + D) * T for k in range(25)})
+    x, t, out = np.array([0.0, 0.0, 1.0]), 0.0, []
+    for tk in times:
+        while True:
+            nxt = next(e for e in edges if e > t + 1e-15)
+            on = 1.0 if (t + 1e-15) % T < D * T else 0.0
+            if nxt > tk:
+                out.append((expm(pieces[on] * (tk - t)) @ x)[:2])
+                break
+            x, t = expm(pieces[on] * (nxt - t)) @ x, nxt
+    return np.array(out)
+
+
+def test_fit_recovers_a_pwm_motor_s_torque_constant(tmp_path):
+    """Current and speed of a PWM-driven DC motor from its exact piecewise solution at
+    K = 0.05 (the model's 0.08), with noise: bgc fit of K through every PWM edge, its 95 %
+    interval covering the truth."""
+    times = np.arange(201) * 1e-4
+    exact = _pwm_motor_exact(times, 0.05)
+    path = _write(tmp_path, "motor.bg", PWM_MOTOR)
+    t, Y, _ = api.simulate(path, "run", backend=BACKENDS[0], params={"K": 0.05})
+    assert np.array_equal(t, times) or np.allclose(t, times, rtol=0, atol=1e-15)
+    assert np.max(np.abs(Y - exact) / np.max(np.abs(exact), axis=0)) < 1e-8  # the model is it
+    data = _noisy_csv(tmp_path / "motor.csv", times, {"la.f": exact[:, 0],
+                                                      "rotor.f": exact[:, 1]}, 2e-3, 17)
+    result = estimate.fit(path, data, ["K=0.01..0.2"],
+                          scene="run", backend=BACKENDS[0])
+    assert result.converged, result.stopped
+    assert result.lower[0] < 0.05 < result.upper[0]
+    assert result.upper[0] - result.lower[0] < 1e-3
+    assert result.residual_sd == pytest.approx(2e-3, rel=0.15)
+
+
 def test_a_time_table_before_the_square_wave_leaves_its_edges_alone(tmp_path):
     """A table of t met before the square wave (its breakpoints time events of their own,
     its value 0 throughout): the edges' jumps are the square wave's still."""
