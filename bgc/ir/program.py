@@ -51,6 +51,7 @@ import sympy as sp
 
 from ..symbolic.algebra import Max, Min
 from ..symbolic.canonical import new
+from ..symbolic.walk import DESCEND, fold
 from ..base.run import RunSettings
 from ..symbolic.sparse import IterationPlan, LUPlan
 
@@ -186,26 +187,17 @@ def rebuild(e, args):
 
 
 def substitute(expr, mapping: dict, memo: dict | None = None):
-    """expr with the symbols (or subexpressions) of mapping replaced, bottom-up with an explicit
-    stack; only changed nodes are rebuilt; memo (shared between calls) remembers results."""
-    memo = {} if memo is None else memo
-    stack = [(expr, False)]
-    while stack:
-        e, ready = stack.pop()
-        if e in memo:
-            continue
+    """expr with the symbols (or subexpressions) of mapping replaced, bottom-up (one walk,
+    bgc.symbolic.walk); only changed nodes are rebuilt; memo (shared between calls) remembers
+    results."""
+    def leaf(e):
         if e in mapping:
-            memo[e] = mapping[e]
-            continue
+            return mapping[e]
         if e.is_Atom or e.is_Indexed or not e.args:
-            memo[e] = e
-            continue
-        if not ready:
-            stack.append((e, True))
-            stack.extend((a, False) for a in e.args if a not in memo)
-            continue
-        memo[e] = rebuild(e, [memo[a] for a in e.args])
-    return memo[expr]
+            return e
+        return DESCEND
+
+    return fold(expr, {} if memo is None else memo, leaf, rebuild)
 
 
 # free symbols, remembered: the passes ask for the symbols of the same statements again and
@@ -226,27 +218,25 @@ def _free_of_args(cls) -> bool:
 
 
 def free_symbols(expr) -> frozenset:
-    """expr.free_symbols as a frozenset, remembered for every subexpression (explicit stack);
-    nodes that define their own free symbols (symbols, Indexed, Derivative) are asked."""
+    """expr.free_symbols as a frozenset, remembered for every subexpression (one walk,
+    bgc.symbolic.walk); nodes that define their own free symbols (symbols, Indexed,
+    Derivative) are asked."""
     found = _FREE.get(expr)
     if found is not None:
         return found
     if len(_FREE) > _FREE_MAX:
         _FREE.clear()
-    memo = _FREE
-    stack = [(expr, False)]
-    while stack:
-        e, ready = stack.pop()
-        if e in memo:
-            continue
-        if not e.args or not _free_of_args(type(e)):
-            memo[e] = frozenset(e.free_symbols)
-        elif not ready:
-            stack.append((e, True))
-            stack.extend((a, False) for a in e.args if a not in memo)
-        else:
-            memo[e] = frozenset().union(*[memo[a] for a in e.args])
-    return memo[expr]
+    return fold(expr, _FREE, _free_leaf, _union)
+
+
+def _free_leaf(e):
+    if not e.args or not _free_of_args(type(e)):
+        return frozenset(e.free_symbols)
+    return DESCEND
+
+
+def _union(e, values):
+    return frozenset().union(*values)
 
 
 def trivial(e) -> bool:
@@ -265,6 +255,12 @@ def _integral(f) -> bool:
     return float(f).is_integer() and abs(float(f)) < 2 ** 53
 
 
+def _float_leaf(n):
+    if not n.args:
+        return frozenset((n,)) if isinstance(n, sp.Float) and _integral(n) else frozenset()
+    return DESCEND
+
+
 def integral_floats(e):
     """Floats with an integral value as integers (1.0*x is x), exact either way.  Which
     subexpressions hold such floats is remembered (explicit stack), like free_symbols."""
@@ -272,21 +268,7 @@ def integral_floats(e):
     if found is None:
         if len(_FLOATS) > _FLOATS_MAX:
             _FLOATS.clear()
-        memo = _FLOATS
-        stack = [(e, False)]
-        while stack:
-            n, ready = stack.pop()
-            if n in memo:
-                continue
-            if not n.args:
-                memo[n] = frozenset((n,)) if isinstance(n, sp.Float) and _integral(n) \
-                    else frozenset()
-            elif not ready:
-                stack.append((n, True))
-                stack.extend((a, False) for a in n.args if a not in memo)
-            else:
-                memo[n] = frozenset().union(*[memo[a] for a in n.args])
-        found = memo[e]
+        found = fold(e, _FLOATS, _float_leaf, _union)
     if not found:
         return e
     return e.xreplace({f: sp.Integer(int(f)) for f in found})

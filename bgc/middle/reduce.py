@@ -35,6 +35,7 @@ import sympy as sp
 from ..symbolic import blt
 from .. import ir
 from ..symbolic.canonical import new, xreplace
+from ..symbolic.walk import DESCEND, fold
 from ..ir import Assign, BlockPlan, Newton, Solve, Store, defines
 from ..symbolic.algebra import (antiderivative, cancel_bounded, expand_bounded, is_singular,
                                 is_symmetric, is_zero, lu_solution_nodes, solve_for)
@@ -1278,25 +1279,16 @@ def _number(expr, values, done=None) -> float:
     Raises _NotNumeric for a symbol without a value; NaN where a function is undefined.
     done (shared by the expressions of one evaluation, whose symbols each take one value):
     the values of the subexpressions already walked."""
-    done = {} if done is None else done
-    stack = [(expr, False)]
-    while stack:
-        e, ready = stack.pop()
-        if e in done:
-            continue
-        if not ready:
-            if e.is_Symbol:
-                if e not in values:
-                    raise _NotNumeric(e)
-                done[e] = values[e]
-            elif e.is_Number or e.is_NumberSymbol:
-                done[e] = float(e)
-            else:
-                stack.append((e, True))
-                stack.extend((a, False) for a in e.args if a not in done)
-            continue
-        done[e] = _apply(e, [done[a] for a in e.args])
-    return done[expr]
+    def leaf(e):
+        if e.is_Symbol:
+            if e not in values:
+                raise _NotNumeric(e)
+            return values[e]
+        if e.is_Number or e.is_NumberSymbol:
+            return float(e)
+        return DESCEND
+
+    return fold(expr, {} if done is None else done, leaf, _apply)
 
 
 _FLOAT_FUNCTIONS = {"sin": math.sin, "cos": math.cos, "tan": math.tan, "asin": math.asin,

@@ -17,6 +17,7 @@ import mpmath  # SymPy's own dependency: the 30-digit determinant of is_singular
 import sympy as sp
 
 from .canonical import xreplace
+from .walk import DESCEND, fold
 from .differentiate import partial
 from ..base.resources import MAX_EXPANDED_TERMS, MAX_GCD_BITS, expanded_terms, fits
 
@@ -302,29 +303,24 @@ def _degrees(expr) -> dict:
     """An upper bound of expr's degree in each variable of its polynomial form (symbols, and
     functions or non-integer powers, which SymPy's polynomials take as variables of their
     own): sums take the largest, products add, an integer power multiplies."""
-    degree: dict = {}
-    stack = [(expr, False)]
-    while stack:
-        e, ready = stack.pop()
-        if e in degree:
-            continue
-        polynomial = e.is_Add or e.is_Mul or (e.is_Pow and e.exp.is_Integer and e.exp > 0)
-        if e.is_Number:
-            degree[e] = {}
-        elif not polynomial:
-            degree[e] = {e: 1}
-        elif not ready:
-            stack.append((e, True))
-            stack.extend((a, False) for a in e.args if a not in degree)
-        elif e.is_Pow:
-            degree[e] = {g: k * int(e.exp) for g, k in degree[e.base].items()}
-        else:
-            out: dict = {}
-            for a in e.args:
-                for g, k in degree[a].items():
-                    out[g] = max(out.get(g, 0), k) if e.is_Add else out.get(g, 0) + k
-            degree[e] = out
-    return degree[expr]
+    return fold(expr, {}, _degree_leaf, _degree)
+
+
+def _degree_leaf(e):
+    if e.is_Number:
+        return {}
+    polynomial = e.is_Add or e.is_Mul or (e.is_Pow and e.exp.is_Integer and e.exp > 0)
+    return DESCEND if polynomial else {e: 1}
+
+
+def _degree(e, degrees):
+    if e.is_Pow:
+        return {g: k * int(e.exp) for g, k in degrees[0].items()}
+    out: dict = {}
+    for d in degrees:
+        for g, k in d.items():
+            out[g] = max(out.get(g, 0), k) if e.is_Add else out.get(g, 0) + k
+    return out
 
 
 def expand_bounded(expr):

@@ -22,6 +22,8 @@ import sympy as sp
 from sympy.core.sympify import _sympify  # the constructor's strict conversion of a number
 from sympy.functions.elementary.exponential import ExpBase as _ExpBase  # exp, exp_polar
 
+from .walk import DESCEND, fold
+
 _SORT_KEY = sp.core.basic._args_sortkey
 _ZERO, _ONE = sp.S.Zero, sp.S.One
 _GLOBAL = sp.core.parameters.global_parameters  # (its evaluate off: the constructor itself)
@@ -156,30 +158,20 @@ def _checked(cls, args, fast):
 
 def xreplace(expr, rule: dict, memo: dict | None = None):
     """expr.xreplace(rule), node for node as SymPy builds it (every changed node rebuilt by its
-    constructor, evaluated; sums and products by `new`), with an explicit stack.  memo: the
-    subexpressions already rebuilt under the same rule (expressions that share them, as the
-    entries of one matrix at one random point do: bgc.symbolic.algebra), each rebuilt once."""
-    memo = {} if memo is None else memo
-    stack = [(expr, False)]
-    while stack:
-        e, ready = stack.pop()
-        if e in memo:
-            continue
+    constructor, evaluated; sums and products by `new`), in one walk (bgc.symbolic.walk).
+    memo: the subexpressions already rebuilt under the same rule (expressions that share them,
+    as the entries of one matrix at one random point do: bgc.symbolic.algebra), each rebuilt
+    once."""
+    def leaf(e):
         if e in rule:
-            memo[e] = rule[e]
-            continue
-        args = e.args
-        if not args:
-            memo[e] = e
-            continue
-        if not ready:
-            stack.append((e, True))
-            stack.extend((a, False) for a in args if a not in memo)
-            continue
-        new_args = [memo[a] for a in args]
-        if all(a is b for a, b in zip(new_args, args)):
-            memo[e] = e
-        else:
-            cls = type(e)
-            memo[e] = new(cls, new_args) if cls is sp.Add or cls is sp.Mul else e.func(*new_args)
-    return memo[expr]
+            return rule[e]
+        return e if not e.args else DESCEND
+
+    return fold(expr, {} if memo is None else memo, leaf, _rebuilt)
+
+
+def _rebuilt(e, new_args):
+    if all(a is b for a, b in zip(new_args, e.args)):
+        return e
+    cls = type(e)
+    return new(cls, new_args) if cls is sp.Add or cls is sp.Mul else e.func(*new_args)

@@ -17,6 +17,7 @@ from __future__ import annotations
 import sympy as sp
 
 from .canonical import new
+from .walk import DESCEND, fold
 
 ZERO = sp.S.Zero
 _PIECEWISE_CONSTANT = (sp.sign, sp.Heaviside)  # derivative zero almost everywhere
@@ -33,33 +34,31 @@ def is_zero(x) -> bool:
 
 
 def directional(expr: sp.Expr, tangents: dict) -> sp.Expr:
-    """d expr along the direction; DiracDelta terms (from sign/abs/Heaviside) are dropped."""
+    """d expr along the direction; DiracDelta terms (from sign/abs/Heaviside) are dropped.  One
+    walk (bgc.symbolic.walk), a Piecewise's children its values (its conditions are constant
+    between events)."""
     if not tangents:
         return ZERO
-    done: dict = {}
-    stack = [(expr, False)]
-    while stack:
-        e, ready = stack.pop()
-        if e in done:
-            continue
+
+    def leaf(e):
         if e.is_Symbol or e.is_Indexed:
-            done[e] = tangents.get(e, ZERO)
-            continue
+            return tangents.get(e, ZERO)
         if e.is_Atom or not e.args:
-            done[e] = ZERO
-            continue
-        kids = [p.expr for p in e.args] if isinstance(e, sp.Piecewise) else e.args
-        if not ready:
-            stack.append((e, True))
-            stack.extend((a, False) for a in kids if a not in done)
-            continue
-        if isinstance(e, sp.Piecewise):  # the conditions are constant between events
-            d = [done[a] for a in kids]
-            done[e] = ZERO if all(is_zero(x) for x in d) else sp.Piecewise(
-                *[(x, p.cond) for x, p in zip(d, e.args)])
-            continue
-        done[e] = _rule(e, [done[a] for a in e.args])
-    return done[expr]
+            return ZERO
+        return DESCEND
+
+    return fold(expr, {}, leaf, _derivative, _kids)
+
+
+def _kids(e):
+    return [p.expr for p in e.args] if isinstance(e, sp.Piecewise) else e.args
+
+
+def _derivative(e, d):
+    if isinstance(e, sp.Piecewise):  # the conditions are constant between events
+        return ZERO if all(is_zero(x) for x in d) else sp.Piecewise(
+            *[(x, p.cond) for x, p in zip(d, e.args)])
+    return _rule(e, d)
 
 
 def partial(expr: sp.Expr, symbol) -> sp.Expr:
