@@ -144,7 +144,7 @@ class _System:
         self.order: dict[sp.Symbol, int] = {}
         self.states = {st.symbol: st for st in es.states}
         self.parameters = {var(p.name) for p in es.parameters}
-        self.params = self.parameters | events.leaves(es.events)  # constant between events
+        self.constants = self.parameters | events.leaves(es.events)  # constant between events
         self.by_name: dict[str, sp.Symbol] = {}
         diags = Collector()
         for eq in es.equations:
@@ -164,7 +164,7 @@ class _System:
         self.by_name[eq.target.name] = eq.target
 
     def is_leaf(self, s) -> bool:
-        return s is TIME or s in self.params or s in self.states
+        return s is TIME or s in self.constants or s in self.states
 
     def symbols(self, expr) -> list[sp.Symbol]:
         """The free symbols of expr in a deterministic order."""
@@ -185,7 +185,7 @@ class _System:
         if v.name.count("der(") >= MAX_DERIVATIVE_ORDER:
             fail(eq.span, f"'{eq.origin}' needs a time derivative of order "
                           f"{MAX_DERIVATIVE_ORDER + 1} ({der(v)}): the model's index is too high")
-        direction = {u: der(u) for u in eq.expr.free_symbols if u not in self.params}
+        direction = {u: der(u) for u in eq.expr.free_symbols if u not in self.constants}
         direction[TIME] = sp.Integer(1)
         new = Equation(der(v), directional(eq.expr, direction), eq.explicit, eq.origin, eq.span)
         self.add(new)
@@ -238,8 +238,8 @@ def _leaf(expr, defs, expandable, memo=None):
 # ---------------------------------------------------------------- constraints
 
 
-def _explicit_defs(sys: _System) -> dict:
-    return {s: eq.expr for s, eq in sys.eqs.items() if eq.explicit}
+def _explicit_defs(system: _System) -> dict:
+    return {s: eq.expr for s, eq in system.eqs.items() if eq.explicit}
 
 
 class _Coordinates:
@@ -247,22 +247,22 @@ class _Coordinates:
     end of their alias chains), each solved for its coordinate's rate: worked out once for all
     the constraint junctions of the model."""
 
-    def __init__(self, sys: _System, defs: dict):
-        self.sys, self.defs = sys, defs
-        self.integrals = [st for st in sys.es.states if st.kind == "integral signal"]
+    def __init__(self, system: _System, defs: dict):
+        self.system, self.defs = system, defs
+        self.integrals = [st for st in system.es.states if st.kind == "integral signal"]
         self.coords = [st.symbol for st in self.integrals]
         self.rate = {q: var(f"d{q.name}/dt") for q in self.coords}
-        self.others = set(sys.states) - set(self.coords)
+        self.others = set(system.states) - set(self.coords)
         frozen = set()
         for st in self.integrals:
-            frozen |= {_alias_end(u, defs, sys.eqs)
-                       for u in sys.eqs[der(st.symbol)].expr.free_symbols}
+            frozen |= {_alias_end(u, defs, system.eqs)
+                       for u in system.eqs[der(st.symbol)].expr.free_symbols}
         self.frozen = frozen
         self.memo: dict = {}
         self.solved: dict = {}
         self.loop = False
         try:
-            rates = {q: self.leaf(sys.eqs[der(q)].expr) for q in self.coords}
+            rates = {q: self.leaf(system.eqs[der(q)].expr) for q in self.coords}
         except _Cycle:
             self.loop = True
             return
@@ -287,7 +287,7 @@ class _Coordinates:
         return u in self.frozen or u in self.others
 
     def expandable(self, s) -> bool:
-        return s in self.defs and s not in self.frozen and not self.sys.is_leaf(s)
+        return s in self.defs and s not in self.frozen and not self.system.is_leaf(s)
 
     def leaf(self, expr):
         return _leaf(expr, self.defs, self.expandable, self.memo)
@@ -306,7 +306,7 @@ class _Coordinates:
         if any(u not in self.solved for u in unknowns):
             return None, "its flows are not all integrated into coordinates by integral signals"
         balance = balance.xreplace({u: self.solved[u] for u in unknowns})
-        multipliers = set(_multipliers(self.sys))
+        multipliers = set(_multipliers(self.system))
         if any(s in self.defs or s in self.others or s in multipliers
                for s in balance.free_symbols):
             return None, "its flows are not all integrated into coordinates by integral signals"
@@ -323,8 +323,8 @@ class _Coordinates:
         return (coeffs, a0, self.coords), None
 
 
-def _multipliers(sys):
-    return [c.multiplier for c in sys.es.constraints]
+def _multipliers(system):
+    return [c.multiplier for c in system.es.constraints]
 
 
 def _alias_end(s, defs, eqs):
@@ -375,7 +375,7 @@ def _potential(coeffs, a0, span, name):
     return sp.expand(P - at_zero), True
 
 
-def _phi(c: ConstraintDef, form, sys: _System):
+def _phi(c: ConstraintDef, form, system: _System):
     coeffs, a0, coords = form
     if c.annotation is not None and c.annotation[0] == "phi":
         phi, span = c.annotation[1], c.annotation[2]
@@ -397,8 +397,8 @@ def _phi(c: ConstraintDef, form, sys: _System):
                                   "'phi = ...' on the junction, or leave the constant to the "
                                   "initial state")
         return P + c.annotation[1], None
-    t0 = sp.Float(sys.es.run.t0)
-    init = {st.symbol: st.init for st in sys.es.states}
+    t0 = sp.Float(system.es.run.t0)
+    init = {st.symbol: st.init for st in system.es.states}
     const = -P.xreplace(init).xreplace({TIME: t0})
     if const.has(*NOT_FINITE) or const.has(sp.I):
         fail(c.name_span, f"constraint '{c.junction}' has no 'init = ...' or 'phi = ...', and "
@@ -410,25 +410,25 @@ def _phi(c: ConstraintDef, form, sys: _System):
     return P + const, msg
 
 
-def _constraints(sys: _System, diags: Collector) -> list[ConstraintInfo]:
-    if not sys.es.constraints:
+def _constraints(system: _System, diags: Collector) -> list[ConstraintInfo]:
+    if not system.es.constraints:
         return []
-    defs = _explicit_defs(sys)
-    coordinates = _Coordinates(sys, defs)
-    multipliers = set(_multipliers(sys))
+    defs = _explicit_defs(system)
+    coordinates = _Coordinates(system, defs)
+    multipliers = set(_multipliers(system))
     memo: dict = {}
     infos = []
-    for c in sys.es.constraints:
+    for c in system.es.constraints:
         try:
-            infos.append(_constraint(c, sys, defs, coordinates, multipliers, memo, diags))
+            infos.append(_constraint(c, system, defs, coordinates, multipliers, memo, diags))
         except ModelError as exc:
             diags.items.extend(exc.diagnostics)
     return infos
 
 
-def _constraint(c, sys, defs, coordinates, multipliers, memo, diags) -> ConstraintInfo:
+def _constraint(c, system, defs, coordinates, multipliers, memo, diags) -> ConstraintInfo:
     def expandable(s):
-        return s in defs and not sys.is_leaf(s)
+        return s in defs and not system.is_leaf(s)
 
     try:
         in_states = _leaf(defs[c.balance], defs, expandable, memo)
@@ -444,7 +444,7 @@ def _constraint(c, sys, defs, coordinates, multipliers, memo, diags) -> Constrai
                           "finite (a division by zero?)")
     resistive = bool(in_states.free_symbols & multipliers)
     if c.kind in contact.SWITCHED and not c.dual:
-        _refuse_imposed_flow(c, in_states, sys, multipliers)
+        _refuse_imposed_flow(c, in_states, system, multipliers)
     if resistive and c.kind not in contact.SWITCHED:
         fail(c.span, f"the flow balance of constraint junction '{c.junction}' depends on a "
                      "multiplier directly (a resistive path?): declare it as a plain junction")
@@ -463,11 +463,11 @@ def _constraint(c, sys, defs, coordinates, multipliers, memo, diags) -> Constrai
                           f"integrable: {why}")
     phi = None
     if kind == "holonomic":
-        phi, msg = _phi(c, form, sys)
-        if msg and (c.corrector == "pid" or _residual_asked(sys.es, c)):
+        phi, msg = _phi(c, form, system)
+        if msg and (c.corrector == "pid" or _residual_asked(system.es, c)):
             diags.warning(c.name_span, msg)
     residual = phi if kind == "holonomic" else c.balance
-    sys.add(Equation(c.residual, residual, True, c.junction, c.span))
+    system.add(Equation(c.residual, residual, True, c.junction, c.span))
     B, dB, gains = c.balance, der(c.balance), c.gains
     if c.corrector == "pid":
         law = dB + 2 * gains[0] * B + gains[1] ** 2 * c.residual
@@ -480,7 +480,7 @@ def _constraint(c, sys, defs, coordinates, multipliers, memo, diags) -> Constrai
     if unilateral or switched:  # active: the constraint's law; else no force (bgc.middle.contact)
         free = c.multiplier - (c.gains[0] * contact.direction(c) if c.kind == "friction" else 0)
         law = sp.Piecewise((law, contact.holds(c)), (free, True))
-    sys.add(Equation(c.multiplier, law, False, c.junction, c.span))
+    system.add(Equation(c.multiplier, law, False, c.junction, c.span))
     return ConstraintInfo(c.junction, c.kind if unilateral or switched else kind, detected,
                           c.corrector, c.gains, phi, in_states, c.multiplier, c.span,
                           c.name_span)
@@ -498,23 +498,23 @@ SWITCHED_WORDS = {  # kind: what it is, the mode that holds its flow at zero (to
                  "flow through an open switch", "a resistance that carries it")}
 
 
-def _refuse_imposed_flow(c: ConstraintDef, in_states, sys: _System, multipliers) -> None:
+def _refuse_imposed_flow(c: ConstraintDef, in_states, system: _System, multipliers) -> None:
     """A switched one-port whose flow, written in the states, reads neither a state nor a
     multiplier has it imposed from outside (a current source in series): the mode that holds
     that flow at zero (blocking, open, sticking) contradicts it, and the multiplier's law
     would divide by zero.  Refused at the element, with a note where the flow is imposed; a
     diode's flow that is a positive number never needs to block, and a zero flow never
     contradicts."""
-    if in_states.free_symbols & (set(sys.states) | multipliers) or in_states == 0:
+    if in_states.free_symbols & (set(system.states) | multipliers) or in_states == 0:
         return
-    if any(s in sys.eqs and not sys.eqs[s].explicit for s in in_states.free_symbols):
+    if any(s in system.eqs and not system.eqs[s].explicit for s in in_states.free_symbols):
         return  # (a coupled field's velocities: they solve M(q) v = p, so follow the states)
     if c.kind == "diode" and in_states.is_number and in_states > 0:
         return
     name = c.junction.removesuffix(".switch")  # (`J : 1 switch(C)`: its switch J.switch)
     word, mode, being, what, path = SWITCHED_WORDS["junction" if name != c.junction
                                                    else c.kind]
-    source = _imposed_by(sys, c.balance, c.junction)
+    source = _imposed_by(system, c.balance, c.junction)
     by = f" by '{source.origin}'" if source is not None else ""
     notes = [Note(source.span, f"'{source.origin}' imposes the flow here, whatever the "
                                f"effort of '{name}'")] if source is not None else []
@@ -523,18 +523,18 @@ def _refuse_imposed_flow(c: ConstraintDef, in_states, sys: _System, multipliers)
                       f"flow another path ({path}) or drive it with an effort source", *notes)
 
 
-def _imposed_by(sys: _System, start, junction: str) -> Equation | None:
+def _imposed_by(system: _System, start, junction: str) -> Equation | None:
     """The equation an imposed flow comes from: the first met, walking the definitions from
     `start` breadth first, whose right side reads parameters, t and event values only (a
     source's law); None if there is none."""
     seen, todo = set(), [start]
     while todo:
         s = todo.pop(0)
-        eq = sys.eqs.get(s)
+        eq = system.eqs.get(s)
         if eq is None or s in seen:
             continue
         seen.add(s)
-        inner = [u for u in sys.symbols(eq.expr) if not sys.is_leaf(u)]
+        inner = [u for u in system.symbols(eq.expr) if not system.is_leaf(u)]
         if not inner and eq.origin != junction:
             return eq
         todo += inner
@@ -548,34 +548,34 @@ def _residual_asked(es, c) -> bool:
 # ---------------------------------------------------------------- what the outputs need
 
 
-def _needed(sys: _System, roots=()) -> tuple[list[sp.Symbol], list[StateVar]]:
+def _needed(system: _System, roots=()) -> tuple[list[sp.Symbol], list[StateVar]]:
     """The targets the outputs (and the events' roots: (expr, span)) need (deriving der()
     equations on demand), and the states."""
     needed: set = set()
     kept: set = set()
     todo: list = []  # (symbol, the span of what needs it)
-    for expr, span in [(o.expr, o.span) for o in sys.es.outputs] + list(roots):
-        todo.extend((u, span) for u in reversed(sys.symbols(expr)))
+    for expr, span in [(o.expr, o.span) for o in system.es.outputs] + list(roots):
+        todo.extend((u, span) for u in reversed(system.symbols(expr)))
     while todo:
         s, span = todo.pop()
-        if s in needed or s is TIME or s in sys.params:
+        if s in needed or s is TIME or s in system.constants:
             continue
-        if s in sys.states:
+        if s in system.states:
             if s not in kept:
                 kept.add(s)
                 todo.append((der(s), span))
             continue
-        eq = sys.eqs.get(s)
+        eq = system.eqs.get(s)
         if eq is None:
-            v = sys.derivative_of(s)
-            if v is None or v not in sys.eqs:
+            v = system.derivative_of(s)
+            if v is None or v not in system.eqs:
                 fail(span, f"'{s.name}' is not determined in this scene: nothing sets it (a "
                            "junction without bonds?)")
-            eq = sys.differentiate(v)
+            eq = system.differentiate(v)
         needed.add(s)
-        todo.extend((u, eq.span) for u in reversed(sys.symbols(eq.expr)))
-    targets = sorted(needed, key=lambda s: sys.order[s])
-    states = [st for st in sys.es.states if st.symbol in kept]
+        todo.extend((u, eq.span) for u in reversed(system.symbols(eq.expr)))
+    targets = sorted(needed, key=lambda s: system.order[s])
+    states = [st for st in system.es.states if st.symbol in kept]
     return targets, states
 
 
@@ -583,8 +583,8 @@ def _needed(sys: _System, roots=()) -> tuple[list[sp.Symbol], list[StateVar]]:
 
 
 class _Blocks:
-    def __init__(self, sys: _System, algebra: str):
-        self.sys = sys
+    def __init__(self, system: _System, algebra: str):
+        self.system = system
         self.algebra = algebra
         self.steps: list = []  # bgc.ir statements over model symbols
         self.plans: list[BlockPlan] = []
@@ -600,7 +600,7 @@ class _Blocks:
 
     def run(self, targets):
         index = {s: i for i, s in enumerate(targets)}
-        eqs = [self.sys.eqs[s] for s in targets]
+        eqs = [self.system.eqs[s] for s in targets]
         succ = [sorted(index[u] for u in eq.expr.free_symbols if u in index) for eq in eqs]
         for comp in blt.components(len(targets), succ):
             if len(comp) == 1 and eqs[comp[0]].explicit and comp[0] not in succ[comp[0]]:
@@ -748,12 +748,12 @@ class _Blocks:
         # (with every mode open: rows that hold only in some modes, two gaps on one
         # coordinate, may be dependent when both hold; a run that reaches that says so)
         off = {contact.active(c): sp.Integer(1 if c.dual else 0)
-               for c in self.sys.es.constraints
+               for c in self.system.es.constraints
                if c.kind == "unilateral" or c.kind in contact.SWITCHED}
         A_off = A.xreplace(off) if off else A
         if m <= SINGULAR_CHECK_MAX and is_singular(m, [(i, k, A_off[i, k])
                                                        for i, k, _ in matrix]):
-            rows = _dependent_rows(self.sys.es.constraints, z, _at_random_point(A_off))
+            rows = _dependent_rows(self.system.es.constraints, z, _at_random_point(A_off))
             if rows:
                 fail(rows[0].name_span, f"the constraint rows {_listed(rows)} are not "
                                         "independent, whatever the state: their multipliers "
@@ -970,32 +970,32 @@ def _tidy(expr):
 def reduce(es: EquationSystem, project_initial: bool = False, algebra: str = "auto") -> Reduced:
     if algebra not in ALGEBRA:
         raise ValueError(f"algebra must be one of {', '.join(ALGEBRA)}, not {algebra!r}")
-    sys = _System(es)
+    system = _System(es)
     diags = Collector()
-    infos = _constraints(sys, diags)
+    infos = _constraints(system, diags)
     diags.raise_if_errors()
     if any(c.kind == "unilateral" or c.kind in contact.SWITCHED for c in infos):
-        es = contact.with_contact_events(sys, infos, _Weights(sys), _explicit_defs(sys), _leaf,
+        es = contact.with_contact_events(system, infos, _Weights(system), _explicit_defs(system), _leaf,
                                          _Cycle)
-        sys.es = es
-        sys.params = sys.parameters | events.leaves(es.events)
+        system.es = es
+        system.constants = system.parameters | events.leaves(es.events)
     try:
-        targets, kept = _needed(sys)
+        targets, kept = _needed(system)
         selected = None
         if any(es.events):
-            targets, kept, selected = _with_events(sys, targets, kept)
+            targets, kept, selected = _with_events(system, targets, kept)
             _warn_unsolved_times(selected, diags)
-            selected = _with_start_forms(sys, selected)
-        blocks = _Blocks(sys, algebra)
+            selected = _with_start_forms(system, selected)
+        blocks = _Blocks(system, algebra)
         blocks.run(targets)
     except ModelError as err:
         _switched_modes_unsupported(err, infos)
         raise
-    _check_constants(blocks, sys)
-    rows = _rows(sys, infos, kept)
+    _check_constants(blocks, system)
+    rows = _rows(system, infos, kept)
     kept_symbols = {st.symbol for st in kept}
     pruned = tuple(st.name for st in es.states if st.symbol not in kept_symbols)
-    eliminated = _eliminated(sys)
+    eliminated = _eliminated(system)
     reduced = Reduced(es.name, es.parameters, tuple(kept), pruned, tuple(blocks.steps),
                       tuple(blocks.plans),
                       tuple(der(st.symbol) for st in kept), es.outputs, tuple(infos),
@@ -1006,7 +1006,7 @@ def reduce(es: EquationSystem, project_initial: bool = False, algebra: str = "au
         check_initial(reduced)
     else:
         initial_values(reduced)  # every initial state a double, projected or not
-    return _with_init_warnings(reduced, sys, eliminated)
+    return _with_init_warnings(reduced, system, eliminated)
 
 
 def _warn_unsolved_times(selected, diags: Collector) -> None:
@@ -1044,7 +1044,7 @@ def _switched_modes_unsupported(err: ModelError, infos) -> None:
          Note(d.span, d.message), *d.notes)
 
 
-def _with_start_forms(sys: _System, selected):
+def _with_start_forms(system: _System, selected):
     """The state relations that read signals, written in what the signals are computed from,
     for the start's first pass (bgc.front.events._at_start): a relation of a signal of a time
     source must read the source's value at t0 there, not its value before the start.  Only
@@ -1052,11 +1052,11 @@ def _with_start_forms(sys: _System, selected):
     operations is left as it is."""
     if selected is None:
         return None
-    defs, memo = _explicit_defs(sys), {}
+    defs, memo = _explicit_defs(system), {}
     sources = {q.symbol for q in selected.squares} | {r.symbol for r, _, _ in selected.time}
 
     def expandable(s):
-        return s in defs and not sys.is_leaf(s)
+        return s in defs and not system.is_leaf(s)
 
     starts = []
     for r in selected.state:
@@ -1078,27 +1078,27 @@ def _with_start_forms(sys: _System, selected):
 MAX_START_FORM = 2000
 
 
-def _with_events(sys: _System, targets, kept):
+def _with_events(system: _System, targets, kept):
     """The targets and states once the events the scene needs are counted in (what they read
     is computed too, and a kept when-block's state is kept), and those events."""
     selected = None
-    for _ in range(len(sys.es.events[3]) + 2):
+    for _ in range(len(system.es.events[3]) + 2):
         used = set()
         for t in targets:
-            used |= sys.eqs[t].expr.free_symbols
-        for o in sys.es.outputs:
+            used |= system.eqs[t].expr.free_symbols
+        for o in system.es.outputs:
             used |= o.expr.free_symbols
-        new = events.select(sys.es.events, used, {st.symbol: st for st in kept},
-                            sys.parameters)
+        new = events.select(system.es.events, used, {st.symbol: st for st in kept},
+                            system.parameters)
         if new == selected:
             break
         selected = new
-        targets, kept = _needed(sys, selected.roots())
-    events.check(selected, sys.es)
+        targets, kept = _needed(system, selected.roots())
+    events.check(selected, system.es)
     return targets, kept, (None if selected.empty else selected)
 
 
-def _check_constants(blocks: _Blocks, sys: _System):
+def _check_constants(blocks: _Blocks, system: _System):
     """The variables that are numbers put into what reads them, forward, as the lowering stage
     does: an expression that then is not finite (1/s where s = 0 is an equation of the model)
     is a located error, not an infinity in the generated code."""
@@ -1120,28 +1120,28 @@ def _check_constants(blocks: _Blocks, sys: _System):
     for step in blocks.steps:
         if isinstance(step, Assign):
             assigns, uses = [step], []
-            eq = sys.eqs.get(step.target) or blocks.owner[step.target]
+            eq = system.eqs.get(step.target) or blocks.owner[step.target]
         else:
             eq = blocks.plan_eq[step.block]
             assigns = list(step.body) + list(step.tangents) if isinstance(step, Newton) else []
             uses = list(step.residuals) + list(step.jacobian) if isinstance(step, Newton) \
                 else list(step.matrix) + list(step.rhs)
         for a in assigns:
-            value = put(a.expr, sys.eqs.get(a.target) or blocks.owner.get(a.target, eq))
+            value = put(a.expr, system.eqs.get(a.target) or blocks.owner.get(a.target, eq))
             if value.is_Number:
                 known[a.target] = value
         for e in uses:
             put(e, eq)
 
 
-def _eliminated(sys: _System):
-    defs = _explicit_defs(sys)
+def _eliminated(system: _System):
+    defs = _explicit_defs(system)
 
     def expandable(s):
-        return s in defs and not sys.is_leaf(s)
+        return s in defs and not system.is_leaf(s)
 
     out = []
-    for st in sys.es.stores:
+    for st in system.es.stores:
         if st.state not in defs:
             out.append((st.state.name, SOLVED_WITH_BLOCK))
             continue
@@ -1154,13 +1154,13 @@ def _eliminated(sys: _System):
     return tuple(out)
 
 
-def _rows(sys, infos, kept) -> list[ConstraintRow]:
+def _rows(system, infos, kept) -> list[ConstraintRow]:
     """The constraint rows in the kept states (constraints on states that this scene does not
     integrate are left out)."""
     kept_symbols = {st.symbol for st in kept}
-    all_states = set(sys.states)
-    balances = {c.junction: c.balance for c in sys.es.constraints}
-    weigh = _Weights(sys)
+    all_states = set(system.states)
+    balances = {c.junction: c.balance for c in system.es.constraints}
+    weigh = _Weights(system)
     rows = []
     for c in infos:
         if c.kind == "unilateral" or c.kind in contact.SWITCHED:
@@ -1189,19 +1189,19 @@ class _Weights:
     smallest change of kinetic energy, as an impulse of the constraint would, which for a
     coupled field is dp = G^T mu whatever M(q) is."""
 
-    def __init__(self, sys: _System):
-        self.sys = sys
-        self.defs = _explicit_defs(sys)
-        self.momenta = [(p, f, sign) for p, f, sign in sys.es.momenta if p in sys.states]
+    def __init__(self, system: _System):
+        self.system = system
+        self.defs = _explicit_defs(system)
+        self.momenta = [(p, f, sign) for p, f, sign in system.es.momenta if p in system.states]
         self.frozen = {f for _, f, _ in self.momenta}
         self.memo: dict = {}
         self.memo_all: dict = {}
 
     def __call__(self, balance) -> tuple:
-        defs, sys = self.defs, self.sys
+        defs, system = self.defs, self.system
 
         def held(s):
-            return s in defs and s not in self.frozen and not sys.is_leaf(s)
+            return s in defs and s not in self.frozen and not system.is_leaf(s)
 
         try:
             in_flows = _leaf(defs[balance], defs, held, self.memo)
@@ -1209,7 +1209,7 @@ class _Weights:
             for p, f, sign in self.momenta:
                 if f in flows:
                     d = sign * partial(in_flows, f)
-                    out.append((p, _leaf(d, defs, lambda s: s in defs and not sys.is_leaf(s),
+                    out.append((p, _leaf(d, defs, lambda s: s in defs and not system.is_leaf(s),
                                          self.memo_all)))
         except _Cycle:
             return ()
@@ -1218,10 +1218,10 @@ class _Weights:
     def speeds(self, moved) -> sp.Expr:
         """The sum of the magnitudes of the velocities of the momenta in moved, in the states
         (a coupled field's through its block)."""
-        defs, sys = self.defs, self.sys
+        defs, system = self.defs, self.system
         try:
             return sp.Add(*[sp.Abs(_leaf(sign * f, defs, lambda s: s in defs and
-                                         not sys.is_leaf(s), self.memo_all), evaluate=False)
+                                         not system.is_leaf(s), self.memo_all), evaluate=False)
                             for p, f, sign in self.momenta if p in moved])
         except _Cycle:
             return sp.Integer(0)
@@ -1421,9 +1421,9 @@ def check_initial(reduced: Reduced):
             pass  # through a Newton block, or not finite there: the generated program says
 
 
-def _with_init_warnings(reduced: Reduced, sys: _System, eliminated) -> Reduced:
+def _with_init_warnings(reduced: Reduced, system: _System, eliminated) -> Reduced:
     """Warn where an init clause on a derivative-causality element disagrees with the model."""
-    stores = [s for s in sys.es.stores if s.given_init is not None]
+    stores = [s for s in system.es.stores if s.given_init is not None]
     if not stores:
         return reduced
     implied_of = dict(eliminated)
@@ -1431,7 +1431,7 @@ def _with_init_warnings(reduced: Reduced, sys: _System, eliminated) -> Reduced:
     t0 = sp.Float(reduced.run.t0)
     values = {**params, TIME: t0,
               **{st.symbol: sp.Float(float(st.init.xreplace(params).xreplace({TIME: t0})))
-                 for st in sys.es.states}}
+                 for st in system.es.states}}
     out = []
     for s in stores:
         expr = implied_of.get(s.state.name)
