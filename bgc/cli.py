@@ -852,7 +852,10 @@ def _simulate_run(settings, record, program, compiled, request, stats, output, p
         # (not while the CSV itself goes to the terminal: the bar would cut its lines)
         progress = _RunProgress() if sys.stderr.isatty() and (
             output or not sys.stdout.isatty()) else None
-        units = {c[0]: c[3] or "" for c in record.plot_columns} if units_row else None
+        units = None
+        if units_row:  # (the outputs' from the record, a warm run's too; the rest's: the model's)
+            units = dict(compiled.graph.units) if compiled is not None else {}
+            units.update({c[0]: c[3] for c in record.plot_columns if c[3]})
         try:
             status, rows = _run(program, settings, stats, output, copy, progress, units)
         except backends.CannotStart:  # (damaged behind its checksum: evicted, built again)
@@ -981,13 +984,22 @@ class _UnitsRow:
             cut = text.find("\n")
             if cut >= 0:
                 names = text[:cut].rstrip("\r").split(",")
-                row = ",".join("s" if n == "t" else self.units.get(n, "") for n in names)
+                row = ",".join(self._unit(n) for n in names)
                 text = text[:cut + 1] + row + "\n" + text[cut + 1:]
                 self.done = True
         self.stream.write(text)
 
     def flush(self) -> None:
         self.stream.flush()
+
+    def _unit(self, name: str) -> str:
+        if name == "t":
+            return "s"
+        if name.startswith("d(") and ")/d(" in name and name.endswith(")"):  # a sensitivity
+            from .front.units import ratio
+            y, p = name[2:-1].split(")/d(", 1)
+            return ratio(self.units.get(y), self.units.get(p)) or ""
+        return self.units.get(name, "")
 
 
 def _run(program, settings, stats: bool, output: str | None, copy: Path | None = None,

@@ -234,3 +234,15 @@ def test_a_parameter_defined_in_the_wrong_unit_is_refused_at_its_definition(tmp_
     first = result.stderr.splitlines()[0]
     assert ":5:" in first and "unit mismatch in the definition of 'Q0'" in first, first
     assert "is V but 'C*V' is s*A" in first, first
+
+
+def test_a_sensitivity_s_unit_is_its_output_s_over_its_parameter_s(tmp_path):
+    (tmp_path / "rc.bg").write_text(RC.format(R="Ohm", source="V"), encoding="utf-8")
+    result = CliRunner().invoke(main, ["simulate", str(tmp_path / "rc.bg"), "--scene", "run",
+                                       "--units", "--sensitivities", "R", "--backend",
+                                       "python"])
+    assert result.exit_code == 0, result.output
+    header, units = result.stdout.splitlines()[:2]
+    unit = dict(zip(header.split(","), units.split(",")))
+    assert _dims(unit["d(c.e)/d(R)"]) == _dims("V/Ohm")  # = A
+    assert _dims(unit["d(c.q)/d(R)"]) == _dims("A*s/Ohm")
