@@ -1752,10 +1752,11 @@ def _fmt_file(layout, path: str, check: bool, diff: bool) -> int:
     """bgc fmt of one file (`-`: the standard input): its exit status."""
     import difflib
 
-    from .base.resources import MAX_SOURCE_BYTES
+    from .base.resources import max_source_bytes
     name = "<stdin>" if path == "-" else path
     try:
-        data = sys.stdin.buffer.read(MAX_SOURCE_BYTES + 1) if path == "-" else read_bounded(path)
+        data = sys.stdin.buffer.read(max_source_bytes() + 1) if path == "-" else \
+            read_bounded(path)
     except OSError as error:
         click.echo(f"error: {name}: cannot read: {outfile.reason(error)}", err=True)
         return 1

@@ -21,7 +21,9 @@ from bgc.codegen.emit import emit_python
 from bgc.front.graph import var
 from bgc.front.parser import KEYWORDS, lark_parser
 from bgc.middle.reduce import explicit_forms
-from bgc.base.resources import MAX_EXPANDED_TERMS, MAX_SOURCE_BYTES, expanded_terms, fits
+from bgc.base.resources import (MAX_EXPANDED_TERMS, MEMORY_BASE,
+                                MEMORY_PER_SOURCE_BYTE, MEMORY_PER_STATEMENT, expanded_terms, fits,
+                                max_source_bytes)
 
 
 def build(text, scene=None, **kw):
@@ -170,14 +172,24 @@ def test_antiderivatives_by_rules_only():
 # ------------------------------------------------------------------ input, read with a bound
 
 
-def test_an_endless_or_huge_file_is_refused_after_a_bounded_read(tmp_path):
+def test_an_endless_or_huge_file_is_refused_after_a_bounded_read(tmp_path, monkeypatch):
+    """The largest model text is what the memory bgc may use can compile (BGC_MEMORY here,
+    what the machine has otherwise): beyond it, refused before parsing, the memory it would
+    need and the time said; read no further than that."""
+    monkeypatch.setenv("BGC_MEMORY", "300M")
+    limit = max_source_bytes()
+    assert limit == (300 * 2 ** 20 - MEMORY_BASE) // MEMORY_PER_SOURCE_BYTE
     huge = tmp_path / "huge.bg"
-    huge.write_bytes(b"model m\n" + b"#" * (MAX_SOURCE_BYTES + 10))
+    huge.write_bytes(b"model m\n" + b"#" * (limit + 10))
     for path in ("/dev/zero", str(huge)):
         result = CliRunner().invoke(main, ["check", path])
         assert result.exit_code == 1, result.output
-        assert result.stderr == f"{path}: error: model file too large (more than " \
-                                f"{MAX_SOURCE_BYTES} bytes)\n"
+        assert result.stderr.startswith(f"{path}: error: the model is too large: its more "
+                                        f"than {limit} bytes need about "), result.stderr
+        assert "more than the 300 MiB available (BGC_MEMORY sets what bgc may use)" in \
+            result.stderr and "the compile would take about" in result.stderr
+    monkeypatch.delenv("BGC_MEMORY")
+    assert max_source_bytes() > 1 << 20  # (this machine's memory: more than 1 MiB of text)
 
 
 def test_at_most_100_scenes():
@@ -352,3 +364,25 @@ def test_exponents_up_to_the_limit_are_kept():
     law = "model m\nparameter a = 0.5\nj : 0\nc : C({})\nj -> c\n"
     build(law.format("1 + a^64"))
     assert "the power a^80 has too large an exponent" in error_of(law.format("a^40 * a^40"))
+
+
+def test_too_many_scalar_parts_are_refused_before_they_are_made(monkeypatch):
+    """Multiports that split into more scalar parts than the memory bgc may use can compile
+    (about MEMORY_PER_STATEMENT each) are refused at the declaration that crosses it, before
+    flatten makes them (the parts' memory and the compile's time said).  (This was
+    tests/errors/model_too_large.bg at a fixed 50 000 parts; the machine's memory allows
+    millions, so the case is made here with BGC_MEMORY.)"""
+    monkeypatch.setenv("BGC_MEMORY", "120M")
+    parts = (120 * 2 ** 20 - MEMORY_BASE) // MEMORY_PER_STATEMENT
+    text = ("model m\na : 0[1000]\nb : C[1000](1)\nc : 1[1000]\nd : I[1000](1)\n"
+            "a -> b\na -> c\nc -> d\n")
+    message = error_of(text)
+    assert message.startswith(f"inline.bg:4:1: error: the model is too large: the more than "
+                              f"{parts} scalar elements, signals and bonds of its multiports "
+                              "once split need about "), message
+    assert "more than the 120 MiB available" in message
+    monkeypatch.setenv("BGC_MEMORY", "1G")  # room for its 7000 parts: split
+    from bgc.front.flatten import flatten
+    from bgc.front.instantiate import front
+    from bgc.front.resolve import resolve
+    assert len(flatten(resolve(front(Source("inline.bg", text)))).bonds) == 3000

@@ -10,6 +10,7 @@ solvers instead), so that no model can make bgc hang, exhaust memory or recurse 
 from __future__ import annotations
 
 import gc
+import os
 import threading
 from contextlib import contextmanager
 from math import comb
@@ -17,20 +18,29 @@ from pathlib import Path
 
 PACKAGE_DIR = Path(__file__).resolve().parent.parent  # the package bgc
 
-# the model text
-MAX_SOURCE_BYTES = 1 << 20  # 1 MiB: larger input is refused, not read
+# the model's size: refused where its compile would need more memory than bgc has (an
+# estimate checked before the work, from the measured cost of large flat models and of
+# components in `for` loops: benchmarks/compile_scale.py), not by a fixed count
+MEMORY_BASE = 100 << 20  # the interpreter, SymPy and bgc before a model
+MEMORY_PER_SOURCE_BYTE = 600  # a flat model's peak per byte of its text (440 measured)
+MEMORY_PER_STATEMENT = 10_000  # per declaration or bond (about 7 KB measured)
+SECONDS_PER_STATEMENT = 6e-4  # a compile's time per declaration or bond (measured, 2 cores)
+SECONDS_PER_SOURCE_BYTE = 3.5e-5  # and per byte of a flat model's text
+DEFAULT_MEMORY = 4 << 30  # where the memory available cannot be read
+MIN_SOURCE_BYTES = 64 << 10  # max_source_bytes() is never below this, whatever the memory
+MAX_GENERATED = 100_000  # declarations and bonds that components and `for` loops make in all
+#                           (a loop charges its body once per pass before expanding it, and
+#                           each statement again as it is made: about 50 000 statements); a
+#                           fixed bound still: an instance's size is not estimated before it is
+#                           made (a nested component's are found as it is expanded)
 MAX_REFERENCE_BYTES = 64 << 20  # a reference CSV (bgc accuracy --reference): 64 MiB
 MAX_NESTING = 100  # levels of nested brackets / operators of different kinds
 MAX_OPTION_CHARS = 1 << 16  # --outputs, --effects
 MAX_LITERAL_DIGITS = 309  # an integer literal longer than this does not fit a double
 MAX_DIMENSION = 10_000  # KIND[n]: the components of one multiport
-MAX_SCALAR_PARTS = 50_000  # scalar elements, signals and bonds once multiports are split
 MAX_MATRIX_ENTRIES = 100_000  # vector and matrix entries (and products) the expressions build
 MAX_EXTREMUM_ARGUMENTS = 32  # of one min() or max(): each one's derivative names all the others
 MAX_INSTANCE_DEPTH = 32  # components instantiating components, levels deep
-MAX_GENERATED = 100_000  # declarations and bonds that components and `for` loops make in all
-#                           (a loop charges its body once per pass before expanding it, and
-#                           each statement again as it is made: about 50 000 statements)
 MAX_SCENES = 100  # of one model (`bgc check` builds each)
 MAX_OUTPUT_ROWS = 10 ** 9  # rows of one run's CSV (the generated programs refuse more too)
 
@@ -80,6 +90,74 @@ def quiet_collector():
         gc.unfreeze()
 
 
+def memory_budget() -> int:
+    """The bytes a compile may use: $BGC_MEMORY if set (a number, with K, M or G), else what
+    the machine has available (Linux: MemAvailable, bounded by an address-space limit), else
+    DEFAULT_MEMORY."""
+    given = os.environ.get("BGC_MEMORY", "").strip()
+    if given:
+        scale = {"K": 1 << 10, "M": 1 << 20, "G": 1 << 30}.get(given[-1:].upper(), 1)
+        try:
+            return max(0, int(float(given[:-1] if scale > 1 else given) * scale))
+        except ValueError:
+            pass
+    available = None
+    try:
+        with open("/proc/meminfo", encoding="ascii") as f:
+            for line in f:
+                if line.startswith("MemAvailable:"):
+                    available = int(line.split()[1]) * 1024
+    except (OSError, ValueError):
+        pass
+    try:
+        import resource
+        soft = resource.getrlimit(resource.RLIMIT_AS)[0]
+        if soft != resource.RLIM_INFINITY and soft > 0:
+            available = soft if available is None else min(available, soft)
+    except (ImportError, OSError, ValueError):
+        pass
+    return DEFAULT_MEMORY if available is None else available
+
+
+def max_source_bytes() -> int:
+    """The largest model text a compile can take in the memory it has (at least
+    MIN_SOURCE_BYTES)."""
+    return max(MIN_SOURCE_BYTES, (memory_budget() - MEMORY_BASE) // MEMORY_PER_SOURCE_BYTE)
+
+
+def max_statements() -> int:
+    """The most declarations and bonds (components' and `for` loops' included, and scalar
+    parts once multiports are split) a compile can take in the memory it has."""
+    return max(1000, (memory_budget() - MEMORY_BASE) // MEMORY_PER_STATEMENT)
+
+
+def too_large(what: str, count: int, per_source_byte: bool = False) -> str:
+    """The message of a model refused for its size (count bytes of text, or declarations and
+    bonds): the memory it needs, the memory there is, the time it would take."""
+    per, seconds, unit = (MEMORY_PER_SOURCE_BYTE, SECONDS_PER_SOURCE_BYTE, "byte of its text") \
+        if per_source_byte else (MEMORY_PER_STATEMENT, SECONDS_PER_STATEMENT,
+                                 "declaration or bond")
+    return (f"the model is too large: {what} need about {_size(MEMORY_BASE + count * per)} of "
+            f"memory to compile (about {_size(per)} per {unit}, measured), more than the "
+            f"{_size(memory_budget())} available (BGC_MEMORY sets what bgc may use); the "
+            f"compile would take about {_duration(count * seconds)}")
+
+
+def _size(n: float) -> str:
+    for unit, k in (("GiB", 1 << 30), ("MiB", 1 << 20), ("KiB", 1 << 10)):
+        if n >= k:
+            return f"{n / k:.3g} {unit}"
+    return f"{int(n)} bytes"
+
+
+def _duration(seconds: float) -> str:
+    if seconds >= 3600:
+        return f"{seconds / 3600:.2g} hours"
+    if seconds >= 60:
+        return f"{seconds / 60:.2g} minutes"
+    return f"{seconds:.2g} s"
+
+
 def resource_dir(name: str) -> Path:
     """The directory `name` ("grammar" or "templates")."""
     for candidate in (PACKAGE_DIR / name, PACKAGE_DIR.parent / name):
@@ -88,11 +166,12 @@ def resource_dir(name: str) -> Path:
     raise FileNotFoundError(f"bgc is installed without its {name}/ directory")
 
 
-def read_bounded(path: str, limit: int = MAX_SOURCE_BYTES) -> bytes:
-    """The bytes of a file, at most limit + 1 of them (a longer file, /dev/zero or a pipe that
-    never ends is read no further); OSError as open() and read() raise it."""
+def read_bounded(path: str, limit: int | None = None) -> bytes:
+    """The bytes of a file, at most limit + 1 of them (None: max_source_bytes(); a longer file,
+    /dev/zero or a pipe that never ends is read no further); OSError as open() and read()
+    raise it."""
     with open(path, "rb") as fh:
-        return fh.read(limit + 1)
+        return fh.read((max_source_bytes() if limit is None else limit) + 1)
 
 
 def fits(expr, nodes: int = MAX_EXPRESSION_NODES, depth: int = MAX_EXPRESSION_DEPTH) -> bool:

@@ -33,7 +33,7 @@ import sympy as sp
 from ..symbolic.algebra import is_zero
 from ..base.diagnostics import Collector, ModelError, fail
 from .graph import Bond, Element, Expr, Graph, Multibond, Signal, Vector, part_name
-from ..base.resources import MAX_SCALAR_PARTS
+from ..base.resources import max_statements, too_large
 
 TWO_PORT_JUNCTIONS = {"transformer": ("1", "0"), "gyrator": ("1", "1")}
 
@@ -186,9 +186,10 @@ def _two_port(el: Element, n: int, m: int) -> tuple[list[Element], list[Bond]]:
 
 
 def _check_size(g: Graph):
-    """Refuse, before making them, more scalar parts than MAX_SCALAR_PARTS in all (a two-port
-    counts its junctions and its entries, a bond its components)."""
+    """Refuse, before making them, more scalar parts than a compile can take (max_statements;
+    a two-port counts its junctions and its entries, a bond its components)."""
     total = 0
+    most = max_statements()
     for item in list(g.elements) + list(g.signals) + list(g.bonds):
         dim = getattr(item, "dim", None)
         if isinstance(item, Bond):
@@ -202,9 +203,9 @@ def _check_size(g: Graph):
             total += dim[0] if isinstance(dim, tuple) else dim
         else:
             total += 1
-        if total > MAX_SCALAR_PARTS:
-            fail(item.span, f"the model is too large: more than {MAX_SCALAR_PARTS} scalar "
-                            "elements, signals and bonds once its multiports are split")
+        if total > most:
+            fail(item.span, too_large(f"the more than {most} scalar elements, signals and "
+                                      "bonds of its multiports once split", total))
 
 
 def _port(el: Element, as_source: bool) -> tuple[int, bool]:

@@ -12,8 +12,8 @@ from lark.exceptions import (UnexpectedCharacters, UnexpectedEOF, UnexpectedInpu
 from . import ast
 from ..base import si
 from ..base.diagnostics import ModelError, Note, Origin, Span, fail
-from ..base.resources import (MAX_DIMENSION, MAX_NESTING, MAX_OPTION_CHARS, MAX_SOURCE_BYTES,
-                              resource_dir)
+from ..base.resources import (MAX_DIMENSION, MAX_NESTING, MAX_OPTION_CHARS, max_source_bytes,
+                              resource_dir, too_large)
 
 # Reserved: none of these can name anything (docs/semantics.md, "Names").
 KEYWORDS = frozenset("""model parameter signal integral init constraint holonomic nonholonomic
@@ -559,8 +559,8 @@ def _syntax_error(exc: UnexpectedInput, source: str):
 
 
 def decode(data: bytes) -> str:
-    if len(data) > MAX_SOURCE_BYTES:
-        fail(None, f"model file too large (more than {MAX_SOURCE_BYTES} bytes)")
+    if len(data) > max_source_bytes():  # (read no further than that: its size is not known)
+        fail(None, too_large(f"its more than {max_source_bytes()} bytes", len(data), True))
     try:
         return data.decode("utf-8")
     except UnicodeDecodeError as exc:
@@ -571,8 +571,9 @@ def decode(data: bytes) -> str:
 
 def parse(source: str, path: str = "<model>") -> ast.Model:
     """Parse `source` into an ast.Model; raises ModelError with a located diagnostic."""
-    if len(source.encode("utf-8")) > MAX_SOURCE_BYTES:
-        fail(None, f"model file too large (more than {MAX_SOURCE_BYTES} bytes)")
+    size = len(source.encode("utf-8"))
+    if size > max_source_bytes():
+        fail(None, too_large(f"its {size} bytes", size, True))
     text = source if source.endswith("\n") else source + "\n"
     try:
         tree = lark_parser().parse(text, start="start")
