@@ -49,6 +49,7 @@ def _best(fn, repeats):
 
 def _row(label, model, scene, params, periods, tol, repeats):
     from bgc.analysis import periodic
+    from bgc.base import backends
     from bgc.execute import runner
     orbit = bgc.periodic(model, scene, params=params)  # (builds and caches the programs)
     T, x0 = orbit.period, np.array(orbit.x0)
@@ -70,10 +71,19 @@ def _row(label, model, scene, params, periods, tol, repeats):
     settings = runner.settings_for(compiled.program.scene, names, params, t_end=k * T, dt=T)
     brute_runs, _ = _best(lambda: runner.run(prepared, settings), repeats)
     shooting = periodic.build(str(model), scene)
-    shoot_runs, _ = _best(lambda: periodic.periodic(model, scene, params=params,
-                                                    shooting=shooting), repeats)
-    return (label, k, brute, again.iterations, shoot, brute / shoot, brute_runs, shoot_runs,
-            brute_runs / shoot_runs, gap)
+    shoot_runs, prepared_orbit = _best(lambda: periodic.periodic(
+        model, scene, params=params, shooting=shooting), repeats)
+    # the integration alone, as the programs count their CPU time: brute force's one run
+    # against the shooting's Newton runs (the period's output runs apart)
+    brute_cpu = min(float(runner.run(prepared, settings, stats=True).stats["cpu"])
+                    for _ in range(repeats))
+    newton_cpu = min(periodic.periodic(model, scene, params=params,
+                                       shooting=shooting).newton_cpu for _ in range(repeats))
+    start, _ = _best(lambda: backends.run_captured([str(prepared.path), "--t-end",
+                                                    repr(float(compiled.program.scene.t0)),
+                                                    "--dt", "1"]), repeats)
+    return (label, k, brute, again.iterations, shoot, brute_runs, shoot_runs, brute_cpu,
+            newton_cpu, start, gap)
 
 
 def main(argv=None) -> int:
@@ -82,14 +92,19 @@ def main(argv=None) -> int:
     ap.add_argument("--tol", type=float, default=1e-8)
     args = ap.parse_args(argv)
     print(f"# settled: every state within {args.tol:g} of the orbit's size; best of "
-          f"{args.repeats}")
-    print(f"{'model':30} {'periods':>8} {'Newton':>7} {'brute s':>9} {'periodic s':>11} "
-          f"{'ratio':>7} {'brute runs':>11} {'shoot runs':>11} {'ratio':>7} {'gap':>9}")
+          f"{args.repeats}; times in ms")
+    print(f"{'model':29} {'periods':>7} {'Newton':>6} | {'brute':>7} {'periodic':>8} "
+          f"{'ratio':>6} | {'brute':>7} {'shoot':>7} {'ratio':>6} | {'brute':>7} {'Newton':>7} "
+          f"{'ratio':>6} | {'start':>6} {'gap':>8}")
+    print(f"{'':29} {'':>7} {'':>6} | {'API calls':^23} | {'runs alone':^22} | "
+          f"{'CPU of the integration':^22} |")
     for case in CASES:
-        label, k, brute, its, shoot, ratio, b_runs, s_runs, r_runs, gap = _row(
-            *case, args.tol, args.repeats)
-        print(f"{label:30} {k:8d} {its:7d} {brute:9.4f} {shoot:11.4f} {ratio:6.1f}x "
-              f"{b_runs:11.4f} {s_runs:11.4f} {r_runs:6.1f}x {gap:9.1e}")
+        (label, k, brute, its, shoot, b_runs, s_runs, b_cpu, n_cpu, start,
+         gap) = _row(*case, args.tol, args.repeats)
+        print(f"{label:29} {k:7d} {its:6d} | {1e3 * brute:7.2f} {1e3 * shoot:8.2f} "
+              f"{brute / shoot:5.2f}x | {1e3 * b_runs:7.2f} {1e3 * s_runs:7.2f} "
+              f"{b_runs / s_runs:5.2f}x | {1e3 * b_cpu:7.3f} {1e3 * n_cpu:7.3f} "
+              f"{b_cpu / n_cpu:5.1f}x | {1e3 * start:6.2f} {gap:8.1e}")
     return 0
 
 

@@ -1509,8 +1509,13 @@ def _analysis_params(model, scene, params, analysed, outputs=None, effects=None)
 @click.option("--max-steps", type=click.IntRange(0, 10**15), default=None, metavar="N",
               help="The most steps of the run to --at t=TIME (0: no limit).  [default: "
                    "10000000]")
+@click.option("--input", "input_files", multiple=True, metavar="FILE.csv",
+              type=click.Path(dir_okay=False),
+              help="Data for the model's inputs (a column t and one per input, as simulate's "
+                   "--input): the run to --at t=TIME follows them, and the point takes their "
+                   "values at its time (printed).  Repeat for more files.")
 def linearize(model, scene, outputs, effects, algebra, at, inputs, params, output, bode_file,
-              max_steps):
+              max_steps, input_files):
     """Linearise: A, B, C, D from the Jacobians the compiler derives; constrained models in
     independent coordinates, the correctors' artificial modes apart.  Prints the eigenvalues
     with their natural frequencies and damping ratios."""
@@ -1526,10 +1531,12 @@ def linearize(model, scene, outputs, effects, algebra, at, inputs, params, outpu
                                "parameter with --inputs")
     _warn(analysed.compiled)
     given = _analysis_params(model, scene, params, analysed, outputs, effects)
+    data = _input_data(input_files, [u.name for u in analysed.compiled.program.inputs])
+    data = _analysed(linear.check_input_data, analysed, data, at)
     evaluator = _analysed(analysis.Evaluator, analysed, given)
     point = _analysed(linear.operating_point, evaluator, at,
-                      lambda T: linear.run_to(evaluator, given, T, max_steps))
-    result = _analysed(linear.linearization, evaluator, *point)
+                      lambda T: linear.run_to(evaluator, given, T, max_steps, data))
+    result = _analysed(linear.linearization, evaluator, *point, data)
     if output:
         fmt = "json" if outfile.is_stdout(output) else linear.check_format(output)
         _write_atomic(output, linear.render(result, fmt))
@@ -1662,6 +1669,23 @@ def _estimation(call, *args, **kwargs):
         _fail(str(error))
 
 
+def _input_data(paths, names) -> dict:
+    """The --input files' data ({name: (t, values)}), each file checked as simulate checks
+    it (exit 1 with the reason; names: the model's inputs, None: any column), an input given
+    twice refused."""
+    data: dict = {}
+    for path in paths:
+        problem = run.input_file_problem(path, names if names is not None else
+                                         run.input_file_columns(path))
+        if problem:
+            _fail(problem)
+        for name, series in run.input_file_data(path).items():
+            if name in data:
+                _fail(f"{path}: input '{name}' is given twice")
+            data[name] = series
+    return data
+
+
 @main.command()
 @MODEL
 @SCENE
@@ -1688,8 +1712,12 @@ def _estimation(call, *args, **kwargs):
 @click.option("--plot", "plot_file", default=None, metavar="FILE.png", callback=_plot_file,
               help="Draw the measured and fitted outputs and the residuals into FILE (needs "
                    "matplotlib).")
+@click.option("--input", "input_files", multiple=True, metavar="FILE.csv",
+              type=click.Path(dir_okay=False),
+              help="Data for the model's inputs (a column t and one per input, as simulate's "
+                   "--input), which every run of the fit follows.  Repeat for more files.")
 def fit(model, scene, effects, algebra, data, varies, params, backend, solver, rtol, atol,
-        max_iter, output, plot_file):
+        max_iter, output, plot_file, input_files):
     """Estimate parameters from measured data by Levenberg-Marquardt on the residuals, with
     their Jacobian from the forward sensitivities the compiler derives: estimates, standard
     errors, 95 % confidence intervals, correlations."""
@@ -1707,10 +1735,13 @@ def fit(model, scene, effects, algebra, data, varies, params, backend, solver, r
         if not math.isfinite(fixed[name]):
             raise click.UsageError(f"-p expects NAME=VALUE with a finite number, got '{item}'")
     backend = _backend(backend)
+    options = {k: v for k, v in (("solver", solver), ("rtol", rtol), ("atol", atol))
+               if v is not None}
+    if input_files:  # (their columns checked against the model's inputs by the fit)
+        options["inputs"] = _input_data(input_files, None)
     result = _estimation(estimate.fit, model, measured, vary, scene, fixed, backend, algebra,
                          max_iter, effects, on_build=lambda c: files.read(c.files),
-                         **{k: v for k, v in (("solver", solver), ("rtol", rtol),
-                                              ("atol", atol)) if v is not None})
+                         **options)
     if output:
         _write_atomic(output, result.json())
     known = _or_exit(api.units, model)

@@ -303,3 +303,27 @@ def test_the_buck_converter_s_orbit_is_the_fixed_point_of_its_exact_period_map(R
         h = 1e-6 * x[1]
         slope = (period(x + [0, h])[1] - period(x - [0, h])[1]) / (2 * h)
         assert abs(mu[1] - slope) < 1e-6, (mu, slope)
+
+
+@pytest.mark.parametrize("backend", ["c", "python"])
+def test_the_newton_runs_session_gives_a_separate_run_s_numbers_bit_for_bit(rl, backend):
+    """bgc.execute.runner.Session (the program's batch mode read from stdin, one process for
+    every Newton run): each run's final values are those of a run of its own."""
+    if backend == "c" and not have_cc():
+        pytest.skip("no C compiler")
+    from bgc import api
+    from bgc.execute import runner
+    compiled = bgc.build(str(rl), "run", outputs="l.f")
+    prepared = runner.prepare(compiled, backend, in_process=backend == "python")
+    names = [p.name for p in compiled.program.params]
+    settings = runner.settings_for(compiled.program.scene, names, {}, t_end=2e-3, dt=1e-3)
+    with runner.Session(prepared, settings, ["final:l.f", "max:l.f"]) as session:
+        rows = [session.run({"Rl": R}) for R in (2.0, 3.5, 2.0)]
+        bad = session.run({"nope": 1.0})
+    for R, row in zip((2.0, 3.5, 2.0), rows):
+        alone = runner.settings_for(compiled.program.scene, names, {"Rl": R}, t_end=2e-3, dt=1e-3)
+        _, Y = api.arrays(runner.run(prepared, alone))
+        assert row["status"] == "ok" and row["final:l.f"] == float(Y[-1, 0])
+        assert row["max:l.f"] == float(np.max(Y[:, 0]))
+    assert rows[0] == {**rows[2], "cpu": rows[0]["cpu"], "run": rows[0]["run"]}
+    assert bad["status"] == "invalid" and "nope" in bad["message"]

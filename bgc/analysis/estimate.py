@@ -181,7 +181,8 @@ def sensitivities(model, params, scene=None, backend="c", algebra="auto", output
     """A run of model's scene with the sensitivities of its states and outputs to `params`
     (a list of parameter names, or one name, or "k,c"); values: parameter overrides
     {name: value} (simulate's params=: a parameter computed from a chosen one follows it
-    unless it is overridden); options as bgc.simulate's.  Raises as bgc.simulate, and
+    unless it is overridden); options as bgc.simulate's (inputs= the data of the model's
+    inputs, {name: (t, values)}: the sensitivities run through them).  Raises as bgc.simulate, and
     FitArgumentError for unknown parameters, BgcModelError (located) for a model whose events
     the sensitivities cannot pass (a discrete value sampled from the states)."""
     if isinstance(params, str):
@@ -189,10 +190,13 @@ def sensitivities(model, params, scene=None, backend="c", algebra="auto", output
     chosen = tuple(params)
     values = dict(values or {})
     options["params"] = values
+    inputs = options.pop("inputs", None)
     compiled = build(model, chosen, scene, tuple(values), True, algebra, outputs, effects,
                      options.get("project_initial", False),
                      options.get("allow_inconsistent", False))
     program = compiled.program
+    if inputs is not None:
+        options["input_data"] = _input_data(program, inputs)
     settings = runner.settings_for(program.scene, [p.name for p in program.params], **options)
     backend, _ = runner.choose_backend(backend)
     ran = runner.prepare(compiled, backend, in_process=backend == "python")
@@ -205,6 +209,22 @@ def sensitivities(model, params, scene=None, backend="c", algebra="auto", output
     return Sensitivities(t, chosen, tuple(program.states[:n]), Y[:, 0, M:],
                          np.moveaxis(Y[:, 1:, M:], 1, 2), tuple(program.outputs[:M]),
                          Y[:, 0, :M], np.moveaxis(Y[:, 1:, :M], 1, 2))
+
+
+def _input_data(program, inputs) -> tuple:
+    """inputs ({name: (t, values)}, the data of the model's declared inputs, as
+    bgc.simulate's inputs=) checked against program's inputs, as RunSettings.input_data;
+    FitArgumentError for people."""
+    from ..base.run import input_data
+    names = [u.name for u in program.inputs]
+    for name in inputs:
+        if name not in names:
+            raise FitArgumentError(f"unknown input {name!r} (inputs: "
+                                   f"{', '.join(names) or 'none'})")
+    try:
+        return input_data(dict(inputs))
+    except (TypeError, ValueError) as error:
+        raise FitArgumentError(str(error)) from None
 
 
 # ---------------------------------------------------------------- measured data
@@ -511,7 +531,8 @@ def fit(model, data, vary, scene=None, params=None, backend="c", algebra="auto",
     variables by name (the scene's outputs are replaced by them), the time column is `t`,
     and the samples lie on a uniform grid from the scene's start.  params: fixed overrides;
     effects: the effects in, replacing the scene's; options: solver, rtol, atol, max_steps,
-    ... as bgc.simulate's (t_end and dt come from the data); on_build(compiled), if given,
+    ... as bgc.simulate's (t_end and dt come from the data), inputs= ({name: (t, values)})
+    the data of the model's declared inputs the runs follow; on_build(compiled), if given,
     is called once the model is compiled, before any run (the command line checks its
     outputs against the files the model read).  Raises api's errors, FitArgumentError,
     FitError."""
@@ -525,6 +546,7 @@ def fit(model, data, vary, scene=None, params=None, backend="c", algebra="auto",
     if both:
         raise FitArgumentError(f"'{both[0]}' is both varied and fixed (-p)")
     outputs = ", ".join(data.columns)
+    inputs = options.pop("inputs", None)
     compiled = build(model, names, scene, tuple(fixed), False, algebra, outputs, effects,
                      options.get("project_initial", False),
                      options.get("allow_inconsistent", False),
@@ -537,6 +559,8 @@ def fit(model, data, vary, scene=None, params=None, backend="c", algebra="auto",
         raise FitArgumentError(f"{data.path}: too few samples: {N} measured values for {P} "
                                f"parameters (more are needed for the errors)")
     dt, t_end, rows = _grid(data, program.scene.t0)
+    if inputs is not None:
+        options["input_data"] = _input_data(program, inputs)
     try:
         settings = runner.settings_for(program.scene, [p.name for p in program.params],
                                        params=fixed, t_end=t_end, dt=dt, **options)

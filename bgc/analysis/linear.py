@@ -58,6 +58,8 @@ class Linearization:
     constraint_rows: tuple[str, ...] = ()  # the independent constraint rows, as E's
     corrector: np.ndarray = None  # E, the constraint error's dynamics (0 x 0 without)
     coupling: float = 0.0  # |G A N| / |A|: 0 where the manifold is invariant
+    input_values: tuple[tuple[str, float], ...] = ()  # the inputs given data: their value
+    #                                                   there, (name, value) each
 
     @property
     def eigenvalues(self) -> np.ndarray:
@@ -105,6 +107,7 @@ class Linearization:
             "full_states": list(self.full_states), "basis": _rows(self.basis),
             "constraint_rows": list(self.constraint_rows),
             "corrector_eigenvalues": _pairs(self.corrector_eigenvalues),
+            **({"input_values": dict(self.input_values)} if self.input_values else {}),
         }
 
 
@@ -177,12 +180,14 @@ def fixed_step(scene) -> float | None:
     return min(h, scene.max_step) if scene.max_step else h
 
 
-def run_to(ev: operating.Evaluator, params: dict, T: float, max_steps: int | None = None):
+def run_to(ev: operating.Evaluator, params: dict, T: float, max_steps: int | None = None,
+           input_data=None):
     """The state and the discrete variables at T of the scene's run (the C backend when
     there is a C compiler).  Its only output rows are t0's and T's: the rows of the scene's
     grid are not needed, and their number is no bound of the work.  The steps are: at most
     max_steps (default MAX_STEPS; 0: no bound), and a run of fixed steps whose count is
-    more is refused before it starts."""
+    more is refused before it starts.  input_data: {name: (t, values)}, the declared inputs'
+    data the run follows."""
     from .. import api
     from ..execute import runner
     program = ev.analysed.compiled.program
@@ -212,6 +217,8 @@ def run_to(ev: operating.Evaluator, params: dict, T: float, max_steps: int | Non
                 f"{_steps_text(steps, 'at least ')}, more than the {budget} a run to one time "
                 "may take (--max-steps raises the bound; a stiff solver's steps are not so "
                 "bounded)")
+    if input_data:
+        options["input_data"] = tuple((name, t, u) for name, (t, u) in input_data.items())
     settings = runner.settings_for(scene, [p.name for p in program.params], params,
                                    **options)
     backend, _ = runner.choose_backend("c")
@@ -335,10 +342,12 @@ def reduction(G: np.ndarray, n: int):
     return ind, N, R, rows
 
 
-def linearization(ev: operating.Evaluator, t: float, x) -> Linearization:
+def linearization(ev: operating.Evaluator, t: float, x, input_data=None) -> Linearization:
     """A, B, C, D of ev's model at (t, x), reduced to independent coordinates when it has
-    constraints."""
+    constraints; input_data ({name: (t, values)}): the inputs given data at their values
+    at t (ev's discrete values set to them)."""
     x = np.asarray(x, dtype=float)
+    values = ev.set_inputs(t, input_data) if input_data else ()
     A = ev.jacobian(t, x)
     Cfull = ev.output_jacobian(t, x)
     Bfull, Dfull = ev.input_jacobians(t, x)
@@ -360,7 +369,7 @@ def linearization(ev: operating.Evaluator, t: float, x) -> Linearization:
                 "point with --at)")
     point = tuple(zip(ev.states, (float(v) for v in x)))
     common = dict(inputs=ev.analysed.inputs, outputs=ev.analysed.outputs, t=float(t),
-                  point=point, full_states=ev.states)
+                  point=point, full_states=ev.states, input_values=values)
     if not ev.constraints:
         return Linearization(ev.states, A=A, B=Bfull, C=C, D=D, basis=np.eye(n),
                              corrector=np.zeros((0, 0)), **common)
@@ -379,18 +388,45 @@ def linearization(ev: operating.Evaluator, t: float, x) -> Linearization:
 
 
 def linearize(model, scene=None, at=None, inputs=None, outputs=None, params=None,
-              effects=None, algebra="auto", max_steps=None) -> Linearization:
+              effects=None, algebra="auto", max_steps=None, input_data=None) -> Linearization:
     """The linearisation of model's scene (bgc.linearize; see the module's doc): at the
     initial state (at=None), at "t=T" (or a number T) of the scene's run, or at "steady".
     inputs: names of the model's inputs (`input NAME`, at their defaults) or of parameters
     (None: the model's inputs); outputs, effects: as a scene's (default: the scene's);
     params: {name: value} overrides; algebra: as bgc.build's; max_steps: the run to T's
-    (run_to)."""
+    (run_to); input_data: {name: (t, values)}, data of the model's inputs (as bgc.simulate's
+    inputs=): the run to T follows them, and the point takes their values at its time."""
     analysed = operating.build(model, scene, outputs, effects,
                                None if inputs is None else tuple(inputs), algebra)
     ev = operating.Evaluator(analysed, params)
-    t, x = operating_point(ev, at, lambda T: run_to(ev, dict(params or {}), T, max_steps))
-    return linearization(ev, t, x)
+    data = check_input_data(analysed, input_data, at)
+    t, x = operating_point(ev, at, lambda T: run_to(ev, dict(params or {}), T, max_steps,
+                                                    data))
+    return linearization(ev, t, x, data)
+
+
+def check_input_data(analysed: operating.Analysed, input_data, at) -> dict:
+    """input_data ({name: (t, values)}) checked: the model's declared inputs, a pair of
+    finite numbers as many, t non-decreasing; not with at="steady" (data are a time
+    source); AnalysisArgumentError for people."""
+    from ..base.run import input_data as checked_data
+    if not input_data:
+        return {}
+    if at is not None and parse_at(at)[0] == "steady":
+        raise AnalysisArgumentError(
+            "--at steady with --input: an input's data are a time source, so the model has "
+            "no equilibrium to linearise about; linearise about a point of the run with "
+            "--at t=TIME")
+    names = [u.name for u in analysed.compiled.program.inputs]
+    for name in input_data:
+        if name not in names:
+            raise AnalysisArgumentError(f"unknown input {name!r} (inputs: "
+                                        f"{', '.join(names) or 'none'})")
+    try:
+        checked = checked_data(dict(input_data))
+    except (TypeError, ValueError) as error:
+        raise AnalysisArgumentError(str(error)) from None
+    return {name: (ts, us) for name, ts, us in checked}
 
 
 # ---------------------------------------------------------------- reports and files
@@ -403,6 +439,9 @@ def modes_table(lin: Linearization) -> str:
              + (f" (independent coordinates: {', '.join(lin.states)})"
                 if len(lin.states) < len(lin.full_states) else "")
              + f", {_count(lin.inputs, 'input')}, {_count(lin.outputs, 'output')}"]
+    if lin.input_values:
+        lines.append(f"inputs from their data at t = {lin.t:.6g}: " + ", ".join(
+            f"{name} = {value:.17g}" for name, value in lin.input_values))
     lines += _modes(lin.eigenvalues)
     if lin.corrector is not None and lin.corrector.size:
         lines.append(f"corrector modes (artificial, of the constraint rows "

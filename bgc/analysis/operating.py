@@ -21,6 +21,7 @@ from it, unless overridden, and the constants of the generated code).
 """
 from __future__ import annotations
 
+import bisect
 import math
 from dataclasses import dataclass
 
@@ -174,6 +175,31 @@ class Evaluator:
                 if d.next is None] if self.events else []
         self.held = tuple(k for k, _ in kept)  # the discrete variables' places in d
         self.held_names = tuple(name for _, name in kept)  # and their output columns
+
+    def set_inputs(self, t: float, data: dict) -> tuple[tuple[str, float], ...]:
+        """The declared inputs given data ({name: (t, values)}) set to their data at t, as a
+        run reads them there (the segment of the rows at t, interpolated linearly, held
+        before the first row and after the last; at a row's time the segment it starts):
+        (name, value) each, the value the model reads."""
+        m, off, pc = self.module, self.doff, self.pc
+        names = list(m._DISCRETE_NAMES) if self.discrete else []
+        out = []
+        for name, (ts, us) in data.items():
+            ts, us = [float(v) for v in ts], [float(v) for v in us]
+            lo = bisect.bisect_right(ts, float(t))
+            if lo == 0 or lo == len(ts):
+                start, value, slope = 0.0, us[0] if lo == 0 else us[-1], 0.0
+            else:
+                k = lo - 1
+                start, value, slope = ts[k], us[k], (us[k + 1] - us[k]) / (ts[k + 1] - ts[k])
+            where = {label: names.index(label) for label in
+                     (f"{name} (segment start)", name, f"{name} (slope)") if label in names}
+            for label, v in ((f"{name} (segment start)", start), (name, value),
+                             (f"{name} (slope)", slope)):
+                if label in where:
+                    pc[off + where[label]] = v
+            out.append((name, (float(t) - start) * slope + value))
+        return tuple(out)
 
     # ------------------------------------------------------------ the discrete values
     # A run freezes its relations, time sources and discrete variables between events

@@ -84,6 +84,7 @@ class Orbit:
     figures: tuple[tuple[str, float, float, float, float], ...]  # (name, mean, min, max,
     #                                                              ripple) per output
     compiled: object = None  # the shooting program's api.Compiled (the plot's units)
+    newton_cpu: float = 0.0  # the Newton runs' own CPU seconds, as the program counts them
 
     @property
     def stable(self) -> bool:
@@ -351,6 +352,18 @@ def period_of(shooting: Shooting, given: dict, period=None) -> float:
 # ---------------------------------------------------------------- the shooting
 
 
+def _initial_state(shooting: Shooting, given: dict):
+    """The model's initial state with the parameters given (each state's x0(NAME) at its
+    default), evaluated here: the shooting's starting point, passed to every run as numbers so
+    that every backend starts from the same bits; None where a value is not a finite number."""
+    try:
+        env = _values(shooting.reduced, given)
+        x = [float(env[var(initial_parameter(s))]) for s in shooting.states]
+    except (TypeError, ValueError):
+        return None
+    return np.array(x) if all(math.isfinite(v) for v in x) else None
+
+
 def _one_period(prepared, program, n, T, t0, given, x0, dt=None, event_rows=False):
     """A run of one period from x0 (None: the model's initial state): the times, the states,
     their sensitivities S[k, i, j] = d x_i / d x0_j and the outputs."""
@@ -390,19 +403,67 @@ def periodic(model, scene=None, period=None, params=None, outputs=None, effects=
     backend, _ = runner.choose_backend(backend)
     prepared = shooting.program_for(backend)
 
+    outputs = program.outputs
+    width = len(outputs) // (1 + n)
+    first = width - n  # the outputs asked for, then the states
+    metrics = [f"final:{outputs[b * width + first + i]}" for b in range(1 + n) for i in range(n)]
+    settings = runner.settings_for(program.scene, names, given, t_end=t0 + T, dt=T)
+    cpu = [0.0]
+
     def shoot(x):
+        row = session.run({initial_parameter(s): v for s, v in zip(shooting.states, x)})
+        if row["status"] != "ok":
+            raise NoOrbit(f"the run of one period failed: {row['message']}")
+        cpu[0] += row["cpu"]
+        v = np.array([row[m] for m in metrics]).reshape(1 + n, n)
+        return np.array(x, dtype=float), v[0], v[1:].T
+
+    start = _initial_state(shooting, given)
+    if start is None:  # (an initial value bgc cannot evaluate here: the program's own)
         try:
-            _, X, S, _ = _one_period(prepared, program, n, T, t0, given, x)
+            start = _one_period(prepared, program, n, T, t0, given, None)[1][0]
         except api.SimulationFailed as failed:
             raise NoOrbit(f"the run of one period failed: {failed}") from None
-        return X[0], X[-1], S[-1]
+    try:
+        session = runner.Session(prepared, settings, metrics)
+    except runner.SessionFailed as failed:
+        raise NoOrbit(f"the run of one period failed: {failed}") from None
+    try:
+        x, end, M, iterations, size, resolution, drifting = _newton(
+            shoot, start, n, program.scene)
+    except runner.SessionFailed as failed:
+        raise NoOrbit(f"the run of one period failed: {failed}") from None
+    finally:
+        session.close()
+    kept = [j for j in range(n) if j not in drifting]
+    multipliers = np.linalg.eigvals(M[np.ix_(kept, kept)]) if kept else np.zeros(0, complex)
+    multipliers = multipliers[np.lexsort((multipliers.imag, -np.abs(multipliers)))]
+    if np.any(np.abs(multipliers) >= 1.0):
+        raise NoOrbit("unstable: the orbit's Floquet multipliers " +
+                      ", ".join(_complex(m) for m in multipliers if abs(m) >= 1.0) +
+                      " lie on or outside the unit circle (a run does not settle on it)",
+                      multipliers)
+    if dt is None:
+        dt = float(program.scene.dt)
+        if not dt < T / 20:
+            dt = T / ROWS_PER_PERIOD
+    t, _, _, y = _one_period(prepared, program, n, T, t0, given, x, dt)
+    figures = _figures(prepared, program, n, T, t0, given, x, dt, shooting.outputs)
+    drift = tuple((shooting.states[j], float(end[j] - x[j])) for j in drifting)
+    return Orbit(T, t0, shooting.states, x, iterations, size, resolution, M, multipliers,
+                 drift, shooting.outputs, t, y[:, :len(shooting.outputs)], figures,
+                 shooting.compiled, cpu[0])
 
-    x, end, M = shoot(None)
+
+def _newton(shoot, start, n, scene):
+    """Newton's method on the period map from start: shoot(x) gives (x, Phi(x), M(x)).
+    Returns (x, Phi(x), M, iterations, defect, resolution, drifting states)."""
+    x, end, M = shoot(start)
     drifting = [j for j in range(n) if np.array_equal(M[:, j], np.eye(n)[:, j])]
     kept = [j for j in range(n) if j not in drifting]
     resolution = False
     iterations = 0
-    rtol = float(program.scene.rtol)
+    rtol = float(scene.rtol)
 
     def defect(x, end):
         F = (end - x)[kept]
@@ -410,7 +471,7 @@ def periodic(model, scene=None, period=None, params=None, outputs=None, effects=
 
     F, size = defect(x, end)
     while True:
-        scale = max(float(np.max(np.abs(x[kept]), initial=0.0)), float(program.scene.atol))
+        scale = max(float(np.max(np.abs(x[kept]), initial=0.0)), float(scene.atol))
         if size <= NEWTON_TOL * scale:
             break
         if iterations >= MAX_ITERATIONS:
@@ -443,23 +504,7 @@ def periodic(model, scene=None, period=None, params=None, outputs=None, effects=
             raise NoOrbit(f"not converged: Newton's iteration stalls {size:.3g} away from a "
                           "periodic state")
         x, end, M, F, size = t_x, t_end, t_M, t_F, t_size
-    multipliers = np.linalg.eigvals(M[np.ix_(kept, kept)]) if kept else np.zeros(0, complex)
-    multipliers = multipliers[np.lexsort((multipliers.imag, -np.abs(multipliers)))]
-    if np.any(np.abs(multipliers) >= 1.0):
-        raise NoOrbit("unstable: the orbit's Floquet multipliers " +
-                      ", ".join(_complex(m) for m in multipliers if abs(m) >= 1.0) +
-                      " lie on or outside the unit circle (a run does not settle on it)",
-                      multipliers)
-    if dt is None:
-        dt = float(program.scene.dt)
-        if not dt < T / 20:
-            dt = T / ROWS_PER_PERIOD
-    t, _, _, y = _one_period(prepared, program, n, T, t0, given, x, dt)
-    figures = _figures(prepared, program, n, T, t0, given, x, dt, shooting.outputs)
-    drift = tuple((shooting.states[j], float(end[j] - x[j])) for j in drifting)
-    return Orbit(T, t0, shooting.states, x, iterations, size, resolution, M, multipliers,
-                 drift, shooting.outputs, t, y[:, :len(shooting.outputs)], figures,
-                 shooting.compiled)
+    return x, end, M, iterations, size, resolution, drifting
 
 
 def _figures(prepared, program, n, T, t0, given, x, dt, outputs):

@@ -402,6 +402,14 @@ def _start(argv: list[str], **options) -> subprocess.Popen:
         raise CannotStart(argv, error) from None
 
 
+def start_piped(argv: list[str]) -> subprocess.Popen:
+    """argv started with its stdin and stdout as pipes of text lines, stderr captured, for a
+    caller that writes a line and reads the answer (a batch read from stdin,
+    bgc.execute.runner.Session); CannotStart if it cannot be started."""
+    return _start(argv, stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                  text=True, bufsize=1)
+
+
 def run_captured(argv: list[str], timeout: float | None = None) -> subprocess.CompletedProcess:
     """Runs argv to its end: its status, stdout and stderr as text (subprocess.run's result);
     CannotStart if it cannot be started; subprocess.TimeoutExpired after timeout seconds

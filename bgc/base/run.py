@@ -211,6 +211,29 @@ def input_file_problem(path: str, names) -> str | None:
     return None
 
 
+def input_file_columns(path: str) -> list[str]:
+    """The columns an --input file's header names ([] if it cannot be read)."""
+    import csv
+    try:
+        with open(path, encoding="utf-8", newline="") as f:
+            return [h.strip() for h in next(csv.reader(f), [])]
+    except (OSError, UnicodeDecodeError, csv.Error):
+        return []
+
+
+def input_file_data(path: str) -> dict:
+    """An --input file that input_file_problem passed, as the API's inputs=: {name: (t,
+    values)}, one per column besides t."""
+    import csv
+    with open(path, encoding="utf-8", newline="") as f:
+        rows = [r for r in csv.reader(f) if any(c.strip() for c in r)]
+    head = [h.strip() for h in rows[0]]
+    k = head.index("t")
+    t = tuple(float(r[k]) for r in rows[1:])
+    return {name: (t, tuple(float(r[j]) for r in rows[1:]))
+            for j, name in enumerate(head) if j != k}
+
+
 def check_run_options(options: dict):
     """ValueError for a run setting that is wrong whatever the model: an unknown solver, a
     tolerance, interval or step that is not a positive finite number, a non-finite end time

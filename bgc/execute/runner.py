@@ -246,3 +246,94 @@ def _run(program: Program, settings, sink, progress, stats, timeout) -> Result:
     return Result(_status(done.returncode), done.stderr, done.stdout,
                   killed=max(0, -done.returncode), write_error=_write_error(done.stderr))
 
+
+
+class SessionFailed(Exception):
+    """A session's program ended or answered other than with a result (the message says how)."""
+
+
+class Session:
+    """Runs of one program, one after another in one process, each from parameters given when
+    the last has ended (its batch mode read from stdin, bgc/runtime/batch.c): a run's numbers
+    are a separate run's, bit for bit, without a process start each.  The C program and the
+    interpreter run as one process each; the Python module loaded in this process runs its
+    batch_rows generator.  run(params) gives the run's row: {"status", each metric, "steps",
+    "rejected", "rhs", "cpu", "message"}."""
+
+    def __init__(self, program: Program, settings: RunSettings, metrics):
+        self.metrics = tuple(metrics)
+        self.pending = None
+        if program.module is not None:
+            options = settings.options(program.defaults)
+            unknown = set(options) - {"t_end", "dt", "solver", "rtol", "atol", "params", "step",
+                                      "max_steps", "project_initial", "allow_inconsistent"}
+            if unknown:
+                raise ValueError(f"a session cannot set {', '.join(sorted(unknown))}")
+            self.proc = None
+            self.rows = program.module.batch_rows(iter(self._next_line, None), self.metrics,
+                                                  **options)
+            return
+        argv = program.argv() + settings.args(program.defaults) + ["--batch", "-"]
+        for m in self.metrics:
+            argv += ["--metric", m]
+        self.proc = backends.start_piped(argv)
+        self.header = self.proc.stdout.readline().rstrip("\n").split(",")
+        if self.header[:2] != ["run", "status"]:
+            self._fail()
+
+    def _next_line(self):
+        line, self.pending = self.pending, None
+        return line
+
+    def run(self, params: dict) -> dict:
+        line = " ".join(f"{name}={float(v)!r}" for name, v in params.items())
+        if self.proc is None:
+            self.pending = line
+            return next(self.rows)
+        try:
+            self.proc.stdin.write(line + "\n")
+            self.proc.stdin.flush()
+            answer = self.proc.stdout.readline()
+        except (BrokenPipeError, OSError):
+            answer = ""
+        if not answer.endswith("\n"):
+            self._fail()
+        import csv
+        (fields,) = csv.reader([answer])
+        row = dict(zip(self.header, fields))
+        for name in self.metrics + ("cpu",):
+            row[name] = float(row[name])
+        for name in ("steps", "rejected", "rhs"):
+            row[name] = int(row[name])
+        return row
+
+    def _fail(self):
+        """The program ended (or broke its pipe): SessionFailed with its last message."""
+        try:
+            self.proc.stdin.close()
+        except OSError:
+            pass
+        err = self.proc.stderr.read()
+        self.close()
+        lines = [ln for ln in err.strip().splitlines() if ln]
+        raise SessionFailed(lines[-1] if lines else
+                            f"the program ended (status {self.proc.returncode})")
+
+    def close(self) -> None:
+        if self.proc is None:
+            self.rows.close()
+            return
+        try:
+            self.proc.stdin.close()
+        except OSError:
+            pass
+        self.proc.wait()
+        for f in (self.proc.stdout, self.proc.stderr):
+            if f:
+                f.close()
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()

@@ -4108,6 +4108,8 @@ def _batch_main(argv):
     out = sys.stdout
     out.write(",".join(["run", "status"] + metrics + ["steps", "rejected", "rhs", "cpu",
                                                        "message"]) + "\n")
+    if source is sys.stdin:
+        out.flush()
     handlers = _stop_on_signals()
     try:
         for row in batch_rows((line for line in source), metrics, params=params,
@@ -4118,6 +4120,8 @@ def _batch_main(argv):
                 row["run"], row["status"], "".join(",%.17g" % row[m] for m in metrics),
                 row["steps"], row["rejected"], row["rhs"], row["cpu"],
                 _quoted(row["message"])))
+            if source is sys.stdin:  # (each result as it is known, as the C program's)
+                out.flush()
     finally:
         for sig, handler in handlers:
             signal.signal(sig, handler)

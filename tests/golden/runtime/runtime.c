@@ -5292,7 +5292,9 @@ int main(int argc, char **argv)
    (nan when the run did not complete).  --trajectories DIR also writes each run's CSV, as
    the program writes it without --batch, to DIR/run-NNNNNN.csv (its number, 6 digits or
    more).  The exit status is 0 when every line was run (whatever the runs' statuses), 2 for
-   a usage error, 3 if the output cannot be written or a signal stopped the batch. */
+   a usage error, 3 if the output cannot be written or a signal stopped the batch.  Read from
+   stdin, each result is written out as soon as its run ends, so that a caller can give the
+   next line from it (bgc periodic's Newton iterations, each run's start from the last). */
 
 #define BGC_MAX_METRICS 256
 #define BGC_LINE_MAX 65536
@@ -5581,6 +5583,10 @@ static int bgc_batch_loop(FILE *in, const bgc_settings *s, const bgc_params *bas
         bgc_put_text(&bgc_out, b->spec[k]);
     }
     bgc_put_text(&bgc_out, ",steps,rejected,rhs,cpu,message\n");
+    if (in == stdin) {
+        bgc_flush(&bgc_out);
+        fflush(stdout);
+    }
     while (fgets(bgc_line, sizeof bgc_line, in)) {
         const size_t len = strlen(bgc_line);
         bgc_stats st = { 0, 0, 0, 0, 0, 0, 0, 0.0, 0.0, 0.0, 0, 0, 0 };
@@ -5610,6 +5616,10 @@ static int bgc_batch_loop(FILE *in, const bgc_settings *s, const bgc_params *bas
             }
         }
         bgc_batch_result(&bgc_out, run++, status, b, &st, msg);
+        if (in == stdin) { /* each result as it is known: a caller may wait for it */
+            bgc_flush(&bgc_out);
+            fflush(stdout);
+        }
         if (bgc_out.failed)
             break;
         if (bgc_batch_signal) {
