@@ -1,6 +1,7 @@
 """What several test files share, imported as a module (`from helpers import ...`), never
 loaded by path: the scalable model families of benchmarks/families.py (which the benchmarks
-run too), and one build of a model for every test of a process that reads it."""
+run too), one build of a model for every test of a process that reads it, and the small models
+several files test (ball: a bouncing ball by a when-block)."""
 from __future__ import annotations
 
 import functools
@@ -45,3 +46,24 @@ def _built(model, scene, options):
 def built_text(name: str, text: str, scene: str | None = None, **options):
     """built() of a model's text, under the file name its messages give."""
     return built(Source(name, text), scene, **options)
+
+
+def ball(scene: str = "scene drop { time 0 .. 3 every 0.01; outputs x, b.p }") -> str:
+    """A ball dropped on a floor, bouncing by a when-block's reinit (x its height), with
+    the scene given."""
+    return f"""model ball "a ball dropped on a floor, bouncing by a when-block"
+parameter m = 1.0
+parameter g = 9.81
+parameter e = 0.8
+parameter h0 = 1.0
+w : Se(-m*g)
+b : I(m)
+signal x = integral(b.f, init = h0)
+w -> j
+j : 1
+j -> b
+when x < 0 {{
+  reinit b.p = -e*b.p
+}}
+{scene}
+"""

@@ -16,23 +16,9 @@ from bgc.execute import runner
 from bgc.api import Source
 
 from conftest import have_cc
+from helpers import ball
 
-BALL = """model ball "a ball dropped on a floor, bouncing by a when-block"
-parameter m = 1.0
-parameter g = 9.81
-parameter e = 0.8
-parameter h0 = 1.0
-w : Se(-m*g)
-b : I(m)
-signal x = integral(b.f, init = h0)
-w -> j
-j : 1
-j -> b
-when x < 0 {
-  reinit b.p = -e*b.p
-}
-scene drop { time 0 .. 3 every 0.01; outputs x, b.p }
-"""
+BALL = ball()
 
 LAG = """model lag "a first-order lag driven by a short pulse"
 parameter tau = 0.5

@@ -20,25 +20,12 @@ from bgc.analysis import estimate
 from bgc.execute import runner
 
 from conftest import ROOT, have_cc, run_bgc
+from helpers import ball
 
 BACKENDS = ["c", "vm", "python"] if have_cc() else ["python"]
 
-BALL = """model ball "a ball dropped on a floor, bouncing by a when-block"
-parameter m = 1.0
-parameter g = 9.81
-parameter e = 0.8
-parameter h0 = 1.0
-w : Se(-m*g)
-b : I(m)
-signal x = integral(b.f, init = h0)
-w -> j
-j : 1
-j -> b
-when x < 0 {
-  reinit b.p = -e*b.p
-}
-scene drop { time 0 .. 3 every 0.01; outputs x, b.p; solver dopri5(rtol = 1e-12, atol = 1e-12) }
-"""
+BALL = ball("scene drop { time 0 .. 3 every 0.01; outputs x, b.p; "
+            "solver dopri5(rtol = 1e-12, atol = 1e-12) }")
 
 PWM = """model pwm "an RL load driven by a PWM voltage"
 parameter V = 12.0

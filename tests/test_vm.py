@@ -14,26 +14,12 @@ from bgc.codegen import vm
 from bgc.api import Source, build
 
 from conftest import run_bgc
+from helpers import ball
 
 ROOT = Path(__file__).resolve().parent.parent
 pytestmark = pytest.mark.skipif(not backends.have_c_compiler(), reason="no C compiler")
 
-BALL = """model ball "a ball dropped on a floor, bouncing by a when-block"
-parameter m = 1.0
-parameter g = 9.81
-parameter e = 0.8
-parameter h0 = 1.0
-w : Se(-m*g)
-b : I(m)
-signal x = integral(b.f, init = h0)
-w -> j
-j : 1
-j -> b
-when x < 0 {
-  reinit b.p = -e*b.p
-}
-scene drop { time 0 .. 1 every 0.01; outputs x, b.p }
-"""
+BALL = ball("scene drop { time 0 .. 1 every 0.01; outputs x, b.p }")
 
 # model -> (the run's settings, solvers); the Python module is run on the first solver
 CASES = {

@@ -90,6 +90,20 @@ def _exact(v):
     return int(v) if not isinstance(v, int) and v.denominator == 1 else v
 
 
+def _subtract(coef: dict, const, pivot, row: dict, row_const):
+    """coef (in place) and const less the multiple of row that clears coef's pivot entry;
+    the new const."""
+    c = coef.get(pivot)
+    if not c:
+        return const
+    f = _div(c, row[pivot])
+    for i, v in row.items():
+        coef[i] = coef.get(i, 0) - f * v
+        if not coef[i]:
+            del coef[i]
+    return [a - f * b for a, b in zip(const, row_const)]
+
+
 def _div(a, c):
     """a / c, exactly."""
     if c == 1:
@@ -411,26 +425,12 @@ class _Units:
                 if i in self.value:
                     const = [a + c * b for a, b in zip(const, self.value[i])]
             for pivot, pc, pconst, _ in reduced:
-                c = coef.get(pivot)
-                if c:
-                    f = _div(c, pc[pivot])
-                    for i, v in pc.items():
-                        coef[i] = coef.get(i, 0) - f * v
-                        if not coef[i]:
-                            del coef[i]
-                    const = [a - f * b for a, b in zip(const, pconst)]
+                const = _subtract(coef, const, pivot, pc, pconst)
             if not coef:
                 continue  # (0 = const: a mismatch, reported by propagation at an equation)
             pivot = min(coef)
             for j, (p2, c2, k2, e2) in enumerate(reduced):
-                c = c2.get(pivot)
-                if c:
-                    f = _div(c, coef[pivot])
-                    for i, v in coef.items():
-                        c2[i] = c2.get(i, 0) - f * v
-                        if not c2[i]:
-                            del c2[i]
-                    reduced[j] = (p2, c2, [a - f * b for a, b in zip(k2, const)], e2)
+                reduced[j] = (p2, c2, _subtract(c2, k2, pivot, coef, const), e2)
             reduced.append((pivot, coef, const, k))
         out = []
         for pivot, coef, const, k in reduced:
