@@ -67,3 +67,23 @@ when x < 0 {{
 }}
 {scene}
 """
+
+
+def pwm_rl(scene: str) -> str:
+    """An RL load driven by a PWM voltage (a square wave's edges its time events), with the
+    scene given."""
+    return f"""model pwm "an RL load driven by a PWM voltage"
+parameter V = 12.0
+parameter R = 2.0
+parameter L = 0.01
+parameter period = 0.001
+parameter duty = 0.3
+u : MSe(V*square(period, duty))
+r : R(R)
+l : I(L)
+u -> j
+j : 1
+j -> r
+j -> l
+{scene}
+"""

@@ -16,7 +16,7 @@ from bgc.execute import runner
 from bgc.api import Source
 
 from conftest import have_cc
-from helpers import ball
+from helpers import ball, pwm_rl
 
 BALL = ball()
 
@@ -28,21 +28,8 @@ signal x = integral(-x/tau + pulse(t0, width), init = 0)
 scene run { time 0 .. 3 every 0.1; outputs x }
 """
 
-PWM = """model pwm "an RL load driven by a PWM voltage"
-parameter V = 12.0
-parameter R = 2.0
-parameter L = 0.01
-parameter period = 0.001
-parameter duty = 0.3
-u : MSe(V*square(period, duty))
-r : R(R)
-l : I(L)
-u -> j
-j : 1
-j -> r
-j -> l
-scene run { time 0 .. 0.2 every 0.001; outputs l.p; solver dopri5(rtol = 1e-10, atol = 1e-12) }
-"""
+PWM = pwm_rl("scene run { time 0 .. 0.2 every 0.001; outputs l.p; "
+             "solver dopri5(rtol = 1e-10, atol = 1e-12) }")
 
 BACKENDS = ["c", "python"] if have_cc() else ["python"]
 

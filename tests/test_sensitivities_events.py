@@ -20,30 +20,15 @@ from bgc.analysis import estimate
 from bgc.execute import runner
 
 from conftest import ROOT, have_cc, run_bgc
-from helpers import ball
+from helpers import ball, pwm_rl
 
 BACKENDS = ["c", "vm", "python"] if have_cc() else ["python"]
 
 BALL = ball("scene drop { time 0 .. 3 every 0.01; outputs x, b.p; "
             "solver dopri5(rtol = 1e-12, atol = 1e-12) }")
 
-PWM = """model pwm "an RL load driven by a PWM voltage"
-parameter V = 12.0
-parameter R = 2.0
-parameter L = 0.01
-parameter period = 0.001
-parameter duty = 0.3
-u : MSe(V*square(period, duty))
-r : R(R)
-l : I(L)
-u -> j
-j : 1
-j -> r
-j -> l
-scene run {
-  time 0 .. 0.0195 every 0.000137; outputs l.p; solver dopri5(rtol = 1e-12, atol = 1e-14)
-}
-"""
+PWM = pwm_rl("scene run {\n  time 0 .. 0.0195 every 0.000137; outputs l.p; "
+             "solver dopri5(rtol = 1e-12, atol = 1e-14)\n}")
 
 
 def _write(tmp_path, name, text):
