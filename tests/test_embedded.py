@@ -275,8 +275,9 @@ def test_cortex_m4_under_qemu_is_the_host(built, model, real, steps):
                     "m4.o"], cwd=directory, check=True)
     subprocess.run(["arm-none-eabi-gcc", *cpu, "-O2", "-I.", f"-DBGC_MODEL={_ident(model)}",
                     f'-DBGC_HEADER="{_ident(model)}.h"', f"-DBGC_STEPS={steps}",
-                    "--specs=rdimon.specs", "-nostartfiles", "-T", str(M4 / "mps2_an386.ld"), str(M4 / "startup.c"),
-                    str(HARNESS), "m4.o", "-lm", "-o", "m4.elf"], cwd=directory, check=True)
+                    "--specs=rdimon.specs", "-nostartfiles", "-T", str(M4 / "mps2_an386.ld"),
+                    str(M4 / "startup.c"), str(HARNESS), "m4.o", "-lm", "-o", "m4.elf"],
+                   cwd=directory, check=True)
     run = subprocess.run(["qemu-system-arm", "-M", "mps2-an386", "-nographic", "-monitor",
                           "none", "-serial", "none", "-semihosting-config",
                           "enable=on,target=native", "-kernel", "m4.elf"], cwd=directory,
