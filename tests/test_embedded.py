@@ -451,14 +451,16 @@ def test_long_functions_in_parts(tmp_path):
     assert _rows(tmp_path, 300) == _simulated("double_pendulum", 300)
 
 
-@pytest.mark.parametrize("model", ["pendulum", "double_pendulum", "stick_slip", "pwm_motor_stop"])
-def test_report_is_what_the_compiler_lays_out(built, model):
+@pytest.mark.parametrize("model, real", [
+    ("pendulum", "double"), ("double_pendulum", "double"), ("stick_slip", "double"),
+    ("pwm_motor_stop", "double"), ("pendulum", "float"), ("pwm_motor_stop", "float")])
+def test_report_is_what_the_compiler_lays_out(built, model, real):
     """--report's struct sizes are sizeof of the structs (x86-64, natural alignment)."""
     from bgc.codegen import embedded
-    directory = built[model, "double"]
+    directory = built[model, real]
     path, scene = MODELS[model]
     program = api.build(str(ROOT / path), scene).program
-    want = embedded.memory(program, "double", "rk4")
+    want = embedded.memory(program, real, "rk4")
     (directory / "sizes.c").write_text(f"""#include <stdio.h>
 #include "{model}.h"
 int main(void)
@@ -502,17 +504,18 @@ def test_pwm_motor_in_float(built):
     the last, the impact's time is resolved only to float's resolution of the angle over the
     approach speed (ulp(qmax) / v: 3e-8 / 0.01 s), and the rebound by |Phi''| (1 + e) times
     that; the last bounces and the rest decision follow, and the rows between the first
-    bounce slower than 1 % of the first impact's and the later of the two rests are left out
-    (13 rows of 10000).  A plastic stop (e = 0) rests at its first strike: every output
+    bounce slower than 2 % of the first impact's (0.12 rad/s, where (1 + e) |Phi''| ulp(qmax)
+    / v exceeds 1e-5 of the speed's size) and the later of the two rests are left out (27
+    rows of 10000).  A plastic stop (e = 0) rests at its first strike: every output
     within 1e-5 over the run."""
     err, names, single, double = _float_errors(built, "pwm_motor_stop", 10000)
     assert err["ind.f"] < 1e-5 and err["angle"] < 1e-5, err
     col = {n: j for j, n in enumerate(names)}
     v, lam = double[:, col["rotor.f"]], double[:, col["stop.lambda"]]
     strikes = np.flatnonzero((v[:-1] > 0) & (v[1:] <= 0))  # rows before an impact
-    slow = strikes[v[strikes] < 1e-2 * v[strikes[0]]][0]
+    slow = strikes[v[strikes] < 2e-2 * v[strikes[0]]][0]
     rest = max(np.flatnonzero(lam != 0)[0], np.flatnonzero(single[:, col["stop.lambda"]])[0])
-    assert 1 <= rest - slow <= 20
+    assert 1 <= rest - slow <= 40
     keep = np.ones(len(v), bool)
     keep[slow:rest + 1] = False
     for name in ("rotor.f", "stop.lambda"):
@@ -525,15 +528,12 @@ def test_pwm_motor_in_float(built):
 
 def test_stick_slip_in_float(built):
     """Float's sticks and breakaways are double's: the same number of each, each within a
-    step.  Its error grows with the run, not at the events: stuck, the mass moves with the
-    belt, x' = vb, a pure integrator, and each step's increment h vb (5e-4) added to x (0.2)
-    rounds to float's resolution of x, a bias that accumulates, 1e-6 of x every 0.2 s
-    (6e-5 of the speed's size after ten seconds); within 1e-5 over the first stick (at
-    0.29 s) and breakaway (0.73 s)."""
-    err, names, single, double = _float_errors(built, "stick_slip", 750)
+    step, and every output within 1e-5 over the ten seconds.  Stuck, the mass moves with the
+    belt, x' = vb, a pure integrator: without the compensated sum of each step's increment
+    h vb (5e-4) onto x (0.2), its rounding to float's resolution of x accumulated, 6e-5 of
+    the speed's size after ten seconds."""
+    err, names, single, double = _float_errors(built, "stick_slip", 10000)
     assert max(err.values()) < 1e-5, err
-    _, single, = _table(_rows(built["stick_slip", "float"], 10000))
-    _, double = _table(_rows(built["stick_slip", "double"], 10000))
     stuck_f, stuck_d = (np.abs(r[:, 2] - 0.5) < 1e-6 for r in (single, double))
     edges_f, edges_d = (np.flatnonzero(np.diff(s.astype(int))) for s in (stuck_f, stuck_d))
     assert len(edges_f) == len(edges_d) >= 8 and np.max(np.abs(edges_f - edges_d)) <= 1

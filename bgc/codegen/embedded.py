@@ -306,7 +306,8 @@ def memory(program: Program, real: str = "double", solver: str = "rk4",
     size = 8 if real == "double" else 4
     n, m = max(len(program.states), 1), max(len(program.outputs), 1)
     ws = _workspace(program, chunk_ops)
-    fields = [(8, 1), (size, n), (size, max(ws.doubles, 1)), (4, max(ws.ints, 1))]
+    fields = [(8, 1), (size, n)] + ([(size, n)] if real == "float" else []) + [
+        (size, max(ws.doubles, 1)), (4, max(ws.ints, 1))]  # (float: x's compensation)
     ev = program.events
     if ev is not None:
         g = max(ev.indicators, 1)
