@@ -26,11 +26,12 @@ cycle, loads two, a taken branch two to four, a float divide 14, and libgcc's so
 operations are sequences of them; cycles per step on the chip are about 1.2-1.6 times these
 counts (zero-wait-state memory), which only the hardware can settle.
 
-CasADi: the pendulum's eq. (12) (benchmarks/pendulum.py) as an SX expression, one rk4 step of
-it as a casadi.Function, its C from casadi's CodeGenerator (casadi_real double or float,
-casadi_int int), built and counted the same way.  The PWM motor is not expressed (CasADi's
-generated code has no event location: its edges and impacts), nor is the chain (its DAE needs
-a linear solve per evaluation: not written for this script yet).
+CasADi: the pendulum's eq. (12) (benchmarks/pendulum.py) and the chain's equations
+(_chain_casadi: its multipliers by CasADi's symbolic solve in every evaluation; its rows are
+bgc simulate's to 4e-16 over 200 steps) as SX expressions, one rk4 step of each as a
+casadi.Function, its C from casadi's CodeGenerator (casadi_real double or float, casadi_int
+int), built and counted the same way.  The PWM motor is not expressed: CasADi's generated
+code has no event location (its edges and impacts).
 
 Columns:  insns/step  instructions per step (the mean over the run's steps);  flash  the
 model object's .text + .rodata (arm-none-eabi-size);  stack  the deepest frame chain of one
@@ -41,6 +42,7 @@ from __future__ import annotations
 
 import argparse
 import datetime
+import math
 import os
 import shutil
 import subprocess
@@ -121,21 +123,60 @@ def bgc_row(model: str, real: str, steps: int | None, work: Path) -> dict:
             "state": mem["state"], "locals": mem["step_locals"]}
 
 
-def casadi_row(model: str, real: str, steps: int | None, work: Path) -> dict:
-    import casadi as ca
+def _pendulum_casadi(ca):
+    """The pendulum's eq. (12) (benchmarks/pendulum.py): (s, f(s)), s = (px, py, x, y), and
+    s(0)."""
     from pendulum import PARAMS
-    if model != "pendulum":
-        why = ("events (PWM edges, impacts)" if model == "pwm"
-               else "not expressed here (a linear solve per evaluation)")
-        return {"model": model, "real": real, "method": "casadi", "note": why}
     m, l, g, alpha, beta = (PARAMS[k] for k in ("m", "l", "g", "alpha", "beta"))
     s = ca.SX.sym("s", 4)
     px, py, x, y = s[0], s[1], s[2], s[3]
     xd, yd = px / m, py / m
     bracket = (y * g + xd**2 + yd**2 + 2 * alpha * (x * xd + y * yd)
                + beta**2 * (x**2 + y**2 - l**2) / 2)
-    f = ca.Function("f", [s], [ca.vertcat(m * (-x / (x**2 + y**2) * bracket),
-                                          m * (g - y / (x**2 + y**2) * bracket), xd, yd)])
+    f = ca.vertcat(m * (-x / (x**2 + y**2) * bracket), m * (g - y / (x**2 + y**2) * bracket),
+                   xd, yd)
+    theta0 = PARAMS["theta0"]
+    return s, f, [0.0, 0.0, l * math.sin(theta0), l * math.cos(theta0)]
+
+
+def _chain_casadi(ca, n=16, m=1.0, l=1.0, g=9.81, alpha=5.0, beta=5.0, theta0=0.5,
+                  dtheta=0.15):
+    """models/pendulum_chain.bg's equations written out: n point masses (x_i, y_i), momenta
+    p, rods phi_i = (x_i - x_{i-1})^2 + (y_i - y_{i-1})^2 - l^2 (x_0 = y_0 = 0) held by the
+    Baumgarte corrector phi'' + 2 alpha phi' + beta^2 phi = 0: p' = F + G^T lambda with
+    (G G^T / m) lambda = -(G F / m + G' v + 2 alpha G v + beta^2 phi), solved by CasADi's
+    own symbolic solve in every evaluation.  (s, f(s)), s = (q, p), and s(0)."""
+    q, p = ca.SX.sym("q", 2 * n), ca.SX.sym("p", 2 * n)
+    v = p / m
+    G = ca.SX.zeros(n, 2 * n)
+    phi, curve = [], []
+    for i in range(n):
+        prev = (0, 0, 0, 0) if i == 0 else (q[2 * i - 2], q[2 * i - 1], v[2 * i - 2],
+                                             v[2 * i - 1])
+        dx, dy = q[2 * i] - prev[0], q[2 * i + 1] - prev[1]
+        dvx, dvy = v[2 * i] - prev[2], v[2 * i + 1] - prev[3]
+        phi.append(dx * dx + dy * dy - l * l)
+        curve.append(2 * (dvx * dvx + dvy * dvy))
+        G[i, 2 * i], G[i, 2 * i + 1] = 2 * dx, 2 * dy
+        if i > 0:
+            G[i, 2 * i - 2], G[i, 2 * i - 1] = -2 * dx, -2 * dy
+    F = ca.vertcat(*[ca.vertcat(0, m * g) for _ in range(n)])
+    lam = ca.solve(G @ G.T / m, -(G @ F / m + ca.vertcat(*curve) + 2 * alpha * (G @ v)
+                                  + beta**2 * ca.vertcat(*phi)))
+    x0, x, y = [], 0.0, 0.0
+    for i in range(n):
+        x, y = x + l * math.sin(theta0 + i * dtheta), y + l * math.cos(theta0 + i * dtheta)
+        x0 += [x, y]
+    return ca.vertcat(q, p), ca.vertcat(v, F + G.T @ lam), x0 + [0.0] * (2 * n)
+
+
+def casadi_row(model: str, real: str, steps: int | None, work: Path) -> dict:
+    import casadi as ca
+    if model == "pwm":
+        return {"model": model, "real": real, "method": "casadi",
+                "note": "no event location (PWM edges, impacts)"}
+    s, rhs, x0 = (_pendulum_casadi if model == "pendulum" else _chain_casadi)(ca)
+    f = ca.Function("f", [s], [rhs])
     h = MODELS[model][3]
     k1 = f(s)
     k2 = f(s + h / 2 * k1)
@@ -150,14 +191,12 @@ def casadi_row(model: str, real: str, steps: int | None, work: Path) -> dict:
     gen.generate(str(directory) + os.sep)
     run(["arm-none-eabi-gcc", *CFLAGS, "-c", "casadi_step.c", "-o", "casadi_step.o"],
         directory)
-    theta0 = PARAMS["theta0"]
-    import math
-    x0 = f"{{0, 0, {l * math.sin(theta0)!r}, {l * math.cos(theta0)!r}}}"
     n = steps or MODELS[model][4]
     per = link_and_count(directory, ["casadi_step.o"],
-                         ["-DBGC_CASADI=casadi_step", "-DBGC_N=4", f"-DBGC_REAL={real}",
-                          f"-DBGC_X0={x0}", '-DBGC_HEADER="casadi_step.h"',
-                          f"-DBGC_STEPS={n}"])
+                         ["-DBGC_CASADI=casadi_step", f"-DBGC_N={len(x0)}",
+                          f"-DBGC_REAL={real}", "-DBGC_X0={" + ", ".join(map(repr, x0)) + "}",
+                          f"-DBGC_NW={step.sz_w()}", f"-DBGC_NIW={step.sz_iw()}",
+                          '-DBGC_HEADER="casadi_step.h"', f"-DBGC_STEPS={n}"])
     return {"model": model, "real": real, "method": f"CasADi {ca.__version__}", "steps": n,
             "insns": per, "flash": flash(directory, "casadi_step.o")}
 

@@ -6,7 +6,8 @@
  * nothing) and "steps N TICKS" through semihosting.
  *   BGC_MODEL=NAME BGC_HEADER='"NAME.h"': a model of bgc's embedded target;
  *   BGC_CASADI=FUNCTION BGC_N=N BGC_HEADER='"FUNCTION.h"': a CasADi-generated step
- *     FUNCTION(arg, res, iw, w, mem) of N states, its initial state in BGC_X0.
+ *     FUNCTION(arg, res, iw, w, mem) of N states, its initial state in BGC_X0, its work
+ *     arrays of BGC_NW reals and BGC_NIW ints.
  * Built with tests/embedded_m4/startup.c and mps2_an386.ld. */
 #include <stdio.h>
 #include BGC_HEADER
@@ -37,8 +38,8 @@ int main(void)
     int j, rc = 0;
 #ifdef BGC_CASADI
     static BGC_REAL x[BGC_N] = BGC_X0, x1[BGC_N];
-    static BGC_REAL work[1000];
-    static int iwork[100];
+    static BGC_REAL work[BGC_NW + 1];
+    static int iwork[BGC_NIW + 1];
     const BGC_REAL *arg[1];
     BGC_REAL *res[1];
 #else
