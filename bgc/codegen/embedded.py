@@ -32,7 +32,7 @@ REALS = ("double", "float")
 HELPERS = ("bgc_opaque", "bgc_sq", "bgc_min", "bgc_max", "bgc_sign", "bgc_heaviside",
            "bgc_square", "bgc_square_next", "bgc_periodic_next")  # emitted where used
 SOLVERS = ("euler", "rk4")  # the fixed-step methods the target steps with
-FLOAT_NEWTON_RTOL, FLOAT_NEWTON_ATOL = 1e-5, 1e-6  # float: Newton's tolerance at least these
+FLOAT_NEWTON_RTOL = 1e-5  # float: Newton's relative tolerance at least this
 FLOAT_BAND_ULPS = 16  # float: a changed relation's band, in float's epsilons of |g|'s largest
 MAX_TABLE_ROWS = 1024  # the most rows of a lookup table the target would carry (flash)
 FAULTS = (("OK", 0, "the step was taken"),
@@ -257,7 +257,9 @@ def emit_embedded(program: Program, real: str = "double", solver: str = "rk4",
         "n_params": len(program.params), "n_consts": program.n_consts,
         "n_inputs": len(program.inputs), "work": max(ws.doubles, 1), "ints": max(ws.ints, 1),
         "blocks": blocks,
-        # Newton's tolerance: the scene's, at least float's resolution in float
+        # Newton's relative tolerance: the scene's, at least float's resolution in float; atol
+        # the scene's in both (the model's own decisions read it: a contact's rest, a switch's
+        # dead band, which float would otherwise take differently from double)
         "rtol": lit(max(sc.rtol, FLOAT_NEWTON_RTOL) if real == "float" else sc.rtol),
         "atol": lit(sc.atol),
         "eps": "FLT_EPSILON" if real == "float" else "DBL_EPSILON",
