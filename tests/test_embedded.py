@@ -33,21 +33,36 @@ MODELS = {"pendulum": ("models/pendulum.bg", "swing"), "dc_motor": ("models/dc_m
           "stick_slip": ("tests/models/stick_slip.bg", "run"),
           "pwm_motor_stop": ("tests/models/pwm_motor_stop.bg", "run"),
           # impacts of a two-link arm on a stop, its multipliers an LU block per step
-          "two_link_arm_stop": ("tests/models/two_link_arm_stop.bg", "strike")}
-STEP = {"pwm_motor_stop": (1e-4, 10000), "stick_slip": (H, 10000), "ball_when": (H, 3000)}
+          "two_link_arm_stop": ("tests/models/two_link_arm_stop.bg", "strike"),
+          # the 16-link chain (constant N = 16): 32 states, a 16-row LU block per evaluation
+          "chain16": ("models/pendulum_chain.bg", "swing")}
+CONSTS = {"chain16": (("N", 16),)}  # the model's constants, as --const gives them
+STEP = {"pwm_motor_stop": (1e-4, 10000), "stick_slip": (H, 10000), "ball_when": (H, 3000),
+        "chain16": (H, 200)}
 BUILDS = [("pendulum", "double"), ("pendulum", "float"), ("dc_motor", "double"),
           ("dc_motor", "float"), ("double_pendulum", "double"), ("double_pendulum", "float"),
           ("diode", "double"), ("ball_when", "double"), ("stick_slip", "double"),
-          ("pwm_motor_stop", "double"), ("two_link_arm_stop", "double")]
+          ("pwm_motor_stop", "double"), ("two_link_arm_stop", "double"),
+          ("ball_when", "float"), ("stick_slip", "float"), ("pwm_motor_stop", "float"),
+          ("chain16", "double"), ("chain16", "float")]
 FORBIDDEN = ("malloc", "calloc", "realloc", "free", "printf", "fprintf", "sprintf",
              "snprintf", "puts", "fputs", "fwrite", "putchar", "fopen", "exit", "abort")
 
 needs_gcc = pytest.mark.skipif(shutil.which("gcc") is None, reason="no gcc on this machine")
 
 
+def _source(model):
+    """The model's file, with its constants (CONSTS) as --const gives them."""
+    path = str(ROOT / MODELS[model][0])
+    if model not in CONSTS:
+        return path
+    src = api.read_source(path)
+    return api.Source(src.path, src.text, CONSTS[model])
+
+
 def _emit(model, real, tmp):
-    path, scene = MODELS[model]
-    files = api.compile(str(ROOT / path), "embedded", scene=scene,
+    scene = MODELS[model][1]
+    files = api.compile(_source(model), "embedded", scene=scene,
                         embedded={"real": real, "solver": "rk4", "step": STEP.get(model, (H,))[0]})
     for name, text in files.items():
         (tmp / name).write_text(text)
@@ -64,17 +79,23 @@ def built(tmp_path_factory):
     for model, real in BUILDS:
         tmp = tmp_path_factory.mktemp(f"{model}-{real}")
         _emit(model, real, tmp)
-        subprocess.run(["gcc", *FLAGS, "-c", f"{model}.c", "-o", f"{model}.o"], cwd=tmp,
+        name = _ident(model)
+        subprocess.run(["gcc", *FLAGS, "-c", f"{name}.c", "-o", f"{name}.o"], cwd=tmp,
                        check=True)
-        subprocess.run(["gcc", *FLAGS[:-1], "-O0", "-I.", f"-DBGC_MODEL={model}",
-                        f'-DBGC_HEADER="{model}.h"', str(HARNESS), f"{model}.o", "-lm",
+        subprocess.run(["gcc", *FLAGS[:-1], "-O0", "-I.", f"-DBGC_MODEL={name}",
+                        f'-DBGC_HEADER="{name}.h"', str(HARNESS), f"{name}.o", "-lm",
                         "-o", "run"], cwd=tmp, check=True)
         out[model, real] = tmp
     return out
 
 
-def _rows(directory, steps=STEPS):
-    text = subprocess.run([str(directory / "run"), str(steps)], capture_output=True,
+def _ident(model):
+    """The generated files' name: the model's own (chain16's file names itself chain8)."""
+    return "chain8" if model == "chain16" else model
+
+
+def _rows(directory, steps=STEPS, *params):
+    text = subprocess.run([str(directory / "run"), str(steps), *params], capture_output=True,
                           text=True, check=True).stdout
     return text
 
@@ -82,9 +103,9 @@ def _rows(directory, steps=STEPS):
 def _simulated(model, steps=STEPS, backend="vm"):
     """`bgc simulate --solver rk4 --step H --dt H` as CSV text (the numbers as the CSV
     writes them, %.17g)."""
-    path, scene = MODELS[model]
+    scene = MODELS[model][1]
     h = STEP.get(model, (H,))[0]
-    t, Y, names = api.simulate(str(ROOT / path), scene, backend=backend, solver="rk4",
+    t, Y, names = api.simulate(_source(model), scene, backend=backend, solver="rk4",
                                step=h, dt=h, t_end=steps * h)
     assert steps * h == t[-1]  # the last row is on the grid too
     lines = [",".join(["t", *names])]
@@ -114,10 +135,15 @@ def test_events_are_the_bytes_of_the_c_backend(built):
         "pwm_motor_stop", 3000, backend="c")
 
 
-@pytest.mark.parametrize("model", ["pendulum", "dc_motor", "double_pendulum"])
+@pytest.mark.parametrize("model", ["pendulum", "dc_motor", "double_pendulum", "chain16",
+                                   "ball_when"])
 def test_float_within_its_resolution(built, model):
-    names, single = _table(_rows(built[model, "float"]))
-    _, double = _table(_simulated(model))
+    """max |float - double| / max |double| per output over the run, below 1e-5; the double
+    rows are simulate's bytes (test_double_is_the_bytes_of_simulate).  The ball: events in
+    float, its bounces located on float's interpolant."""
+    steps = STEP.get(model, (H, STEPS))[1]
+    names, single = _table(_rows(built[model, "float"], steps))
+    _, double = _table(_rows(built[model, "double"], steps))
     assert single.shape == double.shape
     assert np.array_equal(single[:, 0], double[:, 0])
     for j, name in enumerate(names[1:], 1):
@@ -157,7 +183,7 @@ def test_dc_motor_follows_its_linear_equations(built):
 
 def test_no_heap_no_stdio_no_mutable_global(built):
     for (model, real), directory in built.items():
-        obj = str(directory / f"{model}.o")
+        obj = str(directory / f"{_ident(model)}.o")
         undefined = subprocess.run(["nm", "-u", obj], capture_output=True, text=True,
                                    check=True).stdout.split()
         names = {u for u in undefined if u != "U"}
@@ -217,8 +243,8 @@ int main(void)
 @pytest.mark.skipif(shutil.which("clang") is None, reason="no clang on this machine")
 def test_clang_warning_free(built):
     for (model, real), directory in built.items():
-        subprocess.run(["clang", *FLAGS, "-fsyntax-only", f"{model}.c"], cwd=directory,
-                       check=True)
+        subprocess.run(["clang", *FLAGS, "-fsyntax-only", f"{_ident(model)}.c"],
+                       cwd=directory, check=True)
 
 
 @pytest.mark.skipif(shutil.which("arm-none-eabi-gcc") is None,
@@ -226,8 +252,8 @@ def test_clang_warning_free(built):
 def test_arm_none_eabi_warning_free(built):
     cpu = ["-mcpu=cortex-m4", "-mthumb", "-mfloat-abi=hard", "-mfpu=fpv4-sp-d16"]
     for (model, real), directory in built.items():
-        subprocess.run(["arm-none-eabi-gcc", *cpu, *FLAGS, "-c", f"{model}.c", "-o", "arm.o"],
-                       cwd=directory, check=True)
+        subprocess.run(["arm-none-eabi-gcc", *cpu, *FLAGS, "-c", f"{_ident(model)}.c", "-o",
+                        "arm.o"], cwd=directory, check=True)
 
 
 @pytest.mark.skipif(shutil.which("arm-none-eabi-gcc") is None
@@ -237,18 +263,21 @@ def test_arm_none_eabi_warning_free(built):
 @pytest.mark.parametrize("model, real, steps", [
     ("pendulum", "double", 200), ("pendulum", "float", 200),
     ("stick_slip", "double", 1000),  # through its first stick and breakaway
-    ("pwm_motor_stop", "double", 4000)])  # 400 PWM periods, its impacts on the stop
+    ("pwm_motor_stop", "double", 4000),  # 400 PWM periods, its impacts on the stop
+    ("pwm_motor_stop", "float", 4000), ("stick_slip", "float", 1000),
+    ("chain16", "double", 20), ("chain16", "float", 20)])  # (20 steps: 2 s under QEMU)
 def test_cortex_m4_under_qemu_is_the_host(built, model, real, steps):
     """Cross-compiled for a Cortex-M4F (MPS2-AN386), run under QEMU with its output by
     semihosting: the host's rows, byte for byte."""
     directory = built[model, real]
     cpu = ["-mcpu=cortex-m4", "-mthumb", "-mfloat-abi=hard", "-mfpu=fpv4-sp-d16"]
-    subprocess.run(["arm-none-eabi-gcc", *cpu, *FLAGS, "-c", f"{model}.c", "-o", "m4.o"],
+    subprocess.run(["arm-none-eabi-gcc", *cpu, *FLAGS, "-c", f"{_ident(model)}.c", "-o",
+                    "m4.o"], cwd=directory, check=True)
+    subprocess.run(["arm-none-eabi-gcc", *cpu, "-O2", "-I.", f"-DBGC_MODEL={_ident(model)}",
+                    f'-DBGC_HEADER="{_ident(model)}.h"', f"-DBGC_STEPS={steps}",
+                    "--specs=rdimon.specs", "-nostartfiles", "-T", str(M4 / "mps2_an386.ld"),
+                    str(M4 / "startup.c"), str(HARNESS), "m4.o", "-lm", "-o", "m4.elf"],
                    cwd=directory, check=True)
-    subprocess.run(["arm-none-eabi-gcc", *cpu, "-O2", "-I.", f"-DBGC_MODEL={model}",
-                    f'-DBGC_HEADER="{model}.h"', f"-DBGC_STEPS={steps}", "--specs=rdimon.specs",
-                    "-nostartfiles", "-T", str(M4 / "mps2_an386.ld"), str(M4 / "startup.c"),
-                    str(HARNESS), "m4.o", "-lm", "-o", "m4.elf"], cwd=directory, check=True)
     run = subprocess.run(["qemu-system-arm", "-M", "mps2-an386", "-nographic", "-monitor",
                           "none", "-serial", "none", "-semihosting-config",
                           "enable=on,target=native", "-kernel", "m4.elf"], cwd=directory,
@@ -422,14 +451,16 @@ def test_long_functions_in_parts(tmp_path):
     assert _rows(tmp_path, 300) == _simulated("double_pendulum", 300)
 
 
-@pytest.mark.parametrize("model", ["pendulum", "double_pendulum", "stick_slip", "pwm_motor_stop"])
-def test_report_is_what_the_compiler_lays_out(built, model):
+@pytest.mark.parametrize("model, real", [
+    ("pendulum", "double"), ("double_pendulum", "double"), ("stick_slip", "double"),
+    ("pwm_motor_stop", "double"), ("pendulum", "float"), ("pwm_motor_stop", "float")])
+def test_report_is_what_the_compiler_lays_out(built, model, real):
     """--report's struct sizes are sizeof of the structs (x86-64, natural alignment)."""
     from bgc.codegen import embedded
-    directory = built[model, "double"]
+    directory = built[model, real]
     path, scene = MODELS[model]
     program = api.build(str(ROOT / path), scene).program
-    want = embedded.memory(program, "double", "rk4")
+    want = embedded.memory(program, real, "rk4")
     (directory / "sizes.c").write_text(f"""#include <stdio.h>
 #include "{model}.h"
 int main(void)
@@ -457,13 +488,82 @@ def test_adaptive_solver_refused_at_the_scene(tmp_path, capsys):
     assert code == 2 and "not a fixed-step method" in out.err
 
 
-def test_events_in_float_refused_at_the_element(tmp_path, capsys):
-    code, out = _compile(capsys, str(ROOT / "tests" / "models" / "stick_slip.bg"), "--target",
-                         "embedded", "--solver", "rk4", "--real", "float", "-o", str(tmp_path))
+def _float_errors(built, model, steps, *params):
+    """Per output, max |float - double| / max |double| over the run, and the rows."""
+    names, single = _table(_rows(built[model, "float"], steps, *params))
+    _, double = _table(_rows(built[model, "double"], steps, *params))
+    assert np.array_equal(single[:, 0], double[:, 0])
+    err = np.max(np.abs(single - double), axis=0) / np.max(np.abs(double), axis=0)
+    return dict(zip(names[1:], err[1:])), names, single, double
+
+
+def test_pwm_motor_in_float(built):
+    """The PWM edges are time events in double (the driver's clock), so every period's duty is
+    float's own; the current and the angle within 1e-5 over the run.  The speed and the stop's
+    torque jump at the impacts: where the rotor settles on the stop, each bounce slower than
+    the last, the impact's time is resolved only to float's resolution of the angle over the
+    approach speed (ulp(qmax) / v: 3e-8 / 0.01 s), and the rebound by |Phi''| (1 + e) times
+    that; the last bounces and the rest decision follow, and the rows between the first
+    bounce slower than 2 % of the first impact's (0.12 rad/s, where (1 + e) |Phi''| ulp(qmax)
+    / v exceeds 1e-5 of the speed's size) and the later of the two rests are left out (27
+    rows of 10000).  A plastic stop (e = 0) rests at its first strike: every output
+    within 1e-5 over the run."""
+    err, names, single, double = _float_errors(built, "pwm_motor_stop", 10000)
+    assert err["ind.f"] < 1e-5 and err["angle"] < 1e-5, err
+    col = {n: j for j, n in enumerate(names)}
+    v, lam = double[:, col["rotor.f"]], double[:, col["stop.lambda"]]
+    strikes = np.flatnonzero((v[:-1] > 0) & (v[1:] <= 0))  # rows before an impact
+    slow = strikes[v[strikes] < 2e-2 * v[strikes[0]]][0]
+    rest = max(np.flatnonzero(lam != 0)[0], np.flatnonzero(single[:, col["stop.lambda"]])[0])
+    assert 1 <= rest - slow <= 40
+    keep = np.ones(len(v), bool)
+    keep[slow:rest + 1] = False
+    for name in ("rotor.f", "stop.lambda"):
+        j = col[name]
+        assert np.max(np.abs(single[keep, j] - double[keep, j])) \
+            <= 1e-5 * np.max(np.abs(double[:, j])), name
+    err, *_ = _float_errors(built, "pwm_motor_stop", 10000, "e=0")
+    assert max(err.values()) < 1e-5, err
+
+
+def test_stick_slip_in_float(built):
+    """Float's sticks and breakaways are double's: the same number of each, each within a
+    step, and every output within 1e-5 over the ten seconds.  Stuck, the mass moves with the
+    belt, x' = vb, a pure integrator: without the compensated sum of each step's increment
+    h vb (5e-4) onto x (0.2), its rounding to float's resolution of x accumulated, 6e-5 of
+    the speed's size after ten seconds."""
+    err, names, single, double = _float_errors(built, "stick_slip", 10000)
+    assert max(err.values()) < 1e-5, err
+    stuck_f, stuck_d = (np.abs(r[:, 2] - 0.5) < 1e-6 for r in (single, double))
+    edges_f, edges_d = (np.flatnonzero(np.diff(s.astype(int))) for s in (stuck_f, stuck_d))
+    assert len(edges_f) == len(edges_d) >= 8 and np.max(np.abs(edges_f - edges_d)) <= 1
+
+
+def test_table_beyond_its_bound_refused_at_the_table(tmp_path, capsys):
+    from bgc.codegen.embedded import MAX_TABLE_ROWS
+    rows = MAX_TABLE_ROWS + 1
+    (tmp_path / "r.csv").write_text("t,r\n" + "".join(f"{k / rows!r},1.5\n"
+                                                       for k in range(rows)))
+    model = tmp_path / "tab.bg"
+    model.write_text("""model tab
+c : C(1) init q = 1
+r : R(R)
+signal R = table("r.csv", t, interp = linear)
+j : 1
+j -> c
+j -> r
+scene run { time 0 .. 1 every 0.01; outputs c.q
+  solver rk4(step = 0.001) }
+""")
+    out_dir = tmp_path / "out"
+    out_dir.mkdir()
+    code, out = _compile(capsys, str(model), "-s", "run", "--target", "embedded", "-o",
+                         str(out_dir))
     assert code == 1, out.err
-    assert "stick_slip.bg:14:1: error: embedded target: events (" in out.err
-    assert "use --real double" in out.err and "^~~" in out.err
-    assert list(tmp_path.iterdir()) == []
+    assert f"tab.bg:4:12: error: embedded target: the table 'r.csv' has {rows} rows, more " \
+           f"than the {MAX_TABLE_ROWS} the target carries in flash: resample it to " \
+           f"{MAX_TABLE_ROWS} rows or fewer" in out.err and "^~~" in out.err
+    assert list(out_dir.iterdir()) == []
 
 
 def test_a_max_step_below_the_step_refused(tmp_path, capsys):

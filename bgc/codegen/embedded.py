@@ -24,7 +24,7 @@ import sympy as sp
 from .. import ir
 from ..base import solvers
 from ..base.diagnostics import ModelError, error
-from ..ir import FUNCTIONS, D, Program
+from ..ir import FUNCTIONS, D, PeriodicNext, Program, SquareNext, SquareWave, T, Table
 from ..ir.printers import CPrinter, float_literal
 from . import emit
 
@@ -32,7 +32,8 @@ REALS = ("double", "float")
 HELPERS = ("bgc_opaque", "bgc_sq", "bgc_min", "bgc_max", "bgc_sign", "bgc_heaviside",
            "bgc_square", "bgc_square_next", "bgc_periodic_next")  # emitted where used
 SOLVERS = ("euler", "rk4")  # the fixed-step methods the target steps with
-FLOAT_NEWTON_RTOL, FLOAT_NEWTON_ATOL = 1e-5, 1e-6  # float: Newton's tolerance at least these
+FLOAT_NEWTON_RTOL = 1e-5  # float: Newton's relative tolerance at least this
+FLOAT_BAND_ULPS = 16  # float: a changed relation's band, in float's epsilons of |g|'s largest
 MAX_TABLE_ROWS = 1024  # the most rows of a lookup table the target would carry (flash)
 FAULTS = (("OK", 0, "the step was taken"),
           ("FAULT_NONFINITE", 1, "a derivative, state or output is not finite: the state is "
@@ -69,9 +70,19 @@ class _FloatPrinter(_EmbeddedPrinter):
                          if CPrinter.FUNCTION_NAMES.get(f, f) == f},  # libm's, not bgc_max
                       "Abs": "fabsf"}
 
+    _raw_time = False  # inside a time event's helper: t as the driver's double
+
     def _print(self, expr, **kwargs):
         if isinstance(expr, (sp.Rational, sp.Float)) or expr in (sp.pi, sp.E):
             return super()._print(expr, **kwargs) + "f"
+        if expr == T and not self._raw_time:
+            return "(bgc_real)t"
+        if type(expr) in (SquareWave, SquareNext, PeriodicNext) and not self._raw_time:
+            self._raw_time = True  # (an edge in float is off by float's resolution at t)
+            try:
+                return super()._print(expr, **kwargs)
+            finally:
+                self._raw_time = False
         return super()._print(expr, **kwargs)
 
     def _print_power(self, expr):
@@ -96,8 +107,11 @@ class _FloatPrinter(_EmbeddedPrinter):
 _DOUBLE_DECL = re.compile(r"^const double ")
 
 
-def _typed(lines: list[str]) -> list[str]:
-    """The C emitter's temporaries (`const double wK = ...`) in the target's real type."""
+def _typed(lines: list[str], name: str = "") -> list[str]:
+    """The C emitter's temporaries (`const double wK = ...`) in the target's real type; those
+    of next_time stay double (times: the driver's clock is a double whatever the real type)."""
+    if name == "next_time":
+        return lines
     return [_DOUBLE_DECL.sub("const bgc_real ", line) for line in lines]
 
 
@@ -147,23 +161,13 @@ def _refuse(span, message: str):
 def check_supported(program: Program, graph, scene, solver: str, real: str = "double",
                     step: float | None = None) -> None:
     """ModelError, located, for what the embedded target does not run (yet): an adaptive
-    solver, events or Newton blocks in float, a scene's max_step below the step, inputs,
-    lookup tables."""
+    solver, Newton blocks in float, a scene's max_step below the step, inputs, lookup tables
+    (one of more than MAX_TABLE_ROWS rows named so)."""
     if solver not in SOLVERS:
         span = scene.solver[2] if scene is not None and scene.solver else None
         family = "adaptive" if solvers.get(solver).adaptive else "not a fixed-step method"
         _refuse(span, f"the solver '{solver}' is {family}; the target takes one fixed step "
                       f"per call: give --solver rk4 or --solver euler, and --step H")
-    if program.events is not None and real == "float":
-        spans = [item.span for items in (graph.whens, graph.relations, graph.squares,
-                                         graph.discretes) for item in items]
-        owners = {name.split(":")[0].split(".")[0] for name in program.events.names}
-        spans += [e.span for e in graph.elements if e.name in owners]  # switched elements
-        _refuse(spans[0] if spans else None,
-                "events (when-blocks, relations of states or time, switched elements) run "
-                "in double only (in float a located event's time rounds to float's "
-                "resolution, and the run departs from simulate's by more than it): use "
-                "--real double")
     sc = program.scene
     h = step if step is not None else (sc.step if sc.step is not None else sc.dt)
     if sc.max_step is not None and h > sc.max_step:
@@ -175,14 +179,27 @@ def check_supported(program: Program, graph, scene, solver: str, real: str = "do
         _refuse(None, f"algebraic block {newton[0].index} ({', '.join(newton[0].unknowns[:4])}) "
                       f"is solved by Newton's method, which the target does not run in float "
                       f"yet: use --real double")
-    for tab in program.tables:
+    for k, tab in enumerate(program.tables):
+        span = _table_span(graph, k)
         if tab.rows > MAX_TABLE_ROWS:
-            _refuse(None, f"the table '{tab.name}' has {tab.rows} rows, more than the "
-                          f"{MAX_TABLE_ROWS} the target carries: resample it coarser")
-        _refuse(None, f"lookup tables ('{tab.name}') are not supported yet")
+            _refuse(span, f"the table '{tab.name}' has {tab.rows} rows, more than the "
+                          f"{MAX_TABLE_ROWS} the target carries in flash: resample it to "
+                          f"{MAX_TABLE_ROWS} rows or fewer")
+        _refuse(span, f"lookup tables ('{tab.name}') are not supported yet")
     for info in program.inputs:
         _refuse(getattr(info, "span", None),
                 f"inputs ('{info.name}') are not supported yet")
+
+
+def _table_span(graph, k: int):
+    """The place of the first signal or element that reads table k (Table(k, ...)), or
+    None."""
+    for item in (*graph.signals, *graph.elements):
+        for ex in (getattr(item, "expr", None), getattr(item, "value", None)):
+            v = getattr(ex, "value", None)
+            if isinstance(v, sp.Basic) and any(int(f.args[0]) == k for f in v.atoms(Table)):
+                return ex.span
+    return None
 
 
 # ---------------------------------------------------------------- emission
@@ -208,7 +225,7 @@ def emit_embedded(program: Program, real: str = "double", solver: str = "rk4",
     model = {}
     for name in _functions(program):
         f = emit._function_context(writer, name, "out")
-        f["chunks"] = [_typed(lines) for lines in f["chunks"]]
+        f["chunks"] = [_typed(lines, name) for lines in f["chunks"]]
         for e in f["evals"]:
             for key in ("body", "residuals", "tangents", "jacobian"):
                 e[key] = _typed(e[key])
@@ -240,10 +257,15 @@ def emit_embedded(program: Program, real: str = "double", solver: str = "rk4",
         "n_params": len(program.params), "n_consts": program.n_consts,
         "n_inputs": len(program.inputs), "work": max(ws.doubles, 1), "ints": max(ws.ints, 1),
         "blocks": blocks,
-        # Newton's tolerance: the scene's, at least float's resolution in float
+        # Newton's relative tolerance: the scene's, at least float's resolution in float; atol
+        # the scene's in both (the model's own decisions read it: a contact's rest, a switch's
+        # dead band, which float would otherwise take differently from double)
         "rtol": lit(max(sc.rtol, FLOAT_NEWTON_RTOL) if real == "float" else sc.rtol),
-        "atol": lit(max(sc.atol, FLOAT_NEWTON_ATOL) if real == "float" else sc.atol),
+        "atol": lit(sc.atol),
         "eps": "FLT_EPSILON" if real == "float" else "DBL_EPSILON",
+        # a changed relation's band, relative to its indicator's largest magnitude: simulate's
+        # 1e-12 in double; in float what float resolves of the indicator
+        "band": lit(1e-12) if real == "double" else f"({FLOAT_BAND_ULPS:g}.0f * FLT_EPSILON)",
         "fabs": "fabsf" if real == "float" else "fabs",
         "sqrt": "sqrtf" if real == "float" else "sqrt",
         "floor": "floorf" if real == "float" else "floor",
@@ -286,7 +308,8 @@ def memory(program: Program, real: str = "double", solver: str = "rk4",
     size = 8 if real == "double" else 4
     n, m = max(len(program.states), 1), max(len(program.outputs), 1)
     ws = _workspace(program, chunk_ops)
-    fields = [(8, 1), (size, n), (size, max(ws.doubles, 1)), (4, max(ws.ints, 1))]
+    fields = [(8, 1), (size, n)] + ([(size, n)] if real == "float" else []) + [
+        (size, max(ws.doubles, 1)), (4, max(ws.ints, 1))]  # (float: x's compensation)
     ev = program.events
     if ev is not None:
         g = max(ev.indicators, 1)
