@@ -45,3 +45,17 @@ def _built(model, scene, options):
 def built_text(name: str, text: str, scene: str | None = None, **options):
     """built() of a model's text, under the file name its messages give."""
     return built(Source(name, text), scene, **options)
+
+
+def simulated(model, scene: str | None = None, backend: str = "python", **options):
+    """(t, Y, names) of a run of built(model, scene), as bgc.simulate runs it (its settings
+    from the scene and options: t_end, dt, solver, params...), without building again: for
+    tests of what a model computes, not of bgc.simulate itself (tests/test_simulate.py)."""
+    from bgc.api import arrays
+    from bgc.execute.runner import prepare, run, settings_for
+
+    compiled = built(model, scene)
+    settings = settings_for(compiled.program.scene, [p.name for p in compiled.program.params],
+                            **options)
+    ran = prepare(compiled, backend, in_process=True)
+    return (*arrays(run(ran, settings)), list(ran.outputs))
