@@ -48,6 +48,20 @@ def built_text(name: str, text: str, scene: str | None = None, **options):
     return built(Source(name, text), scene, **options)
 
 
+def simulated(model, scene: str | None = None, backend: str = "python", **options):
+    """(t, Y, names) of a run of built(model, scene), as bgc.simulate runs it (its settings
+    from the scene and options: t_end, dt, solver, params...), without building again: for
+    tests of what a model computes, not of bgc.simulate itself (tests/test_simulate.py)."""
+    from bgc.api import arrays
+    from bgc.execute.runner import prepare, run, settings_for
+
+    compiled = built(model, scene)
+    settings = settings_for(compiled.program.scene, [p.name for p in compiled.program.params],
+                            **options)
+    ran = prepare(compiled, backend, in_process=True)
+    return (*arrays(run(ran, settings)), list(ran.outputs))
+
+
 def ball(scene: str = "scene drop { time 0 .. 3 every 0.01; outputs x, b.p }") -> str:
     """A ball dropped on a floor, bouncing by a when-block's reinit (x its height), with
     the scene given."""

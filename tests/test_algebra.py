@@ -11,7 +11,6 @@ Every reference here is computed independently of bgc, inside the test:
 from __future__ import annotations
 
 import ctypes
-import functools
 import math
 import subprocess
 from pathlib import Path
@@ -26,7 +25,7 @@ import bgc
 from bgc.base import backends
 from bgc.api import Source
 from bgc.codegen.emit import emit_c, emit_python
-from helpers import families
+from helpers import built, families
 
 ROOT = Path(__file__).resolve().parent.parent
 MODELS = sorted((ROOT / "models").glob("*.bg"))
@@ -69,8 +68,7 @@ def chain_reference(n, t, theta0=0.5, dtheta=0.15, m=1.0, l=1.0, g=9.81):
 @pytest.mark.parametrize("backend", BACKENDS)
 def test_three_link_chain_matches_minimal_coordinates(backend):
     src = Source("chain3.bg", families.pendulum_chain(3))
-    compiled = bgc.build(src, "swing")
-    (block,) = compiled.reduced.blocks
+    (block,) = built(src, "swing").reduced.blocks
     assert block.method == "lu" and len(block.unknowns) == 3  # the coupled multipliers
     t, Y, names = bgc.simulate(src, scene="swing", backend=backend)
     assert t[-1] == 5.0 and names == ["x1", "y1", "x2", "y2", "x3", "y3"]
@@ -112,7 +110,7 @@ def diode_reference(t, V=5.0, Rs=100.0, Is=1e-12, Vt=0.02585, C=1e-4):
 @pytest.mark.parametrize("backend", BACKENDS)
 def test_diode_loop_solved_by_newton_matches_brentq(backend):
     path = ROOT / "models" / "diode.bg"
-    (block,) = bgc.build(path, "charge").reduced.blocks
+    (block,) = built(path, "charge").reduced.blocks
     assert not block.linear and block.method == "newton"
     assert block.unknowns == ("e[loop->d1]",)  # torn at the exponential's input
     t, Y, names = bgc.simulate(path, scene="charge", backend=backend)
@@ -137,7 +135,7 @@ scene run { outputs cap.q, res.f; time 0 .. 3 every 0.01; solver dopri5(rtol = 1
 @pytest.mark.parametrize("backend", BACKENDS)
 def test_resistor_without_closed_form_inverse_matches_brentq(backend):
     src = Source("nl.bg", NONINVERTIBLE)
-    (block,) = bgc.build(src, "run").reduced.blocks
+    (block,) = built(src, "run").reduced.blocks
     assert block.method == "newton"
     t, Y, _ = bgc.simulate(src, scene="run", backend=backend)
     E, r, a, C = 3.0, 2.0, 1.5, 0.5
@@ -219,13 +217,6 @@ scene run { outputs cap.q; time 0 .. 2 every 0.1; solver rk4 }
 
 
 # ---------------------------------------------------------------- symbolic against numeric
-
-
-@functools.lru_cache(maxsize=None)
-def built(model):
-    """bgc.build(model), once for the tests of this file that read the same default build (a
-    build is a value: frozen stages)."""
-    return bgc.build(model)
 
 
 def _blocks_both_ways(path):

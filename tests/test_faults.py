@@ -748,8 +748,17 @@ def _interrupt_when(proc, ready, sig, group=False) -> list[int]:
     else:
         raise AssertionError("never ready to be interrupted")
     (os.killpg if group else os.kill)(proc.pid, sig)
+    deadline = time.monotonic() + 120
     while proc.poll() is None:
         seen.update(_descendants(proc.pid))
+        if time.monotonic() > deadline:  # (a failure, not a run that never ends)
+            for pid in [*_descendants(proc.pid), proc.pid]:
+                try:
+                    os.kill(pid, signal.SIGKILL)
+                except ProcessLookupError:
+                    pass
+            raise AssertionError(f"bgc did not end within 120 s of {sig.name}: "
+                                 f"{[_cmdline(p) for p in sorted(seen)]}")
         time.sleep(0.02)
     return sorted(seen)
 

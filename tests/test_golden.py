@@ -1,7 +1,6 @@
 """Golden files per model and scene: the check dump and the equation dump of every scene, the C
 program and the Python module of each model's default scene and of the scenes in CODE_SCENES.
 A diff shows which stage changed; `pytest --update-golden` rewrites them."""
-import functools
 import hashlib
 import json
 import os
@@ -22,6 +21,7 @@ from bgc.front.instantiate import front
 from bgc.front.resolve import resolve
 from bgc.middle.reduce import explicit_forms
 from bgc.reports.report import check_report, equations_text
+from helpers import built
 
 ROOT = Path(__file__).resolve().parent.parent
 GOLDEN = Path(__file__).parent / "golden"
@@ -40,13 +40,6 @@ CODE_SCENES = {
     ("diode", "charge"): "outputs computed through a Newton block",
     ("gantry_crane", "swing"): "states that no output needs are not integrated",
 }
-
-
-@functools.lru_cache(maxsize=None)
-def built(path, scene=None, program=True):
-    """bgc.build(path, scene), once per process for the tests of this file (a build is a
-    value: frozen stages)."""
-    return bgc.build(path, scene, program=program)
 
 
 def has_code_golden(path, scene) -> bool:

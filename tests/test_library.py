@@ -16,6 +16,7 @@ from scipy import signal as scipy_signal
 
 import bgc
 from bgc.api import Source
+from helpers import simulated
 
 ROOT = Path(__file__).resolve().parent.parent
 TIGHT = dict(rtol=1e-11, atol=1e-13)
@@ -634,7 +635,7 @@ def test_bridges_and_clutches_of_library_parts_run_as_their_plain_models(library
     exact references tests/test_switching.py checks)."""
     models = ROOT / "tests" / "models"
     assert used in (models / library).read_text()
-    runs = [bgc.simulate(str(models / name), "run", backend="python", t_end=t_end)[1]
+    runs = [simulated(models / name, "run", "python", t_end=t_end)[1]
             for name in (library, plain)]
     np.testing.assert_array_equal(runs[0], runs[1])
 
