@@ -151,11 +151,30 @@ class _Units:
         self.equations: list[_Equation] = []
         self.alias: dict = {}  # model variable name -> its form over the bonds' unknowns
         self.declarations = 0  # units declared, ports of a known domain
+        self.same: dict = {}  # name -> a name it is merged with (merge)
 
     # ------------------------------------------------------------ unknowns
+    def merge(self, a: str, b: str):
+        """a and b are one quantity (a junction's bonds share its effort and its flow): one
+        unknown for both, before any equation is written (union-find over the names)."""
+        ra, rb = self.rep(a), self.rep(b)
+        if ra != rb:
+            self.same[rb] = ra
+        self.same.setdefault(a, a)
+        self.same.setdefault(b, b)
+
+    def rep(self, name: str) -> str:
+        same = self.same
+        while same.get(name, name) != name:
+            same[name] = same.get(same[name], same[name])
+            name = same[name]
+        return name
+
     def unknown(self, name: str | None) -> int:
-        if name is not None and name in self.by_name:
-            return self.by_name[name]
+        if name is not None:
+            name = self.rep(name)
+            if name in self.by_name:
+                return self.by_name[name]
         i = len(self.names)
         self.names.append(name)
         if name is not None:
@@ -324,7 +343,9 @@ class _Units:
         self.failed: set = set()
         self.reported: dict = {}
         self._propagate([k for k, n in enumerate(self.left) if n <= 1])
-        for _ in range(len(self.names) + 1):
+        # (elimination only where there is something to check against: a model that declares
+        # no unit gets what propagation gives it, time's s)
+        for _ in range(len(self.names) + 1 if self.declarations else 0):
             found = self._eliminate()
             if not found:
                 break
@@ -503,6 +524,10 @@ class _Units:
         for i, name in enumerate(self.names):
             if name is not None and not name.startswith("bond ") and i in self.value:
                 out[name] = self.declared.get(i) or show(self.value[i])
+        for name in self.same:  # (merged names: their representative's)
+            i = self.by_name.get(self.rep(name))
+            if not name.startswith("bond ") and i is not None and i in self.value:
+                out[name] = self.declared.get(i) or show(self.value[i])
         for name, f in self.alias.items():
             if all(i in self.value for i in f.terms):
                 out[name] = show(self._value(f))
@@ -575,6 +600,14 @@ def check_units(g: Graph) -> Graph:
     after every law is checked; a mismatch is a ModelError."""
     diags = Collector()
     u = _Units(g, diags)
+    incident = g.incident
+    for el in g.elements:  # a junction's bonds: its effort and its flow (one unknown each)
+        if el.is_junction:
+            e, f = variable_name(el.name, "e"), variable_name(el.name, "f")
+            for k in incident[el.name]:
+                label = g.bonds[k].label
+                u.merge(e, f"bond {label}.e")
+                u.merge(f, f"bond {label}.f")
     _bond_unknowns(u, g)
     _declarations(u, g)
     _elements(u, g)
@@ -657,13 +690,7 @@ def _elements(u: _Units, g: Graph):
 
 
 def _junction(u: _Units, g: Graph, el, bonds):
-    e, f = variable_name(el.name, "e"), variable_name(el.name, "f")
-    for b in bonds:
-        where = _Where(b.span, f"bond '{b.label}' at junction '{el.origin or el.name}'")
-        u.equal(_effort(u, b), u.form_of(e), where, f"the effort of bond '{b.label}'",
-                f"the junction's effort '{e}'", True)
-        u.equal(_flow(u, b), u.form_of(f), where, f"the flow of bond '{b.label}'",
-                f"the junction's flow '{f}'", True)
+    e, f = variable_name(el.name, "e"), variable_name(el.name, "f")  # (its bonds': merged)
     c = el.constraint
     if c is None:
         return
