@@ -62,7 +62,7 @@ def test_a_resistance_declared_in_kilograms_is_refused_naming_both_units(tmp_pat
     assert first.startswith(f"{tmp_path / 'm.bg'}:") and ": error: unit mismatch in the law" \
         in first, err
     # both sides named: C's displacement from R's (kg) path, and C times its effort (A*s)
-    assert "but 'C' times its effort is s*A" in first, first
+    assert "but 'C' times its effort is A*s" in first, first
     assert "'R' is declared 'kg' here" in err and "'C' is declared 'F' here" in err
 
 
@@ -233,7 +233,7 @@ def test_a_parameter_defined_in_the_wrong_unit_is_refused_at_its_definition(tmp_
     assert result.exit_code == 1
     first = result.stderr.splitlines()[0]
     assert ":5:" in first and "unit mismatch in the definition of 'Q0'" in first, first
-    assert "is V but 'C*V' is s*A" in first, first
+    assert "is V but 'C*V' is A*s" in first, first
 
 
 def test_a_sensitivity_s_unit_is_its_output_s_over_its_parameter_s(tmp_path):
@@ -246,3 +246,13 @@ def test_a_sensitivity_s_unit_is_its_output_s_over_its_parameter_s(tmp_path):
     unit = dict(zip(header.split(","), units.split(",")))
     assert _dims(unit["d(c.e)/d(R)"]) == _dims("V/Ohm")  # = A
     assert _dims(unit["d(c.q)/d(R)"]) == _dims("A*s/Ohm")
+
+
+def test_check_says_the_units_were_checked_and_gives_the_states_theirs(tmp_path):
+    result = _check(tmp_path, RC.format(R="Ohm", source="V"))
+    assert result.exit_code == 0, result.output
+    assert "  c.q  C, integral causality, in A*s\n" in result.stdout  # q = C e: F V
+    assert "\nunits: every law checked; " in result.stdout
+    plain = _check(tmp_path, "model plain\nu : Se(1)\nr : R(2)\nc : C(1)\nj : 1\nu -> j\n"
+                             "j -> r\nj -> c\n", "p.bg")
+    assert "units:" not in plain.stdout and "c.q  C, integral causality\n" in plain.stdout

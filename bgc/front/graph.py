@@ -254,6 +254,7 @@ class Graph:
     constants: tuple = ()  # (name, value) of the model file's constants (`--outputs s[N].q`)
     libraries: tuple = ()  # (path, SHA-256 or None) of the files its imports looked at
     units: tuple = ()  # after the units stage: (name, unit) of each quantity whose unit is known
+    units_checked: bool = False  # whether the units stage checked the laws (a unit declared)
 
     @cached_property
     def vector_by_name(self) -> dict:

@@ -559,7 +559,7 @@ def _text(expr) -> str:
 # ---------------------------------------------------------------- display
 
 _NAMED = ["V", "A", "N", "N*m", "W", "J", "Pa", "Ohm", "F", "H", "S", "Wb", "T", "kg",
-          "m", "s", "K", "mol", "cd", "m/s", "m/s^2", "rad/s", "rad/s^2", "rad", "m^2", "m^3",
+          "m", "s", "K", "mol", "cd", "A*s", "m/s", "m/s^2", "rad/s", "rad/s^2", "rad", "m^2", "m^3",
           "m^3/s", "kg*m^2", "N*s", "N/m", "N*s/m", "N*m/rad", "N*m*s", "N*m*s/rad", "V*s/rad", "Pa*s/m^3",
           "J/K", "W/K", "1/s", "Hz"]
 _SHOWN = {}
@@ -616,7 +616,7 @@ def check_units(g: Graph) -> Graph:
     if not u.declarations:  # nothing to check against but time: not checked (docs/units.md)
         return g if diags.errors else replace(g, units=u.units())
     diags.raise_if_errors()
-    return replace(g, units=u.units(), warnings=g.warnings + diags.warnings)
+    return replace(g, units=u.units(), units_checked=True, warnings=g.warnings + diags.warnings)
 
 
 def _bond_unknowns(u: _Units, g: Graph):

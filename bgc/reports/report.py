@@ -212,7 +212,9 @@ def check_report(compiled, summary: SceneSummary | None = None) -> str:
             lines.append(f"  {inst.path}  {inst.component}"
                          + (f", ports {', '.join(listed)}" if listed else ""))
     lines.append(f"states ({len(r.states)}):")
-    lines += [f"  {st.name}  {KINDS[st.kind]}" for st in r.states]
+    units = dict(g.units) if g.units_checked else {}
+    lines += [f"  {st.name}  {KINDS[st.kind]}" + (f", in {units[st.name]}" if st.name in units
+                                                  else "") for st in r.states]
     if g.inputs:
         lines.append(f"inputs ({len(g.inputs)}; their data from --input, else the default):")
         lines += [f"  {u.name} = {_s(u.default)}" + (f"  \"{u.doc}\"" if u.doc else "")
@@ -265,6 +267,9 @@ def check_report(compiled, summary: SceneSummary | None = None) -> str:
                 lines.append(f"    Phi = {_s(k.phi)}")
             level = "dPhi/dt" if k.kind in ("holonomic", "unilateral") else "Phi"
             lines.append(f"    {level} = {_s(k.balance)}")
+    if g.units_checked:
+        lines.append(f"units: every law checked; {len(g.units)} quantities' units known "
+                     "(declared or inferred: bgc.units, simulate --units)")
     lines.append(f"warnings: {len(r.warnings)}")
     return "\n".join(lines) + "\n"
 
