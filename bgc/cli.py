@@ -1522,6 +1522,7 @@ def linearize(model, scene, outputs, effects, algebra, at, inputs, params, outpu
     binary = output is not None and not outfile.is_stdout(output) and \
         linear.check_format(output) == "npz"
     files = _Files(model, [("-o", output), ("--bode", bode_file)],
+                   [("the --input file", p) for p in input_files],
                    binary=("--bode",) + (("-o",) if binary else ()))
     names = None if inputs is None else _names(inputs)
     analysed = _analysed(analysis.build, model, scene, outputs, effects, names, algebra)
@@ -1721,7 +1722,8 @@ def fit(model, scene, effects, algebra, data, varies, params, backend, solver, r
     """Estimate parameters from measured data by Levenberg-Marquardt on the residuals, with
     their Jacobian from the forward sensitivities the compiler derives: estimates, standard
     errors, 95 % confidence intervals, correlations."""
-    files = _Files(model, [("-o", output), ("--plot", plot_file)], [("the data file", data)],
+    files = _Files(model, [("-o", output), ("--plot", plot_file)],
+                   [("the data file", data)] + [("the --input file", p) for p in input_files],
                    binary=("--plot",))
     vary = [_estimation(estimate.parse_vary, v) for v in varies]
     measured = _estimation(estimate.read_data, data)

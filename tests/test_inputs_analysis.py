@@ -150,3 +150,19 @@ def test_linearize_about_a_point_of_a_run_driven_by_data(tmp_path):
         linear.linearize(str(model), "run", at="steady", input_data=data)
     with pytest.raises(AnalysisArgumentError, match="unknown input 'w'"):
         linear.linearize(str(model), "run", input_data={"w": ((0.0,), (1.0,))})
+
+
+@pytest.mark.parametrize("command", ["fit", "linearize"])
+def test_an_output_onto_the_input_data_is_refused(tmp_path, command):
+    """`-o` naming the --input file: one line, exit 1, the data as it was."""
+    model = tmp_path / "decay.bg"
+    model.write_text(DECAY)
+    csv = tmp_path / "u.csv"
+    csv.write_text("t,u\n0,1\n1,3\n")
+    measured = tmp_path / "x.csv"
+    measured.write_text("t,x\n0,1\n0.5,0.5\n1,0.1\n")
+    extra = ["--data", measured, "--vary", "u=0..1"] if command == "fit" else []
+    result = run_bgc(command, model, "--scene", "run", "--input", csv, *extra, "-o", csv)
+    assert result.returncode == 1, result.stderr
+    assert "u.csv" in result.stderr and "Traceback" not in result.stderr
+    assert csv.read_text() == "t,u\n0,1\n1,3\n"
