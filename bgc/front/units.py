@@ -136,7 +136,6 @@ class _Equation:
     where: _Where
     lhs_text: str
     rhs_text: str
-    structural: bool = False  # a junction's: its bonds share its effort and flow
 
 
 class _Units:
@@ -201,9 +200,8 @@ class _Units:
         if name in self.by_name:
             self.declared.setdefault(self.by_name[name], unit)
 
-    def equal(self, lhs: _Form, rhs: _Form, where: _Where, lhs_text: str, rhs_text: str,
-              structural: bool = False):
-        self.equations.append(_Equation(lhs, rhs, where, lhs_text, rhs_text, structural))
+    def equal(self, lhs: _Form, rhs: _Form, where: _Where, lhs_text: str, rhs_text: str):
+        self.equations.append(_Equation(lhs, rhs, where, lhs_text, rhs_text))
 
     # ------------------------------------------------------------ expressions
     def form(self, expr, where: _Where) -> _Form | None:
@@ -326,7 +324,6 @@ class _Units:
         a mechanical side), elimination over the small loops that remain gives the unknowns
         they determine, and propagation goes on from them."""
         self.residual = [eq.lhs.plus(eq.rhs, -1) for eq in self.equations]
-        self.left = [len(r.terms) for r in self.residual]
         self.uses: dict = {}
         for k, r in enumerate(self.residual):
             for i in r.terms:
@@ -342,7 +339,7 @@ class _Units:
                     parent[max(a, b)] = min(a, b)
         self.failed: set = set()
         self.reported: dict = {}
-        self._propagate([k for k, n in enumerate(self.left) if n <= 1])
+        self._propagate([k for k, r in enumerate(self.residual) if len(r.terms) <= 1])
         # (elimination only where there is something to check against: a model that declares
         # no unit gets what propagation gives it, time's s)
         for _ in range(len(self.names) + 1 if self.declarations else 0):
@@ -357,17 +354,14 @@ class _Units:
             self.diags.error(None, "units: the laws do not agree")  # (not checked: dropped)
 
     def _propagate(self, ready):
-        # two queues: a junction's equations first, so that a units conflict shows at a law
-        # (or a declaration), where it is, not at a bond that merely joins two laws
-        queues = ([], [])
-        heads = [0, 0]
-        for k in ready:
-            queues[not self.equations[k].structural].append(k)
-        residual, left = self.residual, self.left
-        while heads[0] < len(queues[0]) or heads[1] < len(queues[1]):
-            q = 0 if heads[0] < len(queues[0]) else 1
-            k = queues[q][heads[q]]
-            heads[q] += 1
+        # (a junction's bonds are one unknown already, merged: a conflict shows at a law or
+        # a declaration, where it is, not at a bond that merely joins two laws)
+        queue = list(ready)
+        residual = self.residual
+        head = 0
+        while head < len(queue):
+            k = queue[head]
+            head += 1
             r = residual[k]
             open_ = [i for i in r.terms if i not in self.value]
             if len(open_) > 1:
@@ -386,13 +380,11 @@ class _Units:
             rest = _Form({i: v for i, v in r.terms.items() if i != x}, r.const)
             self._set(x, tuple(_div(-a, c) for a in self._value(rest)), k)
             for j in self.uses[x]:
-                queues[not self.equations[j].structural].append(j)
+                queue.append(j)
 
     def _set(self, x: int, value: tuple, k: int):
         self.value[x] = value
         self.why[x] = k
-        for j in self.uses.get(x, ()):
-            self.left[j] -= 1
 
     def _eliminate(self) -> list:
         """The unknowns that the equations still open determine together: the open ones
@@ -498,8 +490,7 @@ class _Units:
                 declared.append(Note(source.where.span, f"{self._label(i)} is declared "
                                                         f"'{self.declared[i]}' here"))
                 continue
-            if not source.structural:
-                laws.append(Note(source.where.span, f"{self._label(i)} is "
+            laws.append(Note(source.where.span, f"{self._label(i)} is "
                                                     f"{show(self.value[i])}, from "
                                                     f"{source.where.what}"))
             todo += sorted(j for j in set(source.lhs.terms) | set(source.rhs.terms) if j != i)
