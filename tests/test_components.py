@@ -725,6 +725,43 @@ def test_a_thousand_instances_compile():
     assert time.perf_counter() - start < 120  # (a safety net, not a benchmark)
 
 
+def test_the_expansion_is_counted_before_it_is_made(monkeypatch):
+    """instantiate's estimate (before any statement is made) counts exactly what the
+    expansion then makes: loops whose bodies read their variable and loops whose bodies do
+    not, `if` on the index, a loop-local constant, nested components, an imported one."""
+    from bgc.front import instantiate as stage
+    text = "\n".join([
+        "model counted", "constant N = 7",
+        "component leaf(k = 1) { port a; e : C(k); a -> e }",
+        "component pair(k = 1) { port a; j : 0; a -> j; for i in 1..3 { x[i] : leaf(k = k); "
+        "j -> x[i].a } }",
+        "s : Sf(1)", "top : 0", "s -> top",
+        "for i in 1..N { p[i] : pair(); top -> p[i].a }",
+        "for i in 1..N { for j in i..N { if j > i + 1 { r[i*100+j] : R(1); top -> r[i*100+j] } "
+        "} }",
+        "for i in 1..2*N { constant M = i - 1; if M == 3 { extra : C(1); top -> extra } }",
+    ])
+    model = parse(text + "\n", "counted.bg")
+    st = stage._Instantiate(model, {}, stage.search_path())
+    flat = st.build()
+    assert st.generated == st.estimated > 0
+    assert len(flat.decls) > 7 * (1 + 3 * 3)
+    monkeypatch.setenv("BGC_MEMORY", "110M")  # room for 1048 declarations and bonds
+    wide = "model wide\ns : Sf(1)\ntop : 0\ns -> top\nfor i in 1..600 { c[i] : C(1); top -> c[i] }\n"
+    message = error_of(wide.replace("model wide\n", "model wide\n"))
+    assert ":5:1: error: the model is too large: the more than 1048 declarations and bonds " \
+           "its components and 'for' loops make need about " in message, message
+    assert "more than the 110 MiB available" in message
+
+
+def test_a_loop_of_empty_passes_is_refused_before_it_runs(monkeypatch):
+    start = time.perf_counter()
+    message = error_of("model idle\ns : Sf(1)\ne : C(1)\ns -> e\n"
+                       "for i in 1..1000000000 { if i < 0 { x : C(1) } }\n")
+    assert "the model is too large: the more than" in message
+    assert time.perf_counter() - start < 10  # (refused before a billion passes are made)
+
+
 def test_nesting_depth_is_refused_before_the_work():
     parts = ["model deep", "component c0(k = 1) { port a; e : C(k); a -> e }"]
     for level in range(1, MAX_INSTANCE_DEPTH + 2):

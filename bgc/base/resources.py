@@ -28,16 +28,13 @@ SECONDS_PER_STATEMENT = 6e-4  # a compile's time per declaration or bond (measur
 SECONDS_PER_SOURCE_BYTE = 3.5e-5  # and per byte of a flat model's text
 DEFAULT_MEMORY = 4 << 30  # where the memory available cannot be read
 MIN_SOURCE_BYTES = 64 << 10  # max_source_bytes() is never below this, whatever the memory
-MAX_GENERATED = 100_000  # declarations and bonds that components and `for` loops make in all
-#                           (a loop charges its body once per pass before expanding it, and
-#                           each statement again as it is made: about 50 000 statements); a
-#                           fixed bound still: an instance's size is not estimated before it is
-#                           made (a nested component's are found as it is expanded)
 MAX_REFERENCE_BYTES = 64 << 20  # a reference CSV (bgc accuracy --reference): 64 MiB
 MAX_NESTING = 100  # levels of nested brackets / operators of different kinds
 MAX_OPTION_CHARS = 1 << 16  # --outputs, --effects
 MAX_LITERAL_DIGITS = 309  # an integer literal longer than this does not fit a double
 MAX_DIMENSION = 10_000  # KIND[n]: the components of one multiport
+MAX_INDEX = 10 ** 9  # an index of a name (`cell[k]`): the names a `for` loop makes are bounded by
+#                      the memory estimate; this keeps one name's digits few
 MAX_MATRIX_ENTRIES = 100_000  # vector and matrix entries (and products) the expressions build
 MAX_EXTREMUM_ARGUMENTS = 32  # of one min() or max(): each one's derivative names all the others
 MAX_INSTANCE_DEPTH = 32  # components instantiating components, levels deep

@@ -35,7 +35,8 @@ from . import ast
 from ..base.diagnostics import Collector, ModelError, Note, Origin, Span, did_you_mean, error, fail
 from .graph import Instance, Port
 from .kinds import KINDS, SWITCHED, TIME_SOURCES
-from ..base.resources import MAX_DIMENSION, MAX_GENERATED, MAX_INSTANCE_DEPTH, read_bounded
+from ..base.resources import (MAX_INDEX, MAX_INSTANCE_DEPTH, max_statements, read_bounded,
+                              too_large)
 
 LIBRARY = Path(__file__).resolve().parent.parent / "library"  # bgc's standard library
 
@@ -46,7 +47,7 @@ STRUCTURE = (ast.ComponentDecl, ast.ConstantDecl, ast.ForBlock, ast.IfBlock, ast
 
 
 class _TooLarge(ModelError):
-    """The model makes more than MAX_GENERATED statements: the stage stops at once."""
+    """The model makes more statements than a compile can take: the stage stops at once."""
 
 
 # ---------------------------------------------------------------- files and components
@@ -186,6 +187,36 @@ def _condition(node, env: dict, scope: _Scope) -> bool:
     fail(scope.sp(node.span), "'if' takes a relation of compile-time constants (i > 1)")
 
 
+def _reads(body, var: str) -> bool:
+    """Whether what a body makes can depend on `var`: the name occurs in a constant, a bound
+    or a condition of the body (at any depth of its `for` and `if`)."""
+    todo = list(body)
+    while todo:
+        stmt = todo.pop()
+        if isinstance(stmt, ast.ConstantDecl):
+            exprs = [stmt.expr]
+        elif isinstance(stmt, ast.ForBlock):
+            exprs = [stmt.start, stmt.stop]
+            todo += stmt.body
+        elif isinstance(stmt, ast.IfBlock):
+            exprs = [cond for cond, _ in stmt.branches]
+            for _, branch in stmt.branches:
+                todo += branch
+            todo += stmt.orelse or ()
+        else:
+            continue
+        while exprs:
+            node = exprs.pop()
+            if isinstance(node, ast.Name):
+                if node.name == var:
+                    return True
+            elif isinstance(node, tuple):
+                exprs += node
+            elif hasattr(node, "__dataclass_fields__") and not isinstance(node, Span):
+                exprs += [getattr(node, f) for f in node.__dataclass_fields__]
+    return False
+
+
 # ---------------------------------------------------------------- the stage
 class _Instantiate:
     def __init__(self, model: ast.Model, consts: dict, search: list):
@@ -194,6 +225,7 @@ class _Instantiate:
         self.search = search
         self.diags = Collector()
         self.generated = 0
+        self.most = max_statements()
         self.out: list = []  # the flat declarations
         self.edges: list = []  # (src end, dst end, src span, dst span, depth of its scope)
         self.ports: dict = {}  # flat port name -> graph.Port
@@ -205,11 +237,102 @@ class _Instantiate:
 
     # ------------------------------------------------------------ counting
     def charge(self, n: int, span):
+        """Count what the expansion makes, against what estimate() allowed (a backstop: the
+        estimate counts the same before the work)."""
         self.generated += n
-        if self.generated > MAX_GENERATED:
-            raise _TooLarge([error(span, f"the model is too large: its components and 'for' "
-                                         f"loops make more than {MAX_GENERATED} declarations "
-                                         "and bonds")])
+        if self.generated > self.most:
+            self.refuse(span)
+
+    def refuse(self, span):
+        raise _TooLarge([error(span, too_large(
+            f"the more than {self.most} declarations and bonds its components and 'for' "
+            "loops make", self.most))])
+
+    # ------------------------------------------------------------ the size, before the work
+    def estimate(self, main: _File):
+        """Refuse, before anything is expanded, a model whose components and `for` loops make
+        more declarations and bonds than a compile can take (max_statements: the memory bgc
+        may use): the same count as the expansion's (a `for` charges its passes over its
+        body, each statement one, an instance its component's), made without making them.  A
+        component's size does not depend on its instance (its body sees its file's constants
+        only): each is counted once; a loop whose body's constants, bounds and conditions do
+        not read its variable is counted once and multiplied.  Whatever the count cannot
+        evaluate (a bound that is not a constant) counts nothing: the expansion reports it."""
+        self.sizes: dict = {}
+        self.estimated = self._count(main.decls, dict(main.constants), main,
+                                     _Scope("", main, None, (), ()), True)
+
+    def _count(self, body, env: dict, file: _File, scope: _Scope, top: bool) -> int:
+        total = 0
+        stack = [[iter(body), env, None]]
+        while stack:
+            frame = stack[-1]
+            stmt = next(frame[0], None)
+            if stmt is None:
+                loop = frame[2]  # (a loop's passes are made one after another, not stacked)
+                if loop is None or loop[1] > loop[2]:
+                    stack.pop()
+                else:
+                    frame[0], frame[1] = iter(loop[4]), {**loop[3], loop[0]: loop[1]}
+                    loop[1] += 1
+                continue
+            try:
+                total += self._one(stmt, frame, stack, file, scope, top)
+            except _TooLarge:
+                raise
+            except ModelError:
+                continue
+            if top and total > self.most:
+                self.refuse(scope.sp(getattr(stmt, "span", None)))
+        return total
+
+    def _one(self, stmt, frame: list, stack: list, file: _File, scope: _Scope,
+             top: bool) -> int:
+        """What one statement of a body makes (its passes, its statements), pushing the bodies
+        it repeats or chooses."""
+        env = frame[1]
+        if isinstance(stmt, ast.ConstantDecl):
+            if not (scope.comp is None and top and id(stmt) in self.top):
+                frame[1] = {**env, stmt.name.name: _const(stmt.expr, env, scope, "")}
+            return 0
+        if isinstance(stmt, ast.ForBlock):
+            a = _const(stmt.start, env, scope, "")
+            b = _const(stmt.stop, env, scope, "")
+            count = max(0, b - a + 1)
+            passes = count * max(1, len(stmt.body))
+            if count == 0 or passes > self.most:
+                return passes
+            if _reads(stmt.body, stmt.var.name):
+                stack.append([iter(()), env, [stmt.var.name, a, b, env, stmt.body]])
+                return passes
+            once = self._count(stmt.body, {**env, stmt.var.name: a}, file, scope, False)
+            return passes + count * once
+        if isinstance(stmt, ast.IfBlock):
+            chosen = next((body for cond, body in stmt.branches
+                           if _condition(cond, env, scope)), stmt.orelse)
+            if chosen:
+                stack.append([iter(chosen), env, None])
+            return 0
+        if isinstance(stmt, (ast.ImportDecl, ast.ComponentDecl, ast.LibraryDecl)):
+            return 0
+        if isinstance(stmt, ast.ElementDecl) and not stmt.is_junction \
+                and stmt.kind.name in file.components:
+            return 1 + self._component(file, stmt.kind.name)
+        return 1
+
+    def _component(self, file: _File, name: str) -> int:
+        """The declarations and bonds one instance of component `name` makes (its nested
+        instances' included); a component reached again while it is counted (it instantiates
+        itself: the expansion says so) counts nothing."""
+        comp = file.components[name]
+        key = id(comp)
+        if key not in self.sizes:
+            self.sizes[key] = 0
+            cfile = file.owner[name]
+            size = self._count(comp.body, dict(cfile.constants), cfile,
+                               _Scope("", cfile, comp, (), ()), False)
+            self.sizes[key] = min(size, self.most + 1)
+        return self.sizes[key]
 
     # ------------------------------------------------------------ files
     def main_file(self) -> _File:
@@ -410,8 +533,8 @@ class _Instantiate:
         if index is None:
             return stmt.name.name
         k = _const(index, env, scope, f"the index of '{stmt.name.name}'")
-        if not 0 <= k <= MAX_DIMENSION:
-            fail(scope.sp(index.span), f"an index of a name is from 0 to {MAX_DIMENSION}; this "
+        if not 0 <= k <= MAX_INDEX:
+            fail(scope.sp(index.span), f"an index of a name is from 0 to {MAX_INDEX}; this "
                                        f"one is {k}")
         return f"{stmt.name.name}[{k}]"
 
@@ -431,6 +554,7 @@ class _Instantiate:
                  f"the model has no constant '{unknown[0]}'"
                  f"{did_you_mean(unknown[0], main.constants)} (its constants: {names})")
         self.diags.raise_if_errors()
+        self.estimate(main)
         self.guard(self.expand, root, main.decls, dict(main.constants))
         self.diags.raise_if_errors()
         # the instances, depth first: each one's body expanded once
@@ -957,8 +1081,8 @@ def _text_scope(span: Span) -> _Scope:
 
 def _index_value(node, constants: dict, scope: _Scope, what: str) -> int:
     k = _const(node, constants, scope, what)
-    if not 0 <= k <= MAX_DIMENSION:
-        fail(scope.sp(node.span), f"an index is from 0 to {MAX_DIMENSION}; this one is {k}")
+    if not 0 <= k <= MAX_INDEX:
+        fail(scope.sp(node.span), f"an index is from 0 to {MAX_INDEX}; this one is {k}")
     return k
 
 

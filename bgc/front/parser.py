@@ -12,7 +12,7 @@ from lark.exceptions import (UnexpectedCharacters, UnexpectedEOF, UnexpectedInpu
 from . import ast
 from ..base import si
 from ..base.diagnostics import ModelError, Note, Origin, Span, fail
-from ..base.resources import (MAX_DIMENSION, MAX_NESTING, MAX_OPTION_CHARS, max_source_bytes,
+from ..base.resources import (MAX_DIMENSION, MAX_INDEX, MAX_NESTING, MAX_OPTION_CHARS, max_source_bytes,
                               resource_dir, too_large)
 
 # Reserved: none of these can name anything (docs/semantics.md, "Names").
@@ -107,12 +107,12 @@ def _whole(tok: Token, what: str) -> int:
     return _integer(str(tok), _tspan(tok), what)
 
 
-def _integer(text: str, span: Span, what: str) -> int:
-    """The value of digits, refused above MAX_DIMENSION (before int() reads them)."""
+def _integer(text: str, span: Span, what: str, most: int = MAX_DIMENSION) -> int:
+    """The value of digits, refused above `most` (before int() reads them)."""
     digits = text.lstrip("0")
-    if len(digits) > len(str(MAX_DIMENSION)) or int(digits or 0) > MAX_DIMENSION:
+    if len(digits) > len(str(most)) or int(digits or 0) > most:
         shown = digits if len(digits) <= 20 else digits[:20] + "..."
-        fail(span, f"{what} {shown} is too large (the limit is {MAX_DIMENSION})")
+        fail(span, f"{what} {shown} is too large (the limit is {most})")
     return int(digits or 0)
 
 
@@ -371,7 +371,7 @@ class _ToAst:
         when the constants are known."""
         index = c[1]
         if isinstance(index, ast.Num) and index.text.isdigit():
-            index = _integer(index.text, index.span, "index")
+            index = _integer(index.text, index.span, "index", MAX_INDEX)
         return (str(c[0]), index)
 
     def scene_time(self, meta, c):
