@@ -21,6 +21,12 @@ are written the way a modeller writes them, one element per line.
 - thermal_grid(n): an n x n thermal RC grid of cells written with `for` loops: n^2 states,
   stiff, with a sparse Jacobian (benchmarks/stiff_scale.py); thermal_grid_rhs(n, T) its right
   side written from the formula; thermal_grid_cells(m) the same by its number of states.
+- The Modelica ScalableTestSuite's families written as bond graphs with components and `for`
+  loops (the form issue 41's array-preserving compilation takes; benchmarks/scalable.py):
+  heat_line(n) (1-D heat conduction, n cells), thermal_grid(n) (the 2-D plate, above),
+  transmission_line(n) (an RLC line of n sections), cascaded_first_order(n) (n buffered first-
+  order lags) and harmonic_oscillators(n) (n independent mass-springs); each with the closed
+  form or the matrix its tests compare against (*_matrices: x' = A x + b).
 """
 from __future__ import annotations
 
@@ -323,6 +329,218 @@ def thermal_grid_cells(m: int) -> str:
     return thermal_grid(n)
 
 
+def heat_line(n: int, t_end: float = 1.0) -> str:
+    """1-D heat conduction (ScalableTestSuite's HeatConduction, one dimension): a rod cut into n
+    cells, each a `cell` component (a 0-junction with its heat capacity c, state cell[i].cap.q,
+    its temperature cell[i].cap.e, and the thermal resistance r to the next cell), a heater
+    feeding q_in into cell 1, the last cell losing heat to an ambient at 0 through rb.  The
+    cells start at T0 sin(pi i / n) (every mode excited).  Stiff for large n: the fastest mode
+    decays at about 4/(r c), the slowest at about 1/(n^2 r c)."""
+    return "\n".join([
+        f'model heatline "{n}-cell 1-D heat conduction"',
+        f"constant N = {n}",
+        'parameter c = 1.0 "heat capacity of a cell"',
+        'parameter r = 1.0 "thermal resistance between neighbouring cells"',
+        'parameter rb = 2.0 "thermal resistance from the last cell to the ambient"',
+        'parameter q_in = 1.0 "heat flow into cell 1"',
+        'parameter T0 = 1.0 "the initial temperature profile\'s amplitude"',
+        "",
+        'component cell(c = 1, r = 1, T0 = 0) "a cell: its capacity, and the resistance to '
+        'the next" {',
+        "  port a",
+        "  port b",
+        "  T : 0",
+        "  cap : C(c) init e = T0",
+        "  h : 1",
+        "  res : R(r)",
+        "  a -> T -> cap",
+        "  T -> h -> b",
+        "  h -> res",
+        "}",
+        "",
+        "heater : Sf(q_in)",
+        "ambient : Se(0)",
+        "for i in 1..N - 1 {",
+        "  cell[i] : cell(c, r, T0*sin(3.141592653589793*i/N))",
+        "}",
+        "cell[N] : cell(c, rb, 0)",
+        "heater -> cell[1].a",
+        "for i in 2..N {",
+        "  cell[i - 1].b -> cell[i].a",
+        "}",
+        "cell[N].b -> ambient",
+        "",
+        f"scene cool {{ outputs cell[1].cap.e, cell[N].cap.e; time 0 .. {t_end!r} every "
+        f"{t_end / 10!r}; solver rodas5p(rtol = 1e-8, atol = 1e-10) }}",
+    ]) + "\n"
+
+
+def heat_line_matrices(n: int, c=1.0, r=1.0, rb=2.0, q_in=1.0, T0=1.0):
+    """heat_line(n) as T' = A T + b in the cells' temperatures, from the formula: (A, b,
+    T(0))."""
+    import numpy
+    A = numpy.zeros((n, n))
+    for i in range(n):
+        out = r if i < n - 1 else rb
+        A[i, i] -= 1 / out
+        if i < n - 1:
+            A[i, i + 1] += 1 / r
+            A[i + 1, i] += 1 / r
+            A[i + 1, i + 1] -= 1 / r
+    b = numpy.zeros(n)
+    b[0] = q_in
+    x0 = numpy.array([T0 * math.sin(3.141592653589793 * (i + 1) / n) if i < n - 1 else 0.0
+                      for i in range(n)])
+    return A / c, b / c, x0
+
+
+def transmission_line(n: int, t_end: float = 2.0) -> str:
+    """ScalableTestSuite's TransmissionLine as a bond graph: a line of n sections, each a
+    `section` component (a series inductance l with its resistance rs on a 1-junction, a shunt
+    capacitance cc on the next 0-junction), driven by a voltage step V0 through the source's
+    resistance rg, terminated by a load rl."""
+    return "\n".join([
+        f'model line "{n}-section RLC transmission line"',
+        f"constant N = {n}",
+        'parameter l = 1.0 "inductance of a section"',
+        'parameter cc = 1.0 "capacitance of a section"',
+        'parameter rs = 0.05 "series resistance of a section"',
+        'parameter rg = 1.0 "the source\'s resistance"',
+        'parameter rl = 1.0 "the load"',
+        'parameter V0 = 1.0 "the step"',
+        "",
+        'component section(l = 1, cc = 1, rs = 0) "a section: series L and R, shunt C" {',
+        "  port a",
+        "  port b",
+        "  s : 1",
+        "  coil : I(l)",
+        "  loss : R(rs)",
+        "  n : 0",
+        "  cap : C(cc)",
+        "  a -> s -> n -> b",
+        "  s -> coil",
+        "  s -> loss",
+        "  n -> cap",
+        "}",
+        "",
+        "src : Se(V0)",
+        "g : 1",
+        "rgen : R(rg)",
+        "load : R(rl)",
+        "src -> g",
+        "g -> rgen",
+        "for i in 1..N {",
+        "  sec[i] : section(l, cc, rs)",
+        "}",
+        "g -> sec[1].a",
+        "for i in 2..N {",
+        "  sec[i - 1].b -> sec[i].a",
+        "}",
+        "sec[N].b -> load",
+        "",
+        f"scene step {{ outputs sec[N].cap.e, sec[1].coil.f; time 0 .. {t_end!r} every "
+        f"{t_end / 10!r}; solver dopri5(rtol = 1e-10, atol = 1e-12) }}",
+    ]) + "\n"
+
+
+def transmission_line_matrices(n: int, l=1.0, cc=1.0, rs=0.05, rg=1.0, rl=1.0, V0=1.0):
+    """transmission_line(n) as x' = A x + b, x = (flux of coil 1, charge of cap 1, ...), from
+    the circuit's equations: (A, b, x(0))."""
+    import numpy
+    A = numpy.zeros((2 * n, 2 * n))
+    b = numpy.zeros(2 * n)
+    for k in range(n):
+        p, q = 2 * k, 2 * k + 1  # coil k's flux (current p/l), cap k's charge (voltage q/cc)
+        # flux' = (voltage before) - rs i - (cap k's voltage)
+        if k == 0:
+            b[p] = V0
+            A[p, p] -= rg / l
+        else:
+            A[p, q - 2] += 1 / cc
+        A[p, p] -= rs / l
+        A[p, q] -= 1 / cc
+        # charge' = i_k - i_(k+1) (the load's current after the last)
+        A[q, p] += 1 / l
+        if k < n - 1:
+            A[q, p + 2] -= 1 / l
+        else:
+            A[q, q] -= 1 / (rl * cc)
+    return A, b, numpy.zeros(2 * n)
+
+
+def cascaded_first_order(n: int, t_end: float = 2.0) -> str:
+    """ScalableTestSuite's CascadedFirstOrder: n first-order lags in series, each a `lag`
+    component (a capacitor cc charged through r from an effort source that copies the previous
+    lag's voltage: a buffer), the first fed by a unit step; the lags' time constant is
+    tau / n (r = tau / n, cc = 1), so the last one's output tends to the step delayed by tau as n
+    grows.  x_n(t) = 1 - exp(-s) sum_(k < n) s^k / k!, s = n t / tau."""
+    return "\n".join([
+        f'model cascade "{n} cascaded first-order lags"',
+        f"constant N = {n}",
+        'parameter tau = 1.0 "the cascade\'s total time constant"',
+        "",
+        'component lag(u = 0, r = 1) "a first-order lag of its input u: cap.e\' = (u - cap.e) '
+        '/ r" {',
+        "  drive : Se(u)",
+        "  s : 1",
+        "  res : R(r)",
+        "  cap : C(1)",
+        "  drive -> s",
+        "  s -> res",
+        "  s -> cap",
+        "}",
+        "",
+        "lag[1] : lag(1, tau/N)",
+        "for i in 2..N {",
+        "  lag[i] : lag(lag[i - 1].cap.e, tau/N)",
+        "}",
+        "",
+        f"scene step {{ outputs lag[N].cap.e; time 0 .. {t_end!r} every {t_end / 10!r}; "
+        "solver dopri5(rtol = 1e-10, atol = 1e-12) }",
+    ]) + "\n"
+
+
+def cascaded_first_order_exact(n: int, t, tau=1.0):
+    """The last lag's output of cascaded_first_order(n) at times t, in closed form."""
+    import numpy
+    s = n * numpy.asarray(t, dtype=float) / tau
+    term = numpy.ones_like(s)
+    total = numpy.zeros_like(s)
+    for k in range(n):
+        total += term
+        term = term * s / (k + 1)
+    return 1 - numpy.exp(-s) * total
+
+
+def harmonic_oscillators(n: int, t_end: float = 2.0) -> str:
+    """ScalableTestSuite's HarmonicOscillator: n independent mass-spring oscillators, each an
+    `oscillator` component (a mass m and a spring of stiffness k (1 + i / n) on a 1-junction),
+    released at rest from x0 (the spring's charge): x_i(t) = x0 cos(w_i t), w_i = sqrt(k (1 +
+    i / n) / m)."""
+    return "\n".join([
+        f'model oscillators "{n} independent harmonic oscillators"',
+        f"constant N = {n}",
+        'parameter m = 1.0 "each mass"',
+        'parameter k = 100.0 "the first spring\'s stiffness, up to twice it for the last"',
+        'parameter x0 = 0.01 "the springs\' initial stretch"',
+        "",
+        'component oscillator(m = 1, k = 1, x0 = 0) "a mass on a spring" {',
+        "  v : 1",
+        "  mass : I(m)",
+        "  spring : C(1/k) init q = x0",
+        "  v -> mass",
+        "  v -> spring",
+        "}",
+        "",
+        "for i in 1..N {",
+        "  osc[i] : oscillator(m, k*(1 + i/N), x0)",
+        "}",
+        "",
+        f"scene swing {{ outputs osc[1].spring.q, osc[N].spring.q; time 0 .. {t_end!r} every "
+        f"{t_end / 10!r}; solver dopri5(rtol = 1e-10, atol = 1e-12) }}",
+    ]) + "\n"
+
+
 FAMILIES = {
     "pendulum_chain": pendulum_chain,
     "pendulum_chain_vector": pendulum_chain_vector,
@@ -334,4 +552,8 @@ FAMILIES = {
     "rc_ladder_flat_twin": rc_ladder_flat_twin,
     "thermal_grid": thermal_grid,
     "thermal_grid_cells": thermal_grid_cells,
+    "heat_line": heat_line,
+    "transmission_line": transmission_line,
+    "cascaded_first_order": cascaded_first_order,
+    "harmonic_oscillators": harmonic_oscillators,
 }
