@@ -24,7 +24,7 @@ from .reports.report import (SceneSummary, check_report, scenes_report, equation
 from .front.resolve import resolve
 from .front.units import check_units
 from .base import solvers
-from .base.resources import quiet_collector, read_bounded
+from .base.resources import compile_scope, quiet_collector, read_bounded
 from .middle.scene import Override, Settings, apply_scene, check_parameters as check_parameters_of
 from .base.run import (ALGEBRA, BACKENDS, FORMATS, SIMULATE_OPTIONS, SWEEP_BACKENDS, TARGETS,
                        check_run_options, choice as _choice, exclusive, input_data)
@@ -140,6 +140,7 @@ def scene_override(outputs=None, effects=None, names=("outputs=", "effects=")) -
 
 
 @quiet_collector()
+@compile_scope()
 def build(model, scene: str | None = None, project_initial: bool = False,
           algebra: str = "auto", program: bool = True,
           residual_outputs: bool = False, outputs=None, effects=None,

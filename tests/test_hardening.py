@@ -386,3 +386,32 @@ def test_too_many_scalar_parts_are_refused_before_they_are_made(monkeypatch):
     from bgc.front.instantiate import front
     from bgc.front.resolve import resolve
     assert len(flatten(resolve(front(Source("inline.bg", text)))).bonds) == 3000
+
+
+def test_compile_memos_last_a_compile_and_are_emptied_by_the_next():
+    """The symbolic memos (free symbols, names' symbols...) are never cut short inside a
+    compile (a fixed size emptied when full made large compiles superlinear); the next
+    outermost compile empties them, a nested one or one beside a running compile does not."""
+    import threading
+    from bgc.base.resources import compile_memo, compile_scope
+    memo = compile_memo()
+    with compile_scope():
+        memo.update((k, k) for k in range(1 << 19))  # (more than the old fixed 2^18)
+        with compile_scope():
+            assert len(memo) == 1 << 19
+        inside = threading.Event()
+        done = threading.Event()
+
+        def beside():
+            with compile_scope():
+                inside.set()
+            done.set()
+        threading.Thread(target=beside).start()
+        assert done.wait(10) and inside.is_set()
+        assert len(memo) == 1 << 19
+    with compile_scope():
+        assert not memo
+    from bgc.front.graph import _VARS, var
+    with compile_scope():
+        a = var("memo_probe")
+        assert _VARS["memo_probe"] is a

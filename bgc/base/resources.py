@@ -87,6 +87,38 @@ def quiet_collector():
         gc.unfreeze()
 
 
+# memos of the symbolic work (an expression's free symbols, a name's symbol, ...): they hold what
+# one compile asks again and again, as large as its model needs (a fixed size emptied when full
+# made a large model's compile ask everything again: superlinear), and are emptied when a
+# compile starts while no other runs (a long-lived process keeps one model's worth)
+_memos: list = []
+_compiling = 0
+_compiling_lock = threading.Lock()
+
+
+def compile_memo() -> dict:
+    """A dict for memoising pure functions of expressions over one compile (compile_scope)."""
+    memo: dict = {}
+    _memos.append(memo)
+    return memo
+
+
+@contextmanager
+def compile_scope():
+    """Within: a compile.  The outermost one of all that run at once empties the memos first."""
+    global _compiling
+    with _compiling_lock:
+        if _compiling == 0:
+            for memo in _memos:
+                memo.clear()
+        _compiling += 1
+    try:
+        yield
+    finally:
+        with _compiling_lock:
+            _compiling -= 1
+
+
 def memory_budget() -> int:
     """The bytes a compile may use: $BGC_MEMORY if set (a number, with K, M or G), else what
     the machine has available (Linux: MemAvailable, bounded by an address-space limit), else

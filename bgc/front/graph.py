@@ -14,23 +14,21 @@ from functools import cached_property
 import sympy as sp
 
 from ..base.diagnostics import Collector, Note, Span, did_you_mean
+from ..base.resources import compile_memo
 from .kinds import KINDS
 
 TIME = sp.Symbol("t", real=True)
 
 
-_VARS: dict = {}  # name -> its symbol: SymPy's own constructor checks the assumptions and
-#                  consults its cache every time, and the stages ask for the same names again
-#                  and again (a bond's effort and flow in every equation that reads them)
-_VARS_MAX = 1 << 18  # names kept; beyond, the memo starts again
+_VARS = compile_memo()  # name -> its symbol: SymPy's own constructor checks the assumptions
+#                        and consults its cache every time, and the stages ask for the same
+#                        names again and again (a bond's effort and flow in every equation)
 
 
 def var(name: str) -> sp.Symbol:
     """The symbol of a model variable (all model quantities are real)."""
     symbol = _VARS.get(name)
     if symbol is None:
-        if len(_VARS) > _VARS_MAX:
-            _VARS.clear()
         symbol = _VARS[name] = sp.Symbol(name, real=True)
     return symbol
 

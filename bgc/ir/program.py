@@ -52,6 +52,7 @@ import sympy as sp
 from ..symbolic.algebra import Max, Min
 from ..symbolic.canonical import new
 from ..symbolic.walk import DESCEND, fold
+from ..base.resources import compile_memo
 from ..base.run import RunSettings
 from ..symbolic.sparse import IterationPlan, LUPlan
 
@@ -204,8 +205,7 @@ def substitute(expr, mapping: dict, memo: dict | None = None):
 # again (every pruning, every rewrite), and SymPy walks the whole expression each time
 _BASIC_FREE = sp.Basic.__dict__["free_symbols"]
 _FREE_OF_ARGS: dict = {}  # type -> whether its free symbols are its arguments' (Basic's rule)
-_FREE: dict = {}  # expression -> frozenset of its free symbols
-_FREE_MAX = 1 << 18  # entries kept; beyond, the memo starts again
+_FREE = compile_memo()  # expression -> frozenset of its free symbols
 
 
 def _free_of_args(cls) -> bool:
@@ -224,8 +224,6 @@ def free_symbols(expr) -> frozenset:
     found = _FREE.get(expr)
     if found is not None:
         return found
-    if len(_FREE) > _FREE_MAX:
-        _FREE.clear()
     return fold(expr, _FREE, _free_leaf, _union)
 
 
@@ -247,8 +245,7 @@ def trivial(e) -> bool:
                                                                    or e.args[1].is_Indexed)
 
 
-_FLOATS: dict = {}  # expression -> frozenset of its Floats with an integral value
-_FLOATS_MAX = 1 << 18
+_FLOATS = compile_memo()  # expression -> frozenset of its Floats with an integral value
 
 
 def _integral(f) -> bool:
@@ -266,8 +263,6 @@ def integral_floats(e):
     subexpressions hold such floats is remembered (explicit stack), like free_symbols."""
     found = _FLOATS.get(e)
     if found is None:
-        if len(_FLOATS) > _FLOATS_MAX:
-            _FLOATS.clear()
         found = fold(e, _FLOATS, _float_leaf, _union)
     if not found:
         return e

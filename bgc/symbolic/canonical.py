@@ -23,12 +23,12 @@ from sympy.core.sympify import _sympify  # the constructor's strict conversion o
 from sympy.functions.elementary.exponential import ExpBase as _ExpBase  # exp, exp_polar
 
 from .walk import DESCEND, fold
+from ..base.resources import compile_memo
 
 _SORT_KEY = sp.core.basic._args_sortkey
 _ZERO, _ONE = sp.S.Zero, sp.S.One
 _GLOBAL = sp.core.parameters.global_parameters  # (its evaluate off: the constructor itself)
-_CANONICAL: dict = {}  # a term c*s or a factor b**e -> whether the constructor rebuilds it as is
-_CANONICAL_MAX = 1 << 16
+_CANONICAL = compile_memo()  # a term c*s or a factor b**e -> whether the constructor rebuilds it
 VERIFY = False  # tests: compare every short-way result with the constructor's
 
 
@@ -47,8 +47,6 @@ def _rebuilt_as_is(a, make) -> bool:
     """Whether make() (how Add's or Mul's flattening rebuilds the term or factor a) gives a."""
     found = _CANONICAL.get(a)
     if found is None:
-        if len(_CANONICAL) > _CANONICAL_MAX:
-            _CANONICAL.clear()
         b = make()
         found = _CANONICAL[a] = type(b) is type(a) and b == a
     return found
