@@ -18,6 +18,12 @@ os.environ.setdefault("BGC_CFLAGS", "-O0 -std=c99")
 # (auto: the interpreter for a short run of a model not built before, docs/cli.md) is tested
 # in tests/test_vm.py.
 os.environ.setdefault("BGC_BACKEND", "c")
+# One BLAS thread per process (set before anything imports NumPy; the xdist workers and every
+# subprocess inherit it): the references' matrices are 2x2 to 50x50, where OpenBLAS's threads
+# spin more than they compute (scipy.linalg.expm of a 3x3 matrix 40 times slower on two busy
+# cores), and xdist already runs a worker on each core.  bgc's solvers use no BLAS.
+for _blas in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_blas, "1")
 
 
 def pytest_configure(config):
