@@ -513,6 +513,93 @@ def test_scene_rodas4_without_a_step_refused_as_adaptive(tmp_path, capsys):
     assert "rodas4 at a fixed step of 0.01" in (tmp_path / "rc_pair.c").read_text()
 
 
+# ---------------------------------------------------------------- inputs
+
+
+def _sample(m, j=0):
+    """The harness's input samples with -DBGC_INPUT_SEQUENCE: s(m, j) at t_m, exact in binary."""
+    return ((m * 37 + 5 * j) % 11) * 0.25 - 1.0
+
+
+def _input_data(default, h, steps):
+    """simulate's --input rows for samples held from each step's end: the default over
+    [t0, t1), then s(m) over [t_m, t_(m+1)), each change a repeated t (a jump)."""
+    t, v = [0.0, h], [default, default]
+    for m in range(1, steps + 1):
+        t += [m * h, (m + 1) * h]
+        v += [_sample(m), _sample(m)]
+    return np.array(t), np.array(v)
+
+
+def test_inputs_are_the_bytes_of_simulate_with_its_input_file(tmp_path):
+    """An input is a field of NAME_inputs, the caller's sample at the step's end, held from
+    there: the bytes of bgc simulate --input with those samples as rows held between them
+    (C backend and interpreter), through the when-block's resets located inside the steps; the
+    charge between two rows is the RC's exponential toward C v under the held v."""
+    if shutil.which("gcc") is None:
+        pytest.skip("no gcc on this machine")
+    path = ROOT / "tests" / "models" / "rc_input.bg"
+    h, steps = 0.01, 100
+    files = api.compile(str(path), "embedded", scene="run",
+                        embedded={"real": "double", "solver": "rk4", "step": h})
+    for name, text in files.items():
+        (tmp_path / name).write_text(text)
+    subprocess.run(["gcc", *FLAGS, "-c", "rc_input.c"], cwd=tmp_path, check=True)
+    if shutil.which("clang"):
+        subprocess.run(["clang", *FLAGS, "-fsyntax-only", "rc_input.c"], cwd=tmp_path,
+                       check=True)
+    if shutil.which("arm-none-eabi-gcc"):
+        subprocess.run(["arm-none-eabi-gcc", "-mcpu=cortex-m4", "-mthumb", "-mfloat-abi=hard",
+                        "-mfpu=fpv4-sp-d16", *FLAGS, "-c", "rc_input.c", "-o", "arm.o"],
+                       cwd=tmp_path, check=True)
+    subprocess.run(["gcc", *FLAGS[:-1], "-O0", "-I.", "-DBGC_INPUT_SEQUENCE",
+                    "-DBGC_MODEL=rc_input", '-DBGC_HEADER="rc_input.h"', str(HARNESS),
+                    "rc_input.o", "-lm", "-o", "run"], cwd=tmp_path, check=True)
+    rows = _rows(tmp_path, steps)
+    for backend in ("c", "vm"):
+        t, Y, names = api.simulate(str(path), "run", backend=backend, solver="rk4", step=h,
+                                   dt=h, t_end=steps * h,
+                                   inputs={"v": _input_data(0.25, h, steps)})
+        assert rows == "\n".join([",".join(["t", *names])] + [
+            ",".join("%.17g" % v for v in (tk, *row)) for tk, row in zip(t, Y)]) + "\n"
+    _, table = _table(rows)
+    q, v = table[:, 1], table[:, 2]
+    assert v[0] == 0.25 and all(v[m] == _sample(m) for m in range(1, steps + 1))
+    want = 0.5 * v[:-1] + (q[:-1] - 0.5 * v[:-1]) * np.exp(-h / 0.5)
+    reset = np.abs(q[1:] - want) > 1e-9  # the steps with a reset inside
+    assert 5 <= reset.sum() <= 30 and np.all(q[1:][reset] < want[reset])
+    assert np.max(np.abs(q[1:][~reset] - want[~reset])) < 1e-9
+    # float: the same samples, every output within 1e-5 of its size (the resets in the same
+    # steps)
+    single = tmp_path / "float"
+    single.mkdir()
+    files = api.compile(str(path), "embedded", scene="run",
+                        embedded={"real": "float", "solver": "rk4", "step": h})
+    for name, text in files.items():
+        (single / name).write_text(text)
+    subprocess.run(["gcc", *FLAGS, "-I.", "-DBGC_INPUT_SEQUENCE", "-DBGC_MODEL=rc_input",
+                    '-DBGC_HEADER="rc_input.h"', str(HARNESS), "rc_input.c", "-lm", "-o",
+                    "run"], cwd=single, check=True)
+    _, ftable = _table(_rows(single, steps))
+    err = np.max(np.abs(ftable - table), axis=0) / np.max(np.abs(table), axis=0)
+    assert np.max(err) < 1e-5, err
+    # --report's bytes: sizeof of the structs, the held samples in the state
+    from bgc.codegen import embedded
+    want_bytes = embedded.memory(api.build(str(path), "run").program, "double", "rk4")
+    (tmp_path / "sizes.c").write_text("""#include <stdio.h>
+#include "rc_input.h"
+int main(void)
+{
+    printf("%d %d\\n", (int)sizeof(rc_input_state), (int)sizeof(rc_input_inputs));
+    return 0;
+}
+""")
+    subprocess.run(["gcc", "-std=c99", "sizes.c", "-o", "sizes"], cwd=tmp_path, check=True)
+    got = subprocess.run([str(tmp_path / "sizes")], capture_output=True, text=True,
+                         check=True).stdout.split()
+    assert [int(g) for g in got] == [want_bytes["state"], want_bytes["inputs"]]
+
+
 # ---------------------------------------------------------------- the command and refusals
 
 

@@ -15,6 +15,9 @@ event inside the same call, so that its rows are again simulate's bytes.  A Rose
 method (ros2; rodas4, rodas5p) is the runtime's on fixed steps (bgc/runtime/stiff.c: f, df/dt
 and the Jacobian from jvp at the step's start, I/(gamma h) - J factored with partial pivoting
 in a local n x n array, one solve per stage), on simulate's grid t0 + k H over the run.
+Inputs are the caller's samples at each step's end, held from there (the runtime's input
+segments with slope 0, each sample a time event), as simulate reads an --input file whose
+rows are those samples held between them.
 
 What the target cannot run yet is refused before anything is written, with the place in the
 model and what to change (check_supported)."""
@@ -27,7 +30,8 @@ import sympy as sp
 from .. import ir
 from ..base import solvers
 from ..base.diagnostics import ModelError, error
-from ..ir import FUNCTIONS, D, PeriodicNext, Program, SquareNext, SquareWave, T, Table
+from ..ir import (FUNCTIONS, D, InputNext, InputPart, PeriodicNext, Program, SquareNext,
+                  SquareWave, T, Table)
 from ..ir.printers import CPrinter, float_literal
 from . import emit
 
@@ -84,7 +88,8 @@ class _FloatPrinter(_EmbeddedPrinter):
             return super()._print(expr, **kwargs) + "f"
         if expr == T and not self._raw_time:
             return "(bgc_real)t"
-        if type(expr) in (SquareWave, SquareNext, PeriodicNext) and not self._raw_time:
+        if type(expr) in (SquareWave, SquareNext, PeriodicNext, InputPart, InputNext) \
+                and not self._raw_time:
             self._raw_time = True  # (an edge in float is off by float's resolution at t)
             try:
                 return super()._print(expr, **kwargs)
@@ -169,8 +174,8 @@ def _refuse(span, message: str):
 def check_supported(program: Program, graph, scene, solver: str, real: str = "double",
                     step: float | None = None) -> None:
     """ModelError, located, for what the embedded target does not run (yet): an adaptive
-    solver, Newton blocks in float, a scene's max_step below the step, inputs, lookup tables
-    (one of more than MAX_TABLE_ROWS rows named so)."""
+    solver, Newton blocks in float, a scene's max_step below the step, lookup tables (one of
+    more than MAX_TABLE_ROWS rows named so), and what its Rosenbrock step does not run."""
     sc = program.scene
     span = scene.solver[2] if scene is not None and scene.solver else None
     # a Rosenbrock method named by the scene without a step is an adaptive run in simulate
@@ -197,9 +202,6 @@ def check_supported(program: Program, graph, scene, solver: str, real: str = "do
                           f"{MAX_TABLE_ROWS} the target carries in flash: resample it to "
                           f"{MAX_TABLE_ROWS} rows or fewer")
         _refuse(span, f"lookup tables ('{tab.name}') are not supported yet")
-    for info in program.inputs:
-        _refuse(getattr(info, "span", None),
-                f"inputs ('{info.name}') are not supported yet")
     if solver in ROSENBROCK:
         _check_rosenbrock(program, solver, real, span)
 
@@ -289,7 +291,8 @@ def emit_embedded(program: Program, real: str = "double", solver: str = "rk4",
         "t0": float_literal(sc.t0),
         "n_states": len(program.states), "n_outputs": len(program.outputs),
         "n_params": len(program.params), "n_consts": program.n_consts,
-        "n_inputs": len(program.inputs), "work": max(ws.doubles, 1), "ints": max(ws.ints, 1),
+        "n_inputs": len(program.inputs), "inputs": bool(program.inputs),
+        "input_names": [i.name for i in program.inputs], "work": max(ws.doubles, 1), "ints": max(ws.ints, 1),
         "blocks": blocks,
         # Newton's relative tolerance: the scene's, at least float's resolution in float; atol
         # the scene's in both (the model's own decisions read it: a contact's rest, a switch's
@@ -377,6 +380,8 @@ def memory(program: Program, real: str = "double", solver: str = "rk4",
     if ev is not None:
         g = max(ev.indicators, 1)
         fields += [(8, 3), (8, 2), (4, 1), (size, max(ev.discrete, 1)), (size, 3 * g)]
+    if program.inputs:  # the held samples: their times, values, and whether there are any
+        fields += [(8, len(program.inputs)), (size, len(program.inputs)), (4, 1)]
     state = _struct_bytes(fields)
     stages = solvers.get(solver).tableau.stages
     locals_ = stages * n + 2 * n + m + (4 * n + max(ev.indicators, 1) if ev is not None else 0)
