@@ -513,6 +513,17 @@ def test_scene_rodas4_without_a_step_refused_as_adaptive(tmp_path, capsys):
     assert "rodas4 at a fixed step of 0.01" in (tmp_path / "rc_pair.c").read_text()
 
 
+def test_rosenbrock_on_a_sparse_iteration_matrix_refused():
+    """A 6 x 6 thermal grid (36 states): bgc simulate factors its iteration matrix by the
+    sparse plan, which the target's dense LU would not reproduce: refused, naming the way out."""
+    from helpers import families
+    with pytest.raises(api.BgcModelError) as exc:
+        api.compile(api.Source("grid.bg", families.thermal_grid(6)), "embedded", scene="cool",
+                    embedded={"solver": "ros2", "step": 0.01})
+    assert "the solver 'ros2' on a model of 36 states" in str(exc.value)
+    assert "sparse plan" in str(exc.value) and "--solver rk4" in str(exc.value)
+
+
 # ---------------------------------------------------------------- inputs
 
 
