@@ -74,6 +74,12 @@ class Solver:
     stiff: str | None = None  # ... and the stiff one it switches to
     uses_jacobian: bool = False
     references: tuple = field(default=())
+    for_fixed_steps: bool = False  # meant for --step (ros2): `bgc accuracy` sweeps its step
+
+    @property
+    def swept_by_step(self) -> bool:
+        """Whether `bgc accuracy` sweeps the method's step rather than its tolerance."""
+        return self.family == "fixed" or self.for_fixed_steps
 
     @property
     def adaptive(self) -> bool:
@@ -120,7 +126,8 @@ SOLVER_LIST = (
     Solver("ros2", "rosenbrock", 2,
            "Rosenbrock 2(1), L-stable, two stages: stiff plants at a fixed step (--step, the "
            "embedded target); the Jacobian every step", "_ROS2",
-           Control(0.9, 0.2, 6.0, 0.0, 2), uses_jacobian=True, references=(_VERWER,)),
+           Control(0.9, 0.2, 6.0, 0.0, 2), uses_jacobian=True, references=(_VERWER,),
+           for_fixed_steps=True),
     Solver("rodas4", "rosenbrock", 4,
            "Rosenbrock 4(3), L-stable, stiff; the Jacobian every step", "_RODAS4",
            Control(0.9, 0.2, 6.0, 0.0, 4), uses_jacobian=True, references=(_HAIRER_II,)),

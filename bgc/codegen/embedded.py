@@ -215,8 +215,8 @@ def _check_rosenbrock(program: Program, solver: str, real: str, span) -> None:
         raise ValueError("a Rosenbrock method needs the program's jvp (build it with jacobian)")
     if program.events is not None:
         _refuse(span, f"the solver '{solver}' with events (when-blocks, switched elements, "
-                      f"impacts, time events) is not supported yet: give --solver rk4 or "
-                      f"--solver euler")
+                      f"impacts, time events, an input's samples) is not supported yet: give "
+                      f"--solver rk4 or --solver euler")
     if program.jacobian.lu is not None:
         _refuse(span, f"the solver '{solver}' on a model of {len(program.states)} states, "
                       f"whose iteration matrix bgc simulate factors by its sparse plan, is not "
@@ -292,7 +292,8 @@ def emit_embedded(program: Program, real: str = "double", solver: str = "rk4",
         "n_states": len(program.states), "n_outputs": len(program.outputs),
         "n_params": len(program.params), "n_consts": program.n_consts,
         "n_inputs": len(program.inputs), "inputs": bool(program.inputs),
-        "input_names": [i.name for i in program.inputs], "work": max(ws.doubles, 1), "ints": max(ws.ints, 1),
+        "input_names": [i.name for i in program.inputs],
+        "work": max(ws.doubles, 1), "ints": max(ws.ints, 1),
         "blocks": blocks,
         # Newton's relative tolerance: the scene's, at least float's resolution in float; atol
         # the scene's in both (the model's own decisions read it: a contact's rest, a switch's
@@ -369,8 +370,8 @@ def memory(program: Program, real: str = "double", solver: str = "rk4",
     """The bytes of the caller's structs (natural alignment, 8-byte long) and of one step's
     local arrays (the stages, their argument, the outputs, and the state's copy that the step
     works on; a Rosenbrock method also f, df/dt, the iteration matrix and its pivots, and the
-    Jacobian's direction and product; with events also the step's end, the located state, the interpolant's two
-    derivatives and the indicators), for --report."""
+    Jacobian's direction and product; with events also the step's end, the located state, the
+    interpolant's two derivatives and the indicators), for --report."""
     size = 8 if real == "double" else 4
     n, m = max(len(program.states), 1), max(len(program.outputs), 1)
     ws = _workspace(program, chunk_ops, solver)
