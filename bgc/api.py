@@ -324,7 +324,8 @@ def compile(model, target: str = "c", scene: str | None = None,
 def compile_embedded(compiled: Compiled, real: str = "double", solver: str | None = None,
                      step: float | None = None) -> dict[str, str]:
     """The embedded C target of a built model: {"<id>.h", "<id>.c"} (docs/embedded.md).  solver:
-    euler or rk4 (default: the scene's, which must then be one of them); step: the fixed step
+    euler, rk4 or a Rosenbrock method (ros2, ...) on fixed steps (default: the scene's, which
+    must then be one of them); step: the fixed step
     (default: the scene's step, else its output interval).  What the target cannot run is
     refused with a located BgcModelError."""
     from .codegen import embedded

@@ -600,8 +600,9 @@ def equations(model, scene, outputs, effects, algebra, fmt):
 @click.option("--real", type=click.Choice(["double", "float"]), default=None,
               help="--target embedded: the real type.  [default: double]")
 @click.option("--solver", type=click.Choice(solvers.NAMES), default=None,
-              help="--target embedded: the fixed-step method, euler or rk4 (default: the "
-                   "scene's, if it is one of them).")
+              help="--target embedded: the fixed-step method, euler, rk4 or, for a stiff "
+                   "model, ros2 (rodas4, rodas5p: on fixed steps too) (default: the scene's, "
+                   "if it is one of them).")
 @click.option("--step", type=POSITIVE, default=None,
               help="--target embedded: the fixed step H (default: the scene's step, else its "
                    "output interval).")
@@ -650,9 +651,10 @@ def _compile_embedded(model, scene, outputs, effects, algebra, output, project_i
     if project_initial or allow_inconsistent:
         raise click.UsageError("--target embedded starts from the model's initial values as "
                                "they are: leave out --project-initial and --allow-inconsistent")
-    if solver is not None and solver not in ("euler", "rk4"):
+    from .codegen.embedded import SOLVERS as fixed
+    if solver is not None and solver not in fixed:
         raise click.BadParameter(f"'{solver}' is not a fixed-step method: the embedded target "
-                                 "takes one fixed step per call (euler or rk4)",
+                                 f"takes one fixed step per call ({', '.join(fixed)})",
                                  param_hint="'--solver'")
     directory = Path(output or ".")
     if outfile.is_stdout(str(directory)) or not directory.is_dir():

@@ -3,6 +3,8 @@
  * the format of `bgc simulate`.  Built by tests/test_embedded.py:
  *   cc -std=c99 -DBGC_MODEL=NAME -DBGC_HEADER='"NAME.h"' embedded_harness.c NAME.o -lm
  *   ./a.out STEPS [NAME=VALUE ...]   (parameter overrides by name, then NAME_params_update)
+ * With -DBGC_INPUT_SEQUENCE the inputs are set before each step to a sequence of samples
+ * (the harness's s(k, j)); else they stay 0.
  * Exit status 0, or 3 with the fault code and time on stderr.
  */
 #include <stdio.h>
@@ -67,6 +69,12 @@ int main(int argc, char **argv)
     if (rc == 0)
         row(API(_time)(&s), &y);
     for (k = 0; k < steps && rc == 0; k++) {
+#ifdef BGC_INPUT_SEQUENCE
+        /* the inputs' samples at the step's end t_(k+1): input j's s(k + 1, j), exact in
+           binary, that the test writes as the rows of simulate's --input data */
+        for (j = 0; j < API(_N_INPUTS); j++)
+            u.u[j] = (API(_real))((double)(((k + 1) * 37 + 5 * j) % 11) * 0.25 - 1.0);
+#endif
         rc = API(_step)(&s, &p, &u, &y);
         if (rc == 0)
             row(API(_time)(&s), &y);

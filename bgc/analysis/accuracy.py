@@ -243,7 +243,7 @@ def plan(compiled: Compiled, names=None, rtols=None, steps=None, dt=None) -> lis
     out_dt = dt or compiled.settings.dt
     points = []
     for n in names or list(solvers.NAMES):
-        if solvers.get(n).family == "fixed":
+        if solvers.get(n).swept_by_step:
             hs = steps or [out_dt / k for k in DEFAULT_STEP_DIVISIONS]
             points += [Point(n, "step", h) for h in hs]
         else:
@@ -260,7 +260,7 @@ def plan_gains(compiled: Compiled, names=None, rtols=None, steps=None,
     chosen = names or [s.solver] + (["rk4"] if s.solver != "rk4" else [])
     settings = []
     for n in chosen:
-        if solvers.get(n).family == "fixed":
+        if solvers.get(n).swept_by_step:
             settings += [(n, "step", h) for h in (steps or [s.step or dt or s.dt])]
         else:
             settings += [(n, "rtol", r) for r in (rtols or [s.rtol])]

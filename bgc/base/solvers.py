@@ -74,6 +74,12 @@ class Solver:
     stiff: str | None = None  # ... and the stiff one it switches to
     uses_jacobian: bool = False
     references: tuple = field(default=())
+    for_fixed_steps: bool = False  # meant for --step (ros2): `bgc accuracy` sweeps its step
+
+    @property
+    def swept_by_step(self) -> bool:
+        """Whether `bgc accuracy` sweeps the method's step rather than its tolerance."""
+        return self.family == "fixed" or self.for_fixed_steps
 
     @property
     def adaptive(self) -> bool:
@@ -100,6 +106,8 @@ _HAIRER_1999 = ("Hairer & Wanner, Stiff differential equations solved by Radau m
 _STEINEBACH = ("Steinebach, Construction of Rosenbrock-Wanner method Rodas5P and numerical "
                "benchmarks within the Julia Differential Equations package, BIT Numerical "
                "Mathematics 63 (2023)")
+_VERWER = ("Verwer, Spee, Blom & Hundsdorfer, A second-order Rosenbrock method applied to "
+           "photochemical dispersion problems, SIAM Journal on Scientific Computing 20 (1999)")
 _VERNER = ("Verner, Numerically optimal Runge-Kutta pairs with interpolants, Numerical "
            "Algorithms 53 (2010)")
 
@@ -115,6 +123,11 @@ SOLVER_LIST = (
     Solver("dop853", "erk", 8,
            "Dormand-Prince 8(5,3), adaptive, dense output of order 7: tight tolerances",
            "_DOP853", Control(0.9, 0.333, 6.0, 0.04, 8, 0.2), references=(_HAIRER_I,)),
+    Solver("ros2", "rosenbrock", 2,
+           "Rosenbrock 2(1), L-stable, two stages: stiff plants at a fixed step (--step, the "
+           "embedded target); the Jacobian every step", "_ROS2",
+           Control(0.9, 0.2, 6.0, 0.0, 2), uses_jacobian=True, references=(_VERWER,),
+           for_fixed_steps=True),
     Solver("rodas4", "rosenbrock", 4,
            "Rosenbrock 4(3), L-stable, stiff; the Jacobian every step", "_RODAS4",
            Control(0.9, 0.2, 6.0, 0.0, 4), uses_jacobian=True, references=(_HAIRER_II,)),

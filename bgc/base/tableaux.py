@@ -453,6 +453,30 @@ _VERN7 = ERKTableau(
                 for i in range(16)),
 )
 
+
+# ROS2 (Verwer, Spee, Blom & Hundsdorfer 1999): two stages, order 2, L-stable with
+# gamma = 1 + 1/sqrt(2) (the stability function's z^2 term vanishes), and of order 2 whatever
+# the matrix in place of J (a W-method), so a Jacobian of the step's start is exact enough.
+# Its form (I - gamma h J) k1 = f(t, y) + gamma h f_t, (I - gamma h J) k2 = f(t + h, y + h k1)
+# - 2 k1 - gamma h f_t, y1 = y + h (3 k1 + k2) / 2, in Hairer's transformed coefficients
+# (K_i = gamma h k_i): a21 = 1/gamma, C21 = -2/gamma, m = (3, 1)/(2 gamma), d = (gamma,
+# -gamma).  The error estimate is against the linearly implicit Euler step y + h k1 (order 1);
+# the dense output y0 + sum b_i(theta) h k_i with b_2(theta) = (theta^2/2 - gamma theta) /
+# (1 - 2 gamma), b_1 = theta - b_2, of order 2 (both order conditions at every theta): one
+# row H_1 = (1, 1) / (2 gamma (2 gamma - 1)), the second zero.  Decimals to 30 digits of the
+# closed forms (gamma = 1 + sqrt(2)/2, 1/gamma = 2 - sqrt(2), ...).
+_ROS2 = RosenbrockTableau(
+    gamma=_q("1.70710678118654752440084436210"),
+    c=_row("0", "1"),
+    d=_row("1.70710678118654752440084436210", "-1.70710678118654752440084436210"),
+    a=((), _row("0.585786437626904951198311275790")),
+    C=((), _row("-1.17157287525380990239662255158")),
+    m=_row("0.878679656440357426797466913685", "0.292893218813452475599155637895"),
+    e=_row("0.292893218813452475599155637895", "0.292893218813452475599155637895"),
+    dense=(_row("0.121320343559642573202533086315", "0.121320343559642573202533086315"),
+           _row("0", "0")),
+)
+
 # Hairer & Wanner's RODAS (order 4(3), six stages, stiffly accurate, L-stable), the
 # coefficients of rodas.f (method 1), with its dense output of order 3.
 _RODAS4_A5 = _row("0.1221224509226641e1", "0.6019134481288629e1", "0.1253708332932087e2",

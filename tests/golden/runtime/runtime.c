@@ -1,20 +1,21 @@
 /* ============================================================ solvers === */
 /* The solvers (bgc/solvers.py); their tables follow the API section. */
-#define BGC_NUM_SOLVERS 12
-#define BGC_SOLVER_LIST "euler, rk4, dopri5, vern7, dop853, rodas4, radau5, rodas5p, radau9, radau13, radau or auto"
+#define BGC_NUM_SOLVERS 13
+#define BGC_SOLVER_LIST "euler, rk4, dopri5, vern7, dop853, ros2, rodas4, radau5, rodas5p, radau9, radau13, radau or auto"
 enum {
     BGC_SOLVER_EULER = 0,
     BGC_SOLVER_RK4 = 1,
     BGC_SOLVER_DOPRI5 = 2,
     BGC_SOLVER_VERN7 = 3,
     BGC_SOLVER_DOP853 = 4,
-    BGC_SOLVER_RODAS4 = 5,
-    BGC_SOLVER_RADAU5 = 6,
-    BGC_SOLVER_RODAS5P = 7,
-    BGC_SOLVER_RADAU9 = 8,
-    BGC_SOLVER_RADAU13 = 9,
-    BGC_SOLVER_RADAU = 10,
-    BGC_SOLVER_AUTO = 11,
+    BGC_SOLVER_ROS2 = 5,
+    BGC_SOLVER_RODAS4 = 6,
+    BGC_SOLVER_RADAU5 = 7,
+    BGC_SOLVER_RODAS5P = 8,
+    BGC_SOLVER_RADAU9 = 9,
+    BGC_SOLVER_RADAU13 = 10,
+    BGC_SOLVER_RADAU = 11,
+    BGC_SOLVER_AUTO = 12,
 };
 
 /* ======================================================================= API === */
@@ -618,6 +619,15 @@ static const double bgc_dop853_e2[13] = { -0.18980075407240762, 0.0, 0.0, 0.0, 0
 static const double bgc_dop853_P[112] = { 1.0, -10.266057073759306, 48.161850968566455, -114.93304874997833, 147.46446875669767, -97.06685363011368, 25.69393346270375, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 13.917653631776604, -154.78787266663716, 522.9219089608218, -456.25918840208783, -75.53193732135753, 154.18974869023643, 0.0, 2.6056037519936095, -21.622822384626506, 2.535182028966755, 292.25417465990404, -505.40999933296894, 231.5293791760455, 0.0, -15.018944223519684, 160.09447708973047, -474.3071826037644, 135.96036916173838, 545.1091945264187, -357.6391179106141, 0.0, 3.050527683318488, -38.54396729189063, 174.47140009219885, -337.0513470238771, 291.78987509083254, -93.40532418362432, 0.0, -1.3278744327655212, 16.661770430049543, -74.44027814126304, 140.75210016191608, -119.2562021040512, 37.45832313645163, 0.0, 2.844533632672879, -36.55829548991012, 170.69007169147514, -345.9748485480496, 313.299553623578, -104.0996495089623, 0.0, 0.7657106259527866, -9.906995535619366, 46.8029919188744, -96.5198694669957, 88.74316650017616, -29.8402934266605, 0.0, -1.0889903364513334, 14.097013042320002, -66.68230591294363, 137.96299063474376, -127.82216401767992, 43.53345659001114, 0.0, 18.148505520854727, -127.63310949253875, 357.3419516129657, -500.7031507909224, 349.17035710882897, -96.32455395918828, 0.0, -9.194632392478356, 93.3567459327894, -282.6272618704363, 361.14007718803333, -201.85219053352347, 39.17726167561544, 0.0, -4.436036387594894, 56.68120539776666, -261.77342902691703, 520.9742236688993, -461.17279991013964, 149.72683625798564 };
 
 static const bgc_erk bgc_dop853_erk = { 13, 16, 1, 7, bgc_dop853_c, bgc_dop853_a, bgc_dop853_b, bgc_dop853_e, bgc_dop853_e2, bgc_dop853_P };
+static const double bgc_ros2_c[2] = { 0.0, 1.0 };
+static const double bgc_ros2_d[2] = { 1.7071067811865475, -1.7071067811865475 };
+static const double bgc_ros2_a[4] = { 0.0, 0.0, 0.585786437626905, 0.0 };
+static const double bgc_ros2_C[4] = { 0.0, 0.0, -1.17157287525381, 0.0 };
+static const double bgc_ros2_m[2] = { 0.8786796564403574, 0.2928932188134525 };
+static const double bgc_ros2_e[2] = { 0.2928932188134525, 0.2928932188134525 };
+static const double bgc_ros2_H[4] = { 0.12132034355964258, 0.12132034355964258, 0.0, 0.0 };
+
+static const bgc_rosenbrock bgc_ros2_ros = { 2, 2, 1.7071067811865475, bgc_ros2_c, bgc_ros2_d, bgc_ros2_a, bgc_ros2_C, bgc_ros2_m, bgc_ros2_e, bgc_ros2_H };
 static const double bgc_rodas4_c[6] = { 0.0, 0.386, 0.21, 0.63, 1.0, 1.0 };
 static const double bgc_rodas4_d[6] = { 0.25, -0.1043, 0.1035, -0.03620000000000023, 0.0, 0.0 };
 static const double bgc_rodas4_a[36] = { 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.544, 0.0, 0.0, 0.0, 0.0, 0.0, 0.9466785280815826, 0.2557011698983284, 0.0, 0.0, 0.0, 0.0, 3.314825187068521, 2.896124015972201, 0.9986419139977817, 0.0, 0.0, 0.0, 1.221224509226641, 6.019134481288629, 12.53708332932087, -0.687886036105895, 0.0, 0.0, 1.221224509226641, 6.019134481288629, 12.53708332932087, -0.687886036105895, 1.0, 0.0 };
@@ -677,6 +687,7 @@ const char *const bgc_solver_names[BGC_NUM_SOLVERS] = {
     "dopri5",
     "vern7",
     "dop853",
+    "ros2",
     "rodas4",
     "radau5",
     "rodas5p",
@@ -691,13 +702,14 @@ static const bgc_method bgc_methods[BGC_NUM_SOLVERS] = {
     { "dopri5", "Dormand-Prince 5(4), adaptive, dense output of order 4", BGC_FAMILY_ERK, 5, &bgc_dopri5_erk, NULL, 0.9, 0.2, 10.0, 0.04, 5, 0.75, 5, 6, 3.25, -1, -1, NULL, 0 },
     { "vern7", "Verner 7(6), adaptive, dense output of order 7: moderate to tight tolerances", BGC_FAMILY_ERK, 7, &bgc_vern7_erk, NULL, 0.9, 0.333, 6.0, 0.04, 7, 0.75, -1, -1, 0.0, -1, -1, NULL, 0 },
     { "dop853", "Dormand-Prince 8(5,3), adaptive, dense output of order 7: tight tolerances", BGC_FAMILY_ERK, 8, &bgc_dop853_erk, NULL, 0.9, 0.333, 6.0, 0.04, 8, 0.2, -1, -1, 0.0, -1, -1, NULL, 0 },
+    { "ros2", "Rosenbrock 2(1), L-stable, two stages: stiff plants at a fixed step (--step, the embedded target); the Jacobian every step", BGC_FAMILY_ROSENBROCK, 2, NULL, &bgc_ros2_ros, 0.9, 0.2, 6.0, 0.0, 2, 0.75, -1, -1, 0.0, -1, -1, NULL, 0 },
     { "rodas4", "Rosenbrock 4(3), L-stable, stiff; the Jacobian every step", BGC_FAMILY_ROSENBROCK, 4, NULL, &bgc_rodas4_ros, 0.9, 0.2, 6.0, 0.0, 4, 0.75, -1, -1, 0.0, -1, -1, NULL, 0 },
     { "radau5", "Radau IIA of order 5, implicit, L-stable, stiff; Jacobian and factorisations reused", BGC_FAMILY_RADAU, 5, NULL, NULL, 0.9, 0.2, 8.0, 0.0, 4, 0.75, -1, -1, 0.0, -1, -1, bgc_radau5_radau, 1 },
     { "rodas5p", "Rosenbrock 5(4), L-stable, stiff; the Jacobian every step", BGC_FAMILY_ROSENBROCK, 5, NULL, &bgc_rodas5p_ros, 0.9, 0.2, 6.0, 0.0, 5, 0.75, -1, -1, 0.0, -1, -1, NULL, 0 },
     { "radau9", "Radau IIA of order 9 (5 stages), implicit, L-stable, stiff: tight tolerances", BGC_FAMILY_RADAU, 9, NULL, NULL, 0.9, 0.2, 8.0, 0.0, 4, 0.75, -1, -1, 0.0, -1, -1, bgc_radau9_radau, 1 },
     { "radau13", "Radau IIA of order 13 (7 stages), implicit, L-stable, stiff: very tight tolerances", BGC_FAMILY_RADAU, 13, NULL, NULL, 0.9, 0.2, 8.0, 0.0, 4, 0.75, -1, -1, 0.0, -1, -1, bgc_radau13_radau, 1 },
     { "radau", "Radau IIA of variable order 5, 9, 13 (Hairer's RADAU): the order follows the Newton iteration's convergence; stiff, any tolerance", BGC_FAMILY_RADAU, 13, NULL, NULL, 0.9, 0.2, 8.0, 0.0, 4, 0.75, -1, -1, 0.0, -1, -1, bgc_radau_radau, 3 },
-    { "auto", "dopri5 until its stiffness test fires, then radau (variable order) for the rest of the run", BGC_FAMILY_AUTO, 5, NULL, NULL, 0.9, 0.2, 10.0, 0.0, 5, 0.75, -1, -1, 0.0, 2, 10, NULL, 0 },
+    { "auto", "dopri5 until its stiffness test fires, then radau (variable order) for the rest of the run", BGC_FAMILY_AUTO, 5, NULL, NULL, 0.9, 0.2, 10.0, 0.0, 5, 0.75, -1, -1, 0.0, 2, 11, NULL, 0 },
 };
 
 /* ====================================================================== runtime === */
