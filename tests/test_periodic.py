@@ -327,3 +327,41 @@ def test_the_newton_runs_session_gives_a_separate_run_s_numbers_bit_for_bit(rl, 
         assert row["max:l.f"] == float(np.max(Y[:, 0]))
     assert rows[0] == {**rows[2], "cpu": rows[0]["cpu"], "run": rows[0]["run"]}
     assert bad["status"] == "invalid" and "nope" in bad["message"]
+
+
+def test_the_newton_runs_weigh_the_states_alone_in_every_backend_to_the_same_bytes():
+    """bgc periodic's Newton runs leave the sensitivities out of the step-size control
+    (--error-states, CVODES's errconS = false): a period of the buck with its monodromy
+    matrix takes the steps of the states' control, fewer than with the sensitivities
+    weighed too, and C, Python and the interpreter write the same bytes.  The matrix
+    the orbit reports comes from a run that weighs every state: its multipliers are those
+    of the exact period map (test above); the Newton runs' matrix is within its accuracy."""
+    from bgc.analysis import periodic
+    from bgc.execute import runner
+    shooting = periodic.build(BUCK, "run")
+    program = shooting.compiled.program
+    names = [p.name for p in program.params]
+    n = len(shooting.states)
+    texts, steps = {}, {}
+    for backend in ("c", "python", "vm"):
+        prepared = runner.prepare(shooting.compiled, backend)
+        for weighed in (n, None):
+            settings = runner.settings_for(program.scene, names, {"R": 50.0}, t_end=1e-5,
+                                           dt=1e-6, error_states=weighed)
+            done = runner.run(prepared, settings, stats=True)
+            assert done.status == 0, done.stderr
+            texts[backend, weighed] = done.csv
+            steps[backend, weighed] = int(done.stats["steps"]) + int(done.stats["rejected"])
+    for weighed in (n, None):
+        assert texts["c", weighed] == texts["python", weighed] == texts["vm", weighed]
+        assert steps["c", weighed] == steps["python", weighed] == steps["vm", weighed]
+    assert steps["c", n] < steps["c", None]
+    orbit = bgc.periodic(BUCK, "run", params={"R": 5.0})
+    T = orbit.period
+    session = periodic.open_session(shooting, {"R": 5.0}, T)
+    try:
+        found = periodic.newton(shooting, {"R": 5.0}, T, session)
+    finally:
+        session.close()
+    assert np.array_equal(found.x, orbit.x0) and found.runs == found.iterations + 1
+    assert np.max(np.abs(found.M - orbit.monodromy)) < 1e-6 * np.max(np.abs(orbit.monodromy))

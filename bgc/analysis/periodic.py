@@ -402,39 +402,21 @@ def periodic(model, scene=None, period=None, params=None, outputs=None, effects=
     t0 = float(program.scene.t0)
     backend, _ = runner.choose_backend(backend)
     prepared = shooting.program_for(backend)
-
-    outputs = program.outputs
-    width = len(outputs) // (1 + n)
-    first = width - n  # the outputs asked for, then the states
-    metrics = [f"final:{outputs[b * width + first + i]}" for b in range(1 + n) for i in range(n)]
-    settings = runner.settings_for(program.scene, names, given, t_end=t0 + T, dt=T)
-    cpu = [0.0]
-
-    def shoot(x):
-        row = session.run({initial_parameter(s): v for s, v in zip(shooting.states, x)})
-        if row["status"] != "ok":
-            raise NoOrbit(f"the run of one period failed: {row['message']}")
-        cpu[0] += row["cpu"]
-        v = np.array([row[m] for m in metrics]).reshape(1 + n, n)
-        return np.array(x, dtype=float), v[0], v[1:].T
-
-    start = _initial_state(shooting, given)
-    if start is None:  # (an initial value bgc cannot evaluate here: the program's own)
-        try:
-            start = _one_period(prepared, program, n, T, t0, given, None)[1][0]
-        except api.SimulationFailed as failed:
-            raise NoOrbit(f"the run of one period failed: {failed}") from None
+    session = open_session(shooting, given, T, backend)
     try:
-        session = runner.Session(prepared, settings, metrics)
-    except runner.SessionFailed as failed:
-        raise NoOrbit(f"the run of one period failed: {failed}") from None
-    try:
-        x, end, M, iterations, size, resolution, drifting = _newton(
-            shoot, start, n, program.scene)
-    except runner.SessionFailed as failed:
-        raise NoOrbit(f"the run of one period failed: {failed}") from None
+        found = newton(shooting, given, T, session, backend)
     finally:
         session.close()
+    x, drifting = found.x, found.drifting
+    if dt is None:
+        dt = float(program.scene.dt)
+        if not dt < T / 20:
+            dt = T / ROWS_PER_PERIOD
+    try:  # the orbit's rows, and its monodromy matrix under the error control of every state
+        t, _, S, y = _one_period(prepared, program, n, T, t0, given, x, dt)
+    except api.SimulationFailed as failed:
+        raise NoOrbit(f"the run of one period failed: {failed}") from None
+    M = S[-1]
     kept = [j for j in range(n) if j not in drifting]
     multipliers = np.linalg.eigvals(M[np.ix_(kept, kept)]) if kept else np.zeros(0, complex)
     multipliers = multipliers[np.lexsort((multipliers.imag, -np.abs(multipliers)))]
@@ -443,16 +425,83 @@ def periodic(model, scene=None, period=None, params=None, outputs=None, effects=
                       ", ".join(_complex(m) for m in multipliers if abs(m) >= 1.0) +
                       " lie on or outside the unit circle (a run does not settle on it)",
                       multipliers)
-    if dt is None:
-        dt = float(program.scene.dt)
-        if not dt < T / 20:
-            dt = T / ROWS_PER_PERIOD
-    t, _, _, y = _one_period(prepared, program, n, T, t0, given, x, dt)
     figures = _figures(prepared, program, n, T, t0, given, x, dt, shooting.outputs)
-    drift = tuple((shooting.states[j], float(end[j] - x[j])) for j in drifting)
-    return Orbit(T, t0, shooting.states, x, iterations, size, resolution, M, multipliers,
-                 drift, shooting.outputs, t, y[:, :len(shooting.outputs)], figures,
-                 shooting.compiled, cpu[0])
+    drift = tuple((shooting.states[j], float(found.end[j] - x[j])) for j in drifting)
+    return Orbit(T, t0, shooting.states, x, found.iterations, found.defect, found.resolution,
+                 M, multipliers, drift, shooting.outputs, t, y[:, :len(shooting.outputs)],
+                 figures, shooting.compiled, found.cpu)
+
+
+def _metrics(program, n) -> list[str]:
+    """The batch's columns of a period's run: the states at its end, then their sensitivities
+    to each x0(NAME) in turn."""
+    outputs = program.outputs
+    width = len(outputs) // (1 + n)
+    first = width - n  # the outputs asked for, then the states
+    return [f"final:{outputs[b * width + first + i]}" for b in range(1 + n) for i in range(n)]
+
+
+def open_session(shooting: Shooting, given: dict, T: float, backend: str = "c"):
+    """The runs of one period (from t0 to t0 + T) of the shooting program, in one process
+    (runner.Session), with the error control over the states alone (error_states: the
+    sensitivities follow the steps the states' control chooses); NoOrbit if it cannot start."""
+    program = shooting.compiled.program
+    n = len(shooting.states)
+    t0 = float(program.scene.t0)
+    settings = runner.settings_for(program.scene, [p.name for p in program.params], given,
+                                   t_end=t0 + T, dt=T, error_states=n)
+    try:
+        return runner.Session(shooting.program_for(runner.choose_backend(backend)[0]),
+                              settings, _metrics(program, n))
+    except runner.SessionFailed as failed:
+        raise NoOrbit(f"the run of one period failed: {failed}") from None
+
+
+@dataclass(frozen=True)
+class Newton:
+    """Where Newton's method on the period map ended."""
+
+    x: np.ndarray  # the periodic state at t0
+    end: np.ndarray  # Phi(x)
+    M: np.ndarray  # the last run's monodromy matrix (sensitivities outside the error control)
+    iterations: int
+    defect: float
+    resolution: bool
+    drifting: list
+    cpu: float  # the runs' own CPU seconds, as the program counts them
+    runs: int
+
+
+def newton(shooting: Shooting, given: dict, T: float, session, backend: str = "c") -> Newton:
+    """Newton's method on the period map of shooting's program, its runs in session (from
+    open_session, which the caller closes)."""
+    program = shooting.compiled.program
+    n = len(shooting.states)
+    metrics = _metrics(program, n)
+    cpu, runs = [0.0], [0]
+
+    def shoot(x):
+        try:
+            row = session.run({initial_parameter(s): v for s, v in zip(shooting.states, x)})
+        except runner.SessionFailed as failed:
+            raise NoOrbit(f"the run of one period failed: {failed}") from None
+        if row["status"] != "ok":
+            raise NoOrbit(f"the run of one period failed: {row['message']}")
+        cpu[0] += row["cpu"]
+        runs[0] += 1
+        v = np.array([row[m] for m in metrics]).reshape(1 + n, n)
+        return np.array(x, dtype=float), v[0], v[1:].T
+
+    start = _initial_state(shooting, given)
+    if start is None:  # (an initial value bgc cannot evaluate here: the program's own)
+        prepared = shooting.program_for(runner.choose_backend(backend)[0])
+        try:
+            start = _one_period(prepared, program, n, T, float(program.scene.t0), given,
+                                None)[1][0]
+        except api.SimulationFailed as failed:
+            raise NoOrbit(f"the run of one period failed: {failed}") from None
+    x, end, M, iterations, size, resolution, drifting = _newton(shoot, start, n, program.scene)
+    return Newton(x, end, M, iterations, size, resolution, drifting, cpu[0], runs[0])
 
 
 def _newton(shoot, start, n, scene):

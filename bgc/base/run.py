@@ -60,6 +60,9 @@ class RunSettings:
     input_files: tuple[str, ...] = ()  # CSV files of the inputs' data (--input)
     input_data: tuple = ()  # ((name, (t, ...), (u, ...)), ...): the inputs' data given as
     #                         numbers (the API's inputs=)
+    error_states: int | None = None  # the adaptive solvers' error control weighs the first
+    #   error_states states only (bgc periodic's Newton runs: the states, not their
+    #   sensitivities); None: all.  Not a simulate option.
 
     def with_options(self, **options) -> RunSettings:
         """These settings with the options given (None: keep this one's); params a dict."""
@@ -104,12 +107,14 @@ def parameter_overrides(given, names) -> tuple[tuple[str, float], ...]:
 
 def run_args(t_end=None, dt=None, solver=None, rtol=None, atol=None, step=None, params=None,
              project_initial=False, max_steps=None, allow_inconsistent=False, max_step=None,
-             event_rows=False, events=None, input=None, inputs=None) -> list[str]:
+             event_rows=False, events=None, input=None, inputs=None,
+             error_states=None) -> list[str]:
     """The generated program's command line for these options (None: the program's own)."""
     args = []
     for flag, value in (("--t-end", t_end), ("--dt", dt), ("--solver", solver),
                         ("--rtol", rtol), ("--atol", atol), ("--step", step),
                         ("--max-steps", max_steps), ("--max-step", max_step),
+                        ("--error-states", error_states),
                         ("--events", None if events is None else os.fspath(events))):
         if value is not None:
             args += [flag, repr(value) if isinstance(value, float) else str(value)]

@@ -866,7 +866,7 @@ LINK_INTS = ("NUM_STATES", "NUM_PARAMS", "NUM_CONSTANTS", "NUM_OUTPUTS", "NUM_CO
              "WORK_DOUBLES", "WORK_INTS", "WORK_Y0", "WORK_STAGES", "WORK_Y", "WORK_JAC",
              "JAC_COLORS", "JAC_SPARSE", "SCENE_SOLVER", "NUM_INDICATORS", "NUM_TIMERS",
              "NUM_DISCRETE", "DISCRETE_OFFSET", "NUM_INPUTS", "HAS_JACOBIAN", "NUM_TABLES",
-             "NUM_JUMPS")
+             "NUM_JUMPS", "PARAM_DOUBLES")
 LINK_DOUBLES = ("SCENE_T0", "SCENE_T_END", "SCENE_DT", "SCENE_RTOL", "SCENE_ATOL", "SCENE_STEP",
                 "SCENE_HMAX")
 LINK_TABLES = (("bgc_block", "blocks"), ("int", "jac_color_ptr"), ("int", "jac_color_cols"),

@@ -654,7 +654,8 @@ def program_bytes(program: Program) -> bytes:
         "NUM_DISCRETE": ev.discrete if ev else 0,
         "DISCRETE_OFFSET": unit.d_base if ev else 0, "NUM_INPUTS": len(program.inputs),
         "HAS_JACOBIAN": int(program.has_jacobian), "NUM_TABLES": len(program.tables),
-        "NUM_JUMPS": ev.jumps if ev else 0}
+        "NUM_JUMPS": ev.jumps if ev else 0,
+        "PARAM_DOUBLES": emit.LINK_PARAMS}  # (the interpreter's parameters: a copy copies all)
     doubles = {"SCENE_T0": sc.t0, "SCENE_T_END": sc.t_end, "SCENE_DT": sc.dt,
                "SCENE_RTOL": sc.rtol, "SCENE_ATOL": sc.atol,
                "SCENE_STEP": 0.0 if sc.step is None else sc.step,

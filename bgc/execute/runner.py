@@ -266,7 +266,8 @@ class Session:
         if program.module is not None:
             options = settings.options(program.defaults)
             unknown = set(options) - {"t_end", "dt", "solver", "rtol", "atol", "params", "step",
-                                      "max_steps", "project_initial", "allow_inconsistent"}
+                                      "max_steps", "project_initial", "allow_inconsistent",
+                                      "error_states"}
             if unknown:
                 raise ValueError(f"a session cannot set {', '.join(sorted(unknown))}")
             self.proc = None

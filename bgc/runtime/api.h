@@ -4,6 +4,14 @@
 
 #define BGC_DIM(n) ((n) > 0 ? (n) : 1) /* array size for n elements, n may be 0 */
 #define BGC_COUNT(a) ((int)(sizeof(a) / sizeof((a)[0]))) /* elements of an array */
+/* The doubles of the parameter struct the model uses (the runtime built once holds the most
+   any linked model may have, bgc/emit.py's LINK_PARAMS), and a copy of them: a run's own
+   parameters cost their size, not the largest struct's. */
+#ifndef BGC_PARAM_DOUBLES
+#define BGC_PARAM_DOUBLES ((int)(sizeof(bgc_params) / sizeof(double)))
+#endif
+#define BGC_COPY_PARAMS(dst, src) \
+    memcpy((dst), (src), sizeof(double) * (size_t)BGC_PARAM_DOUBLES)
 
 enum { BGC_OK = 0, BGC_ERR_CONSTRAINT = 1, BGC_ERR_USAGE = 2, BGC_ERR_RUNTIME = 3 };
 /* How an algebraic block failed (bgc_work.failure). */
@@ -117,6 +125,9 @@ typedef struct bgc_settings {
     int order0;           /* radau: the order to start at (5, 9 or 13); 0: 5 */
     double hmax;          /* adaptive solvers: the largest step; 0: no bound but the span */
     int event_rows;       /* 1: two rows at each event, its left and right limits */
+    long error_states;    /* adaptive solvers: the error control weighs the first error_states
+                             states only (the others follow the steps chosen for them: a
+                             shooting's sensitivities, CVODES's errconS = false); 0: all */
     /* Called for each change at an event (what: a condition as written, a state or a
        discrete variable; change: what it became); nonzero stops the run.  NULL: none. */
     int (*on_event)(void *ctx, double t, const char *what, const char *change);

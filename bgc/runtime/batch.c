@@ -184,9 +184,10 @@ static int bgc_batch_constraints(double t, const double *x, const bgc_params *p,
                                  char *msg, size_t msg_size)
 {
     double r[BGC_DIM(BGC_NUM_CONSTRAINTS)] = { 0.0 }, s[BGC_DIM(BGC_NUM_CONSTRAINTS)] = { 0.0 };
-    bgc_params q = *p;
+    bgc_params q;
     size_t used = 0;
     int k, bad = 0;
+    BGC_COPY_PARAMS(&q, p);
     bgc_params_update(&q);
     bgc_residual(t, x, &q, r);
     bgc_scale(t, x, &q, s);
@@ -205,12 +206,14 @@ static int bgc_batch_constraints(double t, const double *x, const bgc_params *p,
 }
 
 /* One run: its status ("ok", ...) and msg; b's accumulators and st filled. */
-static const char *bgc_batch_run(const bgc_settings *s, bgc_params p, int *given, int project,
-                                 char *line, bgc_batch *b, bgc_stats *st, char *msg,
+static const char *bgc_batch_run(const bgc_settings *s, const bgc_params *base, int *given,
+                                 int project, char *line, bgc_batch *b, bgc_stats *st, char *msg,
                                  size_t msg_size)
 {
     double x0[BGC_DIM(BGC_NUM_STATES)] = { 0.0 };
+    bgc_params p;
     int i;
+    BGC_COPY_PARAMS(&p, base);
     msg[0] = '\0';
     if (bgc_batch_line(line, &p, given, msg, msg_size))
         return "invalid";
@@ -335,7 +338,7 @@ static int bgc_batch_loop(FILE *in, const bgc_settings *s, const bgc_params *bas
                     return BGC_ERR_RUNTIME;
                 b->traj = 1;
             }
-            status = bgc_batch_run(s, *base, given, project, bgc_line, b, &st, msg, sizeof msg);
+            status = bgc_batch_run(s, base, given, project, bgc_line, b, &st, msg, sizeof msg);
             if (dir && bgc_batch_close_trajectory()) {
                 fprintf(stderr, "error: cannot write the trajectory of run %ld\n", run);
                 return BGC_ERR_RUNTIME;

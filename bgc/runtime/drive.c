@@ -302,6 +302,13 @@ static inline double bgc_weight(const bgc_settings *s, double y, double y1)
     return s->atol + s->rtol * bgc_max(fabs(y), fabs(y1));
 }
 
+/* The states the error control weighs: the first s->error_states, or all (0). */
+static inline int bgc_error_states(const bgc_settings *s)
+{
+    return s->error_states > 0 && s->error_states < BGC_NUM_STATES ? (int)s->error_states
+                                                                   : BGC_NUM_STATES;
+}
+
 /* The largest step: the run's span, and --max-step if set. */
 static double bgc_hmax(const bgc_settings *s)
 {
@@ -317,9 +324,10 @@ static double bgc_initial_step(bgc_run *r, int q, const double *y, const double 
     enum { N = BGC_NUM_STATES };
     const bgc_settings *s = r->s;
     const double hmax = bgc_hmax(s);
+    const int E = bgc_error_states(s);
     double dnf = 0.0, dny = 0.0, der2 = 0.0, der12, h, h1;
     int i;
-    for (i = 0; i < N; i++) {
+    for (i = 0; i < E; i++) {
         const double sk = s->atol + s->rtol * fabs(y[i]);
         const double qf = f0[i] / sk, qy = y[i] / sk;
         dnf += qf * qf;
@@ -332,7 +340,7 @@ static double bgc_initial_step(bgc_run *r, int q, const double *y, const double 
     r->st->rhs++;
     if (bgc_model_rhs(r->t + h, y1, r->p, r->w, f1))
         return h; /* a block failed there: start small, the step control takes over */
-    for (i = 0; i < N; i++) {
+    for (i = 0; i < E; i++) {
         const double d = (f1[i] - f0[i]) / (s->atol + s->rtol * fabs(y[i]));
         der2 += d * d;
     }
@@ -1157,11 +1165,12 @@ static int bgc_run_solver(bgc_run *r, int solver, double *y)
 static int bgc_integrate(const bgc_settings *s, const bgc_params *p, bgc_work *w, double *y,
                          bgc_sink sink, void *ctx, bgc_stats *stats, char *msg, size_t msg_size)
 {
-    bgc_params q = *p;
+    bgc_params q;
     bgc_run r;
     int i, rc = bgc_check_settings(s, msg, msg_size);
     if (rc)
         return rc;
+    BGC_COPY_PARAMS(&q, p);
     w->rtol = s->rtol;
     w->atol = s->atol;
     w->inputs = s->inputs;

@@ -164,7 +164,7 @@ static void *bgc_erk_start(bgc_run *r, const double *y, double *h, int *rc)
 static double bgc_erk_error(bgc_erk_state *e, const bgc_settings *s, double h, const double *y,
                             const double *y1)
 {
-    enum { N = BGC_NUM_STATES };
+    const int N = bgc_error_states(s);
     const bgc_erk *m = e->m;
     double err = 0.0, err2 = 0.0, worst_q = -1.0;
     int l;

@@ -653,7 +653,7 @@ static const char bgc_usage[] =
     " [--t-end T] [--dt DT] [--solver NAME] [--rtol R] [--atol A]\n"
     "       [--step H] [--max-steps N] [-p NAME=VALUE ...] [--stats] [--progress]\n"
     "       [--project-initial | --allow-inconsistent]\n"
-    "       [--max-step H] [--event-rows] [--events FILE] [--input FILE]\n"
+    "       [--max-step H] [--error-states N] [--event-rows] [--events FILE] [--input FILE]\n"
     "       [--batch FILE|- [--metric KIND:OUTPUT ...] [--trajectories DIR]]\n";
 
 static void bgc_print_usage(FILE *f)
@@ -678,6 +678,7 @@ static void bgc_help(void)
            "  --step H           step of the fixed-step solvers (default: dt)\n"
            "  --max-steps N      the most steps between two output times (%ld; 0: no limit)\n"
            "  --max-step H       every solver's largest step (default: no bound)\n"
+           "  --error-states N   the error control weighs the first N states only (0: all)\n"
            "  --event-rows       two rows at each event: its left and right limits\n"
            "  --events FILE      the event log: t,event,change, a row per change\n"
            "  --input FILE       the inputs' data: CSV, a column t and one per input\n"
@@ -770,6 +771,18 @@ static int bgc_apply_option(const char *name, const char *value, bgc_settings *s
         fprintf(stderr, "error: --max-steps must be a whole number from 0 (no limit) to 1e15\n");
         return -1;
     }
+    if (strcmp(name, "--error-states") == 0) {
+        double n;
+        if (bgc_parse_number(name, value, &n))
+            return -1;
+        if (n >= 0.0 && n <= BGC_NUM_STATES && n == floor(n)) {
+            s->error_states = (long)n;
+            return 0;
+        }
+        fprintf(stderr, "error: --error-states must be a whole number from 0 (all) to %d\n",
+                BGC_NUM_STATES);
+        return -1;
+    }
     if (strcmp(name, "--max-step") == 0) {
         if (bgc_parse_number(name, value, &s->hmax))
             return -1;
@@ -807,7 +820,8 @@ static int bgc_parse_args(int argc, char **argv, bgc_settings *s, bgc_params *p,
 {
     static const char *const with_value[] = { "--t-end", "--dt", "--solver", "--rtol",
                                               "--atol", "--step", "--max-steps", "-p",
-                                              "--max-step", "--events", "--input" };
+                                              "--max-step", "--events", "--input",
+                                              "--error-states" };
     int i, k;
     for (i = 1; i < argc; i++) {
         const char *arg = argv[i], *eq = strncmp(arg, "--", 2) == 0 ? strchr(arg, '=') : NULL;

@@ -400,8 +400,9 @@ int bgc_jvp(double t, const double *x, const bgc_params *p, bgc_work *w, const d
 static int bgc_check_rows(double t, const double *x, const bgc_params *p, int allow, FILE *err)
 {
     double r[BGC_DIM(BGC_NUM_CONSTRAINTS)] = { 0.0 }, s[BGC_DIM(BGC_NUM_CONSTRAINTS)] = { 0.0 };
-    bgc_params q = *p;
+    bgc_params q;
     int k, bad = 0;
+    BGC_COPY_PARAMS(&q, p);
     bgc_params_update(&q);
     bgc_residual(t, x, &q, r);
     bgc_scale(t, x, &q, s);
@@ -527,9 +528,10 @@ int bgc_project_initial(double t, double *x, const bgc_params *p, char *msg, siz
 {
     static const char *const why[] = { "", "the constraint Jacobian is singular",
                                        "no convergence after 50 iterations" };
-    bgc_params q = *p;
+    bgc_params q;
     const char *level = "position";
     int rc;
+    BGC_COPY_PARAMS(&q, p);
     bgc_params_update(&q);
     rc = bgc_project_rows(t, x, &q, bgc_position_rows, BGC_NUM_POSITION_ROWS, bgc_position_jac,
                           NULL, NULL);
@@ -561,6 +563,7 @@ void bgc_settings_default(bgc_settings *s)
     s->order0 = 0;
     s->hmax = BGC_SCENE_HMAX;
     s->event_rows = 0;
+    s->error_states = 0;
     s->on_event = NULL;
     s->event_ctx = NULL;
     s->inputs = NULL;

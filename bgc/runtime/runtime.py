@@ -1038,7 +1038,7 @@ def _project_initial(t, x, p):
 
 class _Settings:
     __slots__ = ("t0", "t_end", "dt", "solver", "rtol", "atol", "step", "max_steps", "h0",
-                 "order0", "hmax", "event_rows", "on_event", "inputs")
+                 "order0", "hmax", "event_rows", "on_event", "inputs", "error_states")
 
     def __init__(self, **values):
         values.setdefault("h0", 0.0)  # a run that goes on from an earlier one (bgc_settings):
@@ -1047,6 +1047,7 @@ class _Settings:
         values.setdefault("event_rows", False)
         values.setdefault("on_event", None)
         values.setdefault("inputs", None)
+        values.setdefault("error_states", 0)  # the first error_states weighed (0: all)
         for key in self.__slots__:
             setattr(self, key, values[key])
 
@@ -1055,9 +1056,10 @@ MAX_STEPS = 100000  # the most steps accepted between two output times, unless s
 
 
 def _settings(t_end=None, dt=None, solver=None, rtol=None, atol=None, step=None,
-              max_steps=None, max_step=None, event_rows=False, on_event=None, inputs=None):
+              max_steps=None, max_step=None, event_rows=False, on_event=None, inputs=None,
+              error_states=None):
     given = {"t_end": t_end, "dt": dt, "solver": solver, "rtol": rtol, "atol": atol, "step": step,
-             "max_steps": max_steps, "hmax": max_step}
+             "max_steps": max_steps, "hmax": max_step, "error_states": error_states}
     values = dict(SCENE, max_steps=MAX_STEPS, event_rows=bool(event_rows), on_event=on_event,
                   inputs=inputs)
     values["hmax"] = float(values.get("hmax") or 0.0)
@@ -1086,6 +1088,8 @@ def _check_settings(s):
         return "--rtol and --atol must be positive"
     if s.step < 0.0:
         return "--step must be positive"
+    if not (0 <= s.error_states <= _N and s.error_states == int(s.error_states)):
+        return "--error-states must be a whole number from 0 (all) to %d" % _N
     if not (s.max_steps >= 0 and s.max_steps == int(s.max_steps)):
         return "--max-steps must be a whole number from 0 (no limit) to 1e15"
     if s.solver not in SOLVERS:
@@ -1130,7 +1134,8 @@ def _initial_state(s, p, project_initial, allow_inconsistent=False):
 
 def rows(t_end=None, dt=None, solver=None, rtol=None, atol=None, params=None, step=None,
          project_initial=False, stats=None, max_steps=None, allow_inconsistent=False,
-         max_step=None, event_rows=False, events=None, inputs=None, input=None):
+         max_step=None, event_rows=False, events=None, inputs=None, input=None,
+         error_states=None):
     """Runs the model, yielding each output row (t, y) as it is computed (y a list ordered as
     OUTPUTS): memory does not grow with the run's length.  A failure raises SimulationError
     after the rows before it (its .times and .rows are then empty: they were yielded).
@@ -1141,7 +1146,9 @@ def rows(t_end=None, dt=None, solver=None, rtol=None, atol=None, params=None, st
     list that receives (t, event, change) for every change at an event, or a file name that
     receives them as CSV (the program's --events).  inputs: {name: (t, values)}, the data of
     the model's inputs (interpolated linearly, held outside, each t a time event; an input
-    without data keeps its default); input: a CSV file of such data, as --input reads it."""
+    without data keeps its default); input: a CSV file of such data, as --input reads it.
+    error_states: the adaptive solvers' error control weighs the first error_states states
+    only (the others follow the steps chosen for them); None or 0: all."""
     if project_initial and allow_inconsistent:
         raise ValueError("project_initial and allow_inconsistent exclude each other")
     log = None
@@ -1153,7 +1160,7 @@ def rows(t_end=None, dt=None, solver=None, rtol=None, atol=None, params=None, st
         log.write("t,event,change\n")
         on_event = _event_writer(log)
     s = _settings(t_end, dt, solver, rtol, atol, step, max_steps, max_step, event_rows,
-                  on_event, _input_series(inputs, input))
+                  on_event, _input_series(inputs, input), error_states)
     p = _with_constants(_param_values(_overrides(params)))
     x0 = _initial_state(s, p, project_initial, allow_inconsistent)
     st = _new_stats() if stats is None else stats
@@ -1171,14 +1178,16 @@ def rows(t_end=None, dt=None, solver=None, rtol=None, atol=None, params=None, st
 
 def simulate(t_end=None, dt=None, solver=None, rtol=None, atol=None, params=None, step=None,
              project_initial=False, out=None, max_steps=None, allow_inconsistent=False,
-             max_step=None, event_rows=False, events=None, inputs=None, input=None):
+             max_step=None, event_rows=False, events=None, inputs=None, input=None,
+             error_states=None):
     """Runs the model; returns (t, Y) with Y[k] the outputs at t[k].  None: the scene's value.
     out: a file name or a text file: the CSV is written there row by row as the run goes
     (header first, as the program writes it) and nothing is kept: returns the number of rows.
-    max_step, event_rows, events, inputs, input: as rows()."""
+    max_step, event_rows, events, inputs, input, error_states: as rows()."""
     run = rows(t_end, dt, solver, rtol, atol, params, step, project_initial,
                max_steps=max_steps, allow_inconsistent=allow_inconsistent, max_step=max_step,
-               event_rows=event_rows, events=events, inputs=inputs, input=input)
+               event_rows=event_rows, events=events, inputs=inputs, input=input,
+               error_states=error_states)
     if out is not None:
         return _stream(run, out)
     times, values = [], []
@@ -1216,11 +1225,11 @@ USAGE = (
     " [--t-end T] [--dt DT] [--solver NAME] [--rtol R] [--atol A]\n"
     "       [--step H] [--max-steps N] [-p NAME=VALUE ...] [--stats] [--progress]\n"
     "       [--project-initial | --allow-inconsistent]\n"
-    "       [--max-step H] [--event-rows] [--events FILE] [--input FILE]\n"
+    "       [--max-step H] [--error-states N] [--event-rows] [--events FILE] [--input FILE]\n"
     "       [--batch FILE|- [--metric KIND:OUTPUT ...] [--trajectories DIR]]\n"
 )
 _WITH_VALUE = ("--t-end", "--dt", "--solver", "--rtol", "--atol", "--step", "--max-steps", "-p",
-               "--max-step", "--events", "--input")
+               "--max-step", "--events", "--input", "--error-states")
 _NUMBER_CHARS = frozenset("0123456789+-.eE")
 
 
@@ -1245,6 +1254,7 @@ def _help():
         "  --max-steps N      the most steps between two output times (%d; 0: no limit)"
         % s.max_steps,
         "  --max-step H       every solver's largest step (default: no bound)",
+        "  --error-states N   the error control weighs the first N states only (0: all)",
         "  --event-rows       two rows at each event: its left and right limits",
         "  --events FILE      the event log: t,event,change, a row per change",
         "  --input FILE       the inputs' data: CSV, a column t and one per input",
@@ -1315,6 +1325,12 @@ def _apply_option(name, value, options, given):
             raise _UsageError(
                 "error: --max-steps must be a whole number from 0 (no limit) to 1e15\n")
         options["max_steps"] = int(n)
+    elif name == "--error-states":
+        n = _parse_number(name, value)
+        if not (0.0 <= n <= _N and n == math.floor(n)):
+            raise _UsageError("error: --error-states must be a whole number from 0 (all) to "
+                              "%d\n" % _N)
+        options["error_states"] = int(n)
     else:
         options[name[2:].replace("-", "_")] = _parse_number(name, value)
 
@@ -2107,6 +2123,11 @@ def _worst(q):
     return i if i >= 0 and q[i] > -1.0 else -1
 
 
+def _error_states(s):
+    """bgc_error_states: the states the error control weighs (s.error_states, or all)."""
+    return s.error_states if 0 < s.error_states < _N else _N
+
+
 def _weights(s, y, y1):
     """Hairer's error-norm weights atol + rtol * max(|y_i|, |y1_i|) (bgc_weight)."""
     return s.atol + s.rtol * _c_max(numpy.abs(y), numpy.abs(y1))
@@ -2116,9 +2137,10 @@ def _initial_step(run, q, y, f0, hmax):
     """Hairer's initial step size guess (HINIT) for a method of order q."""
     s = run.s
     y, f0 = numpy.asarray(y, dtype=float), numpy.asarray(f0, dtype=float)
-    sk = s.atol + s.rtol * numpy.abs(y)
+    E = _error_states(s)
+    sk = s.atol + s.rtol * numpy.abs(y[:E])
     with numpy.errstate(all="ignore"):  # IEEE as in C: an overflow gives inf, then h = 0
-        qf, qy = f0 / sk, y / sk
+        qf, qy = f0[:E] / sk, y[:E] / sk
         dnf, dny = _seq_sum(qf * qf), _seq_sum(qy * qy)
         h = 1e-6 if (dnf <= 1e-10 or dny <= 1e-10) else math.sqrt(dny / dnf) * 0.01
     h = min(h, hmax)
@@ -2128,7 +2150,7 @@ def _initial_step(run, q, y, f0, hmax):
     except _BlockFailure:
         return h  # a block failed there: start small, the step control takes over
     with numpy.errstate(all="ignore"):
-        d = (f1 - f0) / (s.atol + s.rtol * numpy.abs(y))
+        d = (f1[:E] - f0[:E]) / (s.atol + s.rtol * numpy.abs(y[:E]))
         der2 = float(numpy.float64(math.sqrt(_seq_sum(d * d))) / numpy.float64(h))
     der12 = max(math.sqrt(dnf), abs(der2))  # a NaN der2 is ignored
     h1 = max(1e-6, h * 1e-3) if der12 <= 1e-15 else (0.01 / der12) ** (1.0 / q)
@@ -2233,11 +2255,12 @@ class _ListVectors:
     @staticmethod
     def error_sums(s, y, y1, e1, e2):
         """sum (e1_i / sk_i)^2, its largest term's index, and sum (e2_i / sk_i)^2 (e2 may be
-        None), sk_i = atol + rtol * max(|y_i|, |y1_i|)."""
+        None), sk_i = atol + rtol * max(|y_i|, |y1_i|), over the states the error control
+        weighs."""
         rtol, atol = s.rtol, s.atol
         err = err2 = 0.0
         worst, worst_q = -1, -1.0
-        for i in range(_N):
+        for i in range(_error_states(s)):
             sk = atol + rtol * max(abs(y[i]), abs(y1[i]))
             qq = e1[i] / sk
             qq = qq * qq
@@ -2284,12 +2307,13 @@ class _ArrayVectors:
 
     @staticmethod
     def error_sums(s, y, y1, e1, e2):
-        sk = _weights(s, y, y1)
+        E = _error_states(s)
+        sk = _weights(s, y[:E], y1[:E])
         with numpy.errstate(all="ignore"):
-            sq = e1 / sk
+            sq = e1[:E] / sk
             sq = sq * sq
             err = _seq_sum(sq)
-            q2 = e2 / sk if e2 is not None else None
+            q2 = e2[:E] / sk if e2 is not None else None
             err2 = _seq_sum(q2 * q2) if e2 is not None else 0.0
         return err, _worst(sq), err2
 
@@ -2605,8 +2629,8 @@ class _Erk(_Family):
             deno = err + 0.01 * err2
             if not deno > 0.0:
                 deno = 1.0
-            return abs(h) * err * math.sqrt(1.0 / (_N * deno))
-        return math.sqrt(err / _N)
+            return abs(h) * err * math.sqrt(1.0 / (_error_states(s) * deno))
+        return math.sqrt(err / _error_states(s))
 
     def _retry(self, h, tph, y1, failure):
         """A failed attempt: a much smaller step (on fixed steps, the end of the run)."""
@@ -2798,15 +2822,17 @@ def _integrate_run(run, s, y, st):
 # libgcc __divdc3.
 
 
-def _stiff_norm(v, w):
-    """bgc_stiff_norm: sqrt(mean((v_i / w_i)^2)) (0 without states) and the component with
-    the largest share (the first; -1 if every share is NaN)."""
+def _stiff_norm(s, v, w):
+    """bgc_stiff_norm: sqrt(mean((v_i / w_i)^2)) over the states the error control weighs (0
+    without states) and the component with the largest share (the first; -1 if every share
+    is NaN)."""
     if _N == 0:
         return 0.0, -1
+    E = _error_states(s)
     with numpy.errstate(all="ignore"):
-        q = v / w
+        q = v[:E] / w[:E]
         q = q * q
-    return math.sqrt(_seq_sum(q) / _N), _worst(q)
+    return math.sqrt(_seq_sum(q) / E), _worst(q)
 
 
 # ---------------------------------------------------------------- complex arithmetic
@@ -3497,7 +3523,7 @@ class _Rosenbrock(_Family):
         stages = m["stages"]
         with numpy.errstate(all="ignore"):
             y1 = y + _combine(m["m"], K, stages)
-            err, worst = _stiff_norm(_combine(m["e"], K, stages), _weights(run.s, y, y1))
+            err, worst = _stiff_norm(run.s, _combine(m["e"], K, stages), _weights(run.s, y, y1))
         self.worst = worst if worst >= 0 else self.worst
         i = _first_nonfinite(y1)
         if err != err or err == math.inf or i >= 0:
@@ -3778,7 +3804,7 @@ class _Radau(_Family):
             cont = _lu_solve(self.E1, self.piv1, f2 + self.f0)
             run.st["solves"] += 1
             wt = u.atol + u.rtol * _c_max(numpy.abs(y), numpy.abs(y + Z[ns - 1]))
-            err, worst = _stiff_norm(cont, wt)
+            err, worst = _stiff_norm(run.s, cont, wt)
             err = max(err, 1e-10)
             if err >= 1.0 and (self.first or self.reject):  # refined: f at y + err
                 run.st["rhs"] += 1
@@ -3789,7 +3815,7 @@ class _Radau(_Family):
                 if f1 is not None:
                     cont = _lu_solve(self.E1, self.piv1, f1 + f2)
                     run.st["solves"] += 1
-                    err, worst = _stiff_norm(cont, wt)
+                    err, worst = _stiff_norm(run.s, cont, wt)
                     err = max(err, 1e-10)
         self.worst = worst if worst >= 0 else self.worst
         return err
@@ -4020,15 +4046,16 @@ def _batch_run(s, base, project, run, specs, trajectory, allow=False):
 
 def batch_rows(runs, metrics=(), t_end=None, dt=None, solver=None, rtol=None, atol=None,
                params=None, step=None, project_initial=False, trajectories=None,
-               max_steps=None, allow_inconsistent=False):
+               max_steps=None, allow_inconsistent=False, error_states=None):
     """Runs each of `runs` (a line of NAME=VALUE words, or a dict {name: value}) on top of the
     defaults and `params`, yielding one dict per run as it completes: run (its number from 0),
     status (ok, failed, constraint, invalid), each metric ("KIND:OUTPUT", see METRIC_KINDS),
     steps, rejected, rhs, cpu, message.  trajectories: a directory for each run's CSV
-    (run-NNNNNN.csv).  ValueError for bad settings or metrics, before any run."""
+    (run-NNNNNN.csv).  error_states: as rows().  ValueError for bad settings or metrics,
+    before any run."""
     if project_initial and allow_inconsistent:
         raise ValueError("project_initial and allow_inconsistent exclude each other")
-    s = _settings(t_end, dt, solver, rtol, atol, step, max_steps)
+    s = _settings(t_end, dt, solver, rtol, atol, step, max_steps, error_states=error_states)
     base = _overrides(params)
     specs = [_metric_spec(m) for m in metrics]
     index = 0

@@ -382,11 +382,13 @@ BGC_SPARSE_LU(bgc_splu_zform, bgc_splu_zfactor, bgc_splu_zsolve, bgc_smat_zfacto
               bgc_smat_zsolve, bgc_cplx, 1, bgc_cabs1, bgc_cmul, bgc_cdiv, z, dz, bgc_stiff_zlu,
               bgc_stiff_zlu_solve)
 
-/* The error norm of the stiff families: sqrt(mean((v_i / w_i)^2)), 0 without states; *worst:
-   the component with the largest share. */
-static double bgc_stiff_norm(const double *v, const double *w, int *worst)
+/* The error norm of the stiff families: sqrt(mean((v_i / w_i)^2)) over the states the error
+   control weighs (s->error_states), 0 without states; *worst: the component with the largest
+   share. */
+static double bgc_stiff_norm(const bgc_settings *s, const double *v, const double *w,
+                             int *worst)
 {
-    enum { N = BGC_NUM_STATES };
+    const int N = bgc_error_states(s);
     double sum = 0.0, big = -1.0;
     int l;
     for (l = 0; l < N; l++) {
@@ -587,7 +589,7 @@ static double bgc_ros_solution(bgc_ros_state *ms, const bgc_settings *s, const d
         q2[l] = e;
         q3[l] = bgc_weight(s, y[l], y1[l]);
     }
-    return bgc_stiff_norm(q2, q3, &ms->worst);
+    return bgc_stiff_norm(s, q2, q3, &ms->worst);
 }
 
 static void bgc_ros_step(void *state, bgc_run *r, double t, double h, double tph,
@@ -1152,7 +1154,7 @@ static double bgc_radau_error(bgc_radau_state *ms, bgc_run *r, double t, double 
     }
     bgc_radau_lsolve(ms, ms->cont);
     r->st->solves++;
-    err = bgc_max(bgc_stiff_norm(ms->cont, ms->ew, &ms->worst), 1e-10);
+    err = bgc_max(bgc_stiff_norm(r->s, ms->cont, ms->ew, &ms->worst), 1e-10);
     if (err >= 1.0 && (ms->first || ms->reject)) { /* refined: f at y + err */
         for (l = 0; l < N; l++)
             ms->ys[l] = y[l] + ms->cont[l];
@@ -1162,7 +1164,7 @@ static double bgc_radau_error(bgc_radau_state *ms, bgc_run *r, double t, double 
                 ms->cont[l] = ms->tmp[l] + ms->f2[l];
             bgc_radau_lsolve(ms, ms->cont);
             r->st->solves++;
-            err = bgc_max(bgc_stiff_norm(ms->cont, ms->ew, &ms->worst), 1e-10);
+            err = bgc_max(bgc_stiff_norm(r->s, ms->cont, ms->ew, &ms->worst), 1e-10);
         }
     }
     return err;

@@ -24,6 +24,14 @@ enum {
 
 #define BGC_DIM(n) ((n) > 0 ? (n) : 1) /* array size for n elements, n may be 0 */
 #define BGC_COUNT(a) ((int)(sizeof(a) / sizeof((a)[0]))) /* elements of an array */
+/* The doubles of the parameter struct the model uses (the runtime built once holds the most
+   any linked model may have, bgc/emit.py's LINK_PARAMS), and a copy of them: a run's own
+   parameters cost their size, not the largest struct's. */
+#ifndef BGC_PARAM_DOUBLES
+#define BGC_PARAM_DOUBLES ((int)(sizeof(bgc_params) / sizeof(double)))
+#endif
+#define BGC_COPY_PARAMS(dst, src) \
+    memcpy((dst), (src), sizeof(double) * (size_t)BGC_PARAM_DOUBLES)
 
 enum { BGC_OK = 0, BGC_ERR_CONSTRAINT = 1, BGC_ERR_USAGE = 2, BGC_ERR_RUNTIME = 3 };
 /* How an algebraic block failed (bgc_work.failure). */
@@ -137,6 +145,9 @@ typedef struct bgc_settings {
     int order0;           /* radau: the order to start at (5, 9 or 13); 0: 5 */
     double hmax;          /* adaptive solvers: the largest step; 0: no bound but the span */
     int event_rows;       /* 1: two rows at each event, its left and right limits */
+    long error_states;    /* adaptive solvers: the error control weighs the first error_states
+                             states only (the others follow the steps chosen for them: a
+                             shooting's sensitivities, CVODES's errconS = false); 0: all */
     /* Called for each change at an event (what: a condition as written, a state or a
        discrete variable; change: what it became); nonzero stops the run.  NULL: none. */
     int (*on_event)(void *ctx, double t, const char *what, const char *change);
@@ -1114,8 +1125,9 @@ int bgc_jvp(double t, const double *x, const bgc_params *p, bgc_work *w, const d
 static int bgc_check_rows(double t, const double *x, const bgc_params *p, int allow, FILE *err)
 {
     double r[BGC_DIM(BGC_NUM_CONSTRAINTS)] = { 0.0 }, s[BGC_DIM(BGC_NUM_CONSTRAINTS)] = { 0.0 };
-    bgc_params q = *p;
+    bgc_params q;
     int k, bad = 0;
+    BGC_COPY_PARAMS(&q, p);
     bgc_params_update(&q);
     bgc_residual(t, x, &q, r);
     bgc_scale(t, x, &q, s);
@@ -1241,9 +1253,10 @@ int bgc_project_initial(double t, double *x, const bgc_params *p, char *msg, siz
 {
     static const char *const why[] = { "", "the constraint Jacobian is singular",
                                        "no convergence after 50 iterations" };
-    bgc_params q = *p;
+    bgc_params q;
     const char *level = "position";
     int rc;
+    BGC_COPY_PARAMS(&q, p);
     bgc_params_update(&q);
     rc = bgc_project_rows(t, x, &q, bgc_position_rows, BGC_NUM_POSITION_ROWS, bgc_position_jac,
                           NULL, NULL);
@@ -1275,6 +1288,7 @@ void bgc_settings_default(bgc_settings *s)
     s->order0 = 0;
     s->hmax = BGC_SCENE_HMAX;
     s->event_rows = 0;
+    s->error_states = 0;
     s->on_event = NULL;
     s->event_ctx = NULL;
     s->inputs = NULL;
@@ -1619,6 +1633,13 @@ static inline double bgc_weight(const bgc_settings *s, double y, double y1)
     return s->atol + s->rtol * bgc_max(fabs(y), fabs(y1));
 }
 
+/* The states the error control weighs: the first s->error_states, or all (0). */
+static inline int bgc_error_states(const bgc_settings *s)
+{
+    return s->error_states > 0 && s->error_states < BGC_NUM_STATES ? (int)s->error_states
+                                                                   : BGC_NUM_STATES;
+}
+
 /* The largest step: the run's span, and --max-step if set. */
 static double bgc_hmax(const bgc_settings *s)
 {
@@ -1634,9 +1655,10 @@ static double bgc_initial_step(bgc_run *r, int q, const double *y, const double 
     enum { N = BGC_NUM_STATES };
     const bgc_settings *s = r->s;
     const double hmax = bgc_hmax(s);
+    const int E = bgc_error_states(s);
     double dnf = 0.0, dny = 0.0, der2 = 0.0, der12, h, h1;
     int i;
-    for (i = 0; i < N; i++) {
+    for (i = 0; i < E; i++) {
         const double sk = s->atol + s->rtol * fabs(y[i]);
         const double qf = f0[i] / sk, qy = y[i] / sk;
         dnf += qf * qf;
@@ -1649,7 +1671,7 @@ static double bgc_initial_step(bgc_run *r, int q, const double *y, const double 
     r->st->rhs++;
     if (bgc_model_rhs(r->t + h, y1, r->p, r->w, f1))
         return h; /* a block failed there: start small, the step control takes over */
-    for (i = 0; i < N; i++) {
+    for (i = 0; i < E; i++) {
         const double d = (f1[i] - f0[i]) / (s->atol + s->rtol * fabs(y[i]));
         der2 += d * d;
     }
@@ -2474,11 +2496,12 @@ static int bgc_run_solver(bgc_run *r, int solver, double *y)
 static int bgc_integrate(const bgc_settings *s, const bgc_params *p, bgc_work *w, double *y,
                          bgc_sink sink, void *ctx, bgc_stats *stats, char *msg, size_t msg_size)
 {
-    bgc_params q = *p;
+    bgc_params q;
     bgc_run r;
     int i, rc = bgc_check_settings(s, msg, msg_size);
     if (rc)
         return rc;
+    BGC_COPY_PARAMS(&q, p);
     w->rtol = s->rtol;
     w->atol = s->atol;
     w->inputs = s->inputs;
@@ -2753,7 +2776,7 @@ static void *bgc_erk_start(bgc_run *r, const double *y, double *h, int *rc)
 static double bgc_erk_error(bgc_erk_state *e, const bgc_settings *s, double h, const double *y,
                             const double *y1)
 {
-    enum { N = BGC_NUM_STATES };
+    const int N = bgc_error_states(s);
     const bgc_erk *m = e->m;
     double err = 0.0, err2 = 0.0, worst_q = -1.0;
     int l;
@@ -3334,11 +3357,13 @@ BGC_SPARSE_LU(bgc_splu_zform, bgc_splu_zfactor, bgc_splu_zsolve, bgc_smat_zfacto
               bgc_smat_zsolve, bgc_cplx, 1, bgc_cabs1, bgc_cmul, bgc_cdiv, z, dz, bgc_stiff_zlu,
               bgc_stiff_zlu_solve)
 
-/* The error norm of the stiff families: sqrt(mean((v_i / w_i)^2)), 0 without states; *worst:
-   the component with the largest share. */
-static double bgc_stiff_norm(const double *v, const double *w, int *worst)
+/* The error norm of the stiff families: sqrt(mean((v_i / w_i)^2)) over the states the error
+   control weighs (s->error_states), 0 without states; *worst: the component with the largest
+   share. */
+static double bgc_stiff_norm(const bgc_settings *s, const double *v, const double *w,
+                             int *worst)
 {
-    enum { N = BGC_NUM_STATES };
+    const int N = bgc_error_states(s);
     double sum = 0.0, big = -1.0;
     int l;
     for (l = 0; l < N; l++) {
@@ -3539,7 +3564,7 @@ static double bgc_ros_solution(bgc_ros_state *ms, const bgc_settings *s, const d
         q2[l] = e;
         q3[l] = bgc_weight(s, y[l], y1[l]);
     }
-    return bgc_stiff_norm(q2, q3, &ms->worst);
+    return bgc_stiff_norm(s, q2, q3, &ms->worst);
 }
 
 static void bgc_ros_step(void *state, bgc_run *r, double t, double h, double tph,
@@ -4104,7 +4129,7 @@ static double bgc_radau_error(bgc_radau_state *ms, bgc_run *r, double t, double 
     }
     bgc_radau_lsolve(ms, ms->cont);
     r->st->solves++;
-    err = bgc_max(bgc_stiff_norm(ms->cont, ms->ew, &ms->worst), 1e-10);
+    err = bgc_max(bgc_stiff_norm(r->s, ms->cont, ms->ew, &ms->worst), 1e-10);
     if (err >= 1.0 && (ms->first || ms->reject)) { /* refined: f at y + err */
         for (l = 0; l < N; l++)
             ms->ys[l] = y[l] + ms->cont[l];
@@ -4114,7 +4139,7 @@ static double bgc_radau_error(bgc_radau_state *ms, bgc_run *r, double t, double 
                 ms->cont[l] = ms->tmp[l] + ms->f2[l];
             bgc_radau_lsolve(ms, ms->cont);
             r->st->solves++;
-            err = bgc_max(bgc_stiff_norm(ms->cont, ms->ew, &ms->worst), 1e-10);
+            err = bgc_max(bgc_stiff_norm(r->s, ms->cont, ms->ew, &ms->worst), 1e-10);
         }
     }
     return err;
@@ -4953,7 +4978,7 @@ static const char bgc_usage[] =
     " [--t-end T] [--dt DT] [--solver NAME] [--rtol R] [--atol A]\n"
     "       [--step H] [--max-steps N] [-p NAME=VALUE ...] [--stats] [--progress]\n"
     "       [--project-initial | --allow-inconsistent]\n"
-    "       [--max-step H] [--event-rows] [--events FILE] [--input FILE]\n"
+    "       [--max-step H] [--error-states N] [--event-rows] [--events FILE] [--input FILE]\n"
     "       [--batch FILE|- [--metric KIND:OUTPUT ...] [--trajectories DIR]]\n";
 
 static void bgc_print_usage(FILE *f)
@@ -4978,6 +5003,7 @@ static void bgc_help(void)
            "  --step H           step of the fixed-step solvers (default: dt)\n"
            "  --max-steps N      the most steps between two output times (%ld; 0: no limit)\n"
            "  --max-step H       every solver's largest step (default: no bound)\n"
+           "  --error-states N   the error control weighs the first N states only (0: all)\n"
            "  --event-rows       two rows at each event: its left and right limits\n"
            "  --events FILE      the event log: t,event,change, a row per change\n"
            "  --input FILE       the inputs' data: CSV, a column t and one per input\n"
@@ -5070,6 +5096,18 @@ static int bgc_apply_option(const char *name, const char *value, bgc_settings *s
         fprintf(stderr, "error: --max-steps must be a whole number from 0 (no limit) to 1e15\n");
         return -1;
     }
+    if (strcmp(name, "--error-states") == 0) {
+        double n;
+        if (bgc_parse_number(name, value, &n))
+            return -1;
+        if (n >= 0.0 && n <= BGC_NUM_STATES && n == floor(n)) {
+            s->error_states = (long)n;
+            return 0;
+        }
+        fprintf(stderr, "error: --error-states must be a whole number from 0 (all) to %d\n",
+                BGC_NUM_STATES);
+        return -1;
+    }
     if (strcmp(name, "--max-step") == 0) {
         if (bgc_parse_number(name, value, &s->hmax))
             return -1;
@@ -5107,7 +5145,8 @@ static int bgc_parse_args(int argc, char **argv, bgc_settings *s, bgc_params *p,
 {
     static const char *const with_value[] = { "--t-end", "--dt", "--solver", "--rtol",
                                               "--atol", "--step", "--max-steps", "-p",
-                                              "--max-step", "--events", "--input" };
+                                              "--max-step", "--events", "--input",
+                                              "--error-states" };
     int i, k;
     for (i = 1; i < argc; i++) {
         const char *arg = argv[i], *eq = strncmp(arg, "--", 2) == 0 ? strchr(arg, '=') : NULL;
@@ -5470,9 +5509,10 @@ static int bgc_batch_constraints(double t, const double *x, const bgc_params *p,
                                  char *msg, size_t msg_size)
 {
     double r[BGC_DIM(BGC_NUM_CONSTRAINTS)] = { 0.0 }, s[BGC_DIM(BGC_NUM_CONSTRAINTS)] = { 0.0 };
-    bgc_params q = *p;
+    bgc_params q;
     size_t used = 0;
     int k, bad = 0;
+    BGC_COPY_PARAMS(&q, p);
     bgc_params_update(&q);
     bgc_residual(t, x, &q, r);
     bgc_scale(t, x, &q, s);
@@ -5491,12 +5531,14 @@ static int bgc_batch_constraints(double t, const double *x, const bgc_params *p,
 }
 
 /* One run: its status ("ok", ...) and msg; b's accumulators and st filled. */
-static const char *bgc_batch_run(const bgc_settings *s, bgc_params p, int *given, int project,
-                                 char *line, bgc_batch *b, bgc_stats *st, char *msg,
+static const char *bgc_batch_run(const bgc_settings *s, const bgc_params *base, int *given,
+                                 int project, char *line, bgc_batch *b, bgc_stats *st, char *msg,
                                  size_t msg_size)
 {
     double x0[BGC_DIM(BGC_NUM_STATES)] = { 0.0 };
+    bgc_params p;
     int i;
+    BGC_COPY_PARAMS(&p, base);
     msg[0] = '\0';
     if (bgc_batch_line(line, &p, given, msg, msg_size))
         return "invalid";
@@ -5621,7 +5663,7 @@ static int bgc_batch_loop(FILE *in, const bgc_settings *s, const bgc_params *bas
                     return BGC_ERR_RUNTIME;
                 b->traj = 1;
             }
-            status = bgc_batch_run(s, *base, given, project, bgc_line, b, &st, msg, sizeof msg);
+            status = bgc_batch_run(s, base, given, project, bgc_line, b, &st, msg, sizeof msg);
             if (dir && bgc_batch_close_trajectory()) {
                 fprintf(stderr, "error: cannot write the trajectory of run %ld\n", run);
                 return BGC_ERR_RUNTIME;
