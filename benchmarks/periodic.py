@@ -79,11 +79,23 @@ def _row(label, model, scene, params, periods, tol, repeats):
                     for _ in range(repeats))
     newton_cpu = min(periodic.periodic(model, scene, params=params,
                                        shooting=shooting).newton_cpu for _ in range(repeats))
+    # the same in a warm process: each side's runs repeated in one process (runner.Session),
+    # the best; a process's first run pays for its page faults and first calls, once
+    with runner.Session(prepared, settings, ()) as warm:
+        brute_warm = min(warm.run({})["cpu"] for _ in range(repeats + 1))
+    T = prepared_orbit.period
+    given = dict(params)
+    warm = periodic.open_session(shooting, given, T)
+    try:
+        newton_warm = min(periodic.newton(shooting, given, T, warm).cpu
+                          for _ in range(repeats + 1))
+    finally:
+        warm.close()
     start, _ = _best(lambda: backends.run_captured([str(prepared.path), "--t-end",
                                                     repr(float(compiled.program.scene.t0)),
                                                     "--dt", "1"]), repeats)
     return (label, k, brute, again.iterations, shoot, brute_runs, shoot_runs, brute_cpu,
-            newton_cpu, start, gap)
+            newton_cpu, brute_warm, newton_warm, start, gap)
 
 
 def main(argv=None) -> int:
@@ -95,16 +107,17 @@ def main(argv=None) -> int:
           f"{args.repeats}; times in ms")
     print(f"{'model':29} {'periods':>7} {'Newton':>6} | {'brute':>7} {'periodic':>8} "
           f"{'ratio':>6} | {'brute':>7} {'shoot':>7} {'ratio':>6} | {'brute':>7} {'Newton':>7} "
-          f"{'ratio':>6} | {'start':>6} {'gap':>8}")
+          f"{'ratio':>6} | {'brute':>7} {'Newton':>7} {'ratio':>6} | {'start':>6} {'gap':>8}")
     print(f"{'':29} {'':>7} {'':>6} | {'API calls':^23} | {'runs alone':^22} | "
-          f"{'CPU of the integration':^22} |")
+          f"{'CPU, a new process':^22} | {'CPU, a warm process':^22} |")
     for case in CASES:
-        (label, k, brute, its, shoot, b_runs, s_runs, b_cpu, n_cpu, start,
+        (label, k, brute, its, shoot, b_runs, s_runs, b_cpu, n_cpu, b_warm, n_warm, start,
          gap) = _row(*case, args.tol, args.repeats)
         print(f"{label:29} {k:7d} {its:6d} | {1e3 * brute:7.2f} {1e3 * shoot:8.2f} "
               f"{brute / shoot:5.2f}x | {1e3 * b_runs:7.2f} {1e3 * s_runs:7.2f} "
               f"{b_runs / s_runs:5.2f}x | {1e3 * b_cpu:7.3f} {1e3 * n_cpu:7.3f} "
-              f"{b_cpu / n_cpu:5.1f}x | {1e3 * start:6.2f} {gap:8.1e}")
+              f"{b_cpu / n_cpu:5.1f}x | {1e3 * b_warm:7.3f} {1e3 * n_warm:7.3f} "
+              f"{b_warm / n_warm:5.1f}x | {1e3 * start:6.2f} {gap:8.1e}")
     return 0
 
 
