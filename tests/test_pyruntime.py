@@ -117,6 +117,20 @@ def test_runtime_is_its_parts_less_their_headers():
         int(place.split(":")[1]) - 1] == first
 
 
+def test_family_contract_is_one_numbered_list_that_the_c_runtime_cites():
+    """The method families' contract is written once, the numbered list of _Family's
+    docstring; drive.c, erk.c and stiff.c point to it and cite only items it has."""
+    rt = fresh_runtime()
+    items = [int(n) for n in re.findall(r"^    (\d+)\. ", rt._Family.__doc__, re.M)]
+    assert items == list(range(1, len(items) + 1)) and len(items) >= 8
+    for name in ("drive.c", "erk.c", "stiff.c"):
+        text = " ".join((RUNTIME / name).read_text(encoding="utf-8").split())
+        assert "_Family (bgc/runtime/drive.py" in text, name
+        cited = {int(n) for group in re.findall(r"\bitems? (\d+(?:(?:, | and )\d+)*)", text)
+                 for n in re.findall(r"\d+", group)}
+        assert cited and cited <= set(items), (name, cited - set(items))
+
+
 def test_runtime_alone_is_a_model_of_no_states():
     """Imported alone, the runtime's neutral model runs: rows of t and no outputs."""
     rt = fresh_runtime()

@@ -7,16 +7,17 @@
 # blank lines (python_runtime()); the tests load that text (tests/helpers.py, pyruntime()).
 
 # ====================================================================== runtime ===
-# bgc's Python runtime: model-independent, the same in every generated module.  This file is a
-# module of its own (imported by the tests, linted) and the text bgc.emit.python_runtime()
-# inlines verbatim, so a generated module stays one file that needs only numpy.  A generated
-# module is, in order: its docstring, this file, the solver tables (_METHODS, SOLVERS,
-# _SOLVER_LIST, printed from bgc/solvers.py), the model part (templates/python_module.py.j2),
-# then `_bind_model()` and the `main()` call.  The model part comes after the runtime so that
-# its definitions replace the neutral ones below by ordinary rebinding of module globals: the
-# solver path reads _N, _rhs, ... as plain globals, as fast as if the runtime had none.  The
-# runtime is the C runtime's api.h contract in Python and does the C runtime's arithmetic in
-# the same order (docs/architecture.md, "Byte parity").
+# bgc's Python runtime: model-independent, the same in every generated module.  Its parts,
+# bgc/runtime/*.py joined (runtime.py first), are one module, imported by the tests and linted,
+# and the text bgc.codegen.emit.python_runtime() inlines verbatim, so a generated module stays
+# one file that needs only numpy.  A generated module is, in order: its docstring, the
+# runtime, the solver tables (_METHODS, SOLVERS, _SOLVER_LIST, printed from bgc/solvers.py),
+# the model part (templates/python_module.py.j2), then `_bind_model()` and the `main()` call.
+# The model part comes after the runtime so that its definitions replace the neutral ones
+# below by ordinary rebinding of module globals: the solver path reads _N, _rhs, ... as plain
+# globals, as fast as if the runtime had none.  The runtime is the C runtime's api.h contract
+# in Python and does the C runtime's arithmetic in the same order (docs/architecture.md, "Byte
+# parity").
 #
 # ---------------------------------------------------------------- the contract
 # (a) What the model part provides (each defined below with a neutral value: a model of no

@@ -1,14 +1,15 @@
 # ====================================================================== runtime ===
-# bgc's Python runtime: model-independent, the same in every generated module.  This file is a
-# module of its own (imported by the tests, linted) and the text bgc.emit.python_runtime()
-# inlines verbatim, so a generated module stays one file that needs only numpy.  A generated
-# module is, in order: its docstring, this file, the solver tables (_METHODS, SOLVERS,
-# _SOLVER_LIST, printed from bgc/solvers.py), the model part (templates/python_module.py.j2),
-# then `_bind_model()` and the `main()` call.  The model part comes after the runtime so that
-# its definitions replace the neutral ones below by ordinary rebinding of module globals: the
-# solver path reads _N, _rhs, ... as plain globals, as fast as if the runtime had none.  The
-# runtime is the C runtime's api.h contract in Python and does the C runtime's arithmetic in
-# the same order (docs/architecture.md, "Byte parity").
+# bgc's Python runtime: model-independent, the same in every generated module.  Its parts,
+# bgc/runtime/*.py joined (runtime.py first), are one module, imported by the tests and linted,
+# and the text bgc.codegen.emit.python_runtime() inlines verbatim, so a generated module stays
+# one file that needs only numpy.  A generated module is, in order: its docstring, the
+# runtime, the solver tables (_METHODS, SOLVERS, _SOLVER_LIST, printed from bgc/solvers.py),
+# the model part (templates/python_module.py.j2), then `_bind_model()` and the `main()` call.
+# The model part comes after the runtime so that its definitions replace the neutral ones
+# below by ordinary rebinding of module globals: the solver path reads _N, _rhs, ... as plain
+# globals, as fast as if the runtime had none.  The runtime is the C runtime's api.h contract
+# in Python and does the C runtime's arithmetic in the same order (docs/architecture.md, "Byte
+# parity").
 #
 # ---------------------------------------------------------------- the contract
 # (a) What the model part provides (each defined below with a neutral value: a model of no
@@ -1516,11 +1517,11 @@ def main(argv=None):
 
 
 # ================================================================== solve ===
-# The step driver (_drive, as bgc_drive in the C runtime's drive.c: see there for the
-# contract between the driver and a method family), the explicit Runge-Kutta families (read
+# The step driver (_drive, as bgc_drive in the C runtime's drive.c; the contract between the
+# driver and a method family is _Family's docstring), the explicit Runge-Kutta families (read
 # from _METHODS, printed from bgc/solvers.py) and _integrate; the stiff families follow
-# (section stiff).  The explicit solvers keep small states as lists and large ones as
-# numpy vectors (see _LIST_STATES); the arithmetic is the C runtime's, in the same order.
+# (stiff.py).  The explicit solvers keep small states as lists and large ones as numpy
+# vectors (see _LIST_STATES); the arithmetic is the C runtime's, in the same order.
 
 def _output_count(s):
     """As bgc_output_count: at least 1 when t_end > t0, so that t0 and t_end are rows whatever
@@ -2371,12 +2372,8 @@ def _substeps(span, h):
 
 
 # ---------------------------------------------------------------- the step driver
-# A family is a class: __init__(run), start(y) -> the first step (None on a grid), step(t,
-# h, tph, y) -> (outcome, y1, hnew, why), accepted(tph, y1), dense() -> at(theta), after(tph,
-# y1, last) -> True when the stiffness test fired, next_h(h, hnew) -> hnew, span_grid; a
-# failure that ends the run raises _Failure.  Outcomes as drive.c's; why = (bad, bad_kind,
-# block failure) after a failed attempt: bad >= 0 a non-finite component (bad_kind names its
-# kind), -1 the error test, -2 a block, -3 a singular matrix, -4 Newton.
+# The driver and the family type: a family is a subclass of _Family, whose docstring is the
+# contract between them (both runtimes'); a step's outcomes, as drive.c's BGC_STEP_*:
 
 _ACCEPT, _REJECT, _RETRY, _AGAIN = 0, 1, 2, 3
 
@@ -2528,7 +2525,76 @@ def _drive(run, family, y):
 
 
 class _Family:
-    """What a family does not need to do (see _drive)."""
+    """A method family: the steps of one kind of method (_FixedSteps and _Erk in erk.py,
+    _Rosenbrock and _Radau in stiff.py) as the step driver, _drive, takes them.  The family
+    contract, written once for both runtimes, in the order the driver calls it (C's
+    bgc_family in drive.c: start is items 1 and 2, step 3, accepted 5, prepare and dense 6,
+    after 7, next_h 8, finish the end of 1; erk.c and stiff.c cite the items).  The driver
+    owns the rest: output times, budgets, the checks of the accepted state, events, the
+    switch of `auto`.
+
+    1. family(run): the family's state for the method run.m (its row of _METHODS: tableau
+       and step control, printed from bgc/solvers.py) on run's settings, with fixed steps
+       when run.fixed (--step, or a fixed-step method).  A new one at the run's start and
+       after every event (C: finish, then start), so a method restarts with no history.
+    2. start(y) -> h: the evaluations the method needs at the first point (run.t, y) (f;
+       Rosenbrock's f, df/dt and J; Radau's f and Newton weights) and the first step of an
+       adaptive run: run.h bounded by _hmax when the run goes on from an earlier phase or
+       run, else Hairer's estimate (_first_step, _initial_step); None on fixed steps.
+    3. step(t, h, tph, y) -> (outcome, y1, hnew, why): one attempt from (t, y) over h to tph
+       (t + h, but exactly the end or the time event on a step cut onto it).  _ACCEPT: y1
+       is the new point, hnew the controller's next step; _REJECT: the error test failed,
+       try hnew; _RETRY: the attempt failed (a non-finite value, an algebraic block, a
+       singular iteration matrix, Newton's iteration), try hnew, and why = (bad, bad_kind,
+       block failure) names the cause if the steps then fall below _hmin (bad >= 0 a
+       non-finite component, bad_kind its kind; -1 the error test, -2 a block, -3 a
+       singular matrix, -4 Newton); _AGAIN: the same step once more, not counted as
+       rejected (Radau on a fixed step, with a fresh Jacobian).  The driver counts the
+       attempt, checks y1 for non-finite values and hands on the accepted step.
+    4. The error estimate is the family's, inside step: Hairer's RMS norm with the weights
+       atol + rtol max(|y_i|, |y1_i|) over the first _error_states(s) states (_weights,
+       _V.error_sums, _stiff_norm; DOP853 combines two estimates, Radau scales rtol and atol
+       as RADAU5 does); the attribute worst (-1: none) keeps the component with the largest
+       share of the last estimate, for the message when the steps become too small.  On
+       fixed steps no error control: an attempt is accepted unless it fails, and a failure
+       ends the run (Radau's Newton iteration first tries once more with a fresh Jacobian).
+    5. accepted(tph, y1): after the driver has counted the step, before its outputs and the
+       event search (an FSAL pair's last stage, when its error estimate does not use it).
+    6. dense() -> at(theta): the state at t + theta h inside the step just accepted, made
+       once, when an output time inside the step or the event search first needs it, valid
+       until the next attempt (C: prepare, then dense).  A family without a dense output
+       (dense None: the fixed-step methods) has a step end on every output time (span_grid
+       False); the event search then uses the cubic Hermite interpolant (_Dense).
+    7. after(tph, y1, last) -> bool: after the outputs, the evaluations at the new point that
+       the next step starts from (f, or an FSAL pair's last stage; Rosenbrock's f, df/dt and
+       J; Radau's f and weights), none after the run's last step; True when Hairer's
+       stiffness test has fired on 15 accepted steps (an explicit pair under
+       run.detect_stiffness: `auto`'s explicit phase), and the driver switches (_Stiff).
+    8. next_h(h, hnew) -> h: the next step, from the controller's hnew once the driver has
+       bounded it (by _hmax, and by h after a rejection); Radau keeps h, and its factored
+       matrices, while hnew is at most 20 % more and Newton converged fast.
+    9. A Jacobian only in the stiff families: J = d rhs / d x, the model's symbolic one
+       (_stiff_jacobian: dense, or its structural values on a large sparse model, _JAC_LU),
+       for Rosenbrock at every new point (items 2 and 7), for Radau at the first attempt,
+       after a step whose Newton iteration contracted slowly and after a failed or rejected
+       attempt unless J is fresh.  Their iteration matrices are factored by the runtime's
+       own LU, C's operations in C's order (_lu, _zlu, _SparseMatrix: stiff.c's
+       bgc_stiff_lu, bgc_stiff_zlu, the sparse LU of bgc_splu).
+    10. Statistics: a family counts its own work in run.st as it goes: rhs for each f, jac,
+       lu, solves, and order_next (Radau's order at the end); the driver counts steps,
+       rejected, h_next, and the events and evaluations of the event search.
+    11. Failures: an algebraic block's failure (_BlockFailure) in an adaptive attempt's stages
+       is a _RETRY (item 3); on fixed steps, in the Jacobian, and in start, accepted, dense
+       and after, it ends the run, as do a non-finite derivative at the first point and the
+       fifth singular iteration matrix in a row: the family raises _Failure (_block_failed,
+       _fail) with the C program's message (C: BGC_STEP_END or a nonzero return, the message
+       in r->msg).
+    12. span_grid (fixed steps only): True, the steps on one grid over the run and the
+       outputs from the dense output; False, each output interval in steps that land on its
+       end.
+
+    The defaults below: span_grid True, worst -1, no dense output, accepted and after doing
+    nothing, next_h taking hnew (C: NULL functions)."""
 
     span_grid = True
     worst = -1
