@@ -1,7 +1,7 @@
 # bgc/runtime/stiff.py -- a part of the Python runtime (runtime.py's header says how the parts
 # make one module); its C twin is stiff.c: the stiff families, Rosenbrock (_Rosenbrock) and
-# Radau IIA (_Radau), and what they solve with: complex arithmetic, the dense LU
-# factorisations and the sparse LU of a large sparse model.
+# Radau IIA (_Radau), and what they solve with: sums of stages (_combine), complex arithmetic,
+# the dense LU factorisations and the sparse LU of a large sparse model.
 
 # ================================================================== stiff ===
 # The stiff families: Rosenbrock methods in Hairer's transformed form (RODAS's design, any
@@ -28,6 +28,17 @@ def _stiff_norm(s, v, w):
         q = v[:E] / w[:E]
         q = q * q
     return math.sqrt(_seq_sum(q) / E), _worst(q)
+
+
+def _combine(weights, K, count):
+    """sum_j weights[j] K[j] over j < count with a nonzero weight, left to right, for numpy
+    vectors K[j] (the stiff solvers)."""
+    acc = numpy.zeros(_N)  # C's acc = 0.0, then acc += a K_j
+    for j in range(count):
+        a = weights[j]
+        if a != 0.0:
+            acc = acc + a * K[j]
+    return acc
 
 
 # ---------------------------------------------------------------- complex arithmetic

@@ -1516,12 +1516,10 @@ def main(argv=None):
     return 0
 
 
-# ================================================================== solve ===
+# ================================================================== drive ===
 # The step driver (_drive, as bgc_drive in the C runtime's drive.c; the contract between the
-# driver and a method family is _Family's docstring), the explicit Runge-Kutta families (read
-# from _METHODS, printed from bgc/solvers.py) and _integrate; the stiff families follow
-# (stiff.py).  The explicit solvers keep small states as lists and large ones as numpy
-# vectors (see _LIST_STATES); the arithmetic is the C runtime's, in the same order.
+# driver and a method family is _Family's docstring) and the run of a solver (_integrate); the
+# families follow (erk.py, stiff.py).  The arithmetic is the C runtime's, in the same order.
 
 def _output_count(s):
     """As bgc_output_count: at least 1 when t_end > t0, so that t0 and t_end are rows whatever
@@ -2160,209 +2158,6 @@ def _initial_step(run, q, y, f0, hmax):
     return min(min(100.0 * h, h1), hmax)
 
 
-# ---------------------------------------------------------------- explicit Runge-Kutta
-# An explicit step's cost beside the model's right side is a few vector operations per
-# stage.  On a handful of states a numpy call costs more than a list comprehension over the
-# whole vector, so the explicit solvers keep their states as lists up to _LIST_STATES states
-# and as numpy vectors above; both kits compute the same values in the same order as the C
-# runtime (bgc_combine: stage by stage, left to right).
-
-_LIST_STATES = 48
-
-
-def _weighted(w, count, stride=None):
-    """The (weight, stage) pairs of w[j] (w[j][stride]) over j < count, zero weights dropped."""
-    pairs = []
-    for j in range(min(count, len(w))):
-        a = w[j] if stride is None else w[j][stride]
-        if a != 0.0:
-            pairs.append((a, j))
-    return tuple(pairs)
-
-
-def _list_terms(acc, pairs, K):
-    """acc + a_0 K_j0 + ... (up to four pairs, left to right; acc None: no acc)."""
-    n = len(pairs)
-    (a, i) = pairs[0]
-    if n == 1:
-        if acc is None:
-            return [a * u for u in K[i]]
-        return [s + a * u for s, u in zip(acc, K[i])]
-    (b, j) = pairs[1]
-    if n == 2:
-        if acc is None:
-            return [a * u + b * v for u, v in zip(K[i], K[j])]
-        return [s + a * u + b * v for s, u, v in zip(acc, K[i], K[j])]
-    (c, k) = pairs[2]
-    if n == 3:
-        if acc is None:
-            return [a * u + b * v + c * w for u, v, w in zip(K[i], K[j], K[k])]
-        return [s + a * u + b * v + c * w for s, u, v, w in zip(acc, K[i], K[j], K[k])]
-    (d, l) = pairs[3]
-    if acc is None:
-        return [a * u + b * v + c * w + d * x for u, v, w, x in zip(K[i], K[j], K[k], K[l])]
-    return [s + a * u + b * v + c * w + d * x
-            for s, u, v, w, x in zip(acc, K[i], K[j], K[k], K[l])]
-
-
-def _list_terms_into(y, h, pairs, K):
-    """y + h * (a_0 K_j0 + ...) for up to four pairs, in one comprehension."""
-    n = len(pairs)
-    (a, i) = pairs[0]
-    if n == 1:
-        return [z + h * (a * u) for z, u in zip(y, K[i])]
-    (b, j) = pairs[1]
-    if n == 2:
-        return [z + h * (a * u + b * v) for z, u, v in zip(y, K[i], K[j])]
-    (c, k) = pairs[2]
-    if n == 3:
-        return [z + h * (a * u + b * v + c * w) for z, u, v, w in zip(y, K[i], K[j], K[k])]
-    (d, l) = pairs[3]
-    return [z + h * (a * u + b * v + c * w + d * x)
-            for z, u, v, w, x in zip(y, K[i], K[j], K[k], K[l])]
-
-
-class _ListVectors:
-    """States as Python lists."""
-
-    @staticmethod
-    def vec(x):
-        return x.tolist() if isinstance(x, numpy.ndarray) else x
-
-    @staticmethod
-    def combine(y, h, pairs, K):
-        """y + h * sum a K_j over the pairs (y None: h * sum), four terms per comprehension."""
-        n = len(pairs)
-        if n == 0:
-            acc = [0.0] * _N
-        elif n <= 4 and y is not None:
-            return _list_terms_into(y, h, pairs, K)
-        else:
-            acc = _list_terms(None, pairs[:4], K)
-            for k in range(4, n, 4):
-                acc = _list_terms(acc, pairs[k:k + 4], K)
-        if y is None:
-            return [h * u for u in acc]
-        return [u + h * v for u, v in zip(y, acc)]
-
-    @staticmethod
-    def horner(y, q, theta):
-        """y + theta (q_0 + theta (q_1 + ...))."""
-        acc = q[-1]
-        for qd in reversed(q[:-1]):
-            acc = [u + theta * v for u, v in zip(qd, acc)]
-        return [u + theta * v for u, v in zip(y, acc)]
-
-    @staticmethod
-    def error_sums(s, y, y1, e1, e2):
-        """sum (e1_i / sk_i)^2, its largest term's index, and sum (e2_i / sk_i)^2 (e2 may be
-        None), sk_i = atol + rtol * max(|y_i|, |y1_i|), over the states the error control
-        weighs."""
-        rtol, atol = s.rtol, s.atol
-        err = err2 = 0.0
-        worst, worst_q = -1, -1.0
-        for i in range(_error_states(s)):
-            sk = atol + rtol * max(abs(y[i]), abs(y1[i]))
-            qq = e1[i] / sk
-            qq = qq * qq
-            err += qq
-            if qq > worst_q:
-                worst, worst_q = i, qq
-            if e2 is not None:
-                q2 = e2[i] / sk
-                err2 += q2 * q2
-        return err, worst, err2
-
-    @staticmethod
-    def distance2(u, v):
-        acc = 0.0
-        for a, b in zip(u, v):
-            acc += (a - b) * (a - b)
-        return acc
-
-
-class _ArrayVectors:
-    """States as numpy vectors."""
-
-    @staticmethod
-    def vec(x):
-        return numpy.asarray(x, dtype=float)
-
-    @staticmethod
-    def combine(y, h, pairs, K):
-        if pairs:
-            a, j = pairs[0]
-            acc = a * K[j]
-            for a, j in pairs[1:]:
-                acc = acc + a * K[j]
-        else:
-            acc = numpy.zeros(_N)
-        return h * acc if y is None else y + h * acc
-
-    @staticmethod
-    def horner(y, q, theta):
-        acc = q[-1]
-        for qd in reversed(q[:-1]):
-            acc = qd + theta * acc
-        return y + theta * acc
-
-    @staticmethod
-    def error_sums(s, y, y1, e1, e2):
-        E = _error_states(s)
-        sk = _weights(s, y[:E], y1[:E])
-        with numpy.errstate(all="ignore"):
-            sq = e1[:E] / sk
-            sq = sq * sq
-            err = _seq_sum(sq)
-            q2 = e2[:E] / sk if e2 is not None else None
-            err2 = _seq_sum(q2 * q2) if e2 is not None else 0.0
-        return err, _worst(sq), err2
-
-    @staticmethod
-    def distance2(u, v):
-        with numpy.errstate(all="ignore"):
-            d = u - v
-            return _seq_sum(d * d)
-
-
-_V = _ListVectors  # the vectors for _N states: lists up to _LIST_STATES (_bind_model)
-
-
-def _combine(weights, K, count):
-    """sum_j weights[j] K[j] over j < count with a nonzero weight, left to right, for numpy
-    vectors K[j] (the stiff solvers)."""
-    acc = numpy.zeros(_N)  # C's acc = 0.0, then acc += a K_j
-    for j in range(count):
-        a = weights[j]
-        if a != 0.0:
-            acc = acc + a * K[j]
-    return acc
-
-
-def _erk_plan(m):
-    """The method's _ErkPlan, made once (a run restarts its method at every event)."""
-    plan = _ERK_PLANS.get(id(m))
-    if plan is None or plan[0] is not m:
-        plan = _ERK_PLANS[id(m)] = (m, _ErkPlan(m))
-    return plan[1]
-
-
-_ERK_PLANS = {}
-
-
-class _ErkPlan:
-    """A tableau's nonzero weights, ready for _V.combine."""
-
-    def __init__(self, m):
-        stages, c = m["stages"], m["c"]
-        self.a = [_weighted(m["a"][i], i) for i in range(len(c))]
-        self.b = _weighted(m["b"], stages)
-        self.e = _weighted(m["e"], stages) if "e" in m else ()
-        self.e2 = _weighted(m["e2"], stages) if m.get("e2") else None
-        P = m.get("P")
-        self.P = [_weighted(P, len(P), d) for d in range(len(P[0]))] if P else []
-
-
 def _substeps(span, h):
     r = span / h
     if not r < 1e15:
@@ -2610,7 +2405,275 @@ class _Family:
         return hnew
 
 
-# ---------------------------------------------------------------- explicit Runge-Kutta
+# ---------------------------------------------------------------- integrate
+
+
+def _run_solver(run, name):
+    """Runs solver `name` from (run.t, run.y) with the driver."""
+    m = _METHODS[name]
+    family = {"fixed": _FixedSteps, "erk": _Erk, "rosenbrock": _Rosenbrock,
+              "radau": _Radau}.get(m["family"])
+    if family is None:
+        raise ValueError("solver '%s' cannot run by itself" % name)
+    run.m, run.name = m, name
+    run.fixed = run.s.step > 0.0 or m["family"] == "fixed"
+    y = run.y if family in (_FixedSteps, _Erk) else numpy.asarray(run.y, dtype=float)
+    yield from _drive(run, family, y)
+
+
+def _integrate(s, p, x0, st):
+    """Runs the solver: yields the rows (t, outputs) as it computes them; st["cpu"]: the
+    processor seconds it took (the consumer's time between rows excluded)."""
+    cpu = 0.0
+    rows = _integrate_from(s, p, x0, st)
+    try:
+        while True:
+            start = time.process_time()
+            try:
+                row = next(rows)
+            except StopIteration:
+                return
+            finally:
+                cpu += time.process_time() - start
+                st["cpu"] = cpu
+            yield row
+    finally:
+        rows.close()
+
+
+def _integrate_from(s, p, x0, st, w=None):
+    y = numpy.array(x0, dtype=float)
+    i = _first_nonfinite(y)
+    if i >= 0:
+        raise _fail(s.t0, "state", STATES[i])
+    run = _Run(s, p, _Work(s.rtol, s.atol) if w is None else w, st, y)
+    run.w.inputs = s.inputs
+    st["h_next"], st["order_next"] = 0.0, 0
+    if _DISCRETE_NAMES:  # the event iteration at the start (bgc_integrate)
+        w = run.w
+        p[run.doff:] = w.d
+        x = y.tolist()
+        _event_iteration(run, s.t0, x, not w.started)
+        w.started = True
+        _set_next_time(run, s.t0, x)
+        y = run.y = numpy.array(x, dtype=float)
+    try:
+        yield from _integrate_run(run, s, y, st)
+    finally:
+        if _DISCRETE_NAMES:
+            run.w.d = p[run.doff:]
+
+
+def _integrate_run(run, s, y, st):
+    yield from run.emit(s.t0, y)
+    m = _METHODS[s.solver]
+    if m["family"] != "auto":
+        yield from _run_solver(run, s.solver)
+        return
+    run.detect_stiffness = True
+    try:
+        yield from _run_solver(run, m["explicit"])
+    except _Stiff:
+        st["switched"], st["t_switch"] = True, run.t
+        run.detect_stiffness = False
+        yield from _run_solver(run, m["stiff"])
+
+
+# ==================================================================== erk ===
+# The explicit Runge-Kutta families, read from _METHODS (printed from bgc/solvers.py), as
+# erk.c's: the fixed-step methods and the embedded pairs.  An explicit step's cost beside the
+# model's right side is a few vector operations per stage.  On a handful of states a numpy
+# call costs more than a list comprehension over the whole vector, so the explicit solvers
+# keep their states as lists up to _LIST_STATES states and as numpy vectors above; both kits
+# compute the same values in the same order as the C runtime (bgc_combine: stage by stage,
+# left to right).
+
+_LIST_STATES = 48
+
+
+def _weighted(w, count, stride=None):
+    """The (weight, stage) pairs of w[j] (w[j][stride]) over j < count, zero weights dropped."""
+    pairs = []
+    for j in range(min(count, len(w))):
+        a = w[j] if stride is None else w[j][stride]
+        if a != 0.0:
+            pairs.append((a, j))
+    return tuple(pairs)
+
+
+def _list_terms(acc, pairs, K):
+    """acc + a_0 K_j0 + ... (up to four pairs, left to right; acc None: no acc)."""
+    n = len(pairs)
+    (a, i) = pairs[0]
+    if n == 1:
+        if acc is None:
+            return [a * u for u in K[i]]
+        return [s + a * u for s, u in zip(acc, K[i])]
+    (b, j) = pairs[1]
+    if n == 2:
+        if acc is None:
+            return [a * u + b * v for u, v in zip(K[i], K[j])]
+        return [s + a * u + b * v for s, u, v in zip(acc, K[i], K[j])]
+    (c, k) = pairs[2]
+    if n == 3:
+        if acc is None:
+            return [a * u + b * v + c * w for u, v, w in zip(K[i], K[j], K[k])]
+        return [s + a * u + b * v + c * w for s, u, v, w in zip(acc, K[i], K[j], K[k])]
+    (d, l) = pairs[3]
+    if acc is None:
+        return [a * u + b * v + c * w + d * x for u, v, w, x in zip(K[i], K[j], K[k], K[l])]
+    return [s + a * u + b * v + c * w + d * x
+            for s, u, v, w, x in zip(acc, K[i], K[j], K[k], K[l])]
+
+
+def _list_terms_into(y, h, pairs, K):
+    """y + h * (a_0 K_j0 + ...) for up to four pairs, in one comprehension."""
+    n = len(pairs)
+    (a, i) = pairs[0]
+    if n == 1:
+        return [z + h * (a * u) for z, u in zip(y, K[i])]
+    (b, j) = pairs[1]
+    if n == 2:
+        return [z + h * (a * u + b * v) for z, u, v in zip(y, K[i], K[j])]
+    (c, k) = pairs[2]
+    if n == 3:
+        return [z + h * (a * u + b * v + c * w) for z, u, v, w in zip(y, K[i], K[j], K[k])]
+    (d, l) = pairs[3]
+    return [z + h * (a * u + b * v + c * w + d * x)
+            for z, u, v, w, x in zip(y, K[i], K[j], K[k], K[l])]
+
+
+class _ListVectors:
+    """States as Python lists."""
+
+    @staticmethod
+    def vec(x):
+        return x.tolist() if isinstance(x, numpy.ndarray) else x
+
+    @staticmethod
+    def combine(y, h, pairs, K):
+        """y + h * sum a K_j over the pairs (y None: h * sum), four terms per comprehension."""
+        n = len(pairs)
+        if n == 0:
+            acc = [0.0] * _N
+        elif n <= 4 and y is not None:
+            return _list_terms_into(y, h, pairs, K)
+        else:
+            acc = _list_terms(None, pairs[:4], K)
+            for k in range(4, n, 4):
+                acc = _list_terms(acc, pairs[k:k + 4], K)
+        if y is None:
+            return [h * u for u in acc]
+        return [u + h * v for u, v in zip(y, acc)]
+
+    @staticmethod
+    def horner(y, q, theta):
+        """y + theta (q_0 + theta (q_1 + ...))."""
+        acc = q[-1]
+        for qd in reversed(q[:-1]):
+            acc = [u + theta * v for u, v in zip(qd, acc)]
+        return [u + theta * v for u, v in zip(y, acc)]
+
+    @staticmethod
+    def error_sums(s, y, y1, e1, e2):
+        """sum (e1_i / sk_i)^2, its largest term's index, and sum (e2_i / sk_i)^2 (e2 may be
+        None), sk_i = atol + rtol * max(|y_i|, |y1_i|), over the states the error control
+        weighs."""
+        rtol, atol = s.rtol, s.atol
+        err = err2 = 0.0
+        worst, worst_q = -1, -1.0
+        for i in range(_error_states(s)):
+            sk = atol + rtol * max(abs(y[i]), abs(y1[i]))
+            qq = e1[i] / sk
+            qq = qq * qq
+            err += qq
+            if qq > worst_q:
+                worst, worst_q = i, qq
+            if e2 is not None:
+                q2 = e2[i] / sk
+                err2 += q2 * q2
+        return err, worst, err2
+
+    @staticmethod
+    def distance2(u, v):
+        acc = 0.0
+        for a, b in zip(u, v):
+            acc += (a - b) * (a - b)
+        return acc
+
+
+class _ArrayVectors:
+    """States as numpy vectors."""
+
+    @staticmethod
+    def vec(x):
+        return numpy.asarray(x, dtype=float)
+
+    @staticmethod
+    def combine(y, h, pairs, K):
+        if pairs:
+            a, j = pairs[0]
+            acc = a * K[j]
+            for a, j in pairs[1:]:
+                acc = acc + a * K[j]
+        else:
+            acc = numpy.zeros(_N)
+        return h * acc if y is None else y + h * acc
+
+    @staticmethod
+    def horner(y, q, theta):
+        acc = q[-1]
+        for qd in reversed(q[:-1]):
+            acc = qd + theta * acc
+        return y + theta * acc
+
+    @staticmethod
+    def error_sums(s, y, y1, e1, e2):
+        E = _error_states(s)
+        sk = _weights(s, y[:E], y1[:E])
+        with numpy.errstate(all="ignore"):
+            sq = e1[:E] / sk
+            sq = sq * sq
+            err = _seq_sum(sq)
+            q2 = e2[:E] / sk if e2 is not None else None
+            err2 = _seq_sum(q2 * q2) if e2 is not None else 0.0
+        return err, _worst(sq), err2
+
+    @staticmethod
+    def distance2(u, v):
+        with numpy.errstate(all="ignore"):
+            d = u - v
+            return _seq_sum(d * d)
+
+
+_V = _ListVectors  # the vectors for _N states: lists up to _LIST_STATES (_bind_model)
+
+
+def _erk_plan(m):
+    """The method's _ErkPlan, made once (a run restarts its method at every event)."""
+    plan = _ERK_PLANS.get(id(m))
+    if plan is None or plan[0] is not m:
+        plan = _ERK_PLANS[id(m)] = (m, _ErkPlan(m))
+    return plan[1]
+
+
+_ERK_PLANS = {}
+
+
+class _ErkPlan:
+    """A tableau's nonzero weights, ready for _V.combine."""
+
+    def __init__(self, m):
+        stages, c = m["stages"], m["c"]
+        self.a = [_weighted(m["a"][i], i) for i in range(len(c))]
+        self.b = _weighted(m["b"], stages)
+        self.e = _weighted(m["e"], stages) if "e" in m else ()
+        self.e2 = _weighted(m["e2"], stages) if m.get("e2") else None
+        P = m.get("P")
+        self.P = [_weighted(P, len(P), d) for d in range(len(P[0]))] if P else []
+
+
+# ---------------------------------------------------------------- the families
 
 
 class _FixedSteps(_Family):
@@ -2800,80 +2863,6 @@ class _Erk(_Family):
         return False
 
 
-# ---------------------------------------------------------------- integrate
-
-
-def _run_solver(run, name):
-    """Runs solver `name` from (run.t, run.y) with the driver."""
-    m = _METHODS[name]
-    family = {"fixed": _FixedSteps, "erk": _Erk, "rosenbrock": _Rosenbrock,
-              "radau": _Radau}.get(m["family"])
-    if family is None:
-        raise ValueError("solver '%s' cannot run by itself" % name)
-    run.m, run.name = m, name
-    run.fixed = run.s.step > 0.0 or m["family"] == "fixed"
-    y = run.y if family in (_FixedSteps, _Erk) else numpy.asarray(run.y, dtype=float)
-    yield from _drive(run, family, y)
-
-
-def _integrate(s, p, x0, st):
-    """Runs the solver: yields the rows (t, outputs) as it computes them; st["cpu"]: the
-    processor seconds it took (the consumer's time between rows excluded)."""
-    cpu = 0.0
-    rows = _integrate_from(s, p, x0, st)
-    try:
-        while True:
-            start = time.process_time()
-            try:
-                row = next(rows)
-            except StopIteration:
-                return
-            finally:
-                cpu += time.process_time() - start
-                st["cpu"] = cpu
-            yield row
-    finally:
-        rows.close()
-
-
-def _integrate_from(s, p, x0, st, w=None):
-    y = numpy.array(x0, dtype=float)
-    i = _first_nonfinite(y)
-    if i >= 0:
-        raise _fail(s.t0, "state", STATES[i])
-    run = _Run(s, p, _Work(s.rtol, s.atol) if w is None else w, st, y)
-    run.w.inputs = s.inputs
-    st["h_next"], st["order_next"] = 0.0, 0
-    if _DISCRETE_NAMES:  # the event iteration at the start (bgc_integrate)
-        w = run.w
-        p[run.doff:] = w.d
-        x = y.tolist()
-        _event_iteration(run, s.t0, x, not w.started)
-        w.started = True
-        _set_next_time(run, s.t0, x)
-        y = run.y = numpy.array(x, dtype=float)
-    try:
-        yield from _integrate_run(run, s, y, st)
-    finally:
-        if _DISCRETE_NAMES:
-            run.w.d = p[run.doff:]
-
-
-def _integrate_run(run, s, y, st):
-    yield from run.emit(s.t0, y)
-    m = _METHODS[s.solver]
-    if m["family"] != "auto":
-        yield from _run_solver(run, s.solver)
-        return
-    run.detect_stiffness = True
-    try:
-        yield from _run_solver(run, m["explicit"])
-    except _Stiff:
-        st["switched"], st["t_switch"] = True, run.t
-        run.detect_stiffness = False
-        yield from _run_solver(run, m["stiff"])
-
-
 # ================================================================== stiff ===
 # The stiff families: Rosenbrock methods in Hairer's transformed form (RODAS's design, any
 # tableau of the family) and Radau IIA with 3, 5 or 7 stages, of fixed or variable order
@@ -2899,6 +2888,17 @@ def _stiff_norm(s, v, w):
         q = v[:E] / w[:E]
         q = q * q
     return math.sqrt(_seq_sum(q) / E), _worst(q)
+
+
+def _combine(weights, K, count):
+    """sum_j weights[j] K[j] over j < count with a nonzero weight, left to right, for numpy
+    vectors K[j] (the stiff solvers)."""
+    acc = numpy.zeros(_N)  # C's acc = 0.0, then acc += a K_j
+    for j in range(count):
+        a = weights[j]
+        if a != 0.0:
+            acc = acc + a * K[j]
+    return acc
 
 
 # ---------------------------------------------------------------- complex arithmetic
