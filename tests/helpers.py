@@ -1,12 +1,16 @@
 """What several test files share, imported as a module (`from helpers import ...`), never
 loaded by path: the scalable model families of benchmarks/families.py (which the benchmarks
 run too), one build of a model for every test of a process that reads it, and the small models
-several files test (ball: a bouncing ball by a when-block)."""
+several files test (ball: a bouncing ball by a when-block), and the Python runtime as one module
+(pyruntime)."""
 from __future__ import annotations
 
 import functools
 import importlib.util
+import itertools
+import linecache
 import sys
+import types
 from pathlib import Path
 
 import bgc
@@ -101,3 +105,39 @@ j -> r
 j -> l
 {scene}
 """
+
+
+# ---------------------------------------------------------------- the Python runtime
+
+RUNTIME_NAME = "<bgc python runtime>"  # the file name its tracebacks and compile give
+_RUNTIMES = itertools.count()
+
+
+def pyruntime() -> types.ModuleType:
+    """The Python runtime as a generated module starts (bgc.codegen.emit.python_runtime: its
+    parts joined, then the solver tables), executed as a new module at each call (binding a
+    model changes its globals).  Never loaded by path: a part alone is no module."""
+    from bgc.codegen.emit import python_runtime
+
+    text = python_runtime()
+    linecache.cache[RUNTIME_NAME] = (len(text), None, text.splitlines(True), RUNTIME_NAME)
+    module = types.ModuleType(f"_bgc_pyruntime_{next(_RUNTIMES)}")
+    exec(compile(text, RUNTIME_NAME, "exec"), vars(module))
+    return module
+
+
+def pyruntime_place(line: int) -> str:
+    """Where line `line` (from 1) of python_runtime()'s text is written: 'bgc/runtime/PART:LINE',
+    or 'solver tables:LINE' past the parts."""
+    from bgc.codegen.emit import PY_RUNTIME, runtime_body, solver_tables_python
+
+    start = 1  # the text's line where the part's body begins
+    for name in PY_RUNTIME:
+        text = (ROOT / "bgc" / "runtime" / name).read_text(encoding="utf-8")
+        body = runtime_body(text)
+        count = body.count("\n")
+        if line < start + count:
+            return f"bgc/runtime/{name}:{line - start + text.count(chr(10)) - count + 1}"
+        start += count + 2  # and the two blank lines that join the parts
+    assert solver_tables_python()
+    return f"solver tables:{line - start + 1}"

@@ -235,8 +235,9 @@ def test_hbridge_reference_is_bgcs_edges_and_the_motors_exact_solution():
     at tight tolerance, restarted at each of those instants (the current stays positive after
     the start, so the diodes in the dead time apply -V)."""
     from scipy.integrate import solve_ivp
-    from bgc.runtime import runtime as rt
+    from helpers import pyruntime
 
+    rt = pyruntime()
     hb = _benchmark("hbridge")
     p, t_end = hb.HBRIDGE, 2e-4
     chained = []

@@ -1,11 +1,11 @@
-"""The Python runtime (bgc/runtime/runtime.py) on its own: a module that imports what it uses,
-passes pyflakes, and runs a small model bound by hand through its contract (the names its
-head lists), no model compiled.  The generated modules' behaviour is tested elsewhere
-(test_python.py, test_parity.py, ...); these tests pin the contract and a few pieces."""
-import importlib.util
+"""The Python runtime (the parts of bgc/runtime/*.py, one module: bgc.codegen.emit.python_runtime)
+on its own: a module that imports what it uses, passes pyflakes, and runs a small model bound by
+hand through its contract (the names its head lists), no model compiled.  The generated modules'
+behaviour is tested elsewhere (test_python.py, test_parity.py, ...); these tests pin the
+contract, the parts' layout and a few pieces."""
 import io
-import itertools
 import math
+import re
 from pathlib import Path
 
 import numpy as np
@@ -13,22 +13,20 @@ import pytest
 from pyflakes import api as pyflakes_api
 from pyflakes import reporter as pyflakes_reporter
 
-from bgc.codegen.emit import solver_tables_python
+from bgc.codegen.emit import C_RUNTIME, PY_RUNTIME, python_runtime, runtime_body, \
+    solver_tables_python
+
+from helpers import RUNTIME_NAME, pyruntime, pyruntime_place
 
 ROOT = Path(__file__).resolve().parent.parent
-RUNTIME = ROOT / "bgc" / "runtime" / "runtime.py"
+RUNTIME = ROOT / "bgc" / "runtime"
 GOLDEN = ROOT / "tests" / "golden"
-_COUNT = itertools.count()
 
 
 def fresh_runtime():
     """A new copy of the runtime module (binding a model changes its globals) with the solver
     tables, as a generated module has them."""
-    spec = importlib.util.spec_from_file_location(f"_bgc_pyruntime_{next(_COUNT)}", RUNTIME)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    exec(solver_tables_python(), vars(module))
-    return module
+    return pyruntime()
 
 
 def bind(rt, **names):
@@ -78,8 +76,59 @@ def _flakes(text, name):
 
 def test_runtime_passes_pyflakes():
     """No undefined name, unused import or variable: the runtime imports what it uses and
-    defines every name of the model part it reads (its contract)."""
-    assert _flakes(RUNTIME.read_text(encoding="utf-8"), str(RUNTIME)) == []
+    defines every name of the model part it reads (its contract).  Each message names the
+    part and its line."""
+    found = [re.sub(r"^<bgc python runtime>:(\d+):",
+                    lambda m: pyruntime_place(int(m.group(1))) + ":", line)
+             for line in _flakes(python_runtime(), RUNTIME_NAME)]
+    assert found == []
+
+
+def test_runtime_is_its_parts_less_their_headers():
+    """python_runtime() is the parts PY_RUNTIME lists, each less its header (comment lines up
+    to the first blank line, naming the part and its C twin), joined by two blank lines, then
+    the solver tables; each part's body starts with its first line of code or comment and
+    ends with one newline, so that the join is the only blank lines between parts; every
+    Python file of bgc/runtime/ besides __init__.py is a part."""
+    assert sorted(PY_RUNTIME) == sorted(p.name for p in RUNTIME.glob("*.py")
+                                        if p.name != "__init__.py")
+    bodies = []
+    for name in PY_RUNTIME:
+        text = (RUNTIME / name).read_text(encoding="utf-8")
+        header, blank, body = text.partition("\n\n")
+        lines = header.split("\n")
+        assert blank and all(line.startswith("#") for line in lines), name
+        assert lines[0].startswith(f"# bgc/runtime/{name} -- "), name
+        twin = Path(name).with_suffix(".c").name
+        assert twin in C_RUNTIME and f"C twin is {twin}" in " ".join(lines), name
+        assert body == runtime_body(text), name
+        assert body[:1] not in ("", "\n") and body.endswith("\n") and not body.endswith("\n\n")
+        bodies.append(body)
+    assert python_runtime() == "\n\n".join(bodies + [solver_tables_python()])
+    with pytest.raises(ValueError):
+        runtime_body("import math\n\nx = 1\n")  # no header
+    assert pyruntime_place(1) == "bgc/runtime/runtime.py:%d" % (
+        (RUNTIME / "runtime.py").read_text(encoding="utf-8").split("\n").index("") + 2)
+    first = runtime_body((RUNTIME / "main.py").read_text(encoding="utf-8")).split("\n")[0]
+    line = python_runtime().split("\n").index(first) + 1
+    place = pyruntime_place(line)
+    assert place.startswith("bgc/runtime/main.py:")
+    assert (RUNTIME / "main.py").read_text(encoding="utf-8").split("\n")[
+        int(place.split(":")[1]) - 1] == first
+
+
+def test_family_contract_is_one_numbered_list_that_the_c_runtime_cites():
+    """The method families' contract is written once, the numbered list of _Family's
+    docstring; drive.c, erk.c and stiff.c point to it and cite only items it has."""
+    rt = fresh_runtime()
+    items = [int(n) for n in re.findall(r"^    (\d+)\. ", rt._Family.__doc__, re.M)]
+    assert items == list(range(1, len(items) + 1)) and len(items) >= 8
+    for name in ("drive.c", "erk.c", "stiff.c"):
+        text = " ".join((RUNTIME / name).read_text(encoding="utf-8").split())
+        assert "_Family (bgc/runtime/drive.py" in text, name
+        cited = {int(n) for group in re.findall(r"\bitems? (\d+(?:(?:, | and )\d+)*)", text)
+                 for n in re.findall(r"\d+", group)}
+        assert cited and cited <= set(items), (name, cited - set(items))
 
 
 def test_runtime_alone_is_a_model_of_no_states():

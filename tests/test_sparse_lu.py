@@ -1,5 +1,5 @@
 """The stiff solvers' sparse LU (bgc/symbolic/sparse.py, iteration_plan; bgc_splu_* and bgc_smat_*
-in bgc/runtime/stiff.c, _splu_* and _SparseMatrix in runtime.py): on random sparse patterns
+in bgc/runtime/stiff.c, _splu_* and _SparseMatrix in stiff.py): on random sparse patterns
 against numpy's dense solve, the dense fallback when a pivot fails its test; the C and Python
 factorisations and solves bit for bit on a model's plan; and the thermal grid, a model on the
 sparse path, against its closed form (SciPy's expm), its C program's CSV byte for byte in
@@ -18,14 +18,14 @@ from bgc.base import backends
 from bgc.symbolic import sparse
 from bgc.api import Source
 from bgc.codegen.emit import emit_c, emit_python
-from bgc.runtime import runtime as rt
 
 from cbits import C_IO
-from helpers import families
+from helpers import families, pyruntime
 
 ROOT = Path(__file__).resolve().parent.parent
 needs_cc = pytest.mark.skipif(not backends.have_c_compiler(), reason="no C compiler")
 GRID = 6  # 36 states: above sparse.SPARSE_MIN_STATES
+rt = pyruntime()  # the Python runtime, whose _splu_* and _SparseMatrix these tests call
 
 
 @pytest.fixture(scope="module")

@@ -27,6 +27,8 @@ from ..ir.printers import CPrinter, PythonPrinter, float_literal
 
 POW10_RANGE = (-24, 56)  # powers of ten for the C number formatter: |v| in about 1e-40..1e40
 C_RUNTIME = ("runtime.c", "drive.c", "erk.c", "stiff.c", "main.c", "batch.c")  # bgc/runtime/, in this order
+PY_RUNTIME = ("runtime.py", "main.py", "drive.py", "erk.py", "stiff.py", "batch.py")  # the same:
+#   the parts of the Python runtime, one module (python_runtime), each named after its C twin
 COPY_RUN = 64  # C: at least this many copies in a row (out[i] = x[j], ...) become one loop
 PARAMETER_CHUNK = 256  # C: lines of the parameters' defaults or constants in one function
 FUNCTION_LINES = 500  # C: lines of a model function's chunk in one function (emit._line_chunks)
@@ -826,10 +828,21 @@ def c_runtime_parts() -> dict[str, str]:
 
 def python_runtime() -> str:
     """The model-independent start of a generated Python module, after its docstring: the
-    runtime (bgc/runtime/runtime.py, verbatim: a module of its own, whose contract with the
-    model part heads it) and the solver tables; the model part follows and replaces the
-    runtime's neutral model names."""
-    return _runtime_text("runtime.py") + "\n\n" + solver_tables_python()
+    runtime (the parts PY_RUNTIME lists, each less its header, joined by two blank lines: one
+    module, whose contract with the model part heads it) and the solver tables; the model part
+    follows and replaces the runtime's neutral model names."""
+    return "\n\n".join([runtime_body(_runtime_text(f)) for f in PY_RUNTIME]
+                       + [solver_tables_python()])
+
+
+def runtime_body(text: str) -> str:
+    """A part of the Python runtime (bgc/runtime/*.py) less its header: the comment lines up to
+    the first blank line, which say what the part is and name its C twin."""
+    header, blank, body = text.partition("\n\n")
+    if not blank or not all(line.startswith("#") for line in header.split("\n")):
+        raise ValueError("a part of the Python runtime starts with a header of comment lines, "
+                         "then a blank line")
+    return body
 
 
 def _runtime_text(name: str) -> str:

@@ -43,7 +43,7 @@ MAX_IMPACT_ROWS = 3  # rows that take part in one impact, solved symbolically
 REST = sp.Float(1e-6)  # a rebound below this fraction of the largest impact speed stays put
 EPS = sp.Float(2.0 ** -52)  # a double's epsilon
 LOCATED = sp.Float(1e-12)  # a located state event's resolution in t, relative to t (the step
-#                            drivers' bgc_find_event, runtime.py's _find_event)
+#                            drivers' bgc_find_event, drive.py's _find_event)
 
 
 def _magnitude(e) -> sp.Expr:

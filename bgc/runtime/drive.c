@@ -7,20 +7,22 @@
    after a failed attempt, the switch of `auto` to its stiff phase, and the statistics.
    Adding a method is an entry in bgc/solvers.py plus, for a new family, a bgc_family.
 
-   The contract of a family (bgc_family below), in the order the driver calls it:
-     start     its state at (r->t, y): evaluations at the first point and, for an adaptive
-               run, the first step size (r->h if the run goes on from an earlier one, else
-               bgc_initial_step at the moment its evaluations call for);
-     step      one attempt from (t, y) over h to tph (tph is exactly t_end on the last step):
-               y1 and an outcome (accepted with the controller's next h; rejected by the error
-               test, or failed, with the h to retry; the same step again; or the end of the
-               run with a message);
-     accepted  after the driver has counted the step, before its outputs (FSAL stages);
-     dense     the state at t + theta h of the step just accepted (prepare: once, before the
-               first output time inside the step);
-     after     after the outputs, with y1 the new point: evaluations there, the stiffness test;
-     next_h    the next step once the driver has bounded it (a family may keep h);
-     finish    its state freed.
+   The contract of a family, bgc_family below, is written once for both runtimes: the numbered
+   list on the Python runtime's family type, _Family (bgc/runtime/drive.py), which erk.c and
+   stiff.c cite as "contract item N".  bgc_family's members, in the order the driver calls
+   them:
+     start     items 1 and 2: the family's state at (r->t, y), NULL with *rc and the message
+               set if that fails; *h, the first step of an adaptive run;
+     step      item 3 (and 4, the error estimate; 9, the Jacobian): the attempt's outcome in
+               a bgc_outcome, BGC_STEP_END with rc and the message for a failure that ends
+               the run (item 11), the error estimate's worst component in o->worst;
+     accepted  item 5;
+     prepare, dense  item 6 (prepare once per step, before its first dense value);
+     after     item 7 (BGC_STIFF: the stiffness test fired);
+     next_h    item 8;
+     finish    its state freed (item 1: after an event, finish then start);
+     span_grid item 12.
+   A NULL member does nothing (next_h: the controller's step is taken; dense: none).
    A located event (the hybrid models' hook) will end an accepted step early at t* in
    (t, tph]: the driver hands on the outputs up to t*, takes the dense output there as the new
    point, applies the event's resets and starts the family afresh (finish, then start), so

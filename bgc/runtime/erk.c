@@ -1,7 +1,9 @@
 /* ================================================================ erk === */
 /* The explicit Runge-Kutta family, read from the tables of bgc/solvers.py above: the
    fixed-step methods (bgc_family_fixed) and the embedded pairs (bgc_family_erk), as steps
-   for the driver (drive.c). */
+   for the driver (drive.c).  Each keeps the family contract, the numbered list on the Python
+   runtime's _Family (bgc/runtime/drive.py; its twins there are _FixedSteps and _Erk in
+   bgc/runtime/erk.py): the items cited below are that list's. */
 
 /* out = y + h * sum_j w[j * stride] k_j over the stages j < count with a nonzero weight
    (y NULL: out = h * sum); summed stage by stage, left to right, as the Python runtime does.
@@ -94,7 +96,8 @@ static bgc_erk_state *bgc_erk_new(bgc_run *r, int *rc)
 /* ---------------------------------------------------------------- fixed step --- */
 
 /* The fixed-step methods: each step from f(t, y) afresh (no error estimate, no dense output:
-   the driver lands a step on every output time). */
+   the driver lands a step on every output time, span_grid 0, contract items 6 and 12; a
+   failure ends the run, item 11). */
 static void *bgc_fixed_start(bgc_run *r, const double *y, double *h, int *rc)
 {
     (void)y;
@@ -142,7 +145,8 @@ static const bgc_family bgc_family_fixed = {
    y(theta) = y + theta (q_0 + theta (q_1 + ...)).  On fixed steps (s->step > 0) without
    error control, to measure a method's order or its stability at a given step.  With
    r->detect_stiffness, Hairer's stiffness test ends the phase with BGC_STIFF once it has
-   fired on 15 accepted steps. */
+   fired on 15 accepted steps.  bgc_erk_start: the state, f at the first point and the first
+   step (contract items 1 and 2). */
 static void *bgc_erk_start(bgc_run *r, const double *y, double *h, int *rc)
 {
     enum { D = BGC_DIM(BGC_NUM_STATES) };
@@ -160,7 +164,7 @@ static void *bgc_erk_start(bgc_run *r, const double *y, double *h, int *rc)
 }
 
 /* Hairer's error norm: RMS of err_i / (atol + rtol * max(|y_i|, |y1_i|)); DOP853 combines
-   its two estimates.  *worst: the component with the largest share. */
+   its two estimates.  *worst: the component with the largest share (contract item 4). */
 static double bgc_erk_error(bgc_erk_state *e, const bgc_settings *s, double h, const double *y,
                             const double *y1)
 {
@@ -193,7 +197,8 @@ static double bgc_erk_error(bgc_erk_state *e, const bgc_settings *s, double h, c
     return sqrt(err / (double)N);
 }
 
-/* A failed attempt: a step much smaller (or, on fixed steps, the end of the run). */
+/* A failed attempt: a step much smaller (or, on fixed steps, the end of the run; contract
+   items 3 and 11). */
 static void bgc_erk_retry(bgc_erk_state *e, bgc_run *r, double h, double tph, const double *y1,
                           int block, bgc_outcome *o)
 {
@@ -220,6 +225,8 @@ static void bgc_erk_retry(bgc_erk_state *e, bgc_run *r, double h, double tph, co
     }
 }
 
+/* One attempt (contract item 3): the stages, y1, the error estimate and Hairer's step-size
+   controller with Lund's stabilisation (beta). */
 static void bgc_erk_step(void *state, bgc_run *r, double t, double h, double tph,
                          const double *y, double *y1, bgc_outcome *o)
 {
@@ -274,7 +281,8 @@ static void bgc_erk_step(void *state, bgc_run *r, double t, double h, double tph
     }
 }
 
-/* The last stage f(t + h, y1) of an FSAL pair whose estimate does not use it. */
+/* The last stage f(t + h, y1) of an FSAL pair whose estimate does not use it (contract
+   item 5). */
 static int bgc_erk_accepted(void *state, bgc_run *r, double tph, const double *y1)
 {
     enum { D = BGC_DIM(BGC_NUM_STATES) };
@@ -288,6 +296,7 @@ static int bgc_erk_accepted(void *state, bgc_run *r, double tph, const double *y
     return 0;
 }
 
+/* The dense output (contract item 6): the extra stages and the q_d once, then y(theta). */
 static int bgc_erk_prepare(void *state)
 {
     enum { D = BGC_DIM(BGC_NUM_STATES) };
@@ -320,8 +329,9 @@ static void bgc_erk_dense(const void *state, double theta, double *yout)
     }
 }
 
-/* After the outputs: Hairer's stiffness test, h |f(Y_i) - f(Y_j)| / |Y_i - Y_j| for two
-   stages at the same time, then f at the new point (the FSAL stage, or evaluated). */
+/* After the outputs (contract item 7): Hairer's stiffness test, h |f(Y_i) - f(Y_j)| /
+   |Y_i - Y_j| for two stages at the same time, then f at the new point (the FSAL stage, or
+   evaluated). */
 static int bgc_erk_after(void *state, bgc_run *r, double tph, const double *y1, int last)
 {
     enum { N = BGC_NUM_STATES, D = BGC_DIM(BGC_NUM_STATES) };

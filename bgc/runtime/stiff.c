@@ -4,7 +4,10 @@
    (RADAU5's and RADAU's design), both with the Jacobian
    that bgc_jacobian derives symbolically and dense LU factorisations of their own (below); on
    a large sparse model (bgc_jac_lu->n > 0) with J's structural values and the sparse LU the
-   compiler planned (bgc_splu_*, bgc_smat_*). */
+   compiler planned (bgc_splu_*, bgc_smat_*).  Each keeps the family contract, the numbered
+   list on the Python runtime's _Family (bgc/runtime/drive.py; its twins there are _Rosenbrock
+   and _Radau in bgc/runtime/stiff.py): the items cited below are that list's (item 9 is the
+   Jacobian's use). */
 #include <complex.h>
 #undef I /* C99 7.3.1: the program may undefine it */
 #undef complex
@@ -17,7 +20,7 @@ typedef double _Complex bgc_cplx;
    as gcc compiles it, (ac - bd) + i(ad + bc) with Annex G's recovery of infinities that came
    out as NaN + iNaN (libgcc's __muldc3), the quotient as libgcc's __divdc3 of GCC 12 and later
    (Smith's method, scaled).  With gcc these are the bits of its own `*` and `/`; the Python
-   runtime does the same operations (_muldc3, _divdc3 in runtime.py). */
+   runtime does the same operations (_muldc3, _divdc3 in stiff.py). */
 
 /* re + i im, exactly (C99 has no CMPLX; a complex is an array of its two parts, 6.2.5). */
 static bgc_cplx bgc_cmake(double re, double im)
@@ -434,7 +437,8 @@ static void bgc_stiff_end(bgc_outcome *o, int rc)
    control, outputs by the dense output y(theta) = (1 - theta) y0 + theta (y1 + (1 - theta)
    (q_1 + theta (q_2 + ... + theta q_R))), q_r = sum_j H_rj k_j (formed when first needed).
    A singular E, a failed block or a non-finite stage halve the step.  On fixed steps: no
-   error control, and those failures end the run. */
+   error control, and those failures end the run.  J at every new point (contract items 2, 7
+   and 9). */
 typedef struct bgc_ros_state {
     bgc_run *r;
     const bgc_rosenbrock *m;
@@ -592,6 +596,8 @@ static double bgc_ros_solution(bgc_ros_state *ms, const bgc_settings *s, const d
     return bgc_stiff_norm(s, q2, q3, &ms->worst);
 }
 
+/* One attempt (contract item 3): E factored, the stages, y1 and the error, Gustafsson's
+   controller. */
 static void bgc_ros_step(void *state, bgc_run *r, double t, double h, double tph,
                          const double *y, double *y1, bgc_outcome *o)
 {
@@ -670,6 +676,7 @@ static void bgc_ros_step(void *state, bgc_run *r, double t, double h, double tph
     }
 }
 
+/* The dense output (contract item 6): the q_r once, then y(theta). */
 static int bgc_ros_prepare(void *state)
 {
     enum { N = BGC_NUM_STATES, D = BGC_DIM(BGC_NUM_STATES) };
@@ -704,7 +711,7 @@ static void bgc_ros_dense(const void *state, double theta, double *yout)
     }
 }
 
-/* The new point's evaluations (none after the run's last step). */
+/* The new point's evaluations (none after the run's last step; contract item 7). */
 static int bgc_ros_after(void *state, bgc_run *r, double tph, const double *y1, int last)
 {
     return last ? 0 : bgc_ros_point(state, r, tph, y1);
@@ -910,6 +917,8 @@ static void bgc_radau_scale(bgc_radau_state *ms, const double *y)
         ms->scal[l] = ms->u.atol + ms->u.rtol * fabs(y[l]);
 }
 
+/* The state, f and Newton's weights at the first point and the first step (contract items 1
+   and 2; J comes with the first attempt, item 9). */
 static void *bgc_radau_start(bgc_run *r, const double *y, double *h, int *rc)
 {
     const bgc_method *method = r->method;
@@ -1242,6 +1251,8 @@ static void bgc_radau_control(bgc_radau_state *ms, double h, double err, const d
     o->kind = BGC_STEP_ACCEPT;
 }
 
+/* One attempt (contract item 3): J if it is due (item 9), the order, the factorisations when
+   h or J changed, Newton's iteration, the error estimate and the step control. */
 static void bgc_radau_step(void *state, bgc_run *r, double t, double h, double tph,
                            const double *y, double *y1, bgc_outcome *o)
 {
@@ -1307,6 +1318,7 @@ static void bgc_radau_step(void *state, bgc_run *r, double t, double h, double t
     bgc_radau_control(ms, h, err, y, y1, o);
 }
 
+/* The dense output (contract item 6): y0 plus the collocation polynomial. */
 static void bgc_radau_dense(const void *state, double theta, double *yout)
 {
     const bgc_radau_state *ms = state;
@@ -1315,7 +1327,8 @@ static void bgc_radau_dense(const void *state, double theta, double *yout)
         yout[l] = ms->y[l] + bgc_radau_u(ms->dm, ms->b, l, theta);
 }
 
-/* The new point: its weights and f (after the run's last step, the order to go on with). */
+/* The new point: its weights and f (after the run's last step, the order to go on with;
+   contract items 7 and 10). */
 static int bgc_radau_after(void *state, bgc_run *r, double tph, const double *y1, int last)
 {
     bgc_radau_state *ms = state;
@@ -1332,7 +1345,8 @@ static int bgc_radau_after(void *state, bgc_run *r, double tph, const double *y1
 }
 
 /* h is kept (and the factorisations with it) while the controller asks for at most 20 %
-   more and Newton converged fast; J is recomputed when it converged slowly. */
+   more and Newton converged fast; J is recomputed when it converged slowly (contract items 8
+   and 9). */
 static void bgc_radau_next_h(void *state, double h, double *hnew)
 {
     bgc_radau_state *ms = state;

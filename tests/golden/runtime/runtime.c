@@ -1338,20 +1338,22 @@ int bgc_check_settings(const bgc_settings *s, char *msg, size_t msg_size)
    after a failed attempt, the switch of `auto` to its stiff phase, and the statistics.
    Adding a method is an entry in bgc/solvers.py plus, for a new family, a bgc_family.
 
-   The contract of a family (bgc_family below), in the order the driver calls it:
-     start     its state at (r->t, y): evaluations at the first point and, for an adaptive
-               run, the first step size (r->h if the run goes on from an earlier one, else
-               bgc_initial_step at the moment its evaluations call for);
-     step      one attempt from (t, y) over h to tph (tph is exactly t_end on the last step):
-               y1 and an outcome (accepted with the controller's next h; rejected by the error
-               test, or failed, with the h to retry; the same step again; or the end of the
-               run with a message);
-     accepted  after the driver has counted the step, before its outputs (FSAL stages);
-     dense     the state at t + theta h of the step just accepted (prepare: once, before the
-               first output time inside the step);
-     after     after the outputs, with y1 the new point: evaluations there, the stiffness test;
-     next_h    the next step once the driver has bounded it (a family may keep h);
-     finish    its state freed.
+   The contract of a family, bgc_family below, is written once for both runtimes: the numbered
+   list on the Python runtime's family type, _Family (bgc/runtime/drive.py), which erk.c and
+   stiff.c cite as "contract item N".  bgc_family's members, in the order the driver calls
+   them:
+     start     items 1 and 2: the family's state at (r->t, y), NULL with *rc and the message
+               set if that fails; *h, the first step of an adaptive run;
+     step      item 3 (and 4, the error estimate; 9, the Jacobian): the attempt's outcome in
+               a bgc_outcome, BGC_STEP_END with rc and the message for a failure that ends
+               the run (item 11), the error estimate's worst component in o->worst;
+     accepted  item 5;
+     prepare, dense  item 6 (prepare once per step, before its first dense value);
+     after     item 7 (BGC_STIFF: the stiffness test fired);
+     next_h    item 8;
+     finish    its state freed (item 1: after an event, finish then start);
+     span_grid item 12.
+   A NULL member does nothing (next_h: the controller's step is taken; dense: none).
    A located event (the hybrid models' hook) will end an accepted step early at t* in
    (t, tph]: the driver hands on the outputs up to t*, takes the dense output there as the new
    point, applies the event's resets and starts the family afresh (finish, then start), so
@@ -2613,7 +2615,9 @@ int bgc_advance(const bgc_settings *s, const bgc_params *p, bgc_work *w, double 
 /* ================================================================ erk === */
 /* The explicit Runge-Kutta family, read from the tables of bgc/solvers.py above: the
    fixed-step methods (bgc_family_fixed) and the embedded pairs (bgc_family_erk), as steps
-   for the driver (drive.c). */
+   for the driver (drive.c).  Each keeps the family contract, the numbered list on the Python
+   runtime's _Family (bgc/runtime/drive.py; its twins there are _FixedSteps and _Erk in
+   bgc/runtime/erk.py): the items cited below are that list's. */
 
 /* out = y + h * sum_j w[j * stride] k_j over the stages j < count with a nonzero weight
    (y NULL: out = h * sum); summed stage by stage, left to right, as the Python runtime does.
@@ -2706,7 +2710,8 @@ static bgc_erk_state *bgc_erk_new(bgc_run *r, int *rc)
 /* ---------------------------------------------------------------- fixed step --- */
 
 /* The fixed-step methods: each step from f(t, y) afresh (no error estimate, no dense output:
-   the driver lands a step on every output time). */
+   the driver lands a step on every output time, span_grid 0, contract items 6 and 12; a
+   failure ends the run, item 11). */
 static void *bgc_fixed_start(bgc_run *r, const double *y, double *h, int *rc)
 {
     (void)y;
@@ -2754,7 +2759,8 @@ static const bgc_family bgc_family_fixed = {
    y(theta) = y + theta (q_0 + theta (q_1 + ...)).  On fixed steps (s->step > 0) without
    error control, to measure a method's order or its stability at a given step.  With
    r->detect_stiffness, Hairer's stiffness test ends the phase with BGC_STIFF once it has
-   fired on 15 accepted steps. */
+   fired on 15 accepted steps.  bgc_erk_start: the state, f at the first point and the first
+   step (contract items 1 and 2). */
 static void *bgc_erk_start(bgc_run *r, const double *y, double *h, int *rc)
 {
     enum { D = BGC_DIM(BGC_NUM_STATES) };
@@ -2772,7 +2778,7 @@ static void *bgc_erk_start(bgc_run *r, const double *y, double *h, int *rc)
 }
 
 /* Hairer's error norm: RMS of err_i / (atol + rtol * max(|y_i|, |y1_i|)); DOP853 combines
-   its two estimates.  *worst: the component with the largest share. */
+   its two estimates.  *worst: the component with the largest share (contract item 4). */
 static double bgc_erk_error(bgc_erk_state *e, const bgc_settings *s, double h, const double *y,
                             const double *y1)
 {
@@ -2805,7 +2811,8 @@ static double bgc_erk_error(bgc_erk_state *e, const bgc_settings *s, double h, c
     return sqrt(err / (double)N);
 }
 
-/* A failed attempt: a step much smaller (or, on fixed steps, the end of the run). */
+/* A failed attempt: a step much smaller (or, on fixed steps, the end of the run; contract
+   items 3 and 11). */
 static void bgc_erk_retry(bgc_erk_state *e, bgc_run *r, double h, double tph, const double *y1,
                           int block, bgc_outcome *o)
 {
@@ -2832,6 +2839,8 @@ static void bgc_erk_retry(bgc_erk_state *e, bgc_run *r, double h, double tph, co
     }
 }
 
+/* One attempt (contract item 3): the stages, y1, the error estimate and Hairer's step-size
+   controller with Lund's stabilisation (beta). */
 static void bgc_erk_step(void *state, bgc_run *r, double t, double h, double tph,
                          const double *y, double *y1, bgc_outcome *o)
 {
@@ -2886,7 +2895,8 @@ static void bgc_erk_step(void *state, bgc_run *r, double t, double h, double tph
     }
 }
 
-/* The last stage f(t + h, y1) of an FSAL pair whose estimate does not use it. */
+/* The last stage f(t + h, y1) of an FSAL pair whose estimate does not use it (contract
+   item 5). */
 static int bgc_erk_accepted(void *state, bgc_run *r, double tph, const double *y1)
 {
     enum { D = BGC_DIM(BGC_NUM_STATES) };
@@ -2900,6 +2910,7 @@ static int bgc_erk_accepted(void *state, bgc_run *r, double tph, const double *y
     return 0;
 }
 
+/* The dense output (contract item 6): the extra stages and the q_d once, then y(theta). */
 static int bgc_erk_prepare(void *state)
 {
     enum { D = BGC_DIM(BGC_NUM_STATES) };
@@ -2932,8 +2943,9 @@ static void bgc_erk_dense(const void *state, double theta, double *yout)
     }
 }
 
-/* After the outputs: Hairer's stiffness test, h |f(Y_i) - f(Y_j)| / |Y_i - Y_j| for two
-   stages at the same time, then f at the new point (the FSAL stage, or evaluated). */
+/* After the outputs (contract item 7): Hairer's stiffness test, h |f(Y_i) - f(Y_j)| /
+   |Y_i - Y_j| for two stages at the same time, then f at the new point (the FSAL stage, or
+   evaluated). */
 static int bgc_erk_after(void *state, bgc_run *r, double tph, const double *y1, int last)
 {
     enum { N = BGC_NUM_STATES, D = BGC_DIM(BGC_NUM_STATES) };
@@ -2979,7 +2991,10 @@ static const bgc_family bgc_family_erk = {
    (RADAU5's and RADAU's design), both with the Jacobian
    that bgc_jacobian derives symbolically and dense LU factorisations of their own (below); on
    a large sparse model (bgc_jac_lu->n > 0) with J's structural values and the sparse LU the
-   compiler planned (bgc_splu_*, bgc_smat_*). */
+   compiler planned (bgc_splu_*, bgc_smat_*).  Each keeps the family contract, the numbered
+   list on the Python runtime's _Family (bgc/runtime/drive.py; its twins there are _Rosenbrock
+   and _Radau in bgc/runtime/stiff.py): the items cited below are that list's (item 9 is the
+   Jacobian's use). */
 #include <complex.h>
 #undef I /* C99 7.3.1: the program may undefine it */
 #undef complex
@@ -2992,7 +3007,7 @@ typedef double _Complex bgc_cplx;
    as gcc compiles it, (ac - bd) + i(ad + bc) with Annex G's recovery of infinities that came
    out as NaN + iNaN (libgcc's __muldc3), the quotient as libgcc's __divdc3 of GCC 12 and later
    (Smith's method, scaled).  With gcc these are the bits of its own `*` and `/`; the Python
-   runtime does the same operations (_muldc3, _divdc3 in runtime.py). */
+   runtime does the same operations (_muldc3, _divdc3 in stiff.py). */
 
 /* re + i im, exactly (C99 has no CMPLX; a complex is an array of its two parts, 6.2.5). */
 static bgc_cplx bgc_cmake(double re, double im)
@@ -3409,7 +3424,8 @@ static void bgc_stiff_end(bgc_outcome *o, int rc)
    control, outputs by the dense output y(theta) = (1 - theta) y0 + theta (y1 + (1 - theta)
    (q_1 + theta (q_2 + ... + theta q_R))), q_r = sum_j H_rj k_j (formed when first needed).
    A singular E, a failed block or a non-finite stage halve the step.  On fixed steps: no
-   error control, and those failures end the run. */
+   error control, and those failures end the run.  J at every new point (contract items 2, 7
+   and 9). */
 typedef struct bgc_ros_state {
     bgc_run *r;
     const bgc_rosenbrock *m;
@@ -3567,6 +3583,8 @@ static double bgc_ros_solution(bgc_ros_state *ms, const bgc_settings *s, const d
     return bgc_stiff_norm(s, q2, q3, &ms->worst);
 }
 
+/* One attempt (contract item 3): E factored, the stages, y1 and the error, Gustafsson's
+   controller. */
 static void bgc_ros_step(void *state, bgc_run *r, double t, double h, double tph,
                          const double *y, double *y1, bgc_outcome *o)
 {
@@ -3645,6 +3663,7 @@ static void bgc_ros_step(void *state, bgc_run *r, double t, double h, double tph
     }
 }
 
+/* The dense output (contract item 6): the q_r once, then y(theta). */
 static int bgc_ros_prepare(void *state)
 {
     enum { N = BGC_NUM_STATES, D = BGC_DIM(BGC_NUM_STATES) };
@@ -3679,7 +3698,7 @@ static void bgc_ros_dense(const void *state, double theta, double *yout)
     }
 }
 
-/* The new point's evaluations (none after the run's last step). */
+/* The new point's evaluations (none after the run's last step; contract item 7). */
 static int bgc_ros_after(void *state, bgc_run *r, double tph, const double *y1, int last)
 {
     return last ? 0 : bgc_ros_point(state, r, tph, y1);
@@ -3885,6 +3904,8 @@ static void bgc_radau_scale(bgc_radau_state *ms, const double *y)
         ms->scal[l] = ms->u.atol + ms->u.rtol * fabs(y[l]);
 }
 
+/* The state, f and Newton's weights at the first point and the first step (contract items 1
+   and 2; J comes with the first attempt, item 9). */
 static void *bgc_radau_start(bgc_run *r, const double *y, double *h, int *rc)
 {
     const bgc_method *method = r->method;
@@ -4217,6 +4238,8 @@ static void bgc_radau_control(bgc_radau_state *ms, double h, double err, const d
     o->kind = BGC_STEP_ACCEPT;
 }
 
+/* One attempt (contract item 3): J if it is due (item 9), the order, the factorisations when
+   h or J changed, Newton's iteration, the error estimate and the step control. */
 static void bgc_radau_step(void *state, bgc_run *r, double t, double h, double tph,
                            const double *y, double *y1, bgc_outcome *o)
 {
@@ -4282,6 +4305,7 @@ static void bgc_radau_step(void *state, bgc_run *r, double t, double h, double t
     bgc_radau_control(ms, h, err, y, y1, o);
 }
 
+/* The dense output (contract item 6): y0 plus the collocation polynomial. */
 static void bgc_radau_dense(const void *state, double theta, double *yout)
 {
     const bgc_radau_state *ms = state;
@@ -4290,7 +4314,8 @@ static void bgc_radau_dense(const void *state, double theta, double *yout)
         yout[l] = ms->y[l] + bgc_radau_u(ms->dm, ms->b, l, theta);
 }
 
-/* The new point: its weights and f (after the run's last step, the order to go on with). */
+/* The new point: its weights and f (after the run's last step, the order to go on with;
+   contract items 7 and 10). */
 static int bgc_radau_after(void *state, bgc_run *r, double tph, const double *y1, int last)
 {
     bgc_radau_state *ms = state;
@@ -4307,7 +4332,8 @@ static int bgc_radau_after(void *state, bgc_run *r, double tph, const double *y1
 }
 
 /* h is kept (and the factorisations with it) while the controller asks for at most 20 %
-   more and Newton converged fast; J is recomputed when it converged slowly. */
+   more and Newton converged fast; J is recomputed when it converged slowly (contract items 8
+   and 9). */
 static void bgc_radau_next_h(void *state, double h, double *hnew)
 {
     bgc_radau_state *ms = state;

@@ -1,14 +1,15 @@
 # ====================================================================== runtime ===
-# bgc's Python runtime: model-independent, the same in every generated module.  This file is a
-# module of its own (imported by the tests, linted) and the text bgc.emit.python_runtime()
-# inlines verbatim, so a generated module stays one file that needs only numpy.  A generated
-# module is, in order: its docstring, this file, the solver tables (_METHODS, SOLVERS,
-# _SOLVER_LIST, printed from bgc/solvers.py), the model part (templates/python_module.py.j2),
-# then `_bind_model()` and the `main()` call.  The model part comes after the runtime so that
-# its definitions replace the neutral ones below by ordinary rebinding of module globals: the
-# solver path reads _N, _rhs, ... as plain globals, as fast as if the runtime had none.  The
-# runtime is the C runtime's api.h contract in Python and does the C runtime's arithmetic in
-# the same order (docs/architecture.md, "Byte parity").
+# bgc's Python runtime: model-independent, the same in every generated module.  Its parts,
+# bgc/runtime/*.py joined (runtime.py first), are one module, imported by the tests and linted,
+# and the text bgc.codegen.emit.python_runtime() inlines verbatim, so a generated module stays
+# one file that needs only numpy.  A generated module is, in order: its docstring, the
+# runtime, the solver tables (_METHODS, SOLVERS, _SOLVER_LIST, printed from bgc/solvers.py),
+# the model part (templates/python_module.py.j2), then `_bind_model()` and the `main()` call.
+# The model part comes after the runtime so that its definitions replace the neutral ones
+# below by ordinary rebinding of module globals: the solver path reads _N, _rhs, ... as plain
+# globals, as fast as if the runtime had none.  The runtime is the C runtime's api.h contract
+# in Python and does the C runtime's arithmetic in the same order (docs/architecture.md, "Byte
+# parity").
 #
 # ---------------------------------------------------------------- the contract
 # (a) What the model part provides (each defined below with a neutral value: a model of no
@@ -1515,12 +1516,10 @@ def main(argv=None):
     return 0
 
 
-# ================================================================== solve ===
-# The step driver (_drive, as bgc_drive in the C runtime's drive.c: see there for the
-# contract between the driver and a method family), the explicit Runge-Kutta families (read
-# from _METHODS, printed from bgc/solvers.py) and _integrate; the stiff families follow
-# (section stiff).  The explicit solvers keep small states as lists and large ones as
-# numpy vectors (see _LIST_STATES); the arithmetic is the C runtime's, in the same order.
+# ================================================================== drive ===
+# The step driver (_drive, as bgc_drive in the C runtime's drive.c; the contract between the
+# driver and a method family is _Family's docstring) and the run of a solver (_integrate); the
+# families follow (erk.py, stiff.py).  The arithmetic is the C runtime's, in the same order.
 
 def _output_count(s):
     """As bgc_output_count: at least 1 when t_end > t0, so that t0 and t_end are rows whatever
@@ -2159,12 +2158,335 @@ def _initial_step(run, q, y, f0, hmax):
     return min(min(100.0 * h, h1), hmax)
 
 
-# ---------------------------------------------------------------- explicit Runge-Kutta
-# An explicit step's cost beside the model's right side is a few vector operations per
-# stage.  On a handful of states a numpy call costs more than a list comprehension over the
-# whole vector, so the explicit solvers keep their states as lists up to _LIST_STATES states
-# and as numpy vectors above; both kits compute the same values in the same order as the C
-# runtime (bgc_combine: stage by stage, left to right).
+def _substeps(span, h):
+    r = span / h
+    if not r < 1e15:
+        return -1
+    m = math.ceil(r - 1e-6)
+    return 1 if m < 1 else m
+
+
+# ---------------------------------------------------------------- the step driver
+# The driver and the family type: a family is a subclass of _Family, whose docstring is the
+# contract between them (both runtimes'); a step's outcomes, as drive.c's BGC_STEP_*:
+
+_ACCEPT, _REJECT, _RETRY, _AGAIN = 0, 1, 2, 3
+
+
+def _fail_small(run, t, h, bad, bad_kind, failure, worst):
+    """A step size below _hmin: the message names what made the steps shrink."""
+    if bad == -2:
+        return _block_failed(failure)
+    if bad in (-3, -4):
+        what = ("the iteration matrix is singular" if bad == -3
+                else "the Newton iteration does not converge")
+        return _Failure("at t = %.17g: %s: %s (step size down to h = %.3g)"
+                        % (t, run.name, what, h), t)
+    if bad >= 0:
+        return _fail(t, bad_kind, STATES[bad])
+    return _fail_step(t, h, worst)
+
+
+class _Grid:
+    """Where a fixed-step run is: the k-th of n steps from ta to tb (the run's end on a span
+    grid, else the output interval's)."""
+
+    def __init__(self, run, span):
+        s = run.s
+        self.run, self.span = run, span
+        self.step = s.step if s.step > 0.0 else s.dt
+        if 0.0 < s.hmax < self.step:  # --max-step bounds a fixed step too
+            self.step = s.hmax
+        self.ta = self.tb = 0.0
+        self.k = self.n = 0
+
+    def next(self, t):
+        """The next step's end from t and whether it is the run's last."""
+        run = self.run
+        if self.k >= self.n:
+            self.ta, self.k = t, 0
+            self.tb = run.s.t_end if self.span else _output_time(run.s, run.kout, run.nout)
+            self.n = _substeps(self.tb - self.ta, self.step)
+            if self.n < 0:
+                raise _fail_step(t, self.step, -1)
+        end = self.k + 1 >= self.n
+        tph = self.tb if end else self.ta + (self.k + 1) * self.step
+        last = end and (self.span or run.kout >= run.nout)
+        if not self.span:  # each step from its grid point (the same value as the last end)
+            t = self.ta + self.k * self.step
+        if not tph - t >= _hmin(t):
+            raise _fail_step(t, tph - t, -1)
+        return tph, last
+
+
+def _hmax(s):
+    """bgc_hmax: the run's span, and --max-step if set."""
+    span = s.t_end - s.t0
+    return min(span, s.hmax) if s.hmax > 0.0 else span
+
+
+def _drive(run, family, y):
+    """One family's run from (run.t, y) to s.t_end: yields the rows as it passes them, keeps
+    run.t and run.y at the last accepted step; raises _Failure, or _Stiff (run.h: the
+    explicit phase's next step)."""
+    s, st = run.s, run.st
+    if run.kout > run.nout:
+        return
+    hmax = _hmax(s)
+    events = bool(_DISCRETE_NAMES)
+    fam = family(run)
+    h = fam.start(y)
+    t = run.t
+    reject = last = False
+    bad, bad_kind, failure, wanted = -1, "", None, 0.0
+    grid = _Grid(run, fam.span_grid)
+    at_event = False
+    while True:
+        if run.t_next - t <= _hmin(t):  # a time event closer than a step can be
+            t, at_event = run.t_next, True
+        if at_event:  # the event at (t, y); the method starts afresh after it
+            at_event = False
+            x = _as_list(y)
+            yield from _after_event(run, t, x)
+            y = x if isinstance(y, list) else numpy.array(x, dtype=float)
+            run.y = y
+            if t >= s.t_end or run.kout > run.nout:
+                return
+            run.h = 0.0
+            fam = family(run)
+            h = fam.start(y)
+            grid.k = grid.n  # a new grid from the event
+            reject = last = False
+            bad = -1
+            continue
+        if run.fixed:
+            tph, last = grid.next(t)
+            if run.t_next < tph:  # a time event inside: the step ends on it
+                tph, last = run.t_next, False
+            h = tph - t
+        else:
+            if not h >= _hmin(t):
+                raise _fail_small(run, t, h, bad, bad_kind, failure, fam.worst)
+            wanted = h
+            if run.t_next < s.t_end and t + 1.01 * h - run.t_next > 0.0:
+                h = run.t_next - t  # onto the time event
+                tph = run.t_next
+            else:
+                if t + 1.01 * h - s.t_end > 0.0:
+                    h = s.t_end - t
+                    last = True
+                tph = s.t_end if last else t + h
+        outcome, y1, hnew, why = fam.step(t, h, tph, y)
+        if outcome == _AGAIN:
+            continue
+        if outcome != _ACCEPT:
+            if outcome == _RETRY:
+                bad, bad_kind, failure = why
+            reject, last = True, False
+            st["rejected"] += 1
+            h = hnew
+            continue
+        i = _first_nonfinite(y1)
+        if i >= 0:
+            raise _fail(tph, "state", STATES[i])
+        _accept(run, tph)
+        fam.accepted(tph, y1)
+        c = _Dense(run, fam.dense, t, h, tph, y, y1)
+        if events:
+            found = _find_event(run, c)
+            if found is not None:  # the step ends at the event
+                te, ye = found
+                yield from run.emit_step(c, te, False)
+                y = ye if isinstance(y, list) else numpy.array(ye, dtype=float)
+                t, at_event = te, True
+                continue
+        yield from run.emit_step(c, tph)
+        y, t = y1, tph
+        run.t, run.y = t, y
+        grid.k += 1
+        if fam.after(tph, y1, last):
+            run.h = hnew
+            raise _Stiff()
+        if last:
+            if not run.fixed:  # the step to go on with: the controller's, or the one cut short
+                st["h_next"] = max(hnew, wanted)
+            return
+        if not run.fixed:
+            hnew = min(hnew, hmax)
+        if reject:
+            hnew = min(hnew, h)
+        reject, bad = False, -1
+        h = fam.next_h(h, hnew)
+
+
+class _Family:
+    """A method family: the steps of one kind of method (_FixedSteps and _Erk in erk.py,
+    _Rosenbrock and _Radau in stiff.py) as the step driver, _drive, takes them.  The family
+    contract, written once for both runtimes, in the order the driver calls it (C's
+    bgc_family in drive.c: start is items 1 and 2, step 3, accepted 5, prepare and dense 6,
+    after 7, next_h 8, finish the end of 1; erk.c and stiff.c cite the items).  The driver
+    owns the rest: output times, budgets, the checks of the accepted state, events, the
+    switch of `auto`.
+
+    1. family(run): the family's state for the method run.m (its row of _METHODS: tableau
+       and step control, printed from bgc/solvers.py) on run's settings, with fixed steps
+       when run.fixed (--step, or a fixed-step method).  A new one at the run's start and
+       after every event (C: finish, then start), so a method restarts with no history.
+    2. start(y) -> h: the evaluations the method needs at the first point (run.t, y) (f;
+       Rosenbrock's f, df/dt and J; Radau's f and Newton weights) and the first step of an
+       adaptive run: run.h bounded by _hmax when the run goes on from an earlier phase or
+       run, else Hairer's estimate (_first_step, _initial_step); None on fixed steps.
+    3. step(t, h, tph, y) -> (outcome, y1, hnew, why): one attempt from (t, y) over h to tph
+       (t + h, but exactly the end or the time event on a step cut onto it).  _ACCEPT: y1
+       is the new point, hnew the controller's next step; _REJECT: the error test failed,
+       try hnew; _RETRY: the attempt failed (a non-finite value, an algebraic block, a
+       singular iteration matrix, Newton's iteration), try hnew, and why = (bad, bad_kind,
+       block failure) names the cause if the steps then fall below _hmin (bad >= 0 a
+       non-finite component, bad_kind its kind; -1 the error test, -2 a block, -3 a
+       singular matrix, -4 Newton); _AGAIN: the same step once more, not counted as
+       rejected (Radau on a fixed step, with a fresh Jacobian).  The driver counts the
+       attempt, checks y1 for non-finite values and hands on the accepted step.
+    4. The error estimate is the family's, inside step: Hairer's RMS norm with the weights
+       atol + rtol max(|y_i|, |y1_i|) over the first _error_states(s) states (_weights,
+       _V.error_sums, _stiff_norm; DOP853 combines two estimates, Radau scales rtol and atol
+       as RADAU5 does); the attribute worst (-1: none) keeps the component with the largest
+       share of the last estimate, for the message when the steps become too small.  On
+       fixed steps no error control: an attempt is accepted unless it fails, and a failure
+       ends the run (Radau's Newton iteration first tries once more with a fresh Jacobian).
+    5. accepted(tph, y1): after the driver has counted the step, before its outputs and the
+       event search (an FSAL pair's last stage, when its error estimate does not use it).
+    6. dense() -> at(theta): the state at t + theta h inside the step just accepted, made
+       once, when an output time inside the step or the event search first needs it, valid
+       until the next attempt (C: prepare, then dense).  A family without a dense output
+       (dense None: the fixed-step methods) has a step end on every output time (span_grid
+       False); the event search then uses the cubic Hermite interpolant (_Dense).
+    7. after(tph, y1, last) -> bool: after the outputs, the evaluations at the new point that
+       the next step starts from (f, or an FSAL pair's last stage; Rosenbrock's f, df/dt and
+       J; Radau's f and weights), none after the run's last step; True when Hairer's
+       stiffness test has fired on 15 accepted steps (an explicit pair under
+       run.detect_stiffness: `auto`'s explicit phase), and the driver switches (_Stiff).
+    8. next_h(h, hnew) -> h: the next step, from the controller's hnew once the driver has
+       bounded it (by _hmax, and by h after a rejection); Radau keeps h, and its factored
+       matrices, while hnew is at most 20 % more and Newton converged fast.
+    9. A Jacobian only in the stiff families: J = d rhs / d x, the model's symbolic one
+       (_stiff_jacobian: dense, or its structural values on a large sparse model, _JAC_LU),
+       for Rosenbrock at every new point (items 2 and 7), for Radau at the first attempt,
+       after a step whose Newton iteration contracted slowly and after a failed or rejected
+       attempt unless J is fresh.  Their iteration matrices are factored by the runtime's
+       own LU, C's operations in C's order (_lu, _zlu, _SparseMatrix: stiff.c's
+       bgc_stiff_lu, bgc_stiff_zlu, the sparse LU of bgc_splu).
+    10. Statistics: a family counts its own work in run.st as it goes: rhs for each f, jac,
+       lu, solves, and order_next (Radau's order at the end); the driver counts steps,
+       rejected, h_next, and the events and evaluations of the event search.
+    11. Failures: an algebraic block's failure (_BlockFailure) in an adaptive attempt's stages
+       is a _RETRY (item 3); on fixed steps, in the Jacobian, and in start, accepted, dense
+       and after, it ends the run, as do a non-finite derivative at the first point and the
+       fifth singular iteration matrix in a row: the family raises _Failure (_block_failed,
+       _fail) with the C program's message (C: BGC_STEP_END or a nonzero return, the message
+       in r->msg).
+    12. span_grid (fixed steps only): True, the steps on one grid over the run and the
+       outputs from the dense output; False, each output interval in steps that land on its
+       end.
+
+    The defaults below: span_grid True, worst -1, no dense output, accepted and after doing
+    nothing, next_h taking hnew (C: NULL functions)."""
+
+    span_grid = True
+    worst = -1
+    dense = None  # no output time falls inside a step of a family without a dense output
+
+    def accepted(self, tph, y1):
+        pass
+
+    def after(self, tph, y1, last):
+        return False
+
+    def next_h(self, h, hnew):
+        return hnew
+
+
+# ---------------------------------------------------------------- integrate
+
+
+def _run_solver(run, name):
+    """Runs solver `name` from (run.t, run.y) with the driver."""
+    m = _METHODS[name]
+    family = {"fixed": _FixedSteps, "erk": _Erk, "rosenbrock": _Rosenbrock,
+              "radau": _Radau}.get(m["family"])
+    if family is None:
+        raise ValueError("solver '%s' cannot run by itself" % name)
+    run.m, run.name = m, name
+    run.fixed = run.s.step > 0.0 or m["family"] == "fixed"
+    y = run.y if family in (_FixedSteps, _Erk) else numpy.asarray(run.y, dtype=float)
+    yield from _drive(run, family, y)
+
+
+def _integrate(s, p, x0, st):
+    """Runs the solver: yields the rows (t, outputs) as it computes them; st["cpu"]: the
+    processor seconds it took (the consumer's time between rows excluded)."""
+    cpu = 0.0
+    rows = _integrate_from(s, p, x0, st)
+    try:
+        while True:
+            start = time.process_time()
+            try:
+                row = next(rows)
+            except StopIteration:
+                return
+            finally:
+                cpu += time.process_time() - start
+                st["cpu"] = cpu
+            yield row
+    finally:
+        rows.close()
+
+
+def _integrate_from(s, p, x0, st, w=None):
+    y = numpy.array(x0, dtype=float)
+    i = _first_nonfinite(y)
+    if i >= 0:
+        raise _fail(s.t0, "state", STATES[i])
+    run = _Run(s, p, _Work(s.rtol, s.atol) if w is None else w, st, y)
+    run.w.inputs = s.inputs
+    st["h_next"], st["order_next"] = 0.0, 0
+    if _DISCRETE_NAMES:  # the event iteration at the start (bgc_integrate)
+        w = run.w
+        p[run.doff:] = w.d
+        x = y.tolist()
+        _event_iteration(run, s.t0, x, not w.started)
+        w.started = True
+        _set_next_time(run, s.t0, x)
+        y = run.y = numpy.array(x, dtype=float)
+    try:
+        yield from _integrate_run(run, s, y, st)
+    finally:
+        if _DISCRETE_NAMES:
+            run.w.d = p[run.doff:]
+
+
+def _integrate_run(run, s, y, st):
+    yield from run.emit(s.t0, y)
+    m = _METHODS[s.solver]
+    if m["family"] != "auto":
+        yield from _run_solver(run, s.solver)
+        return
+    run.detect_stiffness = True
+    try:
+        yield from _run_solver(run, m["explicit"])
+    except _Stiff:
+        st["switched"], st["t_switch"] = True, run.t
+        run.detect_stiffness = False
+        yield from _run_solver(run, m["stiff"])
+
+
+# ==================================================================== erk ===
+# The explicit Runge-Kutta families, read from _METHODS (printed from bgc/solvers.py), as
+# erk.c's: the fixed-step methods and the embedded pairs.  An explicit step's cost beside the
+# model's right side is a few vector operations per stage.  On a handful of states a numpy
+# call costs more than a list comprehension over the whole vector, so the explicit solvers
+# keep their states as lists up to _LIST_STATES states and as numpy vectors above; both kits
+# compute the same values in the same order as the C runtime (bgc_combine: stage by stage,
+# left to right).
 
 _LIST_STATES = 48
 
@@ -2327,17 +2649,6 @@ class _ArrayVectors:
 _V = _ListVectors  # the vectors for _N states: lists up to _LIST_STATES (_bind_model)
 
 
-def _combine(weights, K, count):
-    """sum_j weights[j] K[j] over j < count with a nonzero weight, left to right, for numpy
-    vectors K[j] (the stiff solvers)."""
-    acc = numpy.zeros(_N)  # C's acc = 0.0, then acc += a K_j
-    for j in range(count):
-        a = weights[j]
-        if a != 0.0:
-            acc = acc + a * K[j]
-    return acc
-
-
 def _erk_plan(m):
     """The method's _ErkPlan, made once (a run restarts its method at every event)."""
     plan = _ERK_PLANS.get(id(m))
@@ -2362,189 +2673,7 @@ class _ErkPlan:
         self.P = [_weighted(P, len(P), d) for d in range(len(P[0]))] if P else []
 
 
-def _substeps(span, h):
-    r = span / h
-    if not r < 1e15:
-        return -1
-    m = math.ceil(r - 1e-6)
-    return 1 if m < 1 else m
-
-
-# ---------------------------------------------------------------- the step driver
-# A family is a class: __init__(run), start(y) -> the first step (None on a grid), step(t,
-# h, tph, y) -> (outcome, y1, hnew, why), accepted(tph, y1), dense() -> at(theta), after(tph,
-# y1, last) -> True when the stiffness test fired, next_h(h, hnew) -> hnew, span_grid; a
-# failure that ends the run raises _Failure.  Outcomes as drive.c's; why = (bad, bad_kind,
-# block failure) after a failed attempt: bad >= 0 a non-finite component (bad_kind names its
-# kind), -1 the error test, -2 a block, -3 a singular matrix, -4 Newton.
-
-_ACCEPT, _REJECT, _RETRY, _AGAIN = 0, 1, 2, 3
-
-
-def _fail_small(run, t, h, bad, bad_kind, failure, worst):
-    """A step size below _hmin: the message names what made the steps shrink."""
-    if bad == -2:
-        return _block_failed(failure)
-    if bad in (-3, -4):
-        what = ("the iteration matrix is singular" if bad == -3
-                else "the Newton iteration does not converge")
-        return _Failure("at t = %.17g: %s: %s (step size down to h = %.3g)"
-                        % (t, run.name, what, h), t)
-    if bad >= 0:
-        return _fail(t, bad_kind, STATES[bad])
-    return _fail_step(t, h, worst)
-
-
-class _Grid:
-    """Where a fixed-step run is: the k-th of n steps from ta to tb (the run's end on a span
-    grid, else the output interval's)."""
-
-    def __init__(self, run, span):
-        s = run.s
-        self.run, self.span = run, span
-        self.step = s.step if s.step > 0.0 else s.dt
-        if 0.0 < s.hmax < self.step:  # --max-step bounds a fixed step too
-            self.step = s.hmax
-        self.ta = self.tb = 0.0
-        self.k = self.n = 0
-
-    def next(self, t):
-        """The next step's end from t and whether it is the run's last."""
-        run = self.run
-        if self.k >= self.n:
-            self.ta, self.k = t, 0
-            self.tb = run.s.t_end if self.span else _output_time(run.s, run.kout, run.nout)
-            self.n = _substeps(self.tb - self.ta, self.step)
-            if self.n < 0:
-                raise _fail_step(t, self.step, -1)
-        end = self.k + 1 >= self.n
-        tph = self.tb if end else self.ta + (self.k + 1) * self.step
-        last = end and (self.span or run.kout >= run.nout)
-        if not self.span:  # each step from its grid point (the same value as the last end)
-            t = self.ta + self.k * self.step
-        if not tph - t >= _hmin(t):
-            raise _fail_step(t, tph - t, -1)
-        return tph, last
-
-
-def _hmax(s):
-    """bgc_hmax: the run's span, and --max-step if set."""
-    span = s.t_end - s.t0
-    return min(span, s.hmax) if s.hmax > 0.0 else span
-
-
-def _drive(run, family, y):
-    """One family's run from (run.t, y) to s.t_end: yields the rows as it passes them, keeps
-    run.t and run.y at the last accepted step; raises _Failure, or _Stiff (run.h: the
-    explicit phase's next step)."""
-    s, st = run.s, run.st
-    if run.kout > run.nout:
-        return
-    hmax = _hmax(s)
-    events = bool(_DISCRETE_NAMES)
-    fam = family(run)
-    h = fam.start(y)
-    t = run.t
-    reject = last = False
-    bad, bad_kind, failure, wanted = -1, "", None, 0.0
-    grid = _Grid(run, fam.span_grid)
-    at_event = False
-    while True:
-        if run.t_next - t <= _hmin(t):  # a time event closer than a step can be
-            t, at_event = run.t_next, True
-        if at_event:  # the event at (t, y); the method starts afresh after it
-            at_event = False
-            x = _as_list(y)
-            yield from _after_event(run, t, x)
-            y = x if isinstance(y, list) else numpy.array(x, dtype=float)
-            run.y = y
-            if t >= s.t_end or run.kout > run.nout:
-                return
-            run.h = 0.0
-            fam = family(run)
-            h = fam.start(y)
-            grid.k = grid.n  # a new grid from the event
-            reject = last = False
-            bad = -1
-            continue
-        if run.fixed:
-            tph, last = grid.next(t)
-            if run.t_next < tph:  # a time event inside: the step ends on it
-                tph, last = run.t_next, False
-            h = tph - t
-        else:
-            if not h >= _hmin(t):
-                raise _fail_small(run, t, h, bad, bad_kind, failure, fam.worst)
-            wanted = h
-            if run.t_next < s.t_end and t + 1.01 * h - run.t_next > 0.0:
-                h = run.t_next - t  # onto the time event
-                tph = run.t_next
-            else:
-                if t + 1.01 * h - s.t_end > 0.0:
-                    h = s.t_end - t
-                    last = True
-                tph = s.t_end if last else t + h
-        outcome, y1, hnew, why = fam.step(t, h, tph, y)
-        if outcome == _AGAIN:
-            continue
-        if outcome != _ACCEPT:
-            if outcome == _RETRY:
-                bad, bad_kind, failure = why
-            reject, last = True, False
-            st["rejected"] += 1
-            h = hnew
-            continue
-        i = _first_nonfinite(y1)
-        if i >= 0:
-            raise _fail(tph, "state", STATES[i])
-        _accept(run, tph)
-        fam.accepted(tph, y1)
-        c = _Dense(run, fam.dense, t, h, tph, y, y1)
-        if events:
-            found = _find_event(run, c)
-            if found is not None:  # the step ends at the event
-                te, ye = found
-                yield from run.emit_step(c, te, False)
-                y = ye if isinstance(y, list) else numpy.array(ye, dtype=float)
-                t, at_event = te, True
-                continue
-        yield from run.emit_step(c, tph)
-        y, t = y1, tph
-        run.t, run.y = t, y
-        grid.k += 1
-        if fam.after(tph, y1, last):
-            run.h = hnew
-            raise _Stiff()
-        if last:
-            if not run.fixed:  # the step to go on with: the controller's, or the one cut short
-                st["h_next"] = max(hnew, wanted)
-            return
-        if not run.fixed:
-            hnew = min(hnew, hmax)
-        if reject:
-            hnew = min(hnew, h)
-        reject, bad = False, -1
-        h = fam.next_h(h, hnew)
-
-
-class _Family:
-    """What a family does not need to do (see _drive)."""
-
-    span_grid = True
-    worst = -1
-    dense = None  # no output time falls inside a step of a family without a dense output
-
-    def accepted(self, tph, y1):
-        pass
-
-    def after(self, tph, y1, last):
-        return False
-
-    def next_h(self, h, hnew):
-        return hnew
-
-
-# ---------------------------------------------------------------- explicit Runge-Kutta
+# ---------------------------------------------------------------- the families
 
 
 class _FixedSteps(_Family):
@@ -2734,80 +2863,6 @@ class _Erk(_Family):
         return False
 
 
-# ---------------------------------------------------------------- integrate
-
-
-def _run_solver(run, name):
-    """Runs solver `name` from (run.t, run.y) with the driver."""
-    m = _METHODS[name]
-    family = {"fixed": _FixedSteps, "erk": _Erk, "rosenbrock": _Rosenbrock,
-              "radau": _Radau}.get(m["family"])
-    if family is None:
-        raise ValueError("solver '%s' cannot run by itself" % name)
-    run.m, run.name = m, name
-    run.fixed = run.s.step > 0.0 or m["family"] == "fixed"
-    y = run.y if family in (_FixedSteps, _Erk) else numpy.asarray(run.y, dtype=float)
-    yield from _drive(run, family, y)
-
-
-def _integrate(s, p, x0, st):
-    """Runs the solver: yields the rows (t, outputs) as it computes them; st["cpu"]: the
-    processor seconds it took (the consumer's time between rows excluded)."""
-    cpu = 0.0
-    rows = _integrate_from(s, p, x0, st)
-    try:
-        while True:
-            start = time.process_time()
-            try:
-                row = next(rows)
-            except StopIteration:
-                return
-            finally:
-                cpu += time.process_time() - start
-                st["cpu"] = cpu
-            yield row
-    finally:
-        rows.close()
-
-
-def _integrate_from(s, p, x0, st, w=None):
-    y = numpy.array(x0, dtype=float)
-    i = _first_nonfinite(y)
-    if i >= 0:
-        raise _fail(s.t0, "state", STATES[i])
-    run = _Run(s, p, _Work(s.rtol, s.atol) if w is None else w, st, y)
-    run.w.inputs = s.inputs
-    st["h_next"], st["order_next"] = 0.0, 0
-    if _DISCRETE_NAMES:  # the event iteration at the start (bgc_integrate)
-        w = run.w
-        p[run.doff:] = w.d
-        x = y.tolist()
-        _event_iteration(run, s.t0, x, not w.started)
-        w.started = True
-        _set_next_time(run, s.t0, x)
-        y = run.y = numpy.array(x, dtype=float)
-    try:
-        yield from _integrate_run(run, s, y, st)
-    finally:
-        if _DISCRETE_NAMES:
-            run.w.d = p[run.doff:]
-
-
-def _integrate_run(run, s, y, st):
-    yield from run.emit(s.t0, y)
-    m = _METHODS[s.solver]
-    if m["family"] != "auto":
-        yield from _run_solver(run, s.solver)
-        return
-    run.detect_stiffness = True
-    try:
-        yield from _run_solver(run, m["explicit"])
-    except _Stiff:
-        st["switched"], st["t_switch"] = True, run.t
-        run.detect_stiffness = False
-        yield from _run_solver(run, m["stiff"])
-
-
 # ================================================================== stiff ===
 # The stiff families: Rosenbrock methods in Hairer's transformed form (RODAS's design, any
 # tableau of the family) and Radau IIA with 3, 5 or 7 stages, of fixed or variable order
@@ -2833,6 +2888,17 @@ def _stiff_norm(s, v, w):
         q = v[:E] / w[:E]
         q = q * q
     return math.sqrt(_seq_sum(q) / E), _worst(q)
+
+
+def _combine(weights, K, count):
+    """sum_j weights[j] K[j] over j < count with a nonzero weight, left to right, for numpy
+    vectors K[j] (the stiff solvers)."""
+    acc = numpy.zeros(_N)  # C's acc = 0.0, then acc += a K_j
+    for j in range(count):
+        a = weights[j]
+        if a != 0.0:
+            acc = acc + a * K[j]
+    return acc
 
 
 # ---------------------------------------------------------------- complex arithmetic
