@@ -306,7 +306,7 @@ def compile(model, target: str = "c", scene: str | None = None,
             embedded: dict | None = None) -> dict[str, str | bytes]:
     """Standalone source code: {filename: text}; target "fmu": {"<id>.fmu": the bytes of an
     FMI 2.0 FMU for Model Exchange and Co-Simulation} (bgc.codegen.fmu; needs a C compiler:
-    bgc.base.backends.BackendError without one; bgc.codegen.fmu.FmuError for a model an FMU cannot
+    bgc.base.toolchain.BackendError without one; bgc.codegen.fmu.FmuError for a model an FMU cannot
     hold); target "embedded": {"<id>.h", "<id>.c"} (bgc.codegen.embedded; embedded: its
     options real, solver, step as compile_embedded takes them)."""
     _choice("target", target, TARGETS)

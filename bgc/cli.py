@@ -17,7 +17,7 @@ from pathlib import Path
 
 import click
 
-from .base import backends, run, solvers
+from .base import cache, processes, run, solvers, toolchain
 from .execute import outfile, runner, warm
 from .base.resources import read_bounded
 
@@ -489,7 +489,7 @@ def _interruptible():
 
 
 class _Group(click.Group):
-    """The commands; a C toolchain that fails (bgc.base.backends.BackendError) is reported as such,
+    """The commands; a C toolchain that fails (bgc.base.toolchain.BackendError) is reported as such,
     exit 1, without a traceback; so is a write that fails where no command caught it (a full
     disk under the cache, a closed stdout while click writes help): one line, exit 1.  A
     command interrupted (SIGINT, SIGTERM: Interrupted) says so in one line and exits with
@@ -498,7 +498,7 @@ class _Group(click.Group):
     def invoke(self, ctx):
         try:
             return super().invoke(ctx)
-        except backends.BackendError as error:
+        except toolchain.BackendError as error:
             click.echo(f"error: {error}", err=True)
             ctx.exit(1)
         except KeyboardInterrupt as error:
@@ -518,8 +518,8 @@ class _Group(click.Group):
                 _fail(f"cannot write '{error.filename}': {outfile.reason(error)}")
             if _raised_in(error, click.utils.__file__, "echo"):  # (click's help or usage line)
                 _stdout_lost(error)
-            if _raised_in(error, backends.__file__):
-                _fail(f"cannot write the compile cache {backends.cache_dir()}: "
+            if any(_raised_in(error, m.__file__) for m in (cache, toolchain, processes)):
+                _fail(f"cannot write the compile cache {cache.cache_dir()}: "
                       f"{outfile.reason(error)}")
             _fail(f"a write failed: {outfile.reason(error)}")
 
@@ -674,7 +674,7 @@ def _compile_embedded(model, scene, outputs, effects, algebra, output, project_i
         click.echo("memory (bytes): " + ", ".join(f"{k}={v}" for k, v in sizes.items()),
                    err=True)
         ident = next(iter(files))[:-2]
-        frames = backends.stack_usage(directory / f"{ident}.c", directory)
+        frames = toolchain.stack_usage(directory / f"{ident}.c", directory)
         if frames is None:
             click.echo("stack: not measured (no C compiler with -fstack-usage)", err=True)
         else:
@@ -860,7 +860,7 @@ def _simulate_run(settings, record, program, compiled, request, stats, output, p
             units.update({c[0]: c[3] for c in record.plot_columns if c[3]})
         try:
             status, rows = _run(program, settings, stats, output, copy, progress, units)
-        except backends.CannotStart:  # (damaged behind its checksum: evicted, built again)
+        except processes.CannotStart:  # (damaged behind its checksum: evicted, built again)
             record, program, compiled = _compile_for_run(request, None, settings.solver)
             status, rows = _run(program, settings, stats, output, copy, progress, units)
         if progress is not None:

@@ -236,7 +236,7 @@ def private_crossings() -> list[str]:
 
 def test_no_private_name_crosses_a_package():
     """A private name is its package's own: none is imported or read from another package
-    (the last five were made public: plot.shorten, backends.run_compiler,
+    (the last five were made public: plot.shorten, toolchain.run_compiler,
     parser.lark_parser, resources.PACKAGE_DIR, tangent.Forward)."""
     assert private_crossings() == []
 

@@ -1,2 +1,3 @@
 """Foundations every stage uses: diagnostics, resource limits and paths, a run's settings, the
-solver catalogue and tableaux, the compile cache and toolchain."""
+solver catalogue and tableaux, the C toolchain, the compile cache and the processes that run
+what it holds."""

@@ -11,9 +11,9 @@ has.  The rows go to a sink (the command line's file or stdout, which it owns) o
 as text; the caller decides what a failure means (bgc.api raises, the command line keeps the
 rows and says so, bgc.analysis.accuracy records it).
 
-Light on purpose, like bgc.base.run: the standard library and bgc.base.backends only at import (a
-warm `bgc simulate` runs through here without importing SymPy or numpy); the emitter is imported
-only to prepare a program from a compiled model.
+Light on purpose, like bgc.base.run: the standard library and bgc.base's cache, toolchain and
+processes only at import (a warm `bgc simulate` runs through here without importing SymPy or
+numpy); the emitter is imported only to prepare a program from a compiled model.
 """
 from __future__ import annotations
 
@@ -25,7 +25,7 @@ import tempfile
 from dataclasses import dataclass, replace
 from pathlib import Path
 
-from ..base import backends
+from ..base import cache, processes, toolchain
 from . import outfile
 from ..base.run import RunSettings, parameter_overrides, run_span_problem
 
@@ -49,7 +49,7 @@ def choose_backend(backend: str) -> tuple[str, str | None]:
     """The backend that runs, and the warning to print about it (None: nothing to say): "c"
     and "vm" (whose interpreter is built once per machine) fall back to "python" when there is
     no C compiler."""
-    if backend in ("c", "vm") and not backends.have_c_compiler():
+    if backend in ("c", "vm") and not toolchain.have_c_compiler():
         return "python", NO_C_COMPILER
     return backend, None
 
@@ -67,7 +67,7 @@ class Program:
     #                           the interpreter's program file (bgc.codegen.vm)
     module: object = None  # or: generated Python loaded in this process
     interpreter: Path | None = None  # the interpreter that runs path (bgc.codegen.vm)
-    bytecode: Path | None = None  # Python: path compiled (backends.python_bytecode), if any
+    bytecode: Path | None = None  # Python: path compiled (cache.python_bytecode), if any
 
     def argv(self) -> list[str]:
         """The command that starts it."""
@@ -90,13 +90,13 @@ def prepare(compiled, backend: str, in_process: bool = False) -> Program:
         return Program("c", path=c_executable(p), **facts)
     if backend == "vm":
         from ..codegen.vm import interpreter, program_bytes
-        path = backends.cache_bytes(program_bytes(p), ".bgvm")
+        path = cache.cache_bytes(program_bytes(p), ".bgvm")
         return Program("vm", path=path, interpreter=interpreter(), **facts)
     (text,) = emit_python(p).values()
     if in_process:
-        return Program("python", module=backends.load_python_module(text), **facts)
-    path = backends.cache_python(text)
-    return Program("python", path=path, bytecode=backends.python_bytecode(path), **facts)
+        return Program("python", module=processes.load_python_module(text), **facts)
+    path = cache.cache_python(text)
+    return Program("python", path=path, bytecode=cache.python_bytecode(path), **facts)
 
 
 def c_executable(program) -> Path:
@@ -106,9 +106,9 @@ def c_executable(program) -> Path:
     from ..codegen.emit import c_runtime_unit, emit_c, linkable
     if linkable(program):
         (text,) = emit_c(program, linked=True).values()
-        return backends.compile_c_linked(text, c_runtime_unit())
+        return cache.compile_c_linked(text, c_runtime_unit())
     (text,) = emit_c(program).values()
-    return backends.compile_c(text)
+    return cache.compile_c(text)
 
 
 def settings_for(defaults: RunSettings, names, params: dict | None = None,
@@ -209,7 +209,7 @@ def run(program, settings: RunSettings | None = None, sink=None, progress=None,
     program = prepare(compiled, choose_backend(backend)[0])
     try:
         return _run(program, settings, sink, progress, stats, timeout)
-    except backends.CannotStart:  # (a cached program damaged behind its checksum: evicted)
+    except processes.CannotStart:  # (a cached program damaged behind its checksum: evicted)
         return _run(prepare(compiled, program.backend), settings, sink, progress, stats,
                     timeout)
 
@@ -233,14 +233,14 @@ def _run(program: Program, settings, sink, progress, stats, timeout) -> Result:
     argv = program.argv() + settings.args(program.defaults) + ["--stats"] * stats \
         + ["--progress"] * (progress is not None)
     if sink is not None:
-        done = backends.run_streaming(argv, sink, progress)
+        done = processes.run_streaming(argv, sink, progress)
         failed = done.sink_error
         write_error = outfile.reason(failed) if failed is not None else _write_error(done.stderr)
         killed = -done.code if done.code < 0 and not done.signal and failed is None else 0
         return Result(_status(done.code, done.signal), done.stderr, killed=killed,
                       write_error=write_error, last_line=done.last_line)
     try:
-        done = backends.run_captured(argv, timeout)
+        done = processes.run_captured(argv, timeout)
     except subprocess.TimeoutExpired:
         return Result(-1, f"stopped after {timeout:g} s (the time budget per run)", "")
     return Result(_status(done.returncode), done.stderr, done.stdout,
@@ -277,7 +277,7 @@ class Session:
         argv = program.argv() + settings.args(program.defaults) + ["--batch", "-"]
         for m in self.metrics:
             argv += ["--metric", m]
-        self.proc = backends.start_piped(argv)
+        self.proc = processes.start_piped(argv)
         self.header = self.proc.stdout.readline().rstrip("\n").split(",")
         if self.header[:2] != ["run", "status"]:
             self._fail()
