@@ -755,19 +755,20 @@ def simulate(model, scene, outputs, effects, algebra, backend, solver, rtol, ato
     output = None if outfile.is_stdout(output) else output
     if project_initial and allow_inconsistent:
         raise click.UsageError("--project-initial and --allow-inconsistent exclude each other")
-    auto = backend == "auto"
-    backend = _backend("c" if auto else backend)
-    auto = auto and backend == "c"  # (without a C compiler: python)
+    chosen = _names(sensitivities)  # (a program with sensitivities is built each time)
+    policy = runner.run_policy(backend, t_end, dt, warm=not chosen)
+    if policy.warning:
+        click.echo(policy.warning, err=True)
     request = warm.Request(model, scene, outputs, effects, algebra, project_initial,
-                           allow_inconsistent, backend, consts)
-    chosen = _names(sensitivities)
+                           allow_inconsistent, policy.backend, consts)
     if sensitivities is not None and not chosen:
         raise click.UsageError("--sensitivities: name one parameter or more (P1,P2,..)")
-    found = warm.lookup(request) if not chosen else None  # (sensitivities: built each time)
-    if found is None and auto and not chosen:  # no build of this model: its interpreted
-        interpreted = replace(request, backend="vm")  # program, if the run is short
+    found = warm.lookup(request) if policy.warm else None
+    if found is None and policy.auto and policy.warm:  # no build of this model: its
+        interpreted = replace(request, backend="vm")  # interpreted program, if the run is short
         found = warm.lookup(interpreted)
-        if found is not None and _short(found[0], t_end, dt):
+        if found is not None and policy.interpreted(found[0].settings, found[0].rhs_ops,
+                                                    found[0].states):
             request = interpreted
             click.echo(runner.INTERPRETED, err=True)
         else:
@@ -779,7 +780,7 @@ def simulate(model, scene, outputs, effects, algebra, backend, solver, rtol, ato
             request, chosen, [item.partition("=")[0] for item in params])
     elif found is None:
         record, program, compiled = _compile_for_run(
-            request, (t_end, dt) if auto and request.backend == "c" else None, solver)
+            request, policy if policy.auto and request.backend == "c" else None, solver)
     else:
         (record, path), compiled = found, None
         program = warm.program(record, path)
@@ -886,20 +887,14 @@ def _scratch(needed: bool):
     return tempfile.TemporaryDirectory(prefix="bgc-")
 
 
-def _short(record: warm.Record, t_end, dt) -> bool:
-    """Whether a run of the model a warm record describes is short
-    (bgc.execute.runner.short_run)."""
-    settings = record.settings.with_options(t_end=t_end, dt=dt)
-    return runner.short_run(settings, record.rhs_ops, record.states)
-
-
-def _compile_for_run(request: warm.Request, auto=None, solver: str | None = None):
+def _compile_for_run(request: warm.Request, policy=None, solver: str | None = None):
     """The cold path: build the model, compile its program into the cache, keep a warm
-    record of it; (record, program, the compiled model).  auto: (t_end, dt) of a run whose
-    backend bgc chooses: the interpreter for a short run (bgc.execute.runner.short_run), which is
-    said on stderr, else the C backend.  solver: the run's (None: the scene's); for an
-    explicit one, C and the interpreter get a program without the Jacobian (nothing the run
-    does not call is built: warm.needs_model sends a later implicit run here again)."""
+    record of it; (record, program, the compiled model).  policy: the run's
+    (bgc.execute.runner.RunPolicy) when bgc chooses its backend: the interpreter where the
+    policy says so (interpreted), which is said on stderr, else the C backend.  solver: the
+    run's (None: the scene's); for an explicit one, C and the interpreter get a program
+    without the Jacobian (nothing the run does not call is built: warm.needs_model sends a
+    later implicit run here again)."""
     r = request
     try:
         data = read_bounded(r.model)
@@ -912,9 +907,9 @@ def _compile_for_run(request: warm.Request, auto=None, solver: str | None = None
     compiled = _build(source, r.scene, r.project_initial, r.algebra, outputs=r.outputs,
                       effects=r.effects, allow_inconsistent=r.allow_inconsistent,
                       jacobian=jacobian)
-    if auto is not None and vm.supports(compiled.program) and runner.short_run(
-            compiled.program.scene.with_options(t_end=auto[0], dt=auto[1]),
-            warm.rhs_ops(compiled.program), len(compiled.program.states)):
+    p = compiled.program
+    if policy is not None and vm.supports(p) and policy.interpreted(p.scene, warm.rhs_ops(p),
+                                                                    len(p.states)):
         request = replace(request, backend="vm")
         click.echo(runner.INTERPRETED, err=True)
     program = runner.prepare(compiled, request.backend)

@@ -55,6 +55,37 @@ def choose_backend(backend: str) -> tuple[str, str | None]:
 
 
 @dataclass(frozen=True)
+class RunPolicy:
+    """How `bgc simulate` runs a model (run_policy): the backend, the warning its fallback
+    prints, whether a warm record may serve the run, and whether bgc chooses between the C
+    build and the interpreter for a model it has no C build of (interpreted)."""
+
+    backend: str  # "c", "vm" or "python": what runs unless interpreted() says "vm"
+    warning: str | None = None  # choose_backend's, None: nothing to say
+    warm: bool = True  # a warm record may run it (bgc.execute.warm); else it is built anew
+    auto: bool = False  # --backend auto with a C compiler: the interpreter for a short run
+    t_end: float | None = None  # the run's --t-end and --dt (None: the scene's)
+    dt: float | None = None
+
+    def interpreted(self, scene: RunSettings, rhs_ops: int, states: int) -> bool:
+        """Whether a model without a C build that the interpreter runs (bgc.codegen.vm.supports)
+        runs there: when bgc chooses (auto) and the run, the model's scene settings with this
+        run's span, is short (short_run of the model's right side and states)."""
+        return self.auto and short_run(scene.with_options(t_end=self.t_end, dt=self.dt),
+                                       rhs_ops, states)
+
+
+def run_policy(backend: str, t_end: float | None = None, dt: float | None = None,
+               warm: bool = True) -> RunPolicy:
+    """The policy of a `bgc simulate` run given --backend (auto, c, vm, python), --t-end and
+    --dt: auto is C, which choose_backend turns into Python without a C compiler (and then
+    nothing is chosen); warm False for a program that is built each time (sensitivities)."""
+    auto = backend == "auto"
+    backend, warning = choose_backend("c" if auto else backend)
+    return RunPolicy(backend, warning, warm, auto and backend == "c", t_end, dt)
+
+
+@dataclass(frozen=True)
 class Program:
     """A generated program ready to run."""
 
