@@ -17,7 +17,7 @@ from pathlib import Path
 
 import click
 
-from .base import cache, processes, run, solvers, toolchain
+from .base import cache, processes, run_settings, solvers, toolchain
 from .execute import outfile, runner, warm
 from .base.resources import read_bounded
 
@@ -97,7 +97,7 @@ POSITIVE, FINITE = _Number(positive=True), _Number(positive=False)
 
 
 def _check_span(compiled, t_end, dt):
-    problem = run.run_span_problem(compiled.settings, t_end, dt)
+    problem = run_settings.run_span_problem(compiled.settings, t_end, dt)
     if problem:
         raise click.UsageError(problem)
 
@@ -359,14 +359,14 @@ def _plot_format(path: str) -> str:
 
 def _parse_params(values, names) -> dict:
     """-p NAME=VALUE items as {name: value}, each checked in turn (its form, its name against
-    the model's parameters `names` with bgc.base.run.parameter_overrides, its value)."""
+    the model's parameters `names` with bgc.base.run_settings.parameter_overrides, its value)."""
     out = {}
     for item in values:
         name, sep, value = item.partition("=")
         if not sep:
             raise click.UsageError(f"-p expects NAME=VALUE, got '{item}'")
         try:
-            run.parameter_overrides({name: value}, names)
+            run_settings.parameter_overrides({name: value}, names)
         except ValueError as error:
             raise click.UsageError(str(error)) from None
         try:
@@ -441,7 +441,7 @@ def ADHOC(f):
                              "need is computed.")(f)
 
 
-ALGEBRA = click.option("--algebra", type=click.Choice(list(run.ALGEBRA)), default="auto",
+ALGEBRA = click.option("--algebra", type=click.Choice(list(run_settings.ALGEBRA)), default="auto",
                        show_default=True,
                        help="How algebraic blocks are solved: symbolically when linear and "
                             "small (auto), always symbolically, or always numerically in the "
@@ -587,7 +587,7 @@ def equations(model, scene, outputs, effects, algebra, fmt):
 @SCENE
 @ADHOC
 @ALGEBRA
-@click.option("--target", type=click.Choice(list(run.TARGETS)), default="c",
+@click.option("--target", type=click.Choice(list(run_settings.TARGETS)), default="c",
               help="fmu: an FMI 2.0 FMU for Model Exchange and Co-Simulation, built with the "
                    "C compiler (needs -o NAME.fmu).  embedded: NAME.h and NAME.c, one fixed "
                    "step per call, no heap, no stdio (docs/embedded.md).")
@@ -787,7 +787,7 @@ def simulate(model, scene, outputs, effects, algebra, backend, solver, rtol, ato
         click.echo(record.warnings, err=True, nl=False)
     files.read(compiled.files if compiled is not None else
                [("table", name) for name, _ in record.files])
-    problem = run.run_span_problem(record.settings, t_end, dt)  # (before -p, as always)
+    problem = run_settings.run_span_problem(record.settings, t_end, dt)  # (before -p, as always)
     if problem:
         raise click.UsageError(problem)
     names = sorted(record.params)
@@ -805,7 +805,7 @@ def simulate(model, scene, outputs, effects, algebra, backend, solver, rtol, ato
         raise click.UsageError(str(error)) from None
     seen: set = set()
     for path in input_files:
-        problem = run.input_file_problem(path, record.inputs)
+        problem = run_settings.input_file_problem(path, record.inputs)
         if problem:
             _fail(problem)
         with open(path, encoding="utf-8") as f:
@@ -860,10 +860,10 @@ def _simulate_run(settings, record, program, compiled, request, stats, output, p
             units = dict(compiled.graph.units) if compiled is not None else {}
             units.update({c[0]: c[3] for c in record.plot_columns if c[3]})
         try:
-            status, rows = _run(program, settings, stats, output, copy, progress, units)
+            status, rows = _run_to_output(program, settings, stats, output, copy, progress, units)
         except processes.CannotStart:  # (damaged behind its checksum: evicted, built again)
             record, program, compiled = _compile_for_run(request, None, settings.solver)
-            status, rows = _run(program, settings, stats, output, copy, progress, units)
+            status, rows = _run_to_output(program, settings, stats, output, copy, progress, units)
         if progress is not None:
             progress.close()
         if plot_file:
@@ -999,8 +999,9 @@ class _UnitsRow:
         return self.units.get(name, "")
 
 
-def _run(program, settings, stats: bool, output: str | None, copy: Path | None = None,
-         progress=None, units: dict | None = None) -> tuple[int, bool]:
+def _run_to_output(program, settings, stats: bool, output: str | None,
+                   copy: Path | None = None, progress=None,
+                   units: dict | None = None) -> tuple[int, bool]:
     """Runs the program (bgc.execute.runner.run), its CSV streamed to `output` (else stdout, and a
     copy into `copy` if given); the exit status, and whether rows were written.  A failed
     run's rows are kept, cut back to the last whole row, and the last line on stderr says so.
@@ -1047,8 +1048,8 @@ def _run(program, settings, stats: bool, output: str | None, copy: Path | None =
 
 
 def _run_to_stdout(program, settings, stats, copy, progress, units=None) -> tuple[int, bool]:
-    """_run with the CSV on stdout: a regular file there (`> out.csv`) is cut back to its last
-    whole row if the run fails, as a named file is."""
+    """_run_to_output with the CSV on stdout: a regular file there (`> out.csv`) is cut back to
+    its last whole row if the run fails, as a named file is."""
     tee = sys.stdout if copy is None else _Tee(sys.stdout, copy)
     sink = tee if units is None else _UnitsRow(tee, units)
     try:
@@ -1673,11 +1674,11 @@ def _input_data(paths, names) -> dict:
     twice refused."""
     data: dict = {}
     for path in paths:
-        problem = run.input_file_problem(path, names if names is not None else
-                                         run.input_file_columns(path))
+        problem = run_settings.input_file_problem(path, names if names is not None else
+                                                  run_settings.input_file_columns(path))
         if problem:
             _fail(problem)
-        for name, series in run.input_file_data(path).items():
+        for name, series in run_settings.input_file_data(path).items():
             if name in data:
                 _fail(f"{path}: input '{name}' is given twice")
             data[name] = series

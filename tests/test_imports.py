@@ -258,11 +258,11 @@ def test_the_api_names_leave_the_submodules_alone():
     import bgc
     import bgc.api
     import bgc.model
-    import bgc.base.run
+    import bgc.base.run_settings
     import bgc.middle.system
     assert isinstance(bgc.middle.system, types.ModuleType)
-    assert isinstance(bgc.base.run, types.ModuleType)
-    assert importlib.import_module("bgc.base.run") is bgc.base.run
+    assert isinstance(bgc.base.run_settings, types.ModuleType)
+    assert importlib.import_module("bgc.base.run_settings") is bgc.base.run_settings
     assert bgc.equations is bgc.api.equations and bgc.load is bgc.model.load
     assert bgc.simulate is bgc.api.simulate and bgc.compile is bgc.api.compile
     assert not set(bgc.__all__) & set(vars(bgc))  # served by __getattr__, never stored

@@ -1,6 +1,7 @@
-"""The one settings type (bgc.base.run.RunSettings) and the one run function (bgc.execute.runner):
-options laid over a scene's settings, a program started with only what differs from its own, the
-parameters checked once, the C compiler's fallback said once, a run's result."""
+"""The one settings type (bgc.base.run_settings.RunSettings) and the one run function
+(bgc.execute.runner): options laid over a scene's settings, a program started with only what
+differs from its own, the parameters checked once, the C compiler's fallback said once, the
+run policy of `bgc simulate`, a run's result."""
 from __future__ import annotations
 
 import io
@@ -12,7 +13,7 @@ import pytest
 import bgc
 from bgc.base import toolchain
 from bgc.execute import runner
-from bgc.base.run import RunSettings, parameter_overrides
+from bgc.base.run_settings import RunSettings, parameter_overrides
 
 RLC = Path(__file__).parent.parent / "models" / "rlc.bg"
 SCENE = RunSettings(0.0, 10.0, 0.01, "dopri5", 1e-6, 1e-9)

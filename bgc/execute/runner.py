@@ -1,7 +1,8 @@
 """Running a generated program: the one place bgc runs a simulation.  The command line (cold and
 warm), bgc.simulate, Model.simulate, `bgc accuracy` and `bgc sweep` all come here for the
 backend (and the fallback when there is no C compiler), the run's settings (a
-bgc.base.run.RunSettings over the program's own, parameter overrides checked once) and the run.
+bgc.base.run_settings.RunSettings over the program's own, parameter overrides checked once) and
+the run.
 
 A Program is a generated program ready to run: a file in the cache started as a process (C, or
 Python), or generated Python loaded in this process (the API's Python backend, whose errors
@@ -11,9 +12,10 @@ has.  The rows go to a sink (the command line's file or stdout, which it owns) o
 as text; the caller decides what a failure means (bgc.api raises, the command line keeps the
 rows and says so, bgc.analysis.accuracy records it).
 
-Light on purpose, like bgc.base.run: the standard library and bgc.base's cache, toolchain and
-processes only at import (a warm `bgc simulate` runs through here without importing SymPy or
-numpy); the emitter is imported only to prepare a program from a compiled model.
+Light on purpose, like bgc.base.run_settings: the standard library and bgc.base's cache,
+toolchain and processes only at import (a warm `bgc simulate` runs through here without
+importing SymPy or numpy); the emitter is imported only to prepare a program from a compiled
+model.
 """
 from __future__ import annotations
 
@@ -27,7 +29,7 @@ from pathlib import Path
 
 from ..base import cache, processes, toolchain
 from . import outfile
-from ..base.run import RunSettings, parameter_overrides, run_span_problem
+from ..base.run_settings import RunSettings, parameter_overrides, run_span_problem
 
 NO_C_COMPILER = "warning: no C compiler found (cc or $CC); using the Python backend"
 INTERPRETED = ("bgc: no cached build for this model; running it in the interpreter (--backend c "
@@ -235,17 +237,20 @@ def run(program, settings: RunSettings | None = None, sink=None, progress=None,
     returns its arrays, and its errors are raised (the generated module's SimulationError,
     ValueError)."""
     if isinstance(program, Program):
-        return _run(program, settings, sink, progress, stats, timeout)
+        return _run_prepared(program, settings, sink, progress, stats, timeout)
     compiled = program
     program = prepare(compiled, choose_backend(backend)[0])
     try:
-        return _run(program, settings, sink, progress, stats, timeout)
+        return _run_prepared(program, settings, sink, progress, stats, timeout)
     except processes.CannotStart:  # (a cached program damaged behind its checksum: evicted)
-        return _run(prepare(compiled, program.backend), settings, sink, progress, stats,
-                    timeout)
+        return _run_prepared(prepare(compiled, program.backend), settings, sink, progress,
+                             stats, timeout)
 
 
-def _run(program: Program, settings, sink, progress, stats, timeout) -> Result:
+def _run_prepared(program: Program, settings, sink, progress, stats, timeout) -> Result:
+    """run's work on a prepared program: in this process, or started as a process with its
+    rows streamed into sink or captured; input data given as numbers first written to files
+    the program reads."""
     settings = program.defaults if settings is None else settings
     if settings.input_data and program.module is None:  # numbers: to files the program reads
         with tempfile.TemporaryDirectory(prefix="bgc-inputs-") as where:
@@ -255,9 +260,9 @@ def _run(program: Program, settings, sink, progress, stats, timeout) -> Result:
                 with open(path, "w", encoding="utf-8") as f:
                     f.write(f"t,{name}\n" + "".join(f"{a!r},{b!r}\n" for a, b in zip(t, u)))
                 files.append(path)
-            return _run(program, replace(settings, input_data=(),
-                                         input_files=settings.input_files + tuple(files)),
-                        sink, progress, stats, timeout)
+            return _run_prepared(program, replace(settings, input_data=(),
+                                                  input_files=settings.input_files + tuple(files)),
+                                 sink, progress, stats, timeout)
     if program.module is not None:
         t, values = program.module.simulate(**settings.options(program.defaults))
         return Result(0, t=t, values=values)

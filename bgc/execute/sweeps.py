@@ -353,7 +353,7 @@ def default_batch_size(n: int, workers: int) -> int:
     return max(1, min(1000, math.ceil(n / (4 * max(1, workers)))))
 
 
-def run(program: SweepProgram, lines: list[str], batch_size: int, client=None,
+def run_batches(program: SweepProgram, lines: list[str], batch_size: int, client=None,
         trajectories: bool = False, progress=None, on_batch=None) -> list[BatchResult]:
     """Runs every line in batches, serially in this process when client is None, else as
     tasks of client (a dask.distributed.Client).  progress(Progress) after each batch;

@@ -5,7 +5,7 @@ After a cold run the command line stores a *record* in the cache directory
 (bgc.base.cache.cache_dir): which program the model compiled to (the file's name and SHA-256)
 and what the command line needs from the compiled model to run it exactly as the cold path
 would — the warnings the model gave (as printed), the parameters' names, the scene's settings (the
-bgc.base.run.RunSettings compiled into the program), whether a constraint has a pid or pd
+bgc.base.run_settings.RunSettings compiled into the program), whether a constraint has a pid or pd
 corrector, whether the program has the Jacobian (one built for an explicit solver has not:
 an implicit solver's run is then cold, and its record replaces this one), and what `--plot`
 says of the model and its outputs (bgc.reports.plot.describe).
@@ -35,7 +35,7 @@ Records are written to a temporary file and renamed into place, so concurrent ru
 sees a whole record or none.
 
 This module imports the standard library only (and bgc.base.cache, bgc.base.toolchain,
-bgc.base.resources, bgc.base.run, bgc.execute.runner and bgc.base.solvers, which do too;
+bgc.base.resources, bgc.base.run_settings, bgc.execute.runner and bgc.base.solvers, which do too;
 bgc.reports.plot when a cold run makes a record).
 """
 from __future__ import annotations
@@ -52,7 +52,7 @@ from pathlib import Path
 from ..base import cache, solvers, toolchain
 from . import runner
 from ..base.resources import read_bounded
-from ..base.run import RunSettings
+from ..base.run_settings import RunSettings
 
 FORMAT = 8  # of the record; change it when its fields change
 
