@@ -46,8 +46,16 @@ GENERATE = r"""
 import json, sys
 from pathlib import Path
 import bgc
-from bgc import backends
-from bgc.codegen.emit import emit_c, emit_python
+try:
+    from bgc.base.toolchain import C_FLAGS, C_LIBS
+    from bgc.codegen.emit import emit_c, emit_python
+except ImportError:  # (a tree from before bgc.base.toolchain: bgc.base.backends, bgc.backends)
+    try:
+        from bgc.base.backends import C_FLAGS, C_LIBS
+        from bgc.codegen.emit import emit_c, emit_python
+    except ImportError:
+        from bgc.backends import C_FLAGS, C_LIBS
+        from bgc.emit import emit_c, emit_python
 out, specs = Path(sys.argv[1]), json.loads(sys.argv[2])
 for name, model, scene in specs:
     program = bgc.build(Path(model), scene).program
@@ -55,8 +63,7 @@ for name, model, scene in specs:
     (py_text,) = emit_python(program).values()
     (out / (name + ".c")).write_text(c_text)
     (out / (name + ".py")).write_text(py_text)
-print(json.dumps({"bgc": bgc.__file__, "flags": list(backends.C_FLAGS),
-                  "libs": list(backends.C_LIBS)}))
+print(json.dumps({"bgc": bgc.__file__, "flags": list(C_FLAGS), "libs": list(C_LIBS)}))
 """
 
 

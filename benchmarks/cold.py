@@ -212,7 +212,7 @@ def main(argv=None):
 def _prebuilt() -> str:
     """Which of bgc.execute.prebuild's files the bgc that runs carries (none in an editable
     install)."""
-    done = subprocess.run([sys.executable, "-c", "import bgc.base.backends as b; "
+    done = subprocess.run([sys.executable, "-c", "import bgc.base.cache as b; "
                            "print(' '.join(p.name for p in b.PREBUILT.glob('*')))"],
                           capture_output=True, text=True, check=True)
     kinds = {"bgc-vm-": "the interpreter", "bgc-runtime-": "the runtime object",

@@ -23,8 +23,8 @@ sparse LU the compiler plans (its ordering and fill are part of lower).  For eve
   cc       wall clock of `cc -O2 -std=c99 model.c -o model -lm` (the program, runtime
            included).  Median over the repeats.
   part     wall clock of `cc FLAGS -std=c99 -c` of the model part alone, as `bgc simulate` builds
-           it to link with the runtime built once: FLAGS are bgc.base.backends.model_part_flags's
-           (-O1 for a part larger than bgc.base.backends.LARGE_PART, else -O2); "to .o" is the
+           it to link with the runtime built once: FLAGS are bgc.base.toolchain.model_part_flags's
+           (-O1 for a part larger than bgc.base.toolchain.LARGE_PART, else -O2); "to .o" is the
            in-process total plus this, the model's build to an object file, as CasADi's is
            measured (build + codegen + cc -O2 -c).  Median over the repeats.
   scene    the same build (in process, then cc -c of the model part) of the program as `bgc
@@ -469,12 +469,12 @@ def bgc_command(*args: str, workdir: Path) -> float:
 
 
 def part_flags(part: Path) -> tuple[str, ...]:
-    """The flags bgc simulate compiles this model part with (bgc.base.backends.model_part_flags)."""
-    from bgc.base import backends
+    """The flags bgc simulate compiles this model part with (bgc.base.toolchain.model_part_flags)."""
+    from bgc.base import toolchain
 
-    rule = getattr(backends, "model_part_flags", None)  # (a bgc from before the rule: -O2)
+    rule = getattr(toolchain, "model_part_flags", None)  # (a bgc from before the rule: -O2)
     size = len(part.read_text(encoding="utf-8"))
-    return rule(backends.C_FLAGS, size) if rule else tuple(backends.C_FLAGS)
+    return rule(toolchain.C_FLAGS, size) if rule else tuple(toolchain.C_FLAGS)
 
 
 def compile_part(part: Path, flags: tuple[str, ...]) -> float:
@@ -590,9 +590,9 @@ def measure_bgc(family: str, n: int, workdir: Path, args) -> Row:
 
 def bgc_module(family: str, n: int, workdir: Path):
     """bgc's generated Python module of a model measured before (written by --one)."""
-    from bgc.base import backends
+    from bgc.base import processes
 
-    return backends.load_python_module(
+    return processes.load_python_module(
         (workdir / f"{model_name(family, n)}.py").read_text(encoding="utf-8"))
 
 

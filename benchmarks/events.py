@@ -451,7 +451,7 @@ def python_baseline(problem: Problem, method: str, rtol: float):
 
 def build_bgc(problem: Problem, workdir: Path):
     import bgc
-    from bgc.base.backends import load_python_module
+    from bgc.base.processes import load_python_module
 
     path = str(MODELS / problem.model)
     (name, text), = bgc.compile(path, target="c", scene=problem.scene).items()

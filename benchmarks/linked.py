@@ -51,20 +51,20 @@ def main(argv=None):
         os.environ["BGC_CACHE_DIR"] = tmp
         os.environ.pop("BGC_CFLAGS", None)
         import bgc
-        from bgc.base import backends
+        from bgc.base import cache, toolchain
         from bgc.execute import runner
         from bgc.codegen.emit import emit_c
         print(f"machine:  {machine.processor()}, {os.cpu_count()} cores, load average "
               f"{machine.load_average()}")
-        print(f"cc:       {machine.cc_version(backends.c_compiler())}  (flags: "
-              f"{' '.join(backends.c_flags())})")
+        print(f"cc:       {machine.cc_version(toolchain.c_compiler())}  (flags: "
+              f"{' '.join(toolchain.c_flags())})")
         print(f"rounds:   {args.rounds}, alternating; cpu: the program's own clock(), median")
         print(f"{'model':16}{'states':>7}  {'arguments':44}{'standalone [ms]':>16}"
               f"{'linked [ms]':>12}{'ratio':>7}")
         for model, run in CASES:
             program = bgc.build(ROOT / "models" / f"{model}.bg").program
             linked = runner.c_executable(program)
-            alone = backends.compile_c(next(iter(emit_c(program).values())))
+            alone = cache.compile_c(next(iter(emit_c(program).values())))
             times = {linked: [], alone: []}
             outputs = {}
             for _ in range(args.rounds):

@@ -247,10 +247,10 @@ def bgc_c(t_end: float, workdir: Path) -> Method:
 
 def bgc_python(t_end: float, workdir: Path) -> Method:
     import bgc
-    import bgc.base.backends
+    import bgc.base.processes
 
     (name, text), = bgc.compile(str(MODEL), target="python", scene=SCENE).items()
-    module = bgc.base.backends.load_python_module(text)
+    module = bgc.base.processes.load_python_module(text)
     run = Run("bgc Python module")
 
     def finish():
@@ -309,7 +309,7 @@ def machine_facts() -> list[str]:
     cc_line, processor, load = (machine.cc_version(c_compiler()), machine.processor(),
                                 machine.load_average())
     try:
-        from bgc.base.backends import C_FLAGS as bgc_flags
+        from bgc.base.toolchain import C_FLAGS as bgc_flags
     except ImportError:
         bgc_flags = CFLAGS
     flags_note = "" if tuple(bgc_flags) == CFLAGS else f"; bgc simulate uses {' '.join(bgc_flags)}!"

@@ -49,7 +49,7 @@ def _best(fn, repeats):
 
 def _row(label, model, scene, params, periods, tol, repeats):
     from bgc.analysis import periodic
-    from bgc.base import backends
+    from bgc.base import processes
     from bgc.execute import runner
     orbit = bgc.periodic(model, scene, params=params)  # (builds and caches the programs)
     T, x0 = orbit.period, np.array(orbit.x0)
@@ -91,9 +91,9 @@ def _row(label, model, scene, params, periods, tol, repeats):
                           for _ in range(repeats + 1))
     finally:
         warm.close()
-    start, _ = _best(lambda: backends.run_captured([str(prepared.path), "--t-end",
-                                                    repr(float(compiled.program.scene.t0)),
-                                                    "--dt", "1"]), repeats)
+    start, _ = _best(lambda: processes.run_captured([str(prepared.path), "--t-end",
+                                                     repr(float(compiled.program.scene.t0)),
+                                                     "--dt", "1"]), repeats)
     return (label, k, brute, again.iterations, shoot, brute_runs, shoot_runs, brute_cpu,
             newton_cpu, brute_warm, newton_warm, start, gap)
 

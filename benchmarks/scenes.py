@@ -25,7 +25,7 @@ state an output), then each scene the model declares, in its order.  Columns of 
            the same bytes in every program; the idea of tests/test_golden.py's model_part).
   bgc s    bgc's front end, model file to C text: bgc.build + bgc.codegen.emit.emit_c, in this
            process, SymPy's cache cleared before each (wall, median over the repeats).
-  cc s     bgc.base.backends.compile_c of that text (cc -O2 -std=c99 ... -lm, the whole program),
+  cc s     bgc.base.cache.compile_c of that text (cc -O2 -std=c99 ... -lm, the whole program),
            into a private cache emptied before each (wall, median).
   rhs      right-side evaluations of the timed run: the generated C program with the SAME
            solver and settings for every row (default --solver rk4 --step 1e-3 --t-end 60,
@@ -79,7 +79,7 @@ sys.path[:0] = [str(HERE), str(ROOT)]  # machine.py beside this file, bgc above
 import machine  # noqa: E402
 
 import bgc  # noqa: E402
-from bgc.base import backends
+from bgc.base import cache, toolchain
 from bgc import ir  # noqa: E402
 from bgc.codegen.emit import c_runtime_parts, emit_c  # noqa: E402
 from bgc.front.graph import model_effects  # noqa: E402
@@ -236,7 +236,7 @@ def time_compile(model: Path, row: Row) -> None:
     if row.exe is not None:
         row.exe.unlink(missing_ok=True)  # the private cache: cc runs again
     start = time.perf_counter()
-    row.exe = backends.compile_c(text)
+    row.exe = cache.compile_c(text)
     row.cc.append(time.perf_counter() - start)
 
 
@@ -300,7 +300,7 @@ def measure(model: Path, rows: list[Row], args) -> None:
     --repeats rounds: each compiles every row once in turn, then runs every row's program
     once in turn, RUNS_PER_ROUND times."""
     for row in rows:
-        row.exe = backends.compile_c(row.c_text)
+        row.exe = cache.compile_c(row.c_text)
         row.rhs = int(run_program(row.exe, fixed_args(args))["rhs"])
         if args.own:
             run_program(row.exe, own_args(row, args))
@@ -339,8 +339,8 @@ def machine_facts(args) -> list[str]:
     import sympy
 
     return [f"date:     {datetime.datetime.now().isoformat(timespec='seconds')}",
-            f"cc:       {machine.cc_version(backends.c_compiler())}  (flags: "
-            f"{' '.join(backends.C_FLAGS)} ... {' '.join(backends.C_LIBS)})",
+            f"cc:       {machine.cc_version(toolchain.c_compiler())}  (flags: "
+            f"{' '.join(toolchain.C_FLAGS)} ... {' '.join(toolchain.C_LIBS)})",
             f"python:   {sys.version.split()[0]}  bgc {bgc.__version__}  numpy "
             f"{numpy.__version__}  sympy {sympy.__version__}",
             f"machine:  {machine.processor()}, {os.cpu_count()} cores, {platform.system()} "
@@ -531,7 +531,7 @@ def parse_args(argv=None):
 
 def main(argv=None) -> int:
     args = parse_args(argv)
-    if not backends.have_c_compiler():
+    if not toolchain.have_c_compiler():
         print("no C compiler (cc or $CC): nothing to time", file=sys.stderr)
         return 1
     print("\n".join(machine_facts(args)), flush=True)

@@ -28,7 +28,7 @@ ROOT = HERE.parent
 sys.path[:0] = [str(HERE), str(ROOT)]
 import machine  # noqa: E402
 
-from bgc.base import backends  # noqa: E402
+from bgc.base import cache, processes, toolchain  # noqa: E402
 from bgc.api import build  # noqa: E402
 from bgc.codegen.emit import emit_c, emit_python  # noqa: E402
 
@@ -43,10 +43,10 @@ def program(path, scene=None, backend="c"):
         compiled = build(path, scene)
         if backend == "c":
             (text,) = emit_c(compiled.program).values()
-            _PROGRAMS[key] = backends.compile_c(text, flags=FLAGS)
+            _PROGRAMS[key] = cache.compile_c(text, flags=FLAGS)
         else:
             (text,) = emit_python(compiled.program).values()
-            _PROGRAMS[key] = backends.load_python_module(text)
+            _PROGRAMS[key] = processes.load_python_module(text)
     return _PROGRAMS[key]
 
 
@@ -76,7 +76,7 @@ def run(path, scene, *args, backend="c"):
     args = [str(a) for a in args]
     prog = program(path, scene, backend)
     if backend == "c":
-        return Run(*backends.run_c(prog, args))
+        return Run(*processes.run_c(prog, args))
     out, err = io.StringIO(), io.StringIO()
     with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
         code = prog.main(args)
@@ -287,7 +287,7 @@ def main():
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--quick", action="store_true", help="leave out the extreme sweep")
     args = parser.parse_args()
-    cc = backends.c_compiler()
+    cc = toolchain.c_compiler()
     print(f"cc:   {machine.cc_version(cc)}  (flags: {' '.join(FLAGS)})")
     print(f"cpu:  {machine.processor()}")
     print(f"load: {machine.load_average()}")

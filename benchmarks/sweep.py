@@ -54,7 +54,7 @@ import machine  # noqa: E402
 
 import bgc  # noqa: E402
 from bgc import api
-from bgc.base import backends
+from bgc.base import toolchain
 from bgc.execute import sweeps  # noqa: E402
 
 MODEL = ROOT / "models" / "pendulum.bg"
@@ -133,12 +133,12 @@ def main(argv=None):
     if args.quick:
         args.runs, args.scipy_runs, args.simulate_runs = 200, 2, 2
         t_end, gains_n, worker_counts = 1.0, 5, [1]
-    if not backends.have_c_compiler():
+    if not toolchain.have_c_compiler():
         sys.exit("benchmarks/sweep.py needs a C compiler (cc or $CC)")
     print(f"machine:  {machine.processor()}, {os.cpu_count()} cores, load average "
           f"{machine.load_average()}")
-    print(f"cc:       {machine.cc_version(backends.c_compiler())} (bgc: "
-          f"{' '.join(backends.C_FLAGS)})")
+    print(f"cc:       {machine.cc_version(toolchain.c_compiler())} (bgc: "
+          f"{' '.join(toolchain.C_FLAGS)})")
     print(f"sweep:    {args.runs} runs of {MODEL.name} scene {SCENE}, 0..{t_end:g} s every "
           f"{DT} s, dopri5 rtol {RTOL:g} atol {ATOL:g}; m ~ {VARY['m']}, l ~ {VARY['l']}, "
           f"seed 1; metrics {', '.join(METRICS)}")

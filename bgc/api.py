@@ -26,9 +26,10 @@ from .front.units import check_units
 from .base import solvers
 from .base.resources import compile_scope, quiet_collector, read_bounded
 from .middle.scene import Override, Settings, apply_scene, check_parameters as check_parameters_of
-from .base.run import (ALGEBRA, BACKENDS, FORMATS, SIMULATE_OPTIONS, SWEEP_BACKENDS, TARGETS,
-                       check_run_options, choice as _choice, exclusive, input_data)
-from .base.run import RunSettings, run_args  # noqa: F401  (the API's, from bgc.base.run)
+from .base.run_settings import (ALGEBRA, BACKENDS, FORMATS, SIMULATE_OPTIONS, SWEEP_BACKENDS,
+                                TARGETS, check_run_options, choice as _choice, exclusive,
+                                input_data)
+from .base.run_settings import RunSettings, run_args  # noqa: F401  (the API's)
 # the one run function and its helpers (bgc.execute.runner), as the API offers them
 from .execute.runner import Result, choose_backend, prepare, run, settings_for
 
@@ -306,7 +307,7 @@ def compile(model, target: str = "c", scene: str | None = None,
             embedded: dict | None = None) -> dict[str, str | bytes]:
     """Standalone source code: {filename: text}; target "fmu": {"<id>.fmu": the bytes of an
     FMI 2.0 FMU for Model Exchange and Co-Simulation} (bgc.codegen.fmu; needs a C compiler:
-    bgc.base.backends.BackendError without one; bgc.codegen.fmu.FmuError for a model an FMU cannot
+    bgc.base.toolchain.BackendError without one; bgc.codegen.fmu.FmuError for a model an FMU cannot
     hold); target "embedded": {"<id>.h", "<id>.c"} (bgc.codegen.embedded; embedded: its
     options real, solver, step as compile_embedded takes them)."""
     _choice("target", target, TARGETS)
@@ -444,5 +445,5 @@ def sweep(model, scene: str | None = None, grid=None, sample=None, vary=None, se
     with session as client:
         size = batch_size or sw.default_batch_size(
             len(lines), len(client.scheduler_info()["workers"]) if client is not None else 1)
-        results = sw.run(prog, lines, size, client, trajectories, progress, on_batch)
+        results = sw.run_batches(prog, lines, size, client, trajectories, progress, on_batch)
     return sw.table(names, values, metrics, results, timing)

@@ -17,7 +17,7 @@ from pathlib import Path
 
 import click
 
-from .base import backends, run, solvers
+from .base import cache, processes, run_settings, solvers, toolchain
 from .execute import outfile, runner, warm
 from .base.resources import read_bounded
 
@@ -97,7 +97,7 @@ POSITIVE, FINITE = _Number(positive=True), _Number(positive=False)
 
 
 def _check_span(compiled, t_end, dt):
-    problem = run.run_span_problem(compiled.settings, t_end, dt)
+    problem = run_settings.run_span_problem(compiled.settings, t_end, dt)
     if problem:
         raise click.UsageError(problem)
 
@@ -359,14 +359,14 @@ def _plot_format(path: str) -> str:
 
 def _parse_params(values, names) -> dict:
     """-p NAME=VALUE items as {name: value}, each checked in turn (its form, its name against
-    the model's parameters `names` with bgc.base.run.parameter_overrides, its value)."""
+    the model's parameters `names` with bgc.base.run_settings.parameter_overrides, its value)."""
     out = {}
     for item in values:
         name, sep, value = item.partition("=")
         if not sep:
             raise click.UsageError(f"-p expects NAME=VALUE, got '{item}'")
         try:
-            run.parameter_overrides({name: value}, names)
+            run_settings.parameter_overrides({name: value}, names)
         except ValueError as error:
             raise click.UsageError(str(error)) from None
         try:
@@ -441,7 +441,7 @@ def ADHOC(f):
                              "need is computed.")(f)
 
 
-ALGEBRA = click.option("--algebra", type=click.Choice(list(run.ALGEBRA)), default="auto",
+ALGEBRA = click.option("--algebra", type=click.Choice(list(run_settings.ALGEBRA)), default="auto",
                        show_default=True,
                        help="How algebraic blocks are solved: symbolically when linear and "
                             "small (auto), always symbolically, or always numerically in the "
@@ -489,7 +489,7 @@ def _interruptible():
 
 
 class _Group(click.Group):
-    """The commands; a C toolchain that fails (bgc.base.backends.BackendError) is reported as such,
+    """The commands; a C toolchain that fails (bgc.base.toolchain.BackendError) is reported as such,
     exit 1, without a traceback; so is a write that fails where no command caught it (a full
     disk under the cache, a closed stdout while click writes help): one line, exit 1.  A
     command interrupted (SIGINT, SIGTERM: Interrupted) says so in one line and exits with
@@ -498,7 +498,7 @@ class _Group(click.Group):
     def invoke(self, ctx):
         try:
             return super().invoke(ctx)
-        except backends.BackendError as error:
+        except toolchain.BackendError as error:
             click.echo(f"error: {error}", err=True)
             ctx.exit(1)
         except KeyboardInterrupt as error:
@@ -518,8 +518,8 @@ class _Group(click.Group):
                 _fail(f"cannot write '{error.filename}': {outfile.reason(error)}")
             if _raised_in(error, click.utils.__file__, "echo"):  # (click's help or usage line)
                 _stdout_lost(error)
-            if _raised_in(error, backends.__file__):
-                _fail(f"cannot write the compile cache {backends.cache_dir()}: "
+            if any(_raised_in(error, m.__file__) for m in (cache, toolchain, processes)):
+                _fail(f"cannot write the compile cache {cache.cache_dir()}: "
                       f"{outfile.reason(error)}")
             _fail(f"a write failed: {outfile.reason(error)}")
 
@@ -587,7 +587,7 @@ def equations(model, scene, outputs, effects, algebra, fmt):
 @SCENE
 @ADHOC
 @ALGEBRA
-@click.option("--target", type=click.Choice(list(run.TARGETS)), default="c",
+@click.option("--target", type=click.Choice(list(run_settings.TARGETS)), default="c",
               help="fmu: an FMI 2.0 FMU for Model Exchange and Co-Simulation, built with the "
                    "C compiler (needs -o NAME.fmu).  embedded: NAME.h and NAME.c, one fixed "
                    "step per call, no heap, no stdio (docs/embedded.md).")
@@ -674,7 +674,7 @@ def _compile_embedded(model, scene, outputs, effects, algebra, output, project_i
         click.echo("memory (bytes): " + ", ".join(f"{k}={v}" for k, v in sizes.items()),
                    err=True)
         ident = next(iter(files))[:-2]
-        frames = backends.stack_usage(directory / f"{ident}.c", directory)
+        frames = toolchain.stack_usage(directory / f"{ident}.c", directory)
         if frames is None:
             click.echo("stack: not measured (no C compiler with -fstack-usage)", err=True)
         else:
@@ -755,19 +755,20 @@ def simulate(model, scene, outputs, effects, algebra, backend, solver, rtol, ato
     output = None if outfile.is_stdout(output) else output
     if project_initial and allow_inconsistent:
         raise click.UsageError("--project-initial and --allow-inconsistent exclude each other")
-    auto = backend == "auto"
-    backend = _backend("c" if auto else backend)
-    auto = auto and backend == "c"  # (without a C compiler: python)
+    chosen = _names(sensitivities)  # (a program with sensitivities is built each time)
+    policy = runner.run_policy(backend, t_end, dt, warm=not chosen)
+    if policy.warning:
+        click.echo(policy.warning, err=True)
     request = warm.Request(model, scene, outputs, effects, algebra, project_initial,
-                           allow_inconsistent, backend, consts)
-    chosen = _names(sensitivities)
+                           allow_inconsistent, policy.backend, consts)
     if sensitivities is not None and not chosen:
         raise click.UsageError("--sensitivities: name one parameter or more (P1,P2,..)")
-    found = warm.lookup(request) if not chosen else None  # (sensitivities: built each time)
-    if found is None and auto and not chosen:  # no build of this model: its interpreted
-        interpreted = replace(request, backend="vm")  # program, if the run is short
+    found = warm.lookup(request) if policy.warm else None
+    if found is None and policy.auto and policy.warm:  # no build of this model: its
+        interpreted = replace(request, backend="vm")  # interpreted program, if the run is short
         found = warm.lookup(interpreted)
-        if found is not None and _short(found[0], t_end, dt):
+        if found is not None and policy.interpreted(found[0].settings, found[0].rhs_ops,
+                                                    found[0].states):
             request = interpreted
             click.echo(runner.INTERPRETED, err=True)
         else:
@@ -779,14 +780,14 @@ def simulate(model, scene, outputs, effects, algebra, backend, solver, rtol, ato
             request, chosen, [item.partition("=")[0] for item in params])
     elif found is None:
         record, program, compiled = _compile_for_run(
-            request, (t_end, dt) if auto and request.backend == "c" else None, solver)
+            request, policy if policy.auto and request.backend == "c" else None, solver)
     else:
         (record, path), compiled = found, None
         program = warm.program(record, path)
         click.echo(record.warnings, err=True, nl=False)
     files.read(compiled.files if compiled is not None else
                [("table", name) for name, _ in record.files])
-    problem = run.run_span_problem(record.settings, t_end, dt)  # (before -p, as always)
+    problem = run_settings.run_span_problem(record.settings, t_end, dt)  # (before -p, as always)
     if problem:
         raise click.UsageError(problem)
     names = sorted(record.params)
@@ -804,7 +805,7 @@ def simulate(model, scene, outputs, effects, algebra, backend, solver, rtol, ato
         raise click.UsageError(str(error)) from None
     seen: set = set()
     for path in input_files:
-        problem = run.input_file_problem(path, record.inputs)
+        problem = run_settings.input_file_problem(path, record.inputs)
         if problem:
             _fail(problem)
         with open(path, encoding="utf-8") as f:
@@ -859,10 +860,10 @@ def _simulate_run(settings, record, program, compiled, request, stats, output, p
             units = dict(compiled.graph.units) if compiled is not None else {}
             units.update({c[0]: c[3] for c in record.plot_columns if c[3]})
         try:
-            status, rows = _run(program, settings, stats, output, copy, progress, units)
-        except backends.CannotStart:  # (damaged behind its checksum: evicted, built again)
+            status, rows = _run_to_output(program, settings, stats, output, copy, progress, units)
+        except processes.CannotStart:  # (damaged behind its checksum: evicted, built again)
             record, program, compiled = _compile_for_run(request, None, settings.solver)
-            status, rows = _run(program, settings, stats, output, copy, progress, units)
+            status, rows = _run_to_output(program, settings, stats, output, copy, progress, units)
         if progress is not None:
             progress.close()
         if plot_file:
@@ -886,20 +887,14 @@ def _scratch(needed: bool):
     return tempfile.TemporaryDirectory(prefix="bgc-")
 
 
-def _short(record: warm.Record, t_end, dt) -> bool:
-    """Whether a run of the model a warm record describes is short
-    (bgc.execute.runner.short_run)."""
-    settings = record.settings.with_options(t_end=t_end, dt=dt)
-    return runner.short_run(settings, record.rhs_ops, record.states)
-
-
-def _compile_for_run(request: warm.Request, auto=None, solver: str | None = None):
+def _compile_for_run(request: warm.Request, policy=None, solver: str | None = None):
     """The cold path: build the model, compile its program into the cache, keep a warm
-    record of it; (record, program, the compiled model).  auto: (t_end, dt) of a run whose
-    backend bgc chooses: the interpreter for a short run (bgc.execute.runner.short_run), which is
-    said on stderr, else the C backend.  solver: the run's (None: the scene's); for an
-    explicit one, C and the interpreter get a program without the Jacobian (nothing the run
-    does not call is built: warm.needs_model sends a later implicit run here again)."""
+    record of it; (record, program, the compiled model).  policy: the run's
+    (bgc.execute.runner.RunPolicy) when bgc chooses its backend: the interpreter where the
+    policy says so (interpreted), which is said on stderr, else the C backend.  solver: the
+    run's (None: the scene's); for an explicit one, C and the interpreter get a program
+    without the Jacobian (nothing the run does not call is built: warm.needs_model sends a
+    later implicit run here again)."""
     r = request
     try:
         data = read_bounded(r.model)
@@ -912,9 +907,9 @@ def _compile_for_run(request: warm.Request, auto=None, solver: str | None = None
     compiled = _build(source, r.scene, r.project_initial, r.algebra, outputs=r.outputs,
                       effects=r.effects, allow_inconsistent=r.allow_inconsistent,
                       jacobian=jacobian)
-    if auto is not None and vm.supports(compiled.program) and runner.short_run(
-            compiled.program.scene.with_options(t_end=auto[0], dt=auto[1]),
-            warm.rhs_ops(compiled.program), len(compiled.program.states)):
+    p = compiled.program
+    if policy is not None and vm.supports(p) and policy.interpreted(p.scene, warm.rhs_ops(p),
+                                                                    len(p.states)):
         request = replace(request, backend="vm")
         click.echo(runner.INTERPRETED, err=True)
     program = runner.prepare(compiled, request.backend)
@@ -1004,8 +999,9 @@ class _UnitsRow:
         return self.units.get(name, "")
 
 
-def _run(program, settings, stats: bool, output: str | None, copy: Path | None = None,
-         progress=None, units: dict | None = None) -> tuple[int, bool]:
+def _run_to_output(program, settings, stats: bool, output: str | None,
+                   copy: Path | None = None, progress=None,
+                   units: dict | None = None) -> tuple[int, bool]:
     """Runs the program (bgc.execute.runner.run), its CSV streamed to `output` (else stdout, and a
     copy into `copy` if given); the exit status, and whether rows were written.  A failed
     run's rows are kept, cut back to the last whole row, and the last line on stderr says so.
@@ -1052,8 +1048,8 @@ def _run(program, settings, stats: bool, output: str | None, copy: Path | None =
 
 
 def _run_to_stdout(program, settings, stats, copy, progress, units=None) -> tuple[int, bool]:
-    """_run with the CSV on stdout: a regular file there (`> out.csv`) is cut back to its last
-    whole row if the run fails, as a named file is."""
+    """_run_to_output with the CSV on stdout: a regular file there (`> out.csv`) is cut back to
+    its last whole row if the run fails, as a named file is."""
     tee = sys.stdout if copy is None else _Tee(sys.stdout, copy)
     sink = tee if units is None else _UnitsRow(tee, units)
     try:
@@ -1678,11 +1674,11 @@ def _input_data(paths, names) -> dict:
     twice refused."""
     data: dict = {}
     for path in paths:
-        problem = run.input_file_problem(path, names if names is not None else
-                                         run.input_file_columns(path))
+        problem = run_settings.input_file_problem(path, names if names is not None else
+                                                  run_settings.input_file_columns(path))
         if problem:
             _fail(problem)
-        for name, series in run.input_file_data(path).items():
+        for name, series in run_settings.input_file_data(path).items():
             if name in data:
                 _fail(f"{path}: input '{name}' is given twice")
             data[name] = series

@@ -16,7 +16,7 @@ import functools
 import numpy as np
 
 from . import api
-from .base import run
+from .base import run_settings
 from .execute import runner
 
 
@@ -107,9 +107,9 @@ class Model(api.Source):
     def __init__(self, source: api.Source, scene: str | None = None, backend: str = "c",
                  algebra: str = "auto", outputs=None, effects=None,
                  project_initial: bool = False, allow_inconsistent: bool = False):
-        run.choice("backend", backend, run.BACKENDS)
-        run.choice("algebra", algebra, run.ALGEBRA)
-        run.exclusive(project_initial, allow_inconsistent)
+        run_settings.choice("backend", backend, run_settings.BACKENDS)
+        run_settings.choice("algebra", algebra, run_settings.ALGEBRA)
+        run_settings.exclusive(project_initial, allow_inconsistent)
         object.__setattr__(self, "path", source.path)
         object.__setattr__(self, "text", source.text)
         object.__setattr__(self, "consts", tuple(getattr(source, "consts", ())))
@@ -170,13 +170,13 @@ class Model(api.Source):
         return dict(self._module.PARAMETERS)
 
     @property
-    def settings(self) -> run.RunSettings:
+    def settings(self) -> run_settings.RunSettings:
         """The scene's run settings: t0, t_end, dt, solver, rtol, atol, step."""
         return self.compiled.settings.run
 
     def _p(self, params):
         """The parameter vector, ordered as `parameters`."""
-        run.check_run_options({"params": params})
+        run_settings.check_run_options({"params": params})
         m = self._module
         return m._param_values(m._overrides(params))
 
@@ -210,12 +210,12 @@ class Model(api.Source):
         """Runs the model (None: the scene's setting); a Trajectory.  backend: the Model's
         unless given ("c" falls back to "python" without a C compiler)."""
         backend = self.backend if backend is None else backend
-        run.choice("backend", backend, run.BACKENDS)
+        run_settings.choice("backend", backend, run_settings.BACKENDS)
         options = dict(t_end=t_end, dt=dt, solver=solver, rtol=rtol, atol=atol, step=step,
                        max_steps=max_steps, params=params,
                        project_initial=self._options["project_initial"] or None,
                        allow_inconsistent=self._options["allow_inconsistent"] or None)
-        run.check_run_options(options)
+        run_settings.check_run_options(options)
         program = self.compiled.program
         settings = runner.settings_for(program.scene, [p.name for p in program.params],
                                        **options)
@@ -227,7 +227,7 @@ class Model(api.Source):
 
     def equations(self, format: str = "text") -> Equations:
         """The reduced equations, as `bgc equations` prints them; format "text" or "latex"."""
-        run.choice("format", format, run.FORMATS)
+        run_settings.choice("format", format, run_settings.FORMATS)
         from .reports.report import equations_latex, equations_text
         return Equations((equations_latex if format == "latex" else equations_text)(
             self.compiled))
@@ -240,7 +240,7 @@ class Model(api.Source):
     def draw(self, format: str = "svg"):
         """The bond graph with its causal strokes (`bgc draw`): format "svg" (an SVG that
         Jupyter displays; needs Graphviz's `dot`) or "dot" (the Graphviz text)."""
-        run.choice("format", format, ("svg", "dot"))
+        run_settings.choice("format", format, ("svg", "dot"))
         from .reports import draw
         dot = draw.draw_dot(self.compiled)
         if format == "dot":

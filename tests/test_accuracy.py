@@ -10,14 +10,14 @@ import numpy as np
 import pytest
 
 from bgc import api
-from bgc.base import backends, solvers
+from bgc.base import solvers, toolchain
 from bgc.analysis import stability
 from conftest import run_bgc
 from test_simulate import pendulum_reference
 
 ROOT = Path(__file__).resolve().parent.parent
 PENDULUM = ROOT / "models" / "pendulum.bg"
-needs_cc = pytest.mark.skipif(not backends.have_c_compiler(), reason="no C compiler")
+needs_cc = pytest.mark.skipif(not toolchain.have_c_compiler(), reason="no C compiler")
 
 
 def bgc(*args, cwd=None):

@@ -22,14 +22,14 @@ from scipy.integrate import solve_ivp
 from scipy.optimize import brentq
 
 import bgc
-from bgc.base import backends
+from bgc.base import processes, toolchain
 from bgc.api import Source
 from bgc.codegen.emit import emit_c, emit_python
 from helpers import built, families
 
 ROOT = Path(__file__).resolve().parent.parent
 MODELS = sorted((ROOT / "models").glob("*.bg"))
-BACKENDS = ["python"] + (["c"] if backends.have_c_compiler() else [])
+BACKENDS = ["python"] + (["c"] if toolchain.have_c_compiler() else [])
 
 
 
@@ -177,7 +177,7 @@ def test_nonlinear_loop_of_two_laws_is_consistent():
     compiled = bgc.build(src)
     assert any(b.method == "newton" for b in compiled.reduced.blocks)
     (text,) = emit_python(compiled.program).values()
-    module = backends.load_python_module(text)
+    module = processes.load_python_module(text)
     rng = np.random.default_rng(3)
     for q in rng.uniform(-1, 1, 5):
         dq = module.rhs(0.0, [q], [1.0])[0]  # the capacitor's current = r3's current
@@ -254,7 +254,7 @@ def test_symbolic_and_numeric_blocks_agree(path):
     modules = {}
     for algebra in ("symbolic", "numeric"):
         (text,) = emit_python(bgc.build(path, algebra=algebra).program).values()
-        modules[algebra] = backends.load_python_module(text)
+        modules[algebra] = processes.load_python_module(text)
     sym, num = modules["symbolic"], modules["numeric"]
     params = list(sym.PARAMETERS.values())
     x0 = sym._init(sym._with_constants(params))
@@ -300,7 +300,7 @@ JACOBIAN_MODELS = MODELS + [Source("nl.bg", NONINVERTIBLE), Source("loop2.bg", T
                          ids=lambda m: m.stem if isinstance(m, Path) else m.path)
 def test_python_jacobian_matches_finite_differences(model):
     (text,) = emit_python(built(model).program).values()
-    module = backends.load_python_module(text)
+    module = processes.load_python_module(text)
     rng = np.random.default_rng(11)
     for _ in range(2):
         params, x = _random_state(module, rng)
@@ -311,7 +311,7 @@ def test_python_jacobian_matches_finite_differences(model):
         assert np.allclose(module.jvp(0.2, x, params, v), J @ v, rtol=1e-9, atol=1e-9)
 
 
-@pytest.mark.skipif(not backends.have_c_compiler(), reason="no C compiler")
+@pytest.mark.skipif(not toolchain.have_c_compiler(), reason="no C compiler")
 @pytest.mark.parametrize("model", JACOBIAN_MODELS,
                          ids=lambda m: m.stem if isinstance(m, Path) else m.path)
 def test_c_jacobian_matches_finite_differences(model, tmp_path):
@@ -320,7 +320,7 @@ def test_c_jacobian_matches_finite_differences(model, tmp_path):
     lib = tmp_path / "model.so"
     src = tmp_path / "model.c"
     src.write_text(text)
-    cc = backends.c_compiler()
+    cc = toolchain.c_compiler()
     subprocess.run([*cc, "-O0", "-std=c99", "-shared", "-fPIC", "-DBGC_NO_MAIN", str(src), "-o",
                     str(lib), "-lm"], check=True, capture_output=True)
     so = ctypes.CDLL(str(lib))

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 import bgc
-from bgc.base.backends import load_python_module
+from bgc.base.processes import load_python_module
 
 pytest.importorskip("scipy")
 ROOT = Path(__file__).resolve().parent.parent

@@ -133,11 +133,11 @@ def test_symmetric_definite_matrix_needs_no_pivoting_however_scaled():
     would refactor it densely), the one-sign test of a symmetric one accepts it, and the
     solution is right."""
     import bgc
-    from bgc.base import backends
+    from bgc.base import processes
     from bgc.codegen.emit import emit_python
 
     (text,) = emit_python(bgc.build(bgc.api.Source("c.bg", "model c\n")).program).values()
-    runtime = backends.load_python_module(text)  # the runtime's routines, as generated
+    runtime = processes.load_python_module(text)  # the runtime's routines, as generated
     m = 6
     entries = sorted({(i, j) for i in range(m) for j in (i - 1, i, i + 1) if 0 <= j < m})
     scales = [1e-6 if i % 2 == 0 else 1e3 for i in range(m)]  # D B D: SPD, badly scaled

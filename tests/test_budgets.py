@@ -6,12 +6,12 @@ import functools
 
 import pytest
 
-from bgc.base import backends
+from bgc.base import cache, processes, toolchain
 from bgc.api import Source, build
 from bgc.codegen.emit import emit_c, emit_python
 from conftest import MODELS
 
-BACKENDS = ["python"] + (["c"] if backends.have_c_compiler() else [])
+BACKENDS = ["python"] + (["c"] if toolchain.have_c_compiler() else [])
 
 
 @functools.lru_cache(maxsize=None)
@@ -24,9 +24,9 @@ def _run(model, scene, backend, *args):
     """(exit status, stdout, the last line of stderr) of the generated program."""
     text = _program(model, scene, backend)
     if backend == "c":
-        code, out, err = backends.run_c(backends.compile_c(text), args)
+        code, out, err = processes.run_c(cache.compile_c(text), args)
     else:
-        code, out, err = backends.run_python(text, args)
+        code, out, err = processes.run_python(text, args)
     return code, out, (err.strip().splitlines() or [""])[-1]
 
 

@@ -1,4 +1,4 @@
-"""The compile cache (bgc.base.backends): the runtime built once and linked with each model's part,
+"""The compile cache (bgc.base.cache): the runtime built once and linked with each model's part,
 giving the bytes the standalone program gives; and a cache that verifies what it holds and
 builds again whatever it cannot run (a program without its mode, a directory in its place, a
 truncated or garbage file, a missing or damaged runtime object), without a traceback, also
@@ -11,12 +11,12 @@ from pathlib import Path
 import pytest
 
 from bgc import api
-from bgc.base import backends
+from bgc.base import cache as compile_cache, processes, toolchain
 from bgc.execute import runner
 from bgc.codegen.emit import c_runtime_unit, emit_c, linkable
 from conftest import MODELS, ROOT, run_bgc
 
-pytestmark = pytest.mark.skipif(not backends.have_c_compiler(), reason="no C compiler")
+pytestmark = pytest.mark.skipif(not toolchain.have_c_compiler(), reason="no C compiler")
 
 STRICT = ("-O2", "-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic")
 # RC charging through R into C from a source V: q(t) = C V (1 - exp(-t / (R C))).
@@ -81,15 +81,15 @@ def test_a_linked_program_writes_the_standalone_programs_bytes(cache, model, sce
     program = api.build(MODELS / f"{model}.bg", scene).program
     assert linkable(program)
     linked = runner.c_executable(program)
-    standalone = backends.compile_c(next(iter(emit_c(program).values())))
+    standalone = compile_cache.compile_c(next(iter(emit_c(program).values())))
     assert linked != standalone
     for solver in solvers:
         args = ["--solver", solver, "--t-end", "0.5"]
         if solver == "rk4":
             args += ["--step", "0.001"]
-        a, b = backends.run_c(linked, args), backends.run_c(standalone, args)
+        a, b = processes.run_c(linked, args), processes.run_c(standalone, args)
         assert a[0] == 0 and a[:2] == b[:2], (solver, a[2])
-    usage = backends.run_c(linked, ["--help"])[1]
+    usage = processes.run_c(linked, ["--help"])[1]
     assert usage.startswith(f"usage: {model}") and "parameters (NAME = default)" in usage
 
 
@@ -125,12 +125,12 @@ def test_a_model_too_large_for_the_runtime_is_built_standalone(cache, monkeypatc
 
 
 def test_a_large_model_part_is_compiled_at_O1_only_under_bgcs_own_flags():
-    own = backends.C_FLAGS
-    assert backends.model_part_flags(own, backends.LARGE_PART) == own
-    assert backends.model_part_flags(own, backends.LARGE_PART + 1) == backends.LARGE_PART_FLAGS
-    assert backends.LARGE_PART_FLAGS[0] == "-O1" and own[0] == "-O2"
+    own = toolchain.C_FLAGS
+    assert toolchain.model_part_flags(own, toolchain.LARGE_PART) == own
+    assert toolchain.model_part_flags(own, toolchain.LARGE_PART + 1) == toolchain.LARGE_PART_FLAGS
+    assert toolchain.LARGE_PART_FLAGS[0] == "-O1" and own[0] == "-O2"
     given = ("-O3", "-std=c99")  # $BGC_CFLAGS: the user's, for every part
-    assert backends.model_part_flags(given, 10 * backends.LARGE_PART) == given
+    assert toolchain.model_part_flags(given, 10 * toolchain.LARGE_PART) == given
 
 
 def test_a_part_at_another_level_than_the_runtime_writes_the_same_bytes(cache, monkeypatch):
@@ -138,18 +138,18 @@ def test_a_part_at_another_level_than_the_runtime_writes_the_same_bytes(cache, m
     at -O1, the same CSV as the standalone program at -O0 (the arithmetic is IEEE's at any
     level: -std=c99, no -ffast-math)."""
     program = api.build(MODELS / "pendulum.bg", "swing").program
-    monkeypatch.setattr(backends, "C_FLAGS", backends.c_flags())
-    monkeypatch.setattr(backends, "LARGE_PART", 0)
+    monkeypatch.setattr(toolchain, "C_FLAGS", toolchain.c_flags())
+    monkeypatch.setattr(toolchain, "LARGE_PART", 0)
     built = []
-    real = backends._build
-    monkeypatch.setattr(backends, "_build", lambda tmp, command, flags, name, *rest:
+    real = toolchain.build
+    monkeypatch.setattr(toolchain, "build", lambda tmp, command, flags, name, *rest:
                         built.append((name, flags)) or real(tmp, command, flags, name, *rest))
     linked = runner.c_executable(program)
-    assert ("model.c", backends.LARGE_PART_FLAGS) in built
-    assert ("runtime.c", backends.c_flags()) in built
-    standalone = backends.compile_c(next(iter(emit_c(program).values())))
+    assert ("model.c", toolchain.LARGE_PART_FLAGS) in built
+    assert ("runtime.c", toolchain.c_flags()) in built
+    standalone = compile_cache.compile_c(next(iter(emit_c(program).values())))
     args = ["--t-end", "0.5", "--solver", "rodas5p"]
-    a, b = backends.run_c(linked, args), backends.run_c(standalone, args)
+    a, b = processes.run_c(linked, args), processes.run_c(standalone, args)
     assert a[0] == 0 and a[:2] == b[:2], a[2]
 
 
@@ -189,8 +189,8 @@ def test_a_damaged_cached_program_is_built_again(cache, tmp_path, how):
     _damage_program(exe, how)
     again = _simulate(tmp_path)  # warm: the record names the damaged program
     assert (again.returncode, again.stdout, again.stderr) == (0, first.stdout, first.stderr)
-    assert _programs(cache) == [exe] and backends.usable(exe)
-    assert backends.run_c(exe, [])[1] == first.stdout
+    assert _programs(cache) == [exe] and compile_cache.usable(exe)
+    assert processes.run_c(exe, [])[1] == first.stdout
 
 
 @pytest.mark.parametrize("how", ["missing", "truncated", "garbage, checksum forged",
@@ -201,7 +201,7 @@ def test_a_damaged_runtime_object_is_built_again(cache, tmp_path, how):
     _damage_program(runtime, how)
     done = _simulate(tmp_path, MODELS / "rlc.bg", "--t-end", "0.5")  # a new model: it links
     assert done.returncode == 0 and done.stdout.startswith("t,"), done.stderr
-    assert _runtime_objects(cache) == [runtime] and backends.usable(runtime, executable=False)
+    assert _runtime_objects(cache) == [runtime] and compile_cache.usable(runtime, executable=False)
 
 
 def test_a_program_that_cannot_start_in_the_api_is_built_again(cache):
@@ -215,8 +215,8 @@ def test_a_program_that_cannot_start_in_the_api_is_built_again(cache):
 
 def test_a_cache_where_programs_cannot_start_is_told_in_one_line(cache, tmp_path, monkeypatch):
     def refuse(argv, **options):
-        raise backends.CannotStart(argv, PermissionError(13, "Permission denied"))
-    monkeypatch.setattr(backends, "_start", refuse)
+        raise processes.CannotStart(argv, PermissionError(13, "Permission denied"))
+    monkeypatch.setattr(processes, "_start", refuse)
     done = _simulate(tmp_path)
     assert done.returncode == 1
     assert done.stderr.startswith("error: cannot start the program") and \
@@ -228,7 +228,7 @@ def test_a_full_disk_while_building_is_told_in_one_line(cache, tmp_path, monkeyp
 
     def full(*args, **kwargs):
         raise OSError(errno.ENOSPC, "No space left on device")
-    monkeypatch.setattr(backends, "run_compiler", full)
+    monkeypatch.setattr(toolchain, "run_compiler", full)
     done = _simulate(tmp_path, None, "-o", "out.csv")
     assert done.returncode == 1 and not (tmp_path / "out.csv").exists()
     assert done.stderr == f"error: cannot write into the compile cache {cache}: No space left " \
@@ -266,7 +266,7 @@ def test_concurrent_runs_share_one_cache(tmp_path):
         for out in range(k, len(models), 3):
             assert (tmp_path / f"out{out}.csv").read_text() == alone.stdout
     assert len(_runtime_objects(cache)) == 1 and len(_programs(cache)) == 3
-    assert all(backends.usable(p) for p in _programs(cache))
+    assert all(compile_cache.usable(p) for p in _programs(cache))
     assert not [p.name for p in cache.iterdir() if p.name.startswith(("build-", "."))]
 
 
@@ -280,19 +280,19 @@ def test_a_run_copies_what_the_install_prebuilt_instead_of_building_it(tmp_path,
     seeds = tmp_path / "prebuilt"
     monkeypatch.setenv("BGC_CACHE_DIR", str(seeds))  # what stands for the package's directory
     vm.interpreter()
-    runtime = backends.compile_runtime(c_runtime_unit())
+    runtime = compile_cache.compile_runtime(c_runtime_unit())
     parser.lark_parser.cache_clear()
     parser.lark_parser()
-    monkeypatch.setattr(backends, "PREBUILT", seeds)
+    monkeypatch.setattr(compile_cache, "PREBUILT", seeds)
     cache = tmp_path / "cache"
     monkeypatch.setenv("BGC_CACHE_DIR", str(cache))
 
     def no_compiler(*args, **kwargs):
         raise AssertionError("the compiler was run")
-    monkeypatch.setattr(backends, "run_compiler", no_compiler)
+    monkeypatch.setattr(toolchain, "run_compiler", no_compiler)
     try:
-        for built in (vm.interpreter(), backends.compile_runtime(c_runtime_unit())):
-            assert built.parent == cache and backends.usable(built, built.suffix != ".o")
+        for built in (vm.interpreter(), compile_cache.compile_runtime(c_runtime_unit())):
+            assert built.parent == cache and compile_cache.usable(built, built.suffix != ".o")
             assert built.read_bytes() == (seeds / built.name).read_bytes()
         assert runtime.name in {p.name for p in cache.iterdir()}
         parser.lark_parser.cache_clear()
@@ -308,4 +308,4 @@ def test_a_run_copies_what_the_install_prebuilt_instead_of_building_it(tmp_path,
     def build(tmp):
         (tmp / "x").write_bytes(b"new")
         return tmp / "x"
-    assert backends._cached("bgc-x", False, build).read_bytes() == b"new"
+    assert compile_cache._cached("bgc-x", False, build).read_bytes() == b"new"

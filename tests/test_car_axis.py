@@ -12,12 +12,12 @@ import pytest
 import sympy as sp
 
 from bgc import api
-from bgc.base import backends
+from bgc.base import toolchain
 from bgc.front.graph import TIME, var
 
 ROOT = Path(__file__).resolve().parent.parent
 MODELS = ROOT / "models"
-BACKENDS = ["python"] + (["c"] if backends.have_c_compiler() else [])
+BACKENDS = ["python"] + (["c"] if toolchain.have_c_compiler() else [])
 FORMS = ["car_axis", "car_axis_vector"]
 
 # The problem's data: eps, M, L, L0, r, w, g; the wheels' mass k = eps^2 M / 2.

@@ -11,7 +11,7 @@ import sympy as sp
 from click.testing import CliRunner
 
 import bgc
-from bgc.base import backends
+from bgc.base import toolchain
 from bgc.api import Source
 from bgc.front.ast import ComponentDecl, PortDecl
 from bgc.cli import main
@@ -897,7 +897,7 @@ def test_a_library_holds_components_only(tmp_path):
 
 
 # ------------------------------------------------------------------ the pendulum chain
-@pytest.mark.parametrize("backend", ["python"] + (["c"] if backends.have_c_compiler() else []))
+@pytest.mark.parametrize("backend", ["python"] + (["c"] if toolchain.have_c_compiler() else []))
 def test_the_pendulum_chain_as_a_component_gives_the_same_csv(backend, tmp_path):
     """models/pendulum_chain.bg (a `link` component and a for loop, under half the lines)
     against its flat twin tests/models/pendulum_chain_flat.bg (written out by

@@ -18,7 +18,7 @@ import pytest
 from scipy.integrate import solve_ivp
 
 from bgc import api
-from bgc.base import backends
+from bgc.base import toolchain
 from conftest import run_bgc
 
 
@@ -39,7 +39,7 @@ def _arm_moving(p: str) -> str:
 ROOT = Path(__file__).resolve().parent.parent
 MODELS = ROOT / "models"
 TEST_MODELS = Path(__file__).parent / "models"
-needs_cc = pytest.mark.skipif(not backends.have_c_compiler(), reason="no C compiler")
+needs_cc = pytest.mark.skipif(not toolchain.have_c_compiler(), reason="no C compiler")
 
 # The IVP Test Set, problem "andrews": q(0.03), the seven joint angles, and lambda(0.03).
 ANDREWS_Q = [0.1581077119629904e+2, -0.1575637105984298e+2, 0.4082224013073101e-1,
@@ -462,7 +462,7 @@ def test_the_jacobian_goes_through_the_field_and_the_augmented_solve():
     """J v of Andrews' right side, derived symbolically through M(q) f = p and the augmented
     system [M G^T; G 0], against central differences of the right side itself (the generated
     Python module, at the start and at a state off it)."""
-    from bgc.base.backends import load_python_module
+    from bgc.base.processes import load_python_module
     from bgc.codegen.emit import emit_python
 
     compiled = api.build(MODELS / "andrews.bg", "squeeze")

@@ -21,8 +21,10 @@ import pytest
 import sympy as sp
 
 from bgc import api
-from bgc.base import backends, solvers
-from bgc.base.backends import BackendError, compile_c, have_c_compiler, load_python_module, run_c
+from bgc.base import solvers, toolchain
+from bgc.base.cache import compile_c
+from bgc.base.processes import load_python_module, run_c
+from bgc.base.toolchain import BackendError, have_c_compiler
 from bgc.codegen.emit import (POW10_RANGE, EmitError, c_param_fields, c_string_literal, emit_c,
                       emit_python, pow10_table)
 from bgc.symbolic.algebra import Max, Min
@@ -539,7 +541,7 @@ int main(void)
 }
 """)
     exe = tmp_path / "loops"
-    subprocess.run([*backends.c_compiler(None), "-std=c99", "-O1", str(src), "-o", str(exe)],
+    subprocess.run([*toolchain.c_compiler(None), "-std=c99", "-O1", str(src), "-o", str(exe)],
                    check=True)
     assert subprocess.run([str(exe)], capture_output=True, text=True).stdout == "same\n"
 
@@ -630,7 +632,7 @@ def test_compile_cache_hit_does_not_compile(monkeypatch):
     def no_compiler(*args, **kwargs):
         raise AssertionError("compiled again")
 
-    monkeypatch.setattr(backends, "run_compiler", no_compiler)
+    monkeypatch.setattr(toolchain, "run_compiler", no_compiler)
     assert compile_c(source) == first
 
 
@@ -641,8 +643,8 @@ def test_compiler_failure_is_a_backend_error():
 
 
 def test_no_eval_or_exec_in_backends():
-    for name in ("ir/printers.py", "codegen/emit.py", "base/backends.py", "codegen/lower.py",
-                 "ir/program.py"):
+    for name in ("ir/printers.py", "codegen/emit.py", "base/cache.py", "base/toolchain.py",
+                 "base/processes.py", "codegen/lower.py", "ir/program.py"):
         text = (HERE.parent / "bgc" / name).read_text()
         assert "eval(" not in text and "exec(" not in text, name
 
@@ -1168,6 +1170,6 @@ def test_model_functions_split_into_short_functions_write_the_python_bytes(monke
         outs.append(run_c(compile_c(text), ["--t-end", "0.5"]))
         assert len(re.findall(r"^static int bgc_rhs_\d+\(", text, re.M)) > (6 if lines == 8 else 0)
     (py,) = emit_python(program, chunk_ops=30).values()
-    from bgc.base.backends import run_python
+    from bgc.base.processes import run_python
     outs.append(run_python(py, ["--t-end", "0.5"]))
     assert outs[0][0] == 0 and outs[0] == outs[1] == outs[2], outs[0][2]

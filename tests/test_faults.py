@@ -28,11 +28,11 @@ from pathlib import Path
 
 import pytest
 
-from bgc.base import backends
+from bgc.base import cache as compile_cache, toolchain
 from bgc.execute import outfile
 from conftest import run_bgc
 
-BACKENDS = ["python"] + (["c"] if backends.have_c_compiler() else [])
+BACKENDS = ["python"] + (["c"] if toolchain.have_c_compiler() else [])
 # 1e8 rk4 steps: a run that is still going when a test stops it.
 DECAY = """model decay
 signal z = integral(-z, init = 1)
@@ -583,10 +583,10 @@ def _cache_is_clean(cache: Path):
     assert [p.name for p in cache.iterdir() if p.name.startswith("build")] == []
     for p in cache.iterdir():
         if p.name.startswith("bgc-") and p.suffix in ("", ".o"):
-            assert backends.usable(p, executable=p.suffix == ""), p.name
+            assert compile_cache.usable(p, executable=p.suffix == ""), p.name
 
 
-@pytest.mark.skipif(not backends.have_c_compiler(), reason="needs a C compiler")
+@pytest.mark.skipif(not toolchain.have_c_compiler(), reason="needs a C compiler")
 def test_the_compiler_hitting_a_file_size_limit_in_the_cache_is_one_line(tmp_path, warm):
     """The runtime object is in the cache (the fixture built it); the compiler links a new
     model's program into the cache under a 50 kB file size limit (SIGXFSZ kills its linker, or
@@ -604,7 +604,7 @@ def test_the_compiler_hitting_a_file_size_limit_in_the_cache_is_one_line(tmp_pat
     assert any(p.name.startswith("bgc-runtime-") for p in cache.iterdir())
 
 
-@pytest.mark.skipif(not backends.have_c_compiler(), reason="needs a C compiler")
+@pytest.mark.skipif(not toolchain.have_c_compiler(), reason="needs a C compiler")
 def test_the_compiler_hitting_a_full_disk_in_its_temporary_directory_is_one_line(
         small_disk, tmp_path, warm):
     """$TMPDIR (where the compiler writes its temporary files) on a full disk."""

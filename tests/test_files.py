@@ -14,11 +14,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from bgc.base import backends
+from bgc.base import processes, toolchain
 from conftest import MODELS, run_bgc
 
-needs_cc = pytest.mark.skipif(not backends.have_c_compiler(), reason="no C compiler")
-BACKENDS = ["python"] + (["c"] if backends.have_c_compiler() else [])
+needs_cc = pytest.mark.skipif(not toolchain.have_c_compiler(), reason="no C compiler")
+BACKENDS = ["python"] + (["c"] if toolchain.have_c_compiler() else [])
 
 BLOW = """model blow
 signal z = integral(z^2, init = 1)
@@ -168,7 +168,7 @@ def test_a_broken_compiler_is_told_as_such_not_as_a_bug_in_bgc(tmp_path):
 def test_generated_c_refuses_fast_math(tmp_path):
     done = bgc("compile", MODELS / "rlc.bg", "-o", "rlc.c", cwd=tmp_path)
     assert done.returncode == 0
-    cc = backends.c_compiler()  # the guard is in the preprocessor: -E is enough
+    cc = toolchain.c_compiler()  # the guard is in the preprocessor: -E is enough
     fast = subprocess.run([*cc, "-E", "-ffast-math", "-std=c99", "rlc.c", "-o", "rlc.i"],
                           cwd=tmp_path, capture_output=True, text=True)
     assert fast.returncode != 0 and "-ffast-math" in fast.stderr
@@ -186,7 +186,7 @@ def test_the_python_module_streams_rows_to_a_file_or_yields_them(tmp_path):
     from bgc.codegen.emit import emit_python
 
     (text,) = emit_python(build(Source("decay.bg", DECAY), "s").program).values()
-    module = backends.load_python_module(text)
+    module = processes.load_python_module(text)
     t, Y = module.simulate(t_end=2.0, dt=0.01)
     assert np.allclose(Y[:, 0], np.exp(-t), rtol=1e-9)
     stats = {}
@@ -194,7 +194,7 @@ def test_the_python_module_streams_rows_to_a_file_or_yields_them(tmp_path):
     assert [r[0] for r in rows] == list(t) and [r[1] for r in rows] == Y.tolist()
     assert stats["steps"] == 2000
     assert module.simulate(t_end=2.0, dt=0.01, out=tmp_path / "a.csv") == len(t)
-    code, out, _ = backends.run_python(text, ["--t-end", "2", "--dt", "0.01"])
+    code, out, _ = processes.run_python(text, ["--t-end", "2", "--dt", "0.01"])
     assert code == 0 and (tmp_path / "a.csv").read_text() == out
     gen = module.rows(t_end=1e5, dt=0.01)  # a generator stops when its consumer does
     first = [next(gen) for _ in range(3)]

@@ -17,7 +17,7 @@ import pytest
 
 import bgc
 from bgc import api
-from bgc.base import backends
+from bgc.base import cache, processes, toolchain
 from bgc.codegen import fmu
 from bgc.codegen.emit import emit_c
 from conftest import run_bgc
@@ -26,7 +26,7 @@ fmpy = pytest.importorskip("fmpy")
 from fmpy.fmi2 import FMU2Model, FMU2Slave  # noqa: E402
 from fmpy.validation import validate_fmu  # noqa: E402
 
-if not backends.have_c_compiler():
+if not toolchain.have_c_compiler():
     pytest.skip("FMU export builds its binary with a C compiler", allow_module_level=True)
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -55,7 +55,7 @@ def built(tmp_path_factory):
             assert file == "pendulum.fmu"
             path.write_bytes(data)
         (text,) = emit_c(compiled.program).values()
-        code, csv, err = backends.run_c(backends.compile_c(text), ["--t-end", str(T_END)])
+        code, csv, err = processes.run_c(cache.compile_c(text), ["--t-end", str(T_END)])
         assert code == 0, err
         out[name] = (compiled, path, api._parse_csv(csv))
     return out
@@ -310,7 +310,7 @@ def test_only_the_fmi_functions_are_exported_and_the_sources_build(built, tmp_pa
         sources.append(tmp_path / f"{name}.c")
         sources[-1].write_text(source, encoding="utf-8")
     for source in sources:
-        done = subprocess.run([*backends.c_compiler(), "-std=c99", "-Wall", "-Wextra",
+        done = subprocess.run([*toolchain.c_compiler(), "-std=c99", "-Wall", "-Wextra",
                                "-pedantic", "-Werror", "-fsyntax-only", str(source)],
                               capture_output=True, text=True)
         assert done.returncode == 0, done.stderr
@@ -429,7 +429,7 @@ def test_an_inconsistent_start_when_asked_for(tmp_path):
     got = fmpy.simulate_fmu(str(path), fmi_type="CoSimulation", **options)
     compiled = api.build(model, allow_inconsistent=True, outputs="x, y")
     (text,) = emit_c(compiled.program).values()
-    code, csv, err = backends.run_c(backends.compile_c(text), [
+    code, csv, err = processes.run_c(cache.compile_c(text), [
         "--t-end", "1", "--dt", "0.01", "-p", "r0=1.05", "--allow-inconsistent"])
     assert code == 0, err
     t, Y, names = api._parse_csv(csv)

@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 
 import bgc
-from bgc.base import backends
+from bgc.base import toolchain
 from bgc.codegen import fmu
 from bgc.api import Source
 
@@ -31,7 +31,7 @@ from test_events import BALL, COUNT, LAG, bounce_times, build, lag_reference  # 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tools"))
 import fuzz_fmu  # noqa: E402
 
-if not backends.have_c_compiler():
+if not toolchain.have_c_compiler():
     pytest.skip("FMU export builds its binary with a C compiler", allow_module_level=True)
 
 TIGHT = "; solver dopri5(rtol = 1e-10, atol = 1e-12) }"
@@ -336,7 +336,7 @@ def test_the_sources_build_without_warnings(tmp_path):
         _, _, source = fmu.fmu_texts(build(text, scene))
         path = tmp_path / f"{name}.c"
         path.write_text(source, encoding="utf-8")
-        done = subprocess.run([*backends.c_compiler(), "-std=c99", "-Wall", "-Wextra",
+        done = subprocess.run([*toolchain.c_compiler(), "-std=c99", "-Wall", "-Wextra",
                                "-pedantic", "-Werror", "-fsyntax-only", str(path)],
                               capture_output=True, text=True)
         assert done.returncode == 0, done.stderr

@@ -14,7 +14,7 @@ import sympy as sp
 
 import bgc
 from bgc.api import read_source
-from bgc.base import backends
+from bgc.base import processes, toolchain
 from bgc.codegen.emit import c_runtime_parts, emit_c, emit_python, python_runtime
 from bgc.front.graph import TIME, var
 from bgc.front.instantiate import front
@@ -108,7 +108,7 @@ def test_golden(path, scene, golden, tmp_path):
         for suffix in (".c", ".py"):
             assert not base.with_suffix(suffix).exists(), \
                 f"{base.with_suffix(suffix).relative_to(ROOT)} is no golden file (CODE_SCENES)"
-    if backends.have_c_compiler():
+    if toolchain.have_c_compiler():
         compile_strictly(c_text, tmp_path, link=scene is None and path.stem in OPTIMISED)
 
 
@@ -156,7 +156,7 @@ def test_python_rhs_matches_sympy_at_random_points(path):
     assert _symbolic_path(path), "SYMBOLIC names it"
     compiled = built(path)
     (text,) = emit_python(compiled.program).values()
-    module = backends.load_python_module(text)
+    module = processes.load_python_module(text)
     r = bgc.build(path, None, algebra="symbolic").reduced
     forms = explicit_forms(r, r.rates, max_ops=20000)
     rng = np.random.default_rng(1)

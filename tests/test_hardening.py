@@ -13,7 +13,7 @@ from click.testing import CliRunner
 from lark.lexer import PatternStr
 
 import bgc
-from bgc.base import backends
+from bgc.base import processes
 from bgc.symbolic.algebra import antiderivative, is_zero, solve_for
 from bgc.api import Source
 from bgc.cli import main
@@ -79,7 +79,7 @@ def test_a_signal_400_deep_in_every_report():
     inertia = text + "j : 1\npush : MSe(w400)\nmass : I(1)\npush -> j\nj -> mass\n"
     assert "d(mass.p)/dt = " in bgc.equations(Source("m.bg", inertia))
     (code,) = emit_python(build(inertia).program).values()
-    module = backends.load_python_module(code)
+    module = processes.load_python_module(code)
     t, a = 0.75, 0.5
     expected = a ** 400 * t + (1 - a ** 400) / (1 - a)
     assert module.rhs(t, [0.0], [a])[0] == pytest.approx(expected, rel=1e-14)
@@ -91,7 +91,7 @@ def test_min_and_max_of_32_arguments():
     terms = ", ".join(f"sin({k}*t)" for k in range(1, 32))
     text = source_with(f"max(mass.p, {terms}) - min(t, mass.p, 0.25)")
     (code,) = emit_python(build(text).program).values()
-    module = backends.load_python_module(code)
+    module = processes.load_python_module(code)
     t, p = 0.7, 0.3
     expected = max([p] + [math.sin(k * t) for k in range(1, 32)]) - min(t, p, 0.25)
     assert module.rhs(t, [p], [])[0] == pytest.approx(expected, rel=1e-15)

@@ -12,6 +12,7 @@ from __future__ import annotations
 import ast
 import functools
 import importlib
+import re
 import types
 from pathlib import Path
 
@@ -236,9 +237,31 @@ def private_crossings() -> list[str]:
 
 def test_no_private_name_crosses_a_package():
     """A private name is its package's own: none is imported or read from another package
-    (the last five were made public: plot.shorten, backends.run_compiler,
+    (the last five were made public: plot.shorten, toolchain.run_compiler,
     parser.lark_parser, resources.PACKAGE_DIR, tangent.Forward)."""
     assert private_crossings() == []
+
+
+def test_every_package_names_its_entry():
+    """Each package's __init__ says what it holds and names its entry (docs/architecture.md,
+    "The packages"), or says that it is a library without one; every `module.name` after
+    "Entry:" is a function or class that module defines (read with `ast`: lsp needs pygls)."""
+    found = modules()
+    for init in sorted(PACKAGE.glob("*/__init__.py")):
+        package = init.parent.name
+        if package == "runtime":
+            continue
+        doc = ast.get_docstring(_syntax(init)) or ""
+        assert "Entry:" in doc or "no one entry" in doc, package
+        named = re.findall(r"\b([a-z_]+)\.([A-Za-z_]+)\b", doc.partition("Entry:")[2])
+        for module, name in named:
+            if f"{package}.{module}" not in found:
+                continue  # (another package's, bgc.api.build)
+            tree = _syntax(found[f"{package}.{module}"])
+            defined = {n.name for n in tree.body
+                       if isinstance(n, (ast.FunctionDef, ast.ClassDef))}
+            assert name in defined, f"{package}: {module}.{name}"
+        assert package != "ir" or "Program" in doc.partition("Entry:")[2]
 
 
 def test_only_the_command_line_imports_click():
@@ -258,11 +281,11 @@ def test_the_api_names_leave_the_submodules_alone():
     import bgc
     import bgc.api
     import bgc.model
-    import bgc.base.run
+    import bgc.base.run_settings
     import bgc.middle.system
     assert isinstance(bgc.middle.system, types.ModuleType)
-    assert isinstance(bgc.base.run, types.ModuleType)
-    assert importlib.import_module("bgc.base.run") is bgc.base.run
+    assert isinstance(bgc.base.run_settings, types.ModuleType)
+    assert importlib.import_module("bgc.base.run_settings") is bgc.base.run_settings
     assert bgc.equations is bgc.api.equations and bgc.load is bgc.model.load
     assert bgc.simulate is bgc.api.simulate and bgc.compile is bgc.api.compile
     assert not set(bgc.__all__) & set(vars(bgc))  # served by __getattr__, never stored

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 import bgc
-from bgc.base import backends
+from bgc.base import toolchain
 from bgc.api import Source
 
 from conftest import have_cc
@@ -269,7 +269,7 @@ def test_linearize_takes_the_declared_inputs():
 
 @pytest.fixture(scope="module")
 def rc_fmu(tmp_path_factory):
-    if not backends.have_c_compiler():
+    if not toolchain.have_c_compiler():
         pytest.skip("FMU export builds its binary with a C compiler")
     tmp = tmp_path_factory.mktemp("fmu")
     (tmp / "rc.bg").write_text(RC, encoding="utf-8")

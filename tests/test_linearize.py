@@ -12,7 +12,7 @@ import pytest
 from click.testing import CliRunner
 
 import bgc
-from bgc.base import backends
+from bgc.base import processes
 from bgc.execute import runner
 from bgc.api import Source
 from bgc.cli import main
@@ -151,7 +151,7 @@ def test_pendulum_started_at_the_bottom_other_parameters(tmp_path):
 
 def _module(model, scene, outputs):
     (text,) = bgc.compile(model, target="python", scene=scene, outputs=list(outputs)).values()
-    return backends.load_python_module(text)
+    return processes.load_python_module(text)
 
 
 def _central(f, x, h):

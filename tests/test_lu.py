@@ -11,14 +11,14 @@ import pytest
 from scipy.linalg import expm
 
 import bgc
-from bgc.base import backends
+from bgc.base import processes, toolchain
 from bgc.api import Source
 from bgc.codegen.emit import emit_c, emit_python
 
 from cbits import C_IO
 
 ROOT = Path(__file__).resolve().parent.parent
-needs_cc = pytest.mark.skipif(not backends.have_c_compiler(), reason="no C compiler")
+needs_cc = pytest.mark.skipif(not toolchain.have_c_compiler(), reason="no C compiler")
 
 # [[4,1,1],[2,1,3],[1,5,2]] pivots on row 2 at column 1; the others are random
 MATRICES = [np.array([[4.0, 1.0, 1.0], [2.0, 1.0, 3.0], [1.0, 5.0, 2.0]])] + [
@@ -95,7 +95,7 @@ def test_c_factorisations_solve_with_row_swaps(tmp_path):
 
 def test_python_dense_block_factorisation_solves_with_row_swaps():
     (text,) = emit_python(bgc.build(ROOT / "models" / "pendulum.bg").program).values()
-    module = backends.load_python_module(text)
+    module = processes.load_python_module(text)
     rng = np.random.default_rng(8)
     for A in MATRICES:
         n = A.shape[0]
@@ -133,7 +133,7 @@ def test_stiff_solvers_on_a_pivoting_iteration_matrix(solver):
         _adaptive(backend, solver)
 
 
-BACKENDS = ["python"] + (["c"] if backends.have_c_compiler() else [])
+BACKENDS = ["python"] + (["c"] if toolchain.have_c_compiler() else [])
 
 
 def _adaptive(backend, solver):
@@ -279,7 +279,7 @@ def _complex_cases(rng):
 
 @pytest.fixture(scope="module")
 def bits_harness(tmp_path_factory):
-    if not backends.have_c_compiler():
+    if not toolchain.have_c_compiler():
         pytest.skip("no C compiler")
     tmp = tmp_path_factory.mktemp("lu_bits")
     (text,) = emit_c(bgc.build(ROOT / "models" / "pendulum.bg").program).values()
@@ -288,7 +288,7 @@ def bits_harness(tmp_path_factory):
     subprocess.run(["cc", "-O2", "-std=c99", "-DBGC_NO_MAIN", "-w", str(tmp / "harness.c"),
                     "-o", str(tmp / "harness"), "-lm"], check=True, cwd=tmp)
     (py,) = emit_python(bgc.build(ROOT / "models" / "pendulum.bg").program).values()
-    return tmp / "harness", backends.load_python_module(py)
+    return tmp / "harness", processes.load_python_module(py)
 
 
 def _run_harness(exe, lines):

@@ -403,10 +403,10 @@ def assert_columns_match(got: Columns, ref: Columns, t: np.ndarray, what: str,
 @pytest.mark.parametrize("case", CASES, ids=[c.id for c in CASES])
 def test_model_matches_reference(case: Case, backend: str) -> None:
     import bgc
-    import bgc.base.backends
+    import bgc.base.toolchain
 
     if backend == "c":
-        if not bgc.base.backends.have_c_compiler():
+        if not bgc.base.toolchain.have_c_compiler():
             pytest.skip("no C compiler")
     kwargs = {"scene": case.scene, "backend": backend}
     if case.params:

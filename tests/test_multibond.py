@@ -11,12 +11,12 @@ import pytest
 from scipy.integrate import solve_ivp
 
 from bgc import api
-from bgc.base import backends
+from bgc.base import toolchain
 from bgc.api import BgcModelError, Source
 
 ROOT = Path(__file__).resolve().parent.parent
 MODELS = ROOT / "models"
-BACKENDS = ["python"] + (["c"] if backends.have_c_compiler() else [])
+BACKENDS = ["python"] + (["c"] if toolchain.have_c_compiler() else [])
 M1, M2, L1, L2, G, TH1, TH2 = 1.0, 0.5, 1.0, 0.7, 9.81, 0.5, 1.0
 
 

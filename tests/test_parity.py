@@ -14,7 +14,7 @@ from pathlib import Path
 import pytest
 
 import bgc
-from bgc.base import backends, solvers
+from bgc.base import cache, processes, solvers, toolchain
 from bgc.api import Source
 from bgc.codegen.emit import emit_c, emit_python
 
@@ -22,7 +22,7 @@ from cbits import C_IO
 from helpers import families
 
 ROOT = Path(__file__).resolve().parent.parent
-pytestmark = pytest.mark.skipif(not backends.have_c_compiler(), reason="no C compiler")
+pytestmark = pytest.mark.skipif(not toolchain.have_c_compiler(), reason="no C compiler")
 
 
 def _source(name):
@@ -54,7 +54,7 @@ def programs(request):
     assert len(compiled.program.states) == MODELS[request.param][0]
     (c_text,) = emit_c(compiled.program).values()
     (py_text,) = emit_python(compiled.program).values()
-    return request.param, backends.compile_c(c_text), backends.load_python_module(py_text)
+    return request.param, cache.compile_c(c_text), processes.load_python_module(py_text)
 
 
 def _c(exe, argv):
@@ -129,7 +129,7 @@ def test_model_functions_are_the_c_programs(tmp_path):
     subprocess.run(["cc", "-O2", "-std=c99", str(tmp_path / "libm.c"), "-o",
                     str(tmp_path / "libm"), "-lm"], check=True)
     (py,) = emit_python(bgc.build(ROOT / "models" / "diode.bg").program).values()
-    module = backends.load_python_module(py)
+    module = processes.load_python_module(py)
     rng = random.Random(5)
     special = [0.0, -0.0, 1.0, -1.0, 0.5, -0.5, 2.0, -3.0, 1e-310, 710.0, -746.0, 1e308,
                -1e308, math.inf, -math.inf, math.nan, 3.0, 0.1, 800.0, -800.0]

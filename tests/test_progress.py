@@ -11,7 +11,7 @@ import sys
 import pytest
 
 import bgc
-from bgc.base import backends
+from bgc.base import cache, processes
 from bgc import cli
 from bgc.codegen.emit import emit_c, emit_python
 from conftest import MODELS, have_cc, run_bgc
@@ -33,7 +33,7 @@ def _progress_lines(stderr: str):
 @pytest.mark.skipif(not have_cc(), reason="no C compiler")
 def test_c_program_progress_on_stderr_only(program):
     (text,) = emit_c(program).values()
-    exe = backends.compile_c(text)
+    exe = cache.compile_c(text)
     args = ["--t-end", "2"]
     plain = subprocess.run([exe, *args], capture_output=True)
     told = subprocess.run([exe, *args, "--progress"], capture_output=True)
@@ -47,7 +47,7 @@ def test_c_program_progress_on_stderr_only(program):
 
 def test_python_module_progress_on_stderr_only(program, capsys):
     (text,) = emit_python(program).values()
-    module = backends.load_python_module(text)
+    module = processes.load_python_module(text)
     assert module.main(["--t-end", "2"]) == 0
     plain = capsys.readouterr()
     assert module.main(["--t-end", "2", "--progress"]) == 0

@@ -1,6 +1,7 @@
-"""The one settings type (bgc.base.run.RunSettings) and the one run function (bgc.execute.runner):
-options laid over a scene's settings, a program started with only what differs from its own, the
-parameters checked once, the C compiler's fallback said once, a run's result."""
+"""The one settings type (bgc.base.run_settings.RunSettings) and the one run function
+(bgc.execute.runner): options laid over a scene's settings, a program started with only what
+differs from its own, the parameters checked once, the C compiler's fallback said once, the
+run policy of `bgc simulate`, a run's result."""
 from __future__ import annotations
 
 import io
@@ -10,8 +11,9 @@ from pathlib import Path
 import pytest
 
 import bgc
+from bgc.base import toolchain
 from bgc.execute import runner
-from bgc.base.run import RunSettings, parameter_overrides
+from bgc.base.run_settings import RunSettings, parameter_overrides
 
 RLC = Path(__file__).parent.parent / "models" / "rlc.bg"
 SCENE = RunSettings(0.0, 10.0, 0.01, "dopri5", 1e-6, 1e-9)
@@ -47,6 +49,30 @@ def test_without_a_c_compiler_the_python_backend_runs_and_says_so(monkeypatch):
     monkeypatch.setenv("CC", "no-such-compiler-bgc")
     assert runner.choose_backend("c") == ("python", runner.NO_C_COMPILER)
     assert runner.choose_backend("python") == ("python", None)
+
+
+def test_the_run_policy_chooses_the_backend_and_the_interpreter_for_a_short_run(monkeypatch):
+    monkeypatch.setattr(toolchain, "have_c_compiler", lambda cc=None: True)
+    auto = runner.run_policy("auto")
+    assert (auto.backend, auto.warning, auto.auto, auto.warm) == ("c", None, True, True)
+    for backend in ("c", "vm", "python"):  # asked for: never chosen
+        given = runner.run_policy(backend, warm=False)
+        assert (given.backend, given.auto, given.warm) == (backend, False, False)
+        assert not given.interpreted(SCENE, 1, 1)
+    # SCENE: 0..10 every 0.01, 1001 rows; VM_WORK = 1e7 (rows x (operations + states))
+    assert runner.VM_WORK == 10_000_000
+    assert auto.interpreted(SCENE, 8_000, 990)  # 1001 x 8 990 = 9.0e6
+    assert not auto.interpreted(SCENE, 10_000, 990)  # 1001 x 10 990 = 1.1e7
+    shorter = runner.run_policy("auto", t_end=1.0)  # 101 rows
+    assert shorter.interpreted(SCENE, 10_000, 990)
+    finer = runner.run_policy("auto", dt=0.001)  # 10 001 rows
+    assert not finer.interpreted(SCENE, 1_000, 10) and finer.interpreted(SCENE, 900, 10)
+    monkeypatch.setattr(toolchain, "have_c_compiler", lambda cc=None: False)
+    fallback = runner.run_policy("auto")  # without a C compiler: Python, nothing chosen
+    assert (fallback.backend, fallback.warning, fallback.auto) == \
+        ("python", runner.NO_C_COMPILER, False)
+    assert not fallback.interpreted(SCENE, 1, 1)
+    assert runner.run_policy("vm").backend == "python"
 
 
 def test_a_run_streams_into_a_sink_or_returns_its_rows(tmp_path, monkeypatch):

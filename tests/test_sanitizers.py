@@ -13,7 +13,7 @@ from pathlib import Path
 import pytest
 
 import bgc
-from bgc.base import backends
+from bgc.base import toolchain
 from bgc.api import Source
 from bgc.codegen.emit import emit_c
 from conftest import MODELS
@@ -24,12 +24,12 @@ ENV = dict(os.environ, ASAN_OPTIONS="abort_on_error=0:detect_leaks=1:exitcode=99
 
 
 def _sanitizers_work(tmp) -> bool:
-    if not backends.have_c_compiler():
+    if not toolchain.have_c_compiler():
         return False
     src = tmp / "probe.c"
     src.write_text("#include <stdlib.h>\nint main(void) { free(malloc(8)); return 0; }\n")
     try:
-        subprocess.run([*backends.c_compiler(), *FLAGS, str(src), "-o", str(tmp / "probe")],
+        subprocess.run([*toolchain.c_compiler(), *FLAGS, str(src), "-o", str(tmp / "probe")],
                        check=True, capture_output=True)
         subprocess.run([str(tmp / "probe")], check=True, capture_output=True, env=ENV)
     except (OSError, subprocess.CalledProcessError):
@@ -48,7 +48,7 @@ def sanitized(tmp_path_factory):
         name = Path(str(model.path if isinstance(model, Source) else model)).stem + (scene or "")
         src, exe = tmp / f"{name}.c", tmp / name
         src.write_text(text)
-        subprocess.run([*backends.c_compiler(), *FLAGS, str(src), "-o", str(exe), "-lm"],
+        subprocess.run([*toolchain.c_compiler(), *FLAGS, str(src), "-o", str(exe), "-lm"],
                        check=True, capture_output=True)
         return exe
     return build

@@ -12,7 +12,7 @@ import subprocess
 from conftest import have_cc, run_bgc
 
 from bgc import api
-from bgc.base import backends
+from bgc.base import cache
 from bgc.codegen import emit, vm
 from bgc.codegen.emit import EmitError
 
@@ -61,7 +61,7 @@ def test_a_program_for_an_explicit_solver_has_no_jacobian_and_the_same_right_sid
 def test_a_program_without_its_jacobian_refuses_an_implicit_solver(tmp_path, monkeypatch):
     monkeypatch.setenv("BGC_CACHE_DIR", str(tmp_path / "cache"))
     (text,) = emit.emit_c(_build(False).program).values()
-    exe = backends.compile_c(text)
+    exe = cache.compile_c(text)
     ok = subprocess.run([str(exe)], capture_output=True, text=True)
     assert ok.returncode == 0, ok.stderr
     for solver in ("radau5", "rodas5p", "auto"):

@@ -12,7 +12,7 @@ from click.testing import CliRunner
 import bgc
 from bgc import ir
 from bgc.api import Source
-from bgc.base.backends import load_python_module
+from bgc.base.processes import load_python_module
 from bgc.cli import main
 from bgc.codegen.emit import emit_python
 

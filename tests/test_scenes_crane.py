@@ -27,7 +27,7 @@ import pytest
 from scipy.integrate import solve_ivp
 
 from bgc import api
-from bgc.base import backends
+from bgc.base import processes
 from bgc.codegen.emit import emit_python
 
 MODEL = Path(__file__).resolve().parent.parent / "models" / "gantry_crane.bg"
@@ -70,7 +70,7 @@ EXPECTED = {
 def module(scene):
     """The scene's generated Python module (built once per test session)."""
     (text,) = emit_python(api.build(MODEL, scene).program).values()
-    return backends.load_python_module(text)
+    return processes.load_python_module(text)
 
 
 def run(scene, **options):

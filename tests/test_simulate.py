@@ -7,13 +7,13 @@ import pytest
 from scipy.integrate import solve_ivp
 
 import bgc
-from bgc.base import backends
+from bgc.base import toolchain
 from bgc.api import Source
 from conftest import run_bgc
 
 ROOT = Path(__file__).resolve().parent.parent
 PENDULUM = ROOT / "models" / "pendulum.bg"
-BACKENDS = ["python"] + (["c"] if backends.have_c_compiler() else [])
+BACKENDS = ["python"] + (["c"] if toolchain.have_c_compiler() else [])
 
 
 def pendulum_reference(t, theta0=0.5, alpha=5.0, beta=5.0, stabilised=True, m=1.0, l=1.0,

@@ -14,7 +14,7 @@ import pytest
 from scipy.linalg import expm
 
 import bgc
-from bgc.base import backends
+from bgc.base import processes, toolchain
 from bgc.symbolic import sparse
 from bgc.api import Source
 from bgc.codegen.emit import emit_c, emit_python
@@ -23,7 +23,7 @@ from cbits import C_IO
 from helpers import families, pyruntime
 
 ROOT = Path(__file__).resolve().parent.parent
-needs_cc = pytest.mark.skipif(not backends.have_c_compiler(), reason="no C compiler")
+needs_cc = pytest.mark.skipif(not toolchain.have_c_compiler(), reason="no C compiler")
 GRID = 6  # 36 states: above sparse.SPARSE_MIN_STATES
 rt = pyruntime()  # the Python runtime, whose _splu_* and _SparseMatrix these tests call
 
@@ -39,14 +39,14 @@ def grid(tmp_path_factory):
     (c_text,) = emit_c(program).values()
     (py_text,) = emit_python(program).values()
     exe = None
-    if backends.have_c_compiler():
+    if toolchain.have_c_compiler():
         work = tmp_path_factory.mktemp("grid")
         (work / "model.c").write_text(c_text)
         (work / "harness.c").write_text(HARNESS)
         exe = work / "grid"
         subprocess.run(["cc", "-O0", "-std=c99", "-w", "harness.c", "-o", str(exe), "-lm"],
                        check=True, cwd=work)
-    return program, exe, backends.load_python_module(py_text)
+    return program, exe, processes.load_python_module(py_text)
 
 
 # ---------------------------------------------------------------- random patterns

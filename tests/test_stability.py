@@ -27,13 +27,13 @@ from scipy.optimize import brentq
 from scipy.special import ellipj, ellipk
 
 import bgc
-from bgc.base import backends
+from bgc.base import cache, processes, toolchain
 from bgc.api import Source, build
 from bgc.codegen.emit import emit_c, emit_python
 from conftest import MODELS, ROOT, run_bgc
 
 TEST_MODELS = ROOT / "tests" / "models"
-HAVE_C = backends.have_c_compiler()
+HAVE_C = toolchain.have_c_compiler()
 needs_c = pytest.mark.skipif(not HAVE_C, reason="no C compiler")
 
 
@@ -46,9 +46,9 @@ def _program(path, scene, backend):
     compiled = build(path, scene)
     if backend == "c":
         (text,) = emit_c(compiled.program).values()
-        return backends.compile_c(text)
+        return cache.compile_c(text)
     (text,) = emit_python(compiled.program).values()
-    return backends.load_python_module(text)
+    return processes.load_python_module(text)
 
 
 class Run:
@@ -87,7 +87,7 @@ def run(path, scene, backend, *args) -> Run:
     program = _program(path, scene, backend)
     args = [str(a) for a in args]
     if backend == "c":
-        return Run(*backends.run_c(program, args, timeout=120))
+        return Run(*processes.run_c(program, args, timeout=120))
     out, err = io.StringIO(), io.StringIO()
     with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
         code = program.main(args)

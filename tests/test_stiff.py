@@ -13,7 +13,9 @@ import pytest
 import sympy as sp
 
 from bgc.base import solvers
-from bgc.base.backends import compile_c, have_c_compiler, load_python_module, run_c
+from bgc.base.cache import compile_c
+from bgc.base.processes import load_python_module, run_c
+from bgc.base.toolchain import have_c_compiler
 from bgc.codegen.emit import emit_c, emit_python
 from bgc.ir import P, Param, SceneSettings, T, X
 from bgc.codegen.lower import explicit_program

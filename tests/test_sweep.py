@@ -12,7 +12,7 @@ from click.testing import CliRunner
 
 import bgc
 from bgc import api
-from bgc.base import backends
+from bgc.base import cache, processes, toolchain
 from bgc.execute import sweeps
 from bgc.cli import main
 from bgc.codegen.emit import emit_c, emit_python
@@ -20,7 +20,7 @@ from bgc.codegen.emit import emit_c, emit_python
 ROOT = Path(__file__).resolve().parent.parent
 PENDULUM = str(ROOT / "models" / "pendulum.bg")
 METRICS = ["final:x", "max:rod.residual", "min:y", "maxabs:rod.lambda", "rms:rod.residual"]
-needs_cc = pytest.mark.skipif(not backends.have_c_compiler(), reason="no C compiler")
+needs_cc = pytest.mark.skipif(not toolchain.have_c_compiler(), reason="no C compiler")
 
 
 @pytest.fixture(scope="module")
@@ -60,10 +60,10 @@ def test_batch_equals_separate_runs_bit_for_bit(swing):
                       seed=3, metrics=METRICS, batch_size=7)
     assert len(table) == 20 and table.failures() == 0
     (source,) = emit_c(swing.program).values()
-    exe = backends.compile_c(source)
+    exe = cache.compile_c(source)
     for i in range(20):
         params = {n: float(table[n][i]) for n in ("m", "l", "alpha")}
-        code, out, err = backends.run_c(exe, api.run_args(params=params) + ["--stats"])
+        code, out, err = processes.run_c(exe, api.run_args(params=params) + ["--stats"])
         assert code == 0, err
         for spec, value in _metrics_from_csv(out).items():
             assert table[spec][i] == value, (i, spec)  # bit for bit
@@ -75,7 +75,7 @@ def test_batch_equals_separate_runs_bit_for_bit(swing):
 
 def test_python_batch_equals_separate_runs(swing):
     (text,) = emit_python(swing.program).values()
-    module = backends.load_python_module(text)
+    module = processes.load_python_module(text)
     runs = ["alpha=2.5 m=1.5", "", "# a comment, no run", "l=1.25"]
     rows = module.batch(runs, METRICS, t_end=0.5)
     assert [r["run"] for r in rows] == [0, 1, 2]

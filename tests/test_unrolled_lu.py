@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 import bgc
-from bgc.base import backends
+from bgc.base import processes, toolchain
 from bgc.symbolic import sparse
 from bgc.codegen.emit import _BlockArea, _unrolled_lu, emit_c, emit_python
 from conftest import MODELS
@@ -87,7 +87,7 @@ def test_plans_cover_static_symmetric_and_dense():
 
 def test_python_unrolled_lu_is_the_runtime_static_lu_to_the_bit():
     (text,) = emit_python(bgc.build(MODELS / "pendulum.bg").program).values()
-    rt = backends.load_python_module(text)
+    rt = processes.load_python_module(text)
     rng = np.random.default_rng(12)
     verdicts = set()
     for k, ((plan, entries), area) in enumerate(zip(PLANS, AREAS)):
@@ -127,7 +127,7 @@ def test_python_unrolled_lu_is_the_runtime_static_lu_to_the_bit():
 
 
 
-needs_cc = pytest.mark.skipif(not backends.have_c_compiler(), reason="no C compiler")
+needs_cc = pytest.mark.skipif(not toolchain.have_c_compiler(), reason="no C compiler")
 
 
 def _c_harness(unrolled) -> str:

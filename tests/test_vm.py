@@ -8,7 +8,7 @@ from pathlib import Path
 import pytest
 
 import bgc
-from bgc.base import backends
+from bgc.base import processes, toolchain
 from bgc.execute import runner
 from bgc.codegen import vm
 from bgc.api import Source, build
@@ -17,7 +17,7 @@ from conftest import run_bgc
 from helpers import ball
 
 ROOT = Path(__file__).resolve().parent.parent
-pytestmark = pytest.mark.skipif(not backends.have_c_compiler(), reason="no C compiler")
+pytestmark = pytest.mark.skipif(not toolchain.have_c_compiler(), reason="no C compiler")
 
 BALL = ball("scene drop { time 0 .. 1 every 0.01; outputs x, b.p }")
 
@@ -155,6 +155,6 @@ def test_a_damaged_program_is_refused(tmp_path):
     for k, bad in enumerate([data[:-4], data[:40], b"garbage", data[:-8] + b"\xff" * 8]):
         path = tmp_path / f"p{k}.bgvm"
         path.write_bytes(bad)
-        done = backends.run_captured([str(interp), str(path)])
+        done = processes.run_captured([str(interp), str(path)])
         assert done.returncode == 3 and "is not a program this interpreter runs" in done.stderr
         assert done.stdout == ""

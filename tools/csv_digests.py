@@ -31,7 +31,7 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
 import bgc  # noqa: E402
-from bgc.base import backends, solvers
+from bgc.base import cache, solvers
 from bgc.execute import runner  # noqa: E402
 from bgc.codegen.emit import emit_c, emit_python  # noqa: E402
 
@@ -46,7 +46,7 @@ def programs(path: Path, scene: str | None, work: Path, c_build: str, chosen):
         progs["c"] = [str(runner.c_executable(compiled.program))]
     elif "c" in chosen:
         (c_text,) = emit_c(compiled.program).values()
-        progs["c"] = [str(backends.compile_c(c_text))]
+        progs["c"] = [str(cache.compile_c(c_text))]
     if "python" in chosen:
         (py_text,) = emit_python(compiled.program).values()
         py = work / f"{path.stem}_{scene or 'default'}.py"

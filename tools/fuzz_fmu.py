@@ -736,7 +736,7 @@ def build(text: str, folder, sanitize: bool = False) -> Fmu | None:
     other exception is bgc's failure, and propagates."""
     sys.path.insert(0, str(ROOT))
     from bgc import api
-    from bgc.base import backends
+    from bgc.base import toolchain
     from bgc.codegen import fmu as fmu_export
     from bgc.base.diagnostics import ModelError
     try:
@@ -744,7 +744,7 @@ def build(text: str, folder, sanitize: bool = False) -> Fmu | None:
         flags = ("-O1", "-g", "-std=c99", "-fsanitize=address,undefined",
                  "-fno-sanitize-recover=all") if sanitize else None
         data = fmu_export.build_fmu(compiled, flags=flags)
-    except (api.BgcModelError, ModelError, fmu_export.FmuError, backends.BackendError):
+    except (api.BgcModelError, ModelError, fmu_export.FmuError, toolchain.BackendError):
         return None
     Path(folder, "m.fmu").write_bytes(data)
     return extract(Path(folder, "m.fmu"), folder)

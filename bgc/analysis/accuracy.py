@@ -33,7 +33,7 @@ import sympy as sp
 from ..execute import runner
 from ..base import solvers
 from ..api import Compiled
-from ..base.run import RunSettings
+from ..base.run_settings import RunSettings
 from .stability import fixed_step_checks, fixed_step_of
 
 DEFAULT_RTOLS = tuple(10.0 ** -k for k in range(3, 11))

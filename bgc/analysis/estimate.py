@@ -215,7 +215,7 @@ def _input_data(program, inputs) -> tuple:
     """inputs ({name: (t, values)}, the data of the model's declared inputs, as
     bgc.simulate's inputs=) checked against program's inputs, as RunSettings.input_data;
     FitArgumentError for people."""
-    from ..base.run import input_data
+    from ..base.run_settings import input_data
     names = [u.name for u in program.inputs]
     for name in inputs:
         if name not in names:

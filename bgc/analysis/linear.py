@@ -409,7 +409,7 @@ def check_input_data(analysed: operating.Analysed, input_data, at) -> dict:
     """input_data ({name: (t, values)}) checked: the model's declared inputs, a pair of
     finite numbers as many, t non-decreasing; not with at="steady" (data are a time
     source); AnalysisArgumentError for people."""
-    from ..base.run import input_data as checked_data
+    from ..base.run_settings import input_data as checked_data
     if not input_data:
         return {}
     if at is not None and parse_at(at)[0] == "steady":

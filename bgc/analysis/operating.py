@@ -29,7 +29,7 @@ import numpy as np
 import sympy as sp
 
 from .. import api
-from ..base import backends
+from ..base import processes
 from ..symbolic.differentiate import directional
 from ..codegen.emit import emit_python
 from ..ir import C, D, P, Assign, Store, substitute
@@ -153,7 +153,7 @@ class Evaluator:
             prog = with_tangent(prog, "rhs", f"rhs_du{k}", seeds)
             prog = with_tangent(prog, "outputs", f"outputs_du{k}", seeds)
         (text,) = emit_python(prog).values()
-        self.module = m = backends.load_python_module(text)
+        self.module = m = processes.load_python_module(text)
         self.analysed = analysed
         self.states = tuple(program.states)
         self.all_outputs = tuple(program.outputs)

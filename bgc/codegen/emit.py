@@ -775,16 +775,16 @@ def _environment():
 
     class CompiledTemplates(jinja2.BytecodeCache):
         """The templates as Jinja compiles them (Python code objects), kept in the compile
-        cache (bgc.base.backends.own_cache_dir) as the parser keeps its tables: a cold `bgc
+        cache (bgc.base.cache.own_cache_dir) as the parser keeps its tables: a cold `bgc
         simulate` reads them in a millisecond instead of compiling them (40 ms).  Jinja keys
         them by the template's name and checks its source's checksum and its own and
         Python's versions; anything unreadable is compiled again, and a cache that cannot
         be written is none."""
 
         def _path(self, bucket):
-            from ..base import backends
-            cache = backends.own_cache_dir()
-            return None if cache is None else cache / f"jinja-{bucket.key[:40]}.cache"
+            from ..base import cache
+            directory = cache.own_cache_dir()
+            return None if directory is None else directory / f"jinja-{bucket.key[:40]}.cache"
 
         def load_bytecode(self, bucket) -> None:
             path = self._path(bucket)
@@ -796,11 +796,11 @@ def _environment():
                 bucket.reset()
 
         def dump_bytecode(self, bucket) -> None:
-            from ..base import backends
+            from ..base import cache
             path = self._path(bucket)
             try:
                 if path is not None:
-                    backends.write_cached(path, bucket.write_bytecode)
+                    cache.write_cached(path, bucket.write_bytecode)
             except OSError:
                 pass
 
@@ -856,7 +856,7 @@ def _render(template: str, context: dict) -> str:
 # ---------------------------------------------------------------- the runtime built once
 #
 # `bgc simulate` does not compile the runtime with every model: it compiles it once into the
-# cache (bgc.base.backends.compile_c_linked) and links each model's part with it.  The runtime's
+# cache (bgc.base.cache.compile_c_linked) and links each model's part with it.  The runtime's
 # files are the ones a standalone program inlines, unchanged; what they read of the model at
 # compile time there (its sizes and scene as macros, its tables and model functions as static
 # names, the parameter struct) the runtime unit reads from the model's object at run time:

@@ -48,7 +48,7 @@ from pathlib import Path
 
 import sympy as sp
 
-from ..base import backends
+from ..base import toolchain
 from .. import ir
 from .emit import _runtime_text, c_string_literal, emit_c, identifier
 from .lower import with_tangent
@@ -124,7 +124,7 @@ def platform() -> tuple[str, str]:
     for prefix, answer in PLATFORMS.items():
         if sys.platform.startswith(prefix) and struct.calcsize("P") == 8:
             return answer
-    raise backends.BackendError(
+    raise toolchain.BackendError(
         f"FMU export builds binaries on 64-bit Linux and macOS only, not on {sys.platform} "
         f"({8 * struct.calcsize('P')}-bit)")
 
@@ -474,18 +474,18 @@ def build_binary(source: str, ident: str, suffix: str, cc: str | None = None,
                  flags: tuple[str, ...] | None = None) -> bytes:
     """The shared library built from source with the system C compiler ($CC or cc) and the C
     backend's flags ($BGC_CFLAGS, else -O2 -std=c99), plus SHARED_FLAGS."""
-    command = backends.c_compiler(cc)
+    command = toolchain.c_compiler(cc)
     if not command or shutil.which(command[0]) is None:
-        raise backends.BackendError(
+        raise toolchain.BackendError(
             "FMU export needs a C compiler to build the FMU's binary: install one (cc), or "
             "set CC")
-    flags = backends.c_flags() if flags is None else tuple(flags)
+    flags = toolchain.c_flags() if flags is None else tuple(flags)
     with tempfile.TemporaryDirectory(prefix="bgc-fmu-") as tmp:
         work = Path(tmp)
         (work / f"{ident}.c").write_text(source, encoding="utf-8")
         out = f"{ident}{suffix}"
-        backends.run_compiler([*command, *flags, *SHARED_FLAGS, f"{ident}.c", "-o", out,
-                                *backends.C_LIBS], work, cwd=work)
+        toolchain.run_compiler([*command, *flags, *SHARED_FLAGS, f"{ident}.c", "-o", out,
+                                *toolchain.C_LIBS], work, cwd=work)
         return (work / out).read_bytes()
 
 

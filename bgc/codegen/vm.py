@@ -37,7 +37,7 @@ from pathlib import Path
 
 from . import emit
 from .. import ir
-from ..base import backends
+from ..base import cache, toolchain
 from ..base.resources import resource_dir
 from ..ir import Assign, Newton, Program, Resolve, Solve, Store
 from ..ir.printers import CPrinter
@@ -109,7 +109,7 @@ INT_TABLES = ("jac_color_ptr", "jac_color_cols", "jac_col_ptr", "jac_col_rows",
               "discrete_log")
 
 
-class VMError(backends.BackendError):
+class VMError(toolchain.BackendError):
     """A program the interpreter cannot run (too many parameters for the runtime built once:
     bgc.codegen.emit.linkable; functions of an FMU), or a bug in bgc: the command line says it in
     one
@@ -759,7 +759,7 @@ def c_unit() -> str:
     """The interpreter's source: the runtime unit (bgc.codegen.emit.c_runtime_unit: the same files,
     the same rewrites), its declarations of the model part's values made variables, its main
     renamed bgc_program_main, then vm.c (the model part, interpreted, and the main that reads
-    the program first).  Built once per machine (bgc.base.backends.compile_vm)."""
+    the program first).  Built once per machine (bgc.base.cache.compile_vm)."""
     sizes, tables = emit._link_declarations()
     api = _ARRAY.sub(r"extern const char *const *\1;", emit._unit_text(emit._runtime_text("api.h")))
     api = api.replace("extern const char *const bgc_model_name;",
@@ -781,8 +781,8 @@ def c_unit() -> str:
 
 def interpreter() -> Path:
     """The interpreter's executable: from the cache, else built into it (once per machine:
-    bgc.base.backends.compile_vm)."""
-    return backends.compile_vm(sources_digest(), c_unit)
+    bgc.base.cache.compile_vm)."""
+    return cache.compile_vm(sources_digest(), c_unit)
 
 
 @functools.lru_cache(maxsize=None)

@@ -35,7 +35,7 @@ from functools import lru_cache
 
 from lark import Lark, Token, Tree
 
-from ..base import backends
+from ..base import cache
 from ..base.diagnostics import ModelError
 from ..front.parser import parse
 from ..base.resources import resource_dir
@@ -101,8 +101,8 @@ def _concrete() -> Lark:
     text = (resource_dir("grammar") / "bg.lark").read_text(encoding="utf-8")
     key = hashlib.sha256(repr((text, _OPTIONS, lark.__version__, sys.version_info[:2]))
                          .encode()).hexdigest()[:40]
-    cache = backends.own_cache_dir()
-    path = cache / f"lark-concrete-{key}.pickle" if cache is not None else None
+    directory = cache.own_cache_dir()
+    path = directory / f"lark-concrete-{key}.pickle" if directory is not None else None
     if path is not None:
         try:
             with open(path, "rb") as f:
@@ -113,7 +113,7 @@ def _concrete() -> Lark:
     parser = Lark(text, postlex=_NewlinesInBrackets(), **_OPTIONS)
     if path is not None:
         try:
-            backends.write_cached(path, lambda f: parser.save(f, ("postlex",)))
+            cache.write_cached(path, lambda f: parser.save(f, ("postlex",)))
         except (OSError, pickle.PicklingError):
             pass
     return parser

@@ -1,8 +1,8 @@
 """What an installed bgc would otherwise build on its first run, built when the package is:
 the interpreter (bgc.codegen.vm), the runtime's object file that each model's C part is linked with
-(bgc.base.backends.compile_runtime) and the parser's tables (bgc.front.parser), written into
+(bgc.base.cache.compile_runtime) and the parser's tables (bgc.front.parser), written into
 DIRECTORY under the names the compile cache gives them (with their SHA-256 beside).  setup.py runs
-it into the package's `prebuilt/` directory; bgc.base.backends copies a file from there into the
+it into the package's `prebuilt/` directory; bgc.base.cache copies a file from there into the
 cache when every input of its name (its source, the compiler and its version, the flags)
 matches a run's, and builds it as before otherwise.
 
@@ -24,18 +24,18 @@ def main(argv: list[str]) -> int:
     os.environ["BGC_CACHE_DIR"] = str(directory)
     os.environ.pop("BGC_CFLAGS", None)  # the flags a run has by default
 
-    from ..base import backends
+    from ..base import cache, toolchain
     from ..codegen import emit, vm
     from ..front import parser
     parser.lark_parser()
-    if not backends.have_c_compiler():
+    if not toolchain.have_c_compiler():
         print("bgc.execute.prebuild: no C compiler: the interpreter and the runtime are built on "
               "first use", file=sys.stderr)
         return 0
     try:
         vm.interpreter()
-        backends.compile_runtime(emit.c_runtime_unit())
-    except backends.BackendError as error:
+        cache.compile_runtime(emit.c_runtime_unit())
+    except toolchain.BackendError as error:
         print(f"bgc.execute.prebuild: {error}: the interpreter and the runtime are built on "
               "first use", file=sys.stderr)
     return 0

@@ -1,7 +1,8 @@
 """Running a generated program: the one place bgc runs a simulation.  The command line (cold and
 warm), bgc.simulate, Model.simulate, `bgc accuracy` and `bgc sweep` all come here for the
 backend (and the fallback when there is no C compiler), the run's settings (a
-bgc.base.run.RunSettings over the program's own, parameter overrides checked once) and the run.
+bgc.base.run_settings.RunSettings over the program's own, parameter overrides checked once) and
+the run.
 
 A Program is a generated program ready to run: a file in the cache started as a process (C, or
 Python), or generated Python loaded in this process (the API's Python backend, whose errors
@@ -11,9 +12,10 @@ has.  The rows go to a sink (the command line's file or stdout, which it owns) o
 as text; the caller decides what a failure means (bgc.api raises, the command line keeps the
 rows and says so, bgc.analysis.accuracy records it).
 
-Light on purpose, like bgc.base.run: the standard library and bgc.base.backends only at import (a
-warm `bgc simulate` runs through here without importing SymPy or numpy); the emitter is imported
-only to prepare a program from a compiled model.
+Light on purpose, like bgc.base.run_settings: the standard library and bgc.base's cache,
+toolchain and processes only at import (a warm `bgc simulate` runs through here without
+importing SymPy or numpy); the emitter is imported only to prepare a program from a compiled
+model.
 """
 from __future__ import annotations
 
@@ -25,9 +27,9 @@ import tempfile
 from dataclasses import dataclass, replace
 from pathlib import Path
 
-from ..base import backends
+from ..base import cache, processes, toolchain
 from . import outfile
-from ..base.run import RunSettings, parameter_overrides, run_span_problem
+from ..base.run_settings import RunSettings, parameter_overrides, run_span_problem
 
 NO_C_COMPILER = "warning: no C compiler found (cc or $CC); using the Python backend"
 INTERPRETED = ("bgc: no cached build for this model; running it in the interpreter (--backend c "
@@ -49,9 +51,40 @@ def choose_backend(backend: str) -> tuple[str, str | None]:
     """The backend that runs, and the warning to print about it (None: nothing to say): "c"
     and "vm" (whose interpreter is built once per machine) fall back to "python" when there is
     no C compiler."""
-    if backend in ("c", "vm") and not backends.have_c_compiler():
+    if backend in ("c", "vm") and not toolchain.have_c_compiler():
         return "python", NO_C_COMPILER
     return backend, None
+
+
+@dataclass(frozen=True)
+class RunPolicy:
+    """How `bgc simulate` runs a model (run_policy): the backend, the warning its fallback
+    prints, whether a warm record may serve the run, and whether bgc chooses between the C
+    build and the interpreter for a model it has no C build of (interpreted)."""
+
+    backend: str  # "c", "vm" or "python": what runs unless interpreted() says "vm"
+    warning: str | None = None  # choose_backend's, None: nothing to say
+    warm: bool = True  # a warm record may run it (bgc.execute.warm); else it is built anew
+    auto: bool = False  # --backend auto with a C compiler: the interpreter for a short run
+    t_end: float | None = None  # the run's --t-end and --dt (None: the scene's)
+    dt: float | None = None
+
+    def interpreted(self, scene: RunSettings, rhs_ops: int, states: int) -> bool:
+        """Whether a model without a C build that the interpreter runs (bgc.codegen.vm.supports)
+        runs there: when bgc chooses (auto) and the run, the model's scene settings with this
+        run's span, is short (short_run of the model's right side and states)."""
+        return self.auto and short_run(scene.with_options(t_end=self.t_end, dt=self.dt),
+                                       rhs_ops, states)
+
+
+def run_policy(backend: str, t_end: float | None = None, dt: float | None = None,
+               warm: bool = True) -> RunPolicy:
+    """The policy of a `bgc simulate` run given --backend (auto, c, vm, python), --t-end and
+    --dt: auto is C, which choose_backend turns into Python without a C compiler (and then
+    nothing is chosen); warm False for a program that is built each time (sensitivities)."""
+    auto = backend == "auto"
+    backend, warning = choose_backend("c" if auto else backend)
+    return RunPolicy(backend, warning, warm, auto and backend == "c", t_end, dt)
 
 
 @dataclass(frozen=True)
@@ -67,7 +100,7 @@ class Program:
     #                           the interpreter's program file (bgc.codegen.vm)
     module: object = None  # or: generated Python loaded in this process
     interpreter: Path | None = None  # the interpreter that runs path (bgc.codegen.vm)
-    bytecode: Path | None = None  # Python: path compiled (backends.python_bytecode), if any
+    bytecode: Path | None = None  # Python: path compiled (cache.python_bytecode), if any
 
     def argv(self) -> list[str]:
         """The command that starts it."""
@@ -90,13 +123,13 @@ def prepare(compiled, backend: str, in_process: bool = False) -> Program:
         return Program("c", path=c_executable(p), **facts)
     if backend == "vm":
         from ..codegen.vm import interpreter, program_bytes
-        path = backends.cache_bytes(program_bytes(p), ".bgvm")
+        path = cache.cache_bytes(program_bytes(p), ".bgvm")
         return Program("vm", path=path, interpreter=interpreter(), **facts)
     (text,) = emit_python(p).values()
     if in_process:
-        return Program("python", module=backends.load_python_module(text), **facts)
-    path = backends.cache_python(text)
-    return Program("python", path=path, bytecode=backends.python_bytecode(path), **facts)
+        return Program("python", module=processes.load_python_module(text), **facts)
+    path = cache.cache_python(text)
+    return Program("python", path=path, bytecode=cache.python_bytecode(path), **facts)
 
 
 def c_executable(program) -> Path:
@@ -106,9 +139,9 @@ def c_executable(program) -> Path:
     from ..codegen.emit import c_runtime_unit, emit_c, linkable
     if linkable(program):
         (text,) = emit_c(program, linked=True).values()
-        return backends.compile_c_linked(text, c_runtime_unit())
+        return cache.compile_c_linked(text, c_runtime_unit())
     (text,) = emit_c(program).values()
-    return backends.compile_c(text)
+    return cache.compile_c(text)
 
 
 def settings_for(defaults: RunSettings, names, params: dict | None = None,
@@ -204,17 +237,20 @@ def run(program, settings: RunSettings | None = None, sink=None, progress=None,
     returns its arrays, and its errors are raised (the generated module's SimulationError,
     ValueError)."""
     if isinstance(program, Program):
-        return _run(program, settings, sink, progress, stats, timeout)
+        return _run_prepared(program, settings, sink, progress, stats, timeout)
     compiled = program
     program = prepare(compiled, choose_backend(backend)[0])
     try:
-        return _run(program, settings, sink, progress, stats, timeout)
-    except backends.CannotStart:  # (a cached program damaged behind its checksum: evicted)
-        return _run(prepare(compiled, program.backend), settings, sink, progress, stats,
-                    timeout)
+        return _run_prepared(program, settings, sink, progress, stats, timeout)
+    except processes.CannotStart:  # (a cached program damaged behind its checksum: evicted)
+        return _run_prepared(prepare(compiled, program.backend), settings, sink, progress,
+                             stats, timeout)
 
 
-def _run(program: Program, settings, sink, progress, stats, timeout) -> Result:
+def _run_prepared(program: Program, settings, sink, progress, stats, timeout) -> Result:
+    """run's work on a prepared program: in this process, or started as a process with its
+    rows streamed into sink or captured; input data given as numbers first written to files
+    the program reads."""
     settings = program.defaults if settings is None else settings
     if settings.input_data and program.module is None:  # numbers: to files the program reads
         with tempfile.TemporaryDirectory(prefix="bgc-inputs-") as where:
@@ -224,23 +260,23 @@ def _run(program: Program, settings, sink, progress, stats, timeout) -> Result:
                 with open(path, "w", encoding="utf-8") as f:
                     f.write(f"t,{name}\n" + "".join(f"{a!r},{b!r}\n" for a, b in zip(t, u)))
                 files.append(path)
-            return _run(program, replace(settings, input_data=(),
-                                         input_files=settings.input_files + tuple(files)),
-                        sink, progress, stats, timeout)
+            return _run_prepared(program, replace(settings, input_data=(),
+                                                  input_files=settings.input_files + tuple(files)),
+                                 sink, progress, stats, timeout)
     if program.module is not None:
         t, values = program.module.simulate(**settings.options(program.defaults))
         return Result(0, t=t, values=values)
     argv = program.argv() + settings.args(program.defaults) + ["--stats"] * stats \
         + ["--progress"] * (progress is not None)
     if sink is not None:
-        done = backends.run_streaming(argv, sink, progress)
+        done = processes.run_streaming(argv, sink, progress)
         failed = done.sink_error
         write_error = outfile.reason(failed) if failed is not None else _write_error(done.stderr)
         killed = -done.code if done.code < 0 and not done.signal and failed is None else 0
         return Result(_status(done.code, done.signal), done.stderr, killed=killed,
                       write_error=write_error, last_line=done.last_line)
     try:
-        done = backends.run_captured(argv, timeout)
+        done = processes.run_captured(argv, timeout)
     except subprocess.TimeoutExpired:
         return Result(-1, f"stopped after {timeout:g} s (the time budget per run)", "")
     return Result(_status(done.returncode), done.stderr, done.stdout,
@@ -277,7 +313,7 @@ class Session:
         argv = program.argv() + settings.args(program.defaults) + ["--batch", "-"]
         for m in self.metrics:
             argv += ["--metric", m]
-        self.proc = backends.start_piped(argv)
+        self.proc = processes.start_piped(argv)
         self.header = self.proc.stdout.readline().rstrip("\n").split(",")
         if self.header[:2] != ["run", "status"]:
             self._fail()

@@ -37,7 +37,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..base import backends
+from ..base import cache, processes
 from . import runner
 
 METRIC_KINDS = ("final", "max", "min", "maxabs", "rms")
@@ -198,7 +198,7 @@ def make_program(c_source, python_source, args, metrics) -> SweepProgram:
 
 @functools.lru_cache(maxsize=8)
 def _executable(c_source: str) -> str:
-    return str(backends.compile_c(c_source))
+    return str(cache.compile_c(c_source))
 
 
 @dataclass(frozen=True)
@@ -220,7 +220,7 @@ def run_batch(program: SweepProgram, first: int, lines: tuple[str, ...],
         if backend == "c":
             argv = [_executable(program.c_source)]
         else:
-            argv = backends.python_program(program.python_source, tmp)
+            argv = processes.python_program(program.python_source, tmp)
         argv += ["--batch", "-", *program.args]
         for m in program.metrics:
             argv += ["--metric", m]
@@ -232,7 +232,7 @@ def run_batch(program: SweepProgram, first: int, lines: tuple[str, ...],
         # (child_env: the program dies with the process that runs it, bgc or a Dask worker,
         # when that is killed; a LocalCluster's workers die with bgc by Dask's own watch)
         done = subprocess.run(argv, input="".join(line + "\n" for line in lines),
-                              capture_output=True, text=True, env=backends.child_env())
+                              capture_output=True, text=True, env=processes.child_env())
         if done.returncode != 0:
             raise BatchFailed(f"the batch of runs {first}..{first + len(lines) - 1} failed "
                              f"(status {done.returncode}): {done.stderr.strip()}")
@@ -353,7 +353,7 @@ def default_batch_size(n: int, workers: int) -> int:
     return max(1, min(1000, math.ceil(n / (4 * max(1, workers)))))
 
 
-def run(program: SweepProgram, lines: list[str], batch_size: int, client=None,
+def run_batches(program: SweepProgram, lines: list[str], batch_size: int, client=None,
         trajectories: bool = False, progress=None, on_batch=None) -> list[BatchResult]:
     """Runs every line in batches, serially in this process when client is None, else as
     tasks of client (a dask.distributed.Client).  progress(Progress) after each batch;

@@ -2,10 +2,10 @@
 once, without importing SymPy or running the pipeline again.
 
 After a cold run the command line stores a *record* in the cache directory
-(bgc.base.backends.cache_dir): which program the model compiled to (the file's name and SHA-256)
+(bgc.base.cache.cache_dir): which program the model compiled to (the file's name and SHA-256)
 and what the command line needs from the compiled model to run it exactly as the cold path
 would — the warnings the model gave (as printed), the parameters' names, the scene's settings (the
-bgc.base.run.RunSettings compiled into the program), whether a constraint has a pid or pd
+bgc.base.run_settings.RunSettings compiled into the program), whether a constraint has a pid or pd
 corrector, whether the program has the Jacobian (one built for an explicit solver has not:
 an implicit solver's run is then cold, and its record replaces this one), and what `--plot`
 says of the model and its outputs (bgc.reports.plot.describe).
@@ -28,15 +28,15 @@ Paths are recorded as the compile used them (relative ones to the working direct
 compile of the same command there would read them).
 
 A record is used only if it reads as one (anything else is a miss), its files are unchanged,
-and the program it names is still the file that was built and can run (bgc.base.backends.usable: a
+and the program it names is still the file that was built and can run (bgc.base.cache.usable: a
 regular file, executable, its SHA-256 the one recorded; like the program cache itself); a program
 that still cannot be started is removed from the cache and the run goes the cold way (bgc.cli). 
 Records are written to a temporary file and renamed into place, so concurrent runs are safe: each
 sees a whole record or none.
 
-This module imports the standard library only (and bgc.base.backends, bgc.base.resources,
-bgc.base.run, bgc.execute.runner and bgc.base.solvers, which do too; bgc.reports.plot when a cold
-run makes a record).
+This module imports the standard library only (and bgc.base.cache, bgc.base.toolchain,
+bgc.base.resources, bgc.base.run_settings, bgc.execute.runner and bgc.base.solvers, which do too;
+bgc.reports.plot when a cold run makes a record).
 """
 from __future__ import annotations
 
@@ -49,10 +49,10 @@ import tempfile
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
-from ..base import backends, solvers
+from ..base import cache, solvers, toolchain
 from . import runner
 from ..base.resources import read_bounded
-from ..base.run import RunSettings
+from ..base.run_settings import RunSettings
 
 FORMAT = 8  # of the record; change it when its fields change
 
@@ -116,9 +116,9 @@ def _installation() -> list:
 def _toolchain(backend: str) -> list:
     if backend == "python":
         return ["python", sys.executable, sys.version]
-    command = backends.c_compiler()
+    command = toolchain.c_compiler()
     where = shutil.which(command[0]) if command else None
-    facts = ["c", command, list(backends.c_flags()), str(where)]
+    facts = ["c", command, list(toolchain.c_flags()), str(where)]
     if where:
         info = os.stat(where)
         facts.append([info.st_size, info.st_mtime_ns])
@@ -133,7 +133,7 @@ def key(request: Request, source: bytes) -> str:
 
 
 def _record_path(digest: str) -> Path:
-    return backends.cache_dir() / f"warm-{digest[:40]}.json"
+    return cache.cache_dir() / f"warm-{digest[:40]}.json"
 
 
 def lookup(request: Request) -> tuple[Record, Path] | None:
@@ -157,13 +157,13 @@ def lookup(request: Request) -> tuple[Record, Path] | None:
         if not all(_sha256(name) == digest for name, digest in record.files):
             return None
         program = path.parent / record.program
-        if Path(record.program).name != record.program or not backends.usable(
+        if Path(record.program).name != record.program or not cache.usable(
                 program, executable=program.suffix not in (".py", ".bgvm"),
                 sha256=record.sha256):
             return None
         if record.interpreter and (Path(record.interpreter).name != record.interpreter
-                                   or not backends.usable(path.parent / record.interpreter,
-                                                          sha256=record.interpreter_sha256)):
+                                   or not cache.usable(path.parent / record.interpreter,
+                                                       sha256=record.interpreter_sha256)):
             return None
     except (OSError, ValueError, TypeError, KeyError, AttributeError):
         return None
@@ -206,7 +206,7 @@ def program(record: Record, path: Path) -> runner.Program:
                               interpreter=path.parent / record.interpreter)
     if path.suffix == ".py":
         return runner.Program("python", record.settings, record.params, path=path,
-                              bytecode=backends.python_bytecode(path))
+                              bytecode=cache.python_bytecode(path))
     return runner.Program("c", record.settings, record.params, path=path)
 
 

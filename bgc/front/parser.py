@@ -60,7 +60,7 @@ _LARK_OPTIONS = dict(parser="lalr", lexer="contextual", propagate_positions=True
 @lru_cache(maxsize=1)
 def lark_parser() -> Lark:
     """The parser.  Building its LALR tables takes a tenth of a second or more, every cold
-    `bgc simulate`; they are kept in the compile cache (bgc.base.backends.own_cache_dir) under the
+    `bgc simulate`; they are kept in the compile cache (bgc.base.cache.own_cache_dir) under the
     SHA-256 of the grammar, the options and the versions of lark and Python, and read back
     (anything unreadable is built again)."""
     import hashlib
@@ -69,24 +69,24 @@ def lark_parser() -> Lark:
 
     import lark
 
-    from ..base import backends
+    from ..base import cache
     text = (resource_dir("grammar") / "bg.lark").read_text(encoding="utf-8")
     key = hashlib.sha256(repr((text, _LARK_OPTIONS, lark.__version__, sys.version_info[:2]))
                          .encode()).hexdigest()[:40]
     name = f"lark-{key}.pickle"
-    cache = backends.own_cache_dir()
-    if cache is not None:
-        parser = _saved(cache / name)
+    directory = cache.own_cache_dir()
+    if directory is not None:
+        parser = _saved(directory / name)
         if parser is not None:
             return parser
-    parser = _saved(backends.PREBUILT / name)  # (bgc.execute.prebuild's, at install)
+    parser = _saved(cache.PREBUILT / name)  # (bgc.execute.prebuild's, at install)
     if parser is None:
         parser = Lark(text, postlex=_BracketPostLex(), **_LARK_OPTIONS)
-    if cache is None:
+    if directory is None:
         return parser
-    path = cache / name
+    path = directory / name
     try:
-        backends.write_cached(path, lambda f: parser.save(f, ("postlex",)))
+        cache.write_cached(path, lambda f: parser.save(f, ("postlex",)))
     except (OSError, pickle.PicklingError):
         pass
     return parser

@@ -53,7 +53,7 @@ from ..symbolic.algebra import Max, Min
 from ..symbolic.canonical import new
 from ..symbolic.walk import DESCEND, fold
 from ..base.resources import compile_memo
-from ..base.run import RunSettings
+from ..base.run_settings import RunSettings
 from ..symbolic.sparse import IterationPlan, LUPlan
 
 T = sp.Symbol("t")
@@ -489,7 +489,7 @@ class ConstraintRow:
     level: str  # "position" (holonomic Phi) or "velocity" (dPhi/dt, or nonholonomic Phi)
 
 
-SceneSettings = RunSettings  # the scene's settings: bgc.base.run's one type of them
+SceneSettings = RunSettings  # the scene's settings: bgc.base.run_settings's one type of them
 
 
 @dataclass(frozen=True)

@@ -46,7 +46,7 @@ from ..front import events
 from .system import (TIME, ConstraintDef, Equation, EquationSystem, OutputDef, ParameterDef,
                      StateVar, der)
 from ..front.graph import var, written
-from ..base.run import ALGEBRA, RunSettings
+from ..base.run_settings import ALGEBRA, RunSettings
 from ..base.resources import (MAX_EXPANDED_TERMS, MAX_EXPRESSION_DEPTH, MAX_EXPRESSION_NODES,
                               SYMBOLIC_MAX_BLOCK, fits)
 from ..symbolic.sparse import plan as lu_plan

@@ -13,7 +13,7 @@ from ..base.diagnostics import Collector, ModelError, Note, Origin, Span, did_yo
 from ..front.graph import Expr, Graph, check_effect_names, check_ports, model_effects, var, written
 from ..front.instantiate import output_refs
 from ..base.resources import MAX_OUTPUT_ROWS
-from ..base.run import RunSettings
+from ..base.run_settings import RunSettings
 
 SOLVER_OPTIONS = ("rtol", "atol", "step", "hmax")
 DEFAULT_TIME = (0.0, 10.0, 0.01)
@@ -27,8 +27,8 @@ def _run_field(name: str) -> property:
 @dataclass(frozen=True)
 class Settings:
     """What a scene chose: its outputs and effects, its parameter values, and its run's
-    settings (a bgc.base.run.RunSettings: the one type of those); .t0, .t_end, .dt, .solver, .rtol,
-    .atol and .step read the run's."""
+    settings (a bgc.base.run_settings.RunSettings: the one type of those); .t0, .t_end, .dt,
+    .solver, .rtol, .atol and .step read the run's."""
 
     scene: str | None
     outputs: tuple | None  # OutRefs; None: every state

@@ -24,7 +24,7 @@ from .causality import CausalGraph
 from ..base.diagnostics import Collector, ModelError, Span, did_you_mean, fail
 from ..symbolic.differentiate import partial
 from ..front.graph import TIME, Element, Graph, part_name, var, variable_name
-from ..base.run import RunSettings
+from ..base.run_settings import RunSettings
 from .scene import parameter_values
 
 
