@@ -174,9 +174,10 @@ def build(model, scene=None, outputs=None, effects=None, algebra="auto") -> Shoo
     """The shooting program of model's scene; raises api's errors, NoOrbit for a model whose
     events the sensitivities cannot pass."""
     first = api.build(model, scene, algebra=algebra, outputs=outputs, effects=effects,
-                      option_names=("--outputs", "--effects", "--scene"))
-    asked = tuple(first.program.outputs)
-    states = tuple(first.program.states) + tuple(first.reduced.pruned)
+                      program=False, option_names=("--outputs", "--effects", "--scene"))
+    # the outputs and states the program would have (lower keeps reduce's, in its order)
+    asked = tuple(o.name for o in first.reduced.outputs)
+    states = tuple(st.name for st in first.reduced.states) + tuple(first.reduced.pruned)
     names = ", ".join(list(asked) + [s for s in states if s not in asked])
     compiled = api.build(first.source, scene, algebra=algebra, outputs=names or None,
                          effects=effects, program=False,
