@@ -12,7 +12,7 @@ import pytest
 import bgc
 from bgc.base import processes, toolchain
 from bgc.symbolic import sparse
-from bgc.codegen.emit import _BlockArea, _unrolled_lu, emit_c, emit_python
+from bgc.codegen.emit import BlockArea, _unrolled_lu, emit_c, emit_python
 from conftest import MODELS
 
 PLAN_KEYS = ("diag", "lptr", "lpos", "lrow", "uptr", "upos", "ucol", "upd", "prow", "pcol")
@@ -41,7 +41,7 @@ def _plans():
 
 PLANS = _plans()
 # the workspace of the harness: save at 0, factors after it, right sides after those
-AREAS = [_BlockArea(0, p.nnz, 2 * p.nnz, 2 * p.nnz, 0, 0, 0, 0, 0, 0, 0) for p, _ in PLANS]
+AREAS = [BlockArea(0, p.nnz, 2 * p.nnz, 2 * p.nnz, 0, 0, 0, 0, 0, 0, 0) for p, _ in PLANS]
 
 
 def _matrices(plan, entries, rng):

@@ -135,7 +135,7 @@ def _functions(program: Program, solver: str = "rk4") -> tuple[str, ...]:
             + (ir.EVENT_FUNCTIONS if program.events is not None else ()))
 
 
-def _workspace(program: Program, chunk_ops: int, solver: str = "rk4"):
+def workspace(program: Program, chunk_ops: int, solver: str = "rk4"):
     """The work area (in the state: a Newton block's last solution is its next start): the
     values that cross the chunks of a long model function (each chunk a function of its own),
     then each algebraic block's storage, as the C emitter lays them out, from offset 0."""
@@ -149,11 +149,11 @@ def _workspace(program: Program, chunk_ops: int, solver: str = "rk4"):
         lu = save + nnz
         dense = lu + (0 if bp.lu.dense else nnz)
         b = dense + m * m
-        areas.append(emit._BlockArea(save, lu, dense, b, b + m, b + 2 * m, b + 3 * m,
+        areas.append(emit.BlockArea(save, lu, dense, b, b + m, b + 2 * m, b + 3 * m,
                                      b + 4 * m, b + 5 * m, ints, ints + m))
         top = b + 6 * m
         ints += m + 1
-    return emit._Workspace(0, 0, 0, 0, 0, tuple(areas), top, ints, layouts)
+    return emit.Workspace(0, 0, 0, 0, 0, tuple(areas), top, ints, layouts)
 
 
 _FLOAT_LITERAL = re.compile(r"(?<![\w.\[])(\d+\.\d*(?:e[-+]?\d+)?|\d+e[-+]?\d+)(?![\w.])")
@@ -221,7 +221,7 @@ def _check_rosenbrock(program: Program, solver: str, real: str, span) -> None:
         _refuse(span, f"the solver '{solver}' on a model of {len(program.states)} states, "
                       f"whose iteration matrix bgc simulate factors by its sparse plan, is not "
                       f"supported yet: give --solver rk4 or --solver euler")
-    if real == "float" and emit._reads_time(program.function("rhs")):
+    if real == "float" and emit.reads_time(program.function("rhs")):
         _refuse(span, f"the solver '{solver}' in float on a model whose laws read the time "
                       f"t: its df/dt, a forward difference over sqrt(DBL_EPSILON t), is below "
                       f"float's resolution: use --real double")
@@ -256,25 +256,25 @@ def emit_embedded(program: Program, real: str = "double", solver: str = "rk4",
     fields = emit.c_param_fields(tuple(p.name for p in program.params))
     printer = (_FloatPrinter if real == "float" else _EmbeddedPrinter)(
         len(program.states), fields, program.n_consts)
-    ws = _workspace(program, chunk_ops, solver)
-    writer = emit._Writer(program, ws, printer, "c")
+    ws = workspace(program, chunk_ops, solver)
+    writer = emit.Writer(program, ws, printer, "c")
     model = {}
     for name in _functions(program, solver):
-        f = emit._function_context(writer, name, "out")
+        f = emit.function_context(writer, name, "out")
         f["chunks"] = [_typed(lines, name) for lines in f["chunks"]]
         for e in f["evals"]:
             for key in ("body", "residuals", "tangents", "jacobian"):
                 e[key] = _typed(e[key])
         model[name] = f
-    blocks = emit._common_context(program, ws, emit.c_string_literal, True)["blocks"]
+    blocks = emit.common_context(program, ws, emit.c_string_literal, True)["blocks"]
     for b in blocks:
         if b["unrolled"]:
             for key in ("factor_lines", "lsolve_lines"):
                 lines = _typed(b["unrolled"][key])
                 b["unrolled"][key] = _single(lines) if real == "float" else lines
     defaults = [printer.doprint(p.default) for p in program.params]
-    consts = _typed(emit._plain_lines(writer, "consts", "p->c"))
-    init = _typed(emit._plain_lines(writer, "init", "x0"))
+    consts = _typed(emit.plain_lines(writer, "consts", "p->c"))
+    init = _typed(emit.plain_lines(writer, "init", "x0"))
     code = "\n".join([*defaults, *consts, *init] + [line for f in model.values()
                                                    for lines in f["chunks"] for line in lines]
                      + [line for f in model.values() for e in f["evals"] for key in
@@ -313,27 +313,27 @@ def emit_embedded(program: Program, real: str = "double", solver: str = "rk4",
         "param_fields": fields,
         "param_defaults": defaults, "consts": consts, "init": init,
         "model": model,
-        "autonomous": not emit._reads_time(program.function("rhs")),
+        "autonomous": not emit.reads_time(program.function("rhs")),
         "stages": tab.stages,
         "tab_c": ", ".join(lit(v) for v in tab.c),
-        "tab_a": ", ".join(lit(v) for v in emit._square(tab.a, tab.stages)) or lit(0.0),
+        "tab_a": ", ".join(lit(v) for v in emit.square(tab.a, tab.stages)) or lit(0.0),
         "tab_b": ", ".join(lit(v) for v in getattr(tab, "b", ())),
         "faults": FAULTS + (EVENT_FAULTS if program.events is not None else ())
                   + (ROSENBROCK_FAULTS if solver in ROSENBROCK else ()),
         "family": "rosenbrock" if solver in ROSENBROCK else "erk",
         "ros": _rosenbrock_context(tab, lit) if solver in ROSENBROCK else None,
         "jac": _jacobian_context(program) if solver in ROSENBROCK else None,
-        "code": code, "events": emit._events_context(program, emit.c_string_literal),
+        "code": code, "events": emit.events_context(program, emit.c_string_literal),
         "helpers": [name for name in HELPERS if f"{name}(" in code],
         "flit": lit,
     }
-    return {f"{ident}.h": emit._render("embedded/model.h.j2", context),
-            f"{ident}.c": emit._render("embedded/model.c.j2", context)}
+    return {f"{ident}.h": emit.render("embedded/model.h.j2", context),
+            f"{ident}.c": emit.render("embedded/model.c.j2", context)}
 
 
 def _rosenbrock_context(tab, lit) -> dict:
     """A Rosenbrock tableau's arrays as C initialisers (the nodes c in double: times)."""
-    square = lambda rows: ", ".join(lit(v) for v in emit._square(rows, tab.stages))  # noqa: E731
+    square = lambda rows: ", ".join(lit(v) for v in emit.square(rows, tab.stages))  # noqa: E731
     return {"c": ", ".join(float_literal(v) for v in tab.c),
             "d": ", ".join(lit(v) for v in tab.d), "a": square(tab.a), "C": square(tab.C),
             "m": ", ".join(lit(v) for v in tab.m), "gamma": float_literal(tab.gamma)}
@@ -374,7 +374,7 @@ def memory(program: Program, real: str = "double", solver: str = "rk4",
     interpolant's two derivatives and the indicators), for --report."""
     size = 8 if real == "double" else 4
     n, m = max(len(program.states), 1), max(len(program.outputs), 1)
-    ws = _workspace(program, chunk_ops, solver)
+    ws = workspace(program, chunk_ops, solver)
     fields = [(8, 1), (size, n)] + ([(size, n)] if real == "float" else []) + [
         (size, max(ws.doubles, 1)), (4, max(ws.ints, 1))]  # (float: x's compensation)
     ev = program.events

@@ -50,7 +50,7 @@ class EmitError(ValueError):
 
 
 @dataclass(frozen=True)
-class _BlockArea:
+class BlockArea:
     save: int
     lu: int
     dense: int
@@ -65,7 +65,7 @@ class _BlockArea:
 
 
 @dataclass(frozen=True)
-class _Workspace:
+class Workspace:
     """Offsets of everything in the workspace's double and int arrays."""
 
     y0: int
@@ -73,13 +73,13 @@ class _Workspace:
     y: int
     jac: int
     slots: int
-    blocks: tuple[_BlockArea, ...]
+    blocks: tuple[BlockArea, ...]
     doubles: int
     ints: int
     layouts: dict  # function name -> ir.Layout
 
 
-def _workspace(program: Program, chunk_ops: int, layouts: bool = True) -> _Workspace:
+def workspace(program: Program, chunk_ops: int, layouts: bool = True) -> Workspace:
     """layouts=False: no slots for the values that cross chunks (bgc.codegen.vm keeps them in its
     registers)."""
     n = max(len(program.states), 1)
@@ -88,7 +88,7 @@ def _workspace(program: Program, chunk_ops: int, layouts: bool = True) -> _Works
     jac = y + max(len(program.outputs), 1)
     slots = jac + 2 * n
     layouts = {name: ir.layout(program.function(name).body, slots, chunk_ops)
-               for name in _model_functions(program)} if layouts else {}
+               for name in model_functions(program)} if layouts else {}
     top = slots + max((len(lay.slot) for lay in layouts.values()), default=0)
     areas, ints = [], 0
     for bp in program.blocks:
@@ -97,20 +97,20 @@ def _workspace(program: Program, chunk_ops: int, layouts: bool = True) -> _Works
         lu = save + nnz
         dense = lu + (0 if bp.lu.dense else nnz)
         b = dense + m * m
-        areas.append(_BlockArea(save, lu, dense, b, b + m, b + 2 * m, b + 3 * m, b + 4 * m,
+        areas.append(BlockArea(save, lu, dense, b, b + m, b + 2 * m, b + 3 * m, b + 4 * m,
                                 b + 5 * m, ints, ints + m))
         top = b + 6 * m
         ints += m + 1
-    return _Workspace(y0, stages, y, jac, slots, tuple(areas), top, ints, layouts)
+    return Workspace(y0, stages, y, jac, slots, tuple(areas), top, ints, layouts)
 
 
 # ---------------------------------------------------------------- statements to lines
 
 
-class _Writer:
+class Writer:
     """Lines of one target language for the statements of one function."""
 
-    def __init__(self, program: Program, ws: _Workspace, printer, lang: str):
+    def __init__(self, program: Program, ws: Workspace, printer, lang: str):
         self.program = program
         self.ws = ws
         self.printer = printer
@@ -206,7 +206,7 @@ class _Writer:
                 "tangents": tangents, "jacobian": jacobian}
 
 
-def _function_context(writer: _Writer, name: str, out_name: str) -> dict:
+def function_context(writer: Writer, name: str, out_name: str) -> dict:
     f = writer.program.function(name)
     writer.function = name
     writer.used = set().union(*[ir.uses(s) for s in f.body]) if f.body else set()
@@ -321,7 +321,7 @@ def _line_chunks(lines: list[str], size: int | None = None) -> list[list[str]]:
     return chunks
 
 
-def _plain_lines(writer: _Writer, name: str, out_name: str) -> list[str]:
+def plain_lines(writer: Writer, name: str, out_name: str) -> list[str]:
     """A function without the workspace argument.  The constraint rows of a field whose flows
     solve M(q) f = p read a linear block: such a function makes a workspace of its own for the
     block's storage (it runs at the start of a run, not per step), and its results are NaN if
@@ -354,52 +354,52 @@ def emit_c(program: Program, chunk_ops: int = ir.CHUNK_OPS, linked: bool = False
         -> dict[str, str]:
     """The standalone C99 program: {"<name>.c": text}.  linked: the model part alone, to be
     linked with the runtime built once (c_runtime_unit; see linkable)."""
-    _validate(program)
+    validate(program)
     fields = c_param_fields(tuple(p.name for p in program.params))
     printer = CPrinter(len(program.states), fields, program.n_consts)
-    ws = _workspace(program, chunk_ops)
-    writer = _Writer(program, ws, printer, "c")
-    context = _common_context(program, ws, c_string_literal, True)
+    ws = workspace(program, chunk_ops)
+    writer = Writer(program, ws, printer, "c")
+    context = common_context(program, ws, c_string_literal, True)
     context.update(
         param_fields=fields,
         param_defaults=[printer.doprint(p.default) for p in program.params],
         default_chunks=_line_chunks(
             [f"if (!given || !given[{j}]) p->{fields[j]} = {printer.doprint(p.default)};"
              for j, p in enumerate(program.params)]),
-        model={name: _function_context(writer, name, "out")
-               for name in _model_functions(program)},
-        plain={name: _plain_lines(writer, name, "out") for name in PLAIN_FUNCTIONS},
+        model={name: function_context(writer, name, "out")
+               for name in model_functions(program)},
+        plain={name: plain_lines(writer, name, "out") for name in PLAIN_FUNCTIONS},
         plain_sizes={name: program.function(name).size for name in PLAIN_FUNCTIONS},
         sparse=SPARSE_FUNCTIONS,
-        consts=_line_chunks(_plain_lines(writer, "consts", "p->c")),
-        init=_copy_loops(_plain_lines(writer, "init", "x0")),
+        consts=_line_chunks(plain_lines(writer, "consts", "p->c")),
+        init=_copy_loops(plain_lines(writer, "init", "x0")),
         scene=_scene_context(program, c_string_literal, step_none="0.0"),
         **c_runtime_parts(),
     )
     if linked:
         context["runtime"] = _link_definitions()
-    return {f"{context['ident']}.c": _render("c_program.c.j2", context)}
+    return {f"{context['ident']}.c": render("c_program.c.j2", context)}
 
 
 @quiet_collector()
 def emit_python(program: Program, chunk_ops: int = ir.CHUNK_OPS) -> dict[str, str]:
     """The standalone Python module (numpy only): {"<name>.py": text}."""
-    _validate(program)
+    validate(program)
     if not program.has_jacobian:  # (its jvp and jacobian are part of the module's API)
         raise EmitError("the Python module needs a program with its Jacobian (jvp)")
     n, m, k = len(program.states), len(program.params), program.n_consts
     fast, ieee = PythonPrinter(n, m, n_consts=k), PythonPrinter(n, m, ieee=True, n_consts=k)
-    ws = _workspace(program, chunk_ops)
-    context = _common_context(program, ws, py_string_literal, False)
+    ws = workspace(program, chunk_ops)
+    context = common_context(program, ws, py_string_literal, False)
     variants = {}
     for label, printer in (("fast", fast), ("ieee", ieee)):
-        writer = _Writer(program, ws, printer, "python")
+        writer = Writer(program, ws, printer, "python")
         variants[label] = {
-            "model": {name: _function_context(writer, name, "out")
-                      for name in _model_functions(program)},
-            "plain": {name: _plain_lines(writer, name, "out") for name in PLAIN_FUNCTIONS},
-            "consts": _plain_lines(writer, "consts", "out"),
-            "init": _plain_lines(writer, "init", "out"),
+            "model": {name: function_context(writer, name, "out")
+                      for name in model_functions(program)},
+            "plain": {name: plain_lines(writer, name, "out") for name in PLAIN_FUNCTIONS},
+            "consts": plain_lines(writer, "consts", "out"),
+            "init": plain_lines(writer, "init", "out"),
             "param_defaults": [printer.doprint(p.default) for p in program.params],
         }
     context.update(
@@ -410,10 +410,10 @@ def emit_python(program: Program, chunk_ops: int = ir.CHUNK_OPS) -> dict[str, st
         velocity_movable=["True" if v else "False" for v in program.velocity_movable],
         runtime=python_runtime(),
     )
-    return {f"{context['ident']}.py": _render("python_module.py.j2", context)}
+    return {f"{context['ident']}.py": render("python_module.py.j2", context)}
 
 
-def _model_functions(program: Program) -> tuple[str, ...]:
+def model_functions(program: Program) -> tuple[str, ...]:
     """rhs, outputs, jvp, the event functions of a program with events, then the program's
     extra functions (bgc.codegen.lower.with_tangent: an FMU's outputs_jvp;
     bgc.analysis.operating's, in the
@@ -489,7 +489,7 @@ def _list(values) -> str:
     return ", ".join(str(v) for v in values) if values else "0"
 
 
-def _block_names(program: Program, limit: int = 6) -> list[str]:
+def block_names(program: Program, limit: int = 6) -> list[str]:
     out = []
     for bp in program.blocks:
         names = list(bp.unknowns[:limit])
@@ -504,7 +504,7 @@ def _block_names(program: Program, limit: int = 6) -> list[str]:
 UNROLL_MAX = 400  # a static plan of at most this many entries + updates is unrolled
 
 
-def _unrolled_lu(k: int, lu, area: _BlockArea, c: bool) -> dict | None:
+def _unrolled_lu(k: int, lu, area: BlockArea, c: bool) -> dict | None:
     """Block k's static LU and its solve as straight-line code (C or Python), or None when the
     plan is dense or long (the runtime's loops over the plan then do it).  The same floating-
     point operations in the same order as the runtime's bgc_lu_static and _solve (so the
@@ -593,7 +593,7 @@ def _decl(c: bool, name: str, value: str) -> str:
 # ---------------------------------------------------------------- context
 
 
-def _common_context(program: Program, ws: _Workspace, literal, c: bool) -> dict:
+def common_context(program: Program, ws: Workspace, literal, c: bool) -> dict:
     jac = program.jacobian
     color_ptr, color_cols, col_ptr, col_rows = [0], [], [0], []
     for cols in jac.colors:
@@ -626,7 +626,7 @@ def _common_context(program: Program, ws: _Workspace, literal, c: bool) -> dict:
             "arrays": {key: list(getattr(lu, key)) for key in PLAN_ARRAYS},
         })
     return {
-        "events": _events_context(program, literal),
+        "events": events_context(program, literal),
         "tables": _tables_context(program, c),
         "inputs": [literal(u.name) for u in program.inputs],
         "ident": identifier(program.name),
@@ -637,7 +637,7 @@ def _common_context(program: Program, ws: _Workspace, literal, c: bool) -> dict:
         "outputs": [literal(o) for o in program.outputs],
         "constraints": [{"junction": literal(c.junction), "level": literal(c.level)}
                         for c in program.constraints],
-        "block_names": [literal(b) for b in _block_names(program)],
+        "block_names": [literal(b) for b in block_names(program)],
         "blocks": blocks,
         "n_states": len(program.states),
         "n_params": len(program.params),
@@ -645,7 +645,7 @@ def _common_context(program: Program, ws: _Workspace, literal, c: bool) -> dict:
         "n_outputs": len(program.outputs),
         "n_constraints": len(program.constraints),
         "n_blocks": len(program.blocks),
-        "autonomous": int(not _reads_time(program.function("rhs"))),
+        "autonomous": int(not reads_time(program.function("rhs"))),
         "position_rows": list(program.position_rows),
         "velocity_rows": list(program.velocity_rows),
         "velocity_movable": [1 if v else 0 for v in program.velocity_movable],
@@ -692,7 +692,7 @@ def discrete_log(ev) -> list[int]:
     return list(ev.log) if ev.log else [0] * (2 * ev.discrete)
 
 
-def _events_context(program: Program, literal) -> dict | None:
+def events_context(program: Program, literal) -> dict | None:
     """The sizes and tables of a program's events (None: it has none, nor their code)."""
     ev = program.events
     if ev is None:
@@ -707,7 +707,7 @@ def _events_context(program: Program, literal) -> dict | None:
 # ---------------------------------------------------------------- validation
 
 
-def _validate(program: Program) -> None:
+def validate(program: Program) -> None:
     n = len(program.states)
     sizes = {"init": n, "rhs": n, "outputs": len(program.outputs),
              "residual": len(program.constraints), "scale": len(program.constraints),
@@ -747,7 +747,7 @@ def _validate(program: Program) -> None:
         _check_default(j, param.default)
 
 
-def _reads_time(f: ir.Function) -> bool:
+def reads_time(f: ir.Function) -> bool:
     return any(ir.T in e.free_symbols for s in f.body for e in ir.expressions(s))
 
 
@@ -770,7 +770,7 @@ def _check_default(j: int, default: sp.Expr) -> None:
 
 
 @functools.lru_cache(maxsize=None)
-def _environment():
+def environment():
     import jinja2  # (here: the interpreter backend and a warm run do without)
 
     class CompiledTemplates(jinja2.BytecodeCache):
@@ -822,8 +822,8 @@ def c_runtime_parts() -> dict[str, str]:
     """The model-independent parts of a generated C program, as the template places them:
     the solvers' numbers (before the API), the API (bgc/runtime/api.h), and the solver tables
     followed by the runtime files (after the model part)."""
-    return {"solver_enum": solver_enum_c(), "api": _runtime_text("api.h"),
-            "runtime": "\n".join([solver_tables_c()] + [_runtime_text(f) for f in C_RUNTIME])}
+    return {"solver_enum": solver_enum_c(), "api": runtime_text("api.h"),
+            "runtime": "\n".join([solver_tables_c()] + [runtime_text(f) for f in C_RUNTIME])}
 
 
 def python_runtime() -> str:
@@ -831,7 +831,7 @@ def python_runtime() -> str:
     runtime (the parts PY_RUNTIME lists, each less its header, joined by two blank lines: one
     module, whose contract with the model part heads it) and the solver tables; the model part
     follows and replaces the runtime's neutral model names."""
-    return "\n\n".join([runtime_body(_runtime_text(f)) for f in PY_RUNTIME]
+    return "\n\n".join([runtime_body(runtime_text(f)) for f in PY_RUNTIME]
                        + [solver_tables_python()])
 
 
@@ -845,12 +845,12 @@ def runtime_body(text: str) -> str:
     return body
 
 
-def _runtime_text(name: str) -> str:
+def runtime_text(name: str) -> str:
     return (resource_dir("runtime") / name).read_text(encoding="utf-8")
 
 
-def _render(template: str, context: dict) -> str:
-    return _environment().get_template(template).render(**context)
+def render(template: str, context: dict) -> str:
+    return environment().get_template(template).render(**context)
 
 
 # ---------------------------------------------------------------- the runtime built once
@@ -864,7 +864,7 @@ def _render(template: str, context: dict) -> str:
 #     of the runtime a standalone program carries);
 #   - the runtime unit declares those and maps the model's names onto them with macros
 #     (_link_declarations), and is the runtime's text with three mechanical rewrites
-#     (_unit_text): a local enum of model sizes becomes const ints, a zero-initialised
+#     (unit_text): a local enum of model sizes becomes const ints, a zero-initialised
 #     array of a model size a variable-length array set with memset, and the API's arrays of
 #     a model size extern arrays of unknown size;
 #   - the parameter struct, which the runtime copies and keeps by value, is an array of
@@ -926,7 +926,7 @@ def _link_definitions() -> str:
     return "\n".join(out) + "\n"
 
 
-def _link_declarations() -> tuple[str, str]:
+def link_declarations() -> tuple[str, str]:
     """The runtime unit's view of a linked model part: before the API, its sizes and the
     parameter struct; after it, its tables and model functions."""
     sizes = ["/* ==================================================================== model === */",
@@ -954,15 +954,15 @@ def _link_declarations() -> tuple[str, str]:
 def c_runtime_unit() -> str:
     """The runtime built once: one C99 translation unit, the same for every model (its
     SHA-256 is part of its cache key), linked with a model part emit_c(..., linked=True)."""
-    sizes, tables = _link_declarations()
+    sizes, tables = link_declarations()
     return "".join([
         "/* bgc's runtime, built once and linked with each model's part (bgc/emit.py). */\n",
-        _environment().get_template("c_prelude.c.j2").render(), sizes, solver_enum_c(),
-        _unit_text(_runtime_text("api.h")), tables, "\n", solver_tables_c(), "\n",
-        "\n".join(_unit_text(_runtime_text(f)) for f in C_RUNTIME)])
+        environment().get_template("c_prelude.c.j2").render(), sizes, solver_enum_c(),
+        unit_text(runtime_text("api.h")), tables, "\n", solver_tables_c(), "\n",
+        "\n".join(unit_text(runtime_text(f)) for f in C_RUNTIME)])
 
 
-def _unit_text(text: str) -> str:
+def unit_text(text: str) -> str:
     """A runtime file as the runtime unit compiles it, where the model's sizes are variables
     (see above): each line rewritten by _unit_line; `names`, the enum constants made variables
     so far (N, D, M: a zeroed array of such a size is rewritten too)."""
@@ -1022,7 +1022,7 @@ def _c_array(name: str, values) -> str:
     return f"static const double {name}[{len(values)}] = {{ {body} }};\n"
 
 
-def _square(rows, width: int) -> list:
+def square(rows, width: int) -> list:
     """Strictly lower triangular rows as a width x width row-major list."""
     out = []
     for row in rows:
@@ -1052,7 +1052,7 @@ def solver_tables_c() -> str:
         if isinstance(tab, solvers.ERKTableau):
             width = tab.all_stages
             out.append(_c_array(f"{ident}_c", tab.c + tab.extra_c)
-                       + _c_array(f"{ident}_a", _square(tab.a + tab.extra_a, width))
+                       + _c_array(f"{ident}_a", square(tab.a + tab.extra_a, width))
                        + _c_array(f"{ident}_b", tab.b) + _c_array(f"{ident}_e", tab.error)
                        + _c_array(f"{ident}_e2", tab.error2)
                        + _c_array(f"{ident}_P", [v for row in tab.dense for v in row]))
@@ -1065,8 +1065,8 @@ def solver_tables_c() -> str:
         elif isinstance(tab, solvers.RosenbrockTableau):
             st = tab.stages
             out.append(_c_array(f"{ident}_c", tab.c) + _c_array(f"{ident}_d", tab.d)
-                       + _c_array(f"{ident}_a", _square(tab.a, st))
-                       + _c_array(f"{ident}_C", _square(tab.C, st))
+                       + _c_array(f"{ident}_a", square(tab.a, st))
+                       + _c_array(f"{ident}_C", square(tab.C, st))
                        + _c_array(f"{ident}_m", tab.m) + _c_array(f"{ident}_e", tab.e)
                        + _c_array(f"{ident}_H", [v for row in tab.dense for v in row]))
             out.append(f"static const bgc_rosenbrock {ident}_ros = {{ {st}, {len(tab.dense)}, "

@@ -50,7 +50,7 @@ import sympy as sp
 
 from ..base import toolchain
 from .. import ir
-from .emit import _runtime_text, c_string_literal, emit_c, identifier
+from .emit import runtime_text, c_string_literal, emit_c, identifier
 from .lower import with_tangent
 
 GUID_PLACEHOLDER = "{00000000-0000-0000-0000-000000000000}"
@@ -447,7 +447,7 @@ def fmu_source(program, guid: str, project_initial: bool = False,
         + ", ".join(map(str, input_slots or (0,))) + " };",
     ]
     return "\n".join(head) + "\n" + text + "\n" + "\n".join(part) + "\n" + \
-        _runtime_text("fmi2.c")
+        runtime_text("fmi2.c")
 
 
 def make_guid(*texts: str) -> str:

@@ -579,7 +579,7 @@ def supports(program: Program) -> bool:
     functions are a model part's (MODEL_FUNCTIONS and the constraint rows', not an FMU's
     outputs_jvp)."""
     return emit.linkable(program) and not _declined(program) and all(
-        k in MODEL_FUNCTIONS for k in emit._model_functions(program))
+        k in MODEL_FUNCTIONS for k in emit.model_functions(program))
 
 
 def program_bytes(program: Program) -> bytes:
@@ -590,13 +590,13 @@ def program_bytes(program: Program) -> bytes:
     if _declined(program):
         raise VMError("the interpreter does not run models with a sparse Jacobian yet; use "
                       "--backend c")
-    emit._validate(program)
+    emit.validate(program)
     unit = _Unit(program)
-    ws = emit._workspace(program, ir.CHUNK_OPS, layouts=False)
+    ws = emit.workspace(program, ir.CHUNK_OPS, layouts=False)
     base = ws.doubles  # the interpreter's registers: above the program's own storage
     entries = {}
     frames = [0]
-    names = emit._model_functions(program)
+    names = emit.model_functions(program)
     extra = [k for k in names if k not in MODEL_FUNCTIONS]
     if extra:
         raise VMError(f"the interpreter does not run the functions {', '.join(extra)}")
@@ -646,7 +646,7 @@ def program_bytes(program: Program) -> bytes:
         "NUM_CONSTRAINTS": len(program.constraints),
         "NUM_POSITION_ROWS": len(program.position_rows),
         "NUM_VELOCITY_ROWS": len(program.velocity_rows), "NUM_BLOCKS": len(program.blocks),
-        "AUTONOMOUS": int(not emit._reads_time(program.function("rhs"))),
+        "AUTONOMOUS": int(not emit.reads_time(program.function("rhs"))),
         "WORK_DOUBLES": work_doubles, "WORK_INTS": ws.ints, "WORK_Y0": ws.y0,
         "WORK_STAGES": ws.stages, "WORK_Y": ws.y, "WORK_JAC": ws.jac,
         "JAC_COLORS": len(jac.colors), "JAC_SPARSE": 0, "SCENE_SOLVER": emit.solvers.index(sc.solver),
@@ -673,7 +673,7 @@ def program_bytes(program: Program) -> bytes:
     out.append(_strings([program.name, emit.identifier(program.name)]))
     for texts in (program.states, [p.name for p in program.params], program.outputs,
                   [c.junction for c in program.constraints],
-                  [c.level for c in program.constraints], emit._block_names(program),
+                  [c.level for c in program.constraints], emit.block_names(program),
                   list(ev.names) if ev else [], [u.name for u in program.inputs]):
         out.append(_strings(list(texts)))
     for name in INT_TABLES:
@@ -760,23 +760,23 @@ def c_unit() -> str:
     the same rewrites), its declarations of the model part's values made variables, its main
     renamed bgc_program_main, then vm.c (the model part, interpreted, and the main that reads
     the program first).  Built once per machine (bgc.base.cache.compile_vm)."""
-    sizes, tables = emit._link_declarations()
-    api = _ARRAY.sub(r"extern const char *const *\1;", emit._unit_text(emit._runtime_text("api.h")))
+    sizes, tables = emit.link_declarations()
+    api = _ARRAY.sub(r"extern const char *const *\1;", emit.unit_text(emit.runtime_text("api.h")))
     api = api.replace("extern const char *const bgc_model_name;",
                       "extern const char *bgc_model_name;")
     files = []
     for name in emit.C_RUNTIME:
-        text = emit._unit_text(emit._runtime_text(name))
+        text = emit.unit_text(emit.runtime_text(name))
         if name == "main.c":
             text = "#define main bgc_program_main\n" + text + "#undef main\n"
         files.append(text)
     return "".join([
         "/* bgc's interpreter: the runtime built once, with the model part read from a file "
         "(bgc/codegen/vm.py). */\n",
-        emit._environment().get_template("c_prelude.c.j2").render(), _mutable(sizes),
+        emit.environment().get_template("c_prelude.c.j2").render(), _mutable(sizes),
         emit.solver_enum_c(), api, _mutable(tables), "\n", emit.solver_tables_c(), "\n",
         "\n".join(files), "\n", c_opcodes(), f"#define LINK_PARAMS_MAX {emit.LINK_PARAMS}\n",
-        c_link_definitions(), emit._runtime_text("vm.c")])
+        c_link_definitions(), emit.runtime_text("vm.c")])
 
 
 def interpreter() -> Path:
