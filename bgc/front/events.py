@@ -38,6 +38,7 @@ from sympy.core.relational import Relational
 from sympy.logic.boolalg import BooleanAtom, BooleanFunction
 
 from ..base.diagnostics import Span
+from ..symbolic.canonical import xreplace
 from ..symbolic.differentiate import partial
 from .graph import TIME, written
 from .kinds import TIME_SOURCES
@@ -504,9 +505,11 @@ def update_stores(sel: Selected, states) -> tuple[list, list]:
         before = w.condition.xreplace({**old, INITIAL: sp.false})
         fires.append(sp.And(now, sp.Not(before)))
     values: dict = {}
+    at_t0: dict = {}  # (the actions' and the discrete values' right sides share their
+    after: dict = {}  #  subexpressions: each substituted once, bgc.symbolic.canonical)
     for w, fire in zip(sel.whens, fires):
         for a in w.actions:  # (at the start, "just before" is the values at t0)
-            expr = sp.Piecewise((a.expr.xreplace(first), FIRST), (a.expr, True)) \
+            expr = sp.Piecewise((xreplace(a.expr, first, at_t0), FIRST), (a.expr, True)) \
                 if a.expr.free_symbols & first.keys() else a.expr
             values.setdefault(a.symbol, []).append((expr, fire))
     out = []
@@ -522,7 +525,7 @@ def update_stores(sel: Selected, states) -> tuple[list, list]:
         out.append(s.value())
     for d in sel.discretes:
         start = sp.Piecewise((first[d.symbol], FIRST), (d.symbol if d.next is None else
-                                                        d.next.xreplace(new), True))
+                                                        xreplace(d.next, new, after), True))
         out.append(sp.Piecewise(*values[d.symbol], (start, True)) if d.symbol in values
                    else start)
     return out
