@@ -472,3 +472,23 @@ def test_a_condition_holding_a_time_source_keeps_it():
     for e_value, x_value, expected in ((False, 1, 1), (True, 1, 0), (True, 3, 1),
                                        (False, -1, 0)):
         assert cond.xreplace({event: sp.true if e_value else sp.false, x: x_value}) == expected
+
+
+def test_a_zero_product_of_a_selection_is_sympys():
+    """groups._times(a, 0): SymPy's a*0 (zero, or NaN where a factor is infinite), without
+    asking a selection finite by construction whether it is infinite."""
+    import sympy as sp
+
+    from bgc.front.graph import var
+    from bgc.middle import groups
+    from bgc.symbolic.algebra import Max
+
+    x, y, e = var("a.p"), var("b.q"), sp.Symbol("event#0")
+    on = sp.Piecewise((sp.Integer(1), e), (sp.Integer(0), True))
+    finite = [x * y, on * (1 - (x - 2 * on) ** 2), sp.Abs(x) + Max(x, y) ** 3, on]
+    others = [x * sp.oo, sp.Symbol("u") * x, 1 / x, sp.Piecewise((sp.zoo, e), (x, True))]
+    for a in finite + others:
+        assert groups._times(a, sp.Integer(0), {}) == a * sp.Integer(0)
+        assert groups._times(a, x, {}) == a * x
+    assert all(groups._finite(a, {}) for a in finite)
+    assert not any(groups._finite(a, {}) for a in others)

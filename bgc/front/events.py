@@ -38,6 +38,7 @@ from sympy.core.relational import Relational
 from sympy.logic.boolalg import BooleanAtom, BooleanFunction
 
 from ..base.diagnostics import Span
+from ..symbolic.canonical import free_symbols, xreplace
 from ..symbolic.differentiate import partial
 from .graph import TIME, written
 from .kinds import TIME_SOURCES
@@ -270,26 +271,26 @@ def select(graph_events, used: set, states: dict, params: set) -> Selected:
             size = len(used)      # reads a discrete variable: a switch's Sw(d < 16))
             for r in relations:  # what a relation reads is read too (a discrete variable)
                 if r.symbol in used:
-                    used |= r.relation.free_symbols
+                    used |= free_symbols(r.relation)
             for d in discretes:  # and what a mode's next value reads
                 if d.symbol in used and d.next is not None:
-                    used |= d.next.free_symbols | d.init.free_symbols
+                    used |= free_symbols(d.next) | free_symbols(d.init)
         more = [w for w in whens if w not in kept and any(
             a.symbol in states if a.kind == "reinit" else a.symbol in used for a in w.actions)]
         if not more:
             break
         kept += more
         for w in more:
-            used |= w.condition.free_symbols
+            used |= free_symbols(w.condition)
             for a in w.actions:
-                used |= a.expr.free_symbols
+                used |= free_symbols(a.expr)
     kept = [w for w in whens if w in kept]
     discrete_symbols = {d.symbol for d in discretes}
     state, time, discrete, crossings = [], [], [], []
     for r in relations:
         if r.symbol not in used and not (r.needs and r.needs <= used | {TIME}):
             continue
-        free = r.relation.free_symbols
+        free = free_symbols(r.relation)
         if free <= params | discrete_symbols:
             discrete.append(r)
             continue
@@ -470,7 +471,7 @@ def _at_start(sel: Selected, new: dict) -> dict:
                 work.pop()
                 continue
             busy.add(sym)
-            todo = sorted((u for u in items[sym].free_symbols
+            todo = sorted((u for u in free_symbols(items[sym])
                            if u in items and u not in done and u not in busy), key=str)
             if todo:
                 work.append(todo[0])
@@ -504,10 +505,12 @@ def update_stores(sel: Selected, states) -> tuple[list, list]:
         before = w.condition.xreplace({**old, INITIAL: sp.false})
         fires.append(sp.And(now, sp.Not(before)))
     values: dict = {}
+    at_t0: dict = {}  # (the actions' and the discrete values' right sides share their
+    after: dict = {}  #  subexpressions: each substituted once, bgc.symbolic.canonical)
     for w, fire in zip(sel.whens, fires):
         for a in w.actions:  # (at the start, "just before" is the values at t0)
-            expr = sp.Piecewise((a.expr.xreplace(first), FIRST), (a.expr, True)) \
-                if a.expr.free_symbols & first.keys() else a.expr
+            expr = sp.Piecewise((xreplace(a.expr, first, at_t0), FIRST), (a.expr, True)) \
+                if free_symbols(a.expr) & first.keys() else a.expr
             values.setdefault(a.symbol, []).append((expr, fire))
     out = []
     for st in states:
@@ -522,7 +525,7 @@ def update_stores(sel: Selected, states) -> tuple[list, list]:
         out.append(s.value())
     for d in sel.discretes:
         start = sp.Piecewise((first[d.symbol], FIRST), (d.symbol if d.next is None else
-                                                        d.next.xreplace(new), True))
+                                                        xreplace(d.next, new, after), True))
         out.append(sp.Piecewise(*values[d.symbol], (start, True)) if d.symbol in values
                    else start)
     return out

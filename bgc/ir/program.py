@@ -50,7 +50,7 @@ from dataclasses import dataclass, field
 import sympy as sp
 
 from ..symbolic.algebra import Max, Min
-from ..symbolic.canonical import new
+from ..symbolic.canonical import free_symbols, new
 from ..symbolic.walk import DESCEND, fold
 from ..base.resources import compile_memo
 from ..base.run_settings import RunSettings
@@ -201,48 +201,16 @@ def substitute(expr, mapping: dict, memo: dict | None = None):
     return fold(expr, {} if memo is None else memo, leaf, rebuild)
 
 
-# free symbols, remembered: the passes ask for the symbols of the same statements again and
-# again (every pruning, every rewrite), and SymPy walks the whole expression each time
-_BASIC_FREE = sp.Basic.__dict__["free_symbols"]
-_FREE_OF_ARGS: dict = {}  # type -> whether its free symbols are its arguments' (Basic's rule)
-_FREE = compile_memo()  # expression -> frozenset of its free symbols
-
-
-def _free_of_args(cls) -> bool:
-    rule = _FREE_OF_ARGS.get(cls)
-    if rule is None:
-        owner = next((k for k in cls.__mro__ if "free_symbols" in k.__dict__), None)
-        rule = _FREE_OF_ARGS[cls] = owner is not None and \
-            owner.__dict__["free_symbols"] is _BASIC_FREE
-    return rule
-
-
-def free_symbols(expr) -> frozenset:
-    """expr.free_symbols as a frozenset, remembered for every subexpression (one walk,
-    bgc.symbolic.walk); nodes that define their own free symbols (symbols, Indexed,
-    Derivative) are asked."""
-    found = _FREE.get(expr)
-    if found is not None:
-        return found
-    return fold(expr, _FREE, _free_leaf, _union)
-
-
-def _free_leaf(e):
-    if not e.args or not _free_of_args(type(e)):
-        return frozenset(e.free_symbols)
-    return DESCEND
-
-
-def _union(e, values):
-    return frozenset().union(*values)
-
-
 def trivial(e) -> bool:
     """A number, a symbol, or a negated symbol: substituted where it is used, never assigned."""
     if e.is_Number or e.is_Symbol or e.is_Indexed:
         return True
     return e.is_Mul and len(e.args) == 2 and e.args[0] == -1 and (e.args[1].is_Symbol
                                                                    or e.args[1].is_Indexed)
+
+
+def _union(e, values):
+    return frozenset().union(*values)
 
 
 _FLOATS = compile_memo()  # expression -> frozenset of its Floats with an integral value

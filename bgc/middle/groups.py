@@ -40,6 +40,7 @@ from ..front.graph import TIME
 from ..symbolic.algebra import Max, Min
 from ..symbolic.conditions import indicator
 from ..symbolic.differentiate import partial
+from ..symbolic.walk import DESCEND, fold
 
 EPS = sp.Float(2.0 ** -52)  # a double's epsilon
 LOCATED = sp.Float(1e-12)  # a located event's resolution in t, relative (bgc.middle.contact)
@@ -368,12 +369,12 @@ def _is(test) -> sp.Expr:
     return indicator(test)
 
 
-def _first(pieces, default) -> sp.Expr:
+def _first(pieces, default, finite: dict) -> sp.Expr:
     """The value of the first (value, c) whose c (0 or 1) is 1, else default: c*v + (1-c)*rest,
-    folded from the end (a loop, not a recursion)."""
+    folded from the end (a loop, not a recursion); finite: _times's memo."""
     out = default
     for value, c in reversed(pieces):
-        out = c * value + (1 - c) * out
+        out = _times(c, value, finite) + (1 - c) * out
     return out
 
 
@@ -386,6 +387,7 @@ def events(sys, members, every, stops, rates, relations, discretes, whens):
     frictions = [m for m in members if m.friction]
     switches = [m for m in members if m.kind == "switch"]
     combos = [c for c in every if c.ok]
+    finite: dict = {}  # (_times)
     fired = []  # the diodes' relations (the events that locate their changes), as for one
     for m in diodes:
         n = len(relations)
@@ -473,7 +475,7 @@ def events(sys, members, every, stops, rates, relations, discretes, whens):
             for k in combos:
                 pieces.append((value(k.bits[i]),
                                (1 - current(k)) * matches(k) * tests[id(k), rows]))
-        return _first(pieces, lost)
+        return _first(pieces, lost, finite)
 
     nexts, kept = {}, sp.Integer(1)
     for m in diodes:  # (no consistent combination: 2)
@@ -512,13 +514,45 @@ def events(sys, members, every, stops, rates, relations, discretes, whens):
         relations = relations + [enters]
         whens = whens + [
             When(enters.symbol, enters.text, tuple(
-                Action("reinit", states[p].name, p, taken * new + (1 - taken) * p, m.c.span)
+                Action("reinit", states[p].name, p, _times(taken, new, finite) + (1 - taken) * p,
+                       m.c.span)
                 for p, new in stop.items()), m.c.span),
             When(INITIAL, f"{m.c.junction}: the start", tuple(
                 Action("reinit", states[p].name, p,
-                       _is(row) * kept * new + (1 - _is(row) * kept) * p, m.c.span)
+                       _times(_is(row) * kept, new, finite) + (1 - _is(row) * kept) * p,
+                       m.c.span)
                 for p, new in stop.items()), m.c.span)]
     return relations, discretes, whens
+
+
+def _times(a, b, memo: dict) -> sp.Expr:
+    """a*b as SymPy builds it.  Where b is zero, SymPy asks whether a factor of a is infinite
+    (the product is then NaN), which for a mode's selection walks all of it through the
+    assumptions system; where a is finite by construction (_finite) the product is zero."""
+    if b is sp.S.Zero and _finite(a, memo):
+        return sp.S.Zero
+    return a * b
+
+
+_FINITE = (sp.Add, sp.Mul, sp.Abs, sp.Piecewise, Max, Min)  # finite where their arguments are
+
+
+def _finite(e, memo: dict) -> bool:
+    """Whether e is finite by construction: finite numbers and symbols, combined by sums,
+    products, powers to a whole exponent >= 0, abs, Max, Min and Piecewise (its values)."""
+    def leaf(x):
+        if x.is_Number or x.is_Symbol:
+            return x.is_finite is True
+        if isinstance(x, sp.Pow):
+            return DESCEND if x.exp.is_Integer and x.exp >= 0 else False
+        return DESCEND if isinstance(x, _FINITE) else False
+
+    def children(x):
+        if isinstance(x, sp.Piecewise):
+            return [pair.expr for pair in x.args]
+        return [x.base] if isinstance(x, sp.Pow) else x.args
+
+    return fold(e, memo, leaf, lambda x, values: all(values), children)
 
 
 def rate_of(states_of, leaf_rate):

@@ -173,3 +173,40 @@ def _rebuilt(e, new_args):
         return e
     cls = type(e)
     return new(cls, new_args) if cls is sp.Add or cls is sp.Mul else e.func(*new_args)
+
+
+# free symbols, remembered: the passes ask for the symbols of the same statements again and
+# again (every pruning, every rewrite; the event selection, every mode's next value), and
+# SymPy walks the whole expression each time, as a tree
+_BASIC_FREE = sp.Basic.__dict__["free_symbols"]
+_FREE_OF_ARGS: dict = {}  # type -> whether its free symbols are its arguments' (Basic's rule)
+_FREE = compile_memo()  # expression -> frozenset of its free symbols
+
+
+def _free_of_args(cls) -> bool:
+    rule = _FREE_OF_ARGS.get(cls)
+    if rule is None:
+        owner = next((k for k in cls.__mro__ if "free_symbols" in k.__dict__), None)
+        rule = _FREE_OF_ARGS[cls] = owner is not None and \
+            owner.__dict__["free_symbols"] is _BASIC_FREE
+    return rule
+
+
+def free_symbols(expr) -> frozenset:
+    """expr.free_symbols as a frozenset, remembered for every subexpression (one walk,
+    bgc.symbolic.walk); nodes that define their own free symbols (symbols, Indexed,
+    Derivative) are asked."""
+    found = _FREE.get(expr)
+    if found is not None:
+        return found
+    return fold(expr, _FREE, _free_leaf, _union)
+
+
+def _free_leaf(e):
+    if not e.args or not _free_of_args(type(e)):
+        return frozenset(e.free_symbols)
+    return DESCEND
+
+
+def _union(e, values):
+    return frozenset().union(*values)

@@ -9,8 +9,9 @@ rule replaces) or DESCEND; `combine(e, values)` the value of a node from its chi
 the order `children(e)` lists them; `memo` holds every value computed (shared between calls,
 it is a cache: the same subexpression in another root is not walked again).  bgc's walks are
 this one with their own leaf and combine: substitution and xreplace (bgc.ir.program,
-bgc.symbolic.canonical), free symbols and integral floats (bgc.ir.program), polynomial degrees
-(bgc.symbolic.algebra) and forward derivatives (bgc.symbolic.differentiate).
+bgc.symbolic.canonical), free symbols (bgc.symbolic.canonical) and integral floats
+(bgc.ir.program), polynomial degrees (bgc.symbolic.algebra) and forward derivatives
+(bgc.symbolic.differentiate).
 """
 from __future__ import annotations
 
