@@ -114,6 +114,23 @@ def test_the_collector_is_restored_after_a_compile():
     assert gc.get_threshold() == before and gc.get_freeze_count() == 0
 
 
+def test_a_parsed_model_is_set_aside_for_the_compile_only():
+    """Within a compile the parsed model is left out of the collector's walks (gc.freeze);
+    the compile's end undoes it, and a parse outside a compile freezes nothing."""
+    import gc
+
+    from bgc.base.resources import quiet_collector
+    from bgc.front.parser import parse
+
+    text = "model m\nx : C(1)\ny : R(2)\nx -> y\n"
+    parse(text)
+    assert gc.get_freeze_count() == 0 and gc.isenabled()
+    with quiet_collector():
+        model = parse(text)
+        assert gc.get_freeze_count() > 0 and gc.isenabled()
+    assert gc.get_freeze_count() == 0 and model.decls
+
+
 def test_one_pruning_walk_keeps_what_each_function_needs():
     """ir.prune_each prunes the steps for several functions in one walk: each function's
     statements are what ir.prune keeps for its stores alone (the double pendulum's program,

@@ -87,6 +87,15 @@ def quiet_collector():
         gc.unfreeze()
 
 
+
+def set_aside() -> None:
+    """Within a compile's quiet_collector (the main thread's): what is alive now is left out
+    of the collector's walks until the compile ends (gc.freeze, undone there).  For a large
+    value just built with the collector off, a parsed model: its objects, all young, would
+    be walked by the next collection of each generation (a second or more at 10^5 lines)."""
+    if getattr(_collector, "depth", 0) and threading.current_thread() is threading.main_thread():
+        gc.freeze()
+
 # memos of the symbolic work (an expression's free symbols, a name's symbol, ...): they hold what
 # one compile asks again and again, as large as its model needs (a fixed size emptied when full
 # made a large model's compile ask everything again: superlinear), and are emptied when a

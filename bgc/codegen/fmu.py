@@ -323,8 +323,7 @@ def _variable_doc(graph, name: str) -> str | None:
 
 def _state_dependence(f: ir.Function, size: int) -> list[tuple[int, ...]]:
     """The states each result of f may depend on (structurally, through its solves), sorted."""
-    rows = ir.state_masks(f, size)
-    return [tuple(j for j in range(bits.bit_length()) if bits >> j & 1) for bits in rows]
+    return [tuple(sorted(row)) for row in ir.state_dependencies(f, size)]
 
 
 # ---------------------------------------------------------------- modelDescription.xml

@@ -279,30 +279,30 @@ def jacobian_pattern(rhs: Function, n: int, blocks) -> JacobianPattern:
     of a block depends on everything the block reads), a greedy colouring of the columns
     in order (no two columns of a colour share a row), and for a large sparse pattern the
     stiff solvers' sparse LU (bgc/symbolic/sparse.py, iteration_plan)."""
-    rows = ir.state_masks(rhs, n)
     columns = [[] for _ in range(n)]
-    for i, m in enumerate(rows):
-        while m:  # (the set bits only, lowest first: a row's work is its nonzeros)
-            low = m & -m
-            columns[low.bit_length() - 1].append(i)
-            m ^= low
-    colors: list[list[int]] = []
-    covered: list[int] = []
-    for j in range(n):
-        rowmask = 0
-        for i in columns[j]:
-            rowmask |= 1 << i
-        for c, cov in enumerate(covered):
-            if not cov & rowmask:
-                colors[c].append(j)
-                covered[c] |= rowmask
+    for i, row in enumerate(ir.state_dependencies(rhs, n)):
+        for j in row:
+            columns[j].append(i)
+    return JacobianPattern(tuple(map(tuple, columns)), _colours(columns),
+                           sparse.iteration_plan(columns))
+
+
+def _colours(columns) -> tuple[tuple[int, ...], ...]:
+    """A greedy colouring of the columns in order: each joins the first colour none of whose
+    columns shares a row with it (the rows of a colour kept as a set: the work is the
+    nonzeros', not the rows')."""
+    colours: list[list[int]] = []
+    covered: list[set] = []
+    for j, rows in enumerate(columns):
+        for colour, cov in zip(colours, covered):
+            if cov.isdisjoint(rows):
+                colour.append(j)
+                cov.update(rows)
                 break
         else:
-            colors.append([j])
-            covered.append(rowmask)
-    columns = tuple(tuple(c) for c in columns)
-    return JacobianPattern(columns, tuple(tuple(c) for c in colors),
-                           sparse.iteration_plan(columns))
+            colours.append([j])
+            covered.append(set(rows))
+    return tuple(map(tuple, colours))
 
 
 # ---------------------------------------------------------------- the stage

@@ -14,7 +14,7 @@ from . import ast
 from ..base import si
 from ..base.diagnostics import ModelError, Note, Origin, Span, fail
 from ..base.resources import (MAX_DIMENSION, MAX_INDEX, MAX_NESTING, MAX_OPTION_CHARS, max_source_bytes,
-                              resource_dir, too_large)
+                              resource_dir, set_aside, too_large)
 
 # Reserved: none of these can name anything (docs/semantics.md, "Names").
 KEYWORDS = frozenset("""model parameter signal integral init constraint holonomic nonholonomic
@@ -590,6 +590,7 @@ def parse(source: str, path: str = "<model>") -> ast.Model:
     finally:
         if collecting:
             gc.enable()
+            set_aside()
 
 
 @lru_cache(maxsize=64)

@@ -310,34 +310,36 @@ def defines(s) -> tuple[sp.Symbol, ...]:
     return ()
 
 
-def state_masks(f: Function, size: int) -> list[int]:
-    """For each result f stores (Store index 0..size-1), the states it may depend on, as a bit
-    mask: structurally, through assignments, and through solves (every unknown of a block
-    depends on everything the block reads).  One pass over the body."""
+def state_dependencies(f: Function, size: int) -> list[frozenset]:
+    """For each result f stores (Store index 0..size-1), the states it may depend on:
+    structurally, through assignments, and through solves (every unknown of a block depends
+    on everything the block reads).  One pass over the body; sets, not bit masks over the
+    states (a mask's operations cost the highest state's index: quadratic in a long chain)."""
     deps: dict = {}
 
-    def mask(e) -> int:
-        bits = 0
-        for a in e.atoms(sp.Indexed):
-            if a.base == X:
-                bits |= 1 << int(a.indices[0])
-        for sym in free_symbols(e):
-            bits |= deps.get(sym, 0)
-        return bits
+    def reads(e) -> frozenset:
+        own = [int(a.indices[0]) for a in e.atoms(sp.Indexed) if a.base == X]
+        return _joined(own, [deps[s] for s in free_symbols(e) if s in deps])
 
-    rows = [0] * size
+    rows = [frozenset()] * size
     for s in f.body:
         if isinstance(s, Assign):
-            deps[s.target] = mask(s.expr)
+            deps[s.target] = reads(s.expr)
         elif isinstance(s, Store):
-            rows[s.index] = mask(s.expr)
+            rows[s.index] = reads(s.expr)
         else:
-            bits = 0
-            for e in expressions(s) + (inner_expressions(s) if isinstance(s, Newton) else []):
-                bits |= mask(e)
+            exprs = expressions(s) + (inner_expressions(s) if isinstance(s, Newton) else [])
+            block = _joined([], [reads(e) for e in exprs])
             for d in defines(s):
-                deps[d] = bits
+                deps[d] = block
     return rows
+
+
+def _joined(items, sets) -> frozenset:
+    """items and the sets together; one of the sets itself when it holds all (no copy)."""
+    if not items and len(sets) == 1:
+        return sets[0]
+    return frozenset(items).union(*sets)
 
 
 def uses(s) -> set:

@@ -238,8 +238,9 @@ def _check_laws(graph: Graph, params: dict):
             _guard_value(diags, el.init[1], params, f"the initial value of '{el.name}'")
         if el.value is None or el.is_junction or isinstance(el.value.value, sp.MatrixBase):
             continue  # (a coupled field's matrix: flatten checks it)
-        if el.value.value.free_symbols - params.keys():
+        if any(s not in params for s in el.value.value.free_symbols):
             continue  # a law of time or of signals: the generated code checks it as it runs
+            # (not `free_symbols - params.keys()`: that walks every parameter, for each law)
         x = _guard_value(diags, el.value, params, f"the law of '{el.name}'")
         if x == 0.0 and el.spec.role == "storage":
             diags.error(el.value.span, f"{el.kind}({el.value.value}) of '{el.name}' is singular: "
